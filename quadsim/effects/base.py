@@ -1,0 +1,195 @@
+"""The one interface every unmodelled effect implements, and how effects are combined.
+
+An effect can act in four places; it implements the hooks it needs and inherits the
+neutral default for the rest (see :class:`EffectBase`):
+
+1. ``apply_to_params(params) -> params`` — static changes of the vehicle (extra mass, CoM
+   offset, inertia error). Engines build their model from the returned set.
+2. ``rotor_speed_rate(t, commanded, actual) -> dOmega/dt`` (B, R) or ``None`` — rotor-speed
+   dynamics (motor lag). ``None`` means the rotor follows its command at once.
+3. ``air_velocity(t, position) -> (B, 3)`` or ``None`` — world-frame wind velocity (m/s);
+   the engine subtracts it from the vehicle velocity to give the relative air velocity in the
+   :class:`EffectContext` that drag effects read.
+4. ``loads(ctx) -> EffectLoads`` — per-rotor thrust scale / offset, and an external force
+   (world frame, at the CoM) and torque (body frame).
+
+Both engines (analytic and MuJoCo) call the same hooks on the same numbers each step and
+apply the result with the same :func:`quadsim.rotors` geometry, so an effect acts
+identically in both by construction; a test per effect checks it.
+
+All arrays carry a leading batch axis B (B simulations advanced in one Python call).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from ..params import VehicleParams
+
+
+@dataclass(frozen=True)
+class EffectParameter:
+    """Declares one named parameter of an effect: unit, the value that switches the effect
+    off, plausible bounds for fitting, and a one-line meaning."""
+
+    name: str
+    unit: str
+    off: float
+    lower: float
+    upper: float
+    doc: str
+
+
+@dataclass(frozen=True)
+class EffectContext:
+    """What an effect may read at one instant, for B simulations.
+
+    position, velocity: world, body origin (B, 3); quat (B, 4) wxyz body-to-world;
+    body_rate (B, 3) rad/s; air_velocity (B, 3): vehicle velocity minus wind, world (m/s);
+    rotor_speed (B, R) actual (rad/s); rotor_accel (B, R) (rad/s^2); t (B,) (s);
+    params: the (possibly modified) vehicle; vbat (B,) battery voltage (V) or NaN.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    quat: np.ndarray
+    body_rate: np.ndarray
+    air_velocity: np.ndarray
+    rotor_speed: np.ndarray
+    rotor_accel: np.ndarray
+    params: VehicleParams
+    vbat: np.ndarray | None = None
+
+
+@dataclass
+class EffectLoads:
+    """Contributions of effects at one instant (B simulations, R rotors).
+
+    thrust_scale (B, R): multiplies each rotor's thrust *and* drag torque (1 = nominal).
+    thrust_offset (B, R): added thrust along each rotor axis (N), no torque change.
+    force_world (B, 3): external force at the CoM, world frame (N).
+    torque_body (B, 3): external torque, body frame (N m).
+    """
+
+    thrust_scale: np.ndarray
+    thrust_offset: np.ndarray
+    force_world: np.ndarray
+    torque_body: np.ndarray
+
+    @classmethod
+    def neutral(cls, batch: int, rotors: int) -> EffectLoads:
+        return cls(np.ones((batch, rotors)), np.zeros((batch, rotors)),
+                   np.zeros((batch, 3)), np.zeros((batch, 3)))
+
+    def add(self, other: EffectLoads) -> EffectLoads:
+        """Combine: scales multiply, offsets and external loads add."""
+        return EffectLoads(self.thrust_scale * other.thrust_scale,
+                           self.thrust_offset + other.thrust_offset,
+                           self.force_world + other.force_world,
+                           self.torque_body + other.torque_body)
+
+
+@runtime_checkable
+class Effect(Protocol):
+    """An unmodelled physical effect (one module per effect in :mod:`quadsim.effects`)."""
+
+    name: ClassVar[str]
+    parameters: ClassVar[tuple[EffectParameter, ...]]
+
+    def values(self) -> dict[str, float]: ...
+    def apply_to_params(self, params: VehicleParams) -> VehicleParams: ...
+    def rotor_speed_rate(self, t: np.ndarray, commanded: np.ndarray,
+                         actual: np.ndarray) -> np.ndarray | None: ...
+    def air_velocity(self, t: np.ndarray, position: np.ndarray) -> np.ndarray | None: ...
+    def loads(self, ctx: EffectContext) -> EffectLoads | None: ...
+
+
+class EffectBase:
+    """Neutral defaults and keyword-checked construction for effects.
+
+    Subclasses set ``name``, ``parameters`` and override the hooks they need. Parameters are
+    given as keywords; an unknown keyword raises (a typo must not silently do nothing)."""
+
+    name: ClassVar[str] = ""
+    parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+
+    def __init__(self, **values: float):
+        known = {p.name: p for p in self.parameters}
+        unknown = set(values) - set(known)
+        if unknown:
+            raise TypeError(f"{self.name}: unknown parameter(s) {sorted(unknown)}; "
+                            f"valid: {', '.join(known)}")
+        self._values = {name: float(values.get(name, spec.off)) for name, spec in known.items()}
+
+    def __getattr__(self, item: str) -> float:
+        values = self.__dict__.get("_values", {})
+        if item in values:
+            return values[item]
+        raise AttributeError(item)
+
+    def values(self) -> dict[str, float]:
+        return dict(self._values)
+
+    def is_off(self) -> bool:
+        return all(self._values[p.name] == p.off for p in self.parameters)
+
+    def apply_to_params(self, params: VehicleParams) -> VehicleParams:
+        return params
+
+    def rotor_speed_rate(self, t, commanded, actual):
+        return None
+
+    def air_velocity(self, t, position):
+        return None
+
+    def loads(self, ctx: EffectContext) -> EffectLoads | None:
+        return None
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}={v:g}" for k, v in self._values.items())
+        return f"{type(self).__name__}({inner})"
+
+
+@dataclass
+class EffectSet:
+    """Several effects acting together, evaluated in a fixed order."""
+
+    effects: tuple[Effect, ...] = field(default_factory=tuple)
+
+    def apply_to_params(self, params: VehicleParams) -> VehicleParams:
+        for effect in self.effects:
+            params = effect.apply_to_params(params)
+        return params
+
+    def has_rotor_dynamics(self) -> bool:
+        probe = np.zeros((1, 1))
+        return any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
+                   for e in self.effects)
+
+    def rotor_speed_rate(self, t, commanded, actual):
+        """dOmega/dt (B, R); the first effect that defines rotor dynamics owns it."""
+        for effect in self.effects:
+            rate = effect.rotor_speed_rate(t, commanded, actual)
+            if rate is not None:
+                return rate
+        return None
+
+    def air_velocity(self, t, position) -> np.ndarray:
+        wind = np.zeros_like(np.asarray(position, dtype=float))
+        for effect in self.effects:
+            w = effect.air_velocity(t, position)
+            if w is not None:
+                wind = wind + w
+        return wind
+
+    def loads(self, ctx: EffectContext) -> EffectLoads:
+        total = EffectLoads.neutral(ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])
+        for effect in self.effects:
+            part = effect.loads(ctx)
+            if part is not None:
+                total = total.add(part)
+        return total
