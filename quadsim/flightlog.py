@@ -1,0 +1,393 @@
+"""Flight logs: the CSV schema (gzip allowed), a validating loader and a deterministic writer.
+
+One header row, one row per sample. Columns (SI; any column other than ``t``, position and
+attitude may be absent):
+
+=====================  ========  ====================================================
+column                 unit      meaning
+=====================  ========  ====================================================
+``t``                  s         time since log start, strictly increasing
+``x, y, z``            m         position, world frame, z up
+``vx, vy, vz``         m/s       velocity, world frame
+``qw, qx, qy, qz``     --        attitude quaternion, body to world, scalar first
+``wx, wy, wz``         rad/s     body angular rate (gyro)
+``ax, ay, az``         m/s^2     specific force, body frame (about +9.81 on z at rest)
+``rotor_1..rotor_N``   rad/s     measured rotor speed
+``cmd_1..cmd_N``       --        motor command, normalised 0-1
+``vbat``               V         battery voltage
+=====================  ========  ====================================================
+
+Body frame: x forward, y left, z up. Example::
+
+    >>> from quadsim.flightlog import load_log, write_log
+    >>> log = load_log("flight_00.csv.gz")          # validates; raises InputError
+    >>> log.t.shape, log.position.shape, log.rotor_speed.shape
+    >>> write_log("copy.csv.gz", log)               # atomic, byte-deterministic
+    >>> traj = log.to_trajectory()                  # quadsim.trajectory.Trajectory
+
+Validation (:func:`load_log`): every problem is one line naming the file, the column and the
+file line (the header is line 1). Errors (:class:`~quadsim.errors.InputError`): missing
+required column, incomplete column group (``vx`` without ``vy``), text that is not a number,
+non-finite values in ``t``/position/attitude, time not strictly increasing, quaternions that
+are not unit length, and implausible units: rotor speeds that look like RPM (above
+``MAX_ROTOR_SPEED`` rad/s), body rates that look like deg/s (above ``MAX_BODY_RATE``),
+accelerometer in g (median magnitude near 1 instead of 9.81), commands outside 0-1, battery
+voltage in mV. Warnings (:class:`~quadsim.errors.QuadsimWarning`): NaN/Inf runs in optional
+columns (kept as NaN), sample-rate jumps (a gap over ``GAP_FACTOR`` times the median step),
+unknown columns (ignored).
+
+Writer (:func:`write_log`): columns in schema order, floats as ``%.10g``, ``\\n`` line ends;
+``.gz`` output is gzip with mtime 0 and no stored file name, so equal logs give equal bytes.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, QuadsimWarning, field_error
+from .fileio import atomic_write_bytes
+from .frames import quat_conjugate, quat_multiply, quat_normalize
+from .trajectory import Trajectory
+
+__all__ = ["FlightLog", "load_log", "write_log", "read_log_columns", "MAX_ROTOR_SPEED",
+           "MAX_BODY_RATE", "GAP_FACTOR", "FLOAT_FORMAT"]
+
+#: rad/s; faster than any quadrotor propeller (~48 000 RPM), so larger values are RPM.
+MAX_ROTOR_SPEED = 5000.0
+#: rad/s; 3400 deg/s, beyond racing quadrotors' flips, so larger values are deg/s.
+MAX_BODY_RATE = 60.0
+#: a time step over GAP_FACTOR x the median step is reported as a sample-rate jump.
+GAP_FACTOR = 5.0
+#: fixed float format of the writer (10 significant digits).
+FLOAT_FORMAT = "%.10g"
+
+_GROUPS = {
+    "position": ("x", "y", "z"),
+    "velocity": ("vx", "vy", "vz"),
+    "quat": ("qw", "qx", "qy", "qz"),
+    "body_rate": ("wx", "wy", "wz"),
+    "accel": ("ax", "ay", "az"),
+}
+_REQUIRED = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
+_NUMBERED = re.compile(r"^(rotor|cmd)_(\d+)$")
+
+
+@dataclass(frozen=True)
+class FlightLog:
+    """One flight, SI units (see the module docstring for the columns).
+
+    t (N,) s; position (N, 3) m world; velocity (N, 3) m/s world or None; quat (N, 4) wxyz
+    body-to-world; body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2
+    body or None; rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or
+    None; vbat (N,) V or None; path: the file it came from (None if built in code); notes:
+    the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns).
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    quat: np.ndarray
+    velocity: np.ndarray | None = None
+    body_rate: np.ndarray | None = None
+    accel: np.ndarray | None = None
+    rotor_speed: np.ndarray | None = None
+    rotor_command: np.ndarray | None = None
+    vbat: np.ndarray | None = None
+    path: Path | None = None
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        n = len(self.t)
+        shapes = {"position": 3, "quat": 4, "velocity": 3, "body_rate": 3, "accel": 3}
+        for name, width in shapes.items():
+            value = getattr(self, name)
+            if value is not None and np.shape(value) != (n, width):
+                raise ValueError(f"FlightLog.{name}: shape {np.shape(value)}, expected ({n}, {width})")
+        for name in ("rotor_speed", "rotor_command"):
+            value = getattr(self, name)
+            if value is not None and (np.ndim(value) != 2 or len(value) != n):
+                raise ValueError(f"FlightLog.{name}: shape {np.shape(value)}, expected ({n}, R)")
+        if self.vbat is not None and np.shape(self.vbat) != (n,):
+            raise ValueError(f"FlightLog.vbat: shape {np.shape(self.vbat)}, expected ({n},)")
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def rotor_count(self) -> int:
+        for value in (self.rotor_speed, self.rotor_command):
+            if value is not None:
+                return value.shape[1]
+        return 0
+
+    def to_trajectory(self) -> Trajectory:
+        """The log as a :class:`~quadsim.trajectory.Trajectory`.
+
+        Missing velocity is differentiated from position and missing body rate from the
+        quaternions (central differences, ``numpy.gradient``); missing rotor speeds become
+        an (N, 0) array. Commands (normalised) go to ``meta["command"]``, not to
+        ``rotor_command`` (which is rad/s), together with ``vbat`` and ``accel``."""
+        velocity = self.velocity
+        if velocity is None:
+            velocity = np.gradient(self.position, self.t, axis=0)
+        body_rate = self.body_rate
+        if body_rate is None:
+            body_rate = body_rate_from_quat(self.t, self.quat)
+        rotor_speed = self.rotor_speed
+        if rotor_speed is None:
+            rotor_speed = np.zeros((len(self.t), 0))
+        meta = {"command": self.rotor_command, "vbat": self.vbat, "accel": self.accel,
+                "path": self.path}
+        return Trajectory(self.t, self.position, velocity, self.quat, body_rate, rotor_speed,
+                          None, engine="log", meta=meta)
+
+
+def body_rate_from_quat(t: np.ndarray, quat: np.ndarray) -> np.ndarray:
+    """Body angular rate (N, 3) rad/s from quaternions (N, 4) by central differences:
+    omega = 2 * vec(conj(q) * dq/dt)."""
+    quat = np.asarray(quat, dtype=float).copy()
+    # Remove sign flips (q and -q are the same attitude) before differentiating.
+    flips = np.sign(np.sum(quat[1:] * quat[:-1], axis=-1))
+    quat[1:] *= np.cumprod(np.where(flips == 0, 1.0, flips))[:, None]
+    dq = np.gradient(quat, t, axis=0)
+    return 2.0 * quat_multiply(quat_conjugate(quat), dq)[:, 1:]
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def _open_text(path: Path) -> str:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise InputError(f"{path}: corrupt gzip data: {exc}") from None
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text (CSV) file") from None
+
+
+def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
+    """Numbers (N, C); text that is not a number is an error naming line and column."""
+    width = len(header)
+    data = np.empty((len(lines), width))
+    for row, line in enumerate(lines):
+        cells = line.split(",")
+        if len(cells) != width:
+            raise InputError(f"{path}: line {row + 2}: {len(cells)} fields, header has {width}")
+        try:
+            data[row] = [float(c) if c.strip() else np.nan for c in cells]
+        except ValueError:
+            for col, cell in enumerate(cells):
+                try:
+                    float(cell) if cell.strip() else None
+                except ValueError:
+                    raise field_error(path, header[col],
+                                      f"line {row + 2}: {cell.strip()!r} is not a number") from None
+    return data
+
+
+def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
+    """Every column of a log file as float arrays, by header name (no validation of values)."""
+    path = Path(path)
+    text = _open_text(path)
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise InputError(f"{path}: empty file (expected a header row)")
+    header = [h.strip() for h in lines[0].split(",")]
+    duplicates = sorted({h for h in header if header.count(h) > 1})
+    if duplicates:
+        raise field_error(path, duplicates[0], "column appears more than once in the header")
+    if len(lines) < 2:
+        raise InputError(f"{path}: no data rows after the header")
+    data = _parse_rows(path, header, lines[1:])
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def _first_bad(mask: np.ndarray) -> tuple[int, int]:
+    """(first index, length of the first run) of True values in a 1-D mask."""
+    first = int(np.argmax(mask))
+    rest = ~mask[first:]
+    run = int(np.argmax(rest)) if rest.any() else len(rest)
+    return first, run
+
+
+def _numbered(path: Path, columns: dict, prefix: str) -> np.ndarray | None:
+    numbers = sorted(int(m.group(2)) for c in columns if (m := _NUMBERED.match(c))
+                     and m.group(1) == prefix)
+    if not numbers:
+        return None
+    if numbers != list(range(1, len(numbers) + 1)):
+        raise field_error(path, f"{prefix}_*", f"columns must be numbered 1..N without gaps, "
+                          f"got {numbers}")
+    return np.stack([columns[f"{prefix}_{i}"] for i in numbers], axis=1)
+
+
+def _group(path: Path, columns: dict, names: tuple[str, ...]) -> np.ndarray | None:
+    present = [n for n in names if n in columns]
+    if not present:
+        return None
+    if len(present) != len(names):
+        missing = [n for n in names if n not in columns]
+        raise field_error(path, missing[0], f"missing while {', '.join(present)} present "
+                          f"(the group {', '.join(names)} comes whole)")
+    return np.stack([columns[n] for n in names], axis=1)
+
+
+def _check_finite(path: Path, name: str, values: np.ndarray, *, required: bool,
+                  notes: list[str]) -> None:
+    """Non-finite values: an error in required columns, a warning (kept as NaN) otherwise."""
+    bad = ~np.isfinite(values)
+    if not bad.any():
+        return
+    first, run = _first_bad(bad)
+    message = (f"line {first + 2}: non-finite value ({values[first]}), run of {run} sample(s); "
+               f"{int(bad.sum())} in all")
+    if required:
+        raise field_error(path, name, message)
+    values[bad] = np.nan
+    notes.append(f"{path}: {name}: {message} (kept as NaN)")
+
+
+def _check_time(path: Path, t: np.ndarray, notes: list[str]) -> None:
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        row = int(np.argmax(steps <= 0)) + 1
+        raise field_error(path, "t", f"line {row + 2}: time {t[row]:g} s does not increase "
+                          f"(previous {t[row - 1]:g} s); time must be strictly increasing")
+    if len(steps) >= 2:
+        typical = float(np.median(steps))
+        jumps = np.flatnonzero(steps > GAP_FACTOR * typical)
+        if len(jumps):
+            row = int(jumps[0]) + 1
+            notes.append(f"{path}: t: line {row + 2}: sample-rate jump, step {steps[row - 1]:.4g} s "
+                         f"vs median {typical:.4g} s ({len(jumps)} such gap(s))")
+
+
+def _check_units(path: Path, log: dict) -> None:
+    """Errors for values whose magnitude says the unit is wrong (RPM, deg/s, g, mV)."""
+    norms = np.linalg.norm(log["quat"], axis=1)
+    if (np.abs(norms - 1.0) > 0.01).any():
+        row = int(np.argmax(np.abs(norms - 1.0) > 0.01))
+        raise field_error(path, "qw..qz", f"line {row + 2}: quaternion norm {norms[row]:.4g}, "
+                          "expected unit quaternions (scalar first)")
+    limits = (("rotor_speed", "rotor_*", MAX_ROTOR_SPEED, "rad/s; looks like RPM"),
+              ("body_rate", "wx..wz", MAX_BODY_RATE, "rad/s; looks like deg/s"))
+    for key, column, limit, hint in limits:
+        value = log.get(key)
+        if value is not None and np.nanmax(np.abs(value), initial=0.0) > limit:  # NaN skipped
+            row = int(np.nanargmax(np.nanmax(np.abs(value), axis=1)))
+            raise field_error(path, column, f"line {row + 2}: {np.nanmax(np.abs(value[row])):.5g} "
+                              f"exceeds {limit:g} {hint} (expected rad/s)")
+    accel = log.get("accel")
+    if accel is not None and np.isfinite(accel).any():
+        typical = float(np.nanmedian(np.linalg.norm(accel, axis=1)))
+        if 0.3 < typical < 3.0:
+            raise field_error(path, "ax..az", f"median |specific force| {typical:.3g}: looks "
+                              "like g; expected m/s^2 (about 9.81 at rest)")
+    command = log.get("rotor_command")
+    if command is not None and (np.nanmax(command, initial=0) > 1.05 or
+                                np.nanmin(command, initial=0) < -0.05):
+        row = int(np.nanargmax(np.nanmax(np.abs(command - 0.5), axis=1)))
+        raise field_error(path, "cmd_*", f"line {row + 2}: command outside 0-1 "
+                          f"({command[row].tolist()}); expected normalised commands")
+    vbat = log.get("vbat")
+    if vbat is not None and np.nanmax(vbat, initial=0) > 100.0:
+        row = int(np.nanargmax(vbat))
+        raise field_error(path, "vbat", f"line {row + 2}: {vbat[row]:g} V; looks like mV")
+
+
+def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
+    """Read and validate a flight log (``.csv`` or ``.csv.gz``); see the module docstring.
+
+    Raises :class:`~quadsim.errors.InputError` (one line: file, column, line) for bad input.
+    Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
+    columns) is described in ``FlightLog.notes`` and, with ``warn=True``, also warned as
+    :class:`~quadsim.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
+    dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
+    path = Path(path)
+    notes: list[str] = []
+    columns = read_log_columns(path)
+    missing = [c for c in _REQUIRED if c not in columns]
+    if missing:
+        raise field_error(path, missing[0], "required column missing (required: "
+                          f"{', '.join(_REQUIRED)})")
+    known = set(_REQUIRED) | {c for g in _GROUPS.values() for c in g} | {"vbat"}
+    unknown = sorted(c for c in columns if c not in known and not _NUMBERED.match(c))
+    if unknown:
+        notes.append(f"{path}: ignoring unknown column(s) {', '.join(unknown)}")
+    for name, values in columns.items():
+        if name in known or _NUMBERED.match(name):
+            _check_finite(path, name, values, required=name in _REQUIRED,
+                          notes=notes)
+    t = columns["t"]
+    _check_time(path, t, notes)
+    log = {key: _group(path, columns, names) for key, names in _GROUPS.items()}
+    log["rotor_speed"] = _numbered(path, columns, "rotor")
+    log["rotor_command"] = _numbered(path, columns, "cmd")
+    if (log["rotor_speed"] is not None and log["rotor_command"] is not None
+            and log["rotor_speed"].shape[1] != log["rotor_command"].shape[1]):
+        raise field_error(path, "cmd_*", f"{log['rotor_command'].shape[1]} command columns but "
+                          f"{log['rotor_speed'].shape[1]} rotor columns")
+    log["vbat"] = columns.get("vbat")
+    _check_units(path, log)
+    if warn:
+        for note in notes:
+            warnings.warn(note, QuadsimWarning, stacklevel=2)
+    return FlightLog(t=t, path=path, notes=tuple(notes), **log)
+
+
+# ----------------------------------------------------------------------------- writing
+
+
+def _columns_of(log: FlightLog) -> tuple[list[str], list[np.ndarray]]:
+    names, blocks = ["t"], [np.asarray(log.t, dtype=float)[:, None]]
+    for key, group in _GROUPS.items():
+        value = getattr(log, key)
+        if value is not None:
+            names += list(group)
+            blocks.append(np.asarray(value, dtype=float))
+    for key, prefix in (("rotor_speed", "rotor"), ("rotor_command", "cmd")):
+        value = getattr(log, key)
+        if value is not None:
+            names += [f"{prefix}_{i + 1}" for i in range(value.shape[1])]
+            blocks.append(np.asarray(value, dtype=float))
+    if log.vbat is not None:
+        names.append("vbat")
+        blocks.append(np.asarray(log.vbat, dtype=float)[:, None])
+    return names, blocks
+
+
+def log_bytes(log: FlightLog, *, gzipped: bool) -> bytes:
+    """The file contents :func:`write_log` writes (deterministic)."""
+    names, blocks = _columns_of(log)
+    buffer = io.StringIO()
+    buffer.write(",".join(names) + "\n")
+    np.savetxt(buffer, np.hstack(blocks), fmt=FLOAT_FORMAT, delimiter=",", newline="\n")
+    data = buffer.getvalue().replace("nan", "").encode("ascii")
+    if not gzipped:
+        return data
+    out = io.BytesIO()
+    with gzip.GzipFile(filename="", mode="wb", fileobj=out, mtime=0, compresslevel=6) as gz:
+        gz.write(data)
+    return out.getvalue()
+
+
+def write_log(path: str | Path, log: FlightLog) -> Path:
+    """Write ``log`` atomically as CSV, gzipped when the name ends in ``.gz``. Columns in
+    schema order; only the signals the log has. Same log -> same bytes."""
+    path = Path(path)
+    return atomic_write_bytes(path, log_bytes(log, gzipped=path.suffix == ".gz"))
