@@ -1,0 +1,300 @@
+"""Residual wrench: the force and torque a parameter set is missing, per sample of a flight log.
+
+The model says the rotors (and any effects it includes) push the vehicle with a wrench
+``(F_model, M_model)``; the log says what the vehicle actually did. Newton–Euler turns the
+measured motion into the wrench that must have acted::
+
+    F_meas = m * f_com                (body frame, N; f = specific force at the CoM)
+    M_meas = I w_dot + w x (I w)      (body frame, about the CoM, N m)
+
+and the residual is ``F_meas - F_model``, ``M_meas - M_model``: zero (up to sensor noise) when
+the model is complete. ``f`` comes from the accelerometer when the log has one (it measures
+the specific force at the body origin; the CoM offset adds ``w_dot x c + w x (w x c)``),
+otherwise from kinematics ``R^T (a_world + g z)`` with ``a_world`` the second derivative of
+position (or first of velocity).
+
+Differentiator
+--------------
+The log is first resampled onto a uniform grid (median step; linear interpolation,
+normalised-linear for quaternions), then every signal that enters the balance (accelerometer,
+body rate, velocity/position, rotor speeds) is smoothed and differentiated with the same
+Savitzky–Golay filter (``scipy.signal.savgol_filter``; default window 0.05 s, cubic). The
+filter is a symmetric FIR, so it is zero-phase: **no lag** between the differentiated motion
+and the rotor speeds, and because all signals pass the same filter the balance is not
+distorted by different delays. Its amplitude response is flat at low frequency and falls to
+-3 dB near ``1.1 / window`` for the smoothed value (about 22 Hz for 0.05 s, cubic); content
+above that is attenuated in both sides of the balance alike (see docs/gap.md for the table).
+
+Example::
+
+    >>> from quadsim.flightlog import load_log
+    >>> from quadsim.params import load_params
+    >>> from quadsim.residual import residual_wrench
+    >>> res = residual_wrench(load_log("flight.csv.gz"), load_params("crazyflie21"))
+    >>> res.force_body.shape, res.torque_world.shape        # (N, 3) each
+    >>> res.channels()                                      # (N, 6) Fx Fy Fz Mx My Mz
+
+Conventions: body x forward, y left, z up; quaternions scalar-first body-to-world; rotor
+speeds rad/s; all arrays have the sample axis first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from .effects.base import Effect, EffectContext, EffectSet
+from .errors import InputError
+from .flightlog import FlightLog, body_rate_from_quat
+from .frames import quat_normalize, rotate, rotate_inverse
+from .params import VehicleParams
+from .rotors import allocation_matrix
+
+__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "flight_states",
+           "resample_uniform", "savgol_response_cutoff", "model_wrench", "measured_wrench",
+           "residual_wrench", "DEFAULT_WINDOW_S"]
+
+#: Savitzky–Golay window (s) used unless told otherwise.
+DEFAULT_WINDOW_S = 0.05
+CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+CHANNEL_UNITS = ("N", "N", "N", "N m", "N m", "N m")
+
+
+@dataclass(frozen=True)
+class FlightStates:
+    """A log on a uniform grid with smoothed values and derivatives (all SI, sample axis first).
+
+    t (N,); position, velocity, accel_world (N, 3) world; quat (N, 4); body_rate,
+    body_accel (N, 3) body (rad/s, rad/s^2); specific_force (N, 3) body at the origin (m/s^2);
+    rotor_speed, rotor_accel (N, R) or None; command (N, R) normalised or None; vbat (N,) or
+    None; accel_source: "accelerometer" or "kinematics"; window_s, polyorder: the filter;
+    name: where the log came from.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    accel_world: np.ndarray
+    quat: np.ndarray
+    body_rate: np.ndarray
+    body_accel: np.ndarray
+    specific_force: np.ndarray
+    rotor_speed: np.ndarray | None
+    rotor_accel: np.ndarray | None
+    command: np.ndarray | None
+    vbat: np.ndarray | None
+    accel_source: str
+    window_s: float
+    polyorder: int
+    name: str = ""
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def take(self, index: np.ndarray) -> FlightStates:
+        """The states at the sample indices (or boolean mask) ``index``."""
+        def pick(value):
+            return None if value is None else value[index]
+
+        return FlightStates(self.t[index], self.position[index], self.velocity[index],
+                            self.accel_world[index], self.quat[index], self.body_rate[index],
+                            self.body_accel[index], self.specific_force[index],
+                            pick(self.rotor_speed), pick(self.rotor_accel), pick(self.command),
+                            pick(self.vbat), self.accel_source, self.window_s, self.polyorder,
+                            self.name)
+
+
+@dataclass(frozen=True)
+class ResidualWrench:
+    """Residual (measured minus model) wrench per sample.
+
+    force_body / torque_body (N, 3): body frame (N, N m); force_world / torque_world: the
+    same vectors in the world frame; measured_* and model_* the two sides of the balance
+    (body frame). ``channels()`` stacks the body residual as (N, 6) Fx Fy Fz Mx My Mz."""
+
+    t: np.ndarray
+    force_body: np.ndarray
+    torque_body: np.ndarray
+    force_world: np.ndarray
+    torque_world: np.ndarray
+    measured_force: np.ndarray
+    measured_torque: np.ndarray
+    model_force: np.ndarray
+    model_torque: np.ndarray
+    accel_source: str
+    window_s: float
+
+    def channels(self) -> np.ndarray:
+        return np.concatenate([self.force_body, self.torque_body], axis=-1)
+
+
+# ----------------------------------------------------------------------------- resampling
+
+
+def _quat_continuous(quat: np.ndarray) -> np.ndarray:
+    """Flip signs so that neighbouring quaternions are in the same hemisphere."""
+    quat = np.array(quat, dtype=float)
+    flips = np.sign(np.sum(quat[1:] * quat[:-1], axis=-1))
+    quat[1:] *= np.cumprod(np.where(flips == 0, 1.0, flips))[:, None]
+    return quat
+
+
+def resample_uniform(log: FlightLog, dt: float | None = None) -> FlightLog:
+    """``log`` on a uniform time grid (step ``dt``, default the median step), by linear
+    interpolation (quaternions: interpolated componentwise after a sign fix, renormalised)."""
+    t = np.asarray(log.t, dtype=float)
+    if len(t) < 2:
+        raise InputError(f"{log.path or 'log'}: t: fewer than 2 samples")
+    step = float(np.median(np.diff(t))) if dt is None else float(dt)
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step + 1e-9)) + 1)
+
+    def interp(value):
+        if value is None:
+            return None
+        value = np.asarray(value, dtype=float)
+        if value.ndim == 1:
+            return np.interp(grid, t, value)
+        return np.stack([np.interp(grid, t, value[:, i]) for i in range(value.shape[1])], -1)
+
+    quat = quat_normalize(interp(_quat_continuous(log.quat)))
+    return FlightLog(grid, interp(log.position), quat, interp(log.velocity),
+                     interp(log.body_rate), interp(log.accel), interp(log.rotor_speed),
+                     interp(log.rotor_command), interp(log.vbat), log.path)
+
+
+def savgol_response_cutoff(window_s: float, dt: float, polyorder: int = 3) -> float:
+    """-3 dB frequency (Hz) of the smoothing (deriv=0) Savitzky–Golay filter used here."""
+    from scipy.signal import freqz, savgol_coeffs
+
+    coeffs = savgol_coeffs(_window_samples(window_s, dt, polyorder), polyorder)
+    freq, response = freqz(coeffs, worN=4096, fs=1.0 / dt)
+    below = np.nonzero(np.abs(response) < 1 / np.sqrt(2))[0]
+    return float(freq[below[0]]) if len(below) else float(freq[-1])
+
+
+def _window_samples(window_s: float, dt: float, polyorder: int) -> int:
+    n = int(round(window_s / dt))
+    n += 1 - n % 2  # odd
+    return max(n, polyorder + 2 + (polyorder + 1) % 2)
+
+
+# ----------------------------------------------------------------------------- states
+
+
+def flight_states(log: FlightLog, *, window_s: float = DEFAULT_WINDOW_S, polyorder: int = 3,
+                  use_accelerometer: bool = True, gravity: float = 9.81,
+                  dt: float | None = None) -> FlightStates:
+    """Resample ``log`` and smooth/differentiate it with one Savitzky–Golay filter.
+
+    Raises :class:`InputError` if the log is shorter than the filter window."""
+    log = resample_uniform(log, dt)
+    step = float(log.t[1] - log.t[0])
+    window = _window_samples(window_s, step, polyorder)
+    if len(log.t) < window + 2:
+        raise InputError(f"{log.path or 'log'}: t: {len(log.t)} samples, fewer than the "
+                         f"{window}-sample smoothing window ({window_s} s)")
+
+    def smooth(x, deriv=0):
+        return savgol_filter(x, window, polyorder, deriv=deriv, delta=step, axis=0,
+                             mode="interp")
+
+    quat = quat_normalize(smooth(_quat_continuous(log.quat)))
+    rate_raw = log.body_rate if log.body_rate is not None else body_rate_from_quat(log.t, log.quat)
+    body_rate, body_accel = smooth(rate_raw), smooth(rate_raw, 1)
+    if log.velocity is not None:
+        velocity, accel_world = smooth(log.velocity), smooth(log.velocity, 1)
+    else:
+        velocity, accel_world = smooth(log.position, 1), smooth(log.position, 2)
+    if use_accelerometer and log.accel is not None and np.all(np.isfinite(log.accel)):
+        specific_force, source = smooth(log.accel), "accelerometer"
+    else:
+        specific_force = rotate_inverse(quat, accel_world + np.array([0.0, 0.0, gravity]))
+        source = "kinematics"
+    rotor_speed = rotor_accel = None
+    if log.rotor_speed is not None:
+        rotor_speed, rotor_accel = smooth(log.rotor_speed), smooth(log.rotor_speed, 1)
+    command = None if log.rotor_command is None else smooth(log.rotor_command)
+    vbat = None if log.vbat is None else smooth(log.vbat)
+    return FlightStates(log.t, smooth(log.position), velocity, accel_world, quat, body_rate,
+                        body_accel, specific_force, rotor_speed, rotor_accel, command, vbat,
+                        source, float(window_s), int(polyorder),
+                        str(log.path) if log.path is not None else "")
+
+
+# ----------------------------------------------------------------------------- the balance
+
+
+def _effect_set(effects: Iterable[Effect] | EffectSet | None) -> EffectSet:
+    if effects is None:
+        return EffectSet(())
+    if isinstance(effects, EffectSet):
+        return effects
+    return EffectSet(tuple(effects))
+
+
+def _require_rotors(states: FlightStates, params: VehicleParams) -> np.ndarray:
+    if states.rotor_speed is None:
+        raise InputError(f"{states.name or 'log'}: rotor_1..rotor_N: the log has no measured "
+                         "rotor speeds; the residual wrench needs them")
+    if states.rotor_speed.shape[1] != params.rotor_count:
+        raise InputError(f"{states.name or 'log'}: rotor_1..rotor_N: {states.rotor_speed.shape[1]}"
+                         f" rotor columns, the model {params.name!r} has {params.rotor_count} rotors")
+    return states.rotor_speed
+
+
+def model_wrench(states: FlightStates, params: VehicleParams,
+                 effects: Iterable[Effect] | EffectSet | None = None,
+                 *, rotor_speed: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, VehicleParams]:
+    """Body-frame force (N, 3) and torque about the CoM (N, 3) that the model (``params``
+    plus ``effects``) predicts from the measured states and rotor speeds; also the effective
+    parameter set (after the effects' ``apply_to_params``)."""
+    effect_set = _effect_set(effects)
+    speed = _require_rotors(states, params) if rotor_speed is None else rotor_speed
+    vehicle = effect_set.apply_to_params(params)
+    wind = effect_set.air_velocity(states.t, states.position)
+    vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
+    accel = states.rotor_accel if states.rotor_accel is not None else np.zeros_like(speed)
+    ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
+                        states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat)
+    loads = effect_set.loads(ctx)
+    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle).T
+    offset_force = loads.thrust_offset[..., None] * vehicle.rotor_axes          # (N, R, 3)
+    arms = vehicle.rotor_positions - vehicle.com
+    force = wrench[:, :3] + offset_force.sum(1) + rotate_inverse(states.quat, loads.force_world)
+    torque = (wrench[:, 3:] + np.cross(arms, offset_force).sum(1) + loads.torque_body)
+    return force, torque, vehicle
+
+
+def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
+    """Body-frame force (N, 3) and torque about the CoM (N, 3) implied by the measured motion
+    for a vehicle with ``params``' mass, CoM and inertia (Newton–Euler)."""
+    w, w_dot, com = states.body_rate, states.body_accel, params.com
+    lever = np.cross(w_dot, com) + np.cross(w, np.cross(w, com))
+    force = params.mass * (states.specific_force + lever)
+    inertia = params.inertia
+    torque = w_dot @ inertia.T + np.cross(w, w @ inertia.T)
+    return force, torque
+
+
+def residual_wrench(log: FlightLog | FlightStates, params: VehicleParams,
+                    effects: Sequence[Effect] | EffectSet | None = None, *,
+                    window_s: float = DEFAULT_WINDOW_S, polyorder: int = 3,
+                    use_accelerometer: bool = True) -> ResidualWrench:
+    """The wrench the model (``params`` + ``effects``) is missing, per sample of ``log``.
+
+    ``log`` may be a :class:`~quadsim.flightlog.FlightLog` (it is resampled and smoothed
+    here) or prepared :class:`FlightStates`. Raises :class:`InputError` when the log has no
+    rotor speeds or a different rotor count than the model."""
+    states = log if isinstance(log, FlightStates) else flight_states(
+        log, window_s=window_s, polyorder=polyorder, use_accelerometer=use_accelerometer,
+        gravity=params.gravity)
+    model_force, model_torque, vehicle = model_wrench(states, params, effects)
+    meas_force, meas_torque = measured_wrench(states, vehicle)
+    force, torque = meas_force - model_force, meas_torque - model_torque
+    return ResidualWrench(states.t, force, torque, rotate(states.quat, force),
+                          rotate(states.quat, torque), meas_force, meas_torque, model_force,
+                          model_torque, states.accel_source, states.window_s)
