@@ -1,5 +1,108 @@
-"""Unmodelled physical effects, one module each, behind one interface (:mod:`.base`)."""
+"""Unmodelled physical effects, one module each, behind one interface (:mod:`.base`).
 
+The registry maps each effect's name to its class; effects are built from keywords or from
+the command-line spec ``name:param=value,param=value``::
+
+    >>> from quadsim.effects import EFFECTS, make_effect, parse_effect_spec, EffectSet
+    >>> sorted(EFFECTS)                                   # the library
+    >>> ge = parse_effect_spec("ground_effect:gain=1.5")
+    >>> lag = make_effect("motor_lag", time_constant=0.03)
+    >>> effects = EffectSet((ge, lag))                   # pass to quadsim.engines.simulate
+
+Every effect has named parameters with units (``EFFECTS[name].parameters``); each
+parameter's ``off`` value is the default, and with all parameters at ``off`` the effect does
+nothing. :func:`make_effect` and :func:`parse_effect_spec` check names and the plausible
+bounds and raise :class:`~quadsim.errors.InputError` (one line) on a typo or a wild value.
+See ``docs/effects.md`` for the formulas and sources (also in each module's docstring).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from ..errors import InputError
 from .base import Effect, EffectBase, EffectContext, EffectLoads, EffectParameter, EffectSet
+from .battery_sag import BatterySag
+from .body_drag import BodyDrag
+from .com_offset import ComOffset
+from .ground_effect import GroundEffect
+from .inertia_error import InertiaError
+from .mass_offset import MassOffset
+from .motor_lag import MotorLag
+from .rotor_drag import RotorDrag
+from .thrust_curve import ThrustCurve
+from .thrust_mismatch import ThrustMismatch
+from .wind import Wind
 
-__all__ = ["Effect", "EffectBase", "EffectContext", "EffectLoads", "EffectParameter", "EffectSet"]
+__all__ = ["Effect", "EffectBase", "EffectContext", "EffectLoads", "EffectParameter",
+           "EffectSet", "EFFECTS", "make_effect", "parse_effect_spec", "effect_set_from_specs",
+           "describe_effects"]
+
+#: name -> effect class, for every effect in the library.
+EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
+    MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
+    ComOffset, MassOffset, InertiaError, Wind)}
+
+# gyroscopic.py belongs to the engines work; register it when it is present.
+try:
+    _gyro = importlib.import_module(".gyroscopic", __name__)
+except ModuleNotFoundError:
+    _gyro = None
+if _gyro is not None:
+    for _value in vars(_gyro).values():
+        if (isinstance(_value, type) and issubclass(_value, EffectBase)
+                and _value is not EffectBase and getattr(_value, "name", "")):
+            EFFECTS[_value.name] = _value
+
+
+def make_effect(name: str, **values: float) -> EffectBase:
+    """Build effect ``name`` with parameter ``values``; unknown names/parameters and values
+    outside the parameter's plausible bounds raise :class:`InputError`."""
+    if name not in EFFECTS:
+        raise InputError(f"effect {name!r}: unknown effect; valid: {', '.join(sorted(EFFECTS))}")
+    cls = EFFECTS[name]
+    specs = {p.name: p for p in cls.parameters}
+    for key, value in values.items():
+        if key not in specs:
+            raise InputError(f"effect {name}: unknown parameter {key!r}; valid: "
+                             f"{', '.join(specs)}")
+        spec = specs[key]
+        if not spec.lower <= float(value) <= spec.upper:
+            raise InputError(f"effect {name}: {key} = {value:g} {spec.unit} outside the "
+                             f"plausible range [{spec.lower:g}, {spec.upper:g}]")
+    return cls(**{k: float(v) for k, v in values.items()})
+
+
+def parse_effect_spec(spec: str) -> EffectBase:
+    """``"name"`` or ``"name:param=value,param=value"`` -> effect (see :func:`make_effect`)."""
+    name, _, rest = spec.strip().partition(":")
+    values: dict[str, float] = {}
+    for item in filter(None, (part.strip() for part in rest.split(","))):
+        key, eq, text = item.partition("=")
+        if not eq:
+            raise InputError(f"effect spec {spec!r}: {item!r} is not param=value")
+        try:
+            values[key.strip()] = float(text)
+        except ValueError:
+            raise InputError(f"effect spec {spec!r}: {key.strip()}: {text!r} is not a number") \
+                from None
+    return make_effect(name.strip(), **values)
+
+
+def effect_set_from_specs(specs: list[str]) -> EffectSet:
+    """An :class:`EffectSet` from command-line specs; one effect may appear only once."""
+    effects = [parse_effect_spec(s) for s in specs]
+    names = [e.name for e in effects]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise InputError(f"effect {repeated[0]!r} given more than once; merge its parameters")
+    return EffectSet(tuple(effects))
+
+
+def describe_effects(effects: EffectSet) -> list[dict]:
+    """JSON-ready description (name, values, units) of each effect, for truth sidecars."""
+    out = []
+    for effect in effects.effects:
+        units = {p.name: p.unit for p in effect.parameters}
+        out.append({"name": effect.name, "values": effect.values(), "units": units})
+    return out

@@ -1,0 +1,34 @@
+"""com_offset: the centre of mass is not where the model puts it.
+
+Formula: ``com' = com + (x, y, z)`` (m, body frame); the inertia about the (new) CoM is kept.
+A shifted CoM moves every rotor's moment arm, ``tau = sum_i (r_i - com') x f_i``, so at hover
+the vehicle needs a constant trim torque ``-(x, y) x m g``: with all rotors equal it tips
+towards the offset (e.g. Bouabdallah & Siegwart 2007, "Full control of a quadrotor", IROS;
+Mahony, Kumar & Corke, IEEE RAM 2012: the CoM is assumed at the rotor-plane centre). A
+battery mounted 5 mm off centre on a 37 g Crazyflie is a typical size.
+
+Static effect: engines build their model from ``apply_to_params``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import EffectBase, EffectParameter
+
+__all__ = ["ComOffset"]
+
+
+class ComOffset(EffectBase):
+    """Shift of the centre of mass in body axes."""
+
+    name = "com_offset"
+    parameters = tuple(EffectParameter(axis, "m", 0.0, -0.1, 0.1,
+                                       f"CoM shift along body {axis} (m)")
+                       for axis in ("x", "y", "z"))
+
+    def apply_to_params(self, params):
+        if self.is_off():
+            return params
+        return params.replace(com=np.asarray(params.com, dtype=float) +
+                              np.array([self.x, self.y, self.z]))

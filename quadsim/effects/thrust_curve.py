@@ -1,0 +1,43 @@
+"""thrust_curve: rotor thrust that is not purely quadratic in rotor speed.
+
+Formula (per rotor, speed Omega in rad/s)::
+
+    T(Omega) = b Omega^2 + linear * Omega + offset          (N, along the rotor axis)
+
+The nominal model keeps only ``b Omega^2`` (momentum theory with a constant thrust
+coefficient, e.g. Bouabdallah, "Design and control of quadrotors", EPFL thesis 2007, eq. 2.4).
+Bench sweeps show a linear term: thrust-stand fits of the form T = k2 Omega^2 + k1 Omega + k0
+(e.g. the 2015 report's force-lift data, and Crazyflie identification by Förster, "System
+identification of the Crazyflie 2.0 nano quadrocopter", ETH 2015, table 3.3, which fits a
+quadratic with linear and constant terms). The extra terms enter as a thrust offset along
+each rotor axis, acting at the hub; the drag torque is left at ``d Omega^2``.
+
+Example: ``make_effect("thrust_curve", linear=-2e-4)`` for the 0.84 kg testbed lowers the
+thrust at 460 rad/s (hover) by 0.092 N per rotor (about 4.5 % of the hover thrust).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import EffectBase, EffectLoads, EffectParameter
+
+__all__ = ["ThrustCurve"]
+
+
+class ThrustCurve(EffectBase):
+    """Linear and constant thrust terms added to ``b Omega^2``."""
+
+    name = "thrust_curve"
+    parameters = (
+        EffectParameter("linear", "N s/rad", 0.0, -1e-2, 1e-2,
+                        "thrust per rotor speed, added to b Omega^2"),
+        EffectParameter("offset", "N", 0.0, -1.0, 1.0, "constant thrust per rotor"),
+    )
+
+    def loads(self, ctx):
+        speed = np.asarray(ctx.rotor_speed, dtype=float)
+        batch, rotors = speed.shape
+        loads = EffectLoads.neutral(batch, rotors)
+        loads.thrust_offset = self.linear * speed + self.offset
+        return loads
