@@ -1,0 +1,217 @@
+"""Build the vehicle's MJCF from a CAD folder: ``python -m quadsim.build_mjcf cad/``.
+
+The body's mass, centre of mass and full inertia come from the meshes
+(:func:`quadsim.massprops.vehicle_mass_properties`) and are written as an explicit
+``<inertial fullinertia=...>`` so MuJoCo never recomputes them; the rotor sites and
+actuators come from the manifest's rotors; b, d and the speed range come from a parameter
+set (``--params``, default ``physical``). Meshes are visual geoms (class ``visual``, no mass)
+referenced relative to the MJCF with the mesh unit's scale (``0.001`` for mm); parts marked
+``collision = "box"|"cylinder"`` get a simple collision geom of their bounding shape.
+
+The actuator control is the squared rotor speed Omega^2 in rad^2/s^2 (see
+:mod:`quadsim.mjcf`). Example::
+
+    python -m quadsim.build_mjcf cad/                         # -> models/testbed.xml
+    python -m quadsim.build_mjcf cad/ -o /tmp/x.xml --params computational
+    python -m quadsim.build_mjcf cad/ --params physical --inertial params
+
+Library::
+
+    >>> from quadsim.build_mjcf import build_model
+    >>> model = build_model("cad")          # BuiltModel: xml text, params, mass properties
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .assembly import MESH_UNITS, Assembly, load_assembly
+from .errors import InputError, ModelError, run_cli
+from .fileio import atomic_write_text
+from .massprops import MassProperties, vehicle_mass_properties
+from .mjcf import vehicle_xml
+from .params import MODELS_DIR, Rotor, VehicleParams, load_params
+
+__all__ = ["BuiltModel", "build_model", "cad_params", "mesh_geoms_xml", "parts_table",
+           "write_model", "main"]
+
+
+@dataclass(frozen=True, eq=False)
+class BuiltModel:
+    """The MJCF text, the parameter set it was built from, the CAD mass properties, and
+    a note saying which inertial was written and why."""
+
+    xml: str
+    params: VehicleParams
+    mass_properties: MassProperties
+    assembly: Assembly
+    inertial_note: str
+
+
+def _vec(values) -> str:
+    return " ".join(f"{float(v):.12g}" for v in np.ravel(values))
+
+
+def _quat(rotation: np.ndarray) -> str:
+    return _vec(Rotation.from_matrix(rotation).as_quat(scalar_first=True))
+
+
+def cad_params(base: VehicleParams, assembly: Assembly, props: MassProperties, *,
+               inertial: str = "cad") -> VehicleParams:
+    """``base`` with the manifest's rotor layout and (``inertial="cad"``) the CAD mass
+    properties; b, d, speed range, radius and environment stay those of ``base``."""
+    rotors = tuple(Rotor(r.name, r.position.copy(), r.axis.copy(), r.spin)
+                   for r in assembly.rotors)
+    source = f"CAD meshes in {assembly.cad_dir.name}/ ({assembly.manifest.name}), trimesh"
+    sources = dict(base.sources, rotor_layout=source)
+    changes: dict = {"rotors": rotors, "sources": sources, "name": assembly.name}
+    if inertial == "cad":
+        changes.update(mass=props.mass, com=props.com, inertia=props.inertia)
+        sources.update(mass=source, com=source, inertia=source)
+    elif inertial != "params":
+        raise InputError(f"--inertial: {inertial!r}; valid: cad, params")
+    return base.replace(**changes)
+
+
+def mesh_geoms_xml(assembly: Assembly, xml_dir: Path) -> tuple[str, str]:
+    """``(assets, geoms)`` MJCF fragments: one mesh asset per part (file relative to
+    ``xml_dir``, scaled to metres), one visual geom per placement, and a simple collision
+    geom (box or cylinder around the part's mesh) where the part asks for one."""
+    scale = _vec([MESH_UNITS[assembly.mesh_unit]] * 3)
+    assets, geoms = [], []
+    for part in assembly.parts:
+        file = Path(os.path.relpath(part.mesh_path, xml_dir.resolve())).as_posix()
+        assets.append(f'    <mesh name="{part.name}" file="{file}" scale="{scale}"/>')
+        low, high = part.mesh.bounds
+        centre, half = 0.5 * (low + high), 0.5 * (high - low)
+        for p in part.placements:
+            geoms.append(f'      <geom name="{part.name}:{p.name}" class="visual" type="mesh" '
+                         f'mesh="{part.name}" pos="{_vec(p.position)}" '
+                         f'quat="{_quat(p.rotation)}"/>')
+            pos = _vec(p.rotation @ centre + p.position)
+            if part.collision == "box":
+                size = _vec(half)
+            elif part.collision == "cylinder":
+                size = _vec([max(half[0], half[1]), half[2]])
+            else:
+                continue
+            geoms.append(f'      <geom class="collision" type="{part.collision}" '
+                         f'size="{size}" pos="{pos}" quat="{_quat(p.rotation)}"/>')
+    return "\n".join(assets) + "\n", "\n".join(geoms)
+
+
+def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
+                output: str | Path | None = None, inertial: str = "cad",
+                hull: bool = False) -> BuiltModel:
+    """Load the CAD folder and the parameter set and produce the MJCF text (not written).
+
+    ``output`` is where the MJCF will live (mesh paths are made relative to it); default
+    ``models/<assembly name>.xml``."""
+    assembly = load_assembly(cad_dir, hull=hull)
+    props = vehicle_mass_properties(assembly)
+    base = load_params(params, check=inertial != "cad")
+    output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
+    vehicle = cad_params(base, assembly, props, inertial=inertial)
+    if inertial == "cad":
+        note = ("inertial from the CAD meshes (trimesh): mass/CoM/inertia of the parts in "
+                f"{assembly.manifest}")
+        if "cad" not in base.sources.get("inertia", "").lower():
+            note += (f"; parameter set {base.name!r} has its own mass {base.mass:.6g} kg and "
+                     f"inertia ({base.sources.get('inertia', 'no source')}), not used here "
+                     "(--inertial params writes those instead)")
+    else:
+        note = (f"inertial from parameter set {base.name!r} ({base.path}): "
+                f"{base.sources.get('inertia', '')}; the CAD mass properties are NOT used "
+                "(--inertial params)")
+    assets, geoms = mesh_geoms_xml(assembly, output.parent)
+    xml = vehicle_xml(vehicle, visual_geoms=geoms, assets=assets,
+                      comment=f"generated by python -m quadsim.build_mjcf from "
+                              f"{assembly.manifest.name}; {note}; ctrl = Omega^2 (rad^2/s^2)")
+    return BuiltModel(xml, vehicle, props, assembly, note)
+
+
+def write_model(model: BuiltModel, output: str | Path) -> Path:
+    """Check that MuJoCo compiles ``model`` at ``output``'s location, then write it
+    atomically. Nothing is written when the check fails (ModelError)."""
+    import mujoco
+
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    probe = output.parent / f".{output.stem}.check.xml"
+    try:
+        probe.write_text(model.xml, encoding="utf-8")
+        mujoco.MjModel.from_xml_path(str(probe))
+    except ValueError as exc:
+        raise ModelError(f"{output}: MuJoCo refuses the generated model: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        probe.unlink(missing_ok=True)
+    return atomic_write_text(output, model.xml)
+
+
+def parts_table(props: MassProperties) -> str:
+    """Human table: one row per placed part (mass g, CoM mm, inertia about its own CoM in
+    body axes, kg m^2) and the vehicle total (inertia about the vehicle CoM)."""
+    head = (f"{'part':<20} {'inst':<6} {'mass g':>8} {'CoM x,y,z mm':>26} "
+            f"{'Ixx':>10} {'Iyy':>10} {'Izz':>10} {'Ixy':>10} {'Ixz':>10} {'Iyz':>10}")
+    rows = [head, "-" * len(head)]
+
+    def row(name, inst, mass, com, inertia):
+        c = ",".join(f"{1000 * v:8.2f}" for v in com)
+        i = inertia
+        return (f"{name:<20} {inst:<6} {1000 * mass:8.3f} {c:>26} " + " ".join(
+            f"{v:10.3e}" for v in (i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2])))
+
+    for p in props.parts:
+        rows.append(row(p.part, p.placement, p.mass, p.com, p.inertia))
+    rows.append("-" * len(head))
+    rows.append(row("TOTAL (about CoM)", "", props.mass, props.com, props.inertia))
+    return "\n".join(rows)
+
+
+@run_cli
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m quadsim.build_mjcf",
+        description="Write a MuJoCo MJCF of the vehicle in a CAD folder: mass properties "
+                    "from the meshes (explicit fullinertia at the CoM), mesh visual geoms, "
+                    "simple collision geoms, one site and one actuator per rotor "
+                    "(ctrl = Omega^2 in rad^2/s^2, gear from b and d). Prints the parts "
+                    "table and the total.")
+    parser.add_argument("cad_dir", type=Path, help="CAD folder with meshes and one manifest "
+                                                   "*.toml (e.g. cad/)")
+    parser.add_argument("-o", "--output", type=Path, default=None,
+                        help="MJCF to write (default: models/<assembly name>.xml)")
+    parser.add_argument("--params", default="physical",
+                        help="parameter set NAME in models/ or a TOML FILE giving b, d and the "
+                             "speed range (default: physical)")
+    parser.add_argument("--inertial", choices=("cad", "params"), default="cad",
+                        help="which mass properties the <inertial> gets: the CAD meshes "
+                             "(default) or the parameter set's own")
+    parser.add_argument("--hull", action="store_true",
+                        help="replace a non-watertight or badly wound mesh by its convex hull "
+                             "(warns; mass properties become approximate)")
+    args = parser.parse_args(argv)
+    model = build_model(args.cad_dir, params=args.params, output=args.output,
+                        inertial=args.inertial, hull=args.hull)
+    output = args.output or MODELS_DIR / f"{model.assembly.name}.xml"
+    print(parts_table(model.mass_properties))
+    print(f"note: {model.inertial_note}")
+    written = write_model(model, output)
+    print(f"wrote {written} ({model.params.rotor_count} rotors, ctrl = Omega^2 in rad^2/s^2, "
+          f"b = {model.params.thrust_factor:.6g} N s^2/rad^2, d = "
+          f"{model.params.drag_factor:.6g} N m s^2/rad^2 from {model.params.sources.get('rotors.thrust_factor', '?')})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
