@@ -1,0 +1,211 @@
+"""MuJoCo runner: the MJCF of :mod:`quadsim.mjcf`, stepped with RK4, one or many at once.
+
+All simulations of a call are stepped together by :class:`mujoco.batch.Batch` (one thread per
+CPU; bit-identical to a plain loop). Inputs are rotor speed commands held over each control
+period; the runner turns them into actuator controls ``ctrl = Omega^2`` (rad^2/s^2). The
+model is compiled without a floor (the analytic reference has no ground) and with MuJoCo's
+fluid drag off. Use :func:`quadsim.engines.simulate` as the front door.
+
+State convention (checked against mujoco 4.0 by ``tests/test_mujoco_engine.py``): the free
+joint's ``qpos = [x, y, z, qw, qx, qy, qz]`` is the body-origin position (world) and the
+body-to-world quaternion; ``qvel[0:3]`` is the body-origin velocity in the world frame and
+``qvel[3:6]`` the angular velocity in the body frame, i.e. the shared :mod:`quadsim.trajectory`
+convention, so no conversion is needed.
+
+Effects (generic, through the hooks of :mod:`quadsim.effects.base`)
+------------------------------------------------------------------
+Without effects a control period is one ``Batch.step(nstep=n)`` call. With effects the runner
+steps one timestep at a time and, once per step for the whole batch,
+
+* integrates the rotor-speed dynamics (if an effect defines them) over the step with RK4 on
+  the held command, and drives the actuators with the step's mean ``Omega^2`` (Simpson), so
+  that thrust is not half a step late;
+* evaluates ``air_velocity`` and ``loads`` at the step's midpoint (time, rotor speed, and the
+  body state predicted from the last accelerations);
+* applies the thrust scale through the controls (``ctrl = scale * mean Omega^2``: the
+  actuators are linear in ctrl, so thrust and drag torque scale exactly, in the body frame, at
+  every RK4 stage), and everything else the effects add (thrust offsets, world force, body
+  torque) through ``xfrc_applied`` as a world force at the CoM and a world torque.
+
+Per-simulation parameter sets (effects such as mass_offset change the vehicle) compile one
+model per distinct set and run them through ``Batch.set_models``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import mujoco
+import numpy as np
+from mujoco import batch as mjbatch
+
+from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
+from .errors import ModelError, SimulationError
+from .frames import quat_derivative, quat_normalize, quat_to_rotmat
+from .mjcf import BODY_NAME, vehicle_xml
+from .params import VehicleParams, inertia_problems
+
+__all__ = ["compile_model", "run_mujoco", "default_timestep", "DEFAULT_MAX_TIMESTEP"]
+
+#: Largest MuJoCo timestep (s) used by default; the timestep always divides the control period.
+DEFAULT_MAX_TIMESTEP = 1e-3
+
+
+def default_timestep(control_period: float, max_timestep: float = DEFAULT_MAX_TIMESTEP) -> float:
+    """The largest timestep <= ``max_timestep`` that divides ``control_period`` exactly."""
+    substeps = max(1, int(np.ceil(control_period / max_timestep - 1e-9)))
+    return control_period / substeps
+
+
+def compile_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
+    """Compile the vehicle for simulation (RK4, no floor, controls not clamped).
+
+    Raises :class:`ModelError` naming the value MuJoCo refuses (e.g. an inertia that breaks
+    the triangle inequality, as the report's published one does)."""
+    where = params.path or params.name
+    problems = inertia_problems(params.inertia)
+    if problems:
+        raise ModelError(f"MuJoCo refuses parameter set {where}: body.inertia "
+                         + "; ".join(problems))
+    try:
+        model = mujoco.MjModel.from_xml_string(
+            vehicle_xml(params, timestep=timestep, integrator="RK4", floor=False))
+    except ValueError as exc:
+        raise ModelError(f"MuJoCo refuses parameter set {where}: {' '.join(str(exc).split())}"
+                         ) from None
+    # Commands are clipped to the rotor range before they get here; effects may scale thrust
+    # beyond it (ctrl = scale * Omega^2), which MuJoCo must not clamp.
+    model.actuator_ctrllimited[:] = 0
+    return model
+
+
+def _make_batch(params: Sequence[VehicleParams], timestep: float, nthread: int
+                ) -> tuple[mjbatch.Batch, int]:
+    models: dict[int, mujoco.MjModel] = {}
+    for p in params:
+        if id(p) not in models:
+            models[id(p)] = compile_model(p, timestep)
+    first = models[id(params[0])]
+    threads = 1 if len(params) == 1 else nthread
+    batch = mjbatch.Batch(first, nsim=len(params), nthread=threads)
+    if len(models) > 1:
+        batch.set_models([models[id(p)] for p in params])
+    return batch, mujoco.mj_name2id(first, mujoco.mjtObj.mjOBJ_BODY, BODY_NAME)
+
+
+def _rotor_step(effects: BatchEffects, t: float, dt: float, command: np.ndarray,
+                omega: np.ndarray):
+    """Rotor speeds at mid-step and end of step (two RK4 half steps), the step's mean
+    Omega^2 (Simpson) and the mid-step rotor acceleration."""
+    batch = command.shape[0]
+    rate = lambda tt, w: effects.rotor_speed_rate(np.full(batch, tt), command, w)  # noqa: E731
+
+    def rk4(t0, w0, h):
+        k1 = rate(t0, w0)
+        k2 = rate(t0 + h / 2, w0 + h / 2 * k1)
+        k3 = rate(t0 + h / 2, w0 + h / 2 * k2)
+        k4 = rate(t0 + h, w0 + h * k3)
+        return w0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    mid = rk4(t, omega, dt / 2)
+    end = rk4(t + dt / 2, mid, dt / 2)
+    mean_sq = (omega**2 + 4 * mid**2 + end**2) / 6
+    return mid, end, mean_sq, rate(t + dt / 2, mid)
+
+
+def _midpoint_state(qpos, qvel, qacc, dt):
+    """Body state half a step ahead, predicted from the last computed accelerations."""
+    h = dt / 2
+    position = qpos[:, 0:3] + qvel[:, 0:3] * h + 0.5 * qacc[:, 0:3] * h * h
+    velocity = qvel[:, 0:3] + qacc[:, 0:3] * h
+    body_rate = qvel[:, 3:6] + qacc[:, 3:6] * h
+    quat = quat_normalize(qpos[:, 3:7]
+                          + quat_derivative(qpos[:, 3:7], qvel[:, 3:6] + qacc[:, 3:6] * h / 2) * h)
+    return position, velocity, quat, body_rate
+
+
+def _effect_step(batch, body_id, body, effects, t, dt, command, omega):
+    """One timestep with effects; returns the rotor speeds at the end of the step."""
+    qpos, qvel, qacc = batch.bind("qpos"), batch.bind("qvel"), batch.bind("qacc")
+    if effects.rotor_dynamics:
+        mid, end, mean_sq, accel = _rotor_step(effects, t, dt, command, omega)
+    else:
+        mid, end, mean_sq, accel = command, command, command**2, np.zeros_like(command)
+    scale = np.ones_like(command)
+    if effects.active:
+        position, velocity, quat, body_rate = _midpoint_state(qpos, qvel, qacc, dt)
+        loads = effects.loads(np.full(len(command), t + dt / 2), position, velocity, quat,
+                              body_rate, mid, accel)
+        force_body, torque_body = extra_wrench(body, loads, mid, include_scale=False)
+        rot = quat_to_rotmat(quat)
+        xfrc = batch.bind("xfrc_applied")
+        xfrc[:, body_id, 0:3] = np.einsum("bij,bj->bi", rot, force_body) + loads.force_world
+        xfrc[:, body_id, 3:6] = np.einsum("bij,bj->bi", rot, torque_body)
+        scale = loads.thrust_scale
+    batch.bind("ctrl")[:] = scale * mean_sq
+    _step(batch, 1)
+    return end
+
+
+def _step(batch, nstep):
+    try:
+        batch.step(nstep=nstep)
+    except mjbatch.SimulationError as exc:
+        raise SimulationError(f"mujoco engine: {' '.join(str(exc).split())}") from None
+
+
+def _check(qpos, qvel, time, expected_t):
+    bad = ~np.all(np.isfinite(qpos), 1) | ~np.all(np.isfinite(qvel), 1) \
+        | (np.abs(time - expected_t) > 1e-6) \
+        | (np.abs(qpos[:, 0:3]).max(1) > STATE_BOUND) | (np.abs(qvel).max(1) > STATE_BOUND)
+    if bad.any():
+        raise SimulationError(
+            f"mujoco engine: simulation(s) {np.flatnonzero(bad).tolist()} diverged before "
+            f"t = {expected_t:.4g} s (NaN, MuJoCo reset after a bad acceleration, or state "
+            f"beyond {STATE_BOUND:g})")
+
+
+def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
+               command_fn: Callable[[int, dict], np.ndarray], periods: int,
+               control_period: float, *, timestep: float | None = None,
+               nthread: int = 0) -> dict:
+    """Advance B simulations ``periods`` control periods in MuJoCo (same contract and output
+    as :func:`quadsim.analytic.run_analytic`). ``timestep`` must divide ``control_period``
+    (default :func:`default_timestep`); ``nthread`` 0 uses every CPU."""
+    dt = timestep or default_timestep(control_period)
+    substeps = int(round(control_period / dt))
+    if abs(substeps * dt - control_period) > 1e-9 * control_period:
+        raise ValueError(f"timestep {dt} does not divide control period {control_period}")
+    batch, body_id = _make_batch(params, dt, nthread)
+    body = body_arrays(params)
+    batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
+    qpos[:, 0:3], qpos[:, 3:7] = initial["position"], quat_normalize(initial["quat"])
+    qvel[:, 0:3], qvel[:, 3:6] = initial["velocity"], initial["body_rate"]
+    batch.forward()
+    stepwise = effects.active or effects.rotor_dynamics
+    omega = np.array(initial["rotor_speed"], dtype=float)
+    samples, command = [], None
+    for k in range(periods + 1):
+        state = {"t": np.full(len(params), k * control_period), "position": qpos[:, 0:3].copy(),
+                 "velocity": qvel[:, 0:3].copy(), "quat": qpos[:, 3:7].copy(),
+                 "body_rate": qvel[:, 3:6].copy(), "rotor_speed": omega.copy()}
+        if k < periods:
+            command = np.array(command_fn(k, state), dtype=float)
+            if not effects.rotor_dynamics:
+                state["rotor_speed"] = omega = command.copy()
+        samples.append((state, command))
+        if k == periods:
+            break
+        if stepwise:
+            for j in range(substeps):
+                omega = _effect_step(batch, body_id, body, effects,
+                                     k * control_period + j * dt, dt, command, omega)
+        else:
+            batch.bind("ctrl")[:] = command**2
+            _step(batch, substeps)
+        _check(qpos, qvel, batch.bind("time"), (k + 1) * control_period)
+    out = {name: np.stack([s[name] for s, _ in samples], axis=1)
+           for name in ("position", "velocity", "quat", "body_rate", "rotor_speed")}
+    out["rotor_command"] = np.stack([c for _, c in samples], axis=1)
+    return out
