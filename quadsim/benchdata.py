@@ -45,6 +45,8 @@ __all__ = [
     "load_cfd_table",
     "load_physical_measurements",
     "load_thrust_stand",
+    "load_testbed_constants",
+    "load_torque_thrust_ratio",
 ]
 
 #: Folder of the transcribed report tables shipped with the package.
@@ -55,7 +57,8 @@ REPORT_GRAVITY = 9.81
 # unit as written -> (factor to SI, SI unit)
 _UNITS = {
     "kg": (1.0, "kg"), "g": (1e-3, "kg"),
-    "m": (1.0, "m"), "mm": (1e-3, "m"), "cm": (1e-2, "m"),
+    "m": (1.0, "m"), "mm": (1e-3, "m"), "cm": (1e-2, "m"), "in": (0.0254, "m"),
+    "kg/m^3": (1.0, "kg/m^3"),
     "s": (1.0, "s"), "ms": (1e-3, "s"),
     "N": (1.0, "N"), "N m": (1.0, "N m"), "Nm": (1.0, "N m"),
     "rad/s": (1.0, "rad/s"), "rpm": (2.0 * math.pi / 60.0, "rad/s"),
@@ -294,3 +297,18 @@ _PHYSICAL_SPEC = {
 def load_physical_measurements(path: str | Path | None = None) -> BenchTable:
     """Report Table 4.4: one row per trial; masses in kg, lengths in m."""
     return read_table(path or DATA_DIR / "table_4_4_physical.csv", _PHYSICAL_SPEC, min_rows=1)
+
+
+def load_testbed_constants(path: str | Path | None = None) -> BenchTable:
+    """Facts about the testbed that are not bench measurements: propeller radius (from the
+    10-inch diameter) and the air density assumed for the figure of merit."""
+    spec = {"propeller_diameter": Column("m", 0.01, 2.0), "air_density": Column("kg/m^3", 0.5, 1.5)}
+    return read_table(path or DATA_DIR / "testbed_constants.csv", spec, min_rows=1)
+
+
+def load_torque_thrust_ratio(path: str | Path | None = None) -> BenchTable:
+    """The stored torque/thrust ratio d/b (m) of a 10-inch propeller, with its 95 % interval
+    and its source (written by ``scripts/write_params.py --stand-data``)."""
+    spec = {"ratio": Column("m", 1e-4, 0.1), "ci95_low": Column("m", 1e-4, 0.1),
+            "ci95_high": Column("m", 1e-4, 0.1)}
+    return read_table(path or DATA_DIR / "torque_thrust_ratio.csv", spec, min_rows=1)
