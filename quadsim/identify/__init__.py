@@ -31,12 +31,13 @@ from .fits import (MODELS, Fit, HeldOutScore, Ratio, StandFit, figure_of_merit, 
                    fit_ratio, fit_thrust_stand, held_out_scores)
 from .inertia import BifilarResult, analyse_bifilar, inertia_bound_problems, lumped_inertia
 from .testbed import (FM_PLAUSIBLE, CurveEffect, MotorMapFit, TestbedIdentification,
-                      identify_testbed)
+                      identification_to_json, identify_testbed)
 
 __all__ = [
     "MODELS", "Fit", "HeldOutScore", "Ratio", "StandFit", "figure_of_merit", "fit_curve",
     "fit_ratio", "fit_thrust_stand", "held_out_scores",
     "BifilarResult", "analyse_bifilar", "inertia_bound_problems", "lumped_inertia",
     "FM_PLAUSIBLE", "CurveEffect", "MotorMapFit", "TestbedIdentification", "identify_testbed",
+    "identification_to_json",
     "Finding", "audit_report",
 ]

@@ -56,10 +56,11 @@ def inertia_bound_problems(moments: np.ndarray, mass: float, max_radius: float) 
 class BifilarResult:
     """Bifilar inertia per axis (roll/pitch/yaw = x/y/z), corrected and as published.
 
-    ``trials`` axis -> (3,) corrected kg m^2 per trial; ``moments`` (3,) corrected means;
+    ``periods`` axis -> (3,) measured periods (s); ``trials`` axis -> (3,) corrected kg m^2 per trial; ``moments`` (3,) corrected means;
     ``published`` (3,) the report's formula (kg m^2/s) on the same mean periods;
     ``problems`` why the corrected tensor cannot be this vehicle's (empty if physical)."""
 
+    periods: dict[str, np.ndarray]
     trials: dict[str, np.ndarray]
     moments: np.ndarray
     published: np.ndarray
@@ -71,7 +72,8 @@ class BifilarResult:
         return not self.problems
 
     def to_json(self) -> dict:
-        return {"corrected_kg_m2": dict(zip(_AXES, self.moments.tolist())),
+        return {"periods_s": {a: t.tolist() for a, t in self.periods.items()},
+                "corrected_kg_m2": dict(zip(_AXES, self.moments.tolist())),
                 "corrected_trials_kg_m2": {a: t.tolist() for a, t in self.trials.items()},
                 "published_formula_kg_m2_per_s": dict(zip(_AXES, self.published.tolist())),
                 "physical": self.physical, "problems": self.problems,
@@ -88,4 +90,4 @@ def analyse_bifilar(table: BifilarTable, *, vehicle_mass: float,
     moments = np.array([bifilar_inertia(*args, table.mean_period[a]) for a in _AXES])
     published = np.array([published_bifilar_inertia(*args, table.mean_period[a]) for a in _AXES])
     problems = inertia_bound_problems(moments, vehicle_mass, max_radius)
-    return BifilarResult(trials, moments, published, problems, max_radius)
+    return BifilarResult(dict(table.periods), trials, moments, published, problems, max_radius)

@@ -79,7 +79,7 @@ def render_physical(ident: TestbedIdentification) -> str:
     b_source = (f"pooled least squares F = b Omega^2 over report Tables 4.5, 4.7, 4.9, 4.11 "
                 f"(4 motors x 3 trials, {points} running points; scale mass x 9.81, RPM -> rad/s)")
     mm = ident.motor_map
-    sat = (f"; speed gain per PWM step falls below half its median after PWM "
+    sat = (f"; speed gain per PWM step falls below 1/4 of its low-speed value after PWM "
            f"{mm.saturation_command:g}" if mm.saturation_command is not None else "")
     inertia_source = (
         "lumped model eq. 3.18/3.19 on Table 4.4 means: sphere of the measured total mass "

@@ -30,6 +30,7 @@ __all__ = [
     "identify_testbed",
     "motor_map_fit",
     "curve_effect",
+    "identification_to_json",
 ]
 
 #: Hover figure of merit of real propellers; outside this range b and d do not fit together.
@@ -41,7 +42,7 @@ class MotorMapFit:
     """PWM -> steady speed: ``command`` (K,), ``speed`` (M, K) trial means (rad/s),
     ``spread`` (M, K) trial standard deviations, ``gain`` (K-1,) mean rad/s per PWM unit
     between steps, ``saturation_command`` the first command after which the gain falls
-    below half of its median over the running range (None if it never does)."""
+    below a quarter of its largest (low-speed) value (None if it never does)."""
 
     command: np.ndarray
     speed: np.ndarray
@@ -57,8 +58,7 @@ def motor_map_fit(lift: ForceLift) -> MotorMapFit:
     spread = lift.speed.std(axis=1, ddof=1)
     gain = np.diff(speed.mean(axis=0)) / np.diff(lift.command)
     running = speed.mean(axis=0)[:-1] > 0
-    reference = float(np.median(gain[running]))
-    low = np.flatnonzero(running & (gain < 0.5 * reference))
+    low = np.flatnonzero(running & (gain < 0.25 * float(gain[running].max())))
     saturation = float(lift.command[low[0]]) if low.size else None
     return MotorMapFit(lift.command, speed, spread, gain, saturation,
                        float(speed[:, -1].max()))
@@ -210,3 +210,38 @@ def identify_testbed(*, force_lift_paths=None, cfd_path=None, physical_path=None
         sources={"force_lift": "; ".join(lift.sources), "cfd": cfd.source,
                  "physical": physical.source, "constants": constants.source},
     )
+
+
+def identification_to_json(ident: TestbedIdentification) -> dict:
+    """Stable-keyed JSON-ready summary of :class:`TestbedIdentification` (SI units)."""
+    mm = ident.motor_map
+    return {
+        "thrust_factor": {
+            "pooled": {m: f.to_json() for m, f in ident.thrust_fits.items()},
+            "per_motor": [f.to_json() for f in ident.motor_fits],
+            "top_point_per_motor": ident.top_point_b.tolist(),
+            "held_out": {k: [s.to_json() for s in v] for k, v in ident.held_out.items()},
+            "curve_effect": {k: v.to_json() for k, v in ident.curve_effects.items()},
+            "command": ident.lift.command.tolist(),
+        },
+        "motor_map": {"command_pwm": mm.command.tolist(), "speed_rad_s": mm.speed.tolist(),
+                      "spread_rad_s": mm.spread.tolist(), "gain_rad_s_per_pwm": mm.gain.tolist(),
+                      "saturation_command": mm.saturation_command, "max_speed": mm.max_speed},
+        "drag_factor": {"value": ident.drag_factor, "ci95": list(ident.drag_factor_ci95),
+                        "torque_thrust_ratio_m": ident.torque_thrust_ratio,
+                        "torque_thrust_ratio_ci95": list(ident.torque_thrust_ratio_ci95),
+                        "source": ident.torque_thrust_source},
+        "figure_of_merit": {"value": ident.figure_of_merit, "plausible_range": list(FM_PLAUSIBLE),
+                            "plausible": FM_PLAUSIBLE[0] <= ident.figure_of_merit
+                            <= FM_PLAUSIBLE[1]},
+        "computational_thrust_factor": ident.cfd_fit.to_json(),
+        "inertia": {"bifilar": ident.bifilar.to_json(),
+                    "lumped_measured_masses_kg_m2": ident.lumped.tolist(),
+                    "lumped_inputs": ident.lumped_inputs,
+                    "lumped_report_inputs_kg_m2": ident.lumped_report_inputs.tolist(),
+                    "physical_set_uses": "bifilar" if ident.bifilar.physical else "lumped",
+                    "physical_set_kg_m2": ident.inertia.tolist()},
+        "mass_kg": ident.mass, "arm_length_m": ident.arm_length,
+        "rotor_radius_m": ident.rotor_radius, "air_density_kg_m3": ident.air_density,
+        "warnings": [ident.inertia_warning] if ident.inertia_warning else [],
+    }

@@ -1,0 +1,159 @@
+"""python -m quadsim.identify: identify b, d, motor map and inertia; audit the report.
+
+Reads the report's bench tables shipped in quadsim/data (or the files given), fits the
+rotor thrust factor b by least squares over every point and trial (95 % intervals),
+scores alternative thrust curves on held-out motors and trials, maps PWM -> rotor speed
+(with its saturation), derives d from a measured torque/thrust ratio, reports the implied
+hover figure of merit, computes the bifilar inertia with the corrected T^2 formula and
+checks that it is physical, and lists what the report got wrong, with numbers.
+
+Output: human-readable tables (default) or one JSON object (--json, stable keys, SI units).
+Exit status 2 with a one-line error on bad input (file and column named).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..benchdata import load_thrust_stand
+from ..errors import run_cli
+from ..params import load_params
+from .audit import Finding, audit_report
+from .fits import StandFit, figure_of_merit, fit_thrust_stand
+from .testbed import FM_PLAUSIBLE, TestbedIdentification, identification_to_json, identify_testbed
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m quadsim.identify", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
+    parser.add_argument("--model", default="report", metavar="NAME|PATH",
+                        help="parameter set whose published numbers the audit checks "
+                             "(default: report)")
+    parser.add_argument("--stand", type=Path, action="append", default=[], metavar="CSV",
+                        help="also fit b and d on a thrust-stand sweep with columns esc_us, "
+                             "torque_Nm, thrust_N, speed_rpm (repeatable)")
+    parser.add_argument("--force-lift", type=Path, nargs="+", metavar="CSV",
+                        help="force-lift tables, one per motor (default: report Tables 4.5, "
+                             "4.7, 4.9, 4.11); header pwm[pwm], mass_1..3[kg], speed_1..3[rpm]")
+    parser.add_argument("--cfd", type=Path, metavar="CSV", help="CFD thrust table (Table 4.2)")
+    parser.add_argument("--physical", type=Path, metavar="CSV",
+                        help="physical measurements (Table 4.4)")
+    parser.add_argument("--bifilar", type=Path, metavar="CSV", help="bifilar periods (Table 4.14)")
+    parser.add_argument("--bifilar-rig", type=Path, metavar="CSV",
+                        help="bifilar rig constants (section 4.3.3)")
+    return parser
+
+
+def _print_thrust(ident: TestbedIdentification) -> None:
+    print("THRUST FACTOR b (F = b Omega^2, least squares over all points and trials)")
+    print(f"  {'motor':<8}{'b [N s^2/rad^2]':>17}{'95 % interval':>26}{'rms [N]':>9}"
+          f"{'top-point b':>13}")
+    for i, fit in enumerate(ident.motor_fits):
+        low, high = fit.interval("b")
+        print(f"  {i + 1:<8}{fit['b']:>17.5g}   [{low:.5g}, {high:.5g}]{fit.rms:>9.3f}"
+              f"{ident.top_point_b[i]:>13.5g}")
+    pooled = ident.thrust_fits["quadratic"]
+    low, high = pooled.interval("b")
+    print(f"  {'pooled':<8}{pooled['b']:>17.5g}   [{low:.5g}, {high:.5g}]{pooled.rms:>9.3f}")
+    print("\n  alternative thrust curves (rms in N; held out = predicted by a fit to the others)")
+    print(f"  {'model':<18}{'parameters':<44}{'fit':>7}{'motor out':>11}{'trial out':>11}")
+    held = {k: {s.model: s for s in v} for k, v in ident.held_out.items()}
+    for model, fit in ident.thrust_fits.items():
+        params = ", ".join(f"{n}={v:.4g}" for n, v in zip(fit.names, fit.params))
+        print(f"  {model:<18}{params:<44}{fit.rms:>7.3f}"
+              f"{held['leave one motor out'][model].rms:>11.3f}"
+              f"{held['leave one trial out'][model].rms:>11.3f}")
+    for effect in ident.curve_effects.values():
+        where = ", ".join(f"PWM {c:g} ({r:+.2f} N)" for c, r in effect.biased_commands)
+        print(f"  {effect.scheme}: {100 * effect.share:.0f} % of the quadratic's held-out "
+              f"squared error is thrust-curve shape ({effect.best_model} removes it); "
+              f"quadratic biased at {where or 'no command'}")
+
+
+def _print_motor_map(ident: TestbedIdentification) -> None:
+    mm = ident.motor_map
+    print("\nMOTOR MAP (PWM value -> steady speed, trial means, rad/s)")
+    print("  " + f"{'PWM':>5}" + "".join(f"{'motor ' + str(i + 1):>10}"
+                                       for i in range(mm.speed.shape[0])) + f"{'gain':>9}")
+    for k, command in enumerate(mm.command):
+        gain = f"{mm.gain[k - 1]:>9.2f}" if k else f"{'':>9}"
+        print(f"  {command:>5g}" + "".join(f"{s:>10.1f}" for s in mm.speed[:, k]) + gain)
+    sat = (f"gain falls below 1/4 of its low-speed value after PWM {mm.saturation_command:g}"
+           if mm.saturation_command is not None else "no saturation found")
+    print(f"  gain in rad/s per PWM unit; {sat}; max speed {mm.max_speed:.1f} rad/s "
+          "(held above the last command)")
+
+
+def _print_drag(ident: TestbedIdentification, stands: list[StandFit]) -> None:
+    low, high = ident.torque_thrust_ratio_ci95
+    fm = ident.figure_of_merit
+    flag = "plausible" if FM_PLAUSIBLE[0] <= fm <= FM_PLAUSIBLE[1] else "IMPLAUSIBLE"
+    print("\nDRAG FACTOR d (no torque measured on the testbed)")
+    print(f"  d/b = {ident.torque_thrust_ratio:.5g} m  (95 % [{low:.5g}, {high:.5g}])")
+    print(f"    source: {ident.torque_thrust_source}")
+    print(f"  d = (d/b) b = {ident.drag_factor:.5g} N m s^2/rad^2  (95 % "
+          f"[{ident.drag_factor_ci95[0]:.5g}, {ident.drag_factor_ci95[1]:.5g}])")
+    print(f"  hover figure of merit FM = b^1.5/(d sqrt(2 rho pi R^2)) = {fm:.3f}  [{flag}; "
+          f"R = {ident.rotor_radius:g} m, rho = {ident.air_density:g} kg/m^3]")
+    cfd = ident.cfd_fit
+    print(f"  computational (CFD Table 4.2) b = {cfd['b']:.5g} N s^2/rad^2 "
+          f"(95 % [{cfd.interval('b')[0]:.5g}, {cfd.interval('b')[1]:.5g}])")
+    for stand in stands:
+        b, d = stand.thrust["b"], stand.torque["d"]
+        fm = figure_of_merit(b, d, ident.air_density, ident.rotor_radius)
+        print(f"  stand {stand.source}: b = {b:.5g}, d = {d:.5g}, "
+              f"d/b = {stand.ratio.value:.5g} m, FM (R = {ident.rotor_radius:g} m) = {fm:.3f}")
+
+
+def _print_inertia(ident: TestbedIdentification) -> None:
+    bif = ident.bifilar
+    print("\nINERTIA (kg m^2)")
+    print(f"  {'axis':<7}{'periods [s]':<20}{'bifilar':>10}{'report formula':>16}{'lumped':>10}")
+    for i, axis in enumerate(("roll", "pitch", "yaw")):
+        periods = " ".join(f"{t:.2f}" for t in bif.periods[axis])
+        print(f"  {axis:<7}{periods:<20}{bif.moments[i]:>10.4g}{bif.published[i]:>16.4g}"
+              f"{ident.lumped[i]:>10.4g}")
+    print("  bifilar: I = m g R^2 T^2/(4 pi^2 L); report formula: [T/(2 pi)] m g R^2/L "
+          "(no square; kg m^2/s)")
+    print(f"  bifilar checks: {'physical' if bif.physical else '; '.join(bif.problems)}")
+    if ident.inertia_warning:
+        print(f"  WARNING: {ident.inertia_warning}")
+
+
+def _print_audit(findings: list[Finding]) -> None:
+    print("\nREPORT AUDIT")
+    for finding in findings:
+        mark = "ERROR" if finding.found else "ok"
+        print(f"  [{mark}] {finding.title}\n          {finding.detail}")
+
+
+@run_cli
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    ident = identify_testbed(force_lift_paths=args.force_lift, cfd_path=args.cfd,
+                             physical_path=args.physical, bifilar_path=args.bifilar,
+                             bifilar_rig_path=args.bifilar_rig)
+    findings = audit_report(ident, load_params(args.model, check=False))
+    stands = [fit_thrust_stand(load_thrust_stand(p)) for p in args.stand]
+    if args.json:
+        out = identification_to_json(ident)
+        out["audit"] = [f.to_json() for f in findings]
+        out["thrust_stand"] = [s.to_json() for s in stands]
+        for warning in out["warnings"]:
+            print(f"warning: {warning}", file=sys.stderr)
+        print(json.dumps(out, indent=2, sort_keys=True))
+        return 0
+    _print_thrust(ident)
+    _print_motor_map(ident)
+    _print_drag(ident, stands)
+    _print_inertia(ident)
+    _print_audit(findings)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
