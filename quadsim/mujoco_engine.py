@@ -39,9 +39,9 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
+from .analytic import STATE_BOUND, BatchEffects, _quat_rate, _rotmat, body_arrays, extra_wrench
 from .errors import ModelError, SimulationError
-from .frames import quat_derivative, quat_normalize, quat_to_rotmat
+from .frames import quat_normalize
 from .mjcf import BODY_NAME, vehicle_xml
 from .params import VehicleParams, inertia_problems
 
@@ -120,13 +120,13 @@ def _midpoint_state(qpos, qvel, qacc, dt):
     velocity = qvel[:, 0:3] + qacc[:, 0:3] * h
     body_rate = qvel[:, 3:6] + qacc[:, 3:6] * h
     quat = quat_normalize(qpos[:, 3:7]
-                          + quat_derivative(qpos[:, 3:7], qvel[:, 3:6] + qacc[:, 3:6] * h / 2) * h)
+                          + _quat_rate(qpos[:, 3:7], qvel[:, 3:6] + qacc[:, 3:6] * h / 2) * h)
     return position, velocity, quat, body_rate
 
 
-def _effect_step(batch, body_id, body, effects, t, dt, command, omega):
+def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega):
     """One timestep with effects; returns the rotor speeds at the end of the step."""
-    qpos, qvel, qacc = batch.bind("qpos"), batch.bind("qvel"), batch.bind("qacc")
+    qpos, qvel, qacc = bound["qpos"], bound["qvel"], bound["qacc"]
     if effects.rotor_dynamics:
         mid, end, mean_sq, accel = _rotor_step(effects, t, dt, command, omega)
     else:
@@ -137,12 +137,12 @@ def _effect_step(batch, body_id, body, effects, t, dt, command, omega):
         loads = effects.loads(np.full(len(command), t + dt / 2), position, velocity, quat,
                               body_rate, mid, accel)
         force_body, torque_body = extra_wrench(body, loads, mid, include_scale=False)
-        rot = quat_to_rotmat(quat)
-        xfrc = batch.bind("xfrc_applied")
+        rot = _rotmat(quat)
+        xfrc = bound["xfrc_applied"]
         xfrc[:, body_id, 0:3] = np.einsum("bij,bj->bi", rot, force_body) + loads.force_world
         xfrc[:, body_id, 3:6] = np.einsum("bij,bj->bi", rot, torque_body)
         scale = loads.thrust_scale
-    batch.bind("ctrl")[:] = scale * mean_sq
+    bound["ctrl"][:] = scale * mean_sq
     _step(batch, 1)
     return end
 
@@ -184,6 +184,7 @@ def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: 
     qvel[:, 0:3], qvel[:, 3:6] = initial["velocity"], initial["body_rate"]
     batch.forward()
     stepwise = effects.active or effects.rotor_dynamics
+    bound = {name: batch.bind(name) for name in ("qpos", "qvel", "qacc", "xfrc_applied", "ctrl")}
     omega = np.array(initial["rotor_speed"], dtype=float)
     samples, command = [], None
     for k in range(periods + 1):
@@ -199,7 +200,7 @@ def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: 
             break
         if stepwise:
             for j in range(substeps):
-                omega = _effect_step(batch, body_id, body, effects,
+                omega = _effect_step(batch, bound, body_id, body, effects,
                                      k * control_period + j * dt, dt, command, omega)
         else:
             batch.bind("ctrl")[:] = command**2
