@@ -36,17 +36,17 @@ from .errors import InputError, field_error
 __all__ = [
     "DATA_DIR",
     "REPORT_GRAVITY",
-    "Column",
     "BenchTable",
+    "Column",
     "ForceLift",
     "SpeedSweep",
-    "read_table",
-    "load_force_lift",
     "load_cfd_table",
+    "load_force_lift",
     "load_physical_measurements",
-    "load_thrust_stand",
     "load_testbed_constants",
+    "load_thrust_stand",
     "load_torque_thrust_ratio",
+    "read_table",
 ]
 
 #: Folder of the transcribed report tables shipped with the package.

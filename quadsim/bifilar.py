@@ -33,11 +33,11 @@ from .benchdata import DATA_DIR, Column, read_table
 from .errors import field_error
 
 __all__ = [
-    "bifilar_inertia",
-    "published_bifilar_inertia",
     "BifilarRig",
     "BifilarTable",
+    "bifilar_inertia",
     "load_bifilar_table",
+    "published_bifilar_inertia",
 ]
 
 

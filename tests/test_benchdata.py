@@ -6,8 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from quadsim.benchdata import (load_cfd_table, load_force_lift, load_physical_measurements,
-                               load_testbed_constants, load_thrust_stand)
+from quadsim.benchdata import (
+    load_cfd_table,
+    load_force_lift,
+    load_physical_measurements,
+    load_testbed_constants,
+    load_thrust_stand,
+)
 from quadsim.bifilar import load_bifilar_table
 from quadsim.errors import InputError
 

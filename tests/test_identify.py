@@ -10,9 +10,16 @@ import pytest
 
 from quadsim.benchdata import load_thrust_stand, load_torque_thrust_ratio
 from quadsim.bifilar import bifilar_inertia, published_bifilar_inertia
-from quadsim.identify import (FM_PLAUSIBLE, audit_report, figure_of_merit, fit_curve,
-                              fit_thrust_stand, held_out_scores, identify_testbed,
-                              lumped_inertia)
+from quadsim.identify import (
+    FM_PLAUSIBLE,
+    audit_report,
+    figure_of_merit,
+    fit_curve,
+    fit_thrust_stand,
+    held_out_scores,
+    identify_testbed,
+    lumped_inertia,
+)
 from quadsim.identify.__main__ import main
 from quadsim.identify.testbed import curve_effect
 from quadsim.params import load_params

@@ -27,17 +27,49 @@ Units: SI inside (speeds rad/s, thrust N, torque N m); RPM and grams are convert
 """
 
 from .audit import Finding, audit_report
-from .fits import (MODELS, Fit, HeldOutScore, Ratio, StandFit, figure_of_merit, fit_curve,
-                   fit_ratio, fit_thrust_stand, held_out_scores)
+from .fits import (
+                   MODELS,
+                   Fit,
+                   HeldOutScore,
+                   Ratio,
+                   StandFit,
+                   figure_of_merit,
+                   fit_curve,
+                   fit_ratio,
+                   fit_thrust_stand,
+                   held_out_scores,
+)
 from .inertia import BifilarResult, analyse_bifilar, inertia_bound_problems, lumped_inertia
-from .testbed import (FM_PLAUSIBLE, CurveEffect, MotorMapFit, TestbedIdentification,
-                      identification_to_json, identify_testbed)
+from .testbed import (
+                   FM_PLAUSIBLE,
+                   CurveEffect,
+                   MotorMapFit,
+                   TestbedIdentification,
+                   identification_to_json,
+                   identify_testbed,
+)
 
 __all__ = [
-    "MODELS", "Fit", "HeldOutScore", "Ratio", "StandFit", "figure_of_merit", "fit_curve",
-    "fit_ratio", "fit_thrust_stand", "held_out_scores",
-    "BifilarResult", "analyse_bifilar", "inertia_bound_problems", "lumped_inertia",
-    "FM_PLAUSIBLE", "CurveEffect", "MotorMapFit", "TestbedIdentification", "identify_testbed",
-    "identification_to_json",
-    "Finding", "audit_report",
+                   "FM_PLAUSIBLE",
+                   "MODELS",
+                   "BifilarResult",
+                   "CurveEffect",
+                   "Finding",
+                   "Fit",
+                   "HeldOutScore",
+                   "MotorMapFit",
+                   "Ratio",
+                   "StandFit",
+                   "TestbedIdentification",
+                   "analyse_bifilar",
+                   "audit_report",
+                   "figure_of_merit",
+                   "fit_curve",
+                   "fit_ratio",
+                   "fit_thrust_stand",
+                   "held_out_scores",
+                   "identification_to_json",
+                   "identify_testbed",
+                   "inertia_bound_problems",
+                   "lumped_inertia",
 ]

@@ -29,14 +29,14 @@ from ..errors import InputError
 __all__ = [
     "MODELS",
     "Fit",
-    "fit_curve",
     "HeldOutScore",
-    "held_out_scores",
-    "figure_of_merit",
     "Ratio",
-    "fit_ratio",
     "StandFit",
+    "figure_of_merit",
+    "fit_curve",
+    "fit_ratio",
     "fit_thrust_stand",
+    "held_out_scores",
 ]
 
 # name -> parameter names (and their units given y in N)

@@ -24,8 +24,8 @@ from ..params import inertia_problems
 __all__ = [
     "BifilarResult",
     "analyse_bifilar",
-    "lumped_inertia",
     "inertia_bound_problems",
+    "lumped_inertia",
 ]
 
 _AXES = ("roll", "pitch", "yaw")  # about body x, y, z

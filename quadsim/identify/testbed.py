@@ -15,22 +15,28 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..benchdata import (ForceLift, SpeedSweep, load_cfd_table, load_force_lift,
-                         load_physical_measurements, load_testbed_constants,
-                         load_torque_thrust_ratio)
+from ..benchdata import (
+    ForceLift,
+    SpeedSweep,
+    load_cfd_table,
+    load_force_lift,
+    load_physical_measurements,
+    load_testbed_constants,
+    load_torque_thrust_ratio,
+)
 from ..bifilar import load_bifilar_table
-from .fits import MODELS, Fit, HeldOutScore, fit_curve, figure_of_merit, held_out_scores
+from .fits import MODELS, Fit, HeldOutScore, figure_of_merit, fit_curve, held_out_scores
 from .inertia import BifilarResult, analyse_bifilar, lumped_inertia
 
 __all__ = [
     "FM_PLAUSIBLE",
-    "MotorMapFit",
     "CurveEffect",
+    "MotorMapFit",
     "TestbedIdentification",
-    "identify_testbed",
-    "motor_map_fit",
     "curve_effect",
     "identification_to_json",
+    "identify_testbed",
+    "motor_map_fit",
 ]
 
 #: Hover figure of merit of real propellers; outside this range b and d do not fit together.
