@@ -69,9 +69,9 @@ def _print_thrust(ident: TestbedIdentification) -> None:
               f"{held['leave one trial out'][model].rms:>11.3f}")
     for effect in ident.curve_effects.values():
         where = ", ".join(f"PWM {c:g} ({r:+.2f} N)" for c, r in effect.biased_commands)
-        print(f"  {effect.scheme}: {100 * effect.share:.0f} % of the quadratic's held-out "
-              f"squared error is thrust-curve shape ({effect.best_model} removes it); "
-              f"quadratic biased at {where or 'no command'}")
+        print(f"  {effect.scheme}: the {effect.best_model} curve removes "
+              f"{100 * effect.share:.0f} % of the quadratic's held-out squared error "
+              f"(thrust-curve effect); quadratic biased at {where or 'no command'}")
 
 
 def _print_motor_map(ident: TestbedIdentification) -> None:

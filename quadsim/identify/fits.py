@@ -176,6 +176,20 @@ class HeldOutScore:
                 "rms_by_step": self.rms_by_step.tolist()}
 
 
+def _step_statistics(residual: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean, RMS and standard error of the mean per column of ``residual`` (N, K), ignoring
+    NaN (stopped rotor); columns without data get 0, 0, inf."""
+    valid = np.isfinite(residual)
+    counts = valid.sum(axis=0)
+    filled = np.where(valid, residual, 0.0)
+    safe = np.maximum(counts, 1)
+    mean = filled.sum(axis=0) / safe
+    rms = np.sqrt((filled**2).sum(axis=0) / safe)
+    variance = (np.where(valid, residual - mean, 0.0) ** 2).sum(axis=0) / np.maximum(counts - 1, 1)
+    stderr = np.where(counts > 1, np.sqrt(variance / safe), np.inf)
+    return mean, rms, stderr
+
+
 def held_out_scores(speed: np.ndarray, thrust: np.ndarray, *, axis: int, scheme: str,
                     models: tuple[str, ...] = tuple(MODELS)) -> list[HeldOutScore]:
     """Leave-one-out scores: ``speed``, ``thrust`` (M, T, K) (motor, trial, step); each slice
@@ -195,15 +209,7 @@ def held_out_scores(speed: np.ndarray, thrust: np.ndarray, *, axis: int, scheme:
             held = speed[tuple(index)]
             residual[tuple(index)] = np.where(held > 0, thrust[tuple(index)] - fit.predict(held),
                                               np.nan)
-        by_step = residual.reshape(-1, speed.shape[-1])
-        counts = np.sum(np.isfinite(by_step), axis=0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            bias = np.nanmean(np.where(counts > 0, by_step, 0.0), axis=0)
-            spread = np.nanstd(np.where(counts > 0, by_step, 0.0), axis=0, ddof=1)
-            rms_step = np.sqrt(np.nanmean(np.where(counts > 0, by_step, 0.0) ** 2, axis=0))
-        running = counts > 0
-        bias, rms_step = np.where(running, bias, 0.0), np.where(running, rms_step, 0.0)
-        stderr = np.where(counts > 1, spread / np.sqrt(np.maximum(counts, 1)), np.inf)
+        bias, rms_step, stderr = _step_statistics(residual.reshape(-1, speed.shape[-1]))
         scores.append(HeldOutScore(model, scheme, float(np.sqrt(np.nanmean(residual**2))),
                                    bias, rms_step, stderr))
     return scores
