@@ -182,3 +182,37 @@ def test_cli_writes_model_and_prints_parts_table(tmp_path, capsys):
     assert "TOTAL (about CoM)" in printed and "837.667" in printed
     model = mujoco.MjModel.from_xml_path(str(out))
     assert model.nu == 4
+
+
+def test_mesh_in_other_units_than_declared_is_caught(tmp_path):
+    # mm mesh declared as metres: a 0.1 m part becomes 100 m, implied density ~1e-9 of real
+    folder = write_cad(tmp_path / "cad", [GOOD], [ROTOR], mesh_unit="m")
+    with pytest.raises(InputError, match=r"implied density .* drawn in mm while mesh_unit says m"):
+        build_model(folder, output=tmp_path / "x.xml")
+
+
+def test_mesh_over_mujoco_stl_limit_is_refused_before_writing(tmp_path):
+    big = dict(GOOD, shape=GEN.cylinder(50, 20, segments=50_002))  # 200,004 triangles
+    folder = write_cad(tmp_path / "cad", [big], [ROTOR])
+    with pytest.raises(InputError, match=r"block.stl has 200004 triangles; MuJoCo reads at most"):
+        build_model(folder, output=tmp_path / "x.xml")
+
+
+def test_parameter_set_can_take_mass_properties_and_rotors_from_cad(tmp_path):
+    from quadsim.massprops import vehicle_mass_properties
+    from quadsim.assembly import load_assembly
+    from quadsim.params import load_params
+
+    cad = REPO / "cad"
+    q = 'unit = "{}", source = "test" }}'
+    (tmp_path / "cadset.toml").write_text("\n".join([
+        'schema = "quadsim.params/1"', 'name = "cadset"', "[body]",
+        f'from_cad = {{ path = "{cad}", source = "cad/ meshes" }}', "[rotors]",
+        "thrust_factor = { value = 1e-5, " + q.format("N s^2/rad^2"),
+        "drag_factor = { value = 1e-7, " + q.format("N m s^2/rad^2"),
+        "max_speed = { value = 700.0, " + q.format("rad/s"), "[rotor_layout]",
+        f'from_cad = {{ path = "{cad}", source = "cad/ manifest" }}']) + "\n")
+    p = load_params(tmp_path / "cadset.toml")
+    props = vehicle_mass_properties(load_assembly(cad))
+    assert p.mass == props.mass and np.array_equal(p.inertia, props.inertia)
+    assert [r.name for r in p.rotors] == ["1", "2", "3", "4"] and p.rotors[1].spin == -1
