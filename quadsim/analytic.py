@@ -339,9 +339,9 @@ def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial
         samples.append((state, command))
         if k == periods:
             break
-        held = command
-        rhs = lambda t, yy: state_derivative(t, yy, body=body, effects=effects,  # noqa: E731
-                                             command=held)
+        def rhs(t, yy, held=command):
+            return state_derivative(t, yy, body=body, effects=effects, command=held)
+
         y = integrate_hold(y, t0, t0 + control_period, rhs, rtol=rtol, atol=atol, batch=batch)
         state = unpack_state(y, t0 + control_period, batch, command, dynamics)
     out = {name: np.stack([s[name] for s, _ in samples], axis=1)

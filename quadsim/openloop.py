@@ -58,8 +58,9 @@ def response_metrics(t: np.ndarray, response: np.ndarray, *, bound: float) -> di
 
     Settled (the last quarter stays within 2 % of the final value, below ``bound``):
     python-control ``step_info``; returned to zero (a rejected disturbance: final and last
-    quarter within 2 % of the peak): settling time and peak. Otherwise: ``growth_exponent`` (slope of
-    log|y| against log t over the second half) and ``time_to_bound`` (None if not reached)."""
+    quarter within 2 % of the peak): settling time and peak. Otherwise: ``growth_exponent``
+    (slope of log|y| against log t over the second half) and ``time_to_bound`` (None if the
+    bound is not reached)."""
     final = float(response[-1])
     peak = float(np.abs(response).max())
     tail = response[int(0.75 * len(response)):]
@@ -198,7 +199,7 @@ def format_report(results: list[OpenLoopResult]) -> str:
         mode = "LQR closed loop" if res.controller == "lqr" else "open loop"
         lines.append(f"model {res.params.name} ({mode}): start z = {REPORT_HEIGHT} m, "
                      f"roll = pitch = yaw = {REPORT_EULER[0]} rad; steps at {res.step_time} s")
-        for engine, reason in res.refused.items():
+        for engine in res.refused:
             lines.append(f"  {engine} refuses this set (reason on stderr); the analytic model "
                          "still runs")
         unstable = int(np.sum(res.poles.real >= -1e-9))
@@ -266,7 +267,8 @@ def save_plot(result: OpenLoopResult, folder: Path) -> Path:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
     plt.close(fig)
-    path = folder / f"{result.params.name}_{'lqr' if result.controller == 'lqr' else 'openloop'}.png"
+    suffix = "lqr" if result.controller == "lqr" else "openloop"
+    path = folder / f"{result.params.name}_{suffix}.png"
     atomic_write_bytes(path, buffer.getvalue())
     return path
 
