@@ -40,8 +40,16 @@ import trimesh
 from .errors import InputError, QuadsimWarning, field_error
 from .frames import euler_to_quat, quat_to_rotmat
 
-__all__ = ["Assembly", "Part", "Placement", "CadRotor", "load_assembly", "find_manifest",
-           "MESH_UNITS", "SCHEMA"]
+__all__ = [
+    "MESH_UNITS",
+    "SCHEMA",
+    "Assembly",
+    "CadRotor",
+    "Part",
+    "Placement",
+    "find_manifest",
+    "load_assembly",
+]
 
 SCHEMA = "quadsim.cad/1"
 #: Mesh unit name -> metres per unit.
@@ -227,7 +235,7 @@ def topology_problem(faces: np.ndarray, vertex_count: int) -> str | None:
     faces = np.asarray(faces, dtype=np.int64)
     start, end = faces.ravel(), faces[:, [1, 2, 0]].ravel()
     undirected = np.sort(np.minimum(start, end) * vertex_count + np.maximum(start, end))
-    edges, counts = np.unique(undirected, return_counts=True)
+    _, counts = np.unique(undirected, return_counts=True)
     if np.any(counts != 2):
         return (f"is not watertight ({int(np.sum(counts == 1))} open edges, "
                 f"{int(np.sum(counts > 2))} edges shared by more than two triangles)")

@@ -24,7 +24,6 @@ Library::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 from dataclasses import dataclass
@@ -40,8 +39,15 @@ from .massprops import MassProperties, vehicle_mass_properties
 from .mjcf import vehicle_xml
 from .params import MODELS_DIR, Rotor, VehicleParams, load_params
 
-__all__ = ["BuiltModel", "build_model", "cad_params", "mesh_geoms_xml", "parts_table",
-           "write_model", "main"]
+__all__ = [
+    "BuiltModel",
+    "build_model",
+    "cad_params",
+    "main",
+    "mesh_geoms_xml",
+    "parts_table",
+    "write_model",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,9 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     print(parts_table(model.mass_properties))
     print(f"note: {model.inertial_note}")
     written = write_model(model, output)
-    print(f"wrote {written} ({model.params.rotor_count} rotors, ctrl = Omega^2 in rad^2/s^2, "
-          f"b = {model.params.thrust_factor:.6g} N s^2/rad^2, d = "
-          f"{model.params.drag_factor:.6g} N m s^2/rad^2 from {model.params.sources.get('rotors.thrust_factor', '?')})")
+    p = model.params
+    print(f"wrote {written} ({p.rotor_count} rotors, ctrl = Omega^2 in rad^2/s^2, "
+          f"b = {p.thrust_factor:.6g} N s^2/rad^2, d = {p.drag_factor:.6g} N m s^2/rad^2 "
+          f"from {p.name}: {p.sources.get('rotors.thrust_factor', 'no source')})")
     return 0
 
 

@@ -33,8 +33,15 @@ from .assembly import MESH_UNITS, Assembly, load_assembly
 from .errors import ModelError, run_cli
 from .massprops import vehicle_mass_properties
 
-__all__ = ["Row", "SOLIDWORKS", "mujoco_mass_properties", "lumped_inertia", "report_rows",
-           "check_rows", "main"]
+__all__ = [
+    "SOLIDWORKS",
+    "Row",
+    "check_rows",
+    "lumped_inertia",
+    "main",
+    "mujoco_mass_properties",
+    "report_rows",
+]
 
 DEFAULT_CAD = Path(__file__).resolve().parent.parent / "cad"
 MECHANICAL = ("mechanical",)

@@ -27,8 +27,14 @@ import trimesh
 from .assembly import Assembly, Part
 from .errors import InputError, field_error
 
-__all__ = ["MassProperties", "PartMassProperties", "mesh_mass_properties",
-           "combine_mass_properties", "parallel_axis", "vehicle_mass_properties"]
+__all__ = [
+    "MassProperties",
+    "PartMassProperties",
+    "combine_mass_properties",
+    "mesh_mass_properties",
+    "parallel_axis",
+    "vehicle_mass_properties",
+]
 
 
 @dataclass(frozen=True)

@@ -38,10 +38,12 @@ def write_cad(folder: Path, parts: list[dict], rotors: list[dict], extra: str = 
     for p in parts:
         if "shape" in p:
             (folder / f"{p['name']}.stl").write_bytes(gen.stl_bytes(*p["shape"]))
-        lines += ["[[part]]", f'name = "{p["name"]}"', f'mesh = "{p.get("mesh", p["name"] + ".stl")}"',
-                  p.get("mass_line") or f'mass = {{ value = {p["mass"]!r}, unit = "kg", source = "t" }}']
+        mesh = p.get("mesh", p["name"] + ".stl")
+        mass = p.get("mass_line") or f'mass = {{ value = {p["mass"]!r}, unit = "kg", source = "" }}'
+        lines += ["[[part]]", f'name = "{p["name"]}"', f'mesh = "{mesh}"', mass]
         for name, position, rpy in p["placements"]:
-            lines += ["[[part.placement]]", f'name = "{name}"', f"position_m = {[float(v) for v in position]}",
+            lines += ["[[part.placement]]", f'name = "{name}"',
+                      f"position_m = {[float(v) for v in position]}",
                       f"rpy_deg = {[float(v) for v in rpy]}"]
     for r in rotors:
         lines.append("[[rotor]]")

@@ -10,8 +10,7 @@ from test_cad import REPO, generator, write_cad
 from quadsim.assembly import load_assembly
 from quadsim.errors import InputError, QuadsimWarning
 from quadsim.inertia_report import mujoco_mass_properties
-from quadsim.massprops import combine_mass_properties, mesh_mass_properties, \
-    vehicle_mass_properties
+from quadsim.massprops import combine_mass_properties, mesh_mass_properties, vehicle_mass_properties
 
 GEN = generator()
 
