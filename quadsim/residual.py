@@ -262,10 +262,12 @@ def model_wrench(states: FlightStates, params: VehicleParams,
                         states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat)
     loads = effect_set.loads(ctx)
     wrench = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle).T
-    offset_force = loads.thrust_offset[..., None] * vehicle.rotor_axes          # (N, R, 3)
-    arms = vehicle.rotor_positions - vehicle.com
-    force = wrench[:, :3] + offset_force.sum(1) + rotate_inverse(states.quat, loads.force_world)
-    torque = (wrench[:, 3:] + np.cross(arms, offset_force).sum(1) + loads.torque_body)
+    # A thrust offset o_i acts along axis a_i at hub r_i: force o_i a_i, torque o_i (r_i-c) x a_i.
+    axes = vehicle.rotor_axes
+    offset_wrench = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    wrench += loads.thrust_offset @ offset_wrench
+    force = wrench[:, :3] + rotate_inverse(states.quat, loads.force_world)
+    torque = wrench[:, 3:] + loads.torque_body
     return force, torque, vehicle
 
 

@@ -1,0 +1,420 @@
+"""The gap diagnosis: fit on training flights, score on held-out flights, rank, decide.
+
+See :mod:`quadsim.gap` for the method and the result schema. Everything here returns plain
+dicts (the ``quadsim.gap/1`` JSON) so that the CLI, the HTML report and tests read the same
+thing.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..effects.base import EffectBase, EffectParameter
+from ..errors import InputError, QuadsimWarning
+from ..flightlog import FlightLog
+from ..params import VehicleParams
+from ..residual import CHANNELS, FlightStates, flight_states
+from . import fitting
+from .fitting import Candidate, Fit, candidates_for, fit_candidate, noise_scale, residuals
+from .where import by_band, by_regime, kstep_errors, regime_masks
+
+__all__ = ["Flight", "prepare", "diagnose", "diagnose_per_flight", "SCHEMA", "MIN_GAIN",
+           "MIN_T", "TIE"]
+
+SCHEMA = "quadsim.gap/1"
+#: an effect must cut the held-out gap by this fraction of the nominal gap ...
+MIN_GAIN = 0.05
+#: ... with this block-wise t statistic (1 s blocks of held-out data; a consistency check,
+#: effects acting only in some regimes, e.g. near the ground, improve few blocks) ...
+MIN_T = 1.0
+#: ... and effects whose held-out gap is within this fraction of the best are confusable.
+TIE = 0.02
+FIT_RATE_HZ = 100.0
+#: long flights are decimated further so that one flight costs at most this many samples.
+MAX_FIT_SAMPLES_PER_FLIGHT = 20000
+
+# Known confusable pairs and what data would separate them.
+SEPARATE = {
+    frozenset({"mass_offset", "nominal_refit"}): "weigh the vehicle, or measure b on a thrust stand",
+    frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
+    frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
+    frozenset({"com_offset", "thrust_mismatch"}): "yaw the vehicle 90 deg and hover again "
+                                                  "(a CoM offset turns with the body, a weak rotor "
+                                                  "does not move); or a rotor thrust-stand test",
+    frozenset({"motor_lag", "inertia_error"}): "fast attitude steps with measured rotor speeds "
+                                               "(lag shows between command and speed, inertia "
+                                               "between speed and rate)",
+    frozenset({"rotor_drag", "body_drag"}): "fly at several speeds: rotor drag is linear in "
+                                            "speed, body drag quadratic",
+    frozenset({"rotor_drag", "wind"}): "fly the same path in both directions (wind is fixed "
+                                       "in the world frame)",
+    frozenset({"thrust_curve", "nominal_refit"}): "fly over a wider range of rotor speeds",
+    frozenset({"ground_effect", "thrust_curve"}): "hover at several heights at the same speed",
+}
+
+
+class NominalRefit(EffectBase):
+    """Baseline: the nominal thrust and drag factors refitted (relative changes)."""
+
+    name = "nominal_refit"
+    parameters = (
+        EffectParameter("thrust", "1", 0.0, -0.5, 0.5, "relative change of b"),
+        EffectParameter("drag", "1", 0.0, -0.9, 3.0, "relative change of d"),
+    )
+
+    def apply_to_params(self, params):
+        return params.replace(thrust_factor=params.thrust_factor * (1 + self.thrust),
+                              drag_factor=params.drag_factor * (1 + self.drag))
+
+
+fitting.LOCAL_EFFECTS["nominal_refit"] = NominalRefit
+fitting.FIT_SPEC["nominal_refit"] = (("thrust", "drag"), {}, lambda p: [0.05, 0.2])
+BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))
+
+
+@dataclass
+class Flight:
+    """One prepared flight: full-rate states, the decimated view used for fitting."""
+
+    name: str
+    states: FlightStates
+    fit: FlightStates
+
+
+def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
+            window_s: float = 0.05) -> list[Flight]:
+    """Check each log against the model and smooth it (:func:`quadsim.residual.flight_states`).
+
+    Raises :class:`InputError` for a rotor-count mismatch or logs without rotor speeds."""
+    out = []
+    for log in logs:
+        name = str(log.path) if log.path is not None else f"log{len(out)}"
+        if log.rotor_speed is None:
+            what = "commands only" if log.rotor_command is not None else "neither"
+            raise InputError(f"{name}: rotor_1..rotor_N: the diagnosis needs measured rotor "
+                             f"speeds (this log has {what}); the residual wrench compares the "
+                             "motion with the thrust of the measured rotors")
+        if log.rotor_count != params.rotor_count:
+            raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
+                             f"the model {params.name!r} has {params.rotor_count}")
+        states = flight_states(log, window_s=window_s, gravity=params.gravity)
+        dt = float(states.t[1] - states.t[0])
+        stride = max(1, int(round(1.0 / (FIT_RATE_HZ * dt))),
+                     int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
+        index = np.arange(0, len(states.t), stride)
+        out.append(Flight(name, states, states.take(index)))
+    return out
+
+
+def _scaled(flights: list[Flight], params, effects, sigma, rotor: bool, *, full=False):
+    return [residuals(f.states if full else f.fit, params, effects, rotor_channel=rotor) / sigma
+            for f in flights]
+
+
+def _gap(scaled: list[np.ndarray]) -> float:
+    """Mean squared scaled residual per sample and channel (1 = noise level)."""
+    return float(np.mean(np.concatenate(scaled) ** 2))
+
+
+def _block_t(before: list[np.ndarray], after: list[np.ndarray], dt: float) -> float:
+    """t statistic of the per-block (1 s) reduction of the squared gap."""
+    block = max(1, int(round(1.0 / dt)))
+    diffs = []
+    for b, a in zip(before, after):
+        d = np.sum(b ** 2, axis=1) - np.sum(a ** 2, axis=1)
+        for k in range(0, len(d) - block + 1, block):
+            diffs.append(float(np.mean(d[k:k + block])))
+    if len(diffs) < 2:
+        return 0.0
+    diffs = np.asarray(diffs)
+    se = diffs.std(ddof=1) / np.sqrt(len(diffs))
+    return float(diffs.mean() / se) if se > 0 else (np.inf if diffs.mean() > 0 else 0.0)
+
+
+def _channel_rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
+
+
+def _channels(rotor: bool, params: VehicleParams) -> list[str]:
+    names = list(CHANNELS)
+    if rotor:
+        names += [f"rotor_{i + 1}" for i in range(params.rotor_count)]
+    return names
+
+
+def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
+    after = _scaled(held, params, fit.effects(), sigma, rotor)
+    gap_before, gap_after = _gap(before), _gap(after)
+    rms = _channel_rms(after, sigma)
+    return {
+        "name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
+        "identifiable": dict(zip(fit.candidate.parameter_names, fit.identifiable)),
+        "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
+        "reduction": (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0,
+        "t_statistic": _block_t(before, after, dt),
+        "heldout_rms_after": dict(zip(_channels(rotor, params), map(float, rms))),
+        "_fit": fit,
+    }
+
+
+def _where(held, params, sigma, rotor, before, effects_after, after) -> dict:
+    masks = [regime_masks(f.fit, params) for f in held]
+    dt = float(held[0].fit.t[1] - held[0].fit.t[0])
+    names = _channels(rotor, params)
+    energy = np.sum(np.concatenate(before) ** 2, axis=0)
+    return {
+        "channels": names,
+        "noise_scale": dict(zip(names, map(float, sigma))),
+        "heldout_rms_before": dict(zip(names, map(float, _channel_rms(before, sigma)))),
+        "heldout_rms_after": dict(zip(names, map(float, _channel_rms(after, sigma)))),
+        "channel_share": dict(zip(names, map(float, energy / max(energy.sum(), 1e-300)))),
+        "regime": by_regime(before, masks),
+        "regime_after": by_regime(after, masks),
+        "band": by_band(before, dt),
+        "kstep_before": kstep_errors([f.fit for f in held], params, []),
+        "kstep_after": kstep_errors([f.fit for f in held], params, effects_after),
+    }
+
+
+def _split(flights: list[Flight], holdout: list[Flight] | None, notes: list[str]):
+    if holdout:
+        return flights, holdout
+    if len(flights) >= 2:
+        held = [f for i, f in enumerate(flights) if i % 3 == 2] or [flights[-1]]
+        return [f for f in flights if f not in held], held
+    notes.append("single flight: no held-out flight to score on; the second half of the same "
+                 "flight is used instead (weaker evidence, give more flights or --holdout)")
+    f = flights[0]
+    half = len(f.states.t) // 2
+    parts = []
+    for sl in (slice(0, half), slice(half, None)):
+        states = f.states.take(np.arange(len(f.states.t))[sl])
+        fit_idx = np.nonzero((f.fit.t >= states.t[0]) & (f.fit.t <= states.t[-1]))[0]
+        parts.append(Flight(f.name, states, f.fit.take(fit_idx)))
+    return [parts[0]], [parts[1]]
+
+
+def _confusable(ranked: list[dict], best: dict, baseline: dict, nominal_gap: float) -> list:
+    out = []
+    tie = TIE * nominal_gap
+    for other in ranked:
+        if other is best or other["name"] == best["name"]:
+            continue
+        if other["heldout_gap_after"] - best["heldout_gap_after"] <= tie:
+            out.append(other["name"])
+    if baseline["heldout_gap_after"] - best["heldout_gap_after"] <= tie:
+        out.append("nominal_refit")
+    return out
+
+
+def _separation(best: str, confusable: list[str]) -> dict:
+    return {other: SEPARATE.get(frozenset({best, other}),
+                                "more varied flights (speeds, heights, attitudes)")
+            for other in confusable}
+
+
+def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
+             holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
+             max_combination: int = 2, progress: Callable | None = None) -> dict:
+    """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`)."""
+    notes: list[str] = []
+    flights = prepare(logs, params)
+    held_in = prepare(holdout, params) if holdout else None
+    train, held = _split(flights, held_in, notes)
+    return _diagnose_split(train, held, params, effects, max_combination, progress, notes)
+
+
+def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes):
+    rotor = all(f.fit.command is not None for f in train + held)
+    dt = float(held[0].fit.t[1] - held[0].fit.t[0])
+    nominal_train = [residuals(f.fit, params, [], rotor_channel=rotor) for f in train]
+    sigma = noise_scale(np.concatenate(nominal_train), float(train[0].fit.t[1] - train[0].fit.t[0]))
+    before = _scaled(held, params, [], sigma, rotor)
+    has_vbat = all(f.fit.vbat is not None and np.all(np.isfinite(f.fit.vbat)) for f in train)
+    cands = candidates_for(params, rotor, has_vbat)
+    if effect_names is not None:
+        unknown = set(effect_names) - {c.name for c in cands}
+        if unknown:
+            raise InputError(f"--effects: unknown or unusable effect(s) {sorted(unknown)}; "
+                             f"valid: {', '.join(c.name for c in cands)}")
+        cands = [c for c in cands if c.name in effect_names]
+    tick = progress or (lambda *_: None)
+    fit_on = [f.fit for f in train]
+    baseline = _score(fit_candidate(BASELINE, fit_on, params, sigma, rotor_channel=rotor),
+                      train, held, params, sigma, rotor, before, dt)
+    tick("nominal_refit")
+    scored = []
+    for cand in cands:
+        scored.append(_score(fit_candidate(cand, fit_on, params, sigma, rotor_channel=rotor),
+                             train, held, params, sigma, rotor, before, dt))
+        tick(cand.name)
+    for s in scored:
+        bad = [k for k, ok in s["identifiable"].items() if not ok]
+        if bad:
+            s["warning"] = ("too little excitation to fit " + ", ".join(bad)
+                            + " on these flights (CI wider than half the plausible range)")
+    ranked = sorted(scored, key=lambda s: (round(s["heldout_gap_after"] / max(before_gap(before), 1e-300), 4),
+                                           len(s["params"]), s["name"]))
+    return _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt,
+                   max_combination, notes, tick)
+
+
+def before_gap(before: list[np.ndarray]) -> float:
+    return _gap(before)
+
+
+def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
+    gain = (reference_gap - entry["heldout_gap_after"]) / nominal_gap if nominal_gap > 0 else 0
+    return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and any(entry["identifiable"].values())
+
+
+def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
+            notes, tick) -> dict:
+    nominal_gap = _gap(before)
+    chosen, best = [], None
+    # An effect wins only if it beats the nominal model clearly and is not clearly worse
+    # than simply refitting b and d (a retuned nominal model). Among the winners whose
+    # held-out gap ties with the best (within TIE), the one with fewest parameters is named.
+    winners = [e for e in ranked if _clear(e, nominal_gap, nominal_gap) and
+               e["heldout_gap_after"] <= baseline["heldout_gap_after"] + TIE * nominal_gap]
+    if winners:
+        floor = winners[0]["heldout_gap_after"] + TIE * nominal_gap
+        best = min((e for e in winners if e["heldout_gap_after"] <= floor),
+                   key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
+        ranked.remove(best)
+        ranked.insert(0, best)
+    combined = best
+    if best is not None:
+        chosen = [best]
+        combined = _greedy(best, ranked, train, held, params, sigma, rotor, before, dt,
+                           max_combination, nominal_gap, tick)
+        if combined is not best:
+            chosen = [e for e in ranked if e["name"] in combined["name"].split("+")]
+    effects_after = combined["_fit"].effects() if combined else []
+    after = _scaled(held, params, effects_after, sigma, rotor)
+    if best is None and _clear(baseline, nominal_gap, nominal_gap):
+        notes.append("the held-out gap shrinks with refitted b and d (nominal_refit) but no "
+                     "library effect explains more: the nominal parameters are off")
+    confusable = _confusable(ranked, best, baseline, nominal_gap) if best else []
+    verdict = {
+        "effect": combined["name"] if combined else "unexplained",
+        "reduction": combined["reduction"] if combined else 0.0,
+        "confusable_with": confusable,
+        "separate_by": _separation(best["name"], confusable) if best else {},
+        "params": combined["params"] if combined else {},
+        "ci": combined["ci"] if combined else {},
+        "heldout_gap_before": nominal_gap,
+        "heldout_gap_after": combined["heldout_gap_after"] if combined else nominal_gap,
+    }
+    result = {
+        "schema": SCHEMA,
+        "model": params.name,
+        "train": [f.name for f in train], "holdout": [f.name for f in held],
+        "where": _where(held, params, sigma, rotor, before, effects_after, after),
+        "baseline": _public(baseline),
+        "effects": [_public(e) for e in ranked],
+        "verdict": verdict,
+        "notes": notes,
+    }
+    if combined is not None and combined is not best:
+        result["combination"] = _public(combined)
+    return result
+
+
+def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_combination,
+            nominal_gap, tick):
+    current = best
+    used = {best["name"]}
+    fit_on = [f.fit for f in train]
+    while len(used) < max_combination:
+        trial = None
+        for entry in ranked[:6]:
+            if entry["name"] in used or not _clear(entry, nominal_gap, nominal_gap):
+                continue
+            cand = current["_fit"].candidate.combine(entry["_fit"].candidate)
+            start = np.concatenate([current["_fit"].theta, entry["_fit"].theta])
+            fit = fit_candidate(cand, fit_on, params, sigma, rotor_channel=rotor, start=start)
+            scored = _score(fit, train, held, params, sigma, rotor, before, dt)
+            tick(cand.name)
+            if trial is None or scored["heldout_gap_after"] < trial["heldout_gap_after"]:
+                trial = scored
+        if trial is None or not _clear(trial, current["heldout_gap_after"], nominal_gap):
+            break
+        current, used = trial, used | set(trial["name"].split("+"))
+    return current
+
+
+def _public(entry: dict) -> dict:
+    return {k: v for k, v in entry.items() if not k.startswith("_")}
+
+
+def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
+                        params: VehicleParams, **kwargs) -> dict:
+    """Judge each flight on its own against ``reference`` (nominal) flights.
+
+    The nominal thrust and drag factors are first refitted on the reference flights (so the
+    reference defines "nominal"); then each flight is diagnosed with its first half as
+    training and its second half as held-out data (a time split inside the flight), and its
+    fitted effect parameters are compared with the spread of the same fit on the reference
+    flights."""
+    ref = prepare(reference, params)
+    if len(ref) < 2:
+        raise InputError("--reference: give at least 2 nominal flights")
+    rotor = all(f.fit.command is not None for f in ref)
+    sigma0 = noise_scale(np.concatenate([residuals(f.fit, params, [], rotor_channel=rotor)
+                                         for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]))
+    base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
+    tuned = base.effects()[0].apply_to_params(params)
+    reference_fits = _reference_spread(ref, tuned, kwargs.get("effects"))
+    flights = []
+    for log in logs:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            one = _diagnose_split(*_halves(prepare([log], tuned)[0]), tuned, kwargs.get("effects"),
+                                  1, kwargs.get("progress"), [])
+        flights.append(_judge(one, reference_fits, str(log.path)))
+    return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
+            "reference": [f.name for f in ref],
+            "reference_refit": base.params(), "flights": flights,
+            "where": {}, "effects": [], "verdict": {"effect": "see flights", "reduction": None,
+                                                    "confusable_with": []}}
+
+
+def _halves(f: Flight):
+    half = len(f.states.t) // 2
+    out = []
+    for sl in (slice(0, half), slice(half, None)):
+        idx = np.arange(len(f.states.t))[sl]
+        states = f.states.take(idx)
+        fit_idx = np.nonzero((f.fit.t >= states.t[0]) & (f.fit.t <= states.t[-1]))[0]
+        out.append(Flight(f.name, states, f.fit.take(fit_idx)))
+    return [out[0]], [out[1]]
+
+
+def _reference_spread(ref: list[Flight], params, effect_names) -> dict:
+    """Per effect: each reference flight's own reduction (first half -> second half)."""
+    spread: dict[str, list[float]] = {}
+    for f in ref:
+        one = _diagnose_split(*_halves(f), params, effect_names, 1, None, [])
+        for e in one["effects"]:
+            spread.setdefault(e["name"], []).append(e["reduction"])
+    return spread
+
+
+def _judge(one: dict, spread: dict, name: str) -> dict:
+    """A flight's verdict: its best effect must beat every reference flight's reduction."""
+    verdict = dict(one["verdict"])
+    effect = verdict["effect"]
+    if effect != "unexplained":
+        ref = spread.get(effect.split("+")[0], [0.0])
+        if verdict["reduction"] <= max(ref) + MIN_GAIN:
+            verdict = {**verdict, "effect": "unexplained",
+                       "note": f"{effect} helps, but no more than on the nominal flights"}
+    return {"file": name, "verdict": verdict["effect"], "params": verdict.get("params", {}),
+            "ci": verdict.get("ci", {}), "reduction": verdict["reduction"],
+            "confusable_with": verdict.get("confusable_with", []),
+            "effects": [{k: e[k] for k in ("name", "params", "reduction")} for e in one["effects"]]}

@@ -1,0 +1,365 @@
+"""Equation-error fitting of candidate effects (the "which" of the gap diagnosis).
+
+For a candidate effect with values theta, every sample of every flight gives a residual
+(measured Newton–Euler wrench minus model wrench, :mod:`quadsim.residual`, plus a rotor-speed
+channel when the log has commands), divided per channel by the noise scale ``sigma``. The
+effect's fittable parameters (:data:`FIT_SPEC`) are found with bounded
+``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at the solution,
+widened by the residuals' correlation time (the smoothed samples are not independent).
+
+A *candidate* is a tuple of (effect name, fixed values, fitted parameter names). Some effects
+need a companion to be seen at all: ``wind`` acts only through drag, so the ``wind``
+candidate fits the mean wind together with the rotor-drag coefficient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..effects import EFFECTS, make_effect
+from ..errors import ModelError
+from ..params import VehicleParams
+from ..residual import FlightStates, measured_wrench, model_wrench
+
+__all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for", "residuals", "fit_candidate",
+           "noise_scale", "command_speed", "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
+
+#: effects that are not in the library but are fitted like one (the nominal-refit baseline).
+LOCAL_EFFECTS: dict[str, type] = {}
+
+
+def effect_class(name: str) -> type:
+    """The class of a library effect (or of a local pseudo-effect such as the baseline)."""
+    return LOCAL_EFFECTS[name] if name in LOCAL_EFFECTS else EFFECTS[name]
+
+
+#: horizon (s) of the rotor-speed channel: speed predicted this far ahead from the measured one.
+ROTOR_HORIZON_S = 0.02
+ROTOR_SUBSTEPS = 10
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """Effects to fit together: ``parts`` = ((effect name, fixed values, fitted names), ...)."""
+
+    name: str
+    parts: tuple[tuple[str, dict, tuple[str, ...]], ...]
+
+    @property
+    def parameter_names(self) -> list[str]:
+        return [f"{name}.{p}" for name, _, fitted in self.parts for p in fitted]
+
+    def effects(self, theta: np.ndarray) -> list:
+        out, k = [], 0
+        for name, fixed, fitted in self.parts:
+            values = dict(fixed)
+            for p in fitted:
+                values[p] = float(theta[k])
+                k += 1
+            if name in LOCAL_EFFECTS:
+                out.append(LOCAL_EFFECTS[name](**values))
+            else:
+                out.append(make_effect(name, **values))
+        return out
+
+    def combine(self, other: Candidate) -> Candidate:
+        return Candidate(f"{self.name}+{other.name}", self.parts + other.parts)
+
+
+@dataclass
+class Fit:
+    """A fitted candidate: parameter values, standard errors, 95 % CI half-widths, cost."""
+
+    candidate: Candidate
+    theta: np.ndarray
+    stderr: np.ndarray
+    correlation: np.ndarray
+    cost: float
+    identifiable: list[bool] = field(default_factory=list)
+
+    def params(self) -> dict[str, float]:
+        return dict(zip(self.candidate.parameter_names, map(float, self.theta)))
+
+    def ci(self) -> dict[str, float]:
+        return dict(zip(self.candidate.parameter_names, map(float, 1.96 * self.stderr)))
+
+    def effects(self) -> list:
+        return self.candidate.effects(self.theta)
+
+
+def _rotor_scale(params: VehicleParams) -> float:
+    return float(params.max_speed) or 1.0
+
+
+#: effect -> (parameters to fit, fixed values, typical magnitude of each fitted parameter
+#: as a function of the vehicle). Unlisted parameters stay at their ``off`` value.
+FIT_SPEC = {
+    "mass_offset": (("mass",), {}, lambda p: [0.05 * p.mass]),
+    "com_offset": (("x", "y"), {}, lambda p: [0.02 * _arm(p)] * 2),
+    "inertia_error": (("xx", "yy", "zz"), {}, lambda p: [0.1] * 3),
+    "thrust_mismatch": (None, {}, lambda p: [0.05] * p.rotor_count),
+    "thrust_curve": (("linear",), {}, lambda p: [0.05 * p.thrust_factor * p.max_speed]),
+    "battery_sag": (("rate",), {}, lambda p: [0.005]),
+    "ground_effect": (("gain",), {}, lambda p: [1.0]),
+    "rotor_drag": (("coefficient", "axial_coefficient"), {},
+                   lambda p: [_drag_scale(p)] * 2),
+    "body_drag": (("cd_area", "cd_area_vertical"), {}, lambda p: [_area_scale(p)] * 2),
+    "motor_lag": (("time_constant",), {}, lambda p: [0.03]),
+    "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
+}
+
+
+def _arm(params: VehicleParams) -> float:
+    return float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
+
+
+def _drag_scale(params: VehicleParams) -> float:
+    """A rotor-drag coefficient giving 10 % of the weight at 2 m/s with four hover rotors."""
+    hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))
+    return 0.1 * params.weight / (params.rotor_count * hover * 2.0)
+
+
+def _area_scale(params: VehicleParams) -> float:
+    """A C_d A giving 10 % of the weight at 2 m/s."""
+    return 0.1 * params.weight / (0.5 * params.air_density * 4.0)
+
+
+def candidates_for(params: VehicleParams, has_commands: bool,
+                   has_vbat: bool = False) -> list[Candidate]:
+    """The candidate list for a vehicle: every effect of the library that the data can show.
+
+    ``motor_lag`` needs commands (with measured rotor speeds, lag does not change the
+    wrench); ``wind`` is fitted with rotor drag (wind alone exerts no force)."""
+    out = []
+    for name in sorted(EFFECTS):
+        if name == "wind":
+            out.append(Candidate("wind", (("wind", {}, ("vx", "vy")),
+                                          ("rotor_drag", {}, ("coefficient",)))))
+            continue
+        if name not in FIT_SPEC or (name == "motor_lag" and not has_commands):
+            continue
+        fitted, fixed, _ = FIT_SPEC[name]
+        if name == "battery_sag" and has_vbat:
+            fitted = ("full_voltage",)  # with a voltage log the sag follows (V / V_full)^2
+        if fitted is None:
+            fitted = tuple(f"rotor_{i + 1}" for i in range(params.rotor_count))
+        known = {p.name for p in EFFECTS[name].parameters}
+        fitted = tuple(p for p in fitted if p in known)
+        if fitted:
+            out.append(Candidate(name, ((name, dict(fixed), fitted),)))
+    return out
+
+
+def _typical(candidate: Candidate, params: VehicleParams) -> np.ndarray:
+    scales = []
+    for name, _, fitted in candidate.parts:
+        names, _, typical = FIT_SPEC.get(name, ((), {}, None))
+        values = typical(params) if typical else []
+        names = names or tuple(f"rotor_{i + 1}" for i in range(params.rotor_count))
+        lookup = dict(zip(names, values))
+        lookup.setdefault("full_voltage", 0.2)
+        if name == "wind":
+            lookup = {"vx": 1.0, "vy": 1.0, "vz": 1.0}
+        scales += [lookup.get(p, 1.0) for p in fitted]
+    return np.asarray(scales, dtype=float)
+
+
+def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
+    lower, upper = [], []
+    for name, _, fitted in candidate.parts:
+        specs = {p.name: p for p in effect_class(name).parameters}
+        for p in fitted:
+            lo, hi = specs[p].lower, specs[p].upper
+            if name == "mass_offset" and p == "mass":  # plausible payloads for this vehicle
+                lo, hi = max(lo, -0.5 * params.mass), min(hi, 2.0 * params.mass)
+            if name == "com_offset":
+                lo, hi = max(lo, -0.5 * _arm(params)), min(hi, 0.5 * _arm(params))
+            lower.append(lo)
+            upper.append(hi)
+    return np.asarray(lower), np.asarray(upper)
+
+
+def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
+           typical: np.ndarray) -> np.ndarray:
+    off = []
+    for name, fixed, fitted in candidate.parts:
+        specs = {p.name: p for p in effect_class(name).parameters}
+        off += [specs[p].off for p in fitted]
+    x0 = np.asarray(off, dtype=float)
+    # Start strictly inside the bounds (least_squares' trust region needs it); an effect
+    # whose "off" value sits on a bound starts a tenth of its typical size away from it.
+    x0 = np.where(x0 <= lower, lower + 0.1 * typical, x0)
+    x0 = np.where(x0 >= upper, upper - 0.1 * typical, x0)
+    return np.clip(x0, lower + 1e-12 * typical, upper - 1e-12 * typical)
+
+
+def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | None:
+    """Commanded rotor speed (N, R) rad/s from normalised commands: the parameter set's motor
+    map, else ``command * max_speed``. None without commands."""
+    if states.command is None:
+        return None
+    return speed_of_command(params, states.command)
+
+
+def _map_units(params: VehicleParams, command: np.ndarray) -> np.ndarray:
+    """Normalised 0-1 command -> the motor map's own command unit (0-1 spans its table)."""
+    mm = params.motor_map
+    if mm.command_unit == "1":
+        return command
+    return mm.command[0] + command * (mm.command[-1] - mm.command[0])
+
+
+def speed_of_command(params: VehicleParams, command: np.ndarray) -> np.ndarray:
+    """Steady rotor speed (rad/s) of normalised commands (..., R): the motor map (a map in
+    other units, e.g. PWM, is spanned by 0-1 over its table), else ``command * max_speed``."""
+    if params.motor_map is not None:
+        return params.motor_map.speed_of(_map_units(params, command))
+    return command * params.max_speed
+
+
+def command_of_speed(params: VehicleParams, speed: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`speed_of_command` (N, R) (monotone part of the map)."""
+    if params.motor_map is None:
+        return speed / params.max_speed
+    mm = params.motor_map
+    raw = np.stack([np.interp(speed[:, i], mm.speed[i], mm.command)
+                    for i in range(speed.shape[1])], -1)
+    if mm.command_unit == "1":
+        return raw
+    return (raw - mm.command[0]) / (mm.command[-1] - mm.command[0])
+
+
+def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
+    """Measured rotor speed at t + h minus the model's prediction from the state at t."""
+    dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
+    steps = max(1, int(round(ROTOR_HORIZON_S / dt)))
+    cmd = command_speed(states, params)
+    speed = states.rotor_speed
+    n = len(states.t) - steps
+    rate_owner = [e for e in effects if e.rotor_speed_rate(np.zeros(1), np.zeros((1, 1)),
+                                                            np.zeros((1, 1))) is not None]
+    if not rate_owner:
+        predicted = cmd[steps:]
+    else:
+        # Explicit Euler in ROTOR_SUBSTEPS substeps per sample (stable for time constants
+        # down to dt / (2 ROTOR_SUBSTEPS)), command held over each sample.
+        predicted = speed[:n].copy()
+        h = dt / ROTOR_SUBSTEPS
+        for k in range(steps):
+            for _ in range(ROTOR_SUBSTEPS):
+                rate = rate_owner[0].rotor_speed_rate(states.t[k:k + n], cmd[k:k + n],
+                                                      predicted)
+                predicted = predicted + h * rate
+    out = np.zeros_like(speed)
+    out[steps:] = speed[steps:] - predicted
+    # Stacked flights: a prediction across a flight boundary (time jump) is not scored.
+    valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
+    out[steps:][~valid] = 0.0
+    return out
+
+
+def stack_states(flights: list[FlightStates]) -> FlightStates:
+    """Several flights as one sample set (each keeps its own time axis; the rotor channel
+    skips the boundaries)."""
+    if len(flights) == 1:
+        return flights[0]
+
+    def cat(name):
+        values = [getattr(f, name) for f in flights]
+        return None if any(v is None for v in values) else np.concatenate(values)
+
+    first = flights[0]
+    return FlightStates(*(cat(n) for n in ("t", "position", "velocity", "accel_world", "quat",
+                                           "body_rate", "body_accel", "specific_force",
+                                           "rotor_speed", "rotor_accel", "command", "vbat")),
+                        first.accel_source, first.window_s, first.polyorder, "stacked")
+
+
+def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
+              rotor_channel: bool) -> np.ndarray:
+    """Unscaled residual (N, C): Fx Fy Fz Mx My Mz (N, N m) [+ rotor_1..R (rad/s)]."""
+    force, torque, vehicle = model_wrench(states, params, effects)
+    meas_force, meas_torque = measured_wrench(states, vehicle)
+    parts = [meas_force - force, meas_torque - torque]
+    if rotor_channel:
+        parts.append(_rotor_channel(states, params, effects))
+    return np.concatenate(parts, axis=1)
+
+
+def noise_scale(residual: np.ndarray, dt: float, window_s: float = 0.5) -> np.ndarray:
+    """Per-channel noise scale: robust spread of the residual after removing its slow part
+    (moving average over ``window_s``), so that a slowly acting effect does not inflate it."""
+    n = max(3, int(round(window_s / dt)) | 1)
+    kernel = np.ones(n) / n
+    slow = np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
+    fast = residual - slow
+    mad = np.median(np.abs(fast - np.median(fast, axis=0)), axis=0) * 1.4826
+    floor = 1e-9 * (np.abs(residual).max(axis=0) + 1e-12)
+    return np.maximum(mad, floor)
+
+
+def _correlation_time(e: np.ndarray, max_lag: int = 200) -> float:
+    """Integrated autocorrelation time (samples) of the scaled residual, for CI widening."""
+    x = e - e.mean(axis=0)
+    var = np.sum(x * x)
+    if var <= 0:
+        return 1.0
+    tau = 1.0
+    for lag in range(1, min(max_lag, len(x) - 1)):
+        rho = np.sum(x[lag:] * x[:-lag]) / var
+        if rho < 0.05:
+            break
+        tau += 2 * rho
+    return float(tau)
+
+
+def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: VehicleParams,
+                  sigma: np.ndarray, *, rotor_channel: bool, start: np.ndarray | None = None,
+                  max_nfev: int = 60) -> Fit:
+    """Bounded least squares of ``candidate`` on ``flights`` (already decimated)."""
+    typical = _typical(candidate, params)
+    lower, upper = _bounds(candidate, params)
+    x0 = _start(candidate, lower, upper, typical) if start is None else np.clip(
+        start, lower + 1e-12 * typical, upper - 1e-12 * typical)
+    if start is None and "battery_sag.full_voltage" in candidate.parameter_names:
+        # Start where the sag is neutral on average: the full voltage at the highest logged.
+        k = candidate.parameter_names.index("battery_sag.full_voltage")
+        x0[k] = np.clip(max(float(np.nanmax(s.vbat)) for s in flights), lower[k], upper[k])
+
+    stacked = stack_states(flights)
+    size = len(stacked.t) * len(sigma)
+
+    def fun(z):
+        # The solver works in units of each parameter's typical size, so that finite
+        # differences and trust regions suit parameters from 1e-8 kg m^2 to volts.
+        try:
+            effects = candidate.effects(x0 + z * typical)
+            return (residuals(stacked, params, effects, rotor_channel=rotor_channel)
+                    / sigma).ravel()
+        except ModelError:
+            # Parameters that make the vehicle non-physical (e.g. inertia breaking the
+            # triangle inequality) are walls, not crashes.
+            return np.full(size, 1e3)
+
+    z_lower, z_upper = (lower - x0) / typical, (upper - x0) / typical
+    result = least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
+                           diff_step=1e-4, max_nfev=max_nfev, method="trf", x_scale=1.0)
+    theta = x0 + result.x * typical
+    jac, res = result.jac / typical, result.fun
+    dof = max(1, res.size - len(x0))
+    s2 = float(res @ res) / dof
+    inflation = _correlation_time(res.reshape(-1, len(sigma)))
+    cov = np.linalg.pinv(jac.T @ jac) * s2 * inflation
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    denom = np.outer(stderr, stderr)
+    corr = np.divide(cov, denom, out=np.zeros_like(cov), where=denom > 0)
+    column = np.linalg.norm(jac, axis=0) * typical
+    # A parameter is identified when the data move the residual and its CI is narrower
+    # than half the plausible range.
+    span = upper - lower
+    identifiable = [bool(c > 1e-6 * np.sqrt(res.size) and 1.96 * se < 0.5 * sp)
+                    for c, se, sp in zip(column, stderr, span)]
+    return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable)

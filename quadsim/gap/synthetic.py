@@ -1,0 +1,192 @@
+"""Inverse-dynamics flight logs: exact, fast test and benchmark data for the gap diagnosis.
+
+A smooth reference path (figure-8 with height and yaw variation, dipping close to the
+ground) is flown *exactly*: differential flatness gives the attitude, Newton–Euler the
+thrust and torque the rotors must produce, and the rotor speeds are solved from the
+geometry-derived allocation (:mod:`quadsim.rotors`) **with the hidden effects acting**
+(through the same hooks the engines call: ``apply_to_params``, ``air_velocity``, ``loads``,
+``rotor_speed_rate``). A few fixed-point passes resolve effects that depend on the rotor
+speeds (drag, thrust curve). Commands are the speeds that the motor dynamics turn into the
+logged speeds. Sensor noise (seeded) is added to every logged signal.
+
+Unlike the closed-loop flight generator (``quadsim.fly``) there is no controller and no
+integration error, so the only differences between the log and the nominal model are the
+hidden effects and the noise: the right data to test that the diagnosis finds them.
+
+Example::
+
+    >>> from quadsim.params import load_params
+    >>> from quadsim.effects import make_effect
+    >>> from quadsim.gap.synthetic import synthetic_flight
+    >>> log = synthetic_flight(load_params("crazyflie21"), [make_effect("mass_offset", mass=0.004)],
+    ...                        seed=3)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..effects.base import Effect, EffectContext, EffectSet
+from ..flightlog import FlightLog
+from ..frames import quat_multiply, quat_normalize, rotate_inverse
+from ..params import VehicleParams, hover_speed
+from ..rotors import allocation_matrix
+from .fitting import command_of_speed
+
+__all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Standard deviations of white sensor noise (SI): position (m), velocity (m/s),
+    attitude (rad, small rotation), gyro (rad/s), accelerometer (m/s^2), rotor speed
+    (fraction of hover speed), vbat (V)."""
+
+    position: float = 5e-4
+    velocity: float = 0.01
+    attitude: float = 2e-3
+    gyro: float = 0.02
+    accel: float = 0.1
+    rotor: float = 0.005
+    vbat: float = 0.005
+
+
+def reference_path(t: np.ndarray, params: VehicleParams, rng: np.random.Generator,
+                   speed: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Position (N, 3) and yaw (N,) of a figure-8 whose height dips to ~1.5 rotor radii.
+
+    Size scales with the vehicle's arm length; ``speed`` (m/s) is the typical path speed."""
+    arm = float(np.max(np.linalg.norm(params.rotor_positions, axis=1)))
+    size = max(0.5, 10 * arm) * rng.uniform(0.8, 1.2)
+    omega = speed / size
+    radius = params.rotor_radius or arm / 2
+    low, high = 1.5 * radius, max(0.6, 12 * radius)
+    phase = rng.uniform(0, 2 * np.pi)
+    u = np.clip(t / 3.0, 0.0, 1.0)
+    ramp = u ** 3 * (10 - 15 * u + 6 * u * u)  # quintic smoothstep: starts at rest, C2
+    # A small fast wiggle (1.5-2.5 Hz, 1.5 m/s^2) excites the attitude dynamics (rates of a few rad/s).
+    wiggle_f = rng.uniform(1.5, 2.5) * 2 * np.pi
+    wiggle = 1.5 / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp  # 1.5 m/s^2 peak
+    x = size * np.sin(omega * t) * ramp + wiggle
+    y = 0.5 * size * np.sin(2 * omega * t) * ramp - 0.7 * wiggle
+    z = low + (high - low) * 0.5 * (1 + np.cos(0.7 * omega * t + phase) ** 3)
+    yaw = (0.6 * np.sin(0.5 * omega * t + phase) + 0.1 * np.sin(0.3 * wiggle_f * t)) * ramp
+    return np.stack([x, y, z], -1), yaw
+
+
+def _attitude(thrust_world: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) with body z along the thrust and the given yaw."""
+    zb = thrust_world / np.linalg.norm(thrust_world, axis=1, keepdims=True)
+    xc = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], -1)
+    yb = np.cross(zb, xc)
+    yb /= np.linalg.norm(yb, axis=1, keepdims=True)
+    xb = np.cross(yb, zb)
+    return np.stack([xb, yb, zb], -1)
+
+
+def _rotmat_to_quat(rot: np.ndarray) -> np.ndarray:
+    w = np.sqrt(np.maximum(1 + rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2], 1e-12)) / 2
+    q = np.stack([w, (rot[:, 2, 1] - rot[:, 1, 2]) / (4 * w),
+                  (rot[:, 0, 2] - rot[:, 2, 0]) / (4 * w), (rot[:, 1, 0] - rot[:, 0, 1]) / (4 * w)], -1)
+    return quat_normalize(q)
+
+
+def _body_rate(t: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """omega = vee(R^T dR/dt), central differences."""
+    skew = np.einsum("nji,njk->nik", rot, np.gradient(rot, t, axis=0))
+    return np.stack([skew[:, 2, 1] - skew[:, 1, 2], skew[:, 0, 2] - skew[:, 2, 0],
+                     skew[:, 1, 0] - skew[:, 0, 1]], -1) / 2
+
+
+def _solve_rotors(vehicle, loads, thrust, torque, speed):
+    """Squared rotor speeds giving [thrust, torque] with per-rotor scale and offsets."""
+    alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]                       # (4, R)
+    axes = vehicle.rotor_axes
+    offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    offsets = loads.thrust_offset @ offset_map[:, [2, 3, 4, 5]]           # (N, 4)
+    rhs = np.concatenate([thrust[:, None], torque], 1) - offsets
+    matrix = alloc[None] * loads.thrust_scale[:, None, :]                # (N, 4, R)
+    omega2 = np.einsum("nij,nj->ni", np.linalg.pinv(matrix), rhs)
+    return np.sqrt(np.maximum(omega2, (0.05 * speed) ** 2))
+
+
+def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
+    """States and rotor speeds of the exact flight; ``com_path`` is the CoM's path (so the
+    thrust direction does not depend on the angular acceleration)."""
+    vehicle = effect_set.apply_to_params(params)
+    accel_com = np.gradient(np.gradient(com_path, t, axis=0), t, axis=0)
+    hover = hover_speed(params)
+    speed = np.full((len(t), params.rotor_count), hover)
+    lift = accel_com + [0, 0, vehicle.gravity]
+    rot = _attitude(lift, yaw)
+    for _ in range(passes):
+        quat = _rotmat_to_quat(rot)
+        rate = _body_rate(t, rot)
+        rate_dot = np.gradient(rate, t, axis=0)
+        position = com_path - np.einsum("nij,j->ni", rot, vehicle.com)   # body origin
+        velocity = np.gradient(position, t, axis=0)
+        wind = effect_set.air_velocity(t, position)
+        ctx = EffectContext(t, position, velocity, quat, rate, velocity - wind, speed,
+                            np.gradient(speed, t, axis=0), vehicle, vbat)
+        loads = effect_set.loads(ctx)
+        thrust_world = vehicle.mass * lift - loads.force_world
+        rot = _attitude(thrust_world, yaw)
+        inertia = vehicle.inertia
+        torque = rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T) - loads.torque_body
+        speed = _solve_rotors(vehicle, loads, np.linalg.norm(thrust_world, axis=1), torque,
+                              hover)
+    specific = rotate_inverse(quat, np.gradient(velocity, t, axis=0) + [0, 0, vehicle.gravity])
+    return position, velocity, quat, rate, specific, speed
+
+
+def _commands(t, speed, effect_set, params, hover):
+    """Normalised commands whose motor dynamics give ``speed`` (Newton on the rate)."""
+    rate_needed = np.gradient(speed, t, axis=0)
+    cmd = speed.copy()
+    if effect_set.has_rotor_dynamics():
+        for _ in range(8):
+            rate = effect_set.rotor_speed_rate(t, cmd, speed)
+            step = 1e-3 * hover
+            slope = (effect_set.rotor_speed_rate(t, cmd + step, speed) - rate) / step
+            cmd = cmd - (rate - rate_needed) / np.where(np.abs(slope) > 1e-12, slope, 1.0)
+    return command_of_speed(params, cmd)
+
+
+def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
+                     duration: float = 10.0, rate_hz: float = 500.0, speed: float = 1.0,
+                     seed: int = 0, noise: SensorNoise | None = SensorNoise(),
+                     full_voltage: float = 4.2, name: str = "synthetic") -> FlightLog:
+    """An exact log of ``params`` + hidden ``effects`` flying :func:`reference_path`.
+
+    Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
+    ``battery_sag`` effect's voltage model)."""
+    rng = np.random.default_rng(seed)
+    pad = int(round(0.2 * rate_hz))  # differentiate on a longer grid, trim the ends
+    t = (np.arange(int(round(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
+    position, yaw = reference_path(t, params, rng, speed)
+    effect_set = EffectSet(tuple(effects))
+    sag = [e for e in effects if getattr(e, "name", "") == "battery_sag"]
+    vbat = sag[0].voltage(t) if sag else full_voltage - 0.15 * t / max(duration, 1e-9)
+    position, velocity, quat, rate, specific, speed_ = _exact_flight(
+        t, params, effect_set, position, yaw, vbat)
+    hover = hover_speed(params)
+    command = _commands(t, speed_, effect_set, params, hover)
+    keep = slice(pad, len(t) - pad)
+    t, position, velocity, quat, rate, specific, speed_, command, vbat = (
+        a[keep] for a in (t, position, velocity, quat, rate, specific, speed_, command, vbat))
+    if noise is not None:
+        n = len(t)
+        position = position + noise.position * rng.standard_normal((n, 3))
+        velocity = velocity + noise.velocity * rng.standard_normal((n, 3))
+        tilt = np.concatenate([np.ones((n, 1)), 0.5 * noise.attitude * rng.standard_normal((n, 3))], 1)
+        quat = quat_normalize(quat_multiply(quat, tilt))
+        rate = rate + noise.gyro * rng.standard_normal((n, 3))
+        specific = specific + noise.accel * rng.standard_normal((n, 3))
+        speed_ = speed_ + noise.rotor * hover * rng.standard_normal(speed_.shape)
+        vbat = vbat + noise.vbat * rng.standard_normal(n)
+    quat = np.where(quat[:, :1] < 0, -quat, quat)
+    return FlightLog(t, position, quat, velocity, rate, specific, speed_,
+                     np.clip(command, 0.0, 1.0), vbat, None)
