@@ -30,6 +30,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from quadsim.benchdata import load_physical_measurements  # noqa: E402
 from quadsim.errors import run_cli  # noqa: E402
 from quadsim.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
 
@@ -127,16 +128,19 @@ def stl_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
 
 
 # ----------------------------------------------------------------------------- the testbed
-# Measured (report Table 4.4, averages of three trials), SI.
-TOTAL_MASS = 0.837667          # overall mass, weighed
-MECHANICAL_MASS = 0.607        # mechanical parts (Table 4.1 list), weighed
-BATTERY_MASS = 0.171
-MOTOR_MASS = 0.052
-PROPELLER_MASS = 0.011
-FRAME_GROUP_MASS = 0.346333    # "upper and lower base with frames attached" (M)
-FRAME_LENGTH_MM = 191.333      # l_f
-ARM_MM = 197.667               # l_mtc, motor axis to centre
-BASE_RADIUS_MM = 67.667        # R_b (half the side of the square base)
+# Measured: report Table 4.4, mean of the three trials, from the package's transcription
+# (quadsim/data/table_4_4_physical.csv) so that the numbers live in one place. SI.
+TABLE_4_4 = {k: float(np.mean(v)) for k, v in load_physical_measurements().columns.items()
+             if k != "trial"}
+TOTAL_MASS = TABLE_4_4["total_mass"]            # overall mass, weighed
+MECHANICAL_MASS = TABLE_4_4["mechanical_mass"]  # mechanical parts (Table 4.1 list), weighed
+BATTERY_MASS = TABLE_4_4["battery_mass"]
+MOTOR_MASS = TABLE_4_4["motor_mass"]
+PROPELLER_MASS = TABLE_4_4["propeller_mass"]
+FRAME_GROUP_MASS = TABLE_4_4["base_mass"]       # "upper and lower base with frames attached" M
+FRAME_LENGTH_MM = 1000 * TABLE_4_4["frame_length"]       # l_f
+ARM_MM = 1000 * TABLE_4_4["motor_to_centre"]             # l_mtc, motor axis to centre
+BASE_RADIUS_MM = 1000 * TABLE_4_4["base_radius"]         # R_b (half the side of the base)
 
 # Assumed dimensions (mm) -- the report gives none; each has its reason in the manifest.
 ARM_OUTER_MM, ARM_WALL_MM = 12.7, 1.2
@@ -263,9 +267,9 @@ def assign_masses(parts: list[dict]) -> None:
         p["volume_mm3"] = volume_mm3(*p["shape"])
         p["count"] = len(p["placements"])
     sources = {
-        "motor": "Table 4.4 m_m (weighed)",
-        "propeller": "Table 4.4 m_p (weighed)",
-        "battery": "Table 4.4 m_b (weighed)",
+        "motor": "Table 4.4 m_m (weighed, mean of 3 trials)",
+        "propeller": "Table 4.4 m_p (weighed, mean of 3 trials)",
+        "battery": "Table 4.4 m_b (weighed, mean of 3 trials)",
         "arduino_uno": "Arduino Uno datasheet (25 g)",
         "imu": "assumed: typical 10-DOF breakout board",
     }
@@ -280,12 +284,12 @@ def assign_masses(parts: list[dict]) -> None:
                                     f"{total / (volume * 1e-9):.0f} kg/m^3)")
 
     split(["base_plate", "frame_arm", "landing_gear"], FRAME_GROUP_MASS,
-          "Table 4.4 M = 0.346333 kg (bases with frames attached; landing gear assumed "
-          "attached when weighed)")
-    motors_props = 4 * (MOTOR_MASS + PROPELLER_MASS)
-    split(["propeller_screw", "propeller_head_cap"],
-          MECHANICAL_MASS - FRAME_GROUP_MASS - motors_props,
-          "Table 4.4 m_mp - M - 4 (m_m + m_p) = 8.667 g residual of the mechanical parts")
+          f"Table 4.4 M = {FRAME_GROUP_MASS:.6f} kg (bases with frames attached; landing gear "
+          "assumed attached when weighed)")
+    residual = MECHANICAL_MASS - FRAME_GROUP_MASS - 4 * (MOTOR_MASS + PROPELLER_MASS)
+    split(["propeller_screw", "propeller_head_cap"], residual,
+          f"Table 4.4 m_mp - M - 4 (m_m + m_p) = {1000 * residual:.3f} g residual of the "
+          "mechanical parts")
     esc_total = TOTAL_MASS - MECHANICAL_MASS - BATTERY_MASS - ARDUINO_MASS - IMU_MASS
     split(["esc"], esc_total,
           "Table 4.4 m_total - m_mp - m_b - Arduino - IMU (ESCs with power wiring)")
@@ -307,7 +311,7 @@ def manifest_text(parts: list[dict]) -> str:
         'mesh_unit = "mm"',
         "",
         "[vehicle]",
-        f'weighed_mass = {{ value = {TOTAL_MASS}, unit = "kg", source = "Table 4.4 overall '
+        f'weighed_mass = {{ value = {TOTAL_MASS!r}, unit = "kg", source = "Table 4.4 overall '
         'mass, mean of 3 trials" }',
         "mass_tolerance = 0.005",
     ]

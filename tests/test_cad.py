@@ -83,13 +83,13 @@ def test_testbed_masses_match_table_4_4():
     assembly = load_assembly(REPO / "cad")
     whole = vehicle_mass_properties(assembly)
     mechanical = vehicle_mass_properties(assembly, groups=("mechanical",))
-    assert whole.mass == pytest.approx(0.837667, rel=1e-9)       # weighed total
+    assert whole.mass == pytest.approx(0.837667, abs=5e-7)        # weighed total (mean)
     assert mechanical.mass == pytest.approx(0.607, rel=1e-9)      # mechanical parts
     by_part = {p.name: p.instance_mass for p in assembly.parts}
     assert by_part["motor"] == 0.052 and by_part["propeller"] == 0.011
     assert by_part["battery"] == 0.171
     frame_group = 2 * by_part["base_plate"] + 4 * by_part["frame_arm"] + 4 * by_part["landing_gear"]
-    assert frame_group == pytest.approx(0.346333, rel=1e-9)
+    assert frame_group == pytest.approx(0.346333, abs=5e-7)
     for part in assembly.parts:
         assert part.mesh.is_watertight and part.mesh.is_winding_consistent
     # Symmetric '+' frame: CoM on the z axis.
@@ -98,12 +98,12 @@ def test_testbed_masses_match_table_4_4():
 
 def test_testbed_rotors_reproduce_report_equations_3_44_to_3_47():
     assembly = load_assembly(REPO / "cad")
-    arm = 0.197667
+    arm = 0.1976666667  # Table 4.4 l_mtc, Average column (mean of the trials, to 1e-10)
     expected = {"1": ([arm, 0], 1), "2": ([0, -arm], -1), "3": ([-arm, 0], 1), "4": ([0, arm], -1)}
     assert [r.name for r in assembly.rotors] == ["1", "2", "3", "4"]
     for rotor in assembly.rotors:
         xy, spin = expected[rotor.name]
-        np.testing.assert_allclose(rotor.position[:2], xy, atol=1e-12)
+        np.testing.assert_allclose(rotor.position[:2], xy, atol=1e-9)  # manifest: 1 nm
         np.testing.assert_allclose(rotor.axis, [0, 0, 1], atol=1e-15)
         assert rotor.spin == spin
     base = load_params("physical")
@@ -111,8 +111,8 @@ def test_testbed_rotors_reproduce_report_equations_3_44_to_3_47():
                                   for r in assembly.rotors))
     a = allocation_matrix(p, about=np.zeros(3))
     b, d = p.thrust_factor, p.drag_factor
-    np.testing.assert_allclose(a[3], [0, -arm * b, 0, arm * b], atol=1e-15)   # roll, eq. 3.44
-    np.testing.assert_allclose(a[4], [-arm * b, 0, arm * b, 0], atol=1e-15)   # pitch, eq. 3.45
+    np.testing.assert_allclose(a[3], [0, -arm * b, 0, arm * b], rtol=1e-8, atol=1e-20)  # 3.44
+    np.testing.assert_allclose(a[4], [-arm * b, 0, arm * b, 0], rtol=1e-8, atol=1e-20)  # 3.45
     np.testing.assert_allclose(a[5], [-d, d, -d, d], rtol=1e-12)              # yaw, eq. 3.46
 
 
