@@ -89,7 +89,7 @@ def screenshot(recording: Path, png: Path, *, width: int, height: int, wait_s: f
         _wait_for(web_port, 30)
         _wait_for(grpc_port, 30)
         source = urllib.parse.quote(f"rerun+http://127.0.0.1:{grpc_port}/proxy", safe="")
-        with tempfile.TemporaryDirectory() as profile:
+        with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
             browser_process = subprocess.Popen(
                 [browser, "--headless", "--no-sandbox", "--use-angle=swiftshader",
                  "--enable-unsafe-swiftshader", "--disable-background-networking",
