@@ -272,7 +272,7 @@ def load_mesh(mesh_path: Path, scale: float, *, where: str, hull: bool = False
     return mesh.convex_hull
 
 
-def _placement(entry: object, path: Path, where: str) -> Placement:
+def _placement(entry: object, path: Path, where: str, default_name: str) -> Placement:
     entry = _check_keys(entry, _PLACEMENT_KEYS, path, where)
     if "position_m" not in entry:
         raise field_error(path, f"{where}.position_m", "missing (m, body frame)")
@@ -280,7 +280,7 @@ def _placement(entry: object, path: Path, where: str) -> Placement:
     rpy = np.radians(_vector(entry.get("rpy_deg"), path, f"{where}.rpy_deg"))
     rotation = quat_to_rotmat(euler_to_quat(rpy))
     rotation[np.abs(rotation) < 1e-15] = 0.0  # exact zeros for right angles (clean tables)
-    return Placement(str(entry.get("name", where)), position, rotation)
+    return Placement(str(entry.get("name", default_name)), position, rotation)
 
 
 def _mass_or_density(entry: dict, path: Path, where: str) -> tuple[float | None, float | None,
@@ -332,7 +332,8 @@ def _part(entry: object, index: int, cad_dir: Path, unit: str, path: Path, hull:
     raw = entry.get("placement", [{"name": name, "position_m": [0.0, 0.0, 0.0]}])
     if not isinstance(raw, list) or not raw:
         raise field_error(path, f"{where}.placement", "expected at least one [[part.placement]]")
-    placements = tuple(_placement(p, path, f"{where}.placement[{i}]") for i, p in enumerate(raw))
+    placements = tuple(_placement(p, path, f"{where}.placement[{i}]", str(i + 1))
+                       for i, p in enumerate(raw))
     names = [p.name for p in placements]
     if len(set(names)) != len(names):
         raise field_error(path, f"{where}.placement", f"placement names repeat: {names}")
