@@ -53,11 +53,19 @@ import numpy as np
 
 from .errors import InputError, QuadsimWarning, field_error
 from .fileio import atomic_write_bytes
-from .frames import quat_conjugate, quat_multiply, quat_normalize
+from .frames import quat_conjugate, quat_multiply
 from .trajectory import Trajectory
 
-__all__ = ["FlightLog", "load_log", "write_log", "read_log_columns", "MAX_ROTOR_SPEED",
-           "MAX_BODY_RATE", "GAP_FACTOR", "FLOAT_FORMAT"]
+__all__ = [
+    "FLOAT_FORMAT",
+    "GAP_FACTOR",
+    "MAX_BODY_RATE",
+    "MAX_ROTOR_SPEED",
+    "FlightLog",
+    "load_log",
+    "read_log_columns",
+    "write_log",
+]
 
 #: rad/s; faster than any quadrotor propeller (~48 000 RPM), so larger values are RPM.
 MAX_ROTOR_SPEED = 5000.0

@@ -47,8 +47,14 @@ from .sensors import SensorModel, parse_signal_values
 from .trajectories import PATHS, Reference, make_reference
 from .trajectory import Trajectory
 
-__all__ = ["generate_flight", "specific_force", "truth_path", "main", "CONTROLLERS",
-           "TRUTH_SCHEMA"]
+__all__ = [
+    "CONTROLLERS",
+    "TRUTH_SCHEMA",
+    "generate_flight",
+    "main",
+    "specific_force",
+    "truth_path",
+]
 
 CONTROLLERS = ("geometric", "lqr")
 TRUTH_SCHEMA = "quadsim.flight-truth/1"

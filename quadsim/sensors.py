@@ -46,7 +46,7 @@ from .errors import InputError
 from .flightlog import FlightLog
 from .frames import quat_multiply, quat_normalize
 
-__all__ = ["SensorModel", "SIGNALS", "parse_signal_values", "rotation_quat"]
+__all__ = ["SIGNALS", "SensorModel", "parse_signal_values", "rotation_quat"]
 
 #: signal -> (unit, FlightLog attribute)
 SIGNALS = {

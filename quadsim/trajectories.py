@@ -37,7 +37,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["Reference", "ReferenceSample", "make_reference", "PATHS", "GROUND_CLEARANCE"]
+__all__ = ["GROUND_CLEARANCE", "PATHS", "Reference", "ReferenceSample", "make_reference"]
 
 #: height (m) of the take-off/landing path's lowest point above the ground.
 GROUND_CLEARANCE = 0.05

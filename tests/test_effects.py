@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
-from quadsim.effects import (EFFECTS, EffectContext, EffectSet, describe_effects,
-                             effect_set_from_specs, make_effect, parse_effect_spec)
+from quadsim.effects import (
+    EFFECTS,
+    EffectContext,
+    EffectSet,
+    describe_effects,
+    effect_set_from_specs,
+    make_effect,
+    parse_effect_spec,
+)
 from quadsim.errors import InputError, ModelError
 from quadsim.frames import euler_to_quat
 from quadsim.params import hover_speed, load_params
@@ -20,7 +29,7 @@ def context(*, position=(0.0, 0.0, 1.0), velocity=(0.0, 0.0, 0.0), euler=(0.0, 0
             wind=(0.0, 0.0, 0.0), speed=None, t=0.0, vbat=None, params=PARAMS):
     """A one-simulation EffectContext (B = 1)."""
     speed = np.full(params.rotor_count, HOVER) if speed is None else np.asarray(speed, float)
-    row = lambda v: np.asarray(v, dtype=float)[None]  # noqa: E731
+    row = lambda v: np.asarray(v, dtype=float)[None]
     return EffectContext(t=np.array([t]), position=row(position), velocity=row(velocity),
                          quat=row(euler_to_quat(np.asarray(euler, float))),
                          body_rate=np.zeros((1, 3)),
@@ -49,7 +58,8 @@ def test_every_effect_is_off_by_default():
 def test_every_effect_documents_formula_source_and_units():
     for name, cls in EFFECTS.items():
         doc = __import__(cls.__module__, fromlist=["_"]).__doc__
-        assert doc and name in doc and "Formula" in doc, name
+        # the effect's name, a formula, and a dated published source
+        assert doc and name in doc and " = " in doc and re.search(r"\b(19|20)\d\d\b", doc), name
         assert all(p.unit and p.doc and p.lower <= p.off <= p.upper for p in cls.parameters)
 
 

@@ -41,14 +41,14 @@ REALISTIC = {
 
 
 def _start(batch: int) -> dict:
-    tile = lambda v: np.tile(v, (batch, 1))  # noqa: E731
+    tile = lambda v: np.tile(v, (batch, 1))
     return engines.initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                                  euler=tile([0.02, -0.01, 0.2]))
 
 
 def _both(sets: list, series: np.ndarray):
     start = _start(len(sets))
-    run = lambda engine: engines.simulate(  # noqa: E731
+    run = lambda engine: engines.simulate(
         PARAMS, engine=engine, initial=start, rotor_speed_series=series, duration=DURATION,
         control_period=PERIOD, effects=sets)
     return run("mujoco"), run("analytic")

@@ -34,9 +34,19 @@ from .thrust_curve import ThrustCurve
 from .thrust_mismatch import ThrustMismatch
 from .wind import Wind
 
-__all__ = ["Effect", "EffectBase", "EffectContext", "EffectLoads", "EffectParameter",
-           "EffectSet", "EFFECTS", "make_effect", "parse_effect_spec", "effect_set_from_specs",
-           "describe_effects"]
+__all__ = [
+    "EFFECTS",
+    "Effect",
+    "EffectBase",
+    "EffectContext",
+    "EffectLoads",
+    "EffectParameter",
+    "EffectSet",
+    "describe_effects",
+    "effect_set_from_specs",
+    "make_effect",
+    "parse_effect_spec",
+]
 
 #: name -> effect class, for every effect in the library.
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (

@@ -22,7 +22,7 @@ import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
 
-__all__ = ["BatterySag", "MIN_SCALE"]
+__all__ = ["MIN_SCALE", "BatterySag"]
 
 MIN_SCALE = 0.5
 

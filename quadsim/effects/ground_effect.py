@@ -26,7 +26,7 @@ from ..errors import ModelError
 from ..frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
 
-__all__ = ["GroundEffect", "ground_effect_ratio", "MAX_TERM"]
+__all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]
 
 MAX_TERM = 0.5
 

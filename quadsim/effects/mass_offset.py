@@ -7,7 +7,8 @@ Formula: a point mass ``mass`` (kg) at body position p = (x, y, z) (m) added to 
     c'  = (m c + mass p) / m'
     I'  = I + m (|c - c'|^2 E - (c - c')(c - c')^T) + mass (|p - c'|^2 E - (p - c')(p - c')^T)
 
-(parallel-axis theorem, e.g. Goldstein, "Classical Mechanics", sec. 5.3). With p = 0 on a
+(parallel-axis theorem, e.g. Goldstein, Poole & Safko, "Classical Mechanics", 3rd ed.,
+2002, sec. 5.3). With p = 0 on a
 symmetric vehicle only the mass changes: hover needs sqrt(m'/m) times the rotor speed.
 Example: ``mass_offset:mass=0.005`` is a 5 g payload, 13.5 % of a 37 g Crazyflie.
 """

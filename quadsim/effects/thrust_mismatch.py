@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import ModelError
 from .base import EffectBase, EffectLoads, EffectParameter
 
-__all__ = ["ThrustMismatch", "MAX_ROTORS"]
+__all__ = ["MAX_ROTORS", "ThrustMismatch"]
 
 MAX_ROTORS = 8
 

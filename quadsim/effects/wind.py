@@ -22,7 +22,7 @@ import numpy as np
 
 from .base import EffectBase, EffectParameter
 
-__all__ = ["Wind", "GUST_COMPONENTS", "LOWEST_FREQUENCY"]
+__all__ = ["GUST_COMPONENTS", "LOWEST_FREQUENCY", "Wind"]
 
 GUST_COMPONENTS = 8
 LOWEST_FREQUENCY = 0.05
