@@ -2,8 +2,9 @@
 
 Each rotor (spin s_i = +1 ccw, speed Omega_i, unit axis a_i in the body frame) carries the
 angular momentum h_i = Jr s_i Omega_i a_i. Euler's equations of the body with its rotors,
-I dw/dt + w x I w + sum_i (w x h_i + dh_i/dt) = tau, give the body the extra torque (body
-frame, N m)::
+I dw/dt + w x I w + sum_i (w x h_i + dh_i/dt) = tau, give the body the extra torque.
+
+Formula (body frame, N m)::
 
     tau_gyro  = -Jr * sum_i s_i Omega_i (w x a_i)        gyroscopic (precession) torque
     tau_spin  = -Jr * sum_i s_i dOmega_i/dt a_i          reaction to spinning a rotor up
