@@ -130,3 +130,17 @@ def test_divergence_is_reported(physical):
     start = initial_state(position=(0, 0, 1), velocity=(2e6, 0, 0))
     with pytest.raises(SimulationError, match="diverged"):
         simulate(physical, engine="analytic", initial=start, duration=0.02)
+
+
+def test_gyroscopic_torque_by_hand():
+    """One ccw rotor on +z at 500 rad/s, Jr = 1e-4 kg m^2, body rolling at 1 rad/s:
+    h = 0.05 z N m s, tau = -w x h = +0.05 y; spinning it up at 1000 rad/s^2: -0.1 z."""
+    from quadsim.effects.gyroscopic import gyroscopic_torque
+
+    axes, spins = np.array([[0.0, 0.0, 1.0]]), np.array([1.0])
+    tau = gyroscopic_torque(1e-4, np.array([[1.0, 0, 0]]), np.array([[500.0]]),
+                            np.array([[1000.0]]), axes, spins)
+    assert np.allclose(tau, [[0.0, 0.05, -0.1]], atol=1e-15)
+    cw = gyroscopic_torque(1e-4, np.array([[1.0, 0, 0]]), np.array([[500.0]]),
+                           np.zeros((1, 1)), axes, -spins)
+    assert np.allclose(cw, [[0.0, -0.05, 0.0]], atol=1e-15)
