@@ -62,6 +62,12 @@ class BuiltModel:
     inertial_note: str
 
 
+GREY = "0.6 0.6 0.62 1"
+#: Visual colour per manifest group (viewer only).
+GROUP_RGBA = {"mechanical": "0.72 0.72 0.75 1", "battery": "0.2 0.3 0.75 1",
+              "avionics": "0.1 0.45 0.2 1"}
+
+
 def _vec(values) -> str:
     return " ".join(f"{float(v):.12g}" for v in np.ravel(values))
 
@@ -101,7 +107,7 @@ def mesh_geoms_xml(assembly: Assembly, xml_dir: Path) -> tuple[str, str]:
         for p in part.placements:
             geoms.append(f'      <geom name="{part.name}:{p.name}" class="visual" type="mesh" '
                          f'mesh="{part.name}" pos="{_vec(p.position)}" '
-                         f'quat="{_quat(p.rotation)}"/>')
+                         f'quat="{_quat(p.rotation)}" rgba="{GROUP_RGBA.get(part.group, GREY)}"/>')
             pos = _vec(p.rotation @ centre + p.position)
             if part.collision == "box":
                 size = _vec(half)
