@@ -57,6 +57,8 @@ MESH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "in": 0.0254}
 #: Plausible average density of a vehicle part (kg/m^3): foam to tungsten. A mm/m slip moves
 #: the implied density by 1e9 and lands far outside.
 DENSITY_RANGE = (5.0, 25000.0)
+#: Plausible largest extent of a part (m) when only its density is given.
+EXTENT_RANGE = (1e-3, 10.0)
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 COLLISION_SHAPES = ("box", "cylinder", "none")
 
@@ -298,19 +300,28 @@ def _mass_or_density(entry: dict, path: Path, where: str) -> tuple[float | None,
 
 def _check_size(mesh: trimesh.Trimesh, mass: float | None, density: float | None,
                 unit: str, path: Path, where: str) -> None:
-    """Catch a mesh drawn in other units than ``mesh_unit`` from its implied density."""
+    """Catch a mesh drawn in other units than ``mesh_unit``: from the implied density when
+    the mass is given (a mm/m slip moves it by 1e9), from the part's size otherwise."""
     low, high = DENSITY_RANGE
-    implied = mass / mesh.volume if mass is not None else density
-    if low <= implied <= high:
-        return
     extent = float(np.max(mesh.extents))
-    hint = ("mesh looks too small: drawn in m while mesh_unit says "
-            f"{unit}?" if implied > high else "mesh looks too large: drawn in mm while "
-            f"mesh_unit says {unit}?")
-    what = "implied density" if mass is not None else "density"
-    raise field_error(path, where, f"{what} {implied:.4g} kg/m^3 is outside the plausible "
-                                   f"{low:g}..{high:g} (volume {mesh.volume:.4g} m^3, largest "
-                                   f"extent {extent:.4g} m): {hint}")
+    small = f"mesh looks too small: drawn in m while mesh_unit says {unit}?"
+    large = f"mesh looks too large: drawn in mm while mesh_unit says {unit}?"
+    if mass is not None:
+        implied = mass / mesh.volume
+        if not low <= implied <= high:
+            raise field_error(path, where, f"implied density {implied:.4g} kg/m^3 is outside the "
+                                           f"plausible {low:g}..{high:g} (volume "
+                                           f"{mesh.volume:.4g} m^3, largest extent {extent:.4g} "
+                                           f"m): {small if implied > high else large}")
+        return
+    if not low <= density <= high:
+        raise field_error(path, where, f"density {density:.4g} kg/m^3 is outside the plausible "
+                                       f"{low:g}..{high:g}")
+    smallest, largest = EXTENT_RANGE
+    if not smallest <= extent <= largest:
+        raise field_error(path, where, f"largest extent {extent:.4g} m is outside the plausible "
+                                       f"{smallest:g}..{largest:g} m for a vehicle part: "
+                                       f"{small if extent < smallest else large}")
 
 
 def _part(entry: object, index: int, cad_dir: Path, unit: str, path: Path, hull: bool) -> Part:
@@ -383,7 +394,9 @@ def load_assembly(cad_dir: str | Path, *, hull: bool = False) -> Assembly:
     if unit not in MESH_UNITS:
         raise field_error(path, "mesh_unit", f"{unit!r}; valid: {', '.join(MESH_UNITS)}")
     raw_parts = data.get("part", [])
-    if not isinstance(raw_parts, list) or not raw_parts:
+    if not isinstance(raw_parts, list):
+        raise field_error(path, "part", "expected [[part]] entries (an array of tables)")
+    if not raw_parts:
         raise field_error(path, "part", "empty assembly: no [[part]] entries")
     # Meshes load in threads (numpy sorts and sums release the GIL); results keep order.
     with ThreadPoolExecutor(max_workers=min(len(raw_parts), os.cpu_count() or 1)) as pool:
@@ -398,6 +411,8 @@ def load_assembly(cad_dir: str | Path, *, hull: bool = False) -> Assembly:
         raise field_error(path, "rotor", "no rotors: add [[rotor]] entries naming a part "
                                          "placement and its spin")
     rotors = tuple(_rotor(e, i, by_name, path) for i, e in enumerate(raw_rotors))
+    if len({r.name for r in rotors}) != len(rotors):
+        raise field_error(path, "rotor", f"rotor names repeat: {[r.name for r in rotors]}")
     vehicle = _check_keys(data.get("vehicle", {}), _VEHICLE_KEYS, path, "vehicle")
     weighed, sources = None, {}
     if "weighed_mass" in vehicle:

@@ -149,6 +149,10 @@ def bad_cases():
                                                'source = "x" }')], [ROTOR], "",
                          r"density: must be a finite number > 0"),
         "empty assembly": ([], [ROTOR], "", r"part: empty assembly"),
+        "mm/m slip, density given": ([dict(GOOD, shape=(v / 1000, f), mass_line=(
+            'density = { value = 2700.0, unit = "kg/m^3", source = "x" }'))], [ROTOR], "",
+            r"density: largest extent 0.0001 m is outside .* drawn in m while mesh_unit says mm"),
+        "repeated rotor": ([GOOD], [ROTOR, ROTOR], "", r"rotor: rotor names repeat"),
         "no rotors": ([GOOD], [], "", r"rotor: no rotors"),
     }
 
