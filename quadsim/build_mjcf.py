@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,7 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .assembly import MESH_UNITS, Assembly, load_assembly
-from .errors import InputError, ModelError, run_cli
+from .errors import InputError, ModelError, QuadsimWarning, run_cli
 from .fileio import atomic_write_text
 from .massprops import MassProperties, vehicle_mass_properties
 from .mjcf import vehicle_xml
@@ -233,8 +234,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="replace a non-watertight or badly wound mesh by its convex hull "
                              "(warns; mass properties become approximate)")
     args = parser.parse_args(argv)
-    model = build_model(args.cad_dir, params=args.params, output=args.output,
-                        inertial=args.inertial, hull=args.hull)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", QuadsimWarning)
+        model = build_model(args.cad_dir, params=args.params, output=args.output,
+                            inertial=args.inertial, hull=args.hull)
+    for warning in caught:  # one line each, after the fact, instead of Python's two-line form
+        print(f"warning: {warning.message}", file=sys.stderr)
     output = args.output or MODELS_DIR / f"{model.assembly.name}.xml"
     print(parts_table(model.mass_properties))
     print(f"note: {model.inertial_note}")

@@ -224,3 +224,16 @@ def test_parameter_set_can_take_mass_properties_and_rotors_from_cad(tmp_path):
     props = vehicle_mass_properties(load_assembly(cad))
     assert p.mass == props.mass and np.array_equal(p.inertia, props.inertia)
     assert [r.name for r in p.rotors] == ["1", "2", "3", "4"] and p.rotors[1].spin == -1
+
+
+def test_cli_hull_fallback_warns_in_one_line_and_builds(tmp_path, capsys):
+    v, f = GEN.box(100, 50, 20)
+    folder = write_cad(tmp_path / "cad", [dict(GOOD, shape=(v, f[:-1]))], [ROTOR])
+    out = tmp_path / "v.xml"
+    assert main([str(folder), "-o", str(out)]) == 2
+    assert not out.exists()
+    assert "not watertight" in capsys.readouterr().err
+    assert main([str(folder), "-o", str(out), "--hull"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: ") and "convex hull" in err[0]
+    assert mujoco.MjModel.from_xml_path(str(out)).body_mass[1] == pytest.approx(0.2)
