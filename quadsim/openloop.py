@@ -8,9 +8,9 @@ analytic Newton–Euler model. Each channel's response is the difference between
 run and the same start with hover inputs (so the step's own effect is isolated from the
 tumble that the tilted start causes by itself). Per channel it prints python-control's
 ``step_info`` where the response settles, else the growth (log-log slope of |response| against
-time since the step: 2 for a double integrator) and the time to reach ``--bound``; the poles of
-the hover linearisation; and the comparison between engines and models (the report's
-steady-state comparison, with real inputs). An open-loop quadrotor has twelve poles at the
+time since the step before it reaches ``--bound``: 2 for a double integrator) and the time
+to reach the bound; the poles of the hover linearisation; and the comparison between engines
+and models (the report's steady-state comparison, with real inputs). An open-loop quadrotor has twelve poles at the
 origin: nothing settles. ``--controller lqr`` runs the closed-loop version (the step becomes a
 disturbance the LQR must reject; responses then settle to a steady-state offset).
 
@@ -59,8 +59,8 @@ def response_metrics(t: np.ndarray, response: np.ndarray, *, bound: float) -> di
     Settled (the last quarter stays within 2 % of the final value, below ``bound``):
     python-control ``step_info``; returned to zero (a rejected disturbance: final and last
     quarter within 2 % of the peak): settling time and peak. Otherwise: ``growth_exponent``
-    (slope of log|y| against log t over the second half) and ``time_to_bound`` (None if the
-    bound is not reached)."""
+    (slope of log|y| against log t over the second half of the time before the bound is
+    reached, or of the whole run) and ``time_to_bound`` (None if not reached)."""
     final = float(response[-1])
     peak = float(np.abs(response).max())
     tail = response[int(0.75 * len(response)):]
@@ -76,13 +76,14 @@ def response_metrics(t: np.ndarray, response: np.ndarray, *, bound: float) -> di
         info = control.step_info(response, t, yfinal=final)
         out.update({k: float(v) for k, v in info.items()}, settles=True)
         return out
-    late = slice(len(t) // 2, None)
+    beyond = np.flatnonzero(np.abs(response) >= bound)
+    end = beyond[0] + 1 if beyond.size else len(t)      # fit the growth before the bound
+    late = slice(end // 2, end)
     magnitude = np.abs(response[late])
     usable = (magnitude > 1e-12) & (t[late] > 0)
     exponent = None
     if usable.sum() > 2:
         exponent = float(np.polyfit(np.log(t[late][usable]), np.log(magnitude[usable]), 1)[0])
-    beyond = np.flatnonzero(np.abs(response) >= bound)
     out.update(growth_exponent=exponent,
                time_to_bound=float(t[beyond[0]]) if beyond.size else None)
     return out

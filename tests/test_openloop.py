@@ -78,3 +78,13 @@ def test_response_metrics_closed_forms():
     m = response_metrics(t, parabola, bound=1.0)
     assert not m["settles"] and m["growth_exponent"] == pytest.approx(2.0, abs=1e-9)
     assert m["time_to_bound"] == pytest.approx(np.sqrt(1 / 0.3), abs=0.01)
+
+
+def test_compare_models_and_rerun_recording(capsys, tmp_path):
+    pytest.importorskip("quadsim.viewer")
+    rrd = tmp_path / "openloop.rrd"
+    code, out, err = _run(capsys, "--model", "physical", "--compare", "report", "--duration",
+                          "0.5", "--step-time", "0.1", "--no-plots", "--rerun", str(rrd))
+    assert code == 0, err
+    assert "model comparison" in out and "physical" in out and "report" in out
+    assert rrd.stat().st_size > 1000
