@@ -79,6 +79,7 @@ __all__ = [
 
 APPLICATION_ID = "quadsim"
 TIMELINE = "time"
+SAMPLE_TIMELINE = "sample"
 #: Colours (RGB) of the line strips, arrows and plot lines per engine.
 ENGINE_COLORS = {
     "mujoco": (31, 119, 180),
@@ -289,8 +290,11 @@ def _log_scene(rec, rr, shapes: list[VehicleShape], members, extent: float) -> N
 def _log_pose_and_thrust(rec, rr, params, key, trajectory, color, arrow_scale) -> None:
     t = np.asarray(trajectory.t, dtype=float)
     w, x, y, z = np.moveaxis(np.asarray(trajectory.quat, dtype=float), -1, 0)
+    # The sample index rides along as a second timeline: rerun 0.41's viewer did not load
+    # Transform3D columns sent on a single timeline (checked headless, docs/viewer.md).
+    indexes = _time(rr, t) + [rr.TimeColumn(SAMPLE_TIMELINE, sequence=np.arange(len(t)))]
     rec.send_columns(
-        f"world/{key}/vehicle", indexes=_time(rr, t),
+        f"world/{key}/vehicle", indexes=indexes,
         columns=rr.Transform3D.columns(translation=trajectory.position,
                                        quaternion=np.stack([x, y, z, w], -1)))
     rec.log(f"world/{key}/path",
@@ -301,10 +305,11 @@ def _log_pose_and_thrust(rec, rr, params, key, trajectory, color, arrow_scale) -
         return  # a log without rotor speeds: pose and path only
     thrust = rotor_thrust(params, trajectory.rotor_speed)  # (N, R) N
     vectors = (thrust * arrow_scale)[..., None] * params.rotor_axes  # body frame, m
-    origins = np.broadcast_to(params.rotor_positions, vectors.shape)
-    columns = rr.Arrows3D.columns(vectors=vectors.reshape(-1, 3),
-                                  origins=origins.reshape(-1, 3),
-                                  colors=np.tile(np.array(color, np.uint8), (vectors.size // 3, 1)))
+    # Hubs and colours never change: static, so only the vectors are sent per sample.
+    rec.log(f"world/{key}/vehicle/thrust",
+            rr.Arrows3D.from_fields(origins=params.rotor_positions, colors=[color] * rotor_count,
+                                    radii=[0.004] * rotor_count), static=True)
+    columns = rr.Arrows3D.columns(vectors=vectors.reshape(-1, 3))
     rec.send_columns(f"world/{key}/vehicle/thrust", indexes=_time(rr, t),
                      columns=columns.partition([rotor_count] * len(t)))
 
@@ -409,7 +414,7 @@ def _blueprint(rrb, rotor_count: int, residual_names: list[str], title: str):
                               line_grid=rrb.LineGrid3D(visible=True, spacing=0.25))
     return rrb.Blueprint(rrb.Horizontal(scene, rrb.Tabs(*tabs, active_tab=0),
                                         column_shares=[2, 3]),
-                         collapse_panels=True)
+                         rrb.TimePanel(timeline=TIMELINE), collapse_panels=True)
 
 
 def _arrow_scale(params: VehicleParams) -> float:

@@ -39,6 +39,8 @@ def read_recording(path: Path) -> dict[str, dict[str, np.ndarray]]:
             column = batch.column(name)
             if name == "time":
                 values = column.cast(pa.int64()).to_numpy() * 1e-9
+            elif not pa.types.is_list(column.type):
+                values = column.to_numpy(zero_copy_only=False)  # another index (sample)
             else:
                 values = column.flatten()
                 while pa.types.is_list(values.type) or pa.types.is_fixed_size_list(values.type):
@@ -90,6 +92,7 @@ def test_expected_entities_time_range_and_counts(recorded):
         assert len(pose["time"]) == 201
         assert pose["time"][0] == pytest.approx(0.0, abs=1e-9)
         assert pose["time"][-1] == pytest.approx(2.0, abs=1e-8)
+        np.testing.assert_array_equal(pose["sample"], np.arange(201))
         assert "LineStrips3D:strips" in data[f"world/{key}/path"]
         for name in STATE12_NAMES:
             assert len(data[f"states/{name}/{key}"]["Scalars:scalars"]) == 201
@@ -125,9 +128,9 @@ def test_thrust_arrows_are_b_omega_squared_along_the_axes(recorded, params):
     _, data, trajectories, _ = recorded
     arrows = data["world/mujoco/vehicle/thrust"]
     vectors = arrows["Arrows3D:vectors"].reshape(201, 4, 3)
-    origins = arrows["Arrows3D:origins"].reshape(201, 4, 3)
-    np.testing.assert_allclose(origins, np.broadcast_to(params.rotor_positions, origins.shape),
-                               atol=1e-6)
+    assert len(arrows["time"]) == 201
+    origins = arrows["Arrows3D:origins"].reshape(4, 3)  # static: the hubs, body frame
+    np.testing.assert_allclose(origins, params.rotor_positions, atol=1e-6)
     thrust = rotor_thrust(params, trajectories["mujoco"].rotor_speed)
     lengths = np.linalg.norm(vectors, axis=-1)
     scale = lengths / thrust  # m per N, one constant for the whole recording
