@@ -74,8 +74,9 @@ def _batch_size(params, effects, initial: dict, series, batch: int | None) -> tu
     sizes = []
     if not isinstance(params, VehicleParams):
         sizes.append(len(params))
-    if isinstance(effects, (list, tuple)):
-        sizes.append(len(effects))
+    if isinstance(effects, (list, tuple)) and effects and all(
+            e is None or isinstance(e, EffectSet) for e in effects):
+        sizes.append(len(effects))           # one EffectSet per simulation
     sizes += [np.shape(v)[0] for v in initial.values() if np.ndim(v) == 2]
     if series is not None and np.ndim(series) == 3:
         sizes.append(np.shape(series)[0])
@@ -101,8 +102,8 @@ def _effective_params(params, effects, batch: int):
     """Per-simulation effect sets and effect-modified parameter sets (shared objects stay
     shared, so a batch without per-simulation changes compiles one model)."""
     base = [params] * batch if isinstance(params, VehicleParams) else list(params)
-    if isinstance(effects, (list, tuple)) and (not effects or isinstance(effects[0], EffectSet)
-                                               or effects[0] is None):
+    if isinstance(effects, (list, tuple)) and effects and all(
+            e is None or isinstance(e, EffectSet) for e in effects):
         sets = [_as_effect_set(e) for e in effects]
     else:
         sets = [_as_effect_set(effects)] * batch
@@ -155,7 +156,11 @@ def _initial_arrays(initial: dict, params: list[VehicleParams], batch: int) -> d
                            dtype=float)
         if value.shape[-1] != size or value.ndim > 2:
             raise InputError(f"initial state: {name} must have shape ({size},) or (B, {size})")
+        if not np.all(np.isfinite(value)):
+            raise InputError(f"initial state: {name} contains NaN or infinite values")
         out[name] = np.broadcast_to(value, (batch, size)).copy()
+    if np.any(np.linalg.norm(out["quat"], axis=1) < 1e-9):
+        raise InputError("initial state: quat must not be zero")
     out["quat"] = quat_normalize(out["quat"])
     rotors = params[0].rotor_count
     speed = initial.get("rotor_speed")

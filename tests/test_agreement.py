@@ -143,7 +143,7 @@ def test_effects_agree_gyroscopic_with_motor_lag():
     """Generic effect hooks: rotor-speed dynamics and a body torque act the same in both
     engines (gyroscopic torque with Jr = 6e-5 kg m^2, 30 ms motor lag, multisine input)."""
     params = load_params("physical")
-    duration = 2.0
+    duration = 1.0
     series = open_loop_inputs(params, int(duration / PERIOD))[-1]
     start = initial_state(position=(0, 0, 1), euler=(0.261, 0.261, 0.261), body_rate=(1, -1, 2))
     effects = EffectSet((Gyroscopic(rotor_inertia=6e-5),
