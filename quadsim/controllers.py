@@ -37,7 +37,7 @@ from .params import VehicleParams
 from .rotors import speeds_for
 from .trajectories import Reference
 
-__all__ = ["GeometricController"]
+__all__ = ["GeometricController", "desired_rotation"]
 
 
 def _vee(matrix: np.ndarray) -> np.ndarray:

@@ -62,7 +62,9 @@ __all__ = [
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
     "FlightLog",
+    "body_rate_from_quat",
     "load_log",
+    "log_bytes",
     "read_log_columns",
     "write_log",
 ]
