@@ -185,7 +185,7 @@ def _open_text(path: Path) -> str:
         except (OSError, EOFError) as exc:
             raise InputError(f"{path}: corrupt gzip data: {exc}") from None
     try:
-        return raw.decode("utf-8")
+        return raw.decode("utf-8-sig")  # a spreadsheet may prepend a BOM
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text (CSV) file") from None
 
