@@ -186,3 +186,13 @@ def test_real_crazyflie_log_loads():
     # logged gyro agrees with the rate differentiated from the mocap quaternions
     derived = body_rate_from_quat(log.t, log.quat)
     assert np.median(np.abs(derived - log.body_rate)) < 0.5
+
+
+def test_minimal_log_with_bom_and_crlf(tmp_path):
+    path = tmp_path / "min.csv"
+    path.write_text("t,x,y,z,qw,qx,qy,qz\r\n0,0,0,1,1,0,0,0\r\n0.01,0,0,1.5,1,0,0,0\r\n",
+                    encoding="utf-8-sig")
+    log = load_log(path)
+    assert log.velocity is None and log.rotor_count == 0
+    np.testing.assert_allclose(log.position[:, 2], [1.0, 1.5])
+    np.testing.assert_allclose(log.to_trajectory().velocity[:, 2], [50.0, 50.0])
