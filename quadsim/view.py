@@ -145,6 +145,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--horizon", type=float, default=1.0,
                         help="with --log: restart the model from the measured state every "
                              "HORIZON s (0: one open-loop run over the whole log); default 1")
+    parser.add_argument("--tab", choices=("states", "rotors", "residuals"), default=None,
+                        help="plot tab shown first (default: residuals with --log, else states)")
     parser.add_argument("--cad", type=Path,
                         help="CAD folder whose meshes draw the vehicle (default: the model's "
                              "from_cad folder if it has one, else simple shapes)")
@@ -214,7 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         title = f"{params.name} vs {args.log.name}"
     written = save_recording(args.rerun, params=params, trajectories=trajectories,
                              measured=measured, spawn=args.rerun_spawn, assembly=assembly,
-                             title=title)
+                             title=title, tab=args.tab or ("states" if args.log is None
+                                                           else "residuals"))
     if written is not None:
         print(f"wrote {written} ({written.stat().st_size / 1e6:.2f} MB); view it with "
               f"`rerun {written}`")

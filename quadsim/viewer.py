@@ -47,6 +47,7 @@ with the wall clock.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from collections.abc import Mapping, Sequence
@@ -237,6 +238,7 @@ def _members(trajectories: Mapping[str, Trajectory], batch_index) -> list[tuple[
     """(key, single-flight trajectory) pairs; batches reduced to the chosen members."""
     chosen = []
     for key, trajectory in trajectories.items():
+        key = _entity_part(key)
         if not isinstance(trajectory, Trajectory):
             raise InputError(f"trajectories[{key!r}]: expected a quadsim Trajectory, "
                              f"got {type(trajectory).__name__}")
@@ -362,9 +364,17 @@ def _residual_table(residuals: Mapping, default_t: np.ndarray):
             raise InputError(f"residuals[{name!r}]: {len(labels)} labels for "
                              f"{values.shape[1]} columns")
         for k, label in enumerate(labels):
-            path = f"residuals/{name}" + (f"/{label}" if label is not None else "")
-            table.append((path, t, values[:, k]))
+            path = f"residuals/{_entity_part(name)}" + (
+                f"/{_entity_part(label)}" if label is not None else "")
+            table.append((path, t, values[:, k], str(label if label is not None else name)))
     return table
+
+
+def _entity_part(text: object) -> str:
+    """A label made safe as one entity-path part (``Fx (N)`` -> ``Fx_N``); the readable
+    label stays in the plot legend."""
+    part = re.sub(r"[^A-Za-z0-9_.-]+", "_", str(text)).strip("_")
+    return part or "_"
 
 
 def _log_residuals(rec, rr, members, measured, residuals, default_t) -> list[str]:
@@ -380,41 +390,72 @@ def _log_residuals(rec, rr, members, measured, residuals, default_t) -> list[str
                 _log_scalars(rec, rr, f"residuals/{name}/{key}", measured.t, table[:, k], key,
                              engine_color(key, index))
         names += list(STATE12_NAMES)
-    for index, (path, t, values) in enumerate(_residual_table(residuals or {}, default_t)):
-        _log_scalars(rec, rr, path, t, values, path.rsplit("/", 1)[-1],
-                     _EXTRA_COLORS[index % len(_EXTRA_COLORS)])
+    for index, (path, t, values, label) in enumerate(_residual_table(residuals or {},
+                                                                      default_t)):
+        _log_scalars(rec, rr, path, t, values, label, _EXTRA_COLORS[index % len(_EXTRA_COLORS)])
         group = path.split("/")[1]
         if group not in names:
             names.append(group)
     return names
 
 
-def _blueprint(rrb, rotor_count: int, residual_names: list[str], title: str):
-    """3D view on the left; tabs of plot grids (states, rotors, residuals) on the right."""
+def _plot(rrb, origin: str, name: str, first: bool):
+    """A time-series view; only the first of a grid shows its legend (colours repeat)."""
+    legend = rrb.PlotLegend(corner="RightBottom", visible=first)
+    return rrb.TimeSeriesView(origin=origin, name=name, plot_legend=legend)
+
+
+def _rotor_views(rrb, rotor_count: int, normalised: bool) -> list:
+    views = []
+    for i in range(1, rotor_count + 1):
+        views += [_plot(rrb, f"rotors/speed_{i}", f"rotor {i} speed (rad/s)", i == 1),
+                  _plot(rrb, f"rotors/command_{i}", f"rotor {i} command (rad/s)", i == 1),
+                  _plot(rrb, f"rotors/thrust_{i}", f"rotor {i} thrust b Omega^2 (N)", i == 1)]
+        if normalised:
+            views.append(_plot(rrb, f"rotors/command_norm_{i}", f"rotor {i} command (0-1)",
+                               i == 1))
+    return views
+
+
+def _blueprint(rrb, rotor_count: int, residual_names: list[str], title: str, *,
+               normalised: bool = False, tab: str = "states", camera=None):
+    """3D view on the left; tabs of plot grids (states, rotors, residuals) on the right.
+
+    ``camera``: (eye position, look target) in the world frame (m), or None for rerun's."""
     units = dict(zip(STATE12_NAMES, STATE12_UNITS))
-    state_views = [rrb.TimeSeriesView(origin=f"states/{n}", name=f"{n} ({units[n]})")
-                   for n in STATE12_NAMES]
-    rotor_views = []
-    for i in range(rotor_count):
-        rotor_views += [rrb.TimeSeriesView(origin=f"rotors/speed_{i + 1}",
-                                           name=f"rotor {i + 1} speed (rad/s)"),
-                        rrb.TimeSeriesView(origin=f"rotors/command_{i + 1}",
-                                           name=f"rotor {i + 1} command (rad/s)"),
-                        rrb.TimeSeriesView(origin=f"rotors/thrust_{i + 1}",
-                                           name=f"rotor {i + 1} thrust (N)")]
+    state_views = [_plot(rrb, f"states/{n}", f"{n} ({units[n]})", k == 0)
+                   for k, n in enumerate(STATE12_NAMES)]
     tabs = [rrb.Grid(*state_views, grid_columns=3, name="states"),
-            rrb.Grid(*rotor_views, grid_columns=3, name="rotors")]
+            rrb.Grid(*_rotor_views(rrb, rotor_count, normalised),
+                     grid_columns=4 if normalised else 3, name="rotors")]
     if residual_names:
-        residual_views = [rrb.TimeSeriesView(
-            origin=f"residuals/{n}",
-            name=f"{n} model - measured ({units[n]})" if n in units else n)
-            for n in residual_names]
+        residual_views = [_plot(rrb, f"residuals/{n}", f"{n} model - measured ({units[n]})"
+                                if n in units else n, k == 0)
+                          for k, n in enumerate(residual_names)]
         tabs.append(rrb.Grid(*residual_views, grid_columns=3, name="residuals"))
-    scene = rrb.Spatial3DView(origin="world", name=title or "vehicle",
+    names = [t.name for t in tabs]
+    if tab not in names:
+        raise InputError(f"plot tab {tab!r} not in this recording; valid: {', '.join(names)}")
+    eye = None
+    if camera is not None:
+        eye = rrb.EyeControls3D(position=camera[0], look_target=camera[1], eye_up=[0, 0, 1])
+    scene = rrb.Spatial3DView(origin="world", name=title or "vehicle", eye_controls=eye,
                               line_grid=rrb.LineGrid3D(visible=True, spacing=0.25))
-    return rrb.Blueprint(rrb.Horizontal(scene, rrb.Tabs(*tabs, active_tab=0),
+    return rrb.Blueprint(rrb.Horizontal(scene, rrb.Tabs(*tabs, active_tab=names.index(tab)),
                                         column_shares=[2, 3]),
-                         rrb.TimePanel(timeline=TIMELINE), collapse_panels=True)
+                         rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+                         collapse_panels=True)
+
+
+def _camera(members) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and target that frame every path: look at the paths' centre from the front-left,
+    above, at a distance that grows with the paths' extent."""
+    points = np.concatenate([np.asarray(m.position, float) for _, m in members])
+    points = points[np.all(np.isfinite(points), axis=1)]
+    low, high = points.min(0), points.max(0)
+    target = 0.5 * (low + high)
+    distance = max(1.5, 1.8 * float(np.linalg.norm(high - low)))
+    return target + distance * np.array([-0.55, -0.75, 0.45]), target
 
 
 def _arrow_scale(params: VehicleParams) -> float:
@@ -438,7 +479,7 @@ def _check_inputs(params, trajectories, measured) -> None:
 
 
 def _record(rec, params, trajectories, measured, residuals, assembly, title, batch_index,
-            thrust_arrow_scale) -> dict:
+            thrust_arrow_scale, tab="states") -> dict:
     """Send everything to ``rec``; returns counts for the caller (entities, samples)."""
     import rerun as rr
     import rerun.blueprint as rrb
@@ -458,14 +499,16 @@ def _record(rec, params, trajectories, measured, residuals, assembly, title, bat
         samples += _log_time_series(rec, rr, params, key, trajectory, color)
     default_t = measured.t if measured is not None else members[0][1].t
     residual_names = _log_residuals(rec, rr, members, measured, residuals, default_t)
-    rec.send_blueprint(_blueprint(rrb, params.rotor_count, residual_names, title))
+    normalised = any(m.meta.get("command") is not None for _, m in members if m.meta)
+    rec.send_blueprint(_blueprint(rrb, params.rotor_count, residual_names, title,
+                                  normalised=normalised, tab=tab, camera=_camera(members)))
     return {"members": [key for key, _ in members], "scalar_samples": samples}
 
 
 def recording_bytes(*, params: VehicleParams, trajectories: Mapping[str, Trajectory],
                     measured: Trajectory | None = None, residuals: Mapping | None = None,
                     assembly=None, title: str = "", batch_index: int | Sequence[int] | str = 0,
-                    thrust_arrow_scale: float | None = None,
+                    thrust_arrow_scale: float | None = None, tab: str = "states",
                     recording_id: str = "quadsim") -> bytes:
     """The ``.rrd`` bytes of a recording (see :func:`save_recording` for the arguments)."""
     import rerun as rr
@@ -474,7 +517,7 @@ def recording_bytes(*, params: VehicleParams, trajectories: Mapping[str, Traject
     memory = rec.memory_recording()
     try:
         _record(rec, params, trajectories, measured, residuals, assembly, title, batch_index,
-                thrust_arrow_scale)
+                thrust_arrow_scale, tab)
         if title:
             rec.send_recording_name(title)
         rec.flush()
@@ -528,7 +571,8 @@ def save_recording(path: str | os.PathLike | None, *, params: VehicleParams,
                    trajectories: Mapping[str, Trajectory], measured: Trajectory | None = None,
                    spawn: bool = False, residuals: Mapping | None = None, assembly=None,
                    title: str = "", batch_index: int | Sequence[int] | str = 0,
-                   thrust_arrow_scale: float | None = None) -> Path | None:
+                   thrust_arrow_scale: float | None = None, tab: str = "states"
+                   ) -> Path | None:
     """Write a rerun recording of simulated (and measured) flights to ``path`` (``.rrd``).
 
     Args:
@@ -543,13 +587,14 @@ def save_recording(path: str | os.PathLike | None, *, params: VehicleParams,
       title: recording name and 3D view title.
       batch_index: member(s) of batched trajectories to log: an int, a list, or ``"all"``.
       thrust_arrow_scale: arrow length per newton (m/N); default: hover thrust = half an arm.
+      tab: plot tab shown first: ``states``, ``rotors`` or (with residuals) ``residuals``.
 
     Returns the path written (None when only spawned). Raises :class:`InputError` (one line)
     for an unusable path or inconsistent inputs; nothing is written then.
     """
     options = dict(params=params, trajectories=dict(trajectories), measured=measured,
                    residuals=residuals, assembly=assembly, title=title, batch_index=batch_index,
-                   thrust_arrow_scale=thrust_arrow_scale)
+                   thrust_arrow_scale=thrust_arrow_scale, tab=tab)
     if path is None:
         if not spawn:
             raise InputError("save_recording: give an output path or spawn=True")
@@ -574,7 +619,7 @@ def _spawn_stream(options: dict) -> None:
     try:
         _record(rec, options["params"], options["trajectories"], options["measured"],
                 options["residuals"], options["assembly"], options["title"],
-                options["batch_index"], options["thrust_arrow_scale"])
+                options["batch_index"], options["thrust_arrow_scale"], options["tab"])
         rec.flush()
     finally:
         rec.disconnect()

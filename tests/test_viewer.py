@@ -254,3 +254,17 @@ def test_cad_assembly_meshes_are_logged(tmp_path):
                                          assembly=assembly))
     logged = [p for p in data if p.startswith("world/mujoco/vehicle/body/")]
     assert len(logged) == len(shapes)
+
+
+def test_caller_residuals_with_labels_and_tab(tmp_path, params):
+    traj = synthetic(params, n=50)
+    residuals = {"residual wrench": (traj.t, np.arange(100.0).reshape(50, 2),
+                                     ["Fx (N)", "Mz [N m]"])}
+    path = save_recording(tmp_path / "r.rrd", params=params, trajectories={"log": traj},
+                          residuals=residuals, tab="residuals")
+    data = read_recording(path)
+    np.testing.assert_allclose(data["residuals/residual_wrench/Mz_N_m"]["Scalars:scalars"],
+                               np.arange(1.0, 100.0, 2.0))
+    assert data["residuals/residual_wrench/Fx_N"]["SeriesLines:names"][0] == "Fx (N)"
+    with pytest.raises(InputError, match="plot tab 'residuals' not in this recording"):
+        recording_bytes(params=params, trajectories={"log": traj}, tab="residuals")
