@@ -17,7 +17,7 @@ from ..effects.base import EffectBase, EffectParameter
 from ..errors import InputError, QuadsimWarning
 from ..flightlog import FlightLog
 from ..params import VehicleParams
-from ..residual import CHANNELS, FlightStates, flight_states
+from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
 from . import fitting
 from .fitting import Candidate, Fit, candidates_for, fit_candidate, noise_scale, residuals
 from .where import by_band, by_regime, kstep_errors, regime_masks
@@ -86,7 +86,7 @@ class Flight:
 
 
 def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
-            window_s: float = 0.05) -> list[Flight]:
+            window_s: float = DEFAULT_WINDOW_S) -> list[Flight]:
     """Check each log against the model and smooth it (:func:`quadsim.residual.flight_states`).
 
     Raises :class:`InputError` for a rotor-count mismatch or logs without rotor speeds."""
@@ -161,7 +161,7 @@ def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
     }
 
 
-def _where(held, params, sigma, rotor, before, effects_after, after) -> dict:
+def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> dict:
     masks = [regime_masks(f.fit, params) for f in held]
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     names = _channels(rotor, params)
@@ -175,8 +175,8 @@ def _where(held, params, sigma, rotor, before, effects_after, after) -> dict:
         "regime": by_regime(before, masks),
         "regime_after": by_regime(after, masks),
         "band": by_band(before, dt),
-        "kstep_before": kstep_errors([f.fit for f in held], params, []),
-        "kstep_after": kstep_errors([f.fit for f in held], params, effects_after),
+        "kstep_before": kstep_errors([f.fit for f in held], params, []) if kstep else {},
+        "kstep_after": kstep_errors([f.fit for f in held], params, effects_after) if kstep else {},
     }
 
 
@@ -219,16 +219,21 @@ def _separation(best: str, confusable: list[str]) -> dict:
 
 def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
-             max_combination: int = 2, progress: Callable | None = None) -> dict:
-    """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`)."""
+             max_combination: int = 2, progress: Callable | None = None,
+             window_s: float = DEFAULT_WINDOW_S, kstep: bool = True) -> dict:
+    """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`).
+
+    ``kstep=False`` skips the k-step prediction errors (the slowest part of "where")."""
     notes: list[str] = []
-    flights = prepare(logs, params)
-    held_in = prepare(holdout, params) if holdout else None
+    flights = prepare(logs, params, window_s=window_s)
+    held_in = prepare(holdout, params, window_s=window_s) if holdout else None
     train, held = _split(flights, held_in, notes)
-    return _diagnose_split(train, held, params, effects, max_combination, progress, notes)
+    return _diagnose_split(train, held, params, effects, max_combination, progress, notes,
+                           kstep)
 
 
-def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes):
+def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
+                    kstep=False):
     rotor = all(f.fit.command is not None for f in train + held)
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     nominal_train = [residuals(f.fit, params, [], rotor_channel=rotor) for f in train]
@@ -260,7 +265,7 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
     ranked = sorted(scored, key=lambda s: (round(s["heldout_gap_after"] / max(before_gap(before), 1e-300), 4),
                                            len(s["params"]), s["name"]))
     return _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt,
-                   max_combination, notes, tick)
+                   max_combination, notes, tick, kstep)
 
 
 def before_gap(before: list[np.ndarray]) -> float:
@@ -273,7 +278,7 @@ def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
 
 
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
-            notes, tick) -> dict:
+            notes, tick, kstep) -> dict:
     nominal_gap = _gap(before)
     chosen, best = [], None
     # An effect wins only if it beats the nominal model clearly and is not clearly worse
@@ -314,7 +319,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "schema": SCHEMA,
         "model": params.name,
         "train": [f.name for f in train], "holdout": [f.name for f in held],
-        "where": _where(held, params, sigma, rotor, before, effects_after, after),
+        "where": _where(held, params, sigma, rotor, before, effects_after, after, kstep),
         "baseline": _public(baseline),
         "effects": [_public(e) for e in ranked],
         "verdict": verdict,
@@ -322,6 +327,11 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
     }
     if combined is not None and combined is not best:
         result["combination"] = _public(combined)
+    # Arrays for plots and recordings (not part of the JSON): first held-out flight.
+    result["_series"] = {"t": held[0].fit.t, "before": before[0] * sigma,
+                         "after": after[0] * sigma, "channels": _channels(rotor, params),
+                         "flight": held[0].name, "states": held[0].fit, "params": params,
+                         "effects": effects_after}
     return result
 
 
@@ -353,7 +363,9 @@ def _public(entry: dict) -> dict:
 
 
 def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
-                        params: VehicleParams, **kwargs) -> dict:
+                        params: VehicleParams, *, effects: Sequence[str] | None = None,
+                        progress: Callable | None = None,
+                        window_s: float = DEFAULT_WINDOW_S) -> dict:
     """Judge each flight on its own against ``reference`` (nominal) flights.
 
     The nominal thrust and drag factors are first refitted on the reference flights (so the
@@ -361,7 +373,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     training and its second half as held-out data (a time split inside the flight), and its
     fitted effect parameters are compared with the spread of the same fit on the reference
     flights."""
-    ref = prepare(reference, params)
+    ref = prepare(reference, params, window_s=window_s)
     if len(ref) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     rotor = all(f.fit.command is not None for f in ref)
@@ -369,14 +381,14 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                                          for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]))
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
     tuned = base.effects()[0].apply_to_params(params)
-    reference_fits = _reference_spread(ref, tuned, kwargs.get("effects"))
+    reference_fits = _reference_spread(ref, tuned, effects, progress)
     flights = []
     for log in logs:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
-            one = _diagnose_split(*_halves(prepare([log], tuned)[0]), tuned, kwargs.get("effects"),
-                                  1, kwargs.get("progress"), [])
-        flights.append(_judge(one, reference_fits, str(log.path)))
+            flight = prepare([log], tuned, window_s=window_s)[0]
+            one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
+        flights.append(_judge(one, reference_fits, flight.name))
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
             "reference_refit": base.params(), "flights": flights,
@@ -395,11 +407,11 @@ def _halves(f: Flight):
     return [out[0]], [out[1]]
 
 
-def _reference_spread(ref: list[Flight], params, effect_names) -> dict:
+def _reference_spread(ref: list[Flight], params, effect_names, progress) -> dict:
     """Per effect: each reference flight's own reduction (first half -> second half)."""
     spread: dict[str, list[float]] = {}
     for f in ref:
-        one = _diagnose_split(*_halves(f), params, effect_names, 1, None, [])
+        one = _diagnose_split(*_halves(f), params, effect_names, 1, progress, [])
         for e in one["effects"]:
             spread.setdefault(e["name"], []).append(e["reduction"])
     return spread

@@ -36,9 +36,11 @@ def effect_class(name: str) -> type:
     return LOCAL_EFFECTS[name] if name in LOCAL_EFFECTS else EFFECTS[name]
 
 
-#: horizon (s) of the rotor-speed channel: speed predicted this far ahead from the measured one.
-ROTOR_HORIZON_S = 0.02
-ROTOR_SUBSTEPS = 10
+#: horizon (s) of the rotor-speed channel: speed predicted this far ahead from the measured
+#: one. Longer than the smoothing window, so that the (smoothed) noise of the starting speed is
+#: not correlated with the noise at the end (it would reward a spurious lag).
+ROTOR_HORIZON_S = 0.12
+ROTOR_SUBSTEPS = 4
 
 
 @dataclass(frozen=True)
@@ -244,15 +246,21 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
     if not rate_owner:
         predicted = cmd[steps:]
     else:
-        # Explicit Euler in ROTOR_SUBSTEPS substeps per sample (stable for time constants
-        # down to dt / (2 ROTOR_SUBSTEPS)), command held over each sample.
+        # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
+        # dt / (2 ROTOR_SUBSTEPS)).
+        rate_fn = rate_owner[0].rotor_speed_rate
         predicted = speed[:n].copy()
         h = dt / ROTOR_SUBSTEPS
         for k in range(steps):
-            for _ in range(ROTOR_SUBSTEPS):
-                rate = rate_owner[0].rotor_speed_rate(states.t[k:k + n], cmd[k:k + n],
-                                                      predicted)
-                predicted = predicted + h * rate
+            start, slope = cmd[k:k + n], cmd[k + 1:k + 1 + n] - cmd[k:k + n]
+            for j in range(ROTOR_SUBSTEPS):
+                # Heun (RK2) with the command interpolated inside the sample (holding it
+                # would add a half-sample lag that the fit would take from the time constant).
+                c0 = start + (j / ROTOR_SUBSTEPS) * slope
+                c1 = start + ((j + 1) / ROTOR_SUBSTEPS) * slope
+                k1 = rate_fn(states.t[k:k + n], c0, predicted)
+                k2 = rate_fn(states.t[k:k + n], c1, predicted + h * k1)
+                predicted = predicted + 0.5 * h * (k1 + k2)
     out = np.zeros_like(speed)
     out[steps:] = speed[steps:] - predicted
     # Stacked flights: a prediction across a flight boundary (time jump) is not scored.

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from scipy.signal import savgol_filter
 
 from ..effects.base import Effect, EffectContext, EffectSet
 from ..flightlog import FlightLog
@@ -113,12 +114,57 @@ def _solve_rotors(vehicle, loads, thrust, torque, speed):
     return np.sqrt(np.maximum(omega2, (0.05 * speed) ** 2))
 
 
+def _accel_sensitivity(effect_set, ctx) -> np.ndarray | None:
+    """d(torque_body)/d(dOmega_r/dt) (N, 3, R) by probing the effects (None if zero)."""
+    base = effect_set.loads(ctx).torque_body
+    rotors = ctx.rotor_speed.shape[1]
+    columns = []
+    for r in range(rotors):
+        probe = np.zeros_like(ctx.rotor_speed)
+        probe[:, r] = 1.0
+        shifted = EffectContext(ctx.t, ctx.position, ctx.velocity, ctx.quat, ctx.body_rate,
+                                ctx.air_velocity, ctx.rotor_speed, ctx.rotor_accel + probe,
+                                ctx.params, ctx.vbat)
+        columns.append(effect_set.loads(shifted).torque_body - base)
+    sens = np.stack(columns, -1)
+    return sens if np.abs(sens).max() > 0 else None
+
+
+def _march_rotors(vehicle, loads, thrust, torque, sens, accel_used, speed, dt):
+    """Rotor speeds when the effect torque depends (linearly) on dOmega/dt: implicit Euler in
+    time (dOmega/dt = (Omega_k - Omega_{k-1}) / dt), Newton at each sample."""
+    alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]
+    axes = vehicle.rotor_axes
+    offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    rhs = (np.concatenate([thrust[:, None], torque], 1) - loads.thrust_offset @ offset_map[:, 2:])
+    # torque here already subtracted the probed term at accel_used; put it back as unknown.
+    rhs[:, 1:] += np.einsum("nir,nr->ni", sens, accel_used)
+    out = speed.copy()
+    square = alloc.shape[0] == alloc.shape[1]
+    for k in range(1, len(out)):
+        x = out[k].copy()
+        matrix = alloc * loads.thrust_scale[k]
+        coupling = np.vstack([np.zeros((1, x.size)), sens[k]]) / dt      # (4, R)
+        for _ in range(3):  # warm start from the previous pass: a few Newton steps suffice
+            f = matrix @ (x * x) + coupling @ (x - out[k - 1]) - rhs[k]
+            jac = matrix * (2 * x) + coupling
+            x = x - (np.linalg.solve(jac, f) if square else np.linalg.lstsq(jac, f, rcond=None)[0])
+        out[k] = np.maximum(x, 0.05 * speed[k])
+    return out
+
+
+def _odd(n: float) -> int:
+    n = max(5, int(round(n)))
+    return n + 1 - n % 2
+
+
 def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
     """States and rotor speeds of the exact flight; ``com_path`` is the CoM's path (so the
     thrust direction does not depend on the angular acceleration)."""
     vehicle = effect_set.apply_to_params(params)
     accel_com = np.gradient(np.gradient(com_path, t, axis=0), t, axis=0)
     hover = hover_speed(params)
+    dt = float(t[1] - t[0])
     speed = np.full((len(t), params.rotor_count), hover)
     lift = accel_com + [0, 0, vehicle.gravity]
     rot = _attitude(lift, yaw)
@@ -129,15 +175,20 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
         position = com_path - np.einsum("nij,j->ni", rot, vehicle.com)   # body origin
         velocity = np.gradient(position, t, axis=0)
         wind = effect_set.air_velocity(t, position)
+        rotor_accel = np.vstack([np.zeros((1, speed.shape[1])), np.diff(speed, axis=0) / dt])
         ctx = EffectContext(t, position, velocity, quat, rate, velocity - wind, speed,
-                            np.gradient(speed, t, axis=0), vehicle, vbat)
+                            rotor_accel, vehicle, vbat)
         loads = effect_set.loads(ctx)
         thrust_world = vehicle.mass * lift - loads.force_world
         rot = _attitude(thrust_world, yaw)
         inertia = vehicle.inertia
         torque = rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T) - loads.torque_body
-        speed = _solve_rotors(vehicle, loads, np.linalg.norm(thrust_world, axis=1), torque,
-                              hover)
+        thrust = np.linalg.norm(thrust_world, axis=1)
+        sens = _accel_sensitivity(effect_set, ctx)
+        if sens is None:
+            speed = _solve_rotors(vehicle, loads, thrust, torque, hover)
+        else:
+            speed = _march_rotors(vehicle, loads, thrust, torque, sens, rotor_accel, speed, dt)
     specific = rotate_inverse(quat, np.gradient(velocity, t, axis=0) + [0, 0, vehicle.gravity])
     return position, velocity, quat, rate, specific, speed
 

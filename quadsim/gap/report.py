@@ -1,0 +1,184 @@
+"""Outputs of the gap diagnosis: JSON (``quadsim.gap/1``), a human summary, an HTML report
+with embedded plots, and a rerun recording of the residuals.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..fileio import atomic_write_text
+
+__all__ = ["to_json", "summary", "write_json", "write_html", "write_rerun", "public"]
+
+
+def public(result: dict) -> dict:
+    """The JSON-able part of a result (keys starting with ``_`` are dropped, recursively)."""
+    if isinstance(result, dict):
+        return {k: public(v) for k, v in result.items() if not str(k).startswith("_")}
+    if isinstance(result, list):
+        return [public(v) for v in result]
+    if isinstance(result, (np.floating, np.integer)):
+        return result.item()
+    if isinstance(result, float) and not np.isfinite(result):
+        return None
+    return result
+
+
+def to_json(result: dict) -> str:
+    """Stable JSON text: sorted keys, 6 significant digits, newline at the end."""
+    def rounded(value):
+        if isinstance(value, float):
+            return float(f"{value:.6g}")
+        if isinstance(value, dict):
+            return {k: rounded(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [rounded(v) for v in value]
+        return value
+
+    return json.dumps(rounded(public(result)), indent=1, sort_keys=True) + "\n"
+
+
+def write_json(path: str | Path, result: dict) -> Path:
+    return atomic_write_text(path, to_json(result))
+
+
+def _fmt_params(params: dict, ci: dict) -> str:
+    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g}" for k, v in params.items())
+
+
+def summary(result: dict) -> str:
+    """A few lines for people: verdict, parameters, where the gap lies, ranking."""
+    if result.get("mode") == "per-flight":
+        lines = [f"per-flight diagnosis against {len(result['reference'])} reference flights "
+                 f"(reference refit: {_fmt_params(result['reference_refit'], {})})"]
+        for f in result["flights"]:
+            red = f["reduction"] or 0.0
+            lines.append(f"  {Path(f['file']).name}: {f['verdict']}"
+                         + (f" ({_fmt_params(f['params'], f['ci'])}; held-out gap -{100 * red:.0f} %)"
+                            if f["verdict"] != "unexplained" else "")
+                         + (f" [confusable: {', '.join(f['confusable_with'])}]"
+                            if f["confusable_with"] else ""))
+        return "\n".join(lines) + "\n"
+    v = result["verdict"]
+    where = result["where"]
+    lines = [f"verdict: {v['effect']}"]
+    if v["effect"] != "unexplained":
+        lines.append(f"  parameters: {_fmt_params(v['params'], v['ci'])}")
+        lines.append(f"  held-out gap {v['heldout_gap_before']:.3g} -> {v['heldout_gap_after']:.3g}"
+                     f" (noise = 1 per channel): -{100 * v['reduction']:.1f} %")
+    if v["confusable_with"]:
+        lines.append("  confusable with: " + "; ".join(
+            f"{k} (separate by: {w})" for k, w in v["separate_by"].items()))
+    share = where["channel_share"]
+    top = sorted(share.items(), key=lambda kv: -kv[1])[:3]
+    lines.append("where: " + ", ".join(f"{k} {100 * s:.0f} %" for k, s in top)
+                 + " of the held-out gap")
+    regimes = sorted(where["regime"].items(), key=lambda kv: -kv[1]["share"])[:3]
+    lines.append("  by regime: " + ", ".join(
+        f"{k} {100 * r['share']:.0f} % (of {100 * r['samples']:.0f} % of samples)"
+        for k, r in regimes))
+    lines.append("  by band: " + ", ".join(f"{k} {100 * s:.0f} %" for k, s in where["band"].items()))
+    lines.append("ranking (held-out gap reduction):")
+    for e in result["effects"][:6]:
+        lines.append(f"  {e['name']:16s} {100 * e['reduction']:6.1f} %  {_fmt_params(e['params'], e['ci'])}")
+    b = result["baseline"]
+    lines.append(f"  (nominal_refit b,d: {100 * b['reduction']:.1f} %)")
+    for note in result.get("notes", []):
+        lines.append(f"note: {note}")
+    return "\n".join(lines) + "\n"
+
+
+def _png(fig) -> str:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=90, bbox_inches="tight", metadata={"Software": None})
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def _figures(result: dict) -> list[tuple[str, str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figs = []
+    series = result.get("_series")
+    if series is not None:
+        channels = series["channels"][:6]
+        fig, axes = plt.subplots(6, 1, figsize=(9, 10), sharex=True)
+        for k, ax in enumerate(axes):
+            ax.plot(series["t"], series["before"][:, k], lw=0.8, label="nominal")
+            ax.plot(series["t"], series["after"][:, k], lw=0.8, label="with verdict")
+            ax.set_ylabel(channels[k])
+        axes[0].legend(loc="upper right")
+        axes[-1].set_xlabel("t (s)")
+        figs.append((f"Residual wrench, held-out flight {Path(series['flight']).name}", _png(fig)))
+    effects = result["effects"]
+    if effects:
+        fig, ax = plt.subplots(figsize=(8, 3.5))
+        names = [e["name"] for e in effects] + ["nominal_refit"]
+        values = [100 * e["reduction"] for e in effects] + [100 * result["baseline"]["reduction"]]
+        ax.barh(names[::-1], values[::-1])
+        ax.set_xlabel("held-out gap reduction (%)")
+        figs.append(("Candidate effects", _png(fig)))
+    where = result["where"]
+    if where.get("kstep_before"):
+        fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
+        for key, label in (("kstep_before", "nominal"), ("kstep_after", "with verdict")):
+            horizons = [float(h) for h in where[key]]
+            pos = [v["position_rms_m"] or np.nan for v in where[key].values()]
+            att = [v["attitude_rms_rad"] or np.nan for v in where[key].values()]
+            ax[0].loglog(horizons, pos, "o-", label=label)
+            ax[1].loglog(horizons, att, "o-", label=label)
+        ax[0].set_xlabel("horizon (s)"), ax[0].set_ylabel("position RMS (m)")
+        ax[1].set_xlabel("horizon (s)"), ax[1].set_ylabel("attitude RMS (rad)")
+        ax[0].legend()
+        figs.append(("k-step prediction error (multiple shooting, analytic engine)", _png(fig)))
+    return figs
+
+
+def write_html(path: str | Path, result: dict) -> Path:
+    """A self-contained HTML page: summary, plots (base64 PNG), the JSON."""
+    body = [f"<h1>quadsim gap diagnosis: {html.escape(str(result.get('model', '')))}</h1>",
+            f"<pre>{html.escape(summary(result))}</pre>"]
+    if result.get("mode") != "per-flight":
+        for title, png in _figures(result):
+            body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
+    body.append(f"<h2>Result ({html.escape(result['schema'])})</h2>"
+                f"<pre>{html.escape(to_json(result))}</pre>")
+    page = ("<!doctype html><html><head><meta charset=\"utf-8\"><title>quadsim gap</title>"
+            "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}"
+            "img{max-width:100%}</style></head><body>" + "\n".join(body) + "</body></html>\n")
+    return atomic_write_text(path, page)
+
+
+def write_rerun(path: str | Path, result: dict) -> Path | None:
+    """Residual wrench (nominal and with the verdict) over the first held-out flight, via
+    :func:`quadsim.viewer.try_save_recording` (None and a message when unavailable)."""
+    series = result.get("_series")
+    if series is None:
+        return None
+    try:
+        from ..viewer import try_save_recording
+    except ImportError as exc:  # pragma: no cover - viewer is part of the package
+        print(f"note: --rerun skipped: {exc}")
+        return None
+    from ..trajectory import Trajectory
+
+    s = series["states"]
+    flight = Trajectory(s.t, s.position, s.velocity, s.quat, s.body_rate, s.rotor_speed,
+                        engine="log")
+    labels = series["channels"][:6]
+    residuals = {"nominal": (s.t, series["before"][:, :6], labels),
+                 "with_verdict": (s.t, series["after"][:, :6], labels)}
+    return try_save_recording(path, params=series["params"], trajectories={"log": flight},
+                              residuals=residuals, title="quadsim gap: residual wrench",
+                              tab="residuals")
