@@ -418,15 +418,26 @@ def _reference_spread(ref: list[Flight], params, effect_names, progress) -> dict
 
 
 def _judge(one: dict, spread: dict, name: str) -> dict:
-    """A flight's verdict: its best effect must beat every reference flight's reduction."""
-    verdict = dict(one["verdict"])
-    effect = verdict["effect"]
-    if effect != "unexplained":
-        ref = spread.get(effect.split("+")[0], [0.0])
-        if verdict["reduction"] <= max(ref) + MIN_GAIN:
-            verdict = {**verdict, "effect": "unexplained",
-                       "note": f"{effect} helps, but no more than on the nominal flights"}
-    return {"file": name, "verdict": verdict["effect"], "params": verdict.get("params", {}),
-            "ci": verdict.get("ci", {}), "reduction": verdict["reduction"],
-            "confusable_with": verdict.get("confusable_with", []),
-            "effects": [{k: e[k] for k in ("name", "params", "reduction")} for e in one["effects"]]}
+    """A flight's verdict: the effect whose held-out reduction exceeds the largest reduction
+    the same effect achieves on any reference (nominal) flight by the most, if that excess is
+    at least MIN_GAIN; ties (within TIE) go to the effect with fewer parameters. Effects that
+    help every nominal flight alike (real drag, an imperfect motor map) are not named."""
+    scored = []
+    for e in one["effects"]:
+        ok = any(e["identifiable"].values()) and e["t_statistic"] >= MIN_T
+        excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
+        if ok and excess >= MIN_GAIN:
+            scored.append((excess, e))
+    effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
+               {"reference_max_reduction": max(spread.get(e["name"], [0.0]))}
+               for e in one["effects"]]
+    if not scored:
+        return {"file": name, "verdict": "unexplained", "params": {}, "ci": {},
+                "reduction": 0.0, "confusable_with": [], "effects": effects}
+    top = max(x for x, _ in scored)
+    tied = [(x, e) for x, e in scored if x >= top - TIE]
+    best = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
+    confusable = [e["name"] for _, e in tied if e is not best]
+    return {"file": name, "verdict": best["name"], "params": best["params"], "ci": best["ci"],
+            "reduction": best["reduction"], "confusable_with": confusable,
+            "separate_by": _separation(best["name"], confusable), "effects": effects}

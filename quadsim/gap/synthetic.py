@@ -168,7 +168,7 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
     speed = np.full((len(t), params.rotor_count), hover)
     lift = accel_com + [0, 0, vehicle.gravity]
     rot = _attitude(lift, yaw)
-    for _ in range(passes):
+    for done in range(passes):
         quat = _rotmat_to_quat(rot)
         rate = _body_rate(t, rot)
         rate_dot = np.gradient(rate, t, axis=0)
@@ -186,6 +186,10 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
         thrust = np.linalg.norm(thrust_world, axis=1)
         sens = _accel_sensitivity(effect_set, ctx)
         if sens is None:
+            speed = _solve_rotors(vehicle, loads, thrust, torque, hover)
+        elif done < passes - 2:
+            # Early passes leave out the dOmega/dt torque (cheap); the last two march in time.
+            torque = torque + np.einsum("nir,nr->ni", sens, rotor_accel)
             speed = _solve_rotors(vehicle, loads, thrust, torque, hover)
         else:
             speed = _march_rotors(vehicle, loads, thrust, torque, sens, rotor_accel, speed, dt)

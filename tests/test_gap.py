@@ -1,0 +1,149 @@
+"""Gap diagnosis on generated logs: each library effect is found blind, no effect gives
+`unexplained`, the JSON follows its schema and is deterministic, bad input is refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from quadsim.effects import make_effect
+from quadsim.errors import InputError
+from quadsim.flightlog import FlightLog, write_log
+from quadsim.gap import diagnose, diagnose_per_flight
+from quadsim.gap.__main__ import main
+from quadsim.gap.report import to_json
+from quadsim.gap.schema import validate
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.params import load_params
+
+jsonschema = pytest.importorskip("jsonschema")
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+# effect(s) hidden in the flights, the library name the diagnosis must give, the parameter
+# checked against its confidence interval and its true value. Magnitudes are realistic for
+# the 37 g Crazyflie (e.g. a 4 g payload, a 4 mm CoM shift, 8 % weaker rotor, 30 ms lag).
+CASES = {
+    "mass_offset": ([("mass_offset", {"mass": 0.004})], "mass_offset.mass", 0.004),
+    "com_offset": ([("com_offset", {"x": 0.004, "y": -0.003})], "com_offset.x", 0.004),
+    "inertia_error": ([("inertia_error", {"xx": 0.3, "yy": 0.3, "zz": 0.2})],
+                      "inertia_error.xx", 0.3),
+    "thrust_mismatch": ([("thrust_mismatch", {"rotor_2": -0.08})], "thrust_mismatch.rotor_2",
+                        -0.08),
+    "thrust_curve": ([("thrust_curve", {"linear": 3e-6})], "thrust_curve.linear", 3e-6),
+    "battery_sag": ([("battery_sag", {"rate": 0.01})], "battery_sag.full_voltage", 4.2),
+    "ground_effect": ([("ground_effect", {"gain": 1.5})], "ground_effect.gain", 1.5),
+    "rotor_drag": ([("rotor_drag", {"coefficient": 1e-6})], "rotor_drag.coefficient", 1e-6),
+    "body_drag": ([("body_drag", {"cd_area": 0.01, "cd_area_vertical": 0.01})],
+                  "body_drag.cd_area", 0.01),
+    "motor_lag": ([("motor_lag", {"time_constant": 0.03})], "motor_lag.time_constant", 0.03),
+    "gyroscopic": ([("gyroscopic", {"rotor_inertia": 5e-8})], "gyroscopic.rotor_inertia", 5e-8),
+    "wind": ([("wind", {"vx": 1.0, "vy": -0.5}), ("rotor_drag", {"coefficient": 1e-6})],
+             "wind.vx", 1.0),
+}
+
+
+def _flights(params, hidden, *, seeds=(0, 1), duration=5.0):
+    effects = [make_effect(name, **values) for name, values in hidden]
+    return [synthetic_flight(params, effects, seed=s, duration=duration) for s in seeds]
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_each_library_effect_is_named_top1_with_parameter_in_its_ci(cf, name):
+    hidden, key, truth = CASES[name]
+    result = diagnose(_flights(cf, hidden), cf, kstep=False, max_combination=1)
+    verdict = result["verdict"]
+    assert verdict["effect"] == name
+    assert result["effects"][0]["name"] == name
+    assert abs(verdict["params"][key] - truth) <= verdict["ci"][key]
+    # The CI is informative: narrower than a third of the true value.
+    assert verdict["ci"][key] < abs(truth) / 3
+    assert verdict["reduction"] > 0.15
+
+
+def test_no_effect_is_unexplained(cf):
+    result = diagnose(_flights(cf, [], seeds=(3, 4)), cf, kstep=False)
+    assert result["verdict"]["effect"] == "unexplained"
+    assert max(e["reduction"] for e in result["effects"]) < 0.05
+
+
+def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
+    logs = _flights(cf, [("thrust_mismatch", {"rotor_3": 0.06})], seeds=(5, 6, 7), duration=4.0)
+    paths = []
+    for k, log in enumerate(logs):
+        paths.append(str(write_log(tmp_path / f"flight_{k}.csv.gz", log)))
+    outputs = []
+    for run in range(2):
+        out = tmp_path / f"gap{run}.json"
+        assert main(["--model", "crazyflie21", *paths, "--json", str(out), "--quiet",
+                     "--effects", "thrust_mismatch", "com_offset", "mass_offset"]) == 0
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
+    document = json.loads(outputs[0])
+    validate(document)
+    assert document["schema"] == "quadsim.gap/1"
+    assert document["verdict"]["effect"] == "thrust_mismatch"
+    assert document["train"] and document["holdout"]
+    assert not set(document["train"]) & set(document["holdout"])  # split by flight
+    assert set(document["where"]["regime"]) >= {"hover", "fast_forward", "near_ground"}
+    assert abs(sum(document["where"]["band"].values()) - 1) < 1e-6
+    for horizon in ("0.05", "1"):
+        assert document["where"]["kstep_before"][horizon]["position_rms_m"] is not None
+    html = tmp_path / "gap.html"
+    assert main(["--model", "crazyflie21", *paths, "--report", str(html), "--quiet",
+                 "--effects", "thrust_mismatch"]) == 0
+    text = html.read_text()
+    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/1" in text
+
+
+def test_per_flight_mode_names_only_the_flight_that_differs(cf):
+    reference = _flights(cf, [], seeds=(10, 11), duration=4.0)
+    tested = [synthetic_flight(cf, [], seed=12, duration=4.0),
+              synthetic_flight(cf, [make_effect("com_offset", x=-0.005)], seed=13, duration=4.0)]
+    result = diagnose_per_flight(tested, reference, cf,
+                                 effects=["com_offset", "mass_offset", "thrust_mismatch"])
+    validate(json.loads(to_json(result)))
+    verdicts = [f["verdict"] for f in result["flights"]]
+    assert verdicts == ["unexplained", "com_offset"]
+    assert abs(result["flights"][1]["params"]["com_offset.x"] + 0.005) < 5e-4
+
+
+def test_too_little_excitation_is_reported_not_fitted(cf):
+    """High above the ground, ground effect cannot be fitted: a warning, never the verdict."""
+    logs = []
+    for seed in (20, 21):
+        log = synthetic_flight(cf, [], seed=seed, duration=4.0)
+        logs.append(FlightLog(log.t, log.position + [0, 0, 2.0], log.quat, log.velocity,
+                              log.body_rate, log.accel, log.rotor_speed, log.rotor_command,
+                              log.vbat))
+    result = diagnose(logs, cf, kstep=False, effects=["ground_effect", "mass_offset"])
+    ground = next(e for e in result["effects"] if e["name"] == "ground_effect")
+    assert "too little excitation" in ground["warning"]
+    assert result["verdict"]["effect"] == "unexplained"
+
+
+def test_bad_input(cf, tmp_path, capsys):
+    log = synthetic_flight(cf, [], seed=0, duration=2.0)
+    three = FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate, log.accel,
+                      log.rotor_speed[:, :3])
+    with pytest.raises(InputError, match="3 rotors in the log, the model 'crazyflie21' has 4"):
+        diagnose([log, three], cf)
+    commands_only = FlightLog(log.t, log.position, log.quat, rotor_command=log.rotor_command)
+    with pytest.raises(InputError, match="needs measured rotor speeds"):
+        diagnose([log, commands_only], cf)
+    single = diagnose([log], cf, kstep=False, effects=["mass_offset"])
+    assert any("single flight" in note for note in single["notes"])
+    path = str(write_log(tmp_path / "one.csv", log))
+    assert main(["--model", "no_such_model", path, "--quiet"]) == 2
+    assert main(["--model", "crazyflie21", "--per-flight", path, "--quiet"]) == 2
+    assert main(["--model", "crazyflie21", path, "--json", str(tmp_path / "x.txt")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("error: ") for line in err)
+    assert not (tmp_path / "x.txt").exists()
+    assert np.isfinite(single["verdict"]["heldout_gap_before"])
