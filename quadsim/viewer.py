@@ -216,7 +216,8 @@ def assembly_for(params: VehicleParams):
     except (OSError, tomllib.TOMLDecodeError):
         return None
     for section in ("body", "rotor_layout"):
-        spec = data.get(section, {}).get("from_cad") if isinstance(data.get(section), dict) else None
+        table = data.get(section)
+        spec = table.get("from_cad") if isinstance(table, dict) else None
         if isinstance(spec, dict) and "path" in spec:
             from .assembly import load_assembly  # local: trimesh and the mesh files
 

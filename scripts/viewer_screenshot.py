@@ -5,8 +5,9 @@
 Starts ``rerun --web-viewer --serve-web FILE`` on free ports, points headless Chromium (with
 its software rasterizer, no display needed) at it, waits in real time (Chromium's
 ``--virtual-time-budget`` proved unreliable for the WebAssembly viewer here), takes the PNG
-over the DevTools protocol and stops the processes it started (by their process ids). Needs ``chromium`` on PATH (Debian: ``apt-get install
-chromium``). Used to make the picture in docs/viewer.md.
+over the DevTools protocol and stops the processes it started (by their process ids).
+Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``). With the software
+rasterizer the viewer takes in data slowly: a 1.6 MB recording needed about two minutes.
 """
 
 from __future__ import annotations
@@ -116,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("recording", type=Path, help=".rrd file to show")
     parser.add_argument("png", type=Path, help="screenshot to write")
     parser.add_argument("--size", default="1600x1000", help="window WIDTHxHEIGHT (px)")
-    parser.add_argument("--wait", type=float, default=25.0,
+    parser.add_argument("--wait", type=float, default=150.0,
                         help="seconds to let the viewer load and render before the shot")
     args = parser.parse_args(argv)
     width, height = (int(v) for v in args.size.lower().split("x"))

@@ -8,12 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_viewer import read_recording  # noqa: E402  (tests/ is on sys.path under pytest)
 
 from quadsim.params import load_params
 from quadsim.trajectory import STATE12_NAMES
 from quadsim.view import main, replay_log
-
-from test_viewer import read_recording  # noqa: E402  (tests/ is on sys.path under pytest)
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data" / "crazyflie21_brushless" / "nominal"
