@@ -33,6 +33,8 @@ MIN_GAIN = 0.05
 MIN_T = 1.0
 #: ... and effects whose held-out gap is within this fraction of the best are confusable.
 TIE = 0.02
+#: per-flight mode: effects within this held-out reduction of the named one are confusable.
+PER_FLIGHT_TIE = 0.05
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -153,6 +155,7 @@ def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
     return {
         "name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
         "identifiable": dict(zip(fit.candidate.parameter_names, fit.identifiable)),
+        "significant": dict(zip(fit.candidate.parameter_names, fit.significant)),
         "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
         "reduction": (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0,
         "t_statistic": _block_t(before, after, dt),
@@ -274,7 +277,10 @@ def before_gap(before: list[np.ndarray]) -> float:
 
 def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
     gain = (reference_gap - entry["heldout_gap_after"]) / nominal_gap if nominal_gap > 0 else 0
-    return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and any(entry["identifiable"].values())
+    # At least one parameter must be both identified (CI narrower than half its plausible
+    # range) and significantly away from the value that switches the effect off.
+    useful = any(entry["identifiable"][k] and entry["significant"][k] for k in entry["params"])
+    return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and useful
 
 
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
@@ -424,7 +430,8 @@ def _judge(one: dict, spread: dict, name: str) -> dict:
     help every nominal flight alike (real drag, an imperfect motor map) are not named."""
     scored = []
     for e in one["effects"]:
-        ok = any(e["identifiable"].values()) and e["t_statistic"] >= MIN_T
+        ok = e["t_statistic"] >= MIN_T and any(
+            e["identifiable"][k] and e["significant"][k] for k in e["params"])
         excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
         if ok and excess >= MIN_GAIN:
             scored.append((excess, e))
@@ -437,7 +444,9 @@ def _judge(one: dict, spread: dict, name: str) -> dict:
     top = max(x for x, _ in scored)
     tied = [(x, e) for x, e in scored if x >= top - TIE]
     best = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
-    confusable = [e["name"] for _, e in tied if e is not best]
+    # Confusable: other qualifying effects that explain this flight about as well.
+    confusable = [e["name"] for _, e in scored
+                  if e is not best and e["reduction"] >= best["reduction"] - PER_FLIGHT_TIE]
     return {"file": name, "verdict": best["name"], "params": best["params"], "ci": best["ci"],
             "reduction": best["reduction"], "confusable_with": confusable,
             "separate_by": _separation(best["name"], confusable), "effects": effects}

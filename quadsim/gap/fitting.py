@@ -27,6 +27,10 @@ from ..residual import FlightStates, measured_wrench, model_wrench
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for", "residuals", "fit_candidate",
            "noise_scale", "command_speed", "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
 
+#: parameters whose "off" value does not switch their effect off (with a voltage log the sag
+#: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
+NO_OFF_VALUE = {"battery_sag.full_voltage"}
+
 #: effects that are not in the library but are fitted like one (the nominal-refit baseline).
 LOCAL_EFFECTS: dict[str, type] = {}
 
@@ -81,6 +85,7 @@ class Fit:
     correlation: np.ndarray
     cost: float
     identifiable: list[bool] = field(default_factory=list)
+    significant: list[bool] = field(default_factory=list)
 
     def params(self) -> dict[str, float]:
         return dict(zip(self.candidate.parameter_names, map(float, self.theta)))
@@ -182,6 +187,15 @@ def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)
+
+
+def _start_off(candidate: Candidate) -> np.ndarray:
+    """The "off" value of each fitted parameter."""
+    off = []
+    for name, _, fitted in candidate.parts:
+        specs = {p.name: p for p in effect_class(name).parameters}
+        off += [specs[p].off for p in fitted]
+    return np.asarray(off, dtype=float)
 
 
 def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
@@ -370,4 +384,7 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     span = upper - lower
     identifiable = [bool(c > 1e-6 * np.sqrt(res.size) and 1.96 * se < 0.5 * sp)
                     for c, se, sp in zip(column, stderr, span)]
-    return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable)
+    off = _start_off(candidate)
+    significant = [bool(abs(th - o) > 1.96 * se) or name in NO_OFF_VALUE
+                   for th, o, se, name in zip(theta, off, stderr, candidate.parameter_names)]
+    return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)

@@ -18,6 +18,7 @@ _EFFECT = {
         "params": _NUMBER_MAP,
         "ci": _NUMBER_MAP,
         "identifiable": {"type": "object", "additionalProperties": {"type": "boolean"}},
+        "significant": {"type": "object", "additionalProperties": {"type": "boolean"}},
         "heldout_gap_before": {"type": "number"},
         "heldout_gap_after": {"type": "number"},
         "reduction": {"type": "number"},
