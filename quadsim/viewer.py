@@ -534,12 +534,19 @@ def display_available() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+def _no_display_note(path: Path | None) -> None:
+    where = (f"view the recording with `rerun {path}` where a display exists, or headless with "
+             f"`rerun --web-viewer {path}`" if path is not None else
+             "save the recording to a file (e.g. --rerun out.rrd) and view it with `rerun FILE`"
+             " or `rerun --web-viewer FILE`")
+    print(f"note: no display here (DISPLAY/WAYLAND_DISPLAY unset), no viewer opened; {where} "
+          "(see docs/viewer.md)", file=sys.stderr)
+
+
 def _spawn_viewer(path: Path) -> None:
     """Open ``path`` in the native rerun viewer, or say how to view it without a display."""
     if not display_available():
-        print(f"note: no display here (DISPLAY/WAYLAND_DISPLAY unset), no viewer opened; view "
-              f"the recording with `rerun {path}` where a display exists, or headless with "
-              f"`rerun --web-viewer {path}` (see docs/viewer.md)", file=sys.stderr)
+        _no_display_note(path)
         return
     try:
         subprocess.Popen([sys.executable, "-m", "rerun", str(path)],
@@ -613,7 +620,7 @@ def _spawn_stream(options: dict) -> None:
     import rerun.blueprint  # noqa: F401  (loaded before the viewer connects)
 
     if not display_available():
-        _spawn_viewer(Path("out.rrd"))
+        _no_display_note(None)
         return None
     rec = rr.RecordingStream(APPLICATION_ID, send_properties=False)
     rec.spawn()
