@@ -63,3 +63,18 @@ def test_non_physical_inertia_refused(tmp_path):
     with pytest.raises(ModelError, match="triangle inequality"):
         load_params(f)
     assert load_params(f, check=False).inertia[2, 2] == 0.0825
+
+
+def test_atomic_write_has_plain_file_permissions(tmp_path):
+    import os
+    import stat
+
+    from quadsim.fileio import atomic_write_text
+
+    mask = os.umask(0o022)
+    try:
+        path = atomic_write_text(tmp_path / "out.txt", "x")
+    finally:
+        os.umask(mask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert path.read_text() == "x"
