@@ -37,7 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from quadsim.effects import EffectBase, EffectLoads, EffectParameter, make_effect  # noqa: E402
-from quadsim.errors import QuadsimWarning  # noqa: E402
+from quadsim.errors import ModelError, QuadsimWarning  # noqa: E402
 from quadsim.fileio import atomic_write_text  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
 from quadsim.gap.diagnose import MIN_GAIN, prepare  # noqa: E402
@@ -96,9 +96,14 @@ def _draw(name: str, params, rng: np.random.Generator) -> list:
         a = rng.uniform(0, 2 * np.pi)
         return [make_effect(name, x=r * np.cos(a), y=r * np.sin(a))]
     if name == "inertia_error":
-        e = rng.uniform(0.15, 0.4, 3) * rng.choice([-1.0, 1.0], 3)
-        return [make_effect(name, xx=e[0] * 0.8 if e[0] < 0 else e[0], yy=e[1] * 0.8 if e[1] < 0 else e[1],
-                            zz=abs(e[2]))]
+        while True:  # redraw until the changed vehicle is still a rigid body
+            e = rng.uniform(0.15, 0.4, 3) * rng.choice([-1.0, 1.0], 3)
+            effect = make_effect(name, xx=e[0], yy=e[1], zz=e[2])
+            try:
+                effect.apply_to_params(params)
+                return [effect]
+            except ModelError:
+                continue
     if name == "thrust_mismatch":
         rotor = int(rng.integers(1, params.rotor_count + 1))
         return [make_effect(name, **{f"rotor_{rotor}": sign * rng.uniform(0.05, 0.15)})]

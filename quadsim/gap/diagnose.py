@@ -14,12 +14,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..effects.base import EffectBase, EffectParameter
-from ..errors import InputError, QuadsimWarning
+from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
 from . import fitting
-from .fitting import Candidate, Fit, candidates_for, fit_candidate, noise_scale, residuals
+from .fitting import (Candidate, Fit, candidates_for, fit_candidate, fit_motor_map, noise_scale,
+                      residuals)
 from .where import by_band, by_regime, kstep_errors, regime_masks
 
 __all__ = ["Flight", "prepare", "diagnose", "diagnose_per_flight", "SCHEMA", "MIN_GAIN",
@@ -149,7 +150,16 @@ def _channels(rotor: bool, params: VehicleParams) -> list[str]:
 
 
 def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
-    after = _scaled(held, params, fit.effects(), sigma, rotor)
+    try:
+        after = _scaled(held, params, fit.effects(), sigma, rotor)
+    except ModelError as exc:  # the fit stopped on a non-physical vehicle: no improvement
+        names = fit.candidate.parameter_names
+        return {"name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
+                "identifiable": dict.fromkeys(names, False),
+                "significant": dict.fromkeys(names, False),
+                "heldout_gap_before": _gap(before), "heldout_gap_after": _gap(before),
+                "reduction": 0.0, "t_statistic": 0.0, "heldout_rms_after": {},
+                "warning": f"fit left the physical range: {exc}", "_fit": fit}
     gap_before, gap_after = _gap(before), _gap(after)
     rms = _channel_rms(after, sigma)
     return {
@@ -235,9 +245,16 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
                            kstep)
 
 
+def params_have_data_map(params: VehicleParams) -> bool:
+    """True when the motor map was already fitted from data by the diagnosis."""
+    return params.motor_map is not None and "quadsim.gap" in params.motor_map.source
+
+
 def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
                     kstep=False):
     rotor = all(f.fit.command is not None for f in train + held)
+    if rotor and not params_have_data_map(params):
+        params = fit_motor_map([f.fit for f in train], params)
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     nominal_train = [residuals(f.fit, params, [], rotor_channel=rotor) for f in train]
     sigma = noise_scale(np.concatenate(nominal_train), float(train[0].fit.t[1] - train[0].fit.t[0]))
@@ -383,6 +400,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     if len(ref) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     rotor = all(f.fit.command is not None for f in ref)
+    if rotor:
+        params = fit_motor_map([f.fit for f in ref], params)
     sigma0 = noise_scale(np.concatenate([residuals(f.fit, params, [], rotor_channel=rotor)
                                          for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]))
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)

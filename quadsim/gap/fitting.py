@@ -25,7 +25,7 @@ from ..params import VehicleParams
 from ..residual import FlightStates, measured_wrench, model_wrench
 
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for", "residuals", "fit_candidate",
-           "noise_scale", "command_speed", "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
+           "noise_scale", "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -210,6 +210,29 @@ def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
     x0 = np.where(x0 <= lower, lower + 0.1 * typical, x0)
     x0 = np.where(x0 >= upper, upper - 0.1 * typical, x0)
     return np.clip(x0, lower + 1e-12 * typical, upper - 1e-12 * typical)
+
+
+def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> VehicleParams:
+    """``params`` with a per-rotor straight-line map cmd (0-1) -> speed fitted on ``flights``.
+
+    Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
+    firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
+    reference) data; what the channel then measures is the rotor *dynamics*."""
+    from ..params import MotorMap
+
+    usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
+    if not usable:
+        return params
+    command = np.concatenate([f.command for f in usable])
+    speed = np.concatenate([f.rotor_speed for f in usable])
+    ends = []
+    for i in range(speed.shape[1]):
+        if np.ptp(command[:, i]) <= 0:
+            return params
+        slope, intercept = np.polyfit(command[:, i], speed[:, i], 1)
+        ends.append([intercept, intercept + slope])
+    return params.replace(motor_map=MotorMap("1", np.array([0.0, 1.0]), np.array(ends),
+                                             "fitted on the training flights (quadsim.gap)"))
 
 
 def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | None:
