@@ -149,7 +149,7 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     vehicle = cad_params(base, assembly, props, inertial=inertial)
     if inertial == "cad":
         note = ("inertial from the CAD meshes (trimesh): mass/CoM/inertia of the parts in "
-                f"{assembly.manifest}")
+                f"{assembly.manifest.parent.name}/{assembly.manifest.name}")
         if "cad" not in base.sources.get("inertia", "").lower():
             note += (f"; parameter set {base.name!r} has its own mass {base.mass:.6g} kg and "
                      f"inertia ({base.sources.get('inertia', 'no source')}), not used here "
