@@ -41,7 +41,7 @@ from quadsim.errors import ModelError, QuadsimWarning  # noqa: E402
 from quadsim.fileio import atomic_write_text  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
 from quadsim.gap.diagnose import MIN_GAIN, prepare  # noqa: E402
-from quadsim.gap.fitting import noise_scale, residuals  # noqa: E402
+from quadsim.gap.fitting import fit_motor_map, noise_scale, residuals  # noqa: E402
 from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
 from quadsim.params import hover_speed, load_params  # noqa: E402
 
@@ -163,6 +163,7 @@ def _oracle_reduction(logs, params, effects) -> float:
     """Held-out gap reduction with the *true* effect and values (observability check)."""
     flights = prepare(logs, params)
     train, held = flights[:2], flights[2:]
+    params = fit_motor_map([f.fit for f in train], params)  # as the diagnosis does
     nominal = [residuals(f.fit, params, [], rotor_channel=True) for f in train]
     sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]))
     before = np.mean(np.concatenate([residuals(f.fit, params, [], rotor_channel=True) / sigma
@@ -189,7 +190,9 @@ def run_case(case: dict) -> dict:
            "confusable_with": verdict["confusable_with"], "seconds": elapsed,
            "truth_values": {k: v for k, v in truth_values.items() if v != 0.0},
            "oracle_reduction": _oracle_reduction(logs, params, effects) if effects else 0.0,
-           "ranked": [e["name"] for e in result["effects"][:3]]}
+           "ranked": [e["name"] for e in result["effects"][:3]],
+           "best_candidate": verdict["best_candidate"],
+           "channel_gap_after": verdict["heldout_channel_gap_after"]}
     key = f"{case['truth']}.{MAIN_PARAMETER.get(case['truth'], '')}"
     if case["truth"] == "thrust_mismatch":
         key = next(k for k in truth_values if k.startswith("thrust_mismatch.") and truth_values[k])

@@ -36,6 +36,10 @@ MIN_T = 1.0
 TIE = 0.02
 #: per-flight mode: effects within this held-out reduction of the named one are confusable.
 PER_FLIGHT_TIE = 0.05
+#: a verdict must leave every channel's held-out mean square below this many times the noise
+#: level; otherwise the best candidate explains only part of the gap and the verdict is
+#: ``unexplained`` (an effect outside the library, or several).
+LACK_OF_FIT = float("inf")
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -328,11 +332,25 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         notes.append("the held-out gap shrinks with refitted b and d (nominal_refit) but no "
                      "library effect explains more: the nominal parameters are off")
     confusable = _confusable(ranked, best, baseline, nominal_gap) if best else []
+    # Lack of fit: a complete model leaves every channel at the noise level (1).
+    channel_gap = np.mean(np.concatenate(after) ** 2, axis=0)
+    lack = {n: float(g) for n, g in zip(_channels(rotor, params), channel_gap) if g > LACK_OF_FIT}
+    candidate = combined
+    if combined is not None and lack:
+        notes.append(f"best candidate {combined['name']} cuts the held-out gap by "
+                     f"{100 * combined['reduction']:.0f} % but leaves "
+                     + ", ".join(f"{k} at {v:.1f}x noise" for k, v in lack.items())
+                     + ": the cause is outside the library (or not one effect); verdict "
+                     "unexplained")
+        combined = None
     verdict = {
         "effect": combined["name"] if combined else "unexplained",
+        "best_candidate": candidate["name"] if candidate else None,
+        "lack_of_fit": lack,
+        "heldout_channel_gap_after": dict(zip(_channels(rotor, params), map(float, channel_gap))),
         "reduction": combined["reduction"] if combined else 0.0,
-        "confusable_with": confusable,
-        "separate_by": _separation(best["name"], confusable) if best else {},
+        "confusable_with": confusable if combined else [],
+        "separate_by": _separation(best["name"], confusable) if combined else {},
         "params": combined["params"] if combined else {},
         "ci": combined["ci"] if combined else {},
         "heldout_gap_before": nominal_gap,

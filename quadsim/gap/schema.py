@@ -38,6 +38,9 @@ _VERDICT = {
         "separate_by": {"type": "object", "additionalProperties": {"type": "string"}},
         "params": _NUMBER_MAP,
         "ci": _NUMBER_MAP,
+        "best_candidate": {"type": ["string", "null"]},
+        "lack_of_fit": _NUMBER_MAP,
+        "heldout_channel_gap_after": _NUMBER_MAP,
     },
 }
 

@@ -35,7 +35,6 @@ from ..flightlog import FlightLog
 from ..frames import quat_multiply, quat_normalize, rotate_inverse
 from ..params import VehicleParams, hover_speed
 from ..rotors import allocation_matrix
-from .fitting import command_of_speed
 
 __all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
 
@@ -55,6 +54,16 @@ class SensorNoise:
     vbat: float = 0.005
 
 
+def _smooth_step(u: np.ndarray) -> np.ndarray:
+    """0 for u <= 0, 1 for u >= 1, infinitely smooth in between (the attitude depends on the
+    path's 2nd derivative and the torque on its 4th: a ramp with a jump in any of them
+    would put a torque spike into the log)."""
+    u = np.clip(u, 0.0, 1.0)
+    a = np.where(u > 0, np.exp(-1.0 / np.maximum(u, 1e-12)), 0.0)
+    b = np.where(u < 1, np.exp(-1.0 / np.maximum(1 - u, 1e-12)), 0.0)
+    return a / (a + b)
+
+
 def reference_path(t: np.ndarray, params: VehicleParams, rng: np.random.Generator,
                    speed: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Position (N, 3) and yaw (N,) of a figure-8 whose height dips to ~1.5 rotor radii.
@@ -66,11 +75,11 @@ def reference_path(t: np.ndarray, params: VehicleParams, rng: np.random.Generato
     radius = params.rotor_radius or arm / 2
     low, high = 1.5 * radius, max(0.6, 12 * radius)
     phase = rng.uniform(0, 2 * np.pi)
-    u = np.clip(t / 3.0, 0.0, 1.0)
-    ramp = u ** 3 * (10 - 15 * u + 6 * u * u)  # quintic smoothstep: starts at rest, C2
-    # A small fast wiggle (1.5-2.5 Hz, 1.5 m/s^2) excites the attitude dynamics (rates of a few rad/s).
-    wiggle_f = rng.uniform(1.5, 2.5) * 2 * np.pi
-    wiggle = 1.5 / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp  # 1.5 m/s^2 peak
+    ramp = _smooth_step(t / 3.0)  # starts at rest; all derivatives continuous
+    # A small fast wiggle (1.5-2.5 Hz, 1.5 m/s^2 on a Crazyflie-sized vehicle) excites the attitude dynamics (rates of a few rad/s).
+    agility = min(1.0, 0.06 / arm)  # larger vehicles: gentler, slower wiggle
+    wiggle_f = rng.uniform(1.5, 2.5) * 2 * np.pi * np.sqrt(agility)
+    wiggle = 1.5 * agility / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp
     x = size * np.sin(omega * t) * ramp + wiggle
     y = 0.5 * size * np.sin(2 * omega * t) * ramp - 0.7 * wiggle
     z = low + (high - low) * 0.5 * (1 + np.cos(0.7 * omega * t + phase) ** 3)
@@ -111,7 +120,46 @@ def _solve_rotors(vehicle, loads, thrust, torque, speed):
     rhs = np.concatenate([thrust[:, None], torque], 1) - offsets
     matrix = alloc[None] * loads.thrust_scale[:, None, :]                # (N, 4, R)
     omega2 = np.einsum("nij,nj->ni", np.linalg.pinv(matrix), rhs)
-    return np.sqrt(np.maximum(omega2, (0.05 * speed) ** 2))
+    return np.sqrt(np.clip(omega2, (0.05 * speed) ** 2, (3.0 * speed) ** 2))
+
+
+def _rotor_wrench(vehicle, effect_set, ctx, speed):
+    """[thrust along body z, torque (3)] (N, 4) of rotors + speed-dependent effect loads."""
+    ctx = EffectContext(ctx.t, ctx.position, ctx.velocity, ctx.quat, ctx.body_rate,
+                        ctx.air_velocity, speed, ctx.rotor_accel, ctx.params, ctx.vbat)
+    loads = effect_set.loads(ctx)
+    alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]
+    axes = vehicle.rotor_axes
+    offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])[:, 2:]
+    wrench = (np.square(speed) * loads.thrust_scale) @ alloc.T + loads.thrust_offset @ offset_map
+    wrench[:, 1:] += loads.torque_body
+    return wrench
+
+
+def _speed_dependent(effect_set, ctx) -> bool:
+    """Whether the effects' loads change with the rotor speeds (then Newton is needed)."""
+    if not effect_set.effects:
+        return False
+    a = effect_set.loads(ctx)
+    b = effect_set.loads(EffectContext(ctx.t, ctx.position, ctx.velocity, ctx.quat,
+                                       ctx.body_rate, ctx.air_velocity, ctx.rotor_speed * 1.01,
+                                       ctx.rotor_accel, ctx.params, ctx.vbat))
+    return not all(np.array_equal(getattr(a, k), getattr(b, k)) for k in
+                   ("thrust_scale", "thrust_offset", "force_world", "torque_body"))
+
+
+def _newton_rotors(vehicle, effect_set, ctx, loads, thrust, inertial_torque, speed, hover,
+                   iterations: int = 4):
+    """Speeds whose rotor + effect wrench equals [thrust, inertial torque], per sample."""
+    target = np.concatenate([thrust[:, None], inertial_torque], 1)
+    step = 1e-4 * hover
+    for _ in range(iterations):
+        base = _rotor_wrench(vehicle, effect_set, ctx, speed)
+        jac = np.stack([(_rotor_wrench(vehicle, effect_set, ctx, speed + step * e) - base) / step
+                        for e in np.eye(speed.shape[1])], -1)                # (N, 4, R)
+        delta = np.einsum("nij,nj->ni", np.linalg.pinv(jac), target - base)
+        speed = np.clip(speed + delta, 0.05 * hover, 3.0 * hover)
+    return speed
 
 
 def _accel_sensitivity(effect_set, ctx) -> np.ndarray | None:
@@ -158,7 +206,7 @@ def _odd(n: float) -> int:
     return n + 1 - n % 2
 
 
-def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
+def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
     """States and rotor speeds of the exact flight; ``com_path`` is the CoM's path (so the
     thrust direction does not depend on the angular acceleration)."""
     vehicle = effect_set.apply_to_params(params)
@@ -168,6 +216,8 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
     speed = np.full((len(t), params.rotor_count), hover)
     lift = accel_com + [0, 0, vehicle.gravity]
     rot = _attitude(lift, yaw)
+    if not effect_set.effects:
+        passes = 2  # nothing feeds back: one pass for the attitude, one for the speeds
     for done in range(passes):
         quat = _rotmat_to_quat(rot)
         rate = _body_rate(t, rot)
@@ -185,12 +235,17 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
         torque = rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T) - loads.torque_body
         thrust = np.linalg.norm(thrust_world, axis=1)
         sens = _accel_sensitivity(effect_set, ctx)
-        if sens is None:
-            speed = _solve_rotors(vehicle, loads, thrust, torque, hover)
-        elif done < passes - 2:
+        if sens is None or done < passes - 2:
             # Early passes leave out the dOmega/dt torque (cheap); the last two march in time.
-            torque = torque + np.einsum("nir,nr->ni", sens, rotor_accel)
-            speed = _solve_rotors(vehicle, loads, thrust, torque, hover)
+            if sens is not None:
+                torque = torque + np.einsum("nir,nr->ni", sens, rotor_accel)
+            solved = _solve_rotors(vehicle, loads, thrust, torque, hover)
+            if done > 0 and _speed_dependent(effect_set, ctx):
+                # Loads that depend on the speeds (rotor-drag torque, a canted rotor) are
+                # solved for together with the speeds (Newton, Jacobian by probing).
+                solved = _newton_rotors(vehicle, effect_set, ctx, loads, thrust,
+                                        torque + loads.torque_body, solved, hover)
+            speed = solved
         else:
             speed = _march_rotors(vehicle, loads, thrust, torque, sens, rotor_accel, speed, dt)
     specific = rotate_inverse(quat, np.gradient(velocity, t, axis=0) + [0, 0, vehicle.gravity])
@@ -198,7 +253,8 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 6):
 
 
 def _commands(t, speed, effect_set, params, hover):
-    """Normalised commands whose motor dynamics give ``speed`` (Newton on the rate)."""
+    """Normalised commands (``commanded speed / max_speed``, the convention of
+    :mod:`quadsim.fly`) whose motor dynamics give ``speed`` (Newton on the rate)."""
     rate_needed = np.gradient(speed, t, axis=0)
     cmd = speed.copy()
     if effect_set.has_rotor_dynamics():
@@ -207,7 +263,7 @@ def _commands(t, speed, effect_set, params, hover):
             step = 1e-3 * hover
             slope = (effect_set.rotor_speed_rate(t, cmd + step, speed) - rate) / step
             cmd = cmd - (rate - rate_needed) / np.where(np.abs(slope) > 1e-12, slope, 1.0)
-    return command_of_speed(params, cmd)
+    return cmd / params.max_speed
 
 
 def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
@@ -219,7 +275,7 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
     ``battery_sag`` effect's voltage model)."""
     rng = np.random.default_rng(seed)
-    pad = int(round(0.2 * rate_hz))  # differentiate on a longer grid, trim the ends
+    pad = int(round(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
     t = (np.arange(int(round(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
     position, yaw = reference_path(t, params, rng, speed)
     effect_set = EffectSet(tuple(effects))
@@ -243,5 +299,4 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         speed_ = speed_ + noise.rotor * hover * rng.standard_normal(speed_.shape)
         vbat = vbat + noise.vbat * rng.standard_normal(n)
     quat = np.where(quat[:, :1] < 0, -quat, quat)
-    return FlightLog(t, position, quat, velocity, rate, specific, speed_,
-                     np.clip(command, 0.0, 1.0), vbat, None)
+    return FlightLog(t, position, quat, velocity, rate, specific, speed_, command, vbat, None)
