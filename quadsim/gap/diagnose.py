@@ -38,8 +38,11 @@ TIE = 0.02
 PER_FLIGHT_TIE = 0.05
 #: a verdict must leave every channel's held-out mean square below this many times the noise
 #: level; otherwise the best candidate explains only part of the gap and the verdict is
-#: ``unexplained`` (an effect outside the library, or several).
-LACK_OF_FIT = float("inf")
+#: ``unexplained`` (an effect outside the library, or several) ...
+LACK_OF_FIT = 3.0
+#: ... unless the verdict already removed all but this fraction of that channel's gap (a
+#: large gap cut by 90 % is explained; what is left is smoothing error near the ground etc.).
+LACK_SHARE = 0.25
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -334,7 +337,9 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
     confusable = _confusable(ranked, best, baseline, nominal_gap) if best else []
     # Lack of fit: a complete model leaves every channel at the noise level (1).
     channel_gap = np.mean(np.concatenate(after) ** 2, axis=0)
-    lack = {n: float(g) for n, g in zip(_channels(rotor, params), channel_gap) if g > LACK_OF_FIT}
+    channel_before = np.mean(np.concatenate(before) ** 2, axis=0)
+    lack = {n: float(g) for n, g, b in zip(_channels(rotor, params), channel_gap, channel_before)
+            if g > LACK_OF_FIT and g > LACK_SHARE * b}
     candidate = combined
     if combined is not None and lack:
         notes.append(f"best candidate {combined['name']} cuts the held-out gap by "

@@ -54,6 +54,10 @@ class SensorNoise:
     vbat: float = 0.005
 
 
+#: peak vertical acceleration of the heave (m/s^2).
+HEAVE_ACCEL = 0.7
+
+
 def _smooth_step(u: np.ndarray) -> np.ndarray:
     """0 for u <= 0, 1 for u >= 1, infinitely smooth in between (the attitude depends on the
     path's 2nd derivative and the torque on its 4th: a ramp with a jump in any of them
@@ -77,12 +81,17 @@ def reference_path(t: np.ndarray, params: VehicleParams, rng: np.random.Generato
     phase = rng.uniform(0, 2 * np.pi)
     ramp = _smooth_step(t / 3.0)  # starts at rest; all derivatives continuous
     # A small fast wiggle (1.5-2.5 Hz, 1.5 m/s^2 on a Crazyflie-sized vehicle) excites the attitude dynamics (rates of a few rad/s).
-    agility = min(1.0, 0.06 / arm)  # larger vehicles: gentler, slower wiggle
+    agility = min(1.0, 0.06 / arm)  # larger vehicles: slower wiggle
     wiggle_f = rng.uniform(1.5, 2.5) * 2 * np.pi * np.sqrt(agility)
-    wiggle = 1.5 * agility / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp
+    wiggle = 1.5 / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp
+    # ... and a vertical one spreads the rotor speeds (separates b, mass and thrust curve).
+    heave_f = 0.6 * wiggle_f
+    heave = HEAVE_ACCEL / heave_f ** 2 * np.sin(heave_f * t + phase) * ramp
     x = size * np.sin(omega * t) * ramp + wiggle
     y = 0.5 * size * np.sin(2 * omega * t) * ramp - 0.7 * wiggle
-    z = low + (high - low) * 0.5 * (1 + np.cos(0.7 * omega * t + phase) ** 3)
+    # The lowest point is 1.5 rotor radii above the ground plus the heave amplitude.
+    low = low + HEAVE_ACCEL / heave_f ** 2
+    z = low + (high - low) * 0.5 * (1 + np.cos(0.7 * omega * t + phase) ** 3) + heave
     yaw = (0.6 * np.sin(0.5 * omega * t + phase) + 0.1 * np.sin(0.3 * wiggle_f * t)) * ramp
     return np.stack([x, y, z], -1), yaw
 
