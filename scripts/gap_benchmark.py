@@ -209,6 +209,10 @@ def summarise(rows: list[dict]) -> str:
     observable = [r for r in lib if r["oracle_reduction"] >= MIN_GAIN]
     hidden = [r for r in lib if r["oracle_reduction"] < MIN_GAIN]
     top1 = [r["verdict"].split("+")[0] == r["truth"] for r in observable]
+    named_or_tied = [r["verdict"].split("+")[0] == r["truth"] or r["truth"] in r["confusable_with"]
+                     for r in observable]
+    outside = [r for r in rows if r["kind"] == "outside"]
+    none = [r for r in rows if r["kind"] == "none"]
     errors = [r["param_rel_error"] for r in observable if "param_rel_error" in r]
     reductions = [r["reduction"] for r in observable]
     capture = [r["reduction"] / r["oracle_reduction"] for r in observable]
@@ -216,19 +220,25 @@ def summarise(rows: list[dict]) -> str:
              f"{sum(r['kind'] == 'none' for r in rows)} no-effect; "
              f"{sum(r['kind'] == 'outside' for r in rows)} out-of-library)",
              f"top-1 accuracy, observable in-library: {np.mean(top1):.1%} "
-             f"({sum(top1)}/{len(top1)})",
+             f"({sum(top1)}/{len(top1)}); named or listed as confusable: "
+             f"{np.mean(named_or_tied):.1%}",
+             f"out-of-library -> unexplained: {sum(r['verdict'] == 'unexplained' for r in outside)}"
+             f"/{len(outside)}; no effect -> unexplained: "
+             f"{sum(r['verdict'] == 'unexplained' for r in none)}/{len(none)}",
              f"main-parameter relative error: median {np.median(errors):.1%}, "
              f"90th percentile {np.percentile(errors, 90):.1%} ({len(errors)} cases)",
              f"held-out gap reduction: median {np.median(reductions):.1%} "
              f"(median {np.median(capture):.1%} of what the true effect itself achieves)",
              f"diagnosis time per case (3 x 6 s flights): median "
              f"{np.median([r['seconds'] for r in rows]):.1f} s"]
-    lines.append("\n| vehicle | hidden | verdict | reduction | true-effect reduction | param est. (rel. err.) |")
-    lines.append("|---|---|---|---|---|---|")
+    lines.append("\n| vehicle | hidden | verdict | confusable with | reduction | true-effect reduction "
+                 "| main param. est. (rel. err.) |")
+    lines.append("|---|---|---|---|---|---|---|")
     for r in rows:
         err = f"{r['param_estimate']:.3g} ({r['param_rel_error']:.0%})" if "param_rel_error" in r else ""
         flag = "" if r["kind"] != "library" or r["oracle_reduction"] >= MIN_GAIN else " (unobservable)"
         lines.append(f"| {r['vehicle']} | {r['truth']}{flag} | {r['verdict']} | "
+                     f"{', '.join(r['confusable_with'])} | "
                      f"{r['reduction']:.2f} | {r['oracle_reduction']:.2f} | {err} |")
     if hidden:
         lines.append(f"\nunobservable (true effect cuts the held-out gap < {MIN_GAIN:.0%}): "
@@ -253,7 +263,11 @@ def main(argv=None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="parallel worker processes")
     parser.add_argument("--cases", type=int, default=None, help="run only the first N cases")
     parser.add_argument("--speed", action="store_true", help="run the speed benchmark only")
+    parser.add_argument("--summarise", metavar="JSON", help="only summarise a results file")
     args = parser.parse_args(argv)
+    if args.summarise:
+        print(summarise(json.loads(Path(args.summarise).read_text())), end="")
+        return 0
     if args.speed:
         print(speed_benchmark(), end="")
         return 0
