@@ -105,7 +105,8 @@ def _rotor_scale(params: VehicleParams) -> float:
 #: as a function of the vehicle). Unlisted parameters stay at their ``off`` value.
 FIT_SPEC = {
     "mass_offset": (("mass",), {}, lambda p: [0.05 * p.mass]),
-    "com_offset": (("x", "y"), {}, lambda p: [0.02 * _arm(p)] * 2),
+    # z (CoM below the rotor plane) acts only through forces in the rotor plane (drag).
+    "com_offset": (("x", "y", "z"), {}, lambda p: [0.02 * _arm(p)] * 3),
     "inertia_error": (("xx", "yy", "zz"), {}, lambda p: [0.1] * 3),
     "thrust_mismatch": (None, {}, lambda p: [0.05] * p.rotor_count),
     "thrust_curve": (("linear",), {}, lambda p: [0.05 * p.thrust_factor * p.max_speed]),
