@@ -388,8 +388,10 @@ def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_com
     fit_on = [f.fit for f in train]
     while len(used) < max_combination:
         trial = None
-        for entry in ranked[:6]:
-            if entry["name"] in used or not _clear(entry, nominal_gap, nominal_gap):
+        # Every other candidate is tried, not only those that helped alone: some effects act
+        # only together (the CoM height matters only through rotor-plane drag).
+        for entry in ranked:
+            if entry["name"] in used or set(entry["name"].split("+")) & used:
                 continue
             cand = current["_fit"].candidate.combine(entry["_fit"].candidate)
             start = np.concatenate([current["_fit"].theta, entry["_fit"].theta])
