@@ -371,8 +371,8 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "verdict": verdict,
         "notes": notes,
     }
-    if combined is not None and combined is not best:
-        result["combination"] = _public(combined)
+    if candidate is not None and candidate is not best:
+        result["combination"] = _public(candidate)  # also when lack of fit made it unnamed
     # Arrays for plots and recordings (not part of the JSON): first held-out flight.
     result["_series"] = {"t": held[0].fit.t, "before": before[0] * sigma,
                          "after": after[0] * sigma, "channels": _channels(rotor, params),
