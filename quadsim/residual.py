@@ -18,11 +18,13 @@ Differentiator
 The log is first resampled onto a uniform grid (median step; linear interpolation,
 normalised-linear for quaternions), then every signal that enters the balance (accelerometer,
 body rate, velocity/position, rotor speeds) is smoothed and differentiated with the same
-Savitzky–Golay filter (``scipy.signal.savgol_filter``; default window 0.05 s, cubic). The
+Savitzky–Golay filter (``scipy.signal.savgol_filter``; default window 0.1 s, cubic). The
 filter is a symmetric FIR, so it is zero-phase: **no lag** between the differentiated motion
 and the rotor speeds, and because all signals pass the same filter the balance is not
 distorted by different delays. Its amplitude response is flat at low frequency and falls to
--3 dB near ``1.1 / window`` for the smoothed value (about 22 Hz for 0.05 s, cubic); content
+-3 dB near ``1.1 / window`` for the smoothed value (about 11 Hz for 0.1 s, cubic; the long
+window keeps the noise of differentiated gyro and rotor speeds, which would bias inertia and
+rotor-inertia estimates low, small); content
 above that is attenuated in both sides of the balance alike (see docs/gap.md for the table).
 
 Example::
@@ -40,8 +42,8 @@ speeds rad/s; all arrays have the sample axis first.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -58,7 +60,7 @@ __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "fligh
            "residual_wrench", "DEFAULT_WINDOW_S"]
 
 #: Savitzky–Golay window (s) used unless told otherwise.
-DEFAULT_WINDOW_S = 0.05
+DEFAULT_WINDOW_S = 0.1
 CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 CHANNEL_UNITS = ("N", "N", "N", "N m", "N m", "N m")
 
@@ -240,8 +242,9 @@ def _require_rotors(states: FlightStates, params: VehicleParams) -> np.ndarray:
         raise InputError(f"{states.name or 'log'}: rotor_1..rotor_N: the log has no measured "
                          "rotor speeds; the residual wrench needs them")
     if states.rotor_speed.shape[1] != params.rotor_count:
-        raise InputError(f"{states.name or 'log'}: rotor_1..rotor_N: {states.rotor_speed.shape[1]}"
-                         f" rotor columns, the model {params.name!r} has {params.rotor_count} rotors")
+        raise InputError(f"{states.name or 'log'}: rotor_1..rotor_N: "
+                         f"{states.rotor_speed.shape[1]} rotor columns, the model "
+                         f"{params.name!r} has {params.rotor_count} rotors")
     return states.rotor_speed
 
 

@@ -11,8 +11,12 @@ from quadsim.errors import InputError
 from quadsim.flightlog import FlightLog
 from quadsim.gap.synthetic import SensorNoise, synthetic_flight
 from quadsim.params import load_params
-from quadsim.residual import (DEFAULT_WINDOW_S, flight_states, residual_wrench,
-                              savgol_response_cutoff)
+from quadsim.residual import (
+    DEFAULT_WINDOW_S,
+    flight_states,
+    residual_wrench,
+    savgol_response_cutoff,
+)
 
 EDGE = 60  # samples at each end where the filter runs on a partial window
 
@@ -116,6 +120,7 @@ def test_bad_input(cf):
     bare = FlightLog(log.t, log.position, log.quat)
     with pytest.raises(InputError, match="no measured rotor speeds"):
         residual_wrench(bare, cf)
-    short = FlightLog(log.t[:20], log.position[:20], log.quat[:20], rotor_speed=log.rotor_speed[:20])
+    short = FlightLog(log.t[:20], log.position[:20], log.quat[:20],
+                      rotor_speed=log.rotor_speed[:20])
     with pytest.raises(InputError, match="fewer than the"):
         residual_wrench(short, cf)

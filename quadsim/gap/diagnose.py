@@ -8,8 +8,8 @@ thing.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -19,8 +19,15 @@ from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
 from . import fitting
-from .fitting import (Candidate, Fit, candidates_for, fit_candidate, fit_motor_map, noise_scale,
-                      residuals)
+from .fitting import (
+    Candidate,
+    Fit,
+    candidates_for,
+    fit_candidate,
+    fit_motor_map,
+    noise_scale,
+    residuals,
+)
 from .where import by_band, by_regime, kstep_errors, regime_masks
 
 __all__ = ["Flight", "prepare", "diagnose", "diagnose_per_flight", "SCHEMA", "MIN_GAIN",
@@ -49,7 +56,8 @@ MAX_FIT_SAMPLES_PER_FLIGHT = 20000
 
 # Known confusable pairs and what data would separate them.
 SEPARATE = {
-    frozenset({"mass_offset", "nominal_refit"}): "weigh the vehicle, or measure b on a thrust stand",
+    frozenset({"mass_offset", "nominal_refit"}):
+        "weigh the vehicle, or measure b on a thrust stand",
     frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
     frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
     frozenset({"com_offset", "thrust_mismatch"}): "yaw the vehicle 90 deg and hover again "
@@ -289,14 +297,11 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         if bad:
             s["warning"] = ("too little excitation to fit " + ", ".join(bad)
                             + " on these flights (CI wider than half the plausible range)")
-    ranked = sorted(scored, key=lambda s: (round(s["heldout_gap_after"] / max(before_gap(before), 1e-300), 4),
+    nominal = max(_gap(before), 1e-300)
+    ranked = sorted(scored, key=lambda s: (round(s["heldout_gap_after"] / nominal, 4),
                                            len(s["params"]), s["name"]))
     return _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt,
                    max_combination, notes, tick, kstep)
-
-
-def before_gap(before: list[np.ndarray]) -> float:
-    return _gap(before)
 
 
 def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
@@ -310,7 +315,7 @@ def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
             notes, tick, kstep) -> dict:
     nominal_gap = _gap(before)
-    chosen, best = [], None
+    best = None
     # An effect wins only if it beats the nominal model clearly and is not clearly worse
     # than simply refitting b and d (a retuned nominal model). Among the winners whose
     # held-out gap ties with the best (within TIE), the one with fewest parameters is named.
@@ -324,11 +329,8 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         ranked.insert(0, best)
     combined = best
     if best is not None:
-        chosen = [best]
         combined = _greedy(best, ranked, train, held, params, sigma, rotor, before, dt,
                            max_combination, nominal_gap, tick)
-        if combined is not best:
-            chosen = [e for e in ranked if e["name"] in combined["name"].split("+")]
     effects_after = combined["_fit"].effects() if combined else []
     after = _scaled(held, params, effects_after, sigma, rotor)
     if best is None and _clear(baseline, nominal_gap, nominal_gap):

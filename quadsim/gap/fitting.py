@@ -24,8 +24,9 @@ from ..errors import ModelError
 from ..params import VehicleParams
 from ..residual import FlightStates, measured_wrench, model_wrench
 
-__all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for", "residuals", "fit_candidate",
-           "noise_scale", "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
+__all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
+           "residuals", "fit_candidate", "noise_scale", "command_speed", "fit_motor_map",
+           "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.

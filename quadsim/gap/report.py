@@ -60,7 +60,8 @@ def summary(result: dict) -> str:
         for f in result["flights"]:
             red = f["reduction"] or 0.0
             lines.append(f"  {Path(f['file']).name}: {f['verdict']}"
-                         + (f" ({_fmt_params(f['params'], f['ci'])}; held-out gap -{100 * red:.0f} %)"
+                         + (f" ({_fmt_params(f['params'], f['ci'])}; "
+                            f"held-out gap -{100 * red:.0f} %)"
                             if f["verdict"] != "unexplained" else "")
                          + (f" [confusable: {', '.join(f['confusable_with'])}]"
                             if f["confusable_with"] else ""))
@@ -83,10 +84,12 @@ def summary(result: dict) -> str:
     lines.append("  by regime: " + ", ".join(
         f"{k} {100 * r['share']:.0f} % (of {100 * r['samples']:.0f} % of samples)"
         for k, r in regimes))
-    lines.append("  by band: " + ", ".join(f"{k} {100 * s:.0f} %" for k, s in where["band"].items()))
+    lines.append("  by band: " + ", ".join(f"{k} {100 * s:.0f} %"
+                                           for k, s in where["band"].items()))
     lines.append("ranking (held-out gap reduction):")
     for e in result["effects"][:6]:
-        lines.append(f"  {e['name']:16s} {100 * e['reduction']:6.1f} %  {_fmt_params(e['params'], e['ci'])}")
+        lines.append(f"  {e['name']:16s} {100 * e['reduction']:6.1f} %  "
+                     f"{_fmt_params(e['params'], e['ci'])}")
     b = result["baseline"]
     lines.append(f"  (nominal_refit b,d: {100 * b['reduction']:.1f} %)")
     for note in result.get("notes", []):

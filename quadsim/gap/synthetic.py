@@ -24,11 +24,10 @@ Example::
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from ..effects.base import Effect, EffectContext, EffectSet
 from ..flightlog import FlightLog
@@ -80,7 +79,8 @@ def reference_path(t: np.ndarray, params: VehicleParams, rng: np.random.Generato
     low, high = 1.5 * radius, max(0.6, 12 * radius)
     phase = rng.uniform(0, 2 * np.pi)
     ramp = _smooth_step(t / 3.0)  # starts at rest; all derivatives continuous
-    # A small fast wiggle (1.5-2.5 Hz, 1.5 m/s^2 on a Crazyflie-sized vehicle) excites the attitude dynamics (rates of a few rad/s).
+    # A small fast wiggle (1.5-2.5 Hz on a Crazyflie-sized vehicle, 1.5 m/s^2) excites the
+    # attitude dynamics (rates of a few rad/s).
     agility = min(1.0, 0.06 / arm)  # larger vehicles: slower wiggle
     wiggle_f = rng.uniform(1.5, 2.5) * 2 * np.pi * np.sqrt(agility)
     wiggle = 1.5 / wiggle_f ** 2 * np.sin(wiggle_f * t) * ramp
@@ -109,7 +109,8 @@ def _attitude(thrust_world: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 def _rotmat_to_quat(rot: np.ndarray) -> np.ndarray:
     w = np.sqrt(np.maximum(1 + rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2], 1e-12)) / 2
     q = np.stack([w, (rot[:, 2, 1] - rot[:, 1, 2]) / (4 * w),
-                  (rot[:, 0, 2] - rot[:, 2, 0]) / (4 * w), (rot[:, 1, 0] - rot[:, 0, 1]) / (4 * w)], -1)
+                  (rot[:, 0, 2] - rot[:, 2, 0]) / (4 * w),
+                  (rot[:, 1, 0] - rot[:, 0, 1]) / (4 * w)], -1)
     return quat_normalize(q)
 
 
@@ -301,7 +302,8 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         n = len(t)
         position = position + noise.position * rng.standard_normal((n, 3))
         velocity = velocity + noise.velocity * rng.standard_normal((n, 3))
-        tilt = np.concatenate([np.ones((n, 1)), 0.5 * noise.attitude * rng.standard_normal((n, 3))], 1)
+        tilt = np.concatenate([np.ones((n, 1)),
+                               0.5 * noise.attitude * rng.standard_normal((n, 3))], 1)
         quat = quat_normalize(quat_multiply(quat, tilt))
         rate = rate + noise.gyro * rng.standard_normal((n, 3))
         specific = specific + noise.accel * rng.standard_normal((n, 3))
