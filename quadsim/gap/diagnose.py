@@ -43,6 +43,8 @@ MIN_T = 1.0
 TIE = 0.02
 #: per-flight mode: effects within this held-out reduction of the named one are confusable.
 PER_FLIGHT_TIE = 0.05
+#: per-flight mode: fewer reference flights than this gives a note (spread poorly known).
+MIN_REFERENCE = 10
 #: a verdict must leave every channel's held-out mean square below this many times the noise
 #: level; otherwise the best candidate explains only part of the gap and the verdict is
 #: ``unexplained`` (an effect outside the library, or several) ...
@@ -443,7 +445,10 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
         flights.append(_judge(one, reference_fits, flight.name))
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
-            "reference_refit": base.params(), "flights": flights,
+            "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
+            "notes": ([f"only {len(ref)} reference flights: an effect's spread over nominal "
+                       "flights is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE
+                      else []),
             "where": {}, "effects": [], "verdict": {"effect": "see flights", "reduction": None,
                                                     "confusable_with": []}}
 

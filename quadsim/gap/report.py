@@ -56,7 +56,8 @@ def summary(result: dict) -> str:
     """A few lines for people: verdict, parameters, where the gap lies, ranking."""
     if result.get("mode") == "per-flight":
         lines = [f"per-flight diagnosis against {len(result['reference'])} reference flights "
-                 f"(reference refit: {_fmt_params(result['reference_refit'], {})})"]
+                 "(reference refit: "
+                 f"{_fmt_params(result['reference_refit'], result.get('reference_refit_ci', {}))})"]
         for f in result["flights"]:
             red = f["reduction"] or 0.0
             lines.append(f"  {Path(f['file']).name}: {f['verdict']}"
@@ -65,6 +66,7 @@ def summary(result: dict) -> str:
                             if f["verdict"] != "unexplained" else "")
                          + (f" [confusable: {', '.join(f['confusable_with'])}]"
                             if f["confusable_with"] else ""))
+        lines += [f"note: {note}" for note in result.get("notes", [])]
         return "\n".join(lines) + "\n"
     v = result["verdict"]
     where = result["where"]
@@ -148,12 +150,32 @@ def _figures(result: dict) -> list[tuple[str, str]]:
     return figs
 
 
+def _per_flight_figure(result: dict) -> list[tuple[str, str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    flights = result["flights"]
+    fig, ax = plt.subplots(figsize=(9, 0.28 * len(flights) + 1))
+    names = [Path(f["file"]).name.split(".")[0] for f in flights]
+    values = [100 * (f["reduction"] or 0.0) for f in flights]
+    bars = ax.barh(names[::-1], values[::-1])
+    for bar, f in zip(bars, flights[::-1]):
+        ax.text(bar.get_width() + 1, bar.get_y() + bar.get_height() / 2, f["verdict"],
+                va="center", fontsize=8)
+    ax.set_xlabel("held-out gap reduction of the verdict (%)")
+    ax.set_xlim(0, 110)
+    return [("Per-flight verdicts", _png(fig))]
+
+
 def write_html(path: str | Path, result: dict) -> Path:
     """A self-contained HTML page: summary, plots (base64 PNG), the JSON."""
     body = [f"<h1>quadsim gap diagnosis: {html.escape(str(result.get('model', '')))}</h1>",
             f"<pre>{html.escape(summary(result))}</pre>"]
-    if result.get("mode") != "per-flight":
-        for title, png in _figures(result):
+    figures = _per_flight_figure(result) if result.get("mode") == "per-flight" else _figures(result)
+    if figures:
+        for title, png in figures:
             body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
     body.append(f"<h2>Result ({html.escape(result['schema'])})</h2>"
                 f"<pre>{html.escape(to_json(result))}</pre>")
@@ -168,6 +190,7 @@ def write_rerun(path: str | Path, result: dict) -> Path | None:
     :func:`quadsim.viewer.try_save_recording` (None and a message when unavailable)."""
     series = result.get("_series")
     if series is None:
+        print("note: --rerun: no residual series in this result (per-flight mode); skipped")
         return None
     try:
         from ..viewer import try_save_recording

@@ -66,6 +66,8 @@ GAP_SCHEMA = {
         "train": {"type": "array", "items": {"type": "string"}},
         "holdout": {"type": "array", "items": {"type": "string"}},
         "reference": {"type": "array", "items": {"type": "string"}},
+        "reference_refit": _NUMBER_MAP,
+        "reference_refit_ci": _NUMBER_MAP,
         "where": {
             "type": "object",
             "properties": {
