@@ -18,8 +18,6 @@ from quadsim.gap.schema import validate
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.params import load_params
 
-jsonschema = pytest.importorskip("jsonschema")
-
 
 @pytest.fixture(scope="module")
 def cf():
@@ -74,6 +72,7 @@ def test_no_effect_is_unexplained(cf):
 
 
 def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
+    pytest.importorskip("jsonschema", reason="jsonschema (test extra) validates the schema")
     logs = _flights(cf, [("thrust_mismatch", {"rotor_3": 0.06})], seeds=(5, 6, 7), duration=4.0)
     paths = []
     for k, log in enumerate(logs):
@@ -103,6 +102,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
 
 
 def test_per_flight_mode_names_only_the_flight_that_differs(cf):
+    pytest.importorskip("jsonschema", reason="jsonschema (test extra) validates the schema")
     reference = _flights(cf, [], seeds=(10, 11), duration=4.0)
     tested = [synthetic_flight(cf, [], seed=12, duration=4.0),
               synthetic_flight(cf, [make_effect("com_offset", x=-0.005)], seed=13, duration=4.0)]
