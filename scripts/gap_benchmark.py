@@ -41,7 +41,7 @@ from quadsim.errors import ModelError, QuadsimWarning  # noqa: E402
 from quadsim.fileio import atomic_write_text  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
 from quadsim.gap.diagnose import MIN_GAIN, prepare  # noqa: E402
-from quadsim.gap.fitting import fit_motor_map, noise_scale, residuals  # noqa: E402
+from quadsim.gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals  # noqa: E402
 from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
 from quadsim.params import hover_speed, load_params  # noqa: E402
 
@@ -165,7 +165,8 @@ def _oracle_reduction(logs, params, effects) -> float:
     train, held = flights[:2], flights[2:]
     params = fit_motor_map([f.fit for f in train], params)  # as the diagnosis does
     nominal = [residuals(f.fit, params, [], rotor_channel=True) for f in train]
-    sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]))
+    sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]),
+                        floor=noise_floor(params, True))
     before = np.mean(np.concatenate([residuals(f.fit, params, [], rotor_channel=True) / sigma
                                      for f in held]) ** 2)
     after = np.mean(np.concatenate([residuals(f.fit, params, effects, rotor_channel=True) / sigma

@@ -25,6 +25,7 @@ from .fitting import (
     candidates_for,
     fit_candidate,
     fit_motor_map,
+    noise_floor,
     noise_scale,
     residuals,
 )
@@ -274,7 +275,8 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         params = fit_motor_map([f.fit for f in train], params)
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     nominal_train = [residuals(f.fit, params, [], rotor_channel=rotor) for f in train]
-    sigma = noise_scale(np.concatenate(nominal_train), float(train[0].fit.t[1] - train[0].fit.t[0]))
+    sigma = noise_scale(np.concatenate(nominal_train), float(train[0].fit.t[1] - train[0].fit.t[0]),
+                        floor=noise_floor(params, rotor))
     before = _scaled(held, params, [], sigma, rotor)
     has_vbat = all(f.fit.vbat is not None and np.all(np.isfinite(f.fit.vbat)) for f in train)
     cands = candidates_for(params, rotor, has_vbat)
@@ -432,7 +434,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     if rotor:
         params = fit_motor_map([f.fit for f in ref], params)
     sigma0 = noise_scale(np.concatenate([residuals(f.fit, params, [], rotor_channel=rotor)
-                                         for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]))
+                                         for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]),
+                         floor=noise_floor(params, rotor))
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
     tuned = base.effects()[0].apply_to_params(params)
     reference_fits = _reference_spread(ref, tuned, effects, progress)

@@ -25,8 +25,9 @@ from ..params import VehicleParams
 from ..residual import FlightStates, measured_wrench, model_wrench
 
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
-           "residuals", "fit_candidate", "noise_scale", "command_speed", "fit_motor_map",
-           "speed_of_command", "command_of_speed", "stack_states", "ROTOR_HORIZON_S"]
+           "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
+           "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
+           "stack_states", "ROTOR_HORIZON_S"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -336,16 +337,33 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     return np.concatenate(parts, axis=1)
 
 
-def noise_scale(residual: np.ndarray, dt: float, window_s: float = 0.5) -> np.ndarray:
+#: the noise scale of a channel is at least this fraction of its operating point (weight,
+#: weight x arm, hover speed): on noiseless (simulated) logs "noise" would otherwise be
+#: round-off and any integration difference would count as a gap.
+NOISE_FLOOR = 1e-3
+
+
+def noise_floor(params: VehicleParams, rotor_channel: bool) -> np.ndarray:
+    """Smallest noise scale per channel (see :data:`NOISE_FLOOR`)."""
+    hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))
+    floors = [params.weight] * 3 + [params.weight * _arm(params)] * 3
+    if rotor_channel:
+        floors += [hover] * params.rotor_count
+    return NOISE_FLOOR * np.asarray(floors)
+
+
+def noise_scale(residual: np.ndarray, dt: float, window_s: float = 0.5,
+                floor: np.ndarray | None = None) -> np.ndarray:
     """Per-channel noise scale: robust spread of the residual after removing its slow part
-    (moving average over ``window_s``), so that a slowly acting effect does not inflate it."""
+    (moving average over ``window_s``), so that a slowly acting effect does not inflate it;
+    at least ``floor`` (:func:`noise_floor`)."""
     n = max(3, int(round(window_s / dt)) | 1)
     kernel = np.ones(n) / n
     slow = np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
     fast = residual - slow
     mad = np.median(np.abs(fast - np.median(fast, axis=0)), axis=0) * 1.4826
-    floor = 1e-9 * (np.abs(residual).max(axis=0) + 1e-12)
-    return np.maximum(mad, floor)
+    tiny = 1e-9 * (np.abs(residual).max(axis=0) + 1e-12)
+    return np.maximum(mad, tiny if floor is None else np.maximum(tiny, floor))
 
 
 def _correlation_time(e: np.ndarray, max_lag: int = 200) -> float:
