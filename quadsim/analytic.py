@@ -42,7 +42,9 @@ from scipy.integrate import solve_ivp
 
 from .effects.base import EffectContext, EffectLoads, EffectSet
 from .errors import SimulationError
+from .frames import quat_derivative as _quat_rate
 from .frames import quat_normalize
+from .frames import quat_to_rotmat as _rotmat
 from .params import VehicleParams
 from .rotors import allocation_matrix
 
@@ -115,32 +117,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     return out
-
-
-def _rotmat(q: np.ndarray) -> np.ndarray:
-    """(B, 4) unit quaternions -> (B, 3, 3) body-to-world (same as frames.quat_to_rotmat)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    out = np.empty((q.shape[0], 3, 3))
-    out[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    out[:, 0, 1] = 2 * (x * y - w * z)
-    out[:, 0, 2] = 2 * (x * z + w * y)
-    out[:, 1, 0] = 2 * (x * y + w * z)
-    out[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    out[:, 1, 2] = 2 * (y * z - w * x)
-    out[:, 2, 0] = 2 * (x * z - w * y)
-    out[:, 2, 1] = 2 * (y * z + w * x)
-    out[:, 2, 2] = 1 - 2 * (x * x + y * y)
-    return out
-
-
-def _quat_rate(q: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """dq/dt = 0.5 q (x) (0, w) for (B, 4) q and (B, 3) body rates."""
-    out = np.empty_like(q)
-    out[:, 0] = -q[:, 1] * w[:, 0] - q[:, 2] * w[:, 1] - q[:, 3] * w[:, 2]
-    out[:, 1] = q[:, 0] * w[:, 0] + q[:, 2] * w[:, 2] - q[:, 3] * w[:, 1]
-    out[:, 2] = q[:, 0] * w[:, 1] - q[:, 1] * w[:, 2] + q[:, 3] * w[:, 0]
-    out[:, 3] = q[:, 0] * w[:, 2] + q[:, 1] * w[:, 1] - q[:, 2] * w[:, 0]
-    return 0.5 * out
 
 
 def _matvec(m: np.ndarray, v: np.ndarray) -> np.ndarray:

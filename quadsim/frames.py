@@ -18,12 +18,17 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
 
 def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     """Body-to-world rotation matrices (..., 3, 3) from unit quaternions (..., 4)."""
-    w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    q = np.asarray(q, dtype=float)
+    # Flat columns filled in place: this runs at every MuJoCo step with effects on, where
+    # stacking small arrays cost more than the arithmetic.
+    w, x, y, z = q.reshape(-1, 4).T
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, \
+        w * y, w * z
+    out = np.empty((9, w.size))
+    out[0], out[1], out[2] = 1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)
+    out[3], out[4], out[5] = 2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)
+    out[6], out[7], out[8] = 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)
+    return out.T.reshape(q.shape[:-1] + (3, 3))
 
 
 def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -76,8 +81,14 @@ def quat_to_euler(q: np.ndarray) -> np.ndarray:
 
 def quat_derivative(q: np.ndarray, body_rate: np.ndarray) -> np.ndarray:
     """dq/dt (..., 4) for body angular velocity (..., 3) (rad/s): 0.5 * q * (0, w)."""
-    pure = np.concatenate([np.zeros(np.shape(body_rate)[:-1] + (1,)), body_rate], -1)
-    return 0.5 * quat_multiply(q, pure)
+    q = np.asarray(q, dtype=float)
+    w = np.asarray(body_rate, dtype=float)
+    out = np.empty(np.broadcast_shapes(q.shape[:-1], w.shape[:-1]) + (4,))
+    out[..., 0] = -q[..., 1] * w[..., 0] - q[..., 2] * w[..., 1] - q[..., 3] * w[..., 2]
+    out[..., 1] = q[..., 0] * w[..., 0] + q[..., 2] * w[..., 2] - q[..., 3] * w[..., 1]
+    out[..., 2] = q[..., 0] * w[..., 1] - q[..., 1] * w[..., 2] + q[..., 3] * w[..., 0]
+    out[..., 3] = q[..., 0] * w[..., 2] + q[..., 1] * w[..., 1] - q[..., 2] * w[..., 0]
+    return 0.5 * out
 
 
 def skew(v: np.ndarray) -> np.ndarray:

@@ -39,9 +39,9 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
-from .analytic import STATE_BOUND, BatchEffects, _quat_rate, _rotmat, body_arrays, extra_wrench
+from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
 from .errors import ModelError, SimulationError
-from .frames import quat_normalize
+from .frames import quat_derivative, quat_normalize, quat_to_rotmat
 from .mjcf import BODY_NAME, vehicle_xml
 from .params import VehicleParams, inertia_problems
 
@@ -120,7 +120,7 @@ def _midpoint_state(qpos, qvel, qacc, dt):
     velocity = qvel[:, 0:3] + qacc[:, 0:3] * h
     body_rate = qvel[:, 3:6] + qacc[:, 3:6] * h
     quat = quat_normalize(qpos[:, 3:7]
-                          + _quat_rate(qpos[:, 3:7], qvel[:, 3:6] + qacc[:, 3:6] * h / 2) * h)
+                          + quat_derivative(qpos[:, 3:7], qvel[:, 3:6] + qacc[:, 3:6] * h / 2) * h)
     return position, velocity, quat, body_rate
 
 
@@ -137,7 +137,7 @@ def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega):
         loads = effects.loads(np.full(len(command), t + dt / 2), position, velocity, quat,
                               body_rate, mid, accel)
         force_body, torque_body = extra_wrench(body, loads, mid, include_scale=False)
-        rot = _rotmat(quat)
+        rot = quat_to_rotmat(quat)
         xfrc = bound["xfrc_applied"]
         xfrc[:, body_id, 0:3] = np.einsum("bij,bj->bi", rot, force_body) + loads.force_world
         xfrc[:, body_id, 3:6] = np.einsum("bij,bj->bi", rot, torque_body)
