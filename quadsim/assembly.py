@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ import numpy as np
 import trimesh
 
 from .errors import InputError, QuadsimWarning, field_error
+from .fileio import read_toml
 from .frames import euler_to_quat, quat_to_rotmat
 
 __all__ = [
@@ -381,12 +381,7 @@ def load_assembly(cad_dir: str | Path, *, hull: bool = False) -> Assembly:
 
     Raises :class:`InputError` naming the file and field for any manifest or mesh problem."""
     path = find_manifest(cad_dir)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    data = read_toml(path)
     _check_keys(data, _TOP_KEYS, path, "top level")
     if data.get("schema") != SCHEMA:
         raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")

@@ -34,13 +34,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError, ModelError, field_error
+from .fileio import read_toml
 
 #: Folder holding the built-in parameter sets (``--model NAME``).
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
@@ -109,6 +109,7 @@ class VehicleParams:
       motor_map: optional command -> speed map.
       sources: field name -> source text, for every stored number.
       path: the file the set was loaded from (None if built in code).
+      cad_dir: the CAD folder the mass properties or rotor layout come from (``from_cad``).
     """
 
     name: str
@@ -129,6 +130,7 @@ class VehicleParams:
     sources: dict[str, str] = field(default_factory=dict, compare=False)
     warnings: tuple[str, ...] = ()
     path: Path | None = None
+    cad_dir: Path | None = None
 
     @property
     def rotor_count(self) -> int:
@@ -299,16 +301,12 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     ``check=False`` skips the physical-inertia check (the analytic engine can still run a
     set such as ``report`` whose published inertia no rigid body has; MuJoCo cannot)."""
     path = resolve_params_path(name_or_path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    data = read_toml(path)
     _check_keys(data, _TOP_KEYS, path, "")
     if data.get("schema") != SCHEMA:
         raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
     sources: dict[str, str] = {}
+    cad_dir = None
 
     body = data.get("body")
     if not isinstance(body, dict):
@@ -345,11 +343,12 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     if "rotor_layout" in data:
         from .assembly import load_assembly
 
-        cad_dir, source = _cad_path(data["rotor_layout"].get("from_cad"), path,
-                                    "rotor_layout.from_cad")
+        layout_dir, source = _cad_path(data["rotor_layout"].get("from_cad"), path,
+                                       "rotor_layout.from_cad")
+        cad_dir = cad_dir or layout_dir
         rotors = tuple(
             Rotor(r.name, np.asarray(r.position, float), np.asarray(r.axis, float), float(r.spin))
-            for r in load_assembly(cad_dir).rotors
+            for r in load_assembly(layout_dir).rotors
         )
         sources["rotor_layout"] = source
     elif "rotor" in data:
@@ -402,6 +401,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         sources=sources,
         warnings=tuple(str(w) for w in data.get("warnings", [])),
         path=path,
+        cad_dir=cad_dir,
     )
     if check:
         check_physical(params, where=path)

@@ -205,24 +205,13 @@ def _assembly_shapes(assembly) -> list[VehicleShape]:
 
 
 def assembly_for(params: VehicleParams):
-    """The CAD assembly named by the parameter file's ``from_cad`` (body or rotor layout),
-    or None when the set does not come from CAD."""
-    import tomllib
-
-    if params.path is None:
+    """The CAD assembly the parameter set's mass properties or rotor layout come from
+    (``from_cad``), or None when the set does not come from CAD."""
+    if params.cad_dir is None:
         return None
-    try:
-        data = tomllib.loads(Path(params.path).read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError):
-        return None
-    for section in ("body", "rotor_layout"):
-        table = data.get(section)
-        spec = table.get("from_cad") if isinstance(table, dict) else None
-        if isinstance(spec, dict) and "path" in spec:
-            from .assembly import load_assembly  # local: trimesh and the mesh files
+    from .assembly import load_assembly  # local: trimesh and the mesh files
 
-            return load_assembly((Path(params.path).parent / spec["path"]).resolve())
-    return None
+    return load_assembly(params.cad_dir)
 
 
 def vehicle_shapes(params: VehicleParams, assembly=None) -> list[VehicleShape]:

@@ -18,7 +18,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from quadsim.controllers import GeometricController
-from quadsim.effects import effect_set_from_specs
+from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
 from quadsim.engines import initial_state, simulate
 from quadsim.fly import generate_flight
 from quadsim.frames import quat_conjugate, quat_multiply
@@ -28,21 +28,8 @@ from quadsim.trajectories import make_reference
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
 PERIOD = 0.01
-REALISTIC = {
-    "thrust_curve": ["thrust_curve:linear=-2e-4"],
-    "thrust_mismatch": ["thrust_mismatch:rotor_1=0.03,rotor_2=-0.02"],
-    "rotor_drag": ["rotor_drag:coefficient=1e-5,axial_coefficient=5e-6"],
-    "body_drag": ["body_drag:cd_area=0.02,cd_area_vertical=0.04"],
-    "ground_effect": ["ground_effect:gain=1.5"],
-    "battery_sag": ["battery_sag:rate=0.01"],
-    "com_offset": ["com_offset:x=0.005,y=-0.003,z=0.01"],
-    "mass_offset": ["mass_offset:mass=0.1,x=0.02,z=-0.03"],
-    "inertia_error": ["inertia_error:xx=0.2,yy=0.1,zz=0.05"],
-    "gyroscopic": ["gyroscopic:rotor_inertia=6e-5"],
-    "wind (+drag)": ["wind:vx=2,vy=-1,gust=0.5,seed=3", "body_drag:cd_area=0.02",
-                     "rotor_drag:coefficient=1e-5"],
-}
-LAG = {"motor_lag": ["motor_lag:time_constant=0.03,time_constant_down=0.05"]}
+REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items() if name != "motor_lag"}
+LAG = {"motor_lag": TESTBED_EXAMPLES["motor_lag"]}
 
 
 def errors(m, a):

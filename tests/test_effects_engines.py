@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim.effects import effect_set_from_specs
+from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
 from quadsim.frames import quat_conjugate, quat_multiply
 from quadsim.params import hover_speed, load_params
 
@@ -27,19 +27,9 @@ SHORT = 0.3  # the all-effects batch (11 flights) runs shorter to keep the suite
 TOLERANCE_M = 1e-4
 TOLERANCE_RAD = 1e-4
 
-REALISTIC = {
-    "thrust_curve": ["thrust_curve:linear=-2e-4"],
-    "thrust_mismatch": ["thrust_mismatch:rotor_1=0.03,rotor_2=-0.02"],
-    "rotor_drag": ["rotor_drag:coefficient=1e-5,axial_coefficient=5e-6"],
-    "body_drag": ["body_drag:cd_area=0.02,cd_area_vertical=0.04"],
-    "ground_effect": ["ground_effect:gain=1.5"],
-    "battery_sag": ["battery_sag:rate=0.01"],
-    "com_offset": ["com_offset:x=0.005,y=-0.003,z=0.01"],
-    "mass_offset": ["mass_offset:mass=0.1,x=0.02,z=-0.03"],
-    "inertia_error": ["inertia_error:xx=0.2,yy=0.1,zz=0.05"],
-    "wind": ["wind:vx=2,vy=-1,gust=0.5,seed=3", "body_drag:cd_area=0.02",
-             "rotor_drag:coefficient=1e-5"],
-}
+# Every effect but those tested on their own below (gyroscopic in test_agreement.py).
+REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items()
+             if name not in ("motor_lag", "gyroscopic")}
 
 
 def _start(batch: int) -> dict:

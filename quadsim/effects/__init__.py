@@ -18,14 +18,13 @@ See ``docs/effects.md`` for the formulas and sources (also in each module's docs
 
 from __future__ import annotations
 
-import importlib
-
 from ..errors import InputError
 from .base import Effect, EffectBase, EffectContext, EffectLoads, EffectParameter, EffectSet
 from .battery_sag import BatterySag
 from .body_drag import BodyDrag
 from .com_offset import ComOffset
 from .ground_effect import GroundEffect
+from .gyroscopic import Gyroscopic
 from .inertia_error import InertiaError
 from .mass_offset import MassOffset
 from .motor_lag import MotorLag
@@ -36,6 +35,7 @@ from .wind import Wind
 
 __all__ = [
     "EFFECTS",
+    "TESTBED_EXAMPLES",
     "Effect",
     "EffectBase",
     "EffectContext",
@@ -51,18 +51,26 @@ __all__ = [
 #: name -> effect class, for every effect in the library.
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
     MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
-    ComOffset, MassOffset, InertiaError, Wind)}
+    ComOffset, MassOffset, InertiaError, Wind, Gyroscopic)}
 
-# gyroscopic.py belongs to the engines work; register it when it is present.
-try:
-    _gyro = importlib.import_module(".gyroscopic", __name__)
-except ModuleNotFoundError:
-    _gyro = None
-if _gyro is not None:
-    for _value in vars(_gyro).values():
-        if (isinstance(_value, type) and issubclass(_value, EffectBase)
-                and _value is not EffectBase and getattr(_value, "name", "")):
-            EFFECTS[_value.name] = _value
+#: Realistic magnitudes of each effect on the 0.84 kg testbed (specs for
+#: :func:`effect_set_from_specs`), shared by the engine-agreement tests and
+#: ``scripts/effects_agreement.py``. Wind only acts through drag, so it comes with drag.
+TESTBED_EXAMPLES: dict[str, tuple[str, ...]] = {
+    "thrust_curve": ("thrust_curve:linear=-2e-4",),
+    "thrust_mismatch": ("thrust_mismatch:rotor_1=0.03,rotor_2=-0.02",),
+    "rotor_drag": ("rotor_drag:coefficient=1e-5,axial_coefficient=5e-6",),
+    "body_drag": ("body_drag:cd_area=0.02,cd_area_vertical=0.04",),
+    "ground_effect": ("ground_effect:gain=1.5",),
+    "battery_sag": ("battery_sag:rate=0.01",),
+    "com_offset": ("com_offset:x=0.005,y=-0.003,z=0.01",),
+    "mass_offset": ("mass_offset:mass=0.1,x=0.02,z=-0.03",),
+    "inertia_error": ("inertia_error:xx=0.2,yy=0.1,zz=0.05",),
+    "gyroscopic": ("gyroscopic:rotor_inertia=6e-5",),
+    "wind": ("wind:vx=2,vy=-1,gust=0.5,seed=3", "body_drag:cd_area=0.02",
+             "rotor_drag:coefficient=1e-5"),
+    "motor_lag": ("motor_lag:time_constant=0.03,time_constant_down=0.05",),
+}
 
 
 def make_effect(name: str, **values: float) -> EffectBase:
