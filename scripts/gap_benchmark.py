@@ -276,7 +276,8 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     with Pool(args.jobs) as pool:
-        rows = list(tqdm(pool.imap(run_case, cases), total=len(cases), file=sys.stderr))
+        rows = list(tqdm(pool.imap(run_case, cases), total=len(cases), file=sys.stderr,
+                         disable=None))
     atomic_write_text(args.out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
     print(summarise(rows), end="")
     return 0

@@ -73,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quiet:
         from tqdm import tqdm
 
-        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False)
+        # disable=None: no bar when stderr is not a terminal (logs, CI)
+        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None)
         progress = lambda name: (bar.set_postfix_str(name), bar.update(1))  # noqa: E731
     extra = {} if args.window is None else {"window_s": args.window}
     try:
