@@ -38,6 +38,11 @@ unknown columns (ignored).
 
 Writer (:func:`write_log`): columns in schema order, floats as ``%.10g``, ``\\n`` line ends;
 ``.gz`` output is gzip with mtime 0 and no stored file name, so equal logs give equal bytes.
+
+Parquet (optional, ``pip install 'quadsim[parquet]'``): a ``.parquet`` file with the same
+column names (float64) is read and validated the same way, and :func:`write_log` writes one
+when the name ends in ``.parquet`` (zstd-compressed, deterministic). Problems in a Parquet
+file are reported with the CSV-equivalent line number (row k is line k + 2).
 """
 
 from __future__ import annotations
@@ -58,6 +63,7 @@ from .trajectory import Trajectory
 
 __all__ = [
     "FLOAT_FORMAT",
+    "LOG_SUFFIXES",
     "GAP_FACTOR",
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
@@ -65,6 +71,8 @@ __all__ = [
     "body_rate_from_quat",
     "load_log",
     "log_bytes",
+    "log_file_bytes",
+    "parquet_bytes",
     "read_log_columns",
     "write_log",
 ]
@@ -210,9 +218,39 @@ def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
     return data
 
 
+def _read_parquet_columns(path: Path) -> dict[str, np.ndarray]:
+    """Columns of a Parquet log (optional: needs pyarrow, ``pip install quadsim[parquet]``)."""
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise InputError(f"{path}: reading Parquet needs pyarrow "
+                         "(pip install 'quadsim[parquet]')") from None
+    try:
+        table = pq.read_table(path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable Parquet file: {' '.join(str(exc).split())}"
+                         ) from None
+    if table.num_rows == 0:
+        raise InputError(f"{path}: no data rows")
+    columns = {}
+    for name in table.column_names:
+        try:
+            columns[name] = table.column(name).to_numpy(zero_copy_only=False).astype(float)
+        except (TypeError, ValueError):
+            raise field_error(path, name, "column is not numeric") from None
+    return columns
+
+
 def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
-    """Every column of a log file as float arrays, by header name (no validation of values)."""
+    """Every column of a log file as float arrays, by header name (no validation of values).
+
+    CSV (``.csv``, ``.csv.gz``) or Parquet (``.parquet``, same column names). Problems are
+    reported by CSV line number (header = line 1; for Parquet, row k is line k + 2)."""
     path = Path(path)
+    if path.suffix == ".parquet":
+        return _read_parquet_columns(path)
     text = _open_text(path)
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
@@ -321,7 +359,8 @@ def _check_units(path: Path, log: dict) -> None:
 
 
 def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
-    """Read and validate a flight log (``.csv`` or ``.csv.gz``); see the module docstring.
+    """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``); see the module
+    docstring.
 
     Raises :class:`~quadsim.errors.InputError` (one line: file, column, line) for bad input.
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
@@ -396,8 +435,38 @@ def log_bytes(log: FlightLog, *, gzipped: bool) -> bytes:
     return out.getvalue()
 
 
-def write_log(path: str | Path, log: FlightLog) -> Path:
-    """Write ``log`` atomically as CSV, gzipped when the name ends in ``.gz``. Columns in
-    schema order; only the signals the log has. Same log -> same bytes."""
+def parquet_bytes(log: FlightLog) -> bytes:
+    """The log as a Parquet file (float64 columns, schema order; needs pyarrow)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise InputError("writing Parquet needs pyarrow (pip install 'quadsim[parquet]')"
+                         ) from None
+    names, blocks = _columns_of(log)
+    data = np.hstack(blocks)
+    table = pa.table({name: data[:, i] for i, name in enumerate(names)})
+    out = io.BytesIO()
+    pq.write_table(table, out, compression="zstd")
+    return out.getvalue()
+
+
+#: File names a log can be written to.
+LOG_SUFFIXES = (".csv", ".csv.gz", ".parquet")
+
+
+def log_file_bytes(path: str | Path, log: FlightLog) -> bytes:
+    """The bytes :func:`write_log` writes to ``path``: CSV, gzipped CSV or Parquet by name."""
     path = Path(path)
-    return atomic_write_bytes(path, log_bytes(log, gzipped=path.suffix == ".gz"))
+    if not path.name.endswith(LOG_SUFFIXES):
+        raise InputError(f"{path}: a flight log must end in {', '.join(LOG_SUFFIXES)}")
+    if path.suffix == ".parquet":
+        return parquet_bytes(log)
+    return log_bytes(log, gzipped=path.suffix == ".gz")
+
+
+def write_log(path: str | Path, log: FlightLog) -> Path:
+    """Write ``log`` atomically as CSV (gzipped when the name ends in ``.gz``) or Parquet
+    (``.parquet``). Columns in schema order; only the signals the log has. Same log -> same
+    bytes."""
+    return atomic_write_bytes(path, log_file_bytes(path, log))

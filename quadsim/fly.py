@@ -40,7 +40,7 @@ from .effects.battery_sag import BatterySag
 from .engines import ENGINES, simulate
 from .errors import InputError, run_cli
 from .fileio import atomic_write_bytes, atomic_write_text
-from .flightlog import FlightLog, log_bytes
+from .flightlog import LOG_SUFFIXES, FlightLog, log_file_bytes
 from .frames import quat_to_rotmat
 from .params import VehicleParams, load_params
 from .sensors import SensorModel, parse_signal_values
@@ -177,7 +177,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--sensor-delay", type=float, default=0.0, help="sensor delay (s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     parser.add_argument("-o", "--output", required=True,
-                        help="log file (.csv or .csv.gz); truth goes to <output>.truth.json")
+                        help="log file (.csv, .csv.gz or .parquet); truth goes to <output>.truth.json")
     return parser
 
 
@@ -185,8 +185,8 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     output = Path(args.output)
-    if not (output.name.endswith(".csv") or output.name.endswith(".csv.gz")):
-        raise InputError(f"{output}: output must end in .csv or .csv.gz")
+    if not output.name.endswith(LOG_SUFFIXES):
+        raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
     params = load_params(args.model)
     effects = effect_set_from_specs(args.effect)
     sensors = SensorModel(
@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                                  engine=args.engine, duration=args.duration,
                                  control_period=args.control_period, speed=args.speed,
                                  height=args.height, size=args.size, controller=args.controller)
-    data = log_bytes(log, gzipped=output.suffix == ".gz")
+    data = log_file_bytes(output, log)
     truth_text = json.dumps(truth, indent=2, sort_keys=True) + "\n"
     atomic_write_bytes(output, data)
     atomic_write_text(truth_path(output), truth_text)

@@ -196,3 +196,30 @@ def test_minimal_log_with_bom_and_crlf(tmp_path):
     assert log.velocity is None and log.rotor_count == 0
     np.testing.assert_allclose(log.position[:, 2], [1.0, 1.5])
     np.testing.assert_allclose(log.to_trajectory().velocity[:, 2], [50.0, 50.0])
+
+
+def test_parquet_round_trip_is_exact_and_deterministic(tmp_path):
+    pytest.importorskip("pyarrow")
+    log = _log()
+    a = write_log(tmp_path / "a.parquet", log)
+    b = write_log(tmp_path / "b.parquet", log)
+    assert a.read_bytes() == b.read_bytes()
+    back = load_log(a)
+    for name in ("t", "position", "velocity", "quat", "body_rate", "accel", "rotor_speed",
+                 "rotor_command", "vbat"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(log, name))  # float64 kept
+    # the same validation as CSV: RPM where rad/s is expected is refused, naming the column
+    rpm = FlightLog(t=log.t, position=log.position, quat=log.quat,
+                    rotor_speed=log.rotor_speed * 60 / (2 * np.pi) * 10)
+    bad = write_log(tmp_path / "rpm.parquet", rpm)
+    with pytest.raises(InputError, match=r"rpm\.parquet: rotor_\*: line 2: .*looks like RPM"):
+        load_log(bad)
+
+
+def test_corrupt_parquet_is_one_line_error(tmp_path):
+    pytest.importorskip("pyarrow")
+    path = tmp_path / "broken.parquet"
+    path.write_bytes(b"PAR1 this is not parquet")
+    with pytest.raises(InputError, match=r"broken\.parquet: not a readable Parquet file") as err:
+        load_log(path)
+    assert "\n" not in str(err.value)
