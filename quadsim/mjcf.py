@@ -33,7 +33,13 @@ def speed_to_ctrl(rotor_speed: np.ndarray) -> np.ndarray:
 
 
 def _vec(values) -> str:
-    return " ".join(f"{float(v):.17g}" for v in np.ravel(values))
+    """Numbers for the MJCF: 15 significant digits, and components below 1e-12 of the
+    vector's largest set to 0, so that floating-point noise of the mesh libraries (which
+    differs between their versions) does not change the bytes of the model."""
+    flat = np.ravel(np.asarray(values, dtype=float))
+    scale = float(np.max(np.abs(flat))) if flat.size else 0.0
+    flat = np.where(np.abs(flat) < 1e-12 * scale, 0.0, flat)
+    return " ".join(f"{float(v):.15g}" for v in flat)
 
 
 def rotor_site_name(index: int) -> str:
@@ -93,7 +99,7 @@ def vehicle_xml(params: VehicleParams, *, timestep: float = 1e-3, integrator: st
 {floor_xml}    <body name="{BODY_NAME}" pos="0 0 1">
       <freejoint name="{BODY_NAME}"/>
       <!-- mass properties from parameter set {params.name!s}: {params.sources.get('inertia', '')} -->
-      <inertial pos="{_vec(params.com)}" mass="{params.mass:.17g}" fullinertia="{_vec(full)}"/>
+      <inertial pos="{_vec(params.com)}" mass="{params.mass:.15g}" fullinertia="{_vec(full)}"/>
 {visual_geoms or chr(10).join(stand_ins)}
 {chr(10).join(sites)}
     </body>
