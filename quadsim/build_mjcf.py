@@ -147,6 +147,11 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     base = load_params(params, check=inertial != "cad")
     output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
     vehicle = cad_params(base, assembly, props, inertial=inertial)
+    from .guards import check_hover_control
+
+    check_hover_control(  # CAD mass with the set's b and speed range: can it hover?
+        vehicle, where=f"{assembly.manifest} + {base.path or base.name}",
+        mass_field="mass (CAD parts)" if inertial == "cad" else "body.mass")
     if inertial == "cad":
         note = ("inertial from the CAD meshes (trimesh): mass/CoM/inertia of the parts in "
                 f"{assembly.manifest.parent.name}/{assembly.manifest.name}")
