@@ -31,7 +31,7 @@ def _parser() -> argparse.ArgumentParser:
                     "flights and scored on held-out flights (split by flight, never by "
                     "sample).",
         epilog=__doc__.split("Examples::")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .gz allowed)")
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .csv.gz or Parquet)")
     parser.add_argument("--model", required=True, help="parameter set: built-in name or TOML")
     parser.add_argument("--holdout", nargs="+", metavar="LOG",
                         help="held-out logs (default: every third of LOG)")
@@ -50,6 +50,31 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_args(args) -> None:
+    """Every argument checked before any work (see :mod:`quadsim.cliargs`)."""
+    from ..cliargs import check_inputs, check_number, check_output, distinct_files
+
+    check_number("--window", args.window, low=0.0, high=60.0, unit="s")
+    for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
+                        ("--reference", args.reference)):
+        check_inputs(flag, paths)
+    distinct_files({"LOG": args.logs, "--holdout": args.holdout,
+                    "--reference": args.reference})
+    if args.per_flight and args.holdout:
+        raise InputError("--holdout: not used with --per-flight (each LOG is judged against "
+                         "--reference)")
+    if args.reference and not args.per_flight:
+        raise InputError("--reference: only used with --per-flight")
+    inputs = [*args.logs, *(args.holdout or []), *(args.reference or [])]
+    outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
+                                   ("--rerun", args.rerun)) if o is not None]
+    for flag, out in outputs:
+        check_output(flag, out, {"--json": (".json",), "--report": (".html",),
+                                 "--rerun": (".rrd",)}[flag], inputs=inputs)
+    if len({str(o) for _, o in outputs}) < len(outputs):
+        raise InputError("--json/--report/--rerun: the same output file given twice")
+
+
 def _load(paths):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
@@ -63,10 +88,8 @@ def _load(paths):
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    _check_args(args)  # quadsim.cliargs: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
-    for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
-        if out is not None and not out.endswith(suffix):
-            raise InputError(f"{out}: output name must end in {suffix}")
     logs = _load(args.logs)
     progress = None
     bar = None
