@@ -75,13 +75,18 @@ def _check_args(args) -> None:
         raise InputError("--json/--report/--rerun: the same output file given twice")
 
 
-def _load(paths):
+def _load(paths, params=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
     for w in caught:
         if issubclass(w.category, QuadsimWarning):
             print(f"warning: {w.message}", file=sys.stderr)
+    from ..logcheck import check_logs  # channels against each other; NaN runs cut or refused
+
+    logs, notes = check_logs(logs, params)
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr)
     return logs
 
 
@@ -90,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.cliargs: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
-    logs = _load(args.logs)
+    logs = _load(args.logs, params)
     progress = None
     bar = None
     if not args.quiet:
@@ -104,10 +109,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, _load(args.reference), params,
+            result = diagnose_per_flight(logs, _load(args.reference, params), params,
                                          effects=args.effects, progress=progress, **extra)
         else:
-            holdout = _load(args.holdout) if args.holdout else None
+            holdout = _load(args.holdout, params) if args.holdout else None
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, **extra)
     finally:
