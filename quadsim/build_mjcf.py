@@ -239,6 +239,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="replace a non-watertight or badly wound mesh by its convex hull "
                              "(warns; mass properties become approximate)")
     args = parser.parse_args(argv)
+    from .cliargs import check_output  # before any work
+
+    if not args.cad_dir.is_dir():
+        raise InputError(f"{args.cad_dir}: CAD folder not found (give the folder holding the "
+                         "meshes and the manifest)")
+    check_output("--output", args.output, (".xml",))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         model = build_model(args.cad_dir, params=args.params, output=args.output,

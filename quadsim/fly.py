@@ -251,12 +251,30 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_args(args) -> None:
+    """Every argument before any work (:mod:`quadsim.cliargs`)."""
+    from .cliargs import check_number, check_output
+
+    check_number("--duration", args.duration, low=0.0, high=24 * 3600.0, unit="s")
+    check_number("--control-period", args.control_period, low=0.0, high=args.duration,
+                 unit="s")
+    check_number("--speed", args.speed, low=0.0, low_inclusive=True, high=1000.0, unit="m/s")
+    check_number("--size", args.size, low=0.0, high=1e4, unit="m")
+    check_number("--height", args.height, low=-1e4, high=1e4, unit="m")
+    check_number("--sensor-rate", args.sensor_rate, low=0.0, high=1e6, unit="Hz")
+    check_number("--sensor-delay", args.sensor_delay, low=0.0, low_inclusive=True,
+                 high=args.duration, unit="s")
+    check_output("-o/--output", args.output, LOG_SUFFIXES)
+    check_output("-o/--output", truth_path(args.output))
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     output = Path(args.output)
     if not output.name.endswith(LOG_SUFFIXES):
         raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
+    _check_args(args)
     params = load_params(args.model)
     effects = effect_set_from_specs(args.effect)
     sensors = SensorModel(

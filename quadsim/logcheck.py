@@ -12,8 +12,9 @@ checked against another one that measures the same physics:
   ``g_i = <gyro_i, quat_i> / <quat_i, quat_i>`` must lie in [0.3, 3] (gross errors only:
   unit, sign, axis; a calibration error is for the diagnosis to find) and the best
   matching quaternion axis must be the same axis with the same sign. deg/s gives g = 57.3,
-  a sign error g = -1, a swapped axis another best match. Axes that hardly turn
-  (rms rotation per window below ``MIN_ROTATION_RAD``) are not judged.
+  a sign error g = -1, a swapped axis another best match. An axis is judged when either
+  the gyro or the quaternions turn by more than ``MIN_ROTATION_RAD`` rms per window, so a
+  deg/s gyro on a gentle flight (3 deg/s, below every magnitude limit) is still caught.
 * **accelerometer vs velocity** -- the specific force rotated to the world frame and
   averaged over the window must equal ``(v_{k+m} - v_k) / T + g e_z`` (m/s^2). The world-z
   gain (dominated by gravity) must lie in [0.6, 1.6] (in g: 0.10) and the horizontal axes,
@@ -145,8 +146,9 @@ def check_gyro(log) -> str | None:
     gyro_rot = integral[k[1:]] - integral[k[:-1]]
     judged = 0
     for i, axis in enumerate("xyz"):
-        if np.sqrt(np.mean(quat_rot[:, i] ** 2)) < MIN_ROTATION_RAD:
-            continue
+        if max(np.sqrt(np.mean(quat_rot[:, i] ** 2)),
+               np.sqrt(np.mean(gyro_rot[:, i] ** 2))) < MIN_ROTATION_RAD:
+            continue  # neither turns: nothing to compare
         judged += 1
         gains = [_gain(gyro_rot[:, i], quat_rot[:, j]) for j in range(3)]
         corr = [abs(np.corrcoef(gyro_rot[:, i], quat_rot[:, j])[0, 1])
