@@ -117,8 +117,15 @@ def check_vehicle(params, *, where=None) -> None:
     """Raise a one-line :class:`~quadsim.errors.InputError` if ``params`` cannot be one
     flyable vehicle (lift, size ratios, propeller overlap and tip speed)."""
     where = where or _where(params)
-    check_hover_control(params, where=where)
     f = feasibility(params)
+    r = params.rotor_radius
+    tip = f["tip_speed_m_s"]
+    if r > 0 and tip > MAX_TIP_MACH * SPEED_OF_SOUND:
+        raise field_error(
+            where, "rotors.max_speed",
+            f"blade tip speed {params.max_speed:.6g} rad/s x radius {r:.4g} m = {tip:.4g} m/s "
+            f"is Mach {tip / SPEED_OF_SOUND:.2f} (> {MAX_TIP_MACH}): RPM stored as rad/s?")
+    check_hover_control(params, where=where)
     arm = f["arm_m"]
     if arm > 0:
         for axis, k in zip("xyz", f["gyration_m"]):
@@ -131,15 +138,8 @@ def check_vehicle(params, *, where=None) -> None:
                     f"{MIN_GYRATION_RATIO}-{MAX_GYRATION_RATIO}); mass {params.mass:.6g} kg, "
                     f"I{axis}{axis} = {params.inertia['xyz'.index(axis)]['xyz'.index(axis)]:.4g}"
                     " kg m^2: a grams, millimetres or g mm^2 slip?")
-    r = params.rotor_radius
     if r > 0 and math.isfinite(f["nearest_hub_m"]) and 2 * r > PROP_OVERLAP * f["nearest_hub_m"]:
         raise field_error(
             where, "rotors.radius",
             f"propellers of radius {r:.4g} m overlap: neighbouring hubs are "
             f"{f['nearest_hub_m']:.4g} m apart (2 r must be <= {PROP_OVERLAP} x that)")
-    tip = f["tip_speed_m_s"]
-    if r > 0 and tip > MAX_TIP_MACH * SPEED_OF_SOUND:
-        raise field_error(
-            where, "rotors.max_speed",
-            f"blade tip speed {params.max_speed:.6g} rad/s x radius {r:.4g} m = {tip:.4g} m/s "
-            f"is Mach {tip / SPEED_OF_SOUND:.2f} (> {MAX_TIP_MACH}): RPM stored as rad/s?")
