@@ -122,7 +122,7 @@ def test_gap_nan_run_cut_out_with_note(flights, tmp_path, capsys):
             log, rotor_speed=rotor)))
     out = tmp_path / "gap.json"
     assert main(["--model", "crazyflie21", *map(str, paths), "--json", str(out),
-                 "--quiet"]) == 0
+                 "--effects", "thrust_mismatch", "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "Traceback" not in err and "kept the clean stretch" in err
     result = json.loads(out.read_text())
@@ -313,8 +313,8 @@ def test_openloop_compare_overlay_and_rerun_message(tmp_path, capsys):
     from quadsim.openloop import main
 
     rrd = tmp_path / "o.rrd"
-    assert main(["--model", "physical", "--compare", "computational", "--duration", "1",
-                 "--step-time", "0.2", "--plots", str(tmp_path), "--rerun", str(rrd)]) == 0
+    assert main(["--model", "physical", "--compare", "computational", "--duration", "0.4",
+                 "--step-time", "0.1", "--plots", str(tmp_path), "--rerun", str(rrd)]) == 0
     captured = capsys.readouterr()
     assert (tmp_path / "compare_physical_computational_openloop.png").is_file()
     assert f"wrote rerun recording {rrd}" in captured.err
