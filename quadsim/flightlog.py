@@ -359,8 +359,9 @@ def _check_units(path: Path, log: dict) -> None:
 
 
 def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
-    """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``); see the module
-    docstring.
+    """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``; also PX4 ULog,
+    Crazyflie uSD and ArduPilot DataFlash files, converted by :mod:`quadsim.logs`); see the
+    module docstring.
 
     Raises :class:`~quadsim.errors.InputError` (one line: file, column, line) for bad input.
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
@@ -369,7 +370,9 @@ def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
     dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
     path = Path(path)
     notes: list[str] = []
-    columns = read_log_columns(path)
+    from .logs import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
+    fmt = detect_format(path)
+    columns = read_columns(path, fmt=fmt) if fmt else read_log_columns(path)
     missing = [c for c in _REQUIRED if c not in columns]
     if missing:
         raise field_error(path, missing[0], "required column missing (required: "
