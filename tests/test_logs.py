@@ -407,3 +407,52 @@ def test_real_dataflash():
     log = load_log(_need(DATA / "ardupilot_dataflash" / "copter_112.BIN"), warn=False)
     assert log.rotor_count == 4 and log.rotor_speed is None and log.vbat is None
     assert log.t[-1] > 600 and abs(np.median(log.accel[:, 2]) - 9.8) < 0.5
+
+
+# ----------------------------------------------------------------------------- commands only
+
+
+def test_command_model_recovers_a_known_lag_and_voltage_term():
+    from quadsim.flightlog import FlightLog
+    from quadsim.gap.commands import CommandModel, fit_command_model
+
+    rng = np.random.default_rng(0)
+    t = np.arange(3000) * 0.002
+    cmd = np.clip(0.5 + 0.2 * np.sin(np.outer(t, [3.0, 4.1, 5.3, 6.7])) +
+                  0.02 * rng.standard_normal((len(t), 4)), 0, 1)
+    vbat = 4.1 - 0.3 * t / t[-1]
+    truth = CommandModel(np.array([50.0, 60, 70, 80]), np.array([3000.0, 3100, 3200, 3300]),
+                         np.array([800.0, 820, 840, 860]), 3.95, 0.03, 0.0, 0, "truth")
+    speed = truth.speeds(t, cmd, vbat)
+    log = FlightLog(t, np.zeros((len(t), 3)), np.tile([1.0, 0, 0, 0], (len(t), 1)),
+                    rotor_speed=speed, rotor_command=cmd, vbat=vbat)
+    model = fit_command_model([log])
+    assert abs(model.tau - 0.03) < 0.03 * 0.02          # 2 % (optimiser tolerance)
+    np.testing.assert_allclose(model.b, truth.b, rtol=0.01)
+    # c is fitted around the median voltage, so compare the predicted speeds
+    assert model.rms < 0.5                              # rad/s, of ~1600
+
+
+@pytest.mark.parametrize("hidden, expected", [
+    (("mass_offset", {"mass": 0.004}), "mass_offset"),
+    (("thrust_mismatch", {"rotor_2": -0.08}), "thrust_mismatch"),
+])
+def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
+    """Generated flights: the verdict with measured speeds and with speeds synthesised from
+    the commands (model fitted on nominal reference flights) is the same effect."""
+    from quadsim.effects import make_effect
+    from quadsim.gap import diagnose
+    from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
+    from quadsim.gap.synthetic import synthetic_flight
+    from quadsim.params import load_params
+
+    cf = load_params("crazyflie21")
+    reference = [synthetic_flight(cf, [], seed=s, duration=3.0) for s in (30, 31)]
+    flights = [synthetic_flight(cf, [make_effect(hidden[0], **hidden[1])], seed=s, duration=4.0)
+               for s in (32, 33)]
+    model = fit_command_model(reference)
+    only_cmd = [synthesise_speeds(without_speeds(g), model) for g in flights]
+    names = ["mass_offset", "thrust_mismatch", "com_offset"]
+    a = diagnose(flights, cf, kstep=False, max_combination=1, effects=names)
+    b = diagnose(only_cmd, cf, kstep=False, max_combination=1, effects=names)
+    assert a["verdict"]["effect"] == b["verdict"]["effect"] == expected

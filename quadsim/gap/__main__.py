@@ -39,6 +39,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
                         help="nominal reference flights for --per-flight")
+    parser.add_argument("--command-reference", nargs="+", metavar="LOG",
+                        help="flights with rotor speeds and commands: logs without rotor "
+                             "speeds get speeds synthesised from their commands "
+                             "(quadsim.gap.commands; default: --reference)")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -68,6 +72,9 @@ def main(argv: list[str] | None = None) -> int:
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
     logs = _load(args.logs)
+    if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
+        from .commands import with_synthesised_speeds
+        logs, _ = with_synthesised_speeds(logs, _load(args.command_reference or args.reference))
     progress = None
     bar = None
     if not args.quiet:
