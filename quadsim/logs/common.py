@@ -168,10 +168,14 @@ def columns_from_signals(t: np.ndarray, signals: dict[str, np.ndarray | None]) -
     return columns
 
 
-def trim_to_valid(columns: dict, required: tuple[str, ...] = ("x", "qw")) -> dict:
-    """Rows where every required column is finite, from the first to the last such row
-    (the common span of position and attitude); inner rows without them are dropped."""
-    ok = np.ones(len(columns["t"]), dtype=bool)
-    for name in required:
-        ok &= np.isfinite(columns[name])
-    return {k: v[ok] for k, v in columns.items()}
+def common_span(columns: dict) -> dict:
+    """The rows from the first to the last where *every* column is finite (the time span
+    that all topics cover); NaN inside the span (a gap in one topic) is kept. Time
+    restarts at 0."""
+    ok = np.all([np.isfinite(v) for v in columns.values()], axis=0)
+    if not ok.any():
+        return columns
+    first, last = int(np.argmax(ok)), len(ok) - int(np.argmax(ok[::-1]))
+    out = {k: v[first:last] for k, v in columns.items()}
+    out["t"] = out["t"] - out["t"][0]
+    return out

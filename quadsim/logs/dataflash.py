@@ -20,7 +20,7 @@ vbat           BAT (CURR)                  Volt                                V
 
 Time: ``TimeUS`` (us) or, in older logs, ``TimeMS`` (ms) since boot -> s from the first
 attitude row; every message is interpolated onto the ATT instants (``common.resample``:
-linear, NaN across gaps). Frames as for PX4 (``quadsim.logs.common``). ``POS`` (geodetic)
+linear, NaN across gaps), trimmed to the span every message covers (``common.common_span``). Frames as for PX4 (``quadsim.logs.common``). ``POS`` (geodetic)
 becomes local NED about its first fix by the flat-earth approximation (R = 6378137 m).
 
 Rotor count from ``FRAME_CLASS`` (1 quad 4, 2 hexa 6, 3 octa 8, 4 octa-quad 8, 5 Y6 6,
@@ -41,7 +41,8 @@ import numpy as np
 
 from ..errors import InputError, field_error
 from ..frames import euler_to_quat
-from .common import (RPM_TO_RAD_S, columns_from_signals, frd_to_body, map_rotors, ned_to_world,
+from .common import (RPM_TO_RAD_S, columns_from_signals, common_span, frd_to_body, map_rotors,
+                     ned_to_world,
                      pwm_to_unit, quat_ned_frd_to_world_body, resample, resample_quat)
 
 MAGIC = b"\xa3\x95\x80"
@@ -206,8 +207,8 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
     keep = np.isfinite(sig["position"]).all(axis=1)
     if keep.sum() < 2:
         raise field_error(path, "XKF1/EKF1", "position and attitude never overlap in time")
-    return columns_from_signals(t_base[keep], {k: (v[keep] if v is not None else None)
-                                               for k, v in sig.items()})
+    return common_span(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}))
 
 
 def is_dataflash(head: bytes) -> bool:

@@ -22,7 +22,8 @@ vbat            battery_status                    voltage_v            V
 Frames: NED/FRD -> world (x north, y west, z up) and body FLU by the half turn about x
 (``quadsim.logs.common``). Time: ``timestamp`` (us since boot) -> s from the first row.
 Every topic is interpolated onto the attitude topic's instants (``common.resample``: linear,
-NaN across gaps); the rows kept are those where position and attitude both exist.
+NaN across gaps); the rows kept are those where position and attitude both exist, trimmed to
+the span every topic covers (``common.common_span``; time restarts at 0 there).
 
 The rotor count is the number of ``actuator_motors`` controls that are not NaN in the log
 (PX4 sets unused ones to NaN), else ``CA_ROTOR_COUNT``, else 4; ESC rotor speeds are taken
@@ -39,8 +40,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, field_error
-from .common import (RPM_TO_RAD_S, frd_to_body, map_rotors, ned_to_world, pwm_to_unit,
-                     quat_ned_frd_to_world_body, resample, resample_quat)
+from .common import (RPM_TO_RAD_S, columns_from_signals, common_span, frd_to_body, map_rotors,
+                     ned_to_world, pwm_to_unit, quat_ned_frd_to_world_body, resample,
+                     resample_quat)
 
 MAGIC = b"ULog\x01\x12\x35"
 #: signal -> candidate (topic, field prefix, count) in order of preference.
@@ -152,10 +154,8 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     if keep.sum() < 2:
         raise field_error(path, "vehicle_local_position", "position and attitude never "
                           "overlap in time")
-    from .common import columns_from_signals
-    cols = columns_from_signals(t_base[keep], {k: (v[keep] if v is not None else None)
-                                               for k, v in out.items()})
-    return cols
+    return common_span(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in out.items()}))
 
 
 def _rotors(path, ulog, sig, out, pwm_range):
