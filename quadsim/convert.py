@@ -8,6 +8,7 @@ written atomically.
 
     python -m quadsim.convert sample_px4_events.ulg -o px4.csv.gz
     python -m quadsim.convert eckart00 -o flight_00.parquet --rotor-map 1,2,3,4
+    python -m quadsim.convert f.ulg -o f.csv.gz --rate 250 --start 19 --end 26
     python -m quadsim.convert copter.bin -o copter.csv.gz --pwm-range 1100,1900
     python -m quadsim.convert f.ulg -o f.csv.gz --topic body_rate=vehicle_angular_velocity \\
         --field body_rate=xyz --model crazyflie21
@@ -16,7 +17,8 @@ Options: ``--topic SIGNAL=TOPIC`` and ``--field SIGNAL=FIELD`` (ULog; SIGNAL one
 position, velocity, quat, body_rate, accel, rotor_speed, rotor_command, vbat; for uSD
 ``--topic event=NAME`` picks the event), ``--rotor-map`` (our rotor i <- log motor m_i,
 1-based), ``--pwm-range LO,HI`` (us), ``--model`` (checks that the log has as many rotors as
-the parameter set). Errors: one line naming the file and the topic/field, exit 2, nothing
+the parameter set), ``--start``/``--end`` (s: keep only that part, e.g. the airborne part;
+time restarts at 0). Errors: one line naming the file and the topic/field, exit 2, nothing
 written.
 """
 
@@ -24,6 +26,8 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+
+import numpy as np
 
 from .errors import InputError, run_cli
 from .flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
@@ -56,8 +60,11 @@ def _range(text: str | None) -> tuple[float, float] | None:
 
 
 def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
-            rotor_map=None, topics=None, fields=None, pwm_range=None, model=None):
-    """Read, validate and write; returns the FlightLog. Nothing is written on error."""
+            rotor_map=None, topics=None, fields=None, pwm_range=None, model=None,
+            start: float | None = None, end: float | None = None, rate_hz: float | None = None):
+    """Read, validate and write; returns the FlightLog. Nothing is written on error.
+    ``start``/``end`` (s, on the converted log's time axis) keep only that part; time then
+    restarts at 0."""
     source, output = Path(source), Path(output)
     if not output.name.endswith(LOG_SUFFIXES):
         raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
@@ -67,7 +74,16 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
         columns = read_log_columns(source)
     else:
         columns = read_columns(source, fmt=fmt, rotor_map=rotor_map, topics=topics,
-                               fields=fields, pwm_range=pwm_range)
+                               fields=fields, pwm_range=pwm_range, rate_hz=rate_hz)
+    if start is not None or end is not None:
+        t = columns["t"]
+        keep = (t >= (start if start is not None else -np.inf)) & \
+               (t <= (end if end is not None else np.inf))
+        if keep.sum() < 2:
+            raise InputError(f"{source}: t: --start/--end keep {int(keep.sum())} sample(s) "
+                             f"of {t[0]:g}..{t[-1]:g} s")
+        columns = {k: v[keep] for k, v in columns.items()}
+        columns["t"] = columns["t"] - columns["t"][0]
     log = log_from_columns(source, columns, warn=False)
     if model is not None:
         from .params import load_params
@@ -97,6 +113,12 @@ def _parser() -> argparse.ArgumentParser:
                         help="log motor number of our rotor 1, 2, ... (1-based)")
     parser.add_argument("--pwm-range", default=None, metavar="LO,HI",
                         help="PWM pulse range in us for normalising motor outputs")
+    parser.add_argument("--rate", type=float, default=None, metavar="HZ",
+                        help="ULog: uniform time base at HZ (default: attitude instants)")
+    parser.add_argument("--start", type=float, default=None, metavar="S",
+                        help="keep samples from this time (s, converted log's time)")
+    parser.add_argument("--end", type=float, default=None, metavar="S",
+                        help="keep samples up to this time (s)")
     parser.add_argument("--model", default=None, help="parameter set whose rotor count the "
                         "log must match")
     return parser
@@ -110,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
                   rotor_map=parse_rotor_map(args.rotor_map),
                   topics=_pairs(args.topic, "--topic", signals),
                   fields=_pairs(args.field, "--field", tuple(TOPICS)),
-                  pwm_range=_range(args.pwm_range), model=args.model)
+                  pwm_range=_range(args.pwm_range), model=args.model, start=args.start,
+                  end=args.end, rate_hz=args.rate)
     print(f"wrote {args.output} ({len(log)} samples, {log.t[-1]:.2f} s, "
           f"{log.rotor_count} rotors)")
     return 0

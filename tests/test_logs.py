@@ -458,3 +458,16 @@ def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
     a = diagnose(flights, cf, kstep=False, max_combination=1, effects=names)
     b = diagnose(only_cmd, cf, kstep=False, max_combination=1, effects=names)
     assert a["verdict"]["effect"] == b["verdict"]["effect"] == expected
+
+
+def test_convert_rate_and_crop(tmp_path):
+    path = tmp_path / "flight.ulg"
+    _write_ulog(path, _px4_topics())
+    out = tmp_path / "f.csv"
+    assert convert_main([str(path), "-o", str(out), "--rate", "500", "--start", "0.2",
+                         "--end", "0.8"]) == 0
+    log = load_log(out)
+    # uniform 2 ms steps, 0.6 s kept, time restarts at 0; position follows x = 1 + t_orig
+    np.testing.assert_allclose(np.diff(log.t), 0.002, atol=1e-9)
+    assert abs(log.t[-1] - 0.6) < 0.0021
+    np.testing.assert_allclose(log.position[:, 0], 1.2 + log.t, atol=1e-5)

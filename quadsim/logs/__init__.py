@@ -62,9 +62,11 @@ def detect_format(path: str | Path) -> str | None:
 def read_columns(path: str | Path, *, fmt: str | None = None,
                  rotor_map: tuple[int, ...] | None = None, topics: dict | None = None,
                  fields: dict | None = None,
-                 pwm_range: tuple[float, float] | None = None) -> dict:
+                 pwm_range: tuple[float, float] | None = None,
+                 rate_hz: float | None = None) -> dict:
     """Schema columns (SI, our frames) of a foreign log. ``topics``/``fields`` (ULog:
-    signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us)."""
+    signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us),
+    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants)."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
@@ -72,7 +74,7 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
     if fmt == "ulog":
         from .ulog import ulog_columns
         return ulog_columns(path, rotor_map=rotor_map, topics=topics, fields=fields,
-                            pwm_range=pwm_range or (1000.0, 2000.0))
+                            pwm_range=pwm_range or (1000.0, 2000.0), rate_hz=rate_hz)
     if fmt == "usd":
         from .usd import usd_columns
         return usd_columns(path, rotor_map=rotor_map, event=(topics or {}).get("event"))

@@ -107,8 +107,11 @@ def _signal(ulog, key: str, topic_over: str | None, field_over: str | None):
 
 def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
                  topics: dict[str, str] | None = None, fields: dict[str, str] | None = None,
-                 pwm_range: tuple[float, float] = (1000.0, 2000.0)) -> dict[str, np.ndarray]:
-    """Flight-log columns (SI, schema names, our frames) from a ULog file."""
+                 pwm_range: tuple[float, float] = (1000.0, 2000.0),
+                 rate_hz: float | None = None) -> dict[str, np.ndarray]:
+    """Flight-log columns (SI, schema names, our frames) from a ULog file. ``rate_hz``: a
+    uniform time base at that rate over the attitude topic's span instead of its instants
+    (PX4 often logs vehicle_attitude at 20-50 Hz and sensor_combined at 250 Hz or more)."""
     path = Path(path)
     topics, fields = topics or {}, fields or {}
     ulog = _open(path)
@@ -121,6 +124,8 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     t_base = sig["quat"][0]
     valid = np.isfinite(sig["quat"][1]).all(axis=1)
     t_base = t_base[valid]
+    if rate_hz:
+        t_base = t_base[0] + np.arange(int((t_base[-1] - t_base[0]) * rate_hz) + 1) / rate_hz
     out: dict[str, np.ndarray | None] = {}
     for key, found in sig.items():
         if found is None:
