@@ -472,3 +472,25 @@ def test_convert_rate_and_crop(tmp_path):
     assert abs(log.t[-1] - 0.6) < 0.0021
     offset = log.position[:, 0] - log.t          # = 1 + first kept time, within one step of 0.2
     assert np.ptp(offset) < 1e-5 and 1.2 - 1e-6 <= offset[0] <= 1.2 + 0.002 + 1e-6
+
+
+def test_gap_cli_command_reference(tmp_path, capsys):
+    """A command-only log: refused in one line without a reference, diagnosed with one."""
+    import dataclasses
+
+    from quadsim.flightlog import write_log
+    from quadsim.gap.__main__ import main as gap_main
+    from quadsim.gap.synthetic import synthetic_flight
+    from quadsim.params import load_params
+
+    cf = load_params("crazyflie21")
+    ref = [write_log(tmp_path / f"ref{s}.csv", synthetic_flight(cf, [], seed=s, duration=2.0))
+           for s in (40, 41)]
+    only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(
+        synthetic_flight(cf, [], seed=s, duration=2.0), rotor_speed=None)) for s in (42, 43)]
+    args = ["--model", "crazyflie21", *map(str, only), "--quiet", "--effects", "mass_offset"]
+    assert gap_main(args) == 2
+    assert "needs measured rotor speeds" in capsys.readouterr().err
+    out = tmp_path / "gap.json"
+    assert gap_main(args + ["--command-reference", *map(str, ref), "--json", str(out)]) == 0
+    assert out.exists()
