@@ -19,8 +19,14 @@ from quadsim.errors import InputError
 from quadsim.flightlog import load_log
 from quadsim.frames import euler_to_quat, quat_to_euler, quat_to_rotmat
 from quadsim.logs import detect_format, read_columns
-from quadsim.logs.common import (P_FLIP, frd_to_body, ned_to_world, quat_ned_frd_to_world_body,
-                                 quat_world_body_to_ned_frd, resample)
+from quadsim.logs.common import (
+    P_FLIP,
+    frd_to_body,
+    ned_to_world,
+    quat_ned_frd_to_world_body,
+    quat_world_body_to_ned_frd,
+    resample,
+)
 from quadsim.logs.usd import CF_GRAVITY, encode_usd, read_usd
 
 DATA = Path(os.environ.get("QUADSIM_SHARED_DATA",
@@ -319,7 +325,7 @@ def _write_dataflash(path: Path, *, att_columns: str = "TimeUS,Roll,Pitch,Yaw",
     roll = np.radians(np.round(np.degrees(0.2 * np.sin(np.arange(N) * 0.05)) * 100) / 100)
     for k in range(N):
         t_us = 2_000_000 + k * 10_000                      # 100 Hz
-        out += _df_msg(130, "QccC", t_us, int(round(np.degrees(roll[k]) * 100)), 500, 9000)
+        out += _df_msg(130, "QccC", t_us, round(np.degrees(roll[k]) * 100), 500, 9000)
         if k % 2 == 0:                                     # 50 Hz
             out += _df_msg(131, "QBffffff", t_us, 0, 0.01 * k, 1.0, -2.0, 1.0, 0.0, -0.5)
             out += _df_msg(131, "QBffffff", t_us, 1, 99.0, 99.0, 99.0, 0.0, 0.0, 0.0)  # core 1

@@ -41,9 +41,18 @@ import numpy as np
 
 from ..errors import InputError, field_error
 from ..frames import euler_to_quat
-from .common import (RPM_TO_RAD_S, columns_from_signals, common_span, frd_to_body, map_rotors,
-                     ned_to_world,
-                     pwm_to_unit, quat_ned_frd_to_world_body, resample, resample_quat)
+from .common import (
+    RPM_TO_RAD_S,
+    columns_from_signals,
+    common_span,
+    frd_to_body,
+    map_rotors,
+    ned_to_world,
+    pwm_to_unit,
+    quat_ned_frd_to_world_body,
+    resample,
+    resample_quat,
+)
 
 MAGIC = b"\xa3\x95\x80"
 _FRAME_ROTORS = {1: 4, 2: 6, 3: 8, 4: 8, 5: 6, 7: 3}
@@ -59,7 +68,7 @@ def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str
                          "(pip install 'quadsim[logs]')") from None
     try:
         reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
-    except Exception as exc:  # pymavlink raises assorted errors on bad files
+    except Exception as exc:  # noqa: BLE001 (pymavlink raises assorted errors on bad files)
         raise InputError(f"{path}: not a readable DataFlash log: {' '.join(str(exc).split())}"
                          ) from None
     messages: dict[str, list[dict]] = {k: [] for k in _WANTED}
@@ -67,7 +76,7 @@ def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str
     while True:
         try:
             msg = reader.recv_match(type=list(_WANTED))
-        except Exception as exc:
+        except Exception as exc:  # noqa: BLE001 (pymavlink: any parse error)
             raise InputError(f"{path}: corrupt DataFlash data: {' '.join(str(exc).split())}"
                              ) from None
         if msg is None:

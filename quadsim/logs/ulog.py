@@ -40,9 +40,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, field_error
-from .common import (RPM_TO_RAD_S, columns_from_signals, common_span, frd_to_body, map_rotors,
-                     ned_to_world, pwm_to_unit, quat_ned_frd_to_world_body, resample,
-                     resample_quat)
+from .common import (
+    RPM_TO_RAD_S,
+    columns_from_signals,
+    common_span,
+    frd_to_body,
+    map_rotors,
+    ned_to_world,
+    pwm_to_unit,
+    quat_ned_frd_to_world_body,
+    resample,
+    resample_quat,
+)
 
 MAGIC = b"ULog\x01\x12\x35"
 #: signal -> candidate (topic, field prefix, count) in order of preference.
@@ -66,7 +75,7 @@ def _open(path: Path):
                          ) from None
     try:
         return ULog(str(path))
-    except Exception as exc:  # pyulog raises plain exceptions on corrupt files
+    except Exception as exc:  # noqa: BLE001 (pyulog raises plain exceptions on corrupt files)
         raise InputError(f"{path}: not a readable ULog file: {' '.join(str(exc).split())}"
                          ) from None
 
@@ -131,7 +140,7 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
         if found is None:
             out[key] = None
             continue
-        t_src, values, topic = found
+        t_src, values, _topic = found
         ok = np.isfinite(values).all(axis=1) if key not in ("rotor_command",) else \
             np.ones(len(t_src), bool)
         t_src, values = t_src[ok], values[ok]
