@@ -39,6 +39,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
                         help="nominal reference flights for --per-flight")
+    parser.add_argument("--command-reference", nargs="+", metavar="LOG",
+                        help="flights with rotor speeds and commands: logs without rotor "
+                             "speeds get speeds synthesised from their commands "
+                             "(quadsim.gap.commands; default: --reference)")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -95,7 +99,14 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.cliargs: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
+    for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
+        if out is not None and not out.endswith(suffix):
+            raise InputError(f"{out}: output name must end in {suffix}")
     logs = _load(args.logs, params)
+    if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
+        from .commands import with_synthesised_speeds
+        logs, _ = with_synthesised_speeds(
+            logs, _load(args.command_reference or args.reference, params))
     progress = None
     bar = None
     if not args.quiet:
