@@ -47,7 +47,33 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local processes (default: the CPU count; 1 = in this process); "
+                             "parallel over flights (--per-flight) or candidate fits")
+    parser.add_argument("--ray", metavar="ADDRESS", default=None,
+                        help="run on Ray instead: 'local' starts a local cluster, HOST:PORT "
+                             "joins one (needs the [ray] extra)")
     return parser
+
+
+def _map_fn(args, bar):
+    """The executor as a ``map(fn, items)``: built-in ``map`` for one in-process worker."""
+    from ..parallel import default_workers, run_tasks
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    if args.ray is None and (args.workers or default_workers()) == 1:
+        return map
+
+    def map_fn(fn, items):
+        items = list(items)
+        labels = [str(getattr(x, "path", None) or getattr(x, "name", None) or f"task {i}")
+                  for i, x in enumerate(items)]
+        tick = (lambda i: bar.update(1)) if bar is not None else None  # noqa: E731
+        return run_tasks(fn, items, workers=args.workers, ray=args.ray, progress=tick,
+                         labels=labels)
+
+    return map_fn
 
 
 def _load(paths):
@@ -67,6 +93,10 @@ def main(argv: list[str] | None = None) -> int:
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
+    if args.ray is not None:
+        from ..parallel import connect_ray
+
+        connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
     logs = _load(args.logs)
     progress = None
     bar = None
@@ -77,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None)
         progress = lambda name: (bar.set_postfix_str(name), bar.update(1))  # noqa: E731
     extra = {} if args.window is None else {"window_s": args.window}
+    extra["map_fn"] = _map_fn(args, bar)
     try:
         if args.per_flight:
             if not args.reference:
