@@ -93,7 +93,7 @@ def _run_pool(fn, tasks, indices, workers, results, progress):
                 broken.append(i)
                 continue
             if progress is not None:
-                progress(i)
+                progress(i, results[i])
     return sorted(broken)
 
 
@@ -179,7 +179,7 @@ def _run_ray(fn, tasks, ray_address, workers, progress, labels):
             error = error or (i, exc.as_instanceof_cause())
             continue
         if progress is not None:
-            progress(i)
+            progress(i, results[i])
     if error is not None:
         cause = error[1]
         raise (cause.cause if getattr(cause, "cause", None) is not None else cause)
@@ -187,11 +187,12 @@ def _run_ray(fn, tasks, ray_address, workers, progress, labels):
 
 
 def run_tasks(fn: Callable, tasks: Sequence, *, workers: int | None = None,
-              ray: str | None = None, progress: Callable[[int], None] | None = None,
+              ray: str | None = None, progress: Callable[[int, object], None] | None = None,
               labels: Sequence[str] | None = None, keep_going: bool = False) -> list:
     """``[fn(t) for t in tasks]`` on the chosen executor (see the module docstring).
 
-    ``progress(i)`` is called in this process as task ``i`` finishes (any order);
+    ``progress(i, result)`` is called in this process as task ``i`` finishes (any order;
+    e.g. to save each result at once);
     ``labels`` name the tasks in failure reports (default ``task <i>``)."""
     tasks = list(tasks)
     if workers is not None and workers < 1:
@@ -207,7 +208,7 @@ def run_tasks(fn: Callable, tasks: Sequence, *, workers: int | None = None,
         for i, task in enumerate(tasks):
             out.append(fn(task))
             if progress is not None:
-                progress(i)
+                progress(i, out[-1])
         return out
     results, failures = _run_processes(fn, tasks, workers, progress, labels)
     return _finish(results, failures, labels, keep_going)
