@@ -91,3 +91,15 @@ def test_gap_json_same_bytes_in_process_processes_and_ray(ray_local, tmp_path, p
         assert gap_main([*args, *how, "--json", str(out)]) == 0
         outputs.append(out.read_bytes())
     assert outputs[0] == outputs[1] == outputs[2]
+
+
+def test_sweep_same_bytes_on_ray(ray_local, tmp_path):
+    pytest.importorskip("pyarrow", reason="the sweep writes Parquet")
+    from quadsim.sweep.__main__ import main as sweep_main
+
+    args = ["--model", "physical", "--path", "hover", "--duration", "0.5", "--quiet",
+            "--initial", "x=-0.1..0.1", "--samples", "4", "--chunk-size", "2"]
+    one, ray = tmp_path / "one.parquet", tmp_path / "ray.parquet"
+    assert sweep_main([*args, "--workers", "1", "-o", str(one)]) == 0
+    assert sweep_main([*args, "--ray", "local", "-o", str(ray)]) == 0
+    assert one.read_bytes() == ray.read_bytes()
