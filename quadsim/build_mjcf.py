@@ -39,6 +39,7 @@ from .fileio import atomic_write_text
 from .massprops import MassProperties, vehicle_mass_properties
 from .mjcf import vehicle_xml
 from .params import MODELS_DIR, Rotor, VehicleParams, load_params
+from .step import is_step
 
 __all__ = [
     "BuiltModel",
@@ -101,8 +102,13 @@ def mesh_geoms_xml(assembly: Assembly, xml_dir: Path) -> tuple[str, str]:
     scale = _vec([MESH_UNITS[assembly.mesh_unit]] * 3)
     assets, geoms = [], []
     for part in assembly.parts:
-        file = Path(os.path.relpath(part.mesh_path, xml_dir.resolve())).as_posix()
-        assets.append(f'    <mesh name="{part.name}" file="{file}" scale="{scale}"/>')
+        if is_step(part.mesh_path):               # MuJoCo reads no STEP: inline, metres
+            vertex = " ".join(f"{v:.9g}" for v in np.asarray(part.mesh.vertices).ravel())
+            face = " ".join(str(int(i)) for i in np.asarray(part.mesh.faces).ravel())
+            assets.append(f'    <mesh name="{part.name}" vertex="{vertex}" face="{face}"/>')
+        else:
+            file = Path(os.path.relpath(part.mesh_path, xml_dir.resolve())).as_posix()
+            assets.append(f'    <mesh name="{part.name}" file="{file}" scale="{scale}"/>')
         low, high = part.mesh.bounds
         centre, half = 0.5 * (low + high), 0.5 * (high - low)
         for p in part.placements:
