@@ -70,8 +70,7 @@ def _check_args(args) -> None:
                         ("--command-reference", args.command_reference)):
         check_inputs(flag, paths)
     distinct_files({"LOG": args.logs, "--holdout": args.holdout,
-                    "--reference": args.reference,
-                    "--command-reference": args.command_reference})
+                    "--reference": args.reference})
     if args.per_flight and args.holdout:
         raise InputError("--holdout: not used with --per-flight (each LOG is judged against "
                          "--reference)")
