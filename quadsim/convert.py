@@ -106,7 +106,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--format", choices=FORMATS + ("csv",), default=None,
                         help="force the input format (default: from magic bytes / name)")
     parser.add_argument("--topic", action="append", default=[], metavar="SIGNAL=TOPIC",
-                        help="ULog topic of a signal (repeatable); uSD: event=NAME")
+                        help="ULog topic of a signal (repeatable); uSD: event=NAME, "
+                        "pose=estPose (motion-capture pose)")
     parser.add_argument("--field", action="append", default=[], metavar="SIGNAL=FIELD",
                         help="ULog field (prefix) of a signal (repeatable)")
     parser.add_argument("--rotor-map", default=None, metavar="M1,M2,...",
@@ -127,7 +128,7 @@ def _parser() -> argparse.ArgumentParser:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    signals = tuple(TOPICS) + ("event",)
+    signals = tuple(TOPICS) + ("event", "pose")
     log = convert(args.log, args.output, fmt=args.format,
                   rotor_map=parse_rotor_map(args.rotor_map),
                   topics=_pairs(args.topic, "--topic", signals),

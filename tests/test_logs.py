@@ -118,9 +118,11 @@ def _usd_fixture(version: int = 2) -> tuple[bytes, dict]:
         values = (truth["x"][k], 0.0, 0.5, *quat[k, 1:], quat[k, 0], *truth["gyro"][k],
                   *truth["acc"][k], *truth["rpm"][k], *truth["pwm"][k], truth["vbat"][k])
         samples.append((round(5 * tick + k * DT * tick), values))
-    pose = [(round(5 * tick + k * 0.01 * tick), (0.1, 0.2, 0.3)) for k in range(10)]
-    events = {"fixedFrequency": (0xFFFF, variables, samples),
-              "estPose": (9, [("locSrv.x", "f"), ("locSrv.y", "f"), ("locSrv.z", "f")], pose)}
+    # motion-capture pose at 100 Hz from 0.1 s to 0.5 s: x = 2 t, level, yaw 0
+    pose = [(round(5 * tick + (0.1 + k * 0.01) * tick), (2 * (0.1 + k * 0.01), 0.2, 0.3,
+                                                        0.0, 0.0, 0.0, 1.0)) for k in range(41)]
+    pose_vars = [(f"locSrv.{a}", "f") for a in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+    events = {"fixedFrequency": (0xFFFF, variables, samples), "estPose": (9, pose_vars, pose)}
     return encode_usd(events, version=version), truth
 
 
@@ -141,7 +143,13 @@ def test_usd_round_trip(tmp_path, version):
     np.testing.assert_allclose(log.rotor_command, truth["pwm"] / 65535, rtol=1e-12)
     np.testing.assert_allclose(log.vbat, truth["vbat"] / 1000, rtol=1e-12)
     events, got_version = read_usd(path)
-    assert got_version == version and len(events["estPose"]["t"]) == 10
+    assert got_version == version and len(events["estPose"]["t"]) == 41
+    # motion-capture pose instead of the state estimate: rows inside 0.1..0.5 s only,
+    # position interpolated linearly (x = 2 t exactly)
+    mocap = read_columns(path, topics={"pose": "estPose"})
+    assert abs(mocap["t"][-1] - 0.4) < 1e-6 and len(mocap["t"]) == 101   # rows 0.1..0.5 s
+    np.testing.assert_allclose(mocap["x"], 2 * (mocap["t"] + 0.1), atol=1e-6)
+    np.testing.assert_allclose(mocap["z"], 0.3, atol=1e-7)
 
 
 def test_usd_rotor_map(tmp_path):

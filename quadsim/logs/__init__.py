@@ -77,7 +77,9 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
                             pwm_range=pwm_range or (1000.0, 2000.0), rate_hz=rate_hz)
     if fmt == "usd":
         from .usd import usd_columns
-        return usd_columns(path, rotor_map=rotor_map, event=(topics or {}).get("event"))
+        topics = topics or {}
+        return usd_columns(path, rotor_map=rotor_map, event=topics.get("event"),
+                           pose=topics.get("pose"))
     if fmt == "dataflash":
         from .dataflash import dataflash_columns
         return dataflash_columns(path, rotor_map=rotor_map, pwm_range=pwm_range)

@@ -34,8 +34,10 @@ pm.vbatMV                    mV          vbat                  / 1000
 
 The Crazyflie's world is z up and its body x forward, y left, z up: no frame change. The
 flight-log rows are the fixed-frequency events (one row each, time from the first); a
-motion-capture pose event (``estPose``, ``locSrv.*``) is not a column of the schema and is
-returned by :func:`read_usd` in ``extra`` (not in the CSV). Measured: the three raw logs
+motion-capture pose event (``estPose``, ``locSrv.*``, ~100 Hz) replaces the on-board state
+estimate as position and attitude with ``pose="estPose"`` (``convert --topic pose=estPose``):
+interpolated linearly onto the rows, NaN across its gaps (no hold), rows outside its span
+dropped; by default the state estimate is used, as in the published CSVs. Measured: the three raw logs
 reproduce ``nominal/flight_00..02.csv.gz`` row for row (docs/logs.md gives the differences).
 
 Errors (one line, file and field): wrong magic byte, unknown version, bad CRC, a truncated
@@ -51,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import field_error
-from .common import RPM_TO_RAD_S, map_rotors
+from .common import RPM_TO_RAD_S, map_rotors, resample, resample_quat
 
 MAGIC = 0xBC
 FIXED_FREQUENCY_ID = 0xFFFF
@@ -138,10 +140,28 @@ def read_usd(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]], int]:
     return events, version
 
 
+def _pose_from(path: Path, events: dict, pose: str, t: np.ndarray):
+    """Position (N, 3) and quaternion (N, 4) of a motion-capture pose event (``locSrv.*``)
+    interpolated onto ``t`` (NaN outside the pose event's span and across its gaps)."""
+    if pose not in events:
+        raise field_error(path, pose, f"pose event not in the log (events: {', '.join(events)})")
+    ev = events[pose]
+    names = [f"locSrv.{a}" for a in ("x", "y", "z", "qw", "qx", "qy", "qz")]
+    missing = [n for n in names if n not in ev]
+    if missing or len(ev["t"]) < 2:
+        raise field_error(path, f"{pose}: {missing[0] if missing else 't'}",
+                          "pose event needs locSrv.x/y/z/qw/qx/qy/qz and 2 or more samples")
+    position = resample(ev["t"], np.stack([ev[n] for n in names[:3]], 1), t)
+    quat = resample_quat(ev["t"], np.stack([ev[n] for n in names[3:]], 1), t)
+    return position, quat
+
+
 def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
-                event: str | None = None) -> dict[str, np.ndarray]:
+                event: str | None = None, pose: str | None = None) -> dict[str, np.ndarray]:
     """Flight-log columns (SI, schema names) from a uSD log: one row per fixed-frequency
-    event (or per ``event`` when given), time from its first row."""
+    event (or per ``event`` when given), time from its first row. ``pose`` (e.g.
+    ``"estPose"``): take position and attitude from that motion-capture event instead of
+    ``stateEstimate`` (linearly interpolated onto the rows; rows outside its span dropped)."""
     path = Path(path)
     events, _ = read_usd(path)
     name = event or next((n for n in events if n == "fixedFrequency"), None)
@@ -162,6 +182,8 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     state = "stateEstimate."
     position = take([state + a for a in "xyz"])
     quat = take([state + a for a in ("qw", "qx", "qy", "qz")])
+    if pose is not None:
+        position, quat = _pose_from(path, events, pose, t)
     if position is None or quat is None:
         missing = "stateEstimate.x/y/z" if position is None else "stateEstimate.qw/qx/qy/qz"
         raise field_error(path, f"{name}: {missing}", "required for position/attitude, not "
@@ -185,6 +207,12 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
             cols.update({f"{prefix}_{i + 1}": value[:, i] for i in range(value.shape[1])})
     if "pm.vbatMV" in ev:
         cols["vbat"] = ev["pm.vbatMV"] / 1000.0
+    if pose is not None:
+        ok = np.isfinite(position).all(axis=1) & np.isfinite(quat).all(axis=1)
+        if ok.sum() < 2:
+            raise field_error(path, pose, "pose event and fixed-frequency rows never overlap")
+        cols = {k: v[ok] for k, v in cols.items()}
+        cols["t"] = cols["t"] - cols["t"][0]
     return cols
 
 
