@@ -5,7 +5,8 @@ never a traceback (an exception escaping ``main`` fails the case, with its argv)
 The CLIs' ``main(argv)`` run in-process (argparse's own errors are ``SystemExit(2)``); two
 cases also run as subprocesses to check the real entry points. Values and files are drawn
 from pools of plausible, wrong-unit, out-of-range, non-numeric and corrupted inputs; the
-pools keep valid runs short (durations <= 0.3 s, 1 s logs), so 200 cases cost ~15 s on a quiet 2-core machine.
+pools keep valid runs short (durations <= 0.3 s, 1 s logs), so 200 cases cost ~15 s on a
+quiet 2-core machine.
 """
 
 from __future__ import annotations
