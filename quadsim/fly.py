@@ -182,7 +182,7 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
     if progress is not None:
         inner = control
 
-        def control(t, state):  # noqa: F811 - same controller, reports the time
+        def control(t, state):  # same controller, reports the time
             progress(float(np.max(t)))
             return inner(t, state)
     traj = simulate(params, engine=engine, initial=geometric.initial_state(), controller=control,

@@ -105,7 +105,7 @@ def cut_nan(log):
 
 def _windows(t: np.ndarray) -> np.ndarray:
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
-    m = max(1, int(round(WINDOW_S / dt))) if dt > 0 else 1
+    m = max(1, round(WINDOW_S / dt)) if dt > 0 else 1
     return np.arange(0, len(t), m)
 
 

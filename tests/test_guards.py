@@ -181,7 +181,7 @@ def test_log_consistency_catches(lively, change, field, hint):
 
 def test_log_consistency_passes_clean_flight(flights):
     params = load_params("crazyflie21")
-    log, notes = logcheck.check_log(load_log(flights[0]), params)
+    log, _ = logcheck.check_log(load_log(flights[0]), params)
     assert len(log) == len(load_log(flights[0]))
     # the rotor thrust over the flight matches the body-z force (exact in simulation)
     ratio = (params.thrust_factor * np.sum(log.rotor_speed ** 2, axis=1)).mean() / (
@@ -297,12 +297,12 @@ def test_identify_stand_radius_and_fm_flag(tmp_path, capsys):
     from quadsim.identify.__main__ import main
 
     assert main(["--stand", str(STAND)]) == 0
-    line = [x for x in capsys.readouterr().out.splitlines() if "stand thrust-stand" in x][0]
+    line = next(x for x in capsys.readouterr().out.splitlines() if "stand thrust-stand" in x)
     assert "R = 0.1778 m, 14-inch from the file name" in line and "IMPLAUSIBLE" not in line
     renamed = tmp_path / "sweep.csv"
     shutil.copy(STAND, renamed)
     assert main(["--stand", str(renamed)]) == 0
-    line = [x for x in capsys.readouterr().out.splitlines() if "stand thrust-stand" in x][0]
+    line = next(x for x in capsys.readouterr().out.splitlines() if "stand thrust-stand" in x)
     # FM ~ 1/R: the same sweep with the 10-inch radius reads 0.1778/0.127 x higher
     fm = float(line.split(") = ")[1].split()[0])
     assert fm > 0.8 and "IMPLAUSIBLE" in line

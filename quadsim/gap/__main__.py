@@ -145,8 +145,19 @@ def main(argv: list[str] | None = None) -> int:
         from tqdm import tqdm
 
         # disable=None: no bar when stderr is not a terminal (logs, CI)
-        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None)
-        progress = lambda name: (bar.set_postfix_str(name), bar.update(1))  # noqa: E731
+        from ..effects import EFFECTS
+
+        # estimated fits: nominal refit + one per candidate (+ combinations, unknown ahead),
+        # per split; the total grows if the diagnosis fits more, so "time left" stays honest
+        per_split = 1 + len(args.effects or EFFECTS)
+        splits = len(args.logs) + len(args.reference or []) if args.per_flight else 1
+        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None,
+                   total=per_split * splits)
+
+        def progress(name):
+            bar.total = max(bar.total, bar.n + 1)
+            bar.set_postfix_str(name)
+            bar.update(1)
     extra = {} if args.window is None else {"window_s": args.window}
     extra["map_fn"] = _map_fn(args, bar)
     try:
