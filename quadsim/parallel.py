@@ -43,8 +43,13 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["TaskFailure", "run_tasks", "default_workers", "connect_ray",
-           "RAY_CONNECT_TIMEOUT_S"]
+__all__ = [
+    "RAY_CONNECT_TIMEOUT_S",
+    "TaskFailure",
+    "connect_ray",
+    "default_workers",
+    "run_tasks",
+]
 
 #: seconds to wait for a TCP connection to a Ray head before calling it unreachable
 RAY_CONNECT_TIMEOUT_S = 5.0

@@ -18,16 +18,17 @@ import os
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from quadsim.flightlog import write_log  # noqa: E402
-from quadsim.gap.__main__ import main as gap_main  # noqa: E402
-from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
-from quadsim.effects import make_effect  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
-from quadsim.sweep.__main__ import main as sweep_main  # noqa: E402
+from quadsim.effects import make_effect
+from quadsim.flightlog import write_log
+from quadsim.gap.__main__ import main as gap_main
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.params import load_params
+from quadsim.sweep.__main__ import main as sweep_main
 
 
 def _noop(x):
@@ -90,8 +91,8 @@ def main() -> None:
         for name, argv, count in (("gap", gap, args.flights), ("sweep", sweep, args.sims)):
             for how in (["--workers", "1"], ["--workers", "2"], ["--ray", "local"]):
                 extra = ["-o", str(tmp / f"{name}{how[1]}.parquet")] if name == "sweep" else []
-                wall = _timed(lambda: (gap_main if name == "gap" else sweep_main)(
-                    [*argv, *how, *extra]), name + how[1])
+                command = gap_main if name == "gap" else sweep_main
+                wall = _timed(partial(command, [*argv, *how, *extra]), name + how[1])
                 key = f"{name}_{how[1] if how[0] == '--workers' else 'ray'}"
                 out[key + "_s"] = wall
                 print(f"{key}: {wall:.1f} s for {count} tasks", flush=True)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import sys
 
-import numpy as np
 import pytest
 
 from quadsim.effects import make_effect
@@ -14,12 +13,12 @@ from quadsim.errors import InputError
 from quadsim.flightlog import write_log
 from quadsim.gap.__main__ import main as gap_main
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import load_params
 from quadsim.parallel import TaskFailure, _finish, run_tasks
+from quadsim.params import load_params
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _parallel_tasks import die_on_three as _die_on_three  # noqa: E402
-from _parallel_tasks import square_noise as _square_noise  # noqa: E402
+from _parallel_tasks import die_on_three as _die_on_three
+from _parallel_tasks import square_noise as _square_noise
 
 
 @pytest.fixture(scope="module")
