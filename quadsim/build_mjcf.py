@@ -153,6 +153,11 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     base = load_params(params, check=inertial != "cad")
     output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
     vehicle = cad_params(base, assembly, props, inertial=inertial)
+    from .guards import check_hover_control
+
+    check_hover_control(  # CAD mass with the set's b and speed range: can it hover?
+        vehicle, where=f"{assembly.manifest} + {base.path or base.name}",
+        mass_field="mass (CAD parts)" if inertial == "cad" else "body.mass")
     if inertial == "cad":
         note = ("inertial from the CAD meshes (trimesh): mass/CoM/inertia of the parts in "
                 f"{assembly.manifest.parent.name}/{assembly.manifest.name}")
@@ -240,6 +245,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="replace a non-watertight or badly wound mesh by its convex hull "
                              "(warns; mass properties become approximate)")
     args = parser.parse_args(argv)
+    from .cliargs import check_output  # before any work
+
+    if not args.cad_dir.is_dir():
+        raise InputError(f"{args.cad_dir}: CAD folder not found (give the folder holding the "
+                         "meshes and the manifest)")
+    check_output("--output", args.output, (".xml",))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         model = build_model(args.cad_dir, params=args.params, output=args.output,

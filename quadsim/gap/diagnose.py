@@ -119,7 +119,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             what = "commands only" if log.rotor_command is not None else "neither"
             raise InputError(f"{name}: rotor_1..rotor_N: the diagnosis needs measured rotor "
                              f"speeds (this log has {what}); the residual wrench compares the "
-                             "motion with the thrust of the measured rotors")
+                             "motion with the thrust of the measured rotors (with commands: "
+                             "--command-reference LOG... synthesises speeds, quadsim.gap.commands)")
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
