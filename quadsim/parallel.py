@@ -37,13 +37,19 @@ import socket
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["TaskFailure", "run_tasks", "default_workers", "connect_ray",
-           "RAY_CONNECT_TIMEOUT_S"]
+__all__ = [
+    "RAY_CONNECT_TIMEOUT_S",
+    "TaskFailure",
+    "connect_ray",
+    "default_workers",
+    "run_tasks",
+]
 
 #: seconds to wait for a TCP connection to a Ray head before calling it unreachable
 RAY_CONNECT_TIMEOUT_S = 5.0
@@ -79,11 +85,29 @@ def _finish(results, failures, labels, keep_going):
     return results
 
 
+#: one thread per worker for the numeric libraries: the workers are the parallelism
+SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                      "MKL_NUM_THREADS")}
+
+
+@contextmanager
+def _worker_env():
+    """Spawned workers inherit the environment at start: set SINGLE_THREAD_ENV (where the
+    user has not) while the pool runs, then restore it."""
+    added = {k: v for k, v in SINGLE_THREAD_ENV.items() if k not in os.environ}
+    os.environ.update(added)
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
+
+
 def _run_pool(fn, tasks, indices, workers, results, progress):
     """Run ``indices`` in one pool; return the indices left unfinished by a broken pool."""
     ctx = multiprocessing.get_context("spawn")
     broken = []
-    with ProcessPoolExecutor(max_workers=min(workers, len(indices)), mp_context=ctx) as pool:
+    with _worker_env(), ProcessPoolExecutor(max_workers=min(workers, len(indices)), mp_context=ctx) as pool:
         futures = {pool.submit(fn, tasks[i]): i for i in indices}
         for future in as_completed(futures):
             i = futures[future]
@@ -140,7 +164,8 @@ def connect_ray(address: str, workers: int | None = None):
     if address == "local":
         # Workers must import *this* quadsim (not another install): put it on their path.
         env = {"env_vars": {"PYTHONPATH": os.pathsep.join(
-            p for p in (package_root, os.environ.get("PYTHONPATH")) if p)}}
+            p for p in (package_root, os.environ.get("PYTHONPATH")) if p),
+            **{k: os.environ.get(k, v) for k, v in SINGLE_THREAD_ENV.items()}}}
         ray.init(num_cpus=workers or default_workers(), include_dashboard=False,
                  log_to_driver=False, logging_level="ERROR", runtime_env=env)
     else:

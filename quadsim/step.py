@@ -35,7 +35,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["STEP_SUFFIXES", "STEP_TOLERANCE", "STEP_ANGULAR_TOLERANCE", "is_step", "read_step"]
+__all__ = ["STEP_ANGULAR_TOLERANCE", "STEP_SUFFIXES", "STEP_TOLERANCE", "is_step", "read_step"]
 
 STEP_SUFFIXES = (".step", ".stp")
 #: relative chord deflection of the tessellation (deflection / edge size)
@@ -63,7 +63,7 @@ def read_step(path: str | Path, *, tolerance: float = STEP_TOLERANCE
     try:
         scene = trimesh.load(path, file_type="step", tol_linear=tolerance, tol_relative=True,
                              tol_angular=STEP_ANGULAR_TOLERANCE)
-    except Exception as exc:                      # OpenCASCADE / glTF errors of any type
+    except Exception as exc:  # noqa: BLE001 - OpenCASCADE / glTF errors of any type
         raise InputError(f"{path}: cannot read STEP: {' '.join(str(exc).split())}") from None
     geometries = list(getattr(scene, "geometry", {}).values()) or [scene]
     if len(geometries) != 1:
@@ -73,8 +73,8 @@ def read_step(path: str | Path, *, tolerance: float = STEP_TOLERANCE
         raise InputError(f"{path}: holds no solid")
     # bit-identical float32 points are one vertex (as for STL): faces then share edges
     points = np.ascontiguousarray(soup, dtype=np.float32) + np.float32(0.0)
-    keys, first, index = np.unique(points.view(np.dtype((np.void, 12))).ravel(),
-                                   return_index=True, return_inverse=True)
+    _, first, index = np.unique(points.view(np.dtype((np.void, 12))).ravel(),
+                                return_index=True, return_inverse=True)
     vertices = points[first].astype(np.float64)
     faces = index.reshape(-1, 3)
     labels = trimesh.graph.connected_component_labels(

@@ -18,39 +18,52 @@ import os
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from quadsim.flightlog import write_log  # noqa: E402
-from quadsim.gap.__main__ import main as gap_main  # noqa: E402
-from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
-from quadsim.effects import make_effect  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
-from quadsim.sweep.__main__ import main as sweep_main  # noqa: E402
+from quadsim.effects import make_effect
+from quadsim.flightlog import write_log
+from quadsim.gap.__main__ import main as gap_main
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.params import load_params
+from quadsim.sweep.__main__ import main as sweep_main
 
 
 def _noop(x):
     return x
 
 
-def _timed(fn) -> float:
-    start = time.perf_counter()
+CPU: dict[str, float] = {}
+
+
+def _timed(fn, key: str = "") -> float:
+    """Wall time (s) of fn(); its CPU time in this process goes to CPU[key] (the single-core
+    cost of a workers=1 run, which load on a shared machine inflates less than wall time)."""
+    start, cpu = time.perf_counter(), time.process_time()
     assert fn() == 0
+    CPU[key] = time.process_time() - cpu
     return time.perf_counter() - start
 
 
-def ray_overhead(tasks: int = 400) -> dict:
+def overheads(tasks: int = 400) -> dict:
+    """Fixed start-up costs (Ray local cluster; a 2-process spawn pool) and Ray's per-task
+    overhead (no-op tasks, warm workers, wall per task)."""
     from quadsim.parallel import connect_ray, run_tasks
 
     start = time.perf_counter()
     connect_ray("local", 2)
-    startup = time.perf_counter() - start
-    run_tasks(_noop, range(20), ray="local")                     # warm the workers
+    run_tasks(_noop, range(2), ray="local")                      # first tasks start workers
+    ray_start = time.perf_counter() - start
+    run_tasks(_noop, range(20), ray="local")
     start = time.perf_counter()
     run_tasks(_noop, range(tasks), ray="local")
     per_task = (time.perf_counter() - start) / tasks
-    return {"ray_start_s": startup, "ray_per_task_s": per_task}
+    start = time.perf_counter()
+    run_tasks(_noop, range(2), workers=2)
+    pool_start = time.perf_counter() - start
+    return {"ray_start_s": ray_start, "ray_per_task_s": per_task, "pool_start_s": pool_start}
 
 
 def main() -> None:
@@ -61,6 +74,7 @@ def main() -> None:
     args = parser.parse_args()
     cf = load_params("crazyflie21")
     out: dict = {"cpus": os.cpu_count(), "load_avg_1min": os.getloadavg()[0]}
+    out.update(overheads())
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         refs = [str(write_log(tmp / f"r{s}.csv.gz", synthetic_flight(cf, [], seed=s,
@@ -77,8 +91,8 @@ def main() -> None:
         for name, argv, count in (("gap", gap, args.flights), ("sweep", sweep, args.sims)):
             for how in (["--workers", "1"], ["--workers", "2"], ["--ray", "local"]):
                 extra = ["-o", str(tmp / f"{name}{how[1]}.parquet")] if name == "sweep" else []
-                wall = _timed(lambda: (gap_main if name == "gap" else sweep_main)(
-                    [*argv, *how, *extra]))
+                command = gap_main if name == "gap" else sweep_main
+                wall = _timed(partial(command, [*argv, *how, *extra]), name + how[1])
                 key = f"{name}_{how[1] if how[0] == '--workers' else 'ray'}"
                 out[key + "_s"] = wall
                 print(f"{key}: {wall:.1f} s for {count} tasks", flush=True)
@@ -87,10 +101,12 @@ def main() -> None:
             out[f"{name}_speedup_ray"] = base / out[f"{name}_ray_s"]
         out["gap_s_per_flight"] = out["gap_1_s"] / args.flights
         out["sweep_s_per_sim"] = out["sweep_1_s"] / args.sims
-    out.update(ray_overhead())
-    for label, tasks, per_task, batch in (("10,000 flights", 10_000, out["gap_s_per_flight"], 1),
+        out["gap_cpu_s_per_flight"] = CPU["gap1"] / args.flights
+        out["sweep_cpu_s_per_sim"] = CPU["sweep1"] / args.sims
+    for label, tasks, per_task, batch in (("10,000 flights", 10_000,
+                                           out["gap_cpu_s_per_flight"], 1),
                                           ("1,000,000 simulations", 1_000_000,
-                                           out["sweep_s_per_sim"], 64)):
+                                           out["sweep_cpu_s_per_sim"], 64)):
         cores = 100 * 16
         waves = math.ceil(tasks / batch / cores)
         wall = waves * (batch * per_task + out["ray_per_task_s"]) + out["ray_start_s"]

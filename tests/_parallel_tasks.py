@@ -16,3 +16,12 @@ def die_on_three(k: int) -> int:
     if k == 3:
         os._exit(1)                     # the worker process dies mid-task
     return k * k
+
+
+def bad_input(k: int) -> int:
+    """A user error raised inside a worker must reach the driver as the same error."""
+    from quadsim.errors import InputError
+
+    if k == 1:
+        raise InputError(f"flight_{k}.csv: t: not increasing")
+    return k

@@ -6,7 +6,6 @@ from __future__ import annotations
 import os
 import sys
 
-import numpy as np
 import pytest
 
 from quadsim.effects import make_effect
@@ -14,12 +13,13 @@ from quadsim.errors import InputError
 from quadsim.flightlog import write_log
 from quadsim.gap.__main__ import main as gap_main
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import load_params
 from quadsim.parallel import TaskFailure, _finish, run_tasks
+from quadsim.params import load_params
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _parallel_tasks import die_on_three as _die_on_three  # noqa: E402
-from _parallel_tasks import square_noise as _square_noise  # noqa: E402
+from _parallel_tasks import bad_input as _bad_input
+from _parallel_tasks import die_on_three as _die_on_three
+from _parallel_tasks import square_noise as _square_noise
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +45,8 @@ def test_dead_worker_is_retried_then_named_and_the_rest_kept():
     out = run_tasks(_die_on_three, range(5), workers=2, keep_going=True)
     assert out[:3] == [0, 1, 4] and out[4] == 16
     assert isinstance(out[3], TaskFailure) and out[3].index == 3
+    with pytest.raises(InputError, match="flight_1.csv: t: not increasing"):
+        run_tasks(_bad_input, range(3), workers=2)
     with pytest.raises(InputError, match="worker died twice running flight_3"):
         _finish(out, [out[3]], [f"flight_{k}" for k in range(5)], keep_going=False)
 
@@ -68,6 +70,8 @@ def test_ray_local_matches_in_process(ray_local):
                                                                      workers=1)
     out = run_tasks(_die_on_three, range(5), ray="local", keep_going=True)
     assert out[:3] == [0, 1, 4] and out[4] == 16 and isinstance(out[3], TaskFailure)
+    with pytest.raises(InputError, match="flight_1.csv: t: not increasing"):
+        run_tasks(_bad_input, range(3), ray="local")
 
 
 @pytest.mark.parametrize("per_flight", [False, True], ids=["heldout", "per-flight"])
@@ -85,12 +89,15 @@ def test_gap_json_same_bytes_in_process_processes_and_ray(ray_local, tmp_path, p
                                                                           duration=2.0)))
                 for s in (30, 31)]
         args += ["--per-flight", "--reference", *refs]
+    executors = [["--workers", "1"], ["--ray", "local"]]
+    if per_flight:                      # processes: here only (each pool start costs seconds)
+        executors.append(["--workers", "2"])
     outputs = []
-    for how in (["--workers", "1"], ["--workers", "2"], ["--ray", "local"]):
+    for how in executors:
         out = tmp_path / f"gap_{how[1]}.json"
         assert gap_main([*args, *how, "--json", str(out)]) == 0
         outputs.append(out.read_bytes())
-    assert outputs[0] == outputs[1] == outputs[2]
+    assert all(o == outputs[0] for o in outputs[1:])
 
 
 def test_sweep_same_bytes_on_ray(ray_local, tmp_path):

@@ -9,25 +9,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_cad import write_cad
 
 from quadsim.assembly import load_assembly
 from quadsim.errors import InputError
 from quadsim.massprops import mesh_mass_properties, vehicle_mass_properties
-from test_cad import write_cad
 
 pytest.importorskip("cascadio", reason="STEP needs the optional [step] extra (cascadio)")
 
 DATA = Path(__file__).resolve().parent / "data"
 HUBS = [(str(i + 1), [0.1 * np.cos(a), 0.1 * np.sin(a), 0.01 * i], [10.0 * i, 0.0, 90.0 * i])
         for i, a in enumerate(np.radians([0, 90, 180, 270]))]
-ROTORS = [dict(name=n, part="block", placement=n, spin=s)
+ROTORS = [{"name": n, "part": "block", "placement": n, "spin": s}
           for (n, _, _), s in zip(HUBS, ["ccw", "cw", "ccw", "cw"])]
 
 
 def _vehicle(folder: Path, mesh: str, mesh_unit: str = "mm") -> Path:
     folder.mkdir(parents=True)
     shutil.copy(DATA / mesh, folder / mesh)
-    parts = [dict(name="block", mesh=mesh, mass=0.1, placements=HUBS)]
+    parts = [{"name": "block", "mesh": mesh, "mass": 0.1, "placements": HUBS}]
     return write_cad(folder, parts, ROTORS, mesh_unit=mesh_unit)
 
 

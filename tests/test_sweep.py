@@ -7,13 +7,19 @@ import numpy as np
 import pytest
 
 pytest.importorskip("pyarrow", reason="the sweep writes Parquet (pyarrow, [parquet] extra)")
-import pyarrow.parquet as pq  # noqa: E402
+import pyarrow.parquet as pq
 
-from quadsim.params import load_params  # noqa: E402
-from quadsim.sweep import (SweepConfig, design_matrix, parse_effect_ranges,  # noqa: E402
-                           parse_initial_ranges, run_sweep, simulate_chunk)
-from quadsim.sweep import driver  # noqa: E402
-from quadsim.sweep.__main__ import main  # noqa: E402
+from quadsim.params import load_params
+from quadsim.sweep import (
+    SweepConfig,
+    design_matrix,
+    driver,
+    parse_effect_ranges,
+    parse_initial_ranges,
+    run_sweep,
+    simulate_chunk,
+)
+from quadsim.sweep.__main__ import main
 
 
 @pytest.fixture(scope="module")

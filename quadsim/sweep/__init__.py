@@ -32,6 +32,6 @@ from .design import Dimension, design_matrix, parse_effect_ranges, parse_initial
 from .driver import SWEEP_SCHEMA, chunk_folder, run_sweep
 from .run import OUTPUT_COLUMNS, SweepConfig, simulate_chunk
 
-__all__ = ["Dimension", "OUTPUT_COLUMNS", "SWEEP_SCHEMA", "SweepConfig", "chunk_folder",
+__all__ = ["OUTPUT_COLUMNS", "SWEEP_SCHEMA", "Dimension", "SweepConfig", "chunk_folder",
            "design_matrix", "parse_effect_ranges", "parse_initial_ranges", "run_sweep",
            "simulate_chunk"]

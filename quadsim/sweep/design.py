@@ -21,8 +21,13 @@ import numpy as np
 from ..effects import EFFECTS, make_effect
 from ..errors import InputError
 
-__all__ = ["Dimension", "INITIAL_KEYS", "parse_effect_ranges", "parse_initial_ranges",
-           "design_matrix"]
+__all__ = [
+    "INITIAL_KEYS",
+    "Dimension",
+    "design_matrix",
+    "parse_effect_ranges",
+    "parse_initial_ranges",
+]
 
 #: initial-state offset keys and their units
 INITIAL_KEYS = {"x": "m", "y": "m", "z": "m", "vx": "m/s", "vy": "m/s", "vz": "m/s",

@@ -14,7 +14,7 @@ from ..fileio import atomic_write_bytes, atomic_write_text
 from ..parallel import TaskFailure, run_tasks
 from .run import OUTPUT_COLUMNS, SweepConfig, simulate_chunk, table_bytes
 
-__all__ = ["run_sweep", "chunk_folder", "SWEEP_SCHEMA"]
+__all__ = ["SWEEP_SCHEMA", "chunk_folder", "run_sweep"]
 
 SWEEP_SCHEMA = "quadsim.sweep/1"
 
@@ -29,7 +29,7 @@ def _chunk_path(folder: Path, k: int) -> Path:
 
 
 def _chunk_task(task, config: SweepConfig):
-    start, rows = task
+    _, rows = task
     return simulate_chunk(config, rows)
 
 

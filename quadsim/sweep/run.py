@@ -33,7 +33,7 @@ from ..params import VehicleParams
 from ..trajectories import make_reference
 from .design import Dimension
 
-__all__ = ["SweepConfig", "OUTPUT_COLUMNS", "simulate_chunk", "table_bytes"]
+__all__ = ["OUTPUT_COLUMNS", "SweepConfig", "simulate_chunk", "table_bytes"]
 
 OUTPUT_COLUMNS = ("pos_err_rms_m", "pos_err_max_m", "pos_err_final_m", "tilt_max_rad",
                   "diverged")
