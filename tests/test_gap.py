@@ -92,7 +92,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert outputs[0] == outputs[1]
     document = json.loads(outputs[0])
     validate(document)
-    assert document["schema"] == "quadsim.gap/1"
+    assert document["schema"] == "quadsim.gap/2"
     assert document["verdict"]["effect"] == "thrust_mismatch"
     assert document["train"] and document["holdout"]
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
@@ -104,7 +104,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert main(["--model", "crazyflie21", *paths, "--report", str(html), "--quiet",
                  "--effects", "thrust_mismatch"]) == 0
     text = html.read_text()
-    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/1" in text
+    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/2" in text
 
 
 def test_per_flight_mode_names_only_the_flight_that_differs(cf):

@@ -43,7 +43,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
                         help="Savitzky-Golay window (s) of the differentiator (default 0.1)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/1 result")
+    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/2 result")
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")

@@ -1,4 +1,4 @@
-"""Outputs of the gap diagnosis: JSON (``quadsim.gap/1``), a human summary, an HTML report
+"""Outputs of the gap diagnosis: JSON (``quadsim.gap/2``), a human summary, an HTML report
 with embedded plots, and a rerun recording of the residuals.
 """
 
