@@ -71,9 +71,11 @@ def test_each_library_effect_is_named_top1_with_parameter_in_its_ci(cf, name):
     assert verdict["reduction"] > 0.15
 
 
-def test_no_effect_is_unexplained(cf):
+def test_no_effect_is_no_significant_gap(cf):
     result = diagnose(_flights(cf, [], seeds=(3, 4)), cf, kstep=False)
-    assert result["verdict"]["effect"] == "unexplained"
+    assert result["verdict"]["outcome"] == "no_significant_gap"
+    assert result["verdict"]["effect"] == "no_significant_gap"
+    assert all(c["at_floor"] for c in result["verdict"]["channels"].values())
     assert max(e["reduction"] for e in result["effects"]) < 0.05
 
 
@@ -116,7 +118,8 @@ def test_per_flight_mode_names_only_the_flight_that_differs(cf):
                                  effects=["com_offset", "mass_offset", "thrust_mismatch"])
     validate(json.loads(to_json(result)))
     verdicts = [f["verdict"] for f in result["flights"]]
-    assert verdicts == ["unexplained", "com_offset"]
+    assert verdicts == ["no_significant_gap", "com_offset"]
+    assert [f["outcome"] for f in result["flights"]] == ["no_significant_gap", "effect"]
     assert abs(result["flights"][1]["params"]["com_offset.x"] + 0.005) < 5e-4
 
 
@@ -131,7 +134,7 @@ def test_too_little_excitation_is_reported_not_fitted(cf):
     result = diagnose(logs, cf, kstep=False, effects=["ground_effect", "mass_offset"])
     ground = next(e for e in result["effects"] if e["name"] == "ground_effect")
     assert "too little excitation" in ground["warning"]
-    assert result["verdict"]["effect"] == "unexplained"
+    assert result["verdict"]["outcome"] != "effect"
 
 
 def test_bad_input(cf, tmp_path, capsys):

@@ -54,10 +54,29 @@ def _load(paths):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
-    for w in caught:
-        if issubclass(w.category, QuadsimWarning):
-            print(f"warning: {w.message}", file=sys.stderr)
+    for line in collapse_warnings([str(w.message) for w in caught
+                                   if issubclass(w.category, QuadsimWarning)]):
+        print(f"warning: {line}", file=sys.stderr)
     return logs
+
+
+def collapse_warnings(messages: list[str]) -> list[str]:
+    """One line per kind of loader warning: messages that differ only in the file name
+    (the text before the first ': ') and in numbers are one kind, printed once with the
+    count of further files."""
+    import re
+
+    kinds: dict[str, list[str]] = {}
+    for m in messages:
+        _, sep, rest = m.partition(": ")
+        key = re.sub(r"[-+]?\d[\d.eE+-]*", "#", rest if sep else m)
+        kinds.setdefault(key, []).append(m)
+    out = []
+    for group in kinds.values():
+        more = len(group) - 1
+        out.append(group[0] + (f" (and {more} more file{'s' if more > 1 else ''} alike)"
+                               if more else ""))
+    return out
 
 
 @run_cli

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..params import VehicleParams, hover_speed
 from .fitting import effect_class
-from .priors import plausibility
+from .priors import candidate_plausibility
 
 __all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation"]
 
@@ -118,8 +118,7 @@ def alternatives(best: dict, others: list[dict], params: VehicleParams) -> list[
     """``best`` and its collinear ``others`` described and ranked (most plausible first)."""
     out = []
     for entry in [best] + list(others):
-        scores = [plausibility(k, v, params) for k, v in entry["params"].items()]
-        worst = max(scores, key=lambda s: s[0]) if scores else (0.0, True, "")
+        worst = candidate_plausibility(entry["params"], params)
         out.append({
             "name": entry["name"],
             "magnitude": describe(entry["name"], entry["params"], entry.get("ci", {}), params),

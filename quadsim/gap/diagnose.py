@@ -322,7 +322,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         tied = [e for e in winners if e["heldout_gap_after"] <= floor]
         first = min(tied, key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
         others = [e for e in ranked if e is not first
-                  and e["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap
+                  and abs(e["heldout_gap_after"] - first["heldout_gap_after"]) <= TIE * nominal_gap
                   and len(e["params"]) <= len(first["params"]) + 1]
         if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap:
             others.append(baseline)
@@ -459,23 +459,43 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                                          for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]),
                          floor=noise_floor(params, rotor))
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
+    notes = ([f"only {len(ref)} reference flights: an effect's spread over nominal flights "
+              "is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE else [])
     tuned = base.effects()[0].apply_to_params(params)
-    reference_fits = _reference_spread(ref, tuned, effects, progress)
+    reference_fits, floors = _reference_spread(ref, tuned, effects, progress)
     flights = []
     for log in logs:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
             flight = prepare([log], tuned, window_s=window_s)[0]
             one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-        flights.append(_judge(one, reference_fits, flight.name))
+        flights.append(_judge(one, reference_fits, flight.name, floors, tuned))
+    # Bad input: a reference set that disagrees with the model more than the flights tested.
+    ratios = [np.median([c["before"] / max(c["floor"], 1e-300) for c in f["channels"].values()])
+              for f in flights]
+    checks = {"flights_vs_reference_floor": float(np.median(ratios)) if ratios else None}
+    if ratios and np.median(ratios) < 1 / rule.FLOOR_TOL:
+        notes.append(f"the reference flights disagree with the model more than the flights "
+                     f"under test (median nominal residual of the tested flights "
+                     f"{np.median(ratios):.2f}x the reference floor): check the reference set")
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
             "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
-            "notes": ([f"only {len(ref)} reference flights: an effect's spread over nominal "
-                       "flights is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE
-                      else []),
-            "where": {}, "effects": [], "verdict": {"effect": "see flights", "reduction": None,
-                                                    "confusable_with": []}}
+            "reference_floor": {k: max(v) for k, v in floors.items()}, "checks": checks,
+            "notes": notes,
+            "where": {}, "effects": [],
+            "verdict": {"outcome": "effect" if any(f["outcome"] == "effect" for f in flights)
+                        else "unexplained", "effect": "see flights",
+                        "answer": _per_flight_answer(flights), "reduction": None,
+                        "confusable_with": []}}
+
+
+def _per_flight_answer(flights: list[dict]) -> str:
+    counts: dict[str, int] = {}
+    for f in flights:
+        counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
+    return f"{len(flights)} flights judged against the reference flights: " + ", ".join(
+        f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
 
 
 def _halves(f: Flight):
@@ -489,21 +509,30 @@ def _halves(f: Flight):
     return [out[0]], [out[1]]
 
 
-def _reference_spread(ref: list[Flight], params, effect_names, progress) -> dict:
-    """Per effect: each reference flight's own reduction (first half -> second half)."""
+def _reference_spread(ref: list[Flight], params, effect_names, progress) -> tuple[dict, dict]:
+    """Per effect: each reference flight's own reduction (first half -> second half); per
+    channel: the largest held-out RMS the nominal model leaves on a reference flight (the
+    per-flight floor, in the channel's unit)."""
     spread: dict[str, list[float]] = {}
+    floors: dict[str, list[float]] = {}
     for f in ref:
         one = _diagnose_split(*_halves(f), params, effect_names, 1, progress, [])
         for e in one["effects"]:
             spread.setdefault(e["name"], []).append(e["reduction"])
-    return spread
+        for k, v in one["where"]["heldout_rms_before"].items():
+            floors.setdefault(k, []).append(v)
+    return spread, floors
 
 
-def _judge(one: dict, spread: dict, name: str) -> dict:
-    """A flight's verdict: the effect whose held-out reduction exceeds the largest reduction
-    the same effect achieves on any reference (nominal) flight by the most, if that excess is
-    at least MIN_GAIN; ties (within TIE) go to the effect with fewer parameters. Effects that
-    help every nominal flight alike (real drag, an imperfect motor map) are not named."""
+def _judge(one: dict, spread: dict, name: str, floors: dict, params) -> dict:
+    """A flight's verdict. An effect *explains a clear share* when its held-out reduction
+    exceeds the largest reduction the same effect achieves on any reference (nominal) flight
+    by at least MIN_GAIN (effects that help every nominal flight alike, real drag or an
+    imperfect motor map, are not named) and its magnitude is plausible; among those within
+    TIE of the largest excess, the most plausible (then fewest parameters) is named, the
+    others within PER_FLIGHT_TIE of its reduction are listed as collinear alternatives.
+    Otherwise the flight is ``no_significant_gap`` when its nominal held-out RMS is at the
+    reference floor on every channel, else ``unexplained``."""
     scored = []
     for e in one["effects"]:
         ok = e["t_statistic"] >= MIN_T and any(
@@ -514,15 +543,36 @@ def _judge(one: dict, spread: dict, name: str) -> dict:
     effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
                {"reference_max_reduction": max(spread.get(e["name"], [0.0]))}
                for e in one["effects"]]
-    if not scored:
-        return {"file": name, "verdict": "unexplained", "params": {}, "ci": {},
-                "reduction": 0.0, "confusable_with": [], "effects": effects}
-    top = max(x for x, _ in scored)
-    tied = [(x, e) for x, e in scored if x >= top - TIE]
-    best = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
-    # Confusable: other qualifying effects that explain this flight about as well.
-    confusable = [e["name"] for _, e in scored
-                  if e is not best and e["reduction"] >= best["reduction"] - PER_FLIGHT_TIE]
-    return {"file": name, "verdict": best["name"], "params": best["params"], "ci": best["ci"],
-            "reduction": best["reduction"], "confusable_with": confusable,
-            "separate_by": _separation(best["name"], confusable), "effects": effects}
+    where = one["where"]
+    names = list(where["heldout_rms_before"])
+    floor = np.array([max(floors.get(k, [0.0])) for k in names])
+    before = np.array([where["heldout_rms_before"][k] for k in names])
+    notes = []
+    best, alts = None, []
+    if scored:
+        top = max(x for x, _ in scored)
+        tied = [(x, e) for x, e in scored if x >= top - TIE]
+        first = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
+        others = [e for _, e in scored
+                  if e is not first and e["reduction"] >= first["reduction"] - PER_FLIGHT_TIE]
+        best, alts = _pick_plausible(first, others, params)
+        if best is None:
+            notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
+                         f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
+            alts = []
+    after = before if best is None else np.array(
+        [best["heldout_rms_after"].get(k, before[n]) for n, k in enumerate(names)])
+    channels = rule.channel_table(names, before, after, floor)
+    kind = rule.outcome(best is not None, before, floor)
+    floor_source = "the reference flights' own held-out residual"
+    label = best["name"] if best else kind
+    confusable = [a["name"] for a in alts if best and a["name"] != best["name"]]
+    return {"file": name, "outcome": kind, "verdict": label,
+            "answer": rule.answer(kind, label, best["reduction"] if best else 0.0, alts,
+                                  channels, floor_source),
+            "channels": channels, "alternatives": alts,
+            "params": best["params"] if best else {}, "ci": best["ci"] if best else {},
+            "units": {k: collinear.unit_of(k) for k in (best["params"] if best else {})},
+            "reduction": best["reduction"] if best else 0.0, "confusable_with": confusable,
+            "separate_by": _separation(best["name"], confusable) if best else {},
+            "effects": effects, "notes": notes}

@@ -34,6 +34,11 @@ __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "can
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
 NO_OFF_VALUE = {"battery_sag.full_voltage"}
 
+#: a fitted value within this fraction of its typical size from a bound is "at the bound".
+AT_BOUND = 1e-3
+#: a standard error below this fraction of the parameter's typical size is not credible.
+ABSURD_CI = 1e-6
+
 #: effects acting upstream of the measured rotor speed (command -> speed channel only).
 UPSTREAM_OF_SPEED = {"motor_lag", "battery_sag"}
 
@@ -444,8 +449,14 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     # A parameter is identified when the data move the residual and its CI is narrower
     # than half the plausible range.
     span = upper - lower
-    identifiable = [bool(c > 1e-6 * np.sqrt(res.size) and 1.96 * se < 0.5 * sp)
-                    for c, se, sp in zip(column, stderr, span)]
+    # Never identified: a value at a bound (the optimum lies beyond it, its CI means
+    # nothing) or an absurdly narrow interval (a flat or degenerate Jacobian direction, e.g.
+    # "wind.vy = 29.99 +- 4e-21 m/s").
+    at_bound = (theta - lower <= AT_BOUND * typical) | (upper - theta <= AT_BOUND * typical)
+    absurd = stderr < ABSURD_CI * typical
+    identifiable = [bool(c > 1e-6 * np.sqrt(res.size) and 1.96 * se < 0.5 * sp
+                         and not b and not a)
+                    for c, se, sp, b, a in zip(column, stderr, span, at_bound, absurd)]
     off = _start_off(candidate)
     significant = [bool(abs(th - o) > 1.96 * se) or name in NO_OFF_VALUE
                    for th, o, se, name in zip(theta, off, stderr, candidate.parameter_names)]
