@@ -19,6 +19,7 @@ from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
 from . import collinear, fitting, verdict as rule
+from .checks import vehicle_check
 from .fitting import (
     Candidate,
     Fit,
@@ -231,9 +232,12 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
+    checks = vehicle_check([f.fit for f in flights + (held_in or [])], params)
     train, held = _split(flights, held_in, notes)
-    return _diagnose_split(train, held, params, effects, max_combination, progress, notes,
-                           kstep)
+    result = _diagnose_split(train, held, params, effects, max_combination, progress, notes,
+                             kstep)
+    result["checks"] = checks
+    return result
 
 
 def params_have_data_map(params: VehicleParams) -> bool:
@@ -452,6 +456,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ref = prepare(reference, params, window_s=window_s)
     if len(ref) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
+    vehicle = vehicle_check([f.fit for f in ref], params)
     rotor = all(f.fit.command is not None for f in ref)
     if rotor:
         params = fit_motor_map([f.fit for f in ref], params)
@@ -473,7 +478,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     # Bad input: a reference set that disagrees with the model more than the flights tested.
     ratios = [np.median([c["before"] / max(c["floor"], 1e-300) for c in f["channels"].values()])
               for f in flights]
-    checks = {"flights_vs_reference_floor": float(np.median(ratios)) if ratios else None}
+    checks = {"flights_vs_reference_floor": float(np.median(ratios)) if ratios else None,
+              **vehicle}
     if ratios and np.median(ratios) < 1 / rule.FLOOR_TOL:
         notes.append(f"the reference flights disagree with the model more than the flights "
                      f"under test (median nominal residual of the tested flights "
