@@ -108,7 +108,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     text = html.read_text()
     assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/2" in text
     # the answer first, the evidence with units, the JSON in a collapsed appendix
-    assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index('"schema"')
+    assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index("&quot;schema&quot;")
     assert "<th>unit</th>" in text and "<td>N m</td>" in text
     assert document["verdict"]["outcome"] == "effect"
     assert all(c["unit"] in ("N", "N m", "rad/s")
