@@ -22,7 +22,8 @@ from ..params import VehicleParams, hover_speed
 from .fitting import effect_class
 from .priors import candidate_plausibility
 
-__all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation"]
+__all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation", "pick_plausible",
+           "collinear_note"]
 
 # Known collinear pairs and what data would separate them.
 SEPARATE = {
@@ -133,3 +134,24 @@ def alternatives(best: dict, others: list[dict], params: VehicleParams) -> list[
         alt["separate_by"] = sep[alt["name"]]
     out.sort(key=lambda a: (not a["plausible"], a["plausibility"]))
     return out
+
+
+def pick_plausible(best: dict, tied: list[dict], params) -> tuple[dict | None, list[dict]]:
+    """Among collinear candidates (``best`` and those ``tied`` with it), the most plausible
+    one (priors), and all of them described (:func:`alternatives`)."""
+    alts = alternatives(best, tied, params)
+    lead = alts[0]
+    if not lead["plausible"]:
+        return None, alts
+    chosen = best if lead["name"] == best["name"] else next(
+        e for e in tied if e["name"] == lead["name"])
+    return chosen, alts
+
+
+def collinear_note(name: str, alts: list[dict]) -> str:
+    others = [a for a in alts if a["name"] != name]
+    return (f"too little excitation to separate {name} from "
+            + ", ".join(a["name"] for a in others) + " on these flights (collinear within the "
+            "tie margin); the name follows the priors, not the data: "
+            + "; ".join(f"{a['name']}: {a['separate_by']}" for a in others
+                        if a.get("separate_by")))

@@ -18,7 +18,8 @@ from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
-from . import collinear, fitting, verdict as rule
+from . import collinear, fitting
+from . import verdict as rule
 from .checks import vehicle_check
 from .fitting import (
     Candidate,
@@ -293,18 +294,6 @@ def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
     return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and useful
 
 
-def _pick_plausible(best: dict, tied: list[dict], params) -> tuple[dict | None, list[dict]]:
-    """Among collinear candidates (``best`` and those ``tied`` with it), the most plausible
-    one (priors), and all of them described (:func:`collinear.alternatives`)."""
-    alts = collinear.alternatives(best, tied, params)
-    lead = alts[0]
-    if not lead["plausible"]:
-        return None, alts
-    chosen = best if lead["name"] == best["name"] else next(
-        e for e in tied if e["name"] == lead["name"])
-    return chosen, alts
-
-
 def _rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
 
@@ -330,7 +319,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
                   and len(e["params"]) <= len(first["params"]) + 1]
         if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap:
             others.append(baseline)
-        best, alts = _pick_plausible(first, others, params)
+        best, alts = collinear.pick_plausible(first, others, params)
         if best is None:
             notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
                          f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
@@ -370,6 +359,8 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
                      f"{100 * combined['reduction']:.0f} % but leaves "
                      + ", ".join(f"{k} at {v:.1f}x the floor" for k, v in lack.items())
                      + ": part of the gap is outside the library (or not one effect)")
+    if combined is not None and confusable:
+        notes.append(collinear.collinear_note(combined["name"], alts))
     floor_source = "the training flights' own in-sample residual (b, d refitted)"
     name = combined["name"] if combined else kind
     verdict = {
@@ -474,7 +465,9 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
             warnings.simplefilter("ignore", QuadsimWarning)
             flight = prepare([log], tuned, window_s=window_s)[0]
             one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-        flights.append(_judge(one, reference_fits, flight.name, floors, tuned))
+        flights.append(rule.judge_flight(one, reference_fits, flight.name, floors, tuned,
+                                        min_t=MIN_T, min_gain=MIN_GAIN, tie=TIE,
+                                        per_flight_tie=PER_FLIGHT_TIE))
     # Bad input: a reference set that disagrees with the model more than the flights tested.
     ratios = [np.median([c["before"] / max(c["floor"], 1e-300) for c in f["channels"].values()])
               for f in flights]
@@ -492,16 +485,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
             "where": {}, "effects": [],
             "verdict": {"outcome": "effect" if any(f["outcome"] == "effect" for f in flights)
                         else "unexplained", "effect": "see flights",
-                        "answer": _per_flight_answer(flights), "reduction": None,
+                        "answer": rule.per_flight_answer(flights), "reduction": None,
                         "confusable_with": []}}
-
-
-def _per_flight_answer(flights: list[dict]) -> str:
-    counts: dict[str, int] = {}
-    for f in flights:
-        counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
-    return f"{len(flights)} flights judged against the reference flights: " + ", ".join(
-        f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
 
 
 def _halves(f: Flight):
@@ -528,57 +513,3 @@ def _reference_spread(ref: list[Flight], params, effect_names, progress) -> tupl
         for k, v in one["where"]["heldout_rms_before"].items():
             floors.setdefault(k, []).append(v)
     return spread, floors
-
-
-def _judge(one: dict, spread: dict, name: str, floors: dict, params) -> dict:
-    """A flight's verdict. An effect *explains a clear share* when its held-out reduction
-    exceeds the largest reduction the same effect achieves on any reference (nominal) flight
-    by at least MIN_GAIN (effects that help every nominal flight alike, real drag or an
-    imperfect motor map, are not named) and its magnitude is plausible; among those within
-    TIE of the largest excess, the most plausible (then fewest parameters) is named, the
-    others within PER_FLIGHT_TIE of its reduction are listed as collinear alternatives.
-    Otherwise the flight is ``no_significant_gap`` when its nominal held-out RMS is at the
-    reference floor on every channel, else ``unexplained``."""
-    scored = []
-    for e in one["effects"]:
-        ok = e["t_statistic"] >= MIN_T and any(
-            e["identifiable"][k] and e["significant"][k] for k in e["params"])
-        excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
-        if ok and excess >= MIN_GAIN:
-            scored.append((excess, e))
-    effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
-               {"reference_max_reduction": max(spread.get(e["name"], [0.0]))}
-               for e in one["effects"]]
-    where = one["where"]
-    names = list(where["heldout_rms_before"])
-    floor = np.array([max(floors.get(k, [0.0])) for k in names])
-    before = np.array([where["heldout_rms_before"][k] for k in names])
-    notes = []
-    best, alts = None, []
-    if scored:
-        top = max(x for x, _ in scored)
-        tied = [(x, e) for x, e in scored if x >= top - TIE]
-        first = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
-        others = [e for _, e in scored
-                  if e is not first and e["reduction"] >= first["reduction"] - PER_FLIGHT_TIE]
-        best, alts = _pick_plausible(first, others, params)
-        if best is None:
-            notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
-                         f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
-            alts = []
-    after = before if best is None else np.array(
-        [best["heldout_rms_after"].get(k, before[n]) for n, k in enumerate(names)])
-    channels = rule.channel_table(names, before, after, floor)
-    kind = rule.outcome(best is not None, before, floor)
-    floor_source = "the reference flights' own held-out residual"
-    label = best["name"] if best else kind
-    confusable = [a["name"] for a in alts if best and a["name"] != best["name"]]
-    return {"file": name, "outcome": kind, "verdict": label,
-            "answer": rule.answer(kind, label, best["reduction"] if best else 0.0, alts,
-                                  channels, floor_source),
-            "channels": channels, "alternatives": alts,
-            "params": best["params"] if best else {}, "ci": best["ci"] if best else {},
-            "units": {k: collinear.unit_of(k) for k in (best["params"] if best else {})},
-            "reduction": best["reduction"] if best else 0.0, "confusable_with": confusable,
-            "separate_by": _separation(best["name"], confusable) if best else {},
-            "effects": effects, "notes": notes}

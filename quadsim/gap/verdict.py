@@ -33,8 +33,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import collinear
+
 __all__ = ["FLOOR_TOL", "MAX_FLOOR", "OUTCOMES", "channel_table", "outcome", "unit_of_channel",
-           "answer"]
+           "answer", "judge_flight", "per_flight_answer"]
 
 FLOOR_TOL = 1.25
 #: pooled mode: a training floor above this many times the noise RMS is a gap in itself.
@@ -90,3 +92,68 @@ def answer(kind: str, name: str | None, reduction: float, alts: list[dict], chan
     text += (", every channel at the floor." if not off else
              f"; above the floor after it: {', '.join(off)} (largest {worst_text}).")
     return text
+
+
+def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *, min_t: float,
+                 min_gain: float, tie: float, per_flight_tie: float) -> dict:
+    """A flight's verdict. An effect *explains a clear share* when its held-out reduction
+    exceeds the largest reduction the same effect achieves on any reference (nominal) flight
+    by at least min_gain (effects that help every nominal flight alike, real drag or an
+    imperfect motor map, are not named) and its magnitude is plausible; among those within
+    tie of the largest excess, the most plausible (then fewest parameters) is named, the
+    others within per_flight_tie of its reduction are listed as collinear alternatives.
+    Otherwise the flight is ``no_significant_gap`` when its nominal held-out RMS is at the
+    reference floor on every channel, else ``unexplained``."""
+    scored = []
+    for e in one["effects"]:
+        ok = e["t_statistic"] >= min_t and any(
+            e["identifiable"][k] and e["significant"][k] for k in e["params"])
+        excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
+        if ok and excess >= min_gain:
+            scored.append((excess, e))
+    effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
+               {"reference_max_reduction": max(spread.get(e["name"], [0.0]))}
+               for e in one["effects"]]
+    where = one["where"]
+    names = list(where["heldout_rms_before"])
+    floor = np.array([max(floors.get(k, [0.0])) for k in names])
+    before = np.array([where["heldout_rms_before"][k] for k in names])
+    notes = []
+    best, alts = None, []
+    if scored:
+        top = max(x for x, _ in scored)
+        tied = [(x, e) for x, e in scored if x >= top - tie]
+        first = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
+        others = [e for _, e in scored
+                  if e is not first and e["reduction"] >= first["reduction"] - per_flight_tie]
+        best, alts = collinear.pick_plausible(first, others, params)
+        if best is None:
+            notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
+                         f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
+            alts = []
+    if best is not None and len(alts) > 1:
+        notes.append(collinear.collinear_note(best["name"], alts))
+    after = before if best is None else np.array(
+        [best["heldout_rms_after"].get(k, before[n]) for n, k in enumerate(names)])
+    channels = channel_table(names, before, after, floor)
+    kind = outcome(best is not None, before, floor)
+    floor_source = "the reference flights' own held-out residual"
+    label = best["name"] if best else kind
+    confusable = [a["name"] for a in alts if best and a["name"] != best["name"]]
+    return {"file": name, "outcome": kind, "verdict": label,
+            "answer": answer(kind, label, best["reduction"] if best else 0.0, alts,
+                                  channels, floor_source),
+            "channels": channels, "alternatives": alts,
+            "params": best["params"] if best else {}, "ci": best["ci"] if best else {},
+            "units": {k: collinear.unit_of(k) for k in (best["params"] if best else {})},
+            "reduction": best["reduction"] if best else 0.0, "confusable_with": confusable,
+            "separate_by": collinear.separation(best["name"], confusable) if best else {},
+            "effects": effects, "notes": notes}
+
+
+def per_flight_answer(flights: list[dict]) -> str:
+    counts: dict[str, int] = {}
+    for f in flights:
+        counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
+    return f"{len(flights)} flights judged against the reference flights: " + ", ".join(
+        f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
