@@ -53,7 +53,11 @@ def _fmt_params(params: dict, ci: dict) -> str:
     """``name = value ± ci unit`` for every parameter (units from the effect declarations)."""
     from .collinear import unit_of
 
-    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g} {unit_of(k)}".rstrip()
+    def unit(k):
+        u = unit_of(k)
+        return "(relative)" if u == "1" else u
+
+    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g} {unit(k)}".rstrip()
                      for k, v in params.items())
 
 

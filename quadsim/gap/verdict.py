@@ -79,7 +79,10 @@ def answer(kind: str, name: str | None, reduction: float, alts: list[dict], chan
                 "several effects at once, or the data cannot tell.")
     lead = alts[0] if alts else None
     text = f"Behaves as if {lead['magnitude']}" if lead else f"{name}"
-    rest = [a for a in alts[1:] if a["plausible"]]
+    names = {a["name"] for a in alts}
+    # the b refit repeats thrust_factor's statement (plus d): say it once
+    rest = [a for a in alts[1:] if a["plausible"]
+            and not (a["name"] == "nominal_refit" and "thrust_factor" in names)]
     if rest:
         text += "; or as if " + "; or as if ".join(a["magnitude"] for a in rest)
         text += f" (collinear: {rest[0].get('separate_by', 'more varied flights')})"
