@@ -34,7 +34,11 @@ MAX_SPEED_RATIO = 1.5
 
 def vehicle_check(states: list, params: VehicleParams) -> dict:
     """Ratios data/model of b, d and rotor speed over ``states`` (FlightStates); raises
-    InputError when the parameter set cannot be the logged vehicle's."""
+    InputError when the parameter set cannot be the logged vehicle's. States without rotor
+    speeds are skipped ({} when none has them)."""
+    states = [s for s in states if s.rotor_speed is not None]
+    if not states:  # command-only logs: nothing to balance against here
+        return {}
     speed = np.concatenate([s.rotor_speed for s in states])
     sf = np.concatenate([s.specific_force for s in states])
     rate_dot = np.concatenate([s.body_accel for s in states])
