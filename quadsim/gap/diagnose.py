@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..delays import align_signal_delays, delay_notes
 from ..effects.base import EffectBase, EffectParameter
 from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
@@ -104,6 +105,7 @@ class Flight:
     name: str
     states: FlightStates
     fit: FlightStates
+    delays_ms: dict = field(default_factory=dict)   # signal delays vs motion capture (ms)
 
 
 def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
@@ -122,12 +124,13 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
+        log, delays_ms = align_signal_delays(log)    # quadsim.delays (estimate, shift, ms)
         states = flight_states(log, window_s=window_s, gravity=params.gravity)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, int(round(1.0 / (FIT_RATE_HZ * dt))),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
         index = np.arange(0, len(states.t), stride)
-        out.append(Flight(name, states, states.take(index)))
+        out.append(Flight(name, states, states.take(index), delays_ms))
     return out
 
 
@@ -258,6 +261,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
+    notes.extend(delay_notes(flights + (held_in or [])))
     train, held = _split(flights, held_in, notes)
     return _diagnose_split(train, held, params, effects, max_combination, progress, notes,
                            kstep)
@@ -446,6 +450,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
             flight = prepare([log], tuned, window_s=window_s)[0]
             one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
         flights.append(_judge(one, reference_fits, flight.name))
+        flights[-1]["signal_delays_ms"] = flight.delays_ms
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
             "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
