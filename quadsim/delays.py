@@ -43,7 +43,7 @@ Example::
     >>> from quadsim.delays import estimate_delays, align_log
     >>> log = load_log("flight_00.csv.gz")
     >>> est = estimate_delays(log)
-    >>> est.ms()                                   # {'gyro': 1.2, 'accel': 8.0, 'rotor': 20.3}
+    >>> est.ms()                                   # {'gyro': -5.6, 'accel': 0.1, 'rotor': -12.1}
     >>> aligned, est = align_log(log)              # shifted log and the estimate used
 """
 

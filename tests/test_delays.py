@@ -76,6 +76,6 @@ def test_real_crazyflie_nominal_offsets():
     gyro, rotor = np.array(gyro), np.array(rotor)
     # the same logging chain on every flight: the gyro offset agrees within 1 ms (one sample
     # is ~2 ms); the rotor-speed offset is estimated on every flight and inside the 50 ms of
-    # real logs (it varies with the flight's speed: -2 to -14 ms on these flights)
+    # real logs (it varies with the flight's speed: -1 to -13 ms on these flights)
     assert np.ptp(gyro) < 1e-3 and np.all(np.abs(gyro) < 0.05)
     assert np.all(np.isfinite(rotor.astype(float))) and np.all(np.abs(rotor) < 0.05)
