@@ -28,6 +28,11 @@ Checks (``tests/test_cable_payload.py``):
   fixed-pivot pendulum's 2 pi sqrt(L / g) because the vehicle swings back against the payload
   (L here is the stretched length L + m g / k).
 
+Only the engines (:func:`quadsim.engines.simulate`) carry the state; anything that evaluates
+``loads`` without it (the flight generator's accelerometer model, ``gap.synthetic``, the
+residual wrench) gets a one-line :class:`~quadsim.errors.ModelError` instead of a silent
+zero.
+
 Parameters: ``mass`` (kg; 0 = off), ``length`` (m, rest length), ``x, y, z`` (m, attachment
 in the body frame), ``axial_frequency`` (Hz, bounce frequency f_a of the payload on the cable;
 real slings 5-30 Hz), ``damping_ratio`` (1, axial). Example:
@@ -40,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ModelError
 from ..frames import quat_to_rotmat
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 
@@ -120,8 +126,14 @@ class CablePayload(EffectBase):
         return np.concatenate([ctx.effect_state[:, 3:6], accel], axis=1)
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
-        if self.mass == 0.0 or ctx.effect_state is None or ctx.effect_state.shape[1] < 6:
+        if self.mass == 0.0:
             return None
+        if ctx.effect_state is None or ctx.effect_state.shape[1] < 6:
+            raise ModelError("cable_payload: needs its internal state (the swinging payload), "
+                             "which only the engines integrate (quadsim.engines.simulate); "
+                             "the flight generator's accelerometer, the inverse-dynamics logs "
+                             "and the residual wrench cannot evaluate it")
+
         rot, pull = self._tension(ctx)
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
