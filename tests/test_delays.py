@@ -66,7 +66,7 @@ def test_real_crazyflie_nominal_offsets():
     from quadsim.flightlog import load_log
 
     gyro, rotor = [], []
-    for path in sorted(folder.glob("flight_*.csv.gz"))[::4]:
+    for path in sorted(folder.glob("flight_*.csv.gz"))[::8]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             est = estimate_delays(load_log(path))
