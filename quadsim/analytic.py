@@ -167,6 +167,42 @@ class BatchEffects:
         if any(dynamics) and not all(dynamics):
             raise ValueError("either every simulation of a batch has rotor dynamics or none")
         self.rotor_dynamics = bool(dynamics) and all(dynamics)
+        #: internal effect states per simulation (the largest group's; others padded)
+        self.state_size = max((s.state_size() for s, _, _ in self.groups), default=0)
+
+    def initial_state(self, vehicle: dict) -> np.ndarray:
+        """(B, state_size) internal effect states at the start (vehicle snapshot dict)."""
+        out = np.zeros((self.batch, self.state_size))
+        for effect_set, params, idx in self.groups:
+            size = effect_set.state_size()
+            if size:
+                part = {k: np.asarray(v)[idx] for k, v in vehicle.items()}
+                out[idx, :size] = effect_set.initial_state(params, part)
+        return out
+
+    def _contexts(self, t, position, velocity, quat, body_rate, rotor_speed, rotor_accel,
+                  effect_state):
+        for effect_set, params, idx in self.groups:
+            if not effect_set.effects:
+                continue
+            wind = effect_set.air_velocity(t[idx], position[idx])
+            size = effect_set.state_size()
+            state = None if effect_state is None else effect_state[idx, :size]
+            yield effect_set, idx, size, EffectContext(
+                t=t[idx], position=position[idx], velocity=velocity[idx], quat=quat[idx],
+                body_rate=body_rate[idx], air_velocity=velocity[idx] - wind,
+                rotor_speed=rotor_speed[idx], rotor_accel=rotor_accel[idx], params=params,
+                effect_state=state)
+
+    def state_rate(self, t, position, velocity, quat, body_rate, rotor_speed, rotor_accel,
+                   effect_state) -> np.ndarray:
+        """d/dt of the internal effect states (B, state_size)."""
+        rate = np.zeros_like(effect_state)
+        for effect_set, idx, size, ctx in self._contexts(
+                t, position, velocity, quat, body_rate, rotor_speed, rotor_accel, effect_state):
+            if size:
+                rate[idx, :size] = effect_set.state_rate(ctx)
+        return rate
 
     def rotor_speed_rate(self, t: np.ndarray, commanded: np.ndarray,
                          actual: np.ndarray) -> np.ndarray:
@@ -180,18 +216,11 @@ class BatchEffects:
 
     def loads(self, t: np.ndarray, position: np.ndarray, velocity: np.ndarray,
               quat: np.ndarray, body_rate: np.ndarray, rotor_speed: np.ndarray,
-              rotor_accel: np.ndarray) -> EffectLoads:
+              rotor_accel: np.ndarray, effect_state: np.ndarray | None = None) -> EffectLoads:
         """Wind first (``air_velocity``), then ``loads(ctx)``; (B, ...) arrays in, loads out."""
         total = EffectLoads.neutral(self.batch, rotor_speed.shape[1])
-        for effect_set, params, idx in self.groups:
-            if not effect_set.effects:
-                continue
-            wind = effect_set.air_velocity(t[idx], position[idx])
-            ctx = EffectContext(t=t[idx], position=position[idx], velocity=velocity[idx],
-                                quat=quat[idx], body_rate=body_rate[idx],
-                                air_velocity=velocity[idx] - wind,
-                                rotor_speed=rotor_speed[idx], rotor_accel=rotor_accel[idx],
-                                params=params)
+        for effect_set, idx, _, ctx in self._contexts(
+                t, position, velocity, quat, body_rate, rotor_speed, rotor_accel, effect_state):
             part = effect_set.loads(ctx)
             for name in ("thrust_scale", "thrust_offset", "force_world", "torque_body"):
                 getattr(total, name)[idx] = getattr(part, name)
@@ -233,6 +262,7 @@ def state_derivative(t: float, y: np.ndarray, *, body: BodyArrays, effects: Batc
     position, velocity, quat, body_rate, omega = _unpack(y, batch, rotors, rotor_dynamics)
     times = np.full(batch, t)
     omega_dot = np.zeros_like(command)
+    extra = y.reshape(batch, -1)[:, y.size // batch - effects.state_size:]
     if rotor_dynamics:
         omega_dot = effects.rotor_speed_rate(times, command, omega)
     else:
@@ -240,7 +270,8 @@ def state_derivative(t: float, y: np.ndarray, *, body: BodyArrays, effects: Batc
     force_body, torque_body = np.zeros((batch, 3)), np.zeros((batch, 3))
     force_world = np.zeros((batch, 3))
     if effects.active:
-        loads = effects.loads(times, position, velocity, quat, body_rate, omega, omega_dot)
+        loads = effects.loads(times, position, velocity, quat, body_rate, omega, omega_dot,
+                              extra)
         force_body, torque_body = extra_wrench(body, loads, omega)
         force_world = loads.force_world
     wrench = _matvec(body.allocation, np.square(omega))
@@ -249,6 +280,9 @@ def state_derivative(t: float, y: np.ndarray, *, body: BodyArrays, effects: Batc
     parts = [velocity, accel, _quat_rate(quat, body_rate), alpha]
     if rotor_dynamics:
         parts.append(omega_dot)
+    if effects.state_size:
+        parts.append(effects.state_rate(times, position, velocity, quat, body_rate, omega,
+                                        omega_dot, extra))
     return np.concatenate(parts, axis=1).ravel()
 
 
@@ -303,6 +337,8 @@ def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial
     batch = len(params)
     dynamics = effects.rotor_dynamics
     y = pack_state(initial, dynamics)
+    if effects.state_size:
+        y = np.concatenate([y.reshape(batch, -1), effects.initial_state(initial)], 1).ravel()
     state = unpack_state(y, 0.0, batch, initial["rotor_speed"], dynamics)
     samples = []
     command = None

@@ -22,6 +22,9 @@ steps one timestep at a time and, once per step for the whole batch,
   that thrust is not half a step late;
 * evaluates ``air_velocity`` and ``loads`` at the step's midpoint (time, rotor speed, and the
   body state predicted from the last accelerations);
+* integrates the internal states of effects that have them (e.g. a cable payload) over the
+  step with two RK4 half steps along the body state predicted from the last accelerations,
+  and evaluates ``loads`` with the mid-step states;
 * applies the thrust scale through the controls (``ctrl = scale * mean Omega^2``: the
   actuators are linear in ctrl, so thrust and drag torque scale exactly, in the body frame, at
   every RK4 stage), and everything else the effects add (thrust offsets, world force, body
@@ -113,9 +116,9 @@ def _rotor_step(effects: BatchEffects, t: float, dt: float, command: np.ndarray,
     return mid, end, mean_sq, rate(t + dt / 2, mid)
 
 
-def _midpoint_state(qpos, qvel, qacc, dt):
-    """Body state half a step ahead, predicted from the last computed accelerations."""
-    h = dt / 2
+def _midpoint_state(qpos, qvel, qacc, dt, h=None):
+    """Body state half a step (or ``h``) ahead, predicted from the last accelerations."""
+    h = dt / 2 if h is None else h
     position = qpos[:, 0:3] + qvel[:, 0:3] * h + 0.5 * qacc[:, 0:3] * h * h
     velocity = qvel[:, 0:3] + qacc[:, 0:3] * h
     body_rate = qvel[:, 3:6] + qacc[:, 3:6] * h
@@ -124,18 +127,43 @@ def _midpoint_state(qpos, qvel, qacc, dt):
     return position, velocity, quat, body_rate
 
 
-def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega):
-    """One timestep with effects; returns the rotor speeds at the end of the step."""
+def _effect_state_step(effects, qpos, qvel, qacc, t, dt, mid, accel, state):
+    """Internal effect states at mid-step and end of step: two RK4 half steps along the body
+    state predicted from the last accelerations."""
+    times = np.full(len(state), 0.0)
+
+    def rate(h, s):
+        vehicle = _midpoint_state(qpos, qvel, qacc, dt, h)
+        return effects.state_rate(times + t + h, *vehicle, mid, accel, s)
+
+    def rk4(t0, s0, h):
+        k1 = rate(t0, s0)
+        k2 = rate(t0 + h / 2, s0 + h / 2 * k1)
+        k3 = rate(t0 + h / 2, s0 + h / 2 * k2)
+        k4 = rate(t0 + h, s0 + h * k3)
+        return s0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    half = rk4(0.0, state, dt / 2)
+    return half, rk4(dt / 2, half, dt / 2)
+
+
+def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega, state=None):
+    """One timestep with effects; returns the rotor speeds (and the internal effect states)
+    at the end of the step."""
     qpos, qvel, qacc = bound["qpos"], bound["qvel"], bound["qacc"]
     if effects.rotor_dynamics:
         mid, end, mean_sq, accel = _rotor_step(effects, t, dt, command, omega)
     else:
         mid, end, mean_sq, accel = command, command, command**2, np.zeros_like(command)
     scale = np.ones_like(command)
+    state_mid = state_end = state
+    if effects.state_size:
+        state_mid, state_end = _effect_state_step(effects, qpos, qvel, qacc, t, dt, mid, accel,
+                                                  state)
     if effects.active:
         position, velocity, quat, body_rate = _midpoint_state(qpos, qvel, qacc, dt)
         loads = effects.loads(np.full(len(command), t + dt / 2), position, velocity, quat,
-                              body_rate, mid, accel)
+                              body_rate, mid, accel, state_mid)
         force_body, torque_body = extra_wrench(body, loads, mid, include_scale=False)
         rot = quat_to_rotmat(quat)
         xfrc = bound["xfrc_applied"]
@@ -144,7 +172,7 @@ def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega):
         scale = loads.thrust_scale
     bound["ctrl"][:] = scale * mean_sq
     _step(batch, 1)
-    return end
+    return end if state is None else (end, state_end)
 
 
 def _step(batch, nstep):
@@ -186,6 +214,7 @@ def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: 
     stepwise = effects.active or effects.rotor_dynamics
     bound = {name: batch.bind(name) for name in ("qpos", "qvel", "qacc", "xfrc_applied", "ctrl")}
     omega = np.array(initial["rotor_speed"], dtype=float)
+    extra = effects.initial_state(initial) if effects.state_size else None
     samples, command = [], None
     for k in range(periods + 1):
         state = {"t": np.full(len(params), k * control_period), "position": qpos[:, 0:3].copy(),
@@ -201,7 +230,9 @@ def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: 
         if stepwise:
             for j in range(substeps):
                 omega = _effect_step(batch, bound, body_id, body, effects,
-                                     k * control_period + j * dt, dt, command, omega)
+                                     k * control_period + j * dt, dt, command, omega, extra)
+                if extra is not None:
+                    omega, extra = omega
         else:
             batch.bind("ctrl")[:] = command**2
             _step(batch, substeps)

@@ -22,12 +22,15 @@ from ..errors import InputError
 from .base import Effect, EffectBase, EffectContext, EffectLoads, EffectParameter, EffectSet
 from .battery_sag import BatterySag
 from .body_drag import BodyDrag
+from .cable_payload import CablePayload
+from .canted_rotor import CantedRotor
 from .com_offset import ComOffset
 from .ground_effect import GroundEffect
 from .gyroscopic import Gyroscopic
 from .inertia_error import InertiaError
 from .mass_offset import MassOffset
 from .motor_lag import MotorLag
+from .rate_damping import RateDamping
 from .rotor_drag import RotorDrag
 from .thrust_curve import ThrustCurve
 from .thrust_factor import ThrustFactor
@@ -52,7 +55,8 @@ __all__ = [
 #: name -> effect class, for every effect in the library.
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
     MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
-    ComOffset, MassOffset, InertiaError, Wind, Gyroscopic, ThrustFactor)}
+    ComOffset, MassOffset, InertiaError, Wind, Gyroscopic, ThrustFactor, RateDamping,
+    CantedRotor, CablePayload)}
 
 #: Realistic magnitudes of each effect on the 0.84 kg testbed (specs for
 #: :func:`effect_set_from_specs`), shared by the engine-agreement tests and
@@ -72,6 +76,9 @@ TESTBED_EXAMPLES: dict[str, tuple[str, ...]] = {
     "wind": ("wind:vx=2,vy=-1,gust=0.5,seed=3", "body_drag:cd_area=0.02",
              "rotor_drag:coefficient=1e-5"),
     "motor_lag": ("motor_lag:time_constant=0.03,time_constant_down=0.05",),
+    "rate_damping": ("rate_damping:x=0.01,y=0.01,z=0.002",),
+    "canted_rotor": ("canted_rotor:rotor=1,angle=0.05,azimuth=1.5708",),
+    "cable_payload": ("cable_payload:mass=0.1,length=0.5,z=-0.05",),
 }
 
 

@@ -16,6 +16,13 @@ neutral default for the rest (see :class:`EffectBase`):
    relative to nominal (battery voltage). It multiplies the commanded speed before the
    rotor-speed dynamics; without a dynamics effect the rotor follows the scaled command with
    the fast first-order response :data:`SPEED_RESPONSE_S`.
+6. Internal state (optional, e.g. a swinging payload): ``state_size() -> S`` (0 = none),
+   ``initial_state(params, vehicle) -> (B, S)`` from the vehicle's initial snapshot (dict of
+   (B, ...) arrays ``position, velocity, quat, body_rate``), and ``state_rate(ctx) -> (B, S)``.
+   The engines integrate the state with the vehicle (the analytic engine inside its ODE, the
+   MuJoCo runner by RK4 over each timestep) and hand each effect its own slice as
+   ``ctx.effect_state`` in ``loads`` and ``state_rate``. Effects with state cannot be fitted
+   from a residual wrench alone (the state is not logged); fast engine paths may refuse them.
 
 Both engines (analytic and MuJoCo) call the same hooks on the same numbers each step and
 apply the result with the same :func:`quadsim.rotors` geometry, so an effect acts
@@ -26,7 +33,7 @@ All arrays carry a leading batch axis B (B simulations advanced in one Python ca
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -59,7 +66,8 @@ class EffectContext:
     position, velocity: world, body origin (B, 3); quat (B, 4) wxyz body-to-world;
     body_rate (B, 3) rad/s; air_velocity (B, 3): vehicle velocity minus wind, world (m/s);
     rotor_speed (B, R) actual (rad/s); rotor_accel (B, R) (rad/s^2); t (B,) (s);
-    params: the (possibly modified) vehicle; vbat (B,) battery voltage (V) or NaN.
+    params: the (possibly modified) vehicle; vbat (B,) battery voltage (V) or NaN;
+    effect_state (B, S): the internal state of the effect being evaluated (None without).
     """
 
     t: np.ndarray
@@ -72,6 +80,7 @@ class EffectContext:
     rotor_accel: np.ndarray
     params: VehicleParams
     vbat: np.ndarray | None = None
+    effect_state: np.ndarray | None = None
 
 
 @dataclass
@@ -161,6 +170,18 @@ class EffectBase:
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
         return None
 
+    def state_size(self) -> int:
+        """Number of internal states per simulation (0: the effect has none)."""
+        return 0
+
+    def initial_state(self, params: VehicleParams, vehicle: dict) -> np.ndarray:
+        """(B, state_size) internal state at the start, from the vehicle snapshot."""
+        return np.zeros((len(vehicle["position"]), 0))
+
+    def state_rate(self, ctx: EffectContext) -> np.ndarray:
+        """d/dt of ``ctx.effect_state`` (B, state_size)."""
+        return np.zeros((len(ctx.t), 0))
+
     def __repr__(self) -> str:
         inner = ", ".join(f"{k}={v:g}" for k, v in self._values.items())
         return f"{type(self).__name__}({inner})"
@@ -215,10 +236,40 @@ class EffectSet:
                 wind = wind + w
         return wind
 
+    def _sized(self) -> list[tuple[Effect, int, int]]:
+        """(effect, first state column, state count) for every effect, in order."""
+        out, start = [], 0
+        for effect in self.effects:
+            size = effect.state_size() if hasattr(effect, "state_size") else 0
+            out.append((effect, start, size))
+            start += size
+        return out
+
+    def state_size(self) -> int:
+        """Total internal states per simulation (the effects' slices, concatenated)."""
+        return sum(size for _, _, size in self._sized())
+
+    def initial_state(self, params: VehicleParams, vehicle: dict) -> np.ndarray:
+        batch = len(vehicle["position"])
+        parts = [effect.initial_state(params, vehicle).reshape(batch, size)
+                 for effect, _, size in self._sized() if size]
+        return np.concatenate(parts, axis=1) if parts else np.zeros((batch, 0))
+
+    def _own(self, ctx: EffectContext, start: int, size: int) -> EffectContext:
+        if ctx.effect_state is None or ctx.effect_state.shape[1] == 0:
+            return ctx
+        return replace(ctx, effect_state=ctx.effect_state[:, start:start + size])
+
+    def state_rate(self, ctx: EffectContext) -> np.ndarray:
+        batch = len(ctx.t)
+        parts = [effect.state_rate(self._own(ctx, start, size)).reshape(batch, size)
+                 for effect, start, size in self._sized() if size]
+        return np.concatenate(parts, axis=1) if parts else np.zeros((batch, 0))
+
     def loads(self, ctx: EffectContext) -> EffectLoads:
         total = EffectLoads.neutral(ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])
-        for effect in self.effects:
-            part = effect.loads(ctx)
+        for effect, start, size in self._sized():
+            part = effect.loads(self._own(ctx, start, size) if size else ctx)
             if part is not None:
                 total = total.add(part)
         return total

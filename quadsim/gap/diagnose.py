@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
 
+from ..delays import align_signal_delays, delay_notes
 from ..effects.base import EffectBase, EffectParameter
 from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
@@ -82,6 +83,7 @@ class Flight:
     name: str
     states: FlightStates
     fit: FlightStates
+    delays_ms: dict = field(default_factory=dict)   # signal delays vs motion capture (ms)
 
 
 def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
@@ -101,12 +103,13 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
+        log, delays_ms = align_signal_delays(log)    # quadsim.delays (estimate, shift, ms)
         states = flight_states(log, window_s=window_s, gravity=params.gravity)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, int(round(1.0 / (FIT_RATE_HZ * dt))),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
         index = np.arange(0, len(states.t), stride)
-        out.append(Flight(name, states, states.take(index)))
+        out.append(Flight(name, states, states.take(index), delays_ms))
     return out
 
 
@@ -238,6 +241,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
     checks = vehicle_check([f.fit for f in flights + (held_in or [])], params)
+    notes.extend(delay_notes(flights + (held_in or [])))
     train, held = _split(flights, held_in, notes)
     result = _diagnose_split(train, held, params, effects, max_combination, progress, notes,
                              kstep, map_fn)
@@ -500,8 +504,10 @@ def _one_flight(log, tuned, effects, window_s, spread, floors, progress) -> dict
         warnings.simplefilter("ignore", QuadsimWarning)
         flight = prepare([log], tuned, window_s=window_s)[0]
         one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-    return rule.judge_flight(one, spread, flight.name, floors, tuned, min_t=MIN_T,
-                             min_gain=MIN_GAIN, tie=TIE, per_flight_tie=PER_FLIGHT_TIE)
+    judged = rule.judge_flight(one, spread, flight.name, floors, tuned, min_t=MIN_T,
+                               min_gain=MIN_GAIN, tie=TIE, per_flight_tie=PER_FLIGHT_TIE)
+    judged["signal_delays_ms"] = flight.delays_ms
+    return judged
 
 
 def _halves(f: Flight):

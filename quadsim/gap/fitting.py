@@ -129,6 +129,8 @@ FIT_SPEC = {
     "body_drag": (("cd_area", "cd_area_vertical"), {}, lambda p: [_area_scale(p)] * 2),
     "motor_lag": (("time_constant",), {}, lambda p: [0.03]),
     "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
+    # a damping time constant I/k of about 1 s
+    "rate_damping": (("x", "y", "z"), {}, lambda p: list(np.diag(p.inertia))),
 }
 
 

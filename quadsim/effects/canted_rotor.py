@@ -1,0 +1,72 @@
+"""canted_rotor: one rotor's thrust axis tilted away from where the model has it.
+
+Formula: rotor ``rotor`` (1-based, the parameter set's numbering) has its unit axis a
+rotated by ``angle`` (rad) about the body-frame direction e = (cos azimuth, sin azimuth, 0)
+(Rodrigues)::
+
+    a' = a cos(angle) + (e x a) sin(angle) + e (e . a)(1 - cos(angle))
+
+The rotor's thrust b Omega^2 and its drag (reaction) torque -s d Omega^2 both act along a'
+(the motor, its shaft and the propeller disc tilt together); everything else about the
+vehicle is unchanged. The effect changes the parameter set's rotor axis, so both engines,
+the allocation (:mod:`quadsim.rotors`) and every other effect (thrust scales, offsets,
+gyroscopic torque) use the tilted axis.
+
+A bent motor mount or a crash-bent arm tilts a rotor by a few degrees; some vehicles tilt
+rotors on purpose (the rotor-axis geometry and its wrench are those of Rajappa, Ryll,
+Bülthoff & Franchi, "Modeling, control and design optimization for a fully-actuated
+hexarotor aerial vehicle with tilted propellers", ICRA 2015, eqs. 1-4). A tilt gives a
+horizontal force b Omega^2 sin(angle) and a torque from the arm and from the tilted drag
+torque, which a controller must trim out.
+
+Parameters: ``rotor`` (index 1..8, must be a whole number within the vehicle's count),
+``angle`` (rad; 0 = off), ``azimuth`` (rad, direction of the tilt axis in the body xy-plane
+from body x). Example: ``canted_rotor:rotor=1,angle=0.05,azimuth=1.5708`` tilts the testbed's
+front rotor by 2.9 deg about body y: at hover (2.06 N) the rotor pushes
+2.06 sin(0.05) = 0.103 N forward (+x).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..errors import ModelError
+from .base import EffectBase, EffectParameter
+
+__all__ = ["CantedRotor", "tilt_axis"]
+
+
+def tilt_axis(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
+    """``axis`` (3,) rotated by ``angle`` (rad) about (cos azimuth, sin azimuth, 0)."""
+    axis = np.asarray(axis, dtype=float)
+    e = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
+    out = axis * np.cos(angle) + np.cross(e, axis) * np.sin(angle) \
+        + e * np.dot(e, axis) * (1.0 - np.cos(angle))
+    return out / np.linalg.norm(out)
+
+
+class CantedRotor(EffectBase):
+    """One rotor axis tilted by an angle about a horizontal body direction."""
+
+    name = "canted_rotor"
+    parameters = (
+        EffectParameter("rotor", "index", 1.0, 1.0, 8.0, "rotor number (1-based)"),
+        EffectParameter("angle", "rad", 0.0, -0.5, 0.5, "tilt angle (0 = off)"),
+        EffectParameter("azimuth", "rad", 0.0, -np.pi, np.pi,
+                        "tilt axis direction in the body xy-plane, from body x"),
+    )
+
+    def apply_to_params(self, params):
+        if self.angle == 0.0:
+            return params
+        index = self.rotor
+        if index != round(index) or not 1 <= index <= params.rotor_count:
+            raise ModelError(f"canted_rotor: rotor = {index:g} is not a rotor of the vehicle "
+                             f"(1..{params.rotor_count})")
+        i = int(round(index)) - 1
+        rotors = list(params.rotors)
+        rotors[i] = dataclasses.replace(rotors[i],
+                                        axis=tilt_axis(rotors[i].axis, self.angle, self.azimuth))
+        return params.replace(rotors=tuple(rotors))

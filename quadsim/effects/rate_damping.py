@@ -1,0 +1,49 @@
+"""rate_damping: aerodynamic damping torque proportional to the body rates.
+
+Formula (body frame, per axis, N m)::
+
+    tau = -(k_x w_x, k_y w_y, k_z w_z)
+
+A rolling or pitching vehicle moves each rotor disc up or down through the air: the
+advancing side sees less inflow and more thrust, the retreating side the opposite, and the
+thrust difference times the arm opposes the rate (plus blade-flapping and frame drag
+moments); yawing adds a profile-drag moment. To first order all are linear in the rate
+(Bristeau, Martin, Salaün & Petit, "The role of propeller aerodynamics in the model of a
+quadrotor UAV", ECC 2009, sec. 4; Mahony, Kumar & Corke, "Multirotor aerial vehicles",
+IEEE RAM 2012, sec. "rotor dynamics"). Order of magnitude from momentum theory: with
+dT/dv_z ~ T/(2 v_i) per rotor (v_i the hover induced velocity) and arm r, a "+" vehicle's
+roll damping is k ~ 2 r^2 dT/dv_z; for the 0.84 kg testbed (T = 2.06 N, v_i = 4.1 m/s,
+r = 0.198 m) k_x ~ 0.02 N m s/rad.
+
+Parameters ``x, y, z`` are the damping coefficients k (N m s/rad) about body x, y, z; 0 = off.
+Example: ``rate_damping:x=0.01,y=0.01,z=0.002`` gives a roll rate of 1 rad/s a torque of
+-0.01 N m (the testbed's Ixx = 0.006 kg m^2: a 0.6 s time constant).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+
+__all__ = ["RateDamping"]
+
+
+class RateDamping(EffectBase):
+    """Linear aerodynamic damping torque -k w per body axis."""
+
+    name = "rate_damping"
+    parameters = (
+        EffectParameter("x", "N m s/rad", 0.0, 0.0, 1.0, "roll damping coefficient k_x"),
+        EffectParameter("y", "N m s/rad", 0.0, 0.0, 1.0, "pitch damping coefficient k_y"),
+        EffectParameter("z", "N m s/rad", 0.0, 0.0, 1.0, "yaw damping coefficient k_z"),
+    )
+
+    def loads(self, ctx: EffectContext) -> EffectLoads | None:
+        if self.is_off():
+            return None
+        batch, rotors = np.shape(ctx.rotor_speed)
+        loads = EffectLoads.neutral(batch, rotors)
+        loads.torque_body = -np.asarray(ctx.body_rate, dtype=float) \
+            * np.array([self.x, self.y, self.z])
+        return loads
