@@ -40,7 +40,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
-from .errors import ModelError, SimulationError
+from .errors import InputError, ModelError, SimulationError
 from .frames import quat_derivative, quat_normalize, quat_to_rotmat
 from .mjcf import BODY_NAME, vehicle_xml
 from .params import VehicleParams, inertia_problems
@@ -79,12 +79,43 @@ def compile_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
     return model
 
 
-def _make_batch(params: Sequence[VehicleParams], timestep: float, nthread: int
-                ) -> tuple[mjbatch.Batch, int]:
+def _models(params: Sequence[VehicleParams], timestep: float) -> list[mujoco.MjModel]:
+    """One compiled model per simulation (shared between simulations with the same set)."""
     models: dict[int, mujoco.MjModel] = {}
     for p in params:
         if id(p) not in models:
             models[id(p)] = compile_model(p, timestep)
+    return [models[id(p)] for p in params]
+
+
+#: Fraction of the available memory a batch may plan to use before it is refused.
+MEMORY_FRACTION = 0.5
+
+
+def check_memory(params: Sequence[VehicleParams], timestep: float, periods: int) -> int:
+    """Estimate the bytes a batch needs (one MjData per simulation plus the samples) and
+    raise :class:`InputError` before allocating if it exceeds ``MEMORY_FRACTION`` of the
+    available memory. Returns the estimate (bytes)."""
+    import os
+
+    model = compile_model(params[0], timestep)
+    per_sim = model.narena + model.nbuffer \
+        + 8 * (periods + 1) * (2 * 13 + 4 * params[0].rotor_count)
+    need = len(params) * per_sim
+    try:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):      # not available on this platform
+        return need
+    if need > MEMORY_FRACTION * free:
+        raise InputError(f"batch of {len(params)} simulations needs about {need / 1e9:.3g} GB "
+                         f"({per_sim / 1e6:.3g} MB each), more than {MEMORY_FRACTION:g} of the "
+                         f"{free / 1e9:.3g} GB available: split the batch")
+    return need
+
+
+def _make_batch(params: Sequence[VehicleParams], timestep: float, nthread: int
+                ) -> tuple[mjbatch.Batch, int]:
+    models = {id(p): m for p, m in zip(params, _models(params, timestep))}
     first = models[id(params[0])]
     threads = 1 if len(params) == 1 else nthread
     batch = mjbatch.Batch(first, nsim=len(params), nthread=threads)
@@ -168,16 +199,47 @@ def _check(qpos, qvel, time, expected_t):
 def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
                command_fn: Callable[[int, dict], np.ndarray], periods: int,
                control_period: float, *, timestep: float | None = None,
-               nthread: int = 0) -> dict:
+               nthread: int = 0, fast: bool | None = None) -> dict:
     """Advance B simulations ``periods`` control periods in MuJoCo (same contract and output
     as :func:`quadsim.analytic.run_analytic`). ``timestep`` must divide ``control_period``
-    (default :func:`default_timestep`); ``nthread`` 0 uses every CPU."""
+    (default :func:`default_timestep`); ``nthread`` 0 uses every CPU.
+
+    ``fast``: None (default) runs the compiled path of :mod:`quadsim.fast_mujoco` when numba
+    is installed and every effect has a fast form, else this module's step-by-step reference
+    path; False forces the reference; True requires the fast path (``InputError`` naming
+    what prevents it)."""
     dt = timestep or default_timestep(control_period)
     substeps = int(round(control_period / dt))
     if abs(substeps * dt - control_period) > 1e-9 * control_period:
         raise ValueError(f"timestep {dt} does not divide control period {control_period}")
-    batch, body_id = _make_batch(params, dt, nthread)
+    check_memory(params, dt, periods)
     body = body_arrays(params)
+    if fast is not False:
+        from . import fast_mujoco
+
+        sets = [None] * len(params)
+        for effect_set, _, idx in effects.groups:
+            for i in idx:
+                sets[i] = effect_set
+        problem = fast_mujoco.fast_form_problem(sets, params)
+        if problem and fast:
+            raise InputError(f"mujoco engine: fast path unavailable: {problem}")
+        if not problem:
+            models = _models(params, dt)
+            body_id = mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, BODY_NAME)
+            out, status = fast_mujoco.run_fast(models, body_id, sets, params, body, initial,
+                                               command_fn, periods, control_period, dt,
+                                               nthread)
+            if status.any():
+                bad = np.flatnonzero(status)
+                raise SimulationError(
+                    f"mujoco engine: simulation(s) {bad.tolist()} diverged before t = "
+                    + ", ".join(f"{status[i] * control_period:.4g}" for i in bad)
+                    + f" s (NaN, MuJoCo reset after a bad acceleration, or state beyond "
+                    f"{STATE_BOUND:g}); the others' results are in this error's .partial",
+                    partial=out, diverged=bad.tolist())
+            return out
+    batch, body_id = _make_batch(params, dt, nthread)
     batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
     qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
     qpos[:, 0:3], qpos[:, 3:7] = initial["position"], quat_normalize(initial["quat"])

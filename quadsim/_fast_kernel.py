@@ -1,0 +1,226 @@
+"""The numba kernel of :mod:`quadsim.fast_mujoco` (imported only when numba is installed).
+
+:func:`run` (``run(functions, addr, commands, omega, k0, substeps, dt, period, rotor_arm,
+rotor_axis, rotor_spin, rotor_position, rows, lag, active, out, status)``) calls MuJoCo's C
+functions by address (no ctypes objects inside, so numba can cache it on disk); the formulas are
+those of :mod:`quadsim.mujoco_engine` (``_effect_step``) and of each effect's module, written
+per simulation and per rotor. Units SI.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+from .analytic import STATE_BOUND
+from .fast_mujoco import _OFFSET as offset
+
+MIN_SCALE = 0.5          # quadsim.effects.battery_sag.MIN_SCALE
+MAX_TERM = 0.5           # quadsim.effects.ground_effect.MAX_TERM
+
+
+@intrinsic
+def _as_pointer(typingctx, address):
+    signature = types.CPointer(types.float64)(types.int64)
+
+    def codegen(context, builder, sig, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+
+    return signature, codegen
+
+
+@intrinsic
+def _call(typingctx, function, model, data, state, spec):
+    """Call a C function ``void f(void*, void*[, void*, int])`` at address ``function``
+    (int64; ``state``/``spec`` ignored when both are 0 for the two-argument form)."""
+    signature = types.void(types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, sig, args):
+        pointer = ir.IntType(8).as_pointer()
+        kind = ir.FunctionType(ir.VoidType(), [pointer, pointer, pointer, ir.IntType(32)])
+        target = builder.inttoptr(args[0], kind.as_pointer())
+        builder.call(target, [builder.inttoptr(args[1], pointer),
+                              builder.inttoptr(args[2], pointer),
+                              builder.inttoptr(args[3], pointer),
+                              builder.trunc(args[4], ir.IntType(32))])
+        return context.get_dummy_value()
+
+    return signature, codegen
+
+
+O_UP, O_DOWN, O_MIS = offset["tau_up"], offset["tau_down"], offset["mismatch"]
+O_BAT, O_GG, O_GH = offset["battery_rate"], offset["ground_gain"], offset["ground_height"]
+O_GR, O_CL, O_CO = offset["ground_radius"], offset["curve_linear"], offset["curve_offset"]
+O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["body_drag"]
+O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
+O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["gust_phase"]
+GUST = offset["gust_phase"] - offset["gust_frequency"]
+BOUND = STATE_BOUND
+TWO_PI = 2.0 * np.pi
+
+
+@numba.njit(inline="always", cache=True)
+def rate(c, w, up, down):
+    return (c - w) / (up if c >= w else down)
+
+
+@numba.njit(inline="always", cache=True)
+def rk4(c, w0, h, up, down):
+    k1 = rate(c, w0, up, down)
+    k2 = rate(c, w0 + h / 2 * k1, up, down)
+    k3 = rate(c, w0 + h / 2 * k2, up, down)
+    k4 = rate(c, w0 + h * k3, up, down)
+    return w0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@numba.njit(cache=True)
+def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub, xfrc, scale):
+    rotors = cmd.shape[0]
+    h = dt / 2
+    pos = np.empty(3)
+    vel = np.empty(3)
+    rate_b = np.empty(3)
+    for i in range(3):
+        pos[i] = qpos[i] + qvel[i] * h + 0.5 * qacc[i] * h * h
+        vel[i] = qvel[i] + qacc[i] * h
+        rate_b[i] = qvel[3 + i] + qacc[3 + i] * h
+    w0 = qvel[3] + qacc[3] * h / 2
+    w1 = qvel[4] + qacc[4] * h / 2
+    w2 = qvel[5] + qacc[5] * h / 2
+    q0, q1, q2, q3 = qpos[3], qpos[4], qpos[5], qpos[6]
+    d0 = 0.5 * (-q1 * w0 - q2 * w1 - q3 * w2)
+    d1 = 0.5 * (q0 * w0 + q2 * w2 - q3 * w1)
+    d2 = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
+    d3 = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
+    q0, q1, q2, q3 = q0 + d0 * h, q1 + d1 * h, q2 + d2 * h, q3 + d3 * h
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    w, x, y, z = q0 / n, q1 / n, q2 / n, q3 / n
+    rot = np.empty((3, 3))
+    rot[0, 0], rot[0, 1], rot[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), \
+        2 * (x * z + w * y)
+    rot[1, 0], rot[1, 1], rot[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), \
+        2 * (y * z - w * x)
+    rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), \
+        1 - 2 * (x * x + y * y)
+    tm = t + dt / 2
+    row = rows[b]
+    air = np.empty(3)
+    for j in range(3):
+        wind = row[O_WM + j]
+        if row[O_GA] > 0.0:
+            total = 0.0
+            for g in range(GUST):
+                total += np.cos(TWO_PI * row[O_GF + g] * tm + row[O_GP + j * GUST + g])
+            wind += row[O_GA] * total
+        air[j] = vel[j] - wind
+    air_body = np.zeros(3)
+    for i in range(3):
+        for j in range(3):
+            air_body[i] += rot[j, i] * air[j]
+    battery = max(MIN_SCALE, 1.0 - row[O_BAT] * tm)
+    force_body = np.zeros(3)       # body frame: rotor drag + body drag + thrust offsets
+    torque = np.zeros(3)           # body frame, about the CoM
+    c, ca = row[O_RD], row[O_RA]
+    momentum = np.zeros(3)
+    spin_up = np.zeros(3)
+    for r in range(rotors):
+        a = axis[b, r]
+        s = row[O_MIS + r] * battery
+        gain = row[O_GG]
+        if gain != 0.0:
+            hub_z = pos[2] + rot[2, 0] * hub[b, r, 0] + rot[2, 1] * hub[b, r, 1] \
+                + rot[2, 2] * hub[b, r, 2]
+            height = max(hub_z - row[O_GH], 1e-9)
+            term = min(gain * (row[O_GR] / (4.0 * height)) ** 2, MAX_TERM)
+            s *= 1.0 / (1.0 - term)
+        scale[r] = s
+        axial = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
+        extra = row[O_CL] * mid[r] + row[O_CO]
+        f = np.empty(3)
+        for i in range(3):
+            along = axial * a[i]
+            f[i] = -mid[r] * (c * (air_body[i] - along) + ca * along) + extra * a[i]
+            force_body[i] += f[i]
+            momentum[i] += spin[r] * mid[r] * a[i]
+            spin_up[i] += spin[r] * acc[r] * a[i]
+        p = arm[b, r]
+        torque[0] += p[1] * f[2] - p[2] * f[1]
+        torque[1] += p[2] * f[0] - p[0] * f[2]
+        torque[2] += p[0] * f[1] - p[1] * f[0]
+    speed = np.sqrt(air_body[0] ** 2 + air_body[1] ** 2 + air_body[2] ** 2)
+    for i in range(3):
+        force_body[i] += -0.5 * row[O_RHO] * speed * row[O_BD + i] * air_body[i]
+    jr = row[O_JR]
+    if jr != 0.0:
+        torque[0] += -jr * (rate_b[1] * momentum[2] - rate_b[2] * momentum[1] + spin_up[0])
+        torque[1] += -jr * (rate_b[2] * momentum[0] - rate_b[0] * momentum[2] + spin_up[1])
+        torque[2] += -jr * (rate_b[0] * momentum[1] - rate_b[1] * momentum[0] + spin_up[2])
+    for i in range(3):
+        xfrc[i] = rot[i, 0] * force_body[0] + rot[i, 1] * force_body[1] \
+            + rot[i, 2] * force_body[2]
+        xfrc[3 + i] = rot[i, 0] * torque[0] + rot[i, 1] * torque[1] + rot[i, 2] * torque[2]
+
+
+@numba.njit(parallel=True, cache=True)
+def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin, hub,
+        rows, lag, active, out, status):
+    """functions: addresses of mj_step and mj_getState."""
+    batch, periods, rotors = commands.shape
+    for b in numba.prange(batch):
+        if status[b] != 0:
+            continue
+        qpos = numba.carray(_as_pointer(addr[b, 2]), 7)
+        qvel = numba.carray(_as_pointer(addr[b, 3]), 6)
+        qacc = numba.carray(_as_pointer(addr[b, 4]), 6)
+        ctrl = numba.carray(_as_pointer(addr[b, 5]), rotors)
+        xfrc = numba.carray(_as_pointer(addr[b, 6]), 6)
+        mid = np.empty(rotors)
+        end = np.empty(rotors)
+        msq = np.empty(rotors)
+        acc = np.zeros(rotors)
+        scale = np.ones(rotors)
+        clock = np.empty(1)
+        up, down = rows[b, O_UP], rows[b, O_DOWN]
+        for k in range(periods):
+            cmd = commands[b, k]
+            for j in range(substeps):
+                t = (k0 + k) * period + j * dt
+                for r in range(rotors):
+                    if lag:
+                        w0 = omega[b, r]
+                        m_ = rk4(cmd[r], w0, dt / 2, up, down)
+                        e_ = rk4(cmd[r], m_, dt / 2, up, down)
+                        mid[r], end[r] = m_, e_
+                        msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
+                        acc[r] = rate(cmd[r], m_, up, down)
+                    else:
+                        mid[r] = end[r] = cmd[r]
+                        msq[r] = cmd[r] * cmd[r]
+                if active:
+                    loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin,
+                          hub, xfrc, scale)
+                for r in range(rotors):
+                    ctrl[r] = scale[r] * msq[r]
+                    omega[b, r] = end[r]
+                _call(functions[0], addr[b, 0], addr[b, 1], 0, 0)
+            _call(functions[1], addr[b, 0], addr[b, 1], clock.ctypes.data, 1)
+            bad = abs(clock[0] - (k0 + k + 1) * period) > 1e-6
+            for i in range(7):
+                if not np.isfinite(qpos[i]) or (i < 3 and abs(qpos[i]) > BOUND):
+                    bad = True
+            for i in range(6):
+                if not np.isfinite(qvel[i]) or abs(qvel[i]) > BOUND:
+                    bad = True
+            if bad:
+                status[b] = k0 + k + 1
+                out[b, k:] = np.nan
+                break
+            out[b, k, 0:3] = qpos[0:3]
+            out[b, k, 3:6] = qvel[0:3]
+            out[b, k, 6:10] = qpos[3:7]
+            out[b, k, 10:13] = qvel[3:6]
+            out[b, k, 13:] = omega[b]
+
