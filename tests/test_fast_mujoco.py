@@ -107,9 +107,11 @@ def test_one_diverging_simulation_is_named_and_others_kept():
 def test_batch_too_large_for_memory_is_refused_before_allocating(monkeypatch):
     from quadsim import mujoco_engine
 
-    per_sim = mujoco_engine.check_memory([PARAMS], 1e-3, 10)
+    model = mujoco_engine.compile_model(PARAMS, 1e-3)
+    per_sim = mujoco_engine.check_memory(model, 1, 10, 4)
     assert per_sim > 1000                     # an MjData is at least kilobytes
     monkeypatch.setattr(mujoco_engine, "MEMORY_FRACTION", per_sim * 1e-12)
-    monkeypatch.setattr(mujoco_engine, "_models", lambda *a: pytest.fail("allocated"))
+    monkeypatch.setattr(mujoco_engine, "_make_batch", lambda *a: pytest.fail("allocated"))
+    monkeypatch.setattr(mujoco_engine, "body_arrays", lambda *a: pytest.fail("allocated"))
     with pytest.raises(InputError, match="batch of 4 simulations needs about"):
         simulate([PARAMS] * 4, duration=0.01)
