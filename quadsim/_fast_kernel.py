@@ -77,7 +77,13 @@ def rk4(c, w0, h, up, down):
 
 
 @numba.njit(cache=True)
-def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub, xfrc, scale):
+def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub, wrench, scale,
+          rot, normalize):
+    """Effect loads of simulation b at the mid-step state predicted from (qpos, qvel, qacc)
+    over dt / 2 (dt = 0: at that state): body-frame force and torque about the CoM into
+    ``wrench`` (6,), per-rotor thrust scale into ``scale``, the rotation matrix into ``rot``.
+    The quaternion is normalised when ``normalize`` (the MuJoCo path does; the analytic
+    right-hand side uses its state as is, like quadsim.analytic)."""
     rotors = cmd.shape[0]
     h = dt / 2
     pos = np.empty(3)
@@ -96,9 +102,8 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
     d2 = 0.5 * (q0 * w1 - q1 * w2 + q3 * w0)
     d3 = 0.5 * (q0 * w2 + q1 * w1 - q2 * w0)
     q0, q1, q2, q3 = q0 + d0 * h, q1 + d1 * h, q2 + d2 * h, q3 + d3 * h
-    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3) if normalize else 1.0
     w, x, y, z = q0 / n, q1 / n, q2 / n, q3 / n
-    rot = np.empty((3, 3))
     rot[0, 0], rot[0, 1], rot[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), \
         2 * (x * z + w * y)
     rot[1, 0], rot[1, 1], rot[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), \
@@ -159,9 +164,8 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
         torque[1] += -jr * (rate_b[2] * momentum[0] - rate_b[0] * momentum[2] + spin_up[1])
         torque[2] += -jr * (rate_b[0] * momentum[1] - rate_b[1] * momentum[0] + spin_up[2])
     for i in range(3):
-        xfrc[i] = rot[i, 0] * force_body[0] + rot[i, 1] * force_body[1] \
-            + rot[i, 2] * force_body[2]
-        xfrc[3 + i] = rot[i, 0] * torque[0] + rot[i, 1] * torque[1] + rot[i, 2] * torque[2]
+        wrench[i] = force_body[i]
+        wrench[3 + i] = torque[i]
 
 
 @numba.njit(parallel=True, cache=True)
@@ -183,6 +187,8 @@ def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, s
         acc = np.zeros(rotors)
         scale = np.ones(rotors)
         clock = np.empty(1)
+        wrench = np.empty(6)
+        rot = np.empty((3, 3))
         up, down = rows[b, O_UP], rows[b, O_DOWN]
         for k in range(periods):
             cmd = commands[b, k]
@@ -201,7 +207,12 @@ def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, s
                         msq[r] = cmd[r] * cmd[r]
                 if active:
                     loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin,
-                          hub, xfrc, scale)
+                          hub, wrench, scale, rot, True)
+                    for i in range(3):
+                        xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
+                            + rot[i, 2] * wrench[2]
+                        xfrc[3 + i] = rot[i, 0] * wrench[3] + rot[i, 1] * wrench[4] \
+                            + rot[i, 2] * wrench[5]
                 for r in range(rotors):
                     ctrl[r] = scale[r] * msq[r]
                     omega[b, r] = end[r]
@@ -224,3 +235,105 @@ def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, s
             out[b, k, 10:13] = qvel[3:6]
             out[b, k, 13:] = omega[b]
 
+
+
+@numba.njit(cache=True)
+def analytic_rhs(t, y, command, lag, active, rows, arm, axis, spin, hub, allocation, mass, com,
+                 inertia, inertia_inv, gravity, thrust_factor, drag_factor, out):
+    """d/dt of the flat batched analytic state (quadsim.analytic.state_derivative) into
+    ``out``, with every effect evaluated in the kernel: Newton-Euler at the CoM, returned at
+    the body origin; thrust scale s and offset o per rotor as in quadsim.analytic."""
+    batch, rotors = command.shape
+    width = 13 + rotors if lag else 13
+    omega = np.empty(rotors)
+    accel_r = np.zeros(rotors)
+    wrench = np.zeros(6)
+    scale = np.ones(rotors)
+    rot = np.empty((3, 3))
+    zeros = np.zeros(6)
+    for b in range(batch):
+        s = y[b * width:(b + 1) * width]
+        d = out[b * width:(b + 1) * width]
+        up, down = rows[b, O_UP], rows[b, O_DOWN]
+        for r in range(rotors):
+            if lag:
+                omega[r] = s[13 + r]
+                accel_r[r] = rate(command[b, r], omega[r], up, down)
+                d[13 + r] = accel_r[r]
+            else:
+                omega[r] = command[b, r]
+        qpos = np.empty(7)
+        qvel = np.empty(6)
+        qpos[0:3] = s[0:3]
+        qpos[3:7] = s[6:10]
+        qvel[0:3] = s[3:6]
+        qvel[3:6] = s[10:13]
+        w0, w1, w2, w3 = s[6], s[7], s[8], s[9]
+        x_, y_, z_ = w1, w2, w3
+        rot[0, 0], rot[0, 1], rot[0, 2] = 1 - 2 * (y_ * y_ + z_ * z_), 2 * (x_ * y_ - w0 * z_), \
+            2 * (x_ * z_ + w0 * y_)
+        rot[1, 0], rot[1, 1], rot[1, 2] = 2 * (x_ * y_ + w0 * z_), 1 - 2 * (x_ * x_ + z_ * z_), \
+            2 * (y_ * z_ - w0 * x_)
+        rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x_ * z_ - w0 * y_), 2 * (y_ * z_ + w0 * x_), \
+            1 - 2 * (x_ * x_ + y_ * y_)
+        for i in range(6):
+            wrench[i] = 0.0
+        if active:
+            loads(b, t, 0.0, qpos, qvel, zeros, command[b], omega, accel_r, rows, arm, axis,
+                  spin, hub, wrench, scale, rot, False)
+        force = np.zeros(3)
+        torque = np.zeros(3)
+        for i in range(3):
+            force[i] = wrench[i]
+            torque[i] = wrench[3 + i]
+        for r in range(rotors):
+            sq = omega[r] * omega[r]
+            for i in range(3):
+                force[i] += allocation[b, i, r] * sq
+                torque[i] += allocation[b, 3 + i, r] * sq
+            if active:
+                thrust = (scale[r] - 1.0) * thrust_factor[b] * sq
+                drag = (scale[r] - 1.0) * drag_factor[b] * sq
+                a = axis[b, r]
+                p = arm[b, r]
+                f0, f1, f2 = thrust * a[0], thrust * a[1], thrust * a[2]
+                force[0] += f0
+                force[1] += f1
+                force[2] += f2
+                torque[0] += p[1] * f2 - p[2] * f1 - drag * spin[r] * a[0]
+                torque[1] += p[2] * f0 - p[0] * f2 - drag * spin[r] * a[1]
+                torque[2] += p[0] * f1 - p[1] * f0 - drag * spin[r] * a[2]
+        om = s[10:13]
+        momentum = np.zeros(3)
+        for i in range(3):
+            for j in range(3):
+                momentum[i] += inertia[b, i, j] * om[j]
+        net = np.empty(3)
+        net[0] = torque[0] - (om[1] * momentum[2] - om[2] * momentum[1])
+        net[1] = torque[1] - (om[2] * momentum[0] - om[0] * momentum[2])
+        net[2] = torque[2] - (om[0] * momentum[1] - om[1] * momentum[0])
+        alpha = np.zeros(3)
+        for i in range(3):
+            for j in range(3):
+                alpha[i] += inertia_inv[b, i, j] * net[j]
+        c = com[b]
+        wc = np.empty(3)
+        wc[0] = om[1] * c[2] - om[2] * c[1]
+        wc[1] = om[2] * c[0] - om[0] * c[2]
+        wc[2] = om[0] * c[1] - om[1] * c[0]
+        lever = np.empty(3)
+        lever[0] = alpha[1] * c[2] - alpha[2] * c[1] + om[1] * wc[2] - om[2] * wc[1]
+        lever[1] = alpha[2] * c[0] - alpha[0] * c[2] + om[2] * wc[0] - om[0] * wc[2]
+        lever[2] = alpha[0] * c[1] - alpha[1] * c[0] + om[0] * wc[1] - om[1] * wc[0]
+        for i in range(3):
+            world = rot[i, 0] * force[0] + rot[i, 1] * force[1] + rot[i, 2] * force[2]
+            if i == 2:
+                world -= gravity[b] * mass[b]
+            d[i] = s[3 + i]
+            d[3 + i] = world / mass[b] - (rot[i, 0] * lever[0] + rot[i, 1] * lever[1]
+                                          + rot[i, 2] * lever[2])
+            d[10 + i] = alpha[i]
+        d[6] = 0.5 * (-w1 * om[0] - w2 * om[1] - w3 * om[2])
+        d[7] = 0.5 * (w0 * om[0] + w2 * om[2] - w3 * om[1])
+        d[8] = 0.5 * (w0 * om[1] - w1 * om[2] + w3 * om[0])
+        d[9] = 0.5 * (w0 * om[2] + w1 * om[1] - w2 * om[0])

@@ -192,9 +192,9 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
     simulation). ``timestep`` (MuJoCo, s) must divide ``control_period`` (default: the largest
     <= 1 ms that does); ``rtol``/``atol`` are the analytic solver's tolerances. Raises
     :class:`~quadsim.errors.ModelError` if MuJoCo refuses the parameter set and
-    :class:`~quadsim.errors.SimulationError` if a run diverges. ``fast`` (MuJoCo): None uses
-    the compiled path when it can (:mod:`quadsim.fast_mujoco`), False the step-by-step
-    reference, True requires the compiled path."""
+    :class:`~quadsim.errors.SimulationError` if a run diverges. ``fast``: None uses the
+    compiled kernels when they can (:mod:`quadsim.fast_mujoco`), False the reference paths;
+    True requires the compiled MuJoCo path."""
     if engine not in ENGINES:
         raise InputError(f"unknown engine {engine!r}: valid engines are {', '.join(ENGINES)}")
     if not (control_period > 0 and duration > 0):
@@ -220,7 +220,7 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
         meta = {"integrator": "MuJoCo RK4", "timestep": dt}
     else:
         out = run_analytic(modified, batch_effects, start, command_fn, periods, control_period,
-                           rtol=rtol, atol=atol)
+                           rtol=rtol, atol=atol, fast=fast)
         meta = {"integrator": "scipy solve_ivp DOP853", "rtol": rtol, "atol": atol}
     meta.update(control_period=control_period, params=[p.name for p in modified])
     if not batched:

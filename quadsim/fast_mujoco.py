@@ -296,3 +296,25 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
         out["rotor_speed"] = np.concatenate([commands, commands[:, -1:]], 1)
     out["rotor_command"] = np.concatenate([commands, commands[:, -1:]], 1)
     return out, status
+
+
+def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], body):
+    """Compiled right-hand side for :mod:`quadsim.analytic` (the same equations as
+    ``state_derivative``, every effect in the kernel): ``rhs(t, y, command) -> dy/dt``.
+    Call only when :func:`fast_form_problem` returned None."""
+    from . import _fast_kernel
+
+    rows, lag = encode(sets, params)
+    active = any(s.effects for s in sets)
+    hub = np.ascontiguousarray([p.rotor_positions for p in params], dtype=float)
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (
+        body.rotor_arm, body.rotor_axis, body.rotor_spin, hub, body.allocation, body.mass,
+        body.com, body.inertia, body.inertia_inv, body.gravity, body.thrust_factor,
+        body.drag_factor)]
+
+    def rhs(t: float, y: np.ndarray, command: np.ndarray) -> np.ndarray:
+        out = np.empty_like(y)
+        _fast_kernel.analytic_rhs(float(t), y, command, lag, active, rows, *arrays, out)
+        return out
+
+    return rhs
