@@ -168,73 +168,89 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
         wrench[3 + i] = torque[i]
 
 
+@numba.njit(cache=True)
+def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin, hub,
+            rows, lag, active, out, status):
+    """Simulation b of :func:`run`."""
+    periods, rotors = commands.shape[1], commands.shape[2]
+    if status[b] != 0:
+        return
+    qpos = numba.carray(_as_pointer(addr[b, 2]), 7)
+    qvel = numba.carray(_as_pointer(addr[b, 3]), 6)
+    qacc = numba.carray(_as_pointer(addr[b, 4]), 6)
+    ctrl = numba.carray(_as_pointer(addr[b, 5]), rotors)
+    xfrc = numba.carray(_as_pointer(addr[b, 6]), 6)
+    mid = np.empty(rotors)
+    end = np.empty(rotors)
+    msq = np.empty(rotors)
+    acc = np.zeros(rotors)
+    scale = np.ones(rotors)
+    clock = np.empty(1)
+    wrench = np.empty(6)
+    rot = np.empty((3, 3))
+    up, down = rows[b, O_UP], rows[b, O_DOWN]
+    for k in range(periods):
+        cmd = commands[b, k]
+        for j in range(substeps):
+            t = (k0 + k) * period + j * dt
+            for r in range(rotors):
+                if lag:
+                    w0 = omega[b, r]
+                    m_ = rk4(cmd[r], w0, dt / 2, up, down)
+                    e_ = rk4(cmd[r], m_, dt / 2, up, down)
+                    mid[r], end[r] = m_, e_
+                    msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
+                    acc[r] = rate(cmd[r], m_, up, down)
+                else:
+                    mid[r] = end[r] = cmd[r]
+                    msq[r] = cmd[r] * cmd[r]
+            if active:
+                loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin,
+                      hub, wrench, scale, rot, True)
+                for i in range(3):
+                    xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
+                        + rot[i, 2] * wrench[2]
+                    xfrc[3 + i] = rot[i, 0] * wrench[3] + rot[i, 1] * wrench[4] \
+                        + rot[i, 2] * wrench[5]
+            for r in range(rotors):
+                ctrl[r] = scale[r] * msq[r]
+                omega[b, r] = end[r]
+            _call(functions[0], addr[b, 0], addr[b, 1], 0, 0)
+        _call(functions[1], addr[b, 0], addr[b, 1], clock.ctypes.data, 1)
+        bad = abs(clock[0] - (k0 + k + 1) * period) > 1e-6
+        for i in range(7):
+            if not np.isfinite(qpos[i]) or (i < 3 and abs(qpos[i]) > BOUND):
+                bad = True
+        for i in range(6):
+            if not np.isfinite(qvel[i]) or abs(qvel[i]) > BOUND:
+                bad = True
+        if bad:
+            status[b] = k0 + k + 1
+            out[b, k:] = np.nan
+            break
+        out[b, k, 0:3] = qpos[0:3]
+        out[b, k, 3:6] = qvel[0:3]
+        out[b, k, 6:10] = qpos[3:7]
+        out[b, k, 10:13] = qvel[3:6]
+        out[b, k, 13:] = omega[b]
+
+
 @numba.njit(parallel=True, cache=True)
 def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin, hub,
         rows, lag, active, out, status):
-    """functions: addresses of mj_step and mj_getState."""
-    batch, periods, rotors = commands.shape
-    for b in numba.prange(batch):
-        if status[b] != 0:
-            continue
-        qpos = numba.carray(_as_pointer(addr[b, 2]), 7)
-        qvel = numba.carray(_as_pointer(addr[b, 3]), 6)
-        qacc = numba.carray(_as_pointer(addr[b, 4]), 6)
-        ctrl = numba.carray(_as_pointer(addr[b, 5]), rotors)
-        xfrc = numba.carray(_as_pointer(addr[b, 6]), 6)
-        mid = np.empty(rotors)
-        end = np.empty(rotors)
-        msq = np.empty(rotors)
-        acc = np.zeros(rotors)
-        scale = np.ones(rotors)
-        clock = np.empty(1)
-        wrench = np.empty(6)
-        rot = np.empty((3, 3))
-        up, down = rows[b, O_UP], rows[b, O_DOWN]
-        for k in range(periods):
-            cmd = commands[b, k]
-            for j in range(substeps):
-                t = (k0 + k) * period + j * dt
-                for r in range(rotors):
-                    if lag:
-                        w0 = omega[b, r]
-                        m_ = rk4(cmd[r], w0, dt / 2, up, down)
-                        e_ = rk4(cmd[r], m_, dt / 2, up, down)
-                        mid[r], end[r] = m_, e_
-                        msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
-                        acc[r] = rate(cmd[r], m_, up, down)
-                    else:
-                        mid[r] = end[r] = cmd[r]
-                        msq[r] = cmd[r] * cmd[r]
-                if active:
-                    loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin,
-                          hub, wrench, scale, rot, True)
-                    for i in range(3):
-                        xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
-                            + rot[i, 2] * wrench[2]
-                        xfrc[3 + i] = rot[i, 0] * wrench[3] + rot[i, 1] * wrench[4] \
-                            + rot[i, 2] * wrench[5]
-                for r in range(rotors):
-                    ctrl[r] = scale[r] * msq[r]
-                    omega[b, r] = end[r]
-                _call(functions[0], addr[b, 0], addr[b, 1], 0, 0)
-            _call(functions[1], addr[b, 0], addr[b, 1], clock.ctypes.data, 1)
-            bad = abs(clock[0] - (k0 + k + 1) * period) > 1e-6
-            for i in range(7):
-                if not np.isfinite(qpos[i]) or (i < 3 and abs(qpos[i]) > BOUND):
-                    bad = True
-            for i in range(6):
-                if not np.isfinite(qvel[i]) or abs(qvel[i]) > BOUND:
-                    bad = True
-            if bad:
-                status[b] = k0 + k + 1
-                out[b, k:] = np.nan
-                break
-            out[b, k, 0:3] = qpos[0:3]
-            out[b, k, 3:6] = qvel[0:3]
-            out[b, k, 6:10] = qpos[3:7]
-            out[b, k, 10:13] = qvel[3:6]
-            out[b, k, 13:] = omega[b]
+    """functions: addresses of mj_step and mj_getState; the simulations in parallel."""
+    for b in numba.prange(commands.shape[0]):
+        run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
+                hub, rows, lag, active, out, status)
 
+
+@numba.njit(cache=True)
+def run_serial(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
+               hub, rows, lag, active, out, status):
+    """:func:`run` in the calling thread (one simulation, or nthread = 1)."""
+    for b in range(commands.shape[0]):
+        run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
+                hub, rows, lag, active, out, status)
 
 
 @numba.njit(cache=True)

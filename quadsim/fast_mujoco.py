@@ -229,9 +229,14 @@ class Kernel:
         rotor speeds (updated); writes the state at the end of each period into ``out``
         (B, K, 13 + R) and the first failing period + 1 of a diverged simulation into
         ``status`` (B,) (0 = fine; such a simulation is not stepped further)."""
-        if self.threads and numba is not None:
+        from . import _fast_kernel
+
+        run = self.run
+        if len(self.datas) == 1 or self.threads == 1:
+            run = _fast_kernel.run_serial         # no thread hand-off for one simulation
+        elif self.threads:
             numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
-        self.run(_CACHE["functions"], self.addr, np.ascontiguousarray(commands), omega, k0, substeps, dt, period,
+        run(_CACHE["functions"], self.addr, np.ascontiguousarray(commands), omega, k0, substeps, dt, period,
                  self.rotor_arm, self.rotor_axis, self.rotor_spin, self.rotor_position,
                  self.rows, self.lag, self.active, out, status)
 
