@@ -235,19 +235,11 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
         out[b, k, 13:] = omega[b]
 
 
-@numba.njit(parallel=True, cache=True)
-def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin, hub,
-        rows, lag, active, out, status):
-    """functions: addresses of mj_step and mj_getState; the simulations in parallel."""
-    for b in numba.prange(commands.shape[0]):
-        run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
-                hub, rows, lag, active, out, status)
-
-
-@numba.njit(cache=True)
-def run_serial(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
+@numba.njit(cache=True, nogil=True)
+def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
                hub, rows, lag, active, out, status):
-    """:func:`run` in the calling thread (one simulation, or nthread = 1)."""
+    """functions: addresses of mj_step and mj_getState; runs without the GIL, so the caller
+    may run chunks of a batch in threads (numba's prange compiled several times slower)."""
     for b in range(commands.shape[0]):
         run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
                 hub, rows, lag, active, out, status)

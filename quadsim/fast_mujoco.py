@@ -7,7 +7,7 @@ evaluated once per step at the predicted mid-step state and applied through
 ``xfrc_applied``) — but written as one numba kernel that also calls ``mj_step`` of
 ``libmujoco`` through ctypes on each simulation's own ``MjData``. A whole open-loop series
 (or one control period under a controller) is one Python call; simulations of a batch run in
-parallel threads (``numba.prange``; MuJoCo is thread-safe across ``MjData``).
+parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``MjData``).
 ``tests/test_fast_mujoco.py`` checks that it matches the reference path to 1e-9 m.
 
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
@@ -222,6 +222,7 @@ class Kernel:
         self.rows = np.ascontiguousarray(effect_rows, dtype=float)
         self.lag, self.active = bool(lag), bool(active)
         self.threads = nthread
+        self._pool = None
 
     def advance(self, commands: np.ndarray, omega: np.ndarray, k0: int, substeps: int,
                 dt: float, period: float, out: np.ndarray, status: np.ndarray) -> None:
@@ -229,16 +230,32 @@ class Kernel:
         rotor speeds (updated); writes the state at the end of each period into ``out``
         (B, K, 13 + R) and the first failing period + 1 of a diverged simulation into
         ``status`` (B,) (0 = fine; such a simulation is not stepped further)."""
-        from . import _fast_kernel
+        commands = np.ascontiguousarray(commands)
+        batch = len(self.datas)
+        threads = self.threads or os.cpu_count() or 1
+        chunks = np.array_split(np.arange(batch), min(threads, batch))
 
-        run = self.run
-        if len(self.datas) == 1 or self.threads == 1:
-            run = _fast_kernel.run_serial         # no thread hand-off for one simulation
-        elif self.threads:
-            numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
-        run(_CACHE["functions"], self.addr, np.ascontiguousarray(commands), omega, k0, substeps, dt, period,
-                 self.rotor_arm, self.rotor_axis, self.rotor_spin, self.rotor_position,
-                 self.rows, self.lag, self.active, out, status)
+        def part(idx):
+            sl = slice(idx[0], idx[-1] + 1)
+            self.run(_CACHE["functions"], self.addr[sl], commands[sl], omega[sl], k0, substeps,
+                     dt, period, self.rotor_arm[sl], self.rotor_axis[sl], self.rotor_spin,
+                     self.rotor_position[sl], self.rows[sl], self.lag, self.active, out[sl],
+                     status[sl])
+
+        if len(chunks) == 1:
+            part(chunks[0])
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(len(chunks))
+        list(self._pool.map(part, chunks))
+
+    def close(self) -> None:
+        """Stop the worker threads (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
 
 def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[VehicleParams],
@@ -269,28 +286,15 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
     omega = np.array(initial["rotor_speed"], dtype=float)
     status = np.zeros(batch, dtype=np.int64)
     ends = np.empty((batch, periods, 13 + rotors))
-    series = getattr(command_fn, "series", None)
     first = {"t": np.zeros(batch), "position": initial["position"].copy(),
-             "velocity": initial["velocity"].copy(), "quat": np.array([d.qpos[3:7] for d in datas]),
+             "velocity": initial["velocity"].copy(),
+             "quat": np.array([d.qpos[3:7] for d in datas]),
              "body_rate": initial["body_rate"].copy(), "rotor_speed": omega.copy()}
-    if series is not None:
-        commands = np.ascontiguousarray(series[:, :periods], dtype=float)
-        kernel.advance(commands, omega, 0, substeps, dt, control_period, ends, status)
-    else:
-        commands = np.empty((batch, periods, rotors))
-        state = first
-        for k in range(periods):
-            if k:
-                row = ends[:, k - 1].copy()
-                row[status > 0] = np.concatenate([first["position"], first["velocity"],
-                                                  first["quat"], first["body_rate"],
-                                                  first["rotor_speed"]], 1)[status > 0]
-                state = {"t": np.full(batch, k * control_period), "position": row[:, 0:3],
-                         "velocity": row[:, 3:6], "quat": row[:, 6:10],
-                         "body_rate": row[:, 10:13], "rotor_speed": row[:, 13:].copy()}
-            commands[:, k] = command_fn(k, state)
-            kernel.advance(commands[:, k:k + 1], omega, k, substeps, dt, control_period,
-                           ends[:, k:k + 1], status)
+    try:
+        commands = _drive(kernel, command_fn, first, ends, omega, status, batch, rotors,
+                          periods, substeps, dt, control_period)
+    finally:
+        kernel.close()
     out = {"position": np.concatenate([first["position"][:, None], ends[:, :, 0:3]], 1),
            "velocity": np.concatenate([first["velocity"][:, None], ends[:, :, 3:6]], 1),
            "quat": np.concatenate([first["quat"][:, None], ends[:, :, 6:10]], 1),
@@ -323,3 +327,29 @@ def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], bod
         return out
 
     return rhs
+
+
+def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, periods, substeps,
+           dt, control_period) -> np.ndarray:
+    """The whole open-loop series in one kernel call, or one call per control period with
+    the controller in between (vectorised over the batch). Returns the commands (B, N, R)."""
+    series = getattr(command_fn, "series", None)
+    if series is not None:
+        commands = np.ascontiguousarray(series[:, :periods], dtype=float)
+        kernel.advance(commands, omega, 0, substeps, dt, control_period, ends, status)
+    else:
+        commands = np.empty((batch, periods, rotors))
+        state = first
+        for k in range(periods):
+            if k:
+                row = ends[:, k - 1].copy()
+                row[status > 0] = np.concatenate([first["position"], first["velocity"],
+                                                  first["quat"], first["body_rate"],
+                                                  first["rotor_speed"]], 1)[status > 0]
+                state = {"t": np.full(batch, k * control_period), "position": row[:, 0:3],
+                         "velocity": row[:, 3:6], "quat": row[:, 6:10],
+                         "body_rate": row[:, 10:13], "rotor_speed": row[:, 13:].copy()}
+            commands[:, k] = command_fn(k, state)
+            kernel.advance(commands[:, k:k + 1], omega, k, substeps, dt, control_period,
+                           ends[:, k:k + 1], status)
+    return commands
