@@ -25,6 +25,7 @@ and the engine uses the reference path. Units SI throughout (m, s, rad, N, N m).
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 from collections.abc import Sequence
 
@@ -34,7 +35,7 @@ from .effects.base import EffectSet
 from .frames import quat_normalize
 from .params import VehicleParams
 
-__all__ = ["available", "fast_form_problem", "encode", "Kernel", "GUST", "MAX_ROTORS"]
+__all__ = ["GUST", "MAX_ROTORS", "Kernel", "available", "encode", "fast_form_problem"]
 
 GUST = 8            # gust components of quadsim.effects.wind
 MAX_ROTORS = 8
@@ -140,8 +141,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
         row[_OFFSET["air_density"]] = p.air_density
         for effect in effect_set.effects:
             v = effect.values()
-            put = lambda key, value: row.__setitem__(  # noqa: E731
-                slice(_OFFSET[key], _OFFSET[key] + np.size(value)), value)
+            put = functools.partial(_put, row)
             if effect.name == "motor_lag" and v["time_constant"] > 0.0:
                 lag = True
                 put("tau_up", v["time_constant"])
@@ -179,6 +179,10 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
 
 
 _CACHE: dict = {}
+
+
+def _put(row: np.ndarray, key: str, value) -> None:
+    row[_OFFSET[key]:_OFFSET[key] + np.size(value)] = value
 
 
 def _kernels():
@@ -267,7 +271,7 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
     its samples from then on are NaN)."""
     import mujoco
 
-    substeps = int(round(control_period / dt))
+    substeps = round(control_period / dt)
     batch, rotors = len(params), params[0].rotor_count
     datas = []
     for i, m in enumerate(models):

@@ -11,7 +11,7 @@ Rows (simulation steps per second, summed over the batch; one step = 1 ms simula
     raw mujoco.rollout, --batch sims        MuJoCo's own threaded open-loop rollout
     quadsim MuJoCo, no effects / all effects, 1 sim and --batch sims (compiled path)
     quadsim MuJoCo, all effects, 1 sim, reference step-by-step path
-    quadsim analytic, no effects / all effects, 1 sim
+    quadsim analytic, no effects / all effects (compiled and numpy right-hand side), 1 sim
     RotorPy 3.0 Multirotor.step (1 ms, aero on), 1 sim, when rotorpy is installed
 
 and the throughput of quadsim (no effects, all effects) and raw rollout against batch size
@@ -74,7 +74,7 @@ def best_rate(fn, steps: int, repeat: int = 2) -> float:
 def raw_loop(params, series: np.ndarray) -> float:
     """mj_step in a Python loop on one MjData, ctrl = Omega^2 set once per control period."""
     model = compile_model(params, DT)
-    substeps = int(round(PERIOD / DT))
+    substeps = round(PERIOD / DT)
 
     def run():
         data = mujoco.MjData(model)
@@ -92,7 +92,7 @@ def raw_rollout(params, series: np.ndarray, threads: int) -> float:
     from mujoco import rollout
 
     model = compile_model(params, DT)
-    substeps = int(round(PERIOD / DT))
+    substeps = round(PERIOD / DT)
     control = np.repeat(series**2, substeps, axis=1)
     datas = [mujoco.MjData(model) for _ in range(threads)]
     data = datas[0]
@@ -109,11 +109,13 @@ def quadsim_rate(params, series: np.ndarray, engine: str = "mujoco", repeat: int
                  **kw) -> float:
     batch, periods = series.shape[:2]
     start = {k: np.tile(v, (batch, 1)) for k, v in START.items()}
-    run = lambda: simulate(params, engine=engine, initial=start,  # noqa: E731
-                           rotor_speed_series=series, duration=periods * PERIOD,
-                           control_period=PERIOD, **kw)
-    run() if engine == "mujoco" else None       # warm-up (compiled kernel from the cache)
-    return best_rate(run, batch * periods * int(round(PERIOD / DT)), repeat)
+    def run(steps=periods):
+        return simulate(params, engine=engine, initial=start,
+                        rotor_speed_series=series[:, :steps], duration=steps * PERIOD,
+                        control_period=PERIOD, **kw)
+
+    run(1)            # warm-up: loads the compiled kernels (numba's cache) outside the timing
+    return best_rate(run, batch * periods * round(PERIOD / DT), repeat)
 
 
 def rotorpy_rate(series: np.ndarray) -> float | None:
@@ -184,7 +186,7 @@ def main() -> None:
     if args.duration <= 0 or args.batch < 1 or args.threads < 1:
         parser.error("--duration, --batch and --threads must be positive")
     params = load_params(args.model)
-    periods = int(round(args.duration / PERIOD))
+    periods = round(args.duration / PERIOD)
     series = multisine(params, periods, args.batch)
     one = series[:1]
     effects = all_effects()
@@ -202,14 +204,16 @@ def main() -> None:
              quadsim_rate(params, short, effects=effects, fast=False, repeat=1)),
             ("quadsim analytic, no effects", 1, quadsim_rate(params, one, "analytic")),
             ("quadsim analytic, all effects", 1,
-             quadsim_rate(params, short, "analytic", effects=effects, repeat=1))]
+             quadsim_rate(params, one, "analytic", effects=effects, repeat=1)),
+            ("quadsim analytic, all effects, numpy right-hand side", 1,
+             quadsim_rate(params, short, "analytic", effects=effects, fast=False, repeat=1))]
     rotorpy = rotorpy_rate(one[0])
     if rotorpy is not None:
         rows.append(("RotorPy 3.0 Multirotor.step, aero on", 1, rotorpy))
     raw = rows[0][2]
     print(f"{args.model}, RK4 {DT * 1e3:g} ms, {args.duration:g} s multisine; {machine}; "
           f"mujoco {mujoco.__version__}")
-    print(f"| configuration | sims | sim-steps/s | vs raw mj_step |\n|---|---|---|---|")
+    print("| configuration | sims | sim-steps/s | vs raw mj_step |\n|---|---|---|---|")
     for label, sims, rate in rows:
         print(f"| {label} | {sims} | {rate:.3g} | {rate / raw:.3g} |")
     result = {"model": params.name, "duration_s": args.duration, "machine": machine,

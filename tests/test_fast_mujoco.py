@@ -36,7 +36,7 @@ def _series(batch: int, periods: int) -> np.ndarray:
 
 
 def _start(batch: int) -> dict:
-    tile = lambda v: np.tile(v, (batch, 1))  # noqa: E731
+    tile = lambda v: np.tile(v, (batch, 1))
     return initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                          euler=tile([0.02, -0.01, 0.2]), body_rate=tile([0.3, -0.2, 0.1]))
 
@@ -62,7 +62,7 @@ def test_every_effect_matches_reference_open_loop():
 
 
 def test_all_effects_with_motor_lag_and_controller_match_reference():
-    kw = dict(initial=_start(2), duration=0.3, effects=ALL_EFFECTS)
+    kw = {"initial": _start(2), "duration": 0.3, "effects": ALL_EFFECTS}
     fast, ref = _both(rotor_speed_series=_series(2, 30), **kw)
     _assert_same(fast, ref)
     reference = make_reference("figure8", speed=1.0)
@@ -119,8 +119,8 @@ def test_batch_too_large_for_memory_is_refused_before_allocating(monkeypatch):
 
 def test_analytic_compiled_rhs_matches_numpy_rhs():
     # every effect at once plus lag, a batch of two with different commands
-    kw = dict(engine="analytic", initial=_start(2), rotor_speed_series=_series(2, 20),
-              duration=0.2, effects=ALL_EFFECTS)
+    kw = {"engine": "analytic", "initial": _start(2), "rotor_speed_series": _series(2, 20),
+              "duration": 0.2, "effects": ALL_EFFECTS}
     fast = simulate(PARAMS, fast=None, **kw)
     ref = simulate(PARAMS, fast=False, **kw)
     _assert_same(fast, ref)
