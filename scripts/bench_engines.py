@@ -190,7 +190,6 @@ def main() -> None:
     series = multisine(params, periods, args.batch)
     one = series[:1]
     effects = all_effects()
-    short = one[:, :max(1, periods // 10)]                 # slow rows run a tenth of the flight
     machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
                f"load average {os.getloadavg()[0]:.1f} at start")
     rows = [("raw MuJoCo mj_step loop", 1, raw_loop(params, series[0])),
@@ -201,12 +200,12 @@ def main() -> None:
             ("quadsim MuJoCo, all effects", args.batch,
              quadsim_rate(params, series, effects=effects)),
             ("quadsim MuJoCo, all effects, reference path", 1,
-             quadsim_rate(params, short, effects=effects, fast=False, repeat=1)),
+             quadsim_rate(params, one, effects=effects, fast=False, repeat=1)),
             ("quadsim analytic, no effects", 1, quadsim_rate(params, one, "analytic")),
             ("quadsim analytic, all effects", 1,
              quadsim_rate(params, one, "analytic", effects=effects, repeat=1)),
             ("quadsim analytic, all effects, numpy right-hand side", 1,
-             quadsim_rate(params, short, "analytic", effects=effects, fast=False, repeat=1))]
+             quadsim_rate(params, one, "analytic", effects=effects, fast=False, repeat=1))]
     rotorpy = rotorpy_rate(one[0])
     if rotorpy is not None:
         rows.append(("RotorPy 3.0 Multirotor.step, aero on", 1, rotorpy))
