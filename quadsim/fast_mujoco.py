@@ -347,9 +347,10 @@ def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, period
         for k in range(periods):
             if k:
                 row = ends[:, k - 1].copy()
-                row[status > 0] = np.concatenate([first["position"], first["velocity"],
-                                                  first["quat"], first["body_rate"],
-                                                  first["rotor_speed"]], 1)[status > 0]
+                if status.any():      # a diverged simulation's controller sees its start
+                    row[status > 0] = np.concatenate([first["position"], first["velocity"],
+                                                      first["quat"], first["body_rate"],
+                                                      first["rotor_speed"]], 1)[status > 0]
                 state = {"t": np.full(batch, k * control_period), "position": row[:, 0:3],
                          "velocity": row[:, 3:6], "quat": row[:, 6:10],
                          "body_rate": row[:, 10:13], "rotor_speed": row[:, 13:].copy()}
