@@ -1,7 +1,8 @@
 """The CAD assembly: a folder of meshes plus a TOML manifest, loaded into frozen objects.
 
 A CAD folder (``cad/`` for the testbed) holds one mesh file per part (STL as exported from a
-CAD tool, in the unit named by ``mesh_unit``) and one manifest ``*.toml`` (schema
+CAD tool, in the unit named by ``mesh_unit``, or STEP, which declares its own unit: see
+:mod:`quadsim.step`) and one manifest ``*.toml`` (schema
 ``quadsim.cad/1``, documented in ``docs/cad.md``) that says, for each part, its mesh, its
 mass per instance (measured) or its density, and where each instance sits in the vehicle;
 and which part placements are rotors, with their spin direction.
@@ -39,6 +40,7 @@ import trimesh
 from .errors import InputError, QuadsimWarning, field_error
 from .fileio import read_toml
 from .frames import euler_to_quat, quat_to_rotmat
+from .step import is_step, read_step
 
 __all__ = [
     "MESH_UNITS",
@@ -224,6 +226,8 @@ def read_mesh(mesh_path: Path) -> tuple[np.ndarray, np.ndarray]:
             data = np.frombuffer(handle.read(), dtype=record, count=count)
             vertices, index = _merge_vertices(data["vertices"].reshape(-1, 3))
             return vertices, index.reshape(-1, 3)
+    if is_step(mesh_path):                        # metres, whatever the file declares
+        return read_step(mesh_path)
     mesh = trimesh.load_mesh(mesh_path, process=True)
     if not isinstance(mesh, trimesh.Trimesh):
         raise ValueError("not a single triangle mesh")
@@ -254,8 +258,12 @@ def load_mesh(mesh_path: Path, scale: float, *, where: str, hull: bool = False
 
     A mesh with holes, inconsistent winding or inward normals is an error, unless ``hull``
     is set: then its convex hull replaces it and a :class:`QuadsimWarning` says so."""
+    if is_step(mesh_path):
+        scale = 1.0                               # STEP declares its unit: read in metres
     try:
         vertices, faces = read_mesh(mesh_path)
+    except InputError:
+        raise
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise InputError(f"{where}: cannot read mesh {mesh_path.name}: {exc}") from None
     if len(faces) == 0:

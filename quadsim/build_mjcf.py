@@ -39,6 +39,7 @@ from .fileio import atomic_write_text
 from .massprops import MassProperties, vehicle_mass_properties
 from .mjcf import vehicle_xml
 from .params import MODELS_DIR, Rotor, VehicleParams, load_params
+from .step import is_step
 
 __all__ = [
     "BuiltModel",
@@ -101,8 +102,13 @@ def mesh_geoms_xml(assembly: Assembly, xml_dir: Path) -> tuple[str, str]:
     scale = _vec([MESH_UNITS[assembly.mesh_unit]] * 3)
     assets, geoms = [], []
     for part in assembly.parts:
-        file = Path(os.path.relpath(part.mesh_path, xml_dir.resolve())).as_posix()
-        assets.append(f'    <mesh name="{part.name}" file="{file}" scale="{scale}"/>')
+        if is_step(part.mesh_path):               # MuJoCo reads no STEP: inline, metres
+            vertex = " ".join(f"{v:.9g}" for v in np.asarray(part.mesh.vertices).ravel())
+            face = " ".join(str(int(i)) for i in np.asarray(part.mesh.faces).ravel())
+            assets.append(f'    <mesh name="{part.name}" vertex="{vertex}" face="{face}"/>')
+        else:
+            file = Path(os.path.relpath(part.mesh_path, xml_dir.resolve())).as_posix()
+            assets.append(f'    <mesh name="{part.name}" file="{file}" scale="{scale}"/>')
         low, high = part.mesh.bounds
         centre, half = 0.5 * (low + high), 0.5 * (high - low)
         for p in part.placements:
@@ -147,6 +153,11 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     base = load_params(params, check=inertial != "cad")
     output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
     vehicle = cad_params(base, assembly, props, inertial=inertial)
+    from .guards import check_hover_control
+
+    check_hover_control(  # CAD mass with the set's b and speed range: can it hover?
+        vehicle, where=f"{assembly.manifest} + {base.path or base.name}",
+        mass_field="mass (CAD parts)" if inertial == "cad" else "body.mass")
     if inertial == "cad":
         note = ("inertial from the CAD meshes (trimesh): mass/CoM/inertia of the parts in "
                 f"{assembly.manifest.parent.name}/{assembly.manifest.name}")
@@ -234,6 +245,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="replace a non-watertight or badly wound mesh by its convex hull "
                              "(warns; mass properties become approximate)")
     args = parser.parse_args(argv)
+    from .cliargs import check_output  # before any work
+
+    if not args.cad_dir.is_dir():
+        raise InputError(f"{args.cad_dir}: CAD folder not found (give the folder holding the "
+                         "meshes and the manifest)")
+    check_output("--output", args.output, (".xml",))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         model = build_model(args.cad_dir, params=args.params, output=args.output,

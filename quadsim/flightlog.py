@@ -71,6 +71,7 @@ __all__ = [
     "body_rate_from_quat",
     "load_log",
     "log_bytes",
+    "log_from_columns",
     "log_file_bytes",
     "parquet_bytes",
     "read_log_columns",
@@ -359,8 +360,9 @@ def _check_units(path: Path, log: dict) -> None:
 
 
 def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
-    """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``); see the module
-    docstring.
+    """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``; also PX4 ULog,
+    Crazyflie uSD and ArduPilot DataFlash files, converted by :mod:`quadsim.logs`); see the
+    module docstring.
 
     Raises :class:`~quadsim.errors.InputError` (one line: file, column, line) for bad input.
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
@@ -368,8 +370,18 @@ def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
     :class:`~quadsim.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
     dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
     path = Path(path)
+    from .logs import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
+    fmt = detect_format(path)
+    columns = read_columns(path, fmt=fmt) if fmt else read_log_columns(path)
+    return log_from_columns(path, columns, warn=warn)
+
+
+def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
+                     warn: bool = True) -> FlightLog:
+    """Validate schema columns (name -> float array) read from ``path`` into a FlightLog
+    (the checks of :func:`load_log`; used by the importers in :mod:`quadsim.logs`)."""
+    path = Path(path)
     notes: list[str] = []
-    columns = read_log_columns(path)
     missing = [c for c in _REQUIRED if c not in columns]
     if missing:
         raise field_error(path, missing[0], "required column missing (required: "

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +51,7 @@ from .trajectory import Trajectory
 __all__ = [
     "CONTROLLERS",
     "TRUTH_SCHEMA",
+    "flight_report",
     "generate_flight",
     "main",
     "specific_force",
@@ -83,6 +85,58 @@ def specific_force(params: VehicleParams, effects: EffectSet, traj: Trajectory) 
     return np.einsum("nji,nj->ni", quat_to_rotmat(traj.quat), accel)
 
 
+#: Limits of :func:`flight_report` beyond which ``fly`` refuses the path (see its docstring).
+MAX_SATURATED_FRACTION = 0.05
+MAX_TILT_DEG = 60.0
+
+
+def flight_report(params: VehicleParams, reference: Reference, traj: Trajectory) -> dict:
+    """What the vehicle actually did on a (single) flight, in numbers.
+
+    * ``saturated_fraction``: share of samples with any rotor command at the end of the
+      speed range (``>= (1 - 1e-6) max_speed`` or ``<= min_speed``); the controller asked for
+      more than the rotors can give.
+    * ``peak_tilt_deg``: largest angle between body z and world z, ``acos(1 - 2 (x^2 + y^2))``
+      of the quaternion (deg).
+    * ``tracking_error_rms_m`` / ``tracking_error_max_m``: distance to the reference
+      position (m).
+    * ``diverged``: a non-finite state, a tilt beyond 90 deg, or a final tracking error above
+      ``max(1 m, path size)``.
+    * ``feasible``: not diverged, saturated below :data:`MAX_SATURATED_FRACTION` and peak
+      tilt below :data:`MAX_TILT_DEG`.
+    """
+    command = traj.rotor_command if traj.rotor_command is not None else traj.rotor_speed
+    top = command >= (1 - 1e-6) * params.max_speed
+    bottom = command <= params.min_speed * (1 + 1e-6) if params.min_speed > 0 else command <= 0
+    saturated = float(np.mean(np.any(top | bottom, axis=-1)))
+    q = traj.quat
+    cos_tilt = np.clip(1 - 2 * (q[..., 1] ** 2 + q[..., 2] ** 2), -1, 1)
+    tilt = float(np.degrees(np.max(np.arccos(cos_tilt)))) if np.all(np.isfinite(q)) else 180.0
+    error = np.linalg.norm(traj.position - reference(traj.t).position, axis=-1)
+    finite = bool(np.all(np.isfinite(traj.position)) and np.all(np.isfinite(q)))
+    size = float(reference.settings.get("size", 1.0) or 1.0)
+    diverged = (not finite) or tilt > 90.0 or float(error[-1]) > max(1.0, size)
+    return {
+        "saturated_fraction": round(saturated, 6),
+        "peak_tilt_deg": round(tilt, 4),
+        "tracking_error_rms_m": round(float(np.sqrt(np.mean(error ** 2))), 6) if finite else None,
+        "tracking_error_max_m": round(float(np.max(error)), 6) if finite else None,
+        "final_height_m": round(float(traj.position[-1, 2]), 6) if finite else None,
+        "diverged": bool(diverged),
+        "feasible": bool(not diverged and saturated < MAX_SATURATED_FRACTION
+                         and tilt < MAX_TILT_DEG),
+        "limits": {"saturated_fraction": MAX_SATURATED_FRACTION, "peak_tilt_deg": MAX_TILT_DEG},
+    }
+
+
+def _describe(report: dict) -> str:
+    error = report["tracking_error_max_m"]
+    return (f"{100 * report['saturated_fraction']:.0f} % of samples saturated, peak tilt "
+            f"{report['peak_tilt_deg']:.0f} deg, max tracking error "
+            f"{'inf' if error is None else f'{error:.3g}'} m, final height "
+            f"{report['final_height_m']:.3g} m" + (", diverged" if report["diverged"] else ""))
+
+
 def _lqr(params: VehicleParams, reference: Reference):
     from .linear import LQRController
 
@@ -110,9 +164,13 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
                     sensors: SensorModel | None, seed: int, *, engine: str = "mujoco",
                     duration: float = 20.0, control_period: float = 0.005, speed: float = 1.0,
                     height: float = 1.0, size: float = 1.0,
-                    controller: str = "geometric") -> tuple[FlightLog, dict]:
+                    controller: str = "geometric",
+                    progress=None) -> tuple[FlightLog, dict]:
     """Fly ``params`` (nominal, what the controller knows) with ``effects`` (what the
-    simulated vehicle has) along ``path``; return the sensor log and the ground truth."""
+    simulated vehicle has) along ``path``; return the sensor log and the ground truth.
+
+    The truth carries ``flight_report`` (:func:`flight_report`): what the vehicle did.
+    ``progress(t)`` (optional) is called with the simulated time after each control step."""
     effects = effects or EffectSet()
     sensors = sensors or SensorModel()
     reference = path if isinstance(path, Reference) else make_reference(
@@ -121,6 +179,12 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
         raise InputError(f"unknown controller {controller!r}; valid: {', '.join(CONTROLLERS)}")
     geometric = GeometricController(params, reference)
     control = geometric if controller == "geometric" else _lqr(params, reference)
+    if progress is not None:
+        inner = control
+
+        def control(t, state):  # noqa: F811 - same controller, reports the time
+            progress(float(np.max(t)))
+            return inner(t, state)
     traj = simulate(params, engine=engine, initial=geometric.initial_state(), controller=control,
                     duration=duration, control_period=control_period, effects=effects)
     truth_params = effects.apply_to_params(params)
@@ -138,6 +202,7 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
         "path": {"name": reference.name, **reference.settings},
         "effects": describe_effects(effects), "sensors": sensors.to_json(),
         "command_normalisation": {"max_speed": params.max_speed, "unit": "rad/s"},
+        "flight_report": flight_report(params, reference, traj),
     }
     return log, truth
 
@@ -176,9 +241,31 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--sensor-rate", type=float, default=None, help="log sample rate (Hz)")
     parser.add_argument("--sensor-delay", type=float, default=0.0, help="sensor delay (s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    parser.add_argument("--allow-saturation", action="store_true",
+                        help="write the flight even when the path is beyond the vehicle "
+                             "(saturated rotors, tilt > 60 deg, divergence); warns and records "
+                             "it in the truth sidecar's flight_report")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("-o", "--output", required=True,
                         help="log file (.csv, .csv.gz or .parquet); truth goes to <output>.truth.json")
     return parser
+
+
+def _check_args(args) -> None:
+    """Every argument before any work (:mod:`quadsim.cliargs`)."""
+    from .cliargs import check_number, check_output
+
+    check_number("--duration", args.duration, low=0.0, high=24 * 3600.0, unit="s")
+    check_number("--control-period", args.control_period, low=0.0, high=args.duration,
+                 unit="s")
+    check_number("--speed", args.speed, low=0.0, low_inclusive=True, high=1000.0, unit="m/s")
+    check_number("--size", args.size, low=0.0, high=1e4, unit="m")
+    check_number("--height", args.height, low=-1e4, high=1e4, unit="m")
+    check_number("--sensor-rate", args.sensor_rate, low=0.0, high=1e6, unit="Hz")
+    check_number("--sensor-delay", args.sensor_delay, low=0.0, low_inclusive=True,
+                 high=args.duration, unit="s")
+    check_output("-o/--output", args.output, LOG_SUFFIXES)
+    check_output("-o/--output", truth_path(args.output))
 
 
 @run_cli
@@ -187,6 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     output = Path(args.output)
     if not output.name.endswith(LOG_SUFFIXES):
         raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
+    _check_args(args)
     params = load_params(args.model)
     effects = effect_set_from_specs(args.effect)
     sensors = SensorModel(
@@ -194,10 +282,38 @@ def main(argv: list[str] | None = None) -> int:
         bias=parse_signal_values(args.sensor_bias, flag="--sensor-bias", signed=True),
         quantization=parse_signal_values(args.sensor_quantization, flag="--sensor-quantization"),
         rate=args.sensor_rate, delay=args.sensor_delay)
-    log, truth = generate_flight(params, args.path, effects, sensors, args.seed,
-                                 engine=args.engine, duration=args.duration,
-                                 control_period=args.control_period, speed=args.speed,
-                                 height=args.height, size=args.size, controller=args.controller)
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        # disable=None: no bar when stderr is not a terminal (logs, CI)
+        bar = tqdm(total=round(args.duration, 3), desc="flying", unit="sim s", file=sys.stderr,
+                   leave=False, disable=None,
+                   bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} sim s "
+                              "[{elapsed}<{remaining}]")
+
+    def progress(t):
+        if bar is not None:
+            bar.update(round(t, 3) - bar.n)
+
+    try:
+        log, truth = generate_flight(params, args.path, effects, sensors, args.seed,
+                                     engine=args.engine, duration=args.duration,
+                                     control_period=args.control_period, speed=args.speed,
+                                     height=args.height, size=args.size,
+                                     controller=args.controller, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    report = truth["flight_report"]
+    if not report["feasible"]:
+        if not args.allow_saturation:
+            raise InputError(
+                f"--path {args.path} --speed {args.speed:g}: beyond vehicle "
+                f"{params.path or params.name}: {_describe(report)}; nothing written (lower "
+                "--speed/--size or pass --allow-saturation)")
+        print(f"warning: path beyond the vehicle: {_describe(report)} (recorded in the truth "
+              "sidecar's flight_report)", file=sys.stderr)
     data = log_file_bytes(output, log)
     truth_text = json.dumps(truth, indent=2, sort_keys=True) + "\n"
     atomic_write_bytes(output, data)

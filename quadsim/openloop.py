@@ -274,6 +274,44 @@ def save_plot(result: OpenLoopResult, folder: Path) -> Path:
     return path
 
 
+def save_compare_plot(results: list[OpenLoopResult], folder: Path) -> Path:
+    """One PNG overlaying every model's responses per channel (analytic engine, which runs
+    every set; MuJoCo where the analytic one is absent); atomic, deterministic."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True)
+    for k, result in enumerate(results):
+        engine = "analytic" if "analytic" in result.trajectories else next(
+            iter(result.trajectories), None)
+        if engine is None:
+            continue
+        for ax, (channel, (t, y)) in zip(axes.flat, result.responses(engine).items()):
+            ax.plot(t, y, color=f"C{k}", ls=("-", "--", ":", "-.")[k % 4],
+                    label=f"{result.params.name} ({engine})")
+            _, output, _, unit = CHANNELS[channel]
+            ax.set_title(f"{channel} step -> {output}")
+            ax.set_ylabel(f"{output} change ({unit})")
+            ax.grid(True, alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel("time since step (s)")
+    axes.flat[0].legend()
+    mode = "LQR closed loop" if results[0].controller == "lqr" else "open loop"
+    fig.suptitle(f"{mode} step responses: " + " vs ".join(r.params.name for r in results))
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
+    plt.close(fig)
+    suffix = "lqr" if results[0].controller == "lqr" else "openloop"
+    path = folder / ("compare_" + "_".join(r.params.name for r in results) + f"_{suffix}.png")
+    atomic_write_bytes(path, buffer.getvalue())
+    return path
+
+
 # ----------------------------------------------------------------------------- CLI
 
 
@@ -328,6 +366,25 @@ def _check_args(args) -> dict:
     for name, value in steps.items():
         if not math.isfinite(value):
             raise InputError(f"--step-{name}: not a finite number")
+    from .cliargs import check_number, check_output
+
+    for flag in ("duration", "control_period", "bound"):
+        check_number("--" + flag.replace("_", "-"), getattr(args, flag), low=0.0)
+    if args.control_period > args.duration:
+        raise InputError(f"--control-period {args.control_period:g}: longer than --duration "
+                         f"{args.duration:g}")
+    names = [args.model, *args.compare]
+    if len(set(names)) < len(names):
+        raise InputError(f"--compare: model given twice ({', '.join(names)})")
+    if not args.no_plots:
+        plots = Path(args.plots)
+        if plots.exists() and not plots.is_dir():
+            raise InputError(f"{plots}: --plots: not a folder")
+        check_output("--plots", plots / "probe.png")
+    if args.rerun:
+        from .viewer import check_output_path
+
+        check_output_path(args.rerun)
     return steps
 
 
@@ -351,6 +408,8 @@ def main(argv: list[str] | None = None) -> int:
     plots = []
     if not args.no_plots:
         plots = [str(save_plot(r, Path(args.plots))) for r in results]
+        if len(results) > 1:
+            plots.append(str(save_compare_plot(results, Path(args.plots))))
     if args.rerun or args.rerun_spawn:
         from .viewer import save_recording  # lazy: rerun only when asked for
 
@@ -358,6 +417,9 @@ def main(argv: list[str] | None = None) -> int:
         save_recording(args.rerun, params=first.params, trajectories=first.trajectories,
                        measured=None, spawn=args.rerun_spawn, batch_index="all",
                        title=f"openloop {first.params.name}")
+        if args.rerun:
+            print(f"wrote rerun recording {args.rerun}; view it with `rerun {args.rerun}`",
+                  file=sys.stderr)
     if args.json:
         print(json.dumps({"results": [r.to_json() for r in results], "plots": plots},
                          indent=2, allow_nan=False))

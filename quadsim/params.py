@@ -403,8 +403,13 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         path=path,
         cad_dir=cad_dir,
     )
+    from .guards import check_hover_control, check_vehicle  # local: guards reads VehicleParams
+
     if check:
         check_physical(params, where=path)
+        check_vehicle(params, where=path)
+    else:
+        check_hover_control(params, where=path)
     return params
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, ModelError, run_cli
+from .errors import InputError, ModelError, QuadsimError, run_cli
 from .params import VehicleParams, load_params
 from .trajectory import Trajectory
 
@@ -131,8 +131,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="parameter set: a name in models/ (physical, computational, ...) "
                              "or a path to a parameter TOML")
     parser.add_argument("--log", type=Path,
-                        help="flight log CSV (.csv or .csv.gz, flight-log schema, rotor speeds "
-                             "in rad/s); without it a hover-and-step LQR flight is simulated")
+                        help="flight log (.csv, .csv.gz or .parquet, flight-log schema, rotor "
+                             "speeds in rad/s); without it a hover-and-step LQR flight is simulated")
     parser.add_argument("--rerun", type=Path, metavar="OUT.rrd",
                         help="recording to write (atomically)")
     parser.add_argument("--rerun-spawn", action="store_true",
@@ -172,10 +172,14 @@ def _load_model(name: str, engines: tuple[str, ...]) -> VehicleParams:
         return load_params(name, check=False)
 
 
-def _measured(path: Path, duration: float | None) -> Trajectory:
+def _measured(path: Path, duration: float | None, params=None) -> Trajectory:
     from .flightlog import load_log
+    from .logcheck import check_log  # channels against each other; NaN runs cut or refused
 
-    measured = load_log(path).to_trajectory()
+    log, notes = check_log(load_log(path), params)
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr)
+    measured = log.to_trajectory()
     if duration is not None:
         keep = measured.t <= measured.t[0] + duration
         if np.count_nonzero(keep) < 3:
@@ -192,6 +196,13 @@ def _measured(path: Path, duration: float | None) -> Trajectory:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    from .cliargs import check_inputs, check_number  # every argument before any work
+
+    check_number("--duration", args.duration, low=0.0, unit="s")
+    check_number("--horizon", args.horizon, low=0.0, low_inclusive=True, unit="s")
+    check_inputs("--log", [args.log] if args.log is not None else None)
+    if args.cad is not None and not args.cad.is_dir():
+        raise InputError(f"{args.cad}: --cad: not a folder")
     if args.rerun is None and not args.rerun_spawn:
         raise InputError("give --rerun OUT.rrd and/or --rerun-spawn (nothing to do otherwise)")
     from .viewer import assembly_for, check_output_path, save_recording
@@ -211,8 +222,13 @@ def main(argv: list[str] | None = None) -> int:
         trajectories = step_flight(params, engines=engines, duration=args.duration or 7.0)
         title = f"{params.name}: LQR hover and steps"
     else:
-        measured = _measured(args.log, args.duration)
-        trajectories = replay_log(params, measured, engines=engines, horizon=args.horizon)
+        measured = _measured(args.log, args.duration, params)
+        try:
+            trajectories = replay_log(params, measured, engines=engines, horizon=args.horizon)
+        except QuadsimError as exc:  # name the log when the message does not
+            if str(args.log) in str(exc):
+                raise
+            raise type(exc)(f"{args.log}: {exc}") from None
         title = f"{params.name} vs {args.log.name}"
     written = save_recording(args.rerun, params=params, trajectories=trajectories,
                              measured=measured, spawn=args.rerun_spawn, assembly=assembly,

@@ -31,7 +31,7 @@ def _parser() -> argparse.ArgumentParser:
                     "flights and scored on held-out flights (split by flight, never by "
                     "sample).",
         epilog=__doc__.split("Examples::")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .gz allowed)")
+    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .csv.gz or Parquet)")
     parser.add_argument("--model", required=True, help="parameter set: built-in name or TOML")
     parser.add_argument("--holdout", nargs="+", metavar="LOG",
                         help="held-out logs (default: every third of LOG)")
@@ -39,6 +39,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
                         help="nominal reference flights for --per-flight")
+    parser.add_argument("--command-reference", nargs="+", metavar="LOG",
+                        help="flights with rotor speeds and commands: logs without rotor "
+                             "speeds get speeds synthesised from their commands "
+                             "(quadsim.gap.commands; default: --reference)")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -47,27 +51,94 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="local processes (default: the CPU count; 1 = in this process); "
+                             "parallel over flights (--per-flight) or candidate fits")
+    parser.add_argument("--ray", metavar="ADDRESS", default=None,
+                        help="run on Ray instead: 'local' starts a local cluster, HOST:PORT "
+                             "joins one (needs the [ray] extra)")
     return parser
 
 
-def _load(paths):
+def _check_args(args) -> None:
+    """Every argument checked before any work (see :mod:`quadsim.cliargs`)."""
+    from ..cliargs import check_inputs, check_number, check_output, distinct_files
+
+    check_number("--window", args.window, low=0.0, high=60.0, unit="s")
+    for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
+                        ("--reference", args.reference),
+                        ("--command-reference", args.command_reference)):
+        check_inputs(flag, paths)
+    distinct_files({"LOG": args.logs, "--holdout": args.holdout,
+                    "--reference": args.reference})
+    if args.per_flight and args.holdout:
+        raise InputError("--holdout: not used with --per-flight (each LOG is judged against "
+                         "--reference)")
+    if args.reference and not args.per_flight:
+        raise InputError("--reference: only used with --per-flight")
+    inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
+              *(args.command_reference or [])]
+    outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
+                                   ("--rerun", args.rerun)) if o is not None]
+    for flag, out in outputs:
+        check_output(flag, out, {"--json": (".json",), "--report": (".html",),
+                                 "--rerun": (".rrd",)}[flag], inputs=inputs)
+    if len({str(o) for _, o in outputs}) < len(outputs):
+        raise InputError("--json/--report/--rerun: the same output file given twice")
+
+
+def _map_fn(args, bar):
+    """The executor as a ``map(fn, items)``: built-in ``map`` for one in-process worker."""
+    from ..parallel import default_workers, run_tasks
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    if args.ray is None and (args.workers or default_workers()) == 1:
+        return map
+
+    def map_fn(fn, items):
+        items = list(items)
+        labels = [str(getattr(x, "path", None) or getattr(x, "name", None) or f"task {i}")
+                  for i, x in enumerate(items)]
+        tick = (lambda i, result: bar.update(1)) if bar is not None else None  # noqa: E731
+        return run_tasks(fn, items, workers=args.workers, ray=args.ray, progress=tick,
+                         labels=labels)
+
+    return map_fn
+
+
+def _load(paths, params=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
     for w in caught:
         if issubclass(w.category, QuadsimWarning):
             print(f"warning: {w.message}", file=sys.stderr)
+    from ..logcheck import check_logs  # channels against each other; NaN runs cut or refused
+
+    logs, notes = check_logs(logs, params)
+    for note in notes:
+        print(f"warning: {note}", file=sys.stderr)
     return logs
 
 
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    _check_args(args)  # quadsim.cliargs: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
-    logs = _load(args.logs)
+    if args.ray is not None:
+        from ..parallel import connect_ray
+
+        connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
+    logs = _load(args.logs, params)
+    if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
+        from .commands import with_synthesised_speeds
+        logs, _ = with_synthesised_speeds(
+            logs, _load(args.command_reference or args.reference, params))
     progress = None
     bar = None
     if not args.quiet:
@@ -77,14 +148,15 @@ def main(argv: list[str] | None = None) -> int:
         bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None)
         progress = lambda name: (bar.set_postfix_str(name), bar.update(1))  # noqa: E731
     extra = {} if args.window is None else {"window_s": args.window}
+    extra["map_fn"] = _map_fn(args, bar)
     try:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, _load(args.reference), params,
+            result = diagnose_per_flight(logs, _load(args.reference, params), params,
                                          effects=args.effects, progress=progress, **extra)
         else:
-            holdout = _load(args.holdout) if args.holdout else None
+            holdout = _load(args.holdout, params) if args.holdout else None
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, **extra)
     finally:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -118,7 +119,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             what = "commands only" if log.rotor_command is not None else "neither"
             raise InputError(f"{name}: rotor_1..rotor_N: the diagnosis needs measured rotor "
                              f"speeds (this log has {what}); the residual wrench compares the "
-                             "motion with the thrust of the measured rotors")
+                             "motion with the thrust of the measured rotors (with commands: "
+                             "--command-reference LOG... synthesises speeds, quadsim.gap.commands)")
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
@@ -251,16 +253,18 @@ def _separation(best: str, confusable: list[str]) -> dict:
 def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
              max_combination: int = 2, progress: Callable | None = None,
-             window_s: float = DEFAULT_WINDOW_S, kstep: bool = True) -> dict:
+             window_s: float = DEFAULT_WINDOW_S, kstep: bool = True,
+             map_fn: Callable = map) -> dict:
     """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`).
 
-    ``kstep=False`` skips the k-step prediction errors (the slowest part of "where")."""
+    ``kstep=False`` skips the k-step prediction errors (the slowest part of "where").
+    ``map_fn(fn, items)`` runs the candidate fits (e.g. a :mod:`quadsim.parallel` executor)."""
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
     train, held = _split(flights, held_in, notes)
     return _diagnose_split(train, held, params, effects, max_combination, progress, notes,
-                           kstep)
+                           kstep, map_fn)
 
 
 def params_have_data_map(params: VehicleParams) -> bool:
@@ -268,8 +272,13 @@ def params_have_data_map(params: VehicleParams) -> bool:
     return params.motor_map is not None and "quadsim.gap" in params.motor_map.source
 
 
+def _fit_score(cand, train, held, params, sigma, rotor, before, dt) -> dict:
+    return _score(fit_candidate(cand, [f.fit for f in train], params, sigma, rotor_channel=rotor),
+                  train, held, params, sigma, rotor, before, dt)
+
+
 def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
-                    kstep=False):
+                    kstep=False, map_fn=map):
     rotor = all(f.fit.command is not None for f in train + held)
     if rotor and not params_have_data_map(params):
         params = fit_motor_map([f.fit for f in train], params)
@@ -292,9 +301,10 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
                       train, held, params, sigma, rotor, before, dt)
     tick("nominal_refit")
     scored = []
-    for cand in cands:
-        scored.append(_score(fit_candidate(cand, fit_on, params, sigma, rotor_channel=rotor),
-                             train, held, params, sigma, rotor, before, dt))
+    for cand, entry in zip(cands, map_fn(partial(_fit_score, train=train, held=held,
+                                                 params=params, sigma=sigma, rotor=rotor,
+                                                 before=before, dt=dt), cands)):
+        scored.append(entry)
         tick(cand.name)
     for s in scored:
         bad = [k for k, ok in s["identifiable"].items() if not ok]
@@ -419,7 +429,7 @@ def _public(entry: dict) -> dict:
 def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
                         params: VehicleParams, *, effects: Sequence[str] | None = None,
                         progress: Callable | None = None,
-                        window_s: float = DEFAULT_WINDOW_S) -> dict:
+                        window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map) -> dict:
     """Judge each flight on its own against ``reference`` (nominal) flights.
 
     The nominal thrust and drag factors are first refitted on the reference flights (so the
@@ -439,13 +449,9 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
     tuned = base.effects()[0].apply_to_params(params)
     reference_fits = _reference_spread(ref, tuned, effects, progress)
-    flights = []
-    for log in logs:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", QuadsimWarning)
-            flight = prepare([log], tuned, window_s=window_s)[0]
-            one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-        flights.append(_judge(one, reference_fits, flight.name))
+    one_flight = partial(_one_flight, tuned=tuned, effects=effects, window_s=window_s,
+                         spread=reference_fits, progress=None if map_fn is not map else progress)
+    flights = list(map_fn(one_flight, logs))
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
             "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
@@ -454,6 +460,14 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                       else []),
             "where": {}, "effects": [], "verdict": {"effect": "see flights", "reduction": None,
                                                     "confusable_with": []}}
+
+
+def _one_flight(log, tuned, effects, window_s, spread, progress) -> dict:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        flight = prepare([log], tuned, window_s=window_s)[0]
+        one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
+    return _judge(one, spread, flight.name)
 
 
 def _halves(f: Flight):

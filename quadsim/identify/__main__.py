@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
 from ..benchdata import load_thrust_stand
-from ..errors import run_cli
+from ..errors import InputError, run_cli
 from ..params import load_params
 from .audit import Finding, audit_report
 from .fits import StandFit, figure_of_merit, fit_thrust_stand
@@ -36,6 +37,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--stand", type=Path, action="append", default=[], metavar="CSV",
                         help="also fit b and d on a thrust-stand sweep with columns esc_us, "
                              "torque_Nm, thrust_N, speed_rpm (repeatable)")
+    parser.add_argument("--stand-radius", type=float, action="append", default=[],
+                        metavar="M", help="propeller radius (m) of each --stand sweep, in order "
+                        "(default: from a file name like 'kde2814_14inch_sweep.csv', else the "
+                        "testbed's radius, said so)")
     parser.add_argument("--force-lift", type=Path, nargs="+", metavar="CSV",
                         help="force-lift tables, one per motor (default: report Tables 4.5, "
                              "4.7, 4.9, 4.11); header pwm[pwm], mass_1..3[kg], speed_1..3[rpm]")
@@ -88,7 +93,35 @@ def _print_motor_map(ident: TestbedIdentification) -> None:
           "(held above the last command)")
 
 
-def _print_drag(ident: TestbedIdentification, stands: list[StandFit]) -> None:
+#: Above this hover figure of merit a small propeller is not physical (the best rotors
+#: reach ~0.8; small propellers 0.3-0.7).
+FM_MAX_PHYSICAL = 0.8
+_INCH = re.compile(r"(\d+(?:\.\d+)?)[-_ ]?(?:inch|in)(?![a-z])", re.IGNORECASE)
+
+
+def _fm_flag(fm: float) -> str:
+    return (f"  [IMPLAUSIBLE: FM > {FM_MAX_PHYSICAL} is not physical for a small propeller; "
+            "wrong radius?]" if fm > FM_MAX_PHYSICAL else "")
+
+
+def stand_radii(paths, given, default: float) -> list[tuple[float, str]]:
+    """Propeller radius (m) of each stand sweep and where it came from: ``--stand-radius``,
+    else the diameter in inches in the file name (``14inch`` -> 0.1778 m), else ``default``."""
+    out = []
+    for i, path in enumerate(paths):
+        if i < len(given):
+            out.append((given[i], "--stand-radius"))
+            continue
+        match = _INCH.search(Path(path).name)
+        if match:
+            out.append((float(match.group(1)) * 0.0254 / 2,
+                        f"{match.group(1)}-inch from the file name"))
+        else:
+            out.append((default, "testbed radius assumed"))
+    return out
+
+
+def _print_drag(ident: TestbedIdentification, stands: list[StandFit], radii=None) -> None:
     low, high = ident.torque_thrust_ratio_ci95
     fm = ident.figure_of_merit
     flag = "plausible" if FM_PLAUSIBLE[0] <= fm <= FM_PLAUSIBLE[1] else "IMPLAUSIBLE"
@@ -102,11 +135,13 @@ def _print_drag(ident: TestbedIdentification, stands: list[StandFit]) -> None:
     cfd = ident.cfd_fit
     print(f"  computational (CFD Table 4.2) b = {cfd['b']:.5g} N s^2/rad^2 "
           f"(95 % [{cfd.interval('b')[0]:.5g}, {cfd.interval('b')[1]:.5g}])")
-    for stand in stands:
+    for stand, (radius, how) in zip(stands, radii or [None] * len(stands)):
         b, d = stand.thrust["b"], stand.torque["d"]
-        fm = figure_of_merit(b, d, ident.air_density, ident.rotor_radius)
+        radius = radius or ident.rotor_radius
+        fm = figure_of_merit(b, d, ident.air_density, radius)
         print(f"  stand {stand.source}: b = {b:.5g}, d = {d:.5g}, "
-              f"d/b = {stand.ratio.value:.5g} m, FM (R = {ident.rotor_radius:g} m) = {fm:.3f}")
+              f"d/b = {stand.ratio.value:.5g} m, FM (R = {radius:g} m, {how}) = {fm:.3f}"
+              + _fm_flag(fm))
 
 
 def _print_inertia(ident: TestbedIdentification) -> None:
@@ -134,22 +169,44 @@ def _print_audit(findings: list[Finding]) -> None:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    from ..cliargs import check_inputs, check_number, distinct_files  # before any work
+
+    for radius in args.stand_radius:
+        check_number("--stand-radius", radius, low=0.0, high=2.0, unit="m")
+    if len(args.stand_radius) > len(args.stand):
+        raise InputError(f"--stand-radius: {len(args.stand_radius)} radii for "
+                         f"{len(args.stand)} --stand sweeps")
+    for flag in ("stand", "force_lift", "cfd", "physical", "bifilar", "bifilar_rig"):
+        value = getattr(args, flag)
+        check_inputs("--" + flag.replace("_", "-"),
+                     value if isinstance(value, list) else [value] if value else None)
+    distinct_files({"--stand": args.stand})
+    distinct_files({"--force-lift": args.force_lift})
     ident = identify_testbed(force_lift_paths=args.force_lift, cfd_path=args.cfd,
                              physical_path=args.physical, bifilar_path=args.bifilar,
                              bifilar_rig_path=args.bifilar_rig)
     findings = audit_report(ident, load_params(args.model, check=False))
     stands = [fit_thrust_stand(load_thrust_stand(p)) for p in args.stand]
+    radii = stand_radii(args.stand, args.stand_radius, ident.rotor_radius)
     if args.json:
         out = identification_to_json(ident)
         out["audit"] = [f.to_json() for f in findings]
-        out["thrust_stand"] = [s.to_json() for s in stands]
+        out["thrust_stand"] = []
+        for stand, (radius, how) in zip(stands, radii):
+            fm = figure_of_merit(stand.thrust["b"], stand.torque["d"], ident.air_density, radius)
+            out["thrust_stand"].append({**stand.to_json(), "rotor_radius_m": radius,
+                                        "rotor_radius_source": how, "figure_of_merit": fm,
+                                        "figure_of_merit_plausible": fm <= FM_MAX_PHYSICAL})
+            if fm > FM_MAX_PHYSICAL:
+                out["warnings"].append(f"{stand.source}: figure of merit {fm:.3f} > "
+                                       f"{FM_MAX_PHYSICAL} (R = {radius:g} m): not physical")
         for warning in out["warnings"]:
             print(f"warning: {warning}", file=sys.stderr)
         print(json.dumps(out, indent=2, sort_keys=True))
         return 0
     _print_thrust(ident)
     _print_motor_map(ident)
-    _print_drag(ident, stands)
+    _print_drag(ident, stands, radii)
     _print_inertia(ident)
     _print_audit(findings)
     return 0

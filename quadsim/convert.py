@@ -1,0 +1,143 @@
+"""``python -m quadsim.convert LOG -o OUT.csv.gz|.csv|.parquet``: a PX4 ULog, Crazyflie uSD or
+ArduPilot DataFlash file (or one of our own logs) -> the quadsim flight-log schema.
+
+The format comes from the first bytes of the file, else the name (``--format`` forces it);
+the importers are :mod:`quadsim.logs` (resampling, frames, units: see there and
+docs/logs.md). The result is validated exactly like a CSV log (:mod:`quadsim.flightlog`) and
+written atomically.
+
+    python -m quadsim.convert sample_px4_events.ulg -o px4.csv.gz
+    python -m quadsim.convert eckart00 -o flight_00.parquet --rotor-map 1,2,3,4
+    python -m quadsim.convert f.ulg -o f.csv.gz --rate 250 --start 19 --end 26
+    python -m quadsim.convert copter.bin -o copter.csv.gz --pwm-range 1100,1900
+    python -m quadsim.convert f.ulg -o f.csv.gz --topic body_rate=vehicle_angular_velocity \\
+        --field body_rate=xyz --model crazyflie21
+
+Options: ``--topic SIGNAL=TOPIC`` and ``--field SIGNAL=FIELD`` (ULog; SIGNAL one of
+position, velocity, quat, body_rate, accel, rotor_speed, rotor_command, vbat; for uSD
+``--topic event=NAME`` picks the event), ``--rotor-map`` (our rotor i <- log motor m_i,
+1-based), ``--pwm-range LO,HI`` (us), ``--model`` (checks that the log has as many rotors as
+the parameter set), ``--start``/``--end`` (s: keep only that part, e.g. the airborne part;
+time restarts at 0). Errors: one line naming the file and the topic/field, exit 2, nothing
+written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, run_cli
+from .flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
+from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
+from .logs.ulog import TOPICS
+
+
+def _pairs(items: list[str], flag: str, allowed) -> dict[str, str]:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not value or key not in allowed:
+            raise InputError(f"{flag}: {item!r}: expected SIGNAL=NAME with SIGNAL one of "
+                             f"{', '.join(allowed)}")
+        out[key] = value
+    return out
+
+
+def _range(text: str | None) -> tuple[float, float] | None:
+    if not text:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--pwm-range: {text!r}: expected LO,HI in us, e.g. 1000,2000"
+                         ) from None
+    if not lo < hi:
+        raise InputError(f"--pwm-range: {text!r}: LO must be below HI")
+    return lo, hi
+
+
+def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
+            rotor_map=None, topics=None, fields=None, pwm_range=None, model=None,
+            start: float | None = None, end: float | None = None, rate_hz: float | None = None):
+    """Read, validate and write; returns the FlightLog. Nothing is written on error.
+    ``start``/``end`` (s, on the converted log's time axis) keep only that part; time then
+    restarts at 0."""
+    source, output = Path(source), Path(output)
+    if not output.name.endswith(LOG_SUFFIXES):
+        raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
+    if fmt is None:
+        fmt = detect_format(source) or "csv"
+    if fmt == "csv":
+        columns = read_log_columns(source)
+    else:
+        columns = read_columns(source, fmt=fmt, rotor_map=rotor_map, topics=topics,
+                               fields=fields, pwm_range=pwm_range, rate_hz=rate_hz)
+    if start is not None or end is not None:
+        t = columns["t"]
+        keep = (t >= (start if start is not None else -np.inf)) & \
+               (t <= (end if end is not None else np.inf))
+        if keep.sum() < 2:
+            raise InputError(f"{source}: t: --start/--end keep {int(keep.sum())} sample(s) "
+                             f"of {t[0]:g}..{t[-1]:g} s")
+        columns = {k: v[keep] for k, v in columns.items()}
+        columns["t"] = columns["t"] - columns["t"][0]
+    log = log_from_columns(source, columns, warn=False)
+    if model is not None:
+        from .params import load_params
+        params = load_params(model)
+        if log.rotor_count and log.rotor_count != params.rotor_count:
+            raise InputError(f"{source}: rotor_*/cmd_*: {log.rotor_count} rotors in the log, "
+                             f"{params.rotor_count} in the parameter set {model}")
+    write_log(output, log)
+    return log
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m quadsim.convert",
+        description="Convert a PX4 ULog, Crazyflie uSD or ArduPilot DataFlash log to the "
+                    "quadsim flight-log schema (CSV, gzipped CSV or Parquet).")
+    parser.add_argument("log", help="input log file")
+    parser.add_argument("-o", "--output", required=True, help="OUT.csv, OUT.csv.gz or "
+                        "OUT.parquet")
+    parser.add_argument("--format", choices=FORMATS + ("csv",), default=None,
+                        help="force the input format (default: from magic bytes / name)")
+    parser.add_argument("--topic", action="append", default=[], metavar="SIGNAL=TOPIC",
+                        help="ULog topic of a signal (repeatable); uSD: event=NAME")
+    parser.add_argument("--field", action="append", default=[], metavar="SIGNAL=FIELD",
+                        help="ULog field (prefix) of a signal (repeatable)")
+    parser.add_argument("--rotor-map", default=None, metavar="M1,M2,...",
+                        help="log motor number of our rotor 1, 2, ... (1-based)")
+    parser.add_argument("--pwm-range", default=None, metavar="LO,HI",
+                        help="PWM pulse range in us for normalising motor outputs")
+    parser.add_argument("--rate", type=float, default=None, metavar="HZ",
+                        help="ULog: uniform time base at HZ (default: attitude instants)")
+    parser.add_argument("--start", type=float, default=None, metavar="S",
+                        help="keep samples from this time (s, converted log's time)")
+    parser.add_argument("--end", type=float, default=None, metavar="S",
+                        help="keep samples up to this time (s)")
+    parser.add_argument("--model", default=None, help="parameter set whose rotor count the "
+                        "log must match")
+    return parser
+
+
+@run_cli
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    signals = tuple(TOPICS) + ("event",)
+    log = convert(args.log, args.output, fmt=args.format,
+                  rotor_map=parse_rotor_map(args.rotor_map),
+                  topics=_pairs(args.topic, "--topic", signals),
+                  fields=_pairs(args.field, "--field", tuple(TOPICS)),
+                  pwm_range=_range(args.pwm_range), model=args.model, start=args.start,
+                  end=args.end, rate_hz=args.rate)
+    print(f"wrote {args.output} ({len(log)} samples, {log.t[-1]:.2f} s, "
+          f"{log.rotor_count} rotors)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,246 @@
+"""Flight-log consistency checks: channels that must agree with each other, not only
+plausible magnitudes.
+
+The loader (:mod:`quadsim.flightlog`) refuses values no vehicle produces (rotor speeds
+above any motor, rates above any airframe). A gyro in deg/s on a gentle flight, a flipped
+axis or an accelerometer in g on a small log passes those limits; here each channel is
+checked against another one that measures the same physics:
+
+* **gyro vs attitude** -- the quaternions give the exact rotation over a window:
+  ``rotvec(conj(q_k) q_{k+m})`` (body frame, rad) must equal the integrated gyro
+  ``int w dt`` over the same window (``WINDOW_S`` = 0.1 s, trapezoid). Per axis, the gain
+  ``g_i = <gyro_i, quat_i> / <quat_i, quat_i>`` must lie in [0.3, 3] (gross errors only:
+  unit, sign, axis; a calibration error is for the diagnosis to find) and the best
+  matching quaternion axis must be the same axis with the same sign. deg/s gives g = 57.3,
+  a sign error g = -1, a swapped axis another best match. An axis is judged when either
+  the gyro or the quaternions turn by more than ``MIN_ROTATION_RAD`` rms per window, so a
+  deg/s gyro on a gentle flight (3 deg/s, below every magnitude limit) is still caught.
+* **accelerometer vs velocity** -- the specific force rotated to the world frame and
+  averaged over the window must equal ``(v_{k+m} - v_k) / T + g e_z`` (m/s^2). The world-z
+  gain (dominated by gravity) must lie in [0.6, 1.6] (in g: 0.10) and the horizontal axes,
+  where excited (rms above ``MIN_ACCEL``), likewise: a world-frame log rotated again doubles
+  the tilt, gain ~2. A sign error on a *body* horizontal axis is not visible: a multirotor's
+  specific force lies almost along body z.
+* **rotor speeds vs weight** -- ``b sum(Omega^2)`` averaged over the flight against
+  ``m g`` (or ``m`` times the logged body-z specific force): the ratio must lie in
+  [0.25, 4] (RPM logged as rad/s gives 91, Hz as rad/s 0.025).
+* **NaN runs** in any channel: the longest all-finite stretch is kept with a note when it
+  holds at least ``MIN_KEPT_FRACTION`` = 50 % of the samples (and at least
+  ``MIN_KEPT_S`` = 1 s); otherwise the log is refused. The fitter never sees a NaN.
+
+Every refusal is one :func:`~quadsim.errors.field_error` line naming the file, the column
+and the numbers. Example::
+
+    >>> from quadsim.logcheck import check_log
+    >>> log, notes = check_log(load_log("flight.csv.gz"), params)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .errors import field_error
+from .frames import quat_to_rotmat
+
+__all__ = ["check_log", "check_logs"]
+
+WINDOW_S = 0.1
+MIN_ROTATION_RAD = 0.005
+MIN_ACCEL = 0.3          # m/s^2 rms of a horizontal axis to judge it
+GAIN_RANGE = (0.3, 3.0)  # gross errors only (unit, sign, frame); calibration is the diagnosis
+THRUST_RANGE = (0.25, 4.0)
+ACCEL_GAIN_RANGE = (0.6, 1.6)  # world instead of body frame doubles the horizontal gain
+MIN_KEPT_FRACTION = 0.5
+MIN_KEPT_S = 1.0
+_ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
+           "rotor_command", "vbat")
+
+
+def _where(log) -> object:
+    return log.path if log.path is not None else "log"
+
+
+def _finite_rows(log) -> np.ndarray:
+    ok = np.isfinite(log.t)
+    for name in _ARRAYS:
+        value = getattr(log, name)
+        if value is not None:
+            ok &= np.all(np.isfinite(np.reshape(value, (len(log.t), -1))), axis=1)
+    return ok
+
+
+def cut_nan(log):
+    """(log, note or None): keep the longest all-finite stretch, or refuse (see module)."""
+    ok = _finite_rows(log)
+    if ok.all():
+        return log, None
+    bad_channels = [name for name in _ARRAYS if getattr(log, name) is not None and not np.all(
+        np.isfinite(getattr(log, name)))]
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))
+    starts, stops = edges[::2], edges[1::2]
+    n = len(log.t)
+    if len(starts) == 0:
+        raise field_error(_where(log), bad_channels[0], "no sample where every channel is "
+                          "finite")
+    best = int(np.argmax(stops - starts))
+    a, b = int(starts[best]), int(stops[best])
+    span = float(log.t[b - 1] - log.t[a]) if b - a > 1 else 0.0
+    if (b - a) < MIN_KEPT_FRACTION * n or span < MIN_KEPT_S:
+        raise field_error(
+            _where(log), bad_channels[0],
+            f"NaN/Inf in {100 * (1 - ok.mean()):.1f} % of the samples "
+            f"({', '.join(bad_channels)}); the longest clean stretch is {b - a} of {n} samples "
+            f"({span:.3g} s), below {100 * MIN_KEPT_FRACTION:.0f} % / {MIN_KEPT_S} s: refused "
+            "(the fitter cannot use non-finite data)")
+    cut = {name: (None if getattr(log, name) is None else getattr(log, name)[a:b])
+           for name in _ARRAYS}
+    note = (f"{_where(log)}: {', '.join(bad_channels)}: NaN/Inf in {n - int(ok.sum())} "
+            f"samples; kept the clean stretch lines {a + 2}-{b + 1} "
+            f"(t {log.t[a]:.3f}-{log.t[b - 1]:.3f} s, {b - a} of {n} samples)")
+    new = dataclasses.replace(log, t=log.t[a:b], notes=(*log.notes, note), **cut)
+    return new, note
+
+
+def _windows(t: np.ndarray) -> np.ndarray:
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    m = max(1, int(round(WINDOW_S / dt))) if dt > 0 else 1
+    return np.arange(0, len(t), m)
+
+
+def _rotvec_between(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Rotation vector (body frame of q0) of conj(q0) * q1, wxyz."""
+    w0, v0 = q0[:, :1], -q0[:, 1:]
+    w1, v1 = q1[:, :1], q1[:, 1:]
+    w = w0 * w1 - np.sum(v0 * v1, axis=1, keepdims=True)
+    v = w0 * v1 + w1 * v0 + np.cross(v0, v1)
+    v = np.where(w < 0, -v, v)
+    w = np.abs(w)
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    angle = 2 * np.arctan2(norm, w)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(norm > 1e-12, angle / norm, 2.0)
+    return v * scale
+
+
+def _cumtrapz(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    steps = 0.5 * (y[1:] + y[:-1]) * np.diff(t)[:, None]
+    return np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(steps, axis=0)])
+
+
+def _gain(measured: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.sum(measured * reference) / np.sum(reference * reference))
+
+
+def check_gyro(log) -> str | None:
+    """Gyro against the quaternions' rotation (see module); raises, or returns a note when
+    the flight is too gentle to judge."""
+    if log.body_rate is None or len(log.t) < 4:
+        return None
+    k = _windows(log.t)
+    if len(k) < 3:
+        return None
+    quat_rot = _rotvec_between(log.quat[k[:-1]], log.quat[k[1:]])
+    integral = _cumtrapz(log.t, log.body_rate)
+    gyro_rot = integral[k[1:]] - integral[k[:-1]]
+    judged = 0
+    for i, axis in enumerate("xyz"):
+        if max(np.sqrt(np.mean(quat_rot[:, i] ** 2)),
+               np.sqrt(np.mean(gyro_rot[:, i] ** 2))) < MIN_ROTATION_RAD:
+            continue  # neither turns: nothing to compare
+        judged += 1
+        gains = [_gain(gyro_rot[:, i], quat_rot[:, j]) for j in range(3)]
+        corr = [abs(np.corrcoef(gyro_rot[:, i], quat_rot[:, j])[0, 1])
+                if np.std(quat_rot[:, j]) > 0 and np.std(gyro_rot[:, i]) > 0 else 0.0
+                for j in range(3)]
+        best = int(np.nanargmax(corr))
+        gain = gains[i]
+        if best != i and corr[best] > 0.7 and corr[best] > corr[i] + 0.2:
+            raise field_error(_where(log), f"w{axis}",
+                              f"gyro w{axis} follows the attitude's {'xyz'[best]} axis "
+                              f"(correlation {corr[best]:.2f} vs {corr[i]:.2f} with {axis}) "
+                              "over 0.1 s windows: axes swapped?")
+        if not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
+            hint = ("deg/s instead of rad/s?" if 40 < gain < 80 else
+                    "sign flipped (frame convention)?" if -1.4 < gain < -0.7 else
+                    "wrong unit or frame?")
+            raise field_error(_where(log), f"w{axis}",
+                              f"integrated gyro = {gain:.4g} x the rotation of the attitude "
+                              f"quaternions over {WINDOW_S} s windows (expected 1): {hint}")
+    if judged == 0:
+        return f"{_where(log)}: wx, wy, wz: too little rotation to check the gyro against the attitude"
+    return None
+
+
+def check_accel(log, gravity: float = 9.81) -> None:
+    """Accelerometer against the velocity derivative plus gravity (see module)."""
+    if log.accel is None or len(log.t) < 4:
+        return
+    k = _windows(log.t)
+    if len(k) < 3:
+        return
+    velocity = log.velocity if log.velocity is not None else np.gradient(log.position, log.t,
+                                                                         axis=0)
+    world = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat), log.accel)
+    integral = _cumtrapz(log.t, world)
+    span = (log.t[k[1:]] - log.t[k[:-1]])[:, None]
+    measured = (integral[k[1:]] - integral[k[:-1]]) / span
+    expected = (velocity[k[1:]] - velocity[k[:-1]]) / span
+    expected[:, 2] += gravity
+    for i, axis in enumerate("xyz"):
+        if i < 2 and np.sqrt(np.mean(expected[:, i] ** 2)) < MIN_ACCEL:
+            continue
+        gain = _gain(measured[:, i], expected[:, i])
+        if not ACCEL_GAIN_RANGE[0] <= gain <= ACCEL_GAIN_RANGE[1]:
+            hint = ("in g instead of m/s^2?" if 0.07 < gain < 0.14 else
+                    "sign or frame (world instead of body?) wrong?")
+            raise field_error(_where(log), f"a{axis}",
+                              f"accelerometer rotated to the world frame = {gain:.4g} x "
+                              f"(velocity derivative + g) on world {axis} over {WINDOW_S} s "
+                              f"windows (expected 1): {hint}")
+
+
+def check_rotors(log, params) -> None:
+    """Rotor speeds against the weight: b sum(Omega^2) vs m g (see module)."""
+    if log.rotor_speed is None or params is None or log.rotor_speed.shape[1] == 0:
+        return
+    thrust = params.thrust_factor * np.sum(np.square(log.rotor_speed), axis=1)
+    if log.accel is not None:
+        need = params.mass * log.accel[:, 2]
+    else:
+        need = np.full(len(log.t), params.weight)
+    mean_need = float(np.mean(need))
+    if mean_need <= 0:
+        return
+    ratio = float(np.mean(thrust)) / mean_need
+    if not THRUST_RANGE[0] <= ratio <= THRUST_RANGE[1]:
+        hint = ("RPM logged as rad/s?" if 40 < ratio < 150 else
+                "Hz logged as rad/s?" if 0.015 < ratio < 0.04 else
+                "wrong unit, or the log is not of this vehicle?")
+        raise field_error(_where(log), "rotor_*",
+                          f"b sum(Omega^2) = {float(np.mean(thrust)):.4g} N on average is "
+                          f"{ratio:.3g} x the thrust the vehicle needed ({mean_need:.4g} N, "
+                          f"mass {params.mass:.4g} kg of {params.path or params.name}): {hint}")
+
+
+def check_log(log, params=None):
+    """All checks on one log; returns (log with NaN runs cut, notes)."""
+    log, note = cut_nan(log)
+    notes = [note] if note else []
+    gyro_note = check_gyro(log)
+    if gyro_note:
+        notes.append(gyro_note)
+    check_accel(log, params.gravity if params is not None else 9.81)
+    check_rotors(log, params)
+    return log, notes
+
+
+def check_logs(logs, params=None):
+    """:func:`check_log` on each; returns (logs, notes)."""
+    out, notes = [], []
+    for log in logs:
+        log, n = check_log(log, params)
+        out.append(log)
+        notes.extend(n)
+    return out, notes

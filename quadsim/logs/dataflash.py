@@ -1,0 +1,227 @@
+"""ArduPilot DataFlash binary logs (``.bin``) through ``pymavlink``'s DFReader (optional:
+``pip install 'quadsim[logs]'``).
+
+Messages read (first instance where a message has several: ``I``/``C``/``Instance`` = 0):
+
+=============  ==========================  ==================================  ==============
+signal         message (fallbacks)         fields                              unit in log
+=============  ==========================  ==================================  ==============
+quat           ATT                         Roll Pitch Yaw                      deg, Z-Y-X
+                                                                               Euler, NED/FRD
+position       XKF1 (EKF1, POS)            PN PE PD (POS: Lat Lng Alt)         m NED (deg, m)
+velocity       XKF1 (EKF1)                 VN VE VD                            m/s NED
+body_rate      IMU                         GyrX GyrY GyrZ                      rad/s FRD
+accel          IMU                         AccX AccY AccZ                      m/s^2 FRD
+rotor_command  RCOU                        C1..Cn (older: Ch1..Chn)            us PWM
+rotor_speed    ESC (Instance, RPM)         RPM                                 RPM
+vbat           BAT (CURR)                  Volt                                V (CURR with an
+                                                                               int16 field: cV)
+=============  ==========================  ==================================  ==============
+
+Time: ``TimeUS`` (us) or, in older logs, ``TimeMS`` (ms) since boot -> s from the first
+attitude row; every message is interpolated onto the ATT instants (``common.resample``:
+linear, NaN across gaps), trimmed to the span every message covers (``common.common_span``). Frames as for PX4 (``quadsim.logs.common``). ``POS`` (geodetic)
+becomes local NED about its first fix by the flat-earth approximation (R = 6378137 m).
+
+Rotor count from ``FRAME_CLASS`` (1 quad 4, 2 hexa 6, 3 octa 8, 4 octa-quad 8, 5 Y6 6,
+7 tri 3), else 4 (older logs: ``FRAME`` is only the X/+ layout). PWM range from
+``MOT_PWM_MIN``/``MOT_PWM_MAX`` when set, else ``RC3_MIN``/``RC3_MAX`` (the throttle channel,
+ArduCopter <= 3.x), else 1000-2000 us; ``pwm_range`` overrides. A voltage that is zero
+throughout (no battery monitor, ``BATT_MONITOR`` = 0) is left out.
+
+Errors: no ATT or no position message ("unknown ArduPilot message layout": the fields
+present are listed), a file pymavlink cannot parse, commands outside 0-1.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, field_error
+from ..frames import euler_to_quat
+from .common import (
+    RPM_TO_RAD_S,
+    columns_from_signals,
+    common_span,
+    frd_to_body,
+    map_rotors,
+    ned_to_world,
+    pwm_to_unit,
+    quat_ned_frd_to_world_body,
+    resample,
+    resample_quat,
+)
+
+MAGIC = b"\xa3\x95\x80"
+_FRAME_ROTORS = {1: 4, 2: 6, 3: 8, 4: 8, 5: 6, 7: 3}
+_WANTED = ("ATT", "XKF1", "EKF1", "POS", "IMU", "RCOU", "ESC", "BAT", "CURR", "PARM")
+EARTH_RADIUS = 6378137.0  # m, WGS-84 equatorial
+
+
+def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str, str]]:
+    try:
+        from pymavlink import DFReader
+    except ImportError:
+        raise InputError(f"{path}: reading DataFlash needs pymavlink "
+                         "(pip install 'quadsim[logs]')") from None
+    try:
+        reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
+    except Exception as exc:  # noqa: BLE001 (pymavlink raises assorted errors on bad files)
+        raise InputError(f"{path}: not a readable DataFlash log: {' '.join(str(exc).split())}"
+                         ) from None
+    messages: dict[str, list[dict]] = {k: [] for k in _WANTED}
+    params: dict[str, float] = {}
+    while True:
+        try:
+            msg = reader.recv_match(type=list(_WANTED))
+        except Exception as exc:  # noqa: BLE001 (pymavlink: any parse error)
+            raise InputError(f"{path}: corrupt DataFlash data: {' '.join(str(exc).split())}"
+                             ) from None
+        if msg is None:
+            break
+        kind = msg.get_type()
+        if kind == "PARM":
+            params[msg.Name] = float(msg.Value)
+        else:
+            messages[kind].append(msg.to_dict())
+    formats = {f.name: f.format for f in reader.formats.values()}
+    return messages, params, formats
+
+
+def _time(rows: list[dict]) -> np.ndarray:
+    if "TimeUS" in rows[0]:
+        return np.array([r["TimeUS"] for r in rows], dtype=float) * 1e-6
+    return np.array([r["TimeMS"] for r in rows], dtype=float) * 1e-3
+
+
+def _first_instance(rows: list[dict]) -> list[dict]:
+    for key in ("I", "C", "Instance", "Inst"):
+        if rows and key in rows[0]:
+            return [r for r in rows if r[key] == 0]
+    return rows
+
+
+def _table(path: Path, rows: list[dict], fields: list[str], kind: str):
+    rows = _first_instance(rows)
+    if not rows:
+        return None
+    missing = [f for f in fields if f not in rows[0]]
+    if missing:
+        raise field_error(path, f"{kind}.{missing[0]}", "unknown ArduPilot message layout "
+                          f"(fields present: {', '.join(k for k in rows[0] if k != 'mavpackettype')})")
+    t = _time(rows)
+    values = np.array([[r[f] for f in fields] for r in rows], dtype=float)
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    return t[keep], values[keep]
+
+
+def _position(path: Path, messages: dict):
+    for kind in ("XKF1", "EKF1"):
+        if messages[kind]:
+            pos = _table(path, messages[kind], ["PN", "PE", "PD"], kind)
+            vel = _table(path, messages[kind], ["VN", "VE", "VD"], kind)
+            return pos, vel
+    if messages["POS"]:
+        t, geo = _table(path, messages["POS"], ["Lat", "Lng", "Alt"], "POS")
+        lat0 = np.radians(geo[0, 0])
+        north = np.radians(geo[:, 0] - geo[0, 0]) * EARTH_RADIUS
+        east = np.radians(geo[:, 1] - geo[0, 1]) * EARTH_RADIUS * np.cos(lat0)
+        return (t, np.stack([north, east, -(geo[:, 2] - geo[0, 2])], axis=1)), None
+    raise field_error(path, "XKF1/EKF1/POS", "no position message: unknown ArduPilot message "
+                      "layout (expected XKF1, EKF1 or POS)")
+
+
+def _rotor_setup(params: dict, pwm_range):
+    count = _FRAME_ROTORS.get(int(params.get("FRAME_CLASS", 1)), 4)
+    if pwm_range is None:
+        if params.get("MOT_PWM_MIN", 0) > 0 and params.get("MOT_PWM_MAX", 0) > 0:
+            pwm_range = (params["MOT_PWM_MIN"], params["MOT_PWM_MAX"])
+        elif "RC3_MIN" in params and "RC3_MAX" in params:
+            pwm_range = (params["RC3_MIN"], params["RC3_MAX"])
+        else:
+            pwm_range = (1000.0, 2000.0)
+    return count, pwm_range
+
+
+def _commands(path, messages, count, pwm_range):
+    rows = messages["RCOU"]
+    if not rows:
+        return None
+    prefix = "C" if "C1" in rows[0] else "Ch"
+    t, pwm = _table(path, rows, [f"{prefix}{i + 1}" for i in range(count)], "RCOU")
+    cmd = pwm_to_unit(pwm, pwm_range)
+    if cmd.max() > 1.05 or cmd.min() < -0.05:
+        raise field_error(path, "RCOU", f"motor outputs span {pwm.min():g}..{pwm.max():g} us, "
+                          f"outside the PWM range {pwm_range[0]:g}-{pwm_range[1]:g} us: unknown "
+                          "range (--pwm-range)")
+    return t, cmd
+
+
+def _speeds(path, messages, count):
+    rows = messages["ESC"]
+    if not rows or "RPM" not in rows[0] or "Instance" not in rows[0]:
+        return None
+    series = []
+    for i in range(count):
+        mine = [r for r in rows if r["Instance"] == i]
+        if len(mine) < 2:
+            raise field_error(path, "ESC", f"no RPM for motor {i + 1} of {count}")
+        series.append((_time(mine), np.abs(np.array([r["RPM"] for r in mine], float))))
+    return series
+
+
+def _voltage(path, messages, formats):
+    for kind in ("BAT", "CURR"):
+        if messages[kind] and "Volt" in messages[kind][0]:
+            t, volt = _table(path, messages[kind], ["Volt"], kind)
+            fmt_cols = formats.get(kind, "")
+            if kind == "CURR" and "h" in fmt_cols and volt.max() > 100:
+                volt = volt / 100.0  # ArduCopter <= 3.2 logged centivolts as int16
+            if np.all(volt == 0):
+                return None
+            return t, volt[:, 0]
+    return None
+
+
+def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
+                      pwm_range: tuple[float, float] | None = None) -> dict[str, np.ndarray]:
+    """Flight-log columns (SI, schema names, our frames) from an ArduPilot DataFlash log."""
+    path = Path(path)
+    messages, params, formats = _read(path)
+    if not messages["ATT"]:
+        raise field_error(path, "ATT", "no attitude message: unknown ArduPilot message layout")
+    t_base, euler = _table(path, messages["ATT"], ["Roll", "Pitch", "Yaw"], "ATT")
+    quat_ned = euler_to_quat(np.radians(euler))
+    pos, vel = _position(path, messages)
+    imu = _table(path, messages["IMU"], ["GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
+                 "IMU") if messages["IMU"] else None
+    count, pwm_range = _rotor_setup(params, pwm_range)
+    cmd = _commands(path, messages, count, pwm_range)
+    speeds = _speeds(path, messages, count)
+    volt = _voltage(path, messages, formats)
+    sig = {"quat": quat_ned_frd_to_world_body(resample_quat(t_base, quat_ned, t_base)),
+           "position": ned_to_world(resample(*pos, t_base)),
+           "velocity": ned_to_world(resample(*vel, t_base)) if vel else None}
+    if imu is not None:
+        both = resample(*imu, t_base)
+        sig["body_rate"], sig["accel"] = frd_to_body(both[:, :3]), frd_to_body(both[:, 3:])
+    sig["rotor_command"] = map_rotors(path, "RCOU", resample(*cmd, t_base) if cmd else None,
+                                      rotor_map)
+    if speeds:
+        speed = np.stack([resample(t, v, t_base) for t, v in speeds], axis=1) * RPM_TO_RAD_S
+        sig["rotor_speed"] = map_rotors(path, "ESC", speed, rotor_map)
+    sig["vbat"] = resample(*volt, t_base) if volt else None
+    keep = np.isfinite(sig["position"]).all(axis=1)
+    if keep.sum() < 2:
+        raise field_error(path, "XKF1/EKF1", "position and attitude never overlap in time")
+    return common_span(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}))
+
+
+def is_dataflash(head: bytes) -> bool:
+    return head[:3] == MAGIC
+
+
+__all__ = ["MAGIC", "dataflash_columns", "is_dataflash"]

@@ -1,0 +1,216 @@
+"""Crazyflie uSD-card logs (the firmware's event-based binary format, versions 1 and 2).
+
+Layout (little-endian; as written by the Crazyflie firmware's uSD deck driver and read by
+its ``tools/usdlog/cfusdlog.py``), checked against the real files in
+``crazyflie21_brushless/usd_raw/``::
+
+    u8  0xBC                     magic
+    u16 version                  1 or 2
+    u16 number of event types
+    per event type:
+        u16 id                   (0xFFFF = the fixed-frequency logging event)
+        char[] name, NUL         e.g. "fixedFrequency", "estPose"
+        u16 number of variables
+        per variable: char[] "group.name(t)", NUL   t = struct code: f, H, h, I, i, B, b, ...
+    events until the last 4 bytes:
+        u16 id, timestamp (v1: u32 ms; v2: u64 us), values packed as the definition says
+    u32 CRC32 (zlib) of everything before it
+
+Signals and units (converted here, at the boundary):
+
+===========================  ==========  ====================  =============================
+uSD variable                 unit        column                conversion
+===========================  ==========  ====================  =============================
+stateEstimate.x/y/z          m           x, y, z               --
+stateEstimate.vx/vy/vz       m/s         vx, vy, vz            --
+stateEstimate.qw/qx/qy/qz    --          qw, qx, qy, qz        --
+gyro.x/y/z                   deg/s       wx, wy, wz            x pi/180
+acc.x/y/z                    g           ax, ay, az            x 9.81 m/s^2 (the firmware's
+                                                               GRAVITY_MAGNITUDE)
+rpm.m1..m4                   RPM         rotor_1..4            x 2 pi/60
+pwm.m1_pwm..m4_pwm           0-65535     cmd_1..4              / 65535
+pm.vbatMV                    mV          vbat                  / 1000
+===========================  ==========  ====================  =============================
+
+The Crazyflie's world is z up and its body x forward, y left, z up: no frame change. The
+flight-log rows are the fixed-frequency events (one row each, time from the first); a
+motion-capture pose event (``estPose``, ``locSrv.*``) is not a column of the schema and is
+returned by :func:`read_usd` in ``extra`` (not in the CSV). Measured: the three raw logs
+reproduce ``nominal/flight_00..02.csv.gz`` row for row (docs/logs.md gives the differences).
+
+Errors (one line, file and field): wrong magic byte, unknown version, bad CRC, a truncated
+event or definition, an event id without a definition, an unknown type code.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import field_error
+from .common import RPM_TO_RAD_S, map_rotors
+
+MAGIC = 0xBC
+FIXED_FREQUENCY_ID = 0xFFFF
+#: m/s^2 per g: the Crazyflie firmware's GRAVITY_MAGNITUDE (the nominal CSVs use it too).
+CF_GRAVITY = 9.81
+_TIMESTAMP = {1: (struct.Struct("<HI"), 1e-3), 2: (struct.Struct("<HQ"), 1e-6)}
+_TYPES = set("bBhHiIqQfd")
+
+
+def _definitions(path: Path, data: bytes) -> tuple[int, dict, int]:
+    def need(idx: int, size: int, what: str) -> None:
+        if idx + size > len(data) - 4:
+            raise field_error(path, what, "truncated event definitions")
+
+    need(0, 5, "header")
+    version, count = struct.unpack_from("<HH", data, 1)
+    if version not in _TIMESTAMP:
+        raise field_error(path, "version", f"uSD log version {version}; only 1 and 2 are known")
+    idx, defs = 5, {}
+    for _ in range(count):
+        need(idx, 2, "event definition")
+        (event_id,) = struct.unpack_from("<H", data, idx)
+        end = data.find(b"\0", idx + 2)
+        if end < 0:
+            raise field_error(path, "event definition", "truncated event name")
+        name = data[idx + 2:end].decode("ascii", "replace")
+        idx = end + 1
+        need(idx, 2, name)
+        (nvars,) = struct.unpack_from("<H", data, idx)
+        idx += 2
+        variables, codes = [], ""
+        for _ in range(nvars):
+            end = data.find(b"\0", idx)
+            if end < 0:
+                raise field_error(path, name, "truncated variable definition")
+            text = data[idx:end].decode("ascii", "replace")
+            idx = end + 1
+            if not (text.endswith(")") and "(" in text) or text[-2] not in _TYPES:
+                raise field_error(path, name, f"variable {text!r}: expected name(type) with a "
+                                  f"type code in {''.join(sorted(_TYPES))}")
+            variables.append(text[:text.rindex("(")])
+            codes += text[-2]
+        defs[event_id] = (name, variables, struct.Struct("<" + codes))
+    return version, defs, idx
+
+
+def read_usd(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]], int]:
+    """Every event of a uSD log: ``{event name: {"t": s, variable: values}}`` in the units
+    of the file (no conversion), and the format version. CRC checked."""
+    path = Path(path)
+    data = path.read_bytes()
+    if len(data) < 9 or data[0] != MAGIC:
+        raise field_error(path, "header", f"not a Crazyflie uSD log (first byte "
+                          f"{data[:1].hex() or 'missing'}, expected bc)")
+    (crc,) = struct.unpack_from("<I", data, len(data) - 4)
+    if zlib.crc32(data[:-4]) != crc:
+        raise field_error(path, "crc32", f"checksum {zlib.crc32(data[:-4]):08x} does not "
+                          f"match the stored {crc:08x}: the file is corrupt or truncated")
+    version, defs, idx = _definitions(path, data)
+    head, tick = _TIMESTAMP[version]
+    rows: dict[int, list] = {k: [] for k in defs}
+    times: dict[int, list] = {k: [] for k in defs}
+    end = len(data) - 4
+    while idx < end:
+        if idx + head.size > end:
+            raise field_error(path, "event", f"truncated event header at byte {idx}")
+        event_id, stamp = head.unpack_from(data, idx)
+        idx += head.size
+        if event_id not in defs:
+            raise field_error(path, "event", f"id {event_id} at byte {idx - head.size} has no "
+                              "definition")
+        body = defs[event_id][2]
+        if idx + body.size > end:
+            raise field_error(path, defs[event_id][0], f"truncated event at byte "
+                              f"{idx - head.size}")
+        rows[event_id].append(body.unpack_from(data, idx))
+        times[event_id].append(stamp)
+        idx += body.size
+    events = {}
+    for event_id, (name, variables, _) in defs.items():
+        values = np.array(rows[event_id], dtype=float).reshape(-1, len(variables))
+        events[name] = {"t": np.array(times[event_id], dtype=float) * tick}
+        events[name].update({v: values[:, i] for i, v in enumerate(variables)})
+    return events, version
+
+
+def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
+                event: str | None = None) -> dict[str, np.ndarray]:
+    """Flight-log columns (SI, schema names) from a uSD log: one row per fixed-frequency
+    event (or per ``event`` when given), time from its first row."""
+    path = Path(path)
+    events, _ = read_usd(path)
+    name = event or next((n for n in events if n == "fixedFrequency"), None)
+    if name is None or name not in events:
+        raise field_error(path, event or "fixedFrequency", "event not in the log (events: "
+                          f"{', '.join(events)})")
+    ev = events[name]
+    if len(ev["t"]) == 0:
+        raise field_error(path, name, "no events recorded")
+    t = ev["t"]
+    cols = {"t": t - t[0]}
+
+    def take(names, scale=1.0):
+        if all(n in ev for n in names):
+            return np.stack([ev[n] for n in names], axis=1) * scale
+        return None
+
+    state = "stateEstimate."
+    position = take([state + a for a in "xyz"])
+    quat = take([state + a for a in ("qw", "qx", "qy", "qz")])
+    if position is None or quat is None:
+        missing = "stateEstimate.x/y/z" if position is None else "stateEstimate.qw/qx/qy/qz"
+        raise field_error(path, f"{name}: {missing}", "required for position/attitude, not "
+                          "logged")
+    groups = {
+        "x y z": position, "vx vy vz": take([state + a for a in ("vx", "vy", "vz")]),
+        "qw qx qy qz": quat,
+        "wx wy wz": take(["gyro.x", "gyro.y", "gyro.z"], np.pi / 180.0),
+        "ax ay az": take(["acc.x", "acc.y", "acc.z"], CF_GRAVITY),
+    }
+    for names, value in groups.items():
+        if value is not None:
+            cols.update({n: value[:, i] for i, n in enumerate(names.split())})
+    motors = sorted(int(k[5:]) for k in ev if k.startswith("rpm.m") and k[5:].isdigit())
+    rotor = take([f"rpm.m{m}" for m in motors], RPM_TO_RAD_S) if motors else None
+    pwm_motors = sorted(int(k[5:-4]) for k in ev if k.startswith("pwm.m") and k.endswith("_pwm"))
+    cmd = take([f"pwm.m{m}_pwm" for m in pwm_motors], 1.0 / 65535.0) if pwm_motors else None
+    for prefix, value in (("rotor", map_rotors(path, "rpm.m*", rotor, rotor_map)),
+                          ("cmd", map_rotors(path, "pwm.m*_pwm", cmd, rotor_map))):
+        if value is not None:
+            cols.update({f"{prefix}_{i + 1}": value[:, i] for i in range(value.shape[1])})
+    if "pm.vbatMV" in ev:
+        cols["vbat"] = ev["pm.vbatMV"] / 1000.0
+    return cols
+
+
+def encode_usd(events: dict[str, tuple[int, list[tuple[str, str]], list[tuple[int, tuple]]]],
+               *, version: int = 2) -> bytes:
+    """A uSD log from ``{name: (id, [(variable, type code)], [(timestamp ticks, values)])}``
+    (ticks: ms for version 1, us for version 2); events written in timestamp order. The
+    writer of the test fixtures; the inverse of :func:`read_usd`."""
+    head, _ = _TIMESTAMP[version]
+    out = bytearray(struct.pack("<BHH", MAGIC, version, len(events)))
+    stream = []
+    for name, (event_id, variables, samples) in events.items():
+        out += struct.pack("<H", event_id) + name.encode() + b"\0"
+        out += struct.pack("<H", len(variables))
+        for var, code in variables:
+            out += f"{var}({code})".encode() + b"\0"
+        body = struct.Struct("<" + "".join(c for _, c in variables))
+        stream += [(stamp, head.pack(event_id, stamp) + body.pack(*values))
+                   for stamp, values in samples]
+    for _, chunk in sorted(stream, key=lambda s: s[0]):
+        out += chunk
+    return bytes(out + struct.pack("<I", zlib.crc32(bytes(out))))
+
+
+def is_usd(head: bytes) -> bool:
+    return len(head) >= 5 and head[0] == MAGIC and head[1:3] in (b"\x01\x00", b"\x02\x00")
+
+
+__all__ = ["CF_GRAVITY", "encode_usd", "is_usd", "read_usd", "usd_columns"]

@@ -1,0 +1,59 @@
+"""Command-only diagnosis on the real Crazyflie flights: per-flight verdicts on the mixed
+flights with measured rotor speeds vs with the speed columns removed and synthesised from
+the commands (model fitted on the nominal flights). Prints agreement and the pairs.
+
+    python scripts/command_only_check.py [DATA_DIR] [--json OUT.json]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from quadsim.flightlog import load_log
+from quadsim.gap import diagnose_per_flight
+from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
+from quadsim.params import load_params
+
+
+def main() -> None:
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    root = Path(args[0] if args else Path(__file__).resolve().parents[1] / ".." / "shared"
+                / "data") / "crazyflie21_brushless"
+    nominal = [load_log(p, warn=False) for p in sorted((root / "nominal").glob("*.csv.gz"))]
+    mixed = [load_log(p, warn=False) for p in sorted((root / "mixed").glob("*.csv.gz"))]
+    params = load_params("crazyflie21")
+    model = fit_command_model(nominal)
+    print(f"command model: tau {model.tau * 1e3:.1f} ms, rms {model.rms:.2f} rad/s, "
+          f"v_ref {model.v_ref:.3f} V, b {model.b.round(1)}, c {model.c.round(1)}", flush=True)
+    t0 = time.time()
+    with_speeds = diagnose_per_flight(mixed, nominal, params)
+    t1 = time.time()
+    ref_cmd = [synthesise_speeds(without_speeds(g), model) for g in nominal]
+    mix_cmd = [synthesise_speeds(without_speeds(g), model) for g in mixed]
+    commands_only = diagnose_per_flight(mix_cmd, ref_cmd, params)
+    t2 = time.time()
+    # variant: reference flights keep their measured speeds, only the mixed ones lose them
+    mixed_ref = diagnose_per_flight(mix_cmd, nominal, params)
+    agree_ref = sum(a["verdict"] == b["verdict"] for a, b in
+                    zip(with_speeds["flights"], mixed_ref["flights"]))
+    print(f"variant (reference with measured speeds): agreement {agree_ref}/{len(mixed)}")
+    pairs = [(Path(a["file"]).name, a["verdict"], b["verdict"])
+             for a, b in zip(with_speeds["flights"], commands_only["flights"])]
+    agree = sum(a == b for _, a, b in pairs)
+    for name, a, b in pairs:
+        print(f"{name:24s} {a:22s} {b:22s} {'' if a == b else '<- differs'}")
+    print(f"agreement {agree}/{len(pairs)} = {agree / len(pairs):.2f}; "
+          f"{t1 - t0:.0f} s with speeds, {t2 - t1:.0f} s commands only")
+    if "--json" in sys.argv:
+        out = sys.argv[sys.argv.index("--json") + 1]
+        Path(out).write_text(json.dumps({"pairs": pairs, "agree_measured_reference": agree_ref,
+                                         "flights_with": with_speeds["flights"],
+                                         "flights_cmd": commands_only["flights"], "agreement": agree / len(pairs),
+                                         "tau_s": model.tau, "rms_rad_s": model.rms}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
