@@ -325,15 +325,30 @@ def unpack_state(y: np.ndarray, t: float, batch: int, rotor_speed: np.ndarray,
 
 def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
                  command_fn: Callable[[int, dict], np.ndarray], periods: int,
-                 control_period: float, *, rtol: float = RTOL, atol: float = ATOL) -> dict:
+                 control_period: float, *, rtol: float = RTOL, atol: float = ATOL,
+                 fast: bool | None = None) -> dict:
     """Advance B simulations ``periods`` control periods; commands held over each period.
 
     ``initial``: snapshot dict of (B, ...) arrays; ``command_fn(k, snapshot) -> (B, R)``
     rotor speed commands (rad/s) for period k. Returns the samples at the period boundaries:
     dict of (B, periods + 1, ...) arrays ``position, velocity, quat, body_rate, rotor_speed,
     rotor_command`` (rotor_speed is the actual speed; without rotor dynamics the command
-    held from that instant)."""
+    held from that instant).
+
+    ``fast``: None (default) evaluates the right-hand side with the compiled kernel of
+    :mod:`quadsim.fast_mujoco` when numba is installed and every effect has a fast form (same
+    equations), else with :func:`state_derivative`; False forces the numpy reference."""
     body = body_arrays(params)
+    compiled = None
+    if fast is not False:
+        from . import fast_mujoco
+
+        sets = [None] * len(params)
+        for effect_set, _, idx in effects.groups:
+            for i in idx:
+                sets[i] = effect_set
+        if fast_mujoco.fast_form_problem(sets, params) is None:
+            compiled = fast_mujoco.analytic_rhs(sets, params, body)
     batch = len(params)
     dynamics = effects.rotor_dynamics
     y = pack_state(initial, dynamics)
@@ -352,6 +367,8 @@ def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial
         if k == periods:
             break
         def rhs(t, yy, held=command):
+            if compiled is not None:
+                return compiled(t, yy, held)
             return state_derivative(t, yy, body=body, effects=effects, command=held)
 
         y = integrate_hold(y, t0, t0 + control_period, rhs, rtol=rtol, atol=atol, batch=batch)

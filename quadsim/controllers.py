@@ -34,7 +34,7 @@ import numpy as np
 
 from .frames import quat_to_rotmat
 from .params import VehicleParams
-from .rotors import speeds_for
+from .rotors import mixer
 from .trajectories import Reference
 
 __all__ = ["GeometricController", "desired_rotation"]
@@ -70,6 +70,7 @@ class GeometricController:
         self.k_w = 2 * damping * inertia * attitude_frequency
         self._integral = None
         self._last_t = None
+        self._mixer_t = mixer(params).T     # once: speeds_for would rebuild it every period
 
     def initial_state(self) -> dict:
         """The reference's state at t = 0 (position, velocity, level attitude, yaw)."""
@@ -112,4 +113,7 @@ class GeometricController:
         return np.concatenate([thrust[:, None], torque], axis=1)
 
     def __call__(self, t: np.ndarray, state: dict) -> np.ndarray:
-        return speeds_for(self.params, self.wrench(np.asarray(t, dtype=float), state))
+        # = rotors.speeds_for(params, wrench) with the mixer computed once
+        omega2 = self.wrench(np.asarray(t, dtype=float), state) @ self._mixer_t
+        omega2 = np.clip(omega2, self.params.min_speed**2, self.params.max_speed**2)
+        return np.sqrt(np.maximum(omega2, 0.0))

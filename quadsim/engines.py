@@ -117,6 +117,13 @@ def _effective_params(params, effects, batch: int):
     return sets, modified
 
 
+def _open_loop(fn, series: np.ndarray):
+    """Mark a command source that ignores the state: ``fn.series`` (B, N, R) holds every
+    command, so an engine may run the whole series in one call."""
+    fn.series = series
+    return fn
+
+
 def _command_source(params: list[VehicleParams], controller, series, periods: int,
                     batch: int) -> Callable[[int, dict], np.ndarray]:
     rotors = params[0].rotor_count
@@ -132,10 +139,13 @@ def _command_source(params: list[VehicleParams], controller, series, periods: in
                              f"commands, got {series.shape[1:]}")
         if not np.all(np.isfinite(series)):
             raise InputError("rotor_speed_series: contains NaN or infinite values")
-        return lambda k, state: np.clip(series[:, k], low, high)
+        clipped = np.clip(series[:, :periods], low[:, None], high[:, None])
+        return _open_loop(lambda k, state: clipped[:, k], clipped)
     if controller is None:
         hover = np.array([hover_speed(p) for p in params])[:, None] * np.ones((1, rotors))
-        return lambda k, state: np.clip(hover, low, high)
+        held = np.clip(hover, low, high)
+        return _open_loop(lambda k, state: held,
+                          np.broadcast_to(held[:, None], (batch, periods, rotors)))
 
     def from_controller(k: int, state: dict) -> np.ndarray:
         command = np.asarray(controller(state["t"], state), dtype=float)
@@ -175,14 +185,16 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
              rotor_speed_series: np.ndarray | None = None, duration: float,
              control_period: float = 0.01, effects=None, timestep: float | None = None,
              rtol: float = RTOL, atol: float = ATOL, nthread: int = 0,
-             batch: int | None = None) -> Trajectory:
+             batch: int | None = None, fast: bool | None = None) -> Trajectory:
     """Simulate one or a batch of flights in ``engine`` ("mujoco" or "analytic").
 
     ``effects``: None, an Effect, an :class:`EffectSet`, or a sequence of EffectSets (one per
     simulation). ``timestep`` (MuJoCo, s) must divide ``control_period`` (default: the largest
     <= 1 ms that does); ``rtol``/``atol`` are the analytic solver's tolerances. Raises
     :class:`~quadsim.errors.ModelError` if MuJoCo refuses the parameter set and
-    :class:`~quadsim.errors.SimulationError` if a run diverges."""
+    :class:`~quadsim.errors.SimulationError` if a run diverges. ``fast``: None uses the
+    compiled kernels when they can (:mod:`quadsim.fast_mujoco`), False the reference paths;
+    True requires the compiled MuJoCo path."""
     if engine not in ENGINES:
         raise InputError(f"unknown engine {engine!r}: valid engines are {', '.join(ENGINES)}")
     if not (control_period > 0 and duration > 0):
@@ -204,11 +216,11 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
 
         dt = timestep or default_timestep(control_period)
         out = run_mujoco(modified, batch_effects, start, command_fn, periods, control_period,
-                         timestep=dt, nthread=nthread)
+                         timestep=dt, nthread=nthread, fast=fast)
         meta = {"integrator": "MuJoCo RK4", "timestep": dt}
     else:
         out = run_analytic(modified, batch_effects, start, command_fn, periods, control_period,
-                           rtol=rtol, atol=atol)
+                           rtol=rtol, atol=atol, fast=fast)
         meta = {"integrator": "scipy solve_ivp DOP853", "rtol": rtol, "atol": atol}
     meta.update(control_period=control_period, params=[p.name for p in modified])
     if not batched:

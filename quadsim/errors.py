@@ -26,7 +26,15 @@ class ModelError(QuadsimError):
 
 
 class SimulationError(QuadsimError):
-    """A simulation diverged (NaN, MuJoCo warning, state out of bounds)."""
+    """A simulation diverged (NaN, MuJoCo warning, state out of bounds).
+
+    ``diverged``: indices of the simulations of a batch that diverged (when known);
+    ``partial``: the batch's results, NaN for a diverged simulation from then on."""
+
+    def __init__(self, message: str, *, partial: dict | None = None,
+                 diverged: list[int] | None = None):
+        super().__init__(message)
+        self.partial, self.diverged = partial, diverged
 
 
 class QuadsimWarning(UserWarning):

@@ -43,7 +43,7 @@ import numpy as np
 from mujoco import batch as mjbatch
 
 from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
-from .errors import ModelError, SimulationError
+from .errors import InputError, ModelError, SimulationError
 from .frames import quat_derivative, quat_normalize, quat_to_rotmat
 from .mjcf import BODY_NAME, vehicle_xml
 from .params import VehicleParams, inertia_problems
@@ -52,6 +52,11 @@ __all__ = ["compile_model", "run_mujoco", "default_timestep", "DEFAULT_MAX_TIMES
 
 #: Largest MuJoCo timestep (s) used by default; the timestep always divides the control period.
 DEFAULT_MAX_TIMESTEP = 1e-3
+
+
+#: Arena of each MjData (bytes). MuJoCo's default for this model is 13.6 MB, of which a step
+#: uses 1.2 kB (no floor, no contacts): 1 MB keeps big batches in memory (1024 sims: 1 GB).
+ARENA_BYTES = 1 << 20
 
 
 def default_timestep(control_period: float, max_timestep: float = DEFAULT_MAX_TIMESTEP) -> float:
@@ -71,8 +76,10 @@ def compile_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
         raise ModelError(f"MuJoCo refuses parameter set {where}: body.inertia "
                          + "; ".join(problems))
     try:
-        model = mujoco.MjModel.from_xml_string(
+        spec = mujoco.MjSpec.from_string(
             vehicle_xml(params, timestep=timestep, integrator="RK4", floor=False))
+        spec.memory = ARENA_BYTES
+        model = spec.compile()
     except ValueError as exc:
         raise ModelError(f"MuJoCo refuses parameter set {where}: {' '.join(str(exc).split())}"
                          ) from None
@@ -82,12 +89,41 @@ def compile_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
     return model
 
 
-def _make_batch(params: Sequence[VehicleParams], timestep: float, nthread: int
-                ) -> tuple[mjbatch.Batch, int]:
+def _models(params: Sequence[VehicleParams], timestep: float) -> list[mujoco.MjModel]:
+    """One compiled model per simulation (shared between simulations with the same set)."""
     models: dict[int, mujoco.MjModel] = {}
     for p in params:
         if id(p) not in models:
             models[id(p)] = compile_model(p, timestep)
+    return [models[id(p)] for p in params]
+
+
+#: Fraction of the available memory a batch may plan to use before it is refused.
+MEMORY_FRACTION = 0.5
+
+
+def check_memory(model: mujoco.MjModel, batch: int, periods: int, rotors: int) -> int:
+    """Estimate the bytes a batch needs (one MjData per simulation plus the samples) and
+    raise :class:`InputError` before allocating if it exceeds ``MEMORY_FRACTION`` of the
+    available memory. Returns the estimate (bytes)."""
+    import os
+
+    per_sim = model.narena + model.nbuffer + 8 * (periods + 1) * (2 * 13 + 4 * rotors)
+    need = batch * per_sim
+    try:
+        free = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):      # not available on this platform
+        return need
+    if need > MEMORY_FRACTION * free:
+        raise InputError(f"batch of {batch} simulations needs about {need / 1e9:.3g} GB "
+                         f"({per_sim / 1e6:.3g} MB each), more than {MEMORY_FRACTION:g} of the "
+                         f"{free / 1e9:.3g} GB available: split the batch")
+    return need
+
+
+def _make_batch(params: Sequence[VehicleParams], compiled: Sequence[mujoco.MjModel],
+                nthread: int) -> tuple[mjbatch.Batch, int]:
+    models = {id(p): m for p, m in zip(params, compiled)}
     first = models[id(params[0])]
     threads = 1 if len(params) == 1 else nthread
     batch = mjbatch.Batch(first, nsim=len(params), nthread=threads)
@@ -196,16 +232,47 @@ def _check(qpos, qvel, time, expected_t):
 def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
                command_fn: Callable[[int, dict], np.ndarray], periods: int,
                control_period: float, *, timestep: float | None = None,
-               nthread: int = 0) -> dict:
+               nthread: int = 0, fast: bool | None = None) -> dict:
     """Advance B simulations ``periods`` control periods in MuJoCo (same contract and output
     as :func:`quadsim.analytic.run_analytic`). ``timestep`` must divide ``control_period``
-    (default :func:`default_timestep`); ``nthread`` 0 uses every CPU."""
+    (default :func:`default_timestep`); ``nthread`` 0 uses every CPU.
+
+    ``fast``: None (default) runs the compiled path of :mod:`quadsim.fast_mujoco` when numba
+    is installed and every effect has a fast form, else this module's step-by-step reference
+    path; False forces the reference; True requires the fast path (``InputError`` naming
+    what prevents it)."""
     dt = timestep or default_timestep(control_period)
     substeps = int(round(control_period / dt))
     if abs(substeps * dt - control_period) > 1e-9 * control_period:
         raise ValueError(f"timestep {dt} does not divide control period {control_period}")
-    batch, body_id = _make_batch(params, dt, nthread)
+    models = _models(params, dt)
+    check_memory(models[0], len(params), periods, params[0].rotor_count)
     body = body_arrays(params)
+    if fast is not False:
+        from . import fast_mujoco
+
+        sets = [None] * len(params)
+        for effect_set, _, idx in effects.groups:
+            for i in idx:
+                sets[i] = effect_set
+        problem = fast_mujoco.fast_form_problem(sets, params)
+        if problem and fast:
+            raise InputError(f"mujoco engine: fast path unavailable: {problem}")
+        if not problem:
+            body_id = mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, BODY_NAME)
+            out, status = fast_mujoco.run_fast(models, body_id, sets, params, body, initial,
+                                               command_fn, periods, control_period, dt,
+                                               nthread)
+            if status.any():
+                bad = np.flatnonzero(status)
+                raise SimulationError(
+                    f"mujoco engine: simulation(s) {bad.tolist()} diverged before t = "
+                    + ", ".join(f"{status[i] * control_period:.4g}" for i in bad)
+                    + f" s (NaN, MuJoCo reset after a bad acceleration, or state beyond "
+                    f"{STATE_BOUND:g}); the others' results are in this error's .partial",
+                    partial=out, diverged=bad.tolist())
+            return out
+    batch, body_id = _make_batch(params, models, nthread)
     batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
     qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
     qpos[:, 0:3], qpos[:, 3:7] = initial["position"], quat_normalize(initial["quat"])

@@ -1,16 +1,25 @@
-"""Benchmark: MuJoCo steps/s (single run and batched through mujoco.batch) vs the analytic
-Newton–Euler model through solve_ivp, on the same flight, at matched accuracy.
+"""Benchmark: quadsim's engines against raw MuJoCo, measured side by side in one run.
 
 The flight: the testbed (``--model``, default physical) from the report's initial state
 (z = 1 m, roll = pitch = yaw = 0.261 rad) under a seeded multisine on every rotor (+-3 % of
-hover speed, 100 Hz zero-order hold) for ``--duration`` s. Accuracy of every configuration is
-the largest position error against a reference (analytic, rtol 1e-13, atol 1e-14).
+hover speed, 100 Hz zero-order hold), RK4 at 1 ms. "All effects" is every effect of the
+library at once, each at its testbed magnitude (``quadsim.effects.TESTBED_EXAMPLES``).
 
-    python scripts/bench_engines.py [--model physical] [--duration 5] [--batch 64] [--json out.json]
+Rows (simulation steps per second, summed over the batch; one step = 1 ms simulated)::
 
-Reports wall time, real-time factor (simulated s per wall s, summed over the batch) and, for
-MuJoCo, timesteps per second (summed over the batch). Timings depend on the machine and its
-load; the numbers in docs/engines.md say where they were taken.
+    raw MuJoCo mj_step loop, 1 sim          the baseline (ratio 1)
+    raw mujoco.rollout, --batch sims        MuJoCo's own threaded open-loop rollout
+    quadsim MuJoCo, no effects / all effects, 1 sim and --batch sims (compiled path)
+    quadsim MuJoCo, all effects, 1 sim, reference step-by-step path
+    quadsim analytic, no effects / all effects (compiled and numpy right-hand side), 1 sim
+    RotorPy 3.0 Multirotor.step (1 ms, aero on), 1 sim, when rotorpy is installed
+
+and the throughput of quadsim (no effects, all effects) and raw rollout against batch size
+1 ... 1024 as a PNG (``--plot``). Ratios are to the raw ``mj_step`` loop of the same run, so
+they travel between machines better than the rates; timings still depend on the machine and
+its load, which the output names::
+
+    python scripts/bench_engines.py [--duration 2] [--batch 64] [--plot out.png] [--json out.json]
 """
 
 from __future__ import annotations
@@ -24,14 +33,20 @@ import time
 import mujoco
 import numpy as np
 
+from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
 from quadsim.engines import initial_state, simulate
 from quadsim.linear import hover_point
 from quadsim.mujoco_engine import compile_model
 from quadsim.params import load_params
 
+PERIOD = 0.01
+DT = 1e-3
+START = initial_state(position=(0, 0, 1), euler=(0.261, 0.261, 0.261))
 
-def multisine(params, periods: int, batch: int, period: float, seed: int = 0) -> np.ndarray:
-    """(batch, periods, R) rotor speeds, a different seeded multisine per simulation."""
+
+def multisine(params, periods: int, batch: int, period: float = PERIOD, seed: int = 0
+              ) -> np.ndarray:
+    """(batch, periods, R) rotor speeds (rad/s), a different seeded multisine per simulation."""
     _, hover = hover_point(params)
     rng = np.random.default_rng(seed)
     t = np.arange(periods) * period
@@ -41,73 +56,173 @@ def multisine(params, periods: int, batch: int, period: float, seed: int = 0) ->
     return hover * (1 + 0.03 * wobble / 5)
 
 
-def timed(fn, repeat: int = 1):
-    best, result = np.inf, None
+def all_effects():
+    """Every effect of the library once, at its testbed magnitude."""
+    return effect_set_from_specs([specs[0] for specs in TESTBED_EXAMPLES.values()])
+
+
+def best_rate(fn, steps: int, repeat: int = 2) -> float:
+    """Steps per second of the fastest of ``repeat`` calls."""
+    best = np.inf
     for _ in range(repeat):
         start = time.perf_counter()
-        result = fn()
+        fn()
         best = min(best, time.perf_counter() - start)
-    return best, result
+    return steps / best
 
 
-def plain_loop_steps_per_s(params, series: np.ndarray, period: float, dt: float) -> float:
-    """mj_step in a Python loop on one MjData (the baseline the batch is compared with)."""
-    model = compile_model(params, dt)
-    data = mujoco.MjData(model)
-    data.qpos[:] = [0, 0, 1, *initial_state(euler=(0.261, 0.261, 0.261))["quat"]]
-    substeps = int(round(period / dt))
-    start = time.perf_counter()
-    for command in series:
-        data.ctrl[:] = command**2
-        for _ in range(substeps):
-            mujoco.mj_step(model, data)
-    return len(series) * substeps / (time.perf_counter() - start)
+def raw_loop(params, series: np.ndarray) -> float:
+    """mj_step in a Python loop on one MjData, ctrl = Omega^2 set once per control period."""
+    model = compile_model(params, DT)
+    substeps = round(PERIOD / DT)
+
+    def run():
+        data = mujoco.MjData(model)
+        data.qpos[:] = [0, 0, 1, *START["quat"]]
+        for command in series:
+            data.ctrl[:] = command**2
+            for _ in range(substeps):
+                mujoco.mj_step(model, data)
+
+    return best_rate(run, len(series) * substeps)
+
+
+def raw_rollout(params, series: np.ndarray, threads: int) -> float:
+    """mujoco.rollout of the batch's open-loop controls (one per 1 ms step), ``threads``."""
+    from mujoco import rollout
+
+    model = compile_model(params, DT)
+    substeps = round(PERIOD / DT)
+    control = np.repeat(series**2, substeps, axis=1)
+    datas = [mujoco.MjData(model) for _ in range(threads)]
+    data = datas[0]
+    data.qpos[:] = [0, 0, 1, *START["quat"]]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state = np.zeros(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state, spec)
+    initial = np.tile(state, (len(series), 1))
+    return best_rate(lambda: rollout.rollout(model, datas, initial, control),
+                     control.shape[0] * control.shape[1])
+
+
+def quadsim_rate(params, series: np.ndarray, engine: str = "mujoco", repeat: int = 2,
+                 **kw) -> float:
+    batch, periods = series.shape[:2]
+    start = {k: np.tile(v, (batch, 1)) for k, v in START.items()}
+    def run(steps=periods):
+        return simulate(params, engine=engine, initial=start,
+                        rotor_speed_series=series[:, :steps], duration=steps * PERIOD,
+                        control_period=PERIOD, **kw)
+
+    run(1)            # warm-up: loads the compiled kernels (numba's cache) outside the timing
+    return best_rate(run, batch * periods * round(PERIOD / DT), repeat)
+
+
+def rotorpy_rate(series: np.ndarray) -> float | None:
+    """RotorPy 3.0 ``Multirotor.step`` at 1 ms with aerodynamics on (its Crazyflie)."""
+    try:
+        from rotorpy.vehicles.crazyflie_params import quad_params
+        from rotorpy.vehicles.multirotor import Multirotor
+    except ImportError:
+        return None
+    vehicle = Multirotor(quad_params, aero=True)
+    hover = vehicle.initial_state["rotor_speeds"]
+    commands = hover * series[0] / series[0].mean()
+    steps = min(len(commands) * 10, 400)
+
+    def run():
+        state = {k: np.array(v, dtype=float) for k, v in vehicle.initial_state.items()}
+        for i in range(steps):
+            state = vehicle.step(state, {"cmd_motor_speeds": commands[i // 10]}, DT)
+
+    return best_rate(run, steps, repeat=1)
+
+
+def scaling(params, periods: int, sizes, threads: int) -> dict:
+    """Steps/s against batch size for raw rollout and quadsim (no effects / all effects)."""
+    out = {"batch": list(sizes), "raw rollout": [], "quadsim no effects": [],
+           "quadsim all effects": []}
+    effects = all_effects()
+    for size in sizes:
+        series = multisine(params, periods, size)
+        out["raw rollout"].append(raw_rollout(params, series, threads))
+        out["quadsim no effects"].append(quadsim_rate(params, series, repeat=1))
+        out["quadsim all effects"].append(quadsim_rate(params, series, repeat=1,
+                                                       effects=effects))
+        print(f"  batch {size:>5}: " + ", ".join(f"{k} {v[-1]:.3g}" for k, v in out.items()
+                                                  if k != "batch"), flush=True)
+    return out
+
+
+def plot(result: dict, path: str, machine: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label in ("raw rollout", "quadsim no effects", "quadsim all effects"):
+        ax.loglog(result["batch"], result[label], "o-", label=label)
+    ax.set_xlabel("simulations in the batch")
+    ax.set_ylabel("simulation steps / s (1 ms steps, summed)")
+    ax.set_title(f"throughput vs batch size\n{machine}", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", default="physical")
-    parser.add_argument("--duration", type=float, default=5.0, help="simulated s")
-    parser.add_argument("--batch", type=int, default=64, help="simulations in the batch")
+    parser.add_argument("--duration", type=float, default=2.0, help="simulated s per flight")
+    parser.add_argument("--batch", type=int, default=64, help="simulations in the batch rows")
+    parser.add_argument("--threads", type=int, default=os.cpu_count() or 1,
+                        help="threads for raw rollout (quadsim uses every CPU)")
+    parser.add_argument("--plot", help="write the throughput-vs-batch PNG here")
+    parser.add_argument("--max-batch", type=int, default=1024, help="largest batch in --plot")
     parser.add_argument("--json", help="write the results here too")
     args = parser.parse_args()
+    if args.duration <= 0 or args.batch < 1 or args.threads < 1:
+        parser.error("--duration, --batch and --threads must be positive")
     params = load_params(args.model)
-    period = 0.01
-    periods = int(round(args.duration / period))
-    series = multisine(params, periods, args.batch, period)
-    start = initial_state(position=(0, 0, 1), euler=(0.261, 0.261, 0.261))
-    run = lambda engine, sims, **kw: simulate(  # noqa: E731
-        params, engine=engine, initial=start, rotor_speed_series=series[:sims],
-        duration=args.duration, control_period=period, **kw)
-    _, reference = timed(lambda: run("analytic", args.batch, rtol=1e-13, atol=1e-14))
-    rows = []
-
-    def record(label, engine, sims, steps_per_sim=None, **kw):
-        wall, traj = timed(lambda: run(engine, sims, **kw), repeat=2 if sims == 1 else 1)
-        error = float(np.abs(traj.position - reference.position[:sims]).max())
-        row = {"config": label, "engine": engine, "sims": sims, "wall_s": wall,
-               "realtime_factor": sims * args.duration / wall, "max_position_error_m": error}
-        if steps_per_sim:
-            row["steps_per_s"] = sims * steps_per_sim / wall
-        rows.append(row)
-        print(f"{label:<34}{sims:>5}{wall:>10.3f} s{row['realtime_factor']:>12.1f}x"
-              f"{row.get('steps_per_s', float('nan')):>14.0f}{error:>12.2e} m")
-
-    print(f"{'configuration':<34}{'sims':>5}{'wall':>12}{'realtime':>13}{'steps/s':>14}"
-          f"{'pos. error':>14}")
-    for dt in (1e-3, 2e-3, 5e-3):
-        for sims in (1, args.batch):
-            record(f"mujoco RK4 dt={dt * 1e3:g} ms", "mujoco", sims,
-                   steps_per_sim=args.duration / dt, timestep=dt)
-    for rtol in (1e-6, 1e-8, 1e-11):
-        for sims in (1, args.batch):
-            record(f"analytic DOP853 rtol={rtol:g}", "analytic", sims, rtol=rtol,
-                   atol=rtol * 0.1)
-    plain = plain_loop_steps_per_s(params, series[0], period, 1e-3)
-    print(f"plain mj_step loop (one MjData, dt=1 ms): {plain:.0f} steps/s")
-    result = {"model": params.name, "duration_s": args.duration, "batch": args.batch,
-              "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs",
-              "mujoco": mujoco.__version__, "rows": rows, "plain_loop_steps_per_s": plain}
+    periods = round(args.duration / PERIOD)
+    series = multisine(params, periods, args.batch)
+    one = series[:1]
+    effects = all_effects()
+    machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+               f"load average {os.getloadavg()[0]:.1f} at start")
+    rows = [("raw MuJoCo mj_step loop", 1, raw_loop(params, series[0])),
+            ("raw mujoco.rollout", args.batch, raw_rollout(params, series, args.threads)),
+            ("quadsim MuJoCo, no effects", 1, quadsim_rate(params, one)),
+            ("quadsim MuJoCo, no effects", args.batch, quadsim_rate(params, series)),
+            ("quadsim MuJoCo, all effects", 1, quadsim_rate(params, one, effects=effects)),
+            ("quadsim MuJoCo, all effects", args.batch,
+             quadsim_rate(params, series, effects=effects)),
+            ("quadsim MuJoCo, all effects, reference path", 1,
+             quadsim_rate(params, one, effects=effects, fast=False, repeat=1)),
+            ("quadsim analytic, no effects", 1, quadsim_rate(params, one, "analytic")),
+            ("quadsim analytic, all effects", 1,
+             quadsim_rate(params, one, "analytic", effects=effects, repeat=1)),
+            ("quadsim analytic, all effects, numpy right-hand side", 1,
+             quadsim_rate(params, one, "analytic", effects=effects, fast=False, repeat=1))]
+    rotorpy = rotorpy_rate(one[0])
+    if rotorpy is not None:
+        rows.append(("RotorPy 3.0 Multirotor.step, aero on", 1, rotorpy))
+    raw = rows[0][2]
+    print(f"{args.model}, RK4 {DT * 1e3:g} ms, {args.duration:g} s multisine; {machine}; "
+          f"mujoco {mujoco.__version__}")
+    print("| configuration | sims | sim-steps/s | vs raw mj_step |\n|---|---|---|---|")
+    for label, sims, rate in rows:
+        print(f"| {label} | {sims} | {rate:.3g} | {rate / raw:.3g} |")
+    result = {"model": params.name, "duration_s": args.duration, "machine": machine,
+              "mujoco": mujoco.__version__,
+              "rows": [{"config": l, "sims": s, "steps_per_s": r, "vs_raw": r / raw}
+                       for l, s, r in rows]}
+    if args.plot:
+        sizes = [n for n in (1, 4, 16, 64, 256, 1024) if n <= args.max_batch]
+        result["scaling"] = scaling(params, max(1, periods // 4), sizes, args.threads)
+        plot(result["scaling"], args.plot, machine)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(result, handle, indent=2)

@@ -1,0 +1,360 @@
+"""Fast MuJoCo path: the effects and MuJoCo's C ``mj_step`` in one compiled loop (numba).
+
+Same physics as the step-by-step reference of :mod:`quadsim.mujoco_engine` — the same
+per-step recipe (rotor lag integrated with two RK4 half steps on the held command, actuators
+driven by the step's Simpson mean ``Omega^2`` times the thrust scale, every other load
+evaluated once per step at the predicted mid-step state and applied through
+``xfrc_applied``) — but written as one numba kernel that also calls ``mj_step`` of
+``libmujoco`` through ctypes on each simulation's own ``MjData``. A whole open-loop series
+(or one control period under a controller) is one Python call; simulations of a batch run in
+parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``MjData``).
+``tests/test_fast_mujoco.py`` checks that it matches the reference path to 1e-9 m.
+
+Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
+module docstring): motor_lag, thrust_curve, thrust_mismatch, rotor_drag, body_drag,
+ground_effect, battery_sag (time model), gyroscopic, wind, and every effect that only changes
+the parameter set (com_offset, mass_offset, inertia_error). :func:`fast_form_problem` names
+the first effect that has none (another class, an effect with internal state, a repeated
+effect, a parameter the kernel does not know); the engine then uses the reference path —
+never an approximation.
+
+Optional: needs numba (``pip install quadsim[fast]``); without it :func:`available` is False
+and the engine uses the reference path. Units SI throughout (m, s, rad, N, N m).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+from collections.abc import Sequence
+
+import numpy as np
+
+from .effects.base import EffectSet
+from .frames import quat_normalize
+from .params import VehicleParams
+
+__all__ = ["GUST", "MAX_ROTORS", "Kernel", "available", "encode", "fast_form_problem"]
+
+GUST = 8            # gust components of quadsim.effects.wind
+MAX_ROTORS = 8
+# Layout of one simulation's effect parameters (a row of ``encode``'s array).
+_LAYOUT = {"tau_up": 1, "tau_down": 1, "mismatch": MAX_ROTORS, "battery_rate": 1,
+           "ground_gain": 1, "ground_height": 1, "ground_radius": 1, "curve_linear": 1,
+           "curve_offset": 1, "rotor_drag": 1, "rotor_drag_axial": 1, "body_drag": 3,
+           "air_density": 1, "rotor_inertia": 1, "wind_mean": 3, "gust_amplitude": 1,
+           "gust_frequency": GUST, "gust_phase": 3 * GUST}
+_OFFSET = {}
+_n = 0
+for _key, _size in _LAYOUT.items():
+    _OFFSET[_key] = _n
+    _n += _size
+WIDTH = _n
+
+# Parameter names each fast form reads (an effect with other parameters has no fast form).
+_KNOWN = {
+    "motor_lag": {"time_constant", "time_constant_down"},
+    "thrust_curve": {"linear", "offset"},
+    "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)},
+    "rotor_drag": {"coefficient", "axial_coefficient"},
+    "body_drag": {"cd_area", "cd_area_vertical"},
+    "ground_effect": {"gain", "ground_height", "radius"},
+    "battery_sag": {"rate", "full_voltage"},
+    "gyroscopic": {"rotor_inertia"},
+    "wind": {"vx", "vy", "vz", "gust", "bandwidth", "seed"},
+}
+_STATIC = {"com_offset", "mass_offset", "inertia_error"}   # apply_to_params only
+
+try:
+    import numba
+except ImportError:      # pragma: no cover - exercised when the extra is absent
+    numba = None
+
+
+def _library():
+    import mujoco
+
+    folder = os.path.dirname(mujoco.__file__)
+    names = sorted(n for n in os.listdir(folder) if n.startswith("libmujoco.so")
+                   or n.startswith("libmujoco.") and n.endswith(".dylib") or n == "mujoco.dll")
+    if not names:
+        return None
+    lib = ctypes.CDLL(os.path.join(folder, names[0]))
+    return np.array([ctypes.cast(lib.mj_step, ctypes.c_void_p).value,
+                     ctypes.cast(lib.mj_getState, ctypes.c_void_p).value], dtype=np.int64)
+
+
+def available() -> bool:
+    """True when numba is installed and MuJoCo's C library can be called from it."""
+    return _kernels() is not None
+
+
+def _effect_problem(effect, seen: set) -> str | None:
+    from . import effects as library
+
+    name = getattr(effect, "name", type(effect).__name__)
+    if library.EFFECTS.get(name) is not type(effect):
+        return f"effect {name!r} ({type(effect).__name__}) has no fast form"
+    if name in seen:
+        return f"effect {name!r} appears twice in one set"
+    seen.add(name)
+    if name in _STATIC:
+        return None
+    if name not in _KNOWN or set(effect.values()) != _KNOWN[name]:
+        return f"effect {name!r} has parameters the fast form does not know"
+    return None
+
+
+def fast_form_problem(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> str | None:
+    """Why these effect sets cannot run on the fast path (None: they can)."""
+    if _kernels() is None:
+        return "numba is not installed (pip install quadsim[fast])"
+    if params[0].rotor_count > MAX_ROTORS:
+        return f"more than {MAX_ROTORS} rotors"
+    for effect_set in {id(s): s for s in sets}.values():
+        seen: set = set()
+        for effect in effect_set.effects:
+            problem = _effect_problem(effect, seen)
+            if problem:
+                return problem
+    for effect_set, p in zip(sets, params):
+        for effect in effect_set.effects:
+            if effect.name == "ground_effect" and effect.gain != 0.0 \
+                    and not (effect.radius or p.rotor_radius) > 0.0:
+                return "ground_effect without a rotor radius"
+            if effect.name == "thrust_mismatch":
+                values = effect.values()
+                if any(values[f"rotor_{i}"] != 0.0
+                       for i in range(p.rotor_count + 1, MAX_ROTORS + 1)):
+                    return "thrust_mismatch beyond the vehicle's rotors"
+    return None
+
+
+def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[np.ndarray, bool]:
+    """(B, WIDTH) effect parameters for the kernel and whether any rotor has lag dynamics.
+    Call only when :func:`fast_form_problem` returned None."""
+    rows = np.zeros((len(params), WIDTH))
+    rows[:, _OFFSET["mismatch"]:_OFFSET["mismatch"] + MAX_ROTORS] = 1.0
+    lag = False
+    for row, effect_set, p in zip(rows, sets, params):
+        row[_OFFSET["air_density"]] = p.air_density
+        for effect in effect_set.effects:
+            v = effect.values()
+            put = functools.partial(_put, row)
+            if effect.name == "motor_lag" and v["time_constant"] > 0.0:
+                lag = True
+                put("tau_up", v["time_constant"])
+                put("tau_down", v["time_constant_down"] if v["time_constant_down"] > 0.0
+                    else v["time_constant"])
+            elif effect.name == "thrust_mismatch":
+                put("mismatch", [1.0 + v[f"rotor_{i}"] for i in range(1, MAX_ROTORS + 1)])
+            elif effect.name == "battery_sag":
+                put("battery_rate", v["rate"])
+            elif effect.name == "ground_effect":
+                put("ground_gain", v["gain"])
+                put("ground_height", v["ground_height"])
+                put("ground_radius", v["radius"] or p.rotor_radius)
+            elif effect.name == "thrust_curve":
+                put("curve_linear", v["linear"])
+                put("curve_offset", v["offset"])
+            elif effect.name == "rotor_drag":
+                put("rotor_drag", v["coefficient"])
+                put("rotor_drag_axial", v["axial_coefficient"])
+            elif effect.name == "body_drag":
+                put("body_drag", [v["cd_area"], v["cd_area"], v["cd_area_vertical"]])
+            elif effect.name == "gyroscopic":
+                put("rotor_inertia", v["rotor_inertia"])
+            elif effect.name == "wind":
+                put("wind_mean", [v["vx"], v["vy"], v["vz"]])
+                if v["gust"] > 0.0:
+                    put("gust_amplitude", v["gust"] * np.sqrt(2.0 / GUST))
+                    put("gust_frequency", effect._frequencies)
+                    put("gust_phase", effect._phases.ravel())
+    lags = [any(e.name == "motor_lag" and e.time_constant > 0.0 for e in s.effects)
+            for s in sets]
+    if any(lags) and not all(lags):
+        raise ValueError("either every simulation of a batch has rotor dynamics or none")
+    return rows, lag
+
+
+_CACHE: dict = {}
+
+
+def _put(row: np.ndarray, key: str, value) -> None:
+    row[_OFFSET[key]:_OFFSET[key] + np.size(value)] = value
+
+
+def _kernels():
+    if "run" in _CACHE:
+        return _CACHE["run"]
+    _CACHE["run"] = None
+    if numba is None:
+        return None
+    functions = _library()
+    if functions is None:
+        return None
+    from . import _fast_kernel
+
+    _CACHE["functions"] = functions
+    _CACHE["run"] = _fast_kernel.run
+    return _CACHE["run"]
+
+
+class Kernel:
+    """Advance B MuJoCo simulations (one MjModel/MjData each) with the compiled loop.
+
+    ``models``/``datas``: the per-simulation MjModel and MjData (states already set, forward
+    computed); ``body_id`` the vehicle body; ``consts`` the per-simulation rotor geometry."""
+
+    def __init__(self, models, datas, body_id: int, rotor_arm: np.ndarray,
+                 rotor_axis: np.ndarray, rotor_spin: np.ndarray, rotor_position: np.ndarray,
+                 effect_rows: np.ndarray, lag: bool, active: bool, nthread: int = 0):
+        self.run = _kernels()
+        self.datas = datas
+        self.models = models            # keep the objects alive while their addresses are used
+        b = len(datas)
+        self.addr = np.zeros((b, 8), dtype=np.int64)
+        for i, (m, d) in enumerate(zip(models, datas)):
+            self.addr[i] = [m._address, d._address, d.qpos.ctypes.data, d.qvel.ctypes.data,
+                            d.qacc.ctypes.data, d.ctrl.ctypes.data,
+                            d.xfrc_applied.ctypes.data + 6 * 8 * body_id, 0]
+        self.rotor_arm = np.ascontiguousarray(rotor_arm, dtype=float)
+        self.rotor_axis = np.ascontiguousarray(rotor_axis, dtype=float)
+        self.rotor_spin = np.ascontiguousarray(rotor_spin, dtype=float)
+        self.rotor_position = np.ascontiguousarray(rotor_position, dtype=float)
+        self.rows = np.ascontiguousarray(effect_rows, dtype=float)
+        self.lag, self.active = bool(lag), bool(active)
+        self.threads = nthread
+        self._pool = None
+
+    def advance(self, commands: np.ndarray, omega: np.ndarray, k0: int, substeps: int,
+                dt: float, period: float, out: np.ndarray, status: np.ndarray) -> None:
+        """Run ``commands`` (B, K, R) over K periods from period k0; ``omega`` (B, R) actual
+        rotor speeds (updated); writes the state at the end of each period into ``out``
+        (B, K, 13 + R) and the first failing period + 1 of a diverged simulation into
+        ``status`` (B,) (0 = fine; such a simulation is not stepped further)."""
+        commands = np.ascontiguousarray(commands)
+        batch = len(self.datas)
+        threads = self.threads or os.cpu_count() or 1
+        chunks = np.array_split(np.arange(batch), min(threads, batch))
+
+        def part(idx):
+            sl = slice(idx[0], idx[-1] + 1)
+            self.run(_CACHE["functions"], self.addr[sl], commands[sl], omega[sl], k0, substeps,
+                     dt, period, self.rotor_arm[sl], self.rotor_axis[sl], self.rotor_spin,
+                     self.rotor_position[sl], self.rows[sl], self.lag, self.active, out[sl],
+                     status[sl])
+
+        if len(chunks) == 1:
+            part(chunks[0])
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(len(chunks))
+        list(self._pool.map(part, chunks))
+
+    def close(self) -> None:
+        """Stop the worker threads (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+
+def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[VehicleParams],
+             body, initial: dict, command_fn, periods: int, control_period: float,
+             dt: float, nthread: int = 0) -> tuple[dict, np.ndarray]:
+    """Run the whole simulation on the fast path (same contract as
+    :func:`quadsim.mujoco_engine.run_mujoco`). Returns the output dict and the status (B,)
+    (0 = fine, else 1 + the index of the control period in which that simulation diverged;
+    its samples from then on are NaN)."""
+    import mujoco
+
+    substeps = round(control_period / dt)
+    batch, rotors = len(params), params[0].rotor_count
+    datas = []
+    for i, m in enumerate(models):
+        d = mujoco.MjData(m)
+        d.qpos[0:3], d.qpos[3:7] = initial["position"][i], quat_normalize(initial["quat"][i])
+        d.qvel[0:3], d.qvel[3:6] = initial["velocity"][i], initial["body_rate"][i]
+        mujoco.mj_forward(m, d)
+        # The reference path's first mid-step prediction sees zero accelerations (its bound
+        # qacc is only filled by the first step); match it exactly.
+        d.qacc[:] = 0.0
+        datas.append(d)
+    rows, lag = encode(sets, params)
+    active = any(s.effects for s in sets)
+    kernel = Kernel(models, datas, body_id, body.rotor_arm, body.rotor_axis, body.rotor_spin,
+                    np.array([p.rotor_positions for p in params]), rows, lag, active, nthread)
+    omega = np.array(initial["rotor_speed"], dtype=float)
+    status = np.zeros(batch, dtype=np.int64)
+    ends = np.empty((batch, periods, 13 + rotors))
+    first = {"t": np.zeros(batch), "position": initial["position"].copy(),
+             "velocity": initial["velocity"].copy(),
+             "quat": np.array([d.qpos[3:7] for d in datas]),
+             "body_rate": initial["body_rate"].copy(), "rotor_speed": omega.copy()}
+    try:
+        commands = _drive(kernel, command_fn, first, ends, omega, status, batch, rotors,
+                          periods, substeps, dt, control_period)
+    finally:
+        kernel.close()
+    out = {"position": np.concatenate([first["position"][:, None], ends[:, :, 0:3]], 1),
+           "velocity": np.concatenate([first["velocity"][:, None], ends[:, :, 3:6]], 1),
+           "quat": np.concatenate([first["quat"][:, None], ends[:, :, 6:10]], 1),
+           "body_rate": np.concatenate([first["body_rate"][:, None], ends[:, :, 10:13]], 1)}
+    if lag:
+        out["rotor_speed"] = np.concatenate([first["rotor_speed"][:, None], ends[:, :, 13:]], 1)
+    else:
+        out["rotor_speed"] = np.concatenate([commands, commands[:, -1:]], 1)
+    out["rotor_command"] = np.concatenate([commands, commands[:, -1:]], 1)
+    return out, status
+
+
+def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], body):
+    """Compiled right-hand side for :mod:`quadsim.analytic` (the same equations as
+    ``state_derivative``, every effect in the kernel): ``rhs(t, y, command) -> dy/dt``.
+    Call only when :func:`fast_form_problem` returned None."""
+    from . import _fast_kernel
+
+    rows, lag = encode(sets, params)
+    active = any(s.effects for s in sets)
+    hub = np.ascontiguousarray([p.rotor_positions for p in params], dtype=float)
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (
+        body.rotor_arm, body.rotor_axis, body.rotor_spin, hub, body.allocation, body.mass,
+        body.com, body.inertia, body.inertia_inv, body.gravity, body.thrust_factor,
+        body.drag_factor)]
+
+    def rhs(t: float, y: np.ndarray, command: np.ndarray) -> np.ndarray:
+        out = np.empty_like(y)
+        _fast_kernel.analytic_rhs(float(t), y, command, lag, active, rows, *arrays, out)
+        return out
+
+    return rhs
+
+
+def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, periods, substeps,
+           dt, control_period) -> np.ndarray:
+    """The whole open-loop series in one kernel call, or one call per control period with
+    the controller in between (vectorised over the batch). Returns the commands (B, N, R)."""
+    series = getattr(command_fn, "series", None)
+    if series is not None:
+        commands = np.ascontiguousarray(series[:, :periods], dtype=float)
+        kernel.advance(commands, omega, 0, substeps, dt, control_period, ends, status)
+    else:
+        commands = np.empty((batch, periods, rotors))
+        state = first
+        for k in range(periods):
+            if k:
+                row = ends[:, k - 1].copy()
+                if status.any():      # a diverged simulation's controller sees its start
+                    row[status > 0] = np.concatenate([first["position"], first["velocity"],
+                                                      first["quat"], first["body_rate"],
+                                                      first["rotor_speed"]], 1)[status > 0]
+                state = {"t": np.full(batch, k * control_period), "position": row[:, 0:3],
+                         "velocity": row[:, 3:6], "quat": row[:, 6:10],
+                         "body_rate": row[:, 10:13], "rotor_speed": row[:, 13:].copy()}
+            commands[:, k] = command_fn(k, state)
+            kernel.advance(commands[:, k:k + 1], omega, k, substeps, dt, control_period,
+                           ends[:, k:k + 1], status)
+    return commands
