@@ -269,6 +269,8 @@ def main(argv=None) -> int:
     parser.add_argument("--self-json", metavar="JSON",
                         help="with --independent/--summarise-independent: self-generated "
                              "results to show side by side")
+    parser.add_argument("--stride", type=int, default=1,
+                        help="with --independent: run every STRIDE-th case (a quick subset)")
     parser.add_argument("--summarise-independent", metavar="JSON",
                         help="only summarise an independent results file")
     args = parser.parse_args(argv)
@@ -286,7 +288,7 @@ def main(argv=None) -> int:
     if args.independent:
         from quadsim.bench.cases import case_list as independent_cases
 
-        rows = run_independent(independent_cases(args.cases), args.jobs)
+        rows = run_independent(independent_cases(args.cases)[::args.stride], args.jobs)
         atomic_write_text(args.out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
         print(summarise_independent(rows, self_rows), end="")
         return 0
