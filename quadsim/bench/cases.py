@@ -14,7 +14,8 @@ Each case is ``FLIGHTS`` flights of ``DURATION`` s at 250 Hz along one path at a
 for the per-flight mode. Cases per vehicle: RotorPy 3 no-effect, 11 in-library (mass x2,
 CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outside
 (flapping moment, translational lift: RotorPy physics quadsim's library lacks); pipeline
-2 no-effect, 8 in-library, 2 outside (rate damping, canted rotor). 56 cases in all.
+2 no-effect, 8 in-library, 2 outside (rate damping, canted rotor). 56 cases in all, plus
+one ``thrust_factor`` case per source and vehicle when the library has that effect.
 
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 (:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
@@ -31,6 +32,7 @@ import warnings
 
 import numpy as np
 
+from ..effects import EFFECTS
 from ..errors import QuadsimWarning
 from ..params import load_params
 from .draws import draw, draw_rotorpy, library_equivalent
@@ -66,6 +68,11 @@ def case_list(count: int | None = None) -> list[dict]:
                       for n in outside]
     for i, case in enumerate(cases):
         case["seed"] = 5000 + i
+    if "thrust_factor" in EFFECTS:  # issue-10 propeller effect (appended: seeds above stay)
+        for source in ("rotorpy", "pipeline"):
+            for vehicle in VEHICLES:
+                cases.append({"source": source, "vehicle": vehicle, "truth": "thrust_factor",
+                              "kind": "library", "seed": 5000 + len(cases)})
     return cases[:count] if count else cases
 
 

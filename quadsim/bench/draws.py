@@ -5,7 +5,8 @@ pipeline sources; :func:`draw_rotorpy` returns the same physical changes as Roto
 parameters (:data:`quadsim.bench.rotorpy_source.EFFECTS`) and :func:`library_equivalent`
 maps those back to the library effect with the true values (used only to check that a case
 is observable, never by the diagnosis). Magnitudes (SI): added mass 5-20 % of the vehicle;
-CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger;
+CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger; all rotors' thrust
+per Omega^2 5-15 % off (``thrust_factor``, where the library has it);
 motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4 % of the
 weight; rotor drag 0.5-2 x 2.5 % of the weight per m/s at hover; wind 0-2 m/s.
 """
@@ -58,6 +59,8 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
         return [make_effect(name, **{f"rotor_{rotor}": sign * rng.uniform(0.05, 0.15)})]
     if name == "thrust_curve":
         return [make_effect(name, linear=sign * rng.uniform(0.03, 0.1) * params.thrust_factor * hover)]
+    if name == "thrust_factor":
+        return [make_effect(name, change=sign * rng.uniform(0.05, 0.15))]
     if name == "battery_sag":
         return [make_effect(name, rate=rng.uniform(0.005, 0.02),
                             full_voltage=4.2 if small else 12.6)]
@@ -107,6 +110,8 @@ def draw_rotorpy(name: str, params: VehicleParams, rng: np.random.Generator) -> 
     if name == "thrust_mismatch":
         return {"weak_rotor": (int(rng.integers(1, params.rotor_count + 1)),
                                -rng.uniform(0.05, 0.15))}
+    if name == "thrust_factor":
+        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
     if name == "motor_lag":
         return {"tau_m": rng.uniform(0.02, 0.05) * (1 if small else 2)}
     if name == "body_drag":
@@ -138,6 +143,8 @@ def library_equivalent(spec: dict, params: VehicleParams) -> list:
     if "weak_rotor" in spec:
         i, d = spec["weak_rotor"]
         out.append(make_effect("thrust_mismatch", **{f"rotor_{i}": d}))
+    if "thrust_scale" in spec:
+        out.append(make_effect("thrust_factor", change=spec["thrust_scale"]))
     if "tau_m" in spec:
         out.append(make_effect("motor_lag", time_constant=spec["tau_m"]))
     if "c_d" in spec:

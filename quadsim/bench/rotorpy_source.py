@@ -20,7 +20,8 @@ Effects (:data:`EFFECTS`, values in SI): ``mass`` (kg added at the CoM), ``com``
 the CoM moves, so every rotor position relative to it moves by -com), ``inertia`` (relative
 change of Ixx Iyy Izz), ``weak_rotor`` (rotor index 1..4, relative change of that rotor's
 k_eta and k_m; RotorPy has one k_eta for all rotors, so :class:`_PerRotorMultirotor` adds the
-difference of that rotor's thrust and torque to RotorPy's own wrench), ``tau_m`` (s),
+difference of that rotor's thrust and torque to RotorPy's own wrench), ``thrust_scale``
+(relative change of k_eta and k_m of all rotors: a propeller/air change), ``tau_m`` (s),
 ``c_d`` (N/(m/s)^2 parasitic drag, all axes), ``k_d``/``k_z`` (kg/rad rotor drag),
 ``wind`` (m/s world x y, RotorPy ``ConstantWind``), ``gust`` (m/s amplitude, RotorPy
 ``SinusoidWind`` at 0.3 Hz), ``k_flap`` (N m/(rad m/s), flapping moment) and ``k_h``
@@ -49,8 +50,8 @@ __all__ = ["EFFECTS", "NOMINAL_TAU_M", "quad_params", "rotorpy_available", "roto
 
 #: s; nominal motor time constant given to RotorPy (quadsim's nominal model has none).
 NOMINAL_TAU_M = 0.005
-EFFECTS = ("mass", "com", "inertia", "weak_rotor", "tau_m", "c_d", "k_d", "k_z", "wind", "gust",
-           "k_flap", "k_h")
+EFFECTS = ("mass", "com", "inertia", "weak_rotor", "thrust_scale", "tau_m", "c_d", "k_d", "k_z",
+           "wind", "gust", "k_flap", "k_h")
 
 
 def rotorpy_available() -> bool:
@@ -83,7 +84,8 @@ def quad_params(params: VehicleParams, effects: dict | None = None) -> dict:
         "rotor_directions": -np.asarray(params.rotor_spins, dtype=float),
         "rI": np.zeros(3),
         "c_Dx": c_d, "c_Dy": c_d, "c_Dz": c_d,
-        "k_eta": params.thrust_factor, "k_m": params.drag_factor,
+        "k_eta": params.thrust_factor * (1.0 + float(effects.get("thrust_scale", 0.0))),
+        "k_m": params.drag_factor * (1.0 + float(effects.get("thrust_scale", 0.0))),
         "k_d": float(effects.get("k_d", 0.0)), "k_z": float(effects.get("k_z", 0.0)),
         "k_h": float(effects.get("k_h", 0.0)), "k_flap": float(effects.get("k_flap", 0.0)),
         "tau_m": float(effects.get("tau_m", NOMINAL_TAU_M)),
