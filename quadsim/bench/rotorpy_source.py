@@ -175,7 +175,7 @@ def rotorpy_flight(params: VehicleParams, effects: dict | None = None, *, seed: 
         "vel_artifact_max": 0.0, "vel_artifact_prob": 0.0,
         "rate_artifact_max": 0.0, "rate_artifact_prob": 0.0})
     dt = 1.0 / rate_hz
-    n = int(round(duration * rate_hz)) + 1
+    n = round(duration * rate_hz) + 1
     state = {k: np.array(v, dtype=float) for k, v in initial.items()}
     rows = {k: [] for k in ("x", "v", "q", "gyro", "accel", "rotor", "cmd")}
     for k in range(n):
