@@ -28,8 +28,9 @@ from quadsim.trajectories import make_reference
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
 PERIOD = 0.01
-REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items() if name != "motor_lag"}
-LAG = {"motor_lag": TESTBED_EXAMPLES["motor_lag"]}
+REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items()
+             if name not in ("motor_lag", "battery_sag")}
+LAG = {name: TESTBED_EXAMPLES[name] for name in ("motor_lag", "battery_sag")}  # rotor states
 
 
 def errors(m, a):

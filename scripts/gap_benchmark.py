@@ -57,6 +57,10 @@ from quadsim.params import load_params  # noqa: E402
 VEHICLES = ("physical", "crazyflie21")
 
 
+#: verdicts that name no effect (quadsim.gap/2 outcomes).
+QUIET = ("unexplained", "no_significant_gap")
+
+
 def _draw(name: str, params, rng: np.random.Generator) -> list:
     """Hidden effect(s) at a random realistic magnitude for this vehicle."""
     return draw(name, params, rng)
@@ -151,9 +155,10 @@ def summarise(rows: list[dict]) -> str:
              f"top-1 accuracy, observable in-library: {np.mean(top1):.1%} "
              f"({sum(top1)}/{len(top1)}); named or listed as confusable: "
              f"{np.mean(named_or_tied):.1%}",
-             f"out-of-library -> unexplained: {sum(r['verdict'] == 'unexplained' for r in outside)}"
-             f"/{len(outside)}; no effect -> unexplained: "
-             f"{sum(r['verdict'] == 'unexplained' for r in none)}/{len(none)}",
+             f"out-of-library -> no confident name: "
+             f"{sum(r['verdict'] in QUIET for r in outside)}/{len(outside)}; no effect -> "
+             f"no_significant_gap: "
+             f"{sum(r['verdict'] == 'no_significant_gap' for r in none)}/{len(none)}",
              f"main-parameter relative error: median {np.median(errors):.1%}, "
              f"90th percentile {np.percentile(errors, 90):.1%} ({len(errors)} cases)",
              f"held-out gap reduction: median {np.median(reductions):.1%} "

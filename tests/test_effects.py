@@ -138,9 +138,12 @@ def test_ground_effect_at_z_equal_radius():
 
 def test_battery_sag_time_and_voltage():
     sag = make_effect("battery_sag", rate=0.01, full_voltage=4.2)
-    np.testing.assert_allclose(sag.loads(context(t=10.0)).thrust_scale, 0.9)
+    # the battery acts on the speed a command gives, never on the thrust of a speed
+    assert sag.loads(context(t=10.0)) is None
+    np.testing.assert_allclose(sag.speed_factor(np.array([10.0])), np.sqrt(0.9))
     np.testing.assert_allclose(sag.voltage(np.array([10.0])), 4.2 * np.sqrt(0.9))
-    np.testing.assert_allclose(sag.loads(context(t=3.0, vbat=3.78)).thrust_scale, 0.81)
+    np.testing.assert_allclose(sag.speed_factor(np.array([3.0]), np.array([3.78])), 0.9)
+    assert make_effect("battery_sag").speed_factor(np.array([1.0])) is None
 
 
 def test_com_offset_hover_torque():

@@ -27,9 +27,10 @@ SHORT = 0.3  # the all-effects batch (11 flights) runs shorter to keep the suite
 TOLERANCE_M = 1e-4
 TOLERANCE_RAD = 1e-4
 
-# Every effect but those tested on their own below (gyroscopic in test_agreement.py).
+# Every effect but those tested on their own below (gyroscopic in test_agreement.py;
+# battery_sag adds rotor-speed states, which a batch has in every simulation or none).
 REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items()
-             if name not in ("motor_lag", "gyroscopic")}
+             if name not in ("motor_lag", "gyroscopic", "battery_sag")}
 
 
 def _start(batch: int) -> dict:
@@ -90,3 +91,18 @@ def test_motor_lag_agrees_between_engines():
     np.testing.assert_allclose(a.rotor_speed[0, [k, 2 * k], 0], [after_up, after_down],
                                rtol=1e-9)
     np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-9)
+
+
+def test_battery_sag_acts_on_the_speed_a_command_gives():
+    """Battery sag lowers the rotor speed of a command (not the thrust of a speed): both
+    engines agree, and the speed settles at sqrt(1 - rate t) times the command."""
+    sets = [effect_set_from_specs(list(TESTBED_EXAMPLES["battery_sag"]))]
+    t = np.arange(int(round(DURATION / PERIOD))) * PERIOD
+    series = HOVER * np.ones((len(t), 1)) * np.array([1.0, 1.01, 1.0, 0.99])
+    m, a = _both(sets, series, DURATION)
+    position, angle = _errors(m, a)
+    assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
+    end = a.t[0, -1] if a.t.ndim > 1 else a.t[-1]
+    expected = series[0] * np.sqrt(1 - 0.01 * end)  # settled (5 ms response << 0.5 s)
+    np.testing.assert_allclose(a.rotor_speed[0, -1], expected, rtol=1e-4)
+    np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)

@@ -59,15 +59,23 @@ def test_each_library_effect_is_named_top1_with_parameter_in_its_ci(cf, name):
     verdict = result["verdict"]
     assert verdict["effect"] == name
     assert result["effects"][0]["name"] == name
+    if name == "battery_sag":
+        # the motor map is refitted on the flights, so full_voltage is the voltage at which
+        # that map holds (its mean speed factor is collinear with the map's slope): within
+        # the 0.15 V the battery falls over a flight of the true full voltage.
+        assert abs(verdict["params"][key] - truth) < 0.15
+        return
     assert abs(verdict["params"][key] - truth) <= verdict["ci"][key]
     # The CI is informative: narrower than a third of the true value.
     assert verdict["ci"][key] < abs(truth) / 3
     assert verdict["reduction"] > 0.15
 
 
-def test_no_effect_is_unexplained(cf):
+def test_no_effect_is_no_significant_gap(cf):
     result = diagnose(_flights(cf, [], seeds=(3, 4)), cf, kstep=False)
-    assert result["verdict"]["effect"] == "unexplained"
+    assert result["verdict"]["outcome"] == "no_significant_gap"
+    assert result["verdict"]["effect"] == "no_significant_gap"
+    assert all(c["at_floor"] for c in result["verdict"]["channels"].values())
     assert max(e["reduction"] for e in result["effects"]) < 0.05
 
 
@@ -86,7 +94,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert outputs[0] == outputs[1]
     document = json.loads(outputs[0])
     validate(document)
-    assert document["schema"] == "quadsim.gap/1"
+    assert document["schema"] == "quadsim.gap/2"
     assert document["verdict"]["effect"] == "thrust_mismatch"
     assert document["train"] and document["holdout"]
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
@@ -98,7 +106,13 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert main(["--model", "crazyflie21", *paths, "--report", str(html), "--quiet",
                  "--effects", "thrust_mismatch"]) == 0
     text = html.read_text()
-    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/1" in text
+    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/2" in text
+    # the answer first, the evidence with units, the JSON in a collapsed appendix
+    assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index("&quot;schema&quot;")
+    assert "<th>unit</th>" in text and "<td>N m</td>" in text
+    assert document["verdict"]["outcome"] == "effect"
+    assert all(c["unit"] in ("N", "N m", "rad/s")
+               for c in document["verdict"]["channels"].values())
 
 
 def test_per_flight_mode_names_only_the_flight_that_differs(cf):
@@ -110,7 +124,8 @@ def test_per_flight_mode_names_only_the_flight_that_differs(cf):
                                  effects=["com_offset", "mass_offset", "thrust_mismatch"])
     validate(json.loads(to_json(result)))
     verdicts = [f["verdict"] for f in result["flights"]]
-    assert verdicts == ["unexplained", "com_offset"]
+    assert verdicts == ["no_significant_gap", "com_offset"]
+    assert [f["outcome"] for f in result["flights"]] == ["no_significant_gap", "effect"]
     assert abs(result["flights"][1]["params"]["com_offset.x"] + 0.005) < 5e-4
 
 
@@ -125,7 +140,7 @@ def test_too_little_excitation_is_reported_not_fitted(cf):
     result = diagnose(logs, cf, kstep=False, effects=["ground_effect", "mass_offset"])
     ground = next(e for e in result["effects"] if e["name"] == "ground_effect")
     assert "too little excitation" in ground["warning"]
-    assert result["verdict"]["effect"] == "unexplained"
+    assert result["verdict"]["outcome"] != "effect"
 
 
 def test_bad_input(cf, tmp_path, capsys):
@@ -147,3 +162,115 @@ def test_bad_input(cf, tmp_path, capsys):
     assert len(err) == 3 and all(line.startswith("error: ") for line in err)
     assert not (tmp_path / "x.txt").exists()
     assert np.isfinite(single["verdict"]["heldout_gap_before"])
+
+
+# ----------------------------------------------------------------- verdicts, physics, checks
+
+
+def test_collinear_pair_is_listed_with_magnitudes_and_plausibility(cf):
+    """A 4 g payload: the verdict names the most plausible of the collinear explanations and
+    lists the uniform loss of thrust per Omega^2 with its magnitude (4 g on 37 g is -9.8 %)."""
+    result = diagnose(_flights(cf, [("mass_offset", {"mass": 0.004})]), cf, kstep=False,
+                      max_combination=1, effects=["mass_offset", "thrust_factor", "com_offset"])
+    verdict = result["verdict"]
+    assert verdict["outcome"] == "effect" and verdict["effect"] == "mass_offset"
+    alts = {a["name"]: a for a in verdict["alternatives"]}
+    assert {"mass_offset", "thrust_factor"} <= set(alts)
+    assert "g heavier" in alts["mass_offset"]["magnitude"]
+    assert "% thrust per Ω² on all 4 rotors" in alts["thrust_factor"]["magnitude"]
+    # -dm / (m + dm) = -0.004 / 0.041 = -9.76 %, within 0.5 points
+    assert abs(alts["thrust_factor"]["params"]["thrust_factor.change"] + 0.004 / 0.041) < 5e-3
+    assert all(a["plausible"] for a in alts.values())
+    assert alts["thrust_factor"]["separate_by"].startswith("weigh the vehicle")
+    assert "Mz" in alts["thrust_factor"]["torque_yaw"]
+    assert verdict["answer"].startswith("Behaves as if +4")
+    assert verdict["units"] == {"mass_offset.mass": "kg"}
+
+
+def test_mass_candidate_not_handicapped_by_unmodelled_drag(cf):
+    """Force residuals are compared at the nominal mass: with drag the model lacks, a pure
+    payload is explained at least as well by the mass as by a thrust scale (before: 0.865 vs
+    0.882, thrust named)."""
+    drag = [("rotor_drag", {"coefficient": 1e-6}), ("body_drag", {"cd_area": 0.005})]
+    result = diagnose(_flights(cf, drag + [("mass_offset", {"mass": 0.004})]), cf, kstep=False,
+                      max_combination=1, effects=["mass_offset", "thrust_factor"])
+    red = {e["name"]: e["reduction"] for e in result["effects"]}
+    assert red["mass_offset"] >= red["thrust_factor"] - 1e-3
+    assert abs(result["verdict"]["params"]["mass_offset.mass"] - 0.004) < 3e-4
+
+
+def test_battery_sag_acts_on_the_command_channel_only(cf):
+    """At measured rotor speeds a battery changes no force; it changes the speed a command
+    gives (speed factor V / V_full)."""
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.fitting import fit_motor_map, residuals
+
+    log = synthetic_flight(cf, [make_effect("battery_sag", rate=0.01)], seed=2, duration=3.0)
+    states = prepare([log], cf)[0].fit
+    params = fit_motor_map([states], cf)
+    plain = residuals(states, params, [], rotor_channel=True)
+    sag = residuals(states, params, [make_effect("battery_sag", full_voltage=4.0)],
+                    rotor_channel=True)
+    np.testing.assert_array_equal(plain[:, :6], sag[:, :6])
+    assert np.abs(plain[:, 6:] - sag[:, 6:]).max() > 10.0  # rad/s: ~5 % of 1600 rad/s
+
+
+def test_wrong_parameter_set_is_caught_before_fitting(cf):
+    logs = _flights(cf, [], seeds=(0, 1), duration=2.0)
+    with pytest.raises(InputError, match=r"needs b = .* 0\.08\d*x the model's .* median logged "
+                                         r"rotor speed"):
+        diagnose(logs, load_params("physical"), kstep=False)
+    assert abs(diagnose(logs, cf, kstep=False, effects=["mass_offset"])["checks"]
+               ["thrust_factor_ratio"] - 1) < 0.01
+
+
+def test_fit_at_a_bound_is_never_identified(cf):
+    """A 100 g payload on the 37 g vehicle is beyond the mass bound (2 m): the fit stops at
+    the bound and must not count as identified."""
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.fitting import candidates_for, fit_candidate, noise_floor
+
+    states = [f.fit for f in prepare(_flights(cf, [("mass_offset", {"mass": 0.1})],
+                                              duration=2.0), cf)]
+    cand = next(c for c in candidates_for(cf, False) if c.name == "mass_offset")
+    fit = fit_candidate(cand, states, cf, noise_floor(cf, False) * 100, rotor_channel=False)
+    assert fit.theta[0] == pytest.approx(2 * cf.mass, rel=1e-3)
+    assert fit.identifiable == [False]
+
+
+def test_low_battery_needs_a_discharge(cf):
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.where import regime_masks
+
+    log = synthetic_flight(cf, [], seed=1, duration=2.0)
+    flat = FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate, log.accel,
+                     log.rotor_speed, log.rotor_command,
+                     4.0 + 0.005 * np.random.default_rng(0).standard_normal(len(log.t)))
+    assert not regime_masks(prepare([flat], cf)[0].fit, cf)["low_battery"].any()
+    draining = regime_masks(prepare([log], cf)[0].fit, cf)["low_battery"]  # 0.15 V drop
+    assert 0.1 < draining.mean() < 0.3
+
+
+def test_drag_refit_unbiased_on_perfect_model_data(cf):
+    """Perfect-model flights at the docs' noise level: b and d refits stay at 0 within their
+    CI (the issue's -0.9 at the bound was not reproduced on these flights)."""
+    from quadsim.gap.diagnose import BASELINE, prepare
+    from quadsim.gap.fitting import fit_candidate, fit_motor_map, noise_floor, noise_scale, \
+        residuals
+
+    states = [f.fit for f in prepare(_flights(cf, [], seeds=(1, 2), duration=4.0), cf)]
+    params = fit_motor_map(states, cf)
+    sigma = noise_scale(np.concatenate([residuals(s, params, [], rotor_channel=True)
+                                        for s in states]), 0.01, floor=noise_floor(params, True))
+    fit = fit_candidate(BASELINE, states, params, sigma, rotor_channel=True)
+    drag, ci = fit.params()["nominal_refit.drag"], fit.ci()["nominal_refit.drag"]
+    assert abs(drag) <= max(ci, 0.01) and ci < 0.1
+
+
+def test_loader_warnings_collapse_per_kind():
+    from quadsim.gap.__main__ import collapse_warnings
+
+    lines = collapse_warnings([f"f{k}.csv: t: line 7: sample-rate jump, step 0.0{k} s"
+                               for k in range(1, 6)] + ["g.csv: vbat: missing"])
+    assert lines == ["f1.csv: t: line 7: sample-rate jump, step 0.01 s (and 4 more files alike)",
+                     "g.csv: vbat: missing"]

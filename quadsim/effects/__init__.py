@@ -30,6 +30,7 @@ from .mass_offset import MassOffset
 from .motor_lag import MotorLag
 from .rotor_drag import RotorDrag
 from .thrust_curve import ThrustCurve
+from .thrust_factor import ThrustFactor
 from .thrust_mismatch import ThrustMismatch
 from .wind import Wind
 
@@ -51,7 +52,7 @@ __all__ = [
 #: name -> effect class, for every effect in the library.
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
     MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
-    ComOffset, MassOffset, InertiaError, Wind, Gyroscopic)}
+    ComOffset, MassOffset, InertiaError, Wind, Gyroscopic, ThrustFactor)}
 
 #: Realistic magnitudes of each effect on the 0.84 kg testbed (specs for
 #: :func:`effect_set_from_specs`), shared by the engine-agreement tests and
@@ -63,6 +64,7 @@ TESTBED_EXAMPLES: dict[str, tuple[str, ...]] = {
     "body_drag": ("body_drag:cd_area=0.02,cd_area_vertical=0.04",),
     "ground_effect": ("ground_effect:gain=1.5",),
     "battery_sag": ("battery_sag:rate=0.01",),
+    "thrust_factor": ("thrust_factor:change=-0.05",),
     "com_offset": ("com_offset:x=0.005,y=-0.003,z=0.01",),
     "mass_offset": ("mass_offset:mass=0.1,x=0.02,z=-0.03",),
     "inertia_error": ("inertia_error:xx=0.2,yy=0.1,zz=0.05",),

@@ -12,6 +12,10 @@ neutral default for the rest (see :class:`EffectBase`):
    :class:`EffectContext` that drag effects read.
 4. ``loads(ctx) -> EffectLoads`` — per-rotor thrust scale / offset, and an external force
    (world frame, at the CoM) and torque (body frame).
+5. ``speed_factor(t, vbat=None) -> (B,)`` or ``None`` — the steady rotor speed a command gives,
+   relative to nominal (battery voltage). It multiplies the commanded speed before the
+   rotor-speed dynamics; without a dynamics effect the rotor follows the scaled command with
+   the fast first-order response :data:`SPEED_RESPONSE_S`.
 
 Both engines (analytic and MuJoCo) call the same hooks on the same numbers each step and
 apply the result with the same :func:`quadsim.rotors` geometry, so an effect acts
@@ -28,6 +32,11 @@ from typing import ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from ..params import VehicleParams
+
+#: time constant (s) with which a rotor follows a command scaled by ``speed_factor`` when no
+#: effect defines rotor dynamics (fast against flight dynamics, slow enough for the engines'
+#: fixed-step rotor integration at 1 ms).
+SPEED_RESPONSE_S = 0.005
 
 
 @dataclass(frozen=True)
@@ -146,6 +155,9 @@ class EffectBase:
     def air_velocity(self, t, position):
         return None
 
+    def speed_factor(self, t, vbat=None):
+        return None
+
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
         return None
 
@@ -168,14 +180,31 @@ class EffectSet:
     def has_rotor_dynamics(self) -> bool:
         probe = np.zeros((1, 1))
         return any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
-                   for e in self.effects)
+                   for e in self.effects) or self.speed_factor(np.zeros(1)) is not None
 
-    def rotor_speed_rate(self, t, commanded, actual):
-        """dOmega/dt (B, R); the first effect that defines rotor dynamics owns it."""
+    def speed_factor(self, t, vbat=None):
+        """Product of the effects' speed factors (B,), or None when none acts."""
+        total = None
+        for effect in self.effects:
+            hook = getattr(effect, "speed_factor", None)
+            f = hook(t, vbat) if hook is not None else None
+            if f is not None:
+                total = f if total is None else total * f
+        return total
+
+    def rotor_speed_rate(self, t, commanded, actual, vbat=None):
+        """dOmega/dt (B, R); the first effect that defines rotor dynamics owns it. Speed
+        factors (battery) scale the command first; with a factor but no dynamics effect the
+        rotor follows with :data:`SPEED_RESPONSE_S`."""
+        factor = self.speed_factor(t, vbat)
+        if factor is not None:
+            commanded = np.asarray(commanded, dtype=float) * np.asarray(factor)[:, None]
         for effect in self.effects:
             rate = effect.rotor_speed_rate(t, commanded, actual)
             if rate is not None:
                 return rate
+        if factor is not None:
+            return (commanded - np.asarray(actual, dtype=float)) / SPEED_RESPONSE_S
         return None
 
     def air_velocity(self, t, position) -> np.ndarray:

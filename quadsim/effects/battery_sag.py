@@ -1,26 +1,34 @@
-"""battery_sag: thrust falling as the battery discharges (from voltage, or from time).
+"""battery_sag: a discharging battery gives less rotor speed for the same command.
 
-Formula. A brushless motor's no-load speed is proportional to its supply voltage, so at a
-fixed command the thrust ~ Omega^2 ~ V^2 (e.g. Podhradsky, Coopmans & Jensen, "Battery
-state-of-charge based altitude controller for small, low cost multirotor unmanned aerial
-vehicles", J. Intell. Robot. Syst. 2014, who fit thrust vs. battery voltage)::
+Physics. A brushless motor's no-load speed is proportional to its supply voltage (speed
+constant K_v, rad/s per V), so at a fixed command (duty cycle) the steady rotor speed scales
+with the voltage, and the thrust ~ Omega^2 ~ V^2 (e.g. Podhradsky, Coopmans & Jensen,
+"Battery state-of-charge based altitude controller for small, low cost multirotor unmanned
+aerial vehicles", J. Intell. Robot. Syst. 2014, who fit thrust vs. battery voltage)::
 
-    scale = (V / full_voltage)^2                        when the engine supplies V (ctx.vbat)
-    scale = max(MIN_SCALE, 1 - rate * t)                otherwise (linear loss with time)
+    speed factor  f = V / full_voltage                   when the voltage is known (vbat)
+    speed factor  f = sqrt(max(MIN_SCALE, 1 - rate t))   otherwise (thrust falls by rate per s)
+    steady speed  Omega_ss = f * Omega_command
 
-and :meth:`BatterySag.voltage` gives the matching voltage ``full_voltage * sqrt(scale)`` for
-flight logs. Modelled as a thrust *and* drag-torque scale at the actual rotor speed: the
-equivalent, when only commands are known, of a lower speed for the same command.
+The battery acts *upstream* of the rotor speed (hook :meth:`speed_factor`, see
+:mod:`quadsim.effects.base`): at a measured rotor speed the thrust is unchanged. With
+measured rotor speeds it is therefore seen only on the command -> speed channel; a loss of
+thrust *per Omega^2* is a propeller/air effect (:mod:`quadsim.effects.thrust_factor`).
+In the engines, without a motor-lag effect, the rotor follows ``f * Omega_command`` with the
+fast response :data:`quadsim.effects.base.SPEED_RESPONSE_S`.
 
-Example: ``make_effect("battery_sag", rate=0.005, full_voltage=4.2)`` loses 10 % thrust in
-20 s (Crazyflie 1S: 4.2 V -> 3.98 V).
+:meth:`BatterySag.voltage` gives the matching voltage ``full_voltage * sqrt(scale)`` for
+flight logs.
+
+Example: ``make_effect("battery_sag", rate=0.005, full_voltage=4.2)`` loses 10 % thrust (5 %
+speed) at a fixed command in 20 s (Crazyflie 1S: 4.2 V -> 3.98 V).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .base import EffectBase, EffectLoads, EffectParameter
+from .base import EffectBase, EffectParameter
 
 __all__ = ["MIN_SCALE", "BatterySag"]
 
@@ -28,31 +36,31 @@ MIN_SCALE = 0.5
 
 
 class BatterySag(EffectBase):
-    """Thrust scale from battery voltage (if known) or a linear loss with time."""
+    """Rotor speed per command from battery voltage (if known) or a linear loss with time."""
 
     name = "battery_sag"
     parameters = (
         EffectParameter("rate", "1/s", 0.0, 0.0, 0.05,
-                        "fraction of thrust lost per second of flight"),
+                        "fraction of thrust (at a fixed command) lost per second of flight"),
         EffectParameter("full_voltage", "V", 4.2, 1.0, 60.0,
                         "voltage of the full battery (1S LiPo: 4.2 V)"),
     )
 
     def scale_at(self, t: np.ndarray) -> np.ndarray:
-        """Thrust scale (B,) at times t (s) from the time model."""
+        """Thrust scale at a fixed command (B,) at times t (s) from the time model."""
         return np.maximum(MIN_SCALE, 1.0 - self.rate * np.asarray(t, dtype=float))
 
     def voltage(self, t: np.ndarray) -> np.ndarray:
         """Battery voltage (V) consistent with the time model at times t (s)."""
         return self.full_voltage * np.sqrt(self.scale_at(t))
 
-    def loads(self, ctx):
-        batch, rotors = np.shape(ctx.rotor_speed)
-        loads = EffectLoads.neutral(batch, rotors)
-        vbat = None if ctx.vbat is None else np.asarray(ctx.vbat, dtype=float)
-        if vbat is not None and np.all(np.isfinite(vbat)):
-            scale = np.square(vbat / self.full_voltage)
-        else:
-            scale = self.scale_at(ctx.t)
-        loads.thrust_scale = np.repeat(scale[:, None], rotors, axis=1)
-        return loads
+    def speed_factor(self, t, vbat=None):
+        """Steady rotor speed per nominal speed of a command (B,); None when off."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if vbat is not None:
+            v = np.asarray(vbat, dtype=float)
+            if v.shape == t.shape and np.all(np.isfinite(v)):
+                return v / self.full_voltage  # a voltage log: the sag follows it
+        if self.rate == 0.0:
+            return None
+        return np.sqrt(self.scale_at(t))

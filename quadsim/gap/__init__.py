@@ -44,7 +44,7 @@ Example::
     >>> result["verdict"]["effect"], result["verdict"]["reduction"]
 
 CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
-(``quadsim.gap/1``), documented in docs/gap.md.
+(``quadsim.gap/2``), documented in docs/gap.md.
 """
 
 from .diagnose import SCHEMA, diagnose, diagnose_per_flight, prepare

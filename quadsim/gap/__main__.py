@@ -43,7 +43,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
                         help="Savitzky-Golay window (s) of the differentiator (default 0.1)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/1 result")
+    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/2 result")
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
@@ -54,10 +54,29 @@ def _load(paths):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
-    for w in caught:
-        if issubclass(w.category, QuadsimWarning):
-            print(f"warning: {w.message}", file=sys.stderr)
+    for line in collapse_warnings([str(w.message) for w in caught
+                                   if issubclass(w.category, QuadsimWarning)]):
+        print(f"warning: {line}", file=sys.stderr)
     return logs
+
+
+def collapse_warnings(messages: list[str]) -> list[str]:
+    """One line per kind of loader warning: messages that differ only in the file name
+    (the text before the first ': ') and in numbers are one kind, printed once with the
+    count of further files."""
+    import re
+
+    kinds: dict[str, list[str]] = {}
+    for m in messages:
+        _, sep, rest = m.partition(": ")
+        key = re.sub(r"[-+]?\d[\d.eE+-]*", "#", rest if sep else m)
+        kinds.setdefault(key, []).append(m)
+    out = []
+    for group in kinds.values():
+        more = len(group) - 1
+        out.append(group[0] + (f" (and {more} more file{'s' if more > 1 else ''} alike)"
+                               if more else ""))
+    return out
 
 
 @run_cli

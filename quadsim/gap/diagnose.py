@@ -1,7 +1,7 @@
 """The gap diagnosis: fit on training flights, score on held-out flights, rank, decide.
 
 See :mod:`quadsim.gap` for the method and the result schema. Everything here returns plain
-dicts (the ``quadsim.gap/1`` JSON) so that the CLI, the HTML report and tests read the same
+dicts (the ``quadsim.gap/2`` JSON) so that the CLI, the HTML report and tests read the same
 thing.
 """
 
@@ -18,7 +18,9 @@ from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
-from . import fitting
+from . import collinear, fitting
+from . import verdict as rule
+from .checks import vehicle_check
 from .fitting import (
     Candidate,
     Fit,
@@ -34,7 +36,7 @@ from .where import by_band, by_regime, kstep_errors, regime_masks
 __all__ = ["Flight", "prepare", "diagnose", "diagnose_per_flight", "SCHEMA", "MIN_GAIN",
            "MIN_T", "TIE"]
 
-SCHEMA = "quadsim.gap/1"
+SCHEMA = "quadsim.gap/2"
 #: an effect must cut the held-out gap by this fraction of the nominal gap ...
 MIN_GAIN = 0.05
 #: ... with this block-wise t statistic (1 s blocks of held-out data; a consistency check,
@@ -46,36 +48,11 @@ TIE = 0.02
 PER_FLIGHT_TIE = 0.05
 #: per-flight mode: fewer reference flights than this gives a note (spread poorly known).
 MIN_REFERENCE = 10
-#: a verdict must leave every channel's held-out mean square below this many times the noise
-#: level; otherwise the best candidate explains only part of the gap and the verdict is
-#: ``unexplained`` (an effect outside the library, or several) ...
-LACK_OF_FIT = 3.0
-#: ... unless the verdict already removed all but this fraction of that channel's gap (a
-#: large gap cut by 90 % is explained; what is left is smoothing error near the ground etc.).
-LACK_SHARE = 0.25
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
 
-# Known confusable pairs and what data would separate them.
-SEPARATE = {
-    frozenset({"mass_offset", "nominal_refit"}):
-        "weigh the vehicle, or measure b on a thrust stand",
-    frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
-    frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
-    frozenset({"com_offset", "thrust_mismatch"}): "yaw the vehicle 90 deg and hover again "
-                                                  "(a CoM offset turns with the body, a weak rotor "
-                                                  "does not move); or a rotor thrust-stand test",
-    frozenset({"motor_lag", "inertia_error"}): "fast attitude steps with measured rotor speeds "
-                                               "(lag shows between command and speed, inertia "
-                                               "between speed and rate)",
-    frozenset({"rotor_drag", "body_drag"}): "fly at several speeds: rotor drag is linear in "
-                                            "speed, body drag quadratic",
-    frozenset({"rotor_drag", "wind"}): "fly the same path in both directions (wind is fixed "
-                                       "in the world frame)",
-    frozenset({"thrust_curve", "nominal_refit"}): "fly over a wider range of rotor speeds",
-    frozenset({"ground_effect", "thrust_curve"}): "hover at several heights at the same speed",
-}
+SEPARATE = collinear.SEPARATE
 
 
 class NominalRefit(EffectBase):
@@ -243,9 +220,7 @@ def _confusable(ranked: list[dict], best: dict, baseline: dict, nominal_gap: flo
 
 
 def _separation(best: str, confusable: list[str]) -> dict:
-    return {other: SEPARATE.get(frozenset({best, other}),
-                                "more varied flights (speeds, heights, attitudes)")
-            for other in confusable}
+    return collinear.separation(best, confusable)
 
 
 def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
@@ -258,9 +233,12 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
+    checks = vehicle_check([f.fit for f in flights + (held_in or [])], params)
     train, held = _split(flights, held_in, notes)
-    return _diagnose_split(train, held, params, effects, max_combination, progress, notes,
-                           kstep)
+    result = _diagnose_split(train, held, params, effects, max_combination, progress, notes,
+                             kstep)
+    result["checks"] = checks
+    return result
 
 
 def params_have_data_map(params: VehicleParams) -> bool:
@@ -316,21 +294,40 @@ def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
     return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and useful
 
 
+def _rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
+
+
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
             notes, tick, kstep) -> dict:
     nominal_gap = _gap(before)
+    names = _channels(rotor, params)
     best = None
+    alts: list[dict] = []
     # An effect wins only if it beats the nominal model clearly and is not clearly worse
     # than simply refitting b and d (a retuned nominal model). Among the winners whose
-    # held-out gap ties with the best (within TIE), the one with fewest parameters is named.
+    # held-out gap ties with the best (within TIE), the most plausible magnitude is named
+    # (priors); ties in plausibility go to fewer parameters.
     winners = [e for e in ranked if _clear(e, nominal_gap, nominal_gap) and
                e["heldout_gap_after"] <= baseline["heldout_gap_after"] + TIE * nominal_gap]
     if winners:
         floor = winners[0]["heldout_gap_after"] + TIE * nominal_gap
-        best = min((e for e in winners if e["heldout_gap_after"] <= floor),
-                   key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
-        ranked.remove(best)
-        ranked.insert(0, best)
+        tied = [e for e in winners if e["heldout_gap_after"] <= floor]
+        first = min(tied, key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
+        others = [e for e in ranked if e is not first
+                  and abs(e["heldout_gap_after"] - first["heldout_gap_after"]) <= TIE * nominal_gap
+                  and len(e["params"]) <= len(first["params"]) + 1]
+        if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap:
+            others.append(baseline)
+        best, alts = collinear.pick_plausible(first, others, params)
+        if best is None:
+            notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
+                         f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
+        elif best is not baseline:
+            ranked.remove(best)
+            ranked.insert(0, best)
+        else:
+            best = first  # the refit ties: name the library effect, list the refit
     combined = best
     if best is not None:
         combined = _greedy(best, ranked, train, held, params, sigma, rotor, before, dt,
@@ -340,30 +337,50 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
     if best is None and _clear(baseline, nominal_gap, nominal_gap):
         notes.append("the held-out gap shrinks with refitted b and d (nominal_refit) but no "
                      "library effect explains more: the nominal parameters are off")
-    confusable = _confusable(ranked, best, baseline, nominal_gap) if best else []
-    # Lack of fit: a complete model leaves every channel at the noise level (1).
-    channel_gap = np.mean(np.concatenate(after) ** 2, axis=0)
-    channel_before = np.mean(np.concatenate(before) ** 2, axis=0)
-    lack = {n: float(g) for n, g, b in zip(_channels(rotor, params), channel_gap, channel_before)
-            if g > LACK_OF_FIT and g > LACK_SHARE * b}
-    candidate = combined
+    confusable = [a["name"] for a in alts if combined and a["name"] != combined["name"]]
+    # The floor: the in-sample (training) residual of the model judged (nominal: b, d refit).
+    base_train = _scaled(train, params, baseline["_fit"].effects(), sigma, rotor)
+    floor_nominal = np.maximum(_rms(base_train, sigma), sigma)
+    floor_after = floor_nominal if combined is None else np.maximum(
+        _rms(_scaled(train, params, effects_after, sigma, rotor), sigma), sigma)
+    rms_before, rms_after = _rms(before, sigma), _rms(after, sigma)
+    channels = rule.channel_table(names, rms_before, rms_after, floor_after)
+    kind = rule.outcome(combined is not None, rms_before, floor_nominal)
+    too_high = [n for n, f, s_ in zip(names, floor_nominal, sigma) if f > rule.MAX_FLOOR * s_]
+    if kind == "no_significant_gap" and too_high:
+        kind = "unexplained"
+        notes.append("the refitted nominal model itself leaves " + ", ".join(too_high)
+                     + f" above {rule.MAX_FLOOR:g}x the noise on the training flights: not "
+                     "claiming 'no significant gap'")
+    lack = {n: c["after"] / max(c["floor"], 1e-300) for n, c in channels.items()
+            if not c["at_floor"]}
     if combined is not None and lack:
-        notes.append(f"best candidate {combined['name']} cuts the held-out gap by "
+        notes.append(f"{combined['name']} cuts the held-out gap by "
                      f"{100 * combined['reduction']:.0f} % but leaves "
-                     + ", ".join(f"{k} at {v:.1f}x noise" for k, v in lack.items())
-                     + ": the cause is outside the library (or not one effect); verdict "
-                     "unexplained")
-        combined = None
+                     + ", ".join(f"{k} at {v:.1f}x the floor" for k, v in lack.items())
+                     + ": part of the gap is outside the library (or not one effect)")
+    if combined is not None and confusable:
+        notes.append(collinear.collinear_note(combined["name"], alts))
+    floor_source = "the training flights' own in-sample residual (b, d refitted)"
+    name = combined["name"] if combined else kind
     verdict = {
-        "effect": combined["name"] if combined else "unexplained",
-        "best_candidate": candidate["name"] if candidate else None,
+        "outcome": kind,
+        "effect": name,
+        "answer": rule.answer(kind, name, combined["reduction"] if combined else 0.0,
+                              alts if combined else [], channels, floor_source),
+        "floor_source": floor_source,
+        "channels": channels,
+        "alternatives": alts if combined else [],
+        "best_candidate": (combined or (ranked[0] if ranked else None) or {}).get("name"),
         "lack_of_fit": lack,
-        "heldout_channel_gap_after": dict(zip(_channels(rotor, params), map(float, channel_gap))),
+        "heldout_channel_gap_after": dict(zip(names, map(float, np.mean(
+            np.concatenate(after) ** 2, axis=0)))),
         "reduction": combined["reduction"] if combined else 0.0,
-        "confusable_with": confusable if combined else [],
-        "separate_by": _separation(best["name"], confusable) if combined else {},
+        "confusable_with": confusable,
+        "separate_by": _separation(combined["name"], confusable) if combined else {},
         "params": combined["params"] if combined else {},
         "ci": combined["ci"] if combined else {},
+        "units": {k: collinear.unit_of(k) for k in (combined["params"] if combined else {})},
         "heldout_gap_before": nominal_gap,
         "heldout_gap_after": combined["heldout_gap_after"] if combined else nominal_gap,
     }
@@ -377,11 +394,11 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "verdict": verdict,
         "notes": notes,
     }
-    if candidate is not None and candidate is not best:
-        result["combination"] = _public(candidate)  # also when lack of fit made it unnamed
+    if combined is not None and combined is not best:
+        result["combination"] = _public(combined)
     # Arrays for plots and recordings (not part of the JSON): first held-out flight.
     result["_series"] = {"t": held[0].fit.t, "before": before[0] * sigma,
-                         "after": after[0] * sigma, "channels": _channels(rotor, params),
+                         "after": after[0] * sigma, "channels": names,
                          "flight": held[0].name, "states": held[0].fit, "params": params,
                          "effects": effects_after}
     return result
@@ -430,6 +447,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ref = prepare(reference, params, window_s=window_s)
     if len(ref) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
+    vehicle = vehicle_check([f.fit for f in ref], params)
     rotor = all(f.fit.command is not None for f in ref)
     if rotor:
         params = fit_motor_map([f.fit for f in ref], params)
@@ -437,23 +455,38 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                                          for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]),
                          floor=noise_floor(params, rotor))
     base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
+    notes = ([f"only {len(ref)} reference flights: an effect's spread over nominal flights "
+              "is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE else [])
     tuned = base.effects()[0].apply_to_params(params)
-    reference_fits = _reference_spread(ref, tuned, effects, progress)
+    reference_fits, floors = _reference_spread(ref, tuned, effects, progress)
     flights = []
     for log in logs:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
             flight = prepare([log], tuned, window_s=window_s)[0]
             one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-        flights.append(_judge(one, reference_fits, flight.name))
+        flights.append(rule.judge_flight(one, reference_fits, flight.name, floors, tuned,
+                                        min_t=MIN_T, min_gain=MIN_GAIN, tie=TIE,
+                                        per_flight_tie=PER_FLIGHT_TIE))
+    # Bad input: a reference set that disagrees with the model more than the flights tested.
+    ratios = [np.median([c["before"] / max(c["floor"], 1e-300) for c in f["channels"].values()])
+              for f in flights]
+    checks = {"flights_vs_reference_floor": float(np.median(ratios)) if ratios else None,
+              **vehicle}
+    if ratios and np.median(ratios) < 1 / rule.FLOOR_TOL:
+        notes.append(f"the reference flights disagree with the model more than the flights "
+                     f"under test (median nominal residual of the tested flights "
+                     f"{np.median(ratios):.2f}x the reference floor): check the reference set")
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
             "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
-            "notes": ([f"only {len(ref)} reference flights: an effect's spread over nominal "
-                       "flights is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE
-                      else []),
-            "where": {}, "effects": [], "verdict": {"effect": "see flights", "reduction": None,
-                                                    "confusable_with": []}}
+            "reference_floor": {k: max(v) for k, v in floors.items()}, "checks": checks,
+            "notes": notes,
+            "where": {}, "effects": [],
+            "verdict": {"outcome": "effect" if any(f["outcome"] == "effect" for f in flights)
+                        else "unexplained", "effect": "see flights",
+                        "answer": rule.per_flight_answer(flights), "reduction": None,
+                        "confusable_with": []}}
 
 
 def _halves(f: Flight):
@@ -467,40 +500,16 @@ def _halves(f: Flight):
     return [out[0]], [out[1]]
 
 
-def _reference_spread(ref: list[Flight], params, effect_names, progress) -> dict:
-    """Per effect: each reference flight's own reduction (first half -> second half)."""
+def _reference_spread(ref: list[Flight], params, effect_names, progress) -> tuple[dict, dict]:
+    """Per effect: each reference flight's own reduction (first half -> second half); per
+    channel: the largest held-out RMS the nominal model leaves on a reference flight (the
+    per-flight floor, in the channel's unit)."""
     spread: dict[str, list[float]] = {}
+    floors: dict[str, list[float]] = {}
     for f in ref:
         one = _diagnose_split(*_halves(f), params, effect_names, 1, progress, [])
         for e in one["effects"]:
             spread.setdefault(e["name"], []).append(e["reduction"])
-    return spread
-
-
-def _judge(one: dict, spread: dict, name: str) -> dict:
-    """A flight's verdict: the effect whose held-out reduction exceeds the largest reduction
-    the same effect achieves on any reference (nominal) flight by the most, if that excess is
-    at least MIN_GAIN; ties (within TIE) go to the effect with fewer parameters. Effects that
-    help every nominal flight alike (real drag, an imperfect motor map) are not named."""
-    scored = []
-    for e in one["effects"]:
-        ok = e["t_statistic"] >= MIN_T and any(
-            e["identifiable"][k] and e["significant"][k] for k in e["params"])
-        excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
-        if ok and excess >= MIN_GAIN:
-            scored.append((excess, e))
-    effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
-               {"reference_max_reduction": max(spread.get(e["name"], [0.0]))}
-               for e in one["effects"]]
-    if not scored:
-        return {"file": name, "verdict": "unexplained", "params": {}, "ci": {},
-                "reduction": 0.0, "confusable_with": [], "effects": effects}
-    top = max(x for x, _ in scored)
-    tied = [(x, e) for x, e in scored if x >= top - TIE]
-    best = min(tied, key=lambda xe: (len(xe[1]["params"]), -xe[0]))[1]
-    # Confusable: other qualifying effects that explain this flight about as well.
-    confusable = [e["name"] for _, e in scored
-                  if e is not best and e["reduction"] >= best["reduction"] - PER_FLIGHT_TIE]
-    return {"file": name, "verdict": best["name"], "params": best["params"], "ci": best["ci"],
-            "reduction": best["reduction"], "confusable_with": confusable,
-            "separate_by": _separation(best["name"], confusable), "effects": effects}
+        for k, v in one["where"]["heldout_rms_before"].items():
+            floors.setdefault(k, []).append(v)
+    return spread, floors

@@ -1,5 +1,6 @@
-"""Outputs of the gap diagnosis: JSON (``quadsim.gap/1``), a human summary, an HTML report
-with embedded plots, and a rerun recording of the residuals.
+"""Outputs of the gap diagnosis: JSON (``quadsim.gap/2``), a human summary that leads with
+the answer in words, an HTML report (answer, evidence per flight with units, plots, the JSON
+in a collapsed appendix), and a rerun recording of the residuals.
 """
 
 from __future__ import annotations
@@ -49,35 +50,48 @@ def write_json(path: str | Path, result: dict) -> Path:
 
 
 def _fmt_params(params: dict, ci: dict) -> str:
-    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g}" for k, v in params.items())
+    """``name = value ± ci unit`` for every parameter (units from the effect declarations)."""
+    from .collinear import unit_of
+
+    def unit(k):
+        u = unit_of(k)
+        return "(relative)" if u == "1" else u
+
+    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g} {unit(k)}".rstrip()
+                     for k, v in params.items())
+
+
+def _channel_lines(channels: dict, indent: str = "  ") -> list[str]:
+    out = [f"{indent}residual RMS per channel (before -> after, floor):"]
+    for name, c in channels.items():
+        mark = "at floor" if c["at_floor"] else f"{c['after'] / max(c['floor'], 1e-300):.1f}x floor"
+        out.append(f"{indent}  {name:8s} {c['before']:.3g} -> {c['after']:.3g} {c['unit']} "
+                    f"(floor {c['floor']:.3g} {c['unit']}; {mark})")
+    return out
 
 
 def summary(result: dict) -> str:
     """A few lines for people: verdict, parameters, where the gap lies, ranking."""
     if result.get("mode") == "per-flight":
-        lines = [f"per-flight diagnosis against {len(result['reference'])} reference flights "
+        lines = [f"answer: {result['verdict'].get('answer', '')}",
+                 f"per-flight diagnosis against {len(result['reference'])} reference flights "
                  "(reference refit: "
                  f"{_fmt_params(result['reference_refit'], result.get('reference_refit_ci', {}))})"]
         for f in result["flights"]:
-            red = f["reduction"] or 0.0
-            lines.append(f"  {Path(f['file']).name}: {f['verdict']}"
-                         + (f" ({_fmt_params(f['params'], f['ci'])}; "
-                            f"held-out gap -{100 * red:.0f} %)"
-                            if f["verdict"] != "unexplained" else "")
-                         + (f" [confusable: {', '.join(f['confusable_with'])}]"
-                            if f["confusable_with"] else ""))
+            lines.append(f"  {Path(f['file']).name}: {f['verdict']}: {f.get('answer', '')}")
         lines += [f"note: {note}" for note in result.get("notes", [])]
         return "\n".join(lines) + "\n"
     v = result["verdict"]
     where = result["where"]
-    lines = [f"verdict: {v['effect']}"]
-    if v["effect"] != "unexplained":
+    lines = [f"answer: {v.get('answer', v['effect'])}", f"verdict: {v['effect']}"]
+    if v.get("outcome", "effect") == "effect":
         lines.append(f"  parameters: {_fmt_params(v['params'], v['ci'])}")
         lines.append(f"  held-out gap {v['heldout_gap_before']:.3g} -> {v['heldout_gap_after']:.3g}"
                      f" (noise = 1 per channel): -{100 * v['reduction']:.1f} %")
     if v["confusable_with"]:
         lines.append("  confusable with: " + "; ".join(
             f"{k} (separate by: {w})" for k, w in v["separate_by"].items()))
+    lines += _channel_lines(v.get("channels", {}))
     share = where["channel_share"]
     top = sorted(share.items(), key=lambda kv: -kv[1])[:3]
     lines.append("where: " + ", ".join(f"{k} {100 * s:.0f} %" for k, s in top)
@@ -122,7 +136,8 @@ def _figures(result: dict) -> list[tuple[str, str]]:
         for k, ax in enumerate(axes):
             ax.plot(series["t"], series["before"][:, k], lw=0.8, label="nominal")
             ax.plot(series["t"], series["after"][:, k], lw=0.8, label="with verdict")
-            ax.set_ylabel(channels[k])
+            unit = {"F": "N", "M": "N m"}.get(channels[k][0], "rad/s")
+            ax.set_ylabel(f"{channels[k]} ({unit})")
         axes[0].legend(loc="upper right")
         axes[-1].set_xlabel("t (s)")
         figs.append((f"Residual wrench, held-out flight {Path(series['flight']).name}", _png(fig)))
@@ -169,19 +184,53 @@ def _per_flight_figure(result: dict) -> list[tuple[str, str]]:
     return [("Per-flight verdicts", _png(fig))]
 
 
+def _flight_html(f: dict, reference: bool) -> str:
+    rows = "".join(
+        f"<tr><td>{html.escape(k)}</td><td>{c['before']:.3g}</td><td>{c['after']:.3g}</td>"
+        f"<td>{c['floor']:.3g}</td><td>{html.escape(c['unit'])}</td>"
+        f"<td>{'yes' if c['at_floor'] else 'no'}</td></tr>"
+        for k, c in f.get("channels", {}).items())
+    floor = "reference flights' held-out RMS" if reference else "training in-sample RMS"
+    table = ("<table><tr><th>channel</th><th>RMS nominal</th><th>RMS with verdict</th>"
+             f"<th>floor ({floor})</th><th>unit</th><th>at floor</th></tr>{rows}</table>")
+    alts = "".join(
+        f"<li><b>{html.escape(a['name'])}</b>: {html.escape(a['magnitude'])}"
+        f"{'' if a['plausible'] else ' — <i>implausible magnitude, not named</i>'}"
+        f"; torques left: {html.escape(a.get('torque_yaw', ''))}"
+        f"{'; separate by: ' + html.escape(a['separate_by']) if a.get('separate_by') else ''}"
+        f"{'; prior: ' + html.escape(a['prior']) if a.get('prior') else ''}</li>"
+        for a in f.get("alternatives", []))
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in f.get("notes", []))
+    return (f"<p><b>{html.escape(f.get('answer', ''))}</b></p>{table}"
+            + (f"<p>Collinear alternatives (most plausible first):</p><ul>{alts}</ul>"
+               if alts else "") + (f"<ul>{notes}</ul>" if notes else ""))
+
+
 def write_html(path: str | Path, result: dict) -> Path:
-    """A self-contained HTML page: summary, plots (base64 PNG), the JSON."""
+    """A self-contained HTML page: the answer in words, the evidence per flight (residual
+    RMS before/after with units against the floor, alternatives), plots (base64 PNG), and
+    the JSON in a collapsed appendix."""
+    per_flight = result.get("mode") == "per-flight"
     body = [f"<h1>quadsim gap diagnosis: {html.escape(str(result.get('model', '')))}</h1>",
-            f"<pre>{html.escape(summary(result))}</pre>"]
-    figures = _per_flight_figure(result) if result.get("mode") == "per-flight" else _figures(result)
-    if figures:
-        for title, png in figures:
-            body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
-    body.append(f"<h2>Result ({html.escape(result['schema'])})</h2>"
-                f"<pre>{html.escape(to_json(result))}</pre>")
+            f"<h2>Answer</h2><p><b>{html.escape(result['verdict'].get('answer', ''))}</b></p>"]
+    if per_flight:
+        body.append("<h2>Per flight</h2>")
+        for f in result["flights"]:
+            body.append(f"<h3>{html.escape(Path(f['file']).name)}: "
+                        f"{html.escape(f['verdict'])}</h3>" + _flight_html(f, True))
+    else:
+        body.append("<h2>Evidence</h2>" + _flight_html(result["verdict"], False))
+    body.append(f"<h2>Summary</h2><pre>{html.escape(summary(result))}</pre>")
+    figures = _per_flight_figure(result) if per_flight else _figures(result)
+    for title, png in figures:
+        body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
+    body.append(f"<details><summary>Appendix: result JSON ({html.escape(result['schema'])})"
+                f"</summary><pre>{html.escape(to_json(result))}</pre></details>")
     page = ("<!doctype html><html><head><meta charset=\"utf-8\"><title>quadsim gap</title>"
             "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}"
-            "img{max-width:100%}</style></head><body>" + "\n".join(body) + "</body></html>\n")
+            "img{max-width:100%}table{border-collapse:collapse}"
+            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}</style></head><body>"
+            + "\n".join(body) + "</body></html>\n")
     return atomic_write_text(path, page)
 
 

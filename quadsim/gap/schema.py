@@ -1,4 +1,10 @@
-"""The JSON Schema of the ``quadsim.gap/1`` result (documented in docs/gap.md).
+"""The JSON Schema of the ``quadsim.gap/2`` result (documented in docs/gap.md).
+
+Version 2 (from 1): the verdict has an ``outcome`` (``no_significant_gap`` | ``effect`` |
+``unexplained``), an ``answer`` in words, per-channel ``channels`` (RMS before/after/floor in
+units, ``at_floor``), the ``alternatives`` (collinear candidates with physical magnitudes
+and plausibility), parameter ``units``; each per-flight entry carries the same, plus
+``checks`` (model/vehicle consistency) in the result.
 
 ``python -m quadsim.gap ... --json OUT.json`` writes an object that validates against
 :data:`GAP_SCHEMA` (draft 2020-12). Numbers are rounded to 6 significant digits; keys sorted.
@@ -28,10 +34,38 @@ _EFFECT = {
     },
 }
 
+_CHANNEL = {
+    "type": "object",
+    "required": ["before", "after", "floor", "unit", "at_floor"],
+    "properties": {"before": {"type": "number"}, "after": {"type": "number"},
+                   "floor": {"type": "number"}, "unit": {"type": "string"},
+                   "at_floor": {"type": "boolean"}},
+}
+
+_ALTERNATIVE = {
+    "type": "object",
+    "required": ["name", "magnitude", "params", "plausible"],
+    "properties": {"name": {"type": "string"}, "magnitude": {"type": "string"},
+                   "params": _NUMBER_MAP, "ci": _NUMBER_MAP,
+                   "units": {"type": "object", "additionalProperties": {"type": "string"}},
+                   "reduction": {"type": ["number", "null"]},
+                   "torque_yaw": {"type": "string"}, "plausible": {"type": "boolean"},
+                   "plausibility": {"type": ["number", "null"]}, "prior": {"type": "string"},
+                   "separate_by": {"type": "string"}},
+}
+
+OUTCOMES = ["no_significant_gap", "effect", "unexplained"]
+
 _VERDICT = {
     "type": "object",
-    "required": ["effect", "reduction", "confusable_with"],
+    "required": ["outcome", "effect", "answer", "reduction", "confusable_with"],
     "properties": {
+        "outcome": {"enum": OUTCOMES},
+        "answer": {"type": "string"},
+        "floor_source": {"type": "string"},
+        "channels": {"type": "object", "additionalProperties": _CHANNEL},
+        "alternatives": {"type": "array", "items": _ALTERNATIVE},
+        "units": {"type": "object", "additionalProperties": {"type": "string"}},
         "effect": {"type": "string"},
         "reduction": {"type": ["number", "null"]},
         "confusable_with": {"type": "array", "items": {"type": "string"}},
@@ -46,8 +80,13 @@ _VERDICT = {
 
 _FLIGHT = {
     "type": "object",
-    "required": ["file", "verdict", "params"],
+    "required": ["file", "outcome", "verdict", "answer", "params", "channels"],
     "properties": {"file": {"type": "string"}, "verdict": {"type": "string"},
+                   "outcome": {"enum": OUTCOMES}, "answer": {"type": "string"},
+                   "channels": {"type": "object", "additionalProperties": _CHANNEL},
+                   "alternatives": {"type": "array", "items": _ALTERNATIVE},
+                   "units": {"type": "object", "additionalProperties": {"type": "string"}},
+                   "notes": {"type": "array", "items": {"type": "string"}},
                    "params": _NUMBER_MAP, "ci": _NUMBER_MAP,
                    "reduction": {"type": ["number", "null"]},
                    "confusable_with": {"type": "array", "items": {"type": "string"}}},
@@ -56,11 +95,11 @@ _FLIGHT = {
 #: JSON Schema (draft 2020-12) of the result.
 GAP_SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "quadsim.gap/1",
+    "title": "quadsim.gap/2",
     "type": "object",
     "required": ["schema", "where", "effects", "verdict"],
     "properties": {
-        "schema": {"const": "quadsim.gap/1"},
+        "schema": {"const": "quadsim.gap/2"},
         "model": {"type": "string"},
         "mode": {"enum": ["per-flight"]},
         "train": {"type": "array", "items": {"type": "string"}},
@@ -91,6 +130,8 @@ GAP_SCHEMA = {
         "verdict": _VERDICT,
         "flights": {"type": "array", "items": _FLIGHT},
         "notes": {"type": "array", "items": {"type": "string"}},
+        "checks": {"type": "object"},
+        "reference_floor": {"type": "object"},
     },
 }
 

@@ -7,7 +7,9 @@ Regimes (a sample may be in several; thresholds scale with the vehicle where tha
 hover (speed < 0.2 m/s and |omega| < 0.5 rad/s), climb (vz > 0.3 m/s), descent
 (vz < -0.3 m/s), fast_forward (horizontal speed > 1 m/s), aggressive_rotation
 (|omega| > 2 rad/s), near_ground (hub height below 4 rotor radii, or 0.1 m when the radius is
-unknown), low_battery (vbat in the lowest 20 % of the log's range; absent without vbat).
+unknown), low_battery (vbat in the lowest 20 % of the log's range; absent without vbat, and
+empty when the battery did not discharge: a range below 2 % of the mean voltage
+(:data:`MIN_VBAT_DROP`) is noise on a flat signal, not a low battery).
 
 k-step prediction error: from shooting nodes every 0.1 s of each held-out flight, the analytic
 rigid-body model (measured rotor speeds, model wrench incl. effects) is integrated forward by
@@ -34,6 +36,11 @@ BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
 HORIZONS_S = (0.05, 0.1, 0.2, 0.5, 1.0)
 
 
+#: the low_battery regime needs the battery to fall by this fraction of its mean voltage
+#: over the log (a 1S LiPo falls 4.2 -> 3.7 V, 12 %, over a full flight; 2 % = 80 mV is far
+#: above the mV noise of a voltage log).
+MIN_VBAT_DROP = 0.02
+
 def regime_masks(states: FlightStates, params: VehicleParams) -> dict[str, np.ndarray]:
     """Boolean masks (N,) per flight regime (see module docstring)."""
     speed = np.linalg.norm(states.velocity, axis=1)
@@ -50,7 +57,8 @@ def regime_masks(states: FlightStates, params: VehicleParams) -> dict[str, np.nd
     }
     if states.vbat is not None and np.all(np.isfinite(states.vbat)):
         lo, hi = float(np.min(states.vbat)), float(np.max(states.vbat))
-        masks["low_battery"] = states.vbat <= lo + 0.2 * (hi - lo) if hi > lo else \
+        drained = hi - lo > MIN_VBAT_DROP * abs(float(np.mean(states.vbat)))
+        masks["low_battery"] = states.vbat <= lo + 0.2 * (hi - lo) if drained else \
             np.zeros(len(states.t), bool)
     return masks
 

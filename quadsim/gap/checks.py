@@ -1,0 +1,70 @@
+"""Does the parameter set describe the logged vehicle at all? Checked before any fit.
+
+A diagnosis that fits effects to flights of a *different* vehicle finds nonsense with
+confidence (the 0.84 kg testbed's set on the 37 g Crazyflie flights named ``battery_sag``
+at 13 V explaining 99.8 %). Two balances that hold for any vehicle flying on its own rotors
+catch it first:
+
+* hover/force balance along body z: ``m f_z = b sum_i Omega_i^2`` (f_z the measured
+  specific force) gives the thrust factor the data need, by least squares over all samples;
+  its ratio to the model's b must lie in [1/:data:`MAX_RATIO`, :data:`MAX_RATIO`]
+  (a payload of 60 % of the mass or a 40 % thrust loss still passes, another vehicle not);
+* the logged rotor speeds must be reachable: median speed <= :data:`MAX_SPEED_RATIO` x the
+  model's ``max_speed``;
+* yaw balance ``I_zz dr/dt ~= d sum_i s_i Omega_i^2`` gives the drag factor the data need
+  (reported, not enforced: it is noisy on gentle flights).
+
+:func:`vehicle_check` returns the ratios (for the result's ``checks``) and raises
+:class:`~quadsim.errors.InputError` with the numbers that disagree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..params import VehicleParams
+from ..rotors import allocation_matrix
+
+__all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "vehicle_check"]
+
+MAX_RATIO = 2.0
+MAX_SPEED_RATIO = 1.5
+
+
+def vehicle_check(states: list, params: VehicleParams) -> dict:
+    """Ratios data/model of b, d and rotor speed over ``states`` (FlightStates); raises
+    InputError when the parameter set cannot be the logged vehicle's. States without rotor
+    speeds are skipped ({} when none has them)."""
+    states = [s for s in states if s.rotor_speed is not None]
+    if not states:  # command-only logs: nothing to balance against here
+        return {}
+    speed = np.concatenate([s.rotor_speed for s in states])
+    sf = np.concatenate([s.specific_force for s in states])
+    rate_dot = np.concatenate([s.body_accel for s in states])
+    omega2 = np.square(speed)
+    x = omega2.sum(axis=1)
+    b_data = float(params.mass * np.dot(sf[:, 2], x) / max(np.dot(x, x), 1e-300))
+    b_ratio = b_data / params.thrust_factor
+    yaw_row = allocation_matrix(params)[5] / params.drag_factor  # +-1 per rotor (spin)
+    xy = omega2 @ yaw_row
+    xy = xy - xy.mean()
+    mz = rate_dot[:, 2] * params.inertia[2, 2]
+    mz = mz - mz.mean()
+    d_ratio = float(np.dot(mz, xy) / max(np.dot(xy, xy), 1e-300)) / params.drag_factor
+    speed_ratio = float(np.median(speed) / params.max_speed) if params.max_speed else None
+    out = {"thrust_factor_data": b_data, "thrust_factor_ratio": float(b_ratio),
+           "drag_factor_ratio": d_ratio, "median_speed_ratio": speed_ratio}
+    problems = []
+    if not 1 / MAX_RATIO <= b_ratio <= MAX_RATIO:
+        problems.append(f"the force balance m*f_z = b*sum(Omega^2) with the model's mass "
+                        f"{params.mass:.4g} kg needs b = {b_data:.3g} N s^2/rad^2, "
+                        f"{b_ratio:.3g}x the model's {params.thrust_factor:.3g} N s^2/rad^2")
+    if speed_ratio is not None and speed_ratio > MAX_SPEED_RATIO:
+        problems.append(f"the median logged rotor speed {np.median(speed):.4g} rad/s is "
+                        f"{speed_ratio:.3g}x the model's max_speed {params.max_speed:.4g} rad/s")
+    if problems:
+        raise InputError(f"model {params.name!r} does not describe the logged vehicle: "
+                         + "; ".join(problems) + f" (yaw balance: d {d_ratio:.3g}x the "
+                         "model's); give the parameter set of the vehicle that flew")
+    return out

@@ -1,0 +1,157 @@
+"""Collinear explanations in words: each candidate's physical magnitude, what the torque and
+yaw channels say, what separates them, and a ranking by physical plausibility.
+
+Two candidates are *collinear* when their held-out gaps tie (within the tie margin of the
+diagnosis): the data cannot choose between them. They are then all listed, each with
+
+* ``magnitude``: the fitted parameters as a physical statement with units ("+4.0 ± 0.2 g
+  (+10.8 % of the vehicle mass)", "-9.7 ± 0.5 % thrust per Omega^2 on all 4 rotors");
+* ``torque_yaw``: the held-out RMS of Mx, My, Mz (N m) that the candidate leaves, so a
+  reader sees whether the torque channels prefer one (a thrust-per-Omega^2 change from the
+  air also scales the yaw drag torque; an added mass at the CoM leaves torques alone);
+* ``separate_by``: the measurement or manoeuvre that would tell them apart;
+* ``plausible`` / ``plausibility``: the prior check of :mod:`quadsim.gap.priors` (score
+  <= 1 plausible; ranking key). An implausible candidate is flagged and never named.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import VehicleParams, hover_speed
+from .fitting import effect_class
+from .priors import candidate_plausibility
+
+__all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation", "pick_plausible",
+           "collinear_note"]
+
+# Known collinear pairs and what data would separate them.
+SEPARATE = {
+    frozenset({"mass_offset", "nominal_refit"}):
+        "weigh the vehicle, or measure b on a thrust stand",
+    frozenset({"mass_offset", "thrust_factor"}):
+        "weigh the vehicle (or measure thrust per Omega^2 on a thrust stand); the yaw "
+        "channel leans to thrust_factor if the drag torque per Omega^2 changed too",
+    frozenset({"thrust_factor", "nominal_refit"}): "the same effect (b refitted); a thrust "
+                                                   "stand tells b and d apart",
+    frozenset({"mass_offset", "thrust_curve"}): "weigh the vehicle; fly over a wider range of "
+                                                "rotor speeds (a thrust-curve change depends "
+                                                "on speed, a mass does not)",
+    frozenset({"thrust_factor", "thrust_curve"}): "fly over a wider range of rotor speeds "
+                                                  "(climbs and descents at several rates)",
+    frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
+    frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
+    frozenset({"com_offset", "thrust_mismatch"}): "yaw the vehicle 90 deg and hover again "
+                                                  "(a CoM offset turns with the body, a weak rotor "
+                                                  "does not move); or a rotor thrust-stand test",
+    frozenset({"motor_lag", "inertia_error"}): "fast attitude steps with measured rotor speeds "
+                                               "(lag shows between command and speed, inertia "
+                                               "between speed and rate)",
+    frozenset({"rotor_drag", "body_drag"}): "fly at several speeds: rotor drag is linear in "
+                                            "speed, body drag quadratic",
+    frozenset({"rotor_drag", "wind"}): "fly the same path in both directions (wind is fixed "
+                                       "in the world frame)",
+    frozenset({"thrust_curve", "nominal_refit"}): "fly over a wider range of rotor speeds",
+    frozenset({"ground_effect", "thrust_curve"}): "hover at several heights at the same speed",
+}
+
+
+def separation(best: str, others: list[str]) -> dict:
+    return {other: SEPARATE.get(frozenset({best.split("+")[0], other.split("+")[0]}),
+                                "more varied flights (speeds, heights, attitudes)")
+            for other in others}
+
+
+def unit_of(parameter: str) -> str:
+    """Unit of ``effect.parameter`` (from the effect's declaration)."""
+    name, _, p = parameter.partition(".")
+    try:
+        specs = {s.name: s for s in effect_class(name).parameters}
+    except KeyError:
+        return ""
+    if p in specs:
+        return specs[p].unit
+    return "1" if p.startswith("rotor_") else ""
+
+
+def _pm(value: float, ci: float | None, scale: float, digits: str = ".2g") -> str:
+    if ci is None or not np.isfinite(ci):
+        return f"{value * scale:+{digits}}"
+    return f"{value * scale:+{digits}} ± {abs(ci) * scale:{digits}}"
+
+
+def describe(name: str, values: dict, ci: dict, params: VehicleParams) -> str:
+    """Physical statement (with units) of a fitted candidate."""
+    parts = []
+    for key, value in values.items():
+        c = ci.get(key)
+        if key == "mass_offset.mass":
+            parts.append(f"{_pm(value, c, 1e3)} g heavier ({100 * value / params.mass:+.1f} % "
+                         f"of the model's {1e3 * params.mass:.4g} g)")
+        elif key in ("thrust_factor.change", "nominal_refit.thrust"):
+            parts.append(f"{_pm(value, c, 100)} % thrust per Ω² on all {params.rotor_count} "
+                         "rotors")
+        elif key == "nominal_refit.drag":
+            parts.append(f"{_pm(value, c, 100)} % drag torque per Ω²")
+        elif key.startswith("thrust_mismatch."):
+            parts.append(f"{key.split('.')[1]} {_pm(value, c, 100)} % thrust")
+        elif key == "thrust_curve.linear":
+            hover = hover_speed(params)
+            rel = value * hover / (params.thrust_factor * hover ** 2)
+            crel = None if c is None else c * hover / (params.thrust_factor * hover ** 2)
+            parts.append(f"{_pm(rel, crel, 100)} % thrust at the hover speed "
+                         f"({value:.3g} N s/rad per rotor)")
+        elif key.startswith("com_offset."):
+            parts.append(f"CoM {key[-1]} {_pm(value, c, 1e3)} mm")
+        else:
+            unit = unit_of(key)
+            parts.append(f"{key} = {_pm(value, c, 1.0, '.4g')} {unit}".rstrip())
+    return ", ".join(parts) if parts else name
+
+
+def _torque_text(entry: dict) -> str:
+    rms = entry.get("heldout_rms_after") or {}
+    have = [(k, rms[k]) for k in ("Mx", "My", "Mz") if k in rms]
+    return ", ".join(f"{k} {v:.2g} N m" for k, v in have)
+
+
+def alternatives(best: dict, others: list[dict], params: VehicleParams) -> list[dict]:
+    """``best`` and its collinear ``others`` described and ranked (most plausible first)."""
+    out = []
+    for entry in [best] + list(others):
+        worst = candidate_plausibility(entry["params"], params)
+        out.append({
+            "name": entry["name"],
+            "magnitude": describe(entry["name"], entry["params"], entry.get("ci", {}), params),
+            "params": entry["params"], "ci": entry.get("ci", {}),
+            "units": {k: unit_of(k) for k in entry["params"]},
+            "reduction": entry.get("reduction"),
+            "torque_yaw": _torque_text(entry),
+            "plausibility": worst[0], "plausible": worst[1], "prior": worst[2],
+        })
+    sep = separation(best["name"], [e["name"] for e in others])
+    for alt in out[1:]:
+        alt["separate_by"] = sep[alt["name"]]
+    out.sort(key=lambda a: (not a["plausible"], a["plausibility"]))
+    return out
+
+
+def pick_plausible(best: dict, tied: list[dict], params) -> tuple[dict | None, list[dict]]:
+    """Among collinear candidates (``best`` and those ``tied`` with it), the most plausible
+    one (priors), and all of them described (:func:`alternatives`)."""
+    alts = alternatives(best, tied, params)
+    lead = alts[0]
+    if not lead["plausible"]:
+        return None, alts
+    chosen = best if lead["name"] == best["name"] else next(
+        e for e in tied if e["name"] == lead["name"])
+    return chosen, alts
+
+
+def collinear_note(name: str, alts: list[dict]) -> str:
+    others = [a for a in alts if a["name"] != name]
+    return (f"too little excitation to separate {name} from "
+            + ", ".join(a["name"] for a in others) + " on these flights (collinear within the "
+            "tie margin); the name follows the priors, not the data: "
+            + "; ".join(f"{a['name']}: {a['separate_by']}" for a in others
+                        if a.get("separate_by")))

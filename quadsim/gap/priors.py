@@ -1,0 +1,110 @@
+"""Plausible magnitudes of fitted effects, with sources: what ranks collinear explanations.
+
+When two candidates explain the same forces (an added mass and a uniform loss of thrust per
+Omega^2 are the same in the force balance up to drag), the data cannot choose; physics can
+say which magnitude is believable. Each prior is a range of the *relative* or absolute size
+that real vehicles show; a fit outside it is flagged ``implausible`` and never named.
+
+=====================  ===================  ==============================================
+parameter              plausible range      source / reasoning
+=====================  ===================  ==============================================
+thrust_factor.change   -15 % .. +5 %        props of one type differ by a few % in b
+                                            (UIUC propeller database, Brandt & Selig,
+                                            AIAA 2011-1255: C_T spread 2-5 % between
+                                            samples); air density 1.225 -> 1.06 kg/m^3 from
+                                            sea level to 1500 m or +-5 % over 0-30 C (ISA);
+                                            wear/chips lose a few %. Together: -15 .. +5 %.
+nominal_refit.thrust   -15 % .. +5 %        same as thrust_factor (a refit of b).
+mass_offset.mass       -5 % .. +60 % of m   payload: nano quads carry up to ~50-60 % of
+                                            their mass (Crazyflie 2.1: 37 g, payload limit
+                                            15 g, Bitcraze datasheet); a lighter vehicle
+                                            than the model by more than a battery-to-battery
+                                            spread (~5 %) is unlikely.
+thrust_mismatch.*      -20 % .. +10 %       one damaged/mismatched prop or motor.
+com_offset.x/y         within 15 % of arm   battery/payload placement.
+thrust_curve.linear    +-20 % at hover      bench fits: linear term up to ~20 % (Foerster 2015).
+battery_sag.rate       0 .. 0.5 %/s         a 1S LiPo loses ~20 % thrust at a fixed
+                                            command over a 5-7 min flight (0.05-0.1 %/s);
+                                            0.5 %/s is a failing cell.
+=====================  ===================  ==============================================
+
+:func:`plausibility` returns (score, plausible, text): score = |value| / bound on its side
+(<= 1 plausible; the smaller, the more plausible).
+"""
+
+from __future__ import annotations
+
+from ..params import VehicleParams
+
+__all__ = ["PRIORS", "plausibility", "candidate_plausibility"]
+
+#: parameter -> (lower, upper, kind, source). kind "relative": fraction of 1; "mass": of the
+#: vehicle mass; "arm": of the arm length; "absolute": in the parameter's unit.
+PRIORS = {
+    "thrust_factor.change": (-0.15, 0.05, "relative",
+                             "prop-to-prop C_T spread 2-5 % (UIUC prop data), air density "
+                             "+-5 % (0-30 C) or -13 % at 1500 m (ISA), wear"),
+    "nominal_refit.thrust": (-0.15, 0.05, "relative", "as thrust_factor.change"),
+    "mass_offset.mass": (-0.05, 0.6, "mass",
+                         "payloads up to ~60 % of the vehicle mass (Crazyflie 2.1: 15 g on "
+                         "37 g, Bitcraze); lighter than modelled by > 5 % is unlikely"),
+    "thrust_mismatch": (-0.2, 0.1, "relative", "one damaged or mismatched prop/motor"),
+    "com_offset.x": (-0.15, 0.15, "arm", "battery/payload placement"),
+    "com_offset.y": (-0.15, 0.15, "arm", "battery/payload placement"),
+    "battery_sag.rate": (0.0, 0.005, "absolute", "1S LiPo: ~20 % thrust over a 5-7 min flight"),
+    "thrust_curve.linear": (-0.2, 0.2, "hover",
+                            "bench fits T = k2 W^2 + k1 W + k0 (Foerster, ETH 2015, table "
+                            "3.3): the linear term reaches ~20 % of the hover thrust"),
+}
+
+#: score given to a parameter without a prior (ranks between well inside and at the edge).
+NO_PRIOR_SCORE = 0.5
+
+
+def _key(parameter: str) -> str | None:
+    if parameter in PRIORS:
+        return parameter
+    head = parameter.split(".")[0]
+    return head if head in PRIORS else None
+
+
+def plausibility(parameter: str, value: float, params: VehicleParams):
+    """(score, plausible, prior text) of a fitted ``value``; (0, True, "") without a prior."""
+    key = _key(parameter)
+    if key is None:
+        return NO_PRIOR_SCORE, True, ""
+    lower, upper, kind, source = PRIORS[key]
+    if kind == "mass":
+        value = value / params.mass
+    elif kind == "hover":  # linear thrust term as a fraction of the hover thrust
+        from ..params import hover_speed
+
+        value = value / (params.thrust_factor * hover_speed(params))
+    elif kind == "arm":
+        import numpy as np
+
+        value = value / float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
+    bound = upper if value >= 0 else lower
+    score = abs(value) / abs(bound) if bound != 0 else (0.0 if value == 0 else float("inf"))
+    scale = {"relative": 100, "mass": 100, "arm": 100, "hover": 100, "absolute": 1}[kind]
+    unit = {"relative": " %", "mass": " % of the vehicle mass", "arm": " % of the arm",
+            "hover": " % of the hover thrust", "absolute": ""}[kind]
+    text = f"plausible {lower * scale:g} .. {upper * scale:g}{unit} ({source})"
+    return float(score), bool(score <= 1.0), text
+
+
+def candidate_plausibility(values: dict, params: VehicleParams):
+    """(score, plausible, text) of a whole fitted candidate: its least plausible parameter.
+
+    A per-rotor mismatch is split into its mean (judged as a uniform thrust-per-Omega^2
+    change, ``thrust_factor.change``) and each rotor's deviation from that mean (judged as a
+    mismatch): four rotors all 16 % weak are a uniform loss, not four damaged props."""
+    values = dict(values)
+    rotors = {k: v for k, v in values.items() if k.startswith("thrust_mismatch.")}
+    if len(rotors) > 1:
+        mean = sum(rotors.values()) / len(rotors)
+        for k in rotors:
+            values[k] = rotors[k] - mean
+        values["thrust_factor.change"] = mean
+    scores = [plausibility(k, v, params) for k, v in values.items()]
+    return max(scores, key=lambda s: s[0]) if scores else (NO_PRIOR_SCORE, True, "")
