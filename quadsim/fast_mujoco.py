@@ -12,7 +12,7 @@ parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``Mj
 
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
 module docstring): motor_lag, thrust_curve, thrust_mismatch, rotor_drag, body_drag,
-ground_effect, battery_sag (time model), gyroscopic, wind, and every effect that only changes
+ground_effect, gyroscopic, wind, and every effect that only changes
 the parameter set (com_offset, mass_offset, inertia_error). :func:`fast_form_problem` names
 the first effect that has none (another class, an effect with internal state, a repeated
 effect, a parameter the kernel does not know); the engine then uses the reference path —
@@ -60,7 +60,6 @@ _KNOWN = {
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "body_drag": {"cd_area", "cd_area_vertical"},
     "ground_effect": {"gain", "ground_height", "radius"},
-    "battery_sag": {"rate", "full_voltage"},
     "gyroscopic": {"rotor_inertia"},
     "wind": {"vx", "vy", "vz", "gust", "bandwidth", "seed"},
 }

@@ -1,0 +1,187 @@
+"""Independent benchmark cases: which flights, from which source, with which hidden effect.
+
+Two sources the diagnosis did not generate (see the issue-10 benchmark section of
+docs/gap.md):
+
+* ``rotorpy`` -- :mod:`.rotorpy_source`: RotorPy's own closed loop, integrator, motor,
+  aerodynamics and sensor models; effects injected as RotorPy parameters;
+* ``pipeline`` -- :mod:`.pipeline`: quadsim's own closed loop (MuJoCo engine), effects
+  through quadsim's hooks, but logged through a realistic sensor pipeline
+  (finite-difference accelerations, filtered and delayed rotor speeds, mocap latency).
+
+Each case is ``FLIGHTS`` flights of ``DURATION`` s at 250 Hz along one path at a random speed
+(varied per flight); every (source, vehicle) pair also has ``REFERENCES`` nominal flights
+for the per-flight mode. Cases per vehicle: RotorPy 3 no-effect, 11 in-library (mass x2,
+CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outside
+(flapping moment, translational lift: RotorPy physics quadsim's library lacks); pipeline
+2 no-effect, 8 in-library, 2 outside (rate damping, canted rotor). 56 cases in all, plus
+one ``thrust_factor`` case per source and vehicle when the library has that effect.
+
+Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
+(:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
+*per-flight* mode (:func:`quadsim.gap.diagnose_per_flight`, each case's first flight against
+the reference flights of the same source). A case is *observable* when the library effect
+with the true values cuts the held-out gap by at least ``MIN_GAIN``
+(:func:`oracle_reduction`).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+
+from ..effects import EFFECTS
+from ..errors import QuadsimWarning
+from ..params import load_params
+from .draws import draw, draw_rotorpy, library_equivalent
+from .score import read_verdict, score_case
+
+__all__ = ["DURATION", "FLIGHTS", "REFERENCES", "case_flights", "case_list", "oracle_reduction",
+           "reference_flights", "run_case", "run_per_flight"]
+
+VEHICLES = ("physical", "crazyflie21")
+FLIGHTS = 3
+REFERENCES = 4
+DURATION = 8.0
+ROTORPY_LIBRARY = ("mass_offset", "mass_offset", "com_offset", "com_offset", "inertia_error",
+                   "thrust_mismatch", "thrust_mismatch", "motor_lag", "body_drag", "rotor_drag",
+                   "wind")
+ROTORPY_OUTSIDE = ("flapping", "translational_lift")
+PIPELINE_LIBRARY = ("mass_offset", "com_offset", "thrust_mismatch", "thrust_curve", "battery_sag",
+                    "motor_lag", "inertia_error", "rotor_drag")
+PIPELINE_OUTSIDE = ("rate_damping", "canted_rotor")
+
+
+def case_list(count: int | None = None) -> list[dict]:
+    """All cases (dicts with source, vehicle, truth, kind, seed); the first ``count``."""
+    cases = []
+    for source, none, library, outside in (("rotorpy", 3, ROTORPY_LIBRARY, ROTORPY_OUTSIDE),
+                                           ("pipeline", 2, PIPELINE_LIBRARY, PIPELINE_OUTSIDE)):
+        for vehicle in VEHICLES:
+            cases += [{"source": source, "vehicle": vehicle, "truth": "none", "kind": "none"}
+                      for _ in range(none)]
+            cases += [{"source": source, "vehicle": vehicle, "truth": n, "kind": "library"}
+                      for n in library]
+            cases += [{"source": source, "vehicle": vehicle, "truth": n, "kind": "outside"}
+                      for n in outside]
+    for i, case in enumerate(cases):
+        case["seed"] = 5000 + i
+    if "thrust_factor" in EFFECTS:  # issue-10 propeller effect (appended: seeds above stay)
+        for source in ("rotorpy", "pipeline"):
+            for vehicle in VEHICLES:
+                cases.append({"source": source, "vehicle": vehicle, "truth": "thrust_factor",
+                              "kind": "library", "seed": 5000 + len(cases)})
+    return cases[:count] if count else cases
+
+
+def _fly(source: str, params, spec, seed: int, speed: float):
+    if source == "rotorpy":
+        from .rotorpy_source import rotorpy_flight
+
+        return rotorpy_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+    from .pipeline import pipeline_flight
+
+    return pipeline_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+
+
+def _spec(case: dict, params, rng):
+    if case["truth"] == "none":
+        return {} if case["source"] == "rotorpy" else []
+    if case["source"] == "rotorpy":
+        return draw_rotorpy(case["truth"], params, rng)
+    return draw(case["truth"], params, rng)
+
+
+def case_flights(case: dict):
+    """(spec, logs): the hidden effect as the source's parameters and FLIGHTS logs."""
+    params = load_params(case["vehicle"])
+    rng = np.random.default_rng(case["seed"])
+    spec = _spec(case, params, rng)
+    speed = rng.uniform(0.7, 1.4)
+    logs = [_fly(case["source"], params, spec, case["seed"] * 10 + s, speed * (1 + 0.15 * s))
+            for s in range(FLIGHTS)]
+    return spec, logs
+
+
+def reference_flights(source: str, vehicle: str) -> list:
+    """REFERENCES nominal flights of ``source`` (seeds apart from every case's)."""
+    params = load_params(vehicle)
+    spec = {} if source == "rotorpy" else []
+    return [_fly(source, params, spec, 90_000 + 17 * k + (vehicle == "physical"), 0.8 + 0.15 * k)
+            for k in range(REFERENCES)]
+
+
+def oracle_reduction(logs, params, effects) -> float:
+    """Held-out gap reduction with the *true* library effects and values (observability)."""
+    from ..gap.diagnose import prepare
+    from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
+
+    if not effects:
+        return 0.0
+    flights = prepare(logs, params)
+    train, held = flights[:-1], flights[-1:]
+    params = fit_motor_map([f.fit for f in train], params)
+    nominal = [residuals(f.fit, params, [], rotor_channel=True) for f in train]
+    sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]),
+                        floor=noise_floor(params, True))
+
+    def gap(eff):
+        return np.mean(np.concatenate([residuals(f.fit, params, eff, rotor_channel=True) / sigma
+                                       for f in held]) ** 2)
+
+    before = gap([])
+    return float((before - gap(effects)) / before)
+
+
+def _truth_effects(case, spec, params) -> list:
+    if case["kind"] != "library":
+        return []
+    return library_equivalent(spec, params) if case["source"] == "rotorpy" else list(spec)
+
+
+def _describe(spec) -> dict:
+    if isinstance(spec, dict):
+        return {k: (np.asarray(v).tolist() if not np.isscalar(v) else float(v))
+                for k, v in spec.items()}
+    return {f"{e.name}.{k}": float(v) for e in spec for k, v in e.values().items() if v}
+
+
+def run_case(case: dict) -> dict:
+    """Fly one case and judge it in held-out mode; the row keeps the first log (for the
+    per-flight mode) under ``_log``."""
+    from ..gap import diagnose
+
+    warnings.simplefilter("ignore", QuadsimWarning)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    params = load_params(case["vehicle"])
+    spec, logs = case_flights(case)
+    start = time.perf_counter()
+    result = diagnose(logs[:-1], params, holdout=logs[-1:], kstep=False)
+    verdict = read_verdict(result["verdict"])
+    out = {**case, "spec": _describe(spec), "seconds": time.perf_counter() - start,
+           "heldout": {**verdict, "reduction": result["verdict"].get("reduction"),
+                       "best_candidate": result["verdict"].get("best_candidate"),
+                       "score": score_case(case["truth"], case["kind"], verdict)},
+           "oracle_reduction": oracle_reduction(logs, params, _truth_effects(case, spec, params)),
+           "_log": logs[0]}
+    return out
+
+
+def run_per_flight(group: tuple[str, str, list[dict]]) -> list[dict]:
+    """Per-flight verdicts for the cases of one (source, vehicle) against its references."""
+    from ..gap import diagnose_per_flight
+
+    warnings.simplefilter("ignore", QuadsimWarning)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    source, vehicle, rows = group
+    params = load_params(vehicle)
+    result = diagnose_per_flight([r["_log"] for r in rows], reference_flights(source, vehicle),
+                                 params)
+    out = []
+    for row, flight in zip(rows, result["flights"]):
+        verdict = read_verdict(flight)
+        out.append({**verdict, "reduction": flight.get("reduction"),
+                    "score": score_case(row["truth"], row["kind"], verdict)})
+    return out
