@@ -243,40 +243,35 @@ def _poles_text(poles: np.ndarray) -> str:
 
 def save_plot(result: OpenLoopResult, folder: Path) -> Path:
     """PNG of each channel's response in each engine; written atomically, deterministic."""
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True)
     styles = {"mujoco": dict(color="C0", lw=2.5, alpha=0.6), "analytic": dict(color="C3", ls="--")}
-    for engine in result.trajectories:
-        for ax, (channel, (t, y)) in zip(axes.flat, result.responses(engine).items()):
-            ax.plot(t, y, label=engine, **styles[engine])
-            _, output, _, unit = CHANNELS[channel]
-            ax.set_title(f"{channel} step -> {output}")
-            ax.set_ylabel(f"{output} change ({unit})")
-            ax.grid(True, alpha=0.3)
-    for ax in axes[1]:
-        ax.set_xlabel("time since step (s)")
-    axes.flat[0].legend()
+    curves = [(result, engine, styles[engine], engine) for engine in result.trajectories]
     mode = "LQR closed loop" if result.controller == "lqr" else "open loop"
-    fig.suptitle(f"{result.params.name}: {mode} step responses from the report's initial state")
-    fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
-    plt.close(fig)
     suffix = "lqr" if result.controller == "lqr" else "openloop"
-    path = folder / f"{result.params.name}_{suffix}.png"
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+    return _save_response_plot(
+        curves, f"{result.params.name}: {mode} step responses from the report's initial state",
+        folder / f"{result.params.name}_{suffix}.png")
 
 
 def save_compare_plot(results: list[OpenLoopResult], folder: Path) -> Path:
     """One PNG overlaying every model's responses per channel (analytic engine, which runs
     every set; MuJoCo where the analytic one is absent); atomic, deterministic."""
+    curves = []
+    for k, result in enumerate(results):
+        engine = "analytic" if "analytic" in result.trajectories else next(
+            iter(result.trajectories), None)
+        if engine is not None:
+            curves.append((result, engine, dict(color=f"C{k}", ls=("-", "--", ":", "-.")[k % 4]),
+                           f"{result.params.name} ({engine})"))
+    mode = "LQR closed loop" if results[0].controller == "lqr" else "open loop"
+    suffix = "lqr" if results[0].controller == "lqr" else "openloop"
+    return _save_response_plot(
+        curves, f"{mode} step responses: " + " vs ".join(r.params.name for r in results),
+        folder / ("compare_" + "_".join(r.params.name for r in results) + f"_{suffix}.png"))
+
+
+def _save_response_plot(curves, title: str, path: Path) -> Path:
+    """The 2x2 step-response figure (one panel per channel, units on the axes) from
+    ``(result, engine, line style, label)`` curves, written atomically as PNG."""
     import io
 
     import matplotlib
@@ -285,14 +280,9 @@ def save_compare_plot(results: list[OpenLoopResult], folder: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(10, 7), sharex=True)
-    for k, result in enumerate(results):
-        engine = "analytic" if "analytic" in result.trajectories else next(
-            iter(result.trajectories), None)
-        if engine is None:
-            continue
+    for result, engine, style, label in curves:
         for ax, (channel, (t, y)) in zip(axes.flat, result.responses(engine).items()):
-            ax.plot(t, y, color=f"C{k}", ls=("-", "--", ":", "-.")[k % 4],
-                    label=f"{result.params.name} ({engine})")
+            ax.plot(t, y, label=label, **style)
             _, output, _, unit = CHANNELS[channel]
             ax.set_title(f"{channel} step -> {output}")
             ax.set_ylabel(f"{output} change ({unit})")
@@ -300,14 +290,11 @@ def save_compare_plot(results: list[OpenLoopResult], folder: Path) -> Path:
     for ax in axes[1]:
         ax.set_xlabel("time since step (s)")
     axes.flat[0].legend()
-    mode = "LQR closed loop" if results[0].controller == "lqr" else "open loop"
-    fig.suptitle(f"{mode} step responses: " + " vs ".join(r.params.name for r in results))
+    fig.suptitle(title)
     fig.tight_layout()
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
     plt.close(fig)
-    suffix = "lqr" if results[0].controller == "lqr" else "openloop"
-    path = folder / ("compare_" + "_".join(r.params.name for r in results) + f"_{suffix}.png")
     atomic_write_bytes(path, buffer.getvalue())
     return path
 
