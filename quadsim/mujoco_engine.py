@@ -138,18 +138,19 @@ def _rotor_step(effects: BatchEffects, t: float, dt: float, command: np.ndarray,
     Omega^2 (Simpson) and the mid-step rotor acceleration."""
     batch = command.shape[0]
     rate = lambda tt, w: effects.rotor_speed_rate(np.full(batch, tt), command, w)  # noqa: E731
-
-    def rk4(t0, w0, h):
-        k1 = rate(t0, w0)
-        k2 = rate(t0 + h / 2, w0 + h / 2 * k1)
-        k3 = rate(t0 + h / 2, w0 + h / 2 * k2)
-        k4 = rate(t0 + h, w0 + h * k3)
-        return w0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-    mid = rk4(t, omega, dt / 2)
-    end = rk4(t + dt / 2, mid, dt / 2)
+    mid = _rk4(rate, t, omega, dt / 2)
+    end = _rk4(rate, t + dt / 2, mid, dt / 2)
     mean_sq = (omega**2 + 4 * mid**2 + end**2) / 6
     return mid, end, mean_sq, rate(t + dt / 2, mid)
+
+
+def _rk4(rate, t0: float, y0: np.ndarray, h: float) -> np.ndarray:
+    """One classic Runge–Kutta step of ``dy/dt = rate(t, y)`` over ``h`` (s)."""
+    k1 = rate(t0, y0)
+    k2 = rate(t0 + h / 2, y0 + h / 2 * k1)
+    k3 = rate(t0 + h / 2, y0 + h / 2 * k2)
+    k4 = rate(t0 + h, y0 + h * k3)
+    return y0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def _midpoint_state(qpos, qvel, qacc, dt, h=None):
@@ -172,15 +173,8 @@ def _effect_state_step(effects, qpos, qvel, qacc, t, dt, mid, accel, state):
         vehicle = _midpoint_state(qpos, qvel, qacc, dt, h)
         return effects.state_rate(times + t + h, *vehicle, mid, accel, s)
 
-    def rk4(t0, s0, h):
-        k1 = rate(t0, s0)
-        k2 = rate(t0 + h / 2, s0 + h / 2 * k1)
-        k3 = rate(t0 + h / 2, s0 + h / 2 * k2)
-        k4 = rate(t0 + h, s0 + h * k3)
-        return s0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-    half = rk4(0.0, state, dt / 2)
-    return half, rk4(dt / 2, half, dt / 2)
+    half = _rk4(rate, 0.0, state, dt / 2)
+    return half, _rk4(rate, dt / 2, half, dt / 2)
 
 
 def _effect_step(batch, bound, body_id, body, effects, t, dt, command, omega, state=None):

@@ -546,22 +546,14 @@ def _spawn_viewer(path: Path) -> None:
 
 
 def check_output_path(path: str | os.PathLike) -> Path:
-    """Raise :class:`InputError` (one line) unless a recording can be written at ``path``:
-    name ends in ``.rrd``, not a directory, nearest existing parent folder writable. Writes
-    nothing, so a CLI can call it before a long simulation."""
-    path = Path(path)
-    if path.suffix != ".rrd":
-        raise InputError(f"{path}: recording file name must end in .rrd")
-    if path.is_dir():
-        raise InputError(f"{path}: cannot write the recording: is a directory")
-    parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise InputError(f"{path}: cannot write the recording: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{path}: cannot write the recording: {parent} is not writable")
-    return path
+    """Raise :class:`InputError` (one line) unless a recording can be written at ``path``
+    (:func:`quadsim.cliargs.check_output`: name ends in ``.rrd``, not a directory, nearest
+    existing parent folder writable). Writes nothing, so a CLI can call it before a long
+    simulation."""
+    from .cliargs import check_output
+
+    check_output("recording", path, (".rrd",))
+    return Path(path)
 
 
 def save_recording(path: str | os.PathLike | None, *, params: VehicleParams,
