@@ -12,10 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from quadsim.flightlog import load_log
-from quadsim.gap import diagnose_per_flight
-from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
-from quadsim.params import load_params
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
+
+from quadsim.flightlog import load_log  # noqa: E402
+from quadsim.gap import diagnose_per_flight  # noqa: E402
+from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds  # noqa: E402
+from quadsim.params import load_params  # noqa: E402
 
 
 def main() -> None:
