@@ -23,7 +23,6 @@ Library::
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import warnings
@@ -34,6 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .assembly import MESH_UNITS, Assembly, load_assembly
+from .cliargs import ArgumentParser
 from .errors import InputError, ModelError, QuadsimWarning, run_cli
 from .fileio import atomic_write_text
 from .massprops import MassProperties, vehicle_mass_properties
@@ -224,7 +224,7 @@ def parts_table(props: MassProperties) -> str:
 
 @run_cli
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.build_mjcf",
         description="Write a MuJoCo MJCF of the vehicle in a CAD folder: mass properties "
                     "from the meshes (explicit fullinertia at the CoM), mesh visual geoms, "

@@ -16,15 +16,27 @@ Example::
 
 from __future__ import annotations
 
+import argparse
 import math
 import os
+import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["check_inputs", "check_number", "check_output", "distinct_files"]
+__all__ = ["ArgumentParser", "check_inputs", "check_number", "check_output", "distinct_files"]
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors (unknown flag, missing argument, bad type) are
+    one line on stderr, ``<prog>: error: <message> (see --help)``, and exit status 2 --
+    like every other input error of quadsim's CLIs, without the usage block."""
+
+    def error(self, message: str):
+        print(f"{self.prog}: error: {' '.join(message.split())} (see --help)", file=sys.stderr)
+        sys.exit(2)
 
 
 def check_number(flag: str, value: float | None, *, low: float | None = None,

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cliargs import ArgumentParser
 from .errors import InputError, run_cli
 from .flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
@@ -96,7 +97,7 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.convert",
         description="Convert a PX4 ULog, Crazyflie uSD or ArduPilot DataFlash log to the "
                     "quadsim flight-log schema (CSV, gzipped CSV or Parquet).")

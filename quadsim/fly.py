@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .analytic import BatchEffects, body_arrays, extra_wrench, rigid_body_accelerations
+from .cliargs import ArgumentParser
 from .controllers import GeometricController
 from .effects import EffectSet, describe_effects, effect_set_from_specs
 from .effects.battery_sag import BatterySag
@@ -214,7 +215,7 @@ def truth_path(log_path: str | Path) -> Path:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.fly", description=__doc__.split("\n\n")[0],
         epilog="Effects: NAME:param=value,... (see docs/effects.md; e.g. "
                "ground_effect:gain=1.5, motor_lag:time_constant=0.03). Sensor signals: "

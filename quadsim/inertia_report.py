@@ -21,7 +21,6 @@ like-for-like comparison and what remains different.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +29,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .assembly import MESH_UNITS, Assembly, load_assembly
+from .cliargs import ArgumentParser
 from .errors import ModelError, run_cli
 from .massprops import vehicle_mass_properties
 
@@ -207,7 +207,7 @@ def format_rows(rows: list[Row]) -> str:
 
 @run_cli
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.inertia_report",
         description="Compare the CAD mass properties (trimesh) with MuJoCo's compile of the "
                     "same meshes, the report's SolidWorks values, its lumped formula and its "

@@ -37,6 +37,7 @@ from pathlib import Path
 import control
 import numpy as np
 
+from .cliargs import ArgumentParser
 from .engines import initial_state, simulate
 from .errors import InputError, ModelError, run_cli
 from .fileio import atomic_write_bytes
@@ -303,7 +304,7 @@ def _save_response_plot(curves, title: str, path: Path) -> Path:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.openloop",
         description="The report's open-loop experiment (section 4.4): start at z = 1 m, "
                     "roll = pitch = yaw = 0.261 rad, hover thrust plus a step on each input "

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .cliargs import ArgumentParser
 from .errors import InputError, ModelError, QuadsimError, run_cli
 from .params import VehicleParams, load_params
 from .trajectory import Trajectory
@@ -121,7 +122,7 @@ def _stitch(batch: Trajectory, starts: np.ndarray) -> Trajectory:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.view",
         description="Write a rerun recording (.rrd) of a model flight in both engines, or of a "
                     "real flight log against the model, with residuals.",

@@ -320,3 +320,23 @@ def test_openloop_compare_overlay_and_rerun_message(tmp_path, capsys):
     assert f"wrote rerun recording {rrd}" in captured.err
     assert main(["--model", "physical", "--compare", "physical"]) == 2
     _one_line_error(capsys, "--compare", "twice")
+
+
+CLI_MODULES = ("quadsim.build_mjcf", "quadsim.openloop", "quadsim.fly", "quadsim.view",
+               "quadsim.convert", "quadsim.identify.__main__", "quadsim.sweep.__main__",
+               "quadsim.inertia_report")
+
+
+@pytest.mark.parametrize("module", CLI_MODULES)
+def test_usage_error_is_one_line(module, capsys):
+    """An unknown flag (and missing required arguments): exit 2 and exactly one stderr line
+    naming what is wrong, no usage block."""
+    import importlib
+
+    main = importlib.import_module(module).main
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--no-such-flag"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "usage:" not in err, err
+    assert "error:" in err and ("--no-such-flag" in err or "required" in err), err

@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 from ..benchdata import load_thrust_stand
+from ..cliargs import ArgumentParser
 from ..errors import InputError, run_cli
 from ..params import load_params
 from .audit import Finding, audit_report
@@ -28,7 +29,7 @@ from .testbed import FM_PLAUSIBLE, TestbedIdentification, identification_to_json
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m quadsim.identify", description=__doc__,
+    parser = ArgumentParser(prog="python -m quadsim.identify", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", action="store_true", help="print one JSON object (SI units)")
     parser.add_argument("--model", default="report", metavar="NAME|PATH",

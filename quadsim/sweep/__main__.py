@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..cliargs import ArgumentParser
 from ..engines import ENGINES
 from ..errors import InputError, run_cli
 from ..params import load_params
@@ -16,7 +17,7 @@ from .run import SweepConfig
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.sweep", description=MANUAL.split("\n\n")[0],
         epilog="Example:" + MANUAL.split("Example::")[1].split(">>>")[0],
         formatter_class=argparse.RawDescriptionHelpFormatter)
