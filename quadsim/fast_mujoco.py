@@ -11,11 +11,15 @@ parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``Mj
 ``tests/test_fast_mujoco.py`` checks that it matches the reference path to 1e-9 m.
 
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
-module docstring): motor_lag, thrust_curve, thrust_mismatch, rotor_drag, body_drag,
-ground_effect, gyroscopic, wind, and every effect that only changes
-the parameter set (com_offset, mass_offset, inertia_error). :func:`fast_form_problem` names
-the first effect that has none (another class, an effect with internal state, a repeated
-effect, a parameter the kernel does not know); the engine then uses the reference path —
+module docstring): every effect of the library — motor_lag, thrust_curve, thrust_mismatch,
+rotor_drag, body_drag, ground_effect, gyroscopic, wind, thrust_factor, rate_damping,
+battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
+rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S), cable_payload (the kernel carries
+the payload state p, v (6,) per simulation, integrated like the reference: two RK4 half steps
+per timestep along the predicted body state) — and every effect that only changes the
+parameter set (com_offset, mass_offset, inertia_error, canted_rotor). :func:`fast_form_problem`
+names the first effect that has none (another class, a repeated effect, a parameter the
+kernel does not know); the engine then uses the reference path —
 never an approximation.
 
 Optional: needs numba (``pip install quadsim[fast]``); without it :func:`available` is False
