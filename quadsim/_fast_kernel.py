@@ -146,20 +146,22 @@ def payload_rate(row, pos, vel, rate_b, rot, st, pull, out):
 
 @numba.njit(cache=True)
 def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, wrench, scale,
-          rot, normalize):
+          rot, normalize, work):
     """Effect loads of simulation b at the mid-step state predicted from (qpos, qvel, qacc)
     over dt / 2 (dt = 0: at that state): body-frame force and torque about the CoM and the
     world-frame force at the CoM into ``wrench`` (9,), per-rotor thrust scale into ``scale``,
-    the rotation matrix into ``rot``; ``st`` the payload state (cable_payload) at that time."""
+    the rotation matrix into ``rot``; ``st`` the payload state (cable_payload) at that time;
+    ``work`` (11, 3) scratch (no allocation per step)."""
     rotors = mid.shape[0]
     h = dt / 2
-    pos = np.empty(3)
-    vel = np.empty(3)
-    rate_b = np.empty(3)
+    pos, vel, rate_b, air, air_body = work[0], work[1], work[2], work[3], work[4]
+    force_body, torque, momentum, spin_up = work[5], work[6], work[7], work[8]
+    f, pull = work[9], work[10]
+    for i in range(3):
+        air_body[i] = force_body[i] = torque[i] = momentum[i] = spin_up[i] = 0.0
     predict(qpos, qvel, qacc, h, normalize, pos, vel, rate_b, rot)
     tm = t + dt / 2
     row = rows[b]
-    air = np.empty(3)
     for j in range(3):
         wind = row[O_WM + j]
         if row[O_GA] > 0.0:
@@ -168,15 +170,11 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
                 total += np.cos(TWO_PI * row[O_GF + g] * tm + row[O_GP + j * GUST + g])
             wind += row[O_GA] * total
         air[j] = vel[j] - wind
-    air_body = np.zeros(3)
     for i in range(3):
         for j in range(3):
             air_body[i] += rot[j, i] * air[j]
-    force_body = np.zeros(3)       # body frame: rotor drag + body drag + thrust offsets
-    torque = np.zeros(3)           # body frame, about the CoM
+    # force_body: body frame, rotor drag + body drag + thrust offsets; torque: about the CoM
     c, ca = row[O_RD], row[O_RA]
-    momentum = np.zeros(3)
-    spin_up = np.zeros(3)
     for r in range(rotors):
         a = axis[b, r]
         s = row[O_MIS + r] * row[O_TG]
@@ -190,7 +188,6 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         scale[r] = s
         axial = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
         extra = row[O_CL] * mid[r] + row[O_CO]
-        f = np.empty(3)
         for i in range(3):
             along = axial * a[i]
             f[i] = -mid[r] * (c * (air_body[i] - along) + ca * along) + extra * a[i]
@@ -215,7 +212,6 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         wrench[3 + i] = torque[i]
         wrench[6 + i] = 0.0
     if row[O_PM] > 0.0:
-        pull = np.empty(3)
         tension(row, pos, vel, rate_b, rot, st, pull)
         ax, ay, az = row[O_PC], row[O_PC + 1], row[O_PC + 2]
         f0 = rot[0, 0] * pull[0] + rot[1, 0] * pull[1] + rot[2, 0] * pull[2]
@@ -282,6 +278,7 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
     rot = np.empty((3, 3))
     half = np.zeros(6)
     scratch = np.empty((7, 12))
+    work = np.empty((11, 3))
     st = extra[b]
     row = rows[b]
     up, down, bat = row[O_UP], row[O_DOWN], row[O_BAT]
@@ -305,7 +302,7 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
                 payload_step(b, qpos, qvel, qacc, dt, row, st, half, scratch, rot)
             if active:
                 loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin,
-                      hub, half, wrench, scale, rot, True)
+                      hub, half, wrench, scale, rot, True, work)
                 for i in range(3):
                     xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
                         + rot[i, 2] * wrench[2] + wrench[6 + i]
@@ -362,6 +359,7 @@ def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, a
     scale = np.ones(rotors)
     rot = np.empty((3, 3))
     zeros = np.zeros(6)
+    work = np.empty((11, 3))
     for b in range(batch):
         s = y[b * width:(b + 1) * width]
         d = out[b * width:(b + 1) * width]
@@ -394,7 +392,7 @@ def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, a
         st = s[base:base + 6] if rows[b, O_PM] > 0.0 else zeros
         if active:
             loads(b, t, 0.0, qpos, qvel, zeros, omega, accel_r, rows, arm, axis,
-                  spin, hub, st, wrench, scale, rot, False)
+                  spin, hub, st, wrench, scale, rot, False, work)
         if rows[b, O_PM] > 0.0:
             for i in range(3):
                 pos[i] = s[i]

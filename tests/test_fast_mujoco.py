@@ -85,6 +85,10 @@ def test_all_effects_with_motor_lag_and_controller_match_reference():
     kw = {"initial": _start(2), "duration": 0.3, "effects": ALL_EFFECTS}
     fast, ref = _both(rotor_speed_series=_series(2, 30), **kw)
     _assert_same(fast, ref)
+    # a second run reuses the first one's (reset) MjData and compiled models: same bits
+    again = simulate(PARAMS, engine="mujoco", fast=True, rotor_speed_series=_series(2, 30), **kw)
+    assert np.array_equal(again.position, fast.position)
+    assert np.array_equal(again.quat, fast.quat)
     reference = make_reference("figure8", speed=1.0)
     c1, c2 = (GeometricController(PARAMS, reference) for _ in range(2))
     kw.update(initial=c1.initial_state(), duration=0.5)
