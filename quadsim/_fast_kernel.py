@@ -67,21 +67,27 @@ TWO_PI = 2.0 * np.pi
 
 
 @numba.njit(inline="always", cache=True)
-def rate(c, w, up, down, bat, t):
-    """dOmega/dt of quadsim.effects.base.EffectSet.rotor_speed_rate: the command scaled by the
-    battery's speed factor sqrt(max(MIN_SCALE, 1 - rate t)) (battery_sag), then the first-order
-    lag (motor_lag, or SPEED_RESPONSE_S when only the battery acts)."""
-    if bat != 0.0:
-        c = c * np.sqrt(max(MIN_SCALE, 1.0 - bat * t))
+def speed_factor(bat, t):
+    """battery_sag's speed factor sqrt(max(MIN_SCALE, 1 - rate t)) (1 when off)."""
+    return np.sqrt(max(MIN_SCALE, 1.0 - bat * t)) if bat != 0.0 else 1.0
+
+
+@numba.njit(inline="always", cache=True)
+def rate(c, w, up, down, f):
+    """dOmega/dt of quadsim.effects.base.EffectSet.rotor_speed_rate: the command scaled by
+    the battery's speed factor f (battery_sag; 1 without it), then the first-order lag
+    (motor_lag, or SPEED_RESPONSE_S when only the battery acts)."""
+    c = c * f
     return (c - w) / (up if c >= w else down)
 
 
 @numba.njit(inline="always", cache=True)
-def rk4(c, t0, w0, h, up, down, bat):
-    k1 = rate(c, w0, up, down, bat, t0)
-    k2 = rate(c, w0 + h / 2 * k1, up, down, bat, t0 + h / 2)
-    k3 = rate(c, w0 + h / 2 * k2, up, down, bat, t0 + h / 2)
-    k4 = rate(c, w0 + h * k3, up, down, bat, t0 + h)
+def rk4(c, w0, h, up, down, f0, f1, f2):
+    """One RK4 step of h; f0, f1, f2 the speed factors at its start, middle and end."""
+    k1 = rate(c, w0, up, down, f0)
+    k2 = rate(c, w0 + h / 2 * k1, up, down, f1)
+    k3 = rate(c, w0 + h / 2 * k2, up, down, f1)
+    k4 = rate(c, w0 + h * k3, up, down, f2)
     return w0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
@@ -283,18 +289,24 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
     row = rows[b]
     up, down, bat = row[O_UP], row[O_DOWN], row[O_BAT]
     carried = row[O_PM] > 0.0
+    hh = dt / 2
+    fa = fb = fc = fd = fe = 1.0
     for k in range(periods):
         cmd = commands[b, k]
         for j in range(substeps):
             t = (k0 + k) * period + j * dt
+            if lag:     # speed factors at the stage times of the two RK4 half steps
+                fa, fb, fc = speed_factor(bat, t), speed_factor(bat, t + hh / 2), \
+                    speed_factor(bat, t + hh)
+                fd, fe = speed_factor(bat, (t + hh) + hh / 2), speed_factor(bat, (t + hh) + hh)
             for r in range(rotors):
                 if lag:
                     w0 = omega[b, r]
-                    m_ = rk4(cmd[r], t, w0, dt / 2, up, down, bat)
-                    e_ = rk4(cmd[r], t + dt / 2, m_, dt / 2, up, down, bat)
+                    m_ = rk4(cmd[r], w0, hh, up, down, fa, fb, fc)
+                    e_ = rk4(cmd[r], m_, hh, up, down, fc, fd, fe)
                     mid[r], end[r] = m_, e_
                     msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
-                    acc[r] = rate(cmd[r], m_, up, down, bat, t + dt / 2)
+                    acc[r] = rate(cmd[r], m_, up, down, fc)
                 else:
                     mid[r] = end[r] = cmd[r]
                     msq[r] = cmd[r] * cmd[r]
@@ -369,7 +381,7 @@ def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, a
         for r in range(rotors):
             if lag:
                 omega[r] = s[13 + r]
-                accel_r[r] = rate(command[b, r], omega[r], up, down, bat, t)
+                accel_r[r] = rate(command[b, r], omega[r], up, down, speed_factor(bat, t))
                 d[13 + r] = accel_r[r]
             else:
                 omega[r] = command[b, r]
