@@ -142,9 +142,11 @@ def test_batch_too_large_for_memory_is_refused_before_allocating(monkeypatch):
 
 
 def test_analytic_compiled_rhs_matches_numpy_rhs():
-    # every effect at once plus lag, a batch of two with different commands
+    # every effect at once (with the payload's internal state) and motor_lag alone (no
+    # state: padded), a batch of two with different commands
+    lag_only = effect_set_from_specs(list(TESTBED_EXAMPLES["motor_lag"]))
     kw = {"engine": "analytic", "initial": _start(2), "rotor_speed_series": _series(2, 20),
-              "duration": 0.2, "effects": ALL_EFFECTS}
+          "duration": 0.2, "effects": [ALL_EFFECTS, lag_only]}
     fast = simulate(PARAMS, fast=None, **kw)
     ref = simulate(PARAMS, fast=False, **kw)
     _assert_same(fast, ref)
