@@ -1,10 +1,13 @@
 """The numba kernel of :mod:`quadsim.fast_mujoco` (imported only when numba is installed).
 
 :func:`run` (``run(functions, addr, commands, omega, k0, substeps, dt, period, rotor_arm,
-rotor_axis, rotor_spin, rotor_position, rows, lag, active, out, status)``) calls MuJoCo's C
-functions by address (no ctypes objects inside, so numba can cache it on disk); the formulas are
-those of :mod:`quadsim.mujoco_engine` (``_effect_step``) and of each effect's module, written
-per simulation and per rotor. Units SI.
+rotor_axis, rotor_spin, rotor_position, rows, extra, lag, active, out, status)``) calls
+MuJoCo's C functions by address (no ctypes objects inside, so numba can cache it on disk); the
+formulas are those of :mod:`quadsim.mujoco_engine` (``_effect_step``,
+``_effect_state_step``) and of each effect's module, written per simulation and per rotor;
+``extra`` (B, 6) carries cable_payload's payload position and velocity (world) between calls.
+:func:`analytic_rhs` is the analytic engine's right-hand side with the same load functions.
+No allocation inside the time-step loop (scratch arrays are made once per call). Units SI.
 """
 
 from __future__ import annotations
