@@ -36,6 +36,7 @@ model per distinct set and run them through ``Batch.set_models``.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Sequence
 
 import mujoco
@@ -93,16 +94,19 @@ def compile_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
 #: as much as thousands of steps; the engine never changes a model after compile_model.
 _MODEL_CACHE: dict[tuple[str, float], mujoco.MjModel] = {}
 _MODEL_CACHE_SIZE = 32
+_MODEL_LOCK = threading.Lock()
 
 
 def _cached_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
     key = (vehicle_xml(params, timestep=timestep, integrator="RK4", floor=False), timestep)
-    model = _MODEL_CACHE.pop(key, None)
+    with _MODEL_LOCK:
+        model = _MODEL_CACHE.pop(key, None)
     if model is None:
         model = compile_model(params, timestep)
-    _MODEL_CACHE[key] = model                  # most recent last
-    while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
-        del _MODEL_CACHE[next(iter(_MODEL_CACHE))]
+    with _MODEL_LOCK:
+        _MODEL_CACHE[key] = model              # most recent last
+        while len(_MODEL_CACHE) > _MODEL_CACHE_SIZE:
+            del _MODEL_CACHE[next(iter(_MODEL_CACHE))]
     return model
 
 
