@@ -1,10 +1,13 @@
 """The numba kernel of :mod:`quadsim.fast_mujoco` (imported only when numba is installed).
 
 :func:`run` (``run(functions, addr, commands, omega, k0, substeps, dt, period, rotor_arm,
-rotor_axis, rotor_spin, rotor_position, rows, lag, active, out, status)``) calls MuJoCo's C
-functions by address (no ctypes objects inside, so numba can cache it on disk); the formulas are
-those of :mod:`quadsim.mujoco_engine` (``_effect_step``) and of each effect's module, written
-per simulation and per rotor. Units SI.
+rotor_axis, rotor_spin, rotor_position, rows, extra, lag, active, out, status)``) calls
+MuJoCo's C functions by address (no ctypes objects inside, so numba can cache it on disk); the
+formulas are those of :mod:`quadsim.mujoco_engine` (``_effect_step``,
+``_effect_state_step``) and of each effect's module, written per simulation and per rotor;
+``extra`` (B, 6) carries cable_payload's payload position and velocity (world) between calls.
+:func:`analytic_rhs` is the analytic engine's right-hand side with the same load functions.
+No allocation inside the time-step loop (scratch arrays are made once per call). Units SI.
 """
 
 from __future__ import annotations
@@ -58,37 +61,44 @@ O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["bod
 O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
 O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["gust_phase"]
 GUST = offset["gust_phase"] - offset["gust_frequency"]
+O_TG, O_RDX = offset["thrust_gain"], offset["rate_damping"]
+O_PM, O_PL, O_PA = offset["payload_mass"], offset["payload_length"], offset["payload_attach"]
+O_PC, O_PK, O_PD = offset["payload_arm"], offset["payload_stiffness"], offset["payload_damping"]
+O_G = offset["gravity"]
 BOUND = STATE_BOUND
 TWO_PI = 2.0 * np.pi
 
 
 @numba.njit(inline="always", cache=True)
-def rate(c, w, up, down):
+def speed_factor(bat, t):
+    """battery_sag's speed factor sqrt(max(MIN_SCALE, 1 - rate t)) (1 when off)."""
+    return np.sqrt(max(MIN_SCALE, 1.0 - bat * t)) if bat != 0.0 else 1.0
+
+
+@numba.njit(inline="always", cache=True)
+def rate(c, w, up, down, f):
+    """dOmega/dt of quadsim.effects.base.EffectSet.rotor_speed_rate: the command scaled by
+    the battery's speed factor f (battery_sag; 1 without it), then the first-order lag
+    (motor_lag, or SPEED_RESPONSE_S when only the battery acts)."""
+    c = c * f
     return (c - w) / (up if c >= w else down)
 
 
 @numba.njit(inline="always", cache=True)
-def rk4(c, w0, h, up, down):
-    k1 = rate(c, w0, up, down)
-    k2 = rate(c, w0 + h / 2 * k1, up, down)
-    k3 = rate(c, w0 + h / 2 * k2, up, down)
-    k4 = rate(c, w0 + h * k3, up, down)
+def rk4(c, w0, h, up, down, f0, f1, f2):
+    """One RK4 step of h; f0, f1, f2 the speed factors at its start, middle and end."""
+    k1 = rate(c, w0, up, down, f0)
+    k2 = rate(c, w0 + h / 2 * k1, up, down, f1)
+    k3 = rate(c, w0 + h / 2 * k2, up, down, f1)
+    k4 = rate(c, w0 + h * k3, up, down, f2)
     return w0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-@numba.njit(cache=True)
-def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub, wrench, scale,
-          rot, normalize):
-    """Effect loads of simulation b at the mid-step state predicted from (qpos, qvel, qacc)
-    over dt / 2 (dt = 0: at that state): body-frame force and torque about the CoM into
-    ``wrench`` (6,), per-rotor thrust scale into ``scale``, the rotation matrix into ``rot``.
-    The quaternion is normalised when ``normalize`` (the MuJoCo path does; the analytic
-    right-hand side uses its state as is, like quadsim.analytic)."""
-    rotors = cmd.shape[0]
-    h = dt / 2
-    pos = np.empty(3)
-    vel = np.empty(3)
-    rate_b = np.empty(3)
+@numba.njit(inline="always", cache=True)
+def predict(qpos, qvel, qacc, h, normalize, pos, vel, rate_b, rot):
+    """Body state h ahead predicted from (qpos, qvel, qacc) (mujoco_engine._midpoint_state);
+    the quaternion is normalised when ``normalize`` (the analytic right-hand side uses its
+    state as is, like quadsim.analytic)."""
     for i in range(3):
         pos[i] = qpos[i] + qvel[i] * h + 0.5 * qacc[i] * h * h
         vel[i] = qvel[i] + qacc[i] * h
@@ -110,9 +120,57 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
         2 * (y * z - w * x)
     rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), \
         1 - 2 * (x * x + y * y)
+
+
+@numba.njit(inline="always", cache=True)
+def tension(row, pos, vel, rate_b, rot, st, pull):
+    """Cable pull T u on the vehicle (world, N) into ``pull`` (quadsim.effects.cable_payload):
+    payload state st = (p, v) world, attachment r_a body frame."""
+    ax, ay, az = row[O_PA], row[O_PA + 1], row[O_PA + 2]
+    cx = rate_b[1] * az - rate_b[2] * ay
+    cy = rate_b[2] * ax - rate_b[0] * az
+    cz = rate_b[0] * ay - rate_b[1] * ax
+    d0 = st[0] - (pos[0] + (rot[0, 0] * ax + rot[0, 1] * ay + rot[0, 2] * az))
+    d1 = st[1] - (pos[1] + (rot[1, 0] * ax + rot[1, 1] * ay + rot[1, 2] * az))
+    d2 = st[2] - (pos[2] + (rot[2, 0] * ax + rot[2, 1] * ay + rot[2, 2] * az))
+    r0 = st[3] - (vel[0] + (rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz))
+    r1 = st[4] - (vel[1] + (rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz))
+    r2 = st[5] - (vel[2] + (rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz))
+    length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    u0, u1, u2 = d0 / length, d1 / length, d2 / length
+    stretch = u0 * r0 + u1 * r1 + u2 * r2
+    t = max(0.0, row[O_PK] * (length - row[O_PL]) + row[O_PD] * stretch)
+    pull[0], pull[1], pull[2] = t * u0, t * u1, t * u2
+
+
+@numba.njit(inline="always", cache=True)
+def payload_rate(row, pos, vel, rate_b, rot, st, pull, out):
+    """d/dt of the payload state (6,) into ``out``."""
+    tension(row, pos, vel, rate_b, rot, st, pull)
+    for i in range(3):
+        out[i] = st[3 + i]
+        out[3 + i] = -pull[i] / row[O_PM]
+    out[5] -= row[O_G]
+
+
+@numba.njit(cache=True)
+def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, wrench, scale,
+          rot, normalize, work):
+    """Effect loads of simulation b at the mid-step state predicted from (qpos, qvel, qacc)
+    over dt / 2 (dt = 0: at that state): body-frame force and torque about the CoM and the
+    world-frame force at the CoM into ``wrench`` (9,), per-rotor thrust scale into ``scale``,
+    the rotation matrix into ``rot``; ``st`` the payload state (cable_payload) at that time;
+    ``work`` (11, 3) scratch (no allocation per step)."""
+    rotors = mid.shape[0]
+    h = dt / 2
+    pos, vel, rate_b, air, air_body = work[0], work[1], work[2], work[3], work[4]
+    force_body, torque, momentum, spin_up = work[5], work[6], work[7], work[8]
+    f, pull = work[9], work[10]
+    for i in range(3):
+        air_body[i] = force_body[i] = torque[i] = momentum[i] = spin_up[i] = 0.0
+    predict(qpos, qvel, qacc, h, normalize, pos, vel, rate_b, rot)
     tm = t + dt / 2
     row = rows[b]
-    air = np.empty(3)
     for j in range(3):
         wind = row[O_WM + j]
         if row[O_GA] > 0.0:
@@ -121,19 +179,14 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
                 total += np.cos(TWO_PI * row[O_GF + g] * tm + row[O_GP + j * GUST + g])
             wind += row[O_GA] * total
         air[j] = vel[j] - wind
-    air_body = np.zeros(3)
     for i in range(3):
         for j in range(3):
             air_body[i] += rot[j, i] * air[j]
-    battery = max(MIN_SCALE, 1.0 - row[O_BAT] * tm)
-    force_body = np.zeros(3)       # body frame: rotor drag + body drag + thrust offsets
-    torque = np.zeros(3)           # body frame, about the CoM
+    # force_body: body frame, rotor drag + body drag + thrust offsets; torque: about the CoM
     c, ca = row[O_RD], row[O_RA]
-    momentum = np.zeros(3)
-    spin_up = np.zeros(3)
     for r in range(rotors):
         a = axis[b, r]
-        s = row[O_MIS + r] * battery
+        s = row[O_MIS + r] * row[O_TG]
         gain = row[O_GG]
         if gain != 0.0:
             hub_z = pos[2] + rot[2, 0] * hub[b, r, 0] + rot[2, 1] * hub[b, r, 1] \
@@ -144,7 +197,6 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
         scale[r] = s
         axial = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
         extra = row[O_CL] * mid[r] + row[O_CO]
-        f = np.empty(3)
         for i in range(3):
             along = axial * a[i]
             f[i] = -mid[r] * (c * (air_body[i] - along) + ca * along) + extra * a[i]
@@ -164,13 +216,58 @@ def loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin, hub,
         torque[1] += -jr * (rate_b[2] * momentum[0] - rate_b[0] * momentum[2] + spin_up[1])
         torque[2] += -jr * (rate_b[0] * momentum[1] - rate_b[1] * momentum[0] + spin_up[2])
     for i in range(3):
+        torque[i] -= row[O_RDX + i] * rate_b[i]
         wrench[i] = force_body[i]
         wrench[3 + i] = torque[i]
+        wrench[6 + i] = 0.0
+    if row[O_PM] > 0.0:
+        tension(row, pos, vel, rate_b, rot, st, pull)
+        ax, ay, az = row[O_PC], row[O_PC + 1], row[O_PC + 2]
+        f0 = rot[0, 0] * pull[0] + rot[1, 0] * pull[1] + rot[2, 0] * pull[2]
+        f1 = rot[0, 1] * pull[0] + rot[1, 1] * pull[1] + rot[2, 1] * pull[2]
+        f2 = rot[0, 2] * pull[0] + rot[1, 2] * pull[1] + rot[2, 2] * pull[2]
+        wrench[3] += ay * f2 - az * f1
+        wrench[4] += az * f0 - ax * f2
+        wrench[5] += ax * f1 - ay * f0
+        for i in range(3):
+            wrench[6 + i] = pull[i]
+
+
+@numba.njit(inline="always", cache=True)
+def payload_step(b, qpos, qvel, qacc, dt, row, st, half, scratch, rot):
+    """The payload state over one timestep (mujoco_engine._effect_state_step): two RK4 half
+    steps along the body state predicted from the last accelerations; ``st`` (6,) is
+    advanced to the end of the step, its mid-step value written to ``half``."""
+    pos, vel, rate_b, pull = scratch[0, 0:3], scratch[0, 3:6], scratch[0, 6:9], scratch[0, 9:12]
+    y0, y, k1, k2, k3, k4 = scratch[1], scratch[2], scratch[3], scratch[4], scratch[5], \
+        scratch[6]
+    hh = dt / 2
+    for part in range(2):
+        t0 = 0.0 if part == 0 else dt / 2
+        for i in range(6):
+            y0[i] = st[i]
+        predict(qpos, qvel, qacc, t0, True, pos, vel, rate_b, rot)
+        payload_rate(row, pos, vel, rate_b, rot, y0, pull, k1)
+        for i in range(6):
+            y[i] = y0[i] + hh / 2 * k1[i]
+        predict(qpos, qvel, qacc, t0 + hh / 2, True, pos, vel, rate_b, rot)
+        payload_rate(row, pos, vel, rate_b, rot, y, pull, k2)
+        for i in range(6):
+            y[i] = y0[i] + hh / 2 * k2[i]
+        payload_rate(row, pos, vel, rate_b, rot, y, pull, k3)
+        for i in range(6):
+            y[i] = y0[i] + hh * k3[i]
+        predict(qpos, qvel, qacc, t0 + hh, True, pos, vel, rate_b, rot)
+        payload_rate(row, pos, vel, rate_b, rot, y, pull, k4)
+        for i in range(6):
+            st[i] = y0[i] + hh / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i])
+            if part == 0:
+                half[i] = st[i]
 
 
 @numba.njit(cache=True)
 def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin, hub,
-            rows, lag, active, out, status):
+            rows, extra, lag, active, out, status):
     """Simulation b of :func:`run`."""
     periods, rotors = commands.shape[1], commands.shape[2]
     if status[b] != 0:
@@ -186,30 +283,44 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
     acc = np.zeros(rotors)
     scale = np.ones(rotors)
     clock = np.empty(1)
-    wrench = np.empty(6)
+    wrench = np.empty(9)
     rot = np.empty((3, 3))
-    up, down = rows[b, O_UP], rows[b, O_DOWN]
+    half = np.zeros(6)
+    scratch = np.empty((7, 12))
+    work = np.empty((11, 3))
+    st = extra[b]
+    row = rows[b]
+    up, down, bat = row[O_UP], row[O_DOWN], row[O_BAT]
+    carried = row[O_PM] > 0.0
+    hh = dt / 2
+    fa = fb = fc = fd = fe = 1.0
     for k in range(periods):
         cmd = commands[b, k]
         for j in range(substeps):
             t = (k0 + k) * period + j * dt
+            if lag:     # speed factors at the stage times of the two RK4 half steps
+                fa, fb, fc = speed_factor(bat, t), speed_factor(bat, t + hh / 2), \
+                    speed_factor(bat, t + hh)
+                fd, fe = speed_factor(bat, (t + hh) + hh / 2), speed_factor(bat, (t + hh) + hh)
             for r in range(rotors):
                 if lag:
                     w0 = omega[b, r]
-                    m_ = rk4(cmd[r], w0, dt / 2, up, down)
-                    e_ = rk4(cmd[r], m_, dt / 2, up, down)
+                    m_ = rk4(cmd[r], w0, hh, up, down, fa, fb, fc)
+                    e_ = rk4(cmd[r], m_, hh, up, down, fc, fd, fe)
                     mid[r], end[r] = m_, e_
                     msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
-                    acc[r] = rate(cmd[r], m_, up, down)
+                    acc[r] = rate(cmd[r], m_, up, down, fc)
                 else:
                     mid[r] = end[r] = cmd[r]
                     msq[r] = cmd[r] * cmd[r]
+            if carried:
+                payload_step(b, qpos, qvel, qacc, dt, row, st, half, scratch, rot)
             if active:
-                loads(b, t, dt, qpos, qvel, qacc, cmd, mid, acc, rows, arm, axis, spin,
-                      hub, wrench, scale, rot, True)
+                loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin,
+                      hub, half, wrench, scale, rot, True, work)
                 for i in range(3):
                     xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
-                        + rot[i, 2] * wrench[2]
+                        + rot[i, 2] * wrench[2] + wrench[6 + i]
                     xfrc[3 + i] = rot[i, 0] * wrench[3] + rot[i, 1] * wrench[4] \
                         + rot[i, 2] * wrench[5]
             for r in range(rotors):
@@ -237,36 +348,43 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
 
 @numba.njit(cache=True, nogil=True)
 def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
-               hub, rows, lag, active, out, status):
+        hub, rows, extra, lag, active, out, status):
     """functions: addresses of mj_step and mj_getState; runs without the GIL, so the caller
     may run chunks of a batch in threads (numba's prange compiled several times slower)."""
     for b in range(commands.shape[0]):
         run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, spin,
-                hub, rows, lag, active, out, status)
+                hub, rows, extra, lag, active, out, status)
 
 
 @numba.njit(cache=True)
-def analytic_rhs(t, y, command, lag, active, rows, arm, axis, spin, hub, allocation, mass, com,
-                 inertia, inertia_inv, gravity, thrust_factor, drag_factor, out):
+def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, allocation, mass,
+                 com, inertia, inertia_inv, gravity, thrust_factor, drag_factor, out):
     """d/dt of the flat batched analytic state (quadsim.analytic.state_derivative) into
     ``out``, with every effect evaluated in the kernel: Newton-Euler at the CoM, returned at
     the body origin; thrust scale s and offset o per rotor as in quadsim.analytic."""
     batch, rotors = command.shape
-    width = 13 + rotors if lag else 13
+    base = 13 + rotors if lag else 13
+    width = base + size
     omega = np.empty(rotors)
     accel_r = np.zeros(rotors)
-    wrench = np.zeros(6)
+    wrench = np.zeros(9)
+    pos = np.empty(3)
+    vel = np.empty(3)
+    pull = np.empty(3)
     scale = np.ones(rotors)
     rot = np.empty((3, 3))
     zeros = np.zeros(6)
+    work = np.empty((11, 3))
     for b in range(batch):
         s = y[b * width:(b + 1) * width]
         d = out[b * width:(b + 1) * width]
-        up, down = rows[b, O_UP], rows[b, O_DOWN]
+        up, down, bat = rows[b, O_UP], rows[b, O_DOWN], rows[b, O_BAT]
+        for i in range(size):
+            d[base + i] = 0.0
         for r in range(rotors):
             if lag:
                 omega[r] = s[13 + r]
-                accel_r[r] = rate(command[b, r], omega[r], up, down)
+                accel_r[r] = rate(command[b, r], omega[r], up, down, speed_factor(bat, t))
                 d[13 + r] = accel_r[r]
             else:
                 omega[r] = command[b, r]
@@ -284,11 +402,17 @@ def analytic_rhs(t, y, command, lag, active, rows, arm, axis, spin, hub, allocat
             2 * (y_ * z_ - w0 * x_)
         rot[2, 0], rot[2, 1], rot[2, 2] = 2 * (x_ * z_ - w0 * y_), 2 * (y_ * z_ + w0 * x_), \
             1 - 2 * (x_ * x_ + y_ * y_)
-        for i in range(6):
+        for i in range(9):
             wrench[i] = 0.0
+        st = s[base:base + 6] if rows[b, O_PM] > 0.0 else zeros
         if active:
-            loads(b, t, 0.0, qpos, qvel, zeros, command[b], omega, accel_r, rows, arm, axis,
-                  spin, hub, wrench, scale, rot, False)
+            loads(b, t, 0.0, qpos, qvel, zeros, omega, accel_r, rows, arm, axis,
+                  spin, hub, st, wrench, scale, rot, False, work)
+        if rows[b, O_PM] > 0.0:
+            for i in range(3):
+                pos[i] = s[i]
+                vel[i] = s[3 + i]
+            payload_rate(rows[b], pos, vel, s[10:13], rot, st, pull, d[base:base + 6])
         force = np.zeros(3)
         torque = np.zeros(3)
         for i in range(3):
@@ -335,6 +459,7 @@ def analytic_rhs(t, y, command, lag, active, rows, arm, axis, spin, hub, allocat
         lever[2] = alpha[0] * c[1] - alpha[1] * c[0] + om[0] * wc[1] - om[1] * wc[0]
         for i in range(3):
             world = rot[i, 0] * force[0] + rot[i, 1] * force[1] + rot[i, 2] * force[2]
+            world += wrench[6 + i]
             if i == 2:
                 world -= gravity[b] * mass[b]
             d[i] = s[3 + i]

@@ -11,11 +11,15 @@ parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``Mj
 ``tests/test_fast_mujoco.py`` checks that it matches the reference path to 1e-9 m.
 
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
-module docstring): motor_lag, thrust_curve, thrust_mismatch, rotor_drag, body_drag,
-ground_effect, gyroscopic, wind, and every effect that only changes
-the parameter set (com_offset, mass_offset, inertia_error). :func:`fast_form_problem` names
-the first effect that has none (another class, an effect with internal state, a repeated
-effect, a parameter the kernel does not know); the engine then uses the reference path —
+module docstring): every effect of the library — motor_lag, thrust_curve, thrust_mismatch,
+rotor_drag, body_drag, ground_effect, gyroscopic, wind, thrust_factor, rate_damping,
+battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
+rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S), cable_payload (the kernel carries
+the payload state p, v (6,) per simulation, integrated like the reference: two RK4 half steps
+per timestep along the predicted body state) — and every effect that only changes the
+parameter set (com_offset, mass_offset, inertia_error, canted_rotor). :func:`fast_form_problem`
+names the first effect that has none (another class, a repeated effect, a parameter the
+kernel does not know); the engine then uses the reference path —
 never an approximation.
 
 Optional: needs numba (``pip install quadsim[fast]``); without it :func:`available` is False
@@ -27,10 +31,12 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
+import threading
 from collections.abc import Sequence
 
 import numpy as np
 
+from .analytic import BatchEffects
 from .effects.base import EffectSet
 from .frames import quat_normalize
 from .params import VehicleParams
@@ -44,7 +50,9 @@ _LAYOUT = {"tau_up": 1, "tau_down": 1, "mismatch": MAX_ROTORS, "battery_rate": 1
            "ground_gain": 1, "ground_height": 1, "ground_radius": 1, "curve_linear": 1,
            "curve_offset": 1, "rotor_drag": 1, "rotor_drag_axial": 1, "body_drag": 3,
            "air_density": 1, "rotor_inertia": 1, "wind_mean": 3, "gust_amplitude": 1,
-           "gust_frequency": GUST, "gust_phase": 3 * GUST}
+           "gust_frequency": GUST, "gust_phase": 3 * GUST, "thrust_gain": 1,
+           "rate_damping": 3, "payload_mass": 1, "payload_length": 1, "payload_attach": 3,
+           "payload_arm": 3, "payload_stiffness": 1, "payload_damping": 1, "gravity": 1}
 _OFFSET = {}
 _n = 0
 for _key, _size in _LAYOUT.items():
@@ -62,8 +70,15 @@ _KNOWN = {
     "ground_effect": {"gain", "ground_height", "radius"},
     "gyroscopic": {"rotor_inertia"},
     "wind": {"vx", "vy", "vz", "gust", "bandwidth", "seed"},
+    "battery_sag": {"rate", "full_voltage"},
+    "thrust_factor": {"change"},
+    "rate_damping": {"x", "y", "z"},
+    "cable_payload": {"mass", "length", "x", "y", "z", "axial_frequency", "damping_ratio"},
 }
-_STATIC = {"com_offset", "mass_offset", "inertia_error"}   # apply_to_params only
+#: effects that only change the parameter set (apply_to_params)
+_STATIC = {"com_offset", "mass_offset", "inertia_error", "canted_rotor"}
+#: internal states the kernel carries per simulation (cable_payload: payload p, v)
+PAYLOAD_STATES = 6
 
 try:
     import numba
@@ -134,15 +149,23 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
     """(B, WIDTH) effect parameters for the kernel and whether any rotor has lag dynamics.
     Call only when :func:`fast_form_problem` returned None."""
     rows = np.zeros((len(params), WIDTH))
+    from .effects.base import SPEED_RESPONSE_S
+
     rows[:, _OFFSET["mismatch"]:_OFFSET["mismatch"] + MAX_ROTORS] = 1.0
-    lag = False
+    rows[:, _OFFSET["thrust_gain"]] = 1.0
+    # a speed factor (battery) without a lag effect: the rotor follows with SPEED_RESPONSE_S
+    rows[:, _OFFSET["tau_up"]] = rows[:, _OFFSET["tau_down"]] = SPEED_RESPONSE_S
+    lags = [s.has_rotor_dynamics() for s in sets]
+    if any(lags) and not all(lags):
+        raise ValueError("either every simulation of a batch has rotor dynamics or none")
+    lag = bool(lags) and all(lags)
     for row, effect_set, p in zip(rows, sets, params):
         row[_OFFSET["air_density"]] = p.air_density
+        row[_OFFSET["gravity"]] = p.gravity
         for effect in effect_set.effects:
             v = effect.values()
             put = functools.partial(_put, row)
             if effect.name == "motor_lag" and v["time_constant"] > 0.0:
-                lag = True
                 put("tau_up", v["time_constant"])
                 put("tau_down", v["time_constant_down"] if v["time_constant_down"] > 0.0
                     else v["time_constant"])
@@ -150,6 +173,18 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("mismatch", [1.0 + v[f"rotor_{i}"] for i in range(1, MAX_ROTORS + 1)])
             elif effect.name == "battery_sag":
                 put("battery_rate", v["rate"])
+            elif effect.name == "thrust_factor":
+                put("thrust_gain", 1.0 + v["change"])
+            elif effect.name == "rate_damping":
+                put("rate_damping", [v["x"], v["y"], v["z"]])
+            elif effect.name == "cable_payload" and v["mass"] > 0.0:
+                attach = np.array([v["x"], v["y"], v["z"]])
+                put("payload_mass", v["mass"])
+                put("payload_length", v["length"])
+                put("payload_attach", attach)
+                put("payload_arm", attach - p.com)
+                put("payload_stiffness", effect.stiffness)
+                put("payload_damping", effect.damping)
             elif effect.name == "ground_effect":
                 put("ground_gain", v["gain"])
                 put("ground_height", v["ground_height"])
@@ -170,10 +205,6 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                     put("gust_amplitude", v["gust"] * np.sqrt(2.0 / GUST))
                     put("gust_frequency", effect._frequencies)
                     put("gust_phase", effect._phases.ravel())
-    lags = [any(e.name == "motor_lag" and e.time_constant > 0.0 for e in s.effects)
-            for s in sets]
-    if any(lags) and not all(lags):
-        raise ValueError("either every simulation of a batch has rotor dynamics or none")
     return rows, lag
 
 
@@ -208,7 +239,8 @@ class Kernel:
 
     def __init__(self, models, datas, body_id: int, rotor_arm: np.ndarray,
                  rotor_axis: np.ndarray, rotor_spin: np.ndarray, rotor_position: np.ndarray,
-                 effect_rows: np.ndarray, lag: bool, active: bool, nthread: int = 0):
+                 effect_rows: np.ndarray, lag: bool, active: bool, nthread: int = 0,
+                 extra: np.ndarray | None = None):
         self.run = _kernels()
         self.datas = datas
         self.models = models            # keep the objects alive while their addresses are used
@@ -223,6 +255,10 @@ class Kernel:
         self.rotor_spin = np.ascontiguousarray(rotor_spin, dtype=float)
         self.rotor_position = np.ascontiguousarray(rotor_position, dtype=float)
         self.rows = np.ascontiguousarray(effect_rows, dtype=float)
+        #: (B, 6) internal effect states (cable_payload's payload position and velocity,
+        #: world), advanced in place
+        self.extra = np.zeros((b, PAYLOAD_STATES)) if extra is None \
+            else np.ascontiguousarray(extra, dtype=float)
         self.lag, self.active = bool(lag), bool(active)
         self.threads = nthread
         self._pool = None
@@ -242,7 +278,8 @@ class Kernel:
             sl = slice(idx[0], idx[-1] + 1)
             self.run(_CACHE["functions"], self.addr[sl], commands[sl], omega[sl], k0, substeps,
                      dt, period, self.rotor_arm[sl], self.rotor_axis[sl], self.rotor_spin,
-                     self.rotor_position[sl], self.rows[sl], self.lag, self.active, out[sl],
+                     self.rotor_position[sl], self.rows[sl], self.extra[sl], self.lag,
+                     self.active, out[sl],
                      status[sl])
 
         if len(chunks) == 1:
@@ -261,6 +298,37 @@ class Kernel:
             self._pool = None
 
 
+#: MjData of finished runs kept for reuse (creating one costs ~1-2 ms through the Python
+#: binding, as much as a hundred steps): at most _POOL_DATAS per model, _POOL_MODELS models.
+_POOL: dict[int, tuple] = {}
+_POOL_DATAS, _POOL_MODELS = 8, 8
+_POOL_LOCK = threading.Lock()
+
+
+def _take_data(model):
+    """An MjData of ``model`` in its reset state (mj_resetData: as if newly made)."""
+    import mujoco
+
+    with _POOL_LOCK:
+        entry = _POOL.get(id(model))
+        data = entry[1].pop() if entry and entry[0] is model and entry[1] else None
+    if data is None:
+        return mujoco.MjData(model)
+    mujoco.mj_resetData(model, data)
+    return data
+
+
+def _give_data(model, data) -> None:
+    with _POOL_LOCK:
+        entry = _POOL.get(id(model))
+        if entry is None or entry[0] is not model:
+            while len(_POOL) >= _POOL_MODELS:
+                del _POOL[next(iter(_POOL))]
+            entry = _POOL[id(model)] = (model, [])
+        if len(entry[1]) < _POOL_DATAS:
+            entry[1].append(data)
+
+
 def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[VehicleParams],
              body, initial: dict, command_fn, periods: int, control_period: float,
              dt: float, nthread: int = 0) -> tuple[dict, np.ndarray]:
@@ -274,7 +342,7 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
     batch, rotors = len(params), params[0].rotor_count
     datas = []
     for i, m in enumerate(models):
-        d = mujoco.MjData(m)
+        d = _take_data(m)
         d.qpos[0:3], d.qpos[3:7] = initial["position"][i], quat_normalize(initial["quat"][i])
         d.qvel[0:3], d.qvel[3:6] = initial["velocity"][i], initial["body_rate"][i]
         mujoco.mj_forward(m, d)
@@ -284,8 +352,13 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
         datas.append(d)
     rows, lag = encode(sets, params)
     active = any(s.effects for s in sets)
+    extra = np.zeros((batch, PAYLOAD_STATES))
+    effects = BatchEffects(sets, params)
+    if effects.state_size:      # the same start as the reference path (cable_payload only)
+        extra[:, :effects.state_size] = effects.initial_state(initial)
     kernel = Kernel(models, datas, body_id, body.rotor_arm, body.rotor_axis, body.rotor_spin,
-                    np.array([p.rotor_positions for p in params]), rows, lag, active, nthread)
+                    np.array([p.rotor_positions for p in params]), rows, lag, active, nthread,
+                    extra)
     omega = np.array(initial["rotor_speed"], dtype=float)
     status = np.zeros(batch, dtype=np.int64)
     ends = np.empty((batch, periods, 13 + rotors))
@@ -298,6 +371,8 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
                           periods, substeps, dt, control_period)
     finally:
         kernel.close()
+        for m, d in zip(models, datas):
+            _give_data(m, d)
     out = {"position": np.concatenate([first["position"][:, None], ends[:, :, 0:3]], 1),
            "velocity": np.concatenate([first["velocity"][:, None], ends[:, :, 3:6]], 1),
            "quat": np.concatenate([first["quat"][:, None], ends[:, :, 6:10]], 1),
@@ -318,6 +393,7 @@ def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], bod
 
     rows, lag = encode(sets, params)
     active = any(s.effects for s in sets)
+    size = max(s.state_size() for s in sets)
     hub = np.ascontiguousarray([p.rotor_positions for p in params], dtype=float)
     arrays = [np.ascontiguousarray(a, dtype=float) for a in (
         body.rotor_arm, body.rotor_axis, body.rotor_spin, hub, body.allocation, body.mass,
@@ -326,7 +402,8 @@ def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], bod
 
     def rhs(t: float, y: np.ndarray, command: np.ndarray) -> np.ndarray:
         out = np.empty_like(y)
-        _fast_kernel.analytic_rhs(float(t), y, command, lag, active, rows, *arrays, out)
+        _fast_kernel.analytic_rhs(float(t), y, command, lag, active, size, rows, *arrays,
+                                  out)
         return out
 
     return rhs

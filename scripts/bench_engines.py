@@ -20,6 +20,7 @@ they travel between machines better than the rates; timings still depend on the 
 its load, which the output names::
 
     python scripts/bench_engines.py [--duration 2] [--batch 64] [--plot out.png] [--json out.json]
+    python scripts/bench_engines.py --quick --plot /tmp/b.png    # does it all run (seconds)
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import time
 import mujoco
 import numpy as np
 
-from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
+from quadsim.effects import EFFECTS, TESTBED_EXAMPLES, effect_set_from_specs
 from quadsim.engines import initial_state, simulate
 from quadsim.linear import hover_point
 from quadsim.mujoco_engine import compile_model
@@ -57,8 +58,21 @@ def multisine(params, periods: int, batch: int, period: float = PERIOD, seed: in
 
 
 def all_effects():
-    """Every effect of the library once, at its testbed magnitude."""
-    return effect_set_from_specs([specs[0] for specs in TESTBED_EXAMPLES.values()])
+    """Every effect of the library once (``quadsim.effects.EFFECTS``), at its testbed
+    magnitude."""
+    effects = effect_set_from_specs([specs[0] for specs in TESTBED_EXAMPLES.values()])
+    missing = set(EFFECTS) - {e.name for e in effects.effects}
+    if missing:
+        raise SystemExit(f"no testbed example for effect(s) {sorted(missing)}")
+    return effects
+
+
+def fast_path_note(params, effects) -> str:
+    """Which path the "all effects" rows take (the compiled one, or why not)."""
+    from quadsim import fast_mujoco
+
+    problem = fast_mujoco.fast_form_problem([effects], [effects.apply_to_params(params)])
+    return "compiled fast path" if problem is None else f"reference path ({problem})"
 
 
 def best_rate(fn, steps: int, repeat: int = 2) -> float:
@@ -182,7 +196,12 @@ def main() -> None:
     parser.add_argument("--plot", help="write the throughput-vs-batch PNG here")
     parser.add_argument("--max-batch", type=int, default=1024, help="largest batch in --plot")
     parser.add_argument("--json", help="write the results here too")
+    parser.add_argument("--quick", action="store_true",
+                        help="a quick check that everything runs: 0.2 s flights, batch 8, "
+                             "plot up to batch 16 (numbers not for reporting)")
     args = parser.parse_args()
+    if args.quick:
+        args.duration, args.batch, args.max_batch = 0.2, min(args.batch, 8), 16
     if args.duration <= 0 or args.batch < 1 or args.threads < 1:
         parser.error("--duration, --batch and --threads must be positive")
     params = load_params(args.model)
@@ -210,13 +229,16 @@ def main() -> None:
     if rotorpy is not None:
         rows.append(("RotorPy 3.0 Multirotor.step, aero on", 1, rotorpy))
     raw = rows[0][2]
+    path = fast_path_note(params, effects)
     print(f"{args.model}, RK4 {DT * 1e3:g} ms, {args.duration:g} s multisine; {machine}; "
           f"mujoco {mujoco.__version__}")
+    print(f"all effects = {len(effects.effects)} library effects "
+          f"({', '.join(e.name for e in effects.effects)}); MuJoCo rows: {path}")
     print("| configuration | sims | sim-steps/s | vs raw mj_step |\n|---|---|---|---|")
     for label, sims, rate in rows:
         print(f"| {label} | {sims} | {rate:.3g} | {rate / raw:.3g} |")
     result = {"model": params.name, "duration_s": args.duration, "machine": machine,
-              "mujoco": mujoco.__version__,
+              "mujoco": mujoco.__version__, "all_effects_path": path,
               "rows": [{"config": l, "sims": s, "steps_per_s": r, "vs_raw": r / raw}
                        for l, s, r in rows]}
     if args.plot:

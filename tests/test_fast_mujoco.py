@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 
 from quadsim.controllers import GeometricController
-from quadsim.effects import TESTBED_EXAMPLES, EffectBase, EffectSet, effect_set_from_specs
+from quadsim.effects import (
+    EFFECTS,
+    TESTBED_EXAMPLES,
+    EffectBase,
+    EffectSet,
+    effect_set_from_specs,
+)
 from quadsim.engines import initial_state, simulate
 from quadsim.errors import InputError, SimulationError
 from quadsim.params import hover_speed, load_params
@@ -25,13 +31,18 @@ PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
 PERIOD = 0.01
 TOL = 1e-9
-# every example set whose effects all have a fast form (the others take the reference path,
-# checked by the fallback tests below); each effect once
-FAST_EXAMPLES = [specs for specs in TESTBED_EXAMPLES.values()
-                 if fast_mujoco.fast_form_problem([effect_set_from_specs(list(specs))],
-                                                  [PARAMS]) is None]
+# every example set of the library (each has a fast form: checked below); each effect once
+FAST_EXAMPLES = list(TESTBED_EXAMPLES.values())
 ALL = [specs[0] for specs in FAST_EXAMPLES]
 ALL_EFFECTS = effect_set_from_specs(ALL)
+
+
+def test_every_library_effect_has_a_fast_form():
+    assert {e.name for e in ALL_EFFECTS.effects} == set(EFFECTS)
+    assert fast_mujoco.fast_form_problem([ALL_EFFECTS], [PARAMS]) is None
+    for specs in FAST_EXAMPLES:
+        assert fast_mujoco.fast_form_problem([effect_set_from_specs(list(specs))],
+                                             [PARAMS]) is None, specs
 
 
 def _series(batch: int, periods: int) -> np.ndarray:
@@ -55,12 +66,15 @@ def _assert_same(a, b):
         assert np.abs(getattr(a, name) - getattr(b, name)).max() <= TOL, name
 
 
-def test_every_effect_matches_reference_open_loop():
-    # one simulation per effect (each example set) plus one with all of them at once
+@pytest.mark.parametrize("dynamics", [False, True])
+def test_every_effect_matches_reference_open_loop(dynamics):
+    # one simulation per effect (each example set) plus one with all of them at once; one
+    # batch is all with rotor dynamics (motor_lag, battery_sag: alone and with the lag) or
+    # all without
     sets = [effect_set_from_specs(list(s)) for s in FAST_EXAMPLES]
-    sets = [s for s in sets if not s.has_rotor_dynamics()]   # one batch: all or none
+    sets = [s for s in sets if s.has_rotor_dynamics() == dynamics]
     sets.append(EffectSet(tuple(e for e in ALL_EFFECTS.effects
-                                if not EffectSet((e,)).has_rotor_dynamics())))
+                                if EffectSet((e,)).has_rotor_dynamics() == dynamics)))
     fast, ref = _both(initial=_start(len(sets)), rotor_speed_series=_series(len(sets), 30),
                       duration=0.3, effects=sets)
     _assert_same(fast, ref)
@@ -71,6 +85,10 @@ def test_all_effects_with_motor_lag_and_controller_match_reference():
     kw = {"initial": _start(2), "duration": 0.3, "effects": ALL_EFFECTS}
     fast, ref = _both(rotor_speed_series=_series(2, 30), **kw)
     _assert_same(fast, ref)
+    # a second run reuses the first one's (reset) MjData and compiled models: same bits
+    again = simulate(PARAMS, engine="mujoco", fast=True, rotor_speed_series=_series(2, 30), **kw)
+    assert np.array_equal(again.position, fast.position)
+    assert np.array_equal(again.quat, fast.quat)
     reference = make_reference("figure8", speed=1.0)
     c1, c2 = (GeometricController(PARAMS, reference) for _ in range(2))
     kw.update(initial=c1.initial_state(), duration=0.5)
@@ -124,9 +142,11 @@ def test_batch_too_large_for_memory_is_refused_before_allocating(monkeypatch):
 
 
 def test_analytic_compiled_rhs_matches_numpy_rhs():
-    # every effect at once plus lag, a batch of two with different commands
+    # every effect at once (with the payload's internal state) and motor_lag alone (no
+    # state: padded), a batch of two with different commands
+    lag_only = effect_set_from_specs(list(TESTBED_EXAMPLES["motor_lag"]))
     kw = {"engine": "analytic", "initial": _start(2), "rotor_speed_series": _series(2, 20),
-              "duration": 0.2, "effects": ALL_EFFECTS}
+          "duration": 0.2, "effects": [ALL_EFFECTS, lag_only]}
     fast = simulate(PARAMS, fast=None, **kw)
     ref = simulate(PARAMS, fast=False, **kw)
     _assert_same(fast, ref)
