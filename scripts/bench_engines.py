@@ -29,16 +29,20 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from quadsim.effects import EFFECTS, TESTBED_EXAMPLES, effect_set_from_specs
-from quadsim.engines import initial_state, simulate
-from quadsim.linear import hover_point
-from quadsim.mujoco_engine import compile_model
-from quadsim.params import load_params
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
+
+from quadsim.effects import EFFECTS, TESTBED_EXAMPLES, effect_set_from_specs  # noqa: E402
+from quadsim.engines import initial_state, simulate  # noqa: E402
+from quadsim.linear import hover_point  # noqa: E402
+from quadsim.mujoco_engine import compile_model  # noqa: E402
+from quadsim.params import load_params  # noqa: E402
 
 PERIOD = 0.01
 DT = 1e-3
