@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 import warnings
@@ -278,7 +279,13 @@ def main(argv=None) -> int:
                         help="with --independent: run every STRIDE-th case (a quick subset)")
     parser.add_argument("--summarise-independent", metavar="JSON",
                         help="only summarise an independent results file")
+    parser.add_argument("--cache", metavar="DIR",
+                        help="with --independent: keep the flown logs here and reuse them on "
+                             "the next run (keyed by case and the flight sources' code); same "
+                             "as the QUADSIM_BENCH_CACHE environment variable")
     args = parser.parse_args(argv)
+    if args.cache:
+        os.environ["QUADSIM_BENCH_CACHE"] = str(Path(args.cache).resolve())
     if args.summarise:
         print(summarise(json.loads(Path(args.summarise).read_text())), end="")
         return 0

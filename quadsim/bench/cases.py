@@ -27,8 +27,13 @@ with the true values cuts the held-out gap by at least ``MIN_GAIN``
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import pickle
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -76,6 +81,45 @@ def case_list(count: int | None = None) -> list[dict]:
     return cases[:count] if count else cases
 
 
+#: directory of flown logs (``QUADSIM_BENCH_CACHE``, or ``--cache`` of the benchmark script);
+#: unset: every flight is flown anew. Entries are keyed by the case and a hash of the sources'
+#: code, so a change of any flight source, draw or effect never reads a stale flight.
+CACHE_ENV = "QUADSIM_BENCH_CACHE"
+
+
+def _code_hash() -> str:
+    here = Path(__file__).resolve().parent
+    files = sorted(here.glob("*.py")) + sorted((here.parent / "effects").glob("*.py")) + [
+        here.parent / name for name in ("fly.py", "sensors.py", "controllers.py",
+                                        "mujoco_engine.py", "fast_mujoco.py", "_fast_kernel.py",
+                                        "trajectories.py")]
+    digest = hashlib.sha256()
+    for f in files:
+        if f.exists():
+            digest.update(f.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _cached(key: dict, make):
+    """``make()`` (a list of FlightLog), stored under the cache directory when one is set."""
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        return make()
+    name = hashlib.sha256(json.dumps({**key, "code": _code_hash()}, sort_keys=True,
+                                     default=str).encode()).hexdigest()[:24]
+    path = Path(root) / f"{name}.pkl"
+    if path.exists():
+        with open(path, "rb") as handle:
+            return pickle.load(handle)
+    value = make()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    with open(tmp, "wb") as handle:
+        pickle.dump(value, handle)
+    os.replace(tmp, path)
+    return value
+
+
 def _fly(source: str, params, spec, seed: int, speed: float):
     if source == "rotorpy":
         from .rotorpy_source import rotorpy_flight
@@ -100,8 +144,9 @@ def case_flights(case: dict):
     rng = np.random.default_rng(case["seed"])
     spec = _spec(case, params, rng)
     speed = rng.uniform(0.7, 1.4)
-    logs = [_fly(case["source"], params, spec, case["seed"] * 10 + s, speed * (1 + 0.15 * s))
-            for s in range(FLIGHTS)]
+    logs = _cached({k: case[k] for k in ("source", "vehicle", "truth", "kind", "seed")},
+                   lambda: [_fly(case["source"], params, spec, case["seed"] * 10 + s,
+                                 speed * (1 + 0.15 * s)) for s in range(FLIGHTS)])
     return spec, logs
 
 
@@ -109,8 +154,9 @@ def reference_flights(source: str, vehicle: str) -> list:
     """REFERENCES nominal flights of ``source`` (seeds apart from every case's)."""
     params = load_params(vehicle)
     spec = {} if source == "rotorpy" else []
-    return [_fly(source, params, spec, 90_000 + 17 * k + (vehicle == "physical"), 0.8 + 0.15 * k)
-            for k in range(REFERENCES)]
+    return _cached({"reference": source, "vehicle": vehicle, "count": REFERENCES},
+                   lambda: [_fly(source, params, spec, 90_000 + 17 * k + (vehicle == "physical"),
+                                 0.8 + 0.15 * k) for k in range(REFERENCES)])
 
 
 def oracle_reduction(logs, params, effects) -> float:
