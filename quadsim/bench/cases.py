@@ -87,13 +87,27 @@ def case_list(count: int | None = None) -> list[dict]:
 CACHE_ENV = "QUADSIM_BENCH_CACHE"
 
 
-def _code_hash() -> str:
+def _code_hash(source: str) -> str:
+    """Hash of the code a source's flights depend on (RotorPy: its adapter and its draws;
+    pipeline: quadsim's closed loop, effects and sensor pipeline)."""
+    import inspect
+
+    from . import draws
+
     here = Path(__file__).resolve().parent
-    files = sorted(here.glob("*.py")) + sorted((here.parent / "effects").glob("*.py")) + [
-        here.parent / name for name in ("fly.py", "sensors.py", "controllers.py",
-                                        "mujoco_engine.py", "fast_mujoco.py", "_fast_kernel.py",
-                                        "trajectories.py")]
+    top = here.parent
     digest = hashlib.sha256()
+    if source == "rotorpy":
+        files = [here / "rotorpy_source.py"]
+        digest.update(inspect.getsource(draws.draw_rotorpy).encode())
+        digest.update(inspect.getsource(draws.library_equivalent).encode())
+    else:
+        files = ([here / n for n in ("pipeline.py", "draws.py", "outside.py")]
+                 + sorted((top / "effects").glob("*.py"))
+                 + [top / n for n in ("fly.py", "sensors.py", "controllers.py", "engines.py",
+                                      "mujoco_engine.py", "fast_mujoco.py", "_fast_kernel.py",
+                                      "trajectories.py")])
+    files += sorted((top.parent / "models").glob("*.toml"))
     for f in files:
         if f.exists():
             digest.update(f.read_bytes())
@@ -105,7 +119,7 @@ def _cached(key: dict, make):
     root = os.environ.get(CACHE_ENV)
     if not root:
         return make()
-    name = hashlib.sha256(json.dumps({**key, "code": _code_hash()}, sort_keys=True,
+    name = hashlib.sha256(json.dumps({**key, "code": _code_hash(key["source"])}, sort_keys=True,
                                      default=str).encode()).hexdigest()[:24]
     path = Path(root) / f"{name}.pkl"
     if path.exists():
@@ -154,7 +168,8 @@ def reference_flights(source: str, vehicle: str) -> list:
     """REFERENCES nominal flights of ``source`` (seeds apart from every case's)."""
     params = load_params(vehicle)
     spec = {} if source == "rotorpy" else []
-    return _cached({"reference": source, "vehicle": vehicle, "count": REFERENCES},
+    return _cached({"source": source, "reference": True, "vehicle": vehicle,
+                    "count": REFERENCES},
                    lambda: [_fly(source, params, spec, 90_000 + 17 * k + (vehicle == "physical"),
                                  0.8 + 0.15 * k) for k in range(REFERENCES)])
 
