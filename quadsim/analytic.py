@@ -93,8 +93,17 @@ class BodyArrays:
 
 
 def body_arrays(params: Sequence[VehicleParams]) -> BodyArrays:
-    """Stack the constants of B parameter sets (same rotor count) into :class:`BodyArrays`."""
-    stack = lambda f: np.array([f(p) for p in params], dtype=float)  # noqa: E731
+    """Stack the constants of B parameter sets (same rotor count) into :class:`BodyArrays`.
+    Each distinct set object is evaluated once (a batch usually repeats one set)."""
+    first: dict[int, int] = {}
+    index = np.array([first.setdefault(id(p), len(first)) for p in params])
+    unique = [None] * len(first)
+    for p in params:
+        unique[first[id(p)]] = p
+
+    def stack(f):
+        return np.array([f(p) for p in unique], dtype=float)[index]
+
     return BodyArrays(
         mass=stack(lambda p: p.mass),
         com=stack(lambda p: p.com),

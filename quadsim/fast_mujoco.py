@@ -159,7 +159,12 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
     if any(lags) and not all(lags):
         raise ValueError("either every simulation of a batch has rotor dynamics or none")
     lag = bool(lags) and all(lags)
-    for row, effect_set, p in zip(rows, sets, params):
+    done: dict[tuple[int, int], int] = {}   # a (set, params) pair seen before: copy its row
+    for i, (row, effect_set, p) in enumerate(zip(rows, sets, params)):
+        seen = done.setdefault((id(effect_set), id(p)), i)
+        if seen != i:
+            row[:] = rows[seen]
+            continue
         row[_OFFSET["air_density"]] = p.air_density
         row[_OFFSET["gravity"]] = p.gravity
         for effect in effect_set.effects:
@@ -285,23 +290,32 @@ class Kernel:
         if len(chunks) == 1:
             part(chunks[0])
             return
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            self._pool = ThreadPoolExecutor(len(chunks))
-        list(self._pool.map(part, chunks))
+        list(_thread_pool(len(chunks)).map(part, chunks))
 
     def close(self) -> None:
-        """Stop the worker threads (if any)."""
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+        """Kept for callers; the worker threads are shared between runs (:func:`_thread_pool`)."""
+
+
+_THREADS: dict[int, object] = {}
+
+
+def _thread_pool(count: int):
+    """A process-wide pool of ``count`` worker threads (made once: starting and joining
+    threads per simulation call cost as much as a few thousand steps)."""
+    with _POOL_LOCK:
+        pool = _THREADS.get(count)
+        if pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            pool = _THREADS[count] = ThreadPoolExecutor(count, thread_name_prefix="quadsim")
+        return pool
 
 
 #: MjData of finished runs kept for reuse (creating one costs ~1-2 ms through the Python
-#: binding, as much as a hundred steps): at most _POOL_DATAS per model, _POOL_MODELS models.
+#: binding, as much as a hundred steps): per model at most as many as fit in _POOL_BYTES
+#: (arena + buffer of each), at most _POOL_MODELS models.
 _POOL: dict[int, tuple] = {}
-_POOL_DATAS, _POOL_MODELS = 8, 8
+_POOL_BYTES, _POOL_MODELS = 256 * 2**20, 8
 _POOL_LOCK = threading.Lock()
 
 
@@ -325,7 +339,7 @@ def _give_data(model, data) -> None:
             while len(_POOL) >= _POOL_MODELS:
                 del _POOL[next(iter(_POOL))]
             entry = _POOL[id(model)] = (model, [])
-        if len(entry[1]) < _POOL_DATAS:
+        if (len(entry[1]) + 1) * (model.narena + model.nbuffer) <= _POOL_BYTES:
             entry[1].append(data)
 
 
