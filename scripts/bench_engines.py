@@ -90,7 +90,13 @@ def best_rate(fn, steps: int, repeat: int = 2) -> float:
 
 
 def raw_loop(params, series: np.ndarray) -> float:
-    """mj_step in a Python loop on one MjData, ctrl = Omega^2 set once per control period."""
+    """Steps/s of :func:`raw_loop_fn`."""
+    return best_rate(raw_loop_fn(params, series), len(series) * round(PERIOD / DT))
+
+
+def raw_loop_fn(params, series: np.ndarray):
+    """A callable: mj_step in a Python loop on one MjData, ctrl = Omega^2 set once per control
+    period (the model compiled outside it)."""
     model = compile_model(params, DT)
     substeps = round(PERIOD / DT)
 
@@ -102,7 +108,51 @@ def raw_loop(params, series: np.ndarray) -> float:
             for _ in range(substeps):
                 mujoco.mj_step(model, data)
 
-    return best_rate(run, len(series) * substeps)
+    return run
+
+
+def interleaved(fns: dict, steps: int, repeat: int = 3) -> dict:
+    """Best steps/s of each callable over ``repeat`` rounds that alternate between them, so
+    that a change of machine load hits every configuration alike (the ratios are what the
+    targets are about)."""
+    best = {k: np.inf for k in fns}
+    for _ in range(repeat):
+        for key, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            best[key] = min(best[key], time.perf_counter() - start)
+    return {k: steps / v for k, v in best.items()}
+
+
+def rollout_fn(params, series: np.ndarray, threads: int):
+    """A callable running mujoco.rollout of the batch's open-loop controls (set-up done)."""
+    from mujoco import rollout
+
+    model = compile_model(params, DT)
+    substeps = round(PERIOD / DT)
+    control = np.repeat(series**2, substeps, axis=1)
+    datas = [mujoco.MjData(model) for _ in range(threads)]
+    data = datas[0]
+    data.qpos[:] = [0, 0, 1, *START["quat"]]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state = np.zeros(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state, spec)
+    initial = np.tile(state, (len(series), 1))
+    return lambda: rollout.rollout(model, datas, initial, control)
+
+
+def quadsim_fn(params, series: np.ndarray, engine: str = "mujoco", **kw):
+    """A callable running quadsim's simulate on the series (kernels loaded by a warm-up)."""
+    batch, periods = series.shape[:2]
+    start = {k: np.tile(v, (batch, 1)) for k, v in START.items()}
+
+    def run(steps=periods):
+        return simulate(params, engine=engine, initial=start,
+                        rotor_speed_series=series[:, :steps], duration=steps * PERIOD,
+                        control_period=PERIOD, **kw)
+
+    run(1)
+    return run
 
 
 def raw_rollout(params, series: np.ndarray, threads: int) -> float:
@@ -154,6 +204,28 @@ def rotorpy_rate(series: np.ndarray) -> float | None:
             state = vehicle.step(state, {"cmd_motor_speeds": commands[i // 10]}, DT)
 
     return best_rate(run, steps, repeat=1)
+
+
+def target_lines(rows, batch: int) -> list[str]:
+    """Issue 11's targets, each as the ratio measured in this run."""
+    rate = {(label, sims): r for label, sims, r in rows}
+    raw, roll = rate[("raw MuJoCo mj_step loop", 1)], rate[("raw mujoco.rollout", batch)]
+    checks = [("all effects, 1 sim / raw mj_step loop", rate[("quadsim MuJoCo, all effects", 1)]
+               / raw, 0.45),
+              (f"all effects, {batch} sims / raw mujoco.rollout of {batch}",
+               rate[("quadsim MuJoCo, all effects", batch)] / roll, 0.85),
+              ("no effects, 1 sim / raw mj_step loop",
+               rate[("quadsim MuJoCo, no effects", 1)] / raw, 0.8),
+              ("analytic all effects, compiled / numpy right-hand side",
+               rate[("quadsim analytic, all effects", 1)]
+               / rate[("quadsim analytic, all effects, numpy right-hand side", 1)], 10.0)]
+    rotorpy = rate.get(("RotorPy 3.0 Multirotor.step, aero on", 1))
+    if rotorpy:
+        checks.insert(1, ("all effects, 1 sim / RotorPy", rate[("quadsim MuJoCo, all effects", 1)]
+                          / rotorpy, 30.0))
+    return ["targets (issue 11), ratios measured in this run:"] + [
+        f"  {label}: {value:.3g} (target >= {goal:g}) {'met' if value >= goal else 'NOT MET'}"
+        for label, value, goal in checks]
 
 
 def scaling(params, periods: int, sizes, threads: int) -> dict:
@@ -215,13 +287,20 @@ def main() -> None:
     effects = all_effects()
     machine = (f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
                f"load average {os.getloadavg()[0]:.1f} at start")
-    rows = [("raw MuJoCo mj_step loop", 1, raw_loop(params, series[0])),
-            ("raw mujoco.rollout", args.batch, raw_rollout(params, series, args.threads)),
-            ("quadsim MuJoCo, no effects", 1, quadsim_rate(params, one)),
-            ("quadsim MuJoCo, no effects", args.batch, quadsim_rate(params, series)),
-            ("quadsim MuJoCo, all effects", 1, quadsim_rate(params, one, effects=effects)),
-            ("quadsim MuJoCo, all effects", args.batch,
-             quadsim_rate(params, series, effects=effects)),
+    steps1 = periods * round(PERIOD / DT)
+    single = interleaved({"raw": raw_loop_fn(params, series[0]),
+                          "none": quadsim_fn(params, one),
+                          "all": quadsim_fn(params, one, effects=effects)}, steps1, 5)
+    batched = interleaved({"rollout": rollout_fn(params, series, args.threads),
+                           "none": quadsim_fn(params, series),
+                           "all": quadsim_fn(params, series, effects=effects)},
+                          steps1 * args.batch, 3)
+    rows = [("raw MuJoCo mj_step loop", 1, single["raw"]),
+            ("raw mujoco.rollout", args.batch, batched["rollout"]),
+            ("quadsim MuJoCo, no effects", 1, single["none"]),
+            ("quadsim MuJoCo, no effects", args.batch, batched["none"]),
+            ("quadsim MuJoCo, all effects", 1, single["all"]),
+            ("quadsim MuJoCo, all effects", args.batch, batched["all"]),
             ("quadsim MuJoCo, all effects, reference path", 1,
              quadsim_rate(params, one, effects=effects, fast=False, repeat=1)),
             ("quadsim analytic, no effects", 1, quadsim_rate(params, one, "analytic")),
@@ -241,7 +320,10 @@ def main() -> None:
     print("| configuration | sims | sim-steps/s | vs raw mj_step |\n|---|---|---|---|")
     for label, sims, rate in rows:
         print(f"| {label} | {sims} | {rate:.3g} | {rate / raw:.3g} |")
+    targets = target_lines(rows, args.batch)
+    print("\n".join(targets))
     result = {"model": params.name, "duration_s": args.duration, "machine": machine,
+              "targets": targets,
               "mujoco": mujoco.__version__, "all_effects_path": path,
               "rows": [{"config": l, "sims": s, "steps_per_s": r, "vs_raw": r / raw}
                        for l, s, r in rows]}
