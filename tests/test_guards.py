@@ -324,7 +324,7 @@ def test_openloop_compare_overlay_and_rerun_message(tmp_path, capsys):
 
 CLI_MODULES = ("quadsim.build_mjcf", "quadsim.openloop", "quadsim.fly", "quadsim.view",
                "quadsim.convert", "quadsim.identify.__main__", "quadsim.sweep.__main__",
-               "quadsim.inertia_report")
+               "quadsim.inertia_report", "quadsim.gap.__main__")
 
 
 @pytest.mark.parametrize("module", CLI_MODULES)

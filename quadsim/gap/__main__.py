@@ -15,6 +15,7 @@ import argparse
 import sys
 import warnings
 
+from ..cliargs import ArgumentParser
 from ..errors import InputError, QuadsimWarning, run_cli
 from ..flightlog import load_log
 from ..params import load_params
@@ -23,7 +24,7 @@ from .report import summary, write_html, write_json, write_rerun
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m quadsim.gap",
         description="Where the gap between a parameter set and real flights lies, which "
                     "unmodelled effect (from quadsim.effects) causes it, and how far it "
