@@ -64,7 +64,7 @@ GUST = offset["gust_phase"] - offset["gust_frequency"]
 O_TG, O_RDX = offset["thrust_gain"], offset["rate_damping"]
 O_PM, O_PL, O_PA = offset["payload_mass"], offset["payload_length"], offset["payload_attach"]
 O_PC, O_PK, O_PD = offset["payload_arm"], offset["payload_stiffness"], offset["payload_damping"]
-O_G = offset["gravity"]
+O_G, O_COM = offset["gravity"], offset["com"]
 BOUND = STATE_BOUND
 TWO_PI = 2.0 * np.pi
 
@@ -234,6 +234,22 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
 
 
 @numba.njit(inline="always", cache=True)
+def joint_load(wrench, rot, com, qfrc):
+    """The free joint's generalised force of the effect wrench (mujoco_engine.joint_load):
+    world force F = R f_body + f_world; body-frame torque about the body origin
+    tau_body + com x R^T F."""
+    fb0 = wrench[0] + rot[0, 0] * wrench[6] + rot[1, 0] * wrench[7] + rot[2, 0] * wrench[8]
+    fb1 = wrench[1] + rot[0, 1] * wrench[6] + rot[1, 1] * wrench[7] + rot[2, 1] * wrench[8]
+    fb2 = wrench[2] + rot[0, 2] * wrench[6] + rot[1, 2] * wrench[7] + rot[2, 2] * wrench[8]
+    for i in range(3):
+        qfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] + rot[i, 2] * wrench[2] \
+            + wrench[6 + i]
+    qfrc[3] = wrench[3] + com[1] * fb2 - com[2] * fb1
+    qfrc[4] = wrench[4] + com[2] * fb0 - com[0] * fb2
+    qfrc[5] = wrench[5] + com[0] * fb1 - com[1] * fb0
+
+
+@numba.njit(inline="always", cache=True)
 def payload_step(b, qpos, qvel, qacc, dt, row, st, half, scratch, rot):
     """The payload state over one timestep (mujoco_engine._effect_state_step): two RK4 half
     steps along the body state predicted from the last accelerations; ``st`` (6,) is
@@ -276,7 +292,7 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
     qvel = numba.carray(_as_pointer(addr[b, 3]), 6)
     qacc = numba.carray(_as_pointer(addr[b, 4]), 6)
     ctrl = numba.carray(_as_pointer(addr[b, 5]), rotors)
-    xfrc = numba.carray(_as_pointer(addr[b, 6]), 6)
+    qfrc = numba.carray(_as_pointer(addr[b, 6]), 6)     # the free joint's qfrc_applied
     mid = np.empty(rotors)
     end = np.empty(rotors)
     msq = np.empty(rotors)
@@ -318,11 +334,7 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
             if active:
                 loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin,
                       hub, half, wrench, scale, rot, True, work)
-                for i in range(3):
-                    xfrc[i] = rot[i, 0] * wrench[0] + rot[i, 1] * wrench[1] \
-                        + rot[i, 2] * wrench[2] + wrench[6 + i]
-                    xfrc[3 + i] = rot[i, 0] * wrench[3] + rot[i, 1] * wrench[4] \
-                        + rot[i, 2] * wrench[5]
+                joint_load(wrench, rot, row[O_COM:O_COM + 3], qfrc)
             for r in range(rotors):
                 ctrl[r] = scale[r] * msq[r]
                 omega[b, r] = end[r]

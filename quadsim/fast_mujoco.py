@@ -3,8 +3,8 @@
 Same physics as the step-by-step reference of :mod:`quadsim.mujoco_engine` — the same
 per-step recipe (rotor lag integrated with two RK4 half steps on the held command, actuators
 driven by the step's Simpson mean ``Omega^2`` times the thrust scale, every other load
-evaluated once per step at the predicted mid-step state and applied through
-``xfrc_applied``) — but written as one numba kernel that also calls ``mj_step`` of
+evaluated once per step at the predicted mid-step state and applied to the free joint
+through ``qfrc_applied``) — but written as one numba kernel that also calls ``mj_step`` of
 ``libmujoco`` through ctypes on each simulation's own ``MjData``. A whole open-loop series
 (or one control period under a controller) is one Python call; simulations of a batch run in
 parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``MjData``).
@@ -52,7 +52,8 @@ _LAYOUT = {"tau_up": 1, "tau_down": 1, "mismatch": MAX_ROTORS, "battery_rate": 1
            "air_density": 1, "rotor_inertia": 1, "wind_mean": 3, "gust_amplitude": 1,
            "gust_frequency": GUST, "gust_phase": 3 * GUST, "thrust_gain": 1,
            "rate_damping": 3, "payload_mass": 1, "payload_length": 1, "payload_attach": 3,
-           "payload_arm": 3, "payload_stiffness": 1, "payload_damping": 1, "gravity": 1}
+           "payload_arm": 3, "payload_stiffness": 1, "payload_damping": 1, "gravity": 1,
+           "com": 3}
 _OFFSET = {}
 _n = 0
 for _key, _size in _LAYOUT.items():
@@ -167,6 +168,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
             continue
         row[_OFFSET["air_density"]] = p.air_density
         row[_OFFSET["gravity"]] = p.gravity
+        row[_OFFSET["com"]:_OFFSET["com"] + 3] = p.com
         for effect in effect_set.effects:
             v = effect.values()
             put = functools.partial(_put, row)
@@ -254,7 +256,7 @@ class Kernel:
         for i, (m, d) in enumerate(zip(models, datas)):
             self.addr[i] = [m._address, d._address, d.qpos.ctypes.data, d.qvel.ctypes.data,
                             d.qacc.ctypes.data, d.ctrl.ctypes.data,
-                            d.xfrc_applied.ctypes.data + 6 * 8 * body_id, 0]
+                            d.qfrc_applied.ctypes.data + 8 * int(m.body_dofadr[body_id]), 0]
         self.rotor_arm = np.ascontiguousarray(rotor_arm, dtype=float)
         self.rotor_axis = np.ascontiguousarray(rotor_axis, dtype=float)
         self.rotor_spin = np.ascontiguousarray(rotor_spin, dtype=float)
