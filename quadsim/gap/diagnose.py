@@ -151,8 +151,10 @@ def _gap(scaled: list[np.ndarray]) -> float:
 
 
 def _block_t(before: list[np.ndarray], after: list[np.ndarray], dt: float) -> float:
-    """t statistic of the per-block (1 s) reduction of the squared gap."""
-    block = max(1, int(round(1.0 / dt)))
+    """t statistic of the per-block (1 s) reduction of the squared gap; blocks shrink to
+    half the shortest held-out part when that is under 2 s (at least two blocks, e.g. the
+    second half of a 4 s flight once its last EDGE_S are dropped)."""
+    block = max(1, min(int(round(1.0 / dt)), min(len(b) for b in before) // 2))
     diffs = []
     for b, a in zip(before, after):
         d = np.sum(b ** 2, axis=1) - np.sum(a ** 2, axis=1)
