@@ -274,3 +274,31 @@ def test_loader_warnings_collapse_per_kind():
                                for k in range(1, 6)] + ["g.csv: vbat: missing"])
     assert lines == ["f1.csv: t: line 7: sample-rate jump, step 0.01 s (and 4 more files alike)",
                      "g.csv: vbat: missing"]
+
+
+def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
+    """A log whose accelerometer is a filtered finite difference of delayed motion capture
+    (quadsim.bench.pipeline) carries filter transients at its ends; the diagnosis drops the
+    first and last EDGE_S = 0.2 s, after which the nominal force residual of the whole
+    prepared flight is at its interior level (> 0.5 s from the ends)."""
+    from quadsim.bench.pipeline import realistic_log
+    from quadsim.gap import diagnose as _  # noqa: F401  (module below)
+    import sys
+
+    module = sys.modules["quadsim.gap.diagnose"]
+    from quadsim.gap.fitting import residuals
+
+    log = realistic_log(synthetic_flight(cf, seed=3, duration=4.0, noise=None), cf, seed=3)
+
+    def force_rms_ratio():
+        states = module.prepare([log], cf)[0].states
+        force = residuals(states, cf, [], rotor_channel=False)[:, :3]
+        inner = (states.t > log.t[0] + 0.5) & (states.t < log.t[-1] - 0.5)
+        return states, float(np.sqrt(np.mean(force**2)) / np.sqrt(np.mean(force[inner]**2)))
+
+    states, ratio = force_rms_ratio()
+    assert states.t[0] == pytest.approx(log.t[0] + module.EDGE_S, abs=0.011)   # s (one 100 Hz sample)
+    assert states.t[-1] == pytest.approx(log.t[-1] - module.EDGE_S, abs=0.011)  # s (one 100 Hz sample)
+    assert ratio < 1.3
+    monkeypatch.setattr(module, "EDGE_S", 0.0)
+    assert force_rms_ratio()[1] > 3.0     # without the trim the ends dominate
