@@ -126,7 +126,9 @@ def run_case(case: dict) -> dict:
            "oracle_reduction": _oracle_reduction(logs, params, effects) if effects else 0.0,
            "ranked": [e["name"] for e in result["effects"][:3]],
            "best_candidate": verdict["best_candidate"],
-           "channel_gap_after": verdict["heldout_channel_gap_after"]}
+           "channel_gap_after": verdict["heldout_channel_gap_after"],
+           "partial": (verdict.get("partial") or {}).get("name"),
+           "consistency": verdict.get("consistency")}
     key = f"{case['truth']}.{MAIN_PARAMETER.get(case['truth'], '')}"
     if case["truth"] == "thrust_mismatch":
         key = next(k for k in truth_values if k.startswith("thrust_mismatch.") and truth_values[k])
