@@ -2,8 +2,8 @@
 
 Blind benchmark: for the 0.84 kg testbed (``physical``) and the 37 g Crazyflie
 (``crazyflie21``), every effect of the library at two random realistic magnitudes, plus
-no-effect cases and effects *outside* the library (aerodynamic rate damping, a canted
-rotor). Each case is three generated flights (:mod:`quadsim.gap.synthetic`, sensor noise
+no-effect cases and effects *outside* the library (translational lift, a blade-flapping
+moment: quadsim.bench.outside). Each case is three generated flights (:mod:`quadsim.gap.synthetic`, sensor noise
 on every signal, random path speed and seed); the diagnosis gets only the logs and the
 nominal parameter set (truth hidden), splits by flight (2 train, 1 held out) and gives a
 verdict. Reported: top-1 accuracy for in-library effects, error of the main parameter,
@@ -85,7 +85,7 @@ def case_list(count: int | None = None) -> list[dict]:
                 cases.append({"vehicle": vehicle, "truth": name, "kind": "library", "k": k})
         for k in range(2):
             cases.append({"vehicle": vehicle, "truth": "none", "kind": "none", "k": k})
-        for name in ("rate_damping", "canted_rotor"):
+        for name in ("translational_lift", "blade_flapping"):
             cases.append({"vehicle": vehicle, "truth": name, "kind": "outside", "k": 0})
     for i, case in enumerate(cases):
         case["seed"] = 1000 + i
@@ -126,7 +126,9 @@ def run_case(case: dict) -> dict:
            "oracle_reduction": _oracle_reduction(logs, params, effects) if effects else 0.0,
            "ranked": [e["name"] for e in result["effects"][:3]],
            "best_candidate": verdict["best_candidate"],
-           "channel_gap_after": verdict["heldout_channel_gap_after"]}
+           "channel_gap_after": verdict["heldout_channel_gap_after"],
+           "partial": (verdict.get("partial") or {}).get("name"),
+           "consistency": verdict.get("consistency")}
     key = f"{case['truth']}.{MAIN_PARAMETER.get(case['truth'], '')}"
     if case["truth"] == "thrust_mismatch":
         key = next(k for k in truth_values if k.startswith("thrust_mismatch.") and truth_values[k])

@@ -14,7 +14,8 @@ Each case is ``FLIGHTS`` flights of ``DURATION`` s at 250 Hz along one path at a
 for the per-flight mode. Cases per vehicle: RotorPy 3 no-effect, 11 in-library (mass x2,
 CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outside
 (flapping moment, translational lift: RotorPy physics quadsim's library lacks); pipeline
-2 no-effect, 8 in-library, 2 outside (rate damping, canted rotor). 56 cases in all, plus
+2 no-effect, 8 in-library, 2 outside (translational lift, blade flapping moment:
+:mod:`.outside`). 56 cases in all, plus
 one ``thrust_factor`` case per source and vehicle when the library has that effect.
 
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
@@ -56,7 +57,7 @@ ROTORPY_LIBRARY = ("mass_offset", "mass_offset", "com_offset", "com_offset", "in
 ROTORPY_OUTSIDE = ("flapping", "translational_lift")
 PIPELINE_LIBRARY = ("mass_offset", "com_offset", "thrust_mismatch", "thrust_curve", "battery_sag",
                     "motor_lag", "inertia_error", "rotor_drag")
-PIPELINE_OUTSIDE = ("rate_damping", "canted_rotor")
+PIPELINE_OUTSIDE = ("translational_lift", "blade_flapping")
 
 
 def case_list(count: int | None = None) -> list[dict]:

@@ -18,7 +18,7 @@ import numpy as np
 from ..effects import make_effect
 from ..errors import ModelError
 from ..params import VehicleParams, hover_speed
-from .outside import CantedRotor, RateDamping
+from .outside import BladeFlapping, TranslationalLift
 
 __all__ = ["draw", "draw_rotorpy", "library_equivalent"]
 
@@ -79,10 +79,19 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
     if name == "wind":
         v = rng.uniform(-2, 2, 2)
         return [make_effect(name, vx=v[0], vy=v[1]), make_effect("rotor_drag", coefficient=drag_k)]
-    if name == "rate_damping":
-        return [RateDamping(k=rng.uniform(0.5, 1.5) * 0.05 * np.max(params.inertia) * 10)]
-    if name == "canted_rotor":
-        return [CantedRotor(angle=sign * rng.uniform(0.03, 0.08))]
+    if name == "rate_damping":   # library effect: damping time constant I/k of 1.3-4 s
+        k = rng.uniform(0.25, 0.75) * np.diag(params.inertia)
+        return [make_effect(name, x=k[0], y=k[1], z=k[2])]
+    if name == "canted_rotor":   # library effect: a bent mount, 2-5 deg
+        return [make_effect(name, rotor=float(rng.integers(1, params.rotor_count + 1)),
+                            angle=sign * np.radians(rng.uniform(2.0, 5.0)),
+                            azimuth=rng.uniform(-np.pi, np.pi))]
+    if name == "translational_lift":   # outside: +2-5 % of the hover thrust at 1.5 m/s
+        return [TranslationalLift(k_h=rng.uniform(0.02, 0.05) * w
+                                  / (params.rotor_count * 1.5 ** 2))]
+    if name == "blade_flapping":   # outside: moment 2-4 % of weight x arm at 1 m/s
+        return [BladeFlapping(k_flap=rng.uniform(0.02, 0.04) * w * arm
+                              / (params.rotor_count * hover))]
     return []
 
 

@@ -20,7 +20,7 @@ from ..errors import InputError, ModelError, QuadsimWarning
 from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
-from . import collinear, fitting
+from . import collinear, consistency, fitting
 from . import verdict as rule
 from .checks import vehicle_check
 from .fitting import (
@@ -427,6 +427,11 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "heldout_gap_before": nominal_gap,
         "heldout_gap_after": combined["heldout_gap_after"] if combined else nominal_gap,
     }
+    if combined is not None and kind == "effect":   # one value in every regime, or not named
+        fit = combined["_fit"]
+        consistency.apply_to_verdict(verdict, notes, consistency.check(
+            fit.candidate, fit.theta, consistency.judged_parameters(combined),
+            [f.fit for f in train + held], params, sigma, rotor))
     result = {
         "schema": SCHEMA,
         "model": params.name,
@@ -536,7 +541,24 @@ def _one_flight(log, tuned, effects, window_s, spread, floors, progress) -> dict
     judged = rule.judge_flight(one, spread, flight.name, floors, tuned, min_t=MIN_T,
                                min_gain=MIN_GAIN, tie=TIE, per_flight_tie=PER_FLIGHT_TIE)
     judged["signal_delays_ms"] = flight.delays_ms
+    if judged["outcome"] == "effect":   # one value in every regime, or not named
+        _flight_consistency(judged, one, flight, tuned)
     return judged
+
+
+def _flight_consistency(judged: dict, one: dict, flight: Flight, params) -> None:
+    """The parameter-consistency guard (:mod:`.consistency`) on one flight (both halves)."""
+    rotor = flight.fit.command is not None
+    has_vbat = flight.fit.vbat is not None and bool(np.all(np.isfinite(flight.fit.vbat)))
+    cand = next((c for c in candidates_for(params, rotor, has_vbat)
+                 if c.name == judged["verdict"]), None)
+    entry = next((e for e in one["effects"] if e["name"] == judged["verdict"]), None)
+    if cand is None or entry is None:
+        return
+    sigma = np.array([one["where"]["noise_scale"][k] for k in one["where"]["channels"]])
+    theta = np.array([entry["params"][k] for k in cand.parameter_names])
+    consistency.apply_to_flight(judged, consistency.check(
+        cand, theta, consistency.judged_parameters(entry), [flight.fit], params, sigma, rotor))
 
 
 def _halves(f: Flight):

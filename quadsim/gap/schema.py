@@ -56,6 +56,27 @@ _ALTERNATIVE = {
 
 OUTCOMES = ["no_significant_gap", "effect", "unexplained"]
 
+#: parameter consistency (quadsim.gap.consistency): the named candidate refitted per regime.
+_CONSISTENCY = {
+    "type": "object",
+    "required": ["consistent", "splits", "inconsistent"],
+    "properties": {
+        "consistent": {"type": "boolean"},
+        "inconsistent": {"type": "array", "items": {"type": "string"}},
+        "splits": {"type": "object", "additionalProperties": {
+            "type": "object", "required": ["threshold", "unit", "params"],
+            "properties": {"threshold": {"type": "number"}, "unit": {"type": "string"},
+                           "params": {"type": "object", "additionalProperties": {
+                               "type": "object",
+                               "required": ["low", "high", "ci_low", "ci_high", "consistent"],
+                           }}}}},
+    },
+}
+#: a candidate not named because its parameters are inconsistent: a partial explanation.
+_PARTIAL = {"type": "object", "required": ["name", "reduction", "params"],
+            "properties": {"name": {"type": "string"}, "reduction": {"type": ["number", "null"]},
+                           "params": _NUMBER_MAP}}
+
 _VERDICT = {
     "type": "object",
     "required": ["outcome", "effect", "answer", "reduction", "confusable_with"],
@@ -75,6 +96,8 @@ _VERDICT = {
         "best_candidate": {"type": ["string", "null"]},
         "lack_of_fit": _NUMBER_MAP,
         "heldout_channel_gap_after": _NUMBER_MAP,
+        "consistency": _CONSISTENCY,
+        "partial": _PARTIAL,
     },
 }
 
@@ -89,7 +112,8 @@ _FLIGHT = {
                    "notes": {"type": "array", "items": {"type": "string"}},
                    "params": _NUMBER_MAP, "ci": _NUMBER_MAP,
                    "reduction": {"type": ["number", "null"]},
-                   "confusable_with": {"type": "array", "items": {"type": "string"}}},
+                   "confusable_with": {"type": "array", "items": {"type": "string"}},
+                   "consistency": _CONSISTENCY, "partial": _PARTIAL},
 }
 
 #: JSON Schema (draft 2020-12) of the result.

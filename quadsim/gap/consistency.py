@@ -1,0 +1,154 @@
+"""Parameter consistency: a named effect must have *one* value in every regime it was fitted on.
+
+A real effect has one value (a payload weighs the same slow and fast, a weak rotor is weak at
+every speed). A library effect standing in for something outside the library needs different
+values in different regimes: e.g. a thrust gain that grows with airspeed (translational lift)
+is fitted as a linear thrust-curve term, large in fast flight and small near hover. The
+guard refits the named candidate (its own parameters, started at the pooled fit) on two
+halves of the data and compares:
+
+* ``airspeed``: samples below / above the median in-plane ground speed |v_xy| (m/s) of all
+  flights (aerodynamic effects the library lacks grow with it);
+* ``rotor_speed``: samples below / above the median mean rotor speed (rad/s) (effects that
+  depend on thrust or on Omega in a way the candidate does not).
+
+A parameter is *inconsistent* on a split when the two values differ by more than their
+combined 95 % interval, sqrt(ci_a^2 + ci_b^2) (statistically different), **and** by more
+than :data:`MATERIAL` times the larger of the two magnitudes (materially different: a real
+effect fitted on independent data or with a slightly wrong floor moves by a few %, not by
+half its value). Only parameters that the pooled fit identified and found significant are
+judged, and only on a half where the refit identifies them too (CI < half the range); a
+parameter too weakly excited in one half cannot disagree.
+
+If any judged parameter is inconsistent, the verdict is not a confident name: outcome
+``unexplained``, and the candidate is reported as a *partial explanation*
+(``verdict.partial``: name, share of the held-out gap it explains, parameters, and the
+split values) with the words "explains N % but needs <p> = a in slow flight and b in fast
+flight: a stand-in for an effect outside the library". The test uses only the data and
+the candidate's own fit; nothing in it names an effect.
+
+Units: parameter values and CIs in the parameter's own unit (``verdict.units``); split
+thresholds in m/s (airspeed) and rad/s (rotor speed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ModelError
+from ..residual import FlightStates
+from .fitting import Candidate, fit_candidate
+
+__all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "split_masks", "check", "apply_to_verdict",
+           "apply_to_flight", "judged_parameters"]
+
+#: relative difference (of the larger magnitude) above which two values are materially
+#: different. 0.5: the two halves ask for values a factor >= 2 apart.
+MATERIAL = 0.5
+#: a half with fewer samples (after decimation) is not fitted.
+MIN_SAMPLES = 200
+SPLITS = ("airspeed", "rotor_speed")
+_LABELS = {"airspeed": ("slow flight", "fast flight"),
+           "rotor_speed": ("low rotor speed", "high rotor speed")}
+
+
+def split_masks(flights: list[FlightStates]) -> dict[str, tuple[float, list[np.ndarray]]]:
+    """Per split: (threshold, per-flight boolean masks of the *upper* half)."""
+    speed = [np.linalg.norm(f.velocity[:, :2], axis=1) for f in flights]
+    rotor = [np.mean(f.rotor_speed, axis=1) for f in flights]
+    out = {}
+    for name, values in (("airspeed", speed), ("rotor_speed", rotor)):
+        threshold = float(np.median(np.concatenate(values)))
+        out[name] = (threshold, [v > threshold for v in values])
+    return out
+
+
+def _fit_half(candidate, flights, masks, upper, params, sigma, rotor, start):
+    parts = [f.take(np.nonzero(m if upper else ~m)[0]) for f, m in zip(flights, masks)]
+    parts = [p for p in parts if len(p.t) > 10]
+    if sum(len(p.t) for p in parts) < MIN_SAMPLES:
+        return None
+    try:
+        return fit_candidate(candidate, parts, params, sigma, rotor_channel=rotor, start=start)
+    except (ModelError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
+def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
+          flights: list[FlightStates], params, sigma: np.ndarray, rotor: bool) -> dict:
+    """Refit ``candidate`` on each split's halves; judge the parameters named in ``judged``.
+
+    Returns ``{"consistent": bool, "splits": {split: {"threshold", "unit", "params": {p:
+    {"low", "high", "ci_low", "ci_high", "consistent"}}}}, "inconsistent": [text, ...]}``."""
+    names = candidate.parameter_names
+    out: dict = {"consistent": True, "splits": {}, "inconsistent": []}
+    for split, (threshold, masks) in split_masks(flights).items():
+        low = _fit_half(candidate, flights, masks, False, params, sigma, rotor, theta)
+        high = _fit_half(candidate, flights, masks, True, params, sigma, rotor, theta)
+        if low is None or high is None:
+            continue
+        entry = {"threshold": threshold, "unit": "m/s" if split == "airspeed" else "rad/s",
+                 "params": {}}
+        for k, p in enumerate(names):
+            if p not in judged:
+                continue
+            a, b = float(low.theta[k]), float(high.theta[k])
+            ca, cb = 1.96 * float(low.stderr[k]), 1.96 * float(high.stderr[k])
+            both = bool(low.identifiable[k] and high.identifiable[k])
+            diff = abs(a - b)
+            ok = not (both and diff > np.hypot(ca, cb) and diff > MATERIAL * max(abs(a), abs(b)))
+            entry["params"][p] = {"low": a, "high": b, "ci_low": ca, "ci_high": cb,
+                                  "consistent": ok}
+            if not ok:
+                out["consistent"] = False
+                lo_label, hi_label = _LABELS[split]
+                out["inconsistent"].append(
+                    f"{p} = {a:.3g} ± {ca:.2g} in {lo_label} and {b:.3g} ± {cb:.2g} in "
+                    f"{hi_label} (split at {threshold:.3g} {entry['unit']})")
+        out["splits"][split] = entry
+    return out
+
+
+def judged_parameters(entry: dict) -> list[str]:
+    """Parameters of a scored entry that are identified and significant (the ones named)."""
+    return [k for k in entry["params"]
+            if entry["identifiable"].get(k) and entry["significant"].get(k)]
+
+
+def _partial_text(name: str, reduction: float, result: dict) -> str:
+    return (f"Unexplained: {name} explains {100 * reduction:.0f} % of the held-out gap but "
+            f"needs different values in different regimes ({'; '.join(result['inconsistent'])})"
+            f": a stand-in for an effect outside the library (or several effects), not a "
+            f"cause. It is given as a partial explanation only.")
+
+
+def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
+    """Record ``result`` in a pooled verdict; an inconsistent name becomes ``unexplained``."""
+    verdict["consistency"] = result
+    if result["consistent"] or verdict.get("outcome") != "effect":
+        return
+    name = verdict["effect"]
+    verdict["partial"] = {k: verdict.get(k) for k in ("reduction", "params", "ci", "units",
+                                                      "alternatives", "confusable_with")}
+    verdict["partial"]["name"] = name
+    verdict.update({"outcome": "unexplained", "effect": "unexplained",
+                    "answer": _partial_text(name, verdict["reduction"], result),
+                    "confusable_with": [], "alternatives": [], "separate_by": {}})
+    notes.append(f"{name} not named: its parameters are inconsistent between regimes ("
+                 + "; ".join(result["inconsistent"]) + ")")
+
+
+def apply_to_flight(judged: dict, result: dict) -> None:
+    """The same for one flight of the per-flight mode (``flights[]`` entry)."""
+    judged["consistency"] = result
+    if result["consistent"] or judged.get("outcome") != "effect":
+        return
+    name = judged["verdict"]
+    judged["partial"] = {k: judged.get(k) for k in ("reduction", "params", "ci", "units",
+                                                    "alternatives", "confusable_with")}
+    judged["partial"]["name"] = name
+    judged.update({"outcome": "unexplained", "verdict": "unexplained",
+                   "answer": _partial_text(name, judged["reduction"], result),
+                   "confusable_with": [], "alternatives": [], "separate_by": {}})
+    judged["notes"].append(f"{name} not named: its parameters are inconsistent between "
+                           "regimes (" + "; ".join(result["inconsistent"]) + ")")

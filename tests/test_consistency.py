@@ -1,0 +1,81 @@
+"""Parameter-consistency guard (quadsim.gap.consistency): an effect outside the library is
+never named with confidence because the stand-in needs different values in different regimes;
+a library effect keeps one value and stays named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from quadsim.bench.outside import BladeFlapping, TranslationalLift, in_plane_air_velocity
+from quadsim.effects import EffectContext, make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.consistency import MATERIAL
+from quadsim.gap.schema import validate
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.params import hover_speed, load_params
+
+# the stand-ins a thrust that grows with airspeed could take (fewer candidates: fast test)
+THRUST_LIKE = ["mass_offset", "thrust_curve", "thrust_factor"]
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+def _ctx(params, velocity, speed):
+    n = len(velocity)
+    return EffectContext(t=np.zeros(n), position=np.zeros((n, 3)), velocity=velocity,
+                         quat=np.tile([1.0, 0, 0, 0], (n, 1)), body_rate=np.zeros((n, 3)),
+                         air_velocity=velocity, rotor_speed=speed,
+                         rotor_accel=np.zeros_like(speed), params=params)
+
+
+def test_outside_effects_by_hand(cf):
+    speed = np.full((2, 4), hover_speed(cf))
+    v = np.array([[1.5, 0.0, 0.3], [0.0, -2.0, 0.0]])
+    ctx = _ctx(cf, v, speed)
+    assert np.allclose(in_plane_air_velocity(ctx), [[1.5, 0, 0], [0, -2.0, 0]])
+    lift = TranslationalLift(k_h=0.01).loads(ctx)
+    # k_h |v_xy|^2 per rotor: 0.01 N/(m/s)^2 x 2.25 m^2/s^2 = 0.0225 N; 0.04 N
+    assert np.allclose(lift.thrust_offset, [[0.0225] * 4, [0.04] * 4], rtol=1e-12)
+    flap = BladeFlapping(k_flap=1e-6).loads(ctx)
+    total = 4 * hover_speed(cf)
+    # forward flight (+x): nose-up moment, -y; flight along -y: e_z x v = (2, 0, 0) -> -x
+    assert np.allclose(flap.torque_body[0], [0, -1e-6 * total * 1.5, 0], rtol=1e-12)
+    assert np.allclose(flap.torque_body[1], [-1e-6 * total * 2.0, 0, 0], rtol=1e-12)
+
+
+def test_translational_lift_is_not_named_with_confidence(cf):
+    # +4 % of the hover thrust at 1.5 m/s (RotorPy's k_h form), flown at 1.3 m/s
+    k_h = 0.04 * cf.weight / (4 * 1.5 ** 2)
+    logs = [synthetic_flight(cf, [TranslationalLift(k_h=k_h)], seed=s, duration=5.0,
+                             speed=1.3) for s in (0, 1, 2)]
+    result = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False, effects=THRUST_LIKE)
+    verdict = result["verdict"]
+    validate(result)
+    assert verdict["outcome"] == "unexplained"
+    assert verdict["effect"] == "unexplained"
+    partial = verdict["partial"]
+    assert partial["name"] in THRUST_LIKE and partial["reduction"] > 0.2
+    assert verdict["consistency"]["consistent"] is False
+    # the stand-in's value in fast flight is at least 1 / (1 - MATERIAL) = 2x its slow value
+    split = verdict["consistency"]["splits"]["airspeed"]["params"]
+    p = next(iter(k for k, v in split.items() if not v["consistent"]))
+    low, high = abs(split[p]["low"]), abs(split[p]["high"])
+    assert high >= low / (1 - MATERIAL)
+    assert "partial explanation" in verdict["answer"]
+
+
+def test_library_effect_keeps_one_value_and_is_named(cf):
+    logs = [synthetic_flight(cf, [make_effect("mass_offset", mass=0.004)], seed=s,
+                             duration=5.0, speed=1.3) for s in (0, 1, 2)]
+    result = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False, effects=THRUST_LIKE)
+    verdict = result["verdict"]
+    assert verdict["outcome"] == "effect" and verdict["effect"] == "mass_offset"
+    assert verdict["consistency"]["consistent"] is True and "partial" not in verdict
+    for split in verdict["consistency"]["splits"].values():
+        q = split["params"]["mass_offset.mass"]
+        # slow and fast halves agree with the 4 g truth within their 95 % CIs
+        assert abs(q["low"] - 0.004) <= q["ci_low"] and abs(q["high"] - 0.004) <= q["ci_high"]
