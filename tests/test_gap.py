@@ -327,3 +327,35 @@ def test_drag_refit_not_diluted_by_rotor_speed_noise(cf):
     assert abs(ols - clean) > ols_ci      # the uncorrected fit is biased beyond its CI
     _, _, hover_ok = _closed_loop_drag_refit(cf, 0.005, 0.0)
     assert not hover_ok
+
+
+@pytest.mark.parametrize("model", ["crazyflie21", "physical"])
+def test_every_candidate_magnitude_is_worded_with_a_unit(model):
+    """Item 7: each candidate's magnitude is a physical statement with a unit, never the raw
+    ``effect.parameter = value`` form (e.g. battery_sag.full_voltage = +3.682 V)."""
+    import re
+
+    from quadsim.gap.collinear import describe
+    from quadsim.gap.diagnose import BASELINE
+    from quadsim.gap.fitting import _typical, candidates_for
+
+    params = load_params(model)
+    units = re.compile(r"( g\b| mm\b| %| ms\b| mN\b| N\b| m/s| V\b| kg m²| g cm²| cm²| s\b)")
+    seen = set()
+    for has_vbat in (False, True):
+        for cand in candidates_for(params, True, has_vbat) + [BASELINE]:
+            values = dict(zip(cand.parameter_names, _typical(cand, params)))
+            if "battery_sag.full_voltage" in values:
+                values["battery_sag.full_voltage"] = 3.682
+            text = describe(cand.name, values, {k: 0.1 * abs(v) for k, v in values.items()},
+                            params)
+            for key in values:
+                assert f"{key} =" not in text and key not in text, (key, text)
+            for part in text.split(", "):
+                assert units.search(part), (cand.name, part)
+            seen |= set(values)
+    assert "battery_sag.full_voltage" in seen and "battery_sag.rate" in seen
+    assert len(seen) >= 20
+    text = describe("battery_sag", {"battery_sag.full_voltage": 3.682},
+                    {"battery_sag.full_voltage": 0.01}, params)
+    assert "3.68 ± 0.01 V" in text and "36.8 mV" in text
