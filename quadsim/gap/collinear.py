@@ -104,9 +104,65 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams) -> str:
         elif key.startswith("com_offset."):
             parts.append(f"CoM {key[-1]} {_pm(value, c, 1e3)} mm")
         else:
-            unit = unit_of(key)
-            parts.append(f"{key} = {_pm(value, c, 1.0, '.4g')} {unit}".rstrip())
+            parts.append(_worded(key, value, c, params))
     return ", ".join(parts) if parts else name
+
+
+def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> str:
+    """Physical statement of one fitted parameter (units named), for the effects that
+    :func:`describe` does not word itself; an effect without a wording here is stated with
+    its declared description and unit (never as a bare ``effect.parameter = value``)."""
+    hover = hover_speed(params)
+    weight = params.mass * params.gravity
+    r = params.rotor_count
+    if key == "battery_sag.full_voltage":
+        return (f"the rotors turn slower per command as the battery drops: speed = nominal "
+                f"map x vbat / ({_pm(value, c, 1.0, '.3g')} V), i.e. 1 % slower per "
+                f"{10 * value:.3g} mV below {value:.3g} V (thrust at a fixed command: 2 % "
+                "lower per 1 % of voltage)")
+    if key == "battery_sag.rate":
+        return (f"the rotors lose {_pm(100 * 60 * value / 2, None if c is None else 100 * 60 * c / 2, 1.0)} "
+                f"% speed per minute at a fixed command ({100 * 60 * value:.2g} % thrust per "
+                "minute; a discharging battery)")
+    if key.startswith("inertia_error."):
+        axis = key[-2:]
+        i = "xyz".index(axis[0])
+        base = params.inertia[i, i]
+        return (f"I_{axis} {_pm(value, c, 100)} % ({base * (1 + value):.3g} kg m² instead of "
+                f"the model's {base:.3g} kg m²)")
+    if key == "ground_effect.gain":
+        rise = 100 * (1 / (1 - min(0.5, value / 16)) - 1)
+        return (f"ground effect {_pm(value, c, 1.0)} x the Cheeseman–Bennett model "
+                f"(+{rise:.2g} % thrust with the rotors one radius above the ground)")
+    if key in ("rotor_drag.coefficient", "rotor_drag.axial_coefficient"):
+        where = "in the rotor plane" if key.endswith(".coefficient") else "along the rotor axes"
+        per = r * value * hover
+        cper = None if c is None else r * c * hover
+        return (f"rotor drag {where} {_pm(per, cper, 1e3)} mN per m/s of air speed at the "
+                f"hover speed ({100 * per / weight:.2g} % of the weight at 1 m/s)")
+    if key in ("body_drag.cd_area", "body_drag.cd_area_vertical"):
+        where = "sideways" if key.endswith(".cd_area") else "vertical"
+        force = 0.5 * params.air_density * value * 4.0
+        return (f"body drag {where} C_d A {_pm(value, c, 1e4)} cm² ({1e3 * force:.2g} mN, "
+                f"{100 * force / weight:.2g} % of the weight, at 2 m/s)")
+    if key == "motor_lag.time_constant":
+        return f"the rotors lag their commands by {_pm(value, c, 1e3)} ms (time constant)"
+    if key == "gyroscopic.rotor_inertia":
+        return f"rotor spin inertia {_pm(value, c, 1e7)} g cm² per rotor (gyroscopic torque)"
+    if key.startswith("rate_damping."):
+        i = "xyz".index(key[-1])
+        tau = params.inertia[i, i] / value if value > 0 else float("inf")
+        return (f"{('roll', 'pitch', 'yaw')[i]} rate damping {_pm(value, c, 1.0, '.3g')} "
+                f"N m per rad/s (decay time I/k {tau:.3g} s)")
+    if key.startswith("wind.v"):
+        return f"mean wind {_pm(value, c, 1.0)} m/s along world {key[-1]}"
+    name, _, p = key.partition(".")
+    try:
+        spec = {s.name: s for s in effect_class(name).parameters}[p]
+        text, unit = spec.doc, spec.unit
+    except KeyError:
+        text, unit = p.replace("_", " "), unit_of(key)
+    return f"{name.replace('_', ' ')}: {text} {_pm(value, c, 1.0, '.4g')} {unit}".rstrip()
 
 
 def _torque_text(entry: dict) -> str:
