@@ -20,6 +20,14 @@ half its value). Only parameters that the pooled fit identified and found signif
 judged, and only on a half where the refit identifies them too (CI < half the range); a
 parameter too weakly excited in one half cannot disagree.
 
+A parameter whose halves differ beyond their combined interval but by less than
+:data:`MATERIAL` *shifts* with the regime: the name stands, marked ``tentative`` (field
+``verdict.tentative`` / ``flights[].tentative``, a note and a sentence in the answer): it
+describes how the vehicle behaved over the flown range, but the value depends on airspeed or
+rotor speed, so it may stand in for an effect outside the library (a thrust gain growing with
+airspeed reads as a small thrust-curve term over a narrow speed range); flights over a wider
+range of speeds tell.
+
 If any judged parameter is inconsistent, the verdict is not a confident name: outcome
 ``unexplained``, and the candidate is reported as a *partial explanation*
 (``verdict.partial``: name, share of the held-out gap it explains, parameters, and the
@@ -81,7 +89,7 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
     Returns ``{"consistent": bool, "splits": {split: {"threshold", "unit", "params": {p:
     {"low", "high", "ci_low", "ci_high", "consistent"}}}}, "inconsistent": [text, ...]}``."""
     names = candidate.parameter_names
-    out: dict = {"consistent": True, "splits": {}, "inconsistent": []}
+    out: dict = {"consistent": True, "splits": {}, "inconsistent": [], "shifted": []}
     for split, (threshold, masks) in split_masks(flights).items():
         low = _fit_half(candidate, flights, masks, False, params, sigma, rotor, theta)
         high = _fit_half(candidate, flights, masks, True, params, sigma, rotor, theta)
@@ -96,15 +104,18 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
             ca, cb = 1.96 * float(low.stderr[k]), 1.96 * float(high.stderr[k])
             both = bool(low.identifiable[k] and high.identifiable[k])
             diff = abs(a - b)
-            ok = not (both and diff > np.hypot(ca, cb) and diff > MATERIAL * max(abs(a), abs(b)))
+            differs = both and diff > np.hypot(ca, cb)
+            ok = not (differs and diff > MATERIAL * max(abs(a), abs(b)))
             entry["params"][p] = {"low": a, "high": b, "ci_low": ca, "ci_high": cb,
                                   "consistent": ok}
+            lo_label, hi_label = _LABELS[split]
+            text = (f"{p} = {a:.3g} ± {ca:.2g} in {lo_label} and {b:.3g} ± {cb:.2g} in "
+                    f"{hi_label} (split at {threshold:.3g} {entry['unit']})")
             if not ok:
                 out["consistent"] = False
-                lo_label, hi_label = _LABELS[split]
-                out["inconsistent"].append(
-                    f"{p} = {a:.3g} ± {ca:.2g} in {lo_label} and {b:.3g} ± {cb:.2g} in "
-                    f"{hi_label} (split at {threshold:.3g} {entry['unit']})")
+                out["inconsistent"].append(text)
+            elif differs:
+                out["shifted"].append(text)
         out["splits"][split] = entry
     return out
 
@@ -122,10 +133,29 @@ def _partial_text(name: str, reduction: float, result: dict) -> str:
             f"cause. It is given as a partial explanation only.")
 
 
+def _tentative_text(result: dict) -> str:
+    return (" Tentative: its value shifts with the regime (" + "; ".join(result["shifted"])
+            + "), so it may stand in for an airspeed- or speed-dependent effect outside the "
+            "library; flights over a wider range of speeds would tell.")
+
+
+def _mark_tentative(entry: dict, notes: list[str], result: dict) -> None:
+    entry["tentative"] = True
+    entry["answer"] = entry.get("answer", "") + _tentative_text(result)
+    notes.append("tentative name: the fitted value shifts with the regime ("
+                 + "; ".join(result["shifted"]) + ")")
+
+
 def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
-    """Record ``result`` in a pooled verdict; an inconsistent name becomes ``unexplained``."""
+    """Record ``result`` in a pooled verdict; an inconsistent name becomes ``unexplained``,
+    a shifted one is marked ``tentative``."""
     verdict["consistency"] = result
-    if result["consistent"] or verdict.get("outcome") != "effect":
+    verdict["tentative"] = False
+    if verdict.get("outcome") != "effect":
+        return
+    if result["consistent"]:
+        if result["shifted"]:
+            _mark_tentative(verdict, notes, result)
         return
     name = verdict["effect"]
     verdict["partial"] = {k: verdict.get(k) for k in ("reduction", "params", "ci", "units",
@@ -141,7 +171,12 @@ def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
 def apply_to_flight(judged: dict, result: dict) -> None:
     """The same for one flight of the per-flight mode (``flights[]`` entry)."""
     judged["consistency"] = result
-    if result["consistent"] or judged.get("outcome") != "effect":
+    judged["tentative"] = False
+    if judged.get("outcome") != "effect":
+        return
+    if result["consistent"]:
+        if result["shifted"]:
+            _mark_tentative(judged, judged["notes"], result)
         return
     name = judged["verdict"]
     judged["partial"] = {k: judged.get(k) for k in ("reduction", "params", "ci", "units",

@@ -26,6 +26,20 @@ thrust_curve.linear    +-20 % at hover      bench fits: linear term up to ~20 % 
 battery_sag.rate       0 .. 0.5 %/s         a 1S LiPo loses ~20 % thrust at a fixed
                                             command over a 5-7 min flight (0.05-0.1 %/s);
                                             0.5 %/s is a failing cell.
+inertia_error.*        -50 % .. +100 %      a CAD or lumped-mass inertia is within ~10-20 %
+                                            (this project: CAD vs SolidWorks +9 %; the
+                                            Crazyflie literature spread is +-20 %); a factor
+                                            2 either way means a different vehicle.
+rate_damping.*         0 .. 3 k_mt          momentum theory: a rolling vehicle's rotor discs
+                                            see +-r w of inflow, dT/dv = T / (2 v_i) per
+                                            rotor, so k_mt = r^2 T_h / v_i (r the arm, T_h the
+                                            hover thrust per rotor, v_i = sqrt(T_h / (2 rho
+                                            A)); Bristeau et al., ECC 2009, sec. 4); blade
+                                            flapping and frame drag add moments of the same
+                                            order (Mahony, Kumar & Corke, IEEE RAM 2012).
+                                            k_mt: 0.020 N m s/rad (0.84 kg testbed), 5.8e-5
+                                            (Crazyflie); decay times I/k below ~0.1 s are
+                                            not aerodynamic damping.
 =====================  ===================  ==============================================
 
 :func:`plausibility` returns (score, plausible, text): score = |value| / bound on its side
@@ -36,7 +50,7 @@ from __future__ import annotations
 
 from ..params import VehicleParams
 
-__all__ = ["PRIORS", "plausibility", "candidate_plausibility"]
+__all__ = ["PRIORS", "plausibility", "candidate_plausibility", "momentum_rate_damping"]
 
 #: parameter -> (lower, upper, kind, source). kind "relative": fraction of 1; "mass": of the
 #: vehicle mass; "arm": of the arm length; "absolute": in the parameter's unit.
@@ -52,6 +66,12 @@ PRIORS = {
     "com_offset.x": (-0.15, 0.15, "arm", "battery/payload placement"),
     "com_offset.y": (-0.15, 0.15, "arm", "battery/payload placement"),
     "battery_sag.rate": (0.0, 0.005, "absolute", "1S LiPo: ~20 % thrust over a 5-7 min flight"),
+    "inertia_error": (-0.5, 1.0, "relative",
+                      "CAD/lumped inertia within 10-20 % (CAD vs SolidWorks +9 %, Crazyflie "
+                      "literature +-20 %); a factor 2 is another vehicle"),
+    "rate_damping": (0.0, 3.0, "momentum",
+                     "momentum theory k = r^2 T_hover / v_i (Bristeau et al. 2009) x 3 for "
+                     "blade flapping and frame drag (Mahony et al. 2012)"),
     "thrust_curve.linear": (-0.2, 0.2, "hover",
                             "bench fits T = k2 W^2 + k1 W + k0 (Foerster, ETH 2015, table "
                             "3.3): the linear term reaches ~20 % of the hover thrust"),
@@ -84,13 +104,30 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
         import numpy as np
 
         value = value / float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
+    elif kind == "momentum":
+        value = value / momentum_rate_damping(params)
     bound = upper if value >= 0 else lower
     score = abs(value) / abs(bound) if bound != 0 else (0.0 if value == 0 else float("inf"))
-    scale = {"relative": 100, "mass": 100, "arm": 100, "hover": 100, "absolute": 1}[kind]
+    scale = {"relative": 100, "mass": 100, "arm": 100, "hover": 100, "absolute": 1,
+             "momentum": 1}[kind]
     unit = {"relative": " %", "mass": " % of the vehicle mass", "arm": " % of the arm",
-            "hover": " % of the hover thrust", "absolute": ""}[kind]
+            "hover": " % of the hover thrust", "absolute": "",
+            "momentum": (f" x the momentum-theory damping "
+                         f"{momentum_rate_damping(params):.2g} N m s/rad")}[kind]
     text = f"plausible {lower * scale:g} .. {upper * scale:g}{unit} ({source})"
     return float(score), bool(score <= 1.0), text
+
+
+def momentum_rate_damping(params: VehicleParams) -> float:
+    """k_mt = r^2 T_h / v_i (N m s/rad): roll/pitch damping of the rotor discs' inflow change
+    by momentum theory (r the largest hub distance from the centre, m; T_h = m g / R the hover
+    thrust per rotor, N; v_i = sqrt(T_h / (2 rho pi R_p^2)) the hover induced velocity, m/s)."""
+    import numpy as np
+
+    arm = float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
+    thrust = params.mass * params.gravity / params.rotor_count
+    induced = np.sqrt(thrust / (2 * params.air_density * np.pi * params.rotor_radius ** 2))
+    return arm ** 2 * thrust / float(induced)
 
 
 def candidate_plausibility(values: dict, params: VehicleParams):

@@ -63,6 +63,7 @@ _CONSISTENCY = {
     "properties": {
         "consistent": {"type": "boolean"},
         "inconsistent": {"type": "array", "items": {"type": "string"}},
+        "shifted": {"type": "array", "items": {"type": "string"}},
         "splits": {"type": "object", "additionalProperties": {
             "type": "object", "required": ["threshold", "unit", "params"],
             "properties": {"threshold": {"type": "number"}, "unit": {"type": "string"},
@@ -98,6 +99,7 @@ _VERDICT = {
         "heldout_channel_gap_after": _NUMBER_MAP,
         "consistency": _CONSISTENCY,
         "partial": _PARTIAL,
+        "tentative": {"type": "boolean"},
     },
 }
 
@@ -113,7 +115,8 @@ _FLIGHT = {
                    "params": _NUMBER_MAP, "ci": _NUMBER_MAP,
                    "reduction": {"type": ["number", "null"]},
                    "confusable_with": {"type": "array", "items": {"type": "string"}},
-                   "consistency": _CONSISTENCY, "partial": _PARTIAL},
+                   "consistency": _CONSISTENCY, "partial": _PARTIAL,
+                   "tentative": {"type": "boolean"}},
 }
 
 #: JSON Schema (draft 2020-12) of the result.
