@@ -72,6 +72,9 @@ ALIGN_PEAK = 0.8
 HIGHPASS_S = 1.0
 #: normalised correlation peak below which a delay is not estimated.
 MIN_PEAK = 0.3
+#: repeatability: the estimates on the two halves of a log must agree within this (s), or
+#: two samples if that is more; otherwise the delay is "not resolvable from this log".
+REPEAT_TOL_S = 0.003
 SIGNALS = ("gyro", "accel", "rotor")
 
 
@@ -116,6 +119,14 @@ def cross_correlation_delay(reference: np.ndarray, signal: np.ndarray, dt: float
         b = sig[k_max + k:n - k_max + k]
         corr[j] = np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b) + 1e-300)
     return _peak(lags, corr, dt)
+
+
+def _pair_delay(kind, ref, sig, fixed, dt, max_lag_s) -> tuple[float, float, bool]:
+    if kind == "correlation":
+        return cross_correlation_delay(ref, sig, dt, max_lag_s)
+    # the regressors are the later signal: their delay behind the target is
+    # d(sig) - d(target); for "accel" the target (accelerometer) is the one sought
+    return regression_delay(ref, sig, dt, max_lag_s, fixed)
 
 
 def _peak(lags: np.ndarray, score: np.ndarray, dt: float) -> tuple[float, float, bool]:
@@ -219,17 +230,19 @@ def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float =
                               _highpass(smooth(turned), dt))
     if rotor is not None and accel is not None:
         pairs["accel"] = ("regression", smooth(accel[:, 2:3]), smooth(rotor**2), "rotor", None)
+    half = len(t) // 2
     for name in ("gyro", "rotor", "accel"):
         if name not in pairs:
             continue
         kind, ref, sig, base, fixed = pairs[name]
-        if kind == "correlation":
-            delay, peak, inside = cross_correlation_delay(ref, sig, dt, max_lag_s)
-        else:
-            # the regressors are the later signal: their delay behind the target is
-            # d(sig) - d(target); for "accel" the target (accelerometer) is the one sought
-            delay, peak, inside = regression_delay(ref, sig, dt, max_lag_s, fixed)
+        delay, peak, inside = _pair_delay(kind, ref, sig, fixed, dt, max_lag_s)
         peaks[name] = peak
+        # repeatability: the same relation on each half of the log must give the same delay
+        halves = [_pair_delay(kind, ref[part], sig[part], None if fixed is None else fixed[part],
+                              dt, max_lag_s)
+                  for part in (slice(0, half), slice(half, None))] if half >= 8 * window else []
+        spread = abs(halves[0][0] - halves[1][0]) if halves else 0.0
+        tol = max(REPEAT_TOL_S, 2 * dt)
         if base is not None and delays.get(base) is None:
             notes.append(f"{name}: delay not estimated ({base} delay unknown)")
         elif peak < MIN_PEAK:
@@ -238,6 +251,11 @@ def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float =
         elif not inside:
             notes.append(f"{name}: delay not estimated (beyond the {1e3 * max_lag_s:.0f} ms "
                          "searched)")
+        elif spread > tol:
+            notes.append(f"{name}: delay not resolvable from this log (the two halves give "
+                         f"{1e3 * halves[0][0]:+.1f} and {1e3 * halves[1][0]:+.1f} ms, "
+                         f"more than {1e3 * tol:.0f} ms apart: filtered or delayed beyond "
+                         "what its partner signal can time)")
         elif name == "rotor":
             delays[name] = delays["gyro"] + delay
         elif name == "accel":
@@ -284,19 +302,19 @@ def align_log(log: FlightLog, estimate: DelayEstimate | None = None, *,
     return aligned, estimate
 
 
-def align_signal_delays(log: FlightLog) -> tuple[FlightLog, dict[str, float | None]]:
+def align_signal_delays(log: FlightLog) -> tuple[FlightLog, DelayEstimate]:
     """The gap diagnosis' hook: estimate all delays and return them in ms; shift only the
     gyro, by delays of 1.5 samples or more. The rotor and accelerometer offsets are reported,
     not shifted: their partner relations are changed by the very effects the diagnosis looks
     for (on generated 5 s Crazyflie logs without any delay, the rotor estimate reads 1-3 ms,
     and 8 ms with rotor gyroscopic/spin-up torques; drag and battery sag move the
     accelerometer estimate by up to 10 ms), while the gyro estimate stays within 0.2 ms."""
-    aligned, estimate = align_log(log, min_samples=1.5, signals=("gyro",))
-    return aligned, estimate.ms()
+    return align_log(log, min_samples=1.5, signals=("gyro",))
 
 
 def delay_notes(flights) -> list[str]:
-    """One note per flight (objects with ``name`` and ``delays_ms``) that has a delay."""
+    """One note per flight (objects with ``name``, ``delays_ms`` and ``delay_notes``) that
+    has a delay or a delay that could not be resolved."""
     out = []
     for f in flights:
         parts = [f"{k} {v:+.1f} ms" for k, v in getattr(f, "delays_ms", {}).items()
@@ -305,4 +323,7 @@ def delay_notes(flights) -> list[str]:
             out.append(f"{f.name}: signal delays vs motion capture: {', '.join(parts)} "
                        "(estimated; a gyro delay of 1.5 samples or more is shifted out before "
                        "fitting, the others are reported only)")
+        unresolved = [n for n in getattr(f, "delay_notes", ()) if "not resolvable" in n]
+        if unresolved:
+            out.append(f"{f.name}: " + "; ".join(unresolved))
     return out

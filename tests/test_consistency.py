@@ -79,3 +79,61 @@ def test_library_effect_keeps_one_value_and_is_named(cf):
         q = split["params"]["mass_offset.mass"]
         # slow and fast halves agree with the 4 g truth within their 95 % CIs
         assert abs(q["low"] - 0.004) <= q["ci_low"] and abs(q["high"] - 0.004) <= q["ci_high"]
+
+
+def test_library_effect_is_not_tentative(cf):
+    """The 4 g payload above: no split shifts it beyond its CIs, so the name is not tentative."""
+    logs = [synthetic_flight(cf, [make_effect("mass_offset", mass=0.004)], seed=s,
+                             duration=5.0, speed=1.3) for s in (0, 1, 2)]
+    verdict = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False,
+                       effects=THRUST_LIKE)["verdict"]
+    assert verdict["tentative"] is False and "Tentative" not in verdict["answer"]
+
+
+def _result(low, high, ci):
+    from quadsim.gap.consistency import MATERIAL as m
+
+    differs = abs(low - high) > np.hypot(ci, ci)
+    material = abs(low - high) > m * max(abs(low), abs(high))
+    text = f"thrust_curve.linear = {low} in slow flight and {high} in fast flight"
+    return {"consistent": not (differs and material), "splits": {},
+            "inconsistent": [text] if differs and material else [],
+            "shifted": [text] if differs and not material else []}
+
+
+@pytest.mark.parametrize("low, high, ci, outcome, tentative", [
+    (1.0, 1.02, 0.05, "effect", False),      # within the CIs: a name
+    (1.0, 1.3, 0.05, "effect", True),        # 0.3 / 1.3 = 23 % < MATERIAL, beyond the CIs
+    (1.0, 2.5, 0.05, "unexplained", None),   # 60 % > MATERIAL and beyond the CIs
+])
+def test_shifted_value_makes_a_tentative_name(low, high, ci, outcome, tentative):
+    from quadsim.gap.consistency import apply_to_verdict
+
+    verdict = {"outcome": "effect", "effect": "thrust_curve", "answer": "Behaves as if X.",
+               "reduction": 0.9, "params": {"thrust_curve.linear": low}, "ci": {},
+               "units": {}, "alternatives": [], "confusable_with": []}
+    notes: list[str] = []
+    apply_to_verdict(verdict, notes, _result(low, high, ci))
+    assert verdict["outcome"] == outcome
+    if tentative is not None:
+        assert verdict["tentative"] is tentative
+        assert ("Tentative" in verdict["answer"]) is tentative
+        assert len(notes) == int(tentative)
+    else:
+        assert verdict["partial"]["name"] == "thrust_curve"
+
+
+def test_rate_damping_prior_is_momentum_theory():
+    """k_mt = r^2 T_h / v_i by hand for the 0.84 kg testbed; a stand-in needing 10x is flagged."""
+    from quadsim.gap.priors import momentum_rate_damping, plausibility
+
+    p = load_params("physical")
+    arm = float(np.max(np.linalg.norm(p.rotor_positions[:, :2], axis=1)))
+    thrust = p.mass * p.gravity / 4
+    v_i = np.sqrt(thrust / (2 * p.air_density * np.pi * p.rotor_radius ** 2))
+    assert momentum_rate_damping(p) == pytest.approx(arm ** 2 * thrust / v_i, rel=1e-12)
+    assert momentum_rate_damping(p) == pytest.approx(0.0197, rel=0.01)   # N m s/rad
+    assert plausibility("rate_damping.x", 2.9 * momentum_rate_damping(p), p)[1]
+    assert not plausibility("rate_damping.x", 3.1 * momentum_rate_damping(p), p)[1]
+    assert not plausibility("inertia_error.xx", -0.6, p)[1]
+    assert plausibility("inertia_error.yy", -0.45, p)[1]

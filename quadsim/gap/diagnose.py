@@ -88,6 +88,7 @@ class Flight:
     states: FlightStates
     fit: FlightStates
     delays_ms: dict = field(default_factory=dict)   # signal delays vs motion capture (ms)
+    delay_notes: tuple = ()                         # why a delay was not estimated
 
 
 def interior(t: np.ndarray, edge_s: float | None = None) -> np.ndarray:
@@ -129,14 +130,14 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
-        log, delays_ms = align_signal_delays(log)    # quadsim.delays (estimate, shift, ms)
+        log, delays = align_signal_delays(log)    # quadsim.delays (estimate, shift, ms)
         states = flight_states(log, window_s=window_s, gravity=params.gravity)
         states = states.take(interior(states.t))
         dt = float(states.t[1] - states.t[0])
         stride = max(1, int(round(1.0 / (FIT_RATE_HZ * dt))),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
         index = np.arange(0, len(states.t), stride)
-        out.append(Flight(name, states, states.take(index), delays_ms))
+        out.append(Flight(name, states, states.take(index), delays.ms(), delays.notes))
     return out
 
 
@@ -541,6 +542,7 @@ def _one_flight(log, tuned, effects, window_s, spread, floors, progress) -> dict
     judged = rule.judge_flight(one, spread, flight.name, floors, tuned, min_t=MIN_T,
                                min_gain=MIN_GAIN, tie=TIE, per_flight_tie=PER_FLIGHT_TIE)
     judged["signal_delays_ms"] = flight.delays_ms
+    judged["notes"].extend(delay_notes([flight]))
     if judged["outcome"] == "effect":   # one value in every regime, or not named
         _flight_consistency(judged, one, flight, tuned)
     return judged
