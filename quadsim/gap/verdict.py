@@ -111,7 +111,9 @@ def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *, mi
     for e in one["effects"]:
         ok = e["t_statistic"] >= min_t and any(
             e["identifiable"][k] and e["significant"][k] for k in e["params"])
-        excess = e["reduction"] - max(spread.get(e["name"], [0.0]))
+        # the references can raise the bar, never lower it: an effect that makes every
+        # nominal flight worse (negative reduction) must still clear MIN_GAIN on its own
+        excess = e["reduction"] - max(0.0, *spread.get(e["name"], [0.0]))
         if ok and excess >= min_gain:
             scored.append((excess, e))
     effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
