@@ -472,10 +472,25 @@ def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_com
             tick(cand.name)
             if trial is None or scored["heldout_gap_after"] < trial["heldout_gap_after"]:
                 trial = scored
-        if trial is None or not _clear(trial, current["heldout_gap_after"], nominal_gap):
+        if trial is None or not _clear(trial, current["heldout_gap_after"], nominal_gap) \
+                or not _every_part_stands(trial, params):
             break
         current, used = trial, used | set(trial["name"].split("+"))
     return current
+
+
+def _every_part_stands(entry: dict, params) -> bool:
+    """A combination claims that each of its effects is there: every part needs a parameter
+    identified and significant, and the combined fit must be physically plausible (priors).
+    Two effects that cancel each other at their bounds (every rotor -50 % thrust and the
+    vehicle 50 % lighter) explain nothing about the vehicle."""
+    from .priors import candidate_plausibility
+
+    for part in entry["name"].split("+"):
+        keys = [k for k in entry["params"] if k.split(".")[0] == part]
+        if not any(entry["identifiable"][k] and entry["significant"][k] for k in keys):
+            return False
+    return bool(candidate_plausibility(entry["params"], params)[1])
 
 
 def _public(entry: dict) -> dict:
