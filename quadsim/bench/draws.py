@@ -6,7 +6,8 @@ parameters (:data:`quadsim.bench.rotorpy_source.EFFECTS`) and :func:`library_equ
 maps those back to the library effect with the true values (used only to check that a case
 is observable, never by the diagnosis). Magnitudes (SI): added mass 5-20 % of the vehicle;
 CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger; all rotors' thrust
-per Omega^2 5-15 % off (``thrust_factor``, where the library has it);
+per Omega^2 5-15 % lower or 2-5 % higher (``thrust_factor``: worn props, heat or altitude lose
+up to 15 %; cold air or another prop batch gain a few %, the prior of quadsim.gap.priors);
 motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4 % of the
 weight; rotor drag 0.5-2 x 2.5 % of the weight per m/s at hover; wind 0-2 m/s.
 """
@@ -59,8 +60,9 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
         return [make_effect(name, **{f"rotor_{rotor}": sign * rng.uniform(0.05, 0.15)})]
     if name == "thrust_curve":
         return [make_effect(name, linear=sign * rng.uniform(0.03, 0.1) * params.thrust_factor * hover)]
-    if name == "thrust_factor":
-        return [make_effect(name, change=sign * rng.uniform(0.05, 0.15))]
+    if name == "thrust_factor":   # within the documented prior -15 % .. +5 % (gap.priors)
+        return [make_effect(name, change=-rng.uniform(0.05, 0.15) if sign < 0
+                            else rng.uniform(0.02, 0.05))]
     if name == "battery_sag":
         return [make_effect(name, rate=rng.uniform(0.005, 0.02),
                             full_voltage=4.2 if small else 12.6)]
