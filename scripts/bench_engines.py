@@ -156,34 +156,16 @@ def quadsim_fn(params, series: np.ndarray, engine: str = "mujoco", **kw):
 
 
 def raw_rollout(params, series: np.ndarray, threads: int) -> float:
-    """mujoco.rollout of the batch's open-loop controls (one per 1 ms step), ``threads``."""
-    from mujoco import rollout
-
-    model = compile_model(params, DT)
-    substeps = round(PERIOD / DT)
-    control = np.repeat(series**2, substeps, axis=1)
-    datas = [mujoco.MjData(model) for _ in range(threads)]
-    data = datas[0]
-    data.qpos[:] = [0, 0, 1, *START["quat"]]
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    state = np.zeros(mujoco.mj_stateSize(model, spec))
-    mujoco.mj_getState(model, data, state, spec)
-    initial = np.tile(state, (len(series), 1))
-    return best_rate(lambda: rollout.rollout(model, datas, initial, control),
-                     control.shape[0] * control.shape[1])
+    """Steps/s of :func:`rollout_fn` (one per 1 ms step, ``threads``)."""
+    return best_rate(rollout_fn(params, series, threads),
+                     series.shape[0] * series.shape[1] * round(PERIOD / DT))
 
 
 def quadsim_rate(params, series: np.ndarray, engine: str = "mujoco", repeat: int = 2,
                  **kw) -> float:
-    batch, periods = series.shape[:2]
-    start = {k: np.tile(v, (batch, 1)) for k, v in START.items()}
-    def run(steps=periods):
-        return simulate(params, engine=engine, initial=start,
-                        rotor_speed_series=series[:, :steps], duration=steps * PERIOD,
-                        control_period=PERIOD, **kw)
-
-    run(1)            # warm-up: loads the compiled kernels (numba's cache) outside the timing
-    return best_rate(run, batch * periods * round(PERIOD / DT), repeat)
+    """Steps/s of :func:`quadsim_fn` (best of ``repeat``; the warm-up is outside)."""
+    return best_rate(quadsim_fn(params, series, engine, **kw),
+                     series.shape[0] * series.shape[1] * round(PERIOD / DT), repeat)
 
 
 def rotorpy_rate(series: np.ndarray) -> float | None:

@@ -146,44 +146,34 @@ def _mark_tentative(entry: dict, notes: list[str], result: dict) -> None:
                  + "; ".join(result["shifted"]) + ")")
 
 
-def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
-    """Record ``result`` in a pooled verdict; an inconsistent name becomes ``unexplained``,
-    a shifted one is marked ``tentative``."""
-    verdict["consistency"] = result
-    verdict["tentative"] = False
-    if verdict.get("outcome") != "effect":
+def _apply(entry: dict, notes: list[str], result: dict, label: str) -> None:
+    """Record ``result`` in ``entry`` (its name under ``label``); an inconsistent name
+    becomes ``unexplained``, a shifted one is marked ``tentative``."""
+    entry["consistency"] = result
+    entry["tentative"] = False
+    if entry.get("outcome") != "effect":
         return
     if result["consistent"]:
         if result["shifted"]:
-            _mark_tentative(verdict, notes, result)
+            _mark_tentative(entry, notes, result)
         return
-    name = verdict["effect"]
-    verdict["partial"] = {k: verdict.get(k) for k in ("reduction", "params", "ci", "units",
-                                                      "alternatives", "confusable_with")}
-    verdict["partial"]["name"] = name
-    verdict.update({"outcome": "unexplained", "effect": "unexplained",
-                    "answer": _partial_text(name, verdict["reduction"], result),
-                    "confusable_with": [], "alternatives": [], "separate_by": {}})
+    name = entry[label]
+    entry["partial"] = {k: entry.get(k) for k in ("reduction", "params", "ci", "units",
+                                                  "alternatives", "confusable_with")}
+    entry["partial"]["name"] = name
+    entry.update({"outcome": "unexplained", label: "unexplained",
+                  "answer": _partial_text(name, entry["reduction"], result),
+                  "confusable_with": [], "alternatives": [], "separate_by": {}})
     notes.append(f"{name} not named: its parameters are inconsistent between regimes ("
                  + "; ".join(result["inconsistent"]) + ")")
 
 
+def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
+    """:func:`_apply` on a pooled verdict (name in ``effect``)."""
+    _apply(verdict, notes, result, "effect")
+
+
 def apply_to_flight(judged: dict, result: dict) -> None:
-    """The same for one flight of the per-flight mode (``flights[]`` entry)."""
-    judged["consistency"] = result
-    judged["tentative"] = False
-    if judged.get("outcome") != "effect":
-        return
-    if result["consistent"]:
-        if result["shifted"]:
-            _mark_tentative(judged, judged["notes"], result)
-        return
-    name = judged["verdict"]
-    judged["partial"] = {k: judged.get(k) for k in ("reduction", "params", "ci", "units",
-                                                    "alternatives", "confusable_with")}
-    judged["partial"]["name"] = name
-    judged.update({"outcome": "unexplained", "verdict": "unexplained",
-                   "answer": _partial_text(name, judged["reduction"], result),
-                   "confusable_with": [], "alternatives": [], "separate_by": {}})
-    judged["notes"].append(f"{name} not named: its parameters are inconsistent between "
-                           "regimes (" + "; ".join(result["inconsistent"]) + ")")
+    """The same for one flight of the per-flight mode (``flights[]`` entry, name in
+    ``verdict``)."""
+    _apply(judged, judged["notes"], result, "verdict")
