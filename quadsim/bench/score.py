@@ -5,14 +5,24 @@
 :func:`quadsim.gap.diagnose_per_flight` (``result["flights"][i]``). It returns::
 
     {"outcome": "no_significant_gap" | "named" | "unexplained",
-     "named": [library effect names in the verdict],
-     "alternatives": [names listed as confusable / collinear with it],
+     "lead": [effects of the verdict's first reading],
+     "named": [effects of every reading the verdict's answer states],
+     "readings": int,         # how many readings the answer states
+     "alternatives": [names listed as confusable / collinear, not stated as a reading],
      "confident": bool}      # a name given without a flag that it is tentative
 
-Scores (:func:`score_case`, per case): ``named`` -- the verdict itself names the hidden
-effect; ``named_or_alternative`` -- it is named or listed as a collinear alternative;
-``no_gap`` -- a no-effect case got ``no_significant_gap``; ``confident_wrong`` -- a
-confident name that is not the hidden effect (for out-of-library cases every name is wrong).
+A *reading* is one explanation the answer states: the named effect ("behaves as if +58 g
+heavier") and every collinear alternative that ties with it on held-out data and is
+physically plausible ("; or as if -6.5 % thrust per Omega^2 on all 4 rotors"). Data that
+cannot separate two causes get a verdict that names both with their magnitudes (the issue's
+"+90 g, or -10 % thrust per Omega^2; weigh it to tell"); an implausible alternative is
+listed ("not named") but is not a reading.
+
+Scores (:func:`score_case`, per case): ``named`` -- a reading of the verdict names the hidden
+effect; ``lead`` -- the first reading does (the priors' pick among collinear readings);
+``named_or_alternative`` -- named or listed at all; ``no_gap`` -- a no-effect case got
+``no_significant_gap``; ``confident_wrong`` -- a confident name that is not the hidden effect
+(for out-of-library cases every name is wrong).
 """
 
 from __future__ import annotations
@@ -49,10 +59,19 @@ def read_verdict(entry: dict) -> dict:
         outcome, named = "unexplained", []
     else:
         outcome, named = "named", [n for n in effect.split("+") if n]
+    lead, readings = list(named), 1 if named else 0
+    if outcome == "named":
+        stated = entry.get("readings")
+        if stated is None:      # results without the field: the plausible alternatives
+            stated = [effect] + [a["name"] for a in entry.get("alternatives") or []
+                                 if isinstance(a, dict) and a.get("plausible")
+                                 and a.get("name") != effect]
+        readings = max(1, len(stated))
+        named += [n for n in _names(stated) if n not in named]
     alternatives = _names(entry.get("confusable_with")) + _names(entry.get("alternatives")) \
         + _names(entry.get("collinear"))
     tentative = bool(entry.get("tentative") or entry.get("flagged") or entry.get("implausible"))
-    return {"outcome": outcome, "named": named,
+    return {"outcome": outcome, "lead": lead, "named": named, "readings": readings,
             "alternatives": sorted(set(alternatives) - set(named)),
             "confident": outcome == "named" and not tentative}
 
@@ -60,7 +79,8 @@ def read_verdict(entry: dict) -> dict:
 def score_case(truth: str, kind: str, verdict: dict) -> dict:
     """Per-case scores for hidden effect ``truth`` of ``kind`` library / none / outside."""
     named = truth in verdict["named"]
-    return {"named": named,
+    return {"named": named, "lead": truth in verdict.get("lead", verdict["named"]),
+            "readings": verdict.get("readings", 1 if verdict["named"] else 0),
             "named_or_alternative": named or truth in verdict["alternatives"],
             "no_gap": verdict["outcome"] == "no_significant_gap",
             "confident_wrong": verdict["confident"] and (kind != "library" or not named)}
@@ -71,16 +91,20 @@ def _rate(values) -> str:
     return f"{np.mean(values):.0%} ({sum(values)}/{len(values)})" if values else "-"
 
 
-def summary_rows(rows: list[dict], min_gain: float) -> list[tuple[str, str, str, str, str]]:
-    """Per (label, group of rows): named, named-or-alternative (observable in-library),
-    no-effect -> no_significant_gap, out-of-library confident wrong names."""
+def summary_rows(rows: list[dict], min_gain: float) -> list[tuple[str, ...]]:
+    """Per (label, group of rows), over the observable in-library cases: a reading names it,
+    the lead reading names it, named or listed, mean readings per named verdict; then
+    no-effect -> no_significant_gap and out-of-library confident wrong names."""
     out = []
     for label, group in rows:
         lib = [r for r in group if r["kind"] == "library" and r["oracle_reduction"] >= min_gain]
         none = [r for r in group if r["kind"] == "none"]
         outside = [r for r in group if r["kind"] == "outside"]
+        counts = [r["score"].get("readings", 1) for r in lib if r["score"].get("readings", 1)]
         out.append((label, _rate(r["score"]["named"] for r in lib),
+                    _rate(r["score"].get("lead", r["score"]["named"]) for r in lib),
                     _rate(r["score"]["named_or_alternative"] for r in lib),
+                    f"{np.mean(counts):.1f}" if counts else "-",
                     _rate(r["score"]["no_gap"] for r in none),
                     f"{sum(r['score']['confident_wrong'] for r in outside)}/{len(outside)}"))
     return out

@@ -47,7 +47,8 @@ CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
 (``quadsim.gap/2``), documented in docs/gap.md.
 """
 
-from .diagnose import SCHEMA, diagnose, diagnose_per_flight, prepare
+from .diagnose import SCHEMA, diagnose, prepare
+from .per_flight import diagnose_per_flight
 from .report import summary, to_json, write_html, write_json, write_rerun
 from .schema import GAP_SCHEMA, validate
 from .synthetic import SensorNoise, synthetic_flight

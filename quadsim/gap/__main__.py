@@ -19,7 +19,8 @@ from ..cliargs import ArgumentParser
 from ..errors import InputError, QuadsimWarning, run_cli
 from ..flightlog import load_log
 from ..params import load_params
-from .diagnose import diagnose, diagnose_per_flight
+from .diagnose import diagnose
+from .per_flight import diagnose_per_flight
 from .report import summary, write_html, write_json, write_rerun
 
 

@@ -7,7 +7,6 @@ thing.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -16,7 +15,7 @@ import numpy as np
 
 from ..delays import align_signal_delays, delay_notes
 from ..effects.base import EffectBase, EffectParameter
-from ..errors import InputError, ModelError, QuadsimWarning
+from ..errors import InputError, ModelError
 from ..flightlog import FlightLog
 from ..params import VehicleParams
 from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
@@ -35,7 +34,7 @@ from .fitting import (
 )
 from .where import by_band, by_regime, kstep_errors, regime_masks
 
-__all__ = ["Flight", "prepare", "diagnose", "diagnose_per_flight", "SCHEMA", "MIN_GAIN",
+__all__ = ["Flight", "prepare", "diagnose", "parts_identified", "SCHEMA", "MIN_GAIN",
            "MIN_T", "TIE", "EDGE_S", "interior"]
 
 SCHEMA = "quadsim.gap/2"
@@ -46,10 +45,6 @@ MIN_GAIN = 0.05
 MIN_T = 1.0
 #: ... and effects whose held-out gap is within this fraction of the best are confusable.
 TIE = 0.02
-#: per-flight mode: effects within this held-out reduction of the named one are confusable.
-PER_FLIGHT_TIE = 0.05
-#: per-flight mode: fewer reference flights than this gives a note (spread poorly known).
-MIN_REFERENCE = 10
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -360,7 +355,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         first = min(tied, key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
         others = [e for e in ranked if e is not first
                   and abs(e["heldout_gap_after"] - first["heldout_gap_after"]) <= TIE * nominal_gap
-                  and len(e["params"]) <= len(first["params"]) + 1]
+                  and len(e["params"]) <= len(first["params"]) + 1 and parts_identified(e)]
         if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap:
             others.append(baseline)
         best, alts = collinear.pick_plausible(first, others, params)
@@ -376,6 +371,8 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
     if best is not None:
         combined = _greedy(best, ranked, train, held, params, sigma, rotor, before, dt,
                            max_combination, nominal_gap, tick)
+        if combined is not best:
+            alts = _combination_alternatives(combined, best, alts, params)
     effects_after = combined["_fit"].effects() if combined else []
     after = _scaled(held, params, effects_after, sigma, rotor)
     if best is None and _clear(baseline, nominal_gap, nominal_gap):
@@ -421,6 +418,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
             np.concatenate(after) ** 2, axis=0)))),
         "reduction": combined["reduction"] if combined else 0.0,
         "confusable_with": confusable,
+        "readings": [a["name"] for a in rule.stated_readings(alts)] if combined else [],
         "separate_by": _separation(combined["name"], confusable) if combined else {},
         "params": combined["params"] if combined else {},
         "ci": combined["ci"] if combined else {},
@@ -479,6 +477,15 @@ def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_com
     return current
 
 
+def parts_identified(entry: dict) -> bool:
+    """Every effect of a fitted candidate has a parameter identified and significant (the
+    ``wind`` candidate fits wind with rotor drag: a wind of 0.002 +- 0.1 m/s is rotor drag
+    alone, not a second reading of the data)."""
+    parts = {k.split(".")[0] for k in entry["params"]}
+    return all(any(entry["identifiable"][k] and entry["significant"][k]
+                   for k in entry["params"] if k.split(".")[0] == part) for part in parts)
+
+
 def _every_part_stands(entry: dict, params) -> bool:
     """A combination claims that each of its effects is there: every part needs a parameter
     identified and significant, and the combined fit must be physically plausible (priors).
@@ -486,119 +493,23 @@ def _every_part_stands(entry: dict, params) -> bool:
     vehicle 50 % lighter) explain nothing about the vehicle."""
     from .priors import candidate_plausibility
 
-    for part in entry["name"].split("+"):
-        keys = [k for k in entry["params"] if k.split(".")[0] == part]
-        if not any(entry["identifiable"][k] and entry["significant"][k] for k in keys):
-            return False
-    return bool(candidate_plausibility(entry["params"], params)[1])
+    return parts_identified(entry) and bool(candidate_plausibility(entry["params"], params)[1])
+
+
+def _combination_alternatives(combined: dict, best: dict, alts: list[dict], params) -> list:
+    """The readings of a combination: the combined fit described first, then each collinear
+    reading of its first effect (``alts`` of ``best``) with the rest of the combination."""
+    rest = combined["name"][len(best["name"]) + 1:]
+    keys = [k for k in combined["params"] if k.split(".")[0] in rest.split("+")]
+    rest_text = collinear.describe(rest, {k: combined["params"][k] for k in keys},
+                                   {k: combined["ci"].get(k) for k in keys}, params)
+    out = collinear.alternatives(combined, [], params)
+    for a in alts:
+        if a["name"] != best["name"]:
+            out.append({**a, "name": f"{a['name']}+{rest}",
+                        "magnitude": f"{a['magnitude']}, with {rest_text}"})
+    return out
 
 
 def _public(entry: dict) -> dict:
     return {k: v for k, v in entry.items() if not k.startswith("_")}
-
-
-def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
-                        params: VehicleParams, *, effects: Sequence[str] | None = None,
-                        progress: Callable | None = None,
-                        window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map) -> dict:
-    """Judge each flight on its own against ``reference`` (nominal) flights.
-
-    The nominal thrust and drag factors are first refitted on the reference flights (so the
-    reference defines "nominal"); then each flight is diagnosed with its first half as
-    training and its second half as held-out data (a time split inside the flight), and its
-    fitted effect parameters are compared with the spread of the same fit on the reference
-    flights."""
-    ref = prepare(reference, params, window_s=window_s)
-    if len(ref) < 2:
-        raise InputError("--reference: give at least 2 nominal flights")
-    vehicle = vehicle_check([f.fit for f in ref], params)
-    rotor = all(f.fit.command is not None for f in ref)
-    if rotor:
-        params = fit_motor_map([f.fit for f in ref], params)
-    sigma0 = noise_scale(np.concatenate([residuals(f.fit, params, [], rotor_channel=rotor)
-                                         for f in ref]), float(ref[0].fit.t[1] - ref[0].fit.t[0]),
-                         floor=noise_floor(params, rotor))
-    base = fit_candidate(BASELINE, [f.fit for f in ref], params, sigma0, rotor_channel=rotor)
-    notes = ([f"only {len(ref)} reference flights: an effect's spread over nominal flights "
-              "is poorly known; give 10 or more"] if len(ref) < MIN_REFERENCE else [])
-    tuned = base.effects()[0].apply_to_params(params)
-    reference_fits, floors = _reference_spread(ref, tuned, effects, progress)
-    one_flight = partial(_one_flight, tuned=tuned, effects=effects, window_s=window_s,
-                         spread=reference_fits, floors=floors,
-                         progress=None if map_fn is not map else progress)
-    flights = list(map_fn(one_flight, logs))
-    # Bad input: a reference set that disagrees with the model more than the flights tested.
-    ratios = [np.median([c["before"] / max(c["floor"], 1e-300) for c in f["channels"].values()])
-              for f in flights]
-    checks = {"flights_vs_reference_floor": float(np.median(ratios)) if ratios else None,
-              **vehicle}
-    if ratios and np.median(ratios) < 1 / rule.FLOOR_TOL:
-        notes.append(f"the reference flights disagree with the model more than the flights "
-                     f"under test (median nominal residual of the tested flights "
-                     f"{np.median(ratios):.2f}x the reference floor): check the reference set")
-    return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
-            "reference": [f.name for f in ref],
-            "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
-            "reference_floor": {k: max(v) for k, v in floors.items()}, "checks": checks,
-            "notes": notes,
-            "where": {}, "effects": [],
-            "verdict": {"outcome": "effect" if any(f["outcome"] == "effect" for f in flights)
-                        else "unexplained", "effect": "see flights",
-                        "answer": rule.per_flight_answer(flights), "reduction": None,
-                        "confusable_with": []}}
-
-
-def _one_flight(log, tuned, effects, window_s, spread, floors, progress) -> dict:
-    """Judge one flight against the reference spread (module level: sent to workers)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        flight = prepare([log], tuned, window_s=window_s)[0]
-        one = _diagnose_split(*_halves(flight), tuned, effects, 1, progress, [])
-    judged = rule.judge_flight(one, spread, flight.name, floors, tuned, min_t=MIN_T,
-                               min_gain=MIN_GAIN, tie=TIE, per_flight_tie=PER_FLIGHT_TIE)
-    judged["signal_delays_ms"] = flight.delays_ms
-    judged["notes"].extend(delay_notes([flight]))
-    if judged["outcome"] == "effect":   # one value in every regime, or not named
-        _flight_consistency(judged, one, flight, tuned)
-    return judged
-
-
-def _flight_consistency(judged: dict, one: dict, flight: Flight, params) -> None:
-    """The parameter-consistency guard (:mod:`.consistency`) on one flight (both halves)."""
-    rotor = flight.fit.command is not None
-    has_vbat = flight.fit.vbat is not None and bool(np.all(np.isfinite(flight.fit.vbat)))
-    cand = next((c for c in candidates_for(params, rotor, has_vbat)
-                 if c.name == judged["verdict"]), None)
-    entry = next((e for e in one["effects"] if e["name"] == judged["verdict"]), None)
-    if cand is None or entry is None:
-        return
-    sigma = np.array([one["where"]["noise_scale"][k] for k in one["where"]["channels"]])
-    theta = np.array([entry["params"][k] for k in cand.parameter_names])
-    consistency.apply_to_flight(judged, consistency.check(
-        cand, theta, consistency.judged_parameters(entry), [flight.fit], params, sigma, rotor))
-
-
-def _halves(f: Flight):
-    half = len(f.states.t) // 2
-    out = []
-    for sl in (slice(0, half), slice(half, None)):
-        idx = np.arange(len(f.states.t))[sl]
-        states = f.states.take(idx)
-        fit_idx = np.nonzero((f.fit.t >= states.t[0]) & (f.fit.t <= states.t[-1]))[0]
-        out.append(Flight(f.name, states, f.fit.take(fit_idx)))
-    return [out[0]], [out[1]]
-
-
-def _reference_spread(ref: list[Flight], params, effect_names, progress) -> tuple[dict, dict]:
-    """Per effect: each reference flight's own reduction (first half -> second half); per
-    channel: the largest held-out RMS the nominal model leaves on a reference flight (the
-    per-flight floor, in the channel's unit)."""
-    spread: dict[str, list[float]] = {}
-    floors: dict[str, list[float]] = {}
-    for f in ref:
-        one = _diagnose_split(*_halves(f), params, effect_names, 1, progress, [])
-        for e in one["effects"]:
-            spread.setdefault(e["name"], []).append(e["reduction"])
-        for k, v in one["where"]["heldout_rms_before"].items():
-            floors.setdefault(k, []).append(v)
-    return spread, floors

@@ -91,6 +91,7 @@ _VERDICT = {
         "effect": {"type": "string"},
         "reduction": {"type": ["number", "null"]},
         "confusable_with": {"type": "array", "items": {"type": "string"}},
+        "readings": {"type": "array", "items": {"type": "string"}},
         "separate_by": {"type": "object", "additionalProperties": {"type": "string"}},
         "params": _NUMBER_MAP,
         "ci": _NUMBER_MAP,
@@ -115,6 +116,7 @@ _FLIGHT = {
                    "params": _NUMBER_MAP, "ci": _NUMBER_MAP,
                    "reduction": {"type": ["number", "null"]},
                    "confusable_with": {"type": "array", "items": {"type": "string"}},
+                   "readings": {"type": "array", "items": {"type": "string"}},
                    "consistency": _CONSISTENCY, "partial": _PARTIAL,
                    "tentative": {"type": "boolean"}},
 }
