@@ -48,13 +48,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from quadsim.bench.cases import oracle_reduction  # noqa: E402
 from quadsim.bench.draws import draw  # noqa: E402
 from quadsim.effects import make_effect  # noqa: E402
 from quadsim.errors import QuadsimWarning  # noqa: E402
 from quadsim.fileio import atomic_write_text  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
-from quadsim.gap.diagnose import MIN_GAIN, prepare  # noqa: E402
-from quadsim.gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals  # noqa: E402
+from quadsim.gap.diagnose import MIN_GAIN  # noqa: E402
 from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
 from quadsim.params import load_params  # noqa: E402
 
@@ -95,21 +95,6 @@ def case_list(count: int | None = None) -> list[dict]:
     return cases[:count] if count else cases
 
 
-def _oracle_reduction(logs, params, effects) -> float:
-    """Held-out gap reduction with the *true* effect and values (observability check)."""
-    flights = prepare(logs, params)
-    train, held = flights[:2], flights[2:]
-    params = fit_motor_map([f.fit for f in train], params)  # as the diagnosis does
-    nominal = [residuals(f.fit, params, [], rotor_channel=True) for f in train]
-    sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]),
-                        floor=noise_floor(params, True))
-    before = np.mean(np.concatenate([residuals(f.fit, params, [], rotor_channel=True) / sigma
-                                     for f in held]) ** 2)
-    after = np.mean(np.concatenate([residuals(f.fit, params, effects, rotor_channel=True) / sigma
-                                    for f in held]) ** 2)
-    return float((before - after) / before)
-
-
 def run_case(case: dict) -> dict:
     warnings.simplefilter("ignore", QuadsimWarning)
     params = load_params(case["vehicle"])
@@ -127,7 +112,7 @@ def run_case(case: dict) -> dict:
            "confusable_with": verdict["confusable_with"], "seconds": elapsed,
            "readings": verdict.get("readings", []),
            "truth_values": {k: v for k, v in truth_values.items() if v != 0.0},
-           "oracle_reduction": _oracle_reduction(logs, params, effects) if effects else 0.0,
+           "oracle_reduction": oracle_reduction(logs, params, effects) if effects else 0.0,
            "ranked": [e["name"] for e in result["effects"][:3]],
            "best_candidate": verdict["best_candidate"],
            "channel_gap_after": verdict["heldout_channel_gap_after"],

@@ -177,25 +177,40 @@ def reference_flights(source: str, vehicle: str) -> list:
 
 
 def oracle_reduction(logs, params, effects) -> float:
-    """Held-out gap reduction with the *true* library effects and values (observability)."""
+    """Held-out gap reduction with the *true* library effects and values (observability):
+    the last log is held out, the others train (motor map and noise scale, as the
+    diagnosis does). For effects upstream of the rotor speed (a battery's speed factor) the
+    truth includes the map: the nominal model's map is fitted on the logged speeds (which
+    carry the sag), the true model's on the speeds the command gives before the factor
+    (speed / factor), so the true factor is not counted twice."""
+    import dataclasses
+
+    from ..effects.base import EffectSet
     from ..gap.diagnose import prepare
     from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
 
     if not effects:
         return 0.0
     flights = prepare(logs, params)
-    train, held = flights[:-1], flights[-1:]
-    params = fit_motor_map([f.fit for f in train], params)
-    nominal = [residuals(f.fit, params, [], rotor_channel=True) for f in train]
-    sigma = noise_scale(np.concatenate(nominal), float(train[0].fit.t[1] - train[0].fit.t[0]),
-                        floor=noise_floor(params, True))
+    train, held = [f.fit for f in flights[:-1]], [f.fit for f in flights[-1:]]
+    nominal_params = fit_motor_map(train, params)
+    factor_of = EffectSet(tuple(effects)).speed_factor
+    unfactored = []
+    for f in train:
+        factor = factor_of(f.t, f.vbat)
+        unfactored.append(f if factor is None or f.rotor_speed is None else dataclasses.replace(
+            f, rotor_speed=f.rotor_speed / np.asarray(factor)[:, None]))
+    true_params = fit_motor_map(unfactored, params)
+    nominal = [residuals(f, nominal_params, [], rotor_channel=True) for f in train]
+    sigma = noise_scale(np.concatenate(nominal), float(train[0].t[1] - train[0].t[0]),
+                        floor=noise_floor(nominal_params, True))
 
-    def gap(eff):
-        return np.mean(np.concatenate([residuals(f.fit, params, eff, rotor_channel=True) / sigma
+    def gap(p, eff):
+        return np.mean(np.concatenate([residuals(f, p, eff, rotor_channel=True) / sigma
                                        for f in held]) ** 2)
 
-    before = gap([])
-    return float((before - gap(effects)) / before)
+    before = gap(nominal_params, [])
+    return float((before - gap(true_params, effects)) / before)
 
 
 def _truth_effects(case, spec, params) -> list:

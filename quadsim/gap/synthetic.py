@@ -106,6 +106,33 @@ def _attitude(thrust_world: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return np.stack([xb, yb, zb], -1)
 
 
+def _align_body_force(rot: np.ndarray, force_dir: np.ndarray) -> np.ndarray:
+    """``rot`` (N, 3, 3) turned in the body frame so that the body direction ``force_dir``
+    (N, 3, unit) lands where ``rot`` put body z: R' = R C with C force_dir = z (Rodrigues).
+    Rotors tilted from body z (a canted rotor) push partly sideways; the attitude must put
+    the rotors' total force, not body z, along the force the path needs."""
+    z = np.array([0.0, 0.0, 1.0])
+    k = np.cross(force_dir, z)
+    s2 = np.sum(k * k, axis=1)
+    if not np.any(s2 > 0.0):
+        return rot
+    c = force_dir[:, 2]
+    kx = np.zeros((len(k), 3, 3))
+    kx[:, 0, 1], kx[:, 0, 2], kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    kx[:, 1, 0], kx[:, 2, 0], kx[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    scale = np.divide(1.0 - c, s2, out=np.zeros_like(c), where=s2 > 0.0)
+    turn = np.eye(3)[None] + kx + np.einsum("nij,njk->nik", kx, kx) * scale[:, None, None]
+    return np.einsum("nij,njk->nik", rot, turn)
+
+
+def _rotor_force_dir(vehicle, loads, speed) -> np.ndarray:
+    """Unit direction (N, 3), body frame, of the rotors' total force at ``speed``."""
+    axes = vehicle.rotor_axes
+    force = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle)[:3].T \
+        + loads.thrust_offset @ axes
+    return force / np.linalg.norm(force, axis=1, keepdims=True)
+
+
 def _rotmat_to_quat(rot: np.ndarray) -> np.ndarray:
     w = np.sqrt(np.maximum(1 + rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2], 1e-12)) / 2
     q = np.stack([w, (rot[:, 2, 1] - rot[:, 1, 2]) / (4 * w),
@@ -228,6 +255,7 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
     rot = _attitude(lift, yaw)
     if not effect_set.effects:
         passes = 2  # nothing feeds back: one pass for the attitude, one for the speeds
+    force_dir = np.tile([0.0, 0.0, 1.0], (len(t), 1))   # body direction of the rotor force
     for done in range(passes):
         quat = _rotmat_to_quat(rot)
         rate = _body_rate(t, rot)
@@ -240,10 +268,11 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
                             rotor_accel, vehicle, vbat)
         loads = effect_set.loads(ctx)
         thrust_world = vehicle.mass * lift - loads.force_world
-        rot = _attitude(thrust_world, yaw)
+        rot = _align_body_force(_attitude(thrust_world, yaw), force_dir)
         inertia = vehicle.inertia
         torque = rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T) - loads.torque_body
-        thrust = np.linalg.norm(thrust_world, axis=1)
+        # the rotors' force along body z (all of it unless a rotor is tilted)
+        thrust = np.linalg.norm(thrust_world, axis=1) * force_dir[:, 2]
         sens = _accel_sensitivity(effect_set, ctx)
         if sens is None or done < passes - 2:
             # Early passes leave out the dOmega/dt torque (cheap); the last two march in time.
@@ -258,6 +287,7 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
             speed = solved
         else:
             speed = _march_rotors(vehicle, loads, thrust, torque, sens, rotor_accel, speed, dt)
+        force_dir = _rotor_force_dir(vehicle, loads, speed)
     specific = rotate_inverse(quat, np.gradient(velocity, t, axis=0) + [0, 0, vehicle.gravity])
     return position, velocity, quat, rate, specific, speed
 
