@@ -22,7 +22,7 @@ Usage::
     python scripts/gap_benchmark.py --speed
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
 
-Independent benchmark (``--independent``): 60 cases from sources this project's diagnosis
+Independent benchmark (``--independent``): 64 cases from sources this project's diagnosis
 did not generate (:mod:`quadsim.bench`: RotorPy closed loop with its own controller,
 integrator and sensors; quadsim's closed loop through a realistic sensor pipeline), judged
 in held-out mode and per flight against nominal flights of the same source. Scores

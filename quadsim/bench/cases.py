@@ -15,8 +15,9 @@ for the per-flight mode. Cases per vehicle: RotorPy 3 no-effect, 11 in-library (
 CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outside
 (flapping moment, translational lift: RotorPy physics quadsim's library lacks); pipeline
 2 no-effect, 8 in-library, 2 outside (translational lift, blade flapping moment:
-:mod:`.outside`). 56 cases in all, plus
-one ``thrust_factor`` case per source and vehicle when the library has that effect.
+:mod:`.outside`). 56 cases in all, plus one ``thrust_factor`` case per source and vehicle,
+and a canted rotor and aerodynamic rate damping per vehicle from the pipeline source
+(appended, so the seeds of the cases before them stay): 64.
 
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 (:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
@@ -59,6 +60,7 @@ ROTORPY_OUTSIDE = ("flapping", "translational_lift")
 PIPELINE_LIBRARY = ("mass_offset", "com_offset", "thrust_mismatch", "thrust_curve", "battery_sag",
                     "motor_lag", "inertia_error", "rotor_drag")
 PIPELINE_OUTSIDE = ("translational_lift", "blade_flapping")
+PIPELINE_LATER = ("canted_rotor", "rate_damping")
 
 
 def case_list(count: int | None = None) -> list[dict]:
@@ -80,6 +82,12 @@ def case_list(count: int | None = None) -> list[dict]:
             for vehicle in VEHICLES:
                 cases.append({"source": source, "vehicle": vehicle, "truth": "thrust_factor",
                               "kind": "library", "seed": 5000 + len(cases)})
+    # library effects of stop 17-18 that RotorPy cannot express (a rotor axis is fixed there;
+    # its drag moment is not a damping we can set): the pipeline source only
+    for name in PIPELINE_LATER:
+        for vehicle in VEHICLES:
+            cases.append({"source": "pipeline", "vehicle": vehicle, "truth": name,
+                          "kind": "library", "seed": 5000 + len(cases)})
     return cases[:count] if count else cases
 
 

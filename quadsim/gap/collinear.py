@@ -53,6 +53,14 @@ SEPARATE = {
                                        "in the world frame)",
     frozenset({"thrust_curve", "nominal_refit"}): "fly over a wider range of rotor speeds",
     frozenset({"ground_effect", "thrust_curve"}): "hover at several heights at the same speed",
+    frozenset({"canted_rotor", "wind"}): "fly the same path in both directions (wind is fixed "
+                                         "in the world, a canted rotor's push turns with the "
+                                         "body); or look at the motor mounts",
+    frozenset({"canted_rotor", "com_offset"}): "hover with a payload on the CoM: a canted "
+                                               "rotor's sideways push grows with its thrust; "
+                                               "or look at the motor mounts",
+    frozenset({"canted_rotor", "thrust_mismatch"}): "look at the motor mounts; a canted rotor "
+                                                    "also pushes sideways (hover drifts)",
 }
 
 
@@ -80,10 +88,16 @@ def _pm(value: float, ci: float | None, scale: float, digits: str = ".2g") -> st
     return f"{value * scale:+{digits}} ± {abs(ci) * scale:{digits}}"
 
 
-def describe(name: str, values: dict, ci: dict, params: VehicleParams) -> str:
-    """Physical statement (with units) of a fitted candidate."""
+def describe(name: str, values: dict, ci: dict, params: VehicleParams,
+             fixed: dict | None = None) -> str:
+    """Physical statement (with units) of a fitted candidate (``fixed``: the values held
+    fixed in the fit, e.g. ``canted_rotor.rotor``)."""
     parts = []
+    if "canted_rotor.tilt_x" in values and "canted_rotor.tilt_y" in values:
+        parts.append(_canted(values, ci, params, (fixed or {}).get("canted_rotor.rotor")))
     for key, value in values.items():
+        if key.startswith("canted_rotor.tilt_"):
+            continue
         c = ci.get(key)
         if key == "mass_offset.mass":
             parts.append(f"{_pm(value, c, 1e3)} g heavier ({100 * value / params.mass:+.1f} % "
@@ -106,6 +120,20 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams) -> str:
         else:
             parts.append(_worded(key, value, c, params))
     return ", ".join(parts) if parts else name
+
+
+def _canted(values: dict, ci: dict, params: VehicleParams, rotor: float | None) -> str:
+    """A canted rotor in words: the lean (deg) and its direction, the sideways push at hover."""
+    tx, ty = values["canted_rotor.tilt_x"], values["canted_rotor.tilt_y"]
+    cx, cy = ci.get("canted_rotor.tilt_x"), ci.get("canted_rotor.tilt_y")
+    angle = float(np.hypot(tx, ty))
+    c = None if cx is None or cy is None else float(np.hypot(cx, cy))
+    push = params.weight / params.rotor_count * np.sin(angle)
+    which = f"rotor {int(rotor)}" if rotor is not None else "a rotor"
+    return (f"{which}'s axis leans {_pm(np.degrees(angle), None if c is None else np.degrees(c), 1.0)}"
+            f" deg (towards body x {np.degrees(tx):+.2g} deg and y {np.degrees(ty):+.2g} deg): "
+            f"it pushes {1e3 * push:.3g} mN sideways at hover ({100 * push / params.weight:.2g} "
+            "% of the weight)")
 
 
 def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> str:
@@ -178,7 +206,8 @@ def alternatives(best: dict, others: list[dict], params: VehicleParams) -> list[
         worst = candidate_plausibility(entry["params"], params)
         out.append({
             "name": entry["name"],
-            "magnitude": describe(entry["name"], entry["params"], entry.get("ci", {}), params),
+            "magnitude": describe(entry["name"], entry["params"], entry.get("ci", {}), params,
+                                  entry.get("fixed")),
             "params": entry["params"], "ci": entry.get("ci", {}),
             "units": {k: unit_of(k) for k in entry["params"]},
             "reduction": entry.get("reduction"),

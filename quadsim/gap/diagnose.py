@@ -180,6 +180,7 @@ def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
     except ModelError as exc:  # the fit stopped on a non-physical vehicle: no improvement
         names = fit.candidate.parameter_names
         return {"name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
+                "fixed": fit.candidate.fixed_values,
                 "identifiable": dict.fromkeys(names, False),
                 "significant": dict.fromkeys(names, False),
                 "heldout_gap_before": _gap(before), "heldout_gap_after": _gap(before),
@@ -189,6 +190,7 @@ def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
     rms = _channel_rms(after, sigma)
     return {
         "name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
+        "fixed": fit.candidate.fixed_values,
         "identifiable": dict(zip(fit.candidate.parameter_names, fit.identifiable)),
         "significant": dict(zip(fit.candidate.parameter_names, fit.significant)),
         "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
@@ -313,6 +315,14 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
                                                  before=before, dt=dt), cands)):
         scored.append(entry)
         tick(cand.name)
+    # Candidates of one name that differ in a fixed value (a canted rotor's index): the one
+    # that fits the training flights best stands for the effect (held-out data not used).
+    best_of = {}
+    for entry in scored:
+        kept = best_of.get(entry["name"])
+        if kept is None or entry["_fit"].cost < kept["_fit"].cost:
+            best_of[entry["name"]] = entry
+    scored = [e for e in scored if best_of[e["name"]] is e]
     for s in scored:
         bad = [k for k, ok in s["identifiable"].items() if not ok]
         if bad:
@@ -422,6 +432,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "separate_by": _separation(combined["name"], confusable) if combined else {},
         "params": combined["params"] if combined else {},
         "ci": combined["ci"] if combined else {},
+        "fixed": combined["fixed"] if combined else {},
         "units": {k: collinear.unit_of(k) for k in (combined["params"] if combined else {})},
         "heldout_gap_before": nominal_gap,
         "heldout_gap_after": combined["heldout_gap_after"] if combined else nominal_gap,
@@ -502,7 +513,8 @@ def _combination_alternatives(combined: dict, best: dict, alts: list[dict], para
     rest = combined["name"][len(best["name"]) + 1:]
     keys = [k for k in combined["params"] if k.split(".")[0] in rest.split("+")]
     rest_text = collinear.describe(rest, {k: combined["params"][k] for k in keys},
-                                   {k: combined["ci"].get(k) for k in keys}, params)
+                                   {k: combined["ci"].get(k) for k in keys}, params,
+                                   combined.get("fixed"))
     out = collinear.alternatives(combined, [], params)
     for a in alts:
         if a["name"] != best["name"]:

@@ -20,7 +20,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..effects import EFFECTS, make_effect
-from ..effects.base import EffectSet
+from ..effects.base import EffectParameter, EffectSet
+from ..effects.canted_rotor import CantedRotor
 from ..errors import ModelError
 from ..params import VehicleParams
 from ..residual import FlightStates, measured_wrench, model_wrench
@@ -69,6 +70,11 @@ class Candidate:
     def parameter_names(self) -> list[str]:
         return [f"{name}.{p}" for name, _, fitted in self.parts for p in fitted]
 
+    @property
+    def fixed_values(self) -> dict[str, float]:
+        """The values held fixed, ``effect.parameter`` -> value (e.g. a canted rotor's index)."""
+        return {f"{name}.{p}": float(v) for name, fixed, _ in self.parts for p, v in fixed.items()}
+
     def effects(self, theta: np.ndarray) -> list:
         out, k = [], 0
         for name, fixed, fitted in self.parts:
@@ -108,6 +114,34 @@ class Fit:
         return self.candidate.effects(self.theta)
 
 
+class CantedRotorFit(CantedRotor):
+    """``canted_rotor`` as the diagnosis fits it: the tilted axis' horizontal components
+    ``tilt_x``, ``tilt_y`` (rad, small angles: the axis leans by them towards body +x, +y)
+    instead of angle and azimuth, which are singular at angle 0 (every azimuth gives the
+    same untilted rotor, so a fit starting there cannot move). ``angle = hypot(tilt_x,
+    tilt_y)``, ``azimuth = atan2(tilt_x, -tilt_y)`` (then Rodrigues tilts z by angle about
+    (cos azimuth, sin azimuth, 0) towards (sin azimuth, -cos azimuth) = (tilt_x, tilt_y) /
+    angle). The rotor index is fixed per candidate: one candidate per rotor, the one that
+    fits the training flights best is kept (:func:`candidates_for`)."""
+
+    parameters = CantedRotor.parameters + (
+        EffectParameter("tilt_x", "rad", 0.0, -0.3, 0.3, "axis lean towards body +x"),
+        EffectParameter("tilt_y", "rad", 0.0, -0.3, 0.3, "axis lean towards body +y"),
+    )
+
+    def apply_to_params(self, params):
+        angle = float(np.hypot(self.tilt_x, self.tilt_y))
+        if angle == 0.0:
+            return CantedRotor(rotor=self.rotor, angle=self.angle,
+                               azimuth=self.azimuth).apply_to_params(params)
+        return CantedRotor(rotor=self.rotor, angle=angle,
+                           azimuth=float(np.arctan2(self.tilt_x, -self.tilt_y))
+                           ).apply_to_params(params)
+
+
+LOCAL_EFFECTS["canted_rotor"] = CantedRotorFit
+
+
 def _rotor_scale(params: VehicleParams) -> float:
     return float(params.max_speed) or 1.0
 
@@ -131,6 +165,8 @@ FIT_SPEC = {
     "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
     # a damping time constant I/k of about 1 s
     "rate_damping": (("x", "y", "z"), {}, lambda p: list(np.diag(p.inertia))),
+    # one candidate per rotor (the index fixed): a lean of about 1 deg
+    "canted_rotor": (("tilt_x", "tilt_y"), {}, lambda p: [0.02, 0.02]),
 }
 
 
@@ -156,7 +192,8 @@ def candidates_for(params: VehicleParams, has_commands: bool,
     ``motor_lag`` and ``battery_sag`` need commands: they act upstream of the measured rotor
     speed, so they are fitted on the command -> speed channel only (with measured rotor
     speeds they do not change the wrench); ``wind`` is fitted with rotor drag (wind alone
-    exerts no force)."""
+    exerts no force); ``canted_rotor`` is one candidate per rotor (its index is discrete;
+    the diagnosis keeps the one that fits the training flights best)."""
     out = []
     for name in sorted(EFFECTS):
         if name == "wind":
@@ -166,6 +203,10 @@ def candidates_for(params: VehicleParams, has_commands: bool,
         if name not in FIT_SPEC or (name in UPSTREAM_OF_SPEED and not has_commands):
             continue
         fitted, fixed, _ = FIT_SPEC[name]
+        if name == "canted_rotor":   # the rotor index is discrete: one candidate per rotor
+            out += [Candidate(name, ((name, {"rotor": float(k + 1)}, fitted),))
+                    for k in range(params.rotor_count)]
+            continue
         if name == "battery_sag" and has_vbat:
             fitted = ("full_voltage",)  # with a voltage log the sag follows (V / V_full)^2
         if fitted is None:

@@ -154,10 +154,13 @@ def _flight_consistency(judged: dict, one: dict, flight: Flight, params) -> None
     """The parameter-consistency guard (:mod:`.consistency`) on one flight (both halves)."""
     rotor = flight.fit.command is not None
     has_vbat = flight.fit.vbat is not None and bool(np.all(np.isfinite(flight.fit.vbat)))
-    cand = next((c for c in candidates_for(params, rotor, has_vbat)
-                 if c.name == judged["verdict"]), None)
     entry = next((e for e in one["effects"] if e["name"] == judged["verdict"]), None)
-    if cand is None or entry is None:
+    if entry is None:
+        return
+    cand = next((c for c in candidates_for(params, rotor, has_vbat)
+                 if c.name == judged["verdict"]
+                 and c.fixed_values == entry.get("fixed", {})), None)
+    if cand is None:
         return
     sigma = np.array([one["where"]["noise_scale"][k] for k in one["where"]["channels"]])
     theta = np.array([entry["params"][k] for k in cand.parameter_names])
@@ -290,7 +293,8 @@ def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *,
         common = _shared_to_floor(shared, names, floor)
         if common is not None:
             kind = label = "no_significant_gap"
-            what = collinear.describe(common["name"], common["params"], common["ci"], params)
+            what = collinear.describe(common["name"], common["params"], common["ci"], params,
+                                      common.get("fixed"))
             band = _band_text(common, spread.get(common["name"], []), params)
             answer = (f"No significant gap against the reference flights: what this flight "
                       f"shows beyond their floor is {common['name']} at the magnitude the "
@@ -303,6 +307,7 @@ def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *,
     return {"file": name, "outcome": kind, "verdict": label, "answer": answer,
             "channels": channels, "alternatives": alts,
             "params": best["params"] if best else {}, "ci": best["ci"] if best else {},
+            "fixed": best.get("fixed", {}) if best else {},
             "units": {k: collinear.unit_of(k) for k in (best["params"] if best else {})},
             "reduction": best["reduction"] if best else 0.0, "confusable_with": confusable,
             "readings": [a["name"] for a in rule.stated_readings(alts)] if best else [],

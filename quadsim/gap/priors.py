@@ -40,6 +40,8 @@ rate_damping.*         0 .. 3 k_mt          momentum theory: a rolling vehicle's
                                             k_mt: 0.020 N m s/rad (0.84 kg testbed), 5.8e-5
                                             (Crazyflie); decay times I/k below ~0.1 s are
                                             not aerodynamic damping.
+canted_rotor.tilt_*    -10 .. +10 deg       a bent mount or crash-bent arm leans a rotor a
+                                            few degrees; more is a visibly broken arm.
 =====================  ===================  ==============================================
 
 :func:`plausibility` returns (score, plausible, text): score = |value| / bound on its side
@@ -72,6 +74,9 @@ PRIORS = {
     "rate_damping": (0.0, 3.0, "momentum",
                      "momentum theory k = r^2 T_hover / v_i (Bristeau et al. 2009) x 3 for "
                      "blade flapping and frame drag (Mahony et al. 2012)"),
+    "canted_rotor": (-0.17, 0.17, "absolute",
+                     "a bent motor mount or arm leans a rotor a few deg; more than 10 deg "
+                     "(0.17 rad) is a visibly broken arm"),
     "thrust_curve.linear": (-0.2, 0.2, "hover",
                             "bench fits T = k2 W^2 + k1 W + k0 (Foerster, ETH 2015, table "
                             "3.3): the linear term reaches ~20 % of the hover thrust"),
