@@ -476,10 +476,10 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
 def test_exact_flight_is_explained_by_its_own_effect(cf, hidden):
     """A noiseless generated flight with one effect: the residual with that effect is far
     below the nominal residual on every channel (a canted rotor pushes sideways, so the
-    attitude carries its force; a battery scales the speed a command gives and the rotor
-    follows with the engines' response, EffectSet.rotor_speed_rate). Measured: Fx 2.8e-3 ->
-    2.5e-8 N (was unchanged: the generator ignored the tilted rotor's sideways push); rotor
-    channel 19 -> 0.09 rad/s (3.0 with the factor applied without the engines' response)."""
+    attitude carries its force; a battery scales the speed a command gives, statically).
+    Measured: Fx 2.8e-3 -> 2.5e-8 N (was unchanged: the generator ignored the tilted rotor's
+    sideways push); rotor channel 19 -> 8e-5 rad/s (3.0 while the generator gave the battery
+    the engines' 5 ms response)."""
     from quadsim.gap.diagnose import prepare
     from quadsim.gap.fitting import residuals
 

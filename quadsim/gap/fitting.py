@@ -281,24 +281,22 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, int(round(ROTOR_HORIZON_S / dt)))
     cmd = command_speed(states, params)
+    # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
+    # static (a battery changes the steady speed, not how fast the rotor gets there): only a
+    # dynamics effect (motor_lag) makes the rotor follow with a lag.
+    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
+    if factor is not None:
+        cmd = cmd * np.asarray(factor)[:, None]
     speed = states.rotor_speed
     n = len(states.t) - steps
-    effect_set = EffectSet(tuple(effects))
-    probe = np.zeros((1, 1))
-    if effect_set.speed_factor(states.t, states.vbat) is None and not any(
-            e.rotor_speed_rate(np.zeros(1), probe, probe) is not None for e in effects):
+    rate_owner = [e for e in effects if e.rotor_speed_rate(np.zeros(1), np.zeros((1, 1)),
+                                                            np.zeros((1, 1))) is not None]
+    if not rate_owner:
         predicted = cmd[steps:]
     else:
-        # The engines' rotor dynamics (EffectSet.rotor_speed_rate: effects upstream of the
-        # speed, a battery's voltage, scale the speed a command gives; a factor without a
-        # dynamics effect follows with SPEED_RESPONSE_S). ROTOR_SUBSTEPS Heun steps per
-        # sample (stable for time constants down to about dt / (2 ROTOR_SUBSTEPS)).
-        vbat = states.vbat
-
-        def rate_fn(t, commanded, actual, k):
-            v = None if vbat is None else vbat[k:k + n]
-            return effect_set.rotor_speed_rate(t, commanded, actual, v)
-
+        # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
+        # dt / (2 ROTOR_SUBSTEPS)).
+        rate_fn = rate_owner[0].rotor_speed_rate
         predicted = speed[:n].copy()
         h = dt / ROTOR_SUBSTEPS
         for k in range(steps):
@@ -308,8 +306,8 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
                 # would add a half-sample lag that the fit would take from the time constant).
                 c0 = start + (j / ROTOR_SUBSTEPS) * slope
                 c1 = start + ((j + 1) / ROTOR_SUBSTEPS) * slope
-                k1 = rate_fn(states.t[k:k + n], c0, predicted, k)
-                k2 = rate_fn(states.t[k:k + n], c1, predicted + h * k1, k)
+                k1 = rate_fn(states.t[k:k + n], c0, predicted)
+                k2 = rate_fn(states.t[k:k + n], c1, predicted + h * k1)
                 predicted = predicted + 0.5 * h * (k1 + k2)
     out = np.zeros_like(speed)
     out[steps:] = speed[steps:] - predicted

@@ -292,11 +292,19 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
     return position, velocity, quat, rate, specific, speed
 
 
-def _commands(t, speed, effect_set, params, hover):
+def _commands(t, speed, effect_set, params, hover, vbat):
     """Normalised commands (``commanded speed / max_speed``, the convention of
-    :mod:`quadsim.fly`) whose motor dynamics give ``speed`` (Newton on the rate)."""
+    :mod:`quadsim.fly`) whose motor dynamics give ``speed`` (Newton on the rate). A speed
+    factor alone (a battery) is static, as the diagnosis models it: command = speed /
+    factor (the engines' 5 ms SPEED_RESPONSE_S smoothing is a numerical convenience, not a
+    lag of the battery)."""
     rate_needed = np.gradient(speed, t, axis=0)
     cmd = speed.copy()
+    probe = np.zeros((1, 1))
+    if not any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
+               for e in effect_set.effects):
+        factor = effect_set.speed_factor(t, vbat)
+        return (cmd if factor is None else cmd / np.asarray(factor)[:, None]) / params.max_speed
     if effect_set.has_rotor_dynamics():
         for _ in range(8):
             rate = effect_set.rotor_speed_rate(t, cmd, speed)
@@ -324,7 +332,7 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     position, velocity, quat, rate, specific, speed_ = _exact_flight(
         t, params, effect_set, position, yaw, vbat)
     hover = hover_speed(params)
-    command = _commands(t, speed_, effect_set, params, hover)
+    command = _commands(t, speed_, effect_set, params, hover, vbat)
     keep = slice(pad, len(t) - pad)
     t, position, velocity, quat, rate, specific, speed_, command, vbat = (
         a[keep] for a in (t, position, velocity, quat, rate, specific, speed_, command, vbat))
