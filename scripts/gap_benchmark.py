@@ -250,15 +250,24 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
                      "not scored: " + ", ".join(f"{r['source']}/{r['vehicle']}/{r['truth']}"
                                                 for r in hidden))
     lines.append("\n| source | vehicle | hidden | held-out verdict (best candidate) | "
-                 "per-flight verdict | alternatives | true-effect reduction |")
+                 "per-flight verdict | listed, not a reading (per flight) | true-effect reduction |")
     lines.append("|---|---|---|---|---|---|---|")
     for r in rows:
         h, p = r["heldout"], r.get("per_flight", {})
         lines.append(f"| {r['source']} | {r['vehicle']} | {r['truth']} | "
-                     f"{'+'.join(h['named']) or h['outcome']} ({h.get('best_candidate')}) | "
-                     f"{'+'.join(p.get('named', [])) or p.get('outcome', '')} | "
+                     f"{_cell(h)} ({h.get('best_candidate')}) | {_cell(p)} | "
                      f"{', '.join(p.get('alternatives', []))} | {r['oracle_reduction']:.2f} |")
     return "\n".join(lines) + "\n"
+
+
+def _cell(v: dict) -> str:
+    """A verdict in a table cell: the lead reading (``a+b`` for a combination), then the
+    other readings the answer states ("or x, y")."""
+    if not v:
+        return ""
+    lead = v.get("lead", v.get("named", []))
+    rest = [n for n in v.get("named", []) if n not in lead]
+    return ("+".join(lead) or v.get("outcome", "")) + (f" (or {', '.join(rest)})" if rest else "")
 
 
 def speed_benchmark() -> str:
