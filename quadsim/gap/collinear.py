@@ -41,9 +41,11 @@ SEPARATE = {
                                                   "(climbs and descents at several rates)",
     frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
     frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
-    frozenset({"com_offset", "thrust_mismatch"}): "yaw the vehicle 90 deg and hover again "
-                                                  "(a CoM offset turns with the body, a weak rotor "
-                                                  "does not move); or a rotor thrust-stand test",
+    frozenset({"com_offset", "thrust_mismatch"}): "balance the vehicle on a knife edge along "
+                                                  "x and y (finds the CoM), or each rotor on the "
+                                                  "thrust stand; in flight, fast yaw turns: the "
+                                                  "accelerometer, c away from the CoM, reads "
+                                                  "w x (w x c), a weak rotor adds nothing",
     frozenset({"motor_lag", "inertia_error"}): "fast attitude steps with measured rotor speeds "
                                                "(lag shows between command and speed, inertia "
                                                "between speed and rate)",
