@@ -148,3 +148,16 @@ def test_stated_readings_say_each_explanation_once():
     # without thrust_factor among them, the b refit is a reading of its own
     assert [a["name"] for a in stated_readings([alts[0], alts[3]])] == ["mass_offset",
                                                                          "nominal_refit"]
+
+
+def test_summary_says_when_a_refit_parameter_is_not_identified():
+    """Item 8(c) in the per-flight summary line: the reference refit's d at its -90 % bound
+    (10 real Crazyflie references) is printed with that flag, never as a plain number."""
+    from quadsim.gap.report import _fmt_params
+
+    text = _fmt_params({"nominal_refit.thrust": -0.0042, "nominal_refit.drag": -0.9},
+                       {"nominal_refit.thrust": 0.006, "nominal_refit.drag": 0.018},
+                       {"nominal_refit.thrust": True, "nominal_refit.drag": False})
+    thrust, drag = text.split(", ")
+    assert "not identified" in drag and "not identified" not in thrust
+    assert drag.startswith("nominal_refit.drag = -0.9 ± 0.018 (relative)")

@@ -132,7 +132,8 @@ def _canted(values: dict, ci: dict, params: VehicleParams, rotor: float | None) 
     c = None if cx is None or cy is None else float(np.hypot(cx, cy))
     push = params.weight / params.rotor_count * np.sin(angle)
     which = f"rotor {int(rotor)}" if rotor is not None else "a rotor"
-    return (f"{which}'s axis leans {_pm(np.degrees(angle), None if c is None else np.degrees(c), 1.0)}"
+    lean = _pm(np.degrees(angle), None if c is None else np.degrees(c), 1.0)
+    return (f"{which}'s axis leans {lean}"
             f" deg (towards body x {np.degrees(tx):+.2g} deg and y {np.degrees(ty):+.2g} deg): "
             f"it pushes {1e3 * push:.3g} mN sideways at hover ({100 * push / params.weight:.2g} "
             "% of the weight)")

@@ -126,7 +126,10 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                      f"{np.median(ratios):.2f}x the reference floor): check the reference set")
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": [f.name for f in ref],
-            "reference_refit": base.params(), "reference_refit_ci": base.ci(), "flights": flights,
+            "reference_refit": base.params(), "reference_refit_ci": base.ci(),
+            "reference_refit_identified": dict(zip(base.candidate.parameter_names,
+                                                   map(bool, base.identifiable))),
+            "flights": flights,
             "reference_floor": {k: max(v) for k, v in floors.items()}, "checks": checks,
             "notes": notes,
             "where": {}, "effects": [],

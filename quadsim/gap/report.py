@@ -49,15 +49,21 @@ def write_json(path: str | Path, result: dict) -> Path:
     return atomic_write_text(path, to_json(result))
 
 
-def _fmt_params(params: dict, ci: dict) -> str:
-    """``name = value ± ci unit`` for every parameter (units from the effect declarations)."""
+def _fmt_params(params: dict, ci: dict, identified: dict | None = None) -> str:
+    """``name = value ± ci unit`` for every parameter (units from the effect declarations);
+    a parameter marked not identified in ``identified`` (at a bound, or an interval wider
+    than half its plausible range) says so."""
     from .collinear import unit_of
 
     def unit(k):
         u = unit_of(k)
         return "(relative)" if u == "1" else u
 
-    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g} {unit(k)}".rstrip()
+    def flag(k):
+        return " (not identified: at a bound or too wide)" \
+            if identified is not None and not identified.get(k, True) else ""
+
+    return ", ".join(f"{k} = {v:.4g} ± {ci.get(k, float('nan')):.2g} {unit(k)}".rstrip() + flag(k)
                      for k, v in params.items())
 
 
@@ -76,7 +82,8 @@ def summary(result: dict) -> str:
         lines = [f"answer: {result['verdict'].get('answer', '')}",
                  f"per-flight diagnosis against {len(result['reference'])} reference flights "
                  "(reference refit: "
-                 f"{_fmt_params(result['reference_refit'], result.get('reference_refit_ci', {}))})"]
+                 + _fmt_params(result["reference_refit"], result.get("reference_refit_ci", {}),
+                               result.get("reference_refit_identified")) + ")"]
         for f in result["flights"]:
             lines.append(f"  {Path(f['file']).name}: {f['verdict']}: {f.get('answer', '')}")
         lines += [f"note: {note}" for note in result.get("notes", [])]

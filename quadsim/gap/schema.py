@@ -138,6 +138,8 @@ GAP_SCHEMA = {
         "reference": {"type": "array", "items": {"type": "string"}},
         "reference_refit": _NUMBER_MAP,
         "reference_refit_ci": _NUMBER_MAP,
+        "reference_refit_identified": {"type": "object",
+                                       "additionalProperties": {"type": "boolean"}},
         "where": {
             "type": "object",
             "properties": {
