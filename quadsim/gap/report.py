@@ -92,7 +92,8 @@ def summary(result: dict) -> str:
     where = result["where"]
     lines = [f"answer: {v.get('answer', v['effect'])}", f"verdict: {v['effect']}"]
     if v.get("outcome", "effect") == "effect":
-        lines.append(f"  parameters: {_fmt_params(v['params'], v['ci'])}")
+        fixed = "".join(f", {k} = {x:g} (held fixed)" for k, x in v.get("fixed", {}).items())
+        lines.append(f"  parameters: {_fmt_params(v['params'], v['ci'])}{fixed}")
         lines.append(f"  held-out gap {v['heldout_gap_before']:.3g} -> {v['heldout_gap_after']:.3g}"
                      f" (noise = 1 per channel): -{100 * v['reduction']:.1f} %")
     if v["confusable_with"]:
