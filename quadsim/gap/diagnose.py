@@ -349,34 +349,11 @@ def _rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
 
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
             notes, tick, kstep) -> dict:
+    """Pick the named effect, grow it into a combination, judge it against the floor and
+    assemble the result (``quadsim.gap/2``)."""
     nominal_gap = _gap(before)
     names = _channels(rotor, params)
-    best = None
-    alts: list[dict] = []
-    # An effect wins only if it beats the nominal model clearly and is not clearly worse
-    # than simply refitting b and d (a retuned nominal model). Among the winners whose
-    # held-out gap ties with the best (within TIE), the most plausible magnitude is named
-    # (priors); ties in plausibility go to fewer parameters.
-    winners = [e for e in ranked if _clear(e, nominal_gap, nominal_gap) and
-               e["heldout_gap_after"] <= baseline["heldout_gap_after"] + TIE * nominal_gap]
-    if winners:
-        floor = winners[0]["heldout_gap_after"] + TIE * nominal_gap
-        tied = [e for e in winners if e["heldout_gap_after"] <= floor]
-        first = min(tied, key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
-        others = [e for e in ranked if e is not first
-                  and abs(e["heldout_gap_after"] - first["heldout_gap_after"]) <= TIE * nominal_gap
-                  and len(e["params"]) <= len(first["params"]) + 1 and parts_identified(e)]
-        if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= TIE * nominal_gap:
-            others.append(baseline)
-        best, alts = collinear.pick_plausible(first, others, params)
-        if best is None:
-            notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
-                         f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
-        elif best is not baseline:
-            ranked.remove(best)
-            ranked.insert(0, best)
-        else:
-            best = first  # the refit ties: name the library effect, list the refit
+    best, alts = _pick(ranked, baseline, nominal_gap, params, notes)
     combined = best
     if best is not None:
         combined = _greedy(best, ranked, train, held, params, sigma, rotor, before, dt,
@@ -388,55 +365,10 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
     if best is None and _clear(baseline, nominal_gap, nominal_gap):
         notes.append("the held-out gap shrinks with refitted b and d (nominal_refit) but no "
                      "library effect explains more: the nominal parameters are off")
-    confusable = [a["name"] for a in alts if combined and a["name"] != combined["name"]]
-    # The floor: the in-sample (training) residual of the model judged (nominal: b, d refit).
-    base_train = _scaled(train, params, baseline["_fit"].effects(), sigma, rotor)
-    floor_nominal = np.maximum(_rms(base_train, sigma), sigma)
-    floor_after = floor_nominal if combined is None else np.maximum(
-        _rms(_scaled(train, params, effects_after, sigma, rotor), sigma), sigma)
-    rms_before, rms_after = _rms(before, sigma), _rms(after, sigma)
-    channels = rule.channel_table(names, rms_before, rms_after, floor_after)
-    kind = rule.outcome(combined is not None, rms_before, floor_nominal)
-    too_high = [n for n, f, s_ in zip(names, floor_nominal, sigma) if f > rule.MAX_FLOOR * s_]
-    if kind == "no_significant_gap" and too_high:
-        kind = "unexplained"
-        notes.append("the refitted nominal model itself leaves " + ", ".join(too_high)
-                     + f" above {rule.MAX_FLOOR:g}x the noise on the training flights: not "
-                     "claiming 'no significant gap'")
-    lack = {n: c["after"] / max(c["floor"], 1e-300) for n, c in channels.items()
-            if not c["at_floor"]}
-    if combined is not None and lack:
-        notes.append(f"{combined['name']} cuts the held-out gap by "
-                     f"{100 * combined['reduction']:.0f} % but leaves "
-                     + ", ".join(f"{k} at {v:.1f}x the floor" for k, v in lack.items())
-                     + ": part of the gap is outside the library (or not one effect)")
-    if combined is not None and confusable:
-        notes.append(collinear.collinear_note(combined["name"], alts))
-    floor_source = "the training flights' own in-sample residual (b, d refitted)"
-    name = combined["name"] if combined else kind
-    verdict = {
-        "outcome": kind,
-        "effect": name,
-        "answer": rule.answer(kind, name, combined["reduction"] if combined else 0.0,
-                              alts if combined else [], channels, floor_source),
-        "floor_source": floor_source,
-        "channels": channels,
-        "alternatives": alts if combined else [],
-        "best_candidate": (combined or (ranked[0] if ranked else None) or {}).get("name"),
-        "lack_of_fit": lack,
-        "heldout_channel_gap_after": dict(zip(names, map(float, np.mean(
-            np.concatenate(after) ** 2, axis=0)))),
-        "reduction": combined["reduction"] if combined else 0.0,
-        "confusable_with": confusable,
-        "readings": [a["name"] for a in rule.stated_readings(alts)] if combined else [],
-        "separate_by": _separation(combined["name"], confusable) if combined else {},
-        "params": combined["params"] if combined else {},
-        "ci": combined["ci"] if combined else {},
-        "fixed": combined["fixed"] if combined else {},
-        "units": {k: collinear.unit_of(k) for k in (combined["params"] if combined else {})},
-        "heldout_gap_before": nominal_gap,
-        "heldout_gap_after": combined["heldout_gap_after"] if combined else nominal_gap,
-    }
+    kind, channels, lack = _judge(combined, baseline, train, params, sigma, rotor, before,
+                                  after, effects_after, names, notes)
+    verdict = _verdict(kind, combined, alts, channels, lack, ranked, after, names,
+                       nominal_gap, notes)
     if combined is not None and kind == "effect":   # one value in every regime, or not named
         fit = combined["_fit"]
         consistency.apply_to_verdict(verdict, notes, consistency.check(
@@ -460,6 +392,100 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
                          "flight": held[0].name, "states": held[0].fit, "params": params,
                          "effects": effects_after}
     return result
+
+
+def _pick(ranked, baseline, nominal_gap, params, notes) -> tuple[dict | None, list[dict]]:
+    """The named effect and its collinear alternatives (described, most plausible first).
+
+    An effect wins only if it beats the nominal model clearly and is not clearly worse than
+    simply refitting b and d (a retuned nominal model). Among the winners whose held-out gap
+    ties with the best (within TIE), the most plausible magnitude is named (priors); ties in
+    plausibility go to fewer parameters. ``ranked`` is reordered: the named effect first."""
+    tie = TIE * nominal_gap
+    winners = [e for e in ranked if _clear(e, nominal_gap, nominal_gap) and
+               e["heldout_gap_after"] <= baseline["heldout_gap_after"] + tie]
+    if not winners:
+        return None, []
+    floor = winners[0]["heldout_gap_after"] + tie
+    tied = [e for e in winners if e["heldout_gap_after"] <= floor]
+    first = min(tied, key=lambda e: (len(e["params"]), e["heldout_gap_after"]))
+    others = [e for e in ranked if e is not first
+              and abs(e["heldout_gap_after"] - first["heldout_gap_after"]) <= tie
+              and len(e["params"]) <= len(first["params"]) + 1 and parts_identified(e)]
+    if baseline["heldout_gap_after"] - first["heldout_gap_after"] <= tie:
+        others.append(baseline)
+    best, alts = collinear.pick_plausible(first, others, params)
+    if best is None:
+        notes.append(f"{first['name']} explains the gap only with an implausible magnitude "
+                     f"({alts[0]['magnitude']}; {alts[0]['prior']}): flagged, not named")
+        return None, alts
+    if best is baseline:
+        return first, alts  # the refit ties: name the library effect, list the refit
+    ranked.remove(best)
+    ranked.insert(0, best)
+    return best, alts
+
+
+def _judge(combined, baseline, train, params, sigma, rotor, before, after, effects_after,
+           names, notes) -> tuple[str, dict, dict]:
+    """The outcome against the floor (:mod:`.verdict`): (kind, channel table, lack of fit).
+    The floor is the in-sample (training) residual of the model judged (nominal: b, d
+    refitted); a nominal floor above MAX_FLOOR x the noise forbids "no significant gap"."""
+    base_train = _scaled(train, params, baseline["_fit"].effects(), sigma, rotor)
+    floor_nominal = np.maximum(_rms(base_train, sigma), sigma)
+    floor_after = floor_nominal if combined is None else np.maximum(
+        _rms(_scaled(train, params, effects_after, sigma, rotor), sigma), sigma)
+    rms_before, rms_after = _rms(before, sigma), _rms(after, sigma)
+    channels = rule.channel_table(names, rms_before, rms_after, floor_after)
+    kind = rule.outcome(combined is not None, rms_before, floor_nominal)
+    too_high = [n for n, f, s_ in zip(names, floor_nominal, sigma) if f > rule.MAX_FLOOR * s_]
+    if kind == "no_significant_gap" and too_high:
+        kind = "unexplained"
+        notes.append("the refitted nominal model itself leaves " + ", ".join(too_high)
+                     + f" above {rule.MAX_FLOOR:g}x the noise on the training flights: not "
+                     "claiming 'no significant gap'")
+    lack = {n: c["after"] / max(c["floor"], 1e-300) for n, c in channels.items()
+            if not c["at_floor"]}
+    if combined is not None and lack:
+        notes.append(f"{combined['name']} cuts the held-out gap by "
+                     f"{100 * combined['reduction']:.0f} % but leaves "
+                     + ", ".join(f"{k} at {v:.1f}x the floor" for k, v in lack.items())
+                     + ": part of the gap is outside the library (or not one effect)")
+    return kind, channels, lack
+
+
+def _verdict(kind, combined, alts, channels, lack, ranked, after, names, nominal_gap,
+             notes) -> dict:
+    """The ``verdict`` block of the result (schema in :mod:`.schema`)."""
+    confusable = [a["name"] for a in alts if combined and a["name"] != combined["name"]]
+    if combined is not None and confusable:
+        notes.append(collinear.collinear_note(combined["name"], alts))
+    floor_source = "the training flights' own in-sample residual (b, d refitted)"
+    name = combined["name"] if combined else kind
+    named = combined or {}
+    return {
+        "outcome": kind,
+        "effect": name,
+        "answer": rule.answer(kind, name, named.get("reduction", 0.0),
+                              alts if combined else [], channels, floor_source),
+        "floor_source": floor_source,
+        "channels": channels,
+        "alternatives": alts if combined else [],
+        "best_candidate": (combined or (ranked[0] if ranked else None) or {}).get("name"),
+        "lack_of_fit": lack,
+        "heldout_channel_gap_after": dict(zip(names, map(float, np.mean(
+            np.concatenate(after) ** 2, axis=0)))),
+        "reduction": named.get("reduction", 0.0),
+        "confusable_with": confusable,
+        "readings": [a["name"] for a in rule.stated_readings(alts)] if combined else [],
+        "separate_by": _separation(combined["name"], confusable) if combined else {},
+        "params": named.get("params", {}),
+        "ci": named.get("ci", {}),
+        "fixed": named.get("fixed", {}),
+        "units": {k: collinear.unit_of(k) for k in named.get("params", {})},
+        "heldout_gap_before": nominal_gap,
+        "heldout_gap_after": named.get("heldout_gap_after", nominal_gap),
+    }
 
 
 def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_combination,

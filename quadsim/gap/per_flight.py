@@ -246,19 +246,7 @@ def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *,
                  per_flight_tie: float = PER_FLIGHT_TIE) -> dict:
     """A flight's verdict from its own diagnosis ``one`` and the reference fits ``spread``
     (see the module doc for the rule)."""
-    scored, shared = [], []
-    for e in one["effects"]:
-        ok = e["t_statistic"] >= min_t and parts_identified(e)
-        refs = spread.get(e["name"], [])
-        # the references can raise the bar, never lower it: an effect that makes every
-        # nominal flight worse (negative reduction) must still clear MIN_GAIN on its own
-        excess = e["reduction"] - max([0.0] + [r["reduction"] for r in refs])
-        if not ok or e["reduction"] < min_gain:
-            continue
-        if excess >= min_gain and differs_from_reference(e, refs):
-            scored.append((excess, e))
-        else:
-            shared.append(e)
+    scored, shared = _classify(one["effects"], spread, min_t, min_gain)
     effects = [{k: e[k] for k in ("name", "params", "ci", "reduction")} |
                {"reference_max_reduction": max([r["reduction"]
                                                 for r in spread.get(e["name"], [])] or [0.0]),
@@ -316,6 +304,24 @@ def judge_flight(one: dict, spread: dict, name: str, floors: dict, params, *,
             "readings": [a["name"] for a in rule.stated_readings(alts)] if best else [],
             "separate_by": collinear.separation(best["name"], confusable) if best else {},
             "effects": effects, "notes": notes}
+
+
+def _classify(entries: list[dict], spread: dict, min_t: float, min_gain: float):
+    """(scored, shared): the effects that differ from the references, as (excess reduction,
+    entry), and those that explain a clear share at the references' own magnitude."""
+    scored, shared = [], []
+    for e in entries:
+        if e["t_statistic"] < min_t or not parts_identified(e) or e["reduction"] < min_gain:
+            continue
+        refs = spread.get(e["name"], [])
+        # the references can raise the bar, never lower it: an effect that makes every
+        # nominal flight worse (negative reduction) must still clear MIN_GAIN on its own
+        excess = e["reduction"] - max([0.0] + [r["reduction"] for r in refs])
+        if excess >= min_gain and differs_from_reference(e, refs):
+            scored.append((excess, e))
+        else:
+            shared.append(e)
+    return scored, shared
 
 
 def _shared_to_floor(shared: list[dict], names: list[str], floor: np.ndarray) -> dict | None:
