@@ -427,7 +427,7 @@ def test_motor_map_is_static_and_survives_a_narrow_command_range(cf):
 def test_a_combination_needs_every_part_identified_and_plausible(cf):
     """Two effects cancelling at their bounds (every rotor -50 % and the vehicle 50 %
     lighter) are not a combination; a plausible pair with both parts identified is."""
-    from quadsim.gap.diagnose import _every_part_stands
+    from quadsim.gap.combine import _every_part_stands
 
     rotors = {f"thrust_mismatch.rotor_{i}": -0.5 for i in range(1, 5)}
     bad = {"name": "thrust_mismatch+mass_offset",

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from quadsim.bench.score import read_verdict, score_case
-from quadsim.gap.diagnose import _combination_alternatives, parts_identified
+from quadsim.gap.combine import _combination_alternatives, parts_identified
 from quadsim.gap.per_flight import differs_from_reference, judge_flight, reference_band
 from quadsim.params import load_params
 

@@ -16,24 +16,35 @@ Method (equation error, then prediction error)
    ``scipy.optimize.least_squares``; 95 % CIs come from the Jacobian, widened by the
    residuals' correlation time. ``wind`` is fitted together with the rotor-drag coefficient
    (wind alone exerts no force).
-3. Each fit is scored by its held-out gap. The baseline ``nominal_refit`` refits b and d
-   (mass is exactly collinear with b in this balance: that pair is reported as confusable).
-   An effect is named when it cuts the held-out gap by >= 5 %, has a parameter that is
-   identified (CI < half its plausible range) and significantly away from "off", and is not
-   worse than the baseline; among effects within 2 % of the best, the one with fewest
-   parameters is named and the others are listed as ``confusable_with`` with what data would
-   separate them. Greedy forward selection then adds a second effect if it earns a further
-   clear gain. No winner: ``unexplained``.
-4. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
+3. Each fit is scored by its held-out gap (:mod:`.scoring`). The baseline ``nominal_refit``
+   refits b and d. An effect explains a clear share when it cuts the held-out gap by >= 5 %,
+   passes a block t test, has a parameter identified (CI < half its plausible range) and
+   significantly away from "off", and is not worse than the baseline. Among effects within
+   2 % of the best, the most plausible magnitude (:mod:`.priors`) is named and every
+   plausible tied one is stated as another *reading* with its magnitude and what would
+   separate them (:mod:`.collinear`). Greedy selection then adds a second effect if it earns
+   a further clear gain and every part stands (:mod:`.combine`).
+4. The verdict (:mod:`.verdict`): the named effect, ``no_significant_gap`` (held-out residual
+   at a floor taken from data on every channel) or ``unexplained``; a named effect must have
+   one value in every regime (:mod:`.consistency`).
+5. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
    aggressive rotation, near ground, low battery), by frequency band, and as k-step
    prediction error of position and attitude (0.05-1 s, multiple shooting with the analytic
-   engine) before and after the verdict.
+   engine) before and after the verdict (:mod:`.where`).
 
-``diagnose_per_flight`` judges each flight alone against nominal reference flights: b, d and
-the command map are refitted on the references; each flight is fitted on its first half and
-scored on its second; an effect is named only if its reduction exceeds the largest the same
-effect achieves on any reference flight by >= 5 % (so real effects present in every flight,
-such as rotor drag, are not blamed on one flight).
+``diagnose_per_flight`` (:mod:`.per_flight`) judges each flight alone against nominal
+reference flights: b, d and the command map are refitted on the references; each flight is
+fitted on its first half and scored on its second; an effect is named only if its reduction
+exceeds the largest the same effect achieves on any reference flight by >= 5 % *and* its
+magnitude lies outside what the reference flights show (so effects present in every flight,
+such as rotor drag or the motors' own lag, are not blamed on one flight).
+
+Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split, rank, decide),
+:mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
+least squares), :mod:`.scoring`, :mod:`.collinear` + :mod:`.priors`, :mod:`.combine`,
+:mod:`.verdict`, :mod:`.consistency`, :mod:`.per_flight`, :mod:`.where`, :mod:`.checks`
+(vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report` and
+:mod:`.schema` (output), :mod:`.synthetic` (generated test flights).
 
 Example::
 

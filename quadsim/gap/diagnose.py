@@ -15,16 +15,16 @@ import numpy as np
 
 from ..delays import align_signal_delays, delay_notes
 from ..effects.base import EffectBase, EffectParameter
-from ..errors import InputError, ModelError
+from ..errors import InputError
 from ..flightlog import FlightLog
 from ..params import VehicleParams
-from ..residual import CHANNELS, DEFAULT_WINDOW_S, FlightStates, flight_states
+from ..residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from . import collinear, consistency, fitting
 from . import verdict as rule
 from .checks import vehicle_check
+from .combine import _combination_alternatives, _greedy, parts_identified
 from .fitting import (
     Candidate,
-    Fit,
     candidates_for,
     fit_candidate,
     fit_motor_map,
@@ -32,19 +32,24 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .scoring import (
+    MIN_GAIN,
+    MIN_T,
+    TIE,
+    _channel_rms,
+    _channels,
+    _clear,
+    _fit_score,
+    _gap,
+    _scaled,
+    _score,
+)
 from .where import by_band, by_regime, kstep_errors, regime_masks
 
 __all__ = ["Flight", "prepare", "diagnose", "parts_identified", "SCHEMA", "MIN_GAIN",
            "MIN_T", "TIE", "EDGE_S", "interior"]
 
 SCHEMA = "quadsim.gap/2"
-#: an effect must cut the held-out gap by this fraction of the nominal gap ...
-MIN_GAIN = 0.05
-#: ... with this block-wise t statistic (1 s blocks of held-out data; a consistency check,
-#: effects acting only in some regimes, e.g. near the ground, improve few blocks) ...
-MIN_T = 1.0
-#: ... and effects whose held-out gap is within this fraction of the best are confusable.
-TIE = 0.02
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -136,71 +141,6 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     return out
 
 
-def _scaled(flights: list[Flight], params, effects, sigma, rotor: bool, *, full=False):
-    return [residuals(f.states if full else f.fit, params, effects, rotor_channel=rotor) / sigma
-            for f in flights]
-
-
-def _gap(scaled: list[np.ndarray]) -> float:
-    """Mean squared scaled residual per sample and channel (1 = noise level)."""
-    return float(np.mean(np.concatenate(scaled) ** 2))
-
-
-def _block_t(before: list[np.ndarray], after: list[np.ndarray], dt: float) -> float:
-    """t statistic of the per-block (1 s) reduction of the squared gap; blocks shrink to
-    half the shortest held-out part when that is under 2 s (at least two blocks, e.g. the
-    second half of a 4 s flight once its last EDGE_S are dropped)."""
-    block = max(1, min(int(round(1.0 / dt)), min(len(b) for b in before) // 2))
-    diffs = []
-    for b, a in zip(before, after):
-        d = np.sum(b ** 2, axis=1) - np.sum(a ** 2, axis=1)
-        for k in range(0, len(d) - block + 1, block):
-            diffs.append(float(np.mean(d[k:k + block])))
-    if len(diffs) < 2:
-        return 0.0
-    diffs = np.asarray(diffs)
-    se = diffs.std(ddof=1) / np.sqrt(len(diffs))
-    return float(diffs.mean() / se) if se > 0 else (np.inf if diffs.mean() > 0 else 0.0)
-
-
-def _channel_rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
-
-
-def _channels(rotor: bool, params: VehicleParams) -> list[str]:
-    names = list(CHANNELS)
-    if rotor:
-        names += [f"rotor_{i + 1}" for i in range(params.rotor_count)]
-    return names
-
-
-def _score(fit: Fit, train, held, params, sigma, rotor, before, dt) -> dict:
-    try:
-        after = _scaled(held, params, fit.effects(), sigma, rotor)
-    except ModelError as exc:  # the fit stopped on a non-physical vehicle: no improvement
-        names = fit.candidate.parameter_names
-        return {"name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
-                "fixed": fit.candidate.fixed_values,
-                "identifiable": dict.fromkeys(names, False),
-                "significant": dict.fromkeys(names, False),
-                "heldout_gap_before": _gap(before), "heldout_gap_after": _gap(before),
-                "reduction": 0.0, "t_statistic": 0.0, "heldout_rms_after": {},
-                "warning": f"fit left the physical range: {exc}", "_fit": fit}
-    gap_before, gap_after = _gap(before), _gap(after)
-    rms = _channel_rms(after, sigma)
-    return {
-        "name": fit.candidate.name, "params": fit.params(), "ci": fit.ci(),
-        "fixed": fit.candidate.fixed_values,
-        "identifiable": dict(zip(fit.candidate.parameter_names, fit.identifiable)),
-        "significant": dict(zip(fit.candidate.parameter_names, fit.significant)),
-        "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
-        "reduction": (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0,
-        "t_statistic": _block_t(before, after, dt),
-        "heldout_rms_after": dict(zip(_channels(rotor, params), map(float, rms))),
-        "_fit": fit,
-    }
-
-
 def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> dict:
     masks = [regime_masks(f.fit, params) for f in held]
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
@@ -238,19 +178,6 @@ def _split(flights: list[Flight], holdout: list[Flight] | None, notes: list[str]
     return [parts[0]], [parts[1]]
 
 
-def _confusable(ranked: list[dict], best: dict, baseline: dict, nominal_gap: float) -> list:
-    out = []
-    tie = TIE * nominal_gap
-    for other in ranked:
-        if other is best or other["name"] == best["name"]:
-            continue
-        if other["heldout_gap_after"] - best["heldout_gap_after"] <= tie:
-            out.append(other["name"])
-    if baseline["heldout_gap_after"] - best["heldout_gap_after"] <= tie:
-        out.append("nominal_refit")
-    return out
-
-
 def _separation(best: str, confusable: list[str]) -> dict:
     return collinear.separation(best, confusable)
 
@@ -279,11 +206,6 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
 def params_have_data_map(params: VehicleParams) -> bool:
     """True when the motor map was already fitted from data by the diagnosis."""
     return params.motor_map is not None and "quadsim.gap" in params.motor_map.source
-
-
-def _fit_score(cand, train, held, params, sigma, rotor, before, dt) -> dict:
-    return _score(fit_candidate(cand, [f.fit for f in train], params, sigma, rotor_channel=rotor),
-                  train, held, params, sigma, rotor, before, dt)
 
 
 def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
@@ -333,18 +255,6 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
                                            len(s["params"]), s["name"]))
     return _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt,
                    max_combination, notes, tick, kstep)
-
-
-def _clear(entry: dict, reference_gap: float, nominal_gap: float) -> bool:
-    gain = (reference_gap - entry["heldout_gap_after"]) / nominal_gap if nominal_gap > 0 else 0
-    # At least one parameter must be both identified (CI narrower than half its plausible
-    # range) and significantly away from the value that switches the effect off.
-    useful = any(entry["identifiable"][k] and entry["significant"][k] for k in entry["params"])
-    return gain >= MIN_GAIN and entry["t_statistic"] >= MIN_T and useful
-
-
-def _rms(scaled: list[np.ndarray], sigma: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
 
 
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
@@ -432,10 +342,10 @@ def _judge(combined, baseline, train, params, sigma, rotor, before, after, effec
     The floor is the in-sample (training) residual of the model judged (nominal: b, d
     refitted); a nominal floor above MAX_FLOOR x the noise forbids "no significant gap"."""
     base_train = _scaled(train, params, baseline["_fit"].effects(), sigma, rotor)
-    floor_nominal = np.maximum(_rms(base_train, sigma), sigma)
+    floor_nominal = np.maximum(_channel_rms(base_train, sigma), sigma)
     floor_after = floor_nominal if combined is None else np.maximum(
-        _rms(_scaled(train, params, effects_after, sigma, rotor), sigma), sigma)
-    rms_before, rms_after = _rms(before, sigma), _rms(after, sigma)
+        _channel_rms(_scaled(train, params, effects_after, sigma, rotor), sigma), sigma)
+    rms_before, rms_after = _channel_rms(before, sigma), _channel_rms(after, sigma)
     channels = rule.channel_table(names, rms_before, rms_after, floor_after)
     kind = rule.outcome(combined is not None, rms_before, floor_nominal)
     too_high = [n for n, f, s_ in zip(names, floor_nominal, sigma) if f > rule.MAX_FLOOR * s_]
@@ -486,67 +396,6 @@ def _verdict(kind, combined, alts, channels, lack, ranked, after, names, nominal
         "heldout_gap_before": nominal_gap,
         "heldout_gap_after": named.get("heldout_gap_after", nominal_gap),
     }
-
-
-def _greedy(best, ranked, train, held, params, sigma, rotor, before, dt, max_combination,
-            nominal_gap, tick):
-    current = best
-    used = {best["name"]}
-    fit_on = [f.fit for f in train]
-    while len(used) < max_combination:
-        trial = None
-        # Every other candidate is tried, not only those that helped alone: some effects act
-        # only together (the CoM height matters only through rotor-plane drag).
-        for entry in ranked:
-            if entry["name"] in used or set(entry["name"].split("+")) & used:
-                continue
-            cand = current["_fit"].candidate.combine(entry["_fit"].candidate)
-            start = np.concatenate([current["_fit"].theta, entry["_fit"].theta])
-            fit = fit_candidate(cand, fit_on, params, sigma, rotor_channel=rotor, start=start)
-            scored = _score(fit, train, held, params, sigma, rotor, before, dt)
-            tick(cand.name)
-            if trial is None or scored["heldout_gap_after"] < trial["heldout_gap_after"]:
-                trial = scored
-        if trial is None or not _clear(trial, current["heldout_gap_after"], nominal_gap) \
-                or not _every_part_stands(trial, params):
-            break
-        current, used = trial, used | set(trial["name"].split("+"))
-    return current
-
-
-def parts_identified(entry: dict) -> bool:
-    """Every effect of a fitted candidate has a parameter identified and significant (the
-    ``wind`` candidate fits wind with rotor drag: a wind of 0.002 +- 0.1 m/s is rotor drag
-    alone, not a second reading of the data)."""
-    parts = {k.split(".")[0] for k in entry["params"]}
-    return all(any(entry["identifiable"][k] and entry["significant"][k]
-                   for k in entry["params"] if k.split(".")[0] == part) for part in parts)
-
-
-def _every_part_stands(entry: dict, params) -> bool:
-    """A combination claims that each of its effects is there: every part needs a parameter
-    identified and significant, and the combined fit must be physically plausible (priors).
-    Two effects that cancel each other at their bounds (every rotor -50 % thrust and the
-    vehicle 50 % lighter) explain nothing about the vehicle."""
-    from .priors import candidate_plausibility
-
-    return parts_identified(entry) and bool(candidate_plausibility(entry["params"], params)[1])
-
-
-def _combination_alternatives(combined: dict, best: dict, alts: list[dict], params) -> list:
-    """The readings of a combination: the combined fit described first, then each collinear
-    reading of its first effect (``alts`` of ``best``) with the rest of the combination."""
-    rest = combined["name"][len(best["name"]) + 1:]
-    keys = [k for k in combined["params"] if k.split(".")[0] in rest.split("+")]
-    rest_text = collinear.describe(rest, {k: combined["params"][k] for k in keys},
-                                   {k: combined["ci"].get(k) for k in keys}, params,
-                                   combined.get("fixed"))
-    out = collinear.alternatives(combined, [], params)
-    for a in alts:
-        if a["name"] != best["name"]:
-            out.append({**a, "name": f"{a['name']}+{rest}",
-                        "magnitude": f"{a['magnitude']}, with {rest_text}"})
-    return out
 
 
 def _public(entry: dict) -> dict:

@@ -58,6 +58,7 @@ from ..residual import DEFAULT_WINDOW_S
 from . import collinear, consistency
 from . import verdict as rule
 from .checks import vehicle_check
+from .combine import parts_identified
 from .diagnose import (
     BASELINE,
     MIN_GAIN,
@@ -66,7 +67,6 @@ from .diagnose import (
     TIE,
     Flight,
     _diagnose_split,
-    parts_identified,
     prepare,
 )
 from .fitting import (

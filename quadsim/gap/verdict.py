@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import numpy as np
 
-
 __all__ = ["FLOOR_TOL", "MAX_FLOOR", "OUTCOMES", "channel_table", "outcome", "unit_of_channel",
            "answer", "stated_readings"]
 
