@@ -161,3 +161,16 @@ def test_summary_says_when_a_refit_parameter_is_not_identified():
     thrust, drag = text.split(", ")
     assert "not identified" in drag and "not identified" not in thrust
     assert drag.startswith("nominal_refit.drag = -0.9 ± 0.018 (relative)")
+
+
+def test_a_canted_rotor_is_compared_with_reference_fits_of_the_same_rotor():
+    """Reference flights that picked rotor 1 say nothing about rotor 3's tilt."""
+    def tilt(rotor, value, ci):
+        return {"name": "canted_rotor", "fixed": {"canted_rotor.rotor": float(rotor)},
+                "params": {"canted_rotor.tilt_x": value}, "ci": {"canted_rotor.tilt_x": ci},
+                "identifiable": {"canted_rotor.tilt_x": True},
+                "significant": {"canted_rotor.tilt_x": abs(value) > ci}}
+
+    refs = [tilt(1, 0.04, 0.01), tilt(1, 0.05, 0.01)]
+    assert not differs_from_reference(tilt(1, 0.045, 0.005), refs)
+    assert differs_from_reference(tilt(3, 0.045, 0.005), refs)

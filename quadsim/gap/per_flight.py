@@ -193,7 +193,8 @@ def _reference_spread(ref: list[Flight], params, effect_names, progress) -> tupl
         one = _diagnose_split(*_halves(f), params, effect_names, 1, progress, [])
         for e in one["effects"]:
             spread.setdefault(e["name"], []).append(
-                {k: e[k] for k in ("reduction", "params", "ci", "identifiable")})
+                {k: e.get(k, {}) for k in ("reduction", "params", "ci", "identifiable",
+                                           "fixed")})
         for k, v in one["where"]["heldout_rms_before"].items():
             floors.setdefault(k, []).append(v)
     return spread, floors
@@ -216,7 +217,11 @@ def differs_from_reference(entry: dict, references: list[dict]) -> bool:
     identified is compared with its "off" value only (its significance). A parameter whose
     value does not carry the effect's size (``battery_sag.full_voltage``: the sag
     (V / V_full)^2 is sized by the logged voltage, the same V_full fits a full and a flat
-    battery) is not compared: the reduction excess alone decides."""
+    battery) is not compared: the reduction excess alone decides. Only reference fits with
+    the same fixed values count (a canted rotor's tilt is compared with the references'
+    fits of the same rotor)."""
+    fixed = entry.get("fixed", {})
+    references = [r for r in references if r.get("fixed", {}) == fixed]
     for key, value in entry["params"].items():
         if not (entry["identifiable"].get(key) and entry["significant"].get(key)):
             continue
