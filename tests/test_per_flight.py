@@ -64,7 +64,7 @@ def test_shared_effect_that_reaches_the_floor_is_no_significant_gap(cf):
     judged = judge_flight(_one([flight], [2.0] * 6), refs, "f", floors, cf)
     assert judged["outcome"] == "no_significant_gap" and judged["verdict"] == "no_significant_gap"
     assert "motor_lag" in judged["notes"][-1] and "shared" in judged["notes"][-1]
-    assert "7" in judged["answer"] and "references" in judged["answer"]
+    assert "motor_lag.time_constant 6.5 to 7.7 ms" in judged["answer"]   # the references' band
     # the same flight with a 24 ms lag differs: named
     lagging = _lag(0.024, 0.0003, reduction=0.98, after=dict.fromkeys(CHANNELS, 1.0))
     judged = judge_flight(_one([lagging], [2.0] * 6), refs, "f", floors, cf)

@@ -236,13 +236,20 @@ def differs_from_reference(entry: dict, references: list[dict]) -> bool:
     return False
 
 
+#: units shown scaled in words (SI inside): seconds as ms, kilograms as g, metres as mm.
+_SHOWN = {"s": (1e3, "ms"), "kg": (1e3, "g"), "m": (1e3, "mm")}
+
+
 def _band_text(entry: dict, references: list[dict], params) -> str:
+    """The reference fits' band of each parameter of ``entry``, in words with units."""
     parts = []
     for key in entry["params"]:
         band = reference_band(key, references)
         if band is not None:
             unit = collinear.unit_of(key)
-            parts.append(f"{key} {band[0]:.3g} to {band[1]:.3g} {unit}".rstrip())
+            scale, shown = _SHOWN.get(unit, (1.0, unit))
+            parts.append(f"{key} {scale * band[0]:.3g} to {scale * band[1]:.3g} "
+                         f"{shown}".rstrip())
     return "; ".join(parts) or "not identified on them"
 
 
