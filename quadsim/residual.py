@@ -56,7 +56,8 @@ from .params import VehicleParams
 from .rotors import allocation_matrix
 
 __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "flight_states",
-           "resample_uniform", "savgol_response_cutoff", "model_wrench", "measured_wrench",
+           "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
+           "measured_wrench",
            "residual_wrench", "DEFAULT_WINDOW_S"]
 
 #: Savitzky–Golay window (s) used unless told otherwise.
@@ -248,6 +249,17 @@ def _require_rotors(states: FlightStates, params: VehicleParams) -> np.ndarray:
     return states.rotor_speed
 
 
+def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray) -> np.ndarray:
+    """Body-frame wrench (N, 6) of the rotors alone: force (N) and torque about the CoM (N m)
+    of speeds ``speed`` (N, R) rad/s with the effects' per-rotor ``loads.thrust_scale`` and
+    ``loads.thrust_offset`` (a thrust offset o_i acts along axis a_i at hub r_i: force
+    o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included."""
+    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle).T
+    axes = vehicle.rotor_axes
+    offset_wrench = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    return wrench + loads.thrust_offset @ offset_wrench
+
+
 def model_wrench(states: FlightStates, params: VehicleParams,
                  effects: Iterable[Effect] | EffectSet | None = None,
                  *, rotor_speed: np.ndarray | None = None
@@ -264,11 +276,7 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat)
     loads = effect_set.loads(ctx)
-    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle).T
-    # A thrust offset o_i acts along axis a_i at hub r_i: force o_i a_i, torque o_i (r_i-c) x a_i.
-    axes = vehicle.rotor_axes
-    offset_wrench = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
-    wrench += loads.thrust_offset @ offset_wrench
+    wrench = rotor_wrench(vehicle, loads, speed)
     force = wrench[:, :3] + rotate_inverse(states.quat, loads.force_world)
     torque = wrench[:, 3:] + loads.torque_body
     return force, torque, vehicle

@@ -35,7 +35,7 @@ from .motor_map import (  # re-exported: the diagnosis' public fitting names
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
            "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
            "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
-           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv"]
+           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -276,6 +276,15 @@ def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
     return np.clip(x0, lower + 1e-12 * typical, upper - 1e-12 * typical)
 
 
+def rate_owner(effects) -> object | None:
+    """The first effect that defines rotor dynamics (``rotor_speed_rate`` not None: a motor
+    lag), or None: then a commanded speed is reached at once (a speed factor, a battery, is
+    static)."""
+    probe = np.zeros((1, 1))
+    return next((e for e in effects
+                 if e.rotor_speed_rate(np.zeros(1), probe, probe) is not None), None)
+
+
 def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
     """Measured rotor speed at t + h minus the model's prediction from the state at t."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
@@ -289,14 +298,13 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
         cmd = cmd * np.asarray(factor)[:, None]
     speed = states.rotor_speed
     n = len(states.t) - steps
-    rate_owner = [e for e in effects if e.rotor_speed_rate(np.zeros(1), np.zeros((1, 1)),
-                                                            np.zeros((1, 1))) is not None]
-    if not rate_owner:
+    owner = rate_owner(effects)
+    if owner is None:
         predicted = cmd[steps:]
     else:
         # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
         # dt / (2 ROTOR_SUBSTEPS)).
-        rate_fn = rate_owner[0].rotor_speed_rate
+        rate_fn = owner.rotor_speed_rate
         predicted = speed[:n].copy()
         h = dt / ROTOR_SUBSTEPS
         for k in range(steps):

@@ -33,7 +33,9 @@ from ..effects.base import Effect, EffectContext, EffectSet
 from ..flightlog import FlightLog
 from ..frames import quat_multiply, quat_normalize, rotate_inverse
 from ..params import VehicleParams, hover_speed
+from ..residual import rotor_wrench
 from ..rotors import allocation_matrix
+from .fitting import rate_owner
 
 __all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
 
@@ -127,9 +129,7 @@ def _align_body_force(rot: np.ndarray, force_dir: np.ndarray) -> np.ndarray:
 
 def _rotor_force_dir(vehicle, loads, speed) -> np.ndarray:
     """Unit direction (N, 3), body frame, of the rotors' total force at ``speed``."""
-    axes = vehicle.rotor_axes
-    force = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle)[:3].T \
-        + loads.thrust_offset @ axes
+    force = rotor_wrench(vehicle, loads, speed)[:, :3]
     return force / np.linalg.norm(force, axis=1, keepdims=True)
 
 
@@ -165,10 +165,7 @@ def _rotor_wrench(vehicle, effect_set, ctx, speed):
     ctx = EffectContext(ctx.t, ctx.position, ctx.velocity, ctx.quat, ctx.body_rate,
                         ctx.air_velocity, speed, ctx.rotor_accel, ctx.params, ctx.vbat)
     loads = effect_set.loads(ctx)
-    alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]
-    axes = vehicle.rotor_axes
-    offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])[:, 2:]
-    wrench = (np.square(speed) * loads.thrust_scale) @ alloc.T + loads.thrust_offset @ offset_map
+    wrench = rotor_wrench(vehicle, loads, speed)[:, 2:]
     wrench[:, 1:] += loads.torque_body
     return wrench
 
@@ -300,9 +297,7 @@ def _commands(t, speed, effect_set, params, hover, vbat):
     lag of the battery)."""
     rate_needed = np.gradient(speed, t, axis=0)
     cmd = speed.copy()
-    probe = np.zeros((1, 1))
-    if not any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
-               for e in effect_set.effects):
+    if rate_owner(effect_set.effects) is None:
         factor = effect_set.speed_factor(t, vbat)
         return (cmd if factor is None else cmd / np.asarray(factor)[:, None]) / params.max_speed
     if effect_set.has_rotor_dynamics():

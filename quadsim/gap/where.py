@@ -29,6 +29,7 @@ from ..errors import QuadsimError
 from ..frames import quat_conjugate, quat_multiply
 from ..params import VehicleParams
 from ..residual import FlightStates
+from .fitting import rate_owner
 
 __all__ = ["regime_masks", "by_regime", "by_band", "kstep_errors", "BANDS_HZ", "HORIZONS_S"]
 
@@ -105,8 +106,7 @@ def kstep_errors(flights: list[FlightStates], params: VehicleParams, effects: li
     speeds are measured, not commanded)."""
     from ..engines import simulate
 
-    effects = [e for e in effects
-               if e.rotor_speed_rate(np.zeros(1), np.ones((1, 1)), np.zeros((1, 1))) is None]
+    effects = [e for e in effects if rate_owner([e]) is None]
     dt = float(flights[0].t[1] - flights[0].t[0])
     steps = {h: max(1, int(round(h / dt))) for h in HORIZONS_S}
     horizon = max(steps.values())
