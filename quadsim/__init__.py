@@ -2,8 +2,8 @@
 and sim-to-real gap diagnosis.
 
 Conventions: SI units inside; world z up; body x forward, y left, z up; quaternions
-scalar-first (w, x, y, z), body to world. See :mod:`quadsim.params` and
-:mod:`quadsim.trajectory`.
+scalar-first (w, x, y, z), body to world. See :mod:`quadsim.vehicle.params` and
+:mod:`quadsim.vehicle.state`.
 """
 
 __version__ = "0.1.0"

@@ -1,7 +1,7 @@
 """Build the vehicle's MJCF from a CAD folder: ``python -m quadsim.build_mjcf cad/``.
 
 The body's mass, centre of mass and full inertia come from the meshes
-(:func:`quadsim.massprops.vehicle_mass_properties`) and are written as an explicit
+(:func:`quadsim.cad.massprops.vehicle_mass_properties`) and are written as an explicit
 ``<inertial fullinertia=...>`` so MuJoCo never recomputes them; the rotor sites and
 actuators come from the manifest's rotors; b, d and the speed range come from a parameter
 set (``--params``, default ``physical``). Meshes are visual geoms (class ``visual``, no mass)
@@ -9,7 +9,7 @@ referenced relative to the MJCF with the mesh unit's scale (``0.001`` for mm); p
 ``collision = "box"|"cylinder"`` get a simple collision geom of their bounding shape.
 
 The actuator control is the squared rotor speed Omega^2 in rad^2/s^2 (see
-:mod:`quadsim.mjcf`). Example::
+:mod:`quadsim.sim.mjcf`). Example::
 
     python -m quadsim.build_mjcf cad/                         # -> models/testbed.xml
     python -m quadsim.build_mjcf cad/ -o /tmp/x.xml --params computational
@@ -32,14 +32,14 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .assembly import MESH_UNITS, Assembly, load_assembly
-from .cliargs import ArgumentParser
-from .errors import InputError, ModelError, QuadsimWarning, run_cli
-from .fileio import atomic_write_text
-from .massprops import MassProperties, vehicle_mass_properties
-from .mjcf import vehicle_xml
-from .params import MODELS_DIR, Rotor, VehicleParams, load_params
-from .step import is_step
+from .cad.assembly import MESH_UNITS, Assembly, load_assembly
+from .cad.massprops import MassProperties, vehicle_mass_properties
+from .cad.step import is_step
+from .core.args import ArgumentParser
+from .core.errors import InputError, ModelError, QuadsimWarning, run_cli
+from .core.files import atomic_write_text
+from .sim.mjcf import vehicle_xml
+from .vehicle.params import MODELS_DIR, Rotor, VehicleParams, load_params
 
 __all__ = [
     "BuiltModel",
@@ -153,7 +153,7 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     base = load_params(params, check=inertial != "cad")
     output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
     vehicle = cad_params(base, assembly, props, inertial=inertial)
-    from .guards import check_hover_control
+    from .vehicle.guards import check_hover_control
 
     check_hover_control(  # CAD mass with the set's b and speed range: can it hover?
         vehicle, where=f"{assembly.manifest} + {base.path or base.name}",
@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="replace a non-watertight or badly wound mesh by its convex hull "
                              "(warns; mass properties become approximate)")
     args = parser.parse_args(argv)
-    from .cliargs import check_output  # before any work
+    from .core.args import check_output  # before any work
 
     if not args.cad_dir.is_dir():
         raise InputError(f"{args.cad_dir}: CAD folder not found (give the folder holding the "

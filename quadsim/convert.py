@@ -3,7 +3,7 @@ ArduPilot DataFlash file (or one of our own logs) -> the quadsim flight-log sche
 
 The format comes from the first bytes of the file, else the name (``--format`` forces it);
 the importers are :mod:`quadsim.logs` (resampling, frames, units: see there and
-docs/logs.md). The result is validated exactly like a CSV log (:mod:`quadsim.flightlog`) and
+docs/logs.md). The result is validated exactly like a CSV log (:mod:`quadsim.logs.flightlog`) and
 written atomically.
 
     python -m quadsim.convert sample_px4_events.ulg -o px4.csv.gz
@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cliargs import ArgumentParser
-from .errors import InputError, run_cli
-from .flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
+from .core.args import ArgumentParser
+from .core.errors import InputError, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
+from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs.ulog import TOPICS
 
 
@@ -87,7 +87,7 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
         columns["t"] = columns["t"] - columns["t"][0]
     log = log_from_columns(source, columns, warn=False)
     if model is not None:
-        from .params import load_params
+        from .vehicle.params import load_params
         params = load_params(model)
         if log.rotor_count and log.rotor_count != params.rotor_count:
             raise InputError(f"{source}: rotor_*/cmd_*: {log.rotor_count} rotors in the log, "

@@ -1,10 +1,10 @@
 """Flight generator: fly a parameter set in closed loop with hidden effects, log like a sensor.
 
-``python -m quadsim.fly`` (and the library function :func:`generate_flight`) flies a
-reference path (:mod:`quadsim.trajectories`) with a tracking controller that knows only the
+``python -m quadsim.fly`` (the CLI of :func:`quadsim.logs.generate.generate_flight`) flies a
+reference path (:mod:`quadsim.sim.paths`) with a tracking controller that knows only the
 *nominal* parameter set, in the MuJoCo engine (or the analytic one), while the simulated
 vehicle carries any set of effects (:mod:`quadsim.effects`). The states are logged in the
-flight-log schema (:mod:`quadsim.flightlog`) through sensor models (:mod:`quadsim.sensors`),
+flight-log schema (:mod:`quadsim.logs.flightlog`) through sensor models (:mod:`quadsim.logs.sensors`),
 and the ground truth (effects and values, sensors, path, seed) goes to a separate sidecar
 ``<log>.truth.json`` so that a diagnosis can be run blind. Same inputs -> same bytes.
 
@@ -21,7 +21,7 @@ Example::
         --effect body_drag:cd_area=0.02 --sensor-noise position=1e-3,gyro=0.01 \\
         --seed 0 -o out/flight.csv.gz
 
-    >>> from quadsim.fly import generate_flight
+    >>> from quadsim.logs.generate import generate_flight
     >>> log, truth = generate_flight(params, "figure8", effects, sensors, seed=0, duration=10)
 """
 
@@ -32,186 +32,18 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
+from .core.args import ArgumentParser
+from .core.errors import InputError, run_cli
+from .core.files import atomic_write_bytes, atomic_write_text
+from .effects import effect_set_from_specs
+from .logs.flightlog import LOG_SUFFIXES, log_file_bytes
+from .logs.generate import CONTROLLERS, describe_report, generate_flight, truth_path
+from .logs.sensors import SensorModel, parse_signal_values
+from .sim.engines import ENGINES
+from .sim.paths import PATHS
+from .vehicle.params import load_params
 
-from .analytic import BatchEffects, body_arrays, extra_wrench, rigid_body_accelerations
-from .cliargs import ArgumentParser
-from .controllers import GeometricController
-from .effects import EffectSet, describe_effects, effect_set_from_specs
-from .effects.battery_sag import BatterySag
-from .engines import ENGINES, simulate
-from .errors import InputError, run_cli
-from .fileio import atomic_write_bytes, atomic_write_text
-from .flightlog import LOG_SUFFIXES, FlightLog, log_file_bytes
-from .frames import quat_to_rotmat
-from .params import VehicleParams, load_params
-from .sensors import SensorModel, parse_signal_values
-from .trajectories import PATHS, Reference, make_reference
-from .trajectory import Trajectory
-
-__all__ = [
-    "CONTROLLERS",
-    "TRUTH_SCHEMA",
-    "flight_report",
-    "generate_flight",
-    "main",
-    "specific_force",
-    "truth_path",
-]
-
-CONTROLLERS = ("geometric", "lqr")
-TRUTH_SCHEMA = "quadsim.flight-truth/1"
-
-
-def specific_force(params: VehicleParams, effects: EffectSet, traj: Trajectory) -> np.ndarray:
-    """Accelerometer specific force (N, 3) in the body frame (m/s^2) of a (single) flight:
-    all non-gravitational forces per unit mass, at the body origin, from the same
-    Newton-Euler terms and effect hooks the engines use (``params`` already effect-modified)."""
-    n = len(traj.t)
-    one = body_arrays([params])
-    body = type(one)(**{k: (v if k == "rotor_spin" else np.repeat(v, n, axis=0))
-                        for k, v in vars(one).items()})
-    command = traj.rotor_command if traj.rotor_command is not None else traj.rotor_speed
-    hooks = BatchEffects(effects, [params] * n)
-    rate = (hooks.rotor_speed_rate(traj.t, command, traj.rotor_speed) if hooks.rotor_dynamics
-            else np.zeros_like(traj.rotor_speed))
-    loads = hooks.loads(traj.t, traj.position, traj.velocity, traj.quat, traj.body_rate,
-                        traj.rotor_speed, rate)
-    force_body, torque_body = extra_wrench(body, loads, traj.rotor_speed)
-    wrench = np.einsum("bkr,br->bk", body.allocation, np.square(traj.rotor_speed))
-    accel, _ = rigid_body_accelerations(body, traj.quat, traj.body_rate,
-                                        wrench[:, :3] + force_body, wrench[:, 3:] + torque_body,
-                                        loads.force_world)
-    accel[:, 2] += params.gravity
-    return np.einsum("nji,nj->ni", quat_to_rotmat(traj.quat), accel)
-
-
-#: Limits of :func:`flight_report` beyond which ``fly`` refuses the path (see its docstring).
-MAX_SATURATED_FRACTION = 0.05
-MAX_TILT_DEG = 60.0
-
-
-def flight_report(params: VehicleParams, reference: Reference, traj: Trajectory) -> dict:
-    """What the vehicle actually did on a (single) flight, in numbers.
-
-    * ``saturated_fraction``: share of samples with any rotor command at the end of the
-      speed range (``>= (1 - 1e-6) max_speed`` or ``<= min_speed``); the controller asked for
-      more than the rotors can give.
-    * ``peak_tilt_deg``: largest angle between body z and world z, ``acos(1 - 2 (x^2 + y^2))``
-      of the quaternion (deg).
-    * ``tracking_error_rms_m`` / ``tracking_error_max_m``: distance to the reference
-      position (m).
-    * ``diverged``: a non-finite state, a tilt beyond 90 deg, or a final tracking error above
-      ``max(1 m, path size)``.
-    * ``feasible``: not diverged, saturated below :data:`MAX_SATURATED_FRACTION` and peak
-      tilt below :data:`MAX_TILT_DEG`.
-    """
-    command = traj.rotor_command if traj.rotor_command is not None else traj.rotor_speed
-    top = command >= (1 - 1e-6) * params.max_speed
-    bottom = command <= params.min_speed * (1 + 1e-6) if params.min_speed > 0 else command <= 0
-    saturated = float(np.mean(np.any(top | bottom, axis=-1)))
-    q = traj.quat
-    cos_tilt = np.clip(1 - 2 * (q[..., 1] ** 2 + q[..., 2] ** 2), -1, 1)
-    tilt = float(np.degrees(np.max(np.arccos(cos_tilt)))) if np.all(np.isfinite(q)) else 180.0
-    error = np.linalg.norm(traj.position - reference(traj.t).position, axis=-1)
-    finite = bool(np.all(np.isfinite(traj.position)) and np.all(np.isfinite(q)))
-    size = float(reference.settings.get("size", 1.0) or 1.0)
-    diverged = (not finite) or tilt > 90.0 or float(error[-1]) > max(1.0, size)
-    return {
-        "saturated_fraction": round(saturated, 6),
-        "peak_tilt_deg": round(tilt, 4),
-        "tracking_error_rms_m": round(float(np.sqrt(np.mean(error ** 2))), 6) if finite else None,
-        "tracking_error_max_m": round(float(np.max(error)), 6) if finite else None,
-        "final_height_m": round(float(traj.position[-1, 2]), 6) if finite else None,
-        "diverged": bool(diverged),
-        "feasible": bool(not diverged and saturated < MAX_SATURATED_FRACTION
-                         and tilt < MAX_TILT_DEG),
-        "limits": {"saturated_fraction": MAX_SATURATED_FRACTION, "peak_tilt_deg": MAX_TILT_DEG},
-    }
-
-
-def _describe(report: dict) -> str:
-    error = report["tracking_error_max_m"]
-    return (f"{100 * report['saturated_fraction']:.0f} % of samples saturated, peak tilt "
-            f"{report['peak_tilt_deg']:.0f} deg, max tracking error "
-            f"{'inf' if error is None else f'{error:.3g}'} m, final height "
-            f"{report['final_height_m']:.3g} m" + (", diverged" if report["diverged"] else ""))
-
-
-def _lqr(params: VehicleParams, reference: Reference):
-    from .linear import LQRController
-
-    def target(t):
-        s = reference(np.atleast_1d(t))
-        cy, sy = np.cos(s.yaw), np.sin(s.yaw)
-        ax = cy * s.acceleration[..., 0] + sy * s.acceleration[..., 1]
-        ay = -sy * s.acceleration[..., 0] + cy * s.acceleration[..., 1]
-        g = params.gravity
-        euler = np.stack([-ay / g, ax / g, s.yaw], -1)   # small-angle attitude for a_d
-        rates = np.stack([np.zeros_like(s.yaw)] * 2 + [s.yaw_rate], -1)
-        return np.concatenate([s.position, s.velocity, euler, rates], -1)
-
-    return LQRController(params, reference=target)
-
-
-def _battery_voltage(effects: EffectSet, t: np.ndarray) -> np.ndarray:
-    for effect in effects.effects:
-        if isinstance(effect, BatterySag):
-            return effect.voltage(t)
-    return np.full(len(t), BatterySag().full_voltage)
-
-
-def generate_flight(params: VehicleParams, path: str | Reference, effects: EffectSet | None,
-                    sensors: SensorModel | None, seed: int, *, engine: str = "mujoco",
-                    duration: float = 20.0, control_period: float = 0.005, speed: float = 1.0,
-                    height: float = 1.0, size: float = 1.0,
-                    controller: str = "geometric",
-                    progress=None) -> tuple[FlightLog, dict]:
-    """Fly ``params`` (nominal, what the controller knows) with ``effects`` (what the
-    simulated vehicle has) along ``path``; return the sensor log and the ground truth.
-
-    The truth carries ``flight_report`` (:func:`flight_report`): what the vehicle did.
-    ``progress(t)`` (optional) is called with the simulated time after each control step."""
-    effects = effects or EffectSet()
-    sensors = sensors or SensorModel()
-    reference = path if isinstance(path, Reference) else make_reference(
-        path, speed=speed, height=height, size=size, duration=duration)
-    if controller not in CONTROLLERS:
-        raise InputError(f"unknown controller {controller!r}; valid: {', '.join(CONTROLLERS)}")
-    geometric = GeometricController(params, reference)
-    control = geometric if controller == "geometric" else _lqr(params, reference)
-    if progress is not None:
-        inner = control
-
-        def control(t, state):  # same controller, reports the time
-            progress(float(np.max(t)))
-            return inner(t, state)
-    traj = simulate(params, engine=engine, initial=geometric.initial_state(), controller=control,
-                    duration=duration, control_period=control_period, effects=effects)
-    truth_params = effects.apply_to_params(params)
-    accel = specific_force(truth_params, effects, traj)
-    command = traj.rotor_command / params.max_speed
-    true_log = FlightLog(t=traj.t, position=traj.position, quat=traj.quat,
-                         velocity=traj.velocity, body_rate=traj.body_rate, accel=accel,
-                         rotor_speed=traj.rotor_speed, rotor_command=command,
-                         vbat=_battery_voltage(effects, traj.t))
-    log = sensors.apply(true_log, seed=seed)
-    truth = {
-        "schema": TRUTH_SCHEMA, "model": params.name, "engine": engine,
-        "controller": controller, "seed": int(seed), "duration_s": duration,
-        "control_period_s": control_period,
-        "path": {"name": reference.name, **reference.settings},
-        "effects": describe_effects(effects), "sensors": sensors.to_json(),
-        "command_normalisation": {"max_speed": params.max_speed, "unit": "rad/s"},
-        "flight_report": flight_report(params, reference, traj),
-    }
-    return log, truth
-
-
-def truth_path(log_path: str | Path) -> Path:
-    """``out/flight.csv.gz`` -> ``out/flight.csv.gz.truth.json``."""
-    log_path = Path(log_path)
-    return log_path.with_name(log_path.name + ".truth.json")
+__all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -253,8 +85,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _check_args(args) -> None:
-    """Every argument before any work (:mod:`quadsim.cliargs`)."""
-    from .cliargs import check_number, check_output
+    """Every argument before any work (:mod:`quadsim.core.args`)."""
+    from .core.args import check_number, check_output
 
     check_number("--duration", args.duration, low=0.0, high=24 * 3600.0, unit="s")
     check_number("--control-period", args.control_period, low=0.0, high=args.duration,
@@ -311,9 +143,9 @@ def main(argv: list[str] | None = None) -> int:
         if not args.allow_saturation:
             raise InputError(
                 f"--path {args.path} --speed {args.speed:g}: beyond vehicle "
-                f"{params.path or params.name}: {_describe(report)}; nothing written (lower "
+                f"{params.path or params.name}: {describe_report(report)}; nothing written (lower "
                 "--speed/--size or pass --allow-saturation)")
-        print(f"warning: path beyond the vehicle: {_describe(report)} (recorded in the truth "
+        print(f"warning: path beyond the vehicle: {describe_report(report)} (recorded in the truth "
               "sidecar's flight_report)", file=sys.stderr)
     data = log_file_bytes(output, log)
     truth_text = json.dumps(truth, indent=2, sort_keys=True) + "\n"

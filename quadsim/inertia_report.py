@@ -2,7 +2,7 @@
 
 Prints side by side, with relative differences to the report's SolidWorks model:
 
-* **trimesh**: :func:`quadsim.massprops.vehicle_mass_properties` of the CAD folder, for the
+* **trimesh**: :func:`quadsim.cad.massprops.vehicle_mass_properties` of the CAD folder, for the
   whole vehicle (weighed mass) and for the mechanical parts of report Table 4.1 alone (the
   parts the SolidWorks model contained, report Fig. 4.1: "without the on-board system");
 * **MuJoCo**: MuJoCo's own compiler on the same meshes with the same masses
@@ -11,7 +11,7 @@ Prints side by side, with relative differences to the report's SolidWorks model:
   Izz 0.01206 kg m^2;
 * **lumped**: report eq. 3.18/3.19 ``2 M R^2/5 + 2 (4) l^2 m`` with Table 4.4 means;
 * **bifilar**: Table 4.14 periods through the report's formula (no T^2, units kg m^2/s) and
-  through the corrected ``I = m g R^2 T^2 / (4 pi^2 L)`` (:mod:`quadsim.bifilar`).
+  through the corrected ``I = m g R^2 T^2 / (4 pi^2 L)`` (:mod:`quadsim.identify.bifilar`).
 
 ``--check`` (run by ``.ci/run``) exits non-zero when trimesh and MuJoCo differ by more than
 1e-6 relative (mass, CoM, inertia) or when the mechanical subset's principal moments differ
@@ -28,10 +28,10 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .assembly import MESH_UNITS, Assembly, load_assembly
-from .cliargs import ArgumentParser
-from .errors import ModelError, run_cli
-from .massprops import vehicle_mass_properties
+from .cad.assembly import MESH_UNITS, Assembly, load_assembly
+from .cad.massprops import vehicle_mass_properties
+from .core.args import ArgumentParser
+from .core.errors import ModelError, run_cli
 
 __all__ = [
     "SOLIDWORKS",
@@ -111,8 +111,8 @@ def lumped_inertia(base_mass: float, base_radius: float, arm: float, motor_mass:
 
 
 def _report_rows() -> list[Row]:
-    from .benchdata import load_physical_measurements
-    from .bifilar import bifilar_inertia, load_bifilar_table, published_bifilar_inertia
+    from .identify.benchdata import load_physical_measurements
+    from .identify.bifilar import bifilar_inertia, load_bifilar_table, published_bifilar_inertia
 
     table = load_physical_measurements()
     mean = {k: float(np.mean(v)) for k, v in table.columns.items() if k != "trial"}

@@ -37,13 +37,13 @@ from pathlib import Path
 import control
 import numpy as np
 
-from .cliargs import ArgumentParser
-from .engines import initial_state, simulate
-from .errors import InputError, ModelError, run_cli
-from .fileio import atomic_write_bytes
-from .linear import LQRController, hover_point, linearize
-from .params import VehicleParams, load_params
-from .rotors import speeds_for
+from .core.args import ArgumentParser
+from .core.errors import InputError, ModelError, run_cli
+from .core.files import atomic_write_bytes
+from .sim.engines import initial_state, simulate
+from .sim.linear import LQRController, hover_point, linearize
+from .vehicle.params import VehicleParams, load_params
+from .vehicle.rotors import speeds_for
 
 __all__ = ["CHANNELS", "OpenLoopResult", "run_openloop", "response_metrics", "main"]
 
@@ -354,7 +354,7 @@ def _check_args(args) -> dict:
     for name, value in steps.items():
         if not math.isfinite(value):
             raise InputError(f"--step-{name}: not a finite number")
-    from .cliargs import check_number, check_output
+    from .core.args import check_number, check_output
 
     for flag in ("duration", "control_period", "bound"):
         check_number("--" + flag.replace("_", "-"), getattr(args, flag), low=0.0)

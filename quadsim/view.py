@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .cliargs import ArgumentParser
-from .errors import InputError, ModelError, QuadsimError, run_cli
-from .params import VehicleParams, load_params
-from .trajectory import Trajectory
+from .core.args import ArgumentParser
+from .core.errors import InputError, ModelError, QuadsimError, run_cli
+from .vehicle.params import VehicleParams, load_params
+from .vehicle.state import Trajectory
 
 __all__ = ["main", "step_flight", "replay_log", "step_reference"]
 
@@ -53,8 +53,8 @@ def step_reference(t: np.ndarray, *, start=(0.0, 0.0, 1.0), step_x: float = 0.5,
 def step_flight(params: VehicleParams, *, engines=ENGINES, duration: float = 7.0,
                 control_period: float = 0.01) -> dict[str, Trajectory]:
     """LQR hover-and-step flight (:func:`step_reference`) in each engine."""
-    from .engines import initial_state, simulate
-    from .linear import LQRController
+    from .sim.engines import initial_state, simulate
+    from .sim.linear import LQRController
 
     controller = LQRController(params, position=(0.0, 0.0, 1.0), reference=step_reference)
     start = initial_state(position=(0.0, 0.0, 1.0))
@@ -82,7 +82,7 @@ def replay_log(params: VehicleParams, measured: Trajectory, *, engines=ENGINES,
     sample period), restarting from the measured state every ``horizon`` s (<= 0: one run
     over the whole log). All segments run as one batch; the result is stitched back into one
     trajectory per engine (segment ends dropped where the next segment starts)."""
-    from .engines import initial_state, simulate
+    from .sim.engines import initial_state, simulate
 
     t = np.asarray(measured.t, dtype=float)
     if measured.rotor_speed.shape[-1] != params.rotor_count:
@@ -174,8 +174,8 @@ def _load_model(name: str, engines: tuple[str, ...]) -> VehicleParams:
 
 
 def _measured(path: Path, duration: float | None, params=None) -> Trajectory:
-    from .flightlog import load_log
-    from .logcheck import check_log  # channels against each other; NaN runs cut or refused
+    from .logs.checks import check_log  # channels against each other; NaN runs cut or refused
+    from .logs.flightlog import load_log
 
     log, notes = check_log(load_log(path), params)
     for note in notes:
@@ -197,7 +197,7 @@ def _measured(path: Path, duration: float | None, params=None) -> Trajectory:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    from .cliargs import check_inputs, check_number  # every argument before any work
+    from .core.args import check_inputs, check_number  # every argument before any work
 
     check_number("--duration", args.duration, low=0.0, unit="s")
     check_number("--horizon", args.horizon, low=0.0, low_inclusive=True, unit="s")
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     engines = _engines(args.engine)
     params = _load_model(args.model, engines)
     if args.cad is not None:
-        from .assembly import load_assembly
+        from .cad.assembly import load_assembly
 
         assembly = load_assembly(args.cad)
     else:

@@ -39,10 +39,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
 from quadsim.effects import EFFECTS, TESTBED_EXAMPLES, effect_set_from_specs  # noqa: E402
-from quadsim.engines import initial_state, simulate  # noqa: E402
-from quadsim.linear import hover_point  # noqa: E402
-from quadsim.mujoco_engine import compile_model  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
+from quadsim.sim.engines import initial_state, simulate  # noqa: E402
+from quadsim.sim.linear import hover_point  # noqa: E402
+from quadsim.sim.mujoco_engine import compile_model  # noqa: E402
+from quadsim.vehicle.params import load_params  # noqa: E402
 
 PERIOD = 0.01
 DT = 1e-3
@@ -73,7 +73,7 @@ def all_effects():
 
 def fast_path_note(params, effects) -> str:
     """Which path the "all effects" rows take (the compiled one, or why not)."""
-    from quadsim import fast_mujoco
+    from quadsim.sim import compiled as fast_mujoco
 
     problem = fast_mujoco.fast_form_problem([effects], [effects.apply_to_params(params)])
     return "compiled fast path" if problem is None else f"reference path ({problem})"

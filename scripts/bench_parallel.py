@@ -24,11 +24,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from quadsim.effects import make_effect
-from quadsim.flightlog import write_log
 from quadsim.gap.__main__ import main as gap_main
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import load_params
+from quadsim.logs.flightlog import write_log
 from quadsim.sweep.__main__ import main as sweep_main
+from quadsim.vehicle.params import load_params
 
 
 def _noop(x):
@@ -50,7 +50,7 @@ def _timed(fn, key: str = "") -> float:
 def overheads(tasks: int = 400) -> dict:
     """Fixed start-up costs (Ray local cluster; a 2-process spawn pool) and Ray's per-task
     overhead (no-op tasks, warm workers, wall per task)."""
-    from quadsim.parallel import connect_ray, run_tasks
+    from quadsim.core.executor import connect_ray, run_tasks
 
     start = time.perf_counter()
     connect_ray("local", 2)

@@ -23,9 +23,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from quadsim.frames import euler_to_quat  # noqa: E402
-from quadsim.params import hover_speed, load_params  # noqa: E402
-from quadsim.trajectory import Trajectory  # noqa: E402
+from quadsim.core.frames import euler_to_quat  # noqa: E402
+from quadsim.vehicle.params import hover_speed, load_params  # noqa: E402
+from quadsim.vehicle.state import Trajectory  # noqa: E402
 from quadsim.viewer import recording_bytes, save_recording  # noqa: E402
 
 
@@ -58,7 +58,7 @@ def bench(params, seconds: float, rate: float, repeat: int) -> dict:
 
 
 def simulation_time(params, seconds: float) -> float:
-    from quadsim.engines import simulate
+    from quadsim.sim.engines import simulate
 
     start = time.perf_counter()
     simulate(params, engine="mujoco", duration=seconds, control_period=0.01)
@@ -83,10 +83,10 @@ def main() -> int:
               f"{r['bytes'] / 1e3 / r['seconds']:.0f} |")
     print(f"\nMuJoCo simulation of the same {args.seconds:g} s (100 Hz control, no "
           f"recording): {simulation_time(params, args.seconds):.3f} s")
-    code = "import sys, quadsim.engines, quadsim.viewer; print('rerun' in sys.modules)"
+    code = "import sys, quadsim.sim.engines, quadsim.viewer; print('rerun' in sys.modules)"
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             cwd=REPO).stdout.strip()
-    print(f"rerun imported by `import quadsim.engines, quadsim.viewer`: {loaded}")
+    print(f"rerun imported by `import quadsim.sim.engines, quadsim.viewer`: {loaded}")
     return 0
 
 

@@ -14,10 +14,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
-from quadsim.flightlog import load_log  # noqa: E402
 from quadsim.gap import diagnose_per_flight  # noqa: E402
 from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
+from quadsim.logs.flightlog import load_log  # noqa: E402
+from quadsim.vehicle.params import load_params  # noqa: E402
 
 
 def main() -> None:

@@ -17,13 +17,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from quadsim.controllers import GeometricController
+from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
-from quadsim.engines import initial_state, simulate
-from quadsim.fly import generate_flight
-from quadsim.frames import quat_conjugate, quat_multiply
-from quadsim.params import hover_speed, load_params
-from quadsim.trajectories import make_reference
+from quadsim.logs.generate import generate_flight
+from quadsim.sim.controllers import GeometricController
+from quadsim.sim.engines import initial_state, simulate
+from quadsim.sim.paths import make_reference
+from quadsim.vehicle.params import hover_speed, load_params
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)

@@ -50,13 +50,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from quadsim.bench.cases import oracle_reduction  # noqa: E402
 from quadsim.bench.draws import draw  # noqa: E402
+from quadsim.core.errors import QuadsimWarning  # noqa: E402
+from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.effects import make_effect  # noqa: E402
-from quadsim.errors import QuadsimWarning  # noqa: E402
-from quadsim.fileio import atomic_write_text  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
 from quadsim.gap.diagnose import MIN_GAIN  # noqa: E402
 from quadsim.gap.synthetic import synthetic_flight  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
+from quadsim.vehicle.params import load_params  # noqa: E402
 
 VEHICLES = ("physical", "crazyflie21")
 

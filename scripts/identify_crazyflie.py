@@ -8,7 +8,7 @@ command -> speed map are identified here from the *nominal* flights only (never 
 * b: least squares through the origin of the body-z force balance
   ``m * f_z = b * sum_i Omega_i^2`` over every sample of every nominal flight, with the
   accelerometer specific force and rotor speeds smoothed by the same Savitzky–Golay filter
-  (quadsim.residual). Its spread is the standard deviation of the per-flight estimates.
+  (quadsim.gap.residual). Its spread is the standard deviation of the per-flight estimates.
 * motor map: per-rotor straight line Omega = a + k * cmd fitted on the same samples,
   stored at cmd = 0 and 1 (it is only trusted inside the flown range, about 0.3-0.5).
 * d = 0.006 m * b (README: torque/thrust ratio of Crazyflie 2.x propellers).
@@ -30,10 +30,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from quadsim.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
-from quadsim.fileio import atomic_write_text  # noqa: E402
-from quadsim.flightlog import load_log  # noqa: E402
-from quadsim.residual import flight_states  # noqa: E402
+from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
+from quadsim.core.files import atomic_write_text  # noqa: E402
+from quadsim.gap.residual import flight_states  # noqa: E402
+from quadsim.logs.flightlog import load_log  # noqa: E402
 
 MASS = 0.037            # kg, README: total mass with battery
 HUB = 0.0354            # m, README: x and y hub offsets (0.050 m from the centre)
@@ -87,7 +87,7 @@ def render(fit: dict) -> str:
     ixx, iyy, izz = INERTIA
     return f'''# Parameter set "crazyflie21": Crazyflie 2.1 Brushless as flown in nominal/ flights.
 # Written by scripts/identify_crazyflie.py (do not edit by hand; rerun the script).
-schema = "quadsim.params/1"
+schema = "quadsim.vehicle.params/1"
 name = "crazyflie21"
 description = "Crazyflie 2.1 Brushless, 37 g quad-X; b identified from the nominal flights"
 

@@ -30,9 +30,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from quadsim.benchdata import load_physical_measurements  # noqa: E402
-from quadsim.errors import run_cli  # noqa: E402
-from quadsim.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
+from quadsim.core.errors import run_cli  # noqa: E402
+from quadsim.core.files import atomic_write_bytes, atomic_write_text  # noqa: E402
+from quadsim.identify.benchdata import load_physical_measurements  # noqa: E402
 
 STL_HEADER = b"quadsim testbed part, binary STL, units: millimetre".ljust(80, b" ")
 CIRCLE_SEGMENTS = 64
@@ -129,7 +129,7 @@ def stl_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
 
 # ----------------------------------------------------------------------------- the testbed
 # Measured: report Table 4.4, mean of the three trials, from the package's transcription
-# (quadsim/data/table_4_4_physical.csv) so that the numbers live in one place. SI.
+# (quadsim/identify/data/table_4_4_physical.csv) so that the numbers live in one place. SI.
 TABLE_4_4 = {k: float(np.mean(v)) for k, v in load_physical_measurements().columns.items()
              if k != "trial"}
 TOTAL_MASS = TABLE_4_4["total_mass"]            # overall mass, weighed

@@ -26,12 +26,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
-from quadsim.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
-from quadsim.flightlog import load_log  # noqa: E402
+from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
+from quadsim.core.executor import run_tasks  # noqa: E402
 from quadsim.gap import diagnose_per_flight  # noqa: E402
 from quadsim.gap.__main__ import collapse_warnings  # noqa: E402
-from quadsim.parallel import run_tasks  # noqa: E402
-from quadsim.params import load_params  # noqa: E402
+from quadsim.logs.flightlog import load_log  # noqa: E402
+from quadsim.vehicle.params import load_params  # noqa: E402
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     print(f"no_significant_gap on {out['no_significant_gap']}/{out['judged']} nominal flights "
           f"({time.perf_counter() - start:.0f} s)")
     if args.json:
-        from quadsim.fileio import atomic_write_text
+        from quadsim.core.files import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(out, indent=1, sort_keys=True) + "\n")
     return 0

@@ -2,9 +2,9 @@
 """Regenerate models/physical.toml and models/computational.toml from the identification.
 
 The numbers in those files are never typed: this script runs quadsim.identify on the
-packaged report tables (quadsim/data/*.csv) and writes the parameter sets (atomically).
+packaged report tables (quadsim/identify/data/*.csv) and writes the parameter sets (atomically).
 With --stand-data it first refits the 10-inch propeller's torque/thrust ratio d/b from a
-thrust-stand sweep (torque, thrust, RPM) and rewrites quadsim/data/torque_thrust_ratio.csv.
+thrust-stand sweep (torque, thrust, RPM) and rewrites quadsim/identify/data/torque_thrust_ratio.csv.
 --check writes nothing and exits 1 if a committed file differs from a fresh rendering.
 
     python scripts/write_params.py                       # rewrite the two TOML files
@@ -22,12 +22,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
-from quadsim.benchdata import DATA_DIR, load_thrust_stand
-from quadsim.errors import run_cli
-from quadsim.fileio import atomic_write_text
+from quadsim.core.errors import run_cli
+from quadsim.core.files import atomic_write_text
 from quadsim.identify import fit_thrust_stand, identify_testbed
+from quadsim.identify.benchdata import DATA_DIR, load_thrust_stand
 from quadsim.identify.paramsets import render_computational, render_physical, render_ratio_csv
-from quadsim.params import MODELS_DIR
+from quadsim.vehicle.params import MODELS_DIR
 
 STAND_SOURCE = ("KDE2814XF-775 motor + 10x3.3 carbon propeller on an RCbenchmark 1580 stand, "
                 "up-and-down ESC sweep (Du et al., 'Computational Multicopter Design', 2016; "

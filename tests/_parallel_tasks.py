@@ -20,7 +20,7 @@ def die_on_three(k: int) -> int:
 
 def bad_input(k: int) -> int:
     """A user error raised inside a worker must reach the driver as the same error."""
-    from quadsim.errors import InputError
+    from quadsim.core.errors import InputError
 
     if k == 1:
         raise InputError(f"flight_{k}.csv: t: not increasing")

@@ -9,13 +9,13 @@ cases of one model run as one batch per engine (that is also a test of batching)
 import numpy as np
 import pytest
 
+from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import EffectSet, make_effect
 from quadsim.effects.gyroscopic import Gyroscopic
-from quadsim.engines import initial_state, simulate
-from quadsim.frames import quat_multiply, quat_conjugate
-from quadsim.linear import LQRController, hover_point
-from quadsim.params import load_params
-from quadsim.rotors import speeds_for
+from quadsim.sim.engines import initial_state, simulate
+from quadsim.sim.linear import LQRController, hover_point
+from quadsim.vehicle.params import load_params
+from quadsim.vehicle.rotors import speeds_for
 
 OPEN_LOOP_S, CLOSED_LOOP_S = 5.0, 20.0
 PERIOD = 0.01
@@ -24,7 +24,7 @@ CASES = ("hover", "collective", "roll", "pitch", "yaw", "multisine")
 
 def _params(name):
     if name == "computational":
-        pytest.importorskip("quadsim.assembly")
+        pytest.importorskip("quadsim.cad.assembly")
     return load_params(name)
 
 
@@ -58,7 +58,7 @@ def open_loop_inputs(params, periods, seed=0):
 
 def _models():
     """Both parameter sets (computational needs the CAD assembly module)."""
-    pytest.importorskip("quadsim.assembly")
+    pytest.importorskip("quadsim.cad.assembly")
     return [load_params("physical"), load_params("computational")]
 
 

@@ -4,12 +4,12 @@ torque-free tumbling, an off-centre CoM) and the hover equilibrium."""
 import numpy as np
 import pytest
 
-from quadsim.analytic import BatchEffects, body_arrays, state_derivative
-from quadsim.engines import initial_state, simulate
-from quadsim.errors import InputError, SimulationError
-from quadsim.frames import quat_to_rotmat
-from quadsim.linear import hover_point
-from quadsim.params import load_params
+from quadsim.core.errors import InputError, SimulationError
+from quadsim.core.frames import quat_to_rotmat
+from quadsim.sim.analytic import BatchEffects, body_arrays, state_derivative
+from quadsim.sim.engines import initial_state, simulate
+from quadsim.sim.linear import hover_point
+from quadsim.vehicle.params import load_params
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def _hover_residual(params):
 @pytest.mark.parametrize("name", ["physical", "computational", "crazyflie21"])
 def test_hover_equilibrium_residual_below_1e9(name):
     if name == "computational":
-        pytest.importorskip("quadsim.assembly")
+        pytest.importorskip("quadsim.cad.assembly")
     accel, alpha = _hover_residual(load_params(name))
     assert np.abs(accel).max() <= 1e-9
     assert np.abs(alpha).max() <= 1e-9

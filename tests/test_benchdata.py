@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from quadsim.benchdata import (
+from quadsim.core.errors import InputError
+from quadsim.identify.benchdata import (
     load_cfd_table,
     load_force_lift,
     load_physical_measurements,
     load_testbed_constants,
     load_thrust_stand,
 )
-from quadsim.bifilar import load_bifilar_table
-from quadsim.errors import InputError
+from quadsim.identify.bifilar import load_bifilar_table
 
 RPM = 2 * math.pi / 60
 

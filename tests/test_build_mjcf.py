@@ -11,9 +11,9 @@ from test_cad import REPO, generator, layout, write_cad
 
 from quadsim import build_mjcf
 from quadsim.build_mjcf import build_model, main, write_model
-from quadsim.errors import InputError
-from quadsim.params import hover_speed
-from quadsim.rotors import allocation_matrix, mixer
+from quadsim.core.errors import InputError
+from quadsim.vehicle.params import hover_speed
+from quadsim.vehicle.rotors import allocation_matrix, mixer
 
 
 @pytest.fixture(scope="module")
@@ -207,14 +207,14 @@ def test_mesh_over_mujoco_stl_limit_is_refused_before_writing(tmp_path, monkeypa
 
 
 def test_parameter_set_can_take_mass_properties_and_rotors_from_cad(tmp_path):
-    from quadsim.assembly import load_assembly
-    from quadsim.massprops import vehicle_mass_properties
-    from quadsim.params import load_params
+    from quadsim.cad.assembly import load_assembly
+    from quadsim.cad.massprops import vehicle_mass_properties
+    from quadsim.vehicle.params import load_params
 
     cad = REPO / "cad"
     q = 'unit = "{}", source = "test" }}'
     (tmp_path / "cadset.toml").write_text("\n".join([
-        'schema = "quadsim.params/1"', 'name = "cadset"', "[body]",
+        'schema = "quadsim.vehicle.params/1"', 'name = "cadset"', "[body]",
         f'from_cad = {{ path = "{cad}", source = "cad/ meshes" }}', "[rotors]",
         "thrust_factor = { value = 1e-5, " + q.format("N s^2/rad^2"),
         "drag_factor = { value = 1e-7, " + q.format("N m s^2/rad^2"),

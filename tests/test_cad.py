@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.assembly import load_assembly
-from quadsim.massprops import vehicle_mass_properties
-from quadsim.params import Rotor, load_params
-from quadsim.rotors import allocation_matrix
+from quadsim.cad.assembly import load_assembly
+from quadsim.cad.massprops import vehicle_mass_properties
+from quadsim.vehicle.params import Rotor, load_params
+from quadsim.vehicle.rotors import allocation_matrix
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = REPO / "scripts" / "make_testbed_cad.py"

@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.flightlog import load_log, write_log
-from quadsim.fly import generate_flight
-from quadsim.params import MODELS_DIR, load_params
+from quadsim.logs.flightlog import load_log, write_log
+from quadsim.logs.generate import generate_flight
+from quadsim.vehicle.params import MODELS_DIR, load_params
 
 REPO = Path(__file__).resolve().parents[1]
 #: cases per command (200 in all; the commands whose valid runs simulate get fewer)

@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 
 from quadsim.build_mjcf import build_model
-from quadsim.params import MODELS_DIR
+from quadsim.vehicle.params import MODELS_DIR
 
 
 def test_committed_testbed_xml_is_fresh():

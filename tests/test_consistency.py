@@ -13,7 +13,7 @@ from quadsim.gap import diagnose
 from quadsim.gap.consistency import MATERIAL
 from quadsim.gap.schema import validate
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import hover_speed, load_params
+from quadsim.vehicle.params import hover_speed, load_params
 
 # the stand-ins a thrust that grows with airspeed could take (fewer candidates: fast test)
 THRUST_LIKE = ["mass_offset", "thrust_curve", "thrust_factor"]

@@ -1,4 +1,4 @@
-"""Signal-delay estimation (quadsim.delays): known shifts on a generated log, real flights."""
+"""Signal-delay estimation (quadsim.logs.delays): known shifts on a generated log, real flights."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.delays import align_log, estimate_delays
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import load_params
+from quadsim.logs.delays import align_log, estimate_delays
+from quadsim.vehicle.params import load_params
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "crazyflie21_brushless"
 if not DATA.exists():  # worktrees live one level deeper than the main checkout
@@ -63,7 +63,7 @@ def test_real_crazyflie_nominal_offsets():
     folder = DATA / "nominal"
     if not folder.exists():
         pytest.skip(f"real Crazyflie data not found at {folder}")
-    from quadsim.flightlog import load_log
+    from quadsim.logs.flightlog import load_log
 
     gyro, rotor = [], []
     for path in sorted(folder.glob("flight_*.csv.gz"))[::8]:

@@ -7,6 +7,8 @@ import re
 import numpy as np
 import pytest
 
+from quadsim.core.errors import InputError, ModelError
+from quadsim.core.frames import euler_to_quat
 from quadsim.effects import (
     EFFECTS,
     EffectContext,
@@ -16,10 +18,8 @@ from quadsim.effects import (
     make_effect,
     parse_effect_spec,
 )
-from quadsim.errors import InputError, ModelError
-from quadsim.frames import euler_to_quat
-from quadsim.params import hover_speed, load_params
-from quadsim.rotors import rotor_wrench
+from quadsim.vehicle.params import hover_speed, load_params
+from quadsim.vehicle.rotors import rotor_wrench
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)

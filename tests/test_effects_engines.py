@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
-from quadsim.frames import quat_conjugate, quat_multiply
-from quadsim.params import hover_speed, load_params
+from quadsim.vehicle.params import hover_speed, load_params
 
-engines = pytest.importorskip("quadsim.engines")
+engines = pytest.importorskip("quadsim.sim.engines")
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)

@@ -1,4 +1,4 @@
-"""The compiled MuJoCo path (quadsim.fast_mujoco) against the step-by-step reference path.
+"""The compiled MuJoCo path (quadsim.sim.compiled) against the step-by-step reference path.
 
 Same physics, so the bound is 1e-9 m / 1e-9 rad over the whole flight (measured: identical to
 the last bit on this machine). Also: batches with per-simulation effects, a controller, the
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim.controllers import GeometricController
+from quadsim.core.errors import InputError, SimulationError
 from quadsim.effects import (
     EFFECTS,
     TESTBED_EXAMPLES,
@@ -18,12 +18,12 @@ from quadsim.effects import (
     EffectSet,
     effect_set_from_specs,
 )
-from quadsim.engines import initial_state, simulate
-from quadsim.errors import InputError, SimulationError
-from quadsim.params import hover_speed, load_params
-from quadsim.trajectories import make_reference
+from quadsim.sim.controllers import GeometricController
+from quadsim.sim.engines import initial_state, simulate
+from quadsim.sim.paths import make_reference
+from quadsim.vehicle.params import hover_speed, load_params
 
-fast_mujoco = pytest.importorskip("quadsim.fast_mujoco")
+fast_mujoco = pytest.importorskip("quadsim.sim.compiled")
 if not fast_mujoco.available():
     pytest.skip("numba is not installed (optional extra 'fast')", allow_module_level=True)
 
@@ -129,7 +129,7 @@ def test_one_diverging_simulation_is_named_and_others_kept():
 
 
 def test_batch_too_large_for_memory_is_refused_before_allocating(monkeypatch):
-    from quadsim import mujoco_engine
+    from quadsim.sim import mujoco_engine
 
     model = mujoco_engine.compile_model(PARAMS, 1e-3)
     per_sim = mujoco_engine.check_memory(model, 1, 10, 4)

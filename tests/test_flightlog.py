@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.errors import InputError, QuadsimWarning
-from quadsim.flightlog import FlightLog, body_rate_from_quat, load_log, write_log
-from quadsim.frames import euler_to_quat
+from quadsim.core.errors import InputError, QuadsimWarning
+from quadsim.core.frames import euler_to_quat
+from quadsim.logs.flightlog import FlightLog, body_rate_from_quat, load_log, write_log
 
 REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "crazyflie21_brushless"
 

@@ -7,14 +7,15 @@ import json
 import numpy as np
 import pytest
 
+from quadsim.core.errors import InputError
+from quadsim.core.frames import euler_to_quat, quat_conjugate, quat_multiply, rotate_inverse
 from quadsim.effects import EffectSet, effect_set_from_specs
-from quadsim.errors import InputError
-from quadsim.flightlog import FlightLog, load_log
-from quadsim.fly import generate_flight, main, truth_path
-from quadsim.frames import euler_to_quat, quat_conjugate, quat_multiply, rotate_inverse
-from quadsim.params import load_params
-from quadsim.sensors import SensorModel, parse_signal_values
-from quadsim.trajectories import PATHS, make_reference
+from quadsim.fly import main
+from quadsim.logs.flightlog import FlightLog, load_log
+from quadsim.logs.generate import generate_flight, truth_path
+from quadsim.logs.sensors import SensorModel, parse_signal_values
+from quadsim.sim.paths import PATHS, make_reference
+from quadsim.vehicle.params import load_params
 
 PARAMS = load_params("physical")
 

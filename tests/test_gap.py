@@ -8,15 +8,15 @@ import json
 import numpy as np
 import pytest
 
+from quadsim.core.errors import InputError
 from quadsim.effects import make_effect
-from quadsim.errors import InputError
-from quadsim.flightlog import FlightLog, write_log
 from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
 from quadsim.gap.report import to_json
 from quadsim.gap.schema import validate
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.params import load_params
+from quadsim.logs.flightlog import FlightLog, write_log
+from quadsim.vehicle.params import load_params
 
 
 @pytest.fixture(scope="module")
@@ -260,8 +260,13 @@ def test_drag_refit_unbiased_on_perfect_model_data(cf):
     """Perfect-model flights at the docs' noise level: b and d refits stay at 0 within their
     CI (the issue's -0.9 at the bound was not reproduced on these flights)."""
     from quadsim.gap.diagnose import BASELINE, prepare
-    from quadsim.gap.fitting import fit_candidate, fit_motor_map, noise_floor, noise_scale, \
-        residuals
+    from quadsim.gap.fitting import (
+        fit_candidate,
+        fit_motor_map,
+        noise_floor,
+        noise_scale,
+        residuals,
+    )
 
     states = [f.fit for f in prepare(_flights(cf, [], seeds=(1, 2), duration=4.0), cf)]
     params = fit_motor_map(states, cf)
@@ -286,9 +291,10 @@ def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
     (quadsim.bench.pipeline) carries filter transients at its ends; the diagnosis drops the
     first and last EDGE_S = 0.2 s, after which the nominal force residual of the whole
     prepared flight is at its interior level (> 0.5 s from the ends)."""
+    import sys
+
     from quadsim.bench.pipeline import realistic_log
     from quadsim.gap import diagnose as _  # noqa: F401  (module below)
-    import sys
 
     module = sys.modules["quadsim.gap.diagnose"]
     from quadsim.gap.fitting import residuals
@@ -315,12 +321,12 @@ def _closed_loop_drag_refit(cf, rotor_noise: float, yaw_amplitude: float, *, iv:
     and rotor-speed noise ``rotor_noise`` x the hover speed. Returns (drag, its 95 % CI)."""
     from dataclasses import replace
 
-    from quadsim.fly import generate_flight
     from quadsim.gap import fitting
     from quadsim.gap.diagnose import BASELINE, prepare
-    from quadsim.params import hover_speed
-    from quadsim.sensors import SensorModel
-    from quadsim.trajectories import make_reference
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+    from quadsim.sim.paths import make_reference
+    from quadsim.vehicle.params import hover_speed
 
     ref = replace(make_reference("hover", duration=8.0), yaw_function=lambda t: (
         yaw_amplitude * np.sin(2.0 * np.asarray(t)), 2.0 * yaw_amplitude * np.cos(2.0 * np.asarray(t))))
@@ -454,8 +460,14 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
     The residual in angular acceleration times the nominal inertia is not biased (measured
     +2.1 % and +1.0 %): |xx|, |yy| within 5 %, |zz| within 15 %."""
     from quadsim.gap.diagnose import prepare
-    from quadsim.gap.fitting import (candidates_for, fit_candidate, fit_motor_map, noise_floor,
-                                     noise_scale, residuals)
+    from quadsim.gap.fitting import (
+        candidates_for,
+        fit_candidate,
+        fit_motor_map,
+        noise_floor,
+        noise_scale,
+        residuals,
+    )
     from quadsim.gap.synthetic import SensorNoise
 
     params = load_params("physical")

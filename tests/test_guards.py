@@ -12,11 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim import guards, logcheck
-from quadsim.errors import InputError
-from quadsim.flightlog import load_log, write_log
-from quadsim.fly import generate_flight
-from quadsim.params import MODELS_DIR, load_params
+from quadsim.core.errors import InputError
+from quadsim.logs import checks as logcheck
+from quadsim.logs.flightlog import load_log, write_log
+from quadsim.logs.generate import generate_flight
+from quadsim.vehicle import guards
+from quadsim.vehicle.params import MODELS_DIR, load_params
 
 REPO = Path(__file__).resolve().parents[1]
 STAND = REPO.parent / "shared" / "data" / "thrust_stand" / "kde2814_14inch_sweep.csv"
@@ -41,7 +42,7 @@ def _files(folder: Path) -> list[Path]:
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
     """Three gentle 3 s Crazyflie figure-8 flights (gyro noise 0.01 rad/s)."""
-    from quadsim.sensors import SensorModel
+    from quadsim.logs.sensors import SensorModel
 
     folder = tmp_path_factory.mktemp("flights")
     params = load_params("crazyflie21")

@@ -8,8 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.benchdata import load_thrust_stand, load_torque_thrust_ratio
-from quadsim.bifilar import bifilar_inertia, published_bifilar_inertia
 from quadsim.identify import (
     FM_PLAUSIBLE,
     audit_report,
@@ -21,8 +19,10 @@ from quadsim.identify import (
     lumped_inertia,
 )
 from quadsim.identify.__main__ import main
+from quadsim.identify.benchdata import load_thrust_stand, load_torque_thrust_ratio
+from quadsim.identify.bifilar import bifilar_inertia, published_bifilar_inertia
 from quadsim.identify.testbed import curve_effect
-from quadsim.params import load_params
+from quadsim.vehicle.params import load_params
 
 STAND_10IN = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "thrust_stand"
               / "kde2814_10inch_sweep.csv")

@@ -6,10 +6,10 @@ import importlib.util
 import numpy as np
 import pytest
 
-from quadsim.errors import ModelError
+from quadsim.core.errors import ModelError
 from quadsim.identify import identify_testbed
 from quadsim.identify.paramsets import render_computational, render_physical
-from quadsim.params import MODELS_DIR, hover_speed, load_params
+from quadsim.vehicle.params import MODELS_DIR, hover_speed, load_params
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +49,8 @@ def test_report_set_is_refused_in_one_line_and_runs_unchecked():
     assert np.diag(p.inertia) == pytest.approx([0.01931, 0.01931, 0.1931])
 
 
-@pytest.mark.skipif(importlib.util.find_spec("quadsim.assembly") is None,
-                    reason="quadsim.assembly (CAD loader) not present")
+@pytest.mark.skipif(importlib.util.find_spec("quadsim.cad.assembly") is None,
+                    reason="quadsim.cad.assembly (CAD loader) not present")
 def test_computational_set_takes_mass_and_layout_from_cad(ident):
     p = load_params("computational")
     assert p.thrust_factor == pytest.approx(ident.cfd_fit["b"], rel=1e-5)

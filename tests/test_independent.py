@@ -13,9 +13,9 @@ import pytest
 
 from quadsim.bench.rotorpy_source import quad_params, rotorpy_available, rotorpy_flight
 from quadsim.bench.score import read_verdict
-from quadsim.errors import QuadsimWarning
-from quadsim.params import load_params
-from quadsim.rotors import rotor_wrench
+from quadsim.core.errors import QuadsimWarning
+from quadsim.vehicle.params import load_params
+from quadsim.vehicle.rotors import rotor_wrench
 
 needs_rotorpy = pytest.mark.skipif(not rotorpy_available(),
                                    reason="rotorpy not installed (pip install 'quadsim[independent]')")
@@ -63,7 +63,7 @@ def test_pipeline_without_noise_or_delay_recovers_specific_force():
     pipeline equals the simulator's specific force (0.05 m/s^2 away from the ends)."""
     from quadsim.bench.pipeline import Pipeline, pipeline_flight
     from quadsim.effects.base import EffectSet
-    from quadsim.fly import generate_flight
+    from quadsim.logs.generate import generate_flight
 
     params = load_params("crazyflie21")
     clean = Pipeline(mocap_latency=0.0, position_noise=0.0, attitude_noise=0.0,

@@ -4,9 +4,15 @@ matrix against the '+' rotor geometry by hand, poles, controllability, LQR stabi
 import numpy as np
 import pytest
 
-from quadsim.linear import (LQRController, dynamics_jacobian_fd, hover_point, is_controllable,
-                            linearize, lqr_gain)
-from quadsim.params import load_params
+from quadsim.sim.linear import (
+    LQRController,
+    dynamics_jacobian_fd,
+    hover_point,
+    is_controllable,
+    linearize,
+    lqr_gain,
+)
+from quadsim.vehicle.params import load_params
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +24,7 @@ def _variants():
     base = load_params("physical")
     yield "physical", base, 0.0
     yield "offset CoM, yawed", base.replace(com=np.array([0.01, -0.02, 0.015])), 0.7
-    if pytest.importorskip("quadsim.assembly"):
+    if pytest.importorskip("quadsim.cad.assembly"):
         yield "computational", load_params("computational"), 0.0
 
 

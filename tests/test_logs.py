@@ -15,9 +15,8 @@ import numpy as np
 import pytest
 
 from quadsim.convert import main as convert_main
-from quadsim.errors import InputError
-from quadsim.flightlog import load_log
-from quadsim.frames import euler_to_quat, quat_to_euler, quat_to_rotmat
+from quadsim.core.errors import InputError
+from quadsim.core.frames import euler_to_quat, quat_to_euler, quat_to_rotmat
 from quadsim.logs import detect_format, read_columns
 from quadsim.logs.common import (
     P_FLIP,
@@ -27,6 +26,7 @@ from quadsim.logs.common import (
     quat_world_body_to_ned_frd,
     resample,
 )
+from quadsim.logs.flightlog import load_log
 from quadsim.logs.usd import CF_GRAVITY, encode_usd, read_usd
 
 DATA = Path(os.environ.get("QUADSIM_SHARED_DATA",
@@ -429,8 +429,8 @@ def test_real_dataflash():
 
 
 def test_command_model_recovers_a_known_lag_and_voltage_term():
-    from quadsim.flightlog import FlightLog
     from quadsim.gap.commands import CommandModel, fit_command_model
+    from quadsim.logs.flightlog import FlightLog
 
     rng = np.random.default_rng(0)
     t = np.arange(3000) * 0.002
@@ -460,7 +460,7 @@ def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
     from quadsim.gap import diagnose
     from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
     from quadsim.gap.synthetic import synthetic_flight
-    from quadsim.params import load_params
+    from quadsim.vehicle.params import load_params
 
     cf = load_params("crazyflie21")
     reference = [synthetic_flight(cf, [], seed=s, duration=3.0) for s in (30, 31)]
@@ -492,10 +492,10 @@ def test_gap_cli_command_reference(tmp_path, capsys):
     """A command-only log: refused in one line without a reference, diagnosed with one."""
     import dataclasses
 
-    from quadsim.flightlog import write_log
     from quadsim.gap.__main__ import main as gap_main
     from quadsim.gap.synthetic import synthetic_flight
-    from quadsim.params import load_params
+    from quadsim.logs.flightlog import write_log
+    from quadsim.vehicle.params import load_params
 
     cf = load_params("crazyflie21")
     ref = [write_log(tmp_path / f"ref{s}.csv", synthetic_flight(cf, [], seed=s, duration=2.0))

@@ -7,10 +7,14 @@ import pytest
 import trimesh
 from test_cad import REPO, generator, write_cad
 
-from quadsim.assembly import load_assembly
-from quadsim.errors import InputError, QuadsimWarning
+from quadsim.cad.assembly import load_assembly
+from quadsim.cad.massprops import (
+    combine_mass_properties,
+    mesh_mass_properties,
+    vehicle_mass_properties,
+)
+from quadsim.core.errors import InputError, QuadsimWarning
 from quadsim.inertia_report import mujoco_mass_properties
-from quadsim.massprops import combine_mass_properties, mesh_mass_properties, vehicle_mass_properties
 
 GEN = generator()
 

@@ -5,13 +5,13 @@ import mujoco
 import numpy as np
 import pytest
 
+from quadsim.core.errors import ModelError, SimulationError
+from quadsim.core.frames import euler_to_quat, quat_derivative, quat_to_rotmat
 from quadsim.effects import EffectSet, make_effect
-from quadsim.engines import initial_state, simulate
-from quadsim.errors import ModelError, SimulationError
-from quadsim.frames import euler_to_quat, quat_derivative, quat_to_rotmat
-from quadsim.linear import hover_point
-from quadsim.mujoco_engine import compile_model, default_timestep
-from quadsim.params import load_params
+from quadsim.sim.engines import initial_state, simulate
+from quadsim.sim.linear import hover_point
+from quadsim.sim.mujoco_engine import compile_model, default_timestep
+from quadsim.vehicle.params import load_params
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_freejoint_velocity_convention(physical):
 @pytest.mark.parametrize("name", ["physical", "computational"])
 def test_hover_residual_acceleration(name):
     if name == "computational":
-        pytest.importorskip("quadsim.assembly")
+        pytest.importorskip("quadsim.cad.assembly")
     params = load_params(name)
     model = compile_model(params, 1e-3)
     data = mujoco.MjData(model)

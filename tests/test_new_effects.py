@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim import engines
+from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import EffectContext, EffectSet, make_effect
 from quadsim.effects.cable_payload import CablePayload, swing_period
-from quadsim.frames import quat_conjugate, quat_multiply
-from quadsim.params import hover_speed, load_params
-from quadsim.rotors import rotor_wrench
+from quadsim.sim import engines
+from quadsim.vehicle.params import hover_speed, load_params
+from quadsim.vehicle.rotors import rotor_wrench
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)

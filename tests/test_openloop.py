@@ -62,7 +62,7 @@ def test_bad_input_is_one_line(capsys, tmp_path):
     assert code == 2 and err.count("\n") == 1
     assert "valid names are" in err and "physical" in err
     bad = tmp_path / "bad.toml"
-    bad.write_text('schema = "quadsim.params/1"\n[body]\nmass = 3\n')
+    bad.write_text('schema = "quadsim.vehicle.params/1"\n[body]\nmass = 3\n')
     code, _, err = _run(capsys, "--model", str(bad))
     assert code == 2 and err.count("\n") == 1 and "bad.toml" in err and "body.mass" in err
     code, _, err = _run(capsys, "--model", "physical", "--duration", "-1")

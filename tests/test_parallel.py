@@ -1,4 +1,4 @@
-"""quadsim.parallel: same results whichever executor; dead workers retried once then named;
+"""quadsim.core.executor: same results whichever executor; dead workers retried once then named;
 Ray missing / unreachable -> one line, exit 2. Ray tests share one local cluster."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
+from quadsim.core.errors import InputError
+from quadsim.core.executor import TaskFailure, _finish, run_tasks
 from quadsim.effects import make_effect
-from quadsim.errors import InputError
-from quadsim.flightlog import write_log
 from quadsim.gap.__main__ import main as gap_main
 from quadsim.gap.synthetic import synthetic_flight
-from quadsim.parallel import TaskFailure, _finish, run_tasks
-from quadsim.params import load_params
+from quadsim.logs.flightlog import write_log
+from quadsim.vehicle.params import load_params
 
 sys.path.insert(0, os.path.dirname(__file__))
 from _parallel_tasks import bad_input as _bad_input
@@ -25,7 +25,7 @@ from _parallel_tasks import square_noise as _square_noise
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray", reason="Ray is the optional [ray] extra")
-    from quadsim.parallel import connect_ray
+    from quadsim.core.executor import connect_ray
 
     connect_ray("local", 2)
     # this test module is not importable by Ray's workers: ship its functions by value

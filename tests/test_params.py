@@ -5,9 +5,9 @@ import re
 import numpy as np
 import pytest
 
-from quadsim.errors import InputError, ModelError
-from quadsim.params import hover_speed, inertia_problems, load_params
-from quadsim.rotors import allocation_matrix, mixer, rotor_wrench
+from quadsim.core.errors import InputError, ModelError
+from quadsim.vehicle.params import hover_speed, inertia_problems, load_params
+from quadsim.vehicle.rotors import allocation_matrix, mixer, rotor_wrench
 
 
 def test_plus_layout_reproduces_report_input_equations():
@@ -69,7 +69,7 @@ def test_atomic_write_has_plain_file_permissions(tmp_path):
     import os
     import stat
 
-    from quadsim.fileio import atomic_write_text
+    from quadsim.core.files import atomic_write_text
 
     mask = os.umask(0o022)
     try:

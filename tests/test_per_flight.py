@@ -9,7 +9,7 @@ import pytest
 from quadsim.bench.score import read_verdict, score_case
 from quadsim.gap.combine import _combination_alternatives, parts_identified
 from quadsim.gap.per_flight import differs_from_reference, judge_flight, reference_band
-from quadsim.params import load_params
+from quadsim.vehicle.params import load_params
 
 CHANNELS = ["Fx", "Fy", "Fz", "Mx", "My", "Mz"]
 

@@ -6,17 +6,17 @@ import numpy as np
 import pytest
 from scipy.signal import savgol_coeffs
 
+from quadsim.core.errors import InputError
 from quadsim.effects import EffectContext, EffectSet, make_effect
-from quadsim.errors import InputError
-from quadsim.flightlog import FlightLog
-from quadsim.gap.synthetic import SensorNoise, synthetic_flight
-from quadsim.params import load_params
-from quadsim.residual import (
+from quadsim.gap.residual import (
     DEFAULT_WINDOW_S,
     flight_states,
     residual_wrench,
     savgol_response_cutoff,
 )
+from quadsim.gap.synthetic import SensorNoise, synthetic_flight
+from quadsim.logs.flightlog import FlightLog
+from quadsim.vehicle.params import load_params
 
 EDGE = 60  # samples at each end where the filter runs on a partial window
 

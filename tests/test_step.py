@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from test_cad import write_cad
 
-from quadsim.assembly import load_assembly
-from quadsim.errors import InputError
-from quadsim.massprops import mesh_mass_properties, vehicle_mass_properties
+from quadsim.cad.assembly import load_assembly
+from quadsim.cad.massprops import mesh_mass_properties, vehicle_mass_properties
+from quadsim.core.errors import InputError
 
 pytest.importorskip("cascadio", reason="STEP needs the optional [step] extra (cascadio)")
 
@@ -49,7 +49,7 @@ def test_step_assembly_matches_the_same_part_as_stl(tmp_path):
 
 
 def test_curved_part_converges_to_closed_form(tmp_path):
-    from quadsim.step import STEP_TOLERANCE, read_step
+    from quadsim.cad.step import STEP_TOLERANCE, read_step
 
     r, h = 0.010, 0.030                                                # m
     coarse, fine = read_step(DATA / "cylinder.step", tolerance=1e-3), \

@@ -9,7 +9,6 @@ import pytest
 pytest.importorskip("pyarrow", reason="the sweep writes Parquet (pyarrow, [parquet] extra)")
 import pyarrow.parquet as pq
 
-from quadsim.params import load_params
 from quadsim.sweep import (
     SweepConfig,
     design_matrix,
@@ -20,6 +19,7 @@ from quadsim.sweep import (
     simulate_chunk,
 )
 from quadsim.sweep.__main__ import main
+from quadsim.vehicle.params import load_params
 
 
 @pytest.fixture(scope="module")

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from quadsim.errors import InputError
-from quadsim.frames import euler_to_quat
-from quadsim.params import load_params
-from quadsim.trajectory import STATE12_NAMES, Trajectory
+from quadsim.core.errors import InputError
+from quadsim.core.frames import euler_to_quat
+from quadsim.vehicle.params import load_params
+from quadsim.vehicle.state import STATE12_NAMES, Trajectory
 from quadsim.viewer import (
     check_output_path,
     recording_bytes,
@@ -232,7 +232,7 @@ def test_spawn_headless_says_how_to_view(tmp_path, params, monkeypatch, capsys):
 
 
 def test_engines_do_not_import_rerun():
-    code = ("import sys, quadsim.engines, quadsim.viewer, quadsim.view; "
+    code = ("import sys, quadsim.sim.engines, quadsim.viewer, quadsim.view; "
             "print('rerun' in sys.modules)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             cwd=REPO, timeout=120)
@@ -241,7 +241,7 @@ def test_engines_do_not_import_rerun():
 
 
 def test_cad_assembly_meshes_are_logged(tmp_path):
-    pytest.importorskip("quadsim.assembly")
+    pytest.importorskip("quadsim.cad.assembly")
     from quadsim.viewer import assembly_for, vehicle_shapes
 
     params = load_params("computational")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from test_viewer import read_recording  # noqa: E402  (tests/ is on sys.path under pytest)
 
-from quadsim.params import load_params
-from quadsim.trajectory import STATE12_NAMES
+from quadsim.vehicle.params import load_params
+from quadsim.vehicle.state import STATE12_NAMES
 from quadsim.view import main, replay_log
 
 REPO = Path(__file__).resolve().parent.parent
@@ -43,7 +43,7 @@ def test_step_flight_logs_both_engines(step_recording):
 def test_replaying_a_model_generated_log_gives_near_zero_residuals(tmp_path):
     """A log written from the analytic engine, replayed through MuJoCo with its own rotor
     speeds, must come back to within the engines' agreement (and the log's 10 digits)."""
-    from quadsim.flightlog import FlightLog, write_log
+    from quadsim.logs.flightlog import FlightLog, write_log
     from quadsim.view import step_flight
 
     params = load_params("physical")
@@ -104,7 +104,7 @@ def test_bad_arguments_one_line(argv, message, capsys, tmp_path, monkeypatch):
 
 
 def test_rotor_count_mismatch_is_one_line(tmp_path, capsys):
-    from quadsim.flightlog import FlightLog, write_log
+    from quadsim.logs.flightlog import FlightLog, write_log
 
     n = 20
     t = np.arange(n) * 0.01
@@ -117,7 +117,7 @@ def test_rotor_count_mismatch_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "o.rrd").exists()
 
 
-@pytest.mark.filterwarnings("ignore::quadsim.errors.QuadsimWarning")  # real logs have gaps
+@pytest.mark.filterwarnings("ignore::quadsim.core.errors.QuadsimWarning")  # real logs have gaps
 def test_real_crazyflie_log(tmp_path):
     log = DATA / "flight_00.csv.gz"
     if not log.is_file():

@@ -8,7 +8,7 @@ timing. This subpackage provides sources that break that circle (issue 10, item 
   controller, RK45 integrator, motor model, aerodynamics, IMU and motion-capture models;
   effects injected as RotorPy parameters (mass, rotor positions about the CoM, inertia, one
   rotor's k_eta and k_m, tau_m, drag coefficients, wind profiles, flapping, translational
-  lift), the log converted to quadsim's :class:`~quadsim.flightlog.FlightLog` (xyzw -> wxyz);
+  lift), the log converted to quadsim's :class:`~quadsim.logs.flightlog.FlightLog` (xyzw -> wxyz);
 * :mod:`.pipeline` -- quadsim's closed loop through a realistic sensor pipeline
   (finite-difference accelerometer from mocap, filtered and delayed rotor speeds, mocap
   latency, noise, bias, quantisation);

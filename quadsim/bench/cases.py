@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import QuadsimWarning
 from ..effects import EFFECTS
-from ..errors import QuadsimWarning
-from ..params import load_params
+from ..vehicle.params import load_params
 from .draws import draw, draw_rotorpy, library_equivalent
 from .score import read_verdict, score_case
 
@@ -114,9 +114,11 @@ def _code_hash(source: str) -> str:
     else:
         files = ([here / n for n in ("pipeline.py", "draws.py", "outside.py")]
                  + sorted((top / "effects").glob("*.py"))
-                 + [top / n for n in ("fly.py", "sensors.py", "controllers.py", "engines.py",
-                                      "mujoco_engine.py", "fast_mujoco.py", "_fast_kernel.py",
-                                      "trajectories.py")])
+                 + [top / n for n in ("logs/generate.py", "logs/sensors.py",
+                                      "sim/controllers.py", "sim/engines.py",
+                                      "sim/mujoco_engine.py", "sim/compiled/__init__.py",
+                                      "sim/compiled/layout.py", "sim/compiled/kernel.py",
+                                      "sim/paths.py")])
     files += sorted((top.parent / "models").glob("*.toml"))
     for f in files:
         if f.exists():

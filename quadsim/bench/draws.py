@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.errors import ModelError
 from ..effects import make_effect
-from ..errors import ModelError
-from ..params import VehicleParams, hover_speed
+from ..vehicle.params import VehicleParams, hover_speed
 from .outside import BladeFlapping, TranslationalLift
 
 __all__ = ["draw", "draw_rotorpy", "library_equivalent"]

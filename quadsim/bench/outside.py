@@ -36,8 +36,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.frames import rotate_inverse
 from ..effects import EffectBase, EffectLoads, EffectParameter
-from ..frames import rotate_inverse
 
 __all__ = ["BladeFlapping", "TranslationalLift", "in_plane_air_velocity"]
 

@@ -1,4 +1,4 @@
-"""A realistic sensor pipeline over :func:`quadsim.fly.generate_flight` (second benchmark source).
+"""A realistic sensor pipeline over :func:`quadsim.logs.generate.generate_flight` (second benchmark source).
 
 quadsim's own closed loop (geometric controller, an engine) flies the vehicle with the
 hidden effects; what the diagnosis then gets is not the simulator's state but what a
@@ -27,7 +27,7 @@ they leave a floor any independent source has.
 
 Example::
 
-    >>> from quadsim.params import load_params
+    >>> from quadsim.vehicle.params import load_params
     >>> from quadsim.effects import make_effect
     >>> log = pipeline_flight(load_params("crazyflie21"), [make_effect("mass_offset", mass=0.004)], seed=1)
 """
@@ -39,11 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import butter, filtfilt, lfilter
 
+from ..core.frames import quat_multiply, quat_normalize, quat_to_rotmat
 from ..effects.base import EffectSet
-from ..flightlog import FlightLog
-from ..frames import quat_multiply, quat_normalize, quat_to_rotmat
-from ..params import VehicleParams, hover_speed
-from ..sensors import rotation_quat
+from ..logs.flightlog import FlightLog
+from ..logs.sensors import rotation_quat
+from ..vehicle.params import VehicleParams, hover_speed
 
 __all__ = ["Pipeline", "pipeline_flight", "realistic_log"]
 
@@ -108,9 +108,9 @@ def realistic_log(true_log: FlightLog, params: VehicleParams, seed: int,
 def pipeline_flight(params: VehicleParams, effects=(), *, seed: int = 0, duration: float = 8.0,
                     speed: float = 1.0, path: str = "lissajous", engine: str = "analytic",
                     pipeline: Pipeline = Pipeline()) -> FlightLog:
-    """Fly ``params`` + hidden ``effects`` with :func:`quadsim.fly.generate_flight` (no sensor
+    """Fly ``params`` + hidden ``effects`` with :func:`quadsim.logs.generate.generate_flight` (no sensor
     model), then pass the true log through :func:`realistic_log`."""
-    from ..fly import generate_flight
+    from ..logs.generate import generate_flight
 
     size = 1.0 if params.mass > 0.2 else 0.5
     true_log, _ = generate_flight(params, path, EffectSet(tuple(effects)), None, seed,

@@ -27,15 +27,15 @@ difference of that rotor's thrust and torque to RotorPy's own wrench), ``thrust_
 ``SinusoidWind`` at 0.3 Hz), ``k_flap`` (N m/(rad m/s), flapping moment) and ``k_h``
 (kg/m, translational lift); the last three are outside quadsim's effect library.
 
-Output (:func:`rotorpy_flight`): a :class:`quadsim.flightlog.FlightLog` at the simulation
+Output (:func:`rotorpy_flight`): a :class:`quadsim.logs.flightlog.FlightLog` at the simulation
 rate: position/velocity/attitude from RotorPy's motion capture (its quaternion xyzw is
 reordered to wxyz, body to world), gyro and specific force (body, m/s^2) from its IMU,
 rotor speeds as RotorPy's state reports them (rad/s), commands = RotorPy's commanded speed /
-max_speed (normalised 0-1, like :func:`quadsim.fly.generate_flight`).
+max_speed (normalised 0-1, like :func:`quadsim.logs.generate.generate_flight`).
 
 Example::
 
-    >>> from quadsim.params import load_params
+    >>> from quadsim.vehicle.params import load_params
     >>> log = rotorpy_flight(load_params("crazyflie21"), {"mass": 0.004}, seed=1)
 """
 
@@ -43,8 +43,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..flightlog import FlightLog
-from ..params import VehicleParams
+from ..logs.flightlog import FlightLog
+from ..vehicle.params import VehicleParams
 
 __all__ = ["EFFECTS", "NOMINAL_TAU_M", "quad_params", "rotorpy_available", "rotorpy_flight"]
 

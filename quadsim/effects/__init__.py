@@ -7,18 +7,18 @@ the command-line spec ``name:param=value,param=value``::
     >>> sorted(EFFECTS)                                   # the library
     >>> ge = parse_effect_spec("ground_effect:gain=1.5")
     >>> lag = make_effect("motor_lag", time_constant=0.03)
-    >>> effects = EffectSet((ge, lag))                   # pass to quadsim.engines.simulate
+    >>> effects = EffectSet((ge, lag))                   # pass to quadsim.sim.engines.simulate
 
 Every effect has named parameters with units (``EFFECTS[name].parameters``); each
 parameter's ``off`` value is the default, and with all parameters at ``off`` the effect does
 nothing. :func:`make_effect` and :func:`parse_effect_spec` check names and the plausible
-bounds and raise :class:`~quadsim.errors.InputError` (one line) on a typo or a wild value.
+bounds and raise :class:`~quadsim.core.errors.InputError` (one line) on a typo or a wild value.
 See ``docs/effects.md`` for the formulas and sources (also in each module's docstring).
 """
 
 from __future__ import annotations
 
-from ..errors import InputError
+from ..core.errors import InputError
 from .base import Effect, EffectBase, EffectContext, EffectLoads, EffectParameter, EffectSet
 from .battery_sag import BatterySag
 from .body_drag import BodyDrag

@@ -25,7 +25,7 @@ neutral default for the rest (see :class:`EffectBase`):
    from a residual wrench alone (the state is not logged); fast engine paths may refuse them.
 
 Both engines (analytic and MuJoCo) call the same hooks on the same numbers each step and
-apply the result with the same :func:`quadsim.rotors` geometry, so an effect acts
+apply the result with the same :func:`quadsim.vehicle.rotors` geometry, so an effect acts
 identically in both by construction; a test per effect checks it.
 
 All arrays carry a leading batch axis B (B simulations advanced in one Python call).
@@ -38,7 +38,7 @@ from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from ..params import VehicleParams
+from ..vehicle.params import VehicleParams
 
 #: time constant (s) with which a rotor follows a command scaled by ``speed_factor`` when no
 #: effect defines rotor dynamics (fast against flight dynamics, slow enough for the engines'

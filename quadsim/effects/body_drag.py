@@ -11,7 +11,7 @@ multirotors in Mahony, Kumar & Corke, "Multirotor aerial vehicles", IEEE RAM 201
 above. Example: C_d A = 0.01 m^2 at 5 m/s, rho = 1.225: 0.153 N.
 
 MuJoCo's own fluid model is switched off in every generated model (``<option density="0"
-viscosity="0">`` in :mod:`quadsim.mjcf`), so this plug-in is the only body drag and it acts
+viscosity="0">`` in :mod:`quadsim.sim.mjcf`), so this plug-in is the only body drag and it acts
 identically in both engines; nothing is counted twice.
 """
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frames import rotate, rotate_inverse
+from ..core.frames import rotate, rotate_inverse
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["BodyDrag"]

@@ -28,9 +28,9 @@ Checks (``tests/test_cable_payload.py``):
   fixed-pivot pendulum's 2 pi sqrt(L / g) because the vehicle swings back against the payload
   (L here is the stretched length L + m g / k).
 
-Only the engines (:func:`quadsim.engines.simulate`) carry the state; anything that evaluates
+Only the engines (:func:`quadsim.sim.engines.simulate`) carry the state; anything that evaluates
 ``loads`` without it (the flight generator's accelerometer model, ``gap.synthetic``, the
-residual wrench) gets a one-line :class:`~quadsim.errors.ModelError` instead of a silent
+residual wrench) gets a one-line :class:`~quadsim.core.errors.ModelError` instead of a silent
 zero.
 
 Parameters: ``mass`` (kg; 0 = off), ``length`` (m, rest length), ``x, y, z`` (m, attachment
@@ -45,8 +45,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
-from ..frames import quat_to_rotmat
+from ..core.errors import ModelError
+from ..core.frames import quat_to_rotmat
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 
 __all__ = ["CablePayload", "swing_period"]
@@ -130,7 +130,7 @@ class CablePayload(EffectBase):
             return None
         if ctx.effect_state is None or ctx.effect_state.shape[1] < 6:
             raise ModelError("cable_payload: needs its internal state (the swinging payload), "
-                             "which only the engines integrate (quadsim.engines.simulate); "
+                             "which only the engines integrate (quadsim.sim.engines.simulate); "
                              "the flight generator's accelerometer, the inverse-dynamics logs "
                              "and the residual wrench cannot evaluate it")
 

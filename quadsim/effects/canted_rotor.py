@@ -9,7 +9,7 @@ rotated by ``angle`` (rad) about the body-frame direction e = (cos azimuth, sin 
 The rotor's thrust b Omega^2 and its drag (reaction) torque -s d Omega^2 both act along a'
 (the motor, its shaft and the propeller disc tilt together); everything else about the
 vehicle is unchanged. The effect changes the parameter set's rotor axis, so both engines,
-the allocation (:mod:`quadsim.rotors`) and every other effect (thrust scales, offsets,
+the allocation (:mod:`quadsim.vehicle.rotors`) and every other effect (thrust scales, offsets,
 gyroscopic torque) use the tilted axis.
 
 A bent motor mount or a crash-bent arm tilts a rotor by a few degrees; some vehicles tilt
@@ -32,7 +32,7 @@ import dataclasses
 
 import numpy as np
 
-from ..errors import ModelError
+from ..core.errors import ModelError
 from .base import EffectBase, EffectParameter
 
 __all__ = ["CantedRotor", "tilt_axis"]

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
-from ..frames import rotate
+from ..core.errors import ModelError
+from ..core.frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..params import VehicleParams
+from ..vehicle.params import VehicleParams
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 
 __all__ = ["Gyroscopic", "gyroscopic_torque"]

@@ -10,7 +10,7 @@ moments scaled. Inertia is the least certain rigid-body parameter: bifilar/trifi
 measurements carry 5-10 % errors (e.g. Jardin & Mueller, "Optimized measurements of unmanned
 air vehicle mass moment of inertia with a bifilar pendulum", J. Aircraft 2009), and CAD
 models miss wiring and glue. The result must still obey the triangle inequality of
-principal moments, else :class:`~quadsim.errors.ModelError`.
+principal moments, else :class:`~quadsim.core.errors.ModelError`.
 
 Example: ``inertia_error:xx=0.2`` makes roll 20 % more sluggish than the model believes.
 """

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..frames import rotate, rotate_inverse
+from ..core.frames import rotate, rotate_inverse
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["RotorDrag", "rotor_drag_forces"]

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
+from ..core.errors import ModelError
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]

@@ -4,7 +4,7 @@ far it shrinks once that effect is added.
 Method (equation error, then prediction error)
 ----------------------------------------------
 1. Every log is resampled and smoothed with one zero-phase Savitzky–Golay filter
-   (:mod:`quadsim.residual`); Newton–Euler turns the measured motion into the wrench that
+   (:mod:`quadsim.gap.residual`); Newton–Euler turns the measured motion into the wrench that
    acted, and the model (parameter set + candidate effects, through the effect hooks the
    engines use) predicts it from the measured rotor speeds. Their difference, per channel
    Fx Fy Fz Mx My Mz (+ one rotor-speed channel per rotor when commands are logged: the
@@ -48,8 +48,8 @@ least squares), :mod:`.scoring`, :mod:`.collinear` + :mod:`.priors`, :mod:`.comb
 
 Example::
 
-    >>> from quadsim.flightlog import load_log
-    >>> from quadsim.params import load_params
+    >>> from quadsim.logs.flightlog import load_log
+    >>> from quadsim.vehicle.params import load_params
     >>> from quadsim.gap import diagnose
     >>> result = diagnose([load_log(p) for p in paths], load_params("crazyflie21"))
     >>> result["verdict"]["effect"], result["verdict"]["reduction"]

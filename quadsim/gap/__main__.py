@@ -15,10 +15,10 @@ import argparse
 import sys
 import warnings
 
-from ..cliargs import ArgumentParser
-from ..errors import InputError, QuadsimWarning, run_cli
-from ..flightlog import load_log
-from ..params import load_params
+from ..core.args import ArgumentParser
+from ..core.errors import InputError, QuadsimWarning, run_cli
+from ..logs.flightlog import load_log
+from ..vehicle.params import load_params
 from .diagnose import diagnose
 from .per_flight import diagnose_per_flight
 from .report import summary, write_html, write_json, write_rerun
@@ -63,8 +63,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _check_args(args) -> None:
-    """Every argument checked before any work (see :mod:`quadsim.cliargs`)."""
-    from ..cliargs import check_inputs, check_number, check_output, distinct_files
+    """Every argument checked before any work (see :mod:`quadsim.core.args`)."""
+    from ..core.args import check_inputs, check_number, check_output, distinct_files
 
     check_number("--window", args.window, low=0.0, high=60.0, unit="s")
     for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
@@ -91,7 +91,7 @@ def _check_args(args) -> None:
 
 def _map_fn(args, bar):
     """The executor as a ``map(fn, items)``: built-in ``map`` for one in-process worker."""
-    from ..parallel import default_workers, run_tasks
+    from ..core.executor import default_workers, run_tasks
 
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers: must be >= 1, got {args.workers}")
@@ -116,7 +116,7 @@ def _load(paths, params=None):
     for line in collapse_warnings([str(w.message) for w in caught
                                    if issubclass(w.category, QuadsimWarning)]):
         print(f"warning: {line}", file=sys.stderr)
-    from ..logcheck import check_logs  # channels against each other; NaN runs cut or refused
+    from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
 
     logs, notes = check_logs(logs, params)
     for note in notes:
@@ -146,13 +146,13 @@ def collapse_warnings(messages: list[str]) -> list[str]:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    _check_args(args)  # quadsim.cliargs: ranges, duplicates, roles, writable outputs
+    _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
     if args.ray is not None:
-        from ..parallel import connect_ray
+        from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
     logs = _load(args.logs, params)

@@ -15,16 +15,16 @@ catch it first:
   (reported, not enforced: it is noisy on gentle flights).
 
 :func:`vehicle_check` returns the ratios (for the result's ``checks``) and raises
-:class:`~quadsim.errors.InputError` with the numbers that disagree.
+:class:`~quadsim.core.errors.InputError` with the numbers that disagree.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from ..params import VehicleParams
-from ..rotors import allocation_matrix
+from ..core.errors import InputError
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "vehicle_check"]
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..params import VehicleParams, hover_speed
+from ..vehicle.params import VehicleParams, hover_speed
 from .fitting import effect_class
 from .priors import candidate_plausibility
 

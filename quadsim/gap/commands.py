@@ -47,8 +47,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
-from ..errors import InputError
-from ..flightlog import FlightLog
+from ..core.errors import InputError
+from ..logs.flightlog import FlightLog
 
 __all__ = ["CommandModel", "fit_command_model", "synthesise_speeds", "with_synthesised_speeds",
            "without_speeds"]

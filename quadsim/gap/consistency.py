@@ -43,9 +43,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
-from ..residual import FlightStates
+from ..core.errors import ModelError
 from .fitting import Candidate, fit_candidate
+from .residual import FlightStates
 
 __all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "split_masks", "check", "apply_to_verdict",
            "apply_to_flight", "judged_parameters"]

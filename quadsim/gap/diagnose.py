@@ -13,12 +13,11 @@ from functools import partial
 
 import numpy as np
 
-from ..delays import align_signal_delays, delay_notes
+from ..core.errors import InputError
 from ..effects.base import EffectBase, EffectParameter
-from ..errors import InputError
-from ..flightlog import FlightLog
-from ..params import VehicleParams
-from ..residual import DEFAULT_WINDOW_S, FlightStates, flight_states
+from ..logs.delays import align_signal_delays, delay_notes
+from ..logs.flightlog import FlightLog
+from ..vehicle.params import VehicleParams
 from . import collinear, consistency, fitting
 from . import verdict as rule
 from .checks import vehicle_check
@@ -32,6 +31,7 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .scoring import (
     MIN_GAIN,
     MIN_T,
@@ -101,7 +101,7 @@ def interior(t: np.ndarray, edge_s: float | None = None) -> np.ndarray:
 
 def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             window_s: float = DEFAULT_WINDOW_S) -> list[Flight]:
-    """Check each log against the model and smooth it (:func:`quadsim.residual.flight_states`).
+    """Check each log against the model and smooth it (:func:`quadsim.gap.residual.flight_states`).
 
     The first and last :data:`EDGE_S` = 0.2 s of each log (at most 10 % of its duration per
     end) are dropped after smoothing: there the derived signals are not valid. The
@@ -130,7 +130,7 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
-        log, delays = align_signal_delays(log)    # quadsim.delays (estimate, shift, ms)
+        log, delays = align_signal_delays(log)    # quadsim.logs.delays (estimate, shift, ms)
         states = flight_states(log, window_s=window_s, gravity=params.gravity)
         states = states.take(interior(states.t))
         dt = float(states.t[1] - states.t[0])
@@ -190,7 +190,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`).
 
     ``kstep=False`` skips the k-step prediction errors (the slowest part of "where").
-    ``map_fn(fn, items)`` runs the candidate fits (e.g. a :mod:`quadsim.parallel` executor)."""
+    ``map_fn(fn, items)`` runs the candidate fits (e.g. a :mod:`quadsim.core.executor` executor)."""
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None

@@ -1,7 +1,7 @@
 """Equation-error fitting of candidate effects (the "which" of the gap diagnosis).
 
 For a candidate effect with values theta, every sample of every flight gives a residual
-(measured Newton–Euler wrench minus model wrench, :mod:`quadsim.residual`, plus a rotor-speed
+(measured Newton–Euler wrench minus model wrench, :mod:`quadsim.gap.residual`, plus a rotor-speed
 channel when the log has commands), divided per channel by the noise scale ``sigma``. The
 effect's fittable parameters (:data:`FIT_SPEC`) are found with bounded
 ``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at the solution,
@@ -19,18 +19,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..core.errors import ModelError
 from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectParameter, EffectSet
 from ..effects.canted_rotor import CantedRotor
-from ..errors import ModelError
-from ..params import VehicleParams
-from ..residual import FlightStates, measured_wrench, model_wrench
+from ..vehicle.params import VehicleParams
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
     fit_motor_map,
     speed_of_command,
 )
+from .residual import FlightStates, measured_wrench, model_wrench
 
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
            "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",

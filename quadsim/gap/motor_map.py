@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..params import VehicleParams
-from ..residual import FlightStates
+from ..vehicle.params import VehicleParams
+from .residual import FlightStates
 
 __all__ = ["fit_motor_map", "command_speed", "speed_of_command", "command_of_speed",
            "MAP_WINDOW_S", "MAP_MIN_RANGE"]
@@ -42,7 +42,7 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> Vehicle
     less than :data:`MAP_MIN_RANGE` of their mean (a gentle path: the independent
     benchmark's Crazyflie references span 2 rad/s of 1565) cannot fix a slope: the map is
     then the proportional gain through the origin."""
-    from ..params import MotorMap
+    from ..vehicle.params import MotorMap
 
     usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
     if not usable:

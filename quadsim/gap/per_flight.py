@@ -50,11 +50,10 @@ from functools import partial
 
 import numpy as np
 
-from ..delays import delay_notes
-from ..errors import InputError, QuadsimWarning
-from ..flightlog import FlightLog
-from ..params import VehicleParams
-from ..residual import DEFAULT_WINDOW_S
+from ..core.errors import InputError, QuadsimWarning
+from ..logs.delays import delay_notes
+from ..logs.flightlog import FlightLog
+from ..vehicle.params import VehicleParams
 from . import collinear, consistency
 from . import verdict as rule
 from .checks import vehicle_check
@@ -78,6 +77,7 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .residual import DEFAULT_WINDOW_S
 
 __all__ = ["diagnose_per_flight", "judge_flight", "differs_from_reference",
            "per_flight_answer", "PER_FLIGHT_TIE", "MIN_REFERENCE"]
@@ -94,8 +94,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map) -> dict:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
-    ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.parallel` executor).
-    Raises :class:`~quadsim.errors.InputError` for fewer than two reference flights."""
+    ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
+    Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     ref = prepare(reference, params, window_s=window_s)
     if len(ref) < 2:
         raise InputError("--reference: give at least 2 nominal flights")

@@ -50,7 +50,7 @@ canted_rotor.tilt_*    -10 .. +10 deg       a bent mount or crash-bent arm leans
 
 from __future__ import annotations
 
-from ..params import VehicleParams
+from ..vehicle.params import VehicleParams
 
 __all__ = ["PRIORS", "plausibility", "candidate_plausibility", "momentum_rate_damping"]
 
@@ -102,7 +102,7 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
     if kind == "mass":
         value = value / params.mass
     elif kind == "hover":  # linear thrust term as a fraction of the hover thrust
-        from ..params import hover_speed
+        from ..vehicle.params import hover_speed
 
         value = value / (params.thrust_factor * hover_speed(params))
     elif kind == "arm":

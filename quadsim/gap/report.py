@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fileio import atomic_write_text
+from ..core.files import atomic_write_text
 
 __all__ = ["to_json", "summary", "write_json", "write_html", "write_rerun", "public"]
 
@@ -254,7 +254,7 @@ def write_rerun(path: str | Path, result: dict) -> Path | None:
     except ImportError as exc:  # pragma: no cover - viewer is part of the package
         print(f"note: --rerun skipped: {exc}")
         return None
-    from ..trajectory import Trajectory
+    from ..vehicle.state import Trajectory
 
     s = series["states"]
     flight = Trajectory(s.t, s.position, s.velocity, s.quat, s.body_rate, s.rotor_speed,

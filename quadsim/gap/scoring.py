@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ModelError
-from ..params import VehicleParams
-from ..residual import CHANNELS
+from ..core.errors import ModelError
+from ..vehicle.params import VehicleParams
 from .fitting import Fit, fit_candidate, residuals
+from .residual import CHANNELS
 
 __all__ = ["MIN_GAIN", "MIN_T", "TIE"]
 

@@ -3,7 +3,7 @@
 A smooth reference path (figure-8 with height and yaw variation, dipping close to the
 ground) is flown *exactly*: differential flatness gives the attitude, Newton–Euler the
 thrust and torque the rotors must produce, and the rotor speeds are solved from the
-geometry-derived allocation (:mod:`quadsim.rotors`) **with the hidden effects acting**
+geometry-derived allocation (:mod:`quadsim.vehicle.rotors`) **with the hidden effects acting**
 (through the same hooks the engines call: ``apply_to_params``, ``air_velocity``, ``loads``,
 ``rotor_speed_rate``). A few fixed-point passes resolve effects that depend on the rotor
 speeds (drag, thrust curve). Commands are the speeds that the motor dynamics turn into the
@@ -15,7 +15,7 @@ hidden effects and the noise: the right data to test that the diagnosis finds th
 
 Example::
 
-    >>> from quadsim.params import load_params
+    >>> from quadsim.vehicle.params import load_params
     >>> from quadsim.effects import make_effect
     >>> from quadsim.gap.synthetic import synthetic_flight
     >>> log = synthetic_flight(load_params("crazyflie21"), [make_effect("mass_offset", mass=0.004)],
@@ -29,13 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.frames import quat_multiply, quat_normalize, rotate_inverse
 from ..effects.base import Effect, EffectContext, EffectSet
-from ..flightlog import FlightLog
-from ..frames import quat_multiply, quat_normalize, rotate_inverse
-from ..params import VehicleParams, hover_speed
-from ..residual import rotor_wrench
-from ..rotors import allocation_matrix
+from ..logs.flightlog import FlightLog
+from ..vehicle.params import VehicleParams, hover_speed
+from ..vehicle.rotors import allocation_matrix
 from .fitting import rate_owner
+from .residual import rotor_wrench
 
 __all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
 

@@ -13,7 +13,7 @@ empty when the battery did not discharge: a range below 2 % of the mean voltage
 
 k-step prediction error: from shooting nodes every 0.1 s of each held-out flight, the analytic
 rigid-body model (measured rotor speeds, model wrench incl. effects) is integrated forward by
-the analytic engine (quadsim.engines.simulate, solve_ivp) with the measured rotor speeds
+the analytic engine (quadsim.sim.engines.simulate, solve_ivp) with the measured rotor speeds
 held over each (decimated) log step; position and attitude errors at horizons
 0.05-1 s. Restarting at every node (multiple shooting) keeps an open-loop-unstable model
 scoreable.
@@ -24,12 +24,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import welch
 
+from ..core.errors import QuadsimError
+from ..core.frames import quat_conjugate, quat_multiply
 from ..effects.base import EffectSet
-from ..errors import QuadsimError
-from ..frames import quat_conjugate, quat_multiply
-from ..params import VehicleParams
-from ..residual import FlightStates
+from ..vehicle.params import VehicleParams
 from .fitting import rate_owner
+from .residual import FlightStates
 
 __all__ = ["regime_masks", "by_regime", "by_band", "kstep_errors", "BANDS_HZ", "HORIZONS_S"]
 
@@ -100,11 +100,11 @@ def kstep_errors(flights: list[FlightStates], params: VehicleParams, effects: li
                  atol: float = 1e-6) -> dict:
     """RMS position (m) and attitude (rad) error at each horizon in :data:`HORIZONS_S`.
 
-    Uses :func:`quadsim.engines.simulate` (analytic engine), one batch holding the shooting
+    Uses :func:`quadsim.sim.engines.simulate` (analytic engine), one batch holding the shooting
     nodes of all flights (at most ``max_nodes``, evenly spread), with the measured rotor
     speeds held over each log step. Effects with rotor dynamics are left out (the rotor
     speeds are measured, not commanded)."""
-    from ..engines import simulate
+    from ..sim.engines import simulate
 
     effects = [e for e in effects if rate_owner([e]) is None]
     dt = float(flights[0].t[1] - flights[0].t[0])

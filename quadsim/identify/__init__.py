@@ -23,7 +23,7 @@ Example::
     >>> ident.thrust_factor, ident.drag_factor, ident.figure_of_merit   # SI, SI, -
 
 Units: SI inside (speeds rad/s, thrust N, torque N m); RPM and grams are converted by
-:mod:`quadsim.benchdata` when the tables are read.
+:mod:`quadsim.identify.benchdata` when the tables are read.
 """
 
 from .audit import Finding, audit_report

@@ -1,6 +1,6 @@
 """python -m quadsim.identify: identify b, d, motor map and inertia; audit the report.
 
-Reads the report's bench tables shipped in quadsim/data (or the files given), fits the
+Reads the report's bench tables shipped in quadsim/identify/data (or the files given), fits the
 rotor thrust factor b by least squares over every point and trial (95 % intervals),
 scores alternative thrust curves on held-out motors and trials, maps PWM -> rotor speed
 (with its saturation), derives d from a measured torque/thrust ratio, reports the implied
@@ -19,11 +19,11 @@ import re
 import sys
 from pathlib import Path
 
-from ..benchdata import load_thrust_stand
-from ..cliargs import ArgumentParser
-from ..errors import InputError, run_cli
-from ..params import load_params
+from ..core.args import ArgumentParser
+from ..core.errors import InputError, run_cli
+from ..vehicle.params import load_params
 from .audit import Finding, audit_report
+from .benchdata import load_thrust_stand
 from .fits import StandFit, figure_of_merit, fit_thrust_stand
 from .testbed import FM_PLAUSIBLE, TestbedIdentification, identification_to_json, identify_testbed
 
@@ -170,7 +170,7 @@ def _print_audit(findings: list[Finding]) -> None:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    from ..cliargs import check_inputs, check_number, distinct_files  # before any work
+    from ..core.args import check_inputs, check_number, distinct_files  # before any work
 
     for radius in args.stand_radius:
         check_number("--stand-radius", radius, low=0.0, high=2.0, unit="m")

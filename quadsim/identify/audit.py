@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..params import VehicleParams, inertia_problems
+from ..vehicle.params import VehicleParams, inertia_problems
 from .fits import figure_of_merit
 from .testbed import FM_PLAUSIBLE, TestbedIdentification
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, stats
 
-from ..errors import InputError
+from ..core.errors import InputError
 
 __all__ = [
     "MODELS",
@@ -267,7 +267,7 @@ class StandFit:
 
 
 def fit_thrust_stand(sweep) -> StandFit:
-    """Fit F = b Omega^2 and Q = d Omega^2 on a :class:`~quadsim.benchdata.SpeedSweep` with
+    """Fit F = b Omega^2 and Q = d Omega^2 on a :class:`~quadsim.identify.benchdata.SpeedSweep` with
     torque, and the ratio Q = (d/b) F, over the points where the rotor turns."""
     if sweep.torque is None:
         raise InputError(f"{sweep.path}: torque: this sweep has no torque column")

@@ -1,6 +1,6 @@
 """Inertia of the testbed from the bifilar test (corrected) and from the lumped model.
 
-Bifilar: :func:`quadsim.bifilar.bifilar_inertia` per trial, mean and spread per axis, with
+Bifilar: :func:`quadsim.identify.bifilar.bifilar_inertia` per trial, mean and spread per axis, with
 the report's unsquared formula alongside. Physical checks on the resulting diagonal tensor:
 every moment positive; triangle inequality (Ixx + Iyy >= Izz and cyclic: no rigid body
 breaks it); and each moment at most m r_max^2, r_max the farthest point of the vehicle from
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bifilar import BifilarTable, bifilar_inertia, published_bifilar_inertia
-from ..params import inertia_problems
+from ..vehicle.params import inertia_problems
+from .bifilar import BifilarTable, bifilar_inertia, published_bifilar_inertia
 
 __all__ = [
     "BifilarResult",

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..benchdata import (
+from .benchdata import (
     ForceLift,
     SpeedSweep,
     load_cfd_table,
@@ -24,7 +24,7 @@ from ..benchdata import (
     load_testbed_constants,
     load_torque_thrust_ratio,
 )
-from ..bifilar import load_bifilar_table
+from .bifilar import load_bifilar_table
 from .fits import MODELS, Fit, HeldOutScore, figure_of_merit, fit_curve, held_out_scores
 from .inertia import BifilarResult, analyse_bifilar, lumped_inertia
 

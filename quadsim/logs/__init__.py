@@ -1,4 +1,4 @@
-"""Flight logs as users have them -> the quadsim flight-log schema (``quadsim.flightlog``).
+"""Flight logs as users have them -> the quadsim flight-log schema (``quadsim.logs.flightlog``).
 
 Formats (detected from the first bytes, else from the file name; ``fmt`` forces one):
 
@@ -12,13 +12,13 @@ format      file                         magic bytes                    module
 ==========  ===========================  =============================  ======================
 
 Each importer returns the schema's columns in SI units and our frames (world z up, body x
-forward, y left, z up; quaternions wxyz body to world); :func:`quadsim.flightlog.load_log`
+forward, y left, z up; quaternions wxyz body to world); :func:`quadsim.logs.flightlog.load_log`
 then validates them exactly like a CSV, so ``gap``, ``view`` and ``convert`` accept these
 files directly. Resampling, frame rotations and rotor numbering: :mod:`.common`.
 
 Example::
 
-    >>> from quadsim.flightlog import load_log
+    >>> from quadsim.logs.flightlog import load_log
     >>> log = load_log("sample_px4_events.ulg")            # FlightLog, SI, our frames
     >>> from quadsim.logs import read_columns
     >>> cols = read_columns("eckart00", rotor_map=(1, 2, 3, 4))   # raw column dict
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
+from ..core.errors import InputError
 from .common import parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import field_error
+from ..core.errors import field_error
 
 #: a step over GAP_FACTOR x a topic's median step is a gap: nothing is interpolated across it.
 GAP_FACTOR = 5.0
@@ -145,7 +145,7 @@ def parse_rotor_map(text: str | None) -> tuple[int, ...] | None:
 
 
 def columns_from_signals(t: np.ndarray, signals: dict[str, np.ndarray | None]) -> dict:
-    """The flight-log column dict (``quadsim.flightlog`` names) from SI signals: keys
+    """The flight-log column dict (``quadsim.logs.flightlog`` names) from SI signals: keys
     position, velocity, quat, body_rate, accel (N, k), rotor_speed, rotor_command (N, R),
     vbat (N,); None entries are left out. Time starts at 0."""
     t = np.asarray(t, dtype=float)

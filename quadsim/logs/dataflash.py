@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, field_error
-from ..frames import euler_to_quat
+from ..core.errors import InputError, field_error
+from ..core.frames import euler_to_quat
 from .common import (
     RPM_TO_RAD_S,
     columns_from_signals,

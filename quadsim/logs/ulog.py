@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, field_error
+from ..core.errors import InputError, field_error
 from .common import (
     RPM_TO_RAD_S,
     columns_from_signals,

@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import field_error
+from ..core.errors import field_error
 from .common import RPM_TO_RAD_S, map_rotors, resample, resample_quat
 
 MAGIC = 0xBC

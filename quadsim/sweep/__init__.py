@@ -1,12 +1,12 @@
 """Monte-Carlo and grid sweeps of effect magnitudes and initial states, closed loop.
 
 ``python -m quadsim.sweep`` flies one parameter set (``--model``) along one reference path
-(:mod:`quadsim.trajectories`) with the geometric controller (:mod:`quadsim.controllers`), which
+(:mod:`quadsim.sim.paths`) with the geometric controller (:mod:`quadsim.sim.controllers`), which
 knows only the nominal vehicle, while each simulation's vehicle carries sampled effects
 (:mod:`quadsim.effects`) and starts from a sampled offset of the path's start. Simulations run
-in chunks, each chunk one batch through :func:`quadsim.engines.simulate`, chunks spread over
+in chunks, each chunk one batch through :func:`quadsim.sim.engines.simulate`, chunks spread over
 local processes (``--workers N``) or Ray (``--ray local|HOST:PORT``) by
-:mod:`quadsim.parallel`.
+:mod:`quadsim.core.executor`.
 
 Outputs: ``OUT.parquet``, one row per simulation (``sim`` index, the inputs ``effect.param``
 and ``init.key`` in SI units, tracking error statistics and a ``diverged`` flag; see

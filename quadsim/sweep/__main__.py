@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..cliargs import ArgumentParser
-from ..engines import ENGINES
-from ..errors import InputError, run_cli
-from ..params import load_params
-from ..trajectories import PATHS
+from ..core.args import ArgumentParser
+from ..core.errors import InputError, run_cli
+from ..sim.engines import ENGINES
+from ..sim.paths import PATHS
+from ..vehicle.params import load_params
 from . import __doc__ as MANUAL
 from .design import design_matrix, parse_effect_ranges, parse_initial_ranges
 from .driver import run_sweep
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
                          duration=args.duration, control_period=args.control_period,
                          engine=args.engine, diverge_m=args.diverge)
     if args.ray is not None:
-        from ..parallel import connect_ray
+        from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)
     summary = run_sweep(config, matrix, args.output, seed=args.seed,

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.errors import InputError
 from ..effects import EFFECTS, make_effect
-from ..errors import InputError
 
 __all__ = [
     "INITIAL_KEYS",

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..fileio import atomic_write_bytes, atomic_write_text
-from ..parallel import TaskFailure, run_tasks
+from ..core.errors import InputError
+from ..core.executor import TaskFailure, run_tasks
+from ..core.files import atomic_write_bytes, atomic_write_text
 from .run import OUTPUT_COLUMNS, SweepConfig, simulate_chunk, table_bytes
 
 __all__ = ["SWEEP_SCHEMA", "chunk_folder", "run_sweep"]

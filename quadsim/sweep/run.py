@@ -1,4 +1,4 @@
-"""Run a sweep: chunks of simulations, batched through :func:`quadsim.engines.simulate`.
+"""Run a sweep: chunks of simulations, batched through :func:`quadsim.sim.engines.simulate`.
 
 Each simulation flies the reference path in closed loop with the geometric controller, which
 knows only the nominal parameter set, while the simulated vehicle carries the row's effects
@@ -24,13 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..controllers import GeometricController
+from ..core.errors import QuadsimError
+from ..core.frames import euler_to_quat, quat_multiply, quat_to_rotmat
 from ..effects import EffectSet, make_effect
-from ..engines import simulate
-from ..errors import QuadsimError
-from ..frames import euler_to_quat, quat_multiply, quat_to_rotmat
-from ..params import VehicleParams
-from ..trajectories import make_reference
+from ..sim.controllers import GeometricController
+from ..sim.engines import simulate
+from ..sim.paths import make_reference
+from ..vehicle.params import VehicleParams
 from .design import Dimension
 
 __all__ = ["OUTPUT_COLUMNS", "SweepConfig", "simulate_chunk", "table_bytes"]

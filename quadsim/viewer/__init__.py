@@ -35,7 +35,7 @@ folder, ``os.replace``). Batched trajectories: only the members named by ``batch
 
 Rerun is imported lazily, inside the functions, so importing an engine that may log costs
 nothing when logging is off. Callers that simulate should not lose their result because a
-recording could not be written: catch :class:`~quadsim.errors.QuadsimError` around
+recording could not be written: catch :class:`~quadsim.core.errors.QuadsimError` around
 :func:`save_recording`, or call :func:`try_save_recording`, which prints the one-line error to
 stderr and returns None.
 

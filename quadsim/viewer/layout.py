@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
-from ..trajectory import STATE12_NAMES, STATE12_UNITS
+from ..core.errors import InputError
+from ..vehicle.state import STATE12_NAMES, STATE12_UNITS
 from .series import TIMELINE
 
 

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, QuadsimError
-from ..fileio import atomic_write_bytes
-from ..params import VehicleParams
-from ..trajectory import Trajectory
+from ..core.errors import InputError, QuadsimError
+from ..core.files import atomic_write_bytes
+from ..vehicle.params import VehicleParams
+from ..vehicle.state import Trajectory
 from .layout import _blueprint, _camera
 from .series import (
     APPLICATION_ID,
@@ -130,10 +130,10 @@ def _spawn_viewer(path: Path) -> None:
 
 def check_output_path(path: str | os.PathLike) -> Path:
     """Raise :class:`InputError` (one line) unless a recording can be written at ``path``
-    (:func:`quadsim.cliargs.check_output`: name ends in ``.rrd``, not a directory, nearest
+    (:func:`quadsim.core.args.check_output`: name ends in ``.rrd``, not a directory, nearest
     existing parent folder writable). Writes nothing, so a CLI can call it before a long
     simulation."""
-    from ..cliargs import check_output
+    from ..core.args import check_output
 
     check_output("recording", path, (".rrd",))
     return Path(path)
@@ -155,7 +155,7 @@ def save_recording(path: str | os.PathLike | None, *, params: VehicleParams,
       spawn: also open the native viewer where a display exists (else print how to view).
       residuals: extra residual series, name -> (N,) / (N, K) array on the measured (or first
         trajectory's) time stamps, or ``(t, values[, labels])``.
-      assembly: a ``quadsim.assembly`` assembly whose part meshes replace the stand-ins.
+      assembly: a ``quadsim.cad.assembly`` assembly whose part meshes replace the stand-ins.
       title: recording name and 3D view title.
       batch_index: member(s) of batched trajectories to log: an int, a list, or ``"all"``.
       thrust_arrow_scale: arrow length per newton (m/N); default: hover thrust = half an arm.

@@ -9,9 +9,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..errors import InputError
-from ..params import VehicleParams
-from ..trajectory import STATE12_NAMES, Trajectory
+from ..core.errors import InputError
+from ..vehicle.params import VehicleParams
+from ..vehicle.state import STATE12_NAMES, Trajectory
 from .shapes import VehicleShape
 
 __all__ = ["APPLICATION_ID", "ENGINE_COLORS", "TIMELINE", "engine_color", "rotor_thrust",

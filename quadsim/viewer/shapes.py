@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..params import VehicleParams
+from ..vehicle.params import VehicleParams
 
 __all__ = ["VehicleShape", "assembly_for", "vehicle_shapes"]
 
@@ -90,7 +90,7 @@ def assembly_for(params: VehicleParams):
     (``from_cad``), or None when the set does not come from CAD."""
     if params.cad_dir is None:
         return None
-    from ..assembly import load_assembly  # local: trimesh and the mesh files
+    from ..cad.assembly import load_assembly  # local: trimesh and the mesh files
 
     return load_assembly(params.cad_dir)
 

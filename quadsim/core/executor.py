@@ -16,7 +16,7 @@ picklable. Exceptions raised by ``fn`` propagate unchanged (the first in task or
 
 A worker that *dies* mid-task (killed, out of memory, segfault) is different: that task is
 retried once; if it dies again, it is reported as a :class:`TaskFailure` in its slot
-(``keep_going=True``) or raises a one-line :class:`~quadsim.errors.InputError` naming it,
+(``keep_going=True``) or raises a one-line :class:`~quadsim.core.errors.InputError` naming it,
 after every other task has finished (``keep_going=False``). With processes, a dead worker
 breaks the whole pool: the unfinished tasks are rerun in a fresh pool, and if that breaks
 again each is rerun alone, so that only the task that kills its worker is blamed. Ray does
@@ -24,7 +24,7 @@ this per task (``max_retries=1``).
 
 Example::
 
-    >>> from quadsim.parallel import run_tasks
+    >>> from quadsim.core.executor import run_tasks
     >>> run_tasks(abs, [-1, 2, -3], workers=1)
     [1, 2, 3]
 """
@@ -160,7 +160,7 @@ def connect_ray(address: str, workers: int | None = None):
     ray = _ray()
     if ray.is_initialized():
         return ray
-    package_root = str(Path(__file__).resolve().parents[1])
+    package_root = str(Path(__file__).resolve().parents[2])
     if address == "local":
         # Workers must import *this* quadsim (not another install): put it on their path.
         env = {"env_vars": {"PYTHONPATH": os.pathsep.join(

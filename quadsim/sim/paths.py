@@ -22,7 +22,7 @@ Paths (``make_reference(name, speed=..., height=..., size=..., duration=...)``):
 
 Example::
 
-    >>> from quadsim.trajectories import make_reference
+    >>> from quadsim.sim.paths import make_reference
     >>> ref = make_reference("figure8", speed=1.0, height=1.0, size=1.0)
     >>> s = ref(np.linspace(0, 10, 101))
     >>> s.position.shape, float(np.linalg.norm(s.velocity, axis=-1).max())   # ((101, 3), 1.0)
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from ..core.errors import InputError
 
 __all__ = ["GROUND_CLEARANCE", "PATHS", "Reference", "ReferenceSample", "make_reference"]
 

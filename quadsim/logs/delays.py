@@ -39,8 +39,8 @@ commands are not shifted (their delay to the rotor speed is the motor's dynamics
 
 Example::
 
-    >>> from quadsim.flightlog import load_log
-    >>> from quadsim.delays import estimate_delays, align_log
+    >>> from quadsim.logs.flightlog import load_log
+    >>> from quadsim.logs.delays import estimate_delays, align_log
     >>> log = load_log("flight_00.csv.gz")
     >>> est = estimate_delays(log)
     >>> est.ms()                                   # {'gyro': -5.6, 'accel': 0.1, 'rotor': -12.1}

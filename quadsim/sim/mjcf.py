@@ -9,7 +9,7 @@ One ``<general>`` actuator per rotor, transmitted through the rotor's hub site w
 the rotor's thrust axis. **The control is the squared rotor speed Omega^2 in rad^2/s^2.**
 With gain 1 and ``gear = [0, 0, b, 0, 0, -spin * d]`` the actuator produces thrust
 ``b * Omega^2`` along the axis and the reaction torque ``-spin * d * Omega^2`` about it
-(spin = +1 ccw), exactly :func:`quadsim.rotors.allocation_matrix`. ``ctrlrange`` is
+(spin = +1 ccw), exactly :func:`quadsim.vehicle.rotors.allocation_matrix`. ``ctrlrange`` is
 ``[min_speed^2, max_speed^2]``. Use :func:`speed_to_ctrl` to convert.
 
 MuJoCo's built-in fluid drag is off (``density = 0``, ``viscosity = 0``) so that drag is
@@ -22,7 +22,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .params import VehicleParams, hover_speed
+from ..vehicle.params import VehicleParams, hover_speed
 
 BODY_NAME = "vehicle"
 

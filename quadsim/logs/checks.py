@@ -1,7 +1,7 @@
 """Flight-log consistency checks: channels that must agree with each other, not only
 plausible magnitudes.
 
-The loader (:mod:`quadsim.flightlog`) refuses values no vehicle produces (rotor speeds
+The loader (:mod:`quadsim.logs.flightlog`) refuses values no vehicle produces (rotor speeds
 above any motor, rates above any airframe). A gyro in deg/s on a gentle flight, a flipped
 axis or an accelerometer in g on a small log passes those limits; here each channel is
 checked against another one that measures the same physics:
@@ -28,10 +28,10 @@ checked against another one that measures the same physics:
   holds at least ``MIN_KEPT_FRACTION`` = 50 % of the samples (and at least
   ``MIN_KEPT_S`` = 1 s); otherwise the log is refused. The fitter never sees a NaN.
 
-Every refusal is one :func:`~quadsim.errors.field_error` line naming the file, the column
+Every refusal is one :func:`~quadsim.core.errors.field_error` line naming the file, the column
 and the numbers. Example::
 
-    >>> from quadsim.logcheck import check_log
+    >>> from quadsim.logs.checks import check_log
     >>> log, notes = check_log(load_log("flight.csv.gz"), params)
 """
 
@@ -41,8 +41,8 @@ import dataclasses
 
 import numpy as np
 
-from .errors import field_error
-from .frames import quat_to_rotmat
+from ..core.errors import field_error
+from ..core.frames import quat_to_rotmat
 
 __all__ = ["check_log", "check_logs"]
 

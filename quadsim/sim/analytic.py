@@ -5,7 +5,7 @@ world frame, unit quaternion wxyz body-to-world, body rates), optionally followe
 actual rotor speeds when an effect gives the rotors dynamics. Batched: B simulations are one
 flat ODE, so one ``solve_ivp`` call advances all of them.
 
-Physics (per simulation, see :mod:`quadsim.rotors` for the rotor conventions)::
+Physics (per simulation, see :mod:`quadsim.vehicle.rotors` for the rotor conventions)::
 
     F_body   = sum_i (s_i b Omega_i^2 + o_i) a_i                  rotor thrust (+ effects)
     tau_com  = sum_i (r_i - c) x f_i - spin_i d s_i Omega_i^2 a_i  rotor torques about the CoM
@@ -20,10 +20,10 @@ evaluation, in one vectorised call for the batch (hooks of :mod:`quadsim.effects
 
 Rotor speed commands are held constant over each control period (zero-order hold); each hold
 interval is one ``solve_ivp`` call (DOP853, rtol 1e-11, atol 1e-12 by default). Use
-:func:`quadsim.engines.simulate` as the front door; this module is the machinery::
+:func:`quadsim.sim.engines.simulate` as the front door; this module is the machinery::
 
-    >>> from quadsim.params import load_params
-    >>> from quadsim.engines import simulate, initial_state
+    >>> from quadsim.vehicle.params import load_params
+    >>> from quadsim.sim.engines import simulate, initial_state
     >>> p = load_params("physical")
     >>> traj = simulate(p, engine="analytic", initial=initial_state(p, position=(0, 0, 1)),
     ...                 duration=1.0, control_period=0.01)
@@ -40,13 +40,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .effects.base import EffectContext, EffectLoads, EffectSet
-from .errors import SimulationError
-from .frames import quat_derivative as _quat_rate
-from .frames import quat_normalize
-from .frames import quat_to_rotmat as _rotmat
-from .params import VehicleParams
-from .rotors import allocation_matrix
+from ..core.errors import SimulationError
+from ..core.frames import quat_derivative as _quat_rate
+from ..core.frames import quat_normalize
+from ..core.frames import quat_to_rotmat as _rotmat
+from ..effects.base import EffectContext, EffectLoads, EffectSet
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import allocation_matrix
 
 __all__ = [
     "BodyArrays",
@@ -75,7 +75,7 @@ class BodyArrays:
     """Per-simulation physical constants, stacked on a leading axis B (SI units).
 
     mass (B,), com (B, 3), inertia / inertia_inv (B, 3, 3) about the CoM, allocation (B, 6, R)
-    about the CoM (:func:`quadsim.rotors.allocation_matrix`), rotor_arm (B, R, 3) = hub - CoM,
+    about the CoM (:func:`quadsim.vehicle.rotors.allocation_matrix`), rotor_arm (B, R, 3) = hub - CoM,
     rotor_axis (B, R, 3), rotor_spin (R,), thrust_factor / drag_factor (B,), gravity (B,).
     """
 
@@ -335,7 +335,7 @@ def unpack_state(y: np.ndarray, t: float, batch: int, rotor_speed: np.ndarray,
 def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
                  command_fn: Callable[[int, dict], np.ndarray], periods: int,
                  control_period: float, *, rtol: float = RTOL, atol: float = ATOL,
-                 fast: bool | None = None) -> dict:
+                 rhs: Callable | None = None) -> dict:
     """Advance B simulations ``periods`` control periods; commands held over each period.
 
     ``initial``: snapshot dict of (B, ...) arrays; ``command_fn(k, snapshot) -> (B, R)``
@@ -344,20 +344,12 @@ def run_analytic(params: Sequence[VehicleParams], effects: BatchEffects, initial
     rotor_command`` (rotor_speed is the actual speed; without rotor dynamics the command
     held from that instant).
 
-    ``fast``: None (default) evaluates the right-hand side with the compiled kernel of
-    :mod:`quadsim.fast_mujoco` when numba is installed and every effect has a fast form (same
-    equations), else with :func:`state_derivative`; False forces the numpy reference."""
+    ``rhs``: None (default) evaluates :func:`state_derivative`; a compiled right-hand side
+    with the same equations (:func:`quadsim.sim.compiled.analytic_fast_rhs`, which
+    :func:`quadsim.sim.engines.simulate` passes when numba is installed and every effect has a
+    fast form) is used instead."""
     body = body_arrays(params)
-    compiled = None
-    if fast is not False:
-        from . import fast_mujoco
-
-        sets = [None] * len(params)
-        for effect_set, _, idx in effects.groups:
-            for i in idx:
-                sets[i] = effect_set
-        if fast_mujoco.fast_form_problem(sets, params) is None:
-            compiled = fast_mujoco.analytic_rhs(sets, params, body)
+    compiled = rhs
     batch = len(params)
     dynamics = effects.rotor_dynamics
     y = pack_state(initial, dynamics)

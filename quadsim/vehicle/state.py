@@ -12,7 +12,7 @@ A :class:`Trajectory` holds time series with an optional leading batch axis:
 
 The 12-state vector of the linear analysis is
 ``[x, y, z, vx, vy, vz, roll, pitch, yaw, p, q, r]`` with Z-Y-X Euler angles
-(:mod:`quadsim.frames`) and body rates.
+(:mod:`quadsim.core.frames`) and body rates.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .frames import quat_to_euler
+from ..core.frames import quat_to_euler
 
 STATE12_NAMES = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "p", "q", "r")
 STATE12_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s",

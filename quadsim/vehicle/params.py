@@ -25,7 +25,7 @@ Mass properties may come from the CAD assembly instead of numbers::
 and the rotor layout likewise (``[rotor_layout] from_cad = {...}``), so that a fact lives in
 one place. Example::
 
-    >>> from quadsim.params import load_params
+    >>> from quadsim.vehicle.params import load_params
     >>> p = load_params("physical")
     >>> p.mass, p.rotor_count
 """
@@ -39,12 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, ModelError, field_error
-from .fileio import read_toml
+from ..core.errors import InputError, ModelError, field_error
+from ..core.files import read_toml
 
 #: Folder holding the built-in parameter sets (``--model NAME``).
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
-SCHEMA = "quadsim.params/1"
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+SCHEMA = "quadsim.vehicle.params/1"
 
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 
@@ -313,8 +313,8 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         raise field_error(path, "body", "missing section [body]")
     _check_keys(body, set(_BODY_UNITS) | {"from_cad"}, path, "body")
     if "from_cad" in body:
-        from .assembly import load_assembly  # local: only sets that use CAD need trimesh
-        from .massprops import vehicle_mass_properties
+        from ..cad.assembly import load_assembly  # local: only sets that use CAD need trimesh
+        from ..cad.massprops import vehicle_mass_properties
 
         cad_dir, source = _cad_path(body["from_cad"], path, "body.from_cad")
         props = vehicle_mass_properties(load_assembly(cad_dir))
@@ -341,7 +341,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         raise field_error(path, "rotors.min_speed", "must be below rotors.max_speed")
 
     if "rotor_layout" in data:
-        from .assembly import load_assembly
+        from ..cad.assembly import load_assembly
 
         layout_dir, source = _cad_path(data["rotor_layout"].get("from_cad"), path,
                                        "rotor_layout.from_cad")

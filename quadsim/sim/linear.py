@@ -1,13 +1,13 @@
 """Linear analysis about hover: analytic Jacobians -> python-control ``StateSpace``, LQR.
 
 State (12): ``[x, y, z, vx, vy, vz, roll, pitch, yaw, p, q, r]`` (world position and velocity
-of the body origin, Z-Y-X Euler angles, body rates; :mod:`quadsim.trajectory`). Input (R):
+of the body origin, Z-Y-X Euler angles, body rates; :mod:`quadsim.vehicle.state`). Input (R):
 rotor speeds (rad/s) about the hover speeds. Hover: level, yaw ``yaw0``, rotor speeds from the
 mixer so that thrust balances weight with no torque (unequal if the CoM is off-centre).
 
 Linearised at hover (omega = 0, so the omega x I omega and CoM-lever terms in omega vanish),
 with F0 = (0, 0, T0) the hover thrust, Rz the yaw rotation, c the CoM, A_f / A_t the force
-and torque rows of :func:`quadsim.rotors.allocation_matrix`, U0 = diag(Omega0)::
+and torque rows of :func:`quadsim.vehicle.rotors.allocation_matrix`, U0 = diag(Omega0)::
 
     d(pos)/dt   = vel
     d(vel)/dt   = (1/m) [Rz skew(e_x) F0, Rz skew(e_y) F0, skew(e_z) Rz F0] d(euler)
@@ -18,7 +18,7 @@ and torque rows of :func:`quadsim.rotors.allocation_matrix`, U0 = diag(Omega0)::
 :func:`dynamics_jacobian_fd` differentiates either engine's full nonlinear dynamics by central
 differences, to check the closed forms (tests do). Example::
 
-    >>> from quadsim.params import load_params
+    >>> from quadsim.vehicle.params import load_params
     >>> from quadsim import linear
     >>> p = load_params("physical")
     >>> sys = linear.linearize(p)
@@ -35,11 +35,11 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
+from ..core.frames import euler_to_quat, quat_to_euler, skew
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import allocation_matrix, speeds_for
+from ..vehicle.state import STATE12_NAMES
 from .analytic import BatchEffects, body_arrays, state_derivative
-from .frames import euler_to_quat, quat_to_euler, skew
-from .params import VehicleParams
-from .rotors import allocation_matrix, speeds_for
-from .trajectory import STATE12_NAMES
 
 __all__ = ["hover_point", "linearize", "dynamics_jacobian_fd", "euler_rates",
            "is_controllable", "lqr_gain", "LQRController", "DEFAULT_LQR_SCALES"]
@@ -130,7 +130,7 @@ def dynamics_jacobian_fd(params: VehicleParams, engine: str, x0: np.ndarray, u0:
                          *, step: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """Central-difference Jacobians (A, B) of an engine's nonlinear dynamics at (x0, u0).
 
-    ``engine``: "analytic" (:func:`quadsim.analytic.state_derivative`) or "mujoco"
+    ``engine``: "analytic" (:func:`quadsim.sim.analytic.state_derivative`) or "mujoco"
     (``mj_forward`` accelerations of the compiled model, ctrl = Omega^2)."""
     rate = _analytic_rate(params) if engine == "analytic" else _mujoco_rate(params)
     a = np.zeros((12, 12))
@@ -169,7 +169,7 @@ class LQRController:
 
     ``reference(t) -> (B, 12) or (12,)`` desired state (default: hover at ``position``, yaw
     ``yaw0``); yaw error is wrapped to [-pi, pi). Called as ``controller(t, state)`` with the
-    engines' snapshot dict (see :mod:`quadsim.engines`); returns (B, R) rotor speeds (rad/s)."""
+    engines' snapshot dict (see :mod:`quadsim.sim.engines`); returns (B, R) rotor speeds (rad/s)."""
 
     params: VehicleParams
     position: tuple[float, float, float] = (0.0, 0.0, 1.0)

@@ -1,19 +1,19 @@
 """Bench data: the report's measured tables and real thrust-stand sweeps, read and checked.
 
 Every table is a CSV file whose header names each column's unit, ``name[unit]`` (our own
-files in ``quadsim/data/``) or ``name_unit`` (the thrust-stand logs, e.g. ``speed_rpm``).
+files in ``quadsim/identify/data/``) or ``name_unit`` (the thrust-stand logs, e.g. ``speed_rpm``).
 Lines starting with ``#`` are comments; our files carry a ``# source:`` line naming the
 report table they transcribe. Units are converted to SI here, at the boundary (RPM -> rad/s,
 grams -> kg, mm -> m, µs stays a command unit), and nothing else in the package sees RPM.
 
-Checks (each failure is one :class:`~quadsim.errors.InputError` line naming file and column):
+Checks (each failure is one :class:`~quadsim.core.errors.InputError` line naming file and column):
 unknown or missing columns, a column without a unit, a unit that does not fit the column,
 empty / non-numeric / NaN cells, implausible magnitudes (e.g. RPM numbers in a rad/s
 column, grams in a kg column), and fewer rows than the fit needs.
 
 Example::
 
-    >>> from quadsim.benchdata import load_force_lift
+    >>> from quadsim.identify.benchdata import load_force_lift
     >>> lift = load_force_lift()            # report Tables 4.5, 4.7, 4.9, 4.11
     >>> lift.thrust.shape, lift.speed.shape # (motor, trial, command) in N and rad/s
     ((4, 3, 11), (4, 3, 11))
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, field_error
+from ..core.errors import InputError, field_error
 
 __all__ = [
     "DATA_DIR",

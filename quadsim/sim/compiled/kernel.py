@@ -1,9 +1,9 @@
-"""The numba kernel of :mod:`quadsim.fast_mujoco` (imported only when numba is installed).
+"""The numba kernel of :mod:`quadsim.sim.compiled` (imported only when numba is installed).
 
 :func:`run` (``run(functions, addr, commands, omega, k0, substeps, dt, period, rotor_arm,
 rotor_axis, rotor_spin, rotor_position, rows, extra, lag, active, out, status)``) calls
 MuJoCo's C functions by address (no ctypes objects inside, so numba can cache it on disk); the
-formulas are those of :mod:`quadsim.mujoco_engine` (``_effect_step``,
+formulas are those of :mod:`quadsim.sim.mujoco_engine` (``_effect_step``,
 ``_effect_state_step``) and of each effect's module, written per simulation and per rotor;
 ``extra`` (B, 6) carries cable_payload's payload position and velocity (world) between calls.
 :func:`analytic_rhs` is the analytic engine's right-hand side with the same load functions.
@@ -18,8 +18,8 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from .analytic import STATE_BOUND
-from .fast_mujoco import _OFFSET as offset
+from ..analytic import STATE_BOUND
+from .layout import OFFSET as offset
 
 MIN_SCALE = 0.5          # quadsim.effects.battery_sag.MIN_SCALE
 MAX_TERM = 0.5           # quadsim.effects.ground_effect.MAX_TERM
@@ -98,7 +98,7 @@ def rk4(c, w0, h, up, down, f0, f1, f2):
 def predict(qpos, qvel, qacc, h, normalize, pos, vel, rate_b, rot):
     """Body state h ahead predicted from (qpos, qvel, qacc) (mujoco_engine._midpoint_state);
     the quaternion is normalised when ``normalize`` (the analytic right-hand side uses its
-    state as is, like quadsim.analytic)."""
+    state as is, like quadsim.sim.analytic)."""
     for i in range(3):
         pos[i] = qpos[i] + qvel[i] * h + 0.5 * qacc[i] * h * h
         vel[i] = qvel[i] + qacc[i] * h
@@ -371,9 +371,9 @@ def run(functions, addr, commands, omega, k0, substeps, dt, period, arm, axis, s
 @numba.njit(cache=True)
 def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, allocation, mass,
                  com, inertia, inertia_inv, gravity, thrust_factor, drag_factor, out):
-    """d/dt of the flat batched analytic state (quadsim.analytic.state_derivative) into
+    """d/dt of the flat batched analytic state (quadsim.sim.analytic.state_derivative) into
     ``out``, with every effect evaluated in the kernel: Newton-Euler at the CoM, returned at
-    the body origin; thrust scale s and offset o per rotor as in quadsim.analytic."""
+    the body origin; thrust scale s and offset o per rotor as in quadsim.sim.analytic."""
     batch, rotors = command.shape
     base = 13 + rotors if lag else 13
     width = base + size

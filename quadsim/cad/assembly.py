@@ -2,14 +2,14 @@
 
 A CAD folder (``cad/`` for the testbed) holds one mesh file per part (STL as exported from a
 CAD tool, in the unit named by ``mesh_unit``, or STEP, which declares its own unit: see
-:mod:`quadsim.step`) and one manifest ``*.toml`` (schema
+:mod:`quadsim.cad.step`) and one manifest ``*.toml`` (schema
 ``quadsim.cad/1``, documented in ``docs/cad.md``) that says, for each part, its mesh, its
 mass per instance (measured) or its density, and where each instance sits in the vehicle;
 and which part placements are rotors, with their spin direction.
 
 Example::
 
-    >>> from quadsim.assembly import load_assembly
+    >>> from quadsim.cad.assembly import load_assembly
     >>> assembly = load_assembly("cad")
     >>> [r.name for r in assembly.rotors], assembly.rotors[0].position
     (['1', '2', '3', '4'], array([0.197667, 0., 0.04135]))
@@ -20,9 +20,9 @@ Z-Y-X: ``R = Rz(yaw) Ry(pitch) Rx(roll)``, mesh frame to body frame). A rotor's 
 origin of its part placement, its thrust axis that placement's z axis (or ``axis``), and
 ``spin`` is ``ccw`` (+1) or ``cw`` (-1) about that axis.
 
-Every manifest mistake raises :class:`quadsim.errors.InputError` naming the file and field.
+Every manifest mistake raises :class:`quadsim.core.errors.InputError` naming the file and field.
 A mesh must be a closed, consistently wound volume; ``hull=True`` replaces a bad mesh by its
-convex hull and warns (:class:`quadsim.errors.QuadsimWarning`).
+convex hull and warns (:class:`quadsim.core.errors.QuadsimWarning`).
 """
 
 from __future__ import annotations
@@ -37,9 +37,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from .errors import InputError, QuadsimWarning, field_error
-from .fileio import read_toml
-from .frames import euler_to_quat, quat_to_rotmat
+from ..core.errors import InputError, QuadsimWarning, field_error
+from ..core.files import read_toml
+from ..core.frames import euler_to_quat, quat_to_rotmat
 from .step import is_step, read_step
 
 __all__ = [

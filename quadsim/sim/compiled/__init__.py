@@ -1,6 +1,6 @@
 """Fast MuJoCo path: the effects and MuJoCo's C ``mj_step`` in one compiled loop (numba).
 
-Same physics as the step-by-step reference of :mod:`quadsim.mujoco_engine` — the same
+Same physics as the step-by-step reference of :mod:`quadsim.sim.mujoco_engine` — the same
 per-step recipe (rotor lag integrated with two RK4 half steps on the held command, actuators
 driven by the step's Simpson mean ``Omega^2`` times the thrust scale, every other load
 evaluated once per step at the predicted mid-step state and applied to the free joint
@@ -36,30 +36,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .analytic import BatchEffects
-from .effects.base import EffectSet
-from .frames import quat_normalize
-from .params import VehicleParams
+from ...core.frames import quat_normalize
+from ...effects.base import EffectSet
+from ...vehicle.params import VehicleParams
+from ..analytic import BatchEffects
+from .layout import GUST, MAX_ROTORS, WIDTH
+from .layout import OFFSET as _OFFSET
 
-__all__ = ["GUST", "MAX_ROTORS", "Kernel", "available", "encode", "fast_form_problem"]
+__all__ = ["GUST", "MAX_ROTORS", "Kernel", "analytic_fast_rhs", "available", "encode",
+           "fast_form_problem", "run_mujoco_fast"]
 
-GUST = 8            # gust components of quadsim.effects.wind
-MAX_ROTORS = 8
-# Layout of one simulation's effect parameters (a row of ``encode``'s array).
-_LAYOUT = {"tau_up": 1, "tau_down": 1, "mismatch": MAX_ROTORS, "battery_rate": 1,
-           "ground_gain": 1, "ground_height": 1, "ground_radius": 1, "curve_linear": 1,
-           "curve_offset": 1, "rotor_drag": 1, "rotor_drag_axial": 1, "body_drag": 3,
-           "air_density": 1, "rotor_inertia": 1, "wind_mean": 3, "gust_amplitude": 1,
-           "gust_frequency": GUST, "gust_phase": 3 * GUST, "thrust_gain": 1,
-           "rate_damping": 3, "payload_mass": 1, "payload_length": 1, "payload_attach": 3,
-           "payload_arm": 3, "payload_stiffness": 1, "payload_damping": 1, "gravity": 1,
-           "com": 3}
-_OFFSET = {}
-_n = 0
-for _key, _size in _LAYOUT.items():
-    _OFFSET[_key] = _n
-    _n += _size
-WIDTH = _n
 
 # Parameter names each fast form reads (an effect with other parameters has no fast form).
 _KNOWN = {
@@ -106,7 +92,7 @@ def available() -> bool:
 
 
 def _effect_problem(effect, seen: set) -> str | None:
-    from . import effects as library
+    from ... import effects as library
 
     name = getattr(effect, "name", type(effect).__name__)
     if library.EFFECTS.get(name) is not type(effect):
@@ -150,7 +136,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
     """(B, WIDTH) effect parameters for the kernel and whether any rotor has lag dynamics.
     Call only when :func:`fast_form_problem` returned None."""
     rows = np.zeros((len(params), WIDTH))
-    from .effects.base import SPEED_RESPONSE_S
+    from ...effects.base import SPEED_RESPONSE_S
 
     rows[:, _OFFSET["mismatch"]:_OFFSET["mismatch"] + MAX_ROTORS] = 1.0
     rows[:, _OFFSET["thrust_gain"]] = 1.0
@@ -231,7 +217,7 @@ def _kernels():
     functions = _library()
     if functions is None:
         return None
-    from . import _fast_kernel
+    from . import kernel as _fast_kernel
 
     _CACHE["functions"] = functions
     _CACHE["run"] = _fast_kernel.run
@@ -349,7 +335,7 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
              body, initial: dict, command_fn, periods: int, control_period: float,
              dt: float, nthread: int = 0) -> tuple[dict, np.ndarray]:
     """Run the whole simulation on the fast path (same contract as
-    :func:`quadsim.mujoco_engine.run_mujoco`). Returns the output dict and the status (B,)
+    :func:`quadsim.sim.mujoco_engine.run_mujoco`). Returns the output dict and the status (B,)
     (0 = fine, else 1 + the index of the control period in which that simulation diverged;
     its samples from then on are NaN)."""
     import mujoco
@@ -402,10 +388,10 @@ def run_fast(models, body_id: int, sets: Sequence[EffectSet], params: Sequence[V
 
 
 def analytic_rhs(sets: Sequence[EffectSet], params: Sequence[VehicleParams], body):
-    """Compiled right-hand side for :mod:`quadsim.analytic` (the same equations as
+    """Compiled right-hand side for :mod:`quadsim.sim.analytic` (the same equations as
     ``state_derivative``, every effect in the kernel): ``rhs(t, y, command) -> dy/dt``.
     Call only when :func:`fast_form_problem` returned None."""
-    from . import _fast_kernel
+    from . import kernel as _fast_kernel
 
     rows, lag = encode(sets, params)
     active = any(s.effects for s in sets)
@@ -450,3 +436,58 @@ def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, period
             kernel.advance(commands[:, k:k + 1], omega, k, substeps, dt, control_period,
                            ends[:, k:k + 1], status)
     return commands
+
+
+def _sets_by_simulation(effects: BatchEffects, count: int) -> list:
+    sets = [None] * count
+    for effect_set, _, idx in effects.groups:
+        for i in idx:
+            sets[i] = effect_set
+    return sets
+
+
+def analytic_fast_rhs(params: Sequence[VehicleParams], effects: BatchEffects, body):
+    """The compiled right-hand side for :func:`quadsim.sim.analytic.run_analytic` (its
+    ``rhs``), or None when these effects have no fast form (the engine then evaluates
+    ``state_derivative``)."""
+    sets = _sets_by_simulation(effects, len(params))
+    if fast_form_problem(sets, params) is not None:
+        return None
+    return analytic_rhs(sets, params, body)
+
+
+def run_mujoco_fast(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
+                    command_fn, periods: int, control_period: float, *, timestep: float,
+                    nthread: int = 0, require: bool = False) -> dict | None:
+    """:func:`quadsim.sim.mujoco_engine.run_mujoco` on the compiled path (same contract and
+    output), or None when it cannot run these effects (``require``: ``InputError`` naming
+    what prevents it instead). Raises ``SimulationError`` (with ``.partial``) on divergence."""
+    import mujoco
+
+    from ...core.errors import InputError, SimulationError
+    from ..analytic import STATE_BOUND, body_arrays
+    from ..mujoco_engine import BODY_NAME, check_memory, compiled_models
+
+    sets = _sets_by_simulation(effects, len(params))
+    problem = fast_form_problem(sets, params)
+    if problem:
+        if require:
+            raise InputError(f"mujoco engine: fast path unavailable: {problem}")
+        return None
+    substeps = int(round(control_period / timestep))
+    models = compiled_models(params, timestep)
+    check_memory(models[0], len(params), periods, params[0].rotor_count)
+    body = body_arrays(params)
+    body_id = mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, BODY_NAME)
+    out, status = run_fast(models, body_id, sets, params, body, initial, command_fn, periods,
+                           control_period, timestep, nthread)
+    if status.any():
+        bad = np.flatnonzero(status)
+        raise SimulationError(
+            f"mujoco engine: simulation(s) {bad.tolist()} diverged before t = "
+            + ", ".join(f"{status[i] * control_period:.4g}" for i in bad)
+            + f" s (NaN, MuJoCo reset after a bad acceleration, or state beyond "
+            f"{STATE_BOUND:g}); the others' results are in this error's .partial",
+            partial=out, diverged=bad.tolist())
+    assert substeps >= 1
+    return out

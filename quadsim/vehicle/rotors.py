@@ -1,7 +1,7 @@
 """Rotor forces and torques from rotor speeds, and the mixer, from rotor geometry alone.
 
 Nothing here knows the layout ("+", "x", hexarotor): the allocation matrix is built from each
-rotor's hub position, thrust axis and spin direction (see :mod:`quadsim.params` for the
+rotor's hub position, thrust axis and spin direction (see :mod:`quadsim.vehicle.params` for the
 conventions). All functions take a leading batch axis: rotor speeds of shape ``(..., R)``.
 
 Per rotor i with speed Omega_i (rad/s), position r_i, unit axis a_i, spin s_i (+1 ccw):
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ModelError
+from ..core.errors import ModelError
 from .params import VehicleParams
 
 

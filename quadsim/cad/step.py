@@ -3,7 +3,7 @@
 SolidWorks and most CAD tools export STEP; ``cad/`` manifests may name a ``.step`` file
 wherever they name an STL. The B-rep is tessellated by OpenCASCADE (``cascadio``, the
 optional extra ``pip install -e '.[step]'``) via ``trimesh.load(..., file_type="step")``,
-then checked exactly like an STL (:func:`quadsim.assembly.load_mesh`: watertight, consistently
+then checked exactly like an STL (:func:`quadsim.cad.assembly.load_mesh`: watertight, consistently
 wound, outward normals, plausible size/density for the manifest's mass).
 
 Units: a STEP file declares its own length unit (e.g. ``SI_UNIT(.MILLI.,.METRE.)``) and
@@ -19,11 +19,11 @@ volume error equals the relative tolerance (-1.0e-2, -9.8e-4, -1.0e-4, -1.0e-5 a
 or inertia we can measure on the bench. Flat faces are exact at any tolerance.
 
 A file must hold exactly one solid: several solids (or disconnected bodies) or an open shell
-give a one-line :class:`~quadsim.errors.InputError`.
+give a one-line :class:`~quadsim.core.errors.InputError`.
 
 Example::
 
-    >>> from quadsim.step import read_step
+    >>> from quadsim.cad.step import read_step
     >>> vertices_m, faces = read_step("tests/data/box.step")
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..core.errors import InputError
 
 __all__ = ["STEP_ANGULAR_TOLERANCE", "STEP_SUFFIXES", "STEP_TOLERANCE", "is_step", "read_step"]
 

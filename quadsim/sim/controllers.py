@@ -1,9 +1,9 @@
 """Geometric tracking controller on SE(3) (Lee, Leok & McClamroch, CDC 2010), batched.
 
-Given a reference (:mod:`quadsim.trajectories`) and the state snapshot that
-:func:`quadsim.engines.simulate` passes to a controller (dict of (B, ...) arrays ``t,
+Given a reference (:mod:`quadsim.sim.paths`) and the state snapshot that
+:func:`quadsim.sim.engines.simulate` passes to a controller (dict of (B, ...) arrays ``t,
 position, velocity, quat, body_rate``), it returns rotor speeds (B, R) (rad/s) through the
-geometry-derived mixer :func:`quadsim.rotors.speeds_for`. Law (world z up, e3 = (0, 0, 1))::
+geometry-derived mixer :func:`quadsim.vehicle.rotors.speeds_for`. Law (world z up, e3 = (0, 0, 1))::
 
     e_x = x - x_d,  e_v = v - v_d,  e_i = integral of e_x dt
     F   = -k_x e_x - k_v e_v - k_i e_i + m g e3 + m a_d            desired force (world)
@@ -20,8 +20,8 @@ The integral term (``k_i = m wi^3``) removes steady offsets from, e.g., an unkno
 
 Example::
 
-    >>> from quadsim.controllers import GeometricController
-    >>> from quadsim.trajectories import make_reference
+    >>> from quadsim.sim.controllers import GeometricController
+    >>> from quadsim.sim.paths import make_reference
     >>> ctrl = GeometricController(params, make_reference("figure8", speed=1.0))
     >>> traj = simulate(params, controller=ctrl, initial=ctrl.initial_state(), duration=10)
 
@@ -32,10 +32,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .frames import quat_to_rotmat
-from .params import VehicleParams
-from .rotors import mixer
-from .trajectories import Reference
+from ..core.frames import quat_to_rotmat
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import mixer
+from .paths import Reference
 
 __all__ = ["GeometricController", "desired_rotation"]
 

@@ -4,12 +4,12 @@ argparse checks types; these check meaning: numeric ranges (``--window -0.1``), 
 values, input files that exist, the same file given twice or in two roles (training and
 ``--holdout``), and output paths that can be written (suffix, not a directory, nearest
 existing parent folder writable), so that a long computation never fails at its last step.
-Each failure is one :class:`~quadsim.errors.InputError` line naming the flag (or the file)
+Each failure is one :class:`~quadsim.core.errors.InputError` line naming the flag (or the file)
 and the value. Nothing here writes anything.
 
 Example::
 
-    >>> from quadsim.cliargs import check_number, check_output, distinct_files
+    >>> from quadsim.core.args import check_number, check_output, distinct_files
     >>> check_number("--window", 0.1, low=0.0)            # passes
     >>> distinct_files({"LOG": ["a.csv"], "--holdout": ["a.csv"]})   # InputError
 """

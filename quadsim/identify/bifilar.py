@@ -12,7 +12,7 @@ not squared, so its numbers have units kg m^2 / s and are wrong by the factor
 
 Example::
 
-    >>> from quadsim.bifilar import bifilar_inertia, load_bifilar_table
+    >>> from quadsim.identify.bifilar import bifilar_inertia, load_bifilar_table
     >>> table = load_bifilar_table()
     >>> rig = table.rig
     >>> I = bifilar_inertia(rig.mass, rig.gravity, rig.wire_half_spacing, rig.wire_length,
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.errors import field_error
 from .benchdata import DATA_DIR, Column, read_table
-from .errors import field_error
 
 __all__ = [
     "BifilarRig",

@@ -19,20 +19,20 @@ column                 unit      meaning
 
 Body frame: x forward, y left, z up. Example::
 
-    >>> from quadsim.flightlog import load_log, write_log
+    >>> from quadsim.logs.flightlog import load_log, write_log
     >>> log = load_log("flight_00.csv.gz")          # validates; raises InputError
     >>> log.t.shape, log.position.shape, log.rotor_speed.shape
     >>> write_log("copy.csv.gz", log)               # atomic, byte-deterministic
-    >>> traj = log.to_trajectory()                  # quadsim.trajectory.Trajectory
+    >>> traj = log.to_trajectory()                  # quadsim.vehicle.state.Trajectory
 
 Validation (:func:`load_log`): every problem is one line naming the file, the column and the
-file line (the header is line 1). Errors (:class:`~quadsim.errors.InputError`): missing
+file line (the header is line 1). Errors (:class:`~quadsim.core.errors.InputError`): missing
 required column, incomplete column group (``vx`` without ``vy``), text that is not a number,
 non-finite values in ``t``/position/attitude, time not strictly increasing, quaternions that
 are not unit length, and implausible units: rotor speeds that look like RPM (above
 ``MAX_ROTOR_SPEED`` rad/s), body rates that look like deg/s (above ``MAX_BODY_RATE``),
 accelerometer in g (median magnitude near 1 instead of 9.81), commands outside 0-1, battery
-voltage in mV. Warnings (:class:`~quadsim.errors.QuadsimWarning`): NaN/Inf runs in optional
+voltage in mV. Warnings (:class:`~quadsim.core.errors.QuadsimWarning`): NaN/Inf runs in optional
 columns (kept as NaN), sample-rate jumps (a gap over ``GAP_FACTOR`` times the median step),
 unknown columns (ignored).
 
@@ -56,10 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, QuadsimWarning, field_error
-from .fileio import atomic_write_bytes
-from .frames import quat_conjugate, quat_multiply
-from .trajectory import Trajectory
+from ..core.errors import InputError, QuadsimWarning, field_error
+from ..core.files import atomic_write_bytes
+from ..core.frames import quat_conjugate, quat_multiply
+from ..vehicle.state import Trajectory
 
 __all__ = [
     "FLOAT_FORMAT",
@@ -146,7 +146,7 @@ class FlightLog:
         return 0
 
     def to_trajectory(self) -> Trajectory:
-        """The log as a :class:`~quadsim.trajectory.Trajectory`.
+        """The log as a :class:`~quadsim.vehicle.state.Trajectory`.
 
         Missing velocity is differentiated from position and missing body rate from the
         quaternions (central differences, ``numpy.gradient``); missing rotor speeds become
@@ -364,13 +364,13 @@ def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
     Crazyflie uSD and ArduPilot DataFlash files, converted by :mod:`quadsim.logs`); see the
     module docstring.
 
-    Raises :class:`~quadsim.errors.InputError` (one line: file, column, line) for bad input.
+    Raises :class:`~quadsim.core.errors.InputError` (one line: file, column, line) for bad input.
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
     columns) is described in ``FlightLog.notes`` and, with ``warn=True``, also warned as
-    :class:`~quadsim.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
+    :class:`~quadsim.core.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
     dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
     path = Path(path)
-    from .logs import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
+    from . import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
     fmt = detect_format(path)
     columns = read_columns(path, fmt=fmt) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)

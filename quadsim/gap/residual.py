@@ -29,9 +29,9 @@ above that is attenuated in both sides of the balance alike (see docs/gap.md for
 
 Example::
 
-    >>> from quadsim.flightlog import load_log
-    >>> from quadsim.params import load_params
-    >>> from quadsim.residual import residual_wrench
+    >>> from quadsim.logs.flightlog import load_log
+    >>> from quadsim.vehicle.params import load_params
+    >>> from quadsim.gap.residual import residual_wrench
     >>> res = residual_wrench(load_log("flight.csv.gz"), load_params("crazyflie21"))
     >>> res.force_body.shape, res.torque_world.shape        # (N, 3) each
     >>> res.channels()                                      # (N, 6) Fx Fy Fz Mx My Mz
@@ -48,12 +48,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_filter
 
-from .effects.base import Effect, EffectContext, EffectSet
-from .errors import InputError
-from .flightlog import FlightLog, body_rate_from_quat
-from .frames import quat_normalize, rotate, rotate_inverse
-from .params import VehicleParams
-from .rotors import allocation_matrix
+from ..core.errors import InputError
+from ..core.frames import quat_normalize, rotate, rotate_inverse
+from ..effects.base import Effect, EffectContext, EffectSet
+from ..logs.flightlog import FlightLog, body_rate_from_quat
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "flight_states",
            "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
@@ -299,7 +299,7 @@ def residual_wrench(log: FlightLog | FlightStates, params: VehicleParams,
                     use_accelerometer: bool = True) -> ResidualWrench:
     """The wrench the model (``params`` + ``effects``) is missing, per sample of ``log``.
 
-    ``log`` may be a :class:`~quadsim.flightlog.FlightLog` (it is resampled and smoothed
+    ``log`` may be a :class:`~quadsim.logs.flightlog.FlightLog` (it is resampled and smoothed
     here) or prepared :class:`FlightStates`. Raises :class:`InputError` when the log has no
     rotor speeds or a different rotor count than the model."""
     states = log if isinstance(log, FlightStates) else flight_states(

@@ -1,6 +1,6 @@
 """Sensor models for logged signals: delay, sample rate, bias, noise, quantisation; seeded.
 
-A :class:`SensorModel` turns a true :class:`~quadsim.flightlog.FlightLog` (what the
+A :class:`SensorModel` turns a true :class:`~quadsim.logs.flightlog.FlightLog` (what the
 simulator knows) into what sensors would have recorded. Steps, in this order:
 
 1. **delay** (s, all signals): the value logged at t is the truth at ``t - delay`` (linear
@@ -30,7 +30,7 @@ signal         unit      columns
 
 Commands (``cmd_i``) are logged exactly. Example::
 
-    >>> from quadsim.sensors import SensorModel
+    >>> from quadsim.logs.sensors import SensorModel
     >>> sensors = SensorModel(noise={"position": 1e-3, "gyro": 0.01}, rate=200.0, delay=0.005)
     >>> measured = sensors.apply(true_log, seed=0)
 """
@@ -42,9 +42,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import InputError
+from ..core.errors import InputError
+from ..core.frames import quat_multiply, quat_normalize
 from .flightlog import FlightLog
-from .frames import quat_multiply, quat_normalize
 
 __all__ = ["SIGNALS", "SensorModel", "parse_signal_values", "rotation_quat"]
 

@@ -22,11 +22,11 @@ dimensionless ratio of the vehicle's own numbers, never a fixed limit on one num
   ``MAX_TIP_MACH`` = 0.9 of the speed of sound (343 m/s): an RPM value stored as rad/s
   (x 9.55) pushes a Crazyflie from 76 m/s to 720 m/s.
 
-Every refusal is one :func:`quadsim.errors.field_error` line naming the file, the field and
+Every refusal is one :func:`quadsim.core.errors.field_error` line naming the file, the field and
 the numbers that disagree. Example::
 
-    >>> from quadsim.params import load_params
-    >>> from quadsim.guards import check_vehicle
+    >>> from quadsim.vehicle.params import load_params
+    >>> from quadsim.vehicle.guards import check_vehicle
     >>> check_vehicle(load_params("crazyflie21"))     # passes silently
     >>> feasibility(load_params("crazyflie21"))["thrust_to_weight"]   # ~3.1
 """
@@ -37,7 +37,7 @@ import math
 
 import numpy as np
 
-from .errors import ModelError, field_error
+from ..core.errors import ModelError, field_error
 
 __all__ = ["MAX_THRUST_TO_WEIGHT", "MIN_THRUST_TO_WEIGHT", "check_hover_control",
            "check_vehicle", "feasibility"]
@@ -114,7 +114,7 @@ def check_hover_control(params, *, where=None, mass_field="body.mass",
 
 
 def check_vehicle(params, *, where=None) -> None:
-    """Raise a one-line :class:`~quadsim.errors.InputError` if ``params`` cannot be one
+    """Raise a one-line :class:`~quadsim.core.errors.InputError` if ``params`` cannot be one
     flyable vehicle (lift, size ratios, propeller overlap and tip speed)."""
     where = where or _where(params)
     f = feasibility(params)

@@ -1,15 +1,15 @@
-"""MuJoCo runner: the MJCF of :mod:`quadsim.mjcf`, stepped with RK4, one or many at once.
+"""MuJoCo runner: the MJCF of :mod:`quadsim.sim.mjcf`, stepped with RK4, one or many at once.
 
 All simulations of a call are stepped together by :class:`mujoco.batch.Batch` (one thread per
 CPU; bit-identical to a plain loop). Inputs are rotor speed commands held over each control
 period; the runner turns them into actuator controls ``ctrl = Omega^2`` (rad^2/s^2). The
 model is compiled without a floor (the analytic reference has no ground) and with MuJoCo's
-fluid drag off. Use :func:`quadsim.engines.simulate` as the front door.
+fluid drag off. Use :func:`quadsim.sim.engines.simulate` as the front door.
 
 State convention (checked against mujoco 4.0 by ``tests/test_mujoco_engine.py``): the free
 joint's ``qpos = [x, y, z, qw, qx, qy, qz]`` is the body-origin position (world) and the
 body-to-world quaternion; ``qvel[0:3]`` is the body-origin velocity in the world frame and
-``qvel[3:6]`` the angular velocity in the body frame, i.e. the shared :mod:`quadsim.trajectory`
+``qvel[3:6]`` the angular velocity in the body frame, i.e. the shared :mod:`quadsim.vehicle.state`
 convention, so no conversion is needed.
 
 Effects (generic, through the hooks of :mod:`quadsim.effects.base`)
@@ -44,11 +44,11 @@ import mujoco
 import numpy as np
 from mujoco import batch as mjbatch
 
+from ..core.errors import InputError, ModelError, SimulationError
+from ..core.frames import quat_derivative, quat_normalize, quat_to_rotmat
+from ..vehicle.params import VehicleParams, inertia_problems
 from .analytic import STATE_BOUND, BatchEffects, body_arrays, extra_wrench
-from .errors import InputError, ModelError, SimulationError
-from .frames import quat_derivative, quat_normalize, quat_to_rotmat
 from .mjcf import BODY_NAME, vehicle_xml
-from .params import VehicleParams, inertia_problems
 
 __all__ = ["compile_model", "run_mujoco", "default_timestep", "DEFAULT_MAX_TIMESTEP"]
 
@@ -111,7 +111,7 @@ def _cached_model(params: VehicleParams, timestep: float) -> mujoco.MjModel:
     return model
 
 
-def _models(params: Sequence[VehicleParams], timestep: float) -> list[mujoco.MjModel]:
+def compiled_models(params: Sequence[VehicleParams], timestep: float) -> list[mujoco.MjModel]:
     """One compiled model per simulation (shared between simulations with the same set, and
     with earlier calls for the same vehicle and timestep)."""
     models: dict[int, mujoco.MjModel] = {}
@@ -269,46 +269,20 @@ def _check(qpos, qvel, time, expected_t):
 def run_mujoco(params: Sequence[VehicleParams], effects: BatchEffects, initial: dict,
                command_fn: Callable[[int, dict], np.ndarray], periods: int,
                control_period: float, *, timestep: float | None = None,
-               nthread: int = 0, fast: bool | None = None) -> dict:
+               nthread: int = 0) -> dict:
     """Advance B simulations ``periods`` control periods in MuJoCo (same contract and output
-    as :func:`quadsim.analytic.run_analytic`). ``timestep`` must divide ``control_period``
+    as :func:`quadsim.sim.analytic.run_analytic`). ``timestep`` must divide ``control_period``
     (default :func:`default_timestep`); ``nthread`` 0 uses every CPU.
 
-    ``fast``: None (default) runs the compiled path of :mod:`quadsim.fast_mujoco` when numba
-    is installed and every effect has a fast form, else this module's step-by-step reference
-    path; False forces the reference; True requires the fast path (``InputError`` naming
-    what prevents it)."""
+    This is the step-by-step reference path; :func:`quadsim.sim.engines.simulate` runs the
+    compiled path of :mod:`quadsim.sim.compiled` instead when it can (same physics)."""
     dt = timestep or default_timestep(control_period)
     substeps = int(round(control_period / dt))
     if abs(substeps * dt - control_period) > 1e-9 * control_period:
         raise ValueError(f"timestep {dt} does not divide control period {control_period}")
-    models = _models(params, dt)
+    models = compiled_models(params, dt)
     check_memory(models[0], len(params), periods, params[0].rotor_count)
     body = body_arrays(params)
-    if fast is not False:
-        from . import fast_mujoco
-
-        sets = [None] * len(params)
-        for effect_set, _, idx in effects.groups:
-            for i in idx:
-                sets[i] = effect_set
-        problem = fast_mujoco.fast_form_problem(sets, params)
-        if problem and fast:
-            raise InputError(f"mujoco engine: fast path unavailable: {problem}")
-        if not problem:
-            body_id = mujoco.mj_name2id(models[0], mujoco.mjtObj.mjOBJ_BODY, BODY_NAME)
-            out, status = fast_mujoco.run_fast(models, body_id, sets, params, body, initial,
-                                               command_fn, periods, control_period, dt,
-                                               nthread)
-            if status.any():
-                bad = np.flatnonzero(status)
-                raise SimulationError(
-                    f"mujoco engine: simulation(s) {bad.tolist()} diverged before t = "
-                    + ", ".join(f"{status[i] * control_period:.4g}" for i in bad)
-                    + f" s (NaN, MuJoCo reset after a bad acceleration, or state beyond "
-                    f"{STATE_BOUND:g}); the others' results are in this error's .partial",
-                    partial=out, diverged=bad.tolist())
-            return out
     batch, body_id = _make_batch(params, models, nthread)
     batch.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
     qpos, qvel = batch.bind("qpos"), batch.bind("qvel")

@@ -1,8 +1,8 @@
-"""One front door to both engines: :func:`simulate` -> :class:`quadsim.trajectory.Trajectory`.
+"""One front door to both engines: :func:`simulate` -> :class:`quadsim.vehicle.state.Trajectory`.
 
-``engine="mujoco"`` steps the MJCF with RK4 (:mod:`quadsim.mujoco_engine`);
+``engine="mujoco"`` steps the MJCF with RK4 (:mod:`quadsim.sim.mujoco_engine`);
 ``engine="analytic"`` integrates the Newton–Euler equations with ``solve_ivp`` / DOP853
-(:mod:`quadsim.analytic`). Both take the same inputs and return the same state convention.
+(:mod:`quadsim.sim.analytic`). Both take the same inputs and return the same state convention.
 
 Inputs are rotor speed commands (rad/s), held constant over each control period (zero-order
 hold) in both engines, and clipped to the rotor range ``[min_speed, max_speed]``:
@@ -10,7 +10,7 @@ hold) in both engines, and clipped to the rotor range ``[min_speed, max_speed]``
 * ``rotor_speed_series``: (N, R) or (B, N, R) commands, one row per control period, or
 * ``controller(t, state) -> (B, R)``: called once per control period with ``t`` (B,) and the
   snapshot ``state``, a dict of (B, ...) arrays ``t, position, velocity, quat, body_rate,
-  rotor_speed`` (the shared convention of :mod:`quadsim.trajectory`), or
+  rotor_speed`` (the shared convention of :mod:`quadsim.vehicle.state`), or
 * neither: every rotor held at hover speed.
 
 Batching: B simulations run together when any of ``initial`` (arrays with a leading axis),
@@ -18,8 +18,8 @@ Batching: B simulations run together when any of ``initial`` (arrays with a lead
 batch axis; the trajectory then has a leading batch axis too. Example::
 
     >>> import numpy as np
-    >>> from quadsim.params import load_params, hover_speed
-    >>> from quadsim.engines import simulate, initial_state
+    >>> from quadsim.vehicle.params import load_params, hover_speed
+    >>> from quadsim.sim.engines import simulate, initial_state
     >>> p = load_params("physical")
     >>> start = initial_state(position=(0, 0, 1), euler=(0.261, 0.261, 0.261))
     >>> series = np.full((500, 4), hover_speed(p))
@@ -41,12 +41,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .analytic import ATOL, RTOL, BatchEffects, run_analytic
-from .effects.base import Effect, EffectSet
-from .errors import InputError
-from .frames import euler_to_quat, quat_normalize
-from .params import VehicleParams, hover_speed
-from .trajectory import Trajectory
+from ..core.errors import InputError
+from ..core.frames import euler_to_quat, quat_normalize
+from ..effects.base import Effect, EffectSet
+from ..vehicle.params import VehicleParams, hover_speed
+from ..vehicle.state import Trajectory
+from .analytic import ATOL, RTOL, BatchEffects, body_arrays, run_analytic
 
 __all__ = ["simulate", "initial_state", "ENGINES", "Controller"]
 
@@ -191,9 +191,9 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
     ``effects``: None, an Effect, an :class:`EffectSet`, or a sequence of EffectSets (one per
     simulation). ``timestep`` (MuJoCo, s) must divide ``control_period`` (default: the largest
     <= 1 ms that does); ``rtol``/``atol`` are the analytic solver's tolerances. Raises
-    :class:`~quadsim.errors.ModelError` if MuJoCo refuses the parameter set and
-    :class:`~quadsim.errors.SimulationError` if a run diverges. ``fast``: None uses the
-    compiled kernels when they can (:mod:`quadsim.fast_mujoco`), False the reference paths;
+    :class:`~quadsim.core.errors.ModelError` if MuJoCo refuses the parameter set and
+    :class:`~quadsim.core.errors.SimulationError` if a run diverges. ``fast``: None uses the
+    compiled kernels when they can (:mod:`quadsim.sim.compiled`), False the reference paths;
     True requires the compiled MuJoCo path."""
     if engine not in ENGINES:
         raise InputError(f"unknown engine {engine!r}: valid engines are {', '.join(ENGINES)}")
@@ -215,12 +215,25 @@ def simulate(params: VehicleParams | Sequence[VehicleParams], *, engine: str = "
         from .mujoco_engine import default_timestep, run_mujoco
 
         dt = timestep or default_timestep(control_period)
-        out = run_mujoco(modified, batch_effects, start, command_fn, periods, control_period,
-                         timestep=dt, nthread=nthread, fast=fast)
+        out = None
+        if fast is not False:
+            from .compiled import run_mujoco_fast
+
+            out = run_mujoco_fast(modified, batch_effects, start, command_fn, periods,
+                                  control_period, timestep=dt, nthread=nthread,
+                                  require=bool(fast))
+        if out is None:
+            out = run_mujoco(modified, batch_effects, start, command_fn, periods,
+                             control_period, timestep=dt, nthread=nthread)
         meta = {"integrator": "MuJoCo RK4", "timestep": dt}
     else:
+        rhs = None
+        if fast is not False:
+            from .compiled import analytic_fast_rhs
+
+            rhs = analytic_fast_rhs(modified, batch_effects, body_arrays(modified))
         out = run_analytic(modified, batch_effects, start, command_fn, periods, control_period,
-                           rtol=rtol, atol=atol, fast=fast)
+                           rtol=rtol, atol=atol, rhs=rhs)
         meta = {"integrator": "scipy solve_ivp DOP853", "rtol": rtol, "atol": atol}
     meta.update(control_period=control_period, params=[p.name for p in modified])
     if not batched:

@@ -7,8 +7,8 @@ the vehicle's total mass, centre of mass and full 3x3 inertia about that centre 
 
 Example::
 
-    >>> from quadsim.assembly import load_assembly
-    >>> from quadsim.massprops import vehicle_mass_properties
+    >>> from quadsim.cad.assembly import load_assembly
+    >>> from quadsim.cad.massprops import vehicle_mass_properties
     >>> props = vehicle_mass_properties(load_assembly("cad"))
     >>> props.mass, props.com, props.principal_moments
 
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from ..core.errors import InputError, field_error
 from .assembly import Assembly, Part
-from .errors import InputError, field_error
 
 __all__ = [
     "MassProperties",

@@ -1,0 +1,147 @@
+"""The package layout: commands at the top, one subpackage per pipeline stage, imports flowing
+one way (a stage imports only stages before it), no import circle; every command in the
+README's command table answers ``--help`` with exit 0."""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "quadsim"
+README = PACKAGE.parent / "README.md"
+
+#: Pipeline stages in data-flow order; a stage may import itself and the stages before it.
+STAGES = ("core", "cad", "vehicle", "identify", "effects", "sim", "logs", "viewer", "gap",
+          "sweep", "bench")
+#: The commands (``python -m quadsim.X``); a command may import any stage, no stage a command.
+COMMANDS = ("build_mjcf", "inertia_report", "identify", "openloop", "fly", "view", "convert",
+            "gap", "sweep")
+
+
+def _module_name(path: Path) -> tuple[str, bool]:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    package = parts[-1] == "__init__"
+    return ".".join(parts[:-1] if package else parts), package
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> quadsim modules it imports (function-level imports included)."""
+    modules = {_module_name(p)[0]: p for p in PACKAGE.rglob("*.py")}
+    graph: dict[str, set[str]] = {name: set() for name in modules}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                candidates = [target] + [f"{target}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                candidates = [a.name for a in node.names]
+            else:
+                continue
+            for candidate in candidates:
+                if not candidate.startswith("quadsim"):
+                    continue
+                # importing a submodule also runs its packages' __init__ (but not one's own)
+                while candidate.startswith("quadsim") and candidate not in modules:
+                    candidate = candidate.rpartition(".")[0]
+                if candidate and candidate != name and not name.startswith(candidate + "."):
+                    graph[name].add(candidate)
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)):
+            return found
+    return None
+
+
+def _stage(module: str) -> str | None:
+    parts = module.split(".")
+    if len(parts) == 1:
+        return None
+    return parts[1]
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_no_import_cycle():
+    cycle = _cycle(import_graph())
+    assert cycle is None, "import circle: " + " -> ".join(cycle)
+
+
+def test_top_level_holds_only_commands_and_stages():
+    top = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__"}
+    assert top <= set(COMMANDS), f"not a command at the top of quadsim/: {top - set(COMMANDS)}"
+    packages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")}
+    assert packages <= set(STAGES), f"not a pipeline stage: {packages - set(STAGES)}"
+
+
+def test_imports_flow_down_the_pipeline():
+    rank = {stage: i for i, stage in enumerate(STAGES)}
+    wrong = []
+    for module, targets in import_graph().items():
+        here = _stage(module)
+        if here is None or here not in rank:      # the package itself or a command module
+            continue
+        for target in targets:
+            there = _stage(target)
+            if target == "quadsim" or there is None:
+                continue
+            if there not in rank:                 # a top-level command module
+                wrong.append(f"{module} imports the command {target}")
+            elif rank[there] > rank[here]:
+                wrong.append(f"{module} ({here}) imports {target} ({there}, a later stage)")
+    assert not wrong, "; ".join(sorted(wrong))
+
+
+def test_fast_path_depends_on_the_engines_not_back():
+    graph = import_graph()
+    for engine in ("quadsim.sim.analytic", "quadsim.sim.mujoco_engine"):
+        assert not any(t.startswith("quadsim.sim.compiled") for t in graph[engine]), engine
+    assert "quadsim.sim.analytic" in graph["quadsim.sim.compiled.kernel"]
+
+
+def _readme_commands() -> list[str]:
+    text = README.read_text(encoding="utf-8")
+    table = text.split("## The commands", 1)[1].split("\n## ", 1)[0]
+    return sorted(set(re.findall(r"`python -m (quadsim(?:\.\w+)+)", table)))
+
+
+def test_readme_lists_every_command():
+    assert [m.split(".", 1)[1] for m in _readme_commands()] == sorted(COMMANDS)
+
+
+@pytest.mark.parametrize("module", _readme_commands())
+def test_every_readme_command_has_help(module):
+    run = subprocess.run([sys.executable, "-m", module, "--help"], cwd=PACKAGE.parent, capture_output=True,
+                         text=True, timeout=120, check=False)
+    assert run.returncode == 0, run.stderr[-500:]
+    assert "usage:" in run.stdout and len(run.stdout) > 200
