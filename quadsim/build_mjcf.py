@@ -38,6 +38,7 @@ from .cad.step import is_step
 from .core.args import ArgumentParser
 from .core.errors import InputError, ModelError, QuadsimWarning, run_cli
 from .core.files import atomic_write_text
+from .core.shipped import is_installed_copy, shipped_dir
 from .sim.mjcf import vehicle_xml
 from .vehicle.params import MODELS_DIR, Rotor, VehicleParams, load_params
 
@@ -151,7 +152,7 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
     assembly = load_assembly(cad_dir, hull=hull)
     props = vehicle_mass_properties(assembly)
     base = load_params(params, check=inertial != "cad")
-    output = Path(output) if output else MODELS_DIR / f"{assembly.name}.xml"
+    output = Path(output) if output else default_output(assembly.name)
     vehicle = cad_params(base, assembly, props, inertial=inertial)
     from .vehicle.guards import check_hover_control
 
@@ -175,6 +176,14 @@ def build_model(cad_dir: str | Path, *, params: str | Path = "physical",
                f"{note}; ctrl = Omega^2 (rad^2/s^2)").replace("--", "option ")  # XML comments
     xml = vehicle_xml(vehicle, visual_geoms=geoms, assets=assets, comment=comment)
     return BuiltModel(xml, vehicle, props, assembly, note)
+
+
+def default_output(name: str) -> Path:
+    """``models/<name>.xml`` in a repository checkout; ``./<name>.xml`` when the models
+    folder is an installed wheel's (package data is never written to)."""
+    if is_installed_copy(MODELS_DIR):
+        return Path(f"{name}.xml")
+    return MODELS_DIR / f"{name}.xml"
 
 
 def write_model(model: BuiltModel, output: str | Path) -> Path:
@@ -231,10 +240,12 @@ def main(argv: list[str] | None = None) -> int:
                     "simple collision geoms, one site and one actuator per rotor "
                     "(ctrl = Omega^2 in rad^2/s^2, gear from b and d). Prints the parts "
                     "table and the total.")
-    parser.add_argument("cad_dir", type=Path, help="CAD folder with meshes and one manifest "
-                                                   "*.toml (e.g. cad/)")
+    parser.add_argument("cad_dir", type=Path, nargs="?", default=shipped_dir("cad"),
+                        help="CAD folder with meshes and one manifest *.toml (default: the "
+                             "shipped testbed, the repository's cad/)")
     parser.add_argument("-o", "--output", type=Path, default=None,
-                        help="MJCF to write (default: models/<assembly name>.xml)")
+                        help="MJCF to write (default: models/<assembly name>.xml in a "
+                             "repository checkout; ./<assembly name>.xml when installed)")
     parser.add_argument("--params", default="physical",
                         help="parameter set NAME in models/ or a TOML FILE giving b, d and the "
                              "speed range (default: physical)")
@@ -257,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
                             inertial=args.inertial, hull=args.hull)
     for warning in caught:  # one line each, after the fact, instead of Python's two-line form
         print(f"warning: {warning.message}", file=sys.stderr)
-    output = args.output or MODELS_DIR / f"{model.assembly.name}.xml"
+    output = args.output or default_output(model.assembly.name)
     print(parts_table(model.mass_properties))
     print(f"note: {model.inertial_note}")
     written = write_model(model, output)

@@ -32,6 +32,7 @@ from .cad.assembly import MESH_UNITS, Assembly, load_assembly
 from .cad.massprops import vehicle_mass_properties
 from .core.args import ArgumentParser
 from .core.errors import ModelError, run_cli
+from .core.shipped import shipped_dir
 
 __all__ = [
     "SOLIDWORKS",
@@ -43,7 +44,7 @@ __all__ = [
     "report_rows",
 ]
 
-DEFAULT_CAD = Path(__file__).resolve().parent.parent / "cad"
+DEFAULT_CAD = shipped_dir("cad")
 MECHANICAL = ("mechanical",)
 MUJOCO_TOLERANCE = 1e-6
 SOLIDWORKS_TOLERANCE = 0.10
@@ -213,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
                     "same meshes, the report's SolidWorks values, its lumped formula and its "
                     "bifilar test (published and corrected).")
     parser.add_argument("cad_dir", nargs="?", type=Path, default=DEFAULT_CAD,
-                        help="CAD folder (default: the repository's cad/)")
+                        help="CAD folder (default: the shipped testbed, the repository's cad/)")
     parser.add_argument("--check", action="store_true",
                         help="exit non-zero if trimesh and MuJoCo differ by more than 1e-6 "
                              "relative or the mechanical parts' principal moments differ "

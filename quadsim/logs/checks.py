@@ -43,6 +43,7 @@ import numpy as np
 
 from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
+from .spans import cut_ground
 
 __all__ = ["check_log", "check_logs"]
 
@@ -225,9 +226,11 @@ def check_rotors(log, params) -> None:
 
 
 def check_log(log, params=None):
-    """All checks on one log; returns (log with NaN runs cut, notes)."""
+    """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes)."""
     log, note = cut_nan(log)
     notes = [note] if note else []
+    log, note = cut_ground(log)          # ground, idle and landing spans (quadsim.logs.spans)
+    notes += [note] if note else []
     gyro_note = check_gyro(log)
     if gyro_note:
         notes.append(gyro_note)

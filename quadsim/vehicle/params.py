@@ -41,9 +41,11 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError, field_error
 from ..core.files import read_toml
+from ..core.shipped import shipped_dir
 
-#: Folder holding the built-in parameter sets (``--model NAME``).
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+#: Folder holding the built-in parameter sets (``--model NAME``): the repository's
+#: ``models/``, or its copy inside an installed wheel (:mod:`quadsim.core.shipped`).
+MODELS_DIR = shipped_dir("models")
 SCHEMA = "quadsim.vehicle.params/1"
 
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
@@ -73,13 +75,28 @@ class Rotor:
 class MotorMap:
     """Command -> steady rotor speed, piecewise linear per rotor (saturation included).
 
-    ``command`` (K,) in ``command_unit``; ``speed`` (R, K) in rad/s.
+    ``command`` (K,) in ``command_unit``; ``speed`` (R, K) in rad/s, at the battery voltage
+    ``reference_voltage`` (V) when one is given. Optional, from ``identify --logs``:
+    ``voltage_gain`` (1/V): the steady speed scales by ``1 + voltage_gain (v - reference_voltage)``
+    (:meth:`speed_at`); ``time_constant`` (s): first-order lag from command to speed.
     """
 
     command_unit: str
     command: np.ndarray
     speed: np.ndarray
     source: str
+    reference_voltage: float | None = None
+    voltage_gain: float = 0.0
+    time_constant: float = 0.0
+
+    def speed_at(self, command: np.ndarray, voltage: np.ndarray | None) -> np.ndarray:
+        """Steady speed (rad/s) for commands (N, R) at battery voltages (N,) (V; None: the
+        reference voltage)."""
+        speed = self.speed_of(command)
+        if voltage is None or self.reference_voltage is None or self.voltage_gain == 0.0:
+            return speed
+        return speed * (1.0 + self.voltage_gain * (np.asarray(voltage, float)
+                                                   - self.reference_voltage))[..., None]
 
     def speed_of(self, command: np.ndarray) -> np.ndarray:
         """Steady speed (rad/s) for commands of shape (..., R)."""
@@ -370,7 +387,8 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     motor_map = None
     if "motor_map" in data:
         mm = data["motor_map"]
-        _check_keys(mm, {"command_unit", "command", "speed"}, path, "motor_map")
+        _check_keys(mm, {"command_unit", "command", "speed", "reference_voltage",
+                         "voltage_gain", "time_constant"}, path, "motor_map")
         unit = mm.get("command_unit")
         if not isinstance(unit, str):
             raise field_error(path, "motor_map.command_unit", "missing (name the command's unit)")
@@ -380,7 +398,18 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
                              shape=(len(rotors), command.shape[0]))
         if np.any(np.diff(command) <= 0):
             raise field_error(path, "motor_map.command", "must be strictly increasing")
-        motor_map = MotorMap(unit, command, speed, source)
+        extra = {}
+        for key, unit_x in (("reference_voltage", "V"), ("voltage_gain", "1/V"),
+                            ("time_constant", "s")):
+            if key in mm:
+                extra[key], sources[f"motor_map.{key}"] = _quantity(mm, key, unit_x, path,
+                                                                    "motor_map")
+        if extra.get("time_constant", 0.0) < 0:
+            raise field_error(path, "motor_map.time_constant", "must be >= 0")
+        if "voltage_gain" in extra and "reference_voltage" not in extra:
+            raise field_error(path, "motor_map.reference_voltage",
+                              "missing (voltage_gain needs the voltage the map was taken at)")
+        motor_map = MotorMap(unit, command, speed, source, **extra)
 
     params = VehicleParams(
         name=str(data.get("name", path.stem)),

@@ -1,0 +1,148 @@
+"""Ground, idle and landing spans of a flight log: found, named and cut.
+
+A log usually starts on the ground (motors off, or armed and idling) and often ends there
+after the landing. Those samples carry no information about the airborne vehicle and break
+every force balance on it: b sum(Omega^2) is far below the weight while the vehicle sits on
+its legs (the PX4 SITL log's first 19 s read as "b sum(Omega^2) is 0.147 x the thrust
+needed"). :func:`airborne_span` marks each sample
+
+* **idle**: the rotor activity (sum Omega^2 from the rotor speeds, else sum cmd^2 from the
+  commands) below :data:`IDLE_FRACTION` of its 90th percentile over the log — motors off or
+  near idle (hover needs about a third of full-throttle sum Omega^2; idle is a few per cent);
+* **ground**: at rest — speed below :data:`REST_SPEED` and body rate below :data:`REST_RATE`
+  for at least :data:`MIN_SPAN_S` — with the rotor activity below :data:`WEAK_FRACTION` of
+  its median over the non-idle samples (spinning up on the ground; a hover needs about the
+  median, since the mean thrust of a flight is about its weight). Without rotor data: at
+  rest within :data:`GROUND_HEIGHT_M` of the log's lowest height (1st percentile), when the
+  log spans more than :data:`LIFT_HEIGHT_M` in height;
+
+and keeps the longest stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
+so one noisy sample does not split a flight). The cut parts are named in a note:
+"``f.ulg: airborne span t 19.20-31.05 s kept (11.85 of 31.1 s); cut: ground 0.00-19.19 s``".
+A log with no airborne stretch of :data:`MIN_SPAN_S` is refused in one line.
+
+Used by :func:`quadsim.logs.checks.check_log` (so ``gap`` and ``view``) and by
+``identify --logs``. Units: s, m, m/s, rad/s.
+
+Example::
+
+    >>> from quadsim.logs.spans import cut_ground
+    >>> log, note = cut_ground(load_log("sample_px4_events.ulg"))
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import field_error
+
+#: rotor activity (sum of squares) below this fraction of its 90th percentile is idle.
+IDLE_FRACTION = 0.15
+#: height (m) above the log's lowest (1st percentile) counted as "on the ground".
+GROUND_HEIGHT_M = 0.05
+#: at rest with the rotor activity below this fraction of its non-idle median is "ground";
+#: without rotor data the log must span more than LIFT_HEIGHT_M (m) in height.
+WEAK_FRACTION = 0.8
+LIFT_HEIGHT_M = 0.3
+#: speed (m/s) and body rate (rad/s) below which the vehicle is at rest.
+REST_SPEED = 0.1
+REST_RATE = 0.2
+#: spans (s) shorter than this are not cut, and no airborne stretch shorter is kept.
+MIN_SPAN_S = 0.5
+
+
+@dataclass(frozen=True)
+class Span:
+    """The airborne part of a log: samples ``start:stop``; ``cut`` lists the removed parts as
+    (kind, t_from, t_to) with kind "idle", "ground" or "idle, ground"."""
+
+    start: int
+    stop: int
+    cut: tuple[tuple[str, float, float], ...]
+
+
+def _activity(log) -> np.ndarray | None:
+    if log.rotor_speed is not None and log.rotor_speed.shape[1]:
+        return np.sum(np.square(log.rotor_speed), axis=1)
+    if log.rotor_command is not None and log.rotor_command.shape[1]:
+        return np.sum(np.square(log.rotor_command), axis=1)
+    return None
+
+
+def _bridge(mask: np.ndarray, n_min: int) -> np.ndarray:
+    """``mask`` with True runs shorter than ``n_min`` samples set False."""
+    out = mask.copy()
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a < n_min:
+            out[a:b] = False
+    return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def airborne_span(log) -> Span:
+    """The longest airborne stretch of ``log`` (a FlightLog) and what was cut around it."""
+    t = np.asarray(log.t, float)
+    n = len(t)
+    dt = float(np.median(np.diff(t))) if n > 1 else 1.0
+    n_min = max(1, int(round(MIN_SPAN_S / dt)))
+    idle = np.zeros(n, bool)
+    activity = _activity(log)
+    height = log.position[:, 2]
+    low = height < np.percentile(height, 1) + GROUND_HEIGHT_M
+    weak = low & (float(np.ptp(height)) > LIFT_HEIGHT_M)
+    if activity is not None:
+        top = float(np.percentile(activity, 90))
+        if top > 0:
+            idle = _bridge(activity < IDLE_FRACTION * top, n_min)
+            weak = activity < WEAK_FRACTION * float(np.median(activity[~idle])) \
+                if (~idle).any() else np.ones(n, bool)
+    velocity = log.velocity if log.velocity is not None else np.gradient(log.position, t, axis=0)
+    rest = np.linalg.norm(velocity, axis=1) < REST_SPEED
+    if log.body_rate is not None:
+        rest &= np.linalg.norm(log.body_rate, axis=1) < REST_RATE
+    ground = _bridge(rest & weak, n_min)
+    flying = _bridge(~(idle | ground), n_min)
+    runs = _runs(flying)
+    if not runs:
+        raise field_error(log.path if log.path is not None else "log", "t",
+                          f"no airborne stretch of {MIN_SPAN_S} s: the whole log is on the "
+                          "ground or with the motors idle")
+    start, stop = max(runs, key=lambda r: (r[1] - r[0], -r[0]))
+    cut = []
+    for a, b in _runs(~flying):
+        kinds = [k for k, m in (("idle", idle), ("ground", ground)) if m[a:b].any()]
+        cut.append((", ".join(kinds) or "short", float(t[a]), float(t[b - 1])))
+    for a, b in runs:
+        if (a, b) != (start, stop):
+            cut.append(("another airborne stretch", float(t[a]), float(t[b - 1])))
+    return Span(start, stop, tuple(sorted(cut, key=lambda c: c[1])))
+
+
+_ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
+           "rotor_command", "vbat")
+
+
+def cut_ground(log):
+    """(log, note or None): ``log`` cut to its airborne span; None when nothing was cut."""
+    span = airborne_span(log)
+    if span.start == 0 and span.stop == len(log.t):
+        return log, None
+    t = log.t
+    where = log.path if log.path is not None else "log"
+    kept = float(t[span.stop - 1] - t[span.start])
+    note = (f"{where}: airborne span t {t[span.start]:.2f}-{t[span.stop - 1]:.2f} s kept "
+            f"({kept:.2f} of {float(t[-1] - t[0]):.2f} s); cut: "
+            + "; ".join(f"{kind} {a:.2f}-{b:.2f} s" for kind, a, b in span.cut))
+    fields = {name: (None if getattr(log, name) is None
+                     else getattr(log, name)[span.start:span.stop]) for name in _ARRAYS}
+    new = dataclasses.replace(log, t=t[span.start:span.stop], notes=(*log.notes, note),
+                              **fields)
+    return new, note
