@@ -9,6 +9,15 @@ checks that it is physical, and lists what the report got wrong, with numbers.
 
 Output: human-readable tables (default) or one JSON object (--json, stable keys, SI units).
 Exit status 2 with a one-line error on bad input (file and column named).
+
+Your own vehicle (docs/own-vehicle.md)::
+
+    python -m quadsim.identify --logs LOG... --vehicle SKELETON.toml -o VEHICLE.toml
+
+identifies b, d, the command -> speed map (with voltage and lag) and the inertia where the
+manoeuvres excite it from flight logs (ground and idle spans cut, :mod:`quadsim.logs.spans`)
+and writes a complete parameter set (:mod:`quadsim.identify.from_logs`); logs without rotor
+speeds give the command (and voltage) -> thrust map from the accelerometer.
 """
 
 from __future__ import annotations
@@ -18,6 +27,8 @@ import json
 import re
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from ..core.args import ArgumentParser
 from ..core.errors import InputError, run_cli
@@ -51,6 +62,15 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--bifilar", type=Path, metavar="CSV", help="bifilar periods (Table 4.14)")
     parser.add_argument("--bifilar-rig", type=Path, metavar="CSV",
                         help="bifilar rig constants (section 4.3.3)")
+    own = parser.add_argument_group("your own vehicle from its flight logs")
+    own.add_argument("--logs", type=Path, nargs="+", metavar="LOG",
+                     help="flight logs (schema CSV/Parquet, PX4 ULog, Crazyflie uSD, ArduPilot "
+                          "DataFlash) of one vehicle; needs --vehicle and -o")
+    own.add_argument("--vehicle", type=Path, metavar="SKELETON.toml",
+                     help="parameter set with mass and rotor geometry; thrust_factor, "
+                          "drag_factor, max_speed, [motor_map] and inertia may be absent")
+    own.add_argument("-o", "--output", type=Path, metavar="VEHICLE.toml",
+                     help="complete parameter set to write (atomically; never the skeleton)")
     return parser
 
 
@@ -170,6 +190,8 @@ def _print_audit(findings: list[Finding]) -> None:
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.logs or args.vehicle or args.output:
+        return identify_logs_command(args)
     from ..core.args import check_inputs, check_number, distinct_files  # before any work
 
     for radius in args.stand_radius:
@@ -210,6 +232,100 @@ def main(argv: list[str] | None = None) -> int:
     _print_drag(ident, stands, radii)
     _print_inertia(ident)
     _print_audit(findings)
+    return 0
+
+
+# ----------------------------------------------------------------------------- --logs
+# The command-side glue of identify --logs: loading, span cutting and smoothing (logs, gap
+# stages), the drag factor by the gap's instrumental-variables refit, and the written set.
+# The fits themselves are pure functions in quadsim.identify.from_logs.
+
+def _series(states) -> "LogSeries":
+    from .from_logs import LogSeries
+
+    return LogSeries(states.name, states.t, states.specific_force, states.body_rate,
+                     states.body_accel, states.rotor_speed, states.command, states.vbat)
+
+
+def _load_states(paths: list[Path]):
+    """(FlightStates per log, notes): importer, NaN and ground/idle cut, channel checks."""
+    import warnings as _warnings
+
+    from ..core.errors import QuadsimWarning
+    from ..gap.residual import flight_states
+    from ..logs.checks import check_log
+    from ..logs.flightlog import load_log
+
+    states, notes = [], []
+    for path in paths:
+        with _warnings.catch_warnings(record=True) as caught:
+            _warnings.simplefilter("always", QuadsimWarning)
+            log, log_notes = check_log(load_log(path))
+        notes += [f"{w.message}" for w in caught] + list(log_notes)
+        if log.accel is None:
+            raise InputError(f"{path}: ax, ay, az: no accelerometer; identify --logs needs the "
+                             "specific force")
+        if log.rotor_speed is None and log.rotor_command is None:
+            raise InputError(f"{path}: rotor_*: neither rotor speeds nor motor commands")
+        states.append(flight_states(log))
+    rates = {round(float(np.median(np.diff(s.t))), 6) for s in states}
+    if len(rates) > 1:  # one grid for the pooled fits: resample to the slowest
+        from ..gap.residual import flight_states as _fs
+
+        slowest = max(rates)
+        states = [_fs(check_log(load_log(p))[0], dt=slowest) for p in paths]
+    return states, notes
+
+
+def _drag_iv(states, provisional) -> tuple[float, float]:
+    """d and its standard error by the gap's instrumental-variables refit (relative to the
+    provisional set's d; the yaw balance is linear in d)."""
+    from ..gap.diagnose import BASELINE
+    from ..gap.fitting import drag_refit_iv
+    from ..gap.fitting import stack_states
+
+    usable = [s for s in states if s.rotor_speed is not None and s.command is not None]
+    if not usable:
+        return float("nan"), float("nan")
+    stacked = stack_states(usable)
+    k = BASELINE.parameter_names.index("nominal_refit.drag")
+    delta, se = drag_refit_iv(stacked, provisional, BASELINE,
+                              np.zeros(len(BASELINE.parameter_names)), k)
+    d0 = provisional.drag_factor
+    return d0 * (1.0 + delta), d0 * se
+
+
+def identify_logs_command(args) -> int:
+    from ..core.args import check_inputs, check_output, distinct_files
+    from ..core.files import atomic_write_text
+    from .from_logs import identify_from_logs
+    from .skeleton import load_skeleton
+    from .vehicle_set import build_set
+
+    if not (args.logs and args.vehicle and args.output):
+        missing = [f for f, v in (("--logs", args.logs), ("--vehicle", args.vehicle),
+                                  ("-o", args.output)) if not v]
+        raise InputError(f"{missing[0]}: identify from logs needs --logs, --vehicle and -o")
+    check_inputs("--logs", args.logs)
+    check_inputs("--vehicle", [args.vehicle])
+    distinct_files({"--logs": args.logs, "--vehicle": [args.vehicle]})
+    check_output("-o", args.output, (".toml",), inputs=[args.vehicle, *args.logs])
+    skeleton, data = load_skeleton(args.vehicle)
+    states, notes = _load_states(list(args.logs))
+    ident = identify_from_logs([_series(s) for s in states], skeleton)
+    names = ", ".join(Path(p).name for p in args.logs)
+    text, params, report = build_set(data, skeleton, ident, names,
+                                     lambda provisional: _drag_iv(states, provisional),
+                                     args.output)
+    for note in notes:
+        print(f"note: {note}")
+    for line in report:
+        print(line)
+    for warning in ident.warnings + report.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    atomic_write_text(args.output, text)
+    print(f"wrote {args.output} ({params.name}: b = {params.thrust_factor:.5g} N s^2/rad^2, "
+          f"d = {params.drag_factor:.5g} N m s^2/rad^2; passes the feasibility guards)")
     return 0
 
 

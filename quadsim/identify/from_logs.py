@@ -1,0 +1,486 @@
+"""A vehicle's rotor factors, motor map and inertia from its own flight logs (pure math).
+
+What a user measures by hand (mass on a scale, rotor positions and spins with a ruler, the
+propeller radius) is a *skeleton* (:mod:`.skeleton`); this module adds what the logs
+determine, each with a 95 % interval and the fit quality. Input: one :class:`LogSeries` per
+log (smoothed on a uniform grid, SI, body frame x forward / y left / z up; ground and idle
+spans already cut). ``python -m quadsim.identify --logs`` loads and smooths the logs, runs
+:func:`identify_from_logs`, adds the drag factor d (the gap's instrumental-variables refit)
+and writes the parameter set.
+
+Fits (N samples pooled over the logs; rotor i at (x_i, y_i) from the CoM, spin s_i = +1 ccw)
+
+* **thrust factor b** (N s^2/rad^2): least squares through the origin of the body-z force
+  balance ``m f_z = b sum_i Omega_i^2`` (f_z the accelerometer's specific force, m the
+  skeleton's mass). Standard error ``s sqrt(tau / sum x^2)`` with tau the residual's
+  integrated autocorrelation time (samples). Per log as well: two logs whose b differ by
+  more than :data:`MIX_TOLERANCE` *and* beyond their combined 95 % interval are refused as
+  logs of different vehicles. A thrust curve ``b Omega^2 + c0`` per rotor is scored on
+  held-out logs (leave one log out) and reported where it lowers the held-out error.
+* **rotor order and spins**: the angular accelerations are regressed on the torque patterns
+  ``sum y_i Omega_i^2`` (roll), ``-sum x_i Omega_i^2`` (pitch) and ``-sum s_i Omega_i^2``
+  (yaw) of every assignment of log columns to skeleton rotors (R! of them); the skeleton's
+  order must explain roll and pitch (R^2) within :data:`ORDER_MARGIN` of the best, and the
+  yaw slope (d / Izz) must be positive, else the spins are reversed.
+* **inertia** Ixx, Iyy (kg m^2): ``I_xx wdot_x + (I_zz - I_yy) w_y w_z = b sum y_i Omega_i^2``
+  (and pitch) by least squares of the torque on the angular acceleration (noise on the
+  speeds enters the dependent side and does not bias it; noise on the differentiated gyro
+  biases it low). The commanded speeds are no instrument here: in closed loop the attitude
+  controller computes them from the same gyro. Identified when the 95 % half-width is below
+  :data:`INERTIA_CI` of the value and R^2 >= :data:`INERTIA_R2`, else the skeleton's value
+  (or the default) is kept and named. Izz and d enter the yaw balance only as d/Izz: Izz
+  stays the skeleton's (or the default) and d is identified given it.
+* **motor map** per rotor: ``Omega = L_tau[a_i + k_i cmd_i (1 + gamma (v - v_ref))]`` with
+  L_tau a first-order lag (time constant tau, s, one for all rotors, from a grid), v the
+  battery voltage (V) and v_ref its median; saturated commands (>= :data:`SATURATED`) are
+  left out. Stored as the map at cmd 0 and 1 at v_ref, ``voltage_gain`` gamma (1/V) and
+  ``time_constant`` tau.
+* **commands only** (no rotor speeds in any log): ``m f_z = sum_i T(u_i)``, with u = cmd
+  (1 + gamma (v - v_ref)) and ``T(u) = c2 u^2 + c1 u`` per rotor alike; the rotor-speed scale
+  is then the skeleton's ``max_speed`` at u = 1 (b = T(1) / max_speed^2, and the motor map
+  follows ``Omega(u) = sqrt(T(u) / b)``): only the product b Omega^2 is identified.
+
+Example::
+
+    >>> ident = identify_from_logs(series, skeleton)
+    >>> ident.thrust.value, ident.thrust.ci95
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter
+
+from ..core.errors import InputError
+
+#: two logs whose b differ by more than this (relative) and beyond their 95 % intervals are
+#: logs of different vehicles.
+MIX_TOLERANCE = 0.05
+#: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this.
+ORDER_MARGIN = 0.05
+#: inertia is identified when its 95 % half-width is below this fraction of the value and
+#: the torque explains at least INERTIA_R2 of the angular acceleration's variance.
+INERTIA_CI = 0.15
+INERTIA_R2 = 0.5
+#: commands at or above this (normalised) are saturated and left out of the motor map.
+SATURATED = 0.99
+#: motor lag grid (s).
+LAG_GRID_S = np.arange(0.0, 0.2001, 0.0025)
+#: default inertia without a skeleton value: Ixx = Iyy = 0.2 m r^2, Izz = 0.35 m r^2 (r the
+#: mean rotor distance; the Crazyflie 2.x 0.21/0.29 and the testbed 0.21/0.41).
+DEFAULT_INERTIA = (0.2, 0.2, 0.35)
+
+
+@dataclass(frozen=True)
+class LogSeries:
+    """One log, smoothed on a uniform grid (SI). t (N,) s; specific_force, body_rate,
+    body_accel (N, 3) body (m/s^2, rad/s, rad/s^2); rotor_speed, command (N, R) (rad/s,
+    normalised 0-1) or None; vbat (N,) V or None; name: the file."""
+
+    name: str
+    t: np.ndarray
+    specific_force: np.ndarray
+    body_rate: np.ndarray
+    body_accel: np.ndarray
+    rotor_speed: np.ndarray | None
+    command: np.ndarray | None
+    vbat: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Skeleton:
+    """What the user measured: mass (kg), com (3,) m, inertia (3,) kg m^2 diagonal or None,
+    rotor positions (R, 3) m (body frame, from the frame centre), spins (R,) +1 ccw / -1 cw,
+    max_speed (rad/s) or None, path (for messages)."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray | None
+    positions: np.ndarray
+    spins: np.ndarray
+    max_speed: float | None
+    path: str
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A value with its 95 % interval, fit quality and the logs it came from."""
+
+    value: float
+    ci95: tuple[float, float]
+    quality: str
+    identified: bool = True
+    why: str = ""
+
+
+@dataclass
+class LogIdentification:
+    """Everything :func:`identify_from_logs` found; notes and warnings are one line each."""
+
+    thrust: Estimate
+    per_log_thrust: list[tuple[str, float, float]]
+    inertia: list[Estimate]
+    motor_map: dict | None
+    curve: str
+    command_only: bool
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def correlation_time(residual: np.ndarray, max_lag: int = 200) -> float:
+    """Integrated autocorrelation time (samples) of a residual (N,), for CI widening."""
+    x = residual - residual.mean()
+    var = float(x @ x)
+    tau = 1.0
+    if var <= 0:
+        return tau
+    for lag in range(1, min(max_lag, len(x) - 1)):
+        rho = float(x[lag:] @ x[:-lag]) / var
+        if rho < 0.05:
+            break
+        tau += 2 * rho
+    return tau
+
+
+def _ci(value: float, se: float) -> tuple[float, float]:
+    return (value - 1.96 * se, value + 1.96 * se)
+
+
+def _origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """y = beta x through the origin: (beta, se, R^2)."""
+    beta = float(x @ y) / float(x @ x)
+    u = y - beta * x
+    se = math.sqrt(float(u @ u) / max(1, len(x) - 1) * correlation_time(u) / float(x @ x))
+    r2 = 1.0 - float(u @ u) / float(np.sum((y - y.mean()) ** 2))
+    return beta, se, r2
+
+
+# ----------------------------------------------------------------------------- thrust
+
+
+def fit_thrust(logs: list[LogSeries], mass: float) -> tuple[Estimate, list[tuple[str, float, float]]]:
+    """b from ``m f_z = b sum Omega^2`` pooled and per log; refuses mixed vehicles."""
+    xs = [np.sum(np.square(s.rotor_speed), axis=1) for s in logs]
+    ys = [mass * s.specific_force[:, 2] for s in logs]
+    per_log = []
+    for s, x, y in zip(logs, xs, ys):
+        beta, se, _ = _origin_fit(x, y)
+        per_log.append((s.name, beta, se))
+    for (na, ba, sa), (nb, bb, sb) in itertools.combinations(per_log, 2):
+        gap = abs(ba - bb)
+        if gap > MIX_TOLERANCE * max(ba, bb) and gap > 1.96 * math.hypot(sa, sb):
+            raise InputError(
+                f"{nb}: rotor_*: b = {bb:.4g} N s^2/rad^2 here but {ba:.4g} in {na} "
+                f"({100 * gap / max(ba, bb):.1f} % apart, beyond both 95 % intervals and the "
+                f"{100 * MIX_TOLERANCE:.0f} % tolerance): logs of different vehicles (or "
+                "payloads) mixed; identify each vehicle on its own logs")
+    beta, se, r2 = _origin_fit(np.concatenate(xs), np.concatenate(ys))
+    spread = np.std([b for _, b, _ in per_log], ddof=1) if len(per_log) > 1 else 0.0
+    quality = (f"R^2 {r2:.3f} over {sum(len(x) for x in xs)} samples of {len(logs)} log(s); "
+               f"per-log std {spread:.3g}")
+    return Estimate(beta, _ci(beta, se), quality), per_log
+
+
+def thrust_curve_score(logs: list[LogSeries], mass: float) -> str:
+    """Leave-one-log-out: does ``b Omega^2 + c0`` per rotor beat ``b Omega^2``? (one line)"""
+    if len(logs) < 2:
+        return "thrust curve: one log, no held-out comparison"
+    rows = [(np.sum(np.square(s.rotor_speed), 1), s.rotor_speed.shape[1],
+             mass * s.specific_force[:, 2]) for s in logs]
+    err_quad = err_curve = 0.0
+    offsets = []
+    for k in range(len(rows)):
+        train = [r for i, r in enumerate(rows) if i != k]
+        x = np.concatenate([r[0] for r in train])
+        y = np.concatenate([r[2] for r in train])
+        count = train[0][1]
+        b = float(x @ y) / float(x @ x)
+        design = np.stack([x, np.full_like(x, count)], 1)
+        (b2, c0), *_ = np.linalg.lstsq(design, y, rcond=None)
+        offsets.append(c0)
+        xk, _, yk = rows[k]
+        err_quad += float(np.sum((yk - b * xk) ** 2))
+        err_curve += float(np.sum((yk - b2 * xk - c0 * count) ** 2))
+    gain = 1.0 - err_curve / err_quad
+    verdict = ("supported: the engines' b Omega^2 is kept; the thrust_curve effect models it"
+               if gain > 0.05 else "not supported: b Omega^2 is enough")
+    return (f"thrust curve b Omega^2 + c0 per rotor (c0 = {np.mean(offsets):.3g} N): held-out "
+            f"squared error {100 * gain:+.1f} % against b Omega^2 alone, leave one log out "
+            f"over {len(logs)} logs: {verdict}")
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def _patterns(omega2: np.ndarray, arms: np.ndarray, spins: np.ndarray) -> np.ndarray:
+    """(N, 3) roll, pitch, yaw torque patterns per unit b (roll, pitch) and d (yaw)."""
+    return np.stack([omega2 @ arms[:, 1], -(omega2 @ arms[:, 0]), -(omega2 @ spins)], 1)
+
+
+def _r2(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    x = x - x.mean()
+    y = y - y.mean()
+    denom = float(x @ x)
+    if denom <= 0:
+        return 0.0, 0.0
+    slope = float(x @ y) / denom
+    u = y - slope * x
+    return slope, 1.0 - float(u @ u) / max(float(y @ y), 1e-300)
+
+
+def check_rotor_order(logs: list[LogSeries], skeleton: Skeleton) -> list[str]:
+    """Refuse a skeleton whose rotor order or spins the logs contradict; notes otherwise."""
+    omega2 = np.concatenate([np.square(s.rotor_speed) for s in logs])
+    accel = np.concatenate([s.body_accel for s in logs])
+    arms = skeleton.positions - skeleton.com
+    count = len(arms)
+
+    def score(order):
+        p = _patterns(omega2[:, list(order)], arms, skeleton.spins)
+        fits = [_r2(p[:, k], accel[:, k]) for k in range(3)]
+        return fits, fits[0][1] + fits[1][1]
+
+    own_fits, own = score(range(count))
+    best_order, best = tuple(range(count)), own
+    if count <= 8:
+        for order in itertools.permutations(range(count)):
+            fits, total = score(order)
+            if fits[0][0] > 0 and fits[1][0] > 0 and total > best + 1e-9:
+                best_order, best = order, total
+    inverse = [0] * count
+    for k, col in enumerate(best_order):
+        inverse[col] = k
+    if best - own > 2 * ORDER_MARGIN or own_fits[0][0] <= 0 or own_fits[1][0] <= 0:
+        mapping = ",".join(str(inverse[i] + 1) for i in range(count))
+        raise InputError(
+            f"{skeleton.path}: rotor: the logs show the rotors in another order: roll+pitch "
+            f"R^2 {own:.2f} with the skeleton's order, {best:.2f} when log columns rotor_1.."
+            f"{count} are the skeleton's rotors {mapping}; reorder the [[rotor]] entries (or "
+            "convert the logs with --rotor-map)")
+    slope_yaw, r2_yaw = own_fits[2]
+    if slope_yaw < 0 and r2_yaw > 0.05:
+        raise InputError(
+            f"{skeleton.path}: rotor.spin: the yaw torque has the wrong sign for these spins "
+            f"(yaw acceleration against -sum s_i Omega_i^2: slope {slope_yaw:.3g}, R^2 "
+            f"{r2_yaw:.2f}): the rotors spin the other way; swap every 'ccw' and 'cw'")
+    return [f"rotor order and spins: roll R^2 {own_fits[0][1]:.2f}, pitch R^2 "
+            f"{own_fits[1][1]:.2f}, yaw R^2 {r2_yaw:.2f} with positive yaw slope: the "
+            f"skeleton's order and spins match the logs"
+            + ("" if r2_yaw > 0.05 else " (yaw too weakly excited to confirm the spins)")]
+
+
+# ----------------------------------------------------------------------------- inertia
+
+
+def fit_inertia(logs: list[LogSeries], skeleton: Skeleton, b: float,
+                defaults: np.ndarray) -> list[Estimate]:
+    """Ixx, Iyy by least squares of the rotor torque on the angular acceleration (see
+    module); the skeleton's value (or the default) is kept where the fit is too weak."""
+    arms = skeleton.positions - skeleton.com
+    accel = np.concatenate([s.body_accel for s in logs])
+    rate = np.concatenate([s.body_rate for s in logs])
+    torque = b * _patterns(np.concatenate([np.square(s.rotor_speed) for s in logs]), arms,
+                           skeleton.spins)
+    out = []
+    gyro = (rate[:, 1] * rate[:, 2], rate[:, 0] * rate[:, 2])
+    for axis, name in ((0, "Ixx"), (1, "Iyy")):
+        y = torque[:, axis]
+        x = np.stack([accel[:, axis], gyro[axis]], 1)
+        coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+        u = y - x @ coef
+        cov = np.linalg.inv(x.T @ x) * float(u @ u) / max(1, len(u) - 2) * correlation_time(u)
+        value, se = float(coef[0]), float(math.sqrt(max(cov[0, 0], 0.0)))
+        keep = float(skeleton.inertia[axis]) if skeleton.inertia is not None else float(
+            defaults[axis])
+        kept_from = "the skeleton's value" if skeleton.inertia is not None else "the default"
+        r2 = 1.0 - float(u @ u) / float(np.sum((y - y.mean()) ** 2))
+        quality = (f"least squares of the rotor torque on the angular acceleration; R^2 "
+                   f"{r2:.3f}; 95 % half-width {100 * 1.96 * se / abs(value):.1f} %")
+        if value > 0 and 1.96 * se < INERTIA_CI * value and r2 >= INERTIA_R2:
+            out.append(Estimate(value, _ci(value, se), quality))
+        else:
+            reason = (f"R^2 {r2:.2f} below {INERTIA_R2}: the torque of the logged rotor speeds "
+                      f"explains too little of the angular acceleration" if r2 < INERTIA_R2
+                      else f"95 % half-width {1.96 * se:.2g} kg m^2 wider than "
+                           f"{100 * INERTIA_CI:.0f} %")
+            why = (f"too little excitation for inertia: {name} fit {value:.3g} kg m^2, "
+                   f"{reason}; {kept_from} {keep:.4g} kg m^2 kept")
+            out.append(Estimate(keep, (float("nan"), float("nan")), quality, False, why))
+    return out
+
+
+# ----------------------------------------------------------------------------- motor map
+
+
+def _lagged(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """First-order lag (backward Euler, starting at the first value), along axis 0."""
+    if tau <= 0:
+        return x
+    alpha = dt / (tau + dt)
+    zi = (1 - alpha) * x[:1]
+    out, _ = lfilter([alpha], [1, -(1 - alpha)], x, axis=0, zi=zi)
+    return out
+
+
+def fit_motor_map(logs: list[LogSeries]) -> dict:
+    """Per-rotor ``Omega = L_tau[a + k cmd (1 + gamma (v - v_ref))]`` (see module)."""
+    dt = float(np.median(np.diff(logs[0].t)))
+    has_v = all(s.vbat is not None for s in logs)
+    v_ref = float(np.median(np.concatenate([s.vbat for s in logs]))) if has_v else None
+    if has_v and float(np.ptp(np.concatenate([s.vbat for s in logs]))) < 0.05:
+        has_v = False
+    count = logs[0].command.shape[1]
+    sse = np.zeros(len(LAG_GRID_S))
+    fits = []
+    for g, tau in enumerate(LAG_GRID_S):
+        per_rotor = []
+        for i in range(count):
+            rows_x, rows_y = [], []
+            for s in logs:
+                cmd = s.command[:, i]
+                cols = [np.ones_like(cmd), cmd]
+                if has_v:
+                    cols.append(cmd * (s.vbat - v_ref))
+                lagged = _lagged(np.stack(cols, 1), tau, dt)
+                keep = _lagged(cmd, tau, dt) < SATURATED
+                keep[: int(5 * tau / dt) + 1] = False     # the filter's start-up
+                rows_x.append(lagged[keep])
+                rows_y.append(s.rotor_speed[keep, i])
+            x, y = np.concatenate(rows_x), np.concatenate(rows_y)
+            coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+            u = y - x @ coef
+            sse[g] += float(u @ u)
+            per_rotor.append((coef, u, x))
+        fits.append(per_rotor)
+    best = int(np.argmin(sse))
+    per_rotor = fits[best]
+    n = sum(len(p[1]) for p in per_rotor)
+    s2 = sse[best] / max(1, n - 3 * count) * correlation_time(per_rotor[0][1])
+    inside = LAG_GRID_S[sse - sse[best] <= 3.84 * s2]
+    speeds = [[float(c[0]), float(c[0] + c[1])] for c, _, _ in per_rotor]
+    gammas = [float(c[2] / c[1]) for c, _, _ in per_rotor] if has_v else []
+    r2 = [1.0 - float(u @ u) / float(np.sum((u + x @ c - np.mean(u + x @ c)) ** 2))
+          for c, u, x in per_rotor]
+    return {"speed": speeds, "reference_voltage": v_ref if has_v else None,
+            "voltage_gain": float(np.mean(gammas)) if has_v else 0.0,
+            "voltage_gain_spread": float(np.std(gammas)) if has_v else 0.0,
+            "time_constant": float(LAG_GRID_S[best]),
+            "time_constant_ci": (float(inside.min()), float(inside.max())),
+            "r2": r2, "samples": n // count,
+            "command_range": (float(min(s.command.min() for s in logs)),
+                              float(max(s.command.max() for s in logs)))}
+
+
+# ----------------------------------------------------------------------------- commands only
+
+
+def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estimate, dict, str]:
+    """Commands only: ``m f_z = sum T(u_i)``, ``T = c2 u^2 + c1 u`` (see module). Returns
+    b (scaled by the skeleton's max_speed), a motor map table, and the fit's one-line summary."""
+    if skeleton.max_speed is None:
+        raise InputError(f"{skeleton.path}: rotors.max_speed: missing; logs without rotor "
+                         "speeds fix only b Omega^2, and the speed scale comes from max_speed "
+                         "(the rotor speed at full command: motor kV x battery voltage, or a "
+                         "tachometer)")
+    has_v = all(s.vbat is not None for s in logs)
+    v_ref = float(np.median(np.concatenate([s.vbat for s in logs]))) if has_v else None
+    us, ys = [], []
+    for s in logs:
+        u = s.command if not has_v else s.command * (s.vbat / v_ref)[:, None]
+        us.append(u)
+        ys.append(skeleton.mass * s.specific_force[:, 2])
+    u, y = np.concatenate(us), np.concatenate(ys)
+    x = np.stack([np.sum(u * u, 1), np.sum(u, 1)], 1)
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    res = y - x @ coef
+    cov = np.linalg.inv(x.T @ x) * float(res @ res) / max(1, len(y) - 2) * correlation_time(res)
+    r2 = 1.0 - float(res @ res) / float(np.sum((y - y.mean()) ** 2))
+    c2, c1 = (float(c) for c in coef)
+    full = c2 + c1
+    if not full > 0:
+        raise InputError(f"{logs[0].name}: cmd_*: the command -> thrust fit gives no thrust at "
+                         f"full command (c2 {c2:.3g}, c1 {c1:.3g} N): commands not normalised "
+                         "0-1, or too little range flown")
+    se_full = math.sqrt(max(float(cov[0, 0] + cov[1, 1] + 2 * cov[0, 1]), 0.0))
+    b = full / skeleton.max_speed ** 2
+    grid = np.linspace(0.0, 1.0, 11)
+    thrust = np.clip(c2 * grid ** 2 + c1 * grid, 0.0, None)
+    speed = np.sqrt(thrust / b)
+    summary = (f"command -> thrust per rotor T(u) = {c2:.4g} u^2 + {c1:.4g} u N (u = cmd"
+               + (f" x vbat / {v_ref:.3g} V" if has_v else "")
+               + f"), R^2 {r2:.3f} over {len(y)} samples of {len(logs)} log(s); "
+               f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N")
+    estimate = Estimate(b, _ci(b, b * 1.96 * se_full / full),
+                        f"commands only: b = T(1) / max_speed^2 with the skeleton's max_speed "
+                        f"{skeleton.max_speed:.5g} rad/s; {summary}")
+    table = {"command": grid.tolist(), "speed": [speed.tolist()] * logs[0].command.shape[1],
+             "reference_voltage": v_ref, "voltage_gain": (1.0 / v_ref) if has_v else 0.0}
+    return estimate, table, summary
+
+
+# ----------------------------------------------------------------------------- all of it
+
+
+def default_inertia(skeleton: Skeleton) -> np.ndarray:
+    """The documented default inertia (kg m^2) from mass and rotor distance (see module)."""
+    r = float(np.mean(np.linalg.norm((skeleton.positions - skeleton.com)[:, :2], axis=1)))
+    return skeleton.mass * r * r * np.asarray(DEFAULT_INERTIA)
+
+
+def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentification:
+    """Thrust factor, rotor order and spins, inertia (x, y) and motor map (see module). The
+    drag factor d is added by the caller (it needs the gap's model of the yaw torque)."""
+    if not logs:
+        raise InputError("--logs: no log given")
+    counts = {s.rotor_speed.shape[1] if s.rotor_speed is not None else s.command.shape[1]
+              for s in logs}
+    if counts != {len(skeleton.positions)}:
+        raise InputError(f"{logs[0].name}: rotor_*: {sorted(counts)} rotor column(s) in the "
+                         f"logs, {len(skeleton.positions)} rotors in {skeleton.path}")
+    defaults = default_inertia(skeleton)
+    with_speed = [s for s in logs if s.rotor_speed is not None]
+    if not with_speed:
+        if any(s.command is None for s in logs):
+            raise InputError(f"{logs[0].name}: cmd_*: neither rotor speeds nor commands")
+        thrust, table, summary = fit_command_thrust(logs, skeleton)
+        inertia = [Estimate(float(skeleton.inertia[k]) if skeleton.inertia is not None
+                            else float(defaults[k]), (float("nan"),) * 2, "", False,
+                            "not identified: without rotor speeds the body torques are "
+                            "unknown; " + ("the skeleton's" if skeleton.inertia is not None
+                                           else "the default") + " value kept")
+                   for k in range(2)]
+        ident = LogIdentification(thrust, [], inertia, table, summary, True)
+        ident.warnings.append("no rotor speeds in any log: b and the motor map are "
+                              "identified only as the product b Omega^2 (speed scale from "
+                              "max_speed); rotor order, spins, inertia and d are not "
+                              "identified")
+        return ident
+    if len(with_speed) < len(logs):
+        ident_warn = [f"{len(logs) - len(with_speed)} log(s) without rotor speeds left out "
+                      "of the rotor fits"]
+    else:
+        ident_warn = []
+    thrust, per_log = fit_thrust(with_speed, skeleton.mass)
+    notes = check_rotor_order(with_speed, skeleton)
+    curve = thrust_curve_score(with_speed, skeleton.mass)
+    with_cmd = [s for s in with_speed if s.command is not None]
+    motor = fit_motor_map(with_cmd) if with_cmd else None
+    inertia = fit_inertia(with_speed, skeleton, thrust.value, defaults)
+    ident = LogIdentification(thrust, per_log, inertia, motor, curve, False, notes,
+                              ident_warn)
+    ident.warnings += [e.why for e in inertia if not e.identified]
+    return ident
+
+
+def commanded_speed(s: LogSeries, motor: dict) -> np.ndarray:
+    """Steady speed (N, R) rad/s of the log's commands on the fitted map (no lag)."""
+    a = np.array([p[0] for p in motor["speed"]])
+    k = np.array([p[1] - p[0] for p in motor["speed"]])
+    gain = np.ones(len(s.t))
+    if motor["reference_voltage"] is not None and s.vbat is not None:
+        gain = 1.0 + motor["voltage_gain"] * (s.vbat - motor["reference_voltage"])
+    return a + k * s.command * gain[:, None]
