@@ -256,7 +256,7 @@ def _load_states(paths: list[Path]):
     from ..logs.checks import check_log
     from ..logs.flightlog import load_log
 
-    states, notes = [], []
+    logs, notes = [], []
     for path in paths:
         with _warnings.catch_warnings(record=True) as caught:
             _warnings.simplefilter("always", QuadsimWarning)
@@ -267,14 +267,10 @@ def _load_states(paths: list[Path]):
                              "specific force")
         if log.rotor_speed is None and log.rotor_command is None:
             raise InputError(f"{path}: rotor_*: neither rotor speeds nor motor commands")
-        states.append(flight_states(log))
-    rates = {round(float(np.median(np.diff(s.t))), 6) for s in states}
-    if len(rates) > 1:  # one grid for the pooled fits: resample to the slowest
-        from ..gap.residual import flight_states as _fs
-
-        slowest = max(rates)
-        states = [_fs(check_log(load_log(p))[0], dt=slowest) for p in paths]
-    return states, notes
+        logs.append(log)
+    # one grid for the pooled fits: every log resampled to the slowest median step
+    dt = max(float(np.median(np.diff(log.t))) for log in logs)
+    return [flight_states(log, dt=dt) for log in logs], notes
 
 
 def _drag_iv(states, provisional) -> tuple[float, float]:

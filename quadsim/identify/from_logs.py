@@ -70,6 +70,7 @@ INERTIA_R2 = 0.5
 SATURATED = 0.99
 #: motor lag grid (s).
 LAG_GRID_S = np.arange(0.0, 0.2001, 0.0025)
+
 #: default inertia without a skeleton value: Ixx = Iyy = 0.2 m r^2, Izz = 0.35 m r^2 (r the
 #: mean rotor distance; the Crazyflie 2.x 0.21/0.29 and the testbed 0.21/0.41).
 DEFAULT_INERTIA = (0.2, 0.2, 0.35)
@@ -326,51 +327,77 @@ def _lagged(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
     return out
 
 
-def fit_motor_map(logs: list[LogSeries]) -> dict:
-    """Per-rotor ``Omega = L_tau[a + k cmd (1 + gamma (v - v_ref))]`` (see module)."""
-    dt = float(np.median(np.diff(logs[0].t)))
-    has_v = all(s.vbat is not None for s in logs)
-    v_ref = float(np.median(np.concatenate([s.vbat for s in logs]))) if has_v else None
-    if has_v and float(np.ptp(np.concatenate([s.vbat for s in logs]))) < 0.05:
-        has_v = False
+def _map_normal_equations(logs: list[LogSeries], tau: float, dt: float, v_ref: float | None):
+    """Per rotor (X'X, X'y, y'y, n) of the lagged map regression at lag ``tau``."""
     count = logs[0].command.shape[1]
-    sse = np.zeros(len(LAG_GRID_S))
-    fits = []
-    for g, tau in enumerate(LAG_GRID_S):
-        per_rotor = []
+    width = 3 if v_ref is not None else 2
+    xx = np.zeros((count, width, width))
+    xy = np.zeros((count, width))
+    yy = np.zeros(count)
+    n = np.zeros(count, int)
+    for s in logs:
+        cols = [np.ones_like(s.command), s.command]
+        if v_ref is not None:
+            cols.append(s.command * (s.vbat - v_ref)[:, None])
+        lagged = _lagged(np.stack(cols, 2), tau, dt)          # (N, R, width)
+        keep = lagged[:, :, 1] < SATURATED
+        keep[: int(5 * tau / dt) + 1] = False                # the filter's start-up
         for i in range(count):
-            rows_x, rows_y = [], []
-            for s in logs:
-                cmd = s.command[:, i]
-                cols = [np.ones_like(cmd), cmd]
-                if has_v:
-                    cols.append(cmd * (s.vbat - v_ref))
-                lagged = _lagged(np.stack(cols, 1), tau, dt)
-                keep = _lagged(cmd, tau, dt) < SATURATED
-                keep[: int(5 * tau / dt) + 1] = False     # the filter's start-up
-                rows_x.append(lagged[keep])
-                rows_y.append(s.rotor_speed[keep, i])
-            x, y = np.concatenate(rows_x), np.concatenate(rows_y)
-            coef, *_ = np.linalg.lstsq(x, y, rcond=None)
-            u = y - x @ coef
-            sse[g] += float(u @ u)
-            per_rotor.append((coef, u, x))
-        fits.append(per_rotor)
-    best = int(np.argmin(sse))
-    per_rotor = fits[best]
-    n = sum(len(p[1]) for p in per_rotor)
-    s2 = sse[best] / max(1, n - 3 * count) * correlation_time(per_rotor[0][1])
-    inside = LAG_GRID_S[sse - sse[best] <= 3.84 * s2]
-    speeds = [[float(c[0]), float(c[0] + c[1])] for c, _, _ in per_rotor]
-    gammas = [float(c[2] / c[1]) for c, _, _ in per_rotor] if has_v else []
-    r2 = [1.0 - float(u @ u) / float(np.sum((u + x @ c - np.mean(u + x @ c)) ** 2))
-          for c, u, x in per_rotor]
-    return {"speed": speeds, "reference_voltage": v_ref if has_v else None,
+            x, y = lagged[keep[:, i], i], s.rotor_speed[keep[:, i], i]
+            xx[i] += x.T @ x
+            xy[i] += x.T @ y
+            yy[i] += y @ y
+            n[i] += len(y)
+    return xx, xy, yy, n
+
+
+def _map_sse(logs, tau, dt, v_ref):
+    xx, xy, yy, n = _map_normal_equations(logs, tau, dt, v_ref)
+    coef = np.stack([np.linalg.solve(a, c) for a, c in zip(xx, xy)])
+    sse = yy - np.einsum("ij,ij->i", coef, xy)
+    return float(sse.sum()), coef, sse, xy, n
+
+
+def _map_correlation(s: LogSeries, coef: np.ndarray, tau: float, dt: float,
+                     v_ref: float | None) -> float:
+    """Correlation time (samples) of rotor 1's map residual on one log."""
+    cols = [np.ones(len(s.t)), s.command[:, 0]]
+    if v_ref is not None:
+        cols.append(s.command[:, 0] * (s.vbat - v_ref))
+    x = _lagged(np.stack(cols, 1), tau, dt)
+    return correlation_time(s.rotor_speed[:, 0] - x @ coef)
+
+
+def fit_motor_map(logs: list[LogSeries]) -> dict:
+    """Per-rotor ``Omega = L_tau[a + k cmd (1 + gamma (v - v_ref))]`` (see module): least
+    squares per lag on the normal equations, the lag on :data:`LAG_GRID_S` (coarse, then
+    refined around the best)."""
+    dt = float(np.median(np.diff(logs[0].t)))
+    voltages = [s.vbat for s in logs]
+    has_v = all(v is not None for v in voltages) and float(np.ptp(np.concatenate(voltages))) >= 0.05
+    v_ref = float(np.median(np.concatenate(voltages))) if has_v else None
+    coarse = LAG_GRID_S[::4]
+    sse_coarse = [_map_sse(logs, tau, dt, v_ref)[0] for tau in coarse]
+    k = int(np.argmin(sse_coarse))
+    fine = LAG_GRID_S[(LAG_GRID_S >= coarse[max(0, k - 1)]) & (LAG_GRID_S <= coarse[min(len(coarse) - 1, k + 1)])]
+    results = {float(tau): _map_sse(logs, tau, dt, v_ref) for tau in fine}
+    best = min(results, key=lambda tau: results[tau][0])
+    total, coef, sse, xy, n = results[best]
+    count = len(coef)
+    s2 = total / max(1, int(n.sum()) - coef.size)
+    inside = [tau for tau, r in results.items()
+              if r[0] - total <= 3.84 * s2 * _map_correlation(logs[0], coef[0], best, dt, v_ref)]
+    # R^2 per rotor: 1 - SSE / (sum y^2 - n mean^2); mean from the constant column's X'y
+    mean = xy[:, 0] / n
+    yy = sse + np.einsum("ij,ij->i", coef, xy)
+    r2 = 1.0 - sse / (yy - n * mean ** 2)
+    gammas = (coef[:, 2] / coef[:, 1]).tolist() if has_v else []
+    return {"speed": [[float(c[0]), float(c[0] + c[1])] for c in coef],
+            "reference_voltage": v_ref,
             "voltage_gain": float(np.mean(gammas)) if has_v else 0.0,
             "voltage_gain_spread": float(np.std(gammas)) if has_v else 0.0,
-            "time_constant": float(LAG_GRID_S[best]),
-            "time_constant_ci": (float(inside.min()), float(inside.max())),
-            "r2": r2, "samples": n // count,
+            "time_constant": best, "time_constant_ci": (min(inside), max(inside)),
+            "r2": r2.tolist(), "samples": int(n.min()),
             "command_range": (float(min(s.command.min() for s in logs)),
                               float(max(s.command.max() for s in logs)))}
 
