@@ -156,10 +156,18 @@ def main(argv: list[str] | None = None) -> int:
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
     logs = _load(args.logs, params)
-    if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
-        from .commands import with_synthesised_speeds
-        logs, _ = with_synthesised_speeds(
-            logs, _load(args.command_reference or args.reference, params))
+    holdout = _load(args.holdout, params) if args.holdout else None
+    reference = _load(args.reference, params) if args.reference else None
+    # command-only logs in any role: speeds synthesised (quadsim.gap.commands.synthesise_all)
+    from .commands import synthesise_all
+
+    command_ref = _load(args.command_reference, params) if args.command_reference else reference
+    roles, command_model = synthesise_all({"logs": logs, "holdout": holdout,
+                                           "reference": reference}, params, command_ref)
+    logs, holdout, reference = roles["logs"], roles["holdout"], roles["reference"]
+    if command_model is not None and not args.quiet:
+        print(f"note: rotor speeds synthesised for the command-only logs from "
+              f"{command_model.source}", file=sys.stderr)
     progress = None
     bar = None
     if not args.quiet:
@@ -185,10 +193,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, _load(args.reference, params), params,
+            result = diagnose_per_flight(logs, reference, params,
                                          effects=args.effects, progress=progress, **extra)
         else:
-            holdout = _load(args.holdout, params) if args.holdout else None
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, **extra)
     finally:

@@ -22,6 +22,13 @@ V_ref where vbat is missing); the synthesised log keeps no commands by default
 (``keep_commands=False``) so that the diagnosis does not score a rotor channel that would
 compare the model with itself.
 
+Without any log with rotor speeds (a command-only fleet) the model comes from the parameter
+set instead (:func:`command_model_from_params`): its ``[motor_map]``, voltage gain and time
+constant, as ``python -m quadsim.identify --logs`` writes them from command-only logs (the
+command -> thrust map from the accelerometer). ``gap`` synthesises speeds for every
+command-only log it is given — positional, ``--holdout`` and ``--reference``
+(:func:`synthesise_all`).
+
 What is lost without measured speeds: the rotor channel (measured speed minus the speed the
 commands predict) disappears, so effects that act *between* command and speed are fixed to
 the reference: ``motor_lag`` cannot be fitted and a change of lag reads as an attitude-
@@ -50,8 +57,8 @@ from scipy.signal import lfilter
 from ..core.errors import InputError
 from ..logs.flightlog import FlightLog
 
-__all__ = ["CommandModel", "fit_command_model", "synthesise_speeds", "with_synthesised_speeds",
-           "without_speeds"]
+__all__ = ["CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
+           "synthesise_all", "synthesise_speeds", "with_synthesised_speeds", "without_speeds"]
 
 TAU_BOUNDS = (5e-4, 0.5)
 
@@ -180,3 +187,54 @@ def with_synthesised_speeds(logs: Sequence[FlightLog], reference: Sequence[Fligh
     unless given); logs with speeds are returned unchanged."""
     model = model or fit_command_model(reference)
     return [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs], model
+
+
+@dataclass(frozen=True)
+class MapCommandModel:
+    """The command -> speed model of a parameter set: ``motor_map.speed_at(command, vbat)``
+    (piecewise linear per rotor, voltage gain about the reference voltage) through the
+    first-order lag ``time_constant`` (tau, s); rms = nan (not fitted here); source."""
+
+    params: object
+    tau: float
+    source: str
+    rms: float = float("nan")
+
+    @property
+    def rotor_count(self) -> int:
+        return self.params.rotor_count
+
+    def speeds(self, t: np.ndarray, command: np.ndarray, vbat: np.ndarray | None) -> np.ndarray:
+        mm = self.params.motor_map
+        steady = mm.speed_at(np.asarray(command, float), vbat)
+        return _lag(steady, _step(t), self.tau)
+
+
+def command_model_from_params(params) -> MapCommandModel:
+    """The parameter set's motor map as a command model; InputError without one."""
+    mm = params.motor_map
+    if mm is None:
+        raise InputError(f"{params.path or params.name}: motor_map: logs without rotor speeds "
+                         "need a command -> speed map: give --command-reference LOG... (logs "
+                         "with rotor speeds and commands) or a parameter set with a "
+                         "[motor_map] (python -m quadsim.identify --logs ... writes one, also "
+                         "from command-only logs)")
+    return MapCommandModel(params, float(mm.time_constant),
+                           f"the motor map of {params.path or params.name} ({mm.source})")
+
+
+def synthesise_all(groups: dict[str, Sequence[FlightLog] | None], params,
+                   reference: Sequence[FlightLog] | None = None):
+    """Every command-only log in ``groups`` (role -> logs) gets synthesised speeds: the model
+    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map.
+    Returns (groups with the same keys, the model or None when no log needed one)."""
+    needing = [g for logs in groups.values() for g in (logs or []) if g.rotor_speed is None]
+    if not needing:
+        return groups, None
+    measured = [g for g in (reference or []) if g.rotor_speed is not None
+                and g.rotor_command is not None]
+    model = fit_command_model(measured) if measured else command_model_from_params(params)
+    out = {role: (None if logs is None else
+                  [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs])
+           for role, logs in groups.items()}
+    return out, model
