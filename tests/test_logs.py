@@ -489,8 +489,10 @@ def test_convert_rate_and_crop(tmp_path):
 
 
 def test_gap_cli_command_reference(tmp_path, capsys):
-    """A command-only log: refused in one line without a reference, diagnosed with one."""
+    """A command-only log: refused in one line without a reference or a motor map,
+    diagnosed with a reference."""
     import dataclasses
+    import re
 
     from quadsim.gap.__main__ import main as gap_main
     from quadsim.gap.synthetic import synthetic_flight
@@ -502,9 +504,12 @@ def test_gap_cli_command_reference(tmp_path, capsys):
            for s in (40, 41)]
     only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(
         synthetic_flight(cf, [], seed=s, duration=2.0), rotor_speed=None)) for s in (42, 43)]
-    args = ["--model", "crazyflie21", *map(str, only), "--quiet", "--effects", "mass_offset"]
+    no_map = tmp_path / "nomap.toml"   # crazyflie21 without its motor map: nothing to map
+    no_map.write_text(re.sub(r"\[motor_map\].*?(?=\n\[\[rotor\]\])", "",
+                             load_params("crazyflie21").path.read_text(), flags=re.S))
+    args = ["--model", str(no_map), *map(str, only), "--quiet", "--effects", "mass_offset"]
     assert gap_main(args) == 2
-    assert "needs measured rotor speeds" in capsys.readouterr().err
+    assert "logs without rotor speeds need a command -> speed map" in capsys.readouterr().err
     out = tmp_path / "gap.json"
     assert gap_main(args + ["--command-reference", *map(str, ref), "--json", str(out)]) == 0
     assert out.exists()

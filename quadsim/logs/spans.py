@@ -100,10 +100,9 @@ def airborne_span(log) -> Span:
     weak = low & (float(np.ptp(height)) > LIFT_HEIGHT_M)
     if activity is not None:
         top = float(np.percentile(activity, 90))
-        if top > 0:
-            idle = _bridge(activity < IDLE_FRACTION * top, n_min)
-            weak = activity < WEAK_FRACTION * float(np.median(activity[~idle])) \
-                if (~idle).any() else np.ones(n, bool)
+        idle = _bridge(activity < IDLE_FRACTION * top, n_min) if top > 0 else np.ones(n, bool)
+        weak = activity < WEAK_FRACTION * float(np.median(activity[~idle])) \
+            if (~idle).any() else np.ones(n, bool)
     velocity = log.velocity if log.velocity is not None else np.gradient(log.position, t, axis=0)
     rest = np.linalg.norm(velocity, axis=1) < REST_SPEED
     if log.body_rate is not None:
