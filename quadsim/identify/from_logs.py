@@ -427,6 +427,19 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
     cov = np.linalg.inv(x.T @ x) * float(res @ res) / max(1, len(y) - 2) * correlation_time(res)
     r2 = 1.0 - float(res @ res) / float(np.sum((y - y.mean()) ** 2))
     c2, c1 = (float(c) for c in coef)
+    shape = ""
+    if not (c1 >= 0 and c2 + c1 > 0 and 2 * c2 + c1 > 0):
+        # the data do not fix the curve's shape (T not increasing on 0..1): one parameter,
+        # T = c2 u^2 (b Omega^2 with the speed proportional to u), fixed by the hover level
+        shape = (f"; the two-term fit ({c2:.3g} u^2 + {c1:.3g} u, R^2 {r2:.3f}) is not "
+                 "increasing on 0..1: the shape is not determined, T = c2 u^2 assumed")
+        xq = x[:, :1]
+        c2, c1 = float(xq[:, 0] @ y / (xq[:, 0] @ xq[:, 0])), 0.0
+        res = y - c2 * xq[:, 0]
+        cov = np.zeros((2, 2))
+        cov[0, 0] = float(res @ res) / max(1, len(y) - 1) * correlation_time(res) / float(
+            xq[:, 0] @ xq[:, 0])
+        r2 = 1.0 - float(res @ res) / float(np.sum((y - y.mean()) ** 2))
     full = c2 + c1
     if not full > 0:
         raise InputError(f"{logs[0].name}: cmd_*: the command -> thrust fit gives no thrust at "
@@ -440,7 +453,7 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
     summary = (f"command -> thrust per rotor T(u) = {c2:.4g} u^2 + {c1:.4g} u N (u = cmd"
                + (f" x vbat / {v_ref:.3g} V" if has_v else "")
                + f"), R^2 {r2:.3f} over {len(y)} samples of {len(logs)} log(s); "
-               f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N")
+               f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N{shape}")
     estimate = Estimate(b, _ci(b, b * 1.96 * se_full / full),
                         f"commands only: b = T(1) / max_speed^2 with the skeleton's max_speed "
                         f"{skeleton.max_speed:.5g} rad/s; {summary}")

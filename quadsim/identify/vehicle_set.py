@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams, load_params
 from .from_logs import LogIdentification, Skeleton
 from .skeleton import quantity, render_params
@@ -61,6 +61,9 @@ def _load_text(text: str, output: Path, *, check: bool) -> VehicleParams:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
         return load_params(tmp, check=check)
+    except (InputError, ModelError) as exc:   # name the output, not the temporary file
+        raise type(exc)(str(exc).replace(tmp, f"{output} (as identified, not written)")) \
+            from None
     finally:
         os.unlink(tmp)
 
@@ -146,7 +149,9 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
             sources.append(f"{name} kept ({e.why})")
             report.lines.append(f"{name} = {e.value:.4g} kg m^2 kept: {e.why}")
     izz_why = ("Izz kept from the skeleton" if inertia is not None else
-               "Izz default 0.35 m r^2") + " (only d/Izz shows in yaw; d is identified given it)"
+               "Izz default 0.35 m r^2") + (" (not identified without rotor speeds)"
+                                            if ident.command_only else
+                                            " (only d/Izz shows in yaw; d is identified given it)")
     sources.append(izz_why)
     report.lines.append(izz_why)
     old_source = body["inertia"]["source"] if "inertia" in body else "none given"
