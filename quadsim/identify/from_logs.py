@@ -187,11 +187,15 @@ def fit_thrust(logs: list[LogSeries], mass: float) -> tuple[Estimate, list[tuple
 
 
 def thrust_curve_score(logs: list[LogSeries], mass: float) -> str:
-    """Leave-one-log-out: does ``b Omega^2 + c0`` per rotor beat ``b Omega^2``? (one line)"""
-    if len(logs) < 2:
-        return "thrust curve: one log, no held-out comparison"
+    """Leave-one-log-out (one log: its halves): does ``b Omega^2 + c0`` per rotor beat
+    ``b Omega^2``? (one line)"""
     rows = [(np.sum(np.square(s.rotor_speed), 1), s.rotor_speed.shape[1],
              mass * s.specific_force[:, 2]) for s in logs]
+    unit = "log"
+    if len(rows) == 1:           # one log: its two halves
+        x, count, y = rows[0]
+        half = len(x) // 2
+        rows, unit = [(x[:half], count, y[:half]), (x[half:], count, y[half:])], "half"
     err_quad = err_curve = 0.0
     offsets = []
     for k in range(len(rows)):
@@ -210,8 +214,8 @@ def thrust_curve_score(logs: list[LogSeries], mass: float) -> str:
     verdict = ("supported: the engines' b Omega^2 is kept; the thrust_curve effect models it"
                if gain > 0.05 else "not supported: b Omega^2 is enough")
     return (f"thrust curve b Omega^2 + c0 per rotor (c0 = {np.mean(offsets):.3g} N): held-out "
-            f"squared error {100 * gain:+.1f} % against b Omega^2 alone, leave one log out "
-            f"over {len(logs)} logs: {verdict}")
+            f"squared error {-100 * gain:+.1f} % against b Omega^2 alone, leave one {unit} "
+            f"out over {len(rows)} {unit}s: {verdict}")
 
 
 # ----------------------------------------------------------------------------- geometry
