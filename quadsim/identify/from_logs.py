@@ -215,7 +215,7 @@ def thrust_curve_score(logs: list[LogSeries], mass: float) -> str:
                if gain > 0.05 else "not supported: b Omega^2 is enough")
     return (f"thrust curve b Omega^2 + c0 per rotor (c0 = {np.mean(offsets):.3g} N): held-out "
             f"squared error {-100 * gain:+.1f} % against b Omega^2 alone, leave one {unit} "
-            f"out over {len(rows)} {unit}s: {verdict}")
+            f"out over {len(rows)} {'halves' if unit == 'half' else 'logs'}: {verdict}")
 
 
 # ----------------------------------------------------------------------------- geometry
