@@ -26,7 +26,7 @@ def page_commands() -> list[str]:
 
 def test_page_commands_are_quadsim_commands_or_setup():
     commands = page_commands()
-    assert sum(c.startswith("python -m quadsim.") for c in commands) >= 12
+    assert sum(c.startswith("python -m quadsim.") for c in commands) >= 11
     for c in commands:
         assert c.startswith(("python -m quadsim.", "D=", "OUT=", "mkdir ")), c
 
