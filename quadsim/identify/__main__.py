@@ -240,7 +240,7 @@ def main(argv: list[str] | None = None) -> int:
 # stages), the drag factor by the gap's instrumental-variables refit, and the written set.
 # The fits themselves are pure functions in quadsim.identify.from_logs.
 
-def _series(states) -> "LogSeries":
+def _series(states):
     from .from_logs import LogSeries
 
     return LogSeries(states.name, states.t, states.specific_force, states.body_rate,
@@ -298,6 +298,11 @@ def identify_logs_command(args) -> int:
     from .skeleton import load_skeleton
     from .vehicle_set import build_set
 
+    bench = [f for f in ("json", "stand", "force_lift", "cfd", "physical", "bifilar",
+                         "bifilar_rig") if getattr(args, f)]
+    if bench:
+        raise InputError(f"--{bench[0].replace('_', '-')}: belongs to the bench-table "
+                         "identification, not to --logs")
     if not (args.logs and args.vehicle and args.output):
         missing = [f for f, v in (("--logs", args.logs), ("--vehicle", args.vehicle),
                                   ("-o", args.output)) if not v]

@@ -34,7 +34,7 @@ import numpy as np
 from ..core.errors import InputError, field_error
 from ..core.files import read_toml
 from ..vehicle.params import SCHEMA, SPIN_SIGN, _cad_path, _quantity, _rotor_table
-from .from_logs import Skeleton
+from .logseries import Skeleton
 
 
 def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams, load_params
-from .from_logs import LogIdentification, Skeleton
+from .logseries import LogIdentification, Skeleton
 from .skeleton import quantity, render_params
 
 DEFAULT_D_OVER_BR = 0.15

@@ -1,0 +1,95 @@
+"""The data types of ``identify --logs`` (:mod:`quadsim.identify.from_logs`): one smoothed log,
+the user's skeleton, an estimate with its interval, the whole identification; and the
+correlation time that widens intervals for autocorrelated residuals. SI units, body frame
+x forward / y left / z up."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LogSeries:
+    """One log, smoothed on a uniform grid (SI). t (N,) s; specific_force, body_rate,
+    body_accel (N, 3) body (m/s^2, rad/s, rad/s^2); rotor_speed, command (N, R) (rad/s,
+    normalised 0-1) or None; vbat (N,) V or None; name: the file."""
+
+    name: str
+    t: np.ndarray
+    specific_force: np.ndarray
+    body_rate: np.ndarray
+    body_accel: np.ndarray
+    rotor_speed: np.ndarray | None
+    command: np.ndarray | None
+    vbat: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Skeleton:
+    """What the user measured: mass (kg), com (3,) m, inertia (3,) kg m^2 diagonal or None,
+    rotor positions (R, 3) m (body frame, from the frame centre), spins (R,) +1 ccw / -1 cw,
+    max_speed (rad/s) or None, path (for messages)."""
+
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray | None
+    positions: np.ndarray
+    spins: np.ndarray
+    max_speed: float | None
+    path: str
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A value with its 95 % interval, fit quality and the logs it came from."""
+
+    value: float
+    ci95: tuple[float, float]
+    quality: str
+    identified: bool = True
+    why: str = ""
+
+
+@dataclass
+class LogIdentification:
+    """Everything :func:`identify_from_logs` found; notes and warnings are one line each."""
+
+    thrust: Estimate
+    per_log_thrust: list[tuple[str, float, float]]
+    inertia: list[Estimate]
+    motor_map: dict | None
+    curve: str
+    command_only: bool
+    notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def correlation_time(residual: np.ndarray, max_lag: int = 200) -> float:
+    """Integrated autocorrelation time (samples) of a residual (N,), for CI widening."""
+    x = residual - residual.mean()
+    var = float(x @ x)
+    tau = 1.0
+    if var <= 0:
+        return tau
+    for lag in range(1, min(max_lag, len(x) - 1)):
+        rho = float(x[lag:] @ x[:-lag]) / var
+        if rho < 0.05:
+            break
+        tau += 2 * rho
+    return tau
+
+
+def _ci(value: float, se: float) -> tuple[float, float]:
+    return (value - 1.96 * se, value + 1.96 * se)
+
+
+def _origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """y = beta x through the origin: (beta, se, R^2)."""
+    beta = float(x @ y) / float(x @ x)
+    u = y - beta * x
+    se = math.sqrt(float(u @ u) / max(1, len(x) - 1) * correlation_time(u) / float(x @ x))
+    r2 = 1.0 - float(u @ u) / float(np.sum((y - y.mean()) ** 2))
+    return beta, se, r2
