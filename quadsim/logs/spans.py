@@ -108,6 +108,8 @@ def airborne_span(log) -> Span:
     if log.body_rate is not None:
         rest &= np.linalg.norm(log.body_rate, axis=1) < REST_RATE
     ground = _bridge(rest & weak, n_min)
+    if not (idle | ground).any():            # nothing to cut (also: logs shorter than n_min)
+        return Span(0, n, ())
     flying = _bridge(~(idle | ground), n_min)
     runs = _runs(flying)
     if not runs:
