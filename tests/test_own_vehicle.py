@@ -73,6 +73,7 @@ def test_identify_logs_recovers_the_thrust_factor_and_writes_a_loadable_set(tmp_
                                rtol=0.03)
     assert abs(params.drag_factor / truth.drag_factor - 1) < 0.03
     assert "time_constant" in data["motor_map"]
+    assert any(n.startswith("thrust curve") for n in data["notes"])
     # what the data cannot determine is named in the file
     assert any("Izz" in w or "inertia" in w or "d not identified" in w
                for w in data.get("warnings", [])) or "Izz" in data["body"]["inertia"]["source"]
@@ -81,6 +82,22 @@ def test_identify_logs_recovers_the_thrust_factor_and_writes_a_loadable_set(tmp_
 
     assert fly_main(["--model", str(out), "--path", "hover", "--duration", "1", "--quiet",
                      "-o", str(tmp_path / "hover.csv.gz")]) == 0
+
+
+def test_output_and_flags_are_checked_before_any_work(tmp_path, flights, capsys):
+    skel = tmp_path / "skeleton.toml"
+    skel.write_text(skeleton_text())
+    before = skel.read_bytes()
+    # the skeleton as output: refused, the input untouched
+    assert identify_main(["--logs", str(flights[0]), "--vehicle", str(skel), "-o",
+                          str(skel)]) == 2
+    assert skel.read_bytes() == before
+    assert identify_main(["--logs", str(flights[0]), "--vehicle", str(skel), "-o",
+                          str(tmp_path / "v.toml"), "--json"]) == 2
+    assert "--json: belongs to the bench-table identification" in capsys.readouterr().err
+    assert identify_main(["--logs", str(flights[0]), "-o", str(tmp_path / "v.toml")]) == 2
+    assert "--vehicle" in capsys.readouterr().err
+    assert not (tmp_path / "v.toml").exists()
 
 
 def test_rotors_in_another_order_are_refused(tmp_path, flights, capsys):

@@ -182,7 +182,8 @@ def without_speeds(log: FlightLog) -> FlightLog:
 
 
 def with_synthesised_speeds(logs: Sequence[FlightLog], reference: Sequence[FlightLog], *,
-                            model: CommandModel | None = None) -> tuple[list[FlightLog], CommandModel]:
+                            model: CommandModel | None = None,
+                            ) -> tuple[list[FlightLog], CommandModel]:
     """Every log without rotor speeds gets synthesised ones (model fitted on ``reference``
     unless given); logs with speeds are returned unchanged."""
     model = model or fit_command_model(reference)

@@ -55,13 +55,10 @@ import math
 import numpy as np
 
 from ..core.errors import InputError
-from .logseries import (Estimate, LogIdentification, LogSeries, Skeleton, _ci, _origin_fit,
-                        correlation_time)
+from .logseries import (MIX_TOLERANCE, Estimate, LogIdentification, LogSeries, Skeleton, _ci,
+                        _origin_fit, correlation_time, refuse_mixed)
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
 
-#: two logs whose b differ by more than this (relative) and beyond their 95 % intervals are
-#: logs of different vehicles.
-MIX_TOLERANCE = 0.05
 #: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this.
 ORDER_MARGIN = 0.05
 #: inertia is identified when its 95 % half-width is below this fraction of the value and
@@ -79,7 +76,8 @@ DEFAULT_INERTIA = (0.2, 0.2, 0.35)
 # ----------------------------------------------------------------------------- thrust
 
 
-def fit_thrust(logs: list[LogSeries], mass: float) -> tuple[Estimate, list[tuple[str, float, float]]]:
+def fit_thrust(logs: list[LogSeries],
+               mass: float) -> tuple[Estimate, list[tuple[str, float, float]]]:
     """b from ``m f_z = b sum Omega^2`` pooled and per log; refuses mixed vehicles."""
     xs = [np.sum(np.square(s.rotor_speed), axis=1) for s in logs]
     ys = [mass * s.specific_force[:, 2] for s in logs]
@@ -87,14 +85,7 @@ def fit_thrust(logs: list[LogSeries], mass: float) -> tuple[Estimate, list[tuple
     for s, x, y in zip(logs, xs, ys):
         beta, se, _ = _origin_fit(x, y)
         per_log.append((s.name, beta, se))
-    for (na, ba, sa), (nb, bb, sb) in itertools.combinations(per_log, 2):
-        gap = abs(ba - bb)
-        if gap > MIX_TOLERANCE * max(ba, bb) and gap > 1.96 * math.hypot(sa, sb):
-            raise InputError(
-                f"{nb}: rotor_*: b = {bb:.4g} N s^2/rad^2 here but {ba:.4g} in {na} "
-                f"({100 * gap / max(ba, bb):.1f} % apart, beyond both 95 % intervals and the "
-                f"{100 * MIX_TOLERANCE:.0f} % tolerance): logs of different vehicles (or "
-                "payloads) mixed; identify each vehicle on its own logs")
+    refuse_mixed(per_log, "rotor_*: b (N s^2/rad^2)")
     beta, se, r2 = _origin_fit(np.concatenate(xs), np.concatenate(ys))
     spread = np.std([b for _, b, _ in per_log], ddof=1) if len(per_log) > 1 else 0.0
     quality = (f"R^2 {r2:.3f} over {sum(len(x) for x in xs)} samples of {len(logs)} log(s); "
@@ -288,7 +279,7 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
     return ident
 
 
-__all__ = ["Estimate", "LogIdentification", "LogSeries", "Skeleton", "LAG_GRID_S",
+__all__ = ["MIX_TOLERANCE", "Estimate", "LogIdentification", "LogSeries", "Skeleton", "LAG_GRID_S",
            "SATURATED", "check_rotor_order", "commanded_speed", "correlation_time",
            "default_inertia", "fit_command_thrust", "fit_inertia", "fit_motor_map",
            "fit_thrust", "identify_from_logs", "thrust_curve_score"]

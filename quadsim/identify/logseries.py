@@ -5,10 +5,17 @@ x forward / y left / z up."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..core.errors import InputError
+
+#: two logs whose b differ by more than this (relative) and beyond their 95 % intervals are
+#: logs of different vehicles.
+MIX_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -93,3 +100,16 @@ def _origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     se = math.sqrt(float(u @ u) / max(1, len(x) - 1) * correlation_time(u) / float(x @ x))
     r2 = 1.0 - float(u @ u) / float(np.sum((y - y.mean()) ** 2))
     return beta, se, r2
+
+
+def refuse_mixed(per_log: list[tuple[str, float, float]], what: str) -> None:
+    """Refuse logs of different vehicles: two per-log values (name, value, se) more than
+    :data:`MIX_TOLERANCE` apart *and* beyond their combined 95 % interval."""
+    for (na, ba, sa), (nb, bb, sb) in itertools.combinations(per_log, 2):
+        gap = abs(ba - bb)
+        if gap > MIX_TOLERANCE * max(abs(ba), abs(bb)) and gap > 1.96 * math.hypot(sa, sb):
+            raise InputError(
+                f"{nb}: {what}: {bb:.4g} here but {ba:.4g} in {na} "
+                f"({100 * gap / max(abs(ba), abs(bb)):.1f} % apart, beyond both 95 % intervals "
+                f"and the {100 * MIX_TOLERANCE:.0f} % tolerance): logs of different vehicles "
+                "(or payloads) mixed; identify each vehicle on its own logs")

@@ -15,7 +15,8 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ..core.errors import InputError
-from .logseries import Estimate, LogSeries, Skeleton, _ci, correlation_time
+from .logseries import (Estimate, LogSeries, Skeleton, _ci, _origin_fit, correlation_time,
+                        refuse_mixed)
 
 #: commands at or above this (normalised) are saturated and left out of the motor map.
 SATURATED = 0.99
@@ -88,7 +89,8 @@ def fit_motor_map(logs: list[LogSeries]) -> dict:
     coarse = LAG_GRID_S[::4]
     sse_coarse = [_map_sse(logs, tau, dt, v_ref)[0] for tau in coarse]
     k = int(np.argmin(sse_coarse))
-    fine = LAG_GRID_S[(LAG_GRID_S >= coarse[max(0, k - 1)]) & (LAG_GRID_S <= coarse[min(len(coarse) - 1, k + 1)])]
+    low, high = coarse[max(0, k - 1)], coarse[min(len(coarse) - 1, k + 1)]
+    fine = LAG_GRID_S[(LAG_GRID_S >= low) & (LAG_GRID_S <= high)]
     results = {float(tau): _map_sse(logs, tau, dt, v_ref) for tau in fine}
     best = min(results, key=lambda tau: results[tau][0])
     total, coef, sse, xy, n = results[best]
@@ -128,6 +130,8 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
         u = s.command if not has_v else s.command * (s.vbat / v_ref)[:, None]
         us.append(u)
         ys.append(skeleton.mass * s.specific_force[:, 2])
+    refuse_mixed([(s.name, *_origin_fit(np.sum(u * u, 1), y)[:2]) for s, u, y in zip(logs, us, ys)],
+                 "cmd_*: thrust per squared command (N)")
     u, y = np.concatenate(us), np.concatenate(ys)
     x = np.stack([np.sum(u * u, 1), np.sum(u, 1)], 1)
     coef, *_ = np.linalg.lstsq(x, y, rcond=None)

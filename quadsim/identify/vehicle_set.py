@@ -104,7 +104,8 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
             src = (f"identify --logs: per-rotor Omega = a + k cmd, R^2 "
                    f"{min(motor['r2']):.3f}-{max(motor['r2']):.3f} over {motor['samples']} "
                    f"samples (flown cmd {lo:.2f}-{hi:.2f}, saturated commands left out); {logs}")
-            report.lines.append(f"motor map: {src.split(';')[0]}; lag {1000 * motor['time_constant']:.1f} ms "
+            report.lines.append(f"motor map: {src.split(';')[0]}; lag "
+                                f"{1000 * motor['time_constant']:.1f} ms "
                                 f"(95 % {1000 * motor['time_constant_ci'][0]:.1f}-"
                                 f"{1000 * motor['time_constant_ci'][1]:.1f} ms)")
         mm = {"command_unit": "1", "command": quantity(command, "1", src),
@@ -156,8 +157,9 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
     report.lines.append(izz_why)
     old_source = body["inertia"]["source"] if "inertia" in body else "none given"
     if "from_cad" not in body:
-        body["inertia"] = quantity([[diag[0], 0.0, 0.0], [0.0, diag[1], 0.0], [0.0, 0.0, diag[2]]],
-                                   "kg m^2", "; ".join(sources) + f"; skeleton: {old_source}; {logs}")
+        matrix = [[diag[0], 0.0, 0.0], [0.0, diag[1], 0.0], [0.0, 0.0, diag[2]]]
+        body["inertia"] = quantity(matrix, "kg m^2",
+                                   "; ".join(sources) + f"; skeleton: {old_source}; {logs}")
         body.setdefault("com", quantity([0.0, 0.0, 0.0], "m", "default: symmetric frame"))
 
     radius = float(rotors["radius"]["value"]) if "radius" in rotors else None
@@ -186,6 +188,7 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
         report.warnings.append(f"d not identified ({why}): {kept} kept")
         report.lines.append(f"d = {float(rotors['drag_factor']['value']):.4g} N m s^2/rad^2 "
                             f"kept: {why}")
+    data["notes"] = list(data.get("notes", [])) + [ident.curve, *ident.notes]
     warnings = list(ident.warnings) + report.warnings
     if warnings:
         data["warnings"] = list(data.get("warnings", [])) + warnings
