@@ -22,7 +22,8 @@ Fits (N samples pooled over the logs; rotor i at (x_i, y_i) from the CoM, spin s
   ``sum y_i Omega_i^2`` (roll), ``-sum x_i Omega_i^2`` (pitch) and ``-sum s_i Omega_i^2``
   (yaw) of every assignment of log columns to skeleton rotors (R! of them); the skeleton's
   order must explain roll and pitch (R^2) within :data:`ORDER_MARGIN` of the best, and the
-  yaw slope (d / Izz) must be positive, else the spins are reversed.
+  yaw slope (d / Izz) must be positive, else the spins are reversed. With roll and pitch
+  R^2 below :data:`WEAK_R2` the order cannot be told and is not checked (a named warning).
 * **inertia** Ixx, Iyy (kg m^2): ``I_xx wdot_x + (I_zz - I_yy) w_y w_z = b sum y_i Omega_i^2``
   (and pitch) by least squares of the torque on the angular acceleration (noise on the
   speeds enters the dependent side and does not bias it; noise on the differentiated gyro
@@ -59,8 +60,10 @@ from .logseries import (MIX_TOLERANCE, Estimate, LogIdentification, LogSeries, S
                         _origin_fit, correlation_time, refuse_mixed)
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
 
-#: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this.
+#: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this; below
+#: WEAK_R2 per axis the order (and, for yaw, the spins) cannot be checked.
 ORDER_MARGIN = 0.05
+WEAK_R2 = 0.05
 #: inertia is identified when its 95 % half-width is below this fraction of the value and
 #: the torque explains at least INERTIA_R2 of the angular acceleration's variance.
 INERTIA_CI = 0.15
@@ -166,7 +169,9 @@ def check_rotor_order(logs: list[LogSeries], skeleton: Skeleton) -> list[str]:
     inverse = [0] * count
     for k, col in enumerate(best_order):
         inverse[col] = k
-    if best - own > 2 * ORDER_MARGIN or own_fits[0][0] <= 0 or own_fits[1][0] <= 0:
+    weak = max(best, own) < 2 * WEAK_R2
+    if not weak and (best - own > 2 * ORDER_MARGIN or own_fits[0][0] <= 0
+                     or own_fits[1][0] <= 0):
         mapping = ",".join(str(inverse[i] + 1) for i in range(count))
         raise InputError(
             f"{skeleton.path}: rotor: the logs show the rotors in another order: roll+pitch "
@@ -174,15 +179,19 @@ def check_rotor_order(logs: list[LogSeries], skeleton: Skeleton) -> list[str]:
             f"{count} are the skeleton's rotors {mapping}; reorder the [[rotor]] entries (or "
             "convert the logs with --rotor-map)")
     slope_yaw, r2_yaw = own_fits[2]
-    if slope_yaw < 0 and r2_yaw > 0.05:
+    if slope_yaw < 0 and r2_yaw > WEAK_R2:
         raise InputError(
             f"{skeleton.path}: rotor.spin: the yaw torque has the wrong sign for these spins "
             f"(yaw acceleration against -sum s_i Omega_i^2: slope {slope_yaw:.3g}, R^2 "
             f"{r2_yaw:.2f}): the rotors spin the other way; swap every 'ccw' and 'cw'")
-    return [f"rotor order and spins: roll R^2 {own_fits[0][1]:.2f}, pitch R^2 "
-            f"{own_fits[1][1]:.2f}, yaw R^2 {r2_yaw:.2f} with positive yaw slope: the "
-            f"skeleton's order and spins match the logs"
-            + ("" if r2_yaw > 0.05 else " (yaw too weakly excited to confirm the spins)")]
+    fits = (f"roll R^2 {own_fits[0][1]:.2f}, pitch R^2 {own_fits[1][1]:.2f}, yaw R^2 "
+            f"{r2_yaw:.2f}")
+    if weak:
+        return [f"rotor order and spins not checked: {fits} (too little roll and pitch in the "
+                "logs to tell one rotor order from another); the skeleton's are kept"]
+    return [f"rotor order and spins: {fits} with positive yaw slope: the skeleton's order "
+            "and spins match the logs"
+            + ("" if r2_yaw > WEAK_R2 else " (yaw too weakly excited to confirm the spins)")]
 
 
 # ----------------------------------------------------------------------------- inertia
@@ -269,6 +278,7 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
         ident_warn = []
     thrust, per_log = fit_thrust(with_speed, skeleton.mass)
     notes = check_rotor_order(with_speed, skeleton)
+    ident_warn += [n for n in notes if "not checked" in n]
     curve = thrust_curve_score(with_speed, skeleton.mass)
     with_cmd = [s for s in with_speed if s.command is not None]
     motor = fit_motor_map(with_cmd) if with_cmd else None
