@@ -192,7 +192,6 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
     warnings = list(ident.warnings) + report.warnings
     if warnings:
         data["warnings"] = list(data.get("warnings", [])) + warnings
-    report.warnings = [w for w in report.warnings]
     header = (f"Parameter set {data.get('name', Path(output).stem)!r}: the skeleton "
               f"{Path(skeleton.path).name} plus what `python -m quadsim.identify --logs` "
               f"identified\nfrom {log_names} (rerun the command instead of editing by hand).")
