@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["read_verdict", "score_case", "summary_rows"]
+__all__ = ["names_truth", "read_verdict", "score_case", "summary_rows"]
 
 _NO_GAP = ("no_significant_gap", "no_gap", "none")
 
@@ -76,12 +76,20 @@ def read_verdict(entry: dict) -> dict:
             "confident": outcome == "named" and not tentative}
 
 
+def names_truth(truth: str, names) -> bool:
+    """Whether ``names`` (effect names of a verdict) name ``truth``; a logged signal's delay
+    (truth ``rotor_delay``) is named by any name that contains ``delay``."""
+    if truth == "rotor_delay":
+        return any("delay" in str(n) for n in names)
+    return truth in names
+
+
 def score_case(truth: str, kind: str, verdict: dict) -> dict:
     """Per-case scores for hidden effect ``truth`` of ``kind`` library / none / outside."""
-    named = truth in verdict["named"]
-    return {"named": named, "lead": truth in verdict.get("lead", verdict["named"]),
+    named = names_truth(truth, verdict["named"])
+    return {"named": named, "lead": names_truth(truth, verdict.get("lead", verdict["named"])),
             "readings": verdict.get("readings", 1 if verdict["named"] else 0),
-            "named_or_alternative": named or truth in verdict["alternatives"],
+            "named_or_alternative": named or names_truth(truth, verdict["alternatives"]),
             "no_gap": verdict["outcome"] == "no_significant_gap",
             "confident_wrong": verdict["confident"] and (kind != "library" or not named)}
 
