@@ -277,7 +277,8 @@ def generate(cache, progress=print) -> "Path":
     """Fly the references and every case (one Crazyflow child process), write each flight
     as ``NAME.csv.gz`` (flight-log schema) with its truth sidecar ``NAME.truth.json``, and
     the observability of every case (:func:`oracle_reductions`) to ``observability.json``.
-    Flights already there are kept (same code hash, same bytes)."""
+    Flights already there are kept (same code hash, same bytes); the observability is
+    computed again only when a flight was flown."""
     import json
 
     from ..core.files import atomic_write_text
@@ -298,6 +299,8 @@ def generate(cache, progress=print) -> "Path":
                          "case": case["case"]}
             atomic_write_text(out / f"{name}.truth.json", truth_json(truth))
             write_log(out / f"{name}.csv.gz", log)
+    if not todo and (out / "observability.json").exists():
+        return out
     refs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _, c in jobs if c is None]
     named = [(name, case) for name, _, case in jobs if case is not None]
     logs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _ in named]
