@@ -282,6 +282,9 @@ def _magnitude(effects: dict) -> str:
     """A case's Crazyflow effects in a table cell (SI; g, mm and ms where clearer)."""
     def fmt(key, value):
         value = np.atleast_1d(np.asarray(value, dtype=float))
+        if key == "payload":
+            return (f"payload {value[0] * 1e3:.3g} g at ("
+                    + ", ".join(f"{v * 1e3:.3g}" for v in value[1:]) + ") mm")
         scale, unit = {"mass": (1e3, " g"), "com": (1e3, " mm"), "rotor_delay": (1e3, " ms"),
                        "wind": (1.0, " m/s")}.get(key, (1.0, ""))
         return f"{key} " + ", ".join(f"{v * scale:.3g}" for v in value) + unit
@@ -309,11 +312,13 @@ def summarise_crazyflow(rows: list[dict], observability_only: bool = False) -> s
                  f"{OBSERVABLE:.0%}): {sum(r['kind'] == 'library' and r['observable'] for r in rows)}"
                  f" of {sum(r['kind'] == 'library' for r in rows)} in-library; not observable, "
                  f"scored apart: {', '.join(hidden) or 'none'}")
-    head = "| case | truth | kind | speed | Crazyflow change | true-effect reduction |"
+    head = ("| case | truth | kind | speed | Crazyflow change | gap / references' | "
+            "true-effect reduction |")
     lines += ["", head + ("" if observability_only else " per-flight verdict | score |"),
-              "|---|---|---|---|---|---|" + ("" if observability_only else "---|---|")]
+              "|---|---|---|---|---|---|---|" + ("" if observability_only else "---|---|")]
     for r in rows:
         cells = [r["name"], r["truth"], r["kind"], f"{r['speed']:.2f}", _magnitude(r["effects"]),
+                 f"{r['gap_vs_references']:.3g}",
                  f"{r['oracle_reduction']:.2f}" + ("" if r["observable"] else " (not observable)")]
         if not observability_only:
             v = r["per_flight"]

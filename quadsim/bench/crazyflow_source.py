@@ -188,19 +188,24 @@ def vehicle_params(drone: str = DRONE) -> VehicleParams:
 
 
 def path_setpoints(t: np.ndarray, seed: int, speed: float) -> np.ndarray:
-    """Mellinger state setpoints (T, 16) of a 3-D Lissajous figure with a yaw sweep: x =
-    0.5 sin(w t), y = 0.3 sin(2 w t + phi), z = 1 + 0.1 sin(1.7 w t), yaw = 0.4 sin(1.3 w t),
-    w = 1.2 speed rad/s (about 0.9 m/s peak at speed 1), phase phi from the seed."""
+    """Mellinger state setpoints (T, 16) of a 3-D Lissajous figure with a yaw sweep and a
+    small fast weave (roll/pitch excitation: about 1.3 m/s^2 at every speed, 6 rad/s^2 at
+    speed 1): x = 0.5 sin(w t) + a sin(4.5 w t), y = 0.3 sin(2 w t + phi) + a sin(5.5 w t +
+    phi), a = 0.03 m / speed^2, z = 1 + 0.1
+    sin(1.7 w t), yaw = 0.4 sin(1.3 w t), w = 1.2 speed rad/s (about 1 m/s peak at speed
+    1), phase phi from the seed."""
     phi = np.random.default_rng(seed).uniform(0, 2 * np.pi)
     w = 1.2 * speed
-    amp = np.array([0.5, 0.3, 0.1])
-    freq = np.array([w, 2 * w, 1.7 * w])
-    phase = np.array([0.0, phi, 0.0])
-    arg = np.outer(t, freq) + phase
+    # (axis, amplitude m, angular frequency rad/s, phase rad)
+    terms = ((0, 0.5, w, 0.0), (1, 0.3, 2 * w, phi), (2, 0.1, 1.7 * w, 0.0),
+             (0, 0.03 / speed ** 2, 4.5 * w, 0.0), (1, 0.03 / speed ** 2, 5.5 * w, phi))
     out = np.zeros((len(t), 16))
-    out[:, 0:3] = amp * np.sin(arg) + np.array([0.0, 0.0, 1.0])
-    out[:, 3:6] = amp * freq * np.cos(arg)
-    out[:, 6:9] = -amp * freq ** 2 * np.sin(arg)
+    out[:, 2] = 1.0
+    for axis, amp, freq, phase in terms:
+        arg = freq * t + phase
+        out[:, axis] += amp * np.sin(arg)
+        out[:, 3 + axis] += amp * freq * np.cos(arg)
+        out[:, 6 + axis] -= amp * freq ** 2 * np.sin(arg)
     yaw = 0.4 * np.sin(1.3 * w * t)
     out[:, 11], out[:, 12] = np.sin(yaw / 2), np.cos(yaw / 2)
     out[:, 15] = 0.4 * 1.3 * w * np.cos(1.3 * w * t)
