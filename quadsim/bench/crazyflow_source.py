@@ -191,14 +191,15 @@ def path_setpoints(t: np.ndarray, seed: int, speed: float) -> np.ndarray:
     """Mellinger state setpoints (T, 16) of a 3-D Lissajous figure with a yaw sweep and a
     small fast weave (roll/pitch excitation: about 1.3 m/s^2 at every speed, 6 rad/s^2 at
     speed 1): x = 0.5 sin(w t) + a sin(4.5 w t), y = 0.3 sin(2 w t + phi) + a sin(5.5 w t +
-    phi), a = 0.03 m / speed^2, z = 1 + 0.1
+    phi), a = 0.03 m / max(speed, 0.5)^2, z = 1 + 0.1
     sin(1.7 w t), yaw = 0.4 sin(1.3 w t), w = 1.2 speed rad/s (about 1 m/s peak at speed
     1), phase phi from the seed."""
     phi = np.random.default_rng(seed).uniform(0, 2 * np.pi)
     w = 1.2 * speed
+    weave = 0.03 / max(speed, 0.5) ** 2
     # (axis, amplitude m, angular frequency rad/s, phase rad)
     terms = ((0, 0.5, w, 0.0), (1, 0.3, 2 * w, phi), (2, 0.1, 1.7 * w, 0.0),
-             (0, 0.03 / speed ** 2, 4.5 * w, 0.0), (1, 0.03 / speed ** 2, 5.5 * w, phi))
+             (0, weave, 4.5 * w, 0.0), (1, weave, 5.5 * w, phi))
     out = np.zeros((len(t), 16))
     out[:, 2] = 1.0
     for axis, amp, freq, phase in terms:
