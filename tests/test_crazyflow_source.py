@@ -13,9 +13,16 @@ import sys
 import numpy as np
 import pytest
 
-from quadsim.bench.crazyflow_source import (RPM, FlightSpec, _flight_job, crazyflow_available,
-                                            crazyflow_flights, crazyflow_params, hover_rpm,
-                                            vehicle_params)
+from quadsim.bench.crazyflow_source import (
+    RPM,
+    FlightSpec,
+    _flight_job,
+    crazyflow_available,
+    crazyflow_flights,
+    crazyflow_params,
+    hover_rpm,
+    vehicle_params,
+)
 from quadsim.bench.score import score_case
 from quadsim.logs.flightlog import log_bytes
 from quadsim.vehicle.rotors import rotor_wrench

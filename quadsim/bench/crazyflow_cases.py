@@ -57,15 +57,28 @@ out-of-library -> no confident name.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..effects import make_effect
-from .crazyflow_source import (DRONE, RPM, FlightSpec, crazyflow_params, hover_rpm,
-                               vehicle_params)
+from .crazyflow_source import DRONE, RPM, FlightSpec, crazyflow_params, hover_rpm, vehicle_params
 
-__all__ = ["CASES", "OBSERVABLE", "REFERENCES", "case_list", "code_hash", "generate", "judge",
-           "load_flights", "library_truth", "oracle_reductions",
-           "reference_specs", "shared_effects"]
+__all__ = [
+    "CASES",
+    "OBSERVABLE",
+    "REFERENCES",
+    "case_list",
+    "code_hash",
+    "flight_dir",
+    "generate",
+    "judge",
+    "library_truth",
+    "load_flights",
+    "oracle_reductions",
+    "reference_specs",
+    "shared_effects",
+]
 
 REFERENCES = 8
 DURATION = 8.0
@@ -257,7 +270,6 @@ def code_hash() -> str:
     version (a change of either never reads a stale flight)."""
     import hashlib
     from importlib.metadata import version
-    from pathlib import Path
 
     here = Path(__file__).resolve().parent
     digest = hashlib.sha256(version("crazyflow").encode())
@@ -268,9 +280,7 @@ def code_hash() -> str:
     return digest.hexdigest()[:12]
 
 
-def flight_dir(cache) -> "Path":
-    from pathlib import Path
-
+def flight_dir(cache) -> Path:
     return Path(cache) / f"crazyflow-{code_hash()}"
 
 
@@ -278,7 +288,7 @@ def _name(role: str, k: int, truth: str) -> str:
     return f"{role}_{k:02d}_{truth}" if role == "case" else f"{role}_{k:02d}"
 
 
-def generate(cache, progress=print) -> "Path":
+def generate(cache, progress=print) -> Path:
     """Fly the references and every case (one Crazyflow child process), write each flight
     as ``NAME.csv.gz`` (flight-log schema) with its truth sidecar ``NAME.truth.json``, and
     the observability of every case (:func:`oracle_reductions`) to ``observability.json``.

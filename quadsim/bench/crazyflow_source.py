@@ -60,8 +60,9 @@ from ..logs.flightlog import FlightLog
 from ..logs.sensors import rotation_quat
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 
-__all__ = ["DRONE", "EFFECTS", "FlightSpec", "RATE_HZ", "RPM", "Sensors", "crazyflow_available",
-           "crazyflow_flights", "crazyflow_params", "path_setpoints", "vehicle_params"]
+__all__ = ["DRONE", "EFFECTS", "RATE_HZ", "RPM", "FlightSpec", "Sensors", "crazyflow_available",
+           "crazyflow_flights", "crazyflow_params", "hover_rpm", "path_setpoints", "to_flight_log",
+           "truth_json", "vehicle_params"]
 
 DRONE = "cf21B_500"
 RATE_HZ = 500
@@ -118,7 +119,7 @@ def _package_dir() -> Path:
     spec = importlib.util.find_spec("crazyflow")
     if spec is None or not spec.submodule_search_locations:
         raise ModelError("crazyflow is not installed (pip install 'quadsim[crazyflow]')")
-    return Path(list(spec.submodule_search_locations)[0])
+    return Path(next(iter(spec.submodule_search_locations)))
 
 
 def crazyflow_params(drone: str = DRONE) -> dict:
@@ -298,9 +299,10 @@ def _run_worker(job: dict) -> dict:
     with tempfile.TemporaryDirectory(prefix="quadsim-crazyflow-") as tmp:
         job_path, out_path = os.path.join(tmp, "job.npz"), os.path.join(tmp, "out.npz")
         np.savez(job_path, **job)
-        done = subprocess.run([sys.executable, "-m", "quadsim.bench.crazyflow_worker", job_path,
-                               out_path], env=env, capture_output=True, text=True,
-                              cwd=str(Path(__file__).resolve().parents[2]))
+        # run by file name in the temporary folder: MuJoCo's MUJOCO_LOG.TXT lands there
+        worker = str(Path(__file__).resolve().with_name("crazyflow_worker.py"))
+        done = subprocess.run([sys.executable, worker, job_path, out_path], env=env,
+                              capture_output=True, text=True, cwd=tmp, check=False)
         if done.returncode != 0:
             tail = done.stderr.strip().splitlines()[-1:] or ["no output"]
             raise ModelError(f"crazyflow worker failed ({done.returncode}): {tail[0]}")

@@ -3,8 +3,8 @@
 Crazyflow needs SciPy's array-API mode (``SCIPY_ARRAY_API=1``), which must be set before
 SciPy is first imported and changes SciPy for the whole process; quadsim's own code runs
 without it. So the flights are flown in a child process (:func:`quadsim.bench.crazyflow_source.fly_batch`
-starts ``python -m quadsim.bench.crazyflow_worker JOB.npz OUT.npz``); this module imports
-nothing of quadsim.
+starts ``python .../crazyflow_worker.py JOB.npz OUT.npz`` in a temporary folder); this
+module imports nothing of quadsim.
 
 What runs here is Crazyflow's own simulation (``crazyflow.Sim``, tested with 0.4.0): its
 first-principles dynamics (:func:`crazyflow.dynamics.first_principles.dynamics`: quadratic
