@@ -147,3 +147,14 @@ def test_delay_truth_is_named_by_any_delay_reading():
     other = {**verdict, "lead": ["motor_lag"], "named": ["motor_lag"]}
     score = score_case("rotor_delay", "library", other)
     assert not score["named"] and score["confident_wrong"]
+
+
+def test_refused_flight_scores_as_neither_named_nor_no_gap():
+    """A flight the diagnosis refuses (issue 22, batches go on) is read as ``refused``: it
+    names nothing, is not a no_significant_gap and not a confident name."""
+    from quadsim.bench.score import read_verdict
+
+    verdict = read_verdict({"outcome": "refused", "reason": "accelerometer check failed"})
+    assert verdict["outcome"] == "refused" and verdict["named"] == []
+    score = score_case("none", "none", verdict)
+    assert not score["no_gap"] and not score["confident_wrong"]

@@ -4,7 +4,7 @@
 :func:`quadsim.gap.diagnose` (``result["verdict"]``) or of one flight of
 :func:`quadsim.gap.diagnose_per_flight` (``result["flights"][i]``). It returns::
 
-    {"outcome": "no_significant_gap" | "named" | "unexplained",
+    {"outcome": "no_significant_gap" | "named" | "unexplained" | "refused",
      "lead": [effects of the verdict's first reading],
      "named": [effects of every reading the verdict's answer states],
      "readings": int,         # how many readings the answer states
@@ -53,7 +53,9 @@ def read_verdict(entry: dict) -> dict:
         effect = effect.get("name") or effect.get("effect")
     effect = str(effect or "unexplained")
     label = str(entry.get("outcome") or effect)
-    if label in _NO_GAP or effect in _NO_GAP:
+    if label == "refused":            # a flight the diagnosis could not judge (its reason kept)
+        outcome, named = "refused", []
+    elif label in _NO_GAP or effect in _NO_GAP:
         outcome, named = "no_significant_gap", []
     elif label in ("unexplained", "see flights") or effect in ("unexplained", "see flights"):
         outcome, named = "unexplained", []
