@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 from test_cad import REPO, generator, layout, write_cad
 
-from quadsim import build_mjcf
-from quadsim.build_mjcf import build_model, main, write_model
+from quadsim.build_mjcf import main
 from quadsim.core.errors import InputError
+from quadsim.sim import model as sim_model
+from quadsim.sim.model import build_model, write_model
 from quadsim.vehicle.params import hover_speed
 from quadsim.vehicle.rotors import allocation_matrix, mixer
 
@@ -198,7 +199,7 @@ def test_mesh_in_other_units_than_declared_is_caught(tmp_path):
 
 def test_mesh_over_mujoco_stl_limit_is_refused_before_writing(tmp_path, monkeypatch):
     # The real limit is 200,000 triangles per STL; a small stand-in keeps the test fast.
-    monkeypatch.setattr(build_mjcf, "MUJOCO_STL_FACE_LIMIT", 200)
+    monkeypatch.setattr(sim_model, "MUJOCO_STL_FACE_LIMIT", 200)
     big = dict(GOOD, shape=GEN.cylinder(50, 20, segments=64))  # 252 triangles
     folder = write_cad(tmp_path / "cad", [big], [ROTOR])
     with pytest.raises(InputError, match=r"block.stl has 252 triangles; MuJoCo reads at most 200"):

@@ -3,7 +3,7 @@
 import mujoco
 import numpy as np
 
-from quadsim.build_mjcf import build_model
+from quadsim.sim.model import build_model
 from quadsim.vehicle.params import MODELS_DIR
 
 

@@ -237,7 +237,7 @@ def test_shipped_data_are_found():
     with pytest.raises(ValueError):
         shipped_dir("nothing")
     # in a checkout the MJCF goes to models/, never into an installed package's data
-    from quadsim.build_mjcf import default_output
+    from quadsim.sim.model import default_output
     from quadsim.core.shipped import is_installed_copy
 
     assert not is_installed_copy(MODELS_DIR)

@@ -76,7 +76,7 @@ def test_several_solids_or_open_shell_is_one_line(tmp_path, fixture, message):
 def test_mjcf_from_step_compiles_with_the_stl_inertia(tmp_path):
     import mujoco
 
-    from quadsim.build_mjcf import build_model, write_model
+    from quadsim.sim.model import build_model, write_model
 
     models = []
     for mesh in ("box.stl", "box.step"):
