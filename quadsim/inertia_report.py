@@ -22,174 +22,26 @@ like-for-like comparison and what remains different.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
-import numpy as np
-
-from .cad.assembly import MESH_UNITS, Assembly, load_assembly
-from .cad.massprops import vehicle_mass_properties
+from .cad.assembly import load_assembly
 from .core.args import ArgumentParser
 from .core.errors import ModelError, run_cli
 from .core.shipped import shipped_dir
+from .identify.inertia_compare import (
+    SOLIDWORKS,
+    Row,
+    agreement_lines,
+    check_rows,
+    lumped_inertia,
+    mujoco_mass_properties,
+    report_rows,
+)
 
-__all__ = [
-    "SOLIDWORKS",
-    "Row",
-    "check_rows",
-    "lumped_inertia",
-    "main",
-    "mujoco_mass_properties",
-    "report_rows",
-]
+__all__ = ["SOLIDWORKS", "Row", "check_rows", "lumped_inertia", "main",
+           "mujoco_mass_properties", "report_rows"]
 
 DEFAULT_CAD = shipped_dir("cad")
-MECHANICAL = ("mechanical",)
-MUJOCO_TOLERANCE = 1e-6
-SOLIDWORKS_TOLERANCE = 0.10
-
-
-@dataclass(frozen=True)
-class Row:
-    """One line of the comparison: mass (kg, NaN if none), CoM (3,) m or None, inertia
-    (3, 3) kg m^2 about the CoM (diagonal where only moments are known), unit note."""
-
-    label: str
-    mass: float
-    com: np.ndarray | None
-    inertia: np.ndarray
-    note: str = ""
-
-    @property
-    def moments(self) -> np.ndarray:
-        return np.diag(self.inertia).copy()
-
-
-SOLIDWORKS = Row("SolidWorks (report Fig. 4.3, App. D)", 0.8098147, None,
-                 np.diag([0.00628, 0.00631, 0.01206]), "mechanical parts, SolidWorks densities")
-
-
-def mujoco_mass_properties(assembly: Assembly, groups: tuple[str, ...] | None = None
-                           ) -> tuple[float, np.ndarray, np.ndarray]:
-    """Mass (kg), CoM (3,) and inertia about the CoM (3, 3) of the assembly as MuJoCo's
-    compiler computes them: every placed mesh a geom with the part's mass, exact mesh
-    inertia, body inertia from geoms."""
-    import mujoco
-
-    scale = " ".join([f"{MESH_UNITS[assembly.mesh_unit]:.17g}"] * 3)
-    assets, geoms = [], []
-    for part in assembly.parts:
-        if groups is not None and part.group not in groups:
-            continue
-        assets.append(f'<mesh name="{part.name}" file={quoteattr(str(part.mesh_path))} '
-                      f'scale="{scale}" inertia="exact"/>')
-        for p in part.placements:
-            mat = " ".join(f"{v:.17g}" for v in p.rotation[:, :2].T.ravel())
-            geoms.append(f'<geom type="mesh" mesh="{part.name}" mass="{part.instance_mass:.17g}"'
-                         f' pos="{" ".join(f"{v:.17g}" for v in p.position)}" xyaxes="{mat}"/>')
-    xml = (f'<mujoco><compiler inertiafromgeom="true"/><asset>{"".join(assets)}</asset>'
-           f'<worldbody><body name="vehicle"><freejoint/>{"".join(geoms)}</body></worldbody>'
-           "</mujoco>")
-    try:
-        model = mujoco.MjModel.from_xml_string(xml)
-    except ValueError as exc:
-        raise ModelError(f"{assembly.manifest}: MuJoCo cannot compile the meshes: {exc}") from None
-    rotation = np.zeros(9)
-    mujoco.mju_quat2Mat(rotation, model.body_iquat[1])
-    rotation = rotation.reshape(3, 3)
-    inertia = rotation @ np.diag(model.body_inertia[1]) @ rotation.T
-    return float(model.body_mass[1]), model.body_ipos[1].copy(), inertia
-
-
-def lumped_inertia(base_mass: float, base_radius: float, arm: float, motor_mass: float
-                   ) -> np.ndarray:
-    """Report eq. 3.18/3.19: ``Ix = Iy = 2 M R^2 / 5 + 2 l^2 m``, ``Iz = 2 M R^2/5 + 4 l^2 m``
-    (a solid sphere for the centre, point motors on the arms), as a diagonal tensor."""
-    centre = 0.4 * base_mass * base_radius**2
-    return np.diag([centre + 2 * arm**2 * motor_mass, centre + 2 * arm**2 * motor_mass,
-                    centre + 4 * arm**2 * motor_mass])
-
-
-def _report_rows() -> list[Row]:
-    from .identify.benchdata import load_physical_measurements
-    from .identify.bifilar import bifilar_inertia, load_bifilar_table, published_bifilar_inertia
-
-    table = load_physical_measurements()
-    mean = {k: float(np.mean(v)) for k, v in table.columns.items() if k != "trial"}
-    lumped = lumped_inertia(mean["base_mass"], mean["base_radius"], mean["frame_length"],
-                            mean["motor_mass"])
-    bifilar = load_bifilar_table()
-    rig = bifilar.rig
-    periods = np.array([bifilar.mean_period[a] for a in ("roll", "pitch", "yaw")])
-    args = (rig.mass, rig.gravity, rig.wire_half_spacing, rig.wire_length, periods)
-    return [
-        Row("lumped eq. 3.18/3.19 (Table 4.4)", mean["total_mass"], None, lumped,
-            "M, R_b, l_f, m_m as the report used them"),
-        Row("bifilar as published (Table 4.15)", rig.mass, None,
-            np.diag(published_bifilar_inertia(*args)), "formula lacks T^2: kg m^2/s"),
-        Row("bifilar, corrected T^2 formula", rig.mass, None, np.diag(bifilar_inertia(*args)),
-            "same periods; they cannot come from this vehicle"),
-    ]
-
-
-def report_rows(assembly: Assembly) -> list[Row]:
-    """All rows of the comparison, trimesh and MuJoCo first (whole vehicle, then the
-    mechanical subset), SolidWorks, then the report's lumped and bifilar values."""
-    rows = []
-    for groups, label in ((None, "whole vehicle"), (MECHANICAL, "mechanical parts")):
-        props = vehicle_mass_properties(assembly, groups=groups)
-        rows.append(Row(f"trimesh, {label}", props.mass, props.com, props.inertia))
-        rows.append(Row(f"MuJoCo, {label}", *mujoco_mass_properties(assembly, groups)))
-    whole = rows[0]
-    scale = SOLIDWORKS.mass / whole.mass
-    rows.append(Row("trimesh, whole, scaled to SW mass", SOLIDWORKS.mass, whole.com,
-                    whole.inertia * scale, f"x {scale:.4f}, same shape, SolidWorks' mass"))
-    rows.append(SOLIDWORKS)
-    return rows + _report_rows()
-
-
-def _relative(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(np.asarray(a) - b) / np.linalg.norm(b))
-
-
-def trimesh_mujoco_differences(rows: list[Row], label: str) -> dict[str, float]:
-    """Relative differences between the trimesh and MuJoCo rows for ``label``: mass, CoM
-    (distance over the radius of gyration) and inertia (Frobenius norm)."""
-    by_label = {r.label: r for r in rows}
-    tm, mj = by_label[f"trimesh, {label}"], by_label[f"MuJoCo, {label}"]
-    gyration = np.sqrt(np.max(np.linalg.eigvalsh(tm.inertia)) / tm.mass)
-    return {"mass": abs(mj.mass - tm.mass) / tm.mass,
-            "CoM": float(np.linalg.norm(mj.com - tm.com)) / gyration,
-            "inertia": _relative(mj.inertia, tm.inertia)}
-
-
-def agreement_lines(rows: list[Row]) -> list[str]:
-    """One line per subset: how closely MuJoCo's compile reproduces trimesh."""
-    return [f"trimesh vs MuJoCo, {label}: " + ", ".join(
-        f"{k} {v:.1e}" for k, v in trimesh_mujoco_differences(rows, label).items())
-        + " (relative)" for label in ("whole vehicle", "mechanical parts")]
-
-
-def check_rows(rows: list[Row]) -> list[str]:
-    """Failures of the CI check (empty when it passes)."""
-    by_label = {r.label: r for r in rows}
-    failures = []
-    for label in ("whole vehicle", "mechanical parts"):
-        diffs = trimesh_mujoco_differences(rows, label)
-        failures += [f"{label}: trimesh vs MuJoCo {k} differ by {v:.2e} relative "
-                     f"(limit {MUJOCO_TOLERANCE:g})" for k, v in diffs.items()
-                     if v > MUJOCO_TOLERANCE]
-    mechanical = np.sort(np.linalg.eigvalsh(by_label["trimesh, mechanical parts"].inertia))
-    solidworks = np.sort(SOLIDWORKS.moments)
-    for name, ours, theirs in zip(("smallest", "middle", "largest"), mechanical, solidworks):
-        if abs(ours / theirs - 1) > SOLIDWORKS_TOLERANCE:
-            failures.append(f"mechanical parts: {name} principal moment {ours:.5g} kg m^2 is "
-                            f"{100 * (ours / theirs - 1):+.1f} % from SolidWorks {theirs:.5g} "
-                            f"(limit {100 * SOLIDWORKS_TOLERANCE:g} %)")
-    return failures
-
-
 def format_rows(rows: list[Row]) -> str:
     """The human table: mass, CoM z, Ixx/Iyy/Izz and their difference to SolidWorks."""
     head = (f"{'source':<38} {'mass kg':>9} {'CoM z mm':>9} {'Ixx':>10} {'Iyy':>10} "
