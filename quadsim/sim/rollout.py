@@ -62,7 +62,7 @@ def _right_hand_side(params: list[VehicleParams], effects: BatchEffects, body, f
 
 def rollout(params: VehicleParams, *, initial: dict, rotor_speed_series: np.ndarray,
             control_period: float, effects: EffectSet | None = None, substeps: int = 2,
-            fast: bool = True) -> dict:
+            fast: bool = True, hold_body_rate: bool = False) -> dict:
     """Open-loop RK4 predictions of B simulations of one vehicle with one effect set.
 
     ``initial``: dict of (B, ...) arrays ``position`` (m), ``velocity`` (m/s, world),
@@ -70,7 +70,12 @@ def rollout(params: VehicleParams, *, initial: dict, rotor_speed_series: np.ndar
     rotors dynamics, ``rotor_speed`` (rad/s; default the first command). ``rotor_speed_series``
     (B, N, R): rotor speeds (rad/s) held over each control period. Returns dict of
     (B, N + 1, ...) arrays ``position, velocity, quat, body_rate``. Raises
-    :class:`SimulationError` when a prediction leaves the state bounds or turns NaN."""
+    :class:`SimulationError` when a prediction leaves the state bounds or turns NaN.
+
+    ``hold_body_rate``: the body rates stay at their initial values (their derivative is set
+    to zero at every stage) -- the assumption that a fast on-board rate loop holds an
+    unobserved rate set-point, as in the nano-drone benchmark's physics baseline; the
+    translational equations and every effect's force are unchanged."""
     series = np.asarray(rotor_speed_series, dtype=float)
     if series.ndim != 3 or series.shape[2] != params.rotor_count:
         raise InputError(f"rotor_speed_series: expected (B, N, {params.rotor_count}), "
@@ -86,7 +91,14 @@ def rollout(params: VehicleParams, *, initial: dict, rotor_speed_series: np.ndar
     plist = [modified] * batch
     batch_effects = BatchEffects([effect_set] * batch, plist)
     body = body_arrays(plist)
-    rhs = _right_hand_side(plist, batch_effects, body, fast)
+    full = _right_hand_side(plist, batch_effects, body, fast)
+
+    def rhs(t, yy, held):
+        rate = full(t, yy, held)
+        if hold_body_rate:
+            rate.reshape(batch, -1)[:, 10:13] = 0.0
+        return rate
+
     start = {k: np.asarray(initial[k], dtype=float).reshape(batch, -1)
              for k in ("position", "velocity", "quat", "body_rate")}
     start["rotor_speed"] = np.asarray(initial.get("rotor_speed", commands[:, 0]), dtype=float)
