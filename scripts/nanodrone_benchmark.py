@@ -8,7 +8,10 @@ windows at every sample (:mod:`quadsim.bench.nanodrone`), predicts them with
 * ``quadsim_nominal`` -- quadsim's full rigid body (``models/nanodrone_cf21bl.toml``: b and d
   fitted on the training runs) driven by the measured rotor speeds;
 * ``quadsim_diagnosed`` -- the same plus the effects the gap diagnosis named on the training
-  runs (``models/nanodrone_cf21bl_diagnosed.toml``, every number with unit and source);
+  runs (``models/nanodrone_cf21bl_diagnosed.toml``, every number with unit and source),
+  and ``quadsim_nominal+A+B..`` rows adding its effects one at a time in the file's order (how
+  much each shrinks the error); ``quadsim_diagnosed_rate_held``: the diagnosed forces with
+  the body rate held as in the authors' physics baseline;
 
 the quadsim rows batched over all windows on the analytic engine's equations
 (:func:`quadsim.sim.rollout.rollout`, fixed-step RK4 at the 10 ms sample period), and scores
@@ -44,6 +47,7 @@ from quadsim.bench import nanodrone as bench  # noqa: E402
 from quadsim.core.args import check_output  # noqa: E402
 from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
 from quadsim.core.files import atomic_write_bytes, atomic_write_text  # noqa: E402
+from quadsim.effects.base import EffectSet  # noqa: E402
 from quadsim.effects.effectfile import load_effect_file  # noqa: E402
 from quadsim.logs.flightlog import load_log  # noqa: E402
 from quadsim.sim.rollout import rollout  # noqa: E402
@@ -91,9 +95,15 @@ def predictions(windows: bench.Windows, diagnosed: Path):
     params = load_params(NOMINAL)
     model = load_effect_file(diagnosed)
     completed = load_params(model.params)
+    ladder = []                  # the diagnosed effects added one at a time, in file order
+    for k in range(1, len(model.effects.effects)):
+        subset = EffectSet(model.effects.effects[:k])
+        name = "quadsim_nominal+" + "+".join(e.name for e in subset.effects)
+        ladder.append((name, lambda subset=subset: quadsim_prediction(windows, completed,
+                                                                      subset)))
     return [("naive", lambda: bench.naive_prediction(windows)),
             ("physics", lambda: bench.physics_prediction(windows)),
-            ("quadsim_nominal", lambda: quadsim_prediction(windows, params)),
+            ("quadsim_nominal", lambda: quadsim_prediction(windows, params)), *ladder,
             ("quadsim_diagnosed", lambda: quadsim_prediction(windows, completed,
                                                              model.effects)),
             ("quadsim_diagnosed_rate_held", lambda: quadsim_prediction(
