@@ -132,6 +132,7 @@ def plot(path: Path, curves: dict, protocol: str, published: bool) -> None:
                     continue
                 ax.plot(bench.REPORTED, row[key][:3], "o--", ms=4, lw=0.8,
                         label=f"published {name}")
+        ax.set_yscale("log")
         ax.set_title(labels[key])
         ax.set_xlabel("horizon h (10 ms steps)")
         ax.grid(alpha=0.3)
