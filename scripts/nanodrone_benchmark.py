@@ -43,15 +43,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from quadsim.bench import nanodrone as bench  # noqa: E402
-from quadsim.core.args import check_output  # noqa: E402
-from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
-from quadsim.core.files import atomic_write_bytes, atomic_write_text  # noqa: E402
-from quadsim.effects.base import EffectSet  # noqa: E402
-from quadsim.effects.effectfile import load_effect_file  # noqa: E402
-from quadsim.logs.flightlog import load_log  # noqa: E402
-from quadsim.sim.rollout import rollout  # noqa: E402
-from quadsim.vehicle.params import load_params  # noqa: E402
+from quadsim.bench import nanodrone as bench
+from quadsim.core.args import check_output
+from quadsim.core.errors import InputError, QuadsimWarning, run_cli
+from quadsim.core.files import atomic_write_bytes, atomic_write_text
+from quadsim.effects.base import EffectSet
+from quadsim.effects.effectfile import load_effect_file
+from quadsim.logs.flightlog import load_log
+from quadsim.sim.rollout import rollout
+from quadsim.vehicle.params import load_params
 
 ROOT = Path(__file__).resolve().parent.parent
 TEST_RUNS = ("melon_20251017_run1", "melon_20251017_run4", "melon_20251017_run5")

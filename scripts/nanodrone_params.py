@@ -33,10 +33,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
-from quadsim.core.files import atomic_write_text  # noqa: E402
-from quadsim.gap.residual import flight_states  # noqa: E402
-from quadsim.logs.flightlog import load_log  # noqa: E402
+from quadsim.core.errors import InputError, QuadsimWarning, run_cli
+from quadsim.core.files import atomic_write_text
+from quadsim.gap.residual import flight_states
+from quadsim.logs.flightlog import load_log
 
 MASS = 0.045                                    # kg, benchmark code (models.py)
 INERTIA = (2.3951e-5, 2.3951e-5, 3.2347e-5)     # kg m^2, benchmark code; z corrected (see doc)

@@ -147,7 +147,7 @@ def test_script_refuses_a_folder_without_the_runs(tmp_path):
     out = tmp_path / "r.json"
     proc = subprocess.run([sys.executable, str(ROOT / "scripts/nanodrone_benchmark.py"),
                            "--data", str(tmp_path), "--json", str(out)],
-                          capture_output=True, text=True, cwd=ROOT)
+                          check=False, capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 2
     assert proc.stderr.startswith("error: ") and "melon_20251017_run1" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
@@ -158,3 +158,55 @@ def test_json_rows_shape():
     text = json.dumps(row)
     assert set(json.loads(text)) == set(bench.QUANTITIES)
     assert row["p"][3] == pytest.approx(27.5)
+
+
+def test_script_end_to_end_on_small_runs(tmp_path):
+    """The CLI on three short synthetic 'melon' runs: JSON rows, the published rows copied,
+    same inputs -> same bytes."""
+    from quadsim.logs.flightlog import write_log
+
+    hover = float(np.sqrt(0.045 * 9.81 / (4 * 3.7228e-8)))
+    for k, name in enumerate(("run1", "run4", "run5")):
+        log = _log(70 + 5 * k, offset=float(k), speed=hover)
+        write_log(tmp_path / "test" / f"melon_20251017_{name}.csv.gz", log)
+    outs = []
+    for tag in ("a", "b"):
+        out = tmp_path / f"{tag}.json"
+        proc = subprocess.run([sys.executable, str(ROOT / "scripts/nanodrone_benchmark.py"),
+                               "--data", str(tmp_path), "--json", str(out)], check=False,
+                              capture_output=True, text=True, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    result = json.loads(outs[0])
+    assert result["protocol"] == "published" and result["windows"] == 19 + 24 + 29
+    rows = result["rows"]
+    for name in ("naive", "physics", "quadsim_nominal", "quadsim_diagnosed",
+                 "quadsim_diagnosed_rate_held", "published_hybrid"):
+        assert set(rows[name]) == set(bench.QUANTITIES) and len(rows[name]["p"]) == 4
+    assert rows["published_physics"] == bench.PUBLISHED["physics"]
+    # the held rate is the physics baseline's rotation: the same body-rate row
+    assert rows["quadsim_diagnosed_rate_held"]["w"] == rows["physics"]["w"]
+
+
+def test_effect_file_refuses_wrong_units_and_unknown_effects(tmp_path):
+    from quadsim.core.errors import InputError
+    from quadsim.effects.effectfile import load_effect_file
+
+    model = load_effect_file(ROOT / "models/nanodrone_cf21bl_diagnosed.toml")
+    assert [e.name for e in model.effects.effects] == ["rotor_drag", "blade_flapping",
+                                                      "inertia_error"]
+    assert all(model.sources.values())
+    head = 'schema = "quadsim.effects/1"\nparams = "nanodrone_cf21bl"\n[[effect]]\n'
+    bad = tmp_path / "bad.toml"
+    bad.write_text(head + 'name = "rotor_drag"\n'
+                   'coefficient = { value = 2e-6, unit = "N/m", source = "x" }\n')
+    with pytest.raises(InputError, match=r"effect\[0\]\.coefficient: unit 'N/m', expected"):
+        load_effect_file(bad)
+    bad.write_text(head + 'name = "rotor_drags"\n')
+    with pytest.raises(InputError, match="unknown effect 'rotor_drags'"):
+        load_effect_file(bad)
+    bad.write_text(head + 'name = "blade_flapping"\ncoefficient = { value = 1.0, unit = '
+                   '"kg m/rad", source = "x" }\n')
+    with pytest.raises(InputError, match="plausible range"):
+        load_effect_file(bad)

@@ -48,8 +48,19 @@ import numpy as np
 from ..core.frames import quat_conjugate, quat_derivative, quat_multiply, quat_normalize, rotate
 from ..logs.flightlog import FlightLog
 
-__all__ = ["HORIZON", "PERIOD", "PUBLISHED", "QUANTITIES", "Windows", "make_windows",
-           "naive_prediction", "physics_prediction", "score", "curves", "summary"]
+__all__ = [
+    "HORIZON",
+    "PERIOD",
+    "PUBLISHED",
+    "QUANTITIES",
+    "Windows",
+    "curves",
+    "make_windows",
+    "naive_prediction",
+    "physics_prediction",
+    "score",
+    "summary",
+]
 
 HORIZON = 50            # steps per window
 PERIOD = 0.01           # s, sample period of the processed runs
@@ -151,7 +162,7 @@ def physics_prediction(windows: Windows) -> dict:
         force = np.zeros_like(p)
         force[:, 2] = thrust
 
-        def accel(quat):
+        def accel(quat, force=force):
             return rotate(quat, force) / MASS - g
 
         a1, d1 = accel(q), quat_derivative(q, w)

@@ -34,8 +34,6 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 from ..core.errors import InputError, SimulationError
