@@ -8,7 +8,7 @@ windows at every sample (:mod:`quadsim.bench.nanodrone`), predicts them with
 * ``quadsim_nominal`` -- quadsim's full rigid body (``models/nanodrone_cf21bl.toml``: b and d
   fitted on the training runs) driven by the measured rotor speeds;
 * ``quadsim_diagnosed`` -- the same plus the effects the gap diagnosis named on the training
-  runs (``models/nanodrone_cf21bl_diagnosed.toml``, every number with unit and source),
+  runs (``models/effects/nanodrone_cf21bl_diagnosed.toml``, every number with unit and source),
   and ``quadsim_nominal+A+B..`` rows adding its effects one at a time in the file's order (how
   much each shrinks the error); ``quadsim_diagnosed_rate_held``: the diagnosed forces with
   the body rate held as in the authors' physics baseline;
@@ -56,7 +56,7 @@ from quadsim.vehicle.params import load_params
 ROOT = Path(__file__).resolve().parent.parent
 TEST_RUNS = ("melon_20251017_run1", "melon_20251017_run4", "melon_20251017_run5")
 NOMINAL = ROOT / "models/nanodrone_cf21bl.toml"
-DIAGNOSED = ROOT / "models/nanodrone_cf21bl_diagnosed.toml"
+DIAGNOSED = ROOT / "models/effects/nanodrone_cf21bl_diagnosed.toml"
 
 
 def run_logs(data: Path, runs: str) -> list:

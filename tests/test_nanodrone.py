@@ -193,7 +193,7 @@ def test_effect_file_refuses_wrong_units_and_unknown_effects(tmp_path):
     from quadsim.core.errors import InputError
     from quadsim.effects.effectfile import load_effect_file
 
-    model = load_effect_file(ROOT / "models/nanodrone_cf21bl_diagnosed.toml")
+    model = load_effect_file(ROOT / "models/effects/nanodrone_cf21bl_diagnosed.toml")
     assert [e.name for e in model.effects.effects] == ["rotor_drag", "blade_flapping",
                                                       "inertia_error"]
     assert all(model.sources.values())

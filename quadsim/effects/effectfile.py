@@ -17,7 +17,7 @@ unknown effects, unknown parameters, missing units or sources and values outside
 plausible range are refused in one line (:class:`~quadsim.core.errors.InputError`)::
 
     >>> from quadsim.effects.effectfile import load_effect_file
-    >>> model = load_effect_file("models/nanodrone_cf21bl_diagnosed.toml")
+    >>> model = load_effect_file("models/effects/nanodrone_cf21bl_diagnosed.toml")
     >>> model.params, [e.name for e in model.effects.effects]
 """
 
