@@ -121,7 +121,7 @@ def plot(path: Path, curves: dict, protocol: str, published: bool) -> None:
 
     labels = {"p": "position (m)", "v": "velocity (m/s)", "R": "attitude (rad)",
               "w": "body rate (rad/s)"}
-    fig, axes = plt.subplots(1, 4, figsize=(15, 3.6))
+    fig, axes = plt.subplots(1, 4, figsize=(18, 3.8))
     horizon = np.arange(1, bench.HORIZON + 1)
     for ax, key in zip(axes, bench.QUANTITIES):
         for name, curve in curves.items():
@@ -137,8 +137,9 @@ def plot(path: Path, curves: dict, protocol: str, published: bool) -> None:
         ax.set_xlabel("horizon h (10 ms steps)")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel(f"mean error ({protocol} scoring)")
-    axes[-1].legend(fontsize=7)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 0.8, 1))
+    handles, names = axes[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="center right", fontsize=8)
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110, metadata={"Software": None})
     plt.close(fig)
