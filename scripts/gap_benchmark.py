@@ -21,6 +21,8 @@ Usage::
     python scripts/gap_benchmark.py [--out bench.json] [--jobs 2] [--cases N]
     python scripts/gap_benchmark.py --speed
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
+    python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --generate-only
+    python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
 
 Independent benchmark (``--independent``): 64 cases from sources this project's diagnosis
 did not generate (:mod:`quadsim.bench`: RotorPy closed loop with its own controller,
@@ -31,6 +33,12 @@ names the hidden effect (the named effect, or a collinear reading its answer sta
 magnitude: "+58 g heavier; or -6.5 % thrust per Omega^2"), the lead reading names it, named
 or listed at all, and the mean number of readings; then no effect -> ``no_significant_gap``
 and out-of-library -> confident wrong names.
+
+Crazyflow source (``--independent --source crazyflow --cache DIR``, :mod:`quadsim.bench.crazyflow_cases`):
+28 single-flight cases from Crazyflow (its own dynamics, integrator, controller and vehicle),
+each judged per flight against 8 nominal Crazyflow flights; ``--generate-only`` flies and
+caches them (flight-log CSV + truth sidecar per flight) and prints each case's observability
+without computing any verdict.
 """
 
 from __future__ import annotations
@@ -270,6 +278,84 @@ def _cell(v: dict) -> str:
     return ("+".join(lead) or v.get("outcome", "")) + (f" (or {', '.join(rest)})" if rest else "")
 
 
+def _magnitude(effects: dict) -> str:
+    """A case's Crazyflow effects in a table cell (SI; g, mm and ms where clearer)."""
+    def fmt(key, value):
+        value = np.atleast_1d(np.asarray(value, dtype=float))
+        if key == "payload":
+            return (f"payload {value[0] * 1e3:.3g} g at ("
+                    + ", ".join(f"{v * 1e3:.3g}" for v in value[1:]) + ") mm")
+        scale, unit = {"mass": (1e3, " g"), "com": (1e3, " mm"), "rotor_delay": (1e3, " ms"),
+                       "wind": (1.0, " m/s")}.get(key, (1.0, ""))
+        return f"{key} " + ", ".join(f"{v * scale:.3g}" for v in value) + unit
+    return "; ".join(fmt(k, v) for k, v in effects.items()) or "-"
+
+
+def summarise_crazyflow(rows: list[dict], observability_only: bool = False) -> str:
+    """Scores of the Crazyflow source (per flight against its 8 nominal flights) and the
+    per-case table; ``observability_only``: the cases and their observability, no verdict."""
+    from quadsim.bench.crazyflow_cases import OBSERVABLE
+    from quadsim.bench.score import summary_rows
+
+    lines = []
+    if not observability_only:
+        group = [{**r, "score": r["per_flight"]["score"]} for r in rows]
+        lines += ["| source | mode | in-library: a reading of the verdict names it | the lead "
+                  "reading names it | named or listed | readings per named verdict | no effect "
+                  "-> no_significant_gap | out-of-library: confident wrong name |",
+                  "|---|---|---|---|---|---|---|---|"]
+        lines += ["| " + " | ".join(row) + " |"
+                  for row in summary_rows([("crazyflow | per-flight", group)], OBSERVABLE)]
+        lines.append("")
+    hidden = [r["name"] for r in rows if r["kind"] == "library" and not r["observable"]]
+    lines.append(f"{len(rows)} cases; observable (true difference cuts the residual >= "
+                 f"{OBSERVABLE:.0%}): {sum(r['kind'] == 'library' and r['observable'] for r in rows)}"
+                 f" of {sum(r['kind'] == 'library' for r in rows)} in-library; not observable, "
+                 f"scored apart: {', '.join(hidden) or 'none'}")
+    head = ("| case | truth | kind | speed | Crazyflow change | gap / references' | "
+            "true-effect reduction |")
+    lines += ["", head + ("" if observability_only else " per-flight verdict | score |"),
+              "|---|---|---|---|---|---|---|" + ("" if observability_only else "---|---|")]
+    for r in rows:
+        cells = [r["name"], r["truth"], r["kind"], f"{r['speed']:.2f}", _magnitude(r["effects"]),
+                 f"{r['gap_vs_references']:.3g}",
+                 f"{r['oracle_reduction']:.2f}" + ("" if r["observable"] else " (not observable)")]
+        if not observability_only:
+            v = r["per_flight"]
+            s = v["score"]
+            cells += [_cell(v), "named" if s["named"] else ("no gap" if s["no_gap"] else
+                                                             ("CONFIDENT WRONG" if s["confident_wrong"]
+                                                              else "-"))]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run_crazyflow(cache: str | None, generate_only: bool, out: str) -> int:
+    """``--independent --source crazyflow``: make (or reuse) the cached flights; with
+    ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
+    from quadsim.bench import crazyflow_cases
+    from quadsim.bench.crazyflow_source import crazyflow_available
+
+    if not crazyflow_available():
+        print("error: --source crazyflow: crazyflow is not installed "
+              "(pip install 'quadsim[crazyflow]')", file=sys.stderr)
+        return 2
+    if not cache:
+        print("error: --source crazyflow: --cache DIR is required (the flights are kept there)",
+              file=sys.stderr)
+        return 2
+    folder = crazyflow_cases.generate(cache, progress=lambda m: print(m, file=sys.stderr))
+    if generate_only:
+        _, rows = crazyflow_cases.load_flights(cache)
+        print(f"flights in {folder}\n" + summarise_crazyflow(rows, observability_only=True), end="")
+        return 0
+    rows = crazyflow_cases.judge(cache)
+    atomic_write_text(out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
+    print(summarise_crazyflow(rows), end="")
+    print(f"diagnosis wall time (all flights, one process): {rows[0]['seconds_all']:.0f} s")
+    return 0
+
+
 def speed_benchmark() -> str:
     params = load_params("crazyflie21")
     log = synthetic_flight(params, [make_effect("com_offset", x=0.004)], duration=600.0,
@@ -302,7 +388,17 @@ def main(argv=None) -> int:
                         help="with --independent: keep the flown logs here and reuse them on "
                              "the next run (keyed by case and the flight sources' code); same "
                              "as the QUADSIM_BENCH_CACHE environment variable")
+    parser.add_argument("--source", choices=("rotorpy+pipeline", "crazyflow"),
+                        default="rotorpy+pipeline",
+                        help="with --independent: which independent source (crazyflow: "
+                             "per-flight cases against 8 nominal Crazyflow flights; needs "
+                             "--cache)")
+    parser.add_argument("--generate-only", action="store_true",
+                        help="with --source crazyflow: only fly and cache the flights and "
+                             "print their observability (no verdict is computed)")
     args = parser.parse_args(argv)
+    if args.independent and args.source == "crazyflow":
+        return run_crazyflow(args.cache, args.generate_only, args.out)
     if args.cache:
         os.environ["QUADSIM_BENCH_CACHE"] = str(Path(args.cache).resolve())
     if args.summarise:

@@ -12,6 +12,11 @@ timing. This subpackage provides sources that break that circle:
 * :mod:`.pipeline` -- quadsim's closed loop through a realistic sensor pipeline
   (finite-difference accelerometer from mocap, filtered and delayed rotor speeds, mocap
   latency, noise, bias, quantisation);
+* :mod:`.crazyflow_source` -- Crazyflow (``pip install 'quadsim[crazyflow]'``): its own
+  first-principles dynamics, RK4 integrator, Mellinger controller and Crazyflie 2.1
+  Brushless, run in a child process (:mod:`.crazyflow_worker`); :mod:`.crazyflow_cases` --
+  its 28 frozen single-flight cases, judged per flight against 8 nominal Crazyflow flights
+  (``scripts/gap_benchmark.py --independent --source crazyflow --cache DIR``);
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
   per-flight mode; :mod:`.score` -- reading a verdict and scoring it.

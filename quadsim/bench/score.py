@@ -4,7 +4,7 @@
 :func:`quadsim.gap.diagnose` (``result["verdict"]``) or of one flight of
 :func:`quadsim.gap.diagnose_per_flight` (``result["flights"][i]``). It returns::
 
-    {"outcome": "no_significant_gap" | "named" | "unexplained",
+    {"outcome": "no_significant_gap" | "named" | "unexplained" | "refused",
      "lead": [effects of the verdict's first reading],
      "named": [effects of every reading the verdict's answer states],
      "readings": int,         # how many readings the answer states
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["read_verdict", "score_case", "summary_rows"]
+__all__ = ["names_truth", "read_verdict", "score_case", "summary_rows"]
 
 _NO_GAP = ("no_significant_gap", "no_gap", "none")
 
@@ -53,7 +53,9 @@ def read_verdict(entry: dict) -> dict:
         effect = effect.get("name") or effect.get("effect")
     effect = str(effect or "unexplained")
     label = str(entry.get("outcome") or effect)
-    if label in _NO_GAP or effect in _NO_GAP:
+    if label == "refused":            # a flight the diagnosis could not judge (its reason kept)
+        outcome, named = "refused", []
+    elif label in _NO_GAP or effect in _NO_GAP:
         outcome, named = "no_significant_gap", []
     elif label in ("unexplained", "see flights") or effect in ("unexplained", "see flights"):
         outcome, named = "unexplained", []
@@ -76,12 +78,20 @@ def read_verdict(entry: dict) -> dict:
             "confident": outcome == "named" and not tentative}
 
 
+def names_truth(truth: str, names) -> bool:
+    """Whether ``names`` (effect names of a verdict) name ``truth``; a logged signal's delay
+    (truth ``rotor_delay``) is named by any name that contains ``delay``."""
+    if truth == "rotor_delay":
+        return any("delay" in str(n) for n in names)
+    return truth in names
+
+
 def score_case(truth: str, kind: str, verdict: dict) -> dict:
     """Per-case scores for hidden effect ``truth`` of ``kind`` library / none / outside."""
-    named = truth in verdict["named"]
-    return {"named": named, "lead": truth in verdict.get("lead", verdict["named"]),
+    named = names_truth(truth, verdict["named"])
+    return {"named": named, "lead": names_truth(truth, verdict.get("lead", verdict["named"])),
             "readings": verdict.get("readings", 1 if verdict["named"] else 0),
-            "named_or_alternative": named or truth in verdict["alternatives"],
+            "named_or_alternative": named or names_truth(truth, verdict["alternatives"]),
             "no_gap": verdict["outcome"] == "no_significant_gap",
             "confident_wrong": verdict["confident"] and (kind != "library" or not named)}
 

@@ -1,0 +1,377 @@
+"""Crazyflow benchmark cases: each a single flight judged per flight against 8 nominal Crazyflow flights.
+
+Source: :mod:`.crazyflow_source` (Crazyflow's own dynamics, RK4 integrator, Mellinger
+controller and Crazyflie 2.1 Brushless model; quadsim only converts the log). The cases are
+*frozen*: drawn once from fixed seeds (:func:`case_list`), cached by
+``scripts/gap_benchmark.py --independent --source crazyflow --generate-only --cache DIR``,
+and judged once (``--independent --source crazyflow --cache DIR``) after the verdict rules
+are frozen. Nothing here was tuned on how the diagnosis does on them.
+
+Cases (:func:`case_list`, 28; every flight 8 s at 500 Hz after a 1 s lead-in, path speed
+0.8-1.25 x unless stated), magnitudes drawn uniformly (SI) in Crazyflow's own terms:
+
+===============  ========================================  ================================
+truth            Crazyflow change (range)                  source of the range
+===============  ========================================  ================================
+none x 6         nothing; 2 at speed 0.8-1.2, 2 slower      the references' own spread
+                 (0.55-0.65), 2 faster (1.35-1.5)
+mass_offset x2   mass +5..+20 % (2.2-8.7 g at the CoM)      a heavier battery/deck: the
+                                                           CF 2.1 decks weigh 1.5-8 g
+mass_offset      payload 4-8 g at 5-15 mm from the centre,  a deck or marker mount off
+(payload)        5-10 mm below: mass, CoM, inertia          centre
+com_offset x2    CoM 3-10 % of the arm (1.5-5 mm)           battery placement (the same
+                                                           range as the RotorPy cases)
+inertia_error x2 Jxx, Jyy +15..+40 %, Jzz +0..+20 %         CAD vs pendulum inertias of
+                                                           small quads differ 10-40 %
+thrust_mismatch  one rotor's thrust and torque curve        a chipped or bent propeller
+ x2              -5..-15 %                                 (5-15 % less thrust)
+thrust_factor    every curve -5..-15 %                      worn propellers, heat
+motor_lag x2     rotor-dynamics coefficients / 1.5-2.5      a slower ESC/motor: time
+                 (57 ms -> 85-140 ms at hover)             constants 20-150 ms in the
+                                                           literature (motor_lag docs)
+rotor_drag x2    body drag x 1.5-2.5 (x, y)                 prop guards / cage; the issue's
+                                                           "rotor drag doubled"
+wind x2          steady wind 1-2.5 m/s, random direction    indoor fans, outdoor calm
+                 (through Crazyflow's own drag matrix)
+rotor_delay x2   rotor-speed log 10-30 ms late              ESC telemetry 10-30 ms
+                                                           (docs/delays.md)
+outside x 4      translational lift +2..+5 % thrust at      RotorPy's k_h model; Mahony
+                 1.5 m/s; blade-flapping moment 2-4 %       et al. 2012; a cable or loose
+                 of weight x arm at 1 m/s; a 1-3 Hz         part tugging
+                 roll/pitch torque 1-3 % of weight x arm
+===============  ========================================  ================================
+
+Observability (:func:`oracle_reductions`): the library effect with the *true difference*
+(case minus references, in quadsim's terms, :func:`library_truth`) is applied in quadsim's
+residual model (:mod:`quadsim.gap.fitting`) on top of the references' shared physics at its
+true value (:func:`shared_effects`: Crazyflow's 57/62 ms rotor dynamics and its body drag,
+both linearised at hover); a case is observable when that cuts the flight's normalised
+residual by at least :data:`OBSERVABLE` (5 %). For a rotor-log delay the "true effect" is
+the log shifted back by the true delay. Cases below it are scored apart and marked, never
+dropped.
+
+Scoring (:mod:`.score`): in-library -> a reading of the verdict names the truth (a delay:
+any reading whose name contains ``delay``); no effect -> ``no_significant_gap``;
+out-of-library -> no confident name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..effects import make_effect
+from .crazyflow_source import DRONE, RPM, FlightSpec, crazyflow_params, hover_rpm, vehicle_params
+
+__all__ = [
+    "CASES",
+    "OBSERVABLE",
+    "REFERENCES",
+    "case_list",
+    "code_hash",
+    "flight_dir",
+    "generate",
+    "judge",
+    "library_truth",
+    "load_flights",
+    "oracle_reductions",
+    "reference_specs",
+    "shared_effects",
+]
+
+REFERENCES = 8
+DURATION = 8.0
+OBSERVABLE = 0.05
+#: (truth, kind, count, speed range)
+CASES = (("none", "none", 2, (0.8, 1.2)), ("none", "none", 2, (0.55, 0.65)),
+         ("none", "none", 2, (1.35, 1.5)),
+         ("mass_offset", "library", 2, None), ("payload", "library", 1, None),
+         ("com_offset", "library", 2, None), ("inertia_error", "library", 2, None),
+         ("thrust_mismatch", "library", 2, None), ("thrust_factor", "library", 1, None),
+         ("motor_lag", "library", 2, None), ("rotor_drag", "library", 2, None),
+         ("wind", "library", 2, None), ("rotor_delay", "library", 2, None),
+         ("translational_lift", "outside", 1, None), ("blade_flapping", "outside", 1, None),
+         ("periodic_torque", "outside", 2, None))
+#: library name a case's truth is scored against (payload is an offset mass)
+SCORED_AS = {"payload": "mass_offset"}
+
+
+def reference_specs() -> list[FlightSpec]:
+    """The 8 nominal reference flights (speeds 0.8-1.25, seeds apart from the cases')."""
+    return [FlightSpec(seed=70_000 + 31 * k, speed=0.8 + 0.064 * k, duration=DURATION)
+            for k in range(REFERENCES)]
+
+
+def _draw(truth: str, rng: np.random.Generator) -> dict:
+    """Crazyflow-side effects of ``truth`` at a random realistic magnitude (module table)."""
+    cp = crazyflow_params(DRONE)
+    mass, arm = float(cp["mass"]), float(np.ravel(cp["L"])[0]) * np.sqrt(2.0)
+    weight = mass * 9.81
+    angle = rng.uniform(0, 2 * np.pi)
+    if truth == "mass_offset":
+        return {"mass": rng.uniform(0.05, 0.2) * mass}
+    if truth == "payload":
+        r, a = rng.uniform(0.005, 0.015), rng.uniform(0, 2 * np.pi)
+        return {"payload": (rng.uniform(0.004, 0.008), r * np.cos(a), r * np.sin(a),
+                            -rng.uniform(0.005, 0.01))}
+    if truth == "com_offset":
+        r = rng.uniform(0.03, 0.1) * arm
+        return {"com": (r * np.cos(angle), r * np.sin(angle))}
+    if truth == "inertia_error":
+        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
+    if truth == "thrust_mismatch":
+        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
+    if truth == "thrust_factor":
+        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
+    if truth == "motor_lag":
+        return {"motor_slow": rng.uniform(1.5, 2.5)}
+    if truth == "rotor_drag":
+        return {"drag_scale": rng.uniform(1.5, 2.5)}
+    if truth == "wind":
+        v = rng.uniform(1.0, 2.5)
+        return {"wind": (v * np.cos(angle), v * np.sin(angle))}
+    if truth == "rotor_delay":
+        return {"rotor_delay": rng.uniform(0.010, 0.030)}
+    if truth == "translational_lift":       # +2..5 % of the hover thrust at 1.5 m/s
+        return {"lift": rng.uniform(0.02, 0.05) * weight / (4 * 1.5 ** 2)}
+    if truth == "blade_flapping":           # moment 2-4 % of weight x arm at 1 m/s
+        hover = hover_rpm(cp) * RPM
+        return {"flap": rng.uniform(0.02, 0.04) * weight * arm / (4 * hover)}
+    if truth == "periodic_torque":
+        amp = rng.uniform(0.01, 0.03) * weight * arm
+        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
+                "torque_hz": rng.uniform(1.0, 3.0)}
+    raise ValueError(f"no Crazyflow case {truth!r}")
+
+
+def case_list() -> list[dict]:
+    """The frozen cases: truth (scored name), kind, seed, speed and the Crazyflow effects."""
+    out = []
+    for truth, kind, count, speeds in CASES:
+        for _ in range(count):
+            seed = 60_000 + len(out)
+            rng = np.random.default_rng(seed)
+            effects = {} if kind == "none" else {
+                k: (tuple(float(x) for x in v) if isinstance(v, tuple) else float(v))
+                for k, v in _draw(truth, rng).items()}
+            low, high = speeds or (0.8, 1.25)
+            out.append({"source": "crazyflow", "vehicle": vehicle_params().name,
+                        "truth": SCORED_AS.get(truth, truth), "case": truth, "kind": kind,
+                        "seed": seed, "speed": float(rng.uniform(low, high)),
+                        "effects": effects})
+    return out
+
+
+def case_spec(case: dict) -> FlightSpec:
+    return FlightSpec(seed=case["seed"], speed=case["speed"], duration=DURATION,
+                      effects=dict(case["effects"]))
+
+
+def _rotor_rates(cp: dict, hover: float) -> tuple[float, float]:
+    """Crazyflow's rotor dynamics linearised at the hover speed (RPM): 1/s up and down."""
+    a = np.ravel(cp["rotor_dyn_coef"])
+    return a[0] + 2 * a[1] * hover, a[2] + 2 * a[3] * hover
+
+
+def shared_effects(slow: float = 1.0, drag: float = 1.0) -> list:
+    """Crazyflow's nominal physics that quadsim's nominal model lacks, as library effects at
+    their true values: first-order rotor dynamics (time constants 1/rate at hover, x
+    ``slow``) and the body drag ``C v`` as rotor drag ``k (sum Omega) v`` with k = C / (4
+    Omega_hover) (x ``drag`` in-plane)."""
+    cp = crazyflow_params(DRONE)
+    hover = hover_rpm(cp)
+    up, down = _rotor_rates(cp, hover)
+    drag_matrix = np.asarray(cp["drag_matrix"])
+    per_speed = 4 * hover * RPM
+    return [make_effect("motor_lag", time_constant=slow / up, time_constant_down=slow / down),
+            make_effect("rotor_drag", coefficient=drag * -drag_matrix[0, 0] / per_speed,
+                        axial_coefficient=-drag_matrix[2, 2] / per_speed)]
+
+
+def library_truth(case: dict) -> list:
+    """Library effects with the true difference of ``case`` from the references, on top of
+    :func:`shared_effects` (the full effect list of the case's true model); [] for cases
+    with no library form (none, outside, delay)."""
+    e = case["effects"]
+    shared = shared_effects(e.get("motor_slow", 1.0), e.get("drag_scale", 1.0))
+    if case["kind"] != "library" or case["case"] == "rotor_delay":
+        return []
+    if "mass" in e:
+        return shared + [make_effect("mass_offset", mass=e["mass"])]
+    if "payload" in e:
+        m, x, y, z = e["payload"]
+        return shared + [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
+    if "com" in e:
+        return shared + [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
+    if "inertia" in e:
+        xx, yy, zz = e["inertia"]
+        return shared + [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
+    if "weak_rotor" in e:
+        i, d = e["weak_rotor"]
+        return shared + [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
+    if "thrust_scale" in e:
+        return shared + [make_effect("thrust_factor", change=e["thrust_scale"])]
+    if "wind" in e:
+        return shared + [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
+    return shared                      # motor_slow / drag_scale: the shared effects scaled
+
+
+def oracle_reductions(logs: list, references: list,
+                      cases: list[dict]) -> list[tuple[float, float]]:
+    """Per case (reduction, gap): the cut of its flight's normalised residual (forces,
+    torques, rotor channel) when the true difference is applied in quadsim's residual model
+    (module docstring), 1 - after / before, with the motor map fitted and the noise scale
+    taken on the references' residuals, as the diagnosis does (0 for cases with no library
+    truth); and the flight's mean squared normalised residual under the references' shared
+    physics relative to the references' own (about 1: nothing the references lack; an
+    out-of-library case far above 1 leaves a real gap)."""
+    import dataclasses
+
+    from ..gap.diagnose import prepare
+    from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
+
+    params = vehicle_params()
+    refs = [f.fit for f in prepare(list(references), params)]
+    fitted = fit_motor_map(refs, params)
+    shared = shared_effects()
+    nominal = [residuals(f, fitted, shared, rotor_channel=True) for f in refs]
+    sigma = noise_scale(np.concatenate(nominal), float(refs[0].t[1] - refs[0].t[0]),
+                        floor=noise_floor(fitted, True))
+
+    def gap(log, effects):
+        states = prepare([log], params)[0].fit
+        return float(np.mean((residuals(states, fitted, effects, rotor_channel=True)
+                              / sigma) ** 2))
+
+    out = []
+    for log, case in zip(logs, cases):
+        before = gap(log, shared)
+        if case["kind"] != "library":
+            out.append((0.0, before))
+            continue
+        if case["case"] == "rotor_delay":
+            delay = float(case["effects"]["rotor_delay"])
+            shifted = dataclasses.replace(log, rotor_speed=np.stack(
+                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))
+            after = gap(shifted, shared)
+        else:
+            after = gap(log, library_truth(case))
+        out.append((float((before - after) / before), before))
+    reference_level = float(np.mean([gap(log, shared) for log in references]))
+    return [(r, g / reference_level) for r, g in out]
+
+
+# ----------------------------------------------------------------------------- flights on disk
+
+
+def code_hash() -> str:
+    """Hash of everything the flights depend on: this source's modules and Crazyflow's
+    version (a change of either never reads a stale flight)."""
+    import hashlib
+    from importlib.metadata import version
+
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256(version("crazyflow").encode())
+    for name in ("crazyflow_source.py", "crazyflow_worker.py"):
+        digest.update((here / name).read_bytes())
+    digest.update(repr([(s.seed, s.speed, s.duration) for s in reference_specs()]).encode())
+    digest.update(repr(case_list()).encode())
+    return digest.hexdigest()[:12]
+
+
+def flight_dir(cache) -> Path:
+    return Path(cache) / f"crazyflow-{code_hash()}"
+
+
+def _name(role: str, k: int, truth: str) -> str:
+    return f"{role}_{k:02d}_{truth}" if role == "case" else f"{role}_{k:02d}"
+
+
+def generate(cache, progress=print) -> Path:
+    """Fly the references and every case (one Crazyflow child process), write each flight
+    as ``NAME.csv.gz`` (flight-log schema) with its truth sidecar ``NAME.truth.json``, and
+    the observability of every case (:func:`oracle_reductions`) to ``observability.json``.
+    Flights already there are kept (same code hash, same bytes); the observability is
+    computed again only when a flight was flown."""
+    import json
+
+    from ..core.files import atomic_write_text
+    from ..logs.flightlog import load_log, write_log
+    from .crazyflow_source import crazyflow_flights, truth_json
+
+    out = flight_dir(cache)
+    out.mkdir(parents=True, exist_ok=True)
+    cases = case_list()
+    jobs = ([(_name("ref", k, ""), s, None) for k, s in enumerate(reference_specs())]
+            + [(_name("case", k, c["case"]), case_spec(c), c) for k, c in enumerate(cases)])
+    todo = [j for j in jobs if not (out / f"{j[0]}.csv.gz").exists()]
+    if todo:
+        progress(f"crazyflow: flying {len(todo)} flights in one child process")
+        for (name, _, case), (log, truth) in zip(todo, crazyflow_flights([j[1] for j in todo])):
+            if case is not None:
+                truth = {**truth, "truth": case["truth"], "kind": case["kind"],
+                         "case": case["case"]}
+            atomic_write_text(out / f"{name}.truth.json", truth_json(truth))
+            write_log(out / f"{name}.csv.gz", log)
+    if not todo and (out / "observability.json").exists():
+        return out
+    refs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _, c in jobs if c is None]
+    named = [(name, case) for name, _, case in jobs if case is not None]
+    logs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _ in named]
+    observed = {n: {"reduction": r, "gap": g} for n, (r, g) in
+                zip([n for n, _ in named], oracle_reductions(logs, refs, [c for _, c in named]))}
+    atomic_write_text(out / "observability.json",
+                      json.dumps(observed, indent=1, sort_keys=True) + "\n")
+    return out
+
+
+def load_flights(cache) -> tuple[list, list[dict]]:
+    """(reference logs, case rows with ``_log`` and ``oracle_reduction``) from
+    :func:`generate`'s directory; raises FileNotFoundError when it is incomplete."""
+    import json
+
+    from ..logs.flightlog import load_log
+
+    out = flight_dir(cache)
+    observed = json.loads((out / "observability.json").read_text())
+    refs = [load_log(out / f"{_name('ref', k, '')}.csv.gz", warn=False)
+            for k in range(REFERENCES)]
+    rows = []
+    for k, case in enumerate(case_list()):
+        name = _name("case", k, case["case"])
+        rows.append({**case, "name": name, "_log": load_log(out / f"{name}.csv.gz", warn=False),
+                     "oracle_reduction": observed[name]["reduction"],
+                     "gap_vs_references": observed[name]["gap"],
+                     "observable": (case["kind"] != "library"
+                                    or observed[name]["reduction"] >= OBSERVABLE)})
+    return refs, rows
+
+
+def judge(cache) -> list[dict]:
+    """THE BLIND RUN: per-flight verdicts of every case against the references, scored
+    (:mod:`.score`). Run it once, after the verdict rules are frozen."""
+    import time
+    import warnings
+
+    from ..core.errors import QuadsimWarning
+    from ..gap import diagnose_per_flight
+    from .score import read_verdict, score_case
+
+    refs, rows = load_flights(cache)
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        result = diagnose_per_flight([r["_log"] for r in rows], refs, vehicle_params())
+    seconds = time.perf_counter() - start
+    out = []
+    for row, flight in zip(rows, result["flights"]):
+        verdict = read_verdict(flight)
+        row = {k: v for k, v in row.items() if k != "_log"}
+        out.append({**row, "effects": {k: np.asarray(v).tolist() for k, v in
+                                       row["effects"].items()},
+                    "per_flight": {**verdict, "reduction": flight.get("reduction"),
+                                   "score": score_case(row["truth"], row["kind"], verdict)},
+                    "seconds_all": seconds})
+    return out
