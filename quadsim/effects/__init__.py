@@ -21,6 +21,7 @@ from __future__ import annotations
 from ..core.errors import InputError
 from .base import Effect, EffectBase, EffectContext, EffectLoads, EffectParameter, EffectSet
 from .battery_sag import BatterySag
+from .blade_flapping import BladeFlapping
 from .body_drag import BodyDrag
 from .cable_payload import CablePayload
 from .canted_rotor import CantedRotor
@@ -56,7 +57,7 @@ __all__ = [
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
     MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
     ComOffset, MassOffset, InertiaError, Wind, Gyroscopic, ThrustFactor, RateDamping,
-    CantedRotor, CablePayload)}
+    CantedRotor, CablePayload, BladeFlapping)}
 
 #: Realistic magnitudes of each effect on the 0.84 kg testbed (specs for
 #: :func:`effect_set_from_specs`), shared by the engine-agreement tests and
@@ -65,6 +66,7 @@ TESTBED_EXAMPLES: dict[str, tuple[str, ...]] = {
     "thrust_curve": ("thrust_curve:linear=-2e-4",),
     "thrust_mismatch": ("thrust_mismatch:rotor_1=0.03,rotor_2=-0.02",),
     "rotor_drag": ("rotor_drag:coefficient=1e-5,axial_coefficient=5e-6",),
+    "blade_flapping": ("blade_flapping:coefficient=2e-6",),
     "body_drag": ("body_drag:cd_area=0.02,cd_area_vertical=0.04",),
     "ground_effect": ("ground_effect:gain=1.5",),
     "battery_sag": ("battery_sag:rate=0.01",),

@@ -171,6 +171,13 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
         cper = None if c is None else r * c * hover
         return (f"rotor drag {where} {_pm(per, cper, 1e3)} mN per m/s of air speed at the "
                 f"hover speed ({100 * per / weight:.2g} % of the weight at 1 m/s)")
+    if key == "blade_flapping.coefficient":
+        moment = r * value * hover                       # N m per m/s of in-plane air speed
+        cmoment = None if c is None else r * c * hover
+        accel = moment / float(params.inertia[0, 0])
+        return (f"blade flapping {_pm(moment, cmoment, 1e3, '.3g')} mN m of nose-up moment per "
+                f"m/s of air speed at the hover speed ({accel:.3g} rad/s² of roll/pitch "
+                "acceleration at 1 m/s)")
     if key in ("body_drag.cd_area", "body_drag.cd_area_vertical"):
         where = "sideways" if key.endswith(".cd_area") else "vertical"
         force = 0.5 * params.air_density * value * 4.0

@@ -167,6 +167,8 @@ FIT_SPEC = {
     "rotor_drag": (("coefficient", "axial_coefficient"), {},
                    lambda p: [_drag_scale(p)] * 2),
     "body_drag": (("cd_area", "cd_area_vertical"), {}, lambda p: [_area_scale(p)] * 2),
+    # a flapping moment as if the rotor-drag force acted half an arm above the CoM
+    "blade_flapping": (("coefficient",), {}, lambda p: [0.5 * _arm(p) * _drag_scale(p)]),
     "motor_lag": (("time_constant",), {}, lambda p: [0.03]),
     "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
     # a damping time constant I/k of about 1 s

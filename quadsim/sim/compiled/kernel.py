@@ -62,6 +62,7 @@ O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind
 O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["gust_phase"]
 GUST = offset["gust_phase"] - offset["gust_frequency"]
 O_TG, O_RDX = offset["thrust_gain"], offset["rate_damping"]
+O_BF = offset["blade_flapping"]
 O_PM, O_PL, O_PA = offset["payload_mass"], offset["payload_length"], offset["payload_attach"]
 O_PC, O_PK, O_PD = offset["payload_arm"], offset["payload_stiffness"], offset["payload_damping"]
 O_G, O_COM = offset["gravity"], offset["com"]
@@ -203,6 +204,10 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
             force_body[i] += f[i]
             momentum[i] += spin[r] * mid[r] * a[i]
             spin_up[i] += spin[r] * acc[r] * a[i]
+        kf = row[O_BF] * mid[r]    # blade_flapping: -k Omega (a x v_perp) = -k Omega (a x v)
+        torque[0] -= kf * (a[1] * air_body[2] - a[2] * air_body[1])
+        torque[1] -= kf * (a[2] * air_body[0] - a[0] * air_body[2])
+        torque[2] -= kf * (a[0] * air_body[1] - a[1] * air_body[0])
         p = arm[b, r]
         torque[0] += p[1] * f[2] - p[2] * f[1]
         torque[1] += p[2] * f[0] - p[0] * f[2]
