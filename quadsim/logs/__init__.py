@@ -31,8 +31,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.bounded import Budget, run_bounded
 from ..core.errors import InputError
-from .common import parse_rotor_map, resample
+from .common import Columns, parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")
 _SUFFIX = {".ulg": "ulog", ".bin": "dataflash"}
@@ -59,32 +60,67 @@ def detect_format(path: str | Path) -> str | None:
     return None
 
 
+#: Time budget of one import: PARSE_TIME_S plus PARSE_TIME_S_PER_MB per MB of file (the
+#: real 1 MB DataFlash log parses in about 2 s on the 2-core development machine).
+PARSE_TIME_S = 30.0
+PARSE_TIME_S_PER_MB = 10.0
+#: Memory budget of one import: PARSE_MEMORY_BYTES plus PARSE_MEMORY_PER_BYTE x file size.
+PARSE_MEMORY_BYTES = 2 * 1024**3
+PARSE_MEMORY_PER_BYTE = 100
+_NAMES = {"ulog": "ULog (pyulog)", "usd": "uSD log", "dataflash": "DataFlash (pymavlink)"}
+
+
+def parse_budget(path: str | Path) -> Budget:
+    """The time and memory budget of importing ``path`` (see PARSE_TIME_S...)."""
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        size = 0
+    return Budget(time_s=PARSE_TIME_S + PARSE_TIME_S_PER_MB * size / 1e6,
+                  memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
+
+
 def read_columns(path: str | Path, *, fmt: str | None = None,
                  rotor_map: tuple[int, ...] | None = None, topics: dict | None = None,
                  fields: dict | None = None,
                  pwm_range: tuple[float, float] | None = None,
-                 rate_hz: float | None = None) -> dict:
+                 rate_hz: float | None = None, budget: Budget | None = None) -> Columns:
     """Schema columns (SI, our frames) of a foreign log. ``topics``/``fields`` (ULog:
     signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us),
-    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants)."""
+    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants).
+
+    The parse runs in a worker process under ``budget`` (default :func:`parse_budget`;
+    :mod:`quadsim.core.bounded`); what the parser printed becomes one note."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
     fmt = fmt or detect_format(path)
+    if fmt not in FORMATS:
+        raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
+                         "or a CSV/Parquet flight log)")
+    options = {"rotor_map": rotor_map, "topics": topics or {}, "fields": fields or {},
+               "pwm_range": pwm_range, "rate_hz": rate_hz}
+    columns, chatter = run_bounded(_read_here, path, fmt, options, label=str(path),
+                                   what=_NAMES[fmt], budget=budget or parse_budget(path))
+    if chatter.total:
+        columns.notes.append(f"{path}: {_NAMES[fmt]} printed {chatter.summary()}")
+    return columns
+
+
+def _read_here(path: Path, fmt: str, options: dict) -> Columns:
+    """The import itself (in the worker process of :func:`read_columns`)."""
+    rotor_map, topics = options["rotor_map"], options["topics"]
     if fmt == "ulog":
         from .ulog import ulog_columns
-        return ulog_columns(path, rotor_map=rotor_map, topics=topics, fields=fields,
-                            pwm_range=pwm_range or (1000.0, 2000.0), rate_hz=rate_hz)
+        return ulog_columns(path, rotor_map=rotor_map, topics=topics, fields=options["fields"],
+                            pwm_range=options["pwm_range"] or (1000.0, 2000.0),
+                            rate_hz=options["rate_hz"])
     if fmt == "usd":
         from .usd import usd_columns
-        topics = topics or {}
         return usd_columns(path, rotor_map=rotor_map, event=topics.get("event"),
                            pose=topics.get("pose"))
-    if fmt == "dataflash":
-        from .dataflash import dataflash_columns
-        return dataflash_columns(path, rotor_map=rotor_map, pwm_range=pwm_range)
-    raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
-                     "or a CSV/Parquet flight log)")
+    from .dataflash import dataflash_columns
+    return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "detect_format", "parse_rotor_map", "read_columns", "resample"]
+__all__ = ["Columns", "FORMATS", "parse_budget", "detect_format", "parse_rotor_map", "read_columns", "resample"]

@@ -45,6 +45,22 @@ P_FLIP = np.diag([1.0, -1.0, -1.0])
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 
 
+class Columns(dict):
+    """Schema columns (name -> float array) and ``notes``: what the importer has to say
+    about them (the parser's corruption flags, spans lost, signals left out). The
+    validation (:func:`quadsim.logs.flightlog.log_from_columns`) adds the notes to the log."""
+
+    def __init__(self, *args, notes: tuple[str, ...] = (), vehicle: dict | None = None,
+                 **kwargs):
+        super().__init__(*args, **kwargs)
+        self.notes = list(notes)
+        #: what the log says about the vehicle: ``{"rotors": int, "kind": str, "source": str}``
+        self.vehicle = dict(vehicle or {})
+
+    def __reduce__(self):
+        return (Columns, (dict(self),), {"notes": self.notes, "vehicle": self.vehicle})
+
+
 def resample(t_src: np.ndarray, values: np.ndarray, t_out: np.ndarray, *,
              max_gap: float | None = None) -> np.ndarray:
     """Linear interpolation of ``values`` (N,) or (N, K) sampled at ``t_src`` (N,) s onto
