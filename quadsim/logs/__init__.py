@@ -109,6 +109,11 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
 
 def _read_here(path: Path, fmt: str, options: dict) -> Columns:
     """The import itself (in the worker process of :func:`read_columns`)."""
+    columns = _parse(path, fmt, options)
+    return columns if isinstance(columns, Columns) else Columns(columns)
+
+
+def _parse(path: Path, fmt: str, options: dict) -> dict:
     rotor_map, topics = options["rotor_map"], options["topics"]
     if fmt == "ulog":
         from .ulog import ulog_columns

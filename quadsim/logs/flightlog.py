@@ -60,6 +60,7 @@ from ..core.errors import InputError, QuadsimWarning, field_error
 from ..core.files import atomic_write_bytes
 from ..core.frames import quat_conjugate, quat_multiply
 from ..vehicle.state import Trajectory
+from .plausible import check_plausible
 
 __all__ = [
     "FLOAT_FORMAT",
@@ -405,6 +406,8 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
                           f"{log['rotor_speed'].shape[1]} rotor columns")
     log["vbat"] = columns.get("vbat")
     _check_units(path, log)
+    check_plausible(path, t, log)
+    notes = [*getattr(columns, "notes", ()), *notes]
     if warn:
         for note in notes:
             warnings.warn(note, QuadsimWarning, stacklevel=2)
