@@ -16,8 +16,9 @@ Outcomes (each a one-line :class:`~quadsim.core.errors.InputError` naming ``labe
 * out of memory (``MemoryError``, or the child killed) -> ``... over the memory budget``;
 * a :class:`~quadsim.core.errors.QuadsimError` in the child is raised again as it was;
 * any other exception (the library's reaction to bytes it did not expect) becomes
-  ``<label>: <what>: cannot be parsed (<ExceptionType>: <message>)``, the message made
-  printable (:func:`printable`).
+  ``<label>: <what>: cannot be parsed (<ExceptionType>: <message> at <file>:<line>)``, the
+  message made printable (:func:`~quadsim.core.errors.printable`); raised in quadsim's own
+  code it says ``internal error of quadsim's importer`` instead (a bug to report).
 
 The captured output comes back as :class:`Chatter`: distinct lines with their counts, in
 order of first appearance, made printable, for the caller to turn into its own warning.
@@ -120,11 +121,13 @@ def _child(conn, fn, args, memory_bytes: int) -> None:
     except MemoryError:
         reply = ("memory", None)
     except RecursionError:
-        reply = ("other", ("RecursionError", "nesting too deep", ""))
+        reply = ("other", ("RecursionError", "nesting too deep", "", False))
     except Exception as exc:  # noqa: BLE001 (whatever the library raises on bad bytes)
         where = traceback.extract_tb(exc.__traceback__)[-1]
+        ours = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        internal = os.path.abspath(where.filename).startswith(ours + os.sep)
         reply = ("other", (type(exc).__name__, str(exc),
-                           f"{os.path.basename(where.filename)}:{where.lineno}"))
+                           f"{os.path.basename(where.filename)}:{where.lineno}", internal))
     sys.stdout.flush()
     sys.stderr.flush()
     sink.seek(0)
@@ -180,6 +183,7 @@ def run_bounded(fn: Callable, *args, label: str, what: str,
         raise InputError(f"{label}: {what}: over the memory budget of "
                          f"{budget.memory_bytes / 2**30:g} GiB (the file is corrupt or far "
                          "larger than a flight)")
-    name, text, where = payload
-    raise InputError(f"{label}: {what}: cannot be parsed ({name}: {printable(text)}"
+    name, text, where, internal = payload
+    kind = "internal error of quadsim's importer" if internal else "cannot be parsed"
+    raise InputError(f"{label}: {what}: {kind} ({name}: {printable(text)}"
                      + (f" at {where}" if where else "") + ")")

@@ -110,7 +110,13 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
 def _read_here(path: Path, fmt: str, options: dict) -> Columns:
     """The import itself (in the worker process of :func:`read_columns`)."""
     columns = _parse(path, fmt, options)
-    return columns if isinstance(columns, Columns) else Columns(columns)
+    columns = columns if isinstance(columns, Columns) else Columns(columns)
+    if fmt in ("ulog", "dataflash"):
+        from .framing import framing_note
+        note = framing_note(path, fmt, path.read_bytes())
+        if note:
+            columns.notes.append(note)
+    return columns
 
 
 def _parse(path: Path, fmt: str, options: dict) -> dict:

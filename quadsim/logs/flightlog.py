@@ -360,7 +360,7 @@ def _check_units(path: Path, log: dict) -> None:
         raise field_error(path, "vbat", f"line {row + 2}: {vbat[row]:g} V; looks like mV")
 
 
-def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
+def load_log(path: str | Path, *, warn: bool = True, budget=None) -> FlightLog:
     """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``; also PX4 ULog,
     Crazyflie uSD and ArduPilot DataFlash files, converted by :mod:`quadsim.logs`); see the
     module docstring.
@@ -369,11 +369,13 @@ def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
     columns) is described in ``FlightLog.notes`` and, with ``warn=True``, also warned as
     :class:`~quadsim.core.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
-    dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
+    dropouts, so callers that know this pass ``warn=False`` and read ``notes``). ``budget``:
+    the time and memory budget of parsing a foreign format (default
+    :func:`quadsim.logs.parse_budget`)."""
     path = Path(path)
     from . import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
     fmt = detect_format(path)
-    columns = read_columns(path, fmt=fmt) if fmt else read_log_columns(path)
+    columns = read_columns(path, fmt=fmt, budget=budget) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)
 
 

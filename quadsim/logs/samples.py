@@ -119,15 +119,17 @@ def _ulog_topic(ULog, ulog, msg_id: int, name: str, stamps: np.ndarray, fields: 
     ulog._data_list.append(data)
 
 
-def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000) -> bytes:
-    """The flight as a PX4 ULog (pyulog's writer); every topic at the flight's instants."""
+def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000,
+               params: dict | None = None) -> bytes:
+    """The flight as a PX4 ULog (pyulog's writer); every topic at the flight's instants;
+    ``params`` override the parameters (MAV_TYPE, CA_ROTOR_COUNT)."""
     from pyulog import ULog
 
     ulog = ULog(None)
     ulog._file_version = 1
     ulog._start_timestamp = start_us
-    ulog._initial_parameters.update({"MAV_TYPE": 2, "CA_ROTOR_COUNT": 4})
-    stamps = start_us + np.round(flight.t * 1e6).astype(np.int64)
+    ulog._initial_parameters.update({"MAV_TYPE": 2, "CA_ROTOR_COUNT": 4, **(params or {})})
+    stamps = np.clip(start_us + np.round(flight.t * 1e6), 0, None).astype(np.int64)
     n = len(stamps)
     rpm = flight.rotor_speed * 60.0 / (2.0 * np.pi)
     topics = {
@@ -140,7 +142,7 @@ def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000) -> bytes:
                             ("float", 3, "accelerometer_m_s2", flight.accel * _FLIP)],
         "actuator_motors": [("float", 12, "control",
                              np.hstack([flight.command, np.full((n, 8), np.nan)]))],
-        "esc_status": [("esc_report", 8, "esc", np.hstack([np.round(rpm), np.zeros((n, 4))]))],
+        "esc_status": [("esc_report", 8, "esc", np.hstack([np.clip(np.nan_to_num(np.round(rpm)), -2**31, 2**31 - 1), np.zeros((n, 4))]))],
         "battery_status": [("float", 0, "voltage_v", flight.vbat)],
     }
     for msg_id, (name, fields) in enumerate(topics.items()):
@@ -169,9 +171,10 @@ def df_message(type_id: int, fmt: str, *values) -> bytes:
     return b"\xa3\x95" + bytes([type_id]) + struct.pack("<" + _df_sizes(fmt), *values)
 
 
-def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000) -> bytes:
+def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000,
+                    params: dict | None = None) -> bytes:
     """The flight as an ArduPilot DataFlash log (FMT, PARM, ATT, XKF1, IMU, RCOU, ESC, BAT);
-    PWM 1000-2000 us (MOT_PWM_MIN/MAX), FRAME_CLASS 1 (quad)."""
+    PWM 1000-2000 us (MOT_PWM_MIN/MAX), FRAME_CLASS 1 (quad); ``params`` override those."""
     out = bytearray(df_format(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
     layout = {129: ("PARM", "QNf", "TimeUS,Name,Value"), 130: ("ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw"),
               131: ("XKF1", "QBffffff", "TimeUS,C,PN,PE,PD,VN,VE,VD"),
@@ -180,15 +183,16 @@ def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000) -> bytes
               134: ("ESC", "QBf", "TimeUS,Instance,RPM"), 135: ("BAT", "QBf", "TimeUS,Inst,Volt")}
     for type_id, (name, fmt, columns) in layout.items():
         out += df_format(type_id, name, fmt, columns)
-    for name, value in (("FRAME_CLASS", 1.0), ("MOT_PWM_MIN", 1000.0), ("MOT_PWM_MAX", 2000.0)):
+    values = {"FRAME_CLASS": 1.0, "MOT_PWM_MIN": 1000.0, "MOT_PWM_MAX": 2000.0, **(params or {})}
+    for name, value in values.items():
         out += df_message(129, "QNf", start_us, name.encode(), value)
     euler = np.degrees(quat_to_euler(quat_ned_frd_to_world_body(flight.quat)))
     pos, vel = flight.position * _FLIP, flight.velocity * _FLIP
     gyro, acc = flight.body_rate * _FLIP, flight.accel * _FLIP
-    pwm = np.round(1000.0 + 1000.0 * flight.command).astype(int)
+    pwm = np.clip(np.nan_to_num(np.round(1000.0 + 1000.0 * flight.command)), 0, 65535).astype(int)
     rpm = flight.rotor_speed * 60.0 / (2.0 * np.pi)
     for k, t in enumerate(flight.t):
-        t_us = start_us + int(round(t * 1e6))
+        t_us = max(0, start_us + int(round(t * 1e6)))
         out += df_message(130, "Qfff", t_us, *euler[k])
         out += df_message(131, "QBffffff", t_us, 0, *pos[k], *vel[k])
         out += df_message(132, "QBffffff", t_us, 0, *gyro[k], *acc[k])
@@ -202,6 +206,11 @@ def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000) -> bytes
 # ----------------------------------------------------------------------------- uSD
 
 
+def _uint16(values: np.ndarray) -> np.ndarray:
+    """Round into the uint16 range (the firmware's saturation; NaN -> 0)."""
+    return np.clip(np.nan_to_num(np.round(values)), 0, 65535).astype(int)
+
+
 def usd_bytes(flight: SampleFlight, *, version: int = 2) -> bytes:
     """The flight as a Crazyflie uSD log (fixed-frequency event; firmware units: gyro deg/s,
     acc g, rpm, pwm 0-65535, mV)."""
@@ -213,12 +222,12 @@ def usd_bytes(flight: SampleFlight, *, version: int = 2) -> bytes:
     variables += [(f"rpm.m{i}", "H") for i in range(1, 5)]
     variables += [(f"pwm.m{i}_pwm", "H") for i in range(1, 5)] + [("pm.vbatMV", "H")]
     tick = 1000 if version == 1 else 1_000_000
-    rpm = np.round(flight.rotor_speed * 60.0 / (2.0 * np.pi)).astype(int)
-    pwm = np.round(flight.command * 65535).astype(int)
+    rpm = _uint16(flight.rotor_speed * 60.0 / (2.0 * np.pi))
+    pwm = _uint16(flight.command * 65535)
     samples = []
     for k, t in enumerate(flight.t):
         values = (*flight.position[k], *flight.velocity[k], *flight.quat[k],
                   *np.degrees(flight.body_rate[k]), *(flight.accel[k] / CF_GRAVITY),
-                  *rpm[k], *pwm[k], int(round(flight.vbat[k] * 1000)))
+                  *rpm[k], *pwm[k], *_uint16(flight.vbat[k:k + 1] * 1000))
         samples.append((round((5.0 + t) * tick), values))
     return encode_usd({"fixedFrequency": (0xFFFF, variables, samples)}, version=version)
