@@ -224,8 +224,23 @@ def check_rotors(log, params) -> None:
                           f"mass {params.mass:.4g} kg of {params.path or params.name}): {hint}")
 
 
+def check_vehicle(log, params) -> None:
+    """The log is of a multirotor with the parameter set's rotor count (refused otherwise)."""
+    if params is None:
+        return
+    name = params.path or params.name
+    if log.vehicle not in (None, "multirotor"):
+        raise field_error(_where(log), "vehicle", f"the log's parameters say a {log.vehicle}, "
+                          f"not a multirotor; the parameter set {name} is a "
+                          f"{params.rotor_count}-rotor multirotor")
+    if log.rotor_count and log.rotor_count != params.rotor_count:
+        raise field_error(_where(log), "rotor_*/cmd_*", f"{log.rotor_count} rotors in the log, "
+                          f"{params.rotor_count} in the parameter set {name}")
+
+
 def check_log(log, params=None):
     """All checks on one log; returns (log with NaN runs cut, notes)."""
+    check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
     gyro_note = check_gyro(log)

@@ -25,8 +25,9 @@ import struct
 
 __all__ = ["MAX_UNFRAMED", "dataflash_framing", "framing_note", "ulog_framing"]
 
-#: fraction of a file that may be unframed without a note (a torn last message).
-MAX_UNFRAMED = 0.001
+#: fraction of a file that may be unframed without a note (none: even a torn last message
+#: says the file was cut).
+MAX_UNFRAMED = 0.0
 _ULOG_TYPES = set(b"BFIMPQARDLCSO")
 _DF_HEAD = b"\xa3\x95"
 _DF_FMT = 128
@@ -77,7 +78,7 @@ def framing_note(path, fmt: str, data: bytes) -> str | None:
     messages; None otherwise."""
     if fmt == "ulog":
         start, size = ulog_framing(data)
-        if start is None or size - start <= MAX_UNFRAMED * size:
+        if start is None or size - start <= MAX_UNFRAMED * size:  # noqa: SIM114
             return None
         return (f"{path}: ULog framing: lost bytes {start}-{size} of {size} "
                 f"({100 * (size - start) / size:.1f} %): the message chain breaks there "
