@@ -15,6 +15,8 @@ import argparse
 import sys
 import warnings
 
+import numpy as np
+
 from ..core.args import ArgumentParser
 from ..core.errors import InputError, QuadsimWarning, run_cli
 from ..logs.flightlog import load_log
@@ -113,15 +115,35 @@ def _load(paths, params=None):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
-    for line in collapse_warnings([str(w.message) for w in caught
-                                   if issubclass(w.category, QuadsimWarning)]):
-        print(f"warning: {line}", file=sys.stderr)
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
 
     logs, notes = check_logs(logs, params)
+    for log in logs:
+        check_length(log, _WINDOW_S[0])
+    for line in collapse_warnings([str(w.message) for w in caught
+                                   if issubclass(w.category, QuadsimWarning)]):
+        print(f"warning: {line}", file=sys.stderr)  # only once every log is accepted
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
     return logs
+
+
+#: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
+#: of the noise scale and a 1 s scoring block.
+MIN_LOG_S = 2.0
+_WINDOW_S = [None]
+
+
+def check_length(log, window_s: float | None) -> None:
+    """A log long enough for the diagnosis, sampled finely enough for ``--window``."""
+    duration = float(log.t[-1] - log.t[0])
+    if duration < MIN_LOG_S:
+        raise InputError(f"{log.path}: t: {duration:.3g} s of flight; the diagnosis needs "
+                         f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
+    step = float(np.median(np.diff(log.t)))
+    if window_s is not None and window_s < 5 * step:
+        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {log.path} "
+                         f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
 def collapse_warnings(messages: list[str]) -> list[str]:
@@ -147,6 +169,7 @@ def collapse_warnings(messages: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
+    _WINDOW_S[0] = args.window
     params = load_params(args.model)
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
