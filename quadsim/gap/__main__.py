@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 
 from ..core.args import ArgumentParser
+from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, QuadsimWarning, run_cli
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
@@ -61,6 +62,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--ray", metavar="ADDRESS", default=None,
                         help="run on Ray instead: 'local' starts a local cluster, HOST:PORT "
                              "joins one (needs the [ray] extra)")
+    parser.add_argument("--allow-large", action="store_true",
+                        help="run past the cost caps (quadsim.core.cost: 4 h, 8 GiB)")
     return parser
 
 
@@ -111,7 +114,9 @@ def _map_fn(args, bar):
     return map_fn
 
 
-def _load(paths, params=None):
+def _load(paths, params, args):
+    """Load, check and count ``paths``: refused when too short, too finely windowed, or
+    when all logs so far cost past the caps (``args.samples_loaded`` counts them)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
@@ -119,7 +124,9 @@ def _load(paths, params=None):
 
     logs, notes = check_logs(logs, params)
     for log in logs:
-        check_length(log, _WINDOW_S[0])
+        check_length(log, args.window)
+    args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
+    check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
     for line in collapse_warnings([str(w.message) for w in caught
                                    if issubclass(w.category, QuadsimWarning)]):
         print(f"warning: {line}", file=sys.stderr)  # only once every log is accepted
@@ -131,7 +138,20 @@ def _load(paths, params=None):
 #: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
 #: of the noise scale and a 1 s scoring block.
 MIN_LOG_S = 2.0
-_WINDOW_S = [None]
+#: measured on the 2-core development machine (one 5 s and one 20 s log at 500 Hz, --workers
+#: 1: 6.9 s and 9.6 s): about 6 s to start and 4e-4 s per logged sample; memory ~2 kB per
+#: sample (states, residuals and candidate fits on the fit grid).
+GAP_START_S = 6.0
+GAP_S_PER_SAMPLE = 4e-4
+GAP_BYTES_PER_SAMPLE = 2048
+GAP_BASE_BYTES = 500 * 1024**2
+
+
+def gap_cost(samples: int) -> Estimate:
+    """Time and memory of diagnosing ``samples`` logged samples (:mod:`quadsim.core.cost`)."""
+    return Estimate(seconds=GAP_START_S + GAP_S_PER_SAMPLE * samples,
+                    bytes=GAP_BASE_BYTES + GAP_BYTES_PER_SAMPLE * samples,
+                    what=f"{samples} logged samples")
 
 
 def check_length(log, window_s: float | None) -> None:
@@ -169,7 +189,6 @@ def collapse_warnings(messages: list[str]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
-    _WINDOW_S[0] = args.window
     params = load_params(args.model)
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
@@ -178,11 +197,11 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
-    logs = _load(args.logs, params)
+    logs = _load(args.logs, params, args)
     if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
         from .commands import with_synthesised_speeds
         logs, _ = with_synthesised_speeds(
-            logs, _load(args.command_reference or args.reference, params))
+            logs, _load(args.command_reference or args.reference, params, args))
     progress = None
     bar = None
     if not args.quiet:
@@ -208,10 +227,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, _load(args.reference, params), params,
+            result = diagnose_per_flight(logs, _load(args.reference, params, args), params,
                                          effects=args.effects, progress=progress, **extra)
         else:
-            holdout = _load(args.holdout, params) if args.holdout else None
+            holdout = _load(args.holdout, params, args) if args.holdout else None
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, **extra)
     finally:
