@@ -277,7 +277,7 @@ def check_rotor_order(log, params) -> None:
     measured, per_rotor = _torque_windows(log, params)
     ok = np.isfinite(measured).all(axis=1) & np.isfinite(per_rotor).all(axis=1)
     measured, per_rotor = measured[ok], per_rotor[ok]
-    if len(measured) < 20:
+    if len(measured) < 10:
         return
     torque_rows = allocation_matrix(params)[3:6]
     judged = [0, 1]  # roll and pitch: the rotors' drag torque on yaw is small and noisy
