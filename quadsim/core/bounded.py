@@ -60,7 +60,8 @@ class Budget:
 
 @dataclass(frozen=True)
 class Chatter:
-    """What a library printed or warned: ``lines`` (distinct, printable) and ``counts``."""
+    """What a library printed or warned: one example line per kind (``lines``, printable)
+    and how many lines of that kind (``counts``)."""
 
     lines: tuple[str, ...] = ()
     counts: tuple[int, ...] = ()
@@ -70,8 +71,8 @@ class Chatter:
         return int(sum(self.counts))
 
     def summary(self, limit: int = 3) -> str:
-        """``N line(s): "a" (x3); "b"; ...`` -- at most ``limit`` kinds shown."""
-        shown = [f'"{line}"' + (f" (x{n})" if n > 1 else "")
+        """``N line(s): "a" (x3 alike); "b"; ...`` -- at most ``limit`` kinds shown."""
+        shown = [f'"{line}"' + (f" (x{n} alike)" if n > 1 else "")
                  for line, n in zip(self.lines[:limit], self.counts[:limit])]
         more = len(self.lines) - limit
         return (f"{self.total} line(s): " + "; ".join(shown)
@@ -79,12 +80,20 @@ class Chatter:
 
 
 def _collect(raw: str, warned: list[str]) -> Chatter:
+    """Lines that differ only in their numbers (offsets, byte values) are one kind; the
+    first of each kind is kept as its example."""
+    import re
+
+    first: dict[str, str] = {}
     counts: dict[str, int] = {}
     for line in raw.splitlines() + warned:
         line = printable(line)
-        if line:
-            counts[line] = counts.get(line, 0) + 1
-    return Chatter(tuple(counts), tuple(counts.values()))
+        if not line:
+            continue
+        kind = re.sub(r"0x[0-9a-fA-F]+|\d+(\.\d+)?", "#", line)
+        first.setdefault(kind, line)
+        counts[kind] = counts.get(kind, 0) + 1
+    return Chatter(tuple(first[k] for k in counts), tuple(counts.values()))
 
 
 def _address_space() -> int:
@@ -109,6 +118,9 @@ def _child(conn, fn, args, memory_bytes: int) -> None:
     sys.stderr.flush()
     os.dup2(sink.fileno(), 1)
     os.dup2(sink.fileno(), 2)
+    # Python-level streams too (a test harness may have replaced sys.stdout by its own)
+    sys.stdout = open(1, "w", closefd=False, errors="replace")  # noqa: SIM115
+    sys.stderr = open(2, "w", closefd=False, errors="replace")  # noqa: SIM115
     warned: list[str] = []
     try:
         with warnings.catch_warnings(record=True) as caught:

@@ -243,16 +243,22 @@ def common_span(columns: dict, path: Path | str | None = None) -> Columns:
     return out
 
 
-def increasing(path, field: str, t: np.ndarray, notes: list[str]) -> np.ndarray:
+def increasing(path, field: str, t: np.ndarray, notes: list[str], *,
+               required: bool = True) -> np.ndarray | None:
     """Mask (N,) of the samples whose time exceeds every earlier one (a clock that jumps
     back, or equal stamps). Those lost are stated in ``notes``; more than ``LOSS_NOTE`` of
-    the samples lost is refused (the time stamps are corrupt, not a few glitches)."""
+    the samples lost is refused (the time stamps are corrupt, not a few glitches) or, for
+    a signal that is not ``required``, returns None (the caller leaves it out; noted)."""
     t = np.asarray(t, dtype=float)
     if len(t) == 0:
         return np.ones(0, bool)
     keep = np.isfinite(t) & np.concatenate(
         [[True], t[1:] > np.maximum.accumulate(np.where(np.isfinite(t), t, -np.inf))[:-1]])
     lost = int((~keep).sum())
+    if lost > LOSS_NOTE * len(t) and not required:
+        notes.append(f"{path}: {field}: time does not increase in {lost} of {len(t)} "
+                     "samples; the signal is left out (lost)")
+        return None
     if lost > LOSS_NOTE * len(t):
         k = int(np.argmax(~keep))
         raise field_error(path, field, f"time does not increase at sample {k} "

@@ -32,6 +32,7 @@ formats in a worker process under a time budget) and classifies the outcome:
 from __future__ import annotations
 
 import dataclasses
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,7 +41,8 @@ import numpy as np
 from ..core.bounded import Budget
 from ..core.errors import InputError, printable
 
-__all__ = ["FORMATS", "OUTCOMES", "SEED", "Case", "judge", "make_case"]
+__all__ = ["FORMATS", "OUTCOMES", "SEED", "Case", "hanging_ulog_bytes", "judge", "judge_batch",
+           "judge_here", "make_case"]
 
 SEED = 20261124
 FORMATS = ("ulog", "dataflash", "usd")
@@ -263,3 +265,67 @@ def _whole(case: Case) -> bool:
     if case.fmt == "ulog":
         return ulog_framing(case.data)[0] is None
     return dataflash_framing(case.data)[0] == 0
+
+
+def judge_here(case: Case, folder: Path) -> tuple[str, str]:
+    """:func:`judge` without the worker process: the importer runs in this process (for a
+    batch of cases that the caller bounds as a whole, e.g. with
+    :func:`quadsim.core.bounded.run_bounded`); a hang is the caller's time budget."""
+    from . import _read_here, detect_format
+    from .flightlog import log_from_columns, read_log_columns
+
+    path = Path(folder) / case.name
+    path.write_bytes(case.data)
+    options = {"rotor_map": None, "topics": {}, "fields": {}, "pwm_range": None,
+               "rate_hz": None}
+    try:
+        fmt = detect_format(path)
+        if fmt is None:
+            columns = read_log_columns(path)
+        else:
+            columns = _read_here(path, fmt, options)
+        log = log_from_columns(path, columns, warn=False)
+    except InputError as exc:
+        text = str(exc)
+        if "\n" in text or not text.startswith(str(path)):
+            return "uncaught", printable(text, limit=10_000)
+        return "refusal", printable(text, limit=10_000)
+    except Exception as exc:  # noqa: BLE001 (that is what is counted)
+        return "uncaught", f"{type(exc).__name__}: {printable(exc)}"
+    finally:
+        path.unlink(missing_ok=True)
+    problem = _garbage(log, case.samples)
+    if problem and problem.endswith("no note") and _whole(case):
+        problem = None
+    return ("garbage", problem) if problem else ("plausible", f"{len(log)} samples")
+
+
+def judge_batch(fmt: str, indices: list[int], folder: str) -> list[tuple[int, str, str]]:
+    """``(index, outcome, message)`` of :func:`judge_here` for cases ``indices`` of ``fmt``."""
+    import warnings
+
+    out = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for index in indices:
+            case = make_case(fmt, index)
+            outcome, message = judge_here(case, Path(folder))
+            out.append((index, outcome, f"{case.kind} ({case.detail}): {message}"))
+    return out
+
+
+def hanging_ulog_bytes() -> bytes:
+    """A small ULog on which pyulog (1.3) never returns: the definitions section of the
+    sample log, then a message header of type 0 whose size runs past the end of the file.
+    pyulog reads the short rest, judges the header corrupt and seeks back ``2 + size``
+    bytes, which lands exactly on the previous message; it re-reads that and the same
+    header again, for ever."""
+    data = clean_bytes("ulog")
+    at, previous = 16, 16
+    while True:
+        size, kind = struct.unpack_from("<HB", data, at)
+        if chr(kind) in "AL":  # first message of the data section
+            break
+        previous, at = at, at + 3 + size
+    rest = 10
+    return data[:at] + struct.pack("<HB", rest + 1 + (at - previous), 0) + bytes(rest)

@@ -103,6 +103,8 @@ def _check_time(path, t: np.ndarray) -> None:
 
 
 def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity) -> None:
+    if velocity is not None:  # a unit slip first: its message names the unit
+        _check_position_units(path, t, position, velocity)
     dt = np.diff(t)
     step = np.linalg.norm(np.diff(position, axis=0), axis=1)
     ok = np.isfinite(step)
@@ -112,9 +114,6 @@ def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity) -> None:
         raise field_error(path, "x..z", f"{_line(row)}: position moves {step[row - 1]:.4g} m "
                           f"in {dt[row - 1]:.4g} s ({step[row - 1] / dt[row - 1]:.4g} m/s, "
                           f"above {MAX_SPEED:g} m/s): a jump no multirotor makes")
-    if velocity is None:
-        return
-    _check_position_units(path, t, position, velocity)
 
 
 def _check_position_units(path, t, position, velocity) -> None:

@@ -187,7 +187,11 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
         ok = np.isfinite(values).all(axis=1) if key not in ("rotor_command",) else \
             np.ones(len(t_src), bool)
         t_src, values = t_src[ok], values[ok]
-        keep = increasing(path, f"{topic}.timestamp", t_src, notes)
+        keep = increasing(path, f"{topic}.timestamp", t_src, notes,
+                          required=key in ("position", "quat"))
+        if keep is None:
+            out[key] = None
+            continue
         t_src, values = t_src[keep], values[keep]
         if len(t_src) < 2:
             if key in ("position", "quat"):
