@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.args import ArgumentParser, check_inputs, check_number, check_output
+from .core.args import ArgumentParser, check_number, check_output
 from .core.errors import InputError, QuadsimWarning, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
 from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
@@ -75,7 +75,6 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
     :class:`~quadsim.core.errors.QuadsimWarning`; ``model`` refuses a log that is not a
     multirotor with that set's rotor count."""
     source, output = Path(source), Path(output)
-    check_inputs("LOG", [source])
     check_output("-o", output, LOG_SUFFIXES, inputs=[source])
     check_number("--rate", rate_hz, low=0.0, high=MAX_RATE_HZ, unit="Hz")
     check_number("--start", start, low=0.0, low_inclusive=True, unit="s")

@@ -32,7 +32,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.bounded import Budget, run_bounded
-from ..core.errors import InputError
+from ..core.errors import InputError, field_error
 from .common import Columns, parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")
@@ -78,6 +78,28 @@ def parse_budget(path: str | Path) -> Budget:
         size = 0
     return Budget(time_s=PARSE_TIME_S + PARSE_TIME_S_PER_MB * size / 1e6,
                   memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
+
+
+_MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a39580")}
+
+
+def refuse_binary(path: Path) -> None:
+    """A ``.ulg``/``.bin`` whose first bytes are not its format's magic, or a binary file
+    that is no format at all, is refused here (not handed to the CSV reader)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except OSError:
+        return
+    shown = head[:8].hex() or "none (empty file)"
+    suffix = path.suffix.lower()
+    if suffix in _MAGIC_BY_SUFFIX:
+        name, magic = _MAGIC_BY_SUFFIX[suffix]
+        raise field_error(path, "header", f"first bytes {shown}, not the {name} magic "
+                          f"{magic}: a damaged or a different file")
+    if b"\0" in head and not head.startswith((b"PAR1", b"\x1f\x8b")):
+        raise field_error(path, "header", f"first bytes {shown} match no log format (PX4 "
+                          "ULog, Crazyflie uSD, ArduPilot DataFlash, CSV, Parquet)")
 
 
 def read_columns(path: str | Path, *, fmt: str | None = None,
@@ -134,4 +156,4 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["Columns", "FORMATS", "parse_budget", "detect_format", "parse_rotor_map", "read_columns", "resample"]
+__all__ = ["Columns", "FORMATS", "parse_budget", "refuse_binary", "detect_format", "parse_rotor_map", "read_columns", "resample"]

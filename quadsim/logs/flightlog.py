@@ -257,7 +257,9 @@ def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
     path = Path(path)
     if path.suffix == ".parquet":
         return _read_parquet_columns(path)
-    _refuse_damaged_magic(path)
+    from . import refuse_binary  # a damaged ULog/DataFlash, not a CSV
+
+    refuse_binary(path)
     text = _open_text(path)
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
@@ -382,28 +384,6 @@ def load_log(path: str | Path, *, warn: bool = True, budget=None) -> FlightLog:
     fmt = detect_format(path)
     columns = read_columns(path, fmt=fmt, budget=budget) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)
-
-
-_MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a39580")}
-
-
-def _refuse_damaged_magic(path: Path) -> None:
-    """A ``.ulg``/``.bin`` whose first bytes are not its format's magic, or a binary file
-    that is no format at all, is refused here (not handed to the CSV reader)."""
-    try:
-        with open(path, "rb") as handle:
-            head = handle.read(4096)
-    except OSError:
-        return
-    shown = head[:8].hex() or "none (empty file)"
-    suffix = path.suffix.lower()
-    if suffix in _MAGIC_BY_SUFFIX:
-        name, magic = _MAGIC_BY_SUFFIX[suffix]
-        raise field_error(path, "header", f"first bytes {shown}, not the {name} magic "
-                          f"{magic}: a damaged or a different file")
-    if b"\0" in head and not head.startswith((b"PAR1", b"\x1f\x8b")):
-        raise field_error(path, "header", f"first bytes {shown} match no log format (PX4 "
-                          "ULog, Crazyflie uSD, ArduPilot DataFlash, CSV, Parquet)")
 
 
 def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,

@@ -28,7 +28,8 @@ time step              <= ``MAX_STEP_S`` = 3600 s        an hour without a sampl
                                                         a corrupt timestamp (ArduPilot pauses
                                                         logging for minutes while disarmed)
 time precision         every step >= 1e-13 x ``|t|``     stored time must resolve its steps
-sample count           >= ``MIN_SAMPLES`` = 10           nothing to diagnose below
+sample count           >= ``MIN_SAMPLES`` = 2            a time base needs two samples (the
+                                                        diagnosis asks for 2 s of flight)
 =====================  ===============================  ======================================
 
 Example::
@@ -56,7 +57,7 @@ MAX_ATTITUDE_RATE = 100.0
 MIN_ROTOR_SPEED = 1.0
 MAX_VBAT = 100.0
 MAX_STEP_S = 3600.0
-MIN_SAMPLES = 10
+MIN_SAMPLES = 2
 #: a step below this fraction of |t| is not resolved (double precision: 2.2e-16 relative;
 #: 1e-13 keeps the step to 0.2 %)
 TIME_PRECISION = 1e-13
