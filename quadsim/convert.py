@@ -33,8 +33,8 @@ import numpy as np
 from .core.args import ArgumentParser, check_number, check_output
 from .core.errors import InputError, QuadsimWarning, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
-from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs.checks import check_vehicle
+from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs.ulog import TOPICS
 
 #: highest --rate (Hz): above any flight controller's logging rate.

@@ -48,7 +48,7 @@ def _csv(path: Path, flight=None, **changes) -> Path:
 def test_pyulog_hang_reproduced_and_refused_within_its_budget(tmp_path, capsys, monkeypatch):
     import multiprocessing
 
-    import quadsim.logs as logs
+    from quadsim import logs
     from quadsim.logs.corrupt import hanging_ulog_bytes
 
     path = tmp_path / "hang.ulg"

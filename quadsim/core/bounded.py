@@ -113,7 +113,7 @@ def _child(conn, fn, args, memory_bytes: int) -> None:
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     except (ImportError, ValueError, OSError):  # no RLIMIT_AS here: time budget only
         pass
-    sink = tempfile.TemporaryFile(mode="w+b")
+    sink = tempfile.TemporaryFile(mode="w+b")  # noqa: SIM115 (lives as long as the worker)
     sys.stdout.flush()
     sys.stderr.flush()
     os.dup2(sink.fileno(), 1)

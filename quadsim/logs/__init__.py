@@ -156,4 +156,4 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["Columns", "FORMATS", "parse_budget", "refuse_binary", "detect_format", "parse_rotor_map", "read_columns", "resample"]
+__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map", "read_columns", "refuse_binary", "resample"]

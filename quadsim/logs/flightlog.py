@@ -65,16 +65,16 @@ from .plausible import check_plausible
 
 __all__ = [
     "FLOAT_FORMAT",
-    "LOG_SUFFIXES",
     "GAP_FACTOR",
+    "LOG_SUFFIXES",
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
     "FlightLog",
     "body_rate_from_quat",
     "load_log",
     "log_bytes",
-    "log_from_columns",
     "log_file_bytes",
+    "log_from_columns",
     "parquet_bytes",
     "read_log_columns",
     "write_log",

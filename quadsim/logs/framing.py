@@ -78,7 +78,7 @@ def framing_note(path, fmt: str, data: bytes) -> str | None:
     messages; None otherwise."""
     if fmt == "ulog":
         start, size = ulog_framing(data)
-        if start is None or size - start <= MAX_UNFRAMED * size:  # noqa: SIM114
+        if start is None or size - start <= MAX_UNFRAMED * size:
             return None
         return (f"{path}: ULog framing: lost bytes {start}-{size} of {size} "
                 f"({100 * (size - start) / size:.1f} %): the message chain breaks there "

@@ -46,8 +46,14 @@ import numpy as np
 
 from ..core.errors import field_error
 
-__all__ = ["MAX_POSITION_M", "MAX_SPEED", "MAX_SPECIFIC_FORCE", "MAX_STEP_S", "MIN_SAMPLES",
-           "check_plausible"]
+__all__ = [
+    "MAX_POSITION_M",
+    "MAX_SPECIFIC_FORCE",
+    "MAX_SPEED",
+    "MAX_STEP_S",
+    "MIN_SAMPLES",
+    "check_plausible",
+]
 
 MAX_POSITION_M = 1e5
 MAX_SPEED = 100.0
@@ -121,7 +127,7 @@ def _check_position_units(path, t, position, velocity) -> None:
     """Displacement over 0.1 s windows against the integrated velocity: gain ~1."""
     steps = np.diff(t)
     dt = float(np.median(steps))
-    m = max(1, int(round(WINDOW_S / dt)))
+    m = max(1, round(WINDOW_S / dt))
     k = np.arange(0, len(t), m)
     if len(k) < 3:
         return

@@ -68,7 +68,7 @@ class SampleFlight:
 
 def sample_flight(duration_s: float = 2.0, rate_hz: float = 100.0) -> SampleFlight:
     """The circle flight of the module docstring."""
-    n = int(round(duration_s * rate_hz)) + 1
+    n = round(duration_s * rate_hz) + 1
     t = np.arange(n) / rate_hz
     c, s = np.cos(OMEGA * t), np.sin(OMEGA * t)
     position = np.stack([RADIUS_M * c, RADIUS_M * s, np.full(n, HEIGHT_M)], axis=1)
@@ -192,7 +192,7 @@ def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000,
     pwm = np.clip(np.nan_to_num(np.round(1000.0 + 1000.0 * flight.command)), 0, 65535).astype(int)
     rpm = flight.rotor_speed * 60.0 / (2.0 * np.pi)
     for k, t in enumerate(flight.t):
-        t_us = max(0, start_us + int(round(t * 1e6)))
+        t_us = max(0, start_us + round(t * 1e6))
         out += df_message(130, "Qfff", t_us, *euler[k])
         out += df_message(131, "QBffffff", t_us, 0, *pos[k], *vel[k])
         out += df_message(132, "QBffffff", t_us, 0, *gyro[k], *acc[k])
