@@ -392,3 +392,20 @@ def test_rotor_order_refused_with_the_map_to_use():
     px4 = dataclasses.replace(log, rotor_speed=log.rotor_speed[:, [0, 2, 3, 1]])
     with pytest.raises(InputError, match=r"rotor_\*: rotor order: .*--rotor-map 1,4,2,3"):
         check_rotor_order(px4, params)
+
+
+def test_body_rate_in_the_world_frame_refused():
+    """A real nominal Crazyflie flight (skips without ../shared/data): its gyro passes; the
+    same rates turned into the world frame are refused as such."""
+    from quadsim.core.frames import quat_to_rotmat
+    from quadsim.logs.checks import check_gyro, cut_nan
+
+    path = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+            / "crazyflie21_brushless" / "nominal" / "flight_10.csv.gz")
+    if not path.exists():
+        pytest.skip(f"real data not found at {path}")
+    log, _ = cut_nan(load_log(path, warn=False))
+    assert check_gyro(log) is None
+    world = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat), log.body_rate)
+    with pytest.raises(InputError, match=r"wx..wz: .*world frame"):
+        check_gyro(dataclasses.replace(log, body_rate=world))

@@ -55,6 +55,9 @@ ACCEL_GAIN_RANGE = (0.6, 1.6)  # world instead of body frame doubles the horizon
 MIN_KEPT_FRACTION = 0.5
 #: rotor order refused when another order leaves under ORDER_GOOD of the torque unexplained
 #: and under ORDER_RATIO x what the log's own order leaves
+#: gyro in the world frame: its residual against the world-frame rotation under this x the
+#: body-frame one
+FRAME_RATIO = 0.25
 ORDER_GOOD = 0.5
 ORDER_RATIO = 0.5
 #: windows of the torque balance (s): long enough that a gyro's noise in I dw is small
@@ -177,7 +180,23 @@ def check_gyro(log) -> str | None:
                               f"quaternions over {WINDOW_S} s windows (expected 1): {hint}")
     if judged == 0:
         return f"{_where(log)}: wx, wy, wz: too little rotation to check the gyro against the attitude"
+    _check_gyro_frame(log, k, quat_rot, gyro_rot)
     return None
+
+
+def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarray) -> None:
+    """Body rate logged in the world frame: the integrated gyro matches the attitude's
+    rotation turned into the world frame far better (residual under ``FRAME_RATIO`` x) than
+    in the body frame. Only visible where the vehicle is tilted (the frames differ)."""
+    world_rot = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat[k[:-1]]), quat_rot)
+    body = float(np.sum((gyro_rot - quat_rot) ** 2))
+    world = float(np.sum((gyro_rot - world_rot) ** 2))
+    differ = float(np.sum((world_rot - quat_rot) ** 2))
+    if differ > 0.02 * float(np.sum(quat_rot**2)) and world < FRAME_RATIO * body:
+        raise field_error(_where(log), "wx..wz",
+                          f"the integrated gyro matches the attitude's rotation in the world "
+                          f"frame (residual {world:.3g} rad^2) far better than in the body frame "
+                          f"({body:.3g} rad^2): body rate logged in the world frame?")
 
 
 def check_accel(log, gravity: float = 9.81) -> None:
