@@ -109,9 +109,9 @@ def _check_time(path, t: np.ndarray) -> None:
                           "relative to the start of the log")
 
 
-def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity) -> None:
+def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity, log: dict) -> None:
     if velocity is not None:  # a unit slip first: its message names the unit
-        _check_position_units(path, t, position, velocity)
+        _check_position_units(path, t, position, velocity, log)
     dt = np.diff(t)
     step = np.linalg.norm(np.diff(position, axis=0), axis=1)
     ok = np.isfinite(step)
@@ -123,7 +123,18 @@ def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity) -> None:
                           f"above {MAX_SPEED:g} m/s): a jump no multirotor makes")
 
 
-def _check_position_units(path, t, position, velocity) -> None:
+def _time_in_ms(t: np.ndarray, log: dict) -> bool:
+    """The gyro turns ~1000 x faster than the quaternions do on this time axis."""
+    rate = log.get("body_rate")
+    if rate is None:
+        return False
+    turn = _rotation_rate(t, log["quat"])
+    gyro = np.linalg.norm(0.5 * (rate[1:] + rate[:-1]), axis=1)
+    use = np.isfinite(turn) & np.isfinite(gyro) & (turn > 0)
+    return use.sum() > 5 and 300 < float(np.median(gyro[use]) / np.median(turn[use])) < 3000
+
+
+def _check_position_units(path, t, position, velocity, log) -> None:
     """Displacement over 0.1 s windows against the integrated velocity: gain ~1."""
     steps = np.diff(t)
     dt = float(np.median(steps))
@@ -144,9 +155,13 @@ def _check_position_units(path, t, position, velocity) -> None:
     ratio = float(np.median(np.sum(moved[use] * flown[use], axis=1) / norm[use]))
     lo, hi = POSITION_VELOCITY_RATIO
     if not lo <= ratio <= hi:
+        if 3e-4 < ratio < 3e-3 and _time_in_ms(t, log):
+            raise field_error(path, "t", f"position changes {ratio:.4g} x as far as the "
+                              "logged velocity integrates to, and the gyro turns ~1000 x "
+                              "faster than the quaternions: time in ms? (expected s)")
         hint = (" (positions in mm?)" if 300 < ratio < 3000 else
                 " (positions in cm?)" if 30 < ratio < 300 else
-                " (time in ms, or velocity in mm/s?)" if 3e-4 < ratio < 3e-3 else "")
+                " (velocity in mm/s?)" if 3e-4 < ratio < 3e-3 else "")
         raise field_error(path, "x..z", f"position changes {ratio:.4g} x as far as the "
                           f"logged velocity integrates to (median over {int(use.sum())} windows "
                           f"of {WINDOW_S:g} s; expected 1): positions in m, velocity in m/s{hint}")
@@ -168,7 +183,7 @@ def check_plausible(path: str | Path, t: np.ndarray, log: dict) -> None:
     _check_norm(path, "vx..vz", log.get("velocity"), MAX_SPEED, "m/s", "velocity")
     _check_norm(path, "ax..az", log.get("accel"), MAX_SPECIFIC_FORCE, "m/s^2",
                 "specific force")
-    _check_steps(path, t, log["position"], log.get("velocity"))
+    _check_steps(path, t, log["position"], log.get("velocity"), log)
     rate = _rotation_rate(t, log["quat"])
     if np.nanmax(rate, initial=0.0) > MAX_ATTITUDE_RATE:
         row = int(np.nanargmax(rate)) + 1
