@@ -83,7 +83,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.cad_dir.is_dir():
         raise InputError(f"{args.cad_dir}: CAD folder not found (give the folder holding the "
                          "meshes and the manifest)")
-    check_output("--output", args.output, (".xml",))
+    if args.output is not None:  # its folder (models/ by default) is created on success
+        folder = args.output.parent
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        check_output("--output", folder / args.output.name, (".xml",))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         model = build_model(args.cad_dir, params=args.params, output=args.output,

@@ -25,15 +25,20 @@ written.
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .core.args import ArgumentParser
-from .core.errors import InputError, run_cli
+from .core.args import ArgumentParser, check_number, check_output
+from .core.errors import InputError, QuadsimWarning, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
+from .logs.checks import check_vehicle
 from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs.ulog import TOPICS
+
+#: highest --rate (Hz): above any flight controller's logging rate.
+MAX_RATE_HZ = 100_000.0
 
 
 def _pairs(items: list[str], flag: str, allowed) -> dict[str, str]:
@@ -63,12 +68,19 @@ def _range(text: str | None) -> tuple[float, float] | None:
 def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
             rotor_map=None, topics=None, fields=None, pwm_range=None, model=None,
             start: float | None = None, end: float | None = None, rate_hz: float | None = None):
-    """Read, validate and write; returns the FlightLog. Nothing is written on error.
-    ``start``/``end`` (s, on the converted log's time axis) keep only that part; time then
-    restarts at 0."""
+    """Read, validate and write; returns the FlightLog. Nothing is written on error, and
+    never over the input (``output`` may not be ``source``). ``start``/``end`` (s, on the
+    converted log's time axis) keep only that part; time then restarts at 0. The importer's
+    notes (spans lost, a vehicle that is not a multirotor) are warned as
+    :class:`~quadsim.core.errors.QuadsimWarning`; ``model`` refuses a log that is not a
+    multirotor with that set's rotor count."""
     source, output = Path(source), Path(output)
-    if not output.name.endswith(LOG_SUFFIXES):
-        raise InputError(f"{output}: output must end in {', '.join(LOG_SUFFIXES)}")
+    check_output("-o", output, LOG_SUFFIXES, inputs=[source])
+    check_number("--rate", rate_hz, low=0.0, high=MAX_RATE_HZ, unit="Hz")
+    check_number("--start", start, low=0.0, low_inclusive=True, unit="s")
+    check_number("--end", end, low=0.0, unit="s")
+    if start is not None and end is not None and not start < end:
+        raise InputError(f"--start {start:g} s, --end {end:g} s: --start must be before --end")
     if fmt is None:
         fmt = detect_format(source) or "csv"
     if fmt == "csv":
@@ -88,10 +100,9 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
     log = log_from_columns(source, columns, warn=False)
     if model is not None:
         from .vehicle.params import load_params
-        params = load_params(model)
-        if log.rotor_count and log.rotor_count != params.rotor_count:
-            raise InputError(f"{source}: rotor_*/cmd_*: {log.rotor_count} rotors in the log, "
-                             f"{params.rotor_count} in the parameter set {model}")
+        check_vehicle(log, load_params(model))
+    for note in log.notes:
+        warnings.warn(note, QuadsimWarning, stacklevel=2)
     write_log(output, log)
     return log
 

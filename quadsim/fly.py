@@ -97,6 +97,20 @@ def _check_args(args) -> None:
     check_output("-o/--output", truth_path(args.output))
 
 
+def _check_effective(params, effects, specs) -> None:
+    """The vehicle with the effects applied is a body: positive mass, positive-definite
+    inertia (``mass_offset:mass=-1`` on a 0.84 kg vehicle is not)."""
+    import numpy as np
+
+    changed = effects.apply_to_params(params)
+    what = "--effect " + " ".join(specs)
+    if not changed.mass > 0:
+        raise InputError(f"{what}: makes the vehicle's mass {changed.mass:.4g} kg (the "
+                         f"parameter set has {params.mass:.4g} kg): no vehicle")
+    if not np.all(np.linalg.eigvalsh(np.asarray(changed.inertia)) > 0):
+        raise InputError(f"{what}: makes the vehicle's inertia not positive definite")
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
@@ -106,6 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_args(args)
     params = load_params(args.model)
     effects = effect_set_from_specs(args.effect)
+    _check_effective(params, effects, args.effect)
     sensors = SensorModel(
         noise=parse_signal_values(args.sensor_noise, flag="--sensor-noise"),
         bias=parse_signal_values(args.sensor_bias, flag="--sensor-bias", signed=True),

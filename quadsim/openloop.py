@@ -102,7 +102,7 @@ def _save_response_plot(curves, title: str, path: Path) -> Path:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, metadata={"Software": None})
     plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
+    atomic_write_bytes(path, buffer.getvalue(), make_parents=True)  # the --plots folder
     return path
 
 
@@ -174,7 +174,10 @@ def _check_args(args) -> dict:
         plots = Path(args.plots)
         if plots.exists() and not plots.is_dir():
             raise InputError(f"{plots}: --plots: not a folder")
-        check_output("--plots", plots / "probe.png")
+        folder = plots  # --plots names a folder to write into: it is created (asked for)
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        check_output("--plots", folder / "probe.png")
     if args.rerun:
         from .viewer import check_output_path
 

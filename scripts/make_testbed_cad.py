@@ -340,9 +340,10 @@ def write_testbed(out_dir: Path) -> list[Path]:
     """Write every STL and the manifest into ``out_dir``; return the paths written."""
     parts = testbed_parts()
     assign_masses(parts)
-    written = [atomic_write_bytes(out_dir / f"{p['name']}.stl", stl_bytes(*p["shape"]))
+    written = [atomic_write_bytes(out_dir / f"{p['name']}.stl", stl_bytes(*p["shape"]),
+                                  make_parents=True)
                for p in parts]
-    written.append(atomic_write_text(out_dir / "testbed.toml", manifest_text(parts)))
+    written.append(atomic_write_text(out_dir / "testbed.toml", manifest_text(parts), make_parents=True))
     return written
 
 

@@ -116,6 +116,7 @@ def pool(tmp_path_factory):
     empty_dir = root / "emptycad"
     empty_dir.mkdir()
     out = root / "out"
+    out.mkdir()  # outputs never create folders
     return {
         "logs": logs,
         "good": [str(p) for p in good],

@@ -129,6 +129,7 @@ def test_cli_is_deterministic_and_writes_truth_sidecar(tmp_path, capsys):
     outputs = []
     for name in ("a", "b"):
         path = tmp_path / name / "flight.csv.gz"
+        path.parent.mkdir()  # outputs never create folders
         assert main(ARGS + ["-o", str(path)]) == 0
         outputs.append((path.read_bytes(), truth_path(path).read_bytes()))
     assert outputs[0] == outputs[1]

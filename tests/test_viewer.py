@@ -217,8 +217,10 @@ def test_bad_inputs_are_rejected(tmp_path, params):
     with pytest.raises(InputError, match="201 samples"):
         recording_bytes(params=params, trajectories={"mujoco": traj},
                         residuals={"wrench": np.zeros(201)})
-    check_output_path(tmp_path / "new" / "deeper" / "ok.rrd")  # creatable: fine
+    with pytest.raises(InputError, match="does not exist"):  # outputs never create folders
+        check_output_path(tmp_path / "new" / "deeper" / "ok.rrd")
     assert not (tmp_path / "new").exists()
+    check_output_path(tmp_path / "ok.rrd")
 
 
 def test_spawn_headless_says_how_to_view(tmp_path, params, monkeypatch, capsys):

@@ -2,8 +2,8 @@
 
 argparse checks types; these check meaning: numeric ranges (``--window -0.1``), finite
 values, input files that exist, the same file given twice or in two roles (training and
-``--holdout``), and output paths that can be written (suffix, not a directory, nearest
-existing parent folder writable), so that a long computation never fails at its last step.
+``--holdout``; also a byte-identical copy), and output paths that can be written (suffix,
+not a directory, not an input, folder exists and is writable), so that a long computation never fails at its last step.
 Each failure is one :class:`~quadsim.core.errors.InputError` line naming the flag (or the file)
 and the value. Nothing here writes anything.
 
@@ -73,14 +73,36 @@ def _key(path: Path) -> tuple:
         return ("path", str(path.resolve()))
 
 
+def _content(path: Path) -> tuple | None:
+    """(size, sha256) of a file's bytes; None when it cannot be read."""
+    import hashlib
+
+    try:
+        digest = hashlib.sha256()
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+        return ("content", path.stat().st_size, digest.hexdigest())
+    except OSError:
+        return None
+
+
 def distinct_files(roles: Mapping[str, Iterable[str | os.PathLike] | None]) -> None:
     """Refuse a file given twice in one role or in two roles (e.g. ``LOG`` and
-    ``--holdout``): a flight in both training and held-out sets would score its own fit."""
+    ``--holdout``), also as a byte-identical copy under another name: a flight in both
+    training and held-out sets would score its own fit."""
     seen: dict[tuple, tuple[str, Path]] = {}
     for role, paths in roles.items():
         for path in paths or ():
             path = Path(path)
             key = _key(path)
+            copy = _content(path)
+            if key not in seen and copy is not None and copy in seen:
+                first_role, first = seen[copy]
+                raise InputError(f"{path}: {role}: the same bytes as {first} ({first_role}); "
+                                 "each flight once (training and held-out must differ)")
+            if copy is not None:
+                seen.setdefault(copy, (role, path))
             if key in seen:
                 first_role, first = seen[key]
                 if first_role == role:
@@ -95,8 +117,8 @@ def check_output(flag: str, path: str | os.PathLike | None,
                  suffixes: tuple[str, ...] | None = None,
                  inputs: Iterable[str | os.PathLike] = ()) -> None:
     """An output file can be written at ``path``: its name ends in one of ``suffixes``, it
-    is not a directory, it is not one of the ``inputs``, and its nearest existing parent
-    folder is writable. Writes nothing."""
+    is not a directory, it is not one of the ``inputs``, and its folder exists and is
+    writable. Writes nothing."""
     if path is None:
         return
     path = Path(path)
@@ -108,8 +130,9 @@ def check_output(flag: str, path: str | os.PathLike | None,
         if Path(other).exists() and path.exists() and _key(Path(other)) == _key(path):
             raise InputError(f"{path}: {flag}: is also an input; it would be overwritten")
     parent = path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
+    if not parent.exists():
+        raise InputError(f"{path}: {flag}: folder {parent} does not exist (outputs never "
+                         "create folders; create it first)")
     if not parent.is_dir():
         raise InputError(f"{path}: {flag}: cannot write: {parent} is not a directory")
     try:  # a real probe: os.access says yes to root even on read-only file systems

@@ -2,7 +2,8 @@
 
 Writers put the bytes into a temporary file in the destination folder and rename it over
 the destination (``os.replace`` is atomic on POSIX and Windows), so an interrupted run never
-leaves half a file and never destroys the previous one.
+leaves half a file and never destroys the previous one. Folders are not created unless the
+caller asks (``make_parents``): a typo in an output path is an error, not a new tree.
 """
 
 from __future__ import annotations
@@ -21,11 +22,17 @@ def _current_umask() -> int:
     return mask
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically; create parent folders. Returns the path."""
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, *,
+                       make_parents: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically. The folder must exist: no folder is created
+    unless ``make_parents`` (for a command whose output *is* a folder). Returns the path."""
     path = Path(path)
+    if not make_parents and not path.parent.is_dir():
+        raise InputError(f"{path}: cannot write: folder {path.parent} does not exist "
+                         "(create it first)")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        if make_parents:
+            path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
@@ -46,9 +53,10 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     return path
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+def atomic_write_text(path: str | os.PathLike, text: str, *,
+                      make_parents: bool = False) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically (see :func:`atomic_write_bytes`)."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, text.encode("utf-8"), make_parents=make_parents)
 
 
 def read_toml(path: str | os.PathLike) -> dict:

@@ -15,7 +15,10 @@ import argparse
 import sys
 import warnings
 
+import numpy as np
+
 from ..core.args import ArgumentParser
+from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, QuadsimWarning, run_cli
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
@@ -59,6 +62,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--ray", metavar="ADDRESS", default=None,
                         help="run on Ray instead: 'local' starts a local cluster, HOST:PORT "
                              "joins one (needs the [ray] extra)")
+    parser.add_argument("--allow-large", action="store_true",
+                        help="run past the cost caps (quadsim.core.cost: 4 h, 8 GiB)")
     return parser
 
 
@@ -109,19 +114,56 @@ def _map_fn(args, bar):
     return map_fn
 
 
-def _load(paths, params=None):
+def _load(paths, params, args):
+    """Load, check and count ``paths``: refused when too short, too finely windowed, or
+    when all logs so far cost past the caps (``args.samples_loaded`` counts them)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
-    for line in collapse_warnings([str(w.message) for w in caught
-                                   if issubclass(w.category, QuadsimWarning)]):
-        print(f"warning: {line}", file=sys.stderr)
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
 
     logs, notes = check_logs(logs, params)
+    for log in logs:
+        check_length(log, args.window)
+    args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
+    check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
+    for line in collapse_warnings([str(w.message) for w in caught
+                                   if issubclass(w.category, QuadsimWarning)]):
+        print(f"warning: {line}", file=sys.stderr)  # only once every log is accepted
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
     return logs
+
+
+#: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
+#: of the noise scale and a 1 s scoring block.
+MIN_LOG_S = 2.0
+#: measured on the 2-core development machine (one 5 s and one 20 s log at 500 Hz, --workers
+#: 1: 6.9 s and 9.6 s): about 6 s to start and 4e-4 s per logged sample; memory ~2 kB per
+#: sample (states, residuals and candidate fits on the fit grid).
+GAP_START_S = 6.0
+GAP_S_PER_SAMPLE = 4e-4
+GAP_BYTES_PER_SAMPLE = 2048
+GAP_BASE_BYTES = 500 * 1024**2
+
+
+def gap_cost(samples: int) -> Estimate:
+    """Time and memory of diagnosing ``samples`` logged samples (:mod:`quadsim.core.cost`)."""
+    return Estimate(seconds=GAP_START_S + GAP_S_PER_SAMPLE * samples,
+                    bytes=GAP_BASE_BYTES + GAP_BYTES_PER_SAMPLE * samples,
+                    what=f"{samples} logged samples")
+
+
+def check_length(log, window_s: float | None) -> None:
+    """A log long enough for the diagnosis, sampled finely enough for ``--window``."""
+    duration = float(log.t[-1] - log.t[0])
+    if duration < MIN_LOG_S:
+        raise InputError(f"{log.path}: t: {duration:.3g} s of flight; the diagnosis needs "
+                         f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
+    step = float(np.median(np.diff(log.t)))
+    if window_s is not None and window_s < 5 * step:
+        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {log.path} "
+                         f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
 def collapse_warnings(messages: list[str]) -> list[str]:
@@ -155,13 +197,14 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
-    logs = _load(args.logs, params)
-    holdout = _load(args.holdout, params) if args.holdout else None
-    reference = _load(args.reference, params) if args.reference else None
+    logs = _load(args.logs, params, args)
+    holdout = _load(args.holdout, params, args) if args.holdout else None
+    reference = _load(args.reference, params, args) if args.reference else None
     # command-only logs in any role: speeds synthesised (quadsim.gap.commands.synthesise_all)
     from .commands import synthesise_all
 
-    command_ref = _load(args.command_reference, params) if args.command_reference else reference
+    command_ref = (_load(args.command_reference, params, args) if args.command_reference
+                   else reference)
     roles, command_model = synthesise_all({"logs": logs, "holdout": holdout,
                                            "reference": reference}, params, command_ref)
     logs, holdout, reference = roles["logs"], roles["holdout"], roles["reference"]

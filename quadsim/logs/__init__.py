@@ -31,8 +31,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..core.errors import InputError
-from .common import parse_rotor_map, resample
+from ..core.bounded import Budget, run_bounded
+from ..core.errors import InputError, field_error
+from .common import Columns, parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")
 _SUFFIX = {".ulg": "ulog", ".bin": "dataflash"}
@@ -59,32 +60,100 @@ def detect_format(path: str | Path) -> str | None:
     return None
 
 
+#: Time budget of one import: PARSE_TIME_S plus PARSE_TIME_S_PER_MB per MB of file (the
+#: real 1 MB DataFlash log parses in about 2 s on the 2-core development machine).
+PARSE_TIME_S = 30.0
+PARSE_TIME_S_PER_MB = 10.0
+#: Memory budget of one import: PARSE_MEMORY_BYTES plus PARSE_MEMORY_PER_BYTE x file size.
+PARSE_MEMORY_BYTES = 2 * 1024**3
+PARSE_MEMORY_PER_BYTE = 100
+_NAMES = {"ulog": "ULog (pyulog)", "usd": "uSD log", "dataflash": "DataFlash (pymavlink)"}
+
+
+def parse_budget(path: str | Path) -> Budget:
+    """The time and memory budget of importing ``path`` (see PARSE_TIME_S...)."""
+    try:
+        size = Path(path).stat().st_size
+    except OSError:
+        size = 0
+    return Budget(time_s=PARSE_TIME_S + PARSE_TIME_S_PER_MB * size / 1e6,
+                  memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
+
+
+_MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a39580")}
+
+
+def refuse_binary(path: Path) -> None:
+    """A ``.ulg``/``.bin`` whose first bytes are not its format's magic, or a binary file
+    that is no format at all, is refused here (not handed to the CSV reader)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except OSError:
+        return
+    shown = head[:8].hex() or "none (empty file)"
+    suffix = path.suffix.lower()
+    if suffix in _MAGIC_BY_SUFFIX:
+        name, magic = _MAGIC_BY_SUFFIX[suffix]
+        raise field_error(path, "header", f"first bytes {shown}, not the {name} magic "
+                          f"{magic}: a damaged or a different file")
+    if b"\0" in head and not head.startswith((b"PAR1", b"\x1f\x8b")):
+        raise field_error(path, "header", f"first bytes {shown} match no log format (PX4 "
+                          "ULog, Crazyflie uSD, ArduPilot DataFlash, CSV, Parquet)")
+
+
 def read_columns(path: str | Path, *, fmt: str | None = None,
                  rotor_map: tuple[int, ...] | None = None, topics: dict | None = None,
                  fields: dict | None = None,
                  pwm_range: tuple[float, float] | None = None,
-                 rate_hz: float | None = None) -> dict:
+                 rate_hz: float | None = None, budget: Budget | None = None) -> Columns:
     """Schema columns (SI, our frames) of a foreign log. ``topics``/``fields`` (ULog:
     signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us),
-    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants)."""
+    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants).
+
+    The parse runs in a worker process under ``budget`` (default :func:`parse_budget`;
+    :mod:`quadsim.core.bounded`); what the parser printed becomes one note."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
     fmt = fmt or detect_format(path)
+    if fmt not in FORMATS:
+        raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
+                         "or a CSV/Parquet flight log)")
+    options = {"rotor_map": rotor_map, "topics": topics or {}, "fields": fields or {},
+               "pwm_range": pwm_range, "rate_hz": rate_hz}
+    columns, chatter = run_bounded(_read_here, path, fmt, options, label=str(path),
+                                   what=_NAMES[fmt], budget=budget or parse_budget(path))
+    if chatter.total:
+        columns.notes.append(f"{path}: {_NAMES[fmt]} printed {chatter.summary()}")
+    return columns
+
+
+def _read_here(path: Path, fmt: str, options: dict) -> Columns:
+    """The import itself (in the worker process of :func:`read_columns`)."""
+    columns = _parse(path, fmt, options)
+    columns = columns if isinstance(columns, Columns) else Columns(columns)
+    if fmt in ("ulog", "dataflash"):
+        from .framing import framing_note
+        note = framing_note(path, fmt, path.read_bytes())
+        if note:
+            columns.notes.append(note)
+    return columns
+
+
+def _parse(path: Path, fmt: str, options: dict) -> dict:
+    rotor_map, topics = options["rotor_map"], options["topics"]
     if fmt == "ulog":
         from .ulog import ulog_columns
-        return ulog_columns(path, rotor_map=rotor_map, topics=topics, fields=fields,
-                            pwm_range=pwm_range or (1000.0, 2000.0), rate_hz=rate_hz)
+        return ulog_columns(path, rotor_map=rotor_map, topics=topics, fields=options["fields"],
+                            pwm_range=options["pwm_range"] or (1000.0, 2000.0),
+                            rate_hz=options["rate_hz"])
     if fmt == "usd":
         from .usd import usd_columns
-        topics = topics or {}
         return usd_columns(path, rotor_map=rotor_map, event=topics.get("event"),
                            pose=topics.get("pose"))
-    if fmt == "dataflash":
-        from .dataflash import dataflash_columns
-        return dataflash_columns(path, rotor_map=rotor_map, pwm_range=pwm_range)
-    raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
-                     "or a CSV/Parquet flight log)")
+    from .dataflash import dataflash_columns
+    return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "detect_format", "parse_rotor_map", "read_columns", "resample"]
+__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map", "read_columns", "refuse_binary", "resample"]

@@ -54,6 +54,16 @@ GAIN_RANGE = (0.3, 3.0)  # gross errors only (unit, sign, frame); calibration is
 THRUST_RANGE = (0.25, 4.0)
 ACCEL_GAIN_RANGE = (0.6, 1.6)  # world instead of body frame doubles the horizontal gain
 MIN_KEPT_FRACTION = 0.5
+#: rotor order refused when another order leaves under ORDER_GOOD of the torque unexplained
+#: and under ORDER_RATIO x what the log's own order leaves
+#: gyro in the world frame: its residual against the world-frame rotation under this x the
+#: body-frame one
+FRAME_RATIO = 0.25
+ORDER_GOOD = 0.5
+ORDER_RATIO = 0.5
+#: windows of the torque balance (s): long enough that a gyro's noise in I dw is small
+#: against the torque integral, short against a manoeuvre
+ORDER_WINDOW_S = 0.4
 MIN_KEPT_S = 1.0
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
@@ -171,7 +181,23 @@ def check_gyro(log) -> str | None:
                               f"quaternions over {WINDOW_S} s windows (expected 1): {hint}")
     if judged == 0:
         return f"{_where(log)}: wx, wy, wz: too little rotation to check the gyro against the attitude"
+    _check_gyro_frame(log, k, quat_rot, gyro_rot)
     return None
+
+
+def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarray) -> None:
+    """Body rate logged in the world frame: the integrated gyro matches the attitude's
+    rotation turned into the world frame far better (residual under ``FRAME_RATIO`` x) than
+    in the body frame. Only visible where the vehicle is tilted (the frames differ)."""
+    world_rot = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat[k[:-1]]), quat_rot)
+    body = float(np.sum((gyro_rot - quat_rot) ** 2))
+    world = float(np.sum((gyro_rot - world_rot) ** 2))
+    differ = float(np.sum((world_rot - quat_rot) ** 2))
+    if differ > 0.02 * float(np.sum(quat_rot**2)) and world < FRAME_RATIO * body:
+        raise field_error(_where(log), "wx..wz",
+                          f"the integrated gyro matches the attitude's rotation in the world "
+                          f"frame (residual {world:.3g} rad^2) far better than in the body frame "
+                          f"({body:.3g} rad^2): body rate logged in the world frame?")
 
 
 def check_accel(log, gravity: float = 9.81) -> None:
@@ -225,8 +251,87 @@ def check_rotors(log, params) -> None:
                           f"mass {params.mass:.4g} kg of {params.path or params.name}): {hint}")
 
 
+def _torque_windows(log, params):
+    """(measured, per-rotor) torque integrals over ``ORDER_WINDOW_S`` windows: measured (W, 3) =
+    I dw + int w x I w dt; per-rotor (W, R) = int Omega_j^2 dt (N m s, rad^2/s)."""
+    dt = float(np.median(np.diff(log.t)))
+    k = np.arange(0, len(log.t), max(1, round(ORDER_WINDOW_S / dt)))
+    inertia = np.asarray(params.inertia, dtype=float)
+    momentum = log.body_rate @ inertia.T
+    gyro = np.cross(log.body_rate, momentum)
+    measured = (momentum[k[1:]] - momentum[k[:-1]]) + (
+        _cumtrapz(log.t, gyro)[k[1:]] - _cumtrapz(log.t, gyro)[k[:-1]])
+    squares = _cumtrapz(log.t, np.square(log.rotor_speed))
+    return measured, squares[k[1:]] - squares[k[:-1]]
+
+
+def _order_score(measured: np.ndarray, predicted: np.ndarray, judged: list[int]) -> float:
+    """Unexplained fraction of the measured torque by the predicted one, pooled over the
+    judged axes (sum of squared residuals / sum of squares about the mean; gain and offset
+    fitted per axis: a CoM offset is an offset, a wrong b or d a gain)."""
+    residual, total = 0.0, 0.0
+    for a in judged:
+        design = np.stack([predicted[:, a], np.ones(len(predicted))], axis=1)
+        coef, *_ = np.linalg.lstsq(design, measured[:, a], rcond=None)
+        spread = np.sum((measured[:, a] - measured[:, a].mean()) ** 2)
+        total += spread
+        # a torque that acts against its command explains nothing
+        residual += spread if coef[0] <= 0 else np.sum((measured[:, a] - design @ coef) ** 2)
+    return float(residual / total) if total > 0 else 1.0
+
+
+def check_rotor_order(log, params) -> None:
+    """Rotor columns in the parameter set's order: the torque balance under each
+    permutation of the rotor columns (the mixer's allocation applied to the permuted
+    Omega^2); a permutation explaining the measured torque far better than the log's own
+    order (unexplained share below ``ORDER_RATIO`` x the log order's and below
+    ``ORDER_GOOD``) is refused, naming the ``--rotor-map`` that applies it."""
+    import itertools
+
+    if (params is None or log.rotor_speed is None or log.body_rate is None
+            or log.rotor_speed.shape[1] != params.rotor_count or len(log.t) < 50
+            or params.rotor_count > 6):
+        return
+    from ..vehicle.rotors import allocation_matrix
+
+    measured, per_rotor = _torque_windows(log, params)
+    ok = np.isfinite(measured).all(axis=1) & np.isfinite(per_rotor).all(axis=1)
+    measured, per_rotor = measured[ok], per_rotor[ok]
+    if len(measured) < 10:
+        return
+    torque_rows = allocation_matrix(params)[3:6]
+    judged = [0, 1]  # roll and pitch: the rotors' drag torque on yaw is small and noisy
+    scores = {}
+    for perm in itertools.permutations(range(params.rotor_count)):
+        scores[perm] = _order_score(measured, per_rotor[:, perm] @ torque_rows.T, judged)
+    own = tuple(range(params.rotor_count))
+    best = min(scores, key=scores.get)
+    if best != own and scores[best] < ORDER_GOOD and scores[best] < ORDER_RATIO * scores[own]:
+        mapping = ",".join(str(m + 1) for m in best)
+        raise field_error(_where(log), "rotor_*", f"rotor order: the torque balance leaves "
+                          f"{100 * scores[own]:.0f} % of the measured torque unexplained in "
+                          f"the log's order but {100 * scores[best]:.0f} % with rotor i taken "
+                          f"from column m_i = {mapping} (convert --rotor-map {mapping}); "
+                          f"rotors numbered as in {params.path or params.name}?")
+
+
+def check_vehicle(log, params) -> None:
+    """The log is of a multirotor with the parameter set's rotor count (refused otherwise)."""
+    if params is None:
+        return
+    name = params.path or params.name
+    if log.vehicle not in (None, "multirotor"):
+        raise field_error(_where(log), "vehicle", f"the log's parameters say a {log.vehicle}, "
+                          f"not a multirotor; the parameter set {name} is a "
+                          f"{params.rotor_count}-rotor multirotor")
+    if log.rotor_count and log.rotor_count != params.rotor_count:
+        raise field_error(_where(log), "rotor_*/cmd_*", f"{log.rotor_count} rotors in the log, "
+                          f"{params.rotor_count} in the parameter set {name}")
+
+
 def check_log(log, params=None):
     """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes)."""
+    check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
     log, note = cut_ground(log)          # ground, idle and landing spans (quadsim.logs.spans)
@@ -236,6 +341,7 @@ def check_log(log, params=None):
         notes.append(gyro_note)
     check_accel(log, params.gravity if params is not None else 9.81)
     check_rotors(log, params)
+    check_rotor_order(log, params)
     return log, notes
 
 

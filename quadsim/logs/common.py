@@ -45,6 +45,22 @@ P_FLIP = np.diag([1.0, -1.0, -1.0])
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 
 
+class Columns(dict):
+    """Schema columns (name -> float array) and ``notes``: what the importer has to say
+    about them (the parser's corruption flags, spans lost, signals left out). The
+    validation (:func:`quadsim.logs.flightlog.log_from_columns`) adds the notes to the log."""
+
+    def __init__(self, *args, notes: tuple[str, ...] = (), vehicle: dict | None = None,
+                 **kwargs):
+        super().__init__(*args, **kwargs)
+        self.notes = list(notes)
+        #: what the log says about the vehicle: ``{"rotors": int, "kind": str, "source": str}``
+        self.vehicle = dict(vehicle or {})
+
+    def __reduce__(self):
+        return (Columns, (dict(self),), {"notes": self.notes, "vehicle": self.vehicle})
+
+
 def resample(t_src: np.ndarray, values: np.ndarray, t_out: np.ndarray, *,
              max_gap: float | None = None) -> np.ndarray:
     """Linear interpolation of ``values`` (N,) or (N, K) sampled at ``t_src`` (N,) s onto
@@ -168,14 +184,116 @@ def columns_from_signals(t: np.ndarray, signals: dict[str, np.ndarray | None]) -
     return columns
 
 
-def common_span(columns: dict) -> dict:
+#: an optional signal finite on less than this fraction of the rows is left out (with a
+#: note) instead of trimming the log to its span.
+MIN_COVER = 0.5
+#: a trim that loses more than this fraction of the rows is stated in a note.
+LOSS_NOTE = 0.05
+_REQUIRED_KEYS = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
+
+
+def _signal_of(name: str) -> str:
+    for group, names in (("position", "xyz"), ("velocity", ("vx", "vy", "vz")),
+                         ("quat", ("qw", "qx", "qy", "qz")), ("body_rate", ("wx", "wy", "wz")),
+                         ("accel", ("ax", "ay", "az"))):
+        if name in names:
+            return group
+    return name.split("_")[0] if "_" in name else name
+
+
+def common_span(columns: dict, path: Path | str | None = None) -> Columns:
     """The rows from the first to the last where *every* column is finite (the time span
     that all topics cover); NaN inside the span (a gap in one topic) is kept. Time
-    restarts at 0."""
-    ok = np.all([np.isfinite(v) for v in columns.values()], axis=0)
+    restarts at 0. An optional signal finite on fewer than ``MIN_COVER`` of the rows is
+    left out instead (with a note naming it), so that one damaged topic cannot trim the
+    flight; a trim losing more than ``LOSS_NOTE`` of the rows is stated in a note with the
+    span lost."""
+    notes = list(getattr(columns, "notes", ()))
+    out = Columns(columns, notes=notes, vehicle=getattr(columns, "vehicle", None))
+    n = len(out["t"])
+    where = path if path is not None else "log"
+    groups: dict[str, list[str]] = {}
+    for name in out:
+        if name not in _REQUIRED_KEYS:
+            groups.setdefault(_signal_of(name), []).append(name)
+    for signal, names in groups.items():
+        finite = np.all([np.isfinite(out[k]) for k in names], axis=0)
+        if finite.mean() < MIN_COVER:
+            for k in names:
+                del out[k]
+            out.notes.append(f"{where}: {signal}: finite on {int(finite.sum())} of {n} rows; "
+                             "left out (the other signals keep the whole flight)")
+    ok = np.all([np.isfinite(v) for v in out.values()], axis=0)
     if not ok.any():
-        return columns
+        return out
     first, last = int(np.argmax(ok)), len(ok) - int(np.argmax(ok[::-1]))
-    out = {k: v[first:last] for k, v in columns.items()}
+    t = out["t"]
+    if (n - (last - first)) > LOSS_NOTE * n:
+        lost = [f"{t[0]:.3f}-{t[first]:.3f} s" for _ in [0] if first > 0]
+        lost += [f"{t[last - 1]:.3f}-{t[-1]:.3f} s" for _ in [0] if last < n]
+        short = [s for s in groups if not np.all(
+            [np.isfinite(out[k][:first]).all() and np.isfinite(out[k][last:]).all()
+             for k in groups[s] if k in out])]
+        out.notes.append(f"{where}: t: lost {n - (last - first)} of {n} rows "
+                         f"({' and '.join(lost)} of the attitude time base) where "
+                         f"{', '.join(short) or 'a signal'} is missing")
+    for k in list(out):
+        out[k] = out[k][first:last]
     out["t"] = out["t"] - out["t"][0]
     return out
+
+
+def increasing(path, field: str, t: np.ndarray, notes: list[str], *,
+               required: bool = True) -> np.ndarray | None:
+    """Mask (N,) of the samples whose time exceeds every earlier one (a clock that jumps
+    back, or equal stamps). Those lost are stated in ``notes``; more than ``LOSS_NOTE`` of
+    the samples lost is refused (the time stamps are corrupt, not a few glitches) or, for
+    a signal that is not ``required``, returns None (the caller leaves it out; noted)."""
+    t = np.asarray(t, dtype=float)
+    if len(t) == 0:
+        return np.ones(0, bool)
+    keep = np.isfinite(t) & np.concatenate(
+        [[True], t[1:] > np.maximum.accumulate(np.where(np.isfinite(t), t, -np.inf))[:-1]])
+    lost = int((~keep).sum())
+    if lost > LOSS_NOTE * len(t) and not required:
+        notes.append(f"{path}: {field}: time does not increase in {lost} of {len(t)} "
+                     "samples; the signal is left out (lost)")
+        return None
+    if lost > LOSS_NOTE * len(t):
+        k = int(np.argmax(~keep))
+        raise field_error(path, field, f"time does not increase at sample {k} "
+                          f"({t[k]:.6g} s after {t[k - 1]:.6g} s); {lost} of {len(t)} "
+                          "samples out of order: corrupt time stamps")
+    if lost:
+        notes.append(f"{path}: {field}: lost {lost} of {len(t)} sample(s) whose time does "
+                     "not increase (left out)")
+    return keep
+
+
+def check_unit_quat(path, field: str, t: np.ndarray, quat: np.ndarray,
+                    tolerance: float = 0.01) -> None:
+    """Refuse finite quaternions (N, 4) whose norm is off 1 by more than ``tolerance``,
+    before any normalisation (a 2x or an all-zero quaternion is corrupt, not an attitude)."""
+    norms = np.linalg.norm(quat, axis=1)
+    bad = np.isfinite(norms) & (np.abs(norms - 1.0) > tolerance)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise field_error(path, field, f"sample {k} (t = {t[k]:.6g} s): quaternion norm "
+                          f"{norms[k]:.4g} ({int(bad.sum())} such sample(s)); expected unit "
+                          "quaternions")
+
+
+def check_parameter(path, name: str, value, *, low: float, high: float,
+                    integer: bool = False) -> float:
+    """A parameter read from a log, validated like user input: finite, in [low, high],
+    a whole number when ``integer``. Returns it as float."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise field_error(path, name, f"parameter {value!r} is not a number") from None
+    if not np.isfinite(number) or not low <= number <= high or (
+            integer and number != round(number)):
+        kind = "a whole number" if integer else "a number"
+        raise field_error(path, name, f"parameter {number:g}: expected {kind} in "
+                          f"{low:g}..{high:g}")
+    return number

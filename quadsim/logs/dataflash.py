@@ -42,10 +42,14 @@ import numpy as np
 from ..core.errors import InputError, field_error
 from ..core.frames import euler_to_quat
 from .common import (
+    LOSS_NOTE,
     RPM_TO_RAD_S,
+    Columns,
+    check_parameter,
     columns_from_signals,
     common_span,
     frd_to_body,
+    increasing,
     map_rotors,
     ned_to_world,
     pwm_to_unit,
@@ -58,6 +62,8 @@ MAGIC = b"\xa3\x95\x80"
 _FRAME_ROTORS = {1: 4, 2: 6, 3: 8, 4: 8, 5: 6, 7: 3}
 _WANTED = ("ATT", "XKF1", "EKF1", "POS", "IMU", "RCOU", "ESC", "BAT", "CURR", "PARM")
 EARTH_RADIUS = 6378137.0  # m, WGS-84 equatorial
+#: notes of the import in progress (one import per worker process at a time)
+_NOTES: list[str] = []
 
 
 def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str, str]]:
@@ -83,17 +89,32 @@ def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str
             break
         kind = msg.get_type()
         if kind == "PARM":
-            params[msg.Name] = float(msg.Value)
+            name, value = getattr(msg, "Name", None), getattr(msg, "Value", None)
+            if not isinstance(name, str) or value is None:
+                raise field_error(path, "PARM", "parameter message without Name/Value "
+                                  "(damaged format definition)")
+            params[name] = value
         else:
             messages[kind].append(msg.to_dict())
     formats = {f.name: f.format for f in reader.formats.values()}
+    reader.close()
     return messages, params, formats
 
 
-def _time(rows: list[dict]) -> np.ndarray:
-    if "TimeUS" in rows[0]:
-        return np.array([r["TimeUS"] for r in rows], dtype=float) * 1e-6
-    return np.array([r["TimeMS"] for r in rows], dtype=float) * 1e-3
+def _time(path: Path, rows: list[dict], kind: str) -> np.ndarray:
+    for name, scale in (("TimeUS", 1e-6), ("TimeMS", 1e-3)):
+        if name in rows[0]:
+            try:
+                return np.array([r[name] for r in rows], dtype=float) * scale
+            except (TypeError, ValueError, KeyError):
+                raise field_error(path, f"{kind}.{name}", "not a number in every message "
+                                  "(damaged format definition)") from None
+    raise field_error(path, f"{kind}.TimeUS", "no TimeUS or TimeMS field: unknown ArduPilot "
+                      f"message layout (fields present: {', '.join(_present(rows))})")
+
+
+def _present(rows: list[dict]) -> list[str]:
+    return [str(k) for k in rows[0] if k != "mavpackettype"]
 
 
 def _first_instance(rows: list[dict]) -> list[dict]:
@@ -103,18 +124,26 @@ def _first_instance(rows: list[dict]) -> list[dict]:
     return rows
 
 
-def _table(path: Path, rows: list[dict], fields: list[str], kind: str):
-    rows = _first_instance(rows)
+def _table(path: Path, rows: list[dict], fields: list[str], kind: str, *,
+           first_only: bool = True):
+    rows = _first_instance(rows) if first_only else rows
     if not rows:
         return None
     missing = [f for f in fields if f not in rows[0]]
     if missing:
         raise field_error(path, f"{kind}.{missing[0]}", "unknown ArduPilot message layout "
-                          f"(fields present: {', '.join(k for k in rows[0] if k != 'mavpackettype')})")
-    t = _time(rows)
-    values = np.array([[r[f] for f in fields] for r in rows], dtype=float)
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    return t[keep], values[keep]
+                          f"(fields present: {', '.join(_present(rows))})")
+    t = _time(path, rows, kind)
+    try:
+        values = np.array([[r.get(f) for f in fields] for r in rows], dtype=float)
+    except (TypeError, ValueError):
+        raise field_error(path, kind, f"fields {', '.join(fields)} are not numbers in every "
+                          "message (damaged format definition)") from None
+    ok = increasing(path, f"{kind}.TimeUS", t, _NOTES)
+    if ok.sum() < 2:
+        raise field_error(path, kind, f"{int(ok.sum())} usable message(s) with increasing "
+                          "time; 2 or more are needed")
+    return t[ok], values[ok]
 
 
 def _position(path: Path, messages: dict):
@@ -133,13 +162,30 @@ def _position(path: Path, messages: dict):
                       "layout (expected XKF1, EKF1 or POS)")
 
 
-def _rotor_setup(params: dict, pwm_range):
-    count = _FRAME_ROTORS.get(int(params.get("FRAME_CLASS", 1)), 4)
+def _rotor_setup(path: Path, params: dict, pwm_range):
+    count = 4
+    if "FRAME_CLASS" in params:
+        frame = int(check_parameter(path, "FRAME_CLASS", params["FRAME_CLASS"], low=0,
+                                    high=255, integer=True))
+        if frame not in _FRAME_ROTORS:
+            raise field_error(path, "FRAME_CLASS", f"parameter {frame}: not a multirotor "
+                              "frame class this importer knows (1 quad, 2 hexa, 3 octa, "
+                              "4 octa-quad, 5 Y6, 7 tri)")
+        count = _FRAME_ROTORS[frame]
+
+    def pair(lo: str, hi: str):
+        low = check_parameter(path, lo, params[lo], low=500, high=2500)
+        high = check_parameter(path, hi, params[hi], low=500, high=2500)
+        if not low < high:
+            raise field_error(path, lo, f"parameter {low:g} not below {hi} {high:g}")
+        return low, high
+
     if pwm_range is None:
-        if params.get("MOT_PWM_MIN", 0) > 0 and params.get("MOT_PWM_MAX", 0) > 0:
-            pwm_range = (params["MOT_PWM_MIN"], params["MOT_PWM_MAX"])
+        if "MOT_PWM_MIN" in params and "MOT_PWM_MAX" in params and not (
+                params["MOT_PWM_MIN"] == 0 and params["MOT_PWM_MAX"] == 0):
+            pwm_range = pair("MOT_PWM_MIN", "MOT_PWM_MAX")
         elif "RC3_MIN" in params and "RC3_MAX" in params:
-            pwm_range = (params["RC3_MIN"], params["RC3_MAX"])
+            pwm_range = pair("RC3_MIN", "RC3_MAX")
         else:
             pwm_range = (1000.0, 2000.0)
     return count, pwm_range
@@ -152,7 +198,7 @@ def _commands(path, messages, count, pwm_range):
     prefix = "C" if "C1" in rows[0] else "Ch"
     t, pwm = _table(path, rows, [f"{prefix}{i + 1}" for i in range(count)], "RCOU")
     cmd = pwm_to_unit(pwm, pwm_range)
-    if cmd.max() > 1.05 or cmd.min() < -0.05:
+    if not np.isfinite(cmd).all() or cmd.max() > 1.05 or cmd.min() < -0.05:
         raise field_error(path, "RCOU", f"motor outputs span {pwm.min():g}..{pwm.max():g} us, "
                           f"outside the PWM range {pwm_range[0]:g}-{pwm_range[1]:g} us: unknown "
                           "range (--pwm-range)")
@@ -165,16 +211,17 @@ def _speeds(path, messages, count):
         return None
     series = []
     for i in range(count):
-        mine = [r for r in rows if r["Instance"] == i]
+        mine = [r for r in rows if r.get("Instance") == i]
         if len(mine) < 2:
             raise field_error(path, "ESC", f"no RPM for motor {i + 1} of {count}")
-        series.append((_time(mine), np.abs(np.array([r["RPM"] for r in mine], float))))
+        t, rpm = _table(path, mine, ["RPM"], "ESC", first_only=False)
+        series.append((t, np.abs(rpm[:, 0])))
     return series
 
 
 def _voltage(path, messages, formats):
     for kind in ("BAT", "CURR"):
-        if messages[kind] and "Volt" in messages[kind][0]:
+        if len(messages[kind]) >= 2 and "Volt" in messages[kind][0]:
             t, volt = _table(path, messages[kind], ["Volt"], kind)
             fmt_cols = formats.get(kind, "")
             if kind == "CURR" and "h" in fmt_cols and volt.max() > 100:
@@ -189,15 +236,17 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
                       pwm_range: tuple[float, float] | None = None) -> dict[str, np.ndarray]:
     """Flight-log columns (SI, schema names, our frames) from an ArduPilot DataFlash log."""
     path = Path(path)
+    _NOTES.clear()
     messages, params, formats = _read(path)
     if not messages["ATT"]:
         raise field_error(path, "ATT", "no attitude message: unknown ArduPilot message layout")
     t_base, euler = _table(path, messages["ATT"], ["Roll", "Pitch", "Yaw"], "ATT")
+    _check_euler(path, t_base, euler)
     quat_ned = euler_to_quat(np.radians(euler))
     pos, vel = _position(path, messages)
     imu = _table(path, messages["IMU"], ["GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
                  "IMU") if messages["IMU"] else None
-    count, pwm_range = _rotor_setup(params, pwm_range)
+    count, pwm_range = _rotor_setup(path, params, pwm_range)
     cmd = _commands(path, messages, count, pwm_range)
     speeds = _speeds(path, messages, count)
     volt = _voltage(path, messages, formats)
@@ -213,11 +262,29 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
         speed = np.stack([resample(t, v, t_base) for t, v in speeds], axis=1) * RPM_TO_RAD_S
         sig["rotor_speed"] = map_rotors(path, "ESC", speed, rotor_map)
     sig["vbat"] = resample(*volt, t_base) if volt else None
-    keep = np.isfinite(sig["position"]).all(axis=1)
+    keep = np.isfinite(sig["position"]).all(axis=1) & np.isfinite(sig["quat"]).all(axis=1)
     if keep.sum() < 2:
         raise field_error(path, "XKF1/EKF1", "position and attitude never overlap in time")
-    return common_span(columns_from_signals(
-        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}))
+    notes = list(_NOTES)
+    if keep.mean() < 1 - LOSS_NOTE:
+        notes.append(f"{path}: XKF1/EKF1/POS: lost {int((~keep).sum())} of {len(keep)} ATT "
+                     f"rows without position (kept {t_base[keep][0] - t_base[0]:.3f}-"
+                     f"{t_base[keep][-1] - t_base[0]:.3f} s of 0-{t_base[-1] - t_base[0]:.3f} s)")
+    columns = Columns(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}),
+        notes=notes, vehicle={"rotors": count, "kind": "multirotor",
+                              "source": "ArduPilot FRAME_CLASS"})
+    return common_span(columns, path)
+
+
+def _check_euler(path: Path, t: np.ndarray, euler: np.ndarray) -> None:
+    """Roll and yaw within +-360 deg, pitch within +-90 deg (ATT, degrees)."""
+    for i, (name, limit) in enumerate((("Roll", 360.0), ("Pitch", 90.5), ("Yaw", 360.0))):
+        bad = ~np.isfinite(euler[:, i]) | (np.abs(euler[:, i]) > limit)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise field_error(path, f"ATT.{name}", f"message {k} (t = {t[k]:.6g} s): "
+                              f"{euler[k, i]:.4g} deg, outside +-{limit:g} deg")
 
 
 def is_dataflash(head: bytes) -> bool:

@@ -36,7 +36,8 @@ voltage in mV. Warnings (:class:`~quadsim.core.errors.QuadsimWarning`): NaN/Inf 
 columns (kept as NaN), sample-rate jumps (a gap over ``GAP_FACTOR`` times the median step),
 unknown columns (ignored).
 
-Writer (:func:`write_log`): columns in schema order, floats as ``%.10g``, ``\\n`` line ends;
+Writer (:func:`write_log`): columns in schema order, floats as ``%.10g`` (time with full
+precision, ``%.17g``, when ``%.10g`` would not keep its steps), ``\\n`` line ends;
 ``.gz`` output is gzip with mtime 0 and no stored file name, so equal logs give equal bytes.
 
 Parquet (optional, ``pip install 'quadsim[parquet]'``): a ``.parquet`` file with the same
@@ -60,19 +61,20 @@ from ..core.errors import InputError, QuadsimWarning, field_error
 from ..core.files import atomic_write_bytes
 from ..core.frames import quat_conjugate, quat_multiply
 from ..vehicle.state import Trajectory
+from .plausible import check_plausible
 
 __all__ = [
     "FLOAT_FORMAT",
-    "LOG_SUFFIXES",
     "GAP_FACTOR",
+    "LOG_SUFFIXES",
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
     "FlightLog",
     "body_rate_from_quat",
     "load_log",
     "log_bytes",
-    "log_from_columns",
     "log_file_bytes",
+    "log_from_columns",
     "parquet_bytes",
     "read_log_columns",
     "write_log",
@@ -106,7 +108,9 @@ class FlightLog:
     body-to-world; body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2
     body or None; rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or
     None; vbat (N,) V or None; path: the file it came from (None if built in code); notes:
-    the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns).
+    the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns);
+    vehicle: what the log's own parameters say the vehicle is ("multirotor", "VTOL", ...;
+    None when the log does not say, as in a CSV).
     """
 
     t: np.ndarray
@@ -120,6 +124,7 @@ class FlightLog:
     vbat: np.ndarray | None = None
     path: Path | None = None
     notes: tuple[str, ...] = ()
+    vehicle: str | None = None
 
     def __post_init__(self):
         n = len(self.t)
@@ -252,6 +257,9 @@ def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
     path = Path(path)
     if path.suffix == ".parquet":
         return _read_parquet_columns(path)
+    from . import refuse_binary  # a damaged ULog/DataFlash, not a CSV
+
+    refuse_binary(path)
     text = _open_text(path)
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
@@ -359,7 +367,7 @@ def _check_units(path: Path, log: dict) -> None:
         raise field_error(path, "vbat", f"line {row + 2}: {vbat[row]:g} V; looks like mV")
 
 
-def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
+def load_log(path: str | Path, *, warn: bool = True, budget=None) -> FlightLog:
     """Read and validate a flight log (``.csv``, ``.csv.gz`` or ``.parquet``; also PX4 ULog,
     Crazyflie uSD and ArduPilot DataFlash files, converted by :mod:`quadsim.logs`); see the
     module docstring.
@@ -368,11 +376,13 @@ def load_log(path: str | Path, *, warn: bool = True) -> FlightLog:
     Suspicious but usable data (NaN runs in optional columns, sample-rate jumps, unknown
     columns) is described in ``FlightLog.notes`` and, with ``warn=True``, also warned as
     :class:`~quadsim.core.errors.QuadsimWarning` (the real Crazyflie logs have motion-capture
-    dropouts, so callers that know this pass ``warn=False`` and read ``notes``)."""
+    dropouts, so callers that know this pass ``warn=False`` and read ``notes``). ``budget``:
+    the time and memory budget of parsing a foreign format (default
+    :func:`quadsim.logs.parse_budget`)."""
     path = Path(path)
     from . import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
     fmt = detect_format(path)
-    columns = read_columns(path, fmt=fmt) if fmt else read_log_columns(path)
+    columns = read_columns(path, fmt=fmt, budget=budget) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)
 
 
@@ -405,10 +415,13 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
                           f"{log['rotor_speed'].shape[1]} rotor columns")
     log["vbat"] = columns.get("vbat")
     _check_units(path, log)
+    check_plausible(path, t, log)
+    notes = [*getattr(columns, "notes", ()), *notes]
     if warn:
         for note in notes:
             warnings.warn(note, QuadsimWarning, stacklevel=2)
-    return FlightLog(t=t, path=path, notes=tuple(notes), **log)
+    vehicle = getattr(columns, "vehicle", {}).get("kind")
+    return FlightLog(t=t, path=path, notes=tuple(notes), vehicle=vehicle, **log)
 
 
 # ----------------------------------------------------------------------------- writing
@@ -437,7 +450,8 @@ def log_bytes(log: FlightLog, *, gzipped: bool) -> bytes:
     names, blocks = _columns_of(log)
     buffer = io.StringIO()
     buffer.write(",".join(names) + "\n")
-    np.savetxt(buffer, np.hstack(blocks), fmt=FLOAT_FORMAT, delimiter=",", newline="\n")
+    formats = [time_format(log.t)] + [FLOAT_FORMAT] * (len(names) - 1)
+    np.savetxt(buffer, np.hstack(blocks), fmt=formats, delimiter=",", newline="\n")
     data = buffer.getvalue().replace("nan", "").encode("ascii")
     if not gzipped:
         return data
@@ -445,6 +459,18 @@ def log_bytes(log: FlightLog, *, gzipped: bool) -> bytes:
     with gzip.GzipFile(filename="", mode="wb", fileobj=out, mtime=0, compresslevel=6) as gz:
         gz.write(data)
     return out.getvalue()
+
+
+def time_format(t: np.ndarray) -> str:
+    """``FLOAT_FORMAT`` when it keeps every time step to 1e-6 of the smallest step, else
+    ``%.17g`` (full double precision): absolute times such as 1.7e9 s are not rounded to
+    whole seconds."""
+    t = np.asarray(t, dtype=float)
+    if len(t) < 2:
+        return FLOAT_FORMAT
+    written = np.array([float(FLOAT_FORMAT % v) for v in t])
+    tolerance = 1e-6 * float(np.min(np.abs(np.diff(t))))
+    return FLOAT_FORMAT if np.all(np.abs(written - t) <= tolerance) else "%.17g"
 
 
 def parquet_bytes(log: FlightLog) -> bytes:

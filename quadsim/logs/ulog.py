@@ -41,10 +41,15 @@ import numpy as np
 
 from ..core.errors import InputError, field_error
 from .common import (
+    LOSS_NOTE,
     RPM_TO_RAD_S,
+    Columns,
+    check_parameter,
+    check_unit_quat,
     columns_from_signals,
     common_span,
     frd_to_body,
+    increasing,
     map_rotors,
     ned_to_world,
     pwm_to_unit,
@@ -54,6 +59,8 @@ from .common import (
 )
 
 MAGIC = b"ULog\x01\x12\x35"
+#: most rows a uniform ``rate_hz`` time base may have (8 float columns x 1e7 rows ~ 2 GB).
+MAX_ROWS = 10_000_000
 #: signal -> candidate (topic, field prefix, count) in order of preference.
 TOPICS = {
     "position": [("vehicle_local_position", "", ("x", "y", "z"))],
@@ -107,11 +114,33 @@ def _signal(ulog, key: str, topic_over: str | None, field_over: str | None):
             continue
         data = min(sets, key=lambda d: d.multi_id).data
         names = _fields(data, prefix, spec)
-        if names is None:
+        if names is None or "timestamp" not in data:
             continue
         values = np.stack([np.asarray(data[n], dtype=float) for n in names], axis=1)
         return np.asarray(data["timestamp"], dtype=float) * 1e-6, values, topic
     return None
+
+
+#: PX4 MAV_TYPE values of multirotors -> rotor count (None: from the outputs).
+_MULTIROTOR = {2: 4, 3: 2, 13: 6, 14: 8, 15: 3}
+_VEHICLE = {1: "fixed wing", 4: "helicopter", 19: "VTOL", 20: "VTOL", 21: "VTOL",
+            22: "VTOL", 23: "VTOL", 24: "VTOL", 25: "VTOL", 10: "ground rover", 12: "submarine"}
+
+
+def _vehicle(path: Path, ulog) -> dict:
+    """What the log's parameters say about the vehicle (MAV_TYPE, CA_ROTOR_COUNT)."""
+    params = ulog.initial_parameters
+    info: dict = {"source": "PX4 MAV_TYPE"}
+    if "MAV_TYPE" in params:
+        kind = int(check_parameter(path, "MAV_TYPE", params["MAV_TYPE"], low=0, high=255,
+                                   integer=True))
+        info["mav_type"] = kind
+        info["kind"] = ("multirotor" if kind in _MULTIROTOR else
+                        _VEHICLE.get(kind, f"MAV_TYPE {kind}"))
+    if "CA_ROTOR_COUNT" in params:
+        info["rotors"] = int(check_parameter(path, "CA_ROTOR_COUNT", params["CA_ROTOR_COUNT"],
+                                             low=1, high=16, integer=True))
+    return info
 
 
 def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
@@ -124,6 +153,10 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     path = Path(path)
     topics, fields = topics or {}, fields or {}
     ulog = _open(path)
+    notes: list[str] = []
+    if ulog.file_corruption:
+        notes.append(f"{path}: pyulog found corrupt data and skipped it (file_corruption)")
+    vehicle = _vehicle(path, ulog)
     sig = {k: _signal(ulog, k, topics.get(k), fields.get(k)) for k in TOPICS}
     for key, what in (("position", "vehicle_local_position x/y/z"),
                       ("quat", "vehicle_attitude q[0..3]")):
@@ -132,22 +165,39 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
                               "(needed for position and attitude; --topic overrides)")
     t_base = sig["quat"][0]
     valid = np.isfinite(sig["quat"][1]).all(axis=1)
+    check_unit_quat(path, f"{sig['quat'][2]}.q", t_base, sig["quat"][1])
     t_base = t_base[valid]
+    t_base = t_base[increasing(path, f"{sig['quat'][2]}.timestamp", t_base, [])]
+    if len(t_base) < 2:
+        raise field_error(path, f"{sig['quat'][2]}", f"{len(t_base)} usable attitude "
+                          "sample(s); the attitude topic is the time base")
     if rate_hz:
+        rows = (t_base[-1] - t_base[0]) * rate_hz
+        if not 2 <= rows <= MAX_ROWS:
+            raise field_error(path, "--rate", f"{rate_hz:g} Hz over the attitude span of "
+                              f"{t_base[-1] - t_base[0]:.4g} s gives {rows:.4g} rows; "
+                              f"2..{MAX_ROWS:.0e} allowed")
         t_base = t_base[0] + np.arange(int((t_base[-1] - t_base[0]) * rate_hz) + 1) / rate_hz
     out: dict[str, np.ndarray | None] = {}
     for key, found in sig.items():
         if found is None:
             out[key] = None
             continue
-        t_src, values, _topic = found
+        t_src, values, topic = found
         ok = np.isfinite(values).all(axis=1) if key not in ("rotor_command",) else \
             np.ones(len(t_src), bool)
         t_src, values = t_src[ok], values[ok]
-        if len(t_src) < 2 or np.any(np.diff(t_src) <= 0):
-            keep = np.concatenate([[True], np.diff(t_src) > 0]) if len(t_src) else []
-            t_src, values = t_src[keep], values[keep]
+        keep = increasing(path, f"{topic}.timestamp", t_src, notes,
+                          required=key in ("position", "quat"))
+        if keep is None:
+            out[key] = None
+            continue
+        t_src, values = t_src[keep], values[keep]
         if len(t_src) < 2:
+            if key in ("position", "quat"):
+                raise field_error(path, topic, f"{len(t_src)} usable sample(s); 2 or more "
+                                  "are needed")
+            notes.append(f"{path}: {topic}: {len(t_src)} usable sample(s); {key} left out")
             out[key] = None
             continue
         out[key] = (resample_quat(t_src, values, t_base) if key == "quat"
@@ -168,8 +218,21 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     if keep.sum() < 2:
         raise field_error(path, "vehicle_local_position", "position and attitude never "
                           "overlap in time")
-    return common_span(columns_from_signals(
-        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in out.items()}))
+    if keep.mean() < 1 - LOSS_NOTE:
+        notes.append(f"{path}: vehicle_local_position: lost {int((~keep).sum())} of "
+                     f"{len(keep)} attitude rows without position (kept "
+                     f"{t_base[keep][0] - t_base[0]:.3f}-{t_base[keep][-1] - t_base[0]:.3f} s "
+                     f"of 0-{t_base[-1] - t_base[0]:.3f} s)")
+    if vehicle.get("kind", "multirotor") != "multirotor":
+        notes.append(f"{path}: MAV_TYPE {vehicle['mav_type']}: a {vehicle['kind']}, not a "
+                     "multirotor; rotor columns are its first motor outputs")
+    if out["rotor_command"] is not None or out["rotor_speed"] is not None:
+        vehicle["rotors"] = (out["rotor_command"] if out["rotor_command"] is not None
+                             else out["rotor_speed"]).shape[1]
+    columns = Columns(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in out.items()}),
+        notes=notes, vehicle=vehicle)
+    return common_span(columns, path)
 
 
 def _rotors(path, ulog, sig, out, pwm_range):
@@ -180,7 +243,8 @@ def _rotors(path, ulog, sig, out, pwm_range):
         raw = sig["rotor_command"][1]
         used = np.isfinite(raw).any(axis=0)
         if sig["rotor_command"][2] == "actuator_outputs":
-            count = int(ulog.initial_parameters.get("CA_ROTOR_COUNT", 4))
+            count = int(check_parameter(path, "CA_ROTOR_COUNT", ulog.initial_parameters.get(
+                "CA_ROTOR_COUNT", 4), low=1, high=16, integer=True))
             cmd = pwm_to_unit(cmd, pwm_range)
         else:
             count = int(np.flatnonzero(used)[-1]) + 1 if used.any() else 0
@@ -192,7 +256,8 @@ def _rotors(path, ulog, sig, out, pwm_range):
                               "(set pwm_range / --pwm-range)")
     if speed is not None:
         if count is None:
-            count = int(ulog.initial_parameters.get("CA_ROTOR_COUNT", speed.shape[1]))
+            count = int(check_parameter(path, "CA_ROTOR_COUNT", ulog.initial_parameters.get(
+                "CA_ROTOR_COUNT", speed.shape[1]), low=1, high=16, integer=True))
         if speed.shape[1] < count:
             raise field_error(path, "esc_status", f"{speed.shape[1]} ESCs for {count} motors")
         speed = np.abs(speed[:, :count]) * RPM_TO_RAD_S

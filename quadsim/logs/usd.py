@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import field_error
-from .common import RPM_TO_RAD_S, map_rotors, resample, resample_quat
+from .common import RPM_TO_RAD_S, check_unit_quat, map_rotors, resample, resample_quat
 
 MAGIC = 0xBC
 FIXED_FREQUENCY_ID = 0xFFFF
@@ -152,6 +152,7 @@ def _pose_from(path: Path, events: dict, pose: str, t: np.ndarray):
         raise field_error(path, f"{pose}: {missing[0] if missing else 't'}",
                           "pose event needs locSrv.x/y/z/qw/qx/qy/qz and 2 or more samples")
     position = resample(ev["t"], np.stack([ev[n] for n in names[:3]], 1), t)
+    check_unit_quat(path, f"{pose}: locSrv.qw..qz", ev["t"], np.stack([ev[n] for n in names[3:]], 1))
     quat = resample_quat(ev["t"], np.stack([ev[n] for n in names[3:]], 1), t)
     return position, quat
 

@@ -6,7 +6,9 @@ import argparse
 import sys
 
 from ..core.args import ArgumentParser
+from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, run_cli
+from ..core.executor import default_workers
 from ..sim.engines import ENGINES
 from ..sim.paths import PATHS
 from ..vehicle.params import load_params
@@ -45,8 +47,30 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--ray", metavar="ADDRESS", default=None,
                         help="'local' starts a local Ray cluster, HOST:PORT joins one")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--allow-large", action="store_true",
+                        help="run past the cost caps (quadsim.core.cost: 4 h, 8 GiB)")
     parser.add_argument("-o", "--output", required=True, help="results (.parquet); plot .png")
     return parser
+
+
+#: measured on the 2-core development machine (python -m quadsim.sweep ... --samples 32 and
+#: 128 --duration 2 --workers 1, machine shared at load 8): 12 s to start, 0.069 s per
+#: simulated second (the 28x-real-time engine benchmark gives 0.036 on a quiet machine).
+SWEEP_START_S = 12.0
+SWEEP_S_PER_SIM_S = 0.05
+#: memory per simulation (design row, result row, Parquet assembly) and to start (bytes).
+SWEEP_BYTES_PER_SIM = 1024
+SWEEP_BASE_BYTES = 400 * 1024**2
+
+
+def sweep_cost(args, dims: int) -> Estimate:
+    """Time and memory of the sweep ``args`` asks for (:mod:`quadsim.core.cost`)."""
+    count = args.samples if args.method == "mc" else float(args.points) ** dims
+    workers = args.workers or default_workers()
+    seconds = SWEEP_START_S + SWEEP_S_PER_SIM_S * count * args.duration / max(1, workers)
+    return Estimate(seconds=seconds, bytes=SWEEP_BASE_BYTES + SWEEP_BYTES_PER_SIM * count,
+                    what=f"{count:.4g} simulations of {args.duration:g} s on {workers} "
+                         "worker(s)")
 
 
 @run_cli
@@ -66,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     dims = parse_effect_ranges(args.effect) + parse_initial_ranges(args.initial)
     if not dims:
         raise InputError("nothing to sweep: give --effect and/or --initial")
+    check_cost(sweep_cost(args, len(dims)), "--samples" if args.method == "mc" else "--points",
+               allow=args.allow_large)
     matrix = design_matrix(dims, method=args.method, samples=args.samples, points=args.points,
                            seed=args.seed)
     config = SweepConfig(load_params(args.model), tuple(dims), path=args.path,

@@ -22,6 +22,12 @@ dimensionless ratio of the vehicle's own numbers, never a fixed limit on one num
   ``MAX_TIP_MACH`` = 0.9 of the speed of sound (343 m/s): an RPM value stored as rad/s
   (x 9.55) pushes a Crazyflie from 76 m/s to 720 m/s.
 
+* **propeller torque** -- the hover figure of merit ``FM = b^1.5 / (d sqrt(2 rho pi r^2))``
+  that b, d and the radius imply must lie in [``MIN_FIGURE_OF_MERIT``, 1] = [0.05, 1]: momentum
+  theory allows no propeller above 1, real ones reach 0.3-0.7, and the report's published
+  pair (d = b/4) gives 0.088; a drag factor d stored x1000 (or a torque/thrust ratio in mm)
+  gives FM x 0.001, one stored /1000 FM x 1000.
+
 Every refusal is one :func:`quadsim.core.errors.field_error` line naming the file, the field and
 the numbers that disagree. Example::
 
@@ -39,7 +45,8 @@ import numpy as np
 
 from ..core.errors import ModelError, field_error
 
-__all__ = ["MAX_THRUST_TO_WEIGHT", "MIN_THRUST_TO_WEIGHT", "check_hover_control",
+__all__ = ["MAX_THRUST_TO_WEIGHT", "MIN_THRUST_TO_WEIGHT", "check_figure_of_merit",
+           "check_hover_control",
            "check_vehicle", "feasibility"]
 
 MIN_THRUST_TO_WEIGHT = 1.2
@@ -49,6 +56,7 @@ MAX_GYRATION_RATIO = 1.5
 SPEED_OF_SOUND = 343.0  # m/s, air at 20 C
 MAX_TIP_MACH = 0.9
 PROP_OVERLAP = 1.2
+MIN_FIGURE_OF_MERIT = 0.05
 
 
 def feasibility(params) -> dict:
@@ -113,6 +121,20 @@ def check_hover_control(params, *, where=None, mass_field="body.mass",
             f"{params.min_speed ** 2:.4g} rad^2/s^2)")
 
 
+def check_figure_of_merit(params, *, where=None) -> None:
+    """b, d and the radius belong to a propeller: hover figure of merit in [0.05, 1]."""
+    r, b, d = params.rotor_radius, params.thrust_factor, params.drag_factor
+    if not (r > 0 and b > 0 and d > 0):
+        return
+    merit = b**1.5 / (d * math.sqrt(2.0 * params.air_density * math.pi * r * r))
+    if not MIN_FIGURE_OF_MERIT <= merit <= 1.0:
+        raise field_error(
+            where or _where(params), "rotors.drag_factor",
+            f"d = {d:.4g} N m s^2/rad^2 with b = {b:.4g} N s^2/rad^2 (d/b = {d / b:.4g} m) "
+            f"and radius {r:.4g} m gives a hover figure of merit {merit:.3g}, outside "
+            f"{MIN_FIGURE_OF_MERIT}-1 (propellers 0.3-0.7): d off by a factor 1000?")
+
+
 def check_vehicle(params, *, where=None) -> None:
     """Raise a one-line :class:`~quadsim.core.errors.InputError` if ``params`` cannot be one
     flyable vehicle (lift, size ratios, propeller overlap and tip speed)."""
@@ -138,6 +160,7 @@ def check_vehicle(params, *, where=None) -> None:
                     f"{MIN_GYRATION_RATIO}-{MAX_GYRATION_RATIO}); mass {params.mass:.6g} kg, "
                     f"I{axis}{axis} = {params.inertia['xyz'.index(axis)]['xyz'.index(axis)]:.4g}"
                     " kg m^2: a grams, millimetres or g mm^2 slip?")
+    check_figure_of_merit(params, where=where)
     if r > 0 and math.isfinite(f["nearest_hub_m"]) and 2 * r > PROP_OVERLAP * f["nearest_hub_m"]:
         raise field_error(
             where, "rotors.radius",
