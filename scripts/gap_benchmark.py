@@ -61,7 +61,7 @@ from quadsim.vehicle.params import load_params  # noqa: E402
 VEHICLES = ("physical", "crazyflie21")
 
 
-#: verdicts that name no effect (quadsim.gap/2 outcomes).
+#: verdicts that name no effect (quadsim.gap/3 outcomes).
 QUIET = ("unexplained", "no_significant_gap")
 
 

@@ -55,7 +55,7 @@ Example::
     >>> result["verdict"]["effect"], result["verdict"]["reduction"]
 
 CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
-(``quadsim.gap/2``), documented in docs/gap.md.
+(``quadsim.gap/3``), documented in docs/gap.md.
 """
 
 from .diagnose import SCHEMA, diagnose, prepare

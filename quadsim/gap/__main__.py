@@ -49,7 +49,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
                         help="Savitzky-Golay window (s) of the differentiator (default 0.1)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/2 result")
+    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/3 result")
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
@@ -155,7 +155,16 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
-    logs = _load(args.logs, params)
+    refused = []
+    if args.per_flight:      # a flight the loader or the checks refuse is refused alone
+        logs = []
+        for k, path in enumerate(args.logs):
+            try:
+                logs += _load([path], params)
+            except InputError as exc:
+                refused.append((k, str(path), str(exc)))
+    else:
+        logs = _load(args.logs, params)
     if any(g.rotor_speed is None for g in logs) and (args.command_reference or args.reference):
         from .commands import with_synthesised_speeds
         logs, _ = with_synthesised_speeds(
@@ -186,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
             result = diagnose_per_flight(logs, _load(args.reference, params), params,
-                                         effects=args.effects, progress=progress, **extra)
+                                         effects=args.effects, progress=progress,
+                                         refused=refused, **extra)
         else:
             holdout = _load(args.holdout, params) if args.holdout else None
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,

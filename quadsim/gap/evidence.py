@@ -166,6 +166,7 @@ class Evidence:
     determined: dict
     log_z: float
     ms: np.ndarray
+    mean: np.ndarray | None = None
     air_force: np.ndarray | None = None
     shared_shift: dict = field(default_factory=dict)
 
@@ -372,7 +373,8 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
         ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
                       dict(zip(keys, map(float, sd))),
                       {k: bool(p < DETERMINED * s) for k, p, s in zip(keys, post, sd)},
-                      log_z, np.mean(resid ** 2, axis=0), shared_shift=shift)
+                      log_z, np.mean(resid ** 2, axis=0), np.mean(resid, axis=0) * reference.sigma,
+                      shared_shift=shift)
         if expl.name == "wind":
             ev.air_force = _air_force(states, reference, shared, _own_effects(expl, theta))
         out.append(ev)

@@ -38,7 +38,7 @@ from scipy.stats import t as student_t
 from . import collinear
 from .residual import CHANNELS
 
-__all__ = ["judge", "posterior", "lack_of_fit", "READING_P", "CONFIDENT", "LOF_P",
+__all__ = ["judge", "posterior", "lack_of_fit", "symptom", "READING_P", "CONFIDENT", "LOF_P",
            "reading_text"]
 
 READING_P = 0.1
@@ -155,6 +155,27 @@ def _differ_on(first, second, reference) -> list[str]:
     return [names[c] for c in order[:2] if gap[c] > 0.01]
 
 
+def symptom(ev, reference) -> dict:
+    """The flight's largest mean residual against the reference model (channel, sign, size
+    in words): what a user sees first, grouped across flights in the report."""
+    if ev is None or ev.mean is None:
+        return {}
+    names = channel_names(reference)
+    c = int(np.argmax(np.abs(ev.mean) / reference.sigma))
+    value = float(ev.mean[c])
+    params = reference.params
+    if c < 3:
+        text = f"{names[c]} {100 * value / params.weight:+.1f} % of the weight"
+    elif c < 6:
+        text = f"{names[c]} {1e3 * value:+.3g} mN m"
+    else:
+        from ..vehicle.params import hover_speed
+
+        text = f"{names[c]} {100 * value / hover_speed(params):+.1f} % of the hover speed"
+    return {"channel": names[c], "sign": "+" if value >= 0 else "-", "value": value,
+            "sigmas": float(abs(value) / reference.sigma[c]), "text": text}
+
+
 def judge(rows, reference, name: str) -> dict:
     """The per-flight entry (``quadsim.gap/3``, :mod:`.schema`) from a flight's evidence."""
     ranked = posterior(rows)
@@ -191,7 +212,9 @@ def judge(rows, reference, name: str) -> dict:
             "confusable_with": [r for r in named if r != verdict],
             "separate_by": ({r: collinear.separation(verdict, [r])[r] for r in named
                              if r != verdict} if outcome == "effect" else {}),
-            "differ_on": separate, "notes": []}
+            "differ_on": separate, "notes": [],
+            "symptom": symptom(next((e for e in rows if e.name == "no_difference"), None),
+                               reference)}
 
 
 def _answer(outcome, lead, stated, lack, separate) -> str:

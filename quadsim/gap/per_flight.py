@@ -45,7 +45,7 @@ from .judge import judge
 from .residual import DEFAULT_WINDOW_S
 
 __all__ = ["diagnose_per_flight", "judge_one", "per_flight_answer", "MIN_REFERENCE",
-           "reference_summary"]
+           "reference_summary", "refused_entry"]
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).
 MIN_REFERENCE = 10
@@ -54,9 +54,12 @@ MIN_REFERENCE = 10
 def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
                         params: VehicleParams, *, effects: Sequence[str] | None = None,
                         progress: Callable | None = None,
-                        window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map) -> dict:
+                        window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
+                        refused: Sequence[tuple[int, str, str]] = ()) -> dict:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
+    ``refused``: (position, file, reason) of flights refused before this call (the CLI's
+    loader and checks); they are placed at their position in ``flights``.
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     ref_flights = prepare(reference, params, window_s=window_s)
@@ -75,6 +78,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
         flights.append(entry)
         if progress is not None and map_fn is map:
             progress(entry["file"])
+    for position, name, reason in sorted(refused):
+        flights.insert(position, refused_entry(name, reason))
     return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
             "reference": ref.names, "reference_model": reference_summary(ref),
             "reference_refit": {k: v for k, v in ref.values().items()
@@ -126,13 +131,18 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
                 start = 1e-3 * (mine - reference.delays_ms["rotor"][0])
             rows = evaluate(states, reference, expl, start_delay_s=start)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
-        return {"file": name, "outcome": "refused", "verdict": "refused",
-                "answer": f"Not judged: {exc}", "reason": str(exc), "probability": None,
-                "readings": [], "posterior": [], "notes": []}
+        return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
     entry["signal_delays_ms"] = flight.delays_ms
     entry["notes"].extend(delay_notes([flight]))
     return entry
+
+
+def refused_entry(name: str, reason: str) -> dict:
+    """The entry of a flight that could not be judged, with the reason."""
+    return {"file": name, "outcome": "refused", "verdict": "refused",
+            "answer": f"Not judged: {reason}", "reason": reason, "probability": None,
+            "readings": [], "posterior": [], "notes": []}
 
 
 def per_flight_answer(flights: list[dict]) -> str:
