@@ -67,10 +67,9 @@ def posterior(rows) -> list[tuple[str, float, object]]:
     for ev in rows:
         key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
         groups.setdefault(key, []).append(ev)
-    effects = sum(1 for k in {e.name for e in rows} if k != "no_difference")
-    logs = {k: logsumexp([e.log_z for e in v]) for k, v in groups.items()}
-    if "no_difference" in logs:
-        logs["no_difference"] += np.log(max(1, effects))
+    prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
+    logs = {k: logsumexp([e.log_z + (prior_null if e.name == "no_difference" else 0.0)
+                          for e in v]) for k, v in groups.items()}
     total = logsumexp(list(logs.values()))
     out = [(k, float(np.exp(logs[k] - total)),
             max(groups[k], key=lambda e: (e.name == k, e.log_z))) for k in groups]
