@@ -19,7 +19,10 @@ u = (theta_s - theta_ref) / s_ref, Ĵ = J_s diag(s_ref) and A = I + ĴᵀĴ the 
 ``|r + Ĵ du|^2 + |du|^2`` at ``du = -A^-1 Ĵᵀ r`` and the marginal adds ``-1/2 log det A``.
 An explanation that gives a shared group a value of its own takes that group out of the
 marginal and fits it with the wider prior N(theta_ref, s_ref^2 + w^2) (w: the prior spread
-of a difference, :func:`_prior_sd`).
+of a difference, :func:`_prior_sd`). The rotor speeds' logging delay is shared as well, but
+not linear at all over a few ms: every explanation fits it, with the references' spread
+(:func:`reference_delay_sd`) as its prior; the reading "signal_delay" fits it with the wide
+prior N(0, s^2 + (20 ms)^2).
 
 Evidence (Laplace at the bounded least-squares optimum, parameters in units of their prior
 spread, z = (theta - mu) / sd)::
@@ -77,6 +80,16 @@ DETERMINED = 0.5
 #: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
 #: (:data:`quadsim.logs.delays.MAX_LAG_S` searches 100 ms).
 DELAY_SD_S = 0.02
+
+
+def reference_delay_sd(reference: Reference) -> float:
+    """How far a nominal flight's rotor delay may lie from the references' (s): their
+    spread, combined with the estimate's repeatability
+    (:data:`quadsim.logs.delays.REPEAT_TOL_S`, 3 ms: the two halves of a log agree to it)."""
+    from ..logs.delays import REPEAT_TOL_S
+
+    sd_ms = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[1]
+    return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
 
 
 class Propeller(ThrustFactor):
@@ -185,6 +198,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     params, sd = reference.params, _prior_sd(reference.params)
     ref = reference.values()
     has_vbat = states.vbat is not None and bool(np.all(np.isfinite(states.vbat)))
+    delay = states.rotor_speed is not None and "rotor" in reference.delays_ms
     out = [_one("no_difference", "", (), (), ())]
     for group, fitted in SHARED:          # a shared group at a value of its own
         if group == "nominal_refit" or (group == "motor_lag" and not reference.rotor):
@@ -222,11 +236,17 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         else:
             out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
                             [sd["battery_sag.rate"]]))
-    if states.rotor_speed is not None and "rotor" in reference.delays_ms:
-        out.append(_one("signal_delay", "rotor", (), [0.0], [DELAY_SD_S], shift="rotor"))
+    if delay:
+        out.append(_one("signal_delay", "rotor", (), [0.0],
+                        [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
+    if delay:       # the rotor delay as a shared parameter of every other explanation
+        tight = reference_delay_sd(reference)
+        out = [e if e.shift else Explanation(e.name, e.variant, e.parts, e.mean + (0.0,),
+                                             e.sd + (tight,), e.replaces, "rotor", e.log_prior)
+               for e in out]
     return out
 
 
@@ -321,61 +341,68 @@ def _air_force(states, reference, effects, own) -> np.ndarray:
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
              start_delay_s: float = 0.0) -> list[Evidence]:
-    """Log evidence of every explanation on one flight's (decimated) ``states``."""
+    """Log evidence of every explanation on one flight's (decimated) ``states``.
+
+    With a rotor-delay reading, every explanation fits the flight's rotor delay too: with
+    the references' prior (:func:`reference_delay_sd`) as a shared parameter, or with the
+    wide prior as the reading "signal_delay" (it starts at ``start_delay_s``, the
+    cross-correlation estimate against the references')."""
+    names = list(reference.candidate.parameter_names)
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    return [_fit_one(states, reference, e, jac, reference.s_ref, names,
+                     start_delay_s if e.name == "signal_delay" else 0.0)
+            for e in explanations]
+
+
+def _fit_one(states, reference: Reference, expl: Explanation, jac: np.ndarray,
+             s_all: np.ndarray, names_all: list[str], start_delay_s: float) -> Evidence:
+    """One explanation's MAP fit and Laplace evidence (module doc); ``jac`` (N C, M): the
+    weighted residual's Jacobian in the shared parameters ``names_all`` (spreads ``s_all``),
+    of which those the explanation does not replace are marginalised."""
     dt = float(states.t[1] - states.t[0])
-    full = jacobian(states, reference, list(range(len(reference.theta))),
-                    reference.candidate.effects)
-    marginals: dict[tuple, _Marginal] = {}
-    out = []
     chans = len(reference.sigma)
-    for expl in explanations:
-        shared, keep = _shared_effects(reference, expl.replaces)
-        if expl.replaces not in marginals:
-            marginals[expl.replaces] = _Marginal(full[:, keep], reference.s_ref[keep])
-        marg = marginals[expl.replaces]
-        mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
-        lower, upper = _bounds(expl, reference, dt)
-        size = full.shape[0] + len(keep) + len(mean)
+    shared, keep = _shared_effects(reference, expl.replaces)
+    marg = _Marginal(jac[:, keep], s_all[keep])
+    mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
+    lower, upper = _bounds(expl, reference, dt)
+    size = jac.shape[0] + len(keep) + len(mean)
 
-        def stacked(z, expl=expl, shared=shared, marg=marg, mean=mean, sd=sd):
-            theta = mean + sd * z
-            try:
-                own = _own_effects(expl, theta)
-                flight = shifted(states, float(theta[-1])) if expl.shift else states
-                r = weighted_residual(flight, reference, shared + own).ravel()
-            except ModelError:
-                return np.full(size, 1e3)
-            aug, du = marg.profile(r)
-            return np.concatenate([aug, du, z])
-
-        if len(mean):
-            z_lo, z_hi = (lower - mean) / sd, (upper - mean) / sd
-            z0 = np.zeros_like(mean)
-            if expl.shift:
-                z0[-1] = start_delay_s / sd[-1]
-            z0 = np.clip(z0, z_lo + 1e-6, z_hi - 1e-6)
-            fit = least_squares(stacked, z0, bounds=(z_lo, z_hi), diff_step=1e-3,
-                                max_nfev=40, method="trf")
-            z, vec, jac = fit.x, fit.fun, fit.jac
-            h = jac.T @ jac
-            sign, logdet_h = np.linalg.slogdet(h)
-            logdet_h = logdet_h if sign > 0 else np.inf
-            post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
-        else:
-            z, vec, logdet_h, post = np.zeros(0), stacked(np.zeros(0)), 0.0, np.zeros(0)
+    def stacked(z):
         theta = mean + sd * z
-        log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * marg.logdet + expl.log_prior
-        resid = vec[:full.shape[0]].reshape(-1, chans) * np.sqrt(reference.tau)
-        keys = expl.parameter_names
-        du = vec[full.shape[0]:full.shape[0] + len(keep)]
-        shift = {reference.candidate.parameter_names[k]: float(reference.s_ref[k] * d)
-                 for k, d in zip(keep, du)}
-        ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
-                      dict(zip(keys, map(float, sd))),
-                      {k: bool(p < DETERMINED * s) for k, p, s in zip(keys, post, sd)},
-                      log_z, np.mean(resid ** 2, axis=0), np.mean(resid, axis=0) * reference.sigma,
-                      shared_shift=shift)
-        if expl.name == "wind":
-            ev.air_force = _air_force(states, reference, shared, _own_effects(expl, theta))
-        out.append(ev)
-    return out
+        try:
+            own = _own_effects(expl, theta)
+            flight = shifted(states, float(theta[-1])) if expl.shift else states
+            r = weighted_residual(flight, reference, shared + own).ravel()
+        except ModelError:
+            return np.full(size, 1e3)
+        aug, du = marg.profile(r)
+        return np.concatenate([aug, du, z])
+
+    if len(mean):
+        z_lo, z_hi = (lower - mean) / sd, (upper - mean) / sd
+        z0 = np.zeros_like(mean)
+        if expl.shift:
+            z0[-1] = start_delay_s / sd[-1]
+        z0 = np.clip(z0, z_lo + 1e-6, z_hi - 1e-6)
+        fit = least_squares(stacked, z0, bounds=(z_lo, z_hi), diff_step=1e-3, max_nfev=40,
+                            method="trf")
+        z, vec, h = fit.x, fit.fun, fit.jac.T @ fit.jac
+        logdet_h = np.linalg.slogdet(h)[1]
+        post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
+    else:
+        z, vec, logdet_h, post = np.zeros(0), stacked(np.zeros(0)), 0.0, np.zeros(0)
+    theta = mean + sd * z
+    log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * marg.logdet + expl.log_prior
+    n = jac.shape[0]
+    resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
+    keys = expl.parameter_names
+    shift = {names_all[k]: float(s_all[k] * d) for k, d in zip(keep, vec[n:n + len(keep)])}
+    own = [expl.name == "signal_delay" or k != "delay.rotor" for k in keys]
+    ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
+                  dict(zip(keys, map(float, sd))),
+                  {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
+                  log_z, np.mean(resid ** 2, axis=0), np.mean(resid, axis=0) * reference.sigma,
+                  shared_shift=shift)
+    if expl.name == "wind":
+        ev.air_force = _air_force(states, reference, shared, _own_effects(expl, theta))
+    return ev
