@@ -8,11 +8,7 @@ flight-log schema (:mod:`quadsim.logs.flightlog`) through sensor models (:mod:`q
 and the ground truth (effects and values, sensors, path, seed) goes to a separate sidecar
 ``<log>.truth.json`` so that a diagnosis can be run blind. Same inputs -> same bytes.
 
-Logged signals: position, velocity, attitude, body rate, rotor speeds (actual), commands
-(``cmd_i = commanded speed / max_speed``, normalised 0-1), battery voltage (from
-``battery_sag`` if present, else its full voltage, constant) and the accelerometer's specific
-force in the body frame at the body origin, ``R^T (a + g e3)`` (about +g on z at rest),
-computed exactly from the Newton-Euler forces (rotors + effects) at each sample.
+The logged signals and their units are listed in :mod:`quadsim.logs.generate`.
 
 Example::
 

@@ -189,7 +189,7 @@ def rotorpy_rate(series: np.ndarray) -> float | None:
 
 
 def target_lines(rows, batch: int) -> list[str]:
-    """Issue 11's targets, each as the ratio measured in this run."""
+    """The speed targets, each as the ratio measured in this run."""
     rate = {(label, sims): r for label, sims, r in rows}
     raw, roll = rate[("raw MuJoCo mj_step loop", 1)], rate[("raw mujoco.rollout", batch)]
     checks = [("all effects, 1 sim / raw mj_step loop", rate[("quadsim MuJoCo, all effects", 1)]
@@ -205,7 +205,7 @@ def target_lines(rows, batch: int) -> list[str]:
     if rotorpy:
         checks.insert(1, ("all effects, 1 sim / RotorPy", rate[("quadsim MuJoCo, all effects", 1)]
                           / rotorpy, 30.0))
-    return ["targets (issue 11), ratios measured in this run:"] + [
+    return ["targets, ratios measured in this run:"] + [
         f"  {label}: {value:.3g} (target >= {goal:g}) {'met' if value >= goal else 'NOT MET'}"
         for label, value, goal in checks]
 

@@ -1,6 +1,6 @@
 """Benchmark: mass properties and MJCF build for an assembly of 1,000,000 triangles.
 
-Target (issue 2): <= 5 s on 2 cores for loading + validating the meshes, their mass
+Target: <= 5 s on 2 cores for loading + validating the meshes, their mass
 properties, and building + writing the MJCF (including MuJoCo's compile check). The
 assembly is synthetic: twelve icospheres (6 subdivisions, 81,920 triangles each) and a
 16,960-triangle motor cylinder on four arms -- exactly 1,000,000 unique mesh triangles in

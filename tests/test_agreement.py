@@ -1,6 +1,6 @@
 """The MuJoCo runner and the analytic Newton–Euler model agree on identical inputs.
 
-Issue 4 tolerances: <= 1e-4 m and 1e-4 rad over 5 s open loop (hover, a step on each of
+Tolerances: <= 1e-4 m and 1e-4 rad over 5 s open loop (hover, a step on each of
 collective / roll / pitch / yaw, a seeded random multisine), <= 1e-3 m over 20 s with the LQR
 closed loop flying a figure-8, for the ``physical`` and ``computational`` parameter sets. All
 cases of one model run as one batch per engine (that is also a test of batching).

@@ -1,4 +1,4 @@
-"""CLI fuzz test (issue 14): seeded random argument lists and corrupted files over gap, fly,
+"""CLI fuzz test: seeded random argument lists and corrupted files over gap, fly,
 view, openloop, build_mjcf and identify. Every case must end with exit status 0 or 2 and
 never a traceback (an exception escaping ``main`` fails the case, with its argv).
 

@@ -351,7 +351,7 @@ def _closed_loop_drag_refit(cf, rotor_noise: float, yaw_amplitude: float, *, iv:
 
 
 def test_drag_refit_not_diluted_by_rotor_speed_noise(cf):
-    """Errors in variables (issue 10, 8b): rotor-speed noise attenuates the least-squares d
+    """Errors in variables: rotor-speed noise attenuates the least-squares d
     refit towards -100 %. Closed-loop Crazyflie, yaw oscillation 0.3 rad: noiseless rotor
     speeds give the reference value (the engine and the residual model differ by ~2 % in
     yaw); with 2 % of hover rotor noise plain least squares gives about -0.12 (dilution), the

@@ -1,4 +1,4 @@
-"""Issue 14 regression tests: every impossible input or setup is refused in one line naming
+"""Regression tests of the refusals: every impossible input or setup is refused in one line naming
 file and field (exit 2, nothing written), or named in the output; plus the feasibility and
 log-consistency checks on their own with closed-form numbers."""
 

@@ -1,5 +1,5 @@
-"""Independent-simulator checks of the gap diagnosis (issue 10: "small independent-simulator
-cases in the suite"): flights from RotorPy (its own controller, integrator, motor and sensor
+"""Independent-simulator checks of the gap diagnosis (small independent-simulator
+cases in the suite): flights from RotorPy (its own controller, integrator, motor and sensor
 models; effects injected as RotorPy parameters) generated at test time, and the realistic
 sensor pipeline. Skipped with the reason when rotorpy is absent."""
 
@@ -128,6 +128,6 @@ def test_rotorpy_no_effect_flight_has_no_significant_gap(per_flight):
     verdict = read_verdict(per_flight["flights"][0])
     assert verdict["outcome"] != "named", verdict
     if "no_significant_gap" not in json.dumps(GAP_SCHEMA):
-        pytest.skip("the verdict no_significant_gap is not in this version's schema yet "
-                    "(issue 10 item 1); checked only that nothing is named")
+        pytest.skip("the verdict no_significant_gap is not in this version's schema yet"
+                    "; checked only that nothing is named")
     assert verdict["outcome"] == "no_significant_gap", verdict

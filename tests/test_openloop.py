@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from quadsim.openloop import main, response_metrics
+from quadsim.openloop import main
+from quadsim.sim.step_response import response_metrics
 
 SHORT = ["--duration", "1.0", "--step-time", "0.2", "--no-plots", "--json"]
 

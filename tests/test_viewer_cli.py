@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from test_viewer import read_recording  # noqa: E402  (tests/ is on sys.path under pytest)
 
+from quadsim.sim.replay import replay_log
 from quadsim.vehicle.params import load_params
 from quadsim.vehicle.state import STATE12_NAMES
-from quadsim.view import main, replay_log
+from quadsim.view import main
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data" / "crazyflie21_brushless" / "nominal"
@@ -44,7 +45,7 @@ def test_replaying_a_model_generated_log_gives_near_zero_residuals(tmp_path):
     """A log written from the analytic engine, replayed through MuJoCo with its own rotor
     speeds, must come back to within the engines' agreement (and the log's 10 digits)."""
     from quadsim.logs.flightlog import FlightLog, write_log
-    from quadsim.view import step_flight
+    from quadsim.sim.replay import step_flight
 
     params = load_params("physical")
     flight = step_flight(params, engines=("analytic",), duration=2.0)["analytic"]
@@ -65,7 +66,7 @@ def test_replaying_a_model_generated_log_gives_near_zero_residuals(tmp_path):
 def test_replay_segments_restart_from_the_measured_state():
     """With a wrong model (10 % more thrust) the error grows within each horizon and drops
     back to zero at every restart."""
-    from quadsim.view import step_flight
+    from quadsim.sim.replay import step_flight
 
     params = load_params("physical")
     measured = step_flight(params, engines=("analytic",), duration=2.0)["analytic"]

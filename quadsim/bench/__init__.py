@@ -2,7 +2,7 @@
 
 The self-generated blind benchmark (``scripts/gap_benchmark.py``) flies each hidden effect
 through the same hooks the diagnosis fits, on inverse-dynamics logs with perfect sensor
-timing. This subpackage provides sources that break that circle (issue 10, item 5):
+timing. This subpackage provides sources that break that circle:
 
 * :mod:`.rotorpy_source` -- RotorPy (``pip install 'quadsim[independent]'``): its own SE(3)
   controller, RK45 integrator, motor model, aerodynamics, IMU and motion-capture models;

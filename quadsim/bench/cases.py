@@ -1,6 +1,6 @@
 """Independent benchmark cases: which flights, from which source, with which hidden effect.
 
-Two sources the diagnosis did not generate (see the issue-10 benchmark section of
+Two sources the diagnosis did not generate (see the independent benchmark section of
 docs/gap.md):
 
 * ``rotorpy`` -- :mod:`.rotorpy_source`: RotorPy's own closed loop, integrator, motor,
@@ -77,12 +77,12 @@ def case_list(count: int | None = None) -> list[dict]:
                       for n in outside]
     for i, case in enumerate(cases):
         case["seed"] = 5000 + i
-    if "thrust_factor" in EFFECTS:  # issue-10 propeller effect (appended: seeds above stay)
+    if "thrust_factor" in EFFECTS:  # propeller-thrust effect (appended: seeds above stay)
         for source in ("rotorpy", "pipeline"):
             for vehicle in VEHICLES:
                 cases.append({"source": source, "vehicle": vehicle, "truth": "thrust_factor",
                               "kind": "library", "seed": 5000 + len(cases)})
-    # library effects of stop 17-18 that RotorPy cannot express (a rotor axis is fixed there;
+    # later library effects (appended) that RotorPy cannot express (a rotor axis is fixed there;
     # its drag moment is not a damping we can set): the pipeline source only
     for name in PIPELINE_LATER:
         for vehicle in VEHICLES:

@@ -22,7 +22,7 @@ vbat            truth + white noise (V)
 ==============  ==========================================================================
 
 The delays and filters are typical of real logs (motion-capture latency 5-20 ms, ESC
-telemetry 10-30 ms; issue 10 quotes 5-50 ms) and are *not* modelled by the diagnosis, so
+telemetry 10-30 ms; 5-50 ms overall) and are *not* modelled by the diagnosis, so
 they leave a floor any independent source has.
 
 Example::
