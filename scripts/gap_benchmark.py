@@ -20,6 +20,7 @@ Usage::
 
     python scripts/gap_benchmark.py [--out bench.json] [--jobs 2] [--cases N]
     python scripts/gap_benchmark.py --speed
+    python scripts/gap_benchmark.py --per-flight-speed ../shared/data
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
@@ -345,6 +346,40 @@ def summarise_per_flight(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def per_flight_speed(data: Path) -> str:
+    """CPU seconds of the per-flight mode on the real Crazyflie flights (``data``: the shared
+    data folder): the reference calibration on the 20 nominal flights, counted once, then
+    each of the 26 ``mixed/`` flights judged (one process); the verdicts are printed too
+    (nothing is tuned on them)."""
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.per_flight import judge_one
+    from quadsim.logs.checks import check_logs
+    from quadsim.logs.flightlog import load_log
+
+    warnings.simplefilter("ignore")
+    root = data / "crazyflie21_brushless"
+    params = load_params("crazyflie21")
+    nominal = check_logs([load_log(p) for p in sorted((root / "nominal").glob("*.csv.gz"))],
+                         params)[0]
+    mixed = check_logs([load_log(p) for p in sorted((root / "mixed").glob("*.csv.gz"))],
+                       params)[0]
+    start = time.process_time()
+    ref = calibrate(prepare(nominal, params), params)
+    calibration = time.process_time() - start
+    start = time.process_time()
+    rows = [judge_one(log, ref) for log in mixed]
+    judged = time.process_time() - start
+    minutes = sum(float(log.t[-1] - log.t[0]) for log in mixed) / 60.0
+    lines = [f"reference calibration ({len(nominal)} flights): {calibration:.1f} s CPU",
+             f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
+             f"= {judged / minutes:.1f} s per flight-minute (calibration not included)"]
+    for r in rows:
+        prob = "-" if r.get("probability") is None else f"{100 * r['probability']:.0f} %"
+        lines.append(f"{Path(r['file']).name}: {r['verdict']} ({prob}): {r['answer']}")
+    return "\n".join(lines) + "\n"
+
+
 def _cell(v: dict) -> str:
     """A verdict in a table cell: the lead reading (``a+b`` for a combination), then the
     other readings the answer states ("or x, y")."""
@@ -383,6 +418,9 @@ def main(argv=None) -> int:
                         help="with --independent: run every STRIDE-th case (a quick subset)")
     parser.add_argument("--summarise-independent", metavar="JSON",
                         help="only summarise an independent results file")
+    parser.add_argument("--per-flight-speed", metavar="DATA", type=Path,
+                        help="CPU time of the per-flight mode on the real Crazyflie flights "
+                             "under DATA (../shared/data), one process; prints the verdicts")
     parser.add_argument("--per-flight-only", action="store_true",
                         help="with --independent: the per-flight mode alone")
     parser.add_argument("--cached-only", action="store_true",
@@ -399,6 +437,9 @@ def main(argv=None) -> int:
         return 0
     if args.speed:
         print(speed_benchmark(), end="")
+        return 0
+    if args.per_flight_speed:
+        print(per_flight_speed(args.per_flight_speed), end="")
         return 0
     self_rows = json.loads(Path(args.self_json).read_text()) if args.self_json else None
     if args.summarise_independent:

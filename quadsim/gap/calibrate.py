@@ -50,6 +50,7 @@ from ..vehicle.params import VehicleParams
 from .diagnose import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .fitting import (
     Candidate,
+    _bounds,
     _correlation_time,
     _typical,
     fit_candidate,
@@ -134,11 +135,14 @@ def jacobian(states, reference: Reference, columns: list[int], build) -> np.ndar
     """Forward-difference Jacobian (N C, len(columns)) of the weighted residual with respect
     to the shared parameters ``columns`` at theta_ref (``build(theta)`` -> effects)."""
     typical = _typical(reference.candidate, reference.params)
+    _, upper = _bounds(reference.candidate, reference.params)
     base = weighted_residual(states, reference, build(reference.theta)).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
         theta = reference.theta.copy()
         h = FD_STEP * typical[k]
+        if theta[k] + h > upper[k]:      # a value at its upper bound: step down
+            h = -h
         theta[k] += h
         out[:, j] = (weighted_residual(states, reference, build(theta)).ravel() - base) / h
     return out
