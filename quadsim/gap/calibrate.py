@@ -14,8 +14,12 @@ Stages
 2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
    (``nominal_refit``; d by instrumental variables), the rotor-drag coefficient, the
-   relative inertia error xx, yy, zz, rate damping x, y, z and, with commands, the motor time
-   constant. Its values are theta_ref, its standard errors se_pool (correlation-widened).
+   relative inertia error xx, yy, zz, rate damping x, y, z, the rotors' spin inertia
+   (gyroscopic torque) and, with commands, the motor time constant and, with a battery
+   voltage log, the speed per command following vbat / V_full (the map "with lag and
+   voltage"). On the 20 real nominal Crazyflie flights, a reference model without the last
+   two left every nominal flight judged against the others named ``gyroscopic`` (0.3-0.5 g
+   cm^2) or ``battery_sag`` (V_full 3.7 V): effects every nominal flight shares. Its values are theta_ref, its standard errors se_pool (correlation-widened).
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.
@@ -68,17 +72,25 @@ SHARED = (("nominal_refit", ("thrust", "drag")),
           ("rotor_drag", ("coefficient",)),
           ("inertia_error", ("xx", "yy", "zz")),
           ("rate_damping", ("x", "y", "z")),
-          ("motor_lag", ("time_constant",)))
+          ("gyroscopic", ("rotor_inertia",)),
+          ("motor_lag", ("time_constant",)),
+          ("battery_sag", ("full_voltage",)))
+
+#: groups that need logged commands (they act on the command -> speed channel) ...
+NEEDS_COMMANDS = {"motor_lag", "battery_sag"}
+#: ... and a logged battery voltage (the speed per command follows vbat / V_full).
+NEEDS_VBAT = {"battery_sag"}
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
 #: (:func:`quadsim.gap.fitting._typical`): the same relative step the fits use (diff_step).
 FD_STEP = 1e-3
 
 
-def shared_candidate(rotor: bool, groups=None) -> Candidate:
-    """The shared parameters as one candidate (``groups``: a subset of :data:`SHARED` names)."""
+def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
+    """The shared parameters as one candidate: :data:`SHARED` less the groups the logs
+    cannot show (no commands: motor lag and battery; no voltage: battery)."""
     parts = tuple((name, {}, fitted) for name, fitted in SHARED
-                  if (rotor or name != "motor_lag") and (groups is None or name in groups))
+                  if (rotor or name not in NEEDS_COMMANDS) and (vbat or name not in NEEDS_VBAT))
     return Candidate("reference", parts)
 
 
@@ -178,7 +190,9 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     dt = float(states[0].t[1] - states[0].t[0])
     sigma0 = noise_scale(np.concatenate([residuals(s, params, [], rotor_channel=rotor)
                                          for s in states]), dt, floor=noise_floor(params, rotor))
-    cand = shared_candidate(rotor)
+    vbat = rotor and all(s.vbat is not None and bool(np.all(np.isfinite(s.vbat)))
+                         for s in states)
+    cand = shared_candidate(rotor, vbat)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     per_flight = [residuals(s, params, fit.effects(), rotor_channel=rotor) for s in states]
     pooled = np.concatenate(per_flight)

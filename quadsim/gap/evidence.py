@@ -197,11 +197,11 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     """Every explanation the flight's data can show (``names``: restrict to these effects)."""
     params, sd = reference.params, _prior_sd(reference.params)
     ref = reference.values()
-    has_vbat = states.vbat is not None and bool(np.all(np.isfinite(states.vbat)))
     delay = states.rotor_speed is not None and "rotor" in reference.delays_ms
     out = [_one("no_difference", "", (), (), ())]
+    groups = {name for name, _, _ in reference.candidate.parts}
     for group, fitted in SHARED:          # a shared group at a value of its own
-        if group == "nominal_refit" or (group == "motor_lag" and not reference.rotor):
+        if group == "nominal_refit" or group not in groups:
             continue
         keys = [f"{group}.{p}" for p in fitted]
         s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
@@ -210,7 +210,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                         replaces=(group,)))
     one = [("mass_offset", ("mass",)), ("com_offset", ("x", "y")),
            ("thrust_curve", ("linear",)), ("ground_effect", ("gain",)),
-           ("body_drag", ("cd_area", "cd_area_vertical")), ("gyroscopic", ("rotor_inertia",))]
+           ("body_drag", ("cd_area", "cd_area_vertical"))]
     for name, fitted in one:
         keys = [f"{name}.{p}" for p in fitted]
         out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
@@ -228,14 +228,9 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
     out.append(_one("wind", "", [("wind", {}, ("vx", "vy"))], [0.0, 0.0], [sd["wind"]] * 2))
-    if reference.rotor:
-        if has_vbat:
-            top = float(np.nanmax(states.vbat))
-            out.append(_one("battery_sag", "", [("battery_sag", {}, ("full_voltage",))], [top],
-                            [sd["battery_sag.full_voltage"]]))
-        else:
-            out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
-                            [sd["battery_sag.rate"]]))
+    if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
+        out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
+                        [sd["battery_sag.rate"]]))
     if delay:
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
