@@ -227,7 +227,6 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out.append(_one("canted_rotor", f"rotor {k + 1}",
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
-    out.append(_one("wind", "", [("wind", {}, ("vx", "vy"))], [0.0, 0.0], [sd["wind"]] * 2))
     if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
         out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
                         [sd["battery_sag.rate"]]))
@@ -326,11 +325,13 @@ def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[i
 
 
 def _air_force(states, reference, effects, own) -> np.ndarray:
+    """Mean air force (world, N) of the flight's wind beyond the references' wind."""
     from ..core.frames import rotate
     from .residual import model_wrench
 
+    base = [e for e in reference.effects() if e.name == "wind"]   # the references' own
     with_wind, _, _ = model_wrench(states, reference.params, effects + own)
-    without, _, _ = model_wrench(states, reference.params, effects)
+    without, _, _ = model_wrench(states, reference.params, effects + base)
     return np.mean(rotate(states.quat, with_wind - without), axis=0)
 
 

@@ -132,13 +132,16 @@ def _wind_text(ev, reference) -> str:
     size = float(np.hypot(*horiz))
     axis = int(np.argmax(np.abs(horiz)))
     sign = "+" if horiz[axis] >= 0 else "-"
-    text = (f"a steady air force of {size:.3g} N along {sign}{'xy'[axis]} (world; "
+    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
             f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
             "airspeed")
     keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
     if keys:
-        speed = float(np.hypot(ev.values["wind.vx"], ev.values["wind.vy"]))
-        text += f": wind of ~{speed:.2g} m/s at the references' rotor-drag coefficient"
+        ref = reference.values()
+        speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
+                               ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
+        text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
+                 "coefficient")
     else:
         text += " (drag coefficient x wind speed fixed by the data, not each factor)"
     return text
