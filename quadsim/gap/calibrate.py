@@ -189,8 +189,14 @@ def _refine(states, params, rotor, cand, theta, sigma) -> np.ndarray:
     """Pooled Gauss-Newton steps from the bounded fit, summing each flight's information
     (the bounded fit stops after a few dozen evaluations of 12-14 parameters; on the real
     nominal Crazyflie flights it left the rotors' spin inertia at its bound 0 while every
-    flight alone asked for 0.3-0.5 g cm^2). Steps are clipped to the bounds."""
+    flight alone asked for 0.3-0.5 g cm^2). Levenberg-Marquardt steps with a unit ridge in
+    units of each parameter's typical size, clipped to the bounds."""
     lower, upper = _bounds(cand, params)
+    typical = _typical(cand, params)
+    dt = float(states[0].t[1] - states[0].t[0])
+    for k, name in enumerate(cand.parameter_names):
+        if name == "motor_lag.time_constant":      # fitting.fit_candidate: the Heun sub-step
+            lower[k] = max(lower[k], dt / 4)
     probe = Reference(params, rotor, cand, theta.copy(), np.zeros_like(theta),
                       np.zeros_like(theta), sigma, np.ones_like(sigma),
                       np.zeros_like(sigma), 1.0, 1, {}, [], {})
@@ -202,7 +208,11 @@ def _refine(states, params, rotor, cand, theta, sigma) -> np.ndarray:
             r = weighted_residual(f, probe, probe.effects()).ravel()
             info += jac.T @ jac
             grad += jac.T @ r
-        probe.theta = np.clip(probe.theta - np.linalg.pinv(info) @ grad, lower, upper)
+        # Levenberg-Marquardt: a unit ridge in units of each parameter's typical size, so a
+        # direction the data do not fix (a wind with no drag to act through) does not move
+        info_z = info * np.outer(typical, typical) + np.eye(len(theta))
+        step = -typical * np.linalg.solve(info_z, typical * grad)
+        probe.theta = np.clip(probe.theta + step, lower, upper)
     return probe.theta
 
 
