@@ -30,7 +30,8 @@ spread, z = (theta - mu) / sd)::
     log Z = -1/2 (|aug(z)|^2 + |z|^2) - 1/2 log det H - 1/2 log det A + log pi
 
 with H = JᵀJ of the stacked residual (the posterior precision in z units; -1/2 log det H is
-the Occam factor log(posterior volume / prior volume)) and pi the model prior: equal per
+the Occam factor log(posterior volume / prior volume); a value at a bound of its parameter
+keeps half the volume, log 2 less) and pi the model prior: equal per
 effect, split evenly among an effect's variants (one per rotor for a weak or canted rotor);
 "no difference" is weighed against them in :func:`quadsim.gap.judge.posterior`. A parameter is *determined* by the data when its posterior spread is
 below half its prior spread (:data:`DETERMINED`); only determined values are ever printed.
@@ -383,7 +384,9 @@ def _fit_one(states, reference: Reference, expl: Explanation, jac: np.ndarray,
         fit = least_squares(stacked, z0, bounds=(z_lo, z_hi), diff_step=1e-3, max_nfev=40,
                             method="trf")
         z, vec, h = fit.x, fit.fun, fit.jac.T @ fit.jac
-        logdet_h = np.linalg.slogdet(h)[1]
+        # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
+        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * int(np.count_nonzero(
+            fit.active_mask))
         post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
     else:
         z, vec, logdet_h, post = np.zeros(0), stacked(np.zeros(0)), 0.0, np.zeros(0)
