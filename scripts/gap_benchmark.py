@@ -20,9 +20,17 @@ Usage::
 
     python scripts/gap_benchmark.py [--out bench.json] [--jobs 2] [--cases N]
     python scripts/gap_benchmark.py --speed
+    python scripts/gap_benchmark.py --per-flight-speed ../shared/data
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --generate-only
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
+    python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
+        [--cached-only] [--stride N] --out pf.json
+
+``--per-flight-only``: the per-flight mode alone (each case's first flight against the 4
+nominal flights of its source; observability as below); ``--cached-only`` judges only the
+cases whose flights are already in ``--cache`` (a sample when flying all of them is too slow
+on the machine at hand: say so when reporting).
 
 Independent benchmark (``--independent``): 64 cases from sources this project's diagnosis
 did not generate (:mod:`quadsim.bench`: RotorPy closed loop with its own controller,
@@ -69,7 +77,7 @@ from quadsim.vehicle.params import load_params  # noqa: E402
 VEHICLES = ("physical", "crazyflie21")
 
 
-#: verdicts that name no effect (quadsim.gap/2 outcomes).
+#: verdicts that name no effect (quadsim.gap/3 outcomes).
 QUIET = ("unexplained", "no_significant_gap")
 
 
@@ -268,6 +276,118 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
     return "\n".join(lines) + "\n"
 
 
+def _is_cached(case: dict) -> bool:
+    """True when the case's flights are in the cache (``QUADSIM_BENCH_CACHE``)."""
+    import hashlib
+
+    from quadsim.bench.cases import CACHE_ENV, _code_hash
+
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        return False
+    key = {k: case[k] for k in ("source", "vehicle", "truth", "kind", "seed")}
+    name = hashlib.sha256(json.dumps({**key, "code": _code_hash(key["source"])},
+                                     sort_keys=True, default=str).encode()).hexdigest()[:24]
+    return (Path(root) / f"{name}.pkl").exists()
+
+
+def _observe(case: dict) -> dict:
+    """Fly (or read) one case; its observability (true-effect held-out reduction)."""
+    from quadsim.bench.cases import _describe, _truth_effects, case_flights
+
+    warnings.simplefilter("ignore", QuadsimWarning)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    params = load_params(case["vehicle"])
+    spec, logs = case_flights(case)
+    return {**case, "spec": _describe(spec), "_log": logs[0],
+            "oracle_reduction": oracle_reduction(logs, params,
+                                                 _truth_effects(case, spec, params))}
+
+
+def run_per_flight_only(cases: list[dict], jobs: int) -> list[dict]:
+    """The per-flight mode alone (module doc), timed per (source, vehicle) group."""
+    from quadsim.bench.cases import run_per_flight
+
+    with Pool(jobs) as pool:
+        rows = pool.map(_observe, cases)
+        keys = sorted({(r["source"], r["vehicle"]) for r in rows})
+        groups = [(s, v, [r for r in rows if (r["source"], r["vehicle"]) == (s, v)])
+                  for s, v in keys]
+        start = time.process_time()
+        verdicts = pool.map(run_per_flight, groups)
+    for (_, _, group), out in zip(groups, verdicts):
+        for row, verdict in zip(group, out):
+            row["per_flight"] = verdict
+    for row in rows:
+        row.pop("_log", None)
+    return rows
+
+
+def summarise_per_flight(rows: list[dict]) -> str:
+    """Per source x vehicle: the per-flight scores; then one row per case."""
+    from quadsim.bench.score import summary_rows
+
+    groups = []
+    for source in dict.fromkeys(r["source"] for r in rows):
+        for vehicle in (*VEHICLES, "both"):
+            group = [{**r, "score": r["per_flight"]["score"]} for r in rows
+                     if r["source"] == source and vehicle in (r["vehicle"], "both")]
+            if group:
+                groups.append((f"{source} | {vehicle}", group))
+    lines = ["| source | vehicle | in-library: a reading names it | the lead reading names it | "
+             "named or listed | readings per named verdict | no effect -> "
+             "no_significant_gap | out-of-library: confident wrong name |",
+             "|---|---|---|---|---|---|---|---|"]
+    lines += ["| " + " | ".join(row) + " |" for row in summary_rows(groups, MIN_GAIN)]
+    hidden = [r for r in rows if r["kind"] == "library" and r["oracle_reduction"] < MIN_GAIN]
+    if hidden:
+        lines.append(f"\nunobservable (true effect cuts the held-out gap < {MIN_GAIN:.0%}), "
+                     "not scored: " + ", ".join(f"{r['source']}/{r['vehicle']}/{r['truth']}"
+                                                for r in hidden))
+    lines += ["\n| source | vehicle | hidden | per-flight verdict | probability | "
+              "true-effect reduction |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        p = r["per_flight"]
+        prob = "-" if p.get("probability") is None else f"{p['probability']:.2f}"
+        lines.append(f"| {r['source']} | {r['vehicle']} | {r['truth']} | {_cell(p)} | {prob} | "
+                     f"{r['oracle_reduction']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def per_flight_speed(data: Path) -> str:
+    """CPU seconds of the per-flight mode on the real Crazyflie flights (``data``: the shared
+    data folder): the reference calibration on the 20 nominal flights, counted once, then
+    each of the 26 ``mixed/`` flights judged (one process); the verdicts are printed too
+    (nothing is tuned on them)."""
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.per_flight import judge_one
+    from quadsim.logs.checks import check_logs
+    from quadsim.logs.flightlog import load_log
+
+    warnings.simplefilter("ignore")
+    root = data / "crazyflie21_brushless"
+    params = load_params("crazyflie21")
+    nominal = check_logs([load_log(p) for p in sorted((root / "nominal").glob("*.csv.gz"))],
+                         params)[0]
+    mixed = check_logs([load_log(p) for p in sorted((root / "mixed").glob("*.csv.gz"))],
+                       params)[0]
+    start = time.process_time()
+    ref = calibrate(prepare(nominal, params), params)
+    calibration = time.process_time() - start
+    start = time.process_time()
+    rows = [judge_one(log, ref) for log in mixed]
+    judged = time.process_time() - start
+    minutes = sum(float(log.t[-1] - log.t[0]) for log in mixed) / 60.0
+    lines = [f"reference calibration ({len(nominal)} flights): {calibration:.1f} s CPU",
+             f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
+             f"= {judged / minutes:.1f} s per flight-minute (calibration not included)"]
+    for r in rows:
+        prob = "-" if r.get("probability") is None else f"{100 * r['probability']:.0f} %"
+        lines.append(f"{Path(r['file']).name}: {r['verdict']} ({prob}): {r['answer']}")
+    return "\n".join(lines) + "\n"
+
+
 def _cell(v: dict) -> str:
     """A verdict in a table cell: the lead reading (``a+b`` for a combination), then the
     other readings the answer states ("or x, y")."""
@@ -384,6 +504,13 @@ def main(argv=None) -> int:
                         help="with --independent: run every STRIDE-th case (a quick subset)")
     parser.add_argument("--summarise-independent", metavar="JSON",
                         help="only summarise an independent results file")
+    parser.add_argument("--per-flight-speed", metavar="DATA", type=Path,
+                        help="CPU time of the per-flight mode on the real Crazyflie flights "
+                             "under DATA (../shared/data), one process; prints the verdicts")
+    parser.add_argument("--per-flight-only", action="store_true",
+                        help="with --independent: the per-flight mode alone")
+    parser.add_argument("--cached-only", action="store_true",
+                        help="with --per-flight-only: only cases already in --cache")
     parser.add_argument("--cache", metavar="DIR",
                         help="with --independent: keep the flown logs here and reuse them on "
                              "the next run (keyed by case and the flight sources' code); same "
@@ -407,10 +534,23 @@ def main(argv=None) -> int:
     if args.speed:
         print(speed_benchmark(), end="")
         return 0
+    if args.per_flight_speed:
+        print(per_flight_speed(args.per_flight_speed), end="")
+        return 0
     self_rows = json.loads(Path(args.self_json).read_text()) if args.self_json else None
     if args.summarise_independent:
         rows = json.loads(Path(args.summarise_independent).read_text())
         print(summarise_independent(rows, self_rows), end="")
+        return 0
+    if args.independent and args.per_flight_only:
+        from quadsim.bench.cases import case_list as independent_cases
+
+        cases = independent_cases(args.cases)[::args.stride]
+        if args.cached_only:
+            cases = [c for c in cases if _is_cached(c)]
+        rows = run_per_flight_only(cases, args.jobs)
+        atomic_write_text(args.out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
+        print(summarise_per_flight(rows), end="")
         return 0
     if args.independent:
         from quadsim.bench.cases import case_list as independent_cases

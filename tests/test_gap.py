@@ -99,7 +99,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert outputs[0] == outputs[1]
     document = json.loads(outputs[0])
     validate(document)
-    assert document["schema"] == "quadsim.gap/2"
+    assert document["schema"] == "quadsim.gap/3"
     assert document["verdict"]["effect"] == "thrust_mismatch"
     assert document["train"] and document["holdout"]
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
@@ -111,7 +111,7 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert main(["--model", "crazyflie21", *paths, "--report", str(html), "--quiet",
                  "--effects", "thrust_mismatch"]) == 0
     text = html.read_text()
-    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/2" in text
+    assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/3" in text
     # the answer first, the evidence with units, the JSON in a collapsed appendix
     assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index("&quot;schema&quot;")
     assert "<th>unit</th>" in text and "<td>N m</td>" in text

@@ -1,5 +1,5 @@
-"""Per-flight rule (quadsim.gap.per_flight), combination readings and benchmark scoring:
-numbers checked against hand-built fit entries (the rule is pure over the fit results)."""
+"""Per-flight posterior (quadsim.gap.judge), combination readings and benchmark scoring:
+numbers checked against hand-built entries (the rules are pure over the fit results)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import pytest
 
 from quadsim.bench.score import read_verdict, score_case
 from quadsim.gap.combine import _combination_alternatives, parts_identified
-from quadsim.gap.per_flight import differs_from_reference, judge_flight, reference_band
+from quadsim.gap.evidence import Evidence, Explanation
+from quadsim.gap.judge import posterior
 from quadsim.vehicle.params import load_params
 
 CHANNELS = ["Fx", "Fy", "Fz", "Mx", "My", "Mz"]
@@ -28,52 +29,43 @@ def _lag(tau, ci, *, identified=True, reduction=0.5, after=None):
             "heldout_rms_after": after or dict.fromkeys(CHANNELS, 1.0)}
 
 
-def test_reference_band_uses_only_identified_reference_fits():
-    refs = [_lag(0.0070, 0.0005), _lag(0.0073, 0.0004), _lag(0.5, 0.4, identified=False)]
-    lo, hi = reference_band("motor_lag.time_constant", refs)
-    assert lo == pytest.approx(0.0065) and hi == pytest.approx(0.0077)
-    assert reference_band("motor_lag.time_constant", refs[2:]) is None
+def _ev(name, log_z, determined=True, variant=""):
+    expl = Explanation(name, variant, (), (0.0,), (1.0,))
+    return Evidence(expl, {f"{name}.p": 1.0}, {f"{name}.p": 0.1}, {f"{name}.p": 1.0},
+                    {f"{name}.p": determined}, log_z, np.ones(6))
 
 
-def test_an_effect_at_the_references_magnitude_does_not_differ():
-    """RotorPy's nominal 5 ms motors fit as 7.2 ms on every flight: a faster flight shows
-    the lag more (bigger reduction) but its magnitude is the references' (7.0-7.3 ms)."""
-    refs = [_lag(0.0070, 0.0005), _lag(0.0073, 0.0004)]
-    assert not differs_from_reference(_lag(0.0072, 0.0003), refs)
-    # 24 ms against 7 ms: differs; 7.9 +- 0.1 ms lies 0.1 ms beyond the band: differs
-    assert differs_from_reference(_lag(0.024, 0.0002), refs)
-    assert differs_from_reference(_lag(0.0079, 0.0001), refs)
-    # its CI reaches into the band: does not differ
-    assert not differs_from_reference(_lag(0.0079, 0.0003), refs)
-    # references that identified nothing: compared with "off" only (significance)
-    assert differs_from_reference(_lag(0.0072, 0.0003), [_lag(0.5, 0.4, identified=False)])
+def test_posterior_sums_variants_and_gives_no_difference_the_effects_prior():
+    """Two effects and no difference at equal evidence: no difference has the prior of both
+    effects together (1/2), each effect 1/4; an effect's variants add up; an explanation
+    whose parameter the data do not determine is counted as no difference."""
+    null = Evidence(Explanation("no_difference", "", (), (), ()), {}, {}, {}, {}, 0.0,
+                    np.ones(6))
+    rows = [null, _ev("mass_offset", 0.0),
+            _ev("thrust_mismatch", np.log(0.5), variant="rotor 1"),
+            _ev("thrust_mismatch", np.log(0.5), variant="rotor 2")]
+    post = {k: p for k, p, _ in posterior(rows)}
+    assert post == pytest.approx({"no_difference": 0.5, "mass_offset": 0.25,
+                                  "thrust_mismatch": 0.25})
+    rows[1] = _ev("mass_offset", 0.0, determined=False)
+    post = {k: p for k, p, _ in posterior(rows)}
+    # mass_offset's weight joins no difference: (2 + 1) / (2 + 1 + 1)
+    assert post == pytest.approx({"no_difference": 0.75, "thrust_mismatch": 0.25})
+    # 3 nats more evidence for a mass: e^3 / (e^3 + 2 + 1)
+    rows[1] = _ev("mass_offset", 3.0)
+    post = {k: p for k, p, _ in posterior(rows)}
+    assert post["mass_offset"] == pytest.approx(np.exp(3) / (np.exp(3) + 3), rel=1e-9)
 
 
-def _one(effects, before):
-    return {"effects": effects,
-            "where": {"heldout_rms_before": dict(zip(CHANNELS, before))}}
-
-
-def test_shared_effect_that_reaches_the_floor_is_no_significant_gap(cf):
-    """A flight above the reference floor only by an effect every reference shares at the
-    same magnitude: no_significant_gap, with the shared effect named in a note."""
-    refs = {"motor_lag": [{**_lag(0.0070, 0.0005), "reduction": 0.69},
-                          {**_lag(0.0073, 0.0004), "reduction": 0.60}]}
-    floors = {k: [1.0, 0.9] for k in CHANNELS}
-    flight = _lag(0.0072, 0.0003, reduction=0.79, after=dict.fromkeys(CHANNELS, 1.1))
-    judged = judge_flight(_one([flight], [2.0] * 6), refs, "f", floors, cf)
-    assert judged["outcome"] == "no_significant_gap" and judged["verdict"] == "no_significant_gap"
-    assert "motor_lag" in judged["notes"][-1] and "shared" in judged["notes"][-1]
-    assert "motor_lag.time_constant 6.5 to 7.7 ms" in judged["answer"]   # the references' band
-    # the same flight with a 24 ms lag differs: named
-    lagging = _lag(0.024, 0.0003, reduction=0.98, after=dict.fromkeys(CHANNELS, 1.0))
-    judged = judge_flight(_one([lagging], [2.0] * 6), refs, "f", floors, cf)
-    assert judged["outcome"] == "effect" and judged["verdict"] == "motor_lag"
-    # a shared effect that leaves a channel above 1.25x the floor: unexplained
-    partial = _lag(0.0072, 0.0003, reduction=0.79,
-                   after={**dict.fromkeys(CHANNELS, 1.0), "Mz": 1.5})
-    judged = judge_flight(_one([partial], [2.0] * 6), refs, "f", floors, cf)
-    assert judged["outcome"] == "unexplained"
+def test_refused_flight_is_read_as_refused_and_never_confident():
+    verdict = read_verdict({"file": "f", "outcome": "refused", "verdict": "refused",
+                            "reason": "x", "probability": None})
+    assert verdict["outcome"] == "refused" and not verdict["confident"]
+    tentative = read_verdict({"outcome": "effect", "verdict": "mass_offset",
+                              "probability": 0.6, "tentative": True,
+                              "readings": ["mass_offset", "thrust_factor"]})
+    assert tentative["probability"] == 0.6 and not tentative["confident"]
+    assert tentative["named"] == ["mass_offset", "thrust_factor"]
 
 
 def _wind(vx, ci):
@@ -161,16 +153,3 @@ def test_summary_says_when_a_refit_parameter_is_not_identified():
     thrust, drag = text.split(", ")
     assert "not identified" in drag and "not identified" not in thrust
     assert drag.startswith("nominal_refit.drag = -0.9 ± 0.018 (relative)")
-
-
-def test_a_canted_rotor_is_compared_with_reference_fits_of_the_same_rotor():
-    """Reference flights that picked rotor 1 say nothing about rotor 3's tilt."""
-    def tilt(rotor, value, ci):
-        return {"name": "canted_rotor", "fixed": {"canted_rotor.rotor": float(rotor)},
-                "params": {"canted_rotor.tilt_x": value}, "ci": {"canted_rotor.tilt_x": ci},
-                "identifiable": {"canted_rotor.tilt_x": True},
-                "significant": {"canted_rotor.tilt_x": abs(value) > ci}}
-
-    refs = [tilt(1, 0.04, 0.01), tilt(1, 0.05, 0.01)]
-    assert not differs_from_reference(tilt(1, 0.045, 0.005), refs)
-    assert differs_from_reference(tilt(3, 0.045, 0.005), refs)

@@ -9,7 +9,9 @@
      "named": [effects of every reading the verdict's answer states],
      "readings": int,         # how many readings the answer states
      "alternatives": [names listed as confusable / collinear, not stated as a reading],
-     "confident": bool}      # a name given without a flag that it is tentative
+     "probability": float | None,   # of the verdict's reading (evidence verdicts)
+     "confident": bool}      # a name given without a flag that it is tentative (evidence
+                             # verdicts: probability >= quadsim.gap.judge.CONFIDENT)
 
 A *reading* is one explanation the answer states: the named effect ("behaves as if +58 g
 heavier") and every collinear alternative that ties with it on held-out data and is
@@ -53,7 +55,7 @@ def read_verdict(entry: dict) -> dict:
         effect = effect.get("name") or effect.get("effect")
     effect = str(effect or "unexplained")
     label = str(entry.get("outcome") or effect)
-    if label == "refused":            # a flight the diagnosis could not judge (its reason kept)
+    if label == "refused" or effect == "refused":
         outcome, named = "refused", []
     elif label in _NO_GAP or effect in _NO_GAP:
         outcome, named = "no_significant_gap", []
@@ -73,8 +75,10 @@ def read_verdict(entry: dict) -> dict:
     alternatives = _names(entry.get("confusable_with")) + _names(entry.get("alternatives")) \
         + _names(entry.get("collinear"))
     tentative = bool(entry.get("tentative") or entry.get("flagged") or entry.get("implausible"))
+    probability = entry.get("probability")
     return {"outcome": outcome, "lead": lead, "named": named, "readings": readings,
             "alternatives": sorted(set(alternatives) - set(named)),
+            "probability": None if probability is None else float(probability),
             "confident": outcome == "named" and not tentative}
 
 

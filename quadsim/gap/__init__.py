@@ -33,16 +33,19 @@ Method (equation error, then prediction error)
    engine) before and after the verdict (:mod:`.where`).
 
 ``diagnose_per_flight`` (:mod:`.per_flight`) judges each flight alone against nominal
-reference flights: b, d and the command map are refitted on the references; each flight is
-fitted on its first half and scored on its second; an effect is named only if its reduction
-exceeds the largest the same effect achieves on any reference flight by >= 5 % *and* its
-magnitude lies outside what the reference flights show (so effects present in every flight,
-such as rotor drag or the motors' own lag, are not blamed on one flight).
+reference flights, by evidence: :mod:`.calibrate` absorbs what every reference flight shares
+(b, d, motor map, motor lag, rotor drag, inertia, rate damping, the rotor delay) into a
+reference model with a per-channel noise model; :mod:`.evidence` fits every explanation of
+how a flight differs (an effect, a shared parameter at a value of its own, a logged signal's
+delay, or none) and weighs it by its Laplace evidence; :mod:`.judge` gives the posterior per
+reading, a lack-of-fit test ("not in the library") and the answer. A flight that cannot be
+judged is ``refused`` with its reason; the others go on.
 
 Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split, rank, decide),
 :mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
 least squares), :mod:`.scoring`, :mod:`.collinear` + :mod:`.priors`, :mod:`.combine`,
-:mod:`.verdict`, :mod:`.consistency`, :mod:`.per_flight`, :mod:`.where`, :mod:`.checks`
+:mod:`.verdict`, :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
+:mod:`.evidence`, :mod:`.judge`, :mod:`.report_flights`), :mod:`.where`, :mod:`.checks`
 (vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report` and
 :mod:`.schema` (output), :mod:`.synthetic` (generated test flights).
 
@@ -55,7 +58,7 @@ Example::
     >>> result["verdict"]["effect"], result["verdict"]["reduction"]
 
 CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
-(``quadsim.gap/2``), documented in docs/gap.md.
+(``quadsim.gap/3``), documented in docs/gap.md.
 """
 
 from .diagnose import SCHEMA, diagnose, prepare

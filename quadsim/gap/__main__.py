@@ -52,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
                         help="Savitzky-Golay window (s) of the differentiator (default 0.1)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/2 result")
+    parser.add_argument("--json", metavar="OUT.json", help="write the quadsim.gap/3 result")
     parser.add_argument("--report", metavar="OUT.html", help="write a self-contained HTML report")
     parser.add_argument("--rerun", metavar="OUT.rrd", help="write a rerun recording of residuals")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
@@ -197,7 +197,16 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
-    logs = _load(args.logs, params, args)
+    refused = []
+    if args.per_flight:      # a flight the loader or the checks refuse is refused alone
+        logs = []
+        for k, path in enumerate(args.logs):
+            try:
+                logs += _load([path], params, args)
+            except InputError as exc:
+                refused.append((k, str(path), str(exc)))
+    else:
+        logs = _load(args.logs, params, args)
     holdout = _load(args.holdout, params, args) if args.holdout else None
     reference = _load(args.reference, params, args) if args.reference else None
     # command-only logs in any role: speeds synthesised (quadsim.gap.commands.synthesise_all)
@@ -237,7 +246,8 @@ def main(argv: list[str] | None = None) -> int:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
             result = diagnose_per_flight(logs, reference, params,
-                                         effects=args.effects, progress=progress, **extra)
+                                         effects=args.effects, progress=progress,
+                                         refused=refused, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, **extra)

@@ -1,7 +1,7 @@
 """The gap diagnosis: fit on training flights, score on held-out flights, rank, decide.
 
 See :mod:`quadsim.gap` for the method and the result schema. Everything here returns plain
-dicts (the ``quadsim.gap/2`` JSON) so that the CLI, the HTML report and tests read the same
+dicts (the ``quadsim.gap/3`` JSON) so that the CLI, the HTML report and tests read the same
 thing.
 """
 
@@ -49,7 +49,7 @@ from .where import by_band, by_regime, kstep_errors, regime_masks
 __all__ = ["Flight", "prepare", "diagnose", "parts_identified", "SCHEMA", "MIN_GAIN",
            "MIN_T", "TIE", "EDGE_S", "interior"]
 
-SCHEMA = "quadsim.gap/2"
+SCHEMA = "quadsim.gap/3"
 FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
@@ -260,7 +260,7 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
             notes, tick, kstep) -> dict:
     """Pick the named effect, grow it into a combination, judge it against the floor and
-    assemble the result (``quadsim.gap/2``)."""
+    assemble the result (``quadsim.gap/3``)."""
     nominal_gap = _gap(before)
     names = _channels(rotor, params)
     best, alts = _pick(ranked, baseline, nominal_gap, params, notes)

@@ -1,4 +1,4 @@
-"""Outputs of the gap diagnosis: JSON (``quadsim.gap/2``), a human summary that leads with
+"""Outputs of the gap diagnosis: JSON (``quadsim.gap/3``), a human summary that leads with
 the answer in words, an HTML report (answer, evidence per flight with units, plots, the JSON
 in a collapsed appendix), and a rerun recording of the residuals.
 """
@@ -79,15 +79,9 @@ def _channel_lines(channels: dict, indent: str = "  ") -> list[str]:
 def summary(result: dict) -> str:
     """A few lines for people: verdict, parameters, where the gap lies, ranking."""
     if result.get("mode") == "per-flight":
-        lines = [f"answer: {result['verdict'].get('answer', '')}",
-                 f"per-flight diagnosis against {len(result['reference'])} reference flights "
-                 "(reference refit: "
-                 + _fmt_params(result["reference_refit"], result.get("reference_refit_ci", {}),
-                               result.get("reference_refit_identified")) + ")"]
-        for f in result["flights"]:
-            lines.append(f"  {Path(f['file']).name}: {f['verdict']}: {f.get('answer', '')}")
-        lines += [f"note: {note}" for note in result.get("notes", [])]
-        return "\n".join(lines) + "\n"
+        from .report_flights import flights_summary
+
+        return flights_summary(result)
     v = result["verdict"]
     where = result["where"]
     lines = [f"answer: {v.get('answer', v['effect'])}", f"verdict: {v['effect']}"]
@@ -173,25 +167,6 @@ def _figures(result: dict) -> list[tuple[str, str]]:
     return figs
 
 
-def _per_flight_figure(result: dict) -> list[tuple[str, str]]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    flights = result["flights"]
-    fig, ax = plt.subplots(figsize=(9, 0.28 * len(flights) + 1))
-    names = [Path(f["file"]).name.split(".")[0] for f in flights]
-    values = [100 * (f["reduction"] or 0.0) for f in flights]
-    bars = ax.barh(names[::-1], values[::-1])
-    for bar, f in zip(bars, flights[::-1]):
-        ax.text(bar.get_width() + 1, bar.get_y() + bar.get_height() / 2, f["verdict"],
-                va="center", fontsize=8)
-    ax.set_xlabel("held-out gap reduction of the verdict (%)")
-    ax.set_xlim(0, 110)
-    return [("Per-flight verdicts", _png(fig))]
-
-
 def _flight_html(f: dict, reference: bool) -> str:
     rows = "".join(
         f"<tr><td>{html.escape(k)}</td><td>{c['before']:.3g}</td><td>{c['after']:.3g}</td>"
@@ -222,22 +197,20 @@ def write_html(path: str | Path, result: dict) -> Path:
     body = [f"<h1>quadsim gap diagnosis: {html.escape(str(result.get('model', '')))}</h1>",
             f"<h2>Answer</h2><p><b>{html.escape(result['verdict'].get('answer', ''))}</b></p>"]
     if per_flight:
-        body.append("<h2>Per flight</h2>")
-        for f in result["flights"]:
-            body.append(f"<h3>{html.escape(Path(f['file']).name)}: "
-                        f"{html.escape(f['verdict'])}</h3>" + _flight_html(f, True))
+        from .report_flights import flights_html
+
+        body = body[:1] + flights_html(result)
     else:
         body.append("<h2>Evidence</h2>" + _flight_html(result["verdict"], False))
-    body.append(f"<h2>Summary</h2><pre>{html.escape(summary(result))}</pre>")
-    figures = _per_flight_figure(result) if per_flight else _figures(result)
-    for title, png in figures:
-        body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
+        body.append(f"<h2>Summary</h2><pre>{html.escape(summary(result))}</pre>")
+        for title, png in _figures(result):
+            body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
     body.append(f"<details><summary>Appendix: result JSON ({html.escape(result['schema'])})"
                 f"</summary><pre>{html.escape(to_json(result))}</pre></details>")
     page = ("<!doctype html><html><head><meta charset=\"utf-8\"><title>quadsim gap</title>"
-            "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}"
+            "<style>body{font-family:sans-serif;max-width:1400px;margin:auto}"
             "img{max-width:100%}table{border-collapse:collapse}"
-            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}</style></head><body>"
+            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}</style></head><body>"
             + "\n".join(body) + "</body></html>\n")
     return atomic_write_text(path, page)
 

@@ -1,4 +1,16 @@
-"""The JSON Schema of the ``quadsim.gap/2`` result (documented in docs/gap.md).
+"""The JSON Schema of the ``quadsim.gap/3`` result (documented in docs/gap.md).
+
+Version 3 (from 2): per-flight results are judged by evidence (:mod:`quadsim.gap.judge`).
+Each flight carries ``probability`` (of its verdict's reading), ``posterior`` (every reading,
+most probable first: name, probability, magnitude in words, log evidence, determined
+``params`` with 95 % ``ci``, ``undetermined`` parameter names, ``fixed``, ``variant``),
+``lack_of_fit`` (channel -> RMS over the references' typical RMS, only channels beyond
+them), ``differ_on`` (channels that separate the two leading readings), ``symptom`` (the
+flight's largest mean residual against the reference model) and ``tentative``; an outcome
+``refused`` with its ``reason`` for a flight that could not be judged. The result carries
+``reference_model`` (shared parameters with standard error and between-flight scatter,
+per-channel sigma and correlation time, reference delays) instead of
+``reference_floor``.
 
 Version 2 (from 1): the verdict has an ``outcome`` (``no_significant_gap`` | ``effect`` |
 ``unexplained``), an ``answer`` in words, per-channel ``channels`` (RMS before/after/floor in
@@ -55,7 +67,7 @@ _ALTERNATIVE = {
                    "separate_by": {"type": "string"}},
 }
 
-OUTCOMES = ["no_significant_gap", "effect", "unexplained"]
+OUTCOMES = ["no_significant_gap", "effect", "unexplained", "refused"]
 
 #: parameter consistency (quadsim.gap.consistency): the named candidate refitted per regime.
 _CONSISTENCY = {
@@ -106,9 +118,19 @@ _VERDICT = {
     },
 }
 
+_READING = {
+    "type": "object",
+    "required": ["name", "probability", "magnitude", "log_evidence", "params", "ci"],
+    "properties": {"name": {"type": "string"}, "probability": {"type": "number"},
+                   "magnitude": {"type": "string"}, "log_evidence": {"type": "number"},
+                   "params": _NUMBER_MAP, "ci": _NUMBER_MAP, "fixed": _NUMBER_MAP,
+                   "undetermined": {"type": "array", "items": {"type": "string"}},
+                   "variant": {"type": "string"}},
+}
+
 _FLIGHT = {
     "type": "object",
-    "required": ["file", "outcome", "verdict", "answer", "params", "channels"],
+    "required": ["file", "outcome", "verdict", "answer", "probability", "posterior"],
     "properties": {"file": {"type": "string"}, "verdict": {"type": "string"},
                    "outcome": {"enum": OUTCOMES}, "answer": {"type": "string"},
                    "channels": {"type": "object", "additionalProperties": _CHANNEL},
@@ -120,17 +142,24 @@ _FLIGHT = {
                    "confusable_with": {"type": "array", "items": {"type": "string"}},
                    "readings": {"type": "array", "items": {"type": "string"}},
                    "consistency": _CONSISTENCY, "partial": _PARTIAL,
-                   "tentative": {"type": "boolean"}},
+                   "tentative": {"type": "boolean"},
+                   "probability": {"type": ["number", "null"]},
+                   "posterior": {"type": "array", "items": _READING},
+                   "reason": {"type": "string"},
+                   "differ_on": {"type": "array", "items": {"type": "string"}},
+                   "symptom": {"type": "object"},
+                   "signal_delays_ms": {"type": "object"},
+                   "lack_of_fit": _NUMBER_MAP},
 }
 
 #: JSON Schema (draft 2020-12) of the result.
 GAP_SCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "quadsim.gap/2",
+    "title": "quadsim.gap/3",
     "type": "object",
     "required": ["schema", "where", "effects", "verdict"],
     "properties": {
-        "schema": {"const": "quadsim.gap/2"},
+        "schema": {"const": "quadsim.gap/3"},
         "model": {"type": "string"},
         "mode": {"enum": ["per-flight"]},
         "train": {"type": "array", "items": {"type": "string"}},
@@ -165,6 +194,7 @@ GAP_SCHEMA = {
         "notes": {"type": "array", "items": {"type": "string"}},
         "checks": {"type": "object"},
         "reference_floor": {"type": "object"},
+        "reference_model": {"type": "object"},
     },
 }
 

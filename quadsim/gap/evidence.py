@@ -1,0 +1,407 @@
+"""Explanations of one flight against the calibrated reference model, weighed by evidence.
+
+An *explanation* says how this flight differs from the reference flights
+(:class:`quadsim.gap.calibrate.Reference`): a library effect with free parameters and a prior
+(centre, spread, source), or a shared parameter group at a value of its own (a motor lag of
+its own instead of the references' 7 ms), or a logged signal's delay of its own.
+"No difference" has no free parameter of its own.
+
+Likelihood (all channels, the references' noise model)::
+
+    -2 log L(theta) = sum_c sum_t r_c(t; theta)^2 / (sigma_c^2 tau_c) + const
+
+(r_c the residual of channel c, sigma_c its RMS and tau_c its correlation time on the
+reference flights: N / tau_c effective samples, so a long flight with correlated residuals
+does not out-vote physics). The shared parameters theta_s are not fixed: every explanation
+carries them with the references' prior N(theta_ref, s_ref^2), marginalised in closed form
+around theta_ref (linear in theta_s, Jacobian J_s of the weighted residual): with
+u = (theta_s - theta_ref) / s_ref, Ĵ = J_s diag(s_ref) and A = I + ĴᵀĴ the profile is
+``|r + Ĵ du|^2 + |du|^2`` at ``du = -A^-1 Ĵᵀ r`` and the marginal adds ``-1/2 log det A``.
+An explanation that gives a shared group a value of its own takes that group out of the
+marginal and fits it with the wider prior N(theta_ref, s_ref^2 + w^2) (w: the prior spread
+of a difference, :func:`_prior_sd`). The rotor speeds' logging delay is shared as well, but
+not linear at all over a few ms: every explanation fits it, with the references' spread
+(:func:`reference_delay_sd`) as its prior; the reading "signal_delay" fits it with the wide
+prior N(0, s^2 + (20 ms)^2).
+
+Evidence (Laplace at the bounded least-squares optimum, parameters in units of their prior
+spread, z = (theta - mu) / sd)::
+
+    log Z = -1/2 (|aug(z)|^2 + |z|^2) - 1/2 log det H - 1/2 log det A + log pi
+
+with H = JᵀJ of the stacked residual (the posterior precision in z units; -1/2 log det H is
+the Occam factor log(posterior volume / prior volume); a value at a bound of its parameter
+keeps half the volume, log 2 less) and pi the model prior: equal per
+effect, split evenly among an effect's variants (one per rotor for a weak or canted rotor);
+"no difference" is weighed against them in :func:`quadsim.gap.judge.posterior`. A parameter is *determined* by the data when its posterior spread is
+below half its prior spread (:data:`DETERMINED`); only determined values are ever printed.
+
+Prior spreads (:func:`_prior_sd`): one rule -- half the larger end of the plausible range
+documented with its source in :mod:`quadsim.gap.priors` (that range is then about two
+spreads), centred on "off" (or on the references' value for a shared group); for the
+parameters without a range there, the source is given in the table.
+
+The coupling of a propeller change (:class:`Propeller`): thrust and drag torque per Omega^2
+scale together (same blade, same air; Leishman 2006 ch. 2-3), and the lower load torque lets
+the motor spin faster per command. A DC motor in steady state, k_t (u V - k_e W) / R = k_Q W^2,
+gives ``d ln W / d ln k_Q = -(1 - eta) / (2 - eta)`` with eta = k_e W / (u V) the motor's
+voltage efficiency: 0.2 at eta = 0.75, 0.33 at 0.5. The exponent alpha is fitted with prior
+N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
+neither map nor drag torque, so the command -> speed channel separates the two where commands
+are logged.
+
+Example::
+
+    >>> rows = evaluate(flight.fit, reference, explanations_for(reference, flight.fit))
+    >>> [(e.name, e.log_z) for e in rows]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+from scipy.optimize import least_squares
+
+from ..core.errors import ModelError
+from ..effects.base import EffectParameter
+from ..effects.thrust_factor import ThrustFactor
+from ..vehicle.params import hover_speed
+from .calibrate import SHARED, Reference, jacobian, weighted_residual
+from ..effects import make_effect
+from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class
+from .priors import momentum_rate_damping
+
+__all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
+           "DETERMINED", "DELAY_SD_S", "shifted"]
+
+#: a parameter is determined when its posterior spread is below this fraction of its prior's.
+DETERMINED = 0.5
+#: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
+#: (:data:`quadsim.logs.delays.MAX_LAG_S` searches 100 ms).
+DELAY_SD_S = 0.02
+
+
+def reference_delay_sd(reference: Reference) -> float:
+    """How far a nominal flight's rotor delay may lie from the references' (s): their
+    spread, combined with the estimate's repeatability
+    (:data:`quadsim.logs.delays.REPEAT_TOL_S`, 3 ms: the two halves of a log agree to it)."""
+    from ..logs.delays import REPEAT_TOL_S
+
+    sd_ms = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[1]
+    return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
+
+
+class Propeller(ThrustFactor):
+    """``thrust_factor`` as a propeller change: thrust and drag torque per Omega^2 scale by
+    (1 + change), and the speed a command gives by (1 + change)^-alpha (module doc)."""
+
+    parameters = ThrustFactor.parameters + (
+        EffectParameter("alpha", "1", 0.0, 0.0, 0.5, "speed-per-command exponent"),)
+
+    def speed_factor(self, t, vbat=None):
+        if self.change == 0.0 or self.alpha == 0.0:
+            return None
+        return np.full(len(t), (1.0 + self.change) ** (-self.alpha))
+
+
+def _range_sd(lower: float, upper: float) -> float:
+    return 0.5 * max(abs(lower), abs(upper))
+
+
+def _prior_sd(params) -> dict:
+    """Prior spread per parameter (module doc); vehicle-scaled where the range is."""
+    arm, mass = _arm(params), params.mass
+    hover_thrust = params.thrust_factor * hover_speed(params)   # N per rad/s at hover
+    return {
+        "mass_offset.mass": _range_sd(-0.05, 0.6) * mass,      # priors: payload to 60 %
+        "com_offset.x": _range_sd(-0.15, 0.15) * arm, "com_offset.y": _range_sd(-0.15, 0.15) * arm,
+        "thrust_mismatch": _range_sd(-0.2, 0.1),
+        "thrust_factor.change": _range_sd(-0.15, 0.05),
+        # DC-motor efficiency 0.6-0.9 (module doc)
+        "thrust_factor.alpha": 0.1,
+        "thrust_curve.linear": _range_sd(-0.2, 0.2) * hover_thrust,
+        "battery_sag.rate": _range_sd(0.0, 0.005),
+        # a battery's full voltage: +-10 % of a cell's 4.2 V (charge state)
+        "battery_sag.full_voltage": 0.42,
+        "inertia_error": _range_sd(-0.5, 1.0),
+        "rate_damping": _range_sd(0.0, 3.0) * momentum_rate_damping(params),
+        "canted_rotor": _range_sd(-0.17, 0.17),
+        # Cheeseman & Bennett (1955) ground effect: gain 1 is the textbook curve
+        "ground_effect.gain": 1.0,
+        # 10 % of the weight at 2 m/s (fitting._drag_scale, _area_scale): a doubled drag
+        "rotor_drag": _drag_scale(params),
+        "body_drag": _area_scale(params),
+        # brushed/brushless micro motors 10-60 ms (Foerster, ETH 2015: Crazyflie 2.0 ~ 15 ms)
+        "motor_lag.time_constant": 0.03,
+        # rotor+motor inertia: the fit's typical size (fitting.FIT_SPEC)
+        "gyroscopic.rotor_inertia": 1e-6 * (mass / 0.04) ** 1.7,
+        # indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)
+        "wind": 5.0,
+    }
+
+
+@dataclass(frozen=True)
+class Explanation:
+    """How a flight may differ from the references (module doc). ``parts``: (effect, fixed,
+    fitted) of its own effects; ``replaces``: shared groups it gives values of its own;
+    ``shift``: a signal whose delay it fits ("rotor"); ``log_prior``: log model prior."""
+
+    name: str
+    variant: str
+    parts: tuple
+    mean: tuple
+    sd: tuple
+    replaces: tuple = ()
+    shift: str | None = None
+    log_prior: float = 0.0
+
+    @property
+    def parameter_names(self) -> list[str]:
+        names = [f"{n}.{p}" for n, _, fitted in self.parts for p in fitted]
+        return names + ([f"delay.{self.shift}"] if self.shift else [])
+
+    @property
+    def fixed_values(self) -> dict:
+        return {f"{n}.{p}": float(v) for n, fixed, _ in self.parts for p, v in fixed.items()}
+
+
+@dataclass
+class Evidence:
+    """One explanation's result on one flight: MAP values, posterior and prior spreads,
+    which values the data determine, log evidence, per-channel mean squared residual over
+    sigma_c^2 (``ms``) and the air force of a wind reading (world, N)."""
+
+    explanation: Explanation
+    values: dict
+    post_sd: dict
+    prior_sd: dict
+    determined: dict
+    log_z: float
+    ms: np.ndarray
+    mean: np.ndarray | None = None
+    air_force: np.ndarray | None = None
+    shared_shift: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.explanation.name
+
+
+def _one(name, variant, parts, mean, sd, **kw) -> Explanation:
+    return Explanation(name, variant, tuple(parts), tuple(map(float, mean)),
+                       tuple(map(float, sd)), **kw)
+
+
+def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
+    """Every explanation the flight's data can show (``names``: restrict to these effects)."""
+    params, sd = reference.params, _prior_sd(reference.params)
+    ref = reference.values()
+    delay = states.rotor_speed is not None and "rotor" in reference.delays_ms
+    out = [_one("no_difference", "", (), (), ())]
+    groups = {name for name, _, _ in reference.candidate.parts}
+    for group, fitted in SHARED:          # a shared group at a value of its own
+        if group == "nominal_refit" or group not in groups:
+            continue
+        keys = [f"{group}.{p}" for p in fitted]
+        s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
+        spread = [np.hypot(s_ref[k], sd.get(k, sd.get(group))) for k in keys]
+        out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
+                        replaces=(group,)))
+    one = [("mass_offset", ("mass",)), ("com_offset", ("x", "y")),
+           ("thrust_curve", ("linear",)), ("ground_effect", ("gain",)),
+           ("body_drag", ("cd_area", "cd_area_vertical"))]
+    for name, fitted in one:
+        keys = [f"{name}.{p}" for p in fitted]
+        out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
+                        [sd.get(k, sd.get(name)) for k in keys]))
+    change = ["change", "alpha"] if reference.rotor else ["change"]
+    out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
+                    [0.0, 0.2][:len(change)],
+                    [sd["thrust_factor.change"], sd["thrust_factor.alpha"]][:len(change)]))
+    rotors = params.rotor_count
+    for k in range(rotors):
+        out.append(_one("thrust_mismatch", f"rotor {k + 1}",
+                        [("thrust_mismatch", {}, (f"rotor_{k + 1}",))], [0.0],
+                        [sd["thrust_mismatch"]], log_prior=-np.log(rotors)))
+        out.append(_one("canted_rotor", f"rotor {k + 1}",
+                        [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
+                        [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
+    if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
+        out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
+                        [sd["battery_sag.rate"]]))
+    if delay:
+        out.append(_one("signal_delay", "rotor", (), [0.0],
+                        [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
+    if names is not None:
+        keep = set(names) | {"no_difference", "signal_delay"}
+        out = [e for e in out if e.name in keep]
+    if delay:       # the rotor delay as a shared parameter of every other explanation
+        tight = reference_delay_sd(reference)
+        out = [e if e.shift else Explanation(e.name, e.variant, e.parts, e.mean + (0.0,),
+                                             e.sd + (tight,), e.replaces, "rotor", e.log_prior)
+               for e in out]
+    return out
+
+
+def _make(name: str, values: dict):
+    if name == "thrust_factor":
+        return Propeller(**values)
+    if name in LOCAL_EFFECTS:
+        return LOCAL_EFFECTS[name](**values)
+    return make_effect(name, **values)
+
+
+def _own_effects(expl: Explanation, theta: np.ndarray) -> list:
+    out, k = [], 0
+    for name, fixed, fitted in expl.parts:
+        values = dict(fixed)
+        for p in fitted:
+            values[p] = float(theta[k])
+            k += 1
+        out.append(_make(name, values))
+    return out
+
+
+def shifted(states, delay_s: float):
+    """``states`` with the rotor speeds (and their derivative) read ``delay_s`` later: the
+    speeds a log that records them ``delay_s`` late had at each time."""
+    if delay_s == 0.0 or states.rotor_speed is None:
+        return states
+    import dataclasses
+
+    t = states.t
+
+    def move(x):
+        return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
+
+    return dataclasses.replace(states, rotor_speed=move(states.rotor_speed),
+                               rotor_accel=None if states.rotor_accel is None
+                               else move(states.rotor_accel))
+
+
+class _Marginal:
+    """The shared parameters not fitted by an explanation, marginalised linearly (module doc)."""
+
+    def __init__(self, jac: np.ndarray, s_ref: np.ndarray):
+        self.j = jac * s_ref
+        a = np.eye(len(s_ref)) + self.j.T @ self.j
+        self.chol = cho_factor(a)
+        self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
+
+    def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        du = -cho_solve(self.chol, self.j.T @ r)
+        return r + self.j @ du, du
+
+
+def _bounds(expl: Explanation, reference: Reference, dt: float):
+    lower, upper = [], []
+    for name, _, fitted in expl.parts:
+        cls = Propeller if name == "thrust_factor" else effect_class(name)
+        specs = {p.name: p for p in cls.parameters}
+        for p in fitted:
+            lo, hi = specs[p].lower, specs[p].upper
+            if name == "motor_lag":
+                lo = max(lo, dt / 4)      # fitting.fit_candidate: the Heun sub-step
+            if name == "mass_offset":
+                lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
+            if name == "com_offset":
+                arm = _arm(reference.params)
+                lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
+            lower.append(lo)
+            upper.append(hi)
+    if expl.shift:
+        lower.append(-0.1)
+        upper.append(0.1)
+    return np.asarray(lower, float), np.asarray(upper, float)
+
+
+def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[int]]:
+    """The reference effects without the replaced groups, and the marginalised columns."""
+    names = reference.candidate.parameter_names
+    keep = [k for k, n in enumerate(names) if n.split(".")[0] not in replaces]
+    effects = [e for e in reference.effects() if e.name not in replaces]
+    return effects, keep
+
+
+def _air_force(states, reference, effects, own) -> np.ndarray:
+    """Mean air force (world, N) of the flight's wind beyond the references' wind."""
+    from ..core.frames import rotate
+    from .residual import model_wrench
+
+    base = [e for e in reference.effects() if e.name == "wind"]   # the references' own
+    with_wind, _, _ = model_wrench(states, reference.params, effects + own)
+    without, _, _ = model_wrench(states, reference.params, effects + base)
+    return np.mean(rotate(states.quat, with_wind - without), axis=0)
+
+
+def evaluate(states, reference: Reference, explanations: list[Explanation],
+             start_delay_s: float = 0.0) -> list[Evidence]:
+    """Log evidence of every explanation on one flight's (decimated) ``states``.
+
+    With a rotor-delay reading, every explanation fits the flight's rotor delay too: with
+    the references' prior (:func:`reference_delay_sd`) as a shared parameter, or with the
+    wide prior as the reading "signal_delay" (it starts at ``start_delay_s``, the
+    cross-correlation estimate against the references')."""
+    names = list(reference.candidate.parameter_names)
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    return [_fit_one(states, reference, e, jac, reference.s_ref, names,
+                     start_delay_s if e.name == "signal_delay" else 0.0)
+            for e in explanations]
+
+
+def _fit_one(states, reference: Reference, expl: Explanation, jac: np.ndarray,
+             s_all: np.ndarray, names_all: list[str], start_delay_s: float) -> Evidence:
+    """One explanation's MAP fit and Laplace evidence (module doc); ``jac`` (N C, M): the
+    weighted residual's Jacobian in the shared parameters ``names_all`` (spreads ``s_all``),
+    of which those the explanation does not replace are marginalised."""
+    dt = float(states.t[1] - states.t[0])
+    chans = len(reference.sigma)
+    shared, keep = _shared_effects(reference, expl.replaces)
+    marg = _Marginal(jac[:, keep], s_all[keep])
+    mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
+    lower, upper = _bounds(expl, reference, dt)
+    size = jac.shape[0] + len(keep) + len(mean)
+
+    def stacked(z):
+        theta = mean + sd * z
+        try:
+            own = _own_effects(expl, theta)
+            flight = shifted(states, float(theta[-1])) if expl.shift else states
+            r = weighted_residual(flight, reference, shared + own).ravel()
+        except ModelError:
+            return np.full(size, 1e3)
+        aug, du = marg.profile(r)
+        return np.concatenate([aug, du, z])
+
+    if len(mean):
+        z_lo, z_hi = (lower - mean) / sd, (upper - mean) / sd
+        z0 = np.zeros_like(mean)
+        if expl.shift:
+            z0[-1] = start_delay_s / sd[-1]
+        z0 = np.clip(z0, z_lo + 1e-6, z_hi - 1e-6)
+        fit = least_squares(stacked, z0, bounds=(z_lo, z_hi), diff_step=1e-3, max_nfev=40,
+                            method="trf")
+        z, vec, h = fit.x, fit.fun, fit.jac.T @ fit.jac
+        # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
+        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * int(np.count_nonzero(
+            fit.active_mask))
+        post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
+    else:
+        z, vec, logdet_h, post = np.zeros(0), stacked(np.zeros(0)), 0.0, np.zeros(0)
+    theta = mean + sd * z
+    log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * marg.logdet + expl.log_prior
+    n = jac.shape[0]
+    resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
+    keys = expl.parameter_names
+    shift = {names_all[k]: float(s_all[k] * d) for k, d in zip(keep, vec[n:n + len(keep)])}
+    own = [expl.name == "signal_delay" or k != "delay.rotor" for k in keys]
+    ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
+                  dict(zip(keys, map(float, sd))),
+                  {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
+                  log_z, np.mean(resid ** 2, axis=0), np.mean(resid, axis=0) * reference.sigma,
+                  shared_shift=shift)
+    if expl.name == "wind":
+        ev.air_force = _air_force(states, reference, shared, _own_effects(expl, theta))
+    return ev

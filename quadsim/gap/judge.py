@@ -1,0 +1,243 @@
+"""A flight's verdict from the evidence of its explanations (:mod:`quadsim.gap.evidence`).
+
+1. **Posterior per reading**: an effect's probability is the sum over its variants of
+   ``exp(log Z)``, normalised over every effect and "no difference" (:func:`posterior`:
+   "no difference" has the prior of all effects together; an explanation whose parameters
+   the data do not determine counts as "no difference").
+2. **Lack of fit ("not in the library")**: after the most probable explanation, each
+   channel's mean squared residual over sigma_c^2 is compared with what the reference
+   flights left: ``z_c = (log ms_c - mean_ref,c) / (spread sqrt(1 + 1/n))`` (n reference
+   flights; the spread pooled over channels with C (n - 1) degrees of freedom,
+   :mod:`.calibrate`). A channel with z_c above the Student-t quantile at
+   ``1 - LOF_P / C`` (one-sided, Bonferroni over the C channels) is not explained by the
+   library: the verdict is ``unexplained`` with that channel named, whatever the weights
+   say. ``LOF_P`` = 0.001: one nominal flight in a thousand is called unexplained by chance.
+3. **Verdict**: the most probable reading and its probability; ``no_difference`` ->
+   ``no_significant_gap``. Readings stated in the answer: every effect with probability
+   >= :data:`READING_P` (0.1: a reading a user should still check, one in ten). A name is
+   *tentative* below :data:`CONFIDENT` (0.9): the answer says so and the benchmark does not
+   count it as confident.
+4. **Magnitudes**: only parameters the data determine (posterior spread below half the
+   prior's, :data:`quadsim.gap.evidence.DETERMINED`) are printed; a shared group's value is
+   given next to the references' (value and uncertainty); wind is answered as the steady
+   air force it exerts (the data fix drag coefficient x wind speed), with the wind speed
+   at the references' drag coefficient.
+
+Example::
+
+    >>> entry = judge(evaluate(states, ref, explanations_for(ref, states)), ref, "f.csv")
+    >>> entry["verdict"], entry["probability"], entry["answer"]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import logsumexp
+from scipy.stats import t as student_t
+
+from . import collinear
+from .residual import CHANNELS
+
+__all__ = ["judge", "posterior", "lack_of_fit", "symptom", "READING_P", "CONFIDENT", "LOF_P",
+           "reading_text"]
+
+READING_P = 0.1
+CONFIDENT = 0.9
+LOF_P = 1e-3
+
+#: shown units: seconds as ms, kilograms as g, metres as mm.
+_SHOWN = {"s": (1e3, "ms"), "kg": (1e3, "g"), "m": (1e3, "mm")}
+
+
+def channel_names(reference) -> list[str]:
+    extra = [f"rotor_{i + 1}" for i in range(reference.params.rotor_count)] \
+        if reference.rotor else []
+    return list(CHANNELS) + extra
+
+
+def posterior(rows) -> list[tuple[str, float, object]]:
+    """(effect, probability, best variant's Evidence), most probable first (module doc).
+
+    "No difference" has the prior of all effects together (a flight is a priori as likely
+    nominal as not; the effects share the other half equally), and an explanation none of
+    whose parameters the data determine predicts what "no difference" predicts: its weight
+    is counted there (a wind the references' zero drag coefficient cannot show is not a
+    reading)."""
+    groups: dict[str, list] = {}
+    for ev in rows:
+        key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
+        groups.setdefault(key, []).append(ev)
+    prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
+    logs = {k: logsumexp([e.log_z + (prior_null if e.name == "no_difference" else 0.0)
+                          for e in v]) for k, v in groups.items()}
+    total = logsumexp(list(logs.values()))
+    out = [(k, float(np.exp(logs[k] - total)),
+            max(groups[k], key=lambda e: (e.name == k, e.log_z))) for k in groups]
+    return sorted(out, key=lambda x: (-x[1], x[0]))
+
+
+def lack_of_fit(ev, reference) -> dict:
+    """Channels the explanation ``ev`` leaves beyond the references' residual (module doc):
+    channel -> (ratio of RMS to the references' typical RMS, z)."""
+    n = len(reference.names)
+    scale = reference.lof_sd * np.sqrt(1 + 1 / n)
+    z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / max(scale, 1e-9)
+    limit = float(student_t.ppf(1 - LOF_P / len(z), reference.lof_dof))
+    names = channel_names(reference)
+    return {names[c]: (float(np.sqrt(np.exp(np.log(ev.ms[c]) - reference.lof_mean[c]))),
+                       float(z[c])) for c in range(len(z)) if z[c] > limit}
+
+
+def _value_text(key: str, value: float, sd: float, params) -> str:
+    return collinear.describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
+
+
+def reading_text(ev, reference) -> str:
+    """The magnitude of a reading in words (determined values only)."""
+    params, name = reference.params, ev.name
+    keys = [k for k, ok in ev.determined.items() if ok]
+    if name == "no_difference":
+        return "no difference from the reference flights"
+    if name == "signal_delay":
+        mean = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[0]
+        d = 1e3 * ev.values["delay.rotor"]
+        if not keys:
+            return "rotor speeds logged with a delay of their own (size not determined)"
+        return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
+                f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
+                f"(references: {mean:+.1f} ms against motion capture)")
+    if name == "wind":
+        return _wind_text(ev, reference)
+    if not keys:
+        return f"{name.replace('_', ' ')} (size not determined by this flight)"
+    values = {k: ev.values[k] for k in keys if not k.endswith(".alpha")}
+    ci = {k: 1.96 * ev.post_sd[k] for k in values}
+    text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
+    if ev.explanation.replaces:
+        ref = reference.values()
+        s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
+        text += " (references: " + "; ".join(
+            _value_text(k, ref[k], s_ref[k], params) for k in values if k in ref) + ")"
+    if ev.explanation.variant and ev.explanation.variant not in text:
+        text = f"{ev.explanation.variant}: {text}"
+    if name == "thrust_factor" and reference.rotor and "thrust_factor.change" in values:
+        text += (f"; the rotors would spin {100 * ((1 + ev.values['thrust_factor.change']) ** -ev.values.get('thrust_factor.alpha', 0.0) - 1):+.1f} % "
+                 "per command (lighter load torque)")
+    return text
+
+
+def _wind_text(ev, reference) -> str:
+    force = ev.air_force if ev.air_force is not None else np.zeros(3)
+    horiz = force[:2]
+    size = float(np.hypot(*horiz))
+    axis = int(np.argmax(np.abs(horiz)))
+    sign = "+" if horiz[axis] >= 0 else "-"
+    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
+            f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
+            "airspeed")
+    keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
+    if keys:
+        ref = reference.values()
+        speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
+                               ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
+        text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
+                 "coefficient")
+    else:
+        text += " (drag coefficient x wind speed fixed by the data, not each factor)"
+    return text
+
+
+def _differ_on(first, second, reference) -> list[str]:
+    """The channels where two explanations' residuals differ most (what would separate them)."""
+    if first is None or second is None:
+        return []
+    gap = np.abs(np.log(np.maximum(first.ms, 1e-300)) - np.log(np.maximum(second.ms, 1e-300)))
+    names = channel_names(reference)
+    order = np.argsort(-gap)
+    return [names[c] for c in order[:2] if gap[c] > 0.01]
+
+
+def symptom(ev, reference) -> dict:
+    """The flight's largest mean residual against the reference model (channel, sign, size
+    in words): what a user sees first, grouped across flights in the report."""
+    if ev is None or ev.mean is None:
+        return {}
+    names = channel_names(reference)
+    c = int(np.argmax(np.abs(ev.mean) / reference.sigma))
+    value = float(ev.mean[c])
+    params = reference.params
+    if c < 3:
+        text = f"{names[c]} {100 * value / params.weight:+.1f} % of the weight"
+    elif c < 6:
+        text = f"{names[c]} {1e3 * value:+.3g} mN m"
+    else:
+        from ..vehicle.params import hover_speed
+
+        text = f"{names[c]} {100 * value / hover_speed(params):+.1f} % of the hover speed"
+    return {"channel": names[c], "sign": "+" if value >= 0 else "-", "value": value,
+            "sigmas": float(abs(value) / reference.sigma[c]), "text": text}
+
+
+def judge(rows, reference, name: str) -> dict:
+    """The per-flight entry (``quadsim.gap/3``, :mod:`.schema`) from a flight's evidence."""
+    ranked = posterior(rows)
+    top, p_top, best = ranked[0]
+    lack = lack_of_fit(best, reference)
+    readings = [{"name": k, "probability": p, "magnitude": reading_text(ev, reference),
+                 "log_evidence": ev.log_z,
+                 "params": {q: ev.values[q] for q, ok in ev.determined.items() if ok},
+                 "ci": {q: 1.96 * ev.post_sd[q] for q, ok in ev.determined.items() if ok},
+                 "undetermined": [q for q, ok in ev.determined.items() if not ok],
+                 "fixed": ev.explanation.fixed_values, "variant": ev.explanation.variant}
+                for k, p, ev in ranked]
+    stated = [r for r in readings if r["probability"] >= READING_P]
+    second = ranked[1] if len(ranked) > 1 else None
+    separate = _differ_on(best, second[2] if second else None, reference)
+    if lack:
+        outcome, verdict = "unexplained", "unexplained"
+    elif top == "no_difference":
+        outcome, verdict = "no_significant_gap", "no_significant_gap"
+    else:
+        outcome, verdict = "effect", top
+    named = [r["name"] for r in stated if r["name"] != "no_difference"]
+    answer = _answer(outcome, readings[0], stated, lack, separate)
+    lead = readings[0]
+    return {"file": name, "outcome": outcome, "verdict": verdict, "answer": answer,
+            "probability": p_top, "tentative": outcome == "effect" and p_top < CONFIDENT,
+            "readings": named if outcome == "effect" else [],
+            "posterior": readings, "lack_of_fit": {k: v[0] for k, v in lack.items()},
+            "params": lead["params"] if outcome == "effect" else {},
+            "ci": lead["ci"] if outcome == "effect" else {},
+            "fixed": lead["fixed"] if outcome == "effect" else {},
+            "units": {k: collinear.unit_of(k) for k in lead["params"]} if outcome == "effect"
+            else {},
+            "confusable_with": [r for r in named if r != verdict],
+            "separate_by": ({r: collinear.separation(verdict, [r])[r] for r in named
+                             if r != verdict} if outcome == "effect" else {}),
+            "differ_on": separate, "notes": [],
+            "symptom": symptom(next((e for e in rows if e.name == "no_difference"), None),
+                               reference)}
+
+
+def _answer(outcome, lead, stated, lack, separate) -> str:
+    others = [r for r in stated if r is not lead]
+    alt = "; ".join(f"or {r['name']} ({100 * r['probability']:.0f} %: {r['magnitude']})"
+                    for r in others)
+    if outcome == "unexplained":
+        where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in lack.items())
+        return (f"Not in the library: after the most probable reading ({lead['name']}, "
+                f"{100 * lead['probability']:.0f} %: {lead['magnitude']}) the residual stays "
+                f"beyond the reference flights' on {where} their typical RMS.")
+    if outcome == "no_significant_gap":
+        text = (f"No difference from the reference flights "
+                f"({100 * lead['probability']:.0f} %).")
+        return text + (f" Next: {alt}." if alt else "")
+    text = f"{lead['name']} ({100 * lead['probability']:.0f} %): {lead['magnitude']}."
+    if lead["probability"] < CONFIDENT:
+        text += " Tentative."
+    if alt:
+        text += f" {alt[0].upper()}{alt[1:]}."
+        if separate:
+            text += f" They differ most on {', '.join(separate)}."
+    return text
+

@@ -1,0 +1,142 @@
+"""Per-flight outputs: the text summary and the HTML page of ``--per-flight`` results.
+
+The page opens with one table -- flight, verdict, probability, magnitude of the leading
+reading, what remains (channels beyond the reference flights, or nothing) -- so each answer
+is stated once. Below it: the readings per flight (posterior, magnitudes, what would separate
+the leaders), the shared symptoms (flights whose largest mean residual against the reference
+model is on the same channel with the same sign, their verdicts side by side), one table of
+signal delays, the refused flights with their reasons, and the reference model. Only values
+the data determine are shown (:mod:`quadsim.gap.judge`). Width: at most 1400 px.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+__all__ = ["flights_summary", "flights_html"]
+
+
+def _short(path: str) -> str:
+    return Path(path).name
+
+
+def _lead(f: dict) -> dict:
+    return f["posterior"][0] if f.get("posterior") else {}
+
+
+def _remains(f: dict) -> str:
+    if f["outcome"] == "refused":
+        return f.get("reason", "")
+    lack = f.get("lack_of_fit") or {}
+    if lack:
+        return ", ".join(f"{k} {v:.2g}x the references" for k, v in lack.items())
+    return "nothing beyond the reference flights"
+
+
+def _prob(f: dict) -> str:
+    p = f.get("probability")
+    return "-" if p is None else f"{100 * p:.0f} %"
+
+
+def flights_summary(result: dict) -> str:
+    """A few lines for people: the answer, then one line per flight."""
+    model = result.get("reference_model", {})
+    lines = [f"answer: {result['verdict'].get('answer', '')}",
+             f"per-flight diagnosis against {len(result['reference'])} reference flights "
+             f"(reference model: {len(model.get('params', {}))} shared parameters calibrated)"]
+    for f in result["flights"]:
+        lines.append(f"  {_short(f['file'])}: {f['verdict']} ({_prob(f)}): {f.get('answer', '')}")
+    lines += [f"note: {note}" for note in result.get("notes", [])]
+    return "\n".join(lines) + "\n"
+
+
+def _table(head: list[str], rows: list[list[str]]) -> str:
+    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
+                   for r in rows)
+    return f"<table><tr>{th}</tr>{body}</table>"
+
+
+def _groups(flights: list[dict]) -> str:
+    groups: dict[tuple, list[dict]] = {}
+    for f in flights:
+        s = f.get("symptom") or {}
+        if s and f["outcome"] != "refused" and s.get("sigmas", 0) >= 1.0:
+            groups.setdefault((s["channel"], s["sign"]), []).append(f)
+    rows = []
+    for (channel, sign), members in sorted(groups.items(), key=lambda kv: -len(kv[1])):
+        if len(members) < 2:
+            continue
+        verdicts: dict[str, int] = {}
+        for f in members:
+            verdicts[f["verdict"]] = verdicts.get(f["verdict"], 0) + 1
+        texts = sorted(f["symptom"]["text"] for f in members)
+        rows.append([f"{channel} {sign}", str(len(members)), f"{texts[0]} .. {texts[-1]}",
+                     ", ".join(f"{n} {k}" for k, n in sorted(verdicts.items(),
+                                                              key=lambda kv: -kv[1]))])
+    if not rows:
+        return ""
+    return ("<h2>Shared symptoms</h2><p>Flights whose largest mean residual against the "
+            "reference model lies on the same channel with the same sign.</p>"
+            + _table(["symptom", "flights", "range", "verdicts"], rows))
+
+
+def _delays(flights: list[dict], result: dict) -> str:
+    keys = sorted({k for f in flights for k in (f.get("signal_delays_ms") or {})})
+    if not keys:
+        return ""
+    ref = (result.get("reference_model") or {}).get("delays_ms", {})
+    rows = [["references (mean ± sd)"] + [
+        f"{ref[k]['mean']:+.1f} ± {ref[k]['sd']:.1f}" if k in ref else "-" for k in keys]]
+    for f in flights:
+        d = f.get("signal_delays_ms") or {}
+        rows.append([_short(f["file"])] + ["-" if d.get(k) is None else f"{d[k]:+.1f}"
+                                           for k in keys])
+    return ("<h2>Signal delays against motion capture (ms)</h2>"
+            + _table(["flight"] + keys, rows))
+
+
+def _readings(f: dict) -> str:
+    items = "".join(
+        f"<li><b>{html.escape(r['name'])}</b> {100 * r['probability']:.1f} %: "
+        f"{html.escape(r['magnitude'])}"
+        + (f" <i>(not determined: {html.escape(', '.join(r['undetermined']))})</i>"
+           if r.get("undetermined") else "") + "</li>"
+        for r in f.get("posterior", [])[:4] if r["probability"] >= 0.01)
+    extra = ""
+    if f.get("differ_on"):
+        extra = f"<p>The two leading readings differ most on {html.escape(', '.join(f['differ_on']))}.</p>"
+    for other, how in (f.get("separate_by") or {}).items():
+        extra += f"<p>To separate from {html.escape(other)}: {html.escape(how)}.</p>"
+    return f"<ul>{items}</ul>{extra}"
+
+
+def flights_html(result: dict) -> list[str]:
+    """The body parts of the per-flight page (module doc)."""
+    flights = result["flights"]
+    rows = [[_short(f["file"]), f["verdict"], _prob(f),
+             _lead(f).get("magnitude", "") if f["outcome"] == "effect" else
+             (f.get("answer", "") if f["outcome"] != "no_significant_gap" else "-"),
+             _remains(f)] for f in flights]
+    body = [f"<p><b>{html.escape(result['verdict'].get('answer', ''))}</b></p>",
+            _table(["flight", "verdict", "probability", "magnitude", "what remains"], rows),
+            _groups(flights), "<h2>Readings per flight</h2>"]
+    for f in flights:
+        if f["outcome"] == "refused":
+            continue
+        body.append(f"<h3>{html.escape(_short(f['file']))}</h3>" + _readings(f))
+    body.append(_delays(flights, result))
+    notes = [n for f in flights for n in f.get("notes", []) if "signal delays" not in n]
+    notes += result.get("notes", [])
+    if notes:
+        body.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+                    + "</ul>")
+    model = result.get("reference_model") or {}
+    if model:
+        rows = [[k, f"{v:.4g}", f"{model['se'].get(k, float('nan')):.2g}",
+                 f"{model['scatter'].get(k, float('nan')):.2g}"]
+                for k, v in model["params"].items()]
+        body.append("<h2>Reference model</h2>"
+                    + _table(["shared parameter", "value", "standard error", "scatter"], rows))
+    return body

@@ -1,0 +1,146 @@
+"""Verdicts by evidence (quadsim.gap.calibrate, .evidence, .judge, .per_flight): synthetic
+flights with a known truth judged against reference flights that share a motor lag and
+rotor drag; numbers checked against the truth with stated tolerances."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from quadsim.core.errors import QuadsimWarning
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose_per_flight, to_json, validate
+from quadsim.gap.calibrate import calibrate
+from quadsim.gap.diagnose import prepare
+from quadsim.gap.evidence import Propeller
+from quadsim.gap.per_flight import judge_one
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.logs.flightlog import FlightLog
+from quadsim.vehicle.params import load_params
+
+#: what every reference flight shares: an 8 ms motor lag and rotor drag
+LAG, DRAG = 0.008, 2e-7
+
+
+def _shared(**kw):
+    return [make_effect("motor_lag", time_constant=kw.get("lag", LAG)),
+            make_effect("rotor_drag", coefficient=kw.get("drag", DRAG))]
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+@pytest.fixture(scope="module")
+def reference(cf):
+    """Four nominal flights, one of them short and slow (its own fit of the lag and the drag
+    has a wide CI: it must not widen what counts as nominal)."""
+    logs = [synthetic_flight(cf, _shared(), duration=5.0, seed=s, speed=0.8 + 0.15 * s)
+            for s in range(3)]
+    logs.append(synthetic_flight(cf, _shared(), duration=2.0, seed=3, speed=0.3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+def _judge(cf, reference, effects, seed, **kw):
+    log = synthetic_flight(cf, effects, duration=5.0, seed=seed, speed=kw.pop("speed", 1.0))
+    return judge_one(log, reference)
+
+
+def test_calibration_recovers_the_shared_lag_and_drag(reference):
+    values = reference.values()
+    assert values["motor_lag.time_constant"] == pytest.approx(LAG, abs=0.001)
+    assert values["rotor_drag.coefficient"] == pytest.approx(DRAG, rel=0.15)
+    assert np.all(reference.sigma > 0) and np.all(reference.tau >= 1)
+
+
+def test_a_flight_with_the_references_lag_is_no_significant_gap(cf, reference):
+    """The lag every reference shares is absorbed: no difference (and flown faster)."""
+    entry = _judge(cf, reference, _shared(), seed=20, speed=1.3)
+    assert entry["outcome"] == "no_significant_gap", entry["answer"]
+    assert entry["probability"] > 0.5
+
+
+@pytest.mark.parametrize("name, effects, key, truth, tol", [
+    ("motor_lag", _shared(lag=0.04), "motor_lag.time_constant", 0.04, 0.004),
+    ("rotor_drag", _shared(drag=4 * DRAG), "rotor_drag.coefficient", 4 * DRAG, 0.6 * DRAG),
+    ("inertia_error", _shared() + [make_effect("inertia_error", xx=0.4, yy=0.4)],
+     "inertia_error.xx", 0.4, 0.08),
+], ids=["lag", "drag", "inertia"])
+def test_a_difference_from_the_references_is_named(cf, reference, name, effects, key, truth,
+                                                   tol):
+    entry = _judge(cf, reference, effects, seed=30)
+    assert entry["outcome"] == "effect" and entry["verdict"] == name, entry["answer"]
+    assert entry["probability"] > 0.9
+    assert entry["params"][key] == pytest.approx(truth, abs=tol)
+
+
+def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, reference):
+    """+6 g and -15 % thrust per Omega^2 load the rotors alike; a propeller change also
+    scales the drag torque and spins the motor faster per command, a mass does neither."""
+    mass = _judge(cf, reference, _shared() + [make_effect("mass_offset", mass=0.006)], seed=40)
+    assert mass["verdict"] == "mass_offset" and mass["probability"] > 0.9, mass["answer"]
+    assert mass["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=0.0005)
+    prop = _judge(cf, reference, _shared() + [Propeller(change=-0.15, alpha=0.2)], seed=41)
+    assert prop["verdict"] == "thrust_factor" and prop["probability"] > 0.9, prop["answer"]
+    assert prop["params"]["thrust_factor.change"] == pytest.approx(-0.15, abs=0.015)
+
+
+def _delayed(log: FlightLog, delay: float) -> FlightLog:
+    late = np.stack([np.interp(log.t - delay, log.t, c) for c in log.rotor_speed.T], -1)
+    return FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate, log.accel,
+                     late, log.rotor_command, log.vbat)
+
+
+def test_a_rotor_speed_delay_is_named(cf, reference):
+    log = _delayed(synthetic_flight(cf, _shared(), duration=5.0, seed=50), 0.025)
+    entry = judge_one(log, reference)
+    assert entry["verdict"] == "signal_delay", entry["answer"]
+    lead = entry["posterior"][0]
+    assert lead["params"]["delay.rotor"] == pytest.approx(0.025, abs=0.004)
+    assert "ms later than on the reference flights" in entry["answer"]
+
+
+def test_a_batch_with_one_bad_flight_refuses_it_and_judges_the_others(cf, tmp_path):
+    pytest.importorskip("jsonschema", reason="jsonschema (test extra) validates the schema")
+    from quadsim.gap.__main__ import main
+    from quadsim.logs.flightlog import write_log
+
+    refs = [str(write_log(tmp_path / f"r{s}.csv", synthetic_flight(cf, [], duration=3.0,
+                                                                   seed=s))) for s in (60, 61)]
+    good = synthetic_flight(cf, [make_effect("mass_offset", mass=0.006)], duration=3.0, seed=62)
+    bad = FlightLog(good.t, good.position, good.quat, good.velocity, good.body_rate,
+                    good.accel / 9.81, good.rotor_speed, good.rotor_command, good.vbat)
+    paths = [str(write_log(tmp_path / "good.csv", good)), str(write_log(tmp_path / "bad.csv", bad)),
+             str(write_log(tmp_path / "also.csv", synthetic_flight(cf, [], duration=3.0, seed=63)))]
+    out = tmp_path / "out.json"
+    html = tmp_path / "out.html"
+    assert main(["--model", "crazyflie21", "--per-flight", *paths, "--reference", *refs,
+                 "--effects", "mass_offset", "com_offset", "--quiet", "--workers", "1",
+                 "--json", str(out), "--report", str(html)]) == 0
+    document = json.loads(out.read_text())
+    validate(document)
+    outcomes = [f["outcome"] for f in document["flights"]]
+    assert outcomes[1] == "refused" and "looks like g" in document["flights"][1]["reason"]
+    assert document["flights"][0]["verdict"] == "mass_offset"
+    assert outcomes[2] == "no_significant_gap"
+    assert "1 refused" in document["verdict"]["answer"]
+    page = html.read_text()
+    assert page.index("<th>probability</th>") < page.index("Readings per flight")
+    assert "max-width:1400px" in page
+    # the same batch as a library call: the bad log (3 rotors) refused, the others judged
+    three = FlightLog(good.t, good.position, good.quat, good.velocity, good.body_rate,
+                      good.accel, good.rotor_speed[:, :3])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        result = diagnose_per_flight([good, three], [synthetic_flight(cf, [], duration=3.0,
+                                                                      seed=s) for s in (60, 61)],
+                                     cf, effects=["mass_offset"])
+    validate(json.loads(to_json(result)))
+    assert [f["outcome"] for f in result["flights"]] == ["effect", "refused"]
+    assert "3 rotors in the log" in result["flights"][1]["reason"]
