@@ -166,6 +166,7 @@ def test_script_end_to_end_on_small_runs(tmp_path):
     from quadsim.logs.flightlog import write_log
 
     hover = float(np.sqrt(0.045 * 9.81 / (4 * 3.7228e-8)))
+    (tmp_path / "test").mkdir()
     for k, name in enumerate(("run1", "run4", "run5")):
         log = _log(70 + 5 * k, offset=float(k), speed=hover)
         write_log(tmp_path / "test" / f"melon_20251017_{name}.csv.gz", log)
