@@ -186,41 +186,18 @@ def test_usd_bad_crc_and_truncation(tmp_path, capsys):
 
 
 def _write_ulog(path: Path, topics: dict, start_us: int = 1_000_000) -> None:
-    """A ULog file through pyulog's own writer (ULog.write_ulog). ``topics``: name ->
-    (timestamps us, [(type, array size, field, values (N,) or (N, size))], nested formats)."""
+    """A ULog file through pyulog's own writer (ULog.write_ulog), one topic at a time by the
+    fuzzer's writer (quadsim.logs.samples). ``topics``: name -> (timestamps us, [(type, array
+    size, field, values (N,) or (N, size))])."""
     pyulog = pytest.importorskip("pyulog", reason="pyulog not installed (quadsim[logs])")
+    from quadsim.logs.samples import ulog_topic
+
     ULog = pyulog.ULog
     ulog = ULog(None)
     ulog._file_version = 1
     ulog._start_timestamp = start_us
     for msg_id, (name, (stamps, fields)) in enumerate(topics.items()):
-        fmt = object.__new__(ULog.MessageFormat)
-        fmt.name = name
-        fmt.fields = [("uint64_t", 0, "timestamp")]
-        data = ULog.Data.__new__(ULog.Data)
-        data.multi_id, data.msg_id, data.name, data.timestamp_idx = 0, msg_id, name, 0
-        data.field_data = [ULog._FieldData("timestamp", "uint64_t")]
-        data.data = {"timestamp": np.asarray(stamps, dtype=np.uint64)}
-        for type_str, size, field, values in fields:
-            if type_str == "esc_report":  # nested struct array: esc[i].esc_rpm
-                sub = object.__new__(ULog.MessageFormat)
-                sub.name, sub.fields = "esc_report", [("int32_t", 0, "esc_rpm")]
-                ulog._message_formats["esc_report"] = sub
-                fmt.fields.append(("esc_report", size, field))
-                for i in range(size):
-                    key = f"{field}[{i}].esc_rpm"
-                    data.field_data.append(ULog._FieldData(key, "int32_t"))
-                    data.data[key] = np.asarray(values[:, i], dtype=np.int32)
-                continue
-            fmt.fields.append((type_str, size, field))
-            dtype = ULog._UNPACK_TYPES[type_str][2]
-            keys = [field] if size == 0 else [f"{field}[{i}]" for i in range(size)]
-            values = np.asarray(values).reshape(len(stamps), -1)
-            for i, key in enumerate(keys):
-                data.field_data.append(ULog._FieldData(key, type_str))
-                data.data[key] = values[:, i].astype(dtype)
-        ulog._message_formats[name] = fmt
-        ulog._data_list.append(data)
+        ulog_topic(ULog, ulog, msg_id, name, stamps, fields)
     ulog.write_ulog(str(path))
 
 

@@ -88,7 +88,7 @@ def sample_flight(duration_s: float = 2.0, rate_hz: float = 100.0) -> SampleFlig
 # ----------------------------------------------------------------------------- ULog
 
 
-def _ulog_topic(ULog, ulog, msg_id: int, name: str, stamps: np.ndarray, fields: list) -> None:
+def ulog_topic(ULog, ulog, msg_id: int, name: str, stamps: np.ndarray, fields: list) -> None:
     """One topic: ``fields`` = [(type, array size, field, values (N,) or (N, size))];
     type ``esc_report`` makes the nested ``esc[i].esc_rpm`` of ``esc_status``."""
     fmt = object.__new__(ULog.MessageFormat)
@@ -146,7 +146,7 @@ def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000,
         "battery_status": [("float", 0, "voltage_v", flight.vbat)],
     }
     for msg_id, (name, fields) in enumerate(topics.items()):
-        _ulog_topic(ULog, ulog, msg_id, name, stamps, fields)
+        ulog_topic(ULog, ulog, msg_id, name, stamps, fields)
     out = io.BytesIO()
     ulog.write_ulog(out)
     return out.getvalue()
