@@ -190,26 +190,32 @@ def summarise(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _judge_per_flight(pool, rows: list[dict]) -> None:
+    """Per-flight verdicts of every row, one task per (source, vehicle) group against that
+    group's nominal flights; each row gets ``per_flight`` and loses its in-memory ``_log``."""
+    from quadsim.bench.cases import run_per_flight
+
+    keys = sorted({(r["source"], r["vehicle"]) for r in rows})
+    groups = [(s, v, [r for r in rows if (r["source"], r["vehicle"]) == (s, v)])
+              for s, v in keys]
+    for (_, _, group), verdicts in zip(groups, pool.map(run_per_flight, groups)):
+        for row, verdict in zip(group, verdicts):
+            row["per_flight"] = verdict
+    for row in rows:
+        row.pop("_log", None)
+
+
 def run_independent(cases: list[dict], jobs: int) -> list[dict]:
     """Independent cases (:mod:`quadsim.bench.cases`): held-out mode per case, then the
     per-flight mode per (source, vehicle) against that source's own nominal flights."""
     from tqdm import tqdm
 
     from quadsim.bench.cases import run_case as run_independent_case
-    from quadsim.bench.cases import run_per_flight
 
     with Pool(jobs) as pool:
         rows = list(tqdm(pool.imap(run_independent_case, cases), total=len(cases),
                          file=sys.stderr, disable=None))
-        keys = sorted({(r["source"], r["vehicle"]) for r in rows})
-        groups = [(s, v, [r for r in rows if (r["source"], r["vehicle"]) == (s, v)])
-                  for s, v in keys]
-        per_flight = pool.map(run_per_flight, groups)
-    for (_, _, group), verdicts in zip(groups, per_flight):
-        for row, verdict in zip(group, verdicts):
-            row["per_flight"] = verdict
-    for row in rows:
-        row.pop("_log", None)
+        _judge_per_flight(pool, rows)
     return rows
 
 
@@ -305,21 +311,10 @@ def _observe(case: dict) -> dict:
 
 
 def run_per_flight_only(cases: list[dict], jobs: int) -> list[dict]:
-    """The per-flight mode alone (module doc), timed per (source, vehicle) group."""
-    from quadsim.bench.cases import run_per_flight
-
+    """The per-flight mode alone (module doc), per (source, vehicle) group."""
     with Pool(jobs) as pool:
         rows = pool.map(_observe, cases)
-        keys = sorted({(r["source"], r["vehicle"]) for r in rows})
-        groups = [(s, v, [r for r in rows if (r["source"], r["vehicle"]) == (s, v)])
-                  for s, v in keys]
-        start = time.process_time()
-        verdicts = pool.map(run_per_flight, groups)
-    for (_, _, group), out in zip(groups, verdicts):
-        for row, verdict in zip(group, out):
-            row["per_flight"] = verdict
-    for row in rows:
-        row.pop("_log", None)
+        _judge_per_flight(pool, rows)
     return rows
 
 

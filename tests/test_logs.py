@@ -27,6 +27,7 @@ from quadsim.logs.common import (
     resample,
 )
 from quadsim.logs.flightlog import load_log
+from quadsim.logs.samples import df_format, df_message
 from quadsim.logs.usd import CF_GRAVITY, encode_usd, read_usd
 
 DATA = Path(os.environ.get("QUADSIM_SHARED_DATA",
@@ -282,44 +283,32 @@ def test_convert_rotor_count_mismatch(tmp_path, capsys):
 # ----------------------------------------------------------------------------- DataFlash
 
 
-def _df_fmt(type_id: int, name: str, fmt: str, columns: str) -> bytes:
-    size = 3 + struct.calcsize("<" + fmt.replace("n", "4s").replace("N", "16s")
-                               .replace("Z", "64s").replace("c", "h").replace("C", "H"))
-    return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", type_id, size, name.encode(),
-                                          fmt.encode(), columns.encode())
-
-
-def _df_msg(type_id: int, fmt: str, *values) -> bytes:
-    codes = fmt.replace("n", "4s").replace("N", "16s").replace("c", "h").replace("C", "H")
-    return b"\xa3\x95" + bytes([type_id]) + struct.pack("<" + codes, *values)
-
-
 def _write_dataflash(path: Path, *, att_columns: str = "TimeUS,Roll,Pitch,Yaw",
                      pwm: float = 1600.0) -> dict:
     """A DataFlash log with ATT (centidegrees), XKF1, IMU, RCOU, ESC, BAT and PARM."""
-    out = bytearray(_df_fmt(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
+    out = bytearray(df_format(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
     layout = {129: ("PARM", "QNf", "TimeUS,Name,Value"), 130: ("ATT", "QccC", att_columns),
               131: ("XKF1", "QBffffff", "TimeUS,C,PN,PE,PD,VN,VE,VD"),
               132: ("IMU", "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
               133: ("RCOU", "QHHHHHH", "TimeUS,C1,C2,C3,C4,C5,C6"),
               134: ("ESC", "QBf", "TimeUS,Instance,RPM"), 135: ("BAT", "QBf", "TimeUS,Inst,Volt")}
     for type_id, (name, fmt, cols) in layout.items():
-        out += _df_fmt(type_id, name, fmt, cols)
-    out += _df_msg(129, "QNf", 0, b"MOT_PWM_MIN", 1100.0)
-    out += _df_msg(129, "QNf", 0, b"MOT_PWM_MAX", 1900.0)
+        out += df_format(type_id, name, fmt, cols)
+    out += df_message(129, "QNf", 0, b"MOT_PWM_MIN", 1100.0)
+    out += df_message(129, "QNf", 0, b"MOT_PWM_MAX", 1900.0)
     roll = np.radians(np.round(np.degrees(0.2 * np.sin(np.arange(N) * 0.05)) * 100) / 100)
     for k in range(N):
         t_us = 2_000_000 + k * 10_000                      # 100 Hz
-        out += _df_msg(130, "QccC", t_us, round(np.degrees(roll[k]) * 100), 500, 9000)
+        out += df_message(130, "QccC", t_us, round(np.degrees(roll[k]) * 100), 500, 9000)
         if k % 2 == 0:                                     # 50 Hz
-            out += _df_msg(131, "QBffffff", t_us, 0, 0.01 * k, 1.0, -2.0, 1.0, 0.0, -0.5)
-            out += _df_msg(131, "QBffffff", t_us, 1, 99.0, 99.0, 99.0, 0.0, 0.0, 0.0)  # core 1
-            out += _df_msg(133, "QHHHHHH", t_us, *[int(pwm)] * 4, 1000, 1000)
+            out += df_message(131, "QBffffff", t_us, 0, 0.01 * k, 1.0, -2.0, 1.0, 0.0, -0.5)
+            out += df_message(131, "QBffffff", t_us, 1, 99.0, 99.0, 99.0, 0.0, 0.0, 0.0)  # core 1
+            out += df_message(133, "QHHHHHH", t_us, *[int(pwm)] * 4, 1000, 1000)
             for i in range(4):
-                out += _df_msg(134, "QBf", t_us + i, i, 5000.0 + 100 * i)
-            out += _df_msg(135, "QBf", t_us, 0, 12.0)
+                out += df_message(134, "QBf", t_us + i, i, 5000.0 + 100 * i)
+            out += df_message(135, "QBf", t_us, 0, 12.0)
         for j in range(2):                                 # 200 Hz
-            out += _df_msg(132, "QBffffff", t_us + 5000 * j, 0, 0.1, 0.2, 0.3, 0.0, 0.0, -9.8)
+            out += df_message(132, "QBffffff", t_us + 5000 * j, 0, 0.1, 0.2, 0.3, 0.0, 0.0, -9.8)
     path.write_bytes(bytes(out))
     return {"roll": roll}
 

@@ -156,7 +156,9 @@ def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000,
 
 
 def _df_sizes(fmt: str) -> str:
-    return fmt.replace("n", "4s").replace("N", "16s").replace("Z", "64s")
+    """struct codes of a DataFlash format (c, C: int16 / uint16 in hundredths)."""
+    return (fmt.replace("n", "4s").replace("N", "16s").replace("Z", "64s")
+            .replace("c", "h").replace("C", "H"))
 
 
 def df_format(type_id: int, name: str, fmt: str, columns: str) -> bytes:
