@@ -53,7 +53,7 @@ import numpy as np
 
 from ..core.errors import InputError
 from ..vehicle.params import VehicleParams
-from .diagnose import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
+from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .fitting import (
     Candidate,
     _bounds,

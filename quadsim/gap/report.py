@@ -104,12 +104,15 @@ def summary(result: dict) -> str:
         for k, r in regimes))
     lines.append("  by band: " + ", ".join(f"{k} {100 * s:.0f} %"
                                            for k, s in where["band"].items()))
-    lines.append("ranking (held-out gap reduction):")
+    lines.append("ranking (posterior probability; held-out gap reduction; determined "
+                 "parameters only):")
     for e in result["effects"][:6]:
-        lines.append(f"  {e['name']:16s} {100 * e['reduction']:6.1f} %  "
-                     f"{_fmt_params(e['params'], e['ci'])}")
-    b = result["baseline"]
-    lines.append(f"  (nominal_refit b,d: {100 * b['reduction']:.1f} %)")
+        p = e.get("probability")
+        prob = "" if p is None else f"{100 * p:5.1f} %  "
+        undetermined = (f" (not determined: {', '.join(e['undetermined'])})"
+                        if e.get("undetermined") else "")
+        lines.append(f"  {e['name']:16s} {prob}{100 * e['reduction']:6.1f} %  "
+                     f"{_fmt_params(e['params'], e['ci'])}{undetermined}")
     for note in result.get("notes", []):
         lines.append(f"note: {note}")
     return "\n".join(lines) + "\n"

@@ -1,0 +1,217 @@
+"""Held-out mode by evidence: candidates fitted on the training flights, weighed by their
+evidence there, then checked on the held-out flights.
+
+``python -m quadsim.gap TRAIN... --holdout HELD...`` (:func:`quadsim.gap.diagnose.diagnose`)
+judges the parameter set against flights that all may share the gap, so there are no
+reference flights: the reference model is the parameter set itself (with the training
+flights' static command -> speed map), and the same evidence machinery as the per-flight mode
+(:mod:`.evidence`, :mod:`.judge`) weighs every explanation of how the flights differ from it.
+
+Stages (each a named type)
+--------------------------
+1. :func:`nominal_reference` -> :class:`quadsim.gap.calibrate.Reference`: the nominal model,
+   every shared group of :data:`quadsim.gap.calibrate.SHARED` at its "off" value with zero
+   spread (nothing is marginalised: the gap is what the flights do that the parameter set
+   does not), and the **noise model from what the gap does not contain**: per channel
+   sigma_c = robust scatter of the *fast* part of the nominal residual on the training
+   flights (residual minus its moving average over :data:`NOISE_WINDOW_S` = 0.5 s,
+   :func:`quadsim.gap.fitting.noise_scale`), and tau_c its correlation time (samples). A gap
+   that acts slower than 0.5 s (every effect of the library at flight speeds: a payload, a
+   weak rotor, drag, a lag seen over the 0.12 s rotor horizon) is left out of sigma, so
+   "the floor contains the gap" cannot happen. (The per-flight mode's sigma is the RMS of
+   the calibrated model over the reference flights instead: there the references show what
+   a right model leaves.)
+2. :func:`heldout_explanations`: :func:`quadsim.gap.evidence.explanations_for` on that
+   reference (every effect, every shared group at a value of its own) plus what the nominal
+   model lacks and the per-flight references carry: ``wind`` fitted with the rotor-drag
+   coefficient (wind acts only through drag, and the nominal model has none), ``motor_lag``
+   (with commands), ``battery_sag`` as a full voltage (with a vbat log), and
+   ``nominal_refit`` (b and d re-identified; b prior as thrust_factor, d prior spread 0.5:
+   the drag-torque factor of a small propeller is known to a factor of ~2 unless measured
+   on a stand -- the Crazyflie's 0.006 m x b from the literature against 0.0013 m x b in its
+   logs, docs/gap.md).
+3. :func:`weigh`: :func:`quadsim.gap.evidence.evaluate` on the stacked training flights
+   (Laplace evidence: likelihood over all channels under the noise model, priors with
+   sources, Occam factor), then each explanation's MAP values predict the held-out flights:
+   its log-likelihood there is added (the posterior of the explanation given all flights,
+   with the held-out part as a plug-in predictive check). :func:`quadsim.gap.judge.posterior`
+   gives the probability per reading, "no difference" included, exactly as per flight.
+4. :mod:`.heldout_verdict`: combinations (the lead with a second effect, weighed by
+   evidence), the consistency guard (:mod:`.consistency`), the lack-of-fit tests ("not in
+   the library") and the verdict (``quadsim.gap/3``).
+
+Example::
+
+    >>> result = diagnose(train_logs, params, holdout=held_logs)
+    >>> result["verdict"]["effect"], result["verdict"]["probability"]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..effects import make_effect
+from ..vehicle.params import VehicleParams
+from .calibrate import Reference, shared_candidate
+from .evidence import Evidence, Explanation, Propeller, evaluate, explanations_for
+from .fitting import (
+    LOCAL_EFFECTS,
+    _correlation_time,
+    effect_class,
+    noise_floor,
+    noise_scale,
+    residuals,
+    stack_states,
+)
+
+__all__ = ["NOISE_WINDOW_S", "D_PRIOR_SD", "Weighed", "nominal_reference", "noise_model",
+           "heldout_explanations", "weigh", "effects_of", "slow_part"]
+
+#: the noise model's window (s): the residual's moving average over it is its slow part.
+#: 0.5 s: five times the 0.1 s smoothing window (its noise decorrelates within it), shorter
+#: than a flight manoeuvre (a figure-8 lap is 4-8 s), so a library effect acting through the
+#: flight state is slow against it. The same window as :func:`quadsim.gap.fitting.noise_scale`.
+NOISE_WINDOW_S = 0.5
+#: prior spread of the relative drag-torque factor error (module doc, stage 2).
+D_PRIOR_SD = 0.5
+#: prior spread of the relative thrust factor error: :mod:`.priors` -15 .. +5 %, half the
+#: larger end (the rule of :func:`quadsim.gap.evidence._prior_sd`).
+B_PRIOR_SD = 0.075
+#: prior spread (V) of a battery's full voltage: +-10 % of a cell's 4.2 V (charge state),
+#: as :mod:`.evidence`.
+VFULL_PRIOR_SD = 0.42
+#: prior spread (s) of a motor time constant: micro motors 10-60 ms (Foerster, ETH 2015:
+#: Crazyflie 2.0 ~ 15 ms), as :mod:`.evidence`.
+LAG_PRIOR_SD = 0.03
+
+#: groups of the nominal reference: SHARED less motor_lag (time constant 0 is "off" but the
+#: Jacobian's forward step would integrate a 0.03 ms lag with 2.5 ms steps) and the battery.
+_NOT_SHARED = {"motor_lag", "battery_sag"}
+
+
+def slow_part(residual: np.ndarray, dt: float, window_s: float = NOISE_WINDOW_S) -> np.ndarray:
+    """Moving average (N, C) of a residual over ``window_s`` (odd number of samples)."""
+    n = max(3, int(round(window_s / dt)) | 1)
+    kernel = np.ones(n) / n
+    return np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
+
+
+def noise_model(nominal: list[np.ndarray], dt: float, floor: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(sigma, tau) per channel from the nominal residuals (N_j, C) of the training flights:
+    the robust scatter of their fast part (:func:`quadsim.gap.fitting.noise_scale`, at least
+    ``floor``) and the fast part's integrated correlation time (samples)."""
+    sigma = noise_scale(np.concatenate(nominal), dt, window_s=NOISE_WINDOW_S, floor=floor)
+    fast = [r - slow_part(r, dt) for r in nominal]
+    tau = np.array([np.mean([_correlation_time(f[:, [c]] / sigma[c]) for f in fast])
+                    for c in range(len(sigma))])
+    return sigma, tau
+
+
+def nominal_reference(train: list, params: VehicleParams, rotor: bool) -> Reference:
+    """The parameter set as the reference model (module doc, stage 1); ``train``: decimated
+    states of the training flights; ``params`` already carries their motor map."""
+    dt = float(train[0].t[1] - train[0].t[0])
+    nominal = [residuals(s, params, [], rotor_channel=rotor) for s in train]
+    sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
+    full = shared_candidate(rotor, False)
+    cand = dataclasses.replace(full, parts=tuple(p for p in full.parts
+                                                 if p[0] not in _NOT_SHARED))
+    off = []
+    for name, _, fitted in cand.parts:
+        specs = {p.name: p for p in effect_class(name).parameters}
+        off += [specs[p].off for p in fitted]
+    theta = np.asarray(off, float)
+    zeros = np.zeros_like(theta)
+    return Reference(params, rotor, cand, theta, zeros, zeros.copy(), sigma, tau,
+                     np.zeros_like(sigma), 1.0, 1, {}, [], {})
+
+
+def heldout_explanations(reference: Reference, train_states, names=None,
+                         vbat: float | None = None) -> list[Explanation]:
+    """Every explanation of how the training flights differ from the parameter set (module
+    doc, stage 2). ``vbat``: the highest logged battery voltage (V) when every training
+    flight logs one (the full-voltage prior is centred there); ``names``: restrict."""
+    from .evidence import _prior_sd
+
+    sd = _prior_sd(reference.params)
+    out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]
+    out.append(Explanation("wind", "", (("wind", {}, ("vx", "vy")),
+                                        ("rotor_drag", {}, ("coefficient",))),
+                           (0.0, 0.0, 0.0), (sd["wind"], sd["wind"], sd["rotor_drag"]),
+                           replaces=("wind", "rotor_drag")))
+    out.append(Explanation("nominal_refit", "", (("nominal_refit", {}, ("thrust", "drag")),),
+                           (0.0, 0.0), (B_PRIOR_SD, D_PRIOR_SD), replaces=("nominal_refit",)))
+    if reference.rotor:
+        out.append(Explanation("motor_lag", "", (("motor_lag", {}, ("time_constant",)),),
+                               (0.0,), (LAG_PRIOR_SD,)))
+        if vbat is not None:
+            out = [e for e in out if e.name != "battery_sag"]
+            out.append(Explanation("battery_sag", "",
+                                   (("battery_sag", {}, ("full_voltage",)),),
+                                   (float(vbat),), (VFULL_PRIOR_SD,)))
+    if names is not None:
+        keep = set(names) | {"no_difference"}
+        out = [e for e in out if e.name in keep]
+    return out
+
+
+def effects_of(ev: Evidence) -> list:
+    """The effects of an explanation at its MAP values."""
+    out = []
+    for name, fixed, fitted in ev.explanation.parts:
+        values = dict(fixed)
+        values.update({p: ev.values[f"{name}.{p}"] for p in fitted})
+        if name == "thrust_factor":
+            out.append(Propeller(**values))
+        elif name in LOCAL_EFFECTS:
+            out.append(LOCAL_EFFECTS[name](**values))
+        else:
+            out.append(make_effect(name, **values))
+    return out
+
+
+@dataclass
+class Weighed:
+    """One explanation on the split: its training evidence (``train``, an
+    :class:`~quadsim.gap.evidence.Evidence`), the same with the held-out log-likelihood added
+    (``total``: what the posterior weighs), its residuals (unscaled, (N_j, C) per flight) on
+    the training and held-out flights, and its held-out log-likelihood."""
+
+    train: Evidence
+    total: Evidence
+    train_residuals: list
+    held_residuals: list
+    held_loglik: float
+
+    @property
+    def name(self) -> str:
+        return self.train.name
+
+
+def _loglik(res: list[np.ndarray], reference: Reference) -> float:
+    return -0.5 * float(sum(np.sum(r ** 2 * reference.weights) for r in res))
+
+
+def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
+          ) -> list[Weighed]:
+    """Stage 3 (module doc): training evidence of every explanation, plus its held-out
+    log-likelihood at the training MAP. ``train``/``held``: decimated states."""
+    rows = evaluate(stack_states(train), reference, expl)
+    return [check(ev, train, held, reference) for ev in rows]
+
+
+def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
+    """One explanation's residuals on both sets and its held-out log-likelihood."""
+    effects = effects_of(ev)
+
+    def res(states):
+        return residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+
+    held_res = [res(s) for s in held]
+    ll = _loglik(held_res, reference)
+    return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll), [res(s) for s in train],
+                   held_res, ll)

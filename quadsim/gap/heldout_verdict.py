@@ -1,0 +1,253 @@
+"""The held-out verdict from the evidence of every explanation (:mod:`.heldout`).
+
+1. **Posterior per reading** (:func:`quadsim.gap.judge.posterior`, as per flight): training
+   evidence plus held-out log-likelihood; "no difference" has the prior of all effects
+   together; an explanation whose parameters the data do not determine counts as "no
+   difference".
+2. **A second effect** (``max_combination`` >= 2): when the lead leaves a systematic
+   remainder (test 4b), the lead is refitted with each other effect; a pair enters the
+   posterior as one more reading with the prior of the lead alone split evenly among its
+   partners (a second simultaneous effect is a priori no likelier than the first alone), and
+   every part of it must be determined and plausible
+   (:func:`quadsim.gap.combine.every_part_stands`).
+3. **Consistency** (:mod:`.consistency`): a named effect needs one value in slow and fast
+   flight, at low and high rotor speed; otherwise ``unexplained`` with a partial explanation.
+4. **Lack of fit ("not in the library")**, per channel c, on the lead reading:
+
+   a. *Generalisation* -- the held-out flights against what the reading leaves on the
+      training flights: per training flight j, l_jc = log(ms_jc / sigma_c^2); mean m_c and
+      spread s pooled over channels (C (n - 1) degrees of freedom; n >= 2 pieces: with one
+      training flight its halves); each held-out flight's z = (l_c - m_c) / (s sqrt(1 +
+      1/n)) against the Student-t quantile at 1 - LOF_P / (C H) (Bonferroni over C channels
+      and H held-out flights). The test of :func:`quadsim.gap.judge.lack_of_fit` with the
+      training flights as references. Beyond: ``unexplained`` (the reading does not carry
+      over to flights it was not fitted on).
+   b. *Systematic remainder* -- the slow part of the residual (0.5 s moving average,
+      :func:`quadsim.gap.heldout.slow_part`) against what noise of the noise model gives
+      it: for noise of scatter sigma_c and correlation time tau_c samples, a W-sample
+      average has variance sigma_c^2 tau_c / W; over all flights ``ratio_c = mean(slow^2)
+      / (sigma_c^2 tau_c / W)`` ~ chi2(nu) / nu with nu = N / W windows; beyond the
+      quantile at 1 - LOF_P / C the channel keeps a systematic residual. With the lead
+      ``no_difference`` this is ``unexplained`` (something acts that no library effect
+      explains); after a named effect the name stands and the answer says what remains,
+      with its size in the channel's unit ("part of the gap is outside the library").
+
+   LOF_P = 1e-3 (:data:`quadsim.gap.judge.LOF_P`): one right model in a thousand is called
+   unexplained by chance.
+5. **Verdict**: the most probable reading with its probability (``tentative`` below
+   :data:`quadsim.gap.judge.CONFIDENT`); readings stated: probability >=
+   :data:`quadsim.gap.judge.READING_P`; a reading whose determined magnitude is outside its
+   plausible range (:mod:`.priors`) is not named (``unexplained``; the note names that
+   effect with its own magnitude). Only determined parameters are printed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+from scipy.stats import t as student_t
+
+from . import collinear, consistency
+from .fitting import Candidate
+from .heldout import NOISE_WINDOW_S, Weighed, check, slow_part
+from .judge import CONFIDENT, LOF_P, READING_P, channel_names, posterior, reading_text
+from .priors import candidate_plausibility
+
+__all__ = ["generalisation", "remainder", "rank", "readings_of", "entry_of"]
+
+
+def _ms(res: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    return np.mean(res ** 2, axis=0) / sigma ** 2
+
+
+def generalisation(w: Weighed, reference) -> dict:
+    """Channels whose held-out residual is beyond what the reading leaves on the training
+    flights (module doc, 4a): channel -> (held-out RMS / training RMS, z)."""
+    pieces = w.train_residuals
+    if len(pieces) < 2:
+        pieces = [p for r in pieces for p in np.array_split(r, 2)]
+    sigma = reference.sigma
+    logs = np.log(np.maximum([_ms(r, sigma) for r in pieces], 1e-300))
+    mean = logs.mean(axis=0)
+    n, c = logs.shape
+    dof = max(1, c * (n - 1))
+    spread = float(np.sqrt(np.sum((logs - mean) ** 2) / dof))
+    scale = max(spread * np.sqrt(1 + 1 / n), 1e-9)
+    limit = float(student_t.ppf(1 - LOF_P / (c * max(1, len(w.held_residuals))), dof))
+    names = channel_names(reference)
+    out = {}
+    for r in w.held_residuals:
+        z = (np.log(np.maximum(_ms(r, sigma), 1e-300)) - mean) / scale
+        for k in np.nonzero(z > limit)[0]:
+            ratio = float(np.exp(0.5 * (np.log(_ms(r, sigma)[k]) - mean[k])))
+            if names[k] not in out or z[k] > out[names[k]][1]:
+                out[names[k]] = (ratio, float(z[k]))
+    return out
+
+
+def remainder(w: Weighed, reference, dt: float) -> dict:
+    """Channels with a systematic residual beyond the noise model (module doc, 4b): channel
+    -> (RMS of the slow part in the channel's unit, ratio of its mean square to the noise's
+    expectation)."""
+    res = w.train_residuals + w.held_residuals
+    window = max(3, int(round(NOISE_WINDOW_S / dt)) | 1)
+    slow = np.concatenate([slow_part(r, dt) for r in res])
+    expected = reference.sigma ** 2 * np.minimum(reference.tau, window) / window
+    ratio = np.mean(slow ** 2, axis=0) / expected
+    nu = max(1.0, len(slow) / window)
+    limit = float(chi2.ppf(1 - LOF_P / len(ratio), nu) / nu)
+    names = channel_names(reference)
+    rms = np.sqrt(np.mean(slow ** 2, axis=0))
+    return {names[k]: (float(rms[k]), float(ratio[k])) for k in range(len(ratio))
+            if ratio[k] > limit}
+
+
+def rank(weighed: list[Weighed]) -> list[tuple[str, float, Weighed]]:
+    """(reading, probability, its best variant), most probable first (module doc, 1)."""
+    by_ev = {id(w.total): w for w in weighed}
+    return [(k, p, by_ev[id(ev)]) for k, p, ev in posterior([w.total for w in weighed])]
+
+
+def pair(lead: Weighed, other: Weighed, partners: int, train, held, reference):
+    """The lead fitted together with ``other`` (module doc, 2): a Weighed or None."""
+    from .evidence import Explanation, evaluate
+    from .fitting import stack_states
+
+    a, b = lead.train.explanation, other.train.explanation
+    expl = Explanation(f"{a.name}+{b.name}", " ".join(v for v in (a.variant, b.variant) if v),
+                       a.parts + b.parts, a.mean + b.mean, a.sd + b.sd,
+                       tuple(dict.fromkeys(a.replaces + b.replaces)), None,
+                       a.log_prior + b.log_prior - float(np.log(max(1, partners))))
+    ev = evaluate(stack_states([s for s in train]), reference, [expl])[0]
+    return check(ev, train, held, reference)
+
+
+def readings_of(ranked, reference) -> list[dict]:
+    """The posterior as JSON rows (the per-flight ``posterior`` shape)."""
+    out = []
+    for k, p, w in ranked:
+        ev = w.train
+        out.append({"name": k, "probability": p,
+                    "magnitude": _words(reading_text(ev, reference), k == ev.name),
+                    "log_evidence": w.total.log_z,
+                    "params": {q: ev.values[q] for q, ok in ev.determined.items() if ok},
+                    "ci": {q: 1.96 * ev.post_sd[q] for q, ok in ev.determined.items() if ok},
+                    "undetermined": [q for q, ok in ev.determined.items() if not ok],
+                    "fixed": ev.explanation.fixed_values, "variant": ev.explanation.variant})
+    return out
+
+
+def _words(text: str, own: bool) -> str:
+    """Per-flight wording in held-out terms (the reference here is the parameter set)."""
+    if not own:
+        return "no difference from the nominal model"
+    return (text.replace("no difference from the reference flights",
+                         "no difference from the nominal model")
+            .replace(" (beyond the references')", "")
+            .replace(" beyond the references' at their rotor-drag coefficient",
+                     " at the fitted rotor-drag coefficient"))
+
+
+def entry_of(w: Weighed, probability: float, before: list, reference) -> dict:
+    """One ranked explanation in the ``effects`` shape (:mod:`.schema` ``_EFFECT``): only
+    determined parameters are given values; ``undetermined`` names the others."""
+    ev = w.train
+    sigma = reference.sigma
+    gap_before = float(np.mean(np.concatenate(before) ** 2))
+    after = [r / sigma for r in w.held_residuals]
+    gap_after = float(np.mean(np.concatenate(after) ** 2))
+    det = {q for q, ok in ev.determined.items() if ok}
+    off = {q: 0.0 for q in ev.values}
+    names = channel_names(reference)
+    rms = np.sqrt(np.mean(np.concatenate(w.held_residuals) ** 2, axis=0))
+    entry = {"name": ev.name, "probability": probability, "log_evidence": w.total.log_z,
+             "params": {q: ev.values[q] for q in ev.values if q in det},
+             "ci": {q: 1.96 * ev.post_sd[q] for q in ev.values if q in det},
+             "fixed": ev.explanation.fixed_values,
+             "identifiable": {q: q in det for q in ev.values},
+             "significant": {q: bool(abs(ev.values[q] - off[q]) > 1.96 * ev.post_sd[q])
+                             for q in ev.values},
+             "undetermined": sorted(set(ev.values) - det),
+             "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
+             "reduction": (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0,
+             "heldout_rms_after": dict(zip(names, map(float, rms))), "_w": w}
+    if entry["undetermined"]:
+        entry["warning"] = ("too little excitation to fit " + ", ".join(entry["undetermined"])
+                            + " on these flights (posterior spread above half the prior's)")
+    return entry
+
+
+def plausible(entry: dict, params) -> tuple[bool, str]:
+    """The prior check of the determined values (:mod:`.priors`)."""
+    score, ok, text = candidate_plausibility(entry["params"], params)
+    return bool(ok), text
+
+
+def consistent(entry: dict, flights, reference) -> dict:
+    """The consistency guard on a named entry (:mod:`.consistency`); the propeller's speed
+    exponent is held at its value (the library's thrust_factor has none)."""
+    ev = entry["_w"].train
+    parts, theta = [], []
+    for name, fixed, fitted in ev.explanation.parts:
+        keep = tuple(p for p in fitted if not (name == "thrust_factor" and p == "alpha"))
+        parts.append((name, dict(fixed), keep))
+        theta += [ev.values[f"{name}.{p}"] for p in keep]
+    cand = Candidate(ev.name, tuple(parts))
+    judged = [q for q in entry["params"] if not q.endswith(".alpha")
+              and entry["significant"].get(q)]
+    return consistency.check(cand, np.asarray(theta, float), judged, flights,
+                             reference.params, reference.sigma, reference.rotor)
+
+
+def separate_by(lead: str, others: list[str]) -> dict:
+    return collinear.separation(lead, others)
+
+
+__all__ += ["pair", "plausible", "consistent", "separate_by", "CONFIDENT", "READING_P"]
+
+
+def _stated(ranked, rows) -> list[dict]:
+    return [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
+
+
+def decide(weighed: list[Weighed], train, held, reference, before: list, max_combination: int,
+           notes: list[str], tick) -> dict:
+    """The verdict block and the ranked entries (module doc): returns ``{"verdict", "effects",
+    "baseline", "combination", "lead"}`` (``lead``: the Weighed whose effects the "where"
+    after-columns use, None for no difference)."""
+    params = reference.params
+    dt = float(train[0].t[1] - train[0].t[0])
+    ranked = rank(weighed)
+    lead_name, _, lead = ranked[0]
+    combination = None
+    if lead_name != "no_difference" and max_combination >= 2 and remainder(lead, reference, dt):
+        others = [w for k, _, w in ranked if k not in ("no_difference", lead_name)
+                  and w.name == k]
+        trials = []
+        for other in others:
+            trials.append(pair(lead, other, len(others), train, held, reference))
+            tick(trials[-1].name)
+        best = max(trials, key=lambda w: w.total.log_z, default=None)
+        if best is not None:
+            entry = entry_of(best, 0.0, before, reference)
+            parts = {q.split(".")[0] for q in best.train.values}
+            stands = all(any(entry["identifiable"][q] and entry["significant"][q]
+                             for q in best.train.values if q.split(".")[0] == p)
+                         for p in parts) and plausible(entry, params)[0]
+            with_pair = rank(weighed + [best])
+            if stands and with_pair[0][2] is best:
+                ranked, combination = with_pair, best
+                lead_name, _, lead = ranked[0]
+    rows = readings_of(ranked, reference)
+    probability = {k: p for k, p, _ in ranked}
+    entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
+               and k != "no_difference"]
+    seen = {e["name"] for e in entries}
+    entries += [entry_of(w, 0.0, before, reference) for w in weighed
+                if w.name not in seen and w.name != "no_difference" and not seen.add(w.name)]
+    entries.sort(key=lambda e: (-e["probability"], -e["log_evidence"], e["name"]))
+    baseline = next(e for e in entries if e["name"] == "nominal_refit") \
+        if any(e["name"] == "nominal_refit" for e in entries) else None
+    return {"ranked": ranked, "rows": rows, "probability": probability, "entries": entries,
+            "baseline": baseline, "combination": combination, "lead": lead,
+            "lead_name": lead_name}
