@@ -189,7 +189,8 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         if unknown:
             raise InputError(f"--effects: unknown or unusable effect(s) {sorted(unknown)}; "
                              f"valid: {', '.join(sorted(known))}")
-        expl = [e for e in expl if e.name in set(effect_names) | {"no_difference"}]
+        expl = [e for e in expl if e.name in set(effect_names) | {"no_difference",
+                                                                   "nominal_refit"}]
     tick = progress or (lambda *_: None)
     weighed = []
     for w in map_fn(partial(_weigh_one, train=fit_on, held=held_on, reference=reference),

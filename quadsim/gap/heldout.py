@@ -153,8 +153,8 @@ def heldout_explanations(reference: Reference, train_states, names=None,
             out.append(Explanation("battery_sag", "",
                                    (("battery_sag", {}, ("full_voltage",)),),
                                    (float(vbat),), (VFULL_PRIOR_SD,)))
-    if names is not None:
-        keep = set(names) | {"no_difference"}
+    if names is not None:     # the parameter set's own b and d always stand
+        keep = set(names) | {"no_difference", "nominal_refit"}
         out = [e for e in out if e.name in keep]
     return out
 

@@ -113,6 +113,11 @@ def summary(result: dict) -> str:
                         if e.get("undetermined") else "")
         lines.append(f"  {e['name']:16s} {prob}{100 * e['reduction']:6.1f} %  "
                      f"{_fmt_params(e['params'], e['ci'])}{undetermined}")
+    b = result.get("baseline") or {}
+    if b:
+        determined = _fmt_params(b["params"], b["ci"]) or "neither b nor d determined"
+        prob = "" if b.get("probability") is None else f"{100 * b['probability']:.1f} %, "
+        lines.append(f"  (nominal_refit b,d: {prob}{determined})")
     for note in result.get("notes", []):
         lines.append(f"note: {note}")
     return "\n".join(lines) + "\n"
@@ -176,7 +181,7 @@ def _flight_html(f: dict, reference: bool) -> str:
         f"<td>{c['floor']:.3g}</td><td>{html.escape(c['unit'])}</td>"
         f"<td>{'yes' if c['at_floor'] else 'no'}</td></tr>"
         for k, c in f.get("channels", {}).items())
-    floor = "reference flights' held-out RMS" if reference else "training in-sample RMS"
+    floor = "reference flights' held-out RMS" if reference else "noise: 0.5 s scatter"
     table = ("<table><tr><th>channel</th><th>RMS nominal</th><th>RMS with verdict</th>"
              f"<th>floor ({floor})</th><th>unit</th><th>at floor</th></tr>{rows}</table>")
     alts = "".join(
