@@ -198,8 +198,7 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         weighed.append(w)
         tick(w.name)
     before = _scaled(held, params, [], sigma, rotor)
-    decision = hv.decide(weighed, fit_on, held_on, reference, before, max_combination, notes,
-                         tick)
+    decision = hv.decide(weighed, fit_on, held_on, reference, before, max_combination, tick)
     lead = decision["lead"]
     effects_after = heldout.effects_of(lead.train) if decision["lead_name"] != "no_difference" \
         else []
@@ -266,11 +265,10 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
                     "unit": rule_unit(n), "at_floor": n not in flagged}
                 for n, b, a, s in zip(names, rms_before, rms_after, reference.sigma)}
     others = [r["name"] for r in stated if r["name"] != lead_name]
-    runner = next((r for r in rows[1:] if r["name"] != "no_difference"), None)
     listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
                                                            if r["name"] != lead_name]
-    if runner is not None and runner not in listed:
-        listed.append(runner)
+    # the two most probable readings after those stated: what else was weighed, and how much
+    listed += [r for r in rows if r not in listed and r["name"] != "no_difference"][:2]
     alts = [_alternative(r, decision, lead_name, params) for r in listed
             if r["name"] != "no_difference"]
     verdict = {
@@ -301,8 +299,7 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
     }
     verdict["answer"] = _answer(verdict, rows, remains, carries, reference)
     if outcome == "effect":    # one value in every regime, or not named
-        consistency.apply_to_verdict(verdict, notes, hv.consistent(
-            entry, [f.fit for f in train + held], reference))
+        consistency.apply_to_verdict(verdict, notes, decision["consistency"])
         if verdict["outcome"] == "effect" and carries:
             verdict.update(outcome="unexplained", effect="unexplained", readings=[],
                            confusable_with=[], separate_by={},

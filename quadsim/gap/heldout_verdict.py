@@ -211,16 +211,19 @@ def _stated(ranked, rows) -> list[dict]:
 
 
 def decide(weighed: list[Weighed], train, held, reference, before: list, max_combination: int,
-           notes: list[str], tick) -> dict:
-    """The verdict block and the ranked entries (module doc): returns ``{"verdict", "effects",
-    "baseline", "combination", "lead"}`` (``lead``: the Weighed whose effects the "where"
-    after-columns use, None for no difference)."""
+           tick) -> dict:
+    """The ranking, the lead (a pair when it earns it) and its consistency (module doc, 1-3):
+    ``{"ranked", "rows", "probability", "entries", "baseline", "combination", "lead",
+    "lead_name", "consistency"}`` (``lead``: the Weighed of the most probable reading)."""
     params = reference.params
     dt = float(train[0].t[1] - train[0].t[0])
     ranked = rank(weighed)
     lead_name, _, lead = ranked[0]
-    combination = None
-    if lead_name != "no_difference" and max_combination >= 2 and remainder(lead, reference, dt):
+    combination = checked = None
+    if lead_name != "no_difference":
+        checked = consistent(entry_of(lead, 1.0, before, reference), train + held, reference)
+    if lead_name != "no_difference" and max_combination >= 2 and checked["consistent"] \
+            and remainder(lead, reference, dt):
         others = [w for k, _, w in ranked if k not in ("no_difference", lead_name)
                   and w.name == k]
         trials = []
@@ -238,6 +241,8 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
             if stands and with_pair[0][2] is best:
                 ranked, combination = with_pair, best
                 lead_name, _, lead = ranked[0]
+                checked = consistent(entry_of(lead, 1.0, before, reference), train + held,
+                                     reference)
     rows = readings_of(ranked, reference)
     probability = {k: p for k, p, _ in ranked}
     entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
@@ -250,4 +255,4 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
         if any(e["name"] == "nominal_refit" for e in entries) else None
     return {"ranked": ranked, "rows": rows, "probability": probability, "entries": entries,
             "baseline": baseline, "combination": combination, "lead": lead,
-            "lead_name": lead_name}
+            "lead_name": lead_name, "consistency": checked}
