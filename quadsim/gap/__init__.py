@@ -11,22 +11,19 @@ Method (equation error, then prediction error)
    speed predicted 0.12 s ahead from the command, which is where motor lag shows), divided
    by each channel's noise scale, is the *gap* (1 = sensor noise).
 2. Flights are split by flight (never by sample): ``--holdout`` or every third flight.
-   Each library effect (:data:`quadsim.effects.EFFECTS`; see :data:`.fitting.FIT_SPEC` for
-   the parameters fitted) is fitted on the training flights by bounded
-   ``scipy.optimize.least_squares``; 95 % CIs come from the Jacobian, widened by the
-   residuals' correlation time. ``wind`` is fitted together with the rotor-drag coefficient
-   (wind alone exerts no force).
-3. Each fit is scored by its held-out gap (:mod:`.scoring`). The baseline ``nominal_refit``
-   refits b and d. An effect explains a clear share when it cuts the held-out gap by >= 5 %,
-   passes a block t test, has a parameter identified (CI < half its plausible range) and
-   significantly away from "off", and is not worse than the baseline. Among effects within
-   2 % of the best, the most plausible magnitude (:mod:`.priors`) is named and every
-   plausible tied one is stated as another *reading* with its magnitude and what would
-   separate them (:mod:`.collinear`). Greedy selection then adds a second effect if it earns
-   a further clear gain and every part stands (:mod:`.combine`).
-4. The verdict (:mod:`.verdict`): the named effect, ``no_significant_gap`` (held-out residual
-   at a floor taken from data on every channel) or ``unexplained``; a named effect must have
-   one value in every regime (:mod:`.consistency`).
+3. Verdict by evidence (:mod:`.heldout`, :mod:`.heldout_verdict`): the parameter set is the
+   reference model; the noise model per channel is the scatter of the residual's fast part
+   (minus its 0.5 s moving average: what the gap does not contain). Every explanation of how
+   the flights differ (each library effect, ``nominal_refit`` = b and d re-identified, or no
+   difference) is fitted on the training flights (:mod:`.evidence`: likelihood over all
+   channels, priors with sources, Laplace evidence with its Occam factor), then predicts the
+   held-out flights; :func:`.judge.posterior` gives a probability per reading. A second
+   effect is added when the lead leaves a systematic remainder and the pair earns it.
+4. The verdict: the most probable reading with its magnitude (determined parameters only),
+   ``no_significant_gap``, or ``unexplained`` (lack of fit: a held-out flight beyond what the
+   reading leaves on the training flights, or a systematic remainder with no effect to
+   explain it; an implausible magnitude; parameters that differ between regimes,
+   :mod:`.consistency`).
 5. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
    aggressive rotation, near ground, low battery), by frequency band, and as k-step
    prediction error of position and attitude (0.05-1 s, multiple shooting with the analytic
@@ -43,8 +40,9 @@ judged is ``refused`` with its reason; the others go on.
 
 Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split, rank, decide),
 :mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
-least squares), :mod:`.scoring`, :mod:`.collinear` + :mod:`.priors`, :mod:`.combine`,
-:mod:`.verdict`, :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
+least squares), :mod:`.heldout` + :mod:`.heldout_verdict` (held-out verdict by evidence),
+:mod:`.scoring` (held-out gap helpers), :mod:`.collinear` + :mod:`.priors`,
+:mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
 :mod:`.evidence`, :mod:`.judge`, :mod:`.report_flights`), :mod:`.where`, :mod:`.checks`
 (vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report` and
 :mod:`.schema` (output), :mod:`.synthetic` (generated test flights).

@@ -17,7 +17,7 @@ from ..core.errors import InputError
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import collinear, consistency, fitting, heldout
+from . import collinear, consistency, heldout
 from . import heldout_verdict as hv
 from .baseline import BASELINE, NominalRefit  # noqa: F401  (re-exported)
 from .checks import vehicle_check

@@ -9,7 +9,7 @@
    posterior as one more reading with the prior of the lead alone split evenly among its
    partners (a second simultaneous effect is a priori no likelier than the first alone), and
    every part of it must be determined and plausible
-   (:func:`quadsim.gap.combine.every_part_stands`).
+   (as :func:`quadsim.gap.combine.parts_identified`).
 3. **Consistency** (:mod:`.consistency`): a named effect needs one value in slow and fast
    flight, at low and high rotor speed; otherwise ``unexplained`` with a partial explanation.
 4. **Lack of fit ("not in the library")**, per channel c, on the lead reading:
@@ -179,7 +179,7 @@ def entry_of(w: Weighed, probability: float, before: list, reference) -> dict:
 
 def plausible(entry: dict, params) -> tuple[bool, str]:
     """The prior check of the determined values (:mod:`.priors`)."""
-    score, ok, text = candidate_plausibility(entry["params"], params)
+    _, ok, text = candidate_plausibility(entry["params"], params)
     return bool(ok), text
 
 
