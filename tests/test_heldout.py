@@ -1,0 +1,108 @@
+"""Held-out mode by evidence (quadsim.gap.heldout, .heldout_verdict): the noise model leaves
+the gap out, the lack-of-fit tests flag a systematic remainder and a reading that does not
+carry over, and the verdict carries a posterior per reading."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
+from quadsim.gap.heldout_verdict import generalisation, remainder
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.vehicle.params import load_params
+
+DT = 0.01          # s, the fit rate (100 Hz)
+
+
+def _white(rng, n, sigma):
+    return rng.normal(0.0, sigma, size=(n, len(sigma)))
+
+
+def test_noise_model_leaves_a_slow_gap_out():
+    """White noise of 1 and 2 plus a 0.2 Hz wave 10x larger: sigma is the noise's (within
+    5 %), not the RMS (7x larger); the correlation time of white noise is ~1 sample."""
+    rng = np.random.default_rng(0)
+    t = np.arange(4000) * DT
+    sigma_true = np.array([1.0, 2.0])
+    flights = [_white(rng, len(t), sigma_true) + 10.0 * np.sin(2 * np.pi * 0.2 * t)[:, None]
+               for _ in range(3)]
+    sigma, tau = noise_model(flights, DT, floor=np.zeros(2))
+    np.testing.assert_allclose(sigma, sigma_true, rtol=0.05)
+    assert np.all(np.sqrt(np.mean(np.concatenate(flights) ** 2, axis=0)) > 3 * sigma)
+    np.testing.assert_allclose(tau, 1.0, atol=0.3)
+
+
+def _weighed(train, held):
+    return SimpleNamespace(train_residuals=train, held_residuals=held)
+
+
+def _reference(sigma, tau):
+    params = SimpleNamespace(rotor_count=4)
+    return SimpleNamespace(sigma=np.asarray(sigma, float), tau=np.asarray(tau, float),
+                           params=params, rotor=False)
+
+
+def test_remainder_flags_a_systematic_residual_not_the_noise():
+    """Noise alone: no channel flagged (its 0.5 s mean has variance sigma^2 tau / W);
+    a slow offset of 0.5 sigma on Mx (20x the noise's slow RMS of sigma / sqrt(51)) is
+    flagged with its RMS in the channel's unit."""
+    rng = np.random.default_rng(1)
+    sigma = np.full(6, 1e-3)
+    ref = _reference(sigma, np.ones(6))
+    noise = [_white(rng, 800, sigma) for _ in range(4)]
+    assert remainder(_weighed(noise[:3], noise[3:]), ref, DT) == {}
+    shifted = [r + np.array([0, 0, 0, 0.5e-3, 0, 0]) for r in noise]
+    flagged = remainder(_weighed(shifted[:3], shifted[3:]), ref, DT)
+    assert set(flagged) == {"Mx"}
+    assert flagged["Mx"][0] == pytest.approx(0.5e-3, rel=0.1)        # N m, the slow RMS
+
+
+def test_generalisation_flags_a_held_out_flight_beyond_the_training_residual():
+    rng = np.random.default_rng(2)
+    sigma = np.full(6, 1.0)
+    ref = _reference(sigma, np.ones(6))
+    train = [_white(rng, 500, sigma) for _ in range(4)]
+    same = [_white(rng, 500, sigma)]
+    assert generalisation(_weighed(train, same), ref) == {}
+    worse = [same[0] * np.array([1, 1, 1.6, 1, 1, 1])]     # Fz 1.6x its training RMS
+    flagged = generalisation(_weighed(train, worse), ref)
+    assert set(flagged) == {"Fz"} and flagged["Fz"][0] == pytest.approx(1.6, rel=0.1)
+
+
+def test_slow_part_is_the_moving_average():
+    x = np.arange(200, dtype=float)[:, None]
+    # a moving average of a straight line is the line (away from the ends)
+    np.testing.assert_allclose(slow_part(x, DT)[60:140, 0], x[60:140, 0])
+    assert int(round(NOISE_WINDOW_S / DT)) | 1 == 51
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+def test_verdict_carries_a_posterior_ranked_by_its_own_key(cf):
+    """A weak rotor (-8 % on rotor 2): named with its probability; the ranking is sorted by
+    probability; no parameter the data do not determine is given a value; every channel
+    within the noise after it."""
+    logs = [synthetic_flight(cf, [make_effect("thrust_mismatch", rotor_2=-0.08)], seed=s,
+                             duration=4.0) for s in (40, 41, 42)]
+    result = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False, max_combination=1,
+                      effects=["thrust_mismatch", "com_offset", "mass_offset", "ground_effect"])
+    v = result["verdict"]
+    assert v["outcome"] == "effect" and v["effect"] == "thrust_mismatch"
+    assert v["probability"] > 0.9 and v["tentative"] is False
+    assert abs(v["params"]["thrust_mismatch.rotor_2"] + 0.08) <= v["ci"]["thrust_mismatch.rotor_2"]
+    probs = [e["probability"] for e in result["effects"]]
+    assert probs == sorted(probs, reverse=True)
+    assert abs(sum(r["probability"] for r in v["posterior"]) - 1.0) < 1e-9
+    for e in result["effects"]:
+        assert not set(e["params"]) & set(e["undetermined"])
+    assert all(c["at_floor"] for c in v["channels"].values())
+    assert v["answer"].startswith("Behaves as if") and "rotor_2 -8" in v["answer"]
+    assert "every channel" in v["answer"]
