@@ -193,10 +193,13 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
                                                                    "nominal_refit"}]
     tick = progress or (lambda *_: None)
     weighed = []
-    for w in map_fn(partial(_weigh_one, train=fit_on, held=held_on, reference=reference),
-                    [[e] for e in expl]):
-        weighed.append(w)
-        tick(w.name)
+    # one evaluate call in one process (the shared Jacobian once), one task per explanation
+    # on workers
+    batches = [expl] if map_fn is map else [[e] for e in expl]
+    for ws in map_fn(partial(heldout.weigh, fit_on, held_on, reference), batches):
+        for w in ws:
+            weighed.append(w)
+            tick(w.name)
     before = _scaled(held, params, [], sigma, rotor)
     decision = hv.decide(weighed, fit_on, held_on, reference, before, max_combination, tick)
     lead = decision["lead"]
@@ -228,11 +231,6 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
                          "flight": held[0].name, "states": held[0].fit, "params": params,
                          "effects": effects_after}
     return result
-
-
-def _weigh_one(expl, train, held, reference):
-    """One explanation weighed (module level: sent to workers)."""
-    return heldout.weigh(train, held, reference, expl)[0]
 
 
 FLOOR_SOURCE = ("the noise model: the short-window (0.5 s) scatter of the nominal residual "
