@@ -79,6 +79,10 @@ SEPARATE = {
 }
 
 
+#: fitted parameters that are not part of an answer (a payload's swing at the first sample).
+_NUISANCE = ("cable_payload.lean_", "cable_payload.rate_")
+
+
 def separation(best: str, others: list[str]) -> dict:
     return {other: SEPARATE.get(frozenset({best.split("+")[0], other.split("+")[0]}),
                                 "more varied flights (speeds, heights, attitudes)")
@@ -111,7 +115,7 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams,
     if "canted_rotor.tilt_x" in values and "canted_rotor.tilt_y" in values:
         parts.append(_canted(values, ci, params, (fixed or {}).get("canted_rotor.rotor")))
     for key, value in values.items():
-        if key.startswith("canted_rotor.tilt_"):
+        if key.startswith("canted_rotor.tilt_") or key.startswith(_NUISANCE):
             continue
         c = ci.get(key)
         if key == "mass_offset.mass":

@@ -238,7 +238,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
     # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
-    out.append(_one("cable_payload", "", [("cable_payload", {}, ("mass", "length"))],
+    out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)],
                     *cable.prior(params)))
     if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
         out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
