@@ -38,10 +38,14 @@ attachment (``mass_offset``); the length shows only where the flight shakes the 
 or above that frequency (turns, stops, a figure-8's reversals). A gentle flight determines
 the mass, not the length (the answer then says so, and ``mass_offset`` ties with it).
 
-Prior (:func:`prior`): the mass as ``mass_offset``'s (payloads to ~60 % of the vehicle's mass,
-:mod:`quadsim.gap.priors`); the length N(0.55 m, (0.225 m)^2): slung loads of micro drones
-hang on 0.1-1 m (the real Crazyflie payload campaign of issue-quality data used ~0.5 m; the
-range is about two spreads, the rule of :func:`quadsim.gap.evidence._prior_sd`).
+Prior (:func:`prior`; each range about two spreads either side of its centre, the rule of
+:func:`quadsim.gap.evidence._prior_sd`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
+drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload limit, Bitcraze
+datasheet; :mod:`quadsim.gap.priors`), centred inside that range rather than on "off" -- the
+reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit
+started there cannot move the length and the swing; the length N(0.55 m, (0.225 m)^2):
+slung loads of micro drones hang on 0.1-1 m (the real Crazyflie payload flights cited in the
+project's issue 22: ~0.5 m).
 
 The integration is compiled with numba when it is installed (the same source runs as plain
 Python otherwise): a minute of 100 Hz flight takes under 1 ms compiled, 0.6 s as Python, on
@@ -65,8 +69,10 @@ from ..effects.cable_payload import CablePayload
 from ..vehicle.params import VehicleParams
 from . import fitting
 
-__all__ = ["FITTED", "LENGTH_PRIOR_M", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
+__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
 
+#: prior of the payload mass, in units of the vehicle's mass: centre and spread (module doc).
+MASS_PRIOR = (0.3, 0.15)
 #: prior of the cable length (m): centre and spread (module doc).
 LENGTH_PRIOR_M = (0.55, 0.225)
 
@@ -80,8 +86,8 @@ FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y")
 def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
     """(means, spreads) of :data:`FITTED` (kg, m, rad, rad, rad/s, rad/s; module doc)."""
     lean, rate = START_PRIOR
-    return ([0.0, LENGTH_PRIOR_M[0], 0.0, 0.0, 0.0, 0.0],
-            [0.3 * params.mass, LENGTH_PRIOR_M[1], lean, lean, rate, rate])
+    return ([MASS_PRIOR[0] * params.mass, LENGTH_PRIOR_M[0], 0.0, 0.0, 0.0, 0.0],
+            [MASS_PRIOR[1] * params.mass, LENGTH_PRIOR_M[1], lean, lean, rate, rate])
 
 
 try:        # the same source, compiled when numba is installed (module doc)
