@@ -79,6 +79,7 @@ def test_steady_acceleration_leans_the_cable_and_loads_it_like_a_mass():
     quat = np.tile([1.0, 0.0, 0.0, 0.0], (len(t), 1))
     force, torque, angle = swing.pull(t, position, accel * t[:, None], quat,
                                       np.zeros((len(t), 3)), load_params("crazyflie21"))
+    assert np.max(np.abs(torque)) < 1e-12       # attached at the CoM: no torque
     assert force == pytest.approx(np.tile(0.01 * np.array([-2.0, 0.0, -9.81]), (len(t), 1)),
                                   abs=1e-6)
     assert angle == pytest.approx(np.full(len(t), np.arctan2(2.0, 9.81)), abs=1e-6)

@@ -105,9 +105,9 @@ def result():
         _flight("a.csv", "mass_offset", 0.93, mass,
                 [_reading("thrust_factor", 0.07, "-14 ± 1 % thrust per Ω² on all 4 rotors")],
                 symptom=_deficit(-0.062), delays={"rotor": 3.1, "gyro": 0.4},
-                notes=["/data/a.csv: signal delays vs motion capture: rotor +3.1 ms, gyro "
+                notes=[("/data/a.csv: signal delays vs motion capture: rotor +3.1 ms, gyro "
                        "+0.4 ms (estimated; a gyro delay of 1.5 samples or more is shifted "
-                       "out before fitting, the others are reported only)"]),
+                       "out before fitting, the others are reported only)")]),
         _flight("b.csv", "thrust_curve", 0.6, "-17 ± 1 % thrust at the hover speed",
                 [_reading("mass_offset", 0.4, "+6.3 ± 0.3 g heavier")],
                 symptom=_deficit(-0.060), delays={"rotor": 2.8},
@@ -147,8 +147,8 @@ def test_page_opens_with_one_table_of_every_flight(result, tmp_path):
     assert first[2][:3] == ["b.csv", "thrust_curve", "60 %"]
     assert first[3] == ["c.csv", "no_significant_gap", "97 %", "-",
                         "nothing beyond the reference flights"]
-    assert first[4] == ["bad.csv", "refused", "-", "Not judged: /data/bad.csv: accel: looks "
-                        "like g", "/data/bad.csv: accel: looks like g"]
+    assert first[4] == ["bad.csv", "refused", "-", ("Not judged: /data/bad.csv: accel: looks "
+                        "like g"), "/data/bad.csv: accel: looks like g"]
     # each answer once: the lead's magnitude appears in that table only, never again as text
     everywhere = "".join(parsed.text) + "".join(
         c for key in parsed.order[1:] for row in parsed.tables[key] for c in row)
@@ -208,5 +208,5 @@ def test_span_notes_of_many_logs_are_one_warning():
     lines += ["/data/f0.csv: vbat: constant", "/data/f1.csv: vbat: constant"]
     out = gather_notes(lines)
     assert out == ["/data/f0.csv: vbat: constant (and 1 more file alike)",
-                   "airborne span kept (ground, idle and landing spans cut) on 3 logs: "
-                   "f0.csv 1.00-40.50 s, f1.csv 1.10-41.50 s, f2.csv 1.20-42.50 s"]
+                   ("airborne span kept (ground, idle and landing spans cut) on 3 logs: "
+                   "f0.csv 1.00-40.50 s, f1.csv 1.10-41.50 s, f2.csv 1.20-42.50 s")]
