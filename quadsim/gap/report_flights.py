@@ -1,12 +1,16 @@
 """Per-flight outputs: the text summary and the HTML page of ``--per-flight`` results.
 
 The page opens with one table -- flight, verdict, probability, magnitude of the leading
-reading, what remains (channels beyond the reference flights, or nothing) -- so each answer
-is stated once. Below it: the readings per flight (posterior, magnitudes, what would separate
-the leaders), the shared symptoms (flights whose largest mean residual against the reference
-model is on the same channel with the same sign, their verdicts side by side), one table of
-signal delays, the refused flights with their reasons, and the reference model. Only values
-the data determine are shown (:mod:`quadsim.gap.judge`). Width: at most 1400 px.
+reading, what remains (channels beyond the reference flights, or nothing; a refused
+flight's reason) -- and states each answer there only. Below it: the shared symptoms
+(flights whose largest mean residual against the reference model is on the same channel with
+the same sign, at least two of them; one column per verdict listing those flights, so the
+readings of one symptom stand side by side), the other readings per flight (runners-up with
+their magnitudes, what would separate the leaders), one table of every flight's signal
+delays and delay notes, the remaining notes, and the reference model. Only values the data
+determine are shown (:mod:`quadsim.gap.judge`; a reference value the reference flights do
+not determine is written as such). The page fits a 1400 px window (:mod:`quadsim.gap.report`:
+long cells wrap). ``tests/test_report_flights.py`` parses it.
 """
 
 from __future__ import annotations
