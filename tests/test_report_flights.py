@@ -210,3 +210,29 @@ def test_span_notes_of_many_logs_are_one_warning():
     assert out == ["/data/f0.csv: vbat: constant (and 1 more file alike)",
                    ("airborne span kept (ground, idle and landing spans cut) on 3 logs: "
                    "f0.csv 1.00-40.50 s, f1.csv 1.10-41.50 s, f2.csv 1.20-42.50 s")]
+
+
+def test_summary_states_each_answer_once_and_gathers_delay_notes(result):
+    from quadsim.gap.report_flights import flights_summary
+
+    result["notes"] += [
+        f"/data/r{k}.csv: gyro: delay not resolvable from this log (the two halves give "
+        f"+{k}8.6 and -9{k}.6 ms, more than 10 ms apart: filtered or delayed beyond what its "
+        "partner signal can time)" for k in range(2)]
+    result["notes"] += [
+        f"/data/r{k}.csv: signal delays vs motion capture: rotor +3.{k} ms (estimated; a gyro "
+        "delay of 1.5 samples or more is shifted out before fitting, the others are reported "
+        "only)" for k in range(2)]
+    lines = flights_summary(result).splitlines()
+    assert lines[2] == "  a.csv: mass_offset (93 %): +6.1 ± 0.3 g heavier (+16.5 % of the " \
+                       "model's 37 g)."
+    assert lines[5] == "  bad.csv: Not judged: /data/bad.csv: accel: looks like g"
+    notes = [line for line in lines if line.startswith("note: ")]
+    assert notes == [
+        "note: only 2 reference flights: give 10 or more",
+        "note: gyro: delay not resolvable on 2 flights, the two halves of each log disagree "
+        "(more than 10 ms apart: filtered or delayed beyond what its partner signal can time): "
+        "r0.csv (+08.6 / -90.6 ms), r1.csv (+18.6 / -91.6 ms)",
+        "note: signal delays vs motion capture (estimated; a gyro delay of 1.5 samples or more "
+        "is shifted out before fitting, the others are reported only): r0.csv rotor +3.0 ms; "
+        "r1.csv rotor +3.1 ms"]

@@ -16,9 +16,10 @@ long cells wrap). ``tests/test_report_flights.py`` parses it.
 from __future__ import annotations
 
 import html
+import re
 from pathlib import Path
 
-__all__ = ["flights_html", "flights_summary"]
+__all__ = ["flights_html", "flights_summary", "gather_delay_notes"]
 
 
 def _short(path: str) -> str:
@@ -50,9 +51,51 @@ def flights_summary(result: dict) -> str:
              f"per-flight diagnosis against {len(result['reference'])} reference flights "
              f"(reference model: {len(model.get('params', {}))} shared parameters calibrated)"]
     for f in result["flights"]:
-        lines.append(f"  {_short(f['file'])}: {f['verdict']} ({_prob(f)}): {f.get('answer', '')}")
-    lines += [f"note: {note}" for note in result.get("notes", [])]
+        answer = f.get("answer", "")
+        said = answer.startswith(f["verdict"]) or f["outcome"] == "refused"
+        lines.append(f"  {_short(f['file'])}: " + (answer if said else
+                                                   f"{f['verdict']} ({_prob(f)}): {answer}"))
+    lines += [f"note: {note}" for note in gather_delay_notes(result.get("notes", []))]
     return "\n".join(lines) + "\n"
+
+
+_UNRESOLVED = re.compile(r"^(?P<file>.*): (?P<signal>\w+): delay not resolvable from this log "
+                         r"\(the two halves give (?P<a>\S+) and (?P<b>\S+) ms, (?P<why>.*)\)$")
+
+
+_ESTIMATED = re.compile(r"^(?P<file>.*): signal delays vs motion capture: (?P<values>.*?) "
+                        r"\((?P<how>estimated.*)\)$")
+
+
+def gather_delay_notes(notes: list[str]) -> list[str]:
+    """Notes with the signal delays of many flights gathered
+    (:func:`quadsim.logs.delays.delay_notes`): the estimated delays in one line, the
+    unresolved ones in one line per signal; other notes as they are."""
+    out, seen, estimated = [], {}, []
+    for note in notes:
+        m = _UNRESOLVED.match(note)
+        e = _ESTIMATED.match(note)
+        if e is not None:
+            if not estimated:
+                out.append("")
+                where = (len(out) - 1, e["how"])
+            estimated.append(f"{_short(e['file'])} {e['values']}")
+            continue
+        if m is None:
+            out.append(note)
+            continue
+        if m["signal"] not in seen:
+            seen[m["signal"]] = (len(out), m["why"], [])
+            out.append("")
+        seen[m["signal"]][2].append(f"{_short(m['file'])} ({m['a']} / {m['b']} ms)")
+    if estimated:
+        out[where[0]] = (f"signal delays vs motion capture ({where[1]}): "
+                         + "; ".join(estimated))
+    for signal, (k, why, files) in seen.items():
+        out[k] = (f"{signal}: delay not resolvable on {len(files)} flight"
+                  f"{'s' if len(files) > 1 else ''}, the two halves of each log disagree "
+                  f"({why}): {', '.join(files)}")
+    return out
 
 
 def _table(head: list[str], rows: list[list[str]]) -> str:
@@ -163,7 +206,7 @@ def flights_html(result: dict) -> list[str]:
                  if text]
     body.append(_delays(flights, result))
     notes = [n for f in flights for n in f.get("notes", []) if not _is_delay_note(n)]
-    notes += [n for n in result.get("notes", []) if not _is_delay_note(n)]
+    notes += gather_delay_notes(result.get("notes", []))     # the references' own
     if notes:
         body.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes)
                     + "</ul>")
