@@ -22,15 +22,8 @@ from ..vehicle.params import VehicleParams, hover_speed
 from .fitting import effect_class
 from .priors import candidate_plausibility
 
-__all__ = [
-    "SEPARATE",
-    "alternatives",
-    "collinear_note",
-    "describe",
-    "pick_plausible",
-    "separation",
-    "unit_of",
-]
+__all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation", "pick_plausible",
+           "collinear_note"]
 
 # Known collinear pairs and what data would separate them.
 SEPARATE = {

@@ -65,25 +65,17 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..effects import make_effect
 from ..effects.base import EffectParameter
 from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference, jacobian, weighted_residual
+from ..effects import make_effect
 from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class
 from .priors import momentum_rate_damping
 
-__all__ = [
-    "DELAY_SD_S",
-    "DETERMINED",
-    "Evidence",
-    "Explanation",
-    "Propeller",
-    "evaluate",
-    "explanations_for",
-    "shifted",
-]
+__all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
+           "DETERMINED", "DELAY_SD_S", "shifted"]
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
 DETERMINED = 0.5

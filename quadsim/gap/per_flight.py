@@ -44,14 +44,8 @@ from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
 
-__all__ = [
-    "MIN_REFERENCE",
-    "diagnose_per_flight",
-    "judge_one",
-    "per_flight_answer",
-    "reference_summary",
-    "refused_entry",
-]
+__all__ = ["diagnose_per_flight", "judge_one", "per_flight_answer", "MIN_REFERENCE",
+           "reference_summary", "refused_entry"]
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).
 MIN_REFERENCE = 10
