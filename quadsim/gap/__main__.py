@@ -109,7 +109,7 @@ def _map_fn(args, bar):
         items = list(items)
         labels = [str(getattr(x, "path", None) or getattr(x, "name", None) or f"task {i}")
                   for i, x in enumerate(items)]
-        tick = (lambda i, result: bar.update(1)) if bar is not None else None
+        tick = (lambda i, result: bar.update(1)) if bar is not None else None  # noqa: E731
         return run_tasks(fn, items, workers=args.workers, ray=args.ray, progress=tick,
                          labels=labels)
 
