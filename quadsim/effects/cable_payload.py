@@ -28,10 +28,12 @@ Checks (``tests/test_cable_payload.py``):
   fixed-pivot pendulum's 2 pi sqrt(L / g) because the vehicle swings back against the payload
   (L here is the stretched length L + m g / k).
 
-Only the engines (:func:`quadsim.sim.engines.simulate`) carry the state; anything that evaluates
-``loads`` without it (the flight generator's accelerometer model, ``gap.synthetic``, the
-residual wrench) gets a one-line :class:`~quadsim.core.errors.ModelError` instead of a silent
-zero.
+Only the engines (:func:`quadsim.sim.engines.simulate`) carry the state; the flight
+generator's accelerometer integrates it again along the flown trajectory
+(:func:`quadsim.logs.generate.effect_states`), and the per-flight diagnosis integrates the
+swing from the logged motion (:mod:`quadsim.gap.cable`). Anything else that evaluates
+``loads`` without it (``gap.synthetic``, the residual wrench) gets a one-line
+:class:`~quadsim.core.errors.ModelError` instead of a silent zero.
 
 Parameters: ``mass`` (kg; 0 = off), ``length`` (m, rest length), ``x, y, z`` (m, attachment
 in the body frame), ``axial_frequency`` (Hz, bounce frequency f_a of the payload on the cable;
@@ -130,9 +132,10 @@ class CablePayload(EffectBase):
             return None
         if ctx.effect_state is None or ctx.effect_state.shape[1] < 6:
             raise ModelError("cable_payload: needs its internal state (the swinging payload), "
-                             "which only the engines integrate (quadsim.sim.engines.simulate); "
-                             "the flight generator's accelerometer, the inverse-dynamics logs "
-                             "and the residual wrench cannot evaluate it")
+                             "which only the engines integrate (quadsim.sim.engines.simulate, "
+                             "and the flight generator along its flight); the inverse-dynamics "
+                             "logs and the residual wrench cannot evaluate it (the per-flight "
+                             "diagnosis fits it as quadsim.gap.cable)")
 
         rot, pull = self._tension(ctx)
         batch, rotors = np.shape(ctx.rotor_speed)

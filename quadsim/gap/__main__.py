@@ -12,8 +12,10 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -114,9 +116,10 @@ def _map_fn(args, bar):
     return map_fn
 
 
-def _load(paths, params, args):
+def _load(paths, params, args, lines: list | None = None):
     """Load, check and count ``paths``: refused when too short, too finely windowed, or
-    when all logs so far cost past the caps (``args.samples_loaded`` counts them)."""
+    when all logs so far cost past the caps (``args.samples_loaded`` counts them). The
+    warnings are printed, or appended to ``lines`` when given (printed later, gathered)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
@@ -127,12 +130,37 @@ def _load(paths, params, args):
         check_length(log, args.window)
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
-    for line in collapse_warnings([str(w.message) for w in caught
-                                   if issubclass(w.category, QuadsimWarning)]):
+    found = [str(w.message) for w in caught if issubclass(w.category, QuadsimWarning)]
+    if lines is not None:
+        lines += found + list(notes)
+        return logs
+    for line in collapse_warnings(found):
         print(f"warning: {line}", file=sys.stderr)  # only once every log is accepted
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
     return logs
+
+
+_SPAN = re.compile(r"^(?P<file>.*): airborne span t (?P<a>\S+)-(?P<b>\S+) s kept "
+                   r"\((?P<kept>\S+) of (?P<total>\S+) s\); cut: (?P<cut>.*)$")
+
+
+def gather_notes(lines: list[str]) -> list[str]:
+    """The warnings of many logs as few lines: the airborne-span notes of every log
+    (:func:`quadsim.logs.spans.cut_ground`) in one line, each file with the span it kept;
+    the other warnings collapsed by kind (:func:`collapse_warnings`)."""
+    spans, rest = [], []
+    for line in lines:
+        m = _SPAN.match(line)
+        if m:
+            spans.append(f"{Path(m['file']).name} {m['a']}-{m['b']} s")
+        else:
+            rest.append(line)
+    out = collapse_warnings(rest)
+    if spans:
+        out.append(f"airborne span kept (ground, idle and landing spans cut) on "
+                   f"{len(spans)} log{'s' if len(spans) > 1 else ''}: " + ", ".join(spans))
+    return out
 
 
 #: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
@@ -199,16 +227,18 @@ def main(argv: list[str] | None = None) -> int:
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
     refused = []
     if args.per_flight:      # a flight the loader or the checks refuse is refused alone
-        logs = []
+        logs, lines = [], []
         for k, path in enumerate(args.logs):
             try:
-                logs += _load([path], params, args)
+                logs += _load([path], params, args, lines)
             except InputError as exc:
                 refused.append((k, str(path), str(exc)))
     else:
-        logs = _load(args.logs, params, args)
+        logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None
-    reference = _load(args.reference, params, args) if args.reference else None
+    reference = _load(args.reference, params, args, lines) if args.reference else None
+    for line in gather_notes(lines or []):      # per flight: every log's notes, gathered
+        print(f"warning: {line}", file=sys.stderr)
     # command-only logs in any role: speeds synthesised (quadsim.gap.commands.synthesise_all)
     from .commands import synthesise_all
 

@@ -40,6 +40,12 @@ SEPARATE = {
     frozenset({"thrust_factor", "thrust_curve"}): "fly over a wider range of rotor speeds "
                                                   "(climbs and descents at several rates)",
     frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
+    frozenset({"mass_offset", "cable_payload"}): "look under the vehicle; or fly sharp stops "
+                                                 "and turns: a slung payload lags and swings "
+                                                 "back at its own period 2 pi sqrt(L / g), a "
+                                                 "rigid mass moves with the vehicle",
+    frozenset({"thrust_factor", "cable_payload"}): "look under the vehicle; weigh it; sharp "
+                                                   "stops and turns show a swinging load",
     frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
     frozenset({"com_offset", "thrust_mismatch"}): "balance the vehicle on a knife edge along "
                                                   "x and y (finds the CoM), or each rotor on the "
@@ -64,6 +70,10 @@ SEPARATE = {
     frozenset({"canted_rotor", "thrust_mismatch"}): "look at the motor mounts; a canted rotor "
                                                     "also pushes sideways (hover drifts)",
 }
+
+
+#: fitted parameters that are not part of an answer (a payload's swing at the first sample).
+_NUISANCE = ("cable_payload.lean_", "cable_payload.rate_")
 
 
 def separation(best: str, others: list[str]) -> dict:
@@ -98,7 +108,7 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams,
     if "canted_rotor.tilt_x" in values and "canted_rotor.tilt_y" in values:
         parts.append(_canted(values, ci, params, (fixed or {}).get("canted_rotor.rotor")))
     for key, value in values.items():
-        if key.startswith("canted_rotor.tilt_"):
+        if key.startswith("canted_rotor.tilt_") or key.startswith(_NUISANCE):
             continue
         c = ci.get(key)
         if key == "mass_offset.mass":
@@ -192,6 +202,13 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
         tau = params.inertia[i, i] / value if value > 0 else float("inf")
         return (f"{('roll', 'pitch', 'yaw')[i]} rate damping {_pm(value, c, 1.0, '.3g')} "
                 f"N m per rad/s (decay time I/k {tau:.3g} s)")
+    if key == "cable_payload.mass":
+        return (f"a {_pm(value, c, 1e3)} g payload hanging on a cable "
+                f"({100 * value / params.mass:+.1f} % of the model's {1e3 * params.mass:.4g} g)")
+    if key == "cable_payload.length":
+        period = 2 * np.pi * np.sqrt(max(value, 0.0) / params.gravity)
+        return (f"cable {_pm(value, c, 1.0, '.2g')} m long (the payload swings with a period "
+                f"of about {period:.2g} s)")
     if key.startswith("wind.v"):
         return f"mean wind {_pm(value, c, 1.0)} m/s along world {key[-1]}"
     name, _, p = key.partition(".")

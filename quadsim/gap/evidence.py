@@ -68,6 +68,7 @@ from ..core.errors import ModelError
 from ..effects.base import EffectParameter
 from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
+from . import cable
 from .calibrate import SHARED, Reference, jacobian, weighted_residual
 from ..effects import make_effect
 from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class
@@ -228,6 +229,9 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out.append(_one("canted_rotor", f"rotor {k + 1}",
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
+    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
+    out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)],
+                    *cable.prior(params)))
     if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
         out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
                         [sd["battery_sag.rate"]]))

@@ -94,13 +94,15 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
 
 def reference_summary(ref: Reference) -> dict:
     """The calibrated reference model as JSON: values, pooled standard error, between-flight
-    scatter per shared parameter; noise scale (sigma) and correlation time per channel."""
+    scatter and whether the reference flights determine it (``identified``) per shared
+    parameter; noise scale (sigma) and correlation time per channel."""
     from .judge import channel_names
 
     names = channel_names(ref)
     return {"params": ref.values(),
             "se": dict(zip(ref.candidate.parameter_names, map(float, ref.se_pool))),
             "scatter": dict(zip(ref.candidate.parameter_names, map(float, ref.scatter))),
+            "identified": {k: bool(v) for k, v in ref.identified.items()},
             "sigma": dict(zip(names, map(float, ref.sigma))),
             "correlation_samples": dict(zip(names, map(float, ref.tau))),
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}

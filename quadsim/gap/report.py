@@ -217,8 +217,10 @@ def write_html(path: str | Path, result: dict) -> Path:
                 f"</summary><pre>{html.escape(to_json(result))}</pre></details>")
     page = ("<!doctype html><html><head><meta charset=\"utf-8\"><title>quadsim gap</title>"
             "<style>body{font-family:sans-serif;max-width:1400px;margin:auto}"
-            "img{max-width:100%}table{border-collapse:collapse}"
-            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}</style></head><body>"
+            "img{max-width:100%}table{border-collapse:collapse;max-width:100%}"
+            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left;"
+            "vertical-align:top;overflow-wrap:anywhere}"
+            "pre{white-space:pre-wrap;overflow-wrap:anywhere}</style></head><body>"
             + "\n".join(body) + "</body></html>\n")
     return atomic_write_text(path, page)
 
