@@ -154,18 +154,32 @@ def regression_delay(target: np.ndarray, regressors: np.ndarray, dt: float,
     x = (x - x.mean(0)) / np.maximum(x.std(0), 1e-300)
     k_max = max(1, min(int(round(max_lag_s / dt)), n // 4))
     lags = np.arange(-k_max, k_max + 1)
-    r2 = np.empty(len(lags))
     a = y[k_max:n - k_max]                        # fixed window: no overlap bias
     extra = [np.ones((len(a), 1))]
     if fixed is not None:
         f = np.asarray(fixed, dtype=float).reshape(n, -1)[k_max:n - k_max]
         extra.append((f - f.mean(0)) / np.maximum(f.std(0), 1e-300))
-    for j, k in enumerate(lags):
-        b = np.concatenate([x[k_max + k:n - k_max + k]] + extra, 1)
-        coef, *_ = np.linalg.lstsq(b, a, rcond=None)
-        resid = a - b @ coef
-        r2[j] = 1.0 - np.sum(resid**2) / np.sum((a - a.mean(0))**2)
-    return _peak(lags, r2, dt)
+    # Least squares per lag through its normal equations, all lags at once (the unlagged
+    # columns' products once; residual sum of squares |a|^2 - c^T coef, minimum-norm coef
+    # where the Gram matrix is singular): the same R^2 as a QR/SVD solve per lag to ~1e-10
+    # (the regressors are standardised), at a small fraction of the cost.
+    extra = np.concatenate(extra, 1)
+    m = len(a)
+    lagged = np.lib.stride_tricks.sliding_window_view(x, m, axis=0)   # (L, R, m): x[j:j + m]
+    lagged_t = np.ascontiguousarray(lagged.transpose(0, 2, 1))          # lag k = j - k_max
+    l_l = lagged @ lagged_t
+    l_e = lagged @ extra
+    l_a = lagged @ a
+    count, e_cols = len(lags), extra.shape[1]
+    e_e = np.broadcast_to(extra.T @ extra, (count, e_cols, e_cols))
+    gram = np.concatenate([np.concatenate([l_l, l_e], 2),
+                           np.concatenate([l_e.transpose(0, 2, 1), e_e], 2)], 1)
+    cross = np.concatenate([l_a, np.broadcast_to(extra.T @ a, (count, e_cols, a.shape[1]))], 1)
+    size = gram.shape[1]
+    coef = np.linalg.pinv(gram, rcond=np.finfo(float).eps * size) @ cross
+    total = np.sum((a - a.mean(0))**2)
+    rss = np.maximum(np.sum(a * a) - np.sum(cross * coef, axis=(1, 2)), 0.0)
+    return _peak(lags, 1.0 - rss / total, dt)
 
 
 def _uniform(log: FlightLog):
