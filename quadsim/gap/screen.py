@@ -154,13 +154,13 @@ def _step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
 
 def linearised(prob: Problem, cols: _Columns, start: np.ndarray, names_all, s_all):
     """One Gauss-Newton step of ``prob`` from ``start`` (module doc): (Evidence at the step,
-    the step z1, whether the linear model held there). A one-sided column (the rotor
+    the step z1, how far the linear model's cost there was off, cost units). A one-sided column (the rotor
     delay's kink) that the step leaves on the other side is recomputed on that side."""
     base = _base(prob, cols, start)
     z1, predicted, a, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)
-    held = bool(abs(float(vec @ vec) - predicted) <= NONLINEAR)
-    return prob.evidence(z1, vec, a.T @ a, active, names_all, s_all), z1, held
+    miss = abs(float(vec @ vec) - predicted)
+    return prob.evidence(z1, vec, a.T @ a, active, names_all, s_all), z1, miss
 
 
 def _signed_step(prob: Problem, cols: _Columns, start: np.ndarray, base: np.ndarray):
@@ -214,7 +214,7 @@ def screened(states, reference: Reference, explanations: list[Explanation], jac:
     cols = _Columns(states, reference, jac, names_all)
     effects = {e.name for e in explanations} - {"no_difference"}
     prior_null = float(np.log(max(1, len(effects))))
-    rows, starts, weight, full = [], [], [], []
+    rows, starts, weight, reach = [], [], [], []
     # the flight's own rotor delay under the reference model first (every explanation
     # carries it with the same prior): the others start there
     null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
@@ -230,38 +230,42 @@ def screened(states, reference: Reference, explanations: list[Explanation], jac:
             rows.append(fitted)
             starts.append(None)
             weight.append(fitted.log_z + prior_null)
-            full.append(False)
+            reach.append(weight[-1])
             continue
         if not len(prob.mean):                        # nothing to fit: exact already
             rows.append(_fit_one(states, reference, expl, jac, s_all, names_all, delay))
             starts.append(None)
             weight.append(rows[-1].log_z + prior_null)
-            full.append(False)
+            reach.append(weight[-1])
             continue
         start = prob.start(delay)
         if expl.shift and expl is not null and expl.name != "signal_delay":
             start[-1] = np.clip((cols.delay_s - prob.mean[-1]) / prob.sd[-1],
                                 prob.z_lo[-1], prob.z_hi[-1])
         try:
-            ev, z1, held = linearised(prob, cols, start, names_all, s_all)
+            ev, z1, miss = linearised(prob, cols, start, names_all, s_all)
         except (ModelError, np.linalg.LinAlgError):
-            ev, z1, held = None, None, False
+            ev, z1, miss = None, None, np.inf
         rows.append(ev)
         starts.append(z1)
-        weight.append(-np.inf if ev is None else
-                      ev.log_z + (prior_null if expl.name == "no_difference" else 0.0))
-        full.append(not held)
+        weight.append(-np.inf if ev is None else ev.log_z)
+        # what a fit could reach: the screened evidence plus half the linear model's miss
+        reach.append(np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss)
+    # most promising first: each refined fit can only raise the best weight, and with it
+    # the cut for those after it
     best = max(weight)
-    for k, expl in enumerate(explanations):
+    for k in sorted(range(len(explanations)), key=lambda k: -reach[k]):
+        expl = explanations[k]
         if expl is null or (rows[k] is not None and starts[k] is None):
             continue
-        if rows[k] is None or full[k] or weight[k] >= best - SCREEN_CUT:
+        if rows[k] is None or reach[k] >= best - SCREEN_CUT:
             delay = start_delay_s if expl.name == "signal_delay" else 0.0
             if starts[k] is None:
                 rows[k] = _fit_one(states, reference, expl, jac, s_all, names_all, delay)
             else:
                 prob = Problem(states, reference, expl, jac, s_all)
                 rows[k] = refined(prob, cols, starts[k], names_all, s_all)
+            best = max(best, rows[k].log_z)
         else:
             rows[k].screened = True
     return rows
