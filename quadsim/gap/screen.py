@@ -114,14 +114,17 @@ def _base(prob: Problem, cols: _Columns, z: np.ndarray) -> np.ndarray:
 
 
 def _columns(prob: Problem, cols: _Columns, start: np.ndarray, base: np.ndarray,
-             signs: np.ndarray) -> np.ndarray:
+             signs: np.ndarray, which=None, out: np.ndarray | None = None) -> np.ndarray:
     """The weighted residual's Jacobian in z at ``start`` (module doc); one-sided
-    differences towards ``signs``. At the reference model the shared parts serve: the
+    differences towards ``signs``; only the columns ``which`` (default all) into ``out``
+    (default a new array). At the reference model the shared parts serve: the
     delay's column, and a replaced group's from the shared Jacobian (taken without the
     delay: a column of the linear model only, the cost is evaluated at the step)."""
     expl, delay = prob.expl, _shared_point(prob, cols, start)
-    jac = np.empty((base.size, len(start)))
+    jac = np.empty((base.size, len(start))) if out is None else out
     for k, key in enumerate(expl.parameter_names):
+        if which is not None and not which[k]:
+            continue
         group = key.split(".")[0]
         if delay is not None and key == "delay.rotor":
             jac[:, k] = cols.delay(delay, float(prob.sd[k]), signs[k])
@@ -171,7 +174,7 @@ def _signed_step(prob: Problem, cols: _Columns, start: np.ndarray, base: np.ndar
     flip &= np.array([k == "delay.rotor" for k in prob.expl.parameter_names])
     if np.any(flip):
         signs[flip] = -1.0
-        jac = _columns(prob, cols, start, base, signs)
+        jac = _columns(prob, cols, start, base, signs, which=flip, out=jac)
         z1, predicted, a, active = _step(prob, start, base, jac)
     return z1, predicted, a, active
 
