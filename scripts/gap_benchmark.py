@@ -60,7 +60,13 @@ import warnings
 from multiprocessing import Pool
 from pathlib import Path
 
-import numpy as np
+if "--per-flight-speed" in sys.argv:
+    # CPU seconds on one core: the numeric libraries on one thread (set before numpy loads;
+    # a threaded BLAS on the per-flight fits' small matrices only adds CPU time)
+    os.environ.update({k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                        "MKL_NUM_THREADS")})
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -351,9 +357,10 @@ def summarise_per_flight(rows: list[dict]) -> str:
 
 def per_flight_speed(data: Path) -> str:
     """CPU seconds of the per-flight mode on the real Crazyflie flights (``data``: the shared
-    data folder): the reference calibration on the 20 nominal flights, counted once, then
-    each of the 26 ``mixed/`` flights judged (one process); the verdicts are printed too
-    (nothing is tuned on them)."""
+    data folder): the reference calibration on the 20 nominal flights (their preparation
+    included), counted once, then each of the 26 ``mixed/`` flights judged (one process, the
+    numeric libraries on one thread); the verdicts are printed too (nothing is tuned on
+    them)."""
     from quadsim.gap.calibrate import calibrate
     from quadsim.gap.diagnose import prepare
     from quadsim.gap.per_flight import judge_one

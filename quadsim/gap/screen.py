@@ -157,8 +157,9 @@ def _step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
 
 def linearised(prob: Problem, cols: _Columns, start: np.ndarray, names_all, s_all):
     """One Gauss-Newton step of ``prob`` from ``start`` (module doc): (Evidence at the step,
-    the step z1, how far the linear model's cost there was off, cost units). A one-sided column (the rotor
-    delay's kink) that the step leaves on the other side is recomputed on that side."""
+    the step z1, how far the linear model's cost there was off, cost units). A one-sided
+    column (the rotor delay's kink) that the step leaves on the other side is recomputed on
+    that side."""
     base = _base(prob, cols, start)
     z1, predicted, a, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)

@@ -159,22 +159,25 @@ def regression_delay(target: np.ndarray, regressors: np.ndarray, dt: float,
     if fixed is not None:
         f = np.asarray(fixed, dtype=float).reshape(n, -1)[k_max:n - k_max]
         extra.append((f - f.mean(0)) / np.maximum(f.std(0), 1e-300))
-    # Least squares per lag through its normal equations, all lags at once (the unlagged
-    # columns' products once; residual sum of squares |a|^2 - c^T coef, minimum-norm coef
-    # where the Gram matrix is singular): the same R^2 as a QR/SVD solve per lag to ~1e-10
-    # (the regressors are standardised), at a small fraction of the cost.
+    # Least squares per lag through its normal equations (the unlagged columns' products
+    # once; residual sum of squares |a|^2 - c^T coef, minimum-norm coef where the Gram
+    # matrix is singular): the same R^2 as a QR/SVD solve per lag to ~1e-10 (the
+    # regressors are standardised), at a small fraction of the cost.
     extra = np.concatenate(extra, 1)
-    m = len(a)
-    lagged = np.lib.stride_tricks.sliding_window_view(x, m, axis=0)   # (L, R, m): x[j:j + m]
-    lagged_t = np.ascontiguousarray(lagged.transpose(0, 2, 1))          # lag k = j - k_max
-    l_l = lagged @ lagged_t
-    l_e = lagged @ extra
-    l_a = lagged @ a
-    count, e_cols = len(lags), extra.shape[1]
-    e_e = np.broadcast_to(extra.T @ extra, (count, e_cols, e_cols))
-    gram = np.concatenate([np.concatenate([l_l, l_e], 2),
-                           np.concatenate([l_e.transpose(0, 2, 1), e_e], 2)], 1)
-    cross = np.concatenate([l_a, np.broadcast_to(extra.T @ a, (count, e_cols, a.shape[1]))], 1)
+    m, r_cols, e_cols = len(a), x.shape[1], extra.shape[1]
+    rhs = np.concatenate([extra, a], 1)
+    count = len(lags)
+    gram = np.empty((count, r_cols + e_cols, r_cols + e_cols))
+    cross = np.empty((count, r_cols + e_cols, a.shape[1]))
+    gram[:, r_cols:, r_cols:] = extra.T @ extra
+    cross[:, r_cols:] = extra.T @ a
+    for j in range(count):                  # lag k = j - k_max: x[k_max + k:...] = x[j:j + m]
+        lagged = x[j:j + m]
+        products = lagged.T @ rhs
+        gram[j, :r_cols, :r_cols] = lagged.T @ lagged
+        gram[j, :r_cols, r_cols:] = products[:, :e_cols]
+        gram[j, r_cols:, :r_cols] = products[:, :e_cols].T
+        cross[j, :r_cols] = products[:, e_cols:]
     size = gram.shape[1]
     coef = np.linalg.pinv(gram, rcond=np.finfo(float).eps * size) @ cross
     total = np.sum((a - a.mean(0))**2)
