@@ -68,10 +68,12 @@ from ..core.errors import ModelError
 from ..effects.base import EffectParameter
 from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
-from .calibrate import SHARED, Reference, jacobian, weighted_residual
+from .calibrate import SHARED, Reference, jacobian
 from ..effects import make_effect
-from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class
+from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, _memo, effect_class,
+                      residuals)
 from .priors import momentum_rate_damping
+from .screen import screened
 
 __all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
            "DETERMINED", "DELAY_SD_S", "shifted"]
@@ -349,16 +351,23 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
-    from .screen import screened
-
     names = list(reference.candidate.parameter_names)
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
     if not full:
         return screened(states, reference, explanations, jac, names, reference.s_ref,
-                        start_delay_s)
+                        start_delay_s, problem=Problem, fit_one=_fit_one,
+                        residual=flight_residual)
     return [_fit_one(states, reference, e, jac, reference.s_ref, names,
                      start_delay_s if e.name == "signal_delay" else 0.0)
             for e in explanations]
+
+
+def flight_residual(states, reference: Reference, effects: list, memo: dict | None = None
+                    ) -> np.ndarray:
+    """:func:`quadsim.gap.calibrate.weighted_residual`, flattened (N C,), with the residual
+    parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    return (r * np.sqrt(reference.weights)).ravel()
 
 
 class Problem:
@@ -368,8 +377,9 @@ class Problem:
     bounds; ``shared``/``keep``/``marg`` the reference effects it keeps and their marginal."""
 
     def __init__(self, states, reference: Reference, expl: Explanation, jac: np.ndarray,
-                 s_all: np.ndarray):
+                 s_all: np.ndarray, memo: dict | None = None):
         self.states, self.reference, self.expl = states, reference, expl
+        self.memo = memo          # residual parts shared by evaluations on one flight
         self.shared, self.keep = _shared_effects(reference, expl.replaces)
         self.marg = _Marginal(jac[:, self.keep], s_all[self.keep])
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
@@ -380,8 +390,15 @@ class Problem:
     def residual(self, z: np.ndarray) -> np.ndarray:
         theta = self.mean + self.sd * z
         own = _own_effects(self.expl, theta)
-        flight = shifted(self.states, float(theta[-1])) if self.expl.shift else self.states
-        return weighted_residual(flight, self.reference, self.shared + own).ravel()
+        flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
+        return flight_residual(flight, self.reference, self.shared + own, self.memo)
+
+    def shifted(self, delay_s: float):
+        """:func:`shifted` states, the same object for the same delay (``memo``)."""
+        if self.memo is None:
+            return shifted(self.states, delay_s)
+        return _memo(self.memo, ("shifted", id(self.states), delay_s), self.states,
+                     lambda: shifted(self.states, delay_s))
 
     def stacked(self, z: np.ndarray) -> np.ndarray:
         try:

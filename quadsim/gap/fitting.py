@@ -391,7 +391,7 @@ def stack_states(flights: list[FlightStates]) -> FlightStates:
 
 
 def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
-              rotor_channel: bool) -> np.ndarray:
+              rotor_channel: bool, memo: dict | None = None) -> np.ndarray:
     """Unscaled residual (N, C): Fx Fy Fz Mx My Mz (N, N m) [+ rotor_1..R (rad/s)].
 
     The force channels are compared as specific force times the *nominal* mass
@@ -412,15 +412,50 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     xx -14 %, zz -79 %; in this form +1.2 ± 4.3 %, -1.9 ± 21 %; with a true +30 % on xx, yy:
     +12 % before, +31 ± 6 % now; docs/gap.md)."""
     force, torque, vehicle = model_wrench(states, params, effects)
-    meas_force, meas_torque = measured_wrench(states, vehicle)
+    if memo is None:
+        meas_force, meas_torque = measured_wrench(states, vehicle)
+    else:
+        key = ("measured", id(states), vehicle.mass, vehicle.com.tobytes(),
+               vehicle.inertia.tobytes())
+        meas_force, meas_torque = _memo(memo, key, states,
+                                        lambda: measured_wrench(states, vehicle))
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
                                                                      params.inertia):
         torque_residual = torque_residual @ np.linalg.solve(vehicle.inertia, params.inertia)
     parts = [(meas_force - force) * (params.mass / vehicle.mass), torque_residual]
     if rotor_channel:
-        parts.append(_rotor_channel(states, params, effects))
+        if memo is None:
+            parts.append(_rotor_channel(states, params, effects))
+        else:
+            parts.append(_memo(memo, _rotor_key(states, params, effects), states,
+                               lambda: _rotor_channel(states, params, effects)))
     return np.concatenate(parts, axis=1)
+
+
+def _memo(memo: dict, key: tuple, states, compute):
+    """``memo[key]`` (computed once): parts of the residual that many evaluations on the
+    same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
+    command -> speed model). The entry holds ``states`` so that its id stays its own."""
+    hit = memo.get(key)
+    if hit is not None and hit[0] is states:
+        return hit[1]
+    if len(memo) > 64:
+        memo.clear()
+    value = compute()
+    memo[key] = (states, value)
+    return value
+
+
+def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
+    """What the rotor channel depends on besides ``states``: the motor map (``params``),
+    the speed factor and the rate owner's values (:func:`_rotor_channel`)."""
+    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
+    owner = rate_owner(effects)
+    return ("rotor", id(states), id(params),
+            None if factor is None else np.asarray(factor, dtype=float).tobytes(),
+            None if owner is None else (type(owner).__name__,
+                                        tuple(sorted(owner.values().items()))))
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,
