@@ -192,10 +192,9 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
     steps; the Laplace evidence at the optimum with the last Jacobian."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
-    a, active = None, 0
     for _ in range(MAX_STEPS):
         base = prob.residual(z)
-        z_new, _, a, active = _signed_step(prob, cols, z, base)
+        z_new = _signed_step(prob, cols, z, base)[0]
         for _ in range(4):                       # backtrack: a step must lower the cost
             vec_new = prob.stacked(z_new)
             new = float(vec_new @ vec_new)
@@ -208,10 +207,10 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
         z, vec, cost = z_new, vec_new, new
         if drop < CONVERGED:
             break
-    if a is None:
-        base = prob.residual(z)
-        _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base,
-                                                         np.ones(len(z))))
+    # the posterior precision from the Jacobian at the optimum (forward differences, as
+    # the full fit's): the last step's came from the iterate before
+    base = prob.residual(z)
+    _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base, np.ones(len(z))))
     return prob.evidence(z, vec, a.T @ a, active, names_all, s_all)
 
 
