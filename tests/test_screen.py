@@ -17,7 +17,8 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Problem, Propeller, evaluate, explanations_for
+from quadsim.gap.evidence import (Problem, Propeller, evaluate, explanations_for,
+                                   flight_residual)
 from quadsim.gap.fitting import _heun_linear, _rotor_channel
 from quadsim.gap.judge import judge
 from quadsim.gap.screen import _Columns, _columns
@@ -110,11 +111,14 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
         states = prepare([log], cf)[0].fit
     names = list(reference.candidate.parameter_names)
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
-    cols = _Columns(states, reference, jac, names)
-    for expl in explanations_for(reference, states):
+    memo: dict = {}
+    expl_all = explanations_for(reference, states)
+    anyone = Problem(states, reference, expl_all[0], jac, reference.s_ref, memo)
+    cols = _Columns(states, reference, jac, names, memo, anyone.shifted, flight_residual)
+    for expl in expl_all:
         if expl.name not in ("motor_lag", "rotor_drag", "mass_offset"):
             continue
-        prob = Problem(states, reference, expl, jac, reference.s_ref)
+        prob = Problem(states, reference, expl, jac, reference.s_ref, memo)
         z0 = np.zeros(len(prob.mean))
         base = prob.residual(z0)
         np.testing.assert_allclose(base, cols.base(0.0), rtol=0, atol=1e-9 * np.abs(base).max())
