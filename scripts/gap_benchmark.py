@@ -20,7 +20,7 @@ Usage::
 
     python scripts/gap_benchmark.py [--out bench.json] [--jobs 2] [--cases N]
     python scripts/gap_benchmark.py --speed
-    python scripts/gap_benchmark.py --per-flight-speed ../shared/data
+    python scripts/gap_benchmark.py --per-flight-speed ../shared/data [--compare-full]
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --generate-only
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
@@ -60,7 +60,13 @@ import warnings
 from multiprocessing import Pool
 from pathlib import Path
 
-import numpy as np
+if "--per-flight-speed" in sys.argv:
+    # CPU seconds on one core: the numeric libraries on one thread (set before numpy loads;
+    # a threaded BLAS on the per-flight fits' small matrices only adds CPU time)
+    os.environ.update({k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                        "MKL_NUM_THREADS")})
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -349,11 +355,14 @@ def summarise_per_flight(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def per_flight_speed(data: Path) -> str:
+def per_flight_speed(data: Path, compare: bool = False) -> str:
     """CPU seconds of the per-flight mode on the real Crazyflie flights (``data``: the shared
-    data folder): the reference calibration on the 20 nominal flights, counted once, then
-    each of the 26 ``mixed/`` flights judged (one process); the verdicts are printed too
-    (nothing is tuned on them)."""
+    data folder): the reference calibration on the 20 nominal flights (their preparation
+    included), counted once, then each of the 26 ``mixed/`` flights judged (one process, the
+    numeric libraries on one thread); the verdicts are printed too (nothing is tuned on
+    them). ``compare``: each flight judged again with every explanation fully fitted
+    (``evaluate(full=True)``, no screen): verdicts, answers and the largest change of a
+    reading's probability."""
     from quadsim.gap.calibrate import calibrate
     from quadsim.gap.diagnose import prepare
     from quadsim.gap.per_flight import judge_one
@@ -377,6 +386,21 @@ def per_flight_speed(data: Path) -> str:
     lines = [f"reference calibration ({len(nominal)} flights): {calibration:.1f} s CPU",
              f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
              f"= {judged / minutes:.1f} s per flight-minute (calibration not included)"]
+    if compare:
+        start = time.process_time()
+        full = [judge_one(log, ref, full=True) for log in mixed]
+        slow = time.process_time() - start
+        change = max(abs(p.get(k, 0.0) - q.get(k, 0.0))
+                     for a, b in zip(rows, full)
+                     for p, q in [({x["name"]: x["probability"] for x in a["posterior"]},
+                                   {x["name"]: x["probability"] for x in b["posterior"]})]
+                     for k in set(p) | set(q))
+        lines.append(f"every explanation fully fitted: {slow:.1f} s CPU = "
+                     f"{slow / minutes:.1f} s per flight-minute; same verdict on "
+                     f"{sum(a['verdict'] == b['verdict'] for a, b in zip(rows, full))}/"
+                     f"{len(rows)}, same answer text on "
+                     f"{sum(a['answer'] == b['answer'] for a, b in zip(rows, full))}/"
+                     f"{len(rows)}; largest change of a reading's probability {change:.2g}")
     for r in rows:
         prob = "-" if r.get("probability") is None else f"{100 * r['probability']:.0f} %"
         lines.append(f"{Path(r['file']).name}: {r['verdict']} ({prob}): {r['answer']}")
@@ -502,6 +526,9 @@ def main(argv=None) -> int:
     parser.add_argument("--per-flight-speed", metavar="DATA", type=Path,
                         help="CPU time of the per-flight mode on the real Crazyflie flights "
                              "under DATA (../shared/data), one process; prints the verdicts")
+    parser.add_argument("--compare-full", action="store_true",
+                        help="with --per-flight-speed: judge each flight again with every "
+                             "explanation fully fitted (no screen) and compare")
     parser.add_argument("--per-flight-only", action="store_true",
                         help="with --independent: the per-flight mode alone")
     parser.add_argument("--cached-only", action="store_true",
@@ -530,7 +557,7 @@ def main(argv=None) -> int:
         print(speed_benchmark(), end="")
         return 0
     if args.per_flight_speed:
-        print(per_flight_speed(args.per_flight_speed), end="")
+        print(per_flight_speed(args.per_flight_speed, args.compare_full), end="")
         return 0
     self_rows = json.loads(Path(args.self_json).read_text()) if args.self_json else None
     if args.summarise_independent:

@@ -69,10 +69,12 @@ from ..effects.base import EffectParameter
 from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
 from . import cable
-from .calibrate import SHARED, Reference, jacobian, weighted_residual
+from .calibrate import SHARED, Reference, jacobian
 from ..effects import make_effect
-from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class
+from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, _memo, effect_class,
+                      residuals)
 from .priors import momentum_rate_damping
+from .screen import screened
 
 __all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
            "DETERMINED", "DELAY_SD_S", "shifted"]
@@ -184,6 +186,8 @@ class Evidence:
     mean: np.ndarray | None = None
     air_force: np.ndarray | None = None
     shared_shift: dict = field(default_factory=dict)
+    #: True: the linearised evidence of :mod:`.screen` (no full fit: it cannot matter)
+    screened: bool = False
 
     @property
     def name(self) -> str:
@@ -341,62 +345,120 @@ def _air_force(states, reference, effects, own) -> np.ndarray:
 
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
-             start_delay_s: float = 0.0) -> list[Evidence]:
+             start_delay_s: float = 0.0, *, full: bool = False) -> list[Evidence]:
     """Log evidence of every explanation on one flight's (decimated) ``states``.
 
     With a rotor-delay reading, every explanation fits the flight's rotor delay too: with
     the references' prior (:func:`reference_delay_sd`) as a shared parameter, or with the
     wide prior as the reading "signal_delay" (it starts at ``start_delay_s``, the
-    cross-correlation estimate against the references')."""
+    cross-correlation estimate against the references').
+
+    Each explanation is first screened by one Gauss-Newton step and fully fitted only where
+    it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
     names = list(reference.candidate.parameter_names)
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    if not full:
+        return screened(states, reference, explanations, jac, names, reference.s_ref,
+                        start_delay_s, problem=Problem, fit_one=_fit_one,
+                        residual=flight_residual)
     return [_fit_one(states, reference, e, jac, reference.s_ref, names,
                      start_delay_s if e.name == "signal_delay" else 0.0)
             for e in explanations]
 
 
-def _fit_one(states, reference: Reference, expl: Explanation, jac: np.ndarray,
-             s_all: np.ndarray, names_all: list[str], start_delay_s: float) -> Evidence:
-    """One explanation's MAP fit and Laplace evidence (module doc); ``jac`` (N C, M): the
-    weighted residual's Jacobian in the shared parameters ``names_all`` (spreads ``s_all``),
-    of which those the explanation does not replace are marginalised."""
-    dt = float(states.t[1] - states.t[0])
-    chans = len(reference.sigma)
-    shared, keep = _shared_effects(reference, expl.replaces)
-    marg = _Marginal(jac[:, keep], s_all[keep])
-    mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
-    lower, upper = _bounds(expl, reference, dt)
-    size = jac.shape[0] + len(keep) + len(mean)
+def flight_residual(states, reference: Reference, effects: list, memo: dict | None = None
+                    ) -> np.ndarray:
+    """:func:`quadsim.gap.calibrate.weighted_residual`, flattened (N C,), with the residual
+    parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    return (r * np.sqrt(reference.weights)).ravel()
 
-    def stacked(z):
-        theta = mean + sd * z
+
+class Problem:
+    """One explanation's fit on one flight (module doc): ``residual(z)`` the weighted
+    residual (N C,) at z (prior units), ``stacked(z)`` the vector whose squared norm is the
+    fit's cost (profiled residual, marginalised shared shifts, z); ``z_lo``, ``z_hi`` the
+    bounds; ``shared``/``keep``/``marg`` the reference effects it keeps and their marginal."""
+
+    def __init__(self, states, reference: Reference, expl: Explanation, jac: np.ndarray,
+                 s_all: np.ndarray, memo: dict | None = None):
+        self.states, self.reference, self.expl = states, reference, expl
+        self.memo = memo          # residual parts shared by evaluations on one flight
+        self.shared, self.keep = _shared_effects(reference, expl.replaces)
+        self.marg = _Marginal(jac[:, self.keep], s_all[self.keep])
+        self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
+        lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
+        self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
+        self.size = jac.shape[0] + len(self.keep) + len(self.mean)
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        theta = self.mean + self.sd * z
+        own = _own_effects(self.expl, theta)
+        flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
+        return flight_residual(flight, self.reference, self.shared + own, self.memo)
+
+    def shifted(self, delay_s: float):
+        """:func:`shifted` states, the same object for the same delay (``memo``)."""
+        if self.memo is None:
+            return shifted(self.states, delay_s)
+        return _memo(self.memo, ("shifted", id(self.states), delay_s), self.states,
+                     lambda: shifted(self.states, delay_s))
+
+    def stacked(self, z: np.ndarray) -> np.ndarray:
         try:
-            own = _own_effects(expl, theta)
-            flight = shifted(states, float(theta[-1])) if expl.shift else states
-            r = weighted_residual(flight, reference, shared + own).ravel()
+            r = self.residual(z)
         except ModelError:
-            return np.full(size, 1e3)
-        aug, du = marg.profile(r)
+            return np.full(self.size, 1e3)
+        aug, du = self.marg.profile(r)
         return np.concatenate([aug, du, z])
 
+    def start(self, start_delay_s: float = 0.0) -> np.ndarray:
+        """z = 0 with the delay at ``start_delay_s``, inside the bounds."""
+        z0 = np.zeros_like(self.mean)
+        if self.expl.shift:
+            z0[-1] = start_delay_s / self.sd[-1]
+        return np.clip(z0, self.z_lo + 1e-6, self.z_hi - 1e-6)
+
+    def evidence(self, z, vec, h, at_bound: int, names_all, s_all) -> Evidence:
+        return laplace(self.states, self.reference, self.expl, self.marg, self.keep, s_all,
+                       names_all, self.shared, z, vec, h, at_bound)
+
+
+def _fit_one(states, reference: Reference, expl: Explanation, jac: np.ndarray,
+             s_all: np.ndarray, names_all: list[str], start_delay_s: float,
+             start: np.ndarray | None = None) -> Evidence:
+    """One explanation's MAP fit and Laplace evidence (module doc); ``jac`` (N C, M): the
+    weighted residual's Jacobian in the shared parameters ``names_all`` (spreads ``s_all``),
+    of which those the explanation does not replace are marginalised. ``start``: where the
+    fit starts (z units; default :meth:`Problem.start`)."""
+    prob = Problem(states, reference, expl, jac, s_all)
+    if not len(prob.mean):
+        return prob.evidence(np.zeros(0), prob.stacked(np.zeros(0)), np.zeros((0, 0)), 0,
+                             names_all, s_all)
+    z0 = prob.start(start_delay_s) if start is None else np.clip(
+        np.asarray(start, dtype=float), prob.z_lo + 1e-6, prob.z_hi - 1e-6)
+    fit = least_squares(prob.stacked, z0, bounds=(prob.z_lo, prob.z_hi), diff_step=1e-3,
+                        max_nfev=40, method="trf")
+    return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac,
+                         int(np.count_nonzero(fit.active_mask)), names_all, s_all)
+
+
+def laplace(states, reference: Reference, expl: Explanation, marg: _Marginal, keep: list[int],
+            s_all: np.ndarray, names_all: list[str], shared: list, z: np.ndarray,
+            vec: np.ndarray, h: np.ndarray, at_bound: int) -> Evidence:
+    """The Evidence of ``expl`` at ``z`` (module doc): ``vec`` the stacked residual there,
+    ``h`` the posterior precision (z units), ``at_bound`` how many values lie at a bound."""
+    chans = len(reference.sigma)
+    mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
     if len(mean):
-        z_lo, z_hi = (lower - mean) / sd, (upper - mean) / sd
-        z0 = np.zeros_like(mean)
-        if expl.shift:
-            z0[-1] = start_delay_s / sd[-1]
-        z0 = np.clip(z0, z_lo + 1e-6, z_hi - 1e-6)
-        fit = least_squares(stacked, z0, bounds=(z_lo, z_hi), diff_step=1e-3, max_nfev=40,
-                            method="trf")
-        z, vec, h = fit.x, fit.fun, fit.jac.T @ fit.jac
         # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
-        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * int(np.count_nonzero(
-            fit.active_mask))
+        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
         post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
     else:
-        z, vec, logdet_h, post = np.zeros(0), stacked(np.zeros(0)), 0.0, np.zeros(0)
+        logdet_h, post = 0.0, np.zeros(0)
     theta = mean + sd * z
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * marg.logdet + expl.log_prior
-    n = jac.shape[0]
+    n = marg.j.shape[0]
     resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
     keys = expl.parameter_names
     shift = {names_all[k]: float(s_all[k] * d) for k, d in zip(keep, vec[n:n + len(keep)])}

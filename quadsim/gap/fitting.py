@@ -287,6 +287,49 @@ def rate_owner(effects) -> object | None:
                  if e.rotor_speed_rate(np.zeros(1), probe, probe) is not None), None)
 
 
+def _linear_time_constant(owner) -> float | None:
+    """The time constant (s) of a first-order lag that is the same up and down
+    (``MotorLag``: dOmega/dt = (Omega_c - Omega) / tau, linear in both speeds), else None."""
+    from ..effects.motor_lag import MotorLag
+
+    if type(owner) is not MotorLag:
+        return None
+    tau = owner.time_constant
+    down = owner.time_constant_down
+    return float(tau) if tau > 0.0 and (down <= 0.0 or down == tau) else None
+
+
+def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
+                 n: int) -> np.ndarray:
+    """:func:`_rotor_channel`'s Heun integration for a linear lag, in closed form.
+
+    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
+    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
+    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
+    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
+    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
+    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
+    recursion, once): the same numbers as stepping the rate function, to round-off, at a
+    few array operations instead of 2 S steps rate evaluations."""
+    a = 1.0 - h / tau + h * h / (2.0 * tau * tau)
+    b0 = h / (2.0 * tau) - h * h / (2.0 * tau * tau)
+    b1 = h / (2.0 * tau)
+    gain = 1.0
+    weights = np.zeros(steps + 1)
+    for k in range(steps):
+        for j in range(ROTOR_SUBSTEPS):
+            f0, f1 = j / ROTOR_SUBSTEPS, (j + 1) / ROTOR_SUBSTEPS
+            # W' = a W + b0 ((1 - f0) c_k + f0 c_k+1) + b1 ((1 - f1) c_k + f1 c_k+1)
+            gain *= a
+            weights *= a
+            weights[k] += b0 * (1.0 - f0) + b1 * (1.0 - f1)
+            weights[k + 1] += b0 * f0 + b1 * f1
+    out = gain * start
+    for k in range(steps + 1):
+        out = out + weights[k] * cmd[k:k + n]
+    return out
+
+
 def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
     """Measured rotor speed at t + h minus the model's prediction from the state at t."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
@@ -301,8 +344,11 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
     speed = states.rotor_speed
     n = len(states.t) - steps
     owner = rate_owner(effects)
+    linear = _linear_time_constant(owner)
     if owner is None:
         predicted = cmd[steps:]
+    elif linear is not None:
+        predicted = _heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, linear, n)
     else:
         # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
         # dt / (2 ROTOR_SUBSTEPS)).
@@ -345,7 +391,7 @@ def stack_states(flights: list[FlightStates]) -> FlightStates:
 
 
 def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
-              rotor_channel: bool) -> np.ndarray:
+              rotor_channel: bool, memo: dict | None = None) -> np.ndarray:
     """Unscaled residual (N, C): Fx Fy Fz Mx My Mz (N, N m) [+ rotor_1..R (rad/s)].
 
     The force channels are compared as specific force times the *nominal* mass
@@ -366,15 +412,50 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     xx -14 %, zz -79 %; in this form +1.2 ± 4.3 %, -1.9 ± 21 %; with a true +30 % on xx, yy:
     +12 % before, +31 ± 6 % now; docs/gap.md)."""
     force, torque, vehicle = model_wrench(states, params, effects)
-    meas_force, meas_torque = measured_wrench(states, vehicle)
+    if memo is None:
+        meas_force, meas_torque = measured_wrench(states, vehicle)
+    else:
+        key = ("measured", id(states), vehicle.mass, vehicle.com.tobytes(),
+               vehicle.inertia.tobytes())
+        meas_force, meas_torque = _memo(memo, key, states,
+                                        lambda: measured_wrench(states, vehicle))
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
                                                                      params.inertia):
         torque_residual = torque_residual @ np.linalg.solve(vehicle.inertia, params.inertia)
     parts = [(meas_force - force) * (params.mass / vehicle.mass), torque_residual]
     if rotor_channel:
-        parts.append(_rotor_channel(states, params, effects))
+        if memo is None:
+            parts.append(_rotor_channel(states, params, effects))
+        else:
+            parts.append(_memo(memo, _rotor_key(states, params, effects), states,
+                               lambda: _rotor_channel(states, params, effects)))
     return np.concatenate(parts, axis=1)
+
+
+def _memo(memo: dict, key: tuple, states, compute):
+    """``memo[key]`` (computed once): parts of the residual that many evaluations on the
+    same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
+    command -> speed model). The entry holds ``states`` so that its id stays its own."""
+    hit = memo.get(key)
+    if hit is not None and hit[0] is states:
+        return hit[1]
+    if len(memo) > 64:
+        memo.clear()
+    value = compute()
+    memo[key] = (states, value)
+    return value
+
+
+def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
+    """What the rotor channel depends on besides ``states``: the motor map (``params``),
+    the speed factor and the rate owner's values (:func:`_rotor_channel`)."""
+    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
+    owner = rate_owner(effects)
+    return ("rotor", id(states), id(params),
+            None if factor is None else np.asarray(factor, dtype=float).tobytes(),
+            None if owner is None else (type(owner).__name__,
+                                        tuple(sorted(owner.values().items()))))
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,

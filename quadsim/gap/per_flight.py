@@ -110,9 +110,10 @@ def reference_summary(ref: Reference) -> dict:
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
-              window_s: float = DEFAULT_WINDOW_S) -> dict:
+              window_s: float = DEFAULT_WINDOW_S, full: bool = False) -> dict:
     """One flight's entry (module level: sent to workers); ``refused`` with the reason when
-    the flight cannot be judged."""
+    the flight cannot be judged. ``full``: every explanation fully fitted (no screen,
+    :func:`quadsim.gap.evidence.evaluate`)."""
     name = str(log.path) if getattr(log, "path", None) is not None else "log"
     try:
         with warnings.catch_warnings():
@@ -131,7 +132,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
                 start = 1e-3 * (mine - reference.delays_ms["rotor"][0])
-            rows = evaluate(states, reference, expl, start_delay_s=start)
+            rows = evaluate(states, reference, expl, start_delay_s=start, full=full)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)

@@ -154,18 +154,35 @@ def regression_delay(target: np.ndarray, regressors: np.ndarray, dt: float,
     x = (x - x.mean(0)) / np.maximum(x.std(0), 1e-300)
     k_max = max(1, min(int(round(max_lag_s / dt)), n // 4))
     lags = np.arange(-k_max, k_max + 1)
-    r2 = np.empty(len(lags))
     a = y[k_max:n - k_max]                        # fixed window: no overlap bias
     extra = [np.ones((len(a), 1))]
     if fixed is not None:
         f = np.asarray(fixed, dtype=float).reshape(n, -1)[k_max:n - k_max]
         extra.append((f - f.mean(0)) / np.maximum(f.std(0), 1e-300))
-    for j, k in enumerate(lags):
-        b = np.concatenate([x[k_max + k:n - k_max + k]] + extra, 1)
-        coef, *_ = np.linalg.lstsq(b, a, rcond=None)
-        resid = a - b @ coef
-        r2[j] = 1.0 - np.sum(resid**2) / np.sum((a - a.mean(0))**2)
-    return _peak(lags, r2, dt)
+    # Least squares per lag through its normal equations (the unlagged columns' products
+    # once; residual sum of squares |a|^2 - c^T coef, minimum-norm coef where the Gram
+    # matrix is singular): the same R^2 as a QR/SVD solve per lag to ~1e-10 (the
+    # regressors are standardised), at a small fraction of the cost.
+    extra = np.concatenate(extra, 1)
+    m, r_cols, e_cols = len(a), x.shape[1], extra.shape[1]
+    rhs = np.concatenate([extra, a], 1)
+    count = len(lags)
+    gram = np.empty((count, r_cols + e_cols, r_cols + e_cols))
+    cross = np.empty((count, r_cols + e_cols, a.shape[1]))
+    gram[:, r_cols:, r_cols:] = extra.T @ extra
+    cross[:, r_cols:] = extra.T @ a
+    for j in range(count):                  # lag k = j - k_max: x[k_max + k:...] = x[j:j + m]
+        lagged = x[j:j + m]
+        products = lagged.T @ rhs
+        gram[j, :r_cols, :r_cols] = lagged.T @ lagged
+        gram[j, :r_cols, r_cols:] = products[:, :e_cols]
+        gram[j, r_cols:, :r_cols] = products[:, :e_cols].T
+        cross[j, :r_cols] = products[:, e_cols:]
+    size = gram.shape[1]
+    coef = np.linalg.pinv(gram, rcond=np.finfo(float).eps * size) @ cross
+    total = np.sum((a - a.mean(0))**2)
+    rss = np.maximum(np.sum(a * a) - np.sum(cross * coef, axis=(1, 2)), 0.0)
+    return _peak(lags, 1.0 - rss / total, dt)
 
 
 def _uniform(log: FlightLog):

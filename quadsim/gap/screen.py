@@ -1,0 +1,283 @@
+"""Linearised evidence of every explanation, and the cut that decides which ones are fitted
+to convergence (:func:`quadsim.gap.evidence.evaluate`).
+
+The full fit of an explanation (:func:`quadsim.gap.evidence._fit_one`: bounded trust-region
+least squares, a finite-difference Jacobian per iteration) costs 40-80 evaluations of the
+flight's residual; a flight has ~20 explanations, and most of them lie hundreds of log units
+of evidence below the best. So:
+
+1. **The flight's rotor delay under the reference model** ("no difference") is fitted first
+   (:func:`refined`); every other explanation carries that delay with the same prior and
+   starts there (z0: its own parameters at their prior centre, theta_ref for a replaced
+   shared group; a "signal_delay" reading at its cross-correlation estimate).
+2. **Screen**: one Gauss-Newton step from z0, ``r(z) ~ r(z0) + J (z - z0)``. J's columns
+   (prior units): for a shared group the explanation gives a value of its own, the
+   shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.calibrate.jacobian`,
+   once per flight); the delay's column once per flight; every other parameter one forward
+   difference (:data:`STEP`, the full fit's ``diff_step``). The rotor speeds are shifted by
+   interpolation between samples, so the residual is piecewise linear in the delay with a
+   kink at every sample: the delay's column is one-sided and is taken again on the other side
+   when the step goes there. The stacked cost (profiled residual, marginalised shifts, z) is
+   then quadratic; its bounded minimum z1 is a small linear least-squares problem
+   (``scipy.optimize.lsq_linear``, bounded-variable). The residual is evaluated at z1 itself:
+   the *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at
+   z1 with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says
+   how far the linear model was off there.
+3. **Cut**: an explanation whose *reach*, screened log Z + miss / 2, lies within
+   :data:`SCREEN_CUT` of the best log weight so far (log Z; "no difference" with its prior,
+   as in :func:`quadsim.gap.judge.posterior`) is fitted to convergence (:func:`refined`:
+   projected Gauss-Newton from z1, a fresh Jacobian per step, halved steps until the cost
+   falls, stopped at a cost drop below :data:`CONVERGED`), most promising first, each result
+   raising the best. The others keep their screened Evidence (``screened=True``).
+
+Why the cut does not move a verdict: a screened reading lies more than SCREEN_CUT = log(1e4)
++ 4 below the best, i.e. at posterior odds below 1e-4 against it by its screened evidence;
+the judge's thresholds are posterior 0.1 (a stated reading) and 0.9 (confident). The screened
+cost is that of a point the fit can reach, so a fit only lowers it, by about miss / 2 where
+the linear model was off; a second local optimum the step does not see is the remaining risk,
+so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones, every
+screened explanation's full-fit evidence lay at least 15 log units below the best (posterior
+< 1e-6); the verdicts were the same on all 26, the largest change of a reading's probability
+2.6e-3 (docs/gap.md). The explanations that matter are fitted to convergence, not with the
+full fit's 40-evaluation cap, so their evidence can exceed the full path's (by up to a few
+log units where that fit stopped early).
+
+``evaluate(..., full=True)`` fits every explanation with the full fit (the reference path
+tests/test_screen.py compares with).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..core.errors import ModelError
+from .calibrate import Reference
+
+__all__ = ["screened", "linearised", "refined", "SCREEN_CUT", "STEP", "MAX_STEPS",
+           "CONVERGED"]
+
+#: forward-difference step in prior units (the full fit's ``diff_step``).
+STEP = 1e-3
+#: log-weight margin below the best within which an explanation is fitted to convergence
+#: (module doc): posterior odds 1e-4, plus 4 for the Occam factor's change from z1 to the
+#: optimum and the step's own error (measured: a few tenths to 2.5 log units).
+SCREEN_CUT = float(np.log(1e4)) + 4.0
+#: Gauss-Newton steps of a refined fit at most, and the cost drop (cost units) below which
+#: it has converged (a hundredth of a log-evidence unit: far below any posterior threshold).
+MAX_STEPS = 8
+CONVERGED = 0.02
+
+
+class _Columns:
+    """Per-flight pieces every explanation's linear model shares: the reference residual at
+    theta_ref with the rotor speeds shifted by a delay, and the rotor-delay column there."""
+
+    def __init__(self, states, reference: Reference, jac: np.ndarray, names_all: list[str],
+                 memo: dict, shifter, residual):
+        self.states, self.reference, self.jac, self.memo = states, reference, jac, memo
+        self.shifted, self.residual = shifter, residual
+        self.index = {n: k for k, n in enumerate(names_all)}
+        self._base: dict[float, np.ndarray] = {}
+        self._delay: dict[tuple, np.ndarray] = {}
+        self.delay_s = 0.0          # the delay every explanation starts at (:func:`screened`)
+
+    def base(self, delay_s: float) -> np.ndarray:
+        if delay_s not in self._base:
+            self._base[delay_s] = self.residual(self.shifted(delay_s), self.reference,
+                                                self.reference.effects(), self.memo)
+        return self._base[delay_s]
+
+    def delay(self, delay_s: float, sd: float, sign: float) -> np.ndarray:
+        """d r / d z of the rotor delay at ``delay_s`` (prior spread ``sd``, s), one-sided
+        towards ``sign``: the shifted speeds are interpolated between samples, so the
+        residual is piecewise linear in the delay with a kink at every sample step."""
+        key = (delay_s, sd, sign)
+        if key not in self._delay:
+            h = sign * STEP
+            moved = self.residual(self.shifted(delay_s + h * sd), self.reference,
+                                  self.reference.effects(), self.memo)
+            self._delay[key] = (moved - self.base(delay_s)) / h
+        return self._delay[key]
+
+
+def _shared_point(prob, cols: _Columns, z: np.ndarray) -> float | None:
+    """The delay (s) at ``z`` when ``z`` is the reference model there (no own value moved
+    and the delay one the per-flight pieces hold), else None."""
+    own = len(z) - (1 if prob.expl.shift else 0)
+    if np.any(z[:own]) or prob.expl.name == "signal_delay":
+        return None
+    if not prob.expl.shift:
+        return 0.0
+    delay = float(prob.mean[-1] + prob.sd[-1] * z[-1])
+    return cols.delay_s if abs(delay - cols.delay_s) <= 1e-12 else None
+
+
+def _base(prob, cols: _Columns, z: np.ndarray) -> np.ndarray:
+    delay = _shared_point(prob, cols, z)
+    return prob.residual(z) if delay is None else cols.base(delay)
+
+
+def _columns(prob, cols: _Columns, start: np.ndarray, base: np.ndarray,
+             signs: np.ndarray, which=None, out: np.ndarray | None = None) -> np.ndarray:
+    """The weighted residual's Jacobian in z at ``start`` (module doc); one-sided
+    differences towards ``signs``; only the columns ``which`` (default all) into ``out``
+    (default a new array). At the reference model the shared parts serve: the
+    delay's column, and a replaced group's from the shared Jacobian (taken without the
+    delay: a column of the linear model only, the cost is evaluated at the step)."""
+    expl, delay = prob.expl, _shared_point(prob, cols, start)
+    jac = np.empty((base.size, len(start))) if out is None else out
+    for k, key in enumerate(expl.parameter_names):
+        if which is not None and not which[k]:
+            continue
+        group = key.split(".")[0]
+        if delay is not None and key == "delay.rotor":
+            jac[:, k] = cols.delay(delay, float(prob.sd[k]), signs[k])
+        elif delay is not None and group in expl.replaces:
+            jac[:, k] = cols.jac[:, cols.index[key]] * prob.sd[k]
+        else:
+            z = start.copy()
+            h = signs[k] * STEP
+            if not prob.z_lo[k] <= z[k] + h <= prob.z_hi[k]:
+                h = -h
+            z[k] += h
+            jac[:, k] = (prob.residual(z) - base) / h
+    return jac
+
+
+def _step(prob, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
+    """The bounded minimum of the linear model: (z1, its predicted cost, A, active count)."""
+    n = len(start)
+    aug0, du0 = prob.marg.profile(base)
+    aug, du = prob.marg.profile(jac)
+    a = np.vstack([aug, du, np.eye(n)])
+    b = np.concatenate([aug0, du0, start])
+    q, r = np.linalg.qr(a)
+    qb = q.T @ b
+    rest = float(b @ b - qb @ qb)
+    step = lsq_linear(r, -qb, bounds=(prob.z_lo - start, prob.z_hi - start), method="bvls")
+    predicted = rest + float(np.sum((qb + r @ step.x) ** 2))
+    return start + step.x, predicted, a, int(np.count_nonzero(step.active_mask))
+
+
+def linearised(prob, cols: _Columns, start: np.ndarray, names_all, s_all):
+    """One Gauss-Newton step of ``prob`` from ``start`` (module doc): (Evidence at the step,
+    the step z1, how far the linear model's cost there was off, cost units). A one-sided
+    column (the rotor delay's kink) that the step leaves on the other side is recomputed on
+    that side."""
+    base = _base(prob, cols, start)
+    z1, predicted, a, active = _signed_step(prob, cols, start, base)
+    vec = prob.stacked(z1)
+    miss = abs(float(vec @ vec) - predicted)
+    return prob.evidence(z1, vec, a.T @ a, active, names_all, s_all), z1, miss
+
+
+def _signed_step(prob, cols: _Columns, start: np.ndarray, base: np.ndarray):
+    signs = np.ones(len(start))
+    jac = _columns(prob, cols, start, base, signs)
+    z1, predicted, a, active = _step(prob, start, base, jac)
+    flip = (z1 < start) & (signs > 0)
+    flip &= np.array([k == "delay.rotor" for k in prob.expl.parameter_names])
+    if np.any(flip):
+        signs[flip] = -1.0
+        jac = _columns(prob, cols, start, base, signs, which=flip, out=jac)
+        z1, predicted, a, active = _step(prob, start, base, jac)
+    return z1, predicted, a, active
+
+
+def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
+    """The MAP fit of ``prob`` from ``z`` by projected Gauss-Newton steps (Jacobian by
+    forward differences at each iterate, the bounded linear step, halved until the cost
+    falls), until the cost falls by less than :data:`CONVERGED` or after :data:`MAX_STEPS`
+    steps; the Laplace evidence at the optimum with the last Jacobian."""
+    vec = prob.stacked(z)
+    cost = float(vec @ vec)
+    for _ in range(MAX_STEPS):
+        base = prob.residual(z)
+        z_new = _signed_step(prob, cols, z, base)[0]
+        for _ in range(4):                       # backtrack: a step must lower the cost
+            vec_new = prob.stacked(z_new)
+            new = float(vec_new @ vec_new)
+            if new <= cost:
+                break
+            z_new = 0.5 * (z + z_new)
+        else:
+            break
+        drop = cost - new
+        z, vec, cost = z_new, vec_new, new
+        if drop < CONVERGED:
+            break
+    # the posterior precision from the Jacobian at the optimum (forward differences, as
+    # the full fit's): the last step's came from the iterate before
+    base = prob.residual(z)
+    _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base, np.ones(len(z))))
+    return prob.evidence(z, vec, a.T @ a, active, names_all, s_all)
+
+
+def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
+             names_all: list[str], s_all: np.ndarray, start_delay_s: float = 0.0, *,
+             problem, fit_one, residual) -> list:
+    """Every explanation's Evidence: screened, and fitted to convergence where it can matter
+    (module doc); ``jac`` the shared-parameter Jacobian at theta_ref. The evidence module,
+    which imports this one, hands in its pieces: ``problem`` its ``Problem`` class,
+    ``fit_one`` its full fit, ``residual`` its ``flight_residual``."""
+    memo: dict = {}
+    any_problem = problem(states, reference, explanations[0], jac, s_all, memo)
+    cols = _Columns(states, reference, jac, names_all, memo, any_problem.shifted, residual)
+    effects = {e.name for e in explanations} - {"no_difference"}
+    prior_null = float(np.log(max(1, len(effects))))
+    rows, starts, weight, reach = [], [], [], []
+    # the flight's own rotor delay under the reference model first (every explanation
+    # carries it with the same prior): the others start there
+    null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
+    fitted = None
+    if null is not None:
+        prob = problem(states, reference, null, jac, s_all, memo)
+        fitted = refined(prob, cols, prob.start(0.0), names_all, s_all)
+        cols.delay_s = fitted.values["delay.rotor"]
+    for expl in explanations:
+        prob = problem(states, reference, expl, jac, s_all, memo)
+        delay = start_delay_s if expl.name == "signal_delay" else 0.0
+        if expl is null:
+            rows.append(fitted)
+            starts.append(None)
+            weight.append(fitted.log_z + prior_null)
+            reach.append(weight[-1])
+            continue
+        if not len(prob.mean):                        # nothing to fit: exact already
+            rows.append(fit_one(states, reference, expl, jac, s_all, names_all, delay))
+            starts.append(None)
+            weight.append(rows[-1].log_z + prior_null)
+            reach.append(weight[-1])
+            continue
+        start = prob.start(delay)
+        if expl.shift and expl is not null and expl.name != "signal_delay":
+            start[-1] = np.clip((cols.delay_s - prob.mean[-1]) / prob.sd[-1],
+                                prob.z_lo[-1], prob.z_hi[-1])
+        try:
+            ev, z1, miss = linearised(prob, cols, start, names_all, s_all)
+        except (ModelError, np.linalg.LinAlgError):
+            ev, z1, miss = None, None, np.inf
+        rows.append(ev)
+        starts.append(z1)
+        weight.append(-np.inf if ev is None else ev.log_z)
+        # what a fit could reach: the screened evidence plus half the linear model's miss
+        reach.append(np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss)
+    # most promising first: each refined fit can only raise the best weight, and with it
+    # the cut for those after it
+    best = max(weight)
+    for k in sorted(range(len(explanations)), key=lambda k: -reach[k]):
+        expl = explanations[k]
+        if expl is null or (rows[k] is not None and starts[k] is None):
+            continue
+        if rows[k] is None or reach[k] >= best - SCREEN_CUT:
+            delay = start_delay_s if expl.name == "signal_delay" else 0.0
+            if starts[k] is None:
+                rows[k] = fit_one(states, reference, expl, jac, s_all, names_all, delay)
+            else:
+                prob = problem(states, reference, expl, jac, s_all, memo)
+                rows[k] = refined(prob, cols, starts[k], names_all, s_all)
+            best = max(best, rows[k].log_z)
+        else:
+            rows[k].screened = True
+    return rows

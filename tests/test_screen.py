@@ -1,0 +1,178 @@
+"""The screened per-flight evidence (quadsim.gap.screen) against the full fits
+(``evaluate(..., full=True)``): generated flights with known effects, judged both ways
+against the same calibrated reference. Same verdict and lead reading; probabilities within
+0.02; every reading the answer states (posterior >= 0.1 on the full path) fitted, not
+screened, with log evidence within 1 (the fits' own reproducibility from different starts,
+measured on the real mixed/ flights: docs/gap.md); the linear model's columns, the
+closed-form lag integration and the batched delay regression against direct forms."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from quadsim.core.errors import QuadsimWarning
+from quadsim.effects import make_effect
+from quadsim.gap.calibrate import calibrate, jacobian
+from quadsim.gap.diagnose import prepare
+from quadsim.gap.evidence import (Problem, Propeller, evaluate, explanations_for,
+                                   flight_residual)
+from quadsim.gap.fitting import _heun_linear, _rotor_channel
+from quadsim.gap.judge import judge
+from quadsim.gap.screen import _Columns, _columns
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.logs.delays import regression_delay
+from quadsim.logs.flightlog import FlightLog
+from quadsim.vehicle.params import load_params
+
+LAG, DRAG = 0.008, 2e-7
+
+
+def _shared(**kw):
+    return [make_effect("motor_lag", time_constant=kw.get("lag", LAG)),
+            make_effect("rotor_drag", coefficient=kw.get("drag", DRAG))]
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+@pytest.fixture(scope="module")
+def reference(cf):
+    logs = [synthetic_flight(cf, _shared(), duration=4.0, seed=s, speed=0.8 + 0.2 * s)
+            for s in range(3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+def _late(log: FlightLog, delay: float) -> FlightLog:
+    late = np.stack([np.interp(log.t - delay, log.t, c) for c in log.rotor_speed.T], -1)
+    return FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate, log.accel,
+                     late, log.rotor_command, log.vbat)
+
+
+CASES = {
+    "none": lambda cf: synthetic_flight(cf, _shared(), duration=4.0, seed=70, speed=1.2),
+    "mass": lambda cf: synthetic_flight(cf, _shared() + [make_effect("mass_offset", mass=0.005)],
+                                        duration=4.0, seed=71),
+    "propeller": lambda cf: synthetic_flight(cf, _shared() + [Propeller(change=-0.12, alpha=0.2)],
+                                             duration=4.0, seed=72),
+    "lag": lambda cf: synthetic_flight(cf, _shared(lag=0.035), duration=4.0, seed=73),
+    "weak rotor": lambda cf: synthetic_flight(
+        cf, _shared() + [make_effect("thrust_mismatch", rotor_2=-0.1)], duration=4.0, seed=74),
+    "delay": lambda cf: _late(synthetic_flight(cf, _shared(), duration=4.0, seed=75), 0.02),
+}
+
+
+def _both(cf, reference, log):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        flight = prepare([log], cf)[0]
+    states = flight.fit
+    expl = explanations_for(reference, states)
+    start = 0.0
+    mine = (flight.delays_ms or {}).get("rotor")
+    if mine is not None and "rotor" in reference.delays_ms:
+        start = 1e-3 * (mine - reference.delays_ms["rotor"][0])
+    fast = evaluate(states, reference, expl, start)
+    full = evaluate(states, reference, expl, start, full=True)
+    return fast, full
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_screened_evidence_gives_the_full_fits_verdict(cf, reference, case):
+    fast, full = _both(cf, reference, CASES[case](cf))
+    a, b = judge(fast, reference, case), judge(full, reference, case)
+    assert a["verdict"] == b["verdict"], (a["answer"], b["answer"])
+    assert a["posterior"][0]["name"] == b["posterior"][0]["name"]
+    assert a["probability"] == pytest.approx(b["probability"], abs=0.02)
+    assert [e.explanation for e in fast] == [e.explanation for e in full]
+    # every reading the answer states: its best variant fitted, not screened, at the same
+    # evidence (a reading below 0.1 can differ by the Occam factor of a value at its bound)
+    for reading in b["posterior"]:
+        if reading["probability"] < 0.1 or reading["name"] == "no_difference":
+            continue
+        k = max((i for i, e in enumerate(full) if e.name == reading["name"]),
+                key=lambda i: full[i].log_z)
+        assert not fast[k].screened, reading["name"]
+        assert fast[k].log_z == pytest.approx(full[k].log_z, abs=1.0), reading["name"]
+
+
+def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
+    """The shared shortcuts (the shared Jacobian for a replaced group, the per-flight delay
+    column) against a central difference of the explanation's own residual."""
+    log = CASES["lag"](cf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = prepare([log], cf)[0].fit
+    names = list(reference.candidate.parameter_names)
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    memo: dict = {}
+    expl_all = explanations_for(reference, states)
+    anyone = Problem(states, reference, expl_all[0], jac, reference.s_ref, memo)
+    cols = _Columns(states, reference, jac, names, memo, anyone.shifted, flight_residual)
+    for expl in expl_all:
+        if expl.name not in ("motor_lag", "rotor_drag", "mass_offset"):
+            continue
+        prob = Problem(states, reference, expl, jac, reference.s_ref, memo)
+        z0 = np.zeros(len(prob.mean))
+        base = prob.residual(z0)
+        np.testing.assert_allclose(base, cols.base(0.0), rtol=0, atol=1e-9 * np.abs(base).max())
+        got = _columns(prob, cols, z0, base, np.ones(len(z0)))
+        for k, key in enumerate(expl.parameter_names):
+            if key == "delay.rotor":
+                continue                      # one-sided by design (a kink at every sample)
+            h = 1e-3
+            plus, minus = z0.copy(), z0.copy()
+            plus[k] += h
+            minus[k] -= h
+            want = (prob.residual(plus) - prob.residual(minus)) / (2 * h)
+            scale = np.linalg.norm(want)
+            assert np.linalg.norm(got[:, k] - want) <= 0.02 * scale, key
+
+
+def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
+    """fitting._heun_linear against the Heun steps of the motor lag's rate function."""
+    log = synthetic_flight(cf, _shared(lag=0.03), duration=2.0, seed=80)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = prepare([log], cf)[0].fit
+    lag = make_effect("motor_lag", time_constant=0.03)
+    fast = _rotor_channel(states, cf, [lag])
+    uneven = make_effect("motor_lag", time_constant=0.03, time_constant_down=0.0300001)
+    slow = _rotor_channel(states, cf, [uneven])        # the stepping path (not linear)
+    assert np.max(np.abs(fast - slow)) <= 1e-4 * np.max(np.abs(slow))
+    # and exactly: a constant command from rest is the Heun recursion's closed form
+    h, tau = 0.0025, 0.03
+    out = _heun_linear(np.zeros(1), np.ones(5), 4, h, tau, 1)
+    a = 1 - h / tau + h * h / (2 * tau * tau)
+    assert out[0] == pytest.approx(1 - a ** 16, rel=1e-12)
+
+
+def test_the_batched_regression_delay_matches_a_least_squares_solve_per_lag():
+    rng = np.random.default_rng(3)
+    n, dt, true = 1500, 0.002, 0.012
+    t = dt * np.arange(n)
+    x = np.stack([np.sin(2 * np.pi * f * t) + 0.05 * rng.standard_normal(n)
+                  for f in (0.7, 1.3, 2.1)], -1)
+    late = np.stack([np.interp(t - true, t, c) for c in x.T], -1)
+    y = late @ np.array([[1.0], [-0.5], [0.3]]) + 0.01 * rng.standard_normal((n, 1))
+    fixed = np.cumsum(y, 0) * dt
+    delay, r2, inside = regression_delay(y, x, dt, fixed=fixed)
+    # the same R^2 curve by one lstsq per lag (the textbook form)
+    k_max = int(round(0.1 / dt))
+    xs = (x - x.mean(0)) / x.std(0)
+    a = y[k_max:n - k_max]
+    f = fixed[k_max:n - k_max]
+    f = (f - f.mean(0)) / f.std(0)
+    best = []
+    for k in range(-k_max, k_max + 1):
+        b = np.concatenate([xs[k_max + k:n - k_max + k], np.ones((len(a), 1)), f], 1)
+        coef = np.linalg.lstsq(b, a, rcond=None)[0]
+        best.append(1 - np.sum((a - b @ coef) ** 2) / np.sum((a - a.mean(0)) ** 2))
+    assert r2 == pytest.approx(max(best), abs=1e-9)
+    assert inside and delay == pytest.approx(-true, abs=dt)
