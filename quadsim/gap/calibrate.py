@@ -21,7 +21,22 @@ Stages
    two left every nominal flight judged against the others named ``gyroscopic`` (0.3-0.5 g
    cm^2) or ``battery_sag`` (V_full 3.7 V): effects every nominal flight shares; a steady
    wind (vx, vy: every nominal flight showed the same 2.5 mN air force along world +y).
-   Then :data:`REFINE_STEPS` pooled Gauss-Newton steps (:func:`_refine`). Its values are theta_ref, its standard errors se_pool (correlation-widened).
+   The rotor speeds' *timing* is shared too: the fit starts from the rotor speeds read
+   d0 later (d0 the references' mean cross-correlation delay, :mod:`quadsim.logs.delays`),
+   and up to :data:`REFINE_STEPS` pooled Levenberg-Marquardt steps (:func:`_refine`) then
+   move every shared parameter and the timing offset d together (forward difference of 2
+   ms; a shift is applied at the full log rate before decimation, :func:`aligned`). Why:
+   the spin-up reaction torque ``-Jr sum_i s_i dOmega_i/dt`` fits the yaw channel only at
+   the right timing, and the cross-correlation estimate reads that very torque as delay
+   (docs: 8 ms on generated logs without any). On the real nominal Crazyflie flights the
+   fit at the logged timing left Jr at its bound 0, while every flight alone asked for
+   0.4-0.9 g cm^2 with its speeds read 10-12 ms earlier; the fastest figure-8s (whose
+   rotors accelerate most) were then all named ``gyroscopic``. Fitted together: d = -11 ms,
+   Jr = 0.57 g cm^2 (0.3-0.8 g cm^2 is a 55 mm propeller with its motor bell). A flight is
+   compared with the reference model at d (:meth:`Reference.align`); its own timing
+   differs from d by the evidence's nuisance delay or the reading ``signal_delay``.
+   Values theta_ref and d; standard errors se_pool (the bounded fit's, correlation-widened)
+   and se_d (the pooled information's).
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.
