@@ -21,7 +21,22 @@ Stages
    two left every nominal flight judged against the others named ``gyroscopic`` (0.3-0.5 g
    cm^2) or ``battery_sag`` (V_full 3.7 V): effects every nominal flight shares; a steady
    wind (vx, vy: every nominal flight showed the same 2.5 mN air force along world +y).
-   Then :data:`REFINE_STEPS` pooled Gauss-Newton steps (:func:`_refine`). Its values are theta_ref, its standard errors se_pool (correlation-widened).
+   The rotor speeds' *timing* is shared too: the fit starts from the rotor speeds read
+   d0 later (d0 the references' mean cross-correlation delay, :mod:`quadsim.logs.delays`),
+   and up to :data:`REFINE_STEPS` pooled Levenberg-Marquardt steps (:func:`_refine`) then
+   move every shared parameter and the timing offset d together (forward difference of 2
+   ms; a shift is applied at the full log rate before decimation, :func:`aligned`). Why:
+   the spin-up reaction torque ``-Jr sum_i s_i dOmega_i/dt`` fits the yaw channel only at
+   the right timing, and the cross-correlation estimate reads that very torque as delay
+   (docs: 8 ms on generated logs without any). On the real nominal Crazyflie flights the
+   fit at the logged timing left Jr at its bound 0, while every flight alone asked for
+   0.4-0.9 g cm^2 with its speeds read 10-12 ms earlier; the fastest figure-8s (whose
+   rotors accelerate most) were then all named ``gyroscopic``. Fitted together: d = -11 ms,
+   Jr = 0.57 g cm^2 (0.3-0.8 g cm^2 is a 55 mm propeller with its motor bell). A flight is
+   compared with the reference model at d (:meth:`Reference.align`); its own timing
+   differs from d by the evidence's nuisance delay or the reading ``signal_delay``.
+   Values theta_ref and d; standard errors se_pool (the bounded fit's, correlation-widened)
+   and se_d (the pooled information's).
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.
@@ -51,7 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .fitting import (
@@ -67,7 +82,7 @@ from .fitting import (
 )
 
 __all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "weighted_residual",
-           "jacobian", "FD_STEP"]
+           "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -87,6 +102,46 @@ NEEDS_VBAT = {"battery_sag"}
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
 #: (:func:`quadsim.gap.fitting._typical`): the same relative step the fits use (diff_step).
 FD_STEP = 1e-3
+
+
+#: the rotor speeds' timing offset is searched within this (s) of zero: the lag window of
+#: :data:`quadsim.logs.delays.MAX_LAG_S`.
+MAX_SHIFT_S = 0.1
+#: finite-difference step (s) of the timing offset and its typical size (the LM ridge unit):
+#: a fifth of a 100 Hz fit sample, and the 10 ms that real logs carry (module doc).
+SHIFT_STEP_S, SHIFT_TYPICAL_S = 0.002, 0.01
+
+
+def shifted(states, delay_s: float):
+    """``states`` with the rotor speeds (and their derivative) read ``delay_s`` later: the
+    speeds a log that records them ``delay_s`` late had at each time."""
+    if delay_s == 0.0 or states.rotor_speed is None:
+        return states
+    import dataclasses
+
+    t = states.t
+
+    def move(x):
+        return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
+
+    return dataclasses.replace(states, rotor_speed=move(states.rotor_speed),
+                               rotor_accel=None if states.rotor_accel is None
+                               else move(states.rotor_accel))
+
+
+def aligned(flight, delay_s: float):
+    """The fit view of a prepared flight (:class:`quadsim.gap.diagnose.Flight`, or its fit
+    states) with its rotor speeds read ``delay_s`` later. A flight with full-rate states is
+    shifted at the full rate and decimated again (a shift by a fraction of a fit sample would
+    otherwise low-pass the speeds by linear interpolation)."""
+    fit = getattr(flight, "fit", flight)
+    full = getattr(flight, "states", None)
+    if delay_s == 0.0 or fit.rotor_speed is None:
+        return fit
+    if full is None or full is fit or full.rotor_speed is None:
+        return shifted(fit, delay_s)
+    index = np.searchsorted(full.t, fit.t)
+    return shifted(full, delay_s).take(index)
 
 
 def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
@@ -122,6 +177,13 @@ class Reference:
     delays_ms: dict
     names: list
     identified: dict
+    rotor_shift_s: float = 0.0
+    rotor_shift_se: float = 0.0
+
+    def align(self, flight):
+        """A prepared flight's fit states with the references' rotor-speed timing
+        (:func:`aligned` by ``rotor_shift_s``): what the reference model compares with."""
+        return aligned(flight, self.rotor_shift_s)
 
     @property
     def s_ref(self) -> np.ndarray:
@@ -181,47 +243,101 @@ def _scatter(flights, reference: Reference) -> np.ndarray:
     return np.sqrt(np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None))
 
 
-#: pooled Gauss-Newton steps after the bounded fit (:func:`_refine`).
-REFINE_STEPS = 2
+#: at most this many pooled Levenberg-Marquardt steps after the bounded fit (:func:`_refine`);
+#: they stop earlier once a step lowers the pooled -2 log L by less than :data:`REFINE_TOL`
+#: (0.1: a twentieth of a log-likelihood unit, far below any evidence the judge weighs).
+REFINE_STEPS = 8
+REFINE_TOL = 0.1
 
 
-def _refine(states, params, rotor, cand, theta, sigma) -> np.ndarray:
-    """Pooled Gauss-Newton steps from the bounded fit, summing each flight's information
-    (the bounded fit stops after a few dozen evaluations of 12-14 parameters; on the real
-    nominal Crazyflie flights it left the rotors' spin inertia at its bound 0 while every
-    flight alone asked for 0.3-0.5 g cm^2). Levenberg-Marquardt steps with a unit ridge in
-    units of each parameter's typical size, clipped to the bounds."""
+def _pooled(flights, probe, shift: float, timing: bool):
+    """Summed information JᵀJ, gradient Jᵀr and cost |r|^2 over the flights at ``shift``;
+    with ``timing`` the last column is the rotor timing offset's (forward difference)."""
+    k = len(probe.theta)
+    size = k + int(timing)
+    info, grad, cost = np.zeros((size, size)), np.zeros(size), 0.0
+    for f in flights:
+        view = aligned(f, shift)
+        jac = jacobian(view, probe, list(range(k)), probe.candidate.effects)
+        r = weighted_residual(view, probe, probe.effects()).ravel()
+        if timing:
+            later = weighted_residual(aligned(f, shift + SHIFT_STEP_S), probe,
+                                      probe.effects()).ravel()
+            jac = np.column_stack([jac, (later - r) / SHIFT_STEP_S])
+        info += jac.T @ jac
+        grad += jac.T @ r
+        cost += float(r @ r)
+    return info, grad, cost
+
+
+def _cost(flights, probe, theta, shift: float) -> float:
+    try:
+        effects = probe.candidate.effects(theta)
+        return float(sum(np.sum(weighted_residual(aligned(f, shift), probe, effects) ** 2)
+                         for f in flights))
+    except ModelError:          # e.g. an inertia breaking the triangle inequality: a wall
+        return float("inf")
+
+
+def _refine(flights, params, rotor, cand, theta, shift, sigma):
+    """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
+    information, over the shared parameters and the rotor speeds' timing offset (module
+    doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
+    parameters at a fixed timing; the timing and the rotors' spin inertia are found only
+    together (on the real nominal Crazyflie flights the spin-up reaction torque fits the
+    yaw channel only with the speeds read ~12 ms earlier: at the logged timing the fit left
+    the spin inertia at its bound 0). Steps in units of each parameter's typical size with
+    a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
+    after one that does not), clipped to the bounds.
+    Returns (theta, shift, standard error of the shift)."""
     lower, upper = _bounds(cand, params)
     typical = _typical(cand, params)
-    dt = float(states[0].t[1] - states[0].t[0])
+    dt = float(getattr(flights[0], "fit", flights[0]).t[1]
+               - getattr(flights[0], "fit", flights[0]).t[0])
     for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":      # fitting.fit_candidate: the Heun sub-step
             lower[k] = max(lower[k], dt / 4)
+    timing = all(getattr(f, "fit", f).rotor_speed is not None for f in flights)
+    if timing:
+        lower, upper = np.append(lower, -MAX_SHIFT_S), np.append(upper, MAX_SHIFT_S)
+        typical = np.append(typical, SHIFT_TYPICAL_S)
     probe = Reference(params, rotor, cand, theta.copy(), np.zeros_like(theta),
                       np.zeros_like(theta), sigma, np.ones_like(sigma),
                       np.zeros_like(sigma), 1.0, 1, {}, [], {})
+    x = np.append(theta, shift) if timing else theta.copy()
+    k = len(theta)
+    lam, info = 1.0, None
     for _ in range(REFINE_STEPS):
-        info = np.zeros((len(theta), len(theta)))
-        grad = np.zeros(len(theta))
-        for f in states:
-            jac = jacobian(f, probe, list(range(len(theta))), cand.effects)
-            r = weighted_residual(f, probe, probe.effects()).ravel()
-            info += jac.T @ jac
-            grad += jac.T @ r
-        # Levenberg-Marquardt: a unit ridge in units of each parameter's typical size, so a
-        # direction the data do not fix (a wind with no drag to act through) does not move
-        info_z = info * np.outer(typical, typical) + np.eye(len(theta))
-        step = -typical * np.linalg.solve(info_z, typical * grad)
-        probe.theta = np.clip(probe.theta + step, lower, upper)
-    return probe.theta
+        probe.theta = x[:k].copy()
+        info, grad, cost = _pooled(flights, probe, float(x[k]) if timing else 0.0, timing)
+        while lam < 1e6:
+            # a ridge in units of each parameter's typical size: a direction the data do
+            # not fix (a wind with no drag to act through) does not move
+            info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
+            trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
+            new = _cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
+            if new < cost:
+                x, lam = trial, max(lam / 3.0, 1e-3)
+                break
+            lam *= 4.0
+        else:
+            break
+        if cost - new < REFINE_TOL:
+            break
+    se = float(np.sqrt(max(np.linalg.pinv(info)[-1, -1], 0.0))) if timing else 0.0
+    return x[:k], (float(x[k]) if timing else 0.0), se
 
 
 def calibrate(flights, params: VehicleParams) -> Reference:
     """The reference model from prepared reference flights (:class:`quadsim.gap.diagnose.Flight`
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two."""
-    states = [getattr(f, "fit", f) for f in flights]
-    if len(states) < 2:
+    if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
+    estimates = [f.delays_ms["rotor"] for f in flights
+                 if (getattr(f, "delays_ms", None) or {}).get("rotor") is not None]
+    start = float(np.clip(1e-3 * np.mean(estimates), -MAX_SHIFT_S, MAX_SHIFT_S)) \
+        if estimates else 0.0
+    states = [aligned(f, start) for f in flights]
     rotor = all(s.command is not None for s in states)
     if rotor:
         params = fit_motor_map(states, params)
@@ -232,7 +348,8 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                          for s in states)
     cand = shared_candidate(rotor, vbat)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
-    theta = _refine(states, params, rotor, cand, fit.theta, sigma0)
+    theta, shift, shift_se = _refine(flights, params, rotor, cand, fit.theta, start, sigma0)
+    states = [aligned(f, shift) for f in flights]
     per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                   for s in states]
     pooled = np.concatenate(per_flight)
@@ -252,6 +369,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     ref = Reference(params, rotor, cand, theta, fit.stderr.copy(),
                     np.zeros_like(fit.theta), sigma, tau, mean, spread, dof, delays,
                     [getattr(f, "name", "") for f in flights],
-                    dict(zip(cand.parameter_names, map(bool, fit.identifiable))))
+                    dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
+                    shift, shift_se)
     ref.scatter = _scatter(states, ref)
     return ref

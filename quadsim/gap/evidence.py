@@ -69,7 +69,7 @@ from ..effects.base import EffectParameter
 from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
 from . import cable
-from .calibrate import SHARED, Reference, jacobian
+from .calibrate import SHARED, Reference, jacobian, shifted
 from ..effects import make_effect
 from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, _memo, effect_class,
                       residuals)
@@ -270,23 +270,6 @@ def _own_effects(expl: Explanation, theta: np.ndarray) -> list:
             k += 1
         out.append(_make(name, values))
     return out
-
-
-def shifted(states, delay_s: float):
-    """``states`` with the rotor speeds (and their derivative) read ``delay_s`` later: the
-    speeds a log that records them ``delay_s`` late had at each time."""
-    if delay_s == 0.0 or states.rotor_speed is None:
-        return states
-    import dataclasses
-
-    t = states.t
-
-    def move(x):
-        return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
-
-    return dataclasses.replace(states, rotor_speed=move(states.rotor_speed),
-                               rotor_accel=None if states.rotor_accel is None
-                               else move(states.rotor_accel))
 
 
 class _Marginal:

@@ -12,6 +12,13 @@
    ``1 - LOF_P / C`` (one-sided, Bonferroni over the C channels) is not explained by the
    library: the verdict is ``unexplained`` with that channel named, whatever the weights
    say. ``LOF_P`` = 0.001: one nominal flight in a thousand is called unexplained by chance.
+   A channel whose residual RMS stays below its noise floor
+   (:data:`quadsim.gap.fitting.NOISE_FLOOR`, 1e-3 of the weight, weight x arm or hover
+   speed) is never lacking fit, whatever its ratio to the references': below the floor a
+   residual is by definition no gap (round-off and integration differences). On simulated
+   references without sensor noise (RotorPy) the residual is 0.5-5 % of the floor and
+   deterministic, so it grows with the flight's speed: a nominal flight flown faster showed
+   8x the references' RMS on the rotor channel, still 4 % of the floor.
 3. **Verdict**: the most probable reading and its probability; ``no_difference`` ->
    ``no_significant_gap``. Readings stated in the answer: every effect with probability
    >= :data:`READING_P` (0.1: a reading a user should still check, one in ten). A name is
@@ -36,6 +43,7 @@ from scipy.special import logsumexp
 from scipy.stats import t as student_t
 
 from . import collinear
+from .fitting import noise_floor
 from .residual import CHANNELS
 
 __all__ = ["judge", "posterior", "lack_of_fit", "symptom", "READING_P", "CONFIDENT", "LOF_P",
@@ -83,9 +91,11 @@ def lack_of_fit(ev, reference) -> dict:
     scale = reference.lof_sd * np.sqrt(1 + 1 / n)
     z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / max(scale, 1e-9)
     limit = float(student_t.ppf(1 - LOF_P / len(z), reference.lof_dof))
+    # below the noise floor a residual is not a gap at all (fitting.NOISE_FLOOR)
+    above = ev.ms * reference.sigma ** 2 > noise_floor(reference.params, reference.rotor) ** 2
     names = channel_names(reference)
     return {names[c]: (float(np.sqrt(np.exp(np.log(ev.ms[c]) - reference.lof_mean[c]))),
-                       float(z[c])) for c in range(len(z)) if z[c] > limit}
+                       float(z[c])) for c in range(len(z)) if z[c] > limit and above[c]}
 
 
 def _value_text(key: str, value: float, sd: float, params) -> str:

@@ -105,6 +105,8 @@ def reference_summary(ref: Reference) -> dict:
             "identified": {k: bool(v) for k, v in ref.identified.items()},
             "sigma": dict(zip(names, map(float, ref.sigma))),
             "correlation_samples": dict(zip(names, map(float, ref.tau))),
+            "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,
+                                "se": 1e3 * ref.rotor_shift_se},
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
                           for k, (m, s, n) in ref.delays_ms.items()}}
 
@@ -120,7 +122,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             warnings.simplefilter("ignore", QuadsimWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
             flight = prepare([log], reference.params, window_s=window_s)[0]
-            states = flight.fit
+            states = reference.align(flight)       # the references' rotor-speed timing
             if states.command is None and reference.rotor:
                 raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
                                  "commands, this one does not")
@@ -131,7 +133,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
-                start = 1e-3 * (mine - reference.delays_ms["rotor"][0])
+                start = 1e-3 * mine - reference.rotor_shift_s
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
