@@ -122,3 +122,58 @@ def test_library_diagnose_on_a_short_log(tmp_path, duration):
         diagnose([log, log, log], PARAMS, kstep=False)
     with pytest.raises(InputError, match=rf"^{path}: t: "):
         diagnose_per_flight([log], [log, log], PARAMS)
+
+
+# ----------------------------------------------------------------------------- mm, no velocity
+
+
+def _one_line(capsys, *names: str) -> str:
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert captured.out == "" and len(err.splitlines()) == 1, err
+    assert err.startswith("error: "), err
+    for name in names:
+        assert name in err, err
+    return err
+
+
+@pytest.mark.parametrize("scale,hint", [(1000.0, "mm"), (100.0, "cm")])
+def test_positions_in_mm_without_velocity(tmp_path, capsys, scale, hint):
+    """The sample circle (0.5 m at 1 rad/s: 0.5 m/s^2, 0.5 m/s) with positions scaled and no
+    velocity column: the positions accelerate scale x as much as the accelerometer says."""
+    from quadsim.convert import main as convert
+    from quadsim.logs.flightlog import FlightLog, write_log
+    from quadsim.logs.samples import sample_flight
+
+    f = sample_flight(duration_s=3.0, rate_hz=200.0)
+    path = tmp_path / "mm.csv"
+    write_log(path, FlightLog(t=f.t, position=f.position * scale, quat=f.quat,
+                              body_rate=f.body_rate, accel=f.accel, rotor_speed=f.rotor_speed))
+    before = path.read_bytes()
+    out = tmp_path / "o.csv"
+    assert convert([str(path), "-o", str(out)]) == 2
+    err = _one_line(capsys, str(path), ": x..z: ", f"(positions in {hint}?)")
+    gain = float(err.split("position accelerates ")[1].split()[0])
+    assert gain == pytest.approx(scale, rel=0.02)   # closed form: p'' = scale x (R a - g)
+    assert not out.exists() and path.read_bytes() == before
+    write_log(path, FlightLog(t=f.t, position=f.position, quat=f.quat, body_rate=f.body_rate,
+                              accel=f.accel, rotor_speed=f.rotor_speed))
+    load_log(path)  # in metres it loads
+
+
+def test_real_positions_in_mm_without_velocity(tmp_path):
+    """A real Crazyflie flight (mocap positions, on-board accelerometer, NaN runs) without
+    its velocity columns: loads in m (gain ~0.92), refused in mm (skips without the data)."""
+    from quadsim.logs.flightlog import write_log
+
+    source = DATA / "crazyflie21_brushless" / "nominal" / "flight_03.csv.gz"
+    if not source.exists():
+        pytest.skip(f"real data not found at {source}")
+    log = load_log(source, warn=False)
+    log = dataclasses.replace(log, velocity=None)
+    path = tmp_path / "f.csv.gz"
+    write_log(path, log)
+    load_log(path, warn=False)
+    write_log(path, dataclasses.replace(log, position=log.position * 1000.0))
+    with pytest.raises(InputError, match=r": x..z: .*\(positions in mm\?\)"):
+        load_log(path, warn=False)
