@@ -177,3 +177,46 @@ def test_real_positions_in_mm_without_velocity(tmp_path):
     write_log(path, dataclasses.replace(log, position=log.position * 1000.0))
     with pytest.raises(InputError, match=r": x..z: .*\(positions in mm\?\)"):
         load_log(path, warn=False)
+
+
+# ----------------------------------------------------------------------------- mm meshes
+
+
+def _nano_cad(folder: Path, mesh_unit: str) -> Path:
+    """A nano quadrotor drawn in mm, every part given by density: an 8 mm hub and four
+    9 mm props on 20 mm arms."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_cad import generator, write_cad
+
+    gen = generator()
+    density = 'density = { value = 1200.0, unit = "kg/m^3", source = "assumed" }'
+    hubs = [(str(i + 1), [0.02 * np.cos(a), 0.02 * np.sin(a), 0.003], [0.0, 0.0, 0.0])
+            for i, a in enumerate(np.radians([45, 135, 225, 315]))]
+    parts = [{"name": "hub", "shape": gen.box(8, 8, 3), "mass_line": density,
+              "placements": [("c", [0, 0, 0], [0, 0, 0])]},
+             {"name": "prop", "shape": gen.box(9, 1, 0.5), "mass_line": density,
+              "placements": hubs}]
+    rotors = [{"name": n, "part": "prop", "placement": n, "spin": s}
+              for (n, _, _), s in zip(hubs, ["ccw", "cw", "ccw", "cw"])]
+    return write_cad(folder, parts, rotors, mesh_unit=mesh_unit)
+
+
+def test_mm_mesh_read_as_m_names_the_mesh_file_and_unit(tmp_path, capsys):
+    """Each part's size (8-9 m read as m) is still within a part's plausible 1 mm-10 m, so
+    only the assembly shows the slip: the parts are 140-160 x the rotor hubs' distance. The
+    refusal names the mesh field, its file and the unit it was read in (not the inertia)."""
+    from quadsim.build_mjcf import main as build
+    from quadsim.cad.assembly import load_assembly
+
+    load_assembly(_nano_cad(tmp_path / "good", "mm"))  # read in mm it loads
+    folder = _nano_cad(tmp_path / "cad", "m")
+    manifest = (folder / "vehicle.toml").read_bytes()
+    out = tmp_path / "models" / "nano.xml"
+    assert build([str(folder), "-o", str(out)]) == 2
+    err = _one_line(capsys, str(folder / "vehicle.toml"), "part[0] (hub).mesh: hub.stl",
+                    'mesh_unit = "m", scale 1 m per unit', "drawn in mm while mesh_unit says m?")
+    assert "inertia" not in err
+    assert not out.exists() and not out.parent.exists()
+    assert (folder / "vehicle.toml").read_bytes() == manifest
