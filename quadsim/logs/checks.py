@@ -53,7 +53,7 @@ from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
 from .spans import cut_ground
 
-__all__ = ["check_log", "check_logs"]
+__all__ = ["check_log", "check_logs", "gyro_frame_evidence", "rotor_order_evidence"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -192,6 +192,38 @@ def check_gyro(log) -> str | None:
     return None
 
 
+def _frame_evidence(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarray
+                    ) -> tuple[float, float, bool, float]:
+    """(RSS_body, RSS_world (rad^2), whether the world frame explains the gyro, Delta chi^2
+    of the world frame over the body frame); see :func:`_check_gyro_frame`."""
+    world_rot = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat[k[:-1]]), quat_rot)
+    ok = np.isfinite(world_rot).all(axis=1) & np.isfinite(gyro_rot).all(axis=1)
+    gyro_rot, quat_rot, world_rot = gyro_rot[ok], quat_rot[ok], world_rot[ok]
+    if len(gyro_rot) < 5:
+        return 0.0, 0.0, False, 0.0
+    body_res, world_res = gyro_rot - quat_rot, gyro_rot - world_rot
+    body, world = float(np.sum(body_res ** 2)), float(np.sum(world_res ** 2))
+    better = body_res if body < world else world_res
+    flat = better.T.ravel()  # window to window, axis after axis
+    rho = float(np.corrcoef(flat[1:], flat[:-1])[0, 1]) if np.std(flat) > 0 else 0.0
+    effective = float(np.clip((1.0 - rho) / (1.0 + rho), 1e-3, 1.0))
+    scale = max(min(body, world) / max(gyro_rot.size - 3, 1), 1e-30)
+    good = world <= FRAME_GOOD * float(np.sum(gyro_rot ** 2))
+    return body, world, good, effective * (body - world) / scale
+
+
+def gyro_frame_evidence(log) -> tuple[float, float, bool, float] | None:
+    """:func:`_frame_evidence` of a log (None when it has no gyro or is too short)."""
+    if log.body_rate is None or len(log.t) < 4:
+        return None
+    k = _windows(log.t)
+    if len(k) < 3:
+        return None
+    quat_rot = _rotvec_between(log.quat[k[:-1]], log.quat[k[1:]])
+    integral = _cumtrapz(log.t, log.body_rate)
+    return _frame_evidence(log, k, quat_rot, integral[k[1:]] - integral[k[:-1]])
+
+
 def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarray) -> None:
     """Body rate logged in the world frame: two hypotheses for the integrated gyro over each
     window, the attitude's rotation in the body frame (``rotvec(conj(q_k) q_{k+m})``) or the
@@ -205,21 +237,8 @@ def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.nda
     or unit matches neither frame and is left to the gain check). The frames differ by the
     tilt and the heading: at 18 deg of tilt (generated figure-8, heading held) a world-frame
     gyro gives Delta chi^2 in the hundreds."""
-    world_rot = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat[k[:-1]]), quat_rot)
-    ok = np.isfinite(world_rot).all(axis=1) & np.isfinite(gyro_rot).all(axis=1)
-    gyro_rot, quat_rot, world_rot = gyro_rot[ok], quat_rot[ok], world_rot[ok]
-    if len(gyro_rot) < 5:
-        return
-    body_res, world_res = gyro_rot - quat_rot, gyro_rot - world_rot
-    body, world = float(np.sum(body_res ** 2)), float(np.sum(world_res ** 2))
-    if world >= body or world > FRAME_GOOD * float(np.sum(gyro_rot ** 2)):
-        return
-    flat = world_res.T.ravel()  # window to window, axis after axis
-    rho = float(np.corrcoef(flat[1:], flat[:-1])[0, 1]) if np.std(flat) > 0 else 0.0
-    effective = float(np.clip((1.0 - rho) / (1.0 + rho), 1e-3, 1.0))
-    scale = max(world / max(gyro_rot.size - 3, 1), 1e-30)
-    evidence = effective * (body - world) / scale
-    if evidence > FRAME_CHI2:
+    body, world, good, evidence = _frame_evidence(log, k, quat_rot, gyro_rot)
+    if good and evidence > FRAME_CHI2:
         raise field_error(_where(log), "wx..wz",
                           f"the integrated gyro matches the attitude's rotation in the world "
                           f"frame (residual {world:.3g} rad^2) far better than in the body frame "
@@ -354,6 +373,34 @@ def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
     return float(np.sum(effective * (own - rss) / scale))
 
 
+def rotor_order_evidence(log, params) -> dict[tuple[int, ...], float]:
+    """Delta chi^2 of every other order of the rotor columns over the log's own (permutation
+    -> value; see :func:`check_rotor_order`); {} when the log cannot be judged (no gyro or
+    rotor speeds, another rotor count, under 50 samples or 5 windows, more than 6 rotors)."""
+    import itertools
+
+    if (params is None or log.rotor_speed is None or log.body_rate is None
+            or log.rotor_speed.shape[1] != params.rotor_count or len(log.t) < 50
+            or params.rotor_count > 6):
+        return {}
+    if not (np.isfinite(log.body_rate).all() and np.isfinite(log.rotor_speed).all()):
+        return {}
+    from ..vehicle.rotors import allocation_matrix
+
+    balance = _torque_balance(log, params)
+    if balance.count < 5:
+        return {}
+    torque_rows = allocation_matrix(params)[3:6]
+    own_order = tuple(range(params.rotor_count))
+    own, _ = _order_residuals(balance, torque_rows, own_order)
+    evidence = {}
+    for perm in itertools.permutations(own_order):
+        if perm != own_order:
+            rss, residuals = _order_residuals(balance, torque_rows, perm)
+            evidence[perm] = _order_evidence(balance, own, rss, residuals)
+    return evidence
+
+
 def check_rotor_order(log, params) -> None:
     """Rotor columns in the parameter set's order, by the torque balance under every
     permutation of the rotor columns.
@@ -377,27 +424,9 @@ def check_rotor_order(log, params) -> None:
     0.01 rad/s) rotors 1 and 2 swapped give Delta chi^2 310-340 and the right order's best
     rival -200 or less; on the 20 nominal Crazyflie flights of ../shared/data the right
     order's best rival reaches 1.0 (tests/test_robust.py)."""
-    import itertools
-
-    if (params is None or log.rotor_speed is None or log.body_rate is None
-            or log.rotor_speed.shape[1] != params.rotor_count or len(log.t) < 50
-            or params.rotor_count > 6):
+    evidence = rotor_order_evidence(log, params)
+    if not evidence:
         return
-    if not (np.isfinite(log.body_rate).all() and np.isfinite(log.rotor_speed).all()):
-        return
-    from ..vehicle.rotors import allocation_matrix
-
-    balance = _torque_balance(log, params)
-    if balance.count < 5:
-        return
-    torque_rows = allocation_matrix(params)[3:6]
-    own_order = tuple(range(params.rotor_count))
-    own, _ = _order_residuals(balance, torque_rows, own_order)
-    evidence = {}
-    for perm in itertools.permutations(own_order):
-        if perm != own_order:
-            rss, residuals = _order_residuals(balance, torque_rows, perm)
-            evidence[perm] = _order_evidence(balance, own, rss, residuals)
     best = max(evidence, key=evidence.get)
     if evidence[best] > ORDER_CHI2:
         mapping = ",".join(str(m + 1) for m in best)
