@@ -61,6 +61,8 @@ MESH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "in": 0.0254}
 DENSITY_RANGE = (5.0, 25000.0)
 #: Plausible largest extent of a part (m) when only its density is given.
 EXTENT_RANGE = (1e-3, 10.0)
+#: A part's largest extent is at most this many times the largest rotor hub distance.
+MAX_PART_SPAN = 5.0
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 COLLISION_SHAPES = ("box", "cylinder", "none")
 
@@ -306,30 +308,60 @@ def _mass_or_density(entry: dict, path: Path, where: str) -> tuple[float | None,
     return None, density, source
 
 
+def _read_as(mesh_path: Path, unit: str) -> str:
+    """How a mesh file's coordinates were read (for refusals): its name and unit."""
+    if is_step(mesh_path):
+        return f"{mesh_path.name} (read in the unit its STEP header declares)"
+    return f"{mesh_path.name} (read in mesh_unit = \"{unit}\", scale {MESH_UNITS[unit]:g} m per unit)"
+
+
 def _check_size(mesh: trimesh.Trimesh, mass: float | None, density: float | None,
-                unit: str, path: Path, where: str) -> None:
+                unit: str, path: Path, where: str, mesh_path: Path) -> None:
     """Catch a mesh drawn in other units than ``mesh_unit``: from the implied density when
-    the mass is given (a mm/m slip moves it by 1e9), from the part's size otherwise."""
+    the mass is given (a mm/m slip moves it by 1e9), from the part's size otherwise. The
+    refusal names the mesh field, the file and the unit it was read in."""
     low, high = DENSITY_RANGE
     extent = float(np.max(mesh.extents))
+    field, read_as = f"{where}.mesh", _read_as(mesh_path, unit)
     small = f"mesh looks too small: drawn in m while mesh_unit says {unit}?"
     large = f"mesh looks too large: drawn in mm while mesh_unit says {unit}?"
+    if is_step(mesh_path):
+        small = large = "the STEP file declares the wrong length unit?"
     if mass is not None:
         implied = mass / mesh.volume
         if not low <= implied <= high:
-            raise field_error(path, where, f"implied density {implied:.4g} kg/m^3 is outside the "
-                                           f"plausible {low:g}..{high:g} (volume "
-                                           f"{mesh.volume:.4g} m^3, largest extent {extent:.4g} "
-                                           f"m): {small if implied > high else large}")
+            raise field_error(path, field, f"{read_as}: implied density {implied:.4g} kg/m^3 "
+                                           f"(mass / volume) is outside the plausible "
+                                           f"{low:g}..{high:g} (volume {mesh.volume:.4g} m^3, "
+                                           f"largest extent {extent:.4g} m): "
+                                           f"{small if implied > high else large}")
         return
     if not low <= density <= high:
-        raise field_error(path, where, f"density {density:.4g} kg/m^3 is outside the plausible "
-                                       f"{low:g}..{high:g}")
+        raise field_error(path, f"{where}.density", f"density {density:.4g} kg/m^3 is outside "
+                                                    f"the plausible {low:g}..{high:g}")
     smallest, largest = EXTENT_RANGE
     if not smallest <= extent <= largest:
-        raise field_error(path, where, f"largest extent {extent:.4g} m is outside the plausible "
-                                       f"{smallest:g}..{largest:g} m for a vehicle part: "
-                                       f"{small if extent < smallest else large}")
+        raise field_error(path, field, f"{read_as}: largest extent {extent:.4g} m is outside "
+                                       f"the plausible {smallest:g}..{largest:g} m for a "
+                                       f"vehicle part: {small if extent < smallest else large}")
+
+
+def _check_span(parts: list[Part], rotors: tuple, unit: str, path: Path) -> None:
+    """A part larger than ``MAX_PART_SPAN`` x the largest distance between two rotor hubs
+    (placements are in m whatever the meshes' unit): a mesh read in too small a unit that the
+    per-part checks let through (a part given by density whose size is still plausible)."""
+    hubs = np.array([r.position for r in rotors])
+    if len(hubs) < 2:
+        return
+    span = float(np.max(np.linalg.norm(hubs[:, None] - hubs[None], axis=-1)))
+    for index, part in enumerate(parts):
+        extent = float(np.max(part.mesh.extents))
+        if span > 0 and extent > MAX_PART_SPAN * span:
+            raise field_error(path, f"part[{index}] ({part.name}).mesh",
+                              f"{_read_as(part.mesh_path, unit)}: largest extent {extent:.4g} m "
+                              f"is {extent / span:.3g} x the largest distance between two rotor "
+                              f"hubs ({span:.4g} m, from position_m): mesh looks too large: "
+                              f"drawn in mm while mesh_unit says {unit}?")
 
 
 def _part(entry: object, index: int, cad_dir: Path, unit: str, path: Path, hull: bool) -> Part:
@@ -342,8 +374,7 @@ def _part(entry: object, index: int, cad_dir: Path, unit: str, path: Path, hull:
     mesh_path = _mesh_file(cad_dir, entry.get("mesh"), path, f"{where}.mesh")
     mass, density, source = _mass_or_density(entry, path, where)
     mesh = load_mesh(mesh_path, MESH_UNITS[unit], where=f"{path}: {where}.mesh", hull=hull)
-    _check_size(mesh, mass, density, unit, path, f"{where}.mass" if mass else
-                f"{where}.density")
+    _check_size(mesh, mass, density, unit, path, where, mesh_path)
     collision = entry.get("collision", "box")
     if collision not in COLLISION_SHAPES:
         raise field_error(path, f"{where}.collision", f"{collision!r}; valid: "
@@ -416,6 +447,7 @@ def load_assembly(cad_dir: str | Path, *, hull: bool = False) -> Assembly:
     rotors = tuple(_rotor(e, i, by_name, path) for i, e in enumerate(raw_rotors))
     if len({r.name for r in rotors}) != len(rotors):
         raise field_error(path, "rotor", f"rotor names repeat: {[r.name for r in rotors]}")
+    _check_span(parts, rotors, unit, path)
     vehicle = _check_keys(data.get("vehicle", {}), _VEHICLE_KEYS, path, "vehicle")
     weighed, sources = None, {}
     if "weighed_mass" in vehicle:

@@ -17,13 +17,12 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from ..core.args import ArgumentParser
 from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, QuadsimWarning, run_cli
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
+from .checks import check_length
 from .diagnose import diagnose
 from .per_flight import diagnose_per_flight
 from .report import summary, write_html, write_json, write_rerun
@@ -163,9 +162,6 @@ def gather_notes(lines: list[str]) -> list[str]:
     return out
 
 
-#: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
-#: of the noise scale and a 1 s scoring block.
-MIN_LOG_S = 2.0
 #: measured on the 2-core development machine (one 5 s and one 20 s log at 500 Hz, --workers
 #: 1: 6.9 s and 9.6 s): about 6 s to start and 4e-4 s per logged sample; memory ~2 kB per
 #: sample (states, residuals and candidate fits on the fit grid).
@@ -180,18 +176,6 @@ def gap_cost(samples: int) -> Estimate:
     return Estimate(seconds=GAP_START_S + GAP_S_PER_SAMPLE * samples,
                     bytes=GAP_BASE_BYTES + GAP_BYTES_PER_SAMPLE * samples,
                     what=f"{samples} logged samples")
-
-
-def check_length(log, window_s: float | None) -> None:
-    """A log long enough for the diagnosis, sampled finely enough for ``--window``."""
-    duration = float(log.t[-1] - log.t[0])
-    if duration < MIN_LOG_S:
-        raise InputError(f"{log.path}: t: {duration:.3g} s of flight; the diagnosis needs "
-                         f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
-    step = float(np.median(np.diff(log.t)))
-    if window_s is not None and window_s < 5 * step:
-        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {log.path} "
-                         f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
 def collapse_warnings(messages: list[str]) -> list[str]:

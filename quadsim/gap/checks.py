@@ -16,6 +16,11 @@ catch it first:
 
 :func:`vehicle_check` returns the ratios (for the result's ``checks``) and raises
 :class:`~quadsim.core.errors.InputError` with the numbers that disagree.
+
+:func:`check_length` refuses a log shorter than :data:`MIN_LOG_S` = 2 s (the edges cut after
+smoothing, the noise window and one scoring block need it) or, with ``window_s``, sampled too
+coarsely for the differentiator's window (fewer than 5 samples); :func:`quadsim.gap.prepare`
+applies the length check to every log given to the library, the CLI both.
 """
 
 from __future__ import annotations
@@ -26,10 +31,28 @@ from ..core.errors import InputError
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
-__all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "vehicle_check"]
+__all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle_check"]
 
 MAX_RATIO = 2.0
 MAX_SPEED_RATIO = 1.5
+#: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
+#: of the noise scale and a 1 s scoring block
+MIN_LOG_S = 2.0
+
+
+def check_length(log, window_s: float | None = None, name: str | None = None) -> None:
+    """A log long enough for the diagnosis and, with ``window_s`` (s), sampled finely
+    enough for it; raises :class:`InputError` naming the file (``name``, default the log's
+    path) and ``t``."""
+    name = name or str(log.path)
+    duration = float(log.t[-1] - log.t[0]) if len(log.t) else 0.0
+    if duration < MIN_LOG_S:
+        raise InputError(f"{name}: t: {duration:.3g} s of flight; the diagnosis needs "
+                         f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
+    step = float(np.median(np.diff(log.t)))
+    if window_s is not None and window_s < 5 * step:
+        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {name} "
+                         f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
 def vehicle_check(states: list, params: VehicleParams) -> dict:

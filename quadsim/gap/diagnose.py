@@ -20,7 +20,7 @@ from ..vehicle.params import VehicleParams
 from . import collinear, consistency, heldout
 from . import heldout_verdict as hv
 from .baseline import BASELINE, NominalRefit  # noqa: F401  (re-exported)
-from .checks import vehicle_check
+from .checks import check_length, vehicle_check
 from .fitting import fit_motor_map, stack_states
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .scoring import _channel_rms, _channels, _gap, _scaled
@@ -83,7 +83,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     (docs/gap.md). 0.2 s covers the Savitzky–Golay window twice over and low-pass filters
     down to 5 Hz; it costs 5 % of an 8 s flight.
 
-    Raises :class:`InputError` for a rotor-count mismatch or logs without rotor speeds."""
+    Raises :class:`InputError` for a rotor-count mismatch, logs without rotor speeds or
+    shorter than :data:`quadsim.gap.checks.MIN_LOG_S` (2 s)."""
     out = []
     for log in logs:
         name = str(log.path) if log.path is not None else f"log{len(out)}"
@@ -96,6 +97,7 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
+        check_length(log, name=name)              # >= MIN_LOG_S, else one line naming t
         log, delays = align_signal_delays(log)    # quadsim.logs.delays (estimate, shift, ms)
         states = flight_states(log, window_s=window_s, gravity=params.gravity)
         states = states.take(interior(states.t))

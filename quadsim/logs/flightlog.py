@@ -43,7 +43,8 @@ precision, ``%.17g``, when ``%.10g`` would not keep its steps), ``\\n`` line end
 Parquet (optional, ``pip install 'quadsim[parquet]'``): a ``.parquet`` file with the same
 column names (float64) is read and validated the same way, and :func:`write_log` writes one
 when the name ends in ``.parquet`` (zstd-compressed, deterministic). Problems in a Parquet
-file are reported with the CSV-equivalent line number (row k is line k + 2).
+file are reported with the CSV-equivalent line number (row k is line k + 2). Reading a file
+into columns is :mod:`quadsim.logs.csvfile`; :func:`read_log_columns` is re-exported here.
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from ..core.errors import InputError, QuadsimWarning, field_error
 from ..core.files import atomic_write_bytes
 from ..core.frames import quat_conjugate, quat_multiply
 from ..vehicle.state import Trajectory
+from .csvfile import read_log_columns
 from .plausible import check_plausible
 
 __all__ = [
@@ -184,94 +186,6 @@ def body_rate_from_quat(t: np.ndarray, quat: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- reading
-
-
-def _open_text(path: Path) -> str:
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"{path}: corrupt gzip data: {exc}") from None
-    try:
-        return raw.decode("utf-8-sig")  # a spreadsheet may prepend a BOM
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text (CSV) file") from None
-
-
-def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
-    """Numbers (N, C); text that is not a number is an error naming line and column."""
-    width = len(header)
-    data = np.empty((len(lines), width))
-    for row, line in enumerate(lines):
-        cells = line.split(",")
-        if len(cells) != width:
-            raise InputError(f"{path}: line {row + 2}: {len(cells)} fields, header has {width}")
-        try:
-            data[row] = [float(c) if c.strip() else np.nan for c in cells]
-        except ValueError:
-            for col, cell in enumerate(cells):
-                try:
-                    float(cell) if cell.strip() else None
-                except ValueError:
-                    raise field_error(path, header[col],
-                                      f"line {row + 2}: {cell.strip()!r} is not a number") from None
-    return data
-
-
-def _read_parquet_columns(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a Parquet log (optional: needs pyarrow, ``pip install quadsim[parquet]``)."""
-    try:
-        import pyarrow.parquet as pq
-    except ImportError:
-        raise InputError(f"{path}: reading Parquet needs pyarrow "
-                         "(pip install 'quadsim[parquet]')") from None
-    try:
-        table = pq.read_table(path)
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: not a readable Parquet file: {' '.join(str(exc).split())}"
-                         ) from None
-    if table.num_rows == 0:
-        raise InputError(f"{path}: no data rows")
-    columns = {}
-    for name in table.column_names:
-        try:
-            columns[name] = table.column(name).to_numpy(zero_copy_only=False).astype(float)
-        except (TypeError, ValueError):
-            raise field_error(path, name, "column is not numeric") from None
-    return columns
-
-
-def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
-    """Every column of a log file as float arrays, by header name (no validation of values).
-
-    CSV (``.csv``, ``.csv.gz``) or Parquet (``.parquet``, same column names). Problems are
-    reported by CSV line number (header = line 1; for Parquet, row k is line k + 2)."""
-    path = Path(path)
-    if path.suffix == ".parquet":
-        return _read_parquet_columns(path)
-    from . import refuse_binary  # a damaged ULog/DataFlash, not a CSV
-
-    refuse_binary(path)
-    text = _open_text(path)
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines:
-        raise InputError(f"{path}: empty file (expected a header row)")
-    header = [h.strip() for h in lines[0].split(",")]
-    duplicates = sorted({h for h in header if header.count(h) > 1})
-    if duplicates:
-        raise field_error(path, duplicates[0], "column appears more than once in the header")
-    if len(lines) < 2:
-        raise InputError(f"{path}: no data rows after the header")
-    data = _parse_rows(path, header, lines[1:])
-    return {name: data[:, i] for i, name in enumerate(header)}
 
 
 def _first_bad(mask: np.ndarray) -> tuple[int, int]:

@@ -17,6 +17,9 @@ position steps         ``|dp|/dt`` <= ``MAX_SPEED``      the same bound between 
                        (with 0.05 m of slack per step)  (a jump of km in one step is corrupt)
 position units         displacement over 0.1 s windows  positions in mm with v in m/s make
                        / integrated v in 0.1..10        the ratio 1000 (``x..z`` named)
+position units,        position's acceleration over     mm give 1000, cm 100 (``x..z``
+no velocity            0.2 s windows / the accelero-    named)
+                       meter's (R a - g) <= 10
 specific force         ``|a|`` <= ``MAX_SPECIFIC_FORCE`` accelerometers saturate at 16-32 g
                        = 400 m/s^2
 attitude rate          rotation between samples / dt    above the gyro bound of the loader
@@ -71,6 +74,11 @@ TIME_PRECISION = 1e-13
 POSITION_VELOCITY_RATIO = (0.1, 10.0)
 MIN_MOVING = 0.2
 WINDOW_S = 0.1
+#: without velocity: the positions' acceleration / the accelerometer's over ACCEL_WINDOW_S
+#: windows where the latter exceeds MIN_ACCEL_JUDGED m/s^2 (cm gives 100, mm 1000)
+POSITION_ACCEL_RATIO = 10.0
+ACCEL_WINDOW_S = 0.2
+MIN_ACCEL_JUDGED = 0.3
 
 
 def _line(row: int) -> str:
@@ -112,15 +120,20 @@ def _check_time(path, t: np.ndarray) -> None:
 def _check_steps(path, t: np.ndarray, position: np.ndarray, velocity, log: dict) -> None:
     if velocity is not None:  # a unit slip first: its message names the unit
         _check_position_units(path, t, position, velocity, log)
+    elif log.get("accel") is not None:
+        _check_position_accel(path, t, position, log)
     dt = np.diff(t)
     step = np.linalg.norm(np.diff(position, axis=0), axis=1)
     ok = np.isfinite(step)
     too_fast = ok & (step > MAX_SPEED * dt + STEP_SLACK_M)
     if too_fast.any():
         row = int(np.argmax(too_fast)) + 1
+        typical = float(np.median(step[ok] / dt[ok])) if ok.any() else 0.0
+        hint = (f" (median speed {typical:.4g} m/s over the whole log: positions in mm or cm?)"
+                if typical > MAX_SPEED else "")
         raise field_error(path, "x..z", f"{_line(row)}: position moves {step[row - 1]:.4g} m "
                           f"in {dt[row - 1]:.4g} s ({step[row - 1] / dt[row - 1]:.4g} m/s, "
-                          f"above {MAX_SPEED:g} m/s): a jump no multirotor makes")
+                          f"above {MAX_SPEED:g} m/s): a jump no multirotor makes{hint}")
 
 
 def _time_in_ms(t: np.ndarray, log: dict) -> bool:
@@ -165,6 +178,62 @@ def _check_position_units(path, t, position, velocity, log) -> None:
         raise field_error(path, "x..z", f"position changes {ratio:.4g} x as far as the "
                           f"logged velocity integrates to (median over {int(use.sum())} windows "
                           f"of {WINDOW_S:g} s; expected 1): positions in m, velocity in m/s{hint}")
+
+
+def _check_position_accel(path, t, position, log, gravity: float = 9.81) -> None:
+    """Without a velocity column: the positions' acceleration against the accelerometer's.
+
+    Over ``ACCEL_WINDOW_S`` windows k, the second difference of the position,
+    ``(p_{k+1} - 2 p_k + p_{k-1}) / T^2`` (central: the mean acceleration over the two
+    windows around k), must equal the specific force turned to the world frame minus
+    gravity, ``R(q) a - g e_z``, averaged the same way (a triangle weight over the two
+    windows; both as the change of the mean velocity from one window to the next, so the
+    IMU's unknown initial velocity cancels). The gain of the first on the second (least
+    squares over windows where the accelerometer's acceleration exceeds
+    ``MIN_ACCEL_JUDGED``) is ~1; positions in mm give ~1000, in cm ~100: refused above
+    ``POSITION_ACCEL_RATIO`` naming ``x..z``."""
+    from ..core.frames import quat_to_rotmat
+
+    steps = np.diff(t)
+    dt = float(np.median(steps))
+    m = max(1, round(ACCEL_WINDOW_S / dt))
+    k = np.arange(0, len(t), m)
+    if len(k) < 7:
+        return
+    world = np.einsum("nij,nj->ni", quat_to_rotmat(log["quat"]), log["accel"])
+    world[:, 2] -= gravity
+    bad = ~np.isfinite(world).all(axis=1)  # NaN runs (kept in optional columns): skipped
+    world[bad] = 0.0
+    near_bad = np.convolve(bad, np.ones(3), mode="same") > 0  # a NaN spoils its neighbours
+    bad_before = np.concatenate([[0], np.cumsum(near_bad)])[k]  # such samples before each k
+
+    def cumulative(y):  # trapezoid integral from t[0], (N, 3)
+        mid = 0.5 * (y[1:] + y[:-1]) * steps[:, None]
+        return np.concatenate([np.zeros((1, 3)), np.cumsum(mid, axis=0)])
+
+    span = (t[k[1:]] - t[k[:-1]])[:, None]
+    scale = 0.5 * (span[1:] + span[:-1])
+    # mean velocity over each window, from the positions and (up to a constant) the IMU
+    moved = (position[k[1:]] - position[k[:-1]]) / span
+    flown = cumulative(cumulative(world))
+    flown = (flown[k[1:]] - flown[k[:-1]]) / span
+    from_position = (moved[1:] - moved[:-1]) / scale
+    from_imu = (flown[1:] - flown[:-1]) / scale
+    clean = (bad_before[2:] - bad_before[:-2]) == 0  # no NaN in the two windows
+    use = (clean & np.isfinite(from_imu).all(axis=1) & np.isfinite(from_position).all(axis=1)
+           & (np.abs(span[1:, 0] - span[:-1, 0]) < 0.5 * m * dt)         # no gap inside
+           & (np.linalg.norm(from_imu, axis=1) > MIN_ACCEL_JUDGED))
+    if use.sum() < 5:
+        return
+    a, b = from_position[use].ravel(), from_imu[use].ravel()
+    gain = float(a @ b / (b @ b))
+    if gain > POSITION_ACCEL_RATIO:
+        hint = (" (positions in mm?)" if 300 < gain < 3000 else
+                " (positions in cm?)" if 30 < gain < 300 else "")
+        raise field_error(path, "x..z", f"position accelerates {gain:.4g} x as much as the "
+                          f"accelerometer says (R a - g over {int(use.sum())} windows of "
+                          f"{ACCEL_WINDOW_S:g} s; expected 1; no velocity column to compare "
+                          f"with): positions in m, specific force in m/s^2{hint}")
 
 
 def _rotation_rate(t: np.ndarray, quat: np.ndarray) -> np.ndarray:
