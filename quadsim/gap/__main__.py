@@ -7,6 +7,8 @@ Examples::
         --report gap.html --rerun gap.rrd
     python -m quadsim.gap --model crazyflie21 --per-flight mixed/*.csv.gz \\
         --reference nominal/*.csv.gz --json mixed.json
+    python -m quadsim.gap --model nanodrone_cf21bl.toml --effects-file diagnosed.toml \\
+        train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
 """
 
 from __future__ import annotations
@@ -48,6 +50,11 @@ def _parser() -> argparse.ArgumentParser:
                         help="flights with rotor speeds and commands: logs without rotor "
                              "speeds get speeds synthesised from their commands "
                              "(quadsim.gap.commands; default: --reference)")
+    parser.add_argument("--effects-file", metavar="EFFECTS.toml",
+                        help="effects already added to --model (an effect file, "
+                             "quadsim.effects.effectfile): the diagnosis starts from the "
+                             "diagnosed model, fits every candidate on top of it and never "
+                             "refits these")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -72,6 +79,11 @@ def _check_args(args) -> None:
     from ..core.args import check_inputs, check_number, check_output, distinct_files
 
     check_number("--window", args.window, low=0.0, high=60.0, unit="s")
+    if args.effects_file is not None:
+        check_inputs("--effects-file", [args.effects_file])
+        if args.per_flight:
+            raise InputError("--effects-file: not used with --per-flight (each flight is "
+                             "judged against the --reference flights' own model)")
     for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
                         ("--reference", args.reference),
                         ("--command-reference", args.command_reference)):
@@ -84,7 +96,8 @@ def _check_args(args) -> None:
     if args.reference and not args.per_flight:
         raise InputError("--reference: only used with --per-flight")
     inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
-              *(args.command_reference or [])]
+              *(args.command_reference or []),
+              *([args.effects_file] if args.effects_file is not None else [])]
     outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
                                    ("--rerun", args.rerun)) if o is not None]
     for flag, out in outputs:
@@ -190,6 +203,15 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
+    base_effects = ()
+    if args.effects_file is not None:
+        from ..effects.effectfile import load_effect_file
+
+        base = load_effect_file(args.effects_file)
+        if base.params not in (params.name, str(args.model)):
+            raise InputError(f"{args.effects_file}: params: the effects complete "
+                             f"{base.params!r}, --model is {params.name!r}")
+        base_effects = base.effects.effects
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
@@ -250,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
                                          refused=refused, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
-                              progress=progress, **extra)
+                              progress=progress, base_effects=base_effects, **extra)
     finally:
         if bar is not None:
             bar.close()

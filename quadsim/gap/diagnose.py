@@ -8,7 +8,7 @@ thing.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -141,7 +141,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     return out
 
 
-def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> dict:
+def _where(held, params, sigma, rotor, before, effects_after, after, kstep,
+           base=()) -> dict:
     masks = [regime_masks(f.fit, params) for f in held]
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     names = _channels(rotor, params)
@@ -155,7 +156,8 @@ def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> d
         "regime": by_regime(before, masks),
         "regime_after": by_regime(after, masks),
         "band": by_band(before, dt),
-        "kstep_before": kstep_errors([f.fit for f in held], params, []) if kstep else {},
+        "kstep_before": kstep_errors([f.fit for f in held], params, list(base)) if kstep
+        else {},
         "kstep_after": kstep_errors([f.fit for f in held], params, effects_after) if kstep else {},
     }
 
@@ -186,8 +188,13 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
              max_combination: int = 2, progress: Callable | None = None,
              window_s: float = DEFAULT_WINDOW_S, kstep: bool = True,
-             map_fn: Callable = map) -> dict:
+             map_fn: Callable = map, base_effects: Sequence = ()) -> dict:
     """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`).
+
+    ``base_effects``: effects already in the model (e.g. from an effect file,
+    :mod:`quadsim.effects.effectfile`): the diagnosis starts from ``params`` plus them -- the
+    "before" gap is theirs, every candidate is fitted and scored on top of them, and they
+    are never refitted -- so that a diagnosed model can be diagnosed again.
 
     ``kstep=False`` skips the k-step prediction errors (the slowest part of "where").
     ``map_fn(fn, items)`` runs the candidate fits (e.g. a :mod:`quadsim.core.executor` executor)."""
@@ -198,8 +205,11 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     notes.extend(delay_notes(flights + (held_in or [])))
     train, held = _split(flights, held_in, notes)
     result = _diagnose_split(train, held, params, effects, max_combination, progress, notes,
-                             kstep, map_fn)
+                             kstep, map_fn, tuple(base_effects))
     result["checks"] = checks
+    if base_effects:
+        result["base_effects"] = [{"name": e.name, "params": {
+            p.name: float(getattr(e, p.name)) for p in e.parameters}} for e in base_effects]
     return result
 
 
@@ -209,17 +219,17 @@ def params_have_data_map(params: VehicleParams) -> bool:
 
 
 def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
-                    kstep=False, map_fn=map):
+                    kstep=False, map_fn=map, base=()):
     rotor = all(f.fit.command is not None for f in train + held)
     if rotor and not params_have_data_map(params):
         params = fit_motor_map([f.fit for f in train], params)
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
-    nominal_train = [residuals(f.fit, params, [], rotor_channel=rotor) for f in train]
+    nominal_train = [residuals(f.fit, params, list(base), rotor_channel=rotor) for f in train]
     sigma = noise_scale(np.concatenate(nominal_train), float(train[0].fit.t[1] - train[0].fit.t[0]),
                         floor=noise_floor(params, rotor))
-    before = _scaled(held, params, [], sigma, rotor)
+    before = _scaled(held, params, list(base), sigma, rotor)
     has_vbat = all(f.fit.vbat is not None and np.all(np.isfinite(f.fit.vbat)) for f in train)
-    cands = candidates_for(params, rotor, has_vbat)
+    cands = [replace(c, base=base) for c in candidates_for(params, rotor, has_vbat)]
     if effect_names is not None:
         unknown = set(effect_names) - {c.name for c in cands}
         if unknown:
@@ -228,7 +238,8 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         cands = [c for c in cands if c.name in effect_names]
     tick = progress or (lambda *_: None)
     fit_on = [f.fit for f in train]
-    baseline = _score(fit_candidate(BASELINE, fit_on, params, sigma, rotor_channel=rotor),
+    baseline = _score(fit_candidate(replace(BASELINE, base=base), fit_on, params, sigma,
+                                    rotor_channel=rotor),
                       train, held, params, sigma, rotor, before, dt)
     tick("nominal_refit")
     scored = []
@@ -254,11 +265,11 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
     ranked = sorted(scored, key=lambda s: (round(s["heldout_gap_after"] / nominal, 4),
                                            len(s["params"]), s["name"]))
     return _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt,
-                   max_combination, notes, tick, kstep)
+                   max_combination, notes, tick, kstep, base)
 
 
 def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max_combination,
-            notes, tick, kstep) -> dict:
+            notes, tick, kstep, base=()) -> dict:
     """Pick the named effect, grow it into a combination, judge it against the floor and
     assemble the result (``quadsim.gap/3``)."""
     nominal_gap = _gap(before)
@@ -270,7 +281,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
                            max_combination, nominal_gap, tick)
         if combined is not best:
             alts = _combination_alternatives(combined, best, alts, params)
-    effects_after = combined["_fit"].effects() if combined else []
+    effects_after = combined["_fit"].effects() if combined else list(base)
     after = _scaled(held, params, effects_after, sigma, rotor)
     if best is None and _clear(baseline, nominal_gap, nominal_gap):
         notes.append("the held-out gap shrinks with refitted b and d (nominal_refit) but no "
@@ -288,7 +299,7 @@ def _decide(ranked, baseline, train, held, params, sigma, rotor, before, dt, max
         "schema": SCHEMA,
         "model": params.name,
         "train": [f.name for f in train], "holdout": [f.name for f in held],
-        "where": _where(held, params, sigma, rotor, before, effects_after, after, kstep),
+        "where": _where(held, params, sigma, rotor, before, effects_after, after, kstep, base),
         "baseline": _public(baseline),
         "effects": [_public(e) for e in ranked],
         "verdict": verdict,
