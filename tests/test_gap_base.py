@@ -68,3 +68,35 @@ def test_effects_file_cli(flights, tmp_path, capsys):
     assert main(["--model", "crazyflie21", "--effects-file", str(tmp_path / "none.toml"),
                  *paths, "--quiet"]) == 2
     assert "--effects-file: file not found" in capsys.readouterr().err
+
+
+def test_write_effects_then_diagnose_again(flights, tmp_path):
+    """The user's loop: diagnose, store the effect it found (--write-effects), diagnose
+    again from that file; the second file holds both effects with units and sources."""
+    from quadsim.effects.effectfile import load_effect_file
+
+    cf, logs = flights
+    paths = []
+    for k, log in enumerate(logs):
+        paths.append(str(tmp_path / f"f{k}.csv.gz"))
+        write_log(paths[-1], log)
+    first, second = tmp_path / "r1.toml", tmp_path / "r2.toml"
+    common = ["--model", "crazyflie21", *paths, "--quiet", "--workers", "1",
+              "--effects", "mass_offset", "rotor_drag"]
+    assert main([*common, "--write-effects", str(first), "--add", "rotor_drag"]) == 0
+    one = load_effect_file(first)
+    assert [e.name for e in one.effects.effects] == ["rotor_drag"]
+    assert one.effects.effects[0].coefficient == pytest.approx(1e-6, rel=0.1)
+    assert "rotor_drag candidate" in one.sources[("rotor_drag", "coefficient")]
+    assert main([*common, "--effects-file", str(first), "--write-effects", str(second)]) == 0
+    two = load_effect_file(second)
+    assert [e.name for e in two.effects.effects] == ["rotor_drag", "mass_offset"]
+    assert two.effects.effects[1].mass == pytest.approx(0.004, rel=0.15)
+    assert two.sources[("rotor_drag", "coefficient")] == \
+        one.sources[("rotor_drag", "coefficient")]
+    assert "on top of r1.toml" in two.sources[("mass_offset", "mass")]
+    # adding an effect the file already holds is refused, nothing written
+    third = tmp_path / "r3.toml"
+    assert main([*common, "--effects-file", str(first), "--write-effects", str(third),
+                 "--add", "rotor_drag"]) == 2
+    assert not third.exists()

@@ -55,6 +55,13 @@ def _parser() -> argparse.ArgumentParser:
                              "quadsim.effects.effectfile): the diagnosis starts from the "
                              "diagnosed model, fits every candidate on top of it and never "
                              "refits these")
+    parser.add_argument("--write-effects", metavar="OUT.toml",
+                        help="write an effect file: the --effects-file effects plus the "
+                             "named effect (or --add NAME), fitted here with unit and "
+                             "source (quadsim.gap.save)")
+    parser.add_argument("--add", metavar="NAME",
+                        help="with --write-effects: the ranked candidate to add instead of "
+                             "the named one")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -99,12 +106,19 @@ def _check_args(args) -> None:
               *(args.command_reference or []),
               *([args.effects_file] if args.effects_file is not None else [])]
     outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
-                                   ("--rerun", args.rerun)) if o is not None]
+                                   ("--rerun", args.rerun),
+                                   ("--write-effects", args.write_effects)) if o is not None]
     for flag, out in outputs:
         check_output(flag, out, {"--json": (".json",), "--report": (".html",),
-                                 "--rerun": (".rrd",)}[flag], inputs=inputs)
+                                 "--rerun": (".rrd",), "--write-effects": (".toml",)}[flag],
+                     inputs=inputs)
     if len({str(o) for _, o in outputs}) < len(outputs):
-        raise InputError("--json/--report/--rerun: the same output file given twice")
+        raise InputError("--json/--report/--rerun/--write-effects: the same output file "
+                         "given twice")
+    if args.add is not None and args.write_effects is None:
+        raise InputError("--add: only used with --write-effects")
+    if args.write_effects is not None and args.per_flight:
+        raise InputError("--write-effects: not used with --per-flight")
 
 
 def _map_fn(args, bar):
@@ -198,12 +212,42 @@ def collapse_warnings(messages: list[str]) -> list[str]:
     return out
 
 
+def _write_effects(args, params, base, result) -> None:
+    """--write-effects: the starting model's effects, then the one this diagnosis adds."""
+    from pathlib import Path
+
+    from ..core.files import atomic_write_text
+    from ..effects.effectfile import render_effect_file
+    from .save import added_effects
+
+    names = [Path(p).name for p in args.logs]
+    held = [Path(p).name for p in args.holdout or []]
+    logs = (f"{len(names)} training log(s) {', '.join(names)}"
+            + (f" (held out: {', '.join(held)})" if held else "")
+            + (f", on top of {Path(args.effects_file).name}" if base else ""))
+    kept = []
+    if base is not None:
+        for effect in base.effects.effects:
+            kept.append((effect.name, {p.name: (getattr(effect, p.name),
+                                                base.sources[(effect.name, p.name)])
+                                       for p in effect.parameters
+                                       if (effect.name, p.name) in base.sources}))
+    added = added_effects(result, args.add, logs=logs, base=tuple(n for n, _ in kept))
+    text = render_effect_file(
+        base.params if base is not None else params.name,
+        f"{params.name} plus the effects python -m quadsim.gap named on its logs",
+        kept + added,
+        header=f"Written by python -m quadsim.gap --write-effects (rerun it instead of "
+               f"editing by hand): {', '.join(n for n, _ in kept + added)} on {params.name}.")
+    atomic_write_text(args.write_effects, text)
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
-    base_effects = ()
+    base_effects, base = (), None
     if args.effects_file is not None:
         from ..effects.effectfile import load_effect_file
 
@@ -282,6 +326,8 @@ def main(argv: list[str] | None = None) -> int:
         write_html(args.report, result)
     if args.rerun:
         write_rerun(args.rerun, result)
+    if args.write_effects:
+        _write_effects(args, params, base, result)
     if not args.quiet:
         print(summary(result), end="")
     return 0
