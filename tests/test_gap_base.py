@@ -25,7 +25,7 @@ def flights():
 
 
 def test_diagnosis_from_a_diagnosed_model_names_what_is_left(flights):
-    cf, logs = flights
+    _, logs = flights
     names = ["mass_offset", "rotor_drag"]
     plain = diagnose(logs, cf, kstep=False, effects=names, max_combination=1)
     base = [make_effect(*DRAG[:1], **DRAG[1])]
@@ -50,7 +50,7 @@ def test_diagnosis_from_a_diagnosed_model_names_what_is_left(flights):
 
 
 def test_effects_file_cli(flights, tmp_path, capsys):
-    cf, logs = flights
+    _, logs = flights
     paths = []
     for k, log in enumerate(logs):
         paths.append(str(tmp_path / f"f{k}.csv.gz"))
@@ -75,7 +75,7 @@ def test_write_effects_then_diagnose_again(flights, tmp_path):
     again from that file; the second file holds both effects with units and sources."""
     from quadsim.effects.effectfile import load_effect_file
 
-    cf, logs = flights
+    _, logs = flights
     paths = []
     for k, log in enumerate(logs):
         paths.append(str(tmp_path / f"f{k}.csv.gz"))
