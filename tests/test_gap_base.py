@@ -25,7 +25,7 @@ def flights():
 
 
 def test_diagnosis_from_a_diagnosed_model_names_what_is_left(flights):
-    _, logs = flights
+    cf, logs = flights
     names = ["mass_offset", "rotor_drag"]
     plain = diagnose(logs, cf, kstep=False, effects=names, max_combination=1)
     base = [make_effect(*DRAG[:1], **DRAG[1])]
