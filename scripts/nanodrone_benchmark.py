@@ -31,7 +31,9 @@ Usage::
         [--runs test|validation] [--diagnosed EFFECTS.toml] [--align-rotors]
 
 JSON: ``{"protocol": P, "windows": B, "rows": {NAME: {"p": [h1, h10, h50, SimErr], "v": ...,
-"R": ..., "w": ...}}}`` (m, m/s, rad, rad/s); same inputs give the same bytes. The wall and
+"R": ..., "w": ...}}, "rate_skill": {ROW: ...}}`` (m, m/s, rad, rad/s; ``rate_skill``: per
+body axis, how much of the body-rate change the nominal and diagnosed rows get right,
+:func:`quadsim.bench.nanodrone.rate_skill`); same inputs give the same bytes. The wall and
 CPU time of each model's predictions go to stdout.
 """
 
@@ -189,12 +191,20 @@ def main(argv: list[str] | None = None) -> int:
                   for log, (_, d) in zip(logs, shifted)}
         print("rotor-speed delays behind the body rate (ms): "
               + ", ".join(f"{k} {v:+.1f}" for k, v in delays.items()))
-    rows, curves = {}, {}
+    rows, curves, skill = {}, {}, {}
     for name, predict in predictions(windows, args.diagnosed, aligned):
         wall, cpu = time.perf_counter(), time.process_time()
         prediction = predict()
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         curves[name] = bench.curves(windows, prediction, args.protocol)
+        if name in ("quadsim_nominal", "quadsim_diagnosed", "quadsim_diagnosed_aligned"):
+            skill[name] = {k: [round(x, 4) for x in v] for k, v in bench.rate_skill(
+                aligned if name.endswith("_aligned") else windows, prediction).items()}
+            print(f"  {name} body rate per axis x/y/z: SimErr "
+                  + "/".join(f"{x:.2f}" for x in skill[name]["simerr_model"])
+                  + " (rate held " + "/".join(f"{x:.2f}" for x in skill[name]["simerr_hold"])
+                  + "), corr of the predicted and true rate change at h = 50 "
+                  + "/".join(f"{x:.2f}" for x in skill[name]["corr_h50"]))
         rows[name] = bench.summary(curves[name])
         print(f"{name}: {len(windows)} windows x {bench.HORIZON} steps in {wall:.2f} s wall, "
               f"{cpu:.2f} s CPU; SimErr p {rows[name]['p'][3]:.4f} m, v {rows[name]['v'][3]:.4f}"
@@ -203,6 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         rows[f"published_{name}"] = row
     result = {"protocol": args.protocol, "runs": args.runs, "windows": len(windows),
               **({"rotor_delays_ms": delays} if args.align_rotors else {}),
+              "rate_skill": skill,
               "rows": {k: {q: [round(x, 6) for x in v[q]] for q in bench.QUANTITIES}
                        for k, v in rows.items()}}
     atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")

@@ -265,3 +265,24 @@ def test_rotor_delay_is_found_from_the_torque_it_drives(delay):
     assert applied == estimate
     if delay:                    # back in step: the residual delay is below a sample
         assert abs(bench.rotor_delay(aligned)) < 0.004
+
+
+def test_rate_skill_closed_forms():
+    w = bench.make_windows([_log(120), _log(100, offset=5.0)])
+    rng = np.random.default_rng(0)
+    truth = dict(w.truth, w=w.truth["w"] + rng.normal(0, 0.3, w.truth["w"].shape).cumsum(1))
+    w = bench.Windows(w.position, w.velocity, w.quat, w.body_rate, w.rotor_speed, truth,
+                      w.run, w.names)
+    change = truth["w"] - w.body_rate[:, None]
+    perfect = bench.rate_skill(w, {"w": truth["w"]})
+    np.testing.assert_allclose(perfect["simerr_model"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(perfect["corr_h50"], 1.0, rtol=1e-12)
+    np.testing.assert_allclose(perfect["gain_h10"], 1.0, rtol=1e-12)
+    held = bench.rate_skill(w, bench.naive_prediction(w))
+    np.testing.assert_allclose(held["simerr_model"], held["simerr_hold"], rtol=1e-12)
+    np.testing.assert_allclose(held["simerr_hold"], np.abs(change).mean(0).sum(0), rtol=1e-12)
+    half = bench.rate_skill(w, {"w": w.body_rate[:, None] + 0.5 * change})
+    np.testing.assert_allclose(half["gain_h50"], 2.0, rtol=1e-12)          # scale it back
+    np.testing.assert_allclose(half["corr_h50"], 1.0, rtol=1e-12)
+    np.testing.assert_allclose(half["simerr_model"], 0.5 * np.array(held["simerr_hold"]),
+                               rtol=1e-12)

@@ -68,6 +68,7 @@ __all__ = [
     "make_windows",
     "naive_prediction",
     "physics_prediction",
+    "rate_skill",
     "rotor_delay",
     "score",
     "summary",
@@ -264,3 +265,27 @@ def summary(curve: dict) -> dict:
 def score(windows: Windows, prediction: dict, protocol: str = "published") -> dict:
     """The benchmark's numbers of one prediction: quantity -> [h1, h10, h50, SimErr]."""
     return summary(curves(windows, prediction, protocol))
+
+
+def rate_skill(windows: Windows, prediction: dict, horizons: tuple[int, ...] = (10, 50)) -> dict:
+    """How much of the body-rate change a prediction gets right, per body axis (x, y, z).
+
+    With ``dw = w(h) - w(0)`` the true change over h steps and ``dw_hat`` the predicted one
+    (each window against its own truth): ``simerr_model`` / ``simerr_hold`` = sum over h of
+    the mean |error| per axis of the prediction and of holding the rate (rad/s);
+    ``corr_h{h}`` = correlation of dw_hat and dw over the windows; ``gain_h{h}`` = the
+    least-squares scale of dw_hat onto dw, <dw_hat, dw> / <dw_hat, dw_hat>. Scaled by that
+    gain, a prediction's mean-square error is (1 - corr^2) times the rate-held one's at best:
+    a diagnostic of what a model's rotation can gain, not a model."""
+    start = windows.body_rate[:, None]
+    true = windows.truth["w"] - start
+    pred = prediction["w"] - start
+    out = {"simerr_model": np.abs(pred - true).mean(0).sum(0).tolist(),
+           "simerr_hold": np.abs(true).mean(0).sum(0).tolist()}
+    for h in horizons:
+        a, b = pred[:, h - 1], true[:, h - 1]
+        a0, b0 = a - a.mean(0), b - b.mean(0)
+        out[f"corr_h{h}"] = ((a0 * b0).sum(0) / np.sqrt((a0 * a0).sum(0) * (b0 * b0).sum(0)
+                                                        + 1e-300)).tolist()
+        out[f"gain_h{h}"] = ((a * b).sum(0) / np.maximum((a * a).sum(0), 1e-300)).tolist()
+    return out
