@@ -11,7 +11,11 @@ windows at every sample (:mod:`quadsim.bench.nanodrone`), predicts them with
   runs (``models/effects/nanodrone_cf21bl_diagnosed.toml``, every number with unit and source),
   and ``quadsim_nominal+A+B..`` rows adding its effects one at a time in the file's order (how
   much each shrinks the error); ``quadsim_diagnosed_rate_held``: the diagnosed forces with
-  the body rate held as in the authors' physics baseline;
+  the body rate held as in the authors' physics baseline; with ``--align-rotors`` also
+  ``quadsim_diagnosed_aligned`` and ``quadsim_diagnosed_rate_held_aligned``: the same on
+  windows whose rotor speeds are shifted per run by the rotor-speed delay behind the body
+  rate estimated from that run's own rotor speeds and body rates
+  (:func:`quadsim.bench.nanodrone.align_rotor_speeds`; JSON ``rotor_delays_ms``);
 
 the quadsim rows batched over all windows on the analytic engine's equations
 (:func:`quadsim.sim.rollout.rollout`, fixed-step RK4 at the 10 ms sample period), and scores
@@ -23,10 +27,13 @@ the test runs.
 Usage::
 
     python scripts/nanodrone_benchmark.py --data ../shared/data/nanodrone_cf21bl \\
-        --json nano.json [--protocol published|per_run] [--plot docs/img/nanodrone.png]
+        --json nano.json [--protocol published|per_run] [--plot docs/img/nanodrone.png] \\
+        [--runs test|validation] [--diagnosed EFFECTS.toml] [--align-rotors]
 
 JSON: ``{"protocol": P, "windows": B, "rows": {NAME: {"p": [h1, h10, h50, SimErr], "v": ...,
-"R": ..., "w": ...}}}`` (m, m/s, rad, rad/s); same inputs give the same bytes. The wall and
+"R": ..., "w": ...}}, "rate_skill": {ROW: ...}}`` (m, m/s, rad, rad/s; ``rate_skill``: per
+body axis, how much of the body-rate change the nominal and diagnosed rows get right,
+:func:`quadsim.bench.nanodrone.rate_skill`); same inputs give the same bytes. The wall and
 CPU time of each model's predictions go to stdout.
 """
 
@@ -90,7 +97,7 @@ def quadsim_prediction(windows: bench.Windows, params, effects=None, *,
             "w": out["body_rate"][:, 1:]}
 
 
-def predictions(windows: bench.Windows, diagnosed: Path):
+def predictions(windows: bench.Windows, diagnosed: Path, aligned: bench.Windows | None = None):
     """(name, callable) per model row."""
     params = load_params(NOMINAL)
     model = load_effect_file(diagnosed)
@@ -107,7 +114,12 @@ def predictions(windows: bench.Windows, diagnosed: Path):
             ("quadsim_diagnosed", lambda: quadsim_prediction(windows, completed,
                                                              model.effects)),
             ("quadsim_diagnosed_rate_held", lambda: quadsim_prediction(
-                windows, completed, model.effects, hold_body_rate=True))]
+                windows, completed, model.effects, hold_body_rate=True)),
+            *([] if aligned is None else [
+                ("quadsim_diagnosed_aligned", lambda: quadsim_prediction(
+                    aligned, completed, model.effects)),
+                ("quadsim_diagnosed_rate_held_aligned", lambda: quadsim_prediction(
+                    aligned, completed, model.effects, hold_body_rate=True))])]
 
 
 def plot(path: Path, curves: dict, protocol: str, published: bool) -> None:
@@ -159,19 +171,40 @@ def main(argv: list[str] | None = None) -> int:
                         help="score the melon test runs (default) or the validation runs "
                              "(run 4 of square/random/chirp: the held-out set while a model "
                              "is being diagnosed)")
+    parser.add_argument("--align-rotors", action="store_true",
+                        help="also score the diagnosed rows with each run's rotor speeds "
+                             "shifted by their delay behind the body rate, estimated from "
+                             "that run (quadsim.bench.nanodrone.align_rotor_speeds)")
     parser.add_argument("--diagnosed", type=Path, default=DIAGNOSED,
                         help="effect file of the diagnosed model (default %(default)s)")
     args = parser.parse_args(argv)
     check_output("--json", args.json)
     if args.plot:
         check_output("--plot", args.plot)
-    windows = bench.make_windows(run_logs(args.data, args.runs))
-    rows, curves = {}, {}
-    for name, predict in predictions(windows, args.diagnosed):
+    logs = run_logs(args.data, args.runs)
+    windows = bench.make_windows(logs)
+    aligned, delays = None, {}
+    if args.align_rotors:
+        shifted = [bench.align_rotor_speeds(log) for log in logs]
+        aligned = bench.make_windows([log for log, _ in shifted])
+        delays = {Path(str(log.path)).name.split(".")[0]: round(1e3 * d, 1)
+                  for log, (_, d) in zip(logs, shifted)}
+        print("rotor-speed delays behind the body rate (ms): "
+              + ", ".join(f"{k} {v:+.1f}" for k, v in delays.items()))
+    rows, curves, skill = {}, {}, {}
+    for name, predict in predictions(windows, args.diagnosed, aligned):
         wall, cpu = time.perf_counter(), time.process_time()
         prediction = predict()
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         curves[name] = bench.curves(windows, prediction, args.protocol)
+        if name in ("quadsim_nominal", "quadsim_diagnosed", "quadsim_diagnosed_aligned"):
+            skill[name] = {k: [round(x, 4) for x in v] for k, v in bench.rate_skill(
+                aligned if name.endswith("_aligned") else windows, prediction).items()}
+            print(f"  {name} body rate per axis x/y/z: SimErr "
+                  + "/".join(f"{x:.2f}" for x in skill[name]["simerr_model"])
+                  + " (rate held " + "/".join(f"{x:.2f}" for x in skill[name]["simerr_hold"])
+                  + "), corr of the predicted and true rate change at h = 50 "
+                  + "/".join(f"{x:.2f}" for x in skill[name]["corr_h50"]))
         rows[name] = bench.summary(curves[name])
         print(f"{name}: {len(windows)} windows x {bench.HORIZON} steps in {wall:.2f} s wall, "
               f"{cpu:.2f} s CPU; SimErr p {rows[name]['p'][3]:.4f} m, v {rows[name]['v'][3]:.4f}"
@@ -179,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, row in bench.PUBLISHED.items() if args.runs == "test" else ():
         rows[f"published_{name}"] = row
     result = {"protocol": args.protocol, "runs": args.runs, "windows": len(windows),
+              **({"rotor_delays_ms": delays} if args.align_rotors else {}),
+              "rate_skill": skill,
               "rows": {k: {q: [round(x, 6) for x in v[q]] for q in bench.QUANTITIES}
                        for k, v in rows.items()}}
     atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")

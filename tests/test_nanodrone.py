@@ -211,3 +211,78 @@ def test_effect_file_refuses_wrong_units_and_unknown_effects(tmp_path):
                    '"kg m/rad", source = "x" }\n')
     with pytest.raises(InputError, match="plausible range"):
         load_effect_file(bad)
+
+
+def _torque_driven_log(delay_s: float, n: int = 3000) -> FlightLog:
+    """100 Hz log whose logged rotor speeds lag by ``delay_s`` the ones whose roll and pitch
+    torques drive its body rate (rotor 1 front-right, 2 rear-right, 3 rear-left, 4
+    front-left); the attitude integrated from the body rate (midpoint rate per step)."""
+    from scipy.integrate import cumulative_trapezoid
+    from scipy.ndimage import gaussian_filter1d
+
+    dt = bench.PERIOD
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(4)
+    base = 2000.0 + gaussian_filter1d(rng.normal(0, 150, (n, 4)), 4, axis=0)
+    lag = round(delay_s / dt)
+    logged = np.vstack([np.repeat(base[:1], lag, 0), base[:n - lag]])  # Omega(t - delay)
+    sq = base ** 2
+    accel = np.column_stack([sq[:, 2] + sq[:, 3] - sq[:, 0] - sq[:, 1],
+                             sq[:, 1] + sq[:, 2] - sq[:, 0] - sq[:, 3], np.zeros(n)]) * 2e-6
+    rate = cumulative_trapezoid(accel - accel.mean(0), dx=dt, axis=0, initial=0.0)
+    quat = np.zeros((n, 4))
+    quat[0] = [1.0, 0, 0, 0]
+    for k in range(1, n):
+        turn = 0.5 * (rate[k - 1] + rate[k]) * dt
+        angle = np.linalg.norm(turn)
+        axis = turn / angle if angle > 0 else turn
+        step = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
+        quat[k] = quat_multiply(quat[k - 1][None], step[None])[0]
+    return FlightLog(t=t, position=np.zeros((n, 3)), quat=quat, velocity=np.zeros((n, 3)),
+                     body_rate=rate, accel=None, rotor_speed=logged, path="torque")
+
+
+def test_align_rotor_speeds_shifts_by_the_delay_and_keeps_every_sample():
+    log = _log(120)                                  # rotor speeds 2000 + k at sample k
+    aligned, delay = bench.align_rotor_speeds(log, 0.025)
+    assert delay == 0.025 and aligned.rotor_speed.shape == log.rotor_speed.shape
+    # Omega(t + 25 ms) = 2000 + k + 2.5 inside; held at the last sample at the end
+    np.testing.assert_allclose(aligned.rotor_speed[:-3, 0], 2002.5 + np.arange(117), atol=1e-9)
+    assert aligned.rotor_speed[-1, 0] == log.rotor_speed[-1, 0]
+    np.testing.assert_array_equal(aligned.body_rate, log.body_rate)
+    assert bench.align_rotor_speeds(log, 0.0)[0] is log
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.03])
+def test_rotor_delay_is_found_from_the_torque_it_drives(delay):
+    """The body rate is the integral of the roll/pitch torque of the rotor speeds ``delay``
+    earlier: the estimate recovers the delay within 3 ms, and shifting by it brings the
+    rotor speeds back into step with the torque they drive."""
+    log = _torque_driven_log(delay)
+    estimate = bench.rotor_delay(log)
+    assert estimate == pytest.approx(delay, abs=0.003)
+    aligned, applied = bench.align_rotor_speeds(log)
+    assert applied == estimate
+    if delay:                    # back in step: the residual delay is below a sample
+        assert abs(bench.rotor_delay(aligned)) < 0.004
+
+
+def test_rate_skill_closed_forms():
+    w = bench.make_windows([_log(120), _log(100, offset=5.0)])
+    rng = np.random.default_rng(0)
+    truth = dict(w.truth, w=w.truth["w"] + rng.normal(0, 0.3, w.truth["w"].shape).cumsum(1))
+    w = bench.Windows(w.position, w.velocity, w.quat, w.body_rate, w.rotor_speed, truth,
+                      w.run, w.names)
+    change = truth["w"] - w.body_rate[:, None]
+    perfect = bench.rate_skill(w, {"w": truth["w"]})
+    np.testing.assert_allclose(perfect["simerr_model"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(perfect["corr_h50"], 1.0, rtol=1e-12)
+    np.testing.assert_allclose(perfect["gain_h10"], 1.0, rtol=1e-12)
+    held = bench.rate_skill(w, bench.naive_prediction(w))
+    np.testing.assert_allclose(held["simerr_model"], held["simerr_hold"], rtol=1e-12)
+    np.testing.assert_allclose(held["simerr_hold"], np.abs(change).mean(0).sum(0), rtol=1e-12)
+    half = bench.rate_skill(w, {"w": w.body_rate[:, None] + 0.5 * change})
+    np.testing.assert_allclose(half["gain_h50"], 2.0, rtol=1e-12)          # scale it back
+    np.testing.assert_allclose(half["corr_h50"], 1.0, rtol=1e-12)
+    np.testing.assert_allclose(half["simerr_model"], 0.5 * np.array(held["simerr_hold"]),
+                               rtol=1e-12)

@@ -36,16 +36,25 @@ authors' physics model (thrust ``Kt sum Omega^2`` along body z, clipped at
 stage, body rate held constant: their code multiplies the angular acceleration by zero).
 Their constants: m = 0.045 kg, g = 9.81 m/s^2, Kt = 3.72e-8 N s^2/rad^2, thrust-to-weight 2.
 
+Rotor-speed timing (:func:`align_rotor_speeds`): the authors shift each run's rotor speeds by
+one integer lag (cross-correlation of sum Omega^2 with the body-z acceleration). What turns
+the vehicle is the torque, so the rotor speeds can also be timed against the body rate: the
+lag at which the integrated Omega_i^2 best explains the body rate
+(:func:`quadsim.logs.delays.estimate_delays`: rotor delay minus gyro delay, both against
+the attitude). The shift uses only the run's own rotor speeds and body rates -- inputs and
+initial states the protocol hands the model -- but of the whole run, not of one window.
+
 Units SI throughout; quaternions scalar-first body to world, as everywhere in quadsim.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.frames import quat_conjugate, quat_derivative, quat_multiply, quat_normalize, rotate
+from ..logs.delays import estimate_delays
 from ..logs.flightlog import FlightLog
 
 __all__ = [
@@ -54,10 +63,13 @@ __all__ = [
     "PUBLISHED",
     "QUANTITIES",
     "Windows",
+    "align_rotor_speeds",
     "curves",
     "make_windows",
     "naive_prediction",
     "physics_prediction",
+    "rate_skill",
+    "rotor_delay",
     "score",
     "summary",
 ]
@@ -140,6 +152,31 @@ def make_windows(logs: list[FlightLog], horizon: int = HORIZON) -> Windows:
     cat = {k: np.concatenate(v) for k, v in parts.items()}
     return Windows(cat["p"], cat["v"], cat["q"], cat["w"], cat["u"],
                    {k: np.concatenate(v) for k, v in truth.items()}, cat["run"], tuple(names))
+
+
+def rotor_delay(log: FlightLog) -> float | None:
+    """Delay (s) of the rotor speeds behind the body rate of ``log``, estimated from the log
+    itself (module docstring); None when the log does not resolve it. Positive: the rotor
+    speeds lag."""
+    delays = estimate_delays(log).delays
+    if delays["rotor"] is None or delays["gyro"] is None:
+        return None
+    return float(delays["rotor"] - delays["gyro"])
+
+
+def align_rotor_speeds(log: FlightLog, delay_s: float | None = None
+                       ) -> tuple[FlightLog, float]:
+    """``log`` with its rotor speeds shifted earlier by ``delay_s`` (default
+    :func:`rotor_delay`; 0 when not resolved): Omega_aligned(t) = Omega(t + delay) by linear
+    interpolation, held at the ends, so that every sample -- and every benchmark window --
+    is kept. Returns the log and the delay applied (s)."""
+    delay = rotor_delay(log) if delay_s is None else float(delay_s)
+    if delay is None or delay == 0.0:
+        return log, 0.0
+    t, speed = log.t, log.rotor_speed
+    shifted = np.stack([np.interp(t + delay, t, speed[:, j]) for j in range(speed.shape[1])],
+                       axis=1)
+    return replace(log, rotor_speed=shifted), delay
 
 
 def naive_prediction(windows: Windows) -> dict:
@@ -228,3 +265,27 @@ def summary(curve: dict) -> dict:
 def score(windows: Windows, prediction: dict, protocol: str = "published") -> dict:
     """The benchmark's numbers of one prediction: quantity -> [h1, h10, h50, SimErr]."""
     return summary(curves(windows, prediction, protocol))
+
+
+def rate_skill(windows: Windows, prediction: dict, horizons: tuple[int, ...] = (10, 50)) -> dict:
+    """How much of the body-rate change a prediction gets right, per body axis (x, y, z).
+
+    With ``dw = w(h) - w(0)`` the true change over h steps and ``dw_hat`` the predicted one
+    (each window against its own truth): ``simerr_model`` / ``simerr_hold`` = sum over h of
+    the mean |error| per axis of the prediction and of holding the rate (rad/s);
+    ``corr_h{h}`` = correlation of dw_hat and dw over the windows; ``gain_h{h}`` = the
+    least-squares scale of dw_hat onto dw, <dw_hat, dw> / <dw_hat, dw_hat>. Scaled by that
+    gain, a prediction's mean-square error is (1 - corr^2) times the rate-held one's at best:
+    a diagnostic of what a model's rotation can gain, not a model."""
+    start = windows.body_rate[:, None]
+    true = windows.truth["w"] - start
+    pred = prediction["w"] - start
+    out = {"simerr_model": np.abs(pred - true).mean(0).sum(0).tolist(),
+           "simerr_hold": np.abs(true).mean(0).sum(0).tolist()}
+    for h in horizons:
+        a, b = pred[:, h - 1], true[:, h - 1]
+        a0, b0 = a - a.mean(0), b - b.mean(0)
+        out[f"corr_h{h}"] = ((a0 * b0).sum(0) / np.sqrt((a0 * a0).sum(0) * (b0 * b0).sum(0)
+                                                        + 1e-300)).tolist()
+        out[f"gain_h{h}"] = ((a * b).sum(0) / np.maximum((a * a).sum(0), 1e-300)).tolist()
+    return out

@@ -19,6 +19,9 @@ plausible range are refused in one line (:class:`~quadsim.core.errors.InputError
     >>> from quadsim.effects.effectfile import load_effect_file
     >>> model = load_effect_file("models/effects/nanodrone_cf21bl_diagnosed.toml")
     >>> model.params, [e.name for e in model.effects.effects]
+
+:func:`render_effect_file` writes one (the text; ``python -m quadsim.gap --write-effects``
+uses it to store a diagnosed model).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from ..core.files import read_toml
 from . import EFFECTS, make_effect
 from .base import EffectSet
 
-__all__ = ["SCHEMA", "EffectModel", "load_effect_file"]
+__all__ = ["SCHEMA", "EffectModel", "load_effect_file", "render_effect_file"]
 
 SCHEMA = "quadsim.effects/1"
 
@@ -50,7 +53,10 @@ class EffectModel:
 def load_effect_file(path: str | Path) -> EffectModel:
     """Read and validate an effect file (module docstring); raises :class:`InputError`."""
     path = Path(path)
-    data = read_toml(path)
+    return _parse(read_toml(path), path)
+
+
+def _parse(data: dict, path) -> EffectModel:
     unknown = sorted(set(data) - {"schema", "params", "description", "effect"})
     if unknown:
         raise field_error(path, unknown[0], "unknown key (valid: schema, params, description, "
@@ -93,3 +99,30 @@ def load_effect_file(path: str | Path) -> EffectModel:
             raise field_error(path, where, str(exc)) from None
     return EffectModel(data["params"], str(data.get("description", "")),
                        EffectSet(tuple(effects)), sources)
+
+
+def render_effect_file(params: str, description: str, effects: list[tuple[str, dict]],
+                       header: str = "") -> str:
+    """TOML text of an effect file: ``effects`` = [(effect name, {parameter: (value,
+    source)}), ...] in order; units from the effects' declarations. The text loads with
+    :func:`load_effect_file` (checked here: unknown names, units, ranges raise)."""
+    from ..identify.skeleton import render_params
+
+    entries = []
+    for name, values in effects:
+        if name not in EFFECTS:
+            raise InputError(f"effect {name!r}: unknown; valid: {', '.join(sorted(EFFECTS))}")
+        units = {p.name: p.unit for p in EFFECTS[name].parameters}
+        entry: dict = {"name": name}
+        for key, (value, source) in values.items():
+            if key not in units:
+                raise InputError(f"effect {name!r}: unknown parameter {key!r}; valid: "
+                                 f"{', '.join(units)}")
+            entry[key] = {"value": float(value), "unit": units[key], "source": str(source)}
+        entries.append(entry)
+    text = render_params({"schema": SCHEMA, "params": params, "description": description,
+                          "effect": entries}, header)
+    import tomllib
+
+    _parse(tomllib.loads(text), "effect file")     # refuse what load_effect_file refuses
+    return text

@@ -7,6 +7,8 @@ Examples::
         --report gap.html --rerun gap.rrd
     python -m quadsim.gap --model crazyflie21 --per-flight mixed/*.csv.gz \\
         --reference nominal/*.csv.gz --json mixed.json
+    python -m quadsim.gap --model nanodrone_cf21bl.toml --effects-file diagnosed.toml \\
+        train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
 """
 
 from __future__ import annotations
@@ -49,6 +51,18 @@ def _parser() -> argparse.ArgumentParser:
                         help="flights with rotor speeds and commands: logs without rotor "
                              "speeds get speeds synthesised from their commands "
                              "(quadsim.gap.commands; default: --reference)")
+    parser.add_argument("--effects-file", metavar="EFFECTS.toml",
+                        help="effects already added to --model (an effect file, "
+                             "quadsim.effects.effectfile): the diagnosis starts from the "
+                             "diagnosed model, fits every candidate on top of it and never "
+                             "refits these")
+    parser.add_argument("--write-effects", metavar="OUT.toml",
+                        help="write an effect file: the --effects-file effects plus the "
+                             "named effect (or --add NAME), fitted here with unit and "
+                             "source (quadsim.gap.save)")
+    parser.add_argument("--add", metavar="NAME",
+                        help="with --write-effects: the ranked candidate to add instead of "
+                             "the named one")
     parser.add_argument("--effects", nargs="+", metavar="NAME",
                         help="candidate effects (default: the whole library)")
     parser.add_argument("--window", type=float, default=None, metavar="S",
@@ -73,6 +87,11 @@ def _check_args(args) -> None:
     from ..core.args import check_inputs, check_number, check_output, distinct_files
 
     check_number("--window", args.window, low=0.0, high=60.0, unit="s")
+    if args.effects_file is not None:
+        check_inputs("--effects-file", [args.effects_file])
+        if args.per_flight:
+            raise InputError("--effects-file: not used with --per-flight (each flight is "
+                             "judged against the --reference flights' own model)")
     for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
                         ("--reference", args.reference),
                         ("--command-reference", args.command_reference)):
@@ -85,14 +104,22 @@ def _check_args(args) -> None:
     if args.reference and not args.per_flight:
         raise InputError("--reference: only used with --per-flight")
     inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
-              *(args.command_reference or [])]
+              *(args.command_reference or []),
+              *([args.effects_file] if args.effects_file is not None else [])]
     outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
-                                   ("--rerun", args.rerun)) if o is not None]
+                                   ("--rerun", args.rerun),
+                                   ("--write-effects", args.write_effects)) if o is not None]
     for flag, out in outputs:
         check_output(flag, out, {"--json": (".json",), "--report": (".html",),
-                                 "--rerun": (".rrd",)}[flag], inputs=inputs)
+                                 "--rerun": (".rrd",), "--write-effects": (".toml",)}[flag],
+                     inputs=inputs)
     if len({str(o) for _, o in outputs}) < len(outputs):
-        raise InputError("--json/--report/--rerun: the same output file given twice")
+        raise InputError("--json/--report/--rerun/--write-effects: the same output file "
+                         "given twice")
+    if args.add is not None and args.write_effects is None:
+        raise InputError("--add: only used with --write-effects")
+    if args.write_effects is not None and args.per_flight:
+        raise InputError("--write-effects: not used with --per-flight")
 
 
 def _map_fn(args, bar):
@@ -197,11 +224,50 @@ def collapse_warnings(messages: list[str]) -> list[str]:
     return out
 
 
+def _write_effects(args, params, base, result) -> None:
+    """--write-effects: the starting model's effects, then the one this diagnosis adds."""
+    from pathlib import Path
+
+    from ..core.files import atomic_write_text
+    from ..effects.effectfile import render_effect_file
+    from .save import added_effects
+
+    names = [Path(p).name for p in args.logs]
+    held = [Path(p).name for p in args.holdout or []]
+    logs = (f"{len(names)} training log(s) {', '.join(names)}"
+            + (f" (held out: {', '.join(held)})" if held else "")
+            + (f", on top of {Path(args.effects_file).name}" if base else ""))
+    kept = []
+    if base is not None:
+        for effect in base.effects.effects:
+            kept.append((effect.name, {p.name: (getattr(effect, p.name),
+                                                base.sources[(effect.name, p.name)])
+                                       for p in effect.parameters
+                                       if (effect.name, p.name) in base.sources}))
+    added = added_effects(result, args.add, logs=logs, base=tuple(n for n, _ in kept))
+    text = render_effect_file(
+        base.params if base is not None else params.name,
+        f"{params.name} plus the effects python -m quadsim.gap named on its logs",
+        kept + added,
+        header=f"Written by python -m quadsim.gap --write-effects (rerun it instead of "
+               f"editing by hand): {', '.join(n for n, _ in kept + added)} on {params.name}.")
+    atomic_write_text(args.write_effects, text)
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
+    base_effects, base = (), None
+    if args.effects_file is not None:
+        from ..effects.effectfile import load_effect_file
+
+        base = load_effect_file(args.effects_file)
+        if base.params not in (params.name, str(args.model)):
+            raise InputError(f"{args.effects_file}: params: the effects complete "
+                             f"{base.params!r}, --model is {params.name!r}")
+        base_effects = base.effects.effects
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
@@ -264,7 +330,7 @@ def main(argv: list[str] | None = None) -> int:
                                          refused=refused, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
-                              progress=progress, **extra)
+                              progress=progress, base_effects=base_effects, **extra)
     finally:
         if bar is not None:
             bar.close()
@@ -274,6 +340,8 @@ def main(argv: list[str] | None = None) -> int:
         write_html(args.report, result)
     if args.rerun:
         write_rerun(args.rerun, result)
+    if args.write_effects:
+        _write_effects(args, params, base, result)
     if not args.quiet:
         print(summary(result), end="")
     return 0

@@ -8,7 +8,7 @@ thing.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -109,7 +109,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     return out
 
 
-def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> dict:
+def _where(held, params, sigma, rotor, before, effects_after, after, kstep,
+           base=()) -> dict:
     masks = [regime_masks(f.fit, params) for f in held]
     dt = float(held[0].fit.t[1] - held[0].fit.t[0])
     names = _channels(rotor, params)
@@ -123,7 +124,8 @@ def _where(held, params, sigma, rotor, before, effects_after, after, kstep) -> d
         "regime": by_regime(before, masks),
         "regime_after": by_regime(after, masks),
         "band": by_band(before, dt),
-        "kstep_before": kstep_errors([f.fit for f in held], params, []) if kstep else {},
+        "kstep_before": kstep_errors([f.fit for f in held], params, list(base)) if kstep
+        else {},
         "kstep_after": kstep_errors([f.fit for f in held], params, effects_after) if kstep else {},
     }
 
@@ -150,8 +152,13 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
              max_combination: int = 2, progress: Callable | None = None,
              window_s: float = DEFAULT_WINDOW_S, kstep: bool = True,
-             map_fn: Callable = map) -> dict:
+             map_fn: Callable = map, base_effects: Sequence = ()) -> dict:
     """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`).
+
+    ``base_effects``: effects already in the model (e.g. from an effect file,
+    :mod:`quadsim.effects.effectfile`): the diagnosis starts from ``params`` plus them -- the
+    "before" gap is theirs, every candidate is fitted and scored on top of them, and they
+    are never refitted -- so that a diagnosed model can be diagnosed again.
 
     ``kstep=False`` skips the k-step prediction errors (the slowest part of "where").
     ``map_fn(fn, items)`` runs the candidate fits (e.g. a :mod:`quadsim.core.executor` executor)."""
@@ -162,8 +169,11 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     notes.extend(delay_notes(flights + (held_in or [])))
     train, held = _split(flights, held_in, notes)
     result = _diagnose_split(train, held, params, effects, max_combination, progress, notes,
-                             kstep, map_fn)
+                             kstep, map_fn, tuple(base_effects))
     result["checks"] = checks
+    if base_effects:
+        result["base_effects"] = [{"name": e.name, "params": {
+            p.name: float(getattr(e, p.name)) for p in e.parameters}} for e in base_effects]
     return result
 
 
@@ -173,13 +183,13 @@ def params_have_data_map(params: VehicleParams) -> bool:
 
 
 def _diagnose_split(train, held, params, effect_names, max_combination, progress, notes,
-                    kstep=False, map_fn=map):
+                    kstep=False, map_fn=map, base=()):
     """The held-out verdict by evidence (:mod:`.heldout`, :mod:`.heldout_verdict`)."""
     rotor = all(f.fit.command is not None for f in train + held)
     if rotor and not params_have_data_map(params):
         params = fit_motor_map([f.fit for f in train], params)
     fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
-    reference = heldout.nominal_reference(fit_on, params, rotor)
+    reference = heldout.nominal_reference(fit_on, params, rotor, base)
     sigma = reference.sigma
     vbat = None
     if rotor and all(s.vbat is not None and np.all(np.isfinite(s.vbat)) for s in fit_on):
@@ -202,11 +212,11 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         for w in ws:
             weighed.append(w)
             tick(w.name)
-    before = _scaled(held, params, [], sigma, rotor)
+    before = _scaled(held, params, list(base), sigma, rotor)
     decision = hv.decide(weighed, fit_on, held_on, reference, before, max_combination, tick)
     lead = decision["lead"]
-    effects_after = heldout.effects_of(lead.train) if decision["lead_name"] != "no_difference" \
-        else []
+    effects_after = list(base) + (heldout.effects_of(lead.train)
+                                  if decision["lead_name"] != "no_difference" else [])
     after = [r / sigma for r in lead.held_residuals] if effects_after else before
     verdict = _verdict(decision, train, held, reference, before, after, notes)
     names = _channels(rotor, params)
@@ -214,7 +224,7 @@ def _diagnose_split(train, held, params, effect_names, max_combination, progress
         "schema": SCHEMA,
         "model": params.name,
         "train": [f.name for f in train], "holdout": [f.name for f in held],
-        "where": _where(held, params, sigma, rotor, before, effects_after, after, kstep),
+        "where": _where(held, params, sigma, rotor, before, effects_after, after, kstep, base),
         "baseline": _public(decision["baseline"] or {}),
         "effects": [_public(e) for e in decision["entries"]],
         "verdict": verdict,

@@ -67,10 +67,13 @@ ROTOR_SUBSTEPS = 4
 
 @dataclass(frozen=True)
 class Candidate:
-    """Effects to fit together: ``parts`` = ((effect name, fixed values, fitted names), ...)."""
+    """Effects to fit together: ``parts`` = ((effect name, fixed values, fitted names), ...);
+    ``base``: effects already in the model (a diagnosed model as the starting point, e.g.
+    ``python -m quadsim.gap --effects-file``), applied first and never fitted."""
 
     name: str
     parts: tuple[tuple[str, dict, tuple[str, ...]], ...]
+    base: tuple = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -82,7 +85,7 @@ class Candidate:
         return {f"{name}.{p}": float(v) for name, fixed, _ in self.parts for p, v in fixed.items()}
 
     def effects(self, theta: np.ndarray) -> list:
-        out, k = [], 0
+        out, k = list(self.base), 0
         for name, fixed, fitted in self.parts:
             values = dict(fixed)
             for p in fitted:
@@ -95,7 +98,7 @@ class Candidate:
         return out
 
     def combine(self, other: Candidate) -> Candidate:
-        return Candidate(f"{self.name}+{other.name}", self.parts + other.parts)
+        return Candidate(f"{self.name}+{other.name}", self.parts + other.parts, self.base)
 
 
 @dataclass

@@ -111,15 +111,18 @@ def noise_model(nominal: list[np.ndarray], dt: float, floor: np.ndarray
     return sigma, tau
 
 
-def nominal_reference(train: list, params: VehicleParams, rotor: bool) -> Reference:
+def nominal_reference(train: list, params: VehicleParams, rotor: bool,
+                      base: tuple = ()) -> Reference:
     """The parameter set as the reference model (module doc, stage 1); ``train``: decimated
-    states of the training flights; ``params`` already carries their motor map."""
+    states of the training flights; ``params`` already carries their motor map; ``base``:
+    effects already in the model (``--effects-file``), part of every explanation's model
+    (carried as the shared candidate's ``base``) and never refitted."""
     dt = float(train[0].t[1] - train[0].t[0])
-    nominal = [residuals(s, params, [], rotor_channel=rotor) for s in train]
+    nominal = [residuals(s, params, list(base), rotor_channel=rotor) for s in train]
     sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
     full = shared_candidate(rotor, False)
     cand = dataclasses.replace(full, parts=tuple(p for p in full.parts
-                                                 if p[0] not in _NOT_SHARED))
+                                                 if p[0] not in _NOT_SHARED), base=tuple(base))
     off = []
     for name, _, fitted in cand.parts:
         specs = {p.name: p for p in effect_class(name).parameters}
@@ -206,7 +209,7 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
 
 def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
     """One explanation's residuals on both sets and its held-out log-likelihood."""
-    effects = effects_of(ev)
+    effects = list(reference.candidate.base) + effects_of(ev)
 
     def res(states):
         return residuals(states, reference.params, effects, rotor_channel=reference.rotor)

@@ -192,7 +192,7 @@ def consistent(entry: dict, flights, reference) -> dict:
         keep = tuple(p for p in fitted if not (name == "thrust_factor" and p == "alpha"))
         parts.append((name, dict(fixed), keep))
         theta += [ev.values[f"{name}.{p}"] for p in keep]
-    cand = Candidate(ev.name, tuple(parts))
+    cand = Candidate(ev.name, tuple(parts), reference.candidate.base)
     judged = [q for q in entry["params"] if not q.endswith(".alpha")
               and entry["significant"].get(q)]
     return consistency.check(cand, np.asarray(theta, float), judged, flights,

@@ -1,0 +1,102 @@
+"""The gap diagnosis started from a diagnosed model (``diagnose(base_effects=...)``,
+``python -m quadsim.gap --effects-file``): the effects already added are in every fit and
+in the "before" gap, and the next effect is named on top of them."""
+
+from __future__ import annotations
+
+import pytest
+
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.__main__ import main
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.logs.flightlog import write_log
+from quadsim.vehicle.params import load_params
+
+DRAG = ("rotor_drag", {"coefficient": 1e-6})
+MASS = ("mass_offset", {"mass": 0.004})
+
+
+@pytest.fixture(scope="module")
+def flights():
+    cf = load_params("crazyflie21")
+    hidden = [make_effect(n, **v) for n, v in (DRAG, MASS)]
+    return cf, [synthetic_flight(cf, hidden, seed=s, duration=5.0) for s in (0, 1)]
+
+
+def test_diagnosis_from_a_diagnosed_model_names_what_is_left(flights):
+    cf, logs = flights
+    names = ["mass_offset", "rotor_drag"]
+    plain = diagnose(logs, cf, kstep=False, effects=names, max_combination=1)
+    base = [make_effect(*DRAG[:1], **DRAG[1])]
+    again = diagnose(logs, cf, kstep=False, effects=names, max_combination=1,
+                     base_effects=base)
+    assert again["base_effects"] == [{"name": "rotor_drag",
+                                      "params": {"coefficient": 1e-6,
+                                                 "axial_coefficient": 0.0}}]
+    # the drag already in the model: its force channels start near the noise, the mass is
+    # what is left and is named with its true value (4 g) inside its CI
+    before = plain["where"]["heldout_rms_before"]
+    after_drag = again["where"]["heldout_rms_before"]
+    assert after_drag["Fx"] < 0.5 * before["Fx"] and after_drag["Fy"] < 0.5 * before["Fy"]
+    assert again["verdict"]["effect"] == "mass_offset"
+    top = again["effects"][0]
+    assert top["name"] == "mass_offset"
+    assert abs(top["params"]["mass_offset.mass"] - 0.004) <= top["ci"]["mass_offset.mass"]
+    # rotor drag fitted on top of the exact drag: nothing more to add (within its CI)
+    drag = next(e for e in again["effects"] if e["name"] == "rotor_drag")
+    assert abs(drag["params"]["rotor_drag.coefficient"]) <= \
+        max(drag["ci"]["rotor_drag.coefficient"], 0.05e-6)
+
+
+def test_effects_file_cli(flights, tmp_path, capsys):
+    _, logs = flights
+    paths = []
+    for k, log in enumerate(logs):
+        paths.append(str(tmp_path / f"f{k}.csv.gz"))
+        write_log(paths[-1], log)
+    wrong = tmp_path / "other.toml"
+    wrong.write_text('schema = "quadsim.effects/1"\nparams = "physical"\n[[effect]]\n'
+                     'name = "rotor_drag"\ncoefficient = { value = 1e-6, unit = "kg/rad", '
+                     'source = "test" }\n')
+    out = tmp_path / "gap.json"
+    assert main(["--model", "crazyflie21", "--effects-file", str(wrong), *paths,
+                 "--json", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {wrong}: params:") and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert main(["--model", "crazyflie21", "--effects-file", str(tmp_path / "none.toml"),
+                 *paths, "--quiet"]) == 2
+    assert "--effects-file: file not found" in capsys.readouterr().err
+
+
+def test_write_effects_then_diagnose_again(flights, tmp_path):
+    """The user's loop: diagnose, store the effect it found (--write-effects), diagnose
+    again from that file; the second file holds both effects with units and sources."""
+    from quadsim.effects.effectfile import load_effect_file
+
+    _, logs = flights
+    paths = []
+    for k, log in enumerate(logs):
+        paths.append(str(tmp_path / f"f{k}.csv.gz"))
+        write_log(paths[-1], log)
+    first, second = tmp_path / "r1.toml", tmp_path / "r2.toml"
+    common = ["--model", "crazyflie21", *paths, "--quiet", "--workers", "1",
+              "--effects", "mass_offset", "rotor_drag"]
+    assert main([*common, "--write-effects", str(first), "--add", "rotor_drag"]) == 0
+    one = load_effect_file(first)
+    assert [e.name for e in one.effects.effects] == ["rotor_drag"]
+    assert one.effects.effects[0].coefficient == pytest.approx(1e-6, rel=0.1)
+    assert "rotor_drag candidate" in one.sources[("rotor_drag", "coefficient")]
+    assert main([*common, "--effects-file", str(first), "--write-effects", str(second)]) == 0
+    two = load_effect_file(second)
+    assert [e.name for e in two.effects.effects] == ["rotor_drag", "mass_offset"]
+    assert two.effects.effects[1].mass == pytest.approx(0.004, rel=0.15)
+    assert two.sources[("rotor_drag", "coefficient")] == \
+        one.sources[("rotor_drag", "coefficient")]
+    assert "on top of r1.toml" in two.sources[("mass_offset", "mass")]
+    # adding an effect the file already holds is refused, nothing written
+    third = tmp_path / "r3.toml"
+    assert main([*common, "--effects-file", str(first), "--write-effects", str(third),
+                 "--add", "rotor_drag"]) == 2
+    assert not third.exists()
