@@ -312,7 +312,10 @@ def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[i
     """The reference effects without the replaced groups, and the marginalised columns."""
     names = reference.candidate.parameter_names
     keep = [k for k, n in enumerate(names) if n.split(".")[0] not in replaces]
-    effects = [e for e in reference.effects() if e.name not in replaces]
+    everything, n_base = reference.effects(), len(reference.candidate.base)
+    # effects already in the model (held-out mode's --effects-file) stay; an explanation
+    # replaces only the fitted shared groups
+    effects = everything[:n_base] + [e for e in everything[n_base:] if e.name not in replaces]
     return effects, keep
 
 
