@@ -230,9 +230,9 @@ def test_summary_states_each_answer_once_and_gathers_delay_notes(result):
     notes = [line for line in lines if line.startswith("note: ")]
     assert notes == [
         "note: only 2 reference flights: give 10 or more",
-        "note: gyro: delay not resolvable on 2 flights, the two halves of each log disagree "
+        ("note: gyro: delay not resolvable on 2 flights, the two halves of each log disagree "
         "(more than 10 ms apart: filtered or delayed beyond what its partner signal can time): "
-        "r0.csv (+08.6 / -90.6 ms), r1.csv (+18.6 / -91.6 ms)",
-        "note: signal delays vs motion capture (estimated; a gyro delay of 1.5 samples or more "
+        "r0.csv (+08.6 / -90.6 ms), r1.csv (+18.6 / -91.6 ms)"),
+        ("note: signal delays vs motion capture (estimated; a gyro delay of 1.5 samples or more "
         "is shifted out before fitting, the others are reported only): r0.csv rotor +3.0 ms; "
-        "r1.csv rotor +3.1 ms"]
+        "r1.csv rotor +3.1 ms")]
