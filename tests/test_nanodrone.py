@@ -196,7 +196,7 @@ def test_effect_file_refuses_wrong_units_and_unknown_effects(tmp_path):
 
     model = load_effect_file(ROOT / "models/effects/nanodrone_cf21bl_diagnosed.toml")
     assert [e.name for e in model.effects.effects] == ["rotor_drag", "blade_flapping",
-                                                      "inertia_error"]
+                                                      "inertia_error", "rate_damping"]
     assert all(model.sources.values())
     head = 'schema = "quadsim.effects/1"\nparams = "nanodrone_cf21bl"\n[[effect]]\n'
     bad = tmp_path / "bad.toml"
