@@ -35,12 +35,14 @@ Why the cut does not move a verdict: a screened reading lies more than SCREEN_CU
 the judge's thresholds are posterior 0.1 (a stated reading) and 0.9 (confident). The screened
 cost is that of a point the fit can reach, so a fit only lowers it, by about miss / 2 where
 the linear model was off; a second local optimum the step does not see is the remaining risk,
-so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones, every
-screened explanation's full-fit evidence lay at least 15 log units below the best (posterior
-< 1e-6); the verdicts were the same on all 26, the largest change of a reading's probability
-2.6e-3 (docs/gap.md). The explanations that matter are fitted to convergence, not with the
-full fit's 40-evaluation cap, so their evidence can exceed the full path's (by up to a few
-log units where that fit stopped early).
+so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones
+(``scripts/gap_benchmark.py --per-flight-speed DATA --compare-full``) the verdicts were the
+same on all 26 and the largest change of a reading's probability 2.6e-3 (docs/gap.md, Speed);
+tests/test_screen.py checks the same on generated flights with known effects. The
+explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
+cap, so their evidence can exceed the full path's (by up to a few log units where that fit
+stopped early); at a bound, the two Jacobians' columns of the bounded value can differ and
+with them the Occam factor (measured: 2.9 log units on a reading at posterior < 0.1).
 
 ``evaluate(..., full=True)`` fits every explanation with the full fit (the reference path
 tests/test_screen.py compares with).
