@@ -274,11 +274,15 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
             continue
         if rows[k] is None or reach[k] >= best - SCREEN_CUT:
             delay = start_delay_s if expl.name == "signal_delay" else 0.0
-            if starts[k] is None:
-                rows[k] = fit_one(states, reference, expl, jac, s_all, names_all, delay)
-            else:
+            rows[k] = None
+            if starts[k] is not None:
                 prob = problem(states, reference, expl, jac, s_all, memo)
-                rows[k] = refined(prob, cols, starts[k], names_all, s_all)
+                try:
+                    rows[k] = refined(prob, cols, starts[k], names_all, s_all)
+                except (ModelError, np.linalg.LinAlgError):   # a non-physical vehicle met
+                    rows[k] = None
+            if rows[k] is None:                               # the full fit walls it off
+                rows[k] = fit_one(states, reference, expl, jac, s_all, names_all, delay)
             best = max(best, rows[k].log_z)
         else:
             rows[k].screened = True
