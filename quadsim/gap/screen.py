@@ -194,9 +194,10 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
     steps; the Laplace evidence at the optimum with the last Jacobian."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
+    a = None
     for _ in range(MAX_STEPS):
         base = prob.residual(z)
-        z_new = _signed_step(prob, cols, z, base)[0]
+        z_new, _, a, active = _signed_step(prob, cols, z, base)
         for _ in range(4):                       # backtrack: a step must lower the cost
             vec_new = prob.stacked(z_new)
             new = float(vec_new @ vec_new)
@@ -209,10 +210,14 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
         z, vec, cost = z_new, vec_new, new
         if drop < CONVERGED:
             break
-    # the posterior precision from the Jacobian at the optimum (forward differences, as
-    # the full fit's): the last step's came from the iterate before
-    base = prob.residual(z)
-    _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base, np.ones(len(z))))
+    # the posterior precision from the last Jacobian (at the iterate before the converged
+    # step, which moved the cost by less than CONVERGED)
+    if a is None:
+        base = prob.residual(z)
+        _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base,
+                                                         np.ones(len(z))))
+    else:
+        active = int(np.count_nonzero((z <= prob.z_lo) | (z >= prob.z_hi)))
     return prob.evidence(z, vec, a.T @ a, active, names_all, s_all)
 
 
