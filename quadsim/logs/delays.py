@@ -113,11 +113,14 @@ def cross_correlation_delay(reference: np.ndarray, signal: np.ndarray, dt: float
     n = len(ref)
     k_max = max(1, min(int(round(max_lag_s / dt)), n // 4))
     lags = np.arange(-k_max, k_max + 1)
-    corr = np.empty(len(lags))
     a = ref[k_max:n - k_max]                      # fixed window: no overlap bias
-    for j, k in enumerate(lags):
-        b = sig[k_max + k:n - k_max + k]
-        corr[j] = np.sum(a * b) / np.sqrt(np.sum(a * a) * np.sum(b * b) + 1e-300)
+    m = len(a)
+    # per lag k (index j = k + k_max): sum(a * sig[j:j + m]) and sum(sig[j:j + m]^2), as one
+    # correlation per column and a running sum of squares
+    dot = sum(np.correlate(sig[:, c], a[:, c], mode="valid") for c in range(a.shape[1]))
+    energy = np.concatenate([[0.0], np.cumsum(np.sum(sig * sig, axis=1))])
+    b_b = energy[m:m + len(lags)] - energy[:len(lags)]
+    corr = dot / np.sqrt(np.sum(a * a) * b_b + 1e-300)
     return _peak(lags, corr, dt)
 
 
