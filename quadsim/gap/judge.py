@@ -109,13 +109,13 @@ def reading_text(ev, reference) -> str:
     if name == "no_difference":
         return "no difference from the reference flights"
     if name == "signal_delay":
-        mean = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[0]
+        mean = 1e3 * reference.rotor_shift_s      # the references' fitted rotor timing
         d = 1e3 * ev.values["delay.rotor"]
         if not keys:
             return "rotor speeds logged with a delay of their own (size not determined)"
         return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
                 f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
-                f"(references: {mean:+.1f} ms against motion capture)")
+                f"(references: {mean:+.1f} ms against motion capture, fitted)")
     if name == "wind":
         return _wind_text(ev, reference)
     if not keys:
