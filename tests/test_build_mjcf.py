@@ -135,8 +135,8 @@ def bad_cases():
                                  "inconsistently wound"),
         "inside out": ([dict(GOOD, shape=(v, f[:, ::-1]))], [ROTOR], "", "inside out"),
         "mm/m slip": ([dict(GOOD, shape=(v / 1000, f))], [ROTOR], "",
-                      r"part\[0\] \(block\).mesh: block.stl \(read in mesh_unit = \"mm\", scale "
-                      r"0.001 m per unit\): implied density .* drawn in m while"),
+                      (r"part\[0\] \(block\).mesh: block.stl \(read in mesh_unit = \"mm\", "
+                       r"scale 0.001 m per unit\): implied density .* drawn in m while")),
         "missing mesh": ([dict(GOOD, mesh="nope.stl")], [ROTOR], "",
                          r"part\[0\] \(block\).mesh: mesh file 'nope.stl' not found"),
         "unknown key": ([GOOD], [dict(ROTOR, speed=3)], "",
@@ -153,8 +153,8 @@ def bad_cases():
         "empty assembly": ([], [ROTOR], "", r"part: empty assembly"),
         "mm/m slip, density given": ([dict(GOOD, shape=(v / 1000, f), mass_line=(
             'density = { value = 2700.0, unit = "kg/m^3", source = "x" }'))], [ROTOR], "",
-            r"\(block\).mesh: block.stl \(read in mesh_unit = \"mm\", scale 0.001 m per "
-            r"unit\): largest extent 0.0001 m is outside .* drawn in m while mesh_unit says mm"),
+            (r"\(block\).mesh: block.stl \(read in mesh_unit = \"mm\", scale 0.001 m per "
+             r"unit\): largest extent 0.0001 m is outside .* drawn in m while mesh_unit says mm")),
         "repeated rotor": ([GOOD], [ROTOR, ROTOR], "", r"rotor: rotor names repeat"),
         "no rotors": ([GOOD], [], "", r"rotor: no rotors"),
     }
