@@ -141,6 +141,15 @@ def _words(text: str, own: bool) -> str:
     """Per-flight wording in held-out terms (the reference here is the parameter set)."""
     if not own:
         return "no difference from the nominal model"
+    cut = text.find(" (references: ")     # the nominal model's values: "off", no spread
+    if cut >= 0:
+        depth, end = 0, len(text)
+        for k in range(cut + 1, len(text)):
+            depth += {"(": 1, ")": -1}.get(text[k], 0)
+            if depth == 0:
+                end = k + 1
+                break
+        text = text[:cut] + text[end:]
     return (text.replace("no difference from the reference flights",
                          "no difference from the nominal model")
             .replace(" (beyond the references')", "")
