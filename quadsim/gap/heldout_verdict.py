@@ -36,9 +36,11 @@
    unexplained by chance.
 5. **Verdict**: the most probable reading with its probability (``tentative`` below
    :data:`quadsim.gap.judge.CONFIDENT`); readings stated: probability >=
-   :data:`quadsim.gap.judge.READING_P`; a reading whose determined magnitude is outside its
-   plausible range (:mod:`.priors`) is not named (``unexplained``; the note names that
-   effect with its own magnitude). Only determined parameters are printed.
+   :data:`quadsim.gap.judge.READING_P`. A reading whose determined magnitude is outside its
+   documented plausible range (:mod:`.priors`) has no prior probability: it is left out of
+   the posterior before ranking, and a note names that effect with its own magnitude (a
+   stand-in for something outside the library fits the data at a value no vehicle has).
+   Only determined parameters are printed.
 """
 
 from __future__ import annotations
@@ -226,7 +228,15 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
     "lead_name", "consistency"}`` (``lead``: the Weighed of the most probable reading)."""
     params = reference.params
     dt = float(train[0].t[1] - train[0].t[0])
-    ranked = rank(weighed)
+    # a value outside its documented plausible range has no prior probability (:mod:`.priors`)
+    implausible = []
+    for w in weighed:
+        values = {q: v for q, v in w.train.values.items() if w.train.determined.get(q)}
+        _, ok, text = candidate_plausibility(values, params)
+        if not ok:
+            implausible.append((w, text))
+    dropped = {id(w) for w, _ in implausible}
+    ranked = rank([w for w in weighed if id(w) not in dropped])
     lead_name, _, lead = ranked[0]
     combination = checked = None
     if lead_name != "no_difference":
@@ -264,4 +274,6 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
         if any(e["name"] == "nominal_refit" for e in entries) else None
     return {"ranked": ranked, "rows": rows, "probability": probability, "entries": entries,
             "baseline": baseline, "combination": combination, "lead": lead,
-            "lead_name": lead_name, "consistency": checked}
+            "lead_name": lead_name, "consistency": checked,
+            "implausible": [(w.name, reading_text(w.train, reference), text)
+                            for w, text in implausible]}
