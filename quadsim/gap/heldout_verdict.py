@@ -2,7 +2,8 @@
 
 1. **Posterior per reading** (:func:`quadsim.gap.judge.posterior`, as per flight): training
    evidence plus held-out log-likelihood; "no difference" has the prior of all effects
-   together; an explanation whose parameters the data do not determine counts as "no
+   together; an explanation whose parameters the data do not determine, or determine
+   within their 95 % interval of the no-difference value (:func:`differs`), counts as "no
    difference".
 2. **A second effect** (``max_combination`` >= 2): when the lead leaves a systematic
    remainder (test 4b), the lead is refitted with each other effect; a pair enters the
@@ -104,10 +105,36 @@ def remainder(w: Weighed, reference, dt: float) -> dict:
             if ratio[k] > limit}
 
 
+#: parameters that say no difference by themselves: a full voltage has no "off" value (the
+#: sag acts for every V_full), a propeller's speed exponent acts only with a thrust change.
+_NOT_A_DIFFERENCE = {"battery_sag.full_voltage", "thrust_factor.alpha"}
+
+
+def differs(ev) -> dict:
+    """Per parameter: determined *and* beyond its 95 % interval from the no-difference value
+    (the prior's centre): a reading none of whose parameters differs predicts what "no
+    difference" predicts within the data's resolution, and is counted there (as
+    :func:`quadsim.gap.judge.posterior` counts an undetermined one)."""
+    centre = dict(zip(ev.explanation.parameter_names, ev.explanation.mean))
+    out = {}
+    for q, ok in ev.determined.items():
+        far = abs(ev.values[q] - centre.get(q, 0.0)) > 1.96 * ev.post_sd[q]
+        out[q] = bool(ok and (far or q in _NOT_A_DIFFERENCE))
+    if out and not any(v for q, v in out.items() if q not in _NOT_A_DIFFERENCE) and \
+            not any(q == "battery_sag.full_voltage" for q in out):
+        out = dict.fromkeys(out, False)
+    return out
+
+
 def rank(weighed: list[Weighed]) -> list[tuple[str, float, Weighed]]:
     """(reading, probability, its best variant), most probable first (module doc, 1)."""
-    by_ev = {id(w.total): w for w in weighed}
-    return [(k, p, by_ev[id(ev)]) for k, p, ev in posterior([w.total for w in weighed])]
+    import dataclasses
+
+    by_ev = {}
+    for w in weighed:
+        ev = dataclasses.replace(w.total, determined=differs(w.train))
+        by_ev[id(ev)] = (w, ev)
+    return [(k, p, by_ev[id(ev)][0]) for k, p, ev in posterior([e for _, e in by_ev.values()])]
 
 
 def pair(lead: Weighed, other: Weighed, partners: int, train, held, reference):
