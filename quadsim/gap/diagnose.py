@@ -1,4 +1,4 @@
-"""The gap diagnosis: fit on training flights, score on held-out flights, rank, decide.
+"""The gap diagnosis: prepare the logs, split by flight, judge by evidence (:mod:`.heldout`).
 
 See :mod:`quadsim.gap` for the method and the result schema. Everything here returns plain
 dicts (the ``quadsim.gap/3`` JSON) so that the CLI, the HTML report and tests read the same
