@@ -1,4 +1,4 @@
-"""The gap diagnosis: fit on training flights, score on held-out flights, rank, decide.
+"""The gap diagnosis: prepare the logs, split by flight, judge by evidence (:mod:`.heldout`).
 
 See :mod:`quadsim.gap` for the method and the result schema. Everything here returns plain
 dicts (the ``quadsim.gap/3`` JSON) so that the CLI, the HTML report and tests read the same
@@ -257,6 +257,9 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
     rows, lead_name, lead = decision["rows"], decision["lead_name"], decision["lead"]
     entry = next((e for e in decision["entries"] if e["name"] == lead_name), None)
     p_lead = decision["probability"][lead_name]
+    for name, magnitude, prior_text in decision["implausible"]:
+        notes.append(f"{name} fits only at an implausible magnitude ({_words_of(magnitude)}; "
+                     f"{prior_text}): given no weight")
     stated = [r for r in rows if r["probability"] >= hv.READING_P
               and r["name"] != "no_difference"]
     remains = hv.remainder(lead, reference, dt)
@@ -316,6 +319,10 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
                            answer=_answer({**verdict, "outcome": "unexplained"}, rows,
                                           remains, carries, reference))
     return verdict
+
+
+def _words_of(text: str) -> str:
+    return hv._words(text, True)
 
 
 def rule_unit(name: str) -> str:

@@ -2,7 +2,8 @@
 
 1. **Posterior per reading** (:func:`quadsim.gap.judge.posterior`, as per flight): training
    evidence plus held-out log-likelihood; "no difference" has the prior of all effects
-   together; an explanation whose parameters the data do not determine counts as "no
+   together; an explanation whose parameters the data do not determine, or determine
+   within their 95 % interval of the no-difference value (:func:`differs`), counts as "no
    difference".
 2. **A second effect** (``max_combination`` >= 2): when the lead leaves a systematic
    remainder (test 4b), the lead is refitted with each other effect; a pair enters the
@@ -36,9 +37,11 @@
    unexplained by chance.
 5. **Verdict**: the most probable reading with its probability (``tentative`` below
    :data:`quadsim.gap.judge.CONFIDENT`); readings stated: probability >=
-   :data:`quadsim.gap.judge.READING_P`; a reading whose determined magnitude is outside its
-   plausible range (:mod:`.priors`) is not named (``unexplained``; the note names that
-   effect with its own magnitude). Only determined parameters are printed.
+   :data:`quadsim.gap.judge.READING_P`. A reading whose determined magnitude is outside its
+   documented plausible range (:mod:`.priors`) has no prior probability: it is left out of
+   the posterior before ranking, and a note names that effect with its own magnitude (a
+   stand-in for something outside the library fits the data at a value no vehicle has).
+   Only determined parameters are printed.
 """
 
 from __future__ import annotations
@@ -102,10 +105,36 @@ def remainder(w: Weighed, reference, dt: float) -> dict:
             if ratio[k] > limit}
 
 
+#: parameters that say no difference by themselves: a full voltage has no "off" value (the
+#: sag acts for every V_full), a propeller's speed exponent acts only with a thrust change.
+_NOT_A_DIFFERENCE = {"battery_sag.full_voltage", "thrust_factor.alpha"}
+
+
+def differs(ev) -> dict:
+    """Per parameter: determined *and* beyond its 95 % interval from the no-difference value
+    (the prior's centre): a reading none of whose parameters differs predicts what "no
+    difference" predicts within the data's resolution, and is counted there (as
+    :func:`quadsim.gap.judge.posterior` counts an undetermined one)."""
+    centre = dict(zip(ev.explanation.parameter_names, ev.explanation.mean))
+    out = {}
+    for q, ok in ev.determined.items():
+        far = abs(ev.values[q] - centre.get(q, 0.0)) > 1.96 * ev.post_sd[q]
+        out[q] = bool(ok and (far or q in _NOT_A_DIFFERENCE))
+    if out and not any(v for q, v in out.items() if q not in _NOT_A_DIFFERENCE) and \
+            not any(q == "battery_sag.full_voltage" for q in out):
+        out = dict.fromkeys(out, False)
+    return out
+
+
 def rank(weighed: list[Weighed]) -> list[tuple[str, float, Weighed]]:
     """(reading, probability, its best variant), most probable first (module doc, 1)."""
-    by_ev = {id(w.total): w for w in weighed}
-    return [(k, p, by_ev[id(ev)]) for k, p, ev in posterior([w.total for w in weighed])]
+    import dataclasses
+
+    by_ev = {}
+    for w in weighed:
+        ev = dataclasses.replace(w.total, determined=differs(w.train))
+        by_ev[id(ev)] = (w, ev)
+    return [(k, p, by_ev[id(ev)][0]) for k, p, ev in posterior([e for _, e in by_ev.values()])]
 
 
 def pair(lead: Weighed, other: Weighed, partners: int, train, held, reference):
@@ -141,6 +170,15 @@ def _words(text: str, own: bool) -> str:
     """Per-flight wording in held-out terms (the reference here is the parameter set)."""
     if not own:
         return "no difference from the nominal model"
+    cut = text.find(" (references: ")     # the nominal model's values: "off", no spread
+    if cut >= 0:
+        depth, end = 0, len(text)
+        for k in range(cut + 1, len(text)):
+            depth += {"(": 1, ")": -1}.get(text[k], 0)
+            if depth == 0:
+                end = k + 1
+                break
+        text = text[:cut] + text[end:]
     return (text.replace("no difference from the reference flights",
                          "no difference from the nominal model")
             .replace(" (beyond the references')", "")
@@ -217,7 +255,15 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
     "lead_name", "consistency"}`` (``lead``: the Weighed of the most probable reading)."""
     params = reference.params
     dt = float(train[0].t[1] - train[0].t[0])
-    ranked = rank(weighed)
+    # a value outside its documented plausible range has no prior probability (:mod:`.priors`)
+    implausible = []
+    for w in weighed:
+        values = {q: v for q, v in w.train.values.items() if w.train.determined.get(q)}
+        _, ok, text = candidate_plausibility(values, params)
+        if not ok:
+            implausible.append((w, text))
+    dropped = {id(w) for w, _ in implausible}
+    ranked = rank([w for w in weighed if id(w) not in dropped])
     lead_name, _, lead = ranked[0]
     combination = checked = None
     if lead_name != "no_difference":
@@ -255,4 +301,6 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
         if any(e["name"] == "nominal_refit" for e in entries) else None
     return {"ranked": ranked, "rows": rows, "probability": probability, "entries": entries,
             "baseline": baseline, "combination": combination, "lead": lead,
-            "lead_name": lead_name, "consistency": checked}
+            "lead_name": lead_name, "consistency": checked,
+            "implausible": [(w.name, reading_text(w.train, reference), text)
+                            for w, text in implausible]}

@@ -1,6 +1,9 @@
 """The JSON Schema of the ``quadsim.gap/3`` result (documented in docs/gap.md).
 
-Version 3 (from 2): per-flight results are judged by evidence (:mod:`quadsim.gap.judge`).
+Version 3 (from 2): per-flight and held-out results are judged by evidence
+(:mod:`quadsim.gap.judge`, :mod:`quadsim.gap.heldout_verdict`); a held-out verdict carries
+``probability`` and ``posterior`` (the per-flight reading rows), each ``effects`` entry
+``probability``, ``log_evidence`` and ``undetermined``, the result ``noise_model``.
 Each flight carries ``probability`` (of its verdict's reading), ``posterior`` (every reading,
 most probable first: name, probability, magnitude in words, log evidence, determined
 ``params`` with 95 % ``ci``, ``undetermined`` parameter names, ``fixed``, ``variant``),
@@ -115,6 +118,9 @@ _VERDICT = {
         "consistency": _CONSISTENCY,
         "partial": _PARTIAL,
         "tentative": {"type": "boolean"},
+        "probability": {"type": ["number", "null"]},
+        "posterior": {"type": "array", "items": {"type": "object",
+                                                 "required": ["name", "probability"]}},
     },
 }
 
