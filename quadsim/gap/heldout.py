@@ -53,6 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.errors import ModelError
 from ..effects import make_effect
 from ..vehicle.params import VehicleParams
 from .calibrate import Reference, shared_candidate
@@ -203,8 +204,16 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
           ) -> list[Weighed]:
     """Stage 3 (module doc): training evidence of every explanation, plus its held-out
     log-likelihood at the training MAP. ``train``/``held``: decimated states."""
-    rows = evaluate(stack_states(train), reference, expl)
-    return [check(ev, train, held, reference) for ev in rows]
+    # every explanation fully fitted (no screen): its result must not depend on which others
+    # share its batch, so that workers and one process give the same bytes
+    rows = evaluate(stack_states(train), reference, expl, full=True)
+    out = []
+    for ev in rows:
+        try:
+            out.append(check(ev, train, held, reference))
+        except ModelError:      # its values make no rigid vehicle: not a reading
+            continue
+    return out
 
 
 def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
