@@ -44,8 +44,8 @@ drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload li
 datasheet; :mod:`quadsim.gap.priors`), centred inside that range rather than on "off" -- the
 reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit
 started there cannot move the length and the swing; the length N(0.55 m, (0.225 m)^2):
-slung loads of micro drones hang on 0.1-1 m (the real Crazyflie payload flights cited in the
-project's issue 22: ~0.5 m).
+slung loads of micro drones hang on 0.1-1 m (the Crazyflie payload campaign behind the
+``mixed/`` flights of the shared data flew ~0.5 m).
 
 The integration is compiled with numba when it is installed (the same source runs as plain
 Python otherwise): a minute of 100 Hz flight takes under 1 ms compiled, 0.6 s as Python, on
