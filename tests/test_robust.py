@@ -23,14 +23,7 @@ from quadsim.logs.usd import encode_usd
 pyulog = pytest.importorskip("pyulog", reason="pyulog not installed (quadsim[logs])")
 
 
-def _one_line(capsys, *names: str) -> str:
-    captured = capsys.readouterr()
-    err = captured.err.strip()
-    assert captured.out == "" and len(err.splitlines()) == 1, err
-    assert err.startswith("error: "), err
-    for name in names:
-        assert name in err, err
-    return err
+from _helpers import one_line as _one_line  # noqa: E402
 
 
 def _csv(path: Path, flight=None, **changes) -> Path:

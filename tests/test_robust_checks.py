@@ -142,14 +142,7 @@ def test_library_diagnose_on_a_short_log(tmp_path, duration):
 # ----------------------------------------------------------------------------- mm, no velocity
 
 
-def _one_line(capsys, *names: str) -> str:
-    captured = capsys.readouterr()
-    err = captured.err.strip()
-    assert captured.out == "" and len(err.splitlines()) == 1, err
-    assert err.startswith("error: "), err
-    for name in names:
-        assert name in err, err
-    return err
+from _helpers import one_line as _one_line  # noqa: E402
 
 
 @pytest.mark.parametrize("scale,hint", [(1000.0, "mm"), (100.0, "cm")])

@@ -27,12 +27,11 @@ from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 
-LAG, DRAG = 0.008, 2e-7
+from _helpers import shared_effects  # noqa: E402
 
 
 def _shared(**kw):
-    return [make_effect("motor_lag", time_constant=kw.get("lag", LAG)),
-            make_effect("rotor_drag", coefficient=kw.get("drag", DRAG))]
+    return shared_effects(**kw)
 
 
 @pytest.fixture(scope="module")

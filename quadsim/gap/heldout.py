@@ -54,12 +54,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import ModelError
-from ..effects import make_effect
 from ..vehicle.params import VehicleParams
 from .calibrate import Reference, shared_candidate
-from .evidence import Evidence, Explanation, Propeller, evaluate, explanations_for
+from .evidence import Evidence, Explanation, _make, evaluate, explanations_for
 from .fitting import (
-    LOCAL_EFFECTS,
     _correlation_time,
     effect_class,
     noise_floor,
@@ -165,17 +163,8 @@ def heldout_explanations(reference: Reference, train_states, names=None,
 
 def effects_of(ev: Evidence) -> list:
     """The effects of an explanation at its MAP values."""
-    out = []
-    for name, fixed, fitted in ev.explanation.parts:
-        values = dict(fixed)
-        values.update({p: ev.values[f"{name}.{p}"] for p in fitted})
-        if name == "thrust_factor":
-            out.append(Propeller(**values))
-        elif name in LOCAL_EFFECTS:
-            out.append(LOCAL_EFFECTS[name](**values))
-        else:
-            out.append(make_effect(name, **values))
-    return out
+    return [_make(name, {**fixed, **{p: ev.values[f"{name}.{p}"] for p in fitted}})
+            for name, fixed, fitted in ev.explanation.parts]
 
 
 @dataclass

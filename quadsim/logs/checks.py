@@ -151,9 +151,9 @@ def _gain(measured: np.ndarray, reference: np.ndarray) -> float:
     return float(np.sum(measured * reference) / np.sum(reference * reference))
 
 
-def check_gyro(log) -> str | None:
-    """Gyro against the quaternions' rotation (see module); raises, or returns a note when
-    the flight is too gentle to judge."""
+def _window_rotations(log):
+    """(window edges k, rotation vectors between the quaternions at the edges, the gyro's
+    integral over each window) (rad), or None when the log has no gyro or too few windows."""
     if log.body_rate is None or len(log.t) < 4:
         return None
     k = _windows(log.t)
@@ -161,7 +161,16 @@ def check_gyro(log) -> str | None:
         return None
     quat_rot = _rotvec_between(log.quat[k[:-1]], log.quat[k[1:]])
     integral = _cumtrapz(log.t, log.body_rate)
-    gyro_rot = integral[k[1:]] - integral[k[:-1]]
+    return k, quat_rot, integral[k[1:]] - integral[k[:-1]]
+
+
+def check_gyro(log) -> str | None:
+    """Gyro against the quaternions' rotation (see module); raises, or returns a note when
+    the flight is too gentle to judge."""
+    rotations = _window_rotations(log)
+    if rotations is None:
+        return None
+    k, quat_rot, gyro_rot = rotations
     _check_gyro_frame(log, k, quat_rot, gyro_rot)  # first: a frame error also upsets the gains
     judged = 0
     for i, axis in enumerate("xyz"):
@@ -214,14 +223,8 @@ def _frame_evidence(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarr
 
 def gyro_frame_evidence(log) -> tuple[float, float, bool, float] | None:
     """:func:`_frame_evidence` of a log (None when it has no gyro or is too short)."""
-    if log.body_rate is None or len(log.t) < 4:
-        return None
-    k = _windows(log.t)
-    if len(k) < 3:
-        return None
-    quat_rot = _rotvec_between(log.quat[k[:-1]], log.quat[k[1:]])
-    integral = _cumtrapz(log.t, log.body_rate)
-    return _frame_evidence(log, k, quat_rot, integral[k[1:]] - integral[k[:-1]])
+    rotations = _window_rotations(log)
+    return None if rotations is None else _frame_evidence(log, *rotations)
 
 
 def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.ndarray) -> None:
