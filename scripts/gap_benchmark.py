@@ -24,6 +24,7 @@ Usage::
     python scripts/gap_benchmark.py --independent --out indep.json [--self-json bench.json]
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --generate-only
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
+    python scripts/gap_benchmark.py --independent --source pyflyt --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
 
@@ -47,6 +48,10 @@ Crazyflow source (``--independent --source crazyflow --cache DIR``, :mod:`quadsi
 each judged per flight against 8 nominal Crazyflow flights; ``--generate-only`` flies and
 caches them (flight-log CSV + truth sidecar per flight) and prints each case's observability
 without computing any verdict.
+
+PyFlyt source (``--independent --source pyflyt --cache DIR``, :mod:`quadsim.bench.pyflyt_cases`):
+the same for 28 cases from PyFlyt 0.29.0 (pybullet; its own QuadX, motors, drag, rate
+damping and PID cascade) against 8 nominal PyFlyt flights.
 """
 
 from __future__ import annotations
@@ -418,7 +423,7 @@ def _cell(v: dict) -> str:
 
 
 def _magnitude(effects: dict) -> str:
-    """A case's Crazyflow effects in a table cell (SI; g, mm and ms where clearer)."""
+    """A case's simulator-side effects in a table cell (SI; g, mm and ms where clearer)."""
     def fmt(key, value):
         value = np.atleast_1d(np.asarray(value, dtype=float))
         if key == "payload":
@@ -430,12 +435,13 @@ def _magnitude(effects: dict) -> str:
     return "; ".join(fmt(k, v) for k, v in effects.items()) or "-"
 
 
-def summarise_crazyflow(rows: list[dict], observability_only: bool = False) -> str:
-    """Scores of the Crazyflow source (per flight against its 8 nominal flights) and the
-    per-case table; ``observability_only``: the cases and their observability, no verdict."""
-    from quadsim.bench.crazyflow_cases import OBSERVABLE
+def summarise_simulator(rows: list[dict], source, observability_only: bool = True) -> str:
+    """Scores of a simulator source (:class:`quadsim.bench.sim_cases.CaseSource`, per flight
+    against its nominal flights) and the per-case table; ``observability_only``: the cases
+    and their observability, no verdict."""
     from quadsim.bench.score import summary_rows
 
+    threshold, label = source.observable, source.name
     lines = []
     if not observability_only:
         group = [{**r, "score": r["per_flight"]["score"]} for r in rows]
@@ -444,14 +450,14 @@ def summarise_crazyflow(rows: list[dict], observability_only: bool = False) -> s
                   "-> no_significant_gap | out-of-library: confident wrong name |",
                   "|---|---|---|---|---|---|---|---|"]
         lines += ["| " + " | ".join(row) + " |"
-                  for row in summary_rows([("crazyflow | per-flight", group)], OBSERVABLE)]
+                  for row in summary_rows([(f"{label} | per-flight", group)], threshold)]
         lines.append("")
     hidden = [r["name"] for r in rows if r["kind"] == "library" and not r["observable"]]
     lines.append(f"{len(rows)} cases; observable (true difference cuts the residual >= "
-                 f"{OBSERVABLE:.0%}): {sum(r['kind'] == 'library' and r['observable'] for r in rows)}"
+                 f"{threshold:.0%}): {sum(r['kind'] == 'library' and r['observable'] for r in rows)}"
                  f" of {sum(r['kind'] == 'library' for r in rows)} in-library; not observable, "
                  f"scored apart: {', '.join(hidden) or 'none'}")
-    head = ("| case | truth | kind | speed | Crazyflow change | gap / references' | "
+    head = (f"| case | truth | kind | speed | {label} change | gap / references' | "
             "true-effect reduction |")
     lines += ["", head + ("" if observability_only else " per-flight verdict | score |"),
               "|---|---|---|---|---|---|---|" + ("" if observability_only else "---|---|")]
@@ -469,28 +475,42 @@ def summarise_crazyflow(rows: list[dict], observability_only: bool = False) -> s
     return "\n".join(lines) + "\n"
 
 
-def run_crazyflow(cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow``: make (or reuse) the cached flights; with
-    ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
-    from quadsim.bench import crazyflow_cases
-    from quadsim.bench.crazyflow_source import crazyflow_available
+#: --source NAME -> (cases module, availability check, install hint) of a simulator source
+SIM_SOURCES = {
+    "crazyflow": ("quadsim.bench.crazyflow_cases", "quadsim.bench.crazyflow_source",
+                  "crazyflow_available", "pip install 'quadsim[crazyflow]'"),
+    "pyflyt": ("quadsim.bench.pyflyt_cases", "quadsim.bench.pyflyt_source", "pyflyt_available",
+               "pip install 'quadsim[pyflyt]' then pip install --no-deps PyFlyt==0.29.0"),
+}
 
-    if not crazyflow_available():
-        print("error: --source crazyflow: crazyflow is not installed "
-              "(pip install 'quadsim[crazyflow]')", file=sys.stderr)
+
+def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
+    """``--independent --source crazyflow|pyflyt``: make (or reuse) the cached flights; with
+    ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
+    import importlib
+
+    from quadsim.bench import sim_cases
+
+    cases_module, source_module, available, hint = SIM_SOURCES[name]
+    if not getattr(importlib.import_module(source_module), available)():
+        print(f"error: --source {name}: {name} is not installed ({hint})", file=sys.stderr)
         return 2
     if not cache:
-        print("error: --source crazyflow: --cache DIR is required (the flights are kept there)",
+        print(f"error: --source {name}: --cache DIR is required (the flights are kept there)",
               file=sys.stderr)
         return 2
-    folder = crazyflow_cases.generate(cache, progress=lambda m: print(m, file=sys.stderr))
+    source = importlib.import_module(cases_module).SOURCE
+    start = time.process_time()
+    folder = sim_cases.generate(source, cache, progress=lambda m: print(m, file=sys.stderr))
     if generate_only:
-        _, rows = crazyflow_cases.load_flights(cache)
-        print(f"flights in {folder}\n" + summarise_crazyflow(rows, observability_only=True), end="")
+        _, rows = sim_cases.load_flights(source, cache)
+        print(f"flights in {folder}\n" + summarise_simulator(rows, source), end="")
+        print(f"CPU time of this process (flying happens in a child process, see "
+              f"'time'): {time.process_time() - start:.0f} s", file=sys.stderr)
         return 0
-    rows = crazyflow_cases.judge(cache)
+    rows = sim_cases.judge(source, cache)
     atomic_write_text(out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
-    print(summarise_crazyflow(rows), end="")
+    print(summarise_simulator(rows, source, observability_only=False), end="")
     print(f"diagnosis wall time (all flights, one process): {rows[0]['seconds_all']:.0f} s")
     return 0
 
@@ -537,17 +557,17 @@ def main(argv=None) -> int:
                         help="with --independent: keep the flown logs here and reuse them on "
                              "the next run (keyed by case and the flight sources' code); same "
                              "as the QUADSIM_BENCH_CACHE environment variable")
-    parser.add_argument("--source", choices=("rotorpy+pipeline", "crazyflow"),
+    parser.add_argument("--source", choices=("rotorpy+pipeline", *SIM_SOURCES),
                         default="rotorpy+pipeline",
-                        help="with --independent: which independent source (crazyflow: "
-                             "per-flight cases against 8 nominal Crazyflow flights; needs "
-                             "--cache)")
+                        help="with --independent: which independent source (crazyflow, "
+                             "pyflyt: per-flight cases against 8 nominal flights of that "
+                             "simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
-                        help="with --source crazyflow: only fly and cache the flights and "
-                             "print their observability (no verdict is computed)")
+                        help="with --source crazyflow|pyflyt: only fly and cache the flights "
+                             "and print their observability (no verdict is computed)")
     args = parser.parse_args(argv)
-    if args.independent and args.source == "crazyflow":
-        return run_crazyflow(args.cache, args.generate_only, args.out)
+    if args.independent and args.source in SIM_SOURCES:
+        return run_simulator(args.source, args.cache, args.generate_only, args.out)
     if args.cache:
         os.environ["QUADSIM_BENCH_CACHE"] = str(Path(args.cache).resolve())
     if args.summarise:

@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("PyFlyt")
 
-from quadsim.bench.pyflyt_source import (  # noqa: E402
+from quadsim.bench.pyflyt_source import (
     PHYSICS_HZ,
     RPM,
     WORKER_ENV,
@@ -26,9 +26,9 @@ from quadsim.bench.pyflyt_source import (  # noqa: E402
     pyflyt_model,
     vehicle_params,
 )
-from quadsim.core.frames import euler_to_quat, quat_to_rotmat  # noqa: E402
-from quadsim.logs.flightlog import log_bytes  # noqa: E402
-from quadsim.vehicle.rotors import rotor_wrench  # noqa: E402
+from quadsim.core.frames import euler_to_quat, quat_to_rotmat
+from quadsim.logs.flightlog import log_bytes
+from quadsim.vehicle.rotors import rotor_wrench
 
 # One pybullet step of PyFlyt's QuadX (noise_ratio 0 in a copy of its cf2x.yaml) from rest at
 # a given attitude with the motors held at given throttles: PyFlyt's own motor forces and

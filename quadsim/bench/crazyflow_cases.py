@@ -57,17 +57,25 @@ out-of-library -> no confident name.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from ..effects import make_effect
-from .crazyflow_source import DRONE, RPM, FlightSpec, crazyflow_params, hover_rpm, vehicle_params
+from . import sim_cases
+from .crazyflow_source import (
+    DRONE,
+    RPM,
+    FlightSpec,
+    crazyflow_flights,
+    crazyflow_params,
+    hover_rpm,
+    vehicle_params,
+)
 
 __all__ = [
     "CASES",
     "OBSERVABLE",
     "REFERENCES",
+    "SOURCE",
     "case_list",
     "code_hash",
     "flight_dir",
@@ -233,158 +241,42 @@ def oracle_reductions(logs: list, references: list,
                       cases: list[dict]) -> list[tuple[float, float]]:
     """Per case (reduction, gap): the cut of its flight's normalised residual (forces,
     torques, rotor channel) when the true difference is applied in quadsim's residual model
-    (module docstring), 1 - after / before, with the motor map fitted and the noise scale
-    taken on the references' residuals, as the diagnosis does (0 for cases with no library
-    truth); and the flight's mean squared normalised residual under the references' shared
-    physics relative to the references' own (about 1: nothing the references lack; an
-    out-of-library case far above 1 leaves a real gap)."""
-    import dataclasses
-
-    from ..gap.diagnose import prepare
-    from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
-
-    params = vehicle_params()
-    refs = [f.fit for f in prepare(list(references), params)]
-    fitted = fit_motor_map(refs, params)
-    shared = shared_effects()
-    nominal = [residuals(f, fitted, shared, rotor_channel=True) for f in refs]
-    sigma = noise_scale(np.concatenate(nominal), float(refs[0].t[1] - refs[0].t[0]),
-                        floor=noise_floor(fitted, True))
-
-    def gap(log, effects):
-        states = prepare([log], params)[0].fit
-        return float(np.mean((residuals(states, fitted, effects, rotor_channel=True)
-                              / sigma) ** 2))
-
-    out = []
-    for log, case in zip(logs, cases):
-        before = gap(log, shared)
-        if scored_kind(case) != "library":
-            out.append((0.0, before))
-            continue
-        if case["case"] == "rotor_delay":
-            delay = float(case["effects"]["rotor_delay"])
-            shifted = dataclasses.replace(log, rotor_speed=np.stack(
-                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))
-            after = gap(shifted, shared)
-        else:
-            after = gap(log, library_truth(case))
-        out.append((float((before - after) / before), before))
-    reference_level = float(np.mean([gap(log, shared) for log in references]))
-    return [(r, g / reference_level) for r, g in out]
+    (module docstring), and the flight's residual relative to the references' own
+    (:func:`quadsim.bench.sim_cases.oracle_reductions` with :func:`shared_effects` and
+    :func:`library_truth`)."""
+    return sim_cases.oracle_reductions(logs, references, cases, vehicle_params(),
+                                       shared_effects(), library_truth, scored_kind)
 
 
 # ----------------------------------------------------------------------------- flights on disk
 
+SOURCE = sim_cases.CaseSource(
+    name="crazyflow", package="crazyflow", modules=("crazyflow_source.py", "crazyflow_worker.py"),
+    references=reference_specs, cases=case_list, case_spec=case_spec, fly=crazyflow_flights,
+    observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
+    observable=OBSERVABLE)
+
 
 def code_hash() -> str:
-    """Hash of everything the flights depend on: this source's modules and Crazyflow's
-    version (a change of either never reads a stale flight)."""
-    import hashlib
-    from importlib.metadata import version
-
-    here = Path(__file__).resolve().parent
-    digest = hashlib.sha256(version("crazyflow").encode())
-    for name in ("crazyflow_source.py", "crazyflow_worker.py"):
-        digest.update((here / name).read_bytes())
-    digest.update(repr([(s.seed, s.speed, s.duration) for s in reference_specs()]).encode())
-    digest.update(repr(case_list()).encode())
-    return digest.hexdigest()[:12]
+    """Hash of everything the flights depend on (:func:`quadsim.bench.sim_cases.code_hash`)."""
+    return sim_cases.code_hash(SOURCE)
 
 
-def flight_dir(cache) -> Path:
-    return Path(cache) / f"crazyflow-{code_hash()}"
+def flight_dir(cache):
+    return sim_cases.flight_dir(SOURCE, cache)
 
 
-def _name(role: str, k: int, truth: str) -> str:
-    return f"{role}_{k:02d}_{truth}" if role == "case" else f"{role}_{k:02d}"
-
-
-def generate(cache, progress=print) -> Path:
-    """Fly the references and every case (one Crazyflow child process), write each flight
-    as ``NAME.csv.gz`` (flight-log schema) with its truth sidecar ``NAME.truth.json``, and
-    the observability of every case (:func:`oracle_reductions`) to ``observability.json``.
-    Flights already there are kept (same code hash, same bytes); the observability is
-    computed again only when a flight was flown."""
-    import json
-
-    from ..core.files import atomic_write_text
-    from ..logs.flightlog import load_log, write_log
-    from .crazyflow_source import crazyflow_flights, truth_json
-
-    out = flight_dir(cache)
-    out.mkdir(parents=True, exist_ok=True)
-    cases = case_list()
-    jobs = ([(_name("ref", k, ""), s, None) for k, s in enumerate(reference_specs())]
-            + [(_name("case", k, c["case"]), case_spec(c), c) for k, c in enumerate(cases)])
-    todo = [j for j in jobs if not (out / f"{j[0]}.csv.gz").exists()]
-    if todo:
-        progress(f"crazyflow: flying {len(todo)} flights in one child process")
-        for (name, _, case), (log, truth) in zip(todo, crazyflow_flights([j[1] for j in todo])):
-            if case is not None:
-                truth = {**truth, "truth": case["truth"], "kind": case["kind"],
-                         "case": case["case"]}
-            atomic_write_text(out / f"{name}.truth.json", truth_json(truth))
-            write_log(out / f"{name}.csv.gz", log)
-    if not todo and (out / "observability.json").exists():
-        return out
-    refs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _, c in jobs if c is None]
-    named = [(name, case) for name, _, case in jobs if case is not None]
-    logs = [load_log(out / f"{name}.csv.gz", warn=False) for name, _ in named]
-    observed = {n: {"reduction": r, "gap": g} for n, (r, g) in
-                zip([n for n, _ in named], oracle_reductions(logs, refs, [c for _, c in named]))}
-    atomic_write_text(out / "observability.json",
-                      json.dumps(observed, indent=1, sort_keys=True) + "\n")
-    return out
+def generate(cache, progress=print):
+    """Fly, write and check the references and every case (:func:`quadsim.bench.sim_cases.generate`)."""
+    return sim_cases.generate(SOURCE, cache, progress)
 
 
 def load_flights(cache) -> tuple[list, list[dict]]:
-    """(reference logs, case rows with ``_log`` and ``oracle_reduction``) from
-    :func:`generate`'s directory; raises FileNotFoundError when it is incomplete."""
-    import json
-
-    from ..logs.flightlog import load_log
-
-    out = flight_dir(cache)
-    observed = json.loads((out / "observability.json").read_text())
-    refs = [load_log(out / f"{_name('ref', k, '')}.csv.gz", warn=False)
-            for k in range(REFERENCES)]
-    rows = []
-    for k, case in enumerate(case_list()):
-        name = _name("case", k, case["case"])
-        rows.append({**case, "kind": scored_kind(case), "flown_as": case["kind"],
-                     "name": name, "_log": load_log(out / f"{name}.csv.gz", warn=False),
-                     "oracle_reduction": observed[name]["reduction"],
-                     "gap_vs_references": observed[name]["gap"],
-                     "observable": (scored_kind(case) != "library"
-                                    or observed[name]["reduction"] >= OBSERVABLE)})
-    return refs, rows
+    """(reference logs, case rows) from :func:`generate`'s folder."""
+    return sim_cases.load_flights(SOURCE, cache)
 
 
 def judge(cache) -> list[dict]:
-    """THE BLIND RUN: per-flight verdicts of every case against the references, scored
-    (:mod:`.score`). Run it once, after the verdict rules are frozen."""
-    import time
-    import warnings
-
-    from ..core.errors import QuadsimWarning
-    from ..gap import diagnose_per_flight
-    from .score import read_verdict, score_case
-
-    refs, rows = load_flights(cache)
-    start = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        result = diagnose_per_flight([r["_log"] for r in rows], refs, vehicle_params())
-    seconds = time.perf_counter() - start
-    out = []
-    for row, flight in zip(rows, result["flights"]):
-        verdict = read_verdict(flight)
-        row = {k: v for k, v in row.items() if k != "_log"}
-        out.append({**row, "effects": {k: np.asarray(v).tolist() for k, v in
-                                       row["effects"].items()},
-                    "per_flight": {**verdict, "reduction": flight.get("reduction"),
-                                   "score": score_case(row["truth"], row["kind"], verdict)},
-                    "seconds_all": seconds})
-    return out
+    """THE BLIND RUN (:func:`quadsim.bench.sim_cases.judge`). Run it once, after the verdict
+    rules are frozen."""
+    return sim_cases.judge(SOURCE, cache)

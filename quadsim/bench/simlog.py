@@ -30,7 +30,7 @@ from ..core.frames import quat_multiply, quat_normalize, quat_to_rotmat
 from ..logs.flightlog import FlightLog
 from ..logs.sensors import rotation_quat
 
-__all__ = ["SimStates", "Sensors", "body_origin_log", "jsonable", "truth_json"]
+__all__ = ["Sensors", "SimStates", "body_origin_log", "jsonable", "truth_json"]
 
 
 @dataclass(frozen=True)
