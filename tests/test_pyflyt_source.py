@@ -150,3 +150,32 @@ def test_flights_hover_units_and_same_bytes():
     assert ratio == pytest.approx(gain, rel=0.03)
     assert np.all(log.quat[:, 0] > 0.99)
     assert np.all((log.rotor_command >= 0) & (log.rotor_command <= 1))
+
+
+def test_case_list_frozen_and_mapped_to_the_library():
+    """The 28 frozen cases: 6 no-effect, 18 in-library, 4 outside; seeds apart from the
+    references'; every in-library truth is a library name (or a delay) and its true
+    difference (on top of the shared physics: motor lag, body drag, rate damping) names it;
+    the PyFlyt-side change is within the module table's ranges (mass +5..+20 %, tau x
+    1.5-2.5 -> effective 22-46 ms, a stable motor)."""
+    from quadsim.bench.pyflyt_cases import case_list, library_truth, reference_specs
+    from quadsim.effects import EFFECTS
+
+    cases, model = case_list(), pyflyt_model()
+    assert case_list() == cases and len(cases) == 28
+    kinds = [c["kind"] for c in cases]
+    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == (6, 18, 4)
+    assert not {c["seed"] for c in cases} & {s.seed for s in reference_specs()}
+    damping = np.array([1e-5, 1e-5, 2e-5])
+    for case in cases:
+        if case["kind"] != "library" or case["truth"] == "rotor_delay":
+            continue
+        names = [e.name for e in library_truth(case, damping)]
+        assert names[:3] == ["motor_lag", "body_drag", "rate_damping"]
+        assert case["truth"] in EFFECTS and (case["truth"] in names or len(names) == 3)
+        if "mass" in case["effects"]:
+            assert 0.05 <= case["effects"]["mass"] / model["mass"] <= 0.2
+        if "motor_slow" in case["effects"]:
+            tau = motor_response(model["tau"] * case["effects"]["motor_slow"],
+                                 model["noise_ratio"])[1]
+            assert 0.020 < tau < 0.047

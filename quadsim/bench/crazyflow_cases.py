@@ -251,7 +251,8 @@ def oracle_reductions(logs: list, references: list,
 # ----------------------------------------------------------------------------- flights on disk
 
 SOURCE = sim_cases.CaseSource(
-    name="crazyflow", package="crazyflow", modules=("crazyflow_source.py", "crazyflow_worker.py"),
+    name="crazyflow", package="crazyflow",
+    modules=("crazyflow_source.py", "crazyflow_worker.py", "simlog.py"),
     references=reference_specs, cases=case_list, case_spec=case_spec, fly=crazyflow_flights,
     observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
     observable=OBSERVABLE)

@@ -43,7 +43,6 @@ Example::
 from __future__ import annotations
 
 import importlib.util
-import json
 import os
 import subprocess
 import sys
@@ -55,10 +54,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import ModelError
-from ..core.frames import quat_multiply, quat_normalize, quat_to_rotmat
 from ..logs.flightlog import FlightLog
-from ..logs.sensors import rotation_quat
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
 
 __all__ = ["DRONE", "EFFECTS", "RATE_HZ", "RPM", "FlightSpec", "Sensors", "crazyflow_available",
            "crazyflow_flights", "crazyflow_params", "hover_rpm", "path_setpoints", "to_flight_log",
@@ -84,21 +82,6 @@ EFFECTS = ("mass", "payload", "com", "inertia", "weak_rotor", "thrust_scale", "m
 
 
 @dataclass(frozen=True)
-class Sensors:
-    """Sensor noise (1-sigma white noise unless named): position m, attitude rad, velocity
-    m/s, gyro rad/s (+ a constant bias drawn per flight with ``gyro_bias`` sigma), accel m/s^2,
-    rotor speed as a fraction of the hover speed."""
-
-    position: float = 3e-4
-    attitude: float = 1e-3
-    velocity: float = 5e-3
-    gyro: float = 5e-3
-    gyro_bias: float = 2e-3
-    accel: float = 0.03
-    rotor: float = 0.003
-
-
-@dataclass(frozen=True)
 class FlightSpec:
     """One flight: seed (path phase, noise), speed factor of the path, duration (s, logged),
     Crazyflow-side effects (:data:`EFFECTS`)."""
@@ -107,7 +90,7 @@ class FlightSpec:
     speed: float = 1.0
     duration: float = 8.0
     effects: dict = field(default_factory=dict)
-    sensors: Sensors = Sensors()
+    sensors: Sensors = field(default_factory=Sensors)
 
 
 def crazyflow_available() -> bool:
@@ -279,19 +262,11 @@ def crazyflow_flights(specs: list[FlightSpec], drone: str = DRONE) -> list[tuple
         sample = {name: value[k, lead:] for name, value in raw.items()}
         log = to_flight_log(sample, spec, jobs[k]["_com"], drone)
         truth = {"source": "crazyflow", "drone": drone, "seed": spec.seed, "speed": spec.speed,
-                 "duration_s": spec.duration, "effects": _jsonable(spec.effects),
-                 "crazyflow_params": _jsonable({key: jobs[k][key] for key in jobs[k]
+                 "duration_s": spec.duration, "effects": jsonable(spec.effects),
+                 "crazyflow_params": jsonable({key: jobs[k][key] for key in jobs[k]
                                                 if not key.startswith("_")})}
         out.append((log, truth))
     return out
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return np.asarray(value, dtype=float).tolist()
-    return float(value)
 
 
 def _run_worker(job: dict) -> dict:
@@ -312,38 +287,13 @@ def _run_worker(job: dict) -> dict:
 
 def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray, drone: str = DRONE) -> FlightLog:
     """Crazyflow's states (xyzw, RPM, CoM) -> a quadsim :class:`FlightLog` of the body origin
-    with the sensor model of ``spec.sensors`` (seeded by ``spec.seed``)."""
+    with the sensor model of ``spec.sensors`` (seeded by ``spec.seed``; :mod:`.simlog`)."""
     cp = crazyflow_params(drone)
-    rng = np.random.default_rng([spec.seed, 7])
-    s = spec.sensors
-    n = raw["pos"].shape[0]
-    t = np.arange(n) / RATE_HZ
-    quat = quat_normalize(raw["quat"][:, [3, 0, 1, 2]])           # xyzw -> wxyz, body -> world
-    rot = quat_to_rotmat(quat)
-    w, alpha = raw["ang_vel"], raw["ang_acc"]
-    r = -np.asarray(com, dtype=float)                              # origin relative to the CoM
-    position = raw["pos"] + rot @ r
-    velocity = raw["vel"] + np.einsum("nij,nj->ni", rot, np.cross(w, r))
-    gravity = np.array([0.0, 0.0, -9.81])
-    specific = np.einsum("nji,nj->ni", rot, raw["acc"] - gravity)   # body frame, at the CoM
-    specific = specific + np.cross(alpha, r) + np.cross(w, np.cross(w, r))
-    position = position + s.position * rng.standard_normal((n, 3))
-    quat = quat_normalize(quat_multiply(quat, rotation_quat(s.attitude
-                                                            * rng.standard_normal((n, 3)))))
-    quat = np.where(quat[:, :1] < 0, -quat, quat)
-    velocity = velocity + s.velocity * rng.standard_normal((n, 3))
-    gyro = w + s.gyro_bias * rng.standard_normal(3) + s.gyro * rng.standard_normal((n, 3))
-    accel = specific + s.accel * rng.standard_normal((n, 3))
-    rotor = raw["rotor_vel"] * RPM
-    delay = float(spec.effects.get("rotor_delay", 0.0))
-    if delay:
-        rotor = np.stack([np.interp(t - delay, t, c) for c in rotor.T], axis=-1)
-    rotor = rotor + s.rotor * hover_rpm(cp) * RPM * rng.standard_normal(rotor.shape)
     max_rpm = _speed_for_thrust(np.ravel(cp["rpm2thrust"]), float(cp["thrust_max"]))
-    command = np.clip(raw["rotor_cmd"] / max_rpm, 0.0, 1.0)
-    return FlightLog(t, position, quat, velocity, gyro, accel, rotor, command, None, None)
-
-
-def truth_json(truth: dict) -> str:
-    """The truth sidecar as JSON text (sorted keys: same truth, same bytes)."""
-    return json.dumps(truth, indent=1, sort_keys=True) + "\n"
+    states = SimStates(rate_hz=RATE_HZ, pos=raw["pos"], vel=raw["vel"],
+                       quat=raw["quat"][:, [3, 0, 1, 2]],          # xyzw -> wxyz, body -> world
+                       ang_vel=raw["ang_vel"], ang_acc=raw["ang_acc"], acc=raw["acc"],
+                       rotor_speed=raw["rotor_vel"] * RPM, command=raw["rotor_cmd"] / max_rpm)
+    return body_origin_log(states, com, spec.sensors, spec.seed,
+                           hover_speed=hover_rpm(cp) * RPM,
+                           rotor_delay=float(spec.effects.get("rotor_delay", 0.0)))
