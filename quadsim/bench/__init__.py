@@ -17,6 +17,12 @@ timing. This subpackage provides sources that break that circle:
   Brushless, run in a child process (:mod:`.crazyflow_worker`); :mod:`.crazyflow_cases` --
   its 28 frozen single-flight cases, judged per flight against 8 nominal Crazyflow flights
   (``scripts/gap_benchmark.py --independent --source crazyflow --cache DIR``);
+* :mod:`.pyflyt_source` -- PyFlyt 0.29.0 (``pip install 'quadsim[pyflyt]'`` then ``pip
+  install --no-deps PyFlyt==0.29.0``): pybullet physics, its own QuadX (``cf2x``), motors,
+  drag, rate damping and PID cascade, run in a child process (:mod:`.pyflyt_worker`);
+  :mod:`.pyflyt_cases` -- its 28 frozen single-flight cases against 8 nominal PyFlyt
+  flights (``--source pyflyt``); :mod:`.simlog` (the sensor model) and :mod:`.sim_cases`
+  (fly, cache, check, judge) are shared by the Crazyflow and PyFlyt sources;
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
   per-flight mode; :mod:`.score` -- reading a verdict and scoring it.

@@ -30,7 +30,7 @@ thrust_mismatch    one motor's thrust and torque             a chipped or bent p
  x2                coefficient -5..-15 %                    (5-15 % less thrust)
 thrust_factor      every coefficient -5..-15 %               worn propellers, heat
 motor_lag x2       yaml tau x 1.5-2.5 (10 -> 15-25 ms;       a slower ESC/motor: time
-                   effective 22-46 ms, motor_response)       constants 20-150 ms in the
+                   effective 19-46 ms, motor_response)       constants 20-150 ms in the
                                                             literature (motor_lag docs)
 rate_damping x2    yaml drag_coef_pqr x 1.5-3                prop guards / a cage add
                                                             frame drag; PyFlyt's own value
