@@ -1,0 +1,81 @@
+"""The fly/cache/check machinery shared by the simulator sources (quadsim.bench.sim_cases),
+on a stand-in source whose "simulator" writes hovering logs: every flight is flown once and
+reused from the cache, the cache key follows the case list, the rows carry the checked
+observability with the source's threshold and its scored kind; no verdict is computed."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadsim.bench import sim_cases
+from quadsim.logs.flightlog import FlightLog
+
+
+@dataclass(frozen=True)
+class _Spec:
+    seed: int
+    speed: float = 1.0
+    duration: float = 0.2
+
+
+def _hover_log(spec: _Spec) -> FlightLog:
+    n = round(spec.duration * 100)
+    t = np.arange(n) / 100.0
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    accel = np.tile([0.0, 0.0, 9.81 + 0.01 * spec.seed], (n, 1))
+    return FlightLog(t, np.zeros((n, 3)), quat, np.zeros((n, 3)), np.zeros((n, 3)), accel,
+                     np.full((n, 4), 1500.0), np.full((n, 4), 0.4), None, None)
+
+
+def _source(cases: list[dict], flown: list) -> sim_cases.CaseSource:
+    def fly(specs):
+        flown.extend(s.seed for s in specs)
+        return [(_hover_log(s), {"source": "stand-in", "seed": s.seed}) for s in specs]
+
+    def observe(logs, refs, rows):
+        assert len(refs) == 2 and len(logs) == len(rows)
+        return [(0.01 * (k + 1), 1.0 + k) for k in range(len(rows))]
+
+    return sim_cases.CaseSource(
+        name="standin", package="numpy", modules=("simlog.py",),
+        references=lambda: [_Spec(seed=1), _Spec(seed=2)], cases=lambda: cases,
+        case_spec=lambda c: _Spec(seed=c["seed"]), fly=fly, observe=observe,
+        scored_kind=lambda c: "library" if c["case"] == "joined" else c["kind"],
+        params=lambda: None, observable=0.015)
+
+
+def test_generate_once_reuse_and_rows(tmp_path):
+    """Two references and three cases are flown once (one batch); a second generate flies
+    nothing and keeps every byte; the rows carry reduction, gap ratio, the scored kind (a
+    case joined to the library) and observable = reduction >= threshold for library cases
+    only; a changed case list is a new cache folder."""
+    cases = [{"case": "mass_offset", "truth": "mass_offset", "kind": "library", "seed": 10,
+              "speed": 1.0, "effects": {"mass": 0.002}},
+             {"case": "none", "truth": "none", "kind": "none", "seed": 11, "speed": 1.0,
+              "effects": {}},
+             {"case": "joined", "truth": "joined", "kind": "outside", "seed": 12,
+              "speed": 1.0, "effects": {}}]
+    flown: list = []
+    source = _source(cases, flown)
+    folder = sim_cases.generate(source, tmp_path, progress=lambda m: None)
+    assert flown == [1, 2, 10, 11, 12]
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert sim_cases.generate(source, tmp_path, progress=lambda m: None) == folder
+    assert flown == [1, 2, 10, 11, 12]
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    truth = json.loads((folder / "case_00_mass_offset.truth.json").read_text())
+    assert truth["truth"] == "mass_offset" and truth["case"] == "mass_offset"
+    refs, rows = sim_cases.load_flights(source, tmp_path)
+    assert len(refs) == 2 and [r["name"] for r in rows] == ["case_00_mass_offset",
+                                                            "case_01_none", "case_02_joined"]
+    assert [r["oracle_reduction"] for r in rows] == [0.01, 0.02, 0.03]
+    assert [r["gap_vs_references"] for r in rows] == [1.0, 2.0, 3.0]
+    assert [r["kind"] for r in rows] == ["library", "none", "library"]
+    assert [r["flown_as"] for r in rows] == ["library", "none", "outside"]
+    assert [r["observable"] for r in rows] == [False, True, True]
+    np.testing.assert_allclose(rows[0]["_log"].accel[:, 2], 9.81 + 0.1, atol=1e-9)
+    other = _source(cases[:2], [])
+    assert sim_cases.flight_dir(other, tmp_path) != folder
