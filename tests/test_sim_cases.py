@@ -79,3 +79,51 @@ def test_generate_once_reuse_and_rows(tmp_path):
     np.testing.assert_allclose(rows[0]["_log"].accel[:, 2], 9.81 + 0.1, atol=1e-9)
     other = _source(cases[:2], [])
     assert sim_cases.flight_dir(other, tmp_path) != folder
+
+
+def _benchmark_script():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "scripts" / "gap_benchmark.py"
+    spec = importlib.util.spec_from_file_location("gap_benchmark_script", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_simulator_summary_and_missing_cache(capsys):
+    """scripts/gap_benchmark.py's simulator table: the observability-only table names the
+    source and marks an unobservable library case; the blind-run table scores hand-made
+    verdicts (a named case, a no-gap flight); ``--source pyflyt`` without ``--cache`` is
+    one error line and exit 2 (nothing flown)."""
+    from quadsim.bench.score import score_case
+
+    script = _benchmark_script()
+    source = _source([], [])
+    rows = [{"name": "case_00_mass_offset", "truth": "mass_offset", "kind": "library",
+             "speed": 1.0, "effects": {"mass": 0.002}, "gap_vs_references": 3.0,
+             "oracle_reduction": 0.5, "observable": True},
+            {"name": "case_01_inertia_error", "truth": "inertia_error", "kind": "library",
+             "speed": 1.1, "effects": {"inertia": (0.2, 0.2, 0.0)},
+             "gap_vs_references": 1.1, "oracle_reduction": 0.01, "observable": False},
+            {"name": "case_02_none", "truth": "none", "kind": "none", "speed": 0.5,
+             "effects": {}, "gap_vs_references": 0.7, "oracle_reduction": 0.0,
+             "observable": True}]
+    text = script.summarise_simulator(rows, source)
+    assert "standin change" in text and "1 of 2 in-library" in text
+    assert "case_01_inertia_error" in text.splitlines()[0]
+    assert "0.01 (not observable)" in text and "verdict" not in text
+    named = {"outcome": "named", "lead": ["mass_offset"], "named": ["mass_offset"],
+             "readings": 1, "alternatives": [], "confident": True}
+    quiet = {"outcome": "no_significant_gap", "lead": [], "named": [], "readings": 0,
+             "alternatives": [], "confident": False}
+    for row, verdict in zip(rows, (named, {**quiet, "outcome": "unexplained"}, quiet)):
+        row["per_flight"] = {**verdict, "score": score_case(row["truth"], row["kind"],
+                                                            verdict)}
+    text = script.summarise_simulator(rows, source, observability_only=False)
+    assert "| standin | per-flight | 100% (1/1) |" in text.replace(" %", "%")
+    assert "| 100% (1/1) | 0/0 |" in text.replace(" %", "%")
+    assert script.main(["--independent", "--source", "pyflyt"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --source pyflyt:")
