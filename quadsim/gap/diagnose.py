@@ -22,6 +22,7 @@ from . import heldout_verdict as hv
 from .baseline import BASELINE, NominalRefit  # noqa: F401  (re-exported)
 from .checks import check_length, vehicle_check
 from .fitting import fit_motor_map, stack_states
+from .priors import candidate_plausibility
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .scoring import _channel_rms, _channels, _gap, _scaled
 from .where import by_band, by_regime, kstep_errors, regime_masks
@@ -331,7 +332,7 @@ def rule_unit(name: str) -> str:
 
 def _alternative(row, decision, lead_name, params) -> dict:
     entry = next((e for e in decision["entries"] if e["name"] == row["name"]), {})
-    score, ok, prior = collinear.candidate_plausibility(row["params"], params)
+    score, ok, prior = candidate_plausibility(row["params"], params)
     alt = {"name": row["name"], "magnitude": row["magnitude"], "params": row["params"],
            "ci": row["ci"], "units": {k: collinear.unit_of(k) for k in row["params"]},
            "probability": row["probability"], "reduction": entry.get("reduction"),
