@@ -148,7 +148,9 @@ def _cumtrapz(t: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _gain(measured: np.ndarray, reference: np.ndarray) -> float:
-    return float(np.sum(measured * reference) / np.sum(reference * reference))
+    """Least-squares gain of ``measured`` on ``reference``; NaN when the reference is 0."""
+    power = float(np.sum(reference * reference))
+    return float(np.sum(measured * reference)) / power if power > 0 else float("nan")
 
 
 def _window_rotations(log):
@@ -189,6 +191,12 @@ def check_gyro(log) -> str | None:
                               f"gyro w{axis} follows the attitude's {'xyz'[best]} axis "
                               f"(correlation {corr[best]:.2f} vs {corr[i]:.2f} with {axis}) "
                               "over 0.1 s windows: axes swapped?")
+        if not np.isfinite(gain):
+            raise field_error(_where(log), f"w{axis}",
+                              f"the integrated gyro turns "
+                              f"{np.sqrt(np.mean(gyro_rot[:, i] ** 2)):.3g} rad rms about "
+                              f"{axis} over {WINDOW_S} s windows, the attitude quaternions not "
+                              "at all: not the gyro of this flight, or a wrong unit?")
         if not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
             hint = ("deg/s instead of rad/s?" if 40 < gain < 80 else
                     "sign flipped (frame convention)?" if -1.4 < gain < -0.7 else
