@@ -55,7 +55,7 @@ from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
-__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "flight_states",
+__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "channel_unit", "flight_states",
            "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
            "measured_wrench",
            "residual_wrench", "DEFAULT_WINDOW_S"]
@@ -63,7 +63,11 @@ __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "fligh
 #: Savitzky–Golay window (s) used unless told otherwise.
 DEFAULT_WINDOW_S = 0.1
 CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
-CHANNEL_UNITS = ("N", "N", "N", "N m", "N m", "N m")
+
+
+def channel_unit(name: str) -> str:
+    """Unit of a residual channel: Fx..Fz N, Mx..Mz N m, a rotor-speed channel rad/s."""
+    return {"F": "N", "M": "N m"}.get(name[0], "rad/s")
 
 
 @dataclass(frozen=True)
