@@ -256,10 +256,6 @@ __all__ += ["pair", "plausible", "every_part_stands", "consistent", "separate_by
             "READING_P"]
 
 
-def _stated(ranked, rows) -> list[dict]:
-    return [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
-
-
 def decide(weighed: list[Weighed], train, held, reference, before: list, max_combination: int,
            tick) -> dict:
     """The ranking, the lead (a pair when it earns it) and its consistency (module doc, 1-3):
