@@ -16,15 +16,24 @@ written atomically.
 Options: ``--topic SIGNAL=TOPIC`` and ``--field SIGNAL=FIELD`` (ULog; SIGNAL one of
 position, velocity, quat, body_rate, accel, rotor_speed, rotor_command, vbat; for uSD
 ``--topic event=NAME`` picks the event), ``--rotor-map`` (our rotor i <- log motor m_i,
-1-based), ``--pwm-range LO,HI`` (us), ``--model`` (checks that the log has as many rotors as
-the parameter set), ``--start``/``--end`` (s: keep only that part, e.g. the airborne part;
-time restarts at 0). Errors: one line naming the file and the topic/field, exit 2, nothing
-written.
+1-based; our own CSV/Parquet logs too), ``--pwm-range LO,HI`` (us), ``--model`` (below),
+``--start``/``--end`` (s: keep only that part, e.g. the airborne part; time restarts at 0).
+Errors: one line naming the file and the topic/field, exit 2, nothing written.
+
+``--model NAME`` checks the converted log as ``gap`` and ``view`` will read it, with the same
+function (:func:`quadsim.logs.checks.check_log`, on the log's airborne span): a multirotor
+with the set's rotor count, the gyro against the attitude (unit, sign, axes, a body rate
+logged in the world frame), the accelerometer, ``b sum(Omega^2)`` against the weight and the
+rotor order by the torque balance under every permutation of the rotor columns. A log those
+checks refuse is refused here too (``gap`` would refuse it): a wrong rotor order names the
+``--rotor-map`` that fixes it. Their notes (a flight too gentle to check the gyro) are
+``warning:`` lines; the log is written whole (the spans ``gap`` cuts stay in it).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -33,7 +42,8 @@ import numpy as np
 from .core.args import ArgumentParser, check_number, check_output
 from .core.errors import InputError, QuadsimWarning, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
-from .logs.checks import check_vehicle
+from .logs.checks import check_log
+from .logs.common import map_rotors
 from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
 from .logs.ulog import TOPICS
 
@@ -72,8 +82,8 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
     never over the input (``output`` may not be ``source``). ``start``/``end`` (s, on the
     converted log's time axis) keep only that part; time then restarts at 0. The importer's
     notes (spans lost, a vehicle that is not a multirotor) are warned as
-    :class:`~quadsim.core.errors.QuadsimWarning`; ``model`` refuses a log that is not a
-    multirotor with that set's rotor count."""
+    :class:`~quadsim.core.errors.QuadsimWarning`; ``model`` refuses a log that ``gap`` would
+    refuse with that set (see the module doc)."""
     source, output = Path(source), Path(output)
     check_output("-o", output, LOG_SUFFIXES, inputs=[source])
     check_number("--rate", rate_hz, low=0.0, high=MAX_RATE_HZ, unit="Hz")
@@ -98,10 +108,16 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
         columns = {k: v[keep] for k, v in columns.items()}
         columns["t"] = columns["t"] - columns["t"][0]
     log = log_from_columns(source, columns, warn=False)
-    if model is not None:
+    if fmt == "csv" and rotor_map is not None:     # the importers map the foreign formats
+        log = dataclasses.replace(
+            log, rotor_speed=map_rotors(source, "rotor_*", log.rotor_speed, rotor_map),
+            rotor_command=map_rotors(source, "cmd_*", log.rotor_command, rotor_map))
+    notes = list(log.notes)
+    if model is not None:       # gap's and view's checks; the notes of what they cut are theirs
         from .vehicle.params import load_params
-        check_vehicle(log, load_params(model))
-    for note in log.notes:
+        checked, found = check_log(log, load_params(model))
+        notes += [n for n in found if n not in checked.notes]
+    for note in notes:
         warnings.warn(note, QuadsimWarning, stacklevel=2)
     write_log(output, log)
     return log
@@ -132,8 +148,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="keep samples from this time (s, converted log's time)")
     parser.add_argument("--end", type=float, default=None, metavar="S",
                         help="keep samples up to this time (s)")
-    parser.add_argument("--model", default=None, help="parameter set whose rotor count the "
-                        "log must match")
+    parser.add_argument("--model", default=None, help="parameter set to check the log "
+                        "against as gap does: rotor count, gyro (unit, axes, frame), "
+                        "accelerometer, rotor speeds vs weight, rotor order")
     return parser
 
 

@@ -33,13 +33,11 @@ from .identify.inertia_compare import (
     Row,
     agreement_lines,
     check_rows,
-    lumped_inertia,
     mujoco_mass_properties,
     report_rows,
 )
 
-__all__ = ["SOLIDWORKS", "Row", "check_rows", "lumped_inertia", "main",
-           "mujoco_mass_properties", "report_rows"]
+__all__ = ["SOLIDWORKS", "Row", "check_rows", "main", "mujoco_mass_properties", "report_rows"]
 
 DEFAULT_CAD = shipped_dir("cad")
 def format_rows(rows: list[Row]) -> str:

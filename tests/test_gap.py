@@ -190,6 +190,12 @@ def test_collinear_pair_is_listed_with_magnitudes_and_plausibility(cf):
     assert "Mz" in alts["thrust_factor"]["torque_yaw"]
     assert verdict["answer"].startswith("Behaves as if +4")
     assert verdict["units"] == {"mass_offset.mass": "kg"}
+    # the readings the answer states: each once, in words, those of probability >= READING_P
+    from quadsim.gap.judge import READING_P
+
+    stated = [a for a in verdict["alternatives"] if a["probability"] >= READING_P]
+    assert [a["name"] for a in stated] == verdict["readings"]
+    assert all(verdict["answer"].count(a["magnitude"]) == 1 for a in stated)
 
 
 def test_mass_candidate_not_handicapped_by_unmodelled_drag(cf):
@@ -433,14 +439,14 @@ def test_motor_map_is_static_and_survives_a_narrow_command_range(cf):
 def test_a_combination_needs_every_part_identified_and_plausible(cf):
     """Two effects cancelling at their bounds (every rotor -50 % and the vehicle 50 %
     lighter) are not a combination; a plausible pair with both parts identified is."""
-    from quadsim.gap.combine import _every_part_stands
+    from quadsim.gap.heldout_verdict import every_part_stands
 
     rotors = {f"thrust_mismatch.rotor_{i}": -0.5 for i in range(1, 5)}
     bad = {"name": "thrust_mismatch+mass_offset",
            "params": {**rotors, "mass_offset.mass": -0.5 * cf.mass},
            "identifiable": {**dict.fromkeys(rotors, False), "mass_offset.mass": True},
            "significant": {**dict.fromkeys(rotors, True), "mass_offset.mass": True}}
-    assert not _every_part_stands(bad, cf)
+    assert not every_part_stands(bad, cf)
     good = {"name": "com_offset+mass_offset",
             "params": {"com_offset.x": 0.002, "com_offset.y": 0.0, "com_offset.z": 0.0,
                        "mass_offset.mass": 0.004},
@@ -448,9 +454,9 @@ def test_a_combination_needs_every_part_identified_and_plausible(cf):
                              "mass_offset.mass": True},
             "significant": {"com_offset.x": True, "com_offset.y": False,
                             "com_offset.z": False, "mass_offset.mass": True}}
-    assert _every_part_stands(good, cf)
+    assert every_part_stands(good, cf)
     implausible = {**good, "params": {**good["params"], "mass_offset.mass": 0.9 * cf.mass}}
-    assert not _every_part_stands(implausible, cf)
+    assert not every_part_stands(implausible, cf)
 
 
 def test_inertia_fit_not_shrunk_by_gyro_noise():

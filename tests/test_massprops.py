@@ -155,10 +155,11 @@ def test_hull_fallback_warns_and_uses_the_convex_hull(tmp_path):
 
 
 def test_lumped_formula_reproduces_the_report_table_4_15():
-    from quadsim.identify.inertia_compare import lumped_inertia
+    from quadsim.identify.inertia import lumped_inertia
 
     # eq. 3.18/3.19 with the report's own inputs gives its printed 0.00444 and 0.00825
-    moments = np.diag(lumped_inertia(0.3463, 0.0677, 0.1913, 0.052))
+    moments = lumped_inertia(sphere_mass=0.3463, sphere_radius=0.0677, arm_length=0.1913,
+                             point_mass=0.052)
     np.testing.assert_allclose(moments, [0.00444, 0.00444, 0.00825], rtol=2e-3)
 
 

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from quadsim.bench.score import read_verdict, score_case
-from quadsim.gap.combine import _combination_alternatives, parts_identified
+from quadsim.gap.collinear import describe
 from quadsim.gap.evidence import Evidence, Explanation
+from quadsim.gap.heldout_verdict import every_part_stands
 from quadsim.gap.judge import posterior
 from quadsim.vehicle.params import load_params
 
@@ -76,28 +77,22 @@ def _wind(vx, ci):
                             "rotor_drag.coefficient": True}}
 
 
-def test_every_part_of_a_reading_must_be_identified():
+def test_every_part_of_a_reading_must_be_identified(cf):
     """wind fitted as 0.002 +- 0.1 m/s with rotor drag is rotor drag alone: not a reading."""
-    assert not parts_identified(_wind(0.002, 0.1))
-    assert parts_identified(_wind(1.0, 0.1))
+    assert not every_part_stands(_wind(0.002, 0.1), cf)
+    assert every_part_stands(_wind(1.0, 0.1), cf)
 
 
-def test_a_combination_answer_describes_every_part(cf):
-    best = {"name": "mass_offset", "params": {"mass_offset.mass": 0.004},
-            "ci": {"mass_offset.mass": 0.0002}, "reduction": 0.8}
-    combined = {"name": "mass_offset+inertia_error",
-                "params": {"mass_offset.mass": 0.004, "inertia_error.xx": 0.3,
-                           "inertia_error.yy": 0.3, "inertia_error.zz": 0.0},
-                "ci": {"mass_offset.mass": 0.0002, "inertia_error.xx": 0.05,
-                       "inertia_error.yy": 0.05, "inertia_error.zz": 0.2}, "reduction": 0.95}
-    factor = {"name": "thrust_factor", "magnitude": "-9.8 ± 0.5 % thrust per Ω² on all 4 rotors",
-              "plausible": True, "params": {"thrust_factor.change": -0.098}}
-    alts = [{"name": "mass_offset", "magnitude": "+4 g", "plausible": True}, factor]
-    out = _combination_alternatives(combined, best, alts, cf)
-    assert out[0]["name"] == "mass_offset+inertia_error"
-    assert "g heavier" in out[0]["magnitude"] and "I_xx +30" in out[0]["magnitude"]
-    assert out[1]["name"] == "thrust_factor+inertia_error"
-    assert out[1]["magnitude"].startswith("-9.8") and "I_xx +30" in out[1]["magnitude"]
+def test_a_combination_reading_describes_every_part(cf):
+    """A pair's magnitude in words (the live reading text, quadsim.gap.judge.reading_text)
+    states each of its effects with units: +4 g on the model's mass, I_xx +30 %."""
+    values = {"mass_offset.mass": 0.004, "inertia_error.xx": 0.3, "inertia_error.yy": 0.3}
+    ci = {"mass_offset.mass": 0.0002, "inertia_error.xx": 0.05, "inertia_error.yy": 0.05}
+    text = describe("mass_offset+inertia_error", values, ci, cf)
+    assert "+4 ± 0.2 g heavier" in text
+    assert f"{100 * 0.004 / cf.mass:+.1f} % of the model's" in text
+    for axis, i in (("xx", 0), ("yy", 1)):
+        assert f"I_{axis} +30 ± 5 % ({1.3 * cf.inertia[i, i]:.3g} kg m² instead of" in text
 
 
 def test_scoring_counts_plausible_collinear_readings_only():
@@ -118,28 +113,6 @@ def test_scoring_counts_plausible_collinear_readings_only():
     assert score_case("translational_lift", "outside", verdict)["confident_wrong"]
     assert np.isclose(score_case("none", "none", read_verdict(
         {"outcome": "no_significant_gap", "effect": "no_significant_gap"}))["no_gap"], 1)
-
-
-def test_stated_readings_say_each_explanation_once():
-    """The b refit and an all-rotors-alike thrust_mismatch repeat thrust_factor's reading;
-    an implausible alternative is never a reading; a real per-rotor pattern is."""
-    from quadsim.gap.verdict import stated_readings
-
-    rotors = {f"thrust_mismatch.rotor_{i}": -0.065 + 0.0001 * i for i in range(1, 5)}
-    ci = dict.fromkeys(rotors, 0.0025)
-    alts = [{"name": "mass_offset", "plausible": True},
-            {"name": "thrust_factor", "plausible": True},
-            {"name": "thrust_mismatch", "plausible": True, "params": rotors, "ci": ci},
-            {"name": "nominal_refit", "plausible": True},
-            {"name": "thrust_curve", "plausible": False}]
-    assert [a["name"] for a in stated_readings(alts)] == ["mass_offset", "thrust_factor"]
-    uneven = {**rotors, "thrust_mismatch.rotor_2": -0.02}
-    alts[2] = {**alts[2], "params": uneven}
-    assert [a["name"] for a in stated_readings(alts)] == ["mass_offset", "thrust_factor",
-                                                          "thrust_mismatch"]
-    # without thrust_factor among them, the b refit is a reading of its own
-    assert [a["name"] for a in stated_readings([alts[0], alts[3]])] == ["mass_offset",
-                                                                         "nominal_refit"]
 
 
 def test_summary_says_when_a_refit_parameter_is_not_identified():

@@ -99,6 +99,41 @@ def test_rotor_order_right_order_of_the_nanodrone_runs_passes():
         check_rotor_order(load_log(path, warn=False), params)
 
 
+def test_convert_with_a_model_refuses_what_gap_refuses(gentle, tmp_path, capsys):
+    """``convert --model`` runs gap's checks (quadsim.logs.checks.check_log): rotor columns
+    1<->2 swapped are refused in the same line as gap's, naming the --rotor-map that fixes
+    them; with that map the converted log carries the right order and passes; a body rate
+    logged in the world frame is refused. A refusal writes nothing and leaves the input."""
+    from quadsim.convert import main as convert
+    from quadsim.gap.__main__ import main as gap
+    from quadsim.logs.flightlog import write_log
+
+    right, swapped, out = tmp_path / "right.csv", tmp_path / "swapped.csv", tmp_path / "o.csv"
+    write_log(right, gentle)
+    write_log(swapped, dataclasses.replace(gentle, rotor_speed=gentle.rotor_speed[:, [1, 0, 2, 3]]))
+    before = swapped.read_bytes()
+    assert convert([str(swapped), "-o", str(out), "--model", "crazyflie21"]) == 2
+    err = _one_line(capsys, str(swapped), ": rotor_*: rotor order", "--rotor-map 2,1,3,4)")
+    assert not out.exists() and swapped.read_bytes() == before
+    assert gap(["--model", "crazyflie21", str(swapped), "--quiet"]) == 2
+    assert _one_line(capsys) == err
+    assert convert([str(swapped), "-o", str(out), "--model", "crazyflie21",
+                    "--rotor-map", "2,1,3,4"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    assert np.array_equal(load_log(out).rotor_speed, load_log(right).rotor_speed)
+    # convert without --model only converts: the swapped order is written as it is
+    assert convert([str(swapped), "-o", str(out)]) == 0
+    assert np.array_equal(load_log(out).rotor_speed, load_log(swapped).rotor_speed)
+    capsys.readouterr()
+    tilted = _flight(1.6, gyro=0.01, attitude=0.002)
+    world = np.einsum("nij,nj->ni", quat_to_rotmat(tilted.quat), tilted.body_rate)
+    write_log(swapped, dataclasses.replace(tilted, body_rate=world))
+    out.unlink()
+    assert convert([str(swapped), "-o", str(out), "--model", "crazyflie21"]) == 2
+    _one_line(capsys, str(swapped), ": wx..wz: ", "body rate logged in the world frame?")
+    assert not out.exists()
+
+
 # ----------------------------------------------------------------------------- gyro frame
 
 

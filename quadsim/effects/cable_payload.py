@@ -48,7 +48,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import ModelError
-from ..core.frames import quat_to_rotmat
+from ..core.frames import cross, quat_to_rotmat
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 
 __all__ = ["CablePayload", "swing_period"]
@@ -59,12 +59,6 @@ def swing_period(length: float, payload_mass: float, vehicle_mass: float,
     """Small-swing period (s) of a payload below a free-floating vehicle holding its thrust:
     2 pi sqrt(L M / ((M + m) g)) (the fixed-pivot pendulum is the limit M -> infinity)."""
     return 2 * np.pi * np.sqrt(length * vehicle_mass / ((vehicle_mass + payload_mass) * gravity))
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
 class CablePayload(EffectBase):
@@ -99,7 +93,7 @@ class CablePayload(EffectBase):
         rot = quat_to_rotmat(quat)
         arm = np.array([self.x, self.y, self.z])
         where = position + rot @ arm
-        speed = velocity + np.einsum("bij,bj->bi", rot, _cross(body_rate, arm[None]))
+        speed = velocity + np.einsum("bij,bj->bi", rot, cross(body_rate, arm[None]))
         return rot, where, speed
 
     def initial_state(self, params, vehicle: dict) -> np.ndarray:
@@ -142,5 +136,5 @@ class CablePayload(EffectBase):
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world = pull
         arm = np.array([self.x, self.y, self.z]) - ctx.params.com
-        loads.torque_body = _cross(arm[None], np.einsum("bji,bj->bi", rot, pull))
+        loads.torque_body = cross(arm[None], np.einsum("bji,bj->bi", rot, pull))
         return loads

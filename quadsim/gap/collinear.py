@@ -1,8 +1,9 @@
-"""Collinear explanations in words: each candidate's physical magnitude, what the torque and
-yaw channels say, what separates them, and a ranking by physical plausibility.
+"""Collinear explanations in words: each candidate's physical magnitude (:func:`describe`),
+what the torque and yaw channels say, and what separates them (:func:`separation`).
 
-Two candidates are *collinear* when their held-out gaps tie (within the tie margin of the
-diagnosis): the data cannot choose between them. They are then all listed, each with
+Readings the data cannot choose between are all listed in ``verdict.alternatives``
+(:mod:`quadsim.gap.diagnose`, from the held-out posterior of
+:mod:`quadsim.gap.heldout_verdict`), each with
 
 * ``magnitude``: the fitted parameters as a physical statement with units ("+4.0 ± 0.2 g
   (+10.8 % of the vehicle mass)", "-9.7 ± 0.5 % thrust per Omega^2 on all 4 rotors");
@@ -11,7 +12,7 @@ diagnosis): the data cannot choose between them. They are then all listed, each 
   air also scales the yaw drag torque; an added mass at the CoM leaves torques alone);
 * ``separate_by``: the measurement or manoeuvre that would tell them apart;
 * ``plausible`` / ``plausibility``: the prior check of :mod:`quadsim.gap.priors` (score
-  <= 1 plausible; ranking key). An implausible candidate is flagged and never named.
+  <= 1 plausible). An implausible candidate is flagged and never named.
 """
 
 from __future__ import annotations
@@ -20,10 +21,8 @@ import numpy as np
 
 from ..vehicle.params import VehicleParams, hover_speed
 from .fitting import effect_class
-from .priors import candidate_plausibility
 
-__all__ = ["describe", "alternatives", "unit_of", "SEPARATE", "separation", "pick_plausible",
-           "collinear_note"]
+__all__ = ["describe", "unit_of", "SEPARATE", "separation"]
 
 # Known collinear pairs and what data would separate them.
 SEPARATE = {
@@ -224,46 +223,3 @@ def _torque_text(entry: dict) -> str:
     rms = entry.get("heldout_rms_after") or {}
     have = [(k, rms[k]) for k in ("Mx", "My", "Mz") if k in rms]
     return ", ".join(f"{k} {v:.2g} N m" for k, v in have)
-
-
-def alternatives(best: dict, others: list[dict], params: VehicleParams) -> list[dict]:
-    """``best`` and its collinear ``others`` described and ranked (most plausible first)."""
-    out = []
-    for entry in [best] + list(others):
-        worst = candidate_plausibility(entry["params"], params)
-        out.append({
-            "name": entry["name"],
-            "magnitude": describe(entry["name"], entry["params"], entry.get("ci", {}), params,
-                                  entry.get("fixed")),
-            "params": entry["params"], "ci": entry.get("ci", {}),
-            "units": {k: unit_of(k) for k in entry["params"]},
-            "reduction": entry.get("reduction"),
-            "torque_yaw": _torque_text(entry),
-            "plausibility": worst[0], "plausible": worst[1], "prior": worst[2],
-        })
-    sep = separation(best["name"], [e["name"] for e in others])
-    for alt in out[1:]:
-        alt["separate_by"] = sep[alt["name"]]
-    out.sort(key=lambda a: (not a["plausible"], a["plausibility"]))
-    return out
-
-
-def pick_plausible(best: dict, tied: list[dict], params) -> tuple[dict | None, list[dict]]:
-    """Among collinear candidates (``best`` and those ``tied`` with it), the most plausible
-    one (priors), and all of them described (:func:`alternatives`)."""
-    alts = alternatives(best, tied, params)
-    lead = alts[0]
-    if not lead["plausible"]:
-        return None, alts
-    chosen = best if lead["name"] == best["name"] else next(
-        e for e in tied if e["name"] == lead["name"])
-    return chosen, alts
-
-
-def collinear_note(name: str, alts: list[dict]) -> str:
-    others = [a for a in alts if a["name"] != name]
-    return (f"too little excitation to separate {name} from "
-            + ", ".join(a["name"] for a in others) + " on these flights (collinear within the "
-            "tie margin); the name follows the priors, not the data: "
-            + "; ".join(f"{a['name']}: {a['separate_by']}" for a in others
-                        if a.get("separate_by")))

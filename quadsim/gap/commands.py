@@ -58,7 +58,7 @@ from ..core.errors import InputError
 from ..logs.flightlog import FlightLog
 
 __all__ = ["CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
-           "synthesise_all", "synthesise_speeds", "with_synthesised_speeds", "without_speeds"]
+           "synthesise_all", "synthesise_speeds", "without_speeds"]
 
 TAU_BOUNDS = (5e-4, 0.5)
 
@@ -179,15 +179,6 @@ def synthesise_speeds(log: FlightLog, model: CommandModel, *,
 def without_speeds(log: FlightLog) -> FlightLog:
     """The log with its rotor-speed columns removed (what a command-only log looks like)."""
     return dataclasses.replace(log, rotor_speed=None)
-
-
-def with_synthesised_speeds(logs: Sequence[FlightLog], reference: Sequence[FlightLog], *,
-                            model: CommandModel | None = None,
-                            ) -> tuple[list[FlightLog], CommandModel]:
-    """Every log without rotor speeds gets synthesised ones (model fitted on ``reference``
-    unless given); logs with speeds are returned unchanged."""
-    model = model or fit_command_model(reference)
-    return [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs], model
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ parameter too weakly excited in one half cannot disagree.
 
 A parameter whose halves differ beyond their combined interval but by less than
 :data:`MATERIAL` *shifts* with the regime: the name stands, marked ``tentative`` (field
-``verdict.tentative`` / ``flights[].tentative``, a note and a sentence in the answer): it
+``verdict.tentative``, a note and a sentence in the answer): it
 describes how the vehicle behaved over the flown range, but the value depends on airspeed or
 rotor speed, so it may stand in for an effect outside the library (a thrust gain growing with
 airspeed reads as a small thrust-curve term over a narrow speed range); flights over a wider
@@ -47,8 +47,7 @@ from ..core.errors import ModelError
 from .fitting import Candidate, fit_candidate
 from .residual import FlightStates
 
-__all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "split_masks", "check", "apply_to_verdict",
-           "apply_to_flight", "judged_parameters"]
+__all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "split_masks", "check", "apply_to_verdict"]
 
 #: relative difference (of the larger magnitude) above which two values are materially
 #: different. 0.5: the two halves ask for values a factor >= 2 apart.
@@ -65,7 +64,7 @@ def split_masks(flights: list[FlightStates]) -> dict[str, tuple[float, list[np.n
     speed = [np.linalg.norm(f.velocity[:, :2], axis=1) for f in flights]
     rotor = [np.mean(f.rotor_speed, axis=1) for f in flights]
     out = {}
-    for name, values in (("airspeed", speed), ("rotor_speed", rotor)):
+    for name, values in zip(SPLITS, (speed, rotor)):
         threshold = float(np.median(np.concatenate(values)))
         out[name] = (threshold, [v > threshold for v in values])
     return out
@@ -120,12 +119,6 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
     return out
 
 
-def judged_parameters(entry: dict) -> list[str]:
-    """Parameters of a scored entry that are identified and significant (the ones named)."""
-    return [k for k in entry["params"]
-            if entry["identifiable"].get(k) and entry["significant"].get(k)]
-
-
 def _partial_text(name: str, reduction: float, result: dict) -> str:
     return (f"Unexplained: {name} explains {100 * reduction:.0f} % of the held-out gap but "
             f"needs different values in different regimes ({'; '.join(result['inconsistent'])})"
@@ -171,9 +164,3 @@ def _apply(entry: dict, notes: list[str], result: dict, label: str) -> None:
 def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
     """:func:`_apply` on a pooled verdict (name in ``effect``)."""
     _apply(verdict, notes, result, "effect")
-
-
-def apply_to_flight(judged: dict, result: dict) -> None:
-    """The same for one flight of the per-flight mode (``flights[]`` entry, name in
-    ``verdict``)."""
-    _apply(judged, judged["notes"], result, "verdict")

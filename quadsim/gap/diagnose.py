@@ -22,7 +22,8 @@ from . import heldout_verdict as hv
 from .baseline import BASELINE, NominalRefit  # noqa: F401  (re-exported)
 from .checks import check_length, vehicle_check
 from .fitting import fit_motor_map, stack_states
-from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
+from .priors import candidate_plausibility
+from .residual import DEFAULT_WINDOW_S, FlightStates, channel_unit, flight_states
 from .scoring import _channel_rms, _channels, _gap, _scaled
 from .where import by_band, by_regime, kstep_errors, regime_masks
 
@@ -275,7 +276,7 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
                                                                                  reference.sigma)
     flagged = set(remains) | set(carries)
     channels = {n: {"before": float(b), "after": float(a), "floor": float(s),
-                    "unit": rule_unit(n), "at_floor": n not in flagged}
+                    "unit": channel_unit(n), "at_floor": n not in flagged}
                 for n, b, a, s in zip(names, rms_before, rms_after, reference.sigma)}
     others = [r["name"] for r in stated if r["name"] != lead_name]
     listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
@@ -325,13 +326,9 @@ def _words_of(text: str) -> str:
     return hv._words(text, True)
 
 
-def rule_unit(name: str) -> str:
-    return {"F": "N", "M": "N m"}.get(name[0], "rad/s")
-
-
 def _alternative(row, decision, lead_name, params) -> dict:
     entry = next((e for e in decision["entries"] if e["name"] == row["name"]), {})
-    score, ok, prior = collinear.candidate_plausibility(row["params"], params)
+    score, ok, prior = candidate_plausibility(row["params"], params)
     alt = {"name": row["name"], "magnitude": row["magnitude"], "params": row["params"],
            "ci": row["ci"], "units": {k: collinear.unit_of(k) for k in row["params"]},
            "probability": row["probability"], "reduction": entry.get("reduction"),
@@ -347,7 +344,7 @@ def _pct(p: float) -> str:
 
 
 def _remains_text(remains: dict) -> str:
-    return ", ".join(f"{k} {v[0]:.2g} {rule_unit(k)} ({v[1] ** 0.5:.1f}x the noise's)"
+    return ", ".join(f"{k} {v[0]:.2g} {channel_unit(k)} ({v[1] ** 0.5:.1f}x the noise's)"
                      for k, v in remains.items())
 
 

@@ -9,8 +9,7 @@
    remainder (test 4b), the lead is refitted with each other effect; a pair enters the
    posterior as one more reading with the prior of the lead alone split evenly among its
    partners (a second simultaneous effect is a priori no likelier than the first alone), and
-   every part of it must be determined and plausible
-   (as :func:`quadsim.gap.combine.parts_identified`).
+   every part of it must be determined and plausible (:func:`every_part_stands`).
 3. **Consistency** (:mod:`.consistency`): a named effect needs one value in slow and fast
    flight, at low and high rotor speed; otherwise ``unexplained`` with a partial explanation.
 4. **Lack of fit ("not in the library")**, per channel c, on the lead reading:
@@ -221,6 +220,18 @@ def plausible(entry: dict, params) -> tuple[bool, str]:
     return bool(ok), text
 
 
+def every_part_stands(entry: dict, params) -> bool:
+    """A pair claims that each of its effects is there: every effect of it needs a parameter
+    determined and significant (a wind of 0.002 +- 0.1 m/s fitted with rotor drag is rotor
+    drag alone), and the determined values must be plausible (:mod:`.priors`): two effects
+    cancelling each other at their bounds (every rotor -50 % thrust and the vehicle 50 %
+    lighter) explain nothing about the vehicle."""
+    keys = entry["identifiable"]
+    parts = {q.split(".")[0] for q in keys}
+    return all(any(keys[q] and entry["significant"][q] for q in keys if q.split(".")[0] == p)
+               for p in parts) and plausible(entry, params)[0]
+
+
 def consistent(entry: dict, flights, reference) -> dict:
     """The consistency guard on a named entry (:mod:`.consistency`); the propeller's speed
     exponent is held at its value (the library's thrust_factor has none)."""
@@ -241,11 +252,8 @@ def separate_by(lead: str, others: list[str]) -> dict:
     return collinear.separation(lead, others)
 
 
-__all__ += ["pair", "plausible", "consistent", "separate_by", "CONFIDENT", "READING_P"]
-
-
-def _stated(ranked, rows) -> list[dict]:
-    return [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
+__all__ += ["pair", "plausible", "every_part_stands", "consistent", "separate_by", "CONFIDENT",
+            "READING_P"]
 
 
 def decide(weighed: list[Weighed], train, held, reference, before: list, max_combination: int,
@@ -278,11 +286,7 @@ def decide(weighed: list[Weighed], train, held, reference, before: list, max_com
             tick(trials[-1].name)
         best = max(trials, key=lambda w: w.total.log_z, default=None)
         if best is not None:
-            entry = entry_of(best, 0.0, before, reference)
-            parts = {q.split(".")[0] for q in best.train.values}
-            stands = all(any(entry["identifiable"][q] and entry["significant"][q]
-                             for q in best.train.values if q.split(".")[0] == p)
-                         for p in parts) and plausible(entry, params)[0]
+            stands = every_part_stands(entry_of(best, 0.0, before, reference), params)
             with_pair = rank(weighed + [best])
             if stands and with_pair[0][2] is best:
                 ranked, combination = with_pair, best

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.files import atomic_write_text
+from .residual import channel_unit
 
 __all__ = ["to_json", "summary", "write_json", "write_html", "write_rerun", "public"]
 
@@ -146,8 +147,7 @@ def _figures(result: dict) -> list[tuple[str, str]]:
         for k, ax in enumerate(axes):
             ax.plot(series["t"], series["before"][:, k], lw=0.8, label="nominal")
             ax.plot(series["t"], series["after"][:, k], lw=0.8, label="with verdict")
-            unit = {"F": "N", "M": "N m"}.get(channels[k][0], "rad/s")
-            ax.set_ylabel(f"{channels[k]} ({unit})")
+            ax.set_ylabel(f"{channels[k]} ({channel_unit(channels[k])})")
         axes[0].legend(loc="upper right")
         axes[-1].set_xlabel("t (s)")
         figs.append((f"Residual wrench, held-out flight {Path(series['flight']).name}", _png(fig)))

@@ -49,13 +49,13 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from ..core.errors import InputError
-from ..core.frames import quat_normalize, rotate, rotate_inverse
+from ..core.frames import cross, quat_normalize, rotate, rotate_inverse
 from ..effects.base import Effect, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
-__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "flight_states",
+__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "channel_unit", "flight_states",
            "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
            "measured_wrench",
            "residual_wrench", "DEFAULT_WINDOW_S"]
@@ -63,7 +63,11 @@ __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "CHANNEL_UNITS", "fligh
 #: Savitzky–Golay window (s) used unless told otherwise.
 DEFAULT_WINDOW_S = 0.1
 CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
-CHANNEL_UNITS = ("N", "N", "N", "N m", "N m", "N m")
+
+
+def channel_unit(name: str) -> str:
+    """Unit of a residual channel: Fx..Fz N, Mx..Mz N m, a rotor-speed channel rad/s."""
+    return {"F": "N", "M": "N m"}.get(name[0], "rad/s")
 
 
 @dataclass(frozen=True)
@@ -287,22 +291,13 @@ def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.nda
     for a vehicle with ``params``' mass, CoM and inertia (Newton–Euler)."""
     w, w_dot, com = states.body_rate, states.body_accel, params.com
     if np.any(com):
-        lever = _cross(w_dot, com) + _cross(w, _cross(w, com))
+        lever = cross(w_dot, com) + cross(w, cross(w, com))
         force = params.mass * (states.specific_force + lever)
     else:                                   # the CoM at the origin: no lever arm
         force = params.mass * states.specific_force
     inertia = params.inertia
-    torque = w_dot @ inertia.T + _cross(w, w @ inertia.T)
+    torque = w_dot @ inertia.T + cross(w, w @ inertia.T)
     return force, torque
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b over the last axis (length 3), broadcast: ``np.cross`` in three products (the
-    residual is evaluated thousands of times per flight; np.cross's axis handling is most of
-    its cost on (N, 3) arrays)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def residual_wrench(log: FlightLog | FlightStates, params: VehicleParams,

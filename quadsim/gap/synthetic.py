@@ -235,11 +235,6 @@ def _march_rotors(vehicle, loads, thrust, torque, sens, accel_used, speed, dt):
     return out
 
 
-def _odd(n: float) -> int:
-    n = max(5, int(round(n)))
-    return n + 1 - n % 2
-
-
 def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
     """States and rotor speeds of the exact flight; ``com_path`` is the CoM's path (so the
     thrust direction does not depend on the angular acceleration)."""

@@ -25,6 +25,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from ..core.errors import InputError
+from ..vehicle.guards import figure_of_merit  # noqa: F401  (re-exported)
 
 __all__ = [
     "MODELS",
@@ -213,16 +214,6 @@ def held_out_scores(speed: np.ndarray, thrust: np.ndarray, *, axis: int, scheme:
         scores.append(HeldOutScore(model, scheme, float(np.sqrt(np.nanmean(residual**2))),
                                    bias, rms_step, stderr))
     return scores
-
-
-def figure_of_merit(thrust_factor: float, drag_factor: float, air_density: float,
-                    rotor_radius: float) -> float:
-    """Hover figure of merit implied by b and d: FM = b^1.5 / (d sqrt(2 rho pi R^2)).
-
-    Ideal (momentum-theory) power over actual power at any speed; real propellers give
-    about 0.3-0.7. (b in N s^2/rad^2, d in N m s^2/rad^2, rho kg/m^3, R m.)"""
-    disc_area = math.pi * rotor_radius**2
-    return thrust_factor**1.5 / (drag_factor * math.sqrt(2.0 * air_density * disc_area))
 
 
 @dataclass(frozen=True)

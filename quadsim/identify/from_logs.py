@@ -148,7 +148,14 @@ def _r2(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 
 
 def check_rotor_order(logs: list[LogSeries], skeleton: Skeleton) -> list[str]:
-    """Refuse a skeleton whose rotor order or spins the logs contradict; notes otherwise."""
+    """Refuse a skeleton whose rotor order or spins the logs contradict; notes otherwise.
+
+    Not :func:`quadsim.logs.checks.check_rotor_order` (``gap``, ``view``, ``convert
+    --model``), which judges one log's columns against a complete parameter set (inertia,
+    b, d) by Delta chi^2: here no parameter set exists yet (the skeleton has positions and
+    spins, b and the inertia are what is being identified), the logs are pooled, the fix is
+    the skeleton's ``[[rotor]]`` order, and the spins are checked too (the yaw slope's
+    sign), which no column order can repair."""
     omega2 = np.concatenate([np.square(s.rotor_speed) for s in logs])
     accel = np.concatenate([s.body_accel for s in logs])
     arms = skeleton.positions - skeleton.com

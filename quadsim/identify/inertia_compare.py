@@ -34,7 +34,7 @@ from ..cad.massprops import vehicle_mass_properties
 from ..core.errors import ModelError
 
 __all__ = ["MECHANICAL", "MUJOCO_TOLERANCE", "SOLIDWORKS", "SOLIDWORKS_TOLERANCE", "Row",
-           "agreement_lines", "check_rows", "lumped_inertia", "mujoco_mass_properties",
+           "agreement_lines", "check_rows", "mujoco_mass_properties",
            "report_rows", "trimesh_mujoco_differences"]
 
 MECHANICAL = ("mechanical",)
@@ -94,23 +94,17 @@ def mujoco_mass_properties(assembly: Assembly, groups: tuple[str, ...] | None = 
     return float(model.body_mass[1]), model.body_ipos[1].copy(), inertia
 
 
-def lumped_inertia(base_mass: float, base_radius: float, arm: float, motor_mass: float
-                   ) -> np.ndarray:
-    """Report eq. 3.18/3.19: ``Ix = Iy = 2 M R^2 / 5 + 2 l^2 m``, ``Iz = 2 M R^2/5 + 4 l^2 m``
-    (a solid sphere for the centre, point motors on the arms), as a diagonal tensor."""
-    centre = 0.4 * base_mass * base_radius**2
-    return np.diag([centre + 2 * arm**2 * motor_mass, centre + 2 * arm**2 * motor_mass,
-                    centre + 4 * arm**2 * motor_mass])
-
-
 def _report_rows() -> list[Row]:
     from .benchdata import load_physical_measurements
     from .bifilar import bifilar_inertia, load_bifilar_table, published_bifilar_inertia
+    from .inertia import lumped_inertia
 
     table = load_physical_measurements()
     mean = {k: float(np.mean(v)) for k, v in table.columns.items() if k != "trial"}
-    lumped = lumped_inertia(mean["base_mass"], mean["base_radius"], mean["frame_length"],
-                            mean["motor_mass"])
+    lumped = np.diag(lumped_inertia(sphere_mass=mean["base_mass"],
+                                    sphere_radius=mean["base_radius"],
+                                    arm_length=mean["frame_length"],
+                                    point_mass=mean["motor_mass"]))
     bifilar = load_bifilar_table()
     rig = bifilar.rig
     periods = np.array([bifilar.mean_period[a] for a in ("roll", "pitch", "yaw")])

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..core.errors import InputError, field_error
 from ..core.files import read_toml
-from ..vehicle.params import SCHEMA, SPIN_SIGN, _cad_path, _quantity, _rotor_table
+from ..vehicle.params import SCHEMA, _cad_path, _quantity, _rotor_table
 from .logseries import Skeleton
 
 
@@ -142,7 +142,3 @@ def render_params(data: dict, header: str) -> str:
         for entry in entries:
             lines += ["", f"[[{name}]]"] + [f"{k} = {_value(v)}" for k, v in entry.items()]
     return "\n".join(lines) + "\n"
-
-
-def spin_name(sign: float) -> str:
-    return next(k for k, v in SPIN_SIGN.items() if v == sign)

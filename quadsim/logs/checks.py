@@ -48,6 +48,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 
 from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
@@ -142,13 +143,10 @@ def _rotvec_between(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     return v * scale
 
 
-def _cumtrapz(t: np.ndarray, y: np.ndarray) -> np.ndarray:
-    steps = 0.5 * (y[1:] + y[:-1]) * np.diff(t)[:, None]
-    return np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(steps, axis=0)])
-
-
 def _gain(measured: np.ndarray, reference: np.ndarray) -> float:
-    return float(np.sum(measured * reference) / np.sum(reference * reference))
+    """Least-squares gain of ``measured`` on ``reference``; NaN when the reference is 0."""
+    power = float(np.sum(reference * reference))
+    return float(np.sum(measured * reference)) / power if power > 0 else float("nan")
 
 
 def _window_rotations(log):
@@ -160,7 +158,7 @@ def _window_rotations(log):
     if len(k) < 3:
         return None
     quat_rot = _rotvec_between(log.quat[k[:-1]], log.quat[k[1:]])
-    integral = _cumtrapz(log.t, log.body_rate)
+    integral = cumulative_trapezoid(log.body_rate, log.t, axis=0, initial=0)
     return k, quat_rot, integral[k[1:]] - integral[k[:-1]]
 
 
@@ -189,6 +187,12 @@ def check_gyro(log) -> str | None:
                               f"gyro w{axis} follows the attitude's {'xyz'[best]} axis "
                               f"(correlation {corr[best]:.2f} vs {corr[i]:.2f} with {axis}) "
                               "over 0.1 s windows: axes swapped?")
+        if not np.isfinite(gain):
+            raise field_error(_where(log), f"w{axis}",
+                              f"the integrated gyro turns "
+                              f"{np.sqrt(np.mean(gyro_rot[:, i] ** 2)):.3g} rad rms about "
+                              f"{axis} over {WINDOW_S} s windows, the attitude quaternions not "
+                              "at all: not the gyro of this flight, or a wrong unit?")
         if not GAIN_RANGE[0] <= gain <= GAIN_RANGE[1]:
             hint = ("deg/s instead of rad/s?" if 40 < gain < 80 else
                     "sign flipped (frame convention)?" if -1.4 < gain < -0.7 else
@@ -260,7 +264,7 @@ def check_accel(log, gravity: float = 9.81) -> None:
     velocity = log.velocity if log.velocity is not None else np.gradient(log.position, log.t,
                                                                          axis=0)
     world = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat), log.accel)
-    integral = _cumtrapz(log.t, world)
+    integral = cumulative_trapezoid(world, log.t, axis=0, initial=0)
     span = (log.t[k[1:]] - log.t[k[:-1]])[:, None]
     measured = (integral[k[1:]] - integral[k[:-1]]) / span
     expected = (velocity[k[1:]] - velocity[k[:-1]]) / span
@@ -341,8 +345,9 @@ def _torque_balance(log, params) -> _TorqueBalance | None:
         return None
     inertia = np.asarray(params.inertia, dtype=float)
     momentum = log.body_rate @ inertia.T
-    momentum = momentum + _cumtrapz(t, np.cross(log.body_rate, momentum))
-    squares = _cumtrapz(t, np.square(log.rotor_speed))
+    momentum = momentum + cumulative_trapezoid(np.cross(log.body_rate, momentum), t,
+                                             axis=0, initial=0)
+    squares = cumulative_trapezoid(np.square(log.rotor_speed), t, axis=0, initial=0)
     z = _window_demean(np.hstack([momentum, squares, (t - t[0])[:, None]]), window, count)
     lag = z[:-1].T @ z[1:]
     return _TorqueBalance(z.T @ z, 0.5 * (lag + lag.T), squares.shape[1],

@@ -64,8 +64,6 @@ __all__ = ["DelayEstimate", "cross_correlation_delay", "estimate_delays", "align
 MAX_LAG_S = 0.1
 #: Savitzky–Golay window (s) applied to both members of each pair.
 SMOOTH_S = 0.04
-#: wider window (s) for the pair that differentiates the (vibration-noisy) gyro.
-ACCEL_SMOOTH_S = 0.1
 #: peak (correlation or R^2) from which :func:`align_log` applies an estimated delay.
 ALIGN_PEAK = 0.8
 #: high-pass window (s) of the integrated rotor-speed pair.
@@ -227,10 +225,9 @@ def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float =
     notes = []
     if len(t) < 4 * window:
         return DelayEstimate(delays, peaks, dt, ("log too short to estimate signal delays",))
-    wide = max(window, int(round(ACCEL_SMOOTH_S / dt)) | 1)
 
-    def smooth(x, d=0, w=window):
-        return savgol_filter(x, w, 3, deriv=d, delta=dt, axis=0)
+    def smooth(x):
+        return savgol_filter(x, window, 3, axis=0)
 
     # gyro against motion capture; the rotor speeds against the gyro (torque ~ angular
     # acceleration) and the accelerometer against the rotor speeds (thrust ~ specific force):

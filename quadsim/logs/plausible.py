@@ -46,6 +46,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 
 from ..core.errors import field_error
 
@@ -156,8 +157,7 @@ def _check_position_units(path, t, position, velocity, log) -> None:
     if len(k) < 3:
         return
     moved = position[k[1:]] - position[k[:-1]]
-    mid = 0.5 * (velocity[1:] + velocity[:-1]) * steps[:, None]
-    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(mid, axis=0)])
+    integral = cumulative_trapezoid(velocity, t, axis=0, initial=0)
     flown = integral[k[1:]] - integral[k[:-1]]
     span = t[k[1:]] - t[k[:-1]]
     norm = np.sum(flown * flown, axis=1)
@@ -207,15 +207,12 @@ def _check_position_accel(path, t, position, log, gravity: float = 9.81) -> None
     near_bad = np.convolve(bad, np.ones(3), mode="same") > 0  # a NaN spoils its neighbours
     bad_before = np.concatenate([[0], np.cumsum(near_bad)])[k]  # such samples before each k
 
-    def cumulative(y):  # trapezoid integral from t[0], (N, 3)
-        mid = 0.5 * (y[1:] + y[:-1]) * steps[:, None]
-        return np.concatenate([np.zeros((1, 3)), np.cumsum(mid, axis=0)])
-
     span = (t[k[1:]] - t[k[:-1]])[:, None]
     scale = 0.5 * (span[1:] + span[:-1])
     # mean velocity over each window, from the positions and (up to a constant) the IMU
     moved = (position[k[1:]] - position[k[:-1]]) / span
-    flown = cumulative(cumulative(world))
+    flown = cumulative_trapezoid(cumulative_trapezoid(world, t, axis=0, initial=0), t, axis=0,
+                                 initial=0)     # trapezoid integrals from t[0], (N, 3)
     flown = (flown[k[1:]] - flown[k[:-1]]) / span
     from_position = (moved[1:] - moved[:-1]) / scale
     from_imu = (flown[1:] - flown[:-1]) / scale

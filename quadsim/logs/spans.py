@@ -21,8 +21,8 @@ so one noisy sample does not split a flight). The cut parts are named in a note:
 "``f.ulg: airborne span t 19.20-31.05 s kept (11.85 of 31.1 s); cut: ground 0.00-19.19 s``".
 A log with no airborne stretch of :data:`MIN_SPAN_S` is refused in one line.
 
-Used by :func:`quadsim.logs.checks.check_log` (so ``gap`` and ``view``) and by
-``identify --logs``. Units: s, m, m/s, rad/s.
+Used by :func:`quadsim.logs.checks.check_log` (so ``gap``, ``view`` and ``convert
+--model``) and by ``identify --logs``. Units: s, m, m/s, rad/s.
 
 Example::
 

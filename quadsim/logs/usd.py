@@ -56,7 +56,6 @@ from ..core.errors import field_error
 from .common import RPM_TO_RAD_S, check_unit_quat, map_rotors, resample, resample_quat
 
 MAGIC = 0xBC
-FIXED_FREQUENCY_ID = 0xFFFF
 #: m/s^2 per g: the Crazyflie firmware's GRAVITY_MAGNITUDE (the nominal CSVs use it too).
 CF_GRAVITY = 9.81
 _TIMESTAMP = {1: (struct.Struct("<HI"), 1e-3), 2: (struct.Struct("<HQ"), 1e-6)}

@@ -41,8 +41,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..core.errors import SimulationError
+from ..core.frames import cross, quat_normalize
 from ..core.frames import quat_derivative as _quat_rate
-from ..core.frames import quat_normalize
 from ..core.frames import quat_to_rotmat as _rotmat
 from ..effects.base import EffectContext, EffectLoads, EffectSet
 from ..vehicle.params import VehicleParams
@@ -119,15 +119,6 @@ def body_arrays(params: Sequence[VehicleParams]) -> BodyArrays:
     )
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b over the last axis (np.cross is several times slower on small arrays)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
 def _matvec(m: np.ndarray, v: np.ndarray) -> np.ndarray:
     return (m @ v[..., None])[..., 0]
 
@@ -146,8 +137,8 @@ def rigid_body_accelerations(body: BodyArrays, quat: np.ndarray, body_rate: np.n
     accel_com = (_matvec(rot, force_body) + force_world + gravity) \
         / body.mass[:, None]
     momentum = _matvec(body.inertia, body_rate)
-    alpha = _matvec(body.inertia_inv, torque_body - _cross(body_rate, momentum))
-    lever = _cross(alpha, body.com) + _cross(body_rate, _cross(body_rate, body.com))
+    alpha = _matvec(body.inertia_inv, torque_body - cross(body_rate, momentum))
+    lever = cross(alpha, body.com) + cross(body_rate, cross(body_rate, body.com))
     return accel_com - _matvec(rot, lever), alpha
 
 
@@ -252,7 +243,7 @@ def extra_wrench(body: BodyArrays, loads: EffectLoads, rotor_speed: np.ndarray, 
         thrust += (loads.thrust_scale - 1.0) * body.thrust_factor[:, None] * omega2
         drag = (loads.thrust_scale - 1.0) * body.drag_factor[:, None] * omega2
     forces = thrust[..., None] * body.rotor_axis                      # (B, R, 3)
-    torque = _cross(body.rotor_arm, forces).sum(1) \
+    torque = cross(body.rotor_arm, forces).sum(1) \
         - np.einsum("br,r,brk->bk", drag, body.rotor_spin, body.rotor_axis)
     return forces.sum(1), torque + loads.torque_body
 

@@ -46,6 +46,7 @@ import numpy as np
 from ..core.errors import ModelError, field_error
 
 __all__ = ["MAX_THRUST_TO_WEIGHT", "MIN_THRUST_TO_WEIGHT", "check_figure_of_merit",
+           "figure_of_merit",
            "check_hover_control",
            "check_vehicle", "feasibility"]
 
@@ -121,12 +122,22 @@ def check_hover_control(params, *, where=None, mass_field="body.mass",
             f"{params.min_speed ** 2:.4g} rad^2/s^2)")
 
 
+def figure_of_merit(thrust_factor: float, drag_factor: float, air_density: float,
+                    rotor_radius: float) -> float:
+    """Hover figure of merit implied by b and d: FM = b^1.5 / (d sqrt(2 rho pi R^2)).
+
+    Ideal (momentum-theory) power over actual power at any speed; real propellers give
+    about 0.3-0.7. (b in N s^2/rad^2, d in N m s^2/rad^2, rho kg/m^3, R m.)"""
+    disc_area = math.pi * rotor_radius**2
+    return thrust_factor**1.5 / (drag_factor * math.sqrt(2.0 * air_density * disc_area))
+
+
 def check_figure_of_merit(params, *, where=None) -> None:
     """b, d and the radius belong to a propeller: hover figure of merit in [0.05, 1]."""
     r, b, d = params.rotor_radius, params.thrust_factor, params.drag_factor
     if not (r > 0 and b > 0 and d > 0):
         return
-    merit = b**1.5 / (d * math.sqrt(2.0 * params.air_density * math.pi * r * r))
+    merit = figure_of_merit(b, d, params.air_density, r)
     if not MIN_FIGURE_OF_MERIT <= merit <= 1.0:
         raise field_error(
             where or _where(params), "rotors.drag_factor",

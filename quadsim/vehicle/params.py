@@ -52,15 +52,6 @@ SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 
 
 @dataclass(frozen=True)
-class Quantity:
-    """A stored number with its unit and its source."""
-
-    value: float | np.ndarray
-    unit: str
-    source: str
-
-
-@dataclass(frozen=True)
 class Rotor:
     """One rotor: hub position (m, body frame), unit thrust axis (body frame), spin sign
     (+1 ccw about the axis, -1 cw)."""

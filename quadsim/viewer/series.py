@@ -28,7 +28,6 @@ ENGINE_COLORS = {
 }
 _EXTRA_COLORS = ((44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
                  (227, 119, 194), (23, 190, 207))
-_ANGLE_STATES = ("roll", "pitch", "yaw")
 
 
 def engine_color(key: str, index: int = 0) -> tuple[int, int, int]:
