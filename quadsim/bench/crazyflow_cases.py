@@ -63,6 +63,7 @@ import numpy as np
 
 from ..effects import make_effect
 from .crazyflow_source import DRONE, RPM, FlightSpec, crazyflow_params, hover_rpm, vehicle_params
+from .observe import OBSERVABLE, TrueModel, per_flight_observability
 
 __all__ = [
     "CASES",
@@ -82,7 +83,6 @@ __all__ = [
 
 REFERENCES = 8
 DURATION = 8.0
-OBSERVABLE = 0.05
 #: (truth, kind, count, speed range)
 CASES = (("none", "none", 2, (0.8, 1.2)), ("none", "none", 2, (0.55, 0.65)),
          ("none", "none", 2, (1.35, 1.5)),
@@ -231,47 +231,29 @@ def library_truth(case: dict) -> list:
 
 def oracle_reductions(logs: list, references: list,
                       cases: list[dict]) -> list[tuple[float, float]]:
-    """Per case (reduction, gap): the cut of its flight's normalised residual (forces,
-    torques, rotor channel) when the true difference is applied in quadsim's residual model
-    (module docstring), 1 - after / before, with the motor map fitted and the noise scale
-    taken on the references' residuals, as the diagnosis does (0 for cases with no library
-    truth); and the flight's mean squared normalised residual under the references' shared
-    physics relative to the references' own (about 1: nothing the references lack; an
-    out-of-library case far above 1 leaves a real gap)."""
+    """Per case (reduction, gap): :func:`quadsim.bench.observe.per_flight_observability` with
+    the references' shared physics (:func:`shared_effects`) and each case's true model
+    (:func:`library_truth`; a late rotor log shifted back by the true delay): the cut of its
+    flight's normalised residual (forces, torques, rotor channel) when the true difference is
+    applied in quadsim's residual model, 0 for cases with no library truth; and the flight's
+    mean squared normalised residual under the shared physics relative to the references'
+    own (about 1: nothing the references lack; an out-of-library case far above 1 leaves a
+    real gap)."""
     import dataclasses
 
-    from ..gap.diagnose import prepare
-    from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
-
-    params = vehicle_params()
-    refs = [f.fit for f in prepare(list(references), params)]
-    fitted = fit_motor_map(refs, params)
     shared = shared_effects()
-    nominal = [residuals(f, fitted, shared, rotor_channel=True) for f in refs]
-    sigma = noise_scale(np.concatenate(nominal), float(refs[0].t[1] - refs[0].t[0]),
-                        floor=noise_floor(fitted, True))
-
-    def gap(log, effects):
-        states = prepare([log], params)[0].fit
-        return float(np.mean((residuals(states, fitted, effects, rotor_channel=True)
-                              / sigma) ** 2))
-
-    out = []
+    truths = []
     for log, case in zip(logs, cases):
-        before = gap(log, shared)
         if scored_kind(case) != "library":
-            out.append((0.0, before))
-            continue
-        if case["case"] == "rotor_delay":
+            truths.append(None)
+        elif case["case"] == "rotor_delay":
             delay = float(case["effects"]["rotor_delay"])
-            shifted = dataclasses.replace(log, rotor_speed=np.stack(
-                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))
-            after = gap(shifted, shared)
+            truths.append(TrueModel(tuple(shared), dataclasses.replace(log, rotor_speed=np.stack(
+                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))))
         else:
-            after = gap(log, library_truth(case))
-        out.append((float((before - after) / before), before))
-    reference_level = float(np.mean([gap(log, shared) for log in references]))
-    return [(r, g / reference_level) for r, g in out]
+            truths.append(TrueModel(tuple(library_truth(case))))
+    return [tuple(o) for o in per_flight_observability(logs, references, vehicle_params(),
+                                                        shared, truths)]
 
 
 # ----------------------------------------------------------------------------- flights on disk
