@@ -19,7 +19,9 @@ timing. This subpackage provides sources that break that circle:
   (``scripts/gap_benchmark.py --independent --source crazyflow --cache DIR``);
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
-  per-flight mode; :mod:`.score` -- reading a verdict and scoring it.
+  per-flight mode; :mod:`.observe` -- whether a flight's true difference from its
+  references shows in it (per-flight observability, every per-flight source);
+  :mod:`.score` -- reading a verdict and scoring it.
 
 Run: ``python scripts/gap_benchmark.py --independent --jobs 2 --out indep.json``; results
 and their reading: docs/gap.md, "Independent benchmark".
