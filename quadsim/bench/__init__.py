@@ -25,7 +25,9 @@ timing. This subpackage provides sources that break that circle:
   (fly, cache, check, judge) are shared by the Crazyflow and PyFlyt sources;
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
-  per-flight mode; :mod:`.score` -- reading a verdict and scoring it.
+  per-flight mode; :mod:`.observe` -- whether a flight's true difference from its
+  references shows in it (per-flight observability, every per-flight source);
+  :mod:`.score` -- reading a verdict and scoring it.
 
 Run: ``python scripts/gap_benchmark.py --independent --jobs 2 --out indep.json``; results
 and their reading: docs/gap.md, "Independent benchmark".

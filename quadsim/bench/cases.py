@@ -10,8 +10,10 @@ docs/gap.md):
   (finite-difference accelerations, filtered and delayed rotor speeds, mocap latency).
 
 Each case is ``FLIGHTS`` flights of ``DURATION`` s at 250 Hz along one path at a random speed
-(varied per flight); every (source, vehicle) pair also has ``REFERENCES`` nominal flights
-for the per-flight mode. Cases per vehicle: RotorPy 3 no-effect, 11 in-library (mass x2,
+(0.7-1.4 x the path's base speed for the first flight, +15 % per further flight); every
+(source, vehicle) pair also has ``REFERENCES`` nominal flights for the per-flight mode, at
+path speeds evenly over ``REFERENCE_SPEEDS`` (0.65-1.5: they span the cases' first flights).
+Cases per vehicle: RotorPy 3 no-effect, 11 in-library (mass x2,
 CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outside
 (flapping moment, translational lift: RotorPy physics quadsim's library lacks); pipeline
 2 no-effect, 8 in-library, 2 outside (translational lift, blade flapping moment:
@@ -22,9 +24,17 @@ and a canted rotor and aerodynamic rate damping per vehicle from the pipeline so
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 (:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
 *per-flight* mode (:func:`quadsim.gap.diagnose_per_flight`, each case's first flight against
-the reference flights of the same source). A case is *observable* when the library effect
-with the true values cuts the held-out gap by at least ``MIN_GAIN``
-(:func:`oracle_reduction`).
+the reference flights of the same source and vehicle, the design of the Crazyflow source,
+:mod:`.crazyflow_cases`). Observability: in held-out mode a case counts when the library
+effect with the true values cuts the held-out gap by at least ``MIN_GAIN``
+(:func:`oracle_reduction`); in per-flight mode when the true difference from the references
+(:func:`per_flight_truth`: the source's shared physics, :func:`shared_physics`, with the
+hidden effect) cuts *that flight's* residual by at least
+:data:`quadsim.bench.observe.OBSERVABLE` (:func:`per_flight_observed`).
+
+Flights are cached per case (all ``FLIGHTS``, :func:`case_flights`), per first flight alone
+(:func:`first_flight`, when only the per-flight mode asked for it; the full set reuses it)
+and per reference flight (:func:`reference_flight`).
 """
 
 from __future__ import annotations
@@ -43,15 +53,19 @@ from ..core.errors import QuadsimWarning
 from ..effects import EFFECTS
 from ..vehicle.params import load_params
 from .draws import draw, draw_rotorpy, library_equivalent
+from .observe import OBSERVABLE, Observed, TrueModel, per_flight_observability, true_model
 from .score import read_verdict, score_case
 
-__all__ = ["DURATION", "FLIGHTS", "REFERENCES", "case_flights", "case_list", "heldout_truth",
-           "oracle_reduction",
-           "reference_flights", "run_case", "run_per_flight"]
+__all__ = ["DURATION", "FLIGHTS", "REFERENCES", "REFERENCE_SPEEDS", "case_flights", "case_key",
+           "case_list", "first_flight", "heldout_truth", "is_cached", "oracle_reduction",
+           "per_flight_observed", "per_flight_truth", "reference_flight", "reference_flights",
+           "reference_key", "reference_speeds", "run_case", "run_per_flight", "shared_physics"]
 
 VEHICLES = ("physical", "crazyflie21")
 FLIGHTS = 3
-REFERENCES = 4
+REFERENCES = 8
+#: path-speed range of the reference flights (x the path's base speed)
+REFERENCE_SPEEDS = (0.65, 1.5)
 DURATION = 8.0
 ROTORPY_LIBRARY = ("mass_offset", "mass_offset", "com_offset", "com_offset", "inertia_error",
                    "thrust_mismatch", "thrust_mismatch", "motor_lag", "body_drag", "rotor_drag",
@@ -126,14 +140,28 @@ def _code_hash(source: str) -> str:
     return digest.hexdigest()[:16]
 
 
-def _cached(key: dict, make):
-    """``make()`` (a list of FlightLog), stored under the cache directory when one is set."""
+def _entry(key: dict) -> Path | None:
+    """The cache file of ``key`` (None: no cache directory is set)."""
     root = os.environ.get(CACHE_ENV)
     if not root:
-        return make()
+        return None
     name = hashlib.sha256(json.dumps({**key, "code": _code_hash(key["source"])}, sort_keys=True,
                                      default=str).encode()).hexdigest()[:24]
-    path = Path(root) / f"{name}.pkl"
+    return Path(root) / f"{name}.pkl"
+
+
+def is_cached(key: dict) -> bool:
+    """Whether the flights of ``key`` are in the cache directory."""
+    path = _entry(key)
+    return path is not None and path.exists()
+
+
+def _cached(key: dict, make):
+    """``make()`` (a FlightLog or a list of them), stored under the cache directory when one
+    is set."""
+    path = _entry(key)
+    if path is None:
+        return make()
     if path.exists():
         with open(path, "rb") as handle:
             return pickle.load(handle)
@@ -164,26 +192,74 @@ def _spec(case: dict, params, rng):
     return draw(case["truth"], params, rng)
 
 
-def case_flights(case: dict):
-    """(spec, logs): the hidden effect as the source's parameters and FLIGHTS logs."""
+def case_key(case: dict, first_only: bool = False) -> dict:
+    """Cache key of a case's FLIGHTS flights, or of its first flight alone (``first_only``,
+    all the per-flight mode needs)."""
+    key = {k: case[k] for k in ("source", "vehicle", "truth", "kind", "seed")}
+    return {**key, "flight": 0} if first_only else key
+
+
+def _case_setup(case: dict):
+    """(params, spec, speed of the first flight): the case's draw from its seed."""
     params = load_params(case["vehicle"])
     rng = np.random.default_rng(case["seed"])
     spec = _spec(case, params, rng)
-    speed = rng.uniform(0.7, 1.4)
-    logs = _cached({k: case[k] for k in ("source", "vehicle", "truth", "kind", "seed")},
-                   lambda: [_fly(case["source"], params, spec, case["seed"] * 10 + s,
-                                 speed * (1 + 0.15 * s)) for s in range(FLIGHTS)])
-    return spec, logs
+    return params, spec, rng.uniform(0.7, 1.4)
+
+
+def _case_flight(case: dict, params, spec, speed: float, s: int):
+    """Flight ``s`` of a case: seed ``10 seed + s``, path speed ``speed (1 + 0.15 s)``."""
+    return _fly(case["source"], params, spec, case["seed"] * 10 + s, speed * (1 + 0.15 * s))
+
+
+def first_flight(case: dict):
+    """(spec, log): the hidden effect and the case's first flight (the per-flight mode's),
+    read from the case's FLIGHTS flights when they are cached, else flown (and cached) alone."""
+    params, spec, speed = _case_setup(case)
+    if is_cached(case_key(case)):
+        return spec, _cached(case_key(case), None)[0]
+    return spec, _cached(case_key(case, first_only=True),
+                         lambda: _case_flight(case, params, spec, speed, 0))
+
+
+def case_flights(case: dict):
+    """(spec, logs): the hidden effect as the source's parameters and FLIGHTS logs (the first
+    one read from the cache when :func:`first_flight` flew it already)."""
+    params, spec, speed = _case_setup(case)
+
+    def make():
+        first = (_cached(case_key(case, first_only=True), None)
+                 if is_cached(case_key(case, first_only=True))
+                 else _case_flight(case, params, spec, speed, 0))
+        return [first] + [_case_flight(case, params, spec, speed, s) for s in range(1, FLIGHTS)]
+
+    return spec, _cached(case_key(case), make)
+
+
+def reference_speeds() -> np.ndarray:
+    """Path speeds of the REFERENCES nominal flights: evenly over :data:`REFERENCE_SPEEDS`,
+    which spans the speeds of the cases' first flights (0.7-1.4)."""
+    return np.linspace(*REFERENCE_SPEEDS, REFERENCES)
+
+
+def reference_key(source: str, vehicle: str, k: int) -> dict:
+    """Cache key of reference flight ``k`` (one entry per flight)."""
+    return {"source": source, "reference": k, "vehicle": vehicle,
+            "seed": 90_000 + 17 * k + (vehicle == "physical"),
+            "speed": round(float(reference_speeds()[k]), 9)}
+
+
+def reference_flight(source: str, vehicle: str, k: int):
+    """Nominal flight ``k`` of ``source`` (seeds apart from every case's)."""
+    key = reference_key(source, vehicle, k)
+    params = load_params(vehicle)
+    spec = {} if source == "rotorpy" else []
+    return _cached(key, lambda: _fly(source, params, spec, key["seed"], key["speed"]))
 
 
 def reference_flights(source: str, vehicle: str) -> list:
-    """REFERENCES nominal flights of ``source`` (seeds apart from every case's)."""
-    params = load_params(vehicle)
-    spec = {} if source == "rotorpy" else []
-    return _cached({"source": source, "reference": True, "vehicle": vehicle,
-                    "count": REFERENCES},
-                   lambda: [_fly(source, params, spec, 90_000 + 17 * k + (vehicle == "physical"),
-                                 0.8 + 0.15 * k) for k in range(REFERENCES)])
+    """The REFERENCES nominal flights of ``source`` (:func:`reference_flight`)."""
+    return [reference_flight(source, vehicle, k) for k in range(REFERENCES)]
 
 
 def oracle_reduction(logs, params, effects) -> float:
@@ -276,19 +352,69 @@ def run_case(case: dict) -> dict:
     return out
 
 
+def shared_physics(source: str) -> list:
+    """The physics every flight of ``source`` shares (its references' included) that quadsim's
+    nominal model lacks, as library effects at their true values: RotorPy's first-order
+    motors (:data:`.rotorpy_source.NOMINAL_TAU_M`); nothing for the sensor pipeline (quadsim's
+    own closed loop; its sensor filters and delays are in every reference too)."""
+    if source == "rotorpy":
+        from .rotorpy_source import NOMINAL_TAU_M
+
+        return [EFFECTS["motor_lag"](time_constant=NOMINAL_TAU_M)]
+    return []
+
+
+def per_flight_truth(case: dict) -> TrueModel | None:
+    """The true model of a case's first flight against its source's references (shared
+    physics with the true difference, :func:`quadsim.bench.observe.true_model`); None for a
+    case with no library form (no effect, outside the library)."""
+    if case["kind"] != "library":
+        return None
+    params, spec, _ = _case_setup(case)
+    return TrueModel(true_model(shared_physics(case["source"]),
+                                _truth_effects(case, spec, params)))
+
+
+def per_flight_observed(source: str, vehicle: str, rows: list[dict],
+                        references: list | None = None) -> list[Observed]:
+    """:class:`quadsim.bench.observe.Observed` of each row's first flight (``_log``) against
+    the references of (source, vehicle): the per-flight mode's observability."""
+    references = reference_flights(source, vehicle) if references is None else references
+    return per_flight_observability([r["_log"] for r in rows], references,
+                                    load_params(vehicle), shared_physics(source),
+                                    [per_flight_truth(r) for r in rows])
+
+
 def run_per_flight(group: tuple[str, str, list[dict]]) -> list[dict]:
-    """Per-flight verdicts for the cases of one (source, vehicle) against its references."""
+    """Per-flight verdicts for the cases of one (source, vehicle) against its references,
+    each with its per-flight observability (``oracle_reduction``: the true difference's cut
+    of that flight's residual; ``gap_vs_references``; ``observable``)."""
     from ..gap import diagnose_per_flight
 
     warnings.simplefilter("ignore", QuadsimWarning)
     warnings.simplefilter("ignore", RuntimeWarning)
     source, vehicle, rows = group
     params = load_params(vehicle)
-    result = diagnose_per_flight([r["_log"] for r in rows], reference_flights(source, vehicle),
-                                 params)
+    references = reference_flights(source, vehicle)
+    observed = per_flight_observed(source, vehicle, rows, references)
+    result = diagnose_per_flight([r["_log"] for r in rows], references, params)
     out = []
-    for row, flight in zip(rows, result["flights"]):
+    for row, flight, seen in zip(rows, result["flights"], observed):
         verdict = read_verdict(flight)
         out.append({**verdict, "reduction": flight.get("reduction"),
-                    "score": score_case(row["truth"], row["kind"], verdict)})
+                    "score": score_case(row["truth"], row["kind"], verdict),
+                    "oracle_reduction": seen.reduction, "gap_vs_references": seen.gap,
+                    "observable": row["kind"] != "library" or seen.reduction >= OBSERVABLE,
+                    **_why(flight)})
     return out
+
+
+def _why(flight: dict) -> dict:
+    """What a per-flight verdict rests on: its most probable reading (also under an
+    ``unexplained`` verdict), that reading's probability, the channels failing the lack-of-fit
+    test (ratio of the flight's RMS to the references') and the answer text."""
+    posterior = flight.get("posterior") or [{}]
+    return {"lead_reading": posterior[0].get("name"),
+            "lead_probability": posterior[0].get("probability"),
+            "lack_of_fit": {k: float(v) for k, v in (flight.get("lack_of_fit") or {}).items()},
+            "answer": flight.get("answer")}

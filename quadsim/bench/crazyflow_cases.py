@@ -70,6 +70,7 @@ from .crazyflow_source import (
     hover_rpm,
     vehicle_params,
 )
+from .observe import OBSERVABLE
 
 __all__ = [
     "CASES",
@@ -90,7 +91,6 @@ __all__ = [
 
 REFERENCES = 8
 DURATION = 8.0
-OBSERVABLE = 0.05
 #: (truth, kind, count, speed range)
 CASES = (("none", "none", 2, (0.8, 1.2)), ("none", "none", 2, (0.55, 0.65)),
          ("none", "none", 2, (1.35, 1.5)),

@@ -66,6 +66,7 @@ import numpy as np
 
 from ..effects import make_effect
 from . import sim_cases
+from .observe import OBSERVABLE
 from .pyflyt_source import FlightSpec, motor_response, pyflyt_flights, pyflyt_model, vehicle_params
 
 __all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spec",
@@ -73,7 +74,6 @@ __all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spe
 
 REFERENCES = 8
 DURATION = 8.0
-OBSERVABLE = 0.05
 #: (truth, kind, count, speed range)
 CASES = (("none", "none", 2, (0.75, 1.35)), ("none", "none", 2, (0.45, 0.55)),
          ("none", "none", 2, (1.5, 1.65)),

@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .observe import TrueModel, per_flight_observability
+
 __all__ = ["CaseSource", "code_hash", "flight_dir", "generate", "judge", "load_flights",
            "oracle_reductions"]
 
@@ -170,40 +172,22 @@ def judge(source: CaseSource, cache) -> list[dict]:
 def oracle_reductions(logs: list, references: list, cases: list[dict], params,
                       shared: list, truth: Callable[[dict], list],
                       scored_kind: Callable[[dict], str]) -> list[tuple[float, float]]:
-    """Per case (reduction, gap): the cut of its flight's normalised residual (forces,
-    torques, rotor channel) when ``truth(case)`` (the full effect list of the case's true
-    model; a delay case: the log shifted back) replaces the references' ``shared`` physics,
-    1 - after / before, with the motor map fitted and the noise scale taken on the
-    references' residuals, as the diagnosis does (0 for cases scored outside the library);
-    and the flight's mean squared normalised residual under ``shared`` relative to the
-    references' own."""
-    from ..gap.diagnose import prepare
-    from ..gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
-
-    refs = [f.fit for f in prepare(list(references), params)]
-    fitted = fit_motor_map(refs, params)
-    nominal = [residuals(f, fitted, shared, rotor_channel=True) for f in refs]
-    sigma = noise_scale(np.concatenate(nominal), float(refs[0].t[1] - refs[0].t[0]),
-                        floor=noise_floor(fitted, True))
-
-    def gap(log, effects):
-        states = prepare([log], params)[0].fit
-        return float(np.mean((residuals(states, fitted, effects, rotor_channel=True)
-                              / sigma) ** 2))
-
-    out = []
+    """Per case (reduction, gap): :func:`quadsim.bench.observe.per_flight_observability` with
+    the references' ``shared`` physics and each case's true model (``truth(case)``, the full
+    effect list; a late rotor log: the shared physics on the log shifted back by the true
+    delay): the cut of its flight's normalised residual (forces, torques, rotor channel) when
+    the true difference is applied in quadsim's residual model, 0 for cases scored outside the
+    library; and the flight's mean squared normalised residual under ``shared`` relative to
+    the references' own."""
+    truths = []
     for log, case in zip(logs, cases):
-        before = gap(log, shared)
         if scored_kind(case) != "library":
-            out.append((0.0, before))
-            continue
-        if "rotor_delay" in case["effects"]:
+            truths.append(None)
+        elif "rotor_delay" in case["effects"]:
             delay = float(case["effects"]["rotor_delay"])
-            shifted = dataclasses.replace(log, rotor_speed=np.stack(
-                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))
-            after = gap(shifted, shared)
+            truths.append(TrueModel(tuple(shared), dataclasses.replace(log, rotor_speed=np.stack(
+                [np.interp(log.t + delay, log.t, c) for c in log.rotor_speed.T], axis=-1))))
         else:
-            after = gap(log, truth(case))
-        out.append((float((before - after) / before), before))
-    reference_level = float(np.mean([gap(log, shared) for log in references]))
-    return [(r, g / reference_level) for r, g in out]
+            truths.append(TrueModel(tuple(truth(case))))
+    return [tuple(o) for o in per_flight_observability(logs, references, params, shared,
+                                                        truths)]
