@@ -68,6 +68,8 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
+from .envelope import coordinates, envelope_of
+from .speed_gain import PART as SPEED_GAIN
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .fitting import (
     Candidate,
@@ -179,6 +181,8 @@ class Reference:
     identified: dict
     rotor_shift_s: float = 0.0
     rotor_shift_se: float = 0.0
+    #: the references' envelope and the model's trend along it (:mod:`.envelope`)
+    envelope: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -225,9 +229,10 @@ def jacobian(states, reference: Reference, columns: list[int], build) -> np.ndar
     return out
 
 
-def _scatter(flights, reference: Reference) -> np.ndarray:
+def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarray:
     """Method-of-moments between-flight variance of each shared parameter (module doc,
-    stage 3): one Gauss-Newton step per reference flight from theta_ref."""
+    stage 3): one Gauss-Newton step per reference flight from theta_ref. ``own``: a list
+    that receives (values (n, P), standard errors (n, P)), each flight's own estimate."""
     k = len(reference.theta)
     values, variances = [], []
     for f in flights:
@@ -238,6 +243,8 @@ def _scatter(flights, reference: Reference) -> np.ndarray:
         values.append(reference.theta - cov @ (jac.T @ r))
         variances.append(np.clip(np.diag(cov), 0, None))
     values, variances = np.asarray(values), np.asarray(variances)
+    if own is not None:
+        own.extend([values, np.sqrt(variances)])
     if len(values) < 2:
         return np.zeros(k)
     return np.sqrt(np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None))
@@ -347,6 +354,8 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     vbat = rotor and all(s.vbat is not None and bool(np.all(np.isfinite(s.vbat)))
                          for s in states)
     cand = shared_candidate(rotor, vbat)
+    if rotor and not vbat:      # the motor map's gain per flight (speed_gain module doc)
+        cand = Candidate(cand.name, cand.parts + (SPEED_GAIN,), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     theta, shift, shift_se = _refine(flights, params, rotor, cand, fit.theta, start, sigma0)
     states = [aligned(f, shift) for f in flights]
@@ -371,5 +380,9 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se)
-    ref.scatter = _scatter(states, ref)
+    own: list = []
+    ref.scatter = _scatter(states, ref, own)
+    ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
+                               np.array([ref.identified.get(k, True)
+                                         for k in cand.parameter_names]), log_ms)
     return ref

@@ -40,6 +40,7 @@ from ..vehicle.params import VehicleParams
 from .calibrate import Reference, calibrate
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
+from .envelope import local_reference, position
 from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
@@ -129,6 +130,8 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
+            place = position(states, reference.envelope)
+            reference = local_reference(reference, place)   # the model at this flight
             expl = explanations_for(reference, states, effects)
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
@@ -138,6 +141,10 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
+    if place is not None:
+        entry["envelope"] = place.to_json()
+        if place.distance > 0:
+            entry["answer"] += f" Flown {place.text}."
     entry["signal_delays_ms"] = flight.delays_ms
     entry["notes"].extend(delay_notes([flight]))
     return entry
