@@ -83,7 +83,7 @@ from .fitting import (
     residuals,
 )
 
-__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "weighted_residual",
+__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "per_flight_candidate", "weighted_residual",
            "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
@@ -152,6 +152,22 @@ def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     parts = tuple((name, {}, fitted) for name, fitted in SHARED
                   if (rotor or name not in NEEDS_COMMANDS) and (vbat or name not in NEEDS_VBAT))
     return Candidate("reference", parts)
+
+
+#: the vertical air drag every flight meets (stage 2): body drag C_d A along body z
+VERTICAL_DRAG = ("body_drag", {}, ("cd_area_vertical",))
+
+
+def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
+    """The shared parameters of the per-flight reference model: :func:`shared_candidate`
+    plus the vertical drag (:data:`VERTICAL_DRAG`) and, with commands but no voltage log,
+    the motor map's gain (:mod:`.speed_gain`; with a voltage log
+    ``battery_sag.full_voltage`` is that gain). Both change with how a flight is flown
+    (module doc, stage 2), so a flight's own value must have a place in the reference
+    uncertainty; neither is a reading of its own (a flight's body drag is, on top)."""
+    cand = shared_candidate(rotor, vbat)
+    extra = (VERTICAL_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
+    return Candidate(cand.name, cand.parts + extra, cand.base)
 
 
 @dataclass
@@ -353,9 +369,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                                          for s in states]), dt, floor=noise_floor(params, rotor))
     vbat = rotor and all(s.vbat is not None and bool(np.all(np.isfinite(s.vbat)))
                          for s in states)
-    cand = shared_candidate(rotor, vbat)
-    if rotor and not vbat:      # the motor map's gain per flight (speed_gain module doc)
-        cand = Candidate(cand.name, cand.parts + (SPEED_GAIN,), cand.base)
+    cand = per_flight_candidate(rotor, vbat)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     theta, shift, shift_se = _refine(flights, params, rotor, cand, fit.theta, start, sigma0)
     states = [aligned(f, shift) for f in flights]

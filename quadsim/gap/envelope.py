@@ -102,6 +102,8 @@ class Trend:
     lof_dof: int
     s_uu: float
     n: int
+    u_low: float
+    u_high: float
 
 
 @dataclass
@@ -181,7 +183,8 @@ def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:
     rest = log_ms - lof_mean - np.outer(du, g)
     dof = max(1, rest.size - 2 * rest.shape[1])
     return Trend(axis, float(u.mean()), u_w, slope, slope_var, g, lof_mean,
-                 float(np.sqrt(np.sum(rest ** 2) / dof)), dof, s_uu, n)
+                 float(np.sqrt(np.sum(rest ** 2) / dof)), dof, s_uu, n,
+                 float(u.min()), float(u.max()))
 
 
 def position(states, envelope: Envelope | None) -> Position | None:
@@ -222,11 +225,13 @@ def local_reference(reference, pos: Position | None):
     lower, upper = _bounds(reference.candidate, reference.params)
     theta = np.clip(reference.theta + trend.slope * d, lower, upper)
     scatter = np.sqrt(reference.scatter ** 2 + trend.slope_var * d ** 2)
-    du = pos.u - trend.u_mean
-    shift = trend.lof_slope * du
+    # beyond the references' outermost places only: inside, their own statistics hold
+    edge = pos.u - np.clip(pos.u, trend.u_low, trend.u_high)
+    shift = trend.lof_slope * edge
     widen = np.maximum(shift, 0.0)
-    factor = np.sqrt(1 + 1 / trend.n + du ** 2 / trend.s_uu) / np.sqrt(1 + 1 / trend.n)
+    n = len(reference.names) or trend.n
+    spread = np.sqrt(reference.lof_sd ** 2
+                     + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
     return dataclasses.replace(
         reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
-        lof_mean=trend.lof_mean + shift - widen, lof_sd=trend.lof_sd * factor,
-        lof_dof=trend.lof_dof)
+        lof_mean=reference.lof_mean + shift - widen, lof_sd=float(spread))
