@@ -1,14 +1,15 @@
 """The reference flights' envelope, and the reference model at a flight flown elsewhere in it
 or outside it.
 
-The reference model (:mod:`.calibrate`) is fitted on flights of one envelope. What its
-shared values absorb of the physics it lacks depends on how the flights were flown: on the
-Crazyflow references (path speed 0.8-1.25) the relative thrust per Omega^2 each flight
-alone asks for drifts with its speed, so a nominal flight flown at 0.6 or 1.45 met the
-pooled value 0.4 % off and that *extrapolation error* was read as ``thrust_factor`` (100 %),
-then as "not in the library" (Fy 1.9x the references' RMS on the faster ones, whose residual
-grows with speed). The references themselves show how the model extrapolates: this module
-measures it over them and moves the reference model to the flight's place in the envelope.
+The reference model (:mod:`.calibrate`) is fitted on flights of one envelope, and what its
+shared values absorb of the physics it lacks depends on how the flights were flown. A
+flight flown elsewhere meets the model's *extrapolation error*; read against the
+references' own residual statistics it looks like an effect. Two parts of it are physics
+the reference model now shares (:func:`.calibrate.per_flight_candidate`: the motor map's
+gain and the vertical drag, both drifting with the flight's envelope on the Crazyflow
+references); the rest is measured here, over the references themselves, and widens the
+reference model for a flight beyond them. Every judged flight's answer states whether it
+lies outside its references' envelope, along which coordinate and by how much.
 
 Coordinates (:func:`coordinates`, per flight, natural log so that "1.6x faster" is a
 distance of log 1.6 = 0.47): RMS speed |v| (m/s), RMS body rate |omega| (rad/s), RMS
@@ -21,34 +22,41 @@ Trend (:func:`fit_trend`). The references' main axis of variation in these coord
 (first principal direction, ``axis``; sign: speed increasing) gives each flight a scalar
 place u. Over the references, each shared parameter's own value theta_j (one Gauss-Newton
 step from the pooled value on flight j alone, standard error se_j: :func:`.calibrate._scatter`)
-is regressed on u_j by weighted least squares (weights 1/se_j^2), slope b with variance
-var(b) scaled by the fit's reduced chi^2 when above 1 (the between-flight scatter); and each
-channel's log mean-square residual (the lack-of-fit statistic) is regressed on u_j by
-ordinary least squares, one residual spread pooled over channels (C (n - 2) degrees of
-freedom). At a flight's place u (:meth:`Trend.at`):
+is regressed on u_j by weighted least squares (weights 1/se_j^2): slope b, variance var(b)
+scaled by the fit's reduced chi^2 when above 1 (the between-flight scatter); each channel's
+log mean-square residual (the lack-of-fit statistic) is regressed on u_j by ordinary least
+squares: slope g_c, one residual spread s_g pooled over channels (C (n - 2) degrees of
+freedom).
 
-* shared values ``theta_ref + b (u - u_w)`` (u_w the weighted mean place), between-flight
-  scatter widened to ``sqrt(tau^2 + var(b) (u - u_w)^2)``: the flight is judged against
-  what nominal flights flown there share, no more precisely than the references show it;
-* lack-of-fit mean ``m_c + g_c (u - u_bar)`` with the regression's prediction factor
-  ``sqrt(1 + 1/n + (u - u_bar)^2 / S_uu)`` on the pooled spread;
-* noise scale sigma_c widened by ``exp(max(0, g_c (u - u_bar)) / 2)``: a flight where the
-  references' residual grows (faster flying) carries that larger residual as noise; it is
-  never narrowed (the sensor noise does not shrink on a slower flight).
+The reference model at a flight's place (:func:`local_reference`). Inside the references'
+range of places [u_min, u_max] their own statistics hold (the calibrated scatter and
+lack-of-fit spread already contain how the references differ among themselves). A flight
+at e = u - u_max > 0 (or u_min - u) beyond the outermost reference meets the model's
+extrapolation, measured by the trend:
 
-No threshold decides "inside" or "outside": the moved model is used at every place (inside
-the envelope it is the references' own interpolation), and the answer states the distance
-when it is above zero. Below :data:`MIN_FLIGHTS` references (3: a slope needs a residual
-degree of freedom) or when the references' places spread less than :data:`MIN_SPREAD` (0.05,
-5 % in speed: no trend can be measured) the reference model is used as calibrated, and the
-answer says that a flight outside the envelope is judged by extrapolation the references
-cannot measure.
+* every shared value keeps its centre; its between-flight scatter grows to
+  ``sqrt(tau^2 + (b^2 + var(b)) e^2)``: how far the trend may carry a nominal flight's value
+  (the slope's sign is not trusted this far out: a 6-reference trend carried the real
+  Crazyflie's I_zz to its bound);
+* the noise scale sigma_c grows by ``exp(max(0, g_c e) / 2)``: the residual the references'
+  trend expects there is carried as noise (never narrowed: the sensor noise does not shrink
+  on a slower flight), and the lack-of-fit mean moves by ``g_c e`` less that widening;
+* the lack-of-fit spread grows to ``sqrt(s^2 + s_g^2 e^2 / (S_uu (1 + 1/n)))`` (the
+  regression's prediction term; S_uu the references' sum of squared places about their
+  mean).
+
+No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
+states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
+slope needs a residual degree of freedom) or when the references' places spread less than
+:data:`MIN_SPREAD` (0.05, 5 %: no trend can be measured) the reference model is used as
+calibrated, and the answer says that the references do not show how their model
+extrapolates.
 
 Example::
 
     >>> pos = position(flight.fit, ref.envelope)
     >>> pos.distance, pos.text          # 0.35, "speed 1.42x the fastest reference's ..."
-    >>> local = ref.envelope.trend.at(ref, pos.u)    # a Reference for this flight
+    >>> local = local_reference(ref, pos)      # the Reference this flight is judged by
 """
 
 from __future__ import annotations
@@ -89,7 +97,8 @@ class Trend:
     ``axis`` (3,): unit direction in the coordinates; ``u_mean``: the references' mean place;
     ``u_w`` (P,): per parameter the weighted mean place; ``slope``/``slope_var`` (P,): dtheta/du
     and its variance; ``lof_slope`` (C,): d(log ms_c)/du; ``lof_mean`` (C,): at u_mean;
-    ``lof_sd``, ``lof_dof``: pooled residual spread; ``s_uu``: sum of squared places."""
+    ``lof_sd``, ``lof_dof``: pooled residual spread; ``s_uu``: sum of squared places about
+    u_mean; ``n``: references; ``u_low``/``u_high``: the outermost references' places."""
 
     axis: np.ndarray
     u_mean: float
@@ -203,10 +212,12 @@ def position(states, envelope: Envelope | None) -> Position | None:
     else:
         fast = above[worst] > 0
         ratio = np.exp(x[worst] - (envelope.high if fast else envelope.low)[worst])
+        size = (f"{ratio:.2f}x" if abs(np.log(ratio)) >= 0.1
+                else f"{100 * abs(ratio - 1):.1f} % {'above' if fast else 'below'}")
         text = (f"outside the reference flights' envelope: {what} {np.exp(x[worst]):.3g} "
-                f"{unit}, {ratio:.2f}x the {'largest' if fast else 'smallest'} reference's")
-        text += ("; the reference model is moved along the references' own trend to this "
-                 "flight" if envelope.trend is not None else
+                f"{unit}, {size} the {'largest' if fast else 'smallest'} reference's")
+        text += ("; the reference model's uncertainty and noise are widened by the "
+                 "references' own trend" if envelope.trend is not None else
                  "; the references do not spread enough to show how their model "
                  "extrapolates: judged by the reference model as calibrated")
     return Position(x, distance, name, u, text)
@@ -214,24 +225,19 @@ def position(states, envelope: Envelope | None) -> Position | None:
 
 def local_reference(reference, pos: Position | None):
     """The reference model at a flight's place (module doc): a copy of ``reference`` with
-    moved shared values, widened scatter, moved lack-of-fit statistics and widened noise
-    scale; ``reference`` itself where no trend is measured."""
+    widened scatter, noise scale and lack-of-fit statistics beyond the outermost reference;
+    ``reference`` itself where no trend is measured."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
     if pos is None or trend is None or pos.u is None:
         return reference
-    from .fitting import _bounds
-
-    d = pos.u - trend.u_w
-    lower, upper = _bounds(reference.candidate, reference.params)
-    theta = np.clip(reference.theta + trend.slope * d, lower, upper)
-    scatter = np.sqrt(reference.scatter ** 2 + trend.slope_var * d ** 2)
     # beyond the references' outermost places only: inside, their own statistics hold
     edge = pos.u - np.clip(pos.u, trend.u_low, trend.u_high)
+    scatter = np.sqrt(reference.scatter ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2)
     shift = trend.lof_slope * edge
     widen = np.maximum(shift, 0.0)
     n = len(reference.names) or trend.n
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
     return dataclasses.replace(
-        reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
+        reference, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
         lof_mean=reference.lof_mean + shift - widen, lof_sd=float(spread))
