@@ -93,7 +93,8 @@ def fastest_against_slowest(data: Path) -> dict:
     entry = result["flights"][0]
     return {"references": {p.name: speed[p] for p in refs}, "file": flight.name,
             "rms_speed": speed[flight], "outcome": entry["outcome"],
-            "verdict": entry["verdict"], "answer": entry["answer"]}
+            "verdict": entry["verdict"], "answer": entry["answer"],
+            "reference_model": result["reference_model"]["params"]}
 
 
 def main(argv=None) -> int:
@@ -110,6 +111,8 @@ def main(argv=None) -> int:
         out = fastest_against_slowest(args.data)
         refs = ", ".join(f"{k} {v:.2f}" for k, v in out["references"].items())
         print(f"references (RMS speed, m/s): {refs}")
+        print("reference model: " + ", ".join(f"{k} {v:.4g}"
+                                              for k, v in out["reference_model"].items()))
         print(f"{out['file']} ({out['rms_speed']:.2f} m/s): {out['verdict']}: {out['answer']}")
         return 0
     out = crosscheck(args.data, args.workers)
