@@ -9,19 +9,17 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from _helpers import shared_effects  # noqa: E402
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import Reference, calibrate
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.envelope import (Envelope, coordinates, fit_trend, local_reference,
-                                  position)
+from quadsim.gap.envelope import Envelope, coordinates, fit_trend, local_reference, position
 from quadsim.gap.fitting import Candidate
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
-
-from _helpers import shared_effects  # noqa: E402
 
 
 def _states(speed: float, rate: float, thrust: float, n: int = 400):
@@ -105,7 +103,7 @@ def test_inside_the_envelope_the_noise_model_is_the_references():
 
 
 def test_references_that_do_not_spread_give_no_trend():
-    ref, trend, _ = _reference(np.repeat(COORDS[:1], 4, axis=0) * [[1.0], [1.001], [1.002],
+    _, trend, _ = _reference(np.repeat(COORDS[:1], 4, axis=0) * [[1.0], [1.001], [1.002],
                                                                        [1.003]], 0.004, 0.7)
     assert trend is None
     pos = position(_states(*(1.6 * COORDS[0])), Envelope(np.log(COORDS[:1]), None))

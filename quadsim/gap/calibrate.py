@@ -68,9 +68,8 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
-from .envelope import coordinates, envelope_of
-from .speed_gain import PART as SPEED_GAIN
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
+from .envelope import coordinates, envelope_of
 from .fitting import (
     Candidate,
     _bounds,
@@ -82,9 +81,10 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .speed_gain import PART as SPEED_GAIN
 
-__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "per_flight_candidate", "weighted_residual",
-           "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
+__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "per_flight_candidate",
+           "weighted_residual", "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),

@@ -40,7 +40,8 @@ from ..vehicle.params import VehicleParams
 from .calibrate import Reference, calibrate
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
-from .envelope import local_reference, position
+from .envelope import local_reference
+from .envelope import position as envelope_position
 from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
@@ -130,7 +131,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
-            place = position(states, reference.envelope)
+            place = envelope_position(states, reference.envelope)
             reference = local_reference(reference, place)   # the model at this flight
             expl = explanations_for(reference, states, effects)
             start = 0.0
