@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope", "Position",
-           "Trend", "coordinates", "envelope_of", "fit_trend", "position", "local_reference"]
+           "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend", "position", "local_reference"]
 
 #: the envelope's coordinates (name, unit, what it measures)
 COORDINATES = (("speed", "m/s", "RMS speed"), ("rate", "rad/s", "RMS body rate"),
@@ -157,6 +157,17 @@ def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
     ``identified`` get no slope) and their log mean squares ``log_ms`` (n, C)."""
     return Envelope(np.asarray(coords, float),
                     fit_trend(np.asarray(coords, float), values, se, identified, log_ms))
+
+
+def envelope_summary(envelope: Envelope | None) -> dict | None:
+    """The references' envelope as JSON: per coordinate the smallest and largest RMS value
+    (SI), and whether a trend was measured."""
+    if envelope is None:
+        return None
+    names = [c[0] for c in COORDINATES]
+    return {"rms": {n: [float(np.exp(lo)), float(np.exp(hi))]
+                    for n, lo, hi in zip(names, envelope.low, envelope.high)},
+            "trend": envelope.trend is not None}
 
 
 def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:

@@ -40,7 +40,7 @@ from ..vehicle.params import VehicleParams
 from .calibrate import Reference, calibrate
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
-from .envelope import local_reference
+from .envelope import envelope_summary, local_reference
 from .envelope import position as envelope_position
 from .evidence import evaluate, explanations_for
 from .judge import judge
@@ -97,7 +97,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
 def reference_summary(ref: Reference) -> dict:
     """The calibrated reference model as JSON: values, pooled standard error, between-flight
     scatter and whether the reference flights determine it (``identified``) per shared
-    parameter; noise scale (sigma) and correlation time per channel."""
+    parameter; noise scale (sigma) and correlation time per channel; the references'
+    envelope (:func:`quadsim.gap.envelope.envelope_summary`)."""
     from .judge import channel_names
 
     names = channel_names(ref)
@@ -110,7 +111,8 @@ def reference_summary(ref: Reference) -> dict:
             "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,
                                 "se": 1e3 * ref.rotor_shift_se},
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
-                          for k, (m, s, n) in ref.delays_ms.items()}}
+                          for k, (m, s, n) in ref.delays_ms.items()},
+            "envelope": envelope_summary(ref.envelope)}
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
