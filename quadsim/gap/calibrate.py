@@ -53,6 +53,17 @@ Stages
    (degrees of freedom C (n - 1)); a flight is compared with them in :mod:`.judge`.
 6. Signal delays (:mod:`quadsim.logs.delays`): each signal's mean and spread over the
    references (ms).
+7. Envelope (:mod:`.envelope`): the references' RMS speed, body rate and thrust variation,
+   and the trend of their own values (stage 3) and log mean squares (stage 5) along their
+   main axis: how the model extrapolates to a flight flown beyond them.
+
+Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the vertical drag (body drag
+C_d A along body z) and, with commands but no voltage log, the motor map's gain
+(:mod:`.speed_gain`). Both drift with how a flight is flown: on the 8 Crazyflow reference
+flights (path speed 0.8-1.25) the rotor channel's mean residual ran from -0.07 % to +0.05 %
+of the hover speed, and the faster no-effect flights' vertical force residual grew with
+speed; without them, nominal flights flown slower or faster were read as ``thrust_factor``
+or ``body_drag``, or failed the lack-of-fit test.
 
 Example::
 
