@@ -10,6 +10,10 @@ flight judged once, never against itself). Nothing here reads ``mixed/``.
 Usage::
 
     python scripts/nominal_crosscheck.py [--data ../shared/data] [--workers 2] [--json out.json]
+    python scripts/nominal_crosscheck.py --fastest      # one flight outside its references
+
+``--fastest``: the fastest nominal flight (RMS speed) judged against the 6 slowest, a flight
+flown outside its references' envelope (``quadsim.gap.envelope``).
 
 Prints, per flight, the verdict and answer, and the no_significant_gap rate. Runs in about
 two minutes on 2 cores.
@@ -43,16 +47,8 @@ def folds(files: list[Path]) -> list[tuple[list[Path], list[Path]]]:
 
 
 def crosscheck(data: Path, workers: int) -> dict:
-    nominal = sorted((data / "crazyflie21_brushless" / "nominal").glob("flight_*.csv.gz"))
-    if len(nominal) < 4:
-        raise InputError(f"{data}: crazyflie21_brushless/nominal/flight_*.csv.gz: "
-                         f"found {len(nominal)} flights, need at least 4")
+    nominal, logs = _nominal(data)
     params = load_params("crazyflie21")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", QuadsimWarning)
-        logs = {p: load_log(p) for p in nominal}
-    for line in collapse_warnings([str(w.message) for w in caught]):
-        print(f"warning: {line}", file=sys.stderr)
     rows = []
     for tested, reference in folds(nominal):
         result = diagnose_per_flight(
@@ -67,14 +63,58 @@ def crosscheck(data: Path, workers: int) -> dict:
     return {"flights": rows, "no_significant_gap": clean, "judged": len(rows)}
 
 
+def _nominal(data: Path) -> tuple[list[Path], dict]:
+    nominal = sorted((data / "crazyflie21_brushless" / "nominal").glob("flight_*.csv.gz"))
+    if len(nominal) < 4:
+        raise InputError(f"{data}: crazyflie21_brushless/nominal/flight_*.csv.gz: "
+                         f"found {len(nominal)} flights, need at least 4")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", QuadsimWarning)
+        logs = {p: load_log(p) for p in nominal}
+    for line in collapse_warnings([str(w.message) for w in caught]):
+        print(f"warning: {line}", file=sys.stderr)
+    return nominal, logs
+
+
+#: references of ``--fastest``: the slowest flights
+SLOWEST = 6
+
+
+def fastest_against_slowest(data: Path) -> dict:
+    """The fastest nominal flight (RMS speed, m/s) judged against the :data:`SLOWEST` slowest."""
+    import numpy as np
+
+    nominal, logs = _nominal(data)
+    speed = {p: float(np.sqrt(np.mean(np.sum(logs[p].velocity ** 2, axis=1)))) for p in nominal}
+    order = sorted(nominal, key=lambda p: (speed[p], p.name))
+    refs, flight = order[:SLOWEST], order[-1]
+    result = diagnose_per_flight([logs[flight]], [logs[p] for p in refs],
+                                 load_params("crazyflie21"))
+    entry = result["flights"][0]
+    return {"references": {p.name: speed[p] for p in refs}, "file": flight.name,
+            "rms_speed": speed[flight], "outcome": entry["outcome"],
+            "verdict": entry["verdict"], "answer": entry["answer"],
+            "reference_model": result["reference_model"]["params"]}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA,
                         help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--workers", type=int, default=2, help="local processes")
     parser.add_argument("--json", type=Path, help="write the per-flight rows (JSON)")
+    parser.add_argument("--fastest", action="store_true",
+                        help="judge the fastest nominal flight against the 6 slowest")
     args = parser.parse_args(argv)
     start = time.perf_counter()
+    if args.fastest:
+        out = fastest_against_slowest(args.data)
+        refs = ", ".join(f"{k} {v:.2f}" for k, v in out["references"].items())
+        print(f"references (RMS speed, m/s): {refs}")
+        print("reference model: " + ", ".join(f"{k} {v:.4g}"
+                                              for k, v in out["reference_model"].items()))
+        print(f"{out['file']} ({out['rms_speed']:.2f} m/s): {out['verdict']}: {out['answer']}")
+        return 0
     out = crosscheck(args.data, args.workers)
     for r in out["flights"]:
         mark = " (tentative)" if r["tentative"] else ""

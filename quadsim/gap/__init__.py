@@ -31,8 +31,11 @@ Method (equation error, then prediction error)
 
 ``diagnose_per_flight`` (:mod:`.per_flight`) judges each flight alone against nominal
 reference flights, by evidence: :mod:`.calibrate` absorbs what every reference flight shares
-(b, d, motor map, motor lag, rotor drag, inertia, rate damping, the rotor delay) into a
-reference model with a per-channel noise model; :mod:`.evidence` fits every explanation of
+(b, d, motor map and its gain, motor lag, rotor drag, vertical drag, inertia, rate damping,
+the rotor delay) into a reference model with a per-channel noise model; :mod:`.envelope`
+places the flight against the references' envelope (speed, body rate, thrust variation),
+states when it lies outside and by how much, and there widens the reference model by the
+trend the references show; :mod:`.evidence` fits every explanation of
 how a flight differs (an effect, a shared parameter at a value of its own, a logged signal's
 delay, or none) and weighs it by its Laplace evidence; :mod:`.judge` gives the posterior per
 reading, a lack-of-fit test ("not in the library") and the answer. A flight that cannot be

@@ -53,6 +53,17 @@ Stages
    (degrees of freedom C (n - 1)); a flight is compared with them in :mod:`.judge`.
 6. Signal delays (:mod:`quadsim.logs.delays`): each signal's mean and spread over the
    references (ms).
+7. Envelope (:mod:`.envelope`): the references' RMS speed, body rate and thrust variation,
+   and the trend of their own values (stage 3) and log mean squares (stage 5) along their
+   main axis: how the model extrapolates to a flight flown beyond them.
+
+Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the vertical drag (body drag
+C_d A along body z) and, with commands but no voltage log, the motor map's gain
+(:mod:`.speed_gain`). Both drift with how a flight is flown: on the 8 Crazyflow reference
+flights (path speed 0.8-1.25) the rotor channel's mean residual ran from -0.07 % to +0.05 %
+of the hover speed, and the faster no-effect flights' vertical force residual grew with
+speed; without them, nominal flights flown slower or faster were read as ``thrust_factor``
+or ``body_drag``, or failed the lack-of-fit test.
 
 Example::
 
@@ -69,6 +80,7 @@ import numpy as np
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
+from .envelope import coordinates, envelope_of
 from .fitting import (
     Candidate,
     _bounds,
@@ -80,9 +92,10 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .speed_gain import PART as SPEED_GAIN
 
-__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "weighted_residual",
-           "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
+__all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "per_flight_candidate",
+           "weighted_residual", "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -152,6 +165,22 @@ def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     return Candidate("reference", parts)
 
 
+#: the vertical air drag every flight meets (stage 2): body drag C_d A along body z
+VERTICAL_DRAG = ("body_drag", {}, ("cd_area_vertical",))
+
+
+def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
+    """The shared parameters of the per-flight reference model: :func:`shared_candidate`
+    plus the vertical drag (:data:`VERTICAL_DRAG`) and, with commands but no voltage log,
+    the motor map's gain (:mod:`.speed_gain`; with a voltage log
+    ``battery_sag.full_voltage`` is that gain). Both change with how a flight is flown
+    (module doc, stage 2), so a flight's own value must have a place in the reference
+    uncertainty; neither is a reading of its own (a flight's body drag is, on top)."""
+    cand = shared_candidate(rotor, vbat)
+    extra = (VERTICAL_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
+    return Candidate(cand.name, cand.parts + extra, cand.base)
+
+
 @dataclass
 class Reference:
     """The calibrated reference model and its noise model (module doc).
@@ -179,6 +208,8 @@ class Reference:
     identified: dict
     rotor_shift_s: float = 0.0
     rotor_shift_se: float = 0.0
+    #: the references' envelope and the model's trend along it (:mod:`.envelope`)
+    envelope: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -225,9 +256,10 @@ def jacobian(states, reference: Reference, columns: list[int], build) -> np.ndar
     return out
 
 
-def _scatter(flights, reference: Reference) -> np.ndarray:
+def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarray:
     """Method-of-moments between-flight variance of each shared parameter (module doc,
-    stage 3): one Gauss-Newton step per reference flight from theta_ref."""
+    stage 3): one Gauss-Newton step per reference flight from theta_ref. ``own``: a list
+    that receives (values (n, P), standard errors (n, P)), each flight's own estimate."""
     k = len(reference.theta)
     values, variances = [], []
     for f in flights:
@@ -238,6 +270,8 @@ def _scatter(flights, reference: Reference) -> np.ndarray:
         values.append(reference.theta - cov @ (jac.T @ r))
         variances.append(np.clip(np.diag(cov), 0, None))
     values, variances = np.asarray(values), np.asarray(variances)
+    if own is not None:
+        own.extend([values, np.sqrt(variances)])
     if len(values) < 2:
         return np.zeros(k)
     return np.sqrt(np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None))
@@ -346,7 +380,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                                          for s in states]), dt, floor=noise_floor(params, rotor))
     vbat = rotor and all(s.vbat is not None and bool(np.all(np.isfinite(s.vbat)))
                          for s in states)
-    cand = shared_candidate(rotor, vbat)
+    cand = per_flight_candidate(rotor, vbat)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     theta, shift, shift_se = _refine(flights, params, rotor, cand, fit.theta, start, sigma0)
     states = [aligned(f, shift) for f in flights]
@@ -371,5 +405,9 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se)
-    ref.scatter = _scatter(states, ref)
+    own: list = []
+    ref.scatter = _scatter(states, ref, own)
+    ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
+                               np.array([ref.identified.get(k, True)
+                                         for k in cand.parameter_names]), log_ms)
     return ref

@@ -374,11 +374,13 @@ class Problem:
         self.marg = _Marginal(jac[:, self.keep], s_all[self.keep])
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
         lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
+        self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
         self.size = jac.shape[0] + len(self.keep) + len(self.mean)
 
     def residual(self, z: np.ndarray) -> np.ndarray:
-        theta = self.mean + self.sd * z
+        # z at its bound gives theta a round-off beyond the parameter's range: clipped
+        theta = np.clip(self.mean + self.sd * z, self.lower, self.upper)
         own = _own_effects(self.expl, theta)
         flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
         return flight_residual(flight, self.reference, self.shared + own, self.memo)
@@ -455,5 +457,7 @@ def laplace(states, reference: Reference, expl: Explanation, marg: _Marginal, ke
                   log_z, np.mean(resid ** 2, axis=0), np.mean(resid, axis=0) * reference.sigma,
                   shared_shift=shift)
     if expl.name == "wind":
-        ev.air_force = _air_force(states, reference, shared, _own_effects(expl, theta))
+        lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
+        ev.air_force = _air_force(states, reference, shared,
+                                  _own_effects(expl, np.clip(theta, lower, upper)))
     return ev

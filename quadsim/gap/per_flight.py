@@ -40,6 +40,8 @@ from ..vehicle.params import VehicleParams
 from .calibrate import Reference, calibrate
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
+from .envelope import envelope_summary, local_reference
+from .envelope import position as envelope_position
 from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
@@ -95,7 +97,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
 def reference_summary(ref: Reference) -> dict:
     """The calibrated reference model as JSON: values, pooled standard error, between-flight
     scatter and whether the reference flights determine it (``identified``) per shared
-    parameter; noise scale (sigma) and correlation time per channel."""
+    parameter; noise scale (sigma) and correlation time per channel; the references'
+    envelope (:func:`quadsim.gap.envelope.envelope_summary`)."""
     from .judge import channel_names
 
     names = channel_names(ref)
@@ -108,7 +111,8 @@ def reference_summary(ref: Reference) -> dict:
             "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,
                                 "se": 1e3 * ref.rotor_shift_se},
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
-                          for k, (m, s, n) in ref.delays_ms.items()}}
+                          for k, (m, s, n) in ref.delays_ms.items()},
+            "envelope": envelope_summary(ref.envelope)}
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
@@ -129,6 +133,8 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
+            place = envelope_position(states, reference.envelope)
+            reference = local_reference(reference, place)   # the model at this flight
             expl = explanations_for(reference, states, effects)
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
@@ -138,6 +144,10 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
+    if place is not None:
+        entry["envelope"] = place.to_json()
+        if place.distance > 0:
+            entry["answer"] += f" Flown {place.text}."
     entry["signal_delays_ms"] = flight.delays_ms
     entry["notes"].extend(delay_notes([flight]))
     return entry

@@ -9,7 +9,8 @@ most probable first: name, probability, magnitude in words, log evidence, determ
 ``params`` with 95 % ``ci``, ``undetermined`` parameter names, ``fixed``, ``variant``),
 ``lack_of_fit`` (channel -> RMS over the references' typical RMS, only channels beyond
 them), ``differ_on`` (channels that separate the two leading readings), ``symptom`` (the
-flight's largest mean residual against the reference model) and ``tentative``; an outcome
+flight's largest mean residual against the reference model), ``envelope`` (where the flight
+lies against its references' envelope, :mod:`quadsim.gap.envelope`) and ``tentative``; an outcome
 ``refused`` with its ``reason`` for a flight that could not be judged. The result carries
 ``reference_model`` (shared parameters with standard error and between-flight scatter,
 per-channel sigma and correlation time, reference delays) instead of
@@ -155,6 +156,10 @@ _FLIGHT = {
                    "differ_on": {"type": "array", "items": {"type": "string"}},
                    "symptom": {"type": "object"},
                    "signal_delays_ms": {"type": "object"},
+                   "envelope": {"type": "object", "properties": {
+                       "outside": {"type": "boolean"}, "distance": {"type": "number"},
+                       "furthest": {"type": ["string", "null"]}, "rms": _NUMBER_MAP,
+                       "place": {"type": ["number", "null"]}, "text": {"type": "string"}}},
                    "lack_of_fit": _NUMBER_MAP},
 }
 

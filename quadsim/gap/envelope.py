@@ -1,0 +1,254 @@
+"""The reference flights' envelope, and the reference model at a flight flown elsewhere in it
+or outside it.
+
+The reference model (:mod:`.calibrate`) is fitted on flights of one envelope, and what its
+shared values absorb of the physics it lacks depends on how the flights were flown. A
+flight flown elsewhere meets the model's *extrapolation error*; read against the
+references' own residual statistics it looks like an effect. Two parts of it are physics
+the reference model now shares (:func:`.calibrate.per_flight_candidate`: the motor map's
+gain and the vertical drag, both drifting with the flight's envelope on the Crazyflow
+references); the rest is measured here, over the references themselves, and widens the
+reference model for a flight beyond them. Every judged flight's answer states whether it
+lies outside its references' envelope, along which coordinate and by how much.
+
+Coordinates (:func:`coordinates`, per flight, natural log so that "1.6x faster" is a
+distance of log 1.6 = 0.47): RMS speed |v| (m/s), RMS body rate |omega| (rad/s), RMS
+variation of the specific force's size |f| about its mean (m/s^2: how hard the thrust is
+worked), each floored at :data:`FLOORS` (a hover's sensor noise level, so that hovering
+flights do not sit at log 0 = -inf). The *envelope* is the references' range per coordinate;
+a flight's distance outside it is the largest excess over the coordinates (:class:`Position`).
+
+Trend (:func:`fit_trend`). The references' main axis of variation in these coordinates
+(first principal direction, ``axis``; sign: speed increasing) gives each flight a scalar
+place u. Over the references, each shared parameter's own value theta_j (one Gauss-Newton
+step from the pooled value on flight j alone, standard error se_j: :func:`.calibrate._scatter`)
+is regressed on u_j by weighted least squares (weights 1/se_j^2): slope b, variance var(b)
+scaled by the fit's reduced chi^2 when above 1 (the between-flight scatter); each channel's
+log mean-square residual (the lack-of-fit statistic) is regressed on u_j by ordinary least
+squares: slope g_c, one residual spread s_g pooled over channels (C (n - 2) degrees of
+freedom).
+
+The reference model at a flight's place (:func:`local_reference`). Inside the references'
+range of places [u_min, u_max] their own statistics hold (the calibrated scatter and
+lack-of-fit spread already contain how the references differ among themselves). A flight
+at e = u - u_max > 0 (or u_min - u) beyond the outermost reference meets the model's
+extrapolation, measured by the trend:
+
+* every shared value keeps its centre; its between-flight scatter grows to
+  ``sqrt(tau^2 + (b^2 + var(b)) e^2)``: how far the trend may carry a nominal flight's value
+  (the slope's sign is not trusted this far out: a 6-reference trend carried the real
+  Crazyflie's I_zz to its bound);
+* the noise scale sigma_c grows by ``exp(max(0, g_c e) / 2)``: the residual the references'
+  trend expects there is carried as noise (never narrowed: the sensor noise does not shrink
+  on a slower flight), and the lack-of-fit mean moves by ``g_c e`` less that widening;
+* the lack-of-fit spread grows to ``sqrt(s^2 + s_g^2 e^2 / (S_uu (1 + 1/n)))`` (the
+  regression's prediction term; S_uu the references' sum of squared places about their
+  mean).
+
+No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
+states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
+slope needs a residual degree of freedom) or when the references' places spread less than
+:data:`MIN_SPREAD` (0.05, 5 %: no trend can be measured) the reference model is used as
+calibrated, and the answer says that the references do not show how their model
+extrapolates.
+
+Example::
+
+    >>> pos = position(flight.fit, ref.envelope)
+    >>> pos.distance, pos.text          # 0.35, "speed 1.42x the fastest reference's ..."
+    >>> local = local_reference(ref, pos)      # the Reference this flight is judged by
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope", "Position",
+           "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend", "position", "local_reference"]
+
+#: the envelope's coordinates (name, unit, what it measures)
+COORDINATES = (("speed", "m/s", "RMS speed"), ("rate", "rad/s", "RMS body rate"),
+               ("thrust", "m/s^2", "RMS variation of the specific force's size"))
+#: floors of the coordinates (m/s, rad/s, m/s^2): a hover's level (5 cm/s drift, 3 deg/s
+#: gyro noise and wobble, 0.05 m/s^2 accelerometer noise)
+FLOORS = np.array([0.05, 0.05, 0.05])
+#: fewest references with which a trend is measured
+MIN_FLIGHTS = 3
+#: least spread (natural log units) of the references' places along their axis
+MIN_SPREAD = 0.05
+
+
+def coordinates(states) -> np.ndarray:
+    """Envelope coordinates (3,) of a flight's states: natural logs (module doc)."""
+    speed = np.sqrt(np.mean(np.sum(states.velocity ** 2, axis=1)))
+    rate = np.sqrt(np.mean(np.sum(states.body_rate ** 2, axis=1)))
+    size = np.linalg.norm(states.specific_force, axis=1)
+    thrust = np.sqrt(np.mean((size - size.mean()) ** 2))
+    return np.log(np.maximum([speed, rate, thrust], FLOORS))
+
+
+@dataclass
+class Trend:
+    """How the references' shared values and residuals move along their axis (module doc).
+
+    ``axis`` (3,): unit direction in the coordinates; ``u_mean``: the references' mean place;
+    ``u_w`` (P,): per parameter the weighted mean place; ``slope``/``slope_var`` (P,): dtheta/du
+    and its variance; ``lof_slope`` (C,): d(log ms_c)/du; ``lof_mean`` (C,): at u_mean;
+    ``lof_sd``, ``lof_dof``: pooled residual spread; ``s_uu``: sum of squared places about
+    u_mean; ``n``: references; ``u_low``/``u_high``: the outermost references' places."""
+
+    axis: np.ndarray
+    u_mean: float
+    u_w: np.ndarray
+    slope: np.ndarray
+    slope_var: np.ndarray
+    lof_slope: np.ndarray
+    lof_mean: np.ndarray
+    lof_sd: float
+    lof_dof: int
+    s_uu: float
+    n: int
+    u_low: float
+    u_high: float
+
+
+@dataclass
+class Envelope:
+    """The references' coordinates (n, 3) and their trend (None: not measurable)."""
+
+    coords: np.ndarray
+    trend: Trend | None
+
+    @property
+    def low(self) -> np.ndarray:
+        return self.coords.min(axis=0)
+
+    @property
+    def high(self) -> np.ndarray:
+        return self.coords.max(axis=0)
+
+
+@dataclass
+class Position:
+    """A flight's place: coordinates, distance outside the envelope (log units, 0 inside),
+    the coordinate furthest outside, place u along the references' axis, and in words."""
+
+    coords: np.ndarray
+    distance: float
+    worst: str
+    u: float | None
+    text: str
+
+    def to_json(self) -> dict:
+        names = [c[0] for c in COORDINATES]
+        return {"outside": self.distance > 0, "distance": float(self.distance),
+                "furthest": self.worst if self.distance > 0 else None,
+                "rms": {n: float(np.exp(v)) for n, v in zip(names, self.coords)},
+                "place": None if self.u is None else float(self.u), "text": self.text}
+
+
+def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
+                identified: np.ndarray, log_ms: np.ndarray) -> Envelope:
+    """The envelope of reference flights (coordinates (n, 3)), with the trend of their own
+    parameter values ``values`` (n, P) (standard errors ``se``; parameters not
+    ``identified`` get no slope) and their log mean squares ``log_ms`` (n, C)."""
+    return Envelope(np.asarray(coords, float),
+                    fit_trend(np.asarray(coords, float), values, se, identified, log_ms))
+
+
+def envelope_summary(envelope: Envelope | None) -> dict | None:
+    """The references' envelope as JSON: per coordinate the smallest and largest RMS value
+    (SI), and whether a trend was measured."""
+    if envelope is None:
+        return None
+    names = [c[0] for c in COORDINATES]
+    return {"rms": {n: [float(np.exp(lo)), float(np.exp(hi))]
+                    for n, lo, hi in zip(names, envelope.low, envelope.high)},
+            "trend": envelope.trend is not None}
+
+
+def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:
+    """The trend of :class:`Trend` (module doc); None when it cannot be measured."""
+    n = len(coords)
+    if n < MIN_FLIGHTS:
+        return None
+    centred = coords - coords.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    if axis[0] < 0 or (axis[0] == 0 and axis.sum() < 0):
+        axis = -axis
+    u = coords @ axis
+    if np.ptp(u) < MIN_SPREAD:
+        return None
+    p = values.shape[1]
+    u_w, slope, slope_var = np.zeros(p), np.zeros(p), np.zeros(p)
+    for k in range(p):
+        w = 1.0 / np.maximum(se[:, k], 1e-300) ** 2
+        if not identified[k] or not np.all(np.isfinite(w)):
+            u_w[k] = u.mean()
+            continue
+        u_w[k] = float(np.sum(w * u) / np.sum(w))
+        du = u - u_w[k]
+        suu = float(np.sum(w * du ** 2))
+        mean = float(np.sum(w * values[:, k]) / np.sum(w))
+        b = float(np.sum(w * du * (values[:, k] - mean)) / suu)
+        chi2 = float(np.sum(w * (values[:, k] - mean - b * du) ** 2)) / (n - 2)
+        slope[k], slope_var[k] = b, max(1.0, chi2) / suu
+    du = u - u.mean()
+    s_uu = float(du @ du)
+    g = (du @ (log_ms - log_ms.mean(axis=0))) / s_uu
+    lof_mean = log_ms.mean(axis=0)
+    rest = log_ms - lof_mean - np.outer(du, g)
+    dof = max(1, rest.size - 2 * rest.shape[1])
+    return Trend(axis, float(u.mean()), u_w, slope, slope_var, g, lof_mean,
+                 float(np.sqrt(np.sum(rest ** 2) / dof)), dof, s_uu, n,
+                 float(u.min()), float(u.max()))
+
+
+def position(states, envelope: Envelope | None) -> Position | None:
+    """A flight's :class:`Position` against the references' envelope (None without one)."""
+    if envelope is None:
+        return None
+    x = coordinates(states)
+    above, below = x - envelope.high, envelope.low - x
+    excess = np.maximum(np.maximum(above, below), 0.0)
+    worst = int(np.argmax(excess))
+    distance = float(excess[worst])
+    u = None if envelope.trend is None else float(x @ envelope.trend.axis)
+    name, unit, what = COORDINATES[worst]
+    if distance <= 0:
+        text = "inside the reference flights' envelope (speed, body rate, thrust variation)"
+    else:
+        fast = above[worst] > 0
+        ratio = np.exp(x[worst] - (envelope.high if fast else envelope.low)[worst])
+        size = (f"{ratio:.2f}x" if abs(np.log(ratio)) >= 0.1
+                else f"{100 * abs(ratio - 1):.1f} % {'above' if fast else 'below'}")
+        text = (f"outside the reference flights' envelope: {what} {np.exp(x[worst]):.3g} "
+                f"{unit}, {size} the {'largest' if fast else 'smallest'} reference's")
+        text += ("; the reference model's uncertainty and noise are widened by the "
+                 "references' own trend" if envelope.trend is not None else
+                 "; the references do not spread enough to show how their model "
+                 "extrapolates: judged by the reference model as calibrated")
+    return Position(x, distance, name, u, text)
+
+
+def local_reference(reference, pos: Position | None):
+    """The reference model at a flight's place (module doc): a copy of ``reference`` with
+    widened scatter, noise scale and lack-of-fit statistics beyond the outermost reference;
+    ``reference`` itself where no trend is measured."""
+    trend = getattr(getattr(reference, "envelope", None), "trend", None)
+    if pos is None or trend is None or pos.u is None:
+        return reference
+    # beyond the references' outermost places only: inside, their own statistics hold
+    edge = pos.u - np.clip(pos.u, trend.u_low, trend.u_high)
+    scatter = np.sqrt(reference.scatter ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2)
+    shift = trend.lof_slope * edge
+    widen = np.maximum(shift, 0.0)
+    n = len(reference.names) or trend.n
+    spread = np.sqrt(reference.lof_sd ** 2
+                     + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
+    return dataclasses.replace(
+        reference, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
+        lof_mean=reference.lof_mean + shift - widen, lof_sd=float(spread))

@@ -1,0 +1,54 @@
+"""The motor map's gain: the steady rotor speed per command scaled by (1 + gain), as a
+pseudo-effect the reference model shares (:mod:`.calibrate`) when commands are logged and
+no battery voltage is.
+
+Why. The static command -> speed map (:func:`quadsim.gap.fitting.fit_motor_map`) is fitted
+once on all reference flights pooled; a single flight's mean speed per command still differs
+from it, and by how it was flown: on the 8 Crazyflow references (path speed 0.8-1.25) the
+rotor channel's mean residual runs from -0.07 % of the hover speed on the slowest to +0.05 %
+on the fastest (Crazyflow's rotor dynamics are not first order at one time constant, so the
+mean speed a varying command gives depends on how much it varies). Without a shared
+parameter for it, that offset had no place in the reference model's uncertainty, and a
+nominal flight's own offset was read as ``thrust_factor`` (whose propeller coupling moves
+the speed per command) or ``battery_sag``. With a battery-voltage log the shared
+``battery_sag.full_voltage`` (speed per command ~ vbat / V_full) already is this gain.
+
+Physics: ``Omega_ss = (1 + gain) Omega_map(command)`` (:meth:`SpeedGain.speed_factor`,
+upstream of the measured speed like a battery: the thrust at a measured speed is unchanged).
+Typical size (fit step unit) 1 %; bounds +-20 % (a map off by more is refused by the motor
+map's own checks).
+
+Example::
+
+    >>> SpeedGain(gain=0.01).speed_factor(np.zeros(3))     # array([1.01, 1.01, 1.01])
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..effects.base import EffectBase, EffectParameter
+from . import fitting
+
+__all__ = ["SpeedGain", "PART"]
+
+
+class SpeedGain(EffectBase):
+    """Steady rotor speed per command scaled by (1 + gain) (module doc)."""
+
+    name = "speed_gain"
+    parameters = (
+        EffectParameter("gain", "1", 0.0, -0.2, 0.2,
+                        "relative change of the steady rotor speed per command"),
+    )
+
+    def speed_factor(self, t, vbat=None):
+        if self.gain == 0.0:
+            return None
+        return np.full(len(np.atleast_1d(t)), 1.0 + self.gain)
+
+
+fitting.LOCAL_EFFECTS["speed_gain"] = SpeedGain
+fitting.FIT_SPEC["speed_gain"] = (("gain",), {}, lambda p: [0.01])
+#: the shared-candidate part (name, fixed, fitted)
+PART = ("speed_gain", {}, ("gain",))

@@ -1,0 +1,147 @@
+"""The references' envelope (quadsim.gap.envelope) and flights flown outside it: closed-form
+checks of the trend and of the reference model moved to a flight's place, and generated
+flights flown 1.6x faster than their references (no effect: no gap; +20 % mass: named)."""
+
+from __future__ import annotations
+
+import warnings
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from _helpers import shared_effects  # noqa: E402
+
+from quadsim.core.errors import QuadsimWarning
+from quadsim.effects import make_effect
+from quadsim.gap.calibrate import Reference, calibrate
+from quadsim.gap.diagnose import prepare
+from quadsim.gap.envelope import Envelope, coordinates, fit_trend, local_reference, position
+from quadsim.gap.fitting import Candidate
+from quadsim.gap.per_flight import judge_one
+from quadsim.gap.synthetic import synthetic_flight
+from quadsim.vehicle.params import load_params
+
+
+def _states(speed: float, rate: float, thrust: float, n: int = 400):
+    """States whose envelope coordinates are exactly (speed, rate, thrust) (RMS values)."""
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    velocity = np.zeros((n, 3))
+    velocity[:, 0] = speed
+    body_rate = np.zeros((n, 3))
+    body_rate[:, 2] = rate
+    force = np.zeros((n, 3))
+    force[:, 2] = 9.81 + thrust * sign
+    return SimpleNamespace(velocity=velocity, body_rate=body_rate, specific_force=force)
+
+
+def _reference(coords, slope, lof_slope, names=4):
+    """A one-parameter reference (the motor map's gain) whose references' own values drift
+    along their axis by ``slope`` per unit place, their log mean squares by ``lof_slope``."""
+    cf = load_params("crazyflie21")
+    cand = Candidate("reference", (("speed_gain", {}, ("gain",)),))
+    channels = 10
+    trend_coords = np.log(coords)
+    axis = np.linalg.svd(trend_coords - trend_coords.mean(0), full_matrices=False)[2][0]
+    axis = axis if axis[0] > 0 else -axis
+    u = trend_coords @ axis
+    values = (slope * (u - u.mean()))[:, None]
+    log_ms = np.outer(u - u.mean(), lof_slope * np.ones(channels))
+    trend = fit_trend(trend_coords, values, np.full_like(values, 1e-4), np.array([True]),
+                      log_ms)
+    ref = Reference(cf, True, cand, np.zeros(1), np.full(1, 1e-5), np.zeros(1),
+                    np.ones(channels), np.ones(channels), np.zeros(channels), 0.2, 30, {},
+                    [f"r{k}" for k in range(names)], {"speed_gain.gain": True})
+    ref.envelope = Envelope(trend_coords, trend)
+    return ref, trend, u
+
+
+COORDS = np.array([[0.6, 1.2, 0.3], [0.7, 1.4, 0.35], [0.8, 1.6, 0.4], [0.9, 1.8, 0.45]])
+
+
+def test_coordinates_are_the_logs_of_the_rms_values():
+    assert coordinates(_states(0.9, 2.0, 0.5)) == pytest.approx(np.log([0.9, 2.0, 0.5]),
+                                                                abs=1e-12)
+
+
+def test_trend_recovers_an_exact_linear_drift():
+    """Values and log mean squares exactly linear in the place: slopes recovered to
+    round-off, no residual spread."""
+    _, trend, _ = _reference(COORDS, slope=0.004, lof_slope=0.7)
+    assert trend.slope[0] == pytest.approx(0.004, rel=1e-9)
+    assert np.allclose(trend.lof_slope, 0.7, rtol=1e-9)
+    assert trend.lof_sd < 1e-9
+
+
+def test_a_flight_16x_faster_is_outside_by_log_16_and_the_model_widens_by_the_trend():
+    ref, trend, u = _reference(COORDS, slope=0.004, lof_slope=0.7)
+    fast = _states(*(1.6 * COORDS[-1]))
+    pos = position(fast, ref.envelope)
+    assert pos.distance == pytest.approx(np.log(1.6), abs=1e-9)
+    assert "1.60x the largest reference's" in pos.text
+    local = local_reference(ref, pos)
+    edge = pos.u - u.max()
+    assert edge == pytest.approx(np.log(1.6) * np.sum(trend.axis), rel=1e-9)
+    # the shared value keeps its centre; its spread grows by what the trend moves it by
+    # beyond the outermost reference (slope and slope uncertainty)
+    assert np.array_equal(local.theta, ref.theta)
+    assert local.scatter[0] == pytest.approx(
+        np.sqrt(0.004 ** 2 + trend.slope_var[0]) * edge, rel=1e-9)
+    # the residual expected exp(0.7 edge) larger, carried as noise (sigma), so the
+    # lack-of-fit mean is unchanged
+    assert np.allclose(local.sigma, np.exp(0.7 * edge / 2), rtol=1e-12)
+    assert np.allclose(local.lof_mean, 0.0, atol=1e-12)
+    assert local.scatter[0] > 0 and local.lof_sd >= ref.lof_sd
+
+
+def test_inside_the_envelope_the_noise_model_is_the_references():
+    ref, _, _ = _reference(COORDS, slope=0.004, lof_slope=0.7)
+    pos = position(_states(*COORDS[1:3].mean(0)), ref.envelope)
+    assert pos.distance == 0.0 and "inside" in pos.text
+    local = local_reference(ref, pos)
+    assert np.array_equal(local.sigma, ref.sigma)
+    assert np.array_equal(local.lof_mean, ref.lof_mean) and local.lof_sd == ref.lof_sd
+
+
+def test_references_that_do_not_spread_give_no_trend():
+    _, trend, _ = _reference(np.repeat(COORDS[:1], 4, axis=0) * [[1.0], [1.001], [1.002],
+                                                                       [1.003]], 0.004, 0.7)
+    assert trend is None
+    pos = position(_states(*(1.6 * COORDS[0])), Envelope(np.log(COORDS[:1]), None))
+    assert pos.distance > 0 and "do not spread enough" in pos.text
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+@pytest.fixture(scope="module")
+def slow_reference(cf):
+    """Four nominal generated flights at path speeds 0.5-0.65 (shared motor lag and rotor
+    drag)."""
+    logs = [synthetic_flight(cf, shared_effects(), duration=5.0, seed=s,
+                             speed=0.5 + 0.05 * s) for s in range(4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+#: 1.6x the references' mean path speed (0.575)
+FAST = 0.92
+
+
+def test_a_nominal_flight_16x_faster_is_no_significant_gap(cf, slow_reference):
+    log = synthetic_flight(cf, shared_effects(), duration=5.0, seed=20, speed=FAST)
+    entry = judge_one(log, slow_reference)
+    assert entry["outcome"] == "no_significant_gap", entry["answer"]
+    assert entry["envelope"]["outside"] and entry["envelope"]["distance"] > np.log(1.3)
+    assert "outside the reference flights' envelope" in entry["answer"]
+
+
+def test_a_real_effect_on_a_flight_16x_faster_is_still_named(cf, slow_reference):
+    mass = 0.2 * cf.mass
+    log = synthetic_flight(cf, shared_effects() + [make_effect("mass_offset", mass=mass)],
+                           duration=5.0, seed=21, speed=FAST)
+    entry = judge_one(log, slow_reference)
+    assert entry["verdict"] == "mass_offset" and entry["probability"] > 0.9, entry["answer"]
+    assert entry["params"]["mass_offset.mass"] == pytest.approx(mass, rel=0.05)
