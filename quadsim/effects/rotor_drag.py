@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.frames import rotate, rotate_inverse
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["RotorDrag", "rotor_drag_forces"]
@@ -42,6 +41,14 @@ def rotor_drag_forces(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
     return -speed * (coefficient * in_plane + axial_coefficient * along)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis, broadcast (``np.cross``'s products without its axis
+    handling, which is most of its cost on these small arrays)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 class RotorDrag(EffectBase):
     """Linear rotor drag (induced drag + blade flapping), per rotor, at the hubs."""
 
@@ -55,12 +62,12 @@ class RotorDrag(EffectBase):
 
     def loads(self, ctx):
         params = ctx.params
-        air_body = rotate_inverse(ctx.quat, ctx.air_velocity)
+        air_body = ctx.to_body(ctx.air_velocity)
         forces = rotor_drag_forces(air_body, ctx.rotor_speed, params.rotor_axes,
                                    self.coefficient, self.axial_coefficient)
         arms = params.rotor_positions - params.com
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
-        loads.force_world = rotate(ctx.quat, forces.sum(axis=1))
-        loads.torque_body = np.cross(arms[None], forces).sum(axis=1)
+        loads.force_world = ctx.to_world(forces.sum(axis=1))
+        loads.torque_body = _cross(arms[None], forces).sum(axis=1)
         return loads

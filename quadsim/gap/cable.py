@@ -93,7 +93,7 @@ def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
 try:        # the same source, compiled when numba is installed (module doc)
     import numba
 
-    _compiled = numba.njit(cache=False)
+    _compiled = numba.njit(cache=True)
 except ImportError:         # pragma: no cover - numba is an optional extra
     def _compiled(fn):
         return fn
@@ -230,13 +230,21 @@ class CableSwing(CablePayload):
     def state_size(self) -> int:
         return 0
 
-    def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams):
+    def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams, *,
+             rotation: np.ndarray | None = None, memo: dict | None = None):
         """Cable pull on the vehicle: force (N, 3, world N), torque about the CoM (N, 3, body
-        N m) and the swing angle from the vertical (N,, rad)."""
-        rot = quat_to_rotmat(quat)
+        N m) and the swing angle from the vertical (N,, rad). ``rotation``: ``quat``'s
+        matrices when the caller has them; ``memo``: a dict kept across calls on the same
+        logged motion (the attachment's acceleration is kept there per attachment point)."""
+        rot = quat_to_rotmat(quat) if rotation is None else rotation
         arm = np.array([self.x, self.y, self.z])
-        moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
-        accel = _derivative(t, moving)
+        key = ("cable_accel", self.x, self.y, self.z)
+        accel = None if memo is None else memo.get(key)
+        if accel is None:
+            moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
+            accel = _derivative(t, moving)
+            if memo is not None:
+                memo[key] = accel
         q, w = swing(t, accel, self.length, params.gravity,
                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
         e = -accel
@@ -251,7 +259,8 @@ class CableSwing(CablePayload):
         if self.mass == 0.0:
             return None
         force, torque, _ = self.pull(ctx.t, ctx.position, ctx.velocity, ctx.quat,
-                                     ctx.body_rate, ctx.params)
+                                     ctx.body_rate, ctx.params, rotation=ctx.rotmat(),
+                                     memo=ctx.flight_memo)
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world, loads.torque_body = force, torque

@@ -378,10 +378,20 @@ class Problem:
         self.size = jac.shape[0] + len(self.keep) + len(self.mean)
 
     def residual(self, z: np.ndarray) -> np.ndarray:
+        """The weighted residual at ``z``; with a ``memo``, the last one per explanation is
+        kept (the screen's step and the refined fit ask again for the point they just
+        evaluated: the start of the next step, the step just accepted)."""
+        last = None if self.memo is None else self.memo.setdefault("last_residual", {})
+        key = (self.expl.name, self.expl.variant)
+        if last is not None and key in last and np.array_equal(last[key][0], z):
+            return last[key][1]
         theta = self.mean + self.sd * z
         own = _own_effects(self.expl, theta)
         flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
-        return flight_residual(flight, self.reference, self.shared + own, self.memo)
+        r = flight_residual(flight, self.reference, self.shared + own, self.memo)
+        if last is not None:
+            last[key] = (np.array(z, dtype=float), r)
+        return r
 
     def shifted(self, delay_s: float):
         """:func:`shifted` states, the same object for the same delay (``memo``)."""

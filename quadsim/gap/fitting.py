@@ -35,7 +35,7 @@ from .residual import FlightStates, measured_wrench, model_wrench
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
            "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
            "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
-           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner"]
+           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner", "flight_memo"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -414,7 +414,12 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     inverse-dynamics flights of the testbed with gyro noise 0.1 rad/s and no inertia error:
     xx -14 %, zz -79 %; in this form +1.2 ± 4.3 %, -1.9 ± 21 %; with a true +30 % on xx, yy:
     +12 % before, +31 ± 6 % now; docs/gap.md)."""
-    force, torque, vehicle = model_wrench(states, params, effects)
+    if memo is None:
+        force, torque, vehicle = model_wrench(states, params, effects)
+    else:
+        rotation, motion = flight_memo(memo, states)
+        force, torque, vehicle = model_wrench(states, params, effects, rotation=rotation,
+                                              flight_memo=motion)
     if memo is None:
         meas_force, meas_torque = measured_wrench(states, vehicle)
     else:
@@ -447,6 +452,24 @@ def _memo(memo: dict, key: tuple, states, compute):
         memo.clear()
     value = compute()
     memo[key] = (states, value)
+    return value
+
+
+def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
+    """What depends only on the logged motion of ``states`` (t, position, velocity, quat,
+    body_rate), kept in ``memo`` across evaluations: the body-to-world rotations (N, 3, 3)
+    and a dict the effects keep their own such values in
+    (:attr:`quadsim.effects.base.EffectContext.flight_memo`). States that share those arrays
+    (a rotor-delay shift moves only the rotor speeds) share the entry."""
+    arrays = (states.t, states.position, states.velocity, states.quat, states.body_rate)
+    key = ("motion",) + tuple(map(id, arrays))
+    hit = memo.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], arrays)):
+        return hit[1]
+    from ..core.frames import quat_to_rotmat
+
+    value = (quat_to_rotmat(states.quat), {})
+    memo[key] = (arrays, value)
     return value
 
 
