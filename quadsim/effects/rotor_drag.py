@@ -18,6 +18,12 @@ Units of both coefficients: N / ((rad/s) (m/s)) = kg/rad. Example at 5 m/s forwa
 0.84 kg testbed at hover (4 x 460 rad/s) with coefficient 1e-5: F_x = -0.092 N.
 The vehicle's angular rate is not included in the hub velocity (the published model uses
 the body velocity only).
+
+Evaluated as sums over the rotors (the same loads, no per-rotor arrays)::
+
+    F   = -coefficient (sum_i Omega_i) v + (coefficient - axial) sum_i Omega_i (v . a_i) a_i
+    tau = -coefficient (sum_i Omega_i (r_i - c)) x v
+          + (coefficient - axial) sum_i Omega_i (v . a_i) (r_i - c) x a_i
 """
 
 from __future__ import annotations
@@ -61,13 +67,21 @@ class RotorDrag(EffectBase):
     )
 
     def loads(self, ctx):
+        """The sums over rotors of :func:`rotor_drag_forces` and of their torques, through
+        sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)
+        arrays (the gap fits evaluate this thousands of times per flight)."""
         params = ctx.params
+        c, k = self.coefficient, self.axial_coefficient
         air_body = ctx.to_body(ctx.air_velocity)
-        forces = rotor_drag_forces(air_body, ctx.rotor_speed, params.rotor_axes,
-                                   self.coefficient, self.axial_coefficient)
+        axes = params.rotor_axes
         arms = params.rotor_positions - params.com
+        speed = np.asarray(ctx.rotor_speed, dtype=float)
+        axial = speed * (air_body @ axes.T)                   # Omega_i (v . a_i), (B, R)
+        force = -c * speed.sum(axis=1)[:, None] * air_body + (c - k) * (axial @ axes)
+        torque = (-c * _cross(speed @ arms, air_body)
+                  + (c - k) * (axial @ _cross(arms, axes)))
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
-        loads.force_world = ctx.to_world(forces.sum(axis=1))
-        loads.torque_body = _cross(arms[None], forces).sum(axis=1)
+        loads.force_world = ctx.to_world(force)
+        loads.torque_body = torque
         return loads

@@ -14,6 +14,7 @@ candidate fits the mean wind together with the rotor-drag coefficient.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -302,18 +303,10 @@ def _linear_time_constant(owner) -> float | None:
     return float(tau) if tau > 0.0 and (down <= 0.0 or down == tau) else None
 
 
-def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
-                 n: int) -> np.ndarray:
-    """:func:`_rotor_channel`'s Heun integration for a linear lag, in closed form.
-
-    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
-    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
-    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
-    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
-    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
-    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
-    recursion, once): the same numbers as stepping the rate function, to round-off, at a
-    few array operations instead of 2 S steps rate evaluations."""
+@functools.lru_cache(maxsize=64)
+def _heun_weights(steps: int, h: float, tau: float) -> tuple[float, np.ndarray]:
+    """(a^(S steps), w_0..w_steps) of :func:`_heun_linear` (kept: a fit asks for the same
+    time constant many times). The weights are read only."""
     a = 1.0 - h / tau + h * h / (2.0 * tau * tau)
     b0 = h / (2.0 * tau) - h * h / (2.0 * tau * tau)
     b1 = h / (2.0 * tau)
@@ -327,6 +320,23 @@ def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: 
             weights *= a
             weights[k] += b0 * (1.0 - f0) + b1 * (1.0 - f1)
             weights[k + 1] += b0 * f0 + b1 * f1
+    weights.setflags(write=False)
+    return gain, weights
+
+
+def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
+                 n: int) -> np.ndarray:
+    """:func:`_rotor_channel`'s Heun integration for a linear lag, in closed form.
+
+    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
+    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
+    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
+    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
+    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
+    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
+    recursion, once): the same numbers as stepping the rate function, to round-off, at a
+    few array operations instead of 2 S steps rate evaluations."""
+    gain, weights = _heun_weights(steps, h, tau)
     out = gain * start
     for k in range(steps + 1):
         out = out + weights[k] * cmd[k:k + n]
