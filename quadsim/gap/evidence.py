@@ -342,11 +342,13 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
     names = list(reference.candidate.parameter_names)
-    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    memo: dict = {}         # residual parts shared by the evaluations on this flight
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects,
+                   memo=memo)
     if not full:
         return screened(states, reference, explanations, jac, names, reference.s_ref,
                         start_delay_s, problem=Problem, fit_one=_fit_one,
-                        residual=flight_residual)
+                        residual=flight_residual, memo=memo)
     return [_fit_one(states, reference, e, jac, reference.s_ref, names,
                      start_delay_s if e.name == "signal_delay" else 0.0)
             for e in explanations]

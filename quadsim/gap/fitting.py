@@ -608,14 +608,15 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
 
     stacked = stack_states(flights)
     size = len(stacked.t) * len(sigma)
+    memo: dict = {}     # the residual parts one parameter does not move (:func:`residuals`)
 
     def fun(z):
         # The solver works in units of each parameter's typical size, so that finite
         # differences and trust regions suit parameters from 1e-8 kg m^2 to volts.
         try:
             effects = candidate.effects(x0 + z * typical)
-            return (residuals(stacked, params, effects, rotor_channel=rotor_channel)
-                    / sigma).ravel()
+            return (residuals(stacked, params, effects, rotor_channel=rotor_channel,
+                              memo=memo) / sigma).ravel()
         except ModelError:
             # Parameters that make the vehicle non-physical (e.g. inertia breaking the
             # triangle inequality) are walls, not crashes.

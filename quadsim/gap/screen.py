@@ -223,12 +223,13 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
 
 def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
              names_all: list[str], s_all: np.ndarray, start_delay_s: float = 0.0, *,
-             problem, fit_one, residual) -> list:
+             problem, fit_one, residual, memo: dict | None = None) -> list:
     """Every explanation's Evidence: screened, and fitted to convergence where it can matter
     (module doc); ``jac`` the shared-parameter Jacobian at theta_ref. The evidence module,
     which imports this one, hands in its pieces: ``problem`` its ``Problem`` class,
-    ``fit_one`` its full fit, ``residual`` its ``flight_residual``."""
-    memo: dict = {}
+    ``fit_one`` its full fit, ``residual`` its ``flight_residual``; ``memo``: residual parts
+    already kept for this flight (:func:`quadsim.gap.fitting.residuals`)."""
+    memo = {} if memo is None else memo
     any_problem = problem(states, reference, explanations[0], jac, s_all, memo)
     cols = _Columns(states, reference, jac, names_all, memo, any_problem.shifted, residual)
     effects = {e.name for e in explanations} - {"no_difference"}
