@@ -50,11 +50,14 @@ def _close(got, want, rel=1e-12):
 
 
 def _models(cf):
-    """Three models that move every memoised part: rotations and the cable's acceleration
-    (shared), the vehicle (inertia, CoM), the rotor channel (lag), a canted rotor."""
+    """Four models that move every memoised part: rotations and the cable's acceleration
+    (shared), the vehicle (inertia, CoM), the rotor channel (lag), a canted rotor; the last
+    differs from the first by the lag alone (the model wrench is reused)."""
     for k, (lag, inertia, tilt, mass) in enumerate([(0.008, 0.0, 0.0, 0.006),
                                                     (0.012, 0.2, 0.05, 0.004),
-                                                    (0.008, -0.1, 0.0, 0.009)]):
+                                                    (0.008, -0.1, 0.0, 0.009),
+                                                    (0.02, 0.0, 0.0, 0.006)]):
+        k = k % 3
         yield [make_effect("motor_lag", time_constant=lag),
                make_effect("rotor_drag", coefficient=2e-7, axial_coefficient=1e-7),
                make_effect("inertia_error", xx=inertia, yy=inertia, zz=0.5 * inertia),
@@ -74,6 +77,7 @@ def test_the_residual_with_its_flight_memo_is_the_residual_from_scratch(cf, stat
         for c in range(slow.shape[1]):
             _close(fast[:, c], slow[:, c])
     assert any(k[0] == "motion" for k in memo)
+    assert sum(isinstance(k, tuple) and k[0] == "wrench" for k in memo) == 3
     motion = next(v for k, v in memo.items() if k[0] == "motion")[1][1]
     assert any(k[0] == "cable_accel" for k in motion)
 

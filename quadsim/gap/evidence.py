@@ -373,11 +373,22 @@ class Problem:
         self.states, self.reference, self.expl = states, reference, expl
         self.memo = memo          # residual parts shared by evaluations on one flight
         self.shared, self.keep = _shared_effects(reference, expl.replaces)
-        self.marg = _Marginal(jac[:, self.keep], s_all[self.keep])
+        self.marg = self._marginal(jac, s_all)
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
         lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
         self.size = jac.shape[0] + len(self.keep) + len(self.mean)
+
+    def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> _Marginal:
+        """The marginal of the kept shared columns; with a ``memo``, one per set of columns
+        (most explanations keep them all) and Jacobian."""
+        if self.memo is None:
+            return _Marginal(jac[:, self.keep], s_all[self.keep])
+        kept = self.memo.setdefault("marginals", {})
+        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes())
+        if key not in kept or kept[key][0] is not jac:
+            kept[key] = (jac, _Marginal(jac[:, self.keep], s_all[self.keep]))
+        return kept[key][1]
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         """The weighted residual at ``z``; with a ``memo``, the last one per explanation is

@@ -22,7 +22,7 @@ from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
 from ..effects import EFFECTS, make_effect
-from ..effects.base import EffectParameter, EffectSet
+from ..effects.base import EffectBase, EffectParameter, EffectSet
 from ..effects.canted_rotor import CantedRotor
 from ..vehicle.params import VehicleParams
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
@@ -428,8 +428,10 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
         force, torque, vehicle = model_wrench(states, params, effects)
     else:
         rotation, motion = flight_memo(memo, states)
-        force, torque, vehicle = model_wrench(states, params, effects, rotation=rotation,
-                                              flight_memo=motion)
+        force, torque, vehicle = _memo(
+            memo, _wrench_key(states, params, effects), states,
+            lambda: model_wrench(states, params, effects, rotation=rotation,
+                                 flight_memo=motion))
     if memo is None:
         meas_force, meas_torque = measured_wrench(states, vehicle)
     else:
@@ -451,6 +453,11 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     return np.concatenate(parts, axis=1)
 
 
+#: kinds of :func:`_memo` entries that one model or one rotor timing owns (evicted oldest
+#: first); the per-flight ones (:func:`flight_memo`) are kept.
+_PER_EVALUATION = ("measured", "rotor", "wrench", "shifted")
+
+
 def _memo(memo: dict, key: tuple, states, compute):
     """``memo[key]`` (computed once): parts of the residual that many evaluations on the
     same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
@@ -458,8 +465,9 @@ def _memo(memo: dict, key: tuple, states, compute):
     hit = memo.get(key)
     if hit is not None and hit[0] is states:
         return hit[1]
-    if len(memo) > 64:
-        memo.clear()
+    if len(memo) > 64:          # the oldest of these entries go (the per-flight ones stay)
+        for old in [k for k in memo if isinstance(k, tuple) and k[0] in _PER_EVALUATION][:16]:
+            del memo[old]
     value = compute()
     memo[key] = (states, value)
     return value
@@ -481,6 +489,22 @@ def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
     value = (quat_to_rotmat(states.quat), {})
     memo[key] = (arrays, value)
     return value
+
+
+#: the hooks through which an effect reaches the model wrench (:func:`model_wrench`); an
+#: effect that keeps :class:`EffectBase`'s neutral ones (a motor lag, a battery's speed factor)
+#: acts on the rotor-speed channel only.
+_WRENCH_HOOKS = ("loads", "apply_to_params", "air_velocity")
+
+
+def _wrench_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
+    """What the model wrench depends on besides ``states`` and ``params``: the class and
+    values of every effect that reaches it (the others only move the rotor channel, so a
+    motor-lag fit evaluates the wrench once per rotor timing)."""
+    acting = tuple((type(e), tuple(sorted(e.values().items()))) for e in effects
+                   if any(getattr(type(e), hook, None) is not getattr(EffectBase, hook)
+                          for hook in _WRENCH_HOOKS))
+    return ("wrench", id(states), id(params), acting)
 
 
 def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
