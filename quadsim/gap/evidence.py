@@ -372,7 +372,13 @@ class Problem:
                  s_all: np.ndarray, memo: dict | None = None):
         self.states, self.reference, self.expl = states, reference, expl
         self.memo = memo          # residual parts shared by evaluations on one flight
-        self.shared, self.keep = _shared_effects(reference, expl.replaces)
+        if memo is None:
+            self.shared, self.keep = _shared_effects(reference, expl.replaces)
+        else:       # the same for every explanation that replaces the same groups
+            kept = memo.setdefault("shared_effects", {})
+            if expl.replaces not in kept:
+                kept[expl.replaces] = _shared_effects(reference, expl.replaces)
+            self.shared, self.keep = kept[expl.replaces]
         self.marg = self._marginal(jac, s_all)
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
         lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
