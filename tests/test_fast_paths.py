@@ -210,3 +210,38 @@ def test_the_winds_gust_phases_drawn_on_first_use_are_the_seeds():
     angle = 2 * np.pi * wind._frequencies * t[:, None, None] + want
     gust = 0.5 * np.sqrt(2.0 / GUST_COMPONENTS) * np.cos(angle).sum(axis=-1)
     _close(wind.air_velocity(t, np.zeros((2, 3))), gust + np.array([1.0, 0.0, 0.0]))
+
+
+def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
+    """screen._step (R of [A b] alone; lsq_linear's own unconstrained first step where it
+    lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
+    from scipy.optimize import lsq_linear
+
+    from quadsim.gap.screen import _Columns, _columns, _step
+    from quadsim.gap.evidence import flight_residual
+
+    ref = _reference(cf, states)
+    names = list(ref.candidate.parameter_names)
+    jac = jacobian(states, ref, list(range(len(names))), ref.candidate.effects)
+    memo: dict = {}
+    expl = next(e for e in explanations_for(ref, states) if e.name == "cable_payload")
+    prob = Problem(states, ref, expl, jac, ref.s_ref, memo)
+    cols = _Columns(states, ref, jac, names, memo, prob.shifted, flight_residual)
+    start = prob.start(0.0)
+    base = prob.residual(start)
+    columns = _columns(prob, cols, start, base, np.ones(len(start)))
+    for squeeze in (None, 1e-3):          # the bounds as they are; then tight around start
+        if squeeze is not None:
+            prob.z_lo, prob.z_hi = start - squeeze, start + squeeze
+        z1, predicted, a, active = _step(prob, start, base, columns)
+        aug0, du0 = prob.marg.profile(base)
+        b = np.concatenate([aug0, du0, start])
+        q, r = np.linalg.qr(a)
+        qb = q.T @ b
+        want = lsq_linear(r, -qb, bounds=(prob.z_lo - start, prob.z_hi - start),
+                          method="bvls")
+        _close(z1 - start, want.x, rel=1e-9)
+        cost = float(b @ b - qb @ qb) + float(np.sum((qb + r @ want.x) ** 2))
+        assert predicted == pytest.approx(cost, rel=1e-9)
+        assert active == int(np.count_nonzero(want.active_mask))
+        assert (active > 0) == (squeeze is not None)

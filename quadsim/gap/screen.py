@@ -154,12 +154,21 @@ def _step(prob, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
     aug, du = prob.marg.profile(jac)
     a = np.vstack([aug, du, np.eye(n)])
     b = np.concatenate([aug0, du0, start])
-    q, r = np.linalg.qr(a)
-    qb = q.T @ b
-    rest = float(b @ b - qb @ qb)
-    step = lsq_linear(r, -qb, bounds=(prob.z_lo - start, prob.z_hi - start), method="bvls")
-    predicted = rest + float(np.sum((qb + r @ step.x) ** 2))
-    return start + step.x, predicted, a, int(np.count_nonzero(step.active_mask))
+    # one Householder QR of [A b] (R only): R of A, Q^T b in the last column and
+    # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed
+    rb = np.linalg.qr(np.column_stack([a, b]), mode="r")
+    r, qb, rest = rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2)
+    lower, upper = prob.z_lo - start, prob.z_hi - start
+    # lsq_linear's own first step: the unconstrained solution, returned when inside the
+    # bounds (the same numbers, without its checks and wrappers)
+    x = np.linalg.lstsq(r, -qb, rcond=-1)[0]
+    if np.all((x >= lower) & (x <= upper)):
+        active = 0
+    else:
+        step = lsq_linear(r, -qb, bounds=(lower, upper), method="bvls")
+        x, active = step.x, int(np.count_nonzero(step.active_mask))
+    predicted = rest + float(np.sum((qb + r @ x) ** 2))
+    return start + x, predicted, a, active
 
 
 def linearised(prob, cols: _Columns, start: np.ndarray, names_all, s_all):
