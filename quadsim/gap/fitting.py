@@ -501,21 +501,25 @@ def _wrench_key(states: FlightStates, params: VehicleParams, effects: list) -> t
     """What the model wrench depends on besides ``states`` and ``params``: the class and
     values of every effect that reaches it (the others only move the rotor channel, so a
     motor-lag fit evaluates the wrench once per rotor timing)."""
-    acting = tuple((type(e), tuple(sorted(e.values().items()))) for e in effects
-                   if any(getattr(type(e), hook, None) is not getattr(EffectBase, hook)
-                          for hook in _WRENCH_HOOKS))
-    return ("wrench", id(states), id(params), acting)
+    return ("wrench", id(states), id(params), _acting(effects, _WRENCH_HOOKS))
+
+
+#: the hooks through which an effect reaches the rotor channel (:func:`_rotor_channel`).
+_ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor")
+
+
+def _acting(effects: list, hooks: tuple) -> tuple:
+    """(class, values) of each effect, in order, whose class has its own version of one of
+    ``hooks`` (an effect is its class and its values)."""
+    return tuple((type(e), tuple(sorted(e.values().items()))) for e in effects
+                 if any(getattr(type(e), hook, None) is not getattr(EffectBase, hook)
+                        for hook in hooks))
 
 
 def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
-    """What the rotor channel depends on besides ``states``: the motor map (``params``),
-    the speed factor and the rate owner's values (:func:`_rotor_channel`)."""
-    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
-    owner = rate_owner(effects)
-    return ("rotor", id(states), id(params),
-            None if factor is None else np.asarray(factor, dtype=float).tobytes(),
-            None if owner is None else (type(owner).__name__,
-                                        tuple(sorted(owner.values().items()))))
+    """What the rotor channel depends on besides ``states``: the motor map (``params``) and
+    the effects with a speed factor or rotor dynamics, in order (:func:`_rotor_channel`)."""
+    return ("rotor", id(states), id(params), _acting(effects, _ROTOR_HOOKS))
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,
