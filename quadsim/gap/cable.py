@@ -249,8 +249,7 @@ class CableSwing(CablePayload):
             accel = _derivative(t, moving)
             if memo is not None:
                 memo[key] = accel
-        q, w = swing(t, accel, self.length, params.gravity,
-                     start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
+        q, w = self._swing(t, accel, params.gravity, memo)
         e = -accel
         e[:, 2] -= params.gravity
         tension = self.mass * (np.einsum("bi,bi->b", q, e)
@@ -258,6 +257,27 @@ class CableSwing(CablePayload):
         force = np.maximum(tension, 0.0)[:, None] * q
         torque = np.cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
         return force, torque, np.arccos(np.clip(-q[:, 2], -1.0, 1.0))
+
+    #: swings kept per flight (:meth:`_swing`): a fit's Jacobian and its next step
+    KEPT_SWINGS = 16
+
+    def _swing(self, t, accel, gravity: float, memo: dict | None):
+        """:func:`swing` of this cable; with a ``memo`` (one flight's logged motion) the
+        last :data:`KEPT_SWINGS` are kept by their inputs: the swing does not depend on the
+        payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
+        shift), so those evaluations reuse it."""
+        key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
+               self.x, self.y, self.z, float(gravity))
+        kept = None if memo is None else memo.setdefault("cable_swings", {})
+        if kept is not None and key in kept:
+            return kept[key]
+        value = swing(t, accel, self.length, gravity,
+                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
+        if kept is not None:
+            if len(kept) >= self.KEPT_SWINGS:
+                del kept[next(iter(kept))]
+            kept[key] = value
+        return value
 
     def loads(self, ctx):
         if self.mass == 0.0:
