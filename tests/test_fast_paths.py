@@ -13,6 +13,7 @@ import warnings
 
 import numpy as np
 import pytest
+from _helpers import shared_effects
 
 from quadsim.core.errors import ModelError, QuadsimWarning
 from quadsim.core.frames import euler_to_quat, rotate, rotate_inverse
@@ -27,8 +28,6 @@ from quadsim.gap.evidence import Problem, explanations_for
 from quadsim.gap.fitting import _typical, effect_class, residuals
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import inertia_problems, load_params
-
-from _helpers import shared_effects  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -218,8 +217,8 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
     from scipy.optimize import lsq_linear
 
-    from quadsim.gap.screen import _Columns, _columns, _step
     from quadsim.gap.evidence import flight_residual
+    from quadsim.gap.screen import _Columns, _columns, _step
 
     ref = _reference(cf, states)
     names = list(ref.candidate.parameter_names)

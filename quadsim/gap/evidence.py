@@ -71,8 +71,9 @@ from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference, jacobian, shifted
 from ..effects import make_effect
-from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, _memo, effect_class,
+from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class,
                       residuals)
+from .memo import _memo
 from .priors import momentum_rate_damping
 from .screen import screened
 
