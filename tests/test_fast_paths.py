@@ -245,3 +245,22 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
         assert predicted == pytest.approx(cost, rel=1e-9)
         assert active == int(np.count_nonzero(want.active_mask))
         assert (active > 0) == (squeeze is not None)
+
+
+def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
+    """cable._swing_floats (the swing without numba) against cable._swing_kernel stepped on
+    arrays (compiled where numba is installed, else as plain Python), with a time jump."""
+    from quadsim.gap import cable
+
+    rng = np.random.default_rng(1)
+    t = np.arange(0.0, 6.4, 0.01)
+    t[300:] += 0.5                                   # stacked flights: a restart
+    accel = rng.normal(size=(len(t), 3))
+    q0, w0 = cable.start_state((0.1, -0.05), (0.3, 0.2))
+    want_q, want_w = np.empty_like(accel), np.empty_like(accel)
+    cable._swing_kernel(t, accel, 0.45, 9.81, q0, w0, want_q, want_w)
+    rows_q, rows_w = cable._swing_floats(t.tolist(), accel.tolist(), 0.45, 9.81,
+                                         q0.tolist(), w0.tolist())
+    _close(np.array(rows_q), want_q, rel=1e-12)
+    _close(np.array(rows_w), want_w, rel=1e-12)
+    np.testing.assert_array_equal(np.array(rows_q)[300], [0.0, 0.0, -1.0])

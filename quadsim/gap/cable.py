@@ -97,7 +97,11 @@ def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
 try:        # the same source, compiled when numba is installed (module doc)
     import numba
 
-    _compiled = numba.njit(cache=True)
+    def _compiled(fn):
+        try:
+            return numba.njit(cache=True)(fn)
+        except RuntimeError:    # no writable cache location: compiled in every process
+            return numba.njit(fn)
 except ImportError:         # pragma: no cover - numba is an optional extra
     def _compiled(fn):
         return fn
@@ -156,6 +160,50 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w):
         out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
+def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0
+                  ) -> tuple[list, list]:
+    """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
+    3-lists), for when it is not compiled: the same operations in the same order (the same
+    numbers), without the per-element indexing of numpy arrays that dominates the
+    uncompiled kernel. Returns the lists of q and w rows."""
+    rate = getattr(_rate, "py_func", _rate)
+    n = len(t)
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    out_q, out_w = [None] * n, [None] * n
+    out_q[0], out_w[0] = [float(v) for v in q0], [float(v) for v in w0]
+    for k in range(1, n):
+        if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
+            out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
+            continue
+        h = t[k] - t[k - 1]
+        qx, qy, qz = out_q[k - 1]
+        wx, wy, wz = out_w[k - 1]
+        a0x, a0y, a0z = accel[k - 1]
+        a1x, a1y, a1z = accel[k]
+        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
+        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length)
+        c = 0.5 * h
+        k2 = rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
+                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length)
+        k3 = rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
+                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length)
+        k4 = rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
+                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length)
+        s = h / 6.0
+        qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        qz += s * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        wx += s * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        wy += s * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        wz += s * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+        qx, qy, qz = qx / norm, qy / norm, qz / norm
+        along = wx * qx + wy * qy + wz * qz
+        out_q[k] = [qx, qy, qz]
+        out_w[k] = [wx - along * qx, wy - along * qy, wz - along * qz]
+    return out_q, out_w
+
+
 def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(q0, w0) of a cable leaning by ``lean`` (rad, towards world +x, +y: the horizontal
@@ -180,9 +228,14 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
     q, w = np.empty_like(accel), np.empty_like(accel)
-    if len(t):
+    if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
         _swing_kernel(t, accel, float(length), float(gravity), np.asarray(q0, float),
                       np.asarray(w0, float), q, w)
+    elif len(t):
+        rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(), float(length),
+                                       float(gravity), np.asarray(q0, float).tolist(),
+                                       np.asarray(w0, float).tolist())
+        q[:], w[:] = rows_q, rows_w
     return q, w
 
 
