@@ -38,6 +38,7 @@ from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from ..core.frames import quat_to_rotmat
 from ..vehicle.params import VehicleParams
 
 #: time constant (s) with which a rotor follows a command scaled by ``speed_factor`` when no
@@ -81,6 +82,28 @@ class EffectContext:
     params: VehicleParams
     vbat: np.ndarray | None = None
     effect_state: np.ndarray | None = None
+    #: ``quat_to_rotmat(quat)`` (B, 3, 3) when the caller has it already (the gap fits keep it
+    #: per flight); None: computed on first use and kept for this instant
+    rotation: np.ndarray | None = None
+    #: values that depend only on the logged motion (t, position, velocity, quat,
+    #: body_rate), kept across the many model evaluations of one flight by a caller that
+    #: evaluates many models on the same samples (the gap fits); None: nothing is kept
+    flight_memo: dict | None = None
+
+    def rotmat(self) -> np.ndarray:
+        """Body-to-world rotation matrices (B, 3, 3) of ``quat``, computed once."""
+        if self.rotation is None:
+            object.__setattr__(self, "rotation", quat_to_rotmat(self.quat))
+        return self.rotation
+
+    def to_world(self, v: np.ndarray) -> np.ndarray:
+        """Body-frame vectors (B, 3) into the world frame (:func:`quadsim.core.frames.rotate`)."""
+        return np.einsum("...ij,...j->...i", self.rotmat(), v)
+
+    def to_body(self, v: np.ndarray) -> np.ndarray:
+        """World-frame vectors (B, 3) into the body frame
+        (:func:`quadsim.core.frames.rotate_inverse`)."""
+        return np.einsum("...ji,...j->...i", self.rotmat(), v)
 
 
 @dataclass

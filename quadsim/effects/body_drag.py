@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.frames import rotate, rotate_inverse
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["BodyDrag"]
@@ -37,11 +36,11 @@ class BodyDrag(EffectBase):
     )
 
     def loads(self, ctx):
-        air_body = rotate_inverse(ctx.quat, ctx.air_velocity)
+        air_body = ctx.to_body(ctx.air_velocity)
         cd_area = np.array([self.cd_area, self.cd_area, self.cd_area_vertical])
         speed = np.linalg.norm(air_body, axis=-1, keepdims=True)
         force_body = -0.5 * ctx.params.air_density * speed * cd_area * air_body
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
-        loads.force_world = rotate(ctx.quat, force_body)
+        loads.force_world = ctx.to_world(force_body)
         return loads

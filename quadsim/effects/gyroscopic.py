@@ -38,8 +38,9 @@ def gyroscopic_torque(rotor_inertia: float, body_rate: np.ndarray, rotor_speed: 
                       ) -> np.ndarray:
     """Body-frame torque (B, 3) (N m) for body rates (B, 3), rotor speeds and accelerations
     (B, R), rotor axes (R, 3) and spin signs (R,)."""
-    momentum_axis = np.einsum("br,r,rk->bk", rotor_speed, spins, axes)   # sum s_i Omega_i a_i
-    spin_up = np.einsum("br,r,rk->bk", rotor_accel, spins, axes)
+    signed = np.asarray(spins, dtype=float)[:, None] * np.asarray(axes, dtype=float)  # s_i a_i
+    momentum_axis = rotor_speed @ signed                                # sum s_i Omega_i a_i
+    spin_up = rotor_accel @ signed
     w, h = body_rate, momentum_axis
     gyro = np.stack([w[:, 1] * h[:, 2] - w[:, 2] * h[:, 1], w[:, 2] * h[:, 0] - w[:, 0] * h[:, 2],
                      w[:, 0] * h[:, 1] - w[:, 1] * h[:, 0]], axis=-1)   # w x h, fast for small B

@@ -18,13 +18,18 @@ Units of both coefficients: N / ((rad/s) (m/s)) = kg/rad. Example at 5 m/s forwa
 0.84 kg testbed at hover (4 x 460 rad/s) with coefficient 1e-5: F_x = -0.092 N.
 The vehicle's angular rate is not included in the hub velocity (the published model uses
 the body velocity only).
+
+Evaluated as sums over the rotors (the same loads, no per-rotor arrays)::
+
+    F   = -coefficient (sum_i Omega_i) v + (coefficient - axial) sum_i Omega_i (v . a_i) a_i
+    tau = -coefficient (sum_i Omega_i (r_i - c)) x v
+          + (coefficient - axial) sum_i Omega_i (v . a_i) (r_i - c) x a_i
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..core.frames import rotate, rotate_inverse
 from .base import EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["RotorDrag", "rotor_drag_forces"]
@@ -42,6 +47,14 @@ def rotor_drag_forces(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
     return -speed * (coefficient * in_plane + axial_coefficient * along)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis, broadcast (``np.cross``'s products without its axis
+    handling, which is most of its cost on these small arrays)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 class RotorDrag(EffectBase):
     """Linear rotor drag (induced drag + blade flapping), per rotor, at the hubs."""
 
@@ -54,13 +67,21 @@ class RotorDrag(EffectBase):
     )
 
     def loads(self, ctx):
+        """The sums over rotors of :func:`rotor_drag_forces` and of their torques, through
+        sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)
+        arrays (the gap fits evaluate this thousands of times per flight)."""
         params = ctx.params
-        air_body = rotate_inverse(ctx.quat, ctx.air_velocity)
-        forces = rotor_drag_forces(air_body, ctx.rotor_speed, params.rotor_axes,
-                                   self.coefficient, self.axial_coefficient)
+        c, k = self.coefficient, self.axial_coefficient
+        air_body = ctx.to_body(ctx.air_velocity)
+        axes = params.rotor_axes
         arms = params.rotor_positions - params.com
+        speed = np.asarray(ctx.rotor_speed, dtype=float)
+        axial = speed * (air_body @ axes.T)                   # Omega_i (v . a_i), (B, R)
+        force = -c * speed.sum(axis=1)[:, None] * air_body + (c - k) * (axial @ axes)
+        torque = (-c * _cross(speed @ arms, air_body)
+                  + (c - k) * (axial @ _cross(arms, axes)))
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
-        loads.force_world = rotate(ctx.quat, forces.sum(axis=1))
-        loads.torque_body = np.cross(arms[None], forces).sum(axis=1)
+        loads.force_world = ctx.to_world(force)
+        loads.torque_body = torque
         return loads

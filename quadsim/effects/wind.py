@@ -42,11 +42,19 @@ class Wind(EffectBase):
         EffectParameter("seed", "1", 0.0, 0.0, 2.0**31, "seed of the gust phases"),
     )
 
-    def __init__(self, **values: float):
-        super().__init__(**values)
-        rng = np.random.default_rng(int(self.seed))
-        self._phases = rng.uniform(0.0, 2.0 * np.pi, size=(3, GUST_COMPONENTS))
-        self._frequencies = np.geomspace(LOWEST_FREQUENCY, self.bandwidth, GUST_COMPONENTS)
+    @property
+    def _phases(self) -> np.ndarray:
+        """Gust phases (3, components) from ``seed``, drawn on first use (a steady wind, the
+        fits' case, never needs them)."""
+        if "_gust_phases" not in self.__dict__:
+            rng = np.random.default_rng(int(self.seed))
+            self.__dict__["_gust_phases"] = rng.uniform(0.0, 2.0 * np.pi,
+                                                        size=(3, GUST_COMPONENTS))
+        return self.__dict__["_gust_phases"]
+
+    @property
+    def _frequencies(self) -> np.ndarray:
+        return np.geomspace(LOWEST_FREQUENCY, self.bandwidth, GUST_COMPONENTS)
 
     def air_velocity(self, t, position):
         t = np.asarray(t, dtype=float)

@@ -49,7 +49,11 @@ slung loads of micro drones hang on 0.1-1 m (the Crazyflie payload campaign behi
 
 The integration is compiled with numba when it is installed (the same source runs as plain
 Python otherwise): a minute of 100 Hz flight takes under 1 ms compiled, 0.6 s as Python, on
-the 2-core x86_64 development machine; the first call in a process compiles (2-6 s).
+the 2-core x86_64 development machine. The first call after an install compiles (3.5 s CPU)
+and caches the machine code on disk (numba's ``cache=True``: ``__pycache__`` beside this
+file, or ``NUMBA_CACHE_DIR``); later processes load it (0.4 s). The attachment's
+acceleration depends only on the logged motion: with a context's ``flight_memo`` (the
+per-flight evidence) it is derived once per flight.
 
 Example::
 
@@ -93,7 +97,11 @@ def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
 try:        # the same source, compiled when numba is installed (module doc)
     import numba
 
-    _compiled = numba.njit(cache=False)
+    def _compiled(fn):
+        try:
+            return numba.njit(cache=True)(fn)
+        except RuntimeError:    # no writable cache location: compiled in every process
+            return numba.njit(fn)
 except ImportError:         # pragma: no cover - numba is an optional extra
     def _compiled(fn):
         return fn
@@ -152,6 +160,50 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w):
         out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
+def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0
+                  ) -> tuple[list, list]:
+    """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
+    3-lists), for when it is not compiled: the same operations in the same order (the same
+    numbers), without the per-element indexing of numpy arrays that dominates the
+    uncompiled kernel. Returns the lists of q and w rows."""
+    rate = getattr(_rate, "py_func", _rate)
+    n = len(t)
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    out_q, out_w = [None] * n, [None] * n
+    out_q[0], out_w[0] = [float(v) for v in q0], [float(v) for v in w0]
+    for k in range(1, n):
+        if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
+            out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
+            continue
+        h = t[k] - t[k - 1]
+        qx, qy, qz = out_q[k - 1]
+        wx, wy, wz = out_w[k - 1]
+        a0x, a0y, a0z = accel[k - 1]
+        a1x, a1y, a1z = accel[k]
+        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
+        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length)
+        c = 0.5 * h
+        k2 = rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
+                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length)
+        k3 = rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
+                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length)
+        k4 = rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
+                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length)
+        s = h / 6.0
+        qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        qz += s * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        wx += s * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        wy += s * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        wz += s * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+        qx, qy, qz = qx / norm, qy / norm, qz / norm
+        along = wx * qx + wy * qy + wz * qz
+        out_q[k] = [qx, qy, qz]
+        out_w[k] = [wx - along * qx, wy - along * qy, wz - along * qz]
+    return out_q, out_w
+
+
 def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(q0, w0) of a cable leaning by ``lean`` (rad, towards world +x, +y: the horizontal
@@ -176,9 +228,14 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
     q, w = np.empty_like(accel), np.empty_like(accel)
-    if len(t):
+    if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
         _swing_kernel(t, accel, float(length), float(gravity), np.asarray(q0, float),
                       np.asarray(w0, float), q, w)
+    elif len(t):
+        rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(), float(length),
+                                       float(gravity), np.asarray(q0, float).tolist(),
+                                       np.asarray(w0, float).tolist())
+        q[:], w[:] = rows_q, rows_w
     return q, w
 
 
@@ -230,15 +287,22 @@ class CableSwing(CablePayload):
     def state_size(self) -> int:
         return 0
 
-    def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams):
+    def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams, *,
+             rotation: np.ndarray | None = None, memo: dict | None = None):
         """Cable pull on the vehicle: force (N, 3, world N), torque about the CoM (N, 3, body
-        N m) and the swing angle from the vertical (N,, rad)."""
-        rot = quat_to_rotmat(quat)
+        N m) and the swing angle from the vertical (N,, rad). ``rotation``: ``quat``'s
+        matrices when the caller has them; ``memo``: a dict kept across calls on the same
+        logged motion (the attachment's acceleration is kept there per attachment point)."""
+        rot = quat_to_rotmat(quat) if rotation is None else rotation
         arm = np.array([self.x, self.y, self.z])
-        moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
-        accel = _derivative(t, moving)
-        q, w = swing(t, accel, self.length, params.gravity,
-                     start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
+        key = ("cable_accel", self.x, self.y, self.z)
+        accel = None if memo is None else memo.get(key)
+        if accel is None:
+            moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
+            accel = _derivative(t, moving)
+            if memo is not None:
+                memo[key] = accel
+        q, w = self._swing(t, accel, params.gravity, memo)
         e = -accel
         e[:, 2] -= params.gravity
         tension = self.mass * (np.einsum("bi,bi->b", q, e)
@@ -247,11 +311,33 @@ class CableSwing(CablePayload):
         torque = np.cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
         return force, torque, np.arccos(np.clip(-q[:, 2], -1.0, 1.0))
 
+    #: swings kept per flight (:meth:`_swing`): a fit's Jacobian and its next step
+    KEPT_SWINGS = 16
+
+    def _swing(self, t, accel, gravity: float, memo: dict | None):
+        """:func:`swing` of this cable; with a ``memo`` (one flight's logged motion) the
+        last :data:`KEPT_SWINGS` are kept by their inputs: the swing does not depend on the
+        payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
+        shift), so those evaluations reuse it."""
+        key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
+               self.x, self.y, self.z, float(gravity))
+        kept = None if memo is None else memo.setdefault("cable_swings", {})
+        if kept is not None and key in kept:
+            return kept[key]
+        value = swing(t, accel, self.length, gravity,
+                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
+        if kept is not None:
+            if len(kept) >= self.KEPT_SWINGS:
+                del kept[next(iter(kept))]
+            kept[key] = value
+        return value
+
     def loads(self, ctx):
         if self.mass == 0.0:
             return None
         force, torque, _ = self.pull(ctx.t, ctx.position, ctx.velocity, ctx.quat,
-                                     ctx.body_rate, ctx.params)
+                                     ctx.body_rate, ctx.params, rotation=ctx.rotmat(),
+                                     memo=ctx.flight_memo)
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world, loads.torque_body = force, torque

@@ -232,19 +232,28 @@ class Reference:
         return self.candidate.effects(self.theta if theta is None else theta)
 
 
-def weighted_residual(states, reference: Reference, effects: list) -> np.ndarray:
+def weighted_residual(states, reference: Reference, effects: list,
+                      memo: dict | None = None) -> np.ndarray:
     """Residual (N, C) of ``effects`` on ``states``, each channel times
-    ``1 / (sigma_c sqrt(tau_c))``: its squared sum is the log-likelihood's -2x (module doc)."""
-    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+    ``1 / (sigma_c sqrt(tau_c))``: its squared sum is the log-likelihood's -2x (module doc).
+    ``memo``: residual parts kept across evaluations on the same ``states``
+    (:func:`quadsim.gap.fitting.residuals`)."""
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
     return r * np.sqrt(reference.weights)
 
 
-def jacobian(states, reference: Reference, columns: list[int], build) -> np.ndarray:
+def jacobian(states, reference: Reference, columns: list[int], build, *,
+             memo: dict | None = None, with_base: bool = False):
     """Forward-difference Jacobian (N C, len(columns)) of the weighted residual with respect
-    to the shared parameters ``columns`` at theta_ref (``build(theta)`` -> effects)."""
+    to the shared parameters ``columns`` at theta_ref (``build(theta)`` -> effects);
+    ``with_base``: (Jacobian, the weighted residual at theta_ref, flattened). The columns
+    share the residual parts one parameter does not move (the rotations, the measured
+    wrench of one vehicle, the rotor channel of one command -> speed model) through
+    ``memo`` (a new one per call by default)."""
+    memo = {} if memo is None else memo
     typical = _typical(reference.candidate, reference.params)
     _, upper = _bounds(reference.candidate, reference.params)
-    base = weighted_residual(states, reference, build(reference.theta)).ravel()
+    base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
         theta = reference.theta.copy()
@@ -252,8 +261,9 @@ def jacobian(states, reference: Reference, columns: list[int], build) -> np.ndar
         if theta[k] + h > upper[k]:      # a value at its upper bound: step down
             h = -h
         theta[k] += h
-        out[:, j] = (weighted_residual(states, reference, build(theta)).ravel() - base) / h
-    return out
+        out[:, j] = (weighted_residual(states, reference, build(theta), memo).ravel()
+                     - base) / h
+    return (out, base) if with_base else out
 
 
 def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarray:
@@ -263,8 +273,8 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
     k = len(reference.theta)
     values, variances = [], []
     for f in flights:
-        jac = jacobian(f, reference, list(range(k)), reference.candidate.effects)
-        r = weighted_residual(f, reference, reference.effects()).ravel()
+        jac, r = jacobian(f, reference, list(range(k)), reference.candidate.effects,
+                          with_base=True)
         info = jac.T @ jac
         cov = np.linalg.pinv(info)
         values.append(reference.theta - cov @ (jac.T @ r))
@@ -292,11 +302,12 @@ def _pooled(flights, probe, shift: float, timing: bool):
     info, grad, cost = np.zeros((size, size)), np.zeros(size), 0.0
     for f in flights:
         view = aligned(f, shift)
-        jac = jacobian(view, probe, list(range(k)), probe.candidate.effects)
-        r = weighted_residual(view, probe, probe.effects()).ravel()
+        memo: dict = {}
+        jac, r = jacobian(view, probe, list(range(k)), probe.candidate.effects, memo=memo,
+                          with_base=True)
         if timing:
             later = weighted_residual(aligned(f, shift + SHIFT_STEP_S), probe,
-                                      probe.effects()).ravel()
+                                      probe.effects(), memo).ravel()
             jac = np.column_stack([jac, (later - r) / SHIFT_STEP_S])
         info += jac.T @ jac
         grad += jac.T @ r

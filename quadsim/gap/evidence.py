@@ -71,8 +71,9 @@ from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference, jacobian, shifted
 from ..effects import make_effect
-from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, _memo, effect_class,
+from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class,
                       residuals)
+from .memo import _memo
 from .priors import momentum_rate_damping
 from .screen import screened
 
@@ -342,11 +343,13 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
     names = list(reference.candidate.parameter_names)
-    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    memo: dict = {}         # residual parts shared by the evaluations on this flight
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects,
+                   memo=memo)
     if not full:
         return screened(states, reference, explanations, jac, names, reference.s_ref,
                         start_delay_s, problem=Problem, fit_one=_fit_one,
-                        residual=flight_residual)
+                        residual=flight_residual, memo=memo)
     return [_fit_one(states, reference, e, jac, reference.s_ref, names,
                      start_delay_s if e.name == "signal_delay" else 0.0)
             for e in explanations]
@@ -370,20 +373,47 @@ class Problem:
                  s_all: np.ndarray, memo: dict | None = None):
         self.states, self.reference, self.expl = states, reference, expl
         self.memo = memo          # residual parts shared by evaluations on one flight
-        self.shared, self.keep = _shared_effects(reference, expl.replaces)
-        self.marg = _Marginal(jac[:, self.keep], s_all[self.keep])
+        if memo is None:
+            self.shared, self.keep = _shared_effects(reference, expl.replaces)
+        else:       # the same for every explanation that replaces the same groups
+            kept = memo.setdefault("shared_effects", {})
+            if expl.replaces not in kept:
+                kept[expl.replaces] = _shared_effects(reference, expl.replaces)
+            self.shared, self.keep = kept[expl.replaces]
+        self.marg = self._marginal(jac, s_all)
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
         lower, upper = _bounds(expl, reference, float(states.t[1] - states.t[0]))
         self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
         self.size = jac.shape[0] + len(self.keep) + len(self.mean)
 
+    def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> _Marginal:
+        """The marginal of the kept shared columns; with a ``memo``, one per set of columns
+        (most explanations keep them all) and Jacobian."""
+        if self.memo is None:
+            return _Marginal(jac[:, self.keep], s_all[self.keep])
+        kept = self.memo.setdefault("marginals", {})
+        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes())
+        if key not in kept or kept[key][0] is not jac:
+            kept[key] = (jac, _Marginal(jac[:, self.keep], s_all[self.keep]))
+        return kept[key][1]
+
     def residual(self, z: np.ndarray) -> np.ndarray:
+        """The weighted residual at ``z``; with a ``memo``, the last one per explanation is
+        kept (the screen's step and the refined fit ask again for the point they just
+        evaluated: the start of the next step, the step just accepted)."""
+        last = None if self.memo is None else self.memo.setdefault("last_residual", {})
+        key = (self.expl.name, self.expl.variant)
+        if last is not None and key in last and np.array_equal(last[key][0], z):
+            return last[key][1]
         # z at its bound gives theta a round-off beyond the parameter's range: clipped
         theta = np.clip(self.mean + self.sd * z, self.lower, self.upper)
         own = _own_effects(self.expl, theta)
         flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
-        return flight_residual(flight, self.reference, self.shared + own, self.memo)
+        r = flight_residual(flight, self.reference, self.shared + own, self.memo)
+        if last is not None:
+            last[key] = (np.array(z, dtype=float), r)
+        return r
 
     def shifted(self, delay_s: float):
         """:func:`shifted` states, the same object for the same delay (``memo``)."""

@@ -14,6 +14,7 @@ candidate fits the mean wind together with the rotor-drag coefficient.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +25,7 @@ from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectParameter, EffectSet
 from ..effects.canted_rotor import CantedRotor
 from ..vehicle.params import VehicleParams
+from .memo import _memo, _rotor_key, _wrench_key, flight_memo
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
@@ -35,7 +37,7 @@ from .residual import FlightStates, measured_wrench, model_wrench
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
            "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
            "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
-           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner"]
+           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner", "flight_memo"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -302,18 +304,10 @@ def _linear_time_constant(owner) -> float | None:
     return float(tau) if tau > 0.0 and (down <= 0.0 or down == tau) else None
 
 
-def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
-                 n: int) -> np.ndarray:
-    """:func:`_rotor_channel`'s Heun integration for a linear lag, in closed form.
-
-    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
-    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
-    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
-    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
-    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
-    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
-    recursion, once): the same numbers as stepping the rate function, to round-off, at a
-    few array operations instead of 2 S steps rate evaluations."""
+@functools.lru_cache(maxsize=64)
+def _heun_weights(steps: int, h: float, tau: float) -> tuple[float, np.ndarray]:
+    """(a^(S steps), w_0..w_steps) of :func:`_heun_linear` (kept: a fit asks for the same
+    time constant many times). The weights are read only."""
     a = 1.0 - h / tau + h * h / (2.0 * tau * tau)
     b0 = h / (2.0 * tau) - h * h / (2.0 * tau * tau)
     b1 = h / (2.0 * tau)
@@ -327,6 +321,23 @@ def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: 
             weights *= a
             weights[k] += b0 * (1.0 - f0) + b1 * (1.0 - f1)
             weights[k + 1] += b0 * f0 + b1 * f1
+    weights.setflags(write=False)
+    return gain, weights
+
+
+def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
+                 n: int) -> np.ndarray:
+    """:func:`_rotor_channel`'s Heun integration for a linear lag, in closed form.
+
+    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
+    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
+    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
+    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
+    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
+    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
+    recursion, once): the same numbers as stepping the rate function, to round-off, at a
+    few array operations instead of 2 S steps rate evaluations."""
+    gain, weights = _heun_weights(steps, h, tau)
     out = gain * start
     for k in range(steps + 1):
         out = out + weights[k] * cmd[k:k + n]
@@ -414,7 +425,14 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     inverse-dynamics flights of the testbed with gyro noise 0.1 rad/s and no inertia error:
     xx -14 %, zz -79 %; in this form +1.2 ± 4.3 %, -1.9 ± 21 %; with a true +30 % on xx, yy:
     +12 % before, +31 ± 6 % now; docs/gap.md)."""
-    force, torque, vehicle = model_wrench(states, params, effects)
+    if memo is None:
+        force, torque, vehicle = model_wrench(states, params, effects)
+    else:
+        rotation, motion = flight_memo(memo, states)
+        force, torque, vehicle = _memo(
+            memo, _wrench_key(states, params, effects), states,
+            lambda: model_wrench(states, params, effects, rotation=rotation,
+                                 flight_memo=motion))
     if memo is None:
         meas_force, meas_torque = measured_wrench(states, vehicle)
     else:
@@ -434,31 +452,6 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
             parts.append(_memo(memo, _rotor_key(states, params, effects), states,
                                lambda: _rotor_channel(states, params, effects)))
     return np.concatenate(parts, axis=1)
-
-
-def _memo(memo: dict, key: tuple, states, compute):
-    """``memo[key]`` (computed once): parts of the residual that many evaluations on the
-    same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
-    command -> speed model). The entry holds ``states`` so that its id stays its own."""
-    hit = memo.get(key)
-    if hit is not None and hit[0] is states:
-        return hit[1]
-    if len(memo) > 64:
-        memo.clear()
-    value = compute()
-    memo[key] = (states, value)
-    return value
-
-
-def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
-    """What the rotor channel depends on besides ``states``: the motor map (``params``),
-    the speed factor and the rate owner's values (:func:`_rotor_channel`)."""
-    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
-    owner = rate_owner(effects)
-    return ("rotor", id(states), id(params),
-            None if factor is None else np.asarray(factor, dtype=float).tobytes(),
-            None if owner is None else (type(owner).__name__,
-                                        tuple(sorted(owner.values().items()))))
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,
@@ -575,14 +568,15 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
 
     stacked = stack_states(flights)
     size = len(stacked.t) * len(sigma)
+    memo: dict = {}     # the residual parts one parameter does not move (:func:`residuals`)
 
     def fun(z):
         # The solver works in units of each parameter's typical size, so that finite
         # differences and trust regions suit parameters from 1e-8 kg m^2 to volts.
         try:
             effects = candidate.effects(x0 + z * typical)
-            return (residuals(stacked, params, effects, rotor_channel=rotor_channel)
-                    / sigma).ravel()
+            return (residuals(stacked, params, effects, rotor_channel=rotor_channel,
+                              memo=memo) / sigma).ravel()
         except ModelError:
             # Parameters that make the vehicle non-physical (e.g. inertia breaking the
             # triangle inequality) are walls, not crashes.

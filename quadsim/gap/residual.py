@@ -266,11 +266,15 @@ def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray) -> np.ndarray
 
 def model_wrench(states: FlightStates, params: VehicleParams,
                  effects: Iterable[Effect] | EffectSet | None = None,
-                 *, rotor_speed: np.ndarray | None = None
+                 *, rotor_speed: np.ndarray | None = None, rotation: np.ndarray | None = None,
+                 flight_memo: dict | None = None
                  ) -> tuple[np.ndarray, np.ndarray, VehicleParams]:
     """Body-frame force (N, 3) and torque about the CoM (N, 3) that the model (``params``
     plus ``effects``) predicts from the measured states and rotor speeds; also the effective
-    parameter set (after the effects' ``apply_to_params``)."""
+    parameter set (after the effects' ``apply_to_params``). ``rotation``: the states'
+    body-to-world matrices (N, 3, 3) when the caller keeps them; ``flight_memo``: handed to
+    the effects as :attr:`quadsim.effects.base.EffectContext.flight_memo` (values that depend
+    only on the logged motion of ``states``)."""
     effect_set = _effect_set(effects)
     speed = _require_rotors(states, params) if rotor_speed is None else rotor_speed
     vehicle = effect_set.apply_to_params(params)
@@ -278,10 +282,11 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
     accel = states.rotor_accel if states.rotor_accel is not None else np.zeros_like(speed)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
-                        states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat)
+                        states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat,
+                        rotation=rotation, flight_memo=flight_memo)
     loads = effect_set.loads(ctx)
     wrench = rotor_wrench(vehicle, loads, speed)
-    force = wrench[:, :3] + rotate_inverse(states.quat, loads.force_world)
+    force = wrench[:, :3] + ctx.to_body(loads.force_world)
     torque = wrench[:, 3:] + loads.torque_body
     return force, torque, vehicle
 

@@ -165,9 +165,12 @@ class VehicleParams:
         return self.mass * self.gravity
 
     def replace(self, **changes) -> VehicleParams:
-        """A copy with some fields changed (validated again)."""
+        """A copy with some fields changed, validated again when the validated field (the
+        inertia, :func:`check_physical`) is among them (the fits replace a parameter set
+        thousands of times per flight)."""
         new = dataclasses.replace(self, **changes)
-        check_physical(new, where=new.path or new.name)
+        if "inertia" in changes:
+            check_physical(new, where=new.path or new.name)
         return new
 
 
@@ -183,6 +186,13 @@ def inertia_problems(inertia: np.ndarray) -> list[str]:
     problems = []
     if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
         return ["must be a finite 3x3 matrix"]
+    diagonal = inertia.diagonal()
+    if not np.any(inertia - np.diag(diagonal)):
+        # a diagonal tensor (the usual case, checked thousands of times per fit): symmetric,
+        # its principal moments are its diagonal -- the same test as below without eigvalsh
+        moments = np.sort(diagonal)
+        if moments[0] > 0 and moments[0] + moments[1] >= moments[2] * (1 - 1e-9):
+            return []
     if not np.allclose(inertia, inertia.T, rtol=1e-9, atol=1e-15):
         problems.append("is not symmetric")
     moments = np.linalg.eigvalsh(0.5 * (inertia + inertia.T))

@@ -28,7 +28,10 @@ def allocation_matrix(params: VehicleParams, *, about: np.ndarray | None = None)
     axes = params.rotor_axes
     arms = params.rotor_positions - point
     forces = params.thrust_factor * axes
-    torques = np.cross(arms, forces) - (params.rotor_spins * params.drag_factor)[:, None] * axes
+    cross = np.stack([arms[:, 1] * forces[:, 2] - arms[:, 2] * forces[:, 1],   # arms x forces
+                      arms[:, 2] * forces[:, 0] - arms[:, 0] * forces[:, 2],
+                      arms[:, 0] * forces[:, 1] - arms[:, 1] * forces[:, 0]], axis=-1)
+    torques = cross - (params.rotor_spins * params.drag_factor)[:, None] * axes
     return np.vstack([forces.T, torques.T])
 
 
