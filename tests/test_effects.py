@@ -26,13 +26,14 @@ HOVER = hover_speed(PARAMS)
 
 
 def context(*, position=(0.0, 0.0, 1.0), velocity=(0.0, 0.0, 0.0), euler=(0.0, 0.0, 0.0),
-            wind=(0.0, 0.0, 0.0), speed=None, t=0.0, vbat=None, params=PARAMS):
+            wind=(0.0, 0.0, 0.0), speed=None, t=0.0, vbat=None, params=PARAMS,
+            body_rate=(0.0, 0.0, 0.0)):
     """A one-simulation EffectContext (B = 1)."""
     speed = np.full(params.rotor_count, HOVER) if speed is None else np.asarray(speed, float)
     row = lambda v: np.asarray(v, dtype=float)[None]
     return EffectContext(t=np.array([t]), position=row(position), velocity=row(velocity),
                          quat=row(euler_to_quat(np.asarray(euler, float))),
-                         body_rate=np.zeros((1, 3)),
+                         body_rate=row(body_rate),
                          air_velocity=row(velocity) - row(wind), rotor_speed=row(speed),
                          rotor_accel=np.zeros((1, params.rotor_count)), params=params,
                          vbat=None if vbat is None else np.array([vbat]))
@@ -104,6 +105,19 @@ def test_rotor_drag_at_5_m_s():
     loads = drag.loads(context(velocity=(0.0, 5.0, 0.0), speed=speed))
     arm = PARAMS.rotor_positions[0, 0]
     np.testing.assert_allclose(loads.torque_body[0, 2], arm * (-1e-5 * 100 * 5.0), rtol=1e-12)
+
+
+def test_rotor_drag_damps_a_yaw_at_hover():
+    """Hovering, yawing at 2 rad/s: each hub moves at w x (r_i - c) in the rotor plane, so the
+    in-plane drag damps the yaw, tau_z = -k sum_i Omega_i |r_i - c|^2 w_z (module doc), with
+    no net force (the hub velocities cancel in pairs)."""
+    drag = make_effect("rotor_drag", coefficient=1e-5, axial_coefficient=4e-6)
+    loads = drag.loads(context(body_rate=(0.0, 0.0, 2.0)))
+    arms = PARAMS.rotor_positions - PARAMS.com
+    planar = np.sum(arms[:, :2] ** 2, axis=1)
+    np.testing.assert_allclose(loads.torque_body[0, 2], -1e-5 * HOVER * planar.sum() * 2.0,
+                               rtol=1e-9)
+    np.testing.assert_allclose(loads.force_world, 0.0, atol=1e-12)
 
 
 def test_body_drag_at_5_m_s():

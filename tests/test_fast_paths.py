@@ -147,9 +147,9 @@ def test_the_rotor_drag_sums_are_the_per_rotor_forces(cf):
     drag = make_effect("rotor_drag", coefficient=3e-7, axial_coefficient=1e-7)
     loads = drag.loads(ctx)
     params = ctx.params
-    forces = rotor_drag_forces(rotate_inverse(ctx.quat, ctx.air_velocity), ctx.rotor_speed,
-                               params.rotor_axes, 3e-7, 1e-7)
     arms = params.rotor_positions - params.com
+    forces = rotor_drag_forces(rotate_inverse(ctx.quat, ctx.air_velocity), ctx.rotor_speed,
+                               params.rotor_axes, 3e-7, 1e-7, ctx.body_rate, arms)
     _close(loads.force_world, rotate(ctx.quat, forces.sum(axis=1)))
     _close(loads.torque_body, np.cross(arms[None], forces).sum(axis=1))
 

@@ -1,10 +1,12 @@
 """rotor_drag: induced drag and blade flapping, linear in air velocity, proportional to speed.
 
-Formula (rotor i with unit axis a_i, speed Omega_i; v the vehicle's air velocity in the body
-frame, i.e. vehicle velocity minus wind, rotated into body axes)::
+Formula (rotor i with unit axis a_i, speed Omega_i, hub at r_i - c from the CoM; v the
+vehicle's air velocity in the body frame, i.e. vehicle velocity minus wind, rotated into body
+axes; w the body rate)::
 
-    v_perp = v - (v . a_i) a_i                      air velocity in the rotor plane
-    F_i    = -coefficient * Omega_i * v_perp - axial_coefficient * Omega_i * (v . a_i) a_i
+    u_i    = v + w x (r_i - c)                      the hub's air velocity
+    u_perp = u_i - (u_i . a_i) a_i                  air velocity in the rotor plane
+    F_i    = -coefficient * Omega_i * u_perp - axial_coefficient * Omega_i * (u_i . a_i) a_i
 
 acting at the rotor hub (so it also makes a torque (r_i - c) x F_i about the CoM). The sum
 over rotors is the well-known linear rotor-drag model ``F = -k (sum_i Omega_i) v_perp``:
@@ -16,14 +18,20 @@ Hua & Hamel, "Nonlinear feedback control of quadrotors exploiting first-order dr
 
 Units of both coefficients: N / ((rad/s) (m/s)) = kg/rad. Example at 5 m/s forward for the
 0.84 kg testbed at hover (4 x 460 rad/s) with coefficient 1e-5: F_x = -0.092 N.
-The vehicle's angular rate is not included in the hub velocity (the published model uses
-the body velocity only).
+The hub velocity includes the rotation, w x (r_i - c), as in RotorPy's rotor drag (Folk et
+al. 2023, ``compute_body_wrench``: local airspeeds ``v + w x r_i``): the published
+body-velocity model drops it, which is fair at speed but not while yawing near hover, where
+each hub moves at |w| |r| (a Crazyflie yawing at 2 rad/s: 0.09 m/s) and the in-plane drag
+then damps the yaw, ``tau_z = -coefficient sum_i Omega_i |r_i - c|^2 w_z`` for arms in the
+rotor plane.
 
-Evaluated as sums over the rotors (the same loads, no per-rotor arrays)::
+Evaluated as sums over the rotors (the same loads, no per-rotor arrays), with
+``R_i = r_i - c``, ``S = sum_i Omega_i R_i`` and ``p_i = Omega_i (u_i . a_i)``
+(``u_i . a_i = v . a_i + w . (R_i x a_i)``)::
 
-    F   = -coefficient (sum_i Omega_i) v + (coefficient - axial) sum_i Omega_i (v . a_i) a_i
-    tau = -coefficient (sum_i Omega_i (r_i - c)) x v
-          + (coefficient - axial) sum_i Omega_i (v . a_i) (r_i - c) x a_i
+    F   = -coefficient ((sum_i Omega_i) v + w x S) + (coefficient - axial) sum_i p_i a_i
+    tau = -coefficient (S x v + w sum_i Omega_i |R_i|^2 - sum_i Omega_i (w . R_i) R_i)
+          + (coefficient - axial) sum_i p_i R_i x a_i
 """
 
 from __future__ import annotations
@@ -37,12 +45,18 @@ __all__ = ["RotorDrag", "rotor_drag_forces"]
 
 def rotor_drag_forces(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
                       rotor_axes: np.ndarray, coefficient: float,
-                      axial_coefficient: float) -> np.ndarray:
+                      axial_coefficient: float, body_rate: np.ndarray | None = None,
+                      arms: np.ndarray | None = None) -> np.ndarray:
     """Per-rotor drag forces (B, R, 3), body frame (N), from the body-frame air velocity
-    (B, 3), rotor speeds (B, R) (rad/s) and unit axes (R, 3)."""
-    axial = np.einsum("bk,rk->br", air_velocity_body, rotor_axes)        # (B, R)
+    (B, 3), rotor speeds (B, R) (rad/s) and unit axes (R, 3); with ``body_rate`` (B, 3)
+    (rad/s) and ``arms`` (R, 3) (hubs from the CoM, m) the hubs' air velocity includes the
+    rotation (module doc)."""
+    hub = np.repeat(air_velocity_body[:, None, :], len(rotor_axes), axis=1)   # (B, R, 3)
+    if body_rate is not None:
+        hub = hub + np.cross(body_rate[:, None, :], arms[None])
+    axial = np.einsum("brk,rk->br", hub, rotor_axes)                     # (B, R)
     along = axial[..., None] * rotor_axes[None]                          # (B, R, 3)
-    in_plane = air_velocity_body[:, None, :] - along
+    in_plane = hub - along
     speed = np.asarray(rotor_speed, dtype=float)[..., None]
     return -speed * (coefficient * in_plane + axial_coefficient * along)
 
@@ -76,10 +90,16 @@ class RotorDrag(EffectBase):
         axes = params.rotor_axes
         arms = params.rotor_positions - params.com
         speed = np.asarray(ctx.rotor_speed, dtype=float)
-        axial = speed * (air_body @ axes.T)                   # Omega_i (v . a_i), (B, R)
-        force = -c * speed.sum(axis=1)[:, None] * air_body + (c - k) * (axial @ axes)
-        torque = (-c * _cross(speed @ arms, air_body)
-                  + (c - k) * (axial @ _cross(arms, axes)))
+        rate = np.asarray(ctx.body_rate, dtype=float)
+        lever = _cross(arms, axes)                            # R_i x a_i, (R, 3)
+        axial = speed * (air_body @ axes.T + rate @ lever.T)  # p_i = Omega_i (u_i . a_i)
+        moment = speed @ arms                                 # S, (B, 3)
+        force = (-c * (speed.sum(axis=1)[:, None] * air_body + _cross(rate, moment))
+                 + (c - k) * (axial @ axes))
+        spin = (speed * (rate @ arms.T)) @ arms               # sum_i Omega_i (w . R_i) R_i
+        torque = (-c * (_cross(moment, air_body)
+                        + rate * (speed @ np.sum(arms ** 2, axis=1))[:, None] - spin)
+                  + (c - k) * (axial @ lever))
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world = ctx.to_world(force)

@@ -57,13 +57,22 @@ Stages
    and the trend of their own values (stage 3) and log mean squares (stage 5) along their
    main axis: how the model extrapolates to a flight flown beyond them.
 
-Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the vertical drag (body drag
-C_d A along body z) and, with commands but no voltage log, the motor map's gain
+Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the body drag (C_d A sideways
+and along body z) and, with commands but no voltage log, the motor map's gain
 (:mod:`.speed_gain`). Both drift with how a flight is flown: on the 8 Crazyflow reference
 flights (path speed 0.8-1.25) the rotor channel's mean residual ran from -0.07 % to +0.05 %
 of the hover speed, and the faster no-effect flights' vertical force residual grew with
 speed; without them, nominal flights flown slower or faster were read as ``thrust_factor``
-or ``body_drag``, or failed the lack-of-fit test.
+or ``body_drag``, or failed the lack-of-fit test. The sideways part: RotorPy's references
+fly with a quadratic parasitic drag in all axes; with the vertical part alone the shared
+wind stood in for it (0.6 m/s, determined to 2e-7 m/s) and a flight's own rotor drag then
+acted on that wind (a doubled rotor drag fitted at half its size).
+
+The shared wind has a Gaussian prior (mean 0, :data:`quadsim.gap.priors.WIND_SD_MS` = 5 m/s)
+in the pooled steps (:func:`_refine`), and its standard error is the posterior's there: a
+wind acts only through drag, so references without drag do not fix it, and the bounded fit
+left it at its bound (-30 m/s on RotorPy references flown without rotor drag), where every
+explanation that gave the drag a value of its own met it.
 
 Example::
 
@@ -92,6 +101,7 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .priors import WIND_SD_MS
 from .speed_gain import PART as SPEED_GAIN
 
 __all__ = ["SHARED", "Reference", "calibrate", "shared_candidate", "per_flight_candidate",
@@ -165,19 +175,19 @@ def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     return Candidate("reference", parts)
 
 
-#: the vertical air drag every flight meets (stage 2): body drag C_d A along body z
-VERTICAL_DRAG = ("body_drag", {}, ("cd_area_vertical",))
+#: the air drag every flight meets (stage 2): body drag C_d A sideways and along body z
+BODY_DRAG = ("body_drag", {}, ("cd_area", "cd_area_vertical"))
 
 
 def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     """The shared parameters of the per-flight reference model: :func:`shared_candidate`
-    plus the vertical drag (:data:`VERTICAL_DRAG`) and, with commands but no voltage log,
+    plus the body drag (:data:`BODY_DRAG`) and, with commands but no voltage log,
     the motor map's gain (:mod:`.speed_gain`; with a voltage log
     ``battery_sag.full_voltage`` is that gain). Both change with how a flight is flown
     (module doc, stage 2), so a flight's own value must have a place in the reference
     uncertainty; neither is a reading of its own (a flight's body drag is, on top)."""
     cand = shared_candidate(rotor, vbat)
-    extra = (VERTICAL_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
+    extra = (BODY_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
     return Candidate(cand.name, cand.parts + extra, cand.base)
 
 
@@ -334,7 +344,7 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
     the spin inertia at its bound 0). Steps in units of each parameter's typical size with
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
-    Returns (theta, shift, standard error of the shift)."""
+    Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
     lower, upper = _bounds(cand, params)
     typical = _typical(cand, params)
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
@@ -351,16 +361,26 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
                       np.zeros_like(sigma), 1.0, 1, {}, [], {})
     x = np.append(theta, shift) if timing else theta.copy()
     k = len(theta)
+    # the steady wind's Gaussian prior (mean 0, WIND_SD_MS): a wind acts only through drag,
+    # so with no drag to act through the data do not fix it and the bounded fit leaves it
+    # anywhere (at its bound, -30 m/s, on RotorPy references flown without rotor drag);
+    # an explanation that then gives the drag a value of its own met a 30 m/s wind.
+    # The prior takes such a wind to 0; a wind the data fix moves by (s / 5 m/s)^2 of itself.
+    prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
+                      for n in cand.parameter_names] + [0.0] * int(timing))
     lam, info = 1.0, None
     for _ in range(REFINE_STEPS):
         probe.theta = x[:k].copy()
         info, grad, cost = _pooled(flights, probe, float(x[k]) if timing else 0.0, timing)
+        info, grad = info + np.diag(prior), grad + prior * x
+        cost += float(np.sum(prior * x ** 2))
         while lam < 1e6:
             # a ridge in units of each parameter's typical size: a direction the data do
-            # not fix (a wind with no drag to act through) does not move
+            # not fix does not move
             info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
             trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
-            new = _cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
+            new = (_cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
+                   + float(np.sum(prior * trial ** 2)))
             if new < cost:
                 x, lam = trial, max(lam / 3.0, 1e-3)
                 break
@@ -369,8 +389,13 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
             break
         if cost - new < REFINE_TOL:
             break
-    se = float(np.sqrt(max(np.linalg.pinv(info)[-1, -1], 0.0))) if timing else 0.0
-    return x[:k], (float(x[k]) if timing else 0.0), se
+    cov = np.linalg.pinv(info)
+    se = float(np.sqrt(max(cov[-1, -1], 0.0))) if timing else 0.0
+    # the wind's standard error under its prior at the refined values (the bounded fit's is
+    # that of a wind at its bound, ~0): what the references know of the room's wind
+    wind_se = {n: float(np.sqrt(max(cov[j, j], 0.0)))
+               for j, n in enumerate(cand.parameter_names) if n.startswith("wind.")}
+    return x[:k], (float(x[k]) if timing else 0.0), se, wind_se
 
 
 def calibrate(flights, params: VehicleParams) -> Reference:
@@ -393,7 +418,11 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                          for s in states)
     cand = per_flight_candidate(rotor, vbat)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
-    theta, shift, shift_se = _refine(flights, params, rotor, cand, fit.theta, start, sigma0)
+    theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta, start,
+                                              sigma0)
+    stderr = fit.stderr.copy()
+    for j, name in enumerate(cand.parameter_names):
+        stderr[j] = wind_se.get(name, stderr[j])
     states = [aligned(f, shift) for f in flights]
     per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                   for s in states]
@@ -411,7 +440,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
         if v:
             delays[key] = (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
                            len(v))
-    ref = Reference(params, rotor, cand, theta, fit.stderr.copy(),
+    ref = Reference(params, rotor, cand, theta, stderr,
                     np.zeros_like(fit.theta), sigma, tau, mean, spread, dof, delays,
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),

@@ -74,7 +74,7 @@ from ..effects import make_effect
 from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class,
                       residuals)
 from .memo import _memo
-from .priors import momentum_rate_damping
+from .priors import WIND_SD_MS, momentum_rate_damping
 from .screen import screened
 
 __all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
@@ -142,7 +142,7 @@ def _prior_sd(params) -> dict:
         # rotor+motor inertia: the fit's typical size (fitting.FIT_SPEC)
         "gyroscopic.rotor_inertia": 1e-6 * (mass / 0.04) ** 1.7,
         # indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)
-        "wind": 5.0,
+        "wind": WIND_SD_MS,
     }
 
 

@@ -42,6 +42,10 @@ rate_damping.*         0 .. 3 k_mt          momentum theory: a rolling vehicle's
                                             not aerodynamic damping.
 canted_rotor.tilt_*    -10 .. +10 deg       a bent mount or crash-bent arm leans a rotor a
                                             few degrees; more is a visibly broken arm.
+wind.vx/vy             sd 5 m/s (Gaussian)  indoor drafts to a fresh breeze (Beaufort 3:
+                                            3.4-5.4 m/s); :data:`WIND_SD_MS`, the spread of
+                                            the per-flight wind reading and the prior of the
+                                            reference calibration's shared wind.
 =====================  ===================  ==============================================
 
 :func:`plausibility` returns (score, plausible, text): score = |value| / bound on its side
@@ -56,6 +60,9 @@ __all__ = ["PRIORS", "plausibility", "candidate_plausibility", "momentum_rate_da
 
 #: parameter -> (lower, upper, kind, source). kind "relative": fraction of 1; "mass": of the
 #: vehicle mass; "arm": of the arm length; "absolute": in the parameter's unit.
+#: prior spread of a steady wind, m/s (indoor drafts to Beaufort 3, 3.4-5.4 m/s)
+WIND_SD_MS = 5.0
+
 PRIORS = {
     "thrust_factor.change": (-0.15, 0.05, "relative",
                              "prop-to-prop C_T spread 2-5 % (UIUC prop data), air density "
