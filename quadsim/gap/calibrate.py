@@ -57,16 +57,13 @@ Stages
    and the trend of their own values (stage 3) and log mean squares (stage 5) along their
    main axis: how the model extrapolates to a flight flown beyond them.
 
-Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the body drag (C_d A sideways
-and along body z) and, with commands but no voltage log, the motor map's gain
+Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the vertical drag (body drag
+C_d A along body z) and, with commands but no voltage log, the motor map's gain
 (:mod:`.speed_gain`). Both drift with how a flight is flown: on the 8 Crazyflow reference
 flights (path speed 0.8-1.25) the rotor channel's mean residual ran from -0.07 % to +0.05 %
 of the hover speed, and the faster no-effect flights' vertical force residual grew with
 speed; without them, nominal flights flown slower or faster were read as ``thrust_factor``
-or ``body_drag``, or failed the lack-of-fit test. The sideways part: RotorPy's references
-fly with a quadratic parasitic drag in all axes; with the vertical part alone the shared
-wind stood in for it (0.6 m/s, determined to 2e-7 m/s) and a flight's own rotor drag then
-acted on that wind (a doubled rotor drag fitted at half its size).
+or ``body_drag``, or failed the lack-of-fit test.
 
 The shared wind has a Gaussian prior (mean 0, :data:`quadsim.gap.priors.WIND_SD_MS` = 5 m/s)
 in the pooled steps (:func:`_refine`), and its standard error is the posterior's there: a
@@ -175,13 +172,16 @@ def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     return Candidate("reference", parts)
 
 
-#: the air drag every flight meets (stage 2): body drag C_d A sideways and along body z
-BODY_DRAG = ("body_drag", {}, ("cd_area", "cd_area_vertical"))
+#: the vertical air drag every flight meets (stage 2): body drag C_d A along body z. Not the
+#: sideways part: it is nearly collinear with the rotor drag on the references' speeds, and
+#: sharing both widened the rotor drag's reference uncertainty until a flight with 4x the
+#: references' rotor drag was judged "no difference" (tests/test_evidence.py).
+BODY_DRAG = ("body_drag", {}, ("cd_area_vertical",))
 
 
 def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     """The shared parameters of the per-flight reference model: :func:`shared_candidate`
-    plus the body drag (:data:`BODY_DRAG`) and, with commands but no voltage log,
+    plus the vertical drag (:data:`BODY_DRAG`) and, with commands but no voltage log,
     the motor map's gain (:mod:`.speed_gain`; with a voltage log
     ``battery_sag.full_voltage`` is that gain). Both change with how a flight is flown
     (module doc, stage 2), so a flight's own value must have a place in the reference
