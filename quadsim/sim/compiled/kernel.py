@@ -196,11 +196,17 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
             term = min(gain * (row[O_GR] / (4.0 * height)) ** 2, MAX_TERM)
             s *= 1.0 / (1.0 - term)
         scale[r] = s
-        axial = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
+        # rotor drag at the hub's air velocity u = v + w x (r_i - c) (effects.rotor_drag)
+        p = arm[b, r]
+        u0 = air_body[0] + rate_b[1] * p[2] - rate_b[2] * p[1]
+        u1 = air_body[1] + rate_b[2] * p[0] - rate_b[0] * p[2]
+        u2 = air_body[2] + rate_b[0] * p[1] - rate_b[1] * p[0]
+        axial = u0 * a[0] + u1 * a[1] + u2 * a[2]
         extra = row[O_CL] * mid[r] + row[O_CO]
         for i in range(3):
             along = axial * a[i]
-            f[i] = -mid[r] * (c * (air_body[i] - along) + ca * along) + extra * a[i]
+            u = u0 if i == 0 else (u1 if i == 1 else u2)
+            f[i] = -mid[r] * (c * (u - along) + ca * along) + extra * a[i]
             force_body[i] += f[i]
             momentum[i] += spin[r] * mid[r] * a[i]
             spin_up[i] += spin[r] * acc[r] * a[i]
@@ -208,7 +214,6 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         torque[0] -= kf * (a[1] * air_body[2] - a[2] * air_body[1])
         torque[1] -= kf * (a[2] * air_body[0] - a[0] * air_body[2])
         torque[2] -= kf * (a[0] * air_body[1] - a[1] * air_body[0])
-        p = arm[b, r]
         torque[0] += p[1] * f[2] - p[2] * f[1]
         torque[1] += p[2] * f[0] - p[0] * f[2]
         torque[2] += p[0] * f[1] - p[1] * f[0]
