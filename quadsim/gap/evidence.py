@@ -75,7 +75,7 @@ from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_clas
                       residuals)
 from .memo import _memo
 from .priors import WIND_SD_MS, momentum_rate_damping
-from .screen import screened
+from .screen import delay_starts, screened
 
 __all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
            "DETERMINED", "DELAY_SD_S", "shifted"]
@@ -337,8 +337,9 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
 
     With a rotor-delay reading, every explanation fits the flight's rotor delay too: with
     the references' prior (:func:`reference_delay_sd`) as a shared parameter, or with the
-    wide prior as the reading "signal_delay" (it starts at ``start_delay_s``, the
-    cross-correlation estimate against the references').
+    wide prior as the reading "signal_delay". Both start at the best point of a grid of
+    delays under their prior (:func:`quadsim.gap.screen.delay_starts`; ``start_delay_s``,
+    the cross-correlation estimate against the references', is one of its points).
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
@@ -346,12 +347,18 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     memo: dict = {}         # residual parts shared by the evaluations on this flight
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects,
                    memo=memo)
+    starts = (0.0, start_delay_s)
+    null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
+    wide = next((e for e in explanations if e.name == "signal_delay"), None)
+    if null is not None:
+        starts = delay_starts(Problem(states, reference, null, jac, reference.s_ref, memo),
+                              float(wide.sd[-1]) if wide is not None else 0.0, start_delay_s)
     if not full:
         return screened(states, reference, explanations, jac, names, reference.s_ref,
-                        start_delay_s, problem=Problem, fit_one=_fit_one,
+                        starts, problem=Problem, fit_one=_fit_one,
                         residual=flight_residual, memo=memo)
     return [_fit_one(states, reference, e, jac, reference.s_ref, names,
-                     start_delay_s if e.name == "signal_delay" else 0.0)
+                     starts[1] if e.name == "signal_delay" else starts[0])
             for e in explanations]
 
 
