@@ -81,11 +81,14 @@ def test_a_flight_16x_faster_is_outside_by_log_16_and_the_model_widens_by_the_tr
     local = local_reference(ref, pos)
     edge = pos.u - u.max()
     assert edge == pytest.approx(np.log(1.6) * np.sum(trend.axis), rel=1e-9)
-    # the shared value keeps its centre; its spread grows by what the trend moves it by
-    # beyond the outermost reference (slope and slope uncertainty)
-    assert np.array_equal(local.theta, ref.theta)
+    # the shared value follows the trend to the flight's place (the regression's prediction,
+    # its variance added); beyond the outermost reference its spread grows by what the trend
+    # moves it by there (slope and slope uncertainty)
+    lead = pos.u - trend.u_w[0]
+    assert local.theta[0] == pytest.approx(ref.theta[0] + 0.004 * lead, rel=1e-9)
     assert local.scatter[0] == pytest.approx(
-        np.sqrt(0.004 ** 2 + trend.slope_var[0]) * edge, rel=1e-9)
+        np.sqrt(trend.slope_var[0] * lead ** 2 + (0.004 ** 2 + trend.slope_var[0]) * edge ** 2),
+        rel=1e-9)
     # the residual expected exp(0.7 edge) larger, carried as noise (sigma), so the
     # lack-of-fit mean is unchanged
     assert np.allclose(local.sigma, np.exp(0.7 * edge / 2), rtol=1e-12)
@@ -94,12 +97,14 @@ def test_a_flight_16x_faster_is_outside_by_log_16_and_the_model_widens_by_the_tr
 
 
 def test_inside_the_envelope_the_noise_model_is_the_references():
-    ref, _, _ = _reference(COORDS, slope=0.004, lof_slope=0.7)
+    ref, _, u = _reference(COORDS, slope=0.004, lof_slope=0.7)
     pos = position(_states(*COORDS[1:3].mean(0)), ref.envelope)
     assert pos.distance == 0.0 and "inside" in pos.text
     local = local_reference(ref, pos)
     assert np.array_equal(local.sigma, ref.sigma)
     assert np.array_equal(local.lof_mean, ref.lof_mean) and local.lof_sd == ref.lof_sd
+    # the shared value is the trend's at the flight's place, inside the envelope too
+    assert local.theta[0] == pytest.approx(0.004 * (pos.u - np.mean(u)), abs=1e-12)
 
 
 def test_references_that_do_not_spread_give_no_trend():

@@ -76,33 +76,40 @@ CONVERGED = 0.02
 #: third of the spacing of the timing likelihood's local optima (measured: ~7 ms on PyFlyt's
 #: 240 Hz motors with their per-step noise, where fits started at zero stopped 7 ms from the
 #: best), so each optimum's basin holds a grid point; the fit then converges within it.
-#: The grid reaches :data:`DELAY_GRID_SDS` prior spreads either side.
 DELAY_GRID_S = 0.002
+#: the grid reaches this many of the shared delay's prior spreads either side of zero and of
+#: the cross-correlation estimate (99.7 % of the prior's mass)
 DELAY_GRID_SDS = 3.0
 
 
 def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, float]:
     """Where the rotor delay's fits start: (every explanation's shared delay, the
-    "signal_delay" reading's), each the best point of a grid (:data:`DELAY_GRID_S`, the
-    cross-correlation estimate ``hint_s`` added) under its prior. ``null``: the "no
-    difference" Problem (its delay under the references' tight prior). The likelihood of a
-    timing offset is not unimodal: a residual with a periodic part (motor noise, the
-    figure-8) matches itself again one period later, so a local fit from zero can stop at
-    the wrong optimum and a wide-prior fit started elsewhere then "finds" a delay of its own
-    (measured: 6 nominal PyFlyt flights named ``signal_delay`` at 29 log units, their best
-    shared delay 4.6 ms from the references', well inside the prior). The profiled cost
+    "signal_delay" reading's), each the best point of a grid (:data:`DELAY_GRID_S`) under its
+    prior (the shared delay's, the wide ``signal_sd``). ``null``: the "no difference"
+    Problem (its delay under the references' tight prior); ``hint_s``: the flight's
+    cross-correlation estimate against the references'. The grid covers
+    :data:`DELAY_GRID_SDS` shared spreads about zero and about ``hint_s``: where the shared
+    delay may lie, and where a delay of the flight's own shows in the cross-correlation.
+
+    Why a grid: the likelihood of a timing offset is not unimodal. A residual with a
+    periodic part (motor noise, the figure-8) matches itself again one period later, so a
+    local fit from zero can stop at the wrong optimum, and a wide-prior fit started elsewhere
+    then "finds" a delay of its own (measured: 2 nominal PyFlyt flights, 2 with an effect
+    outside the library and one inertia error named ``signal_delay`` at 29 log units, their
+    best shared delay 4.6 ms from the references', well inside its prior). The profiled cost
     |aug|^2 + |du|^2 is the same for both priors at one delay: one residual per grid point."""
     sd, lo, hi = float(null.sd[-1]), float(null.lower[-1]), float(null.upper[-1])
-    reach = min(max(hi, -lo), DELAY_GRID_SDS * max(signal_sd, sd))
-    grid = np.arange(-reach, reach + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
-    grid = np.unique(np.clip(np.append(grid, [0.0, hint_s]), lo + 1e-9, hi - 1e-9))
+    steps = np.arange(-DELAY_GRID_SDS * sd, DELAY_GRID_SDS * sd + 0.5 * DELAY_GRID_S,
+                      DELAY_GRID_S)
+    grid = np.unique(np.clip(np.concatenate([steps, hint_s + steps, [0.0, hint_s]]),
+                             lo + 1e-9, hi - 1e-9))
     cost = np.empty(len(grid))
     for k, d in enumerate(grid):
         z = np.array([d / sd])
         vec = null.stacked(z)
         cost[k] = float(vec @ vec) - float(z @ z)     # the profiled cost, prior term apart
     shared = float(grid[np.argmin(cost + (grid / sd) ** 2)])
-    own = float(grid[np.argmin(cost + (grid / signal_sd) ** 2)])
+    own = float(grid[np.argmin(cost + (grid / signal_sd) ** 2)]) if signal_sd > 0 else hint_s
     return shared, own
 
 
