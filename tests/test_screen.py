@@ -175,3 +175,33 @@ def test_the_batched_regression_delay_matches_a_least_squares_solve_per_lag():
         best.append(1 - np.sum((a - b @ coef) ** 2) / np.sum((a - a.mean(0)) ** 2))
     assert r2 == pytest.approx(max(best), abs=1e-9)
     assert inside and delay == pytest.approx(-true, abs=dt)
+
+
+class _TwoOptima:
+    """A 'no difference' problem whose profiled timing cost has two optima: a shallow one
+    at 0 (cost 40) and the best at -5 ms (cost 0), 7 ms apart, as on PyFlyt's noisy motors;
+    the shared delay's prior spread 3.5 ms, a reading's own 20 ms."""
+
+    sd, lower, upper = np.array([0.0035]), np.array([-0.1]), np.array([0.1])
+
+    def stacked(self, z):
+        d = float(z[0]) * self.sd[0]
+        cost = min(40.0 + (d / 0.001) ** 2, ((d + 0.005) / 0.001) ** 2)
+        return np.array([np.sqrt(cost), z[0]])
+
+
+def test_the_delay_fits_start_at_the_global_optimum_under_each_prior():
+    """A fit from zero would stay in the shallow optimum at 0, and a reading with the wide
+    prior started at the cross-correlation estimate would then gain ~20 log units over "no
+    difference" for a delay well inside the shared prior: both start at -5 ms instead."""
+    from quadsim.gap.screen import DELAY_GRID_S, delay_starts
+
+    shared, own = delay_starts(_TwoOptima(), 0.0203, hint_s=-0.004)
+    assert shared == pytest.approx(-0.005, abs=DELAY_GRID_S / 2 + 1e-9)
+    assert own == pytest.approx(-0.005, abs=DELAY_GRID_S / 2 + 1e-9)
+    # a delay far beyond the shared prior is reached through the hint only
+    far = _TwoOptima()
+    far.stacked = lambda z: np.array([np.sqrt(min(40.0, ((z[0] * 0.0035 - 0.03) / 0.001) ** 2)),
+                                      z[0]])
+    shared, own = delay_starts(far, 0.0203, hint_s=0.029)
+    assert abs(shared) < 0.0035 and own == pytest.approx(0.03, abs=DELAY_GRID_S / 2 + 1e-9)
