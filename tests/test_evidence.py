@@ -186,3 +186,21 @@ def test_a_flight_sharing_the_spin_inertia_and_timing_flown_faster_is_no_gap(cf,
     entry = judge_one(log, spinning)
     assert entry["outcome"] == "no_significant_gap", entry["answer"]
     assert entry["probability"] > 0.5
+
+
+def test_a_drag_against_references_without_one_refits_their_wind(cf):
+    """References flown without rotor drag in a 1.5 m/s wind cannot see the wind; a flight
+    with rotor drag (10x the shared one's) in the same room feels drag x (v - w). Its
+    rotor-drag reading refits the wind with the drag (evidence._with_wind): both right.
+    With the references' wind held, the drag fit absorbs the wind's steady force."""
+    wind = make_effect("wind", vx=1.5, vy=0.0)
+    logs = [synthetic_flight(cf, _shared(drag=0.0) + [wind], duration=4.0, seed=s,
+                             speed=0.8 + 0.2 * s) for s in range(3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        ref = calibrate(prepare(logs, cf), cf)
+    assert not ref.identified["rotor_drag.coefficient"]
+    entry = _judge(cf, ref, _shared(drag=10 * DRAG) + [wind], seed=70)
+    assert entry["verdict"] == "rotor_drag" and entry["probability"] > 0.9, entry["answer"]
+    assert entry["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)
+    assert entry["params"]["wind.vx"] == pytest.approx(1.5, abs=0.15)

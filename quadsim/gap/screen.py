@@ -322,8 +322,12 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
         rows.append(ev)
         starts.append(z1)
         weight.append(-np.inf if ev is None else ev.log_z)
-        # what a fit could reach: the screened evidence plus half the linear model's miss
-        reach.append(np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss)
+        # what a fit could reach: the screened evidence plus half the linear model's miss;
+        # a drag with the wind refitted (evidence._with_wind) always: at the references' zero
+        # drag the wind's column is zero, so the step cannot see what the pair reaches
+        always = "wind" in expl.replaces and expl.name != "wind"
+        reach.append(np.inf if ev is None or not np.isfinite(miss) or always
+                     else ev.log_z + 0.5 * miss)
     # most promising first: each refined fit can only raise the best weight, and with it
     # the cut for those after it
     best = max(weight)
