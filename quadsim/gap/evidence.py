@@ -58,6 +58,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -150,7 +151,8 @@ def _prior_sd(params) -> dict:
 class Explanation:
     """How a flight may differ from the references (module doc). ``parts``: (effect, fixed,
     fitted) of its own effects; ``replaces``: shared groups it gives values of its own;
-    ``shift``: a signal whose delay it fits ("rotor"); ``log_prior``: log model prior."""
+    ``shift``: a signal whose delay it fits ("rotor"); ``log_prior``: log model prior;
+    ``coupled``: see the field."""
 
     name: str
     variant: str
@@ -160,6 +162,10 @@ class Explanation:
     replaces: tuple = ()
     shift: str | None = None
     log_prior: float = 0.0
+    #: True: a parameter acts only through another one's value (a propeller's speed exponent
+    #: through its change; a refitted wind through the drag), so the screen's linear step at
+    #: the prior centre cannot see what the explanation reaches: always fitted to convergence
+    coupled: bool = False
 
     @property
     def parameter_names(self) -> list[str]:
@@ -225,7 +231,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     change = ["change", "alpha"] if reference.rotor else ["change"]
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
                     [0.0, 0.2][:len(change)],
-                    [sd["thrust_factor.change"], sd["thrust_factor.alpha"]][:len(change)]))
+                    [sd["thrust_factor.change"], sd["thrust_factor.alpha"]][:len(change)],
+                    coupled=len(change) > 1))
     rotors = params.rotor_count
     for k in range(rotors):
         out.append(_one("thrust_mismatch", f"rotor {k + 1}",
@@ -250,8 +257,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out = [e for e in out if e.name in keep]
     if delay:       # the rotor delay as a shared parameter of every other explanation
         tight = reference_delay_sd(reference)
-        out = [e if e.shift else Explanation(e.name, e.variant, e.parts, e.mean + (0.0,),
-                                             e.sd + (tight,), e.replaces, "rotor", e.log_prior)
+        out = [e if e.shift else dataclasses.replace(e, mean=e.mean + (0.0,),
+                                                     sd=e.sd + (tight,), shift="rotor")
                for e in out]
     return out
 
@@ -277,9 +284,10 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
     (:func:`quadsim.gap.screen.screened`: its linear step cannot move the wind). Measured on RotorPy references flown without rotor drag: their
     wind sat at 0.6 m/s (set through a vertical drag of 1 cm^2), and a flight with rotor drag
     15 mN/(m/s) was read as 8.4 with Fx at 36x the references' RMS."""
-    return Explanation(expl.name, expl.variant, expl.parts + (("wind", {}, ("vx", "vy")),),
-                       expl.mean + (0.0, 0.0), expl.sd + (WIND_SD_MS, WIND_SD_MS),
-                       expl.replaces + ("wind",), expl.shift, expl.log_prior)
+    return dataclasses.replace(expl, parts=expl.parts + (("wind", {}, ("vx", "vy")),),
+                               mean=expl.mean + (0.0, 0.0),
+                               sd=expl.sd + (WIND_SD_MS, WIND_SD_MS),
+                               replaces=expl.replaces + ("wind",), coupled=True)
 
 
 def _make(name: str, values: dict):

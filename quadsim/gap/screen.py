@@ -38,7 +38,12 @@ the linear model was off; a second local optimum the step does not see is the re
 so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones
 (``scripts/gap_benchmark.py --per-flight-speed DATA --compare-full``) the verdicts were the
 same on all 26, but on one flight the full fit of ``cable_payload`` reaches an optimum the
-step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed);
+step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed). An
+explanation with a parameter that acts only through another's value (``coupled``: a
+propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
+references lack) has a zero column at the start, so its step cannot see what it reaches:
+it is always fitted (on RotorPy a 10 % thrust loss was cut as a propeller change and named
+``mass_offset``; fitted, the propeller change leads);
 tests/test_screen.py checks the verdicts on generated flights with known effects. The
 explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
 cap, so their evidence can exceed the full path's (by up to a few log units where that fit
@@ -322,20 +327,21 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
         rows.append(ev)
         starts.append(z1)
         weight.append(-np.inf if ev is None else ev.log_z)
-        # what a fit could reach: the screened evidence plus half the linear model's miss;
-        # a drag with the wind refitted (evidence._with_wind) always: at the references' zero
-        # drag the wind's column is zero, so the step cannot see what the pair reaches
-        always = "wind" in expl.replaces and expl.name != "wind"
-        reach.append(np.inf if ev is None or not np.isfinite(miss) or always
+        # what a fit could reach: the screened evidence plus half the linear model's miss
+        reach.append(np.inf if ev is None or not np.isfinite(miss)
                      else ev.log_z + 0.5 * miss)
     # most promising first: each refined fit can only raise the best weight, and with it
-    # the cut for those after it
+    # the cut for those after it. A coupled explanation's step cannot see what it reaches
+    # (a parameter acting only through another's value has a zero column at the start): it
+    # is always fitted, last, so that the cut of the others is the one their own order gives
     best = max(weight)
-    for k in sorted(range(len(explanations)), key=lambda k: -reach[k]):
+    order = sorted(range(len(explanations)),
+                   key=lambda k: (explanations[k].coupled, -reach[k]))
+    for k in order:
         expl = explanations[k]
         if expl is null or (rows[k] is not None and starts[k] is None):
             continue
-        if rows[k] is None or reach[k] >= best - SCREEN_CUT:
+        if rows[k] is None or expl.coupled or reach[k] >= best - SCREEN_CUT:
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
             rows[k] = None
             if starts[k] is not None:
