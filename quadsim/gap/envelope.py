@@ -258,7 +258,7 @@ def local_reference(reference, pos: Position | None):
     n = len(reference.names) or trend.n
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
-    from .calibrate import _bounds
+    from .fitting import _bounds
 
     lower, upper = _bounds(reference.candidate, reference.params)
     theta = np.clip(reference.theta + trend.slope * (pos.u - trend.u_w), lower, upper)
