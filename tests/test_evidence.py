@@ -204,3 +204,17 @@ def test_a_drag_against_references_without_one_refits_their_wind(cf):
     assert entry["verdict"] == "rotor_drag" and entry["probability"] > 0.9, entry["answer"]
     assert entry["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)
     assert entry["params"]["wind.vx"] == pytest.approx(1.5, abs=0.15)
+
+
+def test_a_payload_off_the_centre_is_a_mass_with_its_position(cf, reference):
+    """+6 g fixed 25 mm ahead of and 10 mm left of the CoM: the mass and where it sits (the
+    off-centre variant of mass_offset, fitted to convergence: its position acts only
+    through its mass)."""
+    payload = make_effect("mass_offset", mass=0.006, x=0.025, y=0.010)
+    entry = _judge(cf, reference, _shared() + [payload], seed=80)
+    assert entry["verdict"] == "mass_offset" and entry["probability"] > 0.9, entry["answer"]
+    lead = entry["posterior"][0]
+    assert lead["variant"] == "off the centre"
+    assert entry["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=0.0006)
+    assert entry["params"]["mass_offset.x"] == pytest.approx(0.025, abs=0.004)
+    assert entry["params"]["mass_offset.y"] == pytest.approx(0.010, abs=0.004)

@@ -128,6 +128,8 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams,
                          f"({value:.3g} N s/rad per rotor)")
         elif key.startswith("com_offset."):
             parts.append(f"CoM {key[-1]} {_pm(value, c, 1e3)} mm")
+        elif key in ("mass_offset.x", "mass_offset.y", "mass_offset.z"):
+            parts.append(f"sitting at body {key[-1]} {_pm(value, c, 1e3)} mm")
         else:
             parts.append(_worded(key, value, c, params))
     return ", ".join(parts) if parts else name

@@ -121,6 +121,8 @@ def _prior_sd(params) -> dict:
     hover_thrust = params.thrust_factor * hover_speed(params)   # N per rad/s at hover
     return {
         "mass_offset.mass": _range_sd(-0.05, 0.6) * mass,      # priors: payload to 60 %
+        # a payload fixed anywhere within the rotors' span
+        "mass_offset.x": _range_sd(-1.0, 1.0) * arm, "mass_offset.y": _range_sd(-1.0, 1.0) * arm,
         "com_offset.x": _range_sd(-0.15, 0.15) * arm, "com_offset.y": _range_sd(-0.15, 0.15) * arm,
         "thrust_mismatch": _range_sd(-0.2, 0.1),
         "thrust_factor.change": _range_sd(-0.15, 0.05),
@@ -221,7 +223,15 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         spread = [np.hypot(s_ref[k], sd.get(k, sd.get(group))) for k in keys]
         out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
                         replaces=(group,)))
-    one = [("mass_offset", ("mass",)), ("com_offset", ("x", "y")),
+    # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
+    # the position acts only through the mass, so the fit is coupled); the two variants
+    # share the effect's prior
+    for variant, fitted in (("", ("mass",)), ("off the centre", ("mass", "x", "y"))):
+        keys = [f"mass_offset.{p}" for p in fitted]
+        out.append(_one("mass_offset", variant, [("mass_offset", {}, fitted)],
+                        [0.0] * len(keys), [sd[k] for k in keys], log_prior=-np.log(2.0),
+                        coupled=len(fitted) > 1))
+    one = [("com_offset", ("x", "y")),
            ("thrust_curve", ("linear",)), ("ground_effect", ("gain",)),
            ("body_drag", ("cd_area", "cd_area_vertical"))]
     for name, fitted in one:
@@ -332,8 +342,10 @@ def _bounds(expl: Explanation, reference: Reference, dt: float):
             lo, hi = specs[p].lower, specs[p].upper
             if name == "motor_lag":
                 lo = max(lo, dt / 4)      # fitting.fit_candidate: the Heun sub-step
-            if name == "mass_offset":
+            if name == "mass_offset" and p == "mass":
                 lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
+            elif name == "mass_offset":         # a payload within the rotors' span
+                lo, hi = max(lo, -_arm(reference.params)), min(hi, _arm(reference.params))
             if name == "com_offset":
                 arm = _arm(reference.params)
                 lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
