@@ -167,6 +167,7 @@ class Explanation:
     #: True: a parameter acts only through another one's value (a propeller's speed exponent
     #: through its change; a refitted wind through the drag), so the screen's linear step at
     #: the prior centre cannot see what the explanation reaches: always fitted to convergence
+    #: (:mod:`.screen`)
     coupled: bool = False
 
     @property
@@ -290,8 +291,8 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
     flight's own it becomes a spurious steady force (marginalised by the Jacobian at their
     zero drag, it cannot be moved). The references' value means nothing then (3 synthetic
     references without drag in a 1.5 m/s wind left it at 5.6 m/s), so the prior is centred
-    on calm air. Such a reading is always fitted to convergence
-    (:func:`quadsim.gap.screen.screened`: its linear step cannot move the wind). Measured on RotorPy references flown without rotor drag: their
+    on calm air. Such a reading is ``coupled`` (always fitted to convergence: the screen's
+    linear step cannot move the wind). Measured on RotorPy references flown without rotor drag: their
     wind sat at 0.6 m/s (set through a vertical drag of 1 cm^2), and a flight with rotor drag
     15 mN/(m/s) was read as 8.4 with Fx at 36x the references' RMS."""
     return dataclasses.replace(expl, parts=expl.parts + (("wind", {}, ("vx", "vy")),),

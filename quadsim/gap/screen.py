@@ -42,8 +42,9 @@ step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed)
 explanation with a parameter that acts only through another's value (``coupled``: a
 propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
 references lack) has a zero column at the start, so its step cannot see what it reaches:
-it is always fitted (on RotorPy a 10 % thrust loss was cut as a propeller change and named
-``mass_offset``; fitted, the propeller change leads);
+it is always fitted, after the others (on RotorPy a 10 % thrust loss was cut as a
+propeller change and named ``mass_offset``; a second linear step was not enough: the wind
+refitted through a drag needs the fit's iterations);
 tests/test_screen.py checks the verdicts on generated flights with known effects. The
 explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
 cap, so their evidence can exceed the full path's (by up to a few log units where that fit
@@ -77,11 +78,11 @@ MAX_STEPS = 8
 CONVERGED = 0.02
 
 
-#: spacing (s) of the rotor-delay grid the fits start from (:func:`delay_starts`): below a
-#: third of the spacing of the timing likelihood's local optima (measured: ~7 ms on PyFlyt's
-#: 240 Hz motors with their per-step noise, where fits started at zero stopped 7 ms from the
-#: best), so each optimum's basin holds a grid point; the fit then converges within it.
-DELAY_GRID_S = 0.002
+#: spacing (s) of the rotor-delay grid the fits start from (:func:`delay_starts`): below half
+#: the spacing of the timing likelihood's local optima (measured: ~7 ms on PyFlyt's 240 Hz
+#: motors with their per-step noise, where fits started at zero stopped 7 ms from the best),
+#: so each optimum's basin holds a grid point; the fit then converges within it.
+DELAY_GRID_S = 0.003
 #: the grid reaches this many of the shared delay's prior spreads either side of zero and of
 #: the cross-correlation estimate (99.7 % of the prior's mass)
 DELAY_GRID_SDS = 3.0
@@ -104,9 +105,10 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     best shared delay 4.6 ms from the references', well inside its prior). The profiled cost
     |aug|^2 + |du|^2 is the same for both priors at one delay: one residual per grid point."""
     sd, lo, hi = float(null.sd[-1]), float(null.lower[-1]), float(null.upper[-1])
-    steps = np.arange(-DELAY_GRID_SDS * sd, DELAY_GRID_SDS * sd + 0.5 * DELAY_GRID_S,
-                      DELAY_GRID_S)
-    grid = np.unique(np.clip(np.concatenate([steps, hint_s + steps, [0.0, hint_s]]),
+    reach = DELAY_GRID_SDS * sd
+    steps = np.arange(-reach, reach + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
+    about_hint = hint_s + steps if abs(hint_s) > reach else []    # else inside already
+    grid = np.unique(np.clip(np.concatenate([steps, about_hint, [0.0, hint_s]]),
                              lo + 1e-9, hi - 1e-9))
     cost = np.empty(len(grid))
     for k, d in enumerate(grid):
