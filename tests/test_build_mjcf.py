@@ -17,11 +17,6 @@ from quadsim.vehicle.params import hover_speed
 from quadsim.vehicle.rotors import allocation_matrix, mixer
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_build_mjcf")
-
-
 @pytest.fixture(scope="module")
 def testbed(tmp_path_factory):
     out = tmp_path_factory.mktemp("models") / "testbed.xml"

@@ -19,11 +19,6 @@ from quadsim.vehicle.params import hover_speed, load_params
 THRUST_LIKE = ["mass_offset", "thrust_curve", "thrust_factor"]
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_consistency")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

@@ -30,11 +30,6 @@ from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import inertia_problems, load_params
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_fast_paths")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

@@ -19,11 +19,6 @@ from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_gap")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

@@ -81,11 +81,6 @@ def test_slow_part_is_the_moving_average():
     assert int(round(NOISE_WINDOW_S / DT)) | 1 == 51
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_heldout")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

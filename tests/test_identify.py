@@ -30,11 +30,6 @@ needs_stand = pytest.mark.skipif(not STAND_10IN.is_file(),
                                  reason="../shared/data/thrust_stand (real 10-inch sweep) absent")
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_identify")
-
-
 @pytest.fixture(scope="module")
 def ident():
     return identify_testbed()

@@ -12,11 +12,6 @@ from quadsim.identify.paramsets import render_computational, render_physical
 from quadsim.vehicle.params import MODELS_DIR, hover_speed, load_params
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_identify_params")
-
-
 @pytest.fixture(scope="module")
 def ident():
     return identify_testbed()

@@ -14,11 +14,6 @@ from quadsim.sim.mujoco_engine import compile_model, default_timestep
 from quadsim.vehicle.params import load_params
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_mujoco_engine")
-
-
 @pytest.fixture(scope="module")
 def physical():
     return load_params("physical")

@@ -32,11 +32,6 @@ def skeleton_text(text: str = CF, *, drop=("thrust_factor", "drag_factor", "max_
     return out + "\n"
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_own_vehicle")
-
-
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
     from quadsim.gap.synthetic import synthetic_flight

@@ -16,11 +16,6 @@ from quadsim.vehicle.params import load_params
 CHANNELS = ["Fx", "Fy", "Fz", "Mx", "My", "Mz"]
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_per_flight")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

@@ -21,11 +21,6 @@ from quadsim.vehicle.params import load_params
 EDGE = 60  # samples at each end where the filter runs on a partial window
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_residual")
-
-
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

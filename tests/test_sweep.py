@@ -22,11 +22,6 @@ from quadsim.sweep.__main__ import main
 from quadsim.vehicle.params import load_params
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_sweep")
-
-
 @pytest.fixture(scope="module")
 def physical():
     return load_params("physical")

@@ -61,11 +61,6 @@ def synthetic(params, *, n=201, dt=0.01, offset=(0.0, 0.0, 0.0), yaw_rate=0.3,
                       np.zeros((n, 3)), speed, speed + 1.0, engine=engine)
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_viewer")
-
-
 @pytest.fixture(scope="module")
 def params():
     return load_params("physical")

@@ -19,11 +19,6 @@ REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data" / "crazyflie21_brushless" / "nominal"
 
 
-#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
-#: fixtures are built once, not once per worker
-pytestmark = pytest.mark.xdist_group("test_viewer_cli")
-
-
 @pytest.fixture(scope="module")
 def step_recording(tmp_path_factory):
     path = tmp_path_factory.mktemp("view") / "step.rrd"
