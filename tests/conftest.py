@@ -35,6 +35,9 @@ def pytest_configure(config):
     # without pytest-xdist the marks would be unknown marks
     config.addinivalue_line("markers", "xdist_group(name): run these tests on one worker "
                             "(pytest-xdist --dist loadgroup)")
+    worker = getattr(config, "workerinput", None)
+    if worker and worker.get("quadsim_dist") == "loadgroup":
+        config.option.loadgroup = True      # read by the worker's collection (see below)
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -56,3 +59,11 @@ def pytest_cmdline_main(config):
 
     for key, value in SINGLE_THREAD_ENV.items():    # inherited by the workers at their start
         os.environ.setdefault(key, value)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """Tell each worker the --dist mode: a worker parses the original command line again, so
+    a mode set above is unknown to it, and only a worker that knows of loadgroup puts the
+    group into its tests' ids (which is how the scheduler sees the groups)."""
+    node.workerinput["quadsim_dist"] = node.config.option.dist
