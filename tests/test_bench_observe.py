@@ -17,6 +17,11 @@ from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_bench_observe")
+
+
 @pytest.fixture(scope="module")
 def observed():
     """Crazyflie, exact generated flights (sensor noise only) against 4 nominal ones: a +10 %

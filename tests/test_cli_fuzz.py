@@ -34,6 +34,11 @@ SEED = 14
 NUMBERS = ["-1", "0", "-0.1", "nan", "inf", "-inf", "1e308", "abc", "", "0.2", "1", "1e-9"]
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_cli_fuzz")
+
+
 @pytest.fixture(scope="module")
 def pool(tmp_path_factory):
     """Files for the fuzzer: good logs, corrupted logs, bad models, outputs."""

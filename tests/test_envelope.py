@@ -115,6 +115,11 @@ def test_references_that_do_not_spread_give_no_trend():
     assert pos.distance > 0 and "do not spread enough" in pos.text
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_envelope")
+
+
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

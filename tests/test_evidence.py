@@ -28,6 +28,11 @@ def _shared(**kw):
     return shared_effects(**kw)
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_evidence")
+
+
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")
@@ -109,8 +114,8 @@ def test_a_batch_with_one_bad_flight_refuses_it_and_judges_the_others(cf, tmp_pa
     from quadsim.gap.__main__ import main
     from quadsim.logs.flightlog import write_log
 
-    refs = [str(write_log(tmp_path / f"r{s}.csv", synthetic_flight(cf, [], duration=3.0,
-                                                                   seed=s))) for s in (60, 61)]
+    ref_logs = [synthetic_flight(cf, [], duration=3.0, seed=s) for s in (60, 61)]
+    refs = [str(write_log(tmp_path / f"r{k}.csv", log)) for k, log in zip((60, 61), ref_logs)]
     good = synthetic_flight(cf, [make_effect("mass_offset", mass=0.006)], duration=3.0, seed=62)
     bad = FlightLog(good.t, good.position, good.quat, good.velocity, good.body_rate,
                     good.accel / 9.81, good.rotor_speed, good.rotor_command, good.vbat)
@@ -136,9 +141,7 @@ def test_a_batch_with_one_bad_flight_refuses_it_and_judges_the_others(cf, tmp_pa
                       good.accel, good.rotor_speed[:, :3])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
-        result = diagnose_per_flight([good, three], [synthetic_flight(cf, [], duration=3.0,
-                                                                      seed=s) for s in (60, 61)],
-                                     cf, effects=["mass_offset"])
+        result = diagnose_per_flight([good, three], ref_logs, cf, effects=["mass_offset"])
     validate(json.loads(to_json(result)))
     assert [f["outcome"] for f in result["flights"]] == ["effect", "refused"]
     assert "3 rotors in the log" in result["flights"][1]["reason"]

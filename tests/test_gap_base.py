@@ -17,6 +17,11 @@ DRAG = ("rotor_drag", {"coefficient": 1e-6})
 MASS = ("mass_offset", {"mass": 0.004})
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_gap_base")
+
+
 @pytest.fixture(scope="module")
 def flights():
     cf = load_params("crazyflie21")

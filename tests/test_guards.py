@@ -39,6 +39,11 @@ def _files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*") if p.is_file())
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_guards")
+
+
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
     """Three gentle 3 s Crazyflie figure-8 flights (gyro noise 0.01 rad/s)."""

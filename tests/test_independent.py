@@ -77,6 +77,11 @@ def test_pipeline_without_noise_or_delay_recovers_specific_force():
     np.testing.assert_allclose(log.rotor_speed, truth.rotor_speed, atol=1e-6)
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_independent")
+
+
 @pytest.fixture(scope="module")
 def per_flight():
     """Per-flight verdicts of a no-effect and a +10 % mass RotorPy flight (Crazyflie), and of

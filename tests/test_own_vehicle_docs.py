@@ -31,6 +31,11 @@ def test_page_commands_are_quadsim_commands_or_setup():
         assert c.startswith(("python -m quadsim.", "D=", "OUT=", "mkdir ")), c
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_own_vehicle_docs")
+
+
 @pytest.fixture(scope="module")
 def ran(tmp_path_factory):
     if not DATA.is_dir():

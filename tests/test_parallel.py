@@ -22,6 +22,11 @@ from _parallel_tasks import die_on_three as _die_on_three
 from _parallel_tasks import square_noise as _square_noise
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_parallel")
+
+
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray", reason="Ray is the optional [ray] extra")

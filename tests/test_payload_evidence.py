@@ -34,6 +34,11 @@ REFERENCE_PATHS = (("figure8", 1.0), ("figure8", 1.5), ("steps", 1.0), ("lissajo
 DURATION = 5.0
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_payload_evidence")
+
+
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

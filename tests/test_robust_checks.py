@@ -34,6 +34,11 @@ def _flight(speed: float, seed: int = 0, **noise):
     return log
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_robust_checks")
+
+
 @pytest.fixture(scope="module")
 def gentle():
     """The issue's flight: the pooled torque share left 4.6 % (right order) vs 7.5 % (1<->2)."""

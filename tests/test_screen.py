@@ -34,6 +34,11 @@ def _shared(**kw):
     return shared_effects(**kw)
 
 
+#: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
+#: fixtures are built once, not once per worker
+pytestmark = pytest.mark.xdist_group("test_screen")
+
+
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")
