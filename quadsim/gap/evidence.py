@@ -169,6 +169,11 @@ class Explanation:
     #: the prior centre cannot see what the explanation reaches: always fitted to convergence
     #: (:mod:`.screen`)
     coupled: bool = False
+    #: for a coupled explanation: the readings it extends or mimics (a payload off the centre:
+    #: the centred mass and a CoM shift; a propeller change: a mass). It is fitted only when
+    #: one of them, or its own screened reach, can matter (:func:`quadsim.gap.screen.screened`);
+    #: empty: always fitted
+    kin: tuple = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -231,7 +236,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         keys = [f"mass_offset.{p}" for p in fitted]
         out.append(_one("mass_offset", variant, [("mass_offset", {}, fitted)],
                         [0.0] * len(keys), [sd[k] for k in keys], log_prior=-np.log(2.0),
-                        coupled=len(fitted) > 1))
+                        coupled=len(fitted) > 1,
+                        kin=("mass_offset", "com_offset", "thrust_curve") if len(fitted) > 1 else ()))
     one = [("com_offset", ("x", "y")),
            ("thrust_curve", ("linear",)), ("ground_effect", ("gain",)),
            ("body_drag", ("cd_area", "cd_area_vertical"))]
@@ -243,7 +249,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
                     [0.0, 0.2][:len(change)],
                     [sd["thrust_factor.change"], sd["thrust_factor.alpha"]][:len(change)],
-                    coupled=len(change) > 1))
+                    coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
     rotors = params.rotor_count
     for k in range(rotors):
         out.append(_one("thrust_mismatch", f"rotor {k + 1}",

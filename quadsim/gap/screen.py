@@ -42,9 +42,12 @@ step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed)
 explanation with a parameter that acts only through another's value (``coupled``: a
 propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
 references lack) has a zero column at the start, so its step cannot see what it reaches:
-it is always fitted, after the others (on RotorPy a 10 % thrust loss was cut as a
-propeller change and named ``mass_offset``; a second linear step was not enough: the wind
-refitted through a drag needs the fit's iterations);
+it is fitted after the others (on RotorPy a 10 % thrust loss was cut as a propeller change
+and named ``mass_offset``; a second linear step was not enough: the wind refitted through a
+drag needs the fit's iterations): always, or, when it names the readings it extends or
+mimics (``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
+propeller change, a mass or a thrust curve), when one of them lies within the cut of the
+best weight before any coupled fit (5 % of the per-flight CPU on the real mixed flights);
 tests/test_screen.py checks the verdicts on generated flights with known effects. The
 explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
 cap, so their evidence can exceed the full path's (by up to a few log units where that fit
@@ -279,6 +282,23 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
     return prob.evidence(z, vec, a.T @ a, active, names_all, s_all)
 
 
+def _kin_matters(expl, explanations: list, rows: list, reach: list, best: float) -> bool:
+    """Whether a coupled explanation is fitted: always without ``kin``; else when one of the
+    readings it extends or mimics (their refined evidence, or their screened reach) lies
+    within :data:`SCREEN_CUT` of the best. Why it is safe: a payload off the centre moves
+    what a centred mass and a CoM shift move, and its position acts only through its mass;
+    a propeller change moves the vertical force as a mass or a thrust curve does: where
+    none of those can matter, neither can it."""
+    if not expl.kin:
+        return True
+    for j, other in enumerate(explanations):
+        if other.name in expl.kin and not other.coupled and rows[j] is not None:
+            value = reach[j] if rows[j].screened else rows[j].log_z   # refined: exact
+            if value >= best - SCREEN_CUT:
+                return True
+    return False
+
+
 def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
              names_all: list[str], s_all: np.ndarray, starts_s: tuple = (0.0, 0.0), *,
              problem, fit_one, residual, memo: dict | None = None) -> list:
@@ -339,11 +359,15 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
     best = max(weight)
     order = sorted(range(len(explanations)),
                    key=lambda k: (explanations[k].coupled, -reach[k]))
+    before = None        # the best weight before any coupled fit: their kin are judged by it
     for k in order:
         expl = explanations[k]
         if expl is null or (rows[k] is not None and starts[k] is None):
             continue
-        if rows[k] is None or expl.coupled or reach[k] >= best - SCREEN_CUT:
+        if expl.coupled and before is None:
+            before = best
+        if rows[k] is None or reach[k] >= best - SCREEN_CUT or (
+                expl.coupled and _kin_matters(expl, explanations, rows, reach, before)):
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
             rows[k] = None
             if starts[k] is not None:
