@@ -424,6 +424,9 @@ def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, period
         kernel.advance(commands, omega, 0, substeps, dt, control_period, ends, status)
     else:
         commands = np.empty((batch, periods, rotors))
+        # one period's end states in a C-contiguous buffer: a slice ends[:, k:k + 1] is not,
+        # and numba would compile the kernel a second time for that layout (~15 s, cold cache)
+        step = np.empty((batch, 1, ends.shape[2]))
         state = first
         for k in range(periods):
             if k:
@@ -437,7 +440,8 @@ def _drive(kernel, command_fn, first, ends, omega, status, batch, rotors, period
                          "body_rate": row[:, 10:13], "rotor_speed": row[:, 13:].copy()}
             commands[:, k] = command_fn(k, state)
             kernel.advance(commands[:, k:k + 1], omega, k, substeps, dt, control_period,
-                           ends[:, k:k + 1], status)
+                           step, status)
+            ends[:, k] = step[:, 0]
     return commands
 
 
