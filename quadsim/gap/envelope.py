@@ -74,6 +74,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .fitting import _bounds
+
 __all__ = ["COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope", "Position",
            "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend", "position", "local_reference"]
 
@@ -258,8 +260,6 @@ def local_reference(reference, pos: Position | None):
     n = len(reference.names) or trend.n
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
-    from .fitting import _bounds
-
     lower, upper = _bounds(reference.candidate, reference.params)
     theta = np.clip(reference.theta + trend.slope * (pos.u - trend.u_w), lower, upper)
     scatter = np.sqrt(scatter ** 2 + trend.slope_var * (pos.u - trend.u_w) ** 2)

@@ -165,14 +165,14 @@ class Explanation:
     shift: str | None = None
     log_prior: float = 0.0
     #: True: a parameter acts only through another one's value (a propeller's speed exponent
-    #: through its change; a refitted wind through the drag), so the screen's linear step at
-    #: the prior centre cannot see what the explanation reaches: always fitted to convergence
-    #: (:mod:`.screen`)
+    #: through its change; a refitted wind through the drag; a payload's position through its
+    #: mass), so the screen's linear step at the prior centre cannot see what the explanation
+    #: reaches: it is fitted to convergence after the others (:mod:`.screen`)
     coupled: bool = False
     #: for a coupled explanation: the readings it extends or mimics (a payload off the centre:
-    #: the centred mass and a CoM shift; a propeller change: a mass). It is fitted only when
-    #: one of them, or its own screened reach, can matter (:func:`quadsim.gap.screen.screened`);
-    #: empty: always fitted
+    #: the centred mass, a CoM shift, a thrust curve; a propeller change: a mass, a thrust
+    #: curve). It is fitted when one of them, or its own screened reach, can matter
+    #: (:func:`quadsim.gap.screen.screened`); empty: always fitted
     kin: tuple = ()
 
     @property
@@ -232,12 +232,13 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
     # the position acts only through the mass, so the fit is coupled); the two variants
     # share the effect's prior
+    payload_kin = ("mass_offset", "com_offset", "thrust_curve")
     for variant, fitted in (("", ("mass",)), ("off the centre", ("mass", "x", "y"))):
         keys = [f"mass_offset.{p}" for p in fitted]
+        off = len(fitted) > 1
         out.append(_one("mass_offset", variant, [("mass_offset", {}, fitted)],
                         [0.0] * len(keys), [sd[k] for k in keys], log_prior=-np.log(2.0),
-                        coupled=len(fitted) > 1,
-                        kin=("mass_offset", "com_offset", "thrust_curve") if len(fitted) > 1 else ()))
+                        coupled=off, kin=payload_kin if off else ()))
     one = [("com_offset", ("x", "y")),
            ("thrust_curve", ("linear",)), ("ground_effect", ("gain",)),
            ("body_drag", ("cd_area", "cd_area_vertical"))]
@@ -297,10 +298,10 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
     flight's own it becomes a spurious steady force (marginalised by the Jacobian at their
     zero drag, it cannot be moved). The references' value means nothing then (3 synthetic
     references without drag in a 1.5 m/s wind left it at 5.6 m/s), so the prior is centred
-    on calm air. Such a reading is ``coupled`` (always fitted to convergence: the screen's
-    linear step cannot move the wind). Measured on RotorPy references flown without rotor drag: their
-    wind sat at 0.6 m/s (set through a vertical drag of 1 cm^2), and a flight with rotor drag
-    15 mN/(m/s) was read as 8.4 with Fx at 36x the references' RMS."""
+    on calm air. Such a reading is ``coupled`` and always fitted to convergence (the screen's
+    linear step cannot move the wind). Measured on RotorPy references flown without rotor
+    drag: their wind sat at 0.6 m/s (set through a vertical drag of 1 cm^2), and a flight with
+    rotor drag 15 mN/(m/s) was read as 8.4 with Fx at 36x the references' RMS."""
     return dataclasses.replace(expl, parts=expl.parts + (("wind", {}, ("vx", "vy")),),
                                mean=expl.mean + (0.0, 0.0),
                                sd=expl.sd + (WIND_SD_MS, WIND_SD_MS),
