@@ -4,7 +4,9 @@ rotor drag; numbers checked against the truth with stated tolerances."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import types
 import warnings
 
 import numpy as np
@@ -13,9 +15,9 @@ import pytest
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight, to_json, validate
-from quadsim.gap.calibrate import calibrate
+from quadsim.gap.calibrate import VBAT_TESTED, calibrate, voltage_spread
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Propeller
+from quadsim.gap.evidence import Propeller, marginal_sd
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
@@ -221,3 +223,55 @@ def test_a_payload_off_the_centre_is_a_mass_with_its_position(cf, reference):
     assert entry["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=0.0006)
     assert entry["params"]["mass_offset.x"] == pytest.approx(0.025, abs=0.004)
     assert entry["params"]["mass_offset.y"] == pytest.approx(0.010, abs=0.004)
+
+
+def test_a_shared_spread_is_never_wider_than_the_physical_prior(reference):
+    """marginal_sd adds precisions: (s_ref^-2 + w^-2)^-1/2 with w the prior spread of a
+    difference (inertia: 0.5); a value the references fix keeps its spread."""
+    names = list(reference.candidate.parameter_names)
+    k, lag = names.index("inertia_error.xx"), names.index("motor_lag.time_constant")
+    wide = dataclasses.replace(reference, scatter=reference.scatter.copy())
+    wide.scatter[k] = 1.6
+    s = marginal_sd(wide)
+    s_ref = float(np.hypot(wide.se_pool[k], 1.6))
+    assert s[k] == pytest.approx((s_ref ** -2 + 0.5 ** -2) ** -0.5, rel=1e-12)
+    assert s[k] < 0.5
+    assert s[lag] == pytest.approx(wide.s_ref[lag], rel=5e-3)   # 1.8 ms against 30 ms
+
+
+def _steady_voltage(log: FlightLog, volts: float) -> FlightLog:
+    return dataclasses.replace(log, vbat=np.full(len(log.t), volts))
+
+
+def test_a_sag_against_references_at_a_steady_voltage_is_named(cf):
+    """References that log a steady 4.2 V do not test "speed ~ vbat / V_full"
+    (calibrate.VBAT_TESTED): the model takes the motor map's gain, and a flight whose battery
+    falls (10 % thrust in 10 s: 4.2 -> 4.0 V) is named battery_sag with V_full ~ 4.2 V.
+    References whose voltage varies test the law: the same flight is followed, no gap."""
+    logs = [_steady_voltage(synthetic_flight(cf, _shared(), duration=4.0, seed=s,
+                                             speed=0.8 + 0.2 * s), 4.2) for s in range(3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        steady = calibrate(prepare(logs, cf), cf)
+    assert steady.vbat_ref == pytest.approx(4.2, abs=1e-9)
+    assert "battery_sag.full_voltage" not in steady.candidate.parameter_names
+    sag = make_effect("battery_sag", rate=0.01, full_voltage=4.2)
+    entry = _judge(cf, steady, _shared() + [sag], seed=100)
+    assert entry["verdict"] == "battery_sag" and entry["probability"] > 0.9, entry["answer"]
+    assert entry["params"]["battery_sag.full_voltage"] == pytest.approx(4.2, abs=0.05)
+    nominal = judge_one(_steady_voltage(synthetic_flight(cf, _shared(), duration=5.0,
+                                                         seed=101), 4.2), steady)
+    assert nominal["outcome"] == "no_significant_gap", nominal["answer"]
+
+
+def test_voltage_spread_averages_out_the_log_noise():
+    """voltage_spread: quarter means, so white noise of 0.01 V on a steady 4.2 V is < 0.1 %,
+    and a fall of 0.15 V over a flight is 0.15 * 3/4 / 4.125 of the mean."""
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 8.0, 4001)
+    flat = types.SimpleNamespace(vbat=4.2 + 0.01 * rng.standard_normal(t.size))
+    falling = types.SimpleNamespace(vbat=4.2 - 0.15 * t / 8.0)
+    mean, spread = voltage_spread([flat])
+    assert mean == pytest.approx(4.2, abs=1e-3) and spread < 1e-3 < VBAT_TESTED
+    mean, spread = voltage_spread([falling])
+    assert spread == pytest.approx(0.15 * 0.75 / 4.125, rel=2e-3) and spread > VBAT_TESTED

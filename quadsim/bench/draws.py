@@ -18,6 +18,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..effects import make_effect
+from ..effects.battery_sag import nominal_voltage
 from ..vehicle.params import VehicleParams, hover_speed
 from .outside import BladeFlapping, TranslationalLift
 
@@ -65,7 +66,7 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
                             else rng.uniform(0.02, 0.05))]
     if name == "battery_sag":
         return [make_effect(name, rate=rng.uniform(0.005, 0.02),
-                            full_voltage=4.2 if small else 12.6)]
+                            full_voltage=nominal_voltage(params))]
     if name == "ground_effect":
         return [make_effect(name, gain=rng.uniform(1.0, 2.0))]
     if name == "rotor_drag":

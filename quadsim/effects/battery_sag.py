@@ -20,6 +20,9 @@ fast response :data:`quadsim.effects.base.SPEED_RESPONSE_S`.
 :meth:`BatterySag.voltage` gives the matching voltage ``full_voltage * sqrt(scale)`` for
 flight logs.
 
+:func:`nominal_voltage` is the full voltage a vehicle's battery has when no effect says
+otherwise (what a generated log records for a nominal flight).
+
 Example: ``make_effect("battery_sag", rate=0.005, full_voltage=4.2)`` loses 10 % thrust (5 %
 speed) at a fixed command in 20 s (Crazyflie 1S: 4.2 V -> 3.98 V).
 """
@@ -30,9 +33,21 @@ import numpy as np
 
 from .base import EffectBase, EffectParameter
 
-__all__ = ["MIN_SCALE", "BatterySag"]
+__all__ = ["MIN_SCALE", "BatterySag", "CELL_VOLTAGE", "nominal_voltage"]
 
 MIN_SCALE = 0.5
+
+#: a charged LiPo cell (V)
+CELL_VOLTAGE = 4.2
+#: vehicles lighter than this (kg) fly on one cell
+ONE_CELL_BELOW_KG = 0.1
+
+
+def nominal_voltage(params) -> float:
+    """Full battery voltage (V) of a vehicle: one LiPo cell below 100 g (Crazyflie 2.1: a 1S
+    250 mAh pack, Bitcraze), three above (the 0.84 kg testbed's Turnigy D2830-11 1000 kV
+    motors are sized for 3S; the report does not name its pack, so this is an assumption)."""
+    return CELL_VOLTAGE * (1 if params.mass < ONE_CELL_BELOW_KG else 3)
 
 
 class BatterySag(EffectBase):

@@ -13,7 +13,8 @@ Likelihood (all channels, the references' noise model)::
 (r_c the residual of channel c, sigma_c its RMS and tau_c its correlation time on the
 reference flights: N / tau_c effective samples, so a long flight with correlated residuals
 does not out-vote physics). The shared parameters theta_s are not fixed: every explanation
-carries them with the references' prior N(theta_ref, s_ref^2), marginalised in closed form
+carries them with the references' prior N(theta_ref, s_ref^2) (s_ref tempered by the
+physical prior of a difference, :func:`marginal_sd`), marginalised in closed form
 around theta_ref (linear in theta_s, Jacobian J_s of the weighted residual): with
 u = (theta_s - theta_ref) / s_ref, Ĵ = J_s diag(s_ref) and A = I + ĴᵀĴ the profile is
 ``|r + Ĵ du|^2 + |du|^2`` at ``du = -A^-1 Ĵᵀ r`` and the marginal adds ``-1/2 log det A``.
@@ -78,14 +79,41 @@ from .memo import _memo
 from .priors import WIND_SD_MS, momentum_rate_damping
 from .screen import delay_starts, screened
 
-__all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate",
+__all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate", "marginal_sd",
            "DETERMINED", "DELAY_SD_S", "shifted"]
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
 DETERMINED = 0.5
+#: prior spread of a flight's V_full against the references' mean voltage (fraction): a
+#: battery's charge state, +-10 % (as ``battery_sag.full_voltage``, :func:`_prior_sd`)
+VBAT_SD = 0.1
+
 #: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
 #: (:data:`quadsim.logs.delays.MAX_LAG_S` searches 100 ms).
 DELAY_SD_S = 0.02
+
+
+def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
+    """The spread of the shared parameters in every explanation's prior (module doc): the
+    references' ``s_ref``, combined with the physical prior spread of a difference
+    (:func:`_prior_sd`) where the parameter has one, by adding precisions:
+    ``(s_ref^-2 + w^-2)^-1/2``.
+
+    Why: what a nominal flight may show is never wider than what physics lets a real
+    difference be. The references' between-flight scatter of a value their data do not fix
+    had no such limit: on the sensor-pipeline testbed (ESC telemetry low-passed, so the
+    rotor torque is noisier than the motion) the roll/pitch inertia sat at its bound, +200 %,
+    with a scatter of 160 %; the linear marginal then moved it 3 spreads, the model's torque
+    vanished, and a 5 mm CoM offset's 13 mN m steady torque was judged "no difference" (83 %).
+    With the prior's 50 % the offset is read as 3.9 and 3.6 mm (truth 4.0, 4.8). A parameter
+    the references fix (s_ref << w) keeps its spread."""
+    sd = _prior_sd(reference.params) if sd is None else sd
+    out = np.array(reference.s_ref, dtype=float)
+    for k, name in enumerate(reference.candidate.parameter_names):
+        w = sd.get(name, sd.get(name.split(".")[0]))
+        if w is not None and out[k] > 0:
+            out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
+    return out
 
 
 def reference_delay_sd(reference: Reference) -> float:
@@ -225,7 +253,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         if group == "nominal_refit" or group not in groups:
             continue
         keys = [f"{group}.{p}" for p in fitted]
-        s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
+        s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
         spread = [np.hypot(s_ref[k], sd.get(k, sd.get(group))) for k in keys]
         out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
                         replaces=(group,)))
@@ -262,9 +290,17 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
     out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)],
                     *cable.prior(params)))
-    if reference.rotor and "battery_sag" not in groups:   # no voltage log: a sag rate
-        out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
-                        [sd["battery_sag.rate"]]))
+    if reference.rotor and "battery_sag" not in groups:
+        volts = getattr(states, "vbat", None)
+        if reference.vbat_ref and volts is not None and np.all(np.isfinite(volts)):
+            # the speed per command follows this flight's voltage (vbat / V_full), a law
+            # the references' steady voltage did not test (calibrate.VBAT_TESTED); V_full
+            # about their voltage, +-10 % (charge state, as battery_sag.full_voltage)
+            out.append(_one("battery_sag", "", [("battery_sag", {}, ("full_voltage",))],
+                            [reference.vbat_ref], [VBAT_SD * reference.vbat_ref]))
+        else:                                               # no voltage log: a sag rate
+            out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
+                            [sd["battery_sag.rate"]]))
     if delay:
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
@@ -400,6 +436,7 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
     names = list(reference.candidate.parameter_names)
+    s_all = marginal_sd(reference)
     memo: dict = {}         # residual parts shared by the evaluations on this flight
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects,
                    memo=memo)
@@ -407,13 +444,13 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
     wide = next((e for e in explanations if e.name == "signal_delay"), None)
     if null is not None:
-        starts = delay_starts(Problem(states, reference, null, jac, reference.s_ref, memo),
+        starts = delay_starts(Problem(states, reference, null, jac, s_all, memo),
                               float(wide.sd[-1]) if wide is not None else 0.0, start_delay_s)
     if not full:
-        return screened(states, reference, explanations, jac, names, reference.s_ref,
+        return screened(states, reference, explanations, jac, names, s_all,
                         starts, problem=Problem, fit_one=_fit_one,
                         residual=flight_residual, memo=memo)
-    return [_fit_one(states, reference, e, jac, reference.s_ref, names,
+    return [_fit_one(states, reference, e, jac, s_all, names,
                      starts[1] if e.name == "signal_delay" else starts[0])
             for e in explanations]
 

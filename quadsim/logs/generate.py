@@ -10,7 +10,8 @@ Same inputs -> same bytes. The command ``python -m quadsim.fly`` is its CLI.
 
 Logged signals: position, velocity, attitude, body rate, rotor speeds (actual), commands
 (``cmd_i = commanded speed / max_speed``, normalised 0-1), battery voltage (from
-``battery_sag`` if present, else its full voltage, constant) and the accelerometer's specific
+``battery_sag`` if present, else the vehicle's full voltage,
+:func:`quadsim.effects.battery_sag.nominal_voltage`, constant) and the accelerometer's specific
 force in the body frame at the body origin, ``R^T (a + g e3)`` (about +g on z at rest),
 computed exactly from the Newton-Euler forces (rotors + effects) at each sample.
 
@@ -30,7 +31,7 @@ from ..core.errors import InputError
 from ..core.frames import quat_to_rotmat
 from ..effects import EffectSet, describe_effects
 from ..effects.base import EffectContext
-from ..effects.battery_sag import BatterySag
+from ..effects.battery_sag import BatterySag, nominal_voltage
 from ..sim.analytic import BatchEffects, body_arrays, extra_wrench, rigid_body_accelerations
 from ..sim.controllers import GeometricController
 from ..sim.engines import simulate
@@ -194,11 +195,11 @@ def _lqr(params: VehicleParams, reference: Reference):
     return LQRController(params, reference=target)
 
 
-def _battery_voltage(effects: EffectSet, t: np.ndarray) -> np.ndarray:
+def _battery_voltage(effects: EffectSet, t: np.ndarray, params: VehicleParams) -> np.ndarray:
     for effect in effects.effects:
         if isinstance(effect, BatterySag):
             return effect.voltage(t)
-    return np.full(len(t), BatterySag().full_voltage)
+    return np.full(len(t), nominal_voltage(params))
 
 
 def generate_flight(params: VehicleParams, path: str | Reference, effects: EffectSet | None,
@@ -234,7 +235,7 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
     true_log = FlightLog(t=traj.t, position=traj.position, quat=traj.quat,
                          velocity=traj.velocity, body_rate=traj.body_rate, accel=accel,
                          rotor_speed=traj.rotor_speed, rotor_command=command,
-                         vbat=_battery_voltage(effects, traj.t))
+                         vbat=_battery_voltage(effects, traj.t, params))
     log = sensors.apply(true_log, seed=seed)
     truth = {
         "schema": TRUTH_SCHEMA, "model": params.name, "engine": engine,
