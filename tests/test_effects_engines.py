@@ -106,3 +106,17 @@ def test_battery_sag_acts_on_the_speed_a_command_gives():
     expected = series[0] * np.sqrt(1 - 0.01 * end)  # settled (5 ms response << 0.5 s)
     np.testing.assert_allclose(a.rotor_speed[0, -1], expected, rtol=1e-4)
     np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)
+
+
+def test_a_propeller_change_acts_on_the_speed_a_command_gives():
+    """thrust_factor with alpha: a command gives (1 + change)^-alpha of its speed (the
+    motor's load changed); both engines (MuJoCo on the compiled path, analytic) agree, and the
+    speed settles there (5 ms response << 0.5 s)."""
+    sets = [effect_set_from_specs(["thrust_factor:change=-0.1,alpha=0.2"])]
+    t = np.arange(int(round(DURATION / PERIOD))) * PERIOD
+    series = HOVER * np.ones((len(t), 1)) * np.array([1.0, 1.01, 1.0, 0.99])
+    m, a = _both(sets, series, DURATION)
+    position, angle = _errors(m, a)
+    assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
+    np.testing.assert_allclose(a.rotor_speed[0, -1], series[0] * 0.9 ** -0.2, rtol=1e-4)
+    np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)

@@ -17,7 +17,7 @@ from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight, to_json, validate
 from quadsim.gap.calibrate import VBAT_TESTED, calibrate, voltage_spread
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Propeller, marginal_sd
+from quadsim.gap.evidence import marginal_sd
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
@@ -91,7 +91,7 @@ def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, reference
     mass = _judge(cf, reference, _shared() + [make_effect("mass_offset", mass=0.006)], seed=40)
     assert mass["verdict"] == "mass_offset" and mass["probability"] > 0.9, mass["answer"]
     assert mass["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=0.0005)
-    prop = _judge(cf, reference, _shared() + [Propeller(change=-0.15, alpha=0.2)], seed=41)
+    prop = _judge(cf, reference, _shared() + [make_effect("thrust_factor", change=-0.15, alpha=0.2)], seed=41)
     assert prop["verdict"] == "thrust_factor" and prop["probability"] > 0.9, prop["answer"]
     assert prop["params"]["thrust_factor.change"] == pytest.approx(-0.15, abs=0.015)
 

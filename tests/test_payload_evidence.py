@@ -18,7 +18,6 @@ from quadsim.effects import EffectSet, make_effect
 from quadsim.gap import cable
 from quadsim.gap.calibrate import calibrate
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Propeller
 from quadsim.gap.per_flight import judge_one
 from quadsim.logs.generate import generate_flight
 from quadsim.logs.sensors import SensorModel
@@ -121,8 +120,8 @@ def test_a_cable_payload_is_named_with_its_mass_and_length(cf, reference):
 @pytest.mark.parametrize("case, effect, key, truth, tol", [
     ("mass", lambda p: make_effect("mass_offset", mass=0.1 * p.mass), "mass_offset.mass",
      lambda p: 0.1 * p.mass, lambda p: 0.01 * p.mass),
-    ("propeller", lambda p: Propeller(change=-0.1, alpha=0.2), "thrust_factor.change",
-     lambda p: -0.1, lambda p: 0.01),
+    ("propeller", lambda p: make_effect("thrust_factor", change=-0.1, alpha=0.2),
+     "thrust_factor.change", lambda p: -0.1, lambda p: 0.01),
 ], ids=["mass+10%", "propeller-10%"])
 def test_mass_and_propeller_are_told_apart_on_closed_loop_flights(cf, reference, case, effect,
                                                                   key, truth, tol):

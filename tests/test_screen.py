@@ -17,7 +17,7 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import (Problem, Propeller, evaluate, explanations_for,
+from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
                                    flight_residual)
 from quadsim.gap.fitting import _heun_linear, _rotor_channel
 from quadsim.gap.judge import judge
@@ -63,8 +63,9 @@ CASES = {
     "none": lambda cf: synthetic_flight(cf, _shared(), duration=4.0, seed=70, speed=1.2),
     "mass": lambda cf: synthetic_flight(cf, _shared() + [make_effect("mass_offset", mass=0.005)],
                                         duration=4.0, seed=71),
-    "propeller": lambda cf: synthetic_flight(cf, _shared() + [Propeller(change=-0.12, alpha=0.2)],
-                                             duration=4.0, seed=72),
+    "propeller": lambda cf: synthetic_flight(
+        cf, _shared() + [make_effect("thrust_factor", change=-0.12, alpha=0.2)],
+        duration=4.0, seed=72),
     "lag": lambda cf: synthetic_flight(cf, _shared(lag=0.035), duration=4.0, seed=73),
     "weak rotor": lambda cf: synthetic_flight(
         cf, _shared() + [make_effect("thrust_mismatch", rotor_2=-0.1)], duration=4.0, seed=74),

@@ -61,9 +61,12 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
         return [make_effect(name, **{f"rotor_{rotor}": sign * rng.uniform(0.05, 0.15)})]
     if name == "thrust_curve":
         return [make_effect(name, linear=sign * rng.uniform(0.03, 0.1) * params.thrust_factor * hover)]
-    if name == "thrust_factor":   # within the documented prior -15 % .. +5 % (gap.priors)
-        return [make_effect(name, change=-rng.uniform(0.05, 0.15) if sign < 0
-                            else rng.uniform(0.02, 0.05))]
+    if name == "thrust_factor":   # within the documented prior -15 % .. +5 % (gap.priors);
+        # the motors are driven like a battery drives them (speed per command ~ voltage), so
+        # the load change moves their speed per command too: DC motors at 60-90 % voltage
+        # efficiency (quadsim.effects.thrust_factor)
+        change = -rng.uniform(0.05, 0.15) if sign < 0 else rng.uniform(0.02, 0.05)
+        return [make_effect(name, change=change, alpha=rng.uniform(0.1, 0.3))]
     if name == "battery_sag":
         return [make_effect(name, rate=rng.uniform(0.005, 0.02),
                             full_voltage=nominal_voltage(params))]

@@ -3,6 +3,7 @@
 Formula (all rotors alike, relative change ``change``)::
 
     T_i = (1 + change) b Omega_i^2,     Q_i = (1 + change) d Omega_i^2
+    Omega_ss = (1 + change)^-alpha Omega_command        (the speed a command gives)
 
 A propeller/air effect, acting *at the measured rotor speed*: momentum/blade-element theory
 gives b, d proportional to the air density rho and to the blade geometry (e.g. Leishman,
@@ -12,13 +13,22 @@ or per 3 K), a different or worn/chipped propeller batch, a propeller guard or a
 the rotors blocking the wake. A battery cannot do this (it changes the speed a command
 gives, :mod:`quadsim.effects.battery_sag`).
 
+The speed a command gives. The drag torque per Omega^2 is the motor's load, so a motor
+driven at a fixed duty cycle spins faster under a lighter propeller: a DC motor in steady
+state, k_t (u V - k_e W) / R = k_Q W^2, gives ``d ln W / d ln k_Q = -(1 - eta) / (2 - eta)``
+with eta = k_e W / (u V) the motor's voltage efficiency: alpha = 0.2 at eta = 0.75, 0.33 at
+0.5. ``alpha = 0`` (the default) is a motor whose controller holds the commanded speed
+(RotorPy's rotors; an ESC with speed control). Like a battery (hook ``speed_factor``) this
+acts upstream of the measured rotor speed.
+
 In the force balance a uniform ``change`` is collinear with an added mass
 (:mod:`quadsim.effects.mass_offset`): at hover ``change = -dm / (m + dm)``; the yaw channel
 separates them (a thrust-per-Omega^2 change from the air also scales the drag torque d),
 weighing the vehicle or a thrust-stand test settles it.
 
 Example: ``make_effect("thrust_factor", change=-0.1)``: 10 % less thrust per Omega^2 on all
-four rotors (hover needs 5.4 % more speed).
+four rotors (hover needs 5.4 % more speed); with ``alpha=0.2`` a command also gives 2.1 %
+less speed (the heavier load).
 """
 
 from __future__ import annotations
@@ -37,7 +47,20 @@ class ThrustFactor(EffectBase):
     parameters = (
         EffectParameter("change", "1", 0.0, -0.5, 0.5,
                         "relative change of propeller thrust (and drag torque) per Omega^2"),
+        EffectParameter("alpha", "1", 0.0, 0.0, 0.5,
+                        "speed-per-command exponent: a command gives (1 + change)^-alpha of "
+                        "its speed (0: speed-controlled motors; 0.2: a DC motor at 75 % "
+                        "voltage efficiency)"),
     )
+
+    def speed_gain(self) -> float:
+        """The factor (1 + change)^-alpha on the speed a command gives."""
+        return float((1.0 + self.change) ** (-self.alpha))
+
+    def speed_factor(self, t, vbat=None):
+        if self.change == 0.0 or self.alpha == 0.0:
+            return None
+        return np.full(len(np.atleast_1d(t)), self.speed_gain())
 
     def loads(self, ctx):
         batch, rotors = np.shape(ctx.rotor_speed)

@@ -42,11 +42,10 @@ documented with its source in :mod:`quadsim.gap.priors` (that range is then abou
 spreads), centred on "off" (or on the references' value for a shared group); for the
 parameters without a range there, the source is given in the table.
 
-The coupling of a propeller change (:class:`Propeller`): thrust and drag torque per Omega^2
-scale together (same blade, same air; Leishman 2006 ch. 2-3), and the lower load torque lets
-the motor spin faster per command. A DC motor in steady state, k_t (u V - k_e W) / R = k_Q W^2,
-gives ``d ln W / d ln k_Q = -(1 - eta) / (2 - eta)`` with eta = k_e W / (u V) the motor's
-voltage efficiency: 0.2 at eta = 0.75, 0.33 at 0.5. The exponent alpha is fitted with prior
+The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`): thrust and drag
+torque per Omega^2 scale together (same blade, same air; Leishman 2006 ch. 2-3), and the
+lower load torque lets the motor spin faster per command, by (1 + change)^-alpha (the
+effect's module doc: alpha 0.2 for a DC motor at 75 % voltage efficiency). Alpha is fitted with prior
 N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
 neither map nor drag torque, so the command -> speed channel separates the two where commands
 are logged.
@@ -67,8 +66,6 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..effects.base import EffectParameter
-from ..effects.thrust_factor import ThrustFactor
 from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference, jacobian, shifted
@@ -79,7 +76,7 @@ from .memo import _memo
 from .priors import WIND_SD_MS, momentum_rate_damping
 from .screen import delay_starts, screened
 
-__all__ = ["Explanation", "Evidence", "Propeller", "explanations_for", "evaluate", "marginal_sd",
+__all__ = ["Explanation", "Evidence", "explanations_for", "evaluate", "marginal_sd",
            "DETERMINED", "DELAY_SD_S", "shifted"]
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
@@ -124,19 +121,6 @@ def reference_delay_sd(reference: Reference) -> float:
 
     sd_ms = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[1]
     return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
-
-
-class Propeller(ThrustFactor):
-    """``thrust_factor`` as a propeller change: thrust and drag torque per Omega^2 scale by
-    (1 + change), and the speed a command gives by (1 + change)^-alpha (module doc)."""
-
-    parameters = ThrustFactor.parameters + (
-        EffectParameter("alpha", "1", 0.0, 0.0, 0.5, "speed-per-command exponent"),)
-
-    def speed_factor(self, t, vbat=None):
-        if self.change == 0.0 or self.alpha == 0.0:
-            return None
-        return np.full(len(t), (1.0 + self.change) ** (-self.alpha))
 
 
 def _range_sd(lower: float, upper: float) -> float:
@@ -345,8 +329,6 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
 
 
 def _make(name: str, values: dict):
-    if name == "thrust_factor":
-        return Propeller(**values)
     if name in LOCAL_EFFECTS:
         return LOCAL_EFFECTS[name](**values)
     return make_effect(name, **values)
@@ -380,7 +362,7 @@ class _Marginal:
 def _bounds(expl: Explanation, reference: Reference, dt: float):
     lower, upper = [], []
     for name, _, fitted in expl.parts:
-        cls = Propeller if name == "thrust_factor" else effect_class(name)
+        cls = effect_class(name)
         specs = {p.name: p for p in cls.parameters}
         for p in fitted:
             lo, hi = specs[p].lower, specs[p].upper

@@ -59,7 +59,7 @@ _KNOWN = {
     "gyroscopic": {"rotor_inertia"},
     "wind": {"vx", "vy", "vz", "gust", "bandwidth", "seed"},
     "battery_sag": {"rate", "full_voltage"},
-    "thrust_factor": {"change"},
+    "thrust_factor": {"change", "alpha"},
     "rate_damping": {"x", "y", "z"},
     "cable_payload": {"mass", "length", "x", "y", "z", "axial_frequency", "damping_ratio"},
 }
@@ -140,7 +140,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
     from ...effects.base import SPEED_RESPONSE_S
 
     rows[:, _OFFSET["mismatch"]:_OFFSET["mismatch"] + MAX_ROTORS] = 1.0
-    rows[:, _OFFSET["thrust_gain"]] = 1.0
+    rows[:, _OFFSET["thrust_gain"]] = rows[:, _OFFSET["speed_gain"]] = 1.0
     # a speed factor (battery) without a lag effect: the rotor follows with SPEED_RESPONSE_S
     rows[:, _OFFSET["tau_up"]] = rows[:, _OFFSET["tau_down"]] = SPEED_RESPONSE_S
     lags = [s.has_rotor_dynamics() for s in sets]
@@ -169,6 +169,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("battery_rate", v["rate"])
             elif effect.name == "thrust_factor":
                 put("thrust_gain", 1.0 + v["change"])
+                put("speed_gain", effect.speed_gain())
             elif effect.name == "rate_damping":
                 put("rate_damping", [v["x"], v["y"], v["z"]])
             elif effect.name == "cable_payload" and v["mass"] > 0.0:

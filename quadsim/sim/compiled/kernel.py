@@ -56,6 +56,7 @@ def _call(typingctx, function, model, data, state, spec):
 
 O_UP, O_DOWN, O_MIS = offset["tau_up"], offset["tau_down"], offset["mismatch"]
 O_BAT, O_GG, O_GH = offset["battery_rate"], offset["ground_gain"], offset["ground_height"]
+O_SG = offset["speed_gain"]
 O_GR, O_CL, O_CO = offset["ground_radius"], offset["curve_linear"], offset["curve_offset"]
 O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["body_drag"]
 O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
@@ -71,9 +72,10 @@ TWO_PI = 2.0 * np.pi
 
 
 @numba.njit(inline="always", cache=True)
-def speed_factor(bat, t):
-    """battery_sag's speed factor sqrt(max(MIN_SCALE, 1 - rate t)) (1 when off)."""
-    return np.sqrt(max(MIN_SCALE, 1.0 - bat * t)) if bat != 0.0 else 1.0
+def speed_factor(bat, gain, t):
+    """The speed factors' product: battery_sag's sqrt(max(MIN_SCALE, 1 - rate t)) (1 when
+    off) times a constant ``gain`` (thrust_factor's (1 + change)^-alpha; 1 when off)."""
+    return gain * (np.sqrt(max(MIN_SCALE, 1.0 - bat * t)) if bat != 0.0 else 1.0)
 
 
 @numba.njit(inline="always", cache=True)
@@ -316,7 +318,7 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
     work = np.empty((11, 3))
     st = extra[b]
     row = rows[b]
-    up, down, bat = row[O_UP], row[O_DOWN], row[O_BAT]
+    up, down, bat, sg = row[O_UP], row[O_DOWN], row[O_BAT], row[O_SG]
     carried = row[O_PM] > 0.0
     hh = dt / 2
     fa = fb = fc = fd = fe = 1.0
@@ -325,9 +327,10 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
         for j in range(substeps):
             t = (k0 + k) * period + j * dt
             if lag:     # speed factors at the stage times of the two RK4 half steps
-                fa, fb, fc = speed_factor(bat, t), speed_factor(bat, t + hh / 2), \
-                    speed_factor(bat, t + hh)
-                fd, fe = speed_factor(bat, (t + hh) + hh / 2), speed_factor(bat, (t + hh) + hh)
+                fa, fb, fc = speed_factor(bat, sg, t), speed_factor(bat, sg, t + hh / 2), \
+                    speed_factor(bat, sg, t + hh)
+                fd, fe = (speed_factor(bat, sg, (t + hh) + hh / 2),
+                          speed_factor(bat, sg, (t + hh) + hh))
             for r in range(rotors):
                 if lag:
                     w0 = omega[b, r]
@@ -400,13 +403,13 @@ def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, a
     for b in range(batch):
         s = y[b * width:(b + 1) * width]
         d = out[b * width:(b + 1) * width]
-        up, down, bat = rows[b, O_UP], rows[b, O_DOWN], rows[b, O_BAT]
+        up, down, bat, sg = rows[b, O_UP], rows[b, O_DOWN], rows[b, O_BAT], rows[b, O_SG]
         for i in range(size):
             d[base + i] = 0.0
         for r in range(rotors):
             if lag:
                 omega[r] = s[13 + r]
-                accel_r[r] = rate(command[b, r], omega[r], up, down, speed_factor(bat, t))
+                accel_r[r] = rate(command[b, r], omega[r], up, down, speed_factor(bat, sg, t))
                 d[13 + r] = accel_r[r]
             else:
                 omega[r] = command[b, r]
