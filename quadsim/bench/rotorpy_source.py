@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..effects.battery_sag import nominal_voltage
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 
@@ -200,6 +201,6 @@ def rotorpy_flight(params: VehicleParams, effects: dict | None = None, *, seed: 
     quat /= np.linalg.norm(quat, axis=1, keepdims=True)
     quat = np.where(quat[:, :1] < 0, -quat, quat)
     t = np.arange(n) * dt
-    vbat = np.full(n, 12.6 if params.mass > 0.2 else 4.2)
+    vbat = np.full(n, nominal_voltage(params))    # RotorPy has no battery model
     return FlightLog(t, arr["x"], quat, arr["v"], arr["gyro"], arr["accel"], arr["rotor"],
                      arr["cmd"] / params.max_speed, vbat, None)
