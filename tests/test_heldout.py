@@ -42,9 +42,9 @@ def _weighed(train, held):
 
 
 def _reference(sigma, tau):
-    params = SimpleNamespace(rotor_count=4)
+    """A noise model on the Crazyflie (noise floors 0.36 mN, 0.033 mN m: far below sigma)."""
     return SimpleNamespace(sigma=np.asarray(sigma, float), tau=np.asarray(tau, float),
-                           params=params, rotor=False)
+                           params=load_params("crazyflie21"), rotor=False)
 
 
 def test_remainder_flags_a_systematic_residual_not_the_noise():
@@ -72,6 +72,24 @@ def test_generalisation_flags_a_held_out_flight_beyond_the_training_residual():
     worse = [same[0] * np.array([1, 1, 1.6, 1, 1, 1])]     # Fz 1.6x its training RMS
     flagged = generalisation(_weighed(train, worse), ref)
     assert set(flagged) == {"Fz"} and flagged["Fz"][0] == pytest.approx(1.6, rel=0.1)
+
+
+def test_generalisation_exempts_the_form_error_and_the_noise_floor():
+    """As per flight (judge.lack_of_fit): Fz at 1.6x its training RMS is no lack of fit when
+    "no difference" leaves 30x more excess there (the reading explains 98 % of the held-out
+    gap, FORM_ERROR 5 %), nor when it is below the channel's noise floor (sigma 1e-5 N
+    against the Crazyflie's 0.36 mN)."""
+    rng = np.random.default_rng(2)
+    sigma = np.full(6, 1.0)
+    ref = _reference(sigma, np.ones(6))
+    train = [_white(rng, 500, sigma) for _ in range(4)]
+    worse = [_white(rng, 500, sigma) * np.array([1, 1, 1.6, 1, 1, 1])]
+    null = _weighed(train, [worse[0] * np.array([1, 1, 6.0, 1, 1, 1])])
+    assert set(generalisation(_weighed(train, worse), ref)) == {"Fz"}
+    assert generalisation(_weighed(train, worse), ref, null) == {}
+    tiny = _reference(np.full(6, 1e-5), np.ones(6))
+    small = _weighed([1e-5 * r for r in train], [1e-5 * worse[0]])
+    assert generalisation(small, tiny) == {}
 
 
 def test_slow_part_is_the_moving_average():

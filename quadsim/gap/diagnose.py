@@ -264,7 +264,8 @@ def _verdict(decision, train, held, reference, before, after, notes) -> dict:
     stated = [r for r in rows if r["probability"] >= hv.READING_P
               and r["name"] != "no_difference"]
     remains = hv.remainder(lead, reference, dt)
-    carries = hv.generalisation(lead, reference) if entry is not None else {}
+    carries = hv.generalisation(lead, reference, decision.get("null")) \
+        if entry is not None else {}
     outcome = "effect" if entry is not None else (
         "unexplained" if remains else "no_significant_gap")
     ok, prior_text = hv.plausible(entry, params) if entry is not None else (True, "")
