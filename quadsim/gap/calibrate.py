@@ -135,7 +135,7 @@ def voltage_spread(flights) -> tuple[float, float]:
     spread (max - min) of the mean voltage over each quarter of each flight, so that the
     voltage log's sample noise averages out, over the mean."""
     means = [float(np.mean(q)) for f in flights
-             for q in np.array_split(np.asarray(getattr(f, "fit", f).vbat, float), 4)]
+             for q in np.array_split(np.asarray(getattr(f, "fit", f).vbat, float), 4) if len(q)]
     mean = float(np.mean(means))
     return mean, float((max(means) - min(means)) / mean) if mean > 0 else 0.0
 
