@@ -17,10 +17,11 @@ Stages
    relative inertia error xx, yy, zz, rate damping x, y, z, the rotors' spin inertia
    (gyroscopic torque) and, with commands, the motor time constant and, with a battery
    voltage log that varies (:data:`VBAT_TESTED`), the speed per command following
-   vbat / V_full (the map "with lag and voltage"). On the 20 real nominal Crazyflie flights, a reference model without the last
-   two left every nominal flight judged against the others named ``gyroscopic`` (0.3-0.5 g
-   cm^2) or ``battery_sag`` (V_full 3.7 V): effects every nominal flight shares; a steady
-   wind (vx, vy: every nominal flight showed the same 2.5 mN air force along world +y).
+   vbat / V_full (the map "with lag and voltage"). On the 20 real nominal Crazyflie
+   flights, a reference model without the last two left every nominal flight judged
+   against the others named ``gyroscopic`` (0.3-0.5 g cm^2) or ``battery_sag`` (V_full
+   3.7 V): effects every nominal flight shares; a steady wind (vx, vy: every nominal
+   flight showed the same 2.5 mN air force along world +y).
    The rotor speeds' *timing* is shared too: the fit starts from the rotor speeds read
    d0 later (d0 the references' mean cross-correlation delay, :mod:`quadsim.logs.delays`),
    and up to :data:`REFINE_STEPS` pooled Levenberg-Marquardt steps (:func:`_refine`) then
@@ -101,8 +102,9 @@ from .fitting import (
 from .priors import WIND_SD_MS
 from .speed_gain import PART as SPEED_GAIN
 
-__all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED", "shared_candidate", "per_flight_candidate",
-           "weighted_residual", "jacobian", "FD_STEP", "shifted", "MAX_SHIFT_S"]
+__all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
+           "shared_candidate", "per_flight_candidate", "weighted_residual", "jacobian",
+           "FD_STEP", "shifted", "MAX_SHIFT_S"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -135,7 +137,8 @@ def voltage_spread(flights) -> tuple[float, float]:
     spread (max - min) of the mean voltage over each quarter of each flight, so that the
     voltage log's sample noise averages out, over the mean."""
     means = [float(np.mean(q)) for f in flights
-             for q in np.array_split(np.asarray(getattr(f, "fit", f).vbat, float), 4) if len(q)]
+             for q in np.array_split(np.asarray(getattr(f, "fit", f).vbat, float), 4)
+             if len(q)]
     mean = float(np.mean(means))
     return mean, float((max(means) - min(means)) / mean) if mean > 0 else 0.0
 

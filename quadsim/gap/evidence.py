@@ -45,8 +45,8 @@ parameters without a range there, the source is given in the table.
 The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`): thrust and drag
 torque per Omega^2 scale together (same blade, same air; Leishman 2006 ch. 2-3), and the
 lower load torque lets the motor spin faster per command, by (1 + change)^-alpha (the
-effect's module doc: alpha 0.2 for a DC motor at 75 % voltage efficiency). Alpha is fitted with prior
-N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
+effect's module doc: alpha 0.2 for a DC motor at 75 % voltage efficiency). Alpha is fitted
+with prior N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
 neither map nor drag torque, so the command -> speed channel separates the two where commands
 are logged.
 
@@ -66,6 +66,7 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
+from ..effects.battery_sag import nominal_voltage
 from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference, jacobian, shifted
@@ -81,8 +82,9 @@ __all__ = ["Explanation", "Evidence", "explanations_for", "evaluate", "marginal_
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
 DETERMINED = 0.5
-#: prior spread of a flight's V_full against the references' mean voltage (fraction): a
-#: battery's charge state, +-10 % (as ``battery_sag.full_voltage``, :func:`_prior_sd`)
+#: prior spread of a full battery voltage (fraction of the pack's voltage): its charge
+#: state, +-10 % (``battery_sag.full_voltage`` in :func:`_prior_sd`, and a flight's V_full
+#: against the references' mean voltage)
 VBAT_SD = 0.1
 
 #: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
@@ -142,8 +144,8 @@ def _prior_sd(params) -> dict:
         "thrust_factor.alpha": 0.1,
         "thrust_curve.linear": _range_sd(-0.2, 0.2) * hover_thrust,
         "battery_sag.rate": _range_sd(0.0, 0.005),
-        # a battery's full voltage: +-10 % of a cell's 4.2 V (charge state)
-        "battery_sag.full_voltage": 0.42,
+        # a battery's full voltage: +-10 % (charge state) of the vehicle's pack
+        "battery_sag.full_voltage": VBAT_SD * nominal_voltage(params),
         "inertia_error": _range_sd(-0.5, 1.0),
         "rate_damping": _range_sd(0.0, 3.0) * momentum_rate_damping(params),
         "canted_rotor": _range_sd(-0.17, 0.17),

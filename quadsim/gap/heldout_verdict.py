@@ -6,7 +6,8 @@
    within their 95 % interval of the no-difference value (:func:`differs`), counts as "no
    difference".
 2. **A second effect** (``max_combination`` >= 2): when the lead leaves a systematic
-   remainder (test 4b) or does not carry over to the held-out flights (4a), the lead is refitted with each other effect; a pair enters the
+   remainder (test 4b) or does not carry over to the held-out flights (4a), the lead is
+   refitted with each other effect; a pair enters the
    posterior as one more reading with the prior of the lead alone split evenly among its
    partners (a second simultaneous effect is a priori no likelier than the first alone), and
    every part of it must be determined and plausible (:func:`every_part_stands`).
@@ -55,10 +56,10 @@ from scipy.stats import chi2
 from scipy.stats import t as student_t
 
 from . import collinear, consistency
-from .fitting import Candidate, noise_floor
+from .fitting import Candidate
 from .heldout import NOISE_WINDOW_S, Weighed, check, slow_part
-from .judge import (CONFIDENT, FORM_ERROR, LOF_P, READING_P, channel_names, posterior,
-                    reading_text)
+from .judge import (CONFIDENT, LOF_P, READING_P, above_floor, channel_names, posterior,
+                    reading_text, within_form_error)
 from .priors import candidate_plausibility
 
 __all__ = ["generalisation", "remainder", "rank", "readings_of", "entry_of"]
@@ -87,20 +88,14 @@ def generalisation(w: Weighed, reference, null: Weighed | None = None) -> dict:
     scale = max(spread * np.sqrt(1 + 1 / n), 1e-9)
     limit = float(student_t.ppf(1 - LOF_P / (c * max(1, len(w.held_residuals))), dof))
     names = channel_names(reference)
-    if null is not None and null is not w:
-        typical = np.exp(mean)
-        left = sum(float(np.sum(np.maximum(0.0, _ms(r, sigma) - typical)))
-                   for r in w.held_residuals)
-        gap = sum(float(np.sum(np.maximum(0.0, _ms(r, sigma) - typical)))
-                  for r in null.held_residuals)
-        if gap > 0 and left <= FORM_ERROR * gap:
-            return {}
-    floor = noise_floor(reference.params, reference.rotor) ** 2
+    if null is not None and null is not w and within_form_error(
+            [_ms(r, sigma) for r in w.held_residuals],
+            [_ms(r, sigma) for r in null.held_residuals], np.exp(mean)):
+        return {}
     out = {}
     for r in w.held_residuals:
         z = (np.log(np.maximum(_ms(r, sigma), 1e-300)) - mean) / scale
-        above = _ms(r, sigma) * sigma ** 2 > floor
-        for k in np.nonzero((z > limit) & above)[0]:
+        for k in np.nonzero((z > limit) & above_floor(_ms(r, sigma), reference))[0]:
             ratio = float(np.exp(0.5 * (np.log(_ms(r, sigma)[k]) - mean[k])))
             if names[k] not in out or z[k] > out[names[k]][1]:
                 out[names[k]] = (ratio, float(z[k]))

@@ -60,8 +60,8 @@ from . import collinear
 from .fitting import noise_floor
 from .residual import CHANNELS
 
-__all__ = ["judge", "posterior", "lack_of_fit", "symptom", "READING_P", "CONFIDENT", "LOF_P",
-           "FORM_ERROR",
+__all__ = ["judge", "posterior", "lack_of_fit", "within_form_error", "above_floor", "symptom",
+           "READING_P", "CONFIDENT", "LOF_P", "FORM_ERROR",
            "reading_text"]
 
 READING_P = 0.1
@@ -102,6 +102,23 @@ def posterior(rows) -> list[tuple[str, float, object]]:
     return sorted(out, key=lambda x: (-x[1], x[0]))
 
 
+def within_form_error(ms, null_ms, typical) -> bool:
+    """Whether a reading leaving mean squares ``ms`` (..., C; sigma_c^2 units) leaves at most
+    :data:`FORM_ERROR` of the gap "no difference" leaves (``null_ms``), each counted as the
+    excess over ``typical`` (C,), summed over every flight and channel (module doc, 2.)."""
+    left = float(np.sum(np.maximum(0.0, np.asarray(ms) - typical)))
+    gap = float(np.sum(np.maximum(0.0, np.asarray(null_ms) - typical)))
+    return gap > 0 and left <= FORM_ERROR * gap
+
+
+def above_floor(ms, reference) -> np.ndarray:
+    """Per channel, whether mean squares ``ms`` (sigma_c^2 units) lie above the channel's
+    noise floor: below it a residual is not a gap at all
+    (:data:`quadsim.gap.fitting.NOISE_FLOOR`)."""
+    return np.asarray(ms) * reference.sigma ** 2 \
+        > noise_floor(reference.params, reference.rotor) ** 2
+
+
 def lack_of_fit(ev, reference, null=None) -> dict:
     """Channels the explanation ``ev`` leaves beyond the references' residual (module doc):
     channel -> (ratio of RMS to the references' typical RMS, z). ``null``: the flight's "no
@@ -110,15 +127,11 @@ def lack_of_fit(ev, reference, null=None) -> dict:
     n = len(reference.names)
     scale = reference.lof_sd * np.sqrt(1 + 1 / n)
     z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / max(scale, 1e-9)
-    if null is not None and null is not ev:
-        typical = np.exp(reference.lof_mean)
-        left = float(np.sum(np.maximum(0.0, ev.ms - typical)))
-        gap = float(np.sum(np.maximum(0.0, null.ms - typical)))
-        if gap > 0 and left <= FORM_ERROR * gap:
-            return {}
+    if null is not None and null is not ev \
+            and within_form_error(ev.ms, null.ms, np.exp(reference.lof_mean)):
+        return {}
     limit = float(student_t.ppf(1 - LOF_P / len(z), reference.lof_dof))
-    # below the noise floor a residual is not a gap at all (fitting.NOISE_FLOOR)
-    above = ev.ms * reference.sigma ** 2 > noise_floor(reference.params, reference.rotor) ** 2
+    above = above_floor(ev.ms, reference)
     names = channel_names(reference)
     return {names[c]: (float(np.sqrt(np.exp(np.log(ev.ms[c]) - reference.lof_mean[c]))),
                        float(z[c])) for c in range(len(z)) if z[c] > limit and above[c]}

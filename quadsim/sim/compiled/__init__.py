@@ -14,7 +14,8 @@ Effects with a fast form (the kernel's own formulas, each a transcription of the
 module docstring): every effect of the library — motor_lag, thrust_curve, thrust_mismatch,
 rotor_drag, blade_flapping, body_drag, ground_effect, gyroscopic, wind, thrust_factor, rate_damping,
 battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
-rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S), cable_payload (the kernel carries
+rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S; thrust_factor's speed gain
+(1 + change)^-alpha multiplies it), cable_payload (the kernel carries
 the payload state p, v (6,) per simulation, integrated like the reference: two RK4 half steps
 per timestep along the predicted body state) — and every effect that only changes the
 parameter set (com_offset, mass_offset, inertia_error, canted_rotor). :func:`fast_form_problem`
