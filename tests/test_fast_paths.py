@@ -82,6 +82,29 @@ def test_the_residual_with_its_flight_memo_is_the_residual_from_scratch(cf, stat
     assert len(motion["cable_swings"]) == 1     # the same cable: only the mass changed
 
 
+def test_a_jacobian_column_recomputes_only_the_effect_it_moves(cf, states):
+    """The kept per-effect loads (quadsim.gap.memo.kept): moving rotor drag adds one entry,
+    and the residual stays the one from scratch; moving the wind moves the air velocity,
+    and every effect that reads it is computed anew (still equal to scratch)."""
+    memo: dict = {}
+    base = list(next(iter(_models(cf))))
+    residuals(states, cf, base, rotor_channel=True, memo=memo)
+    motion = next(v for k, v in memo.items() if k[0] == "motion")[1][1]
+    before = len(motion["loads"])
+
+    def swap(effects, new):
+        return [new if e.name == new.name else e for e in effects]
+
+    moved = swap(base, make_effect("rotor_drag", coefficient=3e-7, axial_coefficient=1e-7))
+    windy = swap(base, make_effect("wind", vx=0.5, vy=-0.2))
+    fast = residuals(states, cf, moved, rotor_channel=True, memo=memo)
+    assert len(motion["loads"]) == before + 1
+    _close(fast, residuals(states, cf, moved, rotor_channel=True))
+    fast = residuals(states, cf, windy, rotor_channel=True, memo=memo)
+    assert len(motion["air"]) == 2
+    _close(fast, residuals(states, cf, windy, rotor_channel=True))
+
+
 def _reference(cf, states):
     cand = shared_candidate(rotor=True)
     values = {"nominal_refit.thrust": 0.01, "nominal_refit.drag": -0.02,

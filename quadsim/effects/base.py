@@ -289,10 +289,18 @@ class EffectSet:
                  for effect, start, size in self._sized() if size]
         return np.concatenate(parts, axis=1) if parts else np.zeros((batch, 0))
 
-    def loads(self, ctx: EffectContext) -> EffectLoads:
+    def loads(self, ctx: EffectContext, kept=None) -> EffectLoads:
+        """The effects' loads combined in order (:meth:`EffectLoads.add`). ``kept``: a
+        callable ``(effect, compute) -> loads`` that may return an effect's loads kept from an
+        earlier call on the same context instead of ``compute()`` (the gap fits evaluate many
+        effect sets on one flight, :func:`quadsim.gap.memo.kept`); used for effects without
+        internal state only."""
         total = EffectLoads.neutral(ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])
         for effect, start, size in self._sized():
-            part = effect.loads(self._own(ctx, start, size) if size else ctx)
+            if kept is not None and not size:
+                part = kept(effect, lambda e=effect: e.loads(ctx))
+            else:
+                part = effect.loads(self._own(ctx, start, size) if size else ctx)
             if part is not None:
                 total = total.add(part)
         return total

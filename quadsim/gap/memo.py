@@ -12,7 +12,12 @@ What is kept, and what it is keyed by (an effect is its class and its values):
   wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
   model (:func:`_rotor_key`: the effects with a speed factor or rotor dynamics), the model
   wrench of one set of effects that reach it (:func:`_wrench_key`: a motor lag does not),
-  the states shifted by one rotor delay.
+  the states shifted by one rotor delay;
+* per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
+  past :data:`KEPT` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
+  vehicle of the effects that change it, the air velocity of those that move the air, and
+  each effect's loads on one vehicle, air velocity and set of rotor speeds -- so a
+  Jacobian column recomputes only the effect whose parameter it moves.
 
 Each entry holds the states it was computed on, so an id is never mistaken for another's.
 Equality with the residual computed from scratch: tests/test_fast_paths.py.
@@ -20,6 +25,7 @@ Equality with the residual computed from scratch: tests/test_fast_paths.py.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,7 +36,7 @@ if TYPE_CHECKING:
     from ..vehicle.params import VehicleParams
     from .residual import FlightStates
 
-__all__ = ["flight_memo"]
+__all__ = ["flight_memo", "kept", "identity", "KEPT"]
 
 
 #: kinds of :func:`_memo` entries that one model or one rotor timing owns (evicted oldest
@@ -88,12 +94,60 @@ def _wrench_key(states: FlightStates, params: VehicleParams, effects: list) -> t
 _ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor")
 
 
+def identity(effect) -> tuple:
+    """(class, sorted values) of ``effect``: what it is (an effect is its class and its
+    values; they are set once, at construction), kept on the instance after the first call."""
+    key = effect.__dict__.get("_identity")
+    if key is None:
+        key = (type(effect), tuple(sorted(effect.values().items())))
+        effect.__dict__["_identity"] = key
+    return key
+
+
 def _acting(effects: list, hooks: tuple) -> tuple:
-    """(class, values) of each effect, in order, whose class has its own version of one of
-    ``hooks`` (an effect is its class and its values)."""
-    return tuple((type(e), tuple(sorted(e.values().items()))) for e in effects
-                 if any(getattr(type(e), hook, None) is not getattr(EffectBase, hook)
-                        for hook in hooks))
+    """:func:`identity` of each effect, in order, whose class has its own version of one of
+    ``hooks``."""
+    return tuple(identity(e) for e in effects if _overrides(type(e), hooks))
+
+
+_OVERRIDES: dict[tuple, bool] = {}
+
+
+def _overrides(cls: type, hooks: tuple) -> bool:
+    """Whether ``cls`` has its own version of one of ``hooks`` (kept per class)."""
+    key = (cls, hooks)
+    hit = _OVERRIDES.get(key)
+    if hit is None:
+        hit = _OVERRIDES[key] = any(getattr(cls, hook, None) is not getattr(EffectBase, hook)
+                                    for hook in hooks)
+    return hit
+
+
+#: entries of one kind that :func:`kept` holds per flight (the oldest used goes first): a
+#: Jacobian moves one parameter at a time, so the unmoved effects' loads and the vehicle
+#: of the point it differentiates at are used again for each column (48 loads of a
+#: 30 000-sample flight: 160 MB at most)
+KEPT = 48
+
+
+def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
+    """``compute()``, kept in the flight's ``motion`` dict (:func:`flight_memo`) under
+    ``kind`` and ``key``, least recently used evicted past :data:`KEPT` entries. ``refs``:
+    the objects whose ids ``key`` holds; the entry keeps them (so no other object takes
+    their ids while it lives) and is used only while they are the same objects."""
+    store = motion.get(kind)
+    if store is None:
+        store = motion[kind] = OrderedDict()
+    hit = store.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        store.move_to_end(key)
+        return hit[1]
+    value = compute()
+    store[key] = (refs, value)
+    store.move_to_end(key)
+    if len(store) > KEPT:
+        store.popitem(last=False)
+    return value
 
 
 def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:

@@ -54,6 +54,7 @@ from ..effects.base import Effect, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
+from .memo import _acting, identity, kept
 
 __all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "channel_unit", "flight_states",
            "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
@@ -253,15 +254,24 @@ def _require_rotors(states: FlightStates, params: VehicleParams) -> np.ndarray:
     return states.rotor_speed
 
 
-def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray) -> np.ndarray:
+def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray,
+                 matrices: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Body-frame wrench (N, 6) of the rotors alone: force (N) and torque about the CoM (N m)
     of speeds ``speed`` (N, R) rad/s with the effects' per-rotor ``loads.thrust_scale`` and
     ``loads.thrust_offset`` (a thrust offset o_i acts along axis a_i at hub r_i: force
-    o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included."""
-    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_matrix(vehicle).T
-    axes = vehicle.rotor_axes
-    offset_wrench = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included.
+    ``matrices``: :func:`rotor_matrices` of ``vehicle`` when the caller keeps them."""
+    allocation_t, offset_wrench = rotor_matrices(vehicle) if matrices is None else matrices
+    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_t
     return wrench + loads.thrust_offset @ offset_wrench
+
+
+def rotor_matrices(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
+    """The (R, 6) maps of :func:`rotor_wrench`: squared speeds to the wrench (the allocation
+    matrix, transposed) and thrust offsets (N) to the wrench."""
+    axes = vehicle.rotor_axes
+    offset = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    return allocation_matrix(vehicle).T, offset
 
 
 def model_wrench(states: FlightStates, params: VehicleParams,
@@ -274,21 +284,45 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     parameter set (after the effects' ``apply_to_params``). ``rotation``: the states'
     body-to-world matrices (N, 3, 3) when the caller keeps them; ``flight_memo``: handed to
     the effects as :attr:`quadsim.effects.base.EffectContext.flight_memo` (values that depend
-    only on the logged motion of ``states``)."""
+    only on the logged motion of ``states``), where the vehicle, the air velocity and each
+    effect's loads are also kept (:func:`quadsim.gap.memo.kept`: the same numbers, computed
+    once per effect, vehicle, air velocity and rotor speeds)."""
     effect_set = _effect_set(effects)
     speed = _require_rotors(states, params) if rotor_speed is None else rotor_speed
-    vehicle = effect_set.apply_to_params(params)
-    wind = effect_set.air_velocity(states.t, states.position)
-    vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
     accel = states.rotor_accel if states.rotor_accel is not None else np.zeros_like(speed)
+    if flight_memo is None:
+        vehicle = effect_set.apply_to_params(params)
+        air = states.velocity - effect_set.air_velocity(states.t, states.position)
+        vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
+        matrices = keep = None
+    else:
+        vehicle_key = (id(params), _acting(effect_set.effects, ("apply_to_params",)))
+        vehicle, matrices = kept(
+            flight_memo, "vehicle", vehicle_key, (params,),
+            lambda: _vehicle_matrices(effect_set.apply_to_params(params)))
+        air_key = _acting(effect_set.effects, ("air_velocity",))
+        air = kept(flight_memo, "air", air_key, (),
+                   lambda: states.velocity - effect_set.air_velocity(states.t, states.position))
+        vbat = states.vbat if states.vbat is not None else kept(
+            flight_memo, "no_vbat", (), (), lambda: np.full(len(states.t), np.nan))
+        refs = (vehicle, air, speed, accel, vbat)
+        context_key = tuple(map(id, refs))
+
+        def keep(effect, compute):
+            return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
+                        compute)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
-                        states.body_rate, states.velocity - wind, speed, accel, vehicle, vbat,
+                        states.body_rate, air, speed, accel, vehicle, vbat,
                         rotation=rotation, flight_memo=flight_memo)
-    loads = effect_set.loads(ctx)
-    wrench = rotor_wrench(vehicle, loads, speed)
+    loads = effect_set.loads(ctx, kept=keep)
+    wrench = rotor_wrench(vehicle, loads, speed, matrices)
     force = wrench[:, :3] + ctx.to_body(loads.force_world)
     torque = wrench[:, 3:] + loads.torque_body
     return force, torque, vehicle
+
+
+def _vehicle_matrices(vehicle: VehicleParams):
+    return vehicle, rotor_matrices(vehicle)
 
 
 def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
