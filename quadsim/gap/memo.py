@@ -34,7 +34,6 @@ from ..effects.base import EffectBase
 
 if TYPE_CHECKING:
     from ..vehicle.params import VehicleParams
-    from .residual import FlightStates
 
 __all__ = ["flight_memo", "kept", "identity", "KEPT"]
 
@@ -83,7 +82,7 @@ def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
 _WRENCH_HOOKS = ("loads", "apply_to_params", "air_velocity")
 
 
-def _wrench_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
+def _wrench_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the model wrench depends on besides ``states`` and ``params``: the class and
     values of every effect that reaches it (the others only move the rotor channel, so a
     motor-lag fit evaluates the wrench once per rotor timing)."""
@@ -150,7 +149,7 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     return value
 
 
-def _rotor_key(states: FlightStates, params: VehicleParams, effects: list) -> tuple:
+def _rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
     the effects with a speed factor or rotor dynamics, in order (:func:`_rotor_channel`)."""
     return ("rotor", id(states), id(params), _acting(effects, _ROTOR_HOOKS))
