@@ -316,9 +316,9 @@ def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
     typical size: ``T (T info T)^+ T``. In SI units the information of a rotor inertia
     (~1e-6 kg m^2) is ~1e24 times a wind's (m/s), so a pseudo-inverse there cuts the wind's
     direction as round-off and gives it a variance of 0: RotorPy's references, whose wind
-    acts through no drag, "knew" their wind to 5e-11 m/s (its prior alone gives 5 m/s), and
-    an explanation met that wind as fixed (a blade-flapping moment, which moves with the
-    air, was read 24 % short)."""
+    acts through no drag, "knew" their wind to 5e-11 m/s (its prior alone gives 5 m/s): the
+    spread every explanation marginalises it with, and the one the answers printed
+    ("references: mean wind -0.12 ± 8.8e-10 m/s")."""
     t = np.asarray(typical, dtype=float)
     return t[:, None] * np.linalg.pinv(info * np.outer(t, t)) * t[None, :]
 
