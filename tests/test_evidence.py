@@ -84,6 +84,8 @@ def test_a_difference_from_the_references_is_named(cf, reference, name, effects,
     assert entry["outcome"] == "effect" and entry["verdict"] == name, entry["answer"]
     assert entry["probability"] > 0.9
     assert entry["params"][key] == pytest.approx(truth, abs=tol)
+    if name == "rotor_drag":     # a shared value the references determine: given beside it
+        assert "(references: rotor drag" in entry["answer"], entry["answer"]
 
 
 def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, reference):
@@ -229,6 +231,7 @@ def test_a_drag_against_references_without_one_refits_their_wind(cf, windy):
     assert entry["verdict"] == "rotor_drag+wind" and entry["probability"] > 0.9, entry["answer"]
     assert entry["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)
     assert entry["params"]["wind.vx"] == pytest.approx(1.5, abs=0.15)
+    assert "references: mean wind" not in entry["answer"]   # theirs is only the prior's
     calm = _judge(cf, ref, _shared(drag=10 * DRAG), seed=72)
     assert calm["verdict"] == "rotor_drag" and calm["probability"] > 0.9, calm["answer"]
     assert calm["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)

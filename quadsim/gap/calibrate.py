@@ -303,14 +303,6 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
     return (out, base) if with_base else out
 
 
-def _wind_prior(cand: Candidate) -> np.ndarray:
-    """Precision (per parameter, 0: none) of the steady wind's prior N(0, WIND_SD_MS^2):
-    a wind acts only through drag, so where the flights show no drag the prior alone fixes
-    it (:func:`_refine`)."""
-    return np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
-                     for n in cand.parameter_names])
-
-
 def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
     """The (pseudo-)inverse of the information ``info`` taken in units of each parameter's
     typical size: ``T (T info T)^+ T``. In SI units the information of a rotor inertia
@@ -420,7 +412,8 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
     # anywhere (at its bound, -30 m/s, on RotorPy references flown without rotor drag);
     # an explanation that then gives the drag a value of its own met a 30 m/s wind.
     # The prior takes such a wind to 0; a wind the data fix moves by (s / 5 m/s)^2 of itself.
-    prior = np.append(_wind_prior(cand), [0.0] * int(timing))
+    prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
+                      for n in cand.parameter_names] + [0.0] * int(timing))
     lam, info = 1.0, None
     for _ in range(REFINE_STEPS):
         probe.theta = x[:k].copy()

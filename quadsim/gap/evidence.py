@@ -78,7 +78,7 @@ from .priors import WIND_SD_MS, momentum_rate_damping
 from .screen import delay_starts, screened
 
 __all__ = ["Explanation", "Evidence", "explanations_for", "evaluate", "marginal_sd",
-           "DETERMINED", "DELAY_SD_S", "shifted"]
+           "DETERMINED", "DELAY_SD_S", "shifted", "reference_determined"]
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
 DETERMINED = 0.5
@@ -109,9 +109,29 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     sd = _prior_sd(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
     for k, name in enumerate(reference.candidate.parameter_names):
-        w = sd.get(name, sd.get(name.split(".")[0]))
+        w = _prior_of(sd, name)
         if w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
+    return out
+
+
+def _prior_of(sd: dict, name: str):
+    """The prior spread of parameter ``name`` (``effect.parameter``) in :func:`_prior_sd`'s
+    table: its own entry, else its effect's; None without one."""
+    return sd.get(name, sd.get(name.split(".")[0]))
+
+
+def reference_determined(reference: Reference) -> dict[str, bool]:
+    """Whether the reference flights determine each shared parameter: identified by their
+    fit and a spread ``s_ref`` below :data:`DETERMINED` times its physical prior spread (the
+    rule a flight's own values are printed by; a parameter without a prior: identified
+    alone). A wind with no drag to act through is the prior's, not theirs."""
+    sd = _prior_sd(reference.params)
+    out = {}
+    for name, s in zip(reference.candidate.parameter_names, reference.s_ref):
+        w = _prior_of(sd, name)
+        out[name] = bool(reference.identified.get(name, True)
+                         and (w is None or s < DETERMINED * float(w)))
     return out
 
 
@@ -240,7 +260,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             continue
         keys = [f"{group}.{p}" for p in fitted]
         s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
-        spread = [np.hypot(s_ref[k], sd.get(k, sd.get(group))) for k in keys]
+        spread = [np.hypot(s_ref[k], _prior_of(sd, k)) for k in keys]
         out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
                         replaces=(group,)))
     # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
@@ -259,7 +279,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     for name, fitted in one:
         keys = [f"{name}.{p}" for p in fitted]
         out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
-                        [sd.get(k, sd.get(name)) for k in keys]))
+                        [_prior_of(sd, k) for k in keys]))
     change = ["change", "alpha"] if reference.rotor else ["change"]
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
                     [0.0, 0.2][:len(change)],

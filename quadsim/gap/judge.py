@@ -62,6 +62,7 @@ from scipy.special import logsumexp
 from scipy.stats import t as student_t
 
 from . import collinear
+from .evidence import reference_determined
 from .fitting import effect_class, noise_floor
 from .residual import CHANNELS
 
@@ -190,15 +191,10 @@ def reading_text(ev, reference) -> str:
     ci = {k: 1.96 * ev.post_sd[k] for k in values}
     text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
     if ev.explanation.replaces:
-        # the references' own values, where their flights determine them (the evidence's
-        # rule, DETERMINED: a spread below half the physical prior's; a wind with no drag to
-        # act through is the prior's, not theirs)
-        from .evidence import DETERMINED, _prior_sd
-
-        ref, prior = reference.values(), _prior_sd(params)
+        # the references' own values, where their flights determine them
+        ref, known_ref = reference.values(), reference_determined(reference)
         s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
-        known = [k for k in values if k in ref and reference.identified.get(k, True)
-                 and s_ref[k] < DETERMINED * prior.get(k, prior.get(k.split(".")[0], np.inf))]
+        known = [k for k in values if known_ref.get(k, False)]
         if known:
             text += " (references: " + "; ".join(
                 _value_text(k, ref[k], s_ref[k], params) for k in known) + ")"
