@@ -1,4 +1,4 @@
-"""Parameter-consistency guard (quadsim.gap.consistency): an effect outside the library is
+"""Parameter-consistency guard (quadsim.gap.consistency): an effect outside the candidates is
 never named with confidence because the stand-in needs different values in different regimes;
 a library effect keeps one value and stays named."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim.bench.outside import BladeFlapping, TranslationalLift, in_plane_air_velocity
+from quadsim.bench.outside import BladeFlapping, in_plane_air_velocity
 from quadsim.effects import EffectContext, make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.consistency import MATERIAL
@@ -37,7 +37,7 @@ def test_outside_effects_by_hand(cf):
     v = np.array([[1.5, 0.0, 0.3], [0.0, -2.0, 0.0]])
     ctx = _ctx(cf, v, speed)
     assert np.allclose(in_plane_air_velocity(ctx), [[1.5, 0, 0], [0, -2.0, 0]])
-    lift = TranslationalLift(k_h=0.01).loads(ctx)
+    lift = make_effect("translational_lift", k_h=0.01).loads(ctx)
     # k_h |v_xy|^2 per rotor: 0.01 N/(m/s)^2 x 2.25 m^2/s^2 = 0.0225 N; 0.04 N
     assert np.allclose(lift.thrust_offset, [[0.0225] * 4, [0.04] * 4], rtol=1e-12)
     flap = BladeFlapping(k_flap=1e-6).loads(ctx)
@@ -48,9 +48,10 @@ def test_outside_effects_by_hand(cf):
 
 
 def test_translational_lift_is_not_named_with_confidence(cf):
+    """Lift left out of the candidates (THRUST_LIKE): a thrust stand-in needs two values."""
     # +4 % of the hover thrust at 1.5 m/s (RotorPy's k_h form), flown at 1.3 m/s
     k_h = 0.04 * cf.weight / (4 * 1.5 ** 2)
-    logs = [synthetic_flight(cf, [TranslationalLift(k_h=k_h)], seed=s, duration=5.0,
+    logs = [synthetic_flight(cf, [make_effect("translational_lift", k_h=k_h)], seed=s, duration=5.0,
                              speed=1.3) for s in (0, 1, 2)]
     result = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False, effects=THRUST_LIKE)
     verdict = result["verdict"]

@@ -22,7 +22,7 @@ from quadsim.gap.per_flight import judge_one
 from quadsim.gap.priors import WIND_SD_MS
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
-from quadsim.vehicle.params import load_params
+from quadsim.vehicle.params import hover_speed, load_params
 
 from _helpers import DRAG, LAG, shared_effects  # noqa: E402
 
@@ -86,6 +86,23 @@ def test_a_difference_from_the_references_is_named(cf, reference, name, effects,
     assert entry["params"][key] == pytest.approx(truth, abs=tol)
     if name == "rotor_drag":     # a shared value the references determine: given beside it
         assert "(references: rotor drag" in entry["answer"], entry["answer"]
+
+
+def test_translational_lift_and_a_thrust_curve_are_told_apart(cf, reference):
+    """Both add thrust in fast flight: the lift with the in-plane air speed at any rotor
+    speed (k_h |v_xy|^2 per rotor), the thrust curve with the rotor speed. On the same path
+    each is named, not the other, with its value (lift 1.5e-3 kg/m: +3.7 % of the hover
+    thrust at 1.5 m/s; curve +5 % at the hover speed)."""
+    lift = _judge(cf, reference, _shared() + [make_effect("translational_lift", k_h=1.5e-3)],
+                  seed=35, speed=1.3)
+    assert lift["verdict"] == "translational_lift" and lift["probability"] > 0.9, lift["answer"]
+    assert lift["params"]["translational_lift.k_h"] == pytest.approx(1.5e-3, rel=0.1)
+    assert "mN of extra thrust at 2 m/s" in lift["answer"]
+    linear = 0.05 * cf.thrust_factor * hover_speed(cf)
+    curve = _judge(cf, reference, _shared() + [make_effect("thrust_curve", linear=linear)],
+                   seed=36, speed=1.3)
+    assert curve["verdict"] == "thrust_curve" and curve["probability"] > 0.9, curve["answer"]
+    assert curve["params"]["thrust_curve.linear"] == pytest.approx(linear, rel=0.1)
 
 
 def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, reference):

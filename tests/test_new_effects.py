@@ -162,3 +162,32 @@ def test_canted_rotor_force_and_torque():
                                rtol=0.01)
     with pytest.raises(Exception, match="rotor = 5"):
         make_effect("canted_rotor", rotor=5, angle=0.1).apply_to_params(PARAMS)
+
+
+def test_translational_lift_closed_form():
+    """k_h |v - (v . a) a|^2 per rotor, along its axis: body-z rotors see the body x-y air
+    speed (RotorPy's form); a canted rotor sees its own plane; rolled 90 deg, the world
+    vertical air speed is in the rotor plane; a wind moves the air speed, not the ground
+    speed; an off effect gives no loads."""
+    k_h = 0.01
+    v = np.array([[1.5, 0.0, 0.3], [0.0, -2.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    quat = np.tile([1.0, 0, 0, 0], (4, 1))
+    quat[2] = [np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0]          # rolled 90 deg about x
+    air = v.copy()
+    air[3] = [1.0, -1.0, 0.0]                                        # ground speed 1, wind +1 y
+    speed = np.full((4, 4), HOVER)
+    tilted = make_effect("canted_rotor", rotor=1, angle=0.05,
+                         azimuth=np.pi / 2).apply_to_params(PARAMS)
+    ctx = EffectContext(t=np.zeros(4), position=np.zeros((4, 3)), velocity=v, quat=quat,
+                        body_rate=np.zeros((4, 3)), air_velocity=air, rotor_speed=speed,
+                        rotor_accel=np.zeros_like(speed), params=tilted)
+    loads = make_effect("translational_lift", k_h=k_h).loads(ctx)
+    a = tilted.rotor_axes[0]
+    expected = k_h * np.array([[2.25] * 4, [4.0] * 4, [1.0] * 4, [2.0] * 4])
+    expected[0, 0] = k_h * (np.sum(v[0] ** 2) - (v[0] @ a) ** 2)      # the canted rotor
+    expected[3, 0] = k_h * (2.0 - (air[3] @ a) ** 2)
+    np.testing.assert_allclose(loads.thrust_offset, expected, rtol=1e-12)
+    assert expected[0, 0] != pytest.approx(k_h * 2.25, rel=1e-3)      # the cant matters
+    np.testing.assert_allclose(loads.force_world, 0.0)
+    np.testing.assert_allclose(loads.torque_body, 0.0)
+    assert make_effect("translational_lift").loads(ctx) is None

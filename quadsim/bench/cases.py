@@ -56,7 +56,7 @@ from .draws import draw, draw_rotorpy, library_equivalent
 from .observe import OBSERVABLE, Observed, TrueModel, per_flight_observability, true_model
 from .score import read_verdict, score_case
 
-__all__ = ["DURATION", "FLIGHTS", "REFERENCES", "REFERENCE_SPEEDS", "case_flights", "case_key",
+__all__ = ["DURATION", "FLIGHTS", "JOINED_LIBRARY", "scored_kind", "REFERENCES", "REFERENCE_SPEEDS", "case_flights", "case_key",
            "case_list", "first_flight", "heldout_truth", "is_cached", "oracle_reduction",
            "per_flight_observed", "per_flight_truth", "reference_flight", "reference_flights",
            "reference_key", "reference_speeds", "run_case", "run_per_flight", "shared_physics"]
@@ -75,6 +75,15 @@ PIPELINE_LIBRARY = ("mass_offset", "com_offset", "thrust_mismatch", "thrust_curv
                     "motor_lag", "inertia_error", "rotor_drag")
 PIPELINE_OUTSIDE = ("translational_lift", "blade_flapping")
 PIPELINE_LATER = ("canted_rotor", "rate_damping")
+#: cases flown as outside the library whose effect the library has gained since
+#: (:mod:`quadsim.effects.translational_lift`: RotorPy's k_h form, per rotor): their flights
+#: and cache keys stay, they are scored as in-library (:func:`scored_kind`).
+JOINED_LIBRARY = frozenset({"translational_lift"})
+
+
+def scored_kind(case: dict) -> str:
+    """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
+    return "library" if case["truth"] in JOINED_LIBRARY else case["kind"]
 
 
 def case_list(count: int | None = None) -> list[dict]:
@@ -300,7 +309,7 @@ def oracle_reduction(logs, params, effects) -> float:
 
 
 def _truth_effects(case, spec, params) -> list:
-    if case["kind"] != "library":
+    if scored_kind(case) != "library":
         return []
     return library_equivalent(spec, params) if case["source"] == "rotorpy" else list(spec)
 
@@ -314,7 +323,7 @@ def heldout_truth(case: dict) -> tuple[str, str]:
     mode the references are RotorPy's own nominal flights (same motors): truth ``none``."""
     if case["source"] == "rotorpy" and case["truth"] == "none":
         return "motor_lag", "library"
-    return case["truth"], case["kind"]
+    return case["truth"], scored_kind(case)
 
 
 def _describe(spec) -> dict:
@@ -368,7 +377,7 @@ def per_flight_truth(case: dict) -> TrueModel | None:
     """The true model of a case's first flight against its source's references (shared
     physics with the true difference, :func:`quadsim.bench.observe.true_model`); None for a
     case with no library form (no effect, outside the library)."""
-    if case["kind"] != "library":
+    if scored_kind(case) != "library":
         return None
     params, spec, _ = _case_setup(case)
     return TrueModel(true_model(shared_physics(case["source"]),
@@ -401,10 +410,11 @@ def run_per_flight(group: tuple[str, str, list[dict]]) -> list[dict]:
     out = []
     for row, flight, seen in zip(rows, result["flights"], observed):
         verdict = read_verdict(flight)
+        kind = scored_kind(row)
         out.append({**verdict, "reduction": flight.get("reduction"),
-                    "score": score_case(row["truth"], row["kind"], verdict),
+                    "score": score_case(row["truth"], kind, verdict),
                     "oracle_reduction": seen.reduction, "gap_vs_references": seen.gap,
-                    "observable": row["kind"] != "library" or seen.reduction >= OBSERVABLE,
+                    "observable": kind != "library" or seen.reduction >= OBSERVABLE,
                     **_why(flight)})
     return out
 

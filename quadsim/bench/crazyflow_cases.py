@@ -105,9 +105,10 @@ CASES = (("none", "none", 2, (0.8, 1.2)), ("none", "none", 2, (0.55, 0.65)),
 SCORED_AS = {"payload": "mass_offset"}
 #: Cases flown as outside the library whose effect the library has gained since the cases
 #: were frozen (blade_flapping: the same hub moment -c sum(Omega) e_z x v, c in kg m/rad, as
-#: :mod:`quadsim.effects.blade_flapping`). They are scored as in-library; the flights, the
-#: case list and so the cache key are unchanged.
-JOINED_LIBRARY = frozenset({"blade_flapping"})
+#: :mod:`quadsim.effects.blade_flapping`; translational_lift: 4 lift |v_h|^2 along body z,
+#: :mod:`quadsim.effects.translational_lift` with k_h = lift). They are scored as in-library;
+#: the flights, the case list and so the cache key are unchanged.
+JOINED_LIBRARY = frozenset({"blade_flapping", "translational_lift"})
 
 
 def scored_kind(case: dict) -> str:
@@ -217,6 +218,8 @@ def library_truth(case: dict) -> list:
         return []
     if "flap" in e:
         return shared + [make_effect("blade_flapping", coefficient=e["flap"])]
+    if "lift" in e:
+        return shared + [make_effect("translational_lift", k_h=e["lift"])]
     if "mass" in e:
         return shared + [make_effect("mass_offset", mass=e["mass"])]
     if "payload" in e:

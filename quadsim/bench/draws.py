@@ -20,7 +20,7 @@ from ..core.errors import ModelError
 from ..effects import make_effect
 from ..effects.battery_sag import nominal_voltage
 from ..vehicle.params import VehicleParams, hover_speed
-from .outside import BladeFlapping, TranslationalLift
+from .outside import BladeFlapping
 
 __all__ = ["draw", "draw_rotorpy", "library_equivalent"]
 
@@ -92,9 +92,9 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
         return [make_effect(name, rotor=float(rng.integers(1, params.rotor_count + 1)),
                             angle=sign * np.radians(rng.uniform(2.0, 5.0)),
                             azimuth=rng.uniform(-np.pi, np.pi))]
-    if name == "translational_lift":   # outside: +2-5 % of the hover thrust at 1.5 m/s
-        return [TranslationalLift(k_h=rng.uniform(0.02, 0.05) * w
-                                  / (params.rotor_count * 1.5 ** 2))]
+    if name == "translational_lift":   # +2-5 % of the hover thrust at 1.5 m/s
+        return [make_effect(name, k_h=rng.uniform(0.02, 0.05) * w
+                            / (params.rotor_count * 1.5 ** 2))]
     if name == "blade_flapping":   # outside: moment 2-4 % of weight x arm at 1 m/s
         return [BladeFlapping(k_flap=rng.uniform(0.02, 0.04) * w * arm
                               / (params.rotor_count * hover))]
@@ -167,6 +167,8 @@ def library_equivalent(spec: dict, params: VehicleParams) -> list:
         out.append(make_effect("body_drag", cd_area=cd, cd_area_vertical=cd))
     if "wind" in spec:
         out.append(make_effect("wind", vx=spec["wind"][0], vy=spec["wind"][1]))
+    if "k_h" in spec:           # RotorPy's lift: k_h (v_x^2 + v_y^2) per rotor, body axes
+        out.append(make_effect("translational_lift", k_h=spec["k_h"]))
     if "k_d" in spec and "gust" not in spec:
         out.append(make_effect("rotor_drag", coefficient=spec["k_d"]))
     return out

@@ -36,6 +36,7 @@ from .rotor_drag import RotorDrag
 from .thrust_curve import ThrustCurve
 from .thrust_factor import ThrustFactor
 from .thrust_mismatch import ThrustMismatch
+from .translational_lift import TranslationalLift
 from .wind import Wind
 
 __all__ = [
@@ -57,7 +58,7 @@ __all__ = [
 EFFECTS: dict[str, type[EffectBase]] = {cls.name: cls for cls in (
     MotorLag, ThrustCurve, ThrustMismatch, RotorDrag, BodyDrag, GroundEffect, BatterySag,
     ComOffset, MassOffset, InertiaError, Wind, Gyroscopic, ThrustFactor, RateDamping,
-    CantedRotor, CablePayload, BladeFlapping)}
+    CantedRotor, CablePayload, BladeFlapping, TranslationalLift)}
 
 #: Realistic magnitudes of each effect on the 0.84 kg testbed (specs for
 #: :func:`effect_set_from_specs`), shared by the engine-agreement tests and
@@ -67,6 +68,7 @@ TESTBED_EXAMPLES: dict[str, tuple[str, ...]] = {
     "thrust_mismatch": ("thrust_mismatch:rotor_1=0.03,rotor_2=-0.02",),
     "rotor_drag": ("rotor_drag:coefficient=1e-5,axial_coefficient=5e-6",),
     "blade_flapping": ("blade_flapping:coefficient=2e-6",),
+    "translational_lift": ("translational_lift:k_h=0.01",),
     "body_drag": ("body_drag:cd_area=0.02,cd_area_vertical=0.04",),
     "ground_effect": ("ground_effect:gain=1.5",),
     "battery_sag": ("battery_sag:rate=0.01",),

@@ -189,6 +189,12 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
         return (f"blade flapping {_pm(moment, cmoment, 1e3, '.3g')} mN m of nose-up moment per "
                 f"m/s of air speed at the hover speed ({accel:.3g} rad/s² of roll/pitch "
                 "acceleration at 1 m/s)")
+    if key == "translational_lift.k_h":
+        lift = r * value * 4.0                           # N at 2 m/s in-plane air speed
+        clift = None if c is None else r * c * 4.0
+        return (f"translational lift {_pm(lift, clift, 1e3, '.3g')} mN of extra thrust at 2 m/s "
+                f"of in-plane air speed ({100 * lift / weight:+.2g} % of the weight; "
+                f"k_h {value:.3g} kg/m per rotor)")
     if key in ("body_drag.cd_area", "body_drag.cd_area_vertical"):
         where = "sideways" if key.endswith(".cd_area") else "vertical"
         force = 0.5 * params.air_density * value * 4.0

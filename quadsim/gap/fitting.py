@@ -26,6 +26,7 @@ from ..effects.base import EffectParameter, EffectSet
 from ..effects.canted_rotor import CantedRotor
 from ..vehicle.params import VehicleParams
 from .memo import _memo, _rotor_key, _wrench_key, flight_memo
+from .priors import momentum_translational_lift
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
@@ -174,6 +175,8 @@ FIT_SPEC = {
     "body_drag": (("cd_area", "cd_area_vertical"), {}, lambda p: [_area_scale(p)] * 2),
     # a flapping moment as if the rotor-drag force acted half an arm above the CoM
     "blade_flapping": (("coefficient",), {}, lambda p: [0.5 * _arm(p) * _drag_scale(p)]),
+    # the momentum-theory lift (quadsim.gap.priors.momentum_translational_lift)
+    "translational_lift": (("k_h",), {}, lambda p: [momentum_translational_lift(p)]),
     "motor_lag": (("time_constant",), {}, lambda p: [0.03]),
     "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
     # a damping time constant I/k of about 1 s

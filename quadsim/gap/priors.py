@@ -42,6 +42,17 @@ rate_damping.*         0 .. 3 k_mt          momentum theory: a rolling vehicle's
                                             not aerodynamic damping.
 canted_rotor.tilt_*    -10 .. +10 deg       a bent mount or crash-bent arm leans a rotor a
                                             few degrees; more is a visibly broken arm.
+translational_lift.k_h 0 .. 2 k_tl          momentum theory: at a fixed rotor speed an edgewise
+                                            speed V lowers the induced inflow v_i = v_h^2 /
+                                            sqrt(V^2 + v_i^2) (Glauert) by V^2 / (4 v_h^2), and
+                                            blade-element theory turns that into dT/T ~ sigma a
+                                            / (8 lambda_h) V^2 / (4 v_h^2), the first factor
+                                            0.5-2 for small propellers (Leishman 2006, eqs.
+                                            2.122, 3.93): k_tl = T_h / (4 v_h^2) per rotor.
+                                            k_tl = rho pi R_p^2 / 2: 0.031 kg/m (0.84 kg
+                                            testbed, R_p 127 mm), 1.5e-3 (Crazyflie model,
+                                            27.5 mm; RotorPy's Crazyflie-brushless k_h:
+                                            1.11e-3).
 wind.vx/vy             sd 5 m/s (Gaussian)  indoor drafts to a fresh breeze (Beaufort 3:
                                             3.4-5.4 m/s); :data:`WIND_SD_MS`, the spread of
                                             the per-flight wind reading and the prior of the
@@ -54,9 +65,12 @@ wind.vx/vy             sd 5 m/s (Gaussian)  indoor drafts to a fresh breeze (Bea
 
 from __future__ import annotations
 
+import math
+
 from ..vehicle.params import VehicleParams
 
-__all__ = ["PRIORS", "plausibility", "candidate_plausibility", "momentum_rate_damping"]
+__all__ = ["PRIORS", "plausibility", "candidate_plausibility", "momentum_rate_damping",
+           "momentum_translational_lift"]
 
 #: parameter -> (lower, upper, kind, source). kind "relative": fraction of 1; "mass": of the
 #: vehicle mass; "arm": of the arm length; "absolute": in the parameter's unit.
@@ -84,6 +98,9 @@ PRIORS = {
     "canted_rotor": (-0.17, 0.17, "absolute",
                      "a bent motor mount or arm leans a rotor a few deg; more than 10 deg "
                      "(0.17 rad) is a visibly broken arm"),
+    "translational_lift.k_h": (0.0, 2.0, "lift",
+                               "momentum theory k = T_hover / (4 v_i^2) per rotor (Glauert "
+                               "inflow, Leishman 2006) x 2 for the blade-element factor"),
     "thrust_curve.linear": (-0.2, 0.2, "hover",
                             "bench fits T = k2 W^2 + k1 W + k0 (Foerster, ETH 2015, table "
                             "3.3): the linear term reaches ~20 % of the hover thrust"),
@@ -118,14 +135,18 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
         value = value / float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
     elif kind == "momentum":
         value = value / momentum_rate_damping(params)
+    elif kind == "lift":
+        value = value / momentum_translational_lift(params)
     bound = upper if value >= 0 else lower
     score = abs(value) / abs(bound) if bound != 0 else (0.0 if value == 0 else float("inf"))
     scale = {"relative": 100, "mass": 100, "arm": 100, "hover": 100, "absolute": 1,
-             "momentum": 1}[kind]
+             "momentum": 1, "lift": 1}[kind]
     unit = {"relative": " %", "mass": " % of the vehicle mass", "arm": " % of the arm",
             "hover": " % of the hover thrust", "absolute": "",
             "momentum": (f" x the momentum-theory damping "
-                         f"{momentum_rate_damping(params):.2g} N m s/rad")}[kind]
+                         f"{momentum_rate_damping(params):.2g} N m s/rad"),
+            "lift": (f" x the momentum-theory lift "
+                     f"{momentum_translational_lift(params):.2g} kg/m")}[kind]
     text = f"plausible {lower * scale:g} .. {upper * scale:g}{unit} ({source})"
     return float(score), bool(score <= 1.0), text
 
@@ -140,6 +161,16 @@ def momentum_rate_damping(params: VehicleParams) -> float:
     thrust = params.mass * params.gravity / params.rotor_count
     induced = np.sqrt(thrust / (2 * params.air_density * np.pi * params.rotor_radius ** 2))
     return arm ** 2 * thrust / float(induced)
+
+
+def momentum_translational_lift(params: VehicleParams) -> float:
+    """k_tl = T_h / (4 v_i^2) (kg/m): the translational-lift coefficient of momentum theory
+    (table above; T_h = m g / R the hover thrust per rotor, N; v_i the hover induced
+    velocity, m/s, as in :func:`momentum_rate_damping`). Equivalently
+    k_tl = rho pi R_p^2 / 2 (R_p the rotor radius, m)."""
+    thrust = params.mass * params.gravity / params.rotor_count
+    induced_sq = thrust / (2 * params.air_density * math.pi * params.rotor_radius ** 2)
+    return thrust / (4 * induced_sq)
 
 
 def candidate_plausibility(values: dict, params: VehicleParams):

@@ -12,8 +12,8 @@ parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``Mj
 
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
 module docstring): every effect of the library — motor_lag, thrust_curve, thrust_mismatch,
-rotor_drag, blade_flapping, body_drag, ground_effect, gyroscopic, wind, thrust_factor, rate_damping,
-battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
+rotor_drag, blade_flapping, translational_lift, body_drag, ground_effect, gyroscopic, wind,
+thrust_factor, rate_damping, battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
 rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S; thrust_factor's speed gain
 (1 + change)^-alpha multiplies it), cable_payload (the kernel carries
 the payload state p, v (6,) per simulation, integrated like the reference: two RK4 half steps
@@ -55,6 +55,7 @@ _KNOWN = {
     "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)},
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "blade_flapping": {"coefficient"},
+    "translational_lift": {"k_h"},
     "body_drag": {"cd_area", "cd_area_vertical"},
     "ground_effect": {"gain", "ground_height", "radius"},
     "gyroscopic": {"rotor_inertia"},
@@ -193,6 +194,8 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("rotor_drag_axial", v["axial_coefficient"])
             elif effect.name == "blade_flapping":
                 put("blade_flapping", v["coefficient"])
+            elif effect.name == "translational_lift":
+                put("translational_lift", v["k_h"])
             elif effect.name == "body_drag":
                 put("body_drag", [v["cd_area"], v["cd_area"], v["cd_area_vertical"]])
             elif effect.name == "gyroscopic":

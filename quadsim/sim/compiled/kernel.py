@@ -64,6 +64,7 @@ O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["g
 GUST = offset["gust_phase"] - offset["gust_frequency"]
 O_TG, O_RDX = offset["thrust_gain"], offset["rate_damping"]
 O_BF = offset["blade_flapping"]
+O_TL = offset["translational_lift"]
 O_PM, O_PL, O_PA = offset["payload_mass"], offset["payload_length"], offset["payload_attach"]
 O_PC, O_PK, O_PD = offset["payload_arm"], offset["payload_stiffness"], offset["payload_damping"]
 O_G, O_COM = offset["gravity"], offset["com"]
@@ -205,6 +206,9 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         u2 = air_body[2] + rate_b[0] * p[1] - rate_b[1] * p[0]
         axial = u0 * a[0] + u1 * a[1] + u2 * a[2]
         extra = row[O_CL] * mid[r] + row[O_CO]
+        # translational_lift: + k_h |v - (v . a) a|^2 along the axis (air velocity, no rotation)
+        va = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
+        extra += row[O_TL] * (air_body[0] ** 2 + air_body[1] ** 2 + air_body[2] ** 2 - va * va)
         for i in range(3):
             along = axial * a[i]
             u = u0 if i == 0 else (u1 if i == 1 else u2)
