@@ -249,8 +249,12 @@ def test_a_drag_against_references_without_one_refits_their_wind(cf, windy):
     assert entry["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)
     assert entry["params"]["wind.vx"] == pytest.approx(1.5, abs=0.15)
     assert "references: mean wind" not in entry["answer"]   # theirs is only the prior's
+    assert "in calm air" not in entry["answer"]
     calm = _judge(cf, ref, _shared(drag=10 * DRAG), seed=72)
     assert calm["verdict"] == "rotor_drag" and calm["probability"] > 0.9, calm["answer"]
+    # the refitted wind excludes nothing: said as calm air, not as a value of ~0 +- 0.03
+    assert "in calm air" in calm["answer"] and "mean wind" not in calm["answer"], \
+        calm["answer"]
     assert calm["params"]["rotor_drag.coefficient"] == pytest.approx(10 * DRAG, rel=0.05)
 
 

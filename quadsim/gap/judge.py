@@ -187,9 +187,13 @@ def reading_text(ev, reference) -> str:
         return _wind_text(ev, reference)
     if not keys:
         return f"{name.replace('_', ' ')} (size not determined by this flight)"
-    values = {k: ev.values[k] for k in keys if not k.endswith(".alpha")}
+    calm = _calm_refit(ev)
+    values = {k: ev.values[k] for k in keys if not k.endswith(".alpha") and k not in calm}
     ci = {k: 1.96 * ev.post_sd[k] for k in values}
     text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
+    if calm and all(ev.determined.get(k) for k in calm):
+        text += (f"; in calm air (the wind refitted with it, within ±"
+                 f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
     if ev.explanation.replaces:
         # the references' own values, where their flights determine them
         ref, known_ref = reference.values(), reference_determined(reference)
@@ -204,6 +208,19 @@ def reading_text(ev, reference) -> str:
         text += (f"; the rotors would spin {100 * ((1 + ev.values['thrust_factor.change']) ** -ev.values.get('thrust_factor.alpha', 0.0) - 1):+.1f} % "
                  "per command (lighter load torque)")
     return text
+
+
+def _calm_refit(ev) -> list[str]:
+    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.evidence._with_wind`)
+    when no component's 95 % interval excludes calm air (as :func:`reading_name` decides):
+    the answer then says "in calm air" instead of printing a wind of 1e-5 ± 0.03 m/s."""
+    if ev.name == "wind" or not any(part == "wind" and fitted
+                                    for part, _, fitted in ev.explanation.parts):
+        return []
+    keys = [k for k in ("wind.vx", "wind.vy") if k in ev.values]
+    if any(ev.determined.get(k) and abs(ev.values[k]) > 1.96 * ev.post_sd[k] for k in keys):
+        return []
+    return keys
 
 
 def _wind_text(ev, reference) -> str:
