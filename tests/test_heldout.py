@@ -124,3 +124,19 @@ def test_verdict_carries_a_posterior_ranked_by_its_own_key(cf):
     assert all(c["at_floor"] for c in v["channels"].values())
     assert v["answer"].startswith("Behaves as if") and "rotor_2 -8" in v["answer"]
     assert "every channel" in v["answer"]
+
+
+def test_a_propeller_change_is_named_not_a_refit_of_b_and_d(cf):
+    """-5 % thrust and drag torque per Omega^2 on DC motors (alpha 0.2: they spin faster per
+    command) on every flight: the training flights' command -> speed map carries the faster
+    spin, so the propeller reading holds the speed per command (alpha 0) and is named with
+    its size; before, it counted the spin twice and "b and d refitted" (the same statement
+    in two parameters) took it on all four self-generated propeller cases."""
+    effect = make_effect("thrust_factor", change=-0.05, alpha=0.2)
+    logs = [synthetic_flight(cf, [effect], seed=s, duration=4.0, speed=1.1) for s in (50, 51, 52)]
+    result = diagnose(logs[:2], cf, holdout=logs[2:], kstep=False, max_combination=1,
+                      effects=["thrust_factor", "mass_offset", "thrust_curve"])
+    v = result["verdict"]
+    assert v["outcome"] == "effect" and v["effect"] == "thrust_factor", v["answer"]
+    assert v["params"]["thrust_factor.change"] == pytest.approx(-0.05, abs=0.003)
+    assert "per command" not in v["answer"]

@@ -141,6 +141,12 @@ def heldout_explanations(reference: Reference, train_states, names=None,
 
     sd = _prior_sd(reference.params)
     out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]
+    # a propeller change with the speed per command held: the reference's static command ->
+    # speed map is fitted on these same flights, so it already carries the lighter load's
+    # faster spin (the speed exponent alpha would count it twice)
+    out = [Explanation("thrust_factor", "", (("thrust_factor", {"alpha": 0.0}, ("change",)),),
+                       (0.0,), (sd["thrust_factor.change"],))
+           if e.name == "thrust_factor" else e for e in out]
     out.append(Explanation("wind", "", (("wind", {}, ("vx", "vy")),
                                         ("rotor_drag", {}, ("coefficient",))),
                            (0.0, 0.0, 0.0), (sd["wind"], sd["wind"], sd["rotor_drag"]),

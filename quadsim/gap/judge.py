@@ -204,7 +204,8 @@ def reading_text(ev, reference) -> str:
                 _value_text(k, ref[k], s_ref[k], params) for k in known) + ")"
     if ev.explanation.variant and ev.explanation.variant not in text:
         text = f"{ev.explanation.variant}: {text}"
-    if name == "thrust_factor" and reference.rotor and "thrust_factor.change" in values:
+    if name == "thrust_factor" and reference.rotor and "thrust_factor.change" in values \
+            and "thrust_factor.alpha" in ev.values:        # fitted (held out: the map has it)
         text += (f"; the rotors would spin {100 * ((1 + ev.values['thrust_factor.change']) ** -ev.values.get('thrust_factor.alpha', 0.0) - 1):+.1f} % "
                  "per command (lighter load torque)")
     return text
