@@ -287,36 +287,3 @@ def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
     _close(np.array(rows_q), want_q, rel=1e-12)
     _close(np.array(rows_w), want_w, rel=1e-12)
     np.testing.assert_array_equal(np.array(rows_q)[300], [0.0, 0.0, -1.0])
-
-
-def test_a_wind_reading_carries_a_drag_where_the_references_show_none(cf, states):
-    """References whose rotor drag is identified as nothing (within 95 % of zero: PyFlyt's
-    quadratic drag at their speeds) give the wind reading a body drag of its own (a wind acts
-    only through a drag; evidence._with_drag); references with a drag leave the wind reading
-    as it is; references whose drag is unidentified let the drags refit the wind instead."""
-    import dataclasses
-
-    from quadsim.gap.evidence import shows_drag
-
-    ref = _reference(cf, states)
-    names = ref.candidate.parameter_names
-    k = names.index("rotor_drag.coefficient")
-    identified = {n: True for n in names}
-
-    def with_drag(value, se, known=True):
-        theta, pool = ref.theta.copy(), ref.se_pool.copy()
-        theta[k], pool[k] = value, se
-        return dataclasses.replace(ref, theta=theta, se_pool=pool, scatter=np.zeros_like(pool),
-                                   identified={**identified, names[k]: known})
-
-    def wind_parts(r):
-        expl = {e.name: e for e in explanations_for(r, states)}
-        return [p for p, _, _ in expl["wind"].parts], expl["wind"].coupled, \
-            [p for p, _, _ in expl["body_drag"].parts]
-
-    nothing, drag, unknown = with_drag(1.5e-8, 2.9e-8), with_drag(2e-7, 1e-8), \
-        with_drag(1.5e-8, 2.9e-8, known=False)
-    assert not shows_drag(nothing) and shows_drag(drag) and not shows_drag(unknown)
-    assert wind_parts(nothing) == (["wind", "body_drag"], True, ["body_drag"])
-    assert wind_parts(drag) == (["wind"], False, ["body_drag"])
-    assert wind_parts(unknown)[2] == ["body_drag", "wind"]       # the drag refits the wind

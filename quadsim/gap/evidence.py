@@ -78,7 +78,7 @@ from .priors import WIND_SD_MS, momentum_rate_damping, momentum_translational_li
 from .screen import delay_starts, screened
 
 __all__ = ["Explanation", "Evidence", "explanations_for", "evaluate", "marginal_sd",
-           "DETERMINED", "DELAY_SD_S", "shifted", "reference_determined", "shows_drag"]
+           "DETERMINED", "DELAY_SD_S", "shifted", "reference_determined"]
 
 #: a parameter is determined when its posterior spread is below this fraction of its prior's.
 DETERMINED = 0.5
@@ -314,8 +314,6 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
     if "wind" in groups and not reference.identified.get("rotor_drag.coefficient", True):
         out = [_with_wind(e, reference) if e.name in DRAGS else e for e in out]
-    elif "wind" in groups and not shows_drag(reference):
-        out = [_with_drag(e, reference) if e.name == "wind" else e for e in out]
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
@@ -339,32 +337,6 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
 #: curve by 173 log units; with the wind refitted (to 0.001 m/s) it left their level and won
 #: by 9.
 DRAGS = ("rotor_drag", "body_drag", "translational_lift")
-
-
-def shows_drag(reference: Reference) -> bool:
-    """Whether the references show a rotor drag a wind can act through: their coefficient
-    identified and beyond its 95 % interval from zero."""
-    names = reference.candidate.parameter_names
-    key = "rotor_drag.coefficient"
-    if not reference.identified.get(key, True):
-        return False
-    return key not in names or \
-        abs(reference.values()[key]) > 1.96 * reference.s_ref[names.index(key)]
-
-
-def _with_drag(expl: Explanation, reference: Reference) -> Explanation:
-    """The wind reading with a body drag of its own (sideways C_d A, the prior of the body-drag
-    reading), for references whose drag is identified as nothing (:func:`shows_drag` false):
-    a wind acts only through a drag, and a drag their speeds did not show may carry the
-    flight's. Measured on PyFlyt (its drag quadratic, C_d A 12 cm^2): the references' linear
-    drag read (1.5 ± 2.9) x 1e-8 kg/rad; a 2.3 m/s wind then acted through nothing and the
-    flight was `unexplained` (a canted rotor leading); with the drag: wind (2.2, -0.7) m/s
-    and C_d A 11 ± 4 cm² against PyFlyt's (2.24, -0.67) and 12. Coupled (the drag acts on the
-    wind's force only through its value): always fitted, as where their drag is unidentified
-    the drags refit the wind (:func:`_with_wind`)."""
-    return dataclasses.replace(expl, parts=expl.parts + (("body_drag", {}, ("cd_area",)),),
-                               mean=expl.mean + (0.0,),
-                               sd=expl.sd + (_area_scale(reference.params),), coupled=True)
 
 
 def _with_wind(expl: Explanation, reference: Reference) -> Explanation:

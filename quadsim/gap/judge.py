@@ -234,17 +234,12 @@ def _wind_text(ev, reference) -> str:
             f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
             "airspeed")
     keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
-    own = "body_drag.cd_area" in ev.values       # a drag of its own (evidence._with_drag)
     if keys:
         ref = reference.values()
         speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
                                ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
-        text += f": wind of ~{speed:.2g} m/s beyond the references' " + (
-            "at their rotor-drag coefficient" if not own else "through a drag of its own")
-    if own and ev.determined.get("body_drag.cd_area"):
-        text += ("; the references show no drag, so the reading carries one: " + _value_text(
-            "body_drag.cd_area", ev.values["body_drag.cd_area"], ev.post_sd["body_drag.cd_area"],
-            reference.params))
+        text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
+                 "coefficient")
     else:
         text += " (drag coefficient x wind speed fixed by the data, not each factor)"
     return text
