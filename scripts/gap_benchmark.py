@@ -80,6 +80,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from quadsim.bench.cases import oracle_reduction  # noqa: E402
 from quadsim.bench.draws import draw  # noqa: E402
+from quadsim.bench.score import joined_kind  # noqa: E402
 from quadsim.core.errors import QuadsimWarning  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.effects import make_effect  # noqa: E402
@@ -125,7 +126,7 @@ def case_list(count: int | None = None) -> list[dict]:
         for k in range(2):
             cases.append({"vehicle": vehicle, "truth": "none", "kind": "none", "k": k})
         for name in ("translational_lift", "blade_flapping"):
-            kind = "library" if name in JOINED_LIBRARY else "outside"
+            kind = joined_kind(name, "outside", JOINED_LIBRARY)
             cases.append({"vehicle": vehicle, "truth": name, "kind": kind, "k": 0})
     for i, case in enumerate(cases):
         case["seed"] = 1000 + i

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadsim.core.errors import InputError
 from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import EffectContext, EffectSet, make_effect
 from quadsim.effects.cable_payload import CablePayload, swing_period
@@ -191,3 +192,5 @@ def test_translational_lift_closed_form():
     np.testing.assert_allclose(loads.force_world, 0.0)
     np.testing.assert_allclose(loads.torque_body, 0.0)
     assert make_effect("translational_lift").loads(ctx) is None
+    with pytest.raises(InputError, match=r"^effect translational_lift: k_h = 2 kg/m outside"):
+        make_effect("translational_lift", k_h=2.0)

@@ -54,9 +54,10 @@ from ..effects import EFFECTS
 from ..vehicle.params import load_params
 from .draws import draw, draw_rotorpy, library_equivalent
 from .observe import OBSERVABLE, Observed, TrueModel, per_flight_observability, true_model
-from .score import read_verdict, score_case
+from .score import joined_kind, read_verdict, score_case
 
-__all__ = ["DURATION", "FLIGHTS", "JOINED_LIBRARY", "scored_kind", "REFERENCES", "REFERENCE_SPEEDS", "case_flights", "case_key",
+__all__ = ["DURATION", "FLIGHTS", "JOINED_LIBRARY", "scored_kind", "REFERENCES",
+           "REFERENCE_SPEEDS", "case_flights", "case_key",
            "case_list", "first_flight", "heldout_truth", "is_cached", "oracle_reduction",
            "per_flight_observed", "per_flight_truth", "reference_flight", "reference_flights",
            "reference_key", "reference_speeds", "run_case", "run_per_flight", "shared_physics"]
@@ -83,7 +84,7 @@ JOINED_LIBRARY = frozenset({"translational_lift"})
 
 def scored_kind(case: dict) -> str:
     """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
-    return "library" if case["truth"] in JOINED_LIBRARY else case["kind"]
+    return joined_kind(case["truth"], case["kind"], JOINED_LIBRARY)
 
 
 def case_list(count: int | None = None) -> list[dict]:

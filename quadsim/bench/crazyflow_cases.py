@@ -71,6 +71,7 @@ from .crazyflow_source import (
     vehicle_params,
 )
 from .observe import OBSERVABLE
+from .score import joined_kind
 
 __all__ = [
     "CASES",
@@ -113,7 +114,7 @@ JOINED_LIBRARY = frozenset({"blade_flapping", "translational_lift"})
 
 def scored_kind(case: dict) -> str:
     """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
-    return "library" if case["case"] in JOINED_LIBRARY else case["kind"]
+    return joined_kind(case["case"], case["kind"], JOINED_LIBRARY)
 
 
 def reference_specs() -> list[FlightSpec]:

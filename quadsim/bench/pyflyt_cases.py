@@ -68,6 +68,7 @@ from ..effects import make_effect
 from . import sim_cases
 from .observe import OBSERVABLE
 from .pyflyt_source import FlightSpec, motor_response, pyflyt_flights, pyflyt_model, vehicle_params
+from .score import joined_kind
 
 __all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spec",
            "library_truth", "oracle_reductions", "reference_specs", "shared_effects"]
@@ -96,7 +97,7 @@ JOINED_LIBRARY = frozenset({"translational_lift"})
 
 def scored_kind(case: dict) -> str:
     """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
-    return "library" if case["case"] in JOINED_LIBRARY else case["kind"]
+    return joined_kind(case["case"], case["kind"], JOINED_LIBRARY)
 
 
 def reference_specs() -> list[FlightSpec]:

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["names_truth", "read_verdict", "score_case", "summary_rows"]
+__all__ = ["joined_kind", "names_truth", "read_verdict", "score_case", "summary_rows"]
 
 _NO_GAP = ("no_significant_gap", "no_gap", "none")
 
@@ -80,6 +80,14 @@ def read_verdict(entry: dict) -> dict:
             "alternatives": sorted(set(alternatives) - set(named)),
             "probability": None if probability is None else float(probability),
             "confident": outcome == "named" and not tentative}
+
+
+def joined_kind(name: str, kind: str, joined) -> str:
+    """The kind a case is scored as today: ``library`` when its effect ``name`` is among
+    ``joined`` -- effects the library gained after the case was flown as outside it (each
+    source's ``JOINED_LIBRARY``; the flights, case list and cache keys stay) -- else the
+    ``kind`` it was flown as."""
+    return "library" if name in joined else kind
 
 
 def names_truth(truth: str, names) -> bool:

@@ -122,12 +122,15 @@ def reading_name(key: str, ev) -> str:
             off = {p.name: p.off for p in effect_class(part).parameters}
         except KeyError:
             continue
-        for p in fitted:
-            q = f"{part}.{p}"
-            if ev.determined.get(q) and abs(ev.values[q] - off.get(p, 0.0)) > 1.96 * ev.post_sd[q]:
-                names.append(part)
-                break
+        if any(_asserted(ev, f"{part}.{p}", off.get(p, 0.0)) for p in fitted):
+            names.append(part)
     return "+".join(names)
+
+
+def _asserted(ev, key: str, off: float = 0.0) -> bool:
+    """Whether ``ev`` asserts parameter ``key``: its value is determined and its 95 %
+    interval (1.96 posterior spreads) excludes the ``off`` value."""
+    return bool(ev.determined.get(key)) and abs(ev.values[key] - off) > 1.96 * ev.post_sd[key]
 
 
 def within_form_error(ms, null_ms, typical) -> bool:
@@ -219,7 +222,7 @@ def _calm_refit(ev) -> list[str]:
                                     for part, _, fitted in ev.explanation.parts):
         return []
     keys = [k for k in ("wind.vx", "wind.vy") if k in ev.values]
-    if any(ev.determined.get(k) and abs(ev.values[k]) > 1.96 * ev.post_sd[k] for k in keys):
+    if any(_asserted(ev, k) for k in keys):
         return []
     return keys
 

@@ -165,12 +165,10 @@ def momentum_rate_damping(params: VehicleParams) -> float:
 
 def momentum_translational_lift(params: VehicleParams) -> float:
     """k_tl = T_h / (4 v_i^2) (kg/m): the translational-lift coefficient of momentum theory
-    (table above; T_h = m g / R the hover thrust per rotor, N; v_i the hover induced
-    velocity, m/s, as in :func:`momentum_rate_damping`). Equivalently
-    k_tl = rho pi R_p^2 / 2 (R_p the rotor radius, m)."""
-    thrust = params.mass * params.gravity / params.rotor_count
-    induced_sq = thrust / (2 * params.air_density * math.pi * params.rotor_radius ** 2)
-    return thrust / (4 * induced_sq)
+    (table above; T_h the hover thrust per rotor, N; v_i^2 = T_h / (2 rho pi R_p^2) the
+    hover induced velocity squared, as in :func:`momentum_rate_damping`), which is
+    k_tl = rho pi R_p^2 / 2 (rho the air density, kg/m^3; R_p the rotor radius, m)."""
+    return 0.5 * params.air_density * math.pi * params.rotor_radius ** 2
 
 
 def candidate_plausibility(values: dict, params: VehicleParams):

@@ -13,7 +13,8 @@ parallel threads (the kernel releases the GIL; MuJoCo is thread-safe across ``Mj
 Effects with a fast form (the kernel's own formulas, each a transcription of the effect's
 module docstring): every effect of the library — motor_lag, thrust_curve, thrust_mismatch,
 rotor_drag, blade_flapping, translational_lift, body_drag, ground_effect, gyroscopic, wind,
-thrust_factor, rate_damping, battery_sag (its time model: the command times sqrt(max(MIN_SCALE, 1 - rate t)) at every
+thrust_factor, rate_damping, battery_sag (its time model: the command times
+sqrt(max(MIN_SCALE, 1 - rate t)) at every
 rotor RK4 stage, then motor_lag's lag or SPEED_RESPONSE_S; thrust_factor's speed gain
 (1 + change)^-alpha multiplies it), cable_payload (the kernel carries
 the payload state p, v (6,) per simulation, integrated like the reference: two RK4 half steps
