@@ -25,6 +25,7 @@ Usage::
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --generate-only
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
     python scripts/gap_benchmark.py --independent --source pyflyt --cache DIR [--generate-only]
+    python scripts/gap_benchmark.py --independent --source multirotor --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
 
@@ -55,6 +56,11 @@ without computing any verdict.
 PyFlyt source (``--independent --source pyflyt --cache DIR``, :mod:`quadsim.bench.pyflyt_cases`):
 the same for 28 cases from PyFlyt 0.29.0 (pybullet; its own QuadX, motors, drag, rate
 damping and PID cascade) against 8 nominal PyFlyt flights.
+
+multirotor source (``--independent --source multirotor --cache DIR``,
+:mod:`quadsim.bench.multirotor_cases`): the same for 28 cases from multirotor 0.5.0 (a 5.5 kg
+quadrotor with its own DC motors, odeint rigid body and ArduPilot-style PID cascade) against 8
+nominal multirotor flights (flying them takes ~12.5 min on 2 cores).
 """
 
 from __future__ import annotations
@@ -514,6 +520,10 @@ SIM_SOURCES = {
                   "crazyflow_available", "pip install 'quadsim[crazyflow]'"),
     "pyflyt": ("quadsim.bench.pyflyt_cases", "quadsim.bench.pyflyt_source", "pyflyt_available",
                "pip install 'quadsim[pyflyt]' then pip install --no-deps PyFlyt==0.29.0"),
+    "multirotor": ("quadsim.bench.multirotor_cases", "quadsim.bench.multirotor_source",
+                   "multirotor_available",
+                   "pip install 'quadsim[multirotor]' then pip install --no-deps "
+                   "multirotor==0.5.0"),
 }
 
 
@@ -602,7 +612,7 @@ def main(argv=None) -> int:
     parser.add_argument("--source", choices=("rotorpy+pipeline", *SIM_SOURCES),
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
-                             "pyflyt: per-flight cases against 8 nominal flights of that "
+                             "pyflyt, multirotor: per-flight cases against 8 nominal flights of that "
                              "simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
                         help="with --source crazyflow|pyflyt: only fly and cache the flights "

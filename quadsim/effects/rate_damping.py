@@ -15,7 +15,11 @@ dT/dv_z ~ T/(2 v_i) per rotor (v_i the hover induced velocity) and arm r, a "+" 
 roll damping is k ~ 2 r^2 dT/dv_z; for the 0.84 kg testbed (T = 2.06 N, v_i = 4.1 m/s,
 r = 0.198 m) k_x ~ 0.02 N m s/rad.
 
-Parameters ``x, y, z`` are the damping coefficients k (N m s/rad) about body x, y, z; 0 = off.
+Parameters ``x, y, z`` are the damping coefficients k (N m s/rad) about body x, y, z; 0 = off;
+at most 10 N m s/rad: the momentum-theory value grows with arm^2 x thrust, 0.47 N m s/rad for
+a 5.5 kg quadrotor on 0.45 m arms with 18-inch propellers (:mod:`quadsim.bench.multirotor_source`)
+whose plausible range reaches 3x that (:mod:`quadsim.gap.priors`); the former 1 N m s/rad cut
+that range off.
 Example: ``rate_damping:x=0.01,y=0.01,z=0.002`` gives a roll rate of 1 rad/s a torque of
 -0.01 N m (the testbed's Ixx = 0.006 kg m^2: a 0.6 s time constant).
 """
@@ -34,9 +38,9 @@ class RateDamping(EffectBase):
 
     name = "rate_damping"
     parameters = (
-        EffectParameter("x", "N m s/rad", 0.0, 0.0, 1.0, "roll damping coefficient k_x"),
-        EffectParameter("y", "N m s/rad", 0.0, 0.0, 1.0, "pitch damping coefficient k_y"),
-        EffectParameter("z", "N m s/rad", 0.0, 0.0, 1.0, "yaw damping coefficient k_z"),
+        EffectParameter("x", "N m s/rad", 0.0, 0.0, 10.0, "roll damping coefficient k_x"),
+        EffectParameter("y", "N m s/rad", 0.0, 0.0, 10.0, "pitch damping coefficient k_y"),
+        EffectParameter("z", "N m s/rad", 0.0, 0.0, 10.0, "yaw damping coefficient k_z"),
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

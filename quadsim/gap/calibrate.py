@@ -293,14 +293,27 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
     base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
-        theta = reference.theta.copy()
         h = FD_STEP * typical[k]
-        if theta[k] + h > upper[k]:      # a value at its upper bound: step down
+        if reference.theta[k] + h > upper[k]:      # a value at its upper bound: step down
             h = -h
-        theta[k] += h
-        out[:, j] = (weighted_residual(states, reference, build(theta), memo).ravel()
-                     - base) / h
+        try:
+            moved = _probe(states, reference, build, memo, k, h)
+        except ModelError:      # the step crosses a wall of the physical set: the other way
+            h = -h
+            moved = _probe(states, reference, build, memo, k, h)
+        out[:, j] = (moved - base) / h
     return (out, base) if with_base else out
+
+
+def _probe(states, reference: Reference, build, memo, k: int, h: float) -> np.ndarray:
+    """The weighted residual (flattened) with shared parameter ``k`` moved by ``h``. Raises
+    ModelError where that leaves the physical set: measured on the multirotor source (a
+    5.5 kg quadrotor, Izz 1.87 Ixx) the pooled steps took the references' inertia error to
+    within 1e-3 of the triangle inequality (Izz <= Ixx + Iyy), and the forward step crossed
+    it; the calibration then failed and no flight was judged."""
+    theta = reference.theta.copy()
+    theta[k] += h
+    return weighted_residual(states, reference, build(theta), memo).ravel()
 
 
 def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
