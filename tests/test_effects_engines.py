@@ -120,3 +120,18 @@ def test_a_propeller_change_acts_on_the_speed_a_command_gives():
     assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
     np.testing.assert_allclose(a.rotor_speed[0, -1], series[0] * 0.9 ** -0.2, rtol=1e-4)
     np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)
+
+
+def test_one_propellers_change_acts_on_its_own_rotors_speed():
+    """thrust_mismatch with alpha: rotor 2's command gives (1 - 0.12)^-0.2 of its speed, the
+    others are untouched; both engines (MuJoCo on the compiled path, analytic) agree, and the
+    speeds settle there (5 ms response << 0.5 s)."""
+    sets = [effect_set_from_specs(["thrust_mismatch:rotor_2=-0.12,alpha=0.2"])]
+    t = np.arange(int(round(DURATION / PERIOD))) * PERIOD
+    series = HOVER * np.ones((len(t), 1)) * np.array([1.0, 1.01, 1.0, 0.99])
+    m, a = _both(sets, series, DURATION)
+    position, angle = _errors(m, a)
+    assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
+    np.testing.assert_allclose(a.rotor_speed[0, -1],
+                               series[0] * np.array([1.0, 0.88 ** -0.2, 1.0, 1.0]), rtol=1e-4)
+    np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)

@@ -290,12 +290,13 @@ def oracle_reduction(logs, params, effects) -> float:
     flights = prepare(logs, params)
     train, held = [f.fit for f in flights[:-1]], [f.fit for f in flights[-1:]]
     nominal_params = fit_motor_map(train, params)
-    factor_of = EffectSet(tuple(effects)).speed_factor
+    factor_of = EffectSet(tuple(effects)).command_factor
     unfactored = []
     for f in train:
-        factor = factor_of(f.t, f.vbat)
-        unfactored.append(f if factor is None or f.rotor_speed is None else dataclasses.replace(
-            f, rotor_speed=f.rotor_speed / np.asarray(factor)[:, None]))
+        factor = None if f.rotor_speed is None else factor_of(f.t, f.vbat,
+                                                               f.rotor_speed.shape[1])
+        unfactored.append(f if factor is None else dataclasses.replace(
+            f, rotor_speed=f.rotor_speed / factor))
     true_params = fit_motor_map(unfactored, params)
     nominal = [residuals(f, nominal_params, [], rotor_channel=True) for f in train]
     sigma = noise_scale(np.concatenate(nominal), float(train[0].t[1] - train[0].t[0]),

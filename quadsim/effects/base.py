@@ -15,7 +15,9 @@ neutral default for the rest (see :class:`EffectBase`):
 5. ``speed_factor(t, vbat=None) -> (B,)`` or ``None`` — the steady rotor speed a command gives,
    relative to nominal (battery voltage). It multiplies the commanded speed before the
    rotor-speed dynamics; without a dynamics effect the rotor follows the scaled command with
-   the fast first-order response :data:`SPEED_RESPONSE_S`.
+   the fast first-order response :data:`SPEED_RESPONSE_S`. ``rotor_speed_factor(rotors) ->
+   (R,)`` or ``None``: the same per rotor and constant (one propeller's load on its DC
+   motor); :meth:`EffectSet.command_factor` is the product of both.
 6. Internal state (optional, e.g. a swinging payload): ``state_size() -> S`` (0 = none),
    ``initial_state(params, vehicle) -> (B, S)`` from the vehicle's initial snapshot (dict of
    (B, ...) arrays ``position, velocity, quat, body_rate``), and ``state_rate(ctx) -> (B, S)``.
@@ -45,6 +47,11 @@ from ..vehicle.params import VehicleParams
 #: effect defines rotor dynamics (fast against flight dynamics, slow enough for the engines'
 #: fixed-step rotor integration at 1 ms).
 SPEED_RESPONSE_S = 0.005
+
+
+def _rotor_factor(effect, rotors: int):
+    hook = getattr(effect, "rotor_speed_factor", None)
+    return hook(rotors) if hook is not None else None
 
 
 @dataclass(frozen=True)
@@ -190,6 +197,9 @@ class EffectBase:
     def speed_factor(self, t, vbat=None):
         return None
 
+    def rotor_speed_factor(self, rotors: int):
+        return None
+
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
         return None
 
@@ -224,7 +234,8 @@ class EffectSet:
     def has_rotor_dynamics(self) -> bool:
         probe = np.zeros((1, 1))
         return any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
-                   for e in self.effects) or self.speed_factor(np.zeros(1)) is not None
+                   for e in self.effects) or self.speed_factor(np.zeros(1)) is not None \
+            or any(_rotor_factor(e, 8) is not None for e in self.effects)
 
     def speed_factor(self, t, vbat=None):
         """Product of the effects' speed factors (B,), or None when none acts."""
@@ -236,13 +247,36 @@ class EffectSet:
                 total = f if total is None else total * f
         return total
 
+    def rotor_factor(self, rotors: int):
+        """Product of the effects' per-rotor speed factors (R,), or None when none acts."""
+        total = None
+        for effect in self.effects:
+            f = _rotor_factor(effect, rotors)
+            if f is not None:
+                total = f if total is None else total * f
+        return total
+
+    def command_factor(self, t, vbat=None, rotors: int = 1):
+        """The factor (B, R) on the speed each rotor's command gives: :meth:`speed_factor`
+        (B,) times :meth:`rotor_factor` (R,); None when neither acts."""
+        uniform, per_rotor = self.speed_factor(t, vbat), self.rotor_factor(rotors)
+        if uniform is None and per_rotor is None:
+            return None
+        n = len(np.atleast_1d(t))
+        out = np.ones((n, rotors))
+        if uniform is not None:
+            out = out * np.asarray(uniform, dtype=float).reshape(-1, 1)
+        if per_rotor is not None:
+            out = out * np.asarray(per_rotor, dtype=float)[None, :]
+        return out
+
     def rotor_speed_rate(self, t, commanded, actual, vbat=None):
         """dOmega/dt (B, R); the first effect that defines rotor dynamics owns it. Speed
-        factors (battery) scale the command first; with a factor but no dynamics effect the
-        rotor follows with :data:`SPEED_RESPONSE_S`."""
-        factor = self.speed_factor(t, vbat)
+        factors (battery, one propeller's load) scale the command first; with a factor but
+        no dynamics effect the rotor follows with :data:`SPEED_RESPONSE_S`."""
+        factor = self.command_factor(t, vbat, np.shape(commanded)[1])
         if factor is not None:
-            commanded = np.asarray(commanded, dtype=float) * np.asarray(factor)[:, None]
+            commanded = np.asarray(commanded, dtype=float) * factor
         for effect in self.effects:
             rate = effect.rotor_speed_rate(t, commanded, actual)
             if rate is not None:

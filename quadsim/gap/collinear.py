@@ -118,7 +118,7 @@ def describe(name: str, values: dict, ci: dict, params: VehicleParams,
                          "rotors")
         elif key == "nominal_refit.drag":
             parts.append(f"{_pm(value, c, 100)} % drag torque per Ω²")
-        elif key.startswith("thrust_mismatch."):
+        elif key.startswith("thrust_mismatch.rotor_"):
             parts.append(f"{key.split('.')[1]} {_pm(value, c, 100)} % thrust")
         elif key == "thrust_curve.linear":
             hover = hover_speed(params)

@@ -42,8 +42,8 @@ documented with its source in :mod:`quadsim.gap.priors` (that range is then abou
 spreads), centred on "off" (or on the references' value for a shared group); for the
 parameters without a range there, the source is given in the table.
 
-The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`): thrust and drag
-torque per Omega^2 scale together (same blade, same air; Leishman 2006 ch. 2-3), and the
+The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`, and one rotor's in
+:mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together (same blade, same air; Leishman 2006 ch. 2-3), and the
 lower load torque lets the motor spin faster per command, by (1 + change)^-alpha (the
 effect's module doc: alpha 0.2 for a DC motor at 75 % voltage efficiency). Alpha is fitted
 with prior N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
@@ -289,9 +289,16 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                     coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
     rotors = params.rotor_count
     for k in range(rotors):
+        # one propeller: its thrust and drag torque, and with commands logged the speed its
+        # command gives (the alpha of thrust_factor: the motor's load). Coupled (alpha acts
+        # through the deviation); its kin is itself: screened by two linear steps and
+        # fitted only where its own reach matters (screen._kin_matters)
+        fitted = (f"rotor_{k + 1}", "alpha")[:len(change)]
         out.append(_one("thrust_mismatch", f"rotor {k + 1}",
-                        [("thrust_mismatch", {}, (f"rotor_{k + 1}",))], [0.0],
-                        [sd["thrust_mismatch"]], log_prior=-np.log(rotors)))
+                        [("thrust_mismatch", {}, fitted)], [0.0, 0.2][:len(fitted)],
+                        [sd["thrust_mismatch"], sd["thrust_factor.alpha"]][:len(fitted)],
+                        log_prior=-np.log(rotors), coupled=len(fitted) > 1,
+                        kin=("thrust_mismatch",)))
         out.append(_one("canted_rotor", f"rotor {k + 1}",
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))

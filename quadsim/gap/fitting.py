@@ -355,9 +355,9 @@ def _rotor_channel(states: FlightStates, params: VehicleParams, effects: list) -
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
     # dynamics effect (motor_lag) makes the rotor follow with a lag.
-    factor = EffectSet(tuple(effects)).speed_factor(states.t, states.vbat)
+    factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat, cmd.shape[1])
     if factor is not None:
-        cmd = cmd * np.asarray(factor)[:, None]
+        cmd = cmd * factor
     speed = states.rotor_speed
     n = len(states.t) - steps
     owner = rate_owner(effects)

@@ -207,11 +207,24 @@ def reading_text(ev, reference) -> str:
                 _value_text(k, ref[k], s_ref[k], params) for k in known) + ")"
     if ev.explanation.variant and ev.explanation.variant not in text:
         text = f"{ev.explanation.variant}: {text}"
-    if name == "thrust_factor" and reference.rotor and "thrust_factor.change" in values \
-            and "thrust_factor.alpha" in ev.values:        # fitted (held out: the map has it)
-        text += (f"; the rotors would spin {100 * ((1 + ev.values['thrust_factor.change']) ** -ev.values.get('thrust_factor.alpha', 0.0) - 1):+.1f} % "
-                 "per command (lighter load torque)")
-    return text
+    return text + _spin_text(name, ev, values, reference)
+
+
+def _spin_text(name: str, ev, values: dict, reference: Reference) -> str:
+    """A propeller reading's speed per command, (1 + change)^-alpha, where alpha was fitted
+    (held out it is not: the training flights' map has it): "the rotors would spin +2.1 %
+    per command" (all rotors) or "rotor 4 would spin +0.9 % per command" (one)."""
+    alpha = ev.values.get(f"{name}.alpha")
+    if not reference.rotor or alpha is None or name not in ("thrust_factor", "thrust_mismatch"):
+        return ""
+    keys = [k for k in values if k == "thrust_factor.change"
+            or k.startswith("thrust_mismatch.rotor_")]
+    if not keys:
+        return ""
+    who = ("the rotors" if name == "thrust_factor"
+           else f"rotor {keys[0].rsplit('_', 1)[1]}")
+    spin = 100 * ((1 + ev.values[keys[0]]) ** -alpha - 1)
+    return f"; {who} would spin {spin:+.1f} % per command (lighter load torque)"
 
 
 def _calm_refit(ev) -> list[str]:

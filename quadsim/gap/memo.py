@@ -90,7 +90,7 @@ def _wrench_key(states, params: VehicleParams, effects: list) -> tuple:
 
 
 #: the hooks through which an effect reaches the rotor channel (:func:`_rotor_channel`).
-_ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor")
+_ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor", "rotor_speed_factor")
 
 
 def identity(effect) -> tuple:

@@ -178,7 +178,7 @@ def candidate_plausibility(values: dict, params: VehicleParams):
     change, ``thrust_factor.change``) and each rotor's deviation from that mean (judged as a
     mismatch): four rotors all 16 % weak are a uniform loss, not four damaged props."""
     values = dict(values)
-    rotors = {k: v for k, v in values.items() if k.startswith("thrust_mismatch.")}
+    rotors = {k: v for k, v in values.items() if k.startswith("thrust_mismatch.rotor_")}
     if len(rotors) > 1:
         mean = sum(rotors.values()) / len(rotors)
         for k in rotors:

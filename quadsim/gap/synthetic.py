@@ -293,8 +293,8 @@ def _commands(t, speed, effect_set, params, hover, vbat):
     rate_needed = np.gradient(speed, t, axis=0)
     cmd = speed.copy()
     if rate_owner(effect_set.effects) is None:
-        factor = effect_set.speed_factor(t, vbat)
-        return (cmd if factor is None else cmd / np.asarray(factor)[:, None]) / params.max_speed
+        factor = effect_set.command_factor(t, vbat, cmd.shape[1])
+        return (cmd if factor is None else cmd / factor) / params.max_speed
     if effect_set.has_rotor_dynamics():
         for _ in range(8):
             rate = effect_set.rotor_speed_rate(t, cmd, speed)

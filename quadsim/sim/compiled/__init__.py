@@ -53,7 +53,7 @@ __all__ = ["GUST", "MAX_ROTORS", "Kernel", "analytic_fast_rhs", "available", "en
 _KNOWN = {
     "motor_lag": {"time_constant", "time_constant_down"},
     "thrust_curve": {"linear", "offset"},
-    "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)},
+    "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)} | {"alpha"},
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "blade_flapping": {"coefficient"},
     "translational_lift": {"k_h"},
@@ -143,6 +143,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
     from ...effects.base import SPEED_RESPONSE_S
 
     rows[:, _OFFSET["mismatch"]:_OFFSET["mismatch"] + MAX_ROTORS] = 1.0
+    rows[:, _OFFSET["rotor_speed_gain"]:_OFFSET["rotor_speed_gain"] + MAX_ROTORS] = 1.0
     rows[:, _OFFSET["thrust_gain"]] = rows[:, _OFFSET["speed_gain"]] = 1.0
     # a speed factor (battery) without a lag effect: the rotor follows with SPEED_RESPONSE_S
     rows[:, _OFFSET["tau_up"]] = rows[:, _OFFSET["tau_down"]] = SPEED_RESPONSE_S
@@ -168,6 +169,9 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                     else v["time_constant"])
             elif effect.name == "thrust_mismatch":
                 put("mismatch", [1.0 + v[f"rotor_{i}"] for i in range(1, MAX_ROTORS + 1)])
+                gains = effect.rotor_speed_factor(MAX_ROTORS)
+                if gains is not None:
+                    put("rotor_speed_gain", gains)
             elif effect.name == "battery_sag":
                 put("battery_rate", v["rate"])
             elif effect.name == "thrust_factor":

@@ -56,7 +56,7 @@ def _call(typingctx, function, model, data, state, spec):
 
 O_UP, O_DOWN, O_MIS = offset["tau_up"], offset["tau_down"], offset["mismatch"]
 O_BAT, O_GG, O_GH = offset["battery_rate"], offset["ground_gain"], offset["ground_height"]
-O_SG = offset["speed_gain"]
+O_SG, O_RSG = offset["speed_gain"], offset["rotor_speed_gain"]
 O_GR, O_CL, O_CO = offset["ground_radius"], offset["curve_linear"], offset["curve_offset"]
 O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["body_drag"]
 O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
@@ -338,11 +338,12 @@ def run_one(b, functions, addr, commands, omega, k0, substeps, dt, period, arm, 
             for r in range(rotors):
                 if lag:
                     w0 = omega[b, r]
-                    m_ = rk4(cmd[r], w0, hh, up, down, fa, fb, fc)
-                    e_ = rk4(cmd[r], m_, hh, up, down, fc, fd, fe)
+                    g = row[O_RSG + r]       # this rotor's own speed factor (1: none)
+                    m_ = rk4(cmd[r], w0, hh, up, down, fa * g, fb * g, fc * g)
+                    e_ = rk4(cmd[r], m_, hh, up, down, fc * g, fd * g, fe * g)
                     mid[r], end[r] = m_, e_
                     msq[r] = (w0 * w0 + 4 * m_ * m_ + e_ * e_) / 6
-                    acc[r] = rate(cmd[r], m_, up, down, fc)
+                    acc[r] = rate(cmd[r], m_, up, down, fc * g)
                 else:
                     mid[r] = end[r] = cmd[r]
                     msq[r] = cmd[r] * cmd[r]
@@ -413,7 +414,8 @@ def analytic_rhs(t, y, command, lag, active, size, rows, arm, axis, spin, hub, a
         for r in range(rotors):
             if lag:
                 omega[r] = s[13 + r]
-                accel_r[r] = rate(command[b, r], omega[r], up, down, speed_factor(bat, sg, t))
+                accel_r[r] = rate(command[b, r], omega[r], up, down,
+                                  speed_factor(bat, sg, t) * rows[b, O_RSG + r])
                 d[13 + r] = accel_r[r]
             else:
                 omega[r] = command[b, r]
