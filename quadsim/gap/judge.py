@@ -210,7 +210,7 @@ def reading_text(ev, reference) -> str:
     return text + _spin_text(name, ev, values, reference)
 
 
-def _spin_text(name: str, ev, values: dict, reference: Reference) -> str:
+def _spin_text(name: str, ev, values: dict, reference) -> str:
     """A propeller reading's speed per command, (1 + change)^-alpha, where alpha was fitted
     (held out it is not: the training flights' map has it): "the rotors would spin +2.1 %
     per command" (all rotors) or "rotor 4 would spin +0.9 % per command" (one)."""
