@@ -289,16 +289,25 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                     coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
     rotors = params.rotor_count
     for k in range(rotors):
-        # one propeller: its thrust and drag torque, and with commands logged the speed its
-        # command gives (the alpha of thrust_factor: the motor's load). Coupled (alpha acts
-        # through the deviation); its kin is itself: screened by two linear steps and
-        # fitted only where its own reach matters (screen._kin_matters)
-        fitted = (f"rotor_{k + 1}", "alpha")[:len(change)]
-        out.append(_one("thrust_mismatch", f"rotor {k + 1}",
-                        [("thrust_mismatch", {}, fitted)], [0.0, 0.2][:len(fitted)],
-                        [sd["thrust_mismatch"], sd["thrust_factor.alpha"]][:len(fitted)],
-                        log_prior=-np.log(rotors), coupled=len(fitted) > 1,
-                        kin=("thrust_mismatch",)))
+        # one propeller: its thrust and drag torque; with commands logged also as a reading
+        # of its own in which the rotor's command gives (1 + e)^-alpha of its speed (the
+        # motor's load, thrust_factor's alpha). That one is coupled (alpha acts through the
+        # deviation); its kin is the plain reading of the same rotor: it is fitted where
+        # that one matters (screen._kin_matters). Why two: with alpha in the only reading, a
+        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
+        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
+        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
+        variants = [((f"rotor_{k + 1}",), f"rotor {k + 1}")]
+        if reference.rotor:
+            variants.append(((f"rotor_{k + 1}", "alpha"),
+                             f"rotor {k + 1}, with its speed per command"))
+        for fitted, variant in variants:
+            out.append(_one("thrust_mismatch", variant, [("thrust_mismatch", {}, fitted)],
+                            [0.0, 0.2][:len(fitted)],
+                            [sd["thrust_mismatch"], sd["thrust_factor.alpha"]][:len(fitted)],
+                            log_prior=-np.log(rotors * len(variants)),
+                            coupled=len(fitted) > 1,
+                            kin=("thrust_mismatch",) if len(fitted) > 1 else ()))
         out.append(_one("canted_rotor", f"rotor {k + 1}",
                         [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
                         [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))

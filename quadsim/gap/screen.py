@@ -310,42 +310,21 @@ def _kin_matters(expl, explanations: list, rows: list, reach: list, best: float)
     within :data:`SCREEN_CUT` of the best. Why it is safe: a payload off the centre moves
     what a centred mass and a CoM shift move, and its position acts only through its mass;
     a propeller change moves the vertical force as a mass or a thrust curve does: where
-    none of those can matter, neither can it. A reading whose kin is its own name (one
-    rotor's propeller, a variant per rotor) is judged by its own reach only, its leading
-    variant after a second linear step (:func:`_second_step`): the first sees the rotor's
-    deviation, the second from there the exponent acting through it; the forces and torques
-    rank the rotors. Measured: with the first step alone (the exponent held at its prior
-    centre, 0.2) the true rotor of speed-controlled motors was cut on PyFlyt and Crazyflow and
-    a mass took it at 1.00; fitting the variants regardless cost 24 % of the per-flight CPU
-    on the real flights (the leading variant alone still 20 %), a second step for every
-    variant 11 %."""
+    none of those can matter, neither can it. A reading whose kin is its own name extends
+    that effect's plain reading of fewer parameters (one rotor's propeller with its speed
+    per command, :mod:`quadsim.gap.evidence`): only that one counts. Measured: fitting the
+    coupled one-rotor readings always cost 28 % of the per-flight CPU on the real flights."""
     if not expl.kin:
         return True
+    mine = set(expl.parameter_names)
     for j, other in enumerate(explanations):
+        if other.name == expl.name and not set(other.parameter_names) < mine:
+            continue                      # its own kin: the plain reading it extends only
         if other.name in expl.kin and not other.coupled and rows[j] is not None:
             value = reach[j] if rows[j].screened else rows[j].log_z   # refined: exact
             if value >= best - SCREEN_CUT:
                 return True
     return False
-
-
-def _second_step(explanations, rows, starts, weight, reach, problem, cols, names_all, s_all):
-    """A second linear step for the leading variant (by reach) of each coupled reading whose
-    kin is its own name (:func:`_kin_matters`; one rotor's propeller): from the first step's
-    point, where the exponent's column is no longer zero. Updates the lists in place."""
-    groups: dict = {}
-    for k, expl in enumerate(explanations):
-        if expl.coupled and expl.name in expl.kin and starts[k] is not None:
-            groups.setdefault(expl.name, []).append(k)
-    for members in groups.values():
-        k = max(members, key=lambda j: reach[j])
-        try:
-            ev, z1, miss = linearised(problem(explanations[k]), cols, starts[k], names_all,
-                                      s_all)
-        except (ModelError, np.linalg.LinAlgError):
-            continue
-        rows[k], starts[k], weight[k] = ev, z1, ev.log_z
-        reach[k] = ev.log_z + 0.5 * miss if np.isfinite(miss) else np.inf
 
 
 def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
@@ -401,9 +380,6 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
         # what a fit could reach: the screened evidence plus half the linear model's miss
         reach.append(np.inf if ev is None or not np.isfinite(miss)
                      else ev.log_z + 0.5 * miss)
-    _second_step(explanations, rows, starts, weight, reach,
-                 lambda e: problem(states, reference, e, jac, s_all, memo), cols, names_all,
-                 s_all)
     # most promising first: each refined fit can only raise the best weight, and with it
     # the cut for those after it. A coupled explanation's step cannot see what it reaches
     # (a parameter acting only through another's value has a zero column at the start): it
