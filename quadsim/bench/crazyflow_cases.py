@@ -167,20 +167,8 @@ def _draw(truth: str, rng: np.random.Generator) -> dict:
 
 def case_list() -> list[dict]:
     """The frozen cases: truth (scored name), kind, seed, speed and the Crazyflow effects."""
-    out = []
-    for truth, kind, count, speeds in CASES:
-        for _ in range(count):
-            seed = 60_000 + len(out)
-            rng = np.random.default_rng(seed)
-            effects = {} if kind == "none" else {
-                k: (tuple(float(x) for x in v) if isinstance(v, tuple) else float(v))
-                for k, v in _draw(truth, rng).items()}
-            low, high = speeds or (0.8, 1.25)
-            out.append({"source": "crazyflow", "vehicle": vehicle_params().name,
-                        "truth": SCORED_AS.get(truth, truth), "case": truth, "kind": kind,
-                        "seed": seed, "speed": float(rng.uniform(low, high)),
-                        "effects": effects})
-    return out
+    return sim_cases.draw_cases(CASES, _draw, source="crazyflow", vehicle=vehicle_params().name, seed0=60_000,
+                                speeds=(0.8, 1.25), scored_as=SCORED_AS)
 
 
 def case_spec(case: dict) -> FlightSpec:

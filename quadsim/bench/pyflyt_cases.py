@@ -148,20 +148,8 @@ def _draw(truth: str, rng: np.random.Generator) -> dict:
 
 def case_list() -> list[dict]:
     """The frozen cases: truth (scored name), kind, seed, speed and the PyFlyt effects."""
-    out = []
-    for truth, kind, count, speeds in CASES:
-        for _ in range(count):
-            seed = 80_000 + len(out)
-            rng = np.random.default_rng(seed)
-            effects = {} if kind == "none" else {
-                k: (tuple(float(x) for x in v) if isinstance(v, tuple) else float(v))
-                for k, v in _draw(truth, rng).items()}
-            low, high = speeds or (0.75, 1.35)
-            out.append({"source": "pyflyt", "vehicle": "pyflyt-cf2x",
-                        "truth": SCORED_AS.get(truth, truth), "case": truth, "kind": kind,
-                        "seed": seed, "speed": float(rng.uniform(low, high)),
-                        "effects": effects})
-    return out
+    return sim_cases.draw_cases(CASES, _draw, source="pyflyt", vehicle="pyflyt-cf2x", seed0=80_000,
+                                speeds=(0.75, 1.35), scored_as=SCORED_AS)
 
 
 def case_spec(case: dict) -> FlightSpec:

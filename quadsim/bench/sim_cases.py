@@ -39,8 +39,8 @@ import numpy as np
 
 from .observe import TrueModel, per_flight_observability
 
-__all__ = ["CaseSource", "code_hash", "flight_dir", "generate", "judge", "load_flights",
-           "oracle_reductions"]
+__all__ = ["CaseSource", "code_hash", "draw_cases", "flight_dir", "generate", "judge",
+           "load_flights", "oracle_reductions"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,30 @@ class CaseSource:
     scored_kind: Callable[[dict], str]
     params: Callable[[], object]
     observable: float
+
+
+def draw_cases(table, draw: Callable, *, source: str, vehicle: str, seed0: int,
+               speeds: tuple[float, float], scored_as: dict) -> list[dict]:
+    """A source's frozen cases from its ``table`` of rows (truth, kind, count, speed range or
+    None): ``count`` cases per row, each from its own seed ``seed0 + index``: the effects
+    drawn by ``draw(truth, rng)`` (numbers as floats, tuples as tuples of floats; none for a
+    no-effect case), then the path speed uniform in the row's range (``speeds`` when None).
+    Each case: source, vehicle, truth (``scored_as`` maps a case's name to the library name
+    it is scored against), case, kind, seed, speed, effects."""
+    out = []
+    for truth, kind, count, row_speeds in table:
+        for _ in range(count):
+            seed = seed0 + len(out)
+            rng = np.random.default_rng(seed)
+            effects = {} if kind == "none" else {
+                k: (tuple(float(x) for x in v) if isinstance(v, tuple) else float(v))
+                for k, v in draw(truth, rng).items()}
+            low, high = row_speeds or speeds
+            out.append({"source": source, "vehicle": vehicle,
+                        "truth": scored_as.get(truth, truth), "case": truth, "kind": kind,
+                        "seed": seed, "speed": float(rng.uniform(low, high)),
+                        "effects": effects})
+    return out
 
 
 def code_hash(source: CaseSource) -> str:
