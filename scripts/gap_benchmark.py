@@ -536,7 +536,7 @@ def _cpu_seconds() -> float:
 
 
 def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow|pyflyt``: make (or reuse) the cached flights; with
+    """``--independent --source crazyflow|pyflyt|multirotor``: make (or reuse) the cached flights; with
     ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
     import importlib
 
@@ -615,7 +615,7 @@ def main(argv=None) -> int:
                              "pyflyt, multirotor: per-flight cases against 8 nominal flights of that "
                              "simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
-                        help="with --source crazyflow|pyflyt: only fly and cache the flights "
+                        help="with --source crazyflow|pyflyt|multirotor: only fly and cache the flights "
                              "and print their observability (no verdict is computed)")
     args = parser.parse_args(argv)
     if args.independent and args.source in SIM_SOURCES:
