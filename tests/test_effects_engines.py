@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from quadsim.core.errors import InputError
 from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
 from quadsim.vehicle.params import hover_speed, load_params
@@ -135,3 +136,5 @@ def test_one_propellers_change_acts_on_its_own_rotors_speed():
     np.testing.assert_allclose(a.rotor_speed[0, -1],
                                series[0] * np.array([1.0, 0.88 ** -0.2, 1.0, 1.0]), rtol=1e-4)
     np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)
+    with pytest.raises(InputError, match=r"thrust_mismatch: alpha = 0.9 .* \[0, 0.5\]"):
+        effect_set_from_specs(["thrust_mismatch:rotor_2=-0.1,alpha=0.9"])

@@ -167,8 +167,8 @@ def _draw(truth: str, rng: np.random.Generator) -> dict:
 
 def case_list() -> list[dict]:
     """The frozen cases: truth (scored name), kind, seed, speed and the Crazyflow effects."""
-    return sim_cases.draw_cases(CASES, _draw, source="crazyflow", vehicle=vehicle_params().name, seed0=60_000,
-                                speeds=(0.8, 1.25), scored_as=SCORED_AS)
+    return sim_cases.draw_cases(CASES, _draw, source="crazyflow", vehicle=vehicle_params().name,
+                                seed0=60_000, speeds=(0.8, 1.25), scored_as=SCORED_AS)
 
 
 def case_spec(case: dict) -> FlightSpec:

@@ -69,7 +69,8 @@ import numpy as np
 from ..effects import make_effect
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
-from .multirotor_source import MODEL, FlightSpec, multirotor_flights, steady_speed, vehicle_params
+from .multirotor_source import (MODEL, FlightSpec, hover_speed_of, multirotor_flights,
+                                steady_speed, vehicle_params)
 from .observe import OBSERVABLE
 from .score import joined_kind
 
@@ -108,7 +109,7 @@ def reference_specs() -> list[FlightSpec]:
 def _draw(truth: str, rng: np.random.Generator) -> dict:
     """multirotor-side effects of ``truth`` at a random realistic magnitude (module table)."""
     mass, arm = MODEL["mass"], MODEL["arm"]
-    weight = mass * 9.81
+    weight = mass * MODEL["gravity"]
     angle = rng.uniform(0, 2 * np.pi)
     if truth == "mass_offset":
         return {"mass": rng.uniform(0.05, 0.2) * mass}
@@ -146,8 +147,8 @@ def _draw(truth: str, rng: np.random.Generator) -> dict:
 
 def case_list() -> list[dict]:
     """The frozen cases: truth (scored name), kind, seed, speed and the multirotor effects."""
-    return sim_cases.draw_cases(CASES, _draw, source="multirotor", vehicle="multirotor-x4", seed0=60_000,
-                                speeds=(0.75, 1.35), scored_as=SCORED_AS)
+    return sim_cases.draw_cases(CASES, _draw, source="multirotor", vehicle="multirotor-x4",
+                                seed0=60_000, speeds=(0.75, 1.35), scored_as=SCORED_AS)
 
 
 def case_spec(case: dict) -> FlightSpec:
@@ -159,7 +160,7 @@ def motor_time_constant(slow: float = 1.0) -> float:
     """The DC motor's time constant (s) linearised at hover: J / (k_t k_e / R + 2 k_d
     Omega_h), J the motor's inertia x ``slow``."""
     m = MODEL
-    hover = np.sqrt(m["mass"] * 9.81 / (4 * m["k_thrust"]))
+    hover = hover_speed_of()
     return float(m["motor_inertia"] * slow / (m["k_emf"] ** 2 / m["resistance"]
                                               + 2 * m["k_drag"] * hover))
 
@@ -168,7 +169,7 @@ def motor_alpha(change: float) -> float:
     """The DC motor's speed-per-command exponent of a propeller change (quadsim's
     ``thrust_factor.alpha``): the steady speed at the hover command with k_d x (1 +
     change) is (1 + change)^-alpha times the nominal one."""
-    hover = np.sqrt(MODEL["mass"] * 9.81 / (4 * MODEL["k_thrust"]))
+    hover = hover_speed_of()
     grid = np.linspace(0.0, 1.0, 2001)
     command = float(np.interp(hover, steady_speed(grid), grid))
     ratio = float(steady_speed(np.array([command]), MODEL["k_drag"] * (1 + change))[0]

@@ -24,7 +24,8 @@ that multirotor has no parameter for (rate damping, a periodic torque or force).
 Vehicle (:func:`vehicle_params`, "multirotor-x4"): a 5.5 kg heavy-lift quadrotor X on 0.45 m
 arms with multirotor's own Tarot T18 motor and 18-inch propeller
 (``multirotor.models.tarott18``: k_thrust 9.8419e-5 N s^2, k_drag 1.8503e-6 N m s^2, motor R
-0.081 ohm, k_e = k_t 0.0265, J 5e-5 kg m^2, k_sv 0.0347 V s, 38 A, 6S 22.2 V); inertia
+0.081 ohm, k_e = k_t 0.0265, J 5e-5 kg m^2, k_sv 0.0347 V s, 38 A, 6S 22.2 V; gravity
+9.81 m/s^2 and air 1.225 kg/m^3 as its SimulationParams); inertia
 (0.15, 0.15, 0.28) kg m^2; body drag C_dA (0.05, 0.05, 0.12) m^2 (a 0.3 m x 0.17 m frame and
 battery seen from the side, and the arms and frame from above, C_d ~ 1).
 
@@ -63,6 +64,7 @@ from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
 
 __all__ = ["EFFECTS", "LOG_HZ", "MODEL", "PHYSICS_HZ", "FlightSpec", "Sensors",
+           "hover_speed_of",
            "multirotor_available", "multirotor_flights", "path_setpoints", "steady_speed",
            "to_flight_log", "truth_json", "vehicle_params"]
 
@@ -76,7 +78,7 @@ MODEL = {"mass": 5.5, "inertia": (0.15, 0.15, 0.28), "arm": 0.45,
          "clockwise": (-1, 1, -1, 1), "k_thrust": 9.8419e-05, "k_drag": 1.8503e-06,
          "prop_inertia": 1.86e-6, "resistance": 0.081, "k_emf": 0.0265,
          "motor_inertia": 5e-5, "k_sv": 0.0347, "max_current": 38.0, "max_voltage": 22.2,
-         "cd_area": (0.05, 0.05, 0.12), "rho": 1.225, "rotor_radius": 0.2286}
+         "cd_area": (0.05, 0.05, 0.12), "rho": 1.225, "rotor_radius": 0.2286, "gravity": 9.81}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its k_thrust
@@ -105,6 +107,12 @@ def multirotor_available() -> bool:
     return all(importlib.util.find_spec(m) is not None for m in ("multirotor", "numba"))
 
 
+def hover_speed_of(mass: float = MODEL["mass"]) -> float:
+    """Rotor speed (rad/s) at which the four propellers carry ``mass`` (kg):
+    sqrt(m g / (4 k_thrust))."""
+    return float(np.sqrt(mass * MODEL["gravity"] / (4 * MODEL["k_thrust"])))
+
+
 def steady_speed(command: np.ndarray, k_drag: float = MODEL["k_drag"]) -> np.ndarray:
     """Steady rotor speed (rad/s) of multirotor's DC motor at a voltage fraction ``command``
     (0..1 of 22.2 V): ``k_t (c V - k_e W) / R = k_d W^2`` solved for W, and at the 38 A
@@ -130,7 +138,7 @@ def vehicle_params() -> VehicleParams:
         name="multirotor-x4", mass=m["mass"], com=np.zeros(3), inertia=np.diag(m["inertia"]),
         rotors=rotors, thrust_factor=m["k_thrust"], drag_factor=m["k_drag"],
         max_speed=float(speed[-1]), min_speed=0.0, rotor_radius=m["rotor_radius"],
-        rotor_inertia=0.0, gravity=9.81, air_density=m["rho"],
+        rotor_inertia=0.0, gravity=m["gravity"], air_density=m["rho"],
         motor_map=MotorMap("1", grid, np.tile(speed, (4, 1)),
                            "multirotor's DC motor in steady state (steady_speed): voltage "
                            "fraction of 22.2 V -> rad/s"),
@@ -291,8 +299,8 @@ def _fly(args) -> dict:
     simulation.trapezoid = pid.trapezoid = _two_point_trapezoid
 
     dt = 1.0 / PHYSICS_HZ
-    vehicle = Multirotor(_vehicle(job), SimulationParams(dt=dt, g=9.81, rho=MODEL["rho"],
-                                                         dtype=np.float64))
+    sim = SimulationParams(dt=dt, g=MODEL["gravity"], rho=MODEL["rho"], dtype=np.float64)
+    vehicle = Multirotor(_vehicle(job), sim)
     ctrl = _controller(vehicle)
     vehicle.reset()
     lead, n = round(LEAD_IN * PHYSICS_HZ), round(spec.duration * PHYSICS_HZ)
@@ -301,7 +309,7 @@ def _fly(args) -> dict:
     start = path_setpoints(t[:1], spec.seed, spec.speed, compensate=False)[0]
     vehicle.state[0:3] = start[:3]
     vehicle.state[8] = start[3]
-    hover = np.sqrt(job["mass"] * 9.81 / (4 * MODEL["k_thrust"]))
+    hover = hover_speed_of(job["mass"])
     for prop in vehicle.propellers:
         prop.speed = prop.motor.speed = hover
     ctrl.reset()
@@ -370,6 +378,5 @@ def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray) -> FlightLog:
     states = SimStates(rate_hz=LOG_HZ, pos=x[keep, 0:3], vel=vel[keep], quat=quat[keep],
                        ang_vel=x[keep, 9:12], ang_acc=ang_acc[keep], acc=acc[keep],
                        rotor_speed=raw["speeds"][keep + 1], command=raw["commands"][keep + 1])
-    hover = float(np.sqrt(MODEL["mass"] * 9.81 / (4 * MODEL["k_thrust"])))
-    return body_origin_log(states, com, spec.sensors, spec.seed, hover_speed=hover,
+    return body_origin_log(states, com, spec.sensors, spec.seed, hover_speed=hover_speed_of(),
                            rotor_delay=float(spec.effects.get("rotor_delay", 0.0)))

@@ -47,6 +47,8 @@ from ..vehicle.params import VehicleParams
 #: effect defines rotor dynamics (fast against flight dynamics, slow enough for the engines'
 #: fixed-step rotor integration at 1 ms).
 SPEED_RESPONSE_S = 0.005
+#: the most rotors an effect's per-rotor parameters address (thrust_mismatch's rotor_1..8)
+MAX_ROTORS = 8
 
 
 def _rotor_factor(effect, rotors: int):
@@ -235,7 +237,7 @@ class EffectSet:
         probe = np.zeros((1, 1))
         return any(e.rotor_speed_rate(np.zeros(1), probe, probe) is not None
                    for e in self.effects) or self.speed_factor(np.zeros(1)) is not None \
-            or any(_rotor_factor(e, 8) is not None for e in self.effects)
+            or any(_rotor_factor(e, MAX_ROTORS) is not None for e in self.effects)
 
     def speed_factor(self, t, vbat=None):
         """Product of the effects' speed factors (B,), or None when none acts."""

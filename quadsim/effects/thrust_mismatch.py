@@ -31,11 +31,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import ModelError
-from .base import EffectBase, EffectLoads, EffectParameter
+from .base import MAX_ROTORS, EffectBase, EffectLoads, EffectParameter
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]
-
-MAX_ROTORS = 8
 
 
 class ThrustMismatch(EffectBase):

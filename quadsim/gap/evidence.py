@@ -43,9 +43,10 @@ spreads), centred on "off" (or on the references' value for a shared group); for
 parameters without a range there, the source is given in the table.
 
 The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`, and one rotor's in
-:mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together (same blade, same air; Leishman 2006 ch. 2-3), and the
-lower load torque lets the motor spin faster per command, by (1 + change)^-alpha (the
-effect's module doc: alpha 0.2 for a DC motor at 75 % voltage efficiency). Alpha is fitted
+:mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together
+(same blade, same air; Leishman 2006 ch. 2-3), and the lower load torque lets the motor spin
+faster per command, by (1 + change)^-alpha (the effect's module doc: alpha 0.2 for a DC
+motor at 75 % voltage efficiency). Alpha is fitted
 with prior N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
 neither map nor drag torque, so the command -> speed channel separates the two where commands
 are logged.
