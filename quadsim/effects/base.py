@@ -333,6 +333,8 @@ class EffectSet:
         internal state only."""
         total = EffectLoads.neutral(ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])
         for effect, start, size in self._sized():
+            if not size and type(effect).loads is EffectBase.loads:
+                continue                    # the neutral hook: no loads (a motor lag, a mass)
             if kept is not None and not size:
                 part = kept(effect, lambda e=effect: e.loads(ctx))
             else:

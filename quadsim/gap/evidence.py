@@ -63,7 +63,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
@@ -399,9 +399,19 @@ class _Marginal:
         a = np.eye(len(s_ref)) + self.j.T @ self.j
         self.chol = cho_factor(a)
         self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
+        # cho_solve's own LAPACK call (the same numbers), without its per-call checks and
+        # batch wrapper: most of its cost on these small systems, called thousands of times
+        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if len(s_ref) else None
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        du = -cho_solve(self.chol, self.j.T @ r)
+        rhs = self.j.T @ r
+        if self._potrs is None:
+            du = -cho_solve(self.chol, rhs)
+        else:
+            x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
+            if info != 0:
+                raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+            du = -x
         return r + self.j @ du, du
 
 
