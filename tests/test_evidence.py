@@ -335,3 +335,34 @@ def test_voltage_spread_averages_out_the_log_noise():
     assert mean == pytest.approx(4.2, abs=1e-3) and spread < 1e-3 < VBAT_TESTED
     mean, spread = voltage_spread([falling])
     assert spread == pytest.approx(0.15 * 0.75 / 4.125, rel=2e-3) and spread > VBAT_TESTED
+
+
+def test_a_shared_value_at_a_bound_of_the_references_fit_is_stated_as_one(cf, reference):
+    """A pooled value that stopped at a bound of the references' fit is flagged
+    (calibrate.bounded) and stated as a bound, not as a measurement with a spread: the motor
+    lag's lower bound is a quarter of a fit sample (the shortest lag the rotor channel's
+    Heun sub-step resolves), an inertia's upper bound the end of its plausible range."""
+    from quadsim.gap.calibrate import bounded, fit_bounds
+    from quadsim.gap.judge import _reference_text
+
+    cand, dt = reference.candidate, 0.01
+    names = cand.parameter_names
+    lower, upper = fit_bounds(cand, cf, dt)
+    lag, ixx = names.index("motor_lag.time_constant"), names.index("inertia_error.xx")
+    assert lower[lag] == pytest.approx(dt / 4)
+    theta = 0.5 * (lower + upper)
+    theta[lag], theta[ixx] = dt / 4, upper[ixx]
+    assert bounded(cand, cf, theta, dt) == {"motor_lag.time_constant": "lower",
+                                            "inertia_error.xx": "upper"}
+    theta[lag] = dt / 4 + 1e-6                  # 1 microsecond inside: a value, not a bound
+    assert "motor_lag.time_constant" not in bounded(cand, cf, theta, dt)
+    # the references here share an 8 ms lag: a measured value, stated with its spread
+    assert "motor_lag.time_constant" not in reference.at_bound
+    key, value = "motor_lag.time_constant", reference.values()["motor_lag.time_constant"]
+    plain = _reference_text(key, value, 0.001, reference)
+    assert "±" in plain and "bound" not in plain, plain
+    at = _reference_text(key, 0.0025, 0.001, dataclasses.replace(
+        reference, at_bound={key: "lower"}))
+    assert at == ("the rotors lag their commands by +2.5 ms (time constant) or less (their "
+                  "fit's lower bound: a quarter of a fit sample, a shorter lag is not "
+                  "resolved)"), at

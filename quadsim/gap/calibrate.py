@@ -80,7 +80,7 @@ Example::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -94,6 +94,7 @@ from .fitting import (
     _correlation_time,
     _typical,
     fit_candidate,
+    ROTOR_SUBSTEPS,
     fit_motor_map,
     noise_floor,
     noise_scale,
@@ -104,7 +105,7 @@ from .speed_gain import PART as SPEED_GAIN
 
 __all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
            "shared_candidate", "per_flight_candidate", "weighted_residual", "jacobian",
-           "FD_STEP", "shifted", "MAX_SHIFT_S"]
+           "FD_STEP", "shifted", "MAX_SHIFT_S", "fit_bounds", "bounded"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -247,6 +248,9 @@ class Reference:
     #: the references' mean battery voltage (V; None without a voltage log): the voltage at
     #: which their speed per command holds (:func:`voltage_spread`)
     vbat_ref: float | None = None
+    #: shared parameter -> "lower" or "upper" where the references' pooled fit stopped at
+    #: that bound (:func:`bounded`): their data say only that the value lies at or beyond it
+    at_bound: dict = field(default_factory=dict)
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -384,6 +388,31 @@ def _pooled(flights, probe, shift: float, timing: bool):
     return info, grad, cost
 
 
+def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
+    ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
+    sub-step of the rotor channel (:func:`quadsim.gap.fitting.fit_candidate`)."""
+    lower, upper = _bounds(cand, params)
+    for k, name in enumerate(cand.parameter_names):
+        if name == "motor_lag.time_constant":
+            lower[k] = max(lower[k], dt / ROTOR_SUBSTEPS)
+    return lower, upper
+
+
+def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
+            ) -> dict[str, str]:
+    """Parameter -> "lower" or "upper" where ``theta`` sits at that bound of
+    :func:`fit_bounds` (within 1e-9 of the parameter's typical size): a motor lag at a
+    quarter of a fit sample (the shortest the fit resolves), an inertia at the end of its
+    plausible range."""
+    lower, upper = fit_bounds(cand, params, dt)
+    tol = 1e-9 * _typical(cand, params)
+    return {name: side for k, name in enumerate(cand.parameter_names)
+            for side, hit in (("lower", theta[k] <= lower[k] + tol[k]),
+                              ("upper", theta[k] >= upper[k] - tol[k])) if hit}
+
+
 def _cost(flights, probe, theta, shift: float) -> float:
     try:
         effects = probe.candidate.effects(theta)
@@ -404,13 +433,10 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
     Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
-    lower, upper = _bounds(cand, params)
-    typical = _typical(cand, params)
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
-    for k, name in enumerate(cand.parameter_names):
-        if name == "motor_lag.time_constant":      # fitting.fit_candidate: the Heun sub-step
-            lower[k] = max(lower[k], dt / 4)
+    lower, upper = fit_bounds(cand, params, dt)
+    typical = _typical(cand, params)
     timing = all(getattr(f, "fit", f).rotor_speed is not None for f in flights)
     if timing:
         lower, upper = np.append(lower, -MAX_SHIFT_S), np.append(upper, MAX_SHIFT_S)
@@ -505,7 +531,8 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     np.zeros_like(fit.theta), sigma, tau, mean, spread, dof, delays,
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
-                    shift, shift_se, vbat_ref=vbat_ref)
+                    shift, shift_se, vbat_ref=vbat_ref,
+                    at_bound=bounded(cand, params, theta, float(states[0].t[1] - states[0].t[0])))
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],

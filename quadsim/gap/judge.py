@@ -172,6 +172,24 @@ def _value_text(key: str, value: float, sd: float, params) -> str:
     return collinear.describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
 
 
+#: why a shared value stops at a bound of the references' fit (calibrate.fit_bounds)
+_BOUND_WHY = {"motor_lag.time_constant": "a quarter of a fit sample, a shorter lag is not "
+                                          "resolved"}
+
+
+def _reference_text(key: str, value: float, sd: float, reference) -> str:
+    """The references' value of a shared parameter in words; where their fit stopped at a
+    bound, the value without a spread and that it is a bound (the data say only "at or
+    beyond"), e.g. "the rotors lag their commands by +2.5 ms (time constant) or less (their
+    fit's lower bound: a quarter of a fit sample, a shorter lag is not resolved)"."""
+    side = getattr(reference, "at_bound", {}).get(key)
+    if side is None:
+        return _value_text(key, value, sd, reference.params)
+    why = _BOUND_WHY.get(key, "the end of its physical range")
+    return (collinear.describe(key.split(".")[0], {key: value}, {}, reference.params)
+            + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
+
+
 def reading_text(ev, reference) -> str:
     """The magnitude of a reading in words (determined values only)."""
     params, name = reference.params, ev.name
@@ -204,7 +222,7 @@ def reading_text(ev, reference) -> str:
         known = [k for k in values if known_ref.get(k, False)]
         if known:
             text += " (references: " + "; ".join(
-                _value_text(k, ref[k], s_ref[k], params) for k in known) + ")"
+                _reference_text(k, ref[k], s_ref[k], reference) for k in known) + ")"
     if ev.explanation.variant and ev.explanation.variant not in text:
         text = f"{ev.explanation.variant}: {text}"
     return text + _spin_text(name, ev, values, reference)

@@ -106,6 +106,7 @@ def reference_summary(ref: Reference) -> dict:
             "se": dict(zip(ref.candidate.parameter_names, map(float, ref.se_pool))),
             "scatter": dict(zip(ref.candidate.parameter_names, map(float, ref.scatter))),
             "identified": {k: bool(v) for k, v in ref.identified.items()},
+            "at_bound": dict(ref.at_bound),
             "sigma": dict(zip(names, map(float, ref.sigma))),
             "correlation_samples": dict(zip(names, map(float, ref.tau))),
             "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,
