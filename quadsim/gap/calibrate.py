@@ -251,6 +251,10 @@ class Reference:
     #: shared parameter -> "lower" or "upper" where the references' pooled fit stopped at
     #: that bound (:func:`bounded`): their data say only that the value lies at or beyond it
     at_bound: dict = field(default_factory=dict)
+    #: (lower, upper) bounds of the shared parameters in the references' fit
+    #: (:func:`fit_bounds`): the reference model at a flight's place stays within them
+    #: (:func:`quadsim.gap.envelope.local_reference`); None: the effects' plausible ranges
+    bounds: tuple | None = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -532,7 +536,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se, vbat_ref=vbat_ref,
-                    at_bound=bounded(cand, params, theta, float(states[0].t[1] - states[0].t[0])))
+                    at_bound=bounded(cand, params, theta, dt), bounds=fit_bounds(cand, params, dt))
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],

@@ -260,7 +260,8 @@ def local_reference(reference, pos: Position | None):
     n = len(reference.names) or trend.n
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
-    lower, upper = _bounds(reference.candidate, reference.params)
+    lower, upper = getattr(reference, "bounds", None) or _bounds(reference.candidate,
+                                                                 reference.params)
     theta = np.clip(reference.theta + trend.slope * (pos.u - trend.u_w), lower, upper)
     scatter = np.sqrt(scatter ** 2 + trend.slope_var * (pos.u - trend.u_w) ** 2)
     return dataclasses.replace(
