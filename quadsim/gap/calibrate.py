@@ -94,8 +94,8 @@ from .fitting import (
     _correlation_time,
     _typical,
     fit_candidate,
-    ROTOR_SUBSTEPS,
     fit_motor_map,
+    min_time_constant,
     noise_floor,
     noise_scale,
     residuals,
@@ -396,11 +396,11 @@ def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
     ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
-    sub-step of the rotor channel (:func:`quadsim.gap.fitting.fit_candidate`)."""
+    sub-step of the rotor channel (:func:`quadsim.gap.fitting.min_time_constant`)."""
     lower, upper = _bounds(cand, params)
     for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":
-            lower[k] = max(lower[k], dt / ROTOR_SUBSTEPS)
+            lower[k] = max(lower[k], min_time_constant(dt))
     return lower, upper
 
 
@@ -536,7 +536,8 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se, vbat_ref=vbat_ref,
-                    at_bound=bounded(cand, params, theta, dt), bounds=fit_bounds(cand, params, dt))
+                    at_bound=bounded(cand, params, theta, dt),
+                    bounds=fit_bounds(cand, params, dt))
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],

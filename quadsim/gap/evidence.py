@@ -73,7 +73,7 @@ from . import cable
 from .calibrate import SHARED, Reference, jacobian, shifted
 from ..effects import make_effect
 from .fitting import (LOCAL_EFFECTS, _area_scale, _arm, _drag_scale, effect_class,
-                      residuals)
+                      min_time_constant, residuals)
 from .memo import _memo
 from .priors import WIND_SD_MS, momentum_rate_damping, momentum_translational_lift
 from .screen import delay_starts, screened
@@ -423,7 +423,7 @@ def _bounds(expl: Explanation, reference: Reference, dt: float):
         for p in fitted:
             lo, hi = specs[p].lower, specs[p].upper
             if name == "motor_lag":
-                lo = max(lo, dt / 4)      # fitting.fit_candidate: the Heun sub-step
+                lo = max(lo, min_time_constant(dt))
             if name == "mass_offset" and p == "mass":
                 lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
             elif name == "mass_offset":         # a payload within the rotors' span

@@ -38,7 +38,8 @@ from .residual import FlightStates, measured_wrench, model_wrench
 __all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
            "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
            "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
-           "stack_states", "ROTOR_HORIZON_S", "drag_refit_iv", "rate_owner", "flight_memo"]
+           "stack_states", "ROTOR_HORIZON_S", "min_time_constant", "drag_refit_iv",
+           "rate_owner", "flight_memo"]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
@@ -66,6 +67,15 @@ def effect_class(name: str) -> type:
 #: not correlated with the noise at the end (it would reward a spurious lag).
 ROTOR_HORIZON_S = 0.12
 ROTOR_SUBSTEPS = 4
+
+
+def min_time_constant(dt: float) -> float:
+    """The shortest rotor time constant (s) a fit on samples ``dt`` apart takes: one Heun
+    sub-step of :func:`_rotor_channel`, ``dt / ROTOR_SUBSTEPS``. Shorter is not resolved at
+    that sample rate, and below half of it the sub-steps turn unstable (amplification
+    1 + z + z^2 / 2 >= 1 for z = -h / tau <= -2): a fit there would read the measured speed
+    through the unstable integration."""
+    return dt / ROTOR_SUBSTEPS
 
 
 @dataclass(frozen=True)
@@ -553,12 +563,9 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     """Bounded least squares of ``candidate`` on ``flights`` (already decimated)."""
     typical = _typical(candidate, params)
     lower, upper = _bounds(candidate, params)
-    # A rotor time constant shorter than the rotor channel's integration sub-step cannot be
-    # resolved at the fit's sample rate, and below half of it the Heun steps of
-    # _rotor_channel turn unstable (amplification 1 + z + z^2 / 2 >= 1 for z = -h / tau <= -2):
-    # a fit there would read the measured speed through the unstable integration. Bound it.
-    step = float(flights[0].t[1] - flights[0].t[0]) / ROTOR_SUBSTEPS if len(flights[0].t) > 1 \
-        else 0.0
+    # a rotor time constant is at least one sub-step of the rotor channel (min_time_constant)
+    step = min_time_constant(float(flights[0].t[1] - flights[0].t[0])) \
+        if len(flights[0].t) > 1 else 0.0
     for k, name in enumerate(candidate.parameter_names):
         if name.startswith("motor_lag.time_constant"):
             lower[k] = max(lower[k], step)
