@@ -251,7 +251,7 @@ def test_references_without_drag_do_not_know_their_wind(windy):
 def test_a_drag_against_references_without_one_refits_their_wind(cf, windy):
     """References flown without rotor drag in a 1.5 m/s wind cannot see the wind; a flight
     with rotor drag (10x the shared one's) in the same room feels drag x (v - w). Its
-    rotor-drag reading refits the wind with the drag (evidence._with_wind): both right, and
+    rotor-drag reading refits the wind with the drag (explanations._with_wind): both right, and
     both named (judge.reading_name: the wind's 95 % interval excludes calm air). With the
     references' wind held, the drag fit absorbs the wind's steady force. The same drag in
     calm air is the drag alone."""

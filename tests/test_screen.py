@@ -19,7 +19,7 @@ from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
                                    flight_residual)
-from quadsim.gap.fitting import _heun_linear, _rotor_channel
+from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
 from quadsim.gap.judge import judge
 from quadsim.gap.screen import _Columns, _columns
 from quadsim.gap.synthetic import synthetic_flight
@@ -141,15 +141,15 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
 
 
 def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
-    """fitting._heun_linear against the Heun steps of the motor lag's rate function."""
+    """rotor_channel._heun_linear against the Heun steps of the motor lag's rate function."""
     log = synthetic_flight(cf, _shared(lag=0.03), duration=2.0, seed=80)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         states = prepare([log], cf)[0].fit
     lag = make_effect("motor_lag", time_constant=0.03)
-    fast = _rotor_channel(states, cf, [lag])
+    fast = rotor_residual(states, cf, [lag])
     uneven = make_effect("motor_lag", time_constant=0.03, time_constant_down=0.0300001)
-    slow = _rotor_channel(states, cf, [uneven])        # the stepping path (not linear)
+    slow = rotor_residual(states, cf, [uneven])        # the stepping path (not linear)
     assert np.max(np.abs(fast - slow)) <= 1e-4 * np.max(np.abs(slow))
     # and exactly: a constant command from rest is the Heun recursion's closed form
     h, tau = 0.0025, 0.03

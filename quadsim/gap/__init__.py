@@ -36,8 +36,9 @@ the rotor delay) into a reference model with a per-channel noise model; :mod:`.e
 places the flight against the references' envelope (speed, body rate, thrust variation),
 states when it lies outside and by how much, and there widens the reference model by the
 trend the references show; :mod:`.evidence` fits every explanation of
-how a flight differs (an effect, a shared parameter at a value of its own, a logged signal's
-delay, or none) and weighs it by its Laplace evidence; :mod:`.judge` gives the posterior per
+how a flight differs (:mod:`.explanations`: an effect, a shared parameter at a value of its
+own, a logged signal's delay, or none, each with its prior) and weighs it by its Laplace
+evidence; :mod:`.judge` gives the posterior per
 reading, a lack-of-fit test ("not in the library") and the answer. A flight that cannot be
 judged is ``refused`` with its reason; the others go on.
 

@@ -80,8 +80,6 @@ Example::
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ..core.errors import InputError, ModelError
@@ -95,17 +93,25 @@ from .fitting import (
     _typical,
     fit_candidate,
     fit_motor_map,
-    min_time_constant,
     noise_floor,
     noise_scale,
     residuals,
 )
 from .priors import WIND_SD_MS
+from .reference import (  # re-exported: the calibration's public names
+    FD_STEP,
+    Reference,
+    aligned,
+    jacobian,
+    shifted,
+    weighted_residual,
+)
+from .rotor_channel import min_time_constant
 from .speed_gain import PART as SPEED_GAIN
 
 __all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
            "shared_candidate", "per_flight_candidate", "weighted_residual", "jacobian",
-           "FD_STEP", "shifted", "MAX_SHIFT_S", "fit_bounds", "bounded"]
+           "FD_STEP", "shifted", "aligned", "MAX_SHIFT_S", "fit_bounds", "bounded"]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -126,7 +132,7 @@ NEEDS_VBAT = {"battery_sag"}
 #: voltage varies by at least this fraction of its mean (:func:`voltage_spread`). Below it
 #: the law's slope is untested and V_full is only the motor map's gain, so the reference
 #: model takes the gain (:mod:`.speed_gain`) and a flight's own sag is a reading
-#: (:func:`quadsim.gap.evidence.explanations_for`). Measured: the 20 real nominal Crazyflie
+#: (:func:`quadsim.gap.explanations.explanations_for`). Measured: the 20 real nominal Crazyflie
 #: flights spread over 3.6-3.8 V (4 %); generated logs record a constant voltage (0 %),
 #: against which a sagging battery (4.2 -> 3.9 V) was followed by the shared law and judged
 #: "no difference". 1 %: a hover speed 1 % off, several times the rotor channel's noise.
@@ -144,49 +150,12 @@ def voltage_spread(flights) -> tuple[float, float]:
     return mean, float((max(means) - min(means)) / mean) if mean > 0 else 0.0
 
 
-#: finite-difference step of the Jacobians, in units of each parameter's typical size
-#: (:func:`quadsim.gap.fitting._typical`): the same relative step the fits use (diff_step).
-FD_STEP = 1e-3
-
-
 #: the rotor speeds' timing offset is searched within this (s) of zero: the lag window of
 #: :data:`quadsim.logs.delays.MAX_LAG_S`.
 MAX_SHIFT_S = 0.1
 #: finite-difference step (s) of the timing offset and its typical size (the LM ridge unit):
 #: a fifth of a 100 Hz fit sample, and the 10 ms that real logs carry (module doc).
 SHIFT_STEP_S, SHIFT_TYPICAL_S = 0.002, 0.01
-
-
-def shifted(states, delay_s: float):
-    """``states`` with the rotor speeds (and their derivative) read ``delay_s`` later: the
-    speeds a log that records them ``delay_s`` late had at each time."""
-    if delay_s == 0.0 or states.rotor_speed is None:
-        return states
-    import dataclasses
-
-    t = states.t
-
-    def move(x):
-        return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
-
-    return dataclasses.replace(states, rotor_speed=move(states.rotor_speed),
-                               rotor_accel=None if states.rotor_accel is None
-                               else move(states.rotor_accel))
-
-
-def aligned(flight, delay_s: float):
-    """The fit view of a prepared flight (:class:`quadsim.gap.diagnose.Flight`, or its fit
-    states) with its rotor speeds read ``delay_s`` later. A flight with full-rate states is
-    shifted at the full rate and decimated again (a shift by a fraction of a fit sample would
-    otherwise low-pass the speeds by linear interpolation)."""
-    fit = getattr(flight, "fit", flight)
-    full = getattr(flight, "states", None)
-    if delay_s == 0.0 or fit.rotor_speed is None:
-        return fit
-    if full is None or full is fit or full.rotor_speed is None:
-        return shifted(fit, delay_s)
-    index = np.searchsorted(full.t, fit.t)
-    return shifted(full, delay_s).take(index)
 
 
 def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
@@ -214,114 +183,6 @@ def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     cand = shared_candidate(rotor, vbat)
     extra = (BODY_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
     return Candidate(cand.name, cand.parts + extra, cand.base)
-
-
-@dataclass
-class Reference:
-    """The calibrated reference model and its noise model (module doc).
-
-    ``params``: the nominal set with the data's motor map; ``candidate``/``theta``: the shared
-    parameters and their values (theta_ref); ``se_pool``, ``scatter``: their pooled standard
-    error and between-flight spread (``s_ref`` combines both); ``sigma`` (C,): residual RMS
-    per channel (N, N m, rad/s); ``tau`` (C,): correlation time per channel (samples);
-    ``lof_mean`` (C,), ``lof_sd``, ``lof_dof``: lack-of-fit statistics; ``delays_ms``: signal
-    -> (mean, sd, count) over the references; ``names``: the reference flights."""
-
-    params: VehicleParams
-    rotor: bool
-    candidate: Candidate
-    theta: np.ndarray
-    se_pool: np.ndarray
-    scatter: np.ndarray
-    sigma: np.ndarray
-    tau: np.ndarray
-    lof_mean: np.ndarray
-    lof_sd: float
-    lof_dof: int
-    delays_ms: dict
-    names: list
-    identified: dict
-    rotor_shift_s: float = 0.0
-    rotor_shift_se: float = 0.0
-    #: the references' envelope and the model's trend along it (:mod:`.envelope`)
-    envelope: object = None
-    #: the references' mean battery voltage (V; None without a voltage log): the voltage at
-    #: which their speed per command holds (:func:`voltage_spread`)
-    vbat_ref: float | None = None
-    #: shared parameter -> "lower" or "upper" where the references' pooled fit stopped at
-    #: that bound (:func:`bounded`): their data say only that the value lies at or beyond it
-    at_bound: dict = field(default_factory=dict)
-    #: (lower, upper) bounds of the shared parameters in the references' fit
-    #: (:func:`fit_bounds`): the reference model at a flight's place stays within them
-    #: (:func:`quadsim.gap.envelope.local_reference`); None: the effects' plausible ranges
-    bounds: tuple | None = None
-
-    def align(self, flight):
-        """A prepared flight's fit states with the references' rotor-speed timing
-        (:func:`aligned` by ``rotor_shift_s``): what the reference model compares with."""
-        return aligned(flight, self.rotor_shift_s)
-
-    @property
-    def s_ref(self) -> np.ndarray:
-        return np.sqrt(self.se_pool ** 2 + self.scatter ** 2)
-
-    @property
-    def weights(self) -> np.ndarray:
-        """Per-channel weight of a squared residual: 1 / (sigma_c^2 tau_c)."""
-        return 1.0 / (self.sigma ** 2 * self.tau)
-
-    def values(self) -> dict:
-        return dict(zip(self.candidate.parameter_names, map(float, self.theta)))
-
-    def effects(self, theta: np.ndarray | None = None) -> list:
-        return self.candidate.effects(self.theta if theta is None else theta)
-
-
-def weighted_residual(states, reference: Reference, effects: list,
-                      memo: dict | None = None) -> np.ndarray:
-    """Residual (N, C) of ``effects`` on ``states``, each channel times
-    ``1 / (sigma_c sqrt(tau_c))``: its squared sum is the log-likelihood's -2x (module doc).
-    ``memo``: residual parts kept across evaluations on the same ``states``
-    (:func:`quadsim.gap.fitting.residuals`)."""
-    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
-    return r * np.sqrt(reference.weights)
-
-
-def jacobian(states, reference: Reference, columns: list[int], build, *,
-             memo: dict | None = None, with_base: bool = False):
-    """Forward-difference Jacobian (N C, len(columns)) of the weighted residual with respect
-    to the shared parameters ``columns`` at theta_ref (``build(theta)`` -> effects);
-    ``with_base``: (Jacobian, the weighted residual at theta_ref, flattened). The columns
-    share the residual parts one parameter does not move (the rotations, the measured
-    wrench of one vehicle, the rotor channel of one command -> speed model) through
-    ``memo`` (a new one per call by default)."""
-    memo = {} if memo is None else memo
-    typical = _typical(reference.candidate, reference.params)
-    _, upper = _bounds(reference.candidate, reference.params)
-    base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
-    out = np.empty((base.size, len(columns)))
-    for j, k in enumerate(columns):
-        h = FD_STEP * typical[k]
-        if reference.theta[k] + h > upper[k]:      # a value at its upper bound: step down
-            h = -h
-        try:
-            moved = _probe(states, reference, build, memo, k, h)
-        except ModelError:      # the step crosses a wall of the physical set: the other way
-            h = -h
-            moved = _probe(states, reference, build, memo, k, h)
-        out[:, j] = (moved - base) / h
-    return (out, base) if with_base else out
-
-
-def _probe(states, reference: Reference, build, memo, k: int, h: float) -> np.ndarray:
-    """The weighted residual (flattened) with shared parameter ``k`` moved by ``h``. Raises
-    ModelError where that leaves the physical set: measured on the multirotor source (a
-    5.5 kg quadrotor, Izz 1.87 Ixx) the pooled steps took the references' inertia error to
-    within 1e-3 of the triangle inequality (Izz <= Ixx + Iyy), and the forward step crossed
-    it; the calibration then failed and no flight was judged."""
-    theta = reference.theta.copy()
-    theta[k] += h
-    return weighted_residual(states, reference, build(theta), memo).ravel()
 
 
 def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
@@ -396,7 +257,7 @@ def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
     ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
-    sub-step of the rotor channel (:func:`quadsim.gap.fitting.min_time_constant`)."""
+    sub-step of the rotor channel (:func:`quadsim.gap.rotor_channel.min_time_constant`)."""
     lower, upper = _bounds(cand, params)
     for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":

@@ -21,7 +21,7 @@ Stages (each a named type)
    "the floor contains the gap" cannot happen. (The per-flight mode's sigma is the RMS of
    the calibrated model over the reference flights instead: there the references show what
    a right model leaves.)
-2. :func:`heldout_explanations`: :func:`quadsim.gap.evidence.explanations_for` on that
+2. :func:`heldout_explanations`: :func:`quadsim.gap.explanations.explanations_for` on that
    reference (every effect, every shared group at a value of its own) plus what the nominal
    model lacks and the per-flight references carry: ``wind`` fitted with the rotor-drag
    coefficient (wind acts only through drag, and the nominal model has none), ``motor_lag``
@@ -56,7 +56,8 @@ import numpy as np
 from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
 from .calibrate import Reference, shared_candidate
-from .evidence import Evidence, Explanation, _make, evaluate, explanations_for
+from .evidence import Evidence, Explanation, evaluate, explanations_for
+from .explanations import _make
 from .fitting import (
     _correlation_time,
     effect_class,
@@ -77,7 +78,7 @@ NOISE_WINDOW_S = 0.5
 #: prior spread of the relative drag-torque factor error (module doc, stage 2).
 D_PRIOR_SD = 0.5
 #: prior spread of the relative thrust factor error: :mod:`.priors` -15 .. +5 %, half the
-#: larger end (the rule of :func:`quadsim.gap.evidence._prior_sd`).
+#: larger end (the rule of :func:`quadsim.gap.explanations._prior_sd`).
 B_PRIOR_SD = 0.075
 #: prior spread (V) of a battery's full voltage: +-10 % of a cell's 4.2 V (charge state),
 #: as :mod:`.evidence`.
@@ -137,7 +138,7 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     """Every explanation of how the training flights differ from the parameter set (module
     doc, stage 2). ``vbat``: the highest logged battery voltage (V) when every training
     flight logs one (the full-voltage prior is centred there); ``names``: restrict."""
-    from .evidence import _prior_sd
+    from .explanations import _prior_sd
 
     sd = _prior_sd(reference.params)
     out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]

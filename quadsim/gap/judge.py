@@ -39,12 +39,12 @@
    *tentative* below :data:`CONFIDENT` (0.9): the answer says so and the benchmark does not
    count it as confident. A reading names every effect it asserts (:func:`reading_name`):
    the rotor-drag reading that refits the references' wind (their drag unidentified,
-   :func:`quadsim.gap.evidence._with_wind`) is ``rotor_drag+wind`` when the flight's wind
+   :func:`quadsim.gap.explanations._with_wind`) is ``rotor_drag+wind`` when the flight's wind
    is determined and its 95 % interval excludes calm air (on RotorPy a flight with a drag
    and a 1.3 m/s wind the references lack was answered with both values, right to 1 %, yet
    named ``rotor_drag`` alone).
 4. **Magnitudes**: only parameters the data determine (posterior spread below half the
-   prior's, :data:`quadsim.gap.evidence.DETERMINED`) are printed; a shared group's value is
+   prior's, :data:`quadsim.gap.explanations.DETERMINED`) are printed; a shared group's value is
    given next to the references' (value and uncertainty); wind is answered as the steady
    air force it exerts (the data fix drag coefficient x wind speed), with the wind speed
    at the references' drag coefficient.
@@ -62,7 +62,7 @@ from scipy.special import logsumexp
 from scipy.stats import t as student_t
 
 from . import collinear
-from .evidence import reference_determined
+from .explanations import reference_determined
 from .fitting import effect_class, noise_floor
 from .residual import CHANNELS
 
@@ -246,7 +246,7 @@ def _spin_text(name: str, ev, values: dict, reference) -> str:
 
 
 def _calm_refit(ev) -> list[str]:
-    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.evidence._with_wind`)
+    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.explanations._with_wind`)
     when no component's 95 % interval excludes calm air (as :func:`reading_name` decides):
     the answer then says "in calm air" instead of printing a wind of 1e-5 ± 0.03 m/s."""
     if ev.name == "wind" or not any(part == "wind" and fitted

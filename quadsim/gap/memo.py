@@ -89,7 +89,7 @@ def _wrench_key(states, params: VehicleParams, effects: list) -> tuple:
     return ("wrench", id(states), id(params), _acting(effects, _WRENCH_HOOKS))
 
 
-#: the hooks through which an effect reaches the rotor channel (:func:`_rotor_channel`).
+#: the hooks through which an effect reaches the rotor channel (:func:`quadsim.gap.rotor_channel.rotor_residual`).
 _ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor", "rotor_speed_factor")
 
 
@@ -151,5 +151,5 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
 
 def _rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
-    the effects with a speed factor or rotor dynamics, in order (:func:`_rotor_channel`)."""
+    the effects with a speed factor or rotor dynamics, in order (:func:`quadsim.gap.rotor_channel.rotor_residual`)."""
     return ("rotor", id(states), id(params), _acting(effects, _ROTOR_HOOKS))

@@ -34,7 +34,7 @@ from ..effects.base import Effect, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams, hover_speed
 from ..vehicle.rotors import allocation_matrix
-from .fitting import rate_owner
+from .rotor_channel import rate_owner
 from .residual import rotor_wrench
 
 __all__ = ["SensorNoise", "synthetic_flight", "reference_path"]

@@ -28,7 +28,7 @@ from ..core.errors import QuadsimError
 from ..core.frames import quat_conjugate, quat_multiply
 from ..effects.base import EffectSet
 from ..vehicle.params import VehicleParams
-from .fitting import rate_owner
+from .rotor_channel import rate_owner
 from .residual import FlightStates
 
 __all__ = ["regime_masks", "by_regime", "by_band", "kstep_errors", "BANDS_HZ", "HORIZONS_S"]
