@@ -26,6 +26,7 @@ Usage::
     python scripts/gap_benchmark.py --independent --source crazyflow --cache DIR --out cf.json
     python scripts/gap_benchmark.py --independent --source pyflyt --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --source multirotor --cache DIR [--generate-only]
+    python scripts/gap_benchmark.py --independent --source l2f --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
 
@@ -61,6 +62,11 @@ multirotor source (``--independent --source multirotor --cache DIR``,
 :mod:`quadsim.bench.multirotor_cases`): the same for 28 cases from multirotor 0.5.0 (a 5.5 kg
 quadrotor with its own DC motors, odeint rigid body and ArduPilot-style PID cascade) against 8
 nominal multirotor flights (flying them takes ~12.5 min on 2 cores).
+
+l2f source (``--independent --source l2f --cache DIR``, :mod:`quadsim.bench.l2f_cases`): the
+same for 30 cases from l2f 2.0.18 (RLtools' "Learning to Fly" simulator: its identified 2.0 kg
+Holybro X500, single-precision RK4, first-order rotors; a PID cascade of this project's)
+against 8 nominal l2f flights.
 """
 
 from __future__ import annotations
@@ -524,6 +530,8 @@ SIM_SOURCES = {
                    "multirotor_available",
                    "pip install 'quadsim[multirotor]' then pip install --no-deps "
                    "multirotor==0.5.0"),
+    "l2f": ("quadsim.bench.l2f_cases", "quadsim.bench.l2f_source", "l2f_available",
+            "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~15 min, 6 GB of memory)"),
 }
 
 
@@ -536,7 +544,7 @@ def _cpu_seconds() -> float:
 
 
 def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow|pyflyt|multirotor``: make (or reuse) the cached flights; with
+    """``--independent --source crazyflow|pyflyt|multirotor|l2f``: make (or reuse) the cached flights; with
     ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
     import importlib
 
@@ -612,10 +620,10 @@ def main(argv=None) -> int:
     parser.add_argument("--source", choices=("rotorpy+pipeline", *SIM_SOURCES),
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
-                             "pyflyt, multirotor: per-flight cases against 8 nominal flights of that "
+                             "pyflyt, multirotor, l2f: per-flight cases against 8 nominal flights of that "
                              "simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
-                        help="with --source crazyflow|pyflyt|multirotor: only fly and cache the flights "
+                        help="with --source crazyflow|pyflyt|multirotor|l2f: only fly and cache the flights "
                              "and print their observability (no verdict is computed)")
     args = parser.parse_args(argv)
     if args.independent and args.source in SIM_SOURCES:

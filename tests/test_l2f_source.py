@@ -1,0 +1,139 @@
+"""The l2f flight source (quadsim.bench.l2f_source, l2f_cases): the vehicle as quadsim sees it,
+the JSON parameter set handed to l2f, the controller's allocation, the frozen case list, and
+-- with l2f installed (``pip install 'quadsim[l2f]'``) -- one short flight pair checked against
+quadsim's own rigid-body and rotor model."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from quadsim.bench.l2f_cases import case_list, library_truth, reference_specs
+from quadsim.bench.l2f_source import (
+    MODEL,
+    OMEGA_MAX,
+    Cascade,
+    FlightSpec,
+    _flight_job,
+    _parameters_json,
+    hover_command,
+    l2f_available,
+    vehicle_params,
+)
+
+
+def test_vehicle_as_quadsim_sees_it():
+    """b = c2 / OMEGA_MAX^2 and d = k_Q b (l2f's reaction torque k_Q T); hover at a rotor
+    state sqrt(m g / (4 c2)) = 0.5549 (l2f's own x500 header: 0.5549636); spins opposite to
+    l2f's torque directions; the inertia the inverse of l2f's J^-1 (0.021705 kg m^2)."""
+    p = vehicle_params()
+    assert p.thrust_factor * OMEGA_MAX ** 2 == pytest.approx(MODEL["c2"], rel=1e-12)
+    assert p.drag_factor == pytest.approx(MODEL["k_torque"] * p.thrust_factor, rel=1e-12)
+    assert hover_command() == pytest.approx(0.5549636212401485, rel=1e-9)
+    assert [r.spin for r in p.rotors] == [1.0, 1.0, -1.0, -1.0]
+    assert p.inertia[0, 0] == pytest.approx(0.021705, rel=1e-4)
+    np.testing.assert_allclose(p.motor_map.speed[0], p.motor_map.command * OMEGA_MAX)
+    # quadsim's yaw torque -s d Omega^2 per rotor is l2f's k_Q T along its torque direction
+    omega = 0.7 * OMEGA_MAX
+    for rotor, direction in zip(p.rotors, MODEL["torque_dir"]):
+        assert -rotor.spin * p.drag_factor * omega ** 2 == pytest.approx(
+            direction * MODEL["k_torque"] * MODEL["c2"] * 0.7 ** 2, rel=1e-12)
+
+
+def test_parameters_json_carries_the_job():
+    """A +0.3 kg payload 40 mm off centre: l2f gets the rotors about the new CoM, the full
+    inertia matrix and its inverse, a 1 kHz step; a weak rotor scales its coefficients."""
+    job = _flight_job(FlightSpec(seed=1, effects={"payload": (0.3, 0.04, 0.0, -0.03),
+                                                  "weak_rotor": (2, -0.1)}))
+    template = json.dumps({"dynamics": {}, "integration": {"dt": 0.01}, "mdp": {}})
+    p = json.loads(_parameters_json(job, template))
+    d = p["dynamics"]
+    assert p["integration"]["dt"] == pytest.approx(1e-3)
+    assert d["mass"] == pytest.approx(2.3)
+    np.testing.assert_allclose(np.array(d["J"]) @ np.array(d["J_inv"]), np.eye(3), atol=1e-12)
+    com_x = 0.3 * 0.04 / 2.3
+    assert d["rotor_positions"][0][0] == pytest.approx(0.176776695296636 - com_x, rel=1e-12)
+    assert d["rotor_thrust_coefficients"][1][2] == pytest.approx(0.9 * MODEL["c2"])
+    assert d["rotor_thrust_coefficients"][0][2] == pytest.approx(MODEL["c2"])
+    assert d["J"][0][2] != 0.0                              # the payload below tilts the axes
+
+
+def test_controller_allocation_hovers_level():
+    """At hover, level, on its setpoint, the controller commands the hover state on every
+    rotor (the allocation inverts the nominal mixer; 1e-9)."""
+    ctrl = Cascade(0.002)
+    z = np.zeros(3)
+    u = ctrl.step(np.array([0, 0, 1.5]), z, np.array([1.0, 0, 0, 0]), z,
+                  np.array([0, 0, 1.5]), z, z, 0.0)
+    np.testing.assert_allclose(u, hover_command(), rtol=1e-9)
+
+
+def test_case_list_frozen_and_mapped_to_the_library():
+    """The 30 frozen cases: 6 no-effect, 20 in-library, 4 outside; seeds apart from the
+    references'; each in-library truth (but the delays) maps to the shared motor lag and body
+    drag and its own library effect; magnitudes within the module table's ranges."""
+    from quadsim.effects import EFFECTS
+
+    cases = case_list()
+    assert case_list() == cases and len(cases) == 30
+    kinds = [c["kind"] for c in cases]
+    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == (6, 20, 4)
+    assert not {c["seed"] for c in cases} & {s.seed for s in reference_specs()}
+    for case in cases:
+        e = case["effects"]
+        if case["kind"] == "library" and case["truth"] != "rotor_delay":
+            names = [x.name for x in library_truth(case)]
+            assert names[:2] == ["motor_lag", "body_drag"]
+            assert case["truth"] in EFFECTS and (case["truth"] in names or len(names) == 2)
+        if "mass" in e:
+            assert 0.05 <= e["mass"] / MODEL["mass"] <= 0.2
+        if "thrust_linear" in e:
+            share = abs(e["thrust_linear"]) * hover_command() / (MODEL["mass"] * 9.81 / 4)
+            assert 0.05 <= share <= 0.15
+        if "motor_slow" in e:
+            assert 1.5 <= e["motor_slow"] <= 2.5
+        if "wind" in e:
+            assert 2.0 <= np.hypot(*e["wind"]) <= 5.0
+
+
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+def test_flights_agree_with_quadsims_model():
+    """A nominal flight (2.1 s logged) and a +0.3 kg flight (0.5 s), one process: 500 Hz,
+    unit quaternions near level, commands in 0..1; the logged rotor speeds in quadsim's
+    rotor model (b, d, arms, spins converted from l2f) with the shared body drag reproduce the
+    logged specific force: the mean thrust is the accelerometer's body z force (1 %) and
+    about the weight (3 %), and on the nominal flight quadsim's residual wrench stays below
+    1.5 % of the weight (forces) and of weight x arm (torques) RMS; the logged speed
+    follows the command through the 54 ms lag (the lag's closed form, 2 % of hover)."""
+    from quadsim.bench.l2f_cases import shared_effects
+    from quadsim.bench.l2f_source import l2f_flights
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.fitting import residuals
+
+    params = vehicle_params()
+    base = FlightSpec(seed=5, speed=0.8, duration=2.1)
+    heavy = FlightSpec(seed=6, speed=0.8, duration=0.5, effects={"mass": 0.3})
+    (log, truth), (log_heavy, _) = l2f_flights([base, heavy], workers=1)
+    assert truth["effects"] == {} and truth["source"] == "l2f"
+    assert log.t[1] == pytest.approx(1.0 / 500)
+    assert np.all(log.quat[:, 0] > 0.9)
+    np.testing.assert_allclose(np.linalg.norm(log.quat, axis=1), 1.0, atol=1e-9)
+    assert np.all((log.rotor_command >= 0) & (log.rotor_command <= 1))
+    weight = params.mass * 9.81
+    for flight, mass in ((log, params.mass), (log_heavy, params.mass + 0.3)):
+        thrust = params.thrust_factor * np.sum(flight.rotor_speed ** 2, axis=1)
+        assert np.mean(flight.accel[:, 2]) * mass == pytest.approx(np.mean(thrust), rel=0.01)
+        assert np.mean(thrust) == pytest.approx(mass * 9.81, rel=0.03)
+    flight = prepare([log], params)[0]
+    r = residuals(flight.fit, params, shared_effects(), rotor_channel=False)
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    assert np.all(rms[:3] < 0.015 * weight), rms
+    assert np.all(rms[3:6] < 0.015 * weight * 0.25), rms
+    # the rotor state follows the command through tau: Omega_k+1 ~ Omega_k + dt/tau (u - Omega)
+    dt, tau = log.t[1] - log.t[0], MODEL["tau"]
+    w, u = log.rotor_speed, log.rotor_command * OMEGA_MAX
+    pred = w[:-1] + (1 - np.exp(-dt / tau)) * (u[1:] - w[:-1])
+    hover = hover_command() * OMEGA_MAX
+    assert np.sqrt(np.mean((pred - w[1:]) ** 2)) < 0.02 * hover
