@@ -115,6 +115,39 @@ def test_references_that_do_not_spread_give_no_trend():
     assert pos.distance > 0 and "do not spread enough" in pos.text
 
 
+def test_the_model_at_a_flight_stays_a_rigid_body():
+    """A flat frame (the Crazyflie model: Izz = 0.74 (Ixx + Iyy)) whose references' yaw
+    inertia error trends by +0.5 per unit place: at a flight 1.6x beyond them the trend asks
+    for more than the triangle inequality allows (Izz <= Ixx + Iyy, i.e. zz <= 0.344 with
+    xx = yy = 0). The reference model there stops on the wall (to 1e-6) and its spread takes
+    up the part of the move left out."""
+    from quadsim.effects.base import EffectSet
+
+    cf = load_params("crazyflie21")
+    cand = Candidate("reference", (("inertia_error", {}, ("xx", "yy", "zz")),))
+    trend_coords = np.log(COORDS)
+    axis = np.linalg.svd(trend_coords - trend_coords.mean(0), full_matrices=False)[2][0]
+    u = trend_coords @ (axis if axis[0] > 0 else -axis)
+    values = np.zeros((len(u), 3))
+    values[:, 2] = 0.5 * (u - u.mean())
+    trend = fit_trend(trend_coords, values, np.full_like(values, 1e-4),
+                      np.array([True, True, True]), np.zeros((len(u), 10)))
+    ref = Reference(cf, True, cand, np.zeros(3), np.full(3, 1e-5), np.zeros(3),
+                    np.ones(10), np.ones(10), np.zeros(10), 0.2, 30, {},
+                    [f"r{k}" for k in range(4)], {})
+    ref.envelope = Envelope(trend_coords, trend)
+    pos = position(_states(*(1.6 * COORDS[-1])), ref.envelope)
+    wanted = 0.5 * (pos.u - trend.u_w[2])
+    inertia = np.diag(cf.inertia)
+    wall = (inertia[0] + inertia[1]) / inertia[2] - 1.0
+    assert wanted > wall + 0.2                          # the trend's value: no rigid body
+    local = local_reference(ref, pos)                   # no ModelError
+    assert local.theta[2] == pytest.approx(wall, abs=1e-6)
+    assert local.theta[2] <= wall + 1e-6               # (check_physical's own tolerance)
+    EffectSet(tuple(local.effects())).apply_to_params(cf)     # physical
+    assert local.scatter[2] >= wanted - wall
+
+
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker
 pytestmark = pytest.mark.xdist_group("test_envelope")

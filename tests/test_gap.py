@@ -443,6 +443,28 @@ def test_motor_map_is_static_and_survives_a_narrow_command_range(cf):
     assert np.allclose(speed_of_command(tuned, np.full((1, 4), 0.525)), 525.0, rtol=0.002)
 
 
+def test_motor_map_takes_the_line_only_where_the_data_support_it(cf):
+    """Commands spanning 6 % of their mean (wide enough for a slope): a motor whose speed is
+    1000 x command gets the gain through the origin (the line's intercept would be the
+    noise's; at a 5 % higher command right to 0.01 %), one with speed 150 + 800 x command
+    the line (right to 0.2 % there): the information criterion, not the range alone."""
+    from quadsim.gap.fitting import fit_motor_map, speed_of_command
+
+    t = np.arange(0, 60, 0.01)
+    command = 0.5 + 0.015 * np.sin(2 * np.pi * 0.2 * t)[:, None] * np.ones(4)
+    flight = _map_flight(command, 0.03, seed=2)
+    tuned = fit_motor_map([flight], cf)
+    np.testing.assert_allclose(tuned.motor_map.speed[:, 0], 0.0)
+    np.testing.assert_allclose(speed_of_command(tuned, np.full((1, 4), 0.525)), 525.0,
+                               rtol=1e-4)
+    offset = _map_flight(command, 0.03, seed=3)
+    offset.rotor_speed = 150.0 + 0.8 * offset.rotor_speed
+    tuned = fit_motor_map([offset], cf)
+    assert np.all(tuned.motor_map.speed[:, 0] > 100.0)
+    np.testing.assert_allclose(speed_of_command(tuned, np.full((1, 4), 0.525)), 570.0,
+                               rtol=2e-3)
+
+
 def test_a_combination_needs_every_part_identified_and_plausible(cf):
     """Two effects cancelling at their bounds (every rotor -50 % and the vehicle 50 %
     lighter) are not a combination; a plausible pair with both parts identified is."""

@@ -21,8 +21,15 @@ timing. This subpackage provides sources that break that circle:
   install --no-deps PyFlyt==0.29.0``): pybullet physics, its own QuadX (``cf2x``), motors,
   drag, rate damping and PID cascade, run in a child process (:mod:`.pyflyt_worker`);
   :mod:`.pyflyt_cases` -- its 28 frozen single-flight cases against 8 nominal PyFlyt
-  flights (``--source pyflyt``); :mod:`.simlog` (the sensor model) and :mod:`.sim_cases`
-  (fly, cache, check, judge) are shared by the Crazyflow and PyFlyt sources;
+  flights (``--source pyflyt``);
+* :mod:`.multirotor_source` -- multirotor 0.5.0 (its DC motors, odeint rigid body and
+  ArduPilot-style PID; a 5.5 kg quadrotor); :mod:`.multirotor_cases` -- 28 frozen cases
+  (``--source multirotor``);
+* :mod:`.l2f_source` -- l2f 2.0.18 (``pip install 'quadsim[l2f]'``, a C++ build): RLtools'
+  Learning to Fly simulator, single-precision RK4, first-order rotors, its identified 2.0 kg
+  Holybro X500, flown by a PID cascade of this module's; :mod:`.l2f_cases` -- 30 frozen
+  cases (``--source l2f``); :mod:`.simlog` (the sensor model) and :mod:`.sim_cases` (fly,
+  cache, check, judge) are shared by the four simulator sources;
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
   per-flight mode; :mod:`.observe` -- whether a flight's true difference from its
