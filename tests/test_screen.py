@@ -211,3 +211,23 @@ def test_the_delay_fits_start_at_the_global_optimum_under_each_prior():
                                       z[0]])
     shared, own = delay_starts(far, 0.0203, hint_s=0.029)
     assert abs(shared) < 0.0035 and own == pytest.approx(0.03, abs=DELAY_GRID_S / 2 + 1e-9)
+
+
+def test_a_late_log_without_a_hint_is_found_within_its_own_prior():
+    """A log 16 ms late that its own cross-correlation cannot time (hint 0, as on the l2f
+    source's second late log): a shallow optimum at 9 ms inside the shared prior's reach
+    (3 x 3.5 ms) and the best at 16 ms beyond it, as a fit-sample-long sawtooth of the
+    interpolated timing makes. The reading's own start is the best point within its wide
+    prior's reach (3 x 20.3 ms), the shared start stays within its own (the tight prior
+    holds it near zero: a far grid point must not move every explanation's start).
+    Before, the own start was searched over the shared reach only, the fit stopped at 9
+    ms, and the late log was named a slower motor at 1.00."""
+    from quadsim.gap.screen import DELAY_GRID_S, DELAY_GRID_SDS, delay_starts
+
+    late = _TwoOptima()
+    late.stacked = lambda z: np.array([np.sqrt(min(
+        30.0 + ((z[0] * 0.0035 - 0.009) / 0.002) ** 2, ((z[0] * 0.0035 - 0.016) / 0.002) ** 2,
+        60.0)), z[0]])
+    shared, own = delay_starts(late, 0.0203, hint_s=0.0)
+    assert own == pytest.approx(0.016, abs=DELAY_GRID_S / 2 + 1e-9)
+    assert abs(shared) <= DELAY_GRID_SDS * 0.0035 + 1e-9
