@@ -205,28 +205,8 @@ def library_truth(case: dict) -> list:
     shared = shared_effects(e.get("motor_slow", 1.0), e.get("drag_scale", 1.0))
     if scored_kind(case) != "library" or case["case"] == "rotor_delay":
         return []
-    if "flap" in e:
-        return shared + [make_effect("blade_flapping", coefficient=e["flap"])]
-    if "lift" in e:
-        return shared + [make_effect("translational_lift", k_h=e["lift"])]
-    if "mass" in e:
-        return shared + [make_effect("mass_offset", mass=e["mass"])]
-    if "payload" in e:
-        m, x, y, z = e["payload"]
-        return shared + [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
-    if "com" in e:
-        return shared + [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
-    if "inertia" in e:
-        xx, yy, zz = e["inertia"]
-        return shared + [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
-    if "weak_rotor" in e:
-        i, d = e["weak_rotor"]
-        return shared + [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
-    if "thrust_scale" in e:
-        return shared + [make_effect("thrust_factor", change=e["thrust_scale"])]
-    if "wind" in e:
-        return shared + [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
-    return shared                      # motor_slow / drag_scale: the shared effects scaled
+    return shared + sim_cases.library_difference(e)   # [] for motor_slow / drag_scale:
+    # the shared effects scaled
 
 
 def oracle_reductions(logs: list, references: list,

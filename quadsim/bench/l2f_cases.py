@@ -110,45 +110,13 @@ def reference_specs() -> list[FlightSpec]:
 
 
 def _draw(truth: str, rng: np.random.Generator) -> dict:
-    """l2f-side effects of ``truth`` at a random realistic magnitude (module table)."""
-    mass = MODEL["mass"]
-    weight = mass * MODEL["gravity"]
-    angle = rng.uniform(0, 2 * np.pi)
-    if truth == "mass_offset":
-        return {"mass": rng.uniform(0.05, 0.2) * mass}
-    if truth == "payload":
-        r, a = rng.uniform(0.02, 0.05), rng.uniform(0, 2 * np.pi)
-        return {"payload": (rng.uniform(0.1, 0.3), r * np.cos(a), r * np.sin(a),
-                            -rng.uniform(0.02, 0.06))}
-    if truth == "com_offset":
-        r = rng.uniform(0.03, 0.1) * ARM
-        return {"com": (r * np.cos(angle), r * np.sin(angle))}
-    if truth == "inertia_error":
-        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
-    if truth == "thrust_mismatch":
-        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
-    if truth == "thrust_factor":
-        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
-    if truth == "thrust_curve":
-        share = rng.uniform(0.05, 0.15) * rng.choice([-1.0, 1.0])
-        return {"thrust_linear": share * weight / 4 / hover_command()}
-    if truth == "motor_lag":
-        return {"motor_slow": rng.uniform(1.5, 2.5)}
-    if truth == "rate_damping":
-        k = rng.uniform(1.5, 3.0) * momentum_rate_damping(vehicle_params())
-        return {"rate_damping": (k, k, k / 3.0)}
-    if truth == "wind":
-        v = rng.uniform(2.0, 5.0)
-        return {"wind": (v * np.cos(angle), v * np.sin(angle))}
-    if truth == "rotor_delay":
-        return {"rotor_delay": rng.uniform(0.010, 0.030)}
-    if truth == "periodic_torque":
-        amp = rng.uniform(0.01, 0.03) * weight * ARM
-        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
-                "torque_hz": rng.uniform(1.0, 3.0)}
-    if truth == "periodic_force":
-        return {"force": rng.uniform(0.01, 0.03) * weight, "force_hz": rng.uniform(2.0, 5.0)}
-    raise ValueError(f"no l2f case {truth!r}")
+    """l2f-side effects of ``truth`` at a random realistic magnitude (module table;
+    :func:`quadsim.bench.sim_cases.draw_effect`)."""
+    scale = sim_cases.DrawScale(
+        mass=MODEL["mass"], gravity=MODEL["gravity"], arm=ARM,
+        damping=momentum_rate_damping(vehicle_params()), payload_kg=(0.1, 0.3),
+        payload_radius=(0.02, 0.05), payload_below=(0.02, 0.06), hover_state=hover_command())
+    return sim_cases.draw_effect(truth, rng, scale)
 
 
 def case_list() -> list[dict]:
@@ -178,29 +146,9 @@ def library_truth(case: dict) -> list:
     shared = shared_effects(e.get("motor_slow", 1.0))
     if scored_kind(case) != "library" or "rotor_delay" in e:
         return []
-    if "mass" in e:
-        return shared + [make_effect("mass_offset", mass=e["mass"])]
-    if "payload" in e:
-        m, x, y, z = e["payload"]
-        return shared + [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
-    if "com" in e:
-        return shared + [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
-    if "inertia" in e:
-        xx, yy, zz = e["inertia"]
-        return shared + [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
-    if "weak_rotor" in e:
-        i, d = e["weak_rotor"]
-        return shared + [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
-    if "thrust_scale" in e:
-        return shared + [make_effect("thrust_factor", change=e["thrust_scale"], alpha=0.0)]
-    if "thrust_linear" in e:
-        return shared + [make_effect("thrust_curve", linear=e["thrust_linear"] / OMEGA_MAX)]
-    if "rate_damping" in e:
-        k = e["rate_damping"]
-        return shared + [make_effect("rate_damping", x=k[0], y=k[1], z=k[2])]
-    if "wind" in e:
-        return shared + [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
-    return shared                      # motor_slow: the shared motor lag scaled
+    # [] for motor_slow: the shared rotor lag scaled; alpha 0 (module doc)
+    return shared + sim_cases.library_difference(e, linear_per_speed=1.0 / OMEGA_MAX,
+                                                 rate_damping=True)
 
 
 def oracle_reductions(logs: list, references: list,
@@ -213,7 +161,7 @@ def oracle_reductions(logs: list, references: list,
 
 SOURCE = sim_cases.CaseSource(
     name="l2f", package="l2f",
-    modules=("l2f_source.py", "simlog.py"),
+    modules=("l2f_source.py", "flightjobs.py", "simlog.py"),
     references=reference_specs, cases=case_list, case_spec=case_spec, fly=l2f_flights,
     observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
     observable=OBSERVABLE)

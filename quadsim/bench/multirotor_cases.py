@@ -107,42 +107,13 @@ def reference_specs() -> list[FlightSpec]:
 
 
 def _draw(truth: str, rng: np.random.Generator) -> dict:
-    """multirotor-side effects of ``truth`` at a random realistic magnitude (module table)."""
-    mass, arm = MODEL["mass"], MODEL["arm"]
-    weight = mass * MODEL["gravity"]
-    angle = rng.uniform(0, 2 * np.pi)
-    if truth == "mass_offset":
-        return {"mass": rng.uniform(0.05, 0.2) * mass}
-    if truth == "payload":
-        r, a = rng.uniform(0.02, 0.06), rng.uniform(0, 2 * np.pi)
-        return {"payload": (rng.uniform(0.2, 0.6), r * np.cos(a), r * np.sin(a),
-                            -rng.uniform(0.03, 0.08))}
-    if truth == "com_offset":
-        r = rng.uniform(0.03, 0.1) * arm
-        return {"com": (r * np.cos(angle), r * np.sin(angle))}
-    if truth == "inertia_error":
-        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
-    if truth == "thrust_mismatch":
-        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
-    if truth == "thrust_factor":
-        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
-    if truth == "motor_lag":
-        return {"motor_slow": rng.uniform(1.5, 2.5)}
-    if truth == "rate_damping":
-        k = rng.uniform(1.5, 3.0) * momentum_rate_damping(vehicle_params())
-        return {"rate_damping": (k, k, k / 3.0)}
-    if truth == "wind":
-        v = rng.uniform(2.0, 5.0)
-        return {"wind": (v * np.cos(angle), v * np.sin(angle))}
-    if truth == "rotor_delay":
-        return {"rotor_delay": rng.uniform(0.010, 0.030)}
-    if truth == "periodic_torque":
-        amp = rng.uniform(0.01, 0.03) * weight * arm
-        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
-                "torque_hz": rng.uniform(1.0, 3.0)}
-    if truth == "periodic_force":
-        return {"force": rng.uniform(0.01, 0.03) * weight, "force_hz": rng.uniform(2.0, 5.0)}
-    raise ValueError(f"no multirotor case {truth!r}")
+    """multirotor-side effects of ``truth`` at a random realistic magnitude (module table;
+    :func:`quadsim.bench.sim_cases.draw_effect`)."""
+    scale = sim_cases.DrawScale(
+        mass=MODEL["mass"], gravity=MODEL["gravity"], arm=MODEL["arm"],
+        damping=momentum_rate_damping(vehicle_params()), payload_kg=(0.2, 0.6),
+        payload_radius=(0.02, 0.06), payload_below=(0.03, 0.08), hover_state=None)
+    return sim_cases.draw_effect(truth, rng, scale)
 
 
 def case_list() -> list[dict]:
@@ -194,28 +165,9 @@ def library_truth(case: dict) -> list:
     shared = shared_effects(e.get("motor_slow", 1.0))
     if scored_kind(case) != "library" or "rotor_delay" in e:
         return []
-    if "mass" in e:
-        return shared + [make_effect("mass_offset", mass=e["mass"])]
-    if "payload" in e:
-        m, x, y, z = e["payload"]
-        return shared + [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
-    if "com" in e:
-        return shared + [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
-    if "inertia" in e:
-        xx, yy, zz = e["inertia"]
-        return shared + [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
-    if "weak_rotor" in e:
-        i, d = e["weak_rotor"]
-        return shared + [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
-    if "thrust_scale" in e:
-        c = e["thrust_scale"]
-        return shared + [make_effect("thrust_factor", change=c, alpha=motor_alpha(c))]
-    if "rate_damping" in e:
-        k = e["rate_damping"]
-        return shared + [make_effect("rate_damping", x=k[0], y=k[1], z=k[2])]
-    if "wind" in e:
-        return shared + [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
-    return shared                      # motor_slow: the shared motor lag scaled
+    # [] for motor_slow: the shared motor lag scaled
+    alpha = motor_alpha(e["thrust_scale"]) if "thrust_scale" in e else 0.0
+    return shared + sim_cases.library_difference(e, thrust_alpha=alpha, rate_damping=True)
 
 
 def oracle_reductions(logs: list, references: list,
@@ -228,7 +180,7 @@ def oracle_reductions(logs: list, references: list,
 
 SOURCE = sim_cases.CaseSource(
     name="multirotor", package="multirotor",
-    modules=("multirotor_source.py", "simlog.py"),
+    modules=("multirotor_source.py", "flightjobs.py", "simlog.py"),
     references=reference_specs, cases=case_list, case_spec=case_spec, fly=multirotor_flights,
     observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
     observable=OBSERVABLE)

@@ -51,7 +51,6 @@ Example::
 from __future__ import annotations
 
 import importlib.util
-import os
 from copy import deepcopy
 from dataclasses import dataclass, field
 
@@ -61,6 +60,7 @@ from ..core.errors import ModelError
 from ..core.frames import euler_to_quat, quat_to_rotmat
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
 
 __all__ = ["EFFECTS", "LOG_HZ", "MODEL", "PHYSICS_HZ", "FlightSpec", "Sensors",
@@ -201,29 +201,11 @@ def _flight_job(spec: FlightSpec) -> dict:
     if unknown:
         raise ValueError(f"unknown multirotor effect(s) {sorted(unknown)}; valid: {EFFECTS}")
     m = MODEL
-    mass = m["mass"] + float(e.get("mass", 0.0))
-    inertia = np.diag(np.asarray(m["inertia"]) * (1.0 + np.asarray(e.get("inertia", (0, 0, 0)),
-                                                                    dtype=float)))
-    com = np.zeros(3)
-    com[:2] = e.get("com", (0.0, 0.0))
-    if "payload" in e:        # point mass m_p at r_p (body): parallel axes about the new CoM
-        m_p, r_p = float(e["payload"][0]), np.asarray(e["payload"][1:], dtype=float)
-        c = com + m_p * r_p / (mass + m_p)
-        inertia = (inertia + mass * (c @ c * np.eye(3) - np.outer(c, c))
-                   + m_p * ((r_p - c) @ (r_p - c) * np.eye(3) - np.outer(r_p - c, r_p - c)))
-        mass, com = mass + m_p, c
-    scale = np.full(4, 1.0 + float(e.get("thrust_scale", 0.0)))
-    if "weak_rotor" in e:
-        scale[int(e["weak_rotor"][0]) - 1] *= 1.0 + float(e["weak_rotor"][1])
-    wind = np.zeros(3)
-    wind[:2] = e.get("wind", (0.0, 0.0))
+    mass, com, inertia = mass_properties(e, m["mass"], m["inertia"])
+    scale = rotor_scales(e)
     return {"mass": mass, "com": com, "inertia": inertia, "prop_scale": scale,
             "motor_inertia": m["motor_inertia"] * float(e.get("motor_slow", 1.0)),
-            "rate_damping": np.broadcast_to(np.asarray(e.get("rate_damping", 0.0), float),
-                                            (3,)).copy(),
-            "wind": wind, "torque": np.asarray(e.get("torque", (0.0, 0.0, 0.0)), dtype=float),
-            "torque_hz": float(e.get("torque_hz", 0.0)), "force": float(e.get("force", 0.0)),
-            "force_hz": float(e.get("force_hz", 0.0))}
+            **disturbances(e)}
 
 
 def _vehicle(job: dict):
@@ -343,14 +325,7 @@ def multirotor_flights(specs: list[FlightSpec], workers: int | None = None
         raise ModelError("multirotor is not installed (pip install 'quadsim[multirotor]' then "
                          "pip install --no-deps multirotor==0.5.0)")
     jobs = [_flight_job(s) for s in specs]
-    workers = min(len(specs), workers or min(4, os.cpu_count() or 1))
-    if workers > 1:
-        import multiprocessing
-
-        with multiprocessing.get_context("spawn").Pool(workers) as pool:
-            raws = pool.map(_fly, list(zip(specs, jobs)), chunksize=1)
-    else:
-        raws = [_fly(a) for a in zip(specs, jobs)]
+    raws = fly_all(_fly, specs, jobs, workers)
     out = []
     for spec, job, raw in zip(specs, jobs, raws):
         log = to_flight_log(raw, spec, job["com"])

@@ -186,26 +186,8 @@ def library_truth(case: dict, damping: np.ndarray) -> list:
     shared = shared_effects(damping, e.get("motor_slow", 1.0), e.get("rate_damping", 1.0))
     if scored_kind(case) != "library" or "rotor_delay" in e:
         return []
-    if "lift" in e:
-        return shared + [make_effect("translational_lift", k_h=e["lift"])]
-    if "mass" in e:
-        return shared + [make_effect("mass_offset", mass=e["mass"])]
-    if "payload" in e:
-        m, x, y, z = e["payload"]
-        return shared + [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
-    if "com" in e:
-        return shared + [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
-    if "inertia" in e:
-        xx, yy, zz = e["inertia"]
-        return shared + [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
-    if "weak_rotor" in e:
-        i, d = e["weak_rotor"]
-        return shared + [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
-    if "thrust_scale" in e:
-        return shared + [make_effect("thrust_factor", change=e["thrust_scale"])]
-    if "wind" in e:
-        return shared + [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
-    return shared                      # motor_slow / rate_damping: the shared effects scaled
+    # [] for motor_slow / rate_damping: the shared effects scaled
+    return shared + sim_cases.library_difference(e)
 
 
 def oracle_reductions(logs: list, references: list,

@@ -37,10 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..effects import make_effect
 from .observe import TrueModel, per_flight_observability
 
-__all__ = ["CaseSource", "code_hash", "draw_cases", "flight_dir", "generate", "judge",
-           "load_flights", "oracle_reductions"]
+__all__ = ["CaseSource", "DrawScale", "code_hash", "draw_cases", "draw_effect", "flight_dir",
+           "generate", "judge", "library_difference", "load_flights", "oracle_reductions"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,113 @@ def draw_cases(table, draw: Callable, *, source: str, vehicle: str, seed0: int,
                         "seed": seed, "speed": float(rng.uniform(low, high)),
                         "effects": effects})
     return out
+
+
+@dataclass(frozen=True)
+class DrawScale:
+    """What a source's case magnitudes are drawn against (SI): the vehicle's mass (kg),
+    gravity (m/s^2), arm (m), momentum-theory rate damping (N m s/rad,
+    :func:`quadsim.gap.priors.momentum_rate_damping`), the payload's mass, radius off the
+    centre and depth below it (each a (low, high) range), and the hover rotor state (a
+    thrust curve's linear term is drawn as a share of the hover thrust there; None: the
+    source draws no thrust curve)."""
+
+    mass: float
+    gravity: float
+    arm: float
+    damping: float
+    payload_kg: tuple[float, float]
+    payload_radius: tuple[float, float]
+    payload_below: tuple[float, float]
+    hover_state: float | None = None
+
+
+def draw_effect(truth: str, rng: np.random.Generator, v: DrawScale) -> dict:
+    """Source-side effects of ``truth`` at a random realistic magnitude, the ranges of the
+    multirotor and l2f case tables (their modules' docstrings): a mass +5..+20 %; a payload
+    in ``v``'s ranges; the CoM 3-10 % of the arm off; Ixx, Iyy +15..+40 %, Izz +0..+20 %; one
+    rotor or all -5..-15 %; a linear thrust term of +-5..15 % of the hover thrust at hover;
+    both rotor time constants x 1.5-2.5; rate damping 1.5-3 x the momentum value (a third on
+    yaw); wind 2-5 m/s; a rotor log 10-30 ms late; a 1-3 Hz torque of 1-3 % of weight x arm;
+    a 2-5 Hz vertical force of 1-3 % of the weight. One angle is drawn first, always."""
+    weight = v.mass * v.gravity
+    angle = rng.uniform(0, 2 * np.pi)
+    if truth == "mass_offset":
+        return {"mass": rng.uniform(0.05, 0.2) * v.mass}
+    if truth == "payload":
+        r, a = rng.uniform(*v.payload_radius), rng.uniform(0, 2 * np.pi)
+        return {"payload": (rng.uniform(*v.payload_kg), r * np.cos(a), r * np.sin(a),
+                            -rng.uniform(*v.payload_below))}
+    if truth == "com_offset":
+        r = rng.uniform(0.03, 0.1) * v.arm
+        return {"com": (r * np.cos(angle), r * np.sin(angle))}
+    if truth == "inertia_error":
+        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
+    if truth == "thrust_mismatch":
+        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
+    if truth == "thrust_factor":
+        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
+    if truth == "thrust_curve" and v.hover_state is not None:
+        share = rng.uniform(0.05, 0.15) * rng.choice([-1.0, 1.0])
+        return {"thrust_linear": share * weight / 4 / v.hover_state}
+    if truth == "motor_lag":
+        return {"motor_slow": rng.uniform(1.5, 2.5)}
+    if truth == "rate_damping":
+        k = rng.uniform(1.5, 3.0) * v.damping
+        return {"rate_damping": (k, k, k / 3.0)}
+    if truth == "wind":
+        speed = rng.uniform(2.0, 5.0)
+        return {"wind": (speed * np.cos(angle), speed * np.sin(angle))}
+    if truth == "rotor_delay":
+        return {"rotor_delay": rng.uniform(0.010, 0.030)}
+    if truth == "periodic_torque":
+        amp = rng.uniform(0.01, 0.03) * weight * v.arm
+        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
+                "torque_hz": rng.uniform(1.0, 3.0)}
+    if truth == "periodic_force":
+        return {"force": rng.uniform(0.01, 0.03) * weight, "force_hz": rng.uniform(2.0, 5.0)}
+    raise ValueError(f"no case {truth!r}")
+
+
+def library_difference(effects: dict, *, thrust_alpha: float = 0.0,
+                       linear_per_speed: float = 0.0, rate_damping: bool = False) -> list:
+    """A case's true difference from its references as library effects, from the case-side
+    ``effects`` every simulator source names alike: flap (``blade_flapping``), lift
+    (``translational_lift`` k_h), mass, payload (an offset ``mass_offset``), com, inertia,
+    weak_rotor (``thrust_mismatch``), thrust_scale (``thrust_factor`` with the source's
+    speed-per-command exponent ``thrust_alpha``), thrust_linear (``thrust_curve``: N per unit
+    normalised rotor state times ``linear_per_speed``, that state per rad/s), rate_damping
+    (``rate_damping`` x, y, z in N m s/rad where ``rate_damping`` is True: a source whose
+    references share none), wind. [] where the change only scales the references' shared
+    physics (a slower motor, a drag or damping scale): the source's shared effects carry it."""
+    e = effects
+    if "flap" in e:
+        return [make_effect("blade_flapping", coefficient=e["flap"])]
+    if "lift" in e:
+        return [make_effect("translational_lift", k_h=e["lift"])]
+    if "mass" in e:
+        return [make_effect("mass_offset", mass=e["mass"])]
+    if "payload" in e:
+        m, x, y, z = e["payload"]
+        return [make_effect("mass_offset", mass=m, x=x, y=y, z=z)]
+    if "com" in e:
+        return [make_effect("com_offset", x=e["com"][0], y=e["com"][1])]
+    if "inertia" in e:
+        xx, yy, zz = e["inertia"]
+        return [make_effect("inertia_error", xx=xx, yy=yy, zz=zz)]
+    if "weak_rotor" in e:
+        i, d = e["weak_rotor"]
+        return [make_effect("thrust_mismatch", **{f"rotor_{int(i)}": d})]
+    if "thrust_scale" in e:
+        return [make_effect("thrust_factor", change=e["thrust_scale"], alpha=thrust_alpha)]
+    if "thrust_linear" in e:
+        return [make_effect("thrust_curve", linear=e["thrust_linear"] * linear_per_speed)]
+    if rate_damping and "rate_damping" in e:
+        k = e["rate_damping"]
+        return [make_effect("rate_damping", x=k[0], y=k[1], z=k[2])]
+    if "wind" in e:
+        return [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
+    return []
 
 
 def code_hash(source: CaseSource) -> str:
