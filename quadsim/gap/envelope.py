@@ -281,7 +281,7 @@ def _physical_towards(reference, theta: np.ndarray) -> np.ndarray:
     point towards it from the pooled value ``reference.theta`` (physical: the references
     were fitted there) that is: the trend is a straight line fitted on the references, and
     a rigid body's inertia must keep the triangle inequality wherever the line leads.
-    Measured on the l2f source (a 2.0 kg X500, Izz 0.91 (Ixx + Iyy), as every flat frame
+    Measured on the l2f source (a 2.0 kg X500, Izz 0.92 (Ixx + Iyy), as every flat frame
     nearly is): the references' roll/pitch/yaw inertia errors (+1, +2, +4 %) trended to
     +9, +18, +45 % at a slow flight's place, which no rigid body has, and 7 of 30 flights
     were refused. The set is convex in the inertia errors (linear inequalities in the

@@ -115,10 +115,11 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     |aug|^2 + |du|^2 is the same for both priors at one delay: one residual per grid point."""
     sd, lo, hi = float(null.sd[-1]), float(null.lower[-1]), float(null.upper[-1])
     reach = DELAY_GRID_SDS * sd
+    steps = np.arange(-reach, reach + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
     wide = DELAY_GRID_SDS * max(sd, signal_sd)      # the reading's own start: its prior's reach
-    steps = np.arange(-wide, wide + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
+    own_steps = np.arange(-wide, wide + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
     about_hint = hint_s + steps if abs(hint_s) > reach else []    # else inside already
-    grid = np.unique(np.clip(np.concatenate([steps, about_hint, [0.0, hint_s]]),
+    grid = np.unique(np.clip(np.concatenate([own_steps, about_hint, [0.0, hint_s]]),
                              lo + 1e-9, hi - 1e-9))
     cost = np.empty(len(grid))
     for k, d in enumerate(grid):
