@@ -531,7 +531,7 @@ SIM_SOURCES = {
                    "pip install 'quadsim[multirotor]' then pip install --no-deps "
                    "multirotor==0.5.0"),
     "l2f": ("quadsim.bench.l2f_cases", "quadsim.bench.l2f_source", "l2f_available",
-            "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~15 min, 6 GB of memory)"),
+            "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"),
 }
 
 
