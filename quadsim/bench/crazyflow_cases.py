@@ -124,45 +124,23 @@ def reference_specs() -> list[FlightSpec]:
 
 
 def _draw(truth: str, rng: np.random.Generator) -> dict:
-    """Crazyflow-side effects of ``truth`` at a random realistic magnitude (module table)."""
+    """Crazyflow-side effects of ``truth`` at a random realistic magnitude (module table;
+    :func:`quadsim.bench.sim_cases.draw_effect`, with Crazyflow's own kinds: the rotor drag
+    scaled, translational lift, blade flapping)."""
     cp = crazyflow_params(DRONE)
     mass, arm = float(cp["mass"]), float(np.ravel(cp["L"])[0]) * np.sqrt(2.0)
     weight = mass * 9.81
-    angle = rng.uniform(0, 2 * np.pi)
-    if truth == "mass_offset":
-        return {"mass": rng.uniform(0.05, 0.2) * mass}
-    if truth == "payload":
-        r, a = rng.uniform(0.005, 0.015), rng.uniform(0, 2 * np.pi)
-        return {"payload": (rng.uniform(0.004, 0.008), r * np.cos(a), r * np.sin(a),
-                            -rng.uniform(0.005, 0.01))}
-    if truth == "com_offset":
-        r = rng.uniform(0.03, 0.1) * arm
-        return {"com": (r * np.cos(angle), r * np.sin(angle))}
-    if truth == "inertia_error":
-        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
-    if truth == "thrust_mismatch":
-        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
-    if truth == "thrust_factor":
-        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
-    if truth == "motor_lag":
-        return {"motor_slow": rng.uniform(1.5, 2.5)}
-    if truth == "rotor_drag":
-        return {"drag_scale": rng.uniform(1.5, 2.5)}
-    if truth == "wind":
-        v = rng.uniform(1.0, 2.5)
-        return {"wind": (v * np.cos(angle), v * np.sin(angle))}
-    if truth == "rotor_delay":
-        return {"rotor_delay": rng.uniform(0.010, 0.030)}
-    if truth == "translational_lift":       # +2..5 % of the hover thrust at 1.5 m/s
-        return {"lift": rng.uniform(0.02, 0.05) * weight / (4 * 1.5 ** 2)}
-    if truth == "blade_flapping":           # moment 2-4 % of weight x arm at 1 m/s
-        hover = hover_rpm(cp) * RPM
-        return {"flap": rng.uniform(0.02, 0.04) * weight * arm / (4 * hover)}
-    if truth == "periodic_torque":
-        amp = rng.uniform(0.01, 0.03) * weight * arm
-        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
-                "torque_hz": rng.uniform(1.0, 3.0)}
-    raise ValueError(f"no Crazyflow case {truth!r}")
+    scale = sim_cases.DrawScale(mass=mass, gravity=9.81, arm=arm, damping=0.0,
+                                payload_kg=(0.004, 0.008), payload_radius=(0.005, 0.015),
+                                payload_below=(0.005, 0.01), wind=(1.0, 2.5))
+    own = {"rotor_drag": lambda r: {"drag_scale": r.uniform(1.5, 2.5)},
+           # +2..5 % of the hover thrust at 1.5 m/s
+           "translational_lift": lambda r: {"lift": r.uniform(0.02, 0.05) * weight
+                                            / (4 * 1.5 ** 2)},
+           # moment 2-4 % of weight x arm at 1 m/s
+           "blade_flapping": lambda r: {"flap": r.uniform(0.02, 0.04) * weight * arm
+                                        / (4 * hover_rpm(cp) * RPM)}}
+    return sim_cases.draw_effect(truth, rng, scale, own)
 
 
 def case_list() -> list[dict]:

@@ -107,43 +107,21 @@ def reference_specs() -> list[FlightSpec]:
 
 
 def _draw(truth: str, rng: np.random.Generator) -> dict:
-    """PyFlyt-side effects of ``truth`` at a random realistic magnitude (module table)."""
+    """PyFlyt-side effects of ``truth`` at a random realistic magnitude (module table;
+    :func:`quadsim.bench.sim_cases.draw_effect`, with PyFlyt's own kinds: its rate drag
+    scaled, translational lift)."""
     model = pyflyt_model()
     mass = model["mass"]
     arm = float(np.linalg.norm(model["props"][0][:2]))
     weight = mass * 9.81
-    angle = rng.uniform(0, 2 * np.pi)
-    if truth == "mass_offset":
-        return {"mass": rng.uniform(0.05, 0.2) * mass}
-    if truth == "payload":
-        r, a = rng.uniform(0.005, 0.015), rng.uniform(0, 2 * np.pi)
-        return {"payload": (rng.uniform(0.002, 0.005), r * np.cos(a), r * np.sin(a),
-                            -rng.uniform(0.005, 0.01))}
-    if truth == "com_offset":
-        r = rng.uniform(0.03, 0.1) * arm
-        return {"com": (r * np.cos(angle), r * np.sin(angle))}
-    if truth == "inertia_error":
-        return {"inertia": (rng.uniform(0.15, 0.4), rng.uniform(0.15, 0.4), rng.uniform(0, 0.2))}
-    if truth == "thrust_mismatch":
-        return {"weak_rotor": (int(rng.integers(1, 5)), -rng.uniform(0.05, 0.15))}
-    if truth == "thrust_factor":
-        return {"thrust_scale": -rng.uniform(0.05, 0.15)}
-    if truth == "motor_lag":
-        return {"motor_slow": rng.uniform(1.5, 2.5)}
-    if truth == "rate_damping":
-        return {"rate_damping": rng.uniform(1.5, 3.0)}
-    if truth == "wind":
-        v = rng.uniform(1.0, 2.5)
-        return {"wind": (v * np.cos(angle), v * np.sin(angle))}
-    if truth == "rotor_delay":
-        return {"rotor_delay": rng.uniform(0.010, 0.030)}
-    if truth == "translational_lift":       # +2..5 % of the hover thrust at 1.5 m/s
-        return {"lift": rng.uniform(0.02, 0.05) * weight / (4 * 1.5 ** 2)}
-    if truth == "periodic_torque":
-        amp = rng.uniform(0.01, 0.03) * weight * arm
-        return {"torque": (amp * np.cos(angle), amp * np.sin(angle), 0.0),
-                "torque_hz": rng.uniform(1.0, 3.0)}
-    raise ValueError(f"no PyFlyt case {truth!r}")
+    scale = sim_cases.DrawScale(mass=mass, gravity=9.81, arm=arm, damping=0.0,
+                                payload_kg=(0.002, 0.005), payload_radius=(0.005, 0.015),
+                                payload_below=(0.005, 0.01), wind=(1.0, 2.5))
+    own = {"rate_damping": lambda r: {"rate_damping": r.uniform(1.5, 3.0)},
+           # +2..5 % of the hover thrust at 1.5 m/s
+           "translational_lift": lambda r: {"lift": r.uniform(0.02, 0.05) * weight
+                                            / (4 * 1.5 ** 2)}}
+    return sim_cases.draw_effect(truth, rng, scale, own)
 
 
 def case_list() -> list[dict]:

@@ -100,7 +100,7 @@ class DrawScale:
     :func:`quadsim.gap.priors.momentum_rate_damping`), the payload's mass, radius off the
     centre and depth below it (each a (low, high) range), and the hover rotor state (a
     thrust curve's linear term is drawn as a share of the hover thrust there; None: the
-    source draws no thrust curve)."""
+    source draws no thrust curve), and the wind's speed range (m/s)."""
 
     mass: float
     gravity: float
@@ -110,18 +110,24 @@ class DrawScale:
     payload_radius: tuple[float, float]
     payload_below: tuple[float, float]
     hover_state: float | None = None
+    wind: tuple[float, float] = (2.0, 5.0)
 
 
-def draw_effect(truth: str, rng: np.random.Generator, v: DrawScale) -> dict:
+def draw_effect(truth: str, rng: np.random.Generator, v: DrawScale,
+                own: dict[str, Callable] | None = None) -> dict:
     """Source-side effects of ``truth`` at a random realistic magnitude, the ranges of the
-    multirotor and l2f case tables (their modules' docstrings): a mass +5..+20 %; a payload
+    simulator sources' case tables (their modules' docstrings): a mass +5..+20 %; a payload
     in ``v``'s ranges; the CoM 3-10 % of the arm off; Ixx, Iyy +15..+40 %, Izz +0..+20 %; one
     rotor or all -5..-15 %; a linear thrust term of +-5..15 % of the hover thrust at hover;
     both rotor time constants x 1.5-2.5; rate damping 1.5-3 x the momentum value (a third on
-    yaw); wind 2-5 m/s; a rotor log 10-30 ms late; a 1-3 Hz torque of 1-3 % of weight x arm;
-    a 2-5 Hz vertical force of 1-3 % of the weight. One angle is drawn first, always."""
+    yaw); wind in ``v.wind``; a rotor log 10-30 ms late; a 1-3 Hz torque of 1-3 % of weight
+    x arm; a 2-5 Hz vertical force of 1-3 % of the weight. ``own``: truth -> ``draw(rng)``
+    for a source's own kinds (a drag scale, a lift, flapping), taking precedence. One angle
+    is drawn first, always (the frozen case lists depend on the order of the draws)."""
     weight = v.mass * v.gravity
     angle = rng.uniform(0, 2 * np.pi)
+    if own and truth in own:
+        return own[truth](rng)
     if truth == "mass_offset":
         return {"mass": rng.uniform(0.05, 0.2) * v.mass}
     if truth == "payload":
@@ -146,7 +152,7 @@ def draw_effect(truth: str, rng: np.random.Generator, v: DrawScale) -> dict:
         k = rng.uniform(1.5, 3.0) * v.damping
         return {"rate_damping": (k, k, k / 3.0)}
     if truth == "wind":
-        speed = rng.uniform(2.0, 5.0)
+        speed = rng.uniform(*v.wind)
         return {"wind": (speed * np.cos(angle), speed * np.sin(angle))}
     if truth == "rotor_delay":
         return {"rotor_delay": rng.uniform(0.010, 0.030)}
