@@ -74,13 +74,25 @@ def disturbances(effects: dict) -> dict:
             "force_hz": float(e.get("force_hz", 0.0))}
 
 
-def fly_all(fly, specs: list, jobs: list, workers: int | None = None) -> list:
-    """``fly((spec, job))`` for every pair, in ``workers`` spawned processes (default: the CPU
-    count, at most 4; one: in this process), in order."""
+def fly_all(fly, to_log, specs: list, jobs: list, *, source: str, model: str,
+            rates: tuple[int, int], workers: int | None = None) -> list[tuple]:
+    """``(log, truth)`` per spec: ``fly((spec, job))`` in ``workers`` spawned processes
+    (default: the CPU count, at most 4; one: in this process), in order; the log
+    ``to_log(raw, spec, job["com"])``; the truth sidecar names the ``source``, its ``model``,
+    the seed, speed, duration, the (physics, log) ``rates`` in Hz, the case-side effects and
+    the job as ``<source>_params``."""
+    from .simlog import jsonable
+
     workers = min(len(specs), workers or min(4, os.cpu_count() or 1))
     if workers > 1:
         import multiprocessing
 
         with multiprocessing.get_context("spawn").Pool(workers) as pool:
-            return pool.map(fly, list(zip(specs, jobs)), chunksize=1)
-    return [fly(a) for a in zip(specs, jobs)]
+            raws = pool.map(fly, list(zip(specs, jobs)), chunksize=1)
+    else:
+        raws = [fly(a) for a in zip(specs, jobs)]
+    return [(to_log(raw, spec, job["com"]),
+             {"source": source, "model": model, "seed": spec.seed, "speed": spec.speed,
+              "duration_s": spec.duration, "physics_hz": rates[0], "log_hz": rates[1],
+              "effects": jsonable(spec.effects), f"{source}_params": jsonable(job)})
+            for spec, job, raw in zip(specs, jobs, raws)]

@@ -68,7 +68,7 @@ from ..core.frames import quat_to_rotmat
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
-from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
+from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
 __all__ = ["EFFECTS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "Cascade", "FlightSpec",
            "Sensors", "hover_command", "l2f_available", "l2f_flights", "path", "to_flight_log",
@@ -364,18 +364,10 @@ def l2f_flights(specs: list[FlightSpec], workers: int | None = None
     sidecar (effects, the flight's l2f parameters, seed, speed)."""
     if not l2f_available():
         raise ModelError("l2f is not installed (pip install 'quadsim[l2f]': compiles l2f "
-                         "2.0.18, a few minutes)")
+                         "2.0.18: about 11 min)")
     jobs = [_flight_job(s) for s in specs]
-    raws = fly_all(_fly, specs, jobs, workers)
-    out = []
-    for spec, job, raw in zip(specs, jobs, raws):
-        log = to_flight_log(raw, spec, job["com"])
-        truth = {"source": "l2f", "model": "l2f-x500", "seed": spec.seed,
-                 "speed": spec.speed, "duration_s": spec.duration, "physics_hz": PHYSICS_HZ,
-                 "log_hz": LOG_HZ, "effects": jsonable(spec.effects),
-                 "l2f_params": jsonable(job)}
-        out.append((log, truth))
-    return out
+    return fly_all(_fly, to_flight_log, specs, jobs, source="l2f", model="l2f-x500",
+                   rates=(PHYSICS_HZ, LOG_HZ), workers=workers)
 
 
 def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray) -> FlightLog:

@@ -61,7 +61,7 @@ from ..core.frames import euler_to_quat, quat_to_rotmat
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
-from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
+from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
 __all__ = ["EFFECTS", "LOG_HZ", "MODEL", "PHYSICS_HZ", "FlightSpec", "Sensors",
            "hover_speed_of",
@@ -325,16 +325,8 @@ def multirotor_flights(specs: list[FlightSpec], workers: int | None = None
         raise ModelError("multirotor is not installed (pip install 'quadsim[multirotor]' then "
                          "pip install --no-deps multirotor==0.5.0)")
     jobs = [_flight_job(s) for s in specs]
-    raws = fly_all(_fly, specs, jobs, workers)
-    out = []
-    for spec, job, raw in zip(specs, jobs, raws):
-        log = to_flight_log(raw, spec, job["com"])
-        truth = {"source": "multirotor", "model": "multirotor-x4", "seed": spec.seed,
-                 "speed": spec.speed, "duration_s": spec.duration, "physics_hz": PHYSICS_HZ,
-                 "log_hz": LOG_HZ, "effects": jsonable(spec.effects),
-                 "multirotor_params": jsonable(job)}
-        out.append((log, truth))
-    return out
+    return fly_all(_fly, to_flight_log, specs, jobs, source="multirotor", model="multirotor-x4",
+                   rates=(PHYSICS_HZ, LOG_HZ), workers=workers)
 
 
 def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray) -> FlightLog:
