@@ -373,3 +373,44 @@ def test_a_shared_value_at_a_bound_of_the_references_fit_is_stated_as_one(cf, re
     assert at == ("the rotors lag their commands by +2.5 ms (time constant) or less (their "
                   "fit's lower bound: a quarter of a fit sample, a shorter lag is not "
                   "resolved)"), at
+
+
+#: an airframe's quadratic drag on a Crazyflie (C_d A, m^2): 3 mN at 1 m/s, 28 mN in 3 m/s
+AIRFRAME = 0.004
+
+
+@pytest.fixture(scope="module")
+def airframe(cf):
+    """Four references flown in calm air with a quadratic airframe drag and no rotor drag:
+    their model takes it as its linear rotor drag."""
+    logs = [synthetic_flight(cf, _shared(drag=0.0)
+                             + [make_effect("body_drag", cd_area=AIRFRAME)],
+                             duration=4.0, seed=40 + s, speed=0.7 + 0.2 * s) for s in range(4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+def test_the_references_drag_as_a_quadratic_law(airframe):
+    """calibrate.quadratic_equivalent: the C_d A whose quadratic force matches the
+    references' fitted linear drag on their own flights is the airframe's, within 25 % (the
+    laws differ in shape over the speeds flown, not in size)."""
+    assert airframe.values()["rotor_drag.coefficient"] > 0
+    assert airframe.quadratic_drag == pytest.approx(AIRFRAME, rel=0.25)
+
+
+def test_a_wind_through_a_quadratic_drag_is_named_with_its_speed(cf, airframe):
+    """A 3 m/s wind through the same airframe drag: at 3 m/s of air speed the quadratic
+    force is about 3x what the references' linear law gives, and its slope with the flight's
+    speed too. The wind reading through that law (explanations._wind_readings) names it with
+    the right speed (the linear law alone needs a wind of ~2x to make the mean force and
+    leaves the slope); the same flight in calm air is no difference."""
+    drag = make_effect("body_drag", cd_area=AIRFRAME)
+    entry = _judge(cf, airframe, _shared(drag=0.0) + [drag, make_effect("wind", vx=3.0, vy=0.0)],
+                   seed=81)
+    assert entry["verdict"] == "wind" and entry["probability"] > 0.9, entry["answer"]
+    assert "quadratic airframe drag" in entry["answer"], entry["answer"]
+    assert entry["params"]["wind.vx"] == pytest.approx(3.0, rel=0.2), entry["answer"]
+    assert abs(entry["params"]["wind.vy"]) < 0.5, entry["answer"]
+    calm = _judge(cf, airframe, _shared(drag=0.0) + [drag], seed=82)
+    assert calm["verdict"] == "no_significant_gap", calm["answer"]

@@ -399,9 +399,39 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     shift, shift_se, vbat_ref=vbat_ref,
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
+    ref.quadratic_drag = quadratic_equivalent(states, ref)
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
                                np.array([ref.identified.get(k, True)
                                          for k in cand.parameter_names]), log_ms)
     return ref
+
+
+def quadratic_equivalent(states, reference: Reference) -> float:
+    """C_d A (m^2) of a quadratic airframe drag ``-1/2 rho C_d A |v| v`` (horizontal, body x
+    and y: :mod:`quadsim.effects.body_drag`) that reproduces the horizontal air force of the
+    references' shared rotor drag (linear in air speed) over their own flights, by least
+    squares on the body-frame force (N). What the references' drag is if its law is
+    quadratic: an airframe's drag is, a rotor's in-plane drag is linear (RotorPy, the
+    pipeline), and flights at the references' speeds cannot tell the two apart, a wind of
+    several m/s can (:func:`quadsim.gap.explanations._wind_readings`). 0 where the reference
+    model has no rotor drag."""
+    from ..effects import make_effect
+    from .residual import model_wrench
+
+    values = reference.values()
+    k = values.get("rotor_drag.coefficient", 0.0)
+    if k <= 0.0:
+        return 0.0
+    shared = reference.effects()
+    without = [e for e in shared if e.name != "rotor_drag"]
+    unit = without + [make_effect("body_drag", cd_area=1.0)]
+    num = den = 0.0
+    for s in states:
+        base = model_wrench(s, reference.params, without)[0][:, :2]
+        linear = model_wrench(s, reference.params, shared)[0][:, :2] - base
+        quad = model_wrench(s, reference.params, unit)[0][:, :2] - base
+        num += float(np.sum(linear * quad))
+        den += float(np.sum(quad * quad))
+    return max(0.0, num / den) if den > 0 else 0.0

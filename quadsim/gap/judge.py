@@ -113,7 +113,7 @@ def reading_name(key: str, ev) -> str:
     explanation (module doc, 3.) with a value the data determine away from "off" (its 95 %
     interval, 1.96 posterior spreads, excludes the off value)."""
     names = [key]
-    if key == "no_difference":
+    if key in ("no_difference", "wind"):     # a wind's own drag is the form of its force
         return key
     for part, _, fitted in ev.explanation.parts:
         if part in names or not fitted:
@@ -272,8 +272,15 @@ def _wind_text(ev, reference) -> str:
         ref = reference.values()
         speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
                                ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
-        text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
-                 "coefficient")
+        drag = ev.values.get("body_drag.cd_area")
+        if drag is not None:        # explanations.WIND_DRAG: the drag's law taken quadratic
+            size = (f" (C_d A {1e4 * drag:.3g} cm^2)" if ev.determined.get("body_drag.cd_area")
+                    else "")
+            text += (f": wind of ~{speed:.2g} m/s beyond the references', through their "
+                     f"drag as a quadratic airframe drag{size}")
+        else:
+            text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
+                     "coefficient")
     else:
         text += " (drag coefficient x wind speed fixed by the data, not each factor)"
     return text

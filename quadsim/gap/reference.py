@@ -106,6 +106,10 @@ class Reference:
     #: (:func:`fit_bounds`): the reference model at a flight's place stays within them
     #: (:func:`quadsim.gap.envelope.local_reference`); None: the effects' plausible ranges
     bounds: tuple | None = None
+    #: C_d A (m^2) of the quadratic airframe drag that gives the references' own horizontal
+    #: air force (:func:`quadsim.gap.calibrate.quadratic_equivalent`); 0 where their model has
+    #: none (no rotor drag, or it is not shared)
+    quadratic_drag: float = 0.0
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
