@@ -397,6 +397,8 @@ def test_the_references_drag_as_a_quadratic_law(airframe):
     laws differ in shape over the speeds flown, not in size)."""
     assert airframe.values()["rotor_drag.coefficient"] > 0
     assert airframe.quadratic_drag == pytest.approx(AIRFRAME, rel=0.25)
+    from quadsim.gap.per_flight import reference_summary
+    assert reference_summary(airframe)["quadratic_drag_m2"] == airframe.quadratic_drag
 
 
 def test_a_wind_through_a_quadratic_drag_is_named_with_its_speed(cf, airframe):

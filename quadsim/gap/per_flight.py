@@ -98,7 +98,8 @@ def reference_summary(ref: Reference) -> dict:
     """The calibrated reference model as JSON: values, pooled standard error, between-flight
     scatter and whether the reference flights determine it (``identified``) per shared
     parameter; noise scale (sigma) and correlation time per channel; the references'
-    envelope (:func:`quadsim.gap.envelope.envelope_summary`)."""
+    envelope (:func:`quadsim.gap.envelope.envelope_summary`); their drag as a quadratic
+    airframe drag's C_d A (m^2, :func:`quadsim.gap.calibrate.quadratic_equivalent`)."""
     from .judge import channel_names
 
     names = channel_names(ref)
@@ -113,7 +114,8 @@ def reference_summary(ref: Reference) -> dict:
                                 "se": 1e3 * ref.rotor_shift_se},
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
                           for k, (m, s, n) in ref.delays_ms.items()},
-            "envelope": envelope_summary(ref.envelope)}
+            "envelope": envelope_summary(ref.envelope),
+            "quadratic_drag_m2": float(ref.quadratic_drag)}
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
