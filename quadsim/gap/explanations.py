@@ -336,7 +336,7 @@ def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     drag on the pipeline, whose references show no horizontal drag."""
     plain = _one("wind", "", [("wind", {}, ("vx", "vy"))], mean, spread, replaces=("wind",),
                  log_prior=-np.log(2.0))
-    drag = getattr(reference, "quadratic_drag", 0.0)
+    drag = reference.quadratic_drag
     if drag <= 0.0:
         return [dataclasses.replace(plain, log_prior=0.0)]
     quad = _one("wind", WIND_DRAG, [("wind", {}, ("vx", "vy")), ("body_drag", {}, ("cd_area",))],
