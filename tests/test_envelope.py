@@ -148,6 +148,71 @@ def test_the_model_at_a_flight_stays_a_rigid_body():
     assert local.scatter[2] >= wanted - wall
 
 
+def _inertia_reference(values, info=None):
+    """A Crazyflie reference with shared inertia errors (xx, yy, zz) whose references'
+    own values are ``values`` (4, 3) at the places of COORDS (standard errors 1e-3) and
+    whose inverse information per sample is ``info`` (4, 3)."""
+    cf = load_params("crazyflie21")
+    cand = Candidate("reference", (("inertia_error", {}, ("xx", "yy", "zz")),))
+    trend_coords = np.log(COORDS)
+    trend = fit_trend(trend_coords, values, np.full_like(values, 1e-3),
+                      np.array([True, True, True]), np.zeros((len(values), 10)), info)
+    mean = values.mean(axis=0)
+    ref = Reference(cf, True, cand, mean, np.full(3, 1e-5), np.zeros(3),
+                    np.ones(10), np.ones(10), np.zeros(10), 0.2, 30, {},
+                    [f"r{k}" for k in range(4)], {})
+    ref.envelope = Envelope(trend_coords, trend)
+    return ref, trend
+
+
+def test_a_bias_that_follows_the_inverse_information_is_carried_by_it():
+    """Roll inertia errors that are exactly 0.02 q (q: the inverse information per sample,
+    spread over an e-fold and a half, and not a line in the place): the inverse-information
+    line wins (weight 1 to 1e-6), and at a flight with 3x the largest reference's q the
+    reference model's roll value is that line's, 0.02 q, its spread at least the line's move
+    beyond the outermost reference. A parameter whose information spreads less than an
+    e-fold keeps the place's line alone."""
+    q = np.array([[0.5, 1.0, 1.0], [0.8, 1.01, 1.0], [1.5, 1.02, 1.0], [2.4, 1.03, 1.0]])
+    values = np.zeros((4, 3))
+    values[:, 0] = 0.02 * q[:, 0]
+    ref, trend = _inertia_reference(values, q)
+    assert trend.q_weight[0] == pytest.approx(1.0, abs=1e-6)
+    assert trend.q_weight[1] == 0.0 and trend.q_weight[2] == 0.0
+    flight = np.array([3 * 2.4, 1.0, 1.0])
+    pos = position(_states(*COORDS[-1]), ref.envelope, flight)
+    local = local_reference(ref, pos)
+    assert local.theta[0] == pytest.approx(0.02 * flight[0], rel=1e-6)
+    assert local.scatter[0] >= 0.02 * (flight[0] - 2.4)
+    # without the flight's information the place's line is used
+    plain = local_reference(ref, position(_states(*COORDS[-1]), ref.envelope))
+    assert plain.theta[0] == pytest.approx(values[-1, 0], abs=0.02)
+
+
+def test_the_wall_takes_back_the_least_certain_move_first():
+    """Roll and pitch errors +30 % measured by the inverse-information line (certain), yaw
+    error +150 % by it too but with scatter about its line: the yaw value alone goes back to the
+    triangle inequality's wall (Izz = Ixx + Iyy), roll and pitch keep their +30 %."""
+    from quadsim.effects.base import EffectSet
+
+    q = np.array([[0.5] * 3, [0.8] * 3, [1.5] * 3, [2.4] * 3])
+    values = np.column_stack([0.1 * q[:, 0], 0.1 * q[:, 0], 0.5 * q[:, 0]])
+    values[:, 2] += np.array([0.0, 0.1, -0.1, 0.0])          # a yaw line with scatter
+    ref, trend = _inertia_reference(values, q)
+    flight = np.full(3, 3.0)
+    pos = position(_states(*COORDS[-1]), ref.envelope, flight)
+    local = local_reference(ref, pos)
+    cf = ref.params
+    inertia = np.diag(cf.inertia)
+    wall = (inertia[0] * (1 + local.theta[0]) + inertia[1] * (1 + local.theta[1])) \
+        / inertia[2] - 1.0
+    assert local.theta[0] == pytest.approx(0.3, abs=1e-6)
+    assert local.theta[1] == pytest.approx(0.3, abs=1e-6)
+    assert 0.5 * 3.0 > wall + 0.5                     # the line's yaw value: no rigid body
+    assert local.theta[2] == pytest.approx(wall, abs=1e-6)
+    assert local.scatter[2] >= 0.5 * 3.0 - wall - 0.05   # the move left out, in its spread
+    EffectSet(tuple(local.effects())).apply_to_params(cf)     # physical
+
+
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker
 pytestmark = pytest.mark.xdist_group("test_envelope")

@@ -404,8 +404,44 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
                                np.array([ref.identified.get(k, True)
-                                         for k in cand.parameter_names]), log_ms)
+                                         for k in cand.parameter_names]), log_ms,
+                               _noise_biased(cand.parameter_names,
+                                             own[1] ** 2 * np.array([[len(s.t)] for s in states])))
     return ref
+
+
+#: shared groups whose least-squares value is biased by noise in what it scales, in
+#: proportion to the inverse information (:func:`inverse_information`): the rotor thrust and
+#: drag torque factors, the inertia and the rotors' gyroscopic inertia scale forces and
+#: torques made from the logged rotor speeds (telemetry noise on the regressor: errors in
+#: variables), and the motor lag is fitted in closed loop (the command answers the noise the
+#: controller sees). The others scale quantities measured with little noise (the velocity
+#: for drags and winds, the gyro's rate for damping), and their drift with how a flight is
+#: flown is a form error that grows with the motion (PyFlyt's quadratic rate drag read as
+#: linear damping), the place's line. Measured: with every group offered the
+#: inverse-information line, the pipeline's references' vertical drag (which it cannot fit
+#: better than the place's, chi^2 2.25 against 2.36) moved on a slower flight, and the
+#: flight's canted rotor went to a body drag with a 6 m/s wind of its own.
+NOISE_BIASED = ("nominal_refit", "inertia_error", "gyroscopic", "motor_lag")
+
+
+def _noise_biased(names, info: np.ndarray) -> np.ndarray:
+    """``info`` with NaN in the columns of groups not in :data:`NOISE_BIASED` (no
+    inverse-information line for them)."""
+    keep = np.array([n.split(".")[0] in NOISE_BIASED for n in names])
+    return np.where(keep, info, np.nan)
+
+
+def inverse_information(states, reference: Reference) -> np.ndarray:
+    """Inverse information per sample (P,) of each shared parameter on one flight's aligned
+    ``states``: the squared standard error of its one-step estimate alone (:func:`_scatter`)
+    times its samples. How little of each parameter a flight's motion shows per sample, the
+    place of :mod:`.envelope`'s inverse-information trend: least squares biases a value by
+    the noise of its regressor over that regressor's signal (errors in variables), and the
+    signal is what the information counts."""
+    own: list = []
+    _scatter([states], reference, own)
+    return own[1][0] ** 2 * len(states.t)
 
 
 def quadratic_equivalent(states, reference: Reference) -> float:

@@ -89,6 +89,13 @@ FLOORS = np.array([0.05, 0.05, 0.05])
 MIN_FLIGHTS = 3
 #: least spread (natural log units) of the references' places along their axis
 MIN_SPREAD = 0.05
+#: least spread (natural log units) of the references' inverse information per sample of a
+#: parameter for its inverse-information form: an e-fold. Below it the line's slope comes
+#: from a range of information narrower than that of the differences it would explain and
+#: extrapolates a noise slope; measured on the l2f references: the rotor thrust, winds and
+#: motor-map gain spread 0.06-0.2 (their information does not depend on how a flight is
+#: flown), the inertia, drag torque, rate damping, rotor drag and motor lag 1.5-3.9
+MIN_INFO_SPREAD = 1.0
 
 
 def coordinates(states) -> np.ndarray:
@@ -108,7 +115,10 @@ class Trend:
     ``u_w`` (P,): per parameter the weighted mean place; ``slope``/``slope_var`` (P,): dtheta/du
     and its variance; ``lof_slope`` (C,): d(log ms_c)/du; ``lof_mean`` (C,): at u_mean;
     ``lof_sd``, ``lof_dof``: pooled residual spread; ``s_uu``: sum of squared places about
-    u_mean; ``n``: references; ``u_low``/``u_high``: the outermost references' places."""
+    u_mean; ``n``: references; ``u_low``/``u_high``: the outermost references' places.
+    The inverse-information form (module doc, per parameter; weight 0 where not measured):
+    ``q_weight`` its posterior weight against the place's line, ``q_w``, ``q_slope``,
+    ``q_slope_var``, ``q_low``/``q_high`` as their place counterparts."""
 
     axis: np.ndarray
     u_mean: float
@@ -123,6 +133,12 @@ class Trend:
     n: int
     u_low: float
     u_high: float
+    q_weight: np.ndarray | None = None
+    q_w: np.ndarray | None = None
+    q_slope: np.ndarray | None = None
+    q_slope_var: np.ndarray | None = None
+    q_low: np.ndarray | None = None
+    q_high: np.ndarray | None = None
 
 
 @dataclass
@@ -151,6 +167,9 @@ class Position:
     worst: str
     u: float | None
     text: str
+    #: the flight's own inverse information per sample of each shared parameter (P,)
+    #: (:func:`quadsim.gap.calibrate.inverse_information`); None: not measured
+    info: np.ndarray | None = None
 
     def to_json(self) -> dict:
         names = [c[0] for c in COORDINATES]
@@ -161,12 +180,15 @@ class Position:
 
 
 def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
-                identified: np.ndarray, log_ms: np.ndarray) -> Envelope:
+                identified: np.ndarray, log_ms: np.ndarray,
+                info: np.ndarray | None = None) -> Envelope:
     """The envelope of reference flights (coordinates (n, 3)), with the trend of their own
     parameter values ``values`` (n, P) (standard errors ``se``; parameters not
-    ``identified`` get no slope) and their log mean squares ``log_ms`` (n, C)."""
+    ``identified`` get no slope), their log mean squares ``log_ms`` (n, C) and their
+    inverse information per sample ``info`` (n, P; None: no inverse-information form)."""
     return Envelope(np.asarray(coords, float),
-                    fit_trend(np.asarray(coords, float), values, se, identified, log_ms))
+                    fit_trend(np.asarray(coords, float), values, se, identified, log_ms,
+                              info))
 
 
 def envelope_summary(envelope: Envelope | None) -> dict | None:
@@ -180,7 +202,20 @@ def envelope_summary(envelope: Envelope | None) -> dict | None:
             "trend": envelope.trend is not None}
 
 
-def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:
+def _line(x: np.ndarray, v: np.ndarray, se: np.ndarray) -> tuple[float, float, float, float]:
+    """Weighted (1/se^2) line of v on x: weighted mean place x_w, slope b, var(b) scaled by
+    the reduced chi^2 when above 1, and the fit's chi^2."""
+    w = 1.0 / np.maximum(se, 1e-300) ** 2
+    x_w = float(np.sum(w * x) / np.sum(w))
+    dx = x - x_w
+    sxx = float(np.sum(w * dx ** 2))
+    mean = float(np.sum(w * v) / np.sum(w))
+    b = float(np.sum(w * dx * (v - mean)) / sxx)
+    chi2 = float(np.sum(w * (v - mean - b * dx) ** 2))
+    return x_w, b, max(1.0, chi2 / (len(x) - 2)) / sxx, chi2
+
+
+def fit_trend(coords, values, se, identified, log_ms, info=None) -> Trend | None:
     """The trend of :class:`Trend` (module doc); None when it cannot be measured."""
     n = len(coords)
     if n < MIN_FLIGHTS:
@@ -194,18 +229,24 @@ def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:
         return None
     p = values.shape[1]
     u_w, slope, slope_var = np.zeros(p), np.zeros(p), np.zeros(p)
+    q = [np.zeros(p) for _ in range(6)]     # weight, q_w, slope, slope_var, low, high
     for k in range(p):
-        w = 1.0 / np.maximum(se[:, k], 1e-300) ** 2
-        if not identified[k] or not np.all(np.isfinite(w)):
+        if not identified[k] or not np.all(np.isfinite(1.0 / np.maximum(se[:, k], 1e-300))):
             u_w[k] = u.mean()
             continue
-        u_w[k] = float(np.sum(w * u) / np.sum(w))
-        du = u - u_w[k]
-        suu = float(np.sum(w * du ** 2))
-        mean = float(np.sum(w * values[:, k]) / np.sum(w))
-        b = float(np.sum(w * du * (values[:, k] - mean)) / suu)
-        chi2 = float(np.sum(w * (values[:, k] - mean - b * du) ** 2)) / (n - 2)
-        slope[k], slope_var[k] = b, max(1.0, chi2) / suu
+        u_w[k], slope[k], slope_var[k], chi2_u = _line(u, values[:, k], se[:, k])
+        x = None if info is None else info[:, k]
+        if x is None or not np.all(np.isfinite(x)) or np.any(x <= 0) \
+                or np.ptp(np.log(x)) < MIN_INFO_SPREAD:
+            continue
+        q_w, b, var_b, chi2_q = _line(x, values[:, k], se[:, k])
+        # the two lines have as many parameters: their likelihoods compare directly, the
+        # chi^2 scaled by the better line's reduced chi^2 (the between-flight scatter
+        # neither line explains, which must not turn a small difference into certainty)
+        scale = max(1.0, min(chi2_u, chi2_q) / (n - 2))
+        weight = 1.0 / (1.0 + np.exp((chi2_q - chi2_u) / (2.0 * scale)))
+        for arr, val in zip(q, (weight, q_w, b, var_b, x.min(), x.max())):
+            arr[k] = val
     du = u - u.mean()
     s_uu = float(du @ du)
     g = (du @ (log_ms - log_ms.mean(axis=0))) / s_uu
@@ -214,11 +255,13 @@ def fit_trend(coords, values, se, identified, log_ms) -> Trend | None:
     dof = max(1, rest.size - 2 * rest.shape[1])
     return Trend(axis, float(u.mean()), u_w, slope, slope_var, g, lof_mean,
                  float(np.sqrt(np.sum(rest ** 2) / dof)), dof, s_uu, n,
-                 float(u.min()), float(u.max()))
+                 float(u.min()), float(u.max()), *q)
 
 
-def position(states, envelope: Envelope | None) -> Position | None:
-    """A flight's :class:`Position` against the references' envelope (None without one)."""
+def position(states, envelope: Envelope | None, info: np.ndarray | None = None
+             ) -> Position | None:
+    """A flight's :class:`Position` against the references' envelope (None without one);
+    ``info``: its inverse information per sample of each shared parameter."""
     if envelope is None:
         return None
     x = coordinates(states)
@@ -241,7 +284,8 @@ def position(states, envelope: Envelope | None) -> Position | None:
                  "uncertainty and noise widened" if envelope.trend is not None else
                  "; the references do not spread enough to show how their model "
                  "extrapolates: judged by the reference model as calibrated")
-    return Position(x, distance, name, u, text)
+    return Position(x, distance, name, u, text,
+                    None if info is None else np.asarray(info, float))
 
 
 def local_reference(reference, pos: Position | None):
@@ -254,7 +298,7 @@ def local_reference(reference, pos: Position | None):
         return reference
     # beyond the references' outermost places only: inside, their own statistics hold
     edge = pos.u - np.clip(pos.u, trend.u_low, trend.u_high)
-    scatter = np.sqrt(reference.scatter ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2)
+    scatter = reference.scatter
     shift = trend.lof_slope * edge
     widen = np.maximum(shift, 0.0)
     n = len(reference.names) or trend.n
@@ -262,45 +306,84 @@ def local_reference(reference, pos: Position | None):
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n)))
     lower, upper = getattr(reference, "bounds", None) or _bounds(reference.candidate,
                                                                  reference.params)
-    predicted = np.clip(reference.theta + trend.slope * (pos.u - trend.u_w), lower, upper)
-    theta = _physical_towards(reference, predicted)
+    move, var = _predicted_move(trend, pos, edge)
+    predicted = np.clip(reference.theta + move, lower, upper)
+    theta = _physical_towards(reference, predicted, np.sqrt(scatter ** 2 + var))
     # the part of the trend's move that no rigid body can make is the model's error there
-    scatter = np.sqrt(scatter ** 2 + trend.slope_var * (pos.u - trend.u_w) ** 2
-                      + (predicted - theta) ** 2)
+    scatter = np.sqrt(scatter ** 2 + var + (predicted - theta) ** 2)
     return dataclasses.replace(
         reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
         lof_mean=reference.lof_mean + shift - widen, lof_sd=float(spread))
+
+
+def _predicted_move(trend: Trend, pos: Position, edge: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The trend's move of each shared value from the pooled one at the flight's place, and
+    its variance (module doc): the place's line, mixed with the inverse-information line by
+    the latter's weight where it is measured and the flight's information is known."""
+    lead = pos.u - trend.u_w
+    move_u = trend.slope * lead
+    var_u = trend.slope_var * lead ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2
+    if trend.q_weight is None or pos.info is None or len(pos.info) != len(trend.slope):
+        return move_u, var_u
+    w = np.where(np.isfinite(pos.info), trend.q_weight, 0.0)
+    info = np.where(w > 0, pos.info, trend.q_w)
+    lead_q = info - trend.q_w
+    edge_q = info - np.clip(info, trend.q_low, trend.q_high)
+    move_q = trend.q_slope * lead_q
+    var_q = (trend.q_slope_var * lead_q ** 2
+             + (trend.q_slope ** 2 + trend.q_slope_var) * edge_q ** 2)
+    move = (1.0 - w) * move_u + w * move_q
+    return move, (1.0 - w) * var_u + w * var_q + w * (1.0 - w) * (move_u - move_q) ** 2
 
 
 #: bisection steps of :func:`_physical_towards` (the move kept to 2^-30 of its length)
 _PHYSICAL_STEPS = 30
 
 
-def _physical_towards(reference, theta: np.ndarray) -> np.ndarray:
-    """``theta`` where the reference model's vehicle there is physical, else the furthest
-    point towards it from the pooled value ``reference.theta`` (physical: the references
-    were fitted there) that is: the trend is a straight line fitted on the references, and
-    a rigid body's inertia must keep the triangle inequality wherever the line leads.
+def _physical_towards(reference, theta: np.ndarray, sd: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """``theta`` where the reference model's vehicle there is physical, else the nearest
+    physical point found by taking back the trend's least certain moves first: each moved
+    value in turn, in order of its move over its spread ``sd`` (smallest first), goes back
+    towards the pooled value ``reference.theta`` (physical: the references were fitted
+    there), the last one only as far as the wall (bisection). The trend is a straight line
+    fitted on the references, and a rigid body's inertia must keep the triangle inequality
+    wherever the line leads.
+
     Measured on the l2f source (a 2.0 kg X500, Izz 0.92 (Ixx + Iyy), as every flat frame
     nearly is): the references' roll/pitch/yaw inertia errors (+1, +2, +4 %) trended to
     +9, +18, +45 % at a slow flight's place, which no rigid body has, and 7 of 30 flights
-    were refused. The set is convex in the inertia errors (linear inequalities in the
-    scaled principal moments), so the segment leaves it once; bisection finds where. The
-    part of the move left out widens the shared value's spread (:func:`local_reference`):
-    with the inertia held at the wall but its spread the references' own, a nominal flight
-    flown slower than any reference was read as an inertia error of its own (+50 %, at
-    94 %), the trend's artefact (least squares shrinks a model torque noisier than a slow
-    flight's motion) and not the flight's."""
+    were refused. The part of the move left out widens the shared value's spread
+    (:func:`local_reference`): with the inertia held at the wall but its spread the
+    references' own, a nominal flight flown slower than any reference was read as an
+    inertia error of its own (+50 %, at 94 %), the trend's artefact (least squares shrinks a
+    model torque noisier than a slow flight's motion) and not the flight's. Taking back the
+    whole move along one line (as before 2026-11-27) pulled the well-measured roll and
+    pitch values back with the yaw value that broke the wall (to a third of their move on
+    that flight); the yaw value, the least certain, is the one the wall speaks against."""
     if _physical(reference, theta):
         return theta
-    inside, outside = 0.0, 1.0
-    for _ in range(_PHYSICAL_STEPS):
-        mid = 0.5 * (inside + outside)
-        if _physical(reference, reference.theta + mid * (theta - reference.theta)):
-            inside = mid
-        else:
-            outside = mid
-    return reference.theta + inside * (theta - reference.theta)
+    base = np.asarray(reference.theta, float)
+    theta = np.array(theta, dtype=float)
+    moved = np.flatnonzero(theta != base)
+    sd = np.ones_like(theta) if sd is None else np.maximum(np.asarray(sd, float), 1e-300)
+    for k in moved[np.argsort(np.abs(theta - base)[moved] / sd[moved], kind="stable")]:
+        start = theta[k]
+        theta[k] = base[k]
+        if not _physical(reference, theta):
+            continue
+        inside, outside = 0.0, 1.0
+        for _ in range(_PHYSICAL_STEPS):
+            mid = 0.5 * (inside + outside)
+            theta[k] = base[k] + mid * (start - base[k])
+            if _physical(reference, theta):
+                inside = mid
+            else:
+                outside = mid
+        theta[k] = base[k] + inside * (start - base[k])
+        return theta
+    return theta
 
 
 def _physical(reference, theta: np.ndarray) -> bool:

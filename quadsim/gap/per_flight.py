@@ -37,7 +37,7 @@ from ..core.errors import InputError, ModelError, QuadsimWarning
 from ..logs.delays import delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from .calibrate import Reference, calibrate
+from .calibrate import Reference, calibrate, inverse_information
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
 from .envelope import envelope_summary, local_reference
@@ -136,7 +136,11 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
-            place = envelope_position(states, reference.envelope)
+            trend = getattr(reference.envelope, "trend", None)
+            info = (inverse_information(states, reference)
+                    if trend is not None and trend.q_weight is not None
+                    and np.any(trend.q_weight > 0) else None)
+            place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
             expl = explanations_for(reference, states, effects)
             start = 0.0
