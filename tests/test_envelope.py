@@ -183,6 +183,11 @@ def test_a_bias_that_follows_the_inverse_information_is_carried_by_it():
     local = local_reference(ref, pos)
     assert local.theta[0] == pytest.approx(0.02 * flight[0], rel=1e-6)
     assert local.scatter[0] >= 0.02 * (flight[0] - 2.4)
+    # the JSON names the parameter that has the line, with its weight
+    from quadsim.gap.envelope import envelope_summary
+    lines = envelope_summary(ref.envelope, ref.candidate.parameter_names)["information_line"]
+    assert list(lines) == ["inertia_error.xx"]
+    assert lines["inertia_error.xx"] == pytest.approx(1.0, abs=1e-6)
     # without the flight's information the place's line is used
     plain = local_reference(ref, position(_states(*COORDS[-1]), ref.envelope))
     assert plain.theta[0] == pytest.approx(values[-1, 0], abs=0.02)

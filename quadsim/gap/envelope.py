@@ -53,6 +53,22 @@ extrapolation, measured by the trend:
   regression's prediction term; S_uu the references' sum of squared places about their
   mean).
 
+A second line per noise-biased parameter (:data:`quadsim.gap.calibrate.NOISE_BIASED`): its
+inverse information per sample q_j = se_j^2 N_j (:func:`quadsim.gap.calibrate.inverse_information`).
+Least squares biases a value scaling a noisy regressor by the noise over the regressor's
+signal (errors in variables), a straight line in q, not in u: over the references the same
+weighted regression on q (where their q spread over at least :data:`MIN_INFO_SPREAD`, an
+e-fold) gives slope b_q, var(b_q), and the two lines, with as many parameters, are compared
+by their chi^2 (scaled by the better one's reduced chi^2 s): the q line's weight
+``w = 1 / (1 + exp((chi2_q - chi2_u) / 2 s))``. At a flight with its own q (``info`` of
+:func:`position`) the shared value moves by ``(1 - w) m_u + w m_q``, its variance
+``(1 - w) v_u + w v_q + w (1 - w) (m_u - m_q)^2`` (each line's v with its extrapolation
+beyond the outermost reference, e_q = q - clip(q, q_min, q_max) for the q line). Measured on
+the l2f references (a 2 kg X500): roll/pitch inertia errors +0.4 to +19 %, rising at slower
+flights, chi^2 9.4/4.2 on u against 1.7/0.55 on q (w 0.98, 0.86); a nominal flight with
+0.61x the slowest reference's body rate reads +43/+49 % on its own, the q line predicts
++61/+52 %, the u line +8/+17 % (it was a tentative ``inertia_error``, now no difference).
+
 No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
 states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
 slope needs a residual degree of freedom) or when the references' places spread less than
@@ -191,15 +207,19 @@ def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
                               info))
 
 
-def envelope_summary(envelope: Envelope | None) -> dict | None:
+def envelope_summary(envelope: Envelope | None, names=()) -> dict | None:
     """The references' envelope as JSON: per coordinate the smallest and largest RMS value
-    (SI), and whether a trend was measured."""
+    (SI), whether a trend was measured, and per shared parameter (``names``) the weight of
+    its inverse-information line where it has one."""
     if envelope is None:
         return None
-    names = [c[0] for c in COORDINATES]
+    coords = [c[0] for c in COORDINATES]
+    trend = envelope.trend
+    weights = {} if trend is None or trend.q_weight is None else {
+        n: float(w) for n, w in zip(names, trend.q_weight) if w > 0}
     return {"rms": {n: [float(np.exp(lo)), float(np.exp(hi))]
-                    for n, lo, hi in zip(names, envelope.low, envelope.high)},
-            "trend": envelope.trend is not None}
+                    for n, lo, hi in zip(coords, envelope.low, envelope.high)},
+            "trend": trend is not None, "information_line": weights}
 
 
 def _line(x: np.ndarray, v: np.ndarray, se: np.ndarray) -> tuple[float, float, float, float]:

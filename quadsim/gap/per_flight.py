@@ -114,7 +114,7 @@ def reference_summary(ref: Reference) -> dict:
                                 "se": 1e3 * ref.rotor_shift_se},
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
                           for k, (m, s, n) in ref.delays_ms.items()},
-            "envelope": envelope_summary(ref.envelope),
+            "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
             "quadratic_drag_m2": float(ref.quadratic_drag)}
 
 
