@@ -532,6 +532,8 @@ SIM_SOURCES = {
                    "multirotor==0.5.0"),
     "l2f": ("quadsim.bench.l2f_cases", "quadsim.bench.l2f_source", "l2f_available",
             "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"),
+    "l2f-fs": ("quadsim.bench.l2f_fs_cases", "quadsim.bench.l2f_source", "l2f_available",
+               "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"),
 }
 
 
@@ -544,7 +546,7 @@ def _cpu_seconds() -> float:
 
 
 def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow|pyflyt|multirotor|l2f``: make (or reuse) the cached flights; with
+    """``--independent --source crazyflow|pyflyt|multirotor|l2f|l2f-fs``: make (or reuse) the cached flights; with
     ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
     import importlib
 
@@ -623,7 +625,7 @@ def main(argv=None) -> int:
                              "pyflyt, multirotor, l2f: per-flight cases against 8 nominal flights of that "
                              "simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
-                        help="with --source crazyflow|pyflyt|multirotor|l2f: only fly and cache the flights "
+                        help="with --source crazyflow|pyflyt|multirotor|l2f|l2f-fs: only fly and cache the flights "
                              "and print their observability (no verdict is computed)")
     args = parser.parse_args(argv)
     if args.independent and args.source in SIM_SOURCES:

@@ -12,6 +12,7 @@ import pytest
 
 from quadsim.bench.l2f_cases import case_list, library_truth, reference_specs
 from quadsim.bench.l2f_source import (
+    FS,
     MODEL,
     OMEGA_MAX,
     Cascade,
@@ -137,3 +138,53 @@ def test_flights_agree_with_quadsims_model():
     pred = w[:-1] + (1 - np.exp(-dt / tau)) * (u[1:] - w[:-1])
     hover = hover_command() * OMEGA_MAX
     assert np.sqrt(np.mean((pred - w[1:]) ** 2)) < 0.02 * hover
+
+
+def test_the_fs_vehicle_as_quadsim_sees_it():
+    """l2f's fs vehicle (thrust 0.785 + 9.155 a + 18.006 a^2 N per rotor): the hover state is
+    the polynomial's root (a = 0.43667: four rotors carry 3.35 kg); the allocation inverts
+    the polynomial; quadsim's b is the stand sweep's least squares through the origin,
+    sum(T a^2) / sum(a^4) over a = 0.1..1.0 (closed form here, 30.13 a^2 N); the JSON gives
+    l2f the curve's three terms, a linear case term added to c1."""
+    from quadsim.bench.l2f_source import STAND, command_for, stand_b, thrust_of
+
+    a = hover_command(vehicle=FS)
+    assert thrust_of(a, FS) == pytest.approx(3.35 * 9.81 / 4, rel=1e-12)
+    assert a == pytest.approx(0.43667, abs=1e-5)
+    thrusts = np.array([1.0, 5.0, 12.0])
+    np.testing.assert_allclose(thrust_of(command_for(thrusts, FS), FS), thrusts, rtol=1e-12)
+    assert command_for(0.5, FS) == 0.0                      # below the constant term
+    expected = np.sum(thrust_of(STAND, FS) * STAND ** 2) / np.sum(STAND ** 4)
+    p = vehicle_params(FS)
+    assert p.thrust_factor * 1000.0 ** 2 == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(30.13, abs=0.01)
+    assert stand_b(MODEL) * OMEGA_MAX ** 2 == pytest.approx(MODEL["c2"], rel=1e-12)
+    assert p.drag_factor == pytest.approx(0.01492 * p.thrust_factor, rel=1e-12)
+    assert p.inertia[2, 2] == pytest.approx(7.296e-2 * 1.879, rel=1e-12)
+    job = _flight_job(FlightSpec(seed=1, effects={"thrust_linear": 0.5}), FS)
+    template = json.dumps({"dynamics": {}, "integration": {"dt": 0.01}, "mdp": {}})
+    d = json.loads(_parameters_json(job, template))["dynamics"]
+    assert d["rotor_thrust_coefficients"][0] == pytest.approx([FS["c0"], FS["c1"] + 0.5,
+                                                               FS["c2"]], rel=1e-12)
+    assert d["mass"] == pytest.approx(3.35) and d["rotor_time_constants_rising"][0] == 0.06532
+    assert d["hovering_throttle_relative"] == pytest.approx(a, rel=1e-12)
+    # the controller's allocation at hover: the hover state on every rotor
+    ctrl = Cascade(0.002, FS)
+    u = ctrl.step(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(3),
+                  np.zeros(3), np.zeros(3), np.zeros(3), 0.0)
+    np.testing.assert_allclose(u, a, rtol=1e-9)
+
+
+def test_the_fs_cases_are_drawn_at_its_scale():
+    """The fs source's frozen cases: 30, the X500's table, its own seeds, masses +5..+20 %
+    of 3.35 kg, the truth's shared physics with the thrust curve against the stand fit."""
+    from quadsim.bench.l2f_fs_cases import SOURCE, case_list
+
+    cases = case_list()
+    assert len(cases) == 30 and SOURCE.name == "l2f-fs"
+    assert {c["vehicle"] for c in cases} == {"l2f-fs"} and cases[0]["seed"] == 81_000
+    masses = [c["effects"]["mass"] for c in cases if c["case"] == "mass_offset"]
+    assert masses and all(0.05 * 3.35 <= m <= 0.2 * 3.35 for m in masses)
+    from quadsim.bench.l2f_cases import FS_CASES
+    names = [e.name for e in FS_CASES.shared_effects()]
+    assert names == ["motor_lag", "body_drag", "thrust_factor", "thrust_curve"]

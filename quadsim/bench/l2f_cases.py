@@ -66,18 +66,21 @@ out-of-library -> no confident name.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from ..effects import make_effect
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
-from .l2f_source import (MODEL, OMEGA_MAX, FlightSpec, hover_command, l2f_flights,
+from .l2f_source import (FS, MODEL, FlightSpec, hover_command, l2f_flights, stand_b,
                          vehicle_params)
 from .observe import OBSERVABLE
 from .score import joined_kind
 
-__all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spec",
-           "library_truth", "oracle_reductions", "reference_specs", "shared_effects"]
+__all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "VehicleCases", "case_list",
+           "case_spec", "library_truth", "oracle_reductions", "reference_specs",
+           "shared_effects"]
 
 REFERENCES = 8
 DURATION = 8.0
@@ -103,26 +106,88 @@ def scored_kind(case: dict) -> str:
     return joined_kind(case["case"], case["kind"], JOINED_LIBRARY)
 
 
-def reference_specs() -> list[FlightSpec]:
-    """The 8 nominal reference flights (speeds 0.7-1.4, seeds apart from the cases')."""
-    return [FlightSpec(seed=90_000 + 37 * k, speed=0.7 + 0.1 * k, duration=DURATION)
-            for k in range(REFERENCES)]
+class VehicleCases:
+    """The frozen cases of one l2f vehicle (:data:`quadsim.bench.l2f_source.VEHICLES`):
+    ``key`` its name there, ``vehicle`` its table, ``arm`` (m), the payload's ranges (kg,
+    m, m) and the seeds of its cases and references."""
 
+    def __init__(self, key: str, vehicle: dict, arm: float, payload_kg, payload_radius,
+                 payload_below, seed0: int, ref_seed0: int):
+        self.key, self.vehicle, self.arm = key, vehicle, arm
+        self.payload = (payload_kg, payload_radius, payload_below)
+        self.seed0, self.ref_seed0 = seed0, ref_seed0
 
-def _draw(truth: str, rng: np.random.Generator) -> dict:
-    """l2f-side effects of ``truth`` at a random realistic magnitude (module table;
-    :func:`quadsim.bench.sim_cases.draw_effect`)."""
-    scale = sim_cases.DrawScale(
-        mass=MODEL["mass"], gravity=MODEL["gravity"], arm=ARM,
-        damping=momentum_rate_damping(vehicle_params()), payload_kg=(0.1, 0.3),
-        payload_radius=(0.02, 0.05), payload_below=(0.02, 0.06), hover_state=hover_command())
-    return sim_cases.draw_effect(truth, rng, scale)
+    def params(self):
+        return vehicle_params(self.vehicle)
 
+    def reference_specs(self) -> list[FlightSpec]:
+        """The 8 nominal reference flights (speeds 0.7-1.4, seeds apart from the cases')."""
+        return [FlightSpec(seed=self.ref_seed0 + 37 * k, speed=0.7 + 0.1 * k,
+                           duration=DURATION) for k in range(REFERENCES)]
 
-def case_list() -> list[dict]:
-    """The frozen cases: truth (scored name), kind, seed, speed and the l2f effects."""
-    return sim_cases.draw_cases(CASES, _draw, source="l2f", vehicle="l2f-x500",
-                                seed0=80_000, speeds=(0.75, 1.35), scored_as=SCORED_AS)
+    def draw(self, truth: str, rng: np.random.Generator) -> dict:
+        """l2f-side effects of ``truth`` at a random realistic magnitude (module table;
+        :func:`quadsim.bench.sim_cases.draw_effect`)."""
+        m = self.vehicle
+        kg, radius, below = self.payload
+        scale = sim_cases.DrawScale(
+            mass=m["mass"], gravity=m["gravity"], arm=self.arm,
+            damping=momentum_rate_damping(self.params()), payload_kg=kg,
+            payload_radius=radius, payload_below=below,
+            hover_state=hover_command(vehicle=m))
+        return sim_cases.draw_effect(truth, rng, scale)
+
+    def case_list(self) -> list[dict]:
+        """The frozen cases: truth (scored name), kind, seed, speed and the l2f effects."""
+        return sim_cases.draw_cases(CASES, self.draw, source="l2f",
+                                    vehicle=self.vehicle["name"], seed0=self.seed0,
+                                    speeds=(0.75, 1.35), scored_as=SCORED_AS)
+
+    def shared_effects(self, slow: float = 1.0) -> list:
+        """l2f's nominal physics that quadsim's nominal model lacks, as library effects at
+        their true values (module docstring): the rotor time constant (x ``slow``), the
+        body drag, and where l2f's thrust is not purely quadratic its curve against the
+        stand fit's b (:func:`quadsim.bench.l2f_source.stand_b`): a propeller factor
+        c2 / (b omega_max^2) - 1 with no speed-per-command change and the curve's linear and
+        constant terms (its reaction torque k_Q (c0 + c1 a) has no library form)."""
+        m = self.vehicle
+        cd = m["cd_area"]
+        out = [make_effect("motor_lag", time_constant=m["tau"] * slow),
+               make_effect("body_drag", cd_area=cd[0], cd_area_vertical=cd[2])]
+        if m["c0"] != 0.0 or m["c1"] != 0.0:
+            w = m["omega_max"]
+            out += [make_effect("thrust_factor", change=m["c2"] / (stand_b(m) * w * w) - 1,
+                                alpha=0.0),
+                    make_effect("thrust_curve", linear=m["c1"] / w, offset=m["c0"])]
+        return out
+
+    def library_truth(self, case: dict) -> list:
+        """Library effects with the true difference of ``case`` from the references, on top
+        of :meth:`shared_effects` (the full effect list of the case's true model); [] for
+        cases with no library form (none, outside, delay)."""
+        e = case["effects"]
+        shared = self.shared_effects(e.get("motor_slow", 1.0))
+        if scored_kind(case) != "library" or "rotor_delay" in e:
+            return []
+        # [] for motor_slow: the shared rotor lag scaled; alpha 0 (module doc)
+        return shared + sim_cases.library_difference(
+            e, linear_per_speed=1.0 / self.vehicle["omega_max"], rate_damping=True)
+
+    def oracle_reductions(self, logs: list, references: list,
+                          cases: list[dict]) -> list[tuple[float, float]]:
+        """Per case (reduction, gap ratio): :func:`quadsim.bench.sim_cases.oracle_reductions`
+        with :meth:`shared_effects` and :meth:`library_truth`."""
+        return sim_cases.oracle_reductions(logs, references, cases, self.params(),
+                                           self.shared_effects(), self.library_truth,
+                                           scored_kind)
+
+    def source(self, name: str) -> sim_cases.CaseSource:
+        return sim_cases.CaseSource(
+            name=name, package="l2f",
+            modules=("l2f_source.py", "flightjobs.py", "simlog.py"),
+            references=self.reference_specs, cases=self.case_list, case_spec=case_spec,
+            fly=partial(l2f_flights, vehicle=self.key), observe=self.oracle_reductions,
+            scored_kind=scored_kind, params=self.params, observable=OBSERVABLE)
 
 
 def case_spec(case: dict) -> FlightSpec:
@@ -130,38 +195,17 @@ def case_spec(case: dict) -> FlightSpec:
                       effects=dict(case["effects"]))
 
 
-def shared_effects(slow: float = 1.0) -> list:
-    """l2f's nominal physics that quadsim's nominal model lacks, as library effects at their
-    true values (module docstring): the rotor time constant (x ``slow``), the body drag."""
-    cd = MODEL["cd_area"]
-    return [make_effect("motor_lag", time_constant=MODEL["tau"] * slow),
-            make_effect("body_drag", cd_area=cd[0], cd_area_vertical=cd[2])]
+#: the X500 (module table); seeds as frozen when the source was built
+X500 = VehicleCases("x500", MODEL, ARM, (0.1, 0.3), (0.02, 0.05), (0.02, 0.06),
+                    seed0=80_000, ref_seed0=90_000)
+#: the fs vehicle (:mod:`.l2f_fs_cases`): arm 0.319 m, a payload 0.15-0.5 kg 30-80 mm off
+#: the centre and 30-80 mm below (a 3.35 kg vehicle's gimbal or sensor), its own seeds
+FS_CASES = VehicleCases("fs", FS, float(np.hypot(0.20895, 0.240666)), (0.15, 0.5),
+                        (0.03, 0.08), (0.03, 0.08), seed0=81_000, ref_seed0=91_000)
 
-
-def library_truth(case: dict) -> list:
-    """Library effects with the true difference of ``case`` from the references, on top of
-    :func:`shared_effects` (the full effect list of the case's true model); [] for cases
-    with no library form (none, outside, delay)."""
-    e = case["effects"]
-    shared = shared_effects(e.get("motor_slow", 1.0))
-    if scored_kind(case) != "library" or "rotor_delay" in e:
-        return []
-    # [] for motor_slow: the shared rotor lag scaled; alpha 0 (module doc)
-    return shared + sim_cases.library_difference(e, linear_per_speed=1.0 / OMEGA_MAX,
-                                                 rate_damping=True)
-
-
-def oracle_reductions(logs: list, references: list,
-                      cases: list[dict]) -> list[tuple[float, float]]:
-    """Per case (reduction, gap ratio): :func:`quadsim.bench.sim_cases.oracle_reductions`
-    with :func:`shared_effects` and :func:`library_truth`."""
-    return sim_cases.oracle_reductions(logs, references, cases, vehicle_params(),
-                                       shared_effects(), library_truth, scored_kind)
-
-
-SOURCE = sim_cases.CaseSource(
-    name="l2f", package="l2f",
-    modules=("l2f_source.py", "flightjobs.py", "simlog.py"),
-    references=reference_specs, cases=case_list, case_spec=case_spec, fly=l2f_flights,
-    observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
-    observable=OBSERVABLE)
+reference_specs = X500.reference_specs
+case_list = X500.case_list
+shared_effects = X500.shared_effects
+library_truth = X500.library_truth
+oracle_reductions = X500.oracle_reductions
+SOURCE = X500.source("l2f")

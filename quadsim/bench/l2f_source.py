@@ -70,9 +70,10 @@ from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["EFFECTS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "Cascade", "FlightSpec",
-           "Sensors", "hover_command", "l2f_available", "l2f_flights", "path", "to_flight_log",
-           "truth_json", "vehicle_params"]
+__all__ = ["EFFECTS", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND", "VEHICLES",
+           "Cascade", "FlightSpec", "Sensors", "command_for", "hover_command", "l2f_available",
+           "l2f_flights", "path", "stand_b", "thrust_of", "to_flight_log", "truth_json",
+           "vehicle_params"]
 
 PHYSICS_HZ = 1000
 CONTROL_HZ = 500
@@ -83,15 +84,37 @@ LEAD_IN = 2.0
 OMEGA_MAX = 1150.0
 #: the vehicle in SI units: l2f 2.0.18 parameters/dynamics/x500_real.h (J from its J^-1,
 #: module doc); the body drag is this module's (module doc)
-MODEL = {"mass": 2.0, "rotor_xy": ((0.176776695296636, -0.176776695296636),
-                                   (-0.176776695296636, 0.176776695296636),
-                                   (0.176776695296636, 0.176776695296636),
-                                   (-0.176776695296636, -0.176776695296636)),
-         "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c2": 15.926119900619797,
+MODEL = {"name": "l2f-x500", "header": "x500_real.h", "mass": 2.0,
+         "rotor_xy": ((0.176776695296636, -0.176776695296636),
+                      (-0.176776695296636, 0.176776695296636),
+                      (0.176776695296636, 0.176776695296636),
+                      (-0.176776695296636, -0.176776695296636)),
+         "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c0": 0.0, "c1": 0.0, "c2": 15.926119900619797,
          "k_torque": 1.0847e-1, "tau": 0.054,
          "inertia": (1 / 46.072333563695004, 1 / 46.939541870071345, 1 / 25.38313043243412),
          "gravity": 9.81, "rho": 1.225, "cd_area": (0.02, 0.02, 0.05),
-         "rotor_radius": 0.127}
+         "rotor_radius": 0.127, "omega_max": OMEGA_MAX,
+         "description": "l2f's identified Holybro X500 (2.0 kg) as quadsim sees it",
+         "omega_source": "chosen: 920 KV on 4S, ~11 000 rpm loaded (rad/s)",
+         "radius_source": "Holybro X500 V2: 10-inch propellers (m)"}
+#: l2f's "fs" vehicle (``parameters/dynamics/fs.h``): 3.35 kg, rotors at (+-0.209, +-0.241)
+#: m (a rectangle), a thrust curve with constant and linear terms (0.785 + 9.155 a + 18.006
+#: a^2 N), k_Q 0.01492 m, 65.3 ms rotors; its J and J^-1 agree (Izz = 1.879 Iyy). The rotor
+#: speed at a = 1 (1000 rad/s: 12-inch propellers at ~9 500 rpm), the propeller radius and
+#: the body drag (a 3.35 kg frame: 1.5x the X500's areas) are this module's choice.
+FS = {"name": "l2f-fs", "header": "fs.h", "mass": 3.35,
+      "rotor_xy": ((0.20895, -0.240666), (-0.20895, 0.240666), (0.20895, 0.240666),
+                   (-0.20895, -0.240666)),
+      "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c0": 0.7846629595902934,
+      "c1": 9.15540123440728, "c2": 18.005569363583604, "k_torque": 0.01492, "tau": 0.06532,
+      "inertia": (7.56e-2, 7.296e-2, 7.296e-2 * 1.879), "gravity": 9.81, "rho": 1.225,
+      "cd_area": (0.03, 0.03, 0.075), "rotor_radius": 0.1524, "omega_max": 1000.0,
+      "description": "l2f's fs vehicle (3.35 kg, thrust 0.785 + 9.16 a + 18.0 a^2 N) as "
+                     "quadsim sees it",
+      "omega_source": "chosen: 12-inch propellers, ~9 500 rpm at full command (rad/s)",
+      "radius_source": "chosen: 12-inch propellers (m)"}
+#: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs)
+VEHICLES = {"x500": MODEL, "fs": FS}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its thrust
@@ -122,41 +145,85 @@ def l2f_available() -> bool:
     return importlib.util.find_spec("l2f") is not None
 
 
-def hover_command(mass: float = MODEL["mass"]) -> float:
-    """Normalised rotor state at which the four rotors carry ``mass`` (kg): sqrt(m g / (4
-    c2))."""
-    return float(np.sqrt(mass * MODEL["gravity"] / (4 * MODEL["c2"])))
+def thrust_of(a, vehicle: dict = MODEL):
+    """One rotor's thrust (N) at normalised rotor state ``a``: c0 + c1 a + c2 a^2."""
+    return vehicle["c0"] + vehicle["c1"] * a + vehicle["c2"] * np.square(a)
 
 
-def _rotor_positions() -> np.ndarray:
-    return np.array([[x, y, 0.0] for x, y in MODEL["rotor_xy"]])
+def command_for(thrust, vehicle: dict = MODEL):
+    """The rotor state (0..1) whose steady thrust is ``thrust`` (N; below c0: 0), the root
+    of c0 + c1 a + c2 a^2 = T (sqrt(T / c2) where c0 = c1 = 0)."""
+    c0, c1, c2 = vehicle["c0"], vehicle["c1"], vehicle["c2"]
+    t = np.maximum(np.asarray(thrust, dtype=float) - c0, 0.0)
+    if c1 == 0.0:
+        return np.clip(np.sqrt(t / c2), 0.0, 1.0)
+    return np.clip((np.sqrt(c1 * c1 + 4.0 * c2 * t) - c1) / (2.0 * c2), 0.0, 1.0)
 
 
-def vehicle_params() -> VehicleParams:
+def hover_command(mass: float | None = None, vehicle: dict = MODEL) -> float:
+    """Normalised rotor state at which the four rotors carry ``mass`` (kg; default the
+    vehicle's): the root of c0 + c1 a + c2 a^2 = m g / 4."""
+    mass = vehicle["mass"] if mass is None else mass
+    if vehicle["c0"] == 0.0 and vehicle["c1"] == 0.0:
+        return float(np.sqrt(mass * vehicle["gravity"] / (4 * vehicle["c2"])))
+    return float(command_for(mass * vehicle["gravity"] / 4.0, vehicle))
+
+
+#: normalised rotor states of the thrust-stand sweep behind a nominal b (:func:`stand_b`)
+STAND = np.linspace(0.1, 1.0, 10)
+
+
+def stand_b(vehicle: dict = MODEL) -> float:
+    """quadsim's b (N s^2/rad^2) of a vehicle: c2 / omega_max^2 where l2f's thrust is purely
+    quadratic; else the least-squares fit of b Omega^2 to its thrust curve over a stand sweep
+    a = 0.1..1.0 (:data:`STAND`), as ``python -m quadsim.identify`` fits a thrust-stand
+    sweep (least squares through the origin over every point). For the fs vehicle that is
+    30.1 a^2 N: at hover (a = 0.437) 5.75 N against l2f's 8.22 (30 % low: the constant and
+    linear terms carry most of the thrust there), its slope 26.3 against 24.9 N per unit
+    state (6 % steep); the form error its references share."""
+    w = vehicle["omega_max"]
+    if vehicle["c0"] == 0.0 and vehicle["c1"] == 0.0:
+        return vehicle["c2"] / w ** 2
+    a2 = STAND ** 2
+    return float(np.sum(thrust_of(STAND, vehicle) * a2) / np.sum(a2 * a2)) / w ** 2
+
+
+def _rotor_positions(vehicle: dict = MODEL) -> np.ndarray:
+    return np.array([[x, y, 0.0] for x, y in vehicle["rotor_xy"]])
+
+
+def vehicle_params(vehicle: dict = MODEL) -> VehicleParams:
     """quadsim's parameter set of the nominal vehicle (module doc)."""
-    m = MODEL
-    b = m["c2"] / OMEGA_MAX ** 2
+    m = vehicle
+    w = m["omega_max"]
+    b = stand_b(m)
     rotors = tuple(Rotor(str(i + 1), p, np.array([0.0, 0.0, 1.0]), -float(s))
-                   for i, (p, s) in enumerate(zip(_rotor_positions(), m["torque_dir"])))
+                   for i, (p, s) in enumerate(zip(_rotor_positions(m), m["torque_dir"])))
     grid = np.linspace(0.0, 1.0, 11)
-    src = "l2f 2.0.18 parameters/dynamics/x500_real.h"
+    src = f"l2f 2.0.18 parameters/dynamics/{m['header']}"
+    quadratic = m["c0"] == 0.0 and m["c1"] == 0.0
     params = VehicleParams(
-        name="l2f-x500", mass=m["mass"], com=np.zeros(3), inertia=np.diag(m["inertia"]),
+        name=m["name"], mass=m["mass"], com=np.zeros(3), inertia=np.diag(m["inertia"]),
         rotors=rotors, thrust_factor=b, drag_factor=m["k_torque"] * b,
-        max_speed=OMEGA_MAX, min_speed=0.0, rotor_radius=m["rotor_radius"],
+        max_speed=w, min_speed=0.0, rotor_radius=m["rotor_radius"],
         rotor_inertia=0.0, gravity=m["gravity"], air_density=m["rho"],
-        motor_map=MotorMap("1", grid, np.tile(grid * OMEGA_MAX, (4, 1)),
+        motor_map=MotorMap("1", grid, np.tile(grid * w, (4, 1)),
                            "l2f's rotor state in steady state equals its command: normalised "
                            "command -> command x OMEGA_MAX rad/s"),
-        description="l2f's identified Holybro X500 (2.0 kg) as quadsim sees it",
+        description=m["description"],
         sources={"mass": f"{src}: mass (kg)",
-                 "inertia": f"{src}: the inverse of its J_inv (kg m^2; its J has a typo)",
+                 "inertia": (f"{src}: the inverse of its J_inv (kg m^2; its J has a typo)"
+                             if m is MODEL else f"{src}: J (kg m^2)"),
                  "rotors": f"{src}: rotor positions (m), spins from its torque directions",
-                 "thrust_factor": f"{src}: 15.93 N at a = 1, over OMEGA_MAX^2 (N s^2/rad^2)",
-                 "drag_factor": f"{src}: torque constant 0.1085 m x b (N m s^2/rad^2)",
-                 "max_speed": "chosen: 920 KV on 4S, ~11 000 rpm loaded (rad/s)",
+                 "thrust_factor": (f"{src}: {m['c2']:.2f} N at a = 1, over OMEGA_MAX^2 "
+                                   "(N s^2/rad^2)" if quadratic else
+                                   f"{src}: its thrust curve fitted as b Omega^2 over a "
+                                   "stand sweep a = 0.1..1 (N s^2/rad^2)"),
+                 "drag_factor": f"{src}: torque constant {m['k_torque']:.4g} m x b "
+                                "(N m s^2/rad^2)",
+                 "max_speed": m["omega_source"],
                  "min_speed": "l2f's action limit 0 (rad/s)",
-                 "rotor_radius": "Holybro X500 V2: 10-inch propellers (m)",
+                 "rotor_radius": m["radius_source"],
                  "rotor_inertia": "l2f leaves the spin-up torque out (kg m^2)",
                  "gravity": f"{src}: gravity (m/s^2)",
                  "air_density": "this module's body drag: ISA sea level (kg/m^3)"})
@@ -194,7 +261,8 @@ def path(t: np.ndarray, seed: int, speed: float) -> tuple[np.ndarray, np.ndarray
 
 class Cascade:
     """The flights' controller (module doc), tuned for the nominal X500 and blind to every
-    case effect: it knows the nominal mass, inertia, rotor positions and thrust coefficient.
+    case effect: it knows the nominal vehicle's mass, inertia, rotor positions and thrust
+    curve (``vehicle``).
     :meth:`step` takes the state (CoM position, world velocity, quaternion w-first, body
     rate) and the setpoints, and returns the normalised commands u (4,) in [0, 1]."""
 
@@ -205,12 +273,12 @@ class Cascade:
     KP_RATE, KI_RATE = np.array([12.0, 12.0, 6.0]), np.array([3.0, 3.0, 1.5])
     MAX_TILT = 0.5                                       # rad
 
-    def __init__(self, dt: float):
-        m = MODEL
+    def __init__(self, dt: float, vehicle: dict = MODEL):
+        m = self.vehicle = vehicle
         self.dt = dt
         self.mass = m["mass"]
         self.inertia = np.diag(m["inertia"])
-        pos = _rotor_positions()
+        pos = _rotor_positions(m)
         # rows: total thrust, roll, pitch and yaw torque per unit rotor thrust
         self.mix = np.array([np.ones(4), pos[:, 1], -pos[:, 0],
                              m["k_torque"] * np.asarray(m["torque_dir"])])
@@ -219,7 +287,7 @@ class Cascade:
         self.i_rate = np.zeros(3)
 
     def step(self, pos, vel, quat, rate, sp_pos, sp_vel, sp_acc, sp_yaw) -> np.ndarray:
-        g = MODEL["gravity"]
+        g = self.vehicle["gravity"]
         v_sp = sp_vel + self.KP_POS * (sp_pos - pos)
         err_v = v_sp - vel
         self.i_vel = np.clip(self.i_vel + err_v * self.dt, -2.0, 2.0)
@@ -242,25 +310,33 @@ class Cascade:
         torque = self.inertia @ (self.KP_RATE * err_rate + self.KI_RATE * self.i_rate) \
             + np.cross(rate, self.inertia @ rate)
         per_rotor = np.clip(self.unmix @ np.concatenate([[thrust], torque]), 0.0, None)
-        return np.clip(np.sqrt(per_rotor / MODEL["c2"]), 0.0, 1.0)
+        return command_for(per_rotor, self.vehicle)
 
 
 # ----------------------------------------------------------------------------- the job
 
 
-def _flight_job(spec: FlightSpec) -> dict:
-    """l2f parameters and this module's disturbances of one flight (SI)."""
+def _flight_job(spec: FlightSpec, vehicle: dict = MODEL) -> dict:
+    """l2f parameters and this module's disturbances of one flight (SI); the X500's job
+    names no vehicle (its cached flights' truth as before), another's carries it."""
     e = dict(spec.effects)
     unknown = set(e) - set(EFFECTS)
     if unknown:
         raise ValueError(f"unknown l2f effect(s) {sorted(unknown)}; valid: {EFFECTS}")
-    m = MODEL
+    m = vehicle
     mass, com, inertia = mass_properties(e, m["mass"], m["inertia"])
     scale = rotor_scales(e)
-    return {"mass": mass, "com": com, "inertia": inertia, "thrust_scale": scale,
-            "thrust_linear": float(e.get("thrust_linear", 0.0)),
-            "tau": m["tau"] * float(e.get("motor_slow", 1.0)),
-            **disturbances(e)}
+    job = {"mass": mass, "com": com, "inertia": inertia, "thrust_scale": scale,
+           "thrust_linear": float(e.get("thrust_linear", 0.0)),
+           "tau": m["tau"] * float(e.get("motor_slow", 1.0)),
+           **disturbances(e)}
+    if vehicle is not MODEL:        # its numbers (the job goes into the truth sidecar)
+        job["vehicle"] = {k: v for k, v in vehicle.items() if not isinstance(v, str)}
+    return job
+
+
+def _vehicle(job: dict) -> dict:
+    return job.get("vehicle", MODEL)
 
 
 def _parameters_json(job: dict, template: str) -> str:
@@ -268,20 +344,21 @@ def _parameters_json(job: dict, template: str) -> str:
     every field l2f reads is present) with the vehicle's dynamics and a 1 kHz step."""
     p = json.loads(template)
     d = p["dynamics"]
-    rel = _rotor_positions() - job["com"]
+    m = _vehicle(job)
+    rel = _rotor_positions(m) - job["com"]
     d["rotor_positions"] = rel.tolist()
     d["rotor_thrust_directions"] = [[0.0, 0.0, 1.0]] * 4
-    d["rotor_torque_directions"] = [[0.0, 0.0, s] for s in MODEL["torque_dir"]]
-    d["rotor_thrust_coefficients"] = [[0.0, job["thrust_linear"] * s, MODEL["c2"] * s]
-                                      for s in job["thrust_scale"]]
-    d["rotor_torque_constants"] = [MODEL["k_torque"]] * 4
+    d["rotor_torque_directions"] = [[0.0, 0.0, s] for s in m["torque_dir"]]
+    d["rotor_thrust_coefficients"] = [[m["c0"] * s, (m["c1"] + job["thrust_linear"]) * s,
+                                       m["c2"] * s] for s in job["thrust_scale"]]
+    d["rotor_torque_constants"] = [m["k_torque"]] * 4
     d["rotor_time_constants_rising"] = [job["tau"]] * 4
     d["rotor_time_constants_falling"] = [job["tau"]] * 4
     d["mass"] = job["mass"]
-    d["gravity"] = [0.0, 0.0, -MODEL["gravity"]]
+    d["gravity"] = [0.0, 0.0, -m["gravity"]]
     d["J"] = np.asarray(job["inertia"]).tolist()
     d["J_inv"] = np.linalg.inv(job["inertia"]).tolist()
-    d["hovering_throttle_relative"] = hover_command(job["mass"])
+    d["hovering_throttle_relative"] = hover_command(job["mass"], m)
     d["action_limit"] = {"min": 0.0, "max": 1.0}
     p["integration"]["dt"] = 1.0 / PHYSICS_HZ
     return json.dumps(p)
@@ -290,8 +367,9 @@ def _parameters_json(job: dict, template: str) -> str:
 def _disturbance(job: dict, rot: np.ndarray, vel: np.ndarray, rate: np.ndarray, t: float
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Body-frame force and torque this module adds over one step (module doc)."""
+    m = _vehicle(job)
     air = rot.T @ (vel - job["wind"])
-    force = -0.5 * MODEL["rho"] * np.asarray(MODEL["cd_area"]) * np.abs(air) * air
+    force = -0.5 * m["rho"] * np.asarray(m["cd_area"]) * np.abs(air) * air
     force[2] += job["force"] * np.sin(2 * np.pi * job["force_hz"] * t)
     torque = -job["rate_damping"] * rate \
         + job["torque"] * np.sin(2 * np.pi * job["torque_hz"] * t)
@@ -317,13 +395,15 @@ def _fly(args) -> dict:
     lead, n = round(LEAD_IN * PHYSICS_HZ), round(spec.duration * PHYSICS_HZ)
     t = np.arange(lead + n + 1) * dt
     sp_pos, sp_vel, sp_acc, sp_yaw = path(t, spec.seed, spec.speed)
-    hover = hover_command(job["mass"])
+    vehicle = _vehicle(job)
+    omega_max = vehicle["omega_max"]
+    hover = hover_command(job["mass"], vehicle)
     state.position = sp_pos[0].tolist()
     state.orientation = [1.0, 0.0, 0.0, 0.0]
     state.linear_velocity = sp_vel[0].tolist()
     state.angular_velocity = [0.0, 0.0, 0.0]
     state.rpm = [hover] * 4
-    ctrl = Cascade(every * dt)
+    ctrl = Cascade(every * dt, vehicle)
     inv_inertia = np.linalg.inv(job["inertia"])
     out = np.empty((lead + n + 1, 17))
     u = np.full(4, hover)
@@ -334,7 +414,7 @@ def _fly(args) -> dict:
                 np.array(s.rpm, dtype=float))
 
     pos, vel, quat, rate, rpm = read(state)
-    out[0] = np.concatenate([pos, vel, quat, rate, rpm * OMEGA_MAX])
+    out[0] = np.concatenate([pos, vel, quat, rate, rpm * omega_max])
     commands = np.empty((lead + n + 1, 4))
     commands[0] = u
     for k in range(lead + n):
@@ -352,25 +432,30 @@ def _fly(args) -> dict:
         pos, vel, quat, rate, rpm = read(state)   # as l2f holds them (single precision)
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(rate))) or quat[0] ** 2 < 0.5:
             raise ModelError(f"l2f flight (seed {spec.seed}) lost control at t = {t[k]:.2f} s")
-        out[k + 1] = np.concatenate([pos, vel, quat, rate, rpm * OMEGA_MAX])
+        out[k + 1] = np.concatenate([pos, vel, quat, rate, rpm * omega_max])
         commands[k + 1] = u
     return {"states": out[lead:], "commands": commands[lead:]}
 
 
-def l2f_flights(specs: list[FlightSpec], workers: int | None = None
+def l2f_flights(specs: list[FlightSpec], workers: int | None = None, vehicle: str = "x500"
                 ) -> list[tuple[FlightLog, dict]]:
-    """Fly every spec in l2f (``workers`` processes, default: the CPU count, at most 4) and
-    return ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the truth
-    sidecar (effects, the flight's l2f parameters, seed, speed)."""
+    """Fly every spec in l2f with the vehicle :data:`VEHICLES` ``[vehicle]`` (``workers``
+    processes, default: the CPU count, at most 4) and return ``(log, truth)`` per spec: the
+    log as :func:`to_flight_log` makes it, the truth sidecar (effects, the flight's l2f
+    parameters, seed, speed)."""
     if not l2f_available():
         raise ModelError("l2f is not installed (pip install 'quadsim[l2f]': compiles l2f "
                          "2.0.18: about 11 min)")
-    jobs = [_flight_job(s) for s in specs]
-    return fly_all(_fly, to_flight_log, specs, jobs, source="l2f", model="l2f-x500",
+    m = VEHICLES[vehicle]
+    jobs = [_flight_job(s, m) for s in specs]
+    to_log = to_flight_log if m is MODEL else (
+        lambda raw, spec, com: to_flight_log(raw, spec, com, m))
+    return fly_all(_fly, to_log, specs, jobs, source="l2f", model=m["name"],
                    rates=(PHYSICS_HZ, LOG_HZ), workers=workers)
 
 
-def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray) -> FlightLog:
+def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray, vehicle: dict = MODEL
+                  ) -> FlightLog:
     """l2f's states (CoM position and world velocity, quaternion, body rate, rotor speeds in
     rad/s) at 1 kHz -> a quadsim :class:`FlightLog` of the body origin at :data:`LOG_HZ`
     with the sensor model of ``spec.sensors`` (seeded by ``spec.seed``)."""
@@ -383,6 +468,6 @@ def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray) -> FlightLog:
                        ang_vel=x[keep, 10:13], ang_acc=ang_acc[keep], acc=acc[keep],
                        rotor_speed=x[keep + 1, 13:17], command=raw["commands"][keep + 1])
     return body_origin_log(states, com, spec.sensors, spec.seed,
-                           hover_speed=hover_command() * OMEGA_MAX,
+                           hover_speed=hover_command(vehicle=vehicle) * vehicle["omega_max"],
                            rotor_delay=float(spec.effects.get("rotor_delay", 0.0)),
-                           gravity=MODEL["gravity"])
+                           gravity=vehicle["gravity"])
