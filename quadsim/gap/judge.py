@@ -157,7 +157,7 @@ def lack_of_fit(ev, reference, null=None) -> dict:
     :data:`FORM_ERROR` of it (module doc)."""
     n = len(reference.names)
     scale = reference.lof_sd * np.sqrt(1 + 1 / n)
-    z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / max(scale, 1e-9)
+    z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / np.maximum(scale, 1e-9)
     if null is not None and null is not ev \
             and within_form_error(ev.ms, null.ms, np.exp(reference.lof_mean)):
         return {}

@@ -87,7 +87,8 @@ class Reference:
     sigma: np.ndarray
     tau: np.ndarray
     lof_mean: np.ndarray
-    lof_sd: float
+    #: float, or (C,) per channel at a flight beyond the references (.envelope)
+    lof_sd: float | np.ndarray
     lof_dof: int
     delays_ms: dict
     names: list
