@@ -66,7 +66,8 @@ nominal multirotor flights (flying them takes ~12.5 min on 2 cores).
 l2f source (``--independent --source l2f --cache DIR``, :mod:`quadsim.bench.l2f_cases`): the
 same for 30 cases from l2f 2.0.18 (RLtools' "Learning to Fly" simulator: its identified 2.0 kg
 Holybro X500, single-precision RK4, first-order rotors; a PID cascade of this project's)
-against 8 nominal l2f flights.
+against 8 nominal l2f flights; ``--source l2f-fs`` (:mod:`quadsim.bench.l2f_fs_cases`) the same
+table for l2f's fs vehicle (3.35 kg, a thrust curve with constant and linear terms).
 """
 
 from __future__ import annotations

@@ -28,8 +28,10 @@ timing. This subpackage provides sources that break that circle:
 * :mod:`.l2f_source` -- l2f 2.0.18 (``pip install 'quadsim[l2f]'``, a C++ build): RLtools'
   Learning to Fly simulator, single-precision RK4, first-order rotors, its identified 2.0 kg
   Holybro X500, flown by a PID cascade of this module's; :mod:`.l2f_cases` -- 30 frozen
-  cases (``--source l2f``); :mod:`.simlog` (the sensor model) and :mod:`.sim_cases` (fly,
-  cache, check, judge) are shared by the four simulator sources;
+  cases (``--source l2f``); :mod:`.l2f_fs_cases` -- 30 of l2f's fs vehicle (3.35 kg, a
+  thrust curve with constant and linear terms; ``--source l2f-fs``); :mod:`.simlog` (the
+  sensor model) and :mod:`.sim_cases` (fly, cache, check, judge) are shared by the
+  simulator sources;
 * :mod:`.draws` -- realistic random magnitudes per vehicle; :mod:`.outside` -- effects
   outside the library; :mod:`.cases` -- the case list and the judging in held-out and
   per-flight mode; :mod:`.observe` -- whether a flight's true difference from its
