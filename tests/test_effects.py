@@ -132,6 +132,23 @@ def test_body_drag_at_5_m_s():
                                atol=1e-12)
 
 
+def test_body_drag_per_axis_on_a_diagonal():
+    """Air at 5 m/s along the body's xy diagonal (3.536 m/s on x and on y): the law on the
+    air speed gives each axis -1/2 rho C_dA |v| v_i, the per-axis law -1/2 rho C_dA |v_i|
+    v_i, 1/sqrt(2) of it; along one axis the two agree."""
+    v = 5.0 / np.sqrt(2.0)
+    norm = make_effect("body_drag", cd_area=0.01).loads(context(velocity=(v, v, 0.0)))
+    axes = make_effect("body_drag", cd_area=0.01, per_axis=1.0).loads(
+        context(velocity=(v, v, 0.0)))
+    np.testing.assert_allclose(norm.force_world, [[-0.5 * 1.225 * 0.01 * 5.0 * v] * 2 + [0]],
+                               rtol=1e-12)
+    np.testing.assert_allclose(axes.force_world, [[-0.5 * 1.225 * 0.01 * v * v] * 2 + [0]],
+                               rtol=1e-12)
+    one = [make_effect("body_drag", cd_area=0.01, per_axis=k).loads(
+        context(velocity=(5.0, 0.0, 0.0))).force_world for k in (0.0, 1.0)]
+    np.testing.assert_allclose(one[0], one[1], rtol=1e-12)
+
+
 def test_ground_effect_at_z_equal_radius():
     radius = PARAMS.rotor_radius
     ground = make_effect("ground_effect", gain=1.5)

@@ -10,6 +10,14 @@ multirotors in Mahony, Kumar & Corke, "Multirotor aerial vehicles", IEEE RAM 201
 ``cd_area`` is the product C_d A (m^2) seen from the front/side, ``cd_area_vertical`` from
 above. Example: C_d A = 0.01 m^2 at 5 m/s, rho = 1.225: 0.153 N.
 
+With ``per_axis = 1`` each body axis's drag follows its own air speed, a box's faces taken
+apart (PyFlyt's drag, ``F_i = -1/2 rho C_dA_i |v_i| v_i``)::
+
+    F_body,i = -0.5 rho C_dA_i |v_i| v_i
+
+The two laws agree for air along one body axis; along a diagonal of the horizontal plane the
+per-axis law's force is 1/sqrt(2) of the other's at the same C_d A.
+
 MuJoCo's own fluid model is switched off in every generated model (``<option density="0"
 viscosity="0">`` in :mod:`quadsim.sim.mjcf`), so this plug-in is the only body drag and it acts
 identically in both engines; nothing is counted twice.
@@ -33,12 +41,16 @@ class BodyDrag(EffectBase):
                         "drag coefficient x area, body x and y directions"),
         EffectParameter("cd_area_vertical", "m^2", 0.0, 0.0, 1.0,
                         "drag coefficient x area, body z direction"),
+        EffectParameter("per_axis", "1", 0.0, 0.0, 1.0,
+                        "1: each body axis's drag on its own air speed |v_i| v_i; 0: on "
+                        "the air speed |v| v"),
     )
 
     def loads(self, ctx):
         air_body = ctx.to_body(ctx.air_velocity)
         cd_area = np.array([self.cd_area, self.cd_area, self.cd_area_vertical])
-        speed = np.linalg.norm(air_body, axis=-1, keepdims=True)
+        speed = (np.abs(air_body) if self.per_axis >= 0.5
+                 else np.linalg.norm(air_body, axis=-1, keepdims=True))
         force_body = -0.5 * ctx.params.air_density * speed * cd_area * air_body
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)

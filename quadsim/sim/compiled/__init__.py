@@ -57,7 +57,7 @@ _KNOWN = {
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "blade_flapping": {"coefficient"},
     "translational_lift": {"k_h"},
-    "body_drag": {"cd_area", "cd_area_vertical"},
+    "body_drag": {"cd_area", "cd_area_vertical", "per_axis"},
     "ground_effect": {"gain", "ground_height", "radius"},
     "gyroscopic": {"rotor_inertia"},
     "wind": {"vx", "vy", "vz", "gust", "bandwidth", "seed"},
@@ -203,6 +203,7 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("translational_lift", v["k_h"])
             elif effect.name == "body_drag":
                 put("body_drag", [v["cd_area"], v["cd_area"], v["cd_area_vertical"]])
+                put("body_drag_axes", v["per_axis"])
             elif effect.name == "gyroscopic":
                 put("rotor_inertia", v["rotor_inertia"])
             elif effect.name == "wind":

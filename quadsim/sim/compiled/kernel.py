@@ -59,6 +59,7 @@ O_BAT, O_GG, O_GH = offset["battery_rate"], offset["ground_gain"], offset["groun
 O_SG, O_RSG = offset["speed_gain"], offset["rotor_speed_gain"]
 O_GR, O_CL, O_CO = offset["ground_radius"], offset["curve_linear"], offset["curve_offset"]
 O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["body_drag"]
+O_BA = offset["body_drag_axes"]
 O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
 O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["gust_phase"]
 GUST = offset["gust_phase"] - offset["gust_frequency"]
@@ -224,8 +225,10 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         torque[1] += p[2] * f[0] - p[0] * f[2]
         torque[2] += p[0] * f[1] - p[1] * f[0]
     speed = np.sqrt(air_body[0] ** 2 + air_body[1] ** 2 + air_body[2] ** 2)
+    per_axis = row[O_BA] >= 0.5          # body_drag.per_axis: |v_i| v_i on each body axis
     for i in range(3):
-        force_body[i] += -0.5 * row[O_RHO] * speed * row[O_BD + i] * air_body[i]
+        own = abs(air_body[i]) if per_axis else speed
+        force_body[i] += -0.5 * row[O_RHO] * own * row[O_BD + i] * air_body[i]
     jr = row[O_JR]
     if jr != 0.0:
         torque[0] += -jr * (rate_b[1] * momentum[2] - rate_b[2] * momentum[1] + spin_up[0])
