@@ -416,3 +416,12 @@ def test_a_wind_through_a_quadratic_drag_is_named_with_its_speed(cf, airframe):
     assert abs(entry["params"]["wind.vy"]) < 0.5, entry["answer"]
     calm = _judge(cf, airframe, _shared(drag=0.0) + [drag], seed=82)
     assert calm["verdict"] == "no_significant_gap", calm["answer"]
+
+
+def test_a_percentage_of_a_hundred_or_more_is_written_whole():
+    """Two significant digits write 100 % as "1e+02 %": such values are written whole."""
+    from quadsim.gap.collinear import _pm
+
+    assert _pm(1.0, 0.42, 100) == "+100 ± 42"
+    assert _pm(0.76, 0.36, 100) == "+76 ± 36"
+    assert _pm(-2.5, None, 100) == "-250"

@@ -93,10 +93,19 @@ def unit_of(parameter: str) -> str:
     return "1" if p.startswith("rotor_") else ""
 
 
+def _num(x: float, digits: str, sign: str = "") -> str:
+    """``x`` formatted with ``digits``; a value of 100 up to a million that this would write
+    with an exponent ("1e+02") as a whole number instead ("100")."""
+    text = f"{x:{sign}{digits}}"
+    if "e" in text and 100 <= abs(x) < 1e6:
+        text = f"{x:{sign}.0f}"
+    return text
+
+
 def _pm(value: float, ci: float | None, scale: float, digits: str = ".2g") -> str:
     if ci is None or not np.isfinite(ci):
-        return f"{value * scale:+{digits}}"
-    return f"{value * scale:+{digits}} ± {abs(ci) * scale:{digits}}"
+        return _num(value * scale, digits, "+")
+    return f"{_num(value * scale, digits, '+')} ± {_num(abs(ci) * scale, digits)}"
 
 
 def describe(name: str, values: dict, ci: dict, params: VehicleParams,
