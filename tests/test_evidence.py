@@ -425,3 +425,33 @@ def test_a_percentage_of_a_hundred_or_more_is_written_whole():
     assert _pm(1.0, 0.42, 100) == "+100 ± 42"
     assert _pm(0.76, 0.36, 100) == "+76 ± 36"
     assert _pm(-2.5, None, 100) == "-250"
+
+
+def test_a_rotor_log_read_later_keeps_its_noise_power_and_its_signal():
+    """``shifted``/``read_later``: a fraction of a sample is a phase shift, not a linear
+    interpolation. Closed forms: a 1.3 Hz sine read 4 ms later (fit samples 10 ms) equals
+    sin(w (t + 4 ms)) to 1e-4 inside the log; white noise read half a sample later keeps its
+    power (within 3 %; linear interpolation halves it); a whole sample is the next sample;
+    the slope in the delay is the same from either side of zero, at the log's ends too;
+    a non-uniform time base is interpolated (the same numbers as np.interp)."""
+    from quadsim.gap.reference import read_later
+
+    t = np.arange(2000) * 0.01
+    sine = np.sin(2 * np.pi * 1.3 * t)[:, None]
+    later = read_later(t, sine, 0.004)
+    np.testing.assert_allclose(later[20:-20, 0], np.sin(2 * np.pi * 1.3 * (t[20:-20] + 0.004)),
+                               atol=1e-4)
+    noise = np.random.default_rng(3).normal(size=(len(t), 2))
+    half = read_later(t, noise, 0.005)[50:-50]
+    assert abs(half.var() / noise[50:-50].var() - 1.0) < 0.03
+    linear = 0.5 * (noise[:-1] + noise[1:])
+    assert linear.var() / noise.var() < 0.55
+    np.testing.assert_allclose(read_later(t, noise, 0.02)[:-2], noise[2:], atol=1e-12)
+    # smooth across zero: the slope from either side agrees (to 1 %)
+    h = 1e-6
+    ahead = (read_later(t, sine, h) - sine) / h
+    behind = (sine - read_later(t, sine, -h)) / h
+    np.testing.assert_allclose(ahead[:, 0], behind[:, 0], rtol=0.01, atol=0.01)
+    bent = np.cumsum(np.full(len(t), 0.01) * (1 + 0.1 * (np.arange(len(t)) % 2)))
+    np.testing.assert_allclose(read_later(bent, sine, 0.004)[:, 0],
+                               np.interp(bent + 0.004, bent, sine[:, 0]))

@@ -26,7 +26,7 @@ Stages
    d0 later (d0 the references' mean cross-correlation delay, :mod:`quadsim.logs.delays`),
    and up to :data:`REFINE_STEPS` pooled Levenberg-Marquardt steps (:func:`_refine`) then
    move every shared parameter and the timing offset d together (forward difference of 2
-   ms; a shift is applied at the full log rate before decimation, :func:`aligned`). Why:
+   ms; a shift is band-limited on the fit samples, :func:`aligned`). Why:
    the spin-up reaction torque ``-Jr sum_i s_i dOmega_i/dt`` fits the yaw channel only at
    the right timing, and the cross-correlation estimate reads that very torque as delay
    (docs: 8 ms on generated logs without any). On the real nominal Crazyflie flights the

@@ -257,7 +257,12 @@ def fit_trend(coords, values, se, identified, log_ms, info=None) -> Trend | None
     u_w, slope, slope_var = np.zeros(p), np.zeros(p), np.zeros(p)
     q = [np.zeros(p) for _ in range(6)]     # weight, q_w, slope, slope_var, low, high
     for k in range(p):
-        if not identified[k] or not np.all(np.isfinite(1.0 / np.maximum(se[:, k], 1e-300))):
+        # a standard error of 0 (or so small that its weight overflows) is a value the
+        # flight's step did not move, not one known exactly: no line (on RotorPy's
+        # references the wind's per-flight errors came out as 0 and its line as NaN)
+        with np.errstate(divide="ignore", over="ignore"):
+            weighable = np.all(np.isfinite(1.0 / se[:, k] ** 2))
+        if not identified[k] or not weighable:
             u_w[k] = u.mean()
             continue
         u_w[k], slope[k], slope_var[k], chi2_u = _line(u, values[:, k], se[:, k])
