@@ -105,25 +105,69 @@ def test_translational_lift_and_a_thrust_curve_are_told_apart(cf, reference):
     assert curve["params"]["thrust_curve.linear"] == pytest.approx(linear, rel=0.1)
 
 
-def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, reference):
-    """+6 g and -15 % thrust per Omega^2 load the rotors alike; a propeller change also
-    scales the drag torque and spins the motor faster per command, a mass does neither."""
-    mass = _judge(cf, reference, _shared() + [make_effect("mass_offset", mass=0.006)], seed=40)
+#: a DC motor whose load takes a quarter of the back EMF at hover: alpha = 0.25 / 1.25 = 0.2
+DC_SHARE = 0.25
+
+
+@pytest.fixture(scope="module")
+def dc_reference(cf):
+    """The reference flights of :func:`reference` on DC motors (``load_share`` 0.25)."""
+    logs = [synthetic_flight(cf, _shared(), duration=5.0, seed=s, speed=0.8 + 0.15 * s,
+                             load_share=DC_SHARE) for s in range(3)]
+    logs.append(synthetic_flight(cf, _shared(), duration=2.0, seed=3, speed=0.3,
+                                 load_share=DC_SHARE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+def test_the_references_map_gives_the_motors_load_exponent(reference, dc_reference):
+    """Closed form (motor_map.load_exponent): DC motors with load share s = 0.25 at hover
+    have alpha = s / (1 + s) = 0.2 (to 0.03); speed-controlled ones 0 (to 0.01)."""
+    alpha, sd = dc_reference.load_exponent
+    assert alpha == pytest.approx(DC_SHARE / (1 + DC_SHARE), abs=0.03) and sd < 0.05
+    assert abs(reference.load_exponent[0]) < 0.01
+
+
+def test_mass_and_propeller_are_separated_by_the_command_speed_map(cf, dc_reference):
+    """On DC motors (alpha 0.2 by their map) +6 g and -15 % thrust per Omega^2 load the
+    rotors alike; a propeller change also scales the drag torque and spins the motor faster
+    per command, a mass does neither."""
+    def judge(effects, seed):
+        log = synthetic_flight(cf, _shared() + effects, duration=5.0, seed=seed,
+                               load_share=DC_SHARE)
+        return judge_one(log, dc_reference)
+
+    mass = judge([make_effect("mass_offset", mass=0.006)], 40)
     assert mass["verdict"] == "mass_offset" and mass["probability"] > 0.9, mass["answer"]
     assert mass["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=0.0005)
-    prop = _judge(cf, reference, _shared() + [make_effect("thrust_factor", change=-0.15, alpha=0.2)], seed=41)
+    prop = judge([make_effect("thrust_factor", change=-0.15, alpha=0.2)], 41)
     assert prop["verdict"] == "thrust_factor" and prop["probability"] > 0.9, prop["answer"]
     assert prop["params"]["thrust_factor.change"] == pytest.approx(-0.15, abs=0.015)
 
 
-def test_one_weak_propeller_on_a_dc_motor_is_named_with_its_spin(cf, reference):
+def test_a_propeller_on_speed_controlled_motors_is_named_without_a_spin(cf, reference):
+    """Speed-controlled motors (alpha 0 by their map): a -15 % propeller does not move the
+    speed per command; it is still named by what it does to the torques (thrust and drag
+    torque per Omega^2 together), with its value to 0.015 and the spin it implies, 0.0 %
+    (the textbook DC prior, alpha 0.2 +- 0.1, would have paid two spreads for it)."""
+    prop = _judge(cf, reference, _shared() + [make_effect("thrust_factor", change=-0.15)],
+                  seed=41)
+    assert prop["verdict"] == "thrust_factor" and prop["probability"] > 0.9, prop["answer"]
+    assert prop["params"]["thrust_factor.change"] == pytest.approx(-0.15, abs=0.015)
+    assert "spin +0.0 % per command" in prop["answer"]
+
+
+def test_one_weak_propeller_on_a_dc_motor_is_named_with_its_spin(cf, dc_reference):
     """One propeller 12 % weaker on a DC motor (alpha 0.2: its command spins it 2.6 % faster):
     the one-rotor reading carries the same coupling as the all-rotor one, so it explains the
     rotor's speed channel too and is named (measured blind on the multirotor source: without
     it the right reading left that channel at 7x the references' and the flight was
     `unexplained`)."""
-    weak = _judge(cf, reference, _shared() + [make_effect("thrust_mismatch", rotor_3=-0.12,
-                                                           alpha=0.2)], seed=42)
+    log = synthetic_flight(cf, _shared() + [make_effect("thrust_mismatch", rotor_3=-0.12,
+                                                        alpha=0.2)],
+                           duration=5.0, seed=42, load_share=DC_SHARE)
+    weak = judge_one(log, dc_reference)
     assert weak["verdict"] == "thrust_mismatch" and weak["probability"] > 0.9, weak["answer"]
     assert weak["params"]["thrust_mismatch.rotor_3"] == pytest.approx(-0.12, abs=0.015)
     assert "rotor 3 would spin +2." in weak["answer"]

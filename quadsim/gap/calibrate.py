@@ -86,6 +86,7 @@ from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .envelope import coordinates, envelope_of
+from .motor_map import load_exponent
 from .fitting import (
     Candidate,
     _bounds,
@@ -400,6 +401,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.quadratic_drag = quadratic_equivalent(states, ref)
+    ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],

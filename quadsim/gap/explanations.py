@@ -17,8 +17,9 @@ The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`, and on
 :mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together
 (same blade, same air; Leishman 2006 ch. 2-3), and the lower load torque lets the motor spin
 faster per command, by (1 + change)^-alpha (the effect's module doc: alpha 0.2 for a DC
-motor at 75 % voltage efficiency). Alpha is fitted
-with prior N(0.2, 0.1^2) (efficiency 0.6-0.9 for small brushless and brushed motors). A mass moves
+motor at 75 % voltage efficiency). Alpha is fitted with the prior the references' own
+command -> speed map implies (:func:`_alpha_prior`), else N(0.2, 0.1^2) (efficiency 0.6-0.9
+for small brushless and brushed motors). A mass moves
 neither map nor drag torque, so the command -> speed channel separates the two where commands
 are logged.
 
@@ -228,9 +229,10 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
                         [_prior_of(sd, k) for k in keys]))
     change = ["change", "alpha"] if reference.rotor else ["change"]
+    alpha, alpha_sd = _alpha_prior(reference, sd)
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
-                    [0.0, 0.2][:len(change)],
-                    [sd["thrust_factor.change"], sd["thrust_factor.alpha"]][:len(change)],
+                    [0.0, alpha][:len(change)],
+                    [sd["thrust_factor.change"], alpha_sd][:len(change)],
                     coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
     rotors = params.rotor_count
     for k in range(rotors):
@@ -248,8 +250,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                              f"rotor {k + 1}, with its speed per command"))
         for fitted, variant in variants:
             out.append(_one("thrust_mismatch", variant, [("thrust_mismatch", {}, fitted)],
-                            [0.0, 0.2][:len(fitted)],
-                            [sd["thrust_mismatch"], sd["thrust_factor.alpha"]][:len(fitted)],
+                            [0.0, alpha][:len(fitted)],
+                            [sd["thrust_mismatch"], alpha_sd][:len(fitted)],
                             log_prior=-np.log(rotors * len(variants)),
                             coupled=len(fitted) > 1,
                             kin=("thrust_mismatch",) if len(fitted) > 1 else ()))
@@ -284,6 +286,29 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                                                      sd=e.sd + (tight,), shift="rotor")
                for e in out]
     return out
+
+
+#: the least spread of the speed-per-command exponent's prior (:func:`_alpha_prior`): at
+#: 0.01 a 10 % propeller change moves the speed per command by 0.1 %, below what one
+#: flight's rotor channel resolves, so a tighter prior changes no evidence
+ALPHA_MIN_SD = 0.01
+
+
+def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
+    """(mean, spread) of a propeller reading's speed-per-command exponent alpha: what the
+    references' own command -> speed map implies (:attr:`Reference.load_exponent`,
+    :func:`quadsim.gap.motor_map.load_exponent`: 0 for a speed-controlled motor, 0.40 ± 0.08
+    on the real Crazyflie 2.1 Brushless flights), within the effect's range and at least
+    :data:`ALPHA_MIN_SD` wide; where their commands do not say, the textbook DC motor
+    N(0.2, 0.1^2) (module doc). Why: with the textbook prior on speed-controlled rotors (l2f,
+    PyFlyt, RotorPy: alpha 0, two spreads from its centre) a propeller change paid 2-4 log
+    units for an exponent the data put at 0 and lost to a mass or a thrust curve that
+    predict the same motion; against a speed-controlled motor the two cannot be told apart
+    by the command -> speed map, and the evidence now says so."""
+    implied = getattr(reference, "load_exponent", None)
+    if implied is None:
+        return 0.2, float(sd["thrust_factor.alpha"])
+    return float(np.clip(implied[0], 0.0, 0.5)), max(float(implied[1]), ALPHA_MIN_SD)
 
 
 #: explanations that give the flight an air-speed load of its own (a drag, a translational

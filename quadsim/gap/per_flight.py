@@ -99,7 +99,9 @@ def reference_summary(ref: Reference) -> dict:
     scatter and whether the reference flights determine it (``identified``) per shared
     parameter; noise scale (sigma) and correlation time per channel; the references'
     envelope (:func:`quadsim.gap.envelope.envelope_summary`); their drag as a quadratic
-    airframe drag's C_d A (m^2, :func:`quadsim.gap.calibrate.quadratic_equivalent`)."""
+    airframe drag's C_d A (m^2, :func:`quadsim.gap.calibrate.quadratic_equivalent`); the
+    speed-per-command exponent their map implies for a propeller change
+    (:func:`quadsim.gap.motor_map.load_exponent`)."""
     from .judge import channel_names
 
     names = channel_names(ref)
@@ -115,7 +117,9 @@ def reference_summary(ref: Reference) -> dict:
             "delays_ms": {k: {"mean": m, "sd": s, "count": n}
                           for k, (m, s, n) in ref.delays_ms.items()},
             "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
-            "quadratic_drag_m2": float(ref.quadratic_drag)}
+            "quadratic_drag_m2": float(ref.quadratic_drag),
+            "load_exponent": None if ref.load_exponent is None else
+            {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]}}
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,

@@ -143,6 +143,10 @@ class Reference:
     #: air force (:func:`quadsim.gap.calibrate.quadratic_equivalent`); 0 where their model has
     #: none (no rotor drag, or it is not shared)
     quadratic_drag: float = 0.0
+    #: (alpha, spread) of the speed-per-command exponent the references' own command ->
+    #: speed map implies for a propeller change (:func:`quadsim.gap.motor_map.load_exponent`);
+    #: None where their commands do not span enough to say
+    load_exponent: tuple | None = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing

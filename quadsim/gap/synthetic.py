@@ -307,11 +307,16 @@ def _commands(t, speed, effect_set, params, hover, vbat):
 def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
                      duration: float = 10.0, rate_hz: float = 500.0, speed: float = 1.0,
                      seed: int = 0, noise: SensorNoise | None = SensorNoise(),
-                     full_voltage: float = 4.2, name: str = "synthetic") -> FlightLog:
+                     full_voltage: float = 4.2, load_share: float = 0.0,
+                     name: str = "synthetic") -> FlightLog:
     """An exact log of ``params`` + hidden ``effects`` flying :func:`reference_path`.
 
     Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
-    ``battery_sag`` effect's voltage model)."""
+    ``battery_sag`` effect's voltage model). ``load_share``: the motors are DC motors whose
+    load torque takes this share s of the back EMF at hover (commands
+    ``c (1 + s c max_speed / hover) / (1 + s)``, the same at hover); 0: speed-controlled
+    motors, commands proportional to speed. Its propeller reading's exponent is then
+    ``alpha = s / (1 + s)`` (:func:`quadsim.gap.motor_map.load_exponent`)."""
     rng = np.random.default_rng(seed)
     pad = int(round(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
     t = (np.arange(int(round(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
@@ -323,6 +328,11 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         t, params, effect_set, position, yaw, vbat)
     hover = hover_speed(params)
     command = _commands(t, speed_, effect_set, params, hover, vbat)
+    if load_share:
+        # a DC motor: u V = k Omega + (R d / k) Omega^2, s = R d h / k^2 at hover h
+        # (quadsim.gap.motor_map.load_exponent), scaled to the same command at hover
+        command = command * (1.0 + load_share * command * params.max_speed / hover) \
+            / (1.0 + load_share)
     keep = slice(pad, len(t) - pad)
     t, position, velocity, quat, rate, specific, speed_, command, vbat = (
         a[keep] for a in (t, position, velocity, quat, rate, specific, speed_, command, vbat))
