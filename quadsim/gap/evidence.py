@@ -55,6 +55,7 @@ from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
 from .calibrate import Reference, jacobian, shifted
+from .reference import rotor_spectra
 from .explanations import (  # re-exported: the evidence's public names
     DELAY_SD_S,
     DETERMINED,
@@ -263,8 +264,10 @@ class Problem:
         """:func:`shifted` states, the same object for the same delay (``memo``)."""
         if self.memo is None:
             return shifted(self.states, delay_s)
+        spectra = _memo(self.memo, ("spectra", id(self.states)), self.states,
+                        lambda: rotor_spectra(self.states))
         return _memo(self.memo, ("shifted", id(self.states), delay_s), self.states,
-                     lambda: shifted(self.states, delay_s))
+                     lambda: shifted(self.states, delay_s, spectra))
 
     def stacked(self, z: np.ndarray) -> np.ndarray:
         try:

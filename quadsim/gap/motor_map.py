@@ -55,13 +55,10 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> Vehicle
     a propeller change at 100 %, twice."""
     from ..vehicle.params import MotorMap
 
-    usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
-    if not usable:
+    means = _window_means(flights)
+    if means is None:
         return params
-    dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
-    command = np.concatenate([_moving_mean(f.command, w) for f, w in zip(usable, dt)])
-    speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
-    windows = sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1)
+    command, speed, windows = means
     ends = []
     for i in range(speed.shape[1]):
         c, w = command[:, i], speed[:, i]
@@ -103,18 +100,19 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
     intercept's standard error (samples counted one per window); alpha's spread is that
     error (delta method) and the rotors' own spread, added in squares.
 
-    Measured: l2f (speed-commanded rotors) 0 ± 0.00x, PyFlyt 0.0x, multirotor (DC motors)
-    0.08, the real Crazyflie 2.1 Brushless nominal flights 0.34-0.48 per rotor; the textbook
-    DC motor at 75 % voltage efficiency is 0.2 (the prior where this returns None)."""
+    Measured on each source's references: RotorPy (speed-commanded) 0.000 ± 0.002, l2f's
+    fs vehicle 0.017 ± 0.012, PyFlyt 0.054 ± 0.029, Crazyflow 0.059 ± 0.027, multirotor
+    (DC motors) 0.078 ± 0.003, the 20 real Crazyflie 2.1 Brushless nominal flights
+    0.40 ± 0.08 (0.34-0.48 per rotor); the l2f X500's references span 5-6 % of their
+    commands per rotor, too little (None). The textbook DC motor at 75 % voltage efficiency
+    is 0.2, the prior where this returns None."""
     from ..vehicle.params import hover_speed
 
-    usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
-    if not usable:
+    means = _window_means(flights)
+    if means is None:
         return None
-    dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
-    command = np.concatenate([_moving_mean(f.command, w) for f, w in zip(usable, dt)])
-    speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
-    windows = max(3.0, sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1))
+    command, speed, windows = means
+    windows = max(3.0, windows)
     hover = hover_speed(params)
     alpha, var = [], []
     for i in range(speed.shape[1]):
@@ -134,6 +132,20 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
     alpha = np.asarray(alpha)
     spread = float(np.sqrt(np.mean(var) + (np.var(alpha, ddof=1) if len(alpha) > 1 else 0.0)))
     return float(alpha.mean()), spread
+
+
+def _window_means(flights: list[FlightStates]) -> tuple | None:
+    """The flights' commands and rotor speeds averaged over :data:`MAP_WINDOW_S` (moving
+    mean, per flight, edges dropped; (M, R) each, pooled) and how many windows they span;
+    None without a flight logging both."""
+    usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
+    if not usable:
+        return None
+    dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
+    command = np.concatenate([_moving_mean(f.command, w) for f, w in zip(usable, dt)])
+    speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
+    windows = sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1)
+    return command, speed, float(windows)
 
 
 def _line_supported(c: np.ndarray, w: np.ndarray, gain: tuple, line, windows: float) -> bool:

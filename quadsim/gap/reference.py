@@ -26,8 +26,8 @@ from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
 from .fitting import Candidate, _bounds, _typical, residuals
 
-__all__ = ["Reference", "weighted_residual", "jacobian", "shifted", "read_later", "aligned",
-           "FD_STEP"]
+__all__ = ["Reference", "weighted_residual", "jacobian", "shifted", "read_later",
+           "rotor_spectra", "aligned", "FD_STEP"]
 
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
@@ -35,13 +35,13 @@ __all__ = ["Reference", "weighted_residual", "jacobian", "shifted", "read_later"
 FD_STEP = 1e-3
 
 
-def shifted(states, delay_s: float):
+def shifted(states, delay_s: float, spectra: tuple | None = None):
     """``states`` with the rotor speeds (and their derivative) read ``delay_s`` later: the
     speeds a log that records them ``delay_s`` late had at each time.
 
-    On a uniform time base the read is band-limited (:func:`read_later`): a whole number of
-    samples exactly, the fraction by a Fourier phase shift, which passes every frequency
-    with its full amplitude. Why not linear interpolation: between two samples it averages
+    On a uniform time base the read is band-limited (:func:`read_later`): a Fourier phase
+    shift, which passes every frequency with its full amplitude (``spectra``: the flight's
+    :func:`rotor_spectra`, when it is read at many delays). Why not linear interpolation: between two samples it averages
     them, and the average of two noisy samples has up to half their noise power. The
     timing likelihood then fell by up to 20 log units at every half sample and rose again at
     every whole one (a sawtooth with the fit sample's period, 10 ms): on the l2f fs source a
@@ -53,17 +53,43 @@ def shifted(states, delay_s: float):
         return states
     import dataclasses
 
+    speed, accel = spectra if spectra is not None else rotor_spectra(states)
     return dataclasses.replace(
-        states, rotor_speed=read_later(states.t, states.rotor_speed, delay_s),
+        states, rotor_speed=read_later(states.t, states.rotor_speed, delay_s, speed),
         rotor_accel=None if states.rotor_accel is None
-        else read_later(states.t, states.rotor_accel, delay_s))
+        else read_later(states.t, states.rotor_accel, delay_s, accel))
 
 
-def read_later(t: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
+def rotor_spectra(states) -> tuple:
+    """The mirrored spectra :func:`read_later` shifts, of the rotor speeds and their
+    derivative (None each on a non-uniform time base or where the signal is missing): one
+    flight's, computed once and passed to every :func:`shifted` of it."""
+    return (_spectrum(states.t, states.rotor_speed),
+            None if states.rotor_accel is None else _spectrum(states.t, states.rotor_accel))
+
+
+def _spectrum(t: np.ndarray, x) -> np.ndarray | None:
+    if x is None or not _uniform(t):
+        return None
+    x = np.asarray(x, dtype=float)
+    return np.fft.rfft(np.concatenate([x, x[::-1]]), axis=0)
+
+
+def _uniform(t: np.ndarray) -> bool:
+    n = len(t)
+    if n < 4:
+        return False
+    dt = (t[-1] - t[0]) / (n - 1)
+    return bool(np.max(np.abs(np.diff(t) - dt)) <= 1e-6 * dt)
+
+
+def read_later(t: np.ndarray, x: np.ndarray, delay_s: float,
+               spectrum: np.ndarray | None = None) -> np.ndarray:
     """Samples ``x`` (N, K) on times ``t`` (N,) read ``delay_s`` later: x(t + delay_s)
     (:func:`shifted`). Uniform ``t`` (spacing within 1e-6 of its mean): the phase
     ``exp(2 pi i nu s)`` (s = delay_s / dt samples, nu in cycles per sample) on the spectrum
-    of the series followed by its mirror image. Mirrored, the periodic series has no jump at
+    of the series followed by its mirror image (``spectrum``: that spectrum, computed once
+    per flight, :func:`rotor_spectra`). Mirrored, the periodic series has no jump at
     either end, so the spectrum does not ring there, and beyond the log's ends the read
     meets the mirror image (x(t_end + d) = x(t_end - d)). The read is smooth in ``delay_s``
     across whole samples: a delay fit's finite differences see the slope, not an edge (a
@@ -71,12 +97,13 @@ def read_later(t: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
     on one side than the other, and a nominal multirotor flight's delay stayed at 0 ms, 7
     log units short of its optimum at -0.4 ms). A non-uniform time base is read by linear
     interpolation."""
-    x = np.asarray(x, dtype=float)
     n = len(t)
-    dt = (t[-1] - t[0]) / (n - 1) if n > 1 else 0.0
-    if n < 4 or np.max(np.abs(np.diff(t) - dt)) > 1e-6 * dt:
-        return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
-    spectrum = np.fft.rfft(np.concatenate([x, x[::-1]]), axis=0)
+    if spectrum is None:
+        if not _uniform(t):
+            x = np.asarray(x, dtype=float)
+            return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
+        spectrum = _spectrum(t, x)
+    dt = (t[-1] - t[0]) / (n - 1)
     nu = np.fft.rfftfreq(2 * n)[:, None]        # cycles per sample
     return np.fft.irfft(spectrum * np.exp(2j * np.pi * nu * (delay_s / dt)), 2 * n,
                         axis=0)[:n]
