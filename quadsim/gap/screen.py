@@ -248,8 +248,9 @@ def _second_reach(prob, cols: _Columns, z1: np.ndarray, names_all, s_all) -> flo
     """What a coupled explanation with kin (module doc, 3.) can reach by a second
     Gauss-Newton step from its first one ``z1``, where the parameter another acts through
     has moved and the other's column is no longer zero: the screened evidence there plus
-    half its miss (-inf where the step fails). It only decides whether the explanation is
-    fitted; the fit starts from ``z1`` as before. Why: on Crazyflow a 6 g payload 3 and 5 mm
+    half its miss (-inf where the step fails). Taken only where neither its own reach nor
+    its kin has it fitted already; it only decides whether the explanation is fitted, and
+    the fit starts from ``z1`` as before. Why: on Crazyflow a 6 g payload 3 and 5 mm
     off the centre (Mx, My at 14x and 7x the references' after a centred mass) stepped like
     a centred mass (its position's columns are zero at zero mass), its kin lay 1200 log
     units below a propeller change, it was never fitted, and the flight was `unexplained`;
@@ -413,8 +414,6 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
         # what a fit could reach: the screened evidence plus half the linear model's miss
         reach.append(np.inf if ev is None or not np.isfinite(miss)
                      else ev.log_z + 0.5 * miss)
-        if expl.coupled and expl.kin and np.isfinite(reach[-1]):
-            reach[-1] = max(reach[-1], _second_reach(prob, cols, z1, names_all, s_all))
     # most promising first: each refined fit can only raise the best weight, and with it
     # the cut for those after it. A coupled explanation's step cannot see what it reaches
     # (a parameter acting only through another's value has a zero column at the start): it
@@ -430,7 +429,10 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
         if expl.coupled and before is None:
             before = best
         if rows[k] is None or reach[k] >= best - SCREEN_CUT or (
-                expl.coupled and _kin_matters(expl, explanations, rows, reach, before)):
+                expl.coupled and _kin_matters(expl, explanations, rows, reach, before)) or (
+                expl.coupled and expl.kin and starts[k] is not None and _second_reach(
+                    problem(states, reference, expl, jac, s_all, memo), cols, starts[k],
+                    names_all, s_all) >= best - SCREEN_CUT):
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
             rows[k] = None
             if starts[k] is not None:
