@@ -47,7 +47,8 @@ and named ``mass_offset``; a second linear step was not enough: the wind refitte
 drag needs the fit's iterations): always, or, when it names the readings it extends or
 mimics (``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
 propeller change, a mass or a thrust curve), when one of them lies within the cut of the
-best weight before any coupled fit (5 % of the per-flight CPU on the real mixed flights);
+best weight before any coupled fit (5 % of the per-flight CPU on the real mixed flights), or
+when a second linear step from its first reaches within the cut (:func:`_second_reach`);
 tests/test_screen.py checks the verdicts on generated flights with known effects. The
 explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
 cap, so their evidence can exceed the full path's (by up to a few log units where that fit
