@@ -51,3 +51,44 @@ def test_a_reading_that_leaves_at_most_the_form_error_of_the_gap_explains_the_fl
     assert list(lack_of_fit(_ev([1, 1, 25, 1, 1, 1]), ref, null)) == ["Fz"]
     # "no difference" itself is never its own form error
     assert list(lack_of_fit(null, ref, null)) == ["Fz"]
+
+
+def test_moderated_spread_follows_the_channels_own_scatter():
+    """quadsim.gap.moderated (Smyth 2004): channels whose spreads differ 4x keep them
+    (each moderated spread within 35 % of its own truth on 8 flights x 10 channels, the quiet
+    ones below the pooled spread, the noisy ones above it on average); channels alike come out at the
+    pooled spread when their scatter is no more than chance (excess <= 0: exactly the
+    pooled spread and its C (n - 1) degrees of freedom)."""
+    from quadsim.gap.moderated import moderated_spread
+
+    rng = np.random.default_rng(7)
+    truth = np.array([0.1] * 5 + [0.4] * 5)
+    x = rng.normal(size=(8, 10)) * truth
+    spread, dof, (pooled, pooled_dof) = moderated_spread(x)
+    assert pooled_dof == 70 and 8 <= dof < 70
+    np.testing.assert_allclose(spread, truth, rtol=0.35)
+    assert spread[:5].max() < pooled < spread[5:].mean()
+    # identical per-channel variances: no scatter beyond chance
+    same = np.tile(np.array([[1.0], [-1.0], [1.0], [-1.0], [1.0], [-1.0], [1.0], [-1.0]]),
+                   (1, 10)) * 0.3
+    spread, dof, (pooled, pooled_dof) = moderated_spread(same)
+    assert dof == pooled_dof == 70
+    np.testing.assert_allclose(spread, pooled, rtol=1e-12)
+
+
+def test_outside_the_envelope_a_channel_is_tested_with_at_least_the_pooled_spread():
+    """envelope.local_reference: inside the references' envelope each channel keeps its own
+    (moderated) spread; a flight outside it gets max(own, pooled) with the pooled degrees of
+    freedom, since a quiet channel's spread says nothing of how it grows beyond them."""
+    import dataclasses
+
+    from quadsim.gap.envelope import Position, local_reference
+
+    model = dataclasses.make_dataclass("Model", ["lof_sd", "lof_dof", "lof_pooled", "envelope"])
+    ref = model(np.array([0.1, 0.5]), 9, (0.3, 14), None)     # no trend: the envelope alone
+    inside = local_reference(ref, Position(np.zeros(3), 0.0, "speed", None, "", None))
+    np.testing.assert_array_equal(inside.lof_sd, [0.1, 0.5])
+    assert inside.lof_dof == 9
+    outside = local_reference(ref, Position(np.zeros(3), 0.2, "speed", None, "", None))
+    np.testing.assert_array_equal(outside.lof_sd, [0.3, 0.5])
+    assert outside.lof_dof == 14

@@ -50,8 +50,10 @@ Stages
    tau_c (samples at the fit rate, 1 + 2 sum rho_k up to the first rho < 0.05): a flight of
    N samples carries N_eff,c = N / tau_c independent samples on that channel.
 5. Lack-of-fit statistics: per reference flight and channel the log of its mean squared
-   residual over sigma_c^2; their mean per channel and one spread pooled over channels
-   (degrees of freedom C (n - 1)); a flight is compared with them in :mod:`.judge`.
+   residual over sigma_c^2; their mean per channel and a spread per channel moderated
+   towards the channels' common one by their own scatter (:mod:`.moderated`, the limma
+   method; outside the references' envelope at least the pooled spread); a flight is
+   compared with them in :mod:`.judge`.
 6. Signal delays (:mod:`quadsim.logs.delays`): each signal's mean and spread over the
    references (ms).
 7. Envelope (:mod:`.envelope`): the references' RMS speed, body rate and thrust variation,
@@ -86,6 +88,7 @@ from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .envelope import coordinates, envelope_of
+from .moderated import moderated_spread
 from .motor_map import load_exponent
 from .fitting import (
     Candidate,
@@ -385,8 +388,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     for c in range(pooled.shape[1])])
     log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
     mean = log_ms.mean(axis=0)
-    dof = max(1, log_ms.size - log_ms.shape[1])
-    spread = float(np.sqrt(np.sum((log_ms - mean) ** 2) / dof))
+    spread, dof, pooled = moderated_spread(log_ms)
     delays = {}
     for key in {k for f in flights for k in getattr(f, "delays_ms", {})}:
         v = [f.delays_ms[key] for f in flights if getattr(f, "delays_ms", {}).get(key) is not None]
@@ -402,6 +404,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     bounds=fit_bounds(cand, params, dt))
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.load_exponent = load_exponent(states, params) if rotor else None
+    ref.lof_pooled = pooled
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],

@@ -325,6 +325,13 @@ def local_reference(reference, pos: Position | None):
     statistics beyond the outermost reference; ``reference`` itself where no trend is
     measured."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
+    pooled = getattr(reference, "lof_pooled", None)
+    if pos is not None and pos.distance > 0 and pooled is not None:
+        # a channel's own spread holds within the references' envelope; beyond it, at least
+        # the pooled one (quadsim.gap.moderated): on Crazyflow two nominal flights 1.23x
+        # beyond the references' thrust variation left Fy at 1.8x, against its own 0.15
+        reference = dataclasses.replace(
+            reference, lof_sd=np.maximum(reference.lof_sd, pooled[0]), lof_dof=pooled[1])
     if pos is None or trend is None or pos.u is None:
         return reference
     # beyond the references' outermost places only: inside, their own statistics hold

@@ -174,6 +174,10 @@ class Reference:
     #: speed map implies for a propeller change (:func:`quadsim.gap.motor_map.load_exponent`);
     #: None where their commands do not span enough to say
     load_exponent: tuple | None = None
+    #: (spread, degrees of freedom) of the lack of fit pooled over the channels: what a
+    #: flight outside the references' envelope is tested with at least
+    #: (:mod:`quadsim.gap.moderated`); None: ``lof_sd`` is the pooled spread already
+    lof_pooled: tuple | None = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
