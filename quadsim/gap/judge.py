@@ -6,9 +6,10 @@
    the data do not determine counts as "no difference").
 2. **Lack of fit ("not in the library")**: after the most probable explanation, each
    channel's mean squared residual over sigma_c^2 is compared with what the reference
-   flights left: ``z_c = (log ms_c - mean_ref,c) / (spread sqrt(1 + 1/n))`` (n reference
-   flights; the spread pooled over channels with C (n - 1) degrees of freedom,
-   :mod:`.calibrate`). A channel with z_c above the Student-t quantile at
+   flights left: ``z_c = (log ms_c - mean_ref,c) / (spread_c sqrt(1 + 1/n))`` (n reference
+   flights; each channel's spread moderated towards the channels' common one by their own
+   scatter, :mod:`.moderated`, with its degrees of freedom; outside the references'
+   envelope at least the pooled spread, with C (n - 1)). A channel with z_c above the Student-t quantile at
    ``1 - LOF_P / C`` (one-sided, Bonferroni over the C channels) is not explained by the
    library: the verdict is ``unexplained`` with that channel named, whatever the weights
    say. ``LOF_P`` = 0.001: one nominal flight in a thousand is called unexplained by chance.
