@@ -88,8 +88,6 @@ from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .envelope import coordinates, envelope_of
-from .moderated import moderated_spread
-from .motor_map import load_exponent
 from .fitting import (
     Candidate,
     _bounds,
@@ -101,6 +99,8 @@ from .fitting import (
     noise_scale,
     residuals,
 )
+from .moderated import moderated_spread
+from .motor_map import load_exponent
 from .priors import WIND_SD_MS
 from .reference import (  # re-exported: the calibration's public names
     FD_STEP,

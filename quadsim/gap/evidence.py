@@ -55,7 +55,6 @@ from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
 from .calibrate import Reference, jacobian, shifted
-from .reference import rotor_spectra
 from .explanations import (  # re-exported: the evidence's public names
     DELAY_SD_S,
     DETERMINED,
@@ -67,6 +66,7 @@ from .explanations import (  # re-exported: the evidence's public names
 )
 from .fitting import _arm, effect_class, residuals
 from .memo import _memo
+from .reference import rotor_spectra
 from .rotor_channel import min_time_constant
 from .screen import delay_starts, screened
 

@@ -103,7 +103,7 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
     Measured on each source's references: RotorPy (speed-commanded) 0.000 ± 0.002, l2f's
     fs vehicle 0.017 ± 0.012, PyFlyt 0.054 ± 0.029, Crazyflow 0.059 ± 0.027, multirotor
     (DC motors) 0.078 ± 0.003, the 20 real Crazyflie 2.1 Brushless nominal flights
-    0.40 ± 0.08 (0.34-0.48 per rotor); the l2f X500's references span 5-6 % of their
+    0.40 ± 0.08 (0.34-0.48 per rotor); the l2f X500's references span 4.9-6.8 % of their
     commands per rotor, too little (None). The textbook DC motor at 75 % voltage efficiency
     is 0.2, the prior where this returns None."""
     from ..vehicle.params import hover_speed
