@@ -456,10 +456,57 @@ def test_a_wind_through_a_quadratic_drag_is_named_with_its_speed(cf, airframe):
                    seed=81)
     assert entry["verdict"] == "wind" and entry["probability"] > 0.9, entry["answer"]
     assert "quadratic airframe drag" in entry["answer"], entry["answer"]
+    assert "on each body axis" not in entry["answer"], entry["answer"]
     assert entry["params"]["wind.vx"] == pytest.approx(3.0, rel=0.2), entry["answer"]
     assert abs(entry["params"]["wind.vy"]) < 0.5, entry["answer"]
     calm = _judge(cf, airframe, _shared(drag=0.0) + [drag], seed=82)
     assert calm["verdict"] == "no_significant_gap", calm["answer"]
+
+
+@pytest.fixture(scope="module")
+def airframe_axes(cf):
+    """The references of :func:`airframe` with the drag on each body axis on its own air
+    speed (``per_axis``: l2f's and PyFlyt's law)."""
+    logs = [synthetic_flight(cf, _shared(drag=0.0)
+                             + [make_effect("body_drag", cd_area=AIRFRAME, per_axis=1.0)],
+                             duration=4.0, seed=40 + s, speed=0.7 + 0.2 * s) for s in range(4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        return calibrate(prepare(logs, cf), cf)
+
+
+def test_a_wind_through_a_drag_on_each_body_axis_is_named_with_its_law(cf, airframe_axes):
+    """A 3 m/s wind along x through a drag on each body axis (|v_i| v_i): the sideways drag
+    does not grow with the wind, as it does under the law on the air speed (|v| v_y, 3x
+    here). The wind reading through that law (explanations.WIND_DRAG_AXES) names it with
+    the right speed and says which law; the same flight in calm air is no difference."""
+    drag = make_effect("body_drag", cd_area=AIRFRAME, per_axis=1.0)
+    entry = _judge(cf, airframe_axes,
+                   _shared(drag=0.0) + [drag, make_effect("wind", vx=3.0, vy=0.0)], seed=83)
+    assert entry["verdict"] == "wind" and entry["probability"] > 0.9, entry["answer"]
+    assert "quadratic drag on each body axis" in entry["answer"], entry["answer"]
+    assert entry["params"]["wind.vx"] == pytest.approx(3.0, rel=0.2), entry["answer"]
+    assert abs(entry["params"]["wind.vy"]) < 0.5, entry["answer"]
+    calm = _judge(cf, airframe_axes, _shared(drag=0.0) + [drag], seed=84)
+    assert calm["verdict"] == "no_significant_gap", calm["answer"]
+
+
+def test_a_reading_under_a_fixed_law_is_not_screened_from_the_reference_model():
+    """screen._centred_is_reference: at its prior's centre a reading is the reference model
+    only when it fits every group it replaces and has no fixed-only part (a drag law, or a
+    wind through the references' drag taken as quadratic)."""
+    from quadsim.gap.explanations import Explanation
+    from quadsim.gap.screen import _centred_is_reference
+
+    com = Explanation("com_offset", "", (("com_offset", {}, ("x", "y")),), (0, 0), (1, 1))
+    own = Explanation("rotor_drag", "", (("rotor_drag", {}, ("coefficient",)),), (0,), (1,),
+                      replaces=("rotor_drag",))
+    law = Explanation("com_offset", "", com.parts + (("drag_law", {"cd_area": 0.01}, ()),),
+                      (0, 0), (1, 1), replaces=("rotor_drag",))
+    quad = Explanation("wind", "", (("wind", {}, ("vx", "vy")), ("body_drag", {}, ("cd_area",))),
+                       (0, 0, 0.01), (1, 1, 1), replaces=("wind", "rotor_drag"))
+    assert _centred_is_reference(com) and _centred_is_reference(own)
+    assert not _centred_is_reference(law) and not _centred_is_reference(quad)
 
 
 def test_a_percentage_of_a_hundred_or_more_is_written_whole():

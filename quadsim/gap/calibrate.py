@@ -403,6 +403,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.quadratic_drag = quadratic_equivalent(states, ref)
+    ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
     ref.load_exponent = load_exponent(states, params) if rotor else None
     ref.lof_pooled = pooled
     own: list = []
@@ -449,9 +450,10 @@ def inverse_information(states, reference: Reference) -> np.ndarray:
     return own[1][0] ** 2 * len(states.t)
 
 
-def quadratic_equivalent(states, reference: Reference) -> float:
+def quadratic_equivalent(states, reference: Reference, per_axis: bool = False) -> float:
     """C_d A (m^2) of a quadratic airframe drag ``-1/2 rho C_d A |v| v`` (horizontal, body x
-    and y: :mod:`quadsim.effects.body_drag`) that reproduces the horizontal air force of the
+    and y: :mod:`quadsim.effects.body_drag`; ``per_axis``: each body axis on its own air
+    speed, ``-1/2 rho C_d A |v_i| v_i``) that reproduces the horizontal air force of the
     references' shared rotor drag (linear in air speed) over their own flights, by least
     squares on the body-frame force (N). What the references' drag is if its law is
     quadratic: an airframe's drag is, a rotor's in-plane drag is linear (RotorPy, the
@@ -467,7 +469,7 @@ def quadratic_equivalent(states, reference: Reference) -> float:
         return 0.0
     shared = reference.effects()
     without = [e for e in shared if e.name != "rotor_drag"]
-    unit = without + [make_effect("body_drag", cd_area=1.0)]
+    unit = without + [make_effect("body_drag", cd_area=1.0, per_axis=float(per_axis))]
     num = den = 0.0
     for s in states:
         base = model_wrench(s, reference.params, without)[0][:, :2]

@@ -346,32 +346,50 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
 def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     """The flight's own wind, through the references' drag as their model has it, and --
     where that drag is a rotor drag (linear in air speed) -- through the same drag as a
-    quadratic airframe drag (:data:`WIND_DRAG`): C_d A centred on the references' own
-    equivalent (:func:`quadsim.gap.calibrate.quadratic_equivalent`), spread
-    :data:`QUADRATIC_SD` of it, the rotor drag replaced. The two variants share the wind's
-    prior.
+    quadratic airframe drag, under either of its two laws (:mod:`quadsim.effects.body_drag`):
+    on the air speed, ``|v| v`` (:data:`WIND_DRAG`), or each body axis on its own, ``|v_i|
+    v_i`` (:data:`WIND_DRAG_AXES`). C_d A is centred on the references' own equivalent under
+    that law (:func:`quadsim.gap.calibrate.quadratic_equivalent`), spread
+    :data:`QUADRATIC_SD` of it, the rotor drag replaced. The plain reading has half the
+    wind's prior, the two quadratic laws a quarter each.
 
     Why: at the references' speeds (about 1 m/s) a linear and a quadratic law give the same
     force; in a wind of several m/s the quadratic law's force grows with the air speed
     squared and its slope with the wind. Measured on the l2f and PyFlyt sources (a quadratic
     drag on each body axis): their wind flights' best reading was the wind (at 1.00), yet
     it left Fx at 2-14x the references' RMS (``unexplained``) and printed 7 m/s for 3.5.
+    Why both laws: the references' ~1 m/s cannot tell them apart, a wind can. In a wind along
+    x the law on the air speed makes the sideways drag grow with the wind (``|v| v_y``, 3x
+    at 3 m/s), the law per axis does not (``|v_y| v_y``). Measured on l2f's two vehicles (a
+    drag per body axis), with only the first law: a 3 m/s wind was read as wind at 1.00 with
+    the right speed, but Fy stayed at 1.8-2.3x the references' (``unexplained``).
     Why anchored on the references: with C_d A free the variant is a steady force of any
     size, and it took a canted rotor (at 1.00, a 7 m/s wind through 65 cm^2) and a rotor
     drag on the pipeline, whose references show no horizontal drag."""
     plain = _one("wind", "", [("wind", {}, ("vx", "vy"))], mean, spread, replaces=("wind",),
                  log_prior=-np.log(2.0))
-    drag = reference.quadratic_drag
-    if drag <= 0.0:
+    laws = quadratic_laws(reference)
+    if not laws:
         return [dataclasses.replace(plain, log_prior=0.0)]
-    quad = _one("wind", WIND_DRAG, [("wind", {}, ("vx", "vy")), ("body_drag", {}, ("cd_area",))],
-                list(mean) + [drag], list(spread) + [QUADRATIC_SD * drag],
-                replaces=("wind", "rotor_drag"), log_prior=-np.log(2.0), coupled=True)
-    return [plain, quad]
+    return [plain] + [
+        _one("wind", variant, [("wind", {}, ("vx", "vy")), ("body_drag", fixed, ("cd_area",))],
+             list(mean) + [drag], list(spread) + [QUADRATIC_SD * drag],
+             replaces=("wind", "rotor_drag"), log_prior=-np.log(2.0 * len(laws)), coupled=True)
+        for variant, fixed, drag in laws]
 
 
-#: the quadratic-drag wind variant (:func:`_wind_readings`)
+def quadratic_laws(reference: Reference) -> list[tuple[str, dict, float]]:
+    """(variant, fixed values, C_d A in m^2) of the references' drag taken as a quadratic
+    airframe drag under each law (:func:`_wind_readings`); empty without a rotor drag."""
+    laws = [(WIND_DRAG, {}, reference.quadratic_drag),
+            (WIND_DRAG_AXES, {"per_axis": 1.0}, reference.quadratic_drag_axes)]
+    return [(variant, fixed, drag) for variant, fixed, drag in laws if drag > 0.0]
+
+
+#: the quadratic-drag wind variants (:func:`_wind_readings`): the law on the air speed and
+#: the law per body axis
 WIND_DRAG = "through the references' drag as a quadratic airframe drag"
+WIND_DRAG_AXES = "through the references' drag as a quadratic drag on each body axis"
 #: prior spread of that variant's C_d A, as a fraction of the references' equivalent: the
 #: equivalence of a linear and a quadratic law depends on the speeds flown (a linear law's
 #: equivalent C_d A falls as 1/speed: over the 0.7-1.4 path speeds of the benchmark's

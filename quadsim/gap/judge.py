@@ -285,8 +285,11 @@ def _wind_text(ev, reference) -> str:
         if drag is not None:        # explanations.WIND_DRAG: the drag's law taken quadratic
             size = (f" (C_d A {1e4 * drag:.3g} cm^2)" if ev.determined.get("body_drag.cd_area")
                     else "")
+            law = ("a quadratic drag on each body axis"
+                   if ev.explanation.fixed_values.get("body_drag.per_axis", 0.0) >= 0.5
+                   else "a quadratic airframe drag")
             text += (f": wind of ~{speed:.2g} m/s beyond the references', through their "
-                     f"drag as a quadratic airframe drag{size}")
+                     f"drag as {law}{size}")
         else:
             text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
                      "coefficient")

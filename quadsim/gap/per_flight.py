@@ -42,6 +42,7 @@ from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
 from .envelope import envelope_summary, local_reference
 from .envelope import position as envelope_position
+from . import drag_law
 from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
@@ -118,6 +119,7 @@ def reference_summary(ref: Reference) -> dict:
                           for k, (m, s, n) in ref.delays_ms.items()},
             "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
             "quadratic_drag_m2": float(ref.quadratic_drag),
+            "quadratic_drag_axes_m2": float(ref.quadratic_drag_axes),
             "load_exponent": None if ref.load_exponent is None else
             {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]}}
 
@@ -146,15 +148,19 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
                     and np.any(trend.q_weight > 0) else None)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
-            expl = explanations_for(reference, states, effects)
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
                 start = 1e-3 * mine - reference.rotor_shift_s
+            law = drag_law.choose(states, reference, start)
+            expl = drag_law.under(explanations_for(reference, states, effects), law)
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
+    entry["drag_law"] = drag_law.describe(law)
+    if law is not None:
+        entry["answer"] += f" Judged with {entry['drag_law']} (the law this flight shows)."
     if place is not None:
         entry["envelope"] = place.to_json()
         if place.distance > 0:

@@ -170,6 +170,9 @@ class Reference:
     #: air force (:func:`quadsim.gap.calibrate.quadratic_equivalent`); 0 where their model has
     #: none (no rotor drag, or it is not shared)
     quadratic_drag: float = 0.0
+    #: the same with each body axis's drag on its own air speed (``per_axis``): the wind
+    #: reading's third variant (:func:`quadsim.gap.explanations._wind_readings`)
+    quadratic_drag_axes: float = 0.0
     #: (alpha, spread) of the speed-per-command exponent the references' own command ->
     #: speed map implies for a propeller change (:func:`quadsim.gap.motor_map.load_exponent`);
     #: None where their commands do not span enough to say

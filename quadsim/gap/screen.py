@@ -165,11 +165,23 @@ class _Columns:
         return self._delay[key]
 
 
+def _centred_is_reference(expl) -> bool:
+    """Whether ``expl`` at its prior's centre is the reference model: each group it replaces
+    is one it fits, and no part of it is fixed only. Not so for a wind through the
+    references' drag taken as quadratic (the rotor drag replaced by a body drag) or a reading
+    under a flight's drag law (:mod:`.drag_law`, a fixed body drag): their centre's residual
+    is their own, not the reference model's (the law's reading of a 12 mm CoM offset on
+    multirotor was screened at -6539 log units from that wrong base, fitted at -172)."""
+    fits = {name for name, _, fitted in expl.parts if fitted}
+    return all(fitted for _, _, fitted in expl.parts) and set(expl.replaces) <= fits
+
+
 def _shared_point(prob, cols: _Columns, z: np.ndarray) -> float | None:
     """The delay (s) at ``z`` when ``z`` is the reference model there (no own value moved
     and the delay one the per-flight pieces hold), else None."""
     own = len(z) - (1 if prob.expl.shift else 0)
-    if np.any(z[:own]) or prob.expl.name == "signal_delay":
+    if np.any(z[:own]) or prob.expl.name == "signal_delay" or not _centred_is_reference(
+            prob.expl):
         return None
     if not prob.expl.shift:
         return 0.0
