@@ -67,7 +67,9 @@ l2f source (``--independent --source l2f --cache DIR``, :mod:`quadsim.bench.l2f_
 same for 30 cases from l2f 2.0.18 (RLtools' "Learning to Fly" simulator: its identified 2.0 kg
 Holybro X500, single-precision RK4, first-order rotors; a PID cascade of this project's)
 against 8 nominal l2f flights; ``--source l2f-fs`` (:mod:`quadsim.bench.l2f_fs_cases`) the same
-table for l2f's fs vehicle (3.35 kg, a thrust curve with constant and linear terms).
+table for l2f's fs vehicle (3.35 kg, a thrust curve with constant and linear terms);
+``--source l2f-flightmare`` (:mod:`quadsim.bench.l2f_flightmare_cases`) for its flightmare
+vehicle (0.73 kg, a thrust curve with a negative constant and a linear term).
 """
 
 from __future__ import annotations
@@ -522,6 +524,8 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
 
 
 #: --source NAME -> (cases module, availability check, install hint) of a simulator source
+#: how to install l2f (a C++ build)
+L2F_HINT = "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"
 SIM_SOURCES = {
     "crazyflow": ("quadsim.bench.crazyflow_cases", "quadsim.bench.crazyflow_source",
                   "crazyflow_available", "pip install 'quadsim[crazyflow]'"),
@@ -532,9 +536,11 @@ SIM_SOURCES = {
                    "pip install 'quadsim[multirotor]' then pip install --no-deps "
                    "multirotor==0.5.0"),
     "l2f": ("quadsim.bench.l2f_cases", "quadsim.bench.l2f_source", "l2f_available",
-            "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"),
+            L2F_HINT),
     "l2f-fs": ("quadsim.bench.l2f_fs_cases", "quadsim.bench.l2f_source", "l2f_available",
-               "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"),
+               L2F_HINT),
+    "l2f-flightmare": ("quadsim.bench.l2f_flightmare_cases", "quadsim.bench.l2f_source",
+                       "l2f_available", L2F_HINT),
 }
 
 
@@ -547,8 +553,9 @@ def _cpu_seconds() -> float:
 
 
 def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow|pyflyt|multirotor|l2f|l2f-fs``: make (or reuse) the cached flights; with
-    ``generate_only`` stop there (no verdict is computed); else the one blind per-flight run."""
+    """``--independent --source crazyflow|pyflyt|multirotor|l2f|l2f-fs|l2f-flightmare``: make
+    (or reuse) the cached flights; with ``generate_only`` stop there (no verdict is
+    computed); else the one blind per-flight run."""
     import importlib
 
     from quadsim.bench import sim_cases
@@ -623,11 +630,13 @@ def main(argv=None) -> int:
     parser.add_argument("--source", choices=("rotorpy+pipeline", *SIM_SOURCES),
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
-                             "pyflyt, multirotor, l2f: per-flight cases against 8 nominal flights of that "
-                             "simulator; need --cache)")
+                             "pyflyt, multirotor, l2f and its vehicles l2f-fs, "
+                             "l2f-flightmare: per-flight cases against 8 nominal flights of "
+                             "that simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
-                        help="with --source crazyflow|pyflyt|multirotor|l2f|l2f-fs: only fly and cache the flights "
-                             "and print their observability (no verdict is computed)")
+                        help="with a --source other than rotorpy+pipeline: only fly and "
+                             "cache the flights and print their observability (no verdict is "
+                             "computed)")
     args = parser.parse_args(argv)
     if args.independent and args.source in SIM_SOURCES:
         return run_simulator(args.source, args.cache, args.generate_only, args.out)

@@ -188,3 +188,36 @@ def test_the_fs_cases_are_drawn_at_its_scale():
     from quadsim.bench.l2f_cases import FS_CASES
     names = [e.name for e in FS_CASES.shared_effects()]
     assert names == ["motor_lag", "body_drag", "thrust_factor", "thrust_curve"]
+
+
+def test_the_flightmare_vehicle_and_its_cases():
+    """l2f's flightmare vehicle (thrust -1.769 + 11.508 a + 11.968 a^2 N per rotor): the
+    hover state is the polynomial's root (a = 0.2462: four rotors carry 0.73 kg); zero
+    thrust is commanded at the curve's own root (a = 0.1348), never below it (no negative
+    thrust asked for); its 30 frozen cases are the X500's table at its scale (masses
+    +5..+20 % of 0.73 kg), its own seeds, the truth's shared physics with the thrust curve
+    (its -1.769 N constant inside the library's range)."""
+    from quadsim.bench.l2f_source import FLIGHTMARE, command_for, thrust_of
+
+    c0, c1, c2 = FLIGHTMARE["c0"], FLIGHTMARE["c1"], FLIGHTMARE["c2"]
+    a = hover_command(vehicle=FLIGHTMARE)
+    assert a == pytest.approx((-c1 + np.sqrt(c1 ** 2 + 4 * c2 * (0.73 * 9.81 / 4 - c0)))
+                              / (2 * c2), rel=1e-12)
+    assert a == pytest.approx(0.2462, abs=1e-4)
+    assert command_for(0.0, FLIGHTMARE) == pytest.approx(0.1348, abs=1e-4)
+    assert thrust_of(command_for(0.0, FLIGHTMARE), FLIGHTMARE) == pytest.approx(0.0, abs=1e-12)
+    p = vehicle_params(FLIGHTMARE)
+    assert p.mass == 0.73 and p.max_speed == 3000.0
+    from quadsim.bench.l2f_flightmare_cases import SOURCE, case_list
+
+    cases = case_list()
+    assert len(cases) == 30 and SOURCE.name == "l2f-flightmare"
+    assert {c["vehicle"] for c in cases} == {"l2f-flightmare"} and cases[0]["seed"] == 82_000
+    masses = [c["effects"]["mass"] for c in cases if c["case"] == "mass_offset"]
+    assert masses and all(0.05 * 0.73 <= m <= 0.2 * 0.73 for m in masses)
+    from quadsim.bench.l2f_cases import FLIGHTMARE_CASES
+
+    shared = FLIGHTMARE_CASES.shared_effects()
+    assert [e.name for e in shared] == ["motor_lag", "body_drag", "thrust_factor",
+                                        "thrust_curve"]
+    assert shared[-1].offset == pytest.approx(c0)

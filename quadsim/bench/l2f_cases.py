@@ -73,8 +73,8 @@ import numpy as np
 from ..effects import make_effect
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
-from .l2f_source import (FS, MODEL, FlightSpec, hover_command, l2f_flights, stand_b,
-                         vehicle_params)
+from .l2f_source import (FLIGHTMARE, FS, MODEL, FlightSpec, hover_command, l2f_flights,
+                         stand_b, vehicle_params)
 from .observe import OBSERVABLE
 from .score import joined_kind
 
@@ -202,6 +202,10 @@ X500 = VehicleCases("x500", MODEL, ARM, (0.1, 0.3), (0.02, 0.05), (0.02, 0.06),
 #: the centre and 30-80 mm below (a 3.35 kg vehicle's gimbal or sensor), its own seeds
 FS_CASES = VehicleCases("fs", FS, float(np.hypot(0.20895, 0.240666)), (0.15, 0.5),
                         (0.03, 0.08), (0.03, 0.08), seed0=81_000, ref_seed0=91_000)
+#: the flightmare vehicle (:mod:`.l2f_flightmare_cases`): arm 0.17 m, a payload 0.04-0.11
+#: kg (the X500's share of its mass) 15-40 mm off the centre and 15-45 mm below, its own seeds
+FLIGHTMARE_CASES = VehicleCases("flightmare", FLIGHTMARE, 0.17, (0.04, 0.11), (0.015, 0.04),
+                                (0.015, 0.045), seed0=82_000, ref_seed0=92_000)
 
 reference_specs = X500.reference_specs
 case_list = X500.case_list

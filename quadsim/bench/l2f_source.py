@@ -70,7 +70,8 @@ from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["EFFECTS", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND", "VEHICLES",
+__all__ = ["EFFECTS", "FLIGHTMARE", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
+           "VEHICLES",
            "Cascade", "FlightSpec", "Sensors", "command_for", "hover_command", "l2f_available",
            "l2f_flights", "path", "stand_b", "thrust_of", "to_flight_log", "truth_json",
            "vehicle_params"]
@@ -113,8 +114,31 @@ FS = {"name": "l2f-fs", "header": "fs.h", "mass": 3.35,
                      "quadsim sees it",
       "omega_source": "chosen: 12-inch propellers, ~9 500 rpm at full command (rad/s)",
       "radius_source": "chosen: 12-inch propellers (m)"}
-#: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs)
-VEHICLES = {"x500": MODEL, "fs": FS}
+#: l2f's "flightmare" vehicle (``parameters/dynamics/flightmare.h``: the quadrotor of UZH's
+#: Flightmare simulator, Song et al., CoRL 2020): 0.73 kg, rotors at 0.17 m on the diagonals
+#: (X), a thrust curve with a negative constant and a linear term (-1.769 + 11.508 a + 11.968
+#: a^2 N: l2f's normalisation of Flightmare's 1.33e-6 w^2 + 3.84e-3 w - 1.769 at w = 3000 a
+#: rad/s), k_Q 0.016 m, 20 ms rotors, J diag(0.00791, 0.00791, 0.0123) kg m^2. The rotor
+#: speed at a = 1 (3000 rad/s) is l2f's own normalisation; the propeller radius (5 inch) and
+#: the body drag (a 0.73 kg racer-sized frame) are this module's choice.
+FLIGHTMARE = {"name": "l2f-flightmare", "header": "flightmare.h", "mass": 0.73,
+              "rotor_xy": ((0.12020815280171307, -0.12020815280171307),
+                           (-0.12020815280171307, 0.12020815280171307),
+                           (0.12020815280171307, 0.12020815280171307),
+                           (-0.12020815280171307, -0.12020815280171307)),
+              "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c0": -1.7689986848125325,
+              "c1": 11.50824315802381, "c2": 11.968428150335603, "k_torque": 0.016,
+              "tau": 0.02, "inertia": (0.00791, 0.00791, 0.0123), "gravity": 9.81,
+              "rho": 1.225, "cd_area": (0.01, 0.01, 0.025), "rotor_radius": 0.0635,
+              "omega_max": 3000.0,
+              "description": "l2f's flightmare vehicle (0.73 kg, thrust -1.77 + 11.5 a + 12.0 "
+                             "a^2 N) as quadsim sees it",
+              "omega_source": "l2f 2.0.18 flightmare.h: its thrust curve normalised at "
+                              "3000 rad/s (rad/s)",
+              "radius_source": "chosen: 5-inch propellers (m)"}
+#: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs,
+#: ``--source l2f-flightmare`` the flightmare vehicle)
+VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its thrust

@@ -32,7 +32,10 @@ class ThrustCurve(EffectBase):
     parameters = (
         EffectParameter("linear", "N s/rad", 0.0, -1e-2, 1e-2,
                         "thrust per rotor speed, added to b Omega^2"),
-        EffectParameter("offset", "N", 0.0, -1.0, 1.0, "constant thrust per rotor"),
+        # up to 5 N either way: a stand fit's constant term is a fraction of a rotor's
+        # thrust, and rotors run from 0.1 N (Crazyflie) to 20 N (multirotor's 5.5 kg frame);
+        # Flightmare's curve (l2f flightmare.h) has -1.77 N
+        EffectParameter("offset", "N", 0.0, -5.0, 5.0, "constant thrust per rotor"),
     )
 
     def loads(self, ctx):
