@@ -188,6 +188,21 @@ def test_a_rotor_speed_delay_is_named(cf, reference):
     assert "ms later than on the reference flights" in entry["answer"]
 
 
+def test_a_rotor_speed_delay_is_named_without_the_references_cross_correlation(cf, reference):
+    """The delay is read by its likelihood wherever rotor speeds are logged: references
+    whose cross-correlation estimate held on none of them (l2f's flightmare vehicle: 0 of 8)
+    still give the reading, and a 25 ms late log is named (it was `motor_lag`)."""
+    import dataclasses
+
+    blind = dataclasses.replace(reference, delays_ms={k: v for k, v in
+                                                      reference.delays_ms.items()
+                                                      if k != "rotor"})
+    log = _delayed(synthetic_flight(cf, _shared(), duration=5.0, seed=50), 0.025)
+    entry = judge_one(log, blind)
+    assert entry["verdict"] == "signal_delay", entry["answer"]
+    assert entry["posterior"][0]["params"]["delay.rotor"] == pytest.approx(0.025, abs=0.004)
+
+
 def test_a_batch_with_one_bad_flight_refuses_it_and_judges_the_others(cf, tmp_path):
     pytest.importorskip("jsonschema", reason="jsonschema (test extra) validates the schema")
     from quadsim.gap.__main__ import main
