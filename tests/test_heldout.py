@@ -140,3 +140,20 @@ def test_a_propeller_change_is_named_not_a_refit_of_b_and_d(cf):
     assert v["outcome"] == "effect" and v["effect"] == "thrust_factor", v["answer"]
     assert v["params"]["thrust_factor.change"] == pytest.approx(-0.05, abs=0.003)
     assert "per command" not in v["answer"]
+
+
+def test_the_held_out_reference_reads_no_rotor_delay(cf):
+    """The held-out mode's reference is the parameter set (heldout.nominal_reference): it
+    fits no rotor timing (``Reference.timing`` False, no cross-correlation estimate), so its
+    explanations carry no delay (the per-flight mode reads one wherever the references'
+    timing is fitted); a delay there had crashed the held-out pair fits (shapes 4 vs 5)."""
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.explanations import explanations_for
+    from quadsim.gap.heldout import nominal_reference
+
+    flight = prepare([synthetic_flight(cf, [], duration=3.0, seed=5)], cf)[0]
+    reference = nominal_reference([flight.fit], cf, rotor=True)
+    assert reference.timing is False
+    out = explanations_for(reference, flight.fit)
+    assert out and all(e.shift is None for e in out)
+    assert "signal_delay" not in {e.name for e in out}

@@ -404,6 +404,7 @@ def calibrate(flights, params: VehicleParams) -> Reference:
                     bounds=fit_bounds(cand, params, dt))
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
+    ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     ref.lof_pooled = pooled
     own: list = []

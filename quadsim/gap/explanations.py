@@ -196,12 +196,13 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     """Every explanation the flight's data can show (``names``: restrict to these effects)."""
     params, sd = reference.params, _prior_sd(reference.params)
     ref = reference.values()
-    # the rotor speeds' timing is read by its likelihood wherever they are logged (the
-    # references' own timing is fitted then, calibrate._refine); the cross-correlation
-    # estimate is only a start. Before, a delay was read only where that estimate held on
-    # some reference: on l2f's flightmare vehicle it held on none of 8 (20 ms rotors), and
-    # rotor logs 17.5 and 25 ms late were named `motor_lag` at 1.00, with no delay reading
-    delay = states.rotor_speed is not None
+    # the rotor speeds' timing is read by its likelihood wherever they are logged and the
+    # references' own timing is fitted (calibrate._refine); the cross-correlation estimate
+    # is only a start. Before, a delay was read only where that estimate held on some
+    # reference: on l2f's flightmare vehicle it held on none of 8 (20 ms rotors), and rotor
+    # logs 17.5 and 25 ms late were named `motor_lag` at 1.00, with no delay reading
+    delay = states.rotor_speed is not None and (reference.timing
+                                                or "rotor" in reference.delays_ms)
     out = [_one("no_difference", "", (), (), ())]
     groups = {name for name, _, _ in reference.candidate.parts}
     for group, fitted in SHARED:          # a shared group at a value of its own

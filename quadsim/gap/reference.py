@@ -173,6 +173,10 @@ class Reference:
     #: the same with each body axis's drag on its own air speed (``per_axis``): the wind
     #: reading's third variant (:func:`quadsim.gap.explanations._wind_readings`)
     quadratic_drag_axes: float = 0.0
+    #: whether the references' rotor-speed timing was fitted (:func:`quadsim.gap.calibrate.
+    #: calibrate`, wherever they log rotor speeds): a flight's own delay is read against it
+    #: (the held-out mode's parameter-set reference has none)
+    timing: bool = False
     #: (alpha, spread) of the speed-per-command exponent the references' own command ->
     #: speed map implies for a propeller change (:func:`quadsim.gap.motor_map.load_exponent`);
     #: None where their commands do not span enough to say
