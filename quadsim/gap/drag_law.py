@@ -82,14 +82,15 @@ def _variant(wind_variant: str) -> str:
     return "the references' drag as " + wind_variant.split(" drag as ")[-1]
 
 
-def choose(states, reference: Reference, start_delay_s: float = 0.0) -> Explanation | None:
+def choose(states, reference: Reference, start_delay_s: float = 0.0,
+           memo: dict | None = None) -> Explanation | None:
     """The flight's drag law (module doc): the "no difference" of the highest evidence
     among :func:`nulls`; None where that is the references' own law (or they have no
-    horizontal drag to take as quadratic)."""
+    horizontal drag to take as quadratic). ``memo``: kept for the flight's evaluation."""
     candidates = nulls(reference, states)
     if len(candidates) < 2:
         return None
-    rows = evaluate(states, reference, candidates, start_delay_s=start_delay_s)
+    rows = evaluate(states, reference, candidates, start_delay_s=start_delay_s, memo=memo)
     best = max(rows, key=lambda ev: ev.log_z)
     return best.explanation if best.explanation.parts else None
 

@@ -169,7 +169,8 @@ def _air_force(states, reference, effects, own) -> np.ndarray:
 
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
-             start_delay_s: float = 0.0, *, full: bool = False) -> list[Evidence]:
+             start_delay_s: float = 0.0, *, full: bool = False,
+             memo: dict | None = None) -> list[Evidence]:
     """Log evidence of every explanation on one flight's (decimated) ``states``.
 
     With a rotor-delay reading, every explanation fits the flight's rotor delay too: with
@@ -179,12 +180,17 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     the cross-correlation estimate against the references', is one of its points).
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
-    it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one."""
+    it can matter (:mod:`quadsim.gap.screen`); ``full=True`` fits every one. ``memo``: the
+    residual parts and the shared Jacobian kept from an earlier call on the same flight and
+    reference (:func:`quadsim.gap.drag_law.choose`)."""
     names = list(reference.candidate.parameter_names)
     s_all = marginal_sd(reference)
-    memo: dict = {}         # residual parts shared by the evaluations on this flight
-    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects,
-                   memo=memo)
+    memo = {} if memo is None else memo   # residual parts shared by evaluations on this flight
+    kept = memo.get("evidence.jacobian")
+    if kept is None or kept[0] is not states or kept[1] is not reference:
+        kept = memo["evidence.jacobian"] = (states, reference, jacobian(
+            states, reference, list(range(len(names))), reference.candidate.effects, memo=memo))
+    jac = kept[2]
     starts = (0.0, start_delay_s)
     null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
     wide = next((e for e in explanations if e.name == "signal_delay"), None)

@@ -152,9 +152,10 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
                 start = 1e-3 * mine - reference.rotor_shift_s
-            law = drag_law.choose(states, reference, start)
+            memo: dict = {}        # the flight's residual parts and shared Jacobian, kept
+            law = drag_law.choose(states, reference, start, memo)
             expl = drag_law.under(explanations_for(reference, states, effects), law)
-            rows = evaluate(states, reference, expl, start_delay_s=start, full=full)
+            rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
