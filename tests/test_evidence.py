@@ -506,22 +506,31 @@ def test_a_wind_through_a_drag_on_each_body_axis_is_named_with_its_law(cf, airfr
     assert calm["verdict"] == "no_significant_gap", calm["answer"]
 
 
-def test_a_reading_under_a_fixed_law_is_not_screened_from_the_reference_model():
-    """screen._centred_is_reference: at its prior's centre a reading is the reference model
-    only when it fits every group it replaces and has no fixed-only part (a drag law, or a
-    wind through the references' drag taken as quadratic)."""
-    from quadsim.gap.explanations import Explanation
-    from quadsim.gap.screen import _centred_is_reference
+def test_a_reading_is_screened_from_the_base_it_is_centred_on():
+    """screen._centred_is_base: at its prior's centre a reading is the shared base model
+    (the reference model, or it under the flight's drag law) only when its fixed-only parts
+    are the base's and it fits every group it replaces that the base does not: a drag-law
+    reading is the law's base, not the reference model's; a wind through the references'
+    drag taken as quadratic is neither."""
+    from types import SimpleNamespace
 
+    from quadsim.gap.explanations import Explanation
+    from quadsim.gap.screen import _centred_is_base
+
+    law_part = ("drag_law", {"cd_area": 0.01, "per_axis": 1.0}, ())
+    plain = SimpleNamespace(fixed=(), replaced=())
+    lawful = SimpleNamespace(fixed=(law_part,), replaced=("rotor_drag",))
     com = Explanation("com_offset", "", (("com_offset", {}, ("x", "y")),), (0, 0), (1, 1))
     own = Explanation("rotor_drag", "", (("rotor_drag", {}, ("coefficient",)),), (0,), (1,),
                       replaces=("rotor_drag",))
-    law = Explanation("com_offset", "", com.parts + (("drag_law", {"cd_area": 0.01}, ()),),
-                      (0, 0), (1, 1), replaces=("rotor_drag",))
+    law = Explanation("com_offset", "", com.parts + (law_part,), (0, 0), (1, 1),
+                      replaces=("rotor_drag",))
     quad = Explanation("wind", "", (("wind", {}, ("vx", "vy")), ("body_drag", {}, ("cd_area",))),
                        (0, 0, 0.01), (1, 1, 1), replaces=("wind", "rotor_drag"))
-    assert _centred_is_reference(com) and _centred_is_reference(own)
-    assert not _centred_is_reference(law) and not _centred_is_reference(quad)
+    assert _centred_is_base(com, plain) and _centred_is_base(own, plain)
+    assert not _centred_is_base(law, plain) and not _centred_is_base(quad, plain)
+    assert _centred_is_base(law, lawful) and not _centred_is_base(com, lawful)
+    assert not _centred_is_base(quad, lawful)
 
 
 def test_a_percentage_of_a_hundred_or_more_is_written_whole():

@@ -139,18 +139,29 @@ class _Columns:
     theta_ref with the rotor speeds shifted by a delay, and the rotor-delay column there."""
 
     def __init__(self, states, reference: Reference, jac: np.ndarray, names_all: list[str],
-                 memo: dict, shifter, residual):
+                 memo: dict, shifter, residual, null=None):
         self.states, self.reference, self.jac, self.memo = states, reference, jac, memo
         self.shifted, self.residual = shifter, residual
         self.index = {n: k for k, n in enumerate(names_all)}
         self._base: dict[float, np.ndarray] = {}
         self._delay: dict[tuple, np.ndarray] = {}
         self.delay_s = 0.0          # the delay every explanation starts at (:func:`screened`)
+        # the model every explanation shares at its prior's centre: the reference model, or
+        # -- under a flight's drag law (.drag_law) -- the "no difference" that carries it
+        # (its fixed-only parts, the groups it replaces, and its effects)
+        self.fixed = tuple(p for p in getattr(null, "parts", ()) if not p[2])
+        self.replaced = tuple(getattr(null, "replaces", ())) if self.fixed else ()
+        self.effects = reference.effects()
+        if self.fixed:      # as evidence._shared_effects: the base's effects always stay
+            n_base = len(reference.candidate.base)
+            self.effects = (self.effects[:n_base]
+                            + [e for e in self.effects[n_base:] if e.name not in self.replaced]
+                            + _fixed_effects(self.fixed))
 
     def base(self, delay_s: float) -> np.ndarray:
         if delay_s not in self._base:
             self._base[delay_s] = self.residual(self.shifted(delay_s), self.reference,
-                                                self.reference.effects(), self.memo)
+                                                self.effects, self.memo)
         return self._base[delay_s]
 
     def delay(self, delay_s: float, sd: float, sign: float) -> np.ndarray:
@@ -160,28 +171,36 @@ class _Columns:
         if key not in self._delay:
             h = sign * STEP
             moved = self.residual(self.shifted(delay_s + h * sd), self.reference,
-                                  self.reference.effects(), self.memo)
+                                  self.effects, self.memo)
             self._delay[key] = (moved - self.base(delay_s)) / h
         return self._delay[key]
 
 
-def _centred_is_reference(expl) -> bool:
-    """Whether ``expl`` at its prior's centre is the reference model: each group it replaces
-    is one it fits, and no part of it is fixed only. Not so for a wind through the
-    references' drag taken as quadratic (the rotor drag replaced by a body drag) or a reading
-    under a flight's drag law (:mod:`.drag_law`, a fixed body drag): their centre's residual
-    is their own, not the reference model's (the law's reading of a 12 mm CoM offset on
-    multirotor was screened at -6539 log units from that wrong base, fitted at -172)."""
+def _centred_is_base(expl, cols) -> bool:
+    """Whether ``expl`` at its prior's centre is the shared base model of ``cols`` (the
+    reference model, or it under the flight's drag law): its fixed-only parts are the
+    base's, and each group it replaces is one it fits or the base replaces. Not so for a
+    wind through the references' drag taken as quadratic (the rotor drag replaced by a body
+    drag it fits): its centre's residual is its own. Measured before the base carried the
+    law: the law's reading of a 12 mm CoM offset on multirotor, screened from the reference
+    model's residual, was put at -6539 log units (fitted: -172)."""
     fits = {name for name, _, fitted in expl.parts if fitted}
-    return all(fitted for _, _, fitted in expl.parts) and set(expl.replaces) <= fits
+    fixed = tuple(p for p in expl.parts if not p[2])
+    return fixed == cols.fixed and set(expl.replaces) <= fits | set(cols.replaced)
+
+
+def _fixed_effects(parts) -> list:
+    from .explanations import _make
+
+    return [_make(name, dict(fixed)) for name, fixed, _ in parts]
 
 
 def _shared_point(prob, cols: _Columns, z: np.ndarray) -> float | None:
     """The delay (s) at ``z`` when ``z`` is the reference model there (no own value moved
     and the delay one the per-flight pieces hold), else None."""
     own = len(z) - (1 if prob.expl.shift else 0)
-    if np.any(z[:own]) or prob.expl.name == "signal_delay" or not _centred_is_reference(
-            prob.expl):
+    if np.any(z[:own]) or prob.expl.name == "signal_delay" or not _centred_is_base(
+            prob.expl, cols):
         return None
     if not prob.expl.shift:
         return 0.0
@@ -379,7 +398,8 @@ def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
     memo = {} if memo is None else memo
     shared_start, start_delay_s = starts_s
     any_problem = problem(states, reference, explanations[0], jac, s_all, memo)
-    cols = _Columns(states, reference, jac, names_all, memo, any_problem.shifted, residual)
+    cols = _Columns(states, reference, jac, names_all, memo, any_problem.shifted, residual,
+                    next((e for e in explanations if e.name == "no_difference"), None))
     effects = {e.name for e in explanations} - {"no_difference"}
     prior_null = float(np.log(max(1, len(effects))))
     rows, starts, weight, reach = [], [], [], []
