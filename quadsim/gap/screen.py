@@ -66,6 +66,7 @@ from scipy.optimize import lsq_linear
 
 from ..core.errors import ModelError
 from .calibrate import Reference
+from .explanations import _make
 
 __all__ = ["screened", "linearised", "refined", "delay_starts", "SCREEN_CUT", "STEP",
            "MAX_STEPS", "CONVERGED", "DELAY_GRID_S"]
@@ -190,8 +191,6 @@ def _centred_is_base(expl, cols) -> bool:
 
 
 def _fixed_effects(parts) -> list:
-    from .explanations import _make
-
     return [_make(name, dict(fixed)) for name, fixed, _ in parts]
 
 
