@@ -53,7 +53,7 @@ from .evidence import evaluate
 from .explanations import Explanation, explanations_for, quadratic_laws
 from .reference import Reference
 
-__all__ = ["DragLaw", "choose", "under", "describe"]
+__all__ = ["DragLaw", "choose", "under"]
 
 
 class DragLaw(BodyDrag):
@@ -101,20 +101,26 @@ def under(explanations: list[Explanation], law: Explanation | None) -> list[Expl
     if law is None:
         return list(explanations)
     part = law.parts[0]
-    wind = law.variant.replace("the references' drag as ", "")
+    axes = _per_axis(part[1])
     out = []
     for e in explanations:
+        drag = next((fixed for n, fixed, _ in e.parts if n == "body_drag"), None)
         if e.name == "no_difference":
             out.append(dataclasses.replace(e, variant=law.variant, parts=law.parts,
                                            replaces=law.replaces))
-        elif e.name == "wind" and any(n == "body_drag" for n, _, _ in e.parts):
-            if e.variant.endswith(wind):                 # the wind through this law only
+        elif e.name == "wind" and drag is not None:
+            if _per_axis(drag) == axes:                  # the wind through this law only
                 out.append(dataclasses.replace(e, log_prior=0.0))
         elif e.name == "wind":
             continue                                     # through the linear law: not this one
         else:
             out.append(_with_law(e, part))
     return out
+
+
+def _per_axis(fixed: dict) -> bool:
+    """Whether a body drag's fixed values take the law per body axis."""
+    return fixed.get("per_axis", 0.0) >= 0.5
 
 
 def _with_law(e: Explanation, part: tuple) -> Explanation:
@@ -128,9 +134,3 @@ def _with_law(e: Explanation, part: tuple) -> Explanation:
         mean = tuple(0.0 if k == "rotor_drag.coefficient" else m for k, m in zip(names, mean))
     replaces = e.replaces + (() if "rotor_drag" in e.replaces else ("rotor_drag",))
     return dataclasses.replace(e, parts=parts + (part,), mean=mean, replaces=replaces)
-
-
-def describe(law: Explanation | None) -> str | None:
-    """The law in words for the per-flight entry; None: the references' own."""
-    return None if law is None else law.variant
-

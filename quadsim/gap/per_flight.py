@@ -37,12 +37,12 @@ from ..core.errors import InputError, ModelError, QuadsimWarning
 from ..logs.delays import delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
+from . import drag_law
 from .calibrate import Reference, calibrate, inverse_information
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
 from .envelope import envelope_summary, local_reference
 from .envelope import position as envelope_position
-from . import drag_law
 from .evidence import evaluate, explanations_for
 from .judge import judge
 from .residual import DEFAULT_WINDOW_S
@@ -159,7 +159,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     entry = judge(rows, reference, flight.name)
-    entry["drag_law"] = drag_law.describe(law)
+    entry["drag_law"] = None if law is None else law.variant    # in words; None: theirs
     if law is not None:
         entry["answer"] += f" Judged with {entry['drag_law']} (the law this flight shows)."
     if place is not None:
