@@ -95,8 +95,8 @@ def _benchmark_script():
 def test_simulator_summary_and_missing_cache(capsys):
     """scripts/gap_benchmark.py's simulator table: the observability-only table names the
     source and marks an unobservable library case; the blind-run table scores hand-made
-    verdicts (a named case, a no-gap flight); ``--source pyflyt`` without ``--cache`` is
-    one error line and exit 2 (nothing flown)."""
+    verdicts (a named case, a no-gap flight); every ``--source`` (pyflyt, the l2f vehicles,
+    ...) without ``--cache`` is one error line and exit 2 (nothing flown)."""
     from quadsim.bench.score import score_case
 
     script = _benchmark_script()
@@ -124,6 +124,7 @@ def test_simulator_summary_and_missing_cache(capsys):
     text = script.summarise_simulator(rows, source, observability_only=False)
     assert "| standin | per-flight | 100% (1/1) |" in text.replace(" %", "%")
     assert "| 100% (1/1) | 0/0 |" in text.replace(" %", "%")
-    assert script.main(["--independent", "--source", "pyflyt"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error: --source pyflyt:")
+    for name in script.SIM_SOURCES:          # every source, the l2f vehicles included
+        assert script.main(["--independent", "--source", name]) == 2, name
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"error: --source {name}:"), err
