@@ -390,6 +390,29 @@ def test_a_sag_against_references_at_a_steady_voltage_is_named(cf):
     assert nominal["outcome"] == "no_significant_gap", nominal["answer"]
 
 
+def test_another_motor_is_named_with_its_lag_and_its_speed_per_command(cf):
+    """References at a steady voltage share the motor map's gain (:mod:`quadsim.gap.
+    speed_gain`). A flight whose motor is 5x slower and spins 30 % faster per command (the
+    command scaled by 1 / 1.3; PyFlyt's slower motors do that) is named ``motor_lag`` by
+    the reading of another motor, with both values; the plain lag reading, without the gain,
+    could only run to its bound (time constant 0.5 s)."""
+    logs = [_steady_voltage(synthetic_flight(cf, _shared(), duration=4.0, seed=s,
+                                             speed=0.8 + 0.2 * s), 4.2) for s in range(3)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        steady = calibrate(prepare(logs, cf), cf)
+    assert "speed_gain.gain" in steady.candidate.parameter_names
+    log = _steady_voltage(synthetic_flight(cf, _shared(lag=5 * LAG), duration=5.0, seed=102),
+                          4.2)
+    entry = judge_one(dataclasses.replace(log, rotor_command=log.rotor_command / 1.3), steady)
+    assert entry["verdict"] == "motor_lag+speed_gain", entry["answer"]
+    assert entry["probability"] > 0.9, entry["answer"]
+    assert entry["params"]["speed_gain.gain"] == pytest.approx(0.3, abs=0.02)
+    assert entry["params"]["motor_lag.time_constant"] == pytest.approx(5 * LAG, abs=0.01)
+    assert "another motor or ESC" in entry["answer"]
+    assert "% faster per command" in entry["answer"]
+
+
 def test_voltage_spread_averages_out_the_log_noise():
     """voltage_spread: quarter means, so white noise of 0.01 V on a steady 4.2 V is < 0.1 %,
     and a fall of 0.15 V over a flight is 0.15 * 3/4 / 4.125 of the mean."""

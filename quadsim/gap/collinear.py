@@ -211,6 +211,8 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
                 f"{100 * force / weight:.2g} % of the weight, at 2 m/s)")
     if key == "motor_lag.time_constant":
         return f"the rotors lag their commands by {_pm(value, c, 1e3)} ms (time constant)"
+    if key == "speed_gain.gain":
+        return f"the rotors spin {_pm(value, c, 1e2)} % faster per command (steady speed)"
     if key == "gyroscopic.rotor_inertia":
         return f"rotor spin inertia {_pm(value, c, 1e7)} g cm² per rotor (gyroscopic torque)"
     if key.startswith("rate_damping."):

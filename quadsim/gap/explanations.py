@@ -216,6 +216,10 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             continue
         out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
                         replaces=(group,)))
+        if group == "motor_lag" and "speed_gain" in groups:
+            out[-1] = dataclasses.replace(out[-1], log_prior=-np.log(2.0))
+            out.append(_motor_change(reference, ref[keys[0]], spread[0],
+                                     np.hypot(s_ref[SPEED_GAIN_KEY], MOTOR_GAIN_SD)))
     # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
     # the position acts only through the mass, so the fit is coupled); the two variants
     # share the effect's prior
@@ -292,6 +296,36 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
                                                      sd=e.sd + (tight,), shift="rotor")
                for e in out]
     return out
+
+
+#: the motor-change reading's speed per command (:func:`_motor_change`)
+SPEED_GAIN_KEY = "speed_gain.gain"
+MOTOR_CHANGE = "another motor or ESC (its time constant and speed per command)"
+#: prior spread of that reading's change of the steady speed per command (fraction): a motor
+#: of another KV rating, or an ESC with another throttle range. KV ratings within one motor
+#: size are sold 1.5-2x apart (e.g. 1400-2700 KV for 22xx motors), and an ESC's throttle
+#: endpoints shift the speed per command by as much as they are recalibrated; a quarter is
+#: a change a swap makes likely, and half the parameter's range (:mod:`.speed_gain`)
+MOTOR_GAIN_SD = 0.25
+
+
+def _motor_change(reference: Reference, lag: float, lag_sd: float, gain_sd: float
+                  ) -> Explanation:
+    """Another motor or ESC (:data:`MOTOR_CHANGE`): the time constant and the steady speed
+    per command (:mod:`.speed_gain`) both of the flight's own, each centred on the
+    references'. A motor's time constant and its speed per volt come from the same
+    constants (its torque constant and winding resistance), so a changed motor moves both;
+    the plain ``motor_lag`` reading moves only the first. Half the reading's prior each.
+
+    Why: on PyFlyt, whose motor noise drifts the throttle up by a fixed amount per step, a
+    2.5x slower motor also spins 45 % faster per command. The plain lag reading ran to its
+    0.5 s bound, 2800 log units below a -3.6 % propeller, and the flight was ``unexplained``
+    (rotor 3 at 1.8x the references' RMS after that propeller)."""
+    ref = reference.values()
+    return _one("motor_lag", MOTOR_CHANGE, [("motor_lag", {}, ("time_constant",)),
+                                            ("speed_gain", {}, ("gain",))],
+                [lag, ref[SPEED_GAIN_KEY]], [lag_sd, gain_sd],
+                replaces=("motor_lag", "speed_gain"), log_prior=-np.log(2.0))
 
 
 #: the least spread of the speed-per-command exponent's prior (:func:`_alpha_prior`): at

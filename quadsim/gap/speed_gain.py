@@ -15,8 +15,11 @@ the speed per command) or ``battery_sag``. With a battery-voltage log the shared
 
 Physics: ``Omega_ss = (1 + gain) Omega_map(command)`` (:meth:`SpeedGain.speed_factor`,
 upstream of the measured speed like a battery: the thrust at a measured speed is unchanged).
-Typical size (fit step unit) 1 %; bounds +-20 % (a map off by more is refused by the motor
-map's own checks).
+Typical size (fit step unit) 1 %; bounds -50 % to +100 %: the references' own gain stays
+within a few per cent (a map off by more is refused by the motor map's own checks), but a
+flight's reading of another motor or ESC
+(:func:`quadsim.gap.explanations.explanations_for`, ``MOTOR_CHANGE``) takes the gain of its
+own, and on PyFlyt a 2.5x slower motor spins +45 % per command.
 
 Example::
 
@@ -38,7 +41,7 @@ class SpeedGain(EffectBase):
 
     name = "speed_gain"
     parameters = (
-        EffectParameter("gain", "1", 0.0, -0.2, 0.2,
+        EffectParameter("gain", "1", 0.0, -0.5, 1.0,
                         "relative change of the steady rotor speed per command"),
     )
 
