@@ -50,6 +50,7 @@ def test_every_effect_is_off_by_default():
         if loads is not None:
             np.testing.assert_array_equal(loads.thrust_scale, 1.0, err_msg=name)
             np.testing.assert_array_equal(loads.thrust_offset, 0.0, err_msg=name)
+            np.testing.assert_array_equal(loads.curve_offset, 0.0, err_msg=name)
             np.testing.assert_array_equal(loads.force_world, 0.0, err_msg=name)
             np.testing.assert_array_equal(loads.torque_body, 0.0, err_msg=name)
         wind = effect.air_velocity(np.zeros(1), np.zeros((1, 3)))
@@ -78,7 +79,24 @@ def test_motor_lag_rate_up_and_down():
 def test_thrust_curve_adds_linear_and_constant_thrust():
     curve = make_effect("thrust_curve", linear=-2e-4, offset=0.01)
     loads = curve.loads(context(speed=[400.0, 450.0, 500.0, 550.0]))
-    np.testing.assert_allclose(loads.thrust_offset, [[-0.07, -0.08, -0.09, -0.1]], atol=1e-15)
+    np.testing.assert_allclose(loads.curve_offset, [[-0.07, -0.08, -0.09, -0.1]], atol=1e-15)
+
+
+def test_a_propeller_change_scales_its_whole_thrust_curve():
+    """thrust_factor scales b Omega^2 and the curve's linear and constant terms alike (a
+    stand fit c0 + c1 a + c2 a^2 of a propeller giving 10 % less thrust has every coefficient
+    10 % lower); a translational lift, not part of the curve, is not scaled."""
+    from quadsim.effects.base import EffectSet
+    from quadsim.gap.residual import rotor_wrench
+
+    speed = np.array([[400.0, 450.0, 500.0, 550.0]])
+    curve = make_effect("thrust_curve", linear=-2e-4, offset=0.01)
+    both = EffectSet((curve, make_effect("thrust_factor", change=-0.1))).loads(
+        context(speed=speed[0]))
+    np.testing.assert_allclose(both.rotor_offset, 0.9 * (-2e-4 * speed + 0.01), rtol=1e-12)
+    force = rotor_wrench(PARAMS, both, speed)[0, 2]
+    expected = 0.9 * np.sum(PARAMS.thrust_factor * speed ** 2 - 2e-4 * speed + 0.01)
+    assert force == pytest.approx(expected, rel=1e-12)
 
 
 def test_thrust_mismatch_scales_named_rotor():
@@ -237,7 +255,7 @@ def test_loads_are_vectorised_over_the_batch():
     for b in range(batch):
         one = effects.loads(context(position=position[b], velocity=velocity[b], euler=euler[b],
                                     speed=speed[b], t=t[b]))
-        for name in ("thrust_scale", "thrust_offset", "force_world", "torque_body"):
+        for name in ("thrust_scale", "thrust_offset", "force_world", "torque_body", "curve_offset"):
             np.testing.assert_allclose(getattr(whole, name)[b], getattr(one, name)[0],
                                        rtol=1e-12, atol=1e-15)
 

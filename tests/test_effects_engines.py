@@ -138,3 +138,28 @@ def test_one_propellers_change_acts_on_its_own_rotors_speed():
     np.testing.assert_allclose(m.rotor_speed, a.rotor_speed, rtol=1e-6)
     with pytest.raises(InputError, match=r"thrust_mismatch: alpha = 0.9 .* \[0, 0.5\]"):
         effect_set_from_specs(["thrust_mismatch:rotor_2=-0.1,alpha=0.9"])
+
+
+def test_a_propeller_change_scales_the_thrust_curve_in_both_engines():
+    """thrust_factor scales a thrust curve's terms with b Omega^2 (EffectLoads.curve_offset)
+    in both engines alike: a curve with a 10 % weaker propeller flies as the vehicle whose b,
+    d and curve terms are all 10 % lower, not as the one whose curve kept its terms."""
+    import dataclasses
+
+    sets = [effect_set_from_specs(["thrust_curve:linear=-2e-4,offset=0.05",
+                                   "thrust_factor:change=-0.1"])]
+    t = np.arange(round(SHORT / PERIOD)) * PERIOD
+    series = HOVER * (1 + 0.01 * np.sin(2 * np.pi * 0.7 * t))[:, None] \
+        * np.array([1.0, 1.002, 1.0, 0.999])
+    m, a = _both(sets, series, SHORT)
+    position, angle = _errors(m, a)
+    assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
+    weaker = dataclasses.replace(PARAMS, thrust_factor=0.9 * PARAMS.thrust_factor,
+                                 drag_factor=0.9 * PARAMS.drag_factor)
+    run = lambda curve: engines.simulate(
+        weaker, engine="analytic", initial=_start(1), duration=SHORT, control_period=PERIOD,
+        rotor_speed_series=series, effects=[effect_set_from_specs([curve])])
+    scaled, kept = run("thrust_curve:linear=-1.8e-4,offset=0.045"), \
+        run("thrust_curve:linear=-2e-4,offset=0.05")
+    np.testing.assert_allclose(a.position, scaled.position, atol=1e-9)
+    assert np.abs(a.position - kept.position).max() > 2 * TOLERANCE_M

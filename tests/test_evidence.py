@@ -413,6 +413,29 @@ def test_another_motor_is_named_with_its_lag_and_its_speed_per_command(cf):
     assert "% faster per command" in entry["answer"]
 
 
+def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference):
+    """The generated references (quadratic rotors) share a thrust-curve slope about their
+    mean rotor speed, and determine it at 0 (within 3 of its spreads); a slope whose
+    spread is half its prior's or more is not shared (calibrate._curve_determined, the
+    rule a value is printed by)."""
+    from quadsim.gap.calibrate import _curve_determined
+    from quadsim.gap.priors import curve_slope_sd
+
+    names = list(reference.candidate.parameter_names)
+    k = names.index("thrust_curve.linear")
+    centre = next(f["centre"] for n, f, _ in reference.candidate.parts if n == "thrust_curve")
+    assert 0.9 * hover_speed(cf) < centre < 1.1 * hover_speed(cf)
+    from quadsim.gap.per_flight import reference_summary
+
+    assert reference_summary(reference)["fixed"] == {"thrust_curve.centre": centre}
+    assert abs(reference.theta[k]) < 3 * reference.s_ref[k]
+    assert _curve_determined(reference)
+    wide = reference.s_ref.copy()
+    wide[k] = 0.5 * curve_slope_sd(cf)
+    assert not _curve_determined(types.SimpleNamespace(
+        candidate=reference.candidate, s_ref=wide, identified={}, params=cf))
+
+
 def test_voltage_spread_averages_out_the_log_noise():
     """voltage_spread: quarter means, so white noise of 0.01 V on a steady 4.2 V is < 0.1 %,
     and a fall of 0.15 V over a flight is 0.15 * 3/4 / 4.125 of the mean."""

@@ -19,6 +19,7 @@ from quadsim.bench.l2f_source import (
     FlightSpec,
     _flight_job,
     _parameters_json,
+    l2f_flights,
     hover_command,
     l2f_available,
     vehicle_params,
@@ -221,3 +222,36 @@ def test_the_flightmare_vehicle_and_its_cases():
     assert [e.name for e in shared] == ["motor_lag", "body_drag", "thrust_factor",
                                         "thrust_curve"]
     assert shared[-1].offset == pytest.approx(c0)
+
+
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+def test_the_references_share_their_thrust_curves_slope():
+    """The fs vehicle's thrust curve (0.785 + 9.16 a + 18.0 a^2 N per rotor) has at hover
+    0.66 of the slope the quadratic model gives (2 T / Omega). Four nominal flights (4 s)
+    share the curve's slope about their mean rotor speed (quadsim.gap.calibrate.centred_curve):
+    the reference model's slope is the closed form dT/dOmega - 2 T / Omega there (5 %), and
+    its inertia no longer absorbs the torque error (within 5 % of the truth; +51 % with b
+    alone). A +0.5 kg flight is then named a mass, within 10 % (its lead was a thrust curve
+    before, at 0.60)."""
+    from quadsim.bench.l2f_source import thrust_of
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.per_flight import judge_one
+
+    params = vehicle_params(FS)
+    specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=4.0) for k in range(4)]
+    specs.append(FlightSpec(seed=80, speed=1.0, duration=4.0, effects={"mass": 0.5}))
+    flown = l2f_flights(specs, workers=1, vehicle="fs")
+    ref = calibrate(prepare([log for log, _ in flown[:4]], params), params)
+    centre = next(f["centre"] for n, f, _ in ref.candidate.parts if n == "thrust_curve")
+    w = FS["omega_max"]
+    a = centre / w
+    slope = (thrust_of(a + 1e-6, FS) - thrust_of(a - 1e-6, FS)) / (2e-6 * w)
+    values = ref.values()
+    assert values["thrust_curve.linear"] == pytest.approx(
+        slope - 2 * thrust_of(a, FS) / centre, rel=0.05)
+    for axis in ("xx", "yy"):
+        assert abs(values[f"inertia_error.{axis}"]) < 0.05
+    entry = judge_one(flown[4][0], ref)
+    assert entry["verdict"] == "mass_offset", entry["answer"]
+    assert entry["params"]["mass_offset.mass"] == pytest.approx(0.5, rel=0.1)

@@ -119,28 +119,49 @@ class EffectContext:
 class EffectLoads:
     """Contributions of effects at one instant (B simulations, R rotors).
 
-    thrust_scale (B, R): multiplies each rotor's thrust *and* drag torque (1 = nominal).
+    thrust_scale (B, R): multiplies each rotor's thrust *and* drag torque (1 = nominal), and
+    its curve offset.
     thrust_offset (B, R): added thrust along each rotor axis (N), no torque change.
     force_world (B, 3): external force at the CoM, world frame (N).
     torque_body (B, 3): external torque, body frame (N m).
+    curve_offset (B, R): thrust along each rotor axis (N) that belongs to the propeller's
+    thrust curve (a thrust curve's linear and constant terms): scaled by ``thrust_scale``
+    like ``b Omega^2``, since a propeller that gives (1 + e) times the thrust at every speed
+    scales its whole curve (a thrust stand's fit c0 + c1 a + c2 a^2 of another propeller
+    batch scales every coefficient). No torque change.
+
+    The thrust the rotors' offsets add along their axes is :attr:`rotor_offset`:
+    ``thrust_offset + thrust_scale * curve_offset``.
     """
 
     thrust_scale: np.ndarray
     thrust_offset: np.ndarray
     force_world: np.ndarray
     torque_body: np.ndarray
+    curve_offset: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.curve_offset is None:
+            self.curve_offset = np.zeros_like(self.thrust_offset)
 
     @classmethod
     def neutral(cls, batch: int, rotors: int) -> EffectLoads:
         return cls(np.ones((batch, rotors)), np.zeros((batch, rotors)),
-                   np.zeros((batch, 3)), np.zeros((batch, 3)))
+                   np.zeros((batch, 3)), np.zeros((batch, 3)), np.zeros((batch, rotors)))
 
     def add(self, other: EffectLoads) -> EffectLoads:
         """Combine: scales multiply, offsets and external loads add."""
         return EffectLoads(self.thrust_scale * other.thrust_scale,
                            self.thrust_offset + other.thrust_offset,
                            self.force_world + other.force_world,
-                           self.torque_body + other.torque_body)
+                           self.torque_body + other.torque_body,
+                           self.curve_offset + other.curve_offset)
+
+    @property
+    def rotor_offset(self) -> np.ndarray:
+        """Thrust (B, R) the offsets add along each rotor axis (N): the thrust offset and the
+        curve offset scaled with the rotor's thrust."""
+        return self.thrust_offset + self.thrust_scale * self.curve_offset
 
 
 @runtime_checkable

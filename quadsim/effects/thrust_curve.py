@@ -2,7 +2,7 @@
 
 Formula (per rotor, speed Omega in rad/s)::
 
-    T(Omega) = b Omega^2 + linear * Omega + offset          (N, along the rotor axis)
+    T(Omega) = b Omega^2 + linear * (Omega - centre) + offset      (N, along the rotor axis)
 
 The nominal model keeps only ``b Omega^2`` (momentum theory with a constant thrust
 coefficient, e.g. Bouabdallah, "Design and control of quadrotors", EPFL thesis 2007, eq. 2.4).
@@ -10,7 +10,9 @@ Bench sweeps show a linear term: thrust-stand fits of the form T = k2 Omega^2 + 
 (e.g. the 2015 report's force-lift data, and Crazyflie identification by Förster, "System
 identification of the Crazyflie 2.0 nano quadrocopter", ETH 2015, table 3.3, which fits a
 quadratic with linear and constant terms). The extra terms enter as a thrust offset along
-each rotor axis, acting at the hub; the drag torque is left at ``d Omega^2``.
+each rotor axis, acting at the hub; the drag torque is left at ``d Omega^2``. They are part
+of the propeller's curve (``EffectLoads.curve_offset``): a propeller change that scales the
+thrust (``thrust_factor``, ``thrust_mismatch``) scales them with ``b Omega^2``.
 
 Example: ``make_effect("thrust_curve", linear=-2e-4)`` for the 0.84 kg testbed lowers the
 thrust at 460 rad/s (hover) by 0.092 N per rotor (about 4.5 % of the hover thrust).
@@ -30,17 +32,22 @@ class ThrustCurve(EffectBase):
 
     name = "thrust_curve"
     parameters = (
-        EffectParameter("linear", "N s/rad", 0.0, -1e-2, 1e-2,
+        EffectParameter("linear", "N s/rad", 0.0, -1.0, 1.0,
                         "thrust per rotor speed, added to b Omega^2"),
         # up to 5 N either way: a stand fit's constant term is a fraction of a rotor's
         # thrust, and rotors run from 0.1 N (Crazyflie) to 20 N (multirotor's 5.5 kg frame);
         # Flightmare's curve (l2f flightmare.h) has -1.77 N
         EffectParameter("offset", "N", 0.0, -5.0, 5.0, "constant thrust per rotor"),
+        # a slope about a speed: the thrust there is b centre^2 + offset whatever the slope
+        # (the gap's reference model shares it about its flights' mean rotor speed, where b
+        # alone then fixes the hover thrust: quadsim.gap.calibrate)
+        EffectParameter("centre", "rad/s", 0.0, 0.0, 1e5,
+                        "rotor speed about which the linear term acts (0: about zero speed)"),
     )
 
     def loads(self, ctx):
         speed = np.asarray(ctx.rotor_speed, dtype=float)
         batch, rotors = speed.shape
         loads = EffectLoads.neutral(batch, rotors)
-        loads.thrust_offset = self.linear * speed + self.offset
+        loads.curve_offset = self.linear * (speed - self.centre) + self.offset
         return loads

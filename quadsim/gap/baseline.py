@@ -20,7 +20,7 @@ class NominalRefit(EffectBase):
 
     name = "nominal_refit"
     parameters = (
-        EffectParameter("thrust", "1", 0.0, -0.5, 0.5, "relative change of b"),
+        EffectParameter("thrust", "1", 0.0, -0.9, 3.0, "relative change of b"),
         EffectParameter("drag", "1", 0.0, -0.9, 3.0, "relative change of d"),
     )
 

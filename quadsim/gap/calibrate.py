@@ -101,7 +101,7 @@ from .fitting import (
 )
 from .moderated import moderated_spread
 from .motor_map import load_exponent
-from .priors import WIND_SD_MS
+from .priors import DETERMINED, WIND_SD_MS, curve_slope_sd
 from .reference import (  # re-exported: the calibration's public names
     FD_STEP,
     Reference,
@@ -119,6 +119,7 @@ __all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
+          ("thrust_curve", ("linear",)),
           ("rotor_drag", ("coefficient",)),
           ("inertia_error", ("xx", "yy", "zz")),
           ("rate_damping", ("x", "y", "z")),
@@ -187,6 +188,26 @@ def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
     cand = shared_candidate(rotor, vbat)
     extra = (BODY_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
     return Candidate(cand.name, cand.parts + extra, cand.base)
+
+
+def centred_curve(cand: Candidate, states) -> Candidate:
+    """``cand`` with the shared thrust curve's slope taken about the flights' mean rotor
+    speed (``thrust_curve.centre``, rad/s): the slope then moves the thrust only away from
+    the references' hover, and b alone sets it there.
+
+    Why: the references fit b and a linear term ``l Omega`` together; over their narrow
+    band of rotor speeds the two are nearly collinear. About zero speed, PyFlyt's references
+    (a purely quadratic rotor) read b +29 ± 14 % and l -26 ± 14 % of the hover thrust per
+    rad/s, and each shared parameter is marginalised with its own spread: the hover thrust
+    could move 14 %, and two masses and a propeller change were "no difference" (PyFlyt
+    95 -> 74 %)."""
+    speeds = [np.mean(s.rotor_speed) for s in states if s.rotor_speed is not None]
+    if not speeds:
+        return cand
+    centre = float(np.mean(speeds))
+    parts = tuple((name, {**fixed, "centre": centre} if name == "thrust_curve" else fixed,
+                   fitted) for name, fixed, fitted in cand.parts)
+    return Candidate(cand.name, parts, cand.base)
 
 
 def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
@@ -354,7 +375,44 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
 
 def calibrate(flights, params: VehicleParams) -> Reference:
     """The reference model from prepared reference flights (:class:`quadsim.gap.diagnose.Flight`
-    or their ``fit`` states); see the module doc. Raises InputError for fewer than two."""
+    or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
+
+    The thrust curve's slope (:func:`centred_curve`) is shared only where the references
+    determine it (:func:`_curve_determined`: its spread below half its prior's, the rule a
+    flight's own values are printed by); else the model is
+    calibrated again without it. Why: the sensor pipeline's low-passed rotor telemetry left
+    the slope at -40 ± 34 % of the hover thrust per rad/s, its per-flight values moved b
+    with it, and at a +20 % mass's place b's trend widened to 10 %: "no difference"."""
+    ref = _calibrate(flights, params, curve=True)
+    if ref is None or not _curve_determined(ref):
+        ref = _calibrate(flights, params, curve=False)
+    return ref
+
+
+def _curve_determined(ref: Reference) -> bool:
+    """Whether the references determine their shared thrust-curve slope: identified, and
+    its spread ``s_ref`` below :data:`quadsim.gap.priors.DETERMINED` times its prior's
+    (:func:`quadsim.gap.priors.curve_slope_sd`)."""
+    names = list(ref.candidate.parameter_names)
+    if CURVE_KEY not in names:
+        return True
+    return _slope_kept(ref.s_ref[names.index(CURVE_KEY)], ref.identified.get(CURVE_KEY, True),
+                       ref.params)
+
+
+def _slope_kept(spread: float, identified: bool, params: VehicleParams) -> bool:
+    return bool(identified and spread < DETERMINED * curve_slope_sd(params))
+
+
+#: the shared thrust curve's slope (:func:`centred_curve`)
+CURVE_KEY = "thrust_curve.linear"
+
+
+def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
+    """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
+    soon as the pooled fit's own spread of a shared slope shows it undetermined (the
+    between-flight scatter only widens it: the real Crazyflie references are calibrated
+    a second time, and this saves the first one's scatter and envelope)."""
     if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     estimates = [f.delays_ms["rotor"] for f in flights
@@ -373,12 +431,18 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     vbat_ref, vbat_spread = voltage_spread(states) if logged else (None, 0.0)
     vbat = logged and vbat_spread >= VBAT_TESTED
     cand = per_flight_candidate(rotor, vbat)
+    cand = centred_curve(cand, states) if curve else Candidate(
+        cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta, start,
                                               sigma0)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
+    if curve and CURVE_KEY in cand.parameter_names:
+        j = cand.parameter_names.index(CURVE_KEY)
+        if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
+            return None
     states = [aligned(f, shift) for f in flights]
     per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                   for s in states]

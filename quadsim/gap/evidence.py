@@ -64,7 +64,7 @@ from .explanations import (  # re-exported: the evidence's public names
     marginal_sd,
     reference_determined,
 )
-from .fitting import _arm, effect_class, residuals
+from .fitting import _arm, curve_bound, effect_class, residuals
 from .memo import _memo
 from .reference import rotor_spectra
 from .rotor_channel import min_time_constant
@@ -138,6 +138,9 @@ def _bounds(expl: Explanation, reference: Reference, dt: float):
             if name == "com_offset":
                 arm = _arm(reference.params)
                 lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
+            if name == "thrust_curve" and p == "linear":
+                bound = curve_bound(reference.params)
+                lo, hi = max(lo, -bound), min(hi, bound)
             lower.append(lo)
             upper.append(hi)
     if expl.shift:

@@ -38,17 +38,20 @@ import numpy as np
 
 from ..effects import make_effect
 from ..effects.battery_sag import nominal_voltage
-from ..vehicle.params import hover_speed
 from . import cable
 from .calibrate import SHARED, Reference
 from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale
-from .priors import WIND_SD_MS, momentum_rate_damping, momentum_translational_lift
+from .priors import (
+    DETERMINED,
+    WIND_SD_MS,
+    curve_slope_sd,
+    momentum_rate_damping,
+    momentum_translational_lift,
+)
 
 __all__ = ["Explanation", "explanations_for", "marginal_sd", "reference_determined",
            "reference_delay_sd", "DETERMINED", "DELAY_SD_S", "VBAT_SD", "DRAGS"]
 
-#: a parameter is determined when its posterior spread is below this fraction of its prior's.
-DETERMINED = 0.5
 #: prior spread of a full battery voltage (fraction of the pack's voltage): its charge
 #: state, +-10 % (``battery_sag.full_voltage`` in :func:`_prior_sd`, and a flight's V_full
 #: against the references' mean voltage)
@@ -119,7 +122,6 @@ def _range_sd(lower: float, upper: float) -> float:
 def _prior_sd(params) -> dict:
     """Prior spread per parameter (module doc); vehicle-scaled where the range is."""
     arm, mass = _arm(params), params.mass
-    hover_thrust = params.thrust_factor * hover_speed(params)   # N per rad/s at hover
     return {
         "mass_offset.mass": _range_sd(-0.05, 0.6) * mass,      # priors: payload to 60 %
         # a payload fixed anywhere within the rotors' span
@@ -129,7 +131,7 @@ def _prior_sd(params) -> dict:
         "thrust_factor.change": _range_sd(-0.15, 0.05),
         # DC-motor efficiency 0.6-0.9 (module doc)
         "thrust_factor.alpha": 0.1,
-        "thrust_curve.linear": _range_sd(-0.2, 0.2) * hover_thrust,
+        "thrust_curve.linear": curve_slope_sd(params),
         "battery_sag.rate": _range_sd(0.0, 0.005),
         # a battery's full voltage: +-10 % (charge state) of the vehicle's pack
         "battery_sag.full_voltage": VBAT_SD * nominal_voltage(params),
@@ -206,7 +208,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     out = [_one("no_difference", "", (), (), ())]
     groups = {name for name, _, _ in reference.candidate.parts}
     for group, fitted in SHARED:          # a shared group at a value of its own
-        if group == "nominal_refit" or group not in groups:
+        if group in ("nominal_refit", "thrust_curve") or group not in groups:
             continue
         keys = [f"{group}.{p}" for p in fitted]
         s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
@@ -214,8 +216,9 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         if group == "wind":
             out.extend(_wind_readings(reference, [ref[k] for k in keys], spread))
             continue
-        out.append(_one(group, "", [(group, {}, fitted)], [ref[k] for k in keys], spread,
-                        replaces=(group,)))
+        fixed = next(f for name, f, _ in reference.candidate.parts if name == group)
+        out.append(_one(group, "", [(group, dict(fixed), fitted)], [ref[k] for k in keys],
+                        spread, replaces=(group,)))
         if group == "motor_lag" and "speed_gain" in groups:
             out[-1] = dataclasses.replace(out[-1], log_prior=-np.log(2.0))
             out.append(_motor_change(reference, ref[keys[0]], spread[0],

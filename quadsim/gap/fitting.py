@@ -23,7 +23,7 @@ from ..core.errors import ModelError
 from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectParameter
 from ..effects.canted_rotor import CantedRotor
-from ..vehicle.params import VehicleParams
+from ..vehicle.params import VehicleParams, hover_speed
 from .memo import _memo, _rotor_key, _wrench_key, flight_memo
 from .priors import momentum_translational_lift
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
@@ -241,6 +241,14 @@ def _typical(candidate: Candidate, params: VehicleParams) -> np.ndarray:
     return np.asarray(scales, dtype=float)
 
 
+def curve_bound(params: VehicleParams) -> float:
+    """The largest thrust-curve slope a fit takes (N s/rad): the hover thrust per rad/s of
+    hover speed, ``b Omega_h``, a linear term carrying the whole hover thrust (fs's stand
+    curve, 0.785 + 9.16 a + 18.0 a^2 N, needs 0.81 of it about its hover speed; the effect's
+    own range is +-1 N s/rad, for any vehicle)."""
+    return params.thrust_factor * hover_speed(params)
+
+
 def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
     lower, upper = [], []
     for name, _, fitted in candidate.parts:
@@ -251,6 +259,8 @@ def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np
                 lo, hi = max(lo, -0.5 * params.mass), min(hi, 2.0 * params.mass)
             if name == "com_offset":
                 lo, hi = max(lo, -0.5 * _arm(params)), min(hi, 0.5 * _arm(params))
+            if name == "thrust_curve" and p == "linear":
+                lo, hi = max(lo, -curve_bound(params)), min(hi, curve_bound(params))
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)

@@ -88,8 +88,9 @@ VFULL_PRIOR_SD = 0.42
 LAG_PRIOR_SD = 0.03
 
 #: groups of the nominal reference: SHARED less motor_lag (time constant 0 is "off" but the
-#: Jacobian's forward step would integrate a 0.03 ms lag with 2.5 ms steps) and the battery.
-_NOT_SHARED = {"motor_lag", "battery_sag"}
+#: Jacobian's forward step would integrate a 0.03 ms lag with 2.5 ms steps), the battery and
+#: the thrust curve (the parameter set's b is the hover thrust there; a curve is a reading).
+_NOT_SHARED = {"motor_lag", "battery_sag", "thrust_curve"}
 
 
 def slow_part(residual: np.ndarray, dt: float, window_s: float = NOISE_WINDOW_S) -> np.ndarray:

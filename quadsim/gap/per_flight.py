@@ -102,7 +102,8 @@ def reference_summary(ref: Reference) -> dict:
     envelope (:func:`quadsim.gap.envelope.envelope_summary`); their drag as a quadratic
     airframe drag's C_d A (m^2, :func:`quadsim.gap.calibrate.quadratic_equivalent`); the
     speed-per-command exponent their map implies for a propeller change
-    (:func:`quadsim.gap.motor_map.load_exponent`)."""
+    (:func:`quadsim.gap.motor_map.load_exponent`); the shared effects' fixed values (the
+    thrust curve's centre, rad/s)."""
     from .judge import channel_names
 
     names = channel_names(ref)
@@ -120,6 +121,8 @@ def reference_summary(ref: Reference) -> dict:
             "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
             "quadratic_drag_m2": float(ref.quadratic_drag),
             "quadratic_drag_axes_m2": float(ref.quadratic_drag_axes),
+            "fixed": {f"{name}.{k}": float(v) for name, fixed, _ in ref.candidate.parts
+                      for k, v in fixed.items()},
             "load_exponent": None if ref.load_exponent is None else
             {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]}}
 

@@ -151,6 +151,21 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
     return float(score), bool(score <= 1.0), text
 
 
+#: a parameter is determined when its posterior spread is below this fraction of its prior's
+#: (the rule a value is printed by, and a shared thrust-curve slope kept by)
+DETERMINED = 0.5
+
+
+def curve_slope_sd(params: VehicleParams) -> float:
+    """Prior spread (N s/rad) of a thrust curve's linear term: half the plausible range of
+    :data:`PRIORS` ``thrust_curve.linear`` (a fraction of the hover thrust per rad/s), in
+    SI for ``params``."""
+    from ..vehicle.params import hover_speed
+
+    lower, upper = PRIORS["thrust_curve.linear"][:2]
+    return 0.5 * max(abs(lower), abs(upper)) * params.thrust_factor * hover_speed(params)
+
+
 def momentum_rate_damping(params: VehicleParams) -> float:
     """k_mt = r^2 T_h / v_i (N m s/rad): roll/pitch damping of the rotor discs' inflow change
     by momentum theory (r the largest hub distance from the centre, m; T_h = m g / R the hover

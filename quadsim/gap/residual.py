@@ -258,12 +258,12 @@ def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray,
                  matrices: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Body-frame wrench (N, 6) of the rotors alone: force (N) and torque about the CoM (N m)
     of speeds ``speed`` (N, R) rad/s with the effects' per-rotor ``loads.thrust_scale`` and
-    ``loads.thrust_offset`` (a thrust offset o_i acts along axis a_i at hub r_i: force
+    ``loads.rotor_offset`` (a thrust offset o_i acts along axis a_i at hub r_i: force
     o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included.
     ``matrices``: :func:`rotor_matrices` of ``vehicle`` when the caller keeps them."""
     allocation_t, offset_wrench = rotor_matrices(vehicle) if matrices is None else matrices
     wrench = (np.square(speed) * loads.thrust_scale) @ allocation_t
-    return wrench + loads.thrust_offset @ offset_wrench
+    return wrench + loads.rotor_offset @ offset_wrench
 
 
 def rotor_matrices(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray]:

@@ -153,7 +153,7 @@ def _solve_rotors(vehicle, loads, thrust, torque, speed):
     alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]                       # (4, R)
     axes = vehicle.rotor_axes
     offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
-    offsets = loads.thrust_offset @ offset_map[:, [2, 3, 4, 5]]           # (N, 4)
+    offsets = loads.rotor_offset @ offset_map[:, [2, 3, 4, 5]]            # (N, 4)
     rhs = np.concatenate([thrust[:, None], torque], 1) - offsets
     matrix = alloc[None] * loads.thrust_scale[:, None, :]                # (N, 4, R)
     omega2 = np.einsum("nij,nj->ni", np.linalg.pinv(matrix), rhs)
@@ -179,7 +179,8 @@ def _speed_dependent(effect_set, ctx) -> bool:
                                        ctx.body_rate, ctx.air_velocity, ctx.rotor_speed * 1.01,
                                        ctx.rotor_accel, ctx.params, ctx.vbat))
     return not all(np.array_equal(getattr(a, k), getattr(b, k)) for k in
-                   ("thrust_scale", "thrust_offset", "force_world", "torque_body"))
+                   ("thrust_scale", "thrust_offset", "force_world", "torque_body",
+                    "curve_offset"))
 
 
 def _newton_rotors(vehicle, effect_set, ctx, loads, thrust, inertial_torque, speed, hover,
@@ -218,7 +219,7 @@ def _march_rotors(vehicle, loads, thrust, torque, sens, accel_used, speed, dt):
     alloc = allocation_matrix(vehicle)[[2, 3, 4, 5]]
     axes = vehicle.rotor_axes
     offset_map = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
-    rhs = (np.concatenate([thrust[:, None], torque], 1) - loads.thrust_offset @ offset_map[:, 2:])
+    rhs = (np.concatenate([thrust[:, None], torque], 1) - loads.rotor_offset @ offset_map[:, 2:])
     # torque here already subtracted the probed term at accel_used; put it back as unknown.
     rhs[:, 1:] += np.einsum("nir,nr->ni", sens, accel_used)
     out = speed.copy()

@@ -222,7 +222,8 @@ class BatchEffects:
         for effect_set, idx, _, ctx in self._contexts(
                 t, position, velocity, quat, body_rate, rotor_speed, rotor_accel, effect_state):
             part = effect_set.loads(ctx)
-            for name in ("thrust_scale", "thrust_offset", "force_world", "torque_body"):
+            for name in ("thrust_scale", "thrust_offset", "force_world", "torque_body",
+                         "curve_offset"):
                 getattr(total, name)[idx] = getattr(part, name)
         return total
 
@@ -232,12 +233,13 @@ def extra_wrench(body: BodyArrays, loads: EffectLoads, rotor_speed: np.ndarray, 
     """Body-frame force and torque about the CoM that the effects add to the nominal rotors.
 
     A thrust scale s multiplies a rotor's thrust and drag torque (extra: (s - 1) times the
-    nominal); a thrust offset o adds o along the rotor axis at the hub (moment arm, no drag
-    torque). ``loads.torque_body`` is added; ``loads.force_world`` is not (it is world-frame).
+    nominal); a thrust offset o (and a curve offset, times s: ``loads.rotor_offset``) adds o
+    along the rotor axis at the hub (moment arm, no drag torque). ``loads.torque_body`` is
+    added; ``loads.force_world`` is not (it is world-frame).
     With ``include_scale=False`` the scale part is left out (the MuJoCo runner applies it
     through the actuator controls instead)."""
     omega2 = np.square(rotor_speed)
-    thrust = loads.thrust_offset.copy()
+    thrust = loads.rotor_offset.copy()
     drag = np.zeros_like(omega2)
     if include_scale:
         thrust += (loads.thrust_scale - 1.0) * body.thrust_factor[:, None] * omega2
