@@ -155,11 +155,20 @@ class VehicleCases:
         out = [make_effect("motor_lag", time_constant=m["tau"] * slow),
                make_effect("body_drag", cd_area=cd[0], cd_area_vertical=cd[2])]
         if m["c0"] != 0.0 or m["c1"] != 0.0:
-            w = m["omega_max"]
-            out += [make_effect("thrust_factor", change=m["c2"] / (stand_b(m) * w * w) - 1,
-                                alpha=0.0),
-                    make_effect("thrust_curve", linear=m["c1"] / w, offset=m["c0"])]
+            factor = self.curve_factor()
+            out += [make_effect("thrust_factor", change=factor - 1, alpha=0.0),
+                    make_effect("thrust_curve", linear=m["c1"] / m["omega_max"] / factor,
+                                offset=m["c0"] / factor)]
         return out
+
+    def curve_factor(self) -> float:
+        """c2 / (b omega_max^2): the propeller factor of :meth:`shared_effects`, 1 for a
+        purely quadratic rotor. A propeller factor scales the whole curve
+        (``EffectLoads.curve_offset``), so the curve's terms are stated divided by it."""
+        m = self.vehicle
+        if m["c0"] == 0.0 and m["c1"] == 0.0:
+            return 1.0
+        return m["c2"] / (stand_b(m) * m["omega_max"] ** 2)
 
     def library_truth(self, case: dict) -> list:
         """Library effects with the true difference of ``case`` from the references, on top
@@ -171,7 +180,8 @@ class VehicleCases:
             return []
         # [] for motor_slow: the shared rotor lag scaled; alpha 0 (module doc)
         return shared + sim_cases.library_difference(
-            e, linear_per_speed=1.0 / self.vehicle["omega_max"], rate_damping=True)
+            e, linear_per_speed=1.0 / (self.vehicle["omega_max"] * self.curve_factor()),
+            rate_damping=True)
 
     def oracle_reductions(self, logs: list, references: list,
                           cases: list[dict]) -> list[tuple[float, float]]:
