@@ -69,7 +69,9 @@ Holybro X500, single-precision RK4, first-order rotors; a PID cascade of this pr
 against 8 nominal l2f flights; ``--source l2f-fs`` (:mod:`quadsim.bench.l2f_fs_cases`) the same
 table for l2f's fs vehicle (3.35 kg, a thrust curve with constant and linear terms);
 ``--source l2f-flightmare`` (:mod:`quadsim.bench.l2f_flightmare_cases`) for its flightmare
-vehicle (0.73 kg, a thrust curve with a negative constant and a linear term).
+vehicle (0.73 kg, a thrust curve with a negative constant and a linear term);
+``--source l2f-mrs`` (:mod:`quadsim.bench.l2f_mrs_cases`) for its mrs vehicle (1.7 kg on
+the flightmare vehicle's rotors, 40 ms).
 """
 
 from __future__ import annotations
@@ -541,6 +543,8 @@ SIM_SOURCES = {
                L2F_HINT),
     "l2f-flightmare": ("quadsim.bench.l2f_flightmare_cases", "quadsim.bench.l2f_source",
                        "l2f_available", L2F_HINT),
+    "l2f-mrs": ("quadsim.bench.l2f_mrs_cases", "quadsim.bench.l2f_source", "l2f_available",
+                L2F_HINT),
 }
 
 
@@ -553,9 +557,9 @@ def _cpu_seconds() -> float:
 
 
 def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -> int:
-    """``--independent --source crazyflow|pyflyt|multirotor|l2f|l2f-fs|l2f-flightmare``: make
-    (or reuse) the cached flights; with ``generate_only`` stop there (no verdict is
-    computed); else the one blind per-flight run."""
+    """``--independent --source NAME`` (:data:`SIM_SOURCES`): make (or reuse) the cached
+    flights; with ``generate_only`` stop there (no verdict is computed); else the one blind
+    per-flight run."""
     import importlib
 
     from quadsim.bench import sim_cases
@@ -631,7 +635,8 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, l2f and its vehicles l2f-fs, "
-                             "l2f-flightmare: per-flight cases against 8 nominal flights of "
+                             "l2f-flightmare, l2f-mrs: per-flight cases against 8 nominal "
+                             "flights of "
                              "that simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",
                         help="with a --source other than rotorpy+pipeline: only fly and "

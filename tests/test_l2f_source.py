@@ -221,7 +221,40 @@ def test_the_flightmare_vehicle_and_its_cases():
     shared = FLIGHTMARE_CASES.shared_effects()
     assert [e.name for e in shared] == ["motor_lag", "body_drag", "thrust_factor",
                                         "thrust_curve"]
-    assert shared[-1].offset == pytest.approx(c0)
+    # a propeller factor scales the whole curve: its terms are stated divided by it
+    factor = FLIGHTMARE_CASES.curve_factor()
+    assert shared[2].change == pytest.approx(factor - 1)
+    assert shared[-1].offset * factor == pytest.approx(c0)
+
+
+def test_the_mrs_vehicle_and_its_cases():
+    """l2f's mrs vehicle (1.7 kg on the flightmare vehicle's rotors; its rotor state in rad/s
+    up to 2000, so -1.769 + 7.672 a + 5.319 a^2 N at a = Omega / 2000): hover at the
+    polynomial's root a = 0.558; 30 frozen cases at its scale (masses +5..+20 % of 1.7 kg)
+    with its own seeds; its truth's propeller factor (0.45: the stand's b is 2.2x c2) built
+    beyond a reading's plausible range, the curve's terms divided by it."""
+    from quadsim.bench.l2f_cases import MRS_CASES
+    from quadsim.bench.l2f_mrs_cases import SOURCE, case_list
+    from quadsim.bench.l2f_source import MRS
+
+    c0, c1, c2 = MRS["c0"], MRS["c1"], MRS["c2"]
+    assert (c1, c2) == pytest.approx((7.672162, 5.319301), rel=1e-6)
+    a = hover_command(vehicle=MRS)
+    assert a == pytest.approx((-c1 + np.sqrt(c1 ** 2 + 4 * c2 * (1.7 * 9.81 / 4 - c0)))
+                              / (2 * c2), rel=1e-12)
+    assert a == pytest.approx(0.5581, abs=1e-4)
+    p = vehicle_params(MRS)
+    assert p.mass == 1.7 and p.max_speed == 2000.0
+    cases = case_list()
+    assert len(cases) == 30 and SOURCE.name == "l2f-mrs"
+    assert {c["vehicle"] for c in cases} == {"l2f-mrs"} and cases[0]["seed"] == 84_000
+    masses = [c["effects"]["mass"] for c in cases if c["case"] == "mass_offset"]
+    assert masses and all(0.05 * 1.7 <= m <= 0.2 * 1.7 for m in masses)
+    shared = MRS_CASES.shared_effects()
+    factor = MRS_CASES.curve_factor()
+    assert factor == pytest.approx(0.4511, abs=1e-3)
+    assert shared[2].change == pytest.approx(factor - 1)
+    assert shared[-1].linear * factor == pytest.approx(c1 / 2000.0)
 
 
 @pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")

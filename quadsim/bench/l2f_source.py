@@ -136,9 +136,26 @@ FLIGHTMARE = {"name": "l2f-flightmare", "header": "flightmare.h", "mass": 0.73,
               "omega_source": "l2f 2.0.18 flightmare.h: its thrust curve normalised at "
                               "3000 rad/s (rad/s)",
               "radius_source": "chosen: 5-inch propellers (m)"}
+#: l2f's "mrs" vehicle (``parameters/dynamics/mrs.h``: a quadrotor of the MRS UAV system, CTU
+#: Prague): 1.7 kg on the flightmare vehicle's rotors, arms and J (0.17 m diagonals,
+#: Flightmare's 1.33e-6 w^2 + 3.84e-3 w - 1.769 N per rotor, k_Q 0.016 m), 40 ms rotors; its
+#: rotor state is in rad/s up to 2000 (l2f's action limit), so a = w / 2000 here: -1.769 +
+#: 7.672 a + 5.319 a^2 N, hover at a = 0.558 (slope 0.91x the quadratic model's 2 T / Omega).
+#: The propeller radius (10 inch) and the body drag (a 1.7 kg frame) are this module's choice.
+MRS = {"name": "l2f-mrs", "header": "mrs.h", "mass": 1.7,
+       "rotor_xy": FLIGHTMARE["rotor_xy"], "torque_dir": (-1.0, -1.0, 1.0, 1.0),
+       "c0": -1.7689986848125325, "c1": 0.0038360810526746032 * 2000.0,
+       "c2": 0.0000013298253500372891 * 2000.0 ** 2, "k_torque": 0.016, "tau": 0.04,
+       "inertia": (0.007911375, 0.007911375, 0.012306583333333334), "gravity": 9.81,
+       "rho": 1.225, "cd_area": (0.015, 0.015, 0.04), "rotor_radius": 0.127,
+       "omega_max": 2000.0,
+       "description": "l2f's mrs vehicle (1.7 kg, thrust -1.77 + 7.67 a + 5.32 a^2 N) as "
+                      "quadsim sees it",
+       "omega_source": "l2f 2.0.18 mrs.h: its action limit, 2000 rad/s",
+       "radius_source": "chosen: 10-inch propellers (m)"}
 #: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs,
-#: ``--source l2f-flightmare`` the flightmare vehicle)
-VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE}
+#: ``--source l2f-flightmare`` the flightmare, ``--source l2f-mrs`` the mrs vehicle)
+VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE, "mrs": MRS}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its thrust
