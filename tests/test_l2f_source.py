@@ -191,70 +191,63 @@ def test_the_fs_cases_are_drawn_at_its_scale():
     assert names == ["motor_lag", "body_drag", "thrust_factor", "thrust_curve"]
 
 
-def test_the_flightmare_vehicle_and_its_cases():
-    """l2f's flightmare vehicle (thrust -1.769 + 11.508 a + 11.968 a^2 N per rotor): the
-    hover state is the polynomial's root (a = 0.2462: four rotors carry 0.73 kg); zero
-    thrust is commanded at the curve's own root (a = 0.1348), never below it (no negative
-    thrust asked for); its 30 frozen cases are the X500's table at its scale (masses
-    +5..+20 % of 0.73 kg), its own seeds, the truth's shared physics with the thrust curve
-    (its -1.769 N constant inside the library's range)."""
-    from quadsim.bench.l2f_source import FLIGHTMARE, command_for, thrust_of
+def _curved_vehicle(vehicle: dict, hover: float, max_speed: float, module: str, seed0: int):
+    """A curved-rotor vehicle's common checks: the hover state is the polynomial's root
+    c0 + c1 a + c2 a^2 = m g / 4 (``hover``, 1e-4), its parameter set's mass and full speed,
+    its 30 frozen cases at its scale (masses +5..+20 %) with its own seeds, and its truth's
+    shared physics: the rotor lag, the body drag, the propeller factor c2 / (b w^2) and the
+    curve's terms divided by that factor (a propeller factor scales the whole curve).
+    Returns the truth's shared effects and the factor."""
+    import importlib
 
-    c0, c1, c2 = FLIGHTMARE["c0"], FLIGHTMARE["c1"], FLIGHTMARE["c2"]
-    a = hover_command(vehicle=FLIGHTMARE)
-    assert a == pytest.approx((-c1 + np.sqrt(c1 ** 2 + 4 * c2 * (0.73 * 9.81 / 4 - c0)))
+    from quadsim.bench import l2f_cases
+
+    c0, c1, c2, m = vehicle["c0"], vehicle["c1"], vehicle["c2"], vehicle["mass"]
+    a = hover_command(vehicle=vehicle)
+    assert a == pytest.approx((-c1 + np.sqrt(c1 ** 2 + 4 * c2 * (m * 9.81 / 4 - c0)))
                               / (2 * c2), rel=1e-12)
-    assert a == pytest.approx(0.2462, abs=1e-4)
-    assert command_for(0.0, FLIGHTMARE) == pytest.approx(0.1348, abs=1e-4)
-    assert thrust_of(command_for(0.0, FLIGHTMARE), FLIGHTMARE) == pytest.approx(0.0, abs=1e-12)
-    p = vehicle_params(FLIGHTMARE)
-    assert p.mass == 0.73 and p.max_speed == 3000.0
-    from quadsim.bench.l2f_flightmare_cases import SOURCE, case_list
-
-    cases = case_list()
-    assert len(cases) == 30 and SOURCE.name == "l2f-flightmare"
-    assert {c["vehicle"] for c in cases} == {"l2f-flightmare"} and cases[0]["seed"] == 82_000
+    assert a == pytest.approx(hover, abs=1e-4)
+    p = vehicle_params(vehicle)
+    assert p.mass == m and p.max_speed == max_speed
+    mod = importlib.import_module(f"quadsim.bench.{module}")
+    cases = mod.case_list()
+    assert len(cases) == 30 and mod.SOURCE.name == vehicle["name"]
+    assert {c["vehicle"] for c in cases} == {vehicle["name"]} and cases[0]["seed"] == seed0
     masses = [c["effects"]["mass"] for c in cases if c["case"] == "mass_offset"]
-    assert masses and all(0.05 * 0.73 <= m <= 0.2 * 0.73 for m in masses)
-    from quadsim.bench.l2f_cases import FLIGHTMARE_CASES
-
-    shared = FLIGHTMARE_CASES.shared_effects()
+    assert masses and all(0.05 * m <= x <= 0.2 * m for x in masses)
+    table = next(v for v in vars(l2f_cases).values()
+                 if isinstance(v, l2f_cases.VehicleCases) and v.vehicle is vehicle)
+    shared, factor = table.shared_effects(), table.curve_factor()
     assert [e.name for e in shared] == ["motor_lag", "body_drag", "thrust_factor",
                                         "thrust_curve"]
-    # a propeller factor scales the whole curve: its terms are stated divided by it
-    factor = FLIGHTMARE_CASES.curve_factor()
     assert shared[2].change == pytest.approx(factor - 1)
     assert shared[-1].offset * factor == pytest.approx(c0)
+    assert shared[-1].linear * factor == pytest.approx(c1 / max_speed)
+    return shared, factor
+
+
+def test_the_flightmare_vehicle_and_its_cases():
+    """l2f's flightmare vehicle (thrust -1.769 + 11.508 a + 11.968 a^2 N per rotor): hover at
+    a = 0.2462 (four rotors carry 0.73 kg); zero thrust is commanded at the curve's own root
+    (a = 0.1348), never below it (no negative thrust asked for); its cases and truth as
+    :func:`_curved_vehicle` (its -1.769 N constant inside the library's range)."""
+    from quadsim.bench.l2f_source import FLIGHTMARE, command_for, thrust_of
+
+    _curved_vehicle(FLIGHTMARE, 0.2462, 3000.0, "l2f_flightmare_cases", 82_000)
+    assert command_for(0.0, FLIGHTMARE) == pytest.approx(0.1348, abs=1e-4)
+    assert thrust_of(command_for(0.0, FLIGHTMARE), FLIGHTMARE) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_the_mrs_vehicle_and_its_cases():
     """l2f's mrs vehicle (1.7 kg on the flightmare vehicle's rotors; its rotor state in rad/s
-    up to 2000, so -1.769 + 7.672 a + 5.319 a^2 N at a = Omega / 2000): hover at the
-    polynomial's root a = 0.558; 30 frozen cases at its scale (masses +5..+20 % of 1.7 kg)
-    with its own seeds; its truth's propeller factor (0.45: the stand's b is 2.2x c2) built
-    beyond a reading's plausible range, the curve's terms divided by it."""
-    from quadsim.bench.l2f_cases import MRS_CASES
-    from quadsim.bench.l2f_mrs_cases import SOURCE, case_list
+    up to 2000, so -1.769 + 7.672 a + 5.319 a^2 N at a = Omega / 2000): hover at a = 0.558;
+    its truth's propeller factor (0.45: the stand's b is 2.2x c2) is built beyond a
+    reading's plausible range; cases and truth as :func:`_curved_vehicle`."""
     from quadsim.bench.l2f_source import MRS
 
-    c0, c1, c2 = MRS["c0"], MRS["c1"], MRS["c2"]
-    assert (c1, c2) == pytest.approx((7.672162, 5.319301), rel=1e-6)
-    a = hover_command(vehicle=MRS)
-    assert a == pytest.approx((-c1 + np.sqrt(c1 ** 2 + 4 * c2 * (1.7 * 9.81 / 4 - c0)))
-                              / (2 * c2), rel=1e-12)
-    assert a == pytest.approx(0.5581, abs=1e-4)
-    p = vehicle_params(MRS)
-    assert p.mass == 1.7 and p.max_speed == 2000.0
-    cases = case_list()
-    assert len(cases) == 30 and SOURCE.name == "l2f-mrs"
-    assert {c["vehicle"] for c in cases} == {"l2f-mrs"} and cases[0]["seed"] == 84_000
-    masses = [c["effects"]["mass"] for c in cases if c["case"] == "mass_offset"]
-    assert masses and all(0.05 * 1.7 <= m <= 0.2 * 1.7 for m in masses)
-    shared = MRS_CASES.shared_effects()
-    factor = MRS_CASES.curve_factor()
+    assert (MRS["c1"], MRS["c2"]) == pytest.approx((7.672162, 5.319301), rel=1e-6)
+    _, factor = _curved_vehicle(MRS, 0.5581, 2000.0, "l2f_mrs_cases", 84_000)
     assert factor == pytest.approx(0.4511, abs=1e-3)
-    assert shared[2].change == pytest.approx(factor - 1)
-    assert shared[-1].linear * factor == pytest.approx(c1 / 2000.0)
 
 
 @pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
