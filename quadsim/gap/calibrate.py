@@ -14,6 +14,8 @@ Stages
 2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
    (``nominal_refit``; d by instrumental variables), the rotor-drag coefficient, the
+   the thrust curve's slope about their mean rotor speed where they determine it
+   (:func:`centred_curve`, :func:`calibrate`), the
    relative inertia error xx, yy, zz, rate damping x, y, z, the rotors' spin inertia
    (gyroscopic torque) and, with commands, the motor time constant and, with a battery
    voltage log that varies (:data:`VBAT_TESTED`), the speed per command following
@@ -411,8 +413,9 @@ CURVE_KEY = "thrust_curve.linear"
 def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
-    between-flight scatter only widens it: the real Crazyflie references are calibrated
-    a second time, and this saves the first one's scatter and envelope)."""
+    between-flight scatter only widens it), which saves that calibration's scatter and
+    envelope. On the real Crazyflie references the pooled spread is small (2.2e-6 N s/rad)
+    and the scatter is not (1.7e-5): their first calibration runs to the end."""
     if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     estimates = [f.delays_ms["rotor"] for f in flights
