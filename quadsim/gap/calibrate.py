@@ -13,10 +13,10 @@ Stages
    references (commands logged).
 2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
-   (``nominal_refit``; d by instrumental variables), the rotor-drag coefficient, the
-   the thrust curve's slope about their mean rotor speed where they determine it
-   (:func:`centred_curve`, :func:`calibrate`), the
-   relative inertia error xx, yy, zz, rate damping x, y, z, the rotors' spin inertia
+   (``nominal_refit``; d by instrumental variables), the thrust curve's slope about their
+   mean rotor speed where they determine it (:func:`centred_curve`, :func:`calibrate`), the
+   rotor-drag coefficient, the relative inertia error xx, yy, zz, rate damping x, y, z, the
+   rotors' spin inertia
    (gyroscopic torque) and, with commands, the motor time constant and, with a battery
    voltage log that varies (:data:`VBAT_TESTED`), the speed per command following
    vbat / V_full (the map "with lag and voltage"). On the 20 real nominal Crazyflie
