@@ -23,9 +23,9 @@ from ..core.errors import ModelError
 from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectParameter
 from ..effects.canted_rotor import CantedRotor
-from ..vehicle.params import VehicleParams, hover_speed
+from ..vehicle.params import VehicleParams
 from .memo import _memo, _rotor_key, _wrench_key, flight_memo
-from .priors import momentum_translational_lift
+from .priors import hover_thrust_per_speed, momentum_translational_lift
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
@@ -246,7 +246,7 @@ def curve_bound(params: VehicleParams) -> float:
     hover speed, ``b Omega_h``, a linear term carrying the whole hover thrust (fs's stand
     curve, 0.785 + 9.16 a + 18.0 a^2 N, needs 0.81 of it about its hover speed; the effect's
     own range is +-1 N s/rad, for any vehicle)."""
-    return params.thrust_factor * hover_speed(params)
+    return hover_thrust_per_speed(params)
 
 
 def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:

@@ -126,9 +126,7 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
     if kind == "mass":
         value = value / params.mass
     elif kind == "hover":  # linear thrust term as a fraction of the hover thrust
-        from ..vehicle.params import hover_speed
-
-        value = value / (params.thrust_factor * hover_speed(params))
+        value = value / hover_thrust_per_speed(params)
     elif kind == "arm":
         import numpy as np
 
@@ -156,14 +154,20 @@ def plausibility(parameter: str, value: float, params: VehicleParams):
 DETERMINED = 0.5
 
 
+def hover_thrust_per_speed(params: VehicleParams) -> float:
+    """The hover thrust per rad/s of hover speed, ``b Omega_h`` (N s/rad): the unit of a
+    thrust curve's linear term (:data:`PRIORS` kind ``hover``)."""
+    from ..vehicle.params import hover_speed
+
+    return params.thrust_factor * hover_speed(params)
+
+
 def curve_slope_sd(params: VehicleParams) -> float:
     """Prior spread (N s/rad) of a thrust curve's linear term: half the plausible range of
     :data:`PRIORS` ``thrust_curve.linear`` (a fraction of the hover thrust per rad/s), in
     SI for ``params``."""
-    from ..vehicle.params import hover_speed
-
     lower, upper = PRIORS["thrust_curve.linear"][:2]
-    return 0.5 * max(abs(lower), abs(upper)) * params.thrust_factor * hover_speed(params)
+    return 0.5 * max(abs(lower), abs(upper)) * hover_thrust_per_speed(params)
 
 
 def momentum_rate_damping(params: VehicleParams) -> float:
