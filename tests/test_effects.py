@@ -82,6 +82,17 @@ def test_thrust_curve_adds_linear_and_constant_thrust():
     np.testing.assert_allclose(loads.curve_offset, [[-0.07, -0.08, -0.09, -0.1]], atol=1e-15)
 
 
+def test_thrust_curve_curvature_acts_about_its_centre():
+    """``quadratic (W - c)^2 + linear (W - c) + offset`` (module doc): zero curvature
+    term at the centre, symmetric about it."""
+    curve = make_effect("thrust_curve", linear=1e-4, quadratic=-2e-6, centre=450.0,
+                        offset=0.01)
+    loads = curve.loads(context(speed=[400.0, 450.0, 500.0, 550.0]))
+    expected = [1e-4 * d - 2e-6 * d * d + 0.01 for d in (-50.0, 0.0, 50.0, 100.0)]
+    np.testing.assert_allclose(loads.curve_offset, [expected], atol=1e-15)
+    assert expected == pytest.approx([0.0, 0.01, 0.01, 0.0], abs=1e-12)
+
+
 def test_a_propeller_change_scales_its_whole_thrust_curve():
     """thrust_factor scales b Omega^2 and the curve's linear and constant terms alike (a
     stand fit c0 + c1 a + c2 a^2 of a propeller giving 10 % less thrust has every coefficient

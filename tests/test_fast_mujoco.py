@@ -81,6 +81,21 @@ def test_every_effect_matches_reference_open_loop(dynamics):
     assert np.abs(fast.position[:, -1] - fast.position[0, -1]).max() > 1e-6  # effects act
 
 
+def test_a_thrust_curves_curvature_about_its_centre_matches_reference():
+    """The kernel expands ``l (W - c) + q (W - c)^2 + o`` about zero speed (encode); the
+    reference path evaluates it about the centre: the same flight, and the curvature acts
+    (against the same curve without it)."""
+    curved = "thrust_curve:linear=-2e-4,quadratic=-2e-6,centre=450,offset=0.02"
+    sets = [effect_set_from_specs([curved, "thrust_factor:change=-0.1"]),
+            effect_set_from_specs([curved.replace("quadratic=-2e-6,", "")])]
+    fast, ref = _both(initial=_start(2), rotor_speed_series=_series(2, 30), duration=0.3,
+                      effects=sets)
+    _assert_same(fast, ref)
+    flat = simulate(PARAMS, engine="mujoco", fast=True, initial=_start(2), duration=0.3,
+                    rotor_speed_series=_series(2, 30), effects=[sets[1]] * 2)
+    assert np.abs(fast.position[0, -1] - flat.position[0, -1]).max() > 1e-6
+
+
 def test_all_effects_with_motor_lag_and_controller_match_reference():
     kw = {"initial": _start(2), "duration": 0.3, "effects": ALL_EFFECTS}
     fast, ref = _both(rotor_speed_series=_series(2, 30), **kw)

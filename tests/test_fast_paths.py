@@ -112,7 +112,8 @@ def _reference(cf, states):
               "inertia_error.yy": 0.1, "inertia_error.zz": 0.05, "rate_damping.x": 1e-6,
               "rate_damping.y": 1e-6, "rate_damping.z": 1e-6,
               "gyroscopic.rotor_inertia": 5e-8, "wind.vx": 0.1, "wind.vy": -0.1,
-              "motor_lag.time_constant": 0.008, "thrust_curve.linear": 0.0}
+              "motor_lag.time_constant": 0.008, "thrust_curve.linear": 0.0,
+              "thrust_curve.quadratic": 1e-10}
     theta = np.array([values[n] for n in cand.parameter_names])
     r = residuals(states, cf, cand.effects(theta), rotor_channel=True)
     sigma = np.sqrt(np.mean(r ** 2, axis=0))

@@ -278,6 +278,37 @@ def test_the_references_share_their_thrust_curves_slope():
         slope - 2 * thrust_of(a, FS) / centre, rel=0.05)
     for axis in ("xx", "yy"):
         assert abs(values[f"inertia_error.{axis}"]) < 0.05
+    # the curvature about the centre, b + quadratic, against the curve's c2 / w^2 (0.42 of
+    # the stand's b): 1.90e-5 for 1.80e-5 measured
+    b = params.thrust_factor * (1 + values["nominal_refit.thrust"])
+    assert b + values["thrust_curve.quadratic"] == pytest.approx(FS["c2"] / w ** 2, rel=0.15)
     entry = judge_one(flown[4][0], ref)
     assert entry["verdict"] == "mass_offset", entry["answer"]
     assert entry["params"]["mass_offset.mass"] == pytest.approx(0.5, rel=0.1)
+
+
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+def test_a_com_offset_on_a_curved_rotor_is_not_a_payload():
+    """l2f's mrs vehicle hovers where its curve's curvature (c2 / w^2) is 0.40 of the b that
+    carries the hover. A CoM offset spreads the rotor speeds, and with b Omega^2 alone the
+    model over-predicts the summed thrust there: the offset of (-9, 12) mm was read as a
+    payload (mass_offset, 0.60; before the shared curvature). With the references' curvature
+    about their hover shared (thrust_curve.quadratic, a prior of half of b) it is a CoM
+    offset (measured -5.5, 10.9 mm), and a +0.25 kg payload stays a mass."""
+    from quadsim.bench.l2f_source import MRS
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.per_flight import judge_one
+
+    params = vehicle_params(MRS)
+    specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=8.0) for k in range(4)]
+    specs += [FlightSpec(seed=80, speed=1.0, duration=4.0, effects={"mass": 0.25}),
+              FlightSpec(seed=81, speed=1.0, duration=4.0, effects={"com": (-0.009, 0.012)})]
+    flown = l2f_flights(specs, workers=1, vehicle="mrs")
+    ref = calibrate(prepare([log for log, _ in flown[:4]], params), params)
+    mass, com = (judge_one(log, ref) for log, _ in flown[4:])
+    assert mass["verdict"] == "mass_offset", mass["answer"]
+    assert mass["params"]["mass_offset.mass"] == pytest.approx(0.25, rel=0.05)
+    assert com["verdict"] == "com_offset", com["answer"]
+    assert com["params"]["com_offset.x"] == pytest.approx(-0.009, abs=0.005)
+    assert com["params"]["com_offset.y"] == pytest.approx(0.012, abs=0.002)

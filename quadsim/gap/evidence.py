@@ -141,6 +141,9 @@ def _bounds(expl: Explanation, reference: Reference, dt: float):
             if name == "thrust_curve" and p == "linear":
                 bound = curve_bound(reference.params)
                 lo, hi = max(lo, -bound), min(hi, bound)
+            if name == "thrust_curve" and p == "quadratic":
+                bound = reference.params.thrust_factor
+                lo, hi = max(lo, -bound), min(hi, bound)
             lower.append(lo)
             upper.append(hi)
     if expl.shift:

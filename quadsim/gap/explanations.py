@@ -44,6 +44,7 @@ from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale
 from .priors import (
     DETERMINED,
     WIND_SD_MS,
+    curve_quadratic_sd,
     curve_slope_sd,
     momentum_rate_damping,
     momentum_translational_lift,
@@ -132,6 +133,7 @@ def _prior_sd(params) -> dict:
         # DC-motor efficiency 0.6-0.9 (module doc)
         "thrust_factor.alpha": 0.1,
         "thrust_curve.linear": curve_slope_sd(params),
+        "thrust_curve.quadratic": curve_quadratic_sd(params),
         "battery_sag.rate": _range_sd(0.0, 0.005),
         # a battery's full voltage: +-10 % (charge state) of the vehicle's pack
         "battery_sag.full_voltage": VBAT_SD * nominal_voltage(params),

@@ -235,6 +235,8 @@ def _typical(candidate: Candidate, params: VehicleParams) -> np.ndarray:
         names = names or tuple(f"rotor_{i + 1}" for i in range(params.rotor_count))
         lookup = dict(zip(names, values))
         lookup.setdefault("full_voltage", 0.2)
+        if name == "thrust_curve":      # the shared curvature about the references' hover
+            lookup.setdefault("quadratic", 0.1 * params.thrust_factor)
         if name == "wind":
             lookup = {"vx": 1.0, "vy": 1.0, "vz": 1.0}
         scales += [lookup.get(p, 1.0) for p in fitted]
@@ -261,6 +263,8 @@ def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np
                 lo, hi = max(lo, -0.5 * _arm(params)), min(hi, 0.5 * _arm(params))
             if name == "thrust_curve" and p == "linear":
                 lo, hi = max(lo, -curve_bound(params)), min(hi, curve_bound(params))
+            if name == "thrust_curve" and p == "quadratic":
+                lo, hi = max(lo, -params.thrust_factor), min(hi, params.thrust_factor)
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)

@@ -170,6 +170,21 @@ def curve_slope_sd(params: VehicleParams) -> float:
     return 0.5 * max(abs(lower), abs(upper)) * hover_thrust_per_speed(params)
 
 
+#: prior spread of a thrust curve's curvature about the hover, as a fraction of b (the
+#: b Omega^2 that gives the hover thrust there): stand fits T = k2 W^2 + k1 W + k0 read
+#: k2 = 1.10-1.26 b at 40-60 % of the top speed (KDE2814 motor, 10 and 14 inch propellers:
+#: Du et al., "Computational Multicopter Design", 2016, measured sweeps), and the published
+#: curves of l2f's vehicle files with a large linear term (fs.h, flightmare.h, mrs.h) read
+#: k2 = 0.40-0.42 b at their vehicles' hover. Half of b covers both.
+CURVE_QUADRATIC_SD = 0.5
+
+
+def curve_quadratic_sd(params: VehicleParams) -> float:
+    """Prior spread (N s^2/rad^2) of the curvature a thrust curve adds about the hover
+    (``thrust_curve.quadratic``): :data:`CURVE_QUADRATIC_SD` times b."""
+    return CURVE_QUADRATIC_SD * params.thrust_factor
+
+
 def momentum_rate_damping(params: VehicleParams) -> float:
     """k_mt = r^2 T_h / v_i (N m s/rad): roll/pitch damping of the rotor discs' inflow change
     by momentum theory (r the largest hub distance from the centre, m; T_h = m g / R the hover

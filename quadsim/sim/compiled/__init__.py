@@ -52,7 +52,7 @@ __all__ = ["GUST", "MAX_ROTORS", "Kernel", "analytic_fast_rhs", "available", "en
 # Parameter names each fast form reads (an effect with other parameters has no fast form).
 _KNOWN = {
     "motor_lag": {"time_constant", "time_constant_down"},
-    "thrust_curve": {"linear", "offset", "centre"},
+    "thrust_curve": {"linear", "offset", "centre", "quadratic"},
     "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)} | {"alpha"},
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "blade_flapping": {"coefficient"},
@@ -192,8 +192,11 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("ground_height", v["ground_height"])
                 put("ground_radius", v["radius"] or p.rotor_radius)
             elif effect.name == "thrust_curve":
-                put("curve_linear", v["linear"])
-                put("curve_offset", v["offset"] - v["linear"] * v["centre"])
+                # expanded about zero speed: q W^2 + (l - 2 q c) W + (o - l c + q c^2)
+                q, c = v["quadratic"], v["centre"]
+                put("curve_quadratic", q)
+                put("curve_linear", v["linear"] - 2.0 * q * c)
+                put("curve_offset", v["offset"] - v["linear"] * c + q * c * c)
             elif effect.name == "rotor_drag":
                 put("rotor_drag", v["coefficient"])
                 put("rotor_drag_axial", v["axial_coefficient"])

@@ -59,7 +59,7 @@ O_BAT, O_GG, O_GH = offset["battery_rate"], offset["ground_gain"], offset["groun
 O_SG, O_RSG = offset["speed_gain"], offset["rotor_speed_gain"]
 O_GR, O_CL, O_CO = offset["ground_radius"], offset["curve_linear"], offset["curve_offset"]
 O_RD, O_RA, O_BD = offset["rotor_drag"], offset["rotor_drag_axial"], offset["body_drag"]
-O_BA = offset["body_drag_axes"]
+O_BA, O_CQ = offset["body_drag_axes"], offset["curve_quadratic"]
 O_RHO, O_JR, O_WM = offset["air_density"], offset["rotor_inertia"], offset["wind_mean"]
 O_GA, O_GF, O_GP = offset["gust_amplitude"], offset["gust_frequency"], offset["gust_phase"]
 GUST = offset["gust_phase"] - offset["gust_frequency"]
@@ -206,7 +206,7 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         u1 = air_body[1] + rate_b[2] * p[0] - rate_b[0] * p[2]
         u2 = air_body[2] + rate_b[0] * p[1] - rate_b[1] * p[0]
         axial = u0 * a[0] + u1 * a[1] + u2 * a[2]
-        extra = s * (row[O_CL] * mid[r] + row[O_CO])   # the curve scales with the propeller
+        extra = s * ((row[O_CQ] * mid[r] + row[O_CL]) * mid[r] + row[O_CO])   # scales with the propeller
         # translational_lift: + k_h |v - (v . a) a|^2 along the axis (air velocity, no rotation)
         va = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
         extra += row[O_TL] * (air_body[0] ** 2 + air_body[1] ** 2 + air_body[2] ** 2 - va * va)
