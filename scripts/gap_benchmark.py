@@ -71,7 +71,9 @@ table for l2f's fs vehicle (3.35 kg, a thrust curve with constant and linear ter
 ``--source l2f-flightmare`` (:mod:`quadsim.bench.l2f_flightmare_cases`) for its flightmare
 vehicle (0.73 kg, a thrust curve with a negative constant and a linear term);
 ``--source l2f-mrs`` (:mod:`quadsim.bench.l2f_mrs_cases`) for its mrs vehicle (1.7 kg on
-the flightmare vehicle's rotors, 40 ms).
+the flightmare vehicle's rotors, 40 ms); ``--source l2f-arpl``
+(:mod:`quadsim.bench.l2f_arpl_cases`) for its arpl vehicle (0.78 kg, a thrust curve that
+bends down, 33 ms).
 """
 
 from __future__ import annotations
@@ -545,6 +547,8 @@ SIM_SOURCES = {
                        "l2f_available", L2F_HINT),
     "l2f-mrs": ("quadsim.bench.l2f_mrs_cases", "quadsim.bench.l2f_source", "l2f_available",
                 L2F_HINT),
+    "l2f-arpl": ("quadsim.bench.l2f_arpl_cases", "quadsim.bench.l2f_source", "l2f_available",
+                 L2F_HINT),
 }
 
 
@@ -635,7 +639,8 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, l2f and its vehicles l2f-fs, "
-                             "l2f-flightmare, l2f-mrs: per-flight cases against 8 nominal "
+                             "l2f-flightmare, l2f-mrs, l2f-arpl: per-flight cases against 8 "
+                             "nominal "
                              "flights of "
                              "that simulator; need --cache)")
     parser.add_argument("--generate-only", action="store_true",

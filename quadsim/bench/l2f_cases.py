@@ -74,7 +74,7 @@ from ..effects import make_effect
 from ..effects.thrust_factor import ThrustFactor
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
-from .l2f_source import (FLIGHTMARE, FS, MODEL, MRS, FlightSpec, hover_command,
+from .l2f_source import (ARPL, FLIGHTMARE, FS, MODEL, MRS, FlightSpec, hover_command,
                          l2f_flights, stand_b, vehicle_params)
 from .observe import OBSERVABLE
 from .score import joined_kind
@@ -155,6 +155,11 @@ class VehicleCases:
         cd = m["cd_area"]
         out = [make_effect("motor_lag", time_constant=m["tau"] * slow),
                make_effect("body_drag", cd_area=cd[0], cd_area_vertical=cd[2])]
+        if m["c2"] <= 0.0:      # a curve that bends down: no propeller factor (see below)
+            b = stand_b(m)
+            return out + [make_effect("thrust_curve", linear=m["c1"] / m["omega_max"],
+                                      offset=m["c0"],
+                                      quadratic=m["c2"] / m["omega_max"] ** 2 - b)]
         if m["c0"] != 0.0 or m["c1"] != 0.0:
             factor = self.curve_factor()
             # built directly: the mrs vehicle's factor (0.45) lies beyond make_effect's
@@ -170,8 +175,8 @@ class VehicleCases:
         purely quadratic rotor. A propeller factor scales the whole curve
         (``EffectLoads.curve_offset``), so the curve's terms are stated divided by it."""
         m = self.vehicle
-        if m["c0"] == 0.0 and m["c1"] == 0.0:
-            return 1.0
+        if (m["c0"] == 0.0 and m["c1"] == 0.0) or m["c2"] <= 0.0:
+            return 1.0      # a curve that bends down (arpl): its c2 is a curvature, not a factor
         return m["c2"] / (stand_b(m) * m["omega_max"] ** 2)
 
     def library_truth(self, case: dict) -> list:
@@ -224,6 +229,12 @@ FLIGHTMARE_CASES = VehicleCases("flightmare", FLIGHTMARE, 0.17, (0.04, 0.11), (0
 #: share of its mass) 20-50 mm off the centre and 20-60 mm below, its own seeds
 MRS_CASES = VehicleCases("mrs", MRS, 0.17, (0.085, 0.255), (0.02, 0.05), (0.02, 0.06),
                          seed0=84_000, ref_seed0=94_000)
+#: the arpl vehicle (:mod:`.l2f_arpl_cases`): arm 0.0775 m (the rectangle's shorter
+#: half-span, the pitch lever: with its 0.125 m diagonal a 9.2 mm CoM offset was lost at 8 s,
+#: before any verdict), a payload 0.04-0.12 kg (the X500's share of its mass) 15-40 mm off
+#: the centre and 15-45 mm below, its own seeds
+ARPL_CASES = VehicleCases("arpl", ARPL, 0.0775, (0.04, 0.12),
+                          (0.015, 0.04), (0.015, 0.045), seed0=85_000, ref_seed0=95_000)
 
 reference_specs = X500.reference_specs
 case_list = X500.case_list

@@ -70,7 +70,7 @@ from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["EFFECTS", "FLIGHTMARE", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
+__all__ = ["ARPL", "EFFECTS", "FLIGHTMARE", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
            "VEHICLES",
            "Cascade", "FlightSpec", "Sensors", "command_for", "hover_command", "l2f_available",
            "l2f_flights", "path", "stand_b", "thrust_of", "to_flight_log", "truth_json",
@@ -153,9 +153,30 @@ MRS = {"name": "l2f-mrs", "header": "mrs.h", "mass": 1.7,
                       "quadsim sees it",
        "omega_source": "l2f 2.0.18 mrs.h: its action limit, 2000 rad/s",
        "radius_source": "chosen: 10-inch propellers (m)"}
+#: l2f's "arpl" vehicle (``parameters/dynamics/arpl.h``: a quadrotor of NYU's Agile Robotics
+#: and Perception Lab): 0.782 kg, rotors on a 155 x 196 mm rectangle, a thrust curve that
+#: bends down, -0.530 + 8.971 a - 0.891 a^2 N per rotor (c2 < 0: it flattens towards full
+#: throttle), k_Q 0.00596 m, 33 ms rotors, J diag(1.7665e-3, 1.3766e-3, 2.953e-3) kg m^2.
+#: Its rotor state is normalised (action limit 0..1); the speed at a = 1 (3000 rad/s), the
+#: propeller radius (5 inch) and the body drag (a 0.78 kg frame, as flightmare's) are this
+#: module's choice.
+ARPL = {"name": "l2f-arpl", "header": "arpl.h", "mass": 0.782,
+        "rotor_xy": ((0.0775, -0.0981), (-0.0775, 0.0981), (0.0775, 0.0981),
+                     (-0.0775, -0.0981)),
+        "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c0": -0.5300192490953086,
+        "c1": 8.971435376396558, "c2": -0.8911788522090669, "k_torque": 0.005964552,
+        "tau": 0.033, "inertia": (1.7665e-3, 1.3766e-3, (1.7665e-3 + 1.3766e-3) / 2 * 1.879),
+        "gravity": 9.81, "rho": 1.225, "cd_area": (0.01, 0.01, 0.025),
+        "rotor_radius": 0.0635, "omega_max": 3000.0,
+        "description": "l2f's arpl vehicle (0.782 kg, thrust -0.53 + 8.97 a - 0.89 a^2 N) as "
+                       "quadsim sees it",
+        "omega_source": "chosen: l2f 2.0.18 arpl.h normalises its rotor state to 0..1; "
+                        "3000 rad/s at 1 (rad/s)",
+        "radius_source": "chosen: 5-inch propellers (m)"}
 #: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs,
-#: ``--source l2f-flightmare`` the flightmare, ``--source l2f-mrs`` the mrs vehicle)
-VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE, "mrs": MRS}
+#: ``--source l2f-flightmare`` the flightmare, ``--source l2f-mrs`` the mrs vehicle,
+#: ``--source l2f-arpl`` the arpl vehicle)
+VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE, "mrs": MRS, "arpl": ARPL}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its thrust
