@@ -100,7 +100,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from quadsim.bench.cases import oracle_reduction  # noqa: E402
 from quadsim.bench.draws import draw  # noqa: E402
 from quadsim.bench.score import joined_kind  # noqa: E402
-from quadsim.core.errors import QuadsimWarning  # noqa: E402
+from quadsim.core.errors import QuadsimError, QuadsimWarning  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.effects import make_effect  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
@@ -566,8 +566,6 @@ def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -
     per-flight run."""
     import importlib
 
-    from quadsim.bench import sim_cases
-
     cases_module, source_module, available, hint = SIM_SOURCES[name]
     if not getattr(importlib.import_module(source_module), available)():
         print(f"error: --source {name}: {name} is not installed ({hint})", file=sys.stderr)
@@ -578,6 +576,16 @@ def run_simulator(name: str, cache: str | None, generate_only: bool, out: str) -
         return 2
     source = importlib.import_module(cases_module).SOURCE
     start = _cpu_seconds()
+    try:
+        return _run_simulator(name, source, cache, generate_only, out, start)
+    except QuadsimError as exc:     # a flight lost, references refused: one line, nothing written
+        print(f"error: --source {name}: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run_simulator(name, source, cache, generate_only, out, start) -> int:
+    from quadsim.bench import sim_cases
+
     folder = sim_cases.generate(source, cache, progress=lambda m: print(m, file=sys.stderr))
     if generate_only:
         _, rows = sim_cases.load_flights(source, cache)

@@ -128,3 +128,30 @@ def test_simulator_summary_and_missing_cache(capsys):
         assert script.main(["--independent", "--source", name]) == 2, name
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"error: --source {name}:"), err
+
+
+def test_a_source_that_cannot_be_judged_is_one_error_line(tmp_path, capsys, monkeypatch):
+    """A flight lost while flying, or references the diagnosis refuses (l2f's arpl vehicle
+    with b 2.7x low at hover), end ``--independent --source`` with one error line and exit 2,
+    the output not written (a traceback before)."""
+    import sys
+    import types as _types
+
+    from quadsim.core.errors import InputError, ModelError
+
+    script = _benchmark_script()
+    fake = _types.ModuleType("fake_cases")
+    fake.SOURCE = _source([], [])
+    fake.ok = lambda: True
+    monkeypatch.setitem(sys.modules, "fake_cases", fake)
+    monkeypatch.setitem(script.SIM_SOURCES, "fake", ("fake_cases", "fake_cases", "ok", ""))
+    out = tmp_path / "x.json"
+    for error in (ModelError("l2f flight (seed 85009) lost control at t = 8.05 s"),
+                  InputError("model 'l2f-arpl' does not describe the logged vehicle")):
+        def fail(*args, error=error, **kwargs):
+            raise error
+        monkeypatch.setattr(sim_cases, "generate", fail)
+        assert script.run_simulator("fake", str(tmp_path), False, str(out)) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"error: --source fake: {error}"]
+        assert not out.exists()
