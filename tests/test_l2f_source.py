@@ -341,3 +341,31 @@ def test_the_arpl_vehicle_and_its_cases():
     assert len(cases) == 30 and SOURCE.name == "l2f-arpl" and cases[0]["seed"] == 85_000
     coms = [np.hypot(*c["effects"]["com"]) for c in cases if c["case"] == "com_offset"]
     assert coms and max(coms) <= 0.1 * 0.0775 * np.sqrt(2)
+
+
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+def test_a_thrust_curve_that_bends_down_is_read_against_references_that_bend_down():
+    """l2f's arpl vehicle's curve bends down (c2 < 0: -0.04 of the b at its hover). Its
+    references' shared curvature ``b + quadratic`` must go below zero
+    (priors.curve_quadratic_bounds, -b..2b): with the bound at 0 it stopped there, and a
+    flight whose linear term is -0.7 or +0.9 N per unit state was read as a mass of +89 or
+    -92 g (0.62, 0.67). Below zero, both are `thrust_curve`, each at its value per rad/s
+    (-0.7 / 3000 and 0.9 / 3000, within 5 %)."""
+    from quadsim.bench.l2f_source import ARPL
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.per_flight import judge_one
+
+    params = vehicle_params(ARPL)
+    specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=8.0) for k in range(4)]
+    specs += [FlightSpec(seed=80 + k, speed=1.0, duration=4.0, effects={"thrust_linear": c})
+              for k, c in enumerate((-0.7, 0.9))]
+    flown = l2f_flights(specs, workers=1, vehicle="arpl")
+    ref = calibrate(prepare([log for log, _ in flown[:4]], params), params)
+    values = ref.values()
+    assert params.thrust_factor * (1 + values["nominal_refit.thrust"]) \
+        + values["thrust_curve.quadratic"] < 0.0
+    for (log, _), c in zip(flown[4:], (-0.7, 0.9)):
+        entry = judge_one(log, ref)
+        assert entry["verdict"] == "thrust_curve", entry["answer"]
+        assert entry["params"]["thrust_curve.linear"] == pytest.approx(c / 3000.0, rel=0.05)

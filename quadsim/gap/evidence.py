@@ -66,6 +66,7 @@ from .explanations import (  # re-exported: the evidence's public names
 )
 from .fitting import _arm, curve_bound, effect_class, residuals
 from .memo import _memo
+from .priors import curve_quadratic_bounds
 from .reference import rotor_spectra
 from .rotor_channel import min_time_constant
 from .screen import delay_starts, screened
@@ -142,8 +143,8 @@ def _bounds(expl: Explanation, reference: Reference, dt: float):
                 bound = curve_bound(reference.params)
                 lo, hi = max(lo, -bound), min(hi, bound)
             if name == "thrust_curve" and p == "quadratic":
-                bound = reference.params.thrust_factor
-                lo, hi = max(lo, -bound), min(hi, bound)
+                low, high = curve_quadratic_bounds(reference.params)
+                lo, hi = max(lo, low), min(hi, high)
             lower.append(lo)
             upper.append(hi)
     if expl.shift:

@@ -25,7 +25,7 @@ from ..effects.base import EffectParameter
 from ..effects.canted_rotor import CantedRotor
 from ..vehicle.params import VehicleParams
 from .memo import _memo, _rotor_key, _wrench_key, flight_memo
-from .priors import hover_thrust_per_speed, momentum_translational_lift
+from .priors import curve_quadratic_bounds, hover_thrust_per_speed, momentum_translational_lift
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
@@ -264,7 +264,8 @@ def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np
             if name == "thrust_curve" and p == "linear":
                 lo, hi = max(lo, -curve_bound(params)), min(hi, curve_bound(params))
             if name == "thrust_curve" and p == "quadratic":
-                lo, hi = max(lo, -params.thrust_factor), min(hi, params.thrust_factor)
+                lo, hi = max(lo, curve_quadratic_bounds(params)[0]), \
+                    min(hi, curve_quadratic_bounds(params)[1])
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)

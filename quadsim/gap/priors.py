@@ -179,6 +179,13 @@ def curve_slope_sd(params: VehicleParams) -> float:
 CURVE_QUADRATIC_SD = 0.5
 
 
+def curve_quadratic_bounds(params: VehicleParams) -> tuple[float, float]:
+    """Bounds (N s^2/rad^2) of a thrust curve's curvature about the hover: the whole
+    curvature ``b + quadratic`` from -b to 2 b. Below zero: a curve that flattens towards
+    full throttle (l2f's arpl.h: k2 = -0.04 of the b at its hover, a motor that saturates)."""
+    return -2.0 * params.thrust_factor, params.thrust_factor
+
+
 def curve_quadratic_sd(params: VehicleParams) -> float:
     """Prior spread (N s^2/rad^2) of the curvature a thrust curve adds about the hover
     (``thrust_curve.quadratic``): :data:`CURVE_QUADRATIC_SD` times b."""
