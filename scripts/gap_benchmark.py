@@ -73,7 +73,8 @@ vehicle (0.73 kg, a thrust curve with a negative constant and a linear term);
 ``--source l2f-mrs`` (:mod:`quadsim.bench.l2f_mrs_cases`) for its mrs vehicle (1.7 kg on
 the flightmare vehicle's rotors, 40 ms); ``--source l2f-arpl``
 (:mod:`quadsim.bench.l2f_arpl_cases`) for its arpl vehicle (0.78 kg, a thrust curve that
-bends down, 33 ms).
+bends down, 33 ms); ``--source l2f-soft`` (:mod:`quadsim.bench.l2f_soft_cases`) for its
+soft_rigid vehicle (0.80 kg on long arms, 46 ms).
 """
 
 from __future__ import annotations
@@ -549,6 +550,8 @@ SIM_SOURCES = {
                 L2F_HINT),
     "l2f-arpl": ("quadsim.bench.l2f_arpl_cases", "quadsim.bench.l2f_source", "l2f_available",
                  L2F_HINT),
+    "l2f-soft": ("quadsim.bench.l2f_soft_cases", "quadsim.bench.l2f_source", "l2f_available",
+                 L2F_HINT),
 }
 
 
@@ -647,7 +650,8 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, l2f and its vehicles l2f-fs, "
-                             "l2f-flightmare, l2f-mrs, l2f-arpl: per-flight cases against 8 "
+                             "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
+                             "against 8 "
                              "nominal "
                              "flights of "
                              "that simulator; need --cache)")

@@ -369,3 +369,31 @@ def test_a_thrust_curve_that_bends_down_is_read_against_references_that_bend_dow
         entry = judge_one(log, ref)
         assert entry["verdict"] == "thrust_curve", entry["answer"]
         assert entry["params"]["thrust_curve.linear"] == pytest.approx(c / 3000.0, rel=0.05)
+
+
+def test_the_soft_vehicle_and_its_cases():
+    """l2f's soft_rigid vehicle (-0.334 + 6.091 a + 0.782 a^2 N per rotor): hover at a =
+    0.3617; quadsim's b is the stand fit over a = 0.1..0.6, 1.31x low at hover; its c2 is
+    0.068 of the stand's b at full speed, below MIN_CURVE_FACTOR, so its truth states the curve
+    exactly with no propeller factor (1e-12 N at four speeds); 30 cases with their own seeds
+    and CoM offsets within 10 % of the 0.142 m arm."""
+    from quadsim.bench.l2f_cases import MIN_CURVE_FACTOR, SOFT_CASES
+    from quadsim.bench.l2f_soft_cases import SOURCE, case_list
+    from quadsim.bench.l2f_source import SOFT, stand_b, thrust_of
+
+    a = hover_command(vehicle=SOFT)
+    assert a == pytest.approx(0.3617, abs=1e-4)
+    p = vehicle_params(SOFT)
+    assert 0.804 * 9.81 / 4 / (a * 2500.0) ** 2 / p.thrust_factor == pytest.approx(1.31, abs=0.01)
+    assert SOFT["c2"] / (stand_b(SOFT) * 2500.0 ** 2) == pytest.approx(0.068, abs=0.001)
+    assert 0.068 < MIN_CURVE_FACTOR and SOFT_CASES.curve_factor() == 1.0
+    shared = SOFT_CASES.shared_effects()
+    assert [e.name for e in shared] == ["motor_lag", "body_drag", "thrust_curve"]
+    speed = np.array([[300.0, 905.0, 1500.0, 2400.0]])
+    model = p.thrust_factor * speed ** 2 \
+        + shared[-1].loads(types.SimpleNamespace(rotor_speed=speed)).curve_offset
+    np.testing.assert_allclose(model, thrust_of(speed / 2500.0, SOFT), atol=1e-12)
+    cases = case_list()
+    assert len(cases) == 30 and SOURCE.name == "l2f-soft" and cases[0]["seed"] == 86_000
+    coms = [np.hypot(*c["effects"]["com"]) for c in cases if c["case"] == "com_offset"]
+    assert coms and max(coms) <= 0.1 * 0.142 * np.sqrt(2)

@@ -74,7 +74,7 @@ from ..effects import make_effect
 from ..effects.thrust_factor import ThrustFactor
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
-from .l2f_source import (ARPL, FLIGHTMARE, FS, MODEL, MRS, FlightSpec, hover_command,
+from .l2f_source import (ARPL, FLIGHTMARE, FS, MODEL, MRS, SOFT, FlightSpec, hover_command,
                          l2f_flights, stand_b, vehicle_params)
 from .observe import OBSERVABLE
 from .score import joined_kind
@@ -155,7 +155,8 @@ class VehicleCases:
         cd = m["cd_area"]
         out = [make_effect("motor_lag", time_constant=m["tau"] * slow),
                make_effect("body_drag", cd_area=cd[0], cd_area_vertical=cd[2])]
-        if m["c2"] <= 0.0:      # a curve that bends down: no propeller factor (see below)
+        if self.curve_factor() == 1.0 and (m["c0"] != 0.0 or m["c1"] != 0.0):
+            # no propeller factor (curve_factor): the curve's curvature against b instead
             b = stand_b(m)
             return out + [make_effect("thrust_curve", linear=m["c1"] / m["omega_max"],
                                       offset=m["c0"],
@@ -175,9 +176,15 @@ class VehicleCases:
         purely quadratic rotor. A propeller factor scales the whole curve
         (``EffectLoads.curve_offset``), so the curve's terms are stated divided by it."""
         m = self.vehicle
-        if (m["c0"] == 0.0 and m["c1"] == 0.0) or m["c2"] <= 0.0:
-            return 1.0      # a curve that bends down (arpl): its c2 is a curvature, not a factor
-        return m["c2"] / (stand_b(m) * m["omega_max"] ** 2)
+        if m["c0"] == 0.0 and m["c1"] == 0.0:
+            return 1.0
+        factor = m["c2"] / (stand_b(m) * m["omega_max"] ** 2)
+        # a curve whose c2 is no propeller's: one that bends down (arpl, c2 < 0), or one
+        # whose linear term carries nearly all of it (soft_rigid: 0.068). A factor scales the
+        # drag torque as well, and l2f's is k_Q times the whole thrust: below a quarter the
+        # truth's yaw torque would be off by more than 4x. Its c2 is then a curvature against
+        # b (thrust_curve.quadratic), the drag torque left at d Omega^2 (1.3x low at hover)
+        return 1.0 if factor < MIN_CURVE_FACTOR else factor
 
     def library_truth(self, case: dict) -> list:
         """Library effects with the true difference of ``case`` from the references, on top
@@ -214,6 +221,11 @@ def case_spec(case: dict) -> FlightSpec:
                       effects=dict(case["effects"]))
 
 
+#: the smallest propeller factor c2 / (b omega_max^2) a curved rotor's truth is stated with
+#: (:meth:`VehicleCases.curve_factor`); below it the curve's c2 is stated as a curvature
+MIN_CURVE_FACTOR = 0.25
+
+
 #: the X500 (module table); seeds as frozen when the source was built
 X500 = VehicleCases("x500", MODEL, ARM, (0.1, 0.3), (0.02, 0.05), (0.02, 0.06),
                     seed0=80_000, ref_seed0=90_000)
@@ -235,6 +247,11 @@ MRS_CASES = VehicleCases("mrs", MRS, 0.17, (0.085, 0.255), (0.02, 0.05), (0.02, 
 #: the centre and 15-45 mm below, its own seeds
 ARPL_CASES = VehicleCases("arpl", ARPL, 0.0775, (0.04, 0.12),
                           (0.015, 0.04), (0.015, 0.045), seed0=85_000, ref_seed0=95_000)
+#: the soft_rigid vehicle (:mod:`.l2f_soft_cases`): arm 0.142 m (the rectangle's shorter
+#: half-span, as arpl's), a payload 0.04-0.12 kg 15-40 mm off the centre and 15-45 mm below,
+#: its own seeds
+SOFT_CASES = VehicleCases("soft", SOFT, 0.142, (0.04, 0.12), (0.015, 0.04), (0.015, 0.045),
+                          seed0=86_000, ref_seed0=96_000)
 
 reference_specs = X500.reference_specs
 case_list = X500.case_list

@@ -70,7 +70,7 @@ from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["ARPL", "EFFECTS", "FLIGHTMARE", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
+__all__ = ["ARPL", "EFFECTS", "FLIGHTMARE", "SOFT", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
            "VEHICLES",
            "Cascade", "FlightSpec", "Sensors", "command_for", "hover_command", "l2f_available",
            "l2f_flights", "path", "stand_b", "thrust_of", "to_flight_log", "truth_json",
@@ -175,10 +175,31 @@ ARPL = {"name": "l2f-arpl", "header": "arpl.h", "mass": 0.782,
         "omega_source": "chosen: l2f 2.0.18 arpl.h normalises its rotor state to 0..1; "
                         "3000 rad/s at 1 (rad/s)",
         "radius_source": "chosen: 5-inch propellers (m)"}
+#: l2f's "soft_rigid" vehicle (``parameters/dynamics/soft_rigid.h``): 0.804 kg, rotors on a
+#: 284 x 338 mm rectangle, -0.334 + 6.091 a + 0.782 a^2 N per rotor (hover at a = 0.362,
+#: where the slope is 0.61x the quadratic model's and c2 is 0.05 of the b that carries the
+#: hover), k_Q 0.0176 m, 46 ms rotors, J diag(6.584e-3, 4.957e-3, 1.057e-2) kg m^2. Its rotor
+#: state is normalised (action limit 0..1); the speed at a = 1 (2500 rad/s), the propeller
+#: radius (8 inch), the body drag (flightmare's) and the stand sweep (a = 0.1..0.6, the band
+#: it flies: b 1.31x low at hover; over 0.1..1.0 it is 2.0x low, at the vehicle check's
+#: limit) are this module's choice, made before any verdict.
+SOFT = {"name": "l2f-soft", "header": "soft_rigid.h", "mass": 0.804,
+        "rotor_xy": ((0.142, -0.169), (-0.142, 0.169), (0.142, 0.169), (-0.142, -0.169)),
+        "torque_dir": (-1.0, -1.0, 1.0, 1.0), "c0": -0.33379755540556755,
+        "c1": 6.090995069311198, "c2": 0.7818335456716792, "k_torque": 1.7602e-2,
+        "tau": 0.046, "inertia": (6.5842e-3, 4.9571e-3, 0.010571830800000001),
+        "gravity": 9.81, "rho": 1.225, "cd_area": (0.01, 0.01, 0.025),
+        "rotor_radius": 0.1016, "omega_max": 2500.0, "stand_top": 0.6,
+        "description": "l2f's soft_rigid vehicle (0.804 kg, thrust -0.33 + 6.09 a + 0.78 a^2 "
+                       "N) as quadsim sees it",
+        "omega_source": "chosen: l2f 2.0.18 soft_rigid.h normalises its rotor state to 0..1; "
+                        "2500 rad/s at 1 (rad/s)",
+        "radius_source": "chosen: 8-inch propellers (m)"}
 #: the vehicles by name (``--source l2f`` flies the X500, ``--source l2f-fs`` the fs,
 #: ``--source l2f-flightmare`` the flightmare, ``--source l2f-mrs`` the mrs vehicle,
-#: ``--source l2f-arpl`` the arpl vehicle)
-VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE, "mrs": MRS, "arpl": ARPL}
+#: ``--source l2f-arpl`` the arpl vehicle, ``--source l2f-soft`` the soft_rigid vehicle)
+VEHICLES = {"x500": MODEL, "fs": FS, "flightmare": FLIGHTMARE, "mrs": MRS, "arpl": ARPL,
+            "soft": SOFT}
 #: case-side effects (:class:`FlightSpec.effects`), SI: mass (kg at the CoM); payload (kg, x,
 #: y, z m: a point mass; mass, CoM and inertia change together); com (x, y m); inertia
 #: (relative change of Ixx Iyy Izz); weak_rotor (rotor 1..4, relative change of its thrust
