@@ -430,6 +430,11 @@ def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference)
     assert reference_summary(reference)["fixed"] == {"thrust_curve.centre": centre}
     assert abs(reference.theta[k]) < 3 * reference.s_ref[k]
     assert _curve_determined(reference)
+    # the curvature about the centre is shared with it, pooled (calibrate.POOLED): no
+    # between-flight scatter, the pooled error its spread, and 0 for quadratic rotors
+    q = names.index("thrust_curve.quadratic")
+    assert reference.scatter[q] == 0.0 and reference.s_ref[q] == reference.se_pool[q] > 0
+    assert abs(reference.theta[q]) < 3 * reference.s_ref[q]
     wide = reference.s_ref.copy()
     wide[k] = 0.5 * curve_slope_sd(cf)
     assert not _curve_determined(types.SimpleNamespace(
