@@ -441,6 +441,25 @@ def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference)
         candidate=reference.candidate, s_ref=wide, identified={}, params=cf))
 
 
+def test_a_reading_on_top_of_a_shared_group_is_not_given_the_references_value(reference):
+    """The flight's own thrust curve (a slope about zero speed, on top of the references'
+    slope about their hover) is another quantity than the references' slope: judged under
+    a drag law (which replaces only the rotor drag) its answer once read "-13 % thrust at
+    the hover speed (references: -20 %)", a value that moves no thrust at hover. Only a
+    reading that gives a shared group a value of its own is set beside the references'."""
+    from quadsim.gap.judge import reading_text
+
+    def reading(replaces):
+        expl = types.SimpleNamespace(replaces=replaces, variant="", fixed_values={}, parts=())
+        return types.SimpleNamespace(
+            name="thrust_curve", explanation=expl, values={"thrust_curve.linear": -4e-5},
+            post_sd={"thrust_curve.linear": 1e-6}, determined={"thrust_curve.linear": True})
+
+    assert "% thrust at the hover speed" in reading_text(reading(("rotor_drag",)), reference)
+    assert "references:" not in reading_text(reading(("rotor_drag",)), reference)
+    assert "(references: " in reading_text(reading(("thrust_curve",)), reference)
+
+
 def test_voltage_spread_averages_out_the_log_noise():
     """voltage_spread: quarter means, so white noise of 0.01 V on a steady 4.2 V is < 0.1 %,
     and a fall of 0.15 V over a flight is 0.15 * 3/4 / 4.125 of the mean."""

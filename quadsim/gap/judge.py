@@ -228,7 +228,11 @@ def reading_text(ev, reference) -> str:
         # the references' own values, where their flights determine them
         ref, known_ref = reference.values(), reference_determined(reference)
         s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
-        known = [k for k in values if known_ref.get(k, False)]
+        # only the groups it gives values of its own: a reading on top of a shared group
+        # (the flight's thrust curve about zero speed on the references' slope about their
+        # hover) is another quantity than the references' value of the same name
+        known = [k for k in values if known_ref.get(k, False)
+                 and k.split(".")[0] in ev.explanation.replaces]
         if known:
             text += " (references: " + "; ".join(
                 _reference_text(k, ref[k], s_ref[k], reference) for k in known) + ")"
