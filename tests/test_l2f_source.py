@@ -397,3 +397,24 @@ def test_the_soft_vehicle_and_its_cases():
     assert len(cases) == 30 and SOURCE.name == "l2f-soft" and cases[0]["seed"] == 86_000
     coms = [np.hypot(*c["effects"]["com"]) for c in cases if c["case"] == "com_offset"]
     assert coms and max(coms) <= 0.1 * 0.142 * np.sqrt(2)
+
+
+def test_the_cascades_rate_integral_holds_a_com_offsets_torque():
+    """The cascade's rate integral is clipped as a torque: it can hold a CoM offset at 15 %
+    of the arm on every vehicle (``i_rate_max = 0.15 m g arm / (J K_I)``, at least the 0.5
+    rad it was). At 0.5 rad the arpl vehicle held 2.7 mN m against a 5.7 mm offset's 44 mN m,
+    and its CoM flights drifted 40-70 m in 8 s; with it, the same flight stays within 7 m
+    (its path spans +-2.7 m)."""
+    from quadsim.bench.l2f_source import ARPL
+
+    ctrl = Cascade(0.002, ARPL)
+    arm = float(np.hypot(0.0775, 0.0981))
+    expected = 0.15 * 0.782 * 9.81 * arm / (np.array(ARPL["inertia"]) * Cascade.KI_RATE)
+    np.testing.assert_allclose(ctrl.i_rate_max, expected, rtol=1e-12)
+    assert ctrl.i_rate_max[0] == pytest.approx(27.15, abs=0.01)
+    assert Cascade(0.002, MODEL).i_rate_max[0] == pytest.approx(11.3, abs=0.05)
+    if not l2f_available():
+        pytest.skip("l2f is not installed (pip install 'quadsim[l2f]')")
+    spec = FlightSpec(seed=85009, speed=0.911, duration=8.0, effects={"com": (0.0057, 0.0006)})
+    (log, _), = l2f_flights([spec], workers=1, vehicle="arpl")
+    assert np.max(np.abs(log.position[:, :2])) < 7.0
