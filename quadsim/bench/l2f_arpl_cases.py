@@ -6,12 +6,14 @@ Source: :mod:`.l2f_source` with :data:`quadsim.bench.l2f_source.ARPL` (l2f 2.0.1
 0.782 kg, rotors on a 155 x 196 mm rectangle (0.125 m from the centre; the case table's arm is its
 shorter half-span, 0.0775 m: CoM offsets 2.3-7.8 mm), J =
 diag(1.7665e-3, 1.3766e-3, 2.953e-3) kg m^2, k_Q 0.00596 m, 33 ms rotors, and a thrust curve
-that bends down: per rotor -0.530 + 8.971 a - 0.891 a^2 N (c2 < 0), hover at a = 0.276,
+that bends down: per rotor -0.530 + 8.971 a - 0.891 a^2 N (c2 < 0), hover at a = 0.281,
 where the slope is 0.61x the quadratic model's 2 T / Omega and the curvature is negative
-(the library's shared curvature reaches 0 at most: ``thrust_curve.quadratic`` >= -b). Its
+(when it was built, the library's shared curvature stopped at 0; since d636543 it may
+bend down: :func:`quadsim.gap.priors.curve_quadratic_bounds`). Its
 rotor state is normalised; this module takes 3000 rad/s at a = 1. quadsim's nominal model
-has b from a thrust-stand least-squares fit of b Omega^2 over a = 0.1..1.0
-(:func:`quadsim.bench.l2f_source.stand_b`), as for the fs, flightmare and mrs vehicles.
+has b from a thrust-stand least-squares fit of b Omega^2 over a = 0.1..0.5, the band it
+flies (1.40x low at hover; :func:`quadsim.bench.l2f_source.stand_b`; over 0.1..1.0 the
+vehicle check refused its references, b 2.7x low).
 The same PID cascade (its nominal mass, inertia, geometry and thrust curve), path, sensors,
 body drag form (C_dA 0.01, 0.01, 0.025 m^2) and the same case table as :mod:`.l2f_cases`
 at this vehicle's scale: masses +5..+20 %, a payload 0.04-0.12 kg 15-40 mm off the centre

@@ -49,8 +49,8 @@ class ThrustCurve(EffectBase):
         # give k2 = 1.10-1.26 b (KDE2814 with 10 and 14 inch propellers, Du et al. 2016);
         # a large negative constant term (Flightmare's -1.77 N) gives k2 well below b. The
         # gap's reference model carries it about the references' hover
-        # (quadsim.gap.calibrate). Range: the whole curvature from -b to +b of a 1 kg frame
-        # is far inside; the gap bounds it by the vehicle's own b.
+        # (quadsim.gap.calibrate). Range: far beyond any frame's b; the gap bounds the whole
+        # curvature b + quadratic to -b .. 2 b (quadsim.gap.priors.curve_quadratic_bounds).
         EffectParameter("quadratic", "N s^2/rad^2", 0.0, -1e-3, 1e-3,
                         "thrust per squared rotor speed about the centre, added to b Omega^2"),
     )

@@ -264,8 +264,8 @@ def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np
             if name == "thrust_curve" and p == "linear":
                 lo, hi = max(lo, -curve_bound(params)), min(hi, curve_bound(params))
             if name == "thrust_curve" and p == "quadratic":
-                lo, hi = max(lo, curve_quadratic_bounds(params)[0]), \
-                    min(hi, curve_quadratic_bounds(params)[1])
+                low, high = curve_quadratic_bounds(params)
+                lo, hi = max(lo, low), min(hi, high)
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)
