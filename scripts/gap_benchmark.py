@@ -27,6 +27,8 @@ Usage::
     python scripts/gap_benchmark.py --independent --source pyflyt --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --source multirotor --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --source l2f --cache DIR [--generate-only]
+    python scripts/gap_benchmark.py --independent --source quadcopter-sim --cache DIR \
+        [--generate-only]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
 
@@ -75,6 +77,11 @@ the flightmare vehicle's rotors, 40 ms); ``--source l2f-arpl``
 (:mod:`quadsim.bench.l2f_arpl_cases`) for its arpl vehicle (0.78 kg, a thrust curve that
 bends down, 33 ms); ``--source l2f-soft`` (:mod:`quadsim.bench.l2f_soft_cases`) for its
 soft_rigid vehicle (0.80 kg on long arms, 46 ms).
+
+quadcopter-sim source (``--independent --source quadcopter-sim --cache DIR``,
+:mod:`quadsim.bench.qcsim_cases`): the same for 28 cases from quadcopter-sim 0.3.0 (its own
+rigid-body equations and 0.65 kg plus-configuration vehicle; DC motors, body drag and a
+geometric controller of this project's) against 8 nominal flights.
 """
 
 from __future__ import annotations
@@ -552,6 +559,8 @@ SIM_SOURCES = {
                  L2F_HINT),
     "l2f-soft": ("quadsim.bench.l2f_soft_cases", "quadsim.bench.l2f_source", "l2f_available",
                  L2F_HINT),
+    "quadcopter-sim": ("quadsim.bench.qcsim_cases", "quadsim.bench.qcsim_source",
+                       "qcsim_available", "pip install 'quadsim[qcsim]'"),
 }
 
 
