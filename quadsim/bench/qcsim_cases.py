@@ -68,8 +68,14 @@ from ..effects import make_effect
 from ..gap.priors import momentum_rate_damping
 from . import sim_cases
 from .observe import OBSERVABLE
-from .qcsim_source import MODEL, FlightSpec, hover_speed_of, qcsim_flights, steady_speed, \
-    vehicle_params
+from .qcsim_source import (
+    MODEL,
+    FlightSpec,
+    hover_speed_of,
+    qcsim_flights,
+    steady_speed,
+    vehicle_params,
+)
 from .score import joined_kind
 
 __all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spec",
