@@ -50,7 +50,7 @@ import dataclasses
 from ..effects.body_drag import BodyDrag
 from . import fitting
 from .evidence import evaluate
-from .explanations import Explanation, explanations_for, quadratic_laws
+from .explanations import Explanation, explanations_for, law_replaces, quadratic_laws
 from .reference import Reference
 
 __all__ = ["DragLaw", "choose", "under"]
@@ -74,7 +74,7 @@ def nulls(reference: Reference, states) -> list[Explanation]:
                  if e.name == "no_difference")
     return [plain] + [dataclasses.replace(plain, variant=_variant(variant),
                                           parts=(("drag_law", dict(fixed, cd_area=drag), ()),),
-                                          replaces=("rotor_drag",))
+                                          replaces=law_replaces(fixed))
                       for variant, fixed, drag in quadratic_laws(reference)]
 
 
@@ -114,7 +114,7 @@ def under(explanations: list[Explanation], law: Explanation | None) -> list[Expl
         elif e.name == "wind":
             continue                                     # through the linear law: not this one
         else:
-            out.append(_with_law(e, part))
+            out.append(_with_law(e, part, law.replaces))
     return out
 
 
@@ -123,7 +123,7 @@ def _per_axis(fixed: dict) -> bool:
     return fixed.get("per_axis", 0.0) >= 0.5
 
 
-def _with_law(e: Explanation, part: tuple) -> Explanation:
+def _with_law(e: Explanation, part: tuple, replaced: tuple = ("rotor_drag",)) -> Explanation:
     per_axis = {k: v for k, v in part[1].items() if k == "per_axis"}
     parts = tuple((n, dict(fixed, **per_axis), fitted) if n == "body_drag" and fitted
                   else (n, fixed, fitted) for n, fixed, fitted in e.parts)
@@ -132,5 +132,5 @@ def _with_law(e: Explanation, part: tuple) -> Explanation:
         # a rotor drag of the flight's own, on top of the law: centred on none
         names = e.parameter_names
         mean = tuple(0.0 if k == "rotor_drag.coefficient" else m for k, m in zip(names, mean))
-    replaces = e.replaces + (() if "rotor_drag" in e.replaces else ("rotor_drag",))
+    replaces = e.replaces + tuple(g for g in replaced if g not in e.replaces)
     return dataclasses.replace(e, parts=parts + (part,), mean=mean, replaces=replaces)

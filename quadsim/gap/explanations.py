@@ -422,17 +422,32 @@ def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     return [plain] + [
         _one("wind", variant, [("wind", {}, ("vx", "vy")), ("body_drag", fixed, ("cd_area",))],
              list(mean) + [drag], list(spread) + [QUADRATIC_SD * drag],
-             replaces=("wind", "rotor_drag"), log_prior=-np.log(2.0 * len(laws)), coupled=True,
+             replaces=("wind",) + law_replaces(fixed), log_prior=-np.log(2.0 * len(laws)),
+             coupled=True,
              kin=("wind",))
         for variant, fixed, drag in laws]
 
 
 def quadratic_laws(reference: Reference) -> list[tuple[str, dict, float]]:
     """(variant, fixed values, C_d A in m^2) of the references' drag taken as a quadratic
-    airframe drag under each law (:func:`_wind_readings`); empty without a rotor drag."""
+    airframe drag under each law (:func:`_wind_readings`); empty without a rotor drag. The
+    law per body axis carries the references' vertical drag too, as its equivalent along
+    body z (``cd_area_vertical``, :func:`quadsim.gap.calibrate.vertical_equivalent`): the law
+    is the vehicle's, on every axis (:func:`law_replaces`)."""
+    axes = {"per_axis": 1.0}
+    vertical = getattr(reference, "quadratic_vertical_axes", 0.0)
+    if vertical > 0.0:
+        axes["cd_area_vertical"] = vertical
     laws = [(WIND_DRAG, {}, reference.quadratic_drag),
-            (WIND_DRAG_AXES, {"per_axis": 1.0}, reference.quadratic_drag_axes)]
+            (WIND_DRAG_AXES, axes, reference.quadratic_drag_axes)]
     return [(variant, fixed, drag) for variant, fixed, drag in laws if drag > 0.0]
+
+
+def law_replaces(fixed: dict) -> tuple[str, ...]:
+    """The references' shared groups a quadratic law's fixed values (:func:`quadratic_laws`)
+    stand in for: their rotor drag, and their vertical body drag where the law carries its
+    equivalent."""
+    return ("rotor_drag",) + (("body_drag",) if "cd_area_vertical" in fixed else ())
 
 
 #: the quadratic-drag wind variants (:func:`_wind_readings`): the law on the air speed and

@@ -231,8 +231,11 @@ def reading_text(ev, reference) -> str:
         # only the groups it gives values of its own: a reading on top of a shared group
         # (the flight's thrust curve about zero speed on the references' slope about their
         # hover) is another quantity than the references' value of the same name
+        # nor a group the flight's drag law stands in for (its own drag is on top of the law)
+        law = {"rotor_drag", "body_drag"} if any(
+            n == "drag_law" for n, _, _ in ev.explanation.parts) else set()
         known = [k for k in values if known_ref.get(k, False)
-                 and k.split(".")[0] in ev.explanation.replaces]
+                 and k.split(".")[0] in set(ev.explanation.replaces) - law]
         if known:
             text += " (references: " + "; ".join(
                 _reference_text(k, ref[k], s_ref[k], reference) for k in known) + ")"

@@ -121,6 +121,7 @@ def reference_summary(ref: Reference) -> dict:
             "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
             "quadratic_drag_m2": float(ref.quadratic_drag),
             "quadratic_drag_axes_m2": float(ref.quadratic_drag_axes),
+            "quadratic_vertical_axes_m2": float(ref.quadratic_vertical_axes),
             "fixed": {f"{name}.{k}": float(v) for name, fixed, _ in ref.candidate.parts
                       for k, v in fixed.items()},
             "load_exponent": None if ref.load_exponent is None else

@@ -173,6 +173,12 @@ class Reference:
     #: the same with each body axis's drag on its own air speed (``per_axis``): the wind
     #: reading's third variant (:func:`quadsim.gap.explanations._wind_readings`)
     quadratic_drag_axes: float = 0.0
+    #: C_d A (m^2) along body z under the law per body axis that gives the references' own
+    #: vertical air force of their shared body drag (on the air speed, ``|v| v_z``):
+    #: :func:`quadsim.gap.calibrate.vertical_equivalent`; the per-axis law carries it in place
+    #: of that shared drag (:func:`quadsim.gap.explanations.quadratic_laws`); 0 where the
+    #: references share none
+    quadratic_vertical_axes: float = 0.0
     #: whether the references' rotor-speed timing was fitted (:func:`quadsim.gap.calibrate.
     #: calibrate`, wherever they log rotor speeds): a flight's own delay is read against it
     #: (the held-out mode's parameter-set reference has none)
