@@ -29,6 +29,8 @@ Usage::
     python scripts/gap_benchmark.py --independent --source l2f --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --source quadcopter-sim --cache DIR \
         [--generate-only]
+    QUADSIM_GENESIS_PYTHON=... python scripts/gap_benchmark.py --independent --source genesis \
+        --cache DIR [--generate-only]
     python scripts/gap_benchmark.py --independent --per-flight-only --cache /tmp/flights \
         [--cached-only] [--stride N] --out pf.json
 
@@ -82,6 +84,12 @@ quadcopter-sim source (``--independent --source quadcopter-sim --cache DIR``,
 :mod:`quadsim.bench.qcsim_cases`): the same for 28 cases from quadcopter-sim 0.3.0 (its own
 rigid-body equations and 0.65 kg plus-configuration vehicle; DC motors, body drag and a
 geometric controller of this project's) against 8 nominal flights.
+
+Genesis source (``--independent --source genesis --cache DIR``,
+:mod:`quadsim.bench.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
+and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
+this project's), flown in child processes of ``QUADSIM_GENESIS_PYTHON`` (an environment with
+torch and Genesis).
 """
 
 from __future__ import annotations
@@ -561,6 +569,11 @@ SIM_SOURCES = {
                  L2F_HINT),
     "quadcopter-sim": ("quadsim.bench.qcsim_cases", "quadsim.bench.qcsim_source",
                        "qcsim_available", "pip install 'quadsim[qcsim]'"),
+    "genesis": ("quadsim.bench.genesis_cases", "quadsim.bench.genesis_source",
+                "genesis_available",
+                "pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
+                "pip install 'quadsim[genesis]'; or set QUADSIM_GENESIS_PYTHON to an "
+                "interpreter that has Genesis"),
 }
 
 

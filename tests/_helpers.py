@@ -24,3 +24,34 @@ def one_line(capsys, *names: str) -> str:
     for name in names:
         assert name in err, err
     return err
+
+
+def check_source_flight(log, heavy_log, params, extra_mass: float, shared: list,
+                        arm: float) -> None:
+    """A simulator source's short flights against quadsim's own rigid-body and rotor model:
+    500 Hz, scalar-first unit quaternions near level, commands in 0..1; the logged rotor
+    speeds in quadsim's rotor model (b, d, layout, spins) reproduce the logged specific
+    force: the mean thrust is the accelerometer's body z force (1 %) and about the weight
+    (5 %: the path climbs and tilts; each flight with its own mass); on the nominal flight
+    quadsim's residual wrench with the source's ``shared`` physics stays below 1.5 % of the
+    weight (forces) and 1.5 % of weight x ``arm`` (torques) RMS."""
+    import numpy as np
+    import pytest
+
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.fitting import residuals
+
+    assert log.t[1] == pytest.approx(1.0 / 500)
+    assert np.all(log.quat[:, 0] > 0.9)
+    np.testing.assert_allclose(np.linalg.norm(log.quat, axis=1), 1.0, atol=1e-9)
+    assert np.all((log.rotor_command >= 0) & (log.rotor_command <= 1))
+    for flight, mass in ((log, params.mass), (heavy_log, params.mass + extra_mass)):
+        thrust = params.thrust_factor * np.sum(flight.rotor_speed ** 2, axis=1)
+        assert np.mean(flight.accel[:, 2]) * mass == pytest.approx(np.mean(thrust), rel=0.01)
+        assert np.mean(thrust) == pytest.approx(mass * params.gravity, rel=0.05)
+    weight = params.mass * params.gravity
+    flight = prepare([log], params)[0]
+    r = residuals(flight.fit, params, shared, rotor_channel=False)
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    assert np.all(rms[:3] < 0.015 * weight), rms
+    assert np.all(rms[3:6] < 0.015 * weight * arm), rms

@@ -122,37 +122,18 @@ def test_case_list_frozen_and_mapped_to_the_library():
 
 @pytest.mark.skipif(not qcsim_available(), reason="quadcopter-sim is not installed")
 def test_flights_agree_with_quadsims_model():
-    """A nominal flight (2.1 s logged) and a +0.1 kg flight (0.5 s), one process: 500 Hz,
-    scalar-first unit quaternions near level, duty cycles in 0..1; the logged rotor speeds
-    in quadsim's rotor model with the shared body drag reproduce the logged specific force
-    and body accelerations: the mean thrust is the accelerometer's body z force (1 %) and
-    about the weight (5 %: the path climbs and tilts; each flight with its own mass), and on
-    the nominal flight quadsim's residual wrench with the shared motor lag and body drag
-    stays below 1.5 % of the weight (forces) and 1.5 % of weight x arm (torques) RMS; the
-    mean speed per duty follows the steady map (3 %)."""
+    """A nominal flight (2.1 s logged) and a +0.1 kg flight (0.5 s), one process, checked by
+    ``_helpers.check_source_flight`` against quadsim's model with the shared motor lag and
+    body drag; the mean speed per duty follows the steady map (3 %)."""
+    from _helpers import check_source_flight
+
     from quadsim.bench.qcsim_cases import shared_effects
     from quadsim.bench.qcsim_source import qcsim_flights
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.fitting import residuals
 
-    params = vehicle_params()
     base = FlightSpec(seed=5, speed=0.8, duration=2.1)
     heavy = FlightSpec(seed=6, speed=0.8, duration=0.5, effects={"mass": 0.1})
     (log, truth), (log_heavy, _) = qcsim_flights([base, heavy], workers=1)
     assert truth["effects"] == {} and truth["source"] == "quadcopter-sim"
-    assert log.t[1] == pytest.approx(1.0 / 500)
-    assert np.all(log.quat[:, 0] > 0.9)
-    np.testing.assert_allclose(np.linalg.norm(log.quat, axis=1), 1.0, atol=1e-9)
-    assert np.all((log.rotor_command >= 0) & (log.rotor_command <= 1))
-    for flight, mass in ((log, params.mass), (log_heavy, params.mass + 0.1)):
-        thrust = params.thrust_factor * np.sum(flight.rotor_speed ** 2, axis=1)
-        assert np.mean(flight.accel[:, 2]) * mass == pytest.approx(np.mean(thrust), rel=0.01)
-        assert np.mean(thrust) == pytest.approx(mass * 9.81, rel=0.05)
+    check_source_flight(log, log_heavy, vehicle_params(), 0.1, shared_effects(), MODEL["arm"])
     ratio = np.mean(log.rotor_speed) / np.mean(steady_speed(log.rotor_command))
     assert ratio == pytest.approx(1.0, rel=0.03)
-    weight = params.mass * 9.81
-    flight = prepare([log], params)[0]
-    r = residuals(flight.fit, params, shared_effects(), rotor_channel=False)
-    rms = np.sqrt(np.mean(r ** 2, axis=0))
-    assert np.all(rms[:3] < 0.015 * weight), rms
-    assert np.all(rms[3:6] < 0.015 * weight * MODEL["arm"]), rms

@@ -70,10 +70,10 @@ from . import sim_cases
 from .observe import OBSERVABLE
 from .qcsim_source import (
     MODEL,
+    MOTOR,
     FlightSpec,
     hover_speed_of,
     qcsim_flights,
-    steady_speed,
     vehicle_params,
 )
 from .score import joined_kind
@@ -134,19 +134,14 @@ def case_spec(case: dict) -> FlightSpec:
 def motor_time_constant(slow: float = 1.0) -> float:
     """The DC motor's time constant (s) linearised at hover: J / (k_t k_e / R + 2 d
     Omega_h), J the motor's inertia x ``slow``."""
-    m = MODEL
-    return float(m["motor_inertia"] * slow / (m["k_emf"] ** 2 / m["resistance"]
-                                              + 2 * m["d"] * hover_speed_of()))
+    return MOTOR.time_constant(hover_speed_of(), MODEL["d"], slow)
 
 
 def motor_alpha(change: float) -> float:
     """The DC motor's speed-per-duty exponent of a propeller change (quadsim's
     ``thrust_factor.alpha``): the steady speed at the hover duty with d x (1 + change) is
     (1 + change)^-alpha times the nominal one."""
-    grid = np.linspace(0.0, 1.0, 2001)
-    duty = np.array([np.interp(hover_speed_of(), steady_speed(grid), grid)])
-    ratio = float(steady_speed(duty, MODEL["d"] * (1 + change))[0] / steady_speed(duty)[0])
-    return float(np.clip(-np.log(ratio) / np.log1p(change), 0.0, 0.5))
+    return MOTOR.alpha(hover_speed_of(), MODEL["d"], change)
 
 
 def shared_effects(slow: float = 1.0) -> list:
@@ -181,7 +176,7 @@ def oracle_reductions(logs: list, references: list,
 
 SOURCE = sim_cases.CaseSource(
     name="quadcopter-sim", package="quadcopter-sim",
-    modules=("qcsim_source.py", "flightjobs.py", "simlog.py"),
+    modules=("qcsim_source.py", "geometric.py", "flightjobs.py", "simlog.py"),
     references=reference_specs, cases=case_list, case_spec=case_spec, fly=qcsim_flights,
     observe=oracle_reductions, scored_kind=scored_kind, params=vehicle_params,
     observable=OBSERVABLE)

@@ -9,11 +9,12 @@ What quadcopter-sim models: thrust ``b Omega_i^2`` per rotor along body z, roll 
 ``l b (Omega_3^2 - Omega_1^2)``, pitch torque ``l b (Omega_4^2 - Omega_2^2)``, yaw torque
 ``d (Omega_2^2 + Omega_4^2 - Omega_1^2 - Omega_3^2)``, gravity, and nothing else: no motor,
 no air, no CoM offset. Its controllers are placeholders (its ``PositionController`` mixes
-position errors straight into rotor speeds), so the flights use this module's own.
+position errors straight into rotor speeds), so the flights use quadsim's geometric
+controller (:class:`quadsim.bench.geometric.Geometric`).
 
 quadsim adds (each documented where it is defined; the references share the first two):
 
-* **DC motors** (:func:`motor_acceleration`): ``J dOmega/dt = k_t (c V - k_e Omega) / R -
+* **DC motors** (:data:`MOTOR`, :class:`quadsim.bench.geometric.DCMotor`): ``J dOmega/dt = k_t (c V - k_e Omega) / R -
   d_i Omega^2`` with the duty cycle c in 0..1 of a 3S battery (11.1 V), motor constants of a
   380 KV outrunner (k_t = k_e = 60 / (2 pi 380) V s/rad, R 0.12 ohm) and the rotor and
   12-inch propeller's J 1.2e-4 kg m^2: the time constant at hover is 21 ms, hover needs a
@@ -64,12 +65,12 @@ from ..core.errors import ModelError
 from ..core.frames import quat_to_rotmat
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
-from ..vehicle.rotors import mixer
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
+from .geometric import DCMotor, Geometric
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["CONTROL_HZ", "EFFECTS", "LOG_HZ", "MODEL", "PHYSICS_HZ", "FlightSpec", "Geometric",
-           "Sensors", "duty_for", "hover_speed_of", "motor_acceleration", "path",
+__all__ = ["CONTROL_HZ", "EFFECTS", "LOG_HZ", "MODEL", "MOTOR", "PHYSICS_HZ", "FlightSpec",
+           "Geometric", "Sensors", "duty_for", "hover_speed_of", "motor_acceleration", "path",
            "qcsim_available", "qcsim_flights", "steady_speed", "to_flight_log", "truth_json",
            "vehicle_params"]
 
@@ -118,31 +119,26 @@ def hover_speed_of(mass: float = MODEL["mass"]) -> float:
     return float(np.sqrt(mass * MODEL["gravity"] / (4 * MODEL["b"])))
 
 
+#: the motors (module doc): 380 KV on 3S, the rotor and 12-inch propeller's J
+MOTOR = DCMotor(battery=MODEL["battery"], k_emf=MODEL["k_emf"], resistance=MODEL["resistance"],
+                inertia=MODEL["motor_inertia"])
+
+
 def steady_speed(duty, k_drag: float = MODEL["d"]) -> np.ndarray:
-    """Steady rotor speed (rad/s) at duty cycle ``duty`` (0..1 of the battery): ``k_t (c V -
-    k_e W) / R = k_d W^2`` solved for W >= 0 (k_t = k_e)."""
-    m = MODEL
-    c = np.clip(np.asarray(duty, dtype=float), 0.0, 1.0)
-    slope = m["k_emf"] ** 2 / m["resistance"]
-    drive = m["k_emf"] * c * m["battery"] / m["resistance"]
-    return (-slope + np.sqrt(slope * slope + 4 * k_drag * drive)) / (2 * k_drag)
+    """Steady rotor speed (rad/s) at duty cycle ``duty`` (0..1 of the battery)
+    (:meth:`quadsim.bench.geometric.DCMotor.steady_speed`)."""
+    return MOTOR.steady_speed(duty, k_drag)
 
 
 def duty_for(speed) -> np.ndarray:
-    """The duty cycle whose steady speed is ``speed`` (rad/s): ``(k_e W + R k_d W^2 / k_t) /
-    V``, clipped to 0..1 (the controller's feed-forward, the nominal propeller's load)."""
-    m = MODEL
-    w = np.asarray(speed, dtype=float)
-    volts = m["k_emf"] * w + m["resistance"] * m["d"] * w * w / m["k_emf"]
-    return np.clip(volts / m["battery"], 0.0, 1.0)
+    """The duty cycle whose steady speed is ``speed`` (rad/s) with the nominal propeller (the
+    controller's feed-forward)."""
+    return MOTOR.duty_for(speed, MODEL["d"])
 
 
 def motor_acceleration(speed, duty, k_drag, inertia) -> np.ndarray:
-    """dOmega/dt (rad/s^2) of the DC motors (module doc): ``(k_t (c V - k_e W) / R - k_d
-    W^2) / J``; ``k_drag`` (4,) per rotor, ``inertia`` J (kg m^2)."""
-    m = MODEL
-    current = (duty * m["battery"] - m["k_emf"] * speed) / m["resistance"]
-    return (m["k_emf"] * current - k_drag * speed * speed) / inertia
+    """dOmega/dt (rad/s^2) of the DC motors; ``k_drag`` (4,) per rotor, ``inertia`` J."""
+    return MOTOR.acceleration(speed, duty, k_drag, inertia)
 
 
 def _rotor_positions() -> np.ndarray:
@@ -210,73 +206,6 @@ def path(t: np.ndarray, seed: int, speed: float) -> tuple[np.ndarray, np.ndarray
     return pos, vel, acc, 0.6 * np.sin(0.9 * w * t), 0.6 * 0.9 * w * np.cos(0.9 * w * t)
 
 
-# ----------------------------------------------------------------------------- the controller
-
-
-def _vee(m: np.ndarray) -> np.ndarray:
-    return np.array([m[2, 1], m[0, 2], m[1, 0]])
-
-
-class Geometric:
-    """The flights' controller: a geometric tracking controller on SE(3) (Lee, Leok &
-    McClamroch, "Geometric tracking control of a quadrotor UAV on SE(3)", CDC 2010) with
-    integral terms on the position and attitude errors (Goodarzi, Lee & Lee, "Geometric
-    nonlinear PID control of a quadrotor UAV on SE(3)", ECC 2013), tuned for the nominal
-    vehicle and blind to every case effect. It allocates the force and moments to the plus
-    configuration's rotors (:func:`quadsim.vehicle.rotors.mixer` of the nominal layout), and
-    each rotor's speed to a duty cycle by the nominal motor's steady map (:func:`duty_for`). :meth:`step` takes the CoM position, world velocity,
-    quaternion (w-first), body rate and the path's setpoints; it returns the duty cycles (4,).
-    """
-
-    # position: natural frequency 2 rad/s, damping 0.9, integral 0.5 (1/s^3 x m); attitude:
-    # 10 rad/s on roll and pitch, 5 on yaw, damping 0.8, integral 2 (1/s)
-    W_POS, Z_POS, KI_POS = 2.0, 0.9, 0.5
-    W_ATT, Z_ATT, KI_ATT = np.array([10.0, 10.0, 5.0]), 0.8, 2.0
-    MAX_TILT = 0.5                                               # rad
-    #: the attitude integral's clip (rad s): holds a CoM offset of 15 % of the arm
-    HOLD_ARM = 0.15
-
-    def __init__(self, dt: float):
-        m = MODEL
-        self.dt = dt
-        self.mass, self.inertia = m["mass"], np.diag(m["inertia"])
-        j = np.asarray(m["inertia"])
-        self.k_x = self.mass * self.W_POS ** 2
-        self.k_v = self.mass * 2 * self.Z_POS * self.W_POS
-        self.k_r = j * self.W_ATT ** 2
-        self.k_w = j * 2 * self.Z_ATT * self.W_ATT
-        # [thrust, roll, pitch, yaw torque] -> squared rotor speeds, from the layout
-        self.unmix = mixer(vehicle_params())
-        self.i_pos = np.zeros(3)
-        self.i_att = np.zeros(3)
-        hold = self.HOLD_ARM * m["mass"] * m["gravity"] * m["arm"]
-        self.i_att_max = np.maximum(0.2, hold / (self.k_r * self.KI_ATT))
-
-    def step(self, pos, vel, quat, rate, sp_pos, sp_vel, sp_acc, sp_yaw, sp_yaw_rate
-             ) -> np.ndarray:
-        m = MODEL
-        e_x, e_v = pos - sp_pos, vel - sp_vel
-        self.i_pos = np.clip(self.i_pos + e_x * self.dt, -1.0, 1.0)
-        force = (-self.k_x * e_x - self.k_v * e_v - self.KI_POS * self.mass * self.i_pos
-                 + self.mass * (sp_acc + np.array([0.0, 0.0, m["gravity"]])))
-        horizontal, limit = np.hypot(*force[:2]), force[2] * np.tan(self.MAX_TILT)
-        if horizontal > limit:
-            force[:2] *= limit / horizontal
-        rot = quat_to_rotmat(quat)
-        b3 = force / np.linalg.norm(force)
-        b2 = np.cross(b3, [np.cos(sp_yaw), np.sin(sp_yaw), 0.0])
-        b2 /= np.linalg.norm(b2)
-        r_d = np.column_stack([np.cross(b2, b3), b2, b3])
-        e_r = 0.5 * _vee(r_d.T @ rot - rot.T @ r_d)
-        e_w = rate - rot.T @ r_d @ np.array([0.0, 0.0, sp_yaw_rate])
-        self.i_att = np.clip(self.i_att + e_r * self.dt, -self.i_att_max, self.i_att_max)
-        moment = (-self.k_r * e_r - self.k_w * e_w - self.k_r * self.KI_ATT * self.i_att
-                  + np.cross(rate, self.inertia @ rate))
-        thrust = float(force @ rot[:, 2])
-        squared = np.clip(self.unmix @ np.concatenate([[thrust], moment]), 0.0, None)
-        return duty_for(np.sqrt(squared))
-
-
 # ----------------------------------------------------------------------------- the job
 
 
@@ -337,7 +266,7 @@ def _fly(args) -> dict:
     lead, n = round(LEAD_IN * PHYSICS_HZ), round(spec.duration * PHYSICS_HZ)
     t = np.arange(lead + n + 1) * dt
     sp_pos, sp_vel, sp_acc, sp_yaw, sp_yaw_rate = path(t, spec.seed, spec.speed)
-    ctrl = Geometric(every * dt)
+    ctrl = Geometric(every * dt, vehicle_params(), duty_for)
     x = np.zeros(17)
     x[0:3], x[3:6], x[6] = sp_pos[0], sp_vel[0], 1.0
     x[13:17] = hover_speed_of(job["mass"]) / root

@@ -67,6 +67,9 @@ class CaseSource:
     scored_kind: Callable[[dict], str]
     params: Callable[[], object]
     observable: float
+    #: the simulator's version where it is not installed in this interpreter (Genesis runs in
+    #: another one: :func:`quadsim.bench.genesis_source.genesis_version`); None: ``package``'s
+    version: Callable[[], str] | None = None
 
 
 def draw_cases(table, draw: Callable, *, source: str, vehicle: str, seed0: int,
@@ -210,7 +213,8 @@ def code_hash(source: CaseSource) -> str:
     """Hash of everything the flights depend on: the source's modules, the simulator's
     version, the reference specs and the case list (a change never reads a stale flight)."""
     here = Path(__file__).resolve().parent
-    digest = hashlib.sha256(version(source.package).encode())
+    digest = hashlib.sha256((source.version() if source.version else
+                             version(source.package)).encode())
     for name in source.modules:
         digest.update((here / name).read_bytes())
     digest.update(repr([(s.seed, s.speed, s.duration) for s in source.references()]).encode())
