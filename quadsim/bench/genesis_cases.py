@@ -100,13 +100,11 @@ def shared_effects(slow: float = 1.0) -> list:
 
 def library_truth(case: dict) -> list:
     """Library effects with the true difference of ``case`` from the references, on top of
-    :func:`shared_effects`; [] for cases with no library form (none, outside, delay)."""
-    e = case["effects"]
-    shared = shared_effects(e.get("motor_slow", 1.0))
-    if scored_kind(case) != "library" or "rotor_delay" in e:
-        return []
-    alpha = motor_alpha(e["thrust_scale"]) if "thrust_scale" in e else 0.0
-    return shared + sim_cases.library_difference(e, thrust_alpha=alpha, rate_damping=True)
+    :func:`shared_effects`; [] for cases with no library form (none, outside, delay):
+    :func:`quadsim.bench.sim_cases.motor_library_truth`."""
+    return sim_cases.motor_library_truth(
+        case, shared_effects(case["effects"].get("motor_slow", 1.0)), motor_alpha,
+        scored_kind(case))
 
 
 def oracle_reductions(logs: list, references: list,

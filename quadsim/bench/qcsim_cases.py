@@ -84,17 +84,10 @@ __all__ = ["CASES", "OBSERVABLE", "REFERENCES", "SOURCE", "case_list", "case_spe
 
 REFERENCES = 8
 DURATION = 8.0
-#: (truth, kind, count, speed range)
-CASES = (("none", "none", 2, (0.75, 1.35)), ("none", "none", 2, (0.45, 0.55)),
-         ("none", "none", 2, (1.5, 1.65)),
-         ("mass_offset", "library", 2, None), ("payload", "library", 1, None),
-         ("com_offset", "library", 2, None), ("inertia_error", "library", 2, None),
-         ("thrust_mismatch", "library", 2, None), ("thrust_factor", "library", 1, None),
-         ("motor_lag", "library", 2, None), ("rate_damping", "library", 2, None),
-         ("wind", "library", 2, None), ("rotor_delay", "library", 2, None),
-         ("periodic_torque", "outside", 2, None), ("periodic_force", "outside", 2, None))
+#: (truth, kind, count, speed range): the table of the DC-motor sources
+CASES = sim_cases.MOTOR_TABLE
 #: library name a case's truth is scored against (payload is an offset mass)
-SCORED_AS = {"payload": "mass_offset"}
+SCORED_AS = sim_cases.PAYLOAD_AS_MASS
 #: cases flown as outside the library whose effect the library has gained since (none yet)
 JOINED_LIBRARY: frozenset = frozenset()
 
@@ -156,14 +149,10 @@ def shared_effects(slow: float = 1.0) -> list:
 def library_truth(case: dict) -> list:
     """Library effects with the true difference of ``case`` from the references, on top of
     :func:`shared_effects` (the full effect list of the case's true model); [] for cases
-    with no library form (none, outside, delay)."""
-    e = case["effects"]
-    shared = shared_effects(e.get("motor_slow", 1.0))
-    if scored_kind(case) != "library" or "rotor_delay" in e:
-        return []
-    # [] for motor_slow: the shared motor lag scaled
-    alpha = motor_alpha(e["thrust_scale"]) if "thrust_scale" in e else 0.0
-    return shared + sim_cases.library_difference(e, thrust_alpha=alpha, rate_damping=True)
+    with no library form (none, outside, delay): :func:`quadsim.bench.sim_cases.motor_library_truth`."""
+    return sim_cases.motor_library_truth(
+        case, shared_effects(case["effects"].get("motor_slow", 1.0)), motor_alpha,
+        scored_kind(case))
 
 
 def oracle_reductions(logs: list, references: list,

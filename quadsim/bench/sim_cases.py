@@ -40,8 +40,9 @@ import numpy as np
 from ..effects import make_effect
 from .observe import TrueModel, per_flight_observability
 
-__all__ = ["CaseSource", "DrawScale", "code_hash", "draw_cases", "draw_effect", "flight_dir",
-           "generate", "judge", "library_difference", "load_flights", "oracle_reductions"]
+__all__ = ["MOTOR_TABLE", "PAYLOAD_AS_MASS", "CaseSource", "DrawScale", "code_hash",
+           "draw_cases", "draw_effect", "flight_dir", "generate", "judge", "library_difference",
+           "load_flights", "motor_library_truth", "oracle_reductions"]
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,36 @@ def library_difference(effects: dict, *, thrust_alpha: float = 0.0,
     if "wind" in e:
         return [make_effect("wind", vx=e["wind"][0], vy=e["wind"][1])]
     return []
+
+
+#: the case table of the simulator sources with a DC motor and no thrust curve of their own
+#: (:mod:`.multirotor_cases`, :mod:`.qcsim_cases`, :mod:`.genesis_cases`; each module's
+#: docstring has the ranges): (truth, kind, count, speed range or None), 28 cases
+MOTOR_TABLE = (("none", "none", 2, (0.75, 1.35)), ("none", "none", 2, (0.45, 0.55)),
+               ("none", "none", 2, (1.5, 1.65)),
+               ("mass_offset", "library", 2, None), ("payload", "library", 1, None),
+               ("com_offset", "library", 2, None), ("inertia_error", "library", 2, None),
+               ("thrust_mismatch", "library", 2, None), ("thrust_factor", "library", 1, None),
+               ("motor_lag", "library", 2, None), ("rate_damping", "library", 2, None),
+               ("wind", "library", 2, None), ("rotor_delay", "library", 2, None),
+               ("periodic_torque", "outside", 2, None), ("periodic_force", "outside", 2, None))
+#: library name a case's truth is scored against (a payload is an offset mass)
+PAYLOAD_AS_MASS = {"payload": "mass_offset"}
+
+
+def motor_library_truth(case: dict, shared: list, motor_alpha: Callable[[float], float],
+                        kind: str) -> list:
+    """Library effects with the true difference of a :data:`MOTOR_TABLE` ``case`` on top of
+    the source's ``shared`` effects (the case's true model; a propeller change with the DC
+    motor's speed-per-command exponent ``motor_alpha(change)``, rate damping as the library's:
+    those sources' references share none); [] for cases scored outside the library (``kind``)
+    and for a late rotor log."""
+    e = case["effects"]
+    if kind != "library" or "rotor_delay" in e:
+        return []
+    alpha = motor_alpha(e["thrust_scale"]) if "thrust_scale" in e else 0.0
+    # [] for motor_slow: the shared motor lag scaled
+    return shared + library_difference(e, thrust_alpha=alpha, rate_damping=True)
 
 
 def code_hash(source: CaseSource) -> str:
