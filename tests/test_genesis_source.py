@@ -108,3 +108,29 @@ def test_flights_agree_with_quadsims_model():
 
     r = residuals(prepare([log], params)[0].fit, params, shared_effects(), rotor_channel=False)
     assert np.sqrt(np.mean(r[:, 5] ** 2)) < 0.05 * MODEL["d"] * hover_speed_of() ** 2
+
+
+def test_no_genesis_is_one_error_line(tmp_path, monkeypatch, capsys):
+    """``QUADSIM_GENESIS_PYTHON`` naming no interpreter (or one without Genesis): not
+    available, flying raises ModelError naming the interpreter, and ``--independent --source
+    genesis --cache DIR`` ends with one error line, exit 2, nothing written into DIR."""
+    import importlib.util
+    from pathlib import Path
+
+    from quadsim.bench.genesis_source import genesis_flights
+    from quadsim.core.errors import ModelError
+
+    monkeypatch.setenv("QUADSIM_GENESIS_PYTHON", str(tmp_path / "no-python"))
+    assert not genesis_available()
+    with pytest.raises(ModelError, match="no-python"):
+        genesis_flights([FlightSpec(seed=1)])
+    script_path = Path(__file__).resolve().parents[1] / "scripts" / "gap_benchmark.py"
+    spec = importlib.util.spec_from_file_location("gap_benchmark_script", script_path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    assert script.main(["--independent", "--source", "genesis", "--cache", str(cache)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --source genesis:"), err
+    assert not any(cache.iterdir())
