@@ -12,10 +12,7 @@ import numpy as np
 import pytest
 
 from quadsim.bench.genesis_cases import (
-    case_list,
-    library_truth,
     motor_time_constant,
-    reference_specs,
     shared_effects,
 )
 from quadsim.bench.genesis_source import (
@@ -64,23 +61,16 @@ def test_the_files_rotor_drag_is_quadsims_rotor_drag():
 
 
 def test_case_list_frozen_and_mapped_to_the_library():
-    """28 frozen cases (6 no-effect, 18 in-library, 4 outside; qcsim_cases' table), seeds
-    apart from the references'; each in-library truth (not a delay) is named by its true
-    difference on top of the shared motor lag and rotor drag."""
-    from quadsim.effects import EFFECTS
+    """The 28 frozen cases (quadcopter-sim's table), mapped to the library on top of the
+    shared motor lag and rotor drag, within the table's ranges, the payload 40-120 g
+    (``_helpers.check_motor_case_list``)."""
+    from _helpers import check_motor_case_list
 
-    cases = case_list()
-    assert case_list() == cases and len(cases) == 28
-    kinds = [c["kind"] for c in cases]
-    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == (6, 18, 4)
-    assert not {c["seed"] for c in cases} & {s.seed for s in reference_specs()}
+    from quadsim.bench import genesis_cases
+
     assert [e.name for e in shared_effects()] == ["motor_lag", "rotor_drag"]
-    for case in cases:
-        if case["kind"] == "library" and case["truth"] != "rotor_delay":
-            names = [x.name for x in library_truth(case)]
-            assert case["truth"] in EFFECTS and (case["truth"] in names or len(names) == 2)
-        if "mass" in case["effects"]:
-            assert 0.05 <= case["effects"]["mass"] / MODEL["mass"] <= 0.2
+    check_motor_case_list(genesis_cases, ("motor_lag", "rotor_drag"), MODEL["mass"],
+                          float(np.hypot(*MODEL["positions"][0])), payload_kg=(0.04, 0.12))
 
 
 @pytest.mark.skipif(not genesis_available(), reason="Genesis is not importable "

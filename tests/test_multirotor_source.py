@@ -9,11 +9,8 @@ import numpy as np
 import pytest
 
 from quadsim.bench.multirotor_cases import (
-    case_list,
-    library_truth,
     motor_alpha,
     motor_time_constant,
-    reference_specs,
 )
 from quadsim.bench.multirotor_source import (
     MODEL,
@@ -63,31 +60,14 @@ def test_propeller_coupling_and_motor_time_constant():
 
 
 def test_case_list_frozen_and_mapped_to_the_library():
-    """The 28 frozen cases: 6 no-effect, 18 in-library, 4 outside; seeds apart from the
-    references'; each in-library truth is a library effect (or a delay) and its true
-    difference (on top of the shared body drag and motor lag) names it; the multirotor-side
-    change is within the module table's ranges."""
-    from quadsim.effects import EFFECTS
+    """The 28 frozen cases, mapped to the library on top of the shared motor lag and body
+    drag, within the table's ranges (``_helpers.check_motor_case_list``)."""
+    from _helpers import check_motor_case_list
 
-    cases = case_list()
-    assert case_list() == cases and len(cases) == 28
-    kinds = [c["kind"] for c in cases]
-    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == (6, 18, 4)
-    assert not {c["seed"] for c in cases} & {s.seed for s in reference_specs()}
-    for case in cases:
-        e = case["effects"]
-        if case["kind"] == "library" and case["truth"] != "rotor_delay":
-            names = [x.name for x in library_truth(case)]
-            assert names[:2] == ["motor_lag", "body_drag"]
-            assert case["truth"] in EFFECTS and (case["truth"] in names or len(names) == 2)
-        if "mass" in e:
-            assert 0.05 <= e["mass"] / MODEL["mass"] <= 0.2
-        if "com" in e:
-            assert 0.03 <= np.hypot(*e["com"]) / MODEL["arm"] <= 0.1
-        if "motor_slow" in e:
-            assert 1.5 <= e["motor_slow"] <= 2.5
-        if "wind" in e:
-            assert 2.0 <= np.hypot(*e["wind"]) <= 5.0
+    from quadsim.bench import multirotor_cases
+
+    check_motor_case_list(multirotor_cases, ("motor_lag", "body_drag"), MODEL["mass"],
+                          MODEL["arm"])
 
 
 @pytest.mark.skipif(not multirotor_available(), reason="multirotor is not installed")
