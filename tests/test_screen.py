@@ -17,11 +17,11 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
-                                   flight_residual)
+from quadsim.gap.evidence import Problem, evaluate, explanations_for
+from quadsim.gap.problem import FitInputs
 from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
 from quadsim.gap.judge import judge
-from quadsim.gap.screen import _Columns, _columns
+from quadsim.gap.screen import Columns, jacobian_columns
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
@@ -118,8 +118,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
     memo: dict = {}
     expl_all = explanations_for(reference, states)
-    anyone = Problem(states, reference, expl_all[0], jac, reference.s_ref, memo)
-    cols = _Columns(states, reference, jac, names, memo, anyone.shifted, flight_residual)
+    cols = Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
     for expl in expl_all:
         if expl.name not in ("motor_lag", "rotor_drag", "mass_offset"):
             continue
@@ -127,7 +126,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
         z0 = np.zeros(len(prob.mean))
         base = prob.residual(z0)
         np.testing.assert_allclose(base, cols.base(0.0), rtol=0, atol=1e-9 * np.abs(base).max())
-        got = _columns(prob, cols, z0, base, np.ones(len(z0)))
+        got = jacobian_columns(prob, cols, z0, base, np.ones(len(z0)))
         for k, key in enumerate(expl.parameter_names):
             if key == "delay.rotor":
                 continue                      # one-sided by design (a kink at every sample)

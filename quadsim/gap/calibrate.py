@@ -331,7 +331,8 @@ def _cost(flights, probe, theta, shift: float) -> float:
         return float("inf")
 
 
-def _refine(flights, params, rotor, cand, theta, shift, sigma):
+def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
+            shift: float, sigma: np.ndarray):
     """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
     information, over the shared parameters and the rotor speeds' timing offset (module
     doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
@@ -454,8 +455,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
-    theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta, start,
-                                              sigma0)
+    theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
+                                              shift=start, sigma=sigma0)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
