@@ -19,7 +19,7 @@ from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, evaluate, explanations_for
 from quadsim.gap.problem import FitInputs
-from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
+from quadsim.gap.rotor_channel import heun_linear, rotor_residual
 from quadsim.gap.judge import judge
 from quadsim.gap.screen import Columns, jacobian_columns
 from quadsim.gap.synthetic import synthetic_flight
@@ -140,7 +140,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
 
 
 def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
-    """rotor_channel._heun_linear against the Heun steps of the motor lag's rate function."""
+    """rotor_channel.heun_linear against the Heun steps of the motor lag's rate function."""
     log = synthetic_flight(cf, _shared(lag=0.03), duration=2.0, seed=80)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
@@ -152,7 +152,7 @@ def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
     assert np.max(np.abs(fast - slow)) <= 1e-4 * np.max(np.abs(slow))
     # and exactly: a constant command from rest is the Heun recursion's closed form
     h, tau = 0.0025, 0.03
-    out = _heun_linear(np.zeros(1), np.ones(5), 4, h, tau, 1)
+    out = heun_linear(np.zeros(1), np.ones(5), 4, h, tau, 1)
     a = 1 - h / tau + h * h / (2 * tau * tau)
     assert out[0] == pytest.approx(1 - a ** 16, rel=1e-12)
 

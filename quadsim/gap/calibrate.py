@@ -398,18 +398,18 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
 
     The thrust curve's slope (:func:`centred_curve`) is shared only where the references
-    determine it (:func:`_curve_determined`: its spread below half its prior's, the rule a
+    determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
     flight's own values are printed by); else the model is
     calibrated again without it. Why: the sensor pipeline's low-passed rotor telemetry left
     the slope at -40 ± 34 % of the hover thrust per rad/s, its per-flight values moved b
     with it, and at a +20 % mass's place b's trend widened to 10 %: "no difference"."""
     ref = _calibrate(flights, params, curve=True)
-    if ref is None or not _curve_determined(ref):
+    if ref is None or not curve_determined(ref):
         ref = _calibrate(flights, params, curve=False)
     return ref
 
 
-def _curve_determined(ref: Reference) -> bool:
+def curve_determined(ref: Reference) -> bool:
     """Whether the references determine their shared thrust-curve slope: identified, and
     its spread ``s_ref`` below :data:`quadsim.gap.priors.DETERMINED` times its prior's
     (:func:`quadsim.gap.priors.curve_slope_sd`)."""
