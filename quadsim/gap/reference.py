@@ -50,14 +50,10 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
 
     On a uniform time base the read is band-limited (:func:`read_later`): a Fourier phase
     shift, which passes every frequency with its full amplitude (``spectra``: the flight's
-    :func:`rotor_spectra`, when it is read at many delays). Why not linear interpolation: between two samples it averages
-    them, and the average of two noisy samples has up to half their noise power. The
-    timing likelihood then fell by up to 20 log units at every half sample and rose again at
-    every whole one (a sawtooth with the fit sample's period, 10 ms): on the l2f fs source a
-    rotor log 18 ms late cost 0.5 at 16 ms but 30 at 0 ms against 6.5 at 6 ms under the
-    reference model, so "no difference" moved its shared delay to half a sample and the
-    reading ``signal_delay`` was judged at 39 %. A non-uniform time base is read by linear
-    interpolation."""
+    :func:`rotor_spectra`, when it is read at many delays). Why not linear interpolation:
+    between two samples it averages them, and the average of two noisy samples has up to
+    half their noise power, so the timing likelihood would be a sawtooth with the fit
+    sample's period. A non-uniform time base is read by linear interpolation."""
     if delay_s == 0.0 or states.rotor_speed is None:
         return states
     import dataclasses
@@ -101,11 +97,8 @@ def read_later(t: np.ndarray, x: np.ndarray, delay_s: float,
     per flight, :func:`rotor_spectra`). Mirrored, the periodic series has no jump at
     either end, so the spectrum does not ring there, and beyond the log's ends the read
     meets the mirror image (x(t_end + d) = x(t_end - d)). The read is smooth in ``delay_s``
-    across whole samples: a delay fit's finite differences see the slope, not an edge (a
-    whole-sample part taken by index and held at the ends made the slope at zero 20x larger
-    on one side than the other, and a nominal multirotor flight's delay stayed at 0 ms, 7
-    log units short of its optimum at -0.4 ms). A non-uniform time base is read by linear
-    interpolation."""
+    across whole samples: a delay fit's finite differences see the slope, not an edge. A
+    non-uniform time base is read by linear interpolation."""
     n = len(t)
     if spectrum is None:
         if not _uniform(t):
@@ -123,11 +116,7 @@ def aligned(flight, delay_s: float):
     states) with its rotor speeds read ``delay_s`` later (:func:`shifted`, band-limited on
     the fit samples). Why not shifted at the full log rate and decimated again: picking
     every k-th sample aliases what lies above the fit rate's Nyquist frequency, with a phase
-    that moves with the shift. PyFlyt's rotor speeds carry a 60 Hz ripple (a third of their
-    variance above 30 Hz; 240 Hz log, 120 Hz fit): the aliased ripple then grew and vanished
-    with an 8.3 ms period of the shift, the references' timing settled on one of its minima
-    (+7.3 ms; minima at -0.7 and +15.3 ms), and every nominal flight, read band-limited,
-    preferred 8-13 ms earlier. A shift of the fit samples moves what they hold, with its
+    that moves with the shift. A shift of the fit samples moves what they hold, with its
     power, whatever the shift."""
     fit = getattr(flight, "fit", flight)
     if delay_s == 0.0 or fit.rotor_speed is None:
@@ -321,11 +310,10 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
 
 
 def _probe(states, reference: Reference, build, memo, k: int, h: float) -> np.ndarray:
-    """The weighted residual (flattened) with shared parameter ``k`` moved by ``h``. Raises
-    ModelError where that leaves the physical set: measured on the multirotor source (a
-    5.5 kg quadrotor, Izz 1.87 Ixx) the pooled steps took the references' inertia error to
-    within 1e-3 of the triangle inequality (Izz <= Ixx + Iyy), and the forward step crossed
-    it; the calibration then failed and no flight was judged."""
+    """The weighted residual (flattened, (N C,)) with shared parameter ``k`` moved by ``h``
+    (its unit). Raises ModelError where that leaves the physical set (e.g. an inertia
+    breaking the triangle inequality Izz <= Ixx + Iyy): :func:`jacobian` then steps the
+    other way."""
     theta = reference.theta.copy()
     theta[k] += h
     return weighted_residual(states, reference, build(theta), memo).ravel()

@@ -1,7 +1,7 @@
 """Linearised evidence of every explanation, and the cut that decides which ones are fitted
-to convergence (:func:`quadsim.gap.evidence.evaluate`).
+to convergence (:func:`quadsim.gap.evidence.evaluate`; docs/gap.md, Speed).
 
-The full fit of an explanation (:func:`quadsim.gap.evidence._fit_one`: bounded trust-region
+The full fit of an explanation (:func:`quadsim.gap.problem.full_fit`: bounded trust-region
 least squares, a finite-difference Jacobian per iteration) costs 40-80 evaluations of the
 flight's residual; a flight has ~20 explanations, and most of them lie hundreds of log units
 of evidence below the best. So:
@@ -9,20 +9,22 @@ of evidence below the best. So:
 1. **The flight's rotor delay under the reference model** ("no difference") is fitted first
    (:func:`refined`); every other explanation carries that delay with the same prior and
    starts there (z0: its own parameters at their prior centre, theta_ref for a replaced
-   shared group; a "signal_delay" reading at its cross-correlation estimate).
+   shared group; a "signal_delay" reading at its cross-correlation estimate). A delay beyond
+   :data:`DELAY_GRID_SDS` prior spreads absorbs a gap rather than timing the log: the others
+   then start at the grid's best within that reach (:func:`delay_starts`).
 2. **Screen**: one Gauss-Newton step from z0, ``r(z) ~ r(z0) + J (z - z0)``. J's columns
    (prior units): for a shared group the explanation gives a value of its own, the
-   shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.calibrate.jacobian`,
-   once per flight); the delay's column once per flight; every other parameter one forward
-   difference (:data:`STEP`, the full fit's ``diff_step``). The rotor speeds are shifted by
-   interpolation between samples, so the residual is piecewise linear in the delay with a
-   kink at every sample: the delay's column is one-sided and is taken again on the other side
-   when the step goes there. The stacked cost (profiled residual, marginalised shifts, z) is
-   then quadratic; its bounded minimum z1 is a small linear least-squares problem
-   (``scipy.optimize.lsq_linear``, bounded-variable). The residual is evaluated at z1 itself:
-   the *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at
-   z1 with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says
-   how far the linear model was off there.
+   shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.reference.jacobian`,
+   once per flight); the delay's column once per flight (:class:`Columns`); every other
+   parameter one forward difference (:data:`STEP`, the full fit's ``diff_step``). The rotor
+   speeds are shifted by interpolation between samples, so the residual is piecewise linear
+   in the delay with a kink at every sample: the delay's column is one-sided and is taken
+   again on the other side when the step goes there. The stacked cost (profiled residual,
+   marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
+   least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
+   *screened* evidence is the Laplace evidence (:func:`quadsim.gap.problem.laplace`) at z1
+   with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says how
+   far the linear model was off there.
 3. **Cut**: an explanation whose *reach*, screened log Z + miss / 2, lies within
    :data:`SCREEN_CUT` of the best log weight so far (log Z; "no difference" with its prior,
    as in :func:`quadsim.gap.judge.posterior`) is fitted to convergence (:func:`refined`:
@@ -34,29 +36,24 @@ Why the cut does not move a verdict: a screened reading lies more than SCREEN_CU
 + 4 below the best, i.e. at posterior odds below 1e-4 against it by its screened evidence;
 the judge's thresholds are posterior 0.1 (a stated reading) and 0.9 (confident). The screened
 cost is that of a point the fit can reach, so a fit only lowers it, by about miss / 2 where
-the linear model was off; a second local optimum the step does not see is the remaining risk,
-so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones
-(``scripts/gap_benchmark.py --per-flight-speed DATA --compare-full``) the verdicts were the
-same on all 26, but on one flight the full fit of ``cable_payload`` reaches an optimum the
-step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed). An
-explanation with a parameter that acts only through another's value (``coupled``: a
-propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
-references lack) has a zero column at the start, so its step cannot see what it reaches:
-it is fitted after the others (on RotorPy a 10 % thrust loss was cut as a propeller change
-and named ``mass_offset``; a second linear step was not enough: the wind refitted through a
-drag needs the fit's iterations): always, or, when it names the readings it extends or
-mimics (``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
-propeller change, a mass or a thrust curve), when one of them lies within the cut of the
-best weight before any coupled fit (5 % of the per-flight CPU on the real mixed flights), or
-when a second linear step from its first reaches within the cut (:func:`_second_reach`);
-tests/test_screen.py checks the verdicts on generated flights with known effects. The
-explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
-cap, so their evidence can exceed the full path's (by up to a few log units where that fit
-stopped early); at a bound, the two Jacobians' columns of the bounded value can differ and
-with them the Occam factor (measured: 2.9 log units on a reading at posterior < 0.1).
+the linear model was off; a second local optimum the step does not see is the remaining risk
+(docs/gap.md, Speed: the comparison with ``full=True``).
 
-``evaluate(..., full=True)`` fits every explanation with the full fit (the reference path
-tests/test_screen.py compares with).
+An explanation with a parameter that acts only through another's value (``coupled``: a
+propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
+references lack) has a zero column at the start, so its step cannot see what it reaches: it
+is fitted after the others, always, or, when it names the readings it extends or mimics
+(``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
+propeller change, a mass or a thrust curve), when one of them lies within the cut of the
+best weight before any coupled fit (:func:`_kin_matters`), or when a second linear step from
+its first reaches within the cut (:func:`_second_reach`); from the step and, where the step
+raised the cost, from the prior centre too (:func:`_refined_coupled`).
+
+The explanations that matter are fitted to convergence, not with the full fit's
+40-evaluation cap, so their evidence can exceed the full path's (by up to a few log units
+where that fit stopped early); at a bound, the two Jacobians' columns of the bounded value
+can differ and with them the Occam factor. ``evaluate(..., full=True)`` fits every
+explanation with the full fit (the reference path tests/test_screen.py compares with).
 """
 
 from __future__ import annotations
@@ -91,7 +88,7 @@ __all__ = [
 STEP = 1e-3
 #: log-weight margin below the best within which an explanation is fitted to convergence
 #: (module doc): posterior odds 1e-4, plus 4 for the Occam factor's change from z1 to the
-#: optimum and the step's own error (measured: a few tenths to 2.5 log units).
+#: optimum and the step's own error (a few log units at most; CHANGELOG).
 SCREEN_CUT = float(np.log(1e4)) + 4.0
 #: Gauss-Newton steps of a refined fit at most, and the cost drop (cost units) below which
 #: it has converged (a hundredth of a log-evidence unit: far below any posterior threshold).
@@ -100,8 +97,7 @@ CONVERGED = 0.02
 
 
 #: spacing (s) of the rotor-delay grid the fits start from (:func:`delay_starts`): below half
-#: the spacing of the timing likelihood's local optima (measured: ~7 ms on PyFlyt's 240 Hz
-#: motors with their per-step noise, where fits started at zero stopped 7 ms from the best),
+#: the spacing of the timing likelihood's local optima (a few ms on logs with motor noise),
 #: so each optimum's basin holds a grid point; the fit then converges within it.
 DELAY_GRID_S = 0.003
 #: the grid reaches this many of the shared delay's prior spreads either side of zero and of
@@ -110,28 +106,22 @@ DELAY_GRID_SDS = 3.0
 
 
 def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, float]:
-    """Where the rotor delay's fits start: (every explanation's shared delay, the
+    """Where the rotor delay's fits start (s): (every explanation's shared delay, the
     "signal_delay" reading's), each the best point of a grid (:data:`DELAY_GRID_S`) under its
-    prior (the shared delay's, the wide ``signal_sd``). ``null``: the "no difference"
-    Problem (its delay under the references' tight prior); ``hint_s``: the flight's
-    cross-correlation estimate against the references'. The shared start is the best of
-    the grid within :data:`DELAY_GRID_SDS` shared spreads about zero and about ``hint_s``
-    (where the shared delay may lie, and where a delay of the flight's own shows in the
-    cross-correlation); the reading's own start the best within as many of its own wide
-    spreads (``signal_sd``). Why the wide reach: a log whose own cross-correlation cannot
-    time it (no hint) may be late by more than the shared reach: on the l2f source a rotor
-    log 17 ms late, started within 10 ms, stopped at 9 ms (cost 340 against 310 at 16 ms;
-    the timing cost was then also a sawtooth with the fit sample's period, since removed by
-    the band-limited read, :func:`quadsim.gap.reference.shifted`) and was named a slower
-    motor at 1.00.
+    prior (the shared delay's, the wide ``signal_sd``, s). ``null``: the "no difference"
+    :class:`~quadsim.gap.problem.Problem` (its delay under the references' tight prior);
+    ``hint_s``: the flight's cross-correlation estimate against the references' (s). The
+    shared start is the best of the grid within :data:`DELAY_GRID_SDS` shared spreads about
+    zero and about ``hint_s`` (where the shared delay may lie, and where a delay of the
+    flight's own shows in the cross-correlation); the reading's own start the best within as
+    many of its own wide spreads (a log the cross-correlation cannot time may be late by
+    more than the shared reach). The grid is clipped to the delay's bounds.
 
     Why a grid: the likelihood of a timing offset is not unimodal. A residual with a
     periodic part (motor noise, the figure-8) matches itself again one period later, so a
     local fit from zero can stop at the wrong optimum, and a wide-prior fit started elsewhere
-    then "finds" a delay of its own (measured: 2 nominal PyFlyt flights, 2 with an effect
-    outside the library and one inertia error named ``signal_delay`` at 29 log units, their
-    best shared delay 4.6 ms from the references', well inside its prior). The profiled cost
-    |aug|^2 + |du|^2 is the same for both priors at one delay: one residual per grid point."""
+    then "finds" a delay of its own. The profiled cost |aug|^2 + |du|^2 is the same for both
+    priors at one delay: one residual per grid point."""
     sd, lo, hi = float(null.sd[-1]), float(null.lower[-1]), float(null.upper[-1])
     reach = DELAY_GRID_SDS * sd
     steps = np.arange(-reach, reach + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
