@@ -106,9 +106,23 @@ from .reference import (  # re-exported: the calibration's public names
 from .rotor_channel import min_time_constant
 from .speed_gain import PART as SPEED_GAIN
 
-__all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
-           "shared_candidate", "per_flight_candidate", "weighted_residual", "jacobian",
-           "FD_STEP", "shifted", "aligned", "MAX_SHIFT_S", "fit_bounds", "bounded"]
+__all__ = [
+    "FD_STEP",
+    "MAX_SHIFT_S",
+    "SHARED",
+    "VBAT_TESTED",
+    "Reference",
+    "aligned",
+    "bounded",
+    "calibrate",
+    "fit_bounds",
+    "jacobian",
+    "per_flight_candidate",
+    "shared_candidate",
+    "shifted",
+    "voltage_spread",
+    "weighted_residual",
+]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
