@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from _helpers import DRAG, LAG, shared_effects
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
@@ -23,8 +24,6 @@ from quadsim.gap.priors import WIND_SD_MS
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
-
-from _helpers import DRAG, LAG, shared_effects  # noqa: E402
 
 
 def _shared(**kw):

@@ -12,22 +12,21 @@ import warnings
 
 import numpy as np
 import pytest
+from _helpers import shared_effects
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, evaluate, explanations_for
+from quadsim.gap.judge import judge
 from quadsim.gap.problem import FitInputs
 from quadsim.gap.rotor_channel import heun_linear, rotor_residual
-from quadsim.gap.judge import judge
 from quadsim.gap.screen import Columns, jacobian_columns
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
-
-from _helpers import shared_effects  # noqa: E402
 
 
 def _shared(**kw):
@@ -168,7 +167,7 @@ def test_the_batched_regression_delay_matches_a_least_squares_solve_per_lag():
     fixed = np.cumsum(y, 0) * dt
     delay, r2, inside = regression_delay(y, x, dt, fixed=fixed)
     # the same R^2 curve by one lstsq per lag (the textbook form)
-    k_max = int(round(0.1 / dt))
+    k_max = round(0.1 / dt)
     xs = (x - x.mean(0)) / x.std(0)
     a = y[k_max:n - k_max]
     f = fixed[k_max:n - k_max]

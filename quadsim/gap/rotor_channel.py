@@ -111,7 +111,7 @@ def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: f
 def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
     """Measured rotor speed at t + h minus the model's prediction from the state at t."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
-    steps = max(1, int(round(ROTOR_HORIZON_S / dt)))
+    steps = max(1, round(ROTOR_HORIZON_S / dt))
     cmd = command_speed(states, params)
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
