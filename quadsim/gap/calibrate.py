@@ -454,34 +454,33 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
             return None
     states = [aligned(f, shift) for f in flights]
-    per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
-                  for s in states]
-    pooled = np.concatenate(per_flight)
-    sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
-    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
-                    for c in range(pooled.shape[1])])
-    log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta))
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
-    delays = {}
-    for key in {k for f in flights for k in getattr(f, "delays_ms", {})}:
-        v = [f.delays_ms[key] for f in flights if getattr(f, "delays_ms", {}).get(key) is not None]
-        if v:
-            delays[key] = (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
-                           len(v))
     ref = Reference(params, rotor, cand, theta, stderr,
-                    np.zeros_like(fit.theta), sigma, tau, mean, spread, dof, delays,
+                    np.zeros_like(fit.theta), sigma, tau, mean, spread, dof,
+                    signal_delays(flights),
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se, vbat_ref=vbat_ref,
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
+    ref.lof_pooled = pooled
+    _complete(ref, states, log_ms)
+    return ref
+
+
+def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
+    """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
+    aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
+    equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
+    and the envelope (stage 7)."""
+    params, rotor, cand = ref.params, ref.rotor, ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
     ref.quadratic_vertical_axes = vertical_equivalent(states, ref)
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
-    ref.lof_pooled = pooled
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
@@ -489,7 +488,34 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                                          for k in cand.parameter_names]), log_ms,
                                _noise_biased(cand.parameter_names,
                                              own[1] ** 2 * np.array([[len(s.t)] for s in states])))
-    return ref
+
+
+def _noise_model(states, params: VehicleParams, rotor: bool, effects: list
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
+    model's residual (``effects``) over the n aligned reference ``states``: per-channel RMS
+    over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
+    per-channel integrated correlation time, the mean over the flights (samples); each
+    flight's log mean square over sigma_c^2."""
+    per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    pooled = np.concatenate(per_flight)
+    sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
+    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
+                    for c in range(pooled.shape[1])])
+    log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
+    return sigma, tau, log_ms
+
+
+def signal_delays(flights) -> dict:
+    """Module doc, stage 6: signal name -> (mean, sample standard deviation (0 for one),
+    count) of the flights' ``delays_ms`` (ms) over those that estimated it."""
+    delays = {}
+    for key in {k for f in flights for k in getattr(f, "delays_ms", {})}:
+        v = [f.delays_ms[key] for f in flights if getattr(f, "delays_ms", {}).get(key) is not None]
+        if v:
+            delays[key] = (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+                           len(v))
+    return delays
 
 
 #: shared groups whose least-squares value is biased by noise in what it scales, in
