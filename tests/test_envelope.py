@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from _helpers import shared_effects  # noqa: E402
+from _helpers import shared_effects
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
@@ -207,7 +207,7 @@ def test_the_wall_takes_back_the_least_certain_move_first():
     q = np.array([[0.5] * 3, [0.8] * 3, [1.5] * 3, [2.4] * 3])
     values = np.column_stack([0.1 * q[:, 0], 0.1 * q[:, 0], 0.5 * q[:, 0]])
     values[:, 2] += np.array([0.0, 0.1, -0.1, 0.0])          # a yaw line with scatter
-    ref, trend = _inertia_reference(values, q)
+    ref, _trend = _inertia_reference(values, q)
     flight = np.full(3, 3.0)
     pos = position(_states(*COORDS[-1]), ref.envelope, flight)
     local = local_reference(ref, pos)

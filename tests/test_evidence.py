@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from _helpers import DRAG, LAG, shared_effects
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
@@ -23,8 +24,6 @@ from quadsim.gap.priors import WIND_SD_MS
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
-
-from _helpers import DRAG, LAG, shared_effects  # noqa: E402
 
 
 def _shared(**kw):
@@ -416,9 +415,9 @@ def test_another_motor_is_named_with_its_lag_and_its_speed_per_command(cf):
 def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference):
     """The generated references (quadratic rotors) share a thrust-curve slope about their
     mean rotor speed, and determine it at 0 (within 3 of its spreads); a slope whose
-    spread is half its prior's or more is not shared (calibrate._curve_determined, the
+    spread is half its prior's or more is not shared (calibrate.curve_determined, the
     rule a value is printed by)."""
-    from quadsim.gap.calibrate import _curve_determined
+    from quadsim.gap.calibrate import curve_determined
     from quadsim.gap.priors import curve_slope_sd
 
     names = list(reference.candidate.parameter_names)
@@ -429,7 +428,7 @@ def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference)
 
     assert reference_summary(reference)["fixed"] == {"thrust_curve.centre": centre}
     assert abs(reference.theta[k]) < 3 * reference.s_ref[k]
-    assert _curve_determined(reference)
+    assert curve_determined(reference)
     # the curvature about the centre is shared with it, pooled (calibrate.POOLED): no
     # between-flight scatter, the pooled error its spread, and 0 for quadratic rotors
     q = names.index("thrust_curve.quadratic")
@@ -437,7 +436,7 @@ def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference)
     assert abs(reference.theta[q]) < 3 * reference.s_ref[q]
     wide = reference.s_ref.copy()
     wide[k] = 0.5 * curve_slope_sd(cf)
-    assert not _curve_determined(types.SimpleNamespace(
+    assert not curve_determined(types.SimpleNamespace(
         candidate=reference.candidate, s_ref=wide, identified={}, params=cf))
 
 
@@ -620,7 +619,7 @@ def test_the_per_axis_law_carries_the_references_vertical_drag(cf, airframe_box)
 
 
 def test_a_reading_is_screened_from_the_base_it_is_centred_on():
-    """screen._centred_is_base: at its prior's centre a reading is the shared base model
+    """screen.centred_is_base: at its prior's centre a reading is the shared base model
     (the reference model, or it under the flight's drag law) only when its fixed-only parts
     are the base's and it fits every group it replaces that the base does not: a drag-law
     reading is the law's base, not the reference model's; a wind through the references'
@@ -628,7 +627,7 @@ def test_a_reading_is_screened_from_the_base_it_is_centred_on():
     from types import SimpleNamespace
 
     from quadsim.gap.explanations import Explanation
-    from quadsim.gap.screen import _centred_is_base
+    from quadsim.gap.screen import centred_is_base
 
     law_part = ("drag_law", {"cd_area": 0.01, "per_axis": 1.0}, ())
     plain = SimpleNamespace(fixed=(), replaced=())
@@ -640,10 +639,10 @@ def test_a_reading_is_screened_from_the_base_it_is_centred_on():
                       replaces=("rotor_drag",))
     quad = Explanation("wind", "", (("wind", {}, ("vx", "vy")), ("body_drag", {}, ("cd_area",))),
                        (0, 0, 0.01), (1, 1, 1), replaces=("wind", "rotor_drag"))
-    assert _centred_is_base(com, plain) and _centred_is_base(own, plain)
-    assert not _centred_is_base(law, plain) and not _centred_is_base(quad, plain)
-    assert _centred_is_base(law, lawful) and not _centred_is_base(com, lawful)
-    assert not _centred_is_base(quad, lawful)
+    assert centred_is_base(com, plain) and centred_is_base(own, plain)
+    assert not centred_is_base(law, plain) and not centred_is_base(quad, plain)
+    assert centred_is_base(law, lawful) and not centred_is_base(com, lawful)
+    assert not centred_is_base(quad, lawful)
 
 
 def test_a_percentage_of_a_hundred_or_more_is_written_whole():

@@ -237,12 +237,12 @@ def test_the_winds_gust_phases_drawn_on_first_use_are_the_seeds():
 
 
 def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
-    """screen._step (R of [A b] alone; lsq_linear's own unconstrained first step where it
+    """screen.linear_step (R of [A b] alone; lsq_linear's own unconstrained first step where it
     lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
     from scipy.optimize import lsq_linear
 
-    from quadsim.gap.evidence import flight_residual
-    from quadsim.gap.screen import _Columns, _columns, _step
+    from quadsim.gap.problem import FitInputs
+    from quadsim.gap.screen import Columns, jacobian_columns, linear_step
 
     ref = _reference(cf, states)
     names = list(ref.candidate.parameter_names)
@@ -250,14 +250,14 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     memo: dict = {}
     expl = next(e for e in explanations_for(ref, states) if e.name == "cable_payload")
     prob = Problem(states, ref, expl, jac, ref.s_ref, memo)
-    cols = _Columns(states, ref, jac, names, memo, prob.shifted, flight_residual)
+    cols = Columns(FitInputs(states, ref, jac, ref.s_ref, memo))
     start = prob.start(0.0)
     base = prob.residual(start)
-    columns = _columns(prob, cols, start, base, np.ones(len(start)))
+    columns = jacobian_columns(prob, cols, start, base, np.ones(len(start)))
     for squeeze in (None, 1e-3):          # the bounds as they are; then tight around start
         if squeeze is not None:
             prob.z_lo, prob.z_hi = start - squeeze, start + squeeze
-        z1, predicted, a, active = _step(prob, start, base, columns)
+        z1, predicted, a, active = linear_step(prob, start, base, columns)
         aug0, du0 = prob.marg.profile(base)
         b = np.concatenate([aug0, du0, start])
         q, r = np.linalg.qr(a)

@@ -2,23 +2,59 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
-from scipy.signal import savgol_coeffs
+from scipy.signal import freqz, savgol_coeffs
 
 from quadsim.core.errors import InputError
+from quadsim.core.frames import rotate
 from quadsim.effects import EffectContext, EffectSet, make_effect
 from quadsim.gap.residual import (
     DEFAULT_WINDOW_S,
     flight_states,
-    residual_wrench,
-    savgol_response_cutoff,
+    measured_wrench,
+    model_wrench,
+    window_samples,
 )
 from quadsim.gap.synthetic import SensorNoise, synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 
 EDGE = 60  # samples at each end where the filter runs on a partial window
+
+
+def savgol_response_cutoff(window_s: float, dt: float, polyorder: int = 3) -> float:
+    """-3 dB frequency (Hz) of the smoothing (deriv=0) Savitzky–Golay filter of
+    :func:`flight_states` (window ``window_s``, sample step ``dt``, s)."""
+    coeffs = savgol_coeffs(window_samples(window_s, dt, polyorder), polyorder)
+    freq, response = freqz(coeffs, worN=4096, fs=1.0 / dt)
+    below = np.nonzero(np.abs(response) < 1 / np.sqrt(2))[0]
+    return float(freq[below[0]]) if len(below) else float(freq[-1])
+
+
+@dataclass(frozen=True)
+class Residual:
+    """Measured minus model wrench per sample: body frame (N, 3) each (N, N m), the force
+    also in the world frame."""
+
+    force_body: np.ndarray
+    torque_body: np.ndarray
+    force_world: np.ndarray
+    accel_source: str
+
+
+def residual_wrench(log, params, effects=None, *, use_accelerometer: bool = True) -> Residual:
+    """The wrench the model (``params`` + ``effects``) is missing, per sample of ``log``:
+    Newton-Euler on the smoothed motion (:func:`measured_wrench`) less the model's
+    (:func:`model_wrench`), as the diagnosis forms it."""
+    states = flight_states(log, use_accelerometer=use_accelerometer, gravity=params.gravity)
+    model_force, model_torque, vehicle = model_wrench(states, params, effects)
+    meas_force, meas_torque = measured_wrench(states, vehicle)
+    force = meas_force - model_force
+    return Residual(force, meas_torque - model_torque, rotate(states.quat, force),
+                    states.accel_source)
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +81,7 @@ def test_differentiator_is_zero_phase_and_exact_on_slow_signals():
 
 def _noise_bound(params, noise: SensorNoise, dt: float) -> tuple[float, float]:
     """Predicted RMS of the residual force / torque from white sensor noise through the filter."""
-    n = int(round(DEFAULT_WINDOW_S / dt)) | 1
+    n = round(DEFAULT_WINDOW_S / dt) | 1
     smooth = np.linalg.norm(savgol_coeffs(n, 3))
     deriv = np.linalg.norm(savgol_coeffs(n, 3, deriv=1, delta=dt))
     hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))

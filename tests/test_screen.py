@@ -12,22 +12,21 @@ import warnings
 
 import numpy as np
 import pytest
+from _helpers import shared_effects
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
-                                   flight_residual)
-from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
+from quadsim.gap.evidence import Problem, evaluate, explanations_for
 from quadsim.gap.judge import judge
-from quadsim.gap.screen import _Columns, _columns
+from quadsim.gap.problem import FitInputs
+from quadsim.gap.rotor_channel import heun_linear, rotor_residual
+from quadsim.gap.screen import Columns, jacobian_columns
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
-
-from _helpers import shared_effects  # noqa: E402
 
 
 def _shared(**kw):
@@ -118,8 +117,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
     memo: dict = {}
     expl_all = explanations_for(reference, states)
-    anyone = Problem(states, reference, expl_all[0], jac, reference.s_ref, memo)
-    cols = _Columns(states, reference, jac, names, memo, anyone.shifted, flight_residual)
+    cols = Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
     for expl in expl_all:
         if expl.name not in ("motor_lag", "rotor_drag", "mass_offset"):
             continue
@@ -127,7 +125,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
         z0 = np.zeros(len(prob.mean))
         base = prob.residual(z0)
         np.testing.assert_allclose(base, cols.base(0.0), rtol=0, atol=1e-9 * np.abs(base).max())
-        got = _columns(prob, cols, z0, base, np.ones(len(z0)))
+        got = jacobian_columns(prob, cols, z0, base, np.ones(len(z0)))
         for k, key in enumerate(expl.parameter_names):
             if key == "delay.rotor":
                 continue                      # one-sided by design (a kink at every sample)
@@ -141,7 +139,7 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
 
 
 def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
-    """rotor_channel._heun_linear against the Heun steps of the motor lag's rate function."""
+    """rotor_channel.heun_linear against the Heun steps of the motor lag's rate function."""
     log = synthetic_flight(cf, _shared(lag=0.03), duration=2.0, seed=80)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
@@ -153,7 +151,7 @@ def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
     assert np.max(np.abs(fast - slow)) <= 1e-4 * np.max(np.abs(slow))
     # and exactly: a constant command from rest is the Heun recursion's closed form
     h, tau = 0.0025, 0.03
-    out = _heun_linear(np.zeros(1), np.ones(5), 4, h, tau, 1)
+    out = heun_linear(np.zeros(1), np.ones(5), 4, h, tau, 1)
     a = 1 - h / tau + h * h / (2 * tau * tau)
     assert out[0] == pytest.approx(1 - a ** 16, rel=1e-12)
 
@@ -169,7 +167,7 @@ def test_the_batched_regression_delay_matches_a_least_squares_solve_per_lag():
     fixed = np.cumsum(y, 0) * dt
     delay, r2, inside = regression_delay(y, x, dt, fixed=fixed)
     # the same R^2 curve by one lstsq per lag (the textbook form)
-    k_max = int(round(0.1 / dt))
+    k_max = round(0.1 / dt)
     xs = (x - x.mean(0)) / x.std(0)
     a = y[k_max:n - k_max]
     f = fixed[k_max:n - k_max]

@@ -19,23 +19,16 @@ Stages
    rotors' spin inertia
    (gyroscopic torque) and, with commands, the motor time constant and, with a battery
    voltage log that varies (:data:`VBAT_TESTED`), the speed per command following
-   vbat / V_full (the map "with lag and voltage"). On the 20 real nominal Crazyflie
-   flights, a reference model without the last two left every nominal flight judged
-   against the others named ``gyroscopic`` (0.3-0.5 g cm^2) or ``battery_sag`` (V_full
-   3.7 V): effects every nominal flight shares; a steady wind (vx, vy: every nominal
-   flight showed the same 2.5 mN air force along world +y).
+   vbat / V_full (the map "with lag and voltage"); a steady wind (vx, vy). Each is an
+   effect every nominal flight may share, which a flight must not be named by.
    The rotor speeds' *timing* is shared too: the fit starts from the rotor speeds read
    d0 later (d0 the references' mean cross-correlation delay, :mod:`quadsim.logs.delays`),
    and up to :data:`REFINE_STEPS` pooled Levenberg-Marquardt steps (:func:`_refine`) then
    move every shared parameter and the timing offset d together (forward difference of 2
    ms; a shift is band-limited on the fit samples, :func:`aligned`). Why:
    the spin-up reaction torque ``-Jr sum_i s_i dOmega_i/dt`` fits the yaw channel only at
-   the right timing, and the cross-correlation estimate reads that very torque as delay
-   (docs: 8 ms on generated logs without any). On the real nominal Crazyflie flights the
-   fit at the logged timing left Jr at its bound 0, while every flight alone asked for
-   0.4-0.9 g cm^2 with its speeds read 10-12 ms earlier; the fastest figure-8s (whose
-   rotors accelerate most) were then all named ``gyroscopic``. Fitted together: d = -11 ms,
-   Jr = 0.57 g cm^2 (0.3-0.8 g cm^2 is a 55 mm propeller with its motor bell). A flight is
+   the right timing, and the cross-correlation estimate reads that very torque as delay,
+   so the timing and the rotors' spin inertia are found only together. A flight is
    compared with the reference model at d (:meth:`Reference.align`); its own timing
    differs from d by the evidence's nuisance delay or the reading ``signal_delay``.
    Values theta_ref and d; standard errors se_pool (the bounded fit's, correlation-widened)
@@ -64,17 +57,15 @@ Stages
 
 Shared beyond :data:`SHARED` (:func:`per_flight_candidate`): the vertical drag (body drag
 C_d A along body z) and, with commands but no voltage log, the motor map's gain
-(:mod:`.speed_gain`). Both drift with how a flight is flown: on the 8 Crazyflow reference
-flights (path speed 0.8-1.25) the rotor channel's mean residual ran from -0.07 % to +0.05 %
-of the hover speed, and the faster no-effect flights' vertical force residual grew with
-speed; without them, nominal flights flown slower or faster were read as ``thrust_factor``
-or ``body_drag``, or failed the lack-of-fit test.
+(:mod:`.speed_gain`). Both drift with how a flight is flown, so a nominal flight flown
+slower or faster than the references must find its own value inside the reference
+uncertainty, not in a reading.
 
 The shared wind has a Gaussian prior (mean 0, :data:`quadsim.gap.priors.WIND_SD_MS` = 5 m/s)
 in the pooled steps (:func:`_refine`), and its standard error is the posterior's there: a
-wind acts only through drag, so references without drag do not fix it, and the bounded fit
-left it at its bound (-30 m/s on RotorPy references flown without rotor drag), where every
-explanation that gave the drag a value of its own met it.
+wind acts only through drag, so references without drag do not fix it, and a bounded fit
+alone leaves it anywhere in its range, where every explanation that gave the drag a value
+of its own would meet it.
 
 Example::
 
@@ -115,9 +106,23 @@ from .reference import (  # re-exported: the calibration's public names
 from .rotor_channel import min_time_constant
 from .speed_gain import PART as SPEED_GAIN
 
-__all__ = ["SHARED", "Reference", "calibrate", "voltage_spread", "VBAT_TESTED",
-           "shared_candidate", "per_flight_candidate", "weighted_residual", "jacobian",
-           "FD_STEP", "shifted", "aligned", "MAX_SHIFT_S", "fit_bounds", "bounded"]
+__all__ = [
+    "FD_STEP",
+    "MAX_SHIFT_S",
+    "SHARED",
+    "VBAT_TESTED",
+    "Reference",
+    "aligned",
+    "bounded",
+    "calibrate",
+    "fit_bounds",
+    "jacobian",
+    "per_flight_candidate",
+    "shared_candidate",
+    "shifted",
+    "voltage_spread",
+    "weighted_residual",
+]
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
 SHARED = (("nominal_refit", ("thrust", "drag")),
@@ -139,10 +144,8 @@ NEEDS_VBAT = {"battery_sag"}
 #: voltage varies by at least this fraction of its mean (:func:`voltage_spread`). Below it
 #: the law's slope is untested and V_full is only the motor map's gain, so the reference
 #: model takes the gain (:mod:`.speed_gain`) and a flight's own sag is a reading
-#: (:func:`quadsim.gap.explanations.explanations_for`). Measured: the 20 real nominal Crazyflie
-#: flights spread over 3.6-3.8 V (4 %); generated logs record a constant voltage (0 %),
-#: against which a sagging battery (4.2 -> 3.9 V) was followed by the shared law and judged
-#: "no difference". 1 %: a hover speed 1 % off, several times the rotor channel's noise.
+#: (:func:`quadsim.gap.explanations.explanations_for`). 1 %: a hover speed 1 % off, several
+#: times the rotor channel's noise.
 VBAT_TESTED = 0.01
 
 
@@ -198,11 +201,10 @@ def centred_curve(cand: Candidate, states) -> Candidate:
     the references' hover, and b alone sets it there.
 
     Why: the references fit b and a linear term ``l Omega`` together; over their narrow
-    band of rotor speeds the two are nearly collinear. About zero speed, PyFlyt's references
-    (a purely quadratic rotor) read b +29 ± 14 % and l -26 ± 14 % of the hover thrust per
-    rad/s, and each shared parameter is marginalised with its own spread: the hover thrust
-    could move 14 %, and two masses and a propeller change were "no difference" (PyFlyt
-    95 -> 74 %)."""
+    band of rotor speeds the two are nearly collinear. About zero speed each is uncertain
+    alone, and each shared parameter is marginalised with its own spread: the hover thrust
+    could move by that spread, and a mass would be "no difference". Without speeds logged,
+    the slope is kept about zero and the curvature dropped."""
     speeds = [np.mean(s.rotor_speed) for s in states if s.rotor_speed is not None]
     if not speeds:      # no speeds logged: a slope about zero only (no hover to centre on)
         return Candidate(cand.name, tuple(
@@ -217,12 +219,9 @@ def centred_curve(cand: Candidate, states) -> Candidate:
 
 def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
     """The (pseudo-)inverse of the information ``info`` taken in units of each parameter's
-    typical size: ``T (T info T)^+ T``. In SI units the information of a rotor inertia
-    (~1e-6 kg m^2) is ~1e24 times a wind's (m/s), so a pseudo-inverse there cuts the wind's
-    direction as round-off and gives it a variance of 0: RotorPy's references, whose wind
-    acts through no drag, "knew" their wind to 5e-11 m/s (its prior alone gives 5 m/s): the
-    spread every explanation marginalises it with, and the one the answers printed
-    ("references: mean wind -0.12 ± 8.8e-10 m/s")."""
+    typical size ``typical`` (P,): ``T (T info T)^+ T`` (P, P). In SI units the information
+    of a rotor inertia (~1e-6 kg m^2) is ~1e24 times a wind's (m/s), so a pseudo-inverse
+    there cuts the wind's direction as round-off and gives it a variance of 0."""
     t = np.asarray(typical, dtype=float)
     return t[:, None] * np.linalg.pinv(info * np.outer(t, t)) * t[None, :]
 
@@ -231,10 +230,8 @@ def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
 #: stay at the pooled value in each flight's one-step estimate (:func:`_scatter`), with no
 #: between-flight scatter and the pooled standard error as their spread. The thrust curve's
 #: curvature about the hover: a flight's own rotor speeds spread too little to fix it, and
-#: it is a property of the propeller, not of how a flight is flown. Measured: left free, one
-#: flight's curvature moved with its roll/pitch inertia, and on RotorPy's Crazyflie a blade
-#: flapping flight's local inertia spread became 0.38 (+-38 %, against 0.07 % at the pooled
-#: place): its moments were absorbed, and "unexplained" became `rate_damping` at 1.00.
+#: it is a property of the propeller, not of how a flight is flown (left free, one flight's
+#: curvature moves with its roll/pitch inertia).
 POOLED = ("thrust_curve.quadratic",)
 
 
@@ -245,10 +242,7 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
 
     The step's pseudo-inverse is taken in SI units (not :func:`_covariance`): there it cuts
     the directions one flight's data barely fix (a wind without drag, inertia against
-    damping), which then stay at theta_ref. Taken in typical units those directions moved
-    per flight: on the real mixed Crazyflie flights the envelope's trends changed and 3 of
-    26 verdicts moved (2 to a tentative ``inertia_error``), and a RotorPy propeller change
-    read as a mass went from 83 % (the propeller stated at 17 %) to 97 %."""
+    damping), which then stay at theta_ref instead of moving per flight."""
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
     values, variances = [], []
@@ -331,14 +325,13 @@ def _cost(flights, probe, theta, shift: float) -> float:
         return float("inf")
 
 
-def _refine(flights, params, rotor, cand, theta, shift, sigma):
+def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
+            shift: float, sigma: np.ndarray):
     """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
     information, over the shared parameters and the rotor speeds' timing offset (module
     doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
     parameters at a fixed timing; the timing and the rotors' spin inertia are found only
-    together (on the real nominal Crazyflie flights the spin-up reaction torque fits the
-    yaw channel only with the speeds read ~12 ms earlier: at the logged timing the fit left
-    the spin inertia at its bound 0). Steps in units of each parameter's typical size with
+    together (module doc, stage 2). Steps in units of each parameter's typical size with
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
     Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
@@ -357,8 +350,7 @@ def _refine(flights, params, rotor, cand, theta, shift, sigma):
     k = len(theta)
     # the steady wind's Gaussian prior (mean 0, WIND_SD_MS): a wind acts only through drag,
     # so with no drag to act through the data do not fix it and the bounded fit leaves it
-    # anywhere (at its bound, -30 m/s, on RotorPy references flown without rotor drag);
-    # an explanation that then gives the drag a value of its own met a 30 m/s wind.
+    # anywhere; an explanation that then gives the drag a value of its own would meet it.
     # The prior takes such a wind to 0; a wind the data fix moves by (s / 5 m/s)^2 of itself.
     prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
                       for n in cand.parameter_names] + [0.0] * int(timing))
@@ -397,18 +389,17 @@ def calibrate(flights, params: VehicleParams) -> Reference:
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
 
     The thrust curve's slope (:func:`centred_curve`) is shared only where the references
-    determine it (:func:`_curve_determined`: its spread below half its prior's, the rule a
+    determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
     flight's own values are printed by); else the model is
-    calibrated again without it. Why: the sensor pipeline's low-passed rotor telemetry left
-    the slope at -40 ± 34 % of the hover thrust per rad/s, its per-flight values moved b
-    with it, and at a +20 % mass's place b's trend widened to 10 %: "no difference"."""
+    calibrated again without it. Why: an undetermined slope moves b with it flight by
+    flight, and the envelope's trend of b then widens until a mass is "no difference"."""
     ref = _calibrate(flights, params, curve=True)
-    if ref is None or not _curve_determined(ref):
+    if ref is None or not curve_determined(ref):
         ref = _calibrate(flights, params, curve=False)
     return ref
 
 
-def _curve_determined(ref: Reference) -> bool:
+def curve_determined(ref: Reference) -> bool:
     """Whether the references determine their shared thrust-curve slope: identified, and
     its spread ``s_ref`` below :data:`quadsim.gap.priors.DETERMINED` times its prior's
     (:func:`quadsim.gap.priors.curve_slope_sd`)."""
@@ -431,8 +422,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
     between-flight scatter only widens it), which saves that calibration's scatter and
-    envelope. On the real Crazyflie references the pooled spread is small (2.2e-6 N s/rad)
-    and the scatter is not (1.7e-5): their first calibration runs to the end."""
+    envelope."""
     if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     estimates = [f.delays_ms["rotor"] for f in flights
@@ -454,8 +444,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
-    theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta, start,
-                                              sigma0)
+    theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
+                                              shift=start, sigma=sigma0)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
@@ -464,34 +454,33 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
             return None
     states = [aligned(f, shift) for f in flights]
-    per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
-                  for s in states]
-    pooled = np.concatenate(per_flight)
-    sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
-    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
-                    for c in range(pooled.shape[1])])
-    log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta))
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
-    delays = {}
-    for key in {k for f in flights for k in getattr(f, "delays_ms", {})}:
-        v = [f.delays_ms[key] for f in flights if getattr(f, "delays_ms", {}).get(key) is not None]
-        if v:
-            delays[key] = (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
-                           len(v))
     ref = Reference(params, rotor, cand, theta, stderr,
-                    np.zeros_like(fit.theta), sigma, tau, mean, spread, dof, delays,
+                    np.zeros_like(fit.theta), sigma, tau, mean, spread, dof,
+                    signal_delays(flights),
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se, vbat_ref=vbat_ref,
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
+    ref.lof_pooled = pooled
+    _complete(ref, states, log_ms)
+    return ref
+
+
+def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
+    """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
+    aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
+    equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
+    and the envelope (stage 7)."""
+    params, rotor, cand = ref.params, ref.rotor, ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
     ref.quadratic_vertical_axes = vertical_equivalent(states, ref)
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
-    ref.lof_pooled = pooled
     own: list = []
     ref.scatter = _scatter(states, ref, own)
     ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
@@ -499,7 +488,34 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                                          for k in cand.parameter_names]), log_ms,
                                _noise_biased(cand.parameter_names,
                                              own[1] ** 2 * np.array([[len(s.t)] for s in states])))
-    return ref
+
+
+def _noise_model(states, params: VehicleParams, rotor: bool, effects: list
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
+    model's residual (``effects``) over the n aligned reference ``states``: per-channel RMS
+    over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
+    per-channel integrated correlation time, the mean over the flights (samples); each
+    flight's log mean square over sigma_c^2."""
+    per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    pooled = np.concatenate(per_flight)
+    sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
+    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
+                    for c in range(pooled.shape[1])])
+    log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
+    return sigma, tau, log_ms
+
+
+def signal_delays(flights) -> dict:
+    """Module doc, stage 6: signal name -> (mean, sample standard deviation (0 for one),
+    count) of the flights' ``delays_ms`` (ms) over those that estimated it."""
+    delays = {}
+    for key in {k for f in flights for k in getattr(f, "delays_ms", {})}:
+        v = [f.delays_ms[key] for f in flights if getattr(f, "delays_ms", {}).get(key) is not None]
+        if v:
+            delays[key] = (float(np.mean(v)), float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
+                           len(v))
+    return delays
 
 
 #: shared groups whose least-squares value is biased by noise in what it scales, in
@@ -509,11 +525,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
 #: variables), and the motor lag is fitted in closed loop (the command answers the noise the
 #: controller sees). The others scale quantities measured with little noise (the velocity
 #: for drags and winds, the gyro's rate for damping), and their drift with how a flight is
-#: flown is a form error that grows with the motion (PyFlyt's quadratic rate drag read as
-#: linear damping), the place's line. Measured: with every group offered the
-#: inverse-information line, the pipeline's references' vertical drag (which it cannot fit
-#: better than the place's, chi^2 2.25 against 2.36) moved on a slower flight, and the
-#: flight's canted rotor went to a body drag with a 6 m/s wind of its own.
+#: flown is a form error that grows with the motion (a quadratic rate drag read as
+#: linear damping), the place's line.
 NOISE_BIASED = ("nominal_refit", "inertia_error", "gyroscopic", "motor_lag")
 
 
@@ -543,7 +556,7 @@ def quadratic_equivalent(states, reference: Reference, per_axis: bool = False) -
     (linear in air speed): fitted to their own flights' horizontal air force by least squares
     on the body-frame force (N), every other shared value held (:func:`_drag_refit`). What the
     references' drag is if its law is quadratic: an airframe's drag is, a rotor's in-plane
-    drag is linear (RotorPy, the pipeline), and flights at the references' speeds cannot
+    drag is linear, and flights at the references' speeds cannot
     tell the two apart, a wind of several m/s can
     (:func:`quadsim.gap.explanations._wind_readings`). 0 where the reference model has no
     rotor drag."""
@@ -562,12 +575,9 @@ def vertical_equivalent(states, reference: Reference) -> float:
     |v| v_z``): fitted to their own flights' body-z air force (:func:`_drag_refit`). The
     vertical drag under the law a flight may show (:mod:`.drag_law`).
 
-    Why: the per-axis law replaced only the references' horizontal (rotor) drag and kept
-    their vertical one on the air speed. Measured on the quadcopter-sim source (a drag per
-    body axis, 400 cm^2 along z): the references' vertical drag read 130 cm^2 on the air
-    speed; two nominal flights 1.2-1.3x faster, judged under the per-axis law, were named
-    ``body_drag`` at 1.00 (+213 and +289 cm^2 along z: the law's own vertical form, read as
-    the flight's). 0 where the references share no vertical drag."""
+    Why: a per-axis law that replaced only the references' horizontal (rotor) drag and kept
+    their vertical one on the air speed reads the law's own vertical form as the flight's.
+    0 where the references share no vertical drag."""
     from ..effects import make_effect
 
     if reference.values().get("body_drag.cd_area_vertical", 0.0) <= 0.0:
@@ -583,12 +593,9 @@ def _drag_refit(states, reference: Reference, group: str, unit, axes: slice) -> 
     less the reference model without that group, over their own flights.
 
     The measured force and not the group's own: fitted to the model's linear force (the
-    group's projection onto its own law), the quadratic area came out low by the squared
+    group's projection onto its own law), the quadratic area comes out low by the squared
     cosine between the two laws' force histories over the references (a projection of a
-    projection): on the quadcopter-sim source (a drag per body axis, 150 cm^2 sideways and
-    400 cm^2 along z), 137 and 296 cm^2; two nominal flights 1.2-1.3x faster than the
-    references read +27 and +81 cm^2 more, the law's own share, and were named
-    ``body_drag``."""
+    projection)."""
     from .residual import measured_wrench, model_wrench
 
     shared = reference.effects()

@@ -1,8 +1,7 @@
 """Does the parameter set describe the logged vehicle at all? Checked before any fit.
 
 A diagnosis that fits effects to flights of a *different* vehicle finds nonsense with
-confidence (the 0.84 kg testbed's set on the 37 g Crazyflie flights named ``battery_sag``
-at 13 V explaining 99.8 %). Two balances that hold for any vehicle flying on its own rotors
+confidence (CHANGELOG: another vehicle's set named an effect at 99.8 %). Two balances that hold for any vehicle flying on its own rotors
 catch it first:
 
 * hover/force balance along body z: ``m f_z = b sum_i Omega_i^2`` (f_z the measured
@@ -33,7 +32,11 @@ from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle_check"]
 
+#: largest ratio (either way) of the thrust factor the data need to the model's: a payload
+#: of 60 % of the mass or a 40 % thrust loss still passes, another vehicle does not
 MAX_RATIO = 2.0
+#: largest median logged rotor speed over the model's ``max_speed``: a rotor cannot run
+#: half again beyond its top speed, a log in other units or of another vehicle does
 MAX_SPEED_RATIO = 1.5
 #: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
 #: of the noise scale and a 1 s scoring block
@@ -56,9 +59,14 @@ def check_length(log, window_s: float | None = None, name: str | None = None) ->
 
 
 def vehicle_check(states: list, params: VehicleParams) -> dict:
-    """Ratios data/model of b, d and rotor speed over ``states`` (FlightStates); raises
-    InputError when the parameter set cannot be the logged vehicle's. States without rotor
-    speeds are skipped ({} when none has them)."""
+    """Ratios data/model of b, d and rotor speed over ``states`` (FlightStates; module doc):
+    ``{"thrust_factor_data": b the data need (N s^2/rad^2), "thrust_factor_ratio": that over
+    the model's b, "drag_factor_ratio": d the yaw balance needs over the model's d,
+    "median_speed_ratio": median logged speed over ``max_speed`` (None without one)}``.
+    Raises InputError when the parameter set cannot be the logged vehicle's (b ratio
+    outside [1/:data:`MAX_RATIO`, :data:`MAX_RATIO`] or speed ratio above
+    :data:`MAX_SPEED_RATIO`). States without rotor speeds are skipped ({} when none has
+    them)."""
     states = [s for s in states if s.rotor_speed is not None]
     if not states:  # command-only logs: nothing to balance against here
         return {}

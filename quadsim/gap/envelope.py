@@ -6,8 +6,8 @@ shared values absorb of the physics it lacks depends on how the flights were flo
 flight flown elsewhere meets the model's *extrapolation error*; read against the
 references' own residual statistics it looks like an effect. Two parts of it are physics
 the reference model now shares (:func:`.calibrate.per_flight_candidate`: the motor map's
-gain and the vertical drag, both drifting with the flight's envelope on the Crazyflow
-references); the rest is measured here, over the references themselves, and widens the
+gain and the vertical drag, both drifting with the flight's envelope); the rest is measured
+here, over the references themselves, and widens the
 reference model for a flight beyond them. Every judged flight's answer states whether it
 lies outside its references' envelope, along which coordinate and by how much.
 
@@ -21,7 +21,8 @@ a flight's distance outside it is the largest excess over the coordinates (:clas
 Trend (:func:`fit_trend`). The references' main axis of variation in these coordinates
 (first principal direction, ``axis``; sign: speed increasing) gives each flight a scalar
 place u. Over the references, each shared parameter's own value theta_j (one Gauss-Newton
-step from the pooled value on flight j alone, standard error se_j: :func:`.calibrate._scatter`)
+step from the pooled value on flight j alone, standard error se_j: stage 3 of
+:mod:`.calibrate`)
 is regressed on u_j by weighted least squares (weights 1/se_j^2): slope b, variance var(b)
 scaled by the fit's reduced chi^2 when above 1 (the between-flight scatter); each channel's
 log mean-square residual (the lack-of-fit statistic) is regressed on u_j by ordinary least
@@ -32,20 +33,16 @@ The reference model at a flight's place (:func:`local_reference`). Every shared 
 trend's prediction at the flight's place, ``theta_ref + b (u - u_w)`` (u_w the references'
 weighted mean place; clipped to the parameter's bounds), its variance ``var(b) (u - u_w)^2``
 added to the between-flight scatter. Why: what a shared value absorbs of the physics the
-model lacks depends on how the flight was flown, and the references show how. Measured on
-PyFlyt (nominal flights against 8 references): its quadratic rate drag, fitted as linear
-damping, reads 21-28 % higher on flights with 9-15 % higher body rates, and its closed-loop
-motor lag reads longer on slower flights (the command correlates with the motor noise the
-controller answers; the references' own lag falls 25 ms per unit place); with the pooled
-value kept at every place, 4 of 6 nominal flights flown slower or faster were named
-``motor_lag`` or ``rate_damping``, with the trend's value none. Inside the references' range
+model lacks depends on how the flight was flown, and the references show how (a quadratic
+rate drag fitted as linear damping reads higher on faster-turning flights; a closed-loop
+motor lag reads longer on slower ones). Inside the references' range
 of places [u_min, u_max] their other statistics hold (the calibrated scatter and lack-of-fit
 spread already contain how the references differ among themselves). A flight at
 e = u - u_max > 0 (or u_min - u) beyond the outermost reference meets the model's
 extrapolation, measured by the trend:
 
 * the between-flight scatter grows further, by ``(b^2 + var(b)) e^2``: the trend itself may
-  bend out there (a 6-reference trend alone carried the real Crazyflie's I_zz to its bound);
+  bend out there;
 * the noise scale sigma_c grows by ``exp(max(0, g_c e) / 2)``: the residual the references'
   trend expects there is carried as noise (never narrowed: the sensor noise does not shrink
   on a slower flight), and the lack-of-fit mean moves by ``g_c e`` less that widening;
@@ -53,11 +50,7 @@ extrapolation, measured by the trend:
   ``sqrt(s^2 + s_g^2 e^2 / (S_uu (1 + 1/n)) + g_c^2 e^2)``: the regression's prediction term
   (S_uu the references' sum of squared places about their mean) and the trend's own move
   there, as for the shared values (a form error that grows with the motion may grow faster
-  beyond the references than along them). Measured on l2f's fs vehicle (its thrust curve's
-  constant term, which b Omega^2 lacks, weighs most where rotors run low): the two nominal
-  flights flown 1.4x beyond the references' thrust variation left Fz at 3.2x the level the
-  trend (1.15 per unit place) predicts there, 4.4 spreads: ``unexplained``; with the move
-  counted, ``no_significant_gap`` (2026-11-27, after the source's blind run).
+  beyond the references than along them).
 
 A second line per noise-biased parameter (:data:`quadsim.gap.calibrate.NOISE_BIASED`): its
 inverse information per sample q_j = se_j^2 N_j (:func:`quadsim.gap.calibrate.inverse_information`).
@@ -69,11 +62,7 @@ by their chi^2 (scaled by the better one's reduced chi^2 s): the q line's weight
 ``w = 1 / (1 + exp((chi2_q - chi2_u) / 2 s))``. At a flight with its own q (``info`` of
 :func:`position`) the shared value moves by ``(1 - w) m_u + w m_q``, its variance
 ``(1 - w) v_u + w v_q + w (1 - w) (m_u - m_q)^2`` (each line's v with its extrapolation
-beyond the outermost reference, e_q = q - clip(q, q_min, q_max) for the q line). Measured on
-the l2f references (a 2 kg X500): roll/pitch inertia errors +0.4 to +19 %, rising at slower
-flights, chi^2 9.4/4.2 on u against 1.7/0.55 on q (w 0.98, 0.86); a nominal flight with
-0.61x the slowest reference's body rate reads +43/+49 % on its own, the q line predicts
-+61/+52 %, the u line +8/+17 % (it was a tentative ``inertia_error``, now no difference).
+beyond the outermost reference, e_q = q - clip(q, q_min, q_max) for the q line).
 
 No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
 states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
@@ -98,8 +87,21 @@ import numpy as np
 
 from .fitting import _bounds
 
-__all__ = ["COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope", "Position",
-           "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend", "position", "local_reference"]
+__all__ = [
+    "COORDINATES",
+    "FLOORS",
+    "MIN_FLIGHTS",
+    "MIN_SPREAD",
+    "Envelope",
+    "Position",
+    "Trend",
+    "coordinates",
+    "envelope_of",
+    "envelope_summary",
+    "fit_trend",
+    "local_reference",
+    "position",
+]
 
 #: the envelope's coordinates (name, unit, what it measures)
 COORDINATES = (("speed", "m/s", "RMS speed"), ("rate", "rad/s", "RMS body rate"),
@@ -114,9 +116,8 @@ MIN_SPREAD = 0.05
 #: least spread (natural log units) of the references' inverse information per sample of a
 #: parameter for its inverse-information form: an e-fold. Below it the line's slope comes
 #: from a range of information narrower than that of the differences it would explain and
-#: extrapolates a noise slope; measured on the l2f references: the rotor thrust, winds and
-#: motor-map gain spread 0.06-0.2 (their information does not depend on how a flight is
-#: flown), the inertia, drag torque, rate damping, rotor drag and motor lag 1.5-3.9
+#: extrapolates a noise slope (a parameter whose information does not depend on how a
+#: flight is flown spreads far less than an e-fold)
 MIN_INFO_SPREAD = 1.0
 
 
@@ -242,7 +243,13 @@ def _line(x: np.ndarray, v: np.ndarray, se: np.ndarray) -> tuple[float, float, f
 
 
 def fit_trend(coords, values, se, identified, log_ms, info=None) -> Trend | None:
-    """The trend of :class:`Trend` (module doc); None when it cannot be measured."""
+    """The :class:`Trend` of n reference flights (module doc): ``coords`` (n, 3) their
+    envelope coordinates (:func:`coordinates`), ``values``/``se`` (n, P) each flight's own
+    shared values and standard errors (each parameter's unit), ``identified`` (P,) which
+    parameters get a slope, ``log_ms`` (n, C) their log mean squares over sigma_c^2,
+    ``info`` (n, P) their inverse information per sample (None: no inverse-information
+    line). None below :data:`MIN_FLIGHTS` references or a spread of places below
+    :data:`MIN_SPREAD`."""
     n = len(coords)
     if n < MIN_FLIGHTS:
         return None
@@ -258,8 +265,7 @@ def fit_trend(coords, values, se, identified, log_ms, info=None) -> Trend | None
     q = [np.zeros(p) for _ in range(6)]     # weight, q_w, slope, slope_var, low, high
     for k in range(p):
         # a standard error of 0 (or so small that its weight overflows) is a value the
-        # flight's step did not move, not one known exactly: no line (on RotorPy's
-        # references the wind's per-flight errors came out as 0 and its line as NaN)
+        # flight's step did not move, not one known exactly: no line
         with np.errstate(divide="ignore", over="ignore"):
             weighable = np.all(np.isfinite(1.0 / se[:, k] ** 2))
         if not identified[k] or not weighable:
@@ -328,8 +334,7 @@ def local_reference(reference, pos: Position | None):
     pooled = getattr(reference, "lof_pooled", None)
     if pos is not None and pos.distance > 0 and pooled is not None:
         # a channel's own spread holds within the references' envelope; beyond it, at least
-        # the pooled one (quadsim.gap.moderated): on Crazyflow two nominal flights 1.23x
-        # beyond the references' thrust variation left Fy at 1.8x, against its own 0.15
+        # the pooled one (quadsim.gap.moderated)
         reference = dataclasses.replace(
             reference, lof_sd=np.maximum(reference.lof_sd, pooled[0]), lof_dof=pooled[1])
     if pos is None or trend is None or pos.u is None:
@@ -390,19 +395,10 @@ def _physical_towards(reference, theta: np.ndarray, sd: np.ndarray | None = None
     towards the pooled value ``reference.theta`` (physical: the references were fitted
     there), the last one only as far as the wall (bisection). The trend is a straight line
     fitted on the references, and a rigid body's inertia must keep the triangle inequality
-    wherever the line leads.
-
-    Measured on the l2f source (a 2.0 kg X500, Izz 0.92 (Ixx + Iyy), as every flat frame
-    nearly is): the references' roll/pitch/yaw inertia errors (+1, +2, +4 %) trended to
-    +9, +18, +45 % at a slow flight's place, which no rigid body has, and 7 of 30 flights
-    were refused. The part of the move left out widens the shared value's spread
-    (:func:`local_reference`): with the inertia held at the wall but its spread the
-    references' own, a nominal flight flown slower than any reference was read as an
-    inertia error of its own (+50 %, at 94 %), the trend's artefact (least squares shrinks a
-    model torque noisier than a slow flight's motion) and not the flight's. Taking back the
-    whole move along one line (as before 2026-11-27) pulled the well-measured roll and
-    pitch values back with the yaw value that broke the wall (to a third of their move on
-    that flight); the yaw value, the least certain, is the one the wall speaks against."""
+    wherever the line leads (a flat frame's Izz is nearly Ixx + Iyy). The part of the move
+    left out widens the shared value's spread (:func:`local_reference`), so the trend's
+    artefact is not read as the flight's own difference. The least certain move goes back
+    first: it is the one the wall speaks against."""
     if _physical(reference, theta):
         return theta
     base = np.asarray(reference.theta, float)

@@ -1,11 +1,10 @@
 """Per-channel spreads of the references' lack of fit, moderated towards their common one.
 
 The lack-of-fit test (:func:`quadsim.gap.judge.lack_of_fit`) compares a flight's log mean
-square per channel with the references'. Their scatter differs by channel: on PyFlyt's 8
-references the spread of the log mean square is 0.12 on Fy and Fz but 0.33-0.41 on Mx, My,
-Mz and Fx; on l2f's fs vehicle 0.07 on the torques and 0.71 on Fz. One spread pooled over
-the channels then over-tests the noisy channels and under-tests the quiet ones; a spread per
-channel alone rests on n - 1 = 7 degrees of freedom. The moderated spread (Smyth 2004,
+square per channel with the references'. Their scatter differs by channel (several-fold
+between the quiet and the noisy channels). One spread pooled over the channels then
+over-tests the noisy channels and under-tests the quiet ones; a spread per channel alone
+rests on n - 1 degrees of freedom (7 for 8 references). The moderated spread (Smyth 2004,
 "Linear models and empirical Bayes methods for assessing differential expression", SAGMB 3:
 the limma method) is in between, by the channels' own evidence:
 

@@ -26,8 +26,17 @@ from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
 from .fitting import Candidate, _bounds, _typical, residuals
 
-__all__ = ["Reference", "weighted_residual", "jacobian", "shifted", "read_later",
-           "rotor_spectra", "aligned", "FD_STEP"]
+__all__ = [
+    "FD_STEP",
+    "LackOfFitBaseline",
+    "Reference",
+    "aligned",
+    "jacobian",
+    "read_later",
+    "rotor_spectra",
+    "shifted",
+    "weighted_residual",
+]
 
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
@@ -41,14 +50,10 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
 
     On a uniform time base the read is band-limited (:func:`read_later`): a Fourier phase
     shift, which passes every frequency with its full amplitude (``spectra``: the flight's
-    :func:`rotor_spectra`, when it is read at many delays). Why not linear interpolation: between two samples it averages
-    them, and the average of two noisy samples has up to half their noise power. The
-    timing likelihood then fell by up to 20 log units at every half sample and rose again at
-    every whole one (a sawtooth with the fit sample's period, 10 ms): on the l2f fs source a
-    rotor log 18 ms late cost 0.5 at 16 ms but 30 at 0 ms against 6.5 at 6 ms under the
-    reference model, so "no difference" moved its shared delay to half a sample and the
-    reading ``signal_delay`` was judged at 39 %. A non-uniform time base is read by linear
-    interpolation."""
+    :func:`rotor_spectra`, when it is read at many delays). Why not linear interpolation:
+    between two samples it averages them, and the average of two noisy samples has up to
+    half their noise power, so the timing likelihood would be a sawtooth with the fit
+    sample's period. A non-uniform time base is read by linear interpolation."""
     if delay_s == 0.0 or states.rotor_speed is None:
         return states
     import dataclasses
@@ -92,11 +97,8 @@ def read_later(t: np.ndarray, x: np.ndarray, delay_s: float,
     per flight, :func:`rotor_spectra`). Mirrored, the periodic series has no jump at
     either end, so the spectrum does not ring there, and beyond the log's ends the read
     meets the mirror image (x(t_end + d) = x(t_end - d)). The read is smooth in ``delay_s``
-    across whole samples: a delay fit's finite differences see the slope, not an edge (a
-    whole-sample part taken by index and held at the ends made the slope at zero 20x larger
-    on one side than the other, and a nominal multirotor flight's delay stayed at 0 ms, 7
-    log units short of its optimum at -0.4 ms). A non-uniform time base is read by linear
-    interpolation."""
+    across whole samples: a delay fit's finite differences see the slope, not an edge. A
+    non-uniform time base is read by linear interpolation."""
     n = len(t)
     if spectrum is None:
         if not _uniform(t):
@@ -114,11 +116,7 @@ def aligned(flight, delay_s: float):
     states) with its rotor speeds read ``delay_s`` later (:func:`shifted`, band-limited on
     the fit samples). Why not shifted at the full log rate and decimated again: picking
     every k-th sample aliases what lies above the fit rate's Nyquist frequency, with a phase
-    that moves with the shift. PyFlyt's rotor speeds carry a 60 Hz ripple (a third of their
-    variance above 30 Hz; 240 Hz log, 120 Hz fit): the aliased ripple then grew and vanished
-    with an 8.3 ms period of the shift, the references' timing settled on one of its minima
-    (+7.3 ms; minima at -0.7 and +15.3 ms), and every nominal flight, read band-limited,
-    preferred 8-13 ms earlier. A shift of the fit samples moves what they hold, with its
+    that moves with the shift. A shift of the fit samples moves what they hold, with its
     power, whatever the shift."""
     fit = getattr(flight, "fit", flight)
     if delay_s == 0.0 or fit.rotor_speed is None:
@@ -126,16 +124,72 @@ def aligned(flight, delay_s: float):
     return shifted(fit, delay_s)
 
 
+@dataclass(frozen=True)
+class LackOfFitBaseline:
+    """What a judged flight's per-channel residual is compared with in the lack-of-fit test
+    when that level comes from flights other than the references of :class:`Reference`'s
+    noise model: in held-out mode, the remainder a reading leaves on the *training* flights.
+
+    ``mean_square`` (C,): per channel c, the mean over the training flights (or their halves,
+    with one training flight) of their mean squared remainder over sigma_c^2
+    (dimensionless; 1 = the noise model's level); ``log_spread``: the spread of
+    log(ms_jc / sigma_c^2) about its per-channel mean, pooled over the channels
+    (``dof`` = C (n - 1) degrees of freedom for n pieces); ``flights``: the names of the
+    flights it was computed on; ``source``: what produced it, in words (e.g. "held-out:
+    training flights' remainder after no_difference").
+
+    Filled by the held-out judgment; :mod:`quadsim.gap.calibrate` leaves it None (the
+    per-flight baseline is ``Reference.lof_mean``/``lof_sd``/``lof_dof``)."""
+
+    mean_square: np.ndarray
+    log_spread: float
+    dof: int
+    flights: tuple = ()
+    source: str = ""
+
+
 @dataclass
 class Reference:
-    """The calibrated reference model and its noise model (module doc).
+    """The calibrated model of what the reference flights share, with its uncertainty and
+    its noise model: the one input of the judgment of a flight in both modes (per flight:
+    :func:`quadsim.gap.calibrate.calibrate`; held out: :func:`quadsim.gap.heldout.
+    nominal_reference`, the parameter set with a noise model of the training flights).
 
-    ``params``: the nominal set with the data's motor map; ``candidate``/``theta``: the shared
-    parameters and their values (theta_ref); ``se_pool``, ``scatter``: their pooled standard
-    error and between-flight spread (``s_ref`` combines both); ``sigma`` (C,): residual RMS
-    per channel (N, N m, rad/s); ``tau`` (C,): correlation time per channel (samples);
-    ``lof_mean`` (C,), ``lof_sd``, ``lof_dof``: lack-of-fit statistics; ``delays_ms``: signal
-    -> (mean, sd, count) over the references; ``names``: the reference flights."""
+    Shapes: M shared parameters (``candidate.parameter_names``, each ``"effect.parameter"``),
+    C residual channels (Fx Fy Fz in N, Mx My Mz in N m, then with ``rotor`` one rotor-speed
+    channel per rotor in rad/s).
+
+    - ``params``: the nominal :class:`~quadsim.vehicle.params.VehicleParams` with the
+      references' static command -> speed map (:func:`quadsim.gap.motor_map.fit_motor_map`)
+      where commands are logged.
+    - ``rotor``: whether the rotor-speed channels are part of the residual (commands logged
+      on every reference flight; :mod:`quadsim.gap.rotor_channel`).
+    - ``candidate``: the shared parameters as one :class:`~quadsim.gap.fitting.Candidate`;
+      ``theta`` (M,): their values theta_ref, each in its effect parameter's unit.
+    - ``se_pool`` (M,): standard error of theta_ref from the pooled fit; ``scatter`` (M,):
+      between-flight spread (random-effect tau); ``s_ref`` (M,) = sqrt(se_pool^2 +
+      scatter^2): what a new nominal flight may show, the spread each explanation
+      marginalises the shared parameters with (same units as ``theta``).
+    - ``sigma`` (C,): per-channel residual RMS of the reference model on the references (N,
+      N m, rad/s); ``tau`` (C,): per-channel integrated correlation time (samples at the fit
+      rate); ``weights`` (C,) = 1 / (sigma_c^2 tau_c): the weight of a squared residual, so
+      that the weighted residual's squared sum is -2 log L (:func:`weighted_residual`).
+    - ``lof_mean`` (C,): mean over the references of log(ms_jc / sigma_c^2) (natural log of
+      each flight's mean square over sigma_c^2); ``lof_sd``: its spread (float, or (C,) per
+      channel, :mod:`quadsim.gap.moderated`); ``lof_dof``: its degrees of freedom;
+      ``lof_pooled``: (spread, dof) pooled over the channels, or None.
+    - ``baseline``: a :class:`LackOfFitBaseline` from flights other than the references
+      (held-out mode), or None: the lack-of-fit baseline is then ``lof_*``.
+    - ``delays_ms``: signal name (``"gyro"``, ``"rotor"``, ``"accel"``) -> (mean, sample
+      standard deviation, count) over the references of that signal's delay against motion
+      capture (ms, positive: the signal lags; :mod:`quadsim.logs.delays`).
+    - ``names``: the reference flights' names; ``identified``: shared parameter -> whether the
+      pooled fit identified it.
+    - ``rotor_shift_s``, ``rotor_shift_se``: the references' rotor-speed timing offset d
+      (s: the speeds are read d later, :meth:`align`) and its standard error (s).
+
+    The remaining fields are documented where they are declared. :func:`quadsim.gap.calibrate.
+    calibrate` fills the fields after ``identified`` once the pooled fit is done."""
 
     params: VehicleParams
     rotor: bool
@@ -191,6 +245,9 @@ class Reference:
     #: flight outside the references' envelope is tested with at least
     #: (:mod:`quadsim.gap.moderated`); None: ``lof_sd`` is the pooled spread already
     lof_pooled: tuple | None = None
+    #: the lack-of-fit baseline from flights other than the references (held-out mode's
+    #: training flights, :class:`LackOfFitBaseline`); None: ``lof_mean``/``lof_sd``/``lof_dof``
+    baseline: LackOfFitBaseline | None = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -199,6 +256,7 @@ class Reference:
 
     @property
     def s_ref(self) -> np.ndarray:
+        """(M,) sqrt(se_pool^2 + scatter^2): the shared parameters' reference uncertainty."""
         return np.sqrt(self.se_pool ** 2 + self.scatter ** 2)
 
     @property
@@ -207,9 +265,11 @@ class Reference:
         return 1.0 / (self.sigma ** 2 * self.tau)
 
     def values(self) -> dict:
+        """Shared parameter name -> theta_ref (float, its unit)."""
         return dict(zip(self.candidate.parameter_names, map(float, self.theta)))
 
     def effects(self, theta: np.ndarray | None = None) -> list:
+        """The reference model's effects at ``theta`` (M,; default theta_ref)."""
         return self.candidate.effects(self.theta if theta is None else theta)
 
 
@@ -250,11 +310,10 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
 
 
 def _probe(states, reference: Reference, build, memo, k: int, h: float) -> np.ndarray:
-    """The weighted residual (flattened) with shared parameter ``k`` moved by ``h``. Raises
-    ModelError where that leaves the physical set: measured on the multirotor source (a
-    5.5 kg quadrotor, Izz 1.87 Ixx) the pooled steps took the references' inertia error to
-    within 1e-3 of the triangle inequality (Izz <= Ixx + Iyy), and the forward step crossed
-    it; the calibration then failed and no flight was judged."""
+    """The weighted residual (flattened, (N C,)) with shared parameter ``k`` moved by ``h``
+    (its unit). Raises ModelError where that leaves the physical set (e.g. an inertia
+    breaking the triangle inequality Izz <= Ixx + Iyy): :func:`jacobian` then steps the
+    other way."""
     theta = reference.theta.copy()
     theta[k] += h
     return weighted_residual(states, reference, build(theta), memo).ravel()

@@ -31,10 +31,12 @@ Example::
 
     >>> from quadsim.logs.flightlog import load_log
     >>> from quadsim.vehicle.params import load_params
-    >>> from quadsim.gap.residual import residual_wrench
-    >>> res = residual_wrench(load_log("flight.csv.gz"), load_params("crazyflie21"))
-    >>> res.force_body.shape, res.torque_world.shape        # (N, 3) each
-    >>> res.channels()                                      # (N, 6) Fx Fy Fz Mx My Mz
+    >>> from quadsim.gap.residual import flight_states, measured_wrench, model_wrench
+    >>> params = load_params("crazyflie21")
+    >>> states = flight_states(load_log("flight.csv.gz"), gravity=params.gravity)
+    >>> force, torque, vehicle = model_wrench(states, params)   # (N, 3) each, body frame
+    >>> measured = measured_wrench(states, vehicle)
+    >>> measured[0] - force, measured[1] - torque               # the residual, N and N m
 
 Conventions: body x forward, y left, z up; quaternions scalar-first body-to-world; rotor
 speeds rad/s; all arrays have the sample axis first.
@@ -42,24 +44,33 @@ speeds rad/s; all arrays have the sample axis first.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import savgol_filter
 
 from ..core.errors import InputError
-from ..core.frames import cross, quat_normalize, rotate, rotate_inverse
+from ..core.frames import cross, quat_normalize, rotate_inverse
 from ..effects.base import Effect, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 from .memo import _acting, identity, kept
 
-__all__ = ["FlightStates", "ResidualWrench", "CHANNELS", "channel_unit", "flight_states",
-           "resample_uniform", "savgol_response_cutoff", "model_wrench", "rotor_wrench",
-           "measured_wrench",
-           "residual_wrench", "DEFAULT_WINDOW_S"]
+__all__ = [
+    "CHANNELS",
+    "DEFAULT_WINDOW_S",
+    "FlightStates",
+    "channel_unit",
+    "flight_states",
+    "measured_wrench",
+    "model_wrench",
+    "resample_uniform",
+    "rotor_matrices",
+    "rotor_wrench",
+    "window_samples",
+]
 
 #: Savitzky–Golay window (s) used unless told otherwise.
 DEFAULT_WINDOW_S = 0.1
@@ -115,30 +126,6 @@ class FlightStates:
                             self.name)
 
 
-@dataclass(frozen=True)
-class ResidualWrench:
-    """Residual (measured minus model) wrench per sample.
-
-    force_body / torque_body (N, 3): body frame (N, N m); force_world / torque_world: the
-    same vectors in the world frame; measured_* and model_* the two sides of the balance
-    (body frame). ``channels()`` stacks the body residual as (N, 6) Fx Fy Fz Mx My Mz."""
-
-    t: np.ndarray
-    force_body: np.ndarray
-    torque_body: np.ndarray
-    force_world: np.ndarray
-    torque_world: np.ndarray
-    measured_force: np.ndarray
-    measured_torque: np.ndarray
-    model_force: np.ndarray
-    model_torque: np.ndarray
-    accel_source: str
-    window_s: float
-
-    def channels(self) -> np.ndarray:
-        return np.concatenate([self.force_body, self.torque_body], axis=-1)
-
-
 # ----------------------------------------------------------------------------- resampling
 
 
@@ -173,18 +160,10 @@ def resample_uniform(log: FlightLog, dt: float | None = None) -> FlightLog:
                      interp(log.rotor_command), interp(log.vbat), log.path)
 
 
-def savgol_response_cutoff(window_s: float, dt: float, polyorder: int = 3) -> float:
-    """-3 dB frequency (Hz) of the smoothing (deriv=0) Savitzky–Golay filter used here."""
-    from scipy.signal import freqz, savgol_coeffs
-
-    coeffs = savgol_coeffs(_window_samples(window_s, dt, polyorder), polyorder)
-    freq, response = freqz(coeffs, worN=4096, fs=1.0 / dt)
-    below = np.nonzero(np.abs(response) < 1 / np.sqrt(2))[0]
-    return float(freq[below[0]]) if len(below) else float(freq[-1])
-
-
-def _window_samples(window_s: float, dt: float, polyorder: int) -> int:
-    n = int(round(window_s / dt))
+def window_samples(window_s: float, dt: float, polyorder: int = 3) -> int:
+    """The Savitzky–Golay window in samples: ``window_s / dt`` (s / s) rounded, made odd,
+    and at least the shortest window of order ``polyorder``."""
+    n = round(window_s / dt)
     n += 1 - n % 2  # odd
     return max(n, polyorder + 2 + (polyorder + 1) % 2)
 
@@ -200,7 +179,7 @@ def flight_states(log: FlightLog, *, window_s: float = DEFAULT_WINDOW_S, polyord
     Raises :class:`InputError` if the log is shorter than the filter window."""
     log = resample_uniform(log, dt)
     step = float(log.t[1] - log.t[0])
-    window = _window_samples(window_s, step, polyorder)
+    window = window_samples(window_s, step, polyorder)
     if len(log.t) < window + 2:
         raise InputError(f"{log.path or 'log'}: t: {len(log.t)} samples, fewer than the "
                          f"{window}-sample smoothing window ({window_s} s)")
@@ -337,23 +316,3 @@ def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.nda
     inertia = params.inertia
     torque = w_dot @ inertia.T + cross(w, w @ inertia.T)
     return force, torque
-
-
-def residual_wrench(log: FlightLog | FlightStates, params: VehicleParams,
-                    effects: Sequence[Effect] | EffectSet | None = None, *,
-                    window_s: float = DEFAULT_WINDOW_S, polyorder: int = 3,
-                    use_accelerometer: bool = True) -> ResidualWrench:
-    """The wrench the model (``params`` + ``effects``) is missing, per sample of ``log``.
-
-    ``log`` may be a :class:`~quadsim.logs.flightlog.FlightLog` (it is resampled and smoothed
-    here) or prepared :class:`FlightStates`. Raises :class:`InputError` when the log has no
-    rotor speeds or a different rotor count than the model."""
-    states = log if isinstance(log, FlightStates) else flight_states(
-        log, window_s=window_s, polyorder=polyorder, use_accelerometer=use_accelerometer,
-        gravity=params.gravity)
-    model_force, model_torque, vehicle = model_wrench(states, params, effects)
-    meas_force, meas_torque = measured_wrench(states, vehicle)
-    force, torque = meas_force - model_force, meas_torque - model_torque
-    return ResidualWrench(states.t, force, torque, rotate(states.quat, force),
-                          rotate(states.quat, torque), meas_force, meas_torque, model_force,
-                          model_torque, states.accel_source, states.window_s)

@@ -6,7 +6,7 @@ battery's voltage, a propeller's load) are seen only here: with measured rotor s
 do not change the wrench. The prediction integrates the first effect that defines rotor
 dynamics (:func:`rate_owner`, e.g. ``motor_lag``: dOmega/dt = (Omega_c - Omega) / tau) by
 ``ROTOR_SUBSTEPS`` Heun steps per sample with the command interpolated inside the sample; a
-lag that is the same up and down has the same numbers in closed form (:func:`_heun_linear`).
+lag that is the same up and down has the same numbers in closed form (:func:`heun_linear`).
 A static factor (a battery, a propeller's load: ``EffectSet.command_factor``) scales the
 command; without dynamics the commanded speed is reached at once.
 
@@ -70,7 +70,7 @@ def _linear_time_constant(owner) -> float | None:
 
 @functools.lru_cache(maxsize=64)
 def _heun_weights(steps: int, h: float, tau: float) -> tuple[float, np.ndarray]:
-    """(a^(S steps), w_0..w_steps) of :func:`_heun_linear` (kept: a fit asks for the same
+    """(a^(S steps), w_0..w_steps) of :func:`heun_linear` (kept: a fit asks for the same
     time constant many times). The weights are read only."""
     a = 1.0 - h / tau + h * h / (2.0 * tau * tau)
     b0 = h / (2.0 * tau) - h * h / (2.0 * tau * tau)
@@ -89,7 +89,7 @@ def _heun_weights(steps: int, h: float, tau: float) -> tuple[float, np.ndarray]:
     return gain, weights
 
 
-def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
+def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
                  n: int) -> np.ndarray:
     """:func:`rotor_residual`'s Heun integration for a linear lag, in closed form.
 
@@ -111,7 +111,7 @@ def _heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: 
 def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
     """Measured rotor speed at t + h minus the model's prediction from the state at t."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
-    steps = max(1, int(round(ROTOR_HORIZON_S / dt)))
+    steps = max(1, round(ROTOR_HORIZON_S / dt))
     cmd = command_speed(states, params)
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
@@ -126,7 +126,7 @@ def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -
     if owner is None:
         predicted = cmd[steps:]
     elif linear is not None:
-        predicted = _heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, linear, n)
+        predicted = heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, linear, n)
     else:
         # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
         # dt / (2 ROTOR_SUBSTEPS)).

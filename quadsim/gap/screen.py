@@ -1,7 +1,7 @@
 """Linearised evidence of every explanation, and the cut that decides which ones are fitted
-to convergence (:func:`quadsim.gap.evidence.evaluate`).
+to convergence (:func:`quadsim.gap.evidence.evaluate`; docs/gap.md, Speed).
 
-The full fit of an explanation (:func:`quadsim.gap.evidence._fit_one`: bounded trust-region
+The full fit of an explanation (:func:`quadsim.gap.problem.full_fit`: bounded trust-region
 least squares, a finite-difference Jacobian per iteration) costs 40-80 evaluations of the
 flight's residual; a flight has ~20 explanations, and most of them lie hundreds of log units
 of evidence below the best. So:
@@ -9,20 +9,22 @@ of evidence below the best. So:
 1. **The flight's rotor delay under the reference model** ("no difference") is fitted first
    (:func:`refined`); every other explanation carries that delay with the same prior and
    starts there (z0: its own parameters at their prior centre, theta_ref for a replaced
-   shared group; a "signal_delay" reading at its cross-correlation estimate).
+   shared group; a "signal_delay" reading at its cross-correlation estimate). A delay beyond
+   :data:`DELAY_GRID_SDS` prior spreads absorbs a gap rather than timing the log: the others
+   then start at the grid's best within that reach (:func:`delay_starts`).
 2. **Screen**: one Gauss-Newton step from z0, ``r(z) ~ r(z0) + J (z - z0)``. J's columns
    (prior units): for a shared group the explanation gives a value of its own, the
-   shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.calibrate.jacobian`,
-   once per flight); the delay's column once per flight; every other parameter one forward
-   difference (:data:`STEP`, the full fit's ``diff_step``). The rotor speeds are shifted by
-   interpolation between samples, so the residual is piecewise linear in the delay with a
-   kink at every sample: the delay's column is one-sided and is taken again on the other side
-   when the step goes there. The stacked cost (profiled residual, marginalised shifts, z) is
-   then quadratic; its bounded minimum z1 is a small linear least-squares problem
-   (``scipy.optimize.lsq_linear``, bounded-variable). The residual is evaluated at z1 itself:
-   the *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at
-   z1 with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says
-   how far the linear model was off there.
+   shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.reference.jacobian`,
+   once per flight); the delay's column once per flight (:class:`Columns`); every other
+   parameter one forward difference (:data:`STEP`, the full fit's ``diff_step``). The rotor
+   speeds are shifted by interpolation between samples, so the residual is piecewise linear
+   in the delay with a kink at every sample: the delay's column is one-sided and is taken
+   again on the other side when the step goes there. The stacked cost (profiled residual,
+   marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
+   least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
+   *screened* evidence is the Laplace evidence (:func:`quadsim.gap.problem.laplace`) at z1
+   with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says how
+   far the linear model was off there.
 3. **Cut**: an explanation whose *reach*, screened log Z + miss / 2, lies within
    :data:`SCREEN_CUT` of the best log weight so far (log Z; "no difference" with its prior,
    as in :func:`quadsim.gap.judge.posterior`) is fitted to convergence (:func:`refined`:
@@ -34,48 +36,59 @@ Why the cut does not move a verdict: a screened reading lies more than SCREEN_CU
 + 4 below the best, i.e. at posterior odds below 1e-4 against it by its screened evidence;
 the judge's thresholds are posterior 0.1 (a stated reading) and 0.9 (confident). The screened
 cost is that of a point the fit can reach, so a fit only lowers it, by about miss / 2 where
-the linear model was off; a second local optimum the step does not see is the remaining risk,
-so it was measured: on the 26 real mixed/ Crazyflie flights against the 20 nominal ones
-(``scripts/gap_benchmark.py --per-flight-speed DATA --compare-full``) the verdicts were the
-same on all 26, but on one flight the full fit of ``cable_payload`` reaches an optimum the
-step and the refined fit miss, and the lead reading changes (docs/gap.md, Speed). An
-explanation with a parameter that acts only through another's value (``coupled``: a
-propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
-references lack) has a zero column at the start, so its step cannot see what it reaches:
-it is fitted after the others (on RotorPy a 10 % thrust loss was cut as a propeller change
-and named ``mass_offset``; a second linear step was not enough: the wind refitted through a
-drag needs the fit's iterations): always, or, when it names the readings it extends or
-mimics (``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
-propeller change, a mass or a thrust curve), when one of them lies within the cut of the
-best weight before any coupled fit (5 % of the per-flight CPU on the real mixed flights), or
-when a second linear step from its first reaches within the cut (:func:`_second_reach`);
-tests/test_screen.py checks the verdicts on generated flights with known effects. The
-explanations that matter are fitted to convergence, not with the full fit's 40-evaluation
-cap, so their evidence can exceed the full path's (by up to a few log units where that fit
-stopped early); at a bound, the two Jacobians' columns of the bounded value can differ and
-with them the Occam factor (measured: 2.9 log units on a reading at posterior < 0.1).
+the linear model was off; a second local optimum the step does not see is the remaining risk
+(docs/gap.md, Speed: the comparison with ``full=True``).
 
-``evaluate(..., full=True)`` fits every explanation with the full fit (the reference path
-tests/test_screen.py compares with).
+An explanation with a parameter that acts only through another's value (``coupled``: a
+propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
+references lack) has a zero column at the start, so its step cannot see what it reaches: it
+is fitted after the others, always, or, when it names the readings it extends or mimics
+(``kin``: a payload off the centre, a centred mass, a CoM shift or a thrust curve; a
+propeller change, a mass or a thrust curve), when one of them lies within the cut of the
+best weight before any coupled fit (:func:`_kin_matters`), or when a second linear step from
+its first reaches within the cut (:func:`_second_reach`); from the step and, where the step
+raised the cost, from the prior centre too (:func:`_refined_coupled`).
+
+The explanations that matter are fitted to convergence, not with the full fit's
+40-evaluation cap, so their evidence can exceed the full path's (by up to a few log units
+where that fit stopped early); at a bound, the two Jacobians' columns of the bounded value
+can differ and with them the Occam factor. ``evaluate(..., full=True)`` fits every
+explanation with the full fit (the reference path tests/test_screen.py compares with).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..core.errors import ModelError
-from .calibrate import Reference
-from .explanations import _make
+from .explanations import Explanation, _make
+from .problem import Evidence, FitInputs, Problem, flight_residual, full_fit, shifted_view
 
-__all__ = ["screened", "linearised", "refined", "delay_starts", "SCREEN_CUT", "STEP",
-           "MAX_STEPS", "CONVERGED", "DELAY_GRID_S"]
+__all__ = [
+    "CONVERGED",
+    "DELAY_GRID_S",
+    "DELAY_GRID_SDS",
+    "MAX_STEPS",
+    "SCREEN_CUT",
+    "STEP",
+    "Columns",
+    "centred_is_base",
+    "delay_starts",
+    "jacobian_columns",
+    "linear_step",
+    "linearised",
+    "refined",
+    "screened",
+]
 
 #: forward-difference step in prior units (the full fit's ``diff_step``).
 STEP = 1e-3
 #: log-weight margin below the best within which an explanation is fitted to convergence
 #: (module doc): posterior odds 1e-4, plus 4 for the Occam factor's change from z1 to the
-#: optimum and the step's own error (measured: a few tenths to 2.5 log units).
+#: optimum and the step's own error (a few log units at most; CHANGELOG).
 SCREEN_CUT = float(np.log(1e4)) + 4.0
 #: Gauss-Newton steps of a refined fit at most, and the cost drop (cost units) below which
 #: it has converged (a hundredth of a log-evidence unit: far below any posterior threshold).
@@ -84,8 +97,7 @@ CONVERGED = 0.02
 
 
 #: spacing (s) of the rotor-delay grid the fits start from (:func:`delay_starts`): below half
-#: the spacing of the timing likelihood's local optima (measured: ~7 ms on PyFlyt's 240 Hz
-#: motors with their per-step noise, where fits started at zero stopped 7 ms from the best),
+#: the spacing of the timing likelihood's local optima (a few ms on logs with motor noise),
 #: so each optimum's basin holds a grid point; the fit then converges within it.
 DELAY_GRID_S = 0.003
 #: the grid reaches this many of the shared delay's prior spreads either side of zero and of
@@ -94,28 +106,22 @@ DELAY_GRID_SDS = 3.0
 
 
 def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, float]:
-    """Where the rotor delay's fits start: (every explanation's shared delay, the
+    """Where the rotor delay's fits start (s): (every explanation's shared delay, the
     "signal_delay" reading's), each the best point of a grid (:data:`DELAY_GRID_S`) under its
-    prior (the shared delay's, the wide ``signal_sd``). ``null``: the "no difference"
-    Problem (its delay under the references' tight prior); ``hint_s``: the flight's
-    cross-correlation estimate against the references'. The shared start is the best of
-    the grid within :data:`DELAY_GRID_SDS` shared spreads about zero and about ``hint_s``
-    (where the shared delay may lie, and where a delay of the flight's own shows in the
-    cross-correlation); the reading's own start the best within as many of its own wide
-    spreads (``signal_sd``). Why the wide reach: a log whose own cross-correlation cannot
-    time it (no hint) may be late by more than the shared reach: on the l2f source a rotor
-    log 17 ms late, started within 10 ms, stopped at 9 ms (cost 340 against 310 at 16 ms;
-    the timing cost was then also a sawtooth with the fit sample's period, since removed by
-    the band-limited read, :func:`quadsim.gap.reference.shifted`) and was named a slower
-    motor at 1.00.
+    prior (the shared delay's, the wide ``signal_sd``, s). ``null``: the "no difference"
+    :class:`~quadsim.gap.problem.Problem` (its delay under the references' tight prior);
+    ``hint_s``: the flight's cross-correlation estimate against the references' (s). The
+    shared start is the best of the grid within :data:`DELAY_GRID_SDS` shared spreads about
+    zero and about ``hint_s`` (where the shared delay may lie, and where a delay of the
+    flight's own shows in the cross-correlation); the reading's own start the best within as
+    many of its own wide spreads (a log the cross-correlation cannot time may be late by
+    more than the shared reach). The grid is clipped to the delay's bounds.
 
     Why a grid: the likelihood of a timing offset is not unimodal. A residual with a
     periodic part (motor noise, the figure-8) matches itself again one period later, so a
     local fit from zero can stop at the wrong optimum, and a wide-prior fit started elsewhere
-    then "finds" a delay of its own (measured: 2 nominal PyFlyt flights, 2 with an effect
-    outside the library and one inertia error named ``signal_delay`` at 29 log units, their
-    best shared delay 4.6 ms from the references', well inside its prior). The profiled cost
-    |aug|^2 + |du|^2 is the same for both priors at one delay: one residual per grid point."""
+    then "finds" a delay of its own. The profiled cost |aug|^2 + |du|^2 is the same for both
+    priors at one delay: one residual per grid point."""
     sd, lo, hi = float(null.sd[-1]), float(null.lower[-1]), float(null.upper[-1])
     reach = DELAY_GRID_SDS * sd
     steps = np.arange(-reach, reach + 0.5 * DELAY_GRID_S, DELAY_GRID_S)
@@ -135,15 +141,23 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     return shared, own
 
 
-class _Columns:
-    """Per-flight pieces every explanation's linear model shares: the reference residual at
-    theta_ref with the rotor speeds shifted by a delay, and the rotor-delay column there."""
+class Columns:
+    """Per-flight pieces every explanation's linear model shares (module doc, 2.): the
+    reference residual (N C,) at theta_ref with the rotor speeds read a delay later
+    (:meth:`base`), the rotor delay's column there (:meth:`delay`), and the shared Jacobian
+    ``jac`` (N C, M) with ``index`` (shared parameter name -> column).
 
-    def __init__(self, states, reference: Reference, jac: np.ndarray, names_all: list[str],
-                 memo: dict, shifter, residual, null=None):
-        self.states, self.reference, self.jac, self.memo = states, reference, jac, memo
-        self.shifted, self.residual = shifter, residual
-        self.index = {n: k for k, n in enumerate(names_all)}
+    ``inputs``: the flight's :class:`~quadsim.gap.problem.FitInputs` (its memo keeps the
+    shifted states); ``null``: the "no difference" explanation, whose fixed-only parts and
+    replaced groups make the shared base model (the reference model, or it under a flight's
+    drag law, :mod:`quadsim.gap.drag_law`); None: the reference model. ``delay_s``: the delay
+    (s) every explanation starts at (:func:`screened` sets it)."""
+
+    def __init__(self, inputs: FitInputs, null: Explanation | None = None):
+        reference = inputs.reference
+        self.states, self.reference, self.jac, self.memo = (inputs.states, reference,
+                                                            inputs.jac, inputs.memo)
+        self.index = {n: k for k, n in enumerate(inputs.names_all)}
         self._base: dict[float, np.ndarray] = {}
         self._delay: dict[tuple, np.ndarray] = {}
         self.delay_s = 0.0          # the delay every explanation starts at (:func:`screened`)
@@ -153,38 +167,40 @@ class _Columns:
         self.fixed = tuple(p for p in getattr(null, "parts", ()) if not p[2])
         self.replaced = tuple(getattr(null, "replaces", ())) if self.fixed else ()
         self.effects = reference.effects()
-        if self.fixed:      # as evidence._shared_effects: the base's effects always stay
+        if self.fixed:      # as problem._shared_effects: the base's effects always stay
             n_base = len(reference.candidate.base)
             self.effects = (self.effects[:n_base]
                             + [e for e in self.effects[n_base:] if e.name not in self.replaced]
                             + _fixed_effects(self.fixed))
 
+    def _residual_at(self, delay_s: float) -> np.ndarray:
+        return flight_residual(shifted_view(self.states, delay_s, self.memo), self.reference,
+                               self.effects, self.memo)
+
     def base(self, delay_s: float) -> np.ndarray:
+        """The shared base model's weighted residual (N C,) with the rotor speeds read
+        ``delay_s`` (s) later."""
         if delay_s not in self._base:
-            self._base[delay_s] = self.residual(self.shifted(delay_s), self.reference,
-                                                self.effects, self.memo)
+            self._base[delay_s] = self._residual_at(delay_s)
         return self._base[delay_s]
 
     def delay(self, delay_s: float, sd: float, sign: float) -> np.ndarray:
-        """d r / d z of the rotor delay at ``delay_s`` (prior spread ``sd``, s), one-sided
-        towards ``sign`` (module doc, 2.: a kink at every sample on a non-uniform time base)."""
+        """d r / d z (N C,) of the rotor delay at ``delay_s`` (prior spread ``sd``, s),
+        one-sided towards ``sign`` (module doc, 2.: a kink at every sample)."""
         key = (delay_s, sd, sign)
         if key not in self._delay:
             h = sign * STEP
-            moved = self.residual(self.shifted(delay_s + h * sd), self.reference,
-                                  self.effects, self.memo)
+            moved = self._residual_at(delay_s + h * sd)
             self._delay[key] = (moved - self.base(delay_s)) / h
         return self._delay[key]
 
 
-def _centred_is_base(expl, cols) -> bool:
+def centred_is_base(expl: Explanation, cols: Columns) -> bool:
     """Whether ``expl`` at its prior's centre is the shared base model of ``cols`` (the
     reference model, or it under the flight's drag law): its fixed-only parts are the
     base's, and each group it replaces is one it fits or the base replaces. Not so for a
     wind through the references' drag taken as quadratic (the rotor drag replaced by a body
-    drag it fits): its centre's residual is its own. Measured before the base carried the
-    law: the law's reading of a 12 mm CoM offset on multirotor, screened from the reference
-    model's residual, was put at -6539 log units (fitted: -172)."""
+    drag it fits): its centre's residual is its own, not the base's."""
     fits = {name for name, _, fitted in expl.parts if fitted}
     fixed = tuple(p for p in expl.parts if not p[2])
     return fixed == cols.fixed and set(expl.replaces) <= fits | set(cols.replaced)
@@ -194,11 +210,11 @@ def _fixed_effects(parts) -> list:
     return [_make(name, dict(fixed)) for name, fixed, _ in parts]
 
 
-def _shared_point(prob, cols: _Columns, z: np.ndarray) -> float | None:
+def _shared_point(prob: Problem, cols: Columns, z: np.ndarray) -> float | None:
     """The delay (s) at ``z`` when ``z`` is the reference model there (no own value moved
     and the delay one the per-flight pieces hold), else None."""
     own = len(z) - (1 if prob.expl.shift else 0)
-    if np.any(z[:own]) or prob.expl.name == "signal_delay" or not _centred_is_base(
+    if np.any(z[:own]) or prob.expl.name == "signal_delay" or not centred_is_base(
             prob.expl, cols):
         return None
     if not prob.expl.shift:
@@ -207,16 +223,18 @@ def _shared_point(prob, cols: _Columns, z: np.ndarray) -> float | None:
     return cols.delay_s if abs(delay - cols.delay_s) <= 1e-12 else None
 
 
-def _base(prob, cols: _Columns, z: np.ndarray) -> np.ndarray:
+def _base(prob: Problem, cols: Columns, z: np.ndarray) -> np.ndarray:
     delay = _shared_point(prob, cols, z)
     return prob.residual(z) if delay is None else cols.base(delay)
 
 
-def _columns(prob, cols: _Columns, start: np.ndarray, base: np.ndarray,
-             signs: np.ndarray, which=None, out: np.ndarray | None = None) -> np.ndarray:
-    """The weighted residual's Jacobian in z at ``start`` (module doc); one-sided
-    differences towards ``signs``; only the columns ``which`` (default all) into ``out``
-    (default a new array). At the reference model the shared parts serve: the
+def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.ndarray,
+                     signs: np.ndarray, *, which=None, out: np.ndarray | None = None
+                     ) -> np.ndarray:
+    """The weighted residual's Jacobian (N C, P) in z at ``start`` (module doc, 2.);
+    one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound);
+    ``base``: the residual at ``start``; only the columns ``which`` (bool (P,), default all)
+    into ``out`` (default a new array). At the reference model the shared parts serve: the
     delay's column, and a replaced group's from the shared Jacobian (taken without the
     delay: a column of the linear model only, the cost is evaluated at the step)."""
     expl, delay = prob.expl, _shared_point(prob, cols, start)
@@ -239,8 +257,10 @@ def _columns(prob, cols: _Columns, start: np.ndarray, base: np.ndarray,
     return jac
 
 
-def _step(prob, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
-    """The bounded minimum of the linear model: (z1, its predicted cost, A, active count)."""
+def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
+    """The bounded minimum of the linear model ``r(z) ~ base + jac (z - start)`` of the
+    stacked cost: (z1 (P,), its predicted cost, the stacked Jacobian A (N C + K + P, P), the
+    count of values at a bound)."""
     n = len(start)
     aug0, du0 = prob.marg.profile(base)
     aug, du = prob.marg.profile(jac)
@@ -263,54 +283,51 @@ def _step(prob, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
     return start + x, predicted, a, active
 
 
-def linearised(prob, cols: _Columns, start: np.ndarray, names_all, s_all):
-    """One Gauss-Newton step of ``prob`` from ``start`` (module doc): (Evidence at the step,
-    the step z1, how far the linear model's cost there was off, cost units). A one-sided
-    column (the rotor delay's kink) that the step leaves on the other side is recomputed on
-    that side."""
+def linearised(prob: Problem, cols: Columns, start: np.ndarray
+               ) -> tuple[Evidence, np.ndarray, float]:
+    """One Gauss-Newton step of ``prob`` from ``start`` (module doc, 2.): (Evidence at the
+    step, the step z1, how far the linear model's cost there was off, cost units). A
+    one-sided column (the rotor delay's kink) that the step leaves on the other side is
+    recomputed on that side."""
     base = _base(prob, cols, start)
     z1, predicted, a, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)
     miss = abs(float(vec @ vec) - predicted)
-    return prob.evidence(z1, vec, a.T @ a, active, names_all, s_all), z1, miss
+    return prob.evidence(z1, vec, a.T @ a, active), z1, miss
 
 
-def _second_reach(prob, cols: _Columns, z1: np.ndarray, names_all, s_all) -> float:
+def _second_reach(prob: Problem, cols: Columns, z1: np.ndarray) -> float:
     """What a coupled explanation with kin (module doc, 3.) can reach by a second
     Gauss-Newton step from its first one ``z1``, where the parameter another acts through
     has moved and the other's column is no longer zero: the screened evidence there plus
     half its miss (-inf where the step fails). Taken only where neither its own reach nor
     its kin has it fitted already; it only decides whether the explanation is fitted, and
-    the fit starts from ``z1`` as before. Why: on Crazyflow a 6 g payload 3 and 5 mm
-    off the centre (Mx, My at 14x and 7x the references' after a centred mass) stepped like
-    a centred mass (its position's columns are zero at zero mass), its kin lay 1200 log
-    units below a propeller change, it was never fitted, and the flight was `unexplained`;
-    its fit lies 7000 log units above the propeller's."""
+    the fit starts from ``z1`` as before."""
     try:
-        ev, _, miss = linearised(prob, cols, z1, names_all, s_all)
+        ev, _, miss = linearised(prob, cols, z1)
     except (ModelError, np.linalg.LinAlgError):
         return -np.inf
     return ev.log_z + 0.5 * miss if np.isfinite(miss) else -np.inf
 
 
-def _signed_step(prob, cols: _Columns, start: np.ndarray, base: np.ndarray):
+def _signed_step(prob: Problem, cols: Columns, start: np.ndarray, base: np.ndarray):
     signs = np.ones(len(start))
-    jac = _columns(prob, cols, start, base, signs)
-    z1, predicted, a, active = _step(prob, start, base, jac)
+    jac = jacobian_columns(prob, cols, start, base, signs)
+    z1, predicted, a, active = linear_step(prob, start, base, jac)
     flip = (z1 < start) & (signs > 0)
     flip &= np.array([k == "delay.rotor" for k in prob.expl.parameter_names])
     if np.any(flip):
         signs[flip] = -1.0
-        jac = _columns(prob, cols, start, base, signs, which=flip, out=jac)
-        z1, predicted, a, active = _step(prob, start, base, jac)
+        jac = jacobian_columns(prob, cols, start, base, signs, which=flip, out=jac)
+        z1, predicted, a, active = linear_step(prob, start, base, jac)
     return z1, predicted, a, active
 
 
-def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
+def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
     """The MAP fit of ``prob`` from ``z`` by projected Gauss-Newton steps (Jacobian by
-    forward differences at each iterate, the bounded linear step, halved until the cost
-    falls), until the cost falls by less than :data:`CONVERGED` or after :data:`MAX_STEPS`
-    steps; the Laplace evidence at the optimum with the last Jacobian."""
+    forward differences at each iterate, the bounded linear step, halved up to 4 times until
+    the cost falls), until the cost falls by less than :data:`CONVERGED` or after
+    :data:`MAX_STEPS` steps; the Laplace evidence at the optimum with the last Jacobian."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
     a = None
@@ -333,36 +350,33 @@ def refined(prob, cols: _Columns, z: np.ndarray, names_all, s_all) -> object:
     # step, which moved the cost by less than CONVERGED)
     if a is None:
         base = prob.residual(z)
-        _, _, a, active = _step(prob, z, base, _columns(prob, cols, z, base,
-                                                         np.ones(len(z))))
+        _, _, a, active = linear_step(prob, z, base, jacobian_columns(
+            prob, cols, z, base, np.ones(len(z))))
     else:
         active = int(np.count_nonzero((z <= prob.z_lo) | (z >= prob.z_hi)))
-    return prob.evidence(z, vec, a.T @ a, active, names_all, s_all)
+    return prob.evidence(z, vec, a.T @ a, active)
 
 
-def _refined_coupled(prob, cols: _Columns, z1: np.ndarray, delay_s: float, names_all,
-                     s_all):
+def _refined_coupled(prob: Problem, cols: Columns, z1: np.ndarray, delay_s: float
+                     ) -> Evidence:
     """:func:`refined` of a coupled explanation from the linear step ``z1`` and, where that
     step raised the cost above the prior centre's, from the centre too (the shared rotor
     delay kept at ``z1``'s): the better evidence. Why: the step cannot see what a coupled
-    parameter reaches, and a wrong start leads the Gauss-Newton steps into another basin.
-    Measured on RotorPy: a translational lift with the references' wind refitted stepped to
-    a 4 m/s wind at 5x the centre's cost and stopped there (log Z -1271, +0.04 % of the true
-    lift); from the centre: the true lift (0.0142 against 0.0141 kg/m) and calm air, log Z
-    -109. A drag with the wind refitted needs the step's start (from the centre 8 steps
-    did not reach the wind)."""
-    first = refined(prob, cols, z1, names_all, s_all)
+    parameter reaches, and a wrong start leads the Gauss-Newton steps into another basin;
+    some explanations need the step's start, others the centre's."""
+    first = refined(prob, cols, z1)
     centre = prob.start(delay_s)
     if prob.expl.shift and prob.expl.name != "signal_delay":
         centre[-1] = z1[-1]
     a, b = prob.stacked(z1), prob.stacked(centre)
     if float(b @ b) >= float(a @ a):
         return first
-    second = refined(prob, cols, centre, names_all, s_all)
+    second = refined(prob, cols, centre)
     return second if second.log_z > first.log_z else first
 
 
-def _kin_matters(expl, explanations: list, rows: list, reach: list, best: float) -> bool:
+def _kin_matters(expl: Explanation, explanations: list, screening: Screening, best: float
+                 ) -> bool:
     """Whether a coupled explanation is fitted: always without ``kin``; else when one of the
     readings it extends or mimics (their refined evidence, or their screened reach) lies
     within :data:`SCREEN_CUT` of the best. Why it is safe: a payload off the centre moves
@@ -370,10 +384,10 @@ def _kin_matters(expl, explanations: list, rows: list, reach: list, best: float)
     a propeller change moves the vertical force as a mass or a thrust curve does: where
     none of those can matter, neither can it. A reading whose kin is its own name extends
     that effect's plain reading of fewer parameters (one rotor's propeller with its speed
-    per command, :mod:`quadsim.gap.evidence`): only that one counts. Measured: fitting the
-    coupled one-rotor readings always cost 28 % of the per-flight CPU on the real flights."""
+    per command): only that one counts."""
     if not expl.kin:
         return True
+    rows, reach = screening.rows, screening.reach
     mine = set(expl.parameter_names)
     for j, other in enumerate(explanations):
         if other.name == expl.name and not set(other.parameter_names) < mine:
@@ -385,99 +399,145 @@ def _kin_matters(expl, explanations: list, rows: list, reach: list, best: float)
     return False
 
 
-def screened(states, reference: Reference, explanations: list, jac: np.ndarray,
-             names_all: list[str], s_all: np.ndarray, starts_s: tuple = (0.0, 0.0), *,
-             problem, fit_one, residual, memo: dict | None = None) -> list:
-    """Every explanation's Evidence: screened, and fitted to convergence where it can matter
-    (module doc); ``jac`` the shared-parameter Jacobian at theta_ref. The evidence module,
-    which imports this one, hands in its pieces: ``problem`` its ``Problem`` class,
-    ``fit_one`` its full fit, ``residual`` its ``flight_residual``; ``memo``: residual parts
-    already kept for this flight (:func:`quadsim.gap.fitting.residuals`); ``starts_s``:
-    where the shared rotor delay and the "signal_delay" reading start (:func:`delay_starts`)."""
-    memo = {} if memo is None else memo
+@dataclasses.dataclass
+class Screening:
+    """The screen's pass over one flight's explanations, one entry per explanation:
+    ``rows`` its Evidence (None where the step failed), ``starts`` the step z1 a refined fit
+    starts from (None: exact already, or no step), ``weight`` the log weight it counts with
+    towards the best (log Z; "no difference" plus its prior), ``reach`` what a fit could
+    reach (screened log Z + miss / 2; inf where the step failed)."""
+
+    rows: list
+    starts: list
+    weight: list
+    reach: list
+
+    def add(self, row, start, weight: float, reach: float) -> None:
+        self.rows.append(row)
+        self.starts.append(start)
+        self.weight.append(weight)
+        self.reach.append(reach)
+
+
+def _null_fit(inputs: FitInputs, cols: Columns, null: Explanation, shared_start: float
+              ) -> Evidence:
+    """Step 1 of the module doc: "no difference" with the flight's rotor delay, fitted to
+    convergence from ``shared_start``; sets ``cols.delay_s`` to its delay, or to
+    ``shared_start`` where the delay lies beyond :data:`DELAY_GRID_SDS` prior spreads (there
+    it absorbs a gap rather than timing the log)."""
+    prob = inputs.problem(null)
+    fitted = refined(prob, cols, prob.start(shared_start))
+    cols.delay_s = fitted.values["delay.rotor"]
+    if abs(cols.delay_s - prob.mean[-1]) > DELAY_GRID_SDS * prob.sd[-1]:
+        cols.delay_s = shared_start
+    return fitted
+
+
+def _screen_all(inputs: FitInputs, cols: Columns, explanations: list, null, fitted,
+                starts_s: tuple) -> Screening:
+    """Step 2 of the module doc: each explanation's screened Evidence, step and reach."""
     shared_start, start_delay_s = starts_s
-    any_problem = problem(states, reference, explanations[0], jac, s_all, memo)
-    cols = _Columns(states, reference, jac, names_all, memo, any_problem.shifted, residual,
-                    next((e for e in explanations if e.name == "no_difference"), None))
     effects = {e.name for e in explanations} - {"no_difference"}
     prior_null = float(np.log(max(1, len(effects))))
-    rows, starts, weight, reach = [], [], [], []
-    # the flight's own rotor delay under the reference model first (every explanation
-    # carries it with the same prior): the others start there
-    null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
-    fitted = None
-    if null is not None:
-        prob = problem(states, reference, null, jac, s_all, memo)
-        fitted = refined(prob, cols, prob.start(shared_start), names_all, s_all)
-        cols.delay_s = fitted.values["delay.rotor"]
-        if abs(cols.delay_s - prob.mean[-1]) > DELAY_GRID_SDS * prob.sd[-1]:
-            # beyond its prior's reach the delay is absorbing a gap, not timing the log:
-            # the others start at the grid's best within the reach (l2f: a 0.17 kg
-            # payload's Fz deficit took the reference model's delay to -29.5 ms, 9.8
-            # spreads; the payload, started there, stopped at -5.2 ms, 15 log units short
-            # of its fit from the reach, and lost to a propeller change at 0.98)
-            cols.delay_s = shared_start
+    out = Screening([], [], [], [])
     for expl in explanations:
-        prob = problem(states, reference, expl, jac, s_all, memo)
+        prob = inputs.problem(expl)
         delay = start_delay_s if expl.name == "signal_delay" else shared_start
         if expl is null:
-            rows.append(fitted)
-            starts.append(None)
-            weight.append(fitted.log_z + prior_null)
-            reach.append(weight[-1])
+            out.add(fitted, None, fitted.log_z + prior_null, fitted.log_z + prior_null)
             continue
         if not len(prob.mean):                        # nothing to fit: exact already
-            rows.append(fit_one(states, reference, expl, jac, s_all, names_all, delay))
-            starts.append(None)
-            weight.append(rows[-1].log_z + prior_null)
-            reach.append(weight[-1])
+            row = full_fit(inputs, expl, delay)
+            out.add(row, None, row.log_z + prior_null, row.log_z + prior_null)
             continue
         start = prob.start(delay)
         if expl.shift and expl is not null and expl.name != "signal_delay":
             start[-1] = np.clip((cols.delay_s - prob.mean[-1]) / prob.sd[-1],
                                 prob.z_lo[-1], prob.z_hi[-1])
         try:
-            ev, z1, miss = linearised(prob, cols, start, names_all, s_all)
+            ev, z1, miss = linearised(prob, cols, start)
         except (ModelError, np.linalg.LinAlgError):
             ev, z1, miss = None, None, np.inf
-        rows.append(ev)
-        starts.append(z1)
-        weight.append(-np.inf if ev is None else ev.log_z)
         # what a fit could reach: the screened evidence plus half the linear model's miss
-        reach.append(np.inf if ev is None or not np.isfinite(miss)
-                     else ev.log_z + 0.5 * miss)
+        out.add(ev, z1, -np.inf if ev is None else ev.log_z,
+                np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss)
+    return out
+
+
+def _matters(inputs: FitInputs, cols: Columns, explanations: list, k: int,
+             screening: Screening, cut: tuple[float, float | None]) -> bool:
+    """Step 3 of the module doc: whether explanation ``k`` is fitted to convergence, with
+    ``cut`` = (the best log weight so far, the best before any coupled fit)."""
+    best, before = cut
+    expl, row, start = explanations[k], screening.rows[k], screening.starts[k]
+    if row is None or screening.reach[k] >= best - SCREEN_CUT:
+        return True
+    if expl.coupled and _kin_matters(expl, explanations, screening, before):
+        return True
+    return bool(expl.coupled and expl.kin and start is not None and _second_reach(
+        inputs.problem(expl), cols, start) >= best - SCREEN_CUT)
+
+
+def _fit_to_convergence(inputs: FitInputs, cols: Columns, expl: Explanation,
+                        start: np.ndarray | None, delay: float) -> Evidence:
+    """:func:`refined` (coupled: :func:`_refined_coupled`) from the step ``start``; the full
+    fit (:func:`~quadsim.gap.problem.full_fit`) where there is no step or the refined fit
+    meets a non-physical vehicle."""
+    row = None
+    if start is not None:
+        prob = inputs.problem(expl)
+        try:
+            row = _refined_coupled(prob, cols, start, delay) if expl.coupled else \
+                refined(prob, cols, start)
+        except (ModelError, np.linalg.LinAlgError):   # a non-physical vehicle met
+            row = None
+    if row is None:                                   # the full fit walls it off
+        row = full_fit(inputs, expl, delay)
+    return row
+
+
+def screened(inputs: FitInputs, explanations: list[Explanation],
+             starts_s: tuple[float, float] = (0.0, 0.0)) -> list[Evidence]:
+    """Every explanation's Evidence on the flight of ``inputs``, in the order of
+    ``explanations``: screened, and fitted to convergence where it can matter (module doc,
+    steps 1-3; ``screened=True`` marks the rows left at their screened evidence).
+    ``starts_s`` (s): where the shared rotor delay and the "signal_delay" reading start
+    (:func:`delay_starts`)."""
+    if inputs.memo is None:
+        inputs = dataclasses.replace(inputs, memo={})
+    start_delay_s = starts_s[1]
+    cols = Columns(inputs, next((e for e in explanations if e.name == "no_difference"), None))
+    # the flight's own rotor delay under the reference model first (every explanation
+    # carries it with the same prior): the others start there
+    null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
+    fitted = None if null is None else _null_fit(inputs, cols, null, starts_s[0])
+    screening = _screen_all(inputs, cols, explanations, null, fitted, starts_s)
+    rows = screening.rows
     # most promising first: each refined fit can only raise the best weight, and with it
     # the cut for those after it. A coupled explanation's step cannot see what it reaches
     # (a parameter acting only through another's value has a zero column at the start): it
     # is always fitted, last, so that the cut of the others is the one their own order gives
-    best = max(weight)
+    best = max(screening.weight)
     order = sorted(range(len(explanations)),
-                   key=lambda k: (explanations[k].coupled, -reach[k]))
+                   key=lambda k: (explanations[k].coupled, -screening.reach[k]))
     before = None        # the best weight before any coupled fit: their kin are judged by it
     for k in order:
         expl = explanations[k]
-        if expl is null or (rows[k] is not None and starts[k] is None):
+        if expl is null or (rows[k] is not None and screening.starts[k] is None):
             continue
         if expl.coupled and before is None:
             before = best
-        if rows[k] is None or reach[k] >= best - SCREEN_CUT or (
-                expl.coupled and _kin_matters(expl, explanations, rows, reach, before)) or (
-                expl.coupled and expl.kin and starts[k] is not None and _second_reach(
-                    problem(states, reference, expl, jac, s_all, memo), cols, starts[k],
-                    names_all, s_all) >= best - SCREEN_CUT):
+        if _matters(inputs, cols, explanations, k, screening, (best, before)):
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
-            rows[k] = None
-            if starts[k] is not None:
-                prob = problem(states, reference, expl, jac, s_all, memo)
-                try:
-                    rows[k] = _refined_coupled(prob, cols, starts[k], delay, names_all,
-                                               s_all) if expl.coupled else \
-                        refined(prob, cols, starts[k], names_all, s_all)
-                except (ModelError, np.linalg.LinAlgError):   # a non-physical vehicle met
-                    rows[k] = None
-            if rows[k] is None:                               # the full fit walls it off
-                rows[k] = fit_one(states, reference, expl, jac, s_all, names_all, delay)
+            rows[k] = _fit_to_convergence(inputs, cols, expl, screening.starts[k], delay)
             best = max(best, rows[k].log_z)
         else:
             rows[k].screened = True
     return rows
+
+
+# alias until integration
+_Columns = Columns
+_columns = jacobian_columns
+_step = linear_step
+_centred_is_base = centred_is_base
