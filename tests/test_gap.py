@@ -14,7 +14,7 @@ from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
 from quadsim.gap.report import to_json
 from quadsim.gap.schema import validate
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
@@ -298,7 +298,7 @@ def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
     prepared flight is at its interior level (> 0.5 s from the ends)."""
     import sys
 
-    from quadsim.bench.pipeline import realistic_log
+    from benchmarks.pipeline import realistic_log
     from quadsim.gap import diagnose as _  # noqa: F401  (module below)
 
     module = sys.modules["quadsim.gap.diagnose"]
@@ -503,7 +503,7 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
         noise_scale,
         residuals,
     )
-    from quadsim.gap.synthetic import SensorNoise
+    from benchmarks.synthetic import SensorNoise
 
     params = load_params("physical")
     log = synthetic_flight(params, [], duration=8.0, seed=0, noise=SensorNoise(gyro=0.1))

@@ -17,7 +17,7 @@ README = PACKAGE.parent / "README.md"
 
 #: Pipeline stages in data-flow order; a stage may import itself and the stages before it.
 STAGES = ("core", "cad", "vehicle", "identify", "effects", "sim", "logs", "viewer", "gap",
-          "sweep", "bench")
+          "sweep")
 #: The commands (``python -m quadsim.X``); a command may import any stage, no stage a command.
 COMMANDS = ("build_mjcf", "inertia_report", "identify", "openloop", "fly", "view", "convert",
             "gap", "sweep")
@@ -125,6 +125,36 @@ def test_imports_flow_down_the_pipeline():
             elif rank[there] > rank[here]:
                 wrong.append(f"{module} ({here}) imports {target} ({there}, a later stage)")
     assert not wrong, "; ".join(sorted(wrong))
+
+
+#: top-level packages of the repository that are not in the wheel
+HARNESS = ("benchmarks", "tests")
+
+
+def _harness_imports(source: str) -> list[str]:
+    """The modules of ``HARNESS`` that Python source ``source`` imports (any level)."""
+    names: list[str] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and not node.level:
+            names.append(node.module or "")
+        elif isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+    return sorted(n for n in names if n.split(".")[0] in HARNESS)
+
+
+def test_harness_import_finder_finds_one():
+    assert _harness_imports("def f():\n    from benchmarks.synthetic import x\n"
+                            "import tests.conftest\nfrom . import benchmarks\n") == \
+        ["benchmarks.synthetic", "tests.conftest"]
+
+
+def test_package_never_imports_the_benchmarks_or_the_tests():
+    """benchmarks/ and tests/ sit beside the package in the repository, not in the wheel:
+    no quadsim module imports them (function-level imports included)."""
+    wrong = [f"{path.relative_to(PACKAGE.parent)} imports {name}"
+             for path in sorted(PACKAGE.rglob("*.py"))
+             for name in _harness_imports(path.read_text(encoding="utf-8"))]
+    assert not wrong, "; ".join(wrong)
 
 
 def test_fast_path_depends_on_the_engines_not_back():

@@ -14,7 +14,7 @@ from quadsim.gap.residual import (
     residual_wrench,
     savgol_response_cutoff,
 )
-from quadsim.gap.synthetic import SensorNoise, synthetic_flight
+from benchmarks.synthetic import SensorNoise, synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 

@@ -42,7 +42,7 @@ def test_pyulog_hang_reproduced_and_refused_within_its_budget(tmp_path, capsys, 
     import multiprocessing
 
     from quadsim import logs
-    from quadsim.logs.corrupt import hanging_ulog_bytes
+    from benchmarks.corrupt import hanging_ulog_bytes
 
     path = tmp_path / "hang.ulg"
     path.write_bytes(hanging_ulog_bytes())
@@ -115,7 +115,7 @@ def test_numpy_warnings_become_one_collapsed_line(capsys):
 def test_fuzz_sample_no_garbage_uncaught_or_hang(tmp_path, fmt, count):
     """300 deterministic corruptions (a slice of scripts/fuzz_logs.py), the importer in one
     bounded worker per format: every case a clean refusal or a plausible log."""
-    from quadsim.logs.corrupt import judge_batch
+    from benchmarks.corrupt import judge_batch
 
     results, _ = run_bounded(judge_batch, fmt, list(range(count)), str(tmp_path),
                              label=fmt, what="fuzz batch", budget=Budget(time_s=120))
@@ -126,7 +126,7 @@ def test_fuzz_sample_no_garbage_uncaught_or_hang(tmp_path, fmt, count):
 
 
 def test_fuzz_cases_through_the_worker(tmp_path):
-    from quadsim.logs.corrupt import judge, make_case
+    from benchmarks.corrupt import judge, make_case
 
     for fmt in ("ulog", "dataflash"):
         for index in range(4):

@@ -312,7 +312,7 @@ def test_no_false_refusal_on_flights_with_each_library_effect():
     from test_gap import CASES
 
     from quadsim.effects import make_effect
-    from quadsim.gap import synthetic_flight
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.logs.checks import check_log, rotor_order_evidence
 
     for name, (hidden, *_) in sorted(CASES.items()):

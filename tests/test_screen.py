@@ -22,7 +22,7 @@ from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
 from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
 from quadsim.gap.judge import judge
 from quadsim.gap.screen import _Columns, _columns
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
