@@ -17,7 +17,7 @@ Inputs are held per control period (zero-order hold) and clipped to each paramet
 Accuracy: RK4's local error is O(dt^5); at the 10 ms control period of the nano-drone
 benchmark with one step per period the result differs from ``simulate(engine="analytic")`` by
 less than 1e-6 m and 1e-5 rad/s after 0.5 s on a tumbling 37 g Crazyflie with rotor drag and
-blade flapping (``tests/test_rollout.py``; 2 substeps: 1.3e-8 m).
+blade flapping (``benchmarks/tests/test_rollout.py``; 2 substeps: 1.3e-8 m).
 
 Example::
 
