@@ -1,8 +1,11 @@
-"""Independent benchmark of the gap diagnosis: flights this project's diagnosis did not make.
+"""The benchmark harness beside the package (repository only, not in the wheel; quadsim never
+imports it; benchmarks/README.md): the blind and independent benchmarks of the gap diagnosis,
+the nano-drone benchmark, and the generators the tests share (:mod:`.synthetic` flights,
+:mod:`.corrupt` logs).
 
 The self-generated blind benchmark (``benchmarks/gap_benchmark.py``) flies each hidden effect
 through the same hooks the diagnosis fits, on inverse-dynamics logs with perfect sensor
-timing. This subpackage provides sources that break that circle:
+timing. This package provides sources that break that circle:
 
 * :mod:`.rotorpy_source` -- RotorPy (``pip install 'quadsim[independent]'``): its own SE(3)
   controller, RK45 integrator, motor model, aerodynamics, IMU and motion-capture models;

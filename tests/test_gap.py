@@ -293,7 +293,7 @@ def test_loader_warnings_collapse_per_kind():
 
 def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
     """A log whose accelerometer is a filtered finite difference of delayed motion capture
-    (quadsim.bench.pipeline) carries filter transients at its ends; the diagnosis drops the
+    (benchmarks.pipeline) carries filter transients at its ends; the diagnosis drops the
     first and last EDGE_S = 0.2 s, after which the nominal force residual of the whole
     prepared flight is at its interior level (> 0.5 s from the ends)."""
     import sys

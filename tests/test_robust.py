@@ -1,7 +1,7 @@
 """Importers under corrupted logs and the cases a new user hit: no hang, no traceback, no
 silent garbage, no lost input. Each refusal: exit 2, one line naming the file and the field,
 nothing written, the input unchanged. Logs are written here by each format's writer
-(quadsim.logs.samples); the corruptions are the fuzzer's (quadsim.logs.corrupt)."""
+(quadsim.logs.samples); the corruptions are the fuzzer's (benchmarks.corrupt)."""
 
 from __future__ import annotations
 
@@ -113,7 +113,7 @@ def test_numpy_warnings_become_one_collapsed_line(capsys):
 
 @pytest.mark.parametrize("fmt,count", [("ulog", 110), ("usd", 150), ("dataflash", 40)])
 def test_fuzz_sample_no_garbage_uncaught_or_hang(tmp_path, fmt, count):
-    """300 deterministic corruptions (a slice of scripts/fuzz_logs.py), the importer in one
+    """300 deterministic corruptions (a slice of benchmarks/fuzz_logs.py), the importer in one
     bounded worker per format: every case a clean refusal or a plausible log."""
     from benchmarks.corrupt import judge_batch
 

@@ -303,7 +303,7 @@ def test_gap_cli_refuses_with_one_line(tmp_path, capsys, gentle, case):
 
 
 def test_no_false_refusal_on_flights_with_each_library_effect():
-    """Synthetic flights (quadsim.gap.synthetic) with each library effect of tests/test_gap
+    """Synthetic flights (benchmarks.synthetic) with each library effect of tests/test_gap
     (thrust_mismatch, com_offset, canted_rotor, ...): every check passes, and no rival rotor
     order fits better than the right one (Delta chi^2 < 0; measured -13 at most, com_offset)."""
     import sys
