@@ -180,3 +180,32 @@ def test_every_readme_command_has_help(module):
                          text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stderr[-500:]
     assert "usage:" in run.stdout and len(run.stdout) > 200
+
+
+def test_names_that_left_the_package_are_refused_with_their_new_path():
+    with pytest.raises(ImportError, match=r"quadsim\.gap\.synthetic_flight moved to "
+                                          r"benchmarks\.synthetic .*from benchmarks\.synthetic "
+                                          r"import synthetic_flight"):
+        from quadsim.gap import synthetic_flight  # noqa: F401
+    with pytest.raises(ImportError, match=r"from benchmarks\.synthetic import SensorNoise"):
+        import quadsim.gap
+
+        quadsim.gap.SensorNoise  # noqa: B018
+    with pytest.raises(AttributeError):
+        quadsim.gap.no_such_name  # noqa: B018
+    # the modules that moved to benchmarks/ are gone from the package (an import of them is
+    # ModuleNotFoundError; CHANGELOG.md names each new path)
+    for gone in ("bench", "gap/synthetic.py", "logs/corrupt.py", "sim/rollout.py"):
+        assert not (PACKAGE / gone).exists(), gone
+
+
+@pytest.mark.parametrize("name", ["gap_benchmark", "nanodrone_benchmark", "fuzz_logs"])
+def test_a_moved_script_runs_its_new_module_after_one_warning(name):
+    done = subprocess.run([sys.executable, str(PACKAGE.parent / "scripts" / f"{name}.py"),
+                           "--help"], capture_output=True, text=True, check=False,
+                          cwd=PACKAGE.parent)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.splitlines() == [
+        (f"warning: scripts/{name}.py moved to benchmarks/{name}.py: run python -m "
+         f"benchmarks.{name} from the repository root")], done.stderr
+    assert done.stdout.startswith("usage: ")
