@@ -52,6 +52,7 @@ import numpy as np
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import EFFECTS
 from quadsim.vehicle.params import load_params
+
 from .draws import draw, draw_rotorpy, library_equivalent
 from .observe import OBSERVABLE, Observed, TrueModel, per_flight_observability, true_model
 from .score import joined_kind, read_verdict, score_case

@@ -60,6 +60,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadsim.effects import make_effect
+
 from . import sim_cases
 from .crazyflow_source import (
     DRONE,

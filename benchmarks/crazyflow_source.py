@@ -56,6 +56,7 @@ import numpy as np
 from quadsim.core.errors import ModelError
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+
 from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
 
 __all__ = ["DRONE", "EFFECTS", "RATE_HZ", "RPM", "FlightSpec", "Sensors", "crazyflow_available",

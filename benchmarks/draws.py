@@ -20,6 +20,7 @@ from quadsim.core.errors import ModelError
 from quadsim.effects import make_effect
 from quadsim.effects.battery_sag import nominal_voltage
 from quadsim.vehicle.params import VehicleParams, hover_speed
+
 from .outside import BladeFlapping
 
 __all__ = ["draw", "draw_rotorpy", "library_equivalent"]

@@ -116,12 +116,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmarks.cases import oracle_reduction  # noqa: E402
 from benchmarks.draws import draw  # noqa: E402
 from benchmarks.score import joined_kind  # noqa: E402
+from benchmarks.synthetic import synthetic_flight  # noqa: E402
 from quadsim.core.errors import QuadsimError, QuadsimWarning  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.effects import make_effect  # noqa: E402
 from quadsim.gap import diagnose  # noqa: E402
 from quadsim.gap.diagnose import MIN_GAIN  # noqa: E402
-from benchmarks.synthetic import synthetic_flight  # noqa: E402
 from quadsim.vehicle.params import load_params  # noqa: E402
 
 VEHICLES = ("physical", "crazyflie21")

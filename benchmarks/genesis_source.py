@@ -69,6 +69,7 @@ import numpy as np
 from quadsim.core.errors import ModelError
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+
 from .flightjobs import disturbances, mass_properties, rotor_scales
 from .geometric import DCMotor
 from .qcsim_source import EFFECTS, FlightSpec

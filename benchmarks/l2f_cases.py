@@ -73,9 +73,21 @@ import numpy as np
 from quadsim.effects import make_effect
 from quadsim.effects.thrust_factor import ThrustFactor
 from quadsim.gap.priors import momentum_rate_damping
+
 from . import sim_cases
-from .l2f_source import (ARPL, FLIGHTMARE, FS, MODEL, MRS, SOFT, FlightSpec, hover_command,
-                         l2f_flights, stand_b, vehicle_params)
+from .l2f_source import (
+    ARPL,
+    FLIGHTMARE,
+    FS,
+    MODEL,
+    MRS,
+    SOFT,
+    FlightSpec,
+    hover_command,
+    l2f_flights,
+    stand_b,
+    vehicle_params,
+)
 from .observe import OBSERVABLE
 from .score import joined_kind
 

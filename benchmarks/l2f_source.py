@@ -67,6 +67,7 @@ from quadsim.core.errors import ModelError
 from quadsim.core.frames import quat_to_rotmat
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 

@@ -68,6 +68,7 @@ import numpy as np
 
 from quadsim.effects import make_effect
 from quadsim.gap.priors import momentum_rate_damping
+
 from . import sim_cases
 from .multirotor_source import (
     MODEL,

@@ -60,6 +60,7 @@ from quadsim.core.errors import ModelError
 from quadsim.core.frames import euler_to_quat, quat_to_rotmat
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
@@ -231,9 +232,15 @@ def _vehicle(job: dict):
 def _controller(vehicle):
     """multirotor's cascaded PID (position -> velocity -> attitude -> rate; altitude ->
     climb rate) with gains for this vehicle (its defaults are P-only with unit gains)."""
-    from multirotor.controller import (AltController, AltRateController, AttController,
-                                       Controller, PosController, RateController,
-                                       VelController)
+    from multirotor.controller import (
+        AltController,
+        AltRateController,
+        AttController,
+        Controller,
+        PosController,
+        RateController,
+        VelController,
+    )
 
     return Controller(
         ctrl_p=PosController(k_p=POSITION_KP, k_i=0.0, k_d=0.0, max_err_i=1.0, vehicle=vehicle,

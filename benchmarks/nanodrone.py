@@ -53,7 +53,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from quadsim.core.frames import quat_conjugate, quat_derivative, quat_multiply, quat_normalize, rotate
+from quadsim.core.frames import (
+    quat_conjugate,
+    quat_derivative,
+    quat_multiply,
+    quat_normalize,
+    rotate,
+)
 from quadsim.logs.delays import estimate_delays
 from quadsim.logs.flightlog import FlightLog
 

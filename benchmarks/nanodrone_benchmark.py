@@ -51,13 +51,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks import nanodrone as bench
+from benchmarks.rollout import rollout
 from quadsim.core.args import check_output
 from quadsim.core.errors import InputError, QuadsimWarning, run_cli
 from quadsim.core.files import atomic_write_bytes, atomic_write_text
 from quadsim.effects.base import EffectSet
 from quadsim.effects.effectfile import load_effect_file
 from quadsim.logs.flightlog import load_log
-from benchmarks.rollout import rollout
 from quadsim.vehicle.params import load_params
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -65,6 +65,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadsim.effects import make_effect
+
 from . import sim_cases
 from .observe import OBSERVABLE
 from .pyflyt_source import FlightSpec, motor_response, pyflyt_flights, pyflyt_model, vehicle_params

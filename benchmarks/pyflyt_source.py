@@ -66,6 +66,7 @@ from quadsim.core.errors import ModelError
 from quadsim.core.frames import quat_to_rotmat
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physical
+
 from .simlog import Sensors, SimStates, body_origin_log, jsonable, truth_json
 
 __all__ = ["CONTROL_HZ", "EFFECTS", "PHYSICS_HZ", "RPM", "WORKER_ENV", "FlightSpec", "Sensors",

@@ -66,6 +66,7 @@ import numpy as np
 
 from quadsim.effects import make_effect
 from quadsim.gap.priors import momentum_rate_damping
+
 from . import sim_cases
 from .observe import OBSERVABLE
 from .qcsim_source import (

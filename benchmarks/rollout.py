@@ -39,8 +39,14 @@ import numpy as np
 from quadsim.core.errors import InputError, SimulationError
 from quadsim.core.frames import quat_normalize
 from quadsim.effects.base import EffectSet
+from quadsim.sim.analytic import (
+    STATE_BOUND,
+    BatchEffects,
+    body_arrays,
+    pack_state,
+    state_derivative,
+)
 from quadsim.vehicle.params import VehicleParams
-from quadsim.sim.analytic import STATE_BOUND, BatchEffects, body_arrays, pack_state, state_derivative
 
 __all__ = ["rollout"]
 

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from quadsim.effects import make_effect
+
 from .observe import TrueModel, per_flight_observability
 
 __all__ = ["MOTOR_TABLE", "PAYLOAD_AS_MASS", "CaseSource", "DrawScale", "code_hash",
@@ -265,6 +266,7 @@ def generate(source: CaseSource, cache, progress=print) -> Path:
     """Fly, write and check every flight of ``source`` (module docstring); the folder."""
     from quadsim.core.files import atomic_write_text
     from quadsim.logs.flightlog import load_log, write_log
+
     from .simlog import truth_json
 
     out = flight_dir(source, cache)
@@ -321,6 +323,7 @@ def judge(source: CaseSource, cache) -> list[dict]:
     (:mod:`.score`). Run it once, after the verdict rules are frozen."""
     from quadsim.core.errors import QuadsimWarning
     from quadsim.gap import diagnose_per_flight
+
     from .score import read_verdict, score_case
 
     refs, rows = load_flights(source, cache)

@@ -31,11 +31,11 @@ import numpy as np
 
 from quadsim.core.frames import quat_multiply, quat_normalize, rotate_inverse
 from quadsim.effects.base import Effect, EffectContext, EffectSet
+from quadsim.gap.residual import rotor_wrench
+from quadsim.gap.rotor_channel import rate_owner
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
-from quadsim.gap.rotor_channel import rate_owner
-from quadsim.gap.residual import rotor_wrench
 
 __all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
 

@@ -42,8 +42,8 @@ def _skeleton(folder: Path) -> Path:
 
 
 def _generate(folder: Path, count: int, duration: float, rate: float) -> list[Path]:
-    from quadsim.core.errors import QuadsimWarning
     from benchmarks.synthetic import synthetic_flight
+    from quadsim.core.errors import QuadsimWarning
     from quadsim.logs.flightlog import write_log
     from quadsim.vehicle.params import load_params
 

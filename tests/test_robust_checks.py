@@ -311,8 +311,8 @@ def test_no_false_refusal_on_flights_with_each_library_effect():
     sys.path.insert(0, str(Path(__file__).parent))
     from test_gap import CASES
 
-    from quadsim.effects import make_effect
     from benchmarks.synthetic import synthetic_flight
+    from quadsim.effects import make_effect
     from quadsim.logs.checks import check_log, rotor_order_evidence
 
     for name, (hidden, *_) in sorted(CASES.items()):

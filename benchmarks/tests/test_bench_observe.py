@@ -11,11 +11,10 @@ import pytest
 
 from benchmarks import cases
 from benchmarks.observe import OBSERVABLE, TrueModel, per_flight_observability, true_model
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
-
 
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker

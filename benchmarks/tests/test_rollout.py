@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from benchmarks import nanodrone as bench
+from benchmarks.rollout import rollout
 from quadsim.core.errors import InputError
 from quadsim.effects import effect_set_from_specs, make_effect
 from quadsim.effects.base import EffectContext
 from quadsim.effects.blade_flapping import flapping_moment
 from quadsim.sim.engines import simulate
-from benchmarks.rollout import rollout
 from quadsim.vehicle.params import hover_speed, load_params
 
 PARAMS = load_params("crazyflie21")
