@@ -57,11 +57,30 @@ from .draws import draw, draw_rotorpy, library_equivalent
 from .observe import OBSERVABLE, Observed, TrueModel, per_flight_observability, true_model
 from .score import joined_kind, read_verdict, score_case
 
-__all__ = ["DURATION", "FLIGHTS", "JOINED_LIBRARY", "scored_kind", "REFERENCES",
-           "REFERENCE_SPEEDS", "case_flights", "case_key",
-           "case_list", "first_flight", "heldout_truth", "is_cached", "oracle_reduction",
-           "per_flight_observed", "per_flight_truth", "reference_flight", "reference_flights",
-           "reference_key", "reference_speeds", "run_case", "run_per_flight", "shared_physics"]
+__all__ = [
+    "DURATION",
+    "FLIGHTS",
+    "JOINED_LIBRARY",
+    "REFERENCES",
+    "REFERENCE_SPEEDS",
+    "case_flights",
+    "case_key",
+    "case_list",
+    "first_flight",
+    "heldout_truth",
+    "is_cached",
+    "oracle_reduction",
+    "per_flight_observed",
+    "per_flight_truth",
+    "reference_flight",
+    "reference_flights",
+    "reference_key",
+    "reference_speeds",
+    "run_case",
+    "run_per_flight",
+    "scored_kind",
+    "shared_physics",
+]
 
 VEHICLES = ("physical", "crazyflie21")
 FLIGHTS = 3

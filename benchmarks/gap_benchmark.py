@@ -109,20 +109,20 @@ if "--per-flight-speed" in sys.argv:
     os.environ.update({k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                                         "MKL_NUM_THREADS")})
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.cases import oracle_reduction  # noqa: E402
-from benchmarks.draws import draw  # noqa: E402
-from benchmarks.score import joined_kind  # noqa: E402
-from benchmarks.synthetic import synthetic_flight  # noqa: E402
-from quadsim.core.errors import QuadsimError, QuadsimWarning  # noqa: E402
-from quadsim.core.files import atomic_write_text  # noqa: E402
-from quadsim.effects import make_effect  # noqa: E402
-from quadsim.gap import diagnose  # noqa: E402
-from quadsim.gap.diagnose import MIN_GAIN  # noqa: E402
-from quadsim.vehicle.params import load_params  # noqa: E402
+from benchmarks.cases import oracle_reduction
+from benchmarks.draws import draw
+from benchmarks.score import joined_kind
+from benchmarks.synthetic import synthetic_flight
+from quadsim.core.errors import QuadsimError, QuadsimWarning
+from quadsim.core.files import atomic_write_text
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.diagnose import MIN_GAIN
+from quadsim.vehicle.params import load_params
 
 VEHICLES = ("physical", "crazyflie21")
 
@@ -215,23 +215,23 @@ def summarise(rows: list[dict]) -> str:
     errors = [r["param_rel_error"] for r in observable if "param_rel_error" in r]
     reductions = [r["reduction"] for r in observable]
     capture = [r["reduction"] / r["oracle_reduction"] for r in observable]
-    lines = [f"cases: {len(rows)} ({len(lib)} in-library, {len(observable)} observable; "
+    lines = [(f"cases: {len(rows)} ({len(lib)} in-library, {len(observable)} observable; "
              f"{sum(r['kind'] == 'none' for r in rows)} no-effect; "
-             f"{sum(r['kind'] == 'outside' for r in rows)} out-of-library)",
-             f"observable in-library: a reading of the verdict names it {np.mean(named):.1%} "
+             f"{sum(r['kind'] == 'outside' for r in rows)} out-of-library)"),
+             (f"observable in-library: a reading of the verdict names it {np.mean(named):.1%} "
              f"({sum(named)}/{len(named)}); the lead reading {np.mean(top1):.1%} "
              f"({sum(top1)}/{len(top1)}); named or listed as confusable: "
-             f"{np.mean(named_or_tied):.1%}",
-             f"out-of-library -> no confident name: "
+             f"{np.mean(named_or_tied):.1%}"),
+             (f"out-of-library -> no confident name: "
              f"{sum(r['verdict'] in QUIET for r in outside)}/{len(outside)}; no effect -> "
              f"no_significant_gap: "
-             f"{sum(r['verdict'] == 'no_significant_gap' for r in none)}/{len(none)}",
-             f"main-parameter relative error: median {np.median(errors):.1%}, "
-             f"90th percentile {np.percentile(errors, 90):.1%} ({len(errors)} cases)",
-             f"held-out gap reduction: median {np.median(reductions):.1%} "
-             f"(median {np.median(capture):.1%} of what the true effect itself achieves)",
-             f"diagnosis time per case (3 x 6 s flights): median "
-             f"{np.median([r['seconds'] for r in rows]):.1f} s"]
+             f"{sum(r['verdict'] == 'no_significant_gap' for r in none)}/{len(none)}"),
+             (f"main-parameter relative error: median {np.median(errors):.1%}, "
+             f"90th percentile {np.percentile(errors, 90):.1%} ({len(errors)} cases)"),
+             (f"held-out gap reduction: median {np.median(reductions):.1%} "
+             f"(median {np.median(capture):.1%} of what the true effect itself achieves)"),
+             (f"diagnosis time per case (3 x 6 s flights): median "
+             f"{np.median([r['seconds'] for r in rows]):.1f} s")]
     lines.append("\n| vehicle | hidden | verdict | confusable with | reduction | true-effect reduction "
                  "| main param. est. (rel. err.) |")
     lines.append("|---|---|---|---|---|---|---|")
@@ -315,9 +315,9 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
                          and vehicle in (r["vehicle"], "both")]
                 if group:
                     groups.append((f"{source} | {mode.replace('_', '-')} | {vehicle}", group))
-    lines = ["| source | mode | vehicle | in-library: a reading of the verdict names it | "
+    lines = [("| source | mode | vehicle | in-library: a reading of the verdict names it | "
              "the lead reading names it | named or listed | readings per named verdict | "
-             "no effect -> no_significant_gap | out-of-library: confident wrong name |",
+             "no effect -> no_significant_gap | out-of-library: confident wrong name |"),
              "|---|---|---|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(row) + " |" for row in summary_rows(groups, MIN_GAIN)]
     hidden = [r for r in rows if r["kind"] == "library" and r["oracle_reduction"] < MIN_GAIN]
@@ -397,9 +397,9 @@ def summarise_per_flight(rows: list[dict]) -> str:
                      if r["source"] == source and vehicle in (r["vehicle"], "both")]
             if group:
                 groups.append((f"{source} | {vehicle}", group))
-    lines = ["| source | vehicle | in-library: a reading names it | the lead reading names it | "
+    lines = [("| source | vehicle | in-library: a reading names it | the lead reading names it | "
              "named or listed | readings per named verdict | no effect -> "
-             "no_significant_gap | out-of-library: confident wrong name |",
+             "no_significant_gap | out-of-library: confident wrong name |"),
              "|---|---|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(row) + " |" for row in summary_rows(groups, OBSERVABLE)]
     hidden = [r for r in rows if r["kind"] == "library" and r["oracle_reduction"] < OBSERVABLE]
@@ -408,8 +408,8 @@ def summarise_per_flight(rows: list[dict]) -> str:
                      f"{OBSERVABLE:.0%}), not scored: "
                      + ", ".join(f"{r['source']}/{r['vehicle']}/{r['truth']} "
                                  f"({r['oracle_reduction']:.2f})" for r in hidden))
-    lines += ["\n| source | vehicle | hidden | speed | per-flight verdict | probability | "
-              "true-effect reduction | gap / references' | score | why (misses) |",
+    lines += [("\n| source | vehicle | hidden | speed | per-flight verdict | probability | "
+              "true-effect reduction | gap / references' | score | why (misses) |"),
               "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         p = r["per_flight"]
@@ -457,8 +457,8 @@ def per_flight_speed(data: Path, compare: bool = False) -> str:
     judged = time.process_time() - start
     minutes = sum(float(log.t[-1] - log.t[0]) for log in mixed) / 60.0
     lines = [f"reference calibration ({len(nominal)} flights): {calibration:.1f} s CPU",
-             f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
-             f"= {judged / minutes:.1f} s per flight-minute (calibration not included)"]
+             (f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
+             f"= {judged / minutes:.1f} s per flight-minute (calibration not included)")]
     if compare:
         start = time.process_time()
         full = [judge_one(log, ref, full=True) for log in mixed]
@@ -513,9 +513,9 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
     lines = []
     if not observability_only:
         group = [{**r, "score": r["per_flight"]["score"]} for r in rows]
-        lines += ["| source | mode | in-library: a reading of the verdict names it | the lead "
+        lines += [("| source | mode | in-library: a reading of the verdict names it | the lead "
                   "reading names it | named or listed | readings per named verdict | no effect "
-                  "-> no_significant_gap | out-of-library: confident wrong name |",
+                  "-> no_significant_gap | out-of-library: confident wrong name |"),
                   "|---|---|---|---|---|---|---|---|"]
         lines += ["| " + " | ".join(row) + " |"
                   for row in summary_rows([(f"{label} | per-flight", group)], threshold)]
@@ -553,8 +553,8 @@ SIM_SOURCES = {
                "pip install 'quadsim[pyflyt]' then pip install --no-deps PyFlyt==0.29.0"),
     "multirotor": ("benchmarks.multirotor_cases", "benchmarks.multirotor_source",
                    "multirotor_available",
-                   "pip install 'quadsim[multirotor]' then pip install --no-deps "
-                   "multirotor==0.5.0"),
+                   ("pip install 'quadsim[multirotor]' then pip install --no-deps "
+                   "multirotor==0.5.0")),
     "l2f": ("benchmarks.l2f_cases", "benchmarks.l2f_source", "l2f_available",
             L2F_HINT),
     "l2f-fs": ("benchmarks.l2f_fs_cases", "benchmarks.l2f_source", "l2f_available",
@@ -571,9 +571,9 @@ SIM_SOURCES = {
                        "qcsim_available", "pip install 'quadsim[qcsim]'"),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
-                "pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
+                ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
                 "pip install 'quadsim[genesis]'; or set QUADSIM_GENESIS_PYTHON to an "
-                "interpreter that has Genesis"),
+                "interpreter that has Genesis")),
 }
 
 

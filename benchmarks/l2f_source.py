@@ -71,11 +71,32 @@ from quadsim.vehicle.params import MotorMap, Rotor, VehicleParams, check_physica
 from .flightjobs import disturbances, fly_all, mass_properties, rotor_scales
 from .simlog import Sensors, SimStates, body_origin_log, truth_json
 
-__all__ = ["ARPL", "EFFECTS", "FLIGHTMARE", "SOFT", "FS", "LOG_HZ", "MODEL", "OMEGA_MAX", "PHYSICS_HZ", "STAND",
-           "VEHICLES",
-           "Cascade", "FlightSpec", "Sensors", "command_for", "hover_command", "l2f_available",
-           "l2f_flights", "path", "stand_b", "thrust_of", "to_flight_log", "truth_json",
-           "vehicle_params"]
+__all__ = [
+    "ARPL",
+    "EFFECTS",
+    "FLIGHTMARE",
+    "FS",
+    "LOG_HZ",
+    "MODEL",
+    "OMEGA_MAX",
+    "PHYSICS_HZ",
+    "SOFT",
+    "STAND",
+    "VEHICLES",
+    "Cascade",
+    "FlightSpec",
+    "Sensors",
+    "command_for",
+    "hover_command",
+    "l2f_available",
+    "l2f_flights",
+    "path",
+    "stand_b",
+    "thrust_of",
+    "to_flight_log",
+    "truth_json",
+    "vehicle_params",
+]
 
 PHYSICS_HZ = 1000
 CONTROL_HZ = 500

@@ -280,8 +280,8 @@ def _two_point_trapezoid(y, dx=1.0, axis=0):
 def _fly(args) -> dict:
     """One flight in multirotor: true states at :data:`PHYSICS_HZ` after the lead-in."""
     spec, job = args
-    import multirotor.controller.pid as pid
-    import multirotor.simulation as simulation
+    from multirotor import simulation
+    from multirotor.controller import pid
     from multirotor.simulation import Multirotor
     from multirotor.vehicle import SimulationParams
 

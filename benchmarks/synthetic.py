@@ -37,7 +37,7 @@ from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
-__all__ = ["SensorNoise", "synthetic_flight", "reference_path"]
+__all__ = ["SensorNoise", "reference_path", "synthetic_flight"]
 
 
 @dataclass(frozen=True)
@@ -319,8 +319,8 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     motors, commands proportional to speed. Its propeller reading's exponent is then
     ``alpha = s / (1 + s)`` (:func:`quadsim.gap.motor_map.load_exponent`)."""
     rng = np.random.default_rng(seed)
-    pad = int(round(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
-    t = (np.arange(int(round(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
+    pad = round(float(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
+    t = (np.arange(round(float(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
     position, yaw = reference_path(t, params, rng, speed)
     effect_set = EffectSet(tuple(effects))
     sag = [e for e in effects if getattr(e, "name", "") == "battery_sag"]

@@ -35,7 +35,7 @@ def _skeleton(folder: Path) -> Path:
     text = (MODELS_DIR / "crazyflie21.toml").read_text()
     text = "\n".join(line for line in text.splitlines()
                      if not re.match(r"(thrust_factor|drag_factor|max_speed) =", line))
-    text = re.sub(r"\[motor_map\].*?(?=\n\[\[rotor\]\])", "", text, flags=re.S)
+    text = re.sub(r"\[motor_map\].*?(?=\n\[\[rotor\]\])", "", text, flags=re.DOTALL)
     path = folder / "skeleton.toml"
     path.write_text(text + "\n")
     return path
