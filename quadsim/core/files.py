@@ -5,8 +5,9 @@ the destination (``os.replace`` is atomic on POSIX and Windows), so an interrupt
 leaves half a file and never destroys the previous one. Folders are not created unless the
 caller asks (``make_parents``): a typo in an output path is an error, not a new tree.
 
-TOML in and out: :func:`read_toml` (one-line errors) and :func:`render_toml` (the writer of
-parameter sets, skeletons and effect files).
+TOML in and out: :func:`read_toml` (one-line errors), :func:`check_schema` (a file of an
+earlier schema name read with one warning, any other refused in one line) and
+:func:`render_toml` (the writer of parameter sets, skeletons and effect files).
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ import math
 import os
 import tempfile
 import tomllib
+import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, QuadsimWarning, field_error
 
 
 def _current_umask() -> int:
@@ -75,6 +78,29 @@ def read_toml(path: str | os.PathLike) -> dict:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: invalid TOML: {exc}") from None
+
+
+def check_schema(data: dict, path: object, schema: str,
+                 earlier: Mapping[str, str] | None = None) -> dict:
+    """``data`` (a file's parsed top level) checked against ``schema``, its ``schema`` key
+    migrated in memory where it names an earlier schema; the file itself is never rewritten.
+
+    ``earlier`` maps each earlier schema name whose content reads unchanged under ``schema``
+    to what renamed it (a phrase for the warning). A file of an earlier name gives one
+    :class:`~quadsim.core.errors.QuadsimWarning` naming the old schema and the line to change,
+    and is returned as a copy whose ``schema`` is ``schema``; any other value raises the
+    one-line ``<file>: schema: expected ...`` :class:`InputError`."""
+    earlier = earlier or {}
+    got = data.get("schema")
+    if got == schema:
+        return data
+    if isinstance(got, str) and got in earlier:
+        warnings.warn(f"{path}: schema: {got!r} is the earlier name of {schema!r} "
+                      f"({earlier[got]}); read as {schema!r}: write schema = \"{schema}\" in "
+                      "the file to silence this warning", QuadsimWarning, stacklevel=2)
+        return {**data, "schema": schema}
+    also = "".join(f" (or the earlier {name!r})" for name in earlier)
+    raise field_error(path, "schema", f"expected {schema!r}{also}, got {got!r}")
 
 
 def _toml_value(v) -> str:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.errors import InputError, field_error
-from ..core.files import read_toml, render_toml
+from ..core.files import check_schema, read_toml, render_toml
 from . import EFFECTS, make_effect
 from .base import EffectSet
 
@@ -61,8 +61,7 @@ def _parse(data: dict, path) -> EffectModel:
     if unknown:
         raise field_error(path, unknown[0], "unknown key (valid: schema, params, description, "
                                             "effect)")
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA)     # quadsim.effects/1 has had no other name
     if not isinstance(data.get("params"), str):
         raise field_error(path, "params", "missing: name or path of the parameter set")
     effects, sources, seen = [], {}, set()

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, field_error
-from ..core.files import read_toml
+from ..core.files import check_schema, read_toml
 from ..core.files import render_toml as render_params  # the earlier import path
-from ..vehicle.params import SCHEMA, _cad_path, _quantity, _rotor_table
+from ..vehicle.params import EARLIER_SCHEMAS, SCHEMA, _cad_path, _quantity, _rotor_table
 from .logseries import Skeleton
 
 __all__ = ["load_skeleton", "quantity", "render_params"]
@@ -46,8 +46,7 @@ def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
     if not path.is_file():
         raise InputError(f"{path}: skeleton file not found")
     data = read_toml(path)
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA, EARLIER_SCHEMAS)
     body = data.get("body")
     if not isinstance(body, dict):
         raise field_error(path, "body", "missing section [body] (mass on a scale)")

@@ -40,13 +40,15 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, ModelError, field_error
-from ..core.files import read_toml
+from ..core.files import check_schema, read_toml
 from ..core.shipped import shipped_dir
 
 #: Folder holding the built-in parameter sets (``--model NAME``): the repository's
 #: ``models/``, or its copy inside an installed wheel (:mod:`quadsim.core.shipped`).
 MODELS_DIR = shipped_dir("models")
 SCHEMA = "quadsim.vehicle.params/1"
+#: earlier names of :data:`SCHEMA`, read with one warning (the content is the same; CHANGELOG)
+EARLIER_SCHEMAS = {"quadsim.params/1": "renamed with the package layout, CHANGELOG.md"}
 
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 
@@ -321,8 +323,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     path = resolve_params_path(name_or_path)
     data = read_toml(path)
     _check_keys(data, _TOP_KEYS, path, "")
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA, EARLIER_SCHEMAS)
     sources: dict[str, str] = {}
     cad_dir = None
 
