@@ -16,9 +16,8 @@ import pytest
 from quadsim.core.errors import InputError
 from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
+from quadsim.sim import engines
 from quadsim.vehicle.params import hover_speed, load_params
-
-engines = pytest.importorskip("quadsim.sim.engines")
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
