@@ -16,7 +16,6 @@ from quadsim.effects import make_effect
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
-
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker
 pytestmark = pytest.mark.xdist_group("test_bench_observe")

@@ -9,7 +9,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from _helpers import shared_effects  # noqa: E402
 
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
@@ -20,6 +19,8 @@ from quadsim.gap.fitting import Candidate
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
+
+from _helpers import shared_effects  # noqa: E402
 
 
 def _states(speed: float, rate: float, thrust: float, n: int = 400):

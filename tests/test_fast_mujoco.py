@@ -56,7 +56,8 @@ def _series(batch: int, periods: int) -> np.ndarray:
 
 
 def _start(batch: int) -> dict:
-    tile = lambda v: np.tile(v, (batch, 1))
+    def tile(v):
+        return np.tile(v, (batch, 1))
     return initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                          euler=tile([0.02, -0.01, 0.2]), body_rate=tile([0.3, -0.2, 0.1]))
 

@@ -13,7 +13,6 @@ import warnings
 
 import numpy as np
 import pytest
-from _helpers import shared_effects
 
 from quadsim.core.errors import ModelError, QuadsimWarning
 from quadsim.core.frames import euler_to_quat, rotate, rotate_inverse
@@ -28,6 +27,8 @@ from quadsim.gap.evidence import Problem, explanations_for
 from quadsim.gap.fitting import _typical, effect_class, residuals
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.vehicle.params import inertia_problems, load_params
+
+from _helpers import shared_effects
 
 
 @pytest.fixture(scope="module")

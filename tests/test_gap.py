@@ -112,7 +112,8 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     text = html.read_text()
     assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/3" in text
     # the answer first, the evidence with units, the JSON in a collapsed appendix
-    assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index("&quot;schema&quot;")
+    assert (text.index("<h2>Answer</h2>") < text.index("<details>")
+            < text.index("&quot;schema&quot;"))
     assert "<th>unit</th>" in text and "<td>N m</td>" in text
     assert document["verdict"]["outcome"] == "effect"
     assert all(c["unit"] in ("N", "N m", "rad/s")
@@ -313,8 +314,9 @@ def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
         return states, float(np.sqrt(np.mean(force**2)) / np.sqrt(np.mean(force[inner]**2)))
 
     states, ratio = force_rms_ratio()
-    assert states.t[0] == pytest.approx(log.t[0] + module.EDGE_S, abs=0.011)   # s (one 100 Hz sample)
-    assert states.t[-1] == pytest.approx(log.t[-1] - module.EDGE_S, abs=0.011)  # s (one 100 Hz sample)
+    # s (one 100 Hz sample)
+    assert states.t[0] == pytest.approx(log.t[0] + module.EDGE_S, abs=0.011)
+    assert states.t[-1] == pytest.approx(log.t[-1] - module.EDGE_S, abs=0.011)
     assert ratio < 1.3
     monkeypatch.setattr(module, "EDGE_S", 0.0)
     assert force_rms_ratio()[1] > 3.0     # without the trim the ends dominate
@@ -337,7 +339,8 @@ def _closed_loop_drag_refits(cf, rotor_noise: float, yaw_amplitude: float, *,
     from quadsim.vehicle.params import hover_speed
 
     ref = replace(make_reference("hover", duration=8.0), yaw_function=lambda t: (
-        yaw_amplitude * np.sin(2.0 * np.asarray(t)), 2.0 * yaw_amplitude * np.cos(2.0 * np.asarray(t))))
+        yaw_amplitude * np.sin(2.0 * np.asarray(t)),
+        2.0 * yaw_amplitude * np.cos(2.0 * np.asarray(t))))
     noise = {"position": 5e-4, "velocity": 0.01, "attitude": 2e-3, "gyro": 0.02, "accel": 0.1,
              "rotor": rotor_noise * hover_speed(cf)}
     log, _ = generate_flight(cf, ref, None, SensorModel(noise=noise), 1, engine="analytic",

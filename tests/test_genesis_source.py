@@ -64,9 +64,9 @@ def test_case_list_frozen_and_mapped_to_the_library():
     """The 28 frozen cases (quadcopter-sim's table), mapped to the library on top of the
     shared motor lag and rotor drag, within the table's ranges, the payload 40-120 g
     (``_helpers.check_motor_case_list``)."""
-    from _helpers import check_motor_case_list
-
     from quadsim.bench import genesis_cases
+
+    from _helpers import check_motor_case_list
 
     assert [e.name for e in shared_effects()] == ["motor_lag", "rotor_drag"]
     check_motor_case_list(genesis_cases, ("motor_lag", "rotor_drag"), MODEL["mass"],
@@ -80,9 +80,9 @@ def test_flights_agree_with_quadsims_model():
     checked by ``_helpers.check_source_flight`` against quadsim's model with the shared
     motor lag and rotor drag (Genesis' world angular velocity turned into body rates, the
     RACE yaw sign as quadsim's spins: the yaw torque's residual is checked on its own)."""
-    from _helpers import check_source_flight
-
     from quadsim.bench.genesis_source import genesis_flights
+
+    from _helpers import check_source_flight
 
     base = FlightSpec(seed=5, speed=0.8, duration=2.1)
     heavy = FlightSpec(seed=6, speed=0.8, duration=0.5, effects={"mass": 0.1})

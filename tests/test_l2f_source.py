@@ -20,9 +20,9 @@ from quadsim.bench.l2f_source import (
     FlightSpec,
     _flight_job,
     _parameters_json,
-    l2f_flights,
     hover_command,
     l2f_available,
+    l2f_flights,
     vehicle_params,
 )
 

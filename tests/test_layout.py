@@ -166,7 +166,7 @@ def test_readme_lists_every_command():
 
 @pytest.mark.parametrize("module", _readme_commands())
 def test_every_readme_command_has_help(module):
-    run = subprocess.run([sys.executable, "-m", module, "--help"], cwd=PACKAGE.parent, capture_output=True,
-                         text=True, timeout=120, check=False)
+    run = subprocess.run([sys.executable, "-m", module, "--help"], cwd=PACKAGE.parent,
+                         capture_output=True, text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stderr[-500:]
     assert "usage:" in run.stdout and len(run.stdout) > 200

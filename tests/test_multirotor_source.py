@@ -62,9 +62,9 @@ def test_propeller_coupling_and_motor_time_constant():
 def test_case_list_frozen_and_mapped_to_the_library():
     """The 28 frozen cases, mapped to the library on top of the shared motor lag and body
     drag, within the table's ranges (``_helpers.check_motor_case_list``)."""
-    from _helpers import check_motor_case_list
-
     from quadsim.bench import multirotor_cases
+
+    from _helpers import check_motor_case_list
 
     check_motor_case_list(multirotor_cases, ("motor_lag", "body_drag"), MODEL["mass"],
                           MODEL["arm"])

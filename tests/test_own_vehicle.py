@@ -237,8 +237,8 @@ def test_shipped_data_are_found():
     with pytest.raises(ValueError):
         shipped_dir("nothing")
     # in a checkout the MJCF goes to models/, never into an installed package's data
-    from quadsim.sim.model import default_output
     from quadsim.core.shipped import is_installed_copy
+    from quadsim.sim.model import default_output
 
     assert not is_installed_copy(MODELS_DIR)
     assert default_output("testbed") == MODELS_DIR / "testbed.xml"

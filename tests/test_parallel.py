@@ -21,7 +21,6 @@ from _parallel_tasks import bad_input as _bad_input
 from _parallel_tasks import die_on_three as _die_on_three
 from _parallel_tasks import square_noise as _square_noise
 
-
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker
 pytestmark = pytest.mark.xdist_group("test_parallel")

@@ -91,9 +91,9 @@ def test_case_list_frozen_and_mapped_to_the_library():
     """The 28 frozen cases, mapped to the library on top of the shared motor lag and body
     drag, within the table's ranges, the payload 30-100 g
     (``_helpers.check_motor_case_list``)."""
-    from _helpers import check_motor_case_list
-
     from quadsim.bench import qcsim_cases
+
+    from _helpers import check_motor_case_list
 
     check_motor_case_list(qcsim_cases, ("motor_lag", "body_drag"), MODEL["mass"],
                           MODEL["arm"], payload_kg=(0.03, 0.1))
@@ -104,10 +104,10 @@ def test_flights_agree_with_quadsims_model():
     """A nominal flight (2.1 s logged) and a +0.1 kg flight (0.5 s), one process, checked by
     ``_helpers.check_source_flight`` against quadsim's model with the shared motor lag and
     body drag; the mean speed per duty follows the steady map (3 %)."""
-    from _helpers import check_source_flight
-
     from quadsim.bench.qcsim_cases import shared_effects
     from quadsim.bench.qcsim_source import qcsim_flights
+
+    from _helpers import check_source_flight
 
     base = FlightSpec(seed=5, speed=0.8, duration=2.1)
     heavy = FlightSpec(seed=6, speed=0.8, duration=0.5, effects={"mass": 0.1})

@@ -17,10 +17,9 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import (Problem, evaluate, explanations_for,
-                                   flight_residual)
-from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
+from quadsim.gap.evidence import Problem, evaluate, explanations_for, flight_residual
 from quadsim.gap.judge import judge
+from quadsim.gap.rotor_channel import _heun_linear, rotor_residual
 from quadsim.gap.screen import _Columns, _columns
 from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay

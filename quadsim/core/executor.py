@@ -161,7 +161,8 @@ def _run_pool(fn, tasks, indices, workers, results, progress):
     """Run ``indices`` in one pool; return the indices left unfinished by a broken pool."""
     ctx = multiprocessing.get_context("spawn")
     broken = []
-    with _worker_env(), ProcessPoolExecutor(max_workers=min(workers, len(indices)), mp_context=ctx) as pool:
+    with _worker_env(), ProcessPoolExecutor(max_workers=min(workers, len(indices)),
+                                            mp_context=ctx) as pool:
         futures = {pool.submit(fn, tasks[i]): i for i in indices}
         for future in as_completed(futures):
             i = futures[future]
