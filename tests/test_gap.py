@@ -468,7 +468,7 @@ def test_motor_map_takes_the_line_only_where_the_data_support_it(cf):
 def test_a_combination_needs_every_part_identified_and_plausible(cf):
     """Two effects cancelling at their bounds (every rotor -50 % and the vehicle 50 %
     lighter) are not a combination; a plausible pair with both parts identified is."""
-    from quadsim.gap.heldout_verdict import every_part_stands
+    from quadsim.gap.judge import every_part_stands
 
     rotors = {f"thrust_mismatch.rotor_{i}": -0.5 for i in range(1, 5)}
     bad = {"name": "thrust_mismatch+mass_offset",

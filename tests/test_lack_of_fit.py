@@ -9,7 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap.judge import FORM_ERROR, LOF_P, lack_of_fit
+from quadsim.gap.judge import FORM_ERROR, LOF_P, Baseline
+from quadsim.gap.judge import lack_of_fit as _lack_of_fit
 from quadsim.vehicle.params import load_params
 
 CHANNELS = 6
@@ -26,6 +27,13 @@ def _reference():
 
 def _ev(ms):
     return SimpleNamespace(ms=np.asarray(ms, float))
+
+
+def lack_of_fit(ev, ref, null=None):
+    """The per-flight use of the one rule: against the reference flights, "no difference"
+    never its own form error."""
+    return _lack_of_fit(ev.ms, Baseline.of_reference(ref), ref,
+                        null_ms=None if null is None or null is ev else null.ms)
 
 
 def test_a_channel_far_beyond_the_references_lacks_fit():
