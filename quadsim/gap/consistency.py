@@ -71,8 +71,9 @@ def split_masks(flights: list[FlightStates]) -> dict[str, tuple[float, list[np.n
     return out
 
 
-def _fit_half(candidate, flights, masks, upper, params, sigma, rotor, start):
-    parts = [f.take(np.nonzero(m if upper else ~m)[0]) for f, m in zip(flights, masks)]
+def _fit_half(candidate, parts: list, *, params, sigma, rotor, start):
+    """``candidate`` refitted on ``parts`` (the half's samples of each flight) from
+    ``start``; None when the half is too small or the fit fails."""
     parts = [p for p in parts if len(p.t) > 10]
     if sum(len(p.t) for p in parts) < MIN_SAMPLES:
         return None
@@ -83,16 +84,20 @@ def _fit_half(candidate, flights, masks, upper, params, sigma, rotor, start):
 
 
 def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
-          flights: list[FlightStates], params, sigma: np.ndarray, rotor: bool) -> dict:
-    """Refit ``candidate`` on each split's halves; judge the parameters named in ``judged``.
+          flights: list[FlightStates], *, params, sigma: np.ndarray, rotor: bool) -> dict:
+    """Refit ``candidate`` (pooled values ``theta``) on each split's halves of ``flights``
+    under ``params`` with noise scale ``sigma`` (rotor channels when ``rotor``); judge the
+    parameters named in ``judged``.
 
     Returns ``{"consistent": bool, "splits": {split: {"threshold", "unit", "params": {p:
     {"low", "high", "ci_low", "ci_high", "consistent"}}}}, "inconsistent": [text, ...]}``."""
     names = candidate.parameter_names
     out: dict = {"consistent": True, "splits": {}, "inconsistent": [], "shifted": []}
     for split, (threshold, masks) in split_masks(flights).items():
-        low = _fit_half(candidate, flights, masks, False, params, sigma, rotor, theta)
-        high = _fit_half(candidate, flights, masks, True, params, sigma, rotor, theta)
+        low, high = (_fit_half(candidate, [f.take(np.nonzero(m if upper else ~m)[0])
+                                           for f, m in zip(flights, masks)],
+                               params=params, sigma=sigma, rotor=rotor, start=theta)
+                     for upper in (False, True))
         if low is None or high is None:
             continue
         entry = {"threshold": threshold, "unit": "m/s" if split == "airspeed" else "rad/s",

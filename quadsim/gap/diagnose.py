@@ -22,8 +22,8 @@ from ..core.errors import InputError
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import collinear, heldout
-from .baseline import BASELINE, NominalRefit  # noqa: F401  (re-exported)
+from . import heldout
+from .baseline import BASELINE  # noqa: F401  (re-exported: quadsim.identify, tests)
 from .checks import check_length, vehicle_check
 from .fitting import fit_motor_map, stack_states
 from .judge import channel_names, judge_heldout
@@ -47,7 +47,6 @@ ANTI_ALIAS = 0.8
 EDGE_S = 0.2
 MAX_EDGE_SHARE = 0.1
 
-SEPARATE = collinear.SEPARATE
 #: the benchmarks' observability threshold (scripts/gap_benchmark.py, quadsim.bench): a hidden
 #: effect whose true values cut the held-out gap by less than this fraction is listed apart
 #: as unobservable. Not used by the verdict.

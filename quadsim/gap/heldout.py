@@ -312,7 +312,8 @@ def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> 
     judged = [q for q in entry["params"] if not q.endswith(".alpha")
               and entry["significant"].get(q)]
     return consistency.check(cand, np.asarray(theta, float), judged, flights,
-                             reference.params, reference.sigma, reference.rotor)
+                             params=reference.params, sigma=reference.sigma,
+                             rotor=reference.rotor)
 
 
 @dataclass(frozen=True)

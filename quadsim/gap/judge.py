@@ -373,34 +373,14 @@ def judge_heldout(decision, reference, *, before: list, after: list,
                                                             plausible=ok)
     stated = [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
     others = [r["name"] for r in stated if r["name"] != lead_name]
-    listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
-                                                           if r["name"] != lead_name]
-    # the two most probable readings after those stated: what else was weighed, and how much
-    listed += [r for r in rows if r not in listed and r["name"] != "no_difference"][:2]
-    alts = tuple(_alternative(r, decision, lead_name, params) for r in listed
-                 if r["name"] != "no_difference") if entry is not None else ()
+    alts = _alternatives(decision, stated, params) if entry is not None else ()
     named = entry is not None and ok and not inconsistent    # the name was weighed as one
     separate_by = collinear.separation(lead_name, others) if named else {}
     reduction = entry["reduction"] if entry else 0.0
-    rms_before = _channel_rms(before, reference.sigma)
-    rms_after = _channel_rms(after, reference.sigma)
-    flagged = set(remains) | set(lack)
-    partial = None
-    if inconsistent:
-        partial = {"reduction": reduction, "params": entry["params"], "ci": entry["ci"],
-                   "units": {k: collinear.unit_of(k) for k in entry["params"]},
-                   "alternatives": [a for a in alts], "confusable_with": others,
-                   "name": lead_name}
-        words = consistency.partial_text(lead_name, reduction, checked)
-        notes.append(consistency.inconsistent_note(lead_name, checked))
-    else:
-        words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated],
-                       lack=lack, against="training", remains=remains,
-                       tentative=p_lead < CONFIDENT, reduction=reduction,
-                       separate=separate_by)
-        if shifted and outcome == "effect":
-            words += consistency.tentative_text(checked)
-            notes.append(consistency.tentative_note(checked))
+    words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
+                                          stated=stated, lack=lack, remains=remains,
+                                          separate_by=separate_by, alternatives=alts)
+    notes += more
     effect = outcome == "effect"
     verdict = Verdict(
         outcome, lead_name if effect else outcome, words, p_lead,
@@ -414,9 +394,8 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         confusable_with=tuple(others) if effect else (),
         separate_by=separate_by if effect else {},
         consistency=checked, partial=partial, floor_source=FLOOR_SOURCE,
-        channels={n: {"before": float(b), "after": float(a), "floor": float(s),
-                      "unit": channel_unit(n), "at_floor": n not in flagged}
-                  for n, b, a, s in zip(names, rms_before, rms_after, reference.sigma)},
+        channels=_channel_table(names, reference.sigma, before=before, after=after,
+                                flagged=set(remains) | set(lack)),
         alternatives=() if inconsistent else alts,
         best_candidate=next((r["name"] for r in rows if r["name"] != "no_difference"), None),
         heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
@@ -424,6 +403,56 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         reduction=reduction, heldout_gap_before=_gap(before),
         heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
     return verdict, tuple(notes)
+
+
+def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
+                   remains: dict, separate_by: dict, alternatives: tuple
+                   ) -> tuple[str, dict | None, list[str]]:
+    """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
+    name (``stands``, :func:`quadsim.gap.consistency.standing`) is a partial explanation;
+    otherwise :func:`quadsim.gap.words.answer`, with the tentative sentence of a shifted
+    name that stands."""
+    lead_name, checked = decision.lead_name, decision.consistency
+    entry = decision.entry(lead_name) or {}
+    reduction = entry.get("reduction", 0.0)
+    if stands == "inconsistent":
+        partial = {"reduction": reduction, "params": entry["params"], "ci": entry["ci"],
+                   "units": {k: collinear.unit_of(k) for k in entry["params"]},
+                   "alternatives": list(alternatives),
+                   "confusable_with": [r["name"] for r in stated if r["name"] != lead_name],
+                   "name": lead_name}
+        return (consistency.partial_text(lead_name, reduction, checked), partial,
+                [consistency.inconsistent_note(lead_name, checked)])
+    rows = decision.rows
+    words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
+                   against="training", remains=remains,
+                   tentative=decision.probability[lead_name] < CONFIDENT,
+                   reduction=reduction, separate=separate_by)
+    if stands == "shifted" and outcome == "effect":
+        return words + consistency.tentative_text(checked), None, \
+            [consistency.tentative_note(checked)]
+    return words, None, []
+
+
+def _alternatives(decision, stated: list, params) -> tuple[dict, ...]:
+    """The lead, the other stated readings, and the two most probable readings after those
+    (what else was weighed, and how much), each as an ``alternatives`` JSON entry."""
+    rows, lead_name = decision.rows, decision.lead_name
+    listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
+                                                           if r["name"] != lead_name]
+    listed += [r for r in rows if r not in listed and r["name"] != "no_difference"][:2]
+    return tuple(_alternative(r, decision, lead_name, params) for r in listed
+                 if r["name"] != "no_difference")
+
+
+def _channel_table(names: list, sigma: np.ndarray, *, before: list, after: list,
+                   flagged: set) -> dict:
+    """Per channel: RMS before and after (channel units), the floor sigma, the unit, and
+    whether it is at the floor (not ``flagged`` by a lack of fit or a remainder)."""
+    rms_before, rms_after = _channel_rms(before, sigma), _channel_rms(after, sigma)
+    return {n: {"before": float(b), "after": float(a), "floor": float(s),
+                "unit": channel_unit(n), "at_floor": n not in flagged}
+            for n, b, a, s in zip(names, rms_before, rms_after, sigma)}
 
 
 def _gap(scaled: list) -> float:
