@@ -26,16 +26,8 @@ from . import collinear
 from .explanations import reference_determined
 from .residual import channel_unit
 
-__all__ = [
-    "answer",
-    "asserted",
-    "batch_answer",
-    "nominal_words",
-    "pct",
-    "reading_text",
-    "reference_text",
-    "remains_text",
-]
+__all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",
+           "reference_text"]
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -195,12 +187,12 @@ def nominal_words(text: str, own: bool) -> str:
                      " at the fitted rotor-drag coefficient"))
 
 
-def pct(p: float) -> str:
+def _pct(p: float) -> str:
     """A probability as whole percent; ``> 99 %`` from 0.995."""
     return f"{100 * p:.0f} %" if p < 0.995 else "> 99 %"
 
 
-def remains_text(remains: dict) -> str:
+def _remains_text(remains: dict) -> str:
     """A systematic remainder (channel -> (slow RMS in the channel's unit, ratio of its mean
     square to the noise's expectation)) in words."""
     return ", ".join(f"{k} {v[0]:.2g} {channel_unit(k)} ({v[1] ** 0.5:.1f}x the noise's)"
@@ -226,15 +218,15 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     if outcome == "no_significant_gap":
         nxt = stated[0] if stated else None
         return (f"No significant gap: no difference from the nominal model is the most "
-                f"probable reading ({pct(lead['probability'])}) and the residual is within "
+                f"probable reading ({_pct(lead['probability'])}) and the residual is within "
                 f"the noise on every channel." + (f" Next: {nxt['name']} "
-                                                  f"({pct(nxt['probability'])}: "
+                                                  f"({_pct(nxt['probability'])}: "
                                                   f"{nxt['magnitude']})." if nxt else ""))
     if outcome == "unexplained":
         if lack:
             where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in lack.items())
             return (f"Unexplained: the most probable reading ({lead['name']}, "
-                    f"{pct(lead['probability'])}: {lead['magnitude']}) leaves the held-out "
+                    f"{_pct(lead['probability'])}: {lead['magnitude']}) leaves the held-out "
                     f"flights beyond what it leaves on the training flights ({where} their "
                     "RMS): it does not carry over; the cause is outside the library, several "
                     "effects at once, or the data cannot tell.")
@@ -243,20 +235,20 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
                     f"{lead['magnitude']}) needs an implausible magnitude; the cause is "
                     "outside the library.")
         return ("Unexplained: no library effect explains the residual (no difference from "
-                f"the nominal model is the most probable reading, {pct(lead['probability'])}"
-                f"), yet a systematic residual stays beyond the noise: {remains_text(remains)}"
+                f"the nominal model is the most probable reading, {_pct(lead['probability'])}"
+                f"), yet a systematic residual stays beyond the noise: {_remains_text(remains)}"
                 " (slow part, RMS). The cause is outside the library.")
-    text = f"Behaves as if {lead['magnitude']} ({pct(lead['probability'])})"
+    text = f"Behaves as if {lead['magnitude']} ({_pct(lead['probability'])})"
     if stated:
         text += "; or as if " + "; or as if ".join(
-            f"{r['magnitude']} ({pct(r['probability'])})" for r in stated)
+            f"{r['magnitude']} ({_pct(r['probability'])})" for r in stated)
         text += f" (to separate them: {dict(separate).get(stated[0]['name'], '')})"
     if tentative:
         text += ". Tentative"
     text += f". Explains {100 * (reduction or 0.0):.0f} % of the held-out gap"
     if remains:
         text += (f"; beyond it a systematic residual stays above the noise on "
-                 f"{remains_text(remains)}: part of the gap is outside the library.")
+                 f"{_remains_text(remains)}: part of the gap is outside the library.")
     else:
         text += ", the residual within the noise on every channel after it."
     return text
