@@ -110,7 +110,8 @@ def _result(low, high, ci):
 def test_shifted_value_makes_a_tentative_name(low, high, ci, standing):
     """consistency.standing: what a split result does to a name (judge.judge_heldout: a
     shifted name stands, tentative, with the sentence; an inconsistent one is a partial)."""
-    from quadsim.gap.consistency import partial_text, standing as of, tentative_text
+    from quadsim.gap.consistency import partial_text, tentative_text
+    from quadsim.gap.consistency import standing as of
 
     result = _result(low, high, ci)
     assert of(result) == standing

@@ -96,7 +96,7 @@ def test_slow_part_is_the_moving_average():
     x = np.arange(200, dtype=float)[:, None]
     # a moving average of a straight line is the line (away from the ends)
     np.testing.assert_allclose(slow_part(x, DT)[60:140, 0], x[60:140, 0])
-    assert int(round(NOISE_WINDOW_S / DT)) | 1 == 51
+    assert round(NOISE_WINDOW_S / DT) | 1 == 51
 
 
 @pytest.fixture(scope="module")
