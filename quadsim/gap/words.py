@@ -213,7 +213,8 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     the named reading explains; ``separate``: per flight the channels on which the two
     leaders differ most, held out ``{reading: how to separate it from the lead}``."""
     if against == "references":
-        return _against_references(outcome, lead, stated, lack, separate, tentative)
+        return _against_references(outcome, lead, stated=stated, lack=lack, separate=separate,
+                                   tentative=tentative)
     remains = remains or {}
     if outcome == "no_significant_gap":
         nxt = stated[0] if stated else None
@@ -254,7 +255,8 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     return text
 
 
-def _against_references(outcome, lead, stated, lack, separate, tentative) -> str:
+def _against_references(outcome: str, lead: dict, *, stated: list, lack: dict, separate,
+                        tentative: bool) -> str:
     """Per-flight sentences (:func:`answer`); ``stated`` excludes ``lead``."""
     alt = "; ".join(f"or {r['name']} ({100 * r['probability']:.0f} %: {r['magnitude']})"
                     for r in stated)
