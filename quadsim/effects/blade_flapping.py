@@ -29,6 +29,8 @@ import numpy as np
 
 from ..core.frames import rotate_inverse
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Scale, Words, arm_length
+from .rotor_drag import drag_scale
 
 __all__ = ["BladeFlapping", "flapping_moment"]
 
@@ -51,6 +53,14 @@ class BladeFlapping(EffectBase):
         EffectParameter("coefficient", "kg m/rad", 0.0, -1e-4, 1e-4,
                         "hub moment per rotor speed per in-plane air speed, "
                         "N m/((rad/s)(m/s)); positive pitches the nose up in forward flight"),
+    )
+
+    #: a flapping moment as if the rotor-drag force acted half an arm above the CoM
+    facts = EffectFacts(
+        fitted=("coefficient",),
+        scales={"coefficient": Scale(lambda p: 0.5 * arm_length(p) * drag_scale(p),
+                                     "the rotor drag's force acting half an arm above the CoM")},
+        words={"coefficient": Words("blade flapping", "kg m/rad", 1.0)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

@@ -28,8 +28,14 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, Scale, Spread, Words
 
-__all__ = ["BodyDrag"]
+__all__ = ["BodyDrag", "area_scale"]
+
+
+def area_scale(params) -> float:
+    """A C_d A (m^2) giving 10 % of the weight at 2 m/s: ``0.1 m g / (rho / 2 (2 m/s)^2)``."""
+    return 0.1 * params.weight / (0.5 * params.air_density * 4.0)
 
 
 class BodyDrag(EffectBase):
@@ -44,6 +50,16 @@ class BodyDrag(EffectBase):
         EffectParameter("per_axis", "1", 0.0, 0.0, 1.0,
                         "1: each body axis's drag on its own air speed |v_i| v_i; 0: on "
                         "the air speed |v| v"),
+    )
+
+    facts = EffectFacts(
+        fitted=("cd_area", "cd_area_vertical"),
+        scales={p: Scale(area_scale, "a C_d A giving 10 % of the weight at 2 m/s")
+                for p in ("cd_area", "cd_area_vertical")},
+        spreads={ALL: Spread(area_scale, "10 % of the weight at 2 m/s: a doubled drag")},
+        words={"cd_area": Words("body drag sideways C_d A", "cm^2", 1e4),
+               "cd_area_vertical": Words("body drag vertical C_d A", "cm^2", 1e4),
+               "per_axis": Words("drag law per body axis", "1", 1.0)},
     )
 
     def loads(self, ctx):

@@ -50,6 +50,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import cross, quat_to_rotmat
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Words
 
 __all__ = ["CablePayload", "swing_period"]
 
@@ -74,6 +75,13 @@ class CablePayload(EffectBase):
         EffectParameter("axial_frequency", "Hz", 20.0, 1.0, 200.0,
                         "payload bounce frequency on the cable (sets the stiffness)"),
         EffectParameter("damping_ratio", "1", 0.3, 0.0, 2.0, "axial damping ratio"),
+    )
+
+    #: no candidate of its own: the payload's state is not logged; the diagnosis integrates
+    #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.cable`)
+    facts = EffectFacts(
+        words={"mass": Words("payload on a cable", "g", 1e3),
+               "length": Words("cable length", "m", 1.0)},
     )
 
     @property

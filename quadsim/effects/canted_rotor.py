@@ -34,6 +34,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import EffectBase, EffectParameter
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
 
 __all__ = ["CantedRotor", "tilt_axis"]
 
@@ -56,6 +57,33 @@ class CantedRotor(EffectBase):
         EffectParameter("angle", "rad", 0.0, -0.5, 0.5, "tilt angle (0 = off)"),
         EffectParameter("azimuth", "rad", 0.0, -np.pi, np.pi,
                         "tilt axis direction in the body xy-plane, from body x"),
+    )
+
+    #: the diagnosis fits the tilted axis' horizontal components (its fit form,
+    #: :class:`quadsim.gap.fitmodels.CantedRotorFit`): angle and azimuth are singular at 0
+    facts = EffectFacts(
+        fitted=("tilt_x", "tilt_y"),
+        one_per_rotor="rotor",
+        fit_parameters=(
+            EffectParameter("tilt_x", "rad", 0.0, -0.3, 0.3, "axis lean towards body +x"),
+            EffectParameter("tilt_y", "rad", 0.0, -0.3, 0.3, "axis lean towards body +y"),
+        ),
+        scales={p: Scale(lambda params: 0.02, "a lean of about 1 deg")
+                for p in ("tilt_x", "tilt_y")},
+        ranges={ALL: PlausibleRange(
+            -0.17, 0.17, "absolute",
+            "a bent motor mount or arm leans a rotor a few deg; more than 10 deg (0.17 rad) is "
+            "a visibly broken arm")},
+        spreads={ALL: Spread()},
+        separate_from={
+            "wind": "fly the same path in both directions (wind is fixed in the world, a canted "
+                    "rotor's push turns with the body); or look at the motor mounts",
+            "com_offset": "hover with a payload on the CoM: a canted rotor's sideways push "
+                          "grows with its thrust; or look at the motor mounts",
+            "thrust_mismatch": "look at the motor mounts; a canted rotor also pushes sideways "
+                               "(hover drifts)"},
+        words={ALL: Words("rotor axis lean", "deg", 180.0 / np.pi),
+               "rotor": Words("rotor", "index", 1.0)},
     )
 
     def apply_to_params(self, params):

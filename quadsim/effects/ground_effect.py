@@ -25,6 +25,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import EffectFacts, Scale, Spread, Words
 
 __all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]
 
@@ -48,6 +49,15 @@ class GroundEffect(EffectBase):
         EffectParameter("ground_height", "m", 0.0, -100.0, 100.0, "world z of the ground"),
         EffectParameter("radius", "m", 0.0, 0.0, 1.0,
                         "rotor radius (0 = the parameter set's rotor_radius)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("gain",),
+        scales={"gain": Scale(lambda p: 1.0, "the textbook curve")},
+        spreads={"gain": Spread(lambda p: 1.0, "Cheeseman & Bennett (1955) ground effect: gain "
+                                               "1 is the textbook curve")},
+        separate_from={"thrust_curve": "hover at several heights at the same speed"},
+        words={"gain": Words("ground effect, x the Cheeseman-Bennett model", "1", 1.0)},
     )
 
     def loads(self, ctx):

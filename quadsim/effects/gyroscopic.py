@@ -29,6 +29,7 @@ import numpy as np
 
 from ..vehicle.params import VehicleParams
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Scale, Spread, Words
 
 __all__ = ["Gyroscopic", "gyroscopic_torque"]
 
@@ -56,8 +57,17 @@ class Gyroscopic(EffectBase):
                         "spin inertia Jr of one rotor + motor bell about its axis (0 = off)"),
     )
 
+    facts = EffectFacts(
+        fitted=("rotor_inertia",),
+        scales={"rotor_inertia": Scale(lambda p: 1e-6 * (p.mass / 0.04) ** 1.7,
+                                       "rotor and motor bell: 0.01 g cm^2 x (m / 40 g)^1.7")},
+        spreads={"rotor_inertia": Spread(lambda p: 1e-6 * (p.mass / 0.04) ** 1.7,
+                                         "rotor+motor inertia: the fit's typical size")},
+        words={"rotor_inertia": Words("rotor spin inertia", "g cm^2", 1e7)},
+    )
+
     @classmethod
-    def from_params(cls, params: VehicleParams) -> "Gyroscopic":
+    def from_params(cls, params: VehicleParams) -> Gyroscopic:
         """The effect with Jr taken from the parameter set (``[rotors] inertia``)."""
         return cls(rotor_inertia=params.rotor_inertia)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, arm_length
 
 __all__ = ["MassOffset", "add_point_mass"]
 
@@ -47,6 +48,38 @@ class MassOffset(EffectBase):
         EffectParameter("x", "m", 0.0, -1.0, 1.0, "payload position, body x"),
         EffectParameter("y", "m", 0.0, -1.0, 1.0, "payload position, body y"),
         EffectParameter("z", "m", 0.0, -1.0, 1.0, "payload position, body z"),
+    )
+
+    facts = EffectFacts(
+        fitted=("mass",),
+        scales={"mass": Scale(lambda p: 0.05 * p.mass, "5 % of the vehicle's mass: a small payload")},
+        windows={
+            "mass": Window(lambda p: -0.5 * p.mass, lambda p: 2.0 * p.mass,
+                           "plausible payloads for this vehicle: half of it lighter to 2x"),
+            **{axis: Window(lambda p: -arm_length(p), lambda p: arm_length(p),
+                            "a payload within the rotors' span") for axis in ("x", "y", "z")}},
+        ranges={"mass": PlausibleRange(
+            -0.05, 0.6, "mass",
+            "payloads up to ~60 % of the vehicle mass (Crazyflie 2.1: 15 g on 37 g, Bitcraze); "
+            "lighter than modelled by > 5 % is unlikely")},
+        spreads={"mass": Spread(reason="payload to 60 % of the vehicle's mass (the range)"),
+                 **{axis: Spread(lambda p: 0.5 * arm_length(p),
+                                 "a payload fixed anywhere within the rotors' span")
+                    for axis in ("x", "y")}},
+        separate_from={
+            "thrust_factor": "weigh the vehicle (or measure thrust per Omega^2 on a thrust "
+                             "stand); the yaw channel leans to thrust_factor if the drag torque "
+                             "per Omega^2 changed too",
+            "thrust_curve": "weigh the vehicle; fly over a wider range of rotor speeds (a "
+                            "thrust-curve change depends on speed, a mass does not)",
+            "thrust_mismatch": "weigh the vehicle; fly with one rotor swapped",
+            "cable_payload": "look under the vehicle; or fly sharp stops and turns: a slung "
+                             "payload lags and swings back at its own period 2 pi sqrt(L / g), a "
+                             "rigid mass moves with the vehicle",
+            "battery_sag": "log vbat over a long flight; weigh the vehicle"},
+        words={"mass": Words("payload", "g", 1e3),
+               **{axis: Words(f"payload position, body {axis}", "mm", 1e3)
+                  for axis in ("x", "y", "z")}},
     )
 
     def apply_to_params(self, params):

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
+from .facts import EffectFacts, Scale, Spread, Words
 
 __all__ = ["MotorLag"]
 
@@ -39,6 +40,20 @@ class MotorLag(EffectBase):
                         "spin-up time constant (0 = no lag, effect off)"),
         EffectParameter("time_constant_down", "s", 0.0, 0.0, 0.5,
                         "spin-down time constant (0 = same as time_constant)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("time_constant",),
+        upstream_of_speed=True,
+        scales={"time_constant": Scale(lambda p: 0.03, "30 ms: a micro motor's time constant")},
+        spreads={"time_constant": Spread(lambda p: 0.03,
+                                         "brushed/brushless micro motors 10-60 ms (Foerster, "
+                                         "ETH 2015: Crazyflie 2.0 ~ 15 ms)")},
+        separate_from={
+            "inertia_error": "fast attitude steps with measured rotor speeds (lag shows between "
+                             "command and speed, inertia between speed and rate)"},
+        words={"time_constant": Words("motor time constant", "ms", 1e3),
+               "time_constant_down": Words("motor time constant (slowing)", "ms", 1e3)},
     )
 
     def rotor_speed_rate(self, t, commanded, actual):

@@ -29,8 +29,19 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
 
-__all__ = ["RateDamping"]
+__all__ = ["RateDamping", "momentum_rate_damping"]
+
+
+def momentum_rate_damping(params) -> float:
+    """k_mt = r^2 T_h / v_i (N m s/rad): roll/pitch damping of the rotor discs' inflow change
+    by momentum theory (r the largest hub distance from the centre, m; T_h = m g / R the hover
+    thrust per rotor, N; v_i = sqrt(T_h / (2 rho pi R_p^2)) the hover induced velocity, m/s)."""
+    arm = float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
+    thrust = params.mass * params.gravity / params.rotor_count
+    induced = np.sqrt(thrust / (2 * params.air_density * np.pi * params.rotor_radius ** 2))
+    return arm ** 2 * thrust / float(induced)
 
 
 class RateDamping(EffectBase):
@@ -41,6 +52,19 @@ class RateDamping(EffectBase):
         EffectParameter("x", "N m s/rad", 0.0, 0.0, 10.0, "roll damping coefficient k_x"),
         EffectParameter("y", "N m s/rad", 0.0, 0.0, 10.0, "pitch damping coefficient k_y"),
         EffectParameter("z", "N m s/rad", 0.0, 0.0, 10.0, "yaw damping coefficient k_z"),
+    )
+
+    facts = EffectFacts(
+        fitted=("x", "y", "z"),
+        scales={axis: Scale(lambda p, i=i: p.inertia[i, i],
+                            "a damping time constant I/k of about 1 s")
+                for i, axis in enumerate("xyz")},
+        ranges={ALL: PlausibleRange(
+            0.0, 3.0, "momentum",
+            "momentum theory k = r^2 T_hover / v_i (Bristeau et al. 2009) x 3 for blade "
+            "flapping and frame drag (Mahony et al. 2012)")},
+        spreads={ALL: Spread()},
+        words={ALL: Words("rate damping", "N m s/rad", 1.0)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

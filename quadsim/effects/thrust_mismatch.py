@@ -32,6 +32,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import MAX_ROTORS, EffectBase, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]
 
@@ -48,6 +49,17 @@ class ThrustMismatch(EffectBase):
                          "speed-per-command exponent: rotor i's command gives (1 + e_i)^-alpha "
                          "of its speed (0: speed-controlled motors; 0.2: a DC motor at 75 % "
                          "voltage efficiency)"),)
+
+    facts = EffectFacts(
+        per_rotor="rotor_{}",
+        scales={"rotor_{}": Scale(lambda p: 0.05, "5 %: one worn or chipped propeller"),
+                "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
+        ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",
+                                    "one damaged or mismatched prop/motor")},
+        spreads={ALL: Spread()},
+        words={"rotor_{}": Words("one rotor's thrust per Omega^2", "%", 100.0),
+               "alpha": Words("speed-per-command exponent", "1", 1.0)},
+    )
 
     def deviations(self, rotors: int) -> np.ndarray:
         """(R,) relative deviations for a vehicle with ``rotors`` rotors."""

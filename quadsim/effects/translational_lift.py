@@ -31,12 +31,15 @@ gets +0.04 N per rotor, +1.9 % of the hover thrust.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..core.frames import rotate_inverse
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words
 
-__all__ = ["TranslationalLift", "translational_lift_thrust"]
+__all__ = ["TranslationalLift", "momentum_translational_lift", "translational_lift_thrust"]
 
 
 def translational_lift_thrust(air_velocity_body: np.ndarray, rotor_axes: np.ndarray,
@@ -46,6 +49,14 @@ def translational_lift_thrust(air_velocity_body: np.ndarray, rotor_axes: np.ndar
     v = np.asarray(air_velocity_body, dtype=float)
     axial = v @ np.asarray(rotor_axes, dtype=float).T                     # (B, R)
     return k_h * (np.sum(v * v, axis=1)[:, None] - axial ** 2)
+
+
+def momentum_translational_lift(params) -> float:
+    """k_tl = T_h / (4 v_i^2) (kg/m): the translational-lift coefficient of momentum theory
+    (T_h the hover thrust per rotor, N; v_i^2 = T_h / (2 rho pi R_p^2) the hover induced
+    velocity squared), which is k_tl = rho pi R_p^2 / 2 (rho the air density, kg/m^3; R_p
+    the rotor radius, m)."""
+    return 0.5 * params.air_density * math.pi * params.rotor_radius ** 2
 
 
 class TranslationalLift(EffectBase):
@@ -58,6 +69,17 @@ class TranslationalLift(EffectBase):
         EffectParameter("k_h", "kg/m", 0.0, -0.5, 0.5,
                         "extra thrust per rotor per in-plane air speed squared, "
                         "N/(m/s)^2; positive: more thrust in edgewise flight"),
+    )
+
+    facts = EffectFacts(
+        fitted=("k_h",),
+        scales={"k_h": Scale(momentum_translational_lift, "the momentum-theory lift")},
+        ranges={"k_h": PlausibleRange(
+            0.0, 2.0, "lift",
+            "momentum theory k = T_hover / (4 v_i^2) per rotor (Glauert inflow, Leishman 2006) "
+            "x 2 for the blade-element factor")},
+        spreads={"k_h": Spread()},
+        words={"k_h": Words("translational lift", "kg/m", 1.0)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

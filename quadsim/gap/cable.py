@@ -71,7 +71,6 @@ from ..core.frames import quat_to_rotmat
 from ..effects.base import EffectLoads, EffectParameter
 from ..effects.cable_payload import CablePayload
 from ..vehicle.params import VehicleParams
-from . import fitting
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
 
@@ -343,5 +342,3 @@ class CableSwing(CablePayload):
         loads.force_world, loads.torque_body = force, torque
         return loads
 
-
-fitting.LOCAL_EFFECTS["cable_payload"] = CableSwing

@@ -17,58 +17,29 @@ Readings the data cannot choose between are all listed in ``verdict.alternatives
 
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
 from ..vehicle.params import VehicleParams, hover_speed
-from .fitting import effect_class
+from .fitmodels import FIT_EFFECTS, effect_class
 
-__all__ = ["describe", "unit_of", "SEPARATE", "separation"]
+__all__ = ["SEPARATE", "describe", "separation", "torque_text", "unit_of"]
 
-# Known collinear pairs and what data would separate them.
-SEPARATE = {
-    frozenset({"mass_offset", "nominal_refit"}):
-        "weigh the vehicle, or measure b on a thrust stand",
-    frozenset({"mass_offset", "thrust_factor"}):
-        "weigh the vehicle (or measure thrust per Omega^2 on a thrust stand); the yaw "
-        "channel leans to thrust_factor if the drag torque per Omega^2 changed too",
-    frozenset({"thrust_factor", "nominal_refit"}): "the same effect (b refitted); a thrust "
-                                                   "stand tells b and d apart",
-    frozenset({"mass_offset", "thrust_curve"}): "weigh the vehicle; fly over a wider range of "
-                                                "rotor speeds (a thrust-curve change depends "
-                                                "on speed, a mass does not)",
-    frozenset({"thrust_factor", "thrust_curve"}): "fly over a wider range of rotor speeds "
-                                                  "(climbs and descents at several rates)",
-    frozenset({"mass_offset", "thrust_mismatch"}): "weigh the vehicle; fly with one rotor swapped",
-    frozenset({"mass_offset", "cable_payload"}): "look under the vehicle; or fly sharp stops "
-                                                 "and turns: a slung payload lags and swings "
-                                                 "back at its own period 2 pi sqrt(L / g), a "
-                                                 "rigid mass moves with the vehicle",
-    frozenset({"thrust_factor", "cable_payload"}): "look under the vehicle; weigh it; sharp "
-                                                   "stops and turns show a swinging load",
-    frozenset({"mass_offset", "battery_sag"}): "log vbat over a long flight; weigh the vehicle",
-    frozenset({"com_offset", "thrust_mismatch"}): "balance the vehicle on a knife edge along "
-                                                  "x and y (finds the CoM), or each rotor on the "
-                                                  "thrust stand; in flight, fast yaw turns: the "
-                                                  "accelerometer, c away from the CoM, reads "
-                                                  "w x (w x c), a weak rotor adds nothing",
-    frozenset({"motor_lag", "inertia_error"}): "fast attitude steps with measured rotor speeds "
-                                               "(lag shows between command and speed, inertia "
-                                               "between speed and rate)",
-    frozenset({"rotor_drag", "body_drag"}): "fly at several speeds: rotor drag is linear in "
-                                            "speed, body drag quadratic",
-    frozenset({"rotor_drag", "wind"}): "fly the same path in both directions (wind is fixed "
-                                       "in the world frame)",
-    frozenset({"thrust_curve", "nominal_refit"}): "fly over a wider range of rotor speeds",
-    frozenset({"ground_effect", "thrust_curve"}): "hover at several heights at the same speed",
-    frozenset({"canted_rotor", "wind"}): "fly the same path in both directions (wind is fixed "
-                                         "in the world, a canted rotor's push turns with the "
-                                         "body); or look at the motor mounts",
-    frozenset({"canted_rotor", "com_offset"}): "hover with a payload on the CoM: a canted "
-                                               "rotor's sideways push grows with its thrust; "
-                                               "or look at the motor mounts",
-    frozenset({"canted_rotor", "thrust_mismatch"}): "look at the motor mounts; a canted rotor "
-                                                    "also pushes sideways (hover drifts)",
-}
+def _separate() -> dict:
+    out: dict = {}
+    for name, cls in FIT_EFFECTS.items():
+        for other, text in cls.facts.separate_from.items():
+            pair = frozenset({name, other})
+            if out.get(pair, text) != text:
+                raise ValueError(f"{name} and {other}: two texts on what separates them")
+            out[pair] = text
+    return out
+
+
+#: known collinear pairs and what data would separate them: a read-only view of the effects'
+#: declared ``facts.separate_from`` (each pair declared by one of the two)
+SEPARATE = MappingProxyType(_separate())
 
 
 #: fitted parameters that are not part of an answer (a payload's swing at the first sample).
@@ -76,6 +47,8 @@ _NUISANCE = ("cable_payload.lean_", "cable_payload.rate_")
 
 
 def separation(best: str, others: list[str]) -> dict:
+    """What tells reading ``best`` from each of ``others`` (:data:`SEPARATE`; a generic
+    advice for a pair without one)."""
     return {other: SEPARATE.get(frozenset({best.split("+")[0], other.split("+")[0]}),
                                 "more varied flights (speeds, heights, attitudes)")
             for other in others}
@@ -238,7 +211,10 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
     return f"{name.replace('_', ' ')}: {text} {_pm(value, c, 1.0, '.4g')} {unit}".rstrip()
 
 
-def _torque_text(entry: dict) -> str:
+def torque_text(entry: dict) -> str:
     rms = entry.get("heldout_rms_after") or {}
     have = [(k, rms[k]) for k in ("Mx", "My", "Mz") if k in rms]
     return ", ".join(f"{k} {v:.2g} N m" for k, v in have)
+
+
+_torque_text = torque_text  # alias for other modules until integration

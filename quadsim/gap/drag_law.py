@@ -47,24 +47,13 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..effects.body_drag import BodyDrag
-from . import fitting
 from .evidence import evaluate
 from .explanations import Explanation, explanations_for, law_replaces, quadratic_laws
+from .fitmodels import DragLaw  # declared with the diagnosis' other effects
 from .reference import Reference
 
 __all__ = ["DragLaw", "choose", "under"]
 
-
-class DragLaw(BodyDrag):
-    """The references' horizontal drag under a quadratic law, held fixed in every reading
-    of a flight (module doc): :class:`quadsim.effects.body_drag.BodyDrag` under its own name,
-    so that a reading's own body drag stays apart from it."""
-
-    name = "drag_law"
-
-
-fitting.LOCAL_EFFECTS["drag_law"] = DragLaw
 
 
 def nulls(reference: Reference, states) -> list[Explanation]:

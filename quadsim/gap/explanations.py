@@ -8,10 +8,11 @@ its own instead of the references' 7 ms), or a logged signal's delay of its own.
 the flight's data can show; :func:`marginal_sd` is the spread of the shared parameters every
 explanation carries.
 
-Prior spreads (:func:`_prior_sd`): one rule -- half the larger end of the plausible range
-documented with its source in :mod:`quadsim.gap.priors` (that range is then about two
-spreads), centred on "off" (or on the references' value for a shared group); for the
-parameters without a range there, the source is given in the table.
+Prior spreads (:func:`prior_spreads`): each effect declares them beside its parameters
+(``facts.spreads``, :mod:`quadsim.effects.facts`): one rule -- half the larger end of the
+plausible range declared with its source (that range is then about two spreads), centred on
+"off" (or on the references' value for a shared group); for the parameters without a range,
+the spread's own source is declared with it.
 
 The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`, and one rotor's in
 :mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together
@@ -36,27 +37,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..effects import make_effect
-from ..effects.battery_sag import nominal_voltage
+from ..effects.battery_sag import VBAT_SD
+from ..effects.facts import ALL
 from . import cable
 from .calibrate import SHARED, Reference
-from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale
-from .priors import (
-    DETERMINED,
-    WIND_SD_MS,
-    curve_quadratic_sd,
-    curve_slope_sd,
-    momentum_rate_damping,
-    momentum_translational_lift,
-)
+from .fitmodels import FIT_EFFECTS, build_effect
+from .priors import DETERMINED, WIND_SD_MS
 
-__all__ = ["Explanation", "explanations_for", "marginal_sd", "reference_determined",
-           "reference_delay_sd", "DETERMINED", "DELAY_SD_S", "VBAT_SD", "DRAGS"]
+__all__ = [
+    "DELAY_SD_S",
+    "DETERMINED",
+    "DRAGS",
+    "VBAT_SD",
+    "Explanation",
+    "explanations_for",
+    "marginal_sd",
+    "own_effects",
+    "prior_of",
+    "prior_spreads",
+    "reference_delay_sd",
+    "reference_determined",
+]
 
-#: prior spread of a full battery voltage (fraction of the pack's voltage): its charge
-#: state, +-10 % (``battery_sag.full_voltage`` in :func:`_prior_sd`, and a flight's V_full
-#: against the references' mean voltage)
-VBAT_SD = 0.1
+# VBAT_SD (re-exported): the prior spread of a full battery voltage, a fraction of the
+# pack's voltage (``battery_sag.full_voltage``'s spread, and a flight's V_full against the
+# references' mean voltage), declared by :mod:`quadsim.effects.battery_sag`
 
 #: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
 #: (:data:`quadsim.logs.delays.MAX_LAG_S` searches 100 ms).
@@ -66,7 +71,7 @@ DELAY_SD_S = 0.02
 def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     """The spread of the shared parameters in every explanation's prior (module doc): the
     references' ``s_ref``, combined with the physical prior spread of a difference
-    (:func:`_prior_sd`) where the parameter has one, by adding precisions:
+    (:func:`prior_spreads`) where the parameter has one, by adding precisions:
     ``(s_ref^-2 + w^-2)^-1/2``.
 
     Why: what a nominal flight may show is never wider than what physics lets a real
@@ -77,17 +82,17 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     vanished, and a 5 mm CoM offset's 13 mN m steady torque was judged "no difference" (83 %).
     With the prior's 50 % the offset is read as 3.9 and 3.6 mm (truth 4.0, 4.8). A parameter
     the references fix (s_ref << w) keeps its spread."""
-    sd = _prior_sd(reference.params) if sd is None else sd
+    sd = prior_spreads(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
     for k, name in enumerate(reference.candidate.parameter_names):
-        w = _prior_of(sd, name)
+        w = prior_of(sd, name)
         if w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
     return out
 
 
-def _prior_of(sd: dict, name: str):
-    """The prior spread of parameter ``name`` (``effect.parameter``) in :func:`_prior_sd`'s
+def prior_of(sd: dict, name: str):
+    """The prior spread of parameter ``name`` (``effect.parameter``) in :func:`prior_spreads`'s
     table: its own entry, else its effect's; None without one."""
     return sd.get(name, sd.get(name.split(".")[0]))
 
@@ -97,10 +102,10 @@ def reference_determined(reference: Reference) -> dict[str, bool]:
     fit and a spread ``s_ref`` below :data:`DETERMINED` times its physical prior spread (the
     rule a flight's own values are printed by; a parameter without a prior: identified
     alone). A wind with no drag to act through is the prior's, not theirs."""
-    sd = _prior_sd(reference.params)
+    sd = prior_spreads(reference.params)
     out = {}
     for name, s in zip(reference.candidate.parameter_names, reference.s_ref):
-        w = _prior_of(sd, name)
+        w = prior_of(sd, name)
         out[name] = bool(reference.identified.get(name, True)
                          and (w is None or s < DETERMINED * float(w)))
     return out
@@ -116,43 +121,16 @@ def reference_delay_sd(reference: Reference) -> float:
     return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
 
 
-def _range_sd(lower: float, upper: float) -> float:
-    return 0.5 * max(abs(lower), abs(upper))
-
-
-def _prior_sd(params) -> dict:
-    """Prior spread per parameter (module doc); vehicle-scaled where the range is."""
-    arm, mass = _arm(params), params.mass
-    return {
-        "mass_offset.mass": _range_sd(-0.05, 0.6) * mass,      # priors: payload to 60 %
-        # a payload fixed anywhere within the rotors' span
-        "mass_offset.x": _range_sd(-1.0, 1.0) * arm, "mass_offset.y": _range_sd(-1.0, 1.0) * arm,
-        "com_offset.x": _range_sd(-0.15, 0.15) * arm, "com_offset.y": _range_sd(-0.15, 0.15) * arm,
-        "thrust_mismatch": _range_sd(-0.2, 0.1),
-        "thrust_factor.change": _range_sd(-0.15, 0.05),
-        # DC-motor efficiency 0.6-0.9 (module doc)
-        "thrust_factor.alpha": 0.1,
-        "thrust_curve.linear": curve_slope_sd(params),
-        "thrust_curve.quadratic": curve_quadratic_sd(params),
-        "battery_sag.rate": _range_sd(0.0, 0.005),
-        # a battery's full voltage: +-10 % (charge state) of the vehicle's pack
-        "battery_sag.full_voltage": VBAT_SD * nominal_voltage(params),
-        "inertia_error": _range_sd(-0.5, 1.0),
-        "rate_damping": _range_sd(0.0, 3.0) * momentum_rate_damping(params),
-        "translational_lift.k_h": _range_sd(0.0, 2.0) * momentum_translational_lift(params),
-        "canted_rotor": _range_sd(-0.17, 0.17),
-        # Cheeseman & Bennett (1955) ground effect: gain 1 is the textbook curve
-        "ground_effect.gain": 1.0,
-        # 10 % of the weight at 2 m/s (fitting._drag_scale, _area_scale): a doubled drag
-        "rotor_drag": _drag_scale(params),
-        "body_drag": _area_scale(params),
-        # brushed/brushless micro motors 10-60 ms (Foerster, ETH 2015: Crazyflie 2.0 ~ 15 ms)
-        "motor_lag.time_constant": 0.03,
-        # rotor+motor inertia: the fit's typical size (fitting.FIT_SPEC)
-        "gyroscopic.rotor_inertia": 1e-6 * (mass / 0.04) ** 1.7,
-        # indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)
-        "wind": WIND_SD_MS,
-    }
+def prior_spreads(params) -> dict:
+    """Prior spread per parameter (``effect.parameter``, or ``effect`` for every parameter of
+    it; the parameter's unit), for ``params``: each effect's declared ``facts.spreads``
+    (module doc)."""
+    out = {}
+    for name, cls in FIT_EFFECTS.items():
+        facts = cls.facts
+        for key in facts.spreads:
+            out[name if key == ALL else f"{name}.{key}"] = facts.spread_of(key, params)
+    return out
 
 
 @dataclass(frozen=True)
@@ -198,7 +176,7 @@ def _one(name, variant, parts, mean, sd, **kw) -> Explanation:
 
 def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
     """Every explanation the flight's data can show (``names``: restrict to these effects)."""
-    params, sd = reference.params, _prior_sd(reference.params)
+    params, sd = reference.params, prior_spreads(reference.params)
     ref = reference.values()
     # the rotor speeds' timing is read by its likelihood wherever they are logged and the
     # references' own timing is fitted (calibrate._refine); the cross-correlation estimate
@@ -214,7 +192,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             continue
         keys = [f"{group}.{p}" for p in fitted]
         s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
-        spread = [np.hypot(s_ref[k], _prior_of(sd, k)) for k in keys]
+        spread = [np.hypot(s_ref[k], prior_of(sd, k)) for k in keys]
         if group == "wind":
             out.extend(_wind_readings(reference, [ref[k] for k in keys], spread))
             continue
@@ -242,7 +220,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     for name, fitted in one:
         keys = [f"{name}.{p}" for p in fitted]
         out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
-                        [_prior_of(sd, k) for k in keys]))
+                        [prior_of(sd, k) for k in keys]))
     change = ["change", "alpha"] if reference.rotor else ["change"]
     alpha, alpha_sd = _alpha_prior(reference, sd)
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
@@ -461,18 +439,18 @@ WIND_DRAG_AXES = "through the references' drag as a quadratic drag on each body 
 QUADRATIC_SD = 0.5
 
 
-def _make(name: str, values: dict):
-    if name in LOCAL_EFFECTS:
-        return LOCAL_EFFECTS[name](**values)
-    return make_effect(name, **values)
-
-
-def _own_effects(expl: Explanation, theta: np.ndarray) -> list:
+def own_effects(expl: Explanation, theta: np.ndarray) -> list:
     out, k = [], 0
     for name, fixed, fitted in expl.parts:
         values = dict(fixed)
         for p in fitted:
             values[p] = float(theta[k])
             k += 1
-        out.append(_make(name, values))
+        out.append(build_effect(name, values))
     return out
+
+
+_prior_sd = prior_spreads  # alias for other modules until integration
+_prior_of = prior_of  # alias for other modules until integration
+_own_effects = own_effects  # alias for other modules until integration
+_make = build_effect  # alias for other modules until integration
