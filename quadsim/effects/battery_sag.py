@@ -71,6 +71,7 @@ class BatterySag(EffectBase):
         upstream_of_speed=True,
         # with a voltage log the sag (V / V_full)^2 acts for every V_full
         no_off_value=("full_voltage",),
+        starts_at_logged_voltage=("full_voltage",),
         scales={"rate": Scale(lambda p: 0.005, "0.5 %/s: a failing cell"),
                 "full_voltage": Scale(lambda p: 0.2, "0.2 V: a cell's charge state")},
         ranges={"rate": PlausibleRange(0.0, 0.005, "absolute",

@@ -139,6 +139,16 @@ class EffectFacts:
     #: fitted parameters whose "off" value does not switch the effect off (so "away from
     #: off" is no test of it)
     no_off_value: tuple[str, ...] = ()
+    #: time constants of the rotor channel: at least one of its sub-steps in a fit
+    #: (:func:`quadsim.gap.rotor_channel.min_time_constant`)
+    rotor_time_constants: tuple[str, ...] = ()
+    #: fitted parameters a fit starts at the highest logged battery voltage (where a
+    #: voltage-following sag is neutral on average)
+    starts_at_logged_voltage: tuple[str, ...] = ()
+    #: fitted parameters refitted by instrumental variables on the commanded speeds, when
+    #: commands are logged (least squares on measured speeds is attenuated by their noise:
+    #: :func:`quadsim.gap.fitting.drag_refit_iv`)
+    instrumented: tuple[str, ...] = ()
     #: parameters of the fit's own parametrisation (the diagnosis' fit form of the effect,
     #: :mod:`quadsim.gap.fitmodels`) that the library form does not have
     fit_parameters: tuple = ()
@@ -249,7 +259,9 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
         return p == ALL or p in known or (pattern and p == pattern)
 
     names = (list(fitted) + list(facts.fixed) + list(facts.with_voltage_log)
-             + list(facts.no_off_value) + [facts.one_per_rotor] * bool(facts.one_per_rotor))
+             + list(facts.no_off_value) + list(facts.rotor_time_constants)
+             + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
+             + [facts.one_per_rotor] * bool(facts.one_per_rotor))
     for table in (facts.scales, facts.windows, facts.ranges, facts.spreads, facts.words):
         names += list(table)
     out += [f"{cls.name}.{p}: not a parameter" for p in dict.fromkeys(names) if not exists(p)]

@@ -45,6 +45,7 @@ class MotorLag(EffectBase):
     facts = EffectFacts(
         fitted=("time_constant",),
         upstream_of_speed=True,
+        rotor_time_constants=("time_constant", "time_constant_down"),
         scales={"time_constant": Scale(lambda p: 0.03, "30 ms: a micro motor's time constant")},
         spreads={"time_constant": Spread(lambda p: 0.03,
                                          "brushed/brushless micro motors 10-60 ms (Foerster, "

@@ -69,6 +69,8 @@ class NominalRefit(EffectBase):
     )
     facts = EffectFacts(
         fitted=("thrust", "drag"),
+        # d from the yaw torque on measured speeds is regression-diluted to -1 near hover
+        instrumented=("drag",),
         scales={"thrust": Scale(lambda p: 0.05, "5 %: as a propeller change (thrust_factor)"),
                 "drag": Scale(lambda p: 0.2, "20 %: d is known less well than b")},
         ranges={"thrust": PlausibleRange(-0.15, 0.05, "relative", "as thrust_factor.change")},

@@ -412,6 +412,18 @@ def drag_refit_iv(states: FlightStates, params: VehicleParams, candidate: Candid
     return gain - 1.0, se
 
 
+def flagged(candidate: Candidate, flag: str) -> list[int]:
+    """Indices of ``candidate``'s fitted parameters that their effect lists in its facts'
+    ``flag`` (:class:`quadsim.effects.facts.EffectFacts`: ``rotor_time_constants``,
+    ``starts_at_logged_voltage``, ``instrumented``)."""
+    out, k = [], 0
+    for name, _, fitted in candidate.parts:
+        listed = getattr(facts_for(name), flag)
+        out += [k + i for i, p in enumerate(fitted) if p in listed]
+        k += len(fitted)
+    return out
+
+
 def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: VehicleParams,
                   sigma: np.ndarray, *, rotor_channel: bool, start: np.ndarray | None = None,
                   max_nfev: int = 60) -> Fit:
@@ -421,14 +433,12 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     # a rotor time constant is at least one sub-step of the rotor channel (min_time_constant)
     step = min_time_constant(float(flights[0].t[1] - flights[0].t[0])) \
         if len(flights[0].t) > 1 else 0.0
-    for k, name in enumerate(candidate.parameter_names):
-        if name.startswith("motor_lag.time_constant"):
-            lower[k] = max(lower[k], step)
+    for k in flagged(candidate, "rotor_time_constants"):
+        lower[k] = max(lower[k], step)
     x0 = _start(candidate, lower, upper, typical) if start is None else np.clip(
         start, lower + 1e-12 * typical, upper - 1e-12 * typical)
-    if start is None and "battery_sag.full_voltage" in candidate.parameter_names:
+    for k in flagged(candidate, "starts_at_logged_voltage") if start is None else ():
         # Start where the sag is neutral on average: the full voltage at the highest logged.
-        k = candidate.parameter_names.index("battery_sag.full_voltage")
         x0[k] = np.clip(max(float(np.nanmax(s.vbat)) for s in flights), lower[k], upper[k])
 
     stacked = stack_states(flights)
@@ -457,8 +467,7 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     inflation = correlation_time(res.reshape(-1, len(sigma)))
     cov = np.linalg.pinv(jac.T @ jac) * s2 * inflation
     stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
-    if "nominal_refit.drag" in candidate.parameter_names and stacked.command is not None:
-        k = candidate.parameter_names.index("nominal_refit.drag")
+    for k in flagged(candidate, "instrumented") if stacked.command is not None else ():
         value, se = drag_refit_iv(stacked, params, candidate, theta, k)
         if np.isfinite(value) and np.isfinite(se):
             theta[k] = float(np.clip(value, lower[k], upper[k]))
