@@ -28,17 +28,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..vehicle.params import VehicleParams
+from .scales import (  # re-exported
+    arm_length,
+    hover_thrust_per_speed,
+    momentum_rate_damping,
+    momentum_translational_lift,
+)
 
 __all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Scale",
            "Spread", "Window", "Words", "arm_length", "missing_facts", "range_unit"]
 
 #: the key of a per-parameter mapping that applies to every parameter of the effect
 ALL = "*"
-
-
-def arm_length(params: VehicleParams) -> float:
-    """The largest horizontal hub distance from the body origin (m): the vehicle's arm."""
-    return float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,9 @@ class EffectFacts:
     fitted: tuple[str, ...] = ()
     #: a per-rotor name pattern ("rotor_{}"): the candidate frees rotor_1 .. rotor_R instead
     per_rotor: str = ""
+    #: for a per-rotor effect, the uniform parameter (``effect.parameter``) the rotors' mean
+    #: is judged as: every rotor equally weak is a uniform change, not R damaged ones
+    uniform_as: str = ""
     #: values held fixed in the candidate (parameter -> value)
     fixed: Mapping[str, float] = field(default_factory=dict)
     #: the fitted parameters' typical sizes (a parameter without one steps in units of 1)
@@ -208,10 +212,6 @@ def range_unit(kind: str, params: VehicleParams) -> float:
         return params.mass
     if kind == "arm":
         return arm_length(params)
-    from .rate_damping import momentum_rate_damping
-    from .thrust_curve import hover_thrust_per_speed
-    from .translational_lift import momentum_translational_lift
-
     return {"hover": hover_thrust_per_speed, "momentum": momentum_rate_damping,
             "lift": momentum_translational_lift}[kind](params)
 

@@ -30,18 +30,9 @@ import numpy as np
 
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
+from .scales import momentum_rate_damping
 
 __all__ = ["RateDamping", "momentum_rate_damping"]
-
-
-def momentum_rate_damping(params) -> float:
-    """k_mt = r^2 T_h / v_i (N m s/rad): roll/pitch damping of the rotor discs' inflow change
-    by momentum theory (r the largest hub distance from the centre, m; T_h = m g / R the hover
-    thrust per rotor, N; v_i = sqrt(T_h / (2 rho pi R_p^2)) the hover induced velocity, m/s)."""
-    arm = float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
-    thrust = params.mass * params.gravity / params.rotor_count
-    induced = np.sqrt(thrust / (2 * params.air_density * np.pi * params.rotor_radius ** 2))
-    return arm ** 2 * thrust / float(induced)
 
 
 class RateDamping(EffectBase):

@@ -25,17 +25,10 @@ import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
 from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words
+from .scales import hover_thrust_per_speed
 
 __all__ = ["CURVE_QUADRATIC_SD", "ThrustCurve", "curve_quadratic_bounds", "curve_quadratic_sd",
            "hover_thrust_per_speed"]
-
-
-def hover_thrust_per_speed(params) -> float:
-    """The hover thrust per rad/s of hover speed, ``b Omega_h`` (N s/rad): the unit of a
-    thrust curve's linear term (plausible-range kind ``hover``)."""
-    from ..vehicle.params import hover_speed
-
-    return params.thrust_factor * hover_speed(params)
 
 
 #: prior spread of a thrust curve's curvature about the hover, as a fraction of b (the

@@ -52,6 +52,7 @@ class ThrustMismatch(EffectBase):
 
     facts = EffectFacts(
         per_rotor="rotor_{}",
+        uniform_as="thrust_factor.change",
         scales={"rotor_{}": Scale(lambda p: 0.05, "5 %: one worn or chipped propeller"),
                 "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
         ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",

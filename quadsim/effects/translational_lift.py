@@ -31,13 +31,12 @@ gets +0.04 N per rotor, +1.9 % of the hover thrust.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..core.frames import rotate_inverse
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words
+from .scales import momentum_translational_lift
 
 __all__ = ["TranslationalLift", "momentum_translational_lift", "translational_lift_thrust"]
 
@@ -49,14 +48,6 @@ def translational_lift_thrust(air_velocity_body: np.ndarray, rotor_axes: np.ndar
     v = np.asarray(air_velocity_body, dtype=float)
     axial = v @ np.asarray(rotor_axes, dtype=float).T                     # (B, R)
     return k_h * (np.sum(v * v, axis=1)[:, None] - axial ** 2)
-
-
-def momentum_translational_lift(params) -> float:
-    """k_tl = T_h / (4 v_i^2) (kg/m): the translational-lift coefficient of momentum theory
-    (T_h the hover thrust per rotor, N; v_i^2 = T_h / (2 rho pi R_p^2) the hover induced
-    velocity squared), which is k_tl = rho pi R_p^2 / 2 (rho the air density, kg/m^3; R_p
-    the rotor radius, m)."""
-    return 0.5 * params.air_density * math.pi * params.rotor_radius ** 2
 
 
 class TranslationalLift(EffectBase):

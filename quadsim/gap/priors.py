@@ -22,6 +22,7 @@ from ..effects.facts import ALL, arm_length
 from ..effects.rate_damping import momentum_rate_damping
 from ..effects.thrust_curve import (  # re-exported
     CURVE_QUADRATIC_SD,
+    ThrustCurve,
     curve_quadratic_bounds,
     curve_quadratic_sd,
     hover_thrust_per_speed,
@@ -113,22 +114,27 @@ def curve_slope_sd(params: VehicleParams) -> float:
     """Prior spread (N s/rad) of a thrust curve's linear term: half the plausible range of
     :data:`PRIORS` ``thrust_curve.linear`` (a fraction of the hover thrust per rad/s), in
     SI for ``params``."""
-    lower, upper = PRIORS["thrust_curve.linear"][:2]
-    return 0.5 * max(abs(lower), abs(upper)) * hover_thrust_per_speed(params)
+    return ThrustCurve.facts.spread_of("linear", params)
 
 
 def candidate_plausibility(values: dict, params: VehicleParams):
     """(score, plausible, text) of a whole fitted candidate: its least plausible parameter.
 
-    A per-rotor mismatch is split into its mean (judged as a uniform thrust-per-Omega^2
-    change, ``thrust_factor.change``) and each rotor's deviation from that mean (judged as a
-    mismatch): four rotors all 16 % weak are a uniform loss, not four damaged props."""
+    A per-rotor effect's values are split into their mean (judged as the uniform parameter
+    its facts name, ``uniform_as``: a mismatch's as a thrust-per-Omega^2 change,
+    ``thrust_factor.change``) and each rotor's deviation from that mean (judged as the
+    per-rotor effect): four rotors all 16 % weak are a uniform loss, not four damaged props."""
     values = dict(values)
-    rotors = {k: v for k, v in values.items() if k.startswith("thrust_mismatch.rotor_")}
-    if len(rotors) > 1:
-        mean = sum(rotors.values()) / len(rotors)
-        for k, v in rotors.items():
-            values[k] = v - mean
-        values["thrust_factor.change"] = mean
+    for name, cls in FIT_EFFECTS.items():
+        facts = cls.facts
+        if not (facts.per_rotor and facts.uniform_as):
+            continue
+        prefix = f"{name}.{facts.per_rotor.partition('{}')[0]}"
+        rotors = {k: v for k, v in values.items() if k.startswith(prefix)}
+        if len(rotors) > 1:
+            mean = sum(rotors.values()) / len(rotors)
+            for k, v in rotors.items():
+                values[k] = v - mean
+            values[facts.uniform_as] = mean
     scores = [plausibility(k, v, params) for k, v in values.items()]
     return max(scores, key=lambda s: s[0]) if scores else (NO_PRIOR_SCORE, True, "")
