@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
 __all__ = ["CELL_VOLTAGE", "MIN_SCALE", "VBAT_SD", "BatterySag", "nominal_voltage"]
 
@@ -52,6 +52,20 @@ def nominal_voltage(params) -> float:
     250 mAh pack, Bitcraze), three above (the 0.84 kg testbed's Turnigy D2830-11 1000 kV
     motors are sized for 3S; the report does not name its pack, so this is an assumption)."""
     return CELL_VOLTAGE * (1 if params.mass < ONE_CELL_BELOW_KG else 3)
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """A battery's reading: the voltage law's full voltage, or a sag rate."""
+    if parameter == "full_voltage":
+        return (f"the rotors turn slower per command as the battery drops: speed = nominal "
+                f"map x vbat / ({plus_minus(value, ci, 1.0, '.3g')} V), i.e. 1 % slower per "
+                f"{10 * value:.3g} mV below {value:.3g} V (thrust at a fixed command: 2 % "
+                "lower per 1 % of voltage)")
+    per_minute = plus_minus(100 * 60 * value / 2, None if ci is None else 100 * 60 * ci / 2,
+                            1.0)
+    return (f"the rotors lose {per_minute} "
+            f"% speed per minute at a fixed command ({100 * 60 * value:.2g} % thrust per "
+            "minute; a discharging battery)")
 
 
 class BatterySag(EffectBase):
@@ -80,8 +94,8 @@ class BatterySag(EffectBase):
                  "full_voltage": Spread(lambda p: VBAT_SD * nominal_voltage(p),
                                         "a battery's full voltage: +-10 % (charge state) of "
                                         "the vehicle's pack")},
-        words={"rate": Words("speed lost per minute at a fixed command", "%/min", 3000.0),
-               "full_voltage": Words("full battery voltage", "V", 1.0)},
+        words={"rate": Words("speed lost per minute at a fixed command", "%/min", 3000.0, _phrase),
+               "full_voltage": Words("full battery voltage", "V", 1.0, _phrase)},
     )
 
     def scale_at(self, t: np.ndarray) -> np.ndarray:

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import EffectBase, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Together, Words, plus_minus
 
 __all__ = ["CantedRotor", "tilt_axis"]
 
@@ -46,6 +46,23 @@ def tilt_axis(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
     out = axis * np.cos(angle) + np.cross(e, axis) * np.sin(angle) \
         + e * np.dot(e, axis) * (1.0 - np.cos(angle))
     return out / np.linalg.norm(out)
+
+
+def _together(values: dict, ci: dict, params, fixed: dict) -> str:
+    """A canted rotor in words: the lean (deg) and its direction, the sideways push at hover
+    (``values``, ``ci``, ``fixed`` keyed by this effect's parameter names)."""
+    tx, ty = values["tilt_x"], values["tilt_y"]
+    cx, cy = ci.get("tilt_x"), ci.get("tilt_y")
+    rotor = fixed.get("rotor")
+    angle = float(np.hypot(tx, ty))
+    c = None if cx is None or cy is None else float(np.hypot(cx, cy))
+    push = params.weight / params.rotor_count * np.sin(angle)
+    which = f"rotor {int(rotor)}" if rotor is not None else "a rotor"
+    lean = plus_minus(np.degrees(angle), None if c is None else np.degrees(c), 1.0)
+    return (f"{which}'s axis leans {lean}"
+            f" deg (towards body x {np.degrees(tx):+.2g} deg and y {np.degrees(ty):+.2g} deg): "
+            f"it pushes {1e3 * push:.3g} mN sideways at hover ({100 * push / params.weight:.2g} "
+            "% of the weight)")
 
 
 class CantedRotor(EffectBase):
@@ -84,6 +101,7 @@ class CantedRotor(EffectBase):
                                "(hover drifts)"},
         words={ALL: Words("rotor axis lean", "deg", 180.0 / np.pi),
                "rotor": Words("rotor", "index", 1.0)},
+        together=Together(("tilt_x", "tilt_y"), _together),
     )
 
     def apply_to_params(self, params):

@@ -15,9 +15,23 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Window, Words, arm_length
+from .facts import (
+    ALL,
+    EffectFacts,
+    PlausibleRange,
+    Scale,
+    Spread,
+    Window,
+    Words,
+    arm_length,
+    plus_minus,
+)
 
 __all__ = ["ComOffset"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"CoM {parameter[-1]} {plus_minus(value, ci, 1e3)} mm"
 
 
 class ComOffset(EffectBase):
@@ -43,7 +57,7 @@ class ComOffset(EffectBase):
                                "CoM), or each rotor on the thrust stand; in flight, fast yaw "
                                "turns: the accelerometer, c away from the CoM, reads w x (w x "
                                "c), a weak rotor adds nothing"},
-        words={ALL: Words("CoM shift", "mm", 1e3)},
+        words={ALL: Words("CoM shift", "mm", 1e3, _phrase)},
     )
 
     def apply_to_params(self, params):

@@ -36,7 +36,8 @@ from .scales import (  # re-exported
 )
 
 __all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Scale",
-           "Spread", "Window", "Words", "arm_length", "missing_facts", "range_unit"]
+           "Spread", "Together", "Window", "Words", "arm_length", "missing_facts", "number",
+           "plus_minus", "range_unit"]
 
 #: the key of a per-parameter mapping that applies to every parameter of the effect
 ALL = "*"
@@ -93,11 +94,40 @@ class Spread:
 @dataclass(frozen=True)
 class Words:
     """How a reading of the parameter is shown: ``label``, the display ``unit`` and the
-    ``scale`` from SI to it (shown = value x scale; 1e3 for grams from kg)."""
+    ``scale`` from SI to it (shown = value x scale; 1e3 for grams from kg); ``phrase``: the
+    reading as a physical statement, ``phrase(parameter, value, ci, params) -> str`` (``ci``
+    the 95 % half-width, None or NaN where not known; :func:`plus_minus` writes the pair)."""
 
     label: str
     unit: str
     scale: float = 1.0
+    phrase: Callable[[str, float, float | None, VehicleParams], str] | None = None
+
+
+@dataclass(frozen=True)
+class Together:
+    """Parameters worded together (a canted rotor's two lean components as one lean and its
+    direction): ``phrase(values, ci, params, fixed) -> str`` over the readings' dicts
+    (``effect.parameter`` keys; ``fixed`` the values held fixed, e.g. the rotor index)."""
+
+    parameters: tuple[str, ...]
+    phrase: Callable[[dict, dict, VehicleParams, dict], str]
+
+
+def number(x: float, digits: str, sign: str = "") -> str:
+    """``x`` formatted with ``digits``; a value of 100 up to a million that this would write
+    with an exponent ("1e+02") as a whole number instead ("100")."""
+    text = f"{x:{sign}{digits}}"
+    if "e" in text and 100 <= abs(x) < 1e6:
+        text = f"{x:{sign}.0f}"
+    return text
+
+
+def plus_minus(value: float, ci: float | None, scale: float, digits: str = ".2g") -> str:
+    """``value x scale`` signed, with `` ± |ci| x scale`` where ``ci`` is known (finite)."""
+    if ci is None or not np.isfinite(ci):
+        return number(value * scale, digits, "+")
+    return f"{number(value * scale, digits, '+')} ± {number(abs(ci) * scale, digits)}"
 
 
 @dataclass(frozen=True)
@@ -160,6 +190,11 @@ class EffectFacts:
     separate_from: Mapping[str, str] = field(default_factory=dict)
     #: how a reading of each parameter is worded (:class:`Words`)
     words: Mapping[str, Words] = field(default_factory=dict)
+    #: parameters worded together (:class:`Together`)
+    together: Together | None = None
+    #: fitted parameters that are no part of an answer (a payload's swing at the first
+    #: sample): never worded
+    nuisance: tuple[str, ...] = ()
 
     def fitted_for(self, rotors: int) -> tuple[str, ...]:
         """The parameters the candidate frees on a vehicle with ``rotors`` rotors."""
@@ -261,7 +296,8 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     names = (list(fitted) + list(facts.fixed) + list(facts.with_voltage_log)
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
-             + [facts.one_per_rotor] * bool(facts.one_per_rotor))
+             + [facts.one_per_rotor] * bool(facts.one_per_rotor) + list(facts.nuisance)
+             + list(facts.together.parameters if facts.together else ()))
     for table in (facts.scales, facts.windows, facts.ranges, facts.spreads, facts.words):
         names += list(table)
     out += [f"{cls.name}.{p}: not a parameter" for p in dict.fromkeys(names) if not exists(p)]

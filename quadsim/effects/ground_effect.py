@@ -25,7 +25,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, Scale, Spread, Words
+from .facts import EffectFacts, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]
 
@@ -37,6 +37,12 @@ def ground_effect_ratio(height: np.ndarray, radius: float, gain: float) -> np.nd
     height = np.maximum(np.asarray(height, dtype=float), 1e-9)
     term = np.minimum(gain * np.square(radius / (4.0 * height)), MAX_TERM)
     return 1.0 / (1.0 - term)
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    rise = 100 * (1 / (1 - min(0.5, value / 16)) - 1)
+    return (f"ground effect {plus_minus(value, ci, 1.0)} x the Cheeseman–Bennett model "
+            f"(+{rise:.2g} % thrust with the rotors one radius above the ground)")
 
 
 class GroundEffect(EffectBase):
@@ -57,7 +63,7 @@ class GroundEffect(EffectBase):
         spreads={"gain": Spread(lambda p: 1.0, "Cheeseman & Bennett (1955) ground effect: gain "
                                                "1 is the textbook curve")},
         separate_from={"thrust_curve": "hover at several heights at the same speed"},
-        words={"gain": Words("ground effect, x the Cheeseman-Bennett model", "1", 1.0)},
+        words={"gain": Words("ground effect, x the Cheeseman-Bennett model", "1", 1.0, _phrase)},
     )
 
     def loads(self, ctx):

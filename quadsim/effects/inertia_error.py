@@ -20,9 +20,16 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
 __all__ = ["InertiaError"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    i = "xyz".index(parameter[0])
+    base = params.inertia[i, i]
+    return (f"I_{parameter} {plus_minus(value, ci, 100)} % ({base * (1 + value):.3g} kg m² "
+            f"instead of the model's {base:.3g} kg m²)")
 
 
 class InertiaError(EffectBase):
@@ -41,7 +48,7 @@ class InertiaError(EffectBase):
             "CAD/lumped inertia within 10-20 % (CAD vs SolidWorks +9 %, Crazyflie literature "
             "+-20 %); a factor 2 is another vehicle")},
         spreads={ALL: Spread()},
-        words={ALL: Words("inertia error", "%", 100.0)},
+        words={ALL: Words("inertia error", "%", 100.0, _phrase)},
     )
 
     def apply_to_params(self, params):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, arm_length
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, arm_length, plus_minus
 
 __all__ = ["MassOffset", "add_point_mass"]
 
@@ -37,6 +37,14 @@ def add_point_mass(mass: float, com: np.ndarray, inertia: np.ndarray, point_mass
     new_inertia = (np.asarray(inertia, dtype=float) + _steiner(mass, com - new_com)
                    + _steiner(point_mass, point - new_com))
     return total, new_com, new_inertia
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """A payload's reading in words: its mass against the model's, or where it sits."""
+    if parameter == "mass":
+        return (f"{plus_minus(value, ci, 1e3)} g heavier ({100 * value / params.mass:+.1f} % "
+                f"of the model's {1e3 * params.mass:.4g} g)")
+    return f"sitting at body {parameter[-1]} {plus_minus(value, ci, 1e3)} mm"
 
 
 class MassOffset(EffectBase):
@@ -77,8 +85,8 @@ class MassOffset(EffectBase):
                              "payload lags and swings back at its own period 2 pi sqrt(L / g), a "
                              "rigid mass moves with the vehicle",
             "battery_sag": "log vbat over a long flight; weigh the vehicle"},
-        words={"mass": Words("payload", "g", 1e3),
-               **{axis: Words(f"payload position, body {axis}", "mm", 1e3)
+        words={"mass": Words("payload", "g", 1e3, _phrase),
+               **{axis: Words(f"payload position, body {axis}", "mm", 1e3, _phrase)
                   for axis in ("x", "y", "z")}},
     )
 

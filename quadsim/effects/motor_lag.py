@@ -26,9 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import EffectFacts, Scale, Spread, Words
+from .facts import EffectFacts, Scale, Spread, Words, plus_minus
 
 __all__ = ["MotorLag"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"the rotors lag their commands by {plus_minus(value, ci, 1e3)} ms (time constant)"
 
 
 class MotorLag(EffectBase):
@@ -53,7 +57,7 @@ class MotorLag(EffectBase):
         separate_from={
             "inertia_error": "fast attitude steps with measured rotor speeds (lag shows between "
                              "command and speed, inertia between speed and rate)"},
-        words={"time_constant": Words("motor time constant", "ms", 1e3),
+        words={"time_constant": Words("motor time constant", "ms", 1e3, _phrase),
                "time_constant_down": Words("motor time constant (slowing)", "ms", 1e3)},
     )
 

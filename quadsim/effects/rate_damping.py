@@ -29,10 +29,17 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 from .scales import momentum_rate_damping
 
 __all__ = ["RateDamping", "momentum_rate_damping"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    i = "xyz".index(parameter)
+    tau = params.inertia[i, i] / value if value > 0 else float("inf")
+    return (f"{('roll', 'pitch', 'yaw')[i]} rate damping {plus_minus(value, ci, 1.0, '.3g')} "
+            f"N m per rad/s (decay time I/k {tau:.3g} s)")
 
 
 class RateDamping(EffectBase):
@@ -55,7 +62,7 @@ class RateDamping(EffectBase):
             "momentum theory k = r^2 T_hover / v_i (Bristeau et al. 2009) x 3 for blade "
             "flapping and frame drag (Mahony et al. 2012)")},
         spreads={ALL: Spread()},
-        words={ALL: Words("rate damping", "N m s/rad", 1.0)},
+        words={ALL: Words("rate damping", "N m s/rad", 1.0, _phrase)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

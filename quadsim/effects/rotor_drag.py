@@ -38,8 +38,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import ALL, EffectFacts, Scale, Spread, Words
+from .facts import ALL, EffectFacts, Scale, Spread, Words, plus_minus
 
 __all__ = ["RotorDrag", "drag_scale", "rotor_drag_forces"]
 
@@ -77,6 +78,17 @@ def drag_scale(params) -> float:
     return 0.1 * params.weight / (params.rotor_count * hover * 2.0)
 
 
+def _phrase(parameter, value, ci, params) -> str:
+    """The drag force per m/s of air speed at the hover speed, all rotors."""
+    where = "in the rotor plane" if parameter == "coefficient" else "along the rotor axes"
+    hover, r = hover_speed(params), params.rotor_count
+    per = r * value * hover
+    cper = None if ci is None else r * ci * hover
+    return (f"rotor drag {where} {plus_minus(per, cper, 1e3)} mN per m/s of air speed at the "
+            f"hover speed ({100 * per / (params.mass * params.gravity):.2g} % of the weight at "
+            "1 m/s)")
+
+
 class RotorDrag(EffectBase):
     """Linear rotor drag (induced drag + blade flapping), per rotor, at the hubs."""
 
@@ -96,8 +108,8 @@ class RotorDrag(EffectBase):
             "body_drag": "fly at several speeds: rotor drag is linear in speed, body drag "
                          "quadratic",
             "wind": "fly the same path in both directions (wind is fixed in the world frame)"},
-        words={"coefficient": Words("rotor drag in the rotor plane", "kg/rad", 1.0),
-               "axial_coefficient": Words("rotor drag along the rotor axes", "kg/rad", 1.0)},
+        words={"coefficient": Words("rotor drag in the rotor plane", "kg/rad", 1.0, _phrase),
+               "axial_coefficient": Words("rotor drag along the rotor axes", "kg/rad", 1.0, _phrase)},
     )
 
     def loads(self, ctx):

@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, plus_minus
 from .scales import hover_thrust_per_speed
 
 __all__ = ["CURVE_QUADRATIC_SD", "ThrustCurve", "curve_quadratic_bounds", "curve_quadratic_sd",
@@ -51,6 +52,15 @@ def curve_quadratic_sd(params) -> float:
     """Prior spread (N s^2/rad^2) of the curvature a thrust curve adds about the hover
     (``thrust_curve.quadratic``): :data:`CURVE_QUADRATIC_SD` times b."""
     return CURVE_QUADRATIC_SD * params.thrust_factor
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """The linear term as its share of the thrust at the hover speed."""
+    hover = hover_speed(params)
+    rel = value * hover / (params.thrust_factor * hover ** 2)
+    crel = None if ci is None else ci * hover / (params.thrust_factor * hover ** 2)
+    return (f"{plus_minus(rel, crel, 100)} % thrust at the hover speed "
+            f"({value:.3g} N s/rad per rotor)")
 
 
 class ThrustCurve(EffectBase):
@@ -98,7 +108,7 @@ class ThrustCurve(EffectBase):
         spreads={"linear": Spread(),
                  "quadratic": Spread(curve_quadratic_sd,
                                      "stand fits and published curves: CURVE_QUADRATIC_SD of b")},
-        words={"linear": Words("thrust-curve slope", "N s/rad", 1.0),
+        words={"linear": Words("thrust-curve slope", "N s/rad", 1.0, _phrase),
                "quadratic": Words("thrust-curve curvature", "N s^2/rad^2", 1.0)},
     )
 

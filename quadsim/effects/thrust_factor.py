@@ -36,9 +36,13 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
 __all__ = ["ThrustFactor"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors"
 
 
 class ThrustFactor(EffectBase):
@@ -69,7 +73,7 @@ class ThrustFactor(EffectBase):
                             "several rates)",
             "cable_payload": "look under the vehicle; weigh it; sharp stops and turns show a "
                              "swinging load"},
-        words={"change": Words("thrust per Omega^2 on every rotor", "%", 100.0),
+        words={"change": Words("thrust per Omega^2 on every rotor", "%", 100.0, _phrase),
                "alpha": Words("speed-per-command exponent", "1", 1.0)},
     )
 

@@ -32,9 +32,13 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import MAX_ROTORS, EffectBase, EffectLoads, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"{parameter} {plus_minus(value, ci, 100)} % thrust"
 
 
 class ThrustMismatch(EffectBase):
@@ -58,7 +62,7 @@ class ThrustMismatch(EffectBase):
         ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",
                                     "one damaged or mismatched prop/motor")},
         spreads={ALL: Spread()},
-        words={"rotor_{}": Words("one rotor's thrust per Omega^2", "%", 100.0),
+        words={"rotor_{}": Words("one rotor's thrust per Omega^2", "%", 100.0, _phrase),
                "alpha": Words("speed-per-command exponent", "1", 1.0)},
     )
 

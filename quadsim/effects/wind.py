@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import ALL, Companion, EffectFacts, Scale, Spread, Words
+from .facts import ALL, Companion, EffectFacts, Scale, Spread, Words, plus_minus
 
 __all__ = ["GUST_COMPONENTS", "LOWEST_FREQUENCY", "WIND_SD_MS", "Wind"]
 
@@ -30,6 +30,10 @@ LOWEST_FREQUENCY = 0.05
 #: prior spread of a steady wind, m/s (indoor drafts to Beaufort 3, 3.4-5.4 m/s): the spread
 #: of a flight's wind reading and the prior of the reference calibration's shared wind
 WIND_SD_MS = 5.0
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"mean wind {plus_minus(value, ci, 1.0)} m/s along world {parameter[-1]}"
 
 
 class Wind(EffectBase):
@@ -53,7 +57,8 @@ class Wind(EffectBase):
         scales={ALL: Scale(lambda p: 1.0, "1 m/s: a draft")},
         spreads={ALL: Spread(lambda p: WIND_SD_MS,
                              "indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)")},
-        words={ALL: Words("mean wind", "m/s", 1.0)},
+        words={ALL: Words("wind", "m/s", 1.0),
+               **{v: Words("mean wind", "m/s", 1.0, _phrase) for v in ("vx", "vy", "vz")}},
     )
 
     @property

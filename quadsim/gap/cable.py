@@ -63,6 +63,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -282,6 +283,10 @@ class CableSwing(CablePayload):
                         "cable's lean from the vertical towards world +y at the first sample"),
         EffectParameter("rate_x", "rad/s", 0.0, -5.0, 5.0, "swing rate along x at the start"),
         EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"))
+
+    #: the swing at the first sample is fitted with the payload, never part of an answer
+    facts = dataclasses.replace(CablePayload.facts,
+                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y"))
 
     def state_size(self) -> int:
         return 0

@@ -27,7 +27,7 @@ from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectBase, EffectParameter
 from ..effects.body_drag import BodyDrag
 from ..effects.canted_rotor import CantedRotor
-from ..effects.facts import EffectFacts, PlausibleRange, Scale, Words
+from ..effects.facts import EffectFacts, PlausibleRange, Scale, Words, plus_minus
 from .cable import CableSwing
 from .speed_gain import SpeedGain
 
@@ -57,6 +57,13 @@ class CantedRotorFit(CantedRotor):
                            ).apply_to_params(params)
 
 
+def _refit_phrase(parameter, value, ci, params) -> str:
+    if parameter == "thrust":
+        return (f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} "
+                "rotors")
+    return f"{plus_minus(value, ci, 100)} % drag torque per Ω²"
+
+
 class NominalRefit(EffectBase):
     """Baseline: the parameter set's thrust and drag factors b and d refitted (relative
     changes); the reference model's shared group and the held-out reading "b and d are off"
@@ -78,8 +85,8 @@ class NominalRefit(EffectBase):
             "mass_offset": "weigh the vehicle, or measure b on a thrust stand",
             "thrust_factor": "the same effect (b refitted); a thrust stand tells b and d apart",
             "thrust_curve": "fly over a wider range of rotor speeds"},
-        words={"thrust": Words("thrust per Omega^2 on every rotor", "%", 100.0),
-               "drag": Words("drag torque per Omega^2", "%", 100.0)},
+        words={"thrust": Words("thrust per Omega^2 on every rotor", "%", 100.0, _refit_phrase),
+               "drag": Words("drag torque per Omega^2", "%", 100.0, _refit_phrase)},
     )
 
     def apply_to_params(self, params):

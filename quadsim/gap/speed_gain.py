@@ -31,9 +31,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..effects.base import EffectBase, EffectParameter
-from ..effects.facts import EffectFacts, Scale, Words
+from ..effects.facts import EffectFacts, Scale, Words, plus_minus
 
 __all__ = ["PART", "SpeedGain"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"the rotors spin {plus_minus(value, ci, 1e2)} % faster per command (steady speed)"
 
 
 class SpeedGain(EffectBase):
@@ -49,7 +53,7 @@ class SpeedGain(EffectBase):
         upstream_of_speed=True,
         scales={"gain": Scale(lambda p: 0.01, "1 %: the references' own gain stays within a few "
                                              "per cent (module doc)")},
-        words={"gain": Words("steady speed per command", "%", 100.0)},
+        words={"gain": Words("steady speed per command", "%", 100.0, _phrase)},
     )
 
     def speed_factor(self, t, vbat=None):
