@@ -267,3 +267,45 @@ def test_what_can_be_fitted_does_not_depend_on_import_order():
                          check=True, env=dict(os.environ)).stdout.strip()
     assert out == ("['cable_payload', 'canted_rotor', 'drag_law', 'nominal_refit', "
                    "'speed_gain'] ['canted_rotor', 'nominal_refit', 'speed_gain']")
+
+
+#: collinear.describe of one reading on main at 42ad543 (model, key, value, 95 % half-width):
+#: the wording moved into the effects' facts (Words.phrase) word for word
+WORDED_42AD543 = [
+    ('crazyflie21', 'battery_sag.rate', 0.0123, 0.004,
+     'the rotors lose +37 ± 12 % speed per minute at a fixed command (74 % thrust per minute; a discharging battery)'),
+    ('crazyflie21', 'body_drag.cd_area', 0.0123, float("nan"),
+     'body drag sideways C_d A +123 cm² (30 mN, 8.3 % of the weight, at 2 m/s)'),
+    ('crazyflie21', 'mass_offset.mass', 0.0123, 0.004,
+     "+12 ± 4 g heavier (+33.2 % of the model's 37 g)"),
+    ('crazyflie21', 'motor_lag.time_constant', 0.0123, None,
+     'the rotors lag their commands by +12 ms (time constant)'),
+    ('crazyflie21', 'nominal_refit.drag', 0.0123, 0.004,
+     '+1.2 ± 0.4 % drag torque per Ω²'),
+    ('crazyflie21', 'thrust_mismatch.rotor_2', -0.5, 0.004,
+     'rotor_2 -50 ± 0.4 % thrust'),
+    ('crazyflie21', 'wind.gust', 3.7, None,
+     'wind: RMS of the gust per axis +3.7 m/s'),
+    ('physical', 'inertia_error.yy', -0.5, 0.004,
+     "I_yy -50 ± 0.4 % (0.003 kg m² instead of the model's 0.006 kg m²)"),
+    ('physical', 'rotor_drag.coefficient', 0.0123, 0.004,
+     'rotor drag in the rotor plane +22207 ± 7222 mN per m/s of air speed at the hover speed (2.7e+02 % of the weight at 1 m/s)'),
+]
+
+
+@pytest.mark.parametrize("model, key, value, ci, text", WORDED_42AD543)
+def test_readings_are_worded_as_before(model, key, value, ci, text):
+    from quadsim.gap.collinear import describe
+
+    ci = {} if ci is None else {key: ci}
+    assert describe(key.split(".")[0], {key: value}, ci, load_params(model)) == text
+
+
+def test_a_canted_rotor_is_worded_as_one_lean_before_the_rest():
+    from quadsim.gap.collinear import describe
+
+    values = {"canted_rotor.tilt_x": 0.03, "canted_rotor.tilt_y": -0.01, "wind.vx": 1.5,
+              "cable_payload.lean_x": 0.1, "mass_offset.mass": 0.004}
+    ci = {"canted_rotor.tilt_x": 0.01, "canted_rotor.tilt_y": 0.02}
+    assert describe("x", values, ci, load_params("crazyflie21"), {"canted_rotor.rotor": 3.0}) \
+        == "rotor 3's axis leans +1.8 ± 1.3 deg (towards body x +1.7 deg and y -0.57 deg): it pushes 2.87 mN sideways at hover (0.79 % of the weight), mean wind +1.5 m/s along world x, +4 g heavier (+10.8 % of the model's 37 g)"

@@ -280,7 +280,7 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     its own ``facts``; every fitted, fixed, per-rotor, voltage-log and no-off parameter and
     every key of its tables among its parameters (or its fit form's); a typical scale and
     words with a unit for each fitted parameter; scales positive and finite on every set in
-    ``params_sets``; ranges ordered (lower < upper) of a known kind with a source; spreads
+    ``params_sets`` (and a phrase, where declared, stating a number at that scale); ranges ordered (lower < upper) of a known kind with a source; spreads
     on a range where they take theirs from it."""
     out = []
     if "facts" not in vars(cls) or not isinstance(vars(cls)["facts"], EffectFacts):
@@ -312,6 +312,10 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
             value = scale.size(params) if scale is not None else 1.0
             if not (np.isfinite(value) and value > 0):
                 out.append(f"{cls.name}.{p}: typical scale {value!r} on {params.name}")
+            elif words is not None and words.phrase is not None:
+                text = words.phrase(p, value, 0.1 * value, params)
+                if not (isinstance(text, str) and any(ch.isdigit() for ch in text)):
+                    out.append(f"{cls.name}.{p}: phrase {text!r} states no number")
     for key, plausible in facts.ranges.items():
         if not plausible.lower < plausible.upper or plausible.kind not in RANGE_KINDS \
                 or not plausible.source.strip():

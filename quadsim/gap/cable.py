@@ -39,7 +39,7 @@ or above that frequency (turns, stops, a figure-8's reversals). A gentle flight 
 the mass, not the length (the answer then says so, and ``mass_offset`` ties with it).
 
 Prior (:func:`prior`; each range about two spreads either side of its centre, the rule of
-:func:`quadsim.gap.explanations._prior_sd`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
+:func:`quadsim.gap.explanations.prior_spreads`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
 drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload limit, Bitcraze
 datasheet; :mod:`quadsim.gap.priors`), centred inside that range rather than on "off" -- the
 reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit

@@ -57,6 +57,8 @@ __all__ = [
     "prior_spreads",
     "reference_delay_sd",
     "reference_determined",
+    "wind_readings",
+    "with_wind",
 ]
 
 # VBAT_SD (re-exported): the prior spread of a full battery voltage, a fraction of the
@@ -194,7 +196,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
         spread = [np.hypot(s_ref[k], prior_of(sd, k)) for k in keys]
         if group == "wind":
-            out.extend(_wind_readings(reference, [ref[k] for k in keys], spread))
+            out.extend(wind_readings(reference, [ref[k] for k in keys], spread))
             continue
         fixed = next(f for name, f, _ in reference.candidate.parts if name == group)
         out.append(_one(group, "", [(group, dict(fixed), fitted)], [ref[k] for k in keys],
@@ -269,7 +271,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
     if "wind" in groups and not reference.identified.get("rotor_drag.coefficient", True):
-        out = [_with_wind(e, reference) if e.name in DRAGS else e for e in out]
+        out = [with_wind(e, reference) if e.name in DRAGS else e for e in out]
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
@@ -336,7 +338,7 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 
 #: explanations that give the flight an air-speed load of its own (a drag, a translational
 #: lift): where the references do not identify their rotor drag (so their wind is no
-#: measured air force), each refits the shared wind with it (:func:`_with_wind`). Not where
+#: measured air force), each refits the shared wind with it (:func:`with_wind`). Not where
 #: the references' drag is identified: on Crazyflow and PyFlyt wind flights (their wind not
 #: the library's form) a body drag with the wind refitted is a superset of the wind reading
 #: and took it at 100 %. Both drags, not one: with only the rotor drag refitting the wind, it
@@ -348,7 +350,7 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 DRAGS = ("rotor_drag", "body_drag", "translational_lift")
 
 
-def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
+def with_wind(expl: Explanation, reference: Reference) -> Explanation:
     """``expl`` with the references' shared wind refitted under the calibration's own prior
     N(0, (5 m/s)^2) (:data:`quadsim.gap.priors.WIND_SD_MS`). Why: the
     references see a wind only through their own drag (drag coefficient x air speed); where
@@ -366,7 +368,7 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
                                replaces=expl.replaces + ("wind",), coupled=True)
 
 
-def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
+def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     """The flight's own wind, through the references' drag as their model has it, and --
     where that drag is a rotor drag (linear in air speed) -- through the same drag as a
     quadratic airframe drag, under either of its two laws (:mod:`quadsim.effects.body_drag`):
@@ -408,7 +410,7 @@ def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
 
 def quadratic_laws(reference: Reference) -> list[tuple[str, dict, float]]:
     """(variant, fixed values, C_d A in m^2) of the references' drag taken as a quadratic
-    airframe drag under each law (:func:`_wind_readings`); empty without a rotor drag. The
+    airframe drag under each law (:func:`wind_readings`); empty without a rotor drag. The
     law per body axis carries the references' vertical drag too, as its equivalent along
     body z (``cd_area_vertical``, :func:`quadsim.gap.calibrate.vertical_equivalent`): the law
     is the vehicle's, on every axis (:func:`law_replaces`)."""
@@ -428,7 +430,7 @@ def law_replaces(fixed: dict) -> tuple[str, ...]:
     return ("rotor_drag",) + (("body_drag",) if "cd_area_vertical" in fixed else ())
 
 
-#: the quadratic-drag wind variants (:func:`_wind_readings`): the law on the air speed and
+#: the quadratic-drag wind variants (:func:`wind_readings`): the law on the air speed and
 #: the law per body axis
 WIND_DRAG = "through the references' drag as a quadratic airframe drag"
 WIND_DRAG_AXES = "through the references' drag as a quadratic drag on each body axis"
@@ -454,3 +456,5 @@ _prior_sd = prior_spreads  # alias for other modules until integration
 _prior_of = prior_of  # alias for other modules until integration
 _own_effects = own_effects  # alias for other modules until integration
 _make = build_effect  # alias for other modules until integration
+_wind_readings = wind_readings  # alias for other modules until integration
+_with_wind = with_wind  # alias for other modules until integration

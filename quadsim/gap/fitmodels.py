@@ -105,7 +105,7 @@ class DragLaw(BodyDrag):
 
 
 #: library effect -> the class the diagnosis fits in its place (module doc)
-FIT_FORMS = MappingProxyType({"canted_rotor": CantedRotorFit, "cable_payload": CableSwing})
+FIT_FORMS = MappingProxyType({cls.name: cls for cls in (CantedRotorFit, CableSwing)})
 #: the diagnosis' own effects, not in the library (module doc)
 PSEUDO_EFFECTS = MappingProxyType({cls.name: cls for cls in (NominalRefit, SpeedGain, DragLaw)})
 #: every class the diagnosis fits in place of a name that is not the library's own
