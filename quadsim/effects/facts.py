@@ -280,7 +280,8 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     its own ``facts``; every fitted, fixed, per-rotor, voltage-log and no-off parameter and
     every key of its tables among its parameters (or its fit form's); a typical scale and
     words with a unit for each fitted parameter; scales positive and finite on every set in
-    ``params_sets`` (and a phrase, where declared, stating a number at that scale); ranges ordered (lower < upper) of a known kind with a source; spreads
+    ``params_sets`` (and a phrase, where declared, stating a number at that scale); ranges
+    ordered (lower < upper) of a known kind with a source; spreads
     on a range where they take theirs from it."""
     out = []
     if "facts" not in vars(cls) or not isinstance(vars(cls)["facts"], EffectFacts):

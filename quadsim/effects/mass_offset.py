@@ -60,7 +60,8 @@ class MassOffset(EffectBase):
 
     facts = EffectFacts(
         fitted=("mass",),
-        scales={"mass": Scale(lambda p: 0.05 * p.mass, "5 % of the vehicle's mass: a small payload")},
+        scales={"mass": Scale(lambda p: 0.05 * p.mass,
+                              "5 % of the vehicle's mass: a small payload")},
         windows={
             "mass": Window(lambda p: -0.5 * p.mass, lambda p: 2.0 * p.mass,
                            "plausible payloads for this vehicle: half of it lighter to 2x"),

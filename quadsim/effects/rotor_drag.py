@@ -109,7 +109,8 @@ class RotorDrag(EffectBase):
                          "quadratic",
             "wind": "fly the same path in both directions (wind is fixed in the world frame)"},
         words={"coefficient": Words("rotor drag in the rotor plane", "kg/rad", 1.0, _phrase),
-               "axial_coefficient": Words("rotor drag along the rotor axes", "kg/rad", 1.0, _phrase)},
+               "axial_coefficient": Words("rotor drag along the rotor axes", "kg/rad", 1.0,
+                                          _phrase)},
     )
 
     def loads(self, ctx):

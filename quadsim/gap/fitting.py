@@ -3,13 +3,16 @@
 For a candidate effect with values theta, every sample of every flight gives a residual
 (measured Newton–Euler wrench minus model wrench, :mod:`quadsim.gap.residual`, plus a rotor-speed
 channel when the log has commands), divided per channel by the noise scale ``sigma``. The
-effect's fittable parameters (:data:`FIT_SPEC`) are found with bounded
-``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at the solution,
-widened by the residuals' correlation time (the smoothed samples are not independent).
+effect's fittable parameters, their typical sizes and fit windows are what the effect declares
+(``facts``, :mod:`quadsim.effects.facts`; :data:`FIT_SPEC` is a read-only view) and are found
+with bounded ``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at
+the solution, widened by the residuals' correlation time (the smoothed samples are not
+independent).
 
 A *candidate* is a tuple of (effect name, fixed values, fitted parameter names). Some effects
-need a companion to be seen at all: ``wind`` acts only through drag, so the ``wind``
-candidate fits the mean wind together with the rotor-drag coefficient.
+need a companion to be seen at all (``facts.companions``): ``wind`` acts only through drag, so
+the ``wind`` candidate fits the mean wind together with the rotor-drag coefficient. The
+diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitmodels`.
 """
 
 from __future__ import annotations
@@ -167,13 +170,16 @@ FIT_SPEC = MappingProxyType({name: _fit_spec_entry(cls) for name, cls in FIT_EFF
 
 def candidates_for(params: VehicleParams, has_commands: bool,
                    has_vbat: bool = False) -> list[Candidate]:
-    """The candidate list for a vehicle: every effect of the library that the data can show.
+    """The candidate list for a vehicle: every effect of the library that the data can show,
+    in name order, as each declares it (``facts``).
 
-    ``motor_lag`` and ``battery_sag`` need commands: they act upstream of the measured rotor
-    speed, so they are fitted on the command -> speed channel only (with measured rotor
-    speeds they do not change the wrench); ``wind`` is fitted with rotor drag (wind alone
-    exerts no force); ``canted_rotor`` is one candidate per rotor (its index is discrete;
-    the diagnosis keeps the one that fits the training flights best)."""
+    An effect upstream of the measured rotor speed (``facts.upstream_of_speed``: a motor
+    lag, a battery) needs commands: it is fitted on the command -> speed channel only (with
+    measured rotor speeds it does not change the wrench); one with companions is fitted with
+    them (wind with the rotor drag: wind alone exerts no force); one with a discrete index
+    (``facts.one_per_rotor``: a canted rotor) is one candidate per rotor (the diagnosis keeps
+    the one that fits the training flights best); with a voltage log an effect fits its
+    ``facts.with_voltage_log`` parameters instead."""
     out = []
     for name in sorted(EFFECTS):
         facts = EFFECTS[name].facts

@@ -35,7 +35,8 @@ from ..effects.base import EffectBase
 if TYPE_CHECKING:
     from ..vehicle.params import VehicleParams
 
-__all__ = ["KEPT", "acting", "flight_memo", "identity", "kept", "memoised", "rotor_key", "wrench_key"]
+__all__ = ["KEPT", "acting", "flight_memo", "identity", "kept", "memoised", "rotor_key",
+           "wrench_key"]
 
 
 #: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
