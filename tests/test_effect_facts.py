@@ -13,7 +13,14 @@ import pytest
 from quadsim.core.errors import InputError
 from quadsim.effects import EFFECTS, facts_of
 from quadsim.effects.base import EffectBase, EffectParameter
-from quadsim.effects.facts import EffectFacts, PlausibleRange, Scale, Words, missing_facts
+from quadsim.effects.facts import (
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Words,
+    missing_facts,
+)
 from quadsim.vehicle.params import load_params
 
 SHIPPED = ("physical", "computational", "crazyflie21")
@@ -64,6 +71,21 @@ def test_a_new_effect_missing_facts_fails(shipped):
     assert problems == ["new_effect.k: typical scale 0.0 on physical",
                         ("new_effect.k: plausible range unordered, of unknown kind or without "
                          "a source")]
+
+
+def test_a_new_effect_with_readings_is_weighed_per_flight():
+    """Readings declared in an effect's facts are per-flight explanations without any table
+    in quadsim.gap: the registry's effects with readings, the six of 42ad543 first."""
+    from quadsim.gap.explanations import reading_effects
+
+    assert [cls.name for cls in reading_effects()] == [
+        "mass_offset", "com_offset", "thrust_curve", "translational_lift", "ground_effect",
+        "body_drag"]
+
+    class Read(_New):
+        facts = EffectFacts(readings=(Reading(("k",), coupled=True),))
+
+    assert missing_facts(Read) == ["new_effect.k: read without a prior spread"]
 
 
 def test_facts_of_gives_a_parameters_wording():

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import ALL, EffectFacts, Scale, Spread, Words, plus_minus
+from .facts import ALL, EffectFacts, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["BodyDrag", "area_scale"]
 
@@ -62,6 +62,7 @@ class BodyDrag(EffectBase):
 
     facts = EffectFacts(
         fitted=("cd_area", "cd_area_vertical"),
+        readings=(Reading(("cd_area", "cd_area_vertical")),),
         scales={p: Scale(area_scale, "a C_d A giving 10 % of the weight at 2 m/s")
                 for p in ("cd_area", "cd_area_vertical")},
         spreads={ALL: Spread(area_scale, "10 % of the weight at 2 m/s: a doubled drag")},

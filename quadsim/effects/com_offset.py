@@ -19,6 +19,7 @@ from .facts import (
     ALL,
     EffectFacts,
     PlausibleRange,
+    Reading,
     Scale,
     Spread,
     Window,
@@ -45,6 +46,7 @@ class ComOffset(EffectBase):
     #: z (the CoM below the rotor plane) acts only through forces in the rotor plane (drag)
     facts = EffectFacts(
         fitted=("x", "y", "z"),
+        readings=(Reading(("x", "y")),),
         scales={ALL: Scale(lambda p: 0.02 * arm_length(p), "2 % of the arm: a battery a few mm "
                                                           "off the centre")},
         windows={ALL: Window(lambda p: -0.5 * arm_length(p), lambda p: 0.5 * arm_length(p),

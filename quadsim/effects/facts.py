@@ -35,8 +35,8 @@ from .scales import (  # re-exported
     momentum_translational_lift,
 )
 
-__all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Scale",
-           "Spread", "Together", "Window", "Words", "arm_length", "missing_facts", "number",
+__all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Reading",
+           "Scale", "Spread", "Together", "Window", "Words", "arm_length", "missing_facts", "number",
            "plus_minus", "range_unit"]
 
 #: the key of a per-parameter mapping that applies to every parameter of the effect
@@ -131,6 +131,24 @@ def plus_minus(value: float, ci: float | None, scale: float, digits: str = ".2g"
 
 
 @dataclass(frozen=True)
+class Reading:
+    """One way a single flight may differ by this effect: an explanation the per-flight
+    evidence weighs (:func:`quadsim.gap.explanations.explanations_for`). ``fitted``: the
+    parameters it frees, centred on "off" with the effect's prior spreads (``spreads``);
+    ``variant``: its name beside the effect's; ``odds``: the readings of the effect sharing
+    its prior odds (each gets 1 / odds); ``coupled``: a parameter acts only through another
+    one's value (a payload's position through its mass), so it is fitted to convergence
+    after the others; ``kin``: for a coupled reading, the effects whose readings it extends
+    or mimics (fitted where one of them can matter)."""
+
+    fitted: tuple[str, ...]
+    variant: str = ""
+    odds: int = 1
+    coupled: bool = False
+    kin: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Companion:
     """An effect fitted together with this one (``effect``, its ``fitted`` parameters): wind
     exerts no force of its own, so it is fitted with the rotor-drag coefficient."""
@@ -161,6 +179,8 @@ class EffectFacts:
     ranges: Mapping[str, PlausibleRange] = field(default_factory=dict)
     #: prior spreads of a difference (a parameter without one: the evidence's own default)
     spreads: Mapping[str, Spread] = field(default_factory=dict)
+    #: the per-flight readings of the effect (:class:`Reading`)
+    readings: tuple[Reading, ...] = ()
     #: effects fitted with this one (:class:`Companion`)
     companions: tuple[Companion, ...] = ()
     #: acts upstream of the measured rotor speed (on the command -> speed map only), so it
@@ -294,7 +314,7 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     def exists(p):
         return p == ALL or p in known or (pattern and p == pattern)
 
-    names = (list(fitted) + list(facts.fixed) + list(facts.with_voltage_log)
+    names = (list(fitted) + [p for r in facts.readings for p in r.fitted] + list(facts.fixed) + list(facts.with_voltage_log)
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
              + [facts.one_per_rotor] * bool(facts.one_per_rotor) + list(facts.nuisance)
@@ -330,6 +350,12 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     for key, scale in facts.scales.items():
         if not scale.reason.strip():
             out.append(f"{cls.name}.{key}: scale without a reason")
+    for r in facts.readings:
+        if not r.fitted or r.odds < 1 or (r.kin and not r.coupled):
+            out.append(f"{cls.name}: reading {r.variant!r} frees nothing, has odds < 1 or kin "
+                       "without being coupled")
+        out += [f"{cls.name}.{p}: read without a prior spread" for p in r.fitted
+                if facts.spreads.get(p, facts.spreads.get(ALL)) is None]
     for c in facts.companions:
         if not c.fitted:
             out.append(f"{cls.name}: companion {c.effect} frees nothing")

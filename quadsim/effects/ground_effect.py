@@ -25,7 +25,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, Scale, Spread, Words, plus_minus
+from .facts import EffectFacts, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]
 
@@ -59,6 +59,7 @@ class GroundEffect(EffectBase):
 
     facts = EffectFacts(
         fitted=("gain",),
+        readings=(Reading(("gain",)),),
         scales={"gain": Scale(lambda p: 1.0, "the textbook curve")},
         spreads={"gain": Spread(lambda p: 1.0, "Cheeseman & Bennett (1955) ground effect: gain "
                                                "1 is the textbook curve")},

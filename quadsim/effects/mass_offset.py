@@ -18,7 +18,17 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, arm_length, plus_minus
+from .facts import (
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Spread,
+    Window,
+    Words,
+    arm_length,
+    plus_minus,
+)
 
 __all__ = ["MassOffset", "add_point_mass"]
 
@@ -60,6 +70,12 @@ class MassOffset(EffectBase):
 
     facts = EffectFacts(
         fitted=("mass",),
+        # a payload at the centre, or off it (its mass and where it sits: it also moves the
+        # CoM; the position acts only through the mass, so the fit is coupled); the two
+        # share the effect's prior
+        readings=(Reading(("mass",), odds=2),
+                  Reading(("mass", "x", "y"), "off the centre", odds=2, coupled=True,
+                          kin=("mass_offset", "com_offset", "thrust_curve"))),
         scales={"mass": Scale(lambda p: 0.05 * p.mass,
                               "5 % of the vehicle's mass: a small payload")},
         windows={

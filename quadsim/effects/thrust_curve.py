@@ -25,7 +25,7 @@ import numpy as np
 
 from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Window, Words, plus_minus
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Window, Words, plus_minus
 from .scales import hover_thrust_per_speed
 
 __all__ = ["CURVE_QUADRATIC_SD", "ThrustCurve", "curve_quadratic_bounds", "curve_quadratic_sd",
@@ -92,6 +92,7 @@ class ThrustCurve(EffectBase):
 
     facts = EffectFacts(
         fitted=("linear",),
+        readings=(Reading(("linear",)),),
         scales={"linear": Scale(lambda p: 0.05 * p.thrust_factor * p.max_speed,
                                 "5 % of b Omega_max: a few % of the thrust at the top speed"),
                 "quadratic": Scale(lambda p: 0.1 * p.thrust_factor,

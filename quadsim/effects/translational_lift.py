@@ -35,7 +35,7 @@ import numpy as np
 
 from ..core.frames import rotate_inverse
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 from .scales import momentum_translational_lift
 
 __all__ = ["TranslationalLift", "momentum_translational_lift", "translational_lift_thrust"]
@@ -74,6 +74,7 @@ class TranslationalLift(EffectBase):
 
     facts = EffectFacts(
         fitted=("k_h",),
+        readings=(Reading(("k_h",)),),
         scales={"k_h": Scale(momentum_translational_lift, "the momentum-theory lift")},
         ranges={"k_h": PlausibleRange(
             0.0, 2.0, "lift",

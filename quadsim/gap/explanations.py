@@ -38,7 +38,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..effects.battery_sag import VBAT_SD
+from ..effects.body_drag import BodyDrag
+from ..effects.com_offset import ComOffset
 from ..effects.facts import ALL
+from ..effects.ground_effect import GroundEffect
+from ..effects.mass_offset import MassOffset
+from ..effects.thrust_curve import ThrustCurve
+from ..effects.translational_lift import TranslationalLift
 from . import cable
 from .calibrate import SHARED, Reference
 from .fitmodels import FIT_EFFECTS, build_effect
@@ -176,6 +182,20 @@ def _one(name, variant, parts, mean, sd, **kw) -> Explanation:
                        tuple(map(float, sd)), **kw)
 
 
+#: effects whose declared readings (``facts.readings``) come first, in this order (the order
+#: the evidence lists and weighs them in); any other effect with readings follows in the
+#: registry's order (:func:`reading_effects`)
+READING_ORDER = (MassOffset, ComOffset, ThrustCurve, TranslationalLift, GroundEffect, BodyDrag)
+
+
+def reading_effects() -> list[type]:
+    """The effect classes with declared per-flight readings: :data:`READING_ORDER`, then the
+    others of :data:`quadsim.gap.fitmodels.FIT_EFFECTS` in its order."""
+    rest = [cls for cls in FIT_EFFECTS.values()
+            if cls.facts.readings and cls not in READING_ORDER]
+    return [cls for cls in READING_ORDER if cls.facts.readings] + rest
+
+
 def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
     """Every explanation the flight's data can show (``names``: restrict to these effects)."""
     params, sd = reference.params, prior_spreads(reference.params)
@@ -205,24 +225,13 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             out[-1] = dataclasses.replace(out[-1], log_prior=-np.log(2.0))
             out.append(_motor_change(reference, ref[keys[0]], spread[0],
                                      np.hypot(s_ref[SPEED_GAIN_KEY], MOTOR_GAIN_SD)))
-    # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
-    # the position acts only through the mass, so the fit is coupled); the two variants
-    # share the effect's prior
-    payload_kin = ("mass_offset", "com_offset", "thrust_curve")
-    for variant, fitted in (("", ("mass",)), ("off the centre", ("mass", "x", "y"))):
-        keys = [f"mass_offset.{p}" for p in fitted]
-        off = len(fitted) > 1
-        out.append(_one("mass_offset", variant, [("mass_offset", {}, fitted)],
-                        [0.0] * len(keys), [sd[k] for k in keys], log_prior=-np.log(2.0),
-                        coupled=off, kin=payload_kin if off else ()))
-    one = [("com_offset", ("x", "y")),
-           ("thrust_curve", ("linear",)), ("translational_lift", ("k_h",)),
-           ("ground_effect", ("gain",)),
-           ("body_drag", ("cd_area", "cd_area_vertical"))]
-    for name, fitted in one:
-        keys = [f"{name}.{p}" for p in fitted]
-        out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
-                        [prior_of(sd, k) for k in keys]))
+    for cls in reading_effects():          # each effect's declared readings (facts.readings)
+        for reading in cls.facts.readings:
+            keys = [f"{cls.name}.{p}" for p in reading.fitted]
+            out.append(_one(cls.name, reading.variant, [(cls.name, {}, reading.fitted)],
+                            [0.0] * len(keys), [prior_of(sd, k) for k in keys],
+                            log_prior=-np.log(float(reading.odds)) if reading.odds > 1 else 0.0,
+                            coupled=reading.coupled, kin=reading.kin))
     change = ["change", "alpha"] if reference.rotor else ["change"]
     alpha, alpha_sd = _alpha_prior(reference, sd)
     out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
