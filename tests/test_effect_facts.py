@@ -98,6 +98,11 @@ def test_facts_of_gives_a_parameters_wording():
         facts_of("body_drag.nothing")
     with pytest.raises(InputError):
         facts_of("nothing.k")
+    from quadsim.gap.fitmodels import parameter_facts_for
+
+    gain = parameter_facts_for("speed_gain.gain")
+    assert (gain.unit, gain.words.unit, gain.words.scale) == ("1", "%", 100.0)
+    assert parameter_facts_for("canted_rotor.tilt_x").words.unit == "deg"
 
 
 #: fitting.candidates_for(crazyflie21, has_commands, has_vbat) on main at 42ad543: name,

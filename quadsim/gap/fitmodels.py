@@ -27,12 +27,21 @@ from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectBase, EffectParameter
 from ..effects.body_drag import BodyDrag
 from ..effects.canted_rotor import CantedRotor
-from ..effects.facts import EffectFacts, PlausibleRange, Scale, Words, plus_minus
+from ..effects.facts import (
+    EffectFacts,
+    ParameterFacts,
+    PlausibleRange,
+    Scale,
+    Words,
+    parameter_facts,
+    plus_minus,
+)
 from .cable import CableSwing
 from .speed_gain import SpeedGain
 
 __all__ = ["FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS", "PSEUDO_EFFECTS", "CantedRotorFit",
-           "DragLaw", "NominalRefit", "build_effect", "effect_class", "facts_for"]
+           "DragLaw", "NominalRefit", "build_effect", "effect_class", "facts_for",
+           "parameter_facts_for"]
 
 
 class CantedRotorFit(CantedRotor):
@@ -122,6 +131,15 @@ def effect_class(name: str) -> type:
 def facts_for(name: str) -> EffectFacts:
     """The diagnosis facts of effect ``name`` (library or pseudo-effect)."""
     return FIT_EFFECTS[name].facts
+
+
+def parameter_facts_for(parameter: str) -> ParameterFacts:
+    """The facts of ``effect.parameter`` (``"speed_gain.gain"``) of any effect the diagnosis
+    fits, library or its own: unit, meaning, typical scale, plausible range, words
+    (:class:`quadsim.effects.facts.ParameterFacts`; :func:`quadsim.effects.facts_of` for
+    the library alone). KeyError for an unknown effect or parameter."""
+    name, _, key = parameter.partition(".")
+    return parameter_facts(FIT_EFFECTS[name], key)
 
 
 def build_effect(name: str, values: dict):
