@@ -75,12 +75,12 @@ def test_a_new_effect_missing_facts_fails(shipped):
 
 def test_a_new_effect_with_readings_is_weighed_per_flight():
     """Readings declared in an effect's facts are per-flight explanations without any table
-    in quadsim.gap: the registry's effects with readings, the six of 42ad543 first."""
+    in quadsim.gap: the registry's effects with readings, in the order of 42ad543."""
     from quadsim.gap.explanations import reading_effects
 
     assert [cls.name for cls in reading_effects()] == [
         "mass_offset", "com_offset", "thrust_curve", "translational_lift", "ground_effect",
-        "body_drag"]
+        "body_drag", "thrust_factor", "thrust_mismatch", "canted_rotor"]
 
     class Read(_New):
         facts = EffectFacts(readings=(Reading(("k",), coupled=True),))

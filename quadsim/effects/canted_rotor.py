@@ -34,7 +34,17 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import EffectBase, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Together, Words, plus_minus
+from .facts import (
+    ALL,
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Spread,
+    Together,
+    Words,
+    plus_minus,
+)
 
 __all__ = ["CantedRotor", "tilt_axis"]
 
@@ -81,6 +91,7 @@ class CantedRotor(EffectBase):
     facts = EffectFacts(
         fitted=("tilt_x", "tilt_y"),
         one_per_rotor="rotor",
+        readings=(Reading(("tilt_x", "tilt_y"), "rotor {}", per_rotor=True),),
         fit_parameters=(
             EffectParameter("tilt_x", "rad", 0.0, -0.3, 0.3, "axis lean towards body +x"),
             EffectParameter("tilt_y", "rad", 0.0, -0.3, 0.3, "axis lean towards body +y"),

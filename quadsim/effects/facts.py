@@ -138,14 +138,19 @@ class Reading:
     ``variant``: its name beside the effect's; ``odds``: the readings of the effect sharing
     its prior odds (each gets 1 / odds); ``coupled``: a parameter acts only through another
     one's value (a payload's position through its mass), so it is fitted to convergence
-    after the others; ``kin``: for a coupled reading, the effects whose readings it extends
-    or mimics (fitted where one of them can matter)."""
+    after the others; ``kin``: the effects whose readings it extends or mimics (a coupled
+    reading is fitted where one of them can matter); ``per_rotor``: one reading per rotor k,
+    "{}" in ``fitted`` and ``variant`` standing for k (the effect's ``one_per_rotor`` index
+    fixed at k), the rotors sharing the effect's prior odds; ``rotor_speeds``: only where
+    the references log rotor speeds (True), only where they do not (False), always (None)."""
 
     fitted: tuple[str, ...]
     variant: str = ""
     odds: int = 1
     coupled: bool = False
     kin: tuple[str, ...] = ()
+    per_rotor: bool = False
+    rotor_speeds: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -166,6 +171,10 @@ class EffectFacts:
     fitted: tuple[str, ...] = ()
     #: a per-rotor name pattern ("rotor_{}"): the candidate frees rotor_1 .. rotor_R instead
     per_rotor: str = ""
+    #: the motor's speed-per-command exponent under a propeller's load: a reading's prior of
+    #: it is what the references' command -> speed map implies
+    #: (:func:`quadsim.gap.explanations.explanations_for`)
+    load_exponent: str = ""
     #: for a per-rotor effect, the uniform parameter (``effect.parameter``) the rotors' mean
     #: is judged as: every rotor equally weak is a uniform change, not R damaged ones
     uniform_as: str = ""
@@ -318,7 +327,8 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
              + [facts.one_per_rotor] * bool(facts.one_per_rotor) + list(facts.nuisance)
-             + list(facts.together.parameters if facts.together else ()))
+             + list(facts.together.parameters if facts.together else ())
+             + [facts.load_exponent] * bool(facts.load_exponent))
     for table in (facts.scales, facts.windows, facts.ranges, facts.spreads, facts.words):
         names += list(table)
     out += [f"{cls.name}.{p}: not a parameter" for p in dict.fromkeys(names) if not exists(p)]
@@ -351,11 +361,11 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
         if not scale.reason.strip():
             out.append(f"{cls.name}.{key}: scale without a reason")
     for r in facts.readings:
-        if not r.fitted or r.odds < 1 or (r.kin and not r.coupled):
-            out.append(f"{cls.name}: reading {r.variant!r} frees nothing, has odds < 1 or kin "
-                       "without being coupled")
+        if not r.fitted or r.odds < 1:
+            out.append(f"{cls.name}: reading {r.variant!r} frees nothing or has odds < 1")
         out += [f"{cls.name}.{p}: read without a prior spread" for p in r.fitted
-                if facts.spreads.get(p, facts.spreads.get(ALL)) is None]
+                if p != facts.load_exponent
+                and facts.spreads.get(p, facts.spreads.get(ALL)) is None]
     for c in facts.companions:
         if not c.fitted:
             out.append(f"{cls.name}: companion {c.effect} frees nothing")

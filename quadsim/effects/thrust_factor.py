@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["ThrustFactor"]
 
@@ -60,6 +60,11 @@ class ThrustFactor(EffectBase):
 
     facts = EffectFacts(
         fitted=("change",),
+        load_exponent="alpha",
+        # with rotor speeds logged the propeller's load moves the speed per command too
+        readings=(Reading(("change",), kin=("mass_offset", "thrust_curve"), rotor_speeds=False),
+                  Reading(("change", "alpha"), coupled=True, kin=("mass_offset", "thrust_curve"),
+                          rotor_speeds=True)),
         scales={"change": Scale(lambda p: 0.05, "5 %: a propeller batch or the air's density"),
                 "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
         ranges={"change": PlausibleRange(

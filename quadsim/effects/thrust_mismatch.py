@@ -32,7 +32,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import MAX_ROTORS, EffectBase, EffectLoads, EffectParameter
-from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
+from .facts import ALL, EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]
 
@@ -57,6 +57,18 @@ class ThrustMismatch(EffectBase):
     facts = EffectFacts(
         per_rotor="rotor_{}",
         uniform_as="thrust_factor.change",
+        load_exponent="alpha",
+        # one propeller: its thrust and drag torque; with rotor speeds logged also as a
+        # reading of its own in which the rotor's command gives (1 + e)^-alpha of its speed
+        # (the motor's load). That one is coupled (alpha acts through the deviation); its kin
+        # is the plain reading of the same rotor. Why two: with alpha in the only reading, a
+        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
+        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
+        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
+        readings=(Reading(("rotor_{}",), "rotor {}", per_rotor=True),
+                  Reading(("rotor_{}", "alpha"), "rotor {}, with its speed per command",
+                          per_rotor=True, coupled=True, kin=("thrust_mismatch",),
+                          rotor_speeds=True)),
         scales={"rotor_{}": Scale(lambda p: 0.05, "5 %: one worn or chipped propeller"),
                 "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
         ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",

@@ -39,11 +39,14 @@ import numpy as np
 
 from ..effects.battery_sag import VBAT_SD
 from ..effects.body_drag import BodyDrag
+from ..effects.canted_rotor import CantedRotor
 from ..effects.com_offset import ComOffset
 from ..effects.facts import ALL
 from ..effects.ground_effect import GroundEffect
 from ..effects.mass_offset import MassOffset
 from ..effects.thrust_curve import ThrustCurve
+from ..effects.thrust_factor import ThrustFactor
+from ..effects.thrust_mismatch import ThrustMismatch
 from ..effects.translational_lift import TranslationalLift
 from . import cable
 from .calibrate import SHARED, Reference
@@ -185,15 +188,40 @@ def _one(name, variant, parts, mean, sd, **kw) -> Explanation:
 #: effects whose declared readings (``facts.readings``) come first, in this order (the order
 #: the evidence lists and weighs them in); any other effect with readings follows in the
 #: registry's order (:func:`reading_effects`)
-READING_ORDER = (MassOffset, ComOffset, ThrustCurve, TranslationalLift, GroundEffect, BodyDrag)
+READING_ORDER = (MassOffset, ComOffset, ThrustCurve, TranslationalLift, GroundEffect, BodyDrag,
+                 ThrustFactor, ThrustMismatch, CantedRotor)
 
 
 def reading_effects() -> list[type]:
     """The effect classes with declared per-flight readings: :data:`READING_ORDER`, then the
     others of :data:`quadsim.gap.fitmodels.FIT_EFFECTS` in its order."""
-    rest = [cls for cls in FIT_EFFECTS.values()
-            if cls.facts.readings and cls not in READING_ORDER]
+    first = {cls.name for cls in READING_ORDER}
+    rest = [cls for name, cls in FIT_EFFECTS.items()
+            if cls.facts.readings and name not in first]
     return [cls for cls in READING_ORDER if cls.facts.readings] + rest
+
+
+def _applicable(cls: type, reference: Reference) -> list:
+    """``cls``'s readings that the references' logs allow (``Reading.rotor_speeds``)."""
+    return [r for r in cls.facts.readings
+            if r.rotor_speeds is None or r.rotor_speeds == bool(reference.rotor)]
+
+
+def _reading(cls: type, reading, sd: dict, alpha: tuple[float, float], *,
+             rotor: int | None = None, log_prior: float | None = None) -> Explanation:
+    """The explanation of ``reading`` of effect ``cls`` (rotor ``rotor`` of a per-rotor one):
+    every parameter centred on "off" with its prior spread, the load exponent on the
+    references' (``alpha``: mean, spread, :func:`_alpha_prior`)."""
+    name, facts = cls.name, cls.facts
+    fitted = tuple(p.format(rotor) for p in reading.fitted) if rotor else reading.fitted
+    fixed = {facts.one_per_rotor: float(rotor)} if rotor and facts.one_per_rotor else {}
+    exponent = [p == facts.load_exponent for p in fitted]
+    if log_prior is None:
+        log_prior = -np.log(float(reading.odds)) if reading.odds > 1 else 0.0
+    return _one(name, reading.variant.format(rotor) if rotor else reading.variant,
+                [(name, fixed, fitted)], [alpha[0] if e else 0.0 for e in exponent],
+                [alpha[1] if e else prior_of(sd, f"{name}.{p}") for p, e in zip(fitted, exponent)],
+                log_prior=log_prior, coupled=reading.coupled, kin=reading.kin)
 
 
 def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
@@ -225,43 +253,17 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             out[-1] = dataclasses.replace(out[-1], log_prior=-np.log(2.0))
             out.append(_motor_change(reference, ref[keys[0]], spread[0],
                                      np.hypot(s_ref[SPEED_GAIN_KEY], MOTOR_GAIN_SD)))
-    for cls in reading_effects():          # each effect's declared readings (facts.readings)
-        for reading in cls.facts.readings:
-            keys = [f"{cls.name}.{p}" for p in reading.fitted]
-            out.append(_one(cls.name, reading.variant, [(cls.name, {}, reading.fitted)],
-                            [0.0] * len(keys), [prior_of(sd, k) for k in keys],
-                            log_prior=-np.log(float(reading.odds)) if reading.odds > 1 else 0.0,
-                            coupled=reading.coupled, kin=reading.kin))
-    change = ["change", "alpha"] if reference.rotor else ["change"]
-    alpha, alpha_sd = _alpha_prior(reference, sd)
-    out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
-                    [0.0, alpha][:len(change)],
-                    [sd["thrust_factor.change"], alpha_sd][:len(change)],
-                    coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
+    # each effect's declared readings (facts.readings): the whole-vehicle ones, then per rotor
+    alpha = _alpha_prior(reference, sd)
+    for cls in reading_effects():
+        out += [_reading(cls, r, sd, alpha) for r in _applicable(cls, reference)
+                if not r.per_rotor]
     rotors = params.rotor_count
-    for k in range(rotors):
-        # one propeller: its thrust and drag torque; with commands logged also as a reading
-        # of its own in which the rotor's command gives (1 + e)^-alpha of its speed (the
-        # motor's load, thrust_factor's alpha). That one is coupled (alpha acts through the
-        # deviation); its kin is the plain reading of the same rotor: it is fitted where
-        # that one matters (screen._kin_matters). Why two: with alpha in the only reading, a
-        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
-        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
-        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
-        variants = [((f"rotor_{k + 1}",), f"rotor {k + 1}")]
-        if reference.rotor:
-            variants.append(((f"rotor_{k + 1}", "alpha"),
-                             f"rotor {k + 1}, with its speed per command"))
-        for fitted, variant in variants:
-            out.append(_one("thrust_mismatch", variant, [("thrust_mismatch", {}, fitted)],
-                            [0.0, alpha][:len(fitted)],
-                            [sd["thrust_mismatch"], alpha_sd][:len(fitted)],
-                            log_prior=-np.log(rotors * len(variants)),
-                            coupled=len(fitted) > 1,
-                            kin=("thrust_mismatch",) if len(fitted) > 1 else ()))
-        out.append(_one("canted_rotor", f"rotor {k + 1}",
-                        [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
-                        [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
+    for k in range(1, rotors + 1):
+        for cls in reading_effects():
+            mine = [r for r in _applicable(cls, reference) if r.per_rotor]
+            out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * len(mine)))
+                    for r in mine]
     # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
     out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)],
                     *cable.prior(params)))
