@@ -51,6 +51,7 @@ from .evidence import evaluate, explanations_for
 from .judge import channel_names, judge
 from .residual import DEFAULT_WINDOW_S
 from .result import Diagnosis, Verdict
+from .traces import flight_series
 from .words import batch_answer
 
 __all__ = ["MIN_REFERENCE", "diagnose_per_flight", "judge_one", "reference_summary",
@@ -172,7 +173,8 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     return dataclasses.replace(
         verdict, answer=words, drag_law=None if law is None else law.variant,
         envelope=None if place is None else place.to_json(),
-        signal_delays_ms=flight.delays_ms,
+        signal_delays_ms=flight.delays_ms, series=flight_series(states, reference, rows,
+                                                                name=flight.name, memo=memo),
         notes=verdict.notes + tuple(delay_notes([flight])))
 
 
