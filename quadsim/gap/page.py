@@ -44,7 +44,7 @@ _CSS = (
     "table{border-collapse:collapse;margin:6px 0 10px}"
     "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}"
     "th{background:#f7f7f7;font-weight:600;font-size:.92em}"
-    "td.name{white-space:nowrap}td.value{white-space:nowrap;text-align:right}"
+    "td.name{white-space:nowrap}td.wrap{white-space:normal}td.value{white-space:nowrap;text-align:right}"
     "td.words{min-width:200px;max-width:480px}.key{font-size:.85em;color:#555;margin-top:0}"
     ".effect{color:#1f77b4}.no_significant_gap{color:#2ca02c}.unexplained{color:#d62728}"
     ".refused{color:#7f7f7f}figure{margin:8px 0}svg{max-width:100%;height:auto}"
@@ -231,10 +231,42 @@ def _flight_section(f) -> str:
     return "".join(parts)
 
 
+# --- shared symptoms ----------------------------------------------------------------------
+
+def _symptoms(flights) -> str:
+    """Flights whose largest mean residual against the reference model (``symptom``, one
+    sigma or more) lies on the same channel with the same sign, two or more of them: one
+    row per symptom, its range, and the flights per verdict."""
+    groups: dict[tuple, list] = {}
+    for f in flights:
+        s = f.get("symptom") or {}
+        if s and f["outcome"] != "refused" and s.get("sigmas", 0) >= 1.0:
+            groups.setdefault((s["channel"], s["sign"]), []).append(f)
+    shared = {key: members for key, members in groups.items() if len(members) >= 2}
+    rows = []
+    for (channel, sign), members in sorted(shared.items(), key=lambda kv: (-len(kv[1]), kv[0])):
+        values = sorted(members, key=lambda f: f["symptom"]["value"])
+        span = values[0]["symptom"]["text"]
+        if len(values) > 1 and values[-1]["symptom"]["text"] != span:
+            span += f" .. {values[-1]['symptom']['text'].split(' ', 1)[-1]}"
+        verdicts: dict[str, list[str]] = {}
+        for f in members:
+            verdicts.setdefault(f["verdict"], []).append(_short(f["file"]))
+        judged = "; ".join(f"{v}: {', '.join(names)}" for v, names in
+                           sorted(verdicts.items(), key=lambda kv: (-len(kv[1]), kv[0])))
+        rows.append([_name(f"{channel} {sign}"), _Cell(f"{len(members)} flights"),
+                     _Cell(span), _name(judged, "wrap")])
+    if not rows:
+        return ""
+    return ("<h2>Shared symptoms</h2><p>Flights whose largest mean residual against the "
+            "reference model lies on the same channel with the same sign, and what each was "
+            "judged.</p>" + _table(["symptom", "flights", "range", "verdicts"], rows))
+
+
 # --- delays --------------------------------------------------------------------------------
 
 _DELAY = re.compile(r"^(.*?): signal delays vs motion capture: (.*?) \(estimated")
-_UNRESOLVED = re.compile(r"^(.*?): (\w+): delay not resolvable")
+_UNRESOLVED = re.compile(r"^(.*?): (\w+):? delay not resolvable")
 _PAIR = re.compile(r"(\w+) ([+-]?\d+(?:\.\d+)?) ms")
 
 
@@ -325,7 +357,7 @@ def _per_flight(result) -> list[str]:
             f"({len(result.get('reference', []))} reference flights)</p>",
             f"<p>{_e(_self_check(model))}</p></div>",
             _table(_FIRST_HEAD, _first_screen_rows(flights)),
-            f'<p class="key">{_e(_FIRST_KEY)}</p>']
+            f'<p class="key">{_e(_FIRST_KEY)}</p>', _symptoms(flights)]
     judged = [f for f in flights if f["outcome"] != "refused"]
     shares = {f["file"]: s for f in judged if (s := _share(f)) is not None}
     if len(judged) > 1 and hasattr(judged[0], "outcome"):
