@@ -9,6 +9,7 @@ import re
 import types
 import warnings
 from html.parser import HTMLParser
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,7 +30,10 @@ def _series(name: str, before, after, seed: int = 0, n: int = 500) -> Series:
     per channel exactly."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * 0.01
-    states = types.SimpleNamespace(velocity=rng.normal(size=(n, 3)),
+    states = types.SimpleNamespace(t=t, position=np.zeros((n, 3)),
+                                   velocity=rng.normal(size=(n, 3)),
+                                   quat=np.tile([1.0, 0, 0, 0], (n, 1)),
+                                   body_rate=np.zeros((n, 3)),
                                    rotor_speed=2000 + 50 * rng.normal(size=(n, 4)))
     params = types.SimpleNamespace(thrust_factor=1e-8)
     noise = rng.normal(size=(n, len(CHANNELS)))
@@ -321,3 +325,32 @@ def test_the_series_shows_the_payload_before_and_not_after(judged):
     assert abs(float(np.mean(s.after[:, fz]))) < 0.2 * abs(expected)
     share = s.share()
     assert share.before[fz] > 5 and share.after[fz] < 2 and share.removed > 0.9
+
+
+def test_the_recording_carries_the_same_series(result):
+    from quadsim.gap.recording import recording
+
+    kw = recording(result)
+    judged = [f for f in result.flights if f.series is not None]
+    assert sorted(kw["trajectories"]) == sorted(Path(f.file).name for f in judged)
+    assert len(kw["residuals"]) == 6 * len(judged)
+    t, values, labels = kw["residuals"]["Fz flight_110.csv.gz"]
+    series = judged[0].series
+    assert labels == ["before", "after", "band +", "band -"]
+    assert np.array_equal(values[:, 0], series.before[:, 2])
+    assert np.array_equal(values[:, 1], series.after[:, 2])
+    assert np.allclose(values[:, 2], 1.96 * SIGMA[2]) and np.allclose(values[:, 3],
+                                                                      -1.96 * SIGMA[2])
+
+
+@pytest.mark.skipif(__import__("shutil").which("chromium") is None,
+                    reason="no Chromium on the PATH")
+def test_the_page_renders_in_a_headless_browser(result, tmp_path):
+    from benchmarks.report_screenshot import render
+
+    html = tmp_path / "r.html"
+    html.write_text(page(result), encoding="utf-8")
+    png = render(html, tmp_path / "r.png", height=900).read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    assert (width, height) == (1400, 900)
