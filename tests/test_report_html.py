@@ -225,7 +225,7 @@ def test_every_reading_named_with_its_magnitude_and_delays_in_one_table(result):
         in "".join(parsed.text)
     delays = next(h for h in parsed.heads if h[:2] == ["flight", "role"])
     assert delays == ["flight", "role", "accel (ms)", "gyro (ms)", "rotor (ms)"]
-    assert "not resolvable" in cells and "-5.7 +- 0.1 ms" in cells
+    assert "not resolvable" in cells and "-5.7 ± 0.1 ms" in cells
     outside = "".join(parsed.text)
     assert "signal delays vs motion capture:" not in outside    # not repeated in the notes
     # the reference model with a unit in every value; an undetermined value not printed
@@ -274,9 +274,13 @@ def test_held_out_page_draws_the_held_out_flight():
                        train=("a", "b"), holdout=("h",), series=series,
                        effects=({"name": "mass_offset", "probability": 1.0, "reduction": 0.9,
                                  "params": {"mass_offset.mass": 0.006},
-                                 "ci": {"mass_offset.mass": 0.0004}},))
+                                 "ci": {"mass_offset.mass": 0.0004}},),
+                       where={"kstep_before": {"0.1": {"position_rms_m": 0.02,
+                                                       "attitude_rms_rad": 0.05}},
+                              "kstep_after": {"0.1": {"position_rms_m": 0.01,
+                                                      "attitude_rms_rad": 0.04}}})
     parsed = _parse(page(result))
-    assert parsed.svgs == 2
+    assert parsed.svgs == 3          # against time, against speed and thrust, k-step
     for _, css, text in parsed.cells:
         if "name" not in css.split() and re.search(r"\d", text):
             assert UNIT.search(text), text

@@ -219,7 +219,7 @@ def _flight_section(f) -> str:
         parts.append(_figure(plots.residual_time(series, series.sigma),
                              f"{name}: residual force and torque against time, before the "
                              "answer (the reference model) and after it (the answer fitted), "
-                             "over the references' 95 % band (+-1.96 x their RMS)."))
+                             "over the references' 95 % band (±1.96 x their RMS)."))
         parts.append(_figure(plots.residual_against(series, series.sigma),
                              f"{name}: where the gap lives: the mean residual in bins of "
                              "speed and of collective thrust, on the three channels with the "
@@ -308,8 +308,8 @@ def _delays(result) -> str:
             _Cell(row[s]) if s in row and row[s].endswith("ms") else _name(row.get(s, "-"))
             for s in signals])
     if ref:
-        rows.append([_name("references"), _name("mean +- sd")] + [
-            _Cell(f"{ref[s]['mean']:+.1f} +- {ref[s]['sd']:.1f} ms") if s in ref else
+        rows.append([_name("references"), _name("mean ± sd")] + [
+            _Cell(f"{ref[s]['mean']:+.1f} ± {ref[s]['sd']:.1f} ms") if s in ref else
             _name("-") for s in signals])
     return ("<h2>Signal delays against motion capture</h2><p>Estimated per log (positive: "
             "the signal lags); a gyro delay of 1.5 samples or more is shifted out before "
@@ -344,7 +344,7 @@ def _reference_model(model: dict) -> str:
             + _table(["shared parameter", "value", "standard error", "scatter between "
                       "flights"], rows)
             + "<p>The references' residual RMS per channel (the band in the figures is "
-              "+-1.96 times it):</p>" + _table(["channel", "residual RMS"], noise))
+              "±1.96 times it):</p>" + _table(["channel", "residual RMS"], noise))
 
 
 # --- the page ------------------------------------------------------------------------------
@@ -390,7 +390,7 @@ def _held_out(result) -> list[str]:
                             "floor (the training flights' RMS)", "at the floor"], rows))
     ranking = []
     for e in result.get("effects", [])[:8]:
-        params = ", ".join(f"{k} = {x:.3g} +- {e['ci'].get(k, float('nan')):.2g} {_unit(k)}"
+        params = ", ".join(f"{k} = {x:.3g} ± {e['ci'].get(k, float('nan')):.2g} {_unit(k)}"
                            for k, x in e.get("params", {}).items())
         ranking.append([_name(e["name"]), _Cell(_pct(e.get("probability"))),
                         _Cell(f"{100 * e['reduction']:.1f} %"), _words(params or "-")])
@@ -410,6 +410,9 @@ def _held_out(result) -> list[str]:
         body.append(_figure(plots.residual_against(series, band),
                             f"{name}: the mean residual in bins of speed and of collective "
                             "thrust."))
+    body.append(_figure(plots.kstep(result.get("where") or {}),
+                        "k-step prediction error (multiple shooting, analytic engine): the "
+                        "nominal model and with the answer."))
     notes = result.get("notes", [])
     if notes:
         body.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_e(n)}</li>" for n in notes)

@@ -7,6 +7,8 @@
 * :func:`residual_against`: where the gap lives: the residual's mean in bins of speed (m/s)
   and of collective thrust (N, b sum Omega^2 with the model's b), before and after, for the
   three channels with the largest residual before, over the same band.
+* :func:`kstep` (held out): the k-step prediction error of position and attitude against
+  the horizon, with the nominal model and with the answer (:mod:`quadsim.gap.where`).
 * :func:`batch`: across flights (one row each, grouped by verdict), the residual against the
   references' level before and after each answer, and each leading reading's determined
   parameters with their 95 % intervals.
@@ -26,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAX_PANELS", "MAX_POINTS", "batch", "residual_against", "residual_time", "scale", "svg"]
+__all__ = ["MAX_PANELS", "MAX_POINTS", "batch", "kstep", "residual_against", "residual_time",
+           "scale", "svg"]
 
 #: points per drawn line at most (a 1400 px page shows fewer)
 MAX_POINTS = 900
@@ -243,5 +246,29 @@ def batch(flights, shares: dict) -> str:
                if any(f.outcome == v for f in order)]
     fig.legend(handles=handles, fontsize=8, frameon=False, loc="lower left",
                bbox_to_anchor=(0.0, 1.0), ncol=len(handles))
+    fig.tight_layout()
+    return svg(fig)
+
+
+def kstep(where: dict) -> str:
+    """SVG (held out): position RMS (m) and attitude RMS (rad) of the k-step prediction
+    against the horizon (s), nominal and with the answer (``where["kstep_before"]``,
+    ``["kstep_after"]``: horizon -> ``position_rms_m``, ``attitude_rms_rad``); "" without."""
+    if not where.get("kstep_before"):
+        return ""
+    fig = _figure(9.0, 3.0)
+    axes = fig.subplots(1, 2)
+    for key, label in (("kstep_before", "nominal model"), ("kstep_after", "with the answer")):
+        table = where.get(key) or {}
+        horizons = [float(h) for h in table]
+        for ax, field in zip(axes, ("position_rms_m", "attitude_rms_rad")):
+            ax.loglog(horizons, [np.nan if v[field] is None else v[field]
+                                 for v in table.values()], "o-", label=label)
+    axes[0].set_ylabel("position RMS (m)")
+    axes[1].set_ylabel("attitude RMS (rad)")
+    for ax in axes:
+        ax.set_xlabel("horizon (s)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, frameon=False)
     fig.tight_layout()
     return svg(fig)
