@@ -184,14 +184,16 @@ def _self_check(model: dict) -> str:
 
 
 def _readings(f) -> str:
-    """Every reading weighed with its probability and magnitude (probability >= 0.1 %)."""
+    """Every reading weighed with its probability and magnitude; those below 0.1 % named in
+    one row."""
     shown = [r for r in f.get("posterior", []) if r["probability"] >= 1e-3]
-    rest = len(f.get("posterior", [])) - len(shown)
+    rest = [r["name"] for r in f.get("posterior", []) if r["probability"] < 1e-3]
     rows = [[_name(r["name"]), _Cell(_pct1(r["probability"])),
              _words(r["magnitude"] + (f" (not determined: {', '.join(r['undetermined'])})"
                                       if r.get("undetermined") else ""))] for r in shown]
     if rest:
-        rows.append([_name(f"{rest} more readings"), _Cell("< 0.1 % each"), _name("-")])
+        rows.append([_name(f"{len(rest)} more readings", "wrap"), _Cell("< 0.1 % each"),
+                     _name(", ".join(rest), "wrap")])
     text = _table(["reading", "probability among the readings weighed",
                    "magnitude (95 % intervals)"], rows)
     post = f.get("posterior", [])
