@@ -96,8 +96,11 @@ def _pct(p) -> str:
     return "-" if p is None else (f"{100 * p:.0f} %" if p < 0.995 else "> 99 %")
 
 
-def _pct1(p: float) -> str:
-    return f"{100 * p:.1f} %" if p < 0.9995 else "> 99.9 %"
+def _pct1(p) -> str:
+    """A probability to 0.1 %: "< 0.1 %" and "> 99.9 %" at the ends."""
+    if p is None:
+        return "-"
+    return "< 0.1 %" if p < 5e-4 else (f"{100 * p:.1f} %" if p < 0.9995 else "> 99.9 %")
 
 
 def _unit(key: str) -> str:
@@ -394,7 +397,7 @@ def _held_out(result) -> list[str]:
     for e in result.get("effects", [])[:8]:
         params = ", ".join(f"{k} = {x:.3g} ± {e['ci'].get(k, float('nan')):.2g} {_unit(k)}"
                            for k, x in e.get("params", {}).items())
-        ranking.append([_name(e["name"]), _Cell(_pct(e.get("probability"))),
+        ranking.append([_name(e["name"]), _Cell(_pct1(e.get("probability"))),
                         _Cell(f"{100 * e['reduction']:.1f} %"), _words(params or "-")])
     if ranking:
         body.append("<h2>Readings weighed</h2>" + _table(
