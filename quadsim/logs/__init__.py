@@ -106,10 +106,12 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
                  rotor_map: tuple[int, ...] | None = None, topics: dict | None = None,
                  fields: dict | None = None,
                  pwm_range: tuple[float, float] | None = None,
-                 rate_hz: float | None = None, budget: Budget | None = None) -> Columns:
+                 rate_hz: float | None = None, budget: Budget | None = None,
+                 euler: str | None = None) -> Columns:
     """Schema columns (SI, our frames) of a foreign log. ``topics``/``fields`` (ULog:
     signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us),
-    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants).
+    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants), ``euler``
+    (uSD: the convention of ``stateEstimate.roll/pitch/yaw``, :mod:`.attitude`).
 
     The parse runs in a worker process under ``budget`` (default :func:`parse_budget`;
     :mod:`quadsim.core.bounded`); what the parser printed becomes one note."""
@@ -121,7 +123,7 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
         raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
                          "or a CSV/Parquet flight log)")
     options = {"rotor_map": rotor_map, "topics": topics or {}, "fields": fields or {},
-               "pwm_range": pwm_range, "rate_hz": rate_hz}
+               "pwm_range": pwm_range, "rate_hz": rate_hz, "euler": euler}
     columns, chatter = run_bounded(_read_here, path, fmt, options, label=str(path),
                                    what=_NAMES[fmt], budget=budget or parse_budget(path))
     if chatter.total:
@@ -151,7 +153,7 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     if fmt == "usd":
         from .usd import usd_columns
         return usd_columns(path, rotor_map=rotor_map, event=topics.get("event"),
-                           pose=topics.get("pose"))
+                           pose=topics.get("pose"), euler=options.get("euler"))
     from .dataflash import dataflash_columns
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 

@@ -52,9 +52,10 @@ from scipy.integrate import cumulative_trapezoid
 
 from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
-from .spans import cut_ground
+from .flightlog import WITHOUT_POSE
+from .spans import cut_ground, split_airborne
 
-__all__ = ["check_log", "check_logs", "gyro_frame_evidence", "rotor_order_evidence"]
+__all__ = ["check_log", "check_log_stretches", "check_logs", "gyro_frame_evidence", "rotor_order_evidence"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -151,8 +152,9 @@ def _gain(measured: np.ndarray, reference: np.ndarray) -> float:
 
 def _window_rotations(log):
     """(window edges k, rotation vectors between the quaternions at the edges, the gyro's
-    integral over each window) (rad), or None when the log has no gyro or too few windows."""
-    if log.body_rate is None or len(log.t) < 4:
+    integral over each window) (rad), or None when the log has no gyro, no attitude or too
+    few windows."""
+    if log.body_rate is None or log.quat is None or len(log.t) < 4:
         return None
     k = _windows(log.t)
     if len(k) < 3:
@@ -255,8 +257,9 @@ def _check_gyro_frame(log, k: np.ndarray, quat_rot: np.ndarray, gyro_rot: np.nda
 
 
 def check_accel(log, gravity: float = 9.81) -> None:
-    """Accelerometer against the velocity derivative plus gravity (see module)."""
-    if log.accel is None or len(log.t) < 4:
+    """Accelerometer against the velocity derivative plus gravity (see module); not judged
+    without a pose (the loader's magnitude test still catches g for m/s^2)."""
+    if log.accel is None or not log.has_pose or len(log.t) < 4:
         return
     k = _windows(log.t)
     if len(k) < 3:
@@ -477,20 +480,44 @@ def check_vehicle(log, params) -> None:
                           f"{params.rotor_count} in the parameter set {name}")
 
 
+def _channel_checks(log, params) -> list[str]:
+    """The checks of channels against each other on one airborne stretch; notes."""
+    notes = []
+    gyro_note = check_gyro(log)
+    if gyro_note:
+        notes.append(gyro_note)
+    if not log.has_pose:
+        notes.append(f"{_where(log)}: {WITHOUT_POSE}; the gyro and accelerometer are checked "
+                     "by their magnitudes and the rotor order by the torque balance only")
+    check_accel(log, params.gravity if params is not None else 9.81)
+    check_rotors(log, params)
+    check_rotor_order(log, params)
+    return notes
+
+
 def check_log(log, params=None):
-    """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes)."""
+    """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes).
+    The longest airborne stretch is kept (:func:`check_log_stretches` keeps every one)."""
     check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
     log, note = cut_ground(log)          # ground, idle and landing spans (quadsim.logs.spans)
     notes += [note] if note else []
-    gyro_note = check_gyro(log)
-    if gyro_note:
-        notes.append(gyro_note)
-    check_accel(log, params.gravity if params is not None else 9.81)
-    check_rotors(log, params)
-    check_rotor_order(log, params)
-    return log, notes
+    return log, notes + _channel_checks(log, params)
+
+
+def check_log_stretches(log, params=None):
+    """:func:`check_log` keeping every airborne stretch (:func:`quadsim.logs.spans.
+    split_airborne`): (logs, one per stretch in time order, notes). For the stages that
+    pool samples (``identify --logs``): several take-offs in one log all count."""
+    check_vehicle(log, params)
+    log, note = cut_nan(log)
+    notes = [note] if note else []
+    logs, note = split_airborne(log)
+    notes += [note] if note else []
+    for part in logs:
+        notes += [n for n in _channel_checks(part, params) if n not in notes]
+    return logs, notes
 
 
 def check_logs(logs, params=None):
