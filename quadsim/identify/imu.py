@@ -59,6 +59,7 @@ from ..core.errors import InputError
 from .logseries import Estimate, correlation_time
 
 __all__ = ["LAG_GRID_S", "TRIM", "WINDOW_S", "ImuIdentification", "ImuSegment", "ThrustMap",
+           "identification_for_set",
            "identify_imu", "lagged", "segments_from_logs"]
 
 #: window of the balances (s): short against the motor lag and the manoeuvres' rise times
@@ -439,3 +440,54 @@ def _thrust_map(w: _Windows, fit: _Fit, keep: np.ndarray, v_ref: float | None) -
     c = fit.thrust
     return ThrustMap(float(c[0]), float(c[1]), float(c[2]) if len(c) > 2 else 0.0, v_ref, cov,
                      _r2(r, w.target[keep]), int(keep.sum()))
+
+
+def identification_for_set(ident: ImuIdentification, skeleton, *, stretches: int):
+    """The :class:`~quadsim.identify.logseries.LogIdentification` that
+    :func:`quadsim.identify.vehicle_set.build_set` writes, from an IMU + commands
+    identification: b = T(1) / max_speed^2 (the skeleton's ``rotors.max_speed``: commands
+    fix only the thrust, not the rotor speed), the motor map ``Omega(u) = sqrt(T(u) / b)``
+    with T_m, Ixx and Iyy with their intervals. Raises :class:`InputError` naming the
+    skeleton's field when max_speed is missing."""
+    from .logseries import LogIdentification
+
+    if skeleton.max_speed is None:
+        raise InputError(f"{skeleton.path}: rotors.max_speed: missing; logs without rotor "
+                         "speeds fix only the thrust per command, and the speed scale comes "
+                         "from max_speed (the rotor speed at full command: motor kV x battery "
+                         "voltage, or a tachometer)")
+    tm = ident.thrust
+    full = tm.c1 + tm.c2
+    b = full / skeleton.max_speed ** 2
+    half = 1.96 * tm.full_thrust_se() / full * b
+    grid = np.linspace(0.0, 1.0, 11)
+    speed = np.sqrt(np.clip(tm.thrust(grid), 0.0, None) / b)
+    summary = (f"command -> thrust per rotor T(u) = {tm.c2:.4g} u^2 + {tm.c1:.4g} u N"
+               + (f" (x (1 + {tm.voltage_gain:.3g} (v - {tm.reference_voltage:.3g} V)) on the "
+                  "u^2 term)" if tm.reference_voltage is not None else "")
+               + f", u the command lagged by T_m = {1000 * ident.time_constant.value:.1f} ms; "
+               f"R^2 {tm.r2:.3f} over {tm.windows} windows of {stretches} airborne stretch(es); "
+               f"T(1) = {full:.4g} +- {1.96 * tm.full_thrust_se():.2g} N")
+    thrust = Estimate(b, (b - half, b + half), f"IMU + commands: b = T(1) / max_speed^2 with "
+                      f"the skeleton's max_speed {skeleton.max_speed:.5g} rad/s; {summary}")
+    count = len(skeleton.positions)
+    table = {"command": grid.tolist(), "speed": [speed.tolist()] * count,
+             "reference_voltage": tm.reference_voltage,
+             "voltage_gain": tm.voltage_gain if tm.reference_voltage is not None else 0.0,
+             "time_constant": round(float(ident.time_constant.value), 5),
+             "time_constant_ci": tuple(float(v) for v in ident.time_constant.ci95)}
+    roll, pitch = ident.torque_per_command
+    tau, (tau_lo, tau_hi) = ident.time_constant.value, ident.time_constant.ci95
+    notes = [(f"motor time constant T_m = {1000 * tau:.1f} ms, 95 % {1000 * tau_lo:.1f}-"
+              f"{1000 * tau_hi:.1f} ms ({ident.time_constant.quality})"),
+             (f"roll torque per unit command difference {roll.value:.4g} N m (95 % "
+              f"{roll.ci95[0]:.4g}-{roll.ci95[1]:.4g}), pitch {pitch.value:.4g} N m "
+              f"({roll.quality})"),
+             (f"balances' R^2: thrust {ident.r2[0]:.3f}, roll {ident.r2[1]:.3f}, pitch "
+              f"{ident.r2[2]:.3f}"), *ident.notes]
+    out = LogIdentification(thrust, [], list(ident.inertia), table, summary, True, notes)
+    out.warnings.append("no rotor speeds: b and the motor map are identified only as the "
+                        "product b Omega^2 (speed scale from max_speed); the rotor order, "
+                        "spins, Izz and d are not identified")
+    out.warnings += [e.why for e in ident.inertia if not e.identified]
+    return out
