@@ -299,13 +299,33 @@ def check_rotors(log, params) -> None:
         return
     ratio = float(np.mean(thrust)) / mean_need
     if not THRUST_RANGE[0] <= ratio <= THRUST_RANGE[1]:
-        hint = ("RPM logged as rad/s?" if 40 < ratio < 150 else
-                "Hz logged as rad/s?" if 0.015 < ratio < 0.04 else
-                "wrong unit, or the log is not of this vehicle?")
+        hint = _thrust_hint(log, params, ratio)
         raise field_error(_where(log), "rotor_*",
                           f"b sum(Omega^2) = {float(np.mean(thrust)):.4g} N on average is "
                           f"{ratio:.3g} x the thrust the vehicle needed ({mean_need:.4g} N, "
                           f"mass {params.mass:.4g} kg of {params.path or params.name}): {hint}")
+
+
+def _thrust_hint(log, params, ratio: float) -> str:
+    """What a thrust ratio far from 1 most likely means: a unit (RPM or Hz as rad/s) or a
+    log of another vehicle, told by the log's own speeds against the set's ``max_speed``:
+    a unit error moves every speed by the same factor (x 60/2 pi, x 1/2 pi), another
+    vehicle's speeds lie elsewhere and need another b."""
+    peak = float(np.nanpercentile(log.rotor_speed, 99))
+    top = getattr(params, "max_speed", None)
+    other = (f"a log of another vehicle than {params.path or params.name}? (its rotors "
+             f"reach {peak:.4g} rad/s" + (f", the set's max_speed is {top:.4g} rad/s" if top
+                                          else "") + "; identify --logs makes its own set)")
+    for factor, unit in ((2 * np.pi / 60, "RPM"), (2 * np.pi, "Hz")):
+        if top and abs(np.log(peak * factor / top)) < np.log(2.0) and \
+                abs(np.log(ratio * factor ** 2)) < np.log(2.0):
+            return (f"{unit} logged as rad/s? (x {factor:.4g} puts the speeds at "
+                    f"{peak * factor:.4g} rad/s, within the set's max_speed {top:.4g} rad/s)")
+    if 40 < ratio < 150 and not top:
+        return "RPM logged as rad/s? or " + other
+    if 0.015 < ratio < 0.04 and not top:
+        return "Hz logged as rad/s? or " + other
+    return other
 
 
 def _window_demean(x: np.ndarray, window: np.ndarray, count: int) -> np.ndarray:

@@ -1,0 +1,45 @@
+"""Messages that name the real problem (issue 44, item 7), each as a user meets it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from quadsim.core.errors import InputError
+from quadsim.logs.checks import check_rotors
+from quadsim.logs.flightlog import FlightLog
+from quadsim.vehicle.params import load_params
+
+
+def _hover(speed: float, n: int = 200) -> FlightLog:
+    t = np.arange(n) * 0.01
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    return FlightLog(t, np.zeros((n, 3)), quat, accel=np.tile([0.0, 0.0, 9.81], (n, 1)),
+                     rotor_speed=np.full((n, 4), speed))
+
+
+def test_another_vehicles_log_is_named_as_such():
+    """A PX4 Iris log (rotors near 500 rad/s) against crazyflie21: not "Hz as rad/s"."""
+    params = load_params("crazyflie21")
+    with pytest.raises(InputError, match=r"a log of another vehicle than .*crazyflie21.* "
+                                         r"\(its rotors reach 500 rad/s, the set's max_speed"):
+        check_rotors(_hover(500.0), params)
+
+
+def test_a_unit_error_is_named_as_such():
+    params = load_params("crazyflie21")
+    hover = float(np.sqrt(params.mass * 9.81 / 4 / params.thrust_factor))     # rad/s
+    with pytest.raises(InputError, match=r"RPM logged as rad/s\?"):
+        check_rotors(_hover(hover * 60 / (2 * np.pi)), params)
+    with pytest.raises(InputError, match=r"Hz logged as rad/s\?"):
+        check_rotors(_hover(hover / (2 * np.pi)), params)
+    check_rotors(_hover(hover), params)                      # the right unit passes
+
+
+def test_openloop_writes_nothing_it_was_not_asked_for(tmp_path, monkeypatch, capsys):
+    from quadsim.openloop import main as openloop_main
+
+    monkeypatch.chdir(tmp_path)
+    assert openloop_main(["--model", "physical", "--duration", "0.5", "--step-time", "0.1",
+                          "--json"]) == 0
+    assert list(tmp_path.iterdir()) == []
