@@ -225,3 +225,12 @@ def test_flightlog_without_pose_is_a_value():
     log = FlightLog(t, None, None, accel=np.zeros((10, 3)), body_rate=np.zeros((10, 3)),
                     rotor_command=np.zeros((10, 4)))
     assert not log.has_pose and log.rotor_count == 4
+
+
+def test_swapped_rotor_columns_are_refused_naming_the_map(imu_usd):
+    logs, _ = check_log_stretches(load_log(imu_usd, warn=False))
+    segs = segments_from_logs(logs)
+    swapped = [type(s)(s.name, s.t, s.specific_force, s.body_rate, s.command[:, [1, 0, 2, 3]],
+                       s.vbat) for s in segs]
+    with pytest.raises(InputError, match=r"another rotor order: .* --rotor-map 2,1,3,4"):
+        identify_imu(swapped, mass=MASS, arms=ARMS)

@@ -73,6 +73,10 @@ LAG_GRID_S = np.arange(0.0, 0.2001, 0.0025)
 TRIM = 4.0
 #: rounds of (best lag, trim): the first fit with every window sees the impacts too.
 ROUNDS = 2
+#: another rotor order must beat the skeleton's by this much roll + pitch R^2 (of 2) to be
+#: named: a wrong order turns at least one axis' torque the wrong way (R^2 near 0), so the
+#: right order wins by far more; smaller gaps are the noise of two close fits.
+ORDER_MARGIN = 0.2
 #: fewer windows than this in a balance: refused (no interval can be stated).
 MIN_WINDOWS = 50
 _CHI2_95 = 3.841
@@ -350,6 +354,7 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
     if best in (0, len(LAG_GRID_S) - 1):
         notes.append(f"motor time constant at the grid's end ({1000 * tau:.1f} ms): not "
                      "determined by these logs")
+    _check_order(segments[0].name, w, keep, arms, per_stretch=per_stretch)
     thrust = _thrust_map(w, _fit(w, keep, arms, per_stretch=False), keep, v_ref)
     if per_stretch:
         scales = _stretch_scales(w, keep, thrust)
@@ -407,6 +412,46 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
                              f"{corr:.1f} windows")
     return ImuIdentification(time_constant, thrust, tuple(inertia), tuple(effect), hover, r2,
                              tuple(notes))
+
+
+def _order_score(w: _Windows, keep: np.ndarray, arms: np.ndarray, *, per_stretch: bool
+                 ) -> float:
+    """Roll + pitch R^2 of the change of body rate explained by the torque of ``arms``
+    (rotor positions in the command columns' order); an axis whose inertia comes out
+    negative scores 0 (the torque turns the vehicle the wrong way)."""
+    fit = _fit(w, keep, arms, per_stretch=per_stretch)
+    total = 0.0
+    for a in range(2):
+        if fit.inertia[a] > 0:
+            total += max(_r2(fit.rate_res[keep, a], w.rot[keep, a]), 0.0)
+    return total
+
+
+def _check_order(name: str, w: _Windows, keep: np.ndarray, arms: np.ndarray, *,
+                 per_stretch: bool) -> None:
+    """Refuse commands whose columns fit another rotor order than the skeleton's by more
+    than ``ORDER_MARGIN`` of roll + pitch R^2 (every permutation of up to 8 columns)."""
+    import itertools
+
+    count = len(arms)
+    if count > 8:
+        return
+    own = _order_score(w, keep, arms, per_stretch=per_stretch)
+    best, best_order = own, tuple(range(count))
+    for order in itertools.permutations(range(count)):
+        if order != tuple(range(count)):
+            score = _order_score(w, keep, arms[list(order)], per_stretch=per_stretch)
+            if score > best:
+                best, best_order = score, order
+    if best - own > ORDER_MARGIN:
+        inverse = [0] * count
+        for column, rotor in enumerate(best_order):
+            inverse[rotor] = column
+        mapping = ",".join(str(c + 1) for c in inverse)
+        raise InputError(f"{name}: cmd_*: the commands fit another rotor order: roll + pitch "
+                         f"R^2 {own:.2f} in the skeleton's order, {best:.2f} with our rotor i "
+                         f"taken from command column m_i = {mapping}; convert the logs with "
+                         f"--rotor-map {mapping} (or reorder the skeleton's [[rotor]] entries)")
 
 
 def _stretch_scales(w: _Windows, keep: np.ndarray, pooled: ThrustMap) -> list[float]:
