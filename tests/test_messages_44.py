@@ -43,3 +43,28 @@ def test_openloop_writes_nothing_it_was_not_asked_for(tmp_path, monkeypatch, cap
     assert openloop_main(["--model", "physical", "--duration", "0.5", "--step-time", "0.1",
                           "--json"]) == 0
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_toml_given_as_a_log_says_so(tmp_path):
+    from quadsim.logs.flightlog import load_log
+
+    path = tmp_path / "skeleton.toml"
+    path.write_text('schema = "quadsim.vehicle.params/1"\n[body]\nmass = 1\n')
+    with pytest.raises(InputError, match=r"skeleton.toml: header: a TOML file \(a parameter "
+                                         r"set or skeleton\?\), not a flight log: were the log "
+                                         r"and the vehicle arguments swapped\?"):
+        load_log(path)
+
+
+def test_file_kind_names_logs_by_their_bytes(tmp_path):
+    import gzip
+
+    from quadsim.logs import file_kind
+
+    gz = tmp_path / "f.csv.gz"
+    gz.write_bytes(gzip.compress(b"t,x\n0,1\n"))
+    assert file_kind(gz) == "a gzip-compressed file (a .csv.gz flight log?)"
+    csv = tmp_path / "f.csv"
+    csv.write_text("t,ax,ay\n0,1,2\n")
+    assert file_kind(csv) == "a CSV flight log"
+    assert file_kind(tmp_path / "missing") is None

@@ -80,6 +80,34 @@ def parse_budget(path: str | Path) -> Budget:
                   memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
 
 
+def file_kind(path: str | Path) -> str | None:
+    """What a file is by its first bytes, for messages that catch a swapped argument: "a
+    PX4 ULog flight log", "a Crazyflie uSD flight log", "an ArduPilot DataFlash flight log",
+    "a gzip-compressed file (a .csv.gz flight log?)", "a Parquet file (a flight log?)", "a
+    CSV flight log" (a header with ``t``), "a TOML file" (a ``schema =`` or ``[section]``
+    line), or None (unreadable or none of these)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except OSError:
+        return None
+    fmt = detect_format(path)
+    if fmt is not None:
+        return {"ulog": "a PX4 ULog flight log", "usd": "a Crazyflie uSD flight log",
+                "dataflash": "an ArduPilot DataFlash flight log"}[fmt]
+    if head.startswith(b"\x1f\x8b"):
+        return "a gzip-compressed file (a .csv.gz flight log?)"
+    if head.startswith(b"PAR1"):
+        return "a Parquet file (a flight log?)"
+    text = head.decode("utf-8", "replace")
+    first = text.splitlines()[0] if text else ""
+    if "," in first and "t" in [c.strip() for c in first.split(",")]:
+        return "a CSV flight log"
+    if any(line.strip().startswith(("schema =", "schema=", "[")) for line in text.splitlines()):
+        return "a TOML file"
+    return None
+
+
 _MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a39580")}
 
 
@@ -158,4 +186,4 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map", "read_columns", "refuse_binary", "resample"]
+__all__ = ["FORMATS", "Columns", "detect_format", "file_kind", "parse_budget", "parse_rotor_map", "read_columns", "refuse_binary", "resample"]

@@ -319,8 +319,11 @@ def load_log(path: str | Path, *, warn: bool = True, budget=None) -> FlightLog:
     the time and memory budget of parsing a foreign format (default
     :func:`quadsim.logs.parse_budget`)."""
     path = Path(path)
-    from . import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
+    from . import detect_format, file_kind, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
     fmt = detect_format(path)
+    if fmt is None and file_kind(path) == "a TOML file":
+        raise field_error(path, "header", "a TOML file (a parameter set or skeleton?), not a "
+                          "flight log: were the log and the vehicle arguments swapped?")
     columns = read_columns(path, fmt=fmt, budget=budget) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)
 
