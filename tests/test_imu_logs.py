@@ -234,3 +234,15 @@ def test_swapped_rotor_columns_are_refused_naming_the_map(imu_usd):
                        s.vbat) for s in segs]
     with pytest.raises(InputError, match=r"another rotor order: .* --rotor-map 2,1,3,4"):
         identify_imu(swapped, mass=MASS, arms=ARMS)
+
+
+def test_gap_says_what_it_needs_on_an_imu_log(imu_usd, tmp_path, capsys):
+    from quadsim.gap.__main__ import main as gap_main
+
+    out = tmp_path / "imu.csv.gz"
+    assert convert_main([str(imu_usd), "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert gap_main(["--model", "crazyflie21", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "no position or attitude (IMU and motors only)" in err
+    assert "identify --logs" in err and "Traceback" not in err
