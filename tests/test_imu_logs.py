@@ -246,3 +246,39 @@ def test_gap_says_what_it_needs_on_an_imu_log(imu_usd, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no position or attitude (IMU and motors only)" in err
     assert "identify --logs" in err and "Traceback" not in err
+
+
+def test_pitch_reconstructed_from_velocity_when_only_roll_and_yaw_are_logged(tmp_path,
+                                                                             capsys):
+    """Another lab's reduced log config: stateEstimate.x/y/z, vx/vy/vz, roll, yaw, motors
+    (no pitch, no IMU). Thrust along body z gives the pitch from the velocity's derivative;
+    checked by the roll the same construction implies."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from quadsim.core.frames import quat_to_rotmat
+
+    dt, n = 0.01, 1500
+    t = np.arange(n) * dt
+    roll = 0.15 * np.sin(2 * np.pi * 0.3 * t)
+    pitch = 0.2 * np.sin(2 * np.pi * 0.25 * t + 1.0)
+    yaw = 0.8 * np.sin(2 * np.pi * 0.05 * t)
+    quat = quat_from_euler(roll, pitch, yaw, convention="flu")
+    body_z = quat_to_rotmat(quat)[:, :, 2]
+    accel = body_z * (G / body_z[:, 2])[:, None] - np.array([0.0, 0.0, G])   # level flight
+    velocity = cumulative_trapezoid(accel, t, axis=0, initial=0)
+    position = cumulative_trapezoid(velocity, t, axis=0, initial=0)
+    variables = [(f"stateEstimate.{a}", "f") for a in ("x", "y", "z", "vx", "vy", "vz",
+                                                      "roll", "yaw")]
+    variables += [(f"motor.m{i}", "H") for i in range(1, 5)]
+    data = np.column_stack([position, velocity, np.degrees(roll), np.degrees(yaw)])
+    samples = [(round(1e6 * tk), (*map(float, row), 30000, 30000, 30000, 30000))
+               for tk, row in zip(t, data)]
+    path = tmp_path / "reduced00"
+    path.write_bytes(encode_usd({"fixedFrequency": (0xFFFF, variables, samples)}))
+    out = tmp_path / "reduced.csv.gz"
+    assert convert_main([str(path), "-o", str(out)]) == 0
+    assert "stateEstimate.pitch: not logged: reconstructed from the velocity" in \
+        capsys.readouterr().err
+    log = load_log(out, warn=False)
+    inner = slice(50, -50)                   # the derivative's ends
+    np.testing.assert_allclose(quat_to_euler(log.quat)[inner, 1], pitch[inner], atol=0.01)

@@ -36,7 +36,8 @@ import numpy as np
 
 from ..core.frames import euler_to_quat
 
-__all__ = ["CONVENTIONS", "pitch_sign_from_gyro", "quat_from_euler"]
+__all__ = ["ACCEL_WINDOW_S", "CONVENTIONS", "pitch_from_velocity", "pitch_sign_from_gyro",
+           "quat_from_euler"]
 
 CONVENTIONS = ("flu", "frd", "crazyflie")
 
@@ -72,3 +73,39 @@ def pitch_sign_from_gyro(t: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
     if ok.sum() < 10 or np.std(rate[ok]) == 0 or np.std(ref[ok]) == 0:
         return 0.0
     return float(np.corrcoef(rate[ok], ref[ok])[0, 1])
+
+
+#: smoothing window (s) of the velocity's derivative in :func:`pitch_from_velocity`: an
+#: on-board velocity estimate is smooth below ~5 Hz; 0.2 s keeps that band and damps the
+#: differentiated noise.
+ACCEL_WINDOW_S = 0.2
+
+
+def pitch_from_velocity(t: np.ndarray, roll: np.ndarray, yaw: np.ndarray,
+                        velocity: np.ndarray, gravity: float = 9.81
+                        ) -> tuple[np.ndarray, float]:
+    """The FLU pitch (N,) rad of a multirotor whose log has roll and yaw (rad, FLU) and the
+    world velocity (N, 3) m/s (z up) but no pitch, and the rms (rad) by which the roll the
+    same construction implies differs from the logged roll (its check).
+
+    A multirotor's thrust lies along its body z, so the specific force ``a + g e_z`` (``a``
+    the velocity's Savitzky-Golay derivative over ``ACCEL_WINDOW_S``) points along body z:
+    turned by ``-yaw`` it is proportional to ``(sin(pitch) cos(roll), -sin(roll),
+    cos(pitch) cos(roll))``, so ``pitch = atan2(f_x', f_z')`` and the implied roll is
+    ``atan2(-f_y', hypot(f_x', f_z'))``. What it costs: the tilt is biased by drag / weight
+    (a body drag tilts the specific force away from body z) and lags by the velocity
+    estimate's own smoothing; the pitch rate is not the gyro's."""
+    from scipy.signal import savgol_filter
+
+    t = np.asarray(t, float)
+    dt = float(np.median(np.diff(t)))
+    window = max(5, round(ACCEL_WINDOW_S / dt) | 1)
+    window = min(window, len(t) - (1 - len(t) % 2))
+    accel = savgol_filter(np.asarray(velocity, float), window, 3, deriv=1, delta=dt, axis=0)
+    f = accel + np.array([0.0, 0.0, gravity])
+    c, s = np.cos(yaw), np.sin(yaw)
+    fx, fy = c * f[:, 0] + s * f[:, 1], -s * f[:, 0] + c * f[:, 1]
+    pitch = np.arctan2(fx, f[:, 2])
+    implied = np.arctan2(-fy, np.hypot(fx, f[:, 2]))
+    diff = np.angle(np.exp(1j * (implied - np.asarray(roll, float))))
+    return pitch, float(np.sqrt(np.mean(diff ** 2)))

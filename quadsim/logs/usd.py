@@ -70,6 +70,10 @@ _TYPES = set("bBhHiIqQfd")
 #: two measure the same turn: a right convention correlates near +1, the wrong sign near -1;
 #: below this the flight pitches too little to tell, and the default is kept).
 PITCH_SIGN_CORR = 0.5
+#: a pitch reconstructed from the velocity (roll and yaw logged, no pitch) is used when the
+#: roll the same construction implies matches the logged roll within this rms (deg): the
+#: thrust-along-body-z premise holds on that axis.
+RECONSTRUCT_ROLL_DEG = 5.0
 
 
 def _definitions(path: Path, data: bytes) -> tuple[int, dict, int]:
@@ -263,15 +267,32 @@ def _euler_attitude(path: Path, ev: dict, name: str, convention: str | None,
     (:mod:`.attitude`). Without ``convention`` the pitch sign is taken from the gyro (the
     correlation of the pitch rate with ``gyro.y``, :data:`PITCH_SIGN_CORR`), else the default
     ``crazyflie`` (the firmware logs pitch nose-up positive); a given convention the gyro
-    contradicts is refused. Only
-    some of the three logged (the usual ``roll`` and ``yaw`` of a reduced log config): None,
-    with a note of what that costs."""
-    from .attitude import pitch_sign_from_gyro, quat_from_euler
+    contradicts is refused. Roll and yaw without pitch, with ``stateEstimate.vx/vy/vz``: the
+    pitch reconstructed from the velocity (:func:`.attitude.pitch_from_velocity`) when the
+    roll it implies matches the logged roll within :data:`RECONSTRUCT_ROLL_DEG`. Otherwise
+    only some of the three logged: None, with a note of what that costs."""
+    from .attitude import pitch_from_velocity, pitch_sign_from_gyro, quat_from_euler
 
     state = "stateEstimate."
     logged = [a for a in ("roll", "pitch", "yaw") if state + a in ev]
     if not logged:
         return None
+    velocity = [state + a for a in ("vx", "vy", "vz")]
+    if logged == ["roll", "yaw"] and all(v in ev for v in velocity) and len(ev["t"]) > 20:
+        roll, yaw = np.radians(ev[state + "roll"]), np.radians(ev[state + "yaw"])
+        pitch, check = pitch_from_velocity(ev["t"], roll, yaw,
+                                           np.stack([ev[v] for v in velocity], 1))
+        if check <= np.radians(RECONSTRUCT_ROLL_DEG):
+            notes.append(f"{path}: {name}: {state}pitch: not logged: reconstructed from the "
+                         f"velocity's derivative, roll and yaw (thrust along body z; the roll "
+                         f"it implies differs from the logged roll by {np.degrees(check):.2g} "
+                         "deg rms). What it costs: the tilt is biased by drag / weight and lags "
+                         "by the velocity estimate's smoothing; log stateEstimate.pitch or "
+                         "qw..qz to avoid it")
+            return quat_from_euler(roll, pitch, yaw, convention="flu")
+        notes.append(f"{path}: {name}: {state}pitch: not reconstructed from the velocity: the "
+                     f"roll it implies differs from the logged roll by {np.degrees(check):.2g} "
+                     f"deg rms (over {RECONSTRUCT_ROLL_DEG:g} deg)")
     if len(logged) < 3:
         lacking = [a for a in ("roll", "pitch", "yaw") if a not in logged]
         notes.append(f"{path}: {name}: {state}{'/'.join(lacking)}: not logged ({', '.join(logged)} "
