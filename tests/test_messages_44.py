@@ -68,3 +68,31 @@ def test_file_kind_names_logs_by_their_bytes(tmp_path):
     csv.write_text("t,ax,ay\n0,1,2\n")
     assert file_kind(csv) == "a CSV flight log"
     assert file_kind(tmp_path / "missing") is None
+
+
+def test_rotor_order_status_confirmed_doubtful_or_not_told():
+    """Generated figure-8 (crazyflie21, 6 s): the right order confirmed from rotor speeds
+    and from commands alone; rotors 1 and 2 swapped doubtful, naming the map that fixes it."""
+    import dataclasses
+    import warnings
+
+    from quadsim.effects import EffectSet
+    from quadsim.logs.checks import rotor_order_status
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+
+    params = load_params("crazyflie21")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log, _ = generate_flight(params, "figure8", EffectSet(), SensorModel(noise={"gyro": 0.01}),
+                                 0, duration=6.0, speed=1.0)
+    own = rotor_order_status(log, params)
+    assert own.confirmed and not own.doubtful and own.evidence < -25 and own.note == ""
+    swapped = rotor_order_status(dataclasses.replace(
+        log, rotor_speed=log.rotor_speed[:, [1, 0, 2, 3]]), params)
+    assert swapped.doubtful and swapped.rival == (1, 0, 2, 3)
+    assert "--rotor-map 2,1,3,4 fits better" in swapped.note
+    commands = dataclasses.replace(log, rotor_speed=None,
+                                   rotor_command=log.rotor_command[:, [1, 0, 2, 3]])
+    status = rotor_order_status(commands, params)
+    assert status.source == "commands" and status.doubtful
