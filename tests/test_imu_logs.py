@@ -39,11 +39,13 @@ G = 9.81
 
 
 def _imu_flight(seed: int = 1, *, seconds: float = 12.0, dt: float = 0.001,
-                ground: tuple[float, ...] = ()) -> dict[str, np.ndarray]:
+                ground: tuple[float, ...] = (), gamma: float = 0.0) -> dict[str, np.ndarray]:
     """An IMU + commands flight: a rate-damped hover with independent random roll, pitch
     and thrust excitation (1st-order lagged motors, T = b (k u)^2); ``ground`` (s): spans
     from these times of 2 s with the motors off on the ground (specific force g, no rate).
-    Returns acc (g), gyro (deg/s), motor (0-65535), t (s), as a uSD log has them."""
+    ``gamma`` (1/V): thrust x (1 + gamma (v - 3.9 V)) with the battery sagging 4.1 -> 3.7 V
+    (logged as vbat). Returns acc (g), gyro (deg/s), motor (0-65535), t (s), vbat (V), as a
+    uSD log has them."""
     rng = np.random.default_rng(seed)
     n = int(seconds / dt)
     t = np.arange(n) * dt
@@ -54,6 +56,7 @@ def _imu_flight(seed: int = 1, *, seconds: float = 12.0, dt: float = 0.001,
     on = np.ones(n, bool)
     for start in ground:
         on[(t >= start) & (t < start + 2.0)] = False
+    vbat = np.linspace(4.1, 3.7, n)
     rate = np.zeros(3)
     u_f = np.full(4, hover)
     e = math.exp(-dt / TRUE_TM)
@@ -68,7 +71,7 @@ def _imu_flight(seed: int = 1, *, seconds: float = 12.0, dt: float = 0.001,
             cmd = np.clip(cmd, 0.0, 1.0)
         else:
             cmd = np.zeros(4)
-        thrust = TRUE_B * (MAX_SPEED * u_f) ** 2
+        thrust = TRUE_B * (MAX_SPEED * u_f) ** 2 * (1 + gamma * (vbat[k] - 3.9))
         torque = np.array([np.sum(ARMS[:, 1] * thrust), -np.sum(ARMS[:, 0] * thrust)])
         if on[k]:
             acc[k] = [0.0, 0.0, np.sum(thrust) / MASS]
@@ -82,7 +85,7 @@ def _imu_flight(seed: int = 1, *, seconds: float = 12.0, dt: float = 0.001,
     acc += rng.normal(0.0, 0.05, acc.shape)
     gyro += rng.normal(0.0, 0.005, gyro.shape)
     return {"t": t, "acc": acc / G, "gyro": np.degrees(gyro),
-            "motor": np.round(motor * 65535.0)}
+            "motor": np.round(motor * 65535.0), "vbat": vbat}
 
 
 def _usd_bytes(flight: dict[str, np.ndarray], extra: dict[str, np.ndarray] | None = None
@@ -159,6 +162,20 @@ def test_identify_recovers_generated_lag_thrust_inertia(imu_usd):
     half = 1.96 * ident.thrust.full_thrust_se()
     assert abs(full - TRUE_B * MAX_SPEED ** 2) <= max(half, 0.03 * full)
     assert full / MAX_SPEED ** 2 == pytest.approx(TRUE_B, rel=0.05)
+
+
+def test_identify_with_voltage_recovers_the_voltage_gain(tmp_path):
+    flight = _imu_flight(seed=3, gamma=0.5)
+    path = tmp_path / "log43"
+    path.write_bytes(_usd_bytes(flight, {"pm.vbatMV": 1000 * flight["vbat"]}))
+    logs, _ = check_log_stretches(load_log(path, warn=False))
+    ident = identify_imu(segments_from_logs(logs), mass=MASS, arms=ARMS)
+    tm = ident.thrust
+    assert tm.reference_voltage == pytest.approx(3.9, abs=0.01)
+    # c3 / c2 = gamma where the map is c2 u^2 (c1 = 0 in the generator)
+    assert tm.voltage_gain == pytest.approx(0.5, rel=0.15)
+    lo, hi = ident.time_constant.ci95
+    assert lo <= TRUE_TM <= hi
 
 
 def test_euler_usd_converts_with_the_pitch_sign_of_the_gyro(tmp_path, capsys):
