@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,8 @@ from quadsim.core.errors import InputError
 from quadsim.logs.checks import check_rotors
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
+
+SKELETON = Path(__file__).resolve().parents[1] / "docs" / "examples" / "cf_imu_skeleton.toml"
 
 
 def _hover(speed: float, n: int = 200) -> FlightLog:
@@ -96,3 +100,41 @@ def test_rotor_order_status_confirmed_doubtful_or_not_told():
                                    rotor_command=log.rotor_command[:, [1, 0, 2, 3]])
     status = rotor_order_status(commands, params)
     assert status.source == "commands" and status.doubtful
+
+
+def test_skeleton_mass_in_grams_names_body_mass(tmp_path):
+    from quadsim.identify.sanity import check_mass_scale
+    from quadsim.identify.skeleton import load_skeleton
+
+    text = SKELETON.read_text().replace(
+        "value = 0.027", "value = 27")
+    path = tmp_path / "grams.toml"
+    path.write_text(text)
+    skeleton, _ = load_skeleton(path)
+    with pytest.raises(InputError, match=r"grams.toml: body.mass: 27 kg on rotors 0.0396 m "
+                                         r"from the centre .*grams given as kg\? \(0.027 kg"):
+        check_mass_scale(skeleton)
+    check_mass_scale(load_skeleton(SKELETON)[0])   # 0.027 kg ok
+
+
+def test_negative_r2_says_what_it_means():
+    from quadsim.identify.sanity import r2_text
+
+    assert r2_text(0.5) == "R^2 0.500"
+    assert r2_text(-8.902).startswith("R^2 -8.902 (below 0: the fit predicts these samples "
+                                      "worse than their mean does")
+
+
+def test_swapped_logs_and_vehicle_are_named(tmp_path):
+    import gzip
+
+    from quadsim.identify.sanity import check_swapped
+
+    log = tmp_path / "f.csv.gz"
+    log.write_bytes(gzip.compress(b"t,x\n0,1\n"))
+    skeleton = SKELETON
+    with pytest.raises(InputError, match=r"f.csv.gz: --vehicle: a gzip-compressed file \(a "
+                                         r"\.csv\.gz flight log\?\), not a skeleton TOML: "
+                                         r"--logs and --vehicle swapped\?"):
+        check_swapped([skeleton], log)
+    check_swapped([log], skeleton)
