@@ -396,7 +396,7 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
     se_slope = math.sqrt(max(float(np.array([1, 2 * hover]) @ thrust.cov[:2, :2]
                                    @ np.array([1, 2 * hover])), 0.0))
     effect = []
-    for a, col in enumerate((1, 0)):
+    for col in (1, 0):
         lever = float(np.sum(np.abs(arms[:, col]))) / 2          # N m per N per side
         value = lever * slope
         effect.append(Estimate(value, (value - 1.96 * lever * se_slope,

@@ -31,8 +31,8 @@ ArduCopter <= 3.x), else 1000-2000 us; ``pwm_range`` overrides. A voltage that i
 throughout (no battery monitor, ``BATT_MONITOR`` = 0) is left out.
 
 No position message (or no ATT): read as IMU + motors on the IMU instants, with a note.
-Errors: no pose and no IMU message; a message missing its fields ("unknown ArduPilot message layout": the fields
-present are listed), a file pymavlink cannot parse, commands outside 0-1.
+Errors: no pose and no IMU message; a message missing its fields ("unknown ArduPilot message
+layout": the fields present are listed), a file pymavlink cannot parse, commands outside 0-1.
 """
 
 from __future__ import annotations

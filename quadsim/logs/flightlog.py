@@ -35,9 +35,9 @@ stage says what it cannot do without a pose (:data:`WITHOUT_POSE`). Example::
 
 Validation (:func:`load_log`): every problem is one line naming the file, the column and the
 file line (the header is line 1). Errors (:class:`~quadsim.core.errors.InputError`): neither
-the IMU minimum nor a pose (the message names what is missing for each), incomplete column group (``vx`` without ``vy``), text that is not a number,
-non-finite values in ``t``/position/attitude, time not strictly increasing, quaternions that
-are not unit length, and implausible units: rotor speeds that look like RPM (above
+the IMU minimum nor a pose (the message names what is missing for each), incomplete column
+group (``vx`` without ``vy``), text that is not a number, non-finite values in
+``t``/position/attitude, time not strictly increasing, quaternions that are not unit length, and implausible units: rotor speeds that look like RPM (above
 ``MAX_ROTOR_SPEED`` rad/s), body rates that look like deg/s (above ``MAX_BODY_RATE``),
 accelerometer in g (median magnitude near 1 instead of 9.81), commands outside 0-1, battery
 voltage in mV. Warnings (:class:`~quadsim.core.errors.QuadsimWarning`): NaN/Inf runs in optional
@@ -124,9 +124,10 @@ class FlightLog:
     """One flight, SI units (see the module docstring for the columns).
 
     t (N,) s; position (N, 3) m world or None; velocity (N, 3) m/s world or None; quat (N, 4)
-    wxyz body-to-world or None (position and quat are None together: an IMU-only log); body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2
-    body or None; rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or
-    None; vbat (N,) V or None; path: the file it came from (None if built in code); notes:
+    wxyz body-to-world or None (position and quat are None together: an IMU-only log);
+    body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2 body or None;
+    rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or None; vbat (N,)
+    V or None; path: the file it came from (None if built in code); notes:
     the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns);
     vehicle: what the log's own parameters say the vehicle is ("multirotor", "VTOL", ...;
     None when the log does not say, as in a CSV).

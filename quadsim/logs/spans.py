@@ -21,7 +21,8 @@ so one noisy sample does not split a flight): :func:`split_airborne` keeps each 
 with several take-offs is several segments, all used: ``identify --logs``), :func:`cut_ground`
 the longest (``gap`` and ``view``, which judge one continuous flight per file; the note names
 the other stretches). An IMU-only log (no pose) is judged by its rotor activity and its gyro
-(at rest: body rate below :data:`REST_RATE`), without the height and speed tests. The cut parts are named in a note:
+(at rest: body rate below :data:`REST_RATE`), without the height and speed tests. The cut
+parts are named in a note:
 "``f.ulg: airborne span t 19.20-31.05 s kept (11.85 of 31.1 s); cut: ground 0.00-19.19 s``".
 A log with no airborne stretch of :data:`MIN_SPAN_S` is refused in one line.
 
