@@ -38,7 +38,8 @@ file line (the header is line 1). Errors (:class:`~quadsim.core.errors.InputErro
 the IMU minimum nor a pose (the message names what is missing for each), incomplete column
 group (``vx`` without ``vy``), text that is not a number, non-finite values in
 ``t``/position/attitude, time not strictly increasing, quaternions that are not unit length,
-and implausible units: rotor speeds that look like RPM (above ``MAX_ROTOR_SPEED`` rad/s), body rates that look like deg/s (above ``MAX_BODY_RATE``),
+and implausible units: rotor speeds that look like RPM (above ``MAX_ROTOR_SPEED`` rad/s),
+body rates that look like deg/s (above ``MAX_BODY_RATE``),
 accelerometer in g (median magnitude near 1 instead of 9.81), commands outside 0-1, battery
 voltage in mV. Warnings (:class:`~quadsim.core.errors.QuadsimWarning`): NaN/Inf runs in optional
 columns (kept as NaN), sample-rate jumps (a gap over ``GAP_FACTOR`` times the median step),
