@@ -299,3 +299,49 @@ def test_pitch_reconstructed_from_velocity_when_only_roll_and_yaw_are_logged(tmp
     log = load_log(out, warn=False)
     inner = slice(50, -50)                   # the derivative's ends
     np.testing.assert_allclose(quat_to_euler(log.quat)[inner, 1], pitch[inner], atol=0.01)
+
+
+def _skeleton(tmp_path, mass: str = "0.027") -> Path:
+    text = (Path(__file__).resolve().parents[1] / "docs" / "examples" /
+            "cf_imu_skeleton.toml").read_text()
+    path = tmp_path / "skeleton.toml"
+    path.write_text(text.replace("value = 0.027", f"value = {mass}").replace(
+        "value = 2500.0", f"value = {MAX_SPEED}"))
+    return path
+
+
+def test_identify_cli_on_imu_logs_writes_the_lag_and_inertia(imu_usd, tmp_path, capsys):
+    import tomllib
+
+    from quadsim.identify.__main__ import main as identify_main
+
+    out = tmp_path / "cf.toml"
+    assert identify_main(["--logs", str(imu_usd), "--vehicle", str(_skeleton(tmp_path)),
+                          "-o", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "2 airborne stretches used" in said.out and "motor time constant T_m" in said.out
+    data = tomllib.loads(out.read_text())
+    tau = data["motor_map"]["time_constant"]["value"]
+    assert tau == pytest.approx(TRUE_TM, rel=0.1)
+    inertia = data["body"]["inertia"]["value"]
+    assert inertia[0][0] == pytest.approx(TRUE_INERTIA[0], rel=0.1)
+    assert inertia[1][1] == pytest.approx(TRUE_INERTIA[1], rel=0.1)
+    assert data["rotors"]["thrust_factor"]["value"] == pytest.approx(TRUE_B, rel=0.05)
+
+
+def test_identify_cli_messages(imu_usd, tmp_path, capsys):
+    from quadsim.identify.__main__ import main as identify_main
+
+    skeleton = _skeleton(tmp_path)
+    # --logs and --vehicle swapped
+    assert identify_main(["--logs", str(skeleton), "--vehicle", str(imu_usd),
+                          "-o", str(tmp_path / "x.toml")]) == 2
+    assert "--vehicle: a Crazyflie uSD flight log, not a skeleton TOML: --logs and --vehicle " \
+        "swapped?" in capsys.readouterr().err
+    # a skeleton mass in grams
+    grams = _skeleton(tmp_path / "..", mass="27")
+    assert identify_main(["--logs", str(imu_usd), "--vehicle", str(grams),
+                          "-o", str(tmp_path / "y.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "body.mass: 27 kg on rotors" in err and "grams given as kg?" in err
+    assert not (tmp_path / "x.toml").exists() and not (tmp_path / "y.toml").exists()

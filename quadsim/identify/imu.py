@@ -531,8 +531,9 @@ def identification_for_set(ident: ImuIdentification, skeleton, *, stretches: int
              (f"balances' R^2: thrust {ident.r2[0]:.3f}, roll {ident.r2[1]:.3f}, pitch "
               f"{ident.r2[2]:.3f}"), *ident.notes]
     out = LogIdentification(thrust, [], list(ident.inertia), table, summary, True, notes)
-    out.warnings.append("no rotor speeds: b and the motor map are identified only as the "
-                        "product b Omega^2 (speed scale from max_speed); the rotor order, "
-                        "spins, Izz and d are not identified")
+    out.warnings.append("no rotor speeds in any log: b and the motor map are identified "
+                        "only as the product b Omega^2 (speed scale from max_speed); the "
+                        "spins, Izz and d are not identified (the rotor order is checked by "
+                        "the roll/pitch balance of the commands)")
     out.warnings += [e.why for e in ident.inertia if not e.identified]
     return out

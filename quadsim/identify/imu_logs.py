@@ -28,14 +28,16 @@ MAX_STEP_S = 0.01
 
 def wants_imu_path(logs) -> bool:
     """Whether ``logs`` (FlightLogs) are for the IMU + commands identification: no rotor
-    speeds in any; commands, accelerometer and gyro in every one, at ``MAX_STEP_S`` or
-    finer."""
+    speeds in any, or no pose in one (the rotor-speed fits need the pose's states);
+    commands, accelerometer and gyro in every one, at ``MAX_STEP_S`` or finer."""
     import numpy as np
 
-    return bool(logs) and all(
-        log.rotor_speed is None and log.rotor_command is not None and log.accel is not None
-        and log.body_rate is not None and len(log.t) > 2
-        and float(np.median(np.diff(log.t))) <= MAX_STEP_S for log in logs)
+    if not logs or (any(log.rotor_speed is not None for log in logs)
+                    and all(log.has_pose for log in logs)):
+        return False
+    return all(log.rotor_command is not None and log.accel is not None
+               and log.body_rate is not None and len(log.t) > 2
+               and float(np.median(np.diff(log.t))) <= MAX_STEP_S for log in logs)
 
 
 def load_checked(paths) -> tuple[list, list[str]]:
@@ -60,6 +62,7 @@ def identify_from_imu_logs(logs, skeleton, notes: list[str] | None = None):
     import numpy as np
 
     from ..logs.checks import check_log_stretches
+    from ..logs.flightlog import WITHOUT_POSE
     from .imu import identification_for_set, identify_imu, segments_from_logs
 
     notes = list(notes or [])
@@ -72,7 +75,10 @@ def identify_from_imu_logs(logs, skeleton, notes: list[str] | None = None):
                              "a log of another vehicle, or the wrong skeleton?")
         parts, found = check_log_stretches(log)
         stretches += parts
-        notes += [n for n in found if n not in notes]
+        notes += [n for n in found if n not in notes and WITHOUT_POSE not in n]
+    bare = [Path(str(log.path)).name for log in logs if not log.has_pose]
+    if bare:
+        notes.append(f"{', '.join(bare)}: {WITHOUT_POSE}")
     arms = np.asarray(skeleton.positions, float) - np.asarray(skeleton.com, float)
     ident = identify_imu(segments_from_logs(stretches), mass=skeleton.mass, arms=arms)
     return identification_for_set(ident, skeleton, stretches=len(stretches)), notes
