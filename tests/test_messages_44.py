@@ -138,3 +138,13 @@ def test_swapped_logs_and_vehicle_are_named(tmp_path):
                                          r"--logs and --vehicle swapped\?"):
         check_swapped([skeleton], log)
     check_swapped([log], skeleton)
+
+
+def test_gap_help_lists_every_format(capsys):
+    from quadsim.gap.__main__ import main as gap_main
+
+    with pytest.raises(SystemExit):
+        gap_main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in ("CSV", ".csv.gz", "Parquet", "PX4 ULog", "Crazyflie uSD", "ArduPilot DataFlash"):
+        assert name in text, name

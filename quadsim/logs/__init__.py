@@ -36,6 +36,9 @@ from ..core.errors import InputError, field_error
 from .common import Columns, parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")
+#: every format a command reads a flight log from, for its --help.
+READABLE = ("quadsim flight-log CSV, .csv.gz or Parquet; PX4 ULog (.ulg); Crazyflie uSD card "
+            "log; ArduPilot DataFlash (.bin)")
 _SUFFIX = {".ulg": "ulog", ".bin": "dataflash"}
 
 
@@ -186,5 +189,5 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "Columns", "detect_format", "file_kind", "parse_budget",
+__all__ = ["FORMATS", "READABLE", "Columns", "detect_format", "file_kind", "parse_budget",
            "parse_rotor_map", "read_columns", "refuse_binary", "resample"]
