@@ -148,3 +148,33 @@ def test_gap_help_lists_every_format(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for name in ("CSV", ".csv.gz", "Parquet", "PX4 ULog", "Crazyflie uSD", "ArduPilot DataFlash"):
         assert name in text, name
+
+
+def test_a_doubtful_rotor_order_makes_the_verdict_tentative_and_capped():
+    """Per-flight on generated figure-8s: rotors 1 and 2 swapped in the judged flight (not
+    refused here: called below the CLI's checks) -> tentative, at most 99 %, the note and
+    the --rotor-map that fits better in the answer; the right order is confirmed."""
+    import dataclasses
+    import warnings
+
+    from quadsim.effects import EffectSet
+    from quadsim.gap.per_flight import diagnose_per_flight
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+
+    params = load_params("crazyflie21")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        flights = [generate_flight(params, "figure8", EffectSet(),
+                                   SensorModel(noise={"gyro": 0.01}), seed, duration=6.0,
+                                   speed=1.0)[0] for seed in (0, 1, 2, 7)]
+    one = flights[3]
+    swapped = dataclasses.replace(one, rotor_speed=one.rotor_speed[:, [1, 0, 2, 3]],
+                                  rotor_command=one.rotor_command[:, [1, 0, 2, 3]])
+    result = diagnose_per_flight([one, swapped], flights[:3], params)
+    right, wrong = result.flights
+    assert not right.tentative or right.outcome == "effect"
+    assert wrong.tentative and wrong.probability <= 0.99
+    assert "--rotor-map 2,1,3,4" in wrong.answer and "a wrong rotor order" in wrong.answer
+    assert any("rotor order not confirmed" in n for n in wrong.notes)
+    assert not any("rotor order" in n for n in right.notes)
