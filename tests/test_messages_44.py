@@ -178,3 +178,25 @@ def test_a_doubtful_rotor_order_makes_the_verdict_tentative_and_capped():
     assert "--rotor-map 2,1,3,4" in wrong.answer and "a wrong rotor order" in wrong.answer
     assert any("rotor order not confirmed" in n for n in wrong.notes)
     assert not any("rotor order" in n for n in right.notes)
+
+
+def test_the_px4_iris_log_against_crazyflie21_is_another_vehicle():
+    """The issue's case: PX4 SITL Iris rotors (~306 rad/s) against crazyflie21
+    read 'Hz logged as rad/s?' (x 2 pi lands within max_speed); undone, the thrust is still
+    1.5x the need: another vehicle."""
+    params = load_params("crazyflie21")
+    with pytest.raises(InputError, match="a log of another vehicle"):
+        check_rotors(_hover(306.0), params)          # undone as Hz: 1.5x the need
+
+
+def test_ctrl_c_while_a_command_starts_is_one_line(capsys):
+    import signal
+
+    import quadsim
+
+    with pytest.raises(SystemExit) as stop:
+        quadsim._interrupted_while_starting(signal.SIGINT, None)
+    assert stop.value.code == 130
+    assert capsys.readouterr().err == "error: interrupted\n"
+    # imported as a library (here, by pytest), the package leaves Ctrl-C alone
+    assert signal.getsignal(signal.SIGINT) is not quadsim._interrupted_while_starting

@@ -313,6 +313,12 @@ def check_rotors(log, params) -> None:
                           f"mass {params.mass:.4g} kg of {params.path or params.name}): {hint}")
 
 
+#: a unit slip is named when undoing it puts b sum(Omega^2) within this factor of the thrust
+#: needed (the set's own b is right for its vehicle up to ~20 %); a PX4 Iris log against
+#: crazyflie21 undone as "Hz" still needs 1.5x: another vehicle, not a unit.
+UNIT_RATIO = 1.3
+
+
 def _thrust_hint(log, params, ratio: float) -> str:
     """What a thrust ratio far from 1 most likely means: a unit (RPM or Hz as rad/s) or a
     log of another vehicle, told by the log's own speeds against the set's ``max_speed``:
@@ -325,7 +331,7 @@ def _thrust_hint(log, params, ratio: float) -> str:
                                           else "") + "; identify --logs makes its own set)")
     for factor, unit in ((2 * np.pi / 60, "RPM"), (2 * np.pi, "Hz")):
         if top and abs(np.log(peak * factor / top)) < np.log(2.0) and \
-                abs(np.log(ratio * factor ** 2)) < np.log(2.0):
+                abs(np.log(ratio * factor ** 2)) < np.log(UNIT_RATIO):
             return (f"{unit} logged as rad/s? (x {factor:.4g} puts the speeds at "
                     f"{peak * factor:.4g} rad/s, within the set's max_speed {top:.4g} rad/s)")
     if 40 < ratio < 150 and not top:
