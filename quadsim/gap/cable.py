@@ -39,7 +39,7 @@ or above that frequency (turns, stops, a figure-8's reversals). A gentle flight 
 the mass, not the length (the answer then says so, and ``mass_offset`` ties with it).
 
 Prior (:func:`prior`; each range about two spreads either side of its centre, the rule of
-:func:`quadsim.gap.explanations._prior_sd`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
+:func:`quadsim.gap.explanations.prior_spreads`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
 drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload limit, Bitcraze
 datasheet; :mod:`quadsim.gap.priors`), centred inside that range rather than on "off" -- the
 reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit
@@ -63,6 +63,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -71,7 +72,6 @@ from ..core.frames import quat_to_rotmat
 from ..effects.base import EffectLoads, EffectParameter
 from ..effects.cable_payload import CablePayload
 from ..vehicle.params import VehicleParams
-from . import fitting
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
 
@@ -284,6 +284,10 @@ class CableSwing(CablePayload):
         EffectParameter("rate_x", "rad/s", 0.0, -5.0, 5.0, "swing rate along x at the start"),
         EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"))
 
+    #: the swing at the first sample is fitted with the payload, never part of an answer
+    facts = dataclasses.replace(CablePayload.facts,
+                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y"))
+
     def state_size(self) -> int:
         return 0
 
@@ -343,5 +347,3 @@ class CableSwing(CablePayload):
         loads.force_world, loads.torque_body = force, torque
         return loads
 
-
-fitting.LOCAL_EFFECTS["cable_payload"] = CableSwing
