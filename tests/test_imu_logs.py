@@ -345,3 +345,21 @@ def test_identify_cli_messages(imu_usd, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "body.mass: 27 kg on rotors" in err and "grams given as kg?" in err
     assert not (tmp_path / "x.toml").exists() and not (tmp_path / "y.toml").exists()
+
+
+def test_dataflash_without_position_converts_as_imu_log(tmp_path, capsys):
+    """An ArduPilot log with IMU, RCOU and BAT but no XKF1/EKF1/POS: rows on the IMU
+    instants, no pose, commands and voltage kept."""
+    pytest.importorskip("pymavlink")
+    from quadsim.logs.samples import dataflash_bytes, sample_flight
+
+    path = tmp_path / "imu.bin"
+    path.write_bytes(dataflash_bytes(sample_flight(duration_s=3.0), omit=("XKF1",)))
+    out = tmp_path / "imu.csv.gz"
+    assert convert_main([str(path), "-o", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "XKF1/EKF1/POS: not logged: read as IMU + motors" in said.err
+    assert "IMU + motors, no pose" in said.out
+    log = load_log(out, warn=False)
+    assert not log.has_pose and log.rotor_command.shape[1] == 4 and log.vbat is not None
+    np.testing.assert_allclose(np.median(log.accel[:, 2]), G, rtol=0.2)
