@@ -363,3 +363,11 @@ def test_dataflash_without_position_converts_as_imu_log(tmp_path, capsys):
     log = load_log(out, warn=False)
     assert not log.has_pose and log.rotor_command.shape[1] == 4 and log.vbat is not None
     np.testing.assert_allclose(np.median(log.accel[:, 2]), G, rtol=0.2)
+
+
+def test_convert_model_checks_an_imu_log_and_says_what_it_cannot(imu_usd, tmp_path, capsys):
+    out = tmp_path / "checked.csv.gz"
+    assert convert_main([str(imu_usd), "-o", str(out), "--model", "crazyflie21"]) == 0
+    err = capsys.readouterr().err
+    assert "no position or attitude in the log (IMU and motors only)" in err
+    assert "the gyro and accelerometer are checked by their magnitudes" in err
