@@ -148,15 +148,19 @@ def _binned(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def residual_against(series, band) -> str:
     """SVG: the mean residual in bins of speed and of collective thrust, before and after,
-    for the three wrench channels whose residual before is largest against ``band``."""
+    for the three wrench channels whose residual before is largest against ``band`` ("" for
+    a flight with neither velocity nor rotor speeds)."""
     wrench = [k for k, c in enumerate(series.channels) if c in _WRENCH]
     sigma = np.asarray(band, float)
     ms = np.mean(series.before ** 2, axis=0) / sigma ** 2
     top = sorted(wrench, key=lambda k: -ms[k])[:3]
-    xs = [("speed (m/s)", np.linalg.norm(series.states.velocity, axis=1))]
+    velocity = getattr(series.states, "velocity", None)
+    xs = [] if velocity is None else [("speed (m/s)", np.linalg.norm(velocity, axis=1))]
     total = thrust(series)
     if total is not None:
         xs.append(("collective thrust (N)", total))
+    if not xs:
+        return ""
     fig = _figure(9.0, 2.3 * len(xs) + 0.4)
     axes = np.atleast_2d(fig.subplots(len(xs), len(top)))
     for row, (label, x) in enumerate(xs):

@@ -50,8 +50,9 @@ def recording(result) -> dict | None:
     for s in series:
         name = Path(str(s.flight)).name
         st = s.states
-        trajectories[name] = Trajectory(st.t, st.position, st.velocity, st.quat,
-                                        st.body_rate, st.rotor_speed, engine="log")
+        if getattr(st, "position", None) is not None and getattr(st, "quat", None) is not None:
+            trajectories[name] = Trajectory(st.t, st.position, st.velocity, st.quat,
+                                            st.body_rate, st.rotor_speed, engine="log")
         band = _bands(result, s)
         for k, channel in enumerate(s.channels):
             if channel not in _WRENCH:
