@@ -106,7 +106,7 @@ def test_facts_of_gives_a_parameters_wording():
 
 
 #: fitting.candidates_for(crazyflie21, has_commands, has_vbat) on main at 42ad543: name,
-#: parameter names, fixed values, fitting._typical (recorded there)
+#: parameter names, fixed values, fitting.typical_scales (recorded there)
 CANDIDATES_42AD543 = {
     (False, False): [
         ('blade_flapping', ['blade_flapping.coefficient'], {},

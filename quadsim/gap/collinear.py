@@ -117,7 +117,7 @@ def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> s
         text, unit = spec.doc, spec.unit
     except KeyError:
         text, unit = p.replace("_", " "), unit_of(key)
-    return f"{name.replace('_', ' ')}: {text} {_pm(value, c, 1.0, '.4g')} {unit}".rstrip()
+    return f"{name.replace('_', ' ')}: {text} {plus_minus(value, c, 1.0, '.4g')} {unit}".rstrip()
 
 
 def torque_text(entry: dict) -> str:
@@ -126,6 +126,4 @@ def torque_text(entry: dict) -> str:
     return ", ".join(f"{k} {v:.2g} N m" for k, v in have)
 
 
-_torque_text = torque_text  # alias for other modules until integration
-_pm = plus_minus  # alias for other modules until integration
-_num = number  # alias for other modules until integration
+_torque_text = torque_text  # alias for judge (being changed on another branch) until it merges

@@ -128,6 +128,3 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     return [full_fit(inputs, e, starts[1] if e.name == "signal_delay" else starts[0])
             for e in explanations]
 
-
-# alias until integration
-_read_inside = read_inside

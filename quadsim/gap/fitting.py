@@ -500,8 +500,8 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)
 
 
-# alias for other modules until integration
-_typical = typical_scales  # alias for other modules until integration
-_bounds = parameter_bounds  # alias for other modules until integration
-_correlation_time = correlation_time  # alias for other modules until integration
-_arm = arm_length  # alias for other modules until integration
+# aliases for calibrate, reference and problem (being changed on another branch) until it merges
+_typical = typical_scales
+_bounds = parameter_bounds
+_correlation_time = correlation_time
+_arm = arm_length

@@ -62,10 +62,10 @@ from ..vehicle.params import VehicleParams
 from . import consistency
 from .calibrate import Reference, shared_candidate
 from .evidence import Evidence, Explanation, evaluate, explanations_for
-from .explanations import _make
+from .fitmodels import build_effect
 from .fitting import (
     Candidate,
-    _correlation_time,
+    correlation_time,
     effect_class,
     noise_floor,
     noise_scale,
@@ -99,7 +99,7 @@ NOISE_WINDOW_S = SLOW_WINDOW_S
 #: prior spread of the relative drag-torque factor error (module doc, stage 2).
 D_PRIOR_SD = 0.5
 #: prior spread of the relative thrust factor error: :mod:`.priors` -15 .. +5 %, half the
-#: larger end (the rule of :func:`quadsim.gap.explanations._prior_sd`).
+#: larger end (the rule of :func:`quadsim.gap.explanations.prior_spreads`).
 B_PRIOR_SD = 0.075
 #: prior spread (V) of a battery's full voltage: +-10 % of a cell's 4.2 V (charge state),
 #: as :mod:`.evidence`.
@@ -121,7 +121,7 @@ def noise_model(nominal: list[np.ndarray], dt: float, floor: np.ndarray
     ``floor``) and the fast part's integrated correlation time (samples)."""
     sigma = noise_scale(np.concatenate(nominal), dt, window_s=NOISE_WINDOW_S, floor=floor)
     fast = [r - slow_part(r, dt) for r in nominal]
-    tau = np.array([np.mean([_correlation_time(f[:, [c]] / sigma[c]) for f in fast])
+    tau = np.array([np.mean([correlation_time(f[:, [c]] / sigma[c]) for f in fast])
                     for c in range(len(sigma))])
     return sigma, tau
 
@@ -153,9 +153,9 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     """Every explanation of how the training flights differ from the parameter set (module
     doc, stage 2). ``vbat``: the highest logged battery voltage (V) when every training
     flight logs one (the full-voltage prior is centred there); ``names``: restrict."""
-    from .explanations import _prior_sd
+    from .explanations import prior_spreads
 
-    sd = _prior_sd(reference.params)
+    sd = prior_spreads(reference.params)
     out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]
     # a propeller change with the speed per command held: the reference's static command ->
     # speed map is fitted on these same flights, so it already carries the lighter load's
@@ -185,7 +185,7 @@ def heldout_explanations(reference: Reference, train_states, names=None,
 
 def effects_of(ev: Evidence) -> list:
     """The effects of an explanation at its MAP values."""
-    return [_make(name, {**fixed, **{p: ev.values[f"{name}.{p}"] for p in fitted}})
+    return [build_effect(name, {**fixed, **{p: ev.values[f"{name}.{p}"] for p in fitted}})
             for name, fixed, fitted in ev.explanation.parts]
 
 

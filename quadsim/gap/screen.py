@@ -64,7 +64,8 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..core.errors import ModelError
-from .explanations import Explanation, _make
+from .explanations import Explanation
+from .fitmodels import build_effect
 from .problem import Evidence, FitInputs, Problem, flight_residual, full_fit, shifted_view
 
 __all__ = [
@@ -207,7 +208,7 @@ def centred_is_base(expl: Explanation, cols: Columns) -> bool:
 
 
 def _fixed_effects(parts) -> list:
-    return [_make(name, dict(fixed)) for name, fixed, _ in parts]
+    return [build_effect(name, dict(fixed)) for name, fixed, _ in parts]
 
 
 def _shared_point(prob: Problem, cols: Columns, z: np.ndarray) -> float | None:
@@ -535,9 +536,3 @@ def screened(inputs: FitInputs, explanations: list[Explanation],
             rows[k].screened = True
     return rows
 
-
-# alias until integration
-_Columns = Columns
-_columns = jacobian_columns
-_step = linear_step
-_centred_is_base = centred_is_base
