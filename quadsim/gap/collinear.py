@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from types import MappingProxyType
 
-from ..effects.facts import number, plus_minus
+from ..effects.facts import plus_minus
 from ..vehicle.params import VehicleParams
 from .fitmodels import FIT_EFFECTS, effect_class
 

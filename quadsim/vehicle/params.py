@@ -358,7 +358,8 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         if key in ("min_speed", "radius", "inertia") and key not in rotor_section:
             values[key] = 0.0
             continue
-        values[key], sources[f"rotors.{key}"] = read_quantity(rotor_section, key, unit, path, "rotors")
+        values[key], sources[f"rotors.{key}"] = read_quantity(rotor_section, key, unit, path,
+                                                              "rotors")
         _positive(values[key], path, f"rotors.{key}", allow_zero=key in ("min_speed", "inertia"))
     if values["min_speed"] >= values["max_speed"]:
         raise field_error(path, "rotors.min_speed", "must be below rotors.max_speed")
