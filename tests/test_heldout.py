@@ -75,10 +75,10 @@ def test_carry_over_flags_a_held_out_flight_beyond_the_training_residual():
 
 
 def test_carry_over_exempts_the_form_error_and_the_noise_floor():
-    """The one rule of both modes (judge.lack_of_fit, against the training flights): Fz at 1.6x its training RMS is no lack of fit when
-    "no difference" leaves 30x more excess there (the reading explains 98 % of the held-out
-    gap, FORM_ERROR 5 %), nor when it is below the channel's noise floor (sigma 1e-5 N
-    against the Crazyflie's 0.36 mN)."""
+    """The one rule of both modes (judge.lack_of_fit, against the training flights): Fz at 1.6x its
+    training RMS is no lack of fit when "no difference" leaves 30x more excess there (the reading
+    explains 98 % of the held-out gap, FORM_ERROR 5 %), nor when it is below the channel's noise
+    floor (sigma 1e-5 N against the Crazyflie's 0.36 mN)."""
     rng = np.random.default_rng(2)
     sigma = np.full(6, 1.0)
     ref = _reference(sigma, np.ones(6))

@@ -40,7 +40,8 @@ def _parser() -> argparse.ArgumentParser:
                     "flights and scored on held-out flights (split by flight, never by "
                     "sample).",
         epilog=__doc__.split("Examples::")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .csv.gz or Parquet)")
+    parser.add_argument("logs", nargs="+", metavar="LOG",
+                        help="flight logs (CSV, .csv.gz or Parquet)")
     parser.add_argument("--model", required=True, help="parameter set: built-in name or TOML")
     parser.add_argument("--holdout", nargs="+", metavar="LOG",
                         help="held-out logs (default: every third of LOG)")

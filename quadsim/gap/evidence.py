@@ -14,16 +14,16 @@ Likelihood (all channels, the references' noise model)::
 reference flights: N / tau_c effective samples, so a long flight with correlated residuals
 does not out-vote physics). The shared parameters theta_s are not fixed: every explanation
 carries them with the references' prior N(theta_ref, s_ref^2) (s_ref tempered by the
-physical prior of a difference, :func:`~quadsim.gap.explanations.marginal_sd`), marginalised in closed form
-around theta_ref (linear in theta_s, Jacobian J_s of the weighted residual): with
+physical prior of a difference, :func:`~quadsim.gap.explanations.marginal_sd`), marginalised
+in closed form around theta_ref (linear in theta_s, Jacobian J_s of the weighted residual): with
 u = (theta_s - theta_ref) / s_ref, Ĵ = J_s diag(s_ref) and A = I + ĴᵀĴ the profile is
 ``|r + Ĵ du|^2 + |du|^2`` at ``du = -A^-1 Ĵᵀ r`` and the marginal adds ``-1/2 log det A``.
 An explanation that gives a shared group a value of its own takes that group out of the
 marginal and fits it with the wider prior N(theta_ref, s_ref^2 + w^2) (w: the prior spread
-of a difference, :func:`quadsim.gap.explanations._prior_sd`). The rotor speeds' logging delay is shared as well, but
-not linear at all over a few ms: every explanation fits it, with the references' spread
-(:func:`quadsim.gap.explanations.reference_delay_sd`) as its prior; the reading "signal_delay" fits it with the wide
-prior N(0, s^2 + (20 ms)^2).
+of a difference, :func:`quadsim.gap.explanations.prior_spreads`). The rotor speeds' logging
+delay is shared as well, but not linear at all over a few ms: every explanation fits it, with
+the references' spread (:func:`quadsim.gap.explanations.reference_delay_sd`) as its prior;
+the reading "signal_delay" fits it with the wide prior N(0, s^2 + (20 ms)^2).
 
 Evidence (Laplace at the bounded least-squares optimum, parameters in units of their prior
 spread, z = (theta - mu) / sd)::
@@ -34,8 +34,9 @@ with H = JᵀJ of the stacked residual (the posterior precision in z units; -1/2
 the Occam factor log(posterior volume / prior volume); a value at a bound of its parameter
 keeps half the volume, log 2 less) and pi the model prior: equal per
 effect, split evenly among an effect's variants (one per rotor for a weak or canted rotor);
-"no difference" is weighed against them in :func:`quadsim.gap.judge.posterior`. A parameter is *determined* by the data when its posterior spread is
-below half its prior spread (:data:`quadsim.gap.explanations.DETERMINED`); only determined values are ever printed.
+"no difference" is weighed against them in :func:`quadsim.gap.judge.posterior`. A parameter
+is *determined* by the data when its posterior spread is below half its prior spread
+(:data:`quadsim.gap.explanations.DETERMINED`); only determined values are ever printed.
 
 The explanations, their priors and the propeller coupling: :mod:`quadsim.gap.explanations`.
 

@@ -250,7 +250,7 @@ def _start_off(candidate: Candidate) -> np.ndarray:
 def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
            typical: np.ndarray) -> np.ndarray:
     off = []
-    for name, fixed, fitted in candidate.parts:
+    for name, _fixed, fitted in candidate.parts:
         specs = {p.name: p for p in effect_class(name).parameters}
         off += [specs[p].off for p in fitted]
     x0 = np.asarray(off, dtype=float)

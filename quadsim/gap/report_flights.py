@@ -181,7 +181,8 @@ def _readings(f: dict) -> str:
         for r in f.get("posterior", [])[1:4] if r["probability"] >= 0.01)
     extra = ""
     if f.get("differ_on"):
-        extra = f"<p>The two leading readings differ most on {html.escape(', '.join(f['differ_on']))}.</p>"
+        differ = html.escape(", ".join(f["differ_on"]))
+        extra = f"<p>The two leading readings differ most on {differ}.</p>"
     for other, how in (f.get("separate_by") or {}).items():
         extra += f"<p>To separate from {html.escape(other)}: {html.escape(how)}.</p>"
     if not items and not extra:

@@ -69,7 +69,8 @@ def reading_text(ev, reference) -> str:
         d = 1e3 * ev.values["delay.rotor"]
         if not keys:
             return "rotor speeds logged with a delay of their own (size not determined)"
-        return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
+        ci = 1.96e3 * ev.post_sd["delay.rotor"]
+        return (f"the rotor speeds are logged {abs(d):.0f} ± {ci:.0f}"
                 f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
                 f"(references: {mean:+.1f} ms against motion capture, fitted)")
     if name == "wind":
@@ -139,7 +140,8 @@ def _wind_text(ev, reference) -> str:
     size = float(np.hypot(*horiz))
     axis = int(np.argmax(np.abs(horiz)))
     sign = "+" if horiz[axis] >= 0 else "-"
-    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
+    text = (f"a steady air force (beyond the references') of {size:.3g} N along "
+            f"{sign}{'xy'[axis]} (world; "
             f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
             "airspeed")
     keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
