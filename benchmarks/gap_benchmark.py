@@ -116,13 +116,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.cases import oracle_reduction
 from benchmarks.draws import draw
+from benchmarks.observe import MIN_GAIN
 from benchmarks.score import joined_kind
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimError, QuadsimWarning
 from quadsim.core.files import atomic_write_text
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
-from quadsim.gap.diagnose import MIN_GAIN
 from quadsim.vehicle.params import load_params
 
 VEHICLES = ("physical", "crazyflie21")

@@ -303,6 +303,8 @@ def test_names_that_left_the_package_are_refused_with_their_new_path():
         quadsim.gap.SensorNoise  # noqa: B018
     with pytest.raises(AttributeError):
         quadsim.gap.no_such_name  # noqa: B018
+    with pytest.raises(ImportError, match=r"from benchmarks\.observe import MIN_GAIN"):
+        from quadsim.gap.diagnose import MIN_GAIN  # noqa: F401
     # the modules that moved to benchmarks/ are gone from the package (an import of them is
     # ModuleNotFoundError; CHANGELOG.md names each new path)
     for gone in ("bench", "gap/synthetic.py", "logs/corrupt.py", "sim/rollout.py"):

@@ -2,8 +2,8 @@
 what the torque and yaw channels say, and what separates them (:func:`separation`).
 
 Readings the data cannot choose between are all listed in ``verdict.alternatives``
-(:mod:`quadsim.gap.diagnose`, from the held-out posterior of
-:mod:`quadsim.gap.heldout_verdict`), each with
+(:mod:`quadsim.gap.diagnose`, from the held-out posterior of :mod:`quadsim.gap.heldout`),
+each with
 
 * ``magnitude``: the fitted parameters as a physical statement with units ("+4.0 ± 0.2 g
   (+10.8 % of the vehicle mass)", "-9.7 ± 0.5 % thrust per Omega^2 on all 4 rotors");
