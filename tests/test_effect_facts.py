@@ -262,7 +262,7 @@ def test_candidates_for_crazyflie21_as_before(case):
 
 
 def test_derived_views_are_read_only_and_as_before():
-    from quadsim.gap import collinear, fitting, priors
+    from quadsim.gap import fitting, priors
 
     with pytest.raises(TypeError):
         fitting.FIT_SPEC["x"] = ((), {}, None)
@@ -280,8 +280,8 @@ def test_derived_views_are_read_only_and_as_before():
         "canted_rotor": (-0.17, 0.17, "absolute"),
         "translational_lift.k_h": (0.0, 2.0, "lift"),
         "thrust_curve.linear": (-0.2, 0.2, "hover")}
-    assert len(collinear.SEPARATE) == 18
-    assert "wind is fixed" in collinear.SEPARATE[frozenset({"rotor_drag", "wind"})]
+    assert len(priors.SEPARATE) == 18
+    assert "wind is fixed" in priors.SEPARATE[frozenset({"rotor_drag", "wind"})]
 
 
 def test_prior_spreads_closed_forms():
@@ -311,7 +311,8 @@ def test_what_can_be_fitted_does_not_depend_on_import_order():
                    "'speed_gain'] ['canted_rotor', 'nominal_refit', 'speed_gain']")
 
 
-#: collinear.describe of one reading on main at 42ad543 (model, key, value, 95 % half-width):
+#: collinear.describe (now priors.describe) of one reading on main at 42ad543 (model, key,
+#: value, 95 % half-width):
 #: the wording moved into the effects' facts (Words.phrase) word for word
 WORDED_42AD543 = [
     ('crazyflie21', 'battery_sag.rate', 0.0123, 0.004,
@@ -339,14 +340,14 @@ WORDED_42AD543 = [
 
 @pytest.mark.parametrize("model, key, value, ci, text", WORDED_42AD543)
 def test_readings_are_worded_as_before(model, key, value, ci, text):
-    from quadsim.gap.collinear import describe
+    from quadsim.gap.priors import describe
 
     ci = {} if ci is None else {key: ci}
     assert describe(key.split(".")[0], {key: value}, ci, load_params(model)) == text
 
 
 def test_a_canted_rotor_is_worded_as_one_lean_before_the_rest():
-    from quadsim.gap.collinear import describe
+    from quadsim.gap.priors import describe
 
     values = {"canted_rotor.tilt_x": 0.03, "canted_rotor.tilt_y": -0.01, "wind.vx": 1.5,
               "cable_payload.lean_x": 0.1, "mass_offset.mass": 0.004}

@@ -13,8 +13,7 @@ from quadsim.core.errors import InputError
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
-from quadsim.gap.report import to_json
-from quadsim.gap.schema import validate
+from quadsim.gap.report import to_json, validate
 from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
@@ -390,9 +389,9 @@ def test_every_candidate_magnitude_is_worded_with_a_unit(model):
     ``effect.parameter = value`` form (e.g. battery_sag.full_voltage = +3.682 V)."""
     import re
 
-    from quadsim.gap.collinear import describe
     from quadsim.gap.diagnose import BASELINE
     from quadsim.gap.fitting import candidates_for, typical_scales
+    from quadsim.gap.priors import describe
 
     params = load_params(model)
     units = re.compile(r"( g\b| mm\b| %| ms\b| mN\b| N\b| m/s| V\b| kg m²| g cm²| cm²| s\b"

@@ -24,7 +24,7 @@ Method (equation error, then prediction error)
    ``no_significant_gap``, or ``unexplained`` (lack of fit: a held-out flight beyond what the
    reading leaves on the training flights, or a systematic remainder with no effect to
    explain it; an implausible magnitude; parameters that differ between regimes,
-   :mod:`.consistency`).
+   :mod:`.where`).
 5. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
    aggressive rotation, near ground, low battery), by frequency band, and as k-step
    prediction error of position and attitude (0.05-1 s, multiple shooting with the analytic
@@ -50,13 +50,14 @@ outcome rule), one answer writer (:mod:`.words`) and one result type
 
 Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode),
 :mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
-least squares), :mod:`.heldout` (held-out reference, weighing, ranking), :mod:`.collinear`
-+ :mod:`.priors`, :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
-:mod:`.evidence`), :mod:`.judge` (the verdict of both modes), :mod:`.words` (answers),
-:mod:`.result` (result types), :mod:`.where`, :mod:`.checks` (vehicle check before
-fitting), :mod:`.commands` (command-only logs), :mod:`.report`, :mod:`.report_flights` and
-:mod:`.schema` (output). Generated test flights: ``benchmarks.synthetic`` in the
-repository (not in the wheel).
+least squares), :mod:`.fitmodels` (the effects the diagnosis fits beyond the library),
+:mod:`.heldout` (held-out reference, weighing, ranking), :mod:`.priors` (plausible
+magnitudes, readings in words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`),
+:mod:`.judge` (the verdict of both modes), :mod:`.words` (answers), :mod:`.result` (result
+types), :mod:`.where` (where and when the gap lies, parameter consistency), :mod:`.checks`
+(vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report`
+(output: JSON and its schema, summaries, HTML, rerun, the effect file). Generated test flights:
+``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::
 
@@ -66,15 +67,14 @@ Example::
     >>> result = diagnose([load_log(p) for p in paths], load_params("crazyflie21"))
     >>> result.verdict.name, result.verdict.reduction       # or result["verdict"]["effect"]
 
-CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
-(``quadsim.gap/3``), documented in docs/gap.md.
+CLI: ``python -m quadsim.gap --help``. Result schema: :data:`GAP_SCHEMA`
+(``quadsim.gap/3``, :mod:`quadsim.gap.report`), documented in docs/gap.md.
 """
 
 from .diagnose import SCHEMA, diagnose, prepare
 from .per_flight import diagnose_per_flight
-from .report import summary, to_json, write_html, write_json, write_rerun
+from .report import GAP_SCHEMA, summary, to_json, validate, write_html, write_json, write_rerun
 from .result import Diagnosis, Reading, Verdict
-from .schema import GAP_SCHEMA, validate
 
 __all__ = ["GAP_SCHEMA", "SCHEMA", "Diagnosis", "Reading", "Verdict",
            "diagnose", "diagnose_per_flight", "prepare", "summary",

@@ -23,9 +23,12 @@ from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from . import heldout
-from .baseline import BASELINE  # noqa: F401  (re-exported: quadsim.identify, tests)
 from .checks import check_length, vehicle_check
-from .fitting import fit_motor_map, stack_states
+from .fitting import (
+    BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
+    fit_motor_map,
+    stack_states,
+)
 from .judge import channel_names, judge_heldout
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Series

@@ -47,6 +47,7 @@ from .residual import FlightStates, measured_wrench, model_wrench
 from .rotor_channel import min_time_constant, rotor_residual
 
 __all__ = [
+    "BASELINE",
     "FIT_SPEC",
     "LOCAL_EFFECTS",
     "NOISE_FLOOR",
@@ -505,3 +506,9 @@ _typical = typical_scales
 _bounds = parameter_bounds
 _correlation_time = correlation_time
 _arm = arm_length
+
+
+#: the nominal refit's candidate (:class:`quadsim.gap.fitmodels.NominalRefit`): the
+#: parameter set's b and d re-identified; a shared group of the reference model
+#: (:mod:`.calibrate`) and the held-out reading "b and d are off"
+BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))

@@ -41,7 +41,7 @@ Stages (each a named type)
    with each other effect; the pair's prior is the lead's split evenly among its partners,
    and every part of it must be determined and plausible,
    :func:`quadsim.gap.judge.every_part_stands`), and the consistency check of the lead
-   (:mod:`.consistency`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
+   (:mod:`.where`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
    turns into the verdict.
 
 Example::
@@ -59,7 +59,7 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
-from . import consistency
+from . import where
 from .calibrate import Reference, shared_candidate
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitmodels import build_effect
@@ -299,7 +299,7 @@ def entry_of(w: Weighed, probability: float, before: list, reference: Reference)
 
 
 def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> dict:
-    """The consistency check (:func:`quadsim.gap.consistency.check`) of the reading ``w``
+    """The consistency check (:func:`quadsim.gap.where.check`) of the reading ``w``
     (its ``effects`` ``entry``) on ``flights`` (decimated states); the propeller's speed
     exponent is held at its value (the library's thrust_factor has none)."""
     ev = w.train
@@ -311,7 +311,7 @@ def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> 
     cand = Candidate(ev.name, tuple(parts), reference.candidate.base)
     judged = [q for q in entry["params"] if not q.endswith(".alpha")
               and entry["significant"].get(q)]
-    return consistency.check(cand, np.asarray(theta, float), judged, flights,
+    return where.check(cand, np.asarray(theta, float), judged, flights,
                              params=reference.params, sigma=reference.sigma,
                              rotor=reference.rotor)
 
