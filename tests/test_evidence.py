@@ -627,8 +627,8 @@ def test_a_reading_is_screened_from_the_base_it_is_centred_on():
     drag taken as quadratic is neither."""
     from types import SimpleNamespace
 
+    from quadsim.gap.evidence import centred_is_base
     from quadsim.gap.explanations import Explanation
-    from quadsim.gap.screen import centred_is_base
 
     law_part = ("drag_law", {"cd_area": 0.01, "per_axis": 1.0}, ())
     plain = SimpleNamespace(fixed=(), replaced=())

@@ -242,8 +242,8 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
     from scipy.optimize import lsq_linear
 
+    from quadsim.gap.evidence import Columns, jacobian_columns, linear_step
     from quadsim.gap.problem import FitInputs
-    from quadsim.gap.screen import Columns, jacobian_columns, linear_step
 
     ref = _reference(cf, states)
     names = list(ref.candidate.parameter_names)

@@ -1,4 +1,4 @@
-"""Held-out mode by evidence (quadsim.gap.heldout, .judge): the noise model leaves
+"""Held-out mode by evidence (quadsim.gap.diagnose, .judge): the noise model leaves
 the gap out, the lack-of-fit tests flag a systematic remainder and a reading that does not
 carry over, and the verdict carries a posterior per reading."""
 
@@ -12,7 +12,7 @@ import pytest
 from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
-from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
+from quadsim.gap.diagnose import NOISE_WINDOW_S, noise_model, slow_part
 from quadsim.gap.judge import carry_over, remainder
 from quadsim.vehicle.params import load_params
 
@@ -147,9 +147,8 @@ def test_the_held_out_reference_reads_no_rotor_delay(cf):
     fits no rotor timing (``Reference.timing`` False, no cross-correlation estimate), so its
     explanations carry no delay (the per-flight mode reads one wherever the references'
     timing is fitted); a delay there had crashed the held-out pair fits (shapes 4 vs 5)."""
-    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.diagnose import nominal_reference, prepare
     from quadsim.gap.explanations import explanations_for
-    from quadsim.gap.heldout import nominal_reference
 
     flight = prepare([synthetic_flight(cf, [], duration=3.0, seed=5)], cf)[0]
     reference = nominal_reference([flight.fit], cf, rotor=True)

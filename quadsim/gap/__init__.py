@@ -11,7 +11,7 @@ Method (equation error, then prediction error)
    speed predicted 0.12 s ahead from the command, which is where motor lag shows), divided
    by each channel's noise scale, is the *gap* (1 = sensor noise).
 2. Flights are split by flight (never by sample): ``--holdout`` or every third flight.
-3. Verdict by evidence (:mod:`.heldout`, :mod:`.judge`): the parameter set is the
+3. Verdict by evidence (:mod:`.diagnose`, :mod:`.judge`): the parameter set is the
    reference model; the noise model per channel is the scatter of the residual's fast part
    (minus its 0.5 s moving average: what the gap does not contain). Every explanation of how
    the flights differ (each library effect, ``nominal_refit`` = b and d re-identified, or no
@@ -48,15 +48,15 @@ baseline -- the reference flights, or the reading's own training flights -- is d
 outcome rule), one answer writer (:mod:`.words`) and one result type
 (:class:`.result.Diagnosis` holding :class:`.result.Verdict`, with ``to_json()``).
 
-Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode),
-:mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
-least squares), :mod:`.fitmodels` (the effects the diagnosis fits beyond the library),
-:mod:`.heldout` (held-out reference, weighing, ranking), :mod:`.priors` (plausible
-magnitudes, readings in words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`),
-:mod:`.judge` (the verdict of both modes), :mod:`.words` (answers), :mod:`.result` (result
-types), :mod:`.where` (where and when the gap lies, parameter consistency), :mod:`.checks`
-(vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report`
-(output: JSON and its schema, summaries, HTML, rerun, the effect file). Generated test flights:
+Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode: its
+reference, weighing and ranking), :mod:`.motor_map` (static command -> speed map from
+data), :mod:`.fitting` (candidates and least squares), :mod:`.fitmodels` (the effects the
+diagnosis fits beyond the library), :mod:`.priors` (plausible magnitudes, readings in
+words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`), :mod:`.judge` (the verdict
+of both modes), :mod:`.words` (answers), :mod:`.result` (result types), :mod:`.where` (where
+and when the gap lies, parameter consistency), :mod:`.checks` (vehicle check before
+fitting), :mod:`.commands` (command-only logs), :mod:`.report` (output: JSON and its schema,
+summaries, HTML, rerun, the effect file). Generated test flights:
 ``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::

@@ -20,7 +20,7 @@ Each candidate's physical magnitude (:func:`describe`), what the torque and yaw 
 say, and what separates them (:func:`separation`).
 
 Readings the data cannot choose between are all listed in ``verdict.alternatives``
-(:mod:`quadsim.gap.diagnose`, from the held-out posterior of :mod:`quadsim.gap.heldout`),
+(:mod:`quadsim.gap.diagnose`, from the held-out posterior of :mod:`quadsim.gap.diagnose`),
 each with
 
 * ``magnitude``: the fitted parameters as a physical statement with units ("+4.0 ± 0.2 g
