@@ -76,6 +76,7 @@ from ..core.errors import InputError, ModelError
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
+from . import order
 from .calibrate import Reference, shared_candidate
 from .checks import check_length, vehicle_check
 from .evidence import Evidence, Explanation, evaluate, explanations_for
@@ -295,7 +296,10 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
                                   if decision.lead_name != "no_difference" else [])
     after = [r / sigma for r in lead.held_residuals] if effects_after else before
     dt = float(fit_on[0].t[1] - fit_on[0].t[0])
+    statuses = order.order_statuses(list(logs) + list(holdout or []), params)
+    decision = order.cap_decision(decision, order.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
+    verdict = order.mark(verdict, statuses)
     names = channel_names(reference)
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:
