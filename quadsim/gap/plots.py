@@ -195,6 +195,8 @@ def batch(flights, shares: dict) -> str:
     intervals. ``flights``: :class:`~quadsim.gap.result.Verdict` per flight; ``shares``:
     file -> :class:`quadsim.gap.result.GapShare` (a flight without one has no residual
     row)."""
+    from matplotlib.ticker import MaxNLocator
+
     from .collinear import unit_of
 
     order = sorted((f for f in flights if f.outcome != "refused"),
@@ -238,6 +240,7 @@ def batch(flights, shares: dict) -> str:
             ax.errorbar(factor * v, y[k], xerr=factor * ci, fmt="o", color=colours[k],
                         capsize=3)
         ax.axvline(0.0, color="0.5", lw=0.8)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_xlabel(f"{key}\n({'relative' if shown == '1' else shown})", fontsize=8)
     for ax in axes:
         ax.grid(alpha=0.3)
