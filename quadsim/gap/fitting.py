@@ -18,6 +18,7 @@ diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitmodels
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from types import MappingProxyType
 
 import numpy as np
@@ -317,7 +318,9 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
                                                                      params.inertia):
-        torque_residual = torque_residual @ np.linalg.solve(vehicle.inertia, params.inertia)
+        torque_residual = torque_residual @ _inertia_map(
+            np.asarray(vehicle.inertia, dtype=float).tobytes(),
+            np.asarray(params.inertia, dtype=float).tobytes())
     parts = [(meas_force - force) * (params.mass / vehicle.mass), torque_residual]
     if rotor_channel:
         if memo is None:
@@ -326,6 +329,16 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
             parts.append(memoised(memo, rotor_key(states, params, effects), states,
                                lambda: rotor_residual(states, params, effects)))
     return np.concatenate(parts, axis=1)
+
+
+@lru_cache(maxsize=256)
+def _inertia_map(vehicle_inertia: bytes, nominal_inertia: bytes) -> np.ndarray:
+    """``I_v^-1 I`` (3, 3) of two inertia matrices given as their float64 bytes (kept: a fit
+    evaluates many models with the same inertia); read-only."""
+    out = np.linalg.solve(np.frombuffer(vehicle_inertia).reshape(3, 3),
+                          np.frombuffer(nominal_inertia).reshape(3, 3))
+    out.flags.writeable = False
+    return out
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,

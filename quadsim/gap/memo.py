@@ -107,7 +107,15 @@ def identity(effect) -> tuple:
 def acting(effects: list, hooks: tuple) -> tuple:
     """:func:`identity` of each effect, in order, whose class has its own version of one of
     ``hooks``."""
-    return tuple(identity(e) for e in effects if _overrides(type(e), hooks))
+    out = []
+    for effect in effects:
+        hit = _OVERRIDES.get((type(effect), hooks))
+        if hit is None:
+            hit = _overrides(type(effect), hooks)
+        if hit:
+            key = effect.__dict__.get("_identity")
+            out.append(identity(effect) if key is None else key)
+    return tuple(out)
 
 
 _OVERRIDES: dict[tuple, bool] = {}

@@ -241,7 +241,13 @@ def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray,
     o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included.
     ``matrices``: :func:`rotor_matrices` of ``vehicle`` when the caller keeps them."""
     allocation_t, offset_wrench = rotor_matrices(vehicle) if matrices is None else matrices
-    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_t
+    neutral = getattr(loads, "is_neutral", lambda name: False)
+    squared = np.square(speed)
+    if not neutral("thrust_scale"):         # a scale of one changes nothing
+        squared = squared * loads.thrust_scale
+    wrench = squared @ allocation_t
+    if neutral("thrust_offset") and neutral("curve_offset"):
+        return wrench                       # no offsets: nothing to add
     return wrench + loads.rotor_offset @ offset_wrench
 
 
@@ -295,8 +301,11 @@ def model_wrench(states: FlightStates, params: VehicleParams,
                         rotation=rotation, flight_memo=flight_memo)
     loads = effect_set.loads(ctx, kept=keep)
     wrench = rotor_wrench(vehicle, loads, speed, matrices)
-    force = wrench[:, :3] + ctx.to_body(loads.force_world)
-    torque = wrench[:, 3:] + loads.torque_body
+    force, torque = wrench[:, :3], wrench[:, 3:]
+    if not loads.is_neutral("force_world"):     # a zero external load adds nothing
+        force = force + ctx.to_body(loads.force_world)
+    if not loads.is_neutral("torque_body"):
+        torque = torque + loads.torque_body
     return force, torque, vehicle
 
 
