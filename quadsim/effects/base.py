@@ -256,6 +256,14 @@ class EffectBase:
     name: ClassVar[str] = ""
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
     facts: ClassVar[EffectFacts] = EffectFacts()
+    #: what ``loads`` reads besides the effect's own values and the logged motion (``t``,
+    #: ``position``, ``velocity``, ``quat``, ``body_rate``, the rotation) and the shape
+    #: (B, R) of ``rotor_speed``: (the :class:`EffectContext` fields among ``air_velocity``,
+    #: ``rotor_speed``, ``rotor_accel``, ``vbat``; the :class:`VehicleParams` attributes of
+    #: ``ctx.params``). None: anything. A caller that evaluates many models on one flight
+    #: (:func:`quadsim.gap.residual.model_wrench`) keeps an effect's loads while these stay
+    #: the same; tests/test_effects.py checks each declaration by moving everything else.
+    loads_reads: ClassVar[tuple[tuple[str, ...], tuple[str, ...]] | None] = None
 
     def __init__(self, **values: float):
         known = _off_values(type(self), self.parameters)

@@ -292,10 +292,19 @@ def model_wrench(states: FlightStates, params: VehicleParams,
             flight_memo, "no_vbat", (), (), lambda: np.full(len(states.t), np.nan))
         refs = (vehicle, air, speed, accel, vbat)
         context_key = tuple(map(id, refs))
+        inputs = {"air_velocity": air, "rotor_speed": speed, "rotor_accel": accel,
+                  "vbat": vbat}
 
         def keep(effect, compute):
-            return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
-                        compute)
+            reads = getattr(type(effect), "loads_reads", None)
+            if reads is None:       # it may read anything: keyed by the whole context
+                return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
+                            compute)
+            fields, attributes = reads
+            own = tuple(inputs[name] for name in fields)
+            key = (identity(effect), fields, tuple(map(id, own)),
+                   _vehicle_values(flight_memo, vehicle, attributes))
+            return kept(flight_memo, "loads", key, own, compute)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, air, speed, accel, vehicle, vbat,
                         rotation=rotation, flight_memo=flight_memo)
@@ -311,6 +320,17 @@ def model_wrench(states: FlightStates, params: VehicleParams,
 
 def _vehicle_matrices(vehicle: VehicleParams):
     return vehicle, rotor_matrices(vehicle)
+
+
+def _vehicle_values(flight_memo: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
+    """The values (float64 bytes) of ``vehicle``'s ``attributes``, kept per vehicle object:
+    an effect's loads that read only these stay the same when a fit moves another part of
+    the vehicle (an inertia, a thrust factor)."""
+    if not attributes:
+        return ()
+    return kept(flight_memo, "vehicle_values", (id(vehicle), attributes), (vehicle,),
+                lambda: tuple(np.asarray(getattr(vehicle, name), dtype=float).tobytes()
+                              for name in attributes))
 
 
 def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
