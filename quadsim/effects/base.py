@@ -232,17 +232,17 @@ class Effect(Protocol):
     def loads(self, ctx: EffectContext) -> EffectLoads | None: ...
 
 
-_OFF: dict[tuple, dict[str, float]] = {}
+_OFF: dict[type, tuple[tuple, dict[str, float]]] = {}
 
 
 def _off_values(cls: type, parameters: tuple) -> dict[str, float]:
-    """Parameter name -> its "off" value, in declaration order (kept per class and
-    parameter tuple: an effect is constructed thousands of times per diagnosis)."""
-    key = (cls, parameters)
-    hit = _OFF.get(key)
-    if hit is None:
-        hit = _OFF[key] = {p.name: p.off for p in parameters}
-    return hit
+    """Parameter name -> its "off" value, in declaration order (kept per class while its
+    ``parameters`` are the same tuple: an effect is constructed thousands of times per
+    diagnosis)."""
+    hit = _OFF.get(cls)
+    if hit is None or hit[0] is not parameters:
+        hit = _OFF[cls] = (parameters, {p.name: p.off for p in parameters})
+    return hit[1]
 
 
 class EffectBase:

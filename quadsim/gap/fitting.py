@@ -116,17 +116,31 @@ class Candidate:
         return {f"{name}.{p}": float(v) for name, fixed, _ in self.parts for p, v in fixed.items()}
 
     def effects(self, theta: np.ndarray) -> list:
+        """The base effects, then each part built with its fixed values and its fitted ones
+        from ``theta`` (in :attr:`parameter_names` order). An effect is its class and its
+        values, set once: a part whose values a step of ``theta`` did not move is the same
+        object as before (:func:`_built`)."""
         out, k = list(self.base), 0
         for name, fixed, fitted in self.parts:
             values = dict(fixed)
             for p in fitted:
                 values[p] = float(theta[k])
                 k += 1
-            out.append(build_effect(name, values))
+            try:
+                out.append(_built(name, tuple(values.items())))
+            except TypeError:           # a fixed value that is not hashable: built anew
+                out.append(build_effect(name, values))
         return out
 
     def combine(self, other: Candidate) -> Candidate:
         return Candidate(f"{self.name}+{other.name}", self.parts + other.parts, self.base)
+
+
+@lru_cache(maxsize=4096)
+def _built(name: str, values: tuple) -> object:
+    """:func:`build_effect` of ``name`` with ``values`` ((parameter, value), ...), kept: a
+    fit builds the same effect for every step that moves another part."""
+    return build_effect(name, dict(values))
 
 
 @dataclass
