@@ -271,7 +271,8 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     the effects as :attr:`quadsim.effects.base.EffectContext.flight_memo` (values that depend
     only on the logged motion of ``states``), where the vehicle, the air velocity and each
     effect's loads are also kept (:func:`quadsim.gap.memo.kept`: the same numbers, computed
-    once per effect, vehicle, air velocity and rotor speeds)."""
+    once per effect, vehicle, air velocity and rotor speeds, or per effect and what it
+    declares its loads read, :attr:`quadsim.effects.base.EffectBase.loads_reads`)."""
     effect_set = _effect_set(effects)
     speed = _require_rotors(states, params) if rotor_speed is None else rotor_speed
     accel = states.rotor_accel if states.rotor_accel is not None else np.zeros_like(speed)
