@@ -19,11 +19,12 @@ from .logseries import (
     Estimate,
     LogSeries,
     Skeleton,
-    _ci,
-    _origin_fit,
+    confidence_interval,
     correlation_time,
+    origin_fit,
     refuse_mixed,
 )
+from .sanity import r2_text
 
 #: commands at or above this (normalised) are saturated and left out of the motor map.
 SATURATED = 0.99
@@ -137,7 +138,7 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
         u = s.command if not has_v else s.command * (s.vbat / v_ref)[:, None]
         us.append(u)
         ys.append(skeleton.mass * s.specific_force[:, 2])
-    refuse_mixed([(s.name, *_origin_fit(np.sum(u * u, 1), y)[:2]) for s, u, y in zip(logs, us, ys)],
+    refuse_mixed([(s.name, *origin_fit(np.sum(u * u, 1), y)[:2]) for s, u, y in zip(logs, us, ys)],
                  "cmd_*: thrust per squared command (N)")
     u, y = np.concatenate(us), np.concatenate(ys)
     x = np.stack([np.sum(u * u, 1), np.sum(u, 1)], 1)
@@ -171,9 +172,9 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
     speed = np.sqrt(thrust / b)
     summary = (f"command -> thrust per rotor T(u) = {c2:.4g} u^2 + {c1:.4g} u N (u = cmd"
                + (f" x vbat / {v_ref:.3g} V" if has_v else "")
-               + f"), R^2 {r2:.3f} over {len(y)} samples of {len(logs)} log(s); "
+               + f"), {r2_text(r2)} over {len(y)} samples of {len(logs)} log(s); "
                f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N{shape}")
-    estimate = Estimate(b, _ci(b, b * 1.96 * se_full / full),
+    estimate = Estimate(b, confidence_interval(b, b * 1.96 * se_full / full),
                         f"commands only: b = T(1) / max_speed^2 with the skeleton's max_speed "
                         f"{skeleton.max_speed:.5g} rad/s; {summary}")
     table = {"command": grid.tolist(), "speed": [speed.tolist()] * logs[0].command.shape[1],
