@@ -121,3 +121,8 @@ def test_the_page_of_a_result_read_back_from_json(result, tmp_path):
     assert "refused" in page and "looks like g" in page
     shown = page[:page.index("<details>")]         # the JSON appendix has every number
     assert "not determined by the reference flights" in shown and "-30" not in shown
+
+
+def test_the_old_page_function_is_refused_with_what_to_change():
+    with pytest.raises(ImportError, match=r"quadsim\.gap\.page\.page\(result\)"):
+        from quadsim.gap.report import flights_html  # noqa: F401

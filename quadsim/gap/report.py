@@ -519,3 +519,12 @@ def added_effects(result: dict, name: str | None, *, logs: str,
             f"python -m quadsim.gap on {logs}: {name} candidate, {value:.4g} +- {ci:.2g} "
             f"(95 % CI){flag}; {share:.1f} % of the held-out gap"))
     return list(out.items())
+
+
+def __getattr__(name: str):
+    """Refuse a name that left this module with exactly what to change."""
+    if name == "flights_html":
+        raise ImportError("quadsim.gap.report.flights_html is gone: the whole page is "
+                          "quadsim.gap.page.page(result) (HTML text), or write_html(path, "
+                          "result)")
+    raise AttributeError(f"module 'quadsim.gap.report' has no attribute {name!r}")
