@@ -112,9 +112,10 @@ class Verdict(_JsonView):
     Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
     ``signal_delays_ms``; JSON ``residual`` (with a ``series``): the RMS per channel before
     and after the answer over the references' RMS, the share of the excess removed and
-    its words (:class:`GapShare`, :func:`quadsim.gap.words.residual_text`). Held out: ``floor_source``, ``channels`` (RMS before/after/floor
-    per channel, units), ``alternatives``, ``best_candidate``, ``reduction`` and the gaps
-    (mean squared residual over sigma^2, 1 = noise). ``series``: per flight, the residual
+    its words (:class:`GapShare`, :func:`quadsim.gap.words.residual_text`). Held out:
+    ``floor_source``, ``channels`` (RMS before/after/floor per channel, units),
+    ``alternatives``, ``best_candidate``, ``reduction`` and the gaps (mean squared residual
+    over sigma^2, 1 = noise). ``series``: per flight, the residual
     before and after the answer (:func:`quadsim.gap.traces.flight_series`), not in the JSON."""
 
     outcome: str

@@ -306,7 +306,8 @@ def residual_text(share, outcome: str) -> str:
     significant gap gets the largest channel only (its small excess is noise)."""
     first = int(np.argmax(share.before))
     last = int(np.argmax(share.after))
-    text = f"Residual up to {share.before[first]:.2g}x the references' RMS ({share.channels[first]})"
+    text = (f"Residual up to {share.before[first]:.2g}x the references' RMS "
+            f"({share.channels[first]})")
     if outcome == "no_significant_gap" or outcome == "refused":
         return text + "."
     text += f" before the answer, {share.after[last]:.2g}x ({share.channels[last]}) after it"
