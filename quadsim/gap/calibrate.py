@@ -80,6 +80,7 @@ import numpy as np
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
+from .discrepancy import centre_term, fit_discrepancy
 from .envelope import coordinates, envelope_of
 from .fitting import (
     Candidate,
@@ -454,7 +455,9 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
             return None
     states = [aligned(f, shift) for f in flights]
-    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta))
+    discrepancy = fit_discrepancy([residuals(s, params, cand.effects(theta), rotor_channel=rotor)
+                                   for s in states], states)
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy)
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
     ref = Reference(params, rotor, cand, theta, stderr,
@@ -466,6 +469,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
+    ref.discrepancy = discrepancy
     _complete(ref, states, log_ms)
     return ref
 
@@ -490,14 +494,18 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
                                              own[1] ** 2 * np.array([[len(s.t)] for s in states])))
 
 
-def _noise_model(states, params: VehicleParams, rotor: bool, effects: list
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
+                 discrepancy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
-    model's residual (``effects``) over the n aligned reference ``states``: per-channel RMS
+    model's residual (``effects``) over the n aligned reference ``states``, after the
+    references' systematic residual (``discrepancy``'s centre,
+    :func:`quadsim.gap.discrepancy.centre_term`; None: none): per-channel RMS
     over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
     per-channel integrated correlation time, the mean over the flights (samples); each
     flight's log mean square over sigma_c^2."""
     per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    per_flight = [r - centre_term(s, discrepancy, r.shape[1])
+                  for r, s in zip(per_flight, states)]
     pooled = np.concatenate(per_flight)
     sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
     tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
