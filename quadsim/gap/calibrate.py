@@ -81,7 +81,7 @@ from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .discrepancy import centre_term, fit_discrepancy
-from .envelope import coordinates, envelope_of
+from .envelope import coordinates
 from .fitting import (
     Candidate,
     _bounds,
@@ -105,6 +105,7 @@ from .reference import (  # re-exported: the calibration's public names
     weighted_residual,
 )
 from .rotor_channel import min_time_constant
+from .selfcheck import PerFlight
 from .speed_gain import PART as SPEED_GAIN
 
 __all__ = [
@@ -470,6 +471,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                     bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
+    ref.log_ms = log_ms
     _complete(ref, states, log_ms)
     return ref
 
@@ -487,11 +489,11 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     ref.scatter = _scatter(states, ref, own)
-    ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
-                               np.array([ref.identified.get(k, True)
-                                         for k in cand.parameter_names]), log_ms,
-                               _noise_biased(cand.parameter_names,
-                                             own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.per_flight = PerFlight(
+        np.array([coordinates(s) for s in states]), own[0], own[1],
+        np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
+        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.envelope = ref.per_flight.envelope(log_ms)
 
 
 def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,

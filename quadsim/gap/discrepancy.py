@@ -91,6 +91,18 @@ class Discrepancy:
     factor: tuple
     flights: int
     explained: np.ndarray
+    #: per covered channel, each reference flight's coefficients (n, F_k): what
+    #: :meth:`without` leaves one of out
+    coefs: tuple = ()
+
+    def without(self, j: int) -> Discrepancy | None:
+        """The term fitted on every reference but the ``j``-th (its coefficients left out;
+        the explained shares kept): the self-check's leave-one-out reference
+        (:mod:`quadsim.gap.selfcheck`). None where fewer than 3 flights would remain."""
+        if self.flights - 1 < 3 or not self.coefs:
+            return None
+        kept = [np.delete(c, j, axis=0) for c in self.coefs]
+        return _from_coefs(self.channels, self.names, kept, self.explained)
 
     @property
     def size(self) -> int:
@@ -158,28 +170,37 @@ def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
     if n < 3:
         return None
     chans = residual_list[0].shape[1]
-    channels, names, centres, factors = [], [], [], []
+    channels, names, coefs_all = [], [], []
     explained = np.zeros(chans)
     for c in range(min(chans, 6)):
         feats = channel_features(c)
-        coefs = []
-        for r, s in zip(residual_list, states_list):
-            x = _design(s, feats)
-            coefs.append(np.linalg.lstsq(x, r[:, c], rcond=None)[0])
-        coefs = np.array(coefs)
-        centre = coefs.mean(axis=0)
-        cov = np.cov(coefs, rowvar=False) * (1.0 + 1.0 / n)
-        cov = cov + RIDGE * np.diag(np.diag(cov)) + 1e-30 * np.eye(len(feats))
+        designs = [_design(s, feats) for s in states_list]
+        coefs = np.array([np.linalg.lstsq(x, r[:, c], rcond=None)[0]
+                          for x, r in zip(designs, residual_list)])
         channels.append(c)
         names.append(feats)
-        centres.append(centre)
-        factors.append(np.linalg.cholesky(cov))
+        coefs_all.append(coefs)
+        centre = coefs.mean(axis=0)
         before = sum(float(np.sum(r[:, c] ** 2)) for r in residual_list)
-        after = sum(float(np.sum((r[:, c] - _design(s, feats) @ centre) ** 2))
-                    for r, s in zip(residual_list, states_list))
+        after = sum(float(np.sum((r[:, c] - x @ centre) ** 2))
+                    for x, r in zip(designs, residual_list))
         explained[c] = max(0.0, 1.0 - after / before) if before > 0 else 0.0
-    return Discrepancy(tuple(channels), tuple(names), tuple(centres), tuple(factors), n,
-                       explained)
+    return _from_coefs(tuple(channels), tuple(names), coefs_all, explained)
+
+
+def _from_coefs(channels: tuple, names: tuple, coefs_all: list, explained: np.ndarray
+                ) -> Discrepancy:
+    """The :class:`Discrepancy` of per-flight coefficients ``coefs_all`` (per channel
+    (n, F)): their mean, and their covariance times (1 + 1/n) with the :data:`RIDGE`."""
+    centres, factors = [], []
+    for coefs in coefs_all:
+        n, f = coefs.shape
+        cov = np.cov(coefs, rowvar=False).reshape(f, f) * (1.0 + 1.0 / n)
+        cov = cov + RIDGE * np.diag(np.diag(cov)) + 1e-30 * np.eye(f)
+        centres.append(coefs.mean(axis=0))
+        factors.append(np.linalg.cholesky(cov))
+    return Discrepancy(channels, names, tuple(centres), tuple(factors), len(coefs_all[0]),
+                       explained, tuple(coefs_all))
 
 
 def centre_term(states, discrepancy: Discrepancy | None, chans: int,

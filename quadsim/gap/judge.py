@@ -74,6 +74,7 @@ from . import collinear
 from .explanations import reference_determined
 from .fitting import effect_class, noise_floor
 from .residual import CHANNELS
+from .selfcheck import negligible
 
 __all__ = ["judge", "posterior", "lack_of_fit", "within_form_error", "above_floor", "symptom",
            "READING_P", "CONFIDENT", "LOF_P", "FORM_ERROR", "reading_name",
@@ -96,17 +97,20 @@ def channel_names(reference) -> list[str]:
     return list(CHANNELS) + extra
 
 
-def posterior(rows) -> list[tuple[str, float, object]]:
+def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
     """(effect, probability, best variant's Evidence), most probable first (module doc).
 
     "No difference" has the prior of all effects together (a flight is a priori as likely
     nominal as not; the effects share the other half equally), and an explanation none of
     whose parameters the data determine predicts what "no difference" predicts: its weight
     is counted there (a wind the references' zero drag coefficient cannot show is not a
-    reading)."""
+    reading). ``negligible(ev)``: whether a reading is no difference that matters
+    (:func:`quadsim.gap.selfcheck.negligible`); its weight is counted there as well."""
     groups: dict[str, list] = {}
     for ev in rows:
         key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
+        if key != "no_difference" and negligible is not None and negligible(ev):
+            key = "no_difference"
         groups.setdefault(key, []).append(ev)
     prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
     logs = {k: logsumexp([e.log_z + (prior_null if e.name == "no_difference" else 0.0)
@@ -338,7 +342,8 @@ def symptom(ev, reference) -> dict:
 
 def judge(rows, reference, name: str) -> dict:
     """The per-flight entry (``quadsim.gap/3``, :mod:`.schema`) from a flight's evidence."""
-    ranked = posterior(rows)
+    check = getattr(reference, "self_check", None)
+    ranked = posterior(rows, lambda ev: negligible(ev, check))
     top, p_top, best = ranked[0]
     lack = lack_of_fit(best, reference,
                        next((e for e in rows if e.name == "no_difference"), None))
@@ -362,8 +367,12 @@ def judge(rows, reference, name: str) -> dict:
     named = [r["name"] for r in stated if r["name"] != "no_difference"]
     answer = _answer(outcome, readings[0], stated, lack, separate)
     lead = readings[0]
+    unsure = check is not None and not check.clean
+    if unsure:      # a set that does not judge itself clean: said, and never confident
+        answer = f"{check.text()} {answer}"
     return {"file": name, "outcome": outcome, "verdict": verdict, "answer": answer,
-            "probability": p_top, "tentative": outcome == "effect" and p_top < CONFIDENT,
+            "probability": p_top,
+            "tentative": outcome == "effect" and (p_top < CONFIDENT or unsure),
             "readings": named if outcome == "effect" else [],
             "posterior": readings, "lack_of_fit": {k: v[0] for k, v in lack.items()},
             "params": lead["params"] if outcome == "effect" else {},

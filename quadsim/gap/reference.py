@@ -255,6 +255,18 @@ class Reference:
     #: (:class:`quadsim.gap.problem.Problem`); None: none (fewer than 3 references, or a
     #: parameter-set reference)
     discrepancy: object = None
+    #: (n, C) each reference flight's log(ms_jc / sigma_c^2) (the lack-of-fit baseline's
+    #: data, ``lof_mean`` their mean): what the self-check leaves one flight out of
+    #: (:mod:`quadsim.gap.selfcheck`); None where not kept
+    log_ms: np.ndarray | None = None
+    #: the self-check of the references against each other
+    #: (:class:`quadsim.gap.selfcheck.SelfCheck`): what a reading's size is compared with
+    #: (practical significance); None before it ran or without one
+    self_check: object = None
+    #: each reference flight's own fit (:class:`quadsim.gap.selfcheck.PerFlight`): what the
+    #: between-flight scatter and the envelope are built from, kept for the self-check;
+    #: None where not kept
+    per_flight: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
