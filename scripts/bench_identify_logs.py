@@ -1,7 +1,7 @@
 """Benchmark: ``python -m quadsim.identify --logs`` on 12 one-minute 100 Hz logs (target: under
 30 s wall on the 2-core development machine). Not a timed test.
 
-By default the logs are generated once (``quadsim.gap.synthetic.synthetic_flight`` of the
+By default the logs are generated once (``benchmarks.synthetic.synthetic_flight`` of the
 ``crazyflie21`` set, seeds 0-11, 60 s at 100 Hz, sensor noise on) into a temporary folder; the
 timed part is the whole command as a user runs it — loading, span cutting, smoothing, every
 fit, the d refit and the checked write — in a fresh process, best of ``--repeat``. ``--logs``
@@ -35,15 +35,15 @@ def _skeleton(folder: Path) -> Path:
     text = (MODELS_DIR / "crazyflie21.toml").read_text()
     text = "\n".join(line for line in text.splitlines()
                      if not re.match(r"(thrust_factor|drag_factor|max_speed) =", line))
-    text = re.sub(r"\[motor_map\].*?(?=\n\[\[rotor\]\])", "", text, flags=re.S)
+    text = re.sub(r"\[motor_map\].*?(?=\n\[\[rotor\]\])", "", text, flags=re.DOTALL)
     path = folder / "skeleton.toml"
     path.write_text(text + "\n")
     return path
 
 
 def _generate(folder: Path, count: int, duration: float, rate: float) -> list[Path]:
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.core.errors import QuadsimWarning
-    from quadsim.gap.synthetic import synthetic_flight
     from quadsim.logs.flightlog import write_log
     from quadsim.vehicle.params import load_params
 

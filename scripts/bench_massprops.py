@@ -27,9 +27,9 @@ import trimesh
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from quadsim.sim.model import build_model, write_model  # noqa: E402
 from quadsim.cad.assembly import load_assembly  # noqa: E402
 from quadsim.cad.massprops import vehicle_mass_properties  # noqa: E402
+from quadsim.sim.model import build_model, write_model  # noqa: E402
 
 
 def _generator():

@@ -23,9 +23,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap.__main__ import main as gap_main
-from quadsim.gap.synthetic import synthetic_flight
 from quadsim.logs.flightlog import write_log
 from quadsim.sweep.__main__ import main as sweep_main
 from quadsim.vehicle.params import load_params

@@ -18,7 +18,7 @@ from quadsim.gap.diagnose import prepare
 from quadsim.gap.envelope import Envelope, coordinates, fit_trend, local_reference, position
 from quadsim.gap.fitting import Candidate
 from quadsim.gap.per_flight import judge_one
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 

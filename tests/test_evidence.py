@@ -21,7 +21,7 @@ from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import marginal_sd
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.priors import WIND_SD_MS
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
 

@@ -26,7 +26,7 @@ from quadsim.gap.calibrate import Reference, jacobian, shared_candidate, weighte
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, explanations_for
 from quadsim.gap.fitting import _typical, effect_class, residuals
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import inertia_problems, load_params
 
 

@@ -14,7 +14,7 @@ from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
 from quadsim.gap.report import to_json
 from quadsim.gap.schema import validate
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
@@ -293,12 +293,12 @@ def test_loader_warnings_collapse_per_kind():
 
 def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
     """A log whose accelerometer is a filtered finite difference of delayed motion capture
-    (quadsim.bench.pipeline) carries filter transients at its ends; the diagnosis drops the
+    (benchmarks.pipeline) carries filter transients at its ends; the diagnosis drops the
     first and last EDGE_S = 0.2 s, after which the nominal force residual of the whole
     prepared flight is at its interior level (> 0.5 s from the ends)."""
     import sys
 
-    from quadsim.bench.pipeline import realistic_log
+    from benchmarks.pipeline import realistic_log
     from quadsim.gap import diagnose as _  # noqa: F401  (module below)
 
     module = sys.modules["quadsim.gap.diagnose"]
@@ -503,7 +503,7 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
         noise_scale,
         residuals,
     )
-    from quadsim.gap.synthetic import SensorNoise
+    from benchmarks.synthetic import SensorNoise
 
     params = load_params("physical")
     log = synthetic_flight(params, [], duration=8.0, seed=0, noise=SensorNoise(gyro=0.1))

@@ -9,7 +9,7 @@ import pytest
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.__main__ import main
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 

@@ -13,7 +13,7 @@ from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
 from quadsim.gap.heldout_verdict import generalisation, remainder
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 DT = 0.01          # s, the fit rate (100 Hz)

@@ -17,7 +17,7 @@ README = PACKAGE.parent / "README.md"
 
 #: Pipeline stages in data-flow order; a stage may import itself and the stages before it.
 STAGES = ("core", "cad", "vehicle", "identify", "effects", "sim", "logs", "viewer", "gap",
-          "sweep", "bench")
+          "sweep")
 #: The commands (``python -m quadsim.X``); a command may import any stage, no stage a command.
 COMMANDS = ("build_mjcf", "inertia_report", "identify", "openloop", "fly", "view", "convert",
             "gap", "sweep")
@@ -127,6 +127,36 @@ def test_imports_flow_down_the_pipeline():
     assert not wrong, "; ".join(sorted(wrong))
 
 
+#: top-level packages of the repository that are not in the wheel
+HARNESS = ("benchmarks", "tests")
+
+
+def _harness_imports(source: str) -> list[str]:
+    """The modules of ``HARNESS`` that Python source ``source`` imports (any level)."""
+    names: list[str] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom) and not node.level:
+            names.append(node.module or "")
+        elif isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+    return sorted(n for n in names if n.split(".")[0] in HARNESS)
+
+
+def test_harness_import_finder_finds_one():
+    assert _harness_imports("def f():\n    from benchmarks.synthetic import x\n"
+                            "import tests.conftest\nfrom . import benchmarks\n") == \
+        ["benchmarks.synthetic", "tests.conftest"]
+
+
+def test_package_never_imports_the_benchmarks_or_the_tests():
+    """benchmarks/ and tests/ sit beside the package in the repository, not in the wheel:
+    no quadsim module imports them (function-level imports included)."""
+    wrong = [f"{path.relative_to(PACKAGE.parent)} imports {name}"
+             for path in sorted(PACKAGE.rglob("*.py"))
+             for name in _harness_imports(path.read_text(encoding="utf-8"))]
+    assert not wrong, "; ".join(wrong)
+
+
 def test_fast_path_depends_on_the_engines_not_back():
     graph = import_graph()
     for engine in ("quadsim.sim.analytic", "quadsim.sim.mujoco_engine"):
@@ -150,3 +180,32 @@ def test_every_readme_command_has_help(module):
                          text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stderr[-500:]
     assert "usage:" in run.stdout and len(run.stdout) > 200
+
+
+def test_names_that_left_the_package_are_refused_with_their_new_path():
+    with pytest.raises(ImportError, match=r"quadsim\.gap\.synthetic_flight moved to "
+                                          r"benchmarks\.synthetic .*from benchmarks\.synthetic "
+                                          r"import synthetic_flight"):
+        from quadsim.gap import synthetic_flight  # noqa: F401
+    with pytest.raises(ImportError, match=r"from benchmarks\.synthetic import SensorNoise"):
+        import quadsim.gap
+
+        quadsim.gap.SensorNoise  # noqa: B018
+    with pytest.raises(AttributeError):
+        quadsim.gap.no_such_name  # noqa: B018
+    # the modules that moved to benchmarks/ are gone from the package (an import of them is
+    # ModuleNotFoundError; CHANGELOG.md names each new path)
+    for gone in ("bench", "gap/synthetic.py", "logs/corrupt.py", "sim/rollout.py"):
+        assert not (PACKAGE / gone).exists(), gone
+
+
+@pytest.mark.parametrize("name", ["gap_benchmark", "nanodrone_benchmark", "fuzz_logs"])
+def test_a_moved_script_runs_its_new_module_after_one_warning(name):
+    done = subprocess.run([sys.executable, str(PACKAGE.parent / "scripts" / f"{name}.py"),
+                           "--help"], capture_output=True, text=True, check=False,
+                          cwd=PACKAGE.parent)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.splitlines() == [
+        (f"warning: scripts/{name}.py moved to benchmarks/{name}.py: run python -m "
+         f"benchmarks.{name} from the repository root")], done.stderr
+    assert done.stdout.startswith("usage: ")

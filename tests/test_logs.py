@@ -430,7 +430,7 @@ def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
     from quadsim.effects import make_effect
     from quadsim.gap import diagnose
     from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
-    from quadsim.gap.synthetic import synthetic_flight
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.vehicle.params import load_params
 
     cf = load_params("crazyflie21")
@@ -466,7 +466,7 @@ def test_gap_cli_command_reference(tmp_path, capsys):
     import re
 
     from quadsim.gap.__main__ import main as gap_main
-    from quadsim.gap.synthetic import synthetic_flight
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.logs.flightlog import write_log
     from quadsim.vehicle.params import load_params
 

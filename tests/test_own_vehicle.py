@@ -34,7 +34,7 @@ def skeleton_text(text: str = CF, *, drop=("thrust_factor", "drag_factor", "max_
 
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
-    from quadsim.gap.synthetic import synthetic_flight
+    from benchmarks.synthetic import synthetic_flight
 
     folder = tmp_path_factory.mktemp("flights")
     cf = load_params("crazyflie21")
@@ -210,7 +210,7 @@ def test_gap_command_only_holdout_and_reference(tmp_path, capsys):
     """Command-only logs in every role run on the set's motor map; a set without one is
     refused in one line naming the way out."""
     from quadsim.gap.__main__ import main as gap_main
-    from quadsim.gap.synthetic import synthetic_flight
+    from benchmarks.synthetic import synthetic_flight
 
     cf = load_params("crazyflie21")
     only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(

@@ -12,7 +12,7 @@ from quadsim.core.errors import InputError
 from quadsim.core.executor import TaskFailure, _finish, run_tasks
 from quadsim.effects import make_effect
 from quadsim.gap.__main__ import main as gap_main
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 

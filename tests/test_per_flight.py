@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim.bench.score import read_verdict, score_case
+from benchmarks.score import read_verdict, score_case
 from quadsim.gap.collinear import describe
 from quadsim.gap.evidence import Evidence, Explanation
 from quadsim.gap.heldout_verdict import every_part_stands

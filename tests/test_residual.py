@@ -18,7 +18,7 @@ from quadsim.gap.residual import (
     model_wrench,
     window_samples,
 )
-from quadsim.gap.synthetic import SensorNoise, synthetic_flight
+from benchmarks.synthetic import SensorNoise, synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 

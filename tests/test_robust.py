@@ -1,7 +1,7 @@
 """Importers under corrupted logs and the cases a new user hit: no hang, no traceback, no
 silent garbage, no lost input. Each refusal: exit 2, one line naming the file and the field,
 nothing written, the input unchanged. Logs are written here by each format's writer
-(quadsim.logs.samples); the corruptions are the fuzzer's (quadsim.logs.corrupt)."""
+(quadsim.logs.samples); the corruptions are the fuzzer's (benchmarks.corrupt)."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def test_pyulog_hang_reproduced_and_refused_within_its_budget(tmp_path, capsys, 
     import multiprocessing
 
     from quadsim import logs
-    from quadsim.logs.corrupt import hanging_ulog_bytes
+    from benchmarks.corrupt import hanging_ulog_bytes
 
     path = tmp_path / "hang.ulg"
     path.write_bytes(hanging_ulog_bytes())
@@ -113,9 +113,9 @@ def test_numpy_warnings_become_one_collapsed_line(capsys):
 
 @pytest.mark.parametrize("fmt,count", [("ulog", 110), ("usd", 150), ("dataflash", 40)])
 def test_fuzz_sample_no_garbage_uncaught_or_hang(tmp_path, fmt, count):
-    """300 deterministic corruptions (a slice of scripts/fuzz_logs.py), the importer in one
+    """300 deterministic corruptions (a slice of benchmarks/fuzz_logs.py), the importer in one
     bounded worker per format: every case a clean refusal or a plausible log."""
-    from quadsim.logs.corrupt import judge_batch
+    from benchmarks.corrupt import judge_batch
 
     results, _ = run_bounded(judge_batch, fmt, list(range(count)), str(tmp_path),
                              label=fmt, what="fuzz batch", budget=Budget(time_s=120))
@@ -126,7 +126,7 @@ def test_fuzz_sample_no_garbage_uncaught_or_hang(tmp_path, fmt, count):
 
 
 def test_fuzz_cases_through_the_worker(tmp_path):
-    from quadsim.logs.corrupt import judge, make_case
+    from benchmarks.corrupt import judge, make_case
 
     for fmt in ("ulog", "dataflash"):
         for index in range(4):

@@ -303,7 +303,7 @@ def test_gap_cli_refuses_with_one_line(tmp_path, capsys, gentle, case):
 
 
 def test_no_false_refusal_on_flights_with_each_library_effect():
-    """Synthetic flights (quadsim.gap.synthetic) with each library effect of tests/test_gap
+    """Synthetic flights (benchmarks.synthetic) with each library effect of tests/test_gap
     (thrust_mismatch, com_offset, canted_rotor, ...): every check passes, and no rival rotor
     order fits better than the right one (Delta chi^2 < 0; measured -13 at most, com_offset)."""
     import sys
@@ -311,8 +311,8 @@ def test_no_false_refusal_on_flights_with_each_library_effect():
     sys.path.insert(0, str(Path(__file__).parent))
     from test_gap import CASES
 
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.effects import make_effect
-    from quadsim.gap import synthetic_flight
     from quadsim.logs.checks import check_log, rotor_order_evidence
 
     for name, (hidden, *_) in sorted(CASES.items()):

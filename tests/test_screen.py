@@ -23,7 +23,7 @@ from quadsim.gap.judge import judge
 from quadsim.gap.problem import FitInputs
 from quadsim.gap.rotor_channel import heun_linear, rotor_residual
 from quadsim.gap.screen import Columns, jacobian_columns
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params

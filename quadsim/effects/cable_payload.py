@@ -32,7 +32,7 @@ Only the engines (:func:`quadsim.sim.engines.simulate`) carry the state; the fli
 generator's accelerometer integrates it again along the flown trajectory
 (:func:`quadsim.logs.generate.effect_states`), and the per-flight diagnosis integrates the
 swing from the logged motion (:mod:`quadsim.gap.cable`). Anything else that evaluates
-``loads`` without it (``gap.synthetic``, the residual wrench) gets a one-line
+``loads`` without it (``benchmarks.synthetic``, the residual wrench) gets a one-line
 :class:`~quadsim.core.errors.ModelError` instead of a silent zero.
 
 Parameters: ``mass`` (kg; 0 = off), ``length`` (m, rest length), ``x, y, z`` (m, attachment

@@ -49,7 +49,8 @@ least squares), :mod:`.heldout` + :mod:`.heldout_verdict` (held-out verdict by e
 :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
 :mod:`.evidence`, :mod:`.judge`, :mod:`.report_flights`), :mod:`.where`, :mod:`.checks`
 (vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report` and
-:mod:`.schema` (output), :mod:`.synthetic` (generated test flights).
+:mod:`.schema` (output). Generated test flights: ``benchmarks.synthetic`` in the
+repository (not in the wheel).
 
 Example::
 
@@ -67,8 +68,18 @@ from .diagnose import SCHEMA, diagnose, prepare
 from .per_flight import diagnose_per_flight
 from .report import summary, to_json, write_html, write_json, write_rerun
 from .schema import GAP_SCHEMA, validate
-from .synthetic import SensorNoise, synthetic_flight
 
 __all__ = ["SCHEMA", "GAP_SCHEMA", "diagnose", "diagnose_per_flight", "prepare", "summary",
-           "to_json", "write_html", "write_json", "write_rerun", "validate", "SensorNoise",
-           "synthetic_flight"]
+           "to_json", "write_html", "write_json", "write_rerun", "validate"]
+
+#: public names that left the package, and where they are now (refused with that change)
+_MOVED = {"synthetic_flight": "benchmarks.synthetic", "SensorNoise": "benchmarks.synthetic"}
+
+
+def __getattr__(name: str):
+    """Refuse a name that moved out of the package with exactly what to change."""
+    if name in _MOVED:
+        raise ImportError(f"quadsim.gap.{name} moved to {_MOVED[name]} (in the repository, "
+                          f"not the wheel): write `from {_MOVED[name]} import {name}` and run "
+                          "from a checkout")
+    raise AttributeError(f"module 'quadsim.gap' has no attribute {name!r}")

@@ -44,7 +44,7 @@ EDGE_S = 0.2
 MAX_EDGE_SHARE = 0.1
 
 SEPARATE = collinear.SEPARATE
-#: the benchmarks' observability threshold (scripts/gap_benchmark.py, quadsim.bench): a hidden
+#: the benchmarks' observability threshold (benchmarks/gap_benchmark.py): a hidden
 #: effect whose true values cut the held-out gap by less than this fraction is listed apart
 #: as unobservable. Not used by the verdict.
 MIN_GAIN = 0.05

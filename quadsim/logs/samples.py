@@ -1,5 +1,5 @@
 """Small, physically consistent flights written in each foreign format by its own writer: the
-fixtures of the importer tests and of the fuzzer (``scripts/fuzz_logs.py``).
+fixtures of the importer tests and of the fuzzer (``benchmarks/fuzz_logs.py``).
 
 The flight (:func:`sample_flight`): a circle of radius ``RADIUS_M`` = 0.5 m at 1 m height
 flown at ``OMEGA`` = 1 rad/s, yaw 0, the attitude tilted so that body z lies along the

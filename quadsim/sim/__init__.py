@@ -3,8 +3,7 @@ MuJoCo engine and its MJCF (:mod:`~quadsim.sim.mujoco_engine`, :mod:`~quadsim.si
 their compiled fast path (:mod:`quadsim.sim.compiled`, which depends on the engines and never
 the other way round), one front door ``simulate`` (:mod:`~quadsim.sim.engines`), hover
 linearisation and LQR (:mod:`~quadsim.sim.linear`), the geometric tracking controller
-(:mod:`~quadsim.sim.controllers`), reference paths (:mod:`~quadsim.sim.paths`) and many short
-open-loop predictions at once on the analytic equations (:mod:`~quadsim.sim.rollout`).
+(:mod:`~quadsim.sim.controllers`) and reference paths (:mod:`~quadsim.sim.paths`).
 
 Imports :mod:`quadsim.core`, :mod:`quadsim.vehicle` and :mod:`quadsim.effects`.
 """

@@ -1,0 +1,69 @@
+"""Helpers shared by the simulator sources' tests (not a test module)."""
+
+from __future__ import annotations
+
+
+def check_source_flight(log, heavy_log, params, extra_mass: float, shared: list,
+                        arm: float) -> None:
+    """A simulator source's short flights against quadsim's own rigid-body and rotor model:
+    500 Hz, scalar-first unit quaternions near level, commands in 0..1; the logged rotor
+    speeds in quadsim's rotor model (b, d, layout, spins) reproduce the logged specific
+    force: the mean thrust is the accelerometer's body z force (1 %) and about the weight
+    (5 %: the path climbs and tilts; each flight with its own mass); on the nominal flight
+    quadsim's residual wrench with the source's ``shared`` physics stays below 1.5 % of the
+    weight (forces) and 1.5 % of weight x ``arm`` (torques) RMS."""
+    import numpy as np
+    import pytest
+
+    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.fitting import residuals
+
+    assert log.t[1] == pytest.approx(1.0 / 500)
+    assert np.all(log.quat[:, 0] > 0.9)
+    np.testing.assert_allclose(np.linalg.norm(log.quat, axis=1), 1.0, atol=1e-9)
+    assert np.all((log.rotor_command >= 0) & (log.rotor_command <= 1))
+    for flight, mass in ((log, params.mass), (heavy_log, params.mass + extra_mass)):
+        thrust = params.thrust_factor * np.sum(flight.rotor_speed ** 2, axis=1)
+        assert np.mean(flight.accel[:, 2]) * mass == pytest.approx(np.mean(thrust), rel=0.01)
+        assert np.mean(thrust) == pytest.approx(mass * params.gravity, rel=0.05)
+    weight = params.mass * params.gravity
+    flight = prepare([log], params)[0]
+    r = residuals(flight.fit, params, shared, rotor_channel=False)
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    assert np.all(rms[:3] < 0.015 * weight), rms
+    assert np.all(rms[3:6] < 0.015 * weight * arm), rms
+
+
+def check_motor_case_list(module, shared: tuple[str, str], mass: float, arm: float,
+                          payload_kg: tuple[float, float] | None = None) -> None:
+    """A DC-motor source's frozen cases (``module``: its cases module; the table
+    ``benchmarks.sim_cases.MOTOR_TABLE``): 28, the same on a second draw; 6 no-effect,
+    18 in-library, 4 outside; seeds apart from the references'; each in-library truth (not
+    a delay) is a library effect named by its true difference on top of the ``shared`` two
+    effects; the drawn changes within the table's ranges (mass +5..+20 % of ``mass``, CoM
+    3-10 % of ``arm``, motor J x 1.5-2.5, wind 2-5 m/s, the payload in ``payload_kg``)."""
+    import numpy as np
+
+    from quadsim.effects import EFFECTS
+
+    cases = module.case_list()
+    assert module.case_list() == cases and len(cases) == 28
+    kinds = [c["kind"] for c in cases]
+    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == (6, 18, 4)
+    assert not {c["seed"] for c in cases} & {s.seed for s in module.reference_specs()}
+    for case in cases:
+        e = case["effects"]
+        if case["kind"] == "library" and case["truth"] != "rotor_delay":
+            names = [x.name for x in module.library_truth(case)]
+            assert tuple(names[:2]) == shared, names
+            assert case["truth"] in EFFECTS and (case["truth"] in names or len(names) == 2)
+        if "mass" in e:
+            assert 0.05 <= e["mass"] / mass <= 0.2
+        if "payload" in e and payload_kg is not None:
+            assert payload_kg[0] <= e["payload"][0] <= payload_kg[1]
+        if "com" in e:
+            assert 0.03 <= np.hypot(*e["com"]) / arm <= 0.1
+        if "motor_slow" in e:
+            assert 1.5 <= e["motor_slow"] <= 2.5
+        if "wind" in e:
+            assert 2.0 <= np.hypot(*e["wind"]) <= 5.0
