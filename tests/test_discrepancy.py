@@ -18,7 +18,7 @@ from quadsim.gap.discrepancy import (
 from quadsim.gap.judge import posterior
 from quadsim.gap.problem import Marginal, laplace
 from quadsim.gap.selfcheck import PRACTICAL_Z, SelfCheck, Spread, negligible
-from quadsim.gap.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 
