@@ -51,6 +51,7 @@ __all__ = [
     "PerFlight",
     "SelfCheck",
     "Spread",
+    "against_text",
     "leave_one_out",
     "negligible",
     "self_check_of",
@@ -246,6 +247,26 @@ def negligible(ev, check: SelfCheck | None) -> bool:
         if abs(ev.values[key] - s.mean) - 1.96 * ev.post_sd[key] > PRACTICAL_Z * s.sd:
             return False
     return compared
+
+
+def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
+    """The size of reading ``ev`` against the references' own readings of it, in words
+    (module doc): per own determined parameter with a spread on the references, "mass
+    +0.0066 kg against the references' +1e-05 ± 3e-05 kg (220 SDs)"; "" where there is
+    nothing to compare with. ``unit_of(key)``: the parameter's unit."""
+    if check is None:
+        return ""
+    spread = check.spreads.get((ev.name, ev.explanation.variant), {})
+    parts = []
+    for key, ok in ev.determined.items():
+        if not ok or not _own(key) or key not in spread:
+            continue
+        s, unit = spread[key], unit_of(key)
+        unit = f" {unit}" if unit and unit != "1" else ""
+        size = abs(ev.values[key] - s.mean) / s.sd if s.sd > 0 else float("inf")
+        parts.append(f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the "
+                     f"references' {s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
+    return "; ".join(parts)
 
 
 def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
