@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
 from quadsim.gap.discrepancy import (
@@ -18,7 +19,6 @@ from quadsim.gap.discrepancy import (
 from quadsim.gap.judge import posterior
 from quadsim.gap.problem import Marginal, laplace
 from quadsim.gap.selfcheck import PRACTICAL_Z, SelfCheck, Spread, negligible
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 
