@@ -98,11 +98,15 @@ class Discrepancy:
     def without(self, j: int) -> Discrepancy | None:
         """The term fitted on every reference but the ``j``-th (its coefficients left out;
         the explained shares kept): the self-check's leave-one-out reference
-        (:mod:`quadsim.gap.selfcheck`). None where fewer than 3 flights would remain."""
-        if self.flights - 1 < 3 or not self.coefs:
+        (:mod:`quadsim.gap.selfcheck`); the channels with too few flights left
+        (:func:`fit_discrepancy`) dropped, None where none remains."""
+        keep = [k for k, c in enumerate(self.coefs) if len(c) - 1 >= c.shape[1] + 1]
+        if not keep:
             return None
-        kept = [np.delete(c, j, axis=0) for c in self.coefs]
-        return _from_coefs(self.channels, self.names, kept, self.explained)
+        return _from_coefs(tuple(self.channels[k] for k in keep),
+                           tuple(self.names[k] for k in keep),
+                           [np.delete(self.coefs[k], j, axis=0) for k in keep],
+                           self.explained)
 
     @property
     def size(self) -> int:
@@ -164,8 +168,10 @@ def channel_features(channel: int) -> tuple:
 
 def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
     """The :class:`Discrepancy` of the reference model's residuals ``residual_list`` (each
-    (N_j, C), SI) on the reference ``states_list`` (module doc); None for fewer than 3
-    flights (a between-flight covariance needs two degrees of freedom at least)."""
+    (N_j, C), SI) on the reference ``states_list`` (module doc). A channel with F features
+    is covered from F + 1 flights on (below, its coefficients' between-flight covariance is
+    not of full rank: the force channels from 5 references, the moments from 10); None
+    where no channel is."""
     n = len(states_list)
     if n < 3:
         return None
@@ -174,6 +180,8 @@ def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
     explained = np.zeros(chans)
     for c in range(min(chans, 6)):
         feats = channel_features(c)
+        if n < len(feats) + 1:      # a covariance of F coefficients needs F + 1 flights
+            continue
         designs = [_design(s, feats) for s in states_list]
         coefs = np.array([np.linalg.lstsq(x, r[:, c], rcond=None)[0]
                           for x, r in zip(designs, residual_list)])
@@ -185,6 +193,8 @@ def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
         after = sum(float(np.sum((r[:, c] - x @ centre) ** 2))
                     for x, r in zip(designs, residual_list))
         explained[c] = max(0.0, 1.0 - after / before) if before > 0 else 0.0
+    if not channels:
+        return None
     return _from_coefs(tuple(channels), tuple(names), coefs_all, explained)
 
 
