@@ -1,12 +1,12 @@
 """Flight generator: fly a parameter set in closed loop with hidden effects, log like a sensor.
 
 ``python -m quadsim.fly`` (the CLI of :func:`quadsim.logs.generate.generate_flight`) flies a
-reference path (:mod:`quadsim.sim.paths`) with a tracking controller that knows only the
-*nominal* parameter set, in the MuJoCo engine (or the analytic one), while the simulated
-vehicle carries any set of effects (:mod:`quadsim.effects`). The states are logged in the
-flight-log schema (:mod:`quadsim.logs.flightlog`) through sensor models (:mod:`quadsim.logs.sensors`),
-and the ground truth (effects and values, sensors, path, seed) goes to a separate sidecar
-``<log>.truth.json`` so that a diagnosis can be run blind. Same inputs -> same bytes.
+reference path (:mod:`quadsim.sim.paths`) with a tracking controller that knows only the *nominal*
+parameter set, in the MuJoCo engine (or the analytic one), while the simulated vehicle carries any
+set of effects (:mod:`quadsim.effects`). The states are logged in the flight-log schema
+(:mod:`quadsim.logs.flightlog`) through sensor models (:mod:`quadsim.logs.sensors`), and the ground
+truth (effects and values, sensors, path, seed) goes to a separate sidecar ``<log>.truth.json`` so
+that a diagnosis can be run blind. Same inputs -> same bytes.
 
 The logged signals and their units are listed in :mod:`quadsim.logs.generate`.
 
@@ -76,7 +76,8 @@ def _parser() -> argparse.ArgumentParser:
                              "it in the truth sidecar's flight_report")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("-o", "--output", required=True,
-                        help="log file (.csv, .csv.gz or .parquet); truth goes to <output>.truth.json")
+                        help="log file (.csv, .csv.gz or .parquet); truth goes to "
+                             "<output>.truth.json")
     return parser
 
 

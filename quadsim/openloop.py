@@ -10,9 +10,9 @@ tumble that the tilted start causes by itself). Per channel it prints python-con
 ``step_info`` where the response settles, else the growth (log-log slope of |response| against
 time since the step before it reaches ``--bound``: 2 for a double integrator) and the time
 to reach the bound; the poles of the hover linearisation; and the comparison between engines
-and models (the report's steady-state comparison, with real inputs). An open-loop quadrotor has twelve poles at the
-origin: nothing settles. ``--controller lqr`` runs the closed-loop version (the step becomes a
-disturbance the LQR must reject; responses then settle to a steady-state offset).
+and models (the report's steady-state comparison, with real inputs). An open-loop quadrotor has
+twelve poles at the origin: nothing settles. ``--controller lqr`` runs the closed-loop version (the
+step becomes a disturbance the LQR must reject; responses then settle to a steady-state offset).
 
 Examples::
 

@@ -47,7 +47,8 @@ def _parser() -> argparse.ArgumentParser:
                              "or a path to a parameter TOML")
     parser.add_argument("--log", type=Path,
                         help="flight log (.csv, .csv.gz or .parquet, flight-log schema, rotor "
-                             "speeds in rad/s); without it a hover-and-step LQR flight is simulated")
+                             "speeds in rad/s); without it a hover-and-step LQR flight is "
+                             "simulated")
     parser.add_argument("--rerun", type=Path, metavar="OUT.rrd",
                         help="recording to write (atomically)")
     parser.add_argument("--rerun-spawn", action="store_true",

@@ -7,7 +7,6 @@ cases of one model run as one batch per engine (that is also a test of batching)
 """
 
 import numpy as np
-import pytest
 
 from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import EffectSet, make_effect
@@ -23,8 +22,6 @@ CASES = ("hover", "collective", "roll", "pitch", "yaw", "multisine")
 
 
 def _params(name):
-    if name == "computational":
-        pytest.importorskip("quadsim.cad.assembly")
     return load_params(name)
 
 
@@ -57,8 +54,7 @@ def open_loop_inputs(params, periods, seed=0):
 
 
 def _models():
-    """Both parameter sets (computational needs the CAD assembly module)."""
-    pytest.importorskip("quadsim.cad.assembly")
+    """Both parameter sets (computational's mass properties come from the CAD meshes)."""
     return [load_params("physical"), load_params("computational")]
 
 

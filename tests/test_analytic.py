@@ -27,8 +27,6 @@ def _hover_residual(params):
 
 @pytest.mark.parametrize("name", ["physical", "computational", "crazyflie21"])
 def test_hover_equilibrium_residual_below_1e9(name):
-    if name == "computational":
-        pytest.importorskip("quadsim.cad.assembly")
     accel, alpha = _hover_residual(load_params(name))
     assert np.abs(accel).max() <= 1e-9
     assert np.abs(alpha).max() <= 1e-9

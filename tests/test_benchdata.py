@@ -56,7 +56,8 @@ def test_cfd_physical_bifilar_cells_match_report():
     table = load_bifilar_table()
     assert table.periods["yaw"] == pytest.approx([4.16, 4.11, 4.02])
     assert table.periods["pitch"] == pytest.approx([0.44, 0.38, 0.41])
-    assert (table.rig.mass, table.rig.wire_half_spacing, table.rig.wire_length) == (0.838, 0.12, 0.4)
+    rig = table.rig
+    assert (rig.mass, rig.wire_half_spacing, rig.wire_length) == (0.838, 0.12, 0.4)
     assert load_testbed_constants()["propeller_diameter"][0] == pytest.approx(0.254)
 
 

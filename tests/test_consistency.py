@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from benchmarks.outside import BladeFlapping, in_plane_air_velocity
+from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import EffectContext, make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.consistency import MATERIAL
 from quadsim.gap.schema import validate
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import hover_speed, load_params
 
 # the stand-ins a thrust that grows with airspeed could take (fewer candidates: fast test)

@@ -43,7 +43,9 @@ def dotted_exists(name: str) -> bool:
     parts = name.split(".")
     for k in range(len(parts), 0, -1):
         base = ROOT.joinpath(*parts[:k])
-        module = base.with_suffix(".py") if base.with_suffix(".py").is_file() else base / "__init__.py"
+        module = base.with_suffix(".py")
+        if not module.is_file():
+            module = base / "__init__.py"
         if module.is_file():
             rest = parts[k:]
             return not rest or (len(rest) == 1 and defines(module, rest[0]))

@@ -30,7 +30,8 @@ def context(*, position=(0.0, 0.0, 1.0), velocity=(0.0, 0.0, 0.0), euler=(0.0, 0
             body_rate=(0.0, 0.0, 0.0)):
     """A one-simulation EffectContext (B = 1)."""
     speed = np.full(params.rotor_count, HOVER) if speed is None else np.asarray(speed, float)
-    row = lambda v: np.asarray(v, dtype=float)[None]
+    def row(v):
+        return np.asarray(v, dtype=float)[None]
     return EffectContext(t=np.array([t]), position=row(position), velocity=row(velocity),
                          quat=row(euler_to_quat(np.asarray(euler, float))),
                          body_rate=row(body_rate),

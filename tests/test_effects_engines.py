@@ -16,9 +16,8 @@ import pytest
 from quadsim.core.errors import InputError
 from quadsim.core.frames import quat_conjugate, quat_multiply
 from quadsim.effects import TESTBED_EXAMPLES, effect_set_from_specs
+from quadsim.sim import engines
 from quadsim.vehicle.params import hover_speed, load_params
-
-engines = pytest.importorskip("quadsim.sim.engines")
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
@@ -35,16 +34,18 @@ REALISTIC = {name: specs for name, specs in TESTBED_EXAMPLES.items()
 
 
 def _start(batch: int) -> dict:
-    tile = lambda v: np.tile(v, (batch, 1))
+    def tile(v):
+        return np.tile(v, (batch, 1))
     return engines.initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                                  euler=tile([0.02, -0.01, 0.2]))
 
 
 def _both(sets: list, series: np.ndarray, duration: float):
     start = _start(len(sets))
-    run = lambda engine: engines.simulate(
-        PARAMS, engine=engine, initial=start, rotor_speed_series=series, duration=duration,
-        control_period=PERIOD, effects=sets)
+    def run(engine):
+        return engines.simulate(
+            PARAMS, engine=engine, initial=start, rotor_speed_series=series, duration=duration,
+            control_period=PERIOD, effects=sets)
     return run("mujoco"), run("analytic")
 
 
@@ -156,9 +157,10 @@ def test_a_propeller_change_scales_the_thrust_curve_in_both_engines():
     assert position[0] <= TOLERANCE_M and angle[0] <= TOLERANCE_RAD
     weaker = dataclasses.replace(PARAMS, thrust_factor=0.9 * PARAMS.thrust_factor,
                                  drag_factor=0.9 * PARAMS.drag_factor)
-    run = lambda curve: engines.simulate(
-        weaker, engine="analytic", initial=_start(1), duration=SHORT, control_period=PERIOD,
-        rotor_speed_series=series, effects=[effect_set_from_specs([curve])])
+    def run(curve):
+        return engines.simulate(
+            weaker, engine="analytic", initial=_start(1), duration=SHORT, control_period=PERIOD,
+            rotor_speed_series=series, effects=[effect_set_from_specs([curve])])
     scaled, kept = run("thrust_curve:linear=-1.8e-4,offset=0.045"), \
         run("thrust_curve:linear=-2e-4,offset=0.05")
     np.testing.assert_allclose(a.position, scaled.position, atol=1e-9)

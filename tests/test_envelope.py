@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from _helpers import shared_effects
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import Reference, calibrate
@@ -18,8 +18,9 @@ from quadsim.gap.diagnose import prepare
 from quadsim.gap.envelope import Envelope, coordinates, fit_trend, local_reference, position
 from quadsim.gap.fitting import Candidate
 from quadsim.gap.per_flight import judge_one
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
+
+from _helpers import shared_effects  # noqa: E402
 
 
 def _states(speed: float, rate: float, thrust: float, n: int = 400):

@@ -11,8 +11,8 @@ import warnings
 
 import numpy as np
 import pytest
-from _helpers import DRAG, LAG, shared_effects
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight, to_json, validate
@@ -21,9 +21,10 @@ from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import marginal_sd
 from quadsim.gap.per_flight import judge_one
 from quadsim.gap.priors import WIND_SD_MS
-from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
+
+from _helpers import DRAG, LAG, shared_effects
 
 
 def _shared(**kw):

@@ -3,7 +3,8 @@
 Same physics, so the bound is 1e-9 m / 1e-9 rad over the whole flight (measured: identical to
 the last bit on this machine). Also: batches with per-simulation effects, a controller, the
 refusal/fallback of effects without a fast form, a diverging simulation named while the
-others keep their results, the memory estimate, determinism. Skipped without numba."""
+others keep their results, the memory estimate, determinism. Skipped without numba (the
+optional extra 'fast')."""
 
 from __future__ import annotations
 
@@ -18,14 +19,13 @@ from quadsim.effects import (
     EffectSet,
     effect_set_from_specs,
 )
+from quadsim.sim import compiled as fast_mujoco
 from quadsim.sim.controllers import GeometricController
 from quadsim.sim.engines import initial_state, simulate
 from quadsim.sim.paths import make_reference
 from quadsim.vehicle.params import hover_speed, load_params
 
-fast_mujoco = pytest.importorskip("quadsim.sim.compiled")
-if not fast_mujoco.available():
-    pytest.skip("numba is not installed (optional extra 'fast')", allow_module_level=True)
+pytest.importorskip("numba", reason="numba is the optional extra 'fast'")
 
 PARAMS = load_params("physical")
 HOVER = hover_speed(PARAMS)
@@ -35,6 +35,10 @@ TOL = 1e-9
 FAST_EXAMPLES = list(TESTBED_EXAMPLES.values())
 ALL = [specs[0] for specs in FAST_EXAMPLES]
 ALL_EFFECTS = effect_set_from_specs(ALL)
+
+
+def test_the_compiled_path_is_available_where_numba_is():
+    assert fast_mujoco.available()
 
 
 def test_every_library_effect_has_a_fast_form():
@@ -52,7 +56,8 @@ def _series(batch: int, periods: int) -> np.ndarray:
 
 
 def _start(batch: int) -> dict:
-    tile = lambda v: np.tile(v, (batch, 1))
+    def tile(v):
+        return np.tile(v, (batch, 1))
     return initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                          euler=tile([0.02, -0.01, 0.2]), body_rate=tile([0.3, -0.2, 0.1]))
 

@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 import pytest
-from _helpers import shared_effects
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import ModelError, QuadsimWarning
 from quadsim.core.frames import euler_to_quat, rotate, rotate_inverse
 from quadsim.effects import make_effect
@@ -26,8 +26,9 @@ from quadsim.gap.calibrate import Reference, jacobian, shared_candidate, weighte
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, explanations_for
 from quadsim.gap.fitting import _typical, effect_class, residuals
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import inertia_problems, load_params
+
+from _helpers import shared_effects
 
 
 @pytest.fixture(scope="module")

@@ -36,8 +36,9 @@ def test_reference_derivatives_match_finite_differences(name):
 
 def test_reference_speeds():
     t = np.linspace(0.0, 30.0, 30001)
-    peak = lambda name: np.linalg.norm(make_reference(
-        name, speed=2.0, duration=30.0)(t).velocity[:, :2], axis=1).max()
+    def peak(name):
+        return np.linalg.norm(make_reference(
+            name, speed=2.0, duration=30.0)(t).velocity[:, :2], axis=1).max()
     assert peak("figure8") == pytest.approx(2.0, rel=1e-6)
     assert peak("lissajous") <= 2.0 + 1e-9
     assert peak("sweep") == pytest.approx(2.0, rel=1e-3)  # ramp ends at full speed

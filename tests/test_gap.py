@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import InputError
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
 from quadsim.gap.report import to_json
 from quadsim.gap.schema import validate
-from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
@@ -112,7 +112,8 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     text = html.read_text()
     assert text.count("data:image/png;base64,") >= 2 and "quadsim.gap/3" in text
     # the answer first, the evidence with units, the JSON in a collapsed appendix
-    assert text.index("<h2>Answer</h2>") < text.index("<details>") < text.index("&quot;schema&quot;")
+    assert (text.index("<h2>Answer</h2>") < text.index("<details>")
+            < text.index("&quot;schema&quot;"))
     assert "<th>unit</th>" in text and "<td>N m</td>" in text
     assert document["verdict"]["outcome"] == "effect"
     assert all(c["unit"] in ("N", "N m", "rad/s")
@@ -313,8 +314,9 @@ def test_log_ends_are_neither_fitted_nor_scored(cf, monkeypatch):
         return states, float(np.sqrt(np.mean(force**2)) / np.sqrt(np.mean(force[inner]**2)))
 
     states, ratio = force_rms_ratio()
-    assert states.t[0] == pytest.approx(log.t[0] + module.EDGE_S, abs=0.011)   # s (one 100 Hz sample)
-    assert states.t[-1] == pytest.approx(log.t[-1] - module.EDGE_S, abs=0.011)  # s (one 100 Hz sample)
+    # s (one 100 Hz sample)
+    assert states.t[0] == pytest.approx(log.t[0] + module.EDGE_S, abs=0.011)
+    assert states.t[-1] == pytest.approx(log.t[-1] - module.EDGE_S, abs=0.011)
     assert ratio < 1.3
     monkeypatch.setattr(module, "EDGE_S", 0.0)
     assert force_rms_ratio()[1] > 3.0     # without the trim the ends dominate
@@ -337,7 +339,8 @@ def _closed_loop_drag_refits(cf, rotor_noise: float, yaw_amplitude: float, *,
     from quadsim.vehicle.params import hover_speed
 
     ref = replace(make_reference("hover", duration=8.0), yaw_function=lambda t: (
-        yaw_amplitude * np.sin(2.0 * np.asarray(t)), 2.0 * yaw_amplitude * np.cos(2.0 * np.asarray(t))))
+        yaw_amplitude * np.sin(2.0 * np.asarray(t)),
+        2.0 * yaw_amplitude * np.cos(2.0 * np.asarray(t))))
     noise = {"position": 5e-4, "velocity": 0.01, "attitude": 2e-3, "gyro": 0.02, "accel": 0.1,
              "rotor": rotor_noise * hover_speed(cf)}
     log, _ = generate_flight(cf, ref, None, SensorModel(noise=noise), 1, engine="analytic",
@@ -494,6 +497,7 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
     (this 8 s testbed flight, gyro noise 0.1 rad/s, no inertia error: xx -18 %, zz -80 %).
     The residual in angular acceleration times the nominal inertia is not biased (measured
     +2.1 % and +1.0 %): |xx|, |yy| within 5 %, |zz| within 15 %."""
+    from benchmarks.synthetic import SensorNoise
     from quadsim.gap.diagnose import prepare
     from quadsim.gap.fitting import (
         candidates_for,
@@ -503,7 +507,6 @@ def test_inertia_fit_not_shrunk_by_gyro_noise():
         noise_scale,
         residuals,
     )
-    from benchmarks.synthetic import SensorNoise
 
     params = load_params("physical")
     log = synthetic_flight(params, [], duration=8.0, seed=0, noise=SensorNoise(gyro=0.1))

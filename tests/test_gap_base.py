@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.__main__ import main
-from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 

@@ -9,11 +9,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
 from quadsim.gap.heldout_verdict import generalisation, remainder
-from benchmarks.synthetic import synthetic_flight
 from quadsim.vehicle.params import load_params
 
 DT = 0.01          # s, the fit rate (100 Hz)

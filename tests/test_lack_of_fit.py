@@ -56,8 +56,8 @@ def test_a_reading_that_leaves_at_most_the_form_error_of_the_gap_explains_the_fl
 def test_moderated_spread_follows_the_channels_own_scatter():
     """quadsim.gap.moderated (Smyth 2004): channels whose spreads differ 4x keep them
     (each moderated spread within 35 % of its own truth on 8 flights x 10 channels, the quiet
-    ones below the pooled spread, the noisy ones above it on average); channels alike come out at the
-    pooled spread when their scatter is no more than chance (excess <= 0: exactly the
+    ones below the pooled spread, the noisy ones above it on average); channels alike come out
+    at the pooled spread when their scatter is no more than chance (excess <= 0: exactly the
     pooled spread and its C (n - 1) degrees of freedom)."""
     from quadsim.gap.moderated import moderated_spread
 

@@ -24,8 +24,7 @@ def _variants():
     base = load_params("physical")
     yield "physical", base, 0.0
     yield "offset CoM, yawed", base.replace(com=np.array([0.01, -0.02, 0.015])), 0.7
-    if pytest.importorskip("quadsim.cad.assembly"):
-        yield "computational", load_params("computational"), 0.0
+    yield "computational", load_params("computational"), 0.0
 
 
 @pytest.mark.parametrize("engine", ["analytic", "mujoco"])

@@ -47,7 +47,8 @@ def _need(path: Path) -> Path:
 
 @pytest.mark.parametrize("roll", [0.3, -1.2, 2.5])
 def test_known_roll_both_ways(roll):
-    """A roll phi in NED/FRD is a roll phi in ours; pitch and yaw change sign (P = diag(1,-1,-1))."""
+    """A roll phi in NED/FRD is a roll phi in ours; pitch and yaw change sign
+    (P = diag(1,-1,-1))."""
     q_ned = euler_to_quat([roll, 0.0, 0.0])
     np.testing.assert_allclose(quat_to_euler(quat_ned_frd_to_world_body(q_ned)),
                                [roll, 0, 0], atol=1e-12)
@@ -85,7 +86,8 @@ def test_resample_sine_has_no_lag_and_no_extrapolation():
     assert np.abs(err).max() <= (w * dt) ** 2 / 8 + 1e-12   # linear-interpolation bound
     # no lag: the error is not correlated with the derivative (a delay tau would give
     # err ~ -tau w cos); fitted delay below 1e-4 of a sample
-    tau = -np.sum(err * w * np.cos(w * t_out[inside])) / np.sum((w * np.cos(w * t_out[inside])) ** 2)
+    cosine = w * np.cos(w * t_out[inside])
+    tau = -np.sum(err * cosine) / np.sum(cosine ** 2)
     assert abs(tau) < 1e-4 * dt
     assert np.isnan(y[~inside]).all()
 
@@ -427,10 +429,10 @@ def test_command_model_recovers_a_known_lag_and_voltage_term():
 def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
     """Generated flights: the verdict with measured speeds and with speeds synthesised from
     the commands (model fitted on nominal reference flights) is the same effect."""
+    from benchmarks.synthetic import synthetic_flight
     from quadsim.effects import make_effect
     from quadsim.gap import diagnose
     from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
-    from benchmarks.synthetic import synthetic_flight
     from quadsim.vehicle.params import load_params
 
     cf = load_params("crazyflie21")
@@ -465,8 +467,8 @@ def test_gap_cli_command_reference(tmp_path, capsys):
     import dataclasses
     import re
 
-    from quadsim.gap.__main__ import main as gap_main
     from benchmarks.synthetic import synthetic_flight
+    from quadsim.gap.__main__ import main as gap_main
     from quadsim.logs.flightlog import write_log
     from quadsim.vehicle.params import load_params
 

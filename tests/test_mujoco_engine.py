@@ -41,8 +41,6 @@ def test_freejoint_velocity_convention(physical):
 
 @pytest.mark.parametrize("name", ["physical", "computational"])
 def test_hover_residual_acceleration(name):
-    if name == "computational":
-        pytest.importorskip("quadsim.cad.assembly")
     params = load_params(name)
     model = compile_model(params, 1e-3)
     data = mujoco.MjData(model)

@@ -82,7 +82,6 @@ def test_response_metrics_closed_forms():
 
 
 def test_compare_models_and_rerun_recording(capsys, tmp_path):
-    pytest.importorskip("quadsim.viewer")
     rrd = tmp_path / "openloop.rrd"
     code, out, err = _run(capsys, "--model", "physical", "--compare", "report", "--duration",
                           "0.5", "--step-time", "0.1", "--no-plots", "--rerun", str(rrd))

@@ -209,8 +209,8 @@ def test_a_hover_is_not_ground():
 def test_gap_command_only_holdout_and_reference(tmp_path, capsys):
     """Command-only logs in every role run on the set's motor map; a set without one is
     refused in one line naming the way out."""
-    from quadsim.gap.__main__ import main as gap_main
     from benchmarks.synthetic import synthetic_flight
+    from quadsim.gap.__main__ import main as gap_main
 
     cf = load_params("crazyflie21")
     only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(
@@ -237,8 +237,8 @@ def test_shipped_data_are_found():
     with pytest.raises(ValueError):
         shipped_dir("nothing")
     # in a checkout the MJCF goes to models/, never into an installed package's data
-    from quadsim.sim.model import default_output
     from quadsim.core.shipped import is_installed_copy
+    from quadsim.sim.model import default_output
 
     assert not is_installed_copy(MODELS_DIR)
     assert default_output("testbed") == MODELS_DIR / "testbed.xml"

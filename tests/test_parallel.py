@@ -8,11 +8,11 @@ import sys
 
 import pytest
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import InputError
 from quadsim.core.executor import TaskFailure, _finish, run_tasks
 from quadsim.effects import make_effect
 from quadsim.gap.__main__ import main as gap_main
-from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 
@@ -20,7 +20,6 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _parallel_tasks import bad_input as _bad_input
 from _parallel_tasks import die_on_three as _die_on_three
 from _parallel_tasks import square_noise as _square_noise
-
 
 #: one xdist worker runs this module's tests (pytest-xdist --dist loadgroup): its module-scoped
 #: fixtures are built once, not once per worker

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.signal import freqz, savgol_coeffs
 
+from benchmarks.synthetic import SensorNoise, synthetic_flight
 from quadsim.core.errors import InputError
 from quadsim.core.frames import rotate
 from quadsim.effects import EffectContext, EffectSet, make_effect
@@ -18,7 +19,6 @@ from quadsim.gap.residual import (
     model_wrench,
     window_samples,
 )
-from benchmarks.synthetic import SensorNoise, synthetic_flight
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 

@@ -41,8 +41,8 @@ def _csv(path: Path, flight=None, **changes) -> Path:
 def test_pyulog_hang_reproduced_and_refused_within_its_budget(tmp_path, capsys, monkeypatch):
     import multiprocessing
 
-    from quadsim import logs
     from benchmarks.corrupt import hanging_ulog_bytes
+    from quadsim import logs
 
     path = tmp_path / "hang.ulg"
     path.write_bytes(hanging_ulog_bytes())

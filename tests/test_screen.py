@@ -12,8 +12,8 @@ import warnings
 
 import numpy as np
 import pytest
-from _helpers import shared_effects
 
+from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
@@ -23,10 +23,11 @@ from quadsim.gap.judge import judge
 from quadsim.gap.problem import FitInputs
 from quadsim.gap.rotor_channel import heun_linear, rotor_residual
 from quadsim.gap.screen import Columns, jacobian_columns
-from benchmarks.synthetic import synthetic_flight
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
+
+from _helpers import shared_effects
 
 
 def _shared(**kw):

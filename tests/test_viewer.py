@@ -243,7 +243,6 @@ def test_engines_do_not_import_rerun():
 
 
 def test_cad_assembly_meshes_are_logged(tmp_path):
-    pytest.importorskip("quadsim.cad.assembly")
     from quadsim.viewer import assembly_for, vehicle_shapes
 
     params = load_params("computational")

@@ -28,7 +28,8 @@ from quadsim.logs.flightlog import log_bytes
 from quadsim.vehicle.rotors import rotor_wrench
 
 needs_crazyflow = pytest.mark.skipif(not crazyflow_available(),
-                                     reason="crazyflow not installed (pip install 'quadsim[crazyflow]')")
+                                     reason="crazyflow not installed "
+                                            "(pip install 'quadsim[crazyflow]')")
 
 _CRAZYFLOW_WRENCH = r"""
 import json, sys

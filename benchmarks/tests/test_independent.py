@@ -18,7 +18,8 @@ from quadsim.vehicle.params import load_params
 from quadsim.vehicle.rotors import rotor_wrench
 
 needs_rotorpy = pytest.mark.skipif(not rotorpy_available(),
-                                   reason="rotorpy not installed (pip install 'quadsim[independent]')")
+                                   reason="rotorpy not installed "
+                                          "(pip install 'quadsim[independent]')")
 
 
 @needs_rotorpy

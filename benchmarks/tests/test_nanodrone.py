@@ -123,11 +123,11 @@ def test_physics_baseline_holds_the_body_rate_and_turns_the_attitude_exactly():
 
 @needs_data
 def test_reproduces_the_published_naive_and_physics_rows():
-    """The published table's Naive and Physics rows, from the authors' constants: every
-    h = 1, 10, 50 entry within 2e-4 of the 4-digit published value (all but one within 6e-5;
-    the exception is the body rate at h = 50, 0.88385 vs 0.8837), every SimErr within 3.5e-3 (relative 1.2e-4; the largest difference is
-    the body-rate SimErr, 29.0899 vs 29.0866, which depends on the data alone: it is the
-    same in both rows and no model enters it)."""
+    """The published table's Naive and Physics rows, from the authors' constants: every h = 1, 10,
+    50 entry within 2e-4 of the 4-digit published value (all but one within 6e-5; the exception is
+    the body rate at h = 50, 0.88385 vs 0.8837), every SimErr within 3.5e-3 (relative 1.2e-4; the
+    largest difference is the body-rate SimErr, 29.0899 vs 29.0866, which depends on the data alone:
+    it is the same in both rows and no model enters it)."""
     from quadsim.logs.flightlog import load_log
 
     runs = ("melon_20251017_run1", "melon_20251017_run4", "melon_20251017_run5")

@@ -312,7 +312,8 @@ def _read_as(mesh_path: Path, unit: str) -> str:
     """How a mesh file's coordinates were read (for refusals): its name and unit."""
     if is_step(mesh_path):
         return f"{mesh_path.name} (read in the unit its STEP header declares)"
-    return f"{mesh_path.name} (read in mesh_unit = \"{unit}\", scale {MESH_UNITS[unit]:g} m per unit)"
+    return (f"{mesh_path.name} (read in mesh_unit = \"{unit}\", "
+            f"scale {MESH_UNITS[unit]:g} m per unit)")
 
 
 def _check_size(mesh: trimesh.Trimesh, mass: float | None, density: float | None,

@@ -1,11 +1,11 @@
 """Command-line argument checks every CLI runs *before* any work starts.
 
-argparse checks types; these check meaning: numeric ranges (``--window -0.1``), finite
-values, input files that exist, the same file given twice or in two roles (training and
-``--holdout``; also a byte-identical copy), and output paths that can be written (suffix,
-not a directory, not an input, folder exists and is writable), so that a long computation never fails at its last step.
-Each failure is one :class:`~quadsim.core.errors.InputError` line naming the flag (or the file)
-and the value. Nothing here writes anything.
+argparse checks types; these check meaning: numeric ranges (``--window -0.1``), finite values, input
+files that exist, the same file given twice or in two roles (training and ``--holdout``; also a
+byte-identical copy), and output paths that can be written (suffix, not a directory, not an input,
+folder exists and is writable), so that a long computation never fails at its last step. Each
+failure is one :class:`~quadsim.core.errors.InputError` line naming the flag (or the file) and the
+value. Nothing here writes anything.
 
 Example::
 

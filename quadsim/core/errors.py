@@ -50,7 +50,8 @@ MAX_LINE = 2000
 
 def printable(text: object, limit: int = MAX_MESSAGE) -> str:
     """``text`` as one printable line: whitespace runs collapsed to one space, characters that
-    are not printable (control bytes, ...) as ``\\xNN``/``\\uNNNN`` escapes, cut at ``limit`` characters."""
+    are not printable (control bytes, ...) as ``\\xNN``/``\\uNNNN`` escapes, cut at ``limit``
+    characters."""
     out = []
     for ch in " ".join(str(text).split()):
         code = ord(ch)

@@ -22,6 +22,10 @@ breaks the whole pool: the unfinished tasks are rerun in a fresh pool, and if th
 again each is rerun alone, so that only the task that kills its worker is blamed. Ray does
 this per task (``max_retries=1``).
 
+Threads: a command's own process runs the numeric libraries (OpenBLAS, MKL, OpenMP) on
+``QUADSIM_THREADS`` threads, default 1 (:func:`limit_numeric_threads`, applied by the
+commands ``gap``, ``identify`` and ``sweep``); each spawned worker on one.
+
 Example::
 
     >>> from quadsim.core.executor import run_tasks
@@ -31,6 +35,7 @@ Example::
 
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import socket
@@ -44,10 +49,14 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = [
+    "DEFAULT_THREADS",
     "RAY_CONNECT_TIMEOUT_S",
+    "THREADS_ENV",
     "TaskFailure",
     "connect_ray",
     "default_workers",
+    "limit_numeric_threads",
+    "numeric_threads",
     "run_tasks",
 ]
 
@@ -85,6 +94,51 @@ def _finish(results, failures, labels, keep_going):
     return results
 
 
+#: the environment variable that sets the numeric libraries' threads of a command's own process
+THREADS_ENV = "QUADSIM_THREADS"
+#: their default: one. Measured on the 2-core machine (README, "Speed"): ``python -m
+#: quadsim.gap`` on 26 real flights against 20 references, one worker, took 56 s CPU with
+#: OpenBLAS's own threads and 36-39 s with one (the same output): its linear algebra is on
+#: small matrices, where a second thread costs more in spinning and handing over than it gains.
+DEFAULT_THREADS = 1
+
+
+def numeric_threads() -> int | None:
+    """The thread count for BLAS/OpenMP in a command's own process: ``QUADSIM_THREADS`` (a
+    positive integer; ``0``: the libraries' own choice, returned as None), else
+    :data:`DEFAULT_THREADS`. Anything else raises a one-line InputError."""
+    text = os.environ.get(THREADS_ENV, "").strip()
+    if not text:
+        return DEFAULT_THREADS
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise InputError(f"{THREADS_ENV}: {text!r} is not a thread count (a positive integer, "
+                         "or 0 for the numeric libraries' own choice)")
+    return value or None
+
+
+def limit_numeric_threads(main: Callable) -> Callable:
+    """Decorate a command's ``main``: while it runs, the numeric libraries' thread pools
+    (OpenBLAS, MKL, OpenMP: threadpoolctl) in this process hold :func:`numeric_threads`
+    threads; restored afterwards (so a test calling ``main`` in-process keeps its own).
+    Spawned workers get one thread each (:data:`SINGLE_THREAD_ENV`) whatever this says."""
+
+    @functools.wraps(main)
+    def wrapper(*args, **kwargs):
+        threads = numeric_threads()
+        if threads is None:
+            return main(*args, **kwargs)
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=threads):
+            return main(*args, **kwargs)
+
+    return wrapper
+
+
 #: one thread per worker for the numeric libraries: the workers are the parallelism
 SINGLE_THREAD_ENV = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                                       "MKL_NUM_THREADS")}
@@ -107,7 +161,8 @@ def _run_pool(fn, tasks, indices, workers, results, progress):
     """Run ``indices`` in one pool; return the indices left unfinished by a broken pool."""
     ctx = multiprocessing.get_context("spawn")
     broken = []
-    with _worker_env(), ProcessPoolExecutor(max_workers=min(workers, len(indices)), mp_context=ctx) as pool:
+    with _worker_env(), ProcessPoolExecutor(max_workers=min(workers, len(indices)),
+                                            mp_context=ctx) as pool:
         futures = {pool.submit(fn, tasks[i]): i for i in indices}
         for future in as_completed(futures):
             i = futures[future]

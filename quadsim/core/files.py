@@ -4,16 +4,26 @@ Writers put the bytes into a temporary file in the destination folder and rename
 the destination (``os.replace`` is atomic on POSIX and Windows), so an interrupted run never
 leaves half a file and never destroys the previous one. Folders are not created unless the
 caller asks (``make_parents``): a typo in an output path is an error, not a new tree.
+
+TOML in and out: :func:`read_toml` (one-line errors), :func:`check_schema` (a file of an
+earlier schema name read with one warning, any other refused in one line) and
+:func:`render_toml` (the writer of parameter sets, skeletons and effect files).
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import tempfile
 import tomllib
+import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
-from .errors import InputError
+import numpy as np
+
+from .errors import InputError, QuadsimWarning, field_error
 
 
 def _current_umask() -> int:
@@ -68,3 +78,68 @@ def read_toml(path: str | os.PathLike) -> dict:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: invalid TOML: {exc}") from None
+
+
+def check_schema(data: dict, path: object, schema: str,
+                 earlier: Mapping[str, str] | None = None) -> dict:
+    """``data`` (a file's parsed top level) checked against ``schema``, its ``schema`` key
+    migrated in memory where it names an earlier schema; the file itself is never rewritten.
+
+    ``earlier`` maps each earlier schema name whose content reads unchanged under ``schema``
+    to what renamed it (a phrase for the warning). A file of an earlier name gives one
+    :class:`~quadsim.core.errors.QuadsimWarning` naming the old schema and the line to change,
+    and is returned as a copy whose ``schema`` is ``schema``; any other value raises the
+    one-line ``<file>: schema: expected ...`` :class:`InputError`."""
+    earlier = earlier or {}
+    got = data.get("schema")
+    if got == schema:
+        return data
+    if isinstance(got, str) and got in earlier:
+        warnings.warn(f"{path}: schema: {got!r} is the earlier name of {schema!r} "
+                      f"({earlier[got]}); read as {schema!r}: write schema = \"{schema}\" in "
+                      "the file to silence this warning", QuadsimWarning, stacklevel=2)
+        return {**data, "schema": schema}
+    also = "".join(f" (or the earlier {name!r})" for name in earlier)
+    raise field_error(path, "schema", f"expected {schema!r}{also}, got {got!r}")
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        if not math.isfinite(f):
+            raise ValueError(f"non-finite value {f} in a TOML file")
+        return repr(f)
+    if isinstance(v, np.ndarray):
+        return _toml_value(v.tolist())
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def render_toml(data: dict, header: str = "") -> str:
+    """TOML text of ``data`` (a parameter set, a skeleton or an effect file): ``header`` as
+    ``#`` comment lines, then the top-level keys, then the tables, then the arrays of tables
+    (``[[rotor]]``, ``[[effect]]``), each in ``data``'s order. Values: bool, str, int,
+    finite float (``repr``: round-trips exactly), NumPy arrays and lists (inline arrays) and
+    dicts (inline tables); a non-finite float raises ValueError, another type TypeError."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    tables = {k: v for k, v in data.items() if isinstance(v, dict)}
+    arrays = {k: v for k, v in data.items()
+              if isinstance(v, list) and v and all(isinstance(x, dict) for x in v)}
+    for key, value in data.items():
+        if key not in tables and key not in arrays:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for name, table in tables.items():
+        lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+    for name, entries in arrays.items():
+        for entry in entries:
+            lines += ["", f"[[{name}]]"] + [f"{k} = {_toml_value(v)}" for k, v in entry.items()]
+    return "\n".join(lines) + "\n"

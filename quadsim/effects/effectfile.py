@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.errors import InputError, field_error
-from ..core.files import read_toml
+from ..core.files import check_schema, read_toml, render_toml
 from . import EFFECTS, make_effect
 from .base import EffectSet
 
@@ -61,8 +61,7 @@ def _parse(data: dict, path) -> EffectModel:
     if unknown:
         raise field_error(path, unknown[0], "unknown key (valid: schema, params, description, "
                                             "effect)")
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA)     # quadsim.effects/1 has had no other name
     if not isinstance(data.get("params"), str):
         raise field_error(path, "params", "missing: name or path of the parameter set")
     effects, sources, seen = [], {}, set()
@@ -106,8 +105,6 @@ def render_effect_file(params: str, description: str, effects: list[tuple[str, d
     """TOML text of an effect file: ``effects`` = [(effect name, {parameter: (value,
     source)}), ...] in order; units from the effects' declarations. The text loads with
     :func:`load_effect_file` (checked here: unknown names, units, ranges raise)."""
-    from ..identify.skeleton import render_params
-
     entries = []
     for name, values in effects:
         if name not in EFFECTS:
@@ -120,8 +117,8 @@ def render_effect_file(params: str, description: str, effects: list[tuple[str, d
                                  f"{', '.join(units)}")
             entry[key] = {"value": float(value), "unit": units[key], "source": str(source)}
         entries.append(entry)
-    text = render_params({"schema": SCHEMA, "params": params, "description": description,
-                          "effect": entries}, header)
+    text = render_toml({"schema": SCHEMA, "params": params, "description": description,
+                        "effect": entries}, header)
     import tomllib
 
     _parse(tomllib.loads(text), "effect file")     # refuse what load_effect_file refuses

@@ -57,7 +57,7 @@ class Gyroscopic(EffectBase):
     )
 
     @classmethod
-    def from_params(cls, params: VehicleParams) -> "Gyroscopic":
+    def from_params(cls, params: VehicleParams) -> Gyroscopic:
         """The effect with Jr taken from the parameter set (``[rotors] inertia``)."""
         return cls(rotor_inertia=params.rotor_inertia)
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from ..core.args import ArgumentParser
 from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, QuadsimWarning, run_cli
+from ..core.executor import limit_numeric_threads
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
 from .checks import check_length
@@ -255,6 +256,7 @@ def _write_effects(args, params, base, result) -> None:
 
 
 @run_cli
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs

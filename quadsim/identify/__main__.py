@@ -32,6 +32,7 @@ import numpy as np
 
 from ..core.args import ArgumentParser
 from ..core.errors import InputError, run_cli
+from ..core.executor import limit_numeric_threads
 from ..vehicle.params import load_params
 from .audit import Finding, audit_report
 from .benchdata import load_thrust_stand
@@ -188,6 +189,7 @@ def _print_audit(findings: list[Finding]) -> None:
 
 
 @run_cli
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.logs or args.vehicle or args.output:
@@ -277,8 +279,7 @@ def _drag_iv(states, provisional) -> tuple[float, float]:
     """d and its standard error by the gap's instrumental-variables refit (relative to the
     provisional set's d; the yaw balance is linear in d)."""
     from ..gap.diagnose import BASELINE
-    from ..gap.fitting import drag_refit_iv
-    from ..gap.fitting import stack_states
+    from ..gap.fitting import drag_refit_iv, stack_states
 
     usable = [s for s in states if s.rotor_speed is not None and s.command is not None]
     if not usable:

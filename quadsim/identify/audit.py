@@ -114,7 +114,8 @@ def _bifilar_vehicle(ident: TestbedIdentification) -> Finding:
          f"{ident.lumped[0]:.4g}, {ident.lumped[1]:.4g}, {ident.lumped[2]:.4g} kg m^2: the "
          "roll/pitch periods are ~2x too short for it, the yaw period ~3x too long")
         if ident.bifilar.problems else "corrected bifilar inertia passes every check",
-        {"izz_over_ixx_plus_iyy": float(izz / (ixx + iyy)), "max_radius_m": ident.bifilar.max_radius})
+        {"izz_over_ixx_plus_iyy": float(izz / (ixx + iyy)),
+         "max_radius_m": ident.bifilar.max_radius})
 
 
 def _top_point(ident: TestbedIdentification) -> Finding:

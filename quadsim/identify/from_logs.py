@@ -56,8 +56,17 @@ import math
 import numpy as np
 
 from ..core.errors import InputError
-from .logseries import (MIX_TOLERANCE, Estimate, LogIdentification, LogSeries, Skeleton, _ci,
-                        _origin_fit, correlation_time, refuse_mixed)
+from .logseries import (
+    MIX_TOLERANCE,
+    Estimate,
+    LogIdentification,
+    LogSeries,
+    Skeleton,
+    _ci,
+    _origin_fit,
+    correlation_time,
+    refuse_mixed,
+)
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
 
 #: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this; below

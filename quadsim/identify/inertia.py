@@ -56,7 +56,8 @@ def inertia_bound_problems(moments: np.ndarray, mass: float, max_radius: float) 
 class BifilarResult:
     """Bifilar inertia per axis (roll/pitch/yaw = x/y/z), corrected and as published.
 
-    ``periods`` axis -> (3,) measured periods (s); ``trials`` axis -> (3,) corrected kg m^2 per trial; ``moments`` (3,) corrected means;
+    ``periods`` axis -> (3,) measured periods (s); ``trials`` axis -> (3,) corrected kg m^2
+    per trial; ``moments`` (3,) corrected means;
     ``published`` (3,) the report's formula (kg m^2/s) on the same mean periods;
     ``problems`` why the corrected tensor cannot be this vehicle's (empty if physical)."""
 

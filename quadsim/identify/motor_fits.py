@@ -15,8 +15,15 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ..core.errors import InputError
-from .logseries import (Estimate, LogSeries, Skeleton, _ci, _origin_fit, correlation_time,
-                        refuse_mixed)
+from .logseries import (
+    Estimate,
+    LogSeries,
+    Skeleton,
+    _ci,
+    _origin_fit,
+    correlation_time,
+    refuse_mixed,
+)
 
 #: commands at or above this (normalised) are saturated and left out of the motor map.
 SATURATED = 0.99

@@ -18,23 +18,26 @@ positions and spins (a ruler; or ``from_cad`` for both). Example (a 45 g Crazyfl
     spin = "ccw"
     ...
 
-:func:`render_params` writes the complete set: the skeleton's own entries unchanged, the
-identified ones added with a ``source`` naming the fit, its logs and its quality, and the
-values the data could not determine listed under ``warnings``.
+:mod:`quadsim.identify.vehicle_set` writes the complete set (TOML by
+:func:`quadsim.core.files.render_toml`; ``render_params`` here is the same function under its
+earlier import path): the skeleton's own entries unchanged, the identified ones added with a
+``source`` naming the fit, its logs and its quality, and the values the data could not
+determine listed under ``warnings``.
 """
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 
 import numpy as np
 
 from ..core.errors import InputError, field_error
-from ..core.files import read_toml
-from ..vehicle.params import SCHEMA, _cad_path, _quantity, _rotor_table
+from ..core.files import check_schema, read_toml
+from ..core.files import render_toml as render_params  # the earlier import path
+from ..vehicle.params import EARLIER_SCHEMAS, SCHEMA, _cad_path, _quantity, _rotor_table
 from .logseries import Skeleton
+
+__all__ = ["load_skeleton", "quantity", "render_params"]
 
 
 def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
@@ -43,8 +46,7 @@ def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
     if not path.is_file():
         raise InputError(f"{path}: skeleton file not found")
     data = read_toml(path)
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA, EARLIER_SCHEMAS)
     body = data.get("body")
     if not isinstance(body, dict):
         raise field_error(path, "body", "missing section [body] (mass on a scale)")
@@ -104,41 +106,3 @@ def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
 def quantity(value, unit: str, source: str) -> dict:
     """An inline ``{ value, unit, source }`` entry."""
     return {"value": value, "unit": unit, "source": source}
-
-
-def _value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        f = float(v)
-        if not math.isfinite(f):
-            raise ValueError(f"non-finite value {f} in a parameter set")
-        return repr(f)
-    if isinstance(v, np.ndarray):
-        return _value(v.tolist())
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def render_params(data: dict, header: str) -> str:
-    """TOML text of a parameter-set dict (top-level keys, then tables, then [[rotor]])."""
-    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
-    tables = {k: v for k, v in data.items() if isinstance(v, dict)}
-    arrays = {k: v for k, v in data.items()
-              if isinstance(v, list) and v and all(isinstance(x, dict) for x in v)}
-    for key, value in data.items():
-        if key not in tables and key not in arrays:
-            lines.append(f"{key} = {_value(value)}")
-    for name, table in tables.items():
-        lines += ["", f"[{name}]"] + [f"{k} = {_value(v)}" for k, v in table.items()]
-    for name, entries in arrays.items():
-        for entry in entries:
-            lines += ["", f"[[{name}]]"] + [f"{k} = {_value(v)}" for k, v in entry.items()]
-    return "\n".join(lines) + "\n"

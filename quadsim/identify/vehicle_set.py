@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, ModelError
+from ..core.files import render_toml
 from ..vehicle.params import VehicleParams, load_params
 from .logseries import LogIdentification, Skeleton
-from .skeleton import quantity, render_params
+from .skeleton import quantity
 
 DEFAULT_D_OVER_BR = 0.15
 DEFAULT_D_OVER_B = 0.01   # m
@@ -167,7 +168,7 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
     given_d = "drag_factor" in rotors
     rotors.setdefault("drag_factor", quantity(float(f"{d_default:.5g}"), "N m s^2/rad^2",
                                               "default (provisional)"))
-    provisional = _load_text(render_params(data, "provisional"), output, check=False)
+    provisional = _load_text(render_toml(data, "provisional"), output, check=False)
     d, se = drag_fit(provisional) if not ident.command_only else (float("nan"),) * 2
     if np.isfinite(d) and d > 0 and 1.96 * se < DRAG_CI * d:
         rotors["drag_factor"] = quantity(
@@ -195,6 +196,6 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
     header = (f"Parameter set {data.get('name', Path(output).stem)!r}: the skeleton "
               f"{Path(skeleton.path).name} plus what `python -m quadsim.identify --logs` "
               f"identified\nfrom {log_names} (rerun the command instead of editing by hand).")
-    text = render_params(data, header)
+    text = render_toml(data, header)
     params = _load_text(text, output, check=True)
     return text, params, report

@@ -156,4 +156,5 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map", "read_columns", "refuse_binary", "resample"]
+__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map",
+           "read_columns", "refuse_binary", "resample"]

@@ -201,7 +201,8 @@ def check_gyro(log) -> str | None:
                               f"integrated gyro = {gain:.4g} x the rotation of the attitude "
                               f"quaternions over {WINDOW_S} s windows (expected 1): {hint}")
     if judged == 0:
-        return f"{_where(log)}: wx, wy, wz: too little rotation to check the gyro against the attitude"
+        return (f"{_where(log)}: wx, wy, wz: too little rotation to check the gyro against the "
+                "attitude")
     return None
 
 

@@ -18,10 +18,11 @@ vbat           BAT (CURR)                  Volt                                V
                                                                                int16 field: cV)
 =============  ==========================  ==================================  ==============
 
-Time: ``TimeUS`` (us) or, in older logs, ``TimeMS`` (ms) since boot -> s from the first
-attitude row; every message is interpolated onto the ATT instants (``common.resample``:
-linear, NaN across gaps), trimmed to the span every message covers (``common.common_span``). Frames as for PX4 (``quadsim.logs.common``). ``POS`` (geodetic)
-becomes local NED about its first fix by the flat-earth approximation (R = 6378137 m).
+Time: ``TimeUS`` (us) or, in older logs, ``TimeMS`` (ms) since boot -> s from the first attitude
+row; every message is interpolated onto the ATT instants (``common.resample``: linear, NaN across
+gaps), trimmed to the span every message covers (``common.common_span``). Frames as for PX4
+(``quadsim.logs.common``). ``POS`` (geodetic) becomes local NED about its first fix by the
+flat-earth approximation (R = 6378137 m).
 
 Rotor count from ``FRAME_CLASS`` (1 quad 4, 2 hexa 6, 3 octa 8, 4 octa-quad 8, 5 Y6 6,
 7 tri 3), else 4 (older logs: ``FRAME`` is only the X/+ layout). PWM range from

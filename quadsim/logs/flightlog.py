@@ -134,7 +134,8 @@ class FlightLog:
         for name, width in shapes.items():
             value = getattr(self, name)
             if value is not None and np.shape(value) != (n, width):
-                raise ValueError(f"FlightLog.{name}: shape {np.shape(value)}, expected ({n}, {width})")
+                raise ValueError(f"FlightLog.{name}: shape {np.shape(value)}, "
+                                 f"expected ({n}, {width})")
         for name in ("rotor_speed", "rotor_command"):
             value = getattr(self, name)
             if value is not None and (np.ndim(value) != 2 or len(value) != n):
@@ -244,8 +245,9 @@ def _check_time(path: Path, t: np.ndarray, notes: list[str]) -> None:
         jumps = np.flatnonzero(steps > GAP_FACTOR * typical)
         if len(jumps):
             row = int(jumps[0]) + 1
-            notes.append(f"{path}: t: line {row + 2}: sample-rate jump, step {steps[row - 1]:.4g} s "
-                         f"vs median {typical:.4g} s ({len(jumps)} such gap(s))")
+            notes.append(f"{path}: t: line {row + 2}: sample-rate jump, "
+                         f"step {steps[row - 1]:.4g} s vs median {typical:.4g} s "
+                         f"({len(jumps)} such gap(s))")
 
 
 def _check_units(path: Path, log: dict) -> None:

@@ -142,7 +142,8 @@ def ulog_bytes(flight: SampleFlight, *, start_us: int = 1_000_000,
                             ("float", 3, "accelerometer_m_s2", flight.accel * _FLIP)],
         "actuator_motors": [("float", 12, "control",
                              np.hstack([flight.command, np.full((n, 8), np.nan)]))],
-        "esc_status": [("esc_report", 8, "esc", np.hstack([np.clip(np.nan_to_num(np.round(rpm)), -2**31, 2**31 - 1), np.zeros((n, 4))]))],
+        "esc_status": [("esc_report", 8, "esc", np.hstack([
+            np.clip(np.nan_to_num(np.round(rpm)), -2**31, 2**31 - 1), np.zeros((n, 4))]))],
         "battery_status": [("float", 0, "voltage_v", flight.vbat)],
     }
     for msg_id, (name, fields) in enumerate(topics.items()):
@@ -178,7 +179,8 @@ def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000,
     """The flight as an ArduPilot DataFlash log (FMT, PARM, ATT, XKF1, IMU, RCOU, ESC, BAT);
     PWM 1000-2000 us (MOT_PWM_MIN/MAX), FRAME_CLASS 1 (quad); ``params`` override those."""
     out = bytearray(df_format(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
-    layout = {129: ("PARM", "QNf", "TimeUS,Name,Value"), 130: ("ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw"),
+    layout = {129: ("PARM", "QNf", "TimeUS,Name,Value"),
+              130: ("ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw"),
               131: ("XKF1", "QBffffff", "TimeUS,C,PN,PE,PD,VN,VE,VD"),
               132: ("IMU", "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ"),
               133: ("RCOU", "QHHHH", "TimeUS,C1,C2,C3,C4"),

@@ -37,8 +37,8 @@ flight-log rows are the fixed-frequency events (one row each, time from the firs
 motion-capture pose event (``estPose``, ``locSrv.*``, ~100 Hz) replaces the on-board state
 estimate as position and attitude with ``pose="estPose"`` (``convert --topic pose=estPose``):
 interpolated linearly onto the rows, NaN across its gaps (no hold), rows outside its span
-dropped; by default the state estimate is used, as in the published CSVs. Measured: the three raw logs
-reproduce ``nominal/flight_00..02.csv.gz`` row for row (docs/logs.md gives the differences).
+dropped; by default the state estimate is used, as in the published CSVs. Measured: the three raw
+logs reproduce ``nominal/flight_00..02.csv.gz`` row for row (docs/logs.md gives the differences).
 
 Errors (one line, file and field): wrong magic byte, unknown version, bad CRC, a truncated
 event or definition, an event id without a definition, an unknown type code.
@@ -151,7 +151,8 @@ def _pose_from(path: Path, events: dict, pose: str, t: np.ndarray):
         raise field_error(path, f"{pose}: {missing[0] if missing else 't'}",
                           "pose event needs locSrv.x/y/z/qw/qx/qy/qz and 2 or more samples")
     position = resample(ev["t"], np.stack([ev[n] for n in names[:3]], 1), t)
-    check_unit_quat(path, f"{pose}: locSrv.qw..qz", ev["t"], np.stack([ev[n] for n in names[3:]], 1))
+    check_unit_quat(path, f"{pose}: locSrv.qw..qz", ev["t"],
+                    np.stack([ev[n] for n in names[3:]], 1))
     quat = resample_quat(ev["t"], np.stack([ev[n] for n in names[3:]], 1), t)
     return position, quat
 

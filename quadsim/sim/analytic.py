@@ -74,8 +74,8 @@ STATE_BOUND = 1e6
 class BodyArrays:
     """Per-simulation physical constants, stacked on a leading axis B (SI units).
 
-    mass (B,), com (B, 3), inertia / inertia_inv (B, 3, 3) about the CoM, allocation (B, 6, R)
-    about the CoM (:func:`quadsim.vehicle.rotors.allocation_matrix`), rotor_arm (B, R, 3) = hub - CoM,
+    mass (B,), com (B, 3), inertia / inertia_inv (B, 3, 3) about the CoM, allocation (B, 6, R) about
+    the CoM (:func:`quadsim.vehicle.rotors.allocation_matrix`), rotor_arm (B, R, 3) = hub - CoM,
     rotor_axis (B, R, 3), rotor_spin (R,), thrust_factor / drag_factor (B,), gravity (B,).
     """
 

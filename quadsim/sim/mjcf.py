@@ -81,6 +81,8 @@ def vehicle_xml(params: VehicleParams, *, timestep: float = 1e-3, integrator: st
     floor_xml = ('    <geom name="floor" type="plane" size="0 0 0.1" rgba="0.8 0.8 0.8 1"'
                  ' contype="1" conaffinity="1"/>\n') if floor else ""
     note = f"<!-- {comment} -->\n" if comment else ""
+    inertia_note = f"mass properties from parameter set {params.name!s}: " \
+        f"{params.sources.get('inertia', '')}"
     return f"""{note}<mujoco model={quoteattr(params.name)}>
   <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>
   <option timestep="{timestep:.17g}" integrator="{integrator}" gravity="0 0 {-params.gravity:.17g}"
@@ -98,7 +100,7 @@ def vehicle_xml(params: VehicleParams, *, timestep: float = 1e-3, integrator: st
   <worldbody>
 {floor_xml}    <body name="{BODY_NAME}" pos="0 0 1">
       <freejoint name="{BODY_NAME}"/>
-      <!-- mass properties from parameter set {params.name!s}: {params.sources.get('inertia', '')} -->
+      <!-- {inertia_note} -->
       <inertial pos="{_vec(params.com)}" mass="{params.mass:.15g}" fullinertia="{_vec(full)}"/>
 {visual_geoms or chr(10).join(stand_ins)}
 {chr(10).join(sites)}

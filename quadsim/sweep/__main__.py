@@ -8,7 +8,7 @@ import sys
 from ..core.args import ArgumentParser
 from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, run_cli
-from ..core.executor import default_workers
+from ..core.executor import default_workers, limit_numeric_threads
 from ..sim.engines import ENGINES
 from ..sim.paths import PATHS
 from ..vehicle.params import load_params
@@ -74,6 +74,7 @@ def sweep_cost(args, dims: int) -> Estimate:
 
 
 @run_cli
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if not args.output.endswith(".parquet"):

@@ -40,13 +40,15 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, ModelError, field_error
-from ..core.files import read_toml
+from ..core.files import check_schema, read_toml
 from ..core.shipped import shipped_dir
 
 #: Folder holding the built-in parameter sets (``--model NAME``): the repository's
 #: ``models/``, or its copy inside an installed wheel (:mod:`quadsim.core.shipped`).
 MODELS_DIR = shipped_dir("models")
 SCHEMA = "quadsim.vehicle.params/1"
+#: earlier names of :data:`SCHEMA`, read with one warning (the content is the same; CHANGELOG)
+EARLIER_SCHEMAS = {"quadsim.params/1": "renamed with the package layout, CHANGELOG.md"}
 
 SPIN_SIGN = {"ccw": 1.0, "cw": -1.0}
 
@@ -260,10 +262,12 @@ def _quantity(table: dict, key: str, unit: str, path: Path, section: str, *, sha
         raise field_error(path, where, "expected an inline table { value, unit, source }")
     extra = set(entry) - {"value", "unit", "source", "note"}
     if extra:
-        raise field_error(path, where, f"unknown keys {sorted(extra)}; valid: value, unit, source, note")
+        raise field_error(path, where,
+                          f"unknown keys {sorted(extra)}; valid: value, unit, source, note")
     for needed in ("value", "unit", "source"):
         if needed not in entry:
-            raise field_error(path, where, f"missing '{needed}' (every number states its unit and source)")
+            raise field_error(path, where,
+                              f"missing '{needed}' (every number states its unit and source)")
     if entry["unit"] != unit:
         raise field_error(path, where, f"unit {entry['unit']!r} where {unit!r} is expected")
     try:
@@ -287,7 +291,8 @@ def _check_keys(table: dict, valid: set[str], path: Path, section: str) -> None:
     unknown = set(table) - valid
     if unknown:
         raise field_error(path, section or "top level",
-                          f"unknown key(s) {sorted(unknown)}; valid keys: {', '.join(sorted(valid))}")
+                          f"unknown key(s) {sorted(unknown)}; "
+                          f"valid keys: {', '.join(sorted(valid))}")
 
 
 def _cad_path(spec: dict, path: Path, where: str) -> tuple[Path, str]:
@@ -321,8 +326,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     path = resolve_params_path(name_or_path)
     data = read_toml(path)
     _check_keys(data, _TOP_KEYS, path, "")
-    if data.get("schema") != SCHEMA:
-        raise field_error(path, "schema", f"expected {SCHEMA!r}, got {data.get('schema')!r}")
+    data = check_schema(data, path, SCHEMA, EARLIER_SCHEMAS)
     sources: dict[str, str] = {}
     cad_dir = None
 
@@ -341,7 +345,8 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     else:
         mass, sources["mass"] = _quantity(body, "mass", "kg", path, "body")
         com, sources["com"] = _quantity(body, "com", "m", path, "body", shape=(3,))
-        inertia, sources["inertia"] = _quantity(body, "inertia", "kg m^2", path, "body", shape=(3, 3))
+        inertia, sources["inertia"] = _quantity(body, "inertia", "kg m^2", path, "body",
+                                                shape=(3, 3))
     _positive(mass, path, "body.mass")
 
     rotor_section = data.get("rotors")

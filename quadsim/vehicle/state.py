@@ -58,7 +58,7 @@ class Trajectory:
         """(..., N, 12) ``[x, y, z, vx, vy, vz, roll, pitch, yaw, p, q, r]``."""
         return np.concatenate([self.position, self.velocity, self.euler, self.body_rate], -1)
 
-    def select(self, index) -> "Trajectory":
+    def select(self, index) -> Trajectory:
         """One member of a batch (index on the leading axis)."""
         pick = lambda a: None if a is None else a[index]  # noqa: E731
         return Trajectory(self.t, pick(self.position), pick(self.velocity), pick(self.quat),

@@ -206,7 +206,8 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
         u1 = air_body[1] + rate_b[2] * p[0] - rate_b[0] * p[2]
         u2 = air_body[2] + rate_b[0] * p[1] - rate_b[1] * p[0]
         axial = u0 * a[0] + u1 * a[1] + u2 * a[2]
-        extra = s * ((row[O_CQ] * mid[r] + row[O_CL]) * mid[r] + row[O_CO])   # scales with the propeller
+        # scales with the propeller
+        extra = s * ((row[O_CQ] * mid[r] + row[O_CL]) * mid[r] + row[O_CO])
         # translational_lift: + k_h |v - (v . a) a|^2 along the axis (air velocity, no rotation)
         va = air_body[0] * a[0] + air_body[1] * a[1] + air_body[2] * a[2]
         extra += row[O_TL] * (air_body[0] ** 2 + air_body[1] ** 2 + air_body[2] ** 2 - va * va)

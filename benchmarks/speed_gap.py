@@ -1,0 +1,172 @@
+"""Speed of the gap diagnosis as a user gets it: the command a user types, timed from outside.
+
+Runs ``python -m quadsim.gap --model crazyflie21 --per-flight MIXED... --reference NOMINAL...
+--workers 1`` as a subprocess (imports, log loading and checks, the references' calibration,
+the per-flight judgment and the summary all included) on the real Crazyflie 2.1 Brushless
+flights of ``../shared/data/crazyflie21_brushless`` and reports, per run:
+
+* flight-minutes: the judged (``--per-flight``) flights' log durations summed (t_last - t_0);
+* CPU s: user + system time of the command and its children (``resource.getrusage``
+  ``RUSAGE_CHILDREN`` before and after), the number to compare on a shared machine;
+* wall s, and CPU s per flight-minute (issue 43's goal: <= 2 for the 26 mixed flights
+  against the 20 nominal references, one worker).
+
+Two series: the first N mixed flights (N = 1, 2, 4, 8, 16, 26) whole, and 8 mixed flights
+cut to 50 and 75 % of their length (the first part of each log; a quarter, ~1.4 s, is below
+the diagnosis' 2 s minimum and is refused; the real flights cannot be made longer without
+inventing data). A least-squares line CPU = fixed + per-minute x
+flight-minutes over the count series splits the cost that does not grow with the judged
+flights (imports, the 20 references' calibration) from the cost that does.
+
+Usage (from the repository root; the machine and its load matter, so say them)::
+
+    nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4]
+
+Exit 0 with one ``skipped:`` line when the data folder is absent. Not a test: it measures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_DATA = ROOT.parent / "shared" / "data"
+CAMPAIGN = "crazyflie21_brushless"
+COUNTS = (1, 2, 4, 8, 16, 26)
+#: the share of each flight kept in the length series, and how many flights it judges
+FRACTIONS = (0.5, 0.75)
+LENGTH_FLIGHTS = 8
+
+
+@dataclass(frozen=True)
+class Run:
+    """One timed command: what it judged and what it cost."""
+
+    label: str
+    flights: int
+    flight_minutes: float
+    cpu_s: float
+    wall_s: float
+    verdicts: str
+
+    @property
+    def cpu_per_minute(self) -> float:
+        return self.cpu_s / self.flight_minutes
+
+
+def log_duration(path: Path) -> float:
+    """t_last - t_0 (s) of a flight-log CSV (``t`` the first column)."""
+    with gzip.open(path, "rt") as handle:
+        lines = handle.read().split("\n")
+    rows = [line for line in lines[1:] if line]
+    return float(rows[-1].split(",", 1)[0]) - float(rows[0].split(",", 1)[0])
+
+
+def cut_log(path: Path, fraction: float, out: Path) -> Path:
+    """The first ``fraction`` of a flight-log CSV (by time), written to ``out`` (gzip)."""
+    with gzip.open(path, "rt") as handle:
+        lines = [line for line in handle.read().split("\n") if line]
+    t = np.array([float(line.split(",", 1)[0]) for line in lines[1:]])
+    keep = t <= t[0] + fraction * (t[-1] - t[0])
+    kept = [lines[0]] + [line for line, k in zip(lines[1:], keep) if k]
+    with gzip.open(out, "wt") as handle:
+        handle.write("\n".join(kept) + "\n")
+    return out
+
+
+def time_gap(label: str, flights: list[Path], references: list[Path]) -> Run:
+    """Run the user's command once; CPU from the children's rusage, wall from a clock."""
+    command = [sys.executable, "-m", "quadsim.gap", "--model", "crazyflie21", "--per-flight",
+               *map(str, flights), "--reference", *map(str, references), "--workers", "1"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    run = subprocess.run(command, capture_output=True, text=True, check=False,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                             p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)})
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if run.returncode != 0:
+        raise SystemExit(f"error: {label}: quadsim.gap exit {run.returncode}: "
+                         f"{run.stderr.strip().splitlines()[-1] if run.stderr.strip() else ''}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    answer = next((line for line in run.stdout.splitlines() if line.startswith("answer:")), "")
+    minutes = sum(log_duration(p) for p in flights) / 60.0
+    return Run(label, len(flights), minutes, cpu, wall, answer.split(":", 1)[-1].strip())
+
+
+def line_fit(runs: list[Run]) -> tuple[float, float]:
+    """(fixed CPU s, CPU s per flight-minute) of the least-squares line through ``runs``."""
+    x = np.array([r.flight_minutes for r in runs])
+    y = np.array([r.cpu_s for r in runs])
+    slope, intercept = np.polyfit(x, y, 1)
+    return float(intercept), float(slope)
+
+
+def table(runs: list[Run]) -> str:
+    head = ("| run | flights | flight-min | CPU s | wall s | CPU s per flight-min |\n"
+            "|---|---:|---:|---:|---:|---:|")
+    rows = [f"| {r.label} | {r.flights} | {r.flight_minutes:.2f} | {r.cpu_s:.1f} | "
+            f"{r.wall_s:.1f} | {r.cpu_per_minute:.1f} |" for r in runs]
+    return "\n".join([head, *rows])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA,
+                        help=f"the shared data folder (default {DEFAULT_DATA})")
+    parser.add_argument("--counts", type=int, nargs="+", default=list(COUNTS),
+                        help="numbers of mixed flights judged whole (default 1 2 4 8 16 26)")
+    parser.add_argument("--fractions", type=float, nargs="*", default=list(FRACTIONS),
+                        help="shares of each flight kept in the length series "
+                             f"({LENGTH_FLIGHTS} flights; default 0.5 0.75; none: skip)")
+    args = parser.parse_args(argv)
+    folder = args.data / CAMPAIGN
+    mixed = sorted((folder / "mixed").glob("flight_*.csv.gz"))
+    nominal = sorted((folder / "nominal").glob("flight_*.csv.gz"))
+    if not mixed or not nominal:
+        print(f"skipped: {folder}: no mixed/ and nominal/ flights (the shared data folder)")
+        return 0
+    load = os.getloadavg()
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+          f"Python {platform.python_version()}; load average at start "
+          f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; QUADSIM_THREADS="
+          f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}")
+    runs = []
+    for n in args.counts:
+        runs.append(time_gap(f"{n} mixed, whole", mixed[:n], nominal))
+        print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s wall "
+              f"({runs[-1].verdicts})", flush=True)
+    counted = list(runs)
+    with tempfile.TemporaryDirectory() as tmp:
+        for fraction in args.fractions:
+            cut = [cut_log(p, fraction, Path(tmp) / f"{int(fraction * 100)}_{p.name}")
+                   for p in mixed[:LENGTH_FLIGHTS]]
+            runs.append(time_gap(f"{LENGTH_FLIGHTS} mixed, first {fraction:.0%}", cut, nominal))
+            print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s "
+                  f"wall ({runs[-1].verdicts})", flush=True)
+    load = os.getloadavg()
+    print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    print(f"references: {len(nominal)} nominal flights, "
+          f"{sum(log_duration(p) for p in nominal) / 60:.2f} min; --workers 1\n")
+    print(table(runs))
+    if len(counted) >= 2:
+        fixed, per_minute = line_fit(counted)
+        print(f"\nCPU = {fixed:.1f} s + {per_minute:.1f} s per judged flight-minute "
+              f"(least squares over the whole-flight runs)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
