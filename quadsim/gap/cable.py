@@ -84,7 +84,7 @@ LENGTH_PRIOR_M = (0.55, 0.225)
 #: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
 START_PRIOR = (0.17, 0.5)
 #: the fitted parameters: the payload, and the swing at the first sample (nuisance).
-FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y", "damping")
+FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y", "swing_damping")
 #: prior of the swing's damping rate (1/s): centre and spread (module doc)
 DAMPING_PRIOR = (0.5, 0.5)
 
@@ -290,7 +290,7 @@ class CableSwing(CablePayload):
                         "cable's lean from the vertical towards world +y at the first sample"),
         EffectParameter("rate_x", "rad/s", 0.0, -5.0, 5.0, "swing rate along x at the start"),
         EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"),
-        EffectParameter("damping", "1/s", 0.0, 0.0, 5.0,
+        EffectParameter("swing_damping", "1/s", 0.0, 0.0, 5.0,
                         "swing damping rate (air drag on the payload and cable)"))
 
     def state_size(self) -> int:
@@ -329,13 +329,13 @@ class CableSwing(CablePayload):
         payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
         shift), so those evaluations reuse it."""
         key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
-               self.x, self.y, self.z, float(gravity), self.damping)
+               self.x, self.y, self.z, float(gravity), self.swing_damping)
         kept = None if memo is None else memo.setdefault("cable_swings", {})
         if kept is not None and key in kept:
             return kept[key]
         value = swing(t, accel, self.length, gravity,
                       start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)),
-                      damping=self.damping)
+                      damping=self.swing_damping)
         if kept is not None:
             if len(kept) >= self.KEPT_SWINGS:
                 del kept[next(iter(kept))]

@@ -67,7 +67,7 @@ FALSE_ALARM_SHARE = 0.1
 #: parameter names (their ``.parameter`` part, or the whole name) that are never a
 #: difference on their own: the rotor speeds' delay, a cable's swing at the first sample and
 #: its damping, a propeller's speed exponent
-NUISANCE = ("delay.rotor", "lean_x", "lean_y", "rate_x", "rate_y", "damping", "alpha")
+NUISANCE = ("delay.rotor", "lean_x", "lean_y", "rate_x", "rate_y", "swing_damping", "alpha")
 
 
 @dataclass(frozen=True)
