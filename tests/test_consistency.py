@@ -102,26 +102,24 @@ def _result(low, high, ci):
             "shifted": [text] if differs and not material else []}
 
 
-@pytest.mark.parametrize("low, high, ci, outcome, tentative", [
-    (1.0, 1.02, 0.05, "effect", False),      # within the CIs: a name
-    (1.0, 1.3, 0.05, "effect", True),        # 0.3 / 1.3 = 23 % < MATERIAL, beyond the CIs
-    (1.0, 2.5, 0.05, "unexplained", None),   # 60 % > MATERIAL and beyond the CIs
+@pytest.mark.parametrize("low, high, ci, standing", [
+    (1.0, 1.02, 0.05, "stands"),        # within the CIs: a name
+    (1.0, 1.3, 0.05, "shifted"),        # 0.3 / 1.3 = 23 % < MATERIAL, beyond the CIs: tentative
+    (1.0, 2.5, 0.05, "inconsistent"),   # 60 % > MATERIAL and beyond the CIs: unexplained
 ])
-def test_shifted_value_makes_a_tentative_name(low, high, ci, outcome, tentative):
-    from quadsim.gap.consistency import apply_to_verdict
+def test_shifted_value_makes_a_tentative_name(low, high, ci, standing):
+    """consistency.standing: what a split result does to a name (judge.judge_heldout: a
+    shifted name stands, tentative, with the sentence; an inconsistent one is a partial)."""
+    from quadsim.gap.consistency import partial_text, tentative_text
+    from quadsim.gap.consistency import standing as of
 
-    verdict = {"outcome": "effect", "effect": "thrust_curve", "answer": "Behaves as if X.",
-               "reduction": 0.9, "params": {"thrust_curve.linear": low}, "ci": {},
-               "units": {}, "alternatives": [], "confusable_with": []}
-    notes: list[str] = []
-    apply_to_verdict(verdict, notes, _result(low, high, ci))
-    assert verdict["outcome"] == outcome
-    if tentative is not None:
-        assert verdict["tentative"] is tentative
-        assert ("Tentative" in verdict["answer"]) is tentative
-        assert len(notes) == int(tentative)
-    else:
-        assert verdict["partial"]["name"] == "thrust_curve"
+    result = _result(low, high, ci)
+    assert of(result) == standing
+    if standing == "shifted":
+        assert "Tentative" in tentative_text(result) and "2.5" not in tentative_text(result)
+    if standing == "inconsistent":
+        assert partial_text("thrust_curve", 0.9, result).startswith(
+            "Unexplained: thrust_curve explains 90 % of the held-out gap")
 
 
 def test_rate_damping_prior_is_momentum_theory():

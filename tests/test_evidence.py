@@ -479,7 +479,7 @@ def test_a_shared_value_at_a_bound_of_the_references_fit_is_stated_as_one(cf, re
     lag's lower bound is a quarter of a fit sample (the shortest lag the rotor channel's
     Heun sub-step resolves), an inertia's upper bound the end of its plausible range."""
     from quadsim.gap.calibrate import bounded, fit_bounds
-    from quadsim.gap.judge import _reference_text
+    from quadsim.gap.words import reference_text as _reference_text
 
     cand, dt = reference.candidate, 0.01
     names = cand.parameter_names

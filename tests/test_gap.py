@@ -471,7 +471,7 @@ def test_motor_map_takes_the_line_only_where_the_data_support_it(cf):
 def test_a_combination_needs_every_part_identified_and_plausible(cf):
     """Two effects cancelling at their bounds (every rotor -50 % and the vehicle 50 %
     lighter) are not a combination; a plausible pair with both parts identified is."""
-    from quadsim.gap.heldout_verdict import every_part_stands
+    from quadsim.gap.judge import every_part_stands
 
     rotors = {f"thrust_mismatch.rotor_{i}": -0.5 for i in range(1, 5)}
     bad = {"name": "thrust_mismatch+mass_offset",
@@ -544,3 +544,35 @@ def test_exact_flight_is_explained_by_its_own_effect(cf, hidden):
     print(hidden[0], before, after)
     assert moved.any()
     assert np.all(after[moved] <= 0.01 * before[moved])
+
+
+def test_result_types_give_the_schema_json_and_read_as_it():
+    """quadsim.gap.result: a per-flight Diagnosis of two refused flights is the
+    quadsim.gap/3 JSON (validates; the batch answer counts them), reads as that JSON
+    (mapping access), keeps no private key, and takes no item assignment."""
+    from quadsim.gap.per_flight import refused_entry
+    from quadsim.gap.result import Diagnosis
+    from quadsim.gap.words import batch_answer
+
+    flights = (refused_entry("a.csv", "t: too short"), refused_entry("b.csv", "t: gap"))
+    result = Diagnosis("quadsim.gap/3", "crazyflie21", "per-flight", flights=flights,
+                       answer=batch_answer(flights), reference=("r1.csv", "r2.csv"),
+                       reference_model={}, reference_refit={})
+    doc = result.to_json()
+    validate(doc)
+    assert dict(result) == doc and result["flights"][1]["reason"] == "t: gap"
+    assert doc["verdict"]["answer"] == ("0 flights judged against the reference flights: ; "
+                                        "2 refused (see each flight's reason)")
+    assert doc["flights"][0] == {"file": "a.csv", "outcome": "refused", "verdict": "refused",
+                                 "answer": "Not judged: t: too short", "reason": "t: too short",
+                                 "probability": None, "readings": [], "posterior": [],
+                                 "notes": []}
+
+    def keys(x):
+        if isinstance(x, dict):
+            return set(x) | {k for v in x.values() for k in keys(v)}
+        return {k for v in x for k in keys(v)} if isinstance(x, list) else set()
+
+    assert not any(k.startswith("_") for k in keys(doc))
+    with pytest.raises(TypeError):
+        result["checks"] = {}

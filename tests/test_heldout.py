@@ -1,4 +1,4 @@
-"""Held-out mode by evidence (quadsim.gap.heldout, .heldout_verdict): the noise model leaves
+"""Held-out mode by evidence (quadsim.gap.heldout, .judge): the noise model leaves
 the gap out, the lack-of-fit tests flag a systematic remainder and a reading that does not
 carry over, and the verdict carries a posterior per reading."""
 
@@ -13,7 +13,7 @@ from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
-from quadsim.gap.heldout_verdict import generalisation, remainder
+from quadsim.gap.judge import carry_over, remainder
 from quadsim.vehicle.params import load_params
 
 DT = 0.01          # s, the fit rate (100 Hz)
@@ -55,27 +55,27 @@ def test_remainder_flags_a_systematic_residual_not_the_noise():
     sigma = np.full(6, 1e-3)
     ref = _reference(sigma, np.ones(6))
     noise = [_white(rng, 800, sigma) for _ in range(4)]
-    assert remainder(_weighed(noise[:3], noise[3:]), ref, DT) == {}
+    assert remainder(noise, ref, DT) == {}
     shifted = [r + np.array([0, 0, 0, 0.5e-3, 0, 0]) for r in noise]
-    flagged = remainder(_weighed(shifted[:3], shifted[3:]), ref, DT)
+    flagged = remainder(shifted, ref, DT)
     assert set(flagged) == {"Mx"}
     assert flagged["Mx"][0] == pytest.approx(0.5e-3, rel=0.1)        # N m, the slow RMS
 
 
-def test_generalisation_flags_a_held_out_flight_beyond_the_training_residual():
+def test_carry_over_flags_a_held_out_flight_beyond_the_training_residual():
     rng = np.random.default_rng(2)
     sigma = np.full(6, 1.0)
     ref = _reference(sigma, np.ones(6))
     train = [_white(rng, 500, sigma) for _ in range(4)]
     same = [_white(rng, 500, sigma)]
-    assert generalisation(_weighed(train, same), ref) == {}
+    assert carry_over(_weighed(train, same), ref) == {}
     worse = [same[0] * np.array([1, 1, 1.6, 1, 1, 1])]     # Fz 1.6x its training RMS
-    flagged = generalisation(_weighed(train, worse), ref)
+    flagged = carry_over(_weighed(train, worse), ref)
     assert set(flagged) == {"Fz"} and flagged["Fz"][0] == pytest.approx(1.6, rel=0.1)
 
 
-def test_generalisation_exempts_the_form_error_and_the_noise_floor():
-    """As per flight (judge.lack_of_fit): Fz at 1.6x its training RMS is no lack of fit when
+def test_carry_over_exempts_the_form_error_and_the_noise_floor():
+    """The one rule of both modes (judge.lack_of_fit, against the training flights): Fz at 1.6x its training RMS is no lack of fit when
     "no difference" leaves 30x more excess there (the reading explains 98 % of the held-out
     gap, FORM_ERROR 5 %), nor when it is below the channel's noise floor (sigma 1e-5 N
     against the Crazyflie's 0.36 mN)."""
@@ -85,18 +85,18 @@ def test_generalisation_exempts_the_form_error_and_the_noise_floor():
     train = [_white(rng, 500, sigma) for _ in range(4)]
     worse = [_white(rng, 500, sigma) * np.array([1, 1, 1.6, 1, 1, 1])]
     null = _weighed(train, [worse[0] * np.array([1, 1, 6.0, 1, 1, 1])])
-    assert set(generalisation(_weighed(train, worse), ref)) == {"Fz"}
-    assert generalisation(_weighed(train, worse), ref, null) == {}
+    assert set(carry_over(_weighed(train, worse), ref)) == {"Fz"}
+    assert carry_over(_weighed(train, worse), ref, null) == {}
     tiny = _reference(np.full(6, 1e-5), np.ones(6))
     small = _weighed([1e-5 * r for r in train], [1e-5 * worse[0]])
-    assert generalisation(small, tiny) == {}
+    assert carry_over(small, tiny) == {}
 
 
 def test_slow_part_is_the_moving_average():
     x = np.arange(200, dtype=float)[:, None]
     # a moving average of a straight line is the line (away from the ends)
     np.testing.assert_allclose(slow_part(x, DT)[60:140, 0], x[60:140, 0])
-    assert int(round(NOISE_WINDOW_S / DT)) | 1 == 51
+    assert round(NOISE_WINDOW_S / DT) | 1 == 51
 
 
 @pytest.fixture(scope="module")

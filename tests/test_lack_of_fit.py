@@ -9,7 +9,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap.judge import FORM_ERROR, LOF_P, lack_of_fit
+from quadsim.gap.judge import FORM_ERROR, LOF_P, Baseline
+from quadsim.gap.judge import lack_of_fit as _lack_of_fit
 from quadsim.vehicle.params import load_params
 
 CHANNELS = 6
@@ -26,6 +27,13 @@ def _reference():
 
 def _ev(ms):
     return SimpleNamespace(ms=np.asarray(ms, float))
+
+
+def lack_of_fit(ev, ref, null=None):
+    """The per-flight use of the one rule: against the reference flights, "no difference"
+    never its own form error."""
+    return _lack_of_fit(ev.ms, Baseline.of_reference(ref), ref,
+                        null_ms=None if null is None or null is ev else null.ms)
 
 
 def test_a_channel_far_beyond_the_references_lacks_fit():
@@ -92,3 +100,39 @@ def test_outside_the_envelope_a_channel_is_tested_with_at_least_the_pooled_sprea
     outside = local_reference(ref, Position(np.zeros(3), 0.2, "speed", None, "", None))
     np.testing.assert_array_equal(outside.lof_sd, [0.3, 0.5])
     assert outside.lof_dof == 14
+
+
+def test_one_rule_counts_every_judged_flight_in_its_bonferroni_limit():
+    """judge.lack_of_fit is the rule of both modes: with H judged flights (held out) the
+    limit is the Student-t quantile at 1 - LOF_P / (C H); a channel z between the C-limit
+    and the 2C-limit lacks fit on one flight, not among two. The ratio is the RMS over the
+    baseline's typical, the largest z over the flights is kept."""
+    from scipy.stats import t as student_t
+
+    ref = _reference()
+    base = Baseline.of_reference(ref)
+    scale = 0.3 * np.sqrt(1.1)
+    one = student_t.ppf(1 - LOF_P / CHANNELS, CHANNELS * 9)
+    two = student_t.ppf(1 - LOF_P / (2 * CHANNELS), CHANNELS * 9)
+    z = 0.5 * (one + two)
+    ms = [1, 1, float(np.exp(z * scale)), 1, 1, 1]
+    lack = _lack_of_fit(ms, base, ref)
+    assert list(lack) == ["Fz"] and lack["Fz"][1] == pytest.approx(z, rel=1e-12)
+    assert lack["Fz"][0] == pytest.approx(np.exp(0.5 * z * scale), rel=1e-12)
+    assert _lack_of_fit([ms, [1] * CHANNELS], base, ref) == {}
+
+
+def test_held_out_baseline_pools_the_training_flights_spread():
+    """Baseline.of_training: log mean squares of the training pieces, mean per channel,
+    one spread pooled over channels with C (n - 1) degrees of freedom; one training flight
+    is cut in its two halves."""
+    sigma = np.ones(2)
+    flights = [np.full((10, 2), 1.0), np.full((10, 2), np.e)]     # ms 1 and e^2
+    base = Baseline.of_training(flights, sigma)
+    np.testing.assert_allclose(base.mean, [1.0, 1.0], rtol=1e-12)
+    # deviations +-1 on 2 channels x 2 flights: sum 4 over C (n - 1) = 2
+    np.testing.assert_allclose(base.spread, [np.sqrt(2.0)] * 2, rtol=1e-12)
+    assert (base.dof, base.count, base.against) == (2, 2, "training")
+    halves = Baseline.of_training([np.concatenate(flights)], sigma)
+    assert halves.count == 2 and halves.dof == 2
+    np.testing.assert_allclose(halves.mean, base.mean, rtol=1e-12)

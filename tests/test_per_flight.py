@@ -9,8 +9,7 @@ import pytest
 from benchmarks.score import read_verdict, score_case
 from quadsim.gap.collinear import describe
 from quadsim.gap.evidence import Evidence, Explanation
-from quadsim.gap.heldout_verdict import every_part_stands
-from quadsim.gap.judge import posterior
+from quadsim.gap.judge import every_part_stands, posterior
 from quadsim.vehicle.params import load_params
 
 CHANNELS = ["Fx", "Fy", "Fz", "Mx", "My", "Mz"]

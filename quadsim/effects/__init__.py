@@ -14,6 +14,11 @@ parameter's ``off`` value is the default, and with all parameters at ``off`` the
 nothing. :func:`make_effect` and :func:`parse_effect_spec` check names and the plausible
 bounds and raise :class:`~quadsim.core.errors.InputError` (one line) on a typo or a wild value.
 See ``docs/effects.md`` for the formulas and sources (also in each module's docstring).
+
+What the gap diagnosis needs to know of each effect (the parameters it fits, their typical
+sizes, plausible ranges with sources, prior spreads, how a reading is worded) is declared by
+the effect itself, ``EFFECTS[name].facts`` (:mod:`.facts`); :func:`facts_of` gives one
+parameter's.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from .body_drag import BodyDrag
 from .cable_payload import CablePayload
 from .canted_rotor import CantedRotor
 from .com_offset import ComOffset
+from .facts import EffectFacts, ParameterFacts, parameter_facts
 from .ground_effect import GroundEffect
 from .gyroscopic import Gyroscopic
 from .inertia_error import InertiaError
@@ -45,11 +51,14 @@ __all__ = [
     "Effect",
     "EffectBase",
     "EffectContext",
+    "EffectFacts",
     "EffectLoads",
     "EffectParameter",
     "EffectSet",
+    "ParameterFacts",
     "describe_effects",
     "effect_set_from_specs",
+    "facts_of",
     "make_effect",
     "parse_effect_spec",
 ]
@@ -137,3 +146,17 @@ def describe_effects(effects: EffectSet) -> list[dict]:
         units = {p.name: p.unit for p in effect.parameters}
         out.append({"name": effect.name, "values": effect.values(), "units": units})
     return out
+
+
+def facts_of(parameter: str) -> ParameterFacts:
+    """The facts of library parameter ``effect.parameter`` (``"body_drag.cd_area"``): unit,
+    meaning, typical scale, plausible range, and how a reading is worded (label, display unit
+    and scale): :class:`~quadsim.effects.facts.ParameterFacts`. Raises :class:`InputError`
+    for an unknown effect or parameter."""
+    name, _, key = parameter.partition(".")
+    if name not in EFFECTS:
+        raise InputError(f"effect {name!r}: unknown effect; valid: {', '.join(sorted(EFFECTS))}")
+    try:
+        return parameter_facts(EFFECTS[name], key)
+    except KeyError:
+        raise InputError(f"effect {name}: unknown parameter {key!r}") from None

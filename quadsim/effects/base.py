@@ -42,6 +42,7 @@ import numpy as np
 
 from ..core.frames import quat_to_rotmat
 from ..vehicle.params import VehicleParams
+from .facts import EffectFacts
 
 #: time constant (s) with which a rotor follows a command scaled by ``speed_factor`` when no
 #: effect defines rotor dynamics (fast against flight dynamics, slow enough for the engines'
@@ -182,11 +183,14 @@ class Effect(Protocol):
 class EffectBase:
     """Neutral defaults and keyword-checked construction for effects.
 
-    Subclasses set ``name``, ``parameters`` and override the hooks they need. Parameters are
-    given as keywords; an unknown keyword raises (a typo must not silently do nothing)."""
+    Subclasses set ``name``, ``parameters``, their diagnosis ``facts``
+    (:class:`~quadsim.effects.facts.EffectFacts`; the default: not fitted by the diagnosis)
+    and override the hooks they need. Parameters are given as keywords; an unknown keyword
+    raises (a typo must not silently do nothing)."""
 
     name: ClassVar[str] = ""
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
+    facts: ClassVar[EffectFacts] = EffectFacts()
 
     def __init__(self, **values: float):
         known = {p.name: p for p in self.parameters}

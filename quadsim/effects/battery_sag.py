@@ -32,13 +32,17 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
-__all__ = ["MIN_SCALE", "BatterySag", "CELL_VOLTAGE", "nominal_voltage"]
+__all__ = ["CELL_VOLTAGE", "MIN_SCALE", "VBAT_SD", "BatterySag", "nominal_voltage"]
 
 MIN_SCALE = 0.5
 
 #: a charged LiPo cell (V)
 CELL_VOLTAGE = 4.2
+#: prior spread of a full battery voltage (fraction of the pack's voltage): its charge
+#: state, +-10 % (the ``full_voltage`` spread of :attr:`BatterySag.facts`)
+VBAT_SD = 0.1
 #: vehicles lighter than this (kg) fly on one cell
 ONE_CELL_BELOW_KG = 0.1
 
@@ -50,6 +54,20 @@ def nominal_voltage(params) -> float:
     return CELL_VOLTAGE * (1 if params.mass < ONE_CELL_BELOW_KG else 3)
 
 
+def _phrase(parameter, value, ci, params) -> str:
+    """A battery's reading: the voltage law's full voltage, or a sag rate."""
+    if parameter == "full_voltage":
+        return (f"the rotors turn slower per command as the battery drops: speed = nominal "
+                f"map x vbat / ({plus_minus(value, ci, 1.0, '.3g')} V), i.e. 1 % slower per "
+                f"{10 * value:.3g} mV below {value:.3g} V (thrust at a fixed command: 2 % "
+                "lower per 1 % of voltage)")
+    per_minute = plus_minus(100 * 60 * value / 2, None if ci is None else 100 * 60 * ci / 2,
+                            1.0)
+    return (f"the rotors lose {per_minute} "
+            f"% speed per minute at a fixed command ({100 * 60 * value:.2g} % thrust per "
+            "minute; a discharging battery)")
+
+
 class BatterySag(EffectBase):
     """Rotor speed per command from battery voltage (if known) or a linear loss with time."""
 
@@ -59,6 +77,25 @@ class BatterySag(EffectBase):
                         "fraction of thrust (at a fixed command) lost per second of flight"),
         EffectParameter("full_voltage", "V", 4.2, 1.0, 60.0,
                         "voltage of the full battery (1S LiPo: 4.2 V)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("rate",),
+        with_voltage_log=("full_voltage",),
+        upstream_of_speed=True,
+        # with a voltage log the sag (V / V_full)^2 acts for every V_full
+        no_off_value=("full_voltage",),
+        starts_at_logged_voltage=("full_voltage",),
+        scales={"rate": Scale(lambda p: 0.005, "0.5 %/s: a failing cell"),
+                "full_voltage": Scale(lambda p: 0.2, "0.2 V: a cell's charge state")},
+        ranges={"rate": PlausibleRange(0.0, 0.005, "absolute",
+                                       "1S LiPo: ~20 % thrust over a 5-7 min flight")},
+        spreads={"rate": Spread(),
+                 "full_voltage": Spread(lambda p: VBAT_SD * nominal_voltage(p),
+                                        "a battery's full voltage: +-10 % (charge state) of "
+                                        "the vehicle's pack")},
+        words={"rate": Words("speed lost per minute at a fixed command", "%/min", 3000.0, _phrase),
+               "full_voltage": Words("full battery voltage", "V", 1.0, _phrase)},
     )
 
     def scale_at(self, t: np.ndarray) -> np.ndarray:

@@ -28,7 +28,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.frames import rotate_inverse
+from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Scale, Words, arm_length, plus_minus
+from .rotor_drag import drag_scale
 
 __all__ = ["BladeFlapping", "flapping_moment"]
 
@@ -43,6 +46,17 @@ def flapping_moment(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
     return -coefficient * np.einsum("br,brk->bk", np.asarray(rotor_speed, float), tilt_axis)
 
 
+def _phrase(parameter, value, ci, params) -> str:
+    """The nose-up moment per m/s of in-plane air speed at the hover speed."""
+    hover, r = hover_speed(params), params.rotor_count
+    moment = r * value * hover                       # N m per m/s of in-plane air speed
+    cmoment = None if ci is None else r * ci * hover
+    accel = moment / float(params.inertia[0, 0])
+    return (f"blade flapping {plus_minus(moment, cmoment, 1e3, '.3g')} mN m of nose-up moment "
+            f"per m/s of air speed at the hover speed ({accel:.3g} rad/s² of roll/pitch "
+            "acceleration at 1 m/s)")
+
+
 class BladeFlapping(EffectBase):
     """Hub moment of flapping rotors, linear in the in-plane air speed and the rotor speed."""
 
@@ -51,6 +65,14 @@ class BladeFlapping(EffectBase):
         EffectParameter("coefficient", "kg m/rad", 0.0, -1e-4, 1e-4,
                         "hub moment per rotor speed per in-plane air speed, "
                         "N m/((rad/s)(m/s)); positive pitches the nose up in forward flight"),
+    )
+
+    #: a flapping moment as if the rotor-drag force acted half an arm above the CoM
+    facts = EffectFacts(
+        fitted=("coefficient",),
+        scales={"coefficient": Scale(lambda p: 0.5 * arm_length(p) * drag_scale(p),
+                                     "the rotor drag's force acting half an arm above the CoM")},
+        words={"coefficient": Words("blade flapping", "kg m/rad", 1.0, _phrase)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

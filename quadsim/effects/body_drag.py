@@ -28,8 +28,22 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, Reading, Scale, Spread, Words, plus_minus
 
-__all__ = ["BodyDrag"]
+__all__ = ["BodyDrag", "area_scale"]
+
+
+def area_scale(params) -> float:
+    """A C_d A (m^2) giving 10 % of the weight at 2 m/s: ``0.1 m g / (rho / 2 (2 m/s)^2)``."""
+    return 0.1 * params.weight / (0.5 * params.air_density * 4.0)
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """C_d A in cm² and its force at 2 m/s."""
+    where = "sideways" if parameter == "cd_area" else "vertical"
+    force = 0.5 * params.air_density * value * 4.0
+    return (f"body drag {where} C_d A {plus_minus(value, ci, 1e4)} cm² ({1e3 * force:.2g} mN, "
+            f"{100 * force / (params.mass * params.gravity):.2g} % of the weight, at 2 m/s)")
 
 
 class BodyDrag(EffectBase):
@@ -44,6 +58,17 @@ class BodyDrag(EffectBase):
         EffectParameter("per_axis", "1", 0.0, 0.0, 1.0,
                         "1: each body axis's drag on its own air speed |v_i| v_i; 0: on "
                         "the air speed |v| v"),
+    )
+
+    facts = EffectFacts(
+        fitted=("cd_area", "cd_area_vertical"),
+        readings=(Reading(("cd_area", "cd_area_vertical")),),
+        scales={p: Scale(area_scale, "a C_d A giving 10 % of the weight at 2 m/s")
+                for p in ("cd_area", "cd_area_vertical")},
+        spreads={ALL: Spread(area_scale, "10 % of the weight at 2 m/s: a doubled drag")},
+        words={"cd_area": Words("body drag sideways C_d A", "cm^2", 1e4, _phrase),
+               "cd_area_vertical": Words("body drag vertical C_d A", "cm^2", 1e4, _phrase),
+               "per_axis": Words("drag law per body axis", "1", 1.0)},
     )
 
     def loads(self, ctx):

@@ -50,6 +50,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import cross, quat_to_rotmat
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Words, plus_minus
 
 __all__ = ["CablePayload", "swing_period"]
 
@@ -59,6 +60,16 @@ def swing_period(length: float, payload_mass: float, vehicle_mass: float,
     """Small-swing period (s) of a payload below a free-floating vehicle holding its thrust:
     2 pi sqrt(L M / ((M + m) g)) (the fixed-pivot pendulum is the limit M -> infinity)."""
     return 2 * np.pi * np.sqrt(length * vehicle_mass / ((vehicle_mass + payload_mass) * gravity))
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """A slung payload's mass against the model's, or its cable and swing period."""
+    if parameter == "mass":
+        return (f"a {plus_minus(value, ci, 1e3)} g payload hanging on a cable "
+                f"({100 * value / params.mass:+.1f} % of the model's {1e3 * params.mass:.4g} g)")
+    period = 2 * np.pi * np.sqrt(max(value, 0.0) / params.gravity)
+    return (f"cable {plus_minus(value, ci, 1.0, '.2g')} m long (the payload swings with a "
+            f"period of about {period:.2g} s)")
 
 
 class CablePayload(EffectBase):
@@ -74,6 +85,13 @@ class CablePayload(EffectBase):
         EffectParameter("axial_frequency", "Hz", 20.0, 1.0, 200.0,
                         "payload bounce frequency on the cable (sets the stiffness)"),
         EffectParameter("damping_ratio", "1", 0.3, 0.0, 2.0, "axial damping ratio"),
+    )
+
+    #: no candidate of its own: the payload's state is not logged; the diagnosis integrates
+    #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.cable`)
+    facts = EffectFacts(
+        words={"mass": Words("payload on a cable", "g", 1e3, _phrase),
+               "length": Words("cable length", "m", 1.0, _phrase)},
     )
 
     @property

@@ -34,6 +34,17 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import EffectBase, EffectParameter
+from .facts import (
+    ALL,
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Spread,
+    Together,
+    Words,
+    plus_minus,
+)
 
 __all__ = ["CantedRotor", "tilt_axis"]
 
@@ -47,6 +58,23 @@ def tilt_axis(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
     return out / np.linalg.norm(out)
 
 
+def _together(values: dict, ci: dict, params, fixed: dict) -> str:
+    """A canted rotor in words: the lean (deg) and its direction, the sideways push at hover
+    (``values``, ``ci``, ``fixed`` keyed by this effect's parameter names)."""
+    tx, ty = values["tilt_x"], values["tilt_y"]
+    cx, cy = ci.get("tilt_x"), ci.get("tilt_y")
+    rotor = fixed.get("rotor")
+    angle = float(np.hypot(tx, ty))
+    c = None if cx is None or cy is None else float(np.hypot(cx, cy))
+    push = params.weight / params.rotor_count * np.sin(angle)
+    which = f"rotor {int(rotor)}" if rotor is not None else "a rotor"
+    lean = plus_minus(np.degrees(angle), None if c is None else np.degrees(c), 1.0)
+    return (f"{which}'s axis leans {lean}"
+            f" deg (towards body x {np.degrees(tx):+.2g} deg and y {np.degrees(ty):+.2g} deg): "
+            f"it pushes {1e3 * push:.3g} mN sideways at hover ({100 * push / params.weight:.2g} "
+            "% of the weight)")
+
+
 class CantedRotor(EffectBase):
     """One rotor axis tilted by an angle about a horizontal body direction."""
 
@@ -56,6 +84,35 @@ class CantedRotor(EffectBase):
         EffectParameter("angle", "rad", 0.0, -0.5, 0.5, "tilt angle (0 = off)"),
         EffectParameter("azimuth", "rad", 0.0, -np.pi, np.pi,
                         "tilt axis direction in the body xy-plane, from body x"),
+    )
+
+    #: the diagnosis fits the tilted axis' horizontal components (its fit form,
+    #: :class:`quadsim.gap.fitmodels.CantedRotorFit`): angle and azimuth are singular at 0
+    facts = EffectFacts(
+        fitted=("tilt_x", "tilt_y"),
+        one_per_rotor="rotor",
+        readings=(Reading(("tilt_x", "tilt_y"), "rotor {}", per_rotor=True),),
+        fit_parameters=(
+            EffectParameter("tilt_x", "rad", 0.0, -0.3, 0.3, "axis lean towards body +x"),
+            EffectParameter("tilt_y", "rad", 0.0, -0.3, 0.3, "axis lean towards body +y"),
+        ),
+        scales={p: Scale(lambda params: 0.02, "a lean of about 1 deg")
+                for p in ("tilt_x", "tilt_y")},
+        ranges={ALL: PlausibleRange(
+            -0.17, 0.17, "absolute",
+            "a bent motor mount or arm leans a rotor a few deg; more than 10 deg (0.17 rad) is "
+            "a visibly broken arm")},
+        spreads={ALL: Spread()},
+        separate_from={
+            "wind": "fly the same path in both directions (wind is fixed in the world, a canted "
+                    "rotor's push turns with the body); or look at the motor mounts",
+            "com_offset": "hover with a payload on the CoM: a canted rotor's sideways push "
+                          "grows with its thrust; or look at the motor mounts",
+            "thrust_mismatch": "look at the motor mounts; a canted rotor also pushes sideways "
+                               "(hover drifts)"},
+        words={ALL: Words("rotor axis lean", "deg", 180.0 / np.pi),
+               "rotor": Words("rotor", "index", 1.0)},
+        together=Together(("tilt_x", "tilt_y"), _together),
     )
 
     def apply_to_params(self, params):

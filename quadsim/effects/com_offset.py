@@ -15,8 +15,24 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
+from .facts import (
+    ALL,
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Spread,
+    Window,
+    Words,
+    arm_length,
+    plus_minus,
+)
 
 __all__ = ["ComOffset"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"CoM {parameter[-1]} {plus_minus(value, ci, 1e3)} mm"
 
 
 class ComOffset(EffectBase):
@@ -26,6 +42,25 @@ class ComOffset(EffectBase):
     parameters = tuple(EffectParameter(axis, "m", 0.0, -0.1, 0.1,
                                        f"CoM shift along body {axis} (m)")
                        for axis in ("x", "y", "z"))
+
+    #: z (the CoM below the rotor plane) acts only through forces in the rotor plane (drag)
+    facts = EffectFacts(
+        fitted=("x", "y", "z"),
+        readings=(Reading(("x", "y")),),
+        scales={ALL: Scale(lambda p: 0.02 * arm_length(p), "2 % of the arm: a battery a few mm "
+                                                          "off the centre")},
+        windows={ALL: Window(lambda p: -0.5 * arm_length(p), lambda p: 0.5 * arm_length(p),
+                             "within half the arm: a CoM off by more is another vehicle")},
+        ranges={axis: PlausibleRange(-0.15, 0.15, "arm", "battery/payload placement")
+                for axis in ("x", "y")},
+        spreads={axis: Spread() for axis in ("x", "y")},
+        separate_from={
+            "thrust_mismatch": "balance the vehicle on a knife edge along x and y (finds the "
+                               "CoM), or each rotor on the thrust stand; in flight, fast yaw "
+                               "turns: the accelerometer, c away from the CoM, reads w x (w x "
+                               "c), a weak rotor adds nothing"},
+        words={ALL: Words("CoM shift", "mm", 1e3, _phrase)},
+    )
 
     def apply_to_params(self, params):
         if self.is_off():

@@ -25,6 +25,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..core.frames import rotate
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import EffectFacts, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_TERM", "GroundEffect", "ground_effect_ratio"]
 
@@ -38,6 +39,12 @@ def ground_effect_ratio(height: np.ndarray, radius: float, gain: float) -> np.nd
     return 1.0 / (1.0 - term)
 
 
+def _phrase(parameter, value, ci, params) -> str:
+    rise = 100 * (1 / (1 - min(0.5, value / 16)) - 1)
+    return (f"ground effect {plus_minus(value, ci, 1.0)} x the Cheeseman–Bennett model "
+            f"(+{rise:.2g} % thrust with the rotors one radius above the ground)")
+
+
 class GroundEffect(EffectBase):
     """Thrust increase near the ground, per rotor, from the hub height."""
 
@@ -48,6 +55,16 @@ class GroundEffect(EffectBase):
         EffectParameter("ground_height", "m", 0.0, -100.0, 100.0, "world z of the ground"),
         EffectParameter("radius", "m", 0.0, 0.0, 1.0,
                         "rotor radius (0 = the parameter set's rotor_radius)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("gain",),
+        readings=(Reading(("gain",)),),
+        scales={"gain": Scale(lambda p: 1.0, "the textbook curve")},
+        spreads={"gain": Spread(lambda p: 1.0, "Cheeseman & Bennett (1955) ground effect: gain "
+                                               "1 is the textbook curve")},
+        separate_from={"thrust_curve": "hover at several heights at the same speed"},
+        words={"gain": Words("ground effect, x the Cheeseman-Bennett model", "1", 1.0, _phrase)},
     )
 
     def loads(self, ctx):

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..vehicle.params import VehicleParams
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, Scale, Spread, Words, plus_minus
 
 __all__ = ["Gyroscopic", "gyroscopic_torque"]
 
@@ -47,6 +48,10 @@ def gyroscopic_torque(rotor_inertia: float, body_rate: np.ndarray, rotor_speed: 
     return -rotor_inertia * (gyro + spin_up)
 
 
+def _phrase(parameter, value, ci, params) -> str:
+    return f"rotor spin inertia {plus_minus(value, ci, 1e7)} g cm² per rotor (gyroscopic torque)"
+
+
 class Gyroscopic(EffectBase):
     """Rotor gyroscopic and spin-up reaction torques."""
 
@@ -54,6 +59,15 @@ class Gyroscopic(EffectBase):
     parameters = (
         EffectParameter("rotor_inertia", "kg m^2", 0.0, 0.0, 1e-3,
                         "spin inertia Jr of one rotor + motor bell about its axis (0 = off)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("rotor_inertia",),
+        scales={"rotor_inertia": Scale(lambda p: 1e-6 * (p.mass / 0.04) ** 1.7,
+                                       "rotor and motor bell: 0.01 g cm^2 x (m / 40 g)^1.7")},
+        spreads={"rotor_inertia": Spread(lambda p: 1e-6 * (p.mass / 0.04) ** 1.7,
+                                         "rotor+motor inertia: the fit's typical size")},
+        words={"rotor_inertia": Words("rotor spin inertia", "g cm^2", 1e7, _phrase)},
     )
 
     @classmethod

@@ -29,8 +29,17 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
+from .scales import momentum_rate_damping
 
-__all__ = ["RateDamping"]
+__all__ = ["RateDamping", "momentum_rate_damping"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    i = "xyz".index(parameter)
+    tau = params.inertia[i, i] / value if value > 0 else float("inf")
+    return (f"{('roll', 'pitch', 'yaw')[i]} rate damping {plus_minus(value, ci, 1.0, '.3g')} "
+            f"N m per rad/s (decay time I/k {tau:.3g} s)")
 
 
 class RateDamping(EffectBase):
@@ -41,6 +50,19 @@ class RateDamping(EffectBase):
         EffectParameter("x", "N m s/rad", 0.0, 0.0, 10.0, "roll damping coefficient k_x"),
         EffectParameter("y", "N m s/rad", 0.0, 0.0, 10.0, "pitch damping coefficient k_y"),
         EffectParameter("z", "N m s/rad", 0.0, 0.0, 10.0, "yaw damping coefficient k_z"),
+    )
+
+    facts = EffectFacts(
+        fitted=("x", "y", "z"),
+        scales={axis: Scale(lambda p, i=i: p.inertia[i, i],
+                            "a damping time constant I/k of about 1 s")
+                for i, axis in enumerate("xyz")},
+        ranges={ALL: PlausibleRange(
+            0.0, 3.0, "momentum",
+            "momentum theory k = r^2 T_hover / v_i (Bristeau et al. 2009) x 3 for blade "
+            "flapping and frame drag (Mahony et al. 2012)")},
+        spreads={ALL: Spread()},
+        words={ALL: Words("rate damping", "N m s/rad", 1.0, _phrase)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

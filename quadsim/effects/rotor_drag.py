@@ -38,9 +38,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, Scale, Spread, Words, plus_minus
 
-__all__ = ["RotorDrag", "rotor_drag_forces"]
+__all__ = ["RotorDrag", "drag_scale", "rotor_drag_forces"]
 
 
 def rotor_drag_forces(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
@@ -69,6 +71,24 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
+def drag_scale(params) -> float:
+    """A rotor-drag coefficient (kg/rad) giving 10 % of the weight at 2 m/s with four hover
+    rotors: ``0.1 m g / (R Omega_h 2 m/s)``, Omega_h = sqrt(m g / (R b))."""
+    hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))
+    return 0.1 * params.weight / (params.rotor_count * hover * 2.0)
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """The drag force per m/s of air speed at the hover speed, all rotors."""
+    where = "in the rotor plane" if parameter == "coefficient" else "along the rotor axes"
+    hover, r = hover_speed(params), params.rotor_count
+    per = r * value * hover
+    cper = None if ci is None else r * ci * hover
+    return (f"rotor drag {where} {plus_minus(per, cper, 1e3)} mN per m/s of air speed at the "
+            f"hover speed ({100 * per / (params.mass * params.gravity):.2g} % of the weight at "
+            "1 m/s)")
+
+
 class RotorDrag(EffectBase):
     """Linear rotor drag (induced drag + blade flapping), per rotor, at the hubs."""
 
@@ -78,6 +98,19 @@ class RotorDrag(EffectBase):
                         "in-plane drag per rotor speed per air speed, N/((rad/s)(m/s))"),
         EffectParameter("axial_coefficient", "kg/rad", 0.0, 0.0, 1e-3,
                         "drag along the rotor axis per rotor speed per air speed"),
+    )
+
+    facts = EffectFacts(
+        fitted=("coefficient", "axial_coefficient"),
+        scales={ALL: Scale(drag_scale, "10 % of the weight at 2 m/s with four hover rotors")},
+        spreads={ALL: Spread(drag_scale, "10 % of the weight at 2 m/s: a doubled drag")},
+        separate_from={
+            "body_drag": "fly at several speeds: rotor drag is linear in speed, body drag "
+                         "quadratic",
+            "wind": "fly the same path in both directions (wind is fixed in the world frame)"},
+        words={"coefficient": Words("rotor drag in the rotor plane", "kg/rad", 1.0, _phrase),
+               "axial_coefficient": Words("rotor drag along the rotor axes", "kg/rad", 1.0,
+                                          _phrase)},
     )
 
     def loads(self, ctx):

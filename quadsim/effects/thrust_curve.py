@@ -23,9 +23,44 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Window, Words, plus_minus
+from .scales import hover_thrust_per_speed
 
-__all__ = ["ThrustCurve"]
+__all__ = ["CURVE_QUADRATIC_SD", "ThrustCurve", "curve_quadratic_bounds", "curve_quadratic_sd",
+           "hover_thrust_per_speed"]
+
+
+#: prior spread of a thrust curve's curvature about the hover, as a fraction of b (the
+#: b Omega^2 that gives the hover thrust there): stand fits T = k2 W^2 + k1 W + k0 read
+#: k2 = 1.10-1.26 b at 40-60 % of the top speed (KDE2814 motor, 10 and 14 inch propellers:
+#: Du et al., "Computational Multicopter Design", 2016, measured sweeps), and the published
+#: curves of l2f's vehicle files with a large linear term (fs.h, flightmare.h, mrs.h) read
+#: k2 = 0.40-0.42 b at their vehicles' hover. Half of b covers both.
+CURVE_QUADRATIC_SD = 0.5
+
+
+def curve_quadratic_bounds(params) -> tuple[float, float]:
+    """Bounds (N s^2/rad^2) of a thrust curve's curvature about the hover: the whole
+    curvature ``b + quadratic`` from -b to 2 b. Below zero: a curve that flattens towards
+    full throttle (l2f's arpl.h: k2 = -0.04 of the b at its hover, a motor that saturates)."""
+    return -2.0 * params.thrust_factor, params.thrust_factor
+
+
+def curve_quadratic_sd(params) -> float:
+    """Prior spread (N s^2/rad^2) of the curvature a thrust curve adds about the hover
+    (``thrust_curve.quadratic``): :data:`CURVE_QUADRATIC_SD` times b."""
+    return CURVE_QUADRATIC_SD * params.thrust_factor
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """The linear term as its share of the thrust at the hover speed."""
+    hover = hover_speed(params)
+    rel = value * hover / (params.thrust_factor * hover ** 2)
+    crel = None if ci is None else ci * hover / (params.thrust_factor * hover ** 2)
+    return (f"{plus_minus(rel, crel, 100)} % thrust at the hover speed "
+            f"({value:.3g} N s/rad per rotor)")
 
 
 class ThrustCurve(EffectBase):
@@ -53,6 +88,29 @@ class ThrustCurve(EffectBase):
         # curvature b + quadratic to -b .. 2 b (quadsim.gap.priors.curve_quadratic_bounds).
         EffectParameter("quadratic", "N s^2/rad^2", 0.0, -1e-3, 1e-3,
                         "thrust per squared rotor speed about the centre, added to b Omega^2"),
+    )
+
+    facts = EffectFacts(
+        fitted=("linear",),
+        readings=(Reading(("linear",)),),
+        scales={"linear": Scale(lambda p: 0.05 * p.thrust_factor * p.max_speed,
+                                "5 % of b Omega_max: a few % of the thrust at the top speed"),
+                "quadratic": Scale(lambda p: 0.1 * p.thrust_factor,
+                                   "the shared curvature about the references' hover: 10 % of b")},
+        windows={"linear": Window(lambda p: -hover_thrust_per_speed(p), hover_thrust_per_speed,
+                                  "a linear term carrying at most the whole hover thrust"),
+                 "quadratic": Window(lambda p: curve_quadratic_bounds(p)[0],
+                                     lambda p: curve_quadratic_bounds(p)[1],
+                                     "the whole curvature b + quadratic from -b to 2 b")},
+        ranges={"linear": PlausibleRange(
+            -0.2, 0.2, "hover",
+            "bench fits T = k2 W^2 + k1 W + k0 (Foerster, ETH 2015, table 3.3): the linear "
+            "term reaches ~20 % of the hover thrust")},
+        spreads={"linear": Spread(),
+                 "quadratic": Spread(curve_quadratic_sd,
+                                     "stand fits and published curves: CURVE_QUADRATIC_SD of b")},
+        words={"linear": Words("thrust-curve slope", "N s/rad", 1.0, _phrase),
+               "quadratic": Words("thrust-curve curvature", "N s^2/rad^2", 1.0)},
     )
 
     def loads(self, ctx):

@@ -36,8 +36,13 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["ThrustFactor"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors"
 
 
 class ThrustFactor(EffectBase):
@@ -51,6 +56,30 @@ class ThrustFactor(EffectBase):
                         "speed-per-command exponent: a command gives (1 + change)^-alpha of "
                         "its speed (0: speed-controlled motors; 0.2: a DC motor at 75 % "
                         "voltage efficiency)"),
+    )
+
+    facts = EffectFacts(
+        fitted=("change",),
+        load_exponent="alpha",
+        # with rotor speeds logged the propeller's load moves the speed per command too
+        readings=(Reading(("change",), kin=("mass_offset", "thrust_curve"), rotor_speeds=False),
+                  Reading(("change", "alpha"), coupled=True, kin=("mass_offset", "thrust_curve"),
+                          rotor_speeds=True)),
+        scales={"change": Scale(lambda p: 0.05, "5 %: a propeller batch or the air's density"),
+                "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
+        ranges={"change": PlausibleRange(
+            -0.15, 0.05, "relative",
+            "prop-to-prop C_T spread 2-5 % (UIUC prop data), air density +-5 % (0-30 C) or "
+            "-13 % at 1500 m (ISA), wear")},
+        spreads={"change": Spread(),
+                 "alpha": Spread(lambda p: 0.1, "DC-motor efficiency 0.6-0.9 (module doc)")},
+        separate_from={
+            "thrust_curve": "fly over a wider range of rotor speeds (climbs and descents at "
+                            "several rates)",
+            "cable_payload": "look under the vehicle; weigh it; sharp stops and turns show a "
+                             "swinging load"},
+        words={"change": Words("thrust per Omega^2 on every rotor", "%", 100.0, _phrase),
+               "alpha": Words("speed-per-command exponent", "1", 1.0)},
     )
 
     def speed_gain(self) -> float:

@@ -32,8 +32,13 @@ import numpy as np
 
 from ..core.errors import ModelError
 from .base import MAX_ROTORS, EffectBase, EffectLoads, EffectParameter
+from .facts import ALL, EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 
 __all__ = ["MAX_ROTORS", "ThrustMismatch"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"{parameter} {plus_minus(value, ci, 100)} % thrust"
 
 
 class ThrustMismatch(EffectBase):
@@ -48,6 +53,30 @@ class ThrustMismatch(EffectBase):
                          "speed-per-command exponent: rotor i's command gives (1 + e_i)^-alpha "
                          "of its speed (0: speed-controlled motors; 0.2: a DC motor at 75 % "
                          "voltage efficiency)"),)
+
+    facts = EffectFacts(
+        per_rotor="rotor_{}",
+        uniform_as="thrust_factor.change",
+        load_exponent="alpha",
+        # one propeller: its thrust and drag torque; with rotor speeds logged also as a
+        # reading of its own in which the rotor's command gives (1 + e)^-alpha of its speed
+        # (the motor's load). That one is coupled (alpha acts through the deviation); its kin
+        # is the plain reading of the same rotor. Why two: with alpha in the only reading, a
+        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
+        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
+        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
+        readings=(Reading(("rotor_{}",), "rotor {}", per_rotor=True),
+                  Reading(("rotor_{}", "alpha"), "rotor {}, with its speed per command",
+                          per_rotor=True, coupled=True, kin=("thrust_mismatch",),
+                          rotor_speeds=True)),
+        scales={"rotor_{}": Scale(lambda p: 0.05, "5 %: one worn or chipped propeller"),
+                "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
+        ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",
+                                    "one damaged or mismatched prop/motor")},
+        spreads={ALL: Spread()},
+        words={"rotor_{}": Words("one rotor's thrust per Omega^2", "%", 100.0, _phrase),
+               "alpha": Words("speed-per-command exponent", "1", 1.0)},
+    )
 
     def deviations(self, rotors: int) -> np.ndarray:
         """(R,) relative deviations for a vehicle with ``rotors`` rotors."""

@@ -35,8 +35,10 @@ import numpy as np
 
 from ..core.frames import rotate_inverse
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
+from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
+from .scales import momentum_translational_lift
 
-__all__ = ["TranslationalLift", "translational_lift_thrust"]
+__all__ = ["TranslationalLift", "momentum_translational_lift", "translational_lift_thrust"]
 
 
 def translational_lift_thrust(air_velocity_body: np.ndarray, rotor_axes: np.ndarray,
@@ -46,6 +48,16 @@ def translational_lift_thrust(air_velocity_body: np.ndarray, rotor_axes: np.ndar
     v = np.asarray(air_velocity_body, dtype=float)
     axial = v @ np.asarray(rotor_axes, dtype=float).T                     # (B, R)
     return k_h * (np.sum(v * v, axis=1)[:, None] - axial ** 2)
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    """The extra thrust at 2 m/s of in-plane air speed, all rotors."""
+    r = params.rotor_count
+    lift = r * value * 4.0                           # N at 2 m/s in-plane air speed
+    clift = None if ci is None else r * ci * 4.0
+    return (f"translational lift {plus_minus(lift, clift, 1e3, '.3g')} mN of extra thrust at "
+            f"2 m/s of in-plane air speed ({100 * lift / (params.mass * params.gravity):+.2g} % "
+            f"of the weight; k_h {value:.3g} kg/m per rotor)")
 
 
 class TranslationalLift(EffectBase):
@@ -58,6 +70,18 @@ class TranslationalLift(EffectBase):
         EffectParameter("k_h", "kg/m", 0.0, -0.5, 0.5,
                         "extra thrust per rotor per in-plane air speed squared, "
                         "N/(m/s)^2; positive: more thrust in edgewise flight"),
+    )
+
+    facts = EffectFacts(
+        fitted=("k_h",),
+        readings=(Reading(("k_h",)),),
+        scales={"k_h": Scale(momentum_translational_lift, "the momentum-theory lift")},
+        ranges={"k_h": PlausibleRange(
+            0.0, 2.0, "lift",
+            "momentum theory k = T_hover / (4 v_i^2) per rotor (Glauert inflow, Leishman 2006) "
+            "x 2 for the blade-element factor")},
+        spreads={"k_h": Spread()},
+        words={"k_h": Words("translational lift", "kg/m", 1.0, _phrase)},
     )
 
     def loads(self, ctx: EffectContext) -> EffectLoads | None:

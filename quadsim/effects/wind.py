@@ -21,11 +21,19 @@ from __future__ import annotations
 import numpy as np
 
 from .base import EffectBase, EffectParameter
+from .facts import ALL, Companion, EffectFacts, Scale, Spread, Words, plus_minus
 
-__all__ = ["GUST_COMPONENTS", "LOWEST_FREQUENCY", "Wind"]
+__all__ = ["GUST_COMPONENTS", "LOWEST_FREQUENCY", "WIND_SD_MS", "Wind"]
 
 GUST_COMPONENTS = 8
 LOWEST_FREQUENCY = 0.05
+#: prior spread of a steady wind, m/s (indoor drafts to Beaufort 3, 3.4-5.4 m/s): the spread
+#: of a flight's wind reading and the prior of the reference calibration's shared wind
+WIND_SD_MS = 5.0
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"mean wind {plus_minus(value, ci, 1.0)} m/s along world {parameter[-1]}"
 
 
 class Wind(EffectBase):
@@ -40,6 +48,17 @@ class Wind(EffectBase):
         EffectParameter("bandwidth", "Hz", 1.0, LOWEST_FREQUENCY, 20.0,
                         "highest gust frequency"),
         EffectParameter("seed", "1", 0.0, 0.0, 2.0**31, "seed of the gust phases"),
+    )
+
+    facts = EffectFacts(
+        fitted=("vx", "vy"),
+        # wind exerts no force of its own: it acts through drag
+        companions=(Companion("rotor_drag", ("coefficient",)),),
+        scales={ALL: Scale(lambda p: 1.0, "1 m/s: a draft")},
+        spreads={ALL: Spread(lambda p: WIND_SD_MS,
+                             "indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)")},
+        words={ALL: Words("wind", "m/s", 1.0),
+               **{v: Words("mean wind", "m/s", 1.0, _phrase) for v in ("vx", "vy", "vz")}},
     )
 
     @property

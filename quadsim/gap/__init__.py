@@ -11,14 +11,15 @@ Method (equation error, then prediction error)
    speed predicted 0.12 s ahead from the command, which is where motor lag shows), divided
    by each channel's noise scale, is the *gap* (1 = sensor noise).
 2. Flights are split by flight (never by sample): ``--holdout`` or every third flight.
-3. Verdict by evidence (:mod:`.heldout`, :mod:`.heldout_verdict`): the parameter set is the
+3. Verdict by evidence (:mod:`.heldout`, :mod:`.judge`): the parameter set is the
    reference model; the noise model per channel is the scatter of the residual's fast part
    (minus its 0.5 s moving average: what the gap does not contain). Every explanation of how
    the flights differ (each library effect, ``nominal_refit`` = b and d re-identified, or no
    difference) is fitted on the training flights (:mod:`.evidence`: likelihood over all
    channels, priors with sources, Laplace evidence with its Occam factor), then predicts the
    held-out flights; :func:`.judge.posterior` gives a probability per reading. A second
-   effect is added when the lead leaves a systematic remainder and the pair earns it.
+   effect is added when the lead leaves a systematic remainder or does not carry over, and
+   the pair earns it.
 4. The verdict: the most probable reading with its magnitude (determined parameters only),
    ``no_significant_gap``, or ``unexplained`` (lack of fit: a held-out flight beyond what the
    reading leaves on the training flights, or a systematic remainder with no effect to
@@ -39,16 +40,21 @@ trend the references show; :mod:`.evidence` fits every explanation of
 how a flight differs (:mod:`.explanations`: an effect, a shared parameter at a value of its
 own, a logged signal's delay, or none, each with its prior) and weighs it by its Laplace
 evidence; :mod:`.judge` gives the posterior per
-reading, a lack-of-fit test ("not in the library") and the answer. A flight that cannot be
-judged is ``refused`` with its reason; the others go on.
+reading, a lack-of-fit test ("not in the library") and the verdict, :mod:`.words` the
+answer. A flight that cannot be judged is ``refused`` with its reason; the others go on.
 
-Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split, rank, decide),
+Both modes share one judgment (:mod:`.judge`: posterior, one lack-of-fit rule whose
+baseline -- the reference flights, or the reading's own training flights -- is data, one
+outcome rule), one answer writer (:mod:`.words`) and one result type
+(:class:`.result.Diagnosis` holding :class:`.result.Verdict`, with ``to_json()``).
+
+Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode),
 :mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
-least squares), :mod:`.heldout` + :mod:`.heldout_verdict` (held-out verdict by evidence),
-:mod:`.scoring` (held-out gap helpers), :mod:`.collinear` + :mod:`.priors`,
-:mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
-:mod:`.evidence`, :mod:`.judge`, :mod:`.report_flights`), :mod:`.where`, :mod:`.checks`
-(vehicle check before fitting), :mod:`.commands` (command-only logs), :mod:`.report` and
+least squares), :mod:`.heldout` (held-out reference, weighing, ranking), :mod:`.collinear`
++ :mod:`.priors`, :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
+:mod:`.evidence`), :mod:`.judge` (the verdict of both modes), :mod:`.words` (answers),
+:mod:`.result` (result types), :mod:`.where`, :mod:`.checks` (vehicle check before
+fitting), :mod:`.commands` (command-only logs), :mod:`.report`, :mod:`.report_flights` and
 :mod:`.schema` (output). Generated test flights: ``benchmarks.synthetic`` in the
 repository (not in the wheel).
 
@@ -58,7 +64,7 @@ Example::
     >>> from quadsim.vehicle.params import load_params
     >>> from quadsim.gap import diagnose
     >>> result = diagnose([load_log(p) for p in paths], load_params("crazyflie21"))
-    >>> result["verdict"]["effect"], result["verdict"]["reduction"]
+    >>> result.verdict.name, result.verdict.reduction       # or result["verdict"]["effect"]
 
 CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
 (``quadsim.gap/3``), documented in docs/gap.md.
@@ -67,10 +73,12 @@ CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
 from .diagnose import SCHEMA, diagnose, prepare
 from .per_flight import diagnose_per_flight
 from .report import summary, to_json, write_html, write_json, write_rerun
+from .result import Diagnosis, Reading, Verdict
 from .schema import GAP_SCHEMA, validate
 
-__all__ = ["SCHEMA", "GAP_SCHEMA", "diagnose", "diagnose_per_flight", "prepare", "summary",
-           "to_json", "write_html", "write_json", "write_rerun", "validate"]
+__all__ = ["GAP_SCHEMA", "SCHEMA", "Diagnosis", "Reading", "Verdict",
+           "diagnose", "diagnose_per_flight", "prepare", "summary",
+           "to_json", "validate", "write_html", "write_json", "write_rerun"]
 
 #: public names that left the package, and where they are now (refused with that change)
 _MOVED = {"synthetic_flight": "benchmarks.synthetic", "SensorNoise": "benchmarks.synthetic"}

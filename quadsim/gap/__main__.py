@@ -136,7 +136,7 @@ def _map_fn(args, bar):
         items = list(items)
         labels = [str(getattr(x, "path", None) or getattr(x, "name", None) or f"task {i}")
                   for i, x in enumerate(items)]
-        tick = (lambda i, result: bar.update(1)) if bar is not None else None  # noqa: E731
+        tick = (lambda i, result: bar.update(1)) if bar is not None else None
         return run_tasks(fn, items, workers=args.workers, ray=args.ray, progress=tick,
                          labels=labels)
 
@@ -255,6 +255,44 @@ def _write_effects(args, params, base, result) -> None:
     atomic_write_text(args.write_effects, text)
 
 
+def _progress(args):
+    """(bar, progress(name)) for the fits: a tqdm bar on a terminal, none with --quiet."""
+    progress = None
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        # disable=None: no bar when stderr is not a terminal (logs, CI)
+        from ..effects import EFFECTS
+
+        # estimated fits: nominal refit + one per candidate (+ combinations, unknown ahead),
+        # per split; the total grows if the diagnosis fits more, so "time left" stays honest
+        per_split = 1 + len(args.effects or EFFECTS)
+        splits = len(args.logs) + len(args.reference or []) if args.per_flight else 1
+        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None,
+                   total=per_split * splits)
+
+        def progress(name):
+            bar.total = max(bar.total, bar.n + 1)
+            bar.set_postfix_str(name)
+            bar.update(1)
+    return bar, progress
+
+
+def _write_outputs(args, params, base, result) -> None:
+    """--json, --report, --rerun, --write-effects, then the summary (unless --quiet)."""
+    if args.json:
+        write_json(args.json, result)
+    if args.report:
+        write_html(args.report, result)
+    if args.rerun:
+        write_rerun(args.rerun, result)
+    if args.write_effects:
+        _write_effects(args, params, base, result)
+    if not args.quiet:
+        print(summary(result), end="")
+
+
 @run_cli
 @limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
@@ -302,25 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     if command_model is not None and not args.quiet:
         print(f"note: rotor speeds synthesised for the command-only logs from "
               f"{command_model.source}", file=sys.stderr)
-    progress = None
-    bar = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        # disable=None: no bar when stderr is not a terminal (logs, CI)
-        from ..effects import EFFECTS
-
-        # estimated fits: nominal refit + one per candidate (+ combinations, unknown ahead),
-        # per split; the total grows if the diagnosis fits more, so "time left" stays honest
-        per_split = 1 + len(args.effects or EFFECTS)
-        splits = len(args.logs) + len(args.reference or []) if args.per_flight else 1
-        bar = tqdm(desc="fitting", unit="fit", file=sys.stderr, leave=False, disable=None,
-                   total=per_split * splits)
-
-        def progress(name):
-            bar.total = max(bar.total, bar.n + 1)
-            bar.set_postfix_str(name)
-            bar.update(1)
+    bar, progress = _progress(args)
     extra = {} if args.window is None else {"window_s": args.window}
     extra["map_fn"] = _map_fn(args, bar)
     try:
@@ -336,16 +356,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if bar is not None:
             bar.close()
-    if args.json:
-        write_json(args.json, result)
-    if args.report:
-        write_html(args.report, result)
-    if args.rerun:
-        write_rerun(args.rerun, result)
-    if args.write_effects:
-        _write_effects(args, params, base, result)
-    if not args.quiet:
-        print(summary(result), end="")
+    _write_outputs(args, params, base, result)
     return 0
 
 

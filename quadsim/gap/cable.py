@@ -39,7 +39,7 @@ or above that frequency (turns, stops, a figure-8's reversals). A gentle flight 
 the mass, not the length (the answer then says so, and ``mass_offset`` ties with it).
 
 Prior (:func:`prior`; each range about two spreads either side of its centre, the rule of
-:func:`quadsim.gap.explanations._prior_sd`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
+:func:`quadsim.gap.explanations.prior_spreads`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
 drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload limit, Bitcraze
 datasheet; :mod:`quadsim.gap.priors`), centred inside that range rather than on "off" -- the
 reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit
@@ -63,6 +63,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -71,7 +72,6 @@ from ..core.frames import quat_to_rotmat
 from ..effects.base import EffectLoads, EffectParameter
 from ..effects.cable_payload import CablePayload
 from ..vehicle.params import VehicleParams
-from . import fitting
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
 
@@ -278,8 +278,10 @@ def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 class CableSwing(CablePayload):
     """``cable_payload`` without an internal state: the swing integrated from the logged
-    motion (module doc). Fitted: ``mass`` and ``length``; the attachment ``x, y, z`` (body,
-    m) is held at the engine's default."""
+    motion (module doc). Fitted: ``mass`` and ``length``, the swing at the first sample and
+    its damping rate ``swing_damping`` (1/s; not the engine's ``damping``, the axial spring's
+    coefficient); the attachment ``x, y`` (body, m) held at the engine's default, ``z``
+    fitted by the reading with a mount (:data:`quadsim.gap.explanations.CABLE_MOUNT`)."""
 
     parameters = tuple(
         EffectParameter("length", "m", 0.5, 0.05, 5.0, "cable length") if p.name == "length"
@@ -292,6 +294,12 @@ class CableSwing(CablePayload):
         EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"),
         EffectParameter("swing_damping", "1/s", 0.0, 0.0, 5.0,
                         "swing damping rate (air drag on the payload and cable)"))
+
+    #: the swing at the first sample, its damping and the attachment's height are fitted
+    #: with the payload, never part of an answer (the JSON's params keep them)
+    facts = dataclasses.replace(CablePayload.facts,
+                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y",
+                                          "swing_damping", "z"))
 
     def state_size(self) -> int:
         return 0
@@ -353,5 +361,3 @@ class CableSwing(CablePayload):
         loads.force_world, loads.torque_body = force, torque
         return loads
 
-
-fitting.LOCAL_EFFECTS["cable_payload"] = CableSwing

@@ -47,7 +47,8 @@ from ..core.errors import ModelError
 from .fitting import Candidate, fit_candidate
 from .residual import FlightStates
 
-__all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "split_masks", "check", "apply_to_verdict"]
+__all__ = ["MATERIAL", "MIN_SAMPLES", "SPLITS", "check", "inconsistent_note", "partial_text",
+           "split_masks", "standing", "tentative_note", "tentative_text"]
 
 #: relative difference (of the larger magnitude) above which two values are materially
 #: different. 0.5: the two halves ask for values a factor >= 2 apart.
@@ -70,8 +71,9 @@ def split_masks(flights: list[FlightStates]) -> dict[str, tuple[float, list[np.n
     return out
 
 
-def _fit_half(candidate, flights, masks, upper, params, sigma, rotor, start):
-    parts = [f.take(np.nonzero(m if upper else ~m)[0]) for f, m in zip(flights, masks)]
+def _fit_half(candidate, parts: list, *, params, sigma, rotor, start):
+    """``candidate`` refitted on ``parts`` (the half's samples of each flight) from
+    ``start``; None when the half is too small or the fit fails."""
     parts = [p for p in parts if len(p.t) > 10]
     if sum(len(p.t) for p in parts) < MIN_SAMPLES:
         return None
@@ -82,16 +84,20 @@ def _fit_half(candidate, flights, masks, upper, params, sigma, rotor, start):
 
 
 def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
-          flights: list[FlightStates], params, sigma: np.ndarray, rotor: bool) -> dict:
-    """Refit ``candidate`` on each split's halves; judge the parameters named in ``judged``.
+          flights: list[FlightStates], *, params, sigma: np.ndarray, rotor: bool) -> dict:
+    """Refit ``candidate`` (pooled values ``theta``) on each split's halves of ``flights``
+    under ``params`` with noise scale ``sigma`` (rotor channels when ``rotor``); judge the
+    parameters named in ``judged``.
 
     Returns ``{"consistent": bool, "splits": {split: {"threshold", "unit", "params": {p:
     {"low", "high", "ci_low", "ci_high", "consistent"}}}}, "inconsistent": [text, ...]}``."""
     names = candidate.parameter_names
     out: dict = {"consistent": True, "splits": {}, "inconsistent": [], "shifted": []}
     for split, (threshold, masks) in split_masks(flights).items():
-        low = _fit_half(candidate, flights, masks, False, params, sigma, rotor, theta)
-        high = _fit_half(candidate, flights, masks, True, params, sigma, rotor, theta)
+        low, high = (_fit_half(candidate, [f.take(np.nonzero(m if upper else ~m)[0])
+                                           for f, m in zip(flights, masks)],
+                               params=params, sigma=sigma, rotor=rotor, start=theta)
+                     for upper in (False, True))
         if low is None or high is None:
             continue
         entry = {"threshold": threshold, "unit": "m/s" if split == "airspeed" else "rad/s",
@@ -119,48 +125,38 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
     return out
 
 
-def _partial_text(name: str, reduction: float, result: dict) -> str:
+def standing(result: dict) -> str:
+    """What ``result`` (:func:`check`) does to a name: ``"stands"`` (one value in every
+    regime), ``"shifted"`` (a value moves beyond its interval by less than
+    :data:`MATERIAL`: the name stands, tentative) or ``"inconsistent"`` (beyond
+    :data:`MATERIAL`: ``unexplained``, a partial explanation)."""
+    if not result["consistent"]:
+        return "inconsistent"
+    return "shifted" if result["shifted"] else "stands"
+
+
+def partial_text(name: str, reduction: float, result: dict) -> str:
+    """The answer for an inconsistent name: a partial explanation."""
     return (f"Unexplained: {name} explains {100 * reduction:.0f} % of the held-out gap but "
             f"needs different values in different regimes ({'; '.join(result['inconsistent'])})"
             f": a stand-in for an effect outside the library (or several effects), not a "
             f"cause. It is given as a partial explanation only.")
 
 
-def _tentative_text(result: dict) -> str:
+def inconsistent_note(name: str, result: dict) -> str:
+    """The result's note for an inconsistent name."""
+    return (f"{name} not named: its parameters are inconsistent between regimes ("
+            + "; ".join(result["inconsistent"]) + ")")
+
+
+def tentative_text(result: dict) -> str:
+    """The sentence appended to the answer of a shifted name."""
     return (" Tentative: its value shifts with the regime (" + "; ".join(result["shifted"])
             + "), so it may stand in for an airspeed- or speed-dependent effect outside the "
             "library; flights over a wider range of speeds would tell.")
 
 
-def _mark_tentative(entry: dict, notes: list[str], result: dict) -> None:
-    entry["tentative"] = True
-    entry["answer"] = entry.get("answer", "") + _tentative_text(result)
-    notes.append("tentative name: the fitted value shifts with the regime ("
-                 + "; ".join(result["shifted"]) + ")")
-
-
-def _apply(entry: dict, notes: list[str], result: dict, label: str) -> None:
-    """Record ``result`` in ``entry`` (its name under ``label``); an inconsistent name
-    becomes ``unexplained``, a shifted one is marked ``tentative``."""
-    entry["consistency"] = result
-    entry["tentative"] = False
-    if entry.get("outcome") != "effect":
-        return
-    if result["consistent"]:
-        if result["shifted"]:
-            _mark_tentative(entry, notes, result)
-        return
-    name = entry[label]
-    entry["partial"] = {k: entry.get(k) for k in ("reduction", "params", "ci", "units",
-                                                  "alternatives", "confusable_with")}
-    entry["partial"]["name"] = name
-    entry.update({"outcome": "unexplained", label: "unexplained",
-                  "answer": _partial_text(name, entry["reduction"], result),
-                  "confusable_with": [], "alternatives": [], "separate_by": {}})
-    notes.append(f"{name} not named: its parameters are inconsistent between regimes ("
-                 + "; ".join(result["inconsistent"]) + ")")
-
-
-def apply_to_verdict(verdict: dict, notes: list[str], result: dict) -> None:
-    """:func:`_apply` on a pooled verdict (name in ``effect``)."""
-    _apply(verdict, notes, result, "effect")
+def tentative_note(result: dict) -> str:
+    """The result's note for a shifted name."""
+    return ("tentative name: the fitted value shifts with the regime ("
+            + "; ".join(result["shifted"]) + ")")

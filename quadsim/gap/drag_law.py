@@ -28,7 +28,7 @@ references' rotor drag replaced by the airframe drag :class:`DragLaw`, a pseudo-
 at that C_d A (no parameter of its own, never part of an answer); a body-drag reading adds
 drag under the same law; a rotor-drag reading adds a linear drag to it (its prior centred
 at 0, the references' linear drag being the law now); the wind reading keeps only its
-variant through that law, with C_d A fitted (:func:`quadsim.gap.explanations._wind_readings`).
+variant through that law, with C_d A fitted (:func:`quadsim.gap.explanations.wind_readings`).
 Held fixed in "no difference", not fitted: a C_d A free within its prior would let "no
 difference" absorb part of a drag change, which a drag reading must explain.
 
@@ -47,24 +47,13 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..effects.body_drag import BodyDrag
-from . import fitting
 from .evidence import evaluate
 from .explanations import Explanation, explanations_for, law_replaces, quadratic_laws
+from .fitmodels import DragLaw  # declared with the diagnosis' other effects
 from .reference import Reference
 
 __all__ = ["DragLaw", "choose", "under"]
 
-
-class DragLaw(BodyDrag):
-    """The references' horizontal drag under a quadratic law, held fixed in every reading
-    of a flight (module doc): :class:`quadsim.effects.body_drag.BodyDrag` under its own name,
-    so that a reading's own body drag stays apart from it."""
-
-    name = "drag_law"
-
-
-fitting.LOCAL_EFFECTS["drag_law"] = DragLaw
 
 
 def nulls(reference: Reference, states) -> list[Explanation]:

@@ -8,10 +8,11 @@ its own instead of the references' 7 ms), or a logged signal's delay of its own.
 the flight's data can show; :func:`marginal_sd` is the spread of the shared parameters every
 explanation carries.
 
-Prior spreads (:func:`_prior_sd`): one rule -- half the larger end of the plausible range
-documented with its source in :mod:`quadsim.gap.priors` (that range is then about two
-spreads), centred on "off" (or on the references' value for a shared group); for the
-parameters without a range there, the source is given in the table.
+Prior spreads (:func:`prior_spreads`): each effect declares them beside its parameters
+(``facts.spreads``, :mod:`quadsim.effects.facts`): one rule -- half the larger end of the
+plausible range declared with its source (that range is then about two spreads), centred on
+"off" (or on the references' value for a shared group); for the parameters without a range,
+the spread's own source is declared with it.
 
 The coupling of a propeller change (:mod:`quadsim.effects.thrust_factor`, and one rotor's in
 :mod:`quadsim.effects.thrust_mismatch`): thrust and drag torque per Omega^2 scale together
@@ -36,27 +37,43 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..effects import make_effect
-from ..effects.battery_sag import nominal_voltage
+from ..effects.battery_sag import VBAT_SD
+from ..effects.body_drag import BodyDrag
+from ..effects.canted_rotor import CantedRotor
+from ..effects.com_offset import ComOffset
+from ..effects.facts import ALL
+from ..effects.ground_effect import GroundEffect
+from ..effects.mass_offset import MassOffset
+from ..effects.scales import arm_length
+from ..effects.thrust_curve import ThrustCurve
+from ..effects.thrust_factor import ThrustFactor
+from ..effects.thrust_mismatch import ThrustMismatch
+from ..effects.translational_lift import TranslationalLift
 from . import cable
 from .calibrate import SHARED, Reference
-from .fitting import LOCAL_EFFECTS, _area_scale, _arm, _drag_scale
-from .priors import (
-    DETERMINED,
-    WIND_SD_MS,
-    curve_quadratic_sd,
-    curve_slope_sd,
-    momentum_rate_damping,
-    momentum_translational_lift,
-)
+from .fitmodels import FIT_EFFECTS, build_effect
+from .priors import DETERMINED, WIND_SD_MS
 
-__all__ = ["Explanation", "explanations_for", "marginal_sd", "reference_determined",
-           "reference_delay_sd", "DETERMINED", "DELAY_SD_S", "VBAT_SD", "DRAGS"]
+__all__ = [
+    "DELAY_SD_S",
+    "DETERMINED",
+    "DRAGS",
+    "VBAT_SD",
+    "Explanation",
+    "explanations_for",
+    "marginal_sd",
+    "own_effects",
+    "prior_of",
+    "prior_spreads",
+    "reference_delay_sd",
+    "reference_determined",
+    "wind_readings",
+    "with_wind",
+]
 
-#: prior spread of a full battery voltage (fraction of the pack's voltage): its charge
-#: state, +-10 % (``battery_sag.full_voltage`` in :func:`_prior_sd`, and a flight's V_full
-#: against the references' mean voltage)
-VBAT_SD = 0.1
+# VBAT_SD (re-exported): the prior spread of a full battery voltage, a fraction of the
+# pack's voltage (``battery_sag.full_voltage``'s spread, and a flight's V_full against the
+# references' mean voltage), declared by :mod:`quadsim.effects.battery_sag`
 
 #: prior spread (s) of a logged signal's delay difference: real logs carry 5-50 ms
 #: (:data:`quadsim.logs.delays.MAX_LAG_S` searches 100 ms).
@@ -66,7 +83,7 @@ DELAY_SD_S = 0.02
 def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     """The spread of the shared parameters in every explanation's prior (module doc): the
     references' ``s_ref``, combined with the physical prior spread of a difference
-    (:func:`_prior_sd`) where the parameter has one, by adding precisions:
+    (:func:`prior_spreads`) where the parameter has one, by adding precisions:
     ``(s_ref^-2 + w^-2)^-1/2``.
 
     Why: what a nominal flight may show is never wider than what physics lets a real
@@ -77,17 +94,17 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     vanished, and a 5 mm CoM offset's 13 mN m steady torque was judged "no difference" (83 %).
     With the prior's 50 % the offset is read as 3.9 and 3.6 mm (truth 4.0, 4.8). A parameter
     the references fix (s_ref << w) keeps its spread."""
-    sd = _prior_sd(reference.params) if sd is None else sd
+    sd = prior_spreads(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
     for k, name in enumerate(reference.candidate.parameter_names):
-        w = _prior_of(sd, name)
+        w = prior_of(sd, name)
         if w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
     return out
 
 
-def _prior_of(sd: dict, name: str):
-    """The prior spread of parameter ``name`` (``effect.parameter``) in :func:`_prior_sd`'s
+def prior_of(sd: dict, name: str):
+    """The prior spread of parameter ``name`` (``effect.parameter``) in :func:`prior_spreads`'s
     table: its own entry, else its effect's; None without one."""
     return sd.get(name, sd.get(name.split(".")[0]))
 
@@ -97,10 +114,10 @@ def reference_determined(reference: Reference) -> dict[str, bool]:
     fit and a spread ``s_ref`` below :data:`DETERMINED` times its physical prior spread (the
     rule a flight's own values are printed by; a parameter without a prior: identified
     alone). A wind with no drag to act through is the prior's, not theirs."""
-    sd = _prior_sd(reference.params)
+    sd = prior_spreads(reference.params)
     out = {}
     for name, s in zip(reference.candidate.parameter_names, reference.s_ref):
-        w = _prior_of(sd, name)
+        w = prior_of(sd, name)
         out[name] = bool(reference.identified.get(name, True)
                          and (w is None or s < DETERMINED * float(w)))
     return out
@@ -116,43 +133,16 @@ def reference_delay_sd(reference: Reference) -> float:
     return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
 
 
-def _range_sd(lower: float, upper: float) -> float:
-    return 0.5 * max(abs(lower), abs(upper))
-
-
-def _prior_sd(params) -> dict:
-    """Prior spread per parameter (module doc); vehicle-scaled where the range is."""
-    arm, mass = _arm(params), params.mass
-    return {
-        "mass_offset.mass": _range_sd(-0.05, 0.6) * mass,      # priors: payload to 60 %
-        # a payload fixed anywhere within the rotors' span
-        "mass_offset.x": _range_sd(-1.0, 1.0) * arm, "mass_offset.y": _range_sd(-1.0, 1.0) * arm,
-        "com_offset.x": _range_sd(-0.15, 0.15) * arm, "com_offset.y": _range_sd(-0.15, 0.15) * arm,
-        "thrust_mismatch": _range_sd(-0.2, 0.1),
-        "thrust_factor.change": _range_sd(-0.15, 0.05),
-        # DC-motor efficiency 0.6-0.9 (module doc)
-        "thrust_factor.alpha": 0.1,
-        "thrust_curve.linear": curve_slope_sd(params),
-        "thrust_curve.quadratic": curve_quadratic_sd(params),
-        "battery_sag.rate": _range_sd(0.0, 0.005),
-        # a battery's full voltage: +-10 % (charge state) of the vehicle's pack
-        "battery_sag.full_voltage": VBAT_SD * nominal_voltage(params),
-        "inertia_error": _range_sd(-0.5, 1.0),
-        "rate_damping": _range_sd(0.0, 3.0) * momentum_rate_damping(params),
-        "translational_lift.k_h": _range_sd(0.0, 2.0) * momentum_translational_lift(params),
-        "canted_rotor": _range_sd(-0.17, 0.17),
-        # Cheeseman & Bennett (1955) ground effect: gain 1 is the textbook curve
-        "ground_effect.gain": 1.0,
-        # 10 % of the weight at 2 m/s (fitting._drag_scale, _area_scale): a doubled drag
-        "rotor_drag": _drag_scale(params),
-        "body_drag": _area_scale(params),
-        # brushed/brushless micro motors 10-60 ms (Foerster, ETH 2015: Crazyflie 2.0 ~ 15 ms)
-        "motor_lag.time_constant": 0.03,
-        # rotor+motor inertia: the fit's typical size (fitting.FIT_SPEC)
-        "gyroscopic.rotor_inertia": 1e-6 * (mass / 0.04) ** 1.7,
-        # indoor drafts to a fresh breeze (Beaufort 3: 3.4-5.4 m/s)
-        "wind": WIND_SD_MS,
-    }
+def prior_spreads(params) -> dict:
+    """Prior spread per parameter (``effect.parameter``, or ``effect`` for every parameter of
+    it; the parameter's unit), for ``params``: each effect's declared ``facts.spreads``
+    (module doc)."""
+    out = {}
+    for name, cls in FIT_EFFECTS.items():
+        facts = cls.facts
+        for key in facts.spreads:
+            out[name if key == ALL else f"{name}.{key}"] = facts.spread_of(key, params)
+    return out
 
 
 @dataclass(frozen=True)
@@ -196,9 +186,48 @@ def _one(name, variant, parts, mean, sd, **kw) -> Explanation:
                        tuple(map(float, sd)), **kw)
 
 
+#: effects whose declared readings (``facts.readings``) come first, in this order (the order
+#: the evidence lists and weighs them in); any other effect with readings follows in the
+#: registry's order (:func:`reading_effects`)
+READING_ORDER = (MassOffset, ComOffset, ThrustCurve, TranslationalLift, GroundEffect, BodyDrag,
+                 ThrustFactor, ThrustMismatch, CantedRotor)
+
+
+def reading_effects() -> list[type]:
+    """The effect classes with declared per-flight readings: :data:`READING_ORDER`, then the
+    others of :data:`quadsim.gap.fitmodels.FIT_EFFECTS` in its order."""
+    first = {cls.name for cls in READING_ORDER}
+    rest = [cls for name, cls in FIT_EFFECTS.items()
+            if cls.facts.readings and name not in first]
+    return [cls for cls in READING_ORDER if cls.facts.readings] + rest
+
+
+def _applicable(cls: type, reference: Reference) -> list:
+    """``cls``'s readings that the references' logs allow (``Reading.rotor_speeds``)."""
+    return [r for r in cls.facts.readings
+            if r.rotor_speeds is None or r.rotor_speeds == bool(reference.rotor)]
+
+
+def _reading(cls: type, reading, sd: dict, alpha: tuple[float, float], *,
+             rotor: int | None = None, log_prior: float | None = None) -> Explanation:
+    """The explanation of ``reading`` of effect ``cls`` (rotor ``rotor`` of a per-rotor one):
+    every parameter centred on "off" with its prior spread, the load exponent on the
+    references' (``alpha``: mean, spread, :func:`_alpha_prior`)."""
+    name, facts = cls.name, cls.facts
+    fitted = tuple(p.format(rotor) for p in reading.fitted) if rotor else reading.fitted
+    fixed = {facts.one_per_rotor: float(rotor)} if rotor and facts.one_per_rotor else {}
+    exponent = [p == facts.load_exponent for p in fitted]
+    if log_prior is None:
+        log_prior = -np.log(float(reading.odds)) if reading.odds > 1 else 0.0
+    return _one(name, reading.variant.format(rotor) if rotor else reading.variant,
+                [(name, fixed, fitted)], [alpha[0] if e else 0.0 for e in exponent],
+                [alpha[1] if e else prior_of(sd, f"{name}.{p}") for p, e in zip(fitted, exponent)],
+                log_prior=log_prior, coupled=reading.coupled, kin=reading.kin)
+
+
 def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
     """Every explanation the flight's data can show (``names``: restrict to these effects)."""
-    params, sd = reference.params, _prior_sd(reference.params)
+    params, sd = reference.params, prior_spreads(reference.params)
     ref = reference.values()
     # the rotor speeds' timing is read by its likelihood wherever they are logged and the
     # references' own timing is fitted (calibrate._refine); the cross-correlation estimate
@@ -214,9 +243,9 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             continue
         keys = [f"{group}.{p}" for p in fitted]
         s_ref = dict(zip(reference.candidate.parameter_names, marginal_sd(reference, sd)))
-        spread = [np.hypot(s_ref[k], _prior_of(sd, k)) for k in keys]
+        spread = [np.hypot(s_ref[k], prior_of(sd, k)) for k in keys]
         if group == "wind":
-            out.extend(_wind_readings(reference, [ref[k] for k in keys], spread))
+            out.extend(wind_readings(reference, [ref[k] for k in keys], spread))
             continue
         fixed = next(f for name, f, _ in reference.candidate.parts if name == group)
         out.append(_one(group, "", [(group, dict(fixed), fitted)], [ref[k] for k in keys],
@@ -225,56 +254,19 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             out[-1] = dataclasses.replace(out[-1], log_prior=-np.log(2.0))
             out.append(_motor_change(reference, ref[keys[0]], spread[0],
                                      np.hypot(s_ref[SPEED_GAIN_KEY], MOTOR_GAIN_SD)))
-    # a payload at the centre, or off it (its mass and where it sits: it also moves the CoM;
-    # the position acts only through the mass, so the fit is coupled); the two variants
-    # share the effect's prior
-    payload_kin = ("mass_offset", "com_offset", "thrust_curve")
-    for variant, fitted in (("", ("mass",)), ("off the centre", ("mass", "x", "y"))):
-        keys = [f"mass_offset.{p}" for p in fitted]
-        off = len(fitted) > 1
-        out.append(_one("mass_offset", variant, [("mass_offset", {}, fitted)],
-                        [0.0] * len(keys), [sd[k] for k in keys], log_prior=-np.log(2.0),
-                        coupled=off, kin=payload_kin if off else ()))
-    one = [("com_offset", ("x", "y")),
-           ("thrust_curve", ("linear",)), ("translational_lift", ("k_h",)),
-           ("ground_effect", ("gain",)),
-           ("body_drag", ("cd_area", "cd_area_vertical"))]
-    for name, fitted in one:
-        keys = [f"{name}.{p}" for p in fitted]
-        out.append(_one(name, "", [(name, {}, fitted)], [0.0] * len(keys),
-                        [_prior_of(sd, k) for k in keys]))
-    change = ["change", "alpha"] if reference.rotor else ["change"]
-    alpha, alpha_sd = _alpha_prior(reference, sd)
-    out.append(_one("thrust_factor", "", [("thrust_factor", {}, tuple(change))],
-                    [0.0, alpha][:len(change)],
-                    [sd["thrust_factor.change"], alpha_sd][:len(change)],
-                    coupled=len(change) > 1, kin=("mass_offset", "thrust_curve")))
+    # each effect's declared readings (facts.readings): the whole-vehicle ones, then per rotor
+    alpha = _alpha_prior(reference, sd)
+    for cls in reading_effects():
+        out += [_reading(cls, r, sd, alpha) for r in _applicable(cls, reference)
+                if not r.per_rotor]
     rotors = params.rotor_count
-    for k in range(rotors):
-        # one propeller: its thrust and drag torque; with commands logged also as a reading
-        # of its own in which the rotor's command gives (1 + e)^-alpha of its speed (the
-        # motor's load, thrust_factor's alpha). That one is coupled (alpha acts through the
-        # deviation); its kin is the plain reading of the same rotor: it is fitted where
-        # that one matters (screen._kin_matters). Why two: with alpha in the only reading, a
-        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
-        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
-        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
-        variants = [((f"rotor_{k + 1}",), f"rotor {k + 1}")]
-        if reference.rotor:
-            variants.append(((f"rotor_{k + 1}", "alpha"),
-                             f"rotor {k + 1}, with its speed per command"))
-        for fitted, variant in variants:
-            out.append(_one("thrust_mismatch", variant, [("thrust_mismatch", {}, fitted)],
-                            [0.0, alpha][:len(fitted)],
-                            [sd["thrust_mismatch"], alpha_sd][:len(fitted)],
-                            log_prior=-np.log(rotors * len(variants)),
-                            coupled=len(fitted) > 1,
-                            kin=("thrust_mismatch",) if len(fitted) > 1 else ()))
-        out.append(_one("canted_rotor", f"rotor {k + 1}",
-                        [("canted_rotor", {"rotor": float(k + 1)}, ("tilt_x", "tilt_y"))],
-                        [0.0, 0.0], [sd["canted_rotor"]] * 2, log_prior=-np.log(rotors)))
-    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
-    # a payload on a cable, alone or with what holds it fixed to the frame (a hook, a mount,
+    for k in range(1, rotors + 1):
+        for cls in reading_effects():
+            mine = [r for r in _applicable(cls, reference) if r.per_rotor]
+            out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * len(mine)))
+                    for r in mine]
+    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable),
+    # alone or with what holds it fixed to the frame (a hook, a mount,
     # the cable's clamp: a mass at the centre; a real hanging payload has one, and without
     # it the swinging mass reads between the two); the variants share the effect's prior
     mean, spread = cable.prior(params)
@@ -284,7 +276,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     # (body z, prior spread half the rotor arm) gives the swing's pull a moment arm
     out.append(_one("cable_payload", CABLE_MOUNT,
                     [("cable_payload", {}, cable.FITTED + ("z",)), ("mass_offset", {}, ("mass",))],
-                    mean + [0.0, 0.0], spread + [0.5 * _arm(params), sd["mass_offset.mass"]],
+                    mean + [0.0, 0.0], spread + [0.5 * arm_length(params), sd["mass_offset.mass"]],
                     log_prior=-np.log(2.0)))
     if reference.rotor and "battery_sag" not in groups:
         volts = getattr(states, "vbat", None)
@@ -301,7 +293,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
     if "wind" in groups and not reference.identified.get("rotor_drag.coefficient", True):
-        out = [_with_wind(e, reference) if e.name in DRAGS else e for e in out]
+        out = [with_wind(e, reference) if e.name in DRAGS else e for e in out]
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
@@ -370,7 +362,7 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 
 #: explanations that give the flight an air-speed load of its own (a drag, a translational
 #: lift): where the references do not identify their rotor drag (so their wind is no
-#: measured air force), each refits the shared wind with it (:func:`_with_wind`). Not where
+#: measured air force), each refits the shared wind with it (:func:`with_wind`). Not where
 #: the references' drag is identified: on Crazyflow and PyFlyt wind flights (their wind not
 #: the library's form) a body drag with the wind refitted is a superset of the wind reading
 #: and took it at 100 %. Both drags, not one: with only the rotor drag refitting the wind, it
@@ -382,7 +374,7 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 DRAGS = ("rotor_drag", "body_drag", "translational_lift")
 
 
-def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
+def with_wind(expl: Explanation, reference: Reference) -> Explanation:
     """``expl`` with the references' shared wind refitted under the calibration's own prior
     N(0, (5 m/s)^2) (:data:`quadsim.gap.priors.WIND_SD_MS`). Why: the
     references see a wind only through their own drag (drag coefficient x air speed); where
@@ -400,7 +392,7 @@ def _with_wind(expl: Explanation, reference: Reference) -> Explanation:
                                replaces=expl.replaces + ("wind",), coupled=True)
 
 
-def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
+def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     """The flight's own wind, through the references' drag as their model has it, and --
     where that drag is a rotor drag (linear in air speed) -- through the same drag as a
     quadratic airframe drag, under either of its two laws (:mod:`quadsim.effects.body_drag`):
@@ -442,7 +434,7 @@ def _wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
 
 def quadratic_laws(reference: Reference) -> list[tuple[str, dict, float]]:
     """(variant, fixed values, C_d A in m^2) of the references' drag taken as a quadratic
-    airframe drag under each law (:func:`_wind_readings`); empty without a rotor drag. The
+    airframe drag under each law (:func:`wind_readings`); empty without a rotor drag. The
     law per body axis carries the references' vertical drag too, as its equivalent along
     body z (``cd_area_vertical``, :func:`quadsim.gap.calibrate.vertical_equivalent`): the law
     is the vehicle's, on every axis (:func:`law_replaces`)."""
@@ -462,7 +454,7 @@ def law_replaces(fixed: dict) -> tuple[str, ...]:
     return ("rotor_drag",) + (("body_drag",) if "cd_area_vertical" in fixed else ())
 
 
-#: the quadratic-drag wind variants (:func:`_wind_readings`): the law on the air speed and
+#: the quadratic-drag wind variants (:func:`wind_readings`): the law on the air speed and
 #: the law per body axis
 WIND_DRAG = "through the references' drag as a quadratic airframe drag"
 WIND_DRAG_AXES = "through the references' drag as a quadratic drag on each body axis"
@@ -473,18 +465,20 @@ WIND_DRAG_AXES = "through the references' drag as a quadratic drag on each body 
 QUADRATIC_SD = 0.5
 
 
-def _make(name: str, values: dict):
-    if name in LOCAL_EFFECTS:
-        return LOCAL_EFFECTS[name](**values)
-    return make_effect(name, **values)
-
-
-def _own_effects(expl: Explanation, theta: np.ndarray) -> list:
+def own_effects(expl: Explanation, theta: np.ndarray) -> list:
     out, k = [], 0
     for name, fixed, fitted in expl.parts:
         values = dict(fixed)
         for p in fitted:
             values[p] = float(theta[k])
             k += 1
-        out.append(_make(name, values))
+        out.append(build_effect(name, values))
     return out
+
+
+_prior_sd = prior_spreads  # alias for other modules until integration
+_prior_of = prior_of  # alias for other modules until integration
+_own_effects = own_effects  # alias for other modules until integration
+_make = build_effect  # alias for other modules until integration
+_wind_readings = wind_readings  # alias for other modules until integration
+_with_wind = with_wind  # alias for other modules until integration

@@ -3,29 +3,40 @@
 For a candidate effect with values theta, every sample of every flight gives a residual
 (measured Newton–Euler wrench minus model wrench, :mod:`quadsim.gap.residual`, plus a rotor-speed
 channel when the log has commands), divided per channel by the noise scale ``sigma``. The
-effect's fittable parameters (:data:`FIT_SPEC`) are found with bounded
-``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at the solution,
-widened by the residuals' correlation time (the smoothed samples are not independent).
+effect's fittable parameters, their typical sizes and fit windows are what the effect declares
+(``facts``, :mod:`quadsim.effects.facts`; :data:`FIT_SPEC` is a read-only view) and are found
+with bounded ``scipy.optimize.least_squares``; confidence intervals come from the Jacobian at
+the solution, widened by the residuals' correlation time (the smoothed samples are not
+independent).
 
 A *candidate* is a tuple of (effect name, fixed values, fitted parameter names). Some effects
-need a companion to be seen at all: ``wind`` acts only through drag, so the ``wind``
-candidate fits the mean wind together with the rotor-drag coefficient.
+need a companion to be seen at all (``facts.companions``): ``wind`` acts only through drag, so
+the ``wind`` candidate fits the mean wind together with the rotor-drag coefficient. The
+diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitmodels`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..effects import EFFECTS, make_effect
-from ..effects.base import EffectParameter
-from ..effects.canted_rotor import CantedRotor
+from ..effects import EFFECTS
+from ..effects.facts import arm_length
+from ..effects.thrust_curve import hover_thrust_per_speed
 from ..vehicle.params import VehicleParams
-from .memo import _memo, _rotor_key, _wrench_key, flight_memo
-from .priors import curve_quadratic_bounds, hover_thrust_per_speed, momentum_translational_lift
+from .fitmodels import (
+    FIT_EFFECTS,
+    LOCAL_EFFECTS,
+    CantedRotorFit,
+    build_effect,
+    effect_class,
+    facts_for,
+)
+from .memo import flight_memo, memoised, rotor_key, wrench_key
 from .motor_map import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
@@ -35,30 +46,53 @@ from .motor_map import (  # re-exported: the diagnosis' public fitting names
 from .residual import FlightStates, measured_wrench, model_wrench
 from .rotor_channel import min_time_constant, rotor_residual
 
-__all__ = ["Candidate", "Fit", "LOCAL_EFFECTS", "effect_class", "FIT_SPEC", "candidates_for",
-           "residuals", "fit_candidate", "noise_scale", "noise_floor", "NOISE_FLOOR",
-           "command_speed", "fit_motor_map", "speed_of_command", "command_of_speed",
-           "stack_states", "drag_refit_iv", "flight_memo"]
+__all__ = [
+    "FIT_SPEC",
+    "LOCAL_EFFECTS",
+    "NOISE_FLOOR",
+    "NO_OFF_VALUE",
+    "UPSTREAM_OF_SPEED",
+    "Candidate",
+    "CantedRotorFit",
+    "Fit",
+    "arm_length",
+    "candidates_for",
+    "command_of_speed",
+    "command_speed",
+    "correlation_time",
+    "curve_bound",
+    "drag_refit_iv",
+    "effect_class",
+    "fit_candidate",
+    "fit_motor_map",
+    "flight_memo",
+    "noise_floor",
+    "noise_scale",
+    "parameter_bounds",
+    "residuals",
+    "speed_of_command",
+    "stack_states",
+    "typical_scales",
+]
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
-#: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply.
-NO_OFF_VALUE = {"battery_sag.full_voltage"}
+#: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply:
+#: each effect's ``facts.no_off_value`` (a read-only view)
+NO_OFF_VALUE = frozenset(f"{name}.{p}" for name, cls in EFFECTS.items()
+                         for p in cls.facts.no_off_value)
 
 #: a fitted value within this fraction of its typical size from a bound is "at the bound".
 AT_BOUND = 1e-3
 #: a standard error below this fraction of the parameter's typical size is not credible.
 ABSURD_CI = 1e-6
 
-#: effects acting upstream of the measured rotor speed (command -> speed channel only).
-UPSTREAM_OF_SPEED = {"motor_lag", "battery_sag"}
+#: library effects acting upstream of the measured rotor speed (command -> speed channel
+#: only): each effect's ``facts.upstream_of_speed`` (a read-only view)
+UPSTREAM_OF_SPEED = frozenset(name for name, cls in EFFECTS.items()
+                              if cls.facts.upstream_of_speed)
 
-#: effects that are not in the library but are fitted like one (the nominal-refit baseline).
-LOCAL_EFFECTS: dict[str, type] = {}
-
-
-def effect_class(name: str) -> type:
-    """The class of a library effect (or of a local pseudo-effect such as the baseline)."""
-    return LOCAL_EFFECTS[name] if name in LOCAL_EFFECTS else EFFECTS[name]
+#: the step unit of a fitted parameter whose effect declares no typical scale for it
+DEFAULT_SCALE = 1.0
 
 
 @dataclass(frozen=True)
@@ -87,10 +121,7 @@ class Candidate:
             for p in fitted:
                 values[p] = float(theta[k])
                 k += 1
-            if name in LOCAL_EFFECTS:
-                out.append(LOCAL_EFFECTS[name](**values))
-            else:
-                out.append(make_effect(name, **values))
+            out.append(build_effect(name, values))
         return out
 
     def combine(self, other: Candidate) -> Candidate:
@@ -119,127 +150,65 @@ class Fit:
         return self.candidate.effects(self.theta)
 
 
-class CantedRotorFit(CantedRotor):
-    """``canted_rotor`` as the diagnosis fits it: the tilted axis' horizontal components
-    ``tilt_x``, ``tilt_y`` (rad, small angles: the axis leans by them towards body +x, +y)
-    instead of angle and azimuth, which are singular at angle 0 (every azimuth gives the
-    same untilted rotor, so a fit starting there cannot move). ``angle = hypot(tilt_x,
-    tilt_y)``, ``azimuth = atan2(tilt_x, -tilt_y)`` (then Rodrigues tilts z by angle about
-    (cos azimuth, sin azimuth, 0) towards (sin azimuth, -cos azimuth) = (tilt_x, tilt_y) /
-    angle). The rotor index is fixed per candidate: one candidate per rotor, the one that
-    fits the training flights best is kept (:func:`candidates_for`)."""
+def _fit_spec_entry(cls: type) -> tuple:
+    facts = cls.facts
+    fitted = None if facts.per_rotor else tuple(facts.fitted)
 
-    parameters = CantedRotor.parameters + (
-        EffectParameter("tilt_x", "rad", 0.0, -0.3, 0.3, "axis lean towards body +x"),
-        EffectParameter("tilt_y", "rad", 0.0, -0.3, 0.3, "axis lean towards body +y"),
-    )
+    def typical(params: VehicleParams, facts=facts) -> list[float]:
+        return [facts.scale_of(p).size(params) for p in facts.fitted_for(params.rotor_count)]
 
-    def apply_to_params(self, params):
-        angle = float(np.hypot(self.tilt_x, self.tilt_y))
-        if angle == 0.0:
-            return CantedRotor(rotor=self.rotor, angle=self.angle,
-                               azimuth=self.azimuth).apply_to_params(params)
-        return CantedRotor(rotor=self.rotor, angle=angle,
-                           azimuth=float(np.arctan2(self.tilt_x, -self.tilt_y))
-                           ).apply_to_params(params)
-
-
-LOCAL_EFFECTS["canted_rotor"] = CantedRotorFit
-
-
-def _rotor_scale(params: VehicleParams) -> float:
-    return float(params.max_speed) or 1.0
+    return fitted, dict(facts.fixed), typical
 
 
 #: effect -> (parameters to fit, fixed values, typical magnitude of each fitted parameter
-#: as a function of the vehicle). Unlisted parameters stay at their ``off`` value.
-FIT_SPEC = {
-    "mass_offset": (("mass",), {}, lambda p: [0.05 * p.mass]),
-    # z (CoM below the rotor plane) acts only through forces in the rotor plane (drag).
-    "com_offset": (("x", "y", "z"), {}, lambda p: [0.02 * _arm(p)] * 3),
-    "inertia_error": (("xx", "yy", "zz"), {}, lambda p: [0.1] * 3),
-    "thrust_mismatch": (None, {}, lambda p: [0.05] * p.rotor_count),
-    "thrust_curve": (("linear",), {}, lambda p: [0.05 * p.thrust_factor * p.max_speed]),
-    "battery_sag": (("rate",), {}, lambda p: [0.005]),
-    "thrust_factor": (("change",), {}, lambda p: [0.05]),
-    "ground_effect": (("gain",), {}, lambda p: [1.0]),
-    "rotor_drag": (("coefficient", "axial_coefficient"), {},
-                   lambda p: [_drag_scale(p)] * 2),
-    "body_drag": (("cd_area", "cd_area_vertical"), {}, lambda p: [_area_scale(p)] * 2),
-    # a flapping moment as if the rotor-drag force acted half an arm above the CoM
-    "blade_flapping": (("coefficient",), {}, lambda p: [0.5 * _arm(p) * _drag_scale(p)]),
-    # the momentum-theory lift (quadsim.gap.priors.momentum_translational_lift)
-    "translational_lift": (("k_h",), {}, lambda p: [momentum_translational_lift(p)]),
-    "motor_lag": (("time_constant",), {}, lambda p: [0.03]),
-    "gyroscopic": (("rotor_inertia",), {}, lambda p: [1e-6 * (p.mass / 0.04) ** 1.7]),
-    # a damping time constant I/k of about 1 s
-    "rate_damping": (("x", "y", "z"), {}, lambda p: list(np.diag(p.inertia))),
-    # one candidate per rotor (the index fixed): a lean of about 1 deg
-    "canted_rotor": (("tilt_x", "tilt_y"), {}, lambda p: [0.02, 0.02]),
-}
-
-
-def _arm(params: VehicleParams) -> float:
-    return float(np.max(np.linalg.norm(params.rotor_positions[:, :2], axis=1)))
-
-
-def _drag_scale(params: VehicleParams) -> float:
-    """A rotor-drag coefficient giving 10 % of the weight at 2 m/s with four hover rotors."""
-    hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))
-    return 0.1 * params.weight / (params.rotor_count * hover * 2.0)
-
-
-def _area_scale(params: VehicleParams) -> float:
-    """A C_d A giving 10 % of the weight at 2 m/s."""
-    return 0.1 * params.weight / (0.5 * params.air_density * 4.0)
+#: as a function of the vehicle), for every effect the diagnosis fits: a read-only view of
+#: the effects' ``facts`` (:mod:`quadsim.effects.facts`; None: one per rotor). Unlisted
+#: parameters stay at their ``off`` value.
+FIT_SPEC = MappingProxyType({name: _fit_spec_entry(cls) for name, cls in FIT_EFFECTS.items()
+                             if cls.facts.fitted or cls.facts.per_rotor})
 
 
 def candidates_for(params: VehicleParams, has_commands: bool,
                    has_vbat: bool = False) -> list[Candidate]:
-    """The candidate list for a vehicle: every effect of the library that the data can show.
+    """The candidate list for a vehicle: every effect of the library that the data can show,
+    in name order, as each declares it (``facts``).
 
-    ``motor_lag`` and ``battery_sag`` need commands: they act upstream of the measured rotor
-    speed, so they are fitted on the command -> speed channel only (with measured rotor
-    speeds they do not change the wrench); ``wind`` is fitted with rotor drag (wind alone
-    exerts no force); ``canted_rotor`` is one candidate per rotor (its index is discrete;
-    the diagnosis keeps the one that fits the training flights best)."""
+    An effect upstream of the measured rotor speed (``facts.upstream_of_speed``: a motor
+    lag, a battery) needs commands: it is fitted on the command -> speed channel only (with
+    measured rotor speeds it does not change the wrench); one with companions is fitted with
+    them (wind with the rotor drag: wind alone exerts no force); one with a discrete index
+    (``facts.one_per_rotor``: a canted rotor) is one candidate per rotor (the diagnosis keeps
+    the one that fits the training flights best); with a voltage log an effect fits its
+    ``facts.with_voltage_log`` parameters instead."""
     out = []
     for name in sorted(EFFECTS):
-        if name == "wind":
-            out.append(Candidate("wind", (("wind", {}, ("vx", "vy")),
-                                          ("rotor_drag", {}, ("coefficient",)))))
+        facts = EFFECTS[name].facts
+        fitted = facts.fitted_for(params.rotor_count)
+        if not fitted or (facts.upstream_of_speed and not has_commands):
             continue
-        if name not in FIT_SPEC or (name in UPSTREAM_OF_SPEED and not has_commands):
-            continue
-        fitted, fixed, _ = FIT_SPEC[name]
-        if name == "canted_rotor":   # the rotor index is discrete: one candidate per rotor
-            out += [Candidate(name, ((name, {"rotor": float(k + 1)}, fitted),))
+        if facts.one_per_rotor:      # a discrete index: one candidate per rotor
+            out += [Candidate(name, ((name, {facts.one_per_rotor: float(k + 1)}, fitted),))
                     for k in range(params.rotor_count)]
             continue
-        if name == "battery_sag" and has_vbat:
-            fitted = ("full_voltage",)  # with a voltage log the sag follows (V / V_full)^2
-        if fitted is None:
-            fitted = tuple(f"rotor_{i + 1}" for i in range(params.rotor_count))
+        if has_vbat and facts.with_voltage_log:
+            fitted = tuple(facts.with_voltage_log)
         known = {p.name for p in EFFECTS[name].parameters}
         fitted = tuple(p for p in fitted if p in known)
         if fitted:
-            out.append(Candidate(name, ((name, dict(fixed), fitted),)))
+            companions = tuple((c.effect, {}, tuple(c.fitted)) for c in facts.companions)
+            out.append(Candidate(name, ((name, dict(facts.fixed), fitted),) + companions))
     return out
 
 
-def _typical(candidate: Candidate, params: VehicleParams) -> np.ndarray:
+def typical_scales(candidate: Candidate, params: VehicleParams) -> np.ndarray:
+    """The typical size of each fitted parameter of ``candidate`` for ``params`` (its unit):
+    the effect's declared scale (``facts.scales``), else :data:`DEFAULT_SCALE`."""
     scales = []
     for name, _, fitted in candidate.parts:
-        names, _, typical = FIT_SPEC.get(name, ((), {}, None))
-        values = typical(params) if typical else []
-        names = names or tuple(f"rotor_{i + 1}" for i in range(params.rotor_count))
-        lookup = dict(zip(names, values))
-        lookup.setdefault("full_voltage", 0.2)
-        if name == "thrust_curve":      # the shared curvature about the references' hover
-            lookup.setdefault("quadratic", 0.1 * params.thrust_factor)
-        if name == "wind":
-            lookup = {"vx": 1.0, "vy": 1.0, "vz": 1.0}
-        scales += [lookup.get(p, 1.0) for p in fitted]
+        facts = facts_for(name)
+        for p in fitted:
+            scale = facts.scale_of(p)
+            scales.append(DEFAULT_SCALE if scale is None else scale.size(params))
     return np.asarray(scales, dtype=float)
 
 
@@ -251,21 +220,19 @@ def curve_bound(params: VehicleParams) -> float:
     return hover_thrust_per_speed(params)
 
 
-def _bounds(candidate: Candidate, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
+def parameter_bounds(candidate: Candidate, params: VehicleParams
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of each fitted parameter of ``candidate``: its declared bounds, within
+    the effect's fit window for this vehicle where it declares one (``facts.windows``)."""
     lower, upper = [], []
     for name, _, fitted in candidate.parts:
-        specs = {p.name: p for p in effect_class(name).parameters}
+        cls = effect_class(name)
+        specs = {p.name: p for p in cls.parameters}
         for p in fitted:
             lo, hi = specs[p].lower, specs[p].upper
-            if name == "mass_offset" and p == "mass":  # plausible payloads for this vehicle
-                lo, hi = max(lo, -0.5 * params.mass), min(hi, 2.0 * params.mass)
-            if name == "com_offset":
-                lo, hi = max(lo, -0.5 * _arm(params)), min(hi, 0.5 * _arm(params))
-            if name == "thrust_curve" and p == "linear":
-                lo, hi = max(lo, -curve_bound(params)), min(hi, curve_bound(params))
-            if name == "thrust_curve" and p == "quadratic":
-                low, high = curve_quadratic_bounds(params)
-                lo, hi = max(lo, low), min(hi, high)
+            window = cls.facts.window_of(p)
+            if window is not None:
+                lo, hi = max(lo, window.low(params)), min(hi, window.high(params))
             lower.append(lo)
             upper.append(hi)
     return np.asarray(lower), np.asarray(upper)
@@ -336,8 +303,8 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
         force, torque, vehicle = model_wrench(states, params, effects)
     else:
         rotation, motion = flight_memo(memo, states)
-        force, torque, vehicle = _memo(
-            memo, _wrench_key(states, params, effects), states,
+        force, torque, vehicle = memoised(
+            memo, wrench_key(states, params, effects), states,
             lambda: model_wrench(states, params, effects, rotation=rotation,
                                  flight_memo=motion))
     if memo is None:
@@ -345,7 +312,7 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     else:
         key = ("measured", id(states), vehicle.mass, vehicle.com.tobytes(),
                vehicle.inertia.tobytes())
-        meas_force, meas_torque = _memo(memo, key, states,
+        meas_force, meas_torque = memoised(memo, key, states,
                                         lambda: measured_wrench(states, vehicle))
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
@@ -356,7 +323,7 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
         if memo is None:
             parts.append(rotor_residual(states, params, effects))
         else:
-            parts.append(_memo(memo, _rotor_key(states, params, effects), states,
+            parts.append(memoised(memo, rotor_key(states, params, effects), states,
                                lambda: rotor_residual(states, params, effects)))
     return np.concatenate(parts, axis=1)
 
@@ -370,7 +337,7 @@ NOISE_FLOOR = 1e-3
 def noise_floor(params: VehicleParams, rotor_channel: bool) -> np.ndarray:
     """Smallest noise scale per channel (see :data:`NOISE_FLOOR`)."""
     hover = np.sqrt(params.weight / (params.rotor_count * params.thrust_factor))
-    floors = [params.weight] * 3 + [params.weight * _arm(params)] * 3
+    floors = [params.weight] * 3 + [params.weight * arm_length(params)] * 3
     if rotor_channel:
         floors += [hover] * params.rotor_count
     return NOISE_FLOOR * np.asarray(floors)
@@ -390,7 +357,7 @@ def noise_scale(residual: np.ndarray, dt: float, window_s: float = 0.5,
     return np.maximum(mad, tiny if floor is None else np.maximum(tiny, floor))
 
 
-def _correlation_time(e: np.ndarray, max_lag: int = 200) -> float:
+def correlation_time(e: np.ndarray, max_lag: int = 200) -> float:
     """Integrated autocorrelation time (samples) of the scaled residual, for CI widening."""
     x = e - e.mean(axis=0)
     var = np.sum(x * x)
@@ -446,28 +413,38 @@ def drag_refit_iv(states: FlightStates, params: VehicleParams, candidate: Candid
         return float("nan"), float("nan")
     gain = float(z @ y) / zx
     u = y - gain * x
-    tau = _correlation_time(u[:, None])
+    tau = correlation_time(u[:, None])
     se = float(np.sqrt(np.mean(u * u) * float(z @ z) * tau) / abs(zx))
     return gain - 1.0, se
+
+
+def flagged(candidate: Candidate, flag: str) -> list[int]:
+    """Indices of ``candidate``'s fitted parameters that their effect lists in its facts'
+    ``flag`` (:class:`quadsim.effects.facts.EffectFacts`: ``rotor_time_constants``,
+    ``starts_at_logged_voltage``, ``instrumented``)."""
+    out, k = [], 0
+    for name, _, fitted in candidate.parts:
+        listed = getattr(facts_for(name), flag)
+        out += [k + i for i, p in enumerate(fitted) if p in listed]
+        k += len(fitted)
+    return out
 
 
 def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: VehicleParams,
                   sigma: np.ndarray, *, rotor_channel: bool, start: np.ndarray | None = None,
                   max_nfev: int = 60) -> Fit:
     """Bounded least squares of ``candidate`` on ``flights`` (already decimated)."""
-    typical = _typical(candidate, params)
-    lower, upper = _bounds(candidate, params)
+    typical = typical_scales(candidate, params)
+    lower, upper = parameter_bounds(candidate, params)
     # a rotor time constant is at least one sub-step of the rotor channel (min_time_constant)
     step = min_time_constant(float(flights[0].t[1] - flights[0].t[0])) \
         if len(flights[0].t) > 1 else 0.0
-    for k, name in enumerate(candidate.parameter_names):
-        if name.startswith("motor_lag.time_constant"):
-            lower[k] = max(lower[k], step)
+    for k in flagged(candidate, "rotor_time_constants"):
+        lower[k] = max(lower[k], step)
     x0 = _start(candidate, lower, upper, typical) if start is None else np.clip(
         start, lower + 1e-12 * typical, upper - 1e-12 * typical)
-    if start is None and "battery_sag.full_voltage" in candidate.parameter_names:
+    for k in flagged(candidate, "starts_at_logged_voltage") if start is None else ():
         # Start where the sag is neutral on average: the full voltage at the highest logged.
-        k = candidate.parameter_names.index("battery_sag.full_voltage")
         x0[k] = np.clip(max(float(np.nanmax(s.vbat)) for s in flights), lower[k], upper[k])
 
     stacked = stack_states(flights)
@@ -493,11 +470,10 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     jac, res = result.jac / typical, result.fun
     dof = max(1, res.size - len(x0))
     s2 = float(res @ res) / dof
-    inflation = _correlation_time(res.reshape(-1, len(sigma)))
+    inflation = correlation_time(res.reshape(-1, len(sigma)))
     cov = np.linalg.pinv(jac.T @ jac) * s2 * inflation
     stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
-    if "nominal_refit.drag" in candidate.parameter_names and stacked.command is not None:
-        k = candidate.parameter_names.index("nominal_refit.drag")
+    for k in flagged(candidate, "instrumented") if stacked.command is not None else ():
         value, se = drag_refit_iv(stacked, params, candidate, theta, k)
         if np.isfinite(value) and np.isfinite(se):
             theta[k] = float(np.clip(value, lower[k], upper[k]))
@@ -522,3 +498,10 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     significant = [bool(abs(th - o) > 1.96 * se) or name in NO_OFF_VALUE
                    for th, o, se, name in zip(theta, off, stderr, candidate.parameter_names)]
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)
+
+
+# alias for other modules until integration
+_typical = typical_scales  # alias for other modules until integration
+_bounds = parameter_bounds  # alias for other modules until integration
+_correlation_time = correlation_time  # alias for other modules until integration
+_arm = arm_length  # alias for other modules until integration

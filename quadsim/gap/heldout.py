@@ -36,14 +36,18 @@ Stages (each a named type)
    its log-likelihood there is added (the posterior of the explanation given all flights,
    with the held-out part as a plug-in predictive check). :func:`quadsim.gap.judge.posterior`
    gives the probability per reading, "no difference" included, exactly as per flight.
-4. :mod:`.heldout_verdict`: combinations (the lead with a second effect, weighed by
-   evidence), the consistency guard (:mod:`.consistency`), the lack-of-fit tests ("not in
-   the library") and the verdict (``quadsim.gap/3``).
+4. :func:`decide`: the ranking (:func:`quadsim.gap.judge.rank`), a second effect when the
+   lead leaves a systematic remainder or does not carry over (:func:`pair`: the lead refitted
+   with each other effect; the pair's prior is the lead's split evenly among its partners,
+   and every part of it must be determined and plausible,
+   :func:`quadsim.gap.judge.every_part_stands`), and the consistency check of the lead
+   (:mod:`.consistency`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
+   turns into the verdict.
 
 Example::
 
     >>> result = diagnose(train_logs, params, holdout=held_logs)
-    >>> result["verdict"]["effect"], result["verdict"]["probability"]
+    >>> result.verdict.name, result.verdict.probability
 """
 
 from __future__ import annotations
@@ -55,10 +59,12 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
+from . import consistency
 from .calibrate import Reference, shared_candidate
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .explanations import _make
 from .fitting import (
+    Candidate,
     _correlation_time,
     effect_class,
     noise_floor,
@@ -66,15 +72,30 @@ from .fitting import (
     residuals,
     stack_states,
 )
+from .judge import (
+    SLOW_WINDOW_S,
+    carry_over,
+    channel_names,
+    every_part_stands,
+    plausible,
+    rank,
+    reading_text,
+    remainder,
+    slow_part,
+)
+from .result import Reading
+from .words import nominal_words
 
-__all__ = ["NOISE_WINDOW_S", "D_PRIOR_SD", "Weighed", "nominal_reference", "noise_model",
-           "heldout_explanations", "weigh", "effects_of", "slow_part"]
+__all__ = ["D_PRIOR_SD", "NOISE_WINDOW_S", "Decision", "Weighed", "decide", "effects_of",
+           "entry_of", "heldout_explanations", "noise_model", "nominal_reference", "pair",
+           "readings_of", "slow_part", "weigh"]
 
 #: the noise model's window (s): the residual's moving average over it is its slow part.
 #: 0.5 s: five times the 0.1 s smoothing window (its noise decorrelates within it), shorter
 #: than a flight manoeuvre (a figure-8 lap is 4-8 s), so a library effect acting through the
-#: flight state is slow against it. The same window as :func:`quadsim.gap.fitting.noise_scale`.
-NOISE_WINDOW_S = 0.5
+#: flight state is slow against it. The same window as :func:`quadsim.gap.fitting.noise_scale`
+#: and :data:`quadsim.gap.judge.SLOW_WINDOW_S`.
+NOISE_WINDOW_S = SLOW_WINDOW_S
 #: prior spread of the relative drag-torque factor error (module doc, stage 2).
 D_PRIOR_SD = 0.5
 #: prior spread of the relative thrust factor error: :mod:`.priors` -15 .. +5 %, half the
@@ -91,13 +112,6 @@ LAG_PRIOR_SD = 0.03
 #: Jacobian's forward step would integrate a 0.03 ms lag with 2.5 ms steps), the battery and
 #: the thrust curve (the parameter set's b is the hover thrust there; a curve is a reading).
 _NOT_SHARED = {"motor_lag", "battery_sag", "thrust_curve"}
-
-
-def slow_part(residual: np.ndarray, dt: float, window_s: float = NOISE_WINDOW_S) -> np.ndarray:
-    """Moving average (N, C) of a residual over ``window_s`` (odd number of samples)."""
-    n = max(3, int(round(window_s / dt)) | 1)
-    kernel = np.ones(n) / n
-    return np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
 
 
 def noise_model(nominal: list[np.ndarray], dt: float, floor: np.ndarray
@@ -175,7 +189,7 @@ def effects_of(ev: Evidence) -> list:
             for name, fixed, fitted in ev.explanation.parts]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Weighed:
     """One explanation on the split: its training evidence (``train``, an
     :class:`~quadsim.gap.evidence.Evidence`), the same with the held-out log-likelihood added
@@ -224,3 +238,164 @@ def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighe
     ll = _loglik(held_res, reference)
     return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll), [res(s) for s in train],
                    held_res, ll)
+
+
+def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: list,
+         reference: Reference) -> Weighed:
+    """The lead fitted together with ``other`` (module doc, stage 4): its prior is the
+    lead's with the partner's, less log(partners) (a second simultaneous effect is a priori
+    no likelier than the first alone)."""
+    a, b = lead.train.explanation, other.train.explanation
+    expl = Explanation(f"{a.name}+{b.name}", " ".join(v for v in (a.variant, b.variant) if v),
+                       a.parts + b.parts, a.mean + b.mean, a.sd + b.sd,
+                       tuple(dict.fromkeys(a.replaces + b.replaces)), None,
+                       a.log_prior + b.log_prior - float(np.log(max(1, partners))))
+    ev = evaluate(stack_states(list(train)), reference, [expl])[0]
+    return check(ev, train, held, reference)
+
+
+def readings_of(ranked: list, reference: Reference) -> list[Reading]:
+    """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words."""
+    out = []
+    for k, p, w in ranked:
+        ev = w.train
+        det = [q for q, ok in ev.determined.items() if ok]
+        out.append(Reading(k, p, nominal_words(reading_text(ev, reference), k == ev.name),
+                           w.total.log_z, {q: ev.values[q] for q in det},
+                           {q: 1.96 * ev.post_sd[q] for q in det},
+                           tuple(q for q, ok in ev.determined.items() if not ok),
+                           ev.explanation.fixed_values, ev.explanation.variant))
+    return out
+
+
+def entry_of(w: Weighed, probability: float, before: list, reference: Reference) -> dict:
+    """One ranked explanation as an ``effects`` JSON entry (:mod:`.schema` ``_EFFECT``):
+    only determined parameters get values (``undetermined`` names the others); the held-out
+    gap (mean squared residual over sigma^2) before (``before``: scaled nominal residuals)
+    and after, and its ``reduction`` (gap_before - gap_after) / gap_before."""
+    ev = w.train
+    sigma = reference.sigma
+    gap_before = float(np.mean(np.concatenate(before) ** 2))
+    after = [r / sigma for r in w.held_residuals]
+    gap_after = float(np.mean(np.concatenate(after) ** 2))
+    det = {q for q, ok in ev.determined.items() if ok}
+    names = channel_names(reference)
+    rms = np.sqrt(np.mean(np.concatenate(w.held_residuals) ** 2, axis=0))
+    entry = {"name": ev.name, "probability": probability, "log_evidence": w.total.log_z,
+             "params": {q: ev.values[q] for q in ev.values if q in det},
+             "ci": {q: 1.96 * ev.post_sd[q] for q in ev.values if q in det},
+             "fixed": ev.explanation.fixed_values,
+             "identifiable": {q: q in det for q in ev.values},
+             "significant": {q: bool(abs(ev.values[q]) > 1.96 * ev.post_sd[q])
+                             for q in ev.values},
+             "undetermined": sorted(set(ev.values) - det),
+             "heldout_gap_before": gap_before, "heldout_gap_after": gap_after,
+             "reduction": (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0,
+             "heldout_rms_after": dict(zip(names, map(float, rms)))}
+    if entry["undetermined"]:
+        entry["warning"] = ("too little excitation to fit " + ", ".join(entry["undetermined"])
+                            + " on these flights (posterior spread above half the prior's)")
+    return entry
+
+
+def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> dict:
+    """The consistency check (:func:`quadsim.gap.consistency.check`) of the reading ``w``
+    (its ``effects`` ``entry``) on ``flights`` (decimated states); the propeller's speed
+    exponent is held at its value (the library's thrust_factor has none)."""
+    ev = w.train
+    parts, theta = [], []
+    for name, fixed, fitted in ev.explanation.parts:
+        keep = tuple(p for p in fitted if not (name == "thrust_factor" and p == "alpha"))
+        parts.append((name, dict(fixed), keep))
+        theta += [ev.values[f"{name}.{p}"] for p in keep]
+    cand = Candidate(ev.name, tuple(parts), reference.candidate.base)
+    judged = [q for q in entry["params"] if not q.endswith(".alpha")
+              and entry["significant"].get(q)]
+    return consistency.check(cand, np.asarray(theta, float), judged, flights,
+                             params=reference.params, sigma=reference.sigma,
+                             rotor=reference.rotor)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The weighed explanations of a split, ranked (:func:`decide`): ``ranked`` (reading,
+    probability, Weighed), most probable first; ``rows`` its :class:`Reading` rows;
+    ``entries`` every explanation as an ``effects`` JSON entry (most probable first);
+    ``lead`` and ``lead_name`` the most probable reading; ``null`` the "no difference"
+    Weighed; ``combination`` the pair kept as the lead (or None); ``consistency`` the lead's
+    check (None for "no difference"); ``implausible`` (name, magnitude, prior) of the
+    explanations given no weight."""
+
+    ranked: tuple
+    rows: tuple
+    entries: tuple
+    lead: Weighed
+    lead_name: str
+    null: Weighed | None
+    combination: Weighed | None
+    consistency: dict | None
+    implausible: tuple
+
+    @property
+    def probability(self) -> dict:
+        """Reading -> posterior probability."""
+        return {k: p for k, p, _ in self.ranked}
+
+    def entry(self, name: str) -> dict | None:
+        """The ``effects`` entry of ``name`` (None for "no difference" or one not fitted)."""
+        return next((e for e in self.entries if e["name"] == name), None)
+
+
+def decide(weighed: list[Weighed], *, train: list, held: list, reference: Reference,
+           before: list, max_combination: int = 2, tick=None) -> Decision:
+    """Rank the weighed explanations; try the lead with a second effect when it leaves a
+    systematic remainder or does not carry over (module doc, stage 4); check the lead's
+    consistency. ``train``/``held``: decimated states; ``before``: the held-out residuals
+    over sigma under the nominal model; ``tick(name)``: progress per pair fitted."""
+    params = reference.params
+    tick = tick or (lambda *_: None)
+    dt = float(train[0].t[1] - train[0].t[0])
+    # a value outside its documented plausible range has no prior probability (:mod:`.priors`)
+    implausible = []
+    for w in weighed:
+        ok, text = plausible({q: v for q, v in w.train.values.items()
+                              if w.train.determined.get(q)}, params)
+        if not ok:
+            implausible.append((w, text))
+    dropped = {id(w) for w, _ in implausible}
+    ranked = rank([w for w in weighed if id(w) not in dropped])
+    lead_name, _, lead = ranked[0]
+    null = next((w for w in weighed if w.name == "no_difference"), None)
+    combination = checked = None
+    if lead_name != "no_difference":
+        checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
+                             reference)
+    if lead_name != "no_difference" and max_combination >= 2 and checked["consistent"] \
+            and (remainder(lead.train_residuals + lead.held_residuals, reference, dt)
+                 or carry_over(lead, reference, null)):
+        others = [w for k, _, w in ranked if k not in ("no_difference", lead_name)
+                  and w.name == k]
+        trials = []
+        for other in others:
+            trials.append(pair(lead, other, partners=len(others), train=train, held=held,
+                               reference=reference))
+            tick(trials[-1].name)
+        best = max(trials, key=lambda w: w.total.log_z, default=None)
+        if best is not None:
+            stands = every_part_stands(entry_of(best, 0.0, before, reference), params)
+            with_pair = rank(weighed + [best])
+            if stands and with_pair[0][2] is best:
+                ranked, combination = with_pair, best
+                lead_name, _, lead = ranked[0]
+                checked = consistent(lead, entry_of(lead, 1.0, before, reference),
+                                     train + held, reference)
+    entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
+               and k != "no_difference"]
+    seen = {e["name"] for e in entries}
+    entries += [entry_of(w, 0.0, before, reference) for w in weighed
+                if w.name not in seen and w.name != "no_difference" and not seen.add(w.name)]
+    entries.sort(key=lambda e: (-e["probability"], -e["log_evidence"], e["name"]))
+    return Decision(tuple(ranked), tuple(readings_of(ranked, reference)), tuple(entries),
+                    lead, lead_name, null, combination, checked,
+                    tuple((w.name, reading_text(w.train, reference), text)
+                          for w, text in implausible))

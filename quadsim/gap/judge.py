@@ -1,117 +1,110 @@
-"""A flight's verdict from the evidence of its explanations (:mod:`quadsim.gap.evidence`).
+"""The judgment of both modes: posterior per reading, lack of fit, outcome -> :class:`Verdict`.
 
-1. **Posterior per reading**: an effect's probability is the sum over its variants of
-   ``exp(log Z)``, normalised over every effect and "no difference" (:func:`posterior`:
-   "no difference" has the prior of all effects together; an explanation whose parameters
-   the data do not determine counts as "no difference").
-2. **Lack of fit ("not in the library")**: after the most probable explanation, each
-   channel's mean squared residual over sigma_c^2 is compared with what the reference
-   flights left: ``z_c = (log ms_c - mean_ref,c) / (spread_c sqrt(1 + 1/n))`` (n reference
-   flights; each channel's spread moderated towards the channels' common one by their own
-   scatter, :mod:`.moderated`, with its degrees of freedom; outside the references'
-   envelope at least the pooled spread, with C (n - 1)). A channel with z_c above the Student-t quantile at
-   ``1 - LOF_P / C`` (one-sided, Bonferroni over the C channels) is not explained by the
-   library: the verdict is ``unexplained`` with that channel named, whatever the weights
-   say. ``LOF_P`` = 0.001: one nominal flight in a thousand is called unexplained by chance.
-   A channel whose residual RMS stays below its noise floor
-   (:data:`quadsim.gap.fitting.NOISE_FLOOR`, 1e-3 of the weight, weight x arm or hover
-   speed) is never lacking fit, whatever its ratio to the references': below the floor a
-   residual is by definition no gap (round-off and integration differences). On simulated
-   references without sensor noise (RotorPy) the residual is 0.5-5 % of the floor and
-   deterministic, so it grows with the flight's speed: a nominal flight flown faster showed
-   8x the references' RMS on the rotor channel, still 4 % of the floor.
-   *Form error.* A reading that leaves at most :data:`FORM_ERROR` (5 %) of the flight's gap
-   -- the excess mean square over the references' typical, summed over the channels (each in
-   its own sigma_c^2 units), of "no difference" -- explains the flight: what remains is the
-   difference between the library's form of the effect and the physics that made it, not a
-   further effect. Why: another simulator's wind, rotor drag or weak rotor is not the
-   library's formula, and against references that leave almost nothing (simulated, with
-   little or no sensor noise) a 2 % remainder of a large gap is still 2-11x their RMS on a
-   channel. Measured (``scripts/gap_benchmark.py --independent --per-flight-only``): the
-   right reading left 0.5-3 % of the gap on Crazyflow (weak rotor, rotor drag x2.2, wind
-   1-2 m/s) and RotorPy (body and rotor drag), each called "unexplained" before; effects
-   outside the library left 52-78 % under their best reading (translational lift, blade
-   flapping, a periodic torque on Crazyflow; a periodic torque on PyFlyt: 71-105 %); a
-   payload read as a thrust change left 8-21 %, and one CoM offset, named right, 8 % (on
-   its rotor channels: still "unexplained"). Measured again on 2026-11-27 over every
-   independent simulator source (l2f X500 and fs, Crazyflow, multirotor, PyFlyt; 114 case
-   flights, the best reading other than "no difference"): the right reading left 0-16 % (90
-   % of them under 5 %; 5-16 % on winds and CoM offsets, whose library forms differ most),
-   effects outside the library 19-100 % (a multirotor periodic torque 19 and 36 %, the
-   others 61 % or more). The classes meet between 16 and 19 %, so no share separates them
-   with a margin; 5 % stays (a right reading left over it is `unexplained`, not a wrong
-   name); the winds among them need the references' own drag law (docs/gap.md, Known
-   limits), not a larger share.
-3. **Verdict**: the most probable reading and its probability; ``no_difference`` ->
-   ``no_significant_gap``. Readings stated in the answer: every effect with probability
-   >= :data:`READING_P` (0.1: a reading a user should still check, one in ten). A name is
-   *tentative* below :data:`CONFIDENT` (0.9): the answer says so and the benchmark does not
-   count it as confident. A reading names every effect it asserts (:func:`reading_name`):
-   the rotor-drag reading that refits the references' wind (their drag unidentified,
-   :func:`quadsim.gap.explanations._with_wind`) is ``rotor_drag+wind`` when the flight's wind
-   is determined and its 95 % interval excludes calm air (on RotorPy a flight with a drag
-   and a 1.3 m/s wind the references lack was answered with both values, right to 1 %, yet
-   named ``rotor_drag`` alone).
-4. **Magnitudes**: only parameters the data determine (posterior spread below half the
-   prior's, :data:`quadsim.gap.explanations.DETERMINED`) are printed; a shared group's value is
-   given next to the references' (value and uncertainty); wind is answered as the steady
-   air force it exerts (the data fix drag coefficient x wind speed), with the wind speed
-   at the references' drag coefficient.
+Inputs: the evidence of every explanation of how flights differ from a reference model
+(:mod:`quadsim.gap.evidence`; held out, :class:`quadsim.gap.heldout.Weighed`). Output: a
+:class:`quadsim.gap.result.Verdict` (per flight :func:`judge`, held out
+:func:`judge_heldout`), worded by :func:`quadsim.gap.words.answer`. The two modes differ
+only in *data*: which flights the lack of fit is measured against (:class:`Baseline`) and
+whether the noise model leaves the slow part out (held out: :func:`remainder` applies).
+
+1. **Posterior** (:func:`posterior`): p(reading) proportional to the sum over its variants of
+   exp(log Z) (natural log of the Laplace evidence); "no difference" carries the prior of
+   all effects together (a flight is a priori as likely nominal as not); an explanation
+   none of whose parameters the data determine counts as "no difference". Held out,
+   :func:`rank` also counts as "no difference" a reading none of whose parameters lies
+   beyond its 95 % interval (1.96 posterior spreads) from the no-difference value
+   (:func:`differs`).
+2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
+   l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
+   spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
+   Student-t quantile at 1 - LOF_P / (C H) (one-sided, Bonferroni over C channels and H
+   judged flights; H = 1 per flight). Two exemptions: a channel below its noise floor
+   (:data:`quadsim.gap.fitting.NOISE_FLOOR`: no gap at all), and a reading leaving at most
+   :data:`FORM_ERROR` of the gap "no difference" leaves (:func:`within_form_error`: the
+   library form's error, not a further effect). The baseline (:class:`Baseline`): per
+   flight the reference flights under the reference model (:meth:`Baseline.of_reference`,
+   moderated spreads); held out the reading's own training flights
+   (:meth:`Baseline.of_training`, pooled spread, C (n - 1) degrees of freedom; tested on
+   named readings: "does it carry over").
+3. **Systematic remainder** (:func:`remainder`, held out): the residual's slow part (0.5 s
+   moving average) against what noise of the noise model gives it, chi2(nu)/nu with nu =
+   N / W windows, at 1 - LOF_P / C. Per flight the noise model is the references' whole
+   residual, so there is no slow part to test.
+4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, an implausible
+   magnitude (:mod:`.priors`), parameters inconsistent between regimes
+   (:mod:`.consistency`), or a systematic remainder with "no difference" the lead;
+   otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
+   name). *Tentative* below :data:`CONFIDENT` or when its value shifts with the regime.
+
+Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
+``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
+``CONFIDENT`` 0.9 (below: tentative); ``FORM_ERROR`` 0.05 (docs/gap.md, method: the form
+error; the measured tables behind it are in CHANGELOG.md).
 
 Example::
 
-    >>> entry = judge(evaluate(states, ref, explanations_for(ref, states)), ref, "f.csv")
-    >>> entry["verdict"], entry["probability"], entry["answer"]
+    >>> verdict = judge(evaluate(states, ref, explanations_for(ref, states)), ref, "f.csv")
+    >>> verdict.name, verdict.probability, verdict.answer
 """
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.special import logsumexp
+from scipy.stats import chi2
 from scipy.stats import t as student_t
 
-from . import collinear
-from .explanations import reference_determined
+from . import collinear, consistency
 from .fitting import effect_class, noise_floor
-from .residual import CHANNELS
+from .priors import candidate_plausibility
+from .residual import CHANNELS, channel_unit
+from .result import Reading, Verdict
 from .selfcheck import against_text, negligible
+from .words import answer, asserted, nominal_words, reading_text
 
-__all__ = ["judge", "posterior", "lack_of_fit", "within_form_error", "above_floor", "symptom",
-           "READING_P", "CONFIDENT", "LOF_P", "FORM_ERROR", "reading_name",
-           "reading_text"]
+__all__ = ["CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P", "Baseline", "above_floor",
+           "carry_over", "channel_names", "differs", "every_part_stands", "judge", "judge_heldout",
+           "lack_of_fit", "mean_squares", "form_share", "outcome_of", "plausible", "posterior", "rank",
+           "reading_name", "reading_text", "remainder", "symptom", "within_form_error"]
 
 READING_P = 0.1
 CONFIDENT = 0.9
 LOF_P = 1e-3
 #: the share of a flight's gap a reading may leave as the form error of the library's effect
-#: (module doc, 2.)
 FORM_ERROR = 0.05
-#: a reading that leaves more than FORM_ERROR but at most this share of the flight's gap is
-#: named tentatively, with what it leaves stated (module doc, 2.): the geometric middle
-#: between the right readings' remainders (90 % of them under 5 %) and the smallest an
-#: effect outside the library left under its best reading (19 %), so neither class is
-#: moved by chance; tentative, so never a confident wrong name
+#: per flight, a reading that leaves more than FORM_ERROR but at most this share of the
+#: flight's gap is named tentatively, with what it leaves stated: the geometric middle
+#: between the right readings' remainders on five simulators (90 % of them under 5 %) and
+#: the smallest an effect outside the library left under its best reading (19 %), so
+#: neither class moves by chance; tentative, so never a confident wrong name (docs/gap.md)
 FORM_ERROR_TENTATIVE = 0.10
-
-#: shown units: seconds as ms, kilograms as g, metres as mm.
-_SHOWN = {"s": (1e3, "ms"), "kg": (1e3, "g"), "m": (1e3, "mm")}
+#: the held-out noise model's window (s): the residual's moving average over it is its slow
+#: part (:data:`quadsim.gap.heldout.NOISE_WINDOW_S`, the same value).
+SLOW_WINDOW_S = 0.5
+#: what the held-out floor is (the verdict's ``floor_source``).
+FLOOR_SOURCE = ("the noise model: the short-window (0.5 s) scatter of the nominal residual "
+                "on the training flights")
 
 
 def channel_names(reference) -> list[str]:
+    """Fx Fy Fz Mx My Mz, then rotor_1..rotor_N when the reference has rotor channels."""
     extra = [f"rotor_{i + 1}" for i in range(reference.params.rotor_count)] \
         if reference.rotor else []
     return list(CHANNELS) + extra
 
 
-def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
-    """(effect, probability, best variant's Evidence), most probable first (module doc).
+# --- 1. posterior ---------------------------------------------------------------------------
 
-    "No difference" has the prior of all effects together (a flight is a priori as likely
-    nominal as not; the effects share the other half equally), and an explanation none of
-    whose parameters the data determine predicts what "no difference" predicts: its weight
-    is counted there (a wind the references' zero drag coefficient cannot show is not a
-    reading). ``negligible(ev)``: whether a reading is no difference that matters
-    (:func:`quadsim.gap.selfcheck.negligible`); its weight is counted there as well."""
+def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
+    """(reading, probability, best variant's Evidence), most probable first (module doc, 1).
+
+    ``rows``: Evidence-like objects with ``name``, ``log_z`` and ``determined``;
+    ``negligible(ev)``: whether a reading is no difference that matters (practical
+    significance, :func:`quadsim.gap.selfcheck.negligible`): its weight counts as "no
+    difference", as an undetermined reading's does."""
     groups: dict[str, list] = {}
     for ev in rows:
         key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
@@ -129,8 +122,9 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
 
 def reading_name(key: str, ev) -> str:
     """The effects a reading asserts, joined by "+": ``key`` and each further effect of its
-    explanation (module doc, 3.) with a value the data determine away from "off" (its 95 %
-    interval, 1.96 posterior spreads, excludes the off value)."""
+    explanation with a value the data determine away from "off" (its 95 % interval, 1.96
+    posterior spreads, excludes the off value): a drag reading refitting the references'
+    wind is ``rotor_drag+wind`` when the flight's wind is not calm air."""
     names = [key]
     if key in ("no_difference", "wind"):     # a wind's own drag is the form of its force
         return key
@@ -141,21 +135,88 @@ def reading_name(key: str, ev) -> str:
             off = {p.name: p.off for p in effect_class(part).parameters}
         except KeyError:
             continue
-        if any(_asserted(ev, f"{part}.{p}", off.get(p, 0.0)) for p in fitted):
+        if any(asserted(ev, f"{part}.{p}", off.get(p, 0.0)) for p in fitted):
             names.append(part)
     return "+".join(names)
 
 
-def _asserted(ev, key: str, off: float = 0.0) -> bool:
-    """Whether ``ev`` asserts parameter ``key``: its value is determined and its 95 %
-    interval (1.96 posterior spreads) excludes the ``off`` value."""
-    return bool(ev.determined.get(key)) and abs(ev.values[key] - off) > 1.96 * ev.post_sd[key]
+#: parameters that say no difference by themselves: a full voltage has no "off" value (the
+#: sag acts for every V_full), a propeller's speed exponent acts only with a thrust change.
+_NOT_A_DIFFERENCE = {"battery_sag.full_voltage", "thrust_factor.alpha"}
+
+
+def differs(ev) -> dict:
+    """Per parameter of ``ev``: determined *and* beyond its 95 % interval from the
+    no-difference value (the prior's centre). A reading none of whose parameters differs
+    predicts what "no difference" predicts within the data's resolution (module doc, 1)."""
+    centre = dict(zip(ev.explanation.parameter_names, ev.explanation.mean))
+    out = {}
+    for q, ok in ev.determined.items():
+        far = abs(ev.values[q] - centre.get(q, 0.0)) > 1.96 * ev.post_sd[q]
+        out[q] = bool(ok and (far or q in _NOT_A_DIFFERENCE))
+    if out and not any(v for q, v in out.items() if q not in _NOT_A_DIFFERENCE) and \
+            not any(q == "battery_sag.full_voltage" for q in out):
+        out = dict.fromkeys(out, False)
+    return out
+
+
+def rank(weighed: list) -> list[tuple[str, float, object]]:
+    """Held out: (reading, probability, its best :class:`~quadsim.gap.heldout.Weighed`),
+    most probable first: :func:`posterior` over each one's total evidence (training plus
+    held-out log-likelihood) with :func:`differs` as what is determined."""
+    by_ev = {}
+    for w in weighed:
+        ev = dataclasses.replace(w.total, determined=differs(w.train))
+        by_ev[id(ev)] = (w, ev)
+    return [(k, p, by_ev[id(ev)][0]) for k, p, ev in posterior([e for _, e in by_ev.values()])]
+
+
+# --- 2./3. lack of fit ----------------------------------------------------------------------
+
+def mean_squares(residuals: list, sigma: np.ndarray) -> np.ndarray:
+    """(len(residuals), C): each (N_j, C) residual's mean square per channel over sigma^2."""
+    return np.array([np.mean(r ** 2, axis=0) / sigma ** 2 for r in residuals])
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """What a right model leaves, per channel, on the log mean-square scale (module doc, 2):
+    ``mean`` (C,) m_c, ``spread`` (C,) s_c, ``dof`` its degrees of freedom, ``count`` n the
+    pieces it is measured on, ``against`` ``"references"`` or ``"training"`` (which flights:
+    the answer's words)."""
+
+    mean: np.ndarray
+    spread: np.ndarray
+    dof: float
+    count: int
+    against: str
+
+    @classmethod
+    def of_reference(cls, reference) -> Baseline:
+        """Per flight: the reference flights' log mean squares under the calibrated model
+        (``reference.lof_mean``/``lof_sd``/``lof_dof``, moderated, :mod:`.moderated`)."""
+        return cls(np.asarray(reference.lof_mean, float), np.asarray(reference.lof_sd, float),
+                   reference.lof_dof, len(reference.names), "references")
+
+    @classmethod
+    def of_training(cls, residuals: list, sigma: np.ndarray) -> Baseline:
+        """Held out: what the reading leaves on the training flights (its residuals (N_j,
+        C), unscaled); with one training flight its two halves. Spread pooled over channels
+        with C (n - 1) degrees of freedom."""
+        pieces = residuals if len(residuals) >= 2 else \
+            [p for r in residuals for p in np.array_split(r, 2)]
+        logs = np.log(np.maximum(mean_squares(pieces, sigma), 1e-300))
+        mean = logs.mean(axis=0)
+        n, c = logs.shape
+        dof = max(1, c * (n - 1))
+        spread = float(np.sqrt(np.sum((logs - mean) ** 2) / dof))
+        return cls(mean, np.full(c, spread), dof, n, "training")
 
 
 def within_form_error(ms, null_ms, typical) -> bool:
     """Whether a reading leaving mean squares ``ms`` (..., C; sigma_c^2 units) leaves at most
     :data:`FORM_ERROR` of the gap "no difference" leaves (``null_ms``), each counted as the
-    excess over ``typical`` (C,), summed over every flight and channel (module doc, 2.)."""
+    excess over ``typical`` (C,), summed over every flight and channel."""
     return form_share(ms, null_ms, typical) <= FORM_ERROR
 
 
@@ -169,160 +230,308 @@ def form_share(ms, null_ms, typical) -> float:
 
 def above_floor(ms, reference) -> np.ndarray:
     """Per channel, whether mean squares ``ms`` (sigma_c^2 units) lie above the channel's
-    noise floor: below it a residual is not a gap at all
-    (:data:`quadsim.gap.fitting.NOISE_FLOOR`)."""
+    noise floor (:func:`quadsim.gap.fitting.noise_floor`): below it a residual is no gap."""
     return np.asarray(ms) * reference.sigma ** 2 \
         > noise_floor(reference.params, reference.rotor) ** 2
 
 
-def lack_of_fit(ev, reference, null=None) -> dict:
-    """Channels the explanation ``ev`` leaves beyond the references' residual (module doc):
-    channel -> (ratio of RMS to the references' typical RMS, z). ``null``: the flight's "no
-    difference" Evidence; the part of its gap ``ev`` explains may leave a remainder of
-    :data:`FORM_ERROR` of it (module doc)."""
-    n = len(reference.names)
-    scale = reference.lof_sd * np.sqrt(1 + 1 / n)
-    z = (np.log(np.maximum(ev.ms, 1e-300)) - reference.lof_mean) / np.maximum(scale, 1e-9)
-    if null is not None and null is not ev \
-            and within_form_error(ev.ms, null.ms, np.exp(reference.lof_mean)):
+def lack_of_fit(ms, baseline: Baseline, reference, *, null_ms=None) -> dict:
+    """Channels the lead reading leaves beyond ``baseline`` (module doc, 2): channel ->
+    (RMS over the baseline's typical RMS, z), the largest z over the judged flights.
+
+    ``ms``: (C,) or (H, C) mean squares (sigma_c^2 units) of the H judged flights under the
+    reading; ``null_ms``: the same under "no difference" (None when the reading is "no
+    difference" itself: it is never its own form error); ``reference``: channel names,
+    sigma and noise floor."""
+    ms = np.atleast_2d(np.asarray(ms, float))
+    if null_ms is not None and within_form_error(ms, np.atleast_2d(null_ms),
+                                                 np.exp(baseline.mean)):
         return {}
-    limit = float(student_t.ppf(1 - LOF_P / len(z), reference.lof_dof))
-    above = above_floor(ev.ms, reference)
+    scale = np.maximum(baseline.spread * np.sqrt(1 + 1 / baseline.count), 1e-9)
+    h, c = ms.shape
+    limit = float(student_t.ppf(1 - LOF_P / (c * h), baseline.dof))
     names = channel_names(reference)
-    return {names[c]: (float(np.sqrt(np.exp(np.log(ev.ms[c]) - reference.lof_mean[c]))),
-                       float(z[c])) for c in range(len(z)) if z[c] > limit and above[c]}
+    out: dict = {}
+    for row in ms:
+        z = (np.log(np.maximum(row, 1e-300)) - baseline.mean) / scale
+        for k in np.nonzero((z > limit) & above_floor(row, reference))[0]:
+            ratio = float(np.exp(0.5 * (np.log(row[k]) - baseline.mean[k])))
+            if names[k] not in out or z[k] > out[names[k]][1]:
+                out[names[k]] = (ratio, float(z[k]))
+    return out
 
 
-def _value_text(key: str, value: float, sd: float, params) -> str:
-    return collinear.describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
+def carry_over(w, reference, null=None) -> dict:
+    """Held out: :func:`lack_of_fit` of the reading ``w`` (a
+    :class:`~quadsim.gap.heldout.Weighed`) on the held-out flights against what it leaves on
+    its training flights (:meth:`Baseline.of_training`); ``null``: the "no difference"
+    Weighed (its held-out mean squares give the form-error exemption)."""
+    sigma = reference.sigma
+    return lack_of_fit(mean_squares(w.held_residuals, sigma),
+                       Baseline.of_training(w.train_residuals, sigma), reference,
+                       null_ms=None if null is None or null is w else
+                       mean_squares(null.held_residuals, sigma))
 
 
-#: why a shared value stops at a bound of the references' fit (calibrate.fit_bounds)
-_BOUND_WHY = {"motor_lag.time_constant": "a quarter of a fit sample, a shorter lag is not "
-                                          "resolved"}
+def slow_part(residual: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) -> np.ndarray:
+    """Moving average (N, C) of a residual over ``window_s`` (odd number of samples)."""
+    n = max(3, int(np.rint(window_s / dt)) | 1)
+    kernel = np.ones(n) / n
+    return np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
 
 
-def _reference_text(key: str, value: float, sd: float, reference) -> str:
-    """The references' value of a shared parameter in words; where their fit stopped at a
-    bound, the value without a spread and that it is a bound (the data say only "at or
-    beyond"), e.g. "the rotors lag their commands by +2.5 ms (time constant) or less (their
-    fit's lower bound: a quarter of a fit sample, a shorter lag is not resolved)"."""
-    side = getattr(reference, "at_bound", {}).get(key)
-    if side is None:
-        return _value_text(key, value, sd, reference.params)
-    why = _BOUND_WHY.get(key, "the end of its physical range")
-    return (collinear.describe(key.split(".")[0], {key: value}, {}, reference.params)
-            + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
+def remainder(residuals: list, reference, dt: float) -> dict:
+    """Channels with a systematic residual beyond the noise model (module doc, 3): channel ->
+    (RMS of the slow part in the channel's unit, ratio of its mean square to the noise's
+    expectation sigma_c^2 min(tau_c, W) / W). ``residuals``: (N_j, C) unscaled, every flight
+    (training and held out); ``reference``: ``sigma``, ``tau`` (samples); ``dt`` (s)."""
+    window = max(3, int(np.rint(SLOW_WINDOW_S / dt)) | 1)
+    slow = np.concatenate([slow_part(r, dt) for r in residuals])
+    expected = reference.sigma ** 2 * np.minimum(reference.tau, window) / window
+    ratio = np.mean(slow ** 2, axis=0) / expected
+    nu = max(1.0, len(slow) / window)
+    limit = float(chi2.ppf(1 - LOF_P / len(ratio), nu) / nu)
+    names = channel_names(reference)
+    rms = np.sqrt(np.mean(slow ** 2, axis=0))
+    return {names[k]: (float(rms[k]), float(ratio[k])) for k in range(len(ratio))
+            if ratio[k] > limit}
 
 
-def reading_text(ev, reference) -> str:
-    """The magnitude of a reading in words (determined values only)."""
-    params, name = reference.params, ev.name
-    keys = [k for k, ok in ev.determined.items() if ok]
-    if name == "no_difference":
-        return "no difference from the reference flights"
-    if name == "signal_delay":
-        mean = 1e3 * reference.rotor_shift_s      # the references' fitted rotor timing
-        d = 1e3 * ev.values["delay.rotor"]
-        if not keys:
-            return "rotor speeds logged with a delay of their own (size not determined)"
-        return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
-                f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
-                f"(references: {mean:+.1f} ms against motion capture, fitted)")
-    if name == "wind":
-        return _wind_text(ev, reference)
-    if not keys:
-        return f"{name.replace('_', ' ')} (size not determined by this flight)"
-    calm = _calm_refit(ev)
-    values = {k: ev.values[k] for k in keys if not k.endswith(".alpha") and k not in calm}
-    ci = {k: 1.96 * ev.post_sd[k] for k in values}
-    text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
-    if calm and all(ev.determined.get(k) for k in calm):
-        text += (f"; in calm air (the wind refitted with it, within ±"
-                 f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
-    if ev.explanation.replaces:
-        # the references' own values, where their flights determine them
-        ref, known_ref = reference.values(), reference_determined(reference)
-        s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
-        # only the groups it gives values of its own: a reading on top of a shared group
-        # (the flight's thrust curve about zero speed on the references' slope about their
-        # hover) is another quantity than the references' value of the same name
-        # nor a group the flight's drag law stands in for (its own drag is on top of the law)
-        law = {"rotor_drag", "body_drag"} if any(
-            n == "drag_law" for n, _, _ in ev.explanation.parts) else set()
-        known = [k for k in values if known_ref.get(k, False)
-                 and k.split(".")[0] in set(ev.explanation.replaces) - law]
-        if known:
-            text += " (references: " + "; ".join(
-                _reference_text(k, ref[k], s_ref[k], reference) for k in known) + ")"
-    if ev.explanation.variant and ev.explanation.variant not in text:
-        text = f"{ev.explanation.variant}: {text}"
-    return text + _spin_text(name, ev, values, reference)
+# --- 4. outcome -----------------------------------------------------------------------------
+
+def plausible(values: dict, params) -> tuple[bool, str]:
+    """Whether determined ``values`` (parameter -> value) lie in their documented plausible
+    ranges (:func:`quadsim.gap.priors.candidate_plausibility`), and the prior in words."""
+    _, ok, text = candidate_plausibility(values, params)
+    return bool(ok), text
 
 
-def _spin_text(name: str, ev, values: dict, reference) -> str:
-    """A propeller reading's speed per command, (1 + change)^-alpha, where alpha was fitted
-    (held out it is not: the training flights' map has it): "the rotors would spin +2.1 %
-    per command" (all rotors) or "rotor 4 would spin +0.9 % per command" (one)."""
-    alpha = ev.values.get(f"{name}.alpha")
-    if not reference.rotor or alpha is None or name not in ("thrust_factor", "thrust_mismatch"):
-        return ""
-    keys = [k for k in values if k == "thrust_factor.change"
-            or k.startswith("thrust_mismatch.rotor_")]
-    if not keys:
-        return ""
-    who = ("the rotors" if name == "thrust_factor"
-           else f"rotor {keys[0].rsplit('_', 1)[1]}")
-    spin = 100 * ((1 + ev.values[keys[0]]) ** -alpha - 1)
-    return f"; {who} would spin {spin:+.1f} % per command (lighter load torque)"
+def every_part_stands(entry, params) -> bool:
+    """A pair claims that each of its effects is there: every effect of ``entry`` (an
+    ``effects`` JSON entry: ``params``, ``identifiable``, ``significant``) needs a parameter
+    determined and significant, and the determined values must be plausible (two effects
+    cancelling each other at their bounds explain nothing about the vehicle)."""
+    keys = entry["identifiable"]
+    parts = {q.split(".")[0] for q in keys}
+    return all(any(keys[q] and entry["significant"][q] for q in keys if q.split(".")[0] == p)
+               for p in parts) and plausible(entry["params"], params)[0]
 
 
-def _calm_refit(ev) -> list[str]:
-    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.explanations._with_wind`)
-    when no component's 95 % interval excludes calm air (as :func:`reading_name` decides):
-    the answer then says "in calm air" instead of printing a wind of 1e-5 ± 0.03 m/s."""
-    if ev.name == "wind" or not any(part == "wind" and fitted
-                                    for part, _, fitted in ev.explanation.parts):
-        return []
-    keys = [k for k in ("wind.vx", "wind.vy") if k in ev.values]
-    if any(_asserted(ev, k) for k in keys):
-        return []
-    return keys
+def outcome_of(lead: str, lack: dict, remains: dict, *, plausible: bool = True) -> str:
+    """The outcome rule of both modes (module doc, 4) for lead reading ``lead``."""
+    if lack or not plausible or (remains and lead == "no_difference"):
+        return "unexplained"
+    return "no_significant_gap" if lead == "no_difference" else "effect"
 
 
-def _wind_text(ev, reference) -> str:
-    force = ev.air_force if ev.air_force is not None else np.zeros(3)
-    horiz = force[:2]
-    size = float(np.hypot(*horiz))
-    axis = int(np.argmax(np.abs(horiz)))
-    sign = "+" if horiz[axis] >= 0 else "-"
-    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
-            f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
-            "airspeed")
-    keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
-    if keys:
-        ref = reference.values()
-        speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
-                               ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
-        drag = ev.values.get("body_drag.cd_area")
-        if drag is not None:        # explanations.WIND_DRAG: the drag's law taken quadratic
-            size = (f" (C_d A {1e4 * drag:.3g} cm^2)" if ev.determined.get("body_drag.cd_area")
-                    else "")
-            law = ("a quadratic drag on each body axis"
-                   if ev.explanation.fixed_values.get("body_drag.per_axis", 0.0) >= 0.5
-                   else "a quadratic airframe drag")
-            text += (f": wind of ~{speed:.2g} m/s beyond the references', through their "
-                     f"drag as {law}{size}")
-        else:
-            text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
-                     "coefficient")
-    else:
-        text += " (drag coefficient x wind speed fixed by the data, not each factor)"
-    return text
+def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
+    det = [q for q, ok in ev.determined.items() if ok]
+    return Reading(k, p, magnitude, ev.log_z, {q: ev.values[q] for q in det},
+                   {q: 1.96 * ev.post_sd[q] for q in det},
+                   tuple(q for q, ok in ev.determined.items() if not ok),
+                   ev.explanation.fixed_values, ev.explanation.variant)
+
+
+def judge(rows, reference, name: str) -> Verdict:
+    """One flight's :class:`Verdict` from the evidence ``rows`` of its explanations against
+    the calibrated ``reference`` (per-flight mode); ``name``: the flight's file."""
+    check = getattr(reference, "self_check", None)
+    ranked = posterior(rows, lambda ev: negligible(ev, check))
+    top, p_top, best = ranked[0]
+    null = next((e for e in rows if e.name == "no_difference"), None)
+    baseline = Baseline.of_reference(reference)
+    lack = lack_of_fit(best.ms, baseline, reference,
+                       null_ms=None if null is None or null is best else null.ms)
+    left = {}           # a reading leaving 5-10 % of the gap: named tentatively, stated
+    share = float("inf") if null is None or null is best else \
+        form_share(best.ms, null.ms, np.exp(baseline.mean))
+    if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
+        left, lack = lack, {}
+    readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
+                for k, p, ev in ranked]
+    lead = readings[0]
+    stated = [r for r in readings if r.probability >= READING_P]
+    separate = _differ_on(best, ranked[1][2] if len(ranked) > 1 else None, reference)
+    outcome = outcome_of(top, lack, {})
+    verdict = lead.name if outcome == "effect" else outcome
+    named = [r.name for r in stated if r.name != "no_difference"]
+    effect = outcome == "effect"
+    unsure = (check is not None and not check.clean) or bool(left)
+    words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
+                   against="references", separate=separate,
+                   tentative=p_top < CONFIDENT or unsure)
+    words += _normal_words(best if effect else None, check, left, share)
+    return Verdict(
+        outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
+        form_remainder={k: v[0] for k, v in left.items()},
+        self_check_clean=None if check is None else check.clean,
+        posterior=tuple(readings), readings=tuple(named) if effect else (),
+        lack_of_fit={k: v[0] for k, v in lack.items()},
+        params=lead.params if effect else {}, ci=lead.ci if effect else {},
+        fixed=lead.fixed if effect else {},
+        units={k: collinear.unit_of(k) for k in lead.params} if effect else {},
+        confusable_with=tuple(r for r in named if r != verdict),
+        separate_by={r: collinear.separation(verdict, [r])[r] for r in named
+                     if r != verdict} if effect else {},
+        file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
+
+
+def _normal_words(lead_ev, check, left: dict, share: float) -> str:
+    """What the answer adds from the references' own normal (docs/gap.md, method): the
+    lead's size against the references' readings of it (``lead_ev``: its Evidence, None
+    when no effect is named), what a tentatively named reading leaves (``left``: channel ->
+    (ratio, z); ``share`` of the flight's gap), and a self-check that is not clean."""
+    words = ""
+    if lead_ev is not None:
+        size = against_text(lead_ev, check, collinear.unit_of)
+        if size:
+            words += f" Its size against the references' own readings of it: {size}."
+    if left:
+        where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
+        words += (f" Beyond it the residual stays beyond the reference flights' on {where} "
+                  f"their typical RMS ({100 * share:.0f} % of the flight's gap: the library's "
+                  "form of it, or a further small effect). Tentative.")
+    if check is not None and not check.clean:
+        words += f" {check.text()}"
+    return words
+
+
+def judge_heldout(decision, reference, *, before: list, after: list,
+                  dt: float) -> tuple[Verdict, tuple[str, ...]]:
+    """The held-out :class:`Verdict` and the notes it adds, from ``decision``
+    (:class:`quadsim.gap.heldout.Decision`). ``before``/``after``: held-out residuals over
+    sigma under the nominal model and with the lead; ``dt`` (s): the fit step."""
+    params = reference.params
+    names = channel_names(reference)
+    rows, lead_name, lead = decision.rows, decision.lead_name, decision.lead
+    entry = decision.entry(lead_name)
+    p_lead = decision.probability[lead_name]
+    notes = [f"{name} fits only at an implausible magnitude ({nominal_words(magnitude, True)}"
+             f"; {prior_text}): given no weight"
+             for name, magnitude, prior_text in decision.implausible]
+    remains = remainder(lead.train_residuals + lead.held_residuals, reference, dt)
+    # a named reading must carry over to the held-out flights
+    lack = carry_over(lead, reference, decision.null) if entry is not None else {}
+    ok, prior_text = plausible(entry["params"], params) if entry is not None else (True, "")
+    if not ok:
+        notes.append(f"{lead_name} is the most probable reading only with an implausible "
+                     f"magnitude ({rows[0]['magnitude']}; {prior_text}): not named")
+    checked = decision.consistency if entry is not None and ok else None
+    stands = consistency.standing(checked) if checked is not None else "stands"
+    inconsistent, shifted = stands == "inconsistent", stands == "shifted"
+    outcome = "unexplained" if inconsistent else outcome_of(lead_name, lack, remains,
+                                                            plausible=ok)
+    stated = [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
+    others = [r["name"] for r in stated if r["name"] != lead_name]
+    alts = _alternatives(decision, stated, params) if entry is not None else ()
+    named = entry is not None and ok and not inconsistent    # the name was weighed as one
+    separate_by = collinear.separation(lead_name, others) if named else {}
+    reduction = entry["reduction"] if entry else 0.0
+    words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
+                                          stated=stated, lack=lack, remains=remains,
+                                          separate_by=separate_by, alternatives=alts)
+    notes += more
+    effect = outcome == "effect"
+    verdict = Verdict(
+        outcome, lead_name if effect else outcome, words, p_lead,
+        tentative=effect and (p_lead < CONFIDENT or shifted), posterior=tuple(rows),
+        readings=tuple([lead_name] + others) if effect else (),
+        lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
+                     **{k: v[0] for k, v in lack.items()}},
+        params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
+        fixed=entry["fixed"] if entry else {},
+        units={k: collinear.unit_of(k) for k in (entry["params"] if entry else {})},
+        confusable_with=tuple(others) if effect else (),
+        separate_by=separate_by if effect else {},
+        consistency=checked, partial=partial, floor_source=FLOOR_SOURCE,
+        channels=_channel_table(names, reference.sigma, before=before, after=after,
+                                flagged=set(remains) | set(lack)),
+        alternatives=() if inconsistent else alts,
+        best_candidate=next((r["name"] for r in rows if r["name"] != "no_difference"), None),
+        heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
+            np.concatenate(after) ** 2, axis=0)))),
+        reduction=reduction, heldout_gap_before=_gap(before),
+        heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
+    return verdict, tuple(notes)
+
+
+def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
+                   remains: dict, separate_by: dict, alternatives: tuple
+                   ) -> tuple[str, dict | None, list[str]]:
+    """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
+    name (``stands``, :func:`quadsim.gap.consistency.standing`) is a partial explanation;
+    otherwise :func:`quadsim.gap.words.answer`, with the tentative sentence of a shifted
+    name that stands."""
+    lead_name, checked = decision.lead_name, decision.consistency
+    entry = decision.entry(lead_name) or {}
+    reduction = entry.get("reduction", 0.0)
+    if stands == "inconsistent":
+        partial = {"reduction": reduction, "params": entry["params"], "ci": entry["ci"],
+                   "units": {k: collinear.unit_of(k) for k in entry["params"]},
+                   "alternatives": list(alternatives),
+                   "confusable_with": [r["name"] for r in stated if r["name"] != lead_name],
+                   "name": lead_name}
+        return (consistency.partial_text(lead_name, reduction, checked), partial,
+                [consistency.inconsistent_note(lead_name, checked)])
+    rows = decision.rows
+    words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
+                   against="training", remains=remains,
+                   tentative=decision.probability[lead_name] < CONFIDENT,
+                   reduction=reduction, separate=separate_by)
+    if stands == "shifted" and outcome == "effect":
+        return words + consistency.tentative_text(checked), None, \
+            [consistency.tentative_note(checked)]
+    return words, None, []
+
+
+def _alternatives(decision, stated: list, params) -> tuple[dict, ...]:
+    """The lead, the other stated readings, and the two most probable readings after those
+    (what else was weighed, and how much), each as an ``alternatives`` JSON entry."""
+    rows, lead_name = decision.rows, decision.lead_name
+    listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
+                                                           if r["name"] != lead_name]
+    listed += [r for r in rows if r not in listed and r["name"] != "no_difference"][:2]
+    return tuple(_alternative(r, decision, lead_name, params) for r in listed
+                 if r["name"] != "no_difference")
+
+
+def _channel_table(names: list, sigma: np.ndarray, *, before: list, after: list,
+                   flagged: set) -> dict:
+    """Per channel: RMS before and after (channel units), the floor sigma, the unit, and
+    whether it is at the floor (not ``flagged`` by a lack of fit or a remainder)."""
+    rms_before, rms_after = _channel_rms(before, sigma), _channel_rms(after, sigma)
+    return {n: {"before": float(b), "after": float(a), "floor": float(s),
+                "unit": channel_unit(n), "at_floor": n not in flagged}
+            for n, b, a, s in zip(names, rms_before, rms_after, sigma)}
+
+
+def _gap(scaled: list) -> float:
+    """Mean squared scaled residual per sample and channel (1 = noise level)."""
+    return float(np.mean(np.concatenate(scaled) ** 2))
+
+
+def _channel_rms(scaled: list, sigma: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
+
+
+def _alternative(row, decision, lead_name: str, params) -> dict:
+    """A reading beside the lead: magnitude, values with units, probability, share of the
+    held-out gap, torques left, plausibility and how to separate it from the lead."""
+    entry = decision.entry(row["name"]) or {}
+    score, ok, prior = candidate_plausibility(row["params"], params)
+    alt = {"name": row["name"], "magnitude": row["magnitude"], "params": dict(row["params"]),
+           "ci": dict(row["ci"]), "units": {k: collinear.unit_of(k) for k in row["params"]},
+           "probability": row["probability"], "reduction": entry.get("reduction"),
+           "torque_yaw": collinear._torque_text(entry), "plausibility": score,
+           "plausible": bool(ok), "prior": prior}
+    if row["name"] != lead_name:
+        alt["separate_by"] = collinear.separation(lead_name, [row["name"]])[row["name"]]
+    return alt
 
 
 def _differ_on(first, second, reference) -> list[str]:
-    """The channels where two explanations' residuals differ most (what would separate them)."""
+    """The channels where two explanations' residuals differ most (what would separate them):
+    at most two, each with |log ms ratio| > 0.01."""
     if first is None or second is None:
         return []
     gap = np.abs(np.log(np.maximum(first.ms, 1e-300)) - np.log(np.maximum(second.ms, 1e-300)))
@@ -333,7 +542,8 @@ def _differ_on(first, second, reference) -> list[str]:
 
 def symptom(ev, reference) -> dict:
     """The flight's largest mean residual against the reference model (channel, sign, size
-    in words): what a user sees first, grouped across flights in the report."""
+    in words: % of the weight, mN m, or % of the hover speed), from the "no difference"
+    Evidence ``ev``; grouped across flights in the report."""
     if ev is None or ev.mean is None:
         return {}
     names = channel_names(reference)
@@ -350,92 +560,3 @@ def symptom(ev, reference) -> dict:
         text = f"{names[c]} {100 * value / hover_speed(params):+.1f} % of the hover speed"
     return {"channel": names[c], "sign": "+" if value >= 0 else "-", "value": value,
             "sigmas": float(abs(value) / reference.sigma[c]), "text": text}
-
-
-def judge(rows, reference, name: str) -> dict:
-    """The per-flight entry (``quadsim.gap/3``, :mod:`.schema`) from a flight's evidence."""
-    check = getattr(reference, "self_check", None)
-    ranked = posterior(rows, lambda ev: negligible(ev, check))
-    top, p_top, best = ranked[0]
-    null = next((e for e in rows if e.name == "no_difference"), None)
-    lack = lack_of_fit(best, reference, null)
-    remains = {}
-    if lack and top != "no_difference" and null is not None and null is not best \
-            and form_share(best.ms, null.ms, np.exp(reference.lof_mean)) \
-            <= FORM_ERROR_TENTATIVE:
-        remains, lack = lack, {}
-    readings = [{"name": reading_name(k, ev), "probability": p,
-                 "magnitude": reading_text(ev, reference),
-                 "log_evidence": ev.log_z,
-                 "params": {q: ev.values[q] for q, ok in ev.determined.items() if ok},
-                 "ci": {q: 1.96 * ev.post_sd[q] for q, ok in ev.determined.items() if ok},
-                 "undetermined": [q for q, ok in ev.determined.items() if not ok],
-                 "fixed": ev.explanation.fixed_values, "variant": ev.explanation.variant}
-                for k, p, ev in ranked]
-    stated = [r for r in readings if r["probability"] >= READING_P]
-    second = ranked[1] if len(ranked) > 1 else None
-    separate = _differ_on(best, second[2] if second else None, reference)
-    if lack:
-        outcome, verdict = "unexplained", "unexplained"
-    elif top == "no_difference":
-        outcome, verdict = "no_significant_gap", "no_significant_gap"
-    else:
-        outcome, verdict = "effect", readings[0]["name"]
-    named = [r["name"] for r in stated if r["name"] != "no_difference"]
-    answer = _answer(outcome, readings[0], stated, lack, separate)
-    lead = readings[0]
-    if outcome == "effect":
-        against = against_text(best, check, collinear.unit_of)
-        if against:
-            answer += f" Its size against the references' own readings of it: {against}."
-    if remains:
-        where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in remains.items())
-        share = form_share(best.ms, null.ms, np.exp(reference.lof_mean))
-        answer += (f" Beyond it the residual stays beyond the reference flights' on {where} "
-                   f"their typical RMS ({100 * share:.0f} % of the flight's gap: the "
-                   "library's form of it, or a further small effect). Tentative.")
-    unsure = (check is not None and not check.clean) or bool(remains)
-    if unsure:      # a set that does not judge itself clean: said, and never confident
-        answer = f"{check.text()} {answer}"
-    return {"file": name, "outcome": outcome, "verdict": verdict, "answer": answer,
-            "probability": p_top,
-            "tentative": outcome == "effect" and (p_top < CONFIDENT or unsure),
-            "readings": named if outcome == "effect" else [],
-            "posterior": readings, "lack_of_fit": {k: v[0] for k, v in lack.items()},
-            "remains": {k: v[0] for k, v in remains.items()},
-            "self_check_clean": None if check is None else check.clean,
-            "params": lead["params"] if outcome == "effect" else {},
-            "ci": lead["ci"] if outcome == "effect" else {},
-            "fixed": lead["fixed"] if outcome == "effect" else {},
-            "units": {k: collinear.unit_of(k) for k in lead["params"]} if outcome == "effect"
-            else {},
-            "confusable_with": [r for r in named if r != verdict],
-            "separate_by": ({r: collinear.separation(verdict, [r])[r] for r in named
-                             if r != verdict} if outcome == "effect" else {}),
-            "differ_on": separate, "notes": [],
-            "symptom": symptom(next((e for e in rows if e.name == "no_difference"), None),
-                               reference)}
-
-
-def _answer(outcome, lead, stated, lack, separate) -> str:
-    others = [r for r in stated if r is not lead]
-    alt = "; ".join(f"or {r['name']} ({100 * r['probability']:.0f} %: {r['magnitude']})"
-                    for r in others)
-    if outcome == "unexplained":
-        where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in lack.items())
-        return (f"Not in the library: after the most probable reading ({lead['name']}, "
-                f"{100 * lead['probability']:.0f} %: {lead['magnitude']}) the residual stays "
-                f"beyond the reference flights' on {where} their typical RMS.")
-    if outcome == "no_significant_gap":
-        text = (f"No difference from the reference flights "
-                f"({100 * lead['probability']:.0f} %).")
-        return text + (f" Next: {alt}." if alt else "")
-    text = f"{lead['name']} ({100 * lead['probability']:.0f} %): {lead['magnitude']}."
-    if lead["probability"] < CONFIDENT:
-        text += " Tentative."
-    if alt:
-        text += f" {alt[0].upper()}{alt[1:]}."
-        if separate:
-            text += f" They differ most on {', '.join(separate)}."
-    return text
-

@@ -8,10 +8,10 @@ What is kept, and what it is keyed by (an effect is its class and its values):
 * per flight (:func:`flight_memo`): the body-to-world rotations of the logged attitude and a
   dict the effects keep their own motion-only values in (the cable's attachment
   acceleration and swings) -- keyed by the identity of the logged-motion arrays;
-* per evaluation kind (:func:`_memo`, oldest evicted first past 64 entries): the measured
+* per evaluation kind (:func:`memoised`, oldest evicted first past 64 entries): the measured
   wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
-  model (:func:`_rotor_key`: the effects with a speed factor or rotor dynamics), the model
-  wrench of one set of effects that reach it (:func:`_wrench_key`: a motor lag does not),
+  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics), the model
+  wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
   the states shifted by one rotor delay;
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
   past :data:`KEPT` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
@@ -35,15 +35,16 @@ from ..effects.base import EffectBase
 if TYPE_CHECKING:
     from ..vehicle.params import VehicleParams
 
-__all__ = ["flight_memo", "kept", "identity", "KEPT"]
+__all__ = ["KEPT", "acting", "flight_memo", "identity", "kept", "memoised", "rotor_key",
+           "wrench_key"]
 
 
-#: kinds of :func:`_memo` entries that one model or one rotor timing owns (evicted oldest
+#: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
 #: first); the per-flight ones (:func:`flight_memo`) are kept.
 _PER_EVALUATION = ("measured", "rotor", "wrench", "shifted")
 
 
-def _memo(memo: dict, key: tuple, states, compute):
+def memoised(memo: dict, key: tuple, states, compute):
     """``memo[key]`` (computed once): parts of the residual that many evaluations on the
     same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
     command -> speed model). The entry holds ``states`` so that its id stays its own."""
@@ -82,11 +83,11 @@ def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
 _WRENCH_HOOKS = ("loads", "apply_to_params", "air_velocity")
 
 
-def _wrench_key(states, params: VehicleParams, effects: list) -> tuple:
+def wrench_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the model wrench depends on besides ``states`` and ``params``: the class and
     values of every effect that reaches it (the others only move the rotor channel, so a
     motor-lag fit evaluates the wrench once per rotor timing)."""
-    return ("wrench", id(states), id(params), _acting(effects, _WRENCH_HOOKS))
+    return ("wrench", id(states), id(params), acting(effects, _WRENCH_HOOKS))
 
 
 #: the hooks through which an effect reaches the rotor channel (:func:`quadsim.gap.rotor_channel.rotor_residual`).
@@ -103,7 +104,7 @@ def identity(effect) -> tuple:
     return key
 
 
-def _acting(effects: list, hooks: tuple) -> tuple:
+def acting(effects: list, hooks: tuple) -> tuple:
     """:func:`identity` of each effect, in order, whose class has its own version of one of
     ``hooks``."""
     return tuple(identity(e) for e in effects if _overrides(type(e), hooks))
@@ -149,7 +150,13 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     return value
 
 
-def _rotor_key(states, params: VehicleParams, effects: list) -> tuple:
+def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
     the effects with a speed factor or rotor dynamics, in order (:func:`quadsim.gap.rotor_channel.rotor_residual`)."""
-    return ("rotor", id(states), id(params), _acting(effects, _ROTOR_HOOKS))
+    return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
+
+
+_memo = memoised  # alias for other modules until integration
+_rotor_key = rotor_key  # alias for other modules until integration
+_wrench_key = wrench_key  # alias for other modules until integration
+_acting = acting  # alias for other modules until integration

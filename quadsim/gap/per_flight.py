@@ -5,7 +5,7 @@ Used as ``python -m quadsim.gap --per-flight LOG... --reference NOMINAL...`` or:
 
     >>> from quadsim.gap import diagnose_per_flight
     >>> result = diagnose_per_flight(flights, nominal_flights, load_params("crazyflie21"))
-    >>> [(f["file"], f["verdict"], f["probability"]) for f in result["flights"]]
+    >>> [(f.file, f.name, f.probability) for f in result.flights]
 
 Stages (each a named type, each testable alone):
 
@@ -18,7 +18,10 @@ Stages (each a named type, each testable alone):
    effect, a shared parameter at a value of its own, a signal delay, or none), fitted on the
    whole flight, with its Laplace evidence.
 4. :func:`quadsim.gap.judge.judge`: posterior probability per reading, a lack-of-fit test
-   ("not in the library"), the answer with magnitudes and what separates the leaders.
+   against the reference flights ("not in the library"), the answer with magnitudes and what
+   separates the leaders -> :class:`quadsim.gap.result.Verdict`.
+
+The result is a :class:`quadsim.gap.result.Diagnosis` (``mode`` ``"per-flight"``).
 
 A flight that cannot be judged (a log the checks refuse, too short to smooth, a rotor count
 that is not the model's) gets ``outcome: refused`` with its reason in its own entry; the
@@ -46,12 +49,15 @@ from .diagnose import SCHEMA, prepare
 from .envelope import envelope_summary, local_reference
 from .envelope import position as envelope_position
 from .evidence import evaluate, explanations_for
-from .judge import judge
+from .judge import channel_names, judge
 from .residual import DEFAULT_WINDOW_S
+from .result import Diagnosis, Verdict
 from .selfcheck import leave_one_out, self_check_of
+from .words import batch_answer
 
-__all__ = ["diagnose_per_flight", "judge_one", "per_flight_answer", "MIN_REFERENCE",
-           "reference_summary", "refused_entry"]
+__all__ = ["MIN_REFERENCE", "Weighed", "diagnose_per_flight", "judge_one",
+           "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
+           "weigh_flight"]
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).
 MIN_REFERENCE = 10
@@ -61,7 +67,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         params: VehicleParams, *, effects: Sequence[str] | None = None,
                         progress: Callable | None = None,
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
-                        refused: Sequence[tuple[int, str, str]] = ()) -> dict:
+                        refused: Sequence[tuple[int, str, str]] = ()) -> Diagnosis:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
@@ -76,47 +82,23 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ref.self_check = reference_self_check(ref_flights, ref, effects)
     if progress is not None:
         progress("reference")
-    notes = ([f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
-              "give 10 or more"] if len(ref_flights) < MIN_REFERENCE else [])
+    notes = ([(f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
+              "give 10 or more")] if len(ref_flights) < MIN_REFERENCE else [])
     notes += delay_notes(ref_flights)
     one = partial(judge_one, reference=ref, effects=effects, window_s=window_s)
     flights = []
     for entry in map_fn(one, logs):
         flights.append(entry)
         if progress is not None and map_fn is map:
-            progress(entry["file"])
+            progress(entry.file)
     for position, name, reason in sorted(refused):
         flights.insert(position, refused_entry(name, reason))
-    return {"schema": SCHEMA, "model": params.name, "mode": "per-flight",
-            "reference": ref.names, "reference_model": reference_summary(ref),
-            "reference_refit": {k: v for k, v in ref.values().items()
-                                if k.startswith("nominal_refit.")},
-            "flights": flights, "checks": vehicle, "notes": notes,
-            "where": {}, "effects": [],
-            "verdict": {"outcome": "effect" if any(f["outcome"] == "effect" for f in flights)
-                        else "unexplained", "effect": "see flights",
-                        "answer": per_flight_answer(flights), "reduction": None,
-                        "confusable_with": []}}
-
-
-def reference_self_check(ref_flights: list, ref: Reference, effects=None):
-    """The references judged against each other (:mod:`quadsim.gap.selfcheck`): each
-    reference weighed against :func:`~quadsim.gap.selfcheck.leave_one_out` of ``ref``, then
-    judged with the other references' readings as the practical-significance scale. None
-    for fewer than 3 references."""
-    if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
-        return None
-    weighed = []
-    for j, f in enumerate(ref_flights):
-        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
-        weighed.append(None if isinstance(w, dict) else w)
-
-    def judge_fn(j, check):
-        return entry_of(weighed[j], dataclasses.replace(weighed[j].reference,
-                                                        self_check=check))
-
-    return self_check_of([f.name for f in ref_flights],
-                         [None if w is None else w.rows for w in weighed], judge_fn)
+    return Diagnosis(SCHEMA, params.name, "per-flight", flights=tuple(flights),
+                     answer=batch_answer(flights), reference=tuple(ref.names),
+                     reference_model=reference_summary(ref),
+                     reference_refit={k: v for k, v in ref.values().items()
+                                      if k.startswith("nominal_refit.")},
+                     checks=vehicle, notes=tuple(notes))
 
 
 def reference_summary(ref: Reference) -> dict:
@@ -128,8 +110,6 @@ def reference_summary(ref: Reference) -> dict:
     speed-per-command exponent their map implies for a propeller change
     (:func:`quadsim.gap.motor_map.load_exponent`); the shared effects' fixed values (the
     thrust curve's centre, rad/s)."""
-    from .judge import channel_names
-
     names = channel_names(ref)
     return {"params": ref.values(),
             "se": dict(zip(ref.candidate.parameter_names, map(float, ref.se_pool))),
@@ -155,11 +135,31 @@ def reference_summary(ref: Reference) -> dict:
             "self_check": None if ref.self_check is None else ref.self_check.to_json()}
 
 
+def reference_self_check(ref_flights: list, ref: Reference, effects=None):
+    """The references judged against each other (:mod:`quadsim.gap.selfcheck`): each
+    reference weighed against :func:`~quadsim.gap.selfcheck.leave_one_out` of ``ref``, then
+    judged with the other references' readings as the practical-significance scale. None
+    for fewer than 3 references."""
+    if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
+        return None
+    weighed = []
+    for j, f in enumerate(ref_flights):
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
+        weighed.append(w if isinstance(w, Weighed) else None)
+
+    def judge_fn(j, check):
+        return verdict_of(weighed[j], check)
+
+    return self_check_of([f.name for f in ref_flights],
+                         [None if w is None else w.rows for w in weighed], judge_fn)
+
+
 def judge_one(log: FlightLog, reference: Reference, effects=None,
-              window_s: float = DEFAULT_WINDOW_S, full: bool = False) -> dict:
-    """One flight's entry (module level: sent to workers); ``refused`` with the reason when
-    the flight cannot be judged. ``full``: every explanation fully fitted (no screen,
-    :func:`quadsim.gap.evidence.evaluate`)."""
+              window_s: float = DEFAULT_WINDOW_S, full: bool = False) -> Verdict:
+    """One flight's :class:`~quadsim.gap.result.Verdict` (module level: sent to workers);
+    ``refused`` with the reason when the flight cannot be judged. ``effects``: restrict the
+    explanations; ``window_s`` (s): smoothing window; ``full``: every explanation fully
+    fitted (no screen, :func:`quadsim.gap.evidence.evaluate`)."""
     name = str(log.path) if getattr(log, "path", None) is not None else "log"
     try:
         with warnings.catch_warnings():
@@ -169,9 +169,9 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
     weighed = weigh_flight(flight, reference, effects, full=full, name=name)
-    if isinstance(weighed, dict):
+    if not isinstance(weighed, Weighed):
         return weighed
-    return entry_of(weighed, reference)
+    return verdict_of(weighed, reference.self_check)
 
 
 @dataclass(frozen=True)
@@ -189,8 +189,8 @@ class Weighed:
 
 
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
-                 name: str = "log") -> Weighed | dict:
-    """The :class:`Weighed` of a prepared flight, or its ``refused`` entry."""
+                 name: str = "log") -> Weighed | Verdict:
+    """The :class:`Weighed` of a prepared flight, or its ``refused`` verdict."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
@@ -221,39 +221,25 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
     return Weighed(flight, rows, reference, place, law)
 
 
-def entry_of(weighed: Weighed, reference: Reference | None = None) -> dict:
-    """The per-flight entry of a :class:`Weighed` flight (``reference``: the model whose
-    self-check the verdict reads; default the weighed one's)."""
+def verdict_of(weighed: Weighed, check=None) -> Verdict:
+    """The :class:`~quadsim.gap.result.Verdict` of a :class:`Weighed` flight, judged with the
+    references' self-check ``check`` (:class:`quadsim.gap.selfcheck.SelfCheck`, or None)."""
     flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
-    reference = weighed.reference if reference is None else dataclasses.replace(
-        weighed.reference, self_check=reference.self_check)
-    entry = judge(rows, reference, flight.name)
-    entry["drag_law"] = None if law is None else law.variant    # in words; None: theirs
-    if law is not None:
-        entry["answer"] += f" Judged with {entry['drag_law']} (the law this flight shows)."
-    if place is not None:
-        entry["envelope"] = place.to_json()
-        if place.distance > 0:
-            entry["answer"] += f" Flown {place.text}."
-    entry["signal_delays_ms"] = flight.delays_ms
-    entry["notes"].extend(delay_notes([flight]))
-    return entry
+    reference = dataclasses.replace(weighed.reference, self_check=check)
+    verdict = judge(rows, reference, flight.name)
+    words = verdict.answer
+    if law is not None:       # the drag law in words; None: the references'
+        words += f" Judged with {law.variant} (the law this flight shows)."
+    if place is not None and place.distance > 0:
+        words += f" Flown {place.text}."
+    return dataclasses.replace(
+        verdict, answer=words, drag_law=None if law is None else law.variant,
+        envelope=None if place is None else place.to_json(),
+        signal_delays_ms=flight.delays_ms,
+        notes=verdict.notes + tuple(delay_notes([flight])))
 
 
-def refused_entry(name: str, reason: str) -> dict:
-    """The entry of a flight that could not be judged, with the reason."""
-    return {"file": name, "outcome": "refused", "verdict": "refused",
-            "answer": f"Not judged: {reason}", "reason": reason, "probability": None,
-            "readings": [], "posterior": [], "notes": []}
-
-
-def per_flight_answer(flights: list[dict]) -> str:
-    counts: dict[str, int] = {}
-    for f in flights:
-        counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
-    refused = counts.get("refused", 0)
-    judged = len(flights) - refused
-    text = f"{judged} flights judged against the reference flights: " + ", ".join(
-        f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
-        if k != "refused")
-    return text + (f"; {refused} refused (see each flight's reason)" if refused else "")
+def refused_entry(name: str, reason: str) -> Verdict:
+    """The verdict of a flight that could not be judged, with the reason."""
+    return Verdict("refused", "refused", f"Not judged: {reason}", None, file=name,
+                   reason=reason)

@@ -15,24 +15,18 @@ import numpy as np
 
 from ..core.files import atomic_write_text
 from .residual import channel_unit
+from .result import plain
 
-__all__ = ["to_json", "summary", "write_json", "write_html", "write_rerun", "public"]
-
-
-def public(result: dict) -> dict:
-    """The JSON-able part of a result (keys starting with ``_`` are dropped, recursively)."""
-    if isinstance(result, dict):
-        return {k: public(v) for k, v in result.items() if not str(k).startswith("_")}
-    if isinstance(result, list):
-        return [public(v) for v in result]
-    if isinstance(result, (np.floating, np.integer)):
-        return result.item()
-    if isinstance(result, float) and not np.isfinite(result):
-        return None
-    return result
+__all__ = ["document", "summary", "to_json", "write_html", "write_json", "write_rerun"]
 
 
-def to_json(result: dict) -> str:
+def document(result) -> dict:
+    """The JSON object of ``result``: a :class:`~quadsim.gap.result.Diagnosis`'s
+    ``to_json()``, or a result already read as a dict (numbers made plain)."""
+    return result.to_json() if hasattr(result, "to_json") else plain(result)
+
+
+def to_json(result) -> str:
     """Stable JSON text: sorted keys, 6 significant digits, newline at the end."""
     def rounded(value):
         if isinstance(value, float):
@@ -43,10 +37,11 @@ def to_json(result: dict) -> str:
             return [rounded(v) for v in value]
         return value
 
-    return json.dumps(rounded(public(result)), indent=1, sort_keys=True) + "\n"
+    return json.dumps(rounded(document(result)), indent=1, sort_keys=True) + "\n"
 
 
-def write_json(path: str | Path, result: dict) -> Path:
+def write_json(path: str | Path, result) -> Path:
+    """``result`` as JSON text (:func:`to_json`) at ``path``, written atomically."""
     return atomic_write_text(path, to_json(result))
 
 
@@ -140,17 +135,17 @@ def _figures(result: dict) -> list[tuple[str, str]]:
     import matplotlib.pyplot as plt
 
     figs = []
-    series = result.get("_series")
+    series = getattr(result, "series", None)
     if series is not None:
-        channels = series["channels"][:6]
+        channels = series.channels[:6]
         fig, axes = plt.subplots(6, 1, figsize=(9, 10), sharex=True)
         for k, ax in enumerate(axes):
-            ax.plot(series["t"], series["before"][:, k], lw=0.8, label="nominal")
-            ax.plot(series["t"], series["after"][:, k], lw=0.8, label="with verdict")
+            ax.plot(series.t, series.before[:, k], lw=0.8, label="nominal")
+            ax.plot(series.t, series.after[:, k], lw=0.8, label="with verdict")
             ax.set_ylabel(f"{channels[k]} ({channel_unit(channels[k])})")
         axes[0].legend(loc="upper right")
         axes[-1].set_xlabel("t (s)")
-        figs.append((f"Residual wrench, held-out flight {Path(series['flight']).name}", _png(fig)))
+        figs.append((f"Residual wrench, held-out flight {Path(series.flight).name}", _png(fig)))
     effects = result["effects"]
     if effects:
         fig, ax = plt.subplots(figsize=(8, 3.5))
@@ -228,7 +223,7 @@ def write_html(path: str | Path, result: dict) -> Path:
 def write_rerun(path: str | Path, result: dict) -> Path | None:
     """Residual wrench (nominal and with the verdict) over the first held-out flight, via
     :func:`quadsim.viewer.try_save_recording` (None and a message when unavailable)."""
-    series = result.get("_series")
+    series = getattr(result, "series", None)
     if series is None:
         print("note: --rerun: no residual series in this result (per-flight mode); skipped")
         return None
@@ -239,12 +234,12 @@ def write_rerun(path: str | Path, result: dict) -> Path | None:
         return None
     from ..vehicle.state import Trajectory
 
-    s = series["states"]
+    s = series.states
     flight = Trajectory(s.t, s.position, s.velocity, s.quat, s.body_rate, s.rotor_speed,
                         engine="log")
-    labels = series["channels"][:6]
-    residuals = {"nominal": (s.t, series["before"][:, :6], labels),
-                 "with_verdict": (s.t, series["after"][:, :6], labels)}
-    return try_save_recording(path, params=series["params"], trajectories={"log": flight},
+    labels = list(series.channels[:6])
+    residuals = {"nominal": (s.t, series.before[:, :6], labels),
+                 "with_verdict": (s.t, series.after[:, :6], labels)}
+    return try_save_recording(path, params=series.params, trajectories={"log": flight},
                               residuals=residuals, title="quadsim gap: residual wrench",
                               tab="residuals")

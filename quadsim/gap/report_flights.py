@@ -48,8 +48,8 @@ def flights_summary(result: dict) -> str:
     """A few lines for people: the answer, then one line per flight."""
     model = result.get("reference_model", {})
     lines = [f"answer: {result['verdict'].get('answer', '')}",
-             f"per-flight diagnosis against {len(result['reference'])} reference flights "
-             f"(reference model: {len(model.get('params', {}))} shared parameters calibrated)"]
+             (f"per-flight diagnosis against {len(result['reference'])} reference flights "
+              f"(reference model: {len(model.get('params', {}))} shared parameters calibrated)")]
     for f in result["flights"]:
         answer = f.get("answer", "")
         said = answer.startswith(f["verdict"]) or f["outcome"] == "refused"

@@ -1,7 +1,7 @@
 """The JSON Schema of the ``quadsim.gap/3`` result (documented in docs/gap.md).
 
 Version 3 (from 2): per-flight and held-out results are judged by evidence
-(:mod:`quadsim.gap.judge`, :mod:`quadsim.gap.heldout_verdict`); a held-out verdict carries
+(:mod:`quadsim.gap.judge`); a held-out verdict carries
 ``probability`` and ``posterior`` (the per-flight reading rows), each ``effects`` entry
 ``probability``, ``log_evidence`` and ``undetermined``, the result ``noise_model``.
 Each flight carries ``probability`` (of its verdict's reading), ``posterior`` (every reading,
@@ -22,6 +22,7 @@ units, ``at_floor``), the ``alternatives`` (collinear candidates with physical m
 and plausibility), parameter ``units``; each per-flight entry carries the same, plus
 ``checks`` (model/vehicle consistency) in the result.
 
+The object is :meth:`quadsim.gap.result.Diagnosis.to_json`.
 ``python -m quadsim.gap ... --json OUT.json`` writes an object that validates against
 :data:`GAP_SCHEMA` (draft 2020-12). Numbers are rounded to 6 significant digits; keys sorted.
 """
@@ -210,8 +211,11 @@ GAP_SCHEMA = {
 }
 
 
-def validate(document: dict) -> None:
-    """Raise ``jsonschema.ValidationError`` if ``document`` does not follow the schema."""
+def validate(document) -> None:
+    """Raise ``jsonschema.ValidationError`` if ``document`` (a JSON object, or a
+    :class:`quadsim.gap.result.Diagnosis`: its ``to_json()``) does not follow the schema."""
     import jsonschema
 
+    if hasattr(document, "to_json"):
+        document = document.to_json()
     jsonschema.validate(document, GAP_SCHEMA)

@@ -273,8 +273,9 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
     """The :class:`SelfCheck` of reference flights ``names`` from each one's Evidence rows
     against the leave-one-out reference (``rows_list[j]``: flight j's rows, or None where it
     could not be judged). ``judge_fn(j, check)`` judges flight j with ``check`` (the
-    references' readings without flight j) and returns its entry (``verdict``,
-    ``lack_of_fit``, ``differ_on``)."""
+    references' readings without flight j) and returns its
+    :class:`~quadsim.gap.result.Verdict` (``outcome``, ``name``, ``lack_of_fit``,
+    ``differ_on``)."""
     per = [readings(rows) if rows is not None else {} for rows in rows_list]
     verdicts, alarms = [], []
     for j, name in enumerate(names):
@@ -282,9 +283,9 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
             verdicts.append("refused")
             continue
         others = SelfCheck(tuple(names), (), (), spreads(per[:j] + per[j + 1:]))
-        entry = judge_fn(j, others)
-        verdicts.append(entry["verdict"])
-        if entry["outcome"] != "no_significant_gap":
-            chans = tuple(entry.get("lack_of_fit") or {}) or tuple(entry.get("differ_on") or ())
-            alarms.append((name, entry["verdict"], chans))
+        verdict = judge_fn(j, others)
+        verdicts.append(verdict.name)
+        if verdict.outcome != "no_significant_gap":
+            chans = tuple(verdict.lack_of_fit or {}) or tuple(verdict.differ_on or ())
+            alarms.append((name, verdict.name, chans))
     return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per))

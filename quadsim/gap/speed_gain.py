@@ -31,9 +31,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..effects.base import EffectBase, EffectParameter
-from . import fitting
+from ..effects.facts import EffectFacts, Scale, Words, plus_minus
 
-__all__ = ["SpeedGain", "PART"]
+__all__ = ["PART", "SpeedGain"]
+
+
+def _phrase(parameter, value, ci, params) -> str:
+    return f"the rotors spin {plus_minus(value, ci, 1e2)} % faster per command (steady speed)"
 
 
 class SpeedGain(EffectBase):
@@ -44,6 +48,13 @@ class SpeedGain(EffectBase):
         EffectParameter("gain", "1", 0.0, -0.5, 1.0,
                         "relative change of the steady rotor speed per command"),
     )
+    facts = EffectFacts(
+        fitted=("gain",),
+        upstream_of_speed=True,
+        scales={"gain": Scale(lambda p: 0.01, "1 %: the references' own gain stays within a few "
+                                             "per cent (module doc)")},
+        words={"gain": Words("steady speed per command", "%", 100.0, _phrase)},
+    )
 
     def speed_factor(self, t, vbat=None):
         if self.gain == 0.0:
@@ -51,7 +62,5 @@ class SpeedGain(EffectBase):
         return np.full(len(np.atleast_1d(t)), 1.0 + self.gain)
 
 
-fitting.LOCAL_EFFECTS["speed_gain"] = SpeedGain
-fitting.FIT_SPEC["speed_gain"] = (("gain",), {}, lambda p: [0.01])
 #: the shared-candidate part (name, fixed, fitted)
 PART = ("speed_gain", {}, ("gain",))

@@ -28,10 +28,12 @@ from ..core.errors import QuadsimError
 from ..core.frames import quat_conjugate, quat_multiply
 from ..effects.base import EffectSet
 from ..vehicle.params import VehicleParams
-from .rotor_channel import rate_owner
+from .fitting import residuals
 from .residual import FlightStates
+from .rotor_channel import rate_owner
 
-__all__ = ["regime_masks", "by_regime", "by_band", "kstep_errors", "BANDS_HZ", "HORIZONS_S"]
+__all__ = ["BANDS_HZ", "HORIZONS_S", "by_band", "by_regime", "kstep_errors", "regime_masks",
+           "scaled_residuals", "where"]
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
 HORIZONS_S = (0.05, 0.1, 0.2, 0.5, 1.0)
@@ -41,6 +43,43 @@ HORIZONS_S = (0.05, 0.1, 0.2, 0.5, 1.0)
 #: over the log (a 1S LiPo falls 4.2 -> 3.7 V, 12 %, over a full flight; 2 % = 80 mV is far
 #: above the mV noise of a voltage log).
 MIN_VBAT_DROP = 0.02
+
+
+def scaled_residuals(states: list[FlightStates], params: VehicleParams, effects: list,
+                     sigma: np.ndarray, *, rotor: bool) -> list[np.ndarray]:
+    """Each flight's residual (N_j, C) under ``params`` plus ``effects``
+    (:func:`quadsim.gap.fitting.residuals`) divided by the noise scale ``sigma`` (C,)."""
+    return [residuals(s, params, effects, rotor_channel=rotor) / sigma for s in states]
+
+
+def where(held: list[FlightStates], params: VehicleParams, *, names: list[str],
+          sigma: np.ndarray, before: list[np.ndarray], after: list[np.ndarray],
+          effects_after: list, base: list, kstep: bool) -> dict:
+    """The ``where`` block of a held-out result: per channel (``names``) the noise scale, the
+    held-out RMS before and after (channel units) and the share of the squared gap; by
+    regime (before and after), by band, and the k-step errors under ``base`` and
+    ``effects_after`` (``kstep`` False: empty). ``before``/``after``: the held-out flights'
+    residuals over ``sigma`` under the nominal model and with the verdict."""
+    masks = [regime_masks(s, params) for s in held]
+    dt = float(held[0].t[1] - held[0].t[0])
+    energy = np.sum(np.concatenate(before) ** 2, axis=0)
+
+    def rms(scaled):
+        return np.sqrt(np.mean(np.concatenate(scaled) ** 2, axis=0)) * sigma
+
+    return {
+        "channels": list(names),
+        "noise_scale": dict(zip(names, map(float, sigma))),
+        "heldout_rms_before": dict(zip(names, map(float, rms(before)))),
+        "heldout_rms_after": dict(zip(names, map(float, rms(after)))),
+        "channel_share": dict(zip(names, map(float, energy / max(energy.sum(), 1e-300)))),
+        "regime": by_regime(before, masks),
+        "regime_after": by_regime(after, masks),
+        "band": by_band(before, dt),
+        "kstep_before": kstep_errors(held, params, list(base)) if kstep else {},
+        "kstep_after": kstep_errors(held, params, effects_after) if kstep else {},
+    }
+
 
 def regime_masks(states: FlightStates, params: VehicleParams) -> dict[str, np.ndarray]:
     """Boolean masks (N,) per flight regime (see module docstring)."""
@@ -108,11 +147,11 @@ def kstep_errors(flights: list[FlightStates], params: VehicleParams, effects: li
 
     effects = [e for e in effects if rate_owner([e]) is None]
     dt = float(flights[0].t[1] - flights[0].t[0])
-    steps = {h: max(1, int(round(h / dt))) for h in HORIZONS_S}
+    steps = {h: max(1, round(h / dt)) for h in HORIZONS_S}
     horizon = max(steps.values())
     picks = []
     for f, states in enumerate(flights):
-        nodes = np.arange(0, len(states.t) - horizon - 1, max(1, int(round(node_every_s / dt))))
+        nodes = np.arange(0, len(states.t) - horizon - 1, max(1, round(node_every_s / dt)))
         picks += [(f, int(n)) for n in nodes]
     empty = {f"{h:g}": {"position_rms_m": None, "attitude_rms_rad": None} for h in HORIZONS_S}
     if not picks:

@@ -1,0 +1,270 @@
+"""The result types of the gap diagnosis: :class:`Reading`, :class:`Verdict`, :class:`Diagnosis`.
+
+Both modes return a :class:`Diagnosis` (``mode`` ``"per-flight"`` or ``"held-out"``): per
+flight it holds one :class:`Verdict` per flight (``flights``), held out one :class:`Verdict`
+for the held-out flights (``verdict``). A verdict's ``outcome`` is one of :data:`OUTCOMES`:
+``effect`` (its ``name`` is the reading, e.g. ``"mass_offset"``), ``no_significant_gap``,
+``unexplained`` or ``refused`` (a flight that could not be judged, with its ``reason``).
+
+``to_json()`` gives the ``quadsim.gap/3`` JSON object (:mod:`quadsim.gap.schema`): plain
+dicts, lists, str, float, bool and None, the same keys as before these types existed. The
+types are also read-only mappings over that JSON (``result["verdict"]["effect"]``,
+``flight["probability"]``), so code written against the dict results keeps working. Arrays
+for plots and recordings (:class:`Series`) are a named field that ``to_json`` leaves out by
+design: they are not part of the result file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+__all__ = ["OUTCOMES", "Diagnosis", "Reading", "Series", "Verdict", "plain"]
+
+#: a verdict's outcomes (``refused``: per flight only).
+OUTCOMES = ("effect", "no_significant_gap", "unexplained", "refused")
+
+
+def plain(value):
+    """``value`` with numpy scalars as Python numbers, tuples as lists, non-finite floats as
+    None (JSON has no NaN), recursively through dicts and lists."""
+    if isinstance(value, Mapping):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+class _JsonView(Mapping):
+    """Read-only mapping access to ``to_json()`` (computed once)."""
+
+    @cached_property
+    def _json(self) -> dict:
+        return self.to_json()
+
+    def __getitem__(self, key):
+        return self._json[key]
+
+    def __iter__(self):
+        return iter(self._json)
+
+    def __len__(self) -> int:
+        return len(self._json)
+
+    __hash__ = None   # mutable JSON inside: not a dict key
+
+
+@dataclass(frozen=True, eq=False)
+class Reading(_JsonView):
+    """One reading of the posterior: ``name`` (an effect, a pair ``a+b``, or
+    ``no_difference``), its posterior ``probability``, its ``magnitude`` in words (determined
+    values only), ``log_evidence`` (natural log), the determined ``params`` with their 95 %
+    half-interval ``ci`` (parameter units, :func:`quadsim.gap.collinear.unit_of`), the
+    ``undetermined`` parameter names, the ``fixed`` values and the explanation's ``variant``."""
+
+    name: str
+    probability: float
+    magnitude: str
+    log_evidence: float
+    params: Mapping = field(default_factory=dict)
+    ci: Mapping = field(default_factory=dict)
+    undetermined: tuple = ()
+    fixed: Mapping = field(default_factory=dict)
+    variant: str = ""
+
+    def to_json(self) -> dict:
+        return plain({"name": self.name, "probability": self.probability,
+                      "magnitude": self.magnitude, "log_evidence": self.log_evidence,
+                      "params": dict(self.params), "ci": dict(self.ci),
+                      "undetermined": list(self.undetermined), "fixed": dict(self.fixed),
+                      "variant": self.variant})
+
+
+#: JSON keys of a held-out verdict beyond the common ones (the field of the same name).
+_HELDOUT_KEYS = ("floor_source", "channels", "alternatives", "best_candidate",
+                 "heldout_channel_gap_after", "reduction", "heldout_gap_before",
+                 "heldout_gap_after")
+#: JSON keys of a judged flight beyond the common ones.
+_FLIGHT_KEYS = ("differ_on", "symptom", "drag_law", "signal_delays_ms", "form_remainder",
+                "self_check_clean")
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Verdict(_JsonView):
+    """The judgment of one flight (``file`` set) or of the held-out flights (``file`` None).
+
+    Common: ``outcome`` (:data:`OUTCOMES`); ``name``: the reading named when ``outcome`` is
+    ``effect``, else the outcome (JSON key ``verdict`` per flight, ``effect`` held out);
+    ``answer`` in words (:mod:`quadsim.gap.words`); ``probability`` of the lead reading
+    (None when refused); ``tentative``; ``posterior`` (every :class:`Reading`, most probable
+    first); ``readings`` (names stated with the named one, probability >= READING_P);
+    ``lack_of_fit`` (channel -> RMS over the baseline's typical RMS, channels beyond it
+    only); the named reading's ``params``/``ci``/``fixed``/``units``; ``confusable_with``
+    and ``separate_by``; ``notes``; ``consistency``/``partial`` (:mod:`.consistency`, held
+    out, when a name was checked).
+
+    Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
+    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``. Held out: ``floor_source``, ``channels`` (RMS before/after/floor
+    per channel, units), ``alternatives``, ``best_candidate``, ``reduction`` and the gaps
+    (mean squared residual over sigma^2, 1 = noise)."""
+
+    outcome: str
+    name: str
+    answer: str
+    probability: float | None = None
+    tentative: bool = False
+    posterior: tuple = ()
+    readings: tuple = ()
+    lack_of_fit: Mapping = field(default_factory=dict)
+    params: Mapping = field(default_factory=dict)
+    ci: Mapping = field(default_factory=dict)
+    fixed: Mapping = field(default_factory=dict)
+    units: Mapping = field(default_factory=dict)
+    confusable_with: tuple = ()
+    separate_by: Mapping = field(default_factory=dict)
+    notes: tuple = ()
+    consistency: Mapping | None = None
+    partial: Mapping | None = None
+    # per flight
+    file: str | None = None
+    reason: str | None = None
+    differ_on: tuple = ()
+    symptom: Mapping = field(default_factory=dict)
+    drag_law: str | None = None
+    envelope: Mapping | None = None
+    signal_delays_ms: Mapping = field(default_factory=dict)
+    # held out
+    floor_source: str = ""
+    channels: Mapping = field(default_factory=dict)
+    alternatives: tuple = ()
+    best_candidate: str | None = None
+    heldout_channel_gap_after: Mapping = field(default_factory=dict)
+    reduction: float | None = None
+    heldout_gap_before: float | None = None
+    heldout_gap_after: float | None = None
+    #: per flight: what a tentatively named reading leaves (channel -> RMS over the
+    #: references' typical RMS; :data:`quadsim.gap.judge.FORM_ERROR_TENTATIVE`)
+    form_remainder: Mapping = field(default_factory=dict)
+    #: per flight: whether the references judge themselves clean
+    #: (:class:`quadsim.gap.selfcheck.SelfCheck`); None without a self-check
+    self_check_clean: bool | None = None
+
+    def __repr__(self) -> str:
+        where = f"{self.file!r}, " if self.file is not None else ""
+        return f"Verdict({where}{self.outcome!r}, {self.name!r}, p={self.probability})"
+
+    def to_json(self) -> dict:
+        out = {"outcome": self.outcome, "answer": self.answer,
+               "probability": self.probability, "readings": list(self.readings),
+               "posterior": [r.to_json() if isinstance(r, Reading) else r
+                             for r in self.posterior],
+               "notes": list(self.notes)}
+        if self.file is not None:
+            out.update(file=self.file, verdict=self.name)
+            if self.outcome == "refused":
+                out["reason"] = self.reason
+                return plain(out)
+        else:
+            out["effect"] = self.name
+            del out["notes"]            # held out: the notes are the result's
+        out.update(tentative=self.tentative, lack_of_fit=dict(self.lack_of_fit),
+                   params=dict(self.params), ci=dict(self.ci), fixed=dict(self.fixed),
+                   units=dict(self.units), confusable_with=list(self.confusable_with),
+                   separate_by=dict(self.separate_by))
+        for key in ("consistency", "partial"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        keys = _FLIGHT_KEYS if self.file is not None else _HELDOUT_KEYS
+        out.update({k: getattr(self, k) for k in keys})
+        if self.file is not None and self.envelope is not None:
+            out["envelope"] = self.envelope
+        return plain(out)
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Series:
+    """Arrays for plots and recordings, over the first held-out flight (not in the JSON):
+    ``t`` (N,) s; ``before``/``after`` (N, C) residuals in channel units (N, N m, rad/s) under
+    the nominal model and with the verdict's effects; ``channels`` (C names); ``flight`` its
+    name; ``states`` (:class:`quadsim.gap.residual.FlightStates`), ``params`` and
+    ``effects`` (the model with the verdict)."""
+
+    t: np.ndarray
+    before: np.ndarray
+    after: np.ndarray
+    channels: tuple
+    flight: str
+    states: object
+    params: object
+    effects: tuple = ()
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Diagnosis(_JsonView):
+    """The whole result of :func:`quadsim.gap.diagnose` (``mode`` ``"held-out"``) or
+    :func:`quadsim.gap.diagnose_per_flight` (``"per-flight"``).
+
+    ``schema`` (``quadsim.gap/3``), ``model`` (parameter-set name), ``verdict`` (held out:
+    the :class:`Verdict` of the held-out flights; per flight None, the JSON's ``verdict`` is
+    the batch answer ``answer``), ``flights`` (per flight: one :class:`Verdict` each, in
+    input order), ``train``/``holdout``/``reference`` (flight names), ``reference_model``
+    and ``reference_refit`` (per flight: the calibrated reference as JSON), ``noise_model``,
+    ``where`` (:mod:`.where`), ``effects``/``baseline``/``combination`` (held out: every
+    ranked explanation as JSON), ``checks`` (:func:`quadsim.gap.checks.vehicle_check`),
+    ``base_effects``, ``notes``; ``series`` (not in the JSON)."""
+
+    schema: str
+    model: str
+    mode: str
+    verdict: Verdict | None = None
+    flights: tuple = ()
+    answer: str = ""
+    train: tuple = ()
+    holdout: tuple = ()
+    reference: tuple = ()
+    reference_model: Mapping | None = None
+    reference_refit: Mapping | None = None
+    noise_model: Mapping | None = None
+    where: Mapping = field(default_factory=dict)
+    effects: tuple = ()
+    baseline: Mapping | None = None
+    combination: Mapping | None = None
+    checks: Mapping = field(default_factory=dict)
+    base_effects: tuple = ()
+    notes: tuple = ()
+    series: Series | None = None
+
+    def __repr__(self) -> str:
+        judged = self.verdict if self.verdict is not None else f"{len(self.flights)} flights"
+        return f"Diagnosis({self.mode!r}, {self.model!r}, {judged!r})"
+
+    def to_json(self) -> dict:
+        out = {"schema": self.schema, "model": self.model, "where": dict(self.where),
+               "effects": list(self.effects), "checks": self.checks,
+               "notes": list(self.notes)}
+        if self.mode == "per-flight":
+            flights = [f.to_json() for f in self.flights]
+            out.update(mode="per-flight", reference=list(self.reference),
+                       reference_model=self.reference_model,
+                       reference_refit=self.reference_refit, flights=flights,
+                       verdict={"outcome": "effect" if any(f.outcome == "effect"
+                                                           for f in self.flights)
+                                else "unexplained", "effect": "see flights",
+                                "answer": self.answer, "reduction": None,
+                                "confusable_with": []})
+            return plain(out)
+        out.update(train=list(self.train), holdout=list(self.holdout),
+                   baseline=self.baseline or {}, verdict=self.verdict.to_json(),
+                   noise_model=self.noise_model)
+        if self.combination is not None:
+            out["combination"] = self.combination
+        if self.base_effects:
+            out["base_effects"] = list(self.base_effects)
+        return plain(out)

@@ -1,0 +1,293 @@
+"""Readings and verdicts in words: what a user reads in ``answer`` and ``magnitude``.
+
+Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here decides.
+
+* :func:`reading_text`: a reading's magnitude (determined values only, each with its 95 %
+  interval and unit, :func:`quadsim.gap.collinear.describe`); a shared parameter given a
+  value of its own is set beside the references' value (:func:`reference_text`); wind is
+  worded as the steady air force it exerts, with the wind speed at the references' drag.
+* :func:`nominal_words`: the same text where the reference model is the parameter set
+  (held-out mode: "no difference from the nominal model", no references' values).
+* :func:`answer`: the one answer writer of both modes. Its sentences name what the lack
+  of fit was measured against (:attr:`quadsim.gap.judge.Baseline.against`):
+  ``"references"`` (per flight: "Not in the library: ... beyond the reference flights'") or
+  ``"training"`` (held out: "Unexplained: ... does not carry over"; a systematic
+  remainder beyond the noise model is worded with its size in the channel's unit).
+* :func:`batch_answer`: the per-flight result's one line (verdict counts).
+
+Probabilities print as whole percent (``> 99 %`` from 0.995 in held-out wording).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import collinear
+from .explanations import reference_determined
+from .residual import channel_unit
+
+__all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",
+           "reference_text"]
+
+
+def asserted(ev, key: str, off: float = 0.0) -> bool:
+    """Whether ``ev`` asserts parameter ``key``: its value is determined and its 95 %
+    interval (1.96 posterior spreads) excludes the ``off`` value."""
+    return bool(ev.determined.get(key)) and abs(ev.values[key] - off) > 1.96 * ev.post_sd[key]
+
+
+def _value_text(key: str, value: float, sd: float, params) -> str:
+    return collinear.describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
+
+
+#: why a shared value stops at a bound of the references' fit (calibrate.fit_bounds)
+_BOUND_WHY = {"motor_lag.time_constant": "a quarter of a fit sample, a shorter lag is not "
+                                          "resolved"}
+
+
+def reference_text(key: str, value: float, sd: float, reference) -> str:
+    """The references' value of a shared parameter in words; where their fit stopped at a
+    bound, the value without a spread and that it is a bound (the data say only "at or
+    beyond"), e.g. "the rotors lag their commands by +2.5 ms (time constant) or less (their
+    fit's lower bound: a quarter of a fit sample, a shorter lag is not resolved)"."""
+    side = getattr(reference, "at_bound", {}).get(key)
+    if side is None:
+        return _value_text(key, value, sd, reference.params)
+    why = _BOUND_WHY.get(key, "the end of its physical range")
+    return (collinear.describe(key.split(".")[0], {key: value}, {}, reference.params)
+            + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
+
+
+def reading_text(ev, reference) -> str:
+    """The magnitude of a reading in words (determined values only)."""
+    params, name = reference.params, ev.name
+    keys = [k for k, ok in ev.determined.items() if ok]
+    if name == "no_difference":
+        return "no difference from the reference flights"
+    if name == "signal_delay":
+        mean = 1e3 * reference.rotor_shift_s      # the references' fitted rotor timing
+        d = 1e3 * ev.values["delay.rotor"]
+        if not keys:
+            return "rotor speeds logged with a delay of their own (size not determined)"
+        return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
+                f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
+                f"(references: {mean:+.1f} ms against motion capture, fitted)")
+    if name == "wind":
+        return _wind_text(ev, reference)
+    if not keys:
+        return f"{name.replace('_', ' ')} (size not determined by this flight)"
+    calm = _calm_refit(ev)
+    values = {k: ev.values[k] for k in keys if not k.endswith(".alpha") and k not in calm}
+    ci = {k: 1.96 * ev.post_sd[k] for k in values}
+    text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
+    if calm and all(ev.determined.get(k) for k in calm):
+        text += (f"; in calm air (the wind refitted with it, within ±"
+                 f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
+    if ev.explanation.replaces:
+        # the references' own values, where their flights determine them
+        ref, known_ref = reference.values(), reference_determined(reference)
+        s_ref = dict(zip(reference.candidate.parameter_names, reference.s_ref))
+        # only the groups it gives values of its own: a reading on top of a shared group
+        # (the flight's thrust curve about zero speed on the references' slope about their
+        # hover) is another quantity than the references' value of the same name
+        # nor a group the flight's drag law stands in for (its own drag is on top of the law)
+        law = {"rotor_drag", "body_drag"} if any(
+            n == "drag_law" for n, _, _ in ev.explanation.parts) else set()
+        known = [k for k in values if known_ref.get(k, False)
+                 and k.split(".")[0] in set(ev.explanation.replaces) - law]
+        if known:
+            text += " (references: " + "; ".join(
+                reference_text(k, ref[k], s_ref[k], reference) for k in known) + ")"
+    if ev.explanation.variant and ev.explanation.variant not in text:
+        text = f"{ev.explanation.variant}: {text}"
+    return text + _spin_text(name, ev, values, reference)
+
+
+def _spin_text(name: str, ev, values: dict, reference) -> str:
+    """A propeller reading's speed per command, (1 + change)^-alpha, where alpha was fitted
+    (held out it is not: the training flights' map has it): "the rotors would spin +2.1 %
+    per command" (all rotors) or "rotor 4 would spin +0.9 % per command" (one)."""
+    alpha = ev.values.get(f"{name}.alpha")
+    if not reference.rotor or alpha is None or name not in ("thrust_factor", "thrust_mismatch"):
+        return ""
+    keys = [k for k in values if k == "thrust_factor.change"
+            or k.startswith("thrust_mismatch.rotor_")]
+    if not keys:
+        return ""
+    who = ("the rotors" if name == "thrust_factor"
+           else f"rotor {keys[0].rsplit('_', 1)[1]}")
+    spin = 100 * ((1 + ev.values[keys[0]]) ** -alpha - 1)
+    return f"; {who} would spin {spin:+.1f} % per command (lighter load torque)"
+
+
+def _calm_refit(ev) -> list[str]:
+    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.explanations._with_wind`)
+    when no component's 95 % interval excludes calm air (as :func:`reading_name` decides):
+    the answer then says "in calm air" instead of printing a wind of 1e-5 ± 0.03 m/s."""
+    if ev.name == "wind" or not any(part == "wind" and fitted
+                                    for part, _, fitted in ev.explanation.parts):
+        return []
+    keys = [k for k in ("wind.vx", "wind.vy") if k in ev.values]
+    if any(asserted(ev, k) for k in keys):
+        return []
+    return keys
+
+
+def _wind_text(ev, reference) -> str:
+    force = ev.air_force if ev.air_force is not None else np.zeros(3)
+    horiz = force[:2]
+    size = float(np.hypot(*horiz))
+    axis = int(np.argmax(np.abs(horiz)))
+    sign = "+" if horiz[axis] >= 0 else "-"
+    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
+            f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
+            "airspeed")
+    keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]
+    if keys:
+        ref = reference.values()
+        speed = float(np.hypot(ev.values["wind.vx"] - ref.get("wind.vx", 0.0),
+                               ev.values["wind.vy"] - ref.get("wind.vy", 0.0)))
+        drag = ev.values.get("body_drag.cd_area")
+        if drag is not None:        # explanations.WIND_DRAG: the drag's law taken quadratic
+            size = (f" (C_d A {1e4 * drag:.3g} cm^2)" if ev.determined.get("body_drag.cd_area")
+                    else "")
+            law = ("a quadratic drag on each body axis"
+                   if ev.explanation.fixed_values.get("body_drag.per_axis", 0.0) >= 0.5
+                   else "a quadratic airframe drag")
+            text += (f": wind of ~{speed:.2g} m/s beyond the references', through their "
+                     f"drag as {law}{size}")
+        else:
+            text += (f": wind of ~{speed:.2g} m/s beyond the references' at their rotor-drag "
+                     "coefficient")
+    else:
+        text += " (drag coefficient x wind speed fixed by the data, not each factor)"
+    return text
+
+
+def nominal_words(text: str, own: bool) -> str:
+    """A reading's text (:func:`reading_text`) in held-out terms, where the reference model
+    is the parameter set: "no difference from the nominal model", the references' values
+    (there are none: "off", no spread) left out. ``own``: whether the text is the reading's
+    own (False: an undetermined explanation counted as "no difference")."""
+    if not own:
+        return "no difference from the nominal model"
+    cut = text.find(" (references: ")     # the nominal model's values: "off", no spread
+    if cut >= 0:
+        depth, end = 0, len(text)
+        for k in range(cut + 1, len(text)):
+            depth += {"(": 1, ")": -1}.get(text[k], 0)
+            if depth == 0:
+                end = k + 1
+                break
+        text = text[:cut] + text[end:]
+    return (text.replace("no difference from the reference flights",
+                         "no difference from the nominal model")
+            .replace(" (beyond the references')", "")
+            .replace(" beyond the references' at their rotor-drag coefficient",
+                     " at the fitted rotor-drag coefficient"))
+
+
+def _pct(p: float) -> str:
+    """A probability as whole percent; ``> 99 %`` from 0.995."""
+    return f"{100 * p:.0f} %" if p < 0.995 else "> 99 %"
+
+
+def _remains_text(remains: dict) -> str:
+    """A systematic remainder (channel -> (slow RMS in the channel's unit, ratio of its mean
+    square to the noise's expectation)) in words."""
+    return ", ".join(f"{k} {v[0]:.2g} {channel_unit(k)} ({v[1] ** 0.5:.1f}x the noise's)"
+                     for k, v in remains.items())
+
+
+def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
+           remains: dict | None = None, tentative: bool = False,
+           reduction: float | None = None, separate: list | dict = ()) -> str:
+    """The verdict in words a quadrotor engineer acts on.
+
+    ``outcome``: the verdict's outcome; ``lead``: the most probable reading (a posterior
+    row: name, probability, magnitude); ``stated``: the other readings stated with it (rows,
+    "no difference" excluded held out); ``lack``: the lack of fit (channel -> (ratio, z));
+    ``against``: ``"references"`` (per flight) or ``"training"`` (held out, the baseline of
+    :func:`quadsim.gap.judge.lack_of_fit`); ``remains``: the systematic remainder (held
+    out); ``tentative``: the name is tentative; ``reduction``: the share of the held-out gap
+    the named reading explains; ``separate``: per flight the channels on which the two
+    leaders differ most, held out ``{reading: how to separate it from the lead}``."""
+    if against == "references":
+        return _against_references(outcome, lead, stated=stated, lack=lack, separate=separate,
+                                   tentative=tentative)
+    remains = remains or {}
+    if outcome == "no_significant_gap":
+        nxt = stated[0] if stated else None
+        return (f"No significant gap: no difference from the nominal model is the most "
+                f"probable reading ({_pct(lead['probability'])}) and the residual is within "
+                f"the noise on every channel." + (f" Next: {nxt['name']} "
+                                                  f"({_pct(nxt['probability'])}: "
+                                                  f"{nxt['magnitude']})." if nxt else ""))
+    if outcome == "unexplained":
+        if lack:
+            where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in lack.items())
+            return (f"Unexplained: the most probable reading ({lead['name']}, "
+                    f"{_pct(lead['probability'])}: {lead['magnitude']}) leaves the held-out "
+                    f"flights beyond what it leaves on the training flights ({where} their "
+                    "RMS): it does not carry over; the cause is outside the library, several "
+                    "effects at once, or the data cannot tell.")
+        if lead["name"] != "no_difference":
+            return (f"Unexplained: the most probable reading ({lead['name']}: "
+                    f"{lead['magnitude']}) needs an implausible magnitude; the cause is "
+                    "outside the library.")
+        return ("Unexplained: no library effect explains the residual (no difference from "
+                f"the nominal model is the most probable reading, {_pct(lead['probability'])}"
+                f"), yet a systematic residual stays beyond the noise: {_remains_text(remains)}"
+                " (slow part, RMS). The cause is outside the library.")
+    text = f"Behaves as if {lead['magnitude']} ({_pct(lead['probability'])})"
+    if stated:
+        text += "; or as if " + "; or as if ".join(
+            f"{r['magnitude']} ({_pct(r['probability'])})" for r in stated)
+        text += f" (to separate them: {dict(separate).get(stated[0]['name'], '')})"
+    if tentative:
+        text += ". Tentative"
+    text += f". Explains {100 * (reduction or 0.0):.0f} % of the held-out gap"
+    if remains:
+        text += (f"; beyond it a systematic residual stays above the noise on "
+                 f"{_remains_text(remains)}: part of the gap is outside the library.")
+    else:
+        text += ", the residual within the noise on every channel after it."
+    return text
+
+
+def _against_references(outcome: str, lead: dict, *, stated: list, lack: dict, separate,
+                        tentative: bool) -> str:
+    """Per-flight sentences (:func:`answer`); ``stated`` excludes ``lead``."""
+    alt = "; ".join(f"or {r['name']} ({100 * r['probability']:.0f} %: {r['magnitude']})"
+                    for r in stated)
+    if outcome == "unexplained":
+        where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in lack.items())
+        return (f"Not in the library: after the most probable reading ({lead['name']}, "
+                f"{100 * lead['probability']:.0f} %: {lead['magnitude']}) the residual stays "
+                f"beyond the reference flights' on {where} their typical RMS.")
+    if outcome == "no_significant_gap":
+        text = (f"No difference from the reference flights "
+                f"({100 * lead['probability']:.0f} %).")
+        return text + (f" Next: {alt}." if alt else "")
+    text = f"{lead['name']} ({100 * lead['probability']:.0f} %): {lead['magnitude']}."
+    if tentative:
+        text += " Tentative."
+    if alt:
+        text += f" {alt[0].upper()}{alt[1:]}."
+        if separate:
+            text += f" They differ most on {', '.join(separate)}."
+    return text
+
+
+def batch_answer(flights: list) -> str:
+    """The per-flight result's answer: how many flights got which verdict, and the refused
+    count (``flights``: verdicts or their JSON, each with ``verdict``)."""
+    counts: dict[str, int] = {}
+    for f in flights:
+        counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
+    refused = counts.get("refused", 0)
+    judged = len(flights) - refused
+    text = f"{judged} flights judged against the reference flights: " + ", ".join(
+        f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+        if k != "refused")
+    return text + (f"; {refused} refused (see each flight's reason)" if refused else "")
