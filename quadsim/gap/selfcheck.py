@@ -204,11 +204,12 @@ def _own(key: str) -> bool:
 def readings(rows) -> dict:
     """(name, variant) -> parameter -> value of one flight's Evidence ``rows``: the
     explanations' own parameters that flight determines (an undetermined value sits at its
-    prior's centre on every flight: no spread of the references' own), nuisance ones left
-    out."""
+    prior's centre on every flight: no spread of the references' own), of the readings
+    fitted to convergence (a screened one keeps its one linear step from the prior's centre,
+    :mod:`quadsim.gap.screen`: not the flight's value), nuisance ones left out."""
     return {(ev.name, ev.explanation.variant): {k: float(v) for k, v in ev.values.items()
                                                if _own(k) and ev.determined.get(k)}
-            for ev in rows if ev.name != "no_difference"}
+            for ev in rows if ev.name != "no_difference" and not getattr(ev, "screened", False)}
 
 
 def spreads(per_flight: list[dict]) -> dict:
