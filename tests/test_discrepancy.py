@@ -67,6 +67,7 @@ def test_discrepancy_centre_and_spread_are_the_flights_coefficients_mean_and_sca
     assert np.allclose(d.without(2).centre[0], np.delete(betas, 2, 0).mean(axis=0))
     # a channel's F coefficients need F + 1 flights: four force features, five flights
     assert d.channels == (0, 1, 2) and d.without(2).channels == (0, 1, 2)
+    assert d.without(2).factor[0].shape == (4, 4)
     assert fit_discrepancy(resid[:4], states[:4]) is None
 
 

@@ -97,16 +97,15 @@ class Discrepancy:
 
     def without(self, j: int) -> Discrepancy | None:
         """The term fitted on every reference but the ``j``-th (its coefficients left out;
-        the explained shares kept): the self-check's leave-one-out reference
-        (:mod:`quadsim.gap.selfcheck`); the channels with too few flights left
-        (:func:`fit_discrepancy`) dropped, None where none remains."""
-        keep = [k for k, c in enumerate(self.coefs) if len(c) - 1 >= c.shape[1] + 1]
-        if not keep:
+        the channels and explained shares kept): the self-check's leave-one-out reference
+        (:mod:`quadsim.gap.selfcheck`). Every channel stays, even where F flights remain
+        (the :data:`RIDGE` keeps the covariance positive): the noise model the flight is
+        judged with is that of the residual after every channel's centre. None where fewer
+        than 2 flights would remain."""
+        if not self.coefs or len(self.coefs[0]) - 1 < 2:
             return None
-        return _from_coefs(tuple(self.channels[k] for k in keep),
-                           tuple(self.names[k] for k in keep),
-                           [np.delete(self.coefs[k], j, axis=0) for k in keep],
-                           self.explained)
+        return _from_coefs(self.channels, self.names,
+                           [np.delete(c, j, axis=0) for c in self.coefs], self.explained)
 
     @property
     def size(self) -> int:
