@@ -390,7 +390,7 @@ def _normal_words(lead_ev, check, left: dict, share: float) -> str:
         where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
         words += (f" Beyond it the residual stays beyond the reference flights' on {where} "
                   f"their typical RMS ({100 * share:.0f} % of the flight's gap: the library's "
-                  "form of it, or a further small effect). Tentative.")
+                  "form of it, or a further small effect).")
     if check is not None and not check.clean:
         words += f" {check.text()}"
     return words
