@@ -42,7 +42,7 @@ from ..core.errors import InputError, ModelError, QuadsimWarning
 from ..logs.delays import delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import drag_law
+from . import drag_law, order
 from .calibrate import Reference, calibrate, inverse_information
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
@@ -171,7 +171,8 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     weighed = weigh_flight(flight, reference, effects, full=full, name=name)
     if not isinstance(weighed, Weighed):
         return weighed
-    return verdict_of(weighed, reference.self_check)
+    return verdict_of(weighed, reference.self_check,
+                      order.order_statuses([log], reference.params))
 
 
 @dataclass(frozen=True)
@@ -221,12 +222,14 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
     return Weighed(flight, rows, reference, place, law)
 
 
-def verdict_of(weighed: Weighed, check=None) -> Verdict:
+def verdict_of(weighed: Weighed, check=None, statuses=()) -> Verdict:
     """The :class:`~quadsim.gap.result.Verdict` of a :class:`Weighed` flight, judged with the
-    references' self-check ``check`` (:class:`quadsim.gap.selfcheck.SelfCheck`, or None)."""
+    references' self-check ``check`` (:class:`quadsim.gap.selfcheck.SelfCheck`, or None) and
+    the rotor-order ``statuses`` of its log (:mod:`quadsim.gap.order`; none: not checked)."""
     flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
     reference = dataclasses.replace(weighed.reference, self_check=check)
-    verdict = judge(rows, reference, flight.name)
+    verdict = order.mark(judge(rows, reference, flight.name,
+                               cap=order.probability_cap(statuses)), statuses)
     words = verdict.answer
     if law is not None:       # the drag law in words; None: the references'
         words += f" Judged with {law.variant} (the law this flight shows)."
