@@ -65,10 +65,11 @@ from .result import Reading, Verdict
 from .selfcheck import against_text, negligible
 from .words import answer, asserted, nominal_words, reading_text
 
-__all__ = ["CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P", "Baseline", "above_floor",
-           "carry_over", "channel_names", "differs", "every_part_stands", "judge", "judge_heldout",
-           "lack_of_fit", "mean_squares", "form_share", "outcome_of", "plausible", "posterior", "rank",
-           "reading_name", "reading_text", "remainder", "symptom", "within_form_error"]
+__all__ = ["CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P", "Baseline",
+           "above_floor", "carry_over", "channel_names", "differs", "every_part_stands",
+           "form_share", "judge", "judge_heldout", "lack_of_fit", "mean_squares", "outcome_of",
+           "plausible", "posterior", "rank", "reading_name", "reading_text", "remainder",
+           "symptom", "within_form_error"]
 
 READING_P = 0.1
 CONFIDENT = 0.9
@@ -338,7 +339,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
     the highest probability stated (:mod:`quadsim.gap.order`: a rotor order the torque
     balance does not confirm)."""
     check = getattr(reference, "self_check", None)
-    ranked = [(k, min(p, cap), ev) for k, p, ev in posterior(rows, lambda ev: negligible(ev, check))]
+    ranked = [(k, min(p, cap), ev)
+              for k, p, ev in posterior(rows, lambda ev: negligible(ev, check))]
     top, p_top, best = ranked[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)

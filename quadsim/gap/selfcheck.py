@@ -206,7 +206,7 @@ def readings(rows) -> dict:
     explanations' own parameters that flight determines (an undetermined value sits at its
     prior's centre on every flight: no spread of the references' own), of the readings
     fitted to convergence (a screened one keeps its one linear step from the prior's centre,
-    :mod:`quadsim.gap.screen`: not the flight's value), nuisance ones left out."""
+    :mod:`quadsim.gap.evidence`: not the flight's value), nuisance ones left out."""
     return {(ev.name, ev.explanation.variant): {k: float(v) for k, v in ev.values.items()
                                                if _own(k) and ev.determined.get(k)}
             for ev in rows if ev.name != "no_difference" and not getattr(ev, "screened", False)}
