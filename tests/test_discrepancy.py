@@ -185,3 +185,24 @@ def test_the_self_check_reports_the_reference_that_differs(cf):
     assert alarms[check["flights"][4]] == "mass_offset"
     assert not check["clean"]
     assert "disagree" in result["flights"][0]["answer"]
+
+
+def test_a_damped_swing_decays_as_a_damped_pendulum():
+    """A cable of 0.5 m leaning 0.05 rad, its attachment still, swing damping c = 0.5 1/s:
+    the small-angle pendulum theta'' + c theta' + (g / L) theta = 0, whose swing decays as
+    exp(-c t / 2) -- a peak 8 s on at about exp(-2) of the first; undamped it keeps it."""
+    from quadsim.gap import cable
+
+    t = np.arange(0.0, 10.0, 0.002)
+    accel = np.zeros((len(t), 3))
+    start = cable.start_state((0.05, 0.0), (0.0, 0.0))
+    period = 2 * np.pi * np.sqrt(0.5 / 9.81)
+    window = (t >= 8.0) & (t < 8.0 + period)
+    first = t < period
+    for damping in (0.5, 0.0):
+        q, _ = cable.swing(t, accel, 0.5, 9.81, start, damping=damping)
+        late = np.flatnonzero(window)[np.argmax(np.abs(q[window, 0]))]
+        early = np.argmax(np.abs(q[first, 0]))
+        amplitude = abs(q[late, 0]) / abs(q[early, 0])
+        assert amplitude == pytest.approx(np.exp(-damping * (t[late] - t[early]) / 2),
+                                          rel=0.02)
