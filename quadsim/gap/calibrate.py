@@ -80,7 +80,8 @@ import numpy as np
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
 from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
-from .envelope import coordinates, envelope_of
+from .discrepancy import centre_term, fit_discrepancy
+from .envelope import coordinates
 from .fitting import (
     Candidate,
     _bounds,
@@ -104,6 +105,7 @@ from .reference import (  # re-exported: the calibration's public names
     weighted_residual,
 )
 from .rotor_channel import min_time_constant
+from .selfcheck import PerFlight
 from .speed_gain import PART as SPEED_GAIN
 
 __all__ = [
@@ -454,7 +456,9 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
             return None
     states = [aligned(f, shift) for f in flights]
-    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta))
+    discrepancy = fit_discrepancy([residuals(s, params, cand.effects(theta), rotor_channel=rotor)
+                                   for s in states], states)
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy)
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
     ref = Reference(params, rotor, cand, theta, stderr,
@@ -466,6 +470,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
+    ref.discrepancy = discrepancy
+    ref.log_ms = log_ms
     _complete(ref, states, log_ms)
     return ref
 
@@ -483,21 +489,25 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     ref.scatter = _scatter(states, ref, own)
-    ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
-                               np.array([ref.identified.get(k, True)
-                                         for k in cand.parameter_names]), log_ms,
-                               _noise_biased(cand.parameter_names,
-                                             own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.per_flight = PerFlight(
+        np.array([coordinates(s) for s in states]), own[0], own[1],
+        np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
+        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.envelope = ref.per_flight.envelope(log_ms)
 
 
-def _noise_model(states, params: VehicleParams, rotor: bool, effects: list
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
+                 discrepancy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
-    model's residual (``effects``) over the n aligned reference ``states``: per-channel RMS
+    model's residual (``effects``) over the n aligned reference ``states``, after the
+    references' systematic residual (``discrepancy``'s centre,
+    :func:`quadsim.gap.discrepancy.centre_term`; None: none): per-channel RMS
     over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
     per-channel integrated correlation time, the mean over the flights (samples); each
     flight's log mean square over sigma_c^2."""
     per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    per_flight = [r - centre_term(s, discrepancy, r.shape[1])
+                  for r, s in zip(per_flight, states)]
     pooled = np.concatenate(per_flight)
     sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
     tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])

@@ -33,6 +33,7 @@ from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
+from .discrepancy import centre_term, columns
 from .explanations import DETERMINED, Explanation, _own_effects
 from .fitting import _arm, curve_bound, effect_class, residuals
 from .memo import _memo
@@ -226,6 +227,7 @@ def flight_residual(states, reference: Reference, effects: list, memo: dict | No
     """:func:`quadsim.gap.reference.weighted_residual`, flattened (N C,), with the residual
     parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
     return (r * np.sqrt(reference.weights)).ravel()
 
 
@@ -268,17 +270,26 @@ class Problem:
         lower, upper = parameter_bounds(expl, reference, float(states.t[1] - states.t[0]))
         self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
-        self.size = jac.shape[0] + len(self.keep) + len(self.mean)
+        self.size = jac.shape[0] + self.marg.j.shape[1] + len(self.mean)
 
     def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> Marginal:
-        """The marginal of the kept shared columns; with a ``memo``, one per set of columns
-        (most explanations keep them all) and Jacobian."""
+        """The marginal of the kept shared columns and the discrepancy's
+        (:func:`quadsim.gap.discrepancy.columns`, unit spread: they are scaled by the
+        coefficients' covariance factor already), after them; with a ``memo``, one per set
+        of columns (most explanations keep them all) and Jacobian."""
+        def build():
+            extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
+                            self.memo)
+            return Marginal(np.hstack([jac[:, self.keep], extra]),
+                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]))
+
         if self.memo is None:
-            return Marginal(jac[:, self.keep], s_all[self.keep])
+            return build()
         kept = self.memo.setdefault("marginals", {})
-        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes())
+        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes(),
+               id(self.reference.discrepancy), self.reference.weights.tobytes())
         if key not in kept or kept[key][0] is not jac:
-            kept[key] = (jac, Marginal(jac[:, self.keep], s_all[self.keep]))
+            kept[key] = (jac, build())
         return kept[key][1]
 
     def residual(self, z: np.ndarray) -> np.ndarray:
