@@ -79,19 +79,19 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
-from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
 from .discrepancy import centre_term, fit_discrepancy
 from .envelope import coordinates
+from .fitmodels import SPEED_GAIN_PART as SPEED_GAIN
 from .fitting import (
     Candidate,
-    _bounds,
-    _correlation_time,
-    _typical,
+    correlation_time,
     fit_candidate,
     fit_motor_map,
     noise_floor,
     noise_scale,
+    parameter_bounds,
     residuals,
+    typical_scales,
 )
 from .moderated import moderated_spread
 from .motor_map import load_exponent
@@ -106,7 +106,6 @@ from .reference import (  # re-exported: the calibration's public names
 )
 from .rotor_channel import min_time_constant
 from .selfcheck import PerFlight
-from .speed_gain import PART as SPEED_GAIN
 
 __all__ = [
     "FD_STEP",
@@ -298,7 +297,7 @@ def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
     """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
     ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
     sub-step of the rotor channel (:func:`quadsim.gap.rotor_channel.min_time_constant`)."""
-    lower, upper = _bounds(cand, params)
+    lower, upper = parameter_bounds(cand, params)
     for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":
             lower[k] = max(lower[k], min_time_constant(dt))
@@ -312,7 +311,7 @@ def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
     quarter of a fit sample (the shortest the fit resolves), an inertia at the end of its
     plausible range."""
     lower, upper = fit_bounds(cand, params, dt)
-    tol = 1e-9 * _typical(cand, params)
+    tol = 1e-9 * typical_scales(cand, params)
     return {name: side for k, name in enumerate(cand.parameter_names)
             for side, hit in (("lower", theta[k] <= lower[k] + tol[k]),
                               ("upper", theta[k] >= upper[k] - tol[k])) if hit}
@@ -340,7 +339,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
     lower, upper = fit_bounds(cand, params, dt)
-    typical = _typical(cand, params)
+    typical = typical_scales(cand, params)
     timing = all(getattr(f, "fit", f).rotor_speed is not None for f in flights)
     if timing:
         lower, upper = np.append(lower, -MAX_SHIFT_S), np.append(upper, MAX_SHIFT_S)
@@ -510,7 +509,7 @@ def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
                   for r, s in zip(per_flight, states)]
     pooled = np.concatenate(per_flight)
     sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
-    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
+    tau = np.array([np.mean([correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
                     for c in range(pooled.shape[1])])
     log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
     return sigma, tau, log_ms
@@ -568,7 +567,7 @@ def quadratic_equivalent(states, reference: Reference, per_axis: bool = False) -
     references' drag is if its law is quadratic: an airframe's drag is, a rotor's in-plane
     drag is linear, and flights at the references' speeds cannot
     tell the two apart, a wind of several m/s can
-    (:func:`quadsim.gap.explanations._wind_readings`). 0 where the reference model has no
+    (:func:`quadsim.gap.explanations.wind_readings`). 0 where the reference model has no
     rotor drag."""
     from ..effects import make_effect
 

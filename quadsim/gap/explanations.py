@@ -476,9 +476,3 @@ def own_effects(expl: Explanation, theta: np.ndarray) -> list:
     return out
 
 
-_prior_sd = prior_spreads  # alias for other modules until integration
-_prior_of = prior_of  # alias for other modules until integration
-_own_effects = own_effects  # alias for other modules until integration
-_make = build_effect  # alias for other modules until integration
-_wind_readings = wind_readings  # alias for other modules until integration
-_with_wind = with_wind  # alias for other modules until integration

@@ -57,7 +57,7 @@ from scipy.special import logsumexp
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
-from . import collinear, consistency
+from . import priors, where
 from .fitting import effect_class, noise_floor
 from .priors import candidate_plausibility
 from .residual import CHANNELS, channel_unit
@@ -373,9 +373,9 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
         lack_of_fit={k: v[0] for k, v in lack.items()},
         params=lead.params if effect else {}, ci=lead.ci if effect else {},
         fixed=lead.fixed if effect else {},
-        units={k: collinear.unit_of(k) for k in lead.params} if effect else {},
+        units={k: priors.unit_of(k) for k in lead.params} if effect else {},
         confusable_with=tuple(r for r in named if r != verdict),
-        separate_by={r: collinear.separation(verdict, [r])[r] for r in named
+        separate_by={r: priors.separation(verdict, [r])[r] for r in named
                      if r != verdict} if effect else {},
         file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
 
@@ -387,7 +387,7 @@ def _normal_words(lead_ev, check, left: dict, share: float) -> str:
     (ratio, z); ``share`` of the flight's gap), and a self-check that is not clean."""
     words = ""
     if lead_ev is not None:
-        size = against_text(lead_ev, check, collinear.unit_of)
+        size = against_text(lead_ev, check, priors.unit_of)
         if size:
             words += f" Its size against the references' own readings of it: {size}."
     if left:
@@ -421,7 +421,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         notes.append(f"{lead_name} is the most probable reading only with an implausible "
                      f"magnitude ({rows[0]['magnitude']}; {prior_text}): not named")
     checked = decision.consistency if entry is not None and ok else None
-    stands = consistency.standing(checked) if checked is not None else "stands"
+    stands = where.standing(checked) if checked is not None else "stands"
     inconsistent, shifted = stands == "inconsistent", stands == "shifted"
     outcome = "unexplained" if inconsistent else outcome_of(lead_name, lack, remains,
                                                             plausible=ok)
@@ -429,7 +429,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     others = [r["name"] for r in stated if r["name"] != lead_name]
     alts = _alternatives(decision, stated, params) if entry is not None else ()
     named = entry is not None and ok and not inconsistent    # the name was weighed as one
-    separate_by = collinear.separation(lead_name, others) if named else {}
+    separate_by = priors.separation(lead_name, others) if named else {}
     reduction = entry["reduction"] if entry else 0.0
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
@@ -444,7 +444,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
                      **{k: v[0] for k, v in lack.items()}},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
         fixed=entry["fixed"] if entry else {},
-        units={k: collinear.unit_of(k) for k in (entry["params"] if entry else {})},
+        units={k: priors.unit_of(k) for k in (entry["params"] if entry else {})},
         confusable_with=tuple(others) if effect else (),
         separate_by=separate_by if effect else {},
         consistency=checked, partial=partial, floor_source=FLOOR_SOURCE,
@@ -463,7 +463,7 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
                    remains: dict, separate_by: dict, alternatives: tuple
                    ) -> tuple[str, dict | None, list[str]]:
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
-    name (``stands``, :func:`quadsim.gap.consistency.standing`) is a partial explanation;
+    name (``stands``, :func:`quadsim.gap.where.standing`) is a partial explanation;
     otherwise :func:`quadsim.gap.words.answer`, with the tentative sentence of a shifted
     name that stands."""
     lead_name, checked = decision.lead_name, decision.consistency
@@ -471,20 +471,20 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
     reduction = entry.get("reduction", 0.0)
     if stands == "inconsistent":
         partial = {"reduction": reduction, "params": entry["params"], "ci": entry["ci"],
-                   "units": {k: collinear.unit_of(k) for k in entry["params"]},
+                   "units": {k: priors.unit_of(k) for k in entry["params"]},
                    "alternatives": list(alternatives),
                    "confusable_with": [r["name"] for r in stated if r["name"] != lead_name],
                    "name": lead_name}
-        return (consistency.partial_text(lead_name, reduction, checked), partial,
-                [consistency.inconsistent_note(lead_name, checked)])
+        return (where.partial_text(lead_name, reduction, checked), partial,
+                [where.inconsistent_note(lead_name, checked)])
     rows = decision.rows
     words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
                    against="training", remains=remains,
                    tentative=decision.probability[lead_name] < CONFIDENT,
                    reduction=reduction, separate=separate_by)
     if stands == "shifted" and outcome == "effect":
-        return words + consistency.tentative_text(checked), None, \
-            [consistency.tentative_note(checked)]
+        return words + where.tentative_text(checked), None, \
+            [where.tentative_note(checked)]
     return words, None, []
 
 
@@ -524,12 +524,12 @@ def _alternative(row, decision, lead_name: str, params) -> dict:
     entry = decision.entry(row["name"]) or {}
     score, ok, prior = candidate_plausibility(row["params"], params)
     alt = {"name": row["name"], "magnitude": row["magnitude"], "params": dict(row["params"]),
-           "ci": dict(row["ci"]), "units": {k: collinear.unit_of(k) for k in row["params"]},
+           "ci": dict(row["ci"]), "units": {k: priors.unit_of(k) for k in row["params"]},
            "probability": row["probability"], "reduction": entry.get("reduction"),
-           "torque_yaw": collinear._torque_text(entry), "plausibility": score,
+           "torque_yaw": priors.torque_text(entry), "plausibility": score,
            "plausible": bool(ok), "prior": prior}
     if row["name"] != lead_name:
-        alt["separate_by"] = collinear.separation(lead_name, [row["name"]])[row["name"]]
+        alt["separate_by"] = priors.separation(lead_name, [row["name"]])[row["name"]]
     return alt
 
 

@@ -34,9 +34,9 @@ from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
 from .discrepancy import centre_term, columns
-from .explanations import DETERMINED, Explanation, _own_effects
-from .fitting import _arm, curve_bound, effect_class, residuals
-from .memo import _memo
+from .explanations import DETERMINED, Explanation, own_effects
+from .fitting import arm_length, curve_bound, effect_class, residuals
+from .memo import memoised
 from .priors import curve_quadratic_bounds
 from .reference import Reference, rotor_spectra, shifted
 from .rotor_channel import min_time_constant
@@ -180,9 +180,10 @@ def parameter_bounds(expl: Explanation, reference: Reference, dt: float
             if name == "mass_offset" and p == "mass":
                 lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
             elif name == "mass_offset":         # a payload within the rotors' span
-                lo, hi = max(lo, -_arm(reference.params)), min(hi, _arm(reference.params))
+                arm = arm_length(reference.params)
+                lo, hi = max(lo, -arm), min(hi, arm)
             if name == "com_offset":
-                arm = _arm(reference.params)
+                arm = arm_length(reference.params)
                 lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
             if name == "thrust_curve" and p == "linear":
                 bound = curve_bound(reference.params)
@@ -237,8 +238,8 @@ def shifted_view(states, delay_s: float, memo: dict | None = None):
     once."""
     if memo is None:
         return shifted(states, delay_s)
-    spectra = _memo(memo, ("spectra", id(states)), states, lambda: rotor_spectra(states))
-    return _memo(memo, ("shifted", id(states), delay_s), states,
+    spectra = memoised(memo, ("spectra", id(states)), states, lambda: rotor_spectra(states))
+    return memoised(memo, ("shifted", id(states), delay_s), states,
                  lambda: shifted(states, delay_s, spectra))
 
 
@@ -302,7 +303,7 @@ class Problem:
             return last[key][1]
         # z at its bound gives theta a round-off beyond the parameter's range: clipped
         theta = np.clip(self.mean + self.sd * z, self.lower, self.upper)
-        own = _own_effects(self.expl, theta)
+        own = own_effects(self.expl, theta)
         flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
         r = flight_residual(flight, self.reference, self.shared + own, self.memo)
         if last is not None:
@@ -409,5 +410,5 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   shared_shift=shift)
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
-                                  _own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
+                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
     return ev

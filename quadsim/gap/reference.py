@@ -25,7 +25,7 @@ import numpy as np
 from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
 from .discrepancy import centre_term
-from .fitting import Candidate, _bounds, _typical, residuals
+from .fitting import Candidate, parameter_bounds, residuals, typical_scales
 
 __all__ = [
     "FD_STEP",
@@ -41,7 +41,7 @@ __all__ = [
 
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
-#: (:func:`quadsim.gap.fitting._typical`): the same relative step the fits use (diff_step).
+#: (:func:`quadsim.gap.fitting.typical_scales`): the same relative step the fits use (diff_step).
 FD_STEP = 1e-3
 
 
@@ -226,7 +226,7 @@ class Reference:
     #: none (no rotor drag, or it is not shared)
     quadratic_drag: float = 0.0
     #: the same with each body axis's drag on its own air speed (``per_axis``): the wind
-    #: reading's third variant (:func:`quadsim.gap.explanations._wind_readings`)
+    #: reading's third variant (:func:`quadsim.gap.explanations.wind_readings`)
     quadratic_drag_axes: float = 0.0
     #: C_d A (m^2) along body z under the law per body axis that gives the references' own
     #: vertical air force of their shared body drag (on the air speed, ``|v| v_z``):
@@ -314,8 +314,8 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
     wrench of one vehicle, the rotor channel of one command -> speed model) through
     ``memo`` (a new one per call by default)."""
     memo = {} if memo is None else memo
-    typical = _typical(reference.candidate, reference.params)
-    _, upper = _bounds(reference.candidate, reference.params)
+    typical = typical_scales(reference.candidate, reference.params)
+    _, upper = parameter_bounds(reference.candidate, reference.params)
     base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
