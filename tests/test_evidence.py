@@ -317,7 +317,7 @@ def test_references_without_drag_do_not_know_their_wind(windy):
 def test_a_drag_against_references_without_one_refits_their_wind(cf, windy):
     """References flown without rotor drag in a 1.5 m/s wind cannot see the wind; a flight
     with rotor drag (10x the shared one's) in the same room feels drag x (v - w). Its
-    rotor-drag reading refits the wind with the drag (explanations._with_wind): both right, and
+    rotor-drag reading refits the wind with the drag (explanations.with_wind): both right, and
     both named (judge.reading_name: the wind's 95 % interval excludes calm air). With the
     references' wind held, the drag fit absorbs the wind's steady force. The same drag in
     calm air is the drag alone."""
@@ -534,7 +534,7 @@ def test_the_references_drag_as_a_quadratic_law(airframe):
 def test_a_wind_through_a_quadratic_drag_is_named_with_its_speed(cf, airframe):
     """A 3 m/s wind through the same airframe drag: at 3 m/s of air speed the quadratic
     force is about 3x what the references' linear law gives, and its slope with the flight's
-    speed too. The wind reading through that law (explanations._wind_readings) names it with
+    speed too. The wind reading through that law (explanations.wind_readings) names it with
     the right speed (the linear law alone needs a wind of ~2x to make the mean force and
     leaves the slope); the same flight in calm air is no difference."""
     drag = make_effect("body_drag", cd_area=AIRFRAME)

@@ -242,18 +242,7 @@ def test_private_import_finder_finds_each_form():
 #: private names still imported from files another branch is changing (normal: calibrate,
 #: problem, reference, judge; speed: residual); each is made public when that branch merges,
 #: and this list shrinks (a fixed entry fails below until it is removed here)
-PENDING_PRIVATE = {
-    "quadsim.gap.calibrate: quadsim.gap.fitting._bounds",
-    "quadsim.gap.calibrate: quadsim.gap.fitting._correlation_time",
-    "quadsim.gap.calibrate: quadsim.gap.fitting._typical",
-    "quadsim.gap.judge: quadsim.gap.collinear._torque_text",
-    "quadsim.gap.problem: quadsim.gap.explanations._own_effects",
-    "quadsim.gap.problem: quadsim.gap.fitting._arm",
-    "quadsim.gap.problem: quadsim.gap.memo._memo",
-    "quadsim.gap.reference: quadsim.gap.fitting._bounds",
-    "quadsim.gap.reference: quadsim.gap.fitting._typical",
-    "quadsim.gap.residual: quadsim.gap.memo._acting",
-}
+PENDING_PRIVATE: set[str] = set()
 
 
 def test_no_module_imports_another_modules_private_names():

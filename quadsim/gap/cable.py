@@ -85,14 +85,18 @@ LENGTH_PRIOR_M = (0.55, 0.225)
 #: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
 START_PRIOR = (0.17, 0.5)
 #: the fitted parameters: the payload, and the swing at the first sample (nuisance).
-FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y")
+FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y", "swing_damping")
+#: prior of the swing's damping rate (1/s): centre and spread (module doc)
+DAMPING_PRIOR = (0.5, 0.5)
 
 
 def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
     """(means, spreads) of :data:`FITTED` (kg, m, rad, rad, rad/s, rad/s; module doc)."""
     lean, rate = START_PRIOR
-    return ([MASS_PRIOR[0] * params.mass, LENGTH_PRIOR_M[0], 0.0, 0.0, 0.0, 0.0],
-            [MASS_PRIOR[1] * params.mass, LENGTH_PRIOR_M[1], lean, lean, rate, rate])
+    return ([MASS_PRIOR[0] * params.mass, LENGTH_PRIOR_M[0], 0.0, 0.0, 0.0, 0.0,
+             DAMPING_PRIOR[0]],
+            [MASS_PRIOR[1] * params.mass, LENGTH_PRIOR_M[1], lean, lean, rate, rate,
+             DAMPING_PRIOR[1]])
 
 
 try:        # the same source, compiled when numba is installed (module doc)
@@ -109,16 +113,18 @@ except ImportError:         # pragma: no cover - numba is an optional extra
 
 
 @_compiled
-def _rate(qx, qy, qz, wx, wy, wz, ax, ay, az, gravity, length):
-    """(dq/dt, dw/dt) of the cable at attachment acceleration a (module doc)."""
+def _rate(qx, qy, qz, wx, wy, wz, ax, ay, az, gravity, length, damping):
+    """(dq/dt, dw/dt) of the cable at attachment acceleration a, swing damping rate
+    ``damping`` (1/s; module doc)."""
     ex, ey, ez = -ax, -ay, -gravity - az
     return (wy * qz - wz * qy, wz * qx - wx * qz, wx * qy - wy * qx,
-            (qy * ez - qz * ey) / length, (qz * ex - qx * ez) / length,
-            (qx * ey - qy * ex) / length)
+            (qy * ez - qz * ey) / length - damping * wx,
+            (qz * ex - qx * ez) / length - damping * wy,
+            (qx * ey - qy * ex) / length - damping * wz)
 
 
 @_compiled
-def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w):
+def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w, damping):
     """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
     ``accel`` (N, 3) the attachment's acceleration (world); ``q0``, ``w0`` the start; a
     time jump restarts hanging still. Fills ``out_q``, ``out_w``."""
@@ -139,14 +145,14 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w):
         a0x, a0y, a0z = accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2]
         a1x, a1y, a1z = accel[k, 0], accel[k, 1], accel[k, 2]
         amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
-        k1 = _rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length)
+        k1 = _rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
         c = 0.5 * h
         k2 = _rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
-                   wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length)
+                   wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
         k3 = _rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
-                   wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length)
+                   wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
         k4 = _rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
-                   wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length)
+                   wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
         s = h / 6.0
         qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
@@ -161,8 +167,8 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w):
         out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
-def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0
-                  ) -> tuple[list, list]:
+def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0,
+                  damping: float = 0.0) -> tuple[list, list]:
     """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
     3-lists), for when it is not compiled: the same operations in the same order (the same
     numbers), without the per-element indexing of numpy arrays that dominates the
@@ -182,14 +188,14 @@ def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0
         a0x, a0y, a0z = accel[k - 1]
         a1x, a1y, a1z = accel[k]
         amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
-        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length)
+        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
         c = 0.5 * h
         k2 = rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
-                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length)
+                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
         k3 = rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
-                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length)
+                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
         k4 = rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
-                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length)
+                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
         s = h / 6.0
         qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
@@ -221,21 +227,22 @@ def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
 
 
 def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
-          start: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+          start: tuple | None = None, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Cable direction q (N, 3) and angular velocity w (N, 3, rad/s) along a flight whose
     attachment point accelerates by ``accel`` (N, 3, world m/s^2) at times ``t`` (s), from
-    ``start`` = (q0, w0) (default: hanging still, :func:`start_state`)."""
+    ``start`` = (q0, w0) (default: hanging still, :func:`start_state`), the swing damped at
+    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc)."""
     t = np.ascontiguousarray(t, dtype=float)
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
     q, w = np.empty_like(accel), np.empty_like(accel)
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
         _swing_kernel(t, accel, float(length), float(gravity), np.asarray(q0, float),
-                      np.asarray(w0, float), q, w)
+                      np.asarray(w0, float), q, w, float(damping))
     elif len(t):
         rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(), float(length),
                                        float(gravity), np.asarray(q0, float).tolist(),
-                                       np.asarray(w0, float).tolist())
+                                       np.asarray(w0, float).tolist(), float(damping))
         q[:], w[:] = rows_q, rows_w
     return q, w
 
@@ -272,8 +279,10 @@ def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 class CableSwing(CablePayload):
     """``cable_payload`` without an internal state: the swing integrated from the logged
-    motion (module doc). Fitted: ``mass`` and ``length``; the attachment ``x, y, z`` (body,
-    m) is held at the engine's default."""
+    motion (module doc). Fitted: ``mass`` and ``length``, the swing at the first sample and
+    its damping rate ``swing_damping`` (1/s; not the engine's ``damping``, the axial spring's
+    coefficient); the attachment ``x, y`` (body, m) held at the engine's default, ``z``
+    fitted by the reading with a mount (:data:`quadsim.gap.explanations.CABLE_MOUNT`)."""
 
     parameters = tuple(
         EffectParameter("length", "m", 0.5, 0.05, 5.0, "cable length") if p.name == "length"
@@ -283,11 +292,15 @@ class CableSwing(CablePayload):
         EffectParameter("lean_y", "rad", 0.0, -1.0, 1.0,
                         "cable's lean from the vertical towards world +y at the first sample"),
         EffectParameter("rate_x", "rad/s", 0.0, -5.0, 5.0, "swing rate along x at the start"),
-        EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"))
+        EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"),
+        EffectParameter("swing_damping", "1/s", 0.0, 0.0, 5.0,
+                        "swing damping rate (air drag on the payload and cable)"))
 
-    #: the swing at the first sample is fitted with the payload, never part of an answer
+    #: the swing at the first sample, its damping and the attachment's height are fitted
+    #: with the payload, never part of an answer (the JSON's params keep them)
     facts = dataclasses.replace(CablePayload.facts,
-                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y"))
+                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y",
+                                          "swing_damping", "z"))
 
     def state_size(self) -> int:
         return 0
@@ -325,12 +338,13 @@ class CableSwing(CablePayload):
         payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
         shift), so those evaluations reuse it."""
         key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
-               self.x, self.y, self.z, float(gravity))
+               self.x, self.y, self.z, float(gravity), self.swing_damping)
         kept = None if memo is None else memo.setdefault("cable_swings", {})
         if kept is not None and key in kept:
             return kept[key]
         value = swing(t, accel, self.length, gravity,
-                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)))
+                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)),
+                      damping=self.swing_damping)
         if kept is not None:
             if len(kept) >= self.KEPT_SWINGS:
                 del kept[next(iter(kept))]

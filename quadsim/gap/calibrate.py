@@ -79,18 +79,19 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..vehicle.params import VehicleParams
-from .baseline import BASELINE  # noqa: F401  (registers the nominal_refit pseudo-effect)
-from .envelope import coordinates, envelope_of
+from .discrepancy import centre_term, fit_discrepancy
+from .envelope import coordinates
+from .fitmodels import SPEED_GAIN_PART as SPEED_GAIN
 from .fitting import (
     Candidate,
-    _bounds,
-    _correlation_time,
-    _typical,
+    correlation_time,
     fit_candidate,
     fit_motor_map,
     noise_floor,
     noise_scale,
+    parameter_bounds,
     residuals,
+    typical_scales,
 )
 from .moderated import moderated_spread
 from .motor_map import load_exponent
@@ -104,7 +105,7 @@ from .reference import (  # re-exported: the calibration's public names
     weighted_residual,
 )
 from .rotor_channel import min_time_constant
-from .speed_gain import PART as SPEED_GAIN
+from .selfcheck import PerFlight
 
 __all__ = [
     "FD_STEP",
@@ -296,7 +297,7 @@ def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
     """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
     ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
     sub-step of the rotor channel (:func:`quadsim.gap.rotor_channel.min_time_constant`)."""
-    lower, upper = _bounds(cand, params)
+    lower, upper = parameter_bounds(cand, params)
     for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":
             lower[k] = max(lower[k], min_time_constant(dt))
@@ -310,7 +311,7 @@ def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
     quarter of a fit sample (the shortest the fit resolves), an inertia at the end of its
     plausible range."""
     lower, upper = fit_bounds(cand, params, dt)
-    tol = 1e-9 * _typical(cand, params)
+    tol = 1e-9 * typical_scales(cand, params)
     return {name: side for k, name in enumerate(cand.parameter_names)
             for side, hit in (("lower", theta[k] <= lower[k] + tol[k]),
                               ("upper", theta[k] >= upper[k] - tol[k])) if hit}
@@ -338,7 +339,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
     lower, upper = fit_bounds(cand, params, dt)
-    typical = _typical(cand, params)
+    typical = typical_scales(cand, params)
     timing = all(getattr(f, "fit", f).rotor_speed is not None for f in flights)
     if timing:
         lower, upper = np.append(lower, -MAX_SHIFT_S), np.append(upper, MAX_SHIFT_S)
@@ -454,7 +455,9 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
             return None
     states = [aligned(f, shift) for f in flights]
-    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta))
+    discrepancy = fit_discrepancy([residuals(s, params, cand.effects(theta), rotor_channel=rotor)
+                                   for s in states], states)
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy)
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
     ref = Reference(params, rotor, cand, theta, stderr,
@@ -466,6 +469,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
+    ref.discrepancy = discrepancy
+    ref.log_ms = log_ms
     _complete(ref, states, log_ms)
     return ref
 
@@ -483,24 +488,28 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     ref.scatter = _scatter(states, ref, own)
-    ref.envelope = envelope_of(np.array([coordinates(s) for s in states]), own[0], own[1],
-                               np.array([ref.identified.get(k, True)
-                                         for k in cand.parameter_names]), log_ms,
-                               _noise_biased(cand.parameter_names,
-                                             own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.per_flight = PerFlight(
+        np.array([coordinates(s) for s in states]), own[0], own[1],
+        np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
+        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+    ref.envelope = ref.per_flight.envelope(log_ms)
 
 
-def _noise_model(states, params: VehicleParams, rotor: bool, effects: list
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
+                 discrepancy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
-    model's residual (``effects``) over the n aligned reference ``states``: per-channel RMS
+    model's residual (``effects``) over the n aligned reference ``states``, after the
+    references' systematic residual (``discrepancy``'s centre,
+    :func:`quadsim.gap.discrepancy.centre_term`; None: none): per-channel RMS
     over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
     per-channel integrated correlation time, the mean over the flights (samples); each
     flight's log mean square over sigma_c^2."""
     per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    per_flight = [r - centre_term(s, discrepancy, r.shape[1])
+                  for r, s in zip(per_flight, states)]
     pooled = np.concatenate(per_flight)
     sigma = np.maximum(np.sqrt(np.mean(pooled ** 2, axis=0)), noise_floor(params, rotor))
-    tau = np.array([np.mean([_correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
+    tau = np.array([np.mean([correlation_time(r[:, [c]] / sigma[c]) for r in per_flight])
                     for c in range(pooled.shape[1])])
     log_ms = np.log([np.mean(r ** 2, axis=0) / sigma ** 2 for r in per_flight])
     return sigma, tau, log_ms
@@ -558,7 +567,7 @@ def quadratic_equivalent(states, reference: Reference, per_axis: bool = False) -
     references' drag is if its law is quadratic: an airframe's drag is, a rotor's in-plane
     drag is linear, and flights at the references' speeds cannot
     tell the two apart, a wind of several m/s can
-    (:func:`quadsim.gap.explanations._wind_readings`). 0 where the reference model has no
+    (:func:`quadsim.gap.explanations.wind_readings`). 0 where the reference model has no
     rotor drag."""
     from ..effects import make_effect
 

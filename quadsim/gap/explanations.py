@@ -44,6 +44,7 @@ from ..effects.com_offset import ComOffset
 from ..effects.facts import ALL
 from ..effects.ground_effect import GroundEffect
 from ..effects.mass_offset import MassOffset
+from ..effects.scales import arm_length
 from ..effects.thrust_curve import ThrustCurve
 from ..effects.thrust_factor import ThrustFactor
 from ..effects.thrust_mismatch import ThrustMismatch
@@ -264,9 +265,19 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             mine = [r for r in _applicable(cls, reference) if r.per_rotor]
             out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * len(mine)))
                     for r in mine]
-    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable)
-    out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)],
-                    *cable.prior(params)))
+    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable),
+    # alone or with what holds it fixed to the frame (a hook, a mount,
+    # the cable's clamp: a mass at the centre; a real hanging payload has one, and without
+    # it the swinging mass reads between the two); the variants share the effect's prior
+    mean, spread = cable.prior(params)
+    out.append(_one("cable_payload", "", [("cable_payload", {}, cable.FITTED)], mean, spread,
+                    log_prior=-np.log(2.0)))
+    # with its mount the cable hangs from a point of the frame, not the CoM: its height
+    # (body z, prior spread half the rotor arm) gives the swing's pull a moment arm
+    out.append(_one("cable_payload", CABLE_MOUNT,
+                    [("cable_payload", {}, cable.FITTED + ("z",)), ("mass_offset", {}, ("mass",))],
+                    mean + [0.0, 0.0], spread + [0.5 * arm_length(params), sd["mass_offset.mass"]],
+                    log_prior=-np.log(2.0)))
     if reference.rotor and "battery_sag" not in groups:
         volts = getattr(states, "vbat", None)
         if reference.vbat_ref and volts is not None and np.all(np.isfinite(volts)):
@@ -294,6 +305,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     return out
 
 
+#: the cable payload's variant with a mass fixed to the frame as well (its mount)
+CABLE_MOUNT = "with a part fixed to the frame"
 #: the motor-change reading's speed per command (:func:`_motor_change`)
 SPEED_GAIN_KEY = "speed_gain.gain"
 MOTOR_CHANGE = "another motor or ESC (its time constant and speed per command)"
@@ -463,9 +476,3 @@ def own_effects(expl: Explanation, theta: np.ndarray) -> list:
     return out
 
 
-_prior_sd = prior_spreads  # alias for other modules until integration
-_prior_of = prior_of  # alias for other modules until integration
-_own_effects = own_effects  # alias for other modules until integration
-_make = build_effect  # alias for other modules until integration
-_wind_readings = wind_readings  # alias for other modules until integration
-_with_wind = with_wind  # alias for other modules until integration

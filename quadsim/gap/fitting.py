@@ -528,13 +528,6 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)
 
 
-# aliases for calibrate, reference and problem (being changed on another branch) until it merges
-_typical = typical_scales
-_bounds = parameter_bounds
-_correlation_time = correlation_time
-_arm = arm_length
-
-
 #: the nominal refit's candidate (:class:`quadsim.gap.fitmodels.NominalRefit`): the
 #: parameter set's b and d re-identified; a shared group of the reference model
 #: (:mod:`.calibrate`) and the held-out reading "b and d are off"

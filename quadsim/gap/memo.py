@@ -168,7 +168,3 @@ def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
 
 
-_memo = memoised  # alias for other modules until integration
-_rotor_key = rotor_key  # alias for other modules until integration
-_wrench_key = wrench_key  # alias for other modules until integration
-_acting = acting  # alias for other modules until integration

@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -51,11 +52,13 @@ from .evidence import evaluate, explanations_for
 from .judge import channel_names, judge
 from .residual import DEFAULT_WINDOW_S
 from .result import Diagnosis, Verdict
+from .selfcheck import leave_one_out, self_check_of
 from .traces import flight_series
 from .words import batch_answer
 
-__all__ = ["MIN_REFERENCE", "diagnose_per_flight", "judge_one", "reference_summary",
-           "refused_entry"]
+__all__ = ["MIN_REFERENCE", "Weighed", "diagnose_per_flight", "judge_one",
+           "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
+           "weigh_flight"]
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).
 MIN_REFERENCE = 10
@@ -77,6 +80,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
         raise InputError("--reference: give at least 2 nominal flights")
     vehicle = vehicle_check([f.fit for f in ref_flights], params)
     ref = calibrate(ref_flights, params)
+    ref.self_check = reference_self_check(ref_flights, ref, effects)
     if progress is not None:
         progress("reference")
     notes = ([(f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
@@ -126,7 +130,29 @@ def reference_summary(ref: Reference) -> dict:
             "fixed": {f"{name}.{k}": float(v) for name, fixed, _ in ref.candidate.parts
                       for k, v in fixed.items()},
             "load_exponent": None if ref.load_exponent is None else
-            {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]}}
+            {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]},
+            "discrepancy": None if ref.discrepancy is None
+            else ref.discrepancy.to_json(names),
+            "self_check": None if ref.self_check is None else ref.self_check.to_json()}
+
+
+def reference_self_check(ref_flights: list, ref: Reference, effects=None):
+    """The references judged against each other (:mod:`quadsim.gap.selfcheck`): each
+    reference weighed against :func:`~quadsim.gap.selfcheck.leave_one_out` of ``ref``, then
+    judged with the other references' readings as the practical-significance scale. None
+    for fewer than 3 references."""
+    if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
+        return None
+    weighed = []
+    for j, f in enumerate(ref_flights):
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
+        weighed.append(w if isinstance(w, Weighed) else None)
+
+    def judge_fn(j, check):
+        return verdict_of(weighed[j], check)
+
+    return self_check_of([f.name for f in ref_flights],
+                         [None if w is None else w.rows for w in weighed], judge_fn)
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
@@ -141,6 +167,39 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             warnings.simplefilter("ignore", QuadsimWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
             flight = prepare([log], reference.params, window_s=window_s)[0]
+    except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
+        return refused_entry(name, str(exc))
+    weighed = weigh_flight(flight, reference, effects, full=full, name=name)
+    if not isinstance(weighed, Weighed):
+        return weighed
+    verdict = verdict_of(weighed, reference.self_check,
+                         order.order_statuses([log], reference.params))
+    local = weighed.reference          # the residual before and after, for the report
+    return dataclasses.replace(verdict, series=flight_series(
+        local.align(weighed.flight), local, weighed.rows, name=weighed.flight.name))
+
+
+@dataclass(frozen=True)
+class Weighed:
+    """One prepared flight weighed against the reference model: ``flight`` (the prepared
+    flight), ``rows`` (every explanation's Evidence), ``reference`` (the reference model at
+    the flight's place, :func:`quadsim.gap.envelope.local_reference`), ``place`` (its
+    envelope position or None), ``law`` (the drag law it is judged under, or None)."""
+
+    flight: object
+    rows: list
+    reference: Reference
+    place: object
+    law: object
+
+
+def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
+                 name: str = "log") -> Weighed | Verdict:
+    """The :class:`Weighed` of a prepared flight, or its ``refused`` verdict."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
             states = reference.align(flight)       # the references' rotor-speed timing
             if states.command is None and reference.rotor:
                 raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
@@ -164,7 +223,15 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
-    statuses = order.order_statuses([log], reference.params)
+    return Weighed(flight, rows, reference, place, law)
+
+
+def verdict_of(weighed: Weighed, check=None, statuses=()) -> Verdict:
+    """The :class:`~quadsim.gap.result.Verdict` of a :class:`Weighed` flight, judged with the
+    references' self-check ``check`` (:class:`quadsim.gap.selfcheck.SelfCheck`, or None) and
+    the rotor-order ``statuses`` of its log (:mod:`quadsim.gap.order`; none: not checked)."""
+    flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
+    reference = dataclasses.replace(weighed.reference, self_check=check)
     verdict = order.mark(judge(rows, reference, flight.name,
                                cap=order.probability_cap(statuses)), statuses)
     words = verdict.answer
@@ -175,8 +242,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     return dataclasses.replace(
         verdict, answer=words, drag_law=None if law is None else law.variant,
         envelope=None if place is None else place.to_json(),
-        signal_delays_ms=flight.delays_ms, series=flight_series(states, reference, rows,
-                                                                name=flight.name, memo=memo),
+        signal_delays_ms=flight.delays_ms,
         notes=verdict.notes + tuple(delay_notes([flight])))
 
 

@@ -33,9 +33,10 @@ from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from .explanations import DETERMINED, Explanation, _own_effects
-from .fitting import _arm, curve_bound, effect_class, residuals
-from .memo import _memo
+from .discrepancy import centre_term, columns
+from .explanations import DETERMINED, Explanation, own_effects
+from .fitting import arm_length, curve_bound, effect_class, residuals
+from .memo import memoised
 from .priors import curve_quadratic_bounds
 from .reference import Reference, rotor_spectra, shifted
 from .rotor_channel import min_time_constant
@@ -179,9 +180,10 @@ def parameter_bounds(expl: Explanation, reference: Reference, dt: float
             if name == "mass_offset" and p == "mass":
                 lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
             elif name == "mass_offset":         # a payload within the rotors' span
-                lo, hi = max(lo, -_arm(reference.params)), min(hi, _arm(reference.params))
+                arm = arm_length(reference.params)
+                lo, hi = max(lo, -arm), min(hi, arm)
             if name == "com_offset":
-                arm = _arm(reference.params)
+                arm = arm_length(reference.params)
                 lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
             if name == "thrust_curve" and p == "linear":
                 bound = curve_bound(reference.params)
@@ -226,6 +228,7 @@ def flight_residual(states, reference: Reference, effects: list, memo: dict | No
     """:func:`quadsim.gap.reference.weighted_residual`, flattened (N C,), with the residual
     parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
     return (r * np.sqrt(reference.weights)).ravel()
 
 
@@ -235,8 +238,8 @@ def shifted_view(states, delay_s: float, memo: dict | None = None):
     once."""
     if memo is None:
         return shifted(states, delay_s)
-    spectra = _memo(memo, ("spectra", id(states)), states, lambda: rotor_spectra(states))
-    return _memo(memo, ("shifted", id(states), delay_s), states,
+    spectra = memoised(memo, ("spectra", id(states)), states, lambda: rotor_spectra(states))
+    return memoised(memo, ("shifted", id(states), delay_s), states,
                  lambda: shifted(states, delay_s, spectra))
 
 
@@ -268,17 +271,26 @@ class Problem:
         lower, upper = parameter_bounds(expl, reference, float(states.t[1] - states.t[0]))
         self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
-        self.size = jac.shape[0] + len(self.keep) + len(self.mean)
+        self.size = jac.shape[0] + self.marg.j.shape[1] + len(self.mean)
 
     def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> Marginal:
-        """The marginal of the kept shared columns; with a ``memo``, one per set of columns
-        (most explanations keep them all) and Jacobian."""
+        """The marginal of the kept shared columns and the discrepancy's
+        (:func:`quadsim.gap.discrepancy.columns`, unit spread: they are scaled by the
+        coefficients' covariance factor already), after them; with a ``memo``, one per set
+        of columns (most explanations keep them all) and Jacobian."""
+        def build():
+            extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
+                            self.memo)
+            return Marginal(np.hstack([jac[:, self.keep], extra]),
+                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]))
+
         if self.memo is None:
-            return Marginal(jac[:, self.keep], s_all[self.keep])
+            return build()
         kept = self.memo.setdefault("marginals", {})
-        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes())
+        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes(),
+               id(self.reference.discrepancy), self.reference.weights.tobytes())
         if key not in kept or kept[key][0] is not jac:
-            kept[key] = (jac, Marginal(jac[:, self.keep], s_all[self.keep]))
+            kept[key] = (jac, build())
         return kept[key][1]
 
     def residual(self, z: np.ndarray) -> np.ndarray:
@@ -291,7 +303,7 @@ class Problem:
             return last[key][1]
         # z at its bound gives theta a round-off beyond the parameter's range: clipped
         theta = np.clip(self.mean + self.sd * z, self.lower, self.upper)
-        own = _own_effects(self.expl, theta)
+        own = own_effects(self.expl, theta)
         flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
         r = flight_residual(flight, self.reference, self.shared + own, self.memo)
         if last is not None:
@@ -398,5 +410,5 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   shared_shift=shift)
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
-                                  _own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
+                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
     return ev

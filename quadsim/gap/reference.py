@@ -24,7 +24,8 @@ import numpy as np
 
 from ..core.errors import ModelError
 from ..vehicle.params import VehicleParams
-from .fitting import Candidate, _bounds, _typical, residuals
+from .discrepancy import centre_term
+from .fitting import Candidate, parameter_bounds, residuals, typical_scales
 
 __all__ = [
     "FD_STEP",
@@ -40,7 +41,7 @@ __all__ = [
 
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
-#: (:func:`quadsim.gap.fitting._typical`): the same relative step the fits use (diff_step).
+#: (:func:`quadsim.gap.fitting.typical_scales`): the same relative step the fits use (diff_step).
 FD_STEP = 1e-3
 
 
@@ -225,7 +226,7 @@ class Reference:
     #: none (no rotor drag, or it is not shared)
     quadratic_drag: float = 0.0
     #: the same with each body axis's drag on its own air speed (``per_axis``): the wind
-    #: reading's third variant (:func:`quadsim.gap.explanations._wind_readings`)
+    #: reading's third variant (:func:`quadsim.gap.explanations.wind_readings`)
     quadratic_drag_axes: float = 0.0
     #: C_d A (m^2) along body z under the law per body axis that gives the references' own
     #: vertical air force of their shared body drag (on the air speed, ``|v| v_z``):
@@ -248,6 +249,24 @@ class Reference:
     #: the lack-of-fit baseline from flights other than the references (held-out mode's
     #: training flights, :class:`LackOfFitBaseline`); None: ``lof_mean``/``lof_sd``/``lof_dof``
     baseline: LackOfFitBaseline | None = None
+    #: the references' systematic residual on flight-state features, with its between-flight
+    #: covariance (:class:`quadsim.gap.discrepancy.Discrepancy`): taken off every residual
+    #: (:func:`weighted_residual`) and marginalised with every explanation
+    #: (:class:`quadsim.gap.problem.Problem`); None: none (fewer than 3 references, or a
+    #: parameter-set reference)
+    discrepancy: object = None
+    #: (n, C) each reference flight's log(ms_jc / sigma_c^2) (the lack-of-fit baseline's
+    #: data, ``lof_mean`` their mean): what the self-check leaves one flight out of
+    #: (:mod:`quadsim.gap.selfcheck`); None where not kept
+    log_ms: np.ndarray | None = None
+    #: the self-check of the references against each other
+    #: (:class:`quadsim.gap.selfcheck.SelfCheck`): what a reading's size is compared with
+    #: (practical significance); None before it ran or without one
+    self_check: object = None
+    #: each reference flight's own fit (:class:`quadsim.gap.selfcheck.PerFlight`): what the
+    #: between-flight scatter and the envelope are built from, kept for the self-check;
+    #: None where not kept
+    per_flight: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -278,8 +297,11 @@ def weighted_residual(states, reference: Reference, effects: list,
     """Residual (N, C) of ``effects`` on ``states``, each channel times
     ``1 / (sigma_c sqrt(tau_c))``: its squared sum is the log-likelihood's -2x (module doc).
     ``memo``: residual parts kept across evaluations on the same ``states``
-    (:func:`quadsim.gap.fitting.residuals`)."""
+    (:func:`quadsim.gap.fitting.residuals`). With a discrepancy term
+    (``reference.discrepancy``), its centre is taken off first
+    (:func:`quadsim.gap.discrepancy.centre_term`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
     return r * np.sqrt(reference.weights)
 
 
@@ -292,8 +314,8 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
     wrench of one vehicle, the rotor channel of one command -> speed model) through
     ``memo`` (a new one per call by default)."""
     memo = {} if memo is None else memo
-    typical = _typical(reference.candidate, reference.params)
-    _, upper = _bounds(reference.candidate, reference.params)
+    typical = typical_scales(reference.candidate, reference.params)
+    _, upper = parameter_bounds(reference.candidate, reference.params)
     base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):

@@ -56,7 +56,7 @@ from ..effects.base import Effect, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
-from .memo import _acting, identity, kept
+from .memo import acting, identity, kept
 
 __all__ = [
     "CHANNELS",
@@ -282,11 +282,11 @@ def model_wrench(states: FlightStates, params: VehicleParams,
         vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
         matrices = keep = None
     else:
-        vehicle_key = (id(params), _acting(effect_set.effects, ("apply_to_params",)))
+        vehicle_key = (id(params), acting(effect_set.effects, ("apply_to_params",)))
         vehicle, matrices = kept(
             flight_memo, "vehicle", vehicle_key, (params,),
             lambda: _vehicle_matrices(effect_set.apply_to_params(params)))
-        air_key = _acting(effect_set.effects, ("air_velocity",))
+        air_key = acting(effect_set.effects, ("air_velocity",))
         air = kept(flight_memo, "air", air_key, (),
                    lambda: states.velocity - effect_set.air_velocity(states.t, states.position))
         vbat = states.vbat if states.vbat is not None else kept(

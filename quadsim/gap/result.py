@@ -92,7 +92,8 @@ _HELDOUT_KEYS = ("floor_source", "channels", "alternatives", "best_candidate",
                  "heldout_channel_gap_after", "reduction", "heldout_gap_before",
                  "heldout_gap_after")
 #: JSON keys of a judged flight beyond the common ones.
-_FLIGHT_KEYS = ("differ_on", "symptom", "drag_law", "signal_delays_ms")
+_FLIGHT_KEYS = ("differ_on", "symptom", "drag_law", "signal_delays_ms", "form_remainder",
+                "self_check_clean")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -110,13 +111,14 @@ class Verdict(_JsonView):
     out, when a name was checked).
 
     Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
-    ``signal_delays_ms``; JSON ``residual`` (with a ``series``): the RMS per channel before
-    and after the answer over the references' RMS, the share of the excess removed and
-    its words (:class:`GapShare`, :func:`quadsim.gap.words.residual_text`). Held out:
-    ``floor_source``, ``channels`` (RMS before/after/floor per channel, units),
-    ``alternatives``, ``best_candidate``, ``reduction`` and the gaps (mean squared residual
-    over sigma^2, 1 = noise). ``series``: per flight, the residual
-    before and after the answer (:func:`quadsim.gap.traces.flight_series`), not in the JSON."""
+    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``; JSON ``residual`` (with
+    a ``series``): the RMS per channel before and after the answer over the references'
+    RMS, the share of the excess removed and its words (:class:`GapShare`,
+    :func:`quadsim.gap.words.residual_text`). Held out: ``floor_source``, ``channels`` (RMS
+    before/after/floor per channel, units), ``alternatives``, ``best_candidate``,
+    ``reduction`` and the gaps (mean squared residual over sigma^2, 1 = noise).
+    ``series``: per flight, the residual before and after the answer
+    (:func:`quadsim.gap.traces.flight_series`), not in the JSON."""
 
     outcome: str
     name: str
@@ -152,6 +154,12 @@ class Verdict(_JsonView):
     reduction: float | None = None
     heldout_gap_before: float | None = None
     heldout_gap_after: float | None = None
+    #: per flight: what a tentatively named reading leaves (channel -> RMS over the
+    #: references' typical RMS; :data:`quadsim.gap.judge.FORM_ERROR_TENTATIVE`)
+    form_remainder: Mapping = field(default_factory=dict)
+    #: per flight: whether the references judge themselves clean
+    #: (:class:`quadsim.gap.selfcheck.SelfCheck`); None without a self-check
+    self_check_clean: bool | None = None
     #: per flight: the residual before and after the answer (:mod:`.traces`; not in the JSON)
     series: Series | None = None
 

@@ -2,14 +2,15 @@
 report's plots (:mod:`quadsim.gap.plots`) and the rerun recording draw.
 
 *Before* is the flight's residual (N, C) under the reference model as calibrated (theta_ref,
-the references' rotor timing). *After* is its residual as the judgment weighed the most
+the references' rotor timing, less the centre of what the references share beyond the
+library, :mod:`quadsim.gap.discrepancy`). *After* is its residual as the judgment weighed the most
 probable reading: the reading's own effects at their fitted values (its rotor delay where it
 fits one), the shared groups it does not replace at theta_ref, plus the linear step of the
-shared parameters its evidence profiles within the references' spread
-(:class:`quadsim.gap.problem.Marginal`): the residual whose per-channel mean square is the
+shared parameters and of the discrepancy term its evidence profiles within the references'
+spread (:class:`quadsim.gap.problem.Marginal`): the residual whose per-channel mean square is the
 reading's ``ms``, which the lack-of-fit test reads. Channels: Fx Fy Fz (N), Mx My Mz (N m),
 then rotor_1..R (rad/s) where the reference has rotor channels
-(:func:`quadsim.gap.fitting.residuals`).
+(:func:`quadsim.gap.problem.flight_residual`).
 
 How much of the gap an answer removes: :meth:`quadsim.gap.result.Series.share`.
 """
@@ -19,9 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from .explanations import marginal_sd
-from .fitting import residuals
 from .judge import channel_names, posterior
-from .problem import FitInputs
+from .problem import FitInputs, flight_residual
 from .reference import Reference, jacobian
 from .result import Series
 
@@ -41,14 +41,14 @@ def flight_series(states, reference: Reference, rows, *, name: str,
     evaluate`), None to compute them."""
     lead = posterior(rows)[0][2]
     expl = lead.explanation
-    before = residuals(states, reference.params, reference.effects(),
-                       rotor_channel=reference.rotor, memo=memo)
+    chans = len(reference.sigma)
+    before = (flight_residual(states, reference, reference.effects(), memo).reshape(-1, chans)
+              / np.sqrt(reference.weights))
     prob = FitInputs(states, reference, _jacobian(states, reference, memo),
                      marginal_sd(reference), memo).problem(expl)
     theta = np.array([lead.values[k] for k in expl.parameter_names], float)
     z = (theta - prob.mean) / prob.sd
     weighted, _ = prob.marg.profile(prob.residual(z))
-    chans = len(reference.sigma)
     after = (weighted[:len(states.t) * chans].reshape(-1, chans)
              * np.sqrt(reference.tau) * reference.sigma)
     return Series(np.asarray(states.t, float), before, after, tuple(channel_names(reference)),

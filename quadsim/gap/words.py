@@ -124,7 +124,7 @@ def _spin_text(name: str, ev, values: dict, reference) -> str:
 
 
 def _calm_refit(ev) -> list[str]:
-    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.explanations._with_wind`)
+    """The wind keys a drag or lift reading refits (:func:`quadsim.gap.explanations.with_wind`)
     when no component's 95 % interval excludes calm air (as :func:`reading_name` decides):
     the answer then says "in calm air" instead of printing a wind of 1e-5 ± 0.03 m/s."""
     if ev.name == "wind" or not any(part == "wind" and fitted

@@ -1,0 +1,208 @@
+"""The calibrated sense of "normal" (issue 47): the discrepancy term, the self-check and
+practical significance, and the Laplace evidence against an exact marginal likelihood."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from benchmarks.synthetic import synthetic_flight
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose_per_flight
+from quadsim.gap.discrepancy import (
+    centre_term,
+    channel_features,
+    columns,
+    features,
+    fit_discrepancy,
+)
+from quadsim.gap.judge import posterior
+from quadsim.gap.problem import Marginal, laplace
+from quadsim.gap.selfcheck import PRACTICAL_Z, SelfCheck, Spread, negligible
+from quadsim.vehicle.params import load_params
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+def _states(n, seed):
+    """Flight states with random motion (only the fields the features read)."""
+    rng = np.random.default_rng(seed)
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    return SimpleNamespace(t=np.arange(n) * 0.01, quat=quat,
+                           velocity=rng.normal(0, 1.0, (n, 3)),
+                           body_rate=rng.normal(0, 1.0, (n, 3)),
+                           body_accel=rng.normal(0, 5.0, (n, 3)))
+
+
+def test_discrepancy_centre_and_spread_are_the_flights_coefficients_mean_and_scatter():
+    """Residual = features @ beta_j exactly on each of 6 flights: the centre is the mean of
+    the beta_j, the covariance their sample covariance x (1 + 1/n) plus the ridge."""
+    rng = np.random.default_rng(0)
+    states = [_states(400, s) for s in range(6)]
+    betas = rng.normal(0, 1.0, (6, 4))            # Fx's four features, per flight
+    resid = []
+    for s, b in zip(states, betas):
+        r = np.zeros((400, 6))
+        names = channel_features(0)
+        f = features(s)
+        r[:, 0] = np.column_stack([f[n] for n in names]) @ b
+        resid.append(r)
+    d = fit_discrepancy(resid, states)
+    assert np.allclose(d.centre[0], betas.mean(axis=0), atol=1e-9)
+    cov = np.cov(betas, rowvar=False) * (1 + 1 / 6)
+    cov += 0.1 * np.diag(np.diag(cov))
+    assert np.allclose(d.factor[0] @ d.factor[0].T, cov, rtol=1e-9, atol=1e-12)
+    assert d.explained[0] > 0 and d.explained[1] == 0.0
+    # the centre term is the features times the centre; the columns scale by the factor
+    c = centre_term(states[0], d, 6)
+    f = np.column_stack([v for v in (features(states[0])[n] for n in channel_features(0))])
+    assert np.allclose(c[:, 0], f @ d.centre[0]) and np.allclose(c[:, 1:], 0.0)
+    cols = columns(states[0], d, np.ones(6) * 4.0)
+    assert cols.shape == (400 * 6, d.size)
+    assert np.allclose(cols.reshape(400, 6, -1)[:, 0, :4], 2.0 * f @ d.factor[0])
+    # leave one out: the other five flights' mean
+    assert np.allclose(d.without(2).centre[0], np.delete(betas, 2, 0).mean(axis=0))
+    # a channel's F coefficients need F + 1 flights: four force features, five flights
+    assert d.channels == (0, 1, 2) and d.without(2).channels == (0, 1, 2)
+    assert d.without(2).factor[0].shape == (4, 4)
+    assert fit_discrepancy(resid[:4], states[:4]) is None
+
+
+def test_laplace_evidence_is_the_exact_marginal_likelihood_of_a_linear_gaussian_reading():
+    """r = r0 + A theta + J u + e, theta ~ N(mu, sd^2), u ~ N(0, s^2), e ~ N(0, I): the
+    exact log Bayes factor of the reading against "no difference" is
+    log N(r0 + A mu; 0, I + A sd^2 A' + J s^2 J') - log N(r0; 0, I + J s^2 J')."""
+    rng = np.random.default_rng(3)
+    n, p, k = 60, 2, 3
+    a, jac = rng.normal(0, 0.4, (n, p)), rng.normal(0, 0.3, (n, k))
+    mu, sd, s = np.array([0.5, -0.2]), np.array([1.5, 0.7]), np.array([0.8, 1.2, 0.5])
+    r0 = a @ np.array([1.1, 0.4]) + rng.normal(0, 1.0, n)     # truth theta = (1.1, 0.4)
+    marg = Marginal(jac, s)
+
+    def log_z(expl_mean, expl_sd, amat):
+        prob = SimpleNamespace(
+            states=None, marg=marg, s_all=s, keep=list(range(k)),
+            reference=SimpleNamespace(candidate=SimpleNamespace(parameter_names=["u1", "u2", "u3"]),
+                                      sigma=np.ones(1), tau=np.ones(1), rotor=False),
+            expl=SimpleNamespace(mean=tuple(expl_mean), sd=tuple(expl_sd), name="linear",
+                                 log_prior=0.0, shift=None,
+                                 parameter_names=[f"x.p{i}" for i in range(len(expl_mean))]))
+        m = len(expl_mean)
+        # the stacked residual is linear in z: its least-squares minimum is the MAP
+        big = np.vstack([marg.profile(amat * expl_sd)[0], marg.profile(amat * expl_sd)[1],
+                         np.eye(m)]) if m else np.zeros((n + k, 0))
+        base = np.concatenate([*marg.profile(r0 + amat @ expl_mean), np.zeros(m)]) \
+            if m else np.concatenate(marg.profile(r0))
+        z = np.linalg.lstsq(big, -base, rcond=None)[0] if m else np.zeros(0)
+        vec = base + big @ z
+        return laplace(prob, z, vec, big.T @ big, 0).log_z
+
+    def exact(cov, mean):
+        _, logdet = np.linalg.slogdet(cov)
+        x = r0 + mean
+        return -0.5 * x @ np.linalg.solve(cov, x) - 0.5 * logdet
+
+    null_cov = np.eye(n) + jac @ np.diag(s ** 2) @ jac.T
+    effect_cov = null_cov + a @ np.diag(sd ** 2) @ a.T
+    want = exact(effect_cov, a @ mu) - exact(null_cov, np.zeros(n))
+    got = log_z(mu, sd, a) - log_z((), (), np.zeros((n, 0)))
+    assert got == pytest.approx(want, abs=1e-8)
+
+
+def _evidence(name, values, post, determined=True):
+    return SimpleNamespace(name=name, explanation=SimpleNamespace(variant="", parts=()),
+                           values=dict(values), post_sd=dict(post),
+                           determined={k: determined for k in values}, log_z=0.0)
+
+
+def test_a_detectable_but_negligible_difference_is_no_difference():
+    """A thrust reading of -1.0 +- 0.2 % is 5 posterior spreads from zero (detectable) but
+    inside the references' own 2 x 0.8 % band: no difference; -4 % is beyond it."""
+    check = SelfCheck(("a", "b"), (), (), {("thrust_factor", ""): {
+        "thrust_factor.change": Spread(0.0, 0.008, 20)}})
+    small = _evidence("thrust_factor", {"thrust_factor.change": -0.010},
+                      {"thrust_factor.change": 0.002})
+    large = _evidence("thrust_factor", {"thrust_factor.change": -0.040},
+                      {"thrust_factor.change": 0.002})
+    assert negligible(small, check) and not negligible(large, check)
+    # the boundary: |v - mean| - 1.96 sd_post = PRACTICAL_Z sd_ref
+    edge = PRACTICAL_Z * 0.008 + 1.96 * 0.002
+    assert negligible(_evidence("thrust_factor", {"thrust_factor.change": edge - 1e-6},
+                                {"thrust_factor.change": 0.002}), check)
+    assert not negligible(_evidence("thrust_factor", {"thrust_factor.change": edge + 1e-6},
+                                    {"thrust_factor.change": 0.002}), check)
+    # a reading the references never showed, or no self-check: the statistical rule alone
+    assert not negligible(_evidence("mass_offset", {"mass_offset.mass": 1e-3},
+                                    {"mass_offset.mass": 1e-4}), check)
+    assert not negligible(small, None)
+    # in the posterior its weight is "no difference"'s
+    null = _evidence("no_difference", {}, {})
+    null.log_z, small.log_z = -10.0, 0.0
+    ranked = posterior([null, small], lambda ev: negligible(ev, check))
+    assert ranked[0][0] == "no_difference" and ranked[0][1] == pytest.approx(1.0)
+    assert posterior([null, small])[0][0] == "thrust_factor"
+
+
+def _logs(cf, effects, seeds, duration=4.0):
+    return [synthetic_flight(cf, effects, seed=s, duration=duration, speed=1.5) for s in seeds]
+
+
+EFFECTS = ["mass_offset", "com_offset", "thrust_mismatch", "body_drag"]
+
+
+def test_a_trait_every_reference_shares_is_normal_and_a_change_on_top_is_named(cf):
+    """Every reference and tested flight carries a quadratic body drag (C_d A 40 cm^2) the
+    reference model holds only as a linear rotor drag: the flight with nothing else is
+    no_significant_gap, the one with +4 g on top is named mass_offset at about +4 g."""
+    drag = [make_effect("body_drag", cd_area=0.004)]
+    reference = _logs(cf, drag, (40, 41, 42, 43, 44))
+    tested = [*_logs(cf, drag, (45,)),
+              *_logs(cf, drag + [make_effect("mass_offset", mass=0.004)], (46,))]
+    result = diagnose_per_flight(tested, reference, cf, effects=EFFECTS)
+    flights = result["flights"]
+    assert flights[0]["outcome"] == "no_significant_gap", flights[0]["answer"]
+    assert flights[1]["verdict"] == "mass_offset", flights[1]["answer"]
+    assert flights[1]["params"]["mass_offset.mass"] == pytest.approx(0.004, abs=1e-3)
+    check = result["reference_model"]["self_check"]
+    assert check["clean"] and check["false_alarms"] == []
+
+
+def test_the_self_check_reports_the_reference_that_differs(cf):
+    """Four plain references and one carrying +5 g: judged against the others (leave one
+    out), that one is a false alarm of the self-check, named by its file with its reading;
+    the set is not clean, and every answer against it says so."""
+    plain = _logs(cf, [], (50, 51, 52, 53))
+    odd = _logs(cf, [make_effect("mass_offset", mass=0.005)], (54,))
+    result = diagnose_per_flight(_logs(cf, [], (55,)), plain + odd, cf, effects=EFFECTS)
+    check = result["reference_model"]["self_check"]
+    alarms = {a["flight"]: a["verdict"] for a in check["false_alarms"]}
+    assert len(check["flights"]) == 5
+    # the heavy one is reported with its reading (a plain one flown at the others' edge
+    # may be reported as well: five references know little of their own envelope)
+    assert alarms[check["flights"][4]] == "mass_offset"
+    assert not check["clean"]
+    assert "disagree" in result["flights"][0]["answer"]
+
+
+def test_a_damped_swing_decays_as_a_damped_pendulum():
+    """A cable of 0.5 m leaning 0.05 rad, its attachment still, swing damping c = 0.5 1/s:
+    the small-angle pendulum theta'' + c theta' + (g / L) theta = 0, whose swing decays as
+    exp(-c t / 2) -- a peak 8 s on at about exp(-2) of the first; undamped it keeps it."""
+    from quadsim.gap import cable
+
+    t = np.arange(0.0, 10.0, 0.002)
+    accel = np.zeros((len(t), 3))
+    start = cable.start_state((0.05, 0.0), (0.0, 0.0))
+    period = 2 * np.pi * np.sqrt(0.5 / 9.81)
+    window = (t >= 8.0) & (t < 8.0 + period)
+    first = t < period
+    for damping in (0.5, 0.0):
+        q, _ = cable.swing(t, accel, 0.5, 9.81, start, damping=damping)
+        late = np.flatnonzero(window)[np.argmax(np.abs(q[window, 0]))]
+        early = np.argmax(np.abs(q[first, 0]))
+        amplitude = abs(q[late, 0]) / abs(q[early, 0])
+        assert amplitude == pytest.approx(np.exp(-damping * (t[late] - t[early]) / 2),
+                                          rel=0.02)
