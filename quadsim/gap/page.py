@@ -104,7 +104,7 @@ def _pct1(p) -> str:
 
 
 def _unit(key: str) -> str:
-    from .collinear import unit_of
+    from .priors import unit_of
 
     unit = unit_of(key)
     return "(relative)" if unit in ("1", "") else unit

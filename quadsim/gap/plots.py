@@ -197,7 +197,7 @@ def batch(flights, shares: dict) -> str:
     row)."""
     from matplotlib.ticker import MaxNLocator
 
-    from .collinear import unit_of
+    from .priors import unit_of
 
     order = sorted((f for f in flights if f.outcome != "refused"),
                    key=lambda f: (f.name, _short(f.file)))
