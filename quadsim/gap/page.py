@@ -45,7 +45,7 @@ _CSS = (
     "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}"
     "th{background:#f7f7f7;font-weight:600;font-size:.92em}"
     "td.name{white-space:nowrap}td.wrap{white-space:normal}td.value{white-space:nowrap;text-align:right}"
-    "td.words{min-width:200px;max-width:480px}.key{font-size:.85em;color:#555;margin-top:0}"
+    "td.words{min-width:120px;max-width:440px}.key{font-size:.85em;color:#555;margin-top:0}"
     ".effect{color:#1f77b4}.no_significant_gap{color:#2ca02c}.unexplained{color:#d62728}"
     ".refused{color:#7f7f7f}figure{margin:8px 0}svg{max-width:100%;height:auto}"
     "figcaption{font-size:.9em;color:#555}"
@@ -137,7 +137,7 @@ def _residual_cells(f, share) -> list[_Cell]:
 def _remains(f) -> _Cell:
     if f["outcome"] == "refused":
         return _words(f.get("reason", ""))
-    lack = f.get("lack_of_fit") or {}
+    lack = f.get("lack_of_fit") or f.get("form_remainder") or {}
     if not lack:
         return _name("nothing beyond the references")
     return _words(", ".join(f"{k} {v:.2g}x" for k, v in lack.items()))
@@ -153,8 +153,8 @@ def _first_screen_rows(flights) -> list[list[_Cell]]:
         lead = _lead(f)
         what = (lead.get("magnitude", "") if f["outcome"] != "refused" else "not judged")
         reading = (f"{lead['name']} {_pct(lead['probability'])}" if lead else "-")
-        rows.append([_name(_short(f["file"])), _name(f["verdict"], f["outcome"]),
-                     _Cell(reading) if lead else _name(reading), _words(what),
+        rows.append([_name(_short(f["file"])), _name(f["verdict"], f"{f['outcome']} wrap"),
+                     _words(reading) if lead else _name(reading), _words(what),
                      *_residual_cells(f, _share(f)), _remains(f)])
     return rows
 
@@ -165,7 +165,8 @@ _FIRST_HEAD = ["flight", "verdict", "leading reading (probability*)",
 _FIRST_KEY = ("* among the readings weighed for that flight, the leading one's (of a verdict "
               "unexplained too: the best reading, which still leaves too much). ** the "
               "largest channel's RMS over the references' RMS. *** the channels the answer "
-              "leaves beyond the references' typical RMS, as that ratio (lack of fit).")
+              "leaves beyond the references' typical RMS, as that ratio (lack of fit; of a "
+              "tentative name, what it leaves).")
 
 
 def _self_check(model: dict) -> str:

@@ -191,10 +191,10 @@ def batch(flights, shares: dict) -> str:
     :data:`COLOURS`): left, the residual RMS over the references' (the wrench channels'
     mean square, 1 = a reference flight's level) before (open) and after (filled) each
     answer; right, one panel per parameter of the leading readings (at most
-    :data:`MAX_PANELS`, the most frequent first): the determined values with their 95 %
-    intervals. ``flights``: :class:`~quadsim.gap.result.Verdict` per flight; ``shares``:
-    file -> :class:`quadsim.gap.result.GapShare` (a flight without one has no residual
-    row)."""
+    :data:`MAX_PANELS`, the most frequent first, angles and rates last): the determined
+    values with their 95 % intervals. ``flights``: :class:`~quadsim.gap.result.Verdict`
+    per flight; ``shares``: file -> :class:`quadsim.gap.result.GapShare` (a flight without
+    one has no residual row)."""
     from matplotlib.ticker import MaxNLocator
 
     from .priors import unit_of
@@ -208,7 +208,9 @@ def batch(flights, shares: dict) -> str:
         if f.outcome in ("effect", "unexplained") and f.posterior:
             for key in f.posterior[0].params:
                 count[key] = count.get(key, 0) + 1
-    keys = sorted(count, key=lambda k: -count[k])[:MAX_PANELS]
+    # the most frequent first; angles and rates (a swing's state) after the sizes
+    keys = sorted(count, key=lambda k: (unit_of(k) in ("rad", "rad/s"), -count[k]))
+    keys = keys[:MAX_PANELS]
     fig = _figure(2.2 * (1 + len(keys)) + 1.6, 0.32 * len(order) + 1.5)
     axes = np.atleast_1d(fig.subplots(1, 1 + len(keys), sharey=True))
     y = np.arange(len(order))[::-1]
