@@ -45,7 +45,7 @@ _CSS = (
     "td,th{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}"
     "th{background:#f7f7f7;font-weight:600;font-size:.92em}"
     "td.name{white-space:nowrap}td.wrap{white-space:normal}td.value{white-space:nowrap;text-align:right}"
-    "td.words{min-width:120px;max-width:440px}.key{font-size:.85em;color:#555;margin-top:0}"
+    "td.words{min-width:200px;max-width:440px}.key{font-size:.85em;color:#555;margin-top:0}"
     ".effect{color:#1f77b4}.no_significant_gap{color:#2ca02c}.unexplained{color:#d62728}"
     ".refused{color:#7f7f7f}figure{margin:8px 0}svg{max-width:100%;height:auto}"
     "figcaption{font-size:.9em;color:#555}"
@@ -69,7 +69,9 @@ class _Cell:
 
     def html(self) -> str:
         css = f"{self.kind} {self.css}".strip()
-        return f'<td class="{css}">{_e(self.text)}</td>'
+        # a pair's name may break after its "+", never inside a name
+        text = re.sub(r"(?<=[a-z_])\+(?=[a-z])", "+<wbr>", _e(self.text))
+        return f'<td class="{css}">{text}</td>'
 
 
 def _name(text, css: str = "") -> _Cell:
@@ -139,7 +141,7 @@ def _remains(f) -> _Cell:
         return _words(f.get("reason", ""))
     lack = f.get("lack_of_fit") or f.get("form_remainder") or {}
     if not lack:
-        return _name("nothing beyond the references")
+        return _name("nothing beyond the references", "wrap")
     return _words(", ".join(f"{k} {v:.2g}x" for k, v in lack.items()))
 
 
