@@ -22,7 +22,10 @@ Evidence
     (Welch cross-spectra summed over the band's bins), with the multiple coherence;
     :func:`z_transfer` -- the same for the collective channel, ``b sum Omega^2 -> m a_z``
     (accelerometer), which has no inertia in it: a thrust lag (inflow dynamics) or a delayed or
-    filtered speed estimate would show there too.
+    filtered speed estimate would show there too;
+    :func:`low_band_balance` -- below 2 Hz, how much of the torque the body does not show the
+    flapping moment explains; :func:`windowed_gain` -- the gain a 0.5 s open-loop prediction
+    needs (the benchmark's horizon).
 
 Candidates, each fitted in the band where the rotors drive the body (``BAND_HZ``, band-passed
 time series, flapping as co-regressor; the nonlinear parameter on a grid, the rest by least
@@ -344,6 +347,22 @@ def windowed_gain(sig: RotationSignals, axis: int, horizon: int = 50) -> tuple[f
     return float(coef[0]), float(coef[1])
 
 
+def low_band_balance(sig: RotationSignals, axis: int, cutoff_hz: float = 2.0) -> dict:
+    """Below ``cutoff_hz``: RMS (N m) of the predicted torque and of the body's moment, and how
+    much of their difference the flapping moment explains: ``tau - M = -c f + c0`` by least
+    squares (c in N m per (rad/s)(m/s), R^2 of the difference)."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    tau, m, f = low(sig.torque[:, axis]), low(sig.moment[:, axis]), low(sig.flapping[:, axis])
+    diff = tau - m
+    x = np.column_stack([-f, np.ones_like(f)])
+    coef = np.linalg.lstsq(x, diff, rcond=None)[0]
+    r2 = 1.0 - float(np.var(diff - x @ coef) / np.var(diff))
+    return {"torque_rms": float(f"{np.std(tau):.3g}"), "moment_rms": float(f"{np.std(m):.3g}"),
+            "flapping": float(f"{coef[0]:.3g}"), "balance_r2": round(r2, 3),
+            "residual_rms": float(f"{np.std(diff - x @ coef):.3g}")}
+
+
 def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
     """Every table of the analysis as a JSON-ready dict (see the module docstring)."""
     params = load_params(model)
@@ -372,6 +391,7 @@ def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
                            "coherence": round(r.coherence, 3)} for r in axis_response(s, axis)],
                 "candidates": {c: _fit_json(fit_candidate([s], axis, c)) for c in candidates},
                 "windowed_gain_0p5s": round(windowed_gain(s, axis)[0], 3),
+                "low_band": low_band_balance(s, axis),
             }
         out["per_log"][s.name] = entry
     for axis, name in enumerate(AXES):
@@ -407,7 +427,11 @@ def print_summary(result: dict) -> None:
                 f"{c} g {f['gain']:.2f}+-{f['gain_ci']:.2f} "
                 f"{units[c]} {f['parameter'] * (1 if c == 'damping' else 1e3):.3g}"
                 f" R2 {f['r2']:.2f}" for c, f in e["candidates"].items())
-            print(f"  {axis}: {bands}\n    {fits}; 0.5 s gain {e['windowed_gain_0p5s']:.2f}")
+            lb = e["low_band"]
+            print(f"  {axis}: {bands}\n    {fits}; 0.5 s gain {e['windowed_gain_0p5s']:.2f}"
+                  f"\n    below 2 Hz: torque RMS {lb['torque_rms']:.3g}, moment RMS "
+                  f"{lb['moment_rms']:.3g} N m; flapping {lb['flapping']:.3g} explains R^2 "
+                  f"{lb['balance_r2']:.2f} of the difference, leaving {lb['residual_rms']:.3g} N m")
     for axis, pooled in result["pooled"].items():
         print(f"pooled {axis}: " + "; ".join(
             f"{c} g {f['gain']:.3f}+-{f['gain_ci']:.3f} {units[c]} "

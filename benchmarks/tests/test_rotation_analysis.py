@@ -85,3 +85,16 @@ def test_band_transfer_reads_gain_and_delay():
     assert np.degrees(np.angle(h[0])) == pytest.approx(-36.0, abs=4.0)
     assert abs(h[1]) == pytest.approx(3e-8, rel=0.05)
     assert coherence > 0.99
+
+
+def test_low_band_balance_and_windowed_gain_read_a_built_balance():
+    """tau - M = -c f below 2 Hz exactly: R^2 1 and c; M = 0.3 tau + 3e-8 f: the windowed
+    least squares returns 0.3 and 3e-8."""
+    torque, flap = _noise(16), _noise(17, 1e3)
+    moment = torque + 4e-8 * flap
+    balance = ra.low_band_balance(_signals(torque, moment, flap), 0)
+    assert balance["flapping"] == pytest.approx(4e-8, rel=1e-3)
+    assert balance["balance_r2"] == pytest.approx(1.0, abs=1e-3)
+    g, c = ra.windowed_gain(_signals(torque, 0.3 * torque + 3e-8 * flap, flap), 0)
+    assert g == pytest.approx(0.3, rel=1e-6)
+    assert c == pytest.approx(3e-8, rel=1e-6)
