@@ -328,6 +328,34 @@ def heldout_r2(fit: CandidateFit, sig: RotationSignals, axis: int) -> float:
     return 1.0 - float(np.var(y - x @ np.asarray(coef)) / np.var(y))
 
 
+def _windows(sig: RotationSignals, axis: int, horizon: int):
+    """(regressors (W, 2): integrated torque and flapping, N m s; target (W,): J delta-omega)
+    over every window of ``horizon`` samples."""
+    dt = 1.0 / RATE_HZ
+
+    def wsum(x):
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        return (c[horizon:] - c[:-horizon])[:-1] * dt
+
+    x = np.column_stack([wsum(sig.torque[:, axis]), wsum(sig.flapping[:, axis])])
+    return x, wsum(sig.moment[:, axis])
+
+
+def windowed_heldout(train: list[RotationSignals], held: list[RotationSignals], axis: int,
+                     horizon: int = 50) -> tuple[tuple[float, float], list[float]]:
+    """The 0.5 s balance ``J delta-omega = g int tau + c int f`` fitted over every window of
+    the training logs ((g, c)), and per held-out log the RMS error of its predicted rate change
+    over the RMS of the rate change itself (holding the rate scores 1; below 1 beats it)."""
+    parts = [_windows(s, axis, horizon) for s in train]
+    coef = np.linalg.lstsq(np.vstack([p[0] for p in parts]),
+                           np.concatenate([p[1] for p in parts]), rcond=None)[0]
+    ratios = []
+    for s in held:
+        x, y = _windows(s, axis, horizon)
+        ratios.append(float(np.sqrt(np.mean((y - x @ coef) ** 2)) / np.sqrt(np.mean(y ** 2))))
+    return (float(coef[0]), float(coef[1])), ratios
+
+
 def windowed_gain(sig: RotationSignals, axis: int, horizon: int = 50) -> tuple[float, float]:
     """What a 0.5 s open-loop prediction needs: the least-squares gain g (1) and flapping
     coefficient of ``J (omega(t+H) - omega(t)) = sum_{k<H} (g tau + c f) dt`` over every window
@@ -395,6 +423,10 @@ def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
             }
         out["per_log"][s.name] = entry
     for axis, name in enumerate(AXES):
+        (g, c), ratios = windowed_heldout(train_s, held_s, axis)
+        out.setdefault("windowed_0p5s", {})[name] = {
+            "gain": round(g, 3), "flapping": float(f"{c:.3g}"),
+            "heldout_rms_over_hold": {s.name: round(r, 3) for s, r in zip(held_s, ratios)}}
         pooled = {}
         for c in candidates:
             fit = fit_candidate(train_s, axis, c)
@@ -413,6 +445,10 @@ def _fit_json(fit: CandidateFit) -> dict:
 
 def print_summary(result: dict) -> None:
     """The per-log tables to stdout."""
+    for axis, w in result.get("windowed_0p5s", {}).items():
+        print(f"0.5 s balance {axis}: g {w['gain']:.3f}, flapping {w['flapping']:.3g}; held-out "
+              "RMS / hold " + ", ".join(f"{k} {v:.2f}" for k, v in
+                                        w["heldout_rms_over_hold"].items()))
     units = {"scale": "delay ms", "iv": "delay ms", "lag": "tau ms", "damping": "k N m s/rad"}
     for name, entry in result["per_log"].items():
         z = entry.get("z")

@@ -98,3 +98,18 @@ def test_low_band_balance_and_windowed_gain_read_a_built_balance():
     g, c = ra.windowed_gain(_signals(torque, 0.3 * torque + 3e-8 * flap, flap), 0)
     assert g == pytest.approx(0.3, rel=1e-6)
     assert c == pytest.approx(3e-8, rel=1e-6)
+
+
+def test_windowed_heldout_scores_against_holding_the_rate():
+    """A balance fitted where M = 0.3 tau + 3e-8 f predicts a held-out log built alike exactly
+    (ratio 0); for a log with M' = 0.15 tau + 1.5e-8 f the prediction is 2 M', its error M':
+    exactly as bad as holding the rate (ratio 1)."""
+    t, f = _noise(18), _noise(19, 1e3)
+    train = _signals(t, 0.3 * t + 3e-8 * f, f)
+    t2, f2 = _noise(20), _noise(21, 1e3)
+    same = _signals(t2, 0.3 * t2 + 3e-8 * f2, f2)
+    half = _signals(t2, 0.15 * t2 + 1.5e-8 * f2, f2)
+    (g, c), ratios = ra.windowed_heldout([train], [same, half], 0)
+    assert g == pytest.approx(0.3, rel=1e-6)
+    assert ratios[0] == pytest.approx(0.0, abs=1e-6)
+    assert ratios[1] == pytest.approx(1.0, rel=1e-6)
