@@ -391,6 +391,19 @@ def low_band_balance(sig: RotationSignals, axis: int, cutoff_hz: float = 2.0) ->
             "residual_rms": float(f"{np.std(diff - x @ coef):.3g}")}
 
 
+def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:
+    """As :func:`low_band_balance` with one flapping coefficient for both axes (the library's
+    ``blade_flapping``): the coefficient and the residual RMS (N m) per axis."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    diff = [low(sig.torque[:, a]) - low(sig.moment[:, a]) for a in (0, 1)]
+    flap = [low(sig.flapping[:, a]) for a in (0, 1)]
+    x, y = np.concatenate(flap), np.concatenate(diff)
+    c = -float(x @ y) / float(x @ x)
+    return {"flapping": float(f"{c:.3g}"),
+            "residual_rms": [float(f"{np.std(diff[a] + c * flap[a]):.3g}") for a in (0, 1)]}
+
+
 def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
     """Every table of the analysis as a JSON-ready dict (see the module docstring)."""
     params = load_params(model)
@@ -421,6 +434,7 @@ def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
                 "windowed_gain_0p5s": round(windowed_gain(s, axis)[0], 3),
                 "low_band": low_band_balance(s, axis),
             }
+        entry["low_band_common"] = low_band_common(s)
         out["per_log"][s.name] = entry
     for axis, name in enumerate(AXES):
         (g, c), ratios = windowed_heldout(train_s, held_s, axis)
