@@ -24,8 +24,11 @@ Evidence
     (accelerometer), which has no inertia in it: a thrust lag (inflow dynamics) or a delayed or
     filtered speed estimate would show there too;
     :func:`low_band_balance` -- below 2 Hz, how much of the torque the body does not show the
-    flapping moment explains; :func:`windowed_gain` -- the gain a 0.5 s open-loop prediction
-    needs (the benchmark's horizon).
+    flapping moment explains, per axis and with a CoM-offset lever beside it
+    (:func:`low_band_common`: one coefficient for both axes); :func:`windowed_gain` -- the gain
+    a 0.5 s open-loop prediction needs (the benchmark's horizon), and
+    :func:`windowed_heldout` -- that balance fitted on the training logs, scored on held-out
+    ones against holding the rate.
 
 Candidates, each fitted in the band where the rotors drive the body (``BAND_HZ``, band-passed
 time series, flapping as co-regressor; the nonlinear parameter on a grid, the rest by least
@@ -378,7 +381,8 @@ def windowed_gain(sig: RotationSignals, axis: int, horizon: int = 50) -> tuple[f
 def low_band_balance(sig: RotationSignals, axis: int, cutoff_hz: float = 2.0) -> dict:
     """Below ``cutoff_hz``: RMS (N m) of the predicted torque and of the body's moment, and how
     much of their difference the flapping moment explains: ``tau - M = -c f + c0`` by least
-    squares (c in N m per (rad/s)(m/s), R^2 of the difference)."""
+    squares (c in N m per (rad/s)(m/s), R^2 of the difference); with a thrust term beside it
+    (``+ a T``, the lever of a CoM offset, ``com_arm_mm`` = a in mm) the residual left."""
     sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
     low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
     tau, m, f = low(sig.torque[:, axis]), low(sig.moment[:, axis]), low(sig.flapping[:, axis])
@@ -386,9 +390,15 @@ def low_band_balance(sig: RotationSignals, axis: int, cutoff_hz: float = 2.0) ->
     x = np.column_stack([-f, np.ones_like(f)])
     coef = np.linalg.lstsq(x, diff, rcond=None)[0]
     r2 = 1.0 - float(np.var(diff - x @ coef) / np.var(diff))
+    # a CoM offset from the frame's centre by r adds -r x (0, 0, T): a torque linear in thrust
+    thrust = low(sig.thrust)
+    xc = np.column_stack([-f, thrust, np.ones_like(f)])
+    coef_c = np.linalg.lstsq(xc, diff, rcond=None)[0]
     return {"torque_rms": float(f"{np.std(tau):.3g}"), "moment_rms": float(f"{np.std(m):.3g}"),
             "flapping": float(f"{coef[0]:.3g}"), "balance_r2": round(r2, 3),
-            "residual_rms": float(f"{np.std(diff - x @ coef):.3g}")}
+            "residual_rms": float(f"{np.std(diff - x @ coef):.3g}"),
+            "com_arm_mm": round(1e3 * float(coef_c[1]), 2),
+            "residual_rms_with_com": float(f"{np.std(diff - xc @ coef_c):.3g}")}
 
 
 def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:

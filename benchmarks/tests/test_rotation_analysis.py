@@ -95,6 +95,12 @@ def test_low_band_balance_and_windowed_gain_read_a_built_balance():
     balance = ra.low_band_balance(_signals(torque, moment, flap), 0)
     assert balance["flapping"] == pytest.approx(4e-8, rel=1e-3)
     assert balance["balance_r2"] == pytest.approx(1.0, abs=1e-3)
+    thrust = 0.4 + _noise(22, 0.05)
+    offset = ra.RotationSignals("synthetic", np.column_stack([torque, torque]),
+                                np.column_stack([moment - 2e-3 * thrust] * 2),
+                                np.column_stack([flap, flap]), np.zeros((N, 2)), None,
+                                thrust, None)
+    assert ra.low_band_balance(offset, 0)["com_arm_mm"] == pytest.approx(2.0, rel=1e-2)
     common = ra.low_band_common(_signals(torque, moment, flap))
     assert common["flapping"] == pytest.approx(4e-8, rel=1e-3)
     assert common["residual_rms"][0] == pytest.approx(0.0, abs=1e-9)
