@@ -10,7 +10,7 @@ Usage::
 
     python -m benchmarks.rotation_scores --data ../shared/data/nanodrone_cf21bl \\
         [--runs test|validation] [--json OUT.json] [--params PARAMS.toml] \\
-        [--drop EFFECT ...] EFFECTS.toml [EFFECTS.toml ...]
+        [--drop EFFECT ...] [--flapping-axes SX SY] EFFECTS.toml [EFFECTS.toml ...]
 """
 
 from __future__ import annotations
@@ -20,6 +20,8 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks import nanodrone as bench  # noqa: E402
@@ -27,16 +29,42 @@ from benchmarks.nanodrone_benchmark import quadsim_prediction, run_logs  # noqa:
 from quadsim.core.errors import run_cli  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.effects.base import EffectSet  # noqa: E402
+from quadsim.effects.blade_flapping import BladeFlapping  # noqa: E402
 from quadsim.effects.effectfile import load_effect_file  # noqa: E402
 from quadsim.vehicle.params import load_params  # noqa: E402
 
 
-def load_model(path: Path, params: Path | None = None, drop: tuple[str, ...] = ()):
-    """(parameter set, effects) of an effect file, its parameter set replaced by ``params``
-    and the effects named in ``drop`` left out when given."""
+class AxisFlapping(BladeFlapping):
+    """A probe, not a library effect: the file's ``blade_flapping`` moment with its roll (x)
+    and pitch (y) components scaled by ``scale_x``, ``scale_y`` (1). No compiled form: the
+    rollout evaluates it on the Python path (same equations)."""
+
+    name = "blade_flapping_axes_probe"
+    scale = (1.0, 1.0)
+
+    def loads(self, ctx):
+        out = super().loads(ctx)
+        if out is not None:
+            out.torque_body = out.torque_body * np.array([*self.scale, 1.0])
+        return out
+
+
+def load_model(path: Path, params: Path | None = None, drop: tuple[str, ...] = (),
+               flapping_axes: tuple[float, float] | None = None):
+    """(parameter set, effects) of an effect file, its parameter set replaced by ``params``,
+    the effects named in ``drop`` left out, and its flapping moment scaled per axis by
+    ``flapping_axes`` (:class:`AxisFlapping`), when given."""
     model = load_effect_file(path)
-    effects = EffectSet(tuple(e for e in model.effects.effects if e.name not in drop))
-    return load_params(params if params is not None else model.params), effects
+    effects = []
+    for effect in model.effects.effects:
+        if effect.name in drop:
+            continue
+        if effect.name == "blade_flapping" and flapping_axes is not None:
+            probe = AxisFlapping(coefficient=effect.coefficient)
+            probe.scale = tuple(flapping_axes)
+            effect = probe
+        effects.append(effect)
+    return load_params(params if params is not None else model.params), EffectSet(tuple(effects))
 
 
 def score_model(windows: bench.Windows, model, protocol: str) -> dict:
@@ -61,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
                         "files' own (e.g. the output of identify --logs)")
     parser.add_argument("--drop", nargs="*", default=[], metavar="EFFECT",
                         help="effects of the files to leave out")
+    parser.add_argument("--flapping-axes", type=float, nargs=2, metavar=("SX", "SY"),
+                        help="scale the files' flapping moment per axis (a probe)")
     parser.add_argument("effects", type=Path, nargs="+")
     args = parser.parse_args(argv)
     logs = run_logs(args.data, args.runs)
@@ -69,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     single = {n: bench.make_windows([log]) for n, log in zip(names, logs)}
     out = {}
     for path in args.effects:
-        model = load_model(path, args.params, tuple(args.drop))
+        model = load_model(path, args.params, tuple(args.drop), args.flapping_axes)
         entry = {"pooled_published": score_model(pooled, model, "published")}
         for name, windows in single.items():
             entry[name] = score_model(windows, model, "per_run")
