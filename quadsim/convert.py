@@ -42,6 +42,7 @@ import numpy as np
 from .core.args import ArgumentParser, check_number, check_output
 from .core.errors import InputError, QuadsimWarning, run_cli
 from .logs import FORMATS, detect_format, parse_rotor_map, read_columns
+from .logs.attitude import CONVENTIONS
 from .logs.checks import check_log
 from .logs.common import map_rotors
 from .logs.flightlog import LOG_SUFFIXES, log_from_columns, read_log_columns, write_log
@@ -77,7 +78,8 @@ def _range(text: str | None) -> tuple[float, float] | None:
 
 def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
             rotor_map=None, topics=None, fields=None, pwm_range=None, model=None,
-            start: float | None = None, end: float | None = None, rate_hz: float | None = None):
+            start: float | None = None, end: float | None = None, rate_hz: float | None = None,
+            euler: str | None = None):
     """Read, validate and write; returns the FlightLog. Nothing is written on error, and
     never over the input (``output`` may not be ``source``). ``start``/``end`` (s, on the
     converted log's time axis) keep only that part; time then restarts at 0. The importer's
@@ -97,7 +99,8 @@ def convert(source: str | Path, output: str | Path, *, fmt: str | None = None,
         columns = read_log_columns(source)
     else:
         columns = read_columns(source, fmt=fmt, rotor_map=rotor_map, topics=topics,
-                               fields=fields, pwm_range=pwm_range, rate_hz=rate_hz)
+                               fields=fields, pwm_range=pwm_range, rate_hz=rate_hz,
+                               euler=euler)
     if start is not None or end is not None:
         t = columns["t"]
         keep = (t >= (start if start is not None else -np.inf)) & \
@@ -148,6 +151,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="keep samples from this time (s, converted log's time)")
     parser.add_argument("--end", type=float, default=None, metavar="S",
                         help="keep samples up to this time (s)")
+    parser.add_argument("--euler", choices=CONVENTIONS, default=None,
+                        help="uSD: convention of stateEstimate.roll/pitch/yaw when no "
+                        "quaternion is logged (default crazyflie: FLU, pitch logged nose-up "
+                        "positive; flu; frd); checked against the gyro")
     parser.add_argument("--model", default=None, help="parameter set to check the log "
                         "against as gap does: rotor count, gyro (unit, axes, frame), "
                         "accelerometer, rotor speeds vs weight, rotor order")
@@ -163,9 +170,11 @@ def main(argv: list[str] | None = None) -> int:
                   topics=_pairs(args.topic, "--topic", signals),
                   fields=_pairs(args.field, "--field", tuple(TOPICS)),
                   pwm_range=_range(args.pwm_range), model=args.model, start=args.start,
-                  end=args.end, rate_hz=args.rate)
+                  end=args.end, rate_hz=args.rate, euler=args.euler)
+    what = "" if log.has_pose else "; IMU + motors, no pose: identify --logs and gap use the " \
+        "body-frame balance, nothing that needs the world frame"
     print(f"wrote {args.output} ({len(log)} samples, {log.t[-1]:.2f} s, "
-          f"{log.rotor_count} rotors)")
+          f"{log.rotor_count} rotors{what})")
     return 0
 
 

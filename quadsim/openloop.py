@@ -22,7 +22,8 @@ Examples::
     python -m quadsim.openloop --model physical --controller lqr --rerun out/openloop.rrd
 
 Units: step sizes in N (as a fraction of the weight for thrust) and N m; times in s; angles
-in rad. Plots (PNG) go to ``--plots DIR`` (default ``out/openloop/``).
+in rad. Plots (PNG) go to ``--plots DIR`` when asked (none by default: no command writes
+where it was not asked; ``--no-plots`` is accepted and changes nothing).
 """
 
 from __future__ import annotations
@@ -141,9 +142,10 @@ def _parser() -> argparse.ArgumentParser:
                         help="zero-order-hold period of the inputs, s (default 0.01)")
     parser.add_argument("--bound", type=float, default=1.0,
                         help="divergence bound for the 'time to bound' (m or rad; default 1)")
-    parser.add_argument("--plots", default="out/openloop", metavar="DIR",
-                        help="folder for PNG plots (default out/openloop)")
-    parser.add_argument("--no-plots", action="store_true", help="do not write PNGs")
+    parser.add_argument("--plots", default=None, metavar="DIR",
+                        help="write PNG plots into this folder (created; default: no plots)")
+    parser.add_argument("--no-plots", action="store_true",
+                        help="no PNGs (the default; kept for scripts that pass it)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of tables")
     parser.add_argument("--rerun", metavar="RRD", help="save a rerun recording (first model)")
     parser.add_argument("--rerun-spawn", action="store_true", help="open a rerun viewer")
@@ -170,7 +172,7 @@ def _check_args(args) -> dict:
     names = [args.model, *args.compare]
     if len(set(names)) < len(names):
         raise InputError(f"--compare: model given twice ({', '.join(names)})")
-    if not args.no_plots:
+    if args.plots is not None and not args.no_plots:
         plots = Path(args.plots)
         if plots.exists() and not plots.is_dir():
             raise InputError(f"{plots}: --plots: not a folder")
@@ -203,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
                             control_period=args.control_period, controller=args.controller,
                             bound=args.bound) for p in models]
     plots = []
-    if not args.no_plots:
+    if args.plots is not None and not args.no_plots:
         plots = [str(save_plot(r, Path(args.plots))) for r in results]
         if len(results) > 1:
             plots.append(str(save_compare_plot(results, Path(args.plots))))

@@ -74,13 +74,15 @@ def test_body_rate_from_quat_ignores_sign_flips():
                                atol=1e-4)
 
 
-@pytest.mark.parametrize("column", ["t", "x", "qw"])
-def test_missing_required_column(tmp_path, column):
+@pytest.mark.parametrize("column, says", [("t", "required column missing"),
+                                          ("x", "missing while y, z present"),
+                                          ("qw", "required with a position")])
+def test_missing_required_column(tmp_path, column, says):
     lines = _csv(_log(), tmp_path)
     header = lines[0].split(",")
     keep = [i for i, h in enumerate(header) if h != column]
     text = "\n".join(",".join(line.split(",")[i] for i in keep) for line in lines)
-    with pytest.raises(InputError, match=rf"bad.csv: {column}: required column missing"):
+    with pytest.raises(InputError, match=rf"bad.csv: {column}: {says}"):
         load_log(_write_text(tmp_path, text))
 
 

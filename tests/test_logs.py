@@ -253,9 +253,15 @@ def test_ulog_round_trip(tmp_path):
 
 
 def test_ulog_bad_inputs(tmp_path, capsys):
+    # no position: an IMU + motors log (issue 44), converted with a warning, no pose columns
     path = tmp_path / "nopos.ulg"
     _write_ulog(path, _px4_topics(position=False))
-    _convert_fails(tmp_path, capsys, path, match="vehicle_local_position")
+    assert convert_main([str(path), "-o", str(tmp_path / "imu.csv.gz")]) == 0
+    assert "vehicle_local_position x/y/z: not in the log: read as IMU + motors" in \
+        capsys.readouterr().err
+    imu = load_log(tmp_path / "imu.csv.gz")
+    assert imu.position is None and imu.quat is None and not imu.has_pose
+    assert imu.accel is not None and imu.body_rate is not None and imu.rotor_command is not None
     path = tmp_path / "range.ulg"
     _write_ulog(path, _px4_topics(motors=1500.0))
     _convert_fails(tmp_path, capsys, path, match="actuator_motors: commands span")

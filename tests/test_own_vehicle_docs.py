@@ -81,3 +81,21 @@ def test_ardupilot_commands_only(ran):
     assert "no rotor speeds in any log" in stderr
     assert any("d not identified" in w for w in data["warnings"])
     assert json.loads((out / "copter_gap.json").read_text())["verdict"]["answer"]
+
+
+def test_imu_only_crazyflie_matches_the_published_identification(ran):
+    """The page's IMU + commands section: T_m, Ixx, Iyy within 10 % of the published
+    identification (Eschmann et al., IROS 2024: ~72 ms, 1.029e-5, 1.105e-5 kg m^2), and the
+    numbers the page quotes are the ones written."""
+    out, stdout, _ = ran
+    data = tomllib.loads((out / "cf_imu.toml").read_text())
+    tau = data["motor_map"]["time_constant"]["value"]
+    inertia = data["body"]["inertia"]["value"]
+    assert abs(tau / 0.072 - 1) < 0.10
+    assert abs(inertia[0][0] / 1.029e-5 - 1) < 0.10
+    assert abs(inertia[1][1] / 1.105e-5 - 1) < 0.10
+    page = PAGE.read_text(encoding="utf-8")
+    assert f"**{1000 * tau:.1f} ms**" in page
+    assert f"**{inertia[0][0]:.4g}".replace("e-05", "e-5") in page
+    assert f"**{inertia[1][1]:.4g}".replace("e-05", "e-5") in page
+    assert "2 airborne stretches used" in stdout

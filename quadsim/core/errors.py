@@ -88,6 +88,19 @@ def _said(caught) -> list[str]:
     return out
 
 
+def _default_interrupt() -> None:
+    """Ctrl-C raises KeyboardInterrupt again (handled below) when the import-time handler of
+    :mod:`quadsim` was installed; in the main thread only (signals live there)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        handler = signal.getsignal(signal.SIGINT)
+        if getattr(handler, "__module__", None) == "quadsim":
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def run_cli(main: Callable[[list[str] | None], int | None]) -> Callable[[list[str] | None], int]:
     """Decorate a CLI ``main(argv)`` so that a :class:`QuadsimError` prints one line on
     stderr (``error: ...``) and exits with status 2 instead of a traceback.
@@ -99,6 +112,7 @@ def run_cli(main: Callable[[list[str] | None], int | None]) -> Callable[[list[st
 
     @functools.wraps(main)
     def wrapper(argv: list[str] | None = None) -> int:
+        _default_interrupt()      # the import-time handler of ``python -m quadsim.X`` ends here
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("default")  # once per message and place
             try:

@@ -23,6 +23,7 @@ from ..core.args import ArgumentParser
 from ..core.cost import Estimate, check_cost
 from ..core.errors import InputError, QuadsimWarning, run_cli
 from ..core.executor import limit_numeric_threads
+from ..logs import READABLE
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
 from .checks import check_length
@@ -40,7 +41,7 @@ def _parser() -> argparse.ArgumentParser:
                     "flights and scored on held-out flights (split by flight, never by "
                     "sample).",
         epilog=__doc__.split("Examples::")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (CSV, .csv.gz or Parquet)")
+    parser.add_argument("logs", nargs="+", metavar="LOG", help=f"flight logs ({READABLE})")
     parser.add_argument("--model", required=True, help="parameter set: built-in name or TOML")
     parser.add_argument("--holdout", nargs="+", metavar="LOG",
                         help="held-out logs (default: every third of LOG)")

@@ -22,7 +22,7 @@ from ..core.errors import InputError
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import heldout
+from . import heldout, order
 from .baseline import BASELINE  # noqa: F401  (re-exported: quadsim.identify, tests)
 from .checks import check_length, vehicle_check
 from .fitting import fit_motor_map, stack_states
@@ -194,7 +194,10 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
                                   if decision.lead_name != "no_difference" else [])
     after = [r / sigma for r in lead.held_residuals] if effects_after else before
     dt = float(fit_on[0].t[1] - fit_on[0].t[0])
+    statuses = order.order_statuses(list(logs) + list(holdout or []), params)
+    decision = order.cap_decision(decision, order.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
+    verdict = order.mark(verdict, statuses)
     names = channel_names(reference)
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:

@@ -314,10 +314,12 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
                    ev.explanation.fixed_values, ev.explanation.variant)
 
 
-def judge(rows, reference, name: str) -> Verdict:
+def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
     """One flight's :class:`Verdict` from the evidence ``rows`` of its explanations against
-    the calibrated ``reference`` (per-flight mode); ``name``: the flight's file."""
-    ranked = posterior(rows)
+    the calibrated ``reference`` (per-flight mode); ``name``: the flight's file; ``cap``:
+    the highest probability stated (:mod:`quadsim.gap.order`: a rotor order the torque
+    balance does not confirm)."""
+    ranked = [(k, min(p, cap), ev) for k, p, ev in posterior(rows)]
     top, p_top, best = ranked[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     lack = lack_of_fit(best.ms, Baseline.of_reference(reference), reference,

@@ -41,7 +41,7 @@ from ..core.errors import InputError, ModelError, QuadsimWarning
 from ..logs.delays import delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import drag_law
+from . import drag_law, order
 from .calibrate import Reference, calibrate, inverse_information
 from .checks import vehicle_check
 from .diagnose import SCHEMA, prepare
@@ -163,7 +163,9 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
-    verdict = judge(rows, reference, flight.name)
+    statuses = order.order_statuses([log], reference.params)
+    verdict = order.mark(judge(rows, reference, flight.name,
+                               cap=order.probability_cap(statuses)), statuses)
     words = verdict.answer
     if law is not None:       # the drag law in words; None: the references'
         words += f" Judged with {law.variant} (the law this flight shows)."

@@ -249,8 +249,9 @@ def _series(states):
                      states.body_accel, states.rotor_speed, states.command, states.vbat)
 
 
-def _load_states(paths: list[Path]):
-    """(FlightStates per log, notes): importer, NaN and ground/idle cut, channel checks."""
+def _load_states(paths: list[Path], loaded=None):
+    """(FlightStates per log, notes): importer, NaN and ground/idle cut, channel checks.
+    ``loaded``: the FlightLogs of ``paths`` when already read."""
     import warnings as _warnings
 
     from ..core.errors import QuadsimWarning
@@ -259,11 +260,15 @@ def _load_states(paths: list[Path]):
     from ..logs.flightlog import load_log
 
     logs, notes = [], []
-    for path in paths:
+    for k, path in enumerate(paths):
         with _warnings.catch_warnings(record=True) as caught:
             _warnings.simplefilter("always", QuadsimWarning)
-            log, log_notes = check_log(load_log(path))
+            log, log_notes = check_log(load_log(path) if loaded is None else loaded[k])
         notes += [f"{w.message}" for w in caught] + list(log_notes)
+        if not log.has_pose:
+            raise InputError(f"{path}: x..z, qw..qz: no pose; without one identify --logs "
+                             "needs the IMU and motor commands at 100 Hz or finer in every "
+                             "log (quadsim.identify.imu)")
         if log.accel is None:
             raise InputError(f"{path}: ax, ay, az: no accelerometer; identify --logs needs the "
                              "specific force")
@@ -296,6 +301,8 @@ def identify_logs_command(args) -> int:
     from ..core.args import check_inputs, check_output, distinct_files
     from ..core.files import atomic_write_text
     from .from_logs import identify_from_logs
+    from .imu_logs import identify_from_imu_logs, load_checked, wants_imu_path
+    from .sanity import check_mass_scale, check_swapped
     from .skeleton import load_skeleton
     from .vehicle_set import build_set
 
@@ -312,13 +319,24 @@ def identify_logs_command(args) -> int:
     check_inputs("--vehicle", [args.vehicle])
     distinct_files({"--logs": args.logs, "--vehicle": [args.vehicle]})
     check_output("-o", args.output, (".toml",), inputs=[args.vehicle, *args.logs])
+    check_swapped(args.logs, args.vehicle)
     skeleton, data = load_skeleton(args.vehicle)
-    states, notes = _load_states(list(args.logs))
-    ident = identify_from_logs([_series(s) for s in states], skeleton)
+    check_mass_scale(skeleton)
+    logs, notes = load_checked(args.logs)
+    if wants_imu_path(logs):          # no rotor speeds or no pose: IMU + commands (.imu)
+        ident, notes = identify_from_imu_logs(logs, skeleton, notes)
+
+        def drag(provisional):
+            return float("nan"), float("nan")
+    else:
+        states, more = _load_states(list(args.logs), logs)
+        notes = [n for n in notes if n not in more] + more
+        ident = identify_from_logs([_series(s) for s in states], skeleton)
+
+        def drag(provisional):
+            return _drag_iv(states, provisional)
     names = ", ".join(Path(p).name for p in args.logs)
-    text, params, report = build_set(data, skeleton, ident, names,
-                                     lambda provisional: _drag_iv(states, provisional),
-                                     args.output)
+    text, params, report = build_set(data, skeleton, ident, names, drag, args.output)
     for note in notes:
         print(f"note: {note}")
     for line in report:

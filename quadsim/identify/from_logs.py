@@ -73,6 +73,7 @@ from .logseries import (
 )
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
 from .rotation import with_band_inertia
+from .sanity import r2_text
 
 #: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this; below
 #: WEAK_R2 per axis the order (and, for yaw, the spins) cannot be checked.
@@ -105,7 +106,7 @@ def fit_thrust(logs: list[LogSeries],
     refuse_mixed(per_log, "rotor_*: b (N s^2/rad^2)")
     beta, se, r2 = _origin_fit(np.concatenate(xs), np.concatenate(ys))
     spread = np.std([b for _, b, _ in per_log], ddof=1) if len(per_log) > 1 else 0.0
-    quality = (f"R^2 {r2:.3f} over {sum(len(x) for x in xs)} samples of {len(logs)} log(s); "
+    quality = (f"{r2_text(r2)} over {sum(len(x) for x in xs)} samples of {len(logs)} log(s); "
                f"per-log std {spread:.3g}")
     return Estimate(beta, _ci(beta, se), quality), per_log
 

@@ -24,6 +24,7 @@ from .logseries import (
     correlation_time,
     refuse_mixed,
 )
+from .sanity import r2_text
 
 #: commands at or above this (normalised) are saturated and left out of the motor map.
 SATURATED = 0.99
@@ -171,7 +172,7 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
     speed = np.sqrt(thrust / b)
     summary = (f"command -> thrust per rotor T(u) = {c2:.4g} u^2 + {c1:.4g} u N (u = cmd"
                + (f" x vbat / {v_ref:.3g} V" if has_v else "")
-               + f"), R^2 {r2:.3f} over {len(y)} samples of {len(logs)} log(s); "
+               + f"), {r2_text(r2)} over {len(y)} samples of {len(logs)} log(s); "
                f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N{shape}")
     estimate = Estimate(b, _ci(b, b * 1.96 * se_full / full),
                         f"commands only: b = T(1) / max_speed^2 with the skeleton's max_speed "

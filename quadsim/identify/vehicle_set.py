@@ -121,10 +121,12 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
                                           f"identify --logs: {how}; {logs}")
             report.lines.append(f"voltage gain {motor['voltage_gain']:.4g} 1/V at "
                                 f"{motor['reference_voltage']:.3f} V")
-        if not ident.command_only:
+        if motor.get("time_constant") is not None:
+            how = ("the lagged commands' thrust and roll/pitch balances (IMU + commands)"
+                   if ident.command_only else "first-order lag")
             mm["time_constant"] = quantity(
                 motor["time_constant"], "s",
-                f"identify --logs: first-order lag, grid 0-200 ms, 95 % "
+                f"identify --logs: {how}, grid 0-200 ms, 95 % "
                 f"{motor['time_constant_ci'][0]:.4f}-{motor['time_constant_ci'][1]:.4f} s; {logs}")
         data["motor_map"] = mm
     if "max_speed" not in rotors:

@@ -36,6 +36,9 @@ from ..core.errors import InputError, field_error
 from .common import Columns, parse_rotor_map, resample
 
 FORMATS = ("ulog", "usd", "dataflash")
+#: every format a command reads a flight log from, for its --help.
+READABLE = ("quadsim flight-log CSV, .csv.gz or Parquet; PX4 ULog (.ulg); Crazyflie uSD card "
+            "log; ArduPilot DataFlash (.bin)")
 _SUFFIX = {".ulg": "ulog", ".bin": "dataflash"}
 
 
@@ -80,6 +83,34 @@ def parse_budget(path: str | Path) -> Budget:
                   memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
 
 
+def file_kind(path: str | Path) -> str | None:
+    """What a file is by its first bytes, for messages that catch a swapped argument: "a
+    PX4 ULog flight log", "a Crazyflie uSD flight log", "an ArduPilot DataFlash flight log",
+    "a gzip-compressed file (a .csv.gz flight log?)", "a Parquet file (a flight log?)", "a
+    CSV flight log" (a header with ``t``), "a TOML file" (a ``schema =`` or ``[section]``
+    line), or None (unreadable or none of these)."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except OSError:
+        return None
+    fmt = detect_format(path)
+    if fmt is not None:
+        return {"ulog": "a PX4 ULog flight log", "usd": "a Crazyflie uSD flight log",
+                "dataflash": "an ArduPilot DataFlash flight log"}[fmt]
+    if head.startswith(b"\x1f\x8b"):
+        return "a gzip-compressed file (a .csv.gz flight log?)"
+    if head.startswith(b"PAR1"):
+        return "a Parquet file (a flight log?)"
+    text = head.decode("utf-8", "replace")
+    first = text.splitlines()[0] if text else ""
+    if "," in first and "t" in [c.strip() for c in first.split(",")]:
+        return "a CSV flight log"
+    if any(line.strip().startswith(("schema =", "schema=", "[")) for line in text.splitlines()):
+        return "a TOML file"
+    return None
+
+
 _MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a39580")}
 
 
@@ -106,10 +137,12 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
                  rotor_map: tuple[int, ...] | None = None, topics: dict | None = None,
                  fields: dict | None = None,
                  pwm_range: tuple[float, float] | None = None,
-                 rate_hz: float | None = None, budget: Budget | None = None) -> Columns:
+                 rate_hz: float | None = None, budget: Budget | None = None,
+                 euler: str | None = None) -> Columns:
     """Schema columns (SI, our frames) of a foreign log. ``topics``/``fields`` (ULog:
     signal -> topic / field prefix; signals as in ``ulog.TOPICS``), ``pwm_range`` (us),
-    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants).
+    ``rate_hz`` (ULog only: uniform time base instead of the attitude instants), ``euler``
+    (uSD: the convention of ``stateEstimate.roll/pitch/yaw``, :mod:`.attitude`).
 
     The parse runs in a worker process under ``budget`` (default :func:`parse_budget`;
     :mod:`quadsim.core.bounded`); what the parser printed becomes one note."""
@@ -121,7 +154,7 @@ def read_columns(path: str | Path, *, fmt: str | None = None,
         raise InputError(f"{path}: unknown log format (expected one of {', '.join(FORMATS)}, "
                          "or a CSV/Parquet flight log)")
     options = {"rotor_map": rotor_map, "topics": topics or {}, "fields": fields or {},
-               "pwm_range": pwm_range, "rate_hz": rate_hz}
+               "pwm_range": pwm_range, "rate_hz": rate_hz, "euler": euler}
     columns, chatter = run_bounded(_read_here, path, fmt, options, label=str(path),
                                    what=_NAMES[fmt], budget=budget or parse_budget(path))
     if chatter.total:
@@ -151,10 +184,10 @@ def _parse(path: Path, fmt: str, options: dict) -> dict:
     if fmt == "usd":
         from .usd import usd_columns
         return usd_columns(path, rotor_map=rotor_map, event=topics.get("event"),
-                           pose=topics.get("pose"))
+                           pose=topics.get("pose"), euler=options.get("euler"))
     from .dataflash import dataflash_columns
     return dataflash_columns(path, rotor_map=rotor_map, pwm_range=options["pwm_range"])
 
 
-__all__ = ["FORMATS", "Columns", "detect_format", "parse_budget", "parse_rotor_map",
-           "read_columns", "refuse_binary", "resample"]
+__all__ = ["FORMATS", "READABLE", "Columns", "detect_format", "file_kind", "parse_budget",
+           "parse_rotor_map", "read_columns", "refuse_binary", "resample"]

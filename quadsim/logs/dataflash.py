@@ -30,8 +30,9 @@ Rotor count from ``FRAME_CLASS`` (1 quad 4, 2 hexa 6, 3 octa 8, 4 octa-quad 8, 5
 ArduCopter <= 3.x), else 1000-2000 us; ``pwm_range`` overrides. A voltage that is zero
 throughout (no battery monitor, ``BATT_MONITOR`` = 0) is left out.
 
-Errors: no ATT or no position message ("unknown ArduPilot message layout": the fields
-present are listed), a file pymavlink cannot parse, commands outside 0-1.
+No position message (or no ATT): read as IMU + motors on the IMU instants, with a note.
+Errors: no pose and no IMU message; a message missing its fields ("unknown ArduPilot message
+layout": the fields present are listed), a file pymavlink cannot parse, commands outside 0-1.
 """
 
 from __future__ import annotations
@@ -159,8 +160,7 @@ def _position(path: Path, messages: dict):
         north = np.radians(geo[:, 0] - geo[0, 0]) * EARTH_RADIUS
         east = np.radians(geo[:, 1] - geo[0, 1]) * EARTH_RADIUS * np.cos(lat0)
         return (t, np.stack([north, east, -(geo[:, 2] - geo[0, 2])], axis=1)), None
-    raise field_error(path, "XKF1/EKF1/POS", "no position message: unknown ArduPilot message "
-                      "layout (expected XKF1, EKF1 or POS)")
+    return None, None
 
 
 def _rotor_setup(path: Path, params: dict, pwm_range):
@@ -239,14 +239,15 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
     path = Path(path)
     _NOTES.clear()
     messages, params, formats = _read(path)
-    if not messages["ATT"]:
-        raise field_error(path, "ATT", "no attitude message: unknown ArduPilot message layout")
-    t_base, euler = _table(path, messages["ATT"], ["Roll", "Pitch", "Yaw"], "ATT")
-    _check_euler(path, t_base, euler)
-    quat_ned = euler_to_quat(np.radians(euler))
     pos, vel = _position(path, messages)
     imu = _table(path, messages["IMU"], ["GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"],
                  "IMU") if messages["IMU"] else None
+    if pos is None or not messages["ATT"]:
+        return _imu_columns(path, messages, params, formats, imu, rotor_map=rotor_map,
+                            pwm_range=pwm_range)
+    t_base, euler = _table(path, messages["ATT"], ["Roll", "Pitch", "Yaw"], "ATT")
+    _check_euler(path, t_base, euler)
+    quat_ned = euler_to_quat(np.radians(euler))
     count, pwm_range = _rotor_setup(path, params, pwm_range)
     cmd = _commands(path, messages, count, pwm_range)
     speeds = _speeds(path, messages, count)
@@ -275,6 +276,34 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
         t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}),
         notes=notes, vehicle={"rotors": count, "kind": "multirotor",
                               "source": "ArduPilot FRAME_CLASS"})
+    return common_span(columns, path)
+
+
+def _imu_columns(path: Path, messages: dict, params: dict, formats: dict, imu, *,
+                 rotor_map, pwm_range) -> Columns:
+    """A log without position (no XKF1, EKF1 or POS) or attitude (ATT): IMU + motors on the
+    IMU message's instants (body rates, specific force, RCOU commands, ESC speeds, battery),
+    with a note; refused when it has no IMU message either."""
+    if imu is None:
+        raise field_error(path, "XKF1/EKF1/POS", "no position message and no IMU message: "
+                          "a log needs a pose (XKF1, EKF1 or POS with ATT) or the IMU")
+    t_base, both = imu
+    count, pwm_range = _rotor_setup(path, params, pwm_range)
+    cmd = _commands(path, messages, count, pwm_range)
+    speeds = _speeds(path, messages, count)
+    volt = _voltage(path, messages, formats)
+    sig = {"body_rate": frd_to_body(both[:, :3]), "accel": frd_to_body(both[:, 3:]),
+           "rotor_command": map_rotors(path, "RCOU", resample(*cmd, t_base) if cmd else None,
+                                       rotor_map),
+           "vbat": resample(*volt, t_base) if volt else None}
+    if speeds:
+        speed = np.stack([resample(t, v, t_base) for t, v in speeds], axis=1) * RPM_TO_RAD_S
+        sig["rotor_speed"] = map_rotors(path, "ESC", speed, rotor_map)
+    lacking = "ATT" if not messages["ATT"] else "XKF1/EKF1/POS"
+    notes = [*_NOTES, f"{path}: {lacking}: not logged: read as IMU + motors (no pose)"]
+    columns = Columns(columns_from_signals(t_base, sig), notes=notes,
+                      vehicle={"rotors": count, "kind": "multirotor",
+                               "source": "ArduPilot FRAME_CLASS"})
     return common_span(columns, path)
 
 

@@ -217,7 +217,13 @@ def _highpass(x: np.ndarray, dt: float, window_s: float = HIGHPASS_S) -> np.ndar
 def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float = MAX_LAG_S,
                     smooth_s: float = SMOOTH_S) -> DelayEstimate:
     """Delays of the gyro, accelerometer and rotor-speed signals of ``log`` against its
-    motion capture (position and attitude), see the module docstring."""
+    motion capture (position and attitude), see the module docstring. A log without a pose
+    has no motion capture to time against: nothing is estimated (said in the notes)."""
+    if not log.has_pose:
+        dt = float(np.median(np.diff(log.t))) if len(log.t) > 1 else 0.0
+        return DelayEstimate(dict.fromkeys(SIGNALS), dict.fromkeys(SIGNALS), dt,
+                             (("no pose in the log: signal delays against motion capture "
+                               "not estimated"),))
     t, dt, position, quat, gyro, accel, rotor = _uniform(log)
     window = max(5, int(round(smooth_s / dt)) | 1)
     delays: dict[str, float | None] = dict.fromkeys(SIGNALS)

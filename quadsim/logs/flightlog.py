@@ -1,7 +1,9 @@
 """Flight logs: the CSV schema (gzip allowed), a validating loader and a deterministic writer.
 
-One header row, one row per sample. Columns (SI; any column other than ``t``, position and
-attitude may be absent):
+One header row, one row per sample. Columns (SI). The minimum is **either the IMU** --
+``t``, ``ax..az``, ``wx..wz`` and rotor speeds or motor commands, as most flight controllers
+log it -- **or the pose** -- ``t``, ``x..z`` and an attitude (quaternion or Euler angles);
+every other column may be absent:
 
 =====================  ========  ====================================================
 column                 unit      meaning
@@ -10,6 +12,10 @@ column                 unit      meaning
 ``x, y, z``            m         position, world frame, z up
 ``vx, vy, vz``         m/s       velocity, world frame
 ``qw, qx, qy, qz``     --        attitude quaternion, body to world, scalar first
+``roll, pitch, yaw``   rad       attitude as Euler angles instead of the quaternion:
+                                 z-y-x (yaw, then pitch, then roll, about the turned
+                                 axes), body x forward, y left, z up in a z-up world;
+                                 read as the quaternion (written back as ``qw..qz``)
 ``wx, wy, wz``         rad/s     body angular rate (gyro)
 ``ax, ay, az``         m/s^2     specific force, body frame (about +9.81 on z at rest)
 ``rotor_1..rotor_N``   rad/s     measured rotor speed
@@ -17,7 +23,9 @@ column                 unit      meaning
 ``vbat``               V         battery voltage
 =====================  ========  ====================================================
 
-Body frame: x forward, y left, z up. Example::
+Body frame: x forward, y left, z up. Position needs an attitude (the two together are the
+pose); an IMU log without them (``FlightLog.position`` and ``quat`` None) is read, and each
+stage says what it cannot do without a pose (:data:`WITHOUT_POSE`). Example::
 
     >>> from quadsim.logs.flightlog import load_log, write_log
     >>> log = load_log("flight_00.csv.gz")          # validates; raises InputError
@@ -26,11 +34,12 @@ Body frame: x forward, y left, z up. Example::
     >>> traj = log.to_trajectory()                  # quadsim.vehicle.state.Trajectory
 
 Validation (:func:`load_log`): every problem is one line naming the file, the column and the
-file line (the header is line 1). Errors (:class:`~quadsim.core.errors.InputError`): missing
-required column, incomplete column group (``vx`` without ``vy``), text that is not a number,
-non-finite values in ``t``/position/attitude, time not strictly increasing, quaternions that
-are not unit length, and implausible units: rotor speeds that look like RPM (above
-``MAX_ROTOR_SPEED`` rad/s), body rates that look like deg/s (above ``MAX_BODY_RATE``),
+file line (the header is line 1). Errors (:class:`~quadsim.core.errors.InputError`): neither
+the IMU minimum nor a pose (the message names what is missing for each), incomplete column
+group (``vx`` without ``vy``), text that is not a number, non-finite values in
+``t``/position/attitude, time not strictly increasing, quaternions that are not unit length,
+and implausible units: rotor speeds that look like RPM (above ``MAX_ROTOR_SPEED`` rad/s),
+body rates that look like deg/s (above ``MAX_BODY_RATE``),
 accelerometer in g (median magnitude near 1 instead of 9.81), commands outside 0-1, battery
 voltage in mV. Warnings (:class:`~quadsim.core.errors.QuadsimWarning`): NaN/Inf runs in optional
 columns (kept as NaN), sample-rate jumps (a gap over ``GAP_FACTOR`` times the median step),
@@ -66,11 +75,13 @@ from .csvfile import read_log_columns
 from .plausible import check_plausible
 
 __all__ = [
+    "EULER",
     "FLOAT_FORMAT",
     "GAP_FACTOR",
     "LOG_SUFFIXES",
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
+    "WITHOUT_POSE",
     "FlightLog",
     "body_rate_from_quat",
     "load_log",
@@ -98,7 +109,14 @@ _GROUPS = {
     "body_rate": ("wx", "wy", "wz"),
     "accel": ("ax", "ay", "az"),
 }
-_REQUIRED = ("t", "x", "y", "z", "qw", "qx", "qy", "qz")
+_REQUIRED = ("t",)
+#: the Euler-angle columns (rad, z-y-x), read as the quaternion.
+EULER = ("roll", "pitch", "yaw")
+#: one line a stage prints when a log has no pose (position and attitude).
+WITHOUT_POSE = ("no position or attitude in the log (IMU and motors only): the body-frame "
+                "force and torque balance is used; nothing that needs the world frame (speed, "
+                "airspeed, drag, wind, ground effect, height) can be read; a pose (motion "
+                "capture or the on-board estimate) would add it")
 _NUMBERED = re.compile(r"^(rotor|cmd)_(\d+)$")
 
 
@@ -106,18 +124,19 @@ _NUMBERED = re.compile(r"^(rotor|cmd)_(\d+)$")
 class FlightLog:
     """One flight, SI units (see the module docstring for the columns).
 
-    t (N,) s; position (N, 3) m world; velocity (N, 3) m/s world or None; quat (N, 4) wxyz
-    body-to-world; body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2
-    body or None; rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or
-    None; vbat (N,) V or None; path: the file it came from (None if built in code); notes:
+    t (N,) s; position (N, 3) m world or None; velocity (N, 3) m/s world or None; quat (N, 4)
+    wxyz body-to-world or None (position and quat are None together: an IMU-only log);
+    body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2 body or None;
+    rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or None; vbat (N,)
+    V or None; path: the file it came from (None if built in code); notes:
     the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns);
     vehicle: what the log's own parameters say the vehicle is ("multirotor", "VTOL", ...;
     None when the log does not say, as in a CSV).
     """
 
     t: np.ndarray
-    position: np.ndarray
-    quat: np.ndarray
+    position: np.ndarray | None
+    quat: np.ndarray | None
     velocity: np.ndarray | None = None
     body_rate: np.ndarray | None = None
     accel: np.ndarray | None = None
@@ -147,6 +166,11 @@ class FlightLog:
         return len(self.t)
 
     @property
+    def has_pose(self) -> bool:
+        """Whether the log has position and attitude (else it is IMU + motors only)."""
+        return self.position is not None and self.quat is not None
+
+    @property
     def rotor_count(self) -> int:
         for value in (self.rotor_speed, self.rotor_command):
             if value is not None:
@@ -159,7 +183,10 @@ class FlightLog:
         Missing velocity is differentiated from position and missing body rate from the
         quaternions (central differences, ``numpy.gradient``); missing rotor speeds become
         an (N, 0) array. Commands (normalised) go to ``meta["command"]``, not to
-        ``rotor_command`` (which is rad/s), together with ``vbat`` and ``accel``."""
+        ``rotor_command`` (which is rad/s), together with ``vbat`` and ``accel``. An IMU-only
+        log (no pose) has no trajectory: :class:`~quadsim.core.errors.InputError`."""
+        if not self.has_pose:
+            raise field_error(self.path or "log", "x..z, qw..qz", WITHOUT_POSE)
         velocity = self.velocity
         if velocity is None:
             velocity = np.gradient(self.position, self.t, axis=0)
@@ -252,7 +279,7 @@ def _check_time(path: Path, t: np.ndarray, notes: list[str]) -> None:
 
 def _check_units(path: Path, log: dict) -> None:
     """Errors for values whose magnitude says the unit is wrong (RPM, deg/s, g, mV)."""
-    norms = np.linalg.norm(log["quat"], axis=1)
+    norms = np.linalg.norm(log["quat"], axis=1) if log["quat"] is not None else np.ones(1)
     if (np.abs(norms - 1.0) > 0.01).any():
         row = int(np.argmax(np.abs(norms - 1.0) > 0.01))
         raise field_error(path, "qw..qz", f"line {row + 2}: quaternion norm {norms[row]:.4g}, "
@@ -296,10 +323,51 @@ def load_log(path: str | Path, *, warn: bool = True, budget=None) -> FlightLog:
     the time and memory budget of parsing a foreign format (default
     :func:`quadsim.logs.parse_budget`)."""
     path = Path(path)
-    from . import detect_format, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
+    from . import detect_format, file_kind, read_columns  # PX4 ULog, Crazyflie uSD, DataFlash
     fmt = detect_format(path)
+    if fmt is None and file_kind(path) == "a TOML file":
+        raise field_error(path, "header", "a TOML file (a parameter set or skeleton?), not a "
+                          "flight log: were the log and the vehicle arguments swapped?")
     columns = read_columns(path, fmt=fmt, budget=budget) if fmt else read_log_columns(path)
     return log_from_columns(path, columns, warn=warn)
+
+
+def _minimum(path: Path, columns: dict) -> dict:
+    """The columns with Euler angles read as the quaternion, after checking the schema's
+    minimum: ``t`` and either a pose (``x..z`` with an attitude) or the IMU (``ax..az``,
+    ``wx..wz`` and ``rotor_*`` or ``cmd_*``). Raises naming what each minimum lacks. An IMU
+    log's attitude or velocity without a position is left out (the pose comes whole)."""
+    if "t" not in columns:
+        raise field_error(path, "t", "required column missing (time in s)")
+    euler = [c for c in EULER if c in columns]
+    if euler and not any(c in columns for c in _GROUPS["quat"]):
+        if len(euler) != 3:
+            missing = [c for c in EULER if c not in columns]
+            raise field_error(path, missing[0], f"missing while {', '.join(euler)} present: an "
+                              "attitude needs roll, pitch and yaw (rad, z-y-x) or qw..qz")
+        from .attitude import quat_from_euler
+        columns = dict(columns)
+        quat = quat_from_euler(*(columns.pop(c) for c in EULER))
+        columns.update({c: quat[:, i] for i, c in enumerate(_GROUPS["quat"])})
+    has = {g: all(c in columns for c in _GROUPS[g]) for g in _GROUPS}
+    motors = any(_NUMBERED.match(c) for c in columns)
+    if has["position"] and has["quat"]:
+        return columns
+    if any(c in columns for c in _GROUPS["position"]) and not has["quat"]:
+        name = next(c for c in _GROUPS["quat"] if c not in columns)
+        raise field_error(path, name, "required with a position: an attitude (qw..qz, or roll, "
+                          "pitch, yaw in rad); an IMU log may have neither")
+    if has["accel"] and has["body_rate"] and motors:
+        if has["quat"] or has["velocity"]:     # an attitude or velocity without position
+            columns = {k: v for k, v in columns.items()
+                       if k not in _GROUPS["quat"] + _GROUPS["velocity"]}
+        return columns
+    lacking = [n for n, ok in (("ax..az", has["accel"]), ("wx..wz", has["body_rate"]),
+                               ("rotor_* or cmd_*", motors)) if not ok]
+    raise field_error(path, lacking[0], "required: a log needs either the IMU (t, ax..az, "
+                      "wx..wz and rotor speeds or motor commands; missing "
+                      f"{', '.join(lacking)}) or a pose (t, x..z and qw..qz or roll, pitch, "
+                      "yaw)")
 
 
 def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
@@ -308,17 +376,15 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
     (the checks of :func:`load_log`; used by the importers in :mod:`quadsim.logs`)."""
     path = Path(path)
     notes: list[str] = []
-    missing = [c for c in _REQUIRED if c not in columns]
-    if missing:
-        raise field_error(path, missing[0], "required column missing (required: "
-                          f"{', '.join(_REQUIRED)})")
+    source, columns = columns, _minimum(path, columns)
+    pose = tuple(c for g in ("position", "quat") for c in _GROUPS[g])
     known = set(_REQUIRED) | {c for g in _GROUPS.values() for c in g} | {"vbat"}
     unknown = sorted(c for c in columns if c not in known and not _NUMBERED.match(c))
     if unknown:
         notes.append(f"{path}: ignoring unknown column(s) {', '.join(unknown)}")
     for name, values in columns.items():
         if name in known or _NUMBERED.match(name):
-            _check_finite(path, name, values, required=name in _REQUIRED,
+            _check_finite(path, name, values, required=name in _REQUIRED + pose,
                           notes=notes)
     t = columns["t"]
     _check_time(path, t, notes)
@@ -332,11 +398,11 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
     log["vbat"] = columns.get("vbat")
     _check_units(path, log)
     check_plausible(path, t, log)
-    notes = [*getattr(columns, "notes", ()), *notes]
+    notes = [*getattr(source, "notes", ()), *notes]
     if warn:
         for note in notes:
             warnings.warn(note, QuadsimWarning, stacklevel=2)
-    vehicle = getattr(columns, "vehicle", {}).get("kind")
+    vehicle = getattr(source, "vehicle", {}).get("kind")
     return FlightLog(t=t, path=path, notes=tuple(notes), vehicle=vehicle, **log)
 
 

@@ -241,7 +241,8 @@ def _rotation_rate(t: np.ndarray, quat: np.ndarray) -> np.ndarray:
 
 def check_plausible(path: str | Path, t: np.ndarray, log: dict) -> None:
     """Raise for the first value outside the module's table. ``log``: the loader's arrays
-    (``position`` (N, 3) m, ``velocity`` (N, 3) m/s, ``quat`` (N, 4) unit, ``accel``
+    (``position`` (N, 3) m, ``velocity`` (N, 3) m/s, ``quat`` (N, 4) unit (position and
+    quat None in an IMU-only log), ``accel``
     (N, 3) m/s^2, ``rotor_speed`` (N, R) rad/s, ``vbat`` (N,) V; None when absent)."""
     path = Path(path)
     _check_time(path, t)
@@ -249,8 +250,9 @@ def check_plausible(path: str | Path, t: np.ndarray, log: dict) -> None:
     _check_norm(path, "vx..vz", log.get("velocity"), MAX_SPEED, "m/s", "velocity")
     _check_norm(path, "ax..az", log.get("accel"), MAX_SPECIFIC_FORCE, "m/s^2",
                 "specific force")
-    _check_steps(path, t, log["position"], log.get("velocity"), log)
-    rate = _rotation_rate(t, log["quat"])
+    if log["position"] is not None:
+        _check_steps(path, t, log["position"], log.get("velocity"), log)
+    rate = _rotation_rate(t, log["quat"]) if log["quat"] is not None else np.zeros(0)
     if np.nanmax(rate, initial=0.0) > MAX_ATTITUDE_RATE:
         row = int(np.nanargmax(rate)) + 1
         raise field_error(path, "qw..qz", f"{_line(row)}: attitude turns at {rate[row - 1]:.4g} "

@@ -175,9 +175,10 @@ def df_message(type_id: int, fmt: str, *values) -> bytes:
 
 
 def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000,
-                    params: dict | None = None) -> bytes:
+                    params: dict | None = None, omit: tuple[str, ...] = ()) -> bytes:
     """The flight as an ArduPilot DataFlash log (FMT, PARM, ATT, XKF1, IMU, RCOU, ESC, BAT);
-    PWM 1000-2000 us (MOT_PWM_MIN/MAX), FRAME_CLASS 1 (quad); ``params`` override those."""
+    PWM 1000-2000 us (MOT_PWM_MIN/MAX), FRAME_CLASS 1 (quad); ``params`` override those;
+    the message kinds in ``omit`` (e.g. ``("XKF1",)``: no position) are not written."""
     out = bytearray(df_format(128, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns"))
     layout = {129: ("PARM", "QNf", "TimeUS,Name,Value"),
               130: ("ATT", "Qfff", "TimeUS,Roll,Pitch,Yaw"),
@@ -197,13 +198,17 @@ def dataflash_bytes(flight: SampleFlight, *, start_us: int = 2_000_000,
     rpm = flight.rotor_speed * 60.0 / (2.0 * np.pi)
     for k, t in enumerate(flight.t):
         t_us = max(0, start_us + round(t * 1e6))
-        out += df_message(130, "Qfff", t_us, *euler[k])
-        out += df_message(131, "QBffffff", t_us, 0, *pos[k], *vel[k])
-        out += df_message(132, "QBffffff", t_us, 0, *gyro[k], *acc[k])
-        out += df_message(133, "QHHHH", t_us, *pwm[k])
-        for i in range(4):
+        rows = {"ATT": (130, "Qfff", t_us, *euler[k]),
+                "XKF1": (131, "QBffffff", t_us, 0, *pos[k], *vel[k]),
+                "IMU": (132, "QBffffff", t_us, 0, *gyro[k], *acc[k]),
+                "RCOU": (133, "QHHHH", t_us, *pwm[k])}
+        for kind, message in rows.items():
+            if kind not in omit:
+                out += df_message(*message)
+        for i in range(4 if "ESC" not in omit else 0):
             out += df_message(134, "QBf", t_us, i, rpm[k, i])
-        out += df_message(135, "QBf", t_us, 0, flight.vbat[k])
+        if "BAT" not in omit:
+            out += df_message(135, "QBf", t_us, 0, flight.vbat[k])
     return bytes(out)
 
 

@@ -16,8 +16,13 @@ needed"). :func:`airborne_span` marks each sample
   rest within :data:`GROUND_HEIGHT_M` of the log's lowest height (1st percentile), when the
   log spans more than :data:`LIFT_HEIGHT_M` in height;
 
-and keeps the longest stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
-so one noisy sample does not split a flight). The cut parts are named in a note:
+and finds every stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
+so one noisy sample does not split a flight): :func:`split_airborne` keeps each of them (a log
+with several take-offs is several segments, all used: ``identify --logs``), :func:`cut_ground`
+the longest (``gap`` and ``view``, which judge one continuous flight per file; the note names
+the other stretches). An IMU-only log (no pose) is judged by its rotor activity and its gyro
+(at rest: body rate below :data:`REST_RATE`), without the height and speed tests. The cut
+parts are named in a note:
 "``f.ulg: airborne span t 19.20-31.05 s kept (11.85 of 31.1 s); cut: ground 0.00-19.19 s``".
 A log with no airborne stretch of :data:`MIN_SPAN_S` is refused in one line.
 
@@ -28,6 +33,7 @@ Example::
 
     >>> from quadsim.logs.spans import cut_ground
     >>> log, note = cut_ground(load_log("sample_px4_events.ulg"))
+    >>> segments, note = split_airborne(load_log("log10.csv.gz"))   # every take-off
 """
 
 from __future__ import annotations
@@ -87,48 +93,95 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
-def airborne_span(log) -> Span:
-    """The longest airborne stretch of ``log`` (a FlightLog) and what was cut around it."""
+def _flying(log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(flying, idle, ground) masks (N,) of ``log`` (see the module)."""
     t = np.asarray(log.t, float)
     n = len(t)
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
-    n_min = max(1, int(round(MIN_SPAN_S / dt)))
+    n_min = max(1, round(MIN_SPAN_S / dt))
     idle = np.zeros(n, bool)
     activity = _activity(log)
-    height = log.position[:, 2]
-    low = height < np.percentile(height, 1) + GROUND_HEIGHT_M
-    weak = low & (float(np.ptp(height)) > LIFT_HEIGHT_M)
+    weak = np.zeros(n, bool)
+    if log.position is not None:
+        height = log.position[:, 2]
+        low = height < np.percentile(height, 1) + GROUND_HEIGHT_M
+        weak = low & (float(np.ptp(height)) > LIFT_HEIGHT_M)
     if activity is not None:
         top = float(np.percentile(activity, 90))
         idle = _bridge(activity < IDLE_FRACTION * top, n_min) if top > 0 else np.ones(n, bool)
         weak = activity < WEAK_FRACTION * float(np.median(activity[~idle])) \
             if (~idle).any() else np.ones(n, bool)
-    velocity = log.velocity if log.velocity is not None else np.gradient(log.position, t, axis=0)
-    rest = np.linalg.norm(velocity, axis=1) < REST_SPEED
+    rest = np.ones(n, bool)
+    if log.position is not None:
+        velocity = log.velocity if log.velocity is not None else np.gradient(log.position, t,
+                                                                             axis=0)
+        rest = np.linalg.norm(velocity, axis=1) < REST_SPEED
     if log.body_rate is not None:
         rest &= np.linalg.norm(log.body_rate, axis=1) < REST_RATE
     ground = _bridge(rest & weak, n_min)
     if not (idle | ground).any():            # nothing to cut (also: logs shorter than n_min)
-        return Span(0, n, ())
-    flying = _bridge(~(idle | ground), n_min)
+        return np.ones(n, bool), idle, ground
+    return _bridge(~(idle | ground), n_min), idle, ground
+
+
+def airborne_spans(log) -> tuple[Span, ...]:
+    """Every airborne stretch of ``log`` (a FlightLog) in time order, each with what was cut
+    around it (the same ``cut`` list on each: every part that is not airborne). Refused when
+    there is none of ``MIN_SPAN_S``."""
+    t = np.asarray(log.t, float)
+    n = len(t)
+    flying, idle, ground = _flying(log)
+    if flying.all():
+        return (Span(0, n, ()),)
     runs = _runs(flying)
     if not runs:
         raise field_error(log.path if log.path is not None else "log", "t",
                           f"no airborne stretch of {MIN_SPAN_S} s: the whole log is on the "
                           "ground or with the motors idle")
-    start, stop = max(runs, key=lambda r: (r[1] - r[0], -r[0]))
     cut = []
     for a, b in _runs(~flying):
         kinds = [k for k, m in (("idle", idle), ("ground", ground)) if m[a:b].any()]
         cut.append((", ".join(kinds) or "short", float(t[a]), float(t[b - 1])))
-    for a, b in runs:
-        if (a, b) != (start, stop):
-            cut.append(("another airborne stretch", float(t[a]), float(t[b - 1])))
-    return Span(start, stop, tuple(sorted(cut, key=lambda c: c[1])))
+    return tuple(Span(a, b, tuple(cut)) for a, b in runs)
+
+
+def airborne_span(log) -> Span:
+    """The longest airborne stretch of ``log`` (a FlightLog) and what was cut around it
+    (the other airborne stretches listed as cut, "another airborne stretch")."""
+    spans = airborne_spans(log)
+    best = max(spans, key=lambda s: (s.stop - s.start, -s.start))
+    t = log.t
+    cut = list(best.cut) + [("another airborne stretch", float(t[s.start]), float(t[s.stop - 1]))
+                            for s in spans if s is not best]
+    return Span(best.start, best.stop, tuple(sorted(cut, key=lambda c: c[1])))
 
 
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
+
+
+def _take(log, span: Span, note: str):
+    fields = {name: (None if getattr(log, name) is None
+                     else getattr(log, name)[span.start:span.stop]) for name in _ARRAYS}
+    return dataclasses.replace(log, t=log.t[span.start:span.stop], notes=(*log.notes, note),
+                               **fields)
+
+
+def split_airborne(log):
+    """(logs, note or None): one log per airborne stretch (:func:`airborne_spans`), in time
+    order, each keeping the file's time axis; the note names every stretch kept and every
+    part cut. Several take-offs in one log are several segments of it, all used."""
+    spans = airborne_spans(log)
+    if len(spans) == 1 and spans[0].start == 0 and spans[0].stop == len(log.t):
+        return [log], None
+    t = log.t
+    where = log.path if log.path is not None else "log"
+    kept = sum(float(t[s.stop - 1] - t[s.start]) for s in spans)
+    note = (f"{where}: {len(spans)} airborne stretch{'es' if len(spans) > 1 else ''} used, t "
+            + ", ".join(f"{t[s.start]:.2f}-{t[s.stop - 1]:.2f} s" for s in spans)
+            + f" ({kept:.2f} of {float(t[-1] - t[0]):.2f} s); cut: "
+            + "; ".join(f"{kind} {a:.2f}-{b:.2f} s" for kind, a, b in spans[0].cut))
+    return [_take(log, s, note) for s in spans], note
 
 
 def cut_ground(log):
@@ -142,8 +195,4 @@ def cut_ground(log):
     note = (f"{where}: airborne span t {t[span.start]:.2f}-{t[span.stop - 1]:.2f} s kept "
             f"({kept:.2f} of {float(t[-1] - t[0]):.2f} s); cut: "
             + "; ".join(f"{kind} {a:.2f}-{b:.2f} s" for kind, a, b in span.cut))
-    fields = {name: (None if getattr(log, name) is None
-                     else getattr(log, name)[span.start:span.stop]) for name in _ARRAYS}
-    new = dataclasses.replace(log, t=t[span.start:span.stop], notes=(*log.notes, note),
-                              **fields)
-    return new, note
+    return _take(log, span, note), note

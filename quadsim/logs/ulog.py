@@ -23,7 +23,9 @@ Frames: NED/FRD -> world (x north, y west, z up) and body FLU by the half turn a
 (``quadsim.logs.common``). Time: ``timestamp`` (us since boot) -> s from the first row.
 Every topic is interpolated onto the attitude topic's instants (``common.resample``: linear,
 NaN across gaps); the rows kept are those where position and attitude both exist, trimmed to
-the span every topic covers (``common.common_span``; time restarts at 0 there).
+the span every topic covers (``common.common_span``; time restarts at 0 there). A log with
+no position or attitude topic is read as IMU + motors on the gyro topic's instants (a note
+says so).
 
 The rotor count is the number of ``actuator_motors`` controls that are not NaN in the log
 (PX4 sets unused ones to NaN), else ``CA_ROTOR_COUNT``, else 4; ESC rotor speeds are taken
@@ -158,19 +160,27 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
         notes.append(f"{path}: pyulog found corrupt data and skipped it (file_corruption)")
     vehicle = _vehicle(path, ulog)
     sig = {k: _signal(ulog, k, topics.get(k), fields.get(k)) for k in TOPICS}
-    for key, what in (("position", "vehicle_local_position x/y/z"),
-                      ("quat", "vehicle_attitude q[0..3]")):
-        if sig[key] is None:
-            raise field_error(path, topics.get(key, what), f"no {key} topic in the log "
-                              "(needed for position and attitude; --topic overrides)")
-    t_base = sig["quat"][0]
-    valid = np.isfinite(sig["quat"][1]).all(axis=1)
-    check_unit_quat(path, f"{sig['quat'][2]}.q", t_base, sig["quat"][1])
+    pose = sig["position"] is not None and sig["quat"] is not None
+    if not pose:
+        lacking = [w for k, w in (("position", "vehicle_local_position x/y/z"),
+                                  ("quat", "vehicle_attitude q[0..3]")) if sig[k] is None]
+        if sig["body_rate"] is None or sig["accel"] is None:
+            raise field_error(path, topics.get("position", lacking[0]), "not in the log, and "
+                              "no gyro and accelerometer topics either: a log needs a pose or the "
+                              "IMU (--topic overrides)")
+        notes.append(f"{path}: {', '.join(lacking)}: not in the log: read as IMU + motors on "
+                     f"the {sig['body_rate'][2]} instants (no pose)")
+        sig["position"] = sig["velocity"] = sig["quat"] = None
+    base = sig["quat"] if pose else sig["body_rate"]
+    t_base = base[0]
+    valid = np.isfinite(base[1]).all(axis=1)
+    if pose:
+        check_unit_quat(path, f"{base[2]}.q", t_base, base[1])
     t_base = t_base[valid]
-    t_base = t_base[increasing(path, f"{sig['quat'][2]}.timestamp", t_base, [])]
+    t_base = t_base[increasing(path, f"{base[2]}.timestamp", t_base, [])]
     if len(t_base) < 2:
-        raise field_error(path, f"{sig['quat'][2]}", f"{len(t_base)} usable attitude "
-                          "sample(s); the attitude topic is the time base")
+        raise field_error(path, f"{base[2]}", f"{len(t_base)} usable sample(s) of the time "
+                          "base topic")
     if rate_hz:
         rows = (t_base[-1] - t_base[0]) * rate_hz
         if not 2 <= rows <= MAX_ROWS:
@@ -211,10 +221,12 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     for key in ("body_rate", "accel"):
         if out[key] is not None:
             out[key] = frd_to_body(out[key])
-    out["quat"] = quat_ned_frd_to_world_body(out["quat"])
+    if pose:
+        out["quat"] = quat_ned_frd_to_world_body(out["quat"])
     out["rotor_speed"] = map_rotors(path, "esc_status", out["rotor_speed"], rotor_map)
     out["rotor_command"] = map_rotors(path, "actuator_motors", out["rotor_command"], rotor_map)
-    keep = np.isfinite(out["position"]).all(axis=1) & np.isfinite(out["quat"]).all(axis=1)
+    keep = (np.isfinite(out["position"]).all(axis=1) & np.isfinite(out["quat"]).all(axis=1)
+            if pose else np.isfinite(out["body_rate"]).all(axis=1))
     if keep.sum() < 2:
         raise field_error(path, "vehicle_local_position", "position and attitude never "
                           "overlap in time")

@@ -29,6 +29,8 @@ acc.x/y/z                    g           ax, ay, az            x 9.81 m/s^2 (the
                                                                GRAVITY_MAGNITUDE)
 rpm.m1..m4                   RPM         rotor_1..4            x 2 pi/60
 pwm.m1_pwm..m4_pwm           0-65535     cmd_1..4              / 65535
+motor.m1..m4 (no pwm.*)      0-65535     cmd_1..4              / 65535
+stateEstimate.roll/pitch/yaw deg         qw..qz (no quat)      Euler, ``euler`` convention
 pm.vbatMV                    mV          vbat                  / 1000
 ===========================  ==========  ====================  =============================
 
@@ -39,6 +41,10 @@ estimate as position and attitude with ``pose="estPose"`` (``convert --topic pos
 interpolated linearly onto the rows, NaN across its gaps (no hold), rows outside its span
 dropped; by default the state estimate is used, as in the published CSVs. Measured: the three raw
 logs reproduce ``nominal/flight_00..02.csv.gz`` row for row (docs/logs.md gives the differences).
+
+No pose (no ``stateEstimate.x/y/z`` and attitude, no ``pose`` event): an IMU + motors log
+(``acc``, ``gyro``, motor commands), as the system-identification logs of
+``crazyflie21_imu_cmd/`` are; a partial attitude (roll and yaw only) is left out with a note.
 
 Errors (one line, file and field): wrong magic byte, unknown version, bad CRC, a truncated
 event or definition, an event id without a definition, an unknown type code.
@@ -53,13 +59,21 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import field_error
-from .common import RPM_TO_RAD_S, check_unit_quat, map_rotors, resample, resample_quat
+from .common import RPM_TO_RAD_S, Columns, check_unit_quat, map_rotors, resample, resample_quat
 
 MAGIC = 0xBC
 #: m/s^2 per g: the Crazyflie firmware's GRAVITY_MAGNITUDE (the nominal CSVs use it too).
 CF_GRAVITY = 9.81
 _TIMESTAMP = {1: (struct.Struct("<HI"), 1e-3), 2: (struct.Struct("<HQ"), 1e-6)}
 _TYPES = set("bBhHiIqQfd")
+#: |correlation| of the pitch angle's rate with the gyro's y rate that tells its sign (the
+#: two measure the same turn: a right convention correlates near +1, the wrong sign near -1;
+#: below this the flight pitches too little to tell, and the default is kept).
+PITCH_SIGN_CORR = 0.5
+#: a pitch reconstructed from the velocity (roll and yaw logged, no pitch) is used when the
+#: roll the same construction implies matches the logged roll within this rms (deg): the
+#: thrust-along-body-z premise holds on that axis.
+RECONSTRUCT_ROLL_DEG = 5.0
 
 
 def _definitions(path: Path, data: bytes) -> tuple[int, dict, int]:
@@ -158,11 +172,16 @@ def _pose_from(path: Path, events: dict, pose: str, t: np.ndarray):
 
 
 def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
-                event: str | None = None, pose: str | None = None) -> dict[str, np.ndarray]:
+                event: str | None = None, pose: str | None = None,
+                euler: str | None = None) -> Columns:
     """Flight-log columns (SI, schema names) from a uSD log: one row per fixed-frequency
     event (or per ``event`` when given), time from its first row. ``pose`` (e.g.
     ``"estPose"``): take position and attitude from that motion-capture event instead of
-    ``stateEstimate`` (linearly interpolated onto the rows; rows outside its span dropped)."""
+    ``stateEstimate`` (linearly interpolated onto the rows; rows outside its span dropped).
+    Without quaternions, ``stateEstimate.roll/pitch/yaw`` (deg) are the attitude in the
+    ``euler`` convention (:mod:`.attitude`, default ``crazyflie``). Without a pose the log is
+    IMU + motors (``acc``, ``gyro``, ``motor.m*`` or ``pwm.m*_pwm``); the notes say what was
+    left out and why."""
     path = Path(path)
     events, _ = read_usd(path)
     name = event or next((n for n in events if n == "fixedFrequency"), None)
@@ -183,12 +202,23 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     state = "stateEstimate."
     position = take([state + a for a in "xyz"])
     quat = take([state + a for a in ("qw", "qx", "qy", "qz")])
+    notes: list[str] = []
+    if quat is None:
+        quat = _euler_attitude(path, ev, name, euler, notes)
     if pose is not None:
         position, quat = _pose_from(path, events, pose, t)
-    if position is None or quat is None:
-        missing = "stateEstimate.x/y/z" if position is None else "stateEstimate.qw/qx/qy/qz"
-        raise field_error(path, f"{name}: {missing}", "required for position/attitude, not "
-                          "logged")
+    if position is not None and quat is None:
+        position = None
+        notes.append(f"{path}: {name}: {state}x/y/z logged without a whole attitude: position "
+                     "left out (without the tilt it cannot enter the body-frame balance)")
+    if quat is not None and position is None:
+        quat = None
+        notes.append(f"{path}: {name}: attitude logged without {state}x/y/z: left out (the "
+                     "schema's pose is position and attitude together)")
+    if position is None and not all(f"{g}.{a}" in ev for g in ("acc", "gyro") for a in "xyz"):
+        raise field_error(path, f"{name}: {state}x/y/z", "not logged, and no acc.x/y/z and "
+                          "gyro.x/y/z either: a log needs a pose or the IMU (with motor "
+                          "commands or rotor speeds)")
     groups = {
         "x y z": position, "vx vy vz": take([state + a for a in ("vx", "vy", "vz")]),
         "qw qx qy qz": quat,
@@ -199,11 +229,12 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
         if value is not None:
             cols.update({n: value[:, i] for i, n in enumerate(names.split())})
     motors = sorted(int(k[5:]) for k in ev if k.startswith("rpm.m") and k[5:].isdigit())
+    commands = _commands(ev)
     rotor = take([f"rpm.m{m}" for m in motors], RPM_TO_RAD_S) if motors else None
-    pwm_motors = sorted(int(k[5:-4]) for k in ev if k.startswith("pwm.m") and k.endswith("_pwm"))
-    cmd = take([f"pwm.m{m}_pwm" for m in pwm_motors], 1.0 / 65535.0) if pwm_motors else None
+    cmd = take(commands[1], 1.0 / 65535.0) if commands else None
     for prefix, value in (("rotor", map_rotors(path, "rpm.m*", rotor, rotor_map)),
-                          ("cmd", map_rotors(path, "pwm.m*_pwm", cmd, rotor_map))):
+                          ("cmd", map_rotors(path, commands[0] if commands else "pwm.m*",
+                                             cmd, rotor_map))):
         if value is not None:
             cols.update({f"{prefix}_{i + 1}": value[:, i] for i in range(value.shape[1])})
     if "pm.vbatMV" in ev:
@@ -214,7 +245,79 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
             raise field_error(path, pose, "pose event and fixed-frequency rows never overlap")
         cols = {k: v[ok] for k, v in cols.items()}
         cols["t"] = cols["t"] - cols["t"][0]
-    return cols
+    return Columns(cols, notes=tuple(notes))
+
+
+def _commands(ev: dict) -> tuple[str, list[str]] | None:
+    """(field pattern, variable names) of the motor commands (0-65535): ``pwm.m1_pwm..`` (the
+    PWM sent), else ``motor.m1..`` (the power distribution's output, as logged by the
+    system-identification logs); None when neither is logged."""
+    pwm = sorted(int(k[5:-4]) for k in ev if k.startswith("pwm.m") and k.endswith("_pwm")
+                 and k[5:-4].isdigit())
+    if pwm:
+        return "pwm.m*_pwm", [f"pwm.m{m}_pwm" for m in pwm]
+    motor = sorted(int(k[7:]) for k in ev if k.startswith("motor.m") and k[7:].isdigit())
+    if motor:
+        return "motor.m*", [f"motor.m{m}" for m in motor]
+    return None
+
+
+def _euler_attitude(path: Path, ev: dict, name: str, convention: str | None,
+                    notes: list[str]) -> np.ndarray | None:
+    """The attitude (N, 4) from ``stateEstimate.roll/pitch/yaw`` (degrees) in ``convention``
+    (:mod:`.attitude`). Without ``convention`` the pitch sign is taken from the gyro (the
+    correlation of the pitch rate with ``gyro.y``, :data:`PITCH_SIGN_CORR`), else the default
+    ``crazyflie`` (the firmware logs pitch nose-up positive); a given convention the gyro
+    contradicts is refused. Roll and yaw without pitch, with ``stateEstimate.vx/vy/vz``: the
+    pitch reconstructed from the velocity (:func:`.attitude.pitch_from_velocity`) when the
+    roll it implies matches the logged roll within :data:`RECONSTRUCT_ROLL_DEG`. Otherwise
+    only some of the three logged: None, with a note of what that costs."""
+    from .attitude import pitch_from_velocity, pitch_sign_from_gyro, quat_from_euler
+
+    state = "stateEstimate."
+    logged = [a for a in ("roll", "pitch", "yaw") if state + a in ev]
+    if not logged:
+        return None
+    velocity = [state + a for a in ("vx", "vy", "vz")]
+    if logged == ["roll", "yaw"] and all(v in ev for v in velocity) and len(ev["t"]) > 20:
+        roll, yaw = np.radians(ev[state + "roll"]), np.radians(ev[state + "yaw"])
+        pitch, check = pitch_from_velocity(ev["t"], roll, yaw,
+                                           np.stack([ev[v] for v in velocity], 1))
+        if check <= np.radians(RECONSTRUCT_ROLL_DEG):
+            notes.append(f"{path}: {name}: {state}pitch: not logged: reconstructed from the "
+                         f"velocity's derivative, roll and yaw (thrust along body z; the roll "
+                         f"it implies differs from the logged roll by {np.degrees(check):.2g} "
+                         "deg rms). What it costs: the tilt is biased by drag / weight and lags "
+                         "by the velocity estimate's smoothing; log stateEstimate.pitch or "
+                         "qw..qz to avoid it")
+            return quat_from_euler(roll, pitch, yaw, convention="flu")
+        notes.append(f"{path}: {name}: {state}pitch: not reconstructed from the velocity: the "
+                     f"roll it implies differs from the logged roll by {np.degrees(check):.2g} "
+                     f"deg rms (over {RECONSTRUCT_ROLL_DEG:g} deg)")
+    if len(logged) < 3:
+        lacking = [a for a in ("roll", "pitch", "yaw") if a not in logged]
+        notes.append(f"{path}: {name}: {state}{'/'.join(lacking)}: not logged ({', '.join(logged)} "
+                     "only): no whole attitude, so the log is read as IMU and motors only where "
+                     "it has them; a partial attitude cannot rotate the pose into the body frame "
+                     f"(log {state}{'/'.join(lacking)} or {state}qw..qz to keep it)")
+        return None
+    angles = [np.radians(ev[state + a]) for a in ("roll", "pitch", "yaw")]
+    told = "given"
+    if "gyro.y" in ev:
+        corr = pitch_sign_from_gyro(ev["t"], angles[0], angles[1], np.radians(ev["gyro.y"]))
+        found = "flu" if corr > PITCH_SIGN_CORR else "crazyflie" if corr < -PITCH_SIGN_CORR \
+            else None
+        if convention is None:
+            convention, told = found or "crazyflie", ("from the gyro" if found else
+                                                      "the default: the flight barely pitches")
+        elif found is not None and (convention == "crazyflie") != (found == "crazyflie"):
+            raise field_error(path, f"{name}: {state}pitch", f"--euler {convention}: the "
+                              f"pitch angle's rate correlates {corr:+.2f} with the gyro's y rate "
+                              f"under that convention's sign: the log says --euler {found}")
+    convention = convention or "crazyflie"
+    notes.append(f"{path}: {name}: attitude from {state}roll/pitch/yaw (deg), Euler convention "
+                 f"{convention!r} ({told}; z-y-x; convert --euler names it)")
+    return quat_from_euler(*angles, convention=convention)
 
 
 def encode_usd(events: dict[str, tuple[int, list[tuple[str, str]], list[tuple[int, tuple]]]],
