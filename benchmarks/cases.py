@@ -26,7 +26,7 @@ Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 *per-flight* mode (:func:`quadsim.gap.diagnose_per_flight`, each case's first flight against
 the reference flights of the same source and vehicle, the design of the Crazyflow source,
 :mod:`.crazyflow_cases`). Observability: in held-out mode a case counts when the library
-effect with the true values cuts the held-out gap by at least ``MIN_GAIN``
+effect with the true values cuts the held-out gap by at least :data:`benchmarks.observe.MIN_GAIN`
 (:func:`oracle_reduction`); in per-flight mode when the true difference from the references
 (:func:`per_flight_truth`: the source's shared physics, :func:`shared_physics`, with the
 hidden effect) cuts *that flight's* residual by at least

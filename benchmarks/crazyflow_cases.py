@@ -1,4 +1,5 @@
-"""Crazyflow benchmark cases: each a single flight judged per flight against 8 nominal Crazyflow flights.
+"""Crazyflow benchmark cases: each a single flight judged per flight against 8 nominal Crazyflow
+flights.
 
 Source: :mod:`.crazyflow_source` (Crazyflow's own dynamics, RK4 integrator, Mellinger
 controller and Crazyflie 2.1 Brushless model; quadsim only converts the log). The cases are
@@ -219,7 +220,8 @@ def flight_dir(cache):
 
 
 def generate(cache, progress=print):
-    """Fly, write and check the references and every case (:func:`benchmarks.sim_cases.generate`)."""
+    """Fly, write and check the references and every case
+    (:func:`benchmarks.sim_cases.generate`)."""
     return sim_cases.generate(SOURCE, cache, progress)
 
 

@@ -1,4 +1,5 @@
-"""Independent flights from Crazyflow (JAX + MuJoCo; its own dynamics, integrator, controller, vehicle).
+"""Independent flights from Crazyflow (JAX + MuJoCo; its own dynamics, integrator, controller,
+vehicle).
 
 Crazyflow (``pip install crazyflow``, tested with 0.4.0; Learning Systems and Robotics Lab,
 TU Munich, https://github.com/utiasDSL/crazyflow) flies a Crazyflie 2.1 Brushless

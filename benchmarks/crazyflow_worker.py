@@ -2,9 +2,9 @@
 
 Crazyflow needs SciPy's array-API mode (``SCIPY_ARRAY_API=1``), which must be set before
 SciPy is first imported and changes SciPy for the whole process; quadsim's own code runs
-without it. So the flights are flown in a child process (:func:`benchmarks.crazyflow_source.fly_batch`
-starts ``python .../crazyflow_worker.py JOB.npz OUT.npz`` in a temporary folder); this
-module imports nothing of quadsim.
+without it. So the flights are flown in a child process
+(:func:`benchmarks.crazyflow_source.fly_batch` starts ``python .../crazyflow_worker.py JOB.npz
+OUT.npz`` in a temporary folder); this module imports nothing of quadsim.
 
 What runs here is Crazyflow's own simulation (``crazyflow.Sim``, tested with 0.4.0): its
 first-principles dynamics (:func:`crazyflow.dynamics.first_principles.dynamics`: quadratic

@@ -5,11 +5,11 @@ pipeline sources; :func:`draw_rotorpy` returns the same physical changes as Roto
 parameters (:data:`benchmarks.rotorpy_source.EFFECTS`) and :func:`library_equivalent`
 maps those back to the library effect with the true values (used only to check that a case
 is observable, never by the diagnosis). Magnitudes (SI): added mass 5-20 % of the vehicle;
-CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger; all rotors' thrust
-per Omega^2 5-15 % lower or 2-5 % higher (``thrust_factor``: worn props, heat or altitude lose
-up to 15 %; cold air or another prop batch gain a few %, the prior of quadsim.gap.priors);
-motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4 % of the
-weight; rotor drag 0.5-2 x 2.5 % of the weight per m/s at hover; wind 0-2 m/s.
+CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger; all
+rotors' thrust per Omega^2 5-15 % lower or 2-5 % higher (``thrust_factor``: worn props, heat or
+altitude lose up to 15 %; cold air or another prop batch gain a few %, the prior of
+quadsim.gap.priors); motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4
+% of the weight; rotor drag 0.5-2 x 2.5 % of the weight per m/s at hover; wind 0-2 m/s.
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ __all__ = ["draw", "draw_rotorpy", "library_equivalent"]
 
 
 def _drag_k(params: VehicleParams, rng) -> float:
-    return rng.uniform(0.5, 2.0) * 0.025 * params.weight / (params.rotor_count * hover_speed(params))
+    per_rotor = params.rotor_count * hover_speed(params)
+    return rng.uniform(0.5, 2.0) * 0.025 * params.weight / per_rotor
 
 
 def _inertia(params: VehicleParams, rng) -> np.ndarray:
@@ -61,7 +62,8 @@ def draw(name: str, params: VehicleParams, rng: np.random.Generator) -> list:
         rotor = int(rng.integers(1, params.rotor_count + 1))
         return [make_effect(name, **{f"rotor_{rotor}": sign * rng.uniform(0.05, 0.15)})]
     if name == "thrust_curve":
-        return [make_effect(name, linear=sign * rng.uniform(0.03, 0.1) * params.thrust_factor * hover)]
+        linear = sign * rng.uniform(0.03, 0.1) * params.thrust_factor * hover
+        return [make_effect(name, linear=linear)]
     if name == "thrust_factor":   # within the documented prior -15 % .. +5 % (gap.priors);
         # the motors are driven like a battery drives them (speed per command ~ voltage), so
         # the load change moves their speed per command too: DC motors at 60-90 % voltage

@@ -3,8 +3,8 @@
 Blind benchmark: for the 0.84 kg testbed (``physical``) and the 37 g Crazyflie
 (``crazyflie21``), every effect of the library at two random realistic magnitudes, plus
 no-effect cases and effects *outside* the library (translational lift, a blade-flapping
-moment: benchmarks.outside). Each case is three generated flights (:mod:`benchmarks.synthetic`, sensor noise
-on every signal, random path speed and seed); the diagnosis gets only the logs and the
+moment: benchmarks.outside). Each case is three generated flights (:mod:`benchmarks.synthetic`,
+sensor noise on every signal, random path speed and seed); the diagnosis gets only the logs and the
 nominal parameter set (truth hidden), splits by flight (2 train, 1 held out) and gives a
 verdict. Reported: top-1 accuracy for in-library effects, error of the main parameter,
 held-out gap reduction, and the verdicts for out-of-library and no-effect cases.
@@ -25,7 +25,8 @@ Usage::
     python -m benchmarks.gap_benchmark --independent --source crazyflow --cache DIR --generate-only
     python -m benchmarks.gap_benchmark --independent --source crazyflow --cache DIR --out cf.json
     python -m benchmarks.gap_benchmark --independent --source pyflyt --cache DIR [--generate-only]
-    python -m benchmarks.gap_benchmark --independent --source multirotor --cache DIR [--generate-only]
+    python -m benchmarks.gap_benchmark --independent --source multirotor --cache DIR \
+        [--generate-only]
     python -m benchmarks.gap_benchmark --independent --source l2f --cache DIR [--generate-only]
     python -m benchmarks.gap_benchmark --independent --source quadcopter-sim --cache DIR \
         [--generate-only]
@@ -52,11 +53,11 @@ magnitude: "+58 g heavier; or -6.5 % thrust per Omega^2"), the lead reading name
 or listed at all, and the mean number of readings; then no effect -> ``no_significant_gap``
 and out-of-library -> confident wrong names.
 
-Crazyflow source (``--independent --source crazyflow --cache DIR``, :mod:`benchmarks.crazyflow_cases`):
-28 single-flight cases from Crazyflow (its own dynamics, integrator, controller and vehicle),
-each judged per flight against 8 nominal Crazyflow flights; ``--generate-only`` flies and
-caches them (flight-log CSV + truth sidecar per flight) and prints each case's observability
-without computing any verdict.
+Crazyflow source (``--independent --source crazyflow --cache DIR``,
+:mod:`benchmarks.crazyflow_cases`): 28 single-flight cases from Crazyflow (its own dynamics,
+integrator, controller and vehicle), each judged per flight against 8 nominal Crazyflow flights;
+``--generate-only`` flies and caches them (flight-log CSV + truth sidecar per flight) and prints
+each case's observability without computing any verdict.
 
 PyFlyt source (``--independent --source pyflyt --cache DIR``, :mod:`benchmarks.pyflyt_cases`):
 the same for 28 cases from PyFlyt 0.29.0 (pybullet; its own QuadX, motors, drag, rate
@@ -115,13 +116,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.cases import oracle_reduction
 from benchmarks.draws import draw
+from benchmarks.observe import MIN_GAIN
 from benchmarks.score import joined_kind
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimError, QuadsimWarning
 from quadsim.core.files import atomic_write_text
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
-from quadsim.gap.diagnose import MIN_GAIN
 from quadsim.vehicle.params import load_params
 
 VEHICLES = ("physical", "crazyflie21")
@@ -232,12 +233,14 @@ def summarise(rows: list[dict]) -> str:
              f"(median {np.median(capture):.1%} of what the true effect itself achieves)"),
              (f"diagnosis time per case (3 x 6 s flights): median "
              f"{np.median([r['seconds'] for r in rows]):.1f} s")]
-    lines.append("\n| vehicle | hidden | verdict | confusable with | reduction | true-effect reduction "
-                 "| main param. est. (rel. err.) |")
+    lines.append("\n| vehicle | hidden | verdict | confusable with | reduction "
+                 "| true-effect reduction | main param. est. (rel. err.) |")
     lines.append("|---|---|---|---|---|---|---|")
     for r in rows:
-        err = f"{r['param_estimate']:.3g} ({r['param_rel_error']:.0%})" if "param_rel_error" in r else ""
-        flag = "" if r["kind"] != "library" or r["oracle_reduction"] >= MIN_GAIN else " (unobservable)"
+        err = (f"{r['param_estimate']:.3g} ({r['param_rel_error']:.0%})"
+               if "param_rel_error" in r else "")
+        flag = ("" if r["kind"] != "library" or r["oracle_reduction"] >= MIN_GAIN
+                else " (unobservable)")
         lines.append(f"| {r['vehicle']} | {r['truth']}{flag} | {r['verdict']} | "
                      f"{', '.join(r['confusable_with'])} | "
                      f"{r['reduction']:.2f} | {r['oracle_reduction']:.2f} | {err} |")
@@ -332,7 +335,8 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
                      "not scored: " + ", ".join(f"{r['source']}/{r['vehicle']}/{r['truth']}"
                                                 for r in hidden))
     lines.append("\n| source | vehicle | hidden | held-out verdict (best candidate) | "
-                 "per-flight verdict | listed, not a reading (per flight) | true-effect reduction |")
+                 "per-flight verdict | listed, not a reading (per flight) | "
+                 "true-effect reduction |")
     lines.append("|---|---|---|---|---|---|---|")
     for r in rows:
         h, p = r["heldout"], r.get("per_flight", {})
@@ -521,8 +525,9 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
                   for row in summary_rows([(f"{label} | per-flight", group)], threshold)]
         lines.append("")
     hidden = [r["name"] for r in rows if r["kind"] == "library" and not r["observable"]]
+    observable = sum(r["kind"] == "library" and r["observable"] for r in rows)
     lines.append(f"{len(rows)} cases; observable (true difference cuts the residual >= "
-                 f"{threshold:.0%}): {sum(r['kind'] == 'library' and r['observable'] for r in rows)}"
+                 f"{threshold:.0%}): {observable}"
                  f" of {sum(r['kind'] == 'library' for r in rows)} in-library; not observable, "
                  f"scored apart: {', '.join(hidden) or 'none'}")
     head = (f"| case | truth | kind | speed | {label} change | gap / references' | "
@@ -536,9 +541,9 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
         if not observability_only:
             v = r["per_flight"]
             s = v["score"]
-            cells += [_cell(v), "named" if s["named"] else ("no gap" if s["no_gap"] else
-                                                             ("CONFIDENT WRONG" if s["confident_wrong"]
-                                                              else "-"))]
+            score = ("named" if s["named"] else "no gap" if s["no_gap"]
+                     else "CONFIDENT WRONG" if s["confident_wrong"] else "-")
+            cells += [_cell(v), score]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

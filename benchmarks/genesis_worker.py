@@ -56,7 +56,8 @@ def _scene(dt: float):
     import genesis as gs
 
     gs.init(backend=gs.cpu, precision="64", logging_level="warning")
-    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=(0.0, 0.0, -MODEL["gravity"])),
+    gravity = (0.0, 0.0, -MODEL["gravity"])
+    scene = gs.Scene(sim_options=gs.options.SimOptions(dt=dt, gravity=gravity),
                      show_viewer=False)
     drone = scene.add_entity(gs.morphs.Drone(file=URDF, model="RACE", pos=(0.0, 0.0, 1.5),
                                              align=False))

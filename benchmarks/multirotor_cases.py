@@ -160,7 +160,8 @@ def shared_effects(slow: float = 1.0) -> list:
 def library_truth(case: dict) -> list:
     """Library effects with the true difference of ``case`` from the references, on top of
     :func:`shared_effects` (the full effect list of the case's true model); [] for cases
-    with no library form (none, outside, delay): :func:`benchmarks.sim_cases.motor_library_truth`."""
+    with no library form (none, outside, delay):
+    :func:`benchmarks.sim_cases.motor_library_truth`."""
     return sim_cases.motor_library_truth(
         case, shared_effects(case["effects"].get("motor_slow", 1.0)), motor_alpha,
         scored_kind(case))

@@ -1,4 +1,5 @@
-"""A realistic sensor pipeline over :func:`quadsim.logs.generate.generate_flight` (second benchmark source).
+"""A realistic sensor pipeline over :func:`quadsim.logs.generate.generate_flight` (second benchmark
+source).
 
 quadsim's own closed loop (geometric controller, an engine) flies the vehicle with the
 hidden effects; what the diagnosis then gets is not the simulator's state but what a
@@ -29,7 +30,8 @@ Example::
 
     >>> from quadsim.vehicle.params import load_params
     >>> from quadsim.effects import make_effect
-    >>> log = pipeline_flight(load_params("crazyflie21"), [make_effect("mass_offset", mass=0.004)], seed=1)
+    >>> log = pipeline_flight(load_params("crazyflie21"),
+    ...                       [make_effect("mass_offset", mass=0.004)], seed=1)
 """
 
 from __future__ import annotations
@@ -96,7 +98,8 @@ def realistic_log(true_log: FlightLog, params: VehicleParams, seed: int,
         rotor = lfilter([alpha], [1.0, alpha - 1.0], true_log.rotor_speed, axis=0,
                         zi=(1.0 - alpha) * true_log.rotor_speed[:1])[0]
         rotor = _delayed(t, rotor, pipeline.rotor_delay)
-        rotor = rotor + pipeline.rotor_noise * hover_speed(params) * rng.standard_normal(rotor.shape)
+        noise = pipeline.rotor_noise * hover_speed(params)
+        rotor = rotor + noise * rng.standard_normal(rotor.shape)
         rotor = np.round(rotor / pipeline.rotor_quantum) * pipeline.rotor_quantum
     vbat = None
     if true_log.vbat is not None:
@@ -108,8 +111,8 @@ def realistic_log(true_log: FlightLog, params: VehicleParams, seed: int,
 def pipeline_flight(params: VehicleParams, effects=(), *, seed: int = 0, duration: float = 8.0,
                     speed: float = 1.0, path: str = "lissajous", engine: str = "analytic",
                     pipeline: Pipeline = Pipeline()) -> FlightLog:
-    """Fly ``params`` + hidden ``effects`` with :func:`quadsim.logs.generate.generate_flight` (no sensor
-    model), then pass the true log through :func:`realistic_log`."""
+    """Fly ``params`` + hidden ``effects`` with :func:`quadsim.logs.generate.generate_flight` (no
+    sensor model), then pass the true log through :func:`realistic_log`."""
     from quadsim.logs.generate import generate_flight
 
     size = 1.0 if params.mass > 0.2 else 0.5

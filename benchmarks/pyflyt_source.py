@@ -336,7 +336,10 @@ def to_flight_log(raw: dict, spec: FlightSpec, com: np.ndarray, model: dict | No
     model = pyflyt_model() if model is None else model
     quat = raw["quat"][:, [3, 0, 1, 2]]                            # xyzw -> wxyz, body -> world
     rot = quat_to_rotmat(quat / np.linalg.norm(quat, axis=1, keepdims=True))
-    to_body = lambda v: np.einsum("nji,nj->ni", rot, v)
+
+    def to_body(v):
+        return np.einsum("nji,nj->ni", rot, v)
+
     states = SimStates(rate_hz=PHYSICS_HZ, pos=raw["pos"], vel=raw["vel"], quat=quat,
                        ang_vel=to_body(raw["ang_vel"]), ang_acc=to_body(raw["ang_acc"]),
                        acc=raw["acc"], rotor_speed=raw["throttle"] * model["max_rpm"] * RPM,

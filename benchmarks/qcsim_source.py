@@ -14,10 +14,10 @@ controller (:class:`benchmarks.geometric.Geometric`).
 
 quadsim adds (each documented where it is defined; the references share the first two):
 
-* **DC motors** (:data:`MOTOR`, :class:`benchmarks.geometric.DCMotor`): ``J dOmega/dt = k_t (c V - k_e Omega) / R -
-  d_i Omega^2`` with the duty cycle c in 0..1 of a 3S battery (11.1 V), motor constants of a
-  380 KV outrunner (k_t = k_e = 60 / (2 pi 380) V s/rad, R 0.12 ohm) and the rotor and
-  12-inch propeller's J 1.2e-4 kg m^2: the time constant at hover is 21 ms, hover needs a
+* **DC motors** (:data:`MOTOR`, :class:`benchmarks.geometric.DCMotor`): ``J dOmega/dt =
+  k_t (c V - k_e Omega) / R - d_i Omega^2`` with the duty cycle c in 0..1 of a 3S battery (11.1 V),
+  motor constants of a 380 KV outrunner (k_t = k_e = 60 / (2 pi 380) V s/rad, R 0.12 ohm) and the
+  rotor and 12-inch propeller's J 1.2e-4 kg m^2: the time constant at hover is 21 ms, hover needs a
   duty of 0.52, a propeller with less drag torque spins faster per command. The current may
   turn negative (an ESC with active braking): spin-up and spin-down alike.
 * **Body drag** on each body axis, ``-1/2 rho C_dA_i |v_i| v_i`` of the air-relative

@@ -235,13 +235,15 @@ def _bandpass(x: np.ndarray) -> np.ndarray:
     return signal.sosfiltfilt(sos, x, axis=0)
 
 
-def _shift(x: np.ndarray, delay_s: float) -> np.ndarray:
+def delayed(x: np.ndarray, delay_s: float) -> np.ndarray:
     """``x(t - delay)`` by linear interpolation (edges held)."""
     n = np.arange(len(x), dtype=float)
     return np.interp(n - delay_s * RATE_HZ, n, x)
 
 
-def _lag(x: np.ndarray, tau_s: float) -> np.ndarray:
+def lagged(x: np.ndarray, tau_s: float) -> np.ndarray:
+    """``x`` through a first-order lag of time constant ``tau_s`` (s), started at rest at
+    ``x[0]``; unchanged for ``tau_s <= 0``."""
     if tau_s <= 0:
         return x
     a = np.exp(-1.0 / (RATE_HZ * tau_s))
@@ -253,9 +255,9 @@ def _design(sig: RotationSignals, axis: int, candidate: str, parameter: float):
     value of its nonlinear parameter."""
     tau = sig.torque[:, axis]
     if candidate in ("scale", "iv"):
-        tau = _shift(tau, parameter)
+        tau = delayed(tau, parameter)
     elif candidate == "lag":
-        tau = _lag(tau, parameter)
+        tau = lagged(tau, parameter)
     cols = [tau, sig.flapping[:, axis]]
     if candidate == "damping":
         cols.append(-sig.rate[:, axis])

@@ -2,12 +2,13 @@
 
 RotorPy (Folk et al., "RotorPy: A Python-based multirotor simulator with aerodynamics for
 education and research", arXiv:2306.04485; ``pip install rotorpy``, tested with 3.0.0) flies
-the vehicle with its own SE(3) controller (:class:`rotorpy.controllers.quadrotor_control.SE3Control`,
-which knows only the *nominal* parameters), its own integrator (``scipy.integrate.solve_ivp``
-RK45 per step in :class:`rotorpy.vehicles.multirotor.Multirotor`), its own first-order motor
-model, its own aerodynamics (parasitic drag, rotor drag, flapping, translational lift) and its
-own sensor models (:class:`rotorpy.sensors.imu.Imu`, :class:`rotorpy.sensors.external_mocap.MotionCapture`).
-Nothing of quadsim's effect hooks is used: an effect is injected as RotorPy parameters.
+the vehicle with its own SE(3) controller
+(:class:`rotorpy.controllers.quadrotor_control.SE3Control`, which knows only the *nominal*
+parameters), its own integrator (``scipy.integrate.solve_ivp`` RK45 per step in
+:class:`rotorpy.vehicles.multirotor.Multirotor`), its own first-order motor model, its own
+aerodynamics (parasitic drag, rotor drag, flapping, translational lift) and its own sensor models
+(:class:`rotorpy.sensors.imu.Imu`, :class:`rotorpy.sensors.external_mocap.MotionCapture`). Nothing
+of quadsim's effect hooks is used: an effect is injected as RotorPy parameters.
 
 Conversion of a quadsim parameter set into RotorPy's ``quad_params`` (:func:`quad_params`):
 mass (kg), Ixx..Izz (kg m^2), rotor positions relative to the CoM (m), ``k_eta = b``

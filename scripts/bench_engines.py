@@ -307,8 +307,8 @@ def main() -> None:
     result = {"model": params.name, "duration_s": args.duration, "machine": machine,
               "targets": targets,
               "mujoco": mujoco.__version__, "all_effects_path": path,
-              "rows": [{"config": l, "sims": s, "steps_per_s": r, "vs_raw": r / raw}
-                       for l, s, r in rows]}
+              "rows": [{"config": c, "sims": s, "steps_per_s": r, "vs_raw": r / raw}
+                       for c, s, r in rows]}
     if args.plot:
         sizes = [n for n in (1, 4, 16, 64, 256, 1024) if n <= args.max_batch]
         result["scaling"] = scaling(params, max(1, periods // 4), sizes, args.threads)

@@ -53,7 +53,8 @@ def main() -> None:
         out = sys.argv[sys.argv.index("--json") + 1]
         Path(out).write_text(json.dumps({"pairs": pairs, "agree_measured_reference": agree_ref,
                                          "flights_with": with_speeds["flights"],
-                                         "flights_cmd": commands_only["flights"], "agreement": agree / len(pairs),
+                                         "flights_cmd": commands_only["flights"],
+                                         "agreement": agree / len(pairs),
                                          "tau_s": model.tau, "rms_rad_s": model.rms}, indent=1))
 
 

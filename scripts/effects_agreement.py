@@ -43,7 +43,10 @@ def errors(m, a):
 def open_loop(specs: dict, duration: float = 5.0):
     sets = [effect_set_from_specs(s) for s in specs.values()]
     batch = len(sets)
-    tile = lambda v: np.tile(v, (batch, 1))
+
+    def tile(v):
+        return np.tile(v, (batch, 1))
+
     start = initial_state(position=tile([0.0, 0.0, 0.3]), velocity=tile([3.0, -2.0, 0.5]),
                           euler=tile([0.02, -0.01, 0.2]))
     t = np.arange(int(round(duration / PERIOD))) * PERIOD

@@ -1,4 +1,5 @@
-"""Moved to benchmarks/gap_benchmark.py: ``python -m benchmarks.gap_benchmark`` from the repository root."""
+"""Moved to benchmarks/gap_benchmark.py: ``python -m benchmarks.gap_benchmark`` from the repository
+root."""
 import runpy
 import sys
 from pathlib import Path

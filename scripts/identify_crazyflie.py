@@ -94,6 +94,14 @@ def render(fit: dict) -> str:
         f'source = "{README}: motor {n} {where}, hub offsets +-0.0354 m (+-5 %)" }}\n'
         f'spin = "{s}"\n' for n, x, y, s, where in rotors)
     ixx, iyy, izz = INERTIA
+    inertia = f"[[{ixx}, 0.0, 0.0], [0.0, {iyy}, 0.0], [0.0, 0.0, {izz}]]"
+    src_inertia = (f"{README}: midpoints of the Crazyflie 2.x literature range "
+                   "(not measured for this vehicle)")
+    src_d = f"{README}: torque/thrust ratio 0.006 m times the identified b"
+    max_speed = f"{max(2750.0, fit['peak']):.1f}"
+    src_max = ("thrust_stand/pwm_rpm_log.csv: rpm4 peak 26304 rpm "
+               "(rpm1-3 unreliable per its authors)")
+    src_radius = f"{README}: rotor radius 0.025-0.03 m, midpoint"
     return f'''# Parameter set "crazyflie21": Crazyflie 2.1 Brushless as flown in nominal/ flights.
 # Written by scripts/identify_crazyflie.py (do not edit by hand; rerun the script).
 schema = "quadsim.vehicle.params/1"
@@ -103,13 +111,13 @@ description = "Crazyflie 2.1 Brushless, 37 g quad-X; b identified from the nomin
 [body]
 mass = {{ value = {MASS}, unit = "kg", source = "{README}: total mass with battery" }}
 com = {{ value = [0.0, 0.0, 0.0], unit = "m", source = "assumed: symmetric frame" }}
-inertia = {{ value = [[{ixx}, 0.0, 0.0], [0.0, {iyy}, 0.0], [0.0, 0.0, {izz}]], unit = "kg m^2", source = "{README}: midpoints of the Crazyflie 2.x literature range (not measured for this vehicle)" }}
+inertia = {{ value = {inertia}, unit = "kg m^2", source = "{src_inertia}" }}
 
 [rotors]
 thrust_factor = {{ value = {b:.5g}, unit = "N s^2/rad^2", source = "{src_b}" }}
-drag_factor = {{ value = {d:.5g}, unit = "N m s^2/rad^2", source = "{README}: torque/thrust ratio 0.006 m times the identified b" }}
-max_speed = {{ value = {max(2750.0, fit['peak']):.1f}, unit = "rad/s", source = "thrust_stand/pwm_rpm_log.csv: rpm4 peak 26304 rpm (rpm1-3 unreliable per its authors)" }}
-radius = {{ value = {RADIUS}, unit = "m", source = "{README}: rotor radius 0.025-0.03 m, midpoint" }}
+drag_factor = {{ value = {d:.5g}, unit = "N m s^2/rad^2", source = "{src_d}" }}
+max_speed = {{ value = {max_speed}, unit = "rad/s", source = "{src_max}" }}
+radius = {{ value = {RADIUS}, unit = "m", source = "{src_radius}" }}
 
 [motor_map]
 command_unit = "1"
@@ -123,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     root = Path(__file__).resolve().parent.parent
-    parser.add_argument("--data", type=Path, default=root.parent / "shared/data/crazyflie21_brushless",
+    parser.add_argument("--data", type=Path,
+                        default=root.parent / "shared/data/crazyflie21_brushless",
                         help="folder holding nominal/flight_*.csv.gz")
     parser.add_argument("--out", type=Path, default=root / "models/crazyflie21.toml")
     args = parser.parse_args(argv)

@@ -83,8 +83,8 @@ class Step:
         pdef = self.add(f"PRODUCT_DEFINITION('design','',{form},{dctx})")
         shape = self.add(f"PRODUCT_DEFINITION_SHAPE('','',{pdef})")
         origin = self.axis((0, 0, 0), (0, 0, 1), (1, 0, 0))
-        rep = self.add(f"ADVANCED_BREP_SHAPE_REPRESENTATION('{name}',({','.join([origin] + items)}),"
-                       f"{ctx})")
+        members = ",".join([origin] + items)
+        rep = self.add(f"ADVANCED_BREP_SHAPE_REPRESENTATION('{name}',({members}),{ctx})")
         self.add(f"SHAPE_DEFINITION_REPRESENTATION({shape},{rep})")
         data = "\n".join(f"#{i + 1}={line};" for i, line in enumerate(self.lines))
         return ("ISO-10303-21;\nHEADER;\nFILE_DESCRIPTION(('quadsim test fixture'),'2;1');\n"

@@ -343,7 +343,8 @@ def write_testbed(out_dir: Path) -> list[Path]:
     written = [atomic_write_bytes(out_dir / f"{p['name']}.stl", stl_bytes(*p["shape"]),
                                   make_parents=True)
                for p in parts]
-    written.append(atomic_write_text(out_dir / "testbed.toml", manifest_text(parts), make_parents=True))
+    written.append(atomic_write_text(out_dir / "testbed.toml", manifest_text(parts),
+                                     make_parents=True))
     return written
 
 

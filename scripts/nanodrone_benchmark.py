@@ -1,4 +1,5 @@
-"""Moved to benchmarks/nanodrone_benchmark.py: ``python -m benchmarks.nanodrone_benchmark`` from the repository root."""
+"""Moved to benchmarks/nanodrone_benchmark.py: ``python -m benchmarks.nanodrone_benchmark`` from the
+repository root."""
 import runpy
 import sys
 from pathlib import Path

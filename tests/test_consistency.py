@@ -1,4 +1,4 @@
-"""Parameter-consistency guard (quadsim.gap.consistency): an effect outside the candidates is
+"""Parameter-consistency guard (quadsim.gap.where): an effect outside the candidates is
 never named with confidence because the stand-in needs different values in different regimes;
 a library effect keeps one value and stays named."""
 
@@ -11,8 +11,8 @@ from benchmarks.outside import BladeFlapping, in_plane_air_velocity
 from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import EffectContext, make_effect
 from quadsim.gap import diagnose
-from quadsim.gap.consistency import MATERIAL
-from quadsim.gap.schema import validate
+from quadsim.gap.report import validate
+from quadsim.gap.where import MATERIAL
 from quadsim.vehicle.params import hover_speed, load_params
 
 # the stand-ins a thrust that grows with airspeed could take (fewer candidates: fast test)
@@ -92,7 +92,7 @@ def test_library_effect_is_not_tentative(cf):
 
 
 def _result(low, high, ci):
-    from quadsim.gap.consistency import MATERIAL as m
+    from quadsim.gap.where import MATERIAL as m
 
     differs = abs(low - high) > np.hypot(ci, ci)
     material = abs(low - high) > m * max(abs(low), abs(high))
@@ -110,8 +110,8 @@ def _result(low, high, ci):
 def test_shifted_value_makes_a_tentative_name(low, high, ci, standing):
     """consistency.standing: what a split result does to a name (judge.judge_heldout: a
     shifted name stands, tentative, with the sentence; an inconsistent one is a partial)."""
-    from quadsim.gap.consistency import partial_text, tentative_text
-    from quadsim.gap.consistency import standing as of
+    from quadsim.gap.where import partial_text, tentative_text
+    from quadsim.gap.where import standing as of
 
     result = _result(low, high, ci)
     assert of(result) == standing

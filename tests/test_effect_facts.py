@@ -106,20 +106,24 @@ def test_facts_of_gives_a_parameters_wording():
 
 
 #: fitting.candidates_for(crazyflie21, has_commands, has_vbat) on main at 42ad543: name,
-#: parameter names, fixed values, fitting._typical (recorded there)
+#: parameter names, fixed values, fitting.typical_scales (recorded there)
 CANDIDATES_42AD543 = {
     (False, False): [
         ('blade_flapping', ['blade_flapping.coefficient'], {},
          [7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 1.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 1.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 2.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 2.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 3.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 3.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 4.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 4.0},
          [0.02, 0.02]),
         ('com_offset', ['com_offset.x', 'com_offset.y', 'com_offset.z'], {},
          [0.0010012632021601515, 0.0010012632021601515, 0.0010012632021601515]),
@@ -139,7 +143,8 @@ CANDIDATES_42AD543 = {
          [5.09135e-06]),
         ('thrust_factor', ['thrust_factor.change'], {},
          [0.05]),
-        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2', 'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
+        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2',
+                             'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
          [0.05, 0.05, 0.05, 0.05]),
         ('translational_lift', ['translational_lift.k_h'], {},
          [0.0014551955346198348]),
@@ -153,13 +158,17 @@ CANDIDATES_42AD543 = {
          [7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 1.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 1.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 2.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 2.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 3.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 3.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 4.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 4.0},
          [0.02, 0.02]),
         ('com_offset', ['com_offset.x', 'com_offset.y', 'com_offset.z'], {},
          [0.0010012632021601515, 0.0010012632021601515, 0.0010012632021601515]),
@@ -181,7 +190,8 @@ CANDIDATES_42AD543 = {
          [5.09135e-06]),
         ('thrust_factor', ['thrust_factor.change'], {},
          [0.05]),
-        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2', 'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
+        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2',
+                             'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
          [0.05, 0.05, 0.05, 0.05]),
         ('translational_lift', ['translational_lift.k_h'], {},
          [0.0014551955346198348]),
@@ -195,13 +205,17 @@ CANDIDATES_42AD543 = {
          [7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 1.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 1.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 2.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 2.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 3.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 3.0},
          [0.02, 0.02]),
-        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'], {'canted_rotor.rotor': 4.0},
+        ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
+         {'canted_rotor.rotor': 4.0},
          [0.02, 0.02]),
         ('com_offset', ['com_offset.x', 'com_offset.y', 'com_offset.z'], {},
          [0.0010012632021601515, 0.0010012632021601515, 0.0010012632021601515]),
@@ -223,7 +237,8 @@ CANDIDATES_42AD543 = {
          [5.09135e-06]),
         ('thrust_factor', ['thrust_factor.change'], {},
          [0.05]),
-        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2', 'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
+        ('thrust_mismatch', ['thrust_mismatch.rotor_1', 'thrust_mismatch.rotor_2',
+                             'thrust_mismatch.rotor_3', 'thrust_mismatch.rotor_4'], {},
          [0.05, 0.05, 0.05, 0.05]),
         ('translational_lift', ['translational_lift.k_h'], {},
          [0.0014551955346198348]),
@@ -247,7 +262,7 @@ def test_candidates_for_crazyflie21_as_before(case):
 
 
 def test_derived_views_are_read_only_and_as_before():
-    from quadsim.gap import collinear, fitting, priors
+    from quadsim.gap import fitting, priors
 
     with pytest.raises(TypeError):
         fitting.FIT_SPEC["x"] = ((), {}, None)
@@ -265,8 +280,8 @@ def test_derived_views_are_read_only_and_as_before():
         "canted_rotor": (-0.17, 0.17, "absolute"),
         "translational_lift.k_h": (0.0, 2.0, "lift"),
         "thrust_curve.linear": (-0.2, 0.2, "hover")}
-    assert len(collinear.SEPARATE) == 18
-    assert "wind is fixed" in collinear.SEPARATE[frozenset({"rotor_drag", "wind"})]
+    assert len(priors.SEPARATE) == 18
+    assert "wind is fixed" in priors.SEPARATE[frozenset({"rotor_drag", "wind"})]
 
 
 def test_prior_spreads_closed_forms():
@@ -296,11 +311,13 @@ def test_what_can_be_fitted_does_not_depend_on_import_order():
                    "'speed_gain'] ['canted_rotor', 'nominal_refit', 'speed_gain']")
 
 
-#: collinear.describe of one reading on main at 42ad543 (model, key, value, 95 % half-width):
+#: collinear.describe (now priors.describe) of one reading on main at 42ad543 (model, key,
+#: value, 95 % half-width):
 #: the wording moved into the effects' facts (Words.phrase) word for word
 WORDED_42AD543 = [
     ('crazyflie21', 'battery_sag.rate', 0.0123, 0.004,
-     'the rotors lose +37 ± 12 % speed per minute at a fixed command (74 % thrust per minute; a discharging battery)'),
+     'the rotors lose +37 ± 12 % speed per minute at a fixed command '
+     '(74 % thrust per minute; a discharging battery)'),
     ('crazyflie21', 'body_drag.cd_area', 0.0123, float("nan"),
      'body drag sideways C_d A +123 cm² (30 mN, 8.3 % of the weight, at 2 m/s)'),
     ('crazyflie21', 'mass_offset.mass', 0.0123, 0.004,
@@ -316,23 +333,26 @@ WORDED_42AD543 = [
     ('physical', 'inertia_error.yy', -0.5, 0.004,
      "I_yy -50 ± 0.4 % (0.003 kg m² instead of the model's 0.006 kg m²)"),
     ('physical', 'rotor_drag.coefficient', 0.0123, 0.004,
-     'rotor drag in the rotor plane +22207 ± 7222 mN per m/s of air speed at the hover speed (2.7e+02 % of the weight at 1 m/s)'),
+     'rotor drag in the rotor plane +22207 ± 7222 mN per m/s of air speed at the hover speed '
+     '(2.7e+02 % of the weight at 1 m/s)'),
 ]
 
 
 @pytest.mark.parametrize("model, key, value, ci, text", WORDED_42AD543)
 def test_readings_are_worded_as_before(model, key, value, ci, text):
-    from quadsim.gap.collinear import describe
+    from quadsim.gap.priors import describe
 
     ci = {} if ci is None else {key: ci}
     assert describe(key.split(".")[0], {key: value}, ci, load_params(model)) == text
 
 
 def test_a_canted_rotor_is_worded_as_one_lean_before_the_rest():
-    from quadsim.gap.collinear import describe
+    from quadsim.gap.priors import describe
 
     values = {"canted_rotor.tilt_x": 0.03, "canted_rotor.tilt_y": -0.01, "wind.vx": 1.5,
               "cable_payload.lean_x": 0.1, "mass_offset.mass": 0.004}
     ci = {"canted_rotor.tilt_x": 0.01, "canted_rotor.tilt_y": 0.02}
     assert describe("x", values, ci, load_params("crazyflie21"), {"canted_rotor.rotor": 3.0}) \
-        == "rotor 3's axis leans +1.8 ± 1.3 deg (towards body x +1.7 deg and y -0.57 deg): it pushes 2.87 mN sideways at hover (0.79 % of the weight), mean wind +1.5 m/s along world x, +4 g heavier (+10.8 % of the model's 37 g)"
+        == ("rotor 3's axis leans +1.8 ± 1.3 deg (towards body x +1.7 deg and y -0.57 deg): "
+            "it pushes 2.87 mN sideways at hover (0.79 % of the weight), mean wind +1.5 m/s "
+            "along world x, +4 g heavier (+10.8 % of the model's 37 g)")

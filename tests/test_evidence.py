@@ -627,8 +627,8 @@ def test_a_reading_is_screened_from_the_base_it_is_centred_on():
     drag taken as quadratic is neither."""
     from types import SimpleNamespace
 
+    from quadsim.gap.evidence import centred_is_base
     from quadsim.gap.explanations import Explanation
-    from quadsim.gap.screen import centred_is_base
 
     law_part = ("drag_law", {"cd_area": 0.01, "per_axis": 1.0}, ())
     plain = SimpleNamespace(fixed=(), replaced=())
@@ -648,11 +648,11 @@ def test_a_reading_is_screened_from_the_base_it_is_centred_on():
 
 def test_a_percentage_of_a_hundred_or_more_is_written_whole():
     """Two significant digits write 100 % as "1e+02 %": such values are written whole."""
-    from quadsim.gap.collinear import _pm
+    from quadsim.effects.facts import plus_minus
 
-    assert _pm(1.0, 0.42, 100) == "+100 ± 42"
-    assert _pm(0.76, 0.36, 100) == "+76 ± 36"
-    assert _pm(-2.5, None, 100) == "-250"
+    assert plus_minus(1.0, 0.42, 100) == "+100 ± 42"
+    assert plus_minus(0.76, 0.36, 100) == "+76 ± 36"
+    assert plus_minus(-2.5, None, 100) == "-250"
 
 
 def test_a_rotor_log_read_later_keeps_its_noise_power_and_its_signal():

@@ -25,7 +25,7 @@ from quadsim.gap.cable import CableSwing
 from quadsim.gap.calibrate import Reference, jacobian, shared_candidate, weighted_residual
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, explanations_for
-from quadsim.gap.fitting import _typical, effect_class, residuals
+from quadsim.gap.fitting import effect_class, residuals, typical_scales
 from quadsim.vehicle.params import inertia_problems, load_params
 
 from _helpers import shared_effects
@@ -126,7 +126,7 @@ def test_the_jacobian_with_a_memo_is_forward_differences_from_scratch(cf, states
     ref = _reference(cf, states)
     columns = list(range(len(ref.theta)))
     fast, base = jacobian(states, ref, columns, ref.candidate.effects, with_base=True)
-    typical = _typical(ref.candidate, ref.params)
+    typical = typical_scales(ref.candidate, ref.params)
     slow_base = weighted_residual(states, ref, ref.effects()).ravel()
     _close(base, slow_base)
     for k in columns:
@@ -242,8 +242,8 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
     from scipy.optimize import lsq_linear
 
+    from quadsim.gap.evidence import Columns, jacobian_columns, linear_step
     from quadsim.gap.problem import FitInputs
-    from quadsim.gap.screen import Columns, jacobian_columns, linear_step
 
     ref = _reference(cf, states)
     names = list(ref.candidate.parameter_names)
@@ -303,7 +303,7 @@ def test_the_jacobian_steps_back_from_a_wall_of_the_physical_set(cf, states):
     i = np.diag(cf.inertia)
     xx, yy = ref.theta[names.index("inertia_error.xx")], ref.theta[names.index("inertia_error.yy")]
     wall = (i[0] * (1 + xx) + i[1] * (1 + yy)) / i[2] - 1.0
-    h = 1e-3 * _typical(ref.candidate, ref.params)[k]
+    h = 1e-3 * typical_scales(ref.candidate, ref.params)[k]
     ref.theta[k] = wall - 0.5 * h
     beyond = ref.theta.copy()
     beyond[k] += h

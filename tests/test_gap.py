@@ -13,8 +13,7 @@ from quadsim.core.errors import InputError
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose, diagnose_per_flight
 from quadsim.gap.__main__ import main
-from quadsim.gap.report import to_json
-from quadsim.gap.schema import validate
+from quadsim.gap.report import to_json, validate
 from quadsim.logs.flightlog import FlightLog, write_log
 from quadsim.vehicle.params import load_params
 
@@ -390,9 +389,9 @@ def test_every_candidate_magnitude_is_worded_with_a_unit(model):
     ``effect.parameter = value`` form (e.g. battery_sag.full_voltage = +3.682 V)."""
     import re
 
-    from quadsim.gap.collinear import describe
     from quadsim.gap.diagnose import BASELINE
-    from quadsim.gap.fitting import _typical, candidates_for
+    from quadsim.gap.fitting import candidates_for, typical_scales
+    from quadsim.gap.priors import describe
 
     params = load_params(model)
     units = re.compile(r"( g\b| mm\b| %| ms\b| mN\b| N\b| m/s| V\b| kg m²| g cm²| cm²| s\b"
@@ -400,7 +399,7 @@ def test_every_candidate_magnitude_is_worded_with_a_unit(model):
     seen = set()
     for has_vbat in (False, True):
         for cand in candidates_for(params, True, has_vbat) + [BASELINE]:
-            values = dict(zip(cand.parameter_names, _typical(cand, params)))
+            values = dict(zip(cand.parameter_names, typical_scales(cand, params)))
             if "battery_sag.full_voltage" in values:
                 values["battery_sag.full_voltage"] = 3.682
             text = describe(cand.name, values, {k: 0.1 * abs(v) for k, v in values.items()},

@@ -1,4 +1,4 @@
-"""Held-out mode by evidence (quadsim.gap.heldout, .judge): the noise model leaves
+"""Held-out mode by evidence (quadsim.gap.diagnose, .judge): the noise model leaves
 the gap out, the lack-of-fit tests flag a systematic remainder and a reading that does not
 carry over, and the verdict carries a posterior per reading."""
 
@@ -12,7 +12,7 @@ import pytest
 from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
-from quadsim.gap.heldout import NOISE_WINDOW_S, noise_model, slow_part
+from quadsim.gap.diagnose import NOISE_WINDOW_S, noise_model, slow_part
 from quadsim.gap.judge import carry_over, remainder
 from quadsim.vehicle.params import load_params
 
@@ -75,10 +75,10 @@ def test_carry_over_flags_a_held_out_flight_beyond_the_training_residual():
 
 
 def test_carry_over_exempts_the_form_error_and_the_noise_floor():
-    """The one rule of both modes (judge.lack_of_fit, against the training flights): Fz at 1.6x its training RMS is no lack of fit when
-    "no difference" leaves 30x more excess there (the reading explains 98 % of the held-out
-    gap, FORM_ERROR 5 %), nor when it is below the channel's noise floor (sigma 1e-5 N
-    against the Crazyflie's 0.36 mN)."""
+    """The one rule of both modes (judge.lack_of_fit, against the training flights): Fz at 1.6x its
+    training RMS is no lack of fit when "no difference" leaves 30x more excess there (the reading
+    explains 98 % of the held-out gap, FORM_ERROR 5 %), nor when it is below the channel's noise
+    floor (sigma 1e-5 N against the Crazyflie's 0.36 mN)."""
     rng = np.random.default_rng(2)
     sigma = np.full(6, 1.0)
     ref = _reference(sigma, np.ones(6))
@@ -147,9 +147,8 @@ def test_the_held_out_reference_reads_no_rotor_delay(cf):
     fits no rotor timing (``Reference.timing`` False, no cross-correlation estimate), so its
     explanations carry no delay (the per-flight mode reads one wherever the references'
     timing is fitted); a delay there had crashed the held-out pair fits (shapes 4 vs 5)."""
-    from quadsim.gap.diagnose import prepare
+    from quadsim.gap.diagnose import nominal_reference, prepare
     from quadsim.gap.explanations import explanations_for
-    from quadsim.gap.heldout import nominal_reference
 
     flight = prepare([synthetic_flight(cf, [], duration=3.0, seed=5)], cf)[0]
     reference = nominal_reference([flight.fit], cf, rotor=True)

@@ -177,6 +177,96 @@ def test_package_never_imports_the_benchmarks_or_the_tests():
     assert not wrong, "; ".join(wrong)
 
 
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_imports(module: str, package: bool, source: str) -> list[str]:
+    """Another quadsim module's private names that ``source`` (module ``module``; ``package``:
+    an ``__init__``) uses: ``from quadsim.x import _y`` (any level, function-level included)
+    and ``x._y`` on a quadsim module it imported (``from . import x``, ``import quadsim.x as
+    x``). Each as ``"module: quadsim.x._y"``."""
+    own = module if package else module.rpartition(".")[0]
+    modules: dict[str, str] = {}        # local name -> quadsim module it is bound to
+    found: list[str] = []
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = own.split(".")[: len(own.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if not target.startswith("quadsim"):
+                continue
+            for alias in node.names:
+                if _private(alias.name) and target != module:
+                    found.append(f"{module}: {target}.{alias.name}")
+                elif not _private(alias.name):
+                    modules[alias.asname or alias.name] = f"{target}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("quadsim"):
+                    modules[alias.asname or alias.name.split(".")[0]] = \
+                        alias.name if alias.asname else alias.name.split(".")[0]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr) \
+                and isinstance(node.value, ast.Name) and node.value.id in modules \
+                and modules[node.value.id] != module:
+            found.append(f"{module}: {modules[node.value.id]}.{node.attr}")
+    return found
+
+
+def test_private_import_finder_finds_each_form():
+    source = ("from .fitting import _bounds, typical\n"
+              "from . import collinear\n"
+              "import quadsim.gap.memo as memo\n"
+              "def f():\n"
+              "    from ..vehicle.params import _quantity\n"
+              "    return collinear._torque_text, memo._memo, typical._x, _own\n"
+              "from .judge import __all__\n"
+              "import numpy as np\n"
+              "np._core\n")
+    assert sorted(private_imports("quadsim.gap.heldout", False, source)) == [
+        "quadsim.gap.heldout: quadsim.gap.collinear._torque_text",
+        "quadsim.gap.heldout: quadsim.gap.fitting._bounds",
+        "quadsim.gap.heldout: quadsim.gap.fitting.typical._x",
+        "quadsim.gap.heldout: quadsim.gap.memo._memo",
+        "quadsim.gap.heldout: quadsim.vehicle.params._quantity"]
+    # a package's modules are one level down from its __init__; its own names are its own
+    assert private_imports("quadsim.gap", True, "from .fitting import _b\nfrom . import _c") \
+        == ["quadsim.gap: quadsim.gap.fitting._b"]
+    assert private_imports("quadsim.gap.x", False, "from .x import _own\n") == []
+
+
+#: private names still imported from files another branch is changing (normal: calibrate,
+#: problem, reference, judge; speed: residual); each is made public when that branch merges,
+#: and this list shrinks (a fixed entry fails below until it is removed here)
+PENDING_PRIVATE = {
+    "quadsim.gap.calibrate: quadsim.gap.fitting._bounds",
+    "quadsim.gap.calibrate: quadsim.gap.fitting._correlation_time",
+    "quadsim.gap.calibrate: quadsim.gap.fitting._typical",
+    "quadsim.gap.judge: quadsim.gap.collinear._torque_text",
+    "quadsim.gap.problem: quadsim.gap.explanations._own_effects",
+    "quadsim.gap.problem: quadsim.gap.fitting._arm",
+    "quadsim.gap.problem: quadsim.gap.memo._memo",
+    "quadsim.gap.reference: quadsim.gap.fitting._bounds",
+    "quadsim.gap.reference: quadsim.gap.fitting._typical",
+    "quadsim.gap.residual: quadsim.gap.memo._acting",
+}
+
+
+def test_no_module_imports_another_modules_private_names():
+    """A name with a leading underscore is its module's own: no quadsim module imports one
+    from another module or reads it as ``module._name`` (make it public, or move it)."""
+    found = set()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module, package = _module_name(path)
+        found.update(private_imports(module, package, path.read_text(encoding="utf-8")))
+    assert not found - PENDING_PRIVATE, "; ".join(sorted(found - PENDING_PRIVATE))
+    assert not PENDING_PRIVATE - found, f"now public, remove: {sorted(PENDING_PRIVATE - found)}"
+
+
 def test_fast_path_depends_on_the_engines_not_back():
     graph = import_graph()
     for engine in ("quadsim.sim.analytic", "quadsim.sim.mujoco_engine"):
@@ -213,6 +303,8 @@ def test_names_that_left_the_package_are_refused_with_their_new_path():
         quadsim.gap.SensorNoise  # noqa: B018
     with pytest.raises(AttributeError):
         quadsim.gap.no_such_name  # noqa: B018
+    with pytest.raises(ImportError, match=r"from benchmarks\.observe import MIN_GAIN"):
+        from quadsim.gap.diagnose import MIN_GAIN  # noqa: F401
     # the modules that moved to benchmarks/ are gone from the package (an import of them is
     # ModuleNotFoundError; CHANGELOG.md names each new path)
     for gone in ("bench", "gap/synthetic.py", "logs/corrupt.py", "sim/rollout.py"):

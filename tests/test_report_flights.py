@@ -1,4 +1,4 @@
-"""The per-flight HTML page and text output (quadsim.gap.report_flights, the CLI's notes):
+"""The per-flight HTML page and text output (quadsim.gap.report, the CLI's notes):
 the page parsed with html.parser and its tables checked cell by cell."""
 
 from __future__ import annotations
@@ -8,8 +8,7 @@ from html.parser import HTMLParser
 import pytest
 
 from quadsim.gap.__main__ import gather_notes
-from quadsim.gap.report import write_html
-from quadsim.gap.report_flights import flights_html
+from quadsim.gap.report import flights_html, write_html
 
 
 class _Tables(HTMLParser):
@@ -213,7 +212,7 @@ def test_span_notes_of_many_logs_are_one_warning():
 
 
 def test_summary_states_each_answer_once_and_gathers_delay_notes(result):
-    from quadsim.gap.report_flights import flights_summary
+    from quadsim.gap.report import flights_summary
 
     result["notes"] += [
         f"/data/r{k}.csv: gyro: delay not resolvable from this log (the two halves give "

@@ -1,4 +1,4 @@
-"""The screened per-flight evidence (quadsim.gap.screen) against the full fits
+"""The screened per-flight evidence (quadsim.gap.evidence) against the full fits
 (``evaluate(..., full=True)``): generated flights with known effects, judged both ways
 against the same calibrated reference. Same verdict and lead reading; probabilities within
 0.02; every reading the answer states (posterior >= 0.1 on the full path) fitted, not
@@ -18,11 +18,10 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Problem, evaluate, explanations_for
+from quadsim.gap.evidence import Columns, Problem, evaluate, explanations_for, jacobian_columns
 from quadsim.gap.judge import judge
 from quadsim.gap.problem import FitInputs
 from quadsim.gap.rotor_channel import heun_linear, rotor_residual
-from quadsim.gap.screen import Columns, jacobian_columns
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
@@ -199,7 +198,7 @@ def test_the_delay_fits_start_at_the_global_optimum_under_each_prior():
     """A fit from zero would stay in the shallow optimum at 0, and a reading with the wide
     prior started at the cross-correlation estimate would then gain ~20 log units over "no
     difference" for a delay well inside the shared prior: both start at -5 ms instead."""
-    from quadsim.gap.screen import DELAY_GRID_S, delay_starts
+    from quadsim.gap.evidence import DELAY_GRID_S, delay_starts
 
     shared, own = delay_starts(_TwoOptima(), 0.0203, hint_s=-0.004)
     assert shared == pytest.approx(-0.005, abs=DELAY_GRID_S / 2 + 1e-9)
@@ -221,7 +220,7 @@ def test_a_late_log_without_a_hint_is_found_within_its_own_prior():
     holds it near zero: a far grid point must not move every explanation's start).
     Before, the own start was searched over the shared reach only, the fit stopped at 9
     ms, and the late log was named a slower motor at 1.00."""
-    from quadsim.gap.screen import DELAY_GRID_S, DELAY_GRID_SDS, delay_starts
+    from quadsim.gap.evidence import DELAY_GRID_S, DELAY_GRID_SDS, delay_starts
 
     late = _TwoOptima()
     late.stacked = lambda z: np.array([np.sqrt(min(

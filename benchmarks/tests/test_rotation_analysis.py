@@ -31,7 +31,7 @@ def _signals(torque, moment, flapping, rate=None, instrument=None) -> ra.Rotatio
 
 def test_scale_candidate_recovers_gain_delay_and_flapping():
     torque, flap = _noise(1), _noise(2, 1e3)
-    moment = 0.7 * ra._shift(torque, 0.005) + 3e-8 * flap
+    moment = 0.7 * ra.delayed(torque, 0.005) + 3e-8 * flap
     fit = ra.fit_candidate([_signals(torque, moment, flap)], 0, "scale", blocks=4)
     assert fit.gain == pytest.approx(0.7, abs=0.01)
     assert fit.parameter == pytest.approx(0.005)
@@ -41,10 +41,10 @@ def test_scale_candidate_recovers_gain_delay_and_flapping():
 
 def test_lag_candidate_recovers_time_constant_and_beats_scale_held_out():
     torque, flap = _noise(3), _noise(4, 1e3)
-    moment = 0.9 * ra._lag(torque, 0.02) + 3e-8 * flap
+    moment = 0.9 * ra.lagged(torque, 0.02) + 3e-8 * flap
     sig = _signals(torque, moment, flap)
     torque2, flap2 = _noise(5), _noise(6, 1e3)
-    held = _signals(torque2, 0.9 * ra._lag(torque2, 0.02) + 3e-8 * flap2, flap2)
+    held = _signals(torque2, 0.9 * ra.lagged(torque2, 0.02) + 3e-8 * flap2, flap2)
     lag = ra.fit_candidate([sig], 0, "lag", blocks=4)
     scale = ra.fit_candidate([sig], 0, "scale", blocks=4)
     assert lag.parameter == pytest.approx(0.02)
@@ -78,7 +78,7 @@ def test_instruments_undo_errors_in_variables():
 def test_band_transfer_reads_gain_and_delay():
     torque, flap = _noise(14), _noise(15, 1e3)
     delay = 0.01
-    moment = 0.6 * ra._shift(torque, delay) + 3e-8 * flap
+    moment = 0.6 * ra.delayed(torque, delay) + 3e-8 * flap
     (h, coherence), = ra.band_transfer([torque, flap], moment, ((8.0, 12.0),))
     assert abs(h[0]) == pytest.approx(0.6, abs=0.02)
     # band centre 10 Hz: phase -360 f d = -36 deg (bins 8.2-11.7 Hz: -30..-42)

@@ -36,8 +36,8 @@ from .scales import (  # re-exported
 )
 
 __all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Reading",
-           "Scale", "Spread", "Together", "Window", "Words", "arm_length", "missing_facts", "number",
-           "plus_minus", "range_unit"]
+           "Scale", "Spread", "Together", "Window", "Words", "arm_length", "missing_facts",
+           "number", "plus_minus", "range_unit"]
 
 #: the key of a per-parameter mapping that applies to every parameter of the effect
 ALL = "*"
@@ -323,7 +323,8 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     def exists(p):
         return p == ALL or p in known or (pattern and p == pattern)
 
-    names = (list(fitted) + [p for r in facts.readings for p in r.fitted] + list(facts.fixed) + list(facts.with_voltage_log)
+    names = (list(fitted) + [p for r in facts.readings for p in r.fitted] + list(facts.fixed)
+             + list(facts.with_voltage_log)
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
              + [facts.one_per_rotor] * bool(facts.one_per_rotor) + list(facts.nuisance)

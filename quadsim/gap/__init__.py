@@ -11,7 +11,7 @@ Method (equation error, then prediction error)
    speed predicted 0.12 s ahead from the command, which is where motor lag shows), divided
    by each channel's noise scale, is the *gap* (1 = sensor noise).
 2. Flights are split by flight (never by sample): ``--holdout`` or every third flight.
-3. Verdict by evidence (:mod:`.heldout`, :mod:`.judge`): the parameter set is the
+3. Verdict by evidence (:mod:`.diagnose`, :mod:`.judge`): the parameter set is the
    reference model; the noise model per channel is the scatter of the residual's fast part
    (minus its 0.5 s moving average: what the gap does not contain). Every explanation of how
    the flights differ (each library effect, ``nominal_refit`` = b and d re-identified, or no
@@ -24,7 +24,7 @@ Method (equation error, then prediction error)
    ``no_significant_gap``, or ``unexplained`` (lack of fit: a held-out flight beyond what the
    reading leaves on the training flights, or a systematic remainder with no effect to
    explain it; an implausible magnitude; parameters that differ between regimes,
-   :mod:`.consistency`).
+   :mod:`.where`).
 5. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
    aggressive rotation, near ground, low battery), by frequency band, and as k-step
    prediction error of position and attitude (0.05-1 s, multiple shooting with the analytic
@@ -48,15 +48,16 @@ baseline -- the reference flights, or the reading's own training flights -- is d
 outcome rule), one answer writer (:mod:`.words`) and one result type
 (:class:`.result.Diagnosis` holding :class:`.result.Verdict`, with ``to_json()``).
 
-Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode),
-:mod:`.motor_map` (static command -> speed map from data), :mod:`.fitting` (candidates and
-least squares), :mod:`.heldout` (held-out reference, weighing, ranking), :mod:`.collinear`
-+ :mod:`.priors`, :mod:`.consistency`, :mod:`.per_flight` (:mod:`.calibrate`,
-:mod:`.evidence`), :mod:`.judge` (the verdict of both modes), :mod:`.words` (answers),
-:mod:`.result` (result types), :mod:`.where`, :mod:`.checks` (vehicle check before
-fitting), :mod:`.commands` (command-only logs), :mod:`.report`, :mod:`.report_flights` and
-:mod:`.schema` (output). Generated test flights: ``benchmarks.synthetic`` in the
-repository (not in the wheel).
+Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode: its
+reference, weighing and ranking), :mod:`.motor_map` (static command -> speed map from
+data), :mod:`.fitting` (candidates and least squares), :mod:`.fitmodels` (the effects the
+diagnosis fits beyond the library), :mod:`.priors` (plausible magnitudes, readings in
+words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`), :mod:`.judge` (the verdict
+of both modes), :mod:`.words` (answers), :mod:`.result` (result types), :mod:`.where` (where
+and when the gap lies, parameter consistency), :mod:`.checks` (vehicle check before
+fitting), :mod:`.commands` (command-only logs), :mod:`.report` (output: JSON and its schema,
+summaries, HTML, rerun, the effect file). Generated test flights:
+``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::
 
@@ -66,15 +67,14 @@ Example::
     >>> result = diagnose([load_log(p) for p in paths], load_params("crazyflie21"))
     >>> result.verdict.name, result.verdict.reduction       # or result["verdict"]["effect"]
 
-CLI: ``python -m quadsim.gap --help``. Result schema: :mod:`quadsim.gap.schema`
-(``quadsim.gap/3``), documented in docs/gap.md.
+CLI: ``python -m quadsim.gap --help``. Result schema: :data:`GAP_SCHEMA`
+(``quadsim.gap/3``, :mod:`quadsim.gap.report`), documented in docs/gap.md.
 """
 
 from .diagnose import SCHEMA, diagnose, prepare
 from .per_flight import diagnose_per_flight
-from .report import summary, to_json, write_html, write_json, write_rerun
+from .report import GAP_SCHEMA, summary, to_json, validate, write_html, write_json, write_rerun
 from .result import Diagnosis, Reading, Verdict
-from .schema import GAP_SCHEMA, validate
 
 __all__ = ["GAP_SCHEMA", "SCHEMA", "Diagnosis", "Reading", "Verdict",
            "diagnose", "diagnose_per_flight", "prepare", "summary",

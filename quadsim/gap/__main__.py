@@ -61,7 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--write-effects", metavar="OUT.toml",
                         help="write an effect file: the --effects-file effects plus the "
                              "named effect (or --add NAME), fitted here with unit and "
-                             "source (quadsim.gap.save)")
+                             "source (quadsim.gap.report)")
     parser.add_argument("--add", metavar="NAME",
                         help="with --write-effects: the ranked candidate to add instead of "
                              "the named one")
@@ -232,7 +232,7 @@ def _write_effects(args, params, base, result) -> None:
 
     from ..core.files import atomic_write_text
     from ..effects.effectfile import render_effect_file
-    from .save import added_effects
+    from .report import added_effects
 
     names = [Path(p).name for p in args.logs]
     held = [Path(p).name for p in args.holdout or []]

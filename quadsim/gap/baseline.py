@@ -1,15 +1,11 @@
-"""The nominal refit's candidate: the parameter set's thrust and drag factors b and d
-re-identified (relative changes), the pseudo-effect :class:`NominalRefit` (declared with the
-diagnosis' other effects in :mod:`quadsim.gap.fitmodels`). :data:`BASELINE` is its candidate
-(used by :mod:`.calibrate` as a shared group and by the held-out mode as the reading "b and d
-are off").
+"""The nominal refit's candidate, now :data:`quadsim.gap.fitting.BASELINE` (its effect
+:class:`quadsim.gap.fitmodels.NominalRefit`).
+
+Kept for :mod:`.calibrate` (changed on another branch) until it merges; then it imports
+``BASELINE`` from :mod:`.fitting` and this module goes.
 """
 
-from __future__ import annotations
-
 from .fitmodels import NominalRefit
-from .fitting import Candidate
+from .fitting import BASELINE
 
 __all__ = ["BASELINE", "NominalRefit"]
-
-BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))

@@ -73,7 +73,8 @@ from ..effects.base import EffectLoads, EffectParameter
 from ..effects.cable_payload import CablePayload
 from ..vehicle.params import VehicleParams
 
-__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior", "start_state", "swing"]
+__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior",
+           "start_state", "swing"]
 
 #: prior of the payload mass, in units of the vehicle's mass: centre and spread (module doc).
 MASS_PRIOR = (0.3, 0.15)

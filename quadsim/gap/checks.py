@@ -1,8 +1,8 @@
 """Does the parameter set describe the logged vehicle at all? Checked before any fit.
 
 A diagnosis that fits effects to flights of a *different* vehicle finds nonsense with
-confidence (CHANGELOG: another vehicle's set named an effect at 99.8 %). Two balances that hold for any vehicle flying on its own rotors
-catch it first:
+confidence (CHANGELOG: another vehicle's set named an effect at 99.8 %). Two balances that
+hold for any vehicle flying on its own rotors catch it first:
 
 * hover/force balance along body z: ``m f_z = b sum_i Omega_i^2`` (f_z the measured
   specific force) gives the thrust factor the data need, by least squares over all samples;

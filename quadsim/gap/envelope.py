@@ -85,7 +85,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fitting import _bounds
+from .fitting import parameter_bounds
 
 __all__ = [
     "COORDINATES",
@@ -350,7 +350,7 @@ def local_reference(reference, pos: Position | None):
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n))
                      + (trend.lof_slope * edge) ** 2)
-    lower, upper = getattr(reference, "bounds", None) or _bounds(reference.candidate,
+    lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
     move, var = _predicted_move(trend, pos, edge)
     predicted = np.clip(reference.theta + move, lower, upper)

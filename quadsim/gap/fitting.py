@@ -47,6 +47,7 @@ from .residual import FlightStates, measured_wrench, model_wrench
 from .rotor_channel import min_time_constant, rotor_residual
 
 __all__ = [
+    "BASELINE",
     "FIT_SPEC",
     "LOCAL_EFFECTS",
     "NOISE_FLOOR",
@@ -250,7 +251,7 @@ def _start_off(candidate: Candidate) -> np.ndarray:
 def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
            typical: np.ndarray) -> np.ndarray:
     off = []
-    for name, fixed, fitted in candidate.parts:
+    for name, _fixed, fitted in candidate.parts:
         specs = {p.name: p for p in effect_class(name).parameters}
         off += [specs[p].off for p in fitted]
     x0 = np.asarray(off, dtype=float)
@@ -500,8 +501,14 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)
 
 
-# alias for other modules until integration
-_typical = typical_scales  # alias for other modules until integration
-_bounds = parameter_bounds  # alias for other modules until integration
-_correlation_time = correlation_time  # alias for other modules until integration
-_arm = arm_length  # alias for other modules until integration
+# aliases for calibrate, reference and problem (being changed on another branch) until it merges
+_typical = typical_scales
+_bounds = parameter_bounds
+_correlation_time = correlation_time
+_arm = arm_length
+
+
+#: the nominal refit's candidate (:class:`quadsim.gap.fitmodels.NominalRefit`): the
+#: parameter set's b and d re-identified; a shared group of the reference model
+#: (:mod:`.calibrate`) and the held-out reading "b and d are off"
+BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))

@@ -90,7 +90,8 @@ def wrench_key(states, params: VehicleParams, effects: list) -> tuple:
     return ("wrench", id(states), id(params), acting(effects, _WRENCH_HOOKS))
 
 
-#: the hooks through which an effect reaches the rotor channel (:func:`quadsim.gap.rotor_channel.rotor_residual`).
+#: the hooks through which an effect reaches the rotor channel
+#: (:func:`quadsim.gap.rotor_channel.rotor_residual`).
 _ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor", "rotor_speed_factor")
 
 
@@ -152,7 +153,8 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
 
 def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
-    the effects with a speed factor or rotor dynamics, in order (:func:`quadsim.gap.rotor_channel.rotor_residual`)."""
+    the effects with a speed factor or rotor dynamics, in order
+    (:func:`quadsim.gap.rotor_channel.rotor_residual`)."""
     return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
 
 

@@ -64,7 +64,7 @@ def mark(verdict, statuses):
 
 
 def cap_decision(decision, cap: float):
-    """A held-out :class:`~quadsim.gap.heldout.Decision` with every probability capped at
+    """A held-out :class:`~quadsim.gap.diagnose.Decision` with every probability capped at
     ``cap`` (the ranking kept)."""
     if cap >= 1.0:
         return decision

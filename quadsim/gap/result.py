@@ -6,7 +6,7 @@ for the held-out flights (``verdict``). A verdict's ``outcome`` is one of :data:
 ``effect`` (its ``name`` is the reading, e.g. ``"mass_offset"``), ``no_significant_gap``,
 ``unexplained`` or ``refused`` (a flight that could not be judged, with its ``reason``).
 
-``to_json()`` gives the ``quadsim.gap/3`` JSON object (:mod:`quadsim.gap.schema`): plain
+``to_json()`` gives the ``quadsim.gap/3`` JSON object (:data:`quadsim.gap.GAP_SCHEMA`): plain
 dicts, lists, str, float, bool and None, the same keys as before these types existed. The
 types are also read-only mappings over that JSON (``result["verdict"]["effect"]``,
 ``flight["probability"]``), so code written against the dict results keeps working. Arrays
@@ -66,7 +66,7 @@ class Reading(_JsonView):
     """One reading of the posterior: ``name`` (an effect, a pair ``a+b``, or
     ``no_difference``), its posterior ``probability``, its ``magnitude`` in words (determined
     values only), ``log_evidence`` (natural log), the determined ``params`` with their 95 %
-    half-interval ``ci`` (parameter units, :func:`quadsim.gap.collinear.unit_of`), the
+    half-interval ``ci`` (parameter units, :func:`quadsim.gap.priors.unit_of`), the
     ``undetermined`` parameter names, the ``fixed`` values and the explanation's ``variant``."""
 
     name: str

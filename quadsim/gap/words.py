@@ -3,7 +3,7 @@
 Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here decides.
 
 * :func:`reading_text`: a reading's magnitude (determined values only, each with its 95 %
-  interval and unit, :func:`quadsim.gap.collinear.describe`); a shared parameter given a
+  interval and unit, :func:`quadsim.gap.priors.describe`); a shared parameter given a
   value of its own is set beside the references' value (:func:`reference_text`); wind is
   worded as the steady air force it exerts, with the wind speed at the references' drag.
 * :func:`nominal_words`: the same text where the reference model is the parameter set
@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import collinear
 from .explanations import reference_determined
+from .priors import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",
@@ -37,7 +37,7 @@ def asserted(ev, key: str, off: float = 0.0) -> bool:
 
 
 def _value_text(key: str, value: float, sd: float, params) -> str:
-    return collinear.describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
+    return describe(key.split(".")[0], {key: value}, {key: 1.96 * sd}, params)
 
 
 #: why a shared value stops at a bound of the references' fit (calibrate.fit_bounds)
@@ -54,7 +54,7 @@ def reference_text(key: str, value: float, sd: float, reference) -> str:
     if side is None:
         return _value_text(key, value, sd, reference.params)
     why = _BOUND_WHY.get(key, "the end of its physical range")
-    return (collinear.describe(key.split(".")[0], {key: value}, {}, reference.params)
+    return (describe(key.split(".")[0], {key: value}, {}, reference.params)
             + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
 
 
@@ -69,7 +69,8 @@ def reading_text(ev, reference) -> str:
         d = 1e3 * ev.values["delay.rotor"]
         if not keys:
             return "rotor speeds logged with a delay of their own (size not determined)"
-        return (f"the rotor speeds are logged {abs(d):.0f} ± {1.96e3 * ev.post_sd['delay.rotor']:.0f}"
+        ci = 1.96e3 * ev.post_sd["delay.rotor"]
+        return (f"the rotor speeds are logged {abs(d):.0f} ± {ci:.0f}"
                 f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
                 f"(references: {mean:+.1f} ms against motion capture, fitted)")
     if name == "wind":
@@ -79,7 +80,7 @@ def reading_text(ev, reference) -> str:
     calm = _calm_refit(ev)
     values = {k: ev.values[k] for k in keys if not k.endswith(".alpha") and k not in calm}
     ci = {k: 1.96 * ev.post_sd[k] for k in values}
-    text = collinear.describe(name, values, ci, params, ev.explanation.fixed_values)
+    text = describe(name, values, ci, params, ev.explanation.fixed_values)
     if calm and all(ev.determined.get(k) for k in calm):
         text += (f"; in calm air (the wind refitted with it, within ±"
                  f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
@@ -139,7 +140,8 @@ def _wind_text(ev, reference) -> str:
     size = float(np.hypot(*horiz))
     axis = int(np.argmax(np.abs(horiz)))
     sign = "+" if horiz[axis] >= 0 else "-"
-    text = (f"a steady air force (beyond the references') of {size:.3g} N along {sign}{'xy'[axis]} (world; "
+    text = (f"a steady air force (beyond the references') of {size:.3g} N along "
+            f"{sign}{'xy'[axis]} (world; "
             f"{100 * size / reference.params.weight:.2g} % of the weight), growing with "
             "airspeed")
     keys = [k for k in ("wind.vx", "wind.vy") if ev.determined.get(k)]

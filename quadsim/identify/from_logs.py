@@ -66,9 +66,9 @@ from .logseries import (
     LogIdentification,
     LogSeries,
     Skeleton,
-    _ci,
-    _origin_fit,
+    confidence_interval,
     correlation_time,
+    origin_fit,
     refuse_mixed,
 )
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
@@ -101,14 +101,14 @@ def fit_thrust(logs: list[LogSeries],
     ys = [mass * s.specific_force[:, 2] for s in logs]
     per_log = []
     for s, x, y in zip(logs, xs, ys):
-        beta, se, _ = _origin_fit(x, y)
+        beta, se, _ = origin_fit(x, y)
         per_log.append((s.name, beta, se))
     refuse_mixed(per_log, "rotor_*: b (N s^2/rad^2)")
-    beta, se, r2 = _origin_fit(np.concatenate(xs), np.concatenate(ys))
+    beta, se, r2 = origin_fit(np.concatenate(xs), np.concatenate(ys))
     spread = np.std([b for _, b, _ in per_log], ddof=1) if len(per_log) > 1 else 0.0
     quality = (f"{r2_text(r2)} over {sum(len(x) for x in xs)} samples of {len(logs)} log(s); "
                f"per-log std {spread:.3g}")
-    return Estimate(beta, _ci(beta, se), quality), per_log
+    return Estimate(beta, confidence_interval(beta, se), quality), per_log
 
 
 def thrust_curve_score(logs: list[LogSeries], mass: float) -> str:
@@ -244,7 +244,7 @@ def fit_inertia(logs: list[LogSeries], skeleton: Skeleton, b: float,
         quality = (f"least squares of the rotor torque on the angular acceleration; R^2 "
                    f"{r2:.3f}; 95 % half-width {100 * 1.96 * se / abs(value):.1f} %")
         if value > 0 and 1.96 * se < INERTIA_CI * value and r2 >= INERTIA_R2:
-            out.append(Estimate(value, _ci(value, se), quality))
+            out.append(Estimate(value, confidence_interval(value, se), quality))
         else:
             reason = (f"R^2 {r2:.2f} below {INERTIA_R2}: the torque of the logged rotor speeds "
                       f"explains too little of the angular acceleration" if r2 < INERTIA_R2

@@ -89,11 +89,12 @@ def correlation_time(residual: np.ndarray, max_lag: int = 200) -> float:
     return tau
 
 
-def _ci(value: float, se: float) -> tuple[float, float]:
+def confidence_interval(value: float, se: float) -> tuple[float, float]:
+    """The 95 % interval (value - 1.96 se, value + 1.96 se) of a Gaussian estimate."""
     return (value - 1.96 * se, value + 1.96 * se)
 
 
-def _origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+def origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     """y = beta x through the origin: (beta, se, R^2)."""
     beta = float(x @ y) / float(x @ x)
     u = y - beta * x

@@ -19,9 +19,9 @@ from .logseries import (
     Estimate,
     LogSeries,
     Skeleton,
-    _ci,
-    _origin_fit,
+    confidence_interval,
     correlation_time,
+    origin_fit,
     refuse_mixed,
 )
 from .sanity import r2_text
@@ -138,7 +138,7 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
         u = s.command if not has_v else s.command * (s.vbat / v_ref)[:, None]
         us.append(u)
         ys.append(skeleton.mass * s.specific_force[:, 2])
-    refuse_mixed([(s.name, *_origin_fit(np.sum(u * u, 1), y)[:2]) for s, u, y in zip(logs, us, ys)],
+    refuse_mixed([(s.name, *origin_fit(np.sum(u * u, 1), y)[:2]) for s, u, y in zip(logs, us, ys)],
                  "cmd_*: thrust per squared command (N)")
     u, y = np.concatenate(us), np.concatenate(ys)
     x = np.stack([np.sum(u * u, 1), np.sum(u, 1)], 1)
@@ -174,7 +174,7 @@ def fit_command_thrust(logs: list[LogSeries], skeleton: Skeleton) -> tuple[Estim
                + (f" x vbat / {v_ref:.3g} V" if has_v else "")
                + f"), {r2_text(r2)} over {len(y)} samples of {len(logs)} log(s); "
                f"T(1) = {full:.4g} +- {1.96 * se_full:.2g} N{shape}")
-    estimate = Estimate(b, _ci(b, b * 1.96 * se_full / full),
+    estimate = Estimate(b, confidence_interval(b, b * 1.96 * se_full / full),
                         f"commands only: b = T(1) / max_speed^2 with the skeleton's max_speed "
                         f"{skeleton.max_speed:.5g} rad/s; {summary}")
     table = {"command": grid.tolist(), "speed": [speed.tolist()] * logs[0].command.shape[1],

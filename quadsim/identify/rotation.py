@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from .logseries import Estimate, LogSeries, Skeleton, _ci
+from .logseries import Estimate, LogSeries, Skeleton, confidence_interval
 
 #: the band where the rotors drive the body (Hz): above ~3 Hz the aerodynamic moments (velocity
 #: effects) are small against the torque; below 16 Hz common 18-20 Hz log filters pass > 0.9
@@ -110,12 +110,12 @@ def band_inertia(logs: list[LogSeries], skeleton: Skeleton, b: float) -> list[Es
                    f"{100 * 1.96 * se / abs(value):.1f} % (delete-one-"
                    f"{'log' if len(parts) >= 3 else 'block'} jackknife)")
         if value > 0 and r2 >= BAND_R2 and 1.96 * se < BAND_CI * value:
-            out.append(Estimate(value, _ci(value, se), quality))
+            out.append(Estimate(value, confidence_interval(value, se), quality))
         else:
             why = (f"band {BAND_HZ[0]:g}-{BAND_HZ[1]:g} Hz fit {name} {value:.3g} kg m^2, "
                    f"R^2 {r2:.2f}, 95 % half-width {1.96 * se:.2g} kg m^2: below the "
                    f"acceptance (R^2 >= {BAND_R2}, half-width < {100 * BAND_CI:.0f} %)")
-            out.append(Estimate(value, _ci(value, se), quality, False, why))
+            out.append(Estimate(value, confidence_interval(value, se), quality, False, why))
     return out
 
 

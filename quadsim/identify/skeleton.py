@@ -34,7 +34,7 @@ import numpy as np
 from ..core.errors import InputError, field_error
 from ..core.files import check_schema, read_toml
 from ..core.files import render_toml as render_params  # the earlier import path
-from ..vehicle.params import EARLIER_SCHEMAS, SCHEMA, _cad_path, _quantity, _rotor_table
+from ..vehicle.params import EARLIER_SCHEMAS, SCHEMA, cad_path, read_quantity, rotor_table
 from .logseries import Skeleton
 
 __all__ = ["load_skeleton", "quantity", "render_params"]
@@ -56,31 +56,31 @@ def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
         from ..cad.assembly import load_assembly
         from ..cad.massprops import vehicle_mass_properties
 
-        cad_dir, _ = _cad_path(body["from_cad"], path, "body.from_cad")
+        cad_dir, _ = cad_path(body["from_cad"], path, "body.from_cad")
         props = vehicle_mass_properties(load_assembly(cad_dir))
         mass, com, inertia = props.mass, props.com, np.diag(props.inertia).copy()
     else:
         if "mass" not in body:
             raise field_error(path, "body.mass", "missing: weigh the vehicle with its battery "
                               "(kg); nothing else fixes the force scale")
-        mass, _ = _quantity(body, "mass", "kg", path, "body")
+        mass, _ = read_quantity(body, "mass", "kg", path, "body")
         if "com" in body:
-            com, _ = _quantity(body, "com", "m", path, "body", shape=(3,))
+            com, _ = read_quantity(body, "com", "m", path, "body", shape=(3,))
         if "inertia" in body:
-            full, _ = _quantity(body, "inertia", "kg m^2", path, "body", shape=(3, 3))
+            full, _ = read_quantity(body, "inertia", "kg m^2", path, "body", shape=(3, 3))
             inertia = np.diag(full).copy()
     if not mass > 0:
         raise field_error(path, "body.mass", f"must be > 0, got {mass}")
     if "rotor_layout" in data:
         from ..cad.assembly import load_assembly
 
-        layout, _ = _cad_path(data["rotor_layout"].get("from_cad"), path, "rotor_layout.from_cad")
+        layout, _ = cad_path(data["rotor_layout"].get("from_cad"), path, "rotor_layout.from_cad")
         rotors = load_assembly(layout).rotors
         positions = np.array([r.position for r in rotors], float)
         spins = np.array([r.spin for r in rotors], float)
         axes = np.array([r.axis for r in rotors], float)
     elif data.get("rotor"):
-        rotors = _rotor_table(data["rotor"], path)
+        rotors = rotor_table(data["rotor"], path)
         positions = np.array([r.position for r in rotors])
         spins = np.array([r.spin for r in rotors])
         axes = np.array([r.axis for r in rotors])
@@ -95,7 +95,7 @@ def load_skeleton(path: str | Path) -> tuple[Skeleton, dict]:
     rotors_section = data.get("rotors", {})
     max_speed = None
     if "max_speed" in rotors_section:
-        max_speed, _ = _quantity(rotors_section, "max_speed", "rad/s", path, "rotors")
+        max_speed, _ = read_quantity(rotors_section, "max_speed", "rad/s", path, "rotors")
     return Skeleton(float(mass), np.asarray(com, float), inertia, positions, spins, max_speed,
                     str(path)), data
 

@@ -255,7 +255,7 @@ def resolve_params_path(name_or_path: str | Path) -> Path:
     )
 
 
-def _quantity(table: dict, key: str, unit: str, path: Path, section: str, *, shape=()):
+def read_quantity(table: dict, key: str, unit: str, path: Path, section: str, *, shape=()):
     where = f"{section}.{key}"
     entry = table.get(key)
     if not isinstance(entry, dict):
@@ -295,18 +295,18 @@ def _check_keys(table: dict, valid: set[str], path: Path, section: str) -> None:
                           f"valid keys: {', '.join(sorted(valid))}")
 
 
-def _cad_path(spec: dict, path: Path, where: str) -> tuple[Path, str]:
+def cad_path(spec: dict, path: Path, where: str) -> tuple[Path, str]:
     if not isinstance(spec, dict) or "path" not in spec or "source" not in spec:
         raise field_error(path, where, "expected { path = \"<cad folder>\", source = \"...\" }")
     return (path.parent / spec["path"]).resolve(), str(spec["source"])
 
 
-def _rotor_table(entries: list, path: Path) -> tuple[Rotor, ...]:
+def rotor_table(entries: list, path: Path) -> tuple[Rotor, ...]:
     rotors = []
     for i, entry in enumerate(entries):
         section = f"rotor[{i}]"
         _check_keys(entry, {"name", "position", "axis", "spin"}, path, section)
-        position, _ = _quantity(entry, "position", "m", path, section, shape=(3,))
+        position, _ = read_quantity(entry, "position", "m", path, section, shape=(3,))
         axis = np.asarray(entry.get("axis", [0.0, 0.0, 1.0]), dtype=float)
         if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) < 1e-9:
             raise field_error(path, f"{section}.axis", "must be a non-zero 3-vector")
@@ -338,14 +338,14 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         from ..cad.assembly import load_assembly  # local: only sets that use CAD need trimesh
         from ..cad.massprops import vehicle_mass_properties
 
-        cad_dir, source = _cad_path(body["from_cad"], path, "body.from_cad")
+        cad_dir, source = cad_path(body["from_cad"], path, "body.from_cad")
         props = vehicle_mass_properties(load_assembly(cad_dir))
         mass, com, inertia = props.mass, props.com, props.inertia
         sources.update(mass=source, com=source, inertia=source)
     else:
-        mass, sources["mass"] = _quantity(body, "mass", "kg", path, "body")
-        com, sources["com"] = _quantity(body, "com", "m", path, "body", shape=(3,))
-        inertia, sources["inertia"] = _quantity(body, "inertia", "kg m^2", path, "body",
+        mass, sources["mass"] = read_quantity(body, "mass", "kg", path, "body")
+        com, sources["com"] = read_quantity(body, "com", "m", path, "body", shape=(3,))
+        inertia, sources["inertia"] = read_quantity(body, "inertia", "kg m^2", path, "body",
                                                 shape=(3, 3))
     _positive(mass, path, "body.mass")
 
@@ -358,7 +358,8 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         if key in ("min_speed", "radius", "inertia") and key not in rotor_section:
             values[key] = 0.0
             continue
-        values[key], sources[f"rotors.{key}"] = _quantity(rotor_section, key, unit, path, "rotors")
+        values[key], sources[f"rotors.{key}"] = read_quantity(rotor_section, key, unit, path,
+                                                              "rotors")
         _positive(values[key], path, f"rotors.{key}", allow_zero=key in ("min_speed", "inertia"))
     if values["min_speed"] >= values["max_speed"]:
         raise field_error(path, "rotors.min_speed", "must be below rotors.max_speed")
@@ -366,7 +367,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     if "rotor_layout" in data:
         from ..cad.assembly import load_assembly
 
-        layout_dir, source = _cad_path(data["rotor_layout"].get("from_cad"), path,
+        layout_dir, source = cad_path(data["rotor_layout"].get("from_cad"), path,
                                        "rotor_layout.from_cad")
         cad_dir = cad_dir or layout_dir
         rotors = tuple(
@@ -375,7 +376,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         )
         sources["rotor_layout"] = source
     elif "rotor" in data:
-        rotors = _rotor_table(data["rotor"], path)
+        rotors = rotor_table(data["rotor"], path)
     else:
         raise field_error(path, "rotor", "no rotors: give [[rotor]] entries or [rotor_layout]")
     if not rotors:
@@ -385,9 +386,9 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
     _check_keys(env, set(_ENV_UNITS), path, "environment")
     gravity, air_density = 9.81, 1.225
     if "gravity" in env:
-        gravity, sources["gravity"] = _quantity(env, "gravity", "m/s^2", path, "environment")
+        gravity, sources["gravity"] = read_quantity(env, "gravity", "m/s^2", path, "environment")
     if "air_density" in env:
-        air_density, sources["air_density"] = _quantity(env, "air_density", "kg/m^3", path,
+        air_density, sources["air_density"] = read_quantity(env, "air_density", "kg/m^3", path,
                                                        "environment")
 
     motor_map = None
@@ -398,9 +399,9 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         unit = mm.get("command_unit")
         if not isinstance(unit, str):
             raise field_error(path, "motor_map.command_unit", "missing (name the command's unit)")
-        command, source = _quantity(mm, "command", unit, path, "motor_map",
+        command, source = read_quantity(mm, "command", unit, path, "motor_map",
                                     shape=(len(mm.get("command", {}).get("value", [])),))
-        speed, _ = _quantity(mm, "speed", "rad/s", path, "motor_map",
+        speed, _ = read_quantity(mm, "speed", "rad/s", path, "motor_map",
                              shape=(len(rotors), command.shape[0]))
         if np.any(np.diff(command) <= 0):
             raise field_error(path, "motor_map.command", "must be strictly increasing")
@@ -408,7 +409,7 @@ def load_params(name_or_path: str | Path, *, check: bool = True) -> VehicleParam
         for key, unit_x in (("reference_voltage", "V"), ("voltage_gain", "1/V"),
                             ("time_constant", "s")):
             if key in mm:
-                extra[key], sources[f"motor_map.{key}"] = _quantity(mm, key, unit_x, path,
+                extra[key], sources[f"motor_map.{key}"] = read_quantity(mm, key, unit_x, path,
                                                                     "motor_map")
         if extra.get("time_constant", 0.0) < 0:
             raise field_error(path, "motor_map.time_constant", "must be >= 0")

@@ -28,7 +28,7 @@ def _rotor_views(rrb, rotor_count: int, normalised: bool) -> list:
     return views
 
 
-def _blueprint(rrb, rotor_count: int, residual_names: list[str], title: str, *,
+def default_blueprint(rrb, rotor_count: int, residual_names: list[str], title: str, *,
                normalised: bool = False, tab: str = "states", camera=None):
     """3D view on the left; tabs of plot grids (states, rotors, residuals) on the right.
 
@@ -58,7 +58,7 @@ def _blueprint(rrb, rotor_count: int, residual_names: list[str], title: str, *,
                          collapse_panels=True)
 
 
-def _camera(members) -> tuple[np.ndarray, np.ndarray]:
+def camera_pose(members) -> tuple[np.ndarray, np.ndarray]:
     """Eye and target that frame every path: look at the paths' centre from the front-left,
     above, at a distance that grows with the paths' extent."""
     points = np.concatenate([np.asarray(m.position, float) for _, m in members])

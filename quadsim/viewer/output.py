@@ -15,15 +15,15 @@ from ..core.errors import InputError, QuadsimError
 from ..core.files import atomic_write_bytes
 from ..vehicle.params import VehicleParams
 from ..vehicle.state import Trajectory
-from .layout import _blueprint, _camera
+from .layout import camera_pose, default_blueprint
 from .series import (
     APPLICATION_ID,
-    _log_pose_and_thrust,
-    _log_residuals,
-    _log_scene,
-    _log_time_series,
-    _members,
     engine_color,
+    log_pose_and_thrust,
+    log_residuals,
+    log_scene,
+    log_time_series,
+    members_of,
 )
 from .shapes import vehicle_shapes
 
@@ -58,23 +58,23 @@ def _record(rec, params, trajectories, measured, residuals, assembly, title, bat
     import rerun.blueprint as rrb
 
     _check_inputs(params, trajectories, measured)
-    members = _members(trajectories, batch_index)
+    members = members_of(trajectories, batch_index)
     if measured is not None:
         members.append(("measured", measured))
     scale = _arrow_scale(params) if thrust_arrow_scale is None else float(thrust_arrow_scale)
     span = np.concatenate([np.abs(m.position).max(0) for _, m in members])
     extent = max(1.0, float(np.nanmax(span)) * 1.2)
-    _log_scene(rec, rr, vehicle_shapes(params, assembly), members, extent)
+    log_scene(rec, rr, vehicle_shapes(params, assembly), members, extent)
     samples = 0
     for index, (key, trajectory) in enumerate(members):
         color = engine_color(key, index)
-        _log_pose_and_thrust(rec, rr, params, key, trajectory, color, scale)
-        samples += _log_time_series(rec, rr, params, key, trajectory, color)
+        log_pose_and_thrust(rec, rr, params, key, trajectory, color, scale)
+        samples += log_time_series(rec, rr, params, key, trajectory, color)
     default_t = measured.t if measured is not None else members[0][1].t
-    residual_names = _log_residuals(rec, rr, members, measured, residuals, default_t)
+    residual_names = log_residuals(rec, rr, members, measured, residuals, default_t)
     normalised = any(m.meta.get("command") is not None for _, m in members if m.meta)
-    rec.send_blueprint(_blueprint(rrb, params.rotor_count, residual_names, title,
-                                  normalised=normalised, tab=tab, camera=_camera(members)))
+    rec.send_blueprint(default_blueprint(rrb, params.rotor_count, residual_names, title,
+                                  normalised=normalised, tab=tab, camera=camera_pose(members)))
     return {"members": [key for key, _ in members], "scalar_samples": samples}
 
 

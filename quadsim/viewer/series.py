@@ -76,7 +76,7 @@ def state_residuals(model: Trajectory, measured: Trajectory) -> np.ndarray:
 # ----------------------------------------------------------------------------- logging
 
 
-def _members(trajectories: Mapping[str, Trajectory], batch_index) -> list[tuple[str, Trajectory]]:
+def members_of(trajectories: Mapping[str, Trajectory], batch_index) -> list[tuple[str, Trajectory]]:
     """(key, single-flight trajectory) pairs; batches reduced to the chosen members."""
     chosen = []
     for key, trajectory in trajectories.items():
@@ -114,7 +114,7 @@ def _log_scalars(rec, rr, path: str, t: np.ndarray, values: np.ndarray, key: str
     return int(np.count_nonzero(keep))
 
 
-def _log_scene(rec, rr, shapes: list[VehicleShape], members, extent: float) -> None:
+def log_scene(rec, rr, shapes: list[VehicleShape], members, extent: float) -> None:
     """Static parts: world axes, ground plane, vehicle meshes under each engine's pose."""
     rec.log("world/axes", rr.TransformAxes3D(axis_length=0.5 * extent), static=True)
     half = extent
@@ -131,7 +131,7 @@ def _log_scene(rec, rr, shapes: list[VehicleShape], members, extent: float) -> N
                               albedo_factor=albedo), static=True)
 
 
-def _log_pose_and_thrust(rec, rr, params, key, trajectory, color, arrow_scale) -> None:
+def log_pose_and_thrust(rec, rr, params, key, trajectory, color, arrow_scale) -> None:
     t = np.asarray(trajectory.t, dtype=float)
     w, x, y, z = np.moveaxis(np.asarray(trajectory.quat, dtype=float), -1, 0)
     # The sample index rides along as a second timeline: rerun 0.41's viewer did not load
@@ -158,7 +158,7 @@ def _log_pose_and_thrust(rec, rr, params, key, trajectory, color, arrow_scale) -
                      columns=columns.partition([rotor_count] * len(t)))
 
 
-def _log_time_series(rec, rr, params, key, trajectory, color) -> int:
+def log_time_series(rec, rr, params, key, trajectory, color) -> int:
     t = np.asarray(trajectory.t, dtype=float)
     sent = 0
     states = trajectory.state12()
@@ -219,7 +219,7 @@ def _entity_part(text: object) -> str:
     return part or "_"
 
 
-def _log_residuals(rec, rr, members, measured, residuals, default_t) -> list[str]:
+def log_residuals(rec, rr, members, measured, residuals, default_t) -> list[str]:
     """Model-minus-measured states per engine and the caller's residuals; returns the
     residual view names."""
     names: list[str] = []
