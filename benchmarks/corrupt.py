@@ -211,15 +211,17 @@ def _garbage(log, samples: int) -> str | None:
         if value is not None and np.nanmax(np.linalg.norm(value, axis=1), initial=0) > limit:
             return f"|{name}| above {limit:g}"
     dt = np.diff(log.t)
-    step = np.linalg.norm(np.diff(log.position, axis=0), axis=1)
-    if np.nanmax(step / dt, initial=0) > 300.0:
-        return "position step above 300 m/s"
-    norms = np.linalg.norm(log.quat, axis=1)
-    if np.max(np.abs(norms - 1.0)) > 1e-3:
-        return "quaternion not unit"
-    dot = np.clip(np.abs(np.sum(log.quat[1:] * log.quat[:-1], axis=1)), 0, 1)
-    if np.max(2 * np.arccos(dot) / dt, initial=0) > 100.0:
-        return "attitude step above 100 rad/s"
+    if log.position is not None:  # an IMU-only log (no pose) is a log too (docs/flightlog.md)
+        step = np.linalg.norm(np.diff(log.position, axis=0), axis=1)
+        if np.nanmax(step / dt, initial=0) > 300.0:
+            return "position step above 300 m/s"
+    if log.quat is not None:
+        norms = np.linalg.norm(log.quat, axis=1)
+        if np.max(np.abs(norms - 1.0)) > 1e-3:
+            return "quaternion not unit"
+        dot = np.clip(np.abs(np.sum(log.quat[1:] * log.quat[:-1], axis=1)), 0, 1)
+        if np.max(2 * np.arccos(dot) / dt, initial=0) > 100.0:
+            return "attitude step above 100 rad/s"
     if log.vbat is not None and (np.nanmin(log.vbat) < 0 or np.nanmax(log.vbat) > 100):
         return "battery voltage outside 0-100 V"
     if log.rotor_speed is not None and np.nanmin(log.rotor_speed) < -1.0:

@@ -289,3 +289,73 @@ def test_registry_parsing_and_errors():
     described = describe_effects(EffectSet((effect,)))
     assert described == [{"name": "ground_effect", "values": effect.values(),
                           "units": {"gain": "1", "ground_height": "m", "radius": "m"}}]
+
+
+def _moved_vehicle_fields(params):
+    """(field name, a copy of ``params`` with that dataclass field moved) for every field."""
+    import dataclasses
+
+    out = []
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        if isinstance(value, bool) or value is None:
+            continue
+        if isinstance(value, float | int):
+            moved = value * 1.1 + 0.01
+        elif isinstance(value, np.ndarray):
+            moved = value + 0.01
+        elif f.name == "rotors":
+            moved = tuple(dataclasses.replace(r, position=r.position + 0.01,
+                                              axis=(r.axis + 0.1) / np.linalg.norm(r.axis + 0.1),
+                                              spin=-r.spin) for r in value)
+        elif isinstance(value, str):
+            moved = value + "x"
+        else:
+            continue
+        out.append((f.name, dataclasses.replace(params, **{f.name: moved})))
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(n for n, c in EFFECTS.items()
+                                        if getattr(c, "loads_reads", None) is not None))
+def test_loads_read_only_what_they_declare(name):
+    """An effect's ``loads_reads`` (what a caller keeps its loads by) names everything its
+    loads read: moving any other context field or vehicle attribute leaves them the same
+    to the bit, and moving the declared ones changes them."""
+    cls = EFFECTS[name]
+    values = {p.name: p.off + 0.3 * ((p.upper if p.upper > p.off else p.lower) - p.off)
+              for p in cls.parameters}
+    effect = cls(**values)
+    rng = np.random.default_rng(1)
+    batch = 6
+
+    def ctx(params=PARAMS, **fields):
+        base = dict(t=np.linspace(0, 1, batch), position=rng.normal(size=(batch, 3)),
+                    velocity=np.ones((batch, 3)), quat=euler_to_quat(np.full((batch, 3), 0.2)),
+                    body_rate=np.full((batch, 3), 0.3), air_velocity=np.full((batch, 3), 2.0),
+                    rotor_speed=HOVER + np.arange(batch * 4.0).reshape(batch, 4),
+                    rotor_accel=np.arange(batch * 4.0).reshape(batch, 4) ** 2,
+                    vbat=np.full(batch, 3.9))
+        base.update(fields)
+        return EffectContext(params=params, **base)
+
+    def same(a, b):
+        return all(np.array_equal(getattr(a, f), getattr(b, f))
+                   for f in ("thrust_scale", "thrust_offset", "force_world", "torque_body",
+                             "curve_offset"))
+
+    fields, attributes = cls.loads_reads
+    first = effect.loads(ctx())
+    others = {"air_velocity": rng.normal(size=(batch, 3)),
+              "rotor_speed": HOVER + rng.normal(size=(batch, 4)) * 100,
+              "rotor_accel": rng.normal(size=(batch, 4)) * 100, "vbat": np.full(batch, 3.5)}
+    for field, moved in others.items():
+        assert same(first, effect.loads(ctx(**{field: moved}))) == (field not in fields), field
+    for field, params in _moved_vehicle_fields(PARAMS):
+        kept = all(np.array_equal(getattr(params, a), getattr(PARAMS, a)) for a in attributes)
+        if kept:
+            assert same(first, effect.loads(ctx(params=params))), field
+    for attribute in attributes:
+        assert any(not np.array_equal(getattr(p, attribute), getattr(PARAMS, attribute))
+                   and not same(first, effect.loads(ctx(params=p)))
+                   for _, p in _moved_vehicle_fields(PARAMS)), attribute

@@ -36,6 +36,7 @@ All arrays carry a leading batch axis B (B simulations advanced in one Python ca
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -147,8 +148,12 @@ class EffectLoads:
 
     @classmethod
     def neutral(cls, batch: int, rotors: int) -> EffectLoads:
-        return cls(np.ones((batch, rotors)), np.zeros((batch, rotors)),
-                   np.zeros((batch, 3)), np.zeros((batch, 3)), np.zeros((batch, rotors)))
+        """Loads that change nothing: scale one, offsets and external loads zero. Their
+        arrays are shared and read-only (an effect sets a field to a new array, never writes
+        into the neutral one), so that :meth:`combine` can pass over the fields an effect
+        left neutral."""
+        ones, zeros, zeros3 = _blank(int(batch), int(rotors))
+        return cls(ones, zeros, zeros3, zeros3, zeros)
 
     def add(self, other: EffectLoads) -> EffectLoads:
         """Combine: scales multiply, offsets and external loads add."""
@@ -158,11 +163,58 @@ class EffectLoads:
                            self.torque_body + other.torque_body,
                            self.curve_offset + other.curve_offset)
 
+    @classmethod
+    def combine(cls, parts: list[EffectLoads], batch: int, rotors: int) -> EffectLoads:
+        """``neutral(batch, rotors).add(parts[0]).add(parts[1])...`` without the products
+        with one and the sums with zero of the fields a part left neutral (the same numbers:
+        ``1 x`` and ``0 + x`` are ``x``, a zero's sign apart). A field that one part sets is
+        that part's array, not a copy: the result is read, never written into."""
+        blank = _blank(int(batch), int(rotors))
+
+        def fold(name, neutral, op):
+            total = None
+            for part in parts:
+                value = getattr(part, name)
+                if value is neutral:
+                    continue
+                total = value if total is None else op(total, value)
+            return neutral if total is None else total
+
+        ones, zeros, zeros3 = blank
+        return cls(fold("thrust_scale", ones, np.multiply),
+                   fold("thrust_offset", zeros, np.add),
+                   fold("force_world", zeros3, np.add),
+                   fold("torque_body", zeros3, np.add),
+                   fold("curve_offset", zeros, np.add))
+
+    def is_neutral(self, name: str) -> bool:
+        """Whether field ``name`` is still the shared array of :meth:`neutral` (its value
+        then is one for ``thrust_scale``, zero for the others)."""
+        value = getattr(self, name)
+        shape = np.shape(value)
+        if value is None or len(shape) != 2:
+            return False
+        ones, zeros, zeros3 = _blank(shape[0], np.shape(self.thrust_scale)[1])
+        return value is (ones if name == "thrust_scale" else
+                         zeros3 if name in ("force_world", "torque_body") else zeros)
+
     @property
     def rotor_offset(self) -> np.ndarray:
         """Thrust (B, R) the offsets add along each rotor axis (N): the thrust offset and the
         curve offset scaled with the rotor's thrust."""
+        if self.is_neutral("curve_offset"):
+            return self.thrust_offset
         return self.thrust_offset + self.thrust_scale * self.curve_offset
+
+
+@lru_cache(maxsize=64)
+def _blank(batch: int, rotors: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read-only ones (B, R), zeros (B, R) and zeros (B, 3): the fields of
+    :meth:`EffectLoads.neutral`, shared by every neutral load of that shape."""
+    arrays = (np.ones((batch, rotors)), np.zeros((batch, rotors)), np.zeros((batch, 3)))
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
 
 
 @runtime_checkable
@@ -180,6 +232,19 @@ class Effect(Protocol):
     def loads(self, ctx: EffectContext) -> EffectLoads | None: ...
 
 
+_OFF: dict[type, tuple[tuple, dict[str, float]]] = {}
+
+
+def _off_values(cls: type, parameters: tuple) -> dict[str, float]:
+    """Parameter name -> its "off" value, in declaration order (kept per class while its
+    ``parameters`` are the same tuple: an effect is constructed thousands of times per
+    diagnosis)."""
+    hit = _OFF.get(cls)
+    if hit is None or hit[0] is not parameters:
+        hit = _OFF[cls] = (parameters, {p.name: p.off for p in parameters})
+    return hit[1]
+
+
 class EffectBase:
     """Neutral defaults and keyword-checked construction for effects.
 
@@ -191,14 +256,22 @@ class EffectBase:
     name: ClassVar[str] = ""
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
     facts: ClassVar[EffectFacts] = EffectFacts()
+    #: what ``loads`` reads besides the effect's own values and the logged motion (``t``,
+    #: ``position``, ``velocity``, ``quat``, ``body_rate``, the rotation) and the shape
+    #: (B, R) of ``rotor_speed``: (the :class:`EffectContext` fields among ``air_velocity``,
+    #: ``rotor_speed``, ``rotor_accel``, ``vbat``; the :class:`VehicleParams` attributes of
+    #: ``ctx.params``). None: anything. A caller that evaluates many models on one flight
+    #: (:func:`quadsim.gap.residual.model_wrench`) keeps an effect's loads while these stay
+    #: the same; tests/test_effects.py checks each declaration by moving everything else.
+    loads_reads: ClassVar[tuple[tuple[str, ...], tuple[str, ...]] | None] = None
 
     def __init__(self, **values: float):
-        known = {p.name: p for p in self.parameters}
-        unknown = set(values) - set(known)
-        if unknown:
+        known = _off_values(type(self), self.parameters)
+        if not values.keys() <= known.keys():
+            unknown = set(values) - set(known)
             raise TypeError(f"{self.name}: unknown parameter(s) {sorted(unknown)}; "
                             f"valid: {', '.join(known)}")
-        self._values = {name: float(values.get(name, spec.off)) for name, spec in known.items()}
+        self._values = {name: float(values.get(name, off)) for name, off in known.items()}
 
     def __getattr__(self, item: str) -> float:
         values = self.__dict__.get("_values", {})
@@ -356,7 +429,7 @@ class EffectSet:
         earlier call on the same context instead of ``compute()`` (the gap fits evaluate many
         effect sets on one flight, :func:`quadsim.gap.memo.kept`); used for effects without
         internal state only."""
-        total = EffectLoads.neutral(ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])
+        parts = []
         for effect, start, size in self._sized():
             if not size and type(effect).loads is EffectBase.loads:
                 continue                    # the neutral hook: no loads (a motor lag, a mass)
@@ -365,5 +438,5 @@ class EffectSet:
             else:
                 part = effect.loads(self._own(ctx, start, size) if size else ctx)
             if part is not None:
-                total = total.add(part)
-        return total
+                parts.append(part)
+        return EffectLoads.combine(parts, ctx.rotor_speed.shape[0], ctx.rotor_speed.shape[1])

@@ -71,6 +71,9 @@ class BodyDrag(EffectBase):
                "per_axis": Words("drag law per body axis", "1", 1.0)},
     )
 
+    #: (context fields, vehicle attributes) ``loads`` reads (:attr:`EffectBase.loads_reads`)
+    loads_reads = (("air_velocity",), ("air_density",))
+
     def loads(self, ctx):
         air_body = ctx.to_body(ctx.air_velocity)
         cd_area = np.array([self.cd_area, self.cd_area, self.cd_area_vertical])

@@ -75,6 +75,9 @@ class Gyroscopic(EffectBase):
         """The effect with Jr taken from the parameter set (``[rotors] inertia``)."""
         return cls(rotor_inertia=params.rotor_inertia)
 
+    #: (context fields, vehicle attributes) ``loads`` reads (:attr:`EffectBase.loads_reads`)
+    loads_reads = (("rotor_speed", "rotor_accel"), ("rotor_axes", "rotor_spins"))
+
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
         if self.rotor_inertia == 0.0:
             return None

@@ -65,6 +65,9 @@ class RateDamping(EffectBase):
         words={ALL: Words("rate damping", "N m s/rad", 1.0, _phrase)},
     )
 
+    #: (context fields, vehicle attributes) ``loads`` reads (:attr:`EffectBase.loads_reads`)
+    loads_reads = ((), ())
+
     def loads(self, ctx: EffectContext) -> EffectLoads | None:
         if self.is_off():
             return None

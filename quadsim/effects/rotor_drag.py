@@ -113,6 +113,10 @@ class RotorDrag(EffectBase):
                                           _phrase)},
     )
 
+    #: (context fields, vehicle attributes) ``loads`` reads (:attr:`EffectBase.loads_reads`)
+    loads_reads = (("air_velocity", "rotor_speed"),
+                   ("rotor_axes", "rotor_positions", "com"))
+
     def loads(self, ctx):
         """The sums over rotors of :func:`rotor_drag_forces` and of their torques, through
         sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)

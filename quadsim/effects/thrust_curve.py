@@ -113,6 +113,9 @@ class ThrustCurve(EffectBase):
                "quadratic": Words("thrust-curve curvature", "N s^2/rad^2", 1.0)},
     )
 
+    #: (context fields, vehicle attributes) ``loads`` reads (:attr:`EffectBase.loads_reads`)
+    loads_reads = (("rotor_speed",), ())
+
     def loads(self, ctx):
         speed = np.asarray(ctx.rotor_speed, dtype=float)
         batch, rotors = speed.shape

@@ -18,6 +18,7 @@ diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitmodels
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from types import MappingProxyType
 
 import numpy as np
@@ -116,17 +117,31 @@ class Candidate:
         return {f"{name}.{p}": float(v) for name, fixed, _ in self.parts for p, v in fixed.items()}
 
     def effects(self, theta: np.ndarray) -> list:
+        """The base effects, then each part built with its fixed values and its fitted ones
+        from ``theta`` (in :attr:`parameter_names` order). An effect is its class and its
+        values, set once: a part whose values a step of ``theta`` did not move is the same
+        object as before (:func:`_built`)."""
         out, k = list(self.base), 0
         for name, fixed, fitted in self.parts:
             values = dict(fixed)
             for p in fitted:
                 values[p] = float(theta[k])
                 k += 1
-            out.append(build_effect(name, values))
+            try:
+                out.append(_built(name, tuple(values.items())))
+            except TypeError:           # a fixed value that is not hashable: built anew
+                out.append(build_effect(name, values))
         return out
 
     def combine(self, other: Candidate) -> Candidate:
         return Candidate(f"{self.name}+{other.name}", self.parts + other.parts, self.base)
+
+
+@lru_cache(maxsize=4096)
+def _built(name: str, values: tuple) -> object:
+    """:func:`build_effect` of ``name`` with ``values`` ((parameter, value), ...), kept: a
+    fit builds the same effect for every step that moves another part."""
+    return build_effect(name, dict(values))
 
 
 @dataclass
@@ -318,7 +333,9 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
                                                                      params.inertia):
-        torque_residual = torque_residual @ np.linalg.solve(vehicle.inertia, params.inertia)
+        torque_residual = torque_residual @ _inertia_map(
+            np.asarray(vehicle.inertia, dtype=float).tobytes(),
+            np.asarray(params.inertia, dtype=float).tobytes())
     parts = [(meas_force - force) * (params.mass / vehicle.mass), torque_residual]
     if rotor_channel:
         if memo is None:
@@ -327,6 +344,16 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
             parts.append(memoised(memo, rotor_key(states, params, effects), states,
                                lambda: rotor_residual(states, params, effects)))
     return np.concatenate(parts, axis=1)
+
+
+@lru_cache(maxsize=256)
+def _inertia_map(vehicle_inertia: bytes, nominal_inertia: bytes) -> np.ndarray:
+    """``I_v^-1 I`` (3, 3) of two inertia matrices given as their float64 bytes (kept: a fit
+    evaluates many models with the same inertia); read-only."""
+    out = np.linalg.solve(np.frombuffer(vehicle_inertia).reshape(3, 3),
+                          np.frombuffer(nominal_inertia).reshape(3, 3))
+    out.flags.writeable = False
+    return out
 
 
 #: the noise scale of a channel is at least this fraction of its operating point (weight,

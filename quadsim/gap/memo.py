@@ -16,8 +16,10 @@ What is kept, and what it is keyed by (an effect is its class and its values):
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
   past :data:`KEPT` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
   vehicle of the effects that change it, the air velocity of those that move the air, and
-  each effect's loads on one vehicle, air velocity and set of rotor speeds -- so a
-  Jacobian column recomputes only the effect whose parameter it moves.
+  each effect's loads on one vehicle, air velocity and set of rotor speeds -- or, for an
+  effect that declares what its loads read (:attr:`quadsim.effects.base.EffectBase.loads_reads`),
+  on those inputs and vehicle attributes alone -- so a Jacobian column recomputes only the
+  effect whose parameter it moves.
 
 Each entry holds the states it was computed on, so an id is never mistaken for another's.
 Equality with the residual computed from scratch: tests/test_fast_paths.py.
@@ -108,7 +110,15 @@ def identity(effect) -> tuple:
 def acting(effects: list, hooks: tuple) -> tuple:
     """:func:`identity` of each effect, in order, whose class has its own version of one of
     ``hooks``."""
-    return tuple(identity(e) for e in effects if _overrides(type(e), hooks))
+    out = []
+    for effect in effects:
+        hit = _OVERRIDES.get((type(effect), hooks))
+        if hit is None:
+            hit = _overrides(type(effect), hooks)
+        if hit:
+            key = effect.__dict__.get("_identity")
+            out.append(identity(effect) if key is None else key)
+    return tuple(out)
 
 
 _OVERRIDES: dict[tuple, bool] = {}

@@ -241,7 +241,13 @@ def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray,
     o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included.
     ``matrices``: :func:`rotor_matrices` of ``vehicle`` when the caller keeps them."""
     allocation_t, offset_wrench = rotor_matrices(vehicle) if matrices is None else matrices
-    wrench = (np.square(speed) * loads.thrust_scale) @ allocation_t
+    neutral = getattr(loads, "is_neutral", lambda name: False)
+    squared = np.square(speed)
+    if not neutral("thrust_scale"):         # a scale of one changes nothing
+        squared = squared * loads.thrust_scale
+    wrench = squared @ allocation_t
+    if neutral("thrust_offset") and neutral("curve_offset"):
+        return wrench                       # no offsets: nothing to add
     return wrench + loads.rotor_offset @ offset_wrench
 
 
@@ -265,7 +271,8 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     the effects as :attr:`quadsim.effects.base.EffectContext.flight_memo` (values that depend
     only on the logged motion of ``states``), where the vehicle, the air velocity and each
     effect's loads are also kept (:func:`quadsim.gap.memo.kept`: the same numbers, computed
-    once per effect, vehicle, air velocity and rotor speeds)."""
+    once per effect, vehicle, air velocity and rotor speeds, or per effect and what it
+    declares its loads read, :attr:`quadsim.effects.base.EffectBase.loads_reads`)."""
     effect_set = _effect_set(effects)
     speed = _require_rotors(states, params) if rotor_speed is None else rotor_speed
     accel = states.rotor_accel if states.rotor_accel is not None else np.zeros_like(speed)
@@ -286,22 +293,45 @@ def model_wrench(states: FlightStates, params: VehicleParams,
             flight_memo, "no_vbat", (), (), lambda: np.full(len(states.t), np.nan))
         refs = (vehicle, air, speed, accel, vbat)
         context_key = tuple(map(id, refs))
+        inputs = {"air_velocity": air, "rotor_speed": speed, "rotor_accel": accel,
+                  "vbat": vbat}
 
         def keep(effect, compute):
-            return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
-                        compute)
+            reads = getattr(type(effect), "loads_reads", None)
+            if reads is None:       # it may read anything: keyed by the whole context
+                return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
+                            compute)
+            fields, attributes = reads
+            own = tuple(inputs[name] for name in fields)
+            key = (identity(effect), fields, tuple(map(id, own)),
+                   _vehicle_values(flight_memo, vehicle, attributes))
+            return kept(flight_memo, "loads", key, own, compute)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, air, speed, accel, vehicle, vbat,
                         rotation=rotation, flight_memo=flight_memo)
     loads = effect_set.loads(ctx, kept=keep)
     wrench = rotor_wrench(vehicle, loads, speed, matrices)
-    force = wrench[:, :3] + ctx.to_body(loads.force_world)
-    torque = wrench[:, 3:] + loads.torque_body
+    force, torque = wrench[:, :3], wrench[:, 3:]
+    if not loads.is_neutral("force_world"):     # a zero external load adds nothing
+        force = force + ctx.to_body(loads.force_world)
+    if not loads.is_neutral("torque_body"):
+        torque = torque + loads.torque_body
     return force, torque, vehicle
 
 
 def _vehicle_matrices(vehicle: VehicleParams):
     return vehicle, rotor_matrices(vehicle)
+
+
+def _vehicle_values(flight_memo: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
+    """The values (float64 bytes) of ``vehicle``'s ``attributes``, kept per vehicle object:
+    an effect's loads that read only these stay the same when a fit moves another part of
+    the vehicle (an inertia, a thrust factor)."""
+    if not attributes:
+        return ()
+    return kept(flight_memo, "vehicle_values", (id(vehicle), attributes), (vehicle,),
+                lambda: tuple(np.asarray(getattr(vehicle, name), dtype=float).tobytes()
+                              for name in attributes))
 
 
 def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:

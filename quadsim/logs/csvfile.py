@@ -47,8 +47,17 @@ def _open_text(path: Path) -> str:
 
 
 def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
-    """Numbers (N, C); text that is not a number is an error naming line and column."""
+    """Numbers (N, C); text that is not a number is an error naming line and column.
+
+    Every cell is read by Python's ``float`` (numpy's conversion of a ``str`` calls it), all
+    cells at once when every row has the header's width and no cell is empty; otherwise row
+    by row, where an empty cell is NaN and a problem names its line."""
     width = len(header)
+    if all(line.count(",") == width - 1 for line in lines):
+        try:
+            return np.array(",".join(lines).split(","), dtype=float).reshape(len(lines), width)
+        except ValueError:
+            pass                # an empty cell (NaN) or text: read row by row below
     data = np.empty((len(lines), width))
     for row, line in enumerate(lines):
         cells = line.split(",")

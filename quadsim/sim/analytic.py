@@ -218,7 +218,10 @@ class BatchEffects:
               quat: np.ndarray, body_rate: np.ndarray, rotor_speed: np.ndarray,
               rotor_accel: np.ndarray, effect_state: np.ndarray | None = None) -> EffectLoads:
         """Wind first (``air_velocity``), then ``loads(ctx)``; (B, ...) arrays in, loads out."""
-        total = EffectLoads.neutral(self.batch, rotor_speed.shape[1])
+        rotors = rotor_speed.shape[1]       # written into per group: arrays of its own
+        total = EffectLoads(np.ones((self.batch, rotors)), np.zeros((self.batch, rotors)),
+                            np.zeros((self.batch, 3)), np.zeros((self.batch, 3)),
+                            np.zeros((self.batch, rotors)))
         for effect_set, idx, _, ctx in self._contexts(
                 t, position, velocity, quat, body_rate, rotor_speed, rotor_accel, effect_state):
             part = effect_set.loads(ctx)
