@@ -31,7 +31,11 @@ Fits (N samples pooled over the logs; rotor i at (x_i, y_i) from the CoM, spin s
   controller computes them from the same gyro. Identified when the 95 % half-width is below
   :data:`INERTIA_CI` of the value and R^2 >= :data:`INERTIA_R2`, else the skeleton's value
   (or the default) is kept and named. Izz and d enter the yaw balance only as d/Izz: Izz
-  stays the skeleton's (or the default) and d is identified given it.
+  stays the skeleton's (or the default) and d is identified given it. Where the whole-band
+  fit is too weak (translating flight: the rotor torque below ~2 Hz balances aerodynamic
+  moments), Ixx and Iyy come from the 4-16 Hz band where the rotors drive the body, with each
+  log's rotor-data delay (:mod:`quadsim.identify.rotation`), when that fit passes the same
+  acceptance.
 * **motor map** per rotor: ``Omega = L_tau[a_i + k_i cmd_i (1 + gamma (v - v_ref))]`` with
   L_tau a first-order lag (time constant tau, s, one for all rotors, from a grid), v the
   battery voltage (V) and v_ref its median; saturated commands (>= :data:`SATURATED`) are
@@ -68,6 +72,7 @@ from .logseries import (
     refuse_mixed,
 )
 from .motor_fits import LAG_GRID_S, SATURATED, commanded_speed, fit_command_thrust, fit_motor_map
+from .rotation import with_band_inertia
 from .sanity import r2_text
 
 #: the skeleton's rotor order must reach the best order's roll/pitch R^2 within this; below
@@ -299,7 +304,8 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
     curve = thrust_curve_score(with_speed, skeleton.mass)
     with_cmd = [s for s in with_speed if s.command is not None]
     motor = fit_motor_map(with_cmd) if with_cmd else None
-    inertia = fit_inertia(with_speed, skeleton, thrust.value, defaults)
+    inertia = with_band_inertia(fit_inertia(with_speed, skeleton, thrust.value, defaults),
+                                with_speed, skeleton, thrust.value)
     ident = LogIdentification(thrust, per_log, inertia, motor, curve, False, notes,
                               ident_warn)
     ident.warnings += [e.why for e in inertia if not e.identified]

@@ -1,0 +1,522 @@
+"""Why the measured rotor speeds over-predict a real Crazyflie's roll and pitch acceleration.
+
+Tests the candidate mechanisms of issue 45 against each other on the logs' own evidence. Per
+log and per body axis (roll x, pitch y) it forms
+
+* the torque the measured rotor speeds predict, ``tau = sum_i (r_i x a_i) b Omega_i^2`` (N m,
+  the parameter set's hubs ``r_i``, axes ``a_i`` and thrust factor ``b``);
+* the moment the body shows, ``M = J domega/dt + omega x J omega`` (N m; ``domega/dt`` by
+  central differences of the logged body rate);
+* the blade-flapping regressor ``f = sum_i Omega_i (v_y, -v_x)`` (body-frame velocity,
+  (rad/s)(m/s); :mod:`quadsim.effects.blade_flapping` with ``a_i = z``), the aerodynamic moment
+  that balances the rotors' torque in translation;
+* an instrument for ``tau``: the same torque of the commanded speeds (motor map and its lag),
+  whose noise is independent of the ESC's speed estimate.
+
+All four are low-passed alike (zero-phase 4th-order Butterworth at ``LOWPASS_HZ``: the
+benchmark's own zero-phase filters are at 18-20 Hz, and a filter applied alike to input and
+output leaves their transfer unchanged) and resampled to ``RATE_HZ``.
+
+Evidence
+    :func:`band_transfer` -- the two-input frequency response ``M = H_tau tau + H_f f`` per band
+    (Welch cross-spectra summed over the band's bins), with the multiple coherence;
+    :func:`z_transfer` -- the same for the collective channel, ``b sum Omega^2 -> m a_z``
+    (accelerometer), which has no inertia in it: a thrust lag (inflow dynamics) or a delayed or
+    filtered speed estimate would show there too;
+    :func:`low_band_balance` -- below 2 Hz, how much of the torque the body does not show the
+    flapping moment explains, per axis and with a CoM-offset lever beside it
+    (:func:`low_band_common`: one coefficient for both axes); :func:`windowed_gain` -- the gain
+    a 0.5 s open-loop prediction needs (the benchmark's horizon), and
+    :func:`windowed_heldout` -- that balance fitted on the training logs, scored on held-out
+    ones against holding the rate.
+
+Candidates, each fitted in the band where the rotors drive the body (``BAND_HZ``, band-passed
+time series, flapping as co-regressor; the nonlinear parameter on a grid, the rest by least
+squares; :func:`fit_candidate`)
+    ``scale``   ``M = g tau(t - d)``: an inertia or torque-arm scale, a pure delay;
+    ``lag``     ``M = g L_tau[tau]``, ``L`` a first-order lag: inflow dynamics between Omega and
+                thrust, an ESC speed estimate that leads the true speed, a gyro filter;
+    ``damping`` ``M = g tau - k omega``: aerodynamic rate damping;
+    ``iv``      ``scale`` by instrumental variables: if rotor-speed noise (errors in variables)
+                made the gain small, the instrumented gain is larger.
+
+The gain ``g`` of every candidate reads as ``J_model / J_true`` where the rest is right.
+Held out: each candidate fitted on the training logs predicts the band-passed moment of the
+held-out logs (R^2).
+
+Usage::
+
+    python -m benchmarks.rotation_analysis --model models/nanodrone_cf21bl.toml \\
+        --train ../shared/data/nanodrone_cf21bl/train/*_run[123].csv.gz \\
+        --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json
+
+Results and their reading: docs/nanodrone.md, "Rotation: what the logs say".
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
+from quadsim.core.files import atomic_write_text  # noqa: E402
+from quadsim.core.frames import rotate_inverse  # noqa: E402
+from quadsim.logs.flightlog import FlightLog, load_log  # noqa: E402
+from quadsim.vehicle.params import VehicleParams, load_params  # noqa: E402
+
+#: analysis rate (Hz): the benchmark's; the 500 Hz logs are low-passed and resampled to it
+RATE_HZ = 100.0
+#: common zero-phase low-pass (Hz), just above the benchmark's own 18-20 Hz filters
+LOWPASS_HZ = 20.0
+#: the band where the rotors drive the body (Hz): above ~3 Hz the flapping moment (a velocity
+#: effect) is small against the torque; below 16 Hz the benchmark's 18 Hz filter leaves > 0.9
+BAND_HZ = (4.0, 16.0)
+#: bands of the frequency-response table (Hz)
+BANDS_HZ = ((0.3, 1.0), (1.0, 2.0), (2.0, 4.0), (4.0, 8.0), (8.0, 12.0), (12.0, 16.0))
+#: Welch segment (samples at RATE_HZ): 2.56 s, 0.39 Hz bins
+SEGMENT = 256
+#: candidate grids: delay d (s), lag time constant (s), damping is linear (no grid)
+DELAYS_S = tuple(np.round(np.arange(-0.030, 0.0301, 0.0025), 4))
+LAGS_S = (0.0, 0.0025, 0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.06, 0.08)
+CANDIDATES = ("scale", "lag", "damping", "iv")
+AXES = ("roll", "pitch")
+
+
+@dataclass(frozen=True)
+class RotationSignals:
+    """One log's rotation signals at ``RATE_HZ`` (N samples; columns roll, pitch).
+
+    torque (N, 2) N m predicted by the measured rotor speeds; moment (N, 2) N m shown by the
+    body; flapping (N, 2) (rad/s)(m/s); rate (N, 2) rad/s; instrument (N, 2) N m of the
+    commanded speeds or None; thrust (N,) N = b sum Omega^2; force_z (N,) N = m a_z or None.
+    """
+
+    name: str
+    torque: np.ndarray
+    moment: np.ndarray
+    flapping: np.ndarray
+    rate: np.ndarray
+    instrument: np.ndarray | None
+    thrust: np.ndarray
+    force_z: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class BandResponse:
+    """The response of the moment to the predicted torque in one band: gain (1) and phase
+    (deg) of ``H_tau``, the flapping gain ``H_f`` (N m per (rad/s)(m/s)) and its phase, and the
+    multiple coherence (1) of (torque, flapping) -> moment."""
+
+    band_hz: tuple[float, float]
+    gain: float
+    phase_deg: float
+    flap_gain: float
+    flap_phase_deg: float
+    coherence: float
+
+
+@dataclass(frozen=True)
+class CandidateFit:
+    """One candidate fitted on some logs in ``BAND_HZ``: gain g (1) with its 95 % interval, the
+    nonlinear parameter (``scale``: delay s; ``lag``: time constant s; ``damping``: k N m s/rad;
+    ``iv``: delay s) with its interval, the flapping coefficient (N m per (rad/s)(m/s)) and R^2
+    of the band-passed moment on the fitted logs."""
+
+    candidate: str
+    gain: float
+    gain_ci: float
+    parameter: float
+    parameter_ci: float
+    flapping: float
+    r2: float
+
+
+def _resample(t: np.ndarray, x: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    return np.stack([np.interp(grid, t, c) for c in np.atleast_2d(x.T)], axis=-1)
+
+
+def rotation_signals(log: FlightLog, params: VehicleParams) -> RotationSignals:
+    """:class:`RotationSignals` of one log (needs rotor speeds, velocity and body rate).
+
+    Raises InputError when the log lacks them or has another rotor count than ``params``."""
+    name = Path(str(log.path)).name.split(".")[0] if log.path else "log"
+    if log.rotor_speed is None or log.body_rate is None or log.velocity is None:
+        raise InputError(f"{log.path}: rotor_1..N, wx..wz, vx..vz: needed")
+    if log.rotor_speed.shape[1] != params.rotor_count:
+        raise InputError(f"{log.path}: rotor_1..N: {log.rotor_speed.shape[1]} rotors, the "
+                         f"model has {params.rotor_count}")
+    t = np.asarray(log.t, float)
+    fs_raw = 1.0 / float(np.median(np.diff(t)))
+    sos = signal.butter(4, LOWPASS_HZ, fs=fs_raw, output="sos")
+    lowpass = lambda x: signal.sosfiltfilt(sos, x, axis=0)           # noqa: E731
+    omega = np.abs(np.asarray(log.rotor_speed, float))
+    arms = np.cross(params.rotor_positions, params.rotor_axes)        # (R, 3) m per N
+    b = params.thrust_factor
+    torque = b * (omega ** 2) @ arms
+    v_body = rotate_inverse(np.asarray(log.quat, float), np.asarray(log.velocity, float))
+    s = omega.sum(axis=1)
+    flapping = np.column_stack([s * v_body[:, 1], -s * v_body[:, 0], np.zeros_like(s)])
+    instrument = None
+    mm = params.motor_map
+    if log.rotor_command is not None and mm is not None:
+        speed = mm.speed_at(np.asarray(log.rotor_command, float), log.vbat)
+        if mm.time_constant > 0:
+            a = np.exp(-1.0 / (fs_raw * mm.time_constant))
+            speed = signal.lfilter([1 - a], [1, -a], speed - speed[0], axis=0) + speed[0]
+        instrument = b * speed ** 2 @ arms
+    grid = np.arange(t[0], t[-1], 1.0 / RATE_HZ)
+    w = _resample(t, lowpass(np.asarray(log.body_rate, float)), grid)
+    wdot = np.gradient(w, 1.0 / RATE_HZ, axis=0)
+    inertia = params.inertia
+    moment = wdot @ inertia.T + np.cross(w, w @ inertia.T)
+    pick = lambda x: _resample(t, lowpass(x), grid)                   # noqa: E731
+    force_z = None if log.accel is None else params.mass * pick(log.accel[:, 2:3])[:, 0]
+    return RotationSignals(
+        name=name, torque=pick(torque)[:, :2], moment=moment[:, :2],
+        flapping=pick(flapping)[:, :2], rate=w[:, :2],
+        instrument=None if instrument is None else pick(instrument)[:, :2],
+        thrust=pick(b * (omega ** 2).sum(axis=1, keepdims=True))[:, 0], force_z=force_z)
+
+
+def _spectra(inputs: list[np.ndarray], output: np.ndarray):
+    """Welch cross-spectral matrix of the inputs (F, n, n), input-output (F, n), output (F,)."""
+    kw = {"fs": RATE_HZ, "nperseg": SEGMENT}
+    x = [u - u.mean() for u in inputs]
+    y = output - output.mean()
+    f, syy = signal.welch(y, **kw)
+    n = len(x)
+    suu = np.zeros((len(f), n, n), complex)
+    suy = np.zeros((len(f), n), complex)
+    for i in range(n):
+        for j in range(n):
+            suu[:, i, j] = signal.csd(x[i], x[j], **kw)[1]
+        suy[:, i] = signal.csd(x[i], y, **kw)[1]
+    return f, suu, suy, syy
+
+
+def band_transfer(inputs: list[np.ndarray], output: np.ndarray,
+                  bands=BANDS_HZ) -> list[tuple[np.ndarray, float]]:
+    """Multi-input frequency response per band: ``output = sum_k H_k inputs_k``, the spectra
+    summed over the band's Welch bins (``H = Suu^-T Suy``, ``csd(u, y) = conj(U) Y``); returns
+    per band (H (n,) complex, multiple coherence)."""
+    f, suu, suy, syy = _spectra(inputs, output)
+    out = []
+    for lo, hi in bands:
+        m = (f >= lo) & (f < hi)
+        a, c = suu[m].sum(axis=0), suy[m].sum(axis=0)
+        h = np.linalg.solve(a, c)
+        coherence = float(np.real(np.conj(c) @ np.linalg.solve(a, c)) / syy[m].sum())
+        out.append((h, coherence))
+    return out
+
+
+def axis_response(sig: RotationSignals, axis: int, bands=BANDS_HZ) -> list[BandResponse]:
+    """:class:`BandResponse` per band of (torque, flapping) -> moment on one axis."""
+    rows = []
+    for band, (h, coherence) in zip(bands, band_transfer(
+            [sig.torque[:, axis], sig.flapping[:, axis]], sig.moment[:, axis], bands)):
+        rows.append(BandResponse(band, float(abs(h[0])), float(np.degrees(np.angle(h[0]))),
+                                 float(abs(h[1])), float(np.degrees(np.angle(h[1]))),
+                                 coherence))
+    return rows
+
+
+def _bandpass(x: np.ndarray) -> np.ndarray:
+    sos = signal.butter(4, BAND_HZ, btype="bandpass", fs=RATE_HZ, output="sos")
+    return signal.sosfiltfilt(sos, x, axis=0)
+
+
+def delayed(x: np.ndarray, delay_s: float) -> np.ndarray:
+    """``x(t - delay)`` by linear interpolation (edges held)."""
+    n = np.arange(len(x), dtype=float)
+    return np.interp(n - delay_s * RATE_HZ, n, x)
+
+
+def lagged(x: np.ndarray, tau_s: float) -> np.ndarray:
+    """``x`` through a first-order lag of time constant ``tau_s`` (s), started at rest at
+    ``x[0]``; unchanged for ``tau_s <= 0``."""
+    if tau_s <= 0:
+        return x
+    a = np.exp(-1.0 / (RATE_HZ * tau_s))
+    return signal.lfilter([1 - a], [1, -a], x - x[0]) + x[0]
+
+
+def _design(sig: RotationSignals, axis: int, candidate: str, parameter: float):
+    """Band-passed (regressors, moment[, instruments]) of one log for one candidate at a grid
+    value of its nonlinear parameter."""
+    tau = sig.torque[:, axis]
+    if candidate in ("scale", "iv"):
+        tau = delayed(tau, parameter)
+    elif candidate == "lag":
+        tau = lagged(tau, parameter)
+    cols = [tau, sig.flapping[:, axis]]
+    if candidate == "damping":
+        cols.append(-sig.rate[:, axis])
+    x = _bandpass(np.column_stack(cols))
+    y = _bandpass(sig.moment[:, axis])
+    z = None
+    if candidate == "iv":
+        if sig.instrument is None:
+            raise InputError(f"{sig.name}: cmd_1..N and a motor map: needed for the iv "
+                             "candidate")
+        z = _bandpass(np.column_stack([sig.instrument[:, axis], sig.flapping[:, axis]]))
+    return x, y, z
+
+
+def _solve(parts, candidate: str):
+    x = np.vstack([p[0] for p in parts])
+    y = np.concatenate([p[1] for p in parts])
+    if candidate == "iv":
+        z = np.vstack([p[2] for p in parts])
+        coef = np.linalg.solve(z.T @ x, z.T @ y)
+    else:
+        coef = np.linalg.lstsq(x, y, rcond=None)[0]
+    r2 = 1.0 - float(np.var(y - x @ coef) / np.var(y))
+    return coef, r2
+
+
+def _fit_once(designs: dict, candidate: str, keep: list[np.ndarray] | None = None):
+    """Best grid value, coefficients and R^2 over precomputed band-passed designs
+    ``{value: [(x, y, z) per log]}``, on the rows ``keep`` of each log (all when None)."""
+    best = None
+    for value, parts in designs.items():
+        if keep is not None:
+            parts = [(x[k], y[k], None if z is None else z[k])
+                     for (x, y, z), k in zip(parts, keep)]
+        coef, r2 = _solve(parts, candidate)
+        if best is None or r2 > best[2]:
+            best = (value, coef, r2)
+    return best
+
+
+def fit_candidate(sigs: list[RotationSignals], axis: int, candidate: str, *,
+                  blocks: int = 8) -> CandidateFit:
+    """Fit one candidate on the logs' ``BAND_HZ`` band (grid value of the nonlinear parameter
+    by the best R^2, the rest by least squares or, for ``iv``, instrumental variables); 95 %
+    intervals by a delete-one-block jackknife over ``blocks`` contiguous blocks of every log's
+    band-passed rows (the band-passed residual is correlated over tens of samples, so
+    per-sample least-squares errors would be too small)."""
+    grid = {"scale": DELAYS_S, "iv": DELAYS_S, "lag": LAGS_S, "damping": (0.0,)}[candidate]
+    designs = {v: [_design(s, axis, candidate, v) for s in sigs] for v in grid}
+    value, coef, r2 = _fit_once(designs, candidate)
+    reps = []
+    for k in range(blocks):
+        keep = []
+        for s in sigs:
+            n = len(s.moment)
+            mask = np.ones(n, bool)
+            mask[k * n // blocks:(k + 1) * n // blocks] = False
+            keep.append(mask)
+        v, c, _ = _fit_once(designs, candidate, keep)
+        reps.append((c[0], c[-1] if candidate == "damping" else v))
+    reps = np.array(reps)
+    spread = np.sqrt((blocks - 1) / blocks * ((reps - reps.mean(axis=0)) ** 2).sum(axis=0))
+    parameter = float(coef[-1]) if candidate == "damping" else float(value)
+    return CandidateFit(candidate, float(coef[0]), float(1.96 * spread[0]), parameter,
+                        float(1.96 * spread[1]), float(coef[1]), r2)
+
+
+def heldout_r2(fit: CandidateFit, sig: RotationSignals, axis: int) -> float:
+    """R^2 of the band-passed moment of a held-out log predicted by a fitted candidate."""
+    candidate = "scale" if fit.candidate == "iv" else fit.candidate
+    x, y, _ = _design(sig, axis, candidate, 0.0 if candidate == "damping" else fit.parameter)
+    coef = [fit.gain, fit.flapping] + ([fit.parameter] if candidate == "damping" else [])
+    return 1.0 - float(np.var(y - x @ np.asarray(coef)) / np.var(y))
+
+
+def _windows(sig: RotationSignals, axis: int, horizon: int):
+    """(regressors (W, 2): integrated torque and flapping, N m s; target (W,): J delta-omega)
+    over every window of ``horizon`` samples."""
+    dt = 1.0 / RATE_HZ
+
+    def wsum(x):
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        return (c[horizon:] - c[:-horizon])[:-1] * dt
+
+    x = np.column_stack([wsum(sig.torque[:, axis]), wsum(sig.flapping[:, axis])])
+    return x, wsum(sig.moment[:, axis])
+
+
+def windowed_heldout(train: list[RotationSignals], held: list[RotationSignals], axis: int,
+                     horizon: int = 50) -> tuple[tuple[float, float], list[float]]:
+    """The 0.5 s balance ``J delta-omega = g int tau + c int f`` fitted over every window of
+    the training logs ((g, c)), and per held-out log the RMS error of its predicted rate change
+    over the RMS of the rate change itself (holding the rate scores 1; below 1 beats it)."""
+    parts = [_windows(s, axis, horizon) for s in train]
+    coef = np.linalg.lstsq(np.vstack([p[0] for p in parts]),
+                           np.concatenate([p[1] for p in parts]), rcond=None)[0]
+    ratios = []
+    for s in held:
+        x, y = _windows(s, axis, horizon)
+        ratios.append(float(np.sqrt(np.mean((y - x @ coef) ** 2)) / np.sqrt(np.mean(y ** 2))))
+    return (float(coef[0]), float(coef[1])), ratios
+
+
+def windowed_gain(sig: RotationSignals, axis: int, horizon: int = 50) -> tuple[float, float]:
+    """What a 0.5 s open-loop prediction needs: the least-squares gain g (1) and flapping
+    coefficient of ``J (omega(t+H) - omega(t)) = sum_{k<H} (g tau + c f) dt`` over every window
+    of the log (the integrated moment balance, dominated by frequencies below ~2 Hz)."""
+    dt = 1.0 / RATE_HZ
+
+    def wsum(x):
+        c = np.concatenate([[0.0], np.cumsum(x)])
+        return (c[horizon:] - c[:-horizon])[:-1] * dt
+
+    m = sig.moment[:, axis]
+    # J delta-omega equals the integral of the moment (exactly, up to the gyroscopic term)
+    target = np.concatenate([[0.0], np.cumsum(m)])
+    target = (target[horizon:] - target[:-horizon])[:-1] * dt
+    x = np.column_stack([wsum(sig.torque[:, axis]), wsum(sig.flapping[:, axis])])
+    coef = np.linalg.lstsq(x, target, rcond=None)[0]
+    return float(coef[0]), float(coef[1])
+
+
+def low_band_balance(sig: RotationSignals, axis: int, cutoff_hz: float = 2.0) -> dict:
+    """Below ``cutoff_hz``: RMS (N m) of the predicted torque and of the body's moment, and how
+    much of their difference the flapping moment explains: ``tau - M = -c f + c0`` by least
+    squares (c in N m per (rad/s)(m/s), R^2 of the difference); with a thrust term beside it
+    (``+ a T``, the lever of a CoM offset, ``com_arm_mm`` = a in mm) the residual left."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    tau, m, f = low(sig.torque[:, axis]), low(sig.moment[:, axis]), low(sig.flapping[:, axis])
+    diff = tau - m
+    x = np.column_stack([-f, np.ones_like(f)])
+    coef = np.linalg.lstsq(x, diff, rcond=None)[0]
+    r2 = 1.0 - float(np.var(diff - x @ coef) / np.var(diff))
+    # a CoM offset from the frame's centre by r adds -r x (0, 0, T): a torque linear in thrust
+    thrust = low(sig.thrust)
+    xc = np.column_stack([-f, thrust, np.ones_like(f)])
+    coef_c = np.linalg.lstsq(xc, diff, rcond=None)[0]
+    return {"torque_rms": float(f"{np.std(tau):.3g}"), "moment_rms": float(f"{np.std(m):.3g}"),
+            "flapping": float(f"{coef[0]:.3g}"), "balance_r2": round(r2, 3),
+            "residual_rms": float(f"{np.std(diff - x @ coef):.3g}"),
+            "com_arm_mm": round(1e3 * float(coef_c[1]), 2),
+            "residual_rms_with_com": float(f"{np.std(diff - xc @ coef_c):.3g}")}
+
+
+def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:
+    """As :func:`low_band_balance` with one flapping coefficient for both axes (the library's
+    ``blade_flapping``): the coefficient and the residual RMS (N m) per axis."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    diff = [low(sig.torque[:, a]) - low(sig.moment[:, a]) for a in (0, 1)]
+    flap = [low(sig.flapping[:, a]) for a in (0, 1)]
+    x, y = np.concatenate(flap), np.concatenate(diff)
+    c = -float(x @ y) / float(x @ x)
+    return {"flapping": float(f"{c:.3g}"),
+            "residual_rms": [float(f"{np.std(diff[a] + c * flap[a]):.3g}") for a in (0, 1)]}
+
+
+def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
+    """Every table of the analysis as a JSON-ready dict (see the module docstring)."""
+    params = load_params(model)
+    sigs = {}
+    for path in [*train, *heldout]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            sigs[path] = rotation_signals(load_log(path), params)
+    train_s = [sigs[p] for p in train]
+    held_s = [sigs[p] for p in heldout]
+    has_iv = all(s.instrument is not None for s in sigs.values())
+    candidates = [c for c in CANDIDATES if c != "iv" or has_iv]
+    out = {"model": str(model), "band_hz": list(BAND_HZ), "per_log": {}, "pooled": {}}
+    for s in [*train_s, *held_s]:
+        entry = {"heldout": s in held_s}
+        if s.force_z is not None:
+            (h, coh), = band_transfer([s.thrust], s.force_z, (BAND_HZ,))
+            entry["z"] = {"gain": round(float(abs(h[0])), 3),
+                          "phase_deg": round(float(np.degrees(np.angle(h[0]))), 1),
+                          "coherence": round(coh, 3)}
+        for axis, name in enumerate(AXES):
+            entry[name] = {
+                "bands": [{"band_hz": list(r.band_hz), "gain": round(r.gain, 3),
+                           "phase_deg": round(r.phase_deg, 1),
+                           "flap_gain": float(f"{r.flap_gain:.3g}"),
+                           "coherence": round(r.coherence, 3)} for r in axis_response(s, axis)],
+                "candidates": {c: _fit_json(fit_candidate([s], axis, c)) for c in candidates},
+                "windowed_gain_0p5s": round(windowed_gain(s, axis)[0], 3),
+                "low_band": low_band_balance(s, axis),
+            }
+        entry["low_band_common"] = low_band_common(s)
+        out["per_log"][s.name] = entry
+    for axis, name in enumerate(AXES):
+        (g, c), ratios = windowed_heldout(train_s, held_s, axis)
+        out.setdefault("windowed_0p5s", {})[name] = {
+            "gain": round(g, 3), "flapping": float(f"{c:.3g}"),
+            "heldout_rms_over_hold": {s.name: round(r, 3) for s, r in zip(held_s, ratios)}}
+        pooled = {}
+        for c in candidates:
+            fit = fit_candidate(train_s, axis, c)
+            pooled[c] = {**_fit_json(fit), "heldout_r2": {
+                s.name: round(heldout_r2(fit, s, axis), 3) for s in held_s}}
+        out["pooled"][name] = pooled
+    return out
+
+
+def _fit_json(fit: CandidateFit) -> dict:
+    return {"gain": round(fit.gain, 3), "gain_ci": round(fit.gain_ci, 3),
+            "parameter": float(f"{fit.parameter:.4g}"),
+            "parameter_ci": float(f"{fit.parameter_ci:.3g}"),
+            "flapping": float(f"{fit.flapping:.4g}"), "r2": round(fit.r2, 3)}
+
+
+def print_summary(result: dict) -> None:
+    """The per-log tables to stdout."""
+    for axis, w in result.get("windowed_0p5s", {}).items():
+        print(f"0.5 s balance {axis}: g {w['gain']:.3f}, flapping {w['flapping']:.3g}; held-out "
+              "RMS / hold " + ", ".join(f"{k} {v:.2f}" for k, v in
+                                        w["heldout_rms_over_hold"].items()))
+    units = {"scale": "delay ms", "iv": "delay ms", "lag": "tau ms", "damping": "k N m s/rad"}
+    for name, entry in result["per_log"].items():
+        z = entry.get("z")
+        print(f"{name}{' (held out)' if entry['heldout'] else ''}"
+              + (f": z {z['gain']:.2f}/{z['phase_deg']:+.0f} deg/coh {z['coherence']:.2f}"
+                 if z else ""))
+        for axis in AXES:
+            e = entry[axis]
+            bands = " ".join(f"{b['band_hz'][0]:g}-{b['band_hz'][1]:g}:{b['gain']:.2f}/"
+                             f"{b['phase_deg']:+.0f}/{b['coherence']:.2f}" for b in e["bands"])
+            fits = "; ".join(
+                f"{c} g {f['gain']:.2f}+-{f['gain_ci']:.2f} "
+                f"{units[c]} {f['parameter'] * (1 if c == 'damping' else 1e3):.3g}"
+                f" R2 {f['r2']:.2f}" for c, f in e["candidates"].items())
+            lb = e["low_band"]
+            print(f"  {axis}: {bands}\n    {fits}; 0.5 s gain {e['windowed_gain_0p5s']:.2f}"
+                  f"\n    below 2 Hz: torque RMS {lb['torque_rms']:.3g}, moment RMS "
+                  f"{lb['moment_rms']:.3g} N m; flapping {lb['flapping']:.3g} explains R^2 "
+                  f"{lb['balance_r2']:.2f} of the difference, leaving {lb['residual_rms']:.3g} N m")
+    for axis, pooled in result["pooled"].items():
+        print(f"pooled {axis}: " + "; ".join(
+            f"{c} g {f['gain']:.3f}+-{f['gain_ci']:.3f} {units[c]} "
+            f"{f['parameter'] * (1 if c == 'damping' else 1e3):.3g}+-"
+            f"{f['parameter_ci'] * (1 if c == 'damping' else 1e3):.2g} R2 {f['r2']:.2f} "
+            f"held-out R2 " + "/".join(f"{v:.2f}" for v in f["heldout_r2"].values())
+            for c, f in pooled.items()))
+
+
+@run_cli
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--model", type=Path, required=True, help="parameter set (TOML)")
+    parser.add_argument("--train", type=Path, nargs="+", required=True)
+    parser.add_argument("--heldout", type=Path, nargs="*", default=[])
+    parser.add_argument("--json", type=Path, metavar="OUT.json")
+    args = parser.parse_args(argv)
+    result = analyse(args.model, args.train, args.heldout)
+    print_summary(result)
+    if args.json:
+        atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""The rotation analysis of issue 45 (benchmarks/rotation_analysis.py): each candidate's fit
+recovers the parameters a synthetic moment was built with, the wrong candidate predicts held-out
+data worse, instruments undo errors-in-variables attenuation, and the band response reads a
+gain and a delay as their closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from benchmarks import rotation_analysis as ra
+
+N = 6000                       # 60 s at RATE_HZ
+
+
+def _noise(seed: int, scale: float = 1e-4) -> np.ndarray:
+    """Band-limited (0.2-25 Hz) random signal."""
+    rng = np.random.default_rng(seed)
+    sos = signal.butter(2, (0.2, 25.0), btype="bandpass", fs=ra.RATE_HZ, output="sos")
+    x = signal.sosfiltfilt(sos, rng.standard_normal(N))
+    return scale * x / x.std()
+
+
+def _signals(torque, moment, flapping, rate=None, instrument=None) -> ra.RotationSignals:
+    two = lambda x: None if x is None else np.column_stack([x, x])    # noqa: E731
+    return ra.RotationSignals("synthetic", two(torque), two(moment), two(flapping),
+                              two(np.zeros(N) if rate is None else rate), two(instrument),
+                              np.zeros(N), None)
+
+
+def test_scale_candidate_recovers_gain_delay_and_flapping():
+    torque, flap = _noise(1), _noise(2, 1e3)
+    moment = 0.7 * ra.delayed(torque, 0.005) + 3e-8 * flap
+    fit = ra.fit_candidate([_signals(torque, moment, flap)], 0, "scale", blocks=4)
+    assert fit.gain == pytest.approx(0.7, abs=0.01)
+    assert fit.parameter == pytest.approx(0.005)
+    assert fit.flapping == pytest.approx(3e-8, rel=0.02)
+    assert fit.r2 > 0.99
+
+
+def test_lag_candidate_recovers_time_constant_and_beats_scale_held_out():
+    torque, flap = _noise(3), _noise(4, 1e3)
+    moment = 0.9 * ra.lagged(torque, 0.02) + 3e-8 * flap
+    sig = _signals(torque, moment, flap)
+    torque2, flap2 = _noise(5), _noise(6, 1e3)
+    held = _signals(torque2, 0.9 * ra.lagged(torque2, 0.02) + 3e-8 * flap2, flap2)
+    lag = ra.fit_candidate([sig], 0, "lag", blocks=4)
+    scale = ra.fit_candidate([sig], 0, "scale", blocks=4)
+    assert lag.parameter == pytest.approx(0.02)
+    assert lag.gain == pytest.approx(0.9, abs=0.02)
+    assert ra.heldout_r2(lag, held, 0) > 0.99
+    assert ra.heldout_r2(scale, held, 0) < ra.heldout_r2(lag, held, 0) - 0.01
+
+
+def test_damping_candidate_recovers_k():
+    torque, flap = _noise(7), _noise(8, 1e3)
+    rate = _noise(9, 1.0)
+    moment = 0.8 * torque - 2e-4 * rate + 3e-8 * flap
+    fit = ra.fit_candidate([_signals(torque, moment, flap, rate)], 0, "damping", blocks=4)
+    assert fit.gain == pytest.approx(0.8, abs=0.01)
+    assert fit.parameter == pytest.approx(2e-4, rel=0.02)
+
+
+def test_instruments_undo_errors_in_variables():
+    """Noise of variance s^2 on the regressor of variance v attenuates least squares by
+    v / (v + s^2) (here 1/2); the instrumented gain stays at the truth."""
+    true, flap = _noise(10), _noise(11, 1e3)
+    measured = true + _noise(12)                 # noise as large as the signal: gain 1/2
+    instrument = true + _noise(13)
+    sig = _signals(measured, true + 0.0 * flap, flap, instrument=instrument)
+    ls = ra.fit_candidate([sig], 0, "scale", blocks=4)
+    iv = ra.fit_candidate([sig], 0, "iv", blocks=4)
+    assert ls.gain == pytest.approx(0.5, abs=0.05)
+    assert iv.gain == pytest.approx(1.0, abs=0.05)
+
+
+def test_band_transfer_reads_gain_and_delay():
+    torque, flap = _noise(14), _noise(15, 1e3)
+    delay = 0.01
+    moment = 0.6 * ra.delayed(torque, delay) + 3e-8 * flap
+    (h, coherence), = ra.band_transfer([torque, flap], moment, ((8.0, 12.0),))
+    assert abs(h[0]) == pytest.approx(0.6, abs=0.02)
+    # band centre 10 Hz: phase -360 f d = -36 deg (bins 8.2-11.7 Hz: -30..-42)
+    assert np.degrees(np.angle(h[0])) == pytest.approx(-36.0, abs=4.0)
+    assert abs(h[1]) == pytest.approx(3e-8, rel=0.05)
+    assert coherence > 0.99
+
+
+def test_low_band_balance_and_windowed_gain_read_a_built_balance():
+    """tau - M = -c f below 2 Hz exactly: R^2 1 and c; M = 0.3 tau + 3e-8 f: the windowed
+    least squares returns 0.3 and 3e-8."""
+    torque, flap = _noise(16), _noise(17, 1e3)
+    moment = torque + 4e-8 * flap
+    balance = ra.low_band_balance(_signals(torque, moment, flap), 0)
+    assert balance["flapping"] == pytest.approx(4e-8, rel=1e-3)
+    assert balance["balance_r2"] == pytest.approx(1.0, abs=1e-3)
+    thrust = 0.4 + _noise(22, 0.05)
+    offset = ra.RotationSignals("synthetic", np.column_stack([torque, torque]),
+                                np.column_stack([moment - 2e-3 * thrust] * 2),
+                                np.column_stack([flap, flap]), np.zeros((N, 2)), None,
+                                thrust, None)
+    assert ra.low_band_balance(offset, 0)["com_arm_mm"] == pytest.approx(2.0, rel=1e-2)
+    common = ra.low_band_common(_signals(torque, moment, flap))
+    assert common["flapping"] == pytest.approx(4e-8, rel=1e-3)
+    assert common["residual_rms"][0] == pytest.approx(0.0, abs=1e-9)
+    g, c = ra.windowed_gain(_signals(torque, 0.3 * torque + 3e-8 * flap, flap), 0)
+    assert g == pytest.approx(0.3, rel=1e-6)
+    assert c == pytest.approx(3e-8, rel=1e-6)
+
+
+def test_windowed_heldout_scores_against_holding_the_rate():
+    """A balance fitted where M = 0.3 tau + 3e-8 f predicts a held-out log built alike exactly
+    (ratio 0); for a log with M' = 0.15 tau + 1.5e-8 f the prediction is 2 M', its error M':
+    exactly as bad as holding the rate (ratio 1)."""
+    t, f = _noise(18), _noise(19, 1e3)
+    train = _signals(t, 0.3 * t + 3e-8 * f, f)
+    t2, f2 = _noise(20), _noise(21, 1e3)
+    same = _signals(t2, 0.3 * t2 + 3e-8 * f2, f2)
+    half = _signals(t2, 0.15 * t2 + 1.5e-8 * f2, f2)
+    (g, c), ratios = ra.windowed_heldout([train], [same, half], 0)
+    assert g == pytest.approx(0.3, rel=1e-6)
+    assert ratios[0] == pytest.approx(0.0, abs=1e-6)
+    assert ratios[1] == pytest.approx(1.0, rel=1e-6)
