@@ -228,7 +228,7 @@ def test_a_batch_with_one_bad_flight_refuses_it_and_judges_the_others(cf, tmp_pa
     assert outcomes[2] == "no_significant_gap"
     assert "1 refused" in document["verdict"]["answer"]
     page = html.read_text()
-    assert page.index("<th>probability</th>") < page.index("<h2>")     # the table first
+    assert page.index("<th>leading reading (probability*)</th>") < page.index("<h2>")  # first
     assert "max-width:1400px" in page
     # the same batch as a library call: the bad log (3 rotors) refused, the others judged
     three = FlightLog(good.t, good.position, good.quat, good.velocity, good.body_rate,

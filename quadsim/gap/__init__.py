@@ -55,8 +55,10 @@ diagnosis fits beyond the library), :mod:`.priors` (plausible magnitudes, readin
 words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`), :mod:`.judge` (the verdict
 of both modes), :mod:`.words` (answers), :mod:`.result` (result types), :mod:`.where` (where
 and when the gap lies, parameter consistency), :mod:`.checks` (vehicle check before
-fitting), :mod:`.commands` (command-only logs), :mod:`.report` (output: JSON and its schema,
-summaries, HTML, rerun, the effect file). Generated test flights:
+fitting), :mod:`.commands` (command-only logs), :mod:`.traces` (each judged flight's residual
+before and after its answer), :mod:`.report` (output: JSON and its schema, summaries, the
+effect file; the HTML page :mod:`.page` with its figures :mod:`.plots`, the rerun recording
+:mod:`.recording`). Generated test flights:
 ``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::

@@ -53,6 +53,7 @@ from .judge import channel_names, judge
 from .residual import DEFAULT_WINDOW_S
 from .result import Diagnosis, Verdict
 from .selfcheck import leave_one_out, self_check_of
+from .traces import flight_series
 from .words import batch_answer
 
 __all__ = ["MIN_REFERENCE", "Weighed", "diagnose_per_flight", "judge_one",
@@ -171,8 +172,11 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     weighed = weigh_flight(flight, reference, effects, full=full, name=name)
     if not isinstance(weighed, Weighed):
         return weighed
-    return verdict_of(weighed, reference.self_check,
-                      order.order_statuses([log], reference.params))
+    verdict = verdict_of(weighed, reference.self_check,
+                         order.order_statuses([log], reference.params))
+    local = weighed.reference          # the residual before and after, for the report
+    return dataclasses.replace(verdict, series=flight_series(
+        local.align(weighed.flight), local, weighed.rows, name=weighed.flight.name))
 
 
 @dataclass(frozen=True)

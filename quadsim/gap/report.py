@@ -1,13 +1,13 @@
 """Outputs of the gap diagnosis: JSON (``quadsim.gap/3``), a human summary that leads with
-the answer in words, an HTML report (answer, evidence per flight with units, plots, the JSON
-in a collapsed appendix), and a rerun recording of the residuals.
+the answer in words, the HTML report (:mod:`quadsim.gap.page`: the answer first, figures as
+inline SVG, the JSON in a collapsed appendix), and a rerun recording of the residuals.
 
 Sections, in the order of the file:
 
 1. **The result's JSON Schema** (:data:`GAP_SCHEMA`, :func:`validate`).
 2. **JSON, the summary, the HTML page and the rerun recording** (:func:`to_json`,
    :func:`write_json`, :func:`summary`, :func:`write_html`, :func:`write_rerun`).
-3. **The per-flight summary and page** (:func:`flights_summary`, :func:`flights_html`).
+3. **The per-flight summary** (:func:`flights_summary`, :func:`gather_delay_notes`).
 4. **A diagnosed model as an effect file** (:func:`added_effects`, :func:`named_candidate`).
 
 The result's JSON Schema
@@ -22,9 +22,11 @@ Each flight carries ``probability`` (of its verdict's reading), ``posterior`` (e
 most probable first: name, probability, magnitude in words, log evidence, determined
 ``params`` with 95 % ``ci``, ``undetermined`` parameter names, ``fixed``, ``variant``),
 ``lack_of_fit`` (channel -> RMS over the references' typical RMS, only channels beyond
-them), ``differ_on`` (channels that separate the two leading readings), ``symptom`` (the
-flight's largest mean residual against the reference model), ``envelope`` (where the flight
-lies against its references' envelope, :mod:`quadsim.gap.envelope`) and ``tentative``; an outcome
+them), ``residual`` (RMS per channel before and after the answer over the references', the
+share of the excess removed, in words), ``differ_on`` (channels that separate the two
+leading readings), ``symptom`` (the flight's largest mean residual against the reference
+model), ``envelope`` (where the flight lies against its references' envelope,
+:mod:`quadsim.gap.envelope`) and ``tentative``; an outcome
 ``refused`` with its ``reason`` for a flight that could not be judged. The result carries
 ``reference_model`` (shared parameters with standard error and between-flight scatter,
 per-channel sigma and correlation time, reference delays) instead of
@@ -42,17 +44,10 @@ The object is :meth:`quadsim.gap.result.Diagnosis.to_json`.
 
 Per-flight outputs
 ------------------
-The text summary and the HTML page of ``--per-flight`` results. The page opens with one table --
-flight, verdict, probability, magnitude of the leading reading, what remains (channels beyond the
-reference flights, or nothing; a refused flight's reason) -- and states each answer there only.
-Below it: the shared symptoms (flights whose largest mean residual against the reference model is on
-the same channel with the same sign, at least two of them; one column per verdict listing those
-flights, so the readings of one symptom stand side by side), the other readings per flight
-(runners-up with their magnitudes, what would separate the leaders), one table of every flight's
-signal delays and delay notes, the remaining notes, and the reference model. Only values the data
-determine are shown (:mod:`quadsim.gap.judge`; a reference value the reference flights do
-not determine is written as such). The page fits a 1400 px window (its style sheet,
-:func:`write_html`: long cells wrap). ``tests/test_report_flights.py`` parses it.
+The text summary of ``--per-flight`` results: the batch's answer, then per flight its answer
+and its residual against the references' (``residual.text``, the report's words). The HTML
+page of both modes is :mod:`quadsim.gap.page` (figures :mod:`quadsim.gap.plots`); the rerun
+recording carries the same series (:mod:`quadsim.gap.recording`).
 
 Store a diagnosed model
 -----------------------
@@ -79,22 +74,16 @@ Example::
 
 from __future__ import annotations
 
-import base64
-import html
-import io
 import json
 import re
 from pathlib import Path
 
-import numpy as np
-
 from ..core.errors import InputError
 from ..core.files import atomic_write_text
 from ..effects import EFFECTS
-from .residual import channel_unit
 from .result import plain
 
-__all__ = ["GAP_SCHEMA", "added_effects", "document", "flights_html", "flights_summary",
+__all__ = ["GAP_SCHEMA", "added_effects", "document", "flights_summary",
            "gather_delay_notes", "named_candidate", "summary", "to_json", "validate",
            "write_html", "write_json", "write_rerun"]
 
@@ -230,7 +219,13 @@ _FLIGHT = {
                        "outside": {"type": "boolean"}, "distance": {"type": "number"},
                        "furthest": {"type": ["string", "null"]}, "rms": _NUMBER_MAP,
                        "place": {"type": ["number", "null"]}, "text": {"type": "string"}}},
-                   "lack_of_fit": _NUMBER_MAP},
+                   "lack_of_fit": _NUMBER_MAP,
+                   "residual": {"type": "object",
+                                "required": ["rms_before", "rms_after", "removed", "text"],
+                                "properties": {"rms_before": _NUMBER_MAP,
+                                               "rms_after": _NUMBER_MAP,
+                                               "removed": {"type": ["number", "null"]},
+                                               "text": {"type": "string"}}}},
 }
 
 #: JSON Schema (draft 2020-12) of the result.
@@ -389,147 +384,34 @@ def summary(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _png(fig) -> str:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=90, bbox_inches="tight", metadata={"Software": None})
-    import matplotlib.pyplot as plt
+def write_html(path: str | Path, result) -> Path:
+    """The report (:func:`quadsim.gap.page.page`: the answer first, figures as inline SVG, a
+    unit in every table cell) with the JSON in a collapsed appendix, written atomically."""
+    from .page import page
 
-    plt.close(fig)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
-
-
-def _figures(result: dict) -> list[tuple[str, str]]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figs = []
-    series = getattr(result, "series", None)
-    if series is not None:
-        channels = series.channels[:6]
-        fig, axes = plt.subplots(6, 1, figsize=(9, 10), sharex=True)
-        for k, ax in enumerate(axes):
-            ax.plot(series.t, series.before[:, k], lw=0.8, label="nominal")
-            ax.plot(series.t, series.after[:, k], lw=0.8, label="with verdict")
-            ax.set_ylabel(f"{channels[k]} ({channel_unit(channels[k])})")
-        axes[0].legend(loc="upper right")
-        axes[-1].set_xlabel("t (s)")
-        figs.append((f"Residual wrench, held-out flight {Path(series.flight).name}", _png(fig)))
-    effects = result["effects"]
-    if effects:
-        fig, ax = plt.subplots(figsize=(8, 3.5))
-        names = [e["name"] for e in effects] + ["nominal_refit"]
-        values = [100 * e["reduction"] for e in effects] + [100 * result["baseline"]["reduction"]]
-        ax.barh(names[::-1], values[::-1])
-        ax.set_xlabel("held-out gap reduction (%)")
-        figs.append(("Candidate effects", _png(fig)))
-    where = result["where"]
-    if where.get("kstep_before"):
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
-        for key, label in (("kstep_before", "nominal"), ("kstep_after", "with verdict")):
-            horizons = [float(h) for h in where[key]]
-            pos = [v["position_rms_m"] or np.nan for v in where[key].values()]
-            att = [v["attitude_rms_rad"] or np.nan for v in where[key].values()]
-            ax[0].loglog(horizons, pos, "o-", label=label)
-            ax[1].loglog(horizons, att, "o-", label=label)
-        ax[0].set_xlabel("horizon (s)"), ax[0].set_ylabel("position RMS (m)")
-        ax[1].set_xlabel("horizon (s)"), ax[1].set_ylabel("attitude RMS (rad)")
-        ax[0].legend()
-        figs.append(("k-step prediction error (multiple shooting, analytic engine)", _png(fig)))
-    return figs
+    return atomic_write_text(path, page(result, to_json(result)))
 
 
-def _flight_html(f: dict, reference: bool) -> str:
-    rows = "".join(
-        f"<tr><td>{html.escape(k)}</td><td>{c['before']:.3g}</td><td>{c['after']:.3g}</td>"
-        f"<td>{c['floor']:.3g}</td><td>{html.escape(c['unit'])}</td>"
-        f"<td>{'yes' if c['at_floor'] else 'no'}</td></tr>"
-        for k, c in f.get("channels", {}).items())
-    floor = "reference flights' held-out RMS" if reference else "noise: 0.5 s scatter"
-    table = ("<table><tr><th>channel</th><th>RMS nominal</th><th>RMS with verdict</th>"
-             f"<th>floor ({floor})</th><th>unit</th><th>at floor</th></tr>{rows}</table>")
-    alts = "".join(
-        f"<li><b>{html.escape(a['name'])}</b>: {html.escape(a['magnitude'])}"
-        f"{'' if a['plausible'] else ' — <i>implausible magnitude, not named</i>'}"
-        f"; torques left: {html.escape(a.get('torque_yaw', ''))}"
-        f"{'; separate by: ' + html.escape(a['separate_by']) if a.get('separate_by') else ''}"
-        f"{'; prior: ' + html.escape(a['prior']) if a.get('prior') else ''}</li>"
-        for a in f.get("alternatives", []))
-    notes = "".join(f"<li>{html.escape(n)}</li>" for n in f.get("notes", []))
-    return (f"<p><b>{html.escape(f.get('answer', ''))}</b></p>{table}"
-            + (f"<p>Collinear alternatives (most plausible first):</p><ul>{alts}</ul>"
-               if alts else "") + (f"<ul>{notes}</ul>" if notes else ""))
+def write_rerun(path: str | Path, result) -> Path | None:
+    """The residual series of the report (:func:`quadsim.gap.recording.recording`) as a rerun
+    recording via :func:`quadsim.viewer.try_save_recording` (None and a message when there
+    is none or the viewer is unavailable)."""
+    from .recording import recording
 
-
-def write_html(path: str | Path, result: dict) -> Path:
-    """A self-contained HTML page: the answer in words, the evidence per flight (residual
-    RMS before/after with units against the floor, alternatives), plots (base64 PNG), and
-    the JSON in a collapsed appendix."""
-    per_flight = result.get("mode") == "per-flight"
-    body = [f"<h1>quadsim gap diagnosis: {html.escape(str(result.get('model', '')))}</h1>",
-            f"<h2>Answer</h2><p><b>{html.escape(result['verdict'].get('answer', ''))}</b></p>"]
-    if per_flight:
-        body = body[:1] + flights_html(result)
-    else:
-        body.append("<h2>Evidence</h2>" + _flight_html(result["verdict"], False))
-        body.append(f"<h2>Summary</h2><pre>{html.escape(summary(result))}</pre>")
-        for title, png in _figures(result):
-            body.append(f"<h2>{html.escape(title)}</h2><img src=\"data:image/png;base64,{png}\">")
-    body.append(f"<details><summary>Appendix: result JSON ({html.escape(result['schema'])})"
-                f"</summary><pre>{html.escape(to_json(result))}</pre></details>")
-    page = ("<!doctype html><html><head><meta charset=\"utf-8\"><title>quadsim gap</title>"
-            "<style>body{font-family:sans-serif;max-width:1400px;margin:auto}"
-            "img{max-width:100%}table{border-collapse:collapse;max-width:100%}"
-            "td,th{border:1px solid #ccc;padding:2px 6px;text-align:left;"
-            "vertical-align:top;overflow-wrap:anywhere}"
-            "pre{white-space:pre-wrap;overflow-wrap:anywhere}</style></head><body>"
-            + "\n".join(body) + "</body></html>\n")
-    return atomic_write_text(path, page)
-
-
-def write_rerun(path: str | Path, result: dict) -> Path | None:
-    """Residual wrench (nominal and with the verdict) over the first held-out flight, via
-    :func:`quadsim.viewer.try_save_recording` (None and a message when unavailable)."""
-    series = getattr(result, "series", None)
-    if series is None:
-        print("note: --rerun: no residual series in this result (per-flight mode); skipped")
+    options = recording(result)
+    if options is None:
+        print("note: --rerun: no residual series in this result; skipped")
         return None
     try:
         from ..viewer import try_save_recording
     except ImportError as exc:  # pragma: no cover - viewer is part of the package
         print(f"note: --rerun skipped: {exc}")
         return None
-    from ..vehicle.state import Trajectory
+    return try_save_recording(path, **options)
 
-    s = series.states
-    flight = Trajectory(s.t, s.position, s.velocity, s.quat, s.body_rate, s.rotor_speed,
-                        engine="log")
-    labels = list(series.channels[:6])
-    residuals = {"nominal": (s.t, series.before[:, :6], labels),
-                 "with_verdict": (s.t, series.after[:, :6], labels)}
-    return try_save_recording(path, params=series.params, trajectories={"log": flight},
-                              residuals=residuals, title="quadsim gap: residual wrench",
-                              tab="residuals")
-
-
-# --- per-flight outputs -----------------------------------------------------------------------
 
 def _short(path: str) -> str:
     return Path(path).name
-
-
-def _lead(f: dict) -> dict:
-    return f["posterior"][0] if f.get("posterior") else {}
-
-
-def _remains(f: dict) -> str:
-    if f["outcome"] == "refused":
-        return f.get("reason", "")
-    lack = f.get("lack_of_fit") or {}
-    if lack:
-        return ", ".join(f"{k} {v:.2g}x the references" for k, v in lack.items())
-    return "nothing beyond the reference flights"
 
 
 def _prob(f: dict) -> str:
@@ -538,7 +420,8 @@ def _prob(f: dict) -> str:
 
 
 def flights_summary(result: dict) -> str:
-    """A few lines for people: the answer, then one line per flight."""
+    """A few lines for people: the answer, then per flight its answer and its residual
+    against the references' before and after it (the words of the report)."""
     model = result.get("reference_model", {})
     lines = [f"answer: {result['verdict'].get('answer', '')}",
              (f"per-flight diagnosis against {len(result['reference'])} reference flights "
@@ -548,6 +431,8 @@ def flights_summary(result: dict) -> str:
         said = answer.startswith(f["verdict"]) or f["outcome"] == "refused"
         lines.append(f"  {_short(f['file'])}: " + (answer if said else
                                                    f"{f['verdict']} ({_prob(f)}): {answer}"))
+        if f.get("residual"):        # the report's words (quadsim.gap.words.residual_text)
+            lines.append(f"    {f['residual']['text']}")
     lines += [f"note: {note}" for note in gather_delay_notes(result.get("notes", []))]
     return "\n".join(lines) + "\n"
 
@@ -590,142 +475,6 @@ def gather_delay_notes(notes: list[str]) -> list[str]:
                   f"({why}): {', '.join(files)}")
     return out
 
-
-def _table(head: list[str], rows: list[list[str]]) -> str:
-    th = "".join(f"<th>{html.escape(h)}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
-                   for r in rows)
-    return f"<table><tr>{th}</tr>{body}</table>"
-
-
-def _groups(flights: list[dict]) -> str:
-    groups: dict[tuple, list[dict]] = {}
-    for f in flights:
-        s = f.get("symptom") or {}
-        if s and f["outcome"] != "refused" and s.get("sigmas", 0) >= 1.0:
-            groups.setdefault((s["channel"], s["sign"]), []).append(f)
-    shared = {key: members for key, members in groups.items() if len(members) >= 2}
-    counts: dict[str, int] = {}
-    for members in shared.values():
-        for f in members:
-            counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
-    order = sorted(counts, key=lambda v: (-counts[v], v))
-    rows = []
-    for (channel, sign), members in sorted(shared.items(), key=lambda kv: (-len(kv[1]), kv[0])):
-        verdicts: dict[str, list[str]] = {}
-        for f in members:
-            verdicts.setdefault(f["verdict"], []).append(_short(f["file"]))
-        values = sorted(members, key=lambda f: f["symptom"]["value"])
-        span = values[0]["symptom"]["text"]
-        if len(values) > 1 and values[-1]["symptom"]["text"] != span:
-            span += f" .. {values[-1]['symptom']['text'].split(' ', 1)[-1]}"
-        rows.append([f"{channel} {sign}", str(len(members)), span] + [
-            f"{len(verdicts.get(v, []))}: {', '.join(verdicts[v])}" if v in verdicts else "-"
-            for v in order])
-    if not rows:
-        return ""
-    return ("<h2>Shared symptoms</h2><p>Flights whose largest mean residual against the "
-            "reference model lies on the same channel with the same sign, and what each was "
-            "judged (one column per verdict).</p>"
-            + _table(["symptom", "flights", "range", *order], rows))
-
-
-def _is_delay_note(note: str) -> bool:
-    return "signal delays vs motion capture" in note or "not resolvable" in note
-
-
-def _delay_remark(f: dict) -> str:
-    """A flight's delay notes other than its delay values (an unresolved delay): the part
-    after the file name, joined."""
-    out = []
-    for note in f.get("notes", []):
-        if _is_delay_note(note) and "signal delays vs motion capture" not in note:
-            out.append(note.split(": ", 1)[-1])
-    return "; ".join(out)
-
-
-def _delays(flights: list[dict], result: dict) -> str:
-    """One table of every flight's signal delays (ms) and delay notes, references first."""
-    keys = sorted({k for f in flights for k in (f.get("signal_delays_ms") or {})})
-    remarks = [_delay_remark(f) for f in flights]
-    if not keys and not any(remarks):
-        return ""
-    ref = (result.get("reference_model") or {}).get("delays_ms", {})
-    rows = [["references (mean ± sd)"] + [
-        f"{ref[k]['mean']:+.1f} ± {ref[k]['sd']:.1f}" if k in ref else "-" for k in keys] + [""]]
-    for f, remark in zip(flights, remarks):
-        d = f.get("signal_delays_ms") or {}
-        if f["outcome"] == "refused" and not d:
-            continue
-        rows.append([_short(f["file"])] + ["-" if d.get(k) is None else f"{d[k]:+.1f}"
-                                           for k in keys] + [remark])
-    return ("<h2>Signal delays against motion capture (ms)</h2><p>Estimated per flight; a "
-            "gyro delay of 1.5 samples or more is shifted out before fitting, the others are "
-            "reported only.</p>" + _table(["flight"] + keys + ["note"], rows))
-
-
-def _readings(f: dict) -> str:
-    """The readings after the leading one (the table states that one), what separates."""
-    items = "".join(
-        f"<li><b>{html.escape(r['name'])}</b> {100 * r['probability']:.1f} %: "
-        f"{html.escape(r['magnitude'])}"
-        + (f" <i>(not determined: {html.escape(', '.join(r['undetermined']))})</i>"
-           if r.get("undetermined") else "") + "</li>"
-        for r in f.get("posterior", [])[1:4] if r["probability"] >= 0.01)
-    extra = ""
-    if f.get("differ_on"):
-        differ = html.escape(", ".join(f["differ_on"]))
-        extra = f"<p>The two leading readings differ most on {differ}.</p>"
-    for other, how in (f.get("separate_by") or {}).items():
-        extra += f"<p>To separate from {html.escape(other)}: {html.escape(how)}.</p>"
-    if not items and not extra:
-        return ""
-    return (f"<ul>{items}</ul>" if items else "") + extra
-
-
-def flights_html(result: dict) -> list[str]:
-    """The body parts of the per-flight page (module doc)."""
-    flights = result["flights"]
-    rows = [[_short(f["file"]), f["verdict"], _prob(f),
-             _lead(f).get("magnitude", "") if f["outcome"] == "effect" else
-             (f.get("answer", "") if f["outcome"] != "no_significant_gap" else "-"),
-             _remains(f)] for f in flights]
-    body = [f"<p><b>{html.escape(result['verdict'].get('answer', ''))}</b></p>",
-            _table(["flight", "verdict", "probability", "magnitude", "what remains"], rows),
-            _groups(flights)]
-    others = [(f, _readings(f)) for f in flights if f["outcome"] != "refused"]
-    if any(text for _, text in others):
-        body.append("<h2>Other readings per flight</h2>")
-        body += [f"<h3>{html.escape(_short(f['file']))}</h3>" + text for f, text in others
-                 if text]
-    body.append(_delays(flights, result))
-    notes = [n for f in flights for n in f.get("notes", []) if not _is_delay_note(n)]
-    notes += gather_delay_notes(result.get("notes", []))     # the references' own
-    if notes:
-        body.append("<h2>Notes</h2><ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes)
-                    + "</ul>")
-    body.append(_reference_model(result.get("reference_model") or {}))
-    return [part for part in body if part]
-
-
-def _reference_model(model: dict) -> str:
-    """The shared parameters of the reference model; a value the reference flights do not
-    determine (``identified`` false) is not printed as a value."""
-    if not model:
-        return ""
-    known = model.get("identified", {})
-    rows = []
-    for k, v in model["params"].items():
-        if known.get(k, True):
-            rows.append([k, f"{v:.4g}", f"{model['se'].get(k, float('nan')):.2g}",
-                         f"{model['scatter'].get(k, float('nan')):.2g}"])
-        else:
-            rows.append([k, "not determined by the reference flights", "-", "-"])
-    return ("<h2>Reference model</h2>"
-            + _table(["shared parameter", "value", "standard error", "scatter"], rows))
-
-
-# --- a diagnosed model as an effect file ------------------------------------------------------
 
 def named_candidate(result: dict) -> str | None:
     """The candidate the verdict named (a combination's name when one was kept), or None."""
@@ -770,3 +519,12 @@ def added_effects(result: dict, name: str | None, *, logs: str,
             f"python -m quadsim.gap on {logs}: {name} candidate, {value:.4g} +- {ci:.2g} "
             f"(95 % CI){flag}; {share:.1f} % of the held-out gap"))
     return list(out.items())
+
+
+def __getattr__(name: str):
+    """Refuse a name that left this module with exactly what to change."""
+    if name == "flights_html":
+        raise ImportError("quadsim.gap.report.flights_html is gone: the whole page is "
+                          "quadsim.gap.page.page(result) (HTML text), or write_html(path, "
+                          "result)")
+    raise AttributeError(f"module 'quadsim.gap.report' has no attribute {name!r}")

@@ -22,7 +22,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["OUTCOMES", "Diagnosis", "Reading", "Series", "Verdict", "plain"]
+__all__ = ["OUTCOMES", "Diagnosis", "GapShare", "Reading", "Series", "Verdict", "plain"]
 
 #: a verdict's outcomes (``refused``: per flight only).
 OUTCOMES = ("effect", "no_significant_gap", "unexplained", "refused")
@@ -111,10 +111,14 @@ class Verdict(_JsonView):
     out, when a name was checked).
 
     Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
-    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``. Held out:
-    ``floor_source``, ``channels`` (RMS before/after/floor per channel, units),
-    ``alternatives``, ``best_candidate``, ``reduction`` and the gaps (mean squared residual
-    over sigma^2, 1 = noise)."""
+    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``; JSON ``residual`` (with
+    a ``series``): the RMS per channel before and after the answer over the references'
+    RMS, the share of the excess removed and its words (:class:`GapShare`,
+    :func:`quadsim.gap.words.residual_text`). Held out: ``floor_source``, ``channels`` (RMS
+    before/after/floor per channel, units), ``alternatives``, ``best_candidate``,
+    ``reduction`` and the gaps (mean squared residual over sigma^2, 1 = noise).
+    ``series``: per flight, the residual before and after the answer
+    (:func:`quadsim.gap.traces.flight_series`), not in the JSON."""
 
     outcome: str
     name: str
@@ -156,6 +160,8 @@ class Verdict(_JsonView):
     #: per flight: whether the references judge themselves clean
     #: (:class:`quadsim.gap.selfcheck.SelfCheck`); None without a self-check
     self_check_clean: bool | None = None
+    #: per flight: the residual before and after the answer (:mod:`.traces`; not in the JSON)
+    series: Series | None = None
 
     def __repr__(self) -> str:
         where = f"{self.file!r}, " if self.file is not None else ""
@@ -186,16 +192,23 @@ class Verdict(_JsonView):
         out.update({k: getattr(self, k) for k in keys})
         if self.file is not None and self.envelope is not None:
             out["envelope"] = self.envelope
+        if self.file is not None and self.series is not None and self.series.sigma is not None:
+            from .words import residual_text
+
+            share = self.series.share()
+            out["residual"] = dict(share.to_json(), text=residual_text(share, self.outcome))
         return plain(out)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
 class Series:
-    """Arrays for plots and recordings, over the first held-out flight (not in the JSON):
-    ``t`` (N,) s; ``before``/``after`` (N, C) residuals in channel units (N, N m, rad/s) under
-    the nominal model and with the verdict's effects; ``channels`` (C names); ``flight`` its
-    name; ``states`` (:class:`quadsim.gap.residual.FlightStates`), ``params`` and
-    ``effects`` (the model with the verdict)."""
+    """Arrays for plots and recordings (not in the JSON): held out over the first held-out
+    flight, per flight over each judged flight (:func:`quadsim.gap.traces.flight_series`).
+    ``t`` (N,) s; ``before``/``after`` (N, C) residuals in channel units (N, N m, rad/s)
+    under the reference (held out: nominal) model and with the answer; ``channels`` (C
+    names); ``flight`` its name; ``states`` (:class:`quadsim.gap.residual.FlightStates`),
+    ``params`` and ``effects`` (the model with the answer); ``sigma`` (C,) the references'
+    residual RMS per channel at this flight (channel units; None held out)."""
 
     t: np.ndarray
     before: np.ndarray
@@ -205,6 +218,35 @@ class Series:
     states: object
     params: object
     effects: tuple = ()
+    sigma: np.ndarray | None = None
+
+    def share(self, sigma=None) -> GapShare:
+        """:class:`GapShare` against ``sigma`` (C,; default ``self.sigma``)."""
+        sigma = np.asarray(self.sigma if sigma is None else sigma, float)
+        before = np.mean(self.before ** 2, axis=0) / sigma ** 2
+        after = np.mean(self.after ** 2, axis=0) / sigma ** 2
+        excess = float(np.sum(np.maximum(before - 1.0, 0.0)))
+        left = float(np.sum(np.maximum(after - 1.0, 0.0)))
+        return GapShare(tuple(self.channels), np.sqrt(before), np.sqrt(after),
+                        None if excess <= 0 else 1.0 - left / excess)
+
+
+@dataclass(frozen=True, eq=False)
+class GapShare:
+    """A flight's residual against the references' level: ``before`` and ``after`` (C,) the
+    RMS per channel over the references' RMS sigma_c (1 = a reference flight's level),
+    ``removed`` the share of the excess mean square the answer removes, 1 - sum_c
+    max(0, after_c^2 - 1) / sum_c max(0, before_c^2 - 1) (None: no excess before)."""
+
+    channels: tuple
+    before: np.ndarray
+    after: np.ndarray
+    removed: float | None
+
+    def to_json(self) -> dict:
+        return plain({"rms_before": dict(zip(self.channels, map(float, self.before))),
+                      "rms_after": dict(zip(self.channels, map(float, self.after))),
+                      "removed": self.removed})
 
 
 @dataclass(frozen=True, eq=False, repr=False)

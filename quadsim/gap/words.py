@@ -14,6 +14,8 @@ Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here deci
   ``"training"`` (held out: "Unexplained: ... does not carry over"; a systematic
   remainder beyond the noise model is worded with its size in the channel's unit).
 * :func:`batch_answer`: the per-flight result's one line (verdict counts).
+* :func:`residual_text`: a judged flight's residual against the references' before and after
+  its answer (the report's and the summary's line, the JSON's ``residual.text``).
 
 Probabilities print as whole percent (``> 99 %`` from 0.995 in held-out wording).
 """
@@ -27,7 +29,7 @@ from .priors import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",
-           "reference_text"]
+           "reference_text", "residual_text"]
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -293,3 +295,22 @@ def batch_answer(flights: list) -> str:
         f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
         if k != "refused")
     return text + (f"; {refused} refused (see each flight's reason)" if refused else "")
+
+
+def residual_text(share, outcome: str) -> str:
+    """A flight's residual against the references' level in words
+    (:class:`quadsim.gap.result.GapShare`; ``outcome`` its verdict's): the largest channel
+    before and after the answer, as RMS over the references' RMS, and the share of the
+    excess the answer removes, e.g. "Residual up to 16.6x the references' RMS (Fz) before
+    the answer, 5.1x (Fy) after it: it removes 87 % of the excess". A flight with no
+    significant gap gets the largest channel only (its small excess is noise)."""
+    first = int(np.argmax(share.before))
+    last = int(np.argmax(share.after))
+    text = (f"Residual up to {share.before[first]:.2g}x the references' RMS "
+            f"({share.channels[first]})")
+    if outcome == "no_significant_gap" or outcome == "refused":
+        return text + "."
+    text += f" before the answer, {share.after[last]:.2g}x ({share.channels[last]}) after it"
+    if share.removed is None:
+        return text + "."
+    return text + f": it removes {100 * share.removed:.0f} % of the excess."
