@@ -123,6 +123,12 @@ def test_verdict_carries_a_posterior_ranked_by_its_own_key(cf):
         assert not set(e["params"]) & set(e["undetermined"])
     assert all(c["at_floor"] for c in v["channels"].values())
     assert v["answer"].startswith("Behaves as if") and "rotor_2 -8" in v["answer"]
+    # the plots' series: one per held-out flight, its residual with the answer below before
+    assert [s.flight for s in result.held_series] == list(result["holdout"])
+    assert result.series is result.held_series[0]
+    s = result.held_series[0]
+    assert s.before.shape == s.after.shape == (len(s.t), len(s.channels))
+    assert np.mean(s.after ** 2) < np.mean(s.before ** 2)
     assert "every channel" in v["answer"]
 
 

@@ -5,6 +5,7 @@ the series of a judged synthetic flight against the physics of its known payload
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import types
 import warnings
@@ -284,6 +285,12 @@ def test_held_out_page_draws_the_held_out_flight():
     for _, css, text in parsed.cells:
         if "name" not in css.split() and re.search(r"\d", text):
             assert UNIT.search(text), text
+    # two held-out flights: each drawn (2 figures each) and named, plus the k-step figure
+    second = _series("/data/g.csv", 2.0, 1.0)
+    both = dataclasses.replace(result, holdout=("h", "g"), held_series=(series, second))
+    html = page(both)
+    assert _parse(html).svgs == 5
+    assert "Held-out flight h.csv" in html and "Held-out flight g.csv" in html
 
 
 # --- the series of a judged flight -------------------------------------------------------

@@ -304,6 +304,9 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:
         combination = decision.entry(decision.lead_name)
+    held_series = tuple(Series(h.t, b * sigma, a * sigma, tuple(names), f.name, h, params,
+                               tuple(effects_after))
+                        for h, b, a, f in zip(held_on, before, after, held))
     return Diagnosis(
         SCHEMA, params.name, "held-out", verdict=verdict,
         train=tuple(f.name for f in train), holdout=tuple(f.name for f in held),
@@ -317,8 +320,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
         checks=checks, notes=tuple(notes) + more,
         base_effects=tuple({"name": e.name, "params": {
             p.name: float(getattr(e, p.name)) for p in e.parameters}} for e in base),
-        series=Series(held_on[0].t, before[0] * sigma, after[0] * sigma, tuple(names),
-                      held[0].name, held_on[0], params, tuple(effects_after)))
+        series=held_series[0],
+        held_series=held_series)
 
 
 def params_have_data_map(params: VehicleParams) -> bool:

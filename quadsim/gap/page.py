@@ -406,8 +406,10 @@ def _held_out(result) -> list[str]:
         body.append("<h2>Readings weighed</h2>" + _table(
             ["reading", "probability among the readings weighed",
              "held-out gap removed", "parameters (95 % intervals)"], ranking))
-    series = getattr(result, "series", None)
-    if series is not None and channels:
+    held = tuple(getattr(result, "held_series", ()) or ())
+    if not held and getattr(result, "series", None) is not None:
+        held = (result.series,)
+    for series in held if channels else ():
         band = np.array([channels[c]["floor"] if c in channels else np.nan
                          for c in series.channels])
         name = _short(series.flight)

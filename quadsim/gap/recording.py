@@ -1,8 +1,8 @@
 """What the rerun recording of a gap diagnosis carries (``--rerun OUT.rrd``): the same series
 as the report's figures (:mod:`quadsim.gap.plots`).
 
-Per flight with a residual series (per-flight mode: every judged flight; held out: the
-first held-out flight): its logged motion as a trajectory, and per wrench channel one plot
+Per flight with a residual series (per-flight mode: every judged flight; held out: every
+held-out flight): its logged motion as a trajectory, and per wrench channel one plot
 view with the residual before the answer, after it, and the references' 95 % band
 (+-1.96 sigma_c; held out: the floor), on the flight's own time stamps (s) in the channel's
 unit (N, N m).
@@ -43,7 +43,9 @@ def recording(result) -> dict | None:
         series = [f.series for f in getattr(result, "flights", ())
                   if getattr(f, "series", None) is not None]
     else:
-        series = [result.series] if getattr(result, "series", None) is not None else []
+        series = list(getattr(result, "held_series", ()) or ())
+        if not series and getattr(result, "series", None) is not None:
+            series = [result.series]
     if not series:
         return None
     trajectories, residuals = {}, {}

@@ -202,8 +202,9 @@ class Verdict(_JsonView):
 
 @dataclass(frozen=True, eq=False, repr=False)
 class Series:
-    """Arrays for plots and recordings (not in the JSON): held out over the first held-out
-    flight, per flight over each judged flight (:func:`quadsim.gap.traces.flight_series`).
+    """Arrays for plots and recordings (not in the JSON): held out over each held-out
+    flight (``Diagnosis.held_series``; ``Diagnosis.series`` the first), per flight over each
+    judged flight (:func:`quadsim.gap.traces.flight_series`).
     ``t`` (N,) s; ``before``/``after`` (N, C) residuals in channel units (N, N m, rad/s)
     under the reference (held out: nominal) model and with the answer; ``channels`` (C
     names); ``flight`` its name; ``states`` (:class:`quadsim.gap.residual.FlightStates`),
@@ -283,6 +284,8 @@ class Diagnosis(_JsonView):
     base_effects: tuple = ()
     notes: tuple = ()
     series: Series | None = None
+    #: held out: every held-out flight's :class:`Series`, in order (``series`` is the first)
+    held_series: tuple = ()
 
     def __repr__(self) -> str:
         judged = self.verdict if self.verdict is not None else f"{len(self.flights)} flights"
