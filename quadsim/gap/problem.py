@@ -35,9 +35,9 @@ from scipy.optimize import least_squares
 from ..core.errors import ModelError
 from .discrepancy import centre_term, columns
 from .explanations import DETERMINED, Explanation, own_effects
-from .fitting import arm_length, curve_bound, effect_class, residuals
+from .fitting import parameter_bounds as fit_bounds
+from .fitting import residuals
 from .memo import memoised
-from .priors import curve_quadratic_bounds
 from .reference import Reference, rotor_spectra, shifted
 from .rotor_channel import min_time_constant
 
@@ -162,37 +162,20 @@ class Marginal:
 def parameter_bounds(expl: Explanation, reference: Reference, dt: float
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) of ``expl``'s parameters in their SI units: each effect parameter's
-    plausible range, narrowed where the vehicle sets a tighter one -- a motor lag of at least
-    :func:`~quadsim.gap.rotor_channel.min_time_constant` of the fit step ``dt`` (s; the rotor
-    channel's Heun sub-step resolves no shorter one); a mass offset within -1/2 .. 2 x the
-    vehicle's mass; a payload's position within the rotor arm and a CoM shift within half
-    of it (on the airframe); the thrust curve within :func:`~quadsim.gap.fitting.curve_bound` and
-    :func:`~quadsim.gap.priors.curve_quadratic_bounds` -- and a fitted delay within
-    +-:data:`DELAY_BOUND_S`."""
-    lower, upper = [], []
+    declared bounds narrowed by its fit window for this vehicle (the effect's facts,
+    :func:`quadsim.gap.fitting.parameter_bounds`: a mass offset within -1/2 .. 2 x the
+    vehicle's mass, a payload within the rotor arm, a CoM shift within half of it, the thrust
+    curve within the hover thrust per rad/s and :func:`~quadsim.gap.priors.curve_quadratic_bounds`);
+    a motor lag of at least :func:`~quadsim.gap.rotor_channel.min_time_constant` of the fit
+    step ``dt`` (s; the rotor channel's Heun sub-step resolves no shorter one); a fitted delay
+    within +-:data:`DELAY_BOUND_S`."""
+    lower, upper = (list(x) for x in fit_bounds(expl, reference.params))
+    k = 0
     for name, _, fitted in expl.parts:
-        cls = effect_class(name)
-        specs = {p.name: p for p in cls.parameters}
-        for p in fitted:
-            lo, hi = specs[p].lower, specs[p].upper
+        for _p in fitted:
             if name == "motor_lag":
-                lo = max(lo, min_time_constant(dt))
-            if name == "mass_offset" and p == "mass":
-                lo, hi = max(lo, -0.5 * reference.params.mass), min(hi, 2 * reference.params.mass)
-            elif name == "mass_offset":         # a payload within the rotors' span
-                arm = arm_length(reference.params)
-                lo, hi = max(lo, -arm), min(hi, arm)
-            if name == "com_offset":
-                arm = arm_length(reference.params)
-                lo, hi = max(lo, -0.5 * arm), min(hi, 0.5 * arm)
-            if name == "thrust_curve" and p == "linear":
-                bound = curve_bound(reference.params)
-                lo, hi = max(lo, -bound), min(hi, bound)
-            if name == "thrust_curve" and p == "quadratic":
-                low, high = curve_quadratic_bounds(reference.params)
-                lo, hi = max(lo, low), min(hi, high)
-            lower.append(lo)
-            upper.append(hi)
+                lower[k] = max(lower[k], min_time_constant(dt))
+            k += 1
     if expl.shift:
         lower.append(-DELAY_BOUND_S)
         upper.append(DELAY_BOUND_S)
