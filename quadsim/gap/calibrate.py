@@ -445,15 +445,17 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
+    if curve and CURVE_KEY in cand.parameter_names:
+        # before the refinement, which changes only the wind's standard errors: a slope the
+        # pooled fit leaves undetermined ends this calibration without paying for it
+        j = cand.parameter_names.index(CURVE_KEY)
+        if not _slope_kept(fit.stderr[j], bool(fit.identifiable[j]), params):
+            return None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
                                               shift=start, sigma=sigma0)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
-    if curve and CURVE_KEY in cand.parameter_names:
-        j = cand.parameter_names.index(CURVE_KEY)
-        if not _slope_kept(stderr[j], bool(fit.identifiable[j]), params):
-            return None
     states = [aligned(f, shift) for f in flights]
     discrepancy = fit_discrepancy([residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                                    for s in states], states)
