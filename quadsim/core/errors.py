@@ -65,6 +65,20 @@ def printable(text: object, limit: int = MAX_MESSAGE) -> str:
     return line if len(line) <= limit else line[:limit - 3] + "..."
 
 
+def refuse_moved(module: str, gone: dict[str, str]) -> Callable[[str], object]:
+    """A module-level ``__getattr__`` for ``module`` that refuses each name in ``gone`` (name ->
+    what to write instead, one sentence) with ``ImportError("<module>.<name> ...: <what>")``
+    and any other missing name with the usual AttributeError. Use: ``__getattr__ =
+    refuse_moved(__name__, {...})`` (CHANGELOG.md lists each such name)."""
+
+    def __getattr__(name: str):
+        if name in gone:
+            raise ImportError(f"{module}.{name} {gone[name]}")
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+
+    return __getattr__
+
+
 def field_error(path: object, field: str, message: str) -> InputError:
     """Build the package's standard one-line error: ``<file>: <field>: <message>``."""
     return InputError(f"{path}: {field}: {message}")

@@ -73,6 +73,7 @@ CLI: ``python -m quadsim.gap --help``. Result schema: :data:`GAP_SCHEMA`
 (``quadsim.gap/3``, :mod:`quadsim.gap.report`), documented in docs/gap.md.
 """
 
+from ..core.errors import refuse_moved
 from .diagnose import SCHEMA, diagnose, prepare
 from .per_flight import diagnose_per_flight
 from .report import GAP_SCHEMA, summary, to_json, validate, write_html, write_json, write_rerun
@@ -86,10 +87,6 @@ __all__ = ["GAP_SCHEMA", "SCHEMA", "Diagnosis", "Reading", "Verdict",
 _MOVED = {"synthetic_flight": "benchmarks.synthetic", "SensorNoise": "benchmarks.synthetic"}
 
 
-def __getattr__(name: str):
-    """Refuse a name that moved out of the package with exactly what to change."""
-    if name in _MOVED:
-        raise ImportError(f"quadsim.gap.{name} moved to {_MOVED[name]} (in the repository, "
-                          f"not the wheel): write `from {_MOVED[name]} import {name}` and run "
-                          "from a checkout")
-    raise AttributeError(f"module 'quadsim.gap' has no attribute {name!r}")
+__getattr__ = refuse_moved(__name__, {
+    name: f"moved to {where} (in the repository, not the wheel): write `from {where} import "
+          f"{name}` and run from a checkout" for name, where in _MOVED.items()})

@@ -72,7 +72,7 @@ from functools import partial
 
 import numpy as np
 
-from ..core.errors import InputError, ModelError
+from ..core.errors import InputError, ModelError, refuse_moved
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
@@ -148,13 +148,10 @@ EDGE_S = 0.2
 MAX_EDGE_SHARE = 0.1
 
 
-def __getattr__(name: str):
-    """Refuse ``MIN_GAIN`` (the benchmarks' threshold, moved out) with exactly what to change."""
-    if name == "MIN_GAIN":
-        raise ImportError("quadsim.gap.diagnose.MIN_GAIN moved to benchmarks.observe.MIN_GAIN "
-                          "(in the repository, not the wheel): write `from benchmarks.observe "
-                          "import MIN_GAIN` and run from a checkout")
-    raise AttributeError(f"module 'quadsim.gap.diagnose' has no attribute {name!r}")
+#: ``MIN_GAIN`` (the benchmarks' threshold) moved out: refused with exactly what to change
+__getattr__ = refuse_moved(__name__, {
+    "MIN_GAIN": "moved to benchmarks.observe.MIN_GAIN (in the repository, not the wheel): "
+                "write `from benchmarks.observe import MIN_GAIN` and run from a checkout"})
 
 
 @dataclass

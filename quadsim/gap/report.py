@@ -78,7 +78,7 @@ import json
 import re
 from pathlib import Path
 
-from ..core.errors import InputError
+from ..core.errors import InputError, refuse_moved
 from ..core.files import atomic_write_text
 from ..effects import EFFECTS
 from .result import plain
@@ -521,10 +521,6 @@ def added_effects(result: dict, name: str | None, *, logs: str,
     return list(out.items())
 
 
-def __getattr__(name: str):
-    """Refuse a name that left this module with exactly what to change."""
-    if name == "flights_html":
-        raise ImportError("quadsim.gap.report.flights_html is gone: the whole page is "
-                          "quadsim.gap.page.page(result) (HTML text), or write_html(path, "
-                          "result)")
-    raise AttributeError(f"module 'quadsim.gap.report' has no attribute {name!r}")
+__getattr__ = refuse_moved(__name__, {
+    "flights_html": "is gone: the whole page is quadsim.gap.page.page(result) (HTML text), "
+                    "or write_html(path, result)"})
