@@ -161,15 +161,17 @@ def differs(ev) -> dict:
     return out
 
 
-def rank(weighed: list) -> list[tuple[str, float, object]]:
+def rank(weighed: list, negligible=None) -> list[tuple[str, float, object]]:
     """Held out: (reading, probability, its best :class:`~quadsim.gap.heldout.Weighed`),
     most probable first: :func:`posterior` over each one's total evidence (training plus
-    held-out log-likelihood) with :func:`differs` as what is determined."""
+    held-out log-likelihood) with :func:`differs` as what is determined; ``negligible``:
+    practical significance, as :func:`posterior`'s."""
     by_ev = {}
     for w in weighed:
         ev = dataclasses.replace(w.total, determined=differs(w.train))
         by_ev[id(ev)] = (w, ev)
-    return [(k, p, by_ev[id(ev)][0]) for k, p, ev in posterior([e for _, e in by_ev.values()])]
+    return [(k, p, by_ev[id(ev)][0])
+            for k, p, ev in posterior([e for _, e in by_ev.values()], negligible)]
 
 
 # --- 2./3. lack of fit ----------------------------------------------------------------------
