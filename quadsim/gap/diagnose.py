@@ -79,6 +79,7 @@ from ..vehicle.params import VehicleParams
 from . import order
 from .calibrate import Reference, shared_candidate
 from .checks import check_length, vehicle_check
+from .discrepancy import centre_term, columns, fit_discrepancy
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitmodels import build_effect
 from .fitting import (
@@ -106,6 +107,7 @@ from .judge import (
 )
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Reading, Series
+from .selfcheck import SelfCheck, Spread, negligible, readings, spreads
 from .where import check as consistency_check
 from .where import scaled_residuals, where
 from .words import nominal_words
@@ -284,7 +286,9 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
                      tick=progress or (lambda *_: None))
     sigma = reference.sigma
-    before = scaled_residuals(held_on, params, list(base), sigma, rotor=rotor)
+    before = [_beyond(b * sigma - centre_term(h, reference.discrepancy, len(sigma)), h,
+                      reference)[0] / sigma for b, h in
+              zip(scaled_residuals(held_on, params, list(base), sigma, rotor=rotor), held_on)]
     decision = decide(weighed, train=fit_on, held=held_on, reference=reference,
                               before=before, max_combination=max_combination,
                               tick=progress or (lambda *_: None))
@@ -398,6 +402,8 @@ def nominal_reference(train: list, params: VehicleParams, rotor: bool,
     (carried as the shared candidate's ``base``) and never refitted."""
     dt = float(train[0].t[1] - train[0].t[0])
     nominal = [residuals(s, params, list(base), rotor_channel=rotor) for s in train]
+    discrepancy = fit_discrepancy(nominal, train)
+    nominal = [r - centre_term(s, discrepancy, r.shape[1]) for r, s in zip(nominal, train)]
     sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
     full = shared_candidate(rotor, False)
     cand = dataclasses.replace(full, parts=tuple(p for p in full.parts
@@ -408,8 +414,9 @@ def nominal_reference(train: list, params: VehicleParams, rotor: bool,
         off += [specs[p].off for p in fitted]
     theta = np.asarray(off, float)
     zeros = np.zeros_like(theta)
-    return Reference(params, rotor, cand, theta, zeros, zeros.copy(), sigma, tau,
-                     np.zeros_like(sigma), 1.0, 1, {}, [], {})
+    ref = Reference(params, rotor, cand, theta, zeros, zeros.copy(), sigma, tau,
+                    np.zeros_like(sigma), 1.0, 1, {}, [], {})
+    return dataclasses.replace(ref, discrepancy=discrepancy)
 
 
 def heldout_explanations(reference: Reference, train_states, names=None,
@@ -471,8 +478,27 @@ class Weighed:
         return self.train.name
 
 
-def _loglik(res: list[np.ndarray], reference: Reference) -> float:
-    return -0.5 * float(sum(np.sum(r ** 2 * reference.weights) for r in res))
+def _beyond(r: np.ndarray, states, reference: Reference) -> tuple[np.ndarray, float]:
+    """(residual, log-likelihood) of one flight's residual ``r`` (N, C; the discrepancy's
+    centre already off) with the flight's own discrepancy coefficients marginalised, exactly
+    (linear-Gaussian: the columns X of :func:`quadsim.gap.discrepancy.columns`, unit prior):
+    log L = -1/2 r_wᵀ r_w + 1/2 bᵀ (I + XᵀX)^-1 b - 1/2 log det(I + XᵀX), b = Xᵀ r_w, r_w the
+    residual times sqrt(:attr:`Reference.weights`). The residual returned is ``r`` less the
+    coefficients' posterior mean X (I + XᵀX)^-1 b (back in channel units): what the flight
+    shows beyond its references, the same on training and held-out flights, so that the
+    carry-over test compares like with like. Without a discrepancy: ``r`` and
+    -1/2 r_wᵀ r_w."""
+    root = np.sqrt(reference.weights)
+    rw = (r * root).ravel()
+    ll = -0.5 * float(rw @ rw)
+    if reference.discrepancy is None:
+        return r, ll
+    x = columns(states, reference.discrepancy, reference.weights)
+    a = np.eye(x.shape[1]) + x.T @ x
+    b = x.T @ rw
+    z = np.linalg.solve(a, b)
+    ll += 0.5 * float(b @ z) - 0.5 * float(np.linalg.slogdet(a)[1])
+    return r - (x @ z).reshape(r.shape) / root, ll
 
 
 def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
@@ -492,16 +518,19 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
 
 
 def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
-    """One explanation's residuals on both sets and its held-out log-likelihood."""
+    """One explanation's residuals on both sets and its held-out log-likelihood, each
+    flight's own discrepancy marginalised (:func:`_beyond`)."""
     effects = list(reference.candidate.base) + effects_of(ev)
 
     def res(states):
-        return residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+        r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+        return _beyond(r - centre_term(states, reference.discrepancy, r.shape[1]), states,
+                       reference)
 
     held_res = [res(s) for s in held]
-    ll = _loglik(held_res, reference)
-    return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll), [res(s) for s in train],
-                   held_res, ll)
+    ll = sum(h[1] for h in held_res)
+    return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll),
+                   [res(s)[0] for s in train], [h[0] for h in held_res], ll)
 
 
 def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: list,
@@ -580,6 +609,62 @@ def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> 
                              rotor=reference.rotor)
 
 
+#: how many leads in turn :class:`Practical` measures on the training flights one by one
+#: before the ranking stands (each a fit per training flight of one explanation)
+PRACTICAL_ROUNDS = 3
+
+
+class Practical:
+    """Held-out practical significance (:mod:`quadsim.gap.selfcheck`, the per-flight rule
+    with the training flights as the references): a reading is a difference only when, on
+    one of its own determined parameters, its 95 % interval lies beyond
+    :data:`quadsim.gap.selfcheck.PRACTICAL_Z` between-flight standard deviations of the same
+    reading fitted on each training flight alone, from the no-difference value (the prior's
+    centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``. The training flights share the
+    gap, so the scale is their spread about no difference, not about their mean. Measured
+    lazily (:meth:`rank`): only for the readings that lead, at most
+    :data:`PRACTICAL_ROUNDS` of them; none below 3 training flights (no spread to speak
+    of: the statistical rule alone)."""
+
+    def __init__(self, train: list, reference: Reference):
+        self.train, self.reference = train, reference
+        self.spreads: dict = {}
+
+    def negligible(self, ev) -> bool:
+        """Whether reading ``ev`` (an Evidence) is within the training flights' spread."""
+        return negligible(ev, SelfCheck((), (), (), self.spreads))
+
+    def rank(self, weighed: list) -> list:
+        """:func:`quadsim.gap.judge.rank` with practical significance: the lead's spread
+        over the training flights measured, then ranked again, until the lead is one
+        measured or "no difference"."""
+        ranked = rank(weighed, self.negligible)
+        for _ in range(PRACTICAL_ROUNDS):
+            name, _, lead = ranked[0]
+            key = (lead.name, lead.train.explanation.variant)
+            if name == "no_difference" or key in self.spreads or len(self.train) < 3:
+                break
+            self.spreads[key] = self.spread_of(lead)
+            ranked = rank(weighed, self.negligible)
+        return ranked
+
+    def spread_of(self, w: Weighed) -> dict:
+        """Parameter -> :class:`~quadsim.gap.selfcheck.Spread` (centre: the prior's; sd: the
+        between-flight SD) of ``w``'s explanation fitted on each training flight alone."""
+        expl = w.train.explanation
+        per = []
+        for states in self.train:
+            try:
+                per.append(readings(evaluate(states, self.reference, [expl], full=True)))
+            except (ModelError, ValueError, np.linalg.LinAlgError):
+                continue
+        centre = dict(zip(expl.parameter_names, expl.mean))
+        out = {}
+        for key, s in spreads(per).get((w.name, expl.variant), {}).items():
+            out[key] = Spread(float(centre.get(key, 0.0)), s.sd, s.count)
+        return out
+
+
 @dataclass(frozen=True)
 class Decision:
     """The weighed explanations of a split, ranked (:func:`decide`): ``ranked`` (reading,
@@ -627,7 +712,9 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         if not ok:
             implausible.append((w, text))
     dropped = {id(w) for w, _ in implausible}
-    ranked = rank([w for w in weighed if id(w) not in dropped])
+    kept = [w for w in weighed if id(w) not in dropped]
+    scale = Practical(train, reference)
+    ranked = scale.rank(kept)
     lead_name, _, lead = ranked[0]
     null = next((w for w in weighed if w.name == "no_difference"), None)
     combination = checked = None
@@ -647,7 +734,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         best = max(trials, key=lambda w: w.total.log_z, default=None)
         if best is not None:
             stands = every_part_stands(entry_of(best, 0.0, before, reference), params)
-            with_pair = rank(weighed + [best])
+            with_pair = scale.rank(weighed + [best])
             if stands and with_pair[0][2] is best:
                 ranked, combination = with_pair, best
                 lead_name, _, lead = ranked[0]

@@ -62,7 +62,7 @@ from .fitting import effect_class, noise_floor
 from .priors import candidate_plausibility
 from .residual import CHANNELS, channel_unit
 from .result import Reading, Verdict
-from .selfcheck import against_text, negligible
+from .selfcheck import NUISANCE, against_text, negligible
 from .words import answer, asserted, nominal_words, reading_text
 
 __all__ = ["CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P", "Baseline",
@@ -122,15 +122,26 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
 
 
 def reading_name(key: str, ev) -> str:
-    """The effects a reading asserts, joined by "+": ``key`` and each further effect of its
-    explanation with a value the data determine away from "off" (its 95 % interval, 1.96
-    posterior spreads, excludes the off value): a drag reading refitting the references'
-    wind is ``rotor_drag+wind`` when the flight's wind is not calm air."""
+    """The effects a reading asserts, joined by "+", the physical change that is largest
+    against the references first (:func:`change_sizes`, the lead rule): ``key`` and each
+    further effect of its explanation with a value the data determine away from "off" (its
+    95 % interval, 1.96 posterior spreads, excludes the off value): a drag reading refitting
+    the references' wind is ``rotor_drag+wind`` when the flight's wind is not calm air.
+
+    **The lead rule** (issue 47, item 5): ``key`` leads unless its own change against the
+    references is within :data:`LEAD_Z` prior spreads while another asserted part's exceeds
+    it; then the part with the largest change leads. The wind reading through a quadratic
+    drag whose C_d A is 8x the references' (prior spread: half of theirs) and whose wind is
+    0.06 m/s (prior spread 5 m/s) is a body drag -- ``body_drag``, or ``body_drag+wind``
+    where the wind's 95 % interval excludes calm air -- not a wind."""
+    sizes = change_sizes(ev)
     names = [key]
-    if key in ("no_difference", "wind"):     # a wind's own drag is the form of its force
+    if key == "no_difference":
         return key
     for part, _, fitted in ev.explanation.parts:
         if part in names or not fitted:
+            continue
+        if key == "wind" and part != "body_drag":     # a wind's own drag law is its form
             continue
         try:
             off = {p.name: p.off for p in effect_class(part).parameters}
@@ -138,7 +149,43 @@ def reading_name(key: str, ev) -> str:
             continue
         if any(asserted(ev, f"{part}.{p}", off.get(p, 0.0)) for p in fitted):
             names.append(part)
+    others = [n for n in names[1:] if sizes.get(n, 0.0) > LEAD_Z]
+    if key == "wind" and others:
+        names = [n for n in names if n != "wind"] + (
+            ["wind"] if any(asserted(ev, k) for k in ("wind.vx", "wind.vy")) else [])
+    elif key == "wind":
+        return key
+    if sizes.get(names[0], 0.0) <= LEAD_Z and others:
+        first = max(others, key=lambda n: sizes[n])
+        names = [first] + [n for n in names if n != first]
     return "+".join(names)
+
+
+#: the lead rule's size (:func:`reading_name`): a change within two prior spreads of the
+#: references' value (the prior's own 95 % band: a value it expects; the spread is half the
+#: larger end of the plausible range, :func:`quadsim.gap.explanations.prior_spreads`) is no
+#: physical change to lead an answer with. A wind's prior spread is 5 m/s and a refitted
+#: drag area's half the references' own: a drag twice theirs (2 spreads) does not take the
+#: lead from a wind, one 8x theirs (14 spreads) does
+LEAD_Z = 2.0
+
+
+def change_sizes(ev) -> dict:
+    """Effect -> its largest change against the references, in prior spreads, over its
+    determined parameters: |value - centre| / prior spread, the centre the prior's (the
+    references' value for a shared group or drag it refits, the no-difference value for an
+    effect of its own). Nuisance parameters (a delay, a swing's start, a speed exponent:
+    :data:`quadsim.gap.selfcheck.NUISANCE`) are not a change."""
+    centre = dict(zip(ev.explanation.parameter_names, ev.explanation.mean))
+    spread = dict(zip(ev.explanation.parameter_names, ev.explanation.sd))
+    out: dict = {}
+    for q, ok in ev.determined.items():
+        if not ok or q in NUISANCE or q.split(".")[-1] in NUISANCE or not spread.get(q):
+            continue
+        z = abs(ev.values[q] - centre.get(q, 0.0)) / spread[q]
+        part = q.split(".")[0]
+        out[part] = max(out.get(part, 0.0), float(z))
+    return out
 
 
 #: parameters that say no difference by themselves: a full voltage has no "off" value (the
@@ -161,15 +208,17 @@ def differs(ev) -> dict:
     return out
 
 
-def rank(weighed: list) -> list[tuple[str, float, object]]:
+def rank(weighed: list, negligible=None) -> list[tuple[str, float, object]]:
     """Held out: (reading, probability, its best :class:`~quadsim.gap.heldout.Weighed`),
     most probable first: :func:`posterior` over each one's total evidence (training plus
-    held-out log-likelihood) with :func:`differs` as what is determined."""
+    held-out log-likelihood) with :func:`differs` as what is determined; ``negligible``:
+    practical significance, as :func:`posterior`'s."""
     by_ev = {}
     for w in weighed:
         ev = dataclasses.replace(w.total, determined=differs(w.train))
         by_ev[id(ev)] = (w, ev)
-    return [(k, p, by_ev[id(ev)][0]) for k, p, ev in posterior([e for _, e in by_ev.values()])]
+    return [(k, p, by_ev[id(ev)][0])
+            for k, p, ev in posterior([e for _, e in by_ev.values()], negligible)]
 
 
 # --- 2./3. lack of fit ----------------------------------------------------------------------
@@ -360,11 +409,12 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
     verdict = lead.name if outcome == "effect" else outcome
     named = [r.name for r in stated if r.name != "no_difference"]
     effect = outcome == "effect"
-    unsure = (check is not None and not check.clean) or bool(left)
+    caveat = lead_caveat(best, reference.params) if outcome == "effect" else ""
+    unsure = (check is not None and not check.clean) or bool(left) or bool(caveat)
     words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
                    against="references", separate=separate,
                    tentative=p_top < CONFIDENT or unsure)
-    words += _normal_words(best if effect else None, check, left, share)
+    words += caveat + _normal_words(best if effect else None, check, left, share)
     return Verdict(
         outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
         form_remainder={k: v[0] for k, v in left.items()},
@@ -378,6 +428,59 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
         separate_by={r: priors.separation(verdict, [r])[r] for r in named
                      if r != verdict} if effect else {},
         file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
+
+
+#: a value within this share of its fit window's width from a bound is at the bound
+AT_BOUND = 1e-3
+
+
+def lead_caveat(ev, params) -> str:
+    """What the lead name must say about its own values (the lead rule's second half,
+    :func:`reading_name`): a determined value at a bound of its fit window
+    (:func:`quadsim.gap.fitting.parameter_bounds`, within :data:`AT_BOUND` of its width:
+    the data say only "at or beyond"; not a bound at the parameter's "off" value: none of
+    it) or outside its documented plausible range
+    (:func:`quadsim.gap.priors.candidate_plausibility`); "" where neither. A lead with a
+    caveat is tentative."""
+    from .fitting import parameter_bounds
+
+    names = [q for q in ev.explanation.parameter_names if q in ev.values]
+    try:
+        lower, upper = parameter_bounds(ev.explanation, params)
+    except (KeyError, ValueError):
+        lower = upper = ()
+    at = []
+    for q, lo, hi in zip(names, lower, upper):
+        if not ev.determined.get(q) or q.split(".")[-1] in NUISANCE or q in NUISANCE:
+            continue
+        width = hi - lo if np.isfinite(hi - lo) else max(abs(lo), abs(hi), 1.0)
+        v = ev.values[q]
+        if abs(v - _off(q)) <= AT_BOUND * width:      # a bound at "off" (no drag) says none
+            continue
+        if np.isfinite(lo) and v - lo <= AT_BOUND * width:
+            at.append(f"{q} at its lower bound {lo:.3g}")
+        elif np.isfinite(hi) and hi - v <= AT_BOUND * width:
+            at.append(f"{q} at its upper bound {hi:.3g}")
+    words = []
+    if at:
+        words.append("its fit stopped at a bound (" + "; ".join(at)
+                     + "): the data say only \"at or beyond\"")
+    own = {q: ev.values[q] for q, ok in ev.determined.items() if ok}
+    ok, prior_text = plausible(own, params) if own else (True, "")
+    if not ok:
+        words.append(f"its size lies outside the plausible range ({prior_text})")
+    if not words:
+        return ""
+    return " Caveat on this name: " + "; ".join(words) + "."
+
+
+def _off(key: str) -> float:
+    """The no-difference value of parameter ``key`` (``effect.parameter``; 0 unknown)."""
+    part, _, name = key.partition(".")
+    try:
+        return float({p.name: p.off for p in effect_class(part).parameters}.get(name, 0.0))
+    except KeyError:
+        return 0.0
 
 
 def _normal_words(lead_ev, check, left: dict, share: float) -> str:

@@ -79,6 +79,12 @@ DOUBT_CHI2 = 4.0
 #: windows of the torque balance (s) whose means are removed: short against a manoeuvre,
 #: so that an unmodelled torque does not accumulate
 ORDER_WINDOW_S = 0.4
+#: a rotor at or above this share of its full command (or of the set's max_speed) is
+#: saturated: its logged value no longer says what it turns at (the motor gives what the
+#: battery allows), so the torque balance leaves those samples out (issue 47: a flight with
+#: 10 % of its samples at the full-command cap was refused at Delta chi^2 72); the same
+#: 0.99 as :data:`quadsim.identify.motor_fits.SATURATED`
+ORDER_SATURATED = 0.99
 MIN_KEPT_S = 1.0
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
@@ -372,14 +378,35 @@ class _TorqueBalance:
     noise: np.ndarray      # (3,) N m s: I_aa x the gyro's white noise
 
 
+def _saturated(log, params) -> np.ndarray:
+    """(N,) whether any rotor of ``log`` is saturated at a sample (:data:`ORDER_SATURATED`:
+    its command at the full-command cap, or its logged speed at the set's max_speed)."""
+    out = np.zeros(len(log.t), bool)
+    if log.rotor_command is not None:
+        out |= np.any(log.rotor_command >= ORDER_SATURATED, axis=1)
+    top = float(getattr(params, "max_speed", 0.0) or 0.0)
+    if log.rotor_speed is not None and top > 0:
+        out |= np.any(log.rotor_speed >= ORDER_SATURATED * top, axis=1)
+    return out
+
+
 def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBalance | None:
     """The balance of ``log`` with ``speeds`` (N, R) rad/s standing for the rotor speeds
-    (default the log's)."""
+    (default the log's). Saturated samples (:func:`_saturated`) are left out: a window is
+    cut at each of them, so that the integrals' error across one stays out of the window
+    means of the samples kept."""
     speeds = log.rotor_speed if speeds is None else speeds
     t = log.t
     m = max(1, round(ORDER_WINDOW_S / float(np.median(np.diff(t)))))
-    window = np.arange(len(t)) // m
-    count = int(window[-1]) + 1
+    cut = _saturated(log, params)
+    keep = ~cut
+    # a new window every m samples and after every saturated stretch
+    start = (np.arange(len(t)) % m == 0) | np.concatenate([[True], cut[:-1]])
+    window = np.cumsum(start) - 1
+    size = np.bincount(window[keep], minlength=int(window[-1]) + 1)
+    keep &= size[window] >= 3            # a window of under 3 samples says nothing
+    _, window = np.unique(window[keep], return_inverse=True)
+    count = int(window.max()) + 1 if window.size else 0
     if count < 5:
         return None
     inertia = np.asarray(params.inertia, dtype=float)
@@ -387,10 +414,12 @@ def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBal
     momentum = momentum + cumulative_trapezoid(np.cross(log.body_rate, momentum), t,
                                              axis=0, initial=0)
     squares = cumulative_trapezoid(np.square(speeds), t, axis=0, initial=0)
-    z = _window_demean(np.hstack([momentum, squares, (t - t[0])[:, None]]), window, count)
+    z = _window_demean(np.hstack([momentum, squares, (t - t[0])[:, None]])[keep], window,
+                       count)
     lag = z[:-1].T @ z[1:]
     return _TorqueBalance(z.T @ z, 0.5 * (lag + lag.T), squares.shape[1],
-                          len(t) - count - 2, np.diag(inertia) * _gyro_noise(log.body_rate))
+                          int(keep.sum()) - count - 2,
+                          np.diag(inertia) * _gyro_noise(log.body_rate))
 
 
 def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
