@@ -552,7 +552,7 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
 #: how to install l2f (a C++ build)
 L2F_HINT = "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"
 #: how to install gym-pybullet-drones (its fork on the package index; pybullet's wheel)
-GPD_HINT = ("pip install pybullet==3.2.7 'gymnasium>=0.28,<1.0' 'transforms3d>=0.4.1,<0.5' "
+GPD_HINT = ("pip install 'quadsim[gpd]' "
             "then pip install --no-deps swarm-drone-gym==2.0.0.3")
 SIM_SOURCES = {
     "crazyflow": ("benchmarks.crazyflow_cases", "benchmarks.crazyflow_source",
