@@ -551,6 +551,9 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
 #: --source NAME -> (cases module, availability check, install hint) of a simulator source
 #: how to install l2f (a C++ build)
 L2F_HINT = "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"
+#: how to install gym-pybullet-drones (its fork on the package index; pybullet's wheel)
+GPD_HINT = ("pip install 'quadsim[gpd]' "
+            "then pip install --no-deps swarm-drone-gym==2.0.0.3")
 SIM_SOURCES = {
     "crazyflow": ("benchmarks.crazyflow_cases", "benchmarks.crazyflow_source",
                   "crazyflow_available", "pip install 'quadsim[crazyflow]'"),
@@ -574,6 +577,8 @@ SIM_SOURCES = {
                  L2F_HINT),
     "quadcopter-sim": ("benchmarks.qcsim_cases", "benchmarks.qcsim_source",
                        "qcsim_available", "pip install 'quadsim[qcsim]'"),
+    "gym-pybullet-drones": ("benchmarks.gpd_cases", "benchmarks.gpd_source", "gpd_available",
+                            GPD_HINT),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -626,8 +631,22 @@ def _run_simulator(name, source, cache, generate_only, out, start) -> int:
     rows = sim_cases.judge(source, cache)
     atomic_write_text(out, json.dumps(rows, indent=1, sort_keys=True) + "\n")
     print(summarise_simulator(rows, source, observability_only=False), end="")
+    print(self_check_line(rows[0].get("self_check")))
     print(f"diagnosis wall time (all flights, one process): {rows[0]['seconds_all']:.0f} s")
     return 0
+
+
+def self_check_line(check: dict | None) -> str:
+    """The references' self-check of a simulator run (:func:`benchmarks.sim_cases.judge`'s
+    ``self_check``) in one line: false alarms of n, clean or not, the channels."""
+    if check is None:
+        return "self-check of the references: none in the result"
+    alarms = check["false_alarms"]
+    which = ", ".join(f"{name} {verdict}" for name, verdict in alarms) or "none"
+    return (f"self-check of the references: {len(alarms)} of {check['flights']} judged "
+            f"against the others not no_significant_gap ({which}); "
+            f"{'clean' if check['clean'] else 'NOT clean'}"
+            + (f"; channels {', '.join(check['channels'])}" if check["channels"] else ""))
 
 
 def speed_benchmark() -> str:
@@ -676,7 +695,8 @@ def main(argv=None) -> int:
     parser.add_argument("--source", choices=("rotorpy+pipeline", *SIM_SOURCES),
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
-                             "pyflyt, multirotor, l2f and its vehicles l2f-fs, "
+                             "pyflyt, multirotor, quadcopter-sim, genesis, "
+                             "gym-pybullet-drones, l2f and its vehicles l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
                              "nominal "

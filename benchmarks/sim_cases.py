@@ -320,7 +320,9 @@ def load_flights(source: CaseSource, cache) -> tuple[list, list[dict]]:
 
 def judge(source: CaseSource, cache) -> list[dict]:
     """THE BLIND RUN: per-flight verdicts of every case against the references, scored
-    (:mod:`.score`). Run it once, after the verdict rules are frozen."""
+    (:mod:`.score`), each row with the references' self-check (``self_check``: how many
+    references, clean, the false alarms as (flight, verdict), their channels; None where the
+    diagnosis made none). Run it once, after the verdict rules are frozen."""
     from quadsim.core.errors import QuadsimWarning
     from quadsim.gap import diagnose_per_flight
 
@@ -333,6 +335,11 @@ def judge(source: CaseSource, cache) -> list[dict]:
         warnings.simplefilter("ignore", RuntimeWarning)
         result = diagnose_per_flight([r["_log"] for r in rows], refs, source.params())
     seconds = time.perf_counter() - start
+    check = (result["reference_model"] or {}).get("self_check")
+    self_check = None if check is None else {
+        "flights": len(check["flights"]), "clean": check["clean"],
+        "false_alarms": [[a["flight"], a["verdict"]] for a in check["false_alarms"]],
+        "channels": check["channels"]}
     out = []
     for row, flight in zip(rows, result["flights"]):
         verdict = read_verdict(flight)
@@ -341,7 +348,7 @@ def judge(source: CaseSource, cache) -> list[dict]:
                                        row["effects"].items()},
                     "per_flight": {**verdict, "reduction": flight.get("reduction"),
                                    "score": score_case(row["truth"], row["kind"], verdict)},
-                    "seconds_all": seconds})
+                    "seconds_all": seconds, "self_check": self_check})
     return out
 
 

@@ -155,3 +155,21 @@ def test_a_source_that_cannot_be_judged_is_one_error_line(tmp_path, capsys, monk
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"error: --source fake: {error}"]
         assert not out.exists()
+
+
+def test_self_check_line():
+    """The runner's one line for the references' self-check (``sim_cases.judge``'s
+    ``self_check``): the count of false alarms of n with each flight's verdict, clean or
+    not, the channels; a result without one says so."""
+    script = _benchmark_script()
+    clean = {"flights": 8, "clean": True, "false_alarms": [], "channels": []}
+    assert script.self_check_line(clean) == (
+        "self-check of the references: 0 of 8 judged against the others not "
+        "no_significant_gap (none); clean")
+    bad = {"flights": 8, "clean": False, "channels": ["Fx", "Mz"],
+           "false_alarms": [["ref_00", "body_drag"], ["ref_03", "unexplained"]]}
+    assert script.self_check_line(bad) == (
+        "self-check of the references: 2 of 8 judged against the others not "
+        "no_significant_gap (ref_00 body_drag, ref_03 unexplained); NOT clean; channels "
+        "Fx, Mz")
+    assert script.self_check_line(None) == "self-check of the references: none in the result"
