@@ -106,6 +106,7 @@ from .judge import (
 )
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Reading, Series
+from .segments import joined_states
 from .where import check as consistency_check
 from .where import scaled_residuals, where
 from .words import nominal_words
@@ -198,13 +199,19 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
         check_length(log, name=name)              # >= MIN_LOG_S, else one line naming t
-        log, delays = align_signal_delays(log)    # quadsim.logs.delays (estimate, shift, ms)
-        states = flight_states(log, window_s=window_s, gravity=params.gravity)
-        states = states.take(interior(states.t))
+        # each airborne stretch alone (quadsim.gap.segments); delays: the longest stretch's
+        parts = [align_signal_delays(p) for p in log.parts()]   # quadsim.logs.delays
+        delays = max(parts, key=lambda part: len(part[0].t))[1]
+        step = None if len(parts) == 1 else float(np.median(np.diff(log.t)))
+        pieces = [flight_states(p, window_s=window_s, gravity=params.gravity, dt=step)
+                  for p, _ in parts]
+        pieces = [s.take(interior(s.t)) for s in pieces]
+        states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
-        out.append(Flight(name, states, decimated(states, stride), delays.ms(), delays.notes))
+        fit = joined_states([decimated(s, stride) for s in pieces])
+        out.append(Flight(name, states, fit, delays.ms(), delays.notes))
     return out
 
 
