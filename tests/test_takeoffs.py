@@ -131,3 +131,28 @@ def test_the_verdict_does_not_see_the_ground_span(flown, cf):
     assert a.outcome == b.outcome and a.name == b.name and a.answer == b.answer
     assert a.probability == b.probability and dict(a.params) == dict(b.params)
     assert a.name in ("mass_offset", "thrust_factor", "thrust_curve"), a.answer
+
+
+def test_gap_gathers_the_stretches_note():
+    from quadsim.gap.__main__ import gather_notes
+
+    said = gather_notes(["/a/f.csv: 2 airborne stretches used, t 0.00-2.50 s, 4.50-7.00 s "
+                         "(5.00 of 7.00 s); cut: idle 2.51-4.49 s"])
+    assert said == ["several take-offs: every airborne stretch used, each a segment of its "
+                    "flight (the ground spans between them cut, nothing fitted across them) "
+                    "on 1 log: f.csv 2 stretches (0.00-2.50 s, 4.50-7.00 s)"]
+
+
+def test_view_trajectory_differentiates_each_stretch_alone():
+    """A joined log without velocity or gyro: the viewer's velocity is each stretch's own
+    derivative (1 m/s and -2 m/s), never the jump between them."""
+    t = np.concatenate([np.arange(0, 1, 0.01), 5 + np.arange(0, 1, 0.01)])
+    x = np.concatenate([np.arange(100) * 0.01, 10 - 2 * np.arange(100) * 0.01])
+    position = np.stack([x, np.zeros(200), np.ones(200)], 1)
+    log = FlightLog(t=t, position=position, quat=np.tile([1.0, 0, 0, 0], (200, 1)),
+                    segments=(100,))
+    traj = log.to_trajectory()
+    np.testing.assert_allclose(traj.velocity[:100, 0], 1.0, atol=1e-9)
+    np.testing.assert_allclose(traj.velocity[100:, 0], -2.0, atol=1e-9)
+    with pytest.raises(ValueError, match="segments"):
+        FlightLog(t=t, position=position, quat=log.quat, segments=(0,))
