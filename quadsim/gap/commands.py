@@ -114,8 +114,11 @@ def _lag(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
 
 
 def fit_command_model(logs: Sequence[FlightLog]) -> CommandModel:
-    """Identify the command -> speed model on logs with rotor speeds and commands."""
-    usable = [g for g in logs if g.rotor_speed is not None and g.rotor_command is not None]
+    """Identify the command -> speed model on logs with rotor speeds and commands (each
+    airborne stretch of a log of several take-offs alone: the lag never runs across the
+    ground span between them)."""
+    usable = [p for g in logs if g.rotor_speed is not None and g.rotor_command is not None
+              for p in g.parts()]
     if not usable:
         raise InputError("command model: the reference logs need both rotor_* (speeds) and "
                          "cmd_* (commands)")
@@ -161,14 +164,15 @@ def fit_command_model(logs: Sequence[FlightLog]) -> CommandModel:
 
 def synthesise_speeds(log: FlightLog, model: CommandModel, *,
                       keep_commands: bool = False) -> FlightLog:
-    """``log`` with rotor speeds from its commands (and vbat) through ``model``."""
+    """``log`` with rotor speeds from its commands (and vbat) through ``model``; each airborne
+    stretch of a log of several take-offs (:attr:`FlightLog.segments`) alone."""
     name = log.path or "log"
     if log.rotor_command is None:
         raise InputError(f"{name}: cmd_1..cmd_N: no commands to synthesise rotor speeds from")
     if log.rotor_count != model.rotor_count:
         raise InputError(f"{name}: cmd_1..cmd_N: {log.rotor_count} commands, the command model "
                          f"has {model.rotor_count} rotors")
-    speed = model.speeds(log.t, log.rotor_command, log.vbat)
+    speed = np.concatenate([model.speeds(p.t, p.rotor_command, p.vbat) for p in log.parts()])
     note = (f"{name}: rotor speeds synthesised from commands (tau {model.tau * 1e3:.1f} ms, "
             f"fit rms {model.rms:.3g} rad/s, {model.source})")
     return dataclasses.replace(log, rotor_speed=speed,

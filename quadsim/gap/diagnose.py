@@ -104,6 +104,7 @@ from .judge import (
     remainder,
     slow_part,
 )
+from .posefree import posefree_log, without_pose_note
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Reading, Series
 from .segments import joined_states
@@ -203,8 +204,10 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         parts = [align_signal_delays(p) for p in log.parts()]   # quadsim.logs.delays
         delays = max(parts, key=lambda part: len(part[0].t))[1]
         step = None if len(parts) == 1 else float(np.median(np.diff(log.t)))
-        pieces = [flight_states(p, window_s=window_s, gravity=params.gravity, dt=step)
-                  for p, _ in parts]
+        pieces = [flight_states(p if p.has_pose else posefree_log(p), window_s=window_s,
+                                gravity=params.gravity, dt=step) for p, _ in parts]
+        if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.posefree)
+            pieces = [dataclasses.replace(s, pose=False) for s in pieces]
         pieces = [s.take(interior(s.t)) for s in pieces]
         states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
@@ -236,7 +239,7 @@ def decimated(states: FlightStates, stride: int) -> FlightStates:
                               low(states.body_accel), low(states.specific_force),
                               low(states.rotor_speed), low(states.rotor_accel),
                               low(states.command), low(states.vbat), states.accel_source,
-                              states.window_s, states.polyorder, states.name)
+                              states.window_s, states.polyorder, states.name, states.pose)
     return low_passed.take(np.arange(0, len(states.t), stride))
 
 
@@ -304,6 +307,9 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     decision = order.cap_decision(decision, order.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
     verdict = order.mark(verdict, statuses)
+    posefree = next((g for g in logs if not g.has_pose), None)
+    if posefree is not None:                  # what a pose would add (quadsim.gap.posefree)
+        verdict = without_pose_note(verdict, posefree)
     names = channel_names(reference)
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:
@@ -406,7 +412,7 @@ def nominal_reference(train: list, params: VehicleParams, rotor: bool,
     dt = float(train[0].t[1] - train[0].t[0])
     nominal = [residuals(s, params, list(base), rotor_channel=rotor) for s in train]
     sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
-    full = shared_candidate(rotor, False)
+    full = shared_candidate(rotor, False, pose=all(s.pose for s in train))
     cand = dataclasses.replace(full, parts=tuple(p for p in full.parts
                                                  if p[0] not in _NOT_SHARED), base=tuple(base))
     off = []

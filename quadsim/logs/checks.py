@@ -621,17 +621,10 @@ def check_log_stretches(log, params=None):
 
 def check_logs(logs, params=None):
     """:func:`check_log` on each, every airborne stretch a segment (``joined``); returns
-    (logs, notes). The diagnosis (``gap``, its only
-    caller) refuses a log without a pose in one line naming what it lacks and what runs on
-    it (``identify --logs``): its residual states are built from the pose."""
+    (logs, notes). The diagnosis (``gap``) is its caller; a log without a pose is checked
+    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.posefree`)."""
     out, notes = [], []
     for log in logs:
-        if not log.has_pose:
-            raise field_error(_where(log), "x..z, qw..qz", "no position or attitude (IMU and "
-                              "motors only): gap needs the pose for its residual states today; "
-                              "identify --logs identifies the thrust map, motor lag and "
-                              "inertia from this log, and a pose (motion capture or the "
-                              "on-board estimate) makes it a gap log")
         log, n = check_log(log, params, joined=True)
         out.append(log)
         notes.extend(n)
