@@ -94,3 +94,20 @@ def test_a_flight_with_a_pose_is_not_judged_against_references_without(cf, refer
         verdict = judge_one(check_logs([log], cf)[0][0], reference)
     assert verdict.outcome == "refused"
     assert "this flight logs a pose, the reference flights do not" in verdict.reason
+
+
+def test_held_out_weighs_no_effect_that_reads_the_pose(cf):
+    """The held-out diagnosis on three IMU-only flights with a 4 g mass offset: the weight is
+    read (as the mass or as the thrust per Omega^2 that carries it: -9.8 % is 1 / 1.108), no
+    explanation that needs the pose is fitted, and the answer says what was not weighed."""
+    from quadsim.gap.diagnose import diagnose
+
+    heavy = (make_effect("mass_offset", mass=0.004),)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        logs = [_fly(cf, heavy, seed, path) for seed, path in enumerate(PATHS[:3])]
+        result = diagnose(logs, cf)
+    weighed = {e["name"] if isinstance(e, dict) else e.name for e in result.effects}
+    assert not weighed & set(without_pose(EFFECTS)) and "mass_offset" in weighed
+    assert result.verdict.name in ("mass_offset", "nominal_refit", "thrust_factor")
+    assert result.verdict.answer.endswith(f"Not weighed: {missing_words()}.")

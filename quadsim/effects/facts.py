@@ -42,11 +42,11 @@ __all__ = ["ALL", "POSE_PARTS", "Companion", "EffectFacts", "ParameterFacts", "P
 #: the key of a per-parameter mapping that applies to every parameter of the effect
 ALL = "*"
 
-#: the parts of the pose an effect may need (:attr:`EffectFacts.needs_pose`), each with what
-#: a log must carry to give it
-POSE_PARTS = {"velocity": "the velocity (vx..vz, or a position to differentiate)",
-              "height": "the position (z)",
-              "attitude": "the attitude (qw..qz or roll, pitch, yaw)"}
+#: the parts of the pose an effect may need (:attr:`EffectFacts.needs_pose`), each with the
+#: flight-log columns that give it (:mod:`quadsim.logs.flightlog`)
+POSE_PARTS = {"velocity": "vx..vz or x..z",
+              "height": "z",
+              "attitude": "qw..qz or roll, pitch, yaw"}
 
 
 @dataclass(frozen=True)

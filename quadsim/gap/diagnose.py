@@ -104,7 +104,7 @@ from .judge import (
     remainder,
     slow_part,
 )
-from .posefree import posefree_log, without_pose_note
+from .posefree import needs_pose, posefree_log, without_pose_note
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Reading, Series
 from .segments import joined_states
@@ -457,6 +457,8 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     if names is not None:     # the parameter set's own b and d always stand
         keep = set(names) | {"no_difference", "nominal_refit"}
         out = [e for e in out if e.name in keep]
+    if not getattr(train_states, "pose", True):         # IMU and motors only (.posefree)
+        out = [e for e in out if not needs_pose(e.parts)]
     return out
 
 

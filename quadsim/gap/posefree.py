@@ -56,8 +56,8 @@ def missing_words() -> str:
     parts = [p for p in POSE_PARTS if any(p in v for v in needed.values())]
     names = ", ".join(name.replace("_", " ") for name in needed)
     return (f"no {_listed(parts)} logged: {names} not weighed (the body-frame force and "
-            f"torque balance was used); log the state estimate or motion capture "
-            f"({'; '.join(POSE_PARTS[p] for p in parts)}) to add them")
+            f"torque balance was used); log the state estimate or motion capture (columns "
+            f"{'; '.join(POSE_PARTS[p] for p in parts)}) to add them")
 
 
 def _listed(words: list[str]) -> str:
