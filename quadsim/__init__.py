@@ -6,8 +6,6 @@ scalar-first (w, x, y, z), body to world. See :mod:`quadsim.vehicle.params` and
 :mod:`quadsim.vehicle.state`.
 """
 
-__version__ = "0.1.0"
-
 
 def _interrupted_while_starting(signum, frame):
     """SIGINT while a ``python -m quadsim.X`` command is still importing (before
@@ -22,14 +20,21 @@ def _interrupted_while_starting(signum, frame):
 def _catch_early_interrupt() -> None:
     """Installed only when the package is imported by ``python -m`` (``sys.argv[0]`` is
     ``"-m"`` while runpy imports the parent packages): a library import never changes the
-    signal handlers. ``run_cli`` puts the default handler back once ``main`` runs."""
-    import signal
+    signal handlers. ``run_cli`` puts the default handler back once ``main`` runs. The first
+    statement of the package, with built-in modules only (``_signal``, not ``signal``, which
+    imports ``enum``: ~10 ms in which Python's own traceback would still be printed);
+    off the main thread ``_signal.signal`` raises ValueError and nothing is installed."""
+    import _signal
     import sys
-    import threading
 
-    if (sys.argv[:1] == ["-m"] and threading.current_thread() is threading.main_thread()
-            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
-        signal.signal(signal.SIGINT, _interrupted_while_starting)
+    if sys.argv[:1] == ["-m"] and _signal.getsignal(_signal.SIGINT) is \
+            _signal.default_int_handler:
+        try:
+            _signal.signal(_signal.SIGINT, _interrupted_while_starting)
+        except ValueError:      # not the main thread: signals are not ours to set there
+            pass
 
 
 _catch_early_interrupt()
+
+__version__ = "0.1.0"

@@ -92,7 +92,7 @@ def _measured(path: Path, duration: float | None, params=None) -> Trajectory:
     from .logs.checks import check_log  # channels against each other; NaN runs cut or refused
     from .logs.flightlog import load_log
 
-    log, notes = check_log(load_log(path), params)
+    log, notes = check_log(load_log(path), params, joined=True)   # every stretch
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
     measured = log.to_trajectory()

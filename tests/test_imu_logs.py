@@ -254,15 +254,19 @@ def test_swapped_rotor_columns_are_refused_naming_the_map(imu_usd):
 
 
 def test_gap_says_what_it_needs_on_an_imu_log(imu_usd, tmp_path, capsys):
+    """gap reads an IMU log (the body-frame balance, quadsim.gap.posefree; every airborne
+    stretch used) and goes on to the vehicle check, which refuses crazyflie21 for this
+    generated vehicle (tests/test_gap_posefree.py judges IMU-only flights)."""
     from quadsim.gap.__main__ import main as gap_main
 
     out = tmp_path / "imu.csv.gz"
     assert convert_main([str(imu_usd), "-o", str(out)]) == 0
     capsys.readouterr()
-    assert gap_main(["--model", "crazyflie21", str(out)]) == 2
+    assert gap_main(["--model", "crazyflie21", str(out), "--workers", "1"]) == 2
     err = capsys.readouterr().err
-    assert "no position or attitude (IMU and motors only)" in err
-    assert "identify --logs" in err and "Traceback" not in err
+    assert "no position or attitude in the log (IMU and motors only)" in err
+    assert "2 airborne stretches used" in err
+    assert "does not describe the logged vehicle" in err and "Traceback" not in err
 
 
 def test_pitch_reconstructed_from_velocity_when_only_roll_and_yaw_are_logged(tmp_path,

@@ -69,6 +69,8 @@ class BladeFlapping(EffectBase):
 
     #: a flapping moment as if the rotor-drag force acted half an arm above the CoM
     facts = EffectFacts(
+        # tilt of the rotor disc with the air velocity in the body frame
+        needs_pose=("velocity", "attitude"),
         fitted=("coefficient",),
         scales={"coefficient": Scale(lambda p: 0.5 * arm_length(p) * drag_scale(p),
                                      "the rotor drag's force acting half an arm above the CoM")},

@@ -61,6 +61,7 @@ class BodyDrag(EffectBase):
     )
 
     facts = EffectFacts(
+        needs_pose=("velocity", "attitude"),   # drag of the air velocity in the body frame
         fitted=("cd_area", "cd_area_vertical"),
         readings=(Reading(("cd_area", "cd_area_vertical")),),
         scales={p: Scale(area_scale, "a C_d A giving 10 % of the weight at 2 m/s")

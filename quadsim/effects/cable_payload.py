@@ -90,6 +90,8 @@ class CablePayload(EffectBase):
     #: no candidate of its own: the payload's state is not logged; the diagnosis integrates
     #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.cable`)
     facts = EffectFacts(
+        # the payload swings under gravity and the vehicle's world acceleration
+        needs_pose=("velocity", "attitude"),
         words={"mass": Words("payload on a cable", "g", 1e3, _phrase),
                "length": Words("cable length", "m", 1.0, _phrase)},
     )

@@ -35,12 +35,18 @@ from .scales import (  # re-exported
     momentum_translational_lift,
 )
 
-__all__ = ["ALL", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange", "Reading",
-           "Scale", "Spread", "Together", "Window", "Words", "arm_length", "missing_facts",
-           "number", "plus_minus", "range_unit"]
+__all__ = ["ALL", "POSE_PARTS", "Companion", "EffectFacts", "ParameterFacts", "PlausibleRange",
+           "Reading", "Scale", "Spread", "Together", "Window", "Words", "arm_length",
+           "missing_facts", "number", "plus_minus", "range_unit", "without_pose"]
 
 #: the key of a per-parameter mapping that applies to every parameter of the effect
 ALL = "*"
+
+#: the parts of the pose an effect may need (:attr:`EffectFacts.needs_pose`), each with the
+#: flight-log columns that give it (:mod:`quadsim.logs.flightlog`)
+POSE_PARTS = {"velocity": "vx..vz or x..z",
+              "height": "z",
+              "attitude": "qw..qz or roll, pitch, yaw"}
 
 
 @dataclass(frozen=True)
@@ -224,6 +230,13 @@ class EffectFacts:
     #: fitted parameters that are no part of an answer (a payload's swing at the first
     #: sample): never worded
     nuisance: tuple[str, ...] = ()
+    #: what of the pose (:data:`POSE_PARTS`) the effect's loads read beyond the IMU, the
+    #: rotors and the battery: "velocity" (the air velocity, from the logged motion),
+    #: "height" (the position's z, the distance to the ground), "attitude" (the world's
+    #: directions in the body frame). On a log without a pose (IMU and motors only) the
+    #: diagnosis cannot weigh the effect (:func:`without_pose`); empty: the body-frame force
+    #: and torque balance alone shows it
+    needs_pose: tuple[str, ...] = ()
 
     def fitted_for(self, rotors: int) -> tuple[str, ...]:
         """The parameters the candidate frees on a vehicle with ``rotors`` rotors."""
@@ -371,3 +384,10 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
         if not c.fitted:
             out.append(f"{cls.name}: companion {c.effect} frees nothing")
     return out
+
+
+def without_pose(effects) -> dict[str, tuple[str, ...]]:
+    """The effects (name -> class, e.g. :data:`quadsim.effects.EFFECTS`) a log without a
+    pose cannot weigh, each with the pose parts it needs (:attr:`EffectFacts.needs_pose`)."""
+    return {name: tuple(cls.facts.needs_pose) for name, cls in sorted(effects.items())
+            if cls.facts.needs_pose}

@@ -58,6 +58,7 @@ class GroundEffect(EffectBase):
     )
 
     facts = EffectFacts(
+        needs_pose=("height", "attitude"),   # the rotor hubs' height above the ground
         fitted=("gain",),
         readings=(Reading(("gain",)),),
         scales={"gain": Scale(lambda p: 1.0, "the textbook curve")},

@@ -101,6 +101,7 @@ class RotorDrag(EffectBase):
     )
 
     facts = EffectFacts(
+        needs_pose=("velocity", "attitude"),   # drag of the air velocity in the rotor plane
         fitted=("coefficient", "axial_coefficient"),
         scales={ALL: Scale(drag_scale, "10 % of the weight at 2 m/s with four hover rotors")},
         spreads={ALL: Spread(drag_scale, "10 % of the weight at 2 m/s: a doubled drag")},

@@ -73,6 +73,7 @@ class TranslationalLift(EffectBase):
     )
 
     facts = EffectFacts(
+        needs_pose=("velocity", "attitude"),   # thrust gain with the air velocity across the rotor
         fitted=("k_h",),
         readings=(Reading(("k_h",)),),
         scales={"k_h": Scale(momentum_translational_lift, "the momentum-theory lift")},

@@ -51,6 +51,8 @@ class Wind(EffectBase):
     )
 
     facts = EffectFacts(
+        # the air velocity is the logged velocity less the wind
+        needs_pose=("velocity", "attitude"),
         fitted=("vx", "vy"),
         # wind exerts no force of its own: it acts through drag
         companions=(Companion("rotor_drag", ("coefficient",)),),

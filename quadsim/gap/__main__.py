@@ -171,23 +171,34 @@ def _load(paths, params, args, lines: list | None = None):
 
 _SPAN = re.compile(r"^(?P<file>.*): airborne span t (?P<a>\S+)-(?P<b>\S+) s kept "
                    r"\((?P<kept>\S+) of (?P<total>\S+) s\); cut: (?P<cut>.*)$")
+_STRETCHES = re.compile(r"^(?P<file>.*): (?P<n>\d+) airborne stretches used, t (?P<spans>.*?) "
+                        r"\((?P<kept>\S+) of (?P<total>\S+) s\); cut: (?P<cut>.*)$")
 
 
 def gather_notes(lines: list[str]) -> list[str]:
     """The warnings of many logs as few lines: the airborne-span notes of every log
     (:func:`quadsim.logs.spans.cut_ground`) in one line, each file with the span it kept;
-    the other warnings collapsed by kind (:func:`collapse_warnings`)."""
-    spans, rest = [], []
+    the logs of several take-offs, every stretch of each used (:func:`quadsim.logs.spans.
+    join_airborne`), in another; the other warnings collapsed by kind
+    (:func:`collapse_warnings`)."""
+    spans, several, rest = [], [], []
     for line in lines:
         m = _SPAN.match(line)
+        k = _STRETCHES.match(line)
         if m:
             spans.append(f"{Path(m['file']).name} {m['a']}-{m['b']} s")
+        elif k:
+            several.append(f"{Path(k['file']).name} {k['n']} stretches ({k['spans']})")
         else:
             rest.append(line)
     out = collapse_warnings(rest)
     if spans:
         out.append(f"airborne span kept (ground, idle and landing spans cut) on "
                    f"{len(spans)} log{'s' if len(spans) > 1 else ''}: " + ", ".join(spans))
+    if several:
+        out.append(f"several take-offs: every airborne stretch used, each a segment of its "
+                   f"flight (the ground spans between them cut, nothing fitted across them) on "
+                   f"{len(several)} log{'s' if len(several) > 1 else ''}: " + "; ".join(several))
     return out
 
 

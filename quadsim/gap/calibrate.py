@@ -95,6 +95,7 @@ from .fitting import (
 )
 from .moderated import moderated_spread
 from .motor_map import load_exponent
+from .posefree import needs_pose
 from .priors import DETERMINED, WIND_SD_MS, curve_slope_sd
 from .reference import (  # re-exported: the calibration's public names
     FD_STEP,
@@ -169,11 +170,13 @@ MAX_SHIFT_S = 0.1
 SHIFT_STEP_S, SHIFT_TYPICAL_S = 0.002, 0.01
 
 
-def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
+def shared_candidate(rotor: bool, vbat: bool = False, *, pose: bool = True) -> Candidate:
     """The shared parameters as one candidate: :data:`SHARED` less the groups the logs
-    cannot show (no commands: motor lag and battery; no voltage: battery)."""
+    cannot show (no commands: motor lag and battery; no voltage: battery; no pose: the
+    effects that read it, :func:`quadsim.gap.posefree.needs_pose`)."""
     parts = tuple((name, {}, fitted) for name, fitted in SHARED
-                  if (rotor or name not in NEEDS_COMMANDS) and (vbat or name not in NEEDS_VBAT))
+                  if (rotor or name not in NEEDS_COMMANDS) and (vbat or name not in NEEDS_VBAT)
+                  and (pose or not needs_pose([(name, {}, fitted)])))
     return Candidate("reference", parts)
 
 
@@ -184,15 +187,15 @@ def shared_candidate(rotor: bool, vbat: bool = False) -> Candidate:
 BODY_DRAG = ("body_drag", {}, ("cd_area_vertical",))
 
 
-def per_flight_candidate(rotor: bool, vbat: bool = False) -> Candidate:
+def per_flight_candidate(rotor: bool, vbat: bool = False, *, pose: bool = True) -> Candidate:
     """The shared parameters of the per-flight reference model: :func:`shared_candidate`
     plus the vertical drag (:data:`BODY_DRAG`) and, with commands but no voltage log,
     the motor map's gain (:mod:`.speed_gain`; with a voltage log
     ``battery_sag.full_voltage`` is that gain). Both change with how a flight is flown
     (module doc, stage 2), so a flight's own value must have a place in the reference
     uncertainty; neither is a reading of its own (a flight's body drag is, on top)."""
-    cand = shared_candidate(rotor, vbat)
-    extra = (BODY_DRAG,) + ((SPEED_GAIN,) if rotor and not vbat else ())
+    cand = shared_candidate(rotor, vbat, pose=pose)
+    extra = ((BODY_DRAG,) if pose else ()) + ((SPEED_GAIN,) if rotor and not vbat else ())
     return Candidate(cand.name, cand.parts + extra, cand.base)
 
 
@@ -441,7 +444,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                            for s in states)
     vbat_ref, vbat_spread = voltage_spread(states) if logged else (None, 0.0)
     vbat = logged and vbat_spread >= VBAT_TESTED
-    cand = per_flight_candidate(rotor, vbat)
+    cand = per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states))
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)

@@ -114,8 +114,11 @@ def _lag(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
 
 
 def fit_command_model(logs: Sequence[FlightLog]) -> CommandModel:
-    """Identify the command -> speed model on logs with rotor speeds and commands."""
-    usable = [g for g in logs if g.rotor_speed is not None and g.rotor_command is not None]
+    """Identify the command -> speed model on logs with rotor speeds and commands (each
+    airborne stretch of a log of several take-offs alone: the lag never runs across the
+    ground span between them)."""
+    usable = [p for g in logs if g.rotor_speed is not None and g.rotor_command is not None
+              for p in g.parts()]
     if not usable:
         raise InputError("command model: the reference logs need both rotor_* (speeds) and "
                          "cmd_* (commands)")
@@ -161,14 +164,15 @@ def fit_command_model(logs: Sequence[FlightLog]) -> CommandModel:
 
 def synthesise_speeds(log: FlightLog, model: CommandModel, *,
                       keep_commands: bool = False) -> FlightLog:
-    """``log`` with rotor speeds from its commands (and vbat) through ``model``."""
+    """``log`` with rotor speeds from its commands (and vbat) through ``model``; each airborne
+    stretch of a log of several take-offs (:attr:`FlightLog.segments`) alone."""
     name = log.path or "log"
     if log.rotor_command is None:
         raise InputError(f"{name}: cmd_1..cmd_N: no commands to synthesise rotor speeds from")
     if log.rotor_count != model.rotor_count:
         raise InputError(f"{name}: cmd_1..cmd_N: {log.rotor_count} commands, the command model "
                          f"has {model.rotor_count} rotors")
-    speed = model.speeds(log.t, log.rotor_command, log.vbat)
+    speed = np.concatenate([model.speeds(p.t, p.rotor_command, p.vbat) for p in log.parts()])
     note = (f"{name}: rotor speeds synthesised from commands (tau {model.tau * 1e3:.1f} ms, "
             f"fit rms {model.rms:.3g} rad/s, {model.source})")
     return dataclasses.replace(log, rotor_speed=speed,
@@ -215,17 +219,96 @@ def command_model_from_params(params) -> MapCommandModel:
                            f"the motor map of {params.path or params.name} ({mm.source})")
 
 
+@dataclass(frozen=True)
+class BalancedModel:
+    """A command model whose rotors' thrusts are rescaled by ``factors`` (R,) (relative
+    thrust per rotor, ``Omega_i -> Omega_i sqrt(factors_i)``): :func:`balance_rotors`."""
+
+    model: object
+    factors: np.ndarray
+
+    @property
+    def rotor_count(self) -> int:
+        return self.model.rotor_count
+
+    @property
+    def tau(self) -> float:
+        return self.model.tau
+
+    @property
+    def rms(self) -> float:
+        return self.model.rms
+
+    @property
+    def source(self) -> str:
+        return (f"{self.model.source}, per-rotor thrust balanced on the references' mean roll "
+                f"and pitch torque (x {', '.join(f'{f:.3f}' for f in self.factors)})")
+
+    def speeds(self, t, command, vbat):
+        return self.model.speeds(t, command, vbat) * np.sqrt(self.factors)
+
+
+def balance_rotors(logs: Sequence[FlightLog], model, params) -> BalancedModel:
+    """``model`` with per-rotor thrust factors ``1 + delta_i`` that make the reference
+    ``logs``' (command-only) mean roll and pitch torque of the rotors equal to what their gyro
+    says it was, ``mean(I w_dot + w x I w)`` (w_dot: the rate change over each stretch over its
+    duration). ``delta`` moves neither the total thrust nor the yaw torque at the references'
+    mean squared speeds (it lies in the null space of those two rows of the allocation
+    matrix), so a flight's weight and yaw readings stay the references'.
+
+    Why: the parameter set's command -> speed map is not the fleet's motors rotor by rotor;
+    the difference is a roll/pitch torque every flight shares, which the per-flight reference
+    model has no shared parameter to hold, so each calm flight was named ``com_offset``
+    (tests/test_commands_wind.py). A map identified from commands only is the same for every
+    rotor (``identify --logs``), so the fleet's own rotor imbalance is the same case."""
+    from ..vehicle.rotors import allocation_matrix
+
+    alloc = allocation_matrix(params)
+    inertia = params.inertia
+    squares, targets, weights = [], [], []
+    for log in logs:
+        for part in log.parts():
+            if part.body_rate is None or part.rotor_command is None or len(part.t) < 3:
+                continue
+            w = part.body_rate
+            duration = float(part.t[-1] - part.t[0])
+            w_dot = (w[-1] - w[0]) / duration
+            gyro_torque = inertia @ w_dot + np.mean(np.cross(w, w @ inertia.T), axis=0)
+            speed = model.speeds(part.t, part.rotor_command, part.vbat)
+            squares.append(np.mean(np.square(speed), axis=0))
+            targets.append(gyro_torque[:2])
+            weights.append(duration)
+    if not squares:
+        return BalancedModel(model, np.ones(model.rotor_count))
+    weights = np.asarray(weights) / np.sum(weights)
+    mean_sq = np.average(squares, axis=0, weights=weights)
+    target = np.average(targets, axis=0, weights=weights)
+    kept_rows = alloc[[2, 5]] * mean_sq              # thrust and yaw per relative change
+    _, _, vt = np.linalg.svd(kept_rows)
+    null = vt[2:].T                                  # (R, R - 2): moves neither
+    moved = alloc[3:5] * mean_sq                     # roll, pitch torque per relative change
+    now = moved.sum(axis=1)
+    c, *_ = np.linalg.lstsq(moved @ null, target - now, rcond=None)
+    delta = null @ c
+    return BalancedModel(model, np.clip(1.0 + delta, 0.5, 1.5))
+
+
 def synthesise_all(groups: dict[str, Sequence[FlightLog] | None], params,
                    reference: Sequence[FlightLog] | None = None):
     """Every command-only log in ``groups`` (role -> logs) gets synthesised speeds: the model
-    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map.
-    Returns (groups with the same keys, the model or None when no log needed one)."""
+    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map,
+    balanced rotor by rotor on the command-only logs of the ``"reference"`` role when there
+    are some (:func:`balance_rotors`: per flight, the references are the fleet). Returns
+    (groups with the same keys, the model or None when no log needed one)."""
     needing = [g for logs in groups.values() for g in (logs or []) if g.rotor_speed is None]
     if not needing:
         return groups, None
     measured = [g for g in (reference or []) if g.rotor_speed is not None
                 and g.rotor_command is not None]
     model = fit_command_model(measured) if measured else command_model_from_params(params)
+    fleet = [g for g in groups.get("reference") or [] if g.rotor_speed is None]
+    if not measured and fleet:      # a command-only fleet: its own rotor balance
+        model = balance_rotors(fleet, model, params)
     out = {role: (None if logs is None else
                   [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs])
            for role, logs in groups.items()}

@@ -105,8 +105,10 @@ from .judge import (
     remainder,
     slow_part,
 )
+from .posefree import needs_pose, posefree_log, without_pose_note
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
 from .result import Diagnosis, Reading, Series
+from .segments import joined_states
 from .selfcheck import SelfCheck, Spread, negligible, readings, spreads
 from .where import check as consistency_check
 from .where import scaled_residuals, where
@@ -200,13 +202,21 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
         check_length(log, name=name)              # >= MIN_LOG_S, else one line naming t
-        log, delays = align_signal_delays(log)    # quadsim.logs.delays (estimate, shift, ms)
-        states = flight_states(log, window_s=window_s, gravity=params.gravity)
-        states = states.take(interior(states.t))
+        # each airborne stretch alone (quadsim.gap.segments); delays: the longest stretch's
+        parts = [align_signal_delays(p) for p in log.parts()]   # quadsim.logs.delays
+        delays = max(parts, key=lambda part: len(part[0].t))[1]
+        step = None if len(parts) == 1 else float(np.median(np.diff(log.t)))
+        pieces = [flight_states(p if p.has_pose else posefree_log(p), window_s=window_s,
+                                gravity=params.gravity, dt=step) for p, _ in parts]
+        if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.posefree)
+            pieces = [dataclasses.replace(s, pose=False) for s in pieces]
+        pieces = [s.take(interior(s.t)) for s in pieces]
+        states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
-        out.append(Flight(name, states, decimated(states, stride), delays.ms(), delays.notes))
+        fit = joined_states([decimated(s, stride) for s in pieces])
+        out.append(Flight(name, states, fit, delays.ms(), delays.notes))
     return out
 
 
@@ -231,7 +241,7 @@ def decimated(states: FlightStates, stride: int) -> FlightStates:
                               low(states.body_accel), low(states.specific_force),
                               low(states.rotor_speed), low(states.rotor_accel),
                               low(states.command), low(states.vbat), states.accel_source,
-                              states.window_s, states.polyorder, states.name)
+                              states.window_s, states.polyorder, states.name, states.pose)
     return low_passed.take(np.arange(0, len(states.t), stride))
 
 
@@ -301,6 +311,9 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     decision = order.cap_decision(decision, order.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
     verdict = order.mark(verdict, statuses)
+    posefree = next((g for g in logs if not g.has_pose), None)
+    if posefree is not None:                  # what a pose would add (quadsim.gap.posefree)
+        verdict = without_pose_note(verdict, posefree)
     names = channel_names(reference)
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:
@@ -405,7 +418,7 @@ def nominal_reference(train: list, params: VehicleParams, rotor: bool,
     discrepancy = fit_discrepancy(nominal, train)
     nominal = [r - centre_term(s, discrepancy, r.shape[1]) for r, s in zip(nominal, train)]
     sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
-    full = shared_candidate(rotor, False)
+    full = shared_candidate(rotor, False, pose=all(s.pose for s in train))
     cand = dataclasses.replace(full, parts=tuple(p for p in full.parts
                                                  if p[0] not in _NOT_SHARED), base=tuple(base))
     off = []
@@ -451,6 +464,8 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     if names is not None:     # the parameter set's own b and d always stand
         keep = set(names) | {"no_difference", "nominal_refit"}
         out = [e for e in out if e.name in keep]
+    if not getattr(train_states, "pose", True):         # IMU and motors only (.posefree)
+        out = [e for e in out if not needs_pose(e.parts)]
     return out
 
 

@@ -52,6 +52,7 @@ from ..effects.translational_lift import TranslationalLift
 from . import cable
 from .calibrate import SHARED, Reference
 from .fitmodels import FIT_EFFECTS, build_effect
+from .posefree import needs_pose
 from .priors import DETERMINED, WIND_SD_MS
 
 __all__ = [
@@ -297,6 +298,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
+    if not getattr(states, "pose", True):       # IMU and motors only (quadsim.gap.posefree)
+        out = [e for e in out if not needs_pose(e.parts)]
     if delay:       # the rotor delay as a shared parameter of every other explanation
         tight = reference_delay_sd(reference)
         out = [e if e.shift else dataclasses.replace(e, mean=e.mean + (0.0,),

@@ -291,7 +291,8 @@ def stack_states(flights: list[FlightStates]) -> FlightStates:
     return FlightStates(*(cat(n) for n in ("t", "position", "velocity", "accel_world", "quat",
                                            "body_rate", "body_accel", "specific_force",
                                            "rotor_speed", "rotor_accel", "command", "vbat")),
-                        first.accel_source, first.window_s, first.polyorder, "stacked")
+                        first.accel_source, first.window_s, first.polyorder, "stacked",
+                        all(f.pose for f in flights))
 
 
 def residuals(states: FlightStates, params: VehicleParams, effects: list, *,

@@ -50,6 +50,7 @@ from .envelope import envelope_summary, local_reference
 from .envelope import position as envelope_position
 from .evidence import evaluate, explanations_for
 from .judge import channel_names, judge
+from .posefree import check_same_kind, without_pose_note
 from .residual import DEFAULT_WINDOW_S
 from .result import Diagnosis, Verdict
 from .selfcheck import leave_one_out, self_check_of
@@ -174,6 +175,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
         return weighed
     verdict = verdict_of(weighed, reference.self_check,
                          order.order_statuses([log], reference.params))
+    verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.posefree)
     local = weighed.reference          # the residual before and after, for the report
     return dataclasses.replace(verdict, series=flight_series(
         local.align(weighed.flight), local, weighed.rows, name=weighed.flight.name))
@@ -201,6 +203,7 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
             warnings.simplefilter("ignore", QuadsimWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
             states = reference.align(flight)       # the references' rotor-speed timing
+            check_same_kind(states, reference, name)   # a pose on both or neither (posefree)
             if states.command is None and reference.rotor:
                 raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
                                  "commands, this one does not")

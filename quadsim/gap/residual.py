@@ -90,7 +90,10 @@ class FlightStates:
     body_accel (N, 3) body (rad/s, rad/s^2); specific_force (N, 3) body at the origin (m/s^2);
     rotor_speed, rotor_accel (N, R) or None; command (N, R) normalised or None; vbat (N,) or
     None; accel_source: "accelerometer" or "kinematics"; window_s, polyorder: the filter;
-    name: where the log came from.
+    name: where the log came from; pose: False for a log without a pose (IMU and motors
+    only): position, velocity and accel_world are then zero and quat the identity, stand-ins
+    that no effect weighed on it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`,
+    :mod:`quadsim.gap.posefree`).
     """
 
     t: np.ndarray
@@ -109,6 +112,7 @@ class FlightStates:
     window_s: float
     polyorder: int
     name: str = ""
+    pose: bool = True
 
     def __len__(self) -> int:
         return len(self.t)
@@ -123,7 +127,7 @@ class FlightStates:
                             self.body_accel[index], self.specific_force[index],
                             pick(self.rotor_speed), pick(self.rotor_accel), pick(self.command),
                             pick(self.vbat), self.accel_source, self.window_s, self.polyorder,
-                            self.name)
+                            self.name, self.pose)
 
 
 # ----------------------------------------------------------------------------- resampling

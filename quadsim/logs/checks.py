@@ -53,7 +53,7 @@ from scipy.integrate import cumulative_trapezoid
 from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
 from .flightlog import WITHOUT_POSE
-from .spans import cut_ground, split_airborne
+from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
            "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_status"]
@@ -515,9 +515,14 @@ class RotorOrder:
 def rotor_order_status(log, params) -> RotorOrder:
     """The log's rotor order as the torque balance sees it (rotor speeds, else commands):
     confirmed, or not told apart from its best rival -- then a wrong order cannot be ruled
-    out, and a verdict on the log must say so (issue 44: never stated at > 99 %)."""
+    out, and a verdict on the log must say so (issue 44: never stated at > 99 %). A log of
+    several airborne stretches (segments): each stretch's Delta chi^2 summed (independent
+    samples; the balance's integrals never run across a ground span)."""
     source = "rotor speeds" if log.rotor_speed is not None else "commands"
-    evidence = rotor_order_evidence(log, params, commands=True)
+    evidence: dict = {}
+    for part in log.parts():
+        for perm, value in rotor_order_evidence(part, params, commands=True).items():
+            evidence[perm] = evidence.get(perm, 0.0) + value
     where = _where(log)
     if not evidence:
         return RotorOrder(False, False, None, float("nan"), "",
@@ -612,15 +617,21 @@ def _channel_checks(log, params) -> list[str]:
     return notes
 
 
-def check_log(log, params=None):
+def check_log(log, params=None, *, joined: bool = False):
     """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes).
-    The longest airborne stretch is kept (:func:`check_log_stretches` keeps every one)."""
+    The longest airborne stretch is kept (:func:`check_log_stretches` keeps every one as its
+    own log); ``joined``: every airborne stretch kept as a segment of the one log
+    (:func:`quadsim.logs.spans.join_airborne`; ``gap`` and ``view``), the channels checked
+    on each stretch alone."""
     check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
-    log, note = cut_ground(log)          # ground, idle and landing spans (quadsim.logs.spans)
+    # ground, idle and landing spans (quadsim.logs.spans)
+    log, note = join_airborne(log) if joined else cut_ground(log)
     notes += [note] if note else []
-    return log, notes + _channel_checks(log, params)
+    for part in log.parts():
+        notes += [n for n in _channel_checks(part, params) if n not in notes]
+    return log, notes
 
 
 def check_log_stretches(log, params=None):
@@ -638,18 +649,12 @@ def check_log_stretches(log, params=None):
 
 
 def check_logs(logs, params=None):
-    """:func:`check_log` on each; returns (logs, notes). The diagnosis (``gap``, its only
-    caller) refuses a log without a pose in one line naming what it lacks and what runs on
-    it (``identify --logs``): its residual states are built from the pose."""
+    """:func:`check_log` on each, every airborne stretch a segment (``joined``); returns
+    (logs, notes). The diagnosis (``gap``) is its caller; a log without a pose is checked
+    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.posefree`)."""
     out, notes = [], []
     for log in logs:
-        if not log.has_pose:
-            raise field_error(_where(log), "x..z, qw..qz", "no position or attitude (IMU and "
-                              "motors only): gap needs the pose for its residual states today; "
-                              "identify --logs identifies the thrust map, motor lag and "
-                              "inertia from this log, and a pose (motion capture or the "
-                              "on-board estimate) makes it a gap log")
-        log, n = check_log(log, params)
+        log, n = check_log(log, params, joined=True)
         out.append(log)
         notes.extend(n)
     return out, notes

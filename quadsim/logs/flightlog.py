@@ -58,6 +58,7 @@ into columns is :mod:`quadsim.logs.csvfile`; :func:`read_log_columns` is re-expo
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import io
 import re
@@ -117,6 +118,9 @@ WITHOUT_POSE = ("no position or attitude in the log (IMU and motors only): the b
                 "force and torque balance is used; nothing that needs the world frame (speed, "
                 "airspeed, drag, wind, ground effect, height) can be read; a pose (motion "
                 "capture or the on-board estimate) would add it")
+#: the per-sample channels of a FlightLog (besides ``t``).
+ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
+          "rotor_command", "vbat")
 _NUMBERED = re.compile(r"^(rotor|cmd)_(\d+)$")
 
 
@@ -131,7 +135,11 @@ class FlightLog:
     V or None; path: the file it came from (None if built in code); notes:
     the loader's remarks on suspicious but usable data (gaps, NaN runs, unknown columns);
     vehicle: what the log's own parameters say the vehicle is ("multirotor", "VTOL", ...;
-    None when the log does not say, as in a CSV).
+    None when the log does not say, as in a CSV); segments: the sample indices where a new
+    airborne stretch of the same flight starts (several take-offs, joined by
+    :func:`quadsim.logs.spans.join_airborne`; empty for one stretch). The time axis jumps at
+    each and the states with it: nothing may be interpolated, filtered or differentiated
+    across one (:meth:`parts` gives the stretches).
     """
 
     t: np.ndarray
@@ -146,6 +154,7 @@ class FlightLog:
     path: Path | None = None
     notes: tuple[str, ...] = ()
     vehicle: str | None = None
+    segments: tuple[int, ...] = ()
 
     def __post_init__(self):
         n = len(self.t)
@@ -161,9 +170,28 @@ class FlightLog:
                 raise ValueError(f"FlightLog.{name}: shape {np.shape(value)}, expected ({n}, R)")
         if self.vbat is not None and np.shape(self.vbat) != (n,):
             raise ValueError(f"FlightLog.vbat: shape {np.shape(self.vbat)}, expected ({n},)")
+        if list(self.segments) != sorted(set(self.segments)) or any(
+                not 0 < k < n for k in self.segments):
+            raise ValueError(f"FlightLog.segments: {self.segments}, expected increasing "
+                             f"indices inside 1..{n - 1}")
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def parts(self) -> list[FlightLog]:
+        """The airborne stretches of a joined log (:attr:`segments`), each a FlightLog with
+        no segments; ``[self]`` when there is one."""
+        if not self.segments:
+            return [self]
+        edges = (0, *self.segments, len(self.t))
+        return [self.take(slice(a, b)) for a, b in zip(edges[:-1], edges[1:])]
+
+    def take(self, index: slice) -> FlightLog:
+        """The samples ``index`` (a slice) of every channel, without segments."""
+        return dataclasses.replace(
+            self, t=self.t[index], segments=(),
+            **{name: (None if getattr(self, name) is None else getattr(self, name)[index])
+               for name in ARRAYS})
 
     @property
     def has_pose(self) -> bool:
@@ -187,6 +215,15 @@ class FlightLog:
         log (no pose) has no trajectory: :class:`~quadsim.core.errors.InputError`."""
         if not self.has_pose:
             raise field_error(self.path or "log", "x..z, qw..qz", WITHOUT_POSE)
+        if self.segments:                 # each stretch differentiated alone, then joined
+            parts = [p.to_trajectory() for p in self.parts()]
+            return Trajectory(self.t, self.position,
+                              np.concatenate([p.velocity for p in parts]), self.quat,
+                              np.concatenate([p.body_rate for p in parts]),
+                              np.concatenate([p.rotor_speed for p in parts]), None,
+                              engine="log", meta={**parts[0].meta, "command": self.rotor_command,
+                                                  "vbat": self.vbat, "accel": self.accel,
+                                                  "segments": self.segments})
         velocity = self.velocity
         if velocity is None:
             velocity = np.gradient(self.position, self.t, axis=0)

@@ -18,9 +18,12 @@ needed"). :func:`airborne_span` marks each sample
 
 and finds every stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
 so one noisy sample does not split a flight): :func:`split_airborne` keeps each of them (a log
-with several take-offs is several segments, all used: ``identify --logs``), :func:`cut_ground`
-the longest (``gap`` and ``view``, which judge one continuous flight per file; the note names
-the other stretches). An IMU-only log (no pose) is judged by its rotor activity and its gyro
+with several take-offs is several segments, all used: ``identify --logs``),
+:func:`join_airborne` keeps each as a segment of one flight (``gap`` and ``view``: one flight
+per file, its stretches joined with :attr:`~quadsim.logs.flightlog.FlightLog.segments` marking
+where the time axis and the states jump; the note says "2 airborne stretches used"), and
+:func:`cut_ground` the longest (``convert --model``; the note names the other stretches).
+An IMU-only log (no pose) is judged by its rotor activity and its gyro
 (at rest: body rate below :data:`REST_RATE`), without the height and speed tests. The cut
 parts are named in a note:
 "``f.ulg: airborne span t 19.20-31.05 s kept (11.85 of 31.1 s); cut: ground 0.00-19.19 s``".
@@ -44,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import field_error
+from .flightlog import ARRAYS
 
 #: rotor activity (sum of squares) below this fraction of its 90th percentile is idle.
 IDLE_FRACTION = 0.15
@@ -156,15 +160,9 @@ def airborne_span(log) -> Span:
     return Span(best.start, best.stop, tuple(sorted(cut, key=lambda c: c[1])))
 
 
-_ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
-           "rotor_command", "vbat")
-
-
 def _take(log, span: Span, note: str):
-    fields = {name: (None if getattr(log, name) is None
-                     else getattr(log, name)[span.start:span.stop]) for name in _ARRAYS}
-    return dataclasses.replace(log, t=log.t[span.start:span.stop], notes=(*log.notes, note),
-                               **fields)
+    return dataclasses.replace(log.take(slice(span.start, span.stop)),
+                               notes=(*log.notes, note))
 
 
 def split_airborne(log):
@@ -182,6 +180,24 @@ def split_airborne(log):
             + f" ({kept:.2f} of {float(t[-1] - t[0]):.2f} s); cut: "
             + "; ".join(f"{kind} {a:.2f}-{b:.2f} s" for kind, a, b in spans[0].cut))
     return [_take(log, s, note) for s in spans], note
+
+
+def join_airborne(log):
+    """(log, note or None): every airborne stretch of ``log`` (:func:`airborne_spans`) kept,
+    joined in time order into one log whose :attr:`~quadsim.logs.flightlog.FlightLog.segments`
+    mark where each stretch after the first starts (the ground spans between them are cut;
+    nothing downstream bridges them). One stretch: exactly :func:`cut_ground`."""
+    spans = airborne_spans(log)
+    if len(spans) == 1:
+        return cut_ground(log)
+    parts, note = split_airborne(log)
+    starts = np.cumsum([len(p.t) for p in parts])[:-1]
+    joined = dataclasses.replace(
+        log, t=np.concatenate([p.t for p in parts]), notes=(*log.notes, note),
+        segments=tuple(int(k) for k in starts),
+        **{name: (None if getattr(log, name) is None
+                  else np.concatenate([getattr(p, name) for p in parts])) for name in ARRAYS})
+    return joined, note
 
 
 def cut_ground(log):

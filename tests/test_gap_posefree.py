@@ -1,0 +1,113 @@
+"""``gap`` on logs without a pose (issue 44, item 1): IMU (accelerometer, gyro) and rotors
+only. The body-frame force and torque balance needs no pose; the effects that read one
+(declared by each effect: ``EffectFacts.needs_pose``) are neither shared by the references
+nor weighed, and the answer names them with what would add them.
+
+Generated closed-loop flights (quadsim.logs.generate, MuJoCo, sensor noise) with their
+position, attitude and velocity columns dropped: 4 nominal references; a nominal flight is
+clear, a 4 g mass offset (+10.8 % of 37 g) is named with its size."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import pytest
+
+from quadsim.core.errors import QuadsimWarning
+from quadsim.effects import EFFECTS, EffectSet, make_effect
+from quadsim.effects.facts import without_pose
+from quadsim.gap.calibrate import calibrate
+from quadsim.gap.diagnose import prepare
+from quadsim.gap.per_flight import judge_one
+from quadsim.gap.posefree import missing_words
+from quadsim.logs.checks import check_logs
+from quadsim.logs.generate import generate_flight
+from quadsim.logs.sensors import SensorModel
+from quadsim.vehicle.params import load_params
+
+NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
+                           "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
+PATHS = ("figure8", "steps", "lissajous", "figure8")
+
+pytestmark = pytest.mark.xdist_group("test_gap_posefree")
+
+
+def _imu(log):
+    return dataclasses.replace(log, position=None, quat=None, velocity=None)
+
+
+def _fly(cf, effects, seed, path="figure8"):
+    log, _ = generate_flight(cf, path, EffectSet(tuple(effects)), NOISE, seed, duration=5.0,
+                             speed=1.0)
+    return check_logs([_imu(log)], cf)[0][0]
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+@pytest.fixture(scope="module")
+def reference(cf):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        refs = [_fly(cf, (), seed, path) for seed, path in enumerate(PATHS)]
+        return calibrate(prepare(refs, cf), cf)
+
+
+def test_the_effects_that_read_the_pose_are_declared():
+    """From the physics: the air velocity (drag, wind, flapping, lift), the height (ground
+    effect), the swing under gravity (cable); none of the body-frame effects."""
+    assert set(without_pose(EFFECTS)) == {"wind", "body_drag", "rotor_drag", "blade_flapping",
+                                          "translational_lift", "ground_effect",
+                                          "cable_payload"}
+    assert without_pose(EFFECTS)["ground_effect"][0] == "height"
+
+
+def test_references_share_no_effect_that_reads_the_pose(reference):
+    shared = {name for name, _, _ in reference.candidate.parts}
+    assert not shared & set(without_pose(EFFECTS))
+    assert {"nominal_refit", "inertia_error", "motor_lag"} <= shared
+
+
+def test_nominal_is_clear_and_a_mass_offset_is_named(cf, reference):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        calm = judge_one(_fly(cf, (), 11), reference)
+        heavy = judge_one(_fly(cf, (make_effect("mass_offset", mass=0.004),), 11), reference)
+    assert calm.outcome == "no_significant_gap", calm.answer
+    assert heavy.name == "mass_offset", heavy.answer
+    mass, ci = heavy.params["mass_offset.mass"], heavy.ci["mass_offset.mass"]
+    assert abs(mass - 0.004) < max(ci, 0.0005), (mass, ci)
+    for verdict in (calm, heavy):
+        assert verdict.answer.endswith(f"Not weighed: {missing_words()}.")
+        assert "wind" in missing_words() and "log the state estimate" in missing_words()
+    # no reading of an effect that needs the pose was weighed
+    assert not {r.name for r in heavy.posterior} & set(without_pose(EFFECTS))
+
+
+def test_a_flight_with_a_pose_is_not_judged_against_references_without(cf, reference):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        log, _ = generate_flight(cf, "figure8", EffectSet(()), NOISE, 12, duration=5.0)
+        verdict = judge_one(check_logs([log], cf)[0][0], reference)
+    assert verdict.outcome == "refused"
+    assert "this flight logs a pose, the reference flights do not" in verdict.reason
+
+
+def test_held_out_weighs_no_effect_that_reads_the_pose(cf):
+    """The held-out diagnosis on three IMU-only flights with a 4 g mass offset: the weight is
+    read (as the mass or as the thrust per Omega^2 that carries it: -9.8 % is 1 / 1.108), no
+    explanation that needs the pose is fitted, and the answer says what was not weighed."""
+    from quadsim.gap.diagnose import diagnose
+
+    heavy = (make_effect("mass_offset", mass=0.004),)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        logs = [_fly(cf, heavy, seed, path) for seed, path in enumerate(PATHS[:3])]
+        result = diagnose(logs, cf)
+    weighed = {e["name"] if isinstance(e, dict) else e.name for e in result.effects}
+    assert not weighed & set(without_pose(EFFECTS)) and "mass_offset" in weighed
+    assert result.verdict.name in ("mass_offset", "nominal_refit", "thrust_factor")
+    assert result.verdict.answer.endswith(f"Not weighed: {missing_words()}.")
