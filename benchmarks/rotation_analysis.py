@@ -416,6 +416,36 @@ def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:
             "residual_rms": [float(f"{np.std(diff[a] + c * flap[a]):.3g}") for a in (0, 1)]}
 
 
+def low_band_pooled(sigs: list[RotationSignals], axis: int, cutoff_hz: float = 2.0) -> dict:
+    """One flapping coefficient for ``axis`` over several logs (the per-axis ``roll`` or
+    ``pitch`` of :mod:`quadsim.effects.blade_flapping`, kg m/rad): below ``cutoff_hz``,
+    ``tau - M = -c f + c0_k`` by least squares over every log's samples together (each log
+    ``k`` its own constant), as :func:`low_band_balance` per log; ``ci``: the 95 % half-width
+    of a delete-one-log jackknife (1.96 x its standard error), ``per_log``: each log's own c."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    parts = []
+    for s in sigs:
+        diff = low(s.torque[:, axis]) - low(s.moment[:, axis])
+        f = low(s.flapping[:, axis])
+        parts.append((f - f.mean(), diff - diff.mean()))   # the log's constant projected out
+
+    def fit(keep):
+        xf = np.concatenate([parts[k][0] for k in keep])
+        yd = np.concatenate([parts[k][1] for k in keep])
+        return -float(xf @ yd) / float(xf @ xf)
+
+    n = len(parts)
+    c = fit(range(n))
+    if n > 1:
+        drop = np.array([fit([k for k in range(n) if k != j]) for j in range(n)])
+        ci = 1.96 * float(np.sqrt((n - 1) / n * np.sum((drop - drop.mean()) ** 2)))
+    else:
+        ci = float("nan")
+    return {"flapping": float(f"{c:.4g}"), "ci": float(f"{ci:.3g}"), "logs": n,
+            "per_log": [float(f"{fit([k]):.3g}") for k in range(n)]}
+
+
 def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
     """Every table of the analysis as a JSON-ready dict (see the module docstring)."""
     params = load_params(model)
@@ -459,6 +489,7 @@ def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
             pooled[c] = {**_fit_json(fit), "heldout_r2": {
                 s.name: round(heldout_r2(fit, s, axis), 3) for s in held_s}}
         out["pooled"][name] = pooled
+        out.setdefault("low_band_pooled", {})[name] = low_band_pooled(train_s, axis)
     return out
 
 
@@ -494,6 +525,9 @@ def print_summary(result: dict) -> None:
                   f"\n    below 2 Hz: torque RMS {lb['torque_rms']:.3g}, moment RMS "
                   f"{lb['moment_rms']:.3g} N m; flapping {lb['flapping']:.3g} explains R^2 "
                   f"{lb['balance_r2']:.2f} of the difference, leaving {lb['residual_rms']:.3g} N m")
+    for axis, lb in result.get("low_band_pooled", {}).items():
+        print(f"below 2 Hz, {lb['logs']} training logs together: {axis} flapping "
+              f"{lb['flapping']:.4g} +- {lb['ci']:.3g} kg m/rad (95 %, jackknife over logs)")
     for axis, pooled in result["pooled"].items():
         print(f"pooled {axis}: " + "; ".join(
             f"{c} g {f['gain']:.3f}+-{f['gain_ci']:.3f} {units[c]} "

@@ -122,3 +122,21 @@ def test_windowed_heldout_scores_against_holding_the_rate():
     assert g == pytest.approx(0.3, rel=1e-6)
     assert ratios[0] == pytest.approx(0.0, abs=1e-6)
     assert ratios[1] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_low_band_pooled_reads_each_axis_its_own_coefficient():
+    """Three logs built with roll 0.9e-7 and pitch 1.3e-7 below 2 Hz (M = tau + c f, each log
+    its own offset): the pooled fit returns each axis' own c, per log the same, and a
+    jackknife interval of zero width (the balance is exact)."""
+    logs = []
+    for k in range(3):
+        torque, flap = _noise(30 + k), _noise(40 + k, 1e3)
+        moment = np.column_stack([torque + 0.9e-7 * flap, torque + 1.3e-7 * flap]) + 1e-5 * k
+        logs.append(ra.RotationSignals(f"log{k}", np.column_stack([torque, torque]), moment,
+                                       np.column_stack([flap, flap]), np.zeros((N, 2)), None,
+                                       np.zeros(N), None))
+    roll, pitch = ra.low_band_pooled(logs, 0), ra.low_band_pooled(logs, 1)
+    assert roll["flapping"] == pytest.approx(0.9e-7, rel=1e-3)
+    assert pitch["flapping"] == pytest.approx(1.3e-7, rel=1e-3)
+    assert pitch["per_log"] == pytest.approx([1.3e-7] * 3, rel=1e-2)
+    assert roll["ci"] == pytest.approx(0.0, abs=1e-10) and roll["logs"] == 3
