@@ -48,7 +48,13 @@ Usage::
 
     python -m benchmarks.rotation_analysis --model models/nanodrone_cf21bl.toml \\
         --train ../shared/data/nanodrone_cf21bl/train/*_run[123].csv.gz \\
-        --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json
+        --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json \
+        [--effects-file IN.toml --write-effects OUT.toml]
+
+With ``--write-effects`` it writes the effect file ``--effects-file`` plus ``blade_flapping``
+with ``roll`` and ``pitch`` from :func:`low_band_pooled` on the ``--train`` logs only, each
+with its unit and source (this command and the logs); an effect file that already holds
+``blade_flapping`` is refused.
 
 Results and their reading: docs/nanodrone.md, "Rotation: what the logs say".
 """
@@ -537,6 +543,32 @@ def print_summary(result: dict) -> None:
             for c, f in pooled.items()))
 
 
+def flapping_effect_file(effects_file: Path, pooled: dict, train: list[Path]) -> str:
+    """The text of effect file ``effects_file`` plus ``blade_flapping`` with ``roll`` and
+    ``pitch`` = ``pooled[axis]["flapping"]`` (:func:`low_band_pooled` on ``train``), each with
+    its unit and source; refused when the file already holds ``blade_flapping``."""
+    from quadsim.effects.effectfile import load_effect_file, render_effect_file
+
+    model = load_effect_file(effects_file)
+    names = [e.name for e in model.effects.effects]
+    if "blade_flapping" in names:
+        raise InputError(f"{effects_file}: blade_flapping is already in it")
+    entries = [(e.name, {k: (v, model.sources[(e.name, k)]) for k, v in e.values().items()
+                         if (e.name, k) in model.sources}) for e in model.effects.effects]
+    logs = ", ".join(Path(p).name for p in train)
+    entries.append(("blade_flapping", {
+        axis: (pooled[axis]["flapping"],
+               f"python -m benchmarks.rotation_analysis on {len(train)} training log(s) {logs}, "
+               f"on top of {Path(effects_file).name}: below 2 Hz, rotor torque minus the "
+               f"body's moment on the flapping regressor, the logs together (low_band_pooled), "
+               f"{pooled[axis]['flapping']:.4g} +- {pooled[axis]['ci']:.2g} (95 %, jackknife "
+               "over logs)") for axis in AXES}))
+    header = ("Written by python -m benchmarks.rotation_analysis --write-effects (rerun it "
+              "instead of editing by hand): " + ", ".join([*names, "blade_flapping"])
+              + f" on {model.params}.")
+    return render_effect_file(model.params, model.description, entries, header)
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -544,9 +576,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--train", type=Path, nargs="+", required=True)
     parser.add_argument("--heldout", type=Path, nargs="*", default=[])
     parser.add_argument("--json", type=Path, metavar="OUT.json")
+    parser.add_argument("--effects-file", type=Path, metavar="IN.toml",
+                        help="effect file the fitted flapping is added to")
+    parser.add_argument("--write-effects", type=Path, metavar="OUT.toml",
+                        help="write --effects-file plus blade_flapping (roll, pitch) fitted "
+                             "below 2 Hz on the --train logs")
     args = parser.parse_args(argv)
+    if (args.write_effects is None) != (args.effects_file is None):
+        raise InputError("--write-effects and --effects-file go together")
     result = analyse(args.model, args.train, args.heldout)
     print_summary(result)
+    if args.write_effects is not None:
+        atomic_write_text(args.write_effects, flapping_effect_file(
+            args.effects_file, result["low_band_pooled"], args.train))
+        print(f"wrote {args.write_effects}")
     if args.json:
         atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")
     return 0

@@ -140,3 +140,24 @@ def test_low_band_pooled_reads_each_axis_its_own_coefficient():
     assert pitch["flapping"] == pytest.approx(1.3e-7, rel=1e-3)
     assert pitch["per_log"] == pytest.approx([1.3e-7] * 3, rel=1e-2)
     assert roll["ci"] == pytest.approx(0.0, abs=1e-10) and roll["logs"] == 3
+
+
+def test_flapping_effect_file_adds_both_axes_with_sources(tmp_path):
+    from quadsim.core.errors import InputError
+    from quadsim.effects.effectfile import load_effect_file
+
+    base = tmp_path / "d1.toml"
+    base.write_text('schema = "quadsim.effects/1"\nparams = "crazyflie21"\n\n[[effect]]\n'
+                    'name = "rotor_drag"\ncoefficient = { value = 2.8e-06, unit = "kg/rad", '
+                    'source = "gap" }\n')
+    pooled = {"roll": {"flapping": 9.1e-8, "ci": 1e-8}, "pitch": {"flapping": 1.31e-7, "ci": 2e-8}}
+    out = tmp_path / "d2.toml"
+    out.write_text(ra.flapping_effect_file(base, pooled, [tmp_path / "a_run1.csv.gz"]))
+    model = load_effect_file(out)
+    rotor_drag, flapping = model.effects.effects
+    assert rotor_drag.coefficient == 2.8e-06
+    assert model.sources[("rotor_drag", "coefficient")] == "gap"
+    assert flapping.axes == (9.1e-8, 1.31e-7)
+    assert "a_run1.csv.gz" in model.sources[("blade_flapping", "pitch")]
+    with pytest.raises(InputError, match="already in it"):
+        ra.flapping_effect_file(out, pooled, [])
