@@ -137,7 +137,9 @@ def test_engines_agree_per_axis():
     magnitude 2e-6 kg m/rad), and the single-coefficient form flies as both axes equal."""
     specs = [["blade_flapping:roll=2e-6"], ["blade_flapping:pitch=2e-6"],
              ["blade_flapping:roll=1e-6,pitch=3e-6"], ["blade_flapping:coefficient=2e-6"],
-             ["blade_flapping:roll=2e-6,pitch=2e-6"]]
+             ["blade_flapping:roll=2e-6,pitch=2e-6"],
+             ["canted_rotor:rotor=1,angle=0.2,azimuth=1.5708",
+              "blade_flapping:roll=1e-6,pitch=3e-6"]]
     sets = [effect_set_from_specs(s) for s in specs]
     t = np.arange(round(DURATION / PERIOD)) * PERIOD
     series = HOVER * (1 + 0.01 * np.sin(2 * np.pi * 0.7 * t))[:, None] \
@@ -169,7 +171,10 @@ def test_compiled_path_reads_both_axes():
     sets = [effect_set_from_specs(["blade_flapping:roll=1e-6,pitch=3e-6"]),
             effect_set_from_specs(["blade_flapping:coefficient=2e-6"]),
             EffectSet((make_effect("blade_flapping", roll=-1e-6, pitch=2e-6,
-                                   coefficient=1e-6),))]
+                                   coefficient=1e-6),)),
+            # a canted rotor: the z row (the mean of the two) acts
+            effect_set_from_specs(["canted_rotor:rotor=1,angle=0.2,azimuth=1.5708",
+                                   "blade_flapping:roll=1e-6,pitch=3e-6"])]
     t = np.arange(30) * PERIOD
     series = HOVER * (1 + 0.02 * np.sin(2 * np.pi * t))[None, :, None] * np.ones((len(sets), 1, 4))
     fast, ref = [engines.simulate(PARAMS, engine="mujoco", fast=f, initial=_start(len(sets)),
