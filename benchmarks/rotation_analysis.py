@@ -48,7 +48,13 @@ Usage::
 
     python -m benchmarks.rotation_analysis --model models/nanodrone_cf21bl.toml \\
         --train ../shared/data/nanodrone_cf21bl/train/*_run[123].csv.gz \\
-        --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json
+        --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json \
+        [--effects-file IN.toml --write-effects OUT.toml]
+
+With ``--write-effects`` it writes the effect file ``--effects-file`` plus ``blade_flapping``
+with ``roll`` and ``pitch`` from :func:`low_band_pooled` on the ``--train`` logs only, each
+with its unit and source (this command and the logs); an effect file that already holds
+``blade_flapping`` is refused.
 
 Results and their reading: docs/nanodrone.md, "Rotation: what the logs say".
 """
@@ -416,6 +422,36 @@ def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:
             "residual_rms": [float(f"{np.std(diff[a] + c * flap[a]):.3g}") for a in (0, 1)]}
 
 
+def low_band_pooled(sigs: list[RotationSignals], axis: int, cutoff_hz: float = 2.0) -> dict:
+    """One flapping coefficient for ``axis`` over several logs (the per-axis ``roll`` or
+    ``pitch`` of :mod:`quadsim.effects.blade_flapping`, kg m/rad): below ``cutoff_hz``,
+    ``tau - M = -c f + c0_k`` by least squares over every log's samples together (each log
+    ``k`` its own constant), as :func:`low_band_balance` per log; ``ci``: the 95 % half-width
+    of a delete-one-log jackknife (1.96 x its standard error), ``per_log``: each log's own c."""
+    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
+    parts = []
+    for s in sigs:
+        diff = low(s.torque[:, axis]) - low(s.moment[:, axis])
+        f = low(s.flapping[:, axis])
+        parts.append((f - f.mean(), diff - diff.mean()))   # the log's constant projected out
+
+    def fit(keep):
+        xf = np.concatenate([parts[k][0] for k in keep])
+        yd = np.concatenate([parts[k][1] for k in keep])
+        return -float(xf @ yd) / float(xf @ xf)
+
+    n = len(parts)
+    c = fit(range(n))
+    if n > 1:
+        drop = np.array([fit([k for k in range(n) if k != j]) for j in range(n)])
+        ci = 1.96 * float(np.sqrt((n - 1) / n * np.sum((drop - drop.mean()) ** 2)))
+    else:
+        ci = float("nan")
+    return {"flapping": float(f"{c:.4g}"), "ci": float(f"{ci:.3g}"), "logs": n,
+            "per_log": [float(f"{fit([k]):.3g}") for k in range(n)]}
+
+
 def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
     """Every table of the analysis as a JSON-ready dict (see the module docstring)."""
     params = load_params(model)
@@ -459,6 +495,7 @@ def analyse(model: Path, train: list[Path], heldout: list[Path]) -> dict:
             pooled[c] = {**_fit_json(fit), "heldout_r2": {
                 s.name: round(heldout_r2(fit, s, axis), 3) for s in held_s}}
         out["pooled"][name] = pooled
+        out.setdefault("low_band_pooled", {})[name] = low_band_pooled(train_s, axis)
     return out
 
 
@@ -494,6 +531,9 @@ def print_summary(result: dict) -> None:
                   f"\n    below 2 Hz: torque RMS {lb['torque_rms']:.3g}, moment RMS "
                   f"{lb['moment_rms']:.3g} N m; flapping {lb['flapping']:.3g} explains R^2 "
                   f"{lb['balance_r2']:.2f} of the difference, leaving {lb['residual_rms']:.3g} N m")
+    for axis, lb in result.get("low_band_pooled", {}).items():
+        print(f"below 2 Hz, {lb['logs']} training logs together: {axis} flapping "
+              f"{lb['flapping']:.4g} +- {lb['ci']:.3g} kg m/rad (95 %, jackknife over logs)")
     for axis, pooled in result["pooled"].items():
         print(f"pooled {axis}: " + "; ".join(
             f"{c} g {f['gain']:.3f}+-{f['gain_ci']:.3f} {units[c]} "
@@ -503,6 +543,32 @@ def print_summary(result: dict) -> None:
             for c, f in pooled.items()))
 
 
+def flapping_effect_file(effects_file: Path, pooled: dict, train: list[Path]) -> str:
+    """The text of effect file ``effects_file`` plus ``blade_flapping`` with ``roll`` and
+    ``pitch`` = ``pooled[axis]["flapping"]`` (:func:`low_band_pooled` on ``train``), each with
+    its unit and source; refused when the file already holds ``blade_flapping``."""
+    from quadsim.effects.effectfile import load_effect_file, render_effect_file
+
+    model = load_effect_file(effects_file)
+    names = [e.name for e in model.effects.effects]
+    if "blade_flapping" in names:
+        raise InputError(f"{effects_file}: blade_flapping is already in it")
+    entries = [(e.name, {k: (v, model.sources[(e.name, k)]) for k, v in e.values().items()
+                         if (e.name, k) in model.sources}) for e in model.effects.effects]
+    logs = ", ".join(Path(p).name for p in train)
+    entries.append(("blade_flapping", {
+        axis: (pooled[axis]["flapping"],
+               f"python -m benchmarks.rotation_analysis on {len(train)} training log(s) {logs}, "
+               f"on top of {Path(effects_file).name}: below 2 Hz, rotor torque minus the "
+               f"body's moment on the flapping regressor, the logs together (low_band_pooled), "
+               f"{pooled[axis]['flapping']:.4g} +- {pooled[axis]['ci']:.2g} (95 %, jackknife "
+               "over logs)") for axis in AXES}))
+    header = ("Written by python -m benchmarks.rotation_analysis --write-effects (rerun it "
+              "instead of editing by hand): " + ", ".join([*names, "blade_flapping"])
+              + f" on {model.params}.")
+    return render_effect_file(model.params, model.description, entries, header)
+
+
 @run_cli
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -510,9 +576,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--train", type=Path, nargs="+", required=True)
     parser.add_argument("--heldout", type=Path, nargs="*", default=[])
     parser.add_argument("--json", type=Path, metavar="OUT.json")
+    parser.add_argument("--effects-file", type=Path, metavar="IN.toml",
+                        help="effect file the fitted flapping is added to")
+    parser.add_argument("--write-effects", type=Path, metavar="OUT.toml",
+                        help="write --effects-file plus blade_flapping (roll, pitch) fitted "
+                             "below 2 Hz on the --train logs")
     args = parser.parse_args(argv)
+    if (args.write_effects is None) != (args.effects_file is None):
+        raise InputError("--write-effects and --effects-file go together")
     result = analyse(args.model, args.train, args.heldout)
     print_summary(result)
+    if args.write_effects is not None:
+        atomic_write_text(args.write_effects, flapping_effect_file(
+            args.effects_file, result["low_band_pooled"], args.train))
+        print(f"wrote {args.write_effects}")
     if args.json:
         atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")
     return 0

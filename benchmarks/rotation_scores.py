@@ -20,49 +20,32 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks import nanodrone as bench  # noqa: E402
 from benchmarks.nanodrone_benchmark import quadsim_prediction, run_logs  # noqa: E402
 from quadsim.core.errors import run_cli  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
+from quadsim.effects import make_effect  # noqa: E402
 from quadsim.effects.base import EffectSet  # noqa: E402
-from quadsim.effects.blade_flapping import BladeFlapping  # noqa: E402
 from quadsim.effects.effectfile import load_effect_file  # noqa: E402
 from quadsim.vehicle.params import load_params  # noqa: E402
-
-
-class AxisFlapping(BladeFlapping):
-    """A probe, not a library effect: the file's ``blade_flapping`` moment with its roll (x)
-    and pitch (y) components scaled by ``scale_x``, ``scale_y`` (1). No compiled form: the
-    rollout evaluates it on the Python path (same equations)."""
-
-    name = "blade_flapping_axes_probe"
-    scale = (1.0, 1.0)
-
-    def loads(self, ctx):
-        out = super().loads(ctx)
-        if out is not None:
-            out.torque_body = out.torque_body * np.array([*self.scale, 1.0])
-        return out
 
 
 def load_model(path: Path, params: Path | None = None, drop: tuple[str, ...] = (),
                flapping_axes: tuple[float, float] | None = None):
     """(parameter set, effects) of an effect file, its parameter set replaced by ``params``,
-    the effects named in ``drop`` left out, and its flapping moment scaled per axis by
-    ``flapping_axes`` (:class:`AxisFlapping`), when given."""
+    the effects named in ``drop`` left out, and its flapping coefficients scaled per axis by
+    ``flapping_axes`` (roll, pitch), when given (the library's per-axis ``blade_flapping``)."""
     model = load_effect_file(path)
     effects = []
     for effect in model.effects.effects:
         if effect.name in drop:
             continue
         if effect.name == "blade_flapping" and flapping_axes is not None:
-            probe = AxisFlapping(coefficient=effect.coefficient)
-            probe.scale = tuple(flapping_axes)
-            effect = probe
+            roll, pitch = effect.axes
+            effect = make_effect("blade_flapping", roll=roll * flapping_axes[0],
+                                 pitch=pitch * flapping_axes[1])
         effects.append(effect)
     return load_params(params if params is not None else model.params), EffectSet(tuple(effects))
 

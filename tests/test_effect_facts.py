@@ -106,11 +106,12 @@ def test_facts_of_gives_a_parameters_wording():
 
 
 #: fitting.candidates_for(crazyflie21, has_commands, has_vbat) on main at 42ad543: name,
-#: parameter names, fixed values, fitting.typical_scales (recorded there)
+#: parameter names, fixed values, fitting.typical_scales (recorded there; blade_flapping
+#: since split per axis: roll and pitch, each the one coefficient's scale)
 CANDIDATES_42AD543 = {
     (False, False): [
-        ('blade_flapping', ['blade_flapping.coefficient'], {},
-         [7.254855490029076e-08]),
+        ('blade_flapping', ['blade_flapping.roll', 'blade_flapping.pitch'], {},
+         [7.254855490029076e-08, 7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
         ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
@@ -154,8 +155,8 @@ CANDIDATES_42AD543 = {
     (True, False): [
         ('battery_sag', ['battery_sag.rate'], {},
          [0.005]),
-        ('blade_flapping', ['blade_flapping.coefficient'], {},
-         [7.254855490029076e-08]),
+        ('blade_flapping', ['blade_flapping.roll', 'blade_flapping.pitch'], {},
+         [7.254855490029076e-08, 7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
         ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
@@ -201,8 +202,8 @@ CANDIDATES_42AD543 = {
     (True, True): [
         ('battery_sag', ['battery_sag.full_voltage'], {},
          [0.2]),
-        ('blade_flapping', ['blade_flapping.coefficient'], {},
-         [7.254855490029076e-08]),
+        ('blade_flapping', ['blade_flapping.roll', 'blade_flapping.pitch'], {},
+         [7.254855490029076e-08, 7.254855490029076e-08]),
         ('body_drag', ['body_drag.cd_area', 'body_drag.cd_area_vertical'], {},
          [0.014815102040816326, 0.014815102040816326]),
         ('canted_rotor', ['canted_rotor.tilt_x', 'canted_rotor.tilt_y'],
@@ -279,7 +280,9 @@ def test_derived_views_are_read_only_and_as_before():
         "rate_damping": (0.0, 3.0, "momentum"),
         "canted_rotor": (-0.17, 0.17, "absolute"),
         "translational_lift.k_h": (0.0, 2.0, "lift"),
-        "thrust_curve.linear": (-0.2, 0.2, "hover")}
+        "thrust_curve.linear": (-0.2, 0.2, "hover"),
+        "blade_flapping.roll": (0.0, 0.03, "hover"),
+        "blade_flapping.pitch": (0.0, 0.03, "hover")}
     assert len(priors.SEPARATE) == 18
     assert "wind is fixed" in priors.SEPARATE[frozenset({"rotor_drag", "wind"})]
 

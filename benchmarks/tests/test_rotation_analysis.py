@@ -122,3 +122,42 @@ def test_windowed_heldout_scores_against_holding_the_rate():
     assert g == pytest.approx(0.3, rel=1e-6)
     assert ratios[0] == pytest.approx(0.0, abs=1e-6)
     assert ratios[1] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_low_band_pooled_reads_each_axis_its_own_coefficient():
+    """Three logs built with roll 0.9e-7 and pitch 1.3e-7 below 2 Hz (M = tau + c f, each log
+    its own offset): the pooled fit returns each axis' own c, per log the same, and a
+    jackknife interval of zero width (the balance is exact)."""
+    logs = []
+    for k in range(3):
+        torque, flap = _noise(30 + k), _noise(40 + k, 1e3)
+        moment = np.column_stack([torque + 0.9e-7 * flap, torque + 1.3e-7 * flap]) + 1e-5 * k
+        logs.append(ra.RotationSignals(f"log{k}", np.column_stack([torque, torque]), moment,
+                                       np.column_stack([flap, flap]), np.zeros((N, 2)), None,
+                                       np.zeros(N), None))
+    roll, pitch = ra.low_band_pooled(logs, 0), ra.low_band_pooled(logs, 1)
+    assert roll["flapping"] == pytest.approx(0.9e-7, rel=1e-3)
+    assert pitch["flapping"] == pytest.approx(1.3e-7, rel=1e-3)
+    assert pitch["per_log"] == pytest.approx([1.3e-7] * 3, rel=1e-2)
+    assert roll["ci"] == pytest.approx(0.0, abs=1e-10) and roll["logs"] == 3
+
+
+def test_flapping_effect_file_adds_both_axes_with_sources(tmp_path):
+    from quadsim.core.errors import InputError
+    from quadsim.effects.effectfile import load_effect_file
+
+    base = tmp_path / "d1.toml"
+    base.write_text('schema = "quadsim.effects/1"\nparams = "crazyflie21"\n\n[[effect]]\n'
+                    'name = "rotor_drag"\ncoefficient = { value = 2.8e-06, unit = "kg/rad", '
+                    'source = "gap" }\n')
+    pooled = {"roll": {"flapping": 9.1e-8, "ci": 1e-8}, "pitch": {"flapping": 1.31e-7, "ci": 2e-8}}
+    out = tmp_path / "d2.toml"
+    out.write_text(ra.flapping_effect_file(base, pooled, [tmp_path / "a_run1.csv.gz"]))
+    model = load_effect_file(out)
+    rotor_drag, flapping = model.effects.effects
+    assert rotor_drag.coefficient == 2.8e-06
+    assert model.sources[("rotor_drag", "coefficient")] == "gap"
+    assert flapping.axes == (9.1e-8, 1.31e-7)
+    assert "a_run1.csv.gz" in model.sources[("blade_flapping", "pitch")]
+    with pytest.raises(InputError, match="already in it"):
+        ra.flapping_effect_file(out, pooled, [])

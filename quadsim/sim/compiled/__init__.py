@@ -55,7 +55,7 @@ _KNOWN = {
     "thrust_curve": {"linear", "offset", "centre", "quadratic"},
     "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)} | {"alpha"},
     "rotor_drag": {"coefficient", "axial_coefficient"},
-    "blade_flapping": {"coefficient"},
+    "blade_flapping": {"roll", "pitch", "coefficient"},
     "translational_lift": {"k_h"},
     "body_drag": {"cd_area", "cd_area_vertical", "per_axis"},
     "ground_effect": {"gain", "ground_height", "radius"},
@@ -201,7 +201,8 @@ def encode(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> tuple[
                 put("rotor_drag", v["coefficient"])
                 put("rotor_drag_axial", v["axial_coefficient"])
             elif effect.name == "blade_flapping":
-                put("blade_flapping", v["coefficient"])
+                roll, pitch = effect.axes          # the z row takes their mean
+                put("blade_flapping", [roll, pitch, 0.5 * (roll + pitch)])
             elif effect.name == "translational_lift":
                 put("translational_lift", v["k_h"])
             elif effect.name == "body_drag":

@@ -218,10 +218,10 @@ def loads(b, t, dt, qpos, qvel, qacc, mid, acc, rows, arm, axis, spin, hub, st, 
             force_body[i] += f[i]
             momentum[i] += spin[r] * mid[r] * a[i]
             spin_up[i] += spin[r] * acc[r] * a[i]
-        kf = row[O_BF] * mid[r]    # blade_flapping: -k Omega (a x v_perp) = -k Omega (a x v)
-        torque[0] -= kf * (a[1] * air_body[2] - a[2] * air_body[1])
-        torque[1] -= kf * (a[2] * air_body[0] - a[0] * air_body[2])
-        torque[2] -= kf * (a[0] * air_body[1] - a[1] * air_body[0])
+        # blade_flapping: -diag(k) Omega (a x v_perp) = -diag(k) Omega (a x v), k per body axis
+        torque[0] -= row[O_BF] * mid[r] * (a[1] * air_body[2] - a[2] * air_body[1])
+        torque[1] -= row[O_BF + 1] * mid[r] * (a[2] * air_body[0] - a[0] * air_body[2])
+        torque[2] -= row[O_BF + 2] * mid[r] * (a[0] * air_body[1] - a[1] * air_body[0])
         torque[0] += p[1] * f[2] - p[2] * f[1]
         torque[1] += p[2] * f[0] - p[0] * f[2]
         torque[2] += p[0] * f[1] - p[1] * f[0]

@@ -19,7 +19,7 @@ _LAYOUT = {"tau_up": 1, "tau_down": 1, "mismatch": MAX_ROTORS, "battery_rate": 1
            "gust_frequency": GUST, "gust_phase": 3 * GUST, "thrust_gain": 1,
            "rate_damping": 3, "payload_mass": 1, "payload_length": 1, "payload_attach": 3,
            "payload_arm": 3, "payload_stiffness": 1, "payload_damping": 1, "gravity": 1,
-           "com": 3, "blade_flapping": 1, "speed_gain": 1,
+           "com": 3, "blade_flapping": 3, "speed_gain": 1,
            "translational_lift": 1, "rotor_speed_gain": MAX_ROTORS, "body_drag_axes": 1,
            "curve_quadratic": 1}
 OFFSET = {}
