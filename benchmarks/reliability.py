@@ -217,21 +217,20 @@ def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[A
     params = load_params(vehicle)
     rng = np.random.default_rng(seed)
     refs = [synthetic_flight(params, duration=DURATION_S, rate_hz=RATE_HZ, speed=float(s),
-                             seed=seed * 100 + k, name=f"reference_{k}")
+                             seed=seed * 100 + k)
             for k, s in enumerate(np.linspace(0.7, 1.4, REFERENCES))]
     cases = _generated_cases(params, rng)
     logs = [synthetic_flight(params, effects, duration=DURATION_S, rate_hz=RATE_HZ,
-                             speed=float(rng.uniform(0.8, 1.3)), seed=seed * 1000 + i,
-                             name=f"{i:02d}_{truth}")
-            for i, (truth, effects) in enumerate(cases)]
+                             speed=float(rng.uniform(0.8, 1.3)), seed=seed * 1000 + i)
+            for i, (_, effects) in enumerate(cases)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         diagnosis = diagnose_per_flight(logs, refs, params)
     out = []
-    for (truth, _), log, entry in zip(cases, logs, diagnosis.flights):
-        flight = entry if isinstance(entry, dict) else entry.to_json()
+    for i, ((truth, _), entry) in enumerate(zip(cases, diagnosis.flights)):
+        flight = entry.to_json()
         outcome = str(flight.get("outcome"))
-        verdict = str(flight.get("verdict") or outcome)
+        verdict = str(flight.get("verdict") or flight.get("effect") or outcome)
         if truth == "none":
             right = outcome == "no_significant_gap"
         elif truth.startswith("outside:"):
@@ -239,7 +238,7 @@ def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[A
         else:
             right = outcome == "effect" and truth in verdict.split("+")
         stated = flight.get("probability")
-        out.append(Answer("generated", log.name, truth, outcome, verdict,
+        out.append(Answer("generated", f"flight_{i:02d}", truth, outcome, verdict,
                           math.nan if stated is None else float(stated), right))
     return out
 
