@@ -336,12 +336,12 @@ def test_drag_factor_x1000_refused(tmp_path, capsys):
     from quadsim.vehicle.params import load_params
 
     text = Path(load_params("crazyflie21").path).read_text()
-    assert "value = 5.5122e-11" in text
+    assert "value = 2.2217e-10" in text
     model = tmp_path / "d1000.toml"
-    model.write_text(text.replace("value = 5.5122e-11", "value = 5.5122e-08"))
+    model.write_text(text.replace("value = 2.2217e-10", "value = 2.2217e-07"))
     path = _csv(tmp_path / "f.csv")
     assert convert_main([str(path), "-o", str(tmp_path / "o.csv"), "--model", str(model)]) == 2
-    _one_line(capsys, str(model), "rotors.drag_factor", "figure of merit 0.00169")
+    _one_line(capsys, str(model), "rotors.drag_factor", "figure of merit 0.00042")
 
 
 def test_fly_negative_mass_offset(tmp_path, capsys):

@@ -23,14 +23,10 @@ dimensionless ratio of the vehicle's own numbers, never a fixed limit on one num
   (x 9.55) pushes a Crazyflie from 76 m/s to 720 m/s.
 
 * **propeller torque** -- the hover figure of merit ``FM = b^1.5 / (d sqrt(2 rho pi r^2))``
-  that b, d and the radius imply must lie in [``MIN_FIGURE_OF_MERIT``,
-  ``MAX_FIGURE_OF_MERIT``] = [0.05, 2]: momentum theory allows no propeller's *aerodynamic*
-  torque above 1, real ones reach 0.3-0.7, and the report's published pair (d = b/4) gives
-  0.088. The upper limit is 2, not 1, because d here is the yaw torque the body receives per
-  Omega^2 (what the engines apply), which a flight's yaw balance identifies and which can be
-  below the propeller's own torque: the Crazyflie 2.1 Brushless flights read d = 0.0015 m x b,
-  FM 1.7 (docs/gap.md). A drag factor d stored x1000 (or a torque/thrust ratio in mm) gives
-  FM x 0.001, one stored /1000 FM x 1000: both still refused.
+  that b, d and the radius imply must lie in [``MIN_FIGURE_OF_MERIT``, 1] = [0.05, 1]: momentum
+  theory allows no propeller above 1, real ones reach 0.3-0.7, and the report's published
+  pair (d = b/4) gives 0.088; a drag factor d stored x1000 (or a torque/thrust ratio in mm)
+  gives FM x 0.001, one stored /1000 FM x 1000.
 
 Every refusal is one :func:`quadsim.core.errors.field_error` line naming the file, the field and
 the numbers that disagree. Example::
@@ -62,7 +58,6 @@ SPEED_OF_SOUND = 343.0  # m/s, air at 20 C
 MAX_TIP_MACH = 0.9
 PROP_OVERLAP = 1.2
 MIN_FIGURE_OF_MERIT = 0.05
-MAX_FIGURE_OF_MERIT = 2.0
 
 
 def feasibility(params) -> dict:
@@ -138,18 +133,17 @@ def figure_of_merit(thrust_factor: float, drag_factor: float, air_density: float
 
 
 def check_figure_of_merit(params, *, where=None) -> None:
-    """b, d and the radius belong to a propeller: hover figure of merit in [0.05, 2]."""
+    """b, d and the radius belong to a propeller: hover figure of merit in [0.05, 1]."""
     r, b, d = params.rotor_radius, params.thrust_factor, params.drag_factor
     if not (r > 0 and b > 0 and d > 0):
         return
     merit = figure_of_merit(b, d, params.air_density, r)
-    if not MIN_FIGURE_OF_MERIT <= merit <= MAX_FIGURE_OF_MERIT:
+    if not MIN_FIGURE_OF_MERIT <= merit <= 1.0:
         raise field_error(
             where or _where(params), "rotors.drag_factor",
             f"d = {d:.4g} N m s^2/rad^2 with b = {b:.4g} N s^2/rad^2 (d/b = {d / b:.4g} m) "
             f"and radius {r:.4g} m gives a hover figure of merit {merit:.3g}, outside "
-            f"{MIN_FIGURE_OF_MERIT}-{MAX_FIGURE_OF_MERIT:g} (propellers 0.3-0.7): "
-            "d off by a factor 1000?")
+            f"{MIN_FIGURE_OF_MERIT}-1 (propellers 0.3-0.7): d off by a factor 1000?")
 
 
 def check_vehicle(params, *, where=None) -> None:
