@@ -1,0 +1,79 @@
+"""The reliability table's arithmetic (benchmarks.reliability): Wilson interval in closed
+form, binning at the edges, scoring of labelled per-flight results."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from benchmarks.reliability import (
+    PAYLOAD_TOTAL,
+    Answer,
+    bin_label,
+    format_table,
+    mixed_answers,
+    reliability_table,
+    wilson_interval,
+)
+
+
+def test_wilson_interval_closed_form():
+    # 8 of 10, z = 1.96: centre (0.8 + 0.19208) / 1.38416, half 1.96 sqrt(0.016 + 0.0009604)
+    # / 1.38416 (Wilson 1927; Agresti & Coull 1998, Table 1 style numbers)
+    z = 1.96
+    lo, hi = wilson_interval(8, 10, z=z)
+    denom = 1 + z * z / 10
+    centre = (0.8 + z * z / 20) / denom
+    half = z * math.sqrt(0.8 * 0.2 / 10 + z * z / 400) / denom
+    assert (lo, hi) == pytest.approx((centre - half, centre + half), rel=1e-12)
+    assert (lo, hi) == pytest.approx((0.4902, 0.9433), abs=1e-4)
+    # all right: the upper end is 1, the lower n / (n + z^2)
+    lo, hi = wilson_interval(14, 14, z=z)
+    assert hi == 1.0 and lo == pytest.approx(14 / (14 + z * z), rel=1e-12)
+    assert wilson_interval(0, 5, z=z)[0] == 0.0
+    assert all(math.isnan(v) for v in wilson_interval(0, 0))
+
+
+def _answer(p, right, outcome="effect"):
+    return Answer("t", "f", "x", outcome, "v", p, right)
+
+
+def test_binning_puts_each_edge_in_the_upper_bin():
+    answers = [_answer(0.2, True), _answer(0.7, False), _answer(0.89, True),
+               _answer(0.9, True), _answer(0.99, True), _answer(1.0, False)]
+    rows = reliability_table(answers)
+    assert [r.label for r in rows] == ["<0.7", "0.7-0.9", "0.9-0.99", ">=0.99"]
+    assert [r.answers for r in rows] == [1, 2, 1, 2]
+    assert rows[1].mean_stated == pytest.approx(0.795)
+    assert rows[1].fraction_right == 0.5 and rows[3].fraction_right == 0.5
+    assert rows[1].low == pytest.approx(wilson_interval(1, 2)[0])
+    assert bin_label(0) == "<0.7" and bin_label(3) == ">=0.99"
+    empty = reliability_table([_answer(0.95, True)])
+    assert empty[0].answers == 0 and math.isnan(empty[0].fraction_right)
+
+
+def test_unexplained_answers_are_counted_apart():
+    text = format_table("t", [_answer(0.99, True), _answer(0.99, False, "unexplained")])
+    assert "t: 1 answers" in text and "not binned: 1 unexplained or refused, 0 of them" in text
+
+
+def test_mixed_scoring_needs_the_name_and_the_total():
+    labels = {"flights": {"a.csv.gz": {"label": "payload"}, "b.csv.gz": {"label": "payload"},
+                          "c.csv.gz": {"label": "none"}, "d.csv.gz": {"label": "payload"}}}
+    near = PAYLOAD_TOTAL - 0.0015        # within 2 g
+    result = {"flights": [
+        {"file": "x/a.csv.gz", "outcome": "effect", "verdict": "cable_payload+mass_offset",
+         "probability": 0.99, "params": {"cable_payload.mass": near - 0.003,
+                                         "mass_offset.mass": 0.003}},
+        {"file": "b.csv.gz", "outcome": "effect", "verdict": "mass_offset",
+         "probability": 0.95, "params": {"mass_offset.mass": PAYLOAD_TOTAL - 0.0025}},
+        {"file": "c.csv.gz", "outcome": "no_significant_gap", "verdict": "no_significant_gap",
+         "probability": 0.8, "params": {}},
+        {"file": "d.csv.gz", "outcome": "effect", "verdict": "wind", "probability": 0.9,
+         "params": {"wind.vx": 0.1}}]}
+    got = {a.flight: (a.right, a.stated) for a in mixed_answers(result, labels)}
+    assert got == {"a.csv.gz": (True, 0.99), "b.csv.gz": (False, 0.95),
+                   "c.csv.gz": (True, 0.8), "d.csv.gz": (False, 0.9)}
+    with pytest.raises(KeyError):
+        mixed_answers({"flights": [{"file": "e.csv.gz"}]}, labels)
