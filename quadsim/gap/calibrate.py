@@ -421,12 +421,44 @@ def _slope_kept(spread: float, identified: bool, params: VehicleParams) -> bool:
 #: the shared thrust curve's slope (:func:`centred_curve`)
 CURVE_KEY = "thrust_curve.linear"
 
+#: :func:`_slope_clearly_undetermined` decides before the refinement only where the
+#: preliminary spread exceeds the threshold by this factor: the refinement moves the rotor
+#: timing and the spin inertia, not the slope, and the preliminary spread tracks the final
+#: one to well within it (CHANGELOG, issue 43); nearer the threshold the whole calibration
+#: decides, as before.
+SLOPE_EARLY_MARGIN = 1.2
+
+
+def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
+                                cand: Candidate, fit) -> bool:
+    """Whether the shared slope's reference spread ``s_ref`` (:func:`curve_determined`), taken
+    at the bounded fit ``fit`` (theta, stderr) on the reference ``states`` aligned at the
+    starting timing, lies beyond :data:`SLOPE_EARLY_MARGIN` times the threshold of
+    :func:`_slope_kept`: the between-flight scatter of :func:`_scatter` with the noise model of
+    :func:`_noise_model` after the discrepancy term (:func:`fit_discrepancy`) at ``fit.theta``,
+    as :func:`_calibrate` builds them after the refinement. True: the slope is not shared and
+    the calibration with it ends here (it would be rejected after the whole calibration).
+    Why: that calibration's refinement and noise model cost as much again as the one without
+    the slope that replaces it; this check costs a tenth of it."""
+    effects = cand.effects(fit.theta)
+    discrepancy = fit_discrepancy([residuals(s, params, effects, rotor_channel=rotor)
+                                   for s in states], states)
+    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy)
+    probe = Reference(params, rotor, cand, fit.theta.copy(), np.asarray(fit.stderr, float),
+                      np.zeros_like(fit.theta), sigma, tau, np.zeros_like(sigma), 1.0, 1,
+                      {}, [], {})
+    probe.discrepancy = discrepancy
+    j = cand.parameter_names.index(CURVE_KEY)
+    spread = float(np.hypot(probe.se_pool[j], _scatter(states, probe)[j]))
+    return spread > SLOPE_EARLY_MARGIN * DETERMINED * curve_slope_sd(params)
+
 
 def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
-    between-flight scatter only widens it), which saves that calibration's scatter and
-    envelope."""
+    between-flight scatter only widens it), or its spread with the scatter before the
+    refinement shows it clearly so (:func:`_slope_clearly_undetermined`), which saves that
+    calibration's refinement, scatter and envelope."""
     if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     estimates = [f.delays_ms["rotor"] for f in flights
@@ -453,6 +485,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         # pooled fit leaves undetermined ends this calibration without paying for it
         j = cand.parameter_names.index(CURVE_KEY)
         if not _slope_kept(fit.stderr[j], bool(fit.identifiable[j]), params):
+            return None
+        if _slope_clearly_undetermined(states, params, rotor, cand, fit):
             return None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
                                               shift=start, sigma=sigma0)

@@ -216,12 +216,23 @@ def centre_term(states, discrepancy: Discrepancy | None, chans: int,
                 memo: dict | None = None) -> np.ndarray | float:
     """phi_c(t)ᵀ beta_bar_c as (N, ``chans``) (SI; zero on the channels it does not cover),
     or 0.0 without a discrepancy: what the references' systematic residual predicts on this
-    flight, taken off every residual."""
+    flight, taken off every residual. With a ``memo``, kept per motion arrays (velocity,
+    body acceleration: what the features read), discrepancy and channel count: the same
+    numbers for every evaluation on one flight."""
     if discrepancy is None:
         return 0.0
+    if memo is not None:
+        key = ("discrepancy.centre", id(states.velocity), id(states.body_accel),
+               id(discrepancy), chans)
+        hit = memo.get(key)
+        if hit is not None and hit[0] is states.velocity and hit[1] is states.body_accel \
+                and hit[2] is discrepancy:
+            return hit[3]
     out = np.zeros((len(states.t), chans))
     for c, names, centre in zip(discrepancy.channels, discrepancy.names, discrepancy.centre):
         out[:, c] = _design(states, names, memo) @ centre
+    if memo is not None:
+        memo[key] = (states.velocity, states.body_accel, discrepancy, out)
     return out
 
 

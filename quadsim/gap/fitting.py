@@ -326,11 +326,12 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
                                  flight_memo=motion))
     if memo is None:
         meas_force, meas_torque = measured_wrench(states, vehicle)
-    else:
-        key = ("measured", id(states), vehicle.mass, vehicle.com.tobytes(),
+    else:       # what the motion implies: the same for every rotor timing of one flight
+        motion = (states.body_rate, states.body_accel, states.specific_force)
+        key = ("measured", *map(id, motion), vehicle.mass, vehicle.com.tobytes(),
                vehicle.inertia.tobytes())
-        meas_force, meas_torque = memoised(memo, key, states,
-                                        lambda: measured_wrench(states, vehicle))
+        meas_force, meas_torque = memoised(memo, key, motion,
+                                           lambda: measured_wrench(states, vehicle))
     torque_residual = meas_torque - torque
     if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
                                                                      params.inertia):

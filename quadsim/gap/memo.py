@@ -49,9 +49,11 @@ _PER_EVALUATION = ("measured", "rotor", "wrench", "shifted")
 def memoised(memo: dict, key: tuple, states, compute):
     """``memo[key]`` (computed once): parts of the residual that many evaluations on the
     same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
-    command -> speed model). The entry holds ``states`` so that its id stays its own."""
+    command -> speed model). The entry holds ``states`` so that its id stays its own;
+    ``states`` may be a tuple of the arrays the key holds the ids of (the measured wrench:
+    the motion, which every rotor timing of a flight shares), each compared by identity."""
     hit = memo.get(key)
-    if hit is not None and hit[0] is states:
+    if hit is not None and _same(hit[0], states):
         return hit[1]
     if len(memo) > 64:          # the oldest of these entries go (the per-flight ones stay)
         for old in [k for k in memo if isinstance(k, tuple) and k[0] in _PER_EVALUATION][:16]:
@@ -59,6 +61,14 @@ def memoised(memo: dict, key: tuple, states, compute):
     value = compute()
     memo[key] = (states, value)
     return value
+
+
+def _same(kept_refs, refs) -> bool:
+    """Whether ``refs`` is ``kept_refs``, or both are tuples of the same objects."""
+    if kept_refs is refs:
+        return True
+    return (type(kept_refs) is tuple and type(refs) is tuple and len(kept_refs) == len(refs)
+            and all(a is b for a, b in zip(kept_refs, refs)))
 
 
 def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:

@@ -144,10 +144,23 @@ class Marginal:
         # cho_solve's own LAPACK call (the same numbers), without its per-call checks and
         # batch wrapper: most of its cost on these small systems, called thousands of times
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if len(s_ref) else None
+        self._last: tuple | None = None
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(r + j du, du) at the profiled shift du = -A^-1 jᵀ r of the weighted residual
-        ``r`` (N C,) or of each of its columns (N C, P)."""
+        ``r`` (N C,) or of each of its columns (N C, P). The last residual vector's answer is
+        kept (a fit's linear step profiles the residual its cost has just profiled; the
+        residuals of :meth:`Problem.residual` are not written to): the arrays returned are
+        shared, not to be written to either."""
+        last = self._last
+        if last is not None and last[0] is r:
+            return last[1]
+        out = self._profile(r)
+        if r.ndim == 1:
+            self._last = (r, out)
+        return out
+
+    def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         rhs = self.j.T @ r
         if self._potrs is None:
             du = -cho_solve(self.chol, rhs)

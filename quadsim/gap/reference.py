@@ -60,6 +60,11 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
     import dataclasses
 
     speed, accel = spectra if spectra is not None else rotor_spectra(states)
+    if speed is not None and accel is not None:     # both in one inverse transform
+        both = read_later(states.t, None, delay_s, np.hstack([speed, accel]))
+        k = speed.shape[1]
+        return dataclasses.replace(states, rotor_speed=np.ascontiguousarray(both[:, :k]),
+                                   rotor_accel=np.ascontiguousarray(both[:, k:]))
     return dataclasses.replace(
         states, rotor_speed=read_later(states.t, states.rotor_speed, delay_s, speed),
         rotor_accel=None if states.rotor_accel is None
@@ -99,7 +104,8 @@ def read_later(t: np.ndarray, x: np.ndarray, delay_s: float,
     either end, so the spectrum does not ring there, and beyond the log's ends the read
     meets the mirror image (x(t_end + d) = x(t_end - d)). The read is smooth in ``delay_s``
     across whole samples: a delay fit's finite differences see the slope, not an edge. A
-    non-uniform time base is read by linear interpolation."""
+    non-uniform time base is read by linear interpolation. The columns are transformed
+    one by one (numpy's FFT): the spectra of several series side by side read as each alone."""
     n = len(t)
     if spectrum is None:
         if not _uniform(t):

@@ -1,0 +1,122 @@
+"""What the speed-ups of issue 43 item 7 keep must be what was computed: the kept discrepancy
+centre, the kept profile of a marginal, the measured wrench kept per motion, the rotor speeds
+and their derivative shifted in one transform, and the thrust-curve slope decided before the
+refinement (on the real references, where present)."""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from quadsim.gap import memo as memo_mod
+from quadsim.gap.discrepancy import centre_term, fit_discrepancy
+from quadsim.gap.problem import Marginal
+from quadsim.gap.reference import read_later, rotor_spectra, shifted
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "crazyflie21_brushless"
+
+
+def _states(n, seed):
+    rng = np.random.default_rng(seed)
+    return SimpleNamespace(t=np.arange(n) * 0.01, quat=np.tile([1.0, 0, 0, 0], (n, 1)),
+                           velocity=rng.normal(0, 1.0, (n, 3)),
+                           body_rate=rng.normal(0, 1.0, (n, 3)),
+                           body_accel=rng.normal(0, 5.0, (n, 3)))
+
+
+def test_kept_centre_term_is_the_computed_one_and_follows_the_motion():
+    flights = [_states(300, k) for k in range(12)]
+    rng = np.random.default_rng(5)
+    disc = fit_discrepancy([rng.normal(0, 1, (300, 6)) for _ in flights], flights)
+    memo: dict = {}
+    first = centre_term(flights[0], disc, 6, memo)
+    np.testing.assert_array_equal(first, centre_term(flights[0], disc, 6))
+    assert centre_term(flights[0], disc, 6, memo) is first          # kept
+    other = centre_term(flights[1], disc, 6, memo)                  # other motion: its own
+    np.testing.assert_array_equal(other, centre_term(flights[1], disc, 6))
+    assert not np.array_equal(other, first)
+
+
+def test_marginal_profile_kept_for_the_last_vector_only():
+    rng = np.random.default_rng(1)
+    jac, spread = rng.normal(size=(400, 5)), np.array([0.5, 1.0, 2.0, 1.5, 0.1])
+    marg, fresh = Marginal(jac, spread), Marginal(jac, spread)
+    r1, r2 = rng.normal(size=400), rng.normal(size=400)
+    a1 = marg.profile(r1)
+    np.testing.assert_array_equal(a1[0], fresh.profile(r1)[0])
+    assert marg.profile(r1) is a1
+    a2 = marg.profile(r2)
+    np.testing.assert_array_equal(a2[1], fresh.profile(r2)[1])
+    # du minimises |r + j du|^2 + |du|^2: j^T (r + j du) + du = 0
+    aug, du = a2
+    np.testing.assert_allclose(marg.j.T @ aug, -du, atol=1e-9)
+    cols = rng.normal(size=(400, 3))              # matrices are not kept
+    np.testing.assert_array_equal(marg.profile(cols)[0], fresh.profile(cols)[0])
+
+
+def test_memoised_with_a_tuple_of_references_compares_each_by_identity():
+    a, b = np.zeros(3), np.ones(3)
+    memo: dict = {}
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return len(calls)
+
+    key = ("measured", id(a), id(b))
+    assert memo_mod.memoised(memo, key, (a, b), compute) == 1
+    assert memo_mod.memoised(memo, key, (a, b), compute) == 1       # a new tuple, same arrays
+    assert memo_mod.memoised(memo, key, (a, np.ones(3)), compute) == 2   # another array
+
+
+def test_speed_and_derivative_shifted_together_read_as_each_alone():
+    rng = np.random.default_rng(3)
+    n = 257
+    import dataclasses
+
+    @dataclasses.dataclass(frozen=True)
+    class S:
+        t: np.ndarray
+        rotor_speed: np.ndarray
+        rotor_accel: np.ndarray
+
+    s = S(np.arange(n) * 0.004, rng.normal(2000, 50, (n, 4)), rng.normal(0, 800, (n, 4)))
+    out = shifted(s, 0.0063, rotor_spectra(s))
+    np.testing.assert_array_equal(out.rotor_speed, read_later(s.t, s.rotor_speed, 0.0063))
+    np.testing.assert_array_equal(out.rotor_accel, read_later(s.t, s.rotor_accel, 0.0063))
+    # a whole-sample delay reads the next samples (away from the mirrored ends)
+    whole = shifted(s, 0.008, rotor_spectra(s))
+    np.testing.assert_allclose(whole.rotor_speed[10:-10], s.rotor_speed[12:-8], atol=1e-8)
+
+
+@pytest.mark.skipif(not (DATA / "nominal").is_dir(), reason="shared real data absent")
+def test_early_slope_decision_agrees_with_the_whole_calibration_on_real_references(
+        monkeypatch):
+    """On the 20 real nominal flights the slope is dropped: the check before the refinement
+    says so, and so does the whole calibration with the slope."""
+    import warnings
+
+    import quadsim.gap.calibrate as cal
+    from quadsim.gap.diagnose import prepare
+    from quadsim.logs.checks import check_logs
+    from quadsim.logs.flightlog import load_log
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        logs, _ = check_logs([load_log(p) for p in sorted((DATA / "nominal").glob("*.csv.gz"))],
+                             params)
+        flights = prepare(logs, params)
+    said = []
+    early = cal._slope_clearly_undetermined
+
+    def record(*args):
+        said.append(early(*args))
+        return False                      # let the whole calibration decide too
+
+    monkeypatch.setattr(cal, "_slope_clearly_undetermined", record)
+    ref = cal._calibrate(flights, params, curve=True)
+    assert said == [True]
+    assert not cal.curve_determined(ref)
