@@ -64,6 +64,7 @@ __all__ = [
     "explanations_for",
     "marginal_sd",
     "own_effects",
+    "predictive_delay_sd",
     "prior_of",
     "prior_spreads",
     "reference_delay_sd",
@@ -125,13 +126,30 @@ def reference_determined(reference: Reference) -> dict[str, bool]:
 
 
 def reference_delay_sd(reference: Reference) -> float:
-    """How far a nominal flight's rotor delay may lie from the references' (s): their
-    spread, combined with the estimate's repeatability
-    (:data:`quadsim.logs.delays.REPEAT_TOL_S`, 3 ms: the two halves of a log agree to it)."""
+    """How far a nominal flight's rotor delay may lie from the references' (s): the
+    predictive spread of one more flight's delay from the references' n estimates,
+    ``s_mod sqrt(1 + 1/n)`` (the second term: their mean's own uncertainty), with
+    ``s_mod^2 = (s_0^2 + (n - 1) s^2) / n``: their sample variance s^2 (n - 1 degrees of
+    freedom) moderated by the estimator's repeatability s_0
+    (:data:`quadsim.logs.delays.REPEAT_TOL_S`, 3 ms: the two halves of a log agree to it)
+    weighed as one degree of freedom. Each reference's estimate already carries the
+    estimator's error, so s holds it once; adding s_0 to s in quadrature counted it twice
+    (a PyFlyt rotor log 11.4 ms late went unnamed under a 3.5 ms prior where the
+    references' own estimates spread 1.8 ms). Without references' estimates (n = 0): s_0."""
     from ..logs.delays import REPEAT_TOL_S
 
-    sd_ms = reference.delays_ms.get("rotor", (0.0, 0.0, 0))[1]
-    return float(np.hypot(1e-3 * sd_ms, REPEAT_TOL_S))
+    _, sd_ms, n = reference.delays_ms.get("rotor", (0.0, 0.0, 0))
+    return predictive_delay_sd(1e-3 * sd_ms, n, REPEAT_TOL_S)
+
+
+def predictive_delay_sd(sd: float, count: int, repeat: float) -> float:
+    """:func:`reference_delay_sd`'s formula (s): ``sd`` the references' sample standard
+    deviation (s, ddof 1) over ``count`` estimates, ``repeat`` the estimator's
+    repeatability (s), weighed as one degree of freedom."""
+    if count < 1:
+        return float(repeat)
+    moderated = (repeat ** 2 + (count - 1) * sd ** 2) / count
+    return float(np.sqrt(moderated * (1.0 + 1.0 / count)))
 
 
 def prior_spreads(params) -> dict:
