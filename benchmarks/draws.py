@@ -8,7 +8,7 @@ is observable, never by the diagnosis). Magnitudes (SI): added mass 5-20 % of th
 CoM offset 3-10 % of the arm; inertia 15-40 % per axis; one rotor 5-15 % weaker/stronger; all
 rotors' thrust per Omega^2 5-15 % lower or 2-5 % higher (``thrust_factor``: worn props, heat or
 altitude lose up to 15 %; cold air or another prop batch gain a few %, the prior of
-quadsim.gap.priors); motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4
+quadsim.gap.fitting); motor time constant 20-50 ms (x2 for the 0.84 kg vehicle); drag at 1.5 m/s 1-4
 % of the weight; rotor drag 0.5-2 x 2.5 % of the weight per m/s at hover; wind 0-2 m/s.
 """
 

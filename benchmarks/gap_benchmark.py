@@ -441,8 +441,7 @@ def per_flight_speed(data: Path, compare: bool = False) -> str:
     (``evaluate(full=True)``, no screen): verdicts, answers and the largest change of a
     reading's probability."""
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.per_flight import judge_one
+    from quadsim.gap.diagnose import judge_one, prepare
     from quadsim.logs.checks import check_logs
     from quadsim.logs.flightlog import load_log
 

@@ -63,7 +63,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadsim.effects import make_effect
-from quadsim.gap.priors import momentum_rate_damping
+from quadsim.gap.fitting import momentum_rate_damping
 
 from . import sim_cases
 from .gpd_source import MODEL, FlightSpec, gpd_flights, hover_speed_of, vehicle_params

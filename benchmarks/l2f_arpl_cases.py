@@ -9,7 +9,7 @@ diag(1.7665e-3, 1.3766e-3, 2.953e-3) kg m^2, k_Q 0.00596 m, 33 ms rotors, and a 
 that bends down: per rotor -0.530 + 8.971 a - 0.891 a^2 N (c2 < 0), hover at a = 0.281,
 where the slope is 0.61x the quadratic model's 2 T / Omega and the curvature is negative
 (when it was built, the library's shared curvature stopped at 0; since d636543 it may
-bend down: :func:`quadsim.gap.priors.curve_quadratic_bounds`). Its
+bend down: :func:`quadsim.gap.fitting.curve_quadratic_bounds`). Its
 rotor state is normalised; this module takes 3000 rad/s at a = 1. quadsim's nominal model
 has b from a thrust-stand least-squares fit of b Omega^2 over a = 0.1..0.5, the band it
 flies (1.40x low at hover; :func:`benchmarks.l2f_source.stand_b`; over 0.1..1.0 the

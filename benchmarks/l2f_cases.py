@@ -38,7 +38,7 @@ thrust_curve x2    a linear thrust term c1 a, c1 a_hover    a propeller whose st
 motor_lag x2       both rotor time constants x 1.5-2.5      slower ESC or heavier propeller
                    (81-135 ms instead of 54)
 rate_damping x2    a torque -k w, k (1.5..3) x the          prop guards add frame drag
-                   momentum-theory damping on roll and      (quadsim.gap.priors)
+                   momentum-theory damping on roll and      (quadsim.gap.fitting)
                    pitch, a third of it on yaw
 wind x2            steady wind 2-5 m/s, random direction,   outdoor breeze (Beaufort 2-3)
                    through the body drag
@@ -72,7 +72,7 @@ import numpy as np
 
 from quadsim.effects import make_effect
 from quadsim.effects.thrust_factor import ThrustFactor
-from quadsim.gap.priors import momentum_rate_damping
+from quadsim.gap.fitting import momentum_rate_damping
 
 from . import sim_cases
 from .l2f_source import (

@@ -18,7 +18,7 @@ late; outside: 1-3 Hz torques, 2-5 Hz vertical forces. Seeds 82 000 + k (cases),
 37 k (references), apart from the other vehicles'.
 
 Kept unseen: built on 2026-11-28 with the verdict rules frozen at the commit that chose the
-air drag's law per flight (:mod:`quadsim.gap.drag_law`); its flights generated and checked
+air drag's law per flight (:mod:`quadsim.gap.evidence`); its flights generated and checked
 for observability only (``--generate-only``), then judged once; the first number is
 reported as it came out (README, docs/gap.md). Observability, scoring and the machinery: as
 :mod:`.l2f_cases` (:class:`benchmarks.l2f_cases.VehicleCases`).

@@ -18,7 +18,7 @@ outside: 1-3 Hz torques, 2-5 Hz vertical forces. Seeds 86 000 + k (cases), 96 00
 (references), apart from the other vehicles'.
 
 Kept unseen: built on 2026-11-28 with the verdict rules frozen at the commit that lets the
-shared curvature bend down (:func:`quadsim.gap.priors.curve_quadratic_bounds`); its flights
+shared curvature bend down (:func:`quadsim.gap.fitting.curve_quadratic_bounds`); its flights
 generated and checked for observability only (``--generate-only``), then judged once; the
 first number is reported as it came out (README, docs/gap.md). Observability, scoring and
 the machinery: as :mod:`.l2f_cases` (:class:`benchmarks.l2f_cases.VehicleCases`).

@@ -37,7 +37,7 @@ thrust_factor      every propeller's k_thrust and k_drag    worn or different pr
 motor_lag x2       motor J x 1.5-2.5 (a time constant of    a heavier motor bell or
                    7-13 ms at hover instead of 5)           propeller
 rate_damping x2    a torque -k w, k (1.5..3) x the          prop guards add frame drag
-                   momentum-theory damping on roll and      (quadsim.gap.priors)
+                   momentum-theory damping on roll and      (quadsim.gap.fitting)
                    pitch, a third of it on yaw
 wind x2            steady wind 2-5 m/s, random direction,   outdoor breeze (Beaufort 2-3)
                    through the body drag
@@ -67,7 +67,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadsim.effects import make_effect
-from quadsim.gap.priors import momentum_rate_damping
+from quadsim.gap.fitting import momentum_rate_damping
 
 from . import sim_cases
 from .multirotor_source import (

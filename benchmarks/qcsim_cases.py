@@ -35,7 +35,7 @@ thrust_factor      every propeller's b and d -5..-15 %      worn or different pr
 motor_lag x2       motor J x 1.5-2.5 (32-54 ms at hover     a heavier propeller
                    instead of 21)
 rate_damping x2    a torque -k w, k (1.5..3) x the          prop guards add frame drag
-                   momentum-theory damping on roll and      (quadsim.gap.priors)
+                   momentum-theory damping on roll and      (quadsim.gap.fitting)
                    pitch, a third of it on yaw
 wind x2            steady wind 2-5 m/s, random direction,   outdoor breeze (Beaufort 2-3)
                    through the body drag
@@ -65,7 +65,7 @@ from __future__ import annotations
 import numpy as np
 
 from quadsim.effects import make_effect
-from quadsim.gap.priors import momentum_rate_damping
+from quadsim.gap.fitting import momentum_rate_damping
 
 from . import sim_cases
 from .observe import OBSERVABLE

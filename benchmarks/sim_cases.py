@@ -102,7 +102,7 @@ def draw_cases(table, draw: Callable, *, source: str, vehicle: str, seed0: int,
 class DrawScale:
     """What a source's case magnitudes are drawn against (SI): the vehicle's mass (kg),
     gravity (m/s^2), arm (m), momentum-theory rate damping (N m s/rad,
-    :func:`quadsim.gap.priors.momentum_rate_damping`), the payload's mass, radius off the
+    :func:`quadsim.gap.fitting.momentum_rate_damping`), the payload's mass, radius off the
     centre and depth below it (each a (low, high) range), and the hover rotor state (a
     thrust curve's linear term is drawn as a share of the hover thrust there; None: the
     source draws no thrust curve), and the wind's speed range (m/s)."""

@@ -31,8 +31,7 @@ import numpy as np
 
 from quadsim.core.frames import quat_multiply, quat_normalize, rotate_inverse
 from quadsim.effects.base import Effect, EffectContext, EffectSet
-from quadsim.gap.residual import rotor_wrench
-from quadsim.gap.rotor_channel import rate_owner
+from quadsim.gap.residual import rate_owner, rotor_wrench
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
@@ -317,7 +316,7 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     load torque takes this share s of the back EMF at hover (commands
     ``c (1 + s c max_speed / hover) / (1 + s)``, the same at hover); 0: speed-controlled
     motors, commands proportional to speed. Its propeller reading's exponent is then
-    ``alpha = s / (1 + s)`` (:func:`quadsim.gap.motor_map.load_exponent`)."""
+    ``alpha = s / (1 + s)`` (:func:`quadsim.gap.residual.load_exponent`)."""
     rng = np.random.default_rng(seed)
     pad = round(float(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
     t = (np.arange(round(float(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
@@ -331,7 +330,7 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     command = _commands(t, speed_, effect_set, params, hover, vbat)
     if load_share:
         # a DC motor: u V = k Omega + (R d / k) Omega^2, s = R d h / k^2 at hover h
-        # (quadsim.gap.motor_map.load_exponent), scaled to the same command at hover
+        # (quadsim.gap.residual.load_exponent), scaled to the same command at hover
         command = command * (1.0 + load_share * command * params.max_speed / hover) \
             / (1.0 + load_share)
     keep = slice(pad, len(t) - pad)

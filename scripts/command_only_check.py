@@ -15,7 +15,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
 from quadsim.gap import diagnose_per_flight  # noqa: E402
-from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds  # noqa: E402
+from quadsim.gap.logcheck import fit_command_model, synthesise_speeds, without_speeds  # noqa: E402
 from quadsim.logs.flightlog import load_log  # noqa: E402
 from quadsim.vehicle.params import load_params  # noqa: E402
 

@@ -13,7 +13,7 @@ Usage::
     python scripts/nominal_crosscheck.py --fastest      # one flight outside its references
 
 ``--fastest``: the fastest nominal flight (RMS speed) judged against the 6 slowest, a flight
-flown outside its references' envelope (``quadsim.gap.envelope``).
+flown outside its references' envelope (``quadsim.gap.reference``).
 
 Prints, per flight, the verdict and answer, and the no_significant_gap rate. Runs in about
 two minutes on 2 cores.

@@ -1,5 +1,5 @@
 """Command-only diagnosis (issue 44, item 5): references and flights with motor commands
-only (rotor speeds synthesised from the parameter set's motor map, quadsim.gap.commands),
+only (rotor speeds synthesised from the parameter set's motor map, quadsim.gap.logcheck),
 generated closed-loop flights (quadsim.logs.generate, MuJoCo, sensor noise) with a body drag
 of C_d A 20 cm^2 shared by every flight.
 
@@ -8,7 +8,7 @@ Measured (crazyflie21, 5 references, 5 s each): a 2 m/s wind is read 2.06 +- 0.2
 flights were named ``com_offset`` at 99-100 % with the same offset (-0.77, -0.29 mm) on each,
 where the same flights with their measured speeds are clear (90-98 %): the motor map's
 per-rotor differences from the flown motors are a roll/pitch torque every flight shares.
-With the map balanced rotor by rotor on the references (quadsim.gap.commands.
+With the map balanced rotor by rotor on the references (quadsim.gap.logcheck.
 balance_rotors: x 1.014, 0.971, 0.987, 1.031) the three are clear (96-99 %); the winds are
 then read 1.91 +- 0.25 m/s (C_d A 21.6 cm^2) and 3.28 +- 0.15 m/s (C_d A 28.8 cm^2, outside:
 the drag area fitted with the wind grows instead of the wind, item 5's symptom, strict xfail).
@@ -25,9 +25,8 @@ import pytest
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import EffectSet, make_effect
 from quadsim.gap.calibrate import calibrate
-from quadsim.gap.commands import synthesise_all
-from quadsim.gap.diagnose import prepare
-from quadsim.gap.per_flight import judge_one
+from quadsim.gap.diagnose import judge_one, prepare
+from quadsim.gap.logcheck import synthesise_all
 from quadsim.logs.checks import check_logs
 from quadsim.logs.generate import generate_flight
 from quadsim.logs.sensors import SensorModel
@@ -91,7 +90,7 @@ def test_balance_moves_neither_thrust_nor_yaw_and_zeroes_the_mean_torque(cf):
     """A closed form: a log at rest (gyro 0) on equal commands, whose rotors the parameter
     set's per-rotor map spins unequally (a roll/pitch torque): the balanced factors make the
     mean roll/pitch torque zero, with the total thrust and yaw torque unchanged."""
-    from quadsim.gap.commands import balance_rotors, command_model_from_params
+    from quadsim.gap.logcheck import balance_rotors, command_model_from_params
     from quadsim.logs.flightlog import FlightLog
     from quadsim.vehicle.rotors import allocation_matrix
 

@@ -1,4 +1,4 @@
-"""Parameter-consistency guard (quadsim.gap.where): an effect outside the candidates is
+"""Parameter-consistency guard (quadsim.gap.judge): an effect outside the candidates is
 never named with confidence because the stand-in needs different values in different regimes;
 a library effect keeps one value and stays named."""
 
@@ -11,8 +11,8 @@ from benchmarks.outside import BladeFlapping, in_plane_air_velocity
 from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import EffectContext, make_effect
 from quadsim.gap import diagnose
+from quadsim.gap.judge import MATERIAL
 from quadsim.gap.report import validate
-from quadsim.gap.where import MATERIAL
 from quadsim.vehicle.params import hover_speed, load_params
 
 # the stand-ins a thrust that grows with airspeed could take (fewer candidates: fast test)
@@ -92,7 +92,7 @@ def test_library_effect_is_not_tentative(cf):
 
 
 def _result(low, high, ci):
-    from quadsim.gap.where import MATERIAL as m
+    from quadsim.gap.judge import MATERIAL as m
 
     differs = abs(low - high) > np.hypot(ci, ci)
     material = abs(low - high) > m * max(abs(low), abs(high))
@@ -110,8 +110,8 @@ def _result(low, high, ci):
 def test_shifted_value_makes_a_tentative_name(low, high, ci, standing):
     """consistency.standing: what a split result does to a name (judge.judge_heldout: a
     shifted name stands, tentative, with the sentence; an inconsistent one is a partial)."""
-    from quadsim.gap.where import partial_text, tentative_text
-    from quadsim.gap.where import standing as of
+    from quadsim.gap.judge import partial_text, tentative_text
+    from quadsim.gap.judge import standing as of
 
     result = _result(low, high, ci)
     assert of(result) == standing
@@ -124,7 +124,7 @@ def test_shifted_value_makes_a_tentative_name(low, high, ci, standing):
 
 def test_rate_damping_prior_is_momentum_theory():
     """k_mt = r^2 T_h / v_i by hand for the 0.84 kg testbed; a stand-in needing 10x is flagged."""
-    from quadsim.gap.priors import momentum_rate_damping, plausibility
+    from quadsim.gap.fitting import momentum_rate_damping, plausibility
 
     p = load_params("physical")
     arm = float(np.max(np.linalg.norm(p.rotor_positions[:, :2], axis=1)))

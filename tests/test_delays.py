@@ -112,7 +112,7 @@ def test_a_late_rotor_logs_mirror_fill_is_not_counted_as_residual():
     square leaves those samples out (closed form: 100 samples at 10 ms, a 27 ms read, the last
     3 rows 10x the others: mean square 1 instead of 3.97); an early read (d < 0) leaves out
     the first rows; no delay or a delay longer than the log keeps them all."""
-    from quadsim.gap.problem import read_inside
+    from quadsim.gap.evidence import read_inside
 
     t = np.arange(100) * 0.01
     resid = np.ones((100, 2))

@@ -9,16 +9,16 @@ import pytest
 from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
-from quadsim.gap.discrepancy import (
+from quadsim.gap.calibrate import PRACTICAL_Z, SelfCheck, Spread, negligible
+from quadsim.gap.evidence import Marginal, laplace
+from quadsim.gap.judge import posterior
+from quadsim.gap.reference import (
     centre_term,
     channel_features,
     columns,
     features,
     fit_discrepancy,
 )
-from quadsim.gap.judge import posterior
-from quadsim.gap.problem import Marginal, laplace
-from quadsim.gap.selfcheck import PRACTICAL_Z, SelfCheck, Spread, negligible
 from quadsim.vehicle.params import load_params
 
 
@@ -191,7 +191,7 @@ def test_a_damped_swing_decays_as_a_damped_pendulum():
     """A cable of 0.5 m leaning 0.05 rad, its attachment still, swing damping c = 0.5 1/s:
     the small-angle pendulum theta'' + c theta' + (g / L) theta = 0, whose swing decays as
     exp(-c t / 2) -- a peak 8 s on at about exp(-2) of the first; undamped it keeps it."""
-    from quadsim.gap import cable
+    from quadsim.gap import fitting as cable
 
     t = np.arange(0.0, 10.0, 0.002)
     accel = np.zeros((len(t), 3))

@@ -35,7 +35,7 @@ def test_every_effect_declares_complete_facts(shipped):
     """Library effects and the diagnosis' own: facts of their own, every named parameter
     exists, each fitted one has a positive finite scale on every shipped set and words with a
     unit, ranges ordered with a source."""
-    from quadsim.gap.fitmodels import PSEUDO_EFFECTS
+    from quadsim.gap.fitting import PSEUDO_EFFECTS
 
     for cls in list(EFFECTS.values()) + list(PSEUDO_EFFECTS.values()):
         assert missing_facts(cls, shipped) == [], cls.name
@@ -98,7 +98,7 @@ def test_facts_of_gives_a_parameters_wording():
         facts_of("body_drag.nothing")
     with pytest.raises(InputError):
         facts_of("nothing.k")
-    from quadsim.gap.fitmodels import parameter_facts_for
+    from quadsim.gap.fitting import parameter_facts_for
 
     gain = parameter_facts_for("speed_gain.gain")
     assert (gain.unit, gain.words.unit, gain.words.scale) == ("1", "%", 100.0)
@@ -263,7 +263,8 @@ def test_candidates_for_crazyflie21_as_before(case):
 
 
 def test_derived_views_are_read_only_and_as_before():
-    from quadsim.gap import fitting, priors
+    from quadsim.gap import fitting
+    from quadsim.gap import fitting as priors
 
     with pytest.raises(TypeError):
         fitting.FIT_SPEC["x"] = ((), {}, None)
@@ -343,14 +344,14 @@ WORDED_42AD543 = [
 
 @pytest.mark.parametrize("model, key, value, ci, text", WORDED_42AD543)
 def test_readings_are_worded_as_before(model, key, value, ci, text):
-    from quadsim.gap.priors import describe
+    from quadsim.gap.fitting import describe
 
     ci = {} if ci is None else {key: ci}
     assert describe(key.split(".")[0], {key: value}, ci, load_params(model)) == text
 
 
 def test_a_canted_rotor_is_worded_as_one_lean_before_the_rest():
-    from quadsim.gap.priors import describe
+    from quadsim.gap.fitting import describe
 
     values = {"canted_rotor.tilt_x": 0.03, "canted_rotor.tilt_y": -0.01, "wind.vx": 1.5,
               "cable_payload.lean_x": 0.1, "mass_offset.mass": 0.004}

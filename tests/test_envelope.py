@@ -1,4 +1,4 @@
-"""The references' envelope (quadsim.gap.envelope) and flights flown outside it: closed-form
+"""The references' envelope (quadsim.gap.reference) and flights flown outside it: closed-form
 checks of the trend and of the reference model moved to a flight's place, and generated
 flights flown 1.6x faster than their references (no effect: no gap; +20 % mass: named)."""
 
@@ -14,10 +14,9 @@ from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import Reference, calibrate
-from quadsim.gap.diagnose import prepare
-from quadsim.gap.envelope import Envelope, coordinates, fit_trend, local_reference, position
+from quadsim.gap.diagnose import judge_one, prepare
 from quadsim.gap.fitting import Candidate
-from quadsim.gap.per_flight import judge_one
+from quadsim.gap.reference import Envelope, coordinates, fit_trend, local_reference, position
 from quadsim.vehicle.params import load_params
 
 from _helpers import shared_effects  # noqa: E402
@@ -190,7 +189,7 @@ def test_a_bias_that_follows_the_inverse_information_is_carried_by_it():
     assert local.theta[0] == pytest.approx(0.02 * flight[0], rel=1e-6)
     assert local.scatter[0] >= 0.02 * (flight[0] - 2.4)
     # the JSON names the parameter that has the line, with its weight
-    from quadsim.gap.envelope import envelope_summary
+    from quadsim.gap.reference import envelope_summary
     lines = envelope_summary(ref.envelope, ref.candidate.parameter_names)["information_line"]
     assert list(lines) == ["inertia_error.xx"]
     assert lines["inertia_error.xx"] == pytest.approx(1.0, abs=1e-6)

@@ -17,10 +17,9 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight, to_json, validate
 from quadsim.gap.calibrate import VBAT_TESTED, calibrate, voltage_spread
-from quadsim.gap.diagnose import prepare
+from quadsim.gap.diagnose import judge_one, prepare
 from quadsim.gap.evidence import marginal_sd
-from quadsim.gap.per_flight import judge_one
-from quadsim.gap.priors import WIND_SD_MS
+from quadsim.gap.fitting import WIND_SD_MS
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
 
@@ -419,13 +418,13 @@ def test_the_references_share_a_thrust_curve_slope_they_determine(cf, reference)
     spread is half its prior's or more is not shared (calibrate.curve_determined, the
     rule a value is printed by)."""
     from quadsim.gap.calibrate import curve_determined
-    from quadsim.gap.priors import curve_slope_sd
+    from quadsim.gap.fitting import curve_slope_sd
 
     names = list(reference.candidate.parameter_names)
     k = names.index("thrust_curve.linear")
     centre = next(f["centre"] for n, f, _ in reference.candidate.parts if n == "thrust_curve")
     assert 0.9 * hover_speed(cf) < centre < 1.1 * hover_speed(cf)
-    from quadsim.gap.per_flight import reference_summary
+    from quadsim.gap.diagnose import reference_summary
 
     assert reference_summary(reference)["fixed"] == {"thrust_curve.centre": centre}
     assert abs(reference.theta[k]) < 3 * reference.s_ref[k]
@@ -527,7 +526,7 @@ def test_the_references_drag_as_a_quadratic_law(airframe):
     between the two laws' forces over the flights)."""
     assert airframe.values()["rotor_drag.coefficient"] > 0
     assert airframe.quadratic_drag == pytest.approx(AIRFRAME, rel=0.1)
-    from quadsim.gap.per_flight import reference_summary
+    from quadsim.gap.diagnose import reference_summary
     assert reference_summary(airframe)["quadratic_drag_m2"] == airframe.quadratic_drag
 
 

@@ -21,11 +21,10 @@ from quadsim.effects import make_effect
 from quadsim.effects.base import EffectContext
 from quadsim.effects.gyroscopic import gyroscopic_torque
 from quadsim.effects.rotor_drag import rotor_drag_forces
-from quadsim.gap.cable import CableSwing
 from quadsim.gap.calibrate import Reference, jacobian, shared_candidate, weighted_residual
 from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import Problem, explanations_for
-from quadsim.gap.fitting import effect_class, residuals, typical_scales
+from quadsim.gap.fitting import CableSwing, effect_class, residuals, typical_scales
 from quadsim.vehicle.params import inertia_problems, load_params
 
 from _helpers import shared_effects
@@ -84,7 +83,7 @@ def test_the_residual_with_its_flight_memo_is_the_residual_from_scratch(cf, stat
 
 
 def test_a_jacobian_column_recomputes_only_the_effect_it_moves(cf, states):
-    """The kept per-effect loads (quadsim.gap.memo.kept): moving rotor drag adds one entry,
+    """The kept per-effect loads (quadsim.gap.residual.kept): moving rotor drag adds one entry,
     and the residual stays the one from scratch; moving the wind moves the air velocity,
     and every effect that reads it is computed anew (still equal to scratch)."""
     memo: dict = {}
@@ -242,8 +241,7 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
     from scipy.optimize import lsq_linear
 
-    from quadsim.gap.evidence import Columns, jacobian_columns, linear_step
-    from quadsim.gap.problem import FitInputs
+    from quadsim.gap.evidence import Columns, FitInputs, jacobian_columns, linear_step
 
     ref = _reference(cf, states)
     names = list(ref.candidate.parameter_names)
@@ -275,7 +273,7 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
 def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
     """cable._swing_floats (the swing without numba) against cable._swing_kernel stepped on
     arrays (compiled where numba is installed, else as plain Python), with a time jump."""
-    from quadsim.gap import cable
+    from quadsim.gap import fitting as cable
 
     rng = np.random.default_rng(1)
     t = np.arange(0.0, 6.4, 0.01)

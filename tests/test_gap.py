@@ -251,7 +251,7 @@ def test_fit_at_a_bound_is_never_identified(cf):
 
 def test_low_battery_needs_a_discharge(cf):
     from quadsim.gap.diagnose import prepare
-    from quadsim.gap.where import regime_masks
+    from quadsim.gap.judge import regime_masks
 
     log = synthetic_flight(cf, [], seed=1, duration=2.0)
     flat = FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate, log.accel,
@@ -391,8 +391,7 @@ def test_every_candidate_magnitude_is_worded_with_a_unit(model):
     import re
 
     from quadsim.gap.diagnose import BASELINE
-    from quadsim.gap.fitting import candidates_for, typical_scales
-    from quadsim.gap.priors import describe
+    from quadsim.gap.fitting import candidates_for, describe, typical_scales
 
     params = load_params(model)
     units = re.compile(r"( g\b| mm\b| %| ms\b| mN\b| N\b| m/s| V\b| kg m²| g cm²| cm²| s\b"
@@ -550,7 +549,7 @@ def test_result_types_give_the_schema_json_and_read_as_it():
     """quadsim.gap.result: a per-flight Diagnosis of two refused flights is the
     quadsim.gap/3 JSON (validates; the batch answer counts them), reads as that JSON
     (mapping access), keeps no private key, and takes no item assignment."""
-    from quadsim.gap.per_flight import refused_entry
+    from quadsim.gap.diagnose import refused_entry
     from quadsim.gap.result import Diagnosis
     from quadsim.gap.words import batch_answer
 

@@ -18,9 +18,8 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import EFFECTS, EffectSet, make_effect
 from quadsim.effects.facts import without_pose
 from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import prepare
-from quadsim.gap.per_flight import judge_one
-from quadsim.gap.posefree import missing_words
+from quadsim.gap.diagnose import judge_one, prepare
+from quadsim.gap.logcheck import missing_words
 from quadsim.logs.checks import check_logs
 from quadsim.logs.generate import generate_flight
 from quadsim.logs.sensors import SensorModel

@@ -9,10 +9,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap import memo as memo_mod
-from quadsim.gap.discrepancy import centre_term, fit_discrepancy
-from quadsim.gap.problem import Marginal
-from quadsim.gap.reference import read_later, rotor_spectra, shifted
+from quadsim.gap import residual as memo_mod
+from quadsim.gap.evidence import Marginal
+from quadsim.gap.reference import centre_term, fit_discrepancy, read_later, rotor_spectra, shifted
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "crazyflie21_brushless"
 

@@ -12,7 +12,7 @@ from benchmarks.synthetic import synthetic_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.diagnose import _beyond
-from quadsim.gap.discrepancy import Discrepancy, columns
+from quadsim.gap.reference import Discrepancy, columns
 from quadsim.vehicle.params import load_params
 
 EFFECTS = ["mass_offset", "com_offset", "thrust_mismatch", "rotor_drag"]

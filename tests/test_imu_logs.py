@@ -254,7 +254,7 @@ def test_swapped_rotor_columns_are_refused_naming_the_map(imu_usd):
 
 
 def test_gap_says_what_it_needs_on_an_imu_log(imu_usd, tmp_path, capsys):
-    """gap reads an IMU log (the body-frame balance, quadsim.gap.posefree; every airborne
+    """gap reads an IMU log (the body-frame balance, quadsim.gap.logcheck; every airborne
     stretch used) and goes on to the vehicle check, which refuses crazyflie21 for this
     generated vehicle (tests/test_gap_posefree.py judges IMU-only flights)."""
     from quadsim.gap.__main__ import main as gap_main

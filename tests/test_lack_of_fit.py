@@ -62,12 +62,12 @@ def test_a_reading_that_leaves_at_most_the_form_error_of_the_gap_explains_the_fl
 
 
 def test_moderated_spread_follows_the_channels_own_scatter():
-    """quadsim.gap.moderated (Smyth 2004): channels whose spreads differ 4x keep them
+    """quadsim.gap.reference (Smyth 2004): channels whose spreads differ 4x keep them
     (each moderated spread within 35 % of its own truth on 8 flights x 10 channels, the quiet
     ones below the pooled spread, the noisy ones above it on average); channels alike come out
     at the pooled spread when their scatter is no more than chance (excess <= 0: exactly the
     pooled spread and its C (n - 1) degrees of freedom)."""
-    from quadsim.gap.moderated import moderated_spread
+    from quadsim.gap.reference import moderated_spread
 
     rng = np.random.default_rng(7)
     truth = np.array([0.1] * 5 + [0.4] * 5)
@@ -90,7 +90,7 @@ def test_outside_the_envelope_a_channel_is_tested_with_at_least_the_pooled_sprea
     freedom, since a quiet channel's spread says nothing of how it grows beyond them."""
     import dataclasses
 
-    from quadsim.gap.envelope import Position, local_reference
+    from quadsim.gap.reference import Position, local_reference
 
     model = dataclasses.make_dataclass("Model", ["lof_sd", "lof_dof", "lof_pooled", "envelope"])
     ref = model(np.array([0.1, 0.5]), 9, (0.3, 14), None)     # no trend: the envelope alone

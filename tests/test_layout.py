@@ -220,7 +220,7 @@ def private_imports(module: str, package: bool, source: str) -> list[str]:
 def test_private_import_finder_finds_each_form():
     source = ("from .fitting import _bounds, typical\n"
               "from . import collinear\n"
-              "import quadsim.gap.memo as memo\n"
+              "import quadsim.gap.residual as memo\n"
               "def f():\n"
               "    from ..vehicle.params import _quantity\n"
               "    return collinear._torque_text, memo._memo, typical._x, _own\n"
@@ -231,7 +231,7 @@ def test_private_import_finder_finds_each_form():
         "quadsim.gap.heldout: quadsim.gap.collinear._torque_text",
         "quadsim.gap.heldout: quadsim.gap.fitting._bounds",
         "quadsim.gap.heldout: quadsim.gap.fitting.typical._x",
-        "quadsim.gap.heldout: quadsim.gap.memo._memo",
+        "quadsim.gap.heldout: quadsim.gap.residual._memo",
         "quadsim.gap.heldout: quadsim.vehicle.params._quantity"]
     # a package's modules are one level down from its __init__; its own names are its own
     assert private_imports("quadsim.gap", True, "from .fitting import _b\nfrom . import _c") \

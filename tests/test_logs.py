@@ -408,7 +408,7 @@ def test_real_dataflash():
 
 
 def test_command_model_recovers_a_known_lag_and_voltage_term():
-    from quadsim.gap.commands import CommandModel, fit_command_model
+    from quadsim.gap.logcheck import CommandModel, fit_command_model
     from quadsim.logs.flightlog import FlightLog
 
     rng = np.random.default_rng(0)
@@ -438,7 +438,7 @@ def test_command_only_diagnosis_names_the_same_effect(hidden, expected):
     from benchmarks.synthetic import synthetic_flight
     from quadsim.effects import make_effect
     from quadsim.gap import diagnose
-    from quadsim.gap.commands import fit_command_model, synthesise_speeds, without_speeds
+    from quadsim.gap.logcheck import fit_command_model, synthesise_speeds, without_speeds
     from quadsim.vehicle.params import load_params
 
     cf = load_params("crazyflie21")

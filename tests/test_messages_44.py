@@ -158,7 +158,7 @@ def test_a_doubtful_rotor_order_makes_the_verdict_tentative_and_capped():
     import warnings
 
     from quadsim.effects import EffectSet
-    from quadsim.gap.per_flight import diagnose_per_flight
+    from quadsim.gap.diagnose import diagnose_per_flight
     from quadsim.logs.generate import generate_flight
     from quadsim.logs.sensors import SensorModel
 

@@ -2,7 +2,7 @@
 the MuJoCo engine, the geometric controller, sensor noise), judged against generated nominal
 reference flights: a payload on a cable, an added mass and a propeller change, each named
 with its size (tolerances stated per test). Also the generator's own cable-payload
-accelerometer (quadsim.logs.generate.effect_states) and the swing model of quadsim.gap.cable
+accelerometer (quadsim.logs.generate.effect_states) and the swing model of quadsim.gap.fitting
 against closed forms."""
 
 from __future__ import annotations
@@ -15,10 +15,9 @@ import pytest
 from quadsim.core.errors import QuadsimWarning
 from quadsim.core.frames import quat_to_rotmat
 from quadsim.effects import EffectSet, make_effect
-from quadsim.gap import cable
+from quadsim.gap import fitting as cable
 from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import prepare
-from quadsim.gap.per_flight import judge_one
+from quadsim.gap.diagnose import judge_one, prepare
 from quadsim.logs.generate import generate_flight
 from quadsim.logs.sensors import SensorModel
 from quadsim.vehicle.params import load_params

@@ -8,8 +8,8 @@ import pytest
 
 from benchmarks.score import read_verdict, score_case
 from quadsim.gap.evidence import Evidence, Explanation
+from quadsim.gap.fitting import describe
 from quadsim.gap.judge import every_part_stands, posterior
-from quadsim.gap.priors import describe
 from quadsim.vehicle.params import load_params
 
 CHANNELS = ["Fx", "Fy", "Fz", "Mx", "My", "Mz"]

@@ -302,8 +302,7 @@ def judged():
     from quadsim.core.errors import QuadsimWarning
     from quadsim.effects import make_effect
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.per_flight import judge_one
+    from quadsim.gap.diagnose import judge_one, prepare
     from quadsim.vehicle.params import load_params
 
     from _helpers import shared_effects
@@ -327,7 +326,7 @@ def test_the_series_shows_the_payload_before_and_not_after(judged):
     fz = s.channels.index("Fz")
     # before: the model misses 6 g: Fz (the nominal mass times the measured specific force
     # T / (m + dm), less the thrust T) is -T dm / (m + dm), T = b sum Omega^2
-    from quadsim.gap.plots import thrust
+    from quadsim.gap.page import thrust
 
     mean = float(np.mean(s.before[:, fz]))
     expected = float(np.mean(-thrust(s) * 0.006 / (cf.mass + 0.006)))
@@ -339,7 +338,7 @@ def test_the_series_shows_the_payload_before_and_not_after(judged):
 
 
 def test_the_recording_carries_the_same_series(result):
-    from quadsim.gap.recording import recording
+    from quadsim.gap.report import recording
 
     kw = recording(result)
     judged = [f for f in result.flights if f.series is not None]

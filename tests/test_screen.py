@@ -18,10 +18,16 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
 from quadsim.gap.diagnose import prepare
-from quadsim.gap.evidence import Columns, Problem, evaluate, explanations_for, jacobian_columns
+from quadsim.gap.evidence import (
+    Columns,
+    FitInputs,
+    Problem,
+    evaluate,
+    explanations_for,
+    jacobian_columns,
+)
 from quadsim.gap.judge import judge
-from quadsim.gap.problem import FitInputs
-from quadsim.gap.rotor_channel import heun_linear, rotor_residual
+from quadsim.gap.residual import heun_linear, rotor_residual
 from quadsim.logs.delays import regression_delay
 from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params

@@ -18,8 +18,7 @@ import pytest
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import EffectSet, make_effect
 from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import interior, prepare
-from quadsim.gap.per_flight import judge_one
+from quadsim.gap.diagnose import interior, judge_one, prepare
 from quadsim.gap.residual import flight_states
 from quadsim.logs.checks import check_log, check_logs
 from quadsim.logs.flightlog import ARRAYS, FlightLog

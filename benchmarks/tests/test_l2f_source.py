@@ -262,8 +262,7 @@ def test_the_references_share_their_thrust_curves_slope():
     before, at 0.60)."""
     from benchmarks.l2f_source import thrust_of
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.per_flight import judge_one
+    from quadsim.gap.diagnose import judge_one, prepare
 
     params = vehicle_params(FS)
     specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=4.0) for k in range(4)]
@@ -298,8 +297,7 @@ def test_a_com_offset_on_a_curved_rotor_is_not_a_payload():
     offset (measured -5.5, 10.9 mm), and a +0.25 kg payload stays a mass."""
     from benchmarks.l2f_source import MRS
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.per_flight import judge_one
+    from quadsim.gap.diagnose import judge_one, prepare
 
     params = vehicle_params(MRS)
     specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=8.0) for k in range(4)]
@@ -353,8 +351,7 @@ def test_a_thrust_curve_that_bends_down_is_read_against_references_that_bend_dow
     (-0.7 / 3000 and 0.9 / 3000, within 5 %)."""
     from benchmarks.l2f_source import ARPL
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.per_flight import judge_one
+    from quadsim.gap.diagnose import judge_one, prepare
 
     params = vehicle_params(ARPL)
     specs = [FlightSpec(seed=70 + k, speed=0.8 + 0.15 * k, duration=8.0) for k in range(4)]

@@ -427,7 +427,7 @@ class EffectSet:
         """The effects' loads combined in order (:meth:`EffectLoads.add`). ``kept``: a
         callable ``(effect, compute) -> loads`` that may return an effect's loads kept from an
         earlier call on the same context instead of ``compute()`` (the gap fits evaluate many
-        effect sets on one flight, :func:`quadsim.gap.memo.kept`); used for effects without
+        effect sets on one flight, :func:`quadsim.gap.residual.kept`); used for effects without
         internal state only."""
         parts = []
         for effect, start, size in self._sized():

@@ -31,7 +31,7 @@ Checks (``tests/test_cable_payload.py``):
 Only the engines (:func:`quadsim.sim.engines.simulate`) carry the state; the flight
 generator's accelerometer integrates it again along the flown trajectory
 (:func:`quadsim.logs.generate.effect_states`), and the per-flight diagnosis integrates the
-swing from the logged motion (:mod:`quadsim.gap.cable`). Anything else that evaluates
+swing from the logged motion (:mod:`quadsim.gap.fitting`). Anything else that evaluates
 ``loads`` without it (``benchmarks.synthetic``, the residual wrench) gets a one-line
 :class:`~quadsim.core.errors.ModelError` instead of a silent zero.
 
@@ -88,7 +88,7 @@ class CablePayload(EffectBase):
     )
 
     #: no candidate of its own: the payload's state is not logged; the diagnosis integrates
-    #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.cable`)
+    #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.fitting`)
     facts = EffectFacts(
         # the payload swings under gravity and the vehicle's world acceleration
         needs_pose=("velocity", "attitude"),
@@ -149,7 +149,7 @@ class CablePayload(EffectBase):
                              "which only the engines integrate (quadsim.sim.engines.simulate, "
                              "and the flight generator along its flight); the inverse-dynamics "
                              "logs and the residual wrench cannot evaluate it (the per-flight "
-                             "diagnosis fits it as quadsim.gap.cable)")
+                             "diagnosis fits it as quadsim.gap.fitting)")
 
         rot, pull = self._tension(ctx)
         batch, rotors = np.shape(ctx.rotor_speed)

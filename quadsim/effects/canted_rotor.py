@@ -87,7 +87,7 @@ class CantedRotor(EffectBase):
     )
 
     #: the diagnosis fits the tilted axis' horizontal components (its fit form,
-    #: :class:`quadsim.gap.fitmodels.CantedRotorFit`): angle and azimuth are singular at 0
+    #: :class:`quadsim.gap.fitting.CantedRotorFit`): angle and azimuth are singular at 0
     facts = EffectFacts(
         fitted=("tilt_x", "tilt_y"),
         one_per_rotor="rotor",

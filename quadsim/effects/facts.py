@@ -78,7 +78,7 @@ class PlausibleRange:
     "relative" a fraction of 1, "absolute" the parameter's unit, "mass" of the vehicle's mass,
     "arm" of its arm, "hover" of the hover thrust per rad/s, "momentum" of the momentum-theory
     rate damping, "lift" of the momentum-theory translational lift), and its ``source``. A
-    fit outside it is ``implausible`` (:mod:`quadsim.gap.priors`)."""
+    fit outside it is ``implausible`` (:mod:`quadsim.gap.fitting`)."""
 
     lower: float
     upper: float
@@ -209,7 +209,7 @@ class EffectFacts:
     #: off" is no test of it)
     no_off_value: tuple[str, ...] = ()
     #: time constants of the rotor channel: at least one of its sub-steps in a fit
-    #: (:func:`quadsim.gap.rotor_channel.min_time_constant`)
+    #: (:func:`quadsim.gap.residual.min_time_constant`)
     rotor_time_constants: tuple[str, ...] = ()
     #: fitted parameters a fit starts at the highest logged battery voltage (where a
     #: voltage-following sag is neutral on average)
@@ -219,7 +219,7 @@ class EffectFacts:
     #: :func:`quadsim.gap.fitting.drag_refit_iv`)
     instrumented: tuple[str, ...] = ()
     #: parameters of the fit's own parametrisation (the diagnosis' fit form of the effect,
-    #: :mod:`quadsim.gap.fitmodels`) that the library form does not have
+    #: :mod:`quadsim.gap.fitting`) that the library form does not have
     fit_parameters: tuple = ()
     #: other effect -> what measurement or manoeuvre tells the two apart
     separate_from: Mapping[str, str] = field(default_factory=dict)

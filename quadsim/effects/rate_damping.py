@@ -18,7 +18,7 @@ r = 0.198 m) k_x ~ 0.02 N m s/rad.
 Parameters ``x, y, z`` are the damping coefficients k (N m s/rad) about body x, y, z; 0 = off;
 at most 10 N m s/rad: the momentum-theory value grows with arm^2 x thrust, 0.47 N m s/rad for
 a 5.5 kg quadrotor on 0.45 m arms with 18-inch propellers (:mod:`benchmarks.multirotor_source`)
-whose plausible range reaches 3x that (:mod:`quadsim.gap.priors`); the former 1 N m s/rad cut
+whose plausible range reaches 3x that (:mod:`quadsim.gap.fitting`); the former 1 N m s/rad cut
 that range off.
 Example: ``rate_damping:x=0.01,y=0.01,z=0.002`` gives a roll rate of 1 rad/s a torque of
 -0.01 N m (the testbed's Ixx = 0.006 kg m^2: a 0.6 s time constant).

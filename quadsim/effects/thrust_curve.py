@@ -85,7 +85,7 @@ class ThrustCurve(EffectBase):
         # a large negative constant term (Flightmare's -1.77 N) gives k2 well below b. The
         # gap's reference model carries it about the references' hover
         # (quadsim.gap.calibrate). Range: far beyond any frame's b; the gap bounds the whole
-        # curvature b + quadratic to -b .. 2 b (quadsim.gap.priors.curve_quadratic_bounds).
+        # curvature b + quadratic to -b .. 2 b (quadsim.gap.fitting.curve_quadratic_bounds).
         EffectParameter("quadratic", "N s^2/rad^2", 0.0, -1e-3, 1e-3,
                         "thrust per squared rotor speed about the centre, added to b Omega^2"),
     )

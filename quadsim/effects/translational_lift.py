@@ -65,7 +65,7 @@ class TranslationalLift(EffectBase):
 
     name = "translational_lift"
     # bounds: 16x the momentum-theory lift of the 0.84 kg testbed (rho pi R^2 / 2 = 0.031
-    # kg/m for its 127 mm rotors; quadsim.gap.priors), negative for a fit's difference
+    # kg/m for its 127 mm rotors; quadsim.gap.fitting), negative for a fit's difference
     parameters = (
         EffectParameter("k_h", "kg/m", 0.0, -0.5, 0.5,
                         "extra thrust per rotor per in-plane air speed squared, "

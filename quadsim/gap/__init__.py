@@ -24,16 +24,16 @@ Method (equation error, then prediction error)
    ``no_significant_gap``, or ``unexplained`` (lack of fit: a held-out flight beyond what the
    reading leaves on the training flights, or a systematic remainder with no effect to
    explain it; an implausible magnitude; parameters that differ between regimes,
-   :mod:`.where`).
+   :mod:`.judge`).
 5. Where: held-out gap by channel, by regime (hover, climb, descent, fast forward,
    aggressive rotation, near ground, low battery), by frequency band, and as k-step
    prediction error of position and attitude (0.05-1 s, multiple shooting with the analytic
-   engine) before and after the verdict (:mod:`.where`).
+   engine) before and after the verdict (:mod:`.judge`).
 
-``diagnose_per_flight`` (:mod:`.per_flight`) judges each flight alone against nominal
+``diagnose_per_flight`` (:mod:`.diagnose`) judges each flight alone against nominal
 reference flights, by evidence: :mod:`.calibrate` absorbs what every reference flight shares
 (b, d, motor map and its gain, motor lag, rotor drag, vertical drag, inertia, rate damping,
-the rotor delay) into a reference model with a per-channel noise model; :mod:`.envelope`
+the rotor delay) into a reference model with a per-channel noise model; :mod:`.reference`
 places the flight against the references' envelope (speed, body rate, thrust variation),
 states when it lies outside and by how much, and there widens the reference model by the
 trend the references show; :mod:`.evidence` fits every explanation of
@@ -48,17 +48,18 @@ baseline -- the reference flights, or the reading's own training flights -- is d
 outcome rule), one answer writer (:mod:`.words`) and one result type
 (:class:`.result.Diagnosis` holding :class:`.result.Verdict`, with ``to_json()``).
 
-Modules, in pipeline order: :mod:`.diagnose` (prepare logs, split; held-out mode: its
-reference, weighing and ranking), :mod:`.motor_map` (static command -> speed map from
-data), :mod:`.fitting` (candidates and least squares), :mod:`.fitmodels` (the effects the
-diagnosis fits beyond the library), :mod:`.priors` (plausible magnitudes, readings in
-words), :mod:`.per_flight` (:mod:`.calibrate`, :mod:`.evidence`), :mod:`.judge` (the verdict
-of both modes), :mod:`.words` (answers), :mod:`.result` (result types), :mod:`.where` (where
-and when the gap lies, parameter consistency), :mod:`.checks` (vehicle check before
-fitting), :mod:`.commands` (command-only logs), :mod:`.traces` (each judged flight's residual
-before and after its answer), :mod:`.report` (output: JSON and its schema, summaries, the
-effect file; the HTML page :mod:`.page` with its figures :mod:`.plots`, the rerun recording
-:mod:`.recording`). Generated test flights:
+Modules, one per stage, imports flowing down (each module's docstring is its manual):
+:mod:`.residual` (the residual wrench per sample, the rotor-speed channel, the command ->
+speed map, the memo), :mod:`.logcheck` (the vehicle check, command-only logs, the rotor order,
+logs without a pose), :mod:`.fitting` (the fit forms beyond the library, plausible magnitudes
+and words, least squares of candidate effects), :mod:`.reference` (the reference model as
+data: the discrepancy term, moderated spreads, the envelope), :mod:`.calibrate` (calibration
+and the references' self-check), :mod:`.explanations` (what a flight is weighed by),
+:mod:`.evidence` (each explanation's fit and Laplace evidence; the drag law), :mod:`.words`
+(answers), :mod:`.result` (result types), :mod:`.judge` (where and when; the verdict of both
+modes), :mod:`.page` (the HTML report, its figures and residual series), :mod:`.report` (JSON
+and its schema, summaries, the effect file, the rerun recording), :mod:`.diagnose` (both modes'
+entry points). Generated test flights:
 ``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::
@@ -74,8 +75,7 @@ CLI: ``python -m quadsim.gap --help``. Result schema: :data:`GAP_SCHEMA`
 """
 
 from ..core.errors import refuse_moved
-from .diagnose import SCHEMA, diagnose, prepare
-from .per_flight import diagnose_per_flight
+from .diagnose import SCHEMA, diagnose, diagnose_per_flight, prepare
 from .report import GAP_SCHEMA, summary, to_json, validate, write_html, write_json, write_rerun
 from .result import Diagnosis, Reading, Verdict
 
@@ -87,6 +87,35 @@ __all__ = ["GAP_SCHEMA", "SCHEMA", "Diagnosis", "Reading", "Verdict",
 _MOVED = {"synthetic_flight": "benchmarks.synthetic", "SensorNoise": "benchmarks.synthetic"}
 
 
+#: modules merged into the stage they belong to (issue 43), old name -> new module
+_MERGED = {
+    "cable": "fitting",
+    "checks": "logcheck",
+    "commands": "logcheck",
+    "discrepancy": "reference",
+    "drag_law": "evidence",
+    "envelope": "reference",
+    "fitmodels": "fitting",
+    "memo": "residual",
+    "moderated": "reference",
+    "motor_map": "residual",
+    "order": "logcheck",
+    "per_flight": "diagnose",
+    "plots": "page",
+    "posefree": "logcheck",
+    "priors": "fitting",
+    "problem": "evidence",
+    "recording": "report",
+    "rotor_channel": "residual",
+    "segments": "residual",
+    "selfcheck": "calibrate",
+    "traces": "page",
+    "where": "judge",
+}
+
 __getattr__ = refuse_moved(__name__, {
-    name: f"moved to {where} (in the repository, not the wheel): write `from {where} import "
-          f"{name}` and run from a checkout" for name, where in _MOVED.items()})
+    **{name: f"moved to {where} (in the repository, not the wheel): write `from {where} import "
+             f"{name}` and run from a checkout" for name, where in _MOVED.items()},
+    **{old: f"was merged into quadsim.gap.{new}: write `from quadsim.gap import {new}` or "
+            f"`from quadsim.gap.{new} import NAME` (every name kept its name)"
+       for old, new in _MERGED.items()}})

@@ -26,9 +26,8 @@ from ..core.executor import limit_numeric_threads
 from ..logs import READABLE
 from ..logs.flightlog import load_log
 from ..vehicle.params import load_params
-from .checks import check_length
-from .diagnose import diagnose
-from .per_flight import diagnose_per_flight
+from .diagnose import diagnose, diagnose_per_flight
+from .logcheck import check_length
 from .report import summary, write_html, write_json, write_rerun
 
 
@@ -52,7 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--command-reference", nargs="+", metavar="LOG",
                         help="flights with rotor speeds and commands: logs without rotor "
                              "speeds get speeds synthesised from their commands "
-                             "(quadsim.gap.commands; default: --reference)")
+                             "(quadsim.gap.logcheck; default: --reference)")
     parser.add_argument("--effects-file", metavar="EFFECTS.toml",
                         help="effects already added to --model (an effect file, "
                              "quadsim.effects.effectfile): the diagnosis starts from the "
@@ -341,8 +340,8 @@ def main(argv: list[str] | None = None) -> int:
     reference = _load(args.reference, params, args, lines) if args.reference else None
     for line in gather_notes(lines or []):      # per flight: every log's notes, gathered
         print(f"warning: {line}", file=sys.stderr)
-    # command-only logs in any role: speeds synthesised (quadsim.gap.commands.synthesise_all)
-    from .commands import synthesise_all
+    # command-only logs in any role: speeds synthesised (quadsim.gap.logcheck.synthesise_all)
+    from .logcheck import synthesise_all
 
     command_ref = (_load(args.command_reference, params, args) if args.command_reference
                    else reference)

@@ -1,11 +1,18 @@
-"""Held-out mode and the shared preparation: prepare the logs, split by flight, judge.
+"""Both modes' entry points: prepare logs into flights; held-out mode (calibrate on the
+training flights, judge the held-out ones) and per-flight mode (each flight judged on its own
+against the reference flights), both through the one judgment of :mod:`quadsim.gap.judge`.
+
+Preparation and held-out mode
+-----------------------------
+
+Held-out mode and the shared preparation: prepare the logs, split by flight, judge.
 
 :func:`prepare` turns logs into :class:`Flight` (smoothed states at the log's rate, the
 decimated fit view, signal delays); :func:`diagnose` splits the flights (``holdout`` or
 every third flight; one flight: its two halves), takes the parameter set as the reference
 model (:func:`nominal_reference`), weighs every explanation
 (:func:`weigh`, :func:`decide`), judges
-(:func:`quadsim.gap.judge.judge_heldout`) and says where the gap lies (:mod:`.where`). It
+(:func:`quadsim.gap.judge.judge_heldout`) and says where the gap lies (:mod:`.judge`). It
 returns a :class:`quadsim.gap.result.Diagnosis` (``mode`` ``"held-out"``; its ``to_json()``
 is the ``quadsim.gap/3`` JSON, :mod:`.report`).
 
@@ -54,37 +61,80 @@ Stages (each a named type)
    with each other effect; the pair's prior is the lead's split evenly among its partners,
    and every part of it must be determined and plausible,
    :func:`quadsim.gap.judge.every_part_stands`), and the consistency check of the lead
-   (:mod:`.where`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
+   (:mod:`.judge`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
    turns into the verdict.
 
 Example::
 
     >>> result = diagnose(train_logs, params, holdout=held_logs)
     >>> result.verdict.name, result.verdict.probability
+
+Per-flight mode
+---------------
+
+Per-flight mode: each flight judged on its own against nominal reference flights, by
+evidence.
+
+Used as ``python -m quadsim.gap --per-flight LOG... --reference NOMINAL...`` or::
+
+    >>> from quadsim.gap import diagnose_per_flight
+    >>> result = diagnose_per_flight(flights, nominal_flights, load_params("crazyflie21"))
+    >>> [(f.file, f.name, f.probability) for f in result.flights]
+
+Stages (each a named type, each testable alone):
+
+1. ``prepare`` (:mod:`.diagnose`): smoothed states, the decimated view, signal delays.
+2. :func:`quadsim.gap.calibrate.calibrate`: the reference model -- nominal parameters plus
+   every effect the reference flights share (b, d, motor map, motor lag, rotor drag,
+   inertia, rate damping), their uncertainty and between-flight scatter, and the residual
+   noise model per channel (RMS, correlation time).
+3. :func:`quadsim.gap.evidence.evaluate`: every explanation of how a flight differs (an
+   effect, a shared parameter at a value of its own, a signal delay, or none), fitted on the
+   whole flight, with its Laplace evidence.
+4. :func:`quadsim.gap.judge.judge`: posterior probability per reading, a lack-of-fit test
+   against the reference flights ("not in the library"), the answer with magnitudes and what
+   separates the leaders -> :class:`quadsim.gap.result.Verdict`.
+
+The result is a :class:`quadsim.gap.result.Diagnosis` (``mode`` ``"per-flight"``).
+
+A flight that cannot be judged (a log the checks refuse, too short to smooth, a rotor count
+that is not the model's) gets ``outcome: refused`` with its reason in its own entry; the
+others are judged and the summary counts the refusals (the batch goes on).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
 
-from ..core.errors import InputError, ModelError, refuse_moved
+from ..core.errors import InputError, ModelError, QuadsimWarning, refuse_moved
 from ..logs.delays import align_signal_delays, delay_notes
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
-from . import order
-from .calibrate import Reference, shared_candidate
-from .checks import check_length, vehicle_check
-from .discrepancy import centre_term, columns, fit_discrepancy
+from . import evidence, logcheck
+from .calibrate import (
+    Reference,
+    SelfCheck,
+    Spread,
+    calibrate,
+    inverse_information,
+    leave_one_out,
+    negligible,
+    readings,
+    self_check_of,
+    shared_candidate,
+    spreads,
+)
 from .evidence import Evidence, Explanation, evaluate, explanations_for
-from .fitmodels import build_effect
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
     Candidate,
+    build_effect,
     correlation_time,
     effect_class,
     fit_motor_map,
@@ -98,44 +148,39 @@ from .judge import (
     carry_over,
     channel_names,
     every_part_stands,
+    judge,
     judge_heldout,
     plausible,
     rank,
     reading_text,
     remainder,
+    scaled_residuals,
     slow_part,
+    where,
 )
-from .posefree import needs_pose, posefree_log, without_pose_note
-from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states
-from .result import Diagnosis, Reading, Series
-from .segments import joined_states
-from .selfcheck import SelfCheck, Spread, negligible, readings, spreads
-from .where import check as consistency_check
-from .where import scaled_residuals, where
-from .words import nominal_words
+from .judge import check as consistency_check
+from .logcheck import (
+    check_length,
+    check_same_kind,
+    needs_pose,
+    posefree_log,
+    vehicle_check,
+    without_pose_note,
+)
+from .page import flight_series
+from .reference import centre_term, columns, envelope_summary, fit_discrepancy, local_reference
+from .reference import position as envelope_position
+from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
+from .result import Diagnosis, Reading, Series, Verdict
+from .words import batch_answer, nominal_words
 
-__all__ = [
-    "D_PRIOR_SD",
-    "EDGE_S",
-    "NOISE_WINDOW_S",
-    "SCHEMA",
-    "Decision",
-    "Flight",
-    "Weighed",
-    "decide",
-    "diagnose",
-    "effects_of",
-    "entry_of",
-    "heldout_explanations",
-    "interior",
-    "noise_model",
-    "nominal_reference",
-    "pair",
-    "prepare",
-    "readings_of",
-    "slow_part",
-    "weigh",
-]
+__all__ = ["D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision", "Flight", "Weighed",
+           "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
+           "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
+           "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
+           "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
+           "weigh_flight"]
+
 
 SCHEMA = "quadsim.gap/3"
 FIT_RATE_HZ = 100.0
@@ -188,7 +233,7 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     decays to 1 % in ~1.04 / f_c; docs/gap.md, method).
 
     Raises :class:`InputError` for a rotor-count mismatch, logs without rotor speeds or
-    shorter than :data:`quadsim.gap.checks.MIN_LOG_S` (2 s)."""
+    shorter than :data:`quadsim.gap.logcheck.MIN_LOG_S` (2 s)."""
     out = []
     for log in logs:
         name = str(log.path) if log.path is not None else f"log{len(out)}"
@@ -197,18 +242,18 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             raise InputError(f"{name}: rotor_1..rotor_N: the diagnosis needs measured rotor "
                              f"speeds (this log has {what}); the residual wrench compares the "
                              "motion with the thrust of the measured rotors (with commands: "
-                             "--command-reference LOG... synthesises speeds, quadsim.gap.commands)")
+                             "--command-reference LOG... synthesises speeds, quadsim.gap.logcheck)")
         if log.rotor_count != params.rotor_count:
             raise InputError(f"{name}: rotor_1..rotor_N: {log.rotor_count} rotors in the log, "
                              f"the model {params.name!r} has {params.rotor_count}")
         check_length(log, name=name)              # >= MIN_LOG_S, else one line naming t
-        # each airborne stretch alone (quadsim.gap.segments); delays: the longest stretch's
+        # each airborne stretch alone (quadsim.gap.residual); delays: the longest stretch's
         parts = [align_signal_delays(p) for p in log.parts()]   # quadsim.logs.delays
         delays = max(parts, key=lambda part: len(part[0].t))[1]
         step = None if len(parts) == 1 else float(np.median(np.diff(log.t)))
         pieces = [flight_states(p if p.has_pose else posefree_log(p), window_s=window_s,
                                 gravity=params.gravity, dt=step) for p, _ in parts]
-        if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.posefree)
+        if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.logcheck)
             pieces = [dataclasses.replace(s, pose=False) for s in pieces]
         pieces = [s.take(interior(s.t)) for s in pieces]
         states = joined_states(pieces)
@@ -307,12 +352,12 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
                                   if decision.lead_name != "no_difference" else [])
     after = [r / sigma for r in lead.held_residuals] if effects_after else before
     dt = float(fit_on[0].t[1] - fit_on[0].t[0])
-    statuses = order.order_statuses(list(logs) + list(holdout or []), params)
-    decision = order.cap_decision(decision, order.probability_cap(statuses))
+    statuses = logcheck.order_statuses(list(logs) + list(holdout or []), params)
+    decision = logcheck.cap_decision(decision, logcheck.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
-    verdict = order.mark(verdict, statuses)
+    verdict = logcheck.mark(verdict, statuses)
     posefree = next((g for g in logs if not g.has_pose), None)
-    if posefree is not None:                  # what a pose would add (quadsim.gap.posefree)
+    if posefree is not None:                  # what a pose would add (quadsim.gap.logcheck)
         verdict = without_pose_note(verdict, posefree)
     names = channel_names(reference)
     combination = None
@@ -379,7 +424,7 @@ def _weigh(train: list, held: list, reference, *, effects, map_fn, tick) -> list
 NOISE_WINDOW_S = SLOW_WINDOW_S
 #: prior spread of the relative drag-torque factor error (module doc, stage 2).
 D_PRIOR_SD = 0.5
-#: prior spread of the relative thrust factor error: :mod:`.priors` -15 .. +5 %, half the
+#: prior spread of the relative thrust factor error: :mod:`.fitting` -15 .. +5 %, half the
 #: larger end (the rule of :func:`quadsim.gap.explanations.prior_spreads`).
 B_PRIOR_SD = 0.075
 #: prior spread (V) of a battery's full voltage: +-10 % of a cell's 4.2 V (charge state),
@@ -496,7 +541,7 @@ class Weighed:
 def _beyond(r: np.ndarray, states, reference: Reference) -> tuple[np.ndarray, float]:
     """(residual, log-likelihood) of one flight's residual ``r`` (N, C; the discrepancy's
     centre already off) with the flight's own discrepancy coefficients marginalised, exactly
-    (linear-Gaussian: the columns X of :func:`quadsim.gap.discrepancy.columns`, unit prior):
+    (linear-Gaussian: the columns X of :func:`quadsim.gap.reference.columns`, unit prior):
     log L = -1/2 r_wᵀ r_w + 1/2 bᵀ (I + XᵀX)^-1 b - 1/2 log det(I + XᵀX), b = Xᵀ r_w, r_w the
     residual times sqrt(:attr:`Reference.weights`). The residual returned is ``r`` less the
     coefficients' posterior mean X (I + XᵀX)^-1 b (back in channel units): what the flight
@@ -607,7 +652,7 @@ def entry_of(w: Weighed, probability: float, before: list, reference: Reference)
 
 
 def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> dict:
-    """The consistency check (:func:`quadsim.gap.where.check`) of the reading ``w``
+    """The consistency check (:func:`quadsim.gap.judge.check`) of the reading ``w``
     (its ``effects`` ``entry``) on ``flights`` (decimated states); the propeller's speed
     exponent is held at its value (the library's thrust_factor has none)."""
     ev = w.train
@@ -630,10 +675,10 @@ PRACTICAL_ROUNDS = 3
 
 
 class Practical:
-    """Held-out practical significance (:mod:`quadsim.gap.selfcheck`, the per-flight rule
+    """Held-out practical significance (:mod:`quadsim.gap.calibrate`, the per-flight rule
     with the training flights as the references): a reading is a difference only when, on
     one of its own determined parameters, its 95 % interval lies beyond
-    :data:`quadsim.gap.selfcheck.PRACTICAL_Z` between-flight standard deviations of the same
+    :data:`quadsim.gap.calibrate.PRACTICAL_Z` between-flight standard deviations of the same
     reading fitted on each training flight alone, from the no-difference value (the prior's
     centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``. The training flights share the
     gap, so the scale is their spread about no difference, not about their mean. Measured
@@ -664,7 +709,7 @@ class Practical:
         return ranked
 
     def spread_of(self, w: Weighed) -> dict:
-        """Parameter -> :class:`~quadsim.gap.selfcheck.Spread` (centre: the prior's; sd: the
+        """Parameter -> :class:`~quadsim.gap.calibrate.Spread` (centre: the prior's; sd: the
         between-flight SD) of ``w``'s explanation fitted on each training flight alone."""
         expl = w.train.explanation
         per = []
@@ -719,7 +764,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     params = reference.params
     tick = tick or (lambda *_: None)
     dt = float(train[0].t[1] - train[0].t[0])
-    # a value outside its documented plausible range has no prior probability (:mod:`.priors`)
+    # a value outside its documented plausible range has no prior probability (:mod:`.fitting`)
     implausible = []
     for w in weighed:
         ok, text = plausible({q: v for q, v in w.train.values.items()
@@ -765,3 +810,197 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                     lead, lead_name, null, combination, checked,
                     tuple((w.name, reading_text(w.train, reference), text)
                           for w, text in implausible))
+
+
+#: fewer reference flights than this gives a note (their scatter is poorly known).
+MIN_REFERENCE = 10
+
+
+def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog],
+                        params: VehicleParams, *, effects: Sequence[str] | None = None,
+                        progress: Callable | None = None,
+                        window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
+                        refused: Sequence[tuple[int, str, str]] = ()) -> Diagnosis:
+    """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
+
+    ``refused``: (position, file, reason) of flights refused before this call (the CLI's
+    loader and checks); they are placed at their position in ``flights``.
+    ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
+    Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
+    ref_flights = prepare(reference, params, window_s=window_s)
+    if len(ref_flights) < 2:
+        raise InputError("--reference: give at least 2 nominal flights")
+    vehicle = vehicle_check([f.fit for f in ref_flights], params)
+    ref = calibrate(ref_flights, params)
+    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    if progress is not None:
+        progress("reference")
+    notes = ([(f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
+              "give 10 or more")] if len(ref_flights) < MIN_REFERENCE else [])
+    notes += delay_notes(ref_flights)
+    one = partial(judge_one, reference=ref, effects=effects, window_s=window_s)
+    flights = []
+    for entry in map_fn(one, logs):
+        flights.append(entry)
+        if progress is not None and map_fn is map:
+            progress(entry.file)
+    for position, name, reason in sorted(refused):
+        flights.insert(position, refused_entry(name, reason))
+    return Diagnosis(SCHEMA, params.name, "per-flight", flights=tuple(flights),
+                     answer=batch_answer(flights), reference=tuple(ref.names),
+                     reference_model=reference_summary(ref),
+                     reference_refit={k: v for k, v in ref.values().items()
+                                      if k.startswith("nominal_refit.")},
+                     checks=vehicle, notes=tuple(notes))
+
+
+def reference_summary(ref: Reference) -> dict:
+    """The calibrated reference model as JSON: values, pooled standard error, between-flight
+    scatter and whether the reference flights determine it (``identified``) per shared
+    parameter; noise scale (sigma) and correlation time per channel; the references'
+    envelope (:func:`quadsim.gap.reference.envelope_summary`); their drag as a quadratic
+    airframe drag's C_d A (m^2, :func:`quadsim.gap.calibrate.quadratic_equivalent`); the
+    speed-per-command exponent their map implies for a propeller change
+    (:func:`quadsim.gap.residual.load_exponent`); the shared effects' fixed values (the
+    thrust curve's centre, rad/s)."""
+    names = channel_names(ref)
+    return {"params": ref.values(),
+            "se": dict(zip(ref.candidate.parameter_names, map(float, ref.se_pool))),
+            "scatter": dict(zip(ref.candidate.parameter_names, map(float, ref.scatter))),
+            "identified": {k: bool(v) for k, v in ref.identified.items()},
+            "at_bound": dict(ref.at_bound),
+            "sigma": dict(zip(names, map(float, ref.sigma))),
+            "correlation_samples": dict(zip(names, map(float, ref.tau))),
+            "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,
+                                "se": 1e3 * ref.rotor_shift_se},
+            "delays_ms": {k: {"mean": m, "sd": s, "count": n}
+                          for k, (m, s, n) in ref.delays_ms.items()},
+            "envelope": envelope_summary(ref.envelope, ref.candidate.parameter_names),
+            "quadratic_drag_m2": float(ref.quadratic_drag),
+            "quadratic_drag_axes_m2": float(ref.quadratic_drag_axes),
+            "quadratic_vertical_axes_m2": float(ref.quadratic_vertical_axes),
+            "fixed": {f"{name}.{k}": float(v) for name, fixed, _ in ref.candidate.parts
+                      for k, v in fixed.items()},
+            "load_exponent": None if ref.load_exponent is None else
+            {"alpha": ref.load_exponent[0], "sd": ref.load_exponent[1]},
+            "discrepancy": None if ref.discrepancy is None
+            else ref.discrepancy.to_json(names),
+            "self_check": None if ref.self_check is None else ref.self_check.to_json()}
+
+
+def reference_self_check(ref_flights: list, ref: Reference, effects=None):
+    """The references judged against each other (:mod:`quadsim.gap.calibrate`): each
+    reference weighed against :func:`~quadsim.gap.calibrate.leave_one_out` of ``ref``, then
+    judged with the other references' readings as the practical-significance scale. None
+    for fewer than 3 references."""
+    if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
+        return None
+    weighed = []
+    for j, f in enumerate(ref_flights):
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
+        weighed.append(w if isinstance(w, WeighedFlight) else None)
+
+    def judge_fn(j, check):
+        return verdict_of(weighed[j], check)
+
+    return self_check_of([f.name for f in ref_flights],
+                         [None if w is None else w.rows for w in weighed], judge_fn)
+
+
+def judge_one(log: FlightLog, reference: Reference, effects=None,
+              window_s: float = DEFAULT_WINDOW_S, full: bool = False) -> Verdict:
+    """One flight's :class:`~quadsim.gap.result.Verdict` (module level: sent to workers);
+    ``refused`` with the reason when the flight cannot be judged. ``effects``: restrict the
+    explanations; ``window_s`` (s): smoothing window; ``full``: every explanation fully
+    fitted (no screen, :func:`quadsim.gap.evidence.evaluate`)."""
+    name = str(log.path) if getattr(log, "path", None) is not None else "log"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            flight = prepare([log], reference.params, window_s=window_s)[0]
+    except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
+        return refused_entry(name, str(exc))
+    weighed = weigh_flight(flight, reference, effects, full=full, name=name)
+    if not isinstance(weighed, WeighedFlight):
+        return weighed
+    verdict = verdict_of(weighed, reference.self_check,
+                         logcheck.order_statuses([log], reference.params))
+    verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.logcheck)
+    local = weighed.reference          # the residual before and after, for the report
+    return dataclasses.replace(verdict, series=flight_series(
+        local.align(weighed.flight), local, weighed.rows, name=weighed.flight.name))
+
+
+@dataclass(frozen=True)
+class WeighedFlight:
+    """One prepared flight weighed against the reference model: ``flight`` (the prepared
+    flight), ``rows`` (every explanation's Evidence), ``reference`` (the reference model at
+    the flight's place, :func:`quadsim.gap.reference.local_reference`), ``place`` (its
+    envelope position or None), ``law`` (the drag law it is judged under, or None)."""
+
+    flight: object
+    rows: list
+    reference: Reference
+    place: object
+    law: object
+
+
+def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
+                 name: str = "log") -> WeighedFlight | Verdict:
+    """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            states = reference.align(flight)       # the references' rotor-speed timing
+            check_same_kind(states, reference, name)   # a pose on both or neither (posefree)
+            if states.command is None and reference.rotor:
+                raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
+                                 "commands, this one does not")
+            if len(states.t) < 20:
+                raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
+                                 "after smoothing)")
+            trend = getattr(reference.envelope, "trend", None)
+            info = (inverse_information(states, reference)
+                    if trend is not None and trend.q_weight is not None
+                    and np.any(trend.q_weight > 0) else None)
+            place = envelope_position(states, reference.envelope, info)
+            reference = local_reference(reference, place)   # the model at this flight
+            start = 0.0
+            mine = (flight.delays_ms or {}).get("rotor")
+            if mine is not None and "rotor" in reference.delays_ms:
+                start = 1e-3 * mine - reference.rotor_shift_s
+            memo: dict = {}        # the flight's residual parts and shared Jacobian, kept
+            law = evidence.choose(states, reference, start, memo)
+            expl = evidence.under(explanations_for(reference, states, effects), law)
+            rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
+    except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
+        return refused_entry(name, str(exc))
+    return WeighedFlight(flight, rows, reference, place, law)
+
+
+def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
+    """The :class:`~quadsim.gap.result.Verdict` of a :class:`WeighedFlight` flight, judged with the
+    references' self-check ``check`` (:class:`quadsim.gap.calibrate.SelfCheck`, or None) and
+    the rotor-order ``statuses`` of its log (:mod:`quadsim.gap.logcheck`; none: not checked)."""
+    flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
+    reference = dataclasses.replace(weighed.reference, self_check=check)
+    verdict = logcheck.mark(judge(rows, reference, flight.name,
+                               cap=logcheck.probability_cap(statuses)), statuses)
+    words = verdict.answer
+    if law is not None:       # the drag law in words; None: the references'
+        words += f" Judged with {law.variant} (the law this flight shows)."
+    if place is not None and place.distance > 0:
+        words += f" Flown {place.text}."
+    return dataclasses.replace(
+        verdict, answer=words, drag_law=None if law is None else law.variant,
+        envelope=None if place is None else place.to_json(),
+        signal_delays_ms=flight.delays_ms,
+        notes=verdict.notes + tuple(delay_notes([flight])))
+
+
+def refused_entry(name: str, reason: str) -> Verdict:
+    """The verdict of a flight that could not be judged, with the reason."""
+    return Verdict("refused", "refused", f"Not judged: {reason}", None, file=name,
+                   reason=reason)

@@ -1,4 +1,39 @@
-"""Explanations of one flight against the calibrated reference model, weighed by evidence.
+"""Weighing explanations of one flight against the reference model: one explanation's fit
+and its Laplace evidence, every explanation of a flight weighed, and the drag law a flight is
+judged under.
+
+One explanation: its fit and evidence
+-------------------------------------
+
+One explanation's fit on one flight, and its Laplace evidence.
+
+The pieces both ways of weighing an explanation share -- the full fit
+(:func:`full_fit`, bounded trust-region least squares) and the screen's linearised step and
+refined fit (:mod:`quadsim.gap.screen`) -- so that neither calls back into the other:
+:mod:`quadsim.gap.evidence` imports both, :mod:`quadsim.gap.screen` imports this module, and
+this module imports neither.
+
+Types:
+
+- :class:`FitInputs`: what every explanation's fit on one flight shares (the flight's
+  states, the reference model, the shared-parameter Jacobian and spreads, the memo).
+- :class:`Problem`: one explanation's fit on that flight: the stacked residual whose squared
+  norm is the fit's cost, the bounds in prior units, the marginal of the shared parameters.
+- :class:`Evidence`: its result (MAP values, spreads, log evidence, per-channel mean square).
+
+The likelihood, the marginal of the shared parameters and the Laplace evidence are defined in
+the module doc of :mod:`quadsim.gap.evidence`; :func:`laplace` computes the latter.
+
+Example::
+
+    >>> inputs = FitInputs(states, reference, jac, marginal_sd(reference), memo={})
+    >>> ev = full_fit(inputs, explanation, start_delay_s=0.0)
+    >>> ev.log_z, ev.values
+
+Every explanation of a flight
+-----------------------------
+
+Explanations of one flight against the calibrated reference model, weighed by evidence.
 
 An *explanation* says how this flight differs from the reference flights
 (:class:`quadsim.gap.calibrate.Reference`): a library effect with free parameters and a prior
@@ -50,7 +85,7 @@ The screen
 Linearised evidence of every explanation, and the cut that decides which ones are fitted
 to convergence (:func:`quadsim.gap.evidence.evaluate`; docs/gap.md, Speed).
 
-The full fit of an explanation (:func:`quadsim.gap.problem.full_fit`: bounded trust-region
+The full fit of an explanation (:func:`quadsim.gap.evidence.full_fit`: bounded trust-region
 least squares, a finite-difference Jacobian per iteration) costs 40-80 evaluations of the
 flight's residual; a flight has ~20 explanations, and most of them lie hundreds of log units
 of evidence below the best. So:
@@ -71,7 +106,7 @@ of evidence below the best. So:
    again on the other side when the step goes there. The stacked cost (profiled residual,
    marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
    least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
-   *screened* evidence is the Laplace evidence (:func:`quadsim.gap.problem.laplace`) at z1
+   *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at z1
    with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says how
    far the linear model was off there.
 3. **Cut**: an explanation whose *reach*, screened log Z + miss / 2, lies within
@@ -103,69 +138,443 @@ The explanations that matter are fitted to convergence, not with the full fit's
 where that fit stopped early); at a bound, the two Jacobians' columns of the bounded value
 can differ and with them the Occam factor. ``evaluate(..., full=True)`` fits every
 explanation with the full fit (the reference path tests/test_screen.py compares with).
+
+The drag law
+------------
+
+The law of the references' air drag, as a flight shows it: chosen once per flight by the
+evidence of "no difference", and every reading judged under it.
+
+Why. The reference model fits the horizontal air drag its flights share as a rotor drag,
+linear in the air velocity (:mod:`quadsim.effects.rotor_drag`). An airframe's drag is
+quadratic (:mod:`quadsim.effects.body_drag`), under one of two laws: on the air speed,
+``-1/2 rho C_d A |v| v``, or each body axis on its own, ``-1/2 rho C_d A |v_i| v_i`` (a box's
+faces taken apart: l2f's, PyFlyt's and multirotor's drag). At the references' ~1 m/s the
+three give the same force; a flight flown faster, or in a wind, shows which one the vehicle
+has. The law is the vehicle's, the references' as much as the flight's: it is no reading of
+its own, and every reading must be judged under the same one. Measured, before:
+
+- with the quadratic laws only inside the wind reading, two nominal multirotor flights
+  outside the references' envelope gained 5-10 log units from the law per axis at a wind of
+  0.2-0.6 m/s, and one was named ``wind`` at 0.80;
+- with "no difference" alone given the laws, an l2f roll/pitch inertia error of +34 % (a
+  flight at 1.3x the references' speed) became ``no_significant_gap`` at 0.97: the inertia
+  reading kept the linear law and lost 10 log units on Fx and Fy to it.
+
+How (:func:`choose`). "No difference" is fitted under each law: the references' own, and
+each quadratic law with its C_d A held at the references' equivalent
+(:func:`quadsim.gap.explanations.quadratic_laws`,
+:func:`quadsim.gap.calibrate.quadratic_equivalent`: least squares of the two laws'
+horizontal force over the reference flights). The law of the highest evidence is the
+flight's (equal prior odds; on a flight at the references' speeds the laws tie, and either
+choice predicts the same). Every explanation is then built under it (:func:`under`): the
+references' rotor drag replaced by the airframe drag :class:`DragLaw`, a pseudo-effect fixed
+at that C_d A (no parameter of its own, never part of an answer); a body-drag reading adds
+drag under the same law; a rotor-drag reading adds a linear drag to it (its prior centred
+at 0, the references' linear drag being the law now); the wind reading keeps only its
+variant through that law, with C_d A fitted (:func:`quadsim.gap.explanations.wind_readings`).
+Held fixed in "no difference", not fitted: a C_d A free within its prior would let "no
+difference" absorb part of a drag change, which a drag reading must explain.
+
+A choice by the maximum, not a sum over the laws: the laws enter every reading, and a sum
+would fit every reading three times (the per-flight time). The choice is a model selection on
+a nuisance with two or three values, by the flight's own evidence, and the entry states it
+(``drag_law`` in the per-flight JSON).
+
+Example::
+
+    >>> law = choose(states, reference, start_delay_s=0.0)     # None: the references' law
+    >>> rows = evaluate(states, reference, under(explanations_for(reference, states), law))
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import lsq_linear
+from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
+from scipy.optimize import least_squares, lsq_linear
 
 from ..core.errors import ModelError
-from .calibrate import jacobian, shifted
+from .calibrate import jacobian
 from .explanations import (  # re-exported: the evidence's public names
     DELAY_SD_S,
     DETERMINED,
     Explanation,
     explanations_for,
+    law_replaces,
     marginal_sd,
+    own_effects,
+    quadratic_laws,
     reference_determined,
 )
-from .fitmodels import build_effect
-from .problem import (  # re-exported: the fit of one explanation
-    Evidence,
-    FitInputs,
-    Problem,
-    flight_residual,
-    full_fit,
-    laplace,
-    read_inside,
-    shifted_view,
-)
-from .reference import Reference
+from .fitting import DragLaw, build_effect, residuals
+from .fitting import parameter_bounds as fit_bounds
+from .reference import Reference, centre_term, columns, rotor_spectra, shifted
+from .residual import memoised, min_time_constant
 
-__all__ = [
-    "CONVERGED",
-    "DELAY_GRID_S",
-    "DELAY_GRID_SDS",
-    "DELAY_SD_S",
-    "DETERMINED",
-    "MAX_STEPS",
-    "SCREEN_CUT",
-    "STEP",
-    "Columns",
-    "Evidence",
-    "Explanation",
-    "FitInputs",
-    "Problem",
-    "centred_is_base",
-    "delay_starts",
-    "evaluate",
-    "explanations_for",
-    "flight_residual",
-    "full_fit",
-    "jacobian_columns",
-    "laplace",
-    "linear_step",
-    "linearised",
-    "marginal_sd",
-    "read_inside",
-    "reference_determined",
-    "refined",
-    "screened",
-    "shifted",
-]
+__all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence", "FitInputs",
+           "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
+           "read_inside", "shifted_view", "CONVERGED", "DELAY_GRID_S", "DELAY_GRID_SDS",
+           "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
+           "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
+           "linear_step", "linearised", "marginal_sd", "reference_determined", "refined",
+           "screened", "shifted", "DragLaw", "choose", "under"]
+
+
+#: bounds (s) of a fitted signal delay (``Explanation.shift``): the lag window of
+#: :data:`quadsim.logs.delays.MAX_LAG_S`, the widest offset the cross-correlation looks at.
+DELAY_BOUND_S = 0.1
+#: the full fit's evaluations of the stacked residual at most (scipy ``max_nfev``): enough
+#: for the 1-6 parameters of an explanation from its prior centre; the screen's refined fit
+#: (:mod:`quadsim.gap.screen`) runs to convergence instead.
+FULL_FIT_EVALUATIONS = 40
+#: the full fit's finite-difference step in prior units (scipy ``diff_step``)
+FULL_FIT_STEP = 1e-3
+
+
+@dataclass
+class Evidence:
+    """One explanation's result on one flight.
+
+    ``values``, ``post_sd``, ``prior_sd``: parameter name (``effect.parameter``, or
+    ``delay.rotor`` in s) -> MAP value, posterior and prior spread (the parameter's SI unit);
+    ``determined``: name -> whether the posterior spread is below
+    :data:`~quadsim.gap.explanations.DETERMINED` times the prior's (only the explanation's
+    own parameters; the shared rotor delay is not one of its own); ``log_z``: log evidence
+    (natural log, model prior included); ``ms`` (C,): per-channel mean squared residual over
+    sigma_c^2 (dimensionless, 1 = the references' level); ``mean`` (C,): per-channel mean
+    residual (N, N m, rad/s); ``air_force`` (3,): mean air force of a wind reading beyond the
+    references' wind (world, N), else None; ``shared_shift``: shared parameter -> its
+    profiled shift from theta_ref (its SI unit); ``screened``: True where the value is the
+    screen's linearised evidence (:mod:`quadsim.gap.screen`), not a converged fit."""
+
+    explanation: Explanation
+    values: dict
+    post_sd: dict
+    prior_sd: dict
+    determined: dict
+    log_z: float
+    ms: np.ndarray
+    mean: np.ndarray | None = None
+    air_force: np.ndarray | None = None
+    shared_shift: dict = field(default_factory=dict)
+    #: True: the linearised evidence of :mod:`.screen` (no full fit: it cannot matter)
+    screened: bool = False
+
+    @property
+    def name(self) -> str:
+        return self.explanation.name
+
+
+@dataclass(frozen=True)
+class FitInputs:
+    """What every explanation's fit on one flight shares.
+
+    ``states``: the flight's (decimated, aligned) fit states
+    (:class:`quadsim.gap.residual.FlightStates`, N samples); ``reference``: the reference
+    model; ``jac`` (N C, M): the weighted residual's Jacobian in the M shared parameters at
+    theta_ref (:func:`quadsim.gap.reference.jacobian`, columns in
+    ``reference.candidate.parameter_names`` order, per unit of each parameter's SI value);
+    ``s_all`` (M,): the spread each shared parameter is marginalised with
+    (:func:`quadsim.gap.explanations.marginal_sd`); ``memo``: residual parts kept across the
+    evaluations on this flight (:func:`quadsim.gap.fitting.residuals`), None for none."""
+
+    states: object
+    reference: Reference
+    jac: np.ndarray
+    s_all: np.ndarray
+    memo: dict | None = field(default=None, compare=False)
+
+    @property
+    def names_all(self) -> list[str]:
+        """The shared parameters' names, in the Jacobian's column order."""
+        return list(self.reference.candidate.parameter_names)
+
+    def problem(self, expl: Explanation) -> Problem:
+        """``expl``'s :class:`Problem` on this flight, sharing the memo."""
+        return Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
+
+
+class Marginal:
+    """The shared parameters not fitted by an explanation, marginalised linearly
+    (:mod:`quadsim.gap.evidence`, module doc): ``j`` = J_s diag(s_ref) (N C, K), ``chol`` the
+    Cholesky factor of A = I + jᵀj, ``logdet`` = log det A."""
+
+    def __init__(self, jac: np.ndarray, s_ref: np.ndarray):
+        self.j = jac * s_ref
+        a = np.eye(len(s_ref)) + self.j.T @ self.j
+        self.chol = cho_factor(a)
+        self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
+        # cho_solve's own LAPACK call (the same numbers), without its per-call checks and
+        # batch wrapper: most of its cost on these small systems, called thousands of times
+        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if len(s_ref) else None
+        self._last: tuple | None = None
+
+    def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(r + j du, du) at the profiled shift du = -A^-1 jᵀ r of the weighted residual
+        ``r`` (N C,) or of each of its columns (N C, P). The last residual vector's answer is
+        kept (a fit's linear step profiles the residual its cost has just profiled; the
+        residuals of :meth:`Problem.residual` are not written to): the arrays returned are
+        shared, not to be written to either."""
+        last = self._last
+        if last is not None and last[0] is r:
+            return last[1]
+        out = self._profile(r)
+        if r.ndim == 1:
+            self._last = (r, out)
+        return out
+
+    def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        rhs = self.j.T @ r
+        if self._potrs is None:
+            du = -cho_solve(self.chol, rhs)
+        else:
+            x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
+            if info != 0:
+                raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+            du = -x
+        return r + self.j @ du, du
+
+
+def parameter_bounds(expl: Explanation, reference: Reference, dt: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of ``expl``'s parameters in their SI units: each effect parameter's
+    declared bounds narrowed by its fit window for this vehicle (the effect's facts,
+    :func:`quadsim.gap.fitting.parameter_bounds`: a mass offset within -1/2 .. 2 x the
+    vehicle's mass, a payload within the rotor arm, a CoM shift within half of it, the thrust
+    curve within the hover thrust per rad/s and
+    :func:`~quadsim.gap.fitting.curve_quadratic_bounds`);
+    a motor lag of at least :func:`~quadsim.gap.residual.min_time_constant` of the fit
+    step ``dt`` (s; the rotor channel's Heun sub-step resolves no shorter one); a fitted delay
+    within +-:data:`DELAY_BOUND_S`."""
+    lower, upper = (list(x) for x in fit_bounds(expl, reference.params))
+    k = 0
+    for name, _, fitted in expl.parts:
+        for _p in fitted:
+            if name == "motor_lag":
+                lower[k] = max(lower[k], min_time_constant(dt))
+            k += 1
+    if expl.shift:
+        lower.append(-DELAY_BOUND_S)
+        upper.append(DELAY_BOUND_S)
+    return np.asarray(lower, float), np.asarray(upper, float)
+
+
+def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[int]]:
+    """The reference effects without the replaced groups, and the marginalised columns."""
+    names = reference.candidate.parameter_names
+    keep = [k for k, n in enumerate(names) if n.split(".")[0] not in replaces]
+    everything, n_base = reference.effects(), len(reference.candidate.base)
+    # effects already in the model (held-out mode's --effects-file) stay; an explanation
+    # replaces only the fitted shared groups
+    effects = everything[:n_base] + [e for e in everything[n_base:] if e.name not in replaces]
+    return effects, keep
+
+
+def _air_force(states, reference: Reference, effects: list, own: list) -> np.ndarray:
+    """Mean air force (world, N; (3,)) of the flight's wind beyond the references' wind:
+    the model wrench with the reading's own effects ``own`` less that with the references'
+    wind, on the shared ``effects``."""
+    from ..core.frames import rotate
+    from .residual import model_wrench
+
+    base = [e for e in reference.effects() if e.name == "wind"]   # the references' own
+    with_wind, _, _ = model_wrench(states, reference.params, effects + own)
+    without, _, _ = model_wrench(states, reference.params, effects + base)
+    return np.mean(rotate(states.quat, with_wind - without), axis=0)
+
+
+def flight_residual(states, reference: Reference, effects: list, memo: dict | None = None
+                    ) -> np.ndarray:
+    """:func:`quadsim.gap.reference.weighted_residual`, flattened (N C,), with the residual
+    parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
+    r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
+    return (r * np.sqrt(reference.weights)).ravel()
+
+
+def shifted_view(states, delay_s: float, memo: dict | None = None):
+    """:func:`quadsim.gap.reference.shifted` states (rotor speeds read ``delay_s`` s later);
+    with a ``memo``, the same object for the same delay, the flight's rotor spectra computed
+    once."""
+    if memo is None:
+        return shifted(states, delay_s)
+    spectra = memoised(memo, ("spectra", id(states)), states, lambda: rotor_spectra(states))
+    return memoised(memo, ("shifted", id(states), delay_s), states,
+                 lambda: shifted(states, delay_s, spectra))
+
+
+class Problem:
+    """One explanation's fit on one flight (:mod:`quadsim.gap.evidence`, module doc).
+
+    ``residual(z)``: the weighted residual (N C,) at z (the explanation's parameters in units
+    of their prior spread, z = (theta - mean) / sd; the rotor delay last where it fits one);
+    ``stacked(z)``: the vector whose squared norm is the fit's cost (profiled residual,
+    marginalised shared shifts, z); ``z_lo``, ``z_hi``: the bounds in z; ``lower``,
+    ``upper``: the same in SI units (:func:`parameter_bounds`); ``shared``/``keep``/``marg``:
+    the reference effects it keeps, the shared columns it marginalises and their
+    :class:`Marginal`; ``memo``: residual parts shared by the evaluations on this flight."""
+
+    def __init__(self, states, reference: Reference, expl: Explanation, jac: np.ndarray,
+                 s_all: np.ndarray, memo: dict | None = None):
+        self.states, self.reference, self.expl = states, reference, expl
+        self.s_all = s_all
+        self.memo = memo          # residual parts shared by evaluations on one flight
+        if memo is None:
+            self.shared, self.keep = _shared_effects(reference, expl.replaces)
+        else:       # the same for every explanation that replaces the same groups
+            kept = memo.setdefault("shared_effects", {})
+            if expl.replaces not in kept:
+                kept[expl.replaces] = _shared_effects(reference, expl.replaces)
+            self.shared, self.keep = kept[expl.replaces]
+        self.marg = self._marginal(jac, s_all)
+        self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
+        lower, upper = parameter_bounds(expl, reference, float(states.t[1] - states.t[0]))
+        self.lower, self.upper = lower, upper
+        self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
+        self.size = jac.shape[0] + self.marg.j.shape[1] + len(self.mean)
+
+    def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> Marginal:
+        """The marginal of the kept shared columns and the discrepancy's
+        (:func:`quadsim.gap.reference.columns`, unit spread: they are scaled by the
+        coefficients' covariance factor already), after them; with a ``memo``, one per set
+        of columns (most explanations keep them all) and Jacobian."""
+        def build():
+            extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
+                            self.memo)
+            return Marginal(np.hstack([jac[:, self.keep], extra]),
+                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]))
+
+        if self.memo is None:
+            return build()
+        kept = self.memo.setdefault("marginals", {})
+        key = (id(jac), tuple(self.keep), s_all[self.keep].tobytes(),
+               id(self.reference.discrepancy), self.reference.weights.tobytes())
+        if key not in kept or kept[key][0] is not jac:
+            kept[key] = (jac, build())
+        return kept[key][1]
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        """The weighted residual at ``z``; with a ``memo``, the last one per explanation is
+        kept (the screen's step and the refined fit ask again for the point they just
+        evaluated: the start of the next step, the step just accepted)."""
+        last = None if self.memo is None else self.memo.setdefault("last_residual", {})
+        key = (self.expl.name, self.expl.variant)
+        if last is not None and key in last and np.array_equal(last[key][0], z):
+            return last[key][1]
+        # z at its bound gives theta a round-off beyond the parameter's range: clipped
+        theta = np.clip(self.mean + self.sd * z, self.lower, self.upper)
+        own = own_effects(self.expl, theta)
+        flight = self.shifted(float(theta[-1])) if self.expl.shift else self.states
+        r = flight_residual(flight, self.reference, self.shared + own, self.memo)
+        if last is not None:
+            last[key] = (np.array(z, dtype=float), r)
+        return r
+
+    def shifted(self, delay_s: float):
+        """:func:`shifted_view` of the flight's states with this problem's memo."""
+        return shifted_view(self.states, delay_s, self.memo)
+
+    def stacked(self, z: np.ndarray) -> np.ndarray:
+        """(profiled residual (N C,), marginalised shifts (K,), z): the fit's cost is its
+        squared norm; a vehicle the model rejects (ModelError) costs 1e3 per entry (a wall
+        the fit turns back from)."""
+        try:
+            r = self.residual(z)
+        except ModelError:
+            return np.full(self.size, 1e3)
+        aug, du = self.marg.profile(r)
+        return np.concatenate([aug, du, z])
+
+    def start(self, start_delay_s: float = 0.0) -> np.ndarray:
+        """z = 0 with the delay at ``start_delay_s``, inside the bounds."""
+        z0 = np.zeros_like(self.mean)
+        if self.expl.shift:
+            z0[-1] = start_delay_s / self.sd[-1]
+        return np.clip(z0, self.z_lo + 1e-6, self.z_hi - 1e-6)
+
+    def evidence(self, z, vec, h, at_bound: int) -> Evidence:
+        """:func:`laplace` of this problem at ``z``."""
+        return laplace(self, z, vec, h, at_bound)
+
+
+def full_fit(inputs: FitInputs, expl: Explanation, start_delay_s: float,
+             start: np.ndarray | None = None) -> Evidence:
+    """``expl``'s MAP fit and Laplace evidence on the flight of ``inputs``
+    (:mod:`quadsim.gap.evidence`, module doc): bounded trust-region least squares of
+    :meth:`Problem.stacked` (at most :data:`FULL_FIT_EVALUATIONS` evaluations, step
+    :data:`FULL_FIT_STEP`), the shared parameters ``expl`` does not replace marginalised.
+    ``start_delay_s`` (s): where the rotor delay starts; ``start``: where the fit starts
+    (z units; default :meth:`Problem.start`). The problem keeps no memo (a fit of its own)."""
+    prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
+    if not len(prob.mean):
+        return prob.evidence(np.zeros(0), prob.stacked(np.zeros(0)), np.zeros((0, 0)), 0)
+    z0 = prob.start(start_delay_s) if start is None else np.clip(
+        np.asarray(start, dtype=float), prob.z_lo + 1e-6, prob.z_hi - 1e-6)
+    fit = least_squares(prob.stacked, z0, bounds=(prob.z_lo, prob.z_hi),
+                        diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
+    return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac,
+                         int(np.count_nonzero(fit.active_mask)))
+
+
+def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
+                ) -> np.ndarray:
+    """The rotor channels' mean square (R,) over the samples whose read ``t + delay_s`` (s)
+    lies inside the log; ``ms`` where all or none do. ``resid`` (N, R): the rotor channels'
+    residual. Beyond the log's ends a rotor log read later meets the mirror image of its
+    samples (:func:`quadsim.gap.reference.read_later`): a fill that keeps the spectrum from
+    ringing, not data, so it does not count in what a reading leaves. The likelihood keeps
+    every sample (each reading's own delay would give each a different sample count)."""
+    inside = (t + delay_s <= t[-1]) & (t + delay_s >= t[0])
+    if inside.all() or not inside.any():
+        return ms
+    return np.mean(resid[inside] ** 2, axis=0)
+
+
+def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bound: int
+            ) -> Evidence:
+    """The :class:`Evidence` of ``prob``'s explanation at ``z`` (its parameters in prior
+    units, (P,)): ``vec`` the stacked residual there (:meth:`Problem.stacked`), ``h`` (P, P)
+    the posterior precision in z units (JᵀJ), ``at_bound`` how many values lie at a bound.
+
+    log Z = -1/2 |vec|^2 - 1/2 log det H - 1/2 log det A + log pi (:mod:`quadsim.gap.evidence`,
+    module doc); a value at a bound keeps half the Laplace volume (log 2 per value into
+    log det H). Posterior spreads sd sqrt(diag H^+). ``ms``: each channel's mean squared
+    residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that fits
+    the rotor delay, the rotor channels' over the samples read inside the log
+    (:func:`read_inside`). A wind reading also gets its air force (:func:`_air_force`)."""
+    states, reference, expl = prob.states, prob.reference, prob.expl
+    names_all = reference.candidate.parameter_names
+    chans = len(reference.sigma)
+    mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
+    if len(mean):
+        # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
+        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
+        post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
+    else:
+        logdet_h, post = 0.0, np.zeros(0)
+    theta = mean + sd * z
+    log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
+    n = prob.marg.j.shape[0]
+    resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
+    keys = expl.parameter_names
+    shift = {names_all[k]: float(prob.s_all[k] * d)
+             for k, d in zip(prob.keep, vec[n:n + len(prob.keep)])}
+    own = [expl.name == "signal_delay" or k != "delay.rotor" for k in keys]
+    ms = np.mean(resid ** 2, axis=0)
+    if expl.shift and reference.rotor and chans > 6:
+        ms[6:] = read_inside(states.t, float(theta[-1]), resid[:, 6:], ms[6:])
+    ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
+                  dict(zip(keys, map(float, sd))),
+                  {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
+                  log_z, ms, np.mean(resid, axis=0) * reference.sigma,
+                  shared_shift=shift)
+    if expl.name == "wind":
+        ev.air_force = _air_force(states, reference, prob.shared,
+                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
+    return ev
 
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
@@ -187,9 +596,9 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:func:`screened`); ``full=True`` fits every one with
-    :func:`quadsim.gap.problem.full_fit`. ``memo``: the residual parts and the shared
+    :func:`quadsim.gap.evidence.full_fit`. ``memo``: the residual parts and the shared
     Jacobian kept from an earlier call on the same flight and reference
-    (:func:`quadsim.gap.drag_law.choose`)."""
+    (:func:`quadsim.gap.evidence.choose`)."""
     names = list(reference.candidate.parameter_names)
     s_all = marginal_sd(reference)
     memo = {} if memo is None else memo   # residual parts shared by evaluations on this flight
@@ -237,7 +646,7 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     """Where the rotor delay's fits start (s): (every explanation's shared delay, the
     "signal_delay" reading's), each the best point of a grid (:data:`DELAY_GRID_S`) under its
     prior (the shared delay's, the wide ``signal_sd``, s). ``null``: the "no difference"
-    :class:`~quadsim.gap.problem.Problem` (its delay under the references' tight prior);
+    :class:`~quadsim.gap.evidence.Problem` (its delay under the references' tight prior);
     ``hint_s``: the flight's cross-correlation estimate against the references' (s). The
     shared start is the best of the grid within :data:`DELAY_GRID_SDS` shared spreads about
     zero and about ``hint_s`` (where the shared delay may lie, and where a delay of the
@@ -275,10 +684,10 @@ class Columns:
     (:meth:`base`), the rotor delay's column there (:meth:`delay`), and the shared Jacobian
     ``jac`` (N C, M) with ``index`` (shared parameter name -> column).
 
-    ``inputs``: the flight's :class:`~quadsim.gap.problem.FitInputs` (its memo keeps the
+    ``inputs``: the flight's :class:`~quadsim.gap.evidence.FitInputs` (its memo keeps the
     shifted states); ``null``: the "no difference" explanation, whose fixed-only parts and
     replaced groups make the shared base model (the reference model, or it under a flight's
-    drag law, :mod:`quadsim.gap.drag_law`); None: the reference model. ``delay_s``: the delay
+    drag law, :mod:`quadsim.gap.evidence`); None: the reference model. ``delay_s``: the delay
     (s) every explanation starts at (:func:`screened` sets it)."""
 
     def __init__(self, inputs: FitInputs, null: Explanation | None = None):
@@ -609,7 +1018,7 @@ def _matters(inputs: FitInputs, cols: Columns, explanations: list, k: int,
 def _fit_to_convergence(inputs: FitInputs, cols: Columns, expl: Explanation,
                         start: np.ndarray | None, delay: float) -> Evidence:
     """:func:`refined` (coupled: :func:`_refined_coupled`) from the step ``start``; the full
-    fit (:func:`~quadsim.gap.problem.full_fit`) where there is no step or the refined fit
+    fit (:func:`~quadsim.gap.evidence.full_fit`) where there is no step or the refined fit
     meets a non-physical vehicle."""
     row = None
     if start is not None:
@@ -662,3 +1071,72 @@ def screened(inputs: FitInputs, explanations: list[Explanation],
         else:
             rows[k].screened = True
     return rows
+
+
+def nulls(reference: Reference, states) -> list[Explanation]:
+    """"No difference" under the references' own drag and under each quadratic law, with
+    the flight's rotor delay as :func:`quadsim.gap.explanations.explanations_for` gives it."""
+    plain = next(e for e in explanations_for(reference, states, names=())
+                 if e.name == "no_difference")
+    return [plain] + [dataclasses.replace(plain, variant=_variant(variant),
+                                          parts=(("drag_law", dict(fixed, cd_area=drag), ()),),
+                                          replaces=law_replaces(fixed))
+                      for variant, fixed, drag in quadratic_laws(reference)]
+
+
+def _variant(wind_variant: str) -> str:
+    return "the references' drag as " + wind_variant.split(" drag as ")[-1]
+
+
+def choose(states, reference: Reference, start_delay_s: float = 0.0,
+           memo: dict | None = None) -> Explanation | None:
+    """The flight's drag law (module doc): the "no difference" of the highest evidence
+    among :func:`nulls`; None where that is the references' own law (or they have no
+    horizontal drag to take as quadratic). ``memo``: kept for the flight's evaluation."""
+    candidates = nulls(reference, states)
+    if len(candidates) < 2:
+        return None
+    rows = evaluate(states, reference, candidates, start_delay_s=start_delay_s, memo=memo)
+    best = max(rows, key=lambda ev: ev.log_z)
+    return best.explanation if best.explanation.parts else None
+
+
+def under(explanations: list[Explanation], law: Explanation | None) -> list[Explanation]:
+    """``explanations`` built under the flight's drag law ``law`` (module doc); unchanged
+    where it is None."""
+    if law is None:
+        return list(explanations)
+    part = law.parts[0]
+    axes = _per_axis(part[1])
+    out = []
+    for e in explanations:
+        drag = next((fixed for n, fixed, _ in e.parts if n == "body_drag"), None)
+        if e.name == "no_difference":
+            out.append(dataclasses.replace(e, variant=law.variant, parts=law.parts,
+                                           replaces=law.replaces))
+        elif e.name == "wind" and drag is not None:
+            if _per_axis(drag) == axes:                  # the wind through this law only
+                out.append(dataclasses.replace(e, log_prior=0.0))
+        elif e.name == "wind":
+            continue                                     # through the linear law: not this one
+        else:
+            out.append(_with_law(e, part, law.replaces))
+    return out
+
+
+def _per_axis(fixed: dict) -> bool:
+    """Whether a body drag's fixed values take the law per body axis."""
+    return fixed.get("per_axis", 0.0) >= 0.5
+
+
+def _with_law(e: Explanation, part: tuple, replaced: tuple = ("rotor_drag",)) -> Explanation:
+    per_axis = {k: v for k, v in part[1].items() if k == "per_axis"}
+    parts = tuple((n, dict(fixed, **per_axis), fitted) if n == "body_drag" and fitted
+                  else (n, fixed, fitted) for n, fixed, fitted in e.parts)
+    mean = e.mean
+    if "rotor_drag" in e.replaces and any(n == "rotor_drag" for n, _, _ in e.parts):
+        # a rotor drag of the flight's own, on top of the law: centred on none
+        names = e.parameter_names
+        mean = tuple(0.0 if k == "rotor_drag.coefficient" else m for k, m in zip(names, mean))
+    replaces = e.replaces + tuple(g for g in replaced if g not in e.replaces)
+    return dataclasses.replace(e, parts=parts + (part,), mean=mean, replaces=replaces)

@@ -49,11 +49,10 @@ from ..effects.thrust_curve import ThrustCurve
 from ..effects.thrust_factor import ThrustFactor
 from ..effects.thrust_mismatch import ThrustMismatch
 from ..effects.translational_lift import TranslationalLift
-from . import cable
+from . import fitting as cable
 from .calibrate import SHARED, Reference
-from .fitmodels import FIT_EFFECTS, build_effect
-from .posefree import needs_pose
-from .priors import DETERMINED, WIND_SD_MS
+from .fitting import DETERMINED, FIT_EFFECTS, WIND_SD_MS, build_effect
+from .logcheck import needs_pose
 
 __all__ = [
     "DELAY_SD_S",
@@ -214,7 +213,7 @@ READING_ORDER = (MassOffset, ComOffset, ThrustCurve, TranslationalLift, GroundEf
 
 def reading_effects() -> list[type]:
     """The effect classes with declared per-flight readings: :data:`READING_ORDER`, then the
-    others of :data:`quadsim.gap.fitmodels.FIT_EFFECTS` in its order."""
+    others of :data:`quadsim.gap.fitting.FIT_EFFECTS` in its order."""
     first = {cls.name for cls in READING_ORDER}
     rest = [cls for name, cls in FIT_EFFECTS.items()
             if cls.facts.readings and name not in first]
@@ -284,7 +283,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
             mine = [r for r in _applicable(cls, reference) if r.per_rotor]
             out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * len(mine)))
                     for r in mine]
-    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.cable),
+    # a payload on a cable, its swing driven by the logged motion (quadsim.gap.fitting),
     # alone or with what holds it fixed to the frame (a hook, a mount,
     # the cable's clamp: a mass at the centre; a real hanging payload has one, and without
     # it the swinging mass reads between the two); the variants share the effect's prior
@@ -316,7 +315,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
-    if not getattr(states, "pose", True):       # IMU and motors only (quadsim.gap.posefree)
+    if not getattr(states, "pose", True):       # IMU and motors only (quadsim.gap.logcheck)
         out = [e for e in out if not needs_pose(e.parts)]
     if delay:       # the rotor delay as a shared parameter of every other explanation
         tight = reference_delay_sd(reference)
@@ -367,7 +366,7 @@ ALPHA_MIN_SD = 0.01
 def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
     """(mean, spread) of a propeller reading's speed-per-command exponent alpha: what the
     references' own command -> speed map implies (:attr:`Reference.load_exponent`,
-    :func:`quadsim.gap.motor_map.load_exponent`: 0 for a speed-controlled motor, 0.40 ± 0.08
+    :func:`quadsim.gap.residual.load_exponent`: 0 for a speed-controlled motor, 0.40 ± 0.08
     on the real Crazyflie 2.1 Brushless flights), within the effect's range and at least
     :data:`ALPHA_MIN_SD` wide; where their commands do not say, the textbook DC motor
     N(0.2, 0.1^2) (module doc). Why: with the textbook prior on speed-controlled rotors (l2f,
@@ -397,7 +396,7 @@ DRAGS = ("rotor_drag", "body_drag", "translational_lift")
 
 def with_wind(expl: Explanation, reference: Reference) -> Explanation:
     """``expl`` with the references' shared wind refitted under the calibration's own prior
-    N(0, (5 m/s)^2) (:data:`quadsim.gap.priors.WIND_SD_MS`). Why: the
+    N(0, (5 m/s)^2) (:data:`quadsim.gap.fitting.WIND_SD_MS`). Why: the
     references see a wind only through their own drag (drag coefficient x air speed); where
     they show no rotor drag their wind is whatever the fit left, and under a drag of the
     flight's own it becomes a spurious steady force (marginalised by the Jacobian at their

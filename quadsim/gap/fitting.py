@@ -1,4 +1,135 @@
-"""Equation-error fitting of candidate effects (the "which" of the gap diagnosis).
+"""What the diagnosis fits, and how: the effects it fits beyond the library (a canted rotor by
+its lean, a cable payload with its swing driven by the logged motion), the plausible magnitudes
+and words the effects' facts give a reading, and equation-error least squares of candidate
+effects over flights.
+
+A cable payload's swing
+-----------------------
+
+``cable_payload`` as the per-flight evidence fits it: the swing driven by the logged motion.
+
+The engines carry the payload's state (:mod:`quadsim.effects.cable_payload`); a log does not.
+It does not need to: the payload's motion depends only on the motion of its attachment point
+and on itself, and the attachment's motion *is* logged. So the swing is integrated along the
+flight from the logged vehicle motion, and the cable's pull on the vehicle follows -- a
+one-way coupling that is exact for the flown trajectory (the vehicle's reaction to the pull
+is already in the log).
+
+Model: an inextensible cable of length L from the attachment point (body origin plus the
+fixed offset ``x, y, z``, the engine's default 0) to a point payload of mass m; unit vector q
+from attachment to payload, angular velocity w of the cable (w . q = 0), attachment
+acceleration a (world, the time derivative of the logged velocity), e = g_vec - a the
+effective gravity seen from the accelerating attachment (the rigid-link limit of the
+engine's model; Sreenath, Lee & Kumar, CDC 2013, eq. 2-4)::
+
+    dq/dt = w x q
+    dw/dt = q x e / L
+    T     = m (q . e + L |w|^2)          cable tension (N), >= 0 (a slack cable pulls nothing)
+    F     = T q                          pull on the vehicle, world, at the attachment
+    tau   = (r_a - c) x R^T F            its torque about the CoM (body)
+
+integrated by RK4 between the log's samples (a linearly interpolated between them), q
+renormalised and w kept normal to q after each step; a time jump (stacked flights) restarts
+it hanging still. No swing damping (as in the engines, where only the cable's axial spring
+is damped), so the swing the payload already had at the first sample never dies out: it is
+fitted with the payload, as four nuisance parameters (lean and swing rate along world x and
+y, :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
+:data:`START_PRIOR`); they are never part of the answer. Measured on a generated 6 s "steps"
+flight (12 deg rms swing): starting hanging still 0.2 s after take-off, where the payload
+already swung at 0.1 rad/s, the modelled direction was off by up to 4.8 deg for the whole
+flight, and the force residual of the true mass and length stayed at 4 mN (11 % of the
+payload's weight); a start along the effective gravity was worse.
+
+What the data fix: at frequencies well below the swing's own (f = sqrt(g / L) / 2 pi, 0.7 Hz
+at 0.5 m) the payload follows the vehicle and the pull is m (g_vec - a): a rigid mass at the
+attachment (``mass_offset``); the length shows only where the flight shakes the payload near
+or above that frequency (turns, stops, a figure-8's reversals). A gentle flight determines
+the mass, not the length (the answer then says so, and ``mass_offset`` ties with it).
+
+Prior (:func:`prior`; each range about two spreads either side of its centre, the rule of
+:func:`quadsim.gap.explanations.prior_spreads`): the mass N(0.3 M, (0.15 M)^2), payloads of micro
+drones up to ~60 % of the vehicle's mass M (Crazyflie 2.1: 37 g, 15 g payload limit, Bitcraze
+datasheet; :mod:`quadsim.gap.fitting`), centred inside that range rather than on "off" -- the
+reading says a payload hangs there, and at a zero mass the swing has no effect, so a fit
+started there cannot move the length and the swing; the length N(0.55 m, (0.225 m)^2):
+slung loads of micro drones hang on 0.1-1 m (the Crazyflie payload campaign behind the
+``mixed/`` flights of the shared data flew ~0.5 m).
+
+The integration is compiled with numba when it is installed (the same source runs as plain
+Python otherwise): a minute of 100 Hz flight takes under 1 ms compiled, 0.6 s as Python, on
+the 2-core x86_64 development machine. The first call after an install compiles (3.5 s CPU)
+and caches the machine code on disk (numba's ``cache=True``: ``__pycache__`` beside this
+file, or ``NUMBA_CACHE_DIR``); later processes load it (0.4 s). The attachment's
+acceleration depends only on the logged motion: with a context's ``flight_memo`` (the
+per-flight evidence) it is derived once per flight.
+
+Example::
+
+    >>> swing = CableSwing(mass=0.0074, length=0.5)
+    >>> force, torque, angle = swing.pull(states, params)   # world N, body N m, rad
+
+Fit forms beyond the library
+----------------------------
+
+The effects the diagnosis fits beyond the library, declared in one place.
+
+:data:`FIT_FORMS`: library effects the diagnosis fits in a form of its own (a canted rotor by
+its axis' horizontal lean, a cable payload with its swing driven by the logged motion);
+:data:`PSEUDO_EFFECTS`: effects of the diagnosis that the library does not have (the nominal
+refit of b and d, the motor map's gain, the references' drag under a quadratic law). Both are
+static: built here from explicit imports, never filled by other modules, so what the
+diagnosis can fit does not depend on what was imported. :data:`FIT_EFFECTS` is the library
+with these; :func:`effect_class`, :func:`build_effect` and :func:`facts_for` read it.
+
+Every class declares its diagnosis facts (:class:`quadsim.effects.facts.EffectFacts`); a
+fit form inherits its library effect's.
+
+Example::
+
+    >>> build_effect("canted_rotor", {"rotor": 1.0, "tilt_x": 0.02})   # a CantedRotorFit
+    >>> facts_for("nominal_refit").fitted                                # ('thrust', 'drag')
+
+Plausible magnitudes and words
+------------------------------
+
+What the effects' declared facts imply for a reading: plausible magnitudes of fitted
+effects, with sources (what ranks collinear explanations), and each reading in words.
+
+When two candidates explain the same forces (an added mass and a uniform loss of thrust per
+Omega^2 are the same in the force balance up to drag), the data cannot choose; physics can
+say which magnitude is believable. Each prior is a range of the *relative* or absolute size
+that real vehicles show; a fit outside it is flagged ``implausible`` and never named.
+
+Each range is declared by its effect beside its parameters, with its source
+(``facts.ranges``, :class:`quadsim.effects.facts.PlausibleRange`); :data:`PRIORS` is a
+read-only view of them, and ``docs/effects.md`` ("Diagnosis facts") tabulates them with their
+reasoning.
+
+:func:`plausibility` returns (score, plausible, text): score = |value| / bound on its side
+(<= 1 plausible; the smaller, the more plausible).
+
+Collinear explanations in words
+-------------------------------
+Each candidate's physical magnitude (:func:`describe`), what the torque and yaw channels
+say, and what separates them (:func:`separation`).
+
+Readings the data cannot choose between are all listed in ``verdict.alternatives``
+(:mod:`quadsim.gap.diagnose`, from the held-out posterior of :mod:`quadsim.gap.diagnose`),
+each with
+
+* ``magnitude``: the fitted parameters as a physical statement with units ("+4.0 ± 0.2 g
+  (+10.8 % of the vehicle mass)", "-9.7 ± 0.5 % thrust per Omega^2 on all 4 rotors");
+* ``torque_yaw``: the held-out RMS of Mx, My, Mz (N m) that the candidate leaves, so a
+  reader sees whether the torque channels prefer one (a thrust-per-Omega^2 change from the
+  air also scales the yaw drag torque; an added mass at the CoM leaves torques alone);
+* ``separate_by``: the measurement or manoeuvre that would tell them apart;
+* ``plausible`` / ``plausibility``: the prior check of :mod:`quadsim.gap.fitting` (score
+  <= 1 plausible). An implausible candidate is flagged and never named.
+
+Least squares of candidate effects
+----------------------------------
+
+Equation-error fitting of candidate effects (the "which" of the gap diagnosis).
 
 For a candidate effect with values theta, every sample of every flight gives a residual
 (measured Newton–Euler wrench minus model wrench, :mod:`quadsim.gap.residual`, plus a rotor-speed
@@ -12,11 +143,13 @@ independent).
 A *candidate* is a tuple of (effect name, fixed values, fitted parameter names). Some effects
 need a companion to be seen at all (``facts.companions``): ``wind`` acts only through drag, so
 the ``wind`` candidate fits the mean wind together with the rotor-drag coefficient. The
-diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitmodels`.
+diagnosis' own effects and fit forms are declared in :mod:`quadsim.gap.fitting`.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from types import MappingProxyType
@@ -25,57 +158,708 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..effects import EFFECTS
-from ..effects.facts import arm_length
-from ..effects.thrust_curve import hover_thrust_per_speed
-from ..vehicle.params import VehicleParams
-from .fitmodels import (
-    FIT_EFFECTS,
-    LOCAL_EFFECTS,
-    CantedRotorFit,
-    build_effect,
-    effect_class,
-    facts_for,
+from ..core.frames import quat_to_rotmat
+from ..effects import EFFECTS, make_effect
+from ..effects.base import EffectBase, EffectLoads, EffectParameter
+from ..effects.body_drag import BodyDrag
+from ..effects.cable_payload import CablePayload
+from ..effects.canted_rotor import CantedRotor
+from ..effects.facts import (
+    ALL,
+    EffectFacts,
+    ParameterFacts,
+    PlausibleRange,
+    Scale,
+    Words,
+    arm_length,
+    parameter_facts,
+    plus_minus,
 )
-from .memo import flight_memo, memoised, rotor_key, wrench_key
-from .motor_map import (  # re-exported: the diagnosis' public fitting names
+from ..effects.rate_damping import momentum_rate_damping
+from ..effects.thrust_curve import (  # re-exported
+    CURVE_QUADRATIC_SD,
+    ThrustCurve,
+    curve_quadratic_bounds,
+    curve_quadratic_sd,
+    hover_thrust_per_speed,
+)
+from ..effects.translational_lift import momentum_translational_lift
+from ..effects.wind import WIND_SD_MS
+from ..vehicle.params import VehicleParams
+from .residual import (  # re-exported: the diagnosis' public fitting names
+    FlightStates,
     command_of_speed,
     command_speed,
     fit_motor_map,
+    flight_memo,
+    measured_wrench,
+    memoised,
+    min_time_constant,
+    model_wrench,
+    rotor_key,
+    rotor_residual,
     speed_of_command,
+    wrench_key,
 )
-from .residual import FlightStates, measured_wrench, model_wrench
-from .rotor_channel import min_time_constant, rotor_residual
 
-__all__ = [
-    "BASELINE",
-    "FIT_SPEC",
-    "LOCAL_EFFECTS",
-    "NOISE_FLOOR",
-    "NO_OFF_VALUE",
-    "UPSTREAM_OF_SPEED",
-    "Candidate",
-    "CantedRotorFit",
-    "Fit",
-    "arm_length",
-    "candidates_for",
-    "command_of_speed",
-    "command_speed",
-    "correlation_time",
-    "curve_bound",
-    "drag_refit_iv",
-    "effect_class",
-    "fit_candidate",
-    "fit_motor_map",
-    "flight_memo",
-    "noise_floor",
-    "noise_scale",
-    "parameter_bounds",
-    "residuals",
-    "speed_of_command",
-    "stack_states",
-    "typical_scales",
-]
+__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior",
+           "start_state", "swing", "FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS", "PSEUDO_EFFECTS",
+           "SPEED_GAIN_PART", "CantedRotorFit", "DragLaw", "NominalRefit", "SpeedGain",
+           "build_effect", "effect_class", "facts_for", "parameter_facts_for",
+           "CURVE_QUADRATIC_SD", "DETERMINED", "PRIORS", "SEPARATE", "WIND_SD_MS",
+           "candidate_plausibility", "curve_quadratic_bounds", "curve_quadratic_sd",
+           "curve_slope_sd", "describe", "hover_thrust_per_speed", "momentum_rate_damping",
+           "momentum_translational_lift", "plausibility", "separation", "torque_text", "unit_of",
+           "BASELINE", "FIT_SPEC", "NOISE_FLOOR", "NO_OFF_VALUE", "UPSTREAM_OF_SPEED", "Candidate",
+           "Fit", "arm_length", "candidates_for", "command_of_speed", "command_speed",
+           "correlation_time", "curve_bound", "drag_refit_iv", "fit_candidate", "fit_motor_map",
+           "flight_memo", "noise_floor", "noise_scale", "parameter_bounds", "residuals",
+           "speed_of_command", "stack_states", "typical_scales"]
+
+
+#: prior of the payload mass, in units of the vehicle's mass: centre and spread (module doc).
+MASS_PRIOR = (0.3, 0.15)
+#: prior of the cable length (m): centre and spread (module doc).
+LENGTH_PRIOR_M = (0.55, 0.225)
+
+
+#: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
+START_PRIOR = (0.17, 0.5)
+#: the fitted parameters: the payload, and the swing at the first sample (nuisance).
+FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y", "swing_damping")
+#: prior of the swing's damping rate (1/s): centre and spread (module doc)
+DAMPING_PRIOR = (0.5, 0.5)
+
+
+def prior(params: VehicleParams) -> tuple[list[float], list[float]]:
+    """(means, spreads) of :data:`FITTED` (kg, m, rad, rad, rad/s, rad/s; module doc)."""
+    lean, rate = START_PRIOR
+    return ([MASS_PRIOR[0] * params.mass, LENGTH_PRIOR_M[0], 0.0, 0.0, 0.0, 0.0,
+             DAMPING_PRIOR[0]],
+            [MASS_PRIOR[1] * params.mass, LENGTH_PRIOR_M[1], lean, lean, rate, rate,
+             DAMPING_PRIOR[1]])
+
+
+try:        # the same source, compiled when numba is installed (module doc)
+    import numba
+
+    def _compiled(fn):
+        try:
+            return numba.njit(cache=True)(fn)
+        except RuntimeError:    # no writable cache location: compiled in every process
+            return numba.njit(fn)
+except ImportError:         # pragma: no cover - numba is an optional extra
+    def _compiled(fn):
+        return fn
+
+
+@_compiled
+def _rate(qx, qy, qz, wx, wy, wz, ax, ay, az, gravity, length, damping):
+    """(dq/dt, dw/dt) of the cable at attachment acceleration a, swing damping rate
+    ``damping`` (1/s; module doc)."""
+    ex, ey, ez = -ax, -ay, -gravity - az
+    return (wy * qz - wz * qy, wz * qx - wx * qz, wx * qy - wy * qx,
+            (qy * ez - qz * ey) / length - damping * wx,
+            (qz * ex - qx * ez) / length - damping * wy,
+            (qx * ey - qy * ex) / length - damping * wz)
+
+
+@_compiled
+def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w, damping):
+    """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
+    ``accel`` (N, 3) the attachment's acceleration (world); ``q0``, ``w0`` the start; a
+    time jump restarts hanging still. Fills ``out_q``, ``out_w``."""
+    n = t.shape[0]
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    for k in range(n):
+        if k == 0:
+            for i in range(3):
+                out_q[k, i], out_w[k, i] = q0[i], w0[i]
+            continue
+        if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
+            out_q[k, 0], out_q[k, 1], out_q[k, 2] = 0.0, 0.0, -1.0
+            out_w[k, 0], out_w[k, 1], out_w[k, 2] = 0.0, 0.0, 0.0
+            continue
+        h = t[k] - t[k - 1]
+        qx, qy, qz = out_q[k - 1, 0], out_q[k - 1, 1], out_q[k - 1, 2]
+        wx, wy, wz = out_w[k - 1, 0], out_w[k - 1, 1], out_w[k - 1, 2]
+        a0x, a0y, a0z = accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2]
+        a1x, a1y, a1z = accel[k, 0], accel[k, 1], accel[k, 2]
+        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
+        k1 = _rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
+        c = 0.5 * h
+        k2 = _rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
+                   wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
+        k3 = _rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
+                   wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
+        k4 = _rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
+                   wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
+        s = h / 6.0
+        qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        qz += s * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        wx += s * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        wy += s * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        wz += s * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+        qx, qy, qz = qx / norm, qy / norm, qz / norm
+        along = wx * qx + wy * qy + wz * qz
+        out_q[k, 0], out_q[k, 1], out_q[k, 2] = qx, qy, qz
+        out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
+
+
+def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0,
+                  damping: float = 0.0) -> tuple[list, list]:
+    """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
+    3-lists), for when it is not compiled: the same operations in the same order (the same
+    numbers), without the per-element indexing of numpy arrays that dominates the
+    uncompiled kernel. Returns the lists of q and w rows."""
+    rate = getattr(_rate, "py_func", _rate)
+    n = len(t)
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    out_q, out_w = [None] * n, [None] * n
+    out_q[0], out_w[0] = [float(v) for v in q0], [float(v) for v in w0]
+    for k in range(1, n):
+        if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
+            out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
+            continue
+        h = t[k] - t[k - 1]
+        qx, qy, qz = out_q[k - 1]
+        wx, wy, wz = out_w[k - 1]
+        a0x, a0y, a0z = accel[k - 1]
+        a1x, a1y, a1z = accel[k]
+        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
+        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
+        c = 0.5 * h
+        k2 = rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
+                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
+        k3 = rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
+                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
+        k4 = rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
+                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
+        s = h / 6.0
+        qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        qz += s * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        wx += s * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        wy += s * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        wz += s * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        norm = math.sqrt(qx * qx + qy * qy + qz * qz)
+        qx, qy, qz = qx / norm, qy / norm, qz / norm
+        along = wx * qx + wy * qy + wz * qz
+        out_q[k] = [qx, qy, qz]
+        out_w[k] = [wx - along * qx, wy - along * qy, wz - along * qz]
+    return out_q, out_w
+
+
+def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(q0, w0) of a cable leaning by ``lean`` (rad, towards world +x, +y: the horizontal
+    components of q are their sines) and swinging at ``rate`` (rad/s: d/dt of those
+    components): q0 = (sin a_x, sin a_y, -sqrt(1 - ...)), w0 = q0 x dq0/dt (w0 . q0 = 0)."""
+    sx = float(np.clip(np.sin(lean[0]), -0.95, 0.95))
+    sy = float(np.clip(np.sin(lean[1]), -0.95, 0.95))
+    horiz = min(sx * sx + sy * sy, 0.95)
+    q0 = np.array([sx, sy, -np.sqrt(1.0 - horiz)])
+    dx = rate[0] * np.sqrt(max(1.0 - sx * sx, 0.0))
+    dy = rate[1] * np.sqrt(max(1.0 - sy * sy, 0.0))
+    dq = np.array([dx, dy, -(q0[0] * dx + q0[1] * dy) / q0[2]])
+    return q0 / np.linalg.norm(q0), np.cross(q0, dq)
+
+
+def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
+          start: tuple | None = None, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Cable direction q (N, 3) and angular velocity w (N, 3, rad/s) along a flight whose
+    attachment point accelerates by ``accel`` (N, 3, world m/s^2) at times ``t`` (s), from
+    ``start`` = (q0, w0) (default: hanging still, :func:`start_state`), the swing damped at
+    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc)."""
+    t = np.ascontiguousarray(t, dtype=float)
+    accel = np.ascontiguousarray(accel, dtype=float)
+    q0, w0 = start_state() if start is None else start
+    q, w = np.empty_like(accel), np.empty_like(accel)
+    if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
+        _swing_kernel(t, accel, float(length), float(gravity), np.asarray(q0, float),
+                      np.asarray(w0, float), q, w, float(damping))
+    elif len(t):
+        rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(), float(length),
+                                       float(gravity), np.asarray(q0, float).tolist(),
+                                       np.asarray(w0, float).tolist(), float(damping))
+        q[:], w[:] = rows_q, rows_w
+    return q, w
+
+
+#: window (s) of the Savitzky-Golay derivative that turns the logged velocity into the
+#: attachment's acceleration: its response falls off above ~4 Hz (slung-load swings are
+#: 0.5-1.6 Hz for 0.1-1 m cables); the difference of a 100 Hz velocity log is noise-dominated
+#: (measured on generated flights with 0.01 m/s velocity noise: 0.14 m/s^2 RMS, which a 7 g
+#: payload turns into 1 mN of force noise, as much as the force residual of a nominal flight).
+ACCEL_WINDOW_S = 0.25
+
+
+def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """d x / d t (N, 3), Savitzky-Golay (cubic, :data:`ACCEL_WINDOW_S`) per stretch of
+    uniform samples (a time jump starts a new one)."""
+    from scipy.signal import savgol_filter
+
+    if len(t) < 3:
+        return np.zeros_like(x)
+    dt = np.diff(t)
+    cut = np.nonzero(np.abs(dt - dt[0]) > 0.5 * dt[0])[0] + 1
+    out = np.zeros_like(x)
+    for piece in np.split(np.arange(len(t)), cut):
+        if len(piece) < 3:
+            continue
+        step = float(t[piece[1]] - t[piece[0]])
+        window = min(len(piece) - (1 - len(piece) % 2), 2 * int(ACCEL_WINDOW_S / (2 * step)) + 1)
+        if window >= 5:
+            out[piece] = savgol_filter(x[piece], window, 3, deriv=1, delta=step, axis=0)
+        else:
+            out[piece] = np.gradient(x[piece], t[piece], axis=0)
+    return out
+
+
+class CableSwing(CablePayload):
+    """``cable_payload`` without an internal state: the swing integrated from the logged
+    motion (module doc). Fitted: ``mass`` and ``length``, the swing at the first sample and
+    its damping rate ``swing_damping`` (1/s; not the engine's ``damping``, the axial spring's
+    coefficient); the attachment ``x, y`` (body, m) held at the engine's default, ``z``
+    fitted by the reading with a mount (:data:`quadsim.gap.explanations.CABLE_MOUNT`)."""
+
+    parameters = tuple(
+        EffectParameter("length", "m", 0.5, 0.05, 5.0, "cable length") if p.name == "length"
+        else p for p in CablePayload.parameters) + (
+        EffectParameter("lean_x", "rad", 0.0, -1.0, 1.0,
+                        "cable's lean from the vertical towards world +x at the first sample"),
+        EffectParameter("lean_y", "rad", 0.0, -1.0, 1.0,
+                        "cable's lean from the vertical towards world +y at the first sample"),
+        EffectParameter("rate_x", "rad/s", 0.0, -5.0, 5.0, "swing rate along x at the start"),
+        EffectParameter("rate_y", "rad/s", 0.0, -5.0, 5.0, "swing rate along y at the start"),
+        EffectParameter("swing_damping", "1/s", 0.0, 0.0, 5.0,
+                        "swing damping rate (air drag on the payload and cable)"))
+
+    #: the swing at the first sample, its damping and the attachment's height are fitted
+    #: with the payload, never part of an answer (the JSON's params keep them)
+    facts = dataclasses.replace(CablePayload.facts,
+                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y",
+                                          "swing_damping", "z"))
+
+    def state_size(self) -> int:
+        return 0
+
+    def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams, *,
+             rotation: np.ndarray | None = None, memo: dict | None = None):
+        """Cable pull on the vehicle: force (N, 3, world N), torque about the CoM (N, 3, body
+        N m) and the swing angle from the vertical (N,, rad). ``rotation``: ``quat``'s
+        matrices when the caller has them; ``memo``: a dict kept across calls on the same
+        logged motion (the attachment's acceleration is kept there per attachment point)."""
+        rot = quat_to_rotmat(quat) if rotation is None else rotation
+        arm = np.array([self.x, self.y, self.z])
+        key = ("cable_accel", self.x, self.y, self.z)
+        accel = None if memo is None else memo.get(key)
+        if accel is None:
+            moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
+            accel = _derivative(t, moving)
+            if memo is not None:
+                memo[key] = accel
+        q, w = self._swing(t, accel, params.gravity, memo)
+        e = -accel
+        e[:, 2] -= params.gravity
+        tension = self.mass * (np.einsum("bi,bi->b", q, e)
+                               + self.length * np.einsum("bi,bi->b", w, w))
+        force = np.maximum(tension, 0.0)[:, None] * q
+        torque = np.cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
+        return force, torque, np.arccos(np.clip(-q[:, 2], -1.0, 1.0))
+
+    #: swings kept per flight (:meth:`_swing`): a fit's Jacobian and its next step
+    KEPT_SWINGS = 16
+
+    def _swing(self, t, accel, gravity: float, memo: dict | None):
+        """:func:`swing` of this cable; with a ``memo`` (one flight's logged motion) the
+        last :data:`KEPT_SWINGS` are kept by their inputs: the swing does not depend on the
+        payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
+        shift), so those evaluations reuse it."""
+        key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
+               self.x, self.y, self.z, float(gravity), self.swing_damping)
+        kept = None if memo is None else memo.setdefault("cable_swings", {})
+        if kept is not None and key in kept:
+            return kept[key]
+        value = swing(t, accel, self.length, gravity,
+                      start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)),
+                      damping=self.swing_damping)
+        if kept is not None:
+            if len(kept) >= self.KEPT_SWINGS:
+                del kept[next(iter(kept))]
+            kept[key] = value
+        return value
+
+    def loads(self, ctx):
+        if self.mass == 0.0:
+            return None
+        force, torque, _ = self.pull(ctx.t, ctx.position, ctx.velocity, ctx.quat,
+                                     ctx.body_rate, ctx.params, rotation=ctx.rotmat(),
+                                     memo=ctx.flight_memo)
+        batch, rotors = np.shape(ctx.rotor_speed)
+        loads = EffectLoads.neutral(batch, rotors)
+        loads.force_world, loads.torque_body = force, torque
+        return loads
+
+
+class CantedRotorFit(CantedRotor):
+    """``canted_rotor`` as the diagnosis fits it: the tilted axis' horizontal components
+    ``tilt_x``, ``tilt_y`` (rad, small angles: the axis leans by them towards body +x, +y)
+    instead of angle and azimuth, which are singular at angle 0 (every azimuth gives the
+    same untilted rotor, so a fit starting there cannot move). ``angle = hypot(tilt_x,
+    tilt_y)``, ``azimuth = atan2(tilt_x, -tilt_y)`` (then Rodrigues tilts z by angle about
+    (cos azimuth, sin azimuth, 0) towards (sin azimuth, -cos azimuth) = (tilt_x, tilt_y) /
+    angle). The rotor index is fixed per candidate: one candidate per rotor
+    (``facts.one_per_rotor``), the one that fits the training flights best is kept."""
+
+    parameters = CantedRotor.parameters + CantedRotor.facts.fit_parameters
+
+    def apply_to_params(self, params):
+        angle = float(np.hypot(self.tilt_x, self.tilt_y))
+        if angle == 0.0:
+            return CantedRotor(rotor=self.rotor, angle=self.angle,
+                               azimuth=self.azimuth).apply_to_params(params)
+        return CantedRotor(rotor=self.rotor, angle=angle,
+                           azimuth=float(np.arctan2(self.tilt_x, -self.tilt_y))
+                           ).apply_to_params(params)
+
+
+def _refit_phrase(parameter, value, ci, params) -> str:
+    if parameter == "thrust":
+        return (f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} "
+                "rotors")
+    return f"{plus_minus(value, ci, 100)} % drag torque per Ω²"
+
+
+class NominalRefit(EffectBase):
+    """Baseline: the parameter set's thrust and drag factors b and d refitted (relative
+    changes); the reference model's shared group and the held-out reading "b and d are off"
+    (:data:`quadsim.gap.fitting.BASELINE`)."""
+
+    name = "nominal_refit"
+    parameters = (
+        EffectParameter("thrust", "1", 0.0, -0.9, 3.0, "relative change of b"),
+        EffectParameter("drag", "1", 0.0, -0.9, 3.0, "relative change of d"),
+    )
+    facts = EffectFacts(
+        fitted=("thrust", "drag"),
+        # d from the yaw torque on measured speeds is regression-diluted to -1 near hover
+        instrumented=("drag",),
+        scales={"thrust": Scale(lambda p: 0.05, "5 %: as a propeller change (thrust_factor)"),
+                "drag": Scale(lambda p: 0.2, "20 %: d is known less well than b")},
+        ranges={"thrust": PlausibleRange(-0.15, 0.05, "relative", "as thrust_factor.change")},
+        separate_from={
+            "mass_offset": "weigh the vehicle, or measure b on a thrust stand",
+            "thrust_factor": "the same effect (b refitted); a thrust stand tells b and d apart",
+            "thrust_curve": "fly over a wider range of rotor speeds"},
+        words={"thrust": Words("thrust per Omega^2 on every rotor", "%", 100.0, _refit_phrase),
+               "drag": Words("drag torque per Omega^2", "%", 100.0, _refit_phrase)},
+    )
+
+    def apply_to_params(self, params):
+        return params.replace(thrust_factor=params.thrust_factor * (1 + self.thrust),
+                              drag_factor=params.drag_factor * (1 + self.drag))
+
+
+def _speed_gain_phrase(parameter, value, ci, params) -> str:
+    return f"the rotors spin {plus_minus(value, ci, 1e2)} % faster per command (steady speed)"
+
+
+class SpeedGain(EffectBase):
+    """The motor map's gain: the steady rotor speed per command scaled by (1 + gain), as a
+    pseudo-effect the reference model shares (:mod:`.calibrate`) when commands are logged and
+    no battery voltage is.
+
+    Why. The static command -> speed map (:func:`quadsim.gap.fitting.fit_motor_map`) is fitted
+    once on all reference flights pooled; a single flight's mean speed per command still differs
+    from it, and by how it was flown: on the 8 Crazyflow references (path speed 0.8-1.25) the
+    rotor channel's mean residual runs from -0.07 % of the hover speed on the slowest to +0.05 %
+    on the fastest (Crazyflow's rotor dynamics are not first order at one time constant, so the
+    mean speed a varying command gives depends on how much it varies). Without a shared
+    parameter for it, that offset had no place in the reference model's uncertainty, and a
+    nominal flight's own offset was read as ``thrust_factor`` (whose propeller coupling moves
+    the speed per command) or ``battery_sag``. With a battery-voltage log the shared
+    ``battery_sag.full_voltage`` (speed per command ~ vbat / V_full) already is this gain.
+
+    Physics: ``Omega_ss = (1 + gain) Omega_map(command)`` (:meth:`SpeedGain.speed_factor`,
+    upstream of the measured speed like a battery: the thrust at a measured speed is unchanged).
+    Typical size (fit step unit) 1 %; bounds -50 % to +100 %: the references' own gain stays
+    within a few per cent (a map off by more is refused by the motor map's own checks), but a
+    flight's reading of another motor or ESC
+    (:func:`quadsim.gap.explanations.explanations_for`, ``MOTOR_CHANGE``) takes the gain of its
+    own, and on PyFlyt a 2.5x slower motor spins +45 % per command.
+
+    Example::
+
+        >>> SpeedGain(gain=0.01).speed_factor(np.zeros(3))     # array([1.01, 1.01, 1.01])
+    """
+
+    name = "speed_gain"
+    parameters = (
+        EffectParameter("gain", "1", 0.0, -0.5, 1.0,
+                        "relative change of the steady rotor speed per command"),
+    )
+    facts = EffectFacts(
+        fitted=("gain",),
+        upstream_of_speed=True,
+        scales={"gain": Scale(lambda p: 0.01, "1 %: the references' own gain stays within a few "
+                                             "per cent (class doc)")},
+        words={"gain": Words("steady speed per command", "%", 100.0, _speed_gain_phrase)},
+    )
+
+    def speed_factor(self, t, vbat=None):
+        if self.gain == 0.0:
+            return None
+        return np.full(len(np.atleast_1d(t)), 1.0 + self.gain)
+
+
+#: the shared-candidate part (name, fixed, fitted) of the motor map's gain
+SPEED_GAIN_PART = ("speed_gain", {}, ("gain",))
+
+
+class DragLaw(BodyDrag):
+    """The references' horizontal drag under a quadratic law, held fixed in every reading
+    of a flight (:mod:`quadsim.gap.evidence`): :class:`quadsim.effects.body_drag.BodyDrag`
+    under its own name, so that a reading's own body drag stays apart from it. Never fitted
+    (its C_d A is the references' equivalent)."""
+
+    name = "drag_law"
+    facts = EffectFacts()
+
+
+#: library effect -> the class the diagnosis fits in its place (module doc)
+FIT_FORMS = MappingProxyType({cls.name: cls for cls in (CantedRotorFit, CableSwing)})
+#: the diagnosis' own effects, not in the library (module doc)
+PSEUDO_EFFECTS = MappingProxyType({cls.name: cls for cls in (NominalRefit, SpeedGain, DragLaw)})
+#: every class the diagnosis fits in place of a name that is not the library's own
+LOCAL_EFFECTS = MappingProxyType({**FIT_FORMS, **PSEUDO_EFFECTS})
+#: name -> the class the diagnosis builds for it (the library, with :data:`LOCAL_EFFECTS`)
+FIT_EFFECTS = MappingProxyType({**EFFECTS, **LOCAL_EFFECTS})
+
+
+def effect_class(name: str) -> type:
+    """The class the diagnosis builds for effect ``name`` (KeyError for an unknown one)."""
+    return FIT_EFFECTS[name]
+
+
+def facts_for(name: str) -> EffectFacts:
+    """The diagnosis facts of effect ``name`` (library or pseudo-effect)."""
+    return FIT_EFFECTS[name].facts
+
+
+def parameter_facts_for(parameter: str) -> ParameterFacts:
+    """The facts of ``effect.parameter`` (``"speed_gain.gain"``) of any effect the diagnosis
+    fits, library or its own: unit, meaning, typical scale, plausible range, words
+    (:class:`quadsim.effects.facts.ParameterFacts`; :func:`quadsim.effects.facts_of` for
+    the library alone). KeyError for an unknown effect or parameter."""
+    name, _, key = parameter.partition(".")
+    return parameter_facts(FIT_EFFECTS[name], key)
+
+
+def build_effect(name: str, values: dict):
+    """Effect ``name`` with parameter ``values``: a :data:`LOCAL_EFFECTS` class built directly,
+    a library effect through :func:`quadsim.effects.make_effect` (its bounds checked)."""
+    if name in LOCAL_EFFECTS:
+        return LOCAL_EFFECTS[name](**values)
+    return make_effect(name, **values)
+
+
+def _priors() -> dict:
+    out = {}
+    for name, cls in FIT_EFFECTS.items():
+        for key, plausible in cls.facts.ranges.items():
+            out[name if key == ALL else f"{name}.{key}"] = (
+                plausible.lower, plausible.upper, plausible.kind, plausible.source)
+    return out
+
+
+#: parameter (``effect.parameter``, or ``effect`` for all its parameters) -> (lower, upper,
+#: kind, source): the effects' declared plausible ranges (a read-only view). kind
+#: "relative": fraction of 1; "mass": of the vehicle mass; "arm": of the arm length;
+#: "absolute": in the parameter's unit; "hover", "momentum", "lift": see
+#: :class:`quadsim.effects.facts.PlausibleRange`.
+PRIORS = MappingProxyType(_priors())
+
+#: score given to a parameter without a prior (ranks between well inside and at the edge).
+NO_PRIOR_SCORE = 0.5
+
+
+def _key(parameter: str) -> str | None:
+    if parameter in PRIORS:
+        return parameter
+    head = parameter.split(".")[0]
+    return head if head in PRIORS else None
+
+
+def plausibility(parameter: str, value: float, params: VehicleParams):
+    """(score, plausible, prior text) of a fitted ``value``; (0, True, "") without a prior."""
+    key = _key(parameter)
+    if key is None:
+        return NO_PRIOR_SCORE, True, ""
+    lower, upper, kind, source = PRIORS[key]
+    if kind == "mass":
+        value = value / params.mass
+    elif kind == "hover":  # linear thrust term as a fraction of the hover thrust
+        value = value / hover_thrust_per_speed(params)
+    elif kind == "arm":
+        value = value / arm_length(params)
+    elif kind == "momentum":
+        value = value / momentum_rate_damping(params)
+    elif kind == "lift":
+        value = value / momentum_translational_lift(params)
+    bound = upper if value >= 0 else lower
+    score = abs(value) / abs(bound) if bound != 0 else (0.0 if value == 0 else float("inf"))
+    scale = {"relative": 100, "mass": 100, "arm": 100, "hover": 100, "absolute": 1,
+             "momentum": 1, "lift": 1}[kind]
+    unit = {"relative": " %", "mass": " % of the vehicle mass", "arm": " % of the arm",
+            "hover": " % of the hover thrust", "absolute": "",
+            "momentum": (f" x the momentum-theory damping "
+                         f"{momentum_rate_damping(params):.2g} N m s/rad"),
+            "lift": (f" x the momentum-theory lift "
+                     f"{momentum_translational_lift(params):.2g} kg/m")}[kind]
+    text = f"plausible {lower * scale:g} .. {upper * scale:g}{unit} ({source})"
+    return float(score), bool(score <= 1.0), text
+
+
+#: a parameter is determined when its posterior spread is below this fraction of its prior's
+#: (the rule a value is printed by, and a shared thrust-curve slope kept by)
+DETERMINED = 0.5
+
+
+def curve_slope_sd(params: VehicleParams) -> float:
+    """Prior spread (N s/rad) of a thrust curve's linear term: half the plausible range of
+    :data:`PRIORS` ``thrust_curve.linear`` (a fraction of the hover thrust per rad/s), in
+    SI for ``params``."""
+    return ThrustCurve.facts.spread_of("linear", params)
+
+
+def candidate_plausibility(values: dict, params: VehicleParams):
+    """(score, plausible, text) of a whole fitted candidate: its least plausible parameter.
+
+    A per-rotor effect's values are split into their mean (judged as the uniform parameter
+    its facts name, ``uniform_as``: a mismatch's as a thrust-per-Omega^2 change,
+    ``thrust_factor.change``) and each rotor's deviation from that mean (judged as the
+    per-rotor effect): four rotors all 16 % weak are a uniform loss, not four damaged props."""
+    values = dict(values)
+    for name, cls in FIT_EFFECTS.items():
+        facts = cls.facts
+        if not (facts.per_rotor and facts.uniform_as):
+            continue
+        prefix = f"{name}.{facts.per_rotor.partition('{}')[0]}"
+        rotors = {k: v for k, v in values.items() if k.startswith(prefix)}
+        if len(rotors) > 1:
+            mean = sum(rotors.values()) / len(rotors)
+            for k, v in rotors.items():
+                values[k] = v - mean
+            values[facts.uniform_as] = mean
+    scores = [plausibility(k, v, params) for k, v in values.items()]
+    return max(scores, key=lambda s: s[0]) if scores else (NO_PRIOR_SCORE, True, "")
+
+
+# --- collinear explanations in words (module doc) ---------------------------------------------
+
+
+def _separate() -> dict:
+    out: dict = {}
+    for name, cls in FIT_EFFECTS.items():
+        for other, text in cls.facts.separate_from.items():
+            pair = frozenset({name, other})
+            if out.get(pair, text) != text:
+                raise ValueError(f"{name} and {other}: two texts on what separates them")
+            out[pair] = text
+    return out
+
+
+#: known collinear pairs and what data would separate them: a read-only view of the effects'
+#: declared ``facts.separate_from`` (each pair declared by one of the two)
+SEPARATE = MappingProxyType(_separate())
+
+
+def separation(best: str, others: list[str]) -> dict:
+    """What tells reading ``best`` from each of ``others`` (:data:`SEPARATE`; a generic
+    advice for a pair without one)."""
+    return {other: SEPARATE.get(frozenset({best.split("+")[0], other.split("+")[0]}),
+                                "more varied flights (speeds, heights, attitudes)")
+            for other in others}
+
+
+def unit_of(parameter: str) -> str:
+    """Unit of ``effect.parameter`` (from the effect's declaration)."""
+    name, _, p = parameter.partition(".")
+    try:
+        specs = {s.name: s for s in effect_class(name).parameters}
+    except KeyError:
+        return ""
+    if p in specs:
+        return specs[p].unit
+    return "1" if p.startswith("rotor_") else ""
+
+
+def describe(name: str, values: dict, ci: dict, params: VehicleParams,
+             fixed: dict | None = None) -> str:
+    """Physical statement (with units) of a fitted candidate (``values``, ``ci``: the fitted
+    ``effect.parameter`` values and 95 % half-widths; ``fixed``: the values held fixed in
+    the fit, e.g. ``canted_rotor.rotor``): each effect's declared wording
+    (:class:`quadsim.effects.facts.Words`, ``phrase``; parameters worded together first,
+    ``facts.together``), its nuisance parameters left out, a parameter without a phrase
+    stated with its declared meaning and unit (:func:`_worded`); ``name`` where nothing is
+    left."""
+    fixed = fixed or {}
+    parts, together = [], set()
+    for effect in dict.fromkeys(key.partition(".")[0] for key in values):
+        facts = _facts(effect)
+        if facts is None or facts.together is None:
+            continue
+        keys = [f"{effect}.{p}" for p in facts.together.parameters]
+        together |= set(keys)
+        if all(k in values for k in keys):
+            own = _own(effect, values)
+            parts.append(facts.together.phrase(own, _own(effect, ci), params,
+                                               _own(effect, fixed)))
+    for key, value in values.items():
+        effect, _, p = key.partition(".")
+        facts = _facts(effect)
+        if key in together or (facts is not None and p in facts.nuisance):
+            continue
+        words = facts.words_of(p) if facts is not None else None
+        c = ci.get(key)
+        if words is not None and words.phrase is not None:
+            parts.append(words.phrase(p, value, c, params))
+        else:
+            parts.append(_worded(key, value, c, params))
+    return ", ".join(parts) if parts else name
+
+
+def _facts(effect: str):
+    cls = FIT_EFFECTS.get(effect)
+    return None if cls is None else cls.facts
+
+
+def _own(effect: str, table: dict) -> dict:
+    """``table``'s entries of ``effect``, keyed by its parameter names."""
+    prefix = effect + "."
+    return {k[len(prefix):]: v for k, v in table.items() if k.startswith(prefix)}
+
+
+def _worded(key: str, value: float, c: float | None, params: VehicleParams) -> str:
+    """A parameter without a declared phrase, stated with its declared meaning and unit
+    (never as a bare ``effect.parameter = value``)."""
+    name, _, p = key.partition(".")
+    try:
+        spec = {s.name: s for s in effect_class(name).parameters}[p]
+        text, unit = spec.doc, spec.unit
+    except KeyError:
+        text, unit = p.replace("_", " "), unit_of(key)
+    return f"{name.replace('_', ' ')}: {text} {plus_minus(value, c, 1.0, '.4g')} {unit}".rstrip()
+
+
+def torque_text(entry: dict) -> str:
+    rms = entry.get("heldout_rms_after") or {}
+    have = [(k, rms[k]) for k in ("Mx", "My", "Mz") if k in rms]
+    return ", ".join(f"{k} {v:.2g} N m" for k, v in have)
+
 
 #: parameters whose "off" value does not switch their effect off (with a voltage log the sag
 #: (V / V_full)^2 acts for every V_full), so "significantly away from off" does not apply:
@@ -530,7 +1314,7 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)
 
 
-#: the nominal refit's candidate (:class:`quadsim.gap.fitmodels.NominalRefit`): the
+#: the nominal refit's candidate (:class:`quadsim.gap.fitting.NominalRefit`): the
 #: parameter set's b and d re-identified; a shared group of the reference model
 #: (:mod:`.calibrate`) and the held-out reading "b and d are off"
 BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))

@@ -1,4 +1,11 @@
-"""Outputs of the gap diagnosis: JSON (``quadsim.gap/3``), a human summary that leads with
+"""Outputs of the gap diagnosis: the JSON (``quadsim.gap/3``) and its schema, the human
+summary that leads with the answer in words, the effect file, the HTML report
+(:mod:`quadsim.gap.page`) and the rerun recording of the residuals.
+
+JSON and summaries
+------------------
+
+Outputs of the gap diagnosis: JSON (``quadsim.gap/3``), a human summary that leads with
 the answer in words, the HTML report (:mod:`quadsim.gap.page`: the answer first, figures as
 inline SVG, the JSON in a collapsed appendix), and a rerun recording of the residuals.
 
@@ -26,7 +33,7 @@ them), ``residual`` (RMS per channel before and after the answer over the refere
 share of the excess removed, in words), ``differ_on`` (channels that separate the two
 leading readings), ``symptom`` (the flight's largest mean residual against the reference
 model), ``envelope`` (where the flight lies against its references' envelope,
-:mod:`quadsim.gap.envelope`) and ``tentative``; an outcome
+:mod:`quadsim.gap.reference`) and ``tentative``; an outcome
 ``refused`` with its ``reason`` for a flight that could not be judged. The result carries
 ``reference_model`` (shared parameters with standard error and between-flight scatter,
 per-channel sigma and correlation time, reference delays) instead of
@@ -46,8 +53,8 @@ Per-flight outputs
 ------------------
 The text summary of ``--per-flight`` results: the batch's answer, then per flight its answer
 and its residual against the references' (``residual.text``, the report's words). The HTML
-page of both modes is :mod:`quadsim.gap.page` (figures :mod:`quadsim.gap.plots`); the rerun
-recording carries the same series (:mod:`quadsim.gap.recording`).
+page of both modes is :mod:`quadsim.gap.page` (figures :mod:`quadsim.gap.page`); the rerun
+recording carries the same series (:mod:`quadsim.gap.report`).
 
 Store a diagnosed model
 -----------------------
@@ -70,6 +77,18 @@ Example::
     >>> entries = added_effects(result, "rotor_drag", logs="9 training logs")
     >>> entries[0][0], sorted(entries[0][1])
     ('rotor_drag', ['axial_coefficient', 'coefficient'])
+
+Rerun recording
+---------------
+
+What the rerun recording of a gap diagnosis carries (``--rerun OUT.rrd``): the same series
+as the report's figures (:mod:`quadsim.gap.page`).
+
+Per flight with a residual series (per-flight mode: every judged flight; held out: every
+held-out flight): its logged motion as a trajectory, and per wrench channel one plot
+view with the residual before the answer, after it, and the references' 95 % band
+(+-1.96 sigma_c; held out: the floor), on the flight's own time stamps (s) in the channel's
+unit (N, N m).
 """
 
 from __future__ import annotations
@@ -78,14 +97,18 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
+
 from ..core.errors import InputError, refuse_moved
 from ..core.files import atomic_write_text
 from ..effects import EFFECTS
+from .page import Z95
 from .result import plain
 
-__all__ = ["GAP_SCHEMA", "added_effects", "document", "flights_summary",
-           "gather_delay_notes", "named_candidate", "summary", "to_json", "validate",
-           "write_html", "write_json", "write_rerun"]
+__all__ = ["GAP_SCHEMA", "added_effects", "document", "flights_summary", "gather_delay_notes",
+           "named_candidate", "summary", "to_json", "validate", "write_html", "write_json",
+           "write_rerun", "recording"]
+
 
 # --- the result's JSON Schema -----------------------------------------------------------------
 
@@ -132,7 +155,7 @@ _ALTERNATIVE = {
 
 OUTCOMES = ["no_significant_gap", "effect", "unexplained", "refused"]
 
-#: parameter consistency (quadsim.gap.where): the named candidate refitted per regime.
+#: parameter consistency (quadsim.gap.judge): the named candidate refitted per regime.
 _CONSISTENCY = {
     "type": "object",
     "required": ["consistent", "splits", "inconsistent"],
@@ -316,7 +339,7 @@ def _fmt_params(params: dict, ci: dict, identified: dict | None = None) -> str:
     """``name = value ± ci unit`` for every parameter (units from the effect declarations);
     a parameter marked not identified in ``identified`` (at a bound, or an interval wider
     than half its plausible range) says so."""
-    from .priors import unit_of
+    from .fitting import unit_of
 
     def unit(k):
         u = unit_of(k)
@@ -393,10 +416,10 @@ def write_html(path: str | Path, result) -> Path:
 
 
 def write_rerun(path: str | Path, result) -> Path | None:
-    """The residual series of the report (:func:`quadsim.gap.recording.recording`) as a rerun
+    """The residual series of the report (:func:`quadsim.gap.report.recording`) as a rerun
     recording via :func:`quadsim.viewer.try_save_recording` (None and a message when there
     is none or the viewer is unavailable)."""
-    from .recording import recording
+    pass
 
     options = recording(result)
     if options is None:
@@ -524,3 +547,57 @@ def added_effects(result: dict, name: str | None, *, logs: str,
 __getattr__ = refuse_moved(__name__, {
     "flights_html": "is gone: the whole page is quadsim.gap.page.page(result) (HTML text), "
                     "or write_html(path, result)"})
+
+
+_WRENCH = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+
+
+def _bands(result, series) -> np.ndarray | None:
+    if series.sigma is not None:
+        return np.asarray(series.sigma, float)
+    channels = (result.get("verdict") or {}).get("channels") or {}
+    if not channels:
+        return None
+    return np.array([channels[c]["floor"] if c in channels else np.nan
+                     for c in series.channels])
+
+
+def recording(result) -> dict | None:
+    """Keyword arguments of :func:`quadsim.viewer.try_save_recording` for ``result`` (a
+    :class:`~quadsim.gap.result.Diagnosis`): ``params``, ``trajectories`` (flight name ->
+    its logged :class:`~quadsim.vehicle.state.Trajectory`), ``residuals`` ("channel
+    flight" -> (t, (N, K) values, labels: before, after, band + and -)), ``title``,
+    ``tab``. None when the result holds no series (a result read back from JSON)."""
+    from ..vehicle.state import Trajectory
+
+    if result.get("mode") == "per-flight":
+        series = [f.series for f in getattr(result, "flights", ())
+                  if getattr(f, "series", None) is not None]
+    else:
+        series = list(getattr(result, "held_series", ()) or ())
+        if not series and getattr(result, "series", None) is not None:
+            series = [result.series]
+    if not series:
+        return None
+    trajectories, residuals = {}, {}
+    for s in series:
+        name = Path(str(s.flight)).name
+        st = s.states
+        if getattr(st, "position", None) is not None and getattr(st, "quat", None) is not None:
+            trajectories[name] = Trajectory(st.t, st.position, st.velocity, st.quat,
+                                            st.body_rate, st.rotor_speed, engine="log")
+        band = _bands(result, s)
+        for k, channel in enumerate(s.channels):
+            if channel not in _WRENCH:
+                continue
+            columns = [s.before[:, k], s.after[:, k]]
+            labels = ["before", "after"]
+            if band is not None and np.isfinite(band[k]):
+                half = np.full(len(s.t), Z95 * band[k])
+                columns += [half, -half]
+                labels += ["band +", "band -"]
+            residuals[f"{channel} {name}"] = (np.asarray(s.t, float),
+                                              np.stack(columns, axis=1), labels)
+    return {"params": series[0].params, "trajectories": trajectories,
+            "residuals": residuals, "title": "quadsim gap: residual wrench before and after "
+            "the answer", "tab": "residuals"}

@@ -1,4 +1,42 @@
-"""Residual wrench: the force and torque a parameter set is missing, per sample of a flight log.
+"""The residual a parameter set leaves on a flight log, per sample: the Newton-Euler wrench
+the model misses (force and torque), joined over a log's airborne stretches; the rotor-speed
+channel (measured speed ahead minus the model's prediction) and the static command -> speed
+map it uses; the memo that keeps the parts of a residual that do not move between model
+evaluations on one flight.
+
+Memo
+----
+
+Residual parts kept across the many model evaluations on one flight
+(:func:`quadsim.gap.fitting.residuals` with ``memo``): the per-flight evidence and the
+calibration's Jacobians evaluate hundreds of models on the same samples, and most of a
+model's residual does not move when one parameter does.
+
+What is kept, and what it is keyed by (an effect is its class and its values):
+
+* per flight (:func:`flight_memo`): the body-to-world rotations of the logged attitude and a
+  dict the effects keep their own motion-only values in (the cable's attachment
+  acceleration and swings) -- keyed by the identity of the logged-motion arrays;
+* per evaluation kind (:func:`memoised`, oldest evicted first past 64 entries): the measured
+  wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
+  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics), the model
+  wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
+  the states shifted by one rotor delay;
+* per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
+  past :data:`KEPT` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
+  vehicle of the effects that change it, the air velocity of those that move the air, and
+  each effect's loads on one vehicle, air velocity and set of rotor speeds -- or, for an
+  effect that declares what its loads read (:attr:`quadsim.effects.base.EffectBase.loads_reads`),
+  on those inputs and vehicle attributes alone -- so a Jacobian column recomputes only the
+  effect whose parameter it moves.
+
+Each entry holds the states it was computed on, so an id is never mistaken for another's.
+Equality with the residual computed from scratch: tests/test_fast_paths.py.
+
+Residual wrench
+---------------
+
+Residual wrench: the force and torque a parameter set is missing, per sample of a flight log.
 
 The model says the rotors (and any effects it includes) push the vehicle with a wrench
 ``(F_model, M_model)``; the log says what the vehicle actually did. Newton–Euler turns the
@@ -40,37 +78,235 @@ Example::
 
 Conventions: body x forward, y left, z up; quaternions scalar-first body-to-world; rotor
 speeds rad/s; all arrays have the sample axis first.
+
+Several airborne stretches
+--------------------------
+
+A flight of several airborne stretches (take-offs) as one set of states.
+
+A log with several take-offs keeps every airborne stretch as a segment of one flight
+(:func:`quadsim.logs.spans.join_airborne`, :attr:`quadsim.logs.flightlog.FlightLog.segments`).
+Each stretch is resampled, smoothed and differentiated alone (:func:`quadsim.gap.residual.
+flight_states`; all on one time step), trimmed at its own ends and decimated alone
+(:func:`quadsim.gap.diagnose.prepare`), and only then are the states joined: the residual is
+per sample, so no sample's residual mixes two stretches; the time axis keeps its jump (a
+non-uniform time base is read by interpolation where a delay is applied,
+:func:`quadsim.gap.reference.read_later`, within one step of a join).
+
+Example::
+
+    >>> from quadsim.gap.residual import joined_states
+    >>> states = joined_states([flight_states(p, dt=0.002) for p in log.parts()])
+
+Command -> speed map
+--------------------
+
+The static command -> rotor-speed map of the gap diagnosis (fitted from data).
+
+Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
+firmware: PWM / 65535), so the rotor channel's static map is taken from the data (training
+or reference flights): what the rotor channel then measures is the rotor *dynamics*, and
+effects upstream of the speed (a battery's voltage, a motor lag) act on top of it.
+
+Example::
+
+    >>> from quadsim.gap.residual import fit_motor_map, speed_of_command
+    >>> tuned = fit_motor_map([states], params)          # FlightStates with commands
+    >>> speed_of_command(tuned, np.full((1, 4), 0.5))    # rad/s per rotor
+
+Commands are normalised 0-1 (per rotor); speeds in rad/s.
+
+Rotor-speed channel
+-------------------
+
+The rotor-speed channel of the gap diagnosis: the measured rotor speed ``ROTOR_HORIZON_S``
+ahead minus the model's prediction from the speed now and the logged commands.
+
+Where commands are logged, the effects upstream of the measured speed (a motor lag, a
+battery's voltage, a propeller's load) are seen only here: with measured rotor speeds they
+do not change the wrench. The prediction integrates the first effect that defines rotor
+dynamics (:func:`rate_owner`, e.g. ``motor_lag``: dOmega/dt = (Omega_c - Omega) / tau) by
+``ROTOR_SUBSTEPS`` Heun steps per sample with the command interpolated inside the sample; a
+lag that is the same up and down has the same numbers in closed form (:func:`heun_linear`).
+A static factor (a battery, a propeller's load: ``EffectSet.command_factor``) scales the
+command; without dynamics the commanded speed is reached at once.
+
+Units: rad/s (speeds), s (times). Example::
+
+    >>> from quadsim.gap.residual import rotor_residual
+    >>> r = rotor_residual(states, params, [make_effect("motor_lag", time_constant=0.03)])
+    >>> r.shape        # (N, R): zero for the first horizon's samples and across flights
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.signal import savgol_filter
 
 from ..core.errors import InputError
 from ..core.frames import cross, quat_normalize, rotate_inverse
-from ..effects.base import Effect, EffectContext, EffectSet
+from ..effects.base import Effect, EffectBase, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
-from .memo import acting, identity, kept
 
-__all__ = [
-    "CHANNELS",
-    "DEFAULT_WINDOW_S",
-    "FlightStates",
-    "channel_unit",
-    "flight_states",
-    "measured_wrench",
-    "model_wrench",
-    "resample_uniform",
-    "rotor_matrices",
-    "rotor_wrench",
-    "window_samples",
-]
+__all__ = ["KEPT", "acting", "flight_memo", "identity", "kept", "memoised", "rotor_key",
+           "wrench_key", "CHANNELS", "DEFAULT_WINDOW_S", "FlightStates", "channel_unit",
+           "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
+           "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
+           "load_exponent", "command_speed", "speed_of_command", "command_of_speed",
+           "MAP_WINDOW_S", "MAP_MIN_RANGE", "ROTOR_HORIZON_S", "ROTOR_SUBSTEPS",
+           "min_time_constant", "rate_owner", "rotor_residual"]
+
+
+if TYPE_CHECKING:
+    from ..vehicle.params import VehicleParams
+
+
+
+#: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
+#: first); the per-flight ones (:func:`flight_memo`) are kept.
+_PER_EVALUATION = ("measured", "rotor", "wrench", "shifted")
+
+
+def memoised(memo: dict, key: tuple, states, compute):
+    """``memo[key]`` (computed once): parts of the residual that many evaluations on the
+    same ``states`` share (the measured wrench of one vehicle; the rotor channel of one
+    command -> speed model). The entry holds ``states`` so that its id stays its own;
+    ``states`` may be a tuple of the arrays the key holds the ids of (the measured wrench:
+    the motion, which every rotor timing of a flight shares), each compared by identity."""
+    hit = memo.get(key)
+    if hit is not None and _same(hit[0], states):
+        return hit[1]
+    if len(memo) > 64:          # the oldest of these entries go (the per-flight ones stay)
+        for old in [k for k in memo if isinstance(k, tuple) and k[0] in _PER_EVALUATION][:16]:
+            del memo[old]
+    value = compute()
+    memo[key] = (states, value)
+    return value
+
+
+def _same(kept_refs, refs) -> bool:
+    """Whether ``refs`` is ``kept_refs``, or both are tuples of the same objects."""
+    if kept_refs is refs:
+        return True
+    return (type(kept_refs) is tuple and type(refs) is tuple and len(kept_refs) == len(refs)
+            and all(a is b for a, b in zip(kept_refs, refs)))
+
+
+def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
+    """What depends only on the logged motion of ``states`` (t, position, velocity, quat,
+    body_rate), kept in ``memo`` across evaluations: the body-to-world rotations (N, 3, 3)
+    and a dict the effects keep their own such values in
+    (:attr:`quadsim.effects.base.EffectContext.flight_memo`). States that share those arrays
+    (a rotor-delay shift moves only the rotor speeds) share the entry."""
+    arrays = (states.t, states.position, states.velocity, states.quat, states.body_rate)
+    key = ("motion",) + tuple(map(id, arrays))
+    hit = memo.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], arrays)):
+        return hit[1]
+    from ..core.frames import quat_to_rotmat
+
+    value = (quat_to_rotmat(states.quat), {})
+    memo[key] = (arrays, value)
+    return value
+
+
+#: the hooks through which an effect reaches the model wrench (:func:`model_wrench`); an
+#: effect that keeps :class:`EffectBase`'s neutral ones (a motor lag, a battery's speed factor)
+#: acts on the rotor-speed channel only.
+_WRENCH_HOOKS = ("loads", "apply_to_params", "air_velocity")
+
+
+def wrench_key(states, params: VehicleParams, effects: list) -> tuple:
+    """What the model wrench depends on besides ``states`` and ``params``: the class and
+    values of every effect that reaches it (the others only move the rotor channel, so a
+    motor-lag fit evaluates the wrench once per rotor timing)."""
+    return ("wrench", id(states), id(params), acting(effects, _WRENCH_HOOKS))
+
+
+#: the hooks through which an effect reaches the rotor channel
+#: (:func:`quadsim.gap.residual.rotor_residual`).
+_ROTOR_HOOKS = ("rotor_speed_rate", "speed_factor", "rotor_speed_factor")
+
+
+def identity(effect) -> tuple:
+    """(class, sorted values) of ``effect``: what it is (an effect is its class and its
+    values; they are set once, at construction), kept on the instance after the first call."""
+    key = effect.__dict__.get("_identity")
+    if key is None:
+        key = (type(effect), tuple(sorted(effect.values().items())))
+        effect.__dict__["_identity"] = key
+    return key
+
+
+def acting(effects: list, hooks: tuple) -> tuple:
+    """:func:`identity` of each effect, in order, whose class has its own version of one of
+    ``hooks``."""
+    out = []
+    for effect in effects:
+        hit = _OVERRIDES.get((type(effect), hooks))
+        if hit is None:
+            hit = _overrides(type(effect), hooks)
+        if hit:
+            key = effect.__dict__.get("_identity")
+            out.append(identity(effect) if key is None else key)
+    return tuple(out)
+
+
+_OVERRIDES: dict[tuple, bool] = {}
+
+
+def _overrides(cls: type, hooks: tuple) -> bool:
+    """Whether ``cls`` has its own version of one of ``hooks`` (kept per class)."""
+    key = (cls, hooks)
+    hit = _OVERRIDES.get(key)
+    if hit is None:
+        hit = _OVERRIDES[key] = any(getattr(cls, hook, None) is not getattr(EffectBase, hook)
+                                    for hook in hooks)
+    return hit
+
+
+#: entries of one kind that :func:`kept` holds per flight (the oldest used goes first): a
+#: Jacobian moves one parameter at a time, so the unmoved effects' loads and the vehicle
+#: of the point it differentiates at are used again for each column (48 loads of a
+#: 30 000-sample flight: 160 MB at most)
+KEPT = 48
+
+
+def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
+    """``compute()``, kept in the flight's ``motion`` dict (:func:`flight_memo`) under
+    ``kind`` and ``key``, least recently used evicted past :data:`KEPT` entries. ``refs``:
+    the objects whose ids ``key`` holds; the entry keeps them (so no other object takes
+    their ids while it lives) and is used only while they are the same objects."""
+    store = motion.get(kind)
+    if store is None:
+        store = motion[kind] = OrderedDict()
+    hit = store.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        store.move_to_end(key)
+        return hit[1]
+    value = compute()
+    store[key] = (refs, value)
+    store.move_to_end(key)
+    if len(store) > KEPT:
+        store.popitem(last=False)
+    return value
+
+
+def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
+    """What the rotor channel depends on besides ``states``: the motor map (``params``) and
+    the effects with a speed factor or rotor dynamics, in order
+    (:func:`quadsim.gap.residual.rotor_residual`)."""
+    return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
+
 
 #: Savitzky–Golay window (s) used unless told otherwise.
 DEFAULT_WINDOW_S = 0.1
@@ -93,7 +329,7 @@ class FlightStates:
     name: where the log came from; pose: False for a log without a pose (IMU and motors
     only): position, velocity and accel_world are then zero and quat the identity, stand-ins
     that no effect weighed on it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`,
-    :mod:`quadsim.gap.posefree`).
+    :mod:`quadsim.gap.logcheck`).
     """
 
     t: np.ndarray
@@ -274,7 +510,7 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     body-to-world matrices (N, 3, 3) when the caller keeps them; ``flight_memo``: handed to
     the effects as :attr:`quadsim.effects.base.EffectContext.flight_memo` (values that depend
     only on the logged motion of ``states``), where the vehicle, the air velocity and each
-    effect's loads are also kept (:func:`quadsim.gap.memo.kept`: the same numbers, computed
+    effect's loads are also kept (:func:`quadsim.gap.residual.kept`: the same numbers, computed
     once per effect, vehicle, air velocity and rotor speeds, or per effect and what it
     declares its loads read, :attr:`quadsim.effects.base.EffectBase.loads_reads`)."""
     effect_set = _effect_set(effects)
@@ -350,3 +586,328 @@ def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.nda
     inertia = params.inertia
     torque = w_dot @ inertia.T + cross(w, w @ inertia.T)
     return force, torque
+
+
+def joined_states(parts: list[FlightStates]) -> FlightStates:
+    """The states of ``parts`` (in time order, one filter and step) concatenated along the
+    sample axis; one part is returned as it is. Raises ValueError for parts with different
+    filters or a None channel in some parts only."""
+    if len(parts) == 1:
+        return parts[0]
+    first = parts[0]
+    for p in parts[1:]:
+        if (p.window_s, p.polyorder, p.accel_source) != (first.window_s, first.polyorder,
+                                                         first.accel_source):
+            raise ValueError("joined_states: the parts were smoothed differently")
+    arrays = {}
+    for f in dataclasses.fields(FlightStates):
+        values = [getattr(p, f.name) for p in parts]
+        if not isinstance(values[0], np.ndarray) and values[0] is not None:
+            continue
+        if any(v is None for v in values):
+            if not all(v is None for v in values):
+                raise ValueError(f"joined_states: {f.name} in some parts only")
+            continue
+        arrays[f.name] = np.concatenate(values, axis=0)
+    return dataclasses.replace(first, **arrays)
+
+
+def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> VehicleParams:
+    """``params`` with a per-rotor straight-line map cmd (0-1) -> speed fitted on ``flights``.
+
+    Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
+    firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
+    reference) data; what the channel then measures is the rotor *dynamics*.
+
+    The map is static, so it is fitted on both signals averaged over
+    :data:`MAP_WINDOW_S` (moving mean, per flight, edges dropped): a measured speed that
+    follows the command with a lag tau (motor, ESC telemetry, filtering) regressed on the
+    raw command has its slope shrunk to the command's autocorrelation at tau (a
+    30 ms lag on a 2 Hz manoeuvre: cos(2 pi 2 0.03) = 0.93), and a vehicle flying at other
+    commands than the training flights (heavier, faster) would then show the map's error as
+    a gap on the rotor channel; averaged over 0.5 s the lag costs < 1 %.
+
+    Per rotor, the map is the straight line ``a + k command`` or the proportional gain
+    through the origin ``k command`` (an ideal motor and ESC). The line needs both a range of
+    commands of at least :data:`MAP_MIN_RANGE` of their mean and the data's support
+    (:func:`_line_supported`: the Bayesian information criterion on the averaged samples,
+    counted as one per window). Why the range: over a narrower one (a gentle path: the
+    independent benchmark's Crazyflie references span 2 rad/s of 1565) the line's slope is
+    noise, and the moving mean's leftover lag still favours it. Why the support: measured
+    on the l2f source (an X500 whose rotor speed is exactly proportional to its command;
+    references flown at mean commands 0.557-0.564, each rotor's range 5-6 %), the range
+    alone took the line on three rotors, with intercepts of 8-11 rad/s, off by 0.3-0.5
+    rad/s at the mean command 0.58 of a +160 g flight, 0.5 of the rotor channel's noise;
+    the propeller reading's free speed-per-command exponent took that up and named the mass
+    a propeller change at 100 %, twice."""
+    from ..vehicle.params import MotorMap
+
+    means = _window_means(flights)
+    if means is None:
+        return params
+    command, speed, windows = means
+    ends = []
+    for i in range(speed.shape[1]):
+        c, w = command[:, i], speed[:, i]
+        if np.ptp(c) <= 0:
+            return params
+        slope, intercept = float(c @ w / (c @ c)), 0.0
+        if np.ptp(c) >= MAP_MIN_RANGE * np.mean(np.abs(c)):
+            line = np.polyfit(c, w, 1)
+            if _line_supported(c, w, (slope, intercept), line, windows):
+                slope, intercept = line
+        ends.append([intercept, intercept + slope])
+    return params.replace(motor_map=MotorMap("1", np.array([0.0, 1.0]), np.array(ends),
+                                             "fitted on the training flights (quadsim.gap)"))
+
+
+#: window (s) of the moving mean on which the static motor map is fitted.
+MAP_WINDOW_S = 0.5
+#: relative range of the (averaged) commands below which the map is a proportional gain.
+MAP_MIN_RANGE = 0.05
+
+
+def load_exponent(flights: list[FlightStates], params: VehicleParams
+                  ) -> tuple[float, float] | None:
+    """How much faster a motor spins per command when its propeller's load torque falls, as
+    the references' own command -> speed map says: (alpha, its spread) with a command giving
+    (1 + change)^-alpha of its speed for a propeller whose thrust and drag torque per Omega^2
+    change by ``change`` (:mod:`quadsim.effects.thrust_factor`); None where the commands span
+    less than :data:`MAP_MIN_RANGE` of their mean (the slope is noise there).
+
+    Physics: a motor driven by a duty cycle u at voltage V turns where
+    ``u V = k Omega + (R d / k) Omega^2`` (back EMF and the resistive drop of the load
+    torque d Omega^2). At a fixed command a load change d (1 + c) moves the speed by
+    ``dln Omega / dc = -s / (1 + s)``, s = R d Omega / k^2 the load's share, and the map's
+    elasticity is ``eps = dln Omega / dln u = (1 + s) / (1 + 2 s)``; so
+    ``alpha = 1 / eps - 1``. A straight line ``Omega = a + k_u u`` through the hover speed
+    h has eps = (h - a) / h there: ``alpha = a / (h - a)``. A speed-controlled motor (an ESC
+    holding the commanded speed, most simulators) has a map through the origin: alpha 0.
+    Per rotor, the line over the windows' means (:data:`MAP_WINDOW_S`, as the map) with its
+    intercept's standard error (samples counted one per window); alpha's spread is that
+    error (delta method) and the rotors' own spread, added in squares.
+
+    Measured on each source's references: RotorPy (speed-commanded) 0.000 ± 0.002, l2f's
+    fs vehicle 0.017 ± 0.012, PyFlyt 0.054 ± 0.029, Crazyflow 0.059 ± 0.027, multirotor
+    (DC motors) 0.078 ± 0.003, the 20 real Crazyflie 2.1 Brushless nominal flights
+    0.40 ± 0.08 (0.34-0.48 per rotor); the l2f X500's references span 4.9-6.8 % of their
+    commands per rotor, too little (None). The textbook DC motor at 75 % voltage efficiency
+    is 0.2, the prior where this returns None."""
+    from ..vehicle.params import hover_speed
+
+    means = _window_means(flights)
+    if means is None:
+        return None
+    command, speed, windows = means
+    windows = max(3.0, windows)
+    hover = hover_speed(params)
+    alpha, var = [], []
+    for i in range(speed.shape[1]):
+        c, w = command[:, i], speed[:, i]
+        if np.ptp(c) < MAP_MIN_RANGE * np.mean(np.abs(c)) or len(c) < 3:
+            return None
+        slope, intercept = np.polyfit(c, w, 1)
+        rss = float(np.sum((w - slope * c - intercept) ** 2))
+        sxx = float(np.sum((c - c.mean()) ** 2))
+        # the intercept's standard error, samples counted one per window
+        se = np.sqrt(rss / (len(c) - 2) * (1 / len(c) + c.mean() ** 2 / sxx)
+                     * len(c) / windows)
+        if not hover > intercept:
+            return None
+        alpha.append(intercept / (hover - intercept))
+        var.append((hover * se / (hover - intercept) ** 2) ** 2)
+    alpha = np.asarray(alpha)
+    spread = float(np.sqrt(np.mean(var) + (np.var(alpha, ddof=1) if len(alpha) > 1 else 0.0)))
+    return float(alpha.mean()), spread
+
+
+def _window_means(flights: list[FlightStates]) -> tuple | None:
+    """The flights' commands and rotor speeds averaged over :data:`MAP_WINDOW_S` (moving
+    mean, per flight, edges dropped; (M, R) each, pooled) and how many windows they span;
+    None without a flight logging both."""
+    usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
+    if not usable:
+        return None
+    dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
+    command = np.concatenate([_moving_mean(f.command, w) for f, w in zip(usable, dt)])
+    speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
+    windows = sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1)
+    return command, speed, float(windows)
+
+
+def _line_supported(c: np.ndarray, w: np.ndarray, gain: tuple, line, windows: float) -> bool:
+    """Whether the straight line beats the gain through the origin by the Bayesian
+    information criterion (one parameter more): ``n ln(RSS_gain / RSS_line) > ln n``, with
+    n the number of independent samples, one per :data:`MAP_WINDOW_S` window of the
+    flights (``windows``: the moving mean makes the samples within a window nearly one)."""
+    n = max(float(windows), 2.0)
+    rss_gain = float(np.sum((w - gain[0] * c - gain[1]) ** 2))
+    rss_line = float(np.sum((w - np.polyval(line, c)) ** 2))
+    if rss_line <= 0.0:
+        return rss_gain > 0.0
+    return n * np.log(max(rss_gain, 1e-300) / rss_line) > np.log(n)
+
+
+def _moving_mean(x: np.ndarray, dt: float) -> np.ndarray:
+    """(N, C) moving mean over MAP_WINDOW_S ('valid' part; the signal itself when shorter)."""
+    n = max(1, int(round(MAP_WINDOW_S / dt)))
+    if len(x) <= n:
+        return x
+    c = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x]), axis=0)
+    return (c[n:] - c[:-n]) / n
+
+
+def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | None:
+    """Commanded rotor speed (N, R) rad/s from normalised commands: the parameter set's motor
+    map, else ``command * max_speed``. None without commands."""
+    if states.command is None:
+        return None
+    return speed_of_command(params, states.command)
+
+
+def _map_units(params: VehicleParams, command: np.ndarray) -> np.ndarray:
+    """Normalised 0-1 command -> the motor map's own command unit (0-1 spans its table)."""
+    mm = params.motor_map
+    if mm.command_unit == "1":
+        return command
+    return mm.command[0] + command * (mm.command[-1] - mm.command[0])
+
+
+def speed_of_command(params: VehicleParams, command: np.ndarray) -> np.ndarray:
+    """Steady rotor speed (rad/s) of normalised commands (..., R): the motor map (a map in
+    other units, e.g. PWM, is spanned by 0-1 over its table), else ``command * max_speed``."""
+    if params.motor_map is not None:
+        return params.motor_map.speed_of(_map_units(params, command))
+    return command * params.max_speed
+
+
+def command_of_speed(params: VehicleParams, speed: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`speed_of_command` (N, R) (monotone part of the map)."""
+    if params.motor_map is None:
+        return speed / params.max_speed
+    mm = params.motor_map
+    raw = np.stack([np.interp(speed[:, i], mm.speed[i], mm.command)
+                    for i in range(speed.shape[1])], -1)
+    if mm.command_unit == "1":
+        return raw
+    return (raw - mm.command[0]) / (mm.command[-1] - mm.command[0])
+
+
+#: horizon (s) of the rotor-speed channel: speed predicted this far ahead from the measured
+#: one. Longer than the smoothing window, so that the (smoothed) noise of the starting speed is
+#: not correlated with the noise at the end (it would reward a spurious lag).
+ROTOR_HORIZON_S = 0.12
+ROTOR_SUBSTEPS = 4
+
+
+def min_time_constant(dt: float) -> float:
+    """The shortest rotor time constant (s) a fit on samples ``dt`` apart takes: one Heun
+    sub-step of :func:`rotor_residual`, ``dt / ROTOR_SUBSTEPS``. Shorter is not resolved at
+    that sample rate, and below half of it the sub-steps turn unstable (amplification
+    1 + z + z^2 / 2 >= 1 for z = -h / tau <= -2): a fit there would read the measured speed
+    through the unstable integration."""
+    return dt / ROTOR_SUBSTEPS
+
+
+def rate_owner(effects) -> object | None:
+    """The first effect that defines rotor dynamics (``rotor_speed_rate`` not None: a motor
+    lag), or None: then a commanded speed is reached at once (a speed factor, a battery, is
+    static)."""
+    probe = np.zeros((1, 1))
+    return next((e for e in effects
+                 if e.rotor_speed_rate(np.zeros(1), probe, probe) is not None), None)
+
+
+def _linear_time_constant(owner) -> float | None:
+    """The time constant (s) of a first-order lag that is the same up and down
+    (``MotorLag``: dOmega/dt = (Omega_c - Omega) / tau, linear in both speeds), else None."""
+    from ..effects.motor_lag import MotorLag
+
+    if type(owner) is not MotorLag:
+        return None
+    tau = owner.time_constant
+    down = owner.time_constant_down
+    return float(tau) if tau > 0.0 and (down <= 0.0 or down == tau) else None
+
+
+@functools.lru_cache(maxsize=64)
+def _heun_weights(steps: int, h: float, tau: float) -> tuple[float, np.ndarray]:
+    """(a^(S steps), w_0..w_steps) of :func:`heun_linear` (kept: a fit asks for the same
+    time constant many times). The weights are read only."""
+    a = 1.0 - h / tau + h * h / (2.0 * tau * tau)
+    b0 = h / (2.0 * tau) - h * h / (2.0 * tau * tau)
+    b1 = h / (2.0 * tau)
+    gain = 1.0
+    weights = np.zeros(steps + 1)
+    for k in range(steps):
+        for j in range(ROTOR_SUBSTEPS):
+            f0, f1 = j / ROTOR_SUBSTEPS, (j + 1) / ROTOR_SUBSTEPS
+            # W' = a W + b0 ((1 - f0) c_k + f0 c_k+1) + b1 ((1 - f1) c_k + f1 c_k+1)
+            gain *= a
+            weights *= a
+            weights[k] += b0 * (1.0 - f0) + b1 * (1.0 - f1)
+            weights[k + 1] += b0 * f0 + b1 * f1
+    weights.setflags(write=False)
+    return gain, weights
+
+
+def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: float,
+                 n: int) -> np.ndarray:
+    """:func:`rotor_residual`'s Heun integration for a linear lag, in closed form.
+
+    One Heun sub-step of dW/dt = (c - W) / tau with the command going from c0 to c1 is
+    affine: ``W' = a W + b0 c0 + b1 c1`` with ``a = 1 - h/tau + h^2/(2 tau^2)``,
+    ``b0 = h/(2 tau) - h^2/(2 tau^2)``, ``b1 = h/(2 tau)`` (k1 = (c0 - W)/tau,
+    k2 = (c1 - W - h k1)/tau, W' = W + h (k1 + k2)/2). The command is interpolated
+    linearly inside each sample, so after ``steps`` samples of ROTOR_SUBSTEPS sub-steps the
+    prediction is ``a^(S steps) W_0 + sum_k w_k cmd_k`` (weights w_k from the same
+    recursion, once): the same numbers as stepping the rate function, to round-off, at a
+    few array operations instead of 2 S steps rate evaluations."""
+    gain, weights = _heun_weights(steps, h, tau)
+    out = gain * start
+    for k in range(steps + 1):
+        out = out + weights[k] * cmd[k:k + n]
+    return out
+
+
+def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
+    """Measured rotor speed at t + h minus the model's prediction from the state at t."""
+    dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
+    steps = max(1, round(ROTOR_HORIZON_S / dt))
+    cmd = command_speed(states, params)
+    # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
+    # static (a battery changes the steady speed, not how fast the rotor gets there): only a
+    # dynamics effect (motor_lag) makes the rotor follow with a lag.
+    factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat, cmd.shape[1])
+    if factor is not None:
+        cmd = cmd * factor
+    speed = states.rotor_speed
+    n = len(states.t) - steps
+    owner = rate_owner(effects)
+    linear = _linear_time_constant(owner)
+    if owner is None:
+        predicted = cmd[steps:]
+    elif linear is not None:
+        predicted = heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, linear, n)
+    else:
+        # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
+        # dt / (2 ROTOR_SUBSTEPS)).
+        rate_fn = owner.rotor_speed_rate
+        predicted = speed[:n].copy()
+        h = dt / ROTOR_SUBSTEPS
+        for k in range(steps):
+            start, slope = cmd[k:k + n], cmd[k + 1:k + 1 + n] - cmd[k:k + n]
+            for j in range(ROTOR_SUBSTEPS):
+                # Heun (RK2) with the command interpolated inside the sample (holding it
+                # would add a half-sample lag that the fit would take from the time constant).
+                c0 = start + (j / ROTOR_SUBSTEPS) * slope
+                c1 = start + ((j + 1) / ROTOR_SUBSTEPS) * slope
+                k1 = rate_fn(states.t[k:k + n], c0, predicted)
+                k2 = rate_fn(states.t[k:k + n], c1, predicted + h * k1)
+                predicted = predicted + 0.5 * h * (k1 + k2)
+    out = np.zeros_like(speed)
+    out[steps:] = speed[steps:] - predicted
+    # Stacked flights: a prediction across a flight boundary (time jump) is not scored.
+    valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
+    out[steps:][~valid] = 0.0
+    return out

@@ -66,7 +66,7 @@ class Reading(_JsonView):
     """One reading of the posterior: ``name`` (an effect, a pair ``a+b``, or
     ``no_difference``), its posterior ``probability``, its ``magnitude`` in words (determined
     values only), ``log_evidence`` (natural log), the determined ``params`` with their 95 %
-    half-interval ``ci`` (parameter units, :func:`quadsim.gap.priors.unit_of`), the
+    half-interval ``ci`` (parameter units, :func:`quadsim.gap.fitting.unit_of`), the
     ``undetermined`` parameter names, the ``fixed`` values and the explanation's ``variant``."""
 
     name: str
@@ -118,7 +118,7 @@ class Verdict(_JsonView):
     before/after/floor per channel, units), ``alternatives``, ``best_candidate``,
     ``reduction`` and the gaps (mean squared residual over sigma^2, 1 = noise).
     ``series``: per flight, the residual before and after the answer
-    (:func:`quadsim.gap.traces.flight_series`), not in the JSON."""
+    (:func:`quadsim.gap.page.flight_series`), not in the JSON."""
 
     outcome: str
     name: str
@@ -158,9 +158,9 @@ class Verdict(_JsonView):
     #: references' typical RMS; :data:`quadsim.gap.judge.FORM_ERROR_TENTATIVE`)
     form_remainder: Mapping = field(default_factory=dict)
     #: per flight: whether the references judge themselves clean
-    #: (:class:`quadsim.gap.selfcheck.SelfCheck`); None without a self-check
+    #: (:class:`quadsim.gap.calibrate.SelfCheck`); None without a self-check
     self_check_clean: bool | None = None
-    #: per flight: the residual before and after the answer (:mod:`.traces`; not in the JSON)
+    #: per flight: the residual before and after the answer (:mod:`.page`; not in the JSON)
     series: Series | None = None
 
     def __repr__(self) -> str:
@@ -204,7 +204,7 @@ class Verdict(_JsonView):
 class Series:
     """Arrays for plots and recordings (not in the JSON): held out over each held-out
     flight (``Diagnosis.held_series``; ``Diagnosis.series`` the first), per flight over each
-    judged flight (:func:`quadsim.gap.traces.flight_series`).
+    judged flight (:func:`quadsim.gap.page.flight_series`).
     ``t`` (N,) s; ``before``/``after`` (N, C) residuals in channel units (N, N m, rad/s)
     under the reference (held out: nominal) model and with the answer; ``channels`` (C
     names); ``flight`` its name; ``states`` (:class:`quadsim.gap.residual.FlightStates`),
@@ -260,8 +260,8 @@ class Diagnosis(_JsonView):
     the batch answer ``answer``), ``flights`` (per flight: one :class:`Verdict` each, in
     input order), ``train``/``holdout``/``reference`` (flight names), ``reference_model``
     and ``reference_refit`` (per flight: the calibrated reference as JSON), ``noise_model``,
-    ``where`` (:mod:`.where`), ``effects``/``baseline``/``combination`` (held out: every
-    ranked explanation as JSON), ``checks`` (:func:`quadsim.gap.checks.vehicle_check`),
+    ``where`` (:mod:`.judge`), ``effects``/``baseline``/``combination`` (held out: every
+    ranked explanation as JSON), ``checks`` (:func:`quadsim.gap.logcheck.vehicle_check`),
     ``base_effects``, ``notes``; ``series`` (not in the JSON)."""
 
     schema: str

@@ -3,7 +3,7 @@
 Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here decides.
 
 * :func:`reading_text`: a reading's magnitude (determined values only, each with its 95 %
-  interval and unit, :func:`quadsim.gap.priors.describe`); a shared parameter given a
+  interval and unit, :func:`quadsim.gap.fitting.describe`); a shared parameter given a
   value of its own is set beside the references' value (:func:`reference_text`); wind is
   worded as the steady air force it exerts, with the wind speed at the references' drag.
 * :func:`nominal_words`: the same text where the reference model is the parameter set
@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from .explanations import reference_determined
-from .priors import describe
+from .fitting import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",

@@ -651,7 +651,7 @@ def check_log_stretches(log, params=None):
 def check_logs(logs, params=None):
     """:func:`check_log` on each, every airborne stretch a segment (``joined``); returns
     (logs, notes). The diagnosis (``gap``) is its caller; a log without a pose is checked
-    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.posefree`)."""
+    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.logcheck`)."""
     out, notes = [], []
     for log in logs:
         log, n = check_log(log, params, joined=True)

@@ -1,0 +1,587 @@
+"""Checks of a log before anything is fitted: does the parameter set describe the logged
+vehicle; rotor speeds from motor commands alone (a command -> speed model from references that
+log both); does the torque balance confirm the log's rotor order; what a log without a pose
+(IMU and motors only) can be judged on.
+
+Vehicle check
+-------------
+
+Does the parameter set describe the logged vehicle at all? Checked before any fit.
+
+A diagnosis that fits effects to flights of a *different* vehicle finds nonsense with
+confidence (CHANGELOG: another vehicle's set named an effect at 99.8 %). Two balances that
+hold for any vehicle flying on its own rotors catch it first:
+
+* hover/force balance along body z: ``m f_z = b sum_i Omega_i^2`` (f_z the measured
+  specific force) gives the thrust factor the data need, by least squares over all samples;
+  its ratio to the model's b must lie in [1/:data:`MAX_RATIO`, :data:`MAX_RATIO`]
+  (a payload of 60 % of the mass or a 40 % thrust loss still passes, another vehicle not);
+* the logged rotor speeds must be reachable: median speed <= :data:`MAX_SPEED_RATIO` x the
+  model's ``max_speed``;
+* yaw balance ``I_zz dr/dt ~= d sum_i s_i Omega_i^2`` gives the drag factor the data need
+  (reported, not enforced: it is noisy on gentle flights).
+
+:func:`vehicle_check` returns the ratios (for the result's ``checks``) and raises
+:class:`~quadsim.core.errors.InputError` with the numbers that disagree.
+
+:func:`check_length` refuses a log shorter than :data:`MIN_LOG_S` = 2 s (the edges cut after
+smoothing, the noise window and one scoring block need it) or, with ``window_s``, sampled too
+coarsely for the differentiator's window (fewer than 5 samples); :func:`quadsim.gap.prepare`
+applies the length check to every log given to the library, the CLI both.
+
+Command-only logs
+-----------------
+
+Diagnosis from motor commands alone: a command -> rotor-speed model identified on
+reference flights that have both, then rotor speeds synthesised for logs that have only
+commands, so that the same gap diagnosis runs on them.
+
+Model (per rotor i; u normalised command 0-1, V battery voltage in V, Omega in rad/s)::
+
+    Omega_ss,i = a_i + b_i u_i + c_i u_i (V - V_ref)          steady state (c_i = 0 without vbat)
+    tau dOmega_i/dt = Omega_ss,i - Omega_i                    first-order motor lag, one tau
+
+The voltage term is the first-order effect of a falling battery (a brushed or brushless
+motor's no-load speed is proportional to the applied voltage u V); ``V_ref`` is the median
+reference voltage. The lag is discretised on the log's median step dt with
+``alpha = exp(-dt / tau)`` and the input averaged over the step (no half-sample bias):
+``y_k = alpha y_(k-1) + (1 - alpha) (x_k + x_(k-1)) / 2`` (``scipy.signal.lfilter``). Because
+the filter is linear, ``a, b, c`` are an ordinary least-squares fit of the filtered features
+``[1, u, u (V - V_ref)]`` for each tau; tau is chosen by bounded scalar minimisation of the
+pooled squared error (``scipy.optimize.minimize_scalar``, 0.5 ms .. 0.5 s; tau = 0 is tried
+too). Samples whose speed, command or voltage is NaN are left out of the fit.
+
+Synthesis (:func:`synthesise_speeds`): the model driven by the log's commands (and vbat;
+V_ref where vbat is missing); the synthesised log keeps no commands by default
+(``keep_commands=False``) so that the diagnosis does not score a rotor channel that would
+compare the model with itself.
+
+Without any log with rotor speeds (a command-only fleet) the model comes from the parameter
+set instead (:func:`command_model_from_params`): its ``[motor_map]``, voltage gain and time
+constant, as ``python -m quadsim.identify --logs`` writes them from command-only logs (the
+command -> thrust map from the accelerometer). ``gap`` synthesises speeds for every
+command-only log it is given — positional, ``--holdout`` and ``--reference``
+(:func:`synthesise_all`).
+
+What is lost without measured speeds: the rotor channel (measured speed minus the speed the
+commands predict) disappears, so effects that act *between* command and speed are fixed to
+the reference: ``motor_lag`` cannot be fitted and a change of lag reads as an attitude-
+dynamics change (confusable with ``inertia_error``); a rotor that turns slower for the same
+command (a weaker motor, a sagging battery beyond the reference's range) is seen only through
+its thrust, i.e. as ``thrust_mismatch``/``mass_offset`` rather than in the rotor channel.
+
+Example::
+
+    >>> from quadsim.gap.logcheck import fit_command_model, synthesise_speeds
+    >>> model = fit_command_model(reference_logs)          # logs with rotor_*, cmd_*, vbat
+    >>> model.tau, model.rms                               # s, rad/s
+    >>> only_cmd = synthesise_speeds(log_without_speeds, model)
+
+Rotor order
+-----------
+
+The rotor order behind a verdict: a verdict on a log whose rotor order the torque balance
+does not confirm is never stated above ``UNCONFIRMED_MAX_P``, and one whose order is
+doubtful is tentative (issue 44).
+
+A log with two rotor columns swapped is read by every explanation as a strange torque
+pattern; the evidence then names some effect with high confidence. The checks refuse an
+order that another fits far better (:func:`quadsim.logs.checks.check_rotor_order`,
+Delta chi^2 > 25), but on real, filtered logs a wrong order is often not that clear: the
+status (:func:`quadsim.logs.checks.rotor_order_status`) is *confirmed* (every other order
+fits worse by Delta chi^2 > 25), *doubtful* (another order fits better by Delta chi^2 > 4)
+or neither (not told apart). Here:
+
+* not confirmed: every probability of the verdict is capped at ``UNCONFIRMED_MAX_P`` = 0.99
+  (a wrong order cannot be ruled out at better than the balance's own resolution) and the
+  status' note is added;
+* doubtful: the verdict, whatever its outcome, is also ``tentative``, with a sentence naming
+  the ``--rotor-map`` that fits better.
+
+Example::
+
+    >>> statuses = order_statuses(logs, params)
+    >>> verdict = mark(judge(rows, reference, name, cap=probability_cap(statuses)), statuses)
+
+Logs without a pose
+-------------------
+
+The diagnosis on logs without a pose (IMU and motors only): the body-frame balance alone.
+
+The residual wrench (:mod:`quadsim.gap.residual`) needs no pose: the measured force is the
+mass times the accelerometer's specific force and the measured torque comes from the gyro
+(``I w_dot + w x I w``), both in the body frame; the model's rotor wrench is body-frame too.
+What a pose adds is the effects whose loads read the vehicle's motion in the world: the air
+velocity (wind, body and rotor drag, blade flapping, translational lift), the height (ground
+effect) and the world's directions in the body frame (a payload swinging under gravity).
+Each effect declares what it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`);
+on a log without a pose those effects are neither shared by the references nor weighed as a
+flight's explanation (:func:`needs_pose`), and the answer names them with what would add
+them (:func:`missing_words`).
+
+Stand-ins (:func:`posefree_log`): the pose-less log gets position 0, velocity 0 and the
+identity attitude, so that the states have the shape every stage expects; no effect weighed
+on it reads them (the filter above), and ``FlightStates.pose`` is False.
+
+Example::
+
+    >>> from quadsim.gap.logcheck import missing_words, posefree_log
+    >>> log = posefree_log(imu_log)            # FlightLog with stand-in pose
+    >>> missing_words()                        # "no velocity, height or attitude logged: ..."
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+from scipy.signal import lfilter
+
+from ..core.errors import InputError
+from ..effects import EFFECTS
+from ..effects.facts import POSE_PARTS, without_pose
+from ..logs.checks import RotorOrder, rotor_order_status
+from ..logs.flightlog import FlightLog
+from ..vehicle.params import VehicleParams
+from ..vehicle.rotors import allocation_matrix
+
+__all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle_check",
+           "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
+           "synthesise_all", "synthesise_speeds", "without_speeds", "UNCONFIRMED_MAX_P",
+           "cap_decision", "mark", "order_statuses", "probability_cap", "missing_words",
+           "needs_pose", "posefree_log"]
+
+
+#: largest ratio (either way) of the thrust factor the data need to the model's: a payload
+#: of 60 % of the mass or a 40 % thrust loss still passes, another vehicle does not
+MAX_RATIO = 2.0
+#: largest median logged rotor speed over the model's ``max_speed``: a rotor cannot run
+#: half again beyond its top speed, a log in other units or of another vehicle does
+MAX_SPEED_RATIO = 1.5
+#: shortest log the diagnosis can use (s): the 0.2 s edges at both ends, the 0.5 s window
+#: of the noise scale and a 1 s scoring block
+MIN_LOG_S = 2.0
+
+
+def check_length(log, window_s: float | None = None, name: str | None = None) -> None:
+    """A log long enough for the diagnosis and, with ``window_s`` (s), sampled finely
+    enough for it; raises :class:`InputError` naming the file (``name``, default the log's
+    path) and ``t``."""
+    name = name or str(log.path)
+    duration = float(log.t[-1] - log.t[0]) if len(log.t) else 0.0
+    if duration < MIN_LOG_S:
+        raise InputError(f"{name}: t: {duration:.3g} s of flight; the diagnosis needs "
+                         f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
+    step = float(np.median(np.diff(log.t)))
+    if window_s is not None and window_s < 5 * step:
+        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {name} "
+                         f"(median step {step:.4g} s); the differentiator needs 5 or more")
+
+
+def vehicle_check(states: list, params: VehicleParams) -> dict:
+    """Ratios data/model of b, d and rotor speed over ``states`` (FlightStates; module doc):
+    ``{"thrust_factor_data": b the data need (N s^2/rad^2), "thrust_factor_ratio": that over
+    the model's b, "drag_factor_ratio": d the yaw balance needs over the model's d,
+    "median_speed_ratio": median logged speed over ``max_speed`` (None without one)}``.
+    Raises InputError when the parameter set cannot be the logged vehicle's (b ratio
+    outside [1/:data:`MAX_RATIO`, :data:`MAX_RATIO`] or speed ratio above
+    :data:`MAX_SPEED_RATIO`). States without rotor speeds are skipped ({} when none has
+    them)."""
+    states = [s for s in states if s.rotor_speed is not None]
+    if not states:  # command-only logs: nothing to balance against here
+        return {}
+    speed = np.concatenate([s.rotor_speed for s in states])
+    sf = np.concatenate([s.specific_force for s in states])
+    rate_dot = np.concatenate([s.body_accel for s in states])
+    omega2 = np.square(speed)
+    x = omega2.sum(axis=1)
+    b_data = float(params.mass * np.dot(sf[:, 2], x) / max(np.dot(x, x), 1e-300))
+    b_ratio = b_data / params.thrust_factor
+    yaw_row = allocation_matrix(params)[5] / params.drag_factor  # +-1 per rotor (spin)
+    xy = omega2 @ yaw_row
+    xy = xy - xy.mean()
+    mz = rate_dot[:, 2] * params.inertia[2, 2]
+    mz = mz - mz.mean()
+    d_ratio = float(np.dot(mz, xy) / max(np.dot(xy, xy), 1e-300)) / params.drag_factor
+    speed_ratio = float(np.median(speed) / params.max_speed) if params.max_speed else None
+    out = {"thrust_factor_data": b_data, "thrust_factor_ratio": float(b_ratio),
+           "drag_factor_ratio": d_ratio, "median_speed_ratio": speed_ratio}
+    problems = []
+    if not 1 / MAX_RATIO <= b_ratio <= MAX_RATIO:
+        problems.append(f"the force balance m*f_z = b*sum(Omega^2) with the model's mass "
+                        f"{params.mass:.4g} kg needs b = {b_data:.3g} N s^2/rad^2, "
+                        f"{b_ratio:.3g}x the model's {params.thrust_factor:.3g} N s^2/rad^2")
+    if speed_ratio is not None and speed_ratio > MAX_SPEED_RATIO:
+        problems.append(f"the median logged rotor speed {np.median(speed):.4g} rad/s is "
+                        f"{speed_ratio:.3g}x the model's max_speed {params.max_speed:.4g} rad/s")
+    if problems:
+        raise InputError(f"model {params.name!r} does not describe the logged vehicle: "
+                         + "; ".join(problems) + f" (yaw balance: d {d_ratio:.3g}x the "
+                         "model's); give the parameter set of the vehicle that flew")
+    return out
+
+
+TAU_BOUNDS = (5e-4, 0.5)
+
+
+@dataclass(frozen=True)
+class CommandModel:
+    """a, b, c (R,) rad/s; v_ref V (NaN: no voltage term); tau s; rms rad/s of the fit on the
+    reference; samples used; source (the reference logs)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    v_ref: float
+    tau: float
+    rms: float
+    samples: int
+    source: str
+
+    @property
+    def rotor_count(self) -> int:
+        return len(self.a)
+
+    def speeds(self, t: np.ndarray, command: np.ndarray, vbat: np.ndarray | None) -> np.ndarray:
+        """Rotor speeds (N, R) rad/s for commands (N, R) and vbat (N,) V or None."""
+        features = _features(command, vbat, self.v_ref)
+        ss = self.a + self.b * features[1] + self.c * features[2]
+        return _lag(ss, _step(t), self.tau)
+
+
+def _step(t: np.ndarray) -> float:
+    return float(np.median(np.diff(t)))
+
+
+def _features(command, vbat, v_ref):
+    u = np.asarray(command, dtype=float)
+    if vbat is None or not np.isfinite(v_ref):
+        dv = np.zeros(len(u))
+    else:
+        dv = np.where(np.isfinite(vbat), np.asarray(vbat, float) - v_ref, 0.0)
+    return np.ones_like(u), u, u * dv[:, None]
+
+
+def _lag(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
+    """First-order lag of x (N, ...) along axis 0, starting at rest at x[0]."""
+    if tau <= 0:
+        return x
+    alpha = np.exp(-dt / tau)
+    b = [(1 - alpha) / 2, (1 - alpha) / 2]
+    # lfilter (direct form II transposed): y0 = b0 x0 + z; z = (1 - b0) x0 starts at rest.
+    zi = x[0] - b[0] * x[0]
+    y, _ = lfilter(b, [1.0, -alpha], x, axis=0, zi=zi[None] if np.ndim(zi) else [zi])
+    return y
+
+
+def fit_command_model(logs: Sequence[FlightLog]) -> CommandModel:
+    """Identify the command -> speed model on logs with rotor speeds and commands (each
+    airborne stretch of a log of several take-offs alone: the lag never runs across the
+    ground span between them)."""
+    usable = [p for g in logs if g.rotor_speed is not None and g.rotor_command is not None
+              for p in g.parts()]
+    if not usable:
+        raise InputError("command model: the reference logs need both rotor_* (speeds) and "
+                         "cmd_* (commands)")
+    counts = {g.rotor_count for g in usable}
+    if len(counts) != 1:
+        raise InputError(f"command model: reference logs disagree on the rotor count {counts}")
+    with_v = all(g.vbat is not None for g in usable)
+    v_ref = float(np.nanmedian(np.concatenate([g.vbat for g in usable]))) if with_v else np.nan
+    flights = [(_step(g.t), _features(g.rotor_command, g.vbat if with_v else None, v_ref),
+                g.rotor_speed) for g in usable]
+
+    def solve(tau: float):
+        rows, targets = [], []
+        for dt, feats, speed in flights:
+            filt = [_lag(f, dt, tau) for f in feats]
+            ok = np.isfinite(speed) & np.all([np.isfinite(f) for f in filt], axis=0)
+            rows.append((filt, ok))
+            targets.append(speed)
+        coef, sse, n = [], 0.0, 0
+        for i in range(usable[0].rotor_count):
+            a_mat = np.concatenate([np.stack([f[:, i] for f in filt], 1)[ok[:, i]]
+                                    for (filt, ok) in rows])
+            y = np.concatenate([s[:, i][ok[:, i]] for s, (_, ok) in zip(targets, rows)])
+            if not with_v:
+                a_mat = a_mat[:, :2]
+            sol, *_ = np.linalg.lstsq(a_mat, y, rcond=None)
+            sse += float(np.sum((a_mat @ sol - y) ** 2))
+            n += len(y)
+            coef.append(np.append(sol, 0.0) if not with_v else sol)
+        return np.array(coef), sse, n
+
+    best = minimize_scalar(lambda lt: solve(np.exp(lt))[1], bounds=np.log(TAU_BOUNDS),
+                           method="bounded", options={"xatol": 0.01})
+    tau = float(np.exp(best.x))
+    coef, sse, n = solve(tau)
+    coef0, sse0, _ = solve(0.0)
+    if sse0 <= sse:
+        tau, coef, sse = 0.0, coef0, sse0
+    names = ", ".join(str(g.path) for g in usable[:3]) + (" ..." if len(usable) > 3 else "")
+    return CommandModel(coef[:, 0], coef[:, 1], coef[:, 2], v_ref, tau, float(np.sqrt(sse / n)),
+                        n, f"fitted on {len(usable)} reference log(s): {names}")
+
+
+def synthesise_speeds(log: FlightLog, model: CommandModel, *,
+                      keep_commands: bool = False) -> FlightLog:
+    """``log`` with rotor speeds from its commands (and vbat) through ``model``; each airborne
+    stretch of a log of several take-offs (:attr:`FlightLog.segments`) alone."""
+    name = log.path or "log"
+    if log.rotor_command is None:
+        raise InputError(f"{name}: cmd_1..cmd_N: no commands to synthesise rotor speeds from")
+    if log.rotor_count != model.rotor_count:
+        raise InputError(f"{name}: cmd_1..cmd_N: {log.rotor_count} commands, the command model "
+                         f"has {model.rotor_count} rotors")
+    speed = np.concatenate([model.speeds(p.t, p.rotor_command, p.vbat) for p in log.parts()])
+    note = (f"{name}: rotor speeds synthesised from commands (tau {model.tau * 1e3:.1f} ms, "
+            f"fit rms {model.rms:.3g} rad/s, {model.source})")
+    return dataclasses.replace(log, rotor_speed=speed,
+                               rotor_command=log.rotor_command if keep_commands else None,
+                               notes=log.notes + (note,))
+
+
+def without_speeds(log: FlightLog) -> FlightLog:
+    """The log with its rotor-speed columns removed (what a command-only log looks like)."""
+    return dataclasses.replace(log, rotor_speed=None)
+
+
+@dataclass(frozen=True)
+class MapCommandModel:
+    """The command -> speed model of a parameter set: ``motor_map.speed_at(command, vbat)``
+    (piecewise linear per rotor, voltage gain about the reference voltage) through the
+    first-order lag ``time_constant`` (tau, s); rms = nan (not fitted here); source."""
+
+    params: object
+    tau: float
+    source: str
+    rms: float = float("nan")
+
+    @property
+    def rotor_count(self) -> int:
+        return self.params.rotor_count
+
+    def speeds(self, t: np.ndarray, command: np.ndarray, vbat: np.ndarray | None) -> np.ndarray:
+        mm = self.params.motor_map
+        steady = mm.speed_at(np.asarray(command, float), vbat)
+        return _lag(steady, _step(t), self.tau)
+
+
+def command_model_from_params(params) -> MapCommandModel:
+    """The parameter set's motor map as a command model; InputError without one."""
+    mm = params.motor_map
+    if mm is None:
+        raise InputError(f"{params.path or params.name}: motor_map: logs without rotor speeds "
+                         "need a command -> speed map: give --command-reference LOG... (logs "
+                         "with rotor speeds and commands) or a parameter set with a "
+                         "[motor_map] (python -m quadsim.identify --logs ... writes one, also "
+                         "from command-only logs)")
+    return MapCommandModel(params, float(mm.time_constant),
+                           f"the motor map of {params.path or params.name} ({mm.source})")
+
+
+@dataclass(frozen=True)
+class BalancedModel:
+    """A command model whose rotors' thrusts are rescaled by ``factors`` (R,) (relative
+    thrust per rotor, ``Omega_i -> Omega_i sqrt(factors_i)``): :func:`balance_rotors`."""
+
+    model: object
+    factors: np.ndarray
+
+    @property
+    def rotor_count(self) -> int:
+        return self.model.rotor_count
+
+    @property
+    def tau(self) -> float:
+        return self.model.tau
+
+    @property
+    def rms(self) -> float:
+        return self.model.rms
+
+    @property
+    def source(self) -> str:
+        return (f"{self.model.source}, per-rotor thrust balanced on the references' mean roll "
+                f"and pitch torque (x {', '.join(f'{f:.3f}' for f in self.factors)})")
+
+    def speeds(self, t, command, vbat):
+        return self.model.speeds(t, command, vbat) * np.sqrt(self.factors)
+
+
+def balance_rotors(logs: Sequence[FlightLog], model, params) -> BalancedModel:
+    """``model`` with per-rotor thrust factors ``1 + delta_i`` that make the reference
+    ``logs``' (command-only) mean roll and pitch torque of the rotors equal to what their gyro
+    says it was, ``mean(I w_dot + w x I w)`` (w_dot: the rate change over each stretch over its
+    duration). ``delta`` moves neither the total thrust nor the yaw torque at the references'
+    mean squared speeds (it lies in the null space of those two rows of the allocation
+    matrix), so a flight's weight and yaw readings stay the references'.
+
+    Why: the parameter set's command -> speed map is not the fleet's motors rotor by rotor;
+    the difference is a roll/pitch torque every flight shares, which the per-flight reference
+    model has no shared parameter to hold, so each calm flight was named ``com_offset``
+    (tests/test_commands_wind.py). A map identified from commands only is the same for every
+    rotor (``identify --logs``), so the fleet's own rotor imbalance is the same case."""
+    from ..vehicle.rotors import allocation_matrix
+
+    alloc = allocation_matrix(params)
+    inertia = params.inertia
+    squares, targets, weights = [], [], []
+    for log in logs:
+        for part in log.parts():
+            if part.body_rate is None or part.rotor_command is None or len(part.t) < 3:
+                continue
+            w = part.body_rate
+            duration = float(part.t[-1] - part.t[0])
+            w_dot = (w[-1] - w[0]) / duration
+            gyro_torque = inertia @ w_dot + np.mean(np.cross(w, w @ inertia.T), axis=0)
+            speed = model.speeds(part.t, part.rotor_command, part.vbat)
+            squares.append(np.mean(np.square(speed), axis=0))
+            targets.append(gyro_torque[:2])
+            weights.append(duration)
+    if not squares:
+        return BalancedModel(model, np.ones(model.rotor_count))
+    weights = np.asarray(weights) / np.sum(weights)
+    mean_sq = np.average(squares, axis=0, weights=weights)
+    target = np.average(targets, axis=0, weights=weights)
+    kept_rows = alloc[[2, 5]] * mean_sq              # thrust and yaw per relative change
+    _, _, vt = np.linalg.svd(kept_rows)
+    null = vt[2:].T                                  # (R, R - 2): moves neither
+    moved = alloc[3:5] * mean_sq                     # roll, pitch torque per relative change
+    now = moved.sum(axis=1)
+    c, *_ = np.linalg.lstsq(moved @ null, target - now, rcond=None)
+    delta = null @ c
+    return BalancedModel(model, np.clip(1.0 + delta, 0.5, 1.5))
+
+
+def synthesise_all(groups: dict[str, Sequence[FlightLog] | None], params,
+                   reference: Sequence[FlightLog] | None = None):
+    """Every command-only log in ``groups`` (role -> logs) gets synthesised speeds: the model
+    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map,
+    balanced rotor by rotor on the command-only logs of the ``"reference"`` role when there
+    are some (:func:`balance_rotors`: per flight, the references are the fleet). Returns
+    (groups with the same keys, the model or None when no log needed one)."""
+    needing = [g for logs in groups.values() for g in (logs or []) if g.rotor_speed is None]
+    if not needing:
+        return groups, None
+    measured = [g for g in (reference or []) if g.rotor_speed is not None
+                and g.rotor_command is not None]
+    model = fit_command_model(measured) if measured else command_model_from_params(params)
+    fleet = [g for g in groups.get("reference") or [] if g.rotor_speed is None]
+    if not measured and fleet:      # a command-only fleet: its own rotor balance
+        model = balance_rotors(fleet, model, params)
+    out = {role: (None if logs is None else
+                  [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs])
+           for role, logs in groups.items()}
+    return out, model
+
+
+#: the highest probability stated on a log whose rotor order is not confirmed ("> 99 %" is
+#: not said: the order's own evidence is weaker than that).
+UNCONFIRMED_MAX_P = 0.99
+
+
+def order_statuses(logs, params) -> list[RotorOrder]:
+    """:func:`quadsim.logs.checks.rotor_order_status` of each log (FlightLogs, cut)."""
+    return [rotor_order_status(log, params) for log in logs]
+
+
+def probability_cap(statuses) -> float:
+    """1 when every log's order is confirmed, else ``UNCONFIRMED_MAX_P``."""
+    return 1.0 if all(s.confirmed for s in statuses) else UNCONFIRMED_MAX_P
+
+
+def mark(verdict, statuses):
+    """``verdict`` with the statuses' notes (orders not confirmed) and, where an order is
+    doubtful, ``tentative`` and a sentence in its answer naming the map that fits better."""
+    notes = tuple(s.note for s in statuses if s.note and s.note not in verdict.notes)
+    doubtful = [s for s in statuses if s.doubtful]
+    if not notes and not doubtful:
+        return verdict
+    answer = verdict.answer
+    tentative = verdict.tentative
+    if doubtful:
+        maps = ", ".join(sorted({",".join(str(m + 1) for m in s.rival) for s in doubtful}))
+        answer += (f" Tentative: the torque balance fits the rotor columns better in another "
+                   f"order (--rotor-map {maps}); a wrong rotor order can produce this reading.")
+        tentative = verdict.outcome != "refused"
+    return dataclasses.replace(verdict, answer=answer, tentative=tentative,
+                               notes=verdict.notes + notes)
+
+
+def cap_decision(decision, cap: float):
+    """A held-out :class:`~quadsim.gap.diagnose.Decision` with every probability capped at
+    ``cap`` (the ranking kept)."""
+    if cap >= 1.0:
+        return decision
+    ranked = tuple((k, min(p, cap), w) for k, p, w in decision.ranked)
+    rows = tuple(dataclasses.replace(r, probability=min(r.probability, cap))
+                 if hasattr(r, "probability") else {**r, "probability": min(r["probability"],
+                                                                            cap)}
+                 for r in decision.rows)
+    return dataclasses.replace(decision, ranked=ranked, rows=rows)
+
+
+def needs_pose(parts) -> bool:
+    """Whether any effect of ``parts`` ((effect, fixed, fitted) triples, an explanation's or
+    a shared group's) reads the pose (:attr:`~quadsim.effects.facts.EffectFacts.needs_pose`).
+    Names that are not library effects (the diagnosis' own fit forms) read none."""
+    return any(name in EFFECTS and EFFECTS[name].facts.needs_pose for name, _, _ in parts)
+
+
+def posefree_log(log):
+    """``log`` (a FlightLog without a pose) with the stand-in pose of the module doc:
+    position and velocity zero (m, m/s), attitude the identity quaternion."""
+    n = len(log.t)
+    return dataclasses.replace(log, position=np.zeros((n, 3)), velocity=np.zeros((n, 3)),
+                               quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+
+
+def missing_words() -> str:
+    """One sentence: which pose parts are not logged, the effects not weighed for want of
+    them (from the effects' facts), and what would add them."""
+    needed = without_pose(EFFECTS)
+    parts = [p for p in POSE_PARTS if any(p in v for v in needed.values())]
+    names = ", ".join(name.replace("_", " ") for name in needed)
+    return (f"no {_listed(parts)} logged: {names} not weighed (the body-frame force and "
+            f"torque balance was used); log the state estimate or motion capture (columns "
+            f"{'; '.join(POSE_PARTS[p] for p in parts)}) to add them")
+
+
+def _listed(words: list[str]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
+
+
+def reference_has_pose(reference) -> bool:
+    """Whether a calibrated reference model (:class:`quadsim.gap.calibrate.Reference`) was
+    built on logs with a pose: its shared groups include an effect that reads one."""
+    return needs_pose(reference.candidate.parts)
+
+
+def check_same_kind(states, reference, name: str) -> None:
+    """InputError when a flight and its references differ in having a pose: the
+    references' shared drag and wind would act on the stand-in pose of a flight without
+    one, and a flight with one would be weighed on effects the references never shared."""
+    from ..core.errors import InputError
+
+    ref_pose = reference_has_pose(reference)
+    if bool(getattr(states, "pose", True)) != ref_pose:
+        which = ("the reference flights log a pose, this flight does not" if ref_pose else
+                 "this flight logs a pose, the reference flights do not")
+        raise InputError(f"{name}: x..z, qw..qz: {which}: judge "
+                         "logs of one kind together (without a pose: IMU and motors only, "
+                         "the body-frame balance; drop the pose columns of the others to "
+                         "compare them so)")
+
+
+def without_pose_note(verdict, log):
+    """``verdict`` (:class:`quadsim.gap.result.Verdict`) with :func:`missing_words` at the
+    end of its answer and in its notes when ``log`` (a FlightLog) has no pose; else as is."""
+    if getattr(log, "has_pose", True) or verdict.outcome == "refused":
+        return verdict
+    said = missing_words()
+    return dataclasses.replace(verdict, answer=f"{verdict.answer} Not weighed: {said}.",
+                               notes=tuple(verdict.notes) + (said,))
