@@ -545,7 +545,7 @@ def model_wrench(states: FlightStates, params: VehicleParams,
         vehicle_key = (id(params), acting(effect_set.effects, ("apply_to_params",)))
         vehicle, matrices = kept(
             flight_memo, "vehicle", vehicle_key, (params,),
-            lambda: _vehicle_matrices(effect_set.apply_to_params(params)))
+            lambda: _vehicle_matrices(effect_set.apply_to_params(params), flight_memo))
         air_key = acting(effect_set.effects, ("air_velocity",))
         air = kept(flight_memo, "air", air_key, (),
                    lambda: states.velocity - effect_set.air_velocity(states.t, states.position))
@@ -579,8 +579,14 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     return force, torque, vehicle
 
 
-def _vehicle_matrices(vehicle: VehicleParams):
-    return vehicle, rotor_matrices(vehicle)
+def _vehicle_matrices(vehicle: VehicleParams, flight_memo: dict):
+    """``vehicle`` and its :func:`rotor_matrices`, these kept in ``flight_memo`` by what they
+    depend on (the rotors, the CoM, the thrust and drag factors): a vehicle that differs in
+    its mass or inertia alone shares them."""
+    key = (id(vehicle.rotors), np.asarray(vehicle.com, dtype=float).tobytes(),
+           float(vehicle.thrust_factor), float(vehicle.drag_factor))
+    return vehicle, kept(flight_memo, "rotor_matrices", key, (vehicle.rotors,),
+                         lambda: rotor_matrices(vehicle))
 
 
 def _vehicle_values(flight_memo: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
