@@ -18,9 +18,15 @@ inventing data). A least-squares line CPU = fixed + per-minute x
 flight-minutes over the count series splits the cost that does not grow with the judged
 flights (imports, the 20 references' calibration) from the cost that does.
 
+``--stages`` instead times the 26-flight command once by stage, in a fresh process of its
+own (``time.process_time`` around the CLI's calls: the imports, loading and checking the
+logs, preparing the references, their calibration, their self-check, judging the flights):
+where the CPU goes, not a second measurement of the total.
+
 Usage (from the repository root; the machine and its load matter, so say them)::
 
     nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4]
+    nice -n 5 python benchmarks/speed_gap.py --stages
 
 Exit 0 with one ``skipped:`` line when the data folder is absent. Not a test: it measures.
 """
@@ -106,6 +112,61 @@ def time_gap(label: str, flights: list[Path], references: list[Path]) -> Run:
     return Run(label, len(flights), minutes, cpu, wall, answer.split(":", 1)[-1].strip())
 
 
+#: (module, function, stage) the stage timer wraps (:func:`staged`)
+STAGES = (("quadsim.gap.__main__", "_load", "loading and checking the logs"),
+          ("quadsim.gap.diagnose", "prepare", "preparing the references"),
+          ("quadsim.gap.diagnose", "calibrate", "the references' calibration"),
+          ("quadsim.gap.diagnose", "reference_self_check", "their self-check"),
+          ("quadsim.gap.diagnose", "judge_one", "judging the flights (prepare, weigh, verdict)"))
+
+
+def staged(argv: list[str]) -> dict:
+    """CPU s (``time.process_time``) per stage of ``python -m quadsim.gap ARGV`` run in this
+    process: "imports" (the CLI's, with the interpreter's start), each of :data:`STAGES`
+    (``prepare`` counted for the references only: a judged flight's is inside judging) and
+    "total"."""
+    import functools
+    import importlib
+
+    modules = {name: importlib.import_module(name) for name, _, _ in STAGES}
+    spent = {"imports (interpreter start included)": time.process_time()}
+    for module, name, label in STAGES:
+        original = getattr(modules[module], name)
+
+        def timed(*args, _original=original, _label=label, **kwargs):
+            begin = time.process_time()
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                if _label != STAGES[1][2] or len(args[0]) > 1:
+                    spent[_label] = spent.get(_label, 0.0) + time.process_time() - begin
+
+        setattr(modules[module], name, functools.wraps(original)(timed))
+    try:
+        modules["quadsim.gap.__main__"].main(argv)
+    except SystemExit:
+        pass
+    spent["total"] = time.process_time()
+    return spent
+
+
+def time_stages(flights: list[Path], references: list[Path]) -> dict:
+    """:func:`staged` of the user's command on ``flights``, in a fresh process."""
+    argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
+            *map(str, references), "--workers", "1"]
+    code = ("import json, sys; from benchmarks.speed_gap import staged; "
+            "print('STAGES ' + json.dumps(staged(sys.argv[1:])))")
+    run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
+                         check=False, cwd=ROOT, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                             p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)})
+    line = next((x for x in run.stdout.splitlines() if x.startswith("STAGES ")), None)
+    if line is None:
+        raise SystemExit(f"error: stages: no timing came back: {run.stderr.strip()[-300:]}")
+    import json
+
+    return json.loads(line.split(" ", 1)[1])
+
+
 def line_fit(runs: list[Run]) -> tuple[float, float]:
     """(fixed CPU s, CPU s per flight-minute) of the least-squares line through ``runs``."""
     x = np.array([r.flight_minutes for r in runs])
@@ -131,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fractions", type=float, nargs="*", default=list(FRACTIONS),
                         help="shares of each flight kept in the length series "
                              f"({LENGTH_FLIGHTS} flights; default 0.5 0.75; none: skip)")
+    parser.add_argument("--stages", action="store_true",
+                        help="time the 26-flight command once by stage instead")
     args = parser.parse_args(argv)
     folder = args.data / CAMPAIGN
     mixed = sorted((folder / "mixed").glob("flight_*.csv.gz"))
@@ -143,6 +206,12 @@ def main(argv: list[str] | None = None) -> int:
           f"Python {platform.python_version()}; load average at start "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; QUADSIM_THREADS="
           f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}")
+    if args.stages:
+        spent = time_stages(mixed, nominal)
+        print("\n| stage | CPU s |\n|---|---:|")
+        for label, value in spent.items():
+            print(f"| {label} | {value:.1f} |")
+        return 0
     runs = []
     for n in args.counts:
         runs.append(time_gap(f"{n} mixed, whole", mixed[:n], nominal))

@@ -1,7 +1,8 @@
 """What the speed-ups of issue 43 item 7 keep must be what was computed: the kept discrepancy
 centre, the kept profile of a marginal, the measured wrench kept per motion, the rotor speeds
 and their derivative shifted in one transform, and the thrust-curve slope decided before the
-refinement (on the real references, where present)."""
+refinement (on the real references, where present); the memo's entries kept by the flight's
+length, and the rotor matrices kept by the vehicle's geometry."""
 
 from pathlib import Path
 from types import SimpleNamespace
@@ -69,6 +70,43 @@ def test_memoised_with_a_tuple_of_references_compares_each_by_identity():
     assert memo_mod.memoised(memo, key, (a, np.ones(3)), compute) == 2   # another array
 
 
+def test_entries_kept_per_flight_follow_its_length_with_the_old_counts_as_floor():
+    # 2^23 values over 16 per sample: a 888-sample fit view keeps 590 entries per kind, a
+    # 30 000-sample flight the old floor
+    assert memo_mod.entries_kept(888, memo_mod.KEPT) == 2 ** 23 // (16 * 888) == 590
+    assert memo_mod.entries_kept(30_000, memo_mod.KEPT) == memo_mod.KEPT == 48
+    assert memo_mod.entries_kept(30_000, 64) == 64
+    n = 888
+    states = SimpleNamespace(t=np.arange(n) * 0.01, position=np.zeros((n, 3)),
+                             velocity=np.zeros((n, 3)), quat=np.tile([1.0, 0, 0, 0], (n, 1)),
+                             body_rate=np.zeros((n, 3)))
+    _, motion = memo_mod.flight_memo({}, states)
+    for k in range(600):
+        memo_mod.kept(motion, "loads", (k,), (), lambda k=k: k)
+    store = motion["loads"]
+    assert len(store) == 590 and next(iter(store)) == (10,)     # the 10 oldest evicted
+    calls = []
+    assert memo_mod.kept(motion, "loads", (10,), (), lambda: calls.append(1) or -1) == 10
+    assert memo_mod.kept(motion, "loads", (9,), (), lambda: calls.append(1) or -1) == -1
+    assert len(calls) == 1
+    # a dict not made by flight_memo keeps KEPT
+    plain: dict = {}
+    for k in range(60):
+        memo_mod.kept(plain, "loads", (k,), (), lambda k=k: k)
+    assert len(plain["loads"]) == memo_mod.KEPT
+
+
+def test_memoised_keeps_entries_by_the_flight_length():
+    n = 888
+    states = SimpleNamespace(t=np.arange(n) * 0.01)
+    memo: dict = {}
+    for k in range(591):
+        memo_mod.memoised(memo, ("wrench", k), states, lambda k=k: k)
+    assert len(memo) == 591                   # past the old 64, within 590 + the one added
+    memo_mod.memoised(memo, ("wrench", 591), states, lambda: 591)
+    assert len(memo) == 592 - 147 and ("wrench", 0) not in memo and ("wrench", 147) in memo
+
+
 def test_speed_and_derivative_shifted_together_read_as_each_alone():
     rng = np.random.default_rng(3)
     n = 257
@@ -119,3 +157,21 @@ def test_early_slope_decision_agrees_with_the_whole_calibration_on_real_referenc
     ref = cal._calibrate(flights, params, curve=True)
     assert said == [True]
     assert not cal.curve_determined(ref)
+
+
+def test_rotor_matrices_kept_by_geometry_are_the_computed_ones():
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    motion: dict = {}
+    heavier = params.replace(mass=params.mass * 1.1, inertia=np.asarray(params.inertia) * 1.2)
+    shifted_com = params.replace(com=np.asarray(params.com, dtype=float) + [0.004, 0.0, 0.0])
+    first = memo_mod._vehicle_matrices(params, motion)[1]
+    same = memo_mod._vehicle_matrices(heavier, motion)[1]
+    other = memo_mod._vehicle_matrices(shifted_com, motion)[1]
+    assert same is first                                  # mass and inertia alone: shared
+    for got, vehicle in ((first, params), (same, heavier), (other, shifted_com)):
+        want = memo_mod.rotor_matrices(vehicle)
+        for g, w in zip(got, want):
+            assert np.array_equal(g, w)
+    assert not np.array_equal(other[0], first[0])         # the torque arms moved with the CoM

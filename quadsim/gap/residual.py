@@ -17,13 +17,14 @@ What is kept, and what it is keyed by (an effect is its class and its values):
 * per flight (:func:`flight_memo`): the body-to-world rotations of the logged attitude and a
   dict the effects keep their own motion-only values in (the cable's attachment
   acceleration and swings) -- keyed by the identity of the logged-motion arrays;
-* per evaluation kind (:func:`memoised`, oldest evicted first past 64 entries): the measured
+* per evaluation kind (:func:`memoised`, oldest evicted first past :func:`entries_kept`
+  entries): the measured
   wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
   model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics), the model
   wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
   the states shifted by one rotor delay;
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
-  past :data:`KEPT` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
+  past :func:`entries_kept` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
   vehicle of the effects that change it, the air velocity of those that move the air, and
   each effect's loads on one vehicle, air velocity and set of rotor speeds -- or, for an
   effect that declares what its loads read (:attr:`quadsim.effects.base.EffectBase.loads_reads`),
@@ -157,7 +158,8 @@ from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
-__all__ = ["KEPT", "acting", "flight_memo", "identity", "kept", "memoised", "rotor_key",
+__all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "identity", "kept",
+           "memoised", "rotor_key",
            "wrench_key", "CHANNELS", "DEFAULT_WINDOW_S", "FlightStates", "channel_unit",
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
@@ -185,9 +187,11 @@ def memoised(memo: dict, key: tuple, states, compute):
     hit = memo.get(key)
     if hit is not None and _same(hit[0], states):
         return hit[1]
-    if len(memo) > 64:          # the oldest of these entries go (the per-flight ones stay)
-        for old in [k for k in memo if isinstance(k, tuple) and k[0] in _PER_EVALUATION][:16]:
-            del memo[old]
+    limit = entries_kept(len(states[0]) if type(states) is tuple else len(states.t), 64)
+    if len(memo) > limit:       # the oldest of these entries go (the per-flight ones stay)
+        old = [k for k in memo if isinstance(k, tuple) and k[0] in _PER_EVALUATION]
+        for k in old[:max(16, limit // 4)]:
+            del memo[k]
     value = compute()
     memo[key] = (states, value)
     return value
@@ -214,7 +218,7 @@ def flight_memo(memo: dict, states) -> tuple[np.ndarray, dict]:
         return hit[1]
     from ..core.frames import quat_to_rotmat
 
-    value = (quat_to_rotmat(states.quat), {})
+    value = (quat_to_rotmat(states.quat), {_LIMIT: entries_kept(len(states.t), KEPT)})
     memo[key] = (arrays, value)
     return value
 
@@ -274,16 +278,32 @@ def _overrides(cls: type, hooks: tuple) -> bool:
     return hit
 
 
-#: entries of one kind that :func:`kept` holds per flight (the oldest used goes first): a
-#: Jacobian moves one parameter at a time, so the unmoved effects' loads and the vehicle
-#: of the point it differentiates at are used again for each column (48 loads of a
+#: entries of one kind that :func:`kept` holds per flight at least (the oldest used goes
+#: first): a Jacobian moves one parameter at a time, so the unmoved effects' loads and the
+#: vehicle of the point it differentiates at are used again for each column (48 loads of a
 #: 30 000-sample flight: 160 MB at most)
 KEPT = 48
+#: float64 values (64 MiB) that one kind of kept entries (:func:`kept`) and the memo's
+#: per-evaluation entries (:func:`memoised`) may hold per flight, an entry counted as 16
+#: values per sample (a wrench 6, a rotor channel or shifted rotor speeds 4-8, an effect's
+#: loads 6-10): a short flight keeps many more entries than the floor, so that what the
+#: explanations' fits revisit (the loads at an earlier delay, the shifted states of an
+#: earlier step) is not computed again; a long one keeps the floor.
+MEMO_VALUES = 2 ** 23
+#: where a flight's motion dict (:func:`flight_memo`) holds its :func:`entries_kept`
+_LIMIT = "gap.entries_kept"
+
+
+def entries_kept(samples: int, floor: int) -> int:
+    """Entries of one kind kept per flight of ``samples`` samples: :data:`MEMO_VALUES` over
+    16 values per sample, at least ``floor``."""
+    return max(floor, MEMO_VALUES // (16 * max(1, samples)))
 
 
 def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     """``compute()``, kept in the flight's ``motion`` dict (:func:`flight_memo`) under
-    ``kind`` and ``key``, least recently used evicted past :data:`KEPT` entries. ``refs``:
+    ``kind`` and ``key``, least recently used evicted past :func:`entries_kept` entries
+    (:data:`KEPT` in a dict not made by :func:`flight_memo`). ``refs``:
     the objects whose ids ``key`` holds; the entry keeps them (so no other object takes
     their ids while it lives) and is used only while they are the same objects."""
     store = motion.get(kind)
@@ -296,7 +316,7 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     value = compute()
     store[key] = (refs, value)
     store.move_to_end(key)
-    if len(store) > KEPT:
+    if len(store) > motion.get(_LIMIT, KEPT):
         store.popitem(last=False)
     return value
 
@@ -525,7 +545,7 @@ def model_wrench(states: FlightStates, params: VehicleParams,
         vehicle_key = (id(params), acting(effect_set.effects, ("apply_to_params",)))
         vehicle, matrices = kept(
             flight_memo, "vehicle", vehicle_key, (params,),
-            lambda: _vehicle_matrices(effect_set.apply_to_params(params)))
+            lambda: _vehicle_matrices(effect_set.apply_to_params(params), flight_memo))
         air_key = acting(effect_set.effects, ("air_velocity",))
         air = kept(flight_memo, "air", air_key, (),
                    lambda: states.velocity - effect_set.air_velocity(states.t, states.position))
@@ -559,8 +579,14 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     return force, torque, vehicle
 
 
-def _vehicle_matrices(vehicle: VehicleParams):
-    return vehicle, rotor_matrices(vehicle)
+def _vehicle_matrices(vehicle: VehicleParams, flight_memo: dict):
+    """``vehicle`` and its :func:`rotor_matrices`, these kept in ``flight_memo`` by what they
+    depend on (the rotors, the CoM, the thrust and drag factors): a vehicle that differs in
+    its mass or inertia alone shares them."""
+    key = (id(vehicle.rotors), np.asarray(vehicle.com, dtype=float).tobytes(),
+           float(vehicle.thrust_factor), float(vehicle.drag_factor))
+    return vehicle, kept(flight_memo, "rotor_matrices", key, (vehicle.rotors,),
+                         lambda: rotor_matrices(vehicle))
 
 
 def _vehicle_values(flight_memo: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
