@@ -464,14 +464,14 @@ VERTICAL_KEY = "body_drag.cd_area_vertical"
 
 
 def vertical_prior(reference: Reference, fixed: dict) -> tuple[float, float] | None:
-    """(centre, spread) in m^2 of the vertical C_d A a quadratic wind reading carries as a
-    parameter of its own (:func:`wind_readings`): the references' shared vertical drag under
-    the reading's law -- their value (the law on the air speed), or its equivalent along body
-    z (``fixed["cd_area_vertical"]``, the law per body axis) -- spread by their
-    :func:`marginal_sd` (the pooled standard error with the between-flight scatter, and the
-    physical prior), scaled by the same equivalence. None where the references share no
-    vertical drag, or it (or its equivalent) is 0 or without spread: the shared value stands
-    as before.
+    """(centre, spread) in m^2 of the vertical C_d A that a wind reading through the law on
+    the air speed (``fixed`` without ``per_axis``) carries as a parameter of its own
+    (:func:`wind_readings`): the references' shared vertical drag (the same law), their value
+    spread by their :func:`marginal_sd` (the pooled standard error with the between-flight
+    scatter, and the physical prior). None under the law per body axis (its vertical force
+    ``-1/2 rho C_d A_z |v_z| v_z`` does not grow with a horizontal wind: the references'
+    equivalent stays fixed, as before), and where the references share no vertical drag or
+    it is at 0 (the shared value stands).
 
     Why a parameter and not the shared value marginalised by its Jacobian at the references'
     place: under the law on the air speed the vertical force ``-1/2 rho C_d A_z |v| v_z``
@@ -484,13 +484,10 @@ def vertical_prior(reference: Reference, fixed: dict) -> tuple[float, float] | N
     steady air force's size is fixed, the wind and the area trade). Carried here: 4.08
     +- 0.25 m/s (95 %), C_d A 19 cm^2, the vertical 3 +- 4 cm^2."""
     names = list(reference.candidate.parameter_names)
-    if VERTICAL_KEY not in names:
+    if fixed.get("per_axis", 0.0) >= 0.5 or VERTICAL_KEY not in names:
         return None
     k = names.index(VERTICAL_KEY)
     value, spread = float(reference.theta[k]), float(marginal_sd(reference)[k])
-    if fixed.get("per_axis", 0.0) >= 0.5:      # the law per body axis: its equivalent
-        scale = float(fixed.get("cd_area_vertical", 0.0)) / value if value > 0 else 0.0
-        value, spread = value * scale, spread * scale
     return (value, spread) if value > 0 and spread > 0 else None
 
 
