@@ -15,7 +15,8 @@ the drag area fitted with the wind grew instead of the wind, item 5's symptom). 
 the references' vertical drag (13 cm^2, predicted at 43 cm^2 at the flight's place) was held
 at their air speed; a quadratic wind reading now carries it as a parameter of its own with
 the references' prior (quadsim.gap.explanations.vertical_prior): 2.06 +- 0.29 m/s (C_d A 19
-cm^2) and 4.08 +- 0.25 m/s (C_d A 19.1 +- 2.3 cm^2, vertical 2.8 +- 4.3 cm^2).
+cm^2) and 4.08 +- 0.25 m/s (C_d A 19.1 +- 2.3 cm^2, vertical 2.8 +- 4.3 cm^2); 5 m/s 5.01 +-
+0.24 (C_d A 19.8 cm^2; before: 3.73 +- 0.11 through 34.8 cm^2).
 """
 
 from __future__ import annotations
@@ -62,14 +63,15 @@ def judged(cf):
         refs = [_commands_only(cf, (), seed, path) for seed, path in enumerate(PATHS)]
         flights = {"calm": _commands_only(cf, (), 21),
                    2.0: _commands_only(cf, (make_effect("wind", vx=2.0),), 22),
-                   4.0: _commands_only(cf, (make_effect("wind", vx=4.0),), 23)}
+                   4.0: _commands_only(cf, (make_effect("wind", vx=4.0),), 23),
+                   5.0: _commands_only(cf, (make_effect("wind", vx=5.0),), 33)}
         roles, model = synthesise_all({"reference": refs, "f": list(flights.values())}, cf)
         reference = calibrate(prepare(roles["reference"], cf), cf)
         out = {k: judge_one(log, reference) for k, log in zip(flights, roles["f"])}
         return out | {"model": model, "reference": reference}
 
 
-@pytest.mark.parametrize("speed", [2.0, 4.0])
+@pytest.mark.parametrize("speed", [2.0, 4.0, 5.0])
 def test_a_wind_is_read_with_its_speed_inside_the_interval(judged, speed):
     verdict = judged[speed]
     assert verdict.name == "wind", verdict.answer
