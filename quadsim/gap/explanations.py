@@ -68,6 +68,7 @@ __all__ = [
     "prior_spreads",
     "reference_delay_sd",
     "reference_determined",
+    "vertical_prior",
     "wind_readings",
     "with_wind",
 ]
@@ -419,8 +420,9 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     on the air speed, ``|v| v`` (:data:`WIND_DRAG`), or each body axis on its own, ``|v_i|
     v_i`` (:data:`WIND_DRAG_AXES`). C_d A is centred on the references' own equivalent under
     that law (:func:`quadsim.gap.calibrate.quadratic_equivalent`), spread
-    :data:`QUADRATIC_SD` of it, the rotor drag replaced. The plain reading has half the
-    wind's prior, the two quadratic laws a quarter each.
+    :data:`QUADRATIC_SD` of it, the rotor drag replaced; under the law on the air speed the
+    references' vertical drag is a parameter of the reading too (:func:`vertical_prior`). The
+    plain reading has half the wind's prior, the two quadratic laws a quarter each.
 
     Why: at the references' speeds (about 1 m/s) a linear and a quadratic law give the same
     force; in a wind of several m/s the quadratic law's force grows with the air speed
