@@ -68,6 +68,7 @@ __all__ = [
     "prior_spreads",
     "reference_delay_sd",
     "reference_determined",
+    "vertical_prior",
     "wind_readings",
     "with_wind",
 ]
@@ -419,8 +420,9 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     on the air speed, ``|v| v`` (:data:`WIND_DRAG`), or each body axis on its own, ``|v_i|
     v_i`` (:data:`WIND_DRAG_AXES`). C_d A is centred on the references' own equivalent under
     that law (:func:`quadsim.gap.calibrate.quadratic_equivalent`), spread
-    :data:`QUADRATIC_SD` of it, the rotor drag replaced. The plain reading has half the
-    wind's prior, the two quadratic laws a quarter each.
+    :data:`QUADRATIC_SD` of it, the rotor drag replaced; under the law on the air speed the
+    references' vertical drag is a parameter of the reading too (:func:`vertical_prior`). The
+    plain reading has half the wind's prior, the two quadratic laws a quarter each.
 
     Why: at the references' speeds (about 1 m/s) a linear and a quadratic law give the same
     force; in a wind of several m/s the quadratic law's force grows with the air speed
@@ -443,13 +445,52 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     laws = quadratic_laws(reference)
     if not laws:
         return [dataclasses.replace(plain, log_prior=0.0)]
-    return [plain] + [
-        _one("wind", variant, [("wind", {}, ("vx", "vy")), ("body_drag", fixed, ("cd_area",))],
-             list(mean) + [drag], list(spread) + [QUADRATIC_SD * drag],
-             replaces=("wind",) + law_replaces(fixed), log_prior=-np.log(2.0 * len(laws)),
-             coupled=True,
-             kin=("wind",))
-        for variant, fixed, drag in laws]
+    out = [plain]
+    for variant, fixed, drag in laws:
+        fitted, centre, sd = ("cd_area",), [drag], [QUADRATIC_SD * drag]
+        replaces = ("wind",) + law_replaces(fixed)
+        own = vertical_prior(reference, fixed)
+        if own is not None:          # the references' vertical drag, refitted at this wind
+            fixed = {k: v for k, v in fixed.items() if k != "cd_area_vertical"}
+            fitted, centre, sd = fitted + ("cd_area_vertical",), centre + [own[0]], sd + [own[1]]
+            replaces = ("wind", "rotor_drag", "body_drag")
+        out.append(_one("wind", variant, [("wind", {}, ("vx", "vy")),
+                                          ("body_drag", fixed, fitted)],
+                        list(mean) + centre, list(spread) + sd, replaces=replaces,
+                        log_prior=-np.log(2.0 * len(laws)), coupled=True, kin=("wind",)))
+    return out
+
+
+#: the references' shared vertical drag (:data:`quadsim.gap.calibrate.BODY_DRAG`)
+VERTICAL_KEY = "body_drag.cd_area_vertical"
+
+
+def vertical_prior(reference: Reference, fixed: dict) -> tuple[float, float] | None:
+    """(centre, spread) in m^2 of the vertical C_d A that a wind reading through the law on
+    the air speed (``fixed`` without ``per_axis``) carries as a parameter of its own
+    (:func:`wind_readings`): the references' shared vertical drag (the same law), their value
+    spread by their :func:`marginal_sd` (the pooled standard error with the between-flight
+    scatter, and the physical prior). None under the law per body axis (its vertical force
+    ``-1/2 rho C_d A_z |v_z| v_z`` does not grow with a horizontal wind: the references'
+    equivalent stays fixed, as before), and where the references share no vertical drag or
+    it is at 0 (the shared value stands).
+
+    Why a parameter and not the shared value marginalised by its Jacobian at the references'
+    place: under the law on the air speed the vertical force ``-1/2 rho C_d A_z |v| v_z``
+    grows with the horizontal air speed, so in a wind of several m/s the references' vertical
+    drag makes a force their own flights (about 1 m/s) never tested, which the linear
+    marginal cannot move. Measured on command-only crazyflie21 flights
+    (tests/test_commands_wind.py, a 20 cm^2 body drag, no vertical drag): the references'
+    vertical C_d A, 13 cm^2, predicted at 43 +- 50 cm^2 at a 4 m/s flight's place; held
+    there, the wind was read 3.28 +- 0.15 m/s through a sideways C_d A of 28.8 cm^2 (the
+    steady air force's size is fixed, the wind and the area trade). Carried here: 4.08
+    +- 0.25 m/s (95 %), C_d A 19 cm^2, the vertical 3 +- 4 cm^2."""
+    names = list(reference.candidate.parameter_names)
+    if fixed.get("per_axis", 0.0) >= 0.5 or VERTICAL_KEY not in names:
+        return None
+    k = names.index(VERTICAL_KEY)
+    value, spread = float(reference.theta[k]), float(marginal_sd(reference)[k])
+    return (value, spread) if value > 0 and spread > 0 else None
 
 
 def quadratic_laws(reference: Reference) -> list[tuple[str, dict, float]]:
