@@ -680,8 +680,10 @@ class Practical:
     one of its own determined parameters, its 95 % interval lies beyond
     :data:`quadsim.gap.calibrate.PRACTICAL_Z` between-flight standard deviations of the same
     reading fitted on each training flight alone, from the no-difference value (the prior's
-    centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``. The training flights share the
-    gap, so the scale is their spread about no difference, not about their mean. Measured
+    centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``, ``sd_between`` their physical
+    spread (their readings' scatter less their own estimation noise,
+    :meth:`quadsim.gap.calibrate.Spread.of`; the centre is exact). The training flights share
+    the gap, so the scale is their spread about no difference, not about their mean. Measured
     lazily (:meth:`rank`): only for the readings that lead, at most
     :data:`PRACTICAL_ROUNDS` of them; none below 3 training flights (no spread to speak
     of: the statistical rule alone)."""
@@ -721,7 +723,7 @@ class Practical:
         centre = dict(zip(expl.parameter_names, expl.mean))
         out = {}
         for key, s in spreads(per).get((w.name, expl.variant), {}).items():
-            out[key] = Spread(float(centre.get(key, 0.0)), s.sd, s.count)
+            out[key] = Spread(float(centre.get(key, 0.0)), s.sd, s.count, s.noise)
         return out
 
 
