@@ -56,7 +56,8 @@ from .flightlog import WITHOUT_POSE
 from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
-           "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_status"]
+           "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_source",
+           "rotor_order_status"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -459,38 +460,92 @@ def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
     return float(np.sum(per_axis))
 
 
+def _order_sources(log, params, commands: bool) -> list[tuple[str, np.ndarray]]:
+    """(name, (N, R) rad/s) of the rotor signals that can stand for the rotor speeds in the
+    torque balance: the logged speeds, and the commands (the squared command scaled by the
+    set's max_speed: its per-axis gain is fitted anyway, so only the shape of Omega(u)
+    matters) where ``commands`` or where the speeds are logged too."""
+    out = []
+    if log.rotor_speed is not None:
+        out.append(("rotor speeds", log.rotor_speed))
+    if log.rotor_command is not None and params is not None and (commands or out):
+        out.append(("commands", np.clip(log.rotor_command, 0.0, None)
+                    * float(params.max_speed)))
+    return out
+
+
+def _best_rss(balance: _TorqueBalance, torque_rows: np.ndarray) -> np.ndarray:
+    """(3,) the balance's best residual per axis over every column order (N m s)^2."""
+    import itertools
+
+    return np.min([_order_fit(balance, torque_rows, perm)[0] for perm in
+                   itertools.permutations(range(balance.rotors))], axis=0)
+
+
+def rotor_order_source(log, params, *, commands: bool = False) -> str:
+    """The rotor signals the order test reads (:func:`rotor_order_evidence`): "rotor
+    speeds", "commands", "rotor speeds and commands" or "" (none judged)."""
+    return " and ".join(name for name, _ in _order_choice(log, params, commands))
+
+
+def _order_choice(log, params, commands: bool) -> list:
+    """[(source name, its :class:`_TorqueBalance`)] that :func:`rotor_order_evidence`
+    reads; [] when the log cannot be judged."""
+    if (params is None or log.body_rate is None or len(log.t) < 50
+            or params.rotor_count > 6 or not np.isfinite(log.body_rate).all()):
+        return []
+    from ..vehicle.rotors import allocation_matrix
+
+    torque_rows = allocation_matrix(params)[3:6]
+    judged = []
+    for name, speeds in _order_sources(log, params, commands):
+        if speeds.shape[1] != params.rotor_count or not np.isfinite(speeds).all():
+            continue
+        balance = _torque_balance(log, params, speeds)
+        if balance is not None:
+            judged.append((name, balance, _best_rss(balance, torque_rows)))
+    if len(judged) < 2:
+        return [(name, balance) for name, balance, _ in judged]
+    best = min(judged, key=lambda j: float(np.sum(j[2] / np.maximum(j[1].noise ** 2,
+                                                                   1e-300))))
+    kept = []
+    for name, balance, rss in judged:      # measured at the better fit's own misfit scale
+        scale = np.maximum(balance.noise ** 2, best[2] / max(balance.dof, 1))
+        if float(np.sum((rss - best[2]) / scale)) <= ORDER_CHI2:
+            kept.append((name, balance))
+    return kept
+
+
 def rotor_order_evidence(log, params, *, commands: bool = False
                          ) -> dict[tuple[int, ...], float]:
     """Delta chi^2 of every other order of the rotor columns over the log's own (permutation
     -> value; see :func:`check_rotor_order`); {} when the log cannot be judged (no gyro or
     rotor speeds, another rotor count, under 50 samples or 5 windows, more than 6 rotors).
-    ``commands``: without rotor speeds, the motor commands stand for them (the squared
-    command, scaled by the set's max_speed: its per-axis gain is fitted anyway, so only the
-    shape of Omega(u) matters; a nonlinear map or the motor lag weakens the evidence)."""
+    ``commands``: without rotor speeds, the motor commands stand for them (a nonlinear map
+    or the motor lag weakens the evidence).
+
+    Where both speeds and commands are logged, each is read, and a rival order's evidence is
+    the larger of the two (the columns must be in the log's order in every signal), except a
+    signal whose best column order fits the momentum worse than the other's by more than
+    ``ORDER_CHI2`` (per axis at the better fit's scale, as the orders are compared): both
+    sides of the balance are the same momentum, so the residuals compare directly, and the
+    signal that explains less carries noise of its own that the other does not (a
+    rotor-speed sensor's noise, integrated, is noise in the regressor), so its orders' small
+    differences are that noise meeting whatever other torque the flight shares (a wind's:
+    measured in CHANGELOG.md, issue 47 item 7)."""
     import itertools
 
-    speeds = log.rotor_speed
-    if speeds is None and commands and log.rotor_command is not None and params is not None:
-        speeds = np.clip(log.rotor_command, 0.0, None) * float(params.max_speed)
-    if (params is None or speeds is None or log.body_rate is None
-            or speeds.shape[1] != params.rotor_count or len(log.t) < 50
-            or params.rotor_count > 6):
-        return {}
-    if not (np.isfinite(log.body_rate).all() and np.isfinite(speeds).all()):
-        return {}
     from ..vehicle.rotors import allocation_matrix
 
-    balance = _torque_balance(log, params, speeds)
-    if balance is None:
-        return {}
-    torque_rows = allocation_matrix(params)[3:6]
-    own_order = tuple(range(params.rotor_count))
-    own, _ = _order_fit(balance, torque_rows, own_order)
-    evidence = {}
-    for perm in itertools.permutations(own_order):
-        if perm != own_order:
-            evidence[perm] = _order_evidence(balance, own, *_order_fit(balance, torque_rows,
-                                                                        perm))
+    torque_rows = allocation_matrix(params)[3:6] if params is not None else None
+    own_order = tuple(range(params.rotor_count)) if params is not None else ()
+    evidence: dict = {}
+    for _, balance in _order_choice(log, params, commands):
+        own, _ = _order_fit(balance, torque_rows, own_order)
+        for perm in itertools.permutations(own_order):
+            if perm != own_order:    # every signal read must fit the log's order
+                value = _order_evidence(balance, own, *_order_fit(balance, torque_rows, perm))
+                evidence[perm] = max(evidence.get(perm, -np.inf), value)
     return evidence
 
 
@@ -518,11 +573,14 @@ def rotor_order_status(log, params) -> RotorOrder:
     out, and a verdict on the log must say so (issue 44: never stated at > 99 %). A log of
     several airborne stretches (segments): each stretch's Delta chi^2 summed (independent
     samples; the balance's integrals never run across a ground span)."""
-    source = "rotor speeds" if log.rotor_speed is not None else "commands"
     evidence: dict = {}
+    sources = []
     for part in log.parts():
+        sources.append(rotor_order_source(part, params, commands=True))
         for perm, value in rotor_order_evidence(part, params, commands=True).items():
             evidence[perm] = evidence.get(perm, 0.0) + value
+    source = " and ".join(dict.fromkeys(s for s in sources if s)) or (
+        "rotor speeds" if log.rotor_speed is not None else "commands")
     where = _where(log)
     if not evidence:
         return RotorOrder(False, False, None, float("nan"), "",
