@@ -377,6 +377,10 @@ class _TorqueBalance:
     rotors: int
     dof: int               # samples - windows - 2 fitted
     noise: np.ndarray      # (3,) N m s: I_aa x the gyro's white noise
+    #: (R,) per-sample variance (rad^4) of each column's integral that its sensor's white
+    #: noise makes, None for commands (:func:`_regressor_noise`)
+    column_noise: np.ndarray | None = None
+    samples: int = 0
 
 
 def _saturated(log, params) -> np.ndarray:
@@ -391,11 +395,13 @@ def _saturated(log, params) -> np.ndarray:
     return out
 
 
-def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBalance | None:
+def _torque_balance(log, params, speeds: np.ndarray | None = None, *,
+                    sensor: bool = False) -> _TorqueBalance | None:
     """The balance of ``log`` with ``speeds`` (N, R) rad/s standing for the rotor speeds
     (default the log's). Saturated samples (:func:`_saturated`) are left out: a window is
     cut at each of them, so that the integrals' error across one stays out of the window
-    means of the samples kept."""
+    means of the samples kept. ``sensor``: ``speeds`` are a sensor's (their white noise is
+    estimated, :func:`_regressor_noise`)."""
     speeds = log.rotor_speed if speeds is None else speeds
     t = log.t
     m = max(1, round(ORDER_WINDOW_S / float(np.median(np.diff(t)))))
@@ -420,7 +426,44 @@ def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBal
     lag = z[:-1].T @ z[1:]
     return _TorqueBalance(z.T @ z, 0.5 * (lag + lag.T), squares.shape[1],
                           int(keep.sum()) - count - 2,
-                          np.diag(inertia) * _gyro_noise(log.body_rate))
+                          np.diag(inertia) * _gyro_noise(log.body_rate),
+                          _regressor_noise(speeds, t, m) if sensor else None,
+                          int(keep.sum()))
+
+
+def _regressor_noise(speeds: np.ndarray, t: np.ndarray, m: int) -> np.ndarray:
+    """(R,) the variance per sample that a speed sensor's white noise sigma_j (from second
+    differences, as the gyro's: :func:`_gyro_noise`) puts in column j of the balance: the
+    squared speed's noise 2 Omega_j sigma_j, integrated over a window of m samples of dt and
+    its mean removed, a random walk of variance (2 Omega_j sigma_j dt)^2 m / 6 on average."""
+    dt = float(np.median(np.diff(t)))
+    sigma = _gyro_noise(speeds)
+    return (2.0 * np.mean(np.abs(speeds), axis=0) * sigma * dt) ** 2 * m / 6.0
+
+
+#: an axis of the balance tells two column orders apart only where the rotor-speed sensor's
+#: noise makes under this share of the variance of either order's torque column: noise as large as
+#: the signal halves the fitted gain (errors in variables), and the orders then differ by how
+#: that noise meets another torque the flight shares. Measured (CHANGELOG, issue 47 item 7):
+#: generated figure-8s with 10 rad/s of speed noise 0.65-1.7 on every axis, a generated
+#: steps flight 0.18-0.24 on roll and pitch, the real Crazyflie flights below 0.005
+ORDER_NOISE_SHARE = 0.5
+
+
+def _noise_share(balance: _TorqueBalance, torque_rows: np.ndarray, columns) -> np.ndarray:
+    """(3,) the share of the variance of the torque column per axis, rotor i from column
+    ``columns[i]``, that the sensor's noise makes (0 for a signal without one)."""
+    if balance.column_noise is None or balance.samples <= 0:
+        return np.zeros(3)
+    r = balance.rotors
+    g = balance.gram[3:3 + r, 3:3 + r]
+    out = np.zeros(3)
+    for a in range(3):
+        mix = np.zeros(r)
+        mix[list(columns)] = torque_rows[a]
+        total = float(mix @ g @ mix) / balance.samples
+        out[a] = float(mix ** 2 @ balance.column_noise) / total if total > 0 else 1.0
+    return out
 
 
 def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
@@ -450,11 +493,14 @@ def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
 
 
 def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
-                    rho: np.ndarray) -> float:
-    """Delta chi^2 of an order over the log's own (see :func:`check_rotor_order`)."""
+                    rho: np.ndarray, told: np.ndarray | None = None) -> float:
+    """Delta chi^2 of an order over the log's own (see :func:`check_rotor_order`); ``told``
+    (3,) bool: the axes that can tell an order (:data:`ORDER_NOISE_SHARE`; default all)."""
     scale = np.maximum(balance.noise ** 2, np.minimum(own, rss) / max(balance.dof, 1))
     effective = np.clip((1.0 - rho) / (1.0 + rho), 1e-3, 1.0)
     per_axis = effective * (own - rss) / scale
+    if told is not None:
+        per_axis = np.where(told, per_axis, 0.0)
     if per_axis.min() < -ORDER_CHI2:     # far worse on one axis: a model error, not an order
         return float(per_axis.min())
     return float(np.sum(per_axis))
@@ -501,7 +547,7 @@ def _order_choice(log, params, commands: bool) -> list:
     for name, speeds in _order_sources(log, params, commands):
         if speeds.shape[1] != params.rotor_count or not np.isfinite(speeds).all():
             continue
-        balance = _torque_balance(log, params, speeds)
+        balance = _torque_balance(log, params, speeds, sensor=name == "rotor speeds")
         if balance is not None:
             judged.append((name, balance, _best_rss(balance, torque_rows)))
     if len(judged) < 2:
@@ -542,9 +588,14 @@ def rotor_order_evidence(log, params, *, commands: bool = False
     evidence: dict = {}
     for _, balance in _order_choice(log, params, commands):
         own, _ = _order_fit(balance, torque_rows, own_order)
+        share = _noise_share(balance, torque_rows, own_order)
         for perm in itertools.permutations(own_order):
             if perm != own_order:    # every signal read must fit the log's order
-                value = _order_evidence(balance, own, *_order_fit(balance, torque_rows, perm))
+                # an axis tells the two apart where either order's column is above the noise
+                told = np.minimum(share, _noise_share(balance, torque_rows, perm)) \
+                    < ORDER_NOISE_SHARE
+                value = _order_evidence(balance, own, *_order_fit(balance, torque_rows, perm),
+                                        told)
                 evidence[perm] = max(evidence.get(perm, -np.inf), value)
     return evidence
 
