@@ -75,3 +75,57 @@ def test_a_body_drag_six_times_the_references_is_named_a_body_drag(cf):
     assert flight["verdict"] == "body_drag", flight["answer"]
     names = [r["name"] for r in flight["posterior"]]
     assert "wind" not in names and "body_drag+wind" in names, names
+
+
+def _heldout_wind(drag, wind, wind_sd=0.05, drag_sd=2.9e-6):
+    """Held out, the wind reading carries a free rotor drag centred on none (prior spreads
+    5 m/s and ``drag_sd``)."""
+    names = ("wind.vx", "wind.vy", "rotor_drag.coefficient")
+    expl = SimpleNamespace(parts=(("wind", {}, ("vx", "vy")),
+                                  ("rotor_drag", {}, ("coefficient",))),
+                           parameter_names=names, mean=(0.0, 0.0, 0.0),
+                           sd=(5.0, 5.0, drag_sd), variant="", fixed_values={})
+    return SimpleNamespace(name="wind", explanation=expl, air_force=None,
+                           values=dict(zip(names, (wind, 0.0, drag))),
+                           post_sd=dict(zip(names, (wind_sd, wind_sd, 0.05 * drag_sd))),
+                           determined=dict.fromkeys(names, True), log_z=0.0)
+
+
+def test_heldout_leads_are_named_by_the_same_rule(cf):
+    """Held out (quadsim.gap.diagnose.readings_of, Decision): a wind of 0.05 +- 0.1 m/s
+    through a rotor drag 10 prior spreads from none is a rotor drag; the answer's name is the
+    row's, while the entry (the fitted candidate) is still found under either name; a drag
+    within LEAD_Z spreads leaves the wind (and a pair) its own name."""
+    from quadsim.gap.diagnose import Decision, Weighed, readings_of
+
+    ev = _heldout_wind(10 * 2.9e-6, 0.05)
+    assert change_sizes(ev)["rotor_drag"] == pytest.approx(10.0)
+    assert reading_name("wind", ev) == "rotor_drag"
+    assert reading_name("wind", _heldout_wind(10 * 2.9e-6, 2.0)) == "rotor_drag+wind"
+    small = _heldout_wind(1.5 * 2.9e-6, 2.0)           # asserted, but 1.5 spreads
+    assert reading_name("wind", small) == "wind"
+    assert reading_name("wind+battery_sag", small) == "wind+battery_sag"
+    # a pair names each part once (it was "a+b+a+b" for a pair's key)
+    pair = SimpleNamespace(explanation=SimpleNamespace(
+        parts=(("mass_offset", {}, ("mass",)), ("thrust_factor", {}, ("change",))),
+        parameter_names=("mass_offset.mass", "thrust_factor.change"), mean=(0.0, 0.0),
+        sd=(0.01, 0.05)), values={"mass_offset.mass": 0.005, "thrust_factor.change": 0.2},
+        post_sd={"mass_offset.mass": 1e-4, "thrust_factor.change": 0.01},
+        determined={"mass_offset.mass": True, "thrust_factor.change": True})
+    assert reading_name("mass_offset+thrust_factor", pair) == "thrust_factor+mass_offset"
+
+    reference = SimpleNamespace(params=cf, values=dict)
+    w = Weighed(ev, ev, [], [], 0.0)
+    rows = readings_of([("wind", 0.99, w)], reference)
+    assert rows[0].name == "rotor_drag"
+    entry = {"name": "wind", "probability": 0.99}
+    decision = Decision((("wind", 0.99, w),), tuple(rows), (entry,), w, "wind", None, None,
+                        None, ())
+    assert decision.shown == "rotor_drag"
+    assert decision.entry("rotor_drag") is entry and decision.entry("wind") is entry
+    # --write-effects finds the candidate behind the renamed lead
+    from quadsim.gap.report import named_candidate
+    assert named_candidate({"verdict": {"outcome": "effect", "effect": "rotor_drag"},
+                            "effects": [entry]}) == "wind"
+    assert named_candidate({"verdict": {"outcome": "effect", "effect": "wind"},
+                            "effects": [{"name": "mass_offset"}, entry]}) == "wind"

@@ -115,7 +115,9 @@ def test_convert_with_a_model_refuses_what_gap_refuses(gentle, tmp_path, capsys)
 
     right, swapped, out = tmp_path / "right.csv", tmp_path / "swapped.csv", tmp_path / "o.csv"
     write_log(right, gentle)
-    write_log(swapped, dataclasses.replace(gentle, rotor_speed=gentle.rotor_speed[:, [1, 0, 2, 3]]))
+    # every rotor column in the swapped order (speeds and commands): what --rotor-map undoes
+    write_log(swapped, dataclasses.replace(gentle, rotor_speed=gentle.rotor_speed[:, [1, 0, 2, 3]],
+                                           rotor_command=gentle.rotor_command[:, [1, 0, 2, 3]]))
     before = swapped.read_bytes()
     assert convert([str(swapped), "-o", str(out), "--model", "crazyflie21"]) == 2
     err = _one_line(capsys, str(swapped), ": rotor_*: rotor order", "--rotor-map 2,1,3,4)")

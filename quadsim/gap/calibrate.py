@@ -23,8 +23,27 @@ without it (:func:`leave_one_out`). What comes out:
 
 **Practical significance** (:func:`negligible`): a reading on a judged flight is a
 difference only when, on at least one of its own determined parameters, its 95 % interval
-(1.96 posterior spreads) lies beyond :data:`PRACTICAL_Z` between-flight standard deviations
-of the same reading on the references: ``|v - mean_ref| - 1.96 sd_post > 2 sd_ref``. A
+lies beyond :data:`PRACTICAL_Z` *physical* between-flight standard deviations ``tau`` of the
+same reading on the references:
+
+    |v - mean_ref| - 1.96 sqrt(sd_post^2 + se_mean^2) > PRACTICAL_Z tau
+
+Each reference's reading v_i carries its own estimation noise (its posterior SD s_i), so
+their sample variance is tau^2 + mean(s_i^2) in expectation: ``tau`` is the method-of-moments
+random-effects estimate sqrt(max(0, var(v_i) - mean(s_i^2))) (:meth:`Spread.of`; ``var``
+with ddof 1), the same estimator as the shared parameters' scatter (:meth:`PerFlight.scatter`).
+The flight's own noise is counted once, in its interval; ``se_mean`` = sqrt(var(v_i) / n) is
+the references' mean's own standard error.
+
+The floor: tau^2 >= min(1, sqrt(2 / (n - 1))) var(v_i), one standard error of the sample
+variance itself (normal readings). An estimate var - mean(s_i^2) of 0 or less says only that
+the physical spread lies below what n readings resolve, not that it is nil, so ``tau`` is
+never taken below the spread the references cannot exclude at one standard error; capped at
+their whole scatter (reached at n = 3: the rule before the noise was taken out), shrinking as
+n^(-1/4) (10 references: 0.69 of their scatter). The floor scales with the observed scatter,
+not with the posterior SDs: where those exceed the readings' scatter (on real references,
+most readings: docs/gap.md), a floor from them would widen the band beyond the scatter the
+references actually show. A
 reading that does not is what the references themselves show flight to flight (a real
 vehicle's rotor that reads -3 % on one reference and +2 % on the next): it counts as "no
 difference" (:func:`quadsim.gap.judge.posterior`), as an undetermined reading does. The
@@ -215,13 +234,30 @@ class PerFlight:
 
 @dataclass(frozen=True)
 class Spread:
-    """One parameter of one reading on the references: ``mean`` and ``sd`` (the
-    between-flight standard deviation, ddof 1) of its fitted values over ``count``
-    reference flights (the parameter's SI unit)."""
+    """One parameter of one reading on the references (the parameter's SI unit): ``mean``
+    of its fitted values over ``count`` reference flights, ``sd`` their *physical*
+    between-flight standard deviation (their scatter less their own estimation noise: module
+    doc, :meth:`of`), ``noise`` the RMS of their posterior SDs and ``mean_se`` the standard
+    error of ``mean`` (0: a centre known exactly)."""
 
     mean: float
     sd: float
     count: int
+    noise: float = 0.0
+    mean_se: float = 0.0
+
+    @classmethod
+    def of(cls, values, post_sd) -> Spread:
+        """The spread of readings ``values`` (n >= 2) with posterior SDs ``post_sd``:
+        ``sd`` = sqrt(max(var - mean(post_sd^2), min(1, sqrt(2 / (n - 1))) var)), ``var``
+        = var(values, ddof 1) (method of moments, E var = tau^2 + mean s_i^2, floored at one
+        standard error of ``var``: module doc), ``noise`` = sqrt(mean(post_sd^2)),
+        ``mean_se`` = sqrt(var / n)."""
+        v, s = np.asarray(values, float), np.asarray(post_sd, float)
+        var, noise2 = float(v.var(ddof=1)), float(np.mean(s ** 2))
+        floor = min(1.0, np.sqrt(2.0 / (len(v) - 1))) * var
+        return cls(float(v.mean()), float(np.sqrt(max(var - noise2, floor))), len(v),
+                   float(np.sqrt(noise2)), float(np.sqrt(var / len(v))))
 
 
 @dataclass(frozen=True)
@@ -275,7 +311,7 @@ class SelfCheck:
                                  for n, v, c in self.false_alarms],
                 "clean": self.clean, "channels": self.channels(),
                 "spreads": {f"{name}{' (' + variant + ')' if variant else ''}":
-                            {p: [s.mean, s.sd, s.count] for p, s in params.items()}
+                            {p: [s.mean, s.sd, s.count, s.noise] for p, s in params.items()}
                             for (name, variant), params in self.spreads.items()}}
 
 
@@ -309,38 +345,45 @@ def _own(key: str) -> bool:
 
 
 def readings(rows) -> dict:
-    """(name, variant) -> parameter -> value of one flight's Evidence ``rows``: the
-    explanations' own parameters that flight determines (an undetermined value sits at its
-    prior's centre on every flight: no spread of the references' own), of the readings
-    fitted to convergence (a screened one keeps its one linear step from the prior's centre,
-    :mod:`quadsim.gap.evidence`: not the flight's value), nuisance ones left out."""
-    return {(ev.name, ev.explanation.variant): {k: float(v) for k, v in ev.values.items()
+    """(name, variant) -> parameter -> (value, posterior SD) of one flight's Evidence
+    ``rows``: the explanations' own parameters that flight determines (an undetermined value
+    sits at its prior's centre on every flight: no spread of the references' own), of the
+    readings fitted to convergence (a screened one keeps its one linear step from the prior's
+    centre, :mod:`quadsim.gap.evidence`: not the flight's value), nuisance ones left out."""
+    return {(ev.name, ev.explanation.variant): {k: (float(v), float(ev.post_sd[k]))
+                                               for k, v in ev.values.items()
                                                if _own(k) and ev.determined.get(k)}
             for ev in rows if ev.name != "no_difference" and not getattr(ev, "screened", False)}
 
 
 def spreads(per_flight: list[dict]) -> dict:
-    """(name, variant) -> parameter -> :class:`Spread` over flights' :func:`readings`
-    (at least two flights per parameter)."""
+    """(name, variant) -> parameter -> :class:`Spread` (:meth:`Spread.of`) over flights'
+    :func:`readings` (at least two flights per parameter)."""
     out: dict = {}
     for key in {k for r in per_flight for k in r}:
         params: dict = {}
         for p in {q for r in per_flight for q in r.get(key, {})}:
-            values = np.array([r[key][p] for r in per_flight if p in r.get(key, {})])
-            if len(values) >= 2:
-                params[p] = Spread(float(values.mean()), float(values.std(ddof=1)),
-                                   len(values))
+            pairs = [r[key][p] for r in per_flight if p in r.get(key, {})]
+            if len(pairs) >= 2:
+                params[p] = Spread.of([v for v, _ in pairs], [s for _, s in pairs])
         if params:
             out[key] = params
     return out
 
 
+def _interval(ev, key: str, s: Spread) -> float:
+    """The 95 % half-width of reading ``ev``'s parameter ``key`` less the references' mean
+    ``s.mean``: 1.96 sqrt(sd_post^2 + se_mean^2)."""
+    return 1.96 * float(np.hypot(ev.post_sd[key], s.mean_se))
+
+
 def negligible(ev, check: SelfCheck | None) -> bool:
     """Whether reading ``ev`` (an Evidence) is no difference that matters (module doc): none
     of its own determined parameters lies, with its 95 % interval, beyond
-    :data:`PRACTICAL_Z` between-flight standard deviations of the same reading on the
-    references. False without a self-check or without the reading's spread on the
-    references (nothing to compare with: the statistical rule alone)."""
+    :data:`PRACTICAL_Z` physical between-flight standard deviations of the same reading on
+    the references: ``|v - mean| - 1.96 sqrt(sd_post^2 + se_mean^2) > PRACTICAL_Z sd``.
+    False without a self-check or without the reading's spread on the references (nothing to
+    compare with: the statistical rule alone)."""
     if check is None or ev.name == "no_difference":
         return False
     spread = check.spreads.get((ev.name, ev.explanation.variant))
@@ -352,7 +395,7 @@ def negligible(ev, check: SelfCheck | None) -> bool:
             continue
         s = spread[key]
         compared = True
-        if abs(ev.values[key] - s.mean) - 1.96 * ev.post_sd[key] > PRACTICAL_Z * s.sd:
+        if abs(ev.values[key] - s.mean) - _interval(ev, key, s) > PRACTICAL_Z * s.sd:
             return False
     return compared
 
@@ -360,8 +403,11 @@ def negligible(ev, check: SelfCheck | None) -> bool:
 def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
     """The size of reading ``ev`` against the references' own readings of it, in words
     (module doc): per own determined parameter with a spread on the references, "mass
-    +0.0066 kg against the references' +1e-05 ± 3e-05 kg (220 SDs)"; "" where there is
-    nothing to compare with. ``unit_of(key)``: the parameter's unit."""
+    +0.0066 kg against the references' +1e-05 ± 3e-05 kg (220 SDs)" (± their physical
+    flight-to-flight SD); where they vary no more than their own estimation noise (``sd``
+    0), "mass +0.0066 kg against the references' +1e-05 kg, which vary no more than their
+    estimation noise (± 4e-05 kg): 95 % interval of the difference +0.0066 ± 0.0002 kg";
+    "" where there is nothing to compare with. ``unit_of(key)``: the parameter's unit."""
     if check is None:
         return ""
     spread = check.spreads.get((ev.name, ev.explanation.variant), {})
@@ -371,9 +417,14 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
             continue
         s, unit = spread[key], unit_of(key)
         unit = f" {unit}" if unit and unit != "1" else ""
-        size = abs(ev.values[key] - s.mean) / s.sd if s.sd > 0 else float("inf")
-        parts.append(f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the "
-                     f"references' {s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
+        head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
+        if s.sd > 0:
+            size = abs(ev.values[key] - s.mean) / s.sd
+            parts.append(f"{head}{s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
+        else:
+            parts.append(f"{head}{s.mean:+.2g}{unit}, which vary no more than their estimation "
+                         f"noise (± {s.noise:.2g}{unit}): 95 % interval of the difference "
+                         f"{ev.values[key] - s.mean:+.2g} ± {_interval(ev, key, s):.2g}{unit}")
     return "; ".join(parts)
 
 

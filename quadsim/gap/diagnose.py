@@ -152,6 +152,7 @@ from .judge import (
     judge_heldout,
     plausible,
     rank,
+    reading_name,
     reading_text,
     remainder,
     scaled_residuals,
@@ -608,12 +609,15 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
 
 
 def readings_of(ranked: list, reference: Reference) -> list[Reading]:
-    """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words."""
+    """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words, each
+    named as per flight: the physical change largest against the references first
+    (:func:`quadsim.gap.judge.reading_name`, the lead rule; the training flights' fit)."""
     out = []
     for k, p, w in ranked:
         ev = w.train
         det = [q for q, ok in ev.determined.items() if ok]
-        out.append(Reading(k, p, nominal_words(reading_text(ev, reference), k == ev.name),
+        out.append(Reading(reading_name(k, ev), p,
+                           nominal_words(reading_text(ev, reference), k == ev.name),
                            w.total.log_z, {q: ev.values[q] for q in det},
                            {q: 1.96 * ev.post_sd[q] for q in det},
                            tuple(q for q, ok in ev.determined.items() if not ok),
@@ -680,8 +684,10 @@ class Practical:
     one of its own determined parameters, its 95 % interval lies beyond
     :data:`quadsim.gap.calibrate.PRACTICAL_Z` between-flight standard deviations of the same
     reading fitted on each training flight alone, from the no-difference value (the prior's
-    centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``. The training flights share the
-    gap, so the scale is their spread about no difference, not about their mean. Measured
+    centre): ``|v - centre| - 1.96 sd_post > 2 sd_between``, ``sd_between`` their physical
+    spread (their readings' scatter less their own estimation noise,
+    :meth:`quadsim.gap.calibrate.Spread.of`; the centre is exact). The training flights share
+    the gap, so the scale is their spread about no difference, not about their mean. Measured
     lazily (:meth:`rank`): only for the readings that lead, at most
     :data:`PRACTICAL_ROUNDS` of them; none below 3 training flights (no spread to speak
     of: the statistical rule alone)."""
@@ -721,7 +727,7 @@ class Practical:
         centre = dict(zip(expl.parameter_names, expl.mean))
         out = {}
         for key, s in spreads(per).get((w.name, expl.variant), {}).items():
-            out[key] = Spread(float(centre.get(key, 0.0)), s.sd, s.count)
+            out[key] = Spread(float(centre.get(key, 0.0)), s.sd, s.count, s.noise)
         return out
 
 
@@ -751,8 +757,18 @@ class Decision:
         return {k: p for k, p, _ in self.ranked}
 
     def entry(self, name: str) -> dict | None:
-        """The ``effects`` entry of ``name`` (None for "no difference" or one not fitted)."""
+        """The ``effects`` entry of ``name`` (None for "no difference" or one not fitted):
+        a reading's key, or its row's name (:func:`readings_of`: a key the lead rule
+        renamed, e.g. ``body_drag`` for the wind reading that carries it)."""
+        name = next((k for r, (k, _, _) in zip(self.rows, self.ranked) if r.name == name
+                     and k != r.name and not any(e["name"] == name for e in self.entries)),
+                    name)
         return next((e for e in self.entries if e["name"] == name), None)
+
+    @property
+    def shown(self) -> str:
+        """The lead's name as the answer states it (its row's: the lead rule)."""
+        return self.rows[0].name if self.rows else self.lead_name
 
 
 def decide(weighed: list[Weighed], *, train: list, held: list, reference: Reference,

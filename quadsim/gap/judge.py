@@ -483,26 +483,25 @@ def reading_name(key: str, ev) -> str:
     0.06 m/s (prior spread 5 m/s) is a body drag -- ``body_drag``, or ``body_drag+wind``
     where the wind's 95 % interval excludes calm air -- not a wind."""
     sizes = change_sizes(ev)
-    names = [key]
     if key == "no_difference":
         return key
+    own = key.split("+")            # a pair (held out, ``a+b``) asserts both of its parts
+    extra = []
     for part, _, fitted in ev.explanation.parts:
-        if part in names or not fitted:
-            continue
-        if key == "wind" and part != "body_drag":     # a wind's own drag law is its form
+        if part in own or part in extra or not fitted:
             continue
         try:
             off = {p.name: p.off for p in effect_class(part).parameters}
         except KeyError:
             continue
         if any(asserted(ev, f"{part}.{p}", off.get(p, 0.0)) for p in fitted):
-            names.append(part)
+            extra.append(part)
+    if "wind" in own:               # a wind's drag is its law: named only when far beyond
+        extra = [n for n in extra if sizes.get(n, 0.0) > LEAD_Z]
+        if extra and not any(asserted(ev, k) for k in ("wind.vx", "wind.vy")):
+            own = [n for n in own if n != "wind"]       # calm air: the drag is the change
+    names = own + extra
     others = [n for n in names[1:] if sizes.get(n, 0.0) > LEAD_Z]
-    if key == "wind" and others:
-        names = [n for n in names if n != "wind"] + (
-            ["wind"] if any(asserted(ev, k) for k in ("wind.vx", "wind.vy")) else [])
-    elif key == "wind":
-        return key
     if sizes.get(names[0], 0.0) <= LEAD_Z and others:
         first = max(others, key=lambda n: sizes[n])
         names = [first] + [n for n in names if n != first]
@@ -861,6 +860,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     rows, lead_name, lead = decision.rows, decision.lead_name, decision.lead
     entry = decision.entry(lead_name)
     p_lead = decision.probability[lead_name]
+    shown = decision.shown                  # the lead rule's name (reading_name)
     notes = [f"{name} fits only at an implausible magnitude ({nominal_words(magnitude, True)}"
              f"; {prior_text}): given no weight"
              for name, magnitude, prior_text in decision.implausible]
@@ -869,7 +869,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     lack = carry_over(lead, reference, decision.null) if entry is not None else {}
     ok, prior_text = plausible(entry["params"], params) if entry is not None else (True, "")
     if not ok:
-        notes.append(f"{lead_name} is the most probable reading only with an implausible "
+        notes.append(f"{shown} is the most probable reading only with an implausible "
                      f"magnitude ({rows[0]['magnitude']}; {prior_text}): not named")
     checked = decision.consistency if entry is not None and ok else None
     stands = standing(checked) if checked is not None else "stands"
@@ -877,20 +877,23 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     outcome = "unexplained" if inconsistent else outcome_of(lead_name, lack, remains,
                                                             plausible=ok)
     stated = [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
-    others = [r["name"] for r in stated if r["name"] != lead_name]
+    others = [r["name"] for r in stated if r is not rows[0]]
     alts = _alternatives(decision, stated, params) if entry is not None else ()
     named = entry is not None and ok and not inconsistent    # the name was weighed as one
-    separate_by = fitting.separation(lead_name, others) if named else {}
+    separate_by = fitting.separation(shown, others) if named else {}
     reduction = entry["reduction"] if entry else 0.0
+    effect = outcome == "effect"
+    caveat = lead_caveat(lead.train, params) if effect else ""      # the lead rule's half
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
-                                          separate_by=separate_by, alternatives=alts)
+                                          separate_by=separate_by, alternatives=alts,
+                                          unsure=bool(caveat))
     notes += more
-    effect = outcome == "effect"
+    words += caveat
     verdict = Verdict(
-        outcome, lead_name if effect else outcome, words, p_lead,
-        tentative=effect and (p_lead < CONFIDENT or shifted), posterior=tuple(rows),
-        readings=tuple([lead_name] + others) if effect else (),
+        outcome, shown if effect else outcome, words, p_lead,
+        tentative=effect and (p_lead < CONFIDENT or shifted or bool(caveat)),
+        posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
                      **{k: v[0] for k, v in lack.items()}},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
@@ -911,27 +914,28 @@ def judge_heldout(decision, reference, *, before: list, after: list,
 
 
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
-                   remains: dict, separate_by: dict, alternatives: tuple
-                   ) -> tuple[str, dict | None, list[str]]:
+                   remains: dict, separate_by: dict, alternatives: tuple,
+                   unsure: bool = False) -> tuple[str, dict | None, list[str]]:
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
     name (``stands``, :func:`quadsim.gap.judge.standing`) is a partial explanation;
-    otherwise :func:`quadsim.gap.words.answer`, with the tentative sentence of a shifted
-    name that stands."""
+    otherwise :func:`quadsim.gap.words.answer` (tentative below :data:`CONFIDENT` or
+    ``unsure``: a lead with a caveat), with the tentative sentence of a shifted name that
+    stands."""
     lead_name, checked = decision.lead_name, decision.consistency
     entry = decision.entry(lead_name) or {}
     reduction = entry.get("reduction", 0.0)
+    rows, shown = decision.rows, decision.shown
     if stands == "inconsistent":
         partial = {"reduction": reduction, "params": entry["params"], "ci": entry["ci"],
                    "units": {k: fitting.unit_of(k) for k in entry["params"]},
                    "alternatives": list(alternatives),
-                   "confusable_with": [r["name"] for r in stated if r["name"] != lead_name],
-                   "name": lead_name}
-        return (partial_text(lead_name, reduction, checked), partial,
-                [inconsistent_note(lead_name, checked)])
-    rows = decision.rows
+                   "confusable_with": [r["name"] for r in stated if r is not rows[0]],
+                   "name": shown}
+        return (partial_text(shown, reduction, checked), partial,
+                [inconsistent_note(shown, checked)])
     words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
                    against="training", remains=remains,
-                   tentative=decision.probability[lead_name] < CONFIDENT,
+                   tentative=decision.probability[lead_name] < CONFIDENT or unsure,
                    reduction=reduction, separate=separate_by)
     if stands == "shifted" and outcome == "effect":
         return words + tentative_text(checked), None, \
@@ -942,9 +946,8 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
 def _alternatives(decision, stated: list, params) -> tuple[dict, ...]:
     """The lead, the other stated readings, and the two most probable readings after those
     (what else was weighed, and how much), each as an ``alternatives`` JSON entry."""
-    rows, lead_name = decision.rows, decision.lead_name
-    listed = [r for r in rows if r["name"] == lead_name] + [r for r in stated
-                                                           if r["name"] != lead_name]
+    rows, lead_name = decision.rows, decision.shown
+    listed = list(rows[:1]) + [r for r in stated if r is not rows[0]]
     listed += [r for r in rows if r not in listed and r["name"] != "no_difference"][:2]
     return tuple(_alternative(r, decision, lead_name, params) for r in listed
                  if r["name"] != "no_difference")

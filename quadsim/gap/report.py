@@ -500,12 +500,19 @@ def gather_delay_notes(notes: list[str]) -> list[str]:
 
 
 def named_candidate(result: dict) -> str | None:
-    """The candidate the verdict named (a combination's name when one was kept), or None."""
+    """The candidate the verdict named (a combination's name when one was kept), or None;
+    a name the lead rule gave the lead (``body_drag`` for the wind reading that carries it,
+    :func:`quadsim.gap.judge.reading_name`) is the most probable candidate's."""
     verdict = result.get("verdict", {})
     if verdict.get("outcome") != "effect":
         return None
     combined = result.get("combination")
-    return combined["name"] if combined else verdict.get("effect")
+    if combined:
+        return combined["name"]
+    name, entries = verdict.get("effect"), result.get("effects") or []
+    if entries and not any(e["name"] == name for e in entries):
+        return entries[0]["name"]
+    return name
 
 
 def added_effects(result: dict, name: str | None, *, logs: str,

@@ -56,7 +56,8 @@ from .flightlog import WITHOUT_POSE
 from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
-           "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_status"]
+           "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_source",
+           "rotor_order_status"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -376,6 +377,10 @@ class _TorqueBalance:
     rotors: int
     dof: int               # samples - windows - 2 fitted
     noise: np.ndarray      # (3,) N m s: I_aa x the gyro's white noise
+    #: (R,) per-sample variance (rad^4) of each column's integral that its sensor's white
+    #: noise makes, None for commands (:func:`_regressor_noise`)
+    column_noise: np.ndarray | None = None
+    samples: int = 0
 
 
 def _saturated(log, params) -> np.ndarray:
@@ -390,11 +395,13 @@ def _saturated(log, params) -> np.ndarray:
     return out
 
 
-def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBalance | None:
+def _torque_balance(log, params, speeds: np.ndarray | None = None, *,
+                    sensor: bool = False) -> _TorqueBalance | None:
     """The balance of ``log`` with ``speeds`` (N, R) rad/s standing for the rotor speeds
     (default the log's). Saturated samples (:func:`_saturated`) are left out: a window is
     cut at each of them, so that the integrals' error across one stays out of the window
-    means of the samples kept."""
+    means of the samples kept. ``sensor``: ``speeds`` are a sensor's (their white noise is
+    estimated, :func:`_regressor_noise`)."""
     speeds = log.rotor_speed if speeds is None else speeds
     t = log.t
     m = max(1, round(ORDER_WINDOW_S / float(np.median(np.diff(t)))))
@@ -419,7 +426,44 @@ def _torque_balance(log, params, speeds: np.ndarray | None = None) -> _TorqueBal
     lag = z[:-1].T @ z[1:]
     return _TorqueBalance(z.T @ z, 0.5 * (lag + lag.T), squares.shape[1],
                           int(keep.sum()) - count - 2,
-                          np.diag(inertia) * _gyro_noise(log.body_rate))
+                          np.diag(inertia) * _gyro_noise(log.body_rate),
+                          _regressor_noise(speeds, t, m) if sensor else None,
+                          int(keep.sum()))
+
+
+def _regressor_noise(speeds: np.ndarray, t: np.ndarray, m: int) -> np.ndarray:
+    """(R,) the variance per sample that a speed sensor's white noise sigma_j (from second
+    differences, as the gyro's: :func:`_gyro_noise`) puts in column j of the balance: the
+    squared speed's noise 2 Omega_j sigma_j, integrated over a window of m samples of dt and
+    its mean removed, a random walk of variance (2 Omega_j sigma_j dt)^2 m / 6 on average."""
+    dt = float(np.median(np.diff(t)))
+    sigma = _gyro_noise(speeds)
+    return (2.0 * np.mean(np.abs(speeds), axis=0) * sigma * dt) ** 2 * m / 6.0
+
+
+#: an axis of the balance tells two column orders apart only where the rotor-speed sensor's
+#: noise makes under this share of the variance of either order's torque column: noise as large as
+#: the signal halves the fitted gain (errors in variables), and the orders then differ by how
+#: that noise meets another torque the flight shares. Measured (CHANGELOG, issue 47 item 7):
+#: generated figure-8s with 10 rad/s of speed noise 0.65-1.7 on every axis, a generated
+#: steps flight 0.18-0.24 on roll and pitch, the real Crazyflie flights below 0.005
+ORDER_NOISE_SHARE = 0.5
+
+
+def _noise_share(balance: _TorqueBalance, torque_rows: np.ndarray, columns) -> np.ndarray:
+    """(3,) the share of the variance of the torque column per axis, rotor i from column
+    ``columns[i]``, that the sensor's noise makes (0 for a signal without one)."""
+    if balance.column_noise is None or balance.samples <= 0:
+        return np.zeros(3)
+    r = balance.rotors
+    g = balance.gram[3:3 + r, 3:3 + r]
+    out = np.zeros(3)
+    for a in range(3):
+        mix = np.zeros(r)
+        mix[list(columns)] = torque_rows[a]
+        total = float(mix @ g @ mix) / balance.samples
+        out[a] = float(mix ** 2 @ balance.column_noise) / total if total > 0 else 1.0
+    return out
 
 
 def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
@@ -449,14 +493,73 @@ def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
 
 
 def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
-                    rho: np.ndarray) -> float:
-    """Delta chi^2 of an order over the log's own (see :func:`check_rotor_order`)."""
+                    rho: np.ndarray, told: np.ndarray | None = None) -> float:
+    """Delta chi^2 of an order over the log's own (see :func:`check_rotor_order`); ``told``
+    (3,) bool: the axes that can tell an order (:data:`ORDER_NOISE_SHARE`; default all)."""
     scale = np.maximum(balance.noise ** 2, np.minimum(own, rss) / max(balance.dof, 1))
     effective = np.clip((1.0 - rho) / (1.0 + rho), 1e-3, 1.0)
     per_axis = effective * (own - rss) / scale
+    if told is not None:
+        per_axis = np.where(told, per_axis, 0.0)
     if per_axis.min() < -ORDER_CHI2:     # far worse on one axis: a model error, not an order
         return float(per_axis.min())
     return float(np.sum(per_axis))
+
+
+def _order_sources(log, params, commands: bool) -> list[tuple[str, np.ndarray]]:
+    """(name, (N, R) rad/s) of the rotor signals that can stand for the rotor speeds in the
+    torque balance: the logged speeds, and the commands (the squared command scaled by the
+    set's max_speed: its per-axis gain is fitted anyway, so only the shape of Omega(u)
+    matters) where ``commands`` or where the speeds are logged too."""
+    out = []
+    if log.rotor_speed is not None:
+        out.append(("rotor speeds", log.rotor_speed))
+    if log.rotor_command is not None and params is not None and (commands or out):
+        out.append(("commands", np.clip(log.rotor_command, 0.0, None)
+                    * float(params.max_speed)))
+    return out
+
+
+def _best_rss(balance: _TorqueBalance, torque_rows: np.ndarray) -> np.ndarray:
+    """(3,) the balance's best residual per axis over every column order (N m s)^2."""
+    import itertools
+
+    return np.min([_order_fit(balance, torque_rows, perm)[0] for perm in
+                   itertools.permutations(range(balance.rotors))], axis=0)
+
+
+def rotor_order_source(log, params, *, commands: bool = False) -> str:
+    """The rotor signals the order test reads (:func:`rotor_order_evidence`): "rotor
+    speeds", "commands", "rotor speeds and commands" or "" (none judged)."""
+    return " and ".join(name for name, _ in _order_choice(log, params, commands))
+
+
+def _order_choice(log, params, commands: bool) -> list:
+    """[(source name, its :class:`_TorqueBalance`)] that :func:`rotor_order_evidence`
+    reads; [] when the log cannot be judged."""
+    if (params is None or log.body_rate is None or len(log.t) < 50
+            or params.rotor_count > 6 or not np.isfinite(log.body_rate).all()):
+        return []
+    from ..vehicle.rotors import allocation_matrix
+
+    torque_rows = allocation_matrix(params)[3:6]
+    judged = []
+    for name, speeds in _order_sources(log, params, commands):
+        if speeds.shape[1] != params.rotor_count or not np.isfinite(speeds).all():
+            continue
+        balance = _torque_balance(log, params, speeds, sensor=name == "rotor speeds")
+        if balance is not None:
+            judged.append((name, balance, _best_rss(balance, torque_rows)))
+    if len(judged) < 2:
+        return [(name, balance) for name, balance, _ in judged]
+    best = min(judged, key=lambda j: float(np.sum(j[2] / np.maximum(j[1].noise ** 2,
+                                                                   1e-300))))
+    kept = []
+    for name, balance, rss in judged:      # measured at the better fit's own misfit scale
+        scale = np.maximum(balance.noise ** 2, best[2] / max(balance.dof, 1))
+        if float(np.sum((rss - best[2]) / scale)) <= ORDER_CHI2:
+            kept.append((name, balance))
+    return kept
 
 
 def rotor_order_evidence(log, params, *, commands: bool = False
@@ -464,33 +567,36 @@ def rotor_order_evidence(log, params, *, commands: bool = False
     """Delta chi^2 of every other order of the rotor columns over the log's own (permutation
     -> value; see :func:`check_rotor_order`); {} when the log cannot be judged (no gyro or
     rotor speeds, another rotor count, under 50 samples or 5 windows, more than 6 rotors).
-    ``commands``: without rotor speeds, the motor commands stand for them (the squared
-    command, scaled by the set's max_speed: its per-axis gain is fitted anyway, so only the
-    shape of Omega(u) matters; a nonlinear map or the motor lag weakens the evidence)."""
+    ``commands``: without rotor speeds, the motor commands stand for them (a nonlinear map
+    or the motor lag weakens the evidence).
+
+    Where both speeds and commands are logged, each is read, and a rival order's evidence is
+    the larger of the two (the columns must be in the log's order in every signal), except a
+    signal whose best column order fits the momentum worse than the other's by more than
+    ``ORDER_CHI2`` (per axis at the better fit's scale, as the orders are compared): both
+    sides of the balance are the same momentum, so the residuals compare directly, and the
+    signal that explains less carries noise of its own that the other does not (a
+    rotor-speed sensor's noise, integrated, is noise in the regressor), so its orders' small
+    differences are that noise meeting whatever other torque the flight shares (a wind's:
+    measured in CHANGELOG.md, issue 47 item 7)."""
     import itertools
 
-    speeds = log.rotor_speed
-    if speeds is None and commands and log.rotor_command is not None and params is not None:
-        speeds = np.clip(log.rotor_command, 0.0, None) * float(params.max_speed)
-    if (params is None or speeds is None or log.body_rate is None
-            or speeds.shape[1] != params.rotor_count or len(log.t) < 50
-            or params.rotor_count > 6):
-        return {}
-    if not (np.isfinite(log.body_rate).all() and np.isfinite(speeds).all()):
-        return {}
     from ..vehicle.rotors import allocation_matrix
 
-    balance = _torque_balance(log, params, speeds)
-    if balance is None:
-        return {}
-    torque_rows = allocation_matrix(params)[3:6]
-    own_order = tuple(range(params.rotor_count))
-    own, _ = _order_fit(balance, torque_rows, own_order)
-    evidence = {}
-    for perm in itertools.permutations(own_order):
-        if perm != own_order:
-            evidence[perm] = _order_evidence(balance, own, *_order_fit(balance, torque_rows,
-                                                                        perm))
+    torque_rows = allocation_matrix(params)[3:6] if params is not None else None
+    own_order = tuple(range(params.rotor_count)) if params is not None else ()
+    evidence: dict = {}
+    for _, balance in _order_choice(log, params, commands):
+        own, _ = _order_fit(balance, torque_rows, own_order)
+        share = _noise_share(balance, torque_rows, own_order)
+        for perm in itertools.permutations(own_order):
+            if perm != own_order:    # every signal read must fit the log's order
+                # an axis tells the two apart where either order's column is above the noise
+                told = np.minimum(share, _noise_share(balance, torque_rows, perm)) \
+                    < ORDER_NOISE_SHARE
+                value = _order_evidence(balance, own, *_order_fit(balance, torque_rows, perm),
+                                        told)
+                evidence[perm] = max(evidence.get(perm, -np.inf), value)
     return evidence
 
 
@@ -518,11 +624,14 @@ def rotor_order_status(log, params) -> RotorOrder:
     out, and a verdict on the log must say so (issue 44: never stated at > 99 %). A log of
     several airborne stretches (segments): each stretch's Delta chi^2 summed (independent
     samples; the balance's integrals never run across a ground span)."""
-    source = "rotor speeds" if log.rotor_speed is not None else "commands"
     evidence: dict = {}
+    sources = []
     for part in log.parts():
+        sources.append(rotor_order_source(part, params, commands=True))
         for perm, value in rotor_order_evidence(part, params, commands=True).items():
             evidence[perm] = evidence.get(perm, 0.0) + value
+    source = " and ".join(dict.fromkeys(s for s in sources if s)) or (
+        "rotor speeds" if log.rotor_speed is not None else "commands")
     where = _where(log)
     if not evidence:
         return RotorOrder(False, False, None, float("nan"), "",
