@@ -11,7 +11,7 @@ from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
 from quadsim.gap.calibrate import PRACTICAL_Z, SelfCheck, Spread, negligible
 from quadsim.gap.evidence import Marginal, laplace
-from quadsim.gap.judge import posterior
+from quadsim.gap.judge import UNCHECKED_WORDS, posterior
 from quadsim.gap.reference import (
     centre_term,
     channel_features,
@@ -206,3 +206,24 @@ def test_a_damped_swing_decays_as_a_damped_pendulum():
         amplitude = abs(q[late, 0]) / abs(q[early, 0])
         assert amplitude == pytest.approx(np.exp(-damping * (t[late] - t[early]) / 2),
                                           rel=0.02)
+
+
+def test_with_two_references_a_name_is_never_confident(cf):
+    """Two references cannot be judged against each other (no self-check, no scale of what
+    they show flight to flight): +6 g is still read as a mass of about +6 g, but tentative,
+    and the answer says why; with three references the same flight is named confidently."""
+    tested = _logs(cf, [make_effect("mass_offset", mass=0.006)], (56,))
+    two = diagnose_per_flight(tested, _logs(cf, [], (50, 51)), cf,
+                              effects=["mass_offset", "com_offset"])
+    flight = two["flights"][0]
+    assert two["reference_model"]["self_check"] is None
+    assert flight["verdict"] == "mass_offset", flight["answer"]
+    assert flight["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=1.5e-3)
+    assert flight["tentative"] is True
+    assert UNCHECKED_WORDS in flight["answer"]
+    three = diagnose_per_flight(tested, _logs(cf, [], (50, 51, 52)), cf,
+                                effects=["mass_offset", "com_offset"])
+    flight = three["flights"][0]
+    assert three["reference_model"]["self_check"] is not None
+    assert flight["verdict"] == "mass_offset" and flight["tentative"] is False, flight["answer"]
+    assert UNCHECKED_WORDS not in flight["answer"]

@@ -155,6 +155,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "check", "inconsistent_note", "kstep_errors", "partial_text", "regime_masks",
            "scaled_residuals", "split_masks", "standing", "tentative_note", "tentative_text",
            "where", "CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P",
+           "UNCHECKED_WORDS",
            "Baseline", "above_floor", "carry_over", "channel_names", "differs",
            "every_part_stands", "form_share", "judge", "judge_heldout", "lack_of_fit",
            "mean_squares", "outcome_of", "plausible", "posterior", "rank", "reading_name",
@@ -757,7 +758,9 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
     named = [r.name for r in stated if r.name != "no_difference"]
     effect = outcome == "effect"
     caveat = lead_caveat(best, reference.params) if outcome == "effect" else ""
-    unsure = (check is not None and not check.clean) or bool(left) or bool(caveat)
+    # no self-check (fewer than 3 references): what they share cannot be told from a
+    # difference of this flight, and practical significance has no scale (docs/gap.md)
+    unsure = check is None or not check.clean or bool(left) or bool(caveat)
     words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
                    against="references", separate=separate,
                    tentative=p_top < CONFIDENT or unsure)
@@ -834,7 +837,8 @@ def _normal_words(lead_ev, check, left: dict, share: float) -> str:
     """What the answer adds from the references' own normal (docs/gap.md, method): the
     lead's size against the references' readings of it (``lead_ev``: its Evidence, None
     when no effect is named), what a tentatively named reading leaves (``left``: channel ->
-    (ratio, z); ``share`` of the flight's gap), and a self-check that is not clean."""
+    (ratio, z); ``share`` of the flight's gap), a self-check that is not clean, and
+    :data:`UNCHECKED_WORDS` where there is none (``check`` None: fewer than 3 references)."""
     words = ""
     if lead_ev is not None:
         size = against_text(lead_ev, check, fitting.unit_of)
@@ -845,9 +849,17 @@ def _normal_words(lead_ev, check, left: dict, share: float) -> str:
         words += (f" Beyond it the residual stays beyond the reference flights' on {where} "
                   f"their typical RMS ({100 * share:.0f} % of the flight's gap: the library's "
                   "form of it, or a further small effect).")
-    if check is not None and not check.clean:
+    if check is None and lead_ev is not None:
+        words += (" " + UNCHECKED_WORDS)
+    elif check is not None and not check.clean:
         words += f" {check.text()}"
     return words
+
+
+#: what a named answer adds when the references could not be checked against each other
+UNCHECKED_WORDS = ("The reference flights could not be judged against each other (fewer "
+                   "than 3), so what they share cannot be told from a difference of this "
+                   "flight: the name is tentative; give 10 or more references.")
 
 
 def judge_heldout(decision, reference, *, before: list, after: list,
