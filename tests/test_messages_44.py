@@ -200,3 +200,27 @@ def test_ctrl_c_while_a_command_starts_is_one_line(capsys):
     assert capsys.readouterr().err == "error: interrupted\n"
     # imported as a library (here, by pytest), the package leaves Ctrl-C alone
     assert signal.getsignal(signal.SIGINT) is not quadsim._interrupted_while_starting
+
+
+def test_a_held_out_result_never_contradicts_its_own_evidence():
+    """Held out, each reading's ``log_evidence`` is what its probability weighs (training
+    evidence plus the held-out log-likelihood): a reading more than 10 nats of evidence
+    above another (more than any prior ratio or count of variants) is never less probable.
+    The issue's case: ``no_difference`` at -1722.6 with probability 1.0 against a reading at
+    -1045.9 with 1.7e-17."""
+    from benchmarks.synthetic import synthetic_flight
+    from quadsim.effects import make_effect
+    from quadsim.gap import diagnose
+
+    cf = load_params("crazyflie21")
+    heavy = [make_effect("mass_offset", mass=0.003)]
+    train = [synthetic_flight(cf, heavy, seed=s, duration=4.0) for s in (3, 4)]
+    held = [synthetic_flight(cf, heavy, seed=5, duration=4.0)]
+    rows = diagnose(train, cf, holdout=held, effects=["mass_offset", "com_offset",
+                                                        "thrust_mismatch"])["verdict"]["posterior"]
+    assert len(rows) >= 3
+    for a in rows:
+        for b in rows:
+            if a["log_evidence"] > b["log_evidence"] + 10.0:
+                assert a["probability"] >= b["probability"], (a["name"], b["name"])
+    assert rows[0]["name"] == "mass_offset"
