@@ -170,9 +170,14 @@ def _payload_total(flight: dict) -> float | None:
 def mixed_answers(result: dict, labels: dict) -> list[Answer]:
     """Answers of a per-flight result (the ``quadsim.gap/3`` JSON) against ``labels``
     (``{"flights": {file: {"label": "payload" | "none"}}}``); a flight without a label is
-    an error naming it."""
+    an error naming it; a result without per-flight ``flights`` (held out, or not a gap
+    result) is a ValueError naming the field."""
+    flights = result.get("flights") if isinstance(result, dict) else None
+    if not isinstance(flights, list) or not flights:
+        raise ValueError("flights: no per-flight verdicts (give the JSON of "
+                         "`python -m quadsim.gap --per-flight ... --json`)")
     out = []
-    for flight in result.get("flights", []):
+    for flight in flights:
         name = Path(str(flight["file"])).name
         if name not in labels["flights"]:
             raise KeyError(f"{name}: no label")

@@ -77,3 +77,19 @@ def test_mixed_scoring_needs_the_name_and_the_total():
                    "c.csv.gz": (True, 0.8), "d.csv.gz": (False, 0.9)}
     with pytest.raises(KeyError):
         mixed_answers({"flights": [{"file": "e.csv.gz"}]}, labels)
+
+
+def test_a_result_without_per_flight_verdicts_is_refused_in_one_line(tmp_path, capsys):
+    """A held-out result (or any JSON without ``flights``) is not scored as an empty table:
+    exit 2, one line naming the file and the field, nothing written."""
+    from benchmarks.reliability import main
+
+    bad = tmp_path / "held_out.json"
+    bad.write_text('{"schema": "quadsim.gap/3", "verdict": {}}')
+    labels = tmp_path / "labels.json"
+    labels.write_text('{"flights": {}}')
+    out = tmp_path / "out.json"
+    assert main(["--mixed", str(bad), "--labels", str(labels), "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {bad}: flights:")
+    assert not out.exists()
