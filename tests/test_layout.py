@@ -294,6 +294,14 @@ def test_names_that_left_the_package_are_refused_with_their_new_path():
         quadsim.gap.no_such_name  # noqa: B018
     with pytest.raises(ImportError, match=r"from benchmarks\.observe import MIN_GAIN"):
         from quadsim.gap.diagnose import MIN_GAIN  # noqa: F401
+    # the modules merged into their stage (issue 43): each refused with its new module
+    for old, new in (("memo", "residual"), ("per_flight", "diagnose"), ("selfcheck", "calibrate"),
+                     ("plots", "page"), ("posefree", "logcheck")):
+        with pytest.raises(ImportError, match=rf"quadsim\.gap\.{old} was merged into "
+                                              rf"quadsim\.gap\.{new}: write `from quadsim\.gap "
+                                              rf"import {new}`"):
+            exec(f"from quadsim.gap import {old}")
+        assert not (PACKAGE / "gap" / f"{old}.py").exists(), old
     # the modules that moved to benchmarks/ are gone from the package (an import of them is
     # ModuleNotFoundError; CHANGELOG.md names each new path)
     for gone in ("bench", "gap/synthetic.py", "logs/corrupt.py", "sim/rollout.py"):

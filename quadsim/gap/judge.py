@@ -780,14 +780,16 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
         file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
 
 
-#: a value within this share of its fit window's width from a bound is at the bound
-AT_BOUND = 1e-3
+#: a value within this share of its fit window's width from a bound is at the bound (the
+#: window, not the typical size of :data:`quadsim.gap.fitting.AT_BOUND`: a caveat is about the
+#: window the fit could not leave; 1e-3 of it is below any reading's stated resolution)
+WINDOW_EDGE = 1e-3
 
 
 def lead_caveat(ev, params) -> str:
     """What the lead name must say about its own values (the lead rule's second half,
     :func:`reading_name`): a determined value at a bound of its fit window
-    (:func:`quadsim.gap.fitting.parameter_bounds`, within :data:`AT_BOUND` of its width:
+    (:func:`quadsim.gap.fitting.parameter_bounds`, within :data:`WINDOW_EDGE` of its width:
     the data say only "at or beyond"; not a bound at the parameter's "off" value: none of
     it) or outside its documented plausible range
     (:func:`quadsim.gap.fitting.candidate_plausibility`); "" where neither. A lead with a
@@ -805,11 +807,11 @@ def lead_caveat(ev, params) -> str:
             continue
         width = hi - lo if np.isfinite(hi - lo) else max(abs(lo), abs(hi), 1.0)
         v = ev.values[q]
-        if abs(v - _off(q)) <= AT_BOUND * width:      # a bound at "off" (no drag) says none
+        if abs(v - _off(q)) <= WINDOW_EDGE * width:      # a bound at "off" (no drag) says none
             continue
-        if np.isfinite(lo) and v - lo <= AT_BOUND * width:
+        if np.isfinite(lo) and v - lo <= WINDOW_EDGE * width:
             at.append(f"{q} at its lower bound {lo:.3g}")
-        elif np.isfinite(hi) and hi - v <= AT_BOUND * width:
+        elif np.isfinite(hi) and hi - v <= WINDOW_EDGE * width:
             at.append(f"{q} at its upper bound {hi:.3g}")
     words = []
     if at:
