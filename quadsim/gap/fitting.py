@@ -23,22 +23,23 @@ effective gravity seen from the accelerating attachment (the rigid-link limit of
 engine's model; Sreenath, Lee & Kumar, CDC 2013, eq. 2-4)::
 
     dq/dt = w x q
-    dw/dt = q x e / L
+    dw/dt = q x e / L - k w          k: the swing's damping rate (1/s)
     T     = m (q . e + L |w|^2)          cable tension (N), >= 0 (a slack cable pulls nothing)
     F     = T q                          pull on the vehicle, world, at the attachment
     tau   = (r_a - c) x R^T F            its torque about the CoM (body)
 
 integrated by RK4 between the log's samples (a linearly interpolated between them), q
 renormalised and w kept normal to q after each step; a time jump (stacked flights) restarts
-it hanging still. No swing damping (as in the engines, where only the cable's axial spring
-is damped), so the swing the payload already had at the first sample never dies out: it is
-fitted with the payload, as four nuisance parameters (lean and swing rate along world x and
-y, :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
-:data:`START_PRIOR`); they are never part of the answer. Measured on a generated 6 s "steps"
-flight (12 deg rms swing): starting hanging still 0.2 s after take-off, where the payload
-already swung at 0.1 rad/s, the modelled direction was off by up to 4.8 deg for the whole
-flight, and the force residual of the true mass and length stayed at 4 mN (11 % of the
-payload's weight); a start along the effective gravity was worse.
+it hanging still. The damping rate k is fitted (prior N(0.5, 0.5^2) 1/s, at least 0:
+:data:`DAMPING_PRIOR`; the engines damp only the cable's axial spring): an undamped model
+swing kept swinging after the real payload hung still. The swing the payload already had at
+the first sample is fitted with the payload too (lean and swing rate along world x and y,
+:func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
+:data:`START_PRIOR`); these and k are nuisance parameters, never part of the answer.
+Measured on a generated 6 s "steps" flight (12 deg rms swing): starting hanging still 0.2 s
+after take-off, where the payload already swung at 0.1 rad/s, the modelled direction was off
+by up to 4.8 deg for the whole flight, and the force residual of the true mass and length
+stayed at 4 mN (11 % of the payload's weight); a start along the effective gravity was worse.
 
 What the data fix: at frequencies well below the swing's own (f = sqrt(g / L) / 2 pi, 0.7 Hz
 at 0.5 m) the payload follows the vehicle and the pull is m (g_vec - a): a rigid mass at the
