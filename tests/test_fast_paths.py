@@ -281,9 +281,10 @@ def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
     accel = rng.normal(size=(len(t), 3))
     q0, w0 = cable.start_state((0.1, -0.05), (0.3, 0.2))
     want_q, want_w = np.empty_like(accel), np.empty_like(accel)
-    cable._swing_kernel(t, accel, 0.45, 9.81, q0, w0, want_q, want_w, 0.3)   # damped 0.3/s
-    rows_q, rows_w = cable._swing_floats(t.tolist(), accel.tolist(), 0.45, 9.81,
-                                         q0.tolist(), w0.tolist(), 0.3)
+    constants = (9.81, 0.45, 0.3)                    # gravity, length, damped 0.3/s
+    cable._swing_kernel(t, accel, np.array([q0, w0]), constants, want_q, want_w)
+    rows_q, rows_w = cable._swing_floats(t.tolist(), accel.tolist(),
+                                         (q0.tolist(), w0.tolist()), constants)
     _close(np.array(rows_q), want_q, rel=1e-12)
     _close(np.array(rows_w), want_w, rel=1e-12)
     np.testing.assert_array_equal(np.array(rows_q)[300], [0.0, 0.0, -1.0])

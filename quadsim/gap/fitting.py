@@ -23,22 +23,23 @@ effective gravity seen from the accelerating attachment (the rigid-link limit of
 engine's model; Sreenath, Lee & Kumar, CDC 2013, eq. 2-4)::
 
     dq/dt = w x q
-    dw/dt = q x e / L
+    dw/dt = q x e / L - k w          k: the swing's damping rate (1/s)
     T     = m (q . e + L |w|^2)          cable tension (N), >= 0 (a slack cable pulls nothing)
     F     = T q                          pull on the vehicle, world, at the attachment
     tau   = (r_a - c) x R^T F            its torque about the CoM (body)
 
 integrated by RK4 between the log's samples (a linearly interpolated between them), q
 renormalised and w kept normal to q after each step; a time jump (stacked flights) restarts
-it hanging still. No swing damping (as in the engines, where only the cable's axial spring
-is damped), so the swing the payload already had at the first sample never dies out: it is
-fitted with the payload, as four nuisance parameters (lean and swing rate along world x and
-y, :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
-:data:`START_PRIOR`); they are never part of the answer. Measured on a generated 6 s "steps"
-flight (12 deg rms swing): starting hanging still 0.2 s after take-off, where the payload
-already swung at 0.1 rad/s, the modelled direction was off by up to 4.8 deg for the whole
-flight, and the force residual of the true mass and length stayed at 4 mN (11 % of the
-payload's weight); a start along the effective gravity was worse.
+it hanging still. The damping rate k is fitted (prior N(0.5, 0.5^2) 1/s, at least 0:
+:data:`DAMPING_PRIOR`; the engines damp only the cable's axial spring): an undamped model
+swing kept swinging after the real payload hung still. The swing the payload already had at
+the first sample is fitted with the payload too (lean and swing rate along world x and y,
+:func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
+:data:`START_PRIOR`); these and k are nuisance parameters, never part of the answer.
+Measured on a generated 6 s "steps" flight (12 deg rms swing): starting hanging still 0.2 s
+after take-off, where the payload already swung at 0.1 rad/s, the modelled direction was off
+by up to 4.8 deg for the whole flight, and the force residual of the true mass and length
+stayed at 4 mN (11 % of the payload's weight); a start along the effective gravity was worse.
 
 What the data fix: at frequencies well below the swing's own (f = sqrt(g / L) / 2 pi, 0.7 Hz
 at 0.5 m) the payload follows the vehicle and the pull is m (g_vec - a): a rigid mass at the
@@ -254,9 +255,14 @@ except ImportError:         # pragma: no cover - numba is an optional extra
 
 
 @_compiled
-def _rate(qx, qy, qz, wx, wy, wz, ax, ay, az, gravity, length, damping):
-    """(dq/dt, dw/dt) of the cable at attachment acceleration a, swing damping rate
-    ``damping`` (1/s; module doc)."""
+def _rate(q, w, a, constants):
+    """(dq/dt, dw/dt) of the cable (module doc): direction ``q``, angular velocity ``w``
+    (rad/s) and the attachment's acceleration ``a`` (world, m/s^2), each a 3-tuple;
+    ``constants`` = (gravity m/s^2, length m, swing damping rate 1/s). Returns a 6-tuple."""
+    qx, qy, qz = q
+    wx, wy, wz = w
+    ax, ay, az = a
+    gravity, length, damping = constants
     ex, ey, ez = -ax, -ay, -gravity - az
     return (wy * qz - wz * qy, wz * qx - wx * qz, wx * qy - wy * qx,
             (qy * ez - qz * ey) / length - damping * wx,
@@ -265,16 +271,17 @@ def _rate(qx, qy, qz, wx, wy, wz, ax, ay, az, gravity, length, damping):
 
 
 @_compiled
-def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w, damping):
+def _swing_kernel(t, accel, start, constants, out_q, out_w):
     """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
-    ``accel`` (N, 3) the attachment's acceleration (world); ``q0``, ``w0`` the start; a
-    time jump restarts hanging still. Fills ``out_q``, ``out_w``."""
+    ``accel`` (N, 3) the attachment's acceleration (world); ``start`` (2, 3) the rows q0, w0;
+    ``constants`` as :func:`_rate`'s; a time jump restarts hanging still. Fills ``out_q``,
+    ``out_w`` (N, 3)."""
     n = t.shape[0]
     dt0 = t[1] - t[0] if n > 1 else 1.0
     for k in range(n):
         if k == 0:
             for i in range(3):
-                out_q[k, i], out_w[k, i] = q0[i], w0[i]
+                out_q[k, i], out_w[k, i] = start[0, i], start[1, i]
             continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
             out_q[k, 0], out_q[k, 1], out_q[k, 2] = 0.0, 0.0, -1.0
@@ -283,17 +290,17 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w, damping):
         h = t[k] - t[k - 1]
         qx, qy, qz = out_q[k - 1, 0], out_q[k - 1, 1], out_q[k - 1, 2]
         wx, wy, wz = out_w[k - 1, 0], out_w[k - 1, 1], out_w[k - 1, 2]
-        a0x, a0y, a0z = accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2]
-        a1x, a1y, a1z = accel[k, 0], accel[k, 1], accel[k, 2]
-        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
-        k1 = _rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
+        a0 = (accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2])
+        a1 = (accel[k, 0], accel[k, 1], accel[k, 2])
+        am = (0.5 * (a0[0] + a1[0]), 0.5 * (a0[1] + a1[1]), 0.5 * (a0[2] + a1[2]))
+        k1 = _rate((qx, qy, qz), (wx, wy, wz), a0, constants)
         c = 0.5 * h
-        k2 = _rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
-                   wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
-        k3 = _rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
-                   wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
-        k4 = _rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
-                   wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
+        k2 = _rate((qx + c * k1[0], qy + c * k1[1], qz + c * k1[2]),
+                   (wx + c * k1[3], wy + c * k1[4], wz + c * k1[5]), am, constants)
+        k3 = _rate((qx + c * k2[0], qy + c * k2[1], qz + c * k2[2]),
+                   (wx + c * k2[3], wy + c * k2[4], wz + c * k2[5]), am, constants)
+        k4 = _rate((qx + h * k3[0], qy + h * k3[1], qz + h * k3[2]),
+                   (wx + h * k3[3], wy + h * k3[4], wz + h * k3[5]), a1, constants)
         s = h / 6.0
         qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
@@ -308,17 +315,17 @@ def _swing_kernel(t, accel, length, gravity, q0, w0, out_q, out_w, damping):
         out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
-def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0,
-                  damping: float = 0.0) -> tuple[list, list]:
+def _swing_floats(t: list, accel: list, start: tuple, constants: tuple) -> tuple[list, list]:
     """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
-    3-lists), for when it is not compiled: the same operations in the same order (the same
-    numbers), without the per-element indexing of numpy arrays that dominates the
-    uncompiled kernel. Returns the lists of q and w rows."""
+    3-lists, ``start`` = (q0, w0) as 3-lists, ``constants`` as :func:`_rate`'s), for when it
+    is not compiled: the same operations in the same order (the same numbers), without the
+    per-element indexing of numpy arrays that dominates the uncompiled kernel. Returns the
+    lists of q and w rows."""
     rate = getattr(_rate, "py_func", _rate)
     n = len(t)
     dt0 = t[1] - t[0] if n > 1 else 1.0
     out_q, out_w = [None] * n, [None] * n
-    out_q[0], out_w[0] = [float(v) for v in q0], [float(v) for v in w0]
+    out_q[0], out_w[0] = [float(v) for v in start[0]], [float(v) for v in start[1]]
     for k in range(1, n):
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
             out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
@@ -326,17 +333,17 @@ def _swing_floats(t: list, accel: list, length: float, gravity: float, q0, w0,
         h = t[k] - t[k - 1]
         qx, qy, qz = out_q[k - 1]
         wx, wy, wz = out_w[k - 1]
-        a0x, a0y, a0z = accel[k - 1]
-        a1x, a1y, a1z = accel[k]
-        amx, amy, amz = 0.5 * (a0x + a1x), 0.5 * (a0y + a1y), 0.5 * (a0z + a1z)
-        k1 = rate(qx, qy, qz, wx, wy, wz, a0x, a0y, a0z, gravity, length, damping)
+        a0 = tuple(accel[k - 1])
+        a1 = tuple(accel[k])
+        am = (0.5 * (a0[0] + a1[0]), 0.5 * (a0[1] + a1[1]), 0.5 * (a0[2] + a1[2]))
+        k1 = rate((qx, qy, qz), (wx, wy, wz), a0, constants)
         c = 0.5 * h
-        k2 = rate(qx + c * k1[0], qy + c * k1[1], qz + c * k1[2], wx + c * k1[3],
-                  wy + c * k1[4], wz + c * k1[5], amx, amy, amz, gravity, length, damping)
-        k3 = rate(qx + c * k2[0], qy + c * k2[1], qz + c * k2[2], wx + c * k2[3],
-                  wy + c * k2[4], wz + c * k2[5], amx, amy, amz, gravity, length, damping)
-        k4 = rate(qx + h * k3[0], qy + h * k3[1], qz + h * k3[2], wx + h * k3[3],
-                  wy + h * k3[4], wz + h * k3[5], a1x, a1y, a1z, gravity, length, damping)
+        k2 = rate((qx + c * k1[0], qy + c * k1[1], qz + c * k1[2]),
+                  (wx + c * k1[3], wy + c * k1[4], wz + c * k1[5]), am, constants)
+        k3 = rate((qx + c * k2[0], qy + c * k2[1], qz + c * k2[2]),
+                  (wx + c * k2[3], wy + c * k2[4], wz + c * k2[5]), am, constants)
+        k4 = rate((qx + h * k3[0], qy + h * k3[1], qz + h * k3[2]),
+                  (wx + h * k3[3], wy + h * k3[4], wz + h * k3[5]), a1, constants)
         s = h / 6.0
         qx += s * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         qy += s * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
@@ -377,13 +384,14 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
     q, w = np.empty_like(accel), np.empty_like(accel)
+    constants = (float(gravity), float(length), float(damping))
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
-        _swing_kernel(t, accel, float(length), float(gravity), np.asarray(q0, float),
-                      np.asarray(w0, float), q, w, float(damping))
+        _swing_kernel(t, accel, np.array([np.asarray(q0, float), np.asarray(w0, float)]),
+                      constants, q, w)
     elif len(t):
-        rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(), float(length),
-                                       float(gravity), np.asarray(q0, float).tolist(),
-                                       np.asarray(w0, float).tolist(), float(damping))
+        rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(),
+                                       (np.asarray(q0, float).tolist(),
+                                        np.asarray(w0, float).tolist()), constants)
         q[:], w[:] = rows_q, rows_w
     return q, w
 

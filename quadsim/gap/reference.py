@@ -56,7 +56,7 @@ rad/s; omega_dot its derivative, rad/s^2)::
   that axis (the law a linear drag model lacks), and the accelerometer's offset r from the
   centre of mass, whose specific force carries omega_dot x r (4 features). Not v_b,i as
   well: at the references' near-constant speeds v and |v| v move together, and their
-  difference extrapolates wildly to a flight flown faster (docs/gap.md, Method);
+  difference extrapolates wildly to a flight flown faster (benchmarks/HISTORY.md);
 - moment channels Mx, My, Mz (N m): phi = (v_b, omega, omega_dot): moments of the air speed
   (rotor flapping, the rotors' drag moment), of the body rate (damping) and of the angular
   acceleration (inertia), on any axis (9 features);
