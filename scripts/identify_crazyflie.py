@@ -118,6 +118,10 @@ YAW_MODELS = ((), ("rotor_drag",), ("spin_up",), ("rate_damping",), ("rotor_drag
 YAW_BANDS = ((0.0, float("inf")), (0.0, 0.5), (0.5, 2.0), (1.0, 16.0), (2.0, 4.0),
              (4.0, 8.0), (8.0, 16.0))
 AIR_DENSITY = 1.225     # kg/m^3, ISA sea level (the vehicle guard's figure of merit)
+#: the instruments' motor lag (s): ``identify --logs`` fits a 50 ms map lag on these flights;
+#: without it the spin-up term's instrument (the commanded speeds' derivative) leads the
+#: measured one by the motor's lag and the fit fails (R^2 < 0)
+MAP_LAG_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -147,12 +151,17 @@ def yaw_regressors(states, params, terms: tuple[str, ...]):
     """(y, X, Z) of one flight: y the measured yaw torque (N m, Newton-Euler with the set's
     inertia), X (N, 1 + k) d's regressor -sum s_i Omega_i^2 and each term's yaw torque per
     unit parameter from the measured rotor speeds, Z the same from the commanded speeds
-    (the set's motor map; its time derivative for the spin-up term): the instruments."""
+    (the set's motor map through a first-order lag MAP_LAG_S; their time derivative for the
+    spin-up term): the instruments."""
+    from scipy.signal import lfilter
+
     from quadsim.effects import parse_effect_spec
     from quadsim.gap.residual import measured_wrench, model_wrench, speed_of_command
 
-    commanded = speed_of_command(params, states.command)
     dt = float(states.t[1] - states.t[0])
+    steady = speed_of_command(params, states.command)
+    pole = float(np.exp(-dt / MAP_LAG_S))           # first-order lag, started at rest
+    commanded = lfilter([1.0 - pole], [1.0, -pole], steady - steady[0], axis=0) + steady[0]
     instrument = dataclasses.replace(states, rotor_speed=commanded,
                                      rotor_accel=np.gradient(commanded, dt, axis=0))
     spins = params.rotor_spins
@@ -220,6 +229,33 @@ def yaw_balance(nominal: list[Path], params_path: Path, *,
             for method in ("IV", "LS"):
                 out.append(_fit(rows, terms, band, method))
     return out
+
+
+#: the yaw loop's trim band (Hz): below it the yaw pattern moves without a yaw acceleration
+TRIM_BAND = (0.0, 0.5)
+
+
+def slow_yaw_pattern(nominal: list[Path]) -> tuple[float, float]:
+    """(share of the yaw pattern X's variance in TRIM_BAND, R^2 of that slow part on the body
+    velocity v_x, v_y), pooled over the flights (each flight's mean removed)."""
+    from quadsim.core.frames import rotate_inverse
+    from quadsim.identify.__main__ import _load_states
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states, _ = _load_states(list(nominal))
+    spins = np.array([1.0, -1.0, 1.0, -1.0])          # motors 1, 3 ccw (README)
+    slow, whole, velocity = [], [], []
+    for st in states:
+        dt = float(st.t[1] - st.t[0])
+        x = -(np.square(st.rotor_speed) @ spins)
+        whole.append(x - x.mean())
+        slow.append(_band(x, dt, TRIM_BAND))
+        velocity.append(_band(rotate_inverse(st.quat, st.velocity)[:, :2], dt, TRIM_BAND))
+    slow, whole, velocity = (np.concatenate(a) for a in (slow, whole, velocity))
+    coef = np.linalg.lstsq(velocity, slow, rcond=None)[0]
+    u = slow - velocity @ coef
+    return float(slow @ slow) / float(whole @ whole), 1.0 - float(u @ u) / float(slow @ slow)
 
 
 #: bands (Hz) of the fits made as quadsim.identify.rotation makes Ixx, Iyy (its BAND_HZ first)
@@ -412,6 +448,9 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"{args.data / 'nominal'}: no flight_*.csv(.gz) files")
     if args.yaw_balance:
         print_yaw_balance(yaw_balance(nominal, args.out), args.out)
+        share, r2 = slow_yaw_pattern(nominal)
+        print(f"yaw pattern X below {TRIM_BAND[1]:g} Hz: {100 * share:.0f} % of its variance; "
+              f"R^2 of that slow part on the body velocity v_x, v_y: {r2:.2f}")
         print_axis_fits(delayed_band_fits(nominal, args.out), args.out)
         return 0
     fit = identify(nominal)
