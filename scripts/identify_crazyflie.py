@@ -43,6 +43,8 @@ Usage::
     python scripts/identify_crazyflie.py [--data ../shared/data/crazyflie21_brushless]
                                          [--out models/crazyflie21.toml]
     python scripts/identify_crazyflie.py --yaw-balance      # the table above; writes nothing
+    python scripts/identify_crazyflie.py --yaw-balance --logs LOG... --out SET.toml
+                                         # the same for another vehicle's logs and set
 """
 
 from __future__ import annotations
@@ -235,16 +237,17 @@ def yaw_balance(nominal: list[Path], params_path: Path, *,
 TRIM_BAND = (0.0, 0.5)
 
 
-def slow_yaw_pattern(nominal: list[Path]) -> tuple[float, float]:
+def slow_yaw_pattern(nominal: list[Path], params_path: Path) -> tuple[float, float]:
     """(share of the yaw pattern X's variance in TRIM_BAND, R^2 of that slow part on the body
     velocity v_x, v_y), pooled over the flights (each flight's mean removed)."""
     from quadsim.core.frames import rotate_inverse
     from quadsim.identify.__main__ import _load_states
+    from quadsim.vehicle.params import load_params
 
+    spins = load_params(params_path).rotor_spins
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         states, _ = _load_states(list(nominal))
-    spins = np.array([1.0, -1.0, 1.0, -1.0])          # motors 1, 3 ccw (README)
     slow, whole, velocity = [], [], []
     for st in states:
         dt = float(st.t[1] - st.t[0])
@@ -344,7 +347,7 @@ def print_yaw_balance(fits: list[YawFit], params_path: Path) -> None:
     params = load_params(params_path)
     b, radius = params.thrust_factor, params.rotor_radius
     izz, izz_max = params.inertia[2, 2], params.inertia[0, 0] + params.inertia[1, 1]
-    print(f"yaw balance on the nominal flights, given Izz {izz:.3g} kg m^2 (b {b:.4g}); "
+    print(f"yaw balance on the logs, given Izz {izz:.3g} kg m^2 (b {b:.4g}); "
           f"FM* at Izz = Ixx + Iyy = {izz_max:.3g}")
     for f in fits:
         hi = "" if np.isinf(f.band[1]) else f"{f.band[1]:g}"
@@ -442,13 +445,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--yaw-balance", action="store_true",
                         help="print the yaw balance's fits of d (models x bands) against the "
                              "set at --out; write nothing")
+    parser.add_argument("--logs", type=Path, nargs="+",
+                        help="with --yaw-balance: these logs instead of nominal/ (another "
+                             "vehicle's, with --out naming its parameter set)")
     args = parser.parse_args(argv)
-    nominal = sorted((args.data / "nominal").glob("flight_*.csv*"))
+    if args.logs and not args.yaw_balance:
+        raise InputError("--logs: only with --yaw-balance (the set is identified from "
+                         "nominal/ only)")
+    nominal = args.logs or sorted((args.data / "nominal").glob("flight_*.csv*"))
     if not nominal:
         raise InputError(f"{args.data / 'nominal'}: no flight_*.csv(.gz) files")
+    missing = [p for p in nominal if not p.is_file()]
+    if missing:
+        raise InputError(f"{missing[0]}: --logs: no such file")
     if args.yaw_balance:
         print_yaw_balance(yaw_balance(nominal, args.out), args.out)
-        share, r2 = slow_yaw_pattern(nominal)
+        share, r2 = slow_yaw_pattern(nominal, args.out)
         print(f"yaw pattern X below {TRIM_BAND[1]:g} Hz: {100 * share:.0f} % of its variance; "
               f"R^2 of that slow part on the body velocity v_x, v_y: {r2:.2f}")
         print_axis_fits(delayed_band_fits(nominal, args.out), args.out)
