@@ -23,20 +23,13 @@ the README's facts instead (``python -m quadsim.identify --logs
 cf.toml``, the skeleton being this file without thrust_factor, drag_factor, max_speed and
 [motor_map]).
 
-Why d stays the README's (``--yaw-balance`` prints both tables behind this; the numbers and
-what they mean: docs/identification.md, "What the crazyflie21 flights say about d"): the yaw
-balance ``Izz wdot_z + (Iyy - Ixx) w_x w_y = d X + sum_k c_k x_k`` (X = -sum_i s_i Omega_i^2;
-x_k the yaw torque per unit parameter of the library's own terms: ``rotor_drag`` (its in-plane
-drag at the hubs, which damps a yaw), ``gyroscopic`` (the rotors' spin-up reaction),
-``rate_damping.z``) fixes only d/Izz. Over the whole band no combination of those terms gives
-a figure of merit below 1, even at Izz = Ixx + Iyy: below ~0.5 Hz the yaw loop trims a slow
-yaw torque the model lacks (it follows the flight velocity), the balance there reads
-``0 = d X + that torque``, which fixes no scale for d and pulls the pooled fit toward 0. Band
-by band (as quadsim.identify.rotation fits Ixx, Iyy) the apparent d rises with frequency, and
-so does the roll/pitch authority above 8 Hz; at 4-8 Hz, where roll and pitch follow the rigid
-body with the literature's inertia, d reads 0.0056 m x b (95 % [0.0049, 0.0063]), the README's
-value. No constant d describes every band, so none is identified; the README's is kept and its
-source says what the flights show.
+``--yaw-balance`` writes nothing and prints what the flights say about d (why it stays the
+README's: docs/identification.md, "What the crazyflie21 flights say about d"). It fits the yaw
+balance ``Izz wdot_z + (Iyy - Ixx) w_x w_y = d X + sum_k c_k x_k`` (X = -sum_i s_i
+Omega_i^2; x_k the z torque per unit parameter of the library's ``rotor_drag``,
+``gyroscopic`` spin-up and ``rate_damping.z`` on the logged states) given the set's Izz, by
+instrumental variables and least squares, over the whole band and in bands (:func:`yaw_balance`),
+and roll, pitch and yaw as quadsim.identify.rotation fits Ixx, Iyy (:func:`delayed_band_fits`).
 
 Usage::
 
