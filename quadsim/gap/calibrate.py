@@ -511,14 +511,6 @@ def shared_candidate(rotor: bool, vbat: bool = False, *, pose: bool = True) -> C
 BODY_DRAG = ("body_drag", {}, ("cd_area_vertical",))
 
 
-#: the roll/pitch moments every flight of a real vehicle meets besides its rotors' (stage 2),
-#: shared with the band inertia (:func:`band_inertia_of`): the rotors' flapping moment per
-#: axis (:mod:`quadsim.effects.blade_flapping`; real rotors flap) and the frame's CoM offset
-#: in the rotor plane (a steady trim torque; without it the pooled fit reads the references'
-#: trim through the wind times the flapping moment). Neither is a reading of its own here.
-MOMENTS = (("blade_flapping", {}, ("roll", "pitch")), ("com_offset", {}, ("x", "y")))
-
-
 def per_flight_candidate(rotor: bool, vbat: bool = False, *, pose: bool = True) -> Candidate:
     """The shared parameters of the per-flight reference model: :func:`shared_candidate`
     plus the vertical drag (:data:`BODY_DRAG`) and, with commands but no voltage log,
@@ -528,8 +520,6 @@ def per_flight_candidate(rotor: bool, vbat: bool = False, *, pose: bool = True) 
     uncertainty; neither is a reading of its own (a flight's body drag is, on top)."""
     cand = shared_candidate(rotor, vbat, pose=pose)
     extra = ((BODY_DRAG,) if pose else ()) + ((SPEED_GAIN,) if rotor and not vbat else ())
-    if pose:
-        extra = extra + MOMENTS
     return Candidate(cand.name, cand.parts + extra, cand.base)
 
 
@@ -582,9 +572,7 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
     the directions one flight's data barely fix (a wind without drag, inertia against
     damping), which then stay at theta_ref instead of moving per flight."""
     k = len(reference.theta)
-    band = getattr(reference, "band", None) or {}
-    free = [j for j, n in enumerate(reference.candidate.parameter_names)
-            if n not in POOLED and n not in band]
+    free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
     values, variances = [], []
     for f in flights:
         jac, r = jacobian(f, reference, free, reference.candidate.effects, with_base=True)
@@ -631,41 +619,25 @@ def _pooled(flights, probe, shift: float, timing: bool):
     return info, grad, cost
 
 
-def fit_bounds(cand: Candidate, params: VehicleParams, dt: float, band: dict | None = None
+def fit_bounds(cand: Candidate, params: VehicleParams, dt: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``cand``'s parameters in the references' fit: the effects' plausible
     ranges, and a motor lag of at least a quarter of a fit sample ``dt`` (s), the Heun
-    sub-step of the rotor channel (:func:`quadsim.gap.residual.min_time_constant`). With the
-    roll and pitch inertia from the band (``band``, :func:`band_inertia_of`), the yaw
-    inertia's upper bound is the triangle inequality's, ``I_zz' <= I_xx' + I_yy'`` (less
-    :data:`TRIANGLE_MARGIN`): beyond it the vehicle is not physical, and a pooled step that
-    crosses it cannot be taken (:func:`_refine`)."""
+    sub-step of the rotor channel (:func:`quadsim.gap.residual.min_time_constant`)."""
     lower, upper = parameter_bounds(cand, params)
-    names = list(cand.parameter_names)
-    for k, name in enumerate(names):
+    for k, name in enumerate(cand.parameter_names):
         if name == "motor_lag.time_constant":
             lower[k] = max(lower[k], min_time_constant(dt))
-    band = band or {}
-    if {"inertia_error.xx", "inertia_error.yy"} <= set(band) and "inertia_error.zz" in names:
-        i = np.diag(np.asarray(params.inertia, float))
-        cap = ((1 + band["inertia_error.xx"][0]) * i[0]
-               + (1 + band["inertia_error.yy"][0]) * i[1]) / i[2] - 1 - TRIANGLE_MARGIN
-        k = names.index("inertia_error.zz")
-        upper[k] = min(upper[k], max(cap, lower[k]))
     return lower, upper
 
 
-#: the yaw inertia's bound stays this fraction inside the triangle inequality (fit_bounds)
-TRIANGLE_MARGIN = 1e-6
-
-
-def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float,
-            band: dict | None = None) -> dict[str, str]:
+def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
+            ) -> dict[str, str]:
     """Parameter -> "lower" or "upper" where ``theta`` sits at that bound of
     :func:`fit_bounds` (within 1e-9 of the parameter's typical size): a motor lag at a
     quarter of a fit sample (the shortest the fit resolves), an inertia at the end of its
     plausible range."""
-    lower, upper = fit_bounds(cand, params, dt, band)
+    lower, upper = fit_bounds(cand, params, dt)
     tol = 1e-9 * typical_scales(cand, params)
     return {name: side for k, name in enumerate(cand.parameter_names)
             for side, hit in (("lower", theta[k] <= lower[k] + tol[k]),
@@ -682,7 +654,7 @@ def _cost(flights, probe, theta, shift: float) -> float:
 
 
 def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
-            shift: float, sigma: np.ndarray, band: dict | None = None):
+            shift: float, sigma: np.ndarray):
     """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
     information, over the shared parameters and the rotor speeds' timing offset (module
     doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
@@ -690,14 +662,10 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     together (module doc, stage 2). Steps in units of each parameter's typical size with
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
-    ``band``: parameters held at their value in ``theta`` (the band inertia,
-    :func:`band_inertia_of`; the yaw inertia then bounded by the triangle inequality,
-    :func:`fit_bounds`).
     Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
-    band = band or {}
-    lower, upper = fit_bounds(cand, params, dt, band)
+    lower, upper = fit_bounds(cand, params, dt)
     typical = typical_scales(cand, params)
     timing = all(getattr(f, "fit", f).rotor_speed is not None for f in flights)
     if timing:
@@ -714,7 +682,6 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     # The prior takes such a wind to 0; a wind the data fix moves by (s / 5 m/s)^2 of itself.
     prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
                       for n in cand.parameter_names] + [0.0] * int(timing))
-    free = np.array([n not in band for n in cand.parameter_names] + [True] * int(timing))
     lam, info = 1.0, None
     for _ in range(REFINE_STEPS):
         probe.theta = x[:k].copy()
@@ -725,9 +692,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
             # a ridge in units of each parameter's typical size: a direction the data do
             # not fix does not move
             info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
-            step = np.zeros(len(x))
-            step[free] = np.linalg.solve(info_z[np.ix_(free, free)], (typical * grad)[free])
-            trial = np.clip(x - typical * step, lower, upper)
+            trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
             new = (_cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
                    + float(np.sum(prior * trial ** 2)))
             if new < cost:
@@ -738,8 +703,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
             break
         if cost - new < REFINE_TOL:
             break
-    cov = np.zeros((len(x), len(x)))
-    cov[np.ix_(free, free)] = _covariance(info[np.ix_(free, free)], typical[free])
+    cov = _covariance(info, typical)
     se = float(np.sqrt(max(cov[-1, -1], 0.0))) if timing else 0.0
     # the wind's standard error under its prior at the refined values (the bounded fit's is
     # that of a wind at its bound, ~0): what the references know of the room's wind
@@ -839,9 +803,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     cand = per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states))
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
-    band = band_inertia_of(states, params)
-    fit = _with_band(cand, fit_candidate(_without_band(cand, band), states, params, sigma0,
-                                         rotor_channel=rotor, max_nfev=40), band)
+    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
     if curve and CURVE_KEY in cand.parameter_names:
         # before the refinement, which changes only the wind's standard errors: a slope the
         # pooled fit leaves undetermined ends this calibration without paying for it
@@ -851,7 +813,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
         if _slope_clearly_undetermined(states, params, rotor, cand, fit):
             return None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                              shift=start, sigma=sigma0, band=band)
+                                              shift=start, sigma=sigma0)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
@@ -867,70 +829,13 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
                     shift, shift_se, vbat_ref=vbat_ref,
-                    at_bound=bounded(cand, params, theta, dt, band),
-                    bounds=fit_bounds(cand, params, dt, band), band=band)
+                    at_bound=bounded(cand, params, theta, dt),
+                    bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
     ref.log_ms = log_ms
     _complete(ref, states, log_ms)
     return ref
-
-
-def band_inertia_of(states, params: VehicleParams) -> dict[str, tuple[float, float]]:
-    """``inertia_error.xx`` / ``.yy`` -> (relative error, its standard error) of the roll and
-    pitch inertia the references show in the band where the rotors drive the body
-    (:func:`quadsim.identify.rotation.band_estimate`: the rotors' moment of the model's rotor
-    speeds, ``params`` with the data's motor map, against the angular acceleration, 4-16 Hz,
-    each flight at its own lag), for each axis that estimate identifies; empty without one."""
-    from ..identify.rotation import band_estimate, band_parts
-    from .residual import model_wrench
-
-    out = {}
-    for axis, key in ((0, "inertia_error.xx"), (1, "inertia_error.yy")):
-        parts = []
-        for s in states:
-            torque = model_wrench(s, params, [])[1][:, axis]
-            w = s.body_rate
-            gyro = w[:, 1] * w[:, 2] if axis == 0 else w[:, 0] * w[:, 2]
-            parts.append(band_parts(torque, s.body_accel[:, axis], gyro,
-                                    1.0 / float(s.t[1] - s.t[0])))
-        est = band_estimate(parts, key)
-        nominal = float(params.inertia[axis, axis])
-        if est is not None and est.identified:
-            se = (est.ci95[1] - est.ci95[0]) / (2 * 1.96)
-            out[key] = (est.value / nominal - 1.0, se / nominal)
-    return out
-
-
-def _without_band(cand: Candidate, band: dict) -> Candidate:
-    """``cand`` with the parameters of ``band`` fixed at their band values."""
-    parts = []
-    for name, fixed, fitted in cand.parts:
-        held = {p: band[f"{name}.{p}"][0] for p in fitted if f"{name}.{p}" in band}
-        parts.append((name, {**fixed, **held}, tuple(p for p in fitted if p not in held)))
-    return Candidate(cand.name, tuple(parts), cand.base)
-
-
-def _with_band(cand: Candidate, fit, band: dict):
-    """``fit`` of :func:`_without_band` as a fit of ``cand``: the band's parameters at their
-    band values and standard errors, identified, uncorrelated with the rest."""
-    if not band:
-        return fit
-    names = cand.parameter_names
-    sub = [n for n in names if n not in band]
-    index = [names.index(n) for n in sub]
-    theta, stderr = np.zeros(len(names)), np.zeros(len(names))
-    corr = np.eye(len(names))
-    theta[index], stderr[index] = fit.theta, fit.stderr
-    corr[np.ix_(index, index)] = fit.correlation
-    ident = [True] * len(names)
-    for k, n in enumerate(names):
-        if n in band:
-            theta[k], stderr[k] = band[n]
-        else:
-            ident[k] = bool(fit.identifiable[sub.index(n)])
-    return dataclasses.replace(fit, candidate=cand, theta=theta, stderr=stderr,
-                               correlation=corr, identifiable=ident, significant=ident)
 
 
 def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:

@@ -610,10 +610,6 @@ class Reference:
     #: shared parameter -> "lower" or "upper" where the references' pooled fit stopped at
     #: that bound (:func:`bounded`): their data say only that the value lies at or beyond it
     at_bound: dict = field(default_factory=dict)
-    #: shared parameter -> (value, standard error) taken from the band where the rotors drive
-    #: the body instead of the pooled fit (:func:`quadsim.gap.calibrate.band_inertia_of`); never
-    #: re-estimated flight by flight
-    band: dict = field(default_factory=dict)
     #: (lower, upper) bounds of the shared parameters in the references' fit
     #: (:func:`fit_bounds`): the reference model at a flight's place stays within them
     #: (:func:`quadsim.gap.reference.local_reference`); None: the effects' plausible ranges
