@@ -81,3 +81,26 @@ def test_slow_logs_cannot_show_the_band():
     slow = LogSeries(log.name, log.t[::4], log.specific_force[::4], log.body_rate[::4],
                      log.body_accel[::4], log.rotor_speed[::4], None, None)   # 25 Hz
     assert band_inertia([slow], SKELETON, B) == [None, None]
+
+
+def test_band_estimate_on_arrays_is_the_log_fit():
+    """``band_parts`` + ``band_estimate`` (the array form a calibration on prepared flight
+    states calls) give the same inertia as ``band_inertia`` on the logs, and recover each
+    log's lag of the moment behind the torque on the delay grid."""
+    from quadsim.identify.rotation import band_estimate, band_parts
+
+    logs = [_log(10 * s, d) for s, d in ((1, 0.0), (2, 0.0175), (3, -0.01))]
+    from_logs = band_inertia(logs, SKELETON, B)[0]
+    parts = []
+    for log in logs:
+        w2 = np.square(log.rotor_speed)
+        torque = B * (w2 @ POS[:, 1])
+        gyro = log.body_rate[:, 1] * log.body_rate[:, 2]
+        parts.append(band_parts(torque, log.body_accel[:, 0], gyro, RATE))
+    est = band_estimate(parts, "Ixx")
+    assert est.identified
+    assert est.value == pytest.approx(from_logs.value, rel=1e-12)
+    assert est.value == pytest.approx(IXX, rel=0.03)
+    # rotor data logged 17.5 ms late, 10 ms early: the moment leads / lags the logged torque
+    assert "-17.5, +10.0 ms" in est.quality
+    assert band_parts(torque, log.body_accel[:, 0], gyro, 30.0) is None     # below 2.5 x 16 Hz
