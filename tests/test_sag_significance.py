@@ -91,3 +91,17 @@ def test_references_readings_are_taken_at_the_references_voltage_too():
     assert sag.post_sd[KEY] == pytest.approx(
         4.19975 * 4.2 / 4.0 * np.hypot(4.4e-4 / 4.19975, se / 4.0), rel=1e-12)
     assert same is other
+
+
+def test_a_refit_of_the_references_own_law_is_sized_by_its_full_voltage():
+    """Where the references' voltage varied (the law is in their model: the reading
+    ``replaces`` it, the real Crazyflie's 20 nominal flights at 3.61-3.86 V), the model
+    follows this flight's voltage already: its V_full alone is the size, whatever it sags."""
+    ev = _sag()
+    shared = Evidence(Explanation("battery_sag", "", ev.explanation.parts, (V_REF,), (0.42,),
+                                  replaces=("battery_sag",)),
+                      ev.values, ev.post_sd, ev.prior_sd, ev.determined, 0.0, np.ones(10))
+    sagging = np.linspace(4.2, 3.99, 800)
+    assert at_reference_voltage(shared, sagging, V_REF) == [shared]
+    assert rows_at_reference_voltage([shared], sagging, V_REF) == [shared]
+    assert negligible_at(shared, CHECK, sagging, V_REF)

@@ -486,8 +486,10 @@ def at_reference_voltage(ev, vbat, vbat_ref, *, pieces: int = 4) -> list:
     voltage ``vbat_ref`` (V) this quarter's speed per command, V_eq = V_full vbat_ref / m_q
     (m_q the quarter's mean voltage), and its posterior spread by V_eq's (the relative
     spreads of V_full and of m_q, its standard error over the quarter's samples, added in
-    quadrature). ``[ev]`` when the reading has no full voltage, or without a voltage log or
-    the references' voltage.
+    quadrature). ``[ev]`` when the reading has no full voltage or refits the references'
+    own (their model follows the voltage already: ``replaces`` battery_sag, where their
+    voltage varied, :data:`quadsim.gap.calibrate.VBAT_TESTED`, and V_full alone is the
+    size), or without a voltage log or the references' voltage.
 
     Why: a sag reading's V_full alone is not its size. The references flew at one voltage,
     so their readings of V_full (their spread, :func:`quadsim.gap.calibrate.negligible`'s
@@ -495,7 +497,8 @@ def at_reference_voltage(ev, vbat, vbat_ref, *, pieces: int = 4) -> list:
     command by m_q / vbat_ref at an unchanged V_full. Practical significance of the sag is
     the size of that change against the references' spread: a battery falling 5 % over the
     flight is 5 % of speed per command, whatever V_full reads."""
-    if _THROUGH_VBAT not in ev.values or vbat is None or not vbat_ref:
+    if _THROUGH_VBAT not in ev.values or "battery_sag" in ev.explanation.replaces \
+            or vbat is None or not vbat_ref:
         return [ev]
     volts = np.asarray(vbat, float)
     if volts.size < 8 or not np.all(np.isfinite(volts)):
