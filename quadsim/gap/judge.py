@@ -88,7 +88,11 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    none of whose parameters the data determine counts as "no difference". Held out,
    :func:`rank` also counts as "no difference" a reading none of whose parameters lies
    beyond its 95 % interval (1.96 posterior spreads) from the no-difference value
-   (:func:`differs`).
+   (:func:`differs`). Per flight, a reading within the references' own between-flight
+   spread of it counts as "no difference" too (practical significance,
+   :func:`quadsim.gap.calibrate.negligible`); a battery-sag reading that brings the law
+   speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
+   of the flight, and their readings alike (:func:`negligible_at`).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
