@@ -185,6 +185,8 @@ def run_case(case: dict) -> dict:
     out = {**case, "verdict": verdict["effect"], "reduction": verdict["reduction"],
            "confusable_with": verdict["confusable_with"], "seconds": elapsed,
            "readings": verdict.get("readings", []),
+           "tentative": bool(verdict.get("tentative")),
+           "probability": verdict.get("probability"),
            "truth_values": {k: v for k, v in truth_values.items() if v != 0.0},
            "oracle_reduction": oracle_reduction(logs, params, effects) if effects else 0.0,
            "ranked": [e["name"] for e in result["effects"][:3]],
@@ -224,7 +226,9 @@ def summarise(rows: list[dict]) -> str:
              f"({sum(top1)}/{len(top1)}); named or listed as confusable: "
              f"{np.mean(named_or_tied):.1%}"),
              (f"out-of-library -> no confident name: "
-             f"{sum(r['verdict'] in QUIET for r in outside)}/{len(outside)}; no effect -> "
+             f"{sum(not _self_score(r)['confident_wrong'] for r in outside)}/{len(outside)} "
+             f"({sum(r['verdict'] not in QUIET for r in outside)} named tentatively); "
+             f"no effect -> "
              f"no_significant_gap: "
              f"{sum(r['verdict'] == 'no_significant_gap' for r in none)}/{len(none)}"),
              (f"main-parameter relative error: median {np.median(errors):.1%}, "
@@ -286,7 +290,8 @@ def _self_verdict(r: dict) -> dict:
     from benchmarks.score import read_verdict
 
     return read_verdict({"effect": r["verdict"], "confusable_with": r["confusable_with"],
-                         "readings": r.get("readings")})
+                         "readings": r.get("readings"), "tentative": r.get("tentative"),
+                         "probability": r.get("probability")})
 
 
 def _self_score(r: dict) -> dict:

@@ -155,6 +155,7 @@ from .judge import (
     reading_name,
     reading_text,
     remainder,
+    rows_at_reference_voltage,
     scaled_residuals,
     slow_part,
     where,
@@ -920,7 +921,9 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
         return verdict_of(weighed[j], check)
 
     return self_check_of([f.name for f in ref_flights],
-                         [None if w is None else w.rows for w in weighed], judge_fn)
+                         [None if w is None else rows_at_reference_voltage(
+                             w.rows, getattr(getattr(w.flight, "fit", w.flight), "vbat", None),
+                             ref.vbat_ref) for w in weighed], judge_fn)
 
 
 def judge_one(log: FlightLog, reference: Reference, effects=None,
@@ -1003,7 +1006,9 @@ def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
     flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
     reference = dataclasses.replace(weighed.reference, self_check=check)
     verdict = logcheck.mark(judge(rows, reference, flight.name,
-                               cap=logcheck.probability_cap(statuses)), statuses)
+                                  cap=logcheck.probability_cap(statuses),
+                                  vbat=getattr(getattr(flight, "fit", flight), "vbat", None)),
+                            statuses)
     words = verdict.answer
     if law is not None:       # the drag law in words; None: the references'
         words += f" Judged with {law.variant} (the law this flight shows)."

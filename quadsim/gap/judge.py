@@ -88,7 +88,11 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    none of whose parameters the data determine counts as "no difference". Held out,
    :func:`rank` also counts as "no difference" a reading none of whose parameters lies
    beyond its 95 % interval (1.96 posterior spreads) from the no-difference value
-   (:func:`differs`).
+   (:func:`differs`). Per flight, a reading within the references' own between-flight
+   spread of it counts as "no difference" too (practical significance,
+   :func:`quadsim.gap.calibrate.negligible`); a battery-sag reading that brings the law
+   speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
+   of the flight, and their readings alike (:func:`negligible_at`).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -109,7 +113,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    magnitude (:mod:`.fitting`), parameters inconsistent between regimes
    (:mod:`.consistency`), or a systematic remainder with "no difference" the lead;
    otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
-   name). *Tentative* below :data:`CONFIDENT` or when its value shifts with the regime.
+   name). *Tentative* below :data:`CONFIDENT`, when its value shifts with the regime, when
+   the lead's own values carry a caveat (:func:`lead_caveat`) and, held out, when a
+   systematic remainder stays beside the name (part of the gap is outside the library).
 
 Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
 ``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
@@ -156,10 +162,11 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "scaled_residuals", "split_masks", "standing", "tentative_note", "tentative_text",
            "where", "CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P",
            "UNCHECKED_WORDS",
-           "Baseline", "above_floor", "carry_over", "channel_names", "differs",
-           "every_part_stands", "form_share", "judge", "judge_heldout", "lack_of_fit",
-           "mean_squares", "outcome_of", "plausible", "posterior", "rank", "reading_name",
-           "reading_text", "remainder", "symptom", "within_form_error"]
+           "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
+           "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
+           "lack_of_fit", "mean_squares", "negligible_at", "outcome_of", "plausible",
+           "posterior", "rank", "reading_name", "reading_text", "remainder",
+           "rows_at_reference_voltage", "symptom", "within_form_error"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -470,6 +477,65 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
     return sorted(out, key=lambda x: (-x[1], x[0]))
 
 
+#: the parameter whose reading acts through a logged signal by a law the references did not
+#: test: a full voltage V_full, with the speed per command following vbat / V_full
+#: (:data:`quadsim.gap.calibrate.VBAT_TESTED`)
+_THROUGH_VBAT = "battery_sag.full_voltage"
+
+
+def at_reference_voltage(ev, vbat, vbat_ref, *, pieces: int = 4) -> list:
+    """Reading ``ev`` as the readings it equals at the references' voltage: one per quarter
+    (``pieces``: 1, the whole flight) of this flight's voltage log ``vbat`` (V), with
+    ``battery_sag.full_voltage`` replaced by the full voltage that gives the references'
+    voltage ``vbat_ref`` (V) this quarter's speed per command, V_eq = V_full vbat_ref / m_q
+    (m_q the quarter's mean voltage), and its posterior spread by V_eq's (the relative
+    spreads of V_full and of m_q, its standard error over the quarter's samples, added in
+    quadrature). ``[ev]`` when the reading has no full voltage or refits the references'
+    own (their model follows the voltage already: ``replaces`` battery_sag, where their
+    voltage varied, :data:`quadsim.gap.calibrate.VBAT_TESTED`, and V_full alone is the
+    size), or without a voltage log or the references' voltage.
+
+    Why: a sag reading's V_full alone is not its size. The references flew at one voltage,
+    so their readings of V_full (their spread, :func:`quadsim.gap.calibrate.negligible`'s
+    scale) are readings of their speed per command; this flight's sag changes its speed per
+    command by m_q / vbat_ref at an unchanged V_full. Practical significance of the sag is
+    the size of that change against the references' spread: a battery falling 5 % over the
+    flight is 5 % of speed per command, whatever V_full reads."""
+    if _THROUGH_VBAT not in ev.values or "battery_sag" in ev.explanation.replaces \
+            or vbat is None or not vbat_ref:
+        return [ev]
+    volts = np.asarray(vbat, float)
+    if volts.size < 8 or not np.all(np.isfinite(volts)):
+        return [ev]
+    full, sd = ev.values[_THROUGH_VBAT], ev.post_sd[_THROUGH_VBAT]
+    out = []
+    for quarter in np.array_split(volts, pieces):
+        m = float(np.mean(quarter))
+        se = float(np.std(quarter, ddof=1)) / np.sqrt(len(quarter))
+        eq = full * vbat_ref / m
+        out.append(dataclasses.replace(
+            ev, values={**ev.values, _THROUGH_VBAT: eq},
+            post_sd={**ev.post_sd, _THROUGH_VBAT: eq * float(np.hypot(sd / full, se / m))}))
+    return out
+
+
+def rows_at_reference_voltage(rows, vbat, vbat_ref) -> list:
+    """A reference flight's Evidence ``rows`` with its sag reading taken at the references'
+    voltage ``vbat_ref`` over its whole voltage log ``vbat`` (:func:`at_reference_voltage`,
+    one piece): the readings whose spread over the references is the scale of
+    :func:`negligible_at` (like with like: a reference flown at another charge state
+    reads the same V_full, and its speed per command differs by its voltage)."""
+    return [at_reference_voltage(ev, vbat, vbat_ref, pieces=1)[0] for ev in rows]
+
+
+def negligible_at(ev, check, vbat=None, vbat_ref=None) -> bool:
+    """Practical significance (:func:`quadsim.gap.calibrate.negligible`) of reading ``ev``
+    on a flight with voltage log ``vbat`` (V; None: none) against references flown at
+    ``vbat_ref`` (V): negligible only where it is at every quarter of the flight
+    (:func:`at_reference_voltage`)."""
+    return all(negligible(e, check) for e in at_reference_voltage(ev, vbat, vbat_ref))
+
+
 def reading_name(key: str, ev) -> str:
     """The effects a reading asserts, joined by "+", the physical change that is largest
     against the references first (:func:`change_sizes`, the lead rule): ``key`` and each
@@ -730,14 +796,16 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
                    ev.explanation.fixed_values, ev.explanation.variant)
 
 
-def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
+def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict:
     """One flight's :class:`Verdict` from the evidence ``rows`` of its explanations against
     the calibrated ``reference`` (per-flight mode); ``name``: the flight's file; ``cap``:
     the highest probability stated (:mod:`quadsim.gap.logcheck`: a rotor order the torque
-    balance does not confirm)."""
+    balance does not confirm); ``vbat``: the flight's logged battery voltage (V, None: not
+    logged), the scale of a sag reading's practical significance (:func:`negligible_at`)."""
     check = getattr(reference, "self_check", None)
-    ranked = [(k, min(p, cap), ev)
-              for k, p, ev in posterior(rows, lambda ev: negligible(ev, check))]
+    vbat_ref = getattr(reference, "vbat_ref", None)
+    ranked = [(k, min(p, cap), ev) for k, p, ev in
+              posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref))]
     top, p_top, best = ranked[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
@@ -764,7 +832,13 @@ def judge(rows, reference, name: str, *, cap: float = 1.0) -> Verdict:
     words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
                    against="references", separate=separate,
                    tentative=p_top < CONFIDENT or unsure)
-    words += caveat + _normal_words(best if effect else None, check, left, share)
+    sized = best
+    if effect:          # a sag's size: its full voltage at the references' voltage
+        sized = max(at_reference_voltage(best, vbat, vbat_ref),
+                    key=lambda e: abs(e.values.get(_THROUGH_VBAT, 0.0)
+                                      - best.values.get(_THROUGH_VBAT, 0.0)))
+    words += caveat + _normal_words(sized if effect else None, check, left, share,
+                                    at_voltage=vbat_ref if sized is not best else None)
     return Verdict(
         outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
         form_remainder={k: v[0] for k, v in left.items()},
@@ -835,17 +909,23 @@ def _off(key: str) -> float:
         return 0.0
 
 
-def _normal_words(lead_ev, check, left: dict, share: float) -> str:
+def _normal_words(lead_ev, check, left: dict, share: float, *,
+                  at_voltage: float | None = None) -> str:
     """What the answer adds from the references' own normal (docs/gap.md, method): the
     lead's size against the references' readings of it (``lead_ev``: its Evidence, None
-    when no effect is named), what a tentatively named reading leaves (``left``: channel ->
-    (ratio, z); ``share`` of the flight's gap), a self-check that is not clean, and
-    :data:`UNCHECKED_WORDS` where there is none (``check`` None: fewer than 3 references)."""
+    when no effect is named; ``at_voltage`` (V): a sag reading taken at the references'
+    voltage, :func:`at_reference_voltage`, at the quarter of the flight farthest from it),
+    what a tentatively named reading leaves (``left``: channel -> (ratio, z); ``share`` of
+    the flight's gap), a self-check that is not clean, and :data:`UNCHECKED_WORDS` where
+    there is none (``check`` None: fewer than 3 references)."""
     words = ""
     if lead_ev is not None:
         size = against_text(lead_ev, check, fitting.unit_of)
+        at = "" if at_voltage is None else (
+            f" (the full voltage that gives their {at_voltage:.3g} V this flight's speed per "
+            "command, at its quarter farthest from them)")
         if size:
-            words += f" Its size against the references' own readings of it: {size}."
+            words += f" Its size against the references' own readings of it{at}: {size}."
     if left:
         where = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
         words += (f" Beyond it the residual stays beyond the reference flights' on {where} "
@@ -898,15 +978,19 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     reduction = entry["reduction"] if entry else 0.0
     effect = outcome == "effect"
     caveat = lead_caveat(lead.train, params) if effect else ""      # the lead rule's half
+    # a name that leaves a systematic remainder explains only part of the gap: the rest is
+    # outside the library, so the name may be a stand-in for it (per flight such a lead is
+    # unexplained, or tentative within FORM_ERROR_TENTATIVE): never confident
+    unsure = bool(caveat) or bool(remains)
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
-                                          unsure=bool(caveat))
+                                          unsure=unsure)
     notes += more
     words += caveat
     verdict = Verdict(
         outcome, shown if effect else outcome, words, p_lead,
-        tentative=effect and (p_lead < CONFIDENT or shifted or bool(caveat)),
+        tentative=effect and (p_lead < CONFIDENT or shifted or unsure),
         posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
                      **{k: v[0] for k, v in lack.items()}},
@@ -933,8 +1017,8 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
     name (``stands``, :func:`quadsim.gap.judge.standing`) is a partial explanation;
     otherwise :func:`quadsim.gap.words.answer` (tentative below :data:`CONFIDENT` or
-    ``unsure``: a lead with a caveat), with the tentative sentence of a shifted name that
-    stands."""
+    ``unsure``: a lead with a caveat or a systematic remainder), with the tentative sentence
+    of a shifted name that stands."""
     lead_name, checked = decision.lead_name, decision.consistency
     entry = decision.entry(lead_name) or {}
     reduction = entry.get("reduction", 0.0)
