@@ -62,7 +62,13 @@ Stages (each a named type)
    and every part of it must be determined and plausible,
    :func:`quadsim.gap.judge.every_part_stands`), and the consistency check of the lead
    (:mod:`.judge`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
-   turns into the verdict.
+   turns into the verdict. A reading whose values lie outside their documented plausible
+   range is weighed like any other, in both modes: as lead it is named with the caveat of
+   :func:`quadsim.gap.judge.lead_caveat` and is tentative, never a confident name (the
+   plausible range is a documented prior band, not a zero-probability region: dropping such
+   a reading hands its evidence to a worse one). A pair is the one place the range still
+   admits or refuses: a pair is a second search, tried only held out, and two effects that
+   need implausible sizes usually cancel each other rather than describe the vehicle.
 
 Example::
 
@@ -739,8 +745,10 @@ class Decision:
     ``entries`` every explanation as an ``effects`` JSON entry (most probable first);
     ``lead`` and ``lead_name`` the most probable reading; ``null`` the "no difference"
     Weighed; ``combination`` the pair kept as the lead (or None); ``consistency`` the lead's
-    check (None for "no difference"); ``implausible`` (name, magnitude, prior) of the
-    explanations given no weight."""
+    check (None for "no difference"); ``implausible`` (name, magnitude, prior text) of the
+    explanations whose determined values lie outside their documented plausible range:
+    weighed like every other, a lead among them named only with the caveat of
+    :func:`quadsim.gap.judge.lead_caveat` (tentative), as per flight."""
 
     ranked: tuple
     rows: tuple
@@ -781,17 +789,16 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     params = reference.params
     tick = tick or (lambda *_: None)
     dt = float(train[0].t[1] - train[0].t[0])
-    # a value outside its documented plausible range has no prior probability (:mod:`.fitting`)
+    # the per-flight rule (quadsim.gap.judge.lead_caveat): a value outside its documented
+    # plausible range keeps its evidence; a lead with one is named with a caveat, tentative
     implausible = []
     for w in weighed:
         ok, text = plausible({q: v for q, v in w.train.values.items()
                               if w.train.determined.get(q)}, params)
         if not ok:
             implausible.append((w, text))
-    dropped = {id(w) for w, _ in implausible}
-    kept = [w for w in weighed if id(w) not in dropped]
     scale = Practical(train, reference)
-    ranked = scale.rank(kept)
+    ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
     null = next((w for w in weighed if w.name == "no_difference"), None)
     combination = checked = None
