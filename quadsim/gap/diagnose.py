@@ -68,7 +68,9 @@ Stages (each a named type)
    plausible range is a documented prior band, not a zero-probability region: dropping such
    a reading hands its evidence to a worse one). A pair is the one place the range still
    admits or refuses: a pair is a second search, tried only held out, and two effects that
-   need implausible sizes usually cancel each other rather than describe the vehicle.
+   need implausible sizes usually cancel each other rather than describe the vehicle. So a
+   pair is built on the most probable plausible reading (the lead, or the first below an
+   implausible lead) with the other plausible readings, and leads where it ranks first.
 
 Example::
 
@@ -805,14 +807,23 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     if lead_name != "no_difference":
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
                              reference)
-    if lead_name != "no_difference" and max_combination >= 2 and checked["consistent"] \
-            and (remainder(lead.train_residuals + lead.held_residuals, reference, dt)
-                 or carry_over(lead, reference, null)):
-        others = [w for k, _, w in ranked if k not in ("no_difference", lead_name)
-                  and w.name == k]
+    # a pair needs every part plausible (every_part_stands), so it is built on the most
+    # probable plausible reading: the lead, or the first below an implausible lead
+    outside = {id(w) for w, _ in implausible}
+    base = next((w for k, _, w in ranked if k == w.name and k != "no_difference"
+                 and id(w) not in outside), None)
+    base_checked = checked if base is lead else (
+        None if base is None else consistent(base, entry_of(base, 1.0, before, reference),
+                                             train + held, reference))
+    if lead_name != "no_difference" and base is not None and max_combination >= 2 \
+            and base_checked["consistent"] \
+            and (remainder(base.train_residuals + base.held_residuals, reference, dt)
+                 or carry_over(base, reference, null)):
+        others = [w for k, _, w in ranked if k not in ("no_difference", base.name)
+                  and w.name == k and id(w) not in outside]
         trials = []
         for other in others:
-            trials.append(pair(lead, other, partners=len(others), train=train, held=held,
+            trials.append(pair(base, other, partners=len(others), train=train, held=held,
                                reference=reference))
             tick(trials[-1].name)
         best = max(trials, key=lambda w: w.total.log_z, default=None)
