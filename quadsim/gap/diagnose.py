@@ -62,7 +62,15 @@ Stages (each a named type)
    and every part of it must be determined and plausible,
    :func:`quadsim.gap.judge.every_part_stands`), and the consistency check of the lead
    (:mod:`.judge`) -> :class:`Decision`, which :func:`quadsim.gap.judge.judge_heldout`
-   turns into the verdict.
+   turns into the verdict. A reading whose values lie outside their documented plausible
+   range is weighed like any other, in both modes: as lead it is named with the caveat of
+   :func:`quadsim.gap.judge.lead_caveat` and is tentative, never a confident name (the
+   plausible range is a documented prior band, not a zero-probability region: dropping such
+   a reading hands its evidence to a worse one). A pair is the one place the range still
+   admits or refuses: a pair is a second search, tried only held out, and two effects that
+   need implausible sizes usually cancel each other rather than describe the vehicle. So a
+   pair is built on the most probable plausible reading (the lead, or the first below an
+   implausible lead) with the other plausible readings, and leads where it ranks first.
 
 Example::
 
@@ -739,8 +747,10 @@ class Decision:
     ``entries`` every explanation as an ``effects`` JSON entry (most probable first);
     ``lead`` and ``lead_name`` the most probable reading; ``null`` the "no difference"
     Weighed; ``combination`` the pair kept as the lead (or None); ``consistency`` the lead's
-    check (None for "no difference"); ``implausible`` (name, magnitude, prior) of the
-    explanations given no weight."""
+    check (None for "no difference"); ``implausible`` (name, magnitude, prior text) of the
+    explanations whose determined values lie outside their documented plausible range:
+    weighed like every other, a lead among them named only with the caveat of
+    :func:`quadsim.gap.judge.lead_caveat` (tentative), as per flight."""
 
     ranked: tuple
     rows: tuple
@@ -781,31 +791,39 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     params = reference.params
     tick = tick or (lambda *_: None)
     dt = float(train[0].t[1] - train[0].t[0])
-    # a value outside its documented plausible range has no prior probability (:mod:`.fitting`)
+    # the per-flight rule (quadsim.gap.judge.lead_caveat): a value outside its documented
+    # plausible range keeps its evidence; a lead with one is named with a caveat, tentative
     implausible = []
     for w in weighed:
         ok, text = plausible({q: v for q, v in w.train.values.items()
                               if w.train.determined.get(q)}, params)
         if not ok:
             implausible.append((w, text))
-    dropped = {id(w) for w, _ in implausible}
-    kept = [w for w in weighed if id(w) not in dropped]
     scale = Practical(train, reference)
-    ranked = scale.rank(kept)
+    ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
     null = next((w for w in weighed if w.name == "no_difference"), None)
     combination = checked = None
     if lead_name != "no_difference":
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
                              reference)
-    if lead_name != "no_difference" and max_combination >= 2 and checked["consistent"] \
-            and (remainder(lead.train_residuals + lead.held_residuals, reference, dt)
-                 or carry_over(lead, reference, null)):
-        others = [w for k, _, w in ranked if k not in ("no_difference", lead_name)
-                  and w.name == k]
+    # a pair needs every part plausible (every_part_stands), so it is built on the most
+    # probable plausible reading: the lead, or the first below an implausible lead
+    outside = {id(w) for w, _ in implausible}
+    base = next((w for k, _, w in ranked if k == w.name and k != "no_difference"
+                 and id(w) not in outside), None)
+    base_checked = checked if base is lead else (
+        None if base is None else consistent(base, entry_of(base, 1.0, before, reference),
+                                             train + held, reference))
+    if lead_name != "no_difference" and base is not None and max_combination >= 2 \
+            and base_checked["consistent"] \
+            and (remainder(base.train_residuals + base.held_residuals, reference, dt)
+                 or carry_over(base, reference, null)):
+        others = [w for k, _, w in ranked if k not in ("no_difference", base.name)
+                  and w.name == k and id(w) not in outside]
         trials = []
         for other in others:
-            trials.append(pair(lead, other, partners=len(others), train=train, held=held,
+            trials.append(pair(base, other, partners=len(others), train=train, held=held,
                                reference=reference))
             tick(trials[-1].name)
         best = max(trials, key=lambda w: w.total.log_z, default=None)

@@ -109,8 +109,8 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    moving average) against what noise of the noise model gives it, chi2(nu)/nu with nu =
    N / W windows, at 1 - LOF_P / C. Per flight the noise model is the references' whole
    residual, so there is no slow part to test.
-4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, an implausible
-   magnitude (:mod:`.fitting`), parameters inconsistent between regimes
+4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, parameters
+   inconsistent between regimes
    (:mod:`.consistency`), or a systematic remainder with "no difference" the lead;
    otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
    name). *Tentative* below :data:`CONFIDENT`, when its value shifts with the regime, when
@@ -781,9 +781,11 @@ def every_part_stands(entry, params) -> bool:
                for p in parts) and plausible(entry["params"], params)[0]
 
 
-def outcome_of(lead: str, lack: dict, remains: dict, *, plausible: bool = True) -> str:
-    """The outcome rule of both modes (module doc, 4) for lead reading ``lead``."""
-    if lack or not plausible or (remains and lead == "no_difference"):
+def outcome_of(lead: str, lack: dict, remains: dict) -> str:
+    """The outcome rule of both modes (module doc, 4) for lead reading ``lead``. A lead
+    outside its plausible range is no outcome of its own: it is named with
+    :func:`lead_caveat`'s caveat and is tentative, in both modes."""
+    if lack or (remains and lead == "no_difference"):
         return "unexplained"
     return "no_significant_gap" if lead == "no_difference" else "effect"
 
@@ -955,25 +957,22 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     entry = decision.entry(lead_name)
     p_lead = decision.probability[lead_name]
     shown = decision.shown                  # the lead rule's name (reading_name)
-    notes = [f"{name} fits only at an implausible magnitude ({nominal_words(magnitude, True)}"
-             f"; {prior_text}): given no weight"
+    # a reading outside its plausible range is weighed as any other (the per-flight rule):
+    # as lead it carries lead_caveat's caveat below and is tentative
+    notes = [f"{name} fits only at a magnitude outside its plausible range "
+             f"({nominal_words(magnitude, True)}; {prior_text}): named only with a caveat"
              for name, magnitude, prior_text in decision.implausible]
     remains = remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     # a named reading must carry over to the held-out flights
     lack = carry_over(lead, reference, decision.null) if entry is not None else {}
-    ok, prior_text = plausible(entry["params"], params) if entry is not None else (True, "")
-    if not ok:
-        notes.append(f"{shown} is the most probable reading only with an implausible "
-                     f"magnitude ({rows[0]['magnitude']}; {prior_text}): not named")
-    checked = decision.consistency if entry is not None and ok else None
+    checked = decision.consistency if entry is not None else None
     stands = standing(checked) if checked is not None else "stands"
     inconsistent, shifted = stands == "inconsistent", stands == "shifted"
-    outcome = "unexplained" if inconsistent else outcome_of(lead_name, lack, remains,
-                                                            plausible=ok)
+    outcome = "unexplained" if inconsistent else outcome_of(lead_name, lack, remains)
     stated = [r for r in rows if r["probability"] >= READING_P and r["name"] != "no_difference"]
     others = [r["name"] for r in stated if r is not rows[0]]
     alts = _alternatives(decision, stated, params) if entry is not None else ()
-    named = entry is not None and ok and not inconsistent    # the name was weighed as one
+    named = entry is not None and not inconsistent    # the name was weighed as one
     separate_by = fitting.separation(shown, others) if named else {}
     reduction = entry["reduction"] if entry else 0.0
     effect = outcome == "effect"
