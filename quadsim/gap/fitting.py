@@ -99,7 +99,8 @@ effects, with sources (what ranks collinear explanations), and each reading in w
 When two candidates explain the same forces (an added mass and a uniform loss of thrust per
 Omega^2 are the same in the force balance up to drag), the data cannot choose; physics can
 say which magnitude is believable. Each prior is a range of the *relative* or absolute size
-that real vehicles show; a fit outside it is flagged ``implausible`` and never named.
+that real vehicles show; a fit outside it is flagged ``implausible``: it keeps its evidence,
+and as lead it is named only with a caveat and tentative (:func:`quadsim.gap.judge.lead_caveat`).
 
 Each range is declared by its effect beside its parameters, with its source
 (``facts.ranges``, :class:`quadsim.effects.facts.PlausibleRange`); :data:`PRIORS` is a
@@ -125,7 +126,8 @@ each with
   air also scales the yaw drag torque; an added mass at the CoM leaves torques alone);
 * ``separate_by``: the measurement or manoeuvre that would tell them apart;
 * ``plausible`` / ``plausibility``: the prior check of :mod:`quadsim.gap.fitting` (score
-  <= 1 plausible). An implausible candidate is flagged and never named.
+  <= 1 plausible). An implausible candidate is flagged; as lead it is named only with a
+  caveat, tentative.
 
 Least squares of candidate effects
 ----------------------------------
