@@ -212,7 +212,7 @@ from .explanations import (  # re-exported: the evidence's public names
 from .fitting import DragLaw, build_effect, residuals
 from .fitting import parameter_bounds as fit_bounds
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
-from .residual import memoised, min_time_constant
+from .residual import flight_memo, memoised, min_time_constant
 
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence", "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
@@ -293,8 +293,21 @@ class FitInputs:
         return list(self.reference.candidate.parameter_names)
 
     def problem(self, expl: Explanation) -> Problem:
-        """``expl``'s :class:`Problem` on this flight, sharing the memo."""
-        return Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
+        """``expl``'s :class:`Problem` on this flight, sharing the memo; with a memo, one per
+        explanation object (a Problem holds only what its inputs fix: the screen, the
+        refined fit and the coupled checks ask for the same one several times)."""
+        if self.memo is None:
+            return Problem(self.states, self.reference, expl, self.jac, self.s_all)
+        kept = self.memo.setdefault("problems", {})
+        hit = kept.get(id(expl))
+        if hit is not None and hit[0] is expl:
+            prob = hit[1]
+            if (prob.states is self.states and prob.reference is self.reference
+                    and prob.jac is self.jac and np.array_equal(prob.s_all, self.s_all)):
+                return prob
+        prob = Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
+        kept[id(expl)] = (expl, prob)
+        return prob
 
 
 class Marginal:
@@ -373,16 +386,22 @@ def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[i
     return effects, keep
 
 
-def _air_force(states, reference: Reference, effects: list, own: list) -> np.ndarray:
+def _air_force(states, reference: Reference, effects: list, own: list,
+               memo: dict | None = None) -> np.ndarray:
     """Mean air force (world, N; (3,)) of the flight's wind beyond the references' wind:
     the model wrench with the reading's own effects ``own`` less that with the references'
-    wind, on the shared ``effects``."""
+    wind, on the shared ``effects``. ``memo``: the flight's (:func:`Problem.residual`'s),
+    whose rotations and kept loads serve (the same numbers)."""
     from ..core.frames import rotate
     from .residual import model_wrench
 
     base = [e for e in reference.effects() if e.name == "wind"]   # the references' own
-    with_wind, _, _ = model_wrench(states, reference.params, effects + own)
-    without, _, _ = model_wrench(states, reference.params, effects + base)
+    kw = {}
+    if memo is not None:
+        rotation, motion = flight_memo(memo, states)
+        kw = {"rotation": rotation, "flight_memo": motion}
+    with_wind, _, _ = model_wrench(states, reference.params, effects + own, **kw)
+    without, _, _ = model_wrench(states, reference.params, effects + base, **kw)
     return np.mean(rotate(states.quat, with_wind - without), axis=0)
 
 
@@ -392,7 +411,17 @@ def flight_residual(states, reference: Reference, effects: list, memo: dict | No
     parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
     r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
-    return (r * np.sqrt(reference.weights)).ravel()
+    return (r * _root_weights(reference, memo)).ravel()
+
+
+def _root_weights(reference: Reference, memo: dict | None) -> np.ndarray:
+    """sqrt(``reference.weights``) (C,), kept in ``memo`` per reference object."""
+    if memo is None:
+        return np.sqrt(reference.weights)
+    hit = memo.get("root_weights")
+    if hit is None or hit[0] is not reference:
+        hit = memo["root_weights"] = (reference, np.sqrt(reference.weights))
+    return hit[1]
 
 
 def shifted_view(states, delay_s: float, memo: dict | None = None):
@@ -420,7 +449,7 @@ class Problem:
     def __init__(self, states, reference: Reference, expl: Explanation, jac: np.ndarray,
                  s_all: np.ndarray, memo: dict | None = None):
         self.states, self.reference, self.expl = states, reference, expl
-        self.s_all = s_all
+        self.jac, self.s_all = jac, s_all
         self.memo = memo          # residual parts shared by evaluations on one flight
         if memo is None:
             self.shared, self.keep = _shared_effects(reference, expl.replaces)
@@ -573,7 +602,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   shared_shift=shift)
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
-                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
+                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)),
+                                  prob.memo)
     return ev
 
 

@@ -324,8 +324,29 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
 def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
     the effects with a speed factor or rotor dynamics, in order
-    (:func:`quadsim.gap.residual.rotor_residual`)."""
-    return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
+    (:func:`quadsim.gap.residual.rotor_residual`). An effect whose only such hook is a
+    per-rotor factor (``rotor_speed_factor``, one propeller's speed per command) enters by
+    the factor it gives, and not at all where it gives none: the channel multiplies the
+    factors in order and skips a None, so a propeller's thrust moved alone (its factor
+    None or unchanged) reuses the channel."""
+    out = []
+    rotors = params.rotor_count if states.command is None else states.command.shape[1]
+    for effect in effects:
+        cls = type(effect)
+        if not _overrides(cls, _ROTOR_HOOKS):
+            continue
+        if _overrides(cls, _DYNAMIC_HOOKS):
+            out.append(identity(effect))
+            continue
+        factor = effect.rotor_speed_factor(rotors)
+        if factor is not None:
+            out.append(("rotor_speed_factor",
+                        np.asarray(factor, dtype=float).tobytes()))
+    return ("rotor", id(states), id(params), tuple(out))
+
+
+#: the rotor-channel hooks other than the static per-rotor factor (:func:`rotor_key`)
+_DYNAMIC_HOOKS = ("rotor_speed_rate", "speed_factor")
 
 
 #: Savitzky–Golay window (s) used unless told otherwise.
