@@ -905,7 +905,7 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
     b = np.concatenate([aug0, du0, start])
     # one Householder QR of [A b] (R only): R of A, Q^T b in the last column and
     # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed
-    rb = np.linalg.qr(np.column_stack([a, b]), mode="r")
+    rb = _upper_factor(np.column_stack([a, b]))
     r, qb, rest = rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2)
     lower, upper = prob.z_lo - start, prob.z_hi - start
     # lsq_linear's own first step: the unconstrained solution, returned when inside the
@@ -918,6 +918,17 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
         x, active = step.x, int(np.count_nonzero(step.active_mask))
     predicted = rest + float(np.sum((qb + r @ x) ** 2))
     return start + x, predicted, a, active
+
+
+def _upper_factor(m: np.ndarray) -> np.ndarray:
+    """R (K, K) of the QR factorisation of ``m`` (M, K), M >= K: LAPACK geqrf, the call
+    ``numpy.linalg.qr(m, mode="r")`` makes (the same numbers), without its wrapper's
+    copies and workspace query (most of its cost on these thin matrices)."""
+    geqrf = get_lapack_funcs(("geqrf",), (m,))[0]
+    qr, _, _, info = geqrf(np.asfortranarray(m), overwrite_a=True)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"geqrf: illegal value in argument {-info}")
+    return np.triu(qr[:m.shape[1]])
 
 
 def linearised(prob: Problem, cols: Columns, start: np.ndarray
