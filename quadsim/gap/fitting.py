@@ -1134,7 +1134,7 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
             parts.append(rotor_residual(states, params, effects))
         else:
             parts.append(memoised(memo, rotor_key(states, params, effects), states,
-                               lambda: rotor_residual(states, params, effects)))
+                               lambda: rotor_residual(states, params, effects, memo=memo)))
     return np.concatenate(parts, axis=1)
 
 

@@ -917,11 +917,18 @@ def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: f
     return out
 
 
-def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
-    """Measured rotor speed at t + h minus the model's prediction from the state at t."""
+def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *,
+                   memo: dict | None = None) -> np.ndarray:
+    """Measured rotor speed at t + h minus the model's prediction from the state at t.
+    ``memo``: a flight's (:func:`memoised`), where the commanded speeds of ``params``' motor
+    map are kept (the same for every model of one flight)."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, round(ROTOR_HORIZON_S / dt))
-    cmd = command_speed(states, params)
+    if memo is None or states.command is None:
+        cmd = command_speed(states, params)
+    else:
+        cmd = memoised(memo, ("command_speed", id(states.command), id(params)),
+                       (states.command, params), lambda: command_speed(states, params))
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
     # dynamics effect (motor_lag) makes the rotor follow with a lag.
