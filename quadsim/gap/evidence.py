@@ -925,7 +925,7 @@ def _upper_factor(m: np.ndarray) -> np.ndarray:
     ``numpy.linalg.qr(m, mode="r")`` makes (the same numbers), without its wrapper's
     copies and workspace query (most of its cost on these thin matrices)."""
     geqrf = get_lapack_funcs(("geqrf",), (m,))[0]
-    qr, _, _, info = geqrf(np.asfortranarray(m), overwrite_a=True)
+    qr, _, _, info = geqrf(np.array(m, order="F"), overwrite_a=True)    # a copy: m stays
     if info != 0:
         raise np.linalg.LinAlgError(f"geqrf: illegal value in argument {-info}")
     return np.triu(qr[:m.shape[1]])

@@ -457,7 +457,9 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
         return states
     import dataclasses
 
-    speed, accel, joined = spectra if spectra is not None else rotor_spectra(states)
+    speed, accel, *joined = spectra if spectra is not None else rotor_spectra(states)
+    joined = joined[0] if joined else (           # (speed, accel) alone: joined here
+        None if speed is None or accel is None else np.hstack([speed, accel]))
     if joined is not None:                          # both in one inverse transform
         both = read_later(states.t, None, delay_s, joined)
         k = speed.shape[1]
