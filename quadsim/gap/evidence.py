@@ -293,21 +293,8 @@ class FitInputs:
         return list(self.reference.candidate.parameter_names)
 
     def problem(self, expl: Explanation) -> Problem:
-        """``expl``'s :class:`Problem` on this flight, sharing the memo; with a memo, one per
-        explanation object (a Problem holds only what its inputs fix: the screen, the
-        refined fit and the coupled checks ask for the same one several times)."""
-        if self.memo is None:
-            return Problem(self.states, self.reference, expl, self.jac, self.s_all)
-        kept = self.memo.setdefault("problems", {})
-        hit = kept.get(id(expl))
-        if hit is not None and hit[0] is expl:
-            prob = hit[1]
-            if (prob.states is self.states and prob.reference is self.reference
-                    and prob.jac is self.jac and np.array_equal(prob.s_all, self.s_all)):
-                return prob
-        prob = Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
-        kept[id(expl)] = (expl, prob)
-        return prob
+        """``expl``'s :class:`Problem` on this flight, sharing the memo."""
+        return Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
 
 
 class Marginal:
@@ -517,7 +504,7 @@ class Problem:
     def __init__(self, states, reference: Reference, expl: Explanation, jac: np.ndarray,
                  s_all: np.ndarray, memo: dict | None = None):
         self.states, self.reference, self.expl = states, reference, expl
-        self.jac, self.s_all = jac, s_all
+        self.s_all = s_all
         self.memo = memo          # residual parts shared by evaluations on one flight
         if memo is None:
             self.shared, self.keep = _shared_effects(reference, expl.replaces)
