@@ -211,7 +211,7 @@ from .explanations import (  # re-exported: the evidence's public names
 )
 from .fitting import DragLaw, build_effect, residuals
 from .fitting import parameter_bounds as fit_bounds
-from .reference import Reference, centre_term, column_blocks, columns, rotor_spectra, shifted
+from .reference import Reference, centre_term, columns, rotor_spectra, shifted
 from .residual import flight_memo, memoised, min_time_constant
 
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence", "FitInputs",
@@ -300,16 +300,9 @@ class FitInputs:
 class Marginal:
     """The shared parameters not fitted by an explanation, marginalised linearly
     (:mod:`quadsim.gap.evidence`, module doc): ``j`` = J_s diag(s_ref) (N C, K), ``chol`` the
-    Cholesky factor of A = I + jᵀj, ``logdet`` = log det A.
+    Cholesky factor of A = I + jᵀj, ``logdet`` = log det A."""
 
-    ``blocks``: where the last columns of ``jac`` are the discrepancy's
-    (:func:`quadsim.gap.reference.column_blocks`: (channel, x_c (N, F_c)) each, zero off
-    its channel's rows), the number of channels C and those blocks; :meth:`profile` then
-    multiplies each block on its own channel's rows only (the same products without the
-    zeros: about a third of the dense multiply's work, equal to it to round-off)."""
-
-    def __init__(self, jac: np.ndarray, s_ref: np.ndarray, *,
-                 blocks: tuple[int, list] | None = None):
+    def __init__(self, jac: np.ndarray, s_ref: np.ndarray):
         self.j = jac * s_ref
         a = np.eye(len(s_ref)) + self.j.T @ self.j
         self.chol = cho_factor(a)
@@ -318,8 +311,6 @@ class Marginal:
         # batch wrapper: most of its cost on these small systems, called thousands of times
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if len(s_ref) else None
         self._last: tuple | None = None
-        self._sparse = None if not blocks or not blocks[1] else _Blocks.of(
-            self.j, blocks[0], blocks[1])
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(r + j du, du) at the profiled shift du = -A^-1 jᵀ r of the weighted residual
@@ -336,13 +327,7 @@ class Marginal:
         return out
 
     def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if self._sparse is not None:
-            return self._sparse.profile(r, self._solve)
-        du = self._solve(self.j.T @ r)
-        return r + self.j @ du, du
-
-    def _solve(self, rhs: np.ndarray) -> np.ndarray:
-        """-A^-1 ``rhs`` (K,) or (K, P)."""
+        rhs = self.j.T @ r
         if self._potrs is None:
             du = -cho_solve(self.chol, rhs)
         else:
@@ -350,60 +335,7 @@ class Marginal:
             if info != 0:
                 raise ValueError(f"illegal value in {-info}th argument of internal potrs")
             du = -x
-        return du
-
-
-@dataclasses.dataclass(frozen=True)
-class _Blocks:
-    """:class:`Marginal`'s columns split as ``dense`` (N C, K_d) and, after them, channel
-    blocks zero off their channel's rows: ``channels`` (G,) the channel of each (a slice
-    where they run in order), ``xp``
-    (G, N, F) each block padded with zero columns to the widest F, ``xt`` its transpose
-    (G, F, N), ``index`` the padded places of the real columns in the blocks' column order,
-    ``chans`` C."""
-
-    dense: np.ndarray
-    channels: np.ndarray | slice
-    xp: np.ndarray
-    xt: np.ndarray
-    index: np.ndarray
-    chans: int
-
-    @classmethod
-    def of(cls, j: np.ndarray, chans: int, blocks: list) -> _Blocks:
-        """From the scaled columns ``j`` (N C, K) whose last columns are ``blocks`` (their
-        unit spread leaves them as they are)."""
-        n, width = len(blocks[0][1]), max(x.shape[1] for _, x in blocks)
-        xp = np.zeros((len(blocks), n, width))
-        index = []
-        for g, (_, x) in enumerate(blocks):
-            xp[g, :, :x.shape[1]] = x
-            index.extend(g * width + np.arange(x.shape[1]))
-        kd = j.shape[1] - len(index)
-        channels = [c for c, _ in blocks]
-        # channels in a run (the force and torque channels, 0..5): a view, not a copy
-        run = channels == list(range(channels[0], channels[0] + len(channels)))
-        return cls(np.ascontiguousarray(j[:, :kd]),
-                   slice(channels[0], channels[0] + len(channels)) if run else
-                   np.array(channels), xp, np.ascontiguousarray(xp.transpose(0, 2, 1)),
-                   np.array(index), chans)
-
-    def profile(self, r: np.ndarray, solve) -> tuple[np.ndarray, np.ndarray]:
-        """(r + j du, du), du = ``solve``(jᵀ r), for ``r`` (N C,) or (N C, P), each block
-        multiplied on its channel's rows only."""
-        cols = 1 if r.ndim == 1 else r.shape[1]
-        n = len(r) // self.chans
-        mine = r.reshape(n, self.chans, cols)[:, self.channels, :].transpose(1, 0, 2)
-        own = np.matmul(self.xt, mine).reshape(-1, cols)[self.index]    # (K_b, P)
-        rhs = np.concatenate([self.dense.T @ r, own[:, 0] if r.ndim == 1 else own])
-        du = solve(rhs)
-        kd = self.dense.shape[1]
-        aug = r + self.dense @ du[:kd]
-        pad = np.zeros((self.xp.shape[0] * self.xp.shape[2], cols))
-        pad[self.index] = du[kd:].reshape(-1, cols)
-        moved = np.matmul(self.xp, pad.reshape(self.xp.shape[0], self.xp.shape[2], cols))
-        aug.reshape(n, self.chans, cols)[:, self.channels, :] += moved.transpose(1, 0, 2)
-        return aug, du
+        return r + self.j @ du, du
 
 
 def parameter_bounds(expl: Explanation, reference: Reference, dt: float
@@ -526,12 +458,10 @@ class Problem:
         coefficients' covariance factor already), after them; with a ``memo``, one per set
         of columns (most explanations keep them all) and Jacobian."""
         def build():
-            weights = self.reference.weights
-            extra = columns(self.states, self.reference.discrepancy, weights, self.memo)
-            blocks = column_blocks(self.states, self.reference.discrepancy, weights, self.memo)
+            extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
+                            self.memo)
             return Marginal(np.hstack([jac[:, self.keep], extra]),
-                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]),
-                            blocks=(len(weights), blocks))
+                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]))
 
         if self.memo is None:
             return build()

@@ -420,22 +420,11 @@ def columns(states, discrepancy: Discrepancy | None, weights: np.ndarray,
         return np.zeros((n * chans, 0))
     out = np.zeros((n, chans, discrepancy.size))
     k = 0
-    for c, x in column_blocks(states, discrepancy, weights, memo):
-        out[:, c, k:k + x.shape[1]] = x
+    for c, names, factor in zip(discrepancy.channels, discrepancy.names, discrepancy.factor):
+        x = _design(states, names, memo) @ factor
+        out[:, c, k:k + x.shape[1]] = x * np.sqrt(weights[c])
         k += x.shape[1]
     return out.reshape(n * chans, -1)
-
-
-def column_blocks(states, discrepancy: Discrepancy | None, weights: np.ndarray,
-                  memo: dict | None = None) -> list[tuple[int, np.ndarray]]:
-    """The nonzero blocks of :func:`columns`, in its column order: (channel c, x_c (N, F_c)
-    = channel c's features times L_c times sqrt(weights_c)); column k of :func:`columns`
-    is zero off channel c's rows. Empty without a discrepancy."""
-    if discrepancy is None:
-        return []
-    return [(c, (_design(states, names, memo) @ factor) * np.sqrt(weights[c]))
-            for c, names, factor in zip(discrepancy.channels, discrepancy.names,
-                                        discrepancy.factor)]
 
 
 #: finite-difference step of the Jacobians, in units of each parameter's typical size
