@@ -2,8 +2,8 @@
 centre, the kept profile of a marginal, the measured wrench kept per motion, the rotor speeds
 and their derivative shifted in one transform, and the thrust-curve slope decided before the
 refinement (on the real references, where present); the memo's entries kept by the flight's
-length, and the rotor matrices kept by the vehicle's geometry; the discrepancy's columns
-profiled block by block, the linear step's R factor, the rotor channel's key."""
+length, and the rotor matrices kept by the vehicle's geometry; the linear step's R factor,
+the rotor channel's key."""
 
 from pathlib import Path
 from types import SimpleNamespace
@@ -176,27 +176,6 @@ def test_rotor_matrices_kept_by_geometry_are_the_computed_ones():
         for g, w in zip(got, want):
             assert np.array_equal(g, w)
     assert not np.array_equal(other[0], first[0])         # the torque arms moved with the CoM
-
-
-def test_marginal_by_channel_blocks_is_the_dense_profile():
-    # the discrepancy's columns are zero off their channel's rows: profiled block by block
-    # they give the dense product's numbers to round-off, vectors and matrices alike
-    from quadsim.gap.reference import column_blocks, columns
-
-    flights = [_states(200, k) for k in range(10)]
-    rng = np.random.default_rng(9)
-    disc = fit_discrepancy([rng.normal(0, 1, (200, 6)) for _ in flights], flights)
-    weights = rng.uniform(0.5, 2.0, 10)            # 10 channels: 4 rotor channels uncovered
-    extra = columns(flights[0], disc, weights)
-    blocks = column_blocks(flights[0], disc, weights)
-    assert sum(x.shape[1] for _, x in blocks) == extra.shape[1] > 0
-    jac = np.hstack([rng.normal(size=(extra.shape[0], 4)), extra])
-    spread = np.concatenate([[0.5, 1.0, 2.0, 0.1], np.ones(extra.shape[1])])
-    dense, blocked = Marginal(jac, spread), Marginal(jac, spread, blocks=(10, blocks))
-    for r in (rng.normal(size=extra.shape[0]), rng.normal(size=(extra.shape[0], 3))):
-        for a, b in zip(dense.profile(r), blocked.profile(r)):
-            np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12 * np.max(np.abs(a)))
-    assert blocked.logdet == dense.logdet
 
 
 def test_linear_step_factor_is_numpys_qr_bit_for_bit():
