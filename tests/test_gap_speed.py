@@ -2,7 +2,8 @@
 centre, the kept profile of a marginal, the measured wrench kept per motion, the rotor speeds
 and their derivative shifted in one transform, and the thrust-curve slope decided before the
 refinement (on the real references, where present); the memo's entries kept by the flight's
-length, and the rotor matrices kept by the vehicle's geometry."""
+length, and the rotor matrices kept by the vehicle's geometry; the linear step's R factor,
+the rotor channel's key."""
 
 from pathlib import Path
 from types import SimpleNamespace
@@ -175,3 +176,39 @@ def test_rotor_matrices_kept_by_geometry_are_the_computed_ones():
         for g, w in zip(got, want):
             assert np.array_equal(g, w)
     assert not np.array_equal(other[0], first[0])         # the torque arms moved with the CoM
+
+
+def test_linear_step_factor_is_numpys_qr_bit_for_bit():
+    from quadsim.gap.evidence import _upper_factor
+
+    rng = np.random.default_rng(4)
+    for rows, cols in ((7, 1), (300, 3), (5300, 6), (5300, 12)):
+        m = rng.normal(size=(rows, cols)) * rng.uniform(1e-6, 1e6, cols)
+        kept = m.copy()
+        r = _upper_factor(m)
+        np.testing.assert_array_equal(m, kept)                  # the input is not written to
+        np.testing.assert_array_equal(r, np.linalg.qr(m, mode="r"))
+
+
+def test_rotor_channel_keyed_by_the_speed_factor_a_propeller_gives():
+    from quadsim.effects import make_effect
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    states = SimpleNamespace(command=np.zeros((5, 4)))
+    lag = make_effect("motor_lag", time_constant=0.03)
+    plain = memo_mod.rotor_key(states, params, [lag])
+    # a thrust deviation without a speed-per-command exponent gives no factor: the same key
+    worn = make_effect("thrust_mismatch", rotor_2=-0.05)
+    assert memo_mod.rotor_key(states, params, [lag, worn]) == plain
+    # with one, its factor enters the key, and the same factor gives the same key
+    loaded = make_effect("thrust_mismatch", rotor_2=-0.05, alpha=0.3)
+    key = memo_mod.rotor_key(states, params, [lag, loaded])
+    assert key != plain
+    assert key == memo_mod.rotor_key(states, params, [lag, make_effect(
+        "thrust_mismatch", rotor_2=-0.05, alpha=0.3)])
+    assert key != memo_mod.rotor_key(states, params, [lag, make_effect(
+        "thrust_mismatch", rotor_2=-0.04, alpha=0.3)])
+    # an effect with rotor dynamics still enters by its values
+    assert plain != memo_mod.rotor_key(states, params, [make_effect("motor_lag",
+                                                                    time_constant=0.04)])

@@ -212,7 +212,7 @@ from .explanations import (  # re-exported: the evidence's public names
 from .fitting import DragLaw, build_effect, residuals
 from .fitting import parameter_bounds as fit_bounds
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
-from .residual import memoised, min_time_constant
+from .residual import flight_memo, memoised, min_time_constant
 
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence", "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
@@ -373,16 +373,22 @@ def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[i
     return effects, keep
 
 
-def _air_force(states, reference: Reference, effects: list, own: list) -> np.ndarray:
+def _air_force(states, reference: Reference, effects: list, own: list,
+               memo: dict | None = None) -> np.ndarray:
     """Mean air force (world, N; (3,)) of the flight's wind beyond the references' wind:
     the model wrench with the reading's own effects ``own`` less that with the references'
-    wind, on the shared ``effects``."""
+    wind, on the shared ``effects``. ``memo``: the flight's (:func:`Problem.residual`'s),
+    whose rotations and kept loads serve (the same numbers)."""
     from ..core.frames import rotate
     from .residual import model_wrench
 
     base = [e for e in reference.effects() if e.name == "wind"]   # the references' own
-    with_wind, _, _ = model_wrench(states, reference.params, effects + own)
-    without, _, _ = model_wrench(states, reference.params, effects + base)
+    kw = {}
+    if memo is not None:
+        rotation, motion = flight_memo(memo, states)
+        kw = {"rotation": rotation, "flight_memo": motion}
+    with_wind, _, _ = model_wrench(states, reference.params, effects + own, **kw)
+    without, _, _ = model_wrench(states, reference.params, effects + base, **kw)
     return np.mean(rotate(states.quat, with_wind - without), axis=0)
 
 
@@ -392,7 +398,17 @@ def flight_residual(states, reference: Reference, effects: list, memo: dict | No
     parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
     r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
-    return (r * np.sqrt(reference.weights)).ravel()
+    return (r * _root_weights(reference, memo)).ravel()
+
+
+def _root_weights(reference: Reference, memo: dict | None) -> np.ndarray:
+    """sqrt(``reference.weights``) (C,), kept in ``memo`` per reference object."""
+    if memo is None:
+        return np.sqrt(reference.weights)
+    hit = memo.get("root_weights")
+    if hit is None or hit[0] is not reference:
+        hit = memo["root_weights"] = (reference, np.sqrt(reference.weights))
+    return hit[1]
 
 
 def shifted_view(states, delay_s: float, memo: dict | None = None):
@@ -573,7 +589,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   shared_shift=shift)
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
-                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)))
+                                  own_effects(expl, np.clip(theta, prob.lower, prob.upper)),
+                                  prob.memo)
     return ev
 
 
@@ -805,7 +822,7 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
     b = np.concatenate([aug0, du0, start])
     # one Householder QR of [A b] (R only): R of A, Q^T b in the last column and
     # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed
-    rb = np.linalg.qr(np.column_stack([a, b]), mode="r")
+    rb = _upper_factor(np.column_stack([a, b]))
     r, qb, rest = rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2)
     lower, upper = prob.z_lo - start, prob.z_hi - start
     # lsq_linear's own first step: the unconstrained solution, returned when inside the
@@ -818,6 +835,17 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
         x, active = step.x, int(np.count_nonzero(step.active_mask))
     predicted = rest + float(np.sum((qb + r @ x) ** 2))
     return start + x, predicted, a, active
+
+
+def _upper_factor(m: np.ndarray) -> np.ndarray:
+    """R (K, K) of the QR factorisation of ``m`` (M, K), M >= K: LAPACK geqrf, the call
+    ``numpy.linalg.qr(m, mode="r")`` makes (the same numbers), without its wrapper's
+    copies and workspace query (most of its cost on these thin matrices)."""
+    geqrf = get_lapack_funcs(("geqrf",), (m,))[0]
+    qr, _, _, info = geqrf(np.array(m, order="F"), overwrite_a=True)    # a copy: m stays
+    if info != 0:
+        raise np.linalg.LinAlgError(f"geqrf: illegal value in argument {-info}")
+    return np.triu(qr[:m.shape[1]])
 
 
 def linearised(prob: Problem, cols: Columns, start: np.ndarray

@@ -453,6 +453,12 @@ class CableSwing(CablePayload):
                                 nuisance=("lean_x", "lean_y", "rate_x", "rate_y",
                                           "swing_damping", "z"))
 
+    #: (context fields, vehicle attributes) ``loads`` reads
+    #: (:attr:`quadsim.effects.base.EffectBase.loads_reads`): the logged motion only (kept
+    #: per flight motion by the caller) and the vehicle's CoM and gravity; not the rotor
+    #: speeds, so a rotor-delay shift reuses the pull
+    loads_reads = ((), ("com", "gravity"))
+
     def state_size(self) -> int:
         return 0
 
@@ -1138,7 +1144,7 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
             parts.append(rotor_residual(states, params, effects))
         else:
             parts.append(memoised(memo, rotor_key(states, params, effects), states,
-                               lambda: rotor_residual(states, params, effects)))
+                               lambda: rotor_residual(states, params, effects, memo=memo)))
     return np.concatenate(parts, axis=1)
 
 

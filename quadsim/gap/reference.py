@@ -446,9 +446,11 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
         return states
     import dataclasses
 
-    speed, accel = spectra if spectra is not None else rotor_spectra(states)
-    if speed is not None and accel is not None:     # both in one inverse transform
-        both = read_later(states.t, None, delay_s, np.hstack([speed, accel]))
+    speed, accel, *joined = spectra if spectra is not None else rotor_spectra(states)
+    joined = joined[0] if joined else (           # (speed, accel) alone: joined here
+        None if speed is None or accel is None else np.hstack([speed, accel]))
+    if joined is not None:                          # both in one inverse transform
+        both = read_later(states.t, None, delay_s, joined)
         k = speed.shape[1]
         return dataclasses.replace(states, rotor_speed=np.ascontiguousarray(both[:, :k]),
                                    rotor_accel=np.ascontiguousarray(both[:, k:]))
@@ -460,10 +462,13 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
 
 def rotor_spectra(states) -> tuple:
     """The mirrored spectra :func:`read_later` shifts, of the rotor speeds and their
-    derivative (None each on a non-uniform time base or where the signal is missing): one
-    flight's, computed once and passed to every :func:`shifted` of it."""
-    return (_spectrum(states.t, states.rotor_speed),
-            None if states.rotor_accel is None else _spectrum(states.t, states.rotor_accel))
+    derivative (None each on a non-uniform time base or where the signal is missing), and
+    both side by side (speeds' columns first; None unless both are there): one flight's,
+    computed once and passed to every :func:`shifted` of it."""
+    speed = _spectrum(states.t, states.rotor_speed)
+    accel = None if states.rotor_accel is None else _spectrum(states.t, states.rotor_accel)
+    joined = None if speed is None or accel is None else np.hstack([speed, accel])
+    return speed, accel, joined
 
 
 def _spectrum(t: np.ndarray, x) -> np.ndarray | None:

@@ -324,8 +324,29 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
 def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     """What the rotor channel depends on besides ``states``: the motor map (``params``) and
     the effects with a speed factor or rotor dynamics, in order
-    (:func:`quadsim.gap.residual.rotor_residual`)."""
-    return ("rotor", id(states), id(params), acting(effects, _ROTOR_HOOKS))
+    (:func:`quadsim.gap.residual.rotor_residual`). An effect whose only such hook is a
+    per-rotor factor (``rotor_speed_factor``, one propeller's speed per command) enters by
+    the factor it gives, and not at all where it gives none: the channel multiplies the
+    factors in order and skips a None, so a propeller's thrust moved alone (its factor
+    None or unchanged) reuses the channel."""
+    out = []
+    rotors = params.rotor_count if states.command is None else states.command.shape[1]
+    for effect in effects:
+        cls = type(effect)
+        if not _overrides(cls, _ROTOR_HOOKS):
+            continue
+        if _overrides(cls, _DYNAMIC_HOOKS):
+            out.append(identity(effect))
+            continue
+        factor = effect.rotor_speed_factor(rotors)
+        if factor is not None:
+            out.append(("rotor_speed_factor",
+                        np.asarray(factor, dtype=float).tobytes()))
+    return ("rotor", id(states), id(params), tuple(out))
+
+
+#: the rotor-channel hooks other than the static per-rotor factor (:func:`rotor_key`)
+_DYNAMIC_HOOKS = ("rotor_speed_rate", "speed_factor")
 
 
 #: Savitzky–Golay window (s) used unless told otherwise.
@@ -896,11 +917,18 @@ def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: f
     return out
 
 
-def rotor_residual(states: FlightStates, params: VehicleParams, effects: list) -> np.ndarray:
-    """Measured rotor speed at t + h minus the model's prediction from the state at t."""
+def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *,
+                   memo: dict | None = None) -> np.ndarray:
+    """Measured rotor speed at t + h minus the model's prediction from the state at t.
+    ``memo``: a flight's (:func:`memoised`), where the commanded speeds of ``params``' motor
+    map are kept (the same for every model of one flight)."""
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, round(ROTOR_HORIZON_S / dt))
-    cmd = command_speed(states, params)
+    if memo is None or states.command is None:
+        cmd = command_speed(states, params)
+    else:
+        cmd = memoised(memo, ("command_speed", id(states.command), id(params)),
+                       (states.command, params), lambda: command_speed(states, params))
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
     # dynamics effect (motor_lag) makes the rotor follow with a lag.
