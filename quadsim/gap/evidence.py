@@ -83,7 +83,7 @@ Example::
 The screen
 ----------
 Linearised evidence of every explanation, and the cut that decides which ones are fitted
-to convergence (:func:`quadsim.gap.evidence.evaluate`; docs/gap.md, Speed).
+to convergence (:func:`quadsim.gap.evidence.evaluate`).
 
 The full fit of an explanation (:func:`quadsim.gap.evidence.full_fit`: bounded trust-region
 least squares, a finite-difference Jacobian per iteration) costs 40-80 evaluations of the
@@ -101,9 +101,10 @@ of evidence below the best. So:
    shared-parameter Jacobian the marginal needs anyway (:func:`quadsim.gap.reference.jacobian`,
    once per flight); the delay's column once per flight (:class:`Columns`); every other
    parameter one forward difference (:data:`STEP`, the full fit's ``diff_step``). The rotor
-   speeds are shifted by interpolation between samples, so the residual is piecewise linear
-   in the delay with a kink at every sample: the delay's column is one-sided and is taken
-   again on the other side when the step goes there. The stacked cost (profiled residual,
+   speeds are read later by a Fourier phase shift (:func:`quadsim.gap.reference.read_later`;
+   linear interpolation on a non-uniform time base, piecewise linear in the delay with a
+   kink at every sample), so the delay's column is one-sided and is taken again on the other
+   side when the step goes there. The stacked cost (profiled residual,
    marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
    least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
    *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at z1
@@ -121,7 +122,8 @@ Why the cut does not move a verdict: a screened reading lies more than SCREEN_CU
 the judge's thresholds are posterior 0.1 (a stated reading) and 0.9 (confident). The screened
 cost is that of a point the fit can reach, so a fit only lowers it, by about miss / 2 where
 the linear model was off; a second local optimum the step does not see is the remaining risk
-(docs/gap.md, Speed: the comparison with ``full=True``).
+(``full=True`` below; the last comparison: benchmarks/HISTORY.md, 22.2 s per flight-minute,
+the same verdict on all 26 mixed flights).
 
 An explanation with a parameter that acts only through another's value (``coupled``: a
 propeller's speed exponent, no effect at zero change; a wind refitted through a drag the
