@@ -61,6 +61,7 @@ __all__ = [
     "DURATION",
     "FLIGHTS",
     "JOINED_LIBRARY",
+    "READ_SINCE",
     "REFERENCES",
     "REFERENCE_SPEEDS",
     "case_flights",
@@ -100,11 +101,15 @@ PIPELINE_LATER = ("canted_rotor", "rate_damping")
 #: (:mod:`quadsim.effects.translational_lift`: RotorPy's k_h form, per rotor): their flights
 #: and cache keys stay, they are scored as in-library (:func:`scored_kind`).
 JOINED_LIBRARY = frozenset({"translational_lift"})
+#: cases flown as outside while the library's effect had no per-flight reading: RotorPy's
+#: flapping moment and the pipeline's (:mod:`quadsim.effects.blade_flapping`, a reading
+#: since issue 45), scored as in-library the same way
+READ_SINCE = frozenset({"flapping", "blade_flapping"})
 
 
 def scored_kind(case: dict) -> str:
     """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
-    return joined_kind(case["truth"], case["kind"], JOINED_LIBRARY)
+    return joined_kind(case["truth"], case["kind"], JOINED_LIBRARY | READ_SINCE)
 
 
 def case_list(count: int | None = None) -> list[dict]:
@@ -333,7 +338,19 @@ def oracle_reduction(logs, params, effects) -> float:
 def _truth_effects(case, spec, params) -> list:
     if scored_kind(case) != "library":
         return []
-    return library_equivalent(spec, params) if case["source"] == "rotorpy" else list(spec)
+    if case["source"] != "rotorpy":
+        return list(spec)
+    return library_equivalent(spec, params) + rotorpy_flapping(spec)
+
+
+def rotorpy_flapping(spec: dict) -> list:
+    """RotorPy's flapping moment as the library's (:mod:`quadsim.effects.blade_flapping`): its
+    ``-k_flap Omega_i (v x e_z)``, v the vehicle's airspeed, is the library's
+    ``-c Omega_i (e_z x v_perp)`` at ``c = -k_flap`` (both axes); [] without one. Here, not in
+    :func:`.draws.library_equivalent`, whose source keys the flown RotorPy flights' cache."""
+    if "k_flap" not in spec:
+        return []
+    return [EFFECTS["blade_flapping"](coefficient=-float(spec["k_flap"]))]
 
 
 def heldout_truth(case: dict) -> tuple[str, str]:

@@ -149,6 +149,10 @@ MAIN_PARAMETER = {
 #: (quadsim.effects.translational_lift): their case keeps its place (and so every case's seed)
 #: and is scored as in-library.
 JOINED_LIBRARY = frozenset({"translational_lift"})
+#: library effects flown here as outside the library while the diagnosis had no per-flight
+#: reading of them (quadsim.effects.blade_flapping, a reading since issue 45): their outside
+#: case keeps its place and seed and is scored as in-library; their library cases stay
+READ_SINCE = frozenset({"blade_flapping"})
 
 
 def case_list(count: int | None = None) -> list[dict]:
@@ -162,7 +166,7 @@ def case_list(count: int | None = None) -> list[dict]:
         for k in range(2):
             cases.append({"vehicle": vehicle, "truth": "none", "kind": "none", "k": k})
         for name in ("translational_lift", "blade_flapping"):
-            kind = joined_kind(name, "outside", JOINED_LIBRARY)
+            kind = joined_kind(name, "outside", JOINED_LIBRARY | READ_SINCE)
             cases.append({"vehicle": vehicle, "truth": name, "kind": kind, "k": 0})
     for i, case in enumerate(cases):
         case["seed"] = 1000 + i

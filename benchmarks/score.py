@@ -90,12 +90,18 @@ def joined_kind(name: str, kind: str, joined) -> str:
     return "library" if name in joined else kind
 
 
+#: a case's truth under a source's own name -> the library effect that names it (RotorPy's
+#: ``flapping`` moment is the library's ``blade_flapping``, benchmarks.draws.library_equivalent)
+LIBRARY_NAME = {"flapping": "blade_flapping"}
+
+
 def names_truth(truth: str, names) -> bool:
-    """Whether ``names`` (effect names of a verdict) name ``truth``; a logged signal's delay
-    (truth ``rotor_delay``) is named by any name that contains ``delay``."""
+    """Whether ``names`` (effect names of a verdict) name ``truth`` (or its
+    :data:`LIBRARY_NAME`); a logged signal's delay (truth ``rotor_delay``) is named by any
+    name that contains ``delay``."""
     if truth == "rotor_delay":
         return any("delay" in str(n) for n in names)
-    return truth in names
+    return LIBRARY_NAME.get(truth, truth) in names
 
 
 def score_case(truth: str, kind: str, verdict: dict) -> dict:

@@ -80,7 +80,7 @@ def test_a_new_effect_with_readings_is_weighed_per_flight():
 
     assert [cls.name for cls in reading_effects()] == [
         "mass_offset", "com_offset", "thrust_curve", "translational_lift", "ground_effect",
-        "body_drag", "thrust_factor", "thrust_mismatch", "canted_rotor"]
+        "body_drag", "thrust_factor", "thrust_mismatch", "canted_rotor", "blade_flapping"]
 
     class Read(_New):
         facts = EffectFacts(readings=(Reading(("k",), coupled=True),))

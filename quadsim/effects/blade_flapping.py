@@ -40,7 +40,16 @@ import numpy as np
 from ..core.frames import rotate_inverse
 from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
-from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, arm_length, plus_minus
+from .facts import (
+    EffectFacts,
+    PlausibleRange,
+    Reading,
+    Scale,
+    Spread,
+    Words,
+    arm_length,
+    plus_minus,
+)
 from .rotor_drag import drag_scale
 
 __all__ = ["BladeFlapping", "flapping_moment"]
@@ -123,6 +132,8 @@ class BladeFlapping(EffectBase):
         # tilt of the rotor disc with the air velocity in the body frame
         needs_pose=("velocity", "attitude"),
         fitted=("roll", "pitch"),
+        # one per-flight reading, both axes free (quadsim.gap.explanations)
+        readings=(Reading(("roll", "pitch")),),
         scales={"roll": _SCALE, "pitch": _SCALE, "coefficient": _SCALE},
         ranges={"roll": _RANGE, "pitch": _RANGE},
         spreads={"roll": _SPREAD, "pitch": _SPREAD},
