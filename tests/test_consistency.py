@@ -59,7 +59,9 @@ def test_translational_lift_is_not_named_with_confidence(cf):
     assert verdict["outcome"] == "unexplained"
     assert verdict["effect"] == "unexplained"
     partial = verdict["partial"]
-    assert partial["name"] in THRUST_LIKE and partial["reduction"] > 0.2
+    # the stand-in: a thrust-like reading, alone or refitted with the shared b (a pair)
+    assert set(partial["name"].split("+")) <= {*THRUST_LIKE, "nominal_refit"}
+    assert partial["reduction"] > 0.2
     assert verdict["consistency"]["consistent"] is False
     # the stand-in's value in fast flight is at least 1 / (1 - MATERIAL) = 2x its slow value
     split = verdict["consistency"]["splits"]["airspeed"]["params"]
@@ -136,3 +138,20 @@ def test_rate_damping_prior_is_momentum_theory():
     assert not plausibility("rate_damping.x", 3.1 * momentum_rate_damping(p), p)[1]
     assert not plausibility("inertia_error.xx", -0.6, p)[1]
     assert plausibility("inertia_error.yy", -0.45, p)[1]
+
+
+def test_material_difference_counts_a_typical_size():
+    """Two halves' values differ materially when they are a factor >= 2 apart *and* at least
+    half a typical effect apart (judge.material): a wind of 0.09 and of 0.00 m/s (typical
+    1 m/s) is not; 2 g and 6 g of added mass (typical 1.85 g) are; 4 g and 5 g are not."""
+    from quadsim.gap.fitting import Candidate, typical_scales
+    from quadsim.gap.judge import material
+
+    parts = (("wind", {}, ("vx",)), ("mass_offset", {}, ("mass",)))
+    wind, mass = typical_scales(Candidate("x", parts), load_params("crazyflie21"))
+    assert wind == 1.0 and abs(mass - 0.00185) < 1e-12
+    assert not material(-0.0876, -0.0024, wind)
+    assert material(-0.9, -0.1, wind)                 # 0.8 > 0.5 x 0.9
+    assert material(0.002, 0.006, mass)               # 0.004 > 0.5 x 0.006
+    assert not material(0.004, 0.005, mass)           # 0.001 < 0.5 x 0.005
+    assert not material(0.0, 0.9e-3, 2e-3) and material(0.0, 1.1e-3, 2e-3)   # half of 2e-3

@@ -46,11 +46,13 @@ halves of the data and compares:
 
 A parameter is *inconsistent* on a split when the two values differ by more than their
 combined 95 % interval, sqrt(ci_a^2 + ci_b^2) (statistically different), **and** by more
-than :data:`MATERIAL` times the larger of the two magnitudes (materially different: a real
-effect fitted on independent data or with a slightly wrong floor moves by a few %, not by
-half its value). Only parameters that the pooled fit identified and found significant are
-judged, and only on a half where the refit identifies them too (CI < half the range); a
-parameter too weakly excited in one half cannot disagree.
+than :data:`MATERIAL` times the larger of the two magnitudes and of the parameter's
+typical size (:func:`material`; materially different: a real effect fitted on independent
+data or with a slightly wrong floor moves by a few %, not by half its value, and two small
+values near the no-effect value are not a factor apart that matters). Only parameters that
+the pooled fit identified and found significant are judged, and only on a half where the
+refit identifies them too (CI < half the range); a parameter too weakly excited in one half
+cannot disagree.
 
 A parameter whose halves differ beyond their combined interval but by less than
 :data:`MATERIAL` *shifts* with the regime: the name stands, marked ``tentative`` (field
@@ -152,6 +154,7 @@ from .fitting import (
     fit_candidate,
     noise_floor,
     residuals,
+    typical_scales,
 )
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
@@ -164,7 +167,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "lack_of_fit", "mean_squares", "negligible_at", "outcome_of", "plausible",
+           "lack_of_fit", "material", "mean_squares", "negligible_at", "outcome_of", "plausible",
            "posterior", "rank", "reading_name", "reading_text", "remainder",
            "rows_at_reference_voltage", "symptom", "within_form_error"]
 
@@ -315,9 +318,19 @@ def kstep_errors(flights: list[FlightStates], params: VehicleParams, effects: li
 
 # --- parameter consistency (module doc) ---------------------------------------------------------
 
-#: relative difference (of the larger magnitude) above which two values are materially
-#: different. 0.5: the two halves ask for values a factor >= 2 apart.
+#: relative difference above which two values are materially different: of the larger
+#: magnitude, and at least of the parameter's typical size (its effect's declared scale,
+#: :func:`quadsim.gap.fitting.typical_scales`). 0.5: the two halves ask for values a factor
+#: >= 2 apart, or half a typical effect apart where both are small (a wind of 0.09 and of
+#: 0.00 m/s is a factor 40 apart and no material difference).
 MATERIAL = 0.5
+
+
+def material(a: float, b: float, typical: float) -> bool:
+    """Whether values ``a`` and ``b`` of one parameter (its unit) are materially different:
+    ``|a - b| > MATERIAL max(|a|, |b|, typical)``, ``typical`` the parameter's typical size
+    (:data:`MATERIAL`)."""
+    return abs(a - b) > MATERIAL * max(abs(a), abs(b), typical)
 #: a half with fewer samples (after decimation) is not fitted.
 MIN_SAMPLES = 200
 SPLITS = ("airspeed", "rotor_speed")
@@ -357,6 +370,7 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
     Returns ``{"consistent": bool, "splits": {split: {"threshold", "unit", "params": {p:
     {"low", "high", "ci_low", "ci_high", "consistent"}}}}, "inconsistent": [text, ...]}``."""
     names = candidate.parameter_names
+    typical = typical_scales(candidate, params)
     out: dict = {"consistent": True, "splits": {}, "inconsistent": [], "shifted": []}
     for split, (threshold, masks) in split_masks(flights).items():
         low, high = (_fit_half(candidate, [f.take(np.nonzero(m if upper else ~m)[0])
@@ -375,7 +389,7 @@ def check(candidate: Candidate, theta: np.ndarray, judged: list[str],
             both = bool(low.identifiable[k] and high.identifiable[k])
             diff = abs(a - b)
             differs = both and diff > np.hypot(ca, cb)
-            ok = not (differs and diff > MATERIAL * max(abs(a), abs(b)))
+            ok = not (differs and material(a, b, typical[k]))
             entry["params"][p] = {"low": a, "high": b, "ci_low": ca, "ci_high": cb,
                                   "consistent": ok}
             lo_label, hi_label = _LABELS[split]
