@@ -61,7 +61,6 @@ __all__ = [
     "DURATION",
     "FLIGHTS",
     "JOINED_LIBRARY",
-    "READ_SINCE",
     "REFERENCES",
     "REFERENCE_SPEEDS",
     "case_flights",
@@ -97,19 +96,17 @@ PIPELINE_LIBRARY = ("mass_offset", "com_offset", "thrust_mismatch", "thrust_curv
                     "motor_lag", "inertia_error", "rotor_drag")
 PIPELINE_OUTSIDE = ("translational_lift", "blade_flapping")
 PIPELINE_LATER = ("canted_rotor", "rate_damping")
-#: cases flown as outside the library whose effect the library has gained since
-#: (:mod:`quadsim.effects.translational_lift`: RotorPy's k_h form, per rotor): their flights
-#: and cache keys stay, they are scored as in-library (:func:`scored_kind`).
-JOINED_LIBRARY = frozenset({"translational_lift"})
-#: cases flown as outside while the library's effect had no per-flight reading: RotorPy's
-#: flapping moment and the pipeline's (:mod:`quadsim.effects.blade_flapping`, a reading
-#: since issue 45), scored as in-library the same way
-READ_SINCE = frozenset({"flapping", "blade_flapping"})
+#: cases flown as outside the library whose effect the diagnosis has gained since: RotorPy's
+#: k_h lift (:mod:`quadsim.effects.translational_lift`, per rotor) and the flapping moment of
+#: RotorPy (``flapping``) and of the pipeline (:mod:`quadsim.effects.blade_flapping`, a
+#: per-flight reading since issue 45): their flights and cache keys stay, they are scored
+#: as in-library (:func:`scored_kind`).
+JOINED_LIBRARY = frozenset({"translational_lift", "flapping", "blade_flapping"})
 
 
 def scored_kind(case: dict) -> str:
     """The kind a case is scored as today (see :data:`JOINED_LIBRARY`)."""
-    return joined_kind(case["truth"], case["kind"], JOINED_LIBRARY | READ_SINCE)
+    return joined_kind(case["truth"], case["kind"], JOINED_LIBRARY)
 
 
 def case_list(count: int | None = None) -> list[dict]:
