@@ -133,7 +133,12 @@ QUIET = ("unexplained", "no_significant_gap")
 
 
 def _draw(name: str, params, rng: np.random.Generator) -> list:
-    """Hidden effect(s) at a random realistic magnitude for this vehicle."""
+    """Hidden effect(s) at a random realistic magnitude for this vehicle (issue 47's
+    out-of-library effects from :mod:`benchmarks.unmodelled`)."""
+    from benchmarks.unmodelled import UNMODELLED, draw_unmodelled
+
+    if name in UNMODELLED:
+        return draw_unmodelled(name, params, rng)
     return draw(name, params, rng)
 
 
@@ -170,6 +175,11 @@ def case_list(count: int | None = None) -> list[dict]:
             cases.append({"vehicle": vehicle, "truth": name, "kind": kind, "k": 0})
     for i, case in enumerate(cases):
         case["seed"] = 1000 + i
+    # issue 47's out-of-library cases (benchmarks.unmodelled), appended: the seeds above stay
+    for name in ("rotor_wake", "frame_moment"):
+        for vehicle in VEHICLES:
+            cases.append({"vehicle": vehicle, "truth": name, "kind": "outside", "k": 0,
+                          "seed": 1000 + len(cases)})
     return cases[:count] if count else cases
 
 
