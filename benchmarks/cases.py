@@ -24,7 +24,8 @@ flown as outside are scored as in-library since the library gained them
 (:data:`JOINED_LIBRARY`), which left both sources' out-of-library sets empty; issue 47's
 out-of-library cases are appended after them (:data:`PIPELINE_UNMODELLED`, effects of
 :mod:`.unmodelled`: rotor-rotor wake interference and the frame's drag moment, pipeline
-source only; RotorPy none, :data:`ROTORPY_UNMODELLED`): 68.
+source only; RotorPy none, :data:`ROTORPY_UNMODELLED`): 68; then a gyro mounted askew per
+vehicle (:data:`PIPELINE_SENSOR`, :mod:`.imu_error`, sensor side, pipeline source): 70.
 
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 (:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
@@ -119,6 +120,9 @@ PIPELINE_UNMODELLED = ("rotor_wake", "frame_moment")
 #: flying those needs the adapter (:mod:`.rotorpy_source`) changed, whose bytes key every
 #: cached RotorPy flight (:func:`_code_hash`)
 ROTORPY_UNMODELLED: tuple[str, ...] = ()
+#: issue 47's sensor-side out-of-library case (appended after the cases above): the
+#: pipeline's logged gyro turned from the body axes (:mod:`.imu_error`)
+PIPELINE_SENSOR = ("gyro_misalignment",)
 
 
 def scored_kind(case: dict) -> str:
@@ -157,15 +161,19 @@ def case_list(count: int | None = None) -> list[dict]:
             for vehicle in VEHICLES:
                 cases.append({"source": source, "vehicle": vehicle, "truth": name,
                               "kind": "outside", "seed": 5000 + len(cases)})
+    for name in PIPELINE_SENSOR:
+        for vehicle in VEHICLES:
+            cases.append({"source": "pipeline", "vehicle": vehicle, "truth": name,
+                          "kind": "outside", "seed": 5000 + len(cases)})
     return cases[:count] if count else cases
 
 
 def unmodelled_cases() -> list[dict]:
-    """The out-of-library cases of :mod:`.unmodelled` (issue 47), as :func:`case_list` has
-    them (seeds 5064 on)."""
+    """Issue 47's out-of-library cases (:mod:`.unmodelled`, :mod:`.imu_error`), as
+    :func:`case_list` has them (seeds 5064 on)."""
     from .unmodelled import UNMODELLED
 
-    return [c for c in case_list() if c["truth"] in UNMODELLED]
+    return [c for c in case_list() if c["truth"] in UNMODELLED or c["truth"] in PIPELINE_SENSOR]
 
 
 #: directory of flown logs (``QUADSIM_BENCH_CACHE``, or ``--cache`` of the benchmark script);
@@ -205,12 +213,17 @@ def _code_hash(source: str) -> str:
 
 def _unmodelled_hash(key: dict) -> dict:
     """``{"unmodelled": hash}`` of :mod:`.unmodelled`'s file for a case that flies one of its
-    effects, else ``{}`` (so the keys of every other case and reference stay as they were)."""
+    effects (``{"imu_error": hash}`` of :mod:`.imu_error`'s for a gyro case), else ``{}`` (so
+    the keys of every other case and reference stay as they were)."""
     from .unmodelled import UNMODELLED
 
+    here = Path(__file__).resolve().parent
+    if key.get("truth") in PIPELINE_SENSOR:
+        data = (here / "imu_error.py").read_bytes()
+        return {"imu_error": hashlib.sha256(data).hexdigest()[:16]}
     if key.get("truth") not in UNMODELLED:
         return {}
-    data = (Path(__file__).resolve().parent / "unmodelled.py").read_bytes()
+    data = (here / "unmodelled.py").read_bytes()
     return {"unmodelled": hashlib.sha256(data).hexdigest()[:16]}
 
 
@@ -254,9 +267,15 @@ def _fly(source: str, params, spec, seed: int, speed: float):
         from .rotorpy_source import rotorpy_flight
 
         return rotorpy_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+    from .imu_error import GyroMisalignment
     from .pipeline import pipeline_flight
 
-    return pipeline_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+    sensors = [s for s in spec if isinstance(s, GyroMisalignment)]
+    log = pipeline_flight(params, [e for e in spec if not isinstance(e, GyroMisalignment)],
+                          seed=seed, duration=DURATION, speed=speed)
+    for sensor in sensors:       # sensor side, after the pipeline (benchmarks.imu_error)
+        log = sensor.apply(log)
+    return log
 
 
 def _spec(case: dict, params, rng):
@@ -266,6 +285,10 @@ def _spec(case: dict, params, rng):
         return {} if case["source"] == "rotorpy" else []
     if case["truth"] in UNMODELLED:
         return draw_unmodelled(case["truth"], params, rng)
+    if case["truth"] in PIPELINE_SENSOR:
+        from .imu_error import draw_gyro_misalignment
+
+        return draw_gyro_misalignment(params, rng)
     if case["source"] == "rotorpy":
         return draw_rotorpy(case["truth"], params, rng)
     return draw(case["truth"], params, rng)

@@ -90,14 +90,14 @@ def test_draws_are_the_documented_sizes():
 
 
 def test_case_lists_append_the_new_cases_only():
-    """Independent cases: 64 as before (the first and last seeds kept) + 4 pipeline cases
-    seeds 5064-5067, scored as outside; their cache keys carry the module's hash, no other
+    """Independent cases: 64 as before (the first and last seeds kept) + 6 pipeline cases
+    seeds 5064-5069, scored as outside; their cache keys carry their module's hash, no other
     key does. Self-generated: 76 as before + 4 outside cases seeds 1076-1079."""
     from benchmarks import gap_benchmark
     from benchmarks.cases import _unmodelled_hash, case_list, scored_kind, unmodelled_cases
 
     cases = case_list()
-    assert len(cases) == 68
+    assert len(cases) == 70
     assert (cases[0]["seed"], cases[63]["seed"], cases[63]["truth"]) == (5000, 5063,
                                                                        "rate_damping")
     new = unmodelled_cases()
@@ -105,13 +105,43 @@ def test_case_lists_append_the_new_cases_only():
         ("pipeline", "physical", "rotor_wake", 5064),
         ("pipeline", "crazyflie21", "rotor_wake", 5065),
         ("pipeline", "physical", "frame_moment", 5066),
-        ("pipeline", "crazyflie21", "frame_moment", 5067)]
+        ("pipeline", "crazyflie21", "frame_moment", 5067),
+        ("pipeline", "physical", "gyro_misalignment", 5068),
+        ("pipeline", "crazyflie21", "gyro_misalignment", 5069)]
     assert all(scored_kind(c) == "outside" for c in new)
     assert all(_unmodelled_hash(c) == {} for c in cases[:64])
-    assert all(len(_unmodelled_hash(c)["unmodelled"]) == 16 for c in new)
+    assert all(len(_unmodelled_hash(c)["unmodelled"]) == 16 for c in new[:4])
+    assert all(list(_unmodelled_hash(c)) == ["imu_error"] for c in new[4:])
     self_cases = gap_benchmark.case_list()
     assert len(self_cases) == 80
     assert [(c["truth"], c["seed"], c["kind"]) for c in self_cases[76:]] == [
         ("rotor_wake", 1076, "outside"), ("rotor_wake", 1077, "outside"),
         ("frame_moment", 1078, "outside"), ("frame_moment", 1079, "outside")]
     assert self_cases[75]["seed"] == 1075
+
+
+def test_gyro_misalignment_turns_the_logged_rates():
+    """Rodrigues against closed forms: 2 deg about z turns a roll rate of 1 rad/s into
+    (cos 2 deg, sin 2 deg, 0) = (0.999391, 0.034899, 0); 90 deg about k = (1, 1, 1)/sqrt(3):
+    R e_x = k x e_x + (k . e_x) k = (1/3, 1/3 + 1/sqrt(3), 1/3 - 1/sqrt(3)), R R^T = I,
+    R k = k; the flight's other signals stay; draws turn by 1-3 deg."""
+    from benchmarks.imu_error import GyroMisalignment, draw_gyro_misalignment, rotation_matrix
+    from quadsim.logs.flightlog import FlightLog
+
+    rates = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+    log = FlightLog(np.array([0.0, 0.004]), np.zeros((2, 3)),
+                    np.tile([1.0, 0.0, 0.0, 0.0], (2, 1)), body_rate=rates)
+    turned = GyroMisalignment((0.0, 0.0, np.radians(2.0))).apply(log)
+    np.testing.assert_allclose(turned.body_rate, [[0.9993908, 0.0348995, 0.0], [0, 0, 2.0]],
+                               atol=1e-7)
+    np.testing.assert_array_equal(turned.quat, log.quat)
+    k = np.ones(3) / np.sqrt(3.0)
+    r = rotation_matrix(np.pi / 2 * k)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(r @ k, k, atol=1e-12)
+    np.testing.assert_allclose(r[:, 0], [1 / 3, 1 / 3 + 1 / np.sqrt(3), 1 / 3 - 1 / np.sqrt(3)],
+                               atol=1e-12)
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        (gyro,) = draw_gyro_misalignment(load_params("crazyflie21"), rng)
+        assert 1.0 <= np.degrees(np.linalg.norm(gyro.rotvec)) <= 3.0
