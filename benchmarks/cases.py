@@ -19,7 +19,13 @@ CoM x2, inertia, weak rotor x2, motor lag, body drag, rotor drag, wind), 2 outsi
 2 no-effect, 8 in-library, 2 outside (translational lift, blade flapping moment:
 :mod:`.outside`). 56 cases in all, plus one ``thrust_factor`` case per source and vehicle,
 and a canted rotor and aerodynamic rate damping per vehicle from the pipeline source
-(appended, so the seeds of the cases before them stay): 64.
+(appended, so the seeds of the cases before them stay): 64. The flapping and lift cases
+flown as outside are scored as in-library since the library gained them
+(:data:`JOINED_LIBRARY`), which left both sources' out-of-library sets empty; issue 47's
+out-of-library cases are appended after them (:data:`PIPELINE_UNMODELLED`, effects of
+:mod:`.unmodelled`: rotor-rotor wake interference and the frame's drag moment, pipeline
+source only; RotorPy none, :data:`ROTORPY_UNMODELLED`): 68; then a gyro mounted askew per
+vehicle (:data:`PIPELINE_SENSOR`, :mod:`.imu_error`, sensor side, pipeline source): 70.
 
 Judging (:func:`run_case`, :func:`run_per_flight`): *held-out* mode
 (:func:`quadsim.gap.diagnose`, first ``FLIGHTS - 1`` flights train, the last held out) and
@@ -80,6 +86,7 @@ __all__ = [
     "run_per_flight",
     "scored_kind",
     "shared_physics",
+    "unmodelled_cases",
 ]
 
 VEHICLES = ("physical", "crazyflie21")
@@ -102,6 +109,20 @@ PIPELINE_LATER = ("canted_rotor", "rate_damping")
 #: per-flight reading since issue 45): their flights and cache keys stay, they are scored
 #: as in-library (:func:`scored_kind`).
 JOINED_LIBRARY = frozenset({"translational_lift", "flapping", "blade_flapping"})
+#: out-of-library cases added by issue 47 (appended after every case above, so no seed, flight
+#: or cache key of those moves): effects of :mod:`.unmodelled` flown through quadsim's hooks
+PIPELINE_UNMODELLED = ("rotor_wake", "frame_moment")
+#: RotorPy has none: every aerodynamic term its ``quad_params`` offers (parasitic drag
+#: ``c_D*``, rotor drag ``k_d``, induced inflow ``k_z``, translational lift ``k_h``, flapping
+#: ``k_flap``, first-order motors ``tau_m``) is a library reading now; what else its
+#: configuration offers is sensor-side (its IMU's mounting rotation ``R_BS`` and lever arm
+#: ``p_BS``, biases and random walk) or white rotor-speed noise (``motor_noise_std``), and
+#: flying those needs the adapter (:mod:`.rotorpy_source`) changed, whose bytes key every
+#: cached RotorPy flight (:func:`_code_hash`)
+ROTORPY_UNMODELLED: tuple[str, ...] = ()
+#: issue 47's sensor-side out-of-library case (appended after the cases above): the
+#: pipeline's logged gyro turned from the body axes (:mod:`.imu_error`)
+PIPELINE_SENSOR = ("gyro_misalignment",)
 
 
 def scored_kind(case: dict) -> str:
@@ -134,7 +155,25 @@ def case_list(count: int | None = None) -> list[dict]:
         for vehicle in VEHICLES:
             cases.append({"source": "pipeline", "vehicle": vehicle, "truth": name,
                           "kind": "library", "seed": 5000 + len(cases)})
+    # issue 47's out-of-library cases (appended: the seeds above stay)
+    for source, names in (("rotorpy", ROTORPY_UNMODELLED), ("pipeline", PIPELINE_UNMODELLED)):
+        for name in names:
+            for vehicle in VEHICLES:
+                cases.append({"source": source, "vehicle": vehicle, "truth": name,
+                              "kind": "outside", "seed": 5000 + len(cases)})
+    for name in PIPELINE_SENSOR:
+        for vehicle in VEHICLES:
+            cases.append({"source": "pipeline", "vehicle": vehicle, "truth": name,
+                          "kind": "outside", "seed": 5000 + len(cases)})
     return cases[:count] if count else cases
+
+
+def unmodelled_cases() -> list[dict]:
+    """Issue 47's out-of-library cases (:mod:`.unmodelled`, :mod:`.imu_error`), as
+    :func:`case_list` has them (seeds 5064 on)."""
+    from .unmodelled import UNMODELLED
+
+    return [c for c in case_list() if c["truth"] in UNMODELLED or c["truth"] in PIPELINE_SENSOR]
 
 
 #: directory of flown logs (``QUADSIM_BENCH_CACHE``, or ``--cache`` of the benchmark script);
@@ -172,12 +211,29 @@ def _code_hash(source: str) -> str:
     return digest.hexdigest()[:16]
 
 
+def _unmodelled_hash(key: dict) -> dict:
+    """``{"unmodelled": hash}`` of :mod:`.unmodelled`'s file for a case that flies one of its
+    effects (``{"imu_error": hash}`` of :mod:`.imu_error`'s for a gyro case), else ``{}`` (so
+    the keys of every other case and reference stay as they were)."""
+    from .unmodelled import UNMODELLED
+
+    here = Path(__file__).resolve().parent
+    if key.get("truth") in PIPELINE_SENSOR:
+        data = (here / "imu_error.py").read_bytes()
+        return {"imu_error": hashlib.sha256(data).hexdigest()[:16]}
+    if key.get("truth") not in UNMODELLED:
+        return {}
+    data = (here / "unmodelled.py").read_bytes()
+    return {"unmodelled": hashlib.sha256(data).hexdigest()[:16]}
+
+
 def _entry(key: dict) -> Path | None:
     """The cache file of ``key`` (None: no cache directory is set)."""
     root = os.environ.get(CACHE_ENV)
     if not root:
         return None
-    name = hashlib.sha256(json.dumps({**key, "code": _code_hash(key["source"])}, sort_keys=True,
+    name = hashlib.sha256(json.dumps({**key, **_unmodelled_hash(key),
+                                      "code": _code_hash(key["source"])}, sort_keys=True,
                                      default=str).encode()).hexdigest()[:24]
     return Path(root) / f"{name}.pkl"
 
@@ -211,14 +267,28 @@ def _fly(source: str, params, spec, seed: int, speed: float):
         from .rotorpy_source import rotorpy_flight
 
         return rotorpy_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+    from .imu_error import GyroMisalignment
     from .pipeline import pipeline_flight
 
-    return pipeline_flight(params, spec, seed=seed, duration=DURATION, speed=speed)
+    sensors = [s for s in spec if isinstance(s, GyroMisalignment)]
+    log = pipeline_flight(params, [e for e in spec if not isinstance(e, GyroMisalignment)],
+                          seed=seed, duration=DURATION, speed=speed)
+    for sensor in sensors:       # sensor side, after the pipeline (benchmarks.imu_error)
+        log = sensor.apply(log)
+    return log
 
 
 def _spec(case: dict, params, rng):
+    from .unmodelled import UNMODELLED, draw_unmodelled
+
     if case["truth"] == "none":
         return {} if case["source"] == "rotorpy" else []
+    if case["truth"] in UNMODELLED:
+        return draw_unmodelled(case["truth"], params, rng)
+    if case["truth"] in PIPELINE_SENSOR:
+        from .imu_error import draw_gyro_misalignment
+
+        return draw_gyro_misalignment(params, rng)
     if case["source"] == "rotorpy":
         return draw_rotorpy(case["truth"], params, rng)
     return draw(case["truth"], params, rng)
