@@ -36,11 +36,15 @@ flown at one speed, what the flights say about the air loads the set lacks: blad
 (roll, pitch) from the roll/pitch moment balance and rotor drag from the body x/y force
 balance below 2 Hz, each regressor the library effect's own load per unit parameter, with the
 flight's RMS speed, hover thrust as a mass and battery voltage (:func:`air_loads`;
-docs/identification.md, "The crazyflie21 set's air loads").
+docs/identification.md, "The crazyflie21 set's air loads"). ``--side-force`` prints each
+flight's steady body-frame side force after the set and those air loads, and the lean of
+rotor 2 it would read as beyond the nominal flights' (:func:`side_forces`; docs/nanodrone.md,
+"Is the mixed campaign's rotor-2 tilt shared?").
 
 Usage::
 
     python scripts/identify_crazyflie.py --air-loads        # per flight; writes nothing
+    python scripts/identify_crazyflie.py --side-force [--logs LOG...]   # writes nothing
     python scripts/identify_crazyflie.py [--data ../shared/data/crazyflie21_brushless]
                                          [--out models/crazyflie21.toml]
     python scripts/identify_crazyflie.py --yaw-balance      # the table above; writes nothing
@@ -337,6 +341,68 @@ def print_air_loads(fits: list[AirLoads], params_path: Path) -> None:
               f"{f.vbat[0]:.2f}-{f.vbat[1]:.2f}  {cells}")
 
 
+#: seconds per block of the steady side force's batch means
+SIDE_BLOCK_S = 1.0
+
+
+@dataclass(frozen=True)
+class SideForce:
+    """One flight's steady body-frame side force (N) after the set and its air loads
+    (``models/effects/crazyflie21_nominal.toml``), with 95 % intervals (batch means over
+    SIDE_BLOCK_S blocks), and its mean thrust of ``rotor`` (N): a rotor whose axis leans by a
+    small angle a pushes T a sideways, so a force F beyond the references' reads as a lean of
+    F / T (rad)."""
+
+    name: str
+    force: tuple[float, float]
+    ci95: tuple[float, float]
+    thrust: float
+
+
+def side_forces(paths: list[Path], params_path: Path, effects_path: Path, *,
+                rotor: int = 2) -> list[SideForce]:
+    """:class:`SideForce` of each flight in ``paths`` (``rotor``: 1-based, the set's
+    numbering)."""
+    from quadsim.effects.effectfile import load_effect_file
+    from quadsim.gap.residual import measured_wrench, model_wrench
+    from quadsim.vehicle.params import load_params
+
+    params = load_params(params_path)
+    effects = load_effect_file(effects_path).effects.effects
+    out = []
+    for path in paths:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            states = flight_states(load_log(path))
+        dt = float(states.t[1] - states.t[0])
+        force = measured_wrench(states, params)[0] - model_wrench(states, params, effects)[0]
+        size = max(2, int(round(SIDE_BLOCK_S / dt)))
+        blocks = len(force) // size
+        means = force[:blocks * size, :2].reshape(blocks, size, 2).mean(axis=1)
+        ci = 1.96 * means.std(axis=0, ddof=1) / np.sqrt(blocks)
+        thrust = params.thrust_factor * float(np.mean(np.square(states.rotor_speed[:, rotor - 1])))
+        out.append(SideForce(path.name.split(".")[0], tuple(float(v) for v in means.mean(0)),
+                             tuple(float(v) for v in ci), thrust))
+    return out
+
+
+def print_side_forces(flights: list[SideForce], references: list[SideForce]) -> None:
+    """Each flight's steady side force and, beyond the references' mean, the lean of rotor 2
+    it would read as."""
+    ref = np.array([f.force for f in references])
+    centre, spread = ref.mean(axis=0), ref.std(axis=0, ddof=1)
+    print(f"{len(references)} nominal flights: side force x {1e3 * centre[0]:+.2f} (SD "
+          f"{1e3 * spread[0]:.2f}), y {1e3 * centre[1]:+.2f} (SD {1e3 * spread[1]:.2f}) mN")
+    print(f"{'flight':<11} {'Fx mN':>13} {'Fy mN':>13}   beyond the nominal mean, as rotor 2's "
+          "lean toward x, y (deg)")
+    for f in flights:
+        extra = np.degrees((np.array(f.force) - centre) / f.thrust)
+        ci = np.degrees(np.array(f.ci95) / f.thrust)
+        print(f"{f.name:<11} {1e3 * f.force[0]:+6.2f} ± {1e3 * f.ci95[0]:.2f} "
+              f"{1e3 * f.force[1]:+6.2f} ± {1e3 * f.ci95[1]:.2f}   "
+              f"{extra[0]:+.2f} ± {ci[0]:.2f}, {extra[1]:+.2f} ± {ci[1]:.2f}")
+
+
 #: the yaw loop's trim band (Hz): below it the yaw pattern moves without a yaw acceleration
 TRIM_BAND = (0.0, 0.5)
 
@@ -553,19 +619,30 @@ def main(argv: list[str] | None = None) -> int:
                         help="print what each nominal flight and each group of flights say "
                              "about blade flapping and rotor drag against the set at --out; "
                              "write nothing")
+    parser.add_argument("--side-force", action="store_true",
+                        help="print each log's (--logs; default nominal/) steady side force "
+                             "after the set and its air loads, and the rotor-2 lean it would "
+                             "read as beyond the nominal flights'; write nothing")
     parser.add_argument("--logs", type=Path, nargs="+",
                         help="with --yaw-balance: these logs instead of nominal/ (another "
                              "vehicle's, with --out naming its parameter set)")
     args = parser.parse_args(argv)
-    if args.logs and not (args.yaw_balance or args.air_loads):
-        raise InputError("--logs: only with --yaw-balance or --air-loads (the set is "
-                         "identified from nominal/ only)")
+    if args.logs and not (args.yaw_balance or args.air_loads or args.side_force):
+        raise InputError("--logs: only with --yaw-balance, --air-loads or --side-force (the "
+                         "set is identified from nominal/ only)")
     nominal = args.logs or sorted((args.data / "nominal").glob("flight_*.csv*"))
     if not nominal:
         raise InputError(f"{args.data / 'nominal'}: no flight_*.csv(.gz) files")
     missing = [p for p in nominal if not p.is_file()]
     if missing:
         raise InputError(f"{missing[0]}: --logs: no such file")
+    if args.side_force:
+        own = sorted((args.data / "nominal").glob("flight_*.csv*"))
+        effects = args.out.parent / "effects" / f"{args.out.stem}_nominal.toml"
+        references = side_forces(own, args.out, effects)
+        flights = references if not args.logs else side_forces(nominal, args.out, effects)
+        print_side_forces(flights, references)
+        return 0
     if args.air_loads:
         groups = [(p.name.split(".")[0], [p]) for p in nominal]
         if len(nominal) == 20:          # nominal/: five flights at each of four speeds
