@@ -31,8 +31,20 @@ Omega_i^2; x_k the z torque per unit parameter of the library's ``rotor_drag``,
 instrumental variables and least squares, over the whole band and in bands (:func:`yaw_balance`),
 and roll, pitch and yaw as quadsim.identify.rotation fits Ixx, Iyy (:func:`delayed_band_fits`).
 
+``--air-loads`` writes nothing and prints, per nominal flight and per group of five flights
+flown at one speed, what the flights say about the air loads the set lacks: blade flapping
+(roll, pitch) from the roll/pitch moment balance and rotor drag from the body x/y force
+balance below 2 Hz, each regressor the library effect's own load per unit parameter, with the
+flight's RMS speed, hover thrust as a mass and battery voltage (:func:`air_loads`;
+docs/identification.md, "The crazyflie21 set's air loads"). ``--side-force`` prints each
+flight's steady body-frame side force after the set and those air loads, and the lean of
+rotor 2 it would read as beyond the nominal flights' (:func:`side_forces`; docs/nanodrone.md,
+"Is the mixed campaign's rotor-2 tilt shared?").
+
 Usage::
 
+    python scripts/identify_crazyflie.py --air-loads        # per flight; writes nothing
+    python scripts/identify_crazyflie.py --side-force [--logs LOG...]   # writes nothing
     python scripts/identify_crazyflie.py [--data ../shared/data/crazyflie21_brushless]
                                          [--out models/crazyflie21.toml]
     python scripts/identify_crazyflie.py --yaw-balance      # the table above; writes nothing
@@ -224,6 +236,171 @@ def yaw_balance(nominal: list[Path], params_path: Path, *,
             for method in ("IV", "LS"):
                 out.append(_fit(rows, terms, band, method))
     return out
+
+
+#: the air loads' band (Hz): the figure-8s' air speed lives below it (one lap per 7-9 s
+#: flight, 92 % of the held-out gap below 1 Hz), and there the rigid body's own torque
+#: I omega_dot is small, so the rotors' moments trim what the air does (an inertia column
+#: takes what is left of it)
+AIR_BAND = (0.0, 2.0)
+
+
+@dataclass(frozen=True)
+class AirLoads:
+    """What one flight (or a pooled group) says about the air loads the set lacks, each
+    with its 95 % interval (batch means over BLOCK_S blocks), in the library's own
+    parameters: ``blade_flapping.roll``/``.pitch`` (kg m/rad) from the roll/pitch moment
+    balance, ``rotor_drag.coefficient`` (kg/rad) from the body x/y force balance; with the
+    flight's RMS air speed (m/s, still air), its hover thrust as a mass (g: b sum Omega^2 /
+    f_z, median) and its battery voltage (V, first and last second)."""
+
+    name: str
+    roll: tuple[float, float]
+    pitch: tuple[float, float]
+    drag_x: tuple[float, float]
+    drag_y: tuple[float, float]
+    rms_speed: float
+    hover_mass_g: float
+    vbat: tuple[float, float]
+
+
+def _air_rows(states, params):
+    """Per axis (roll, pitch, drag x, drag y) the (y, X) of one flight: y the residual of
+    the set's model (N m or N: Newton-Euler with the set's mass and inertia less the set's
+    rotor wrench), X the library effect's load per unit parameter on the logged states (the
+    moments with the angular acceleration beside it: the inertia's share at low frequency)."""
+    from quadsim.effects import parse_effect_spec
+    from quadsim.gap.residual import measured_wrench, model_wrench
+
+    force, torque = measured_wrench(states, params)
+    base_f, base_t, _ = model_wrench(states, params, [])
+    unit = 1e-9                       # inside every range; the loads are linear in it
+
+    def per_unit(spec):
+        f, t, _ = model_wrench(states, params, [parse_effect_spec(spec)])
+        return (f - base_f) / unit, (t - base_t) / unit
+
+    _, flap_roll = per_unit(f"blade_flapping:roll={unit}")
+    _, flap_pitch = per_unit(f"blade_flapping:pitch={unit}")
+    drag, _ = per_unit(f"rotor_drag:coefficient={unit}")
+    accel = states.body_accel
+    return [(torque[:, 0] - base_t[:, 0], np.stack([flap_roll[:, 0], accel[:, 0]], 1)),
+            (torque[:, 1] - base_t[:, 1], np.stack([flap_pitch[:, 1], accel[:, 1]], 1)),
+            (force[:, 0] - base_f[:, 0], drag[:, :1]),
+            (force[:, 1] - base_f[:, 1], drag[:, 1:2])]
+
+
+def air_loads(groups: list[tuple[str, list[Path]]], params_path: Path) -> list[AirLoads]:
+    """:class:`AirLoads` of each named group of flights (one flight or several, pooled with
+    each flight's mean removed), least squares in :data:`AIR_BAND`."""
+    from quadsim.vehicle.params import load_params
+
+    params = load_params(params_path)
+    cache: dict[Path, tuple] = {}
+    for path in {p for _, paths in groups for p in paths}:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            log = load_log(path)
+            states = flight_states(log)
+        dt = float(states.t[1] - states.t[0])
+        omega2 = np.square(states.rotor_speed).sum(1)
+        mass = params.thrust_factor * omega2 / states.specific_force[:, 2]
+        speed = float(np.sqrt(np.mean(np.sum(np.square(states.velocity[:, :2]), 1))))
+        second = max(1, int(round(1.0 / dt)))
+        vbat = log.vbat
+        volts = ((float(np.mean(vbat[:second])), float(np.mean(vbat[-second:])))
+                 if vbat is not None else (float("nan"), float("nan")))
+        cache[path] = (_air_rows(states, params), dt, speed, 1e3 * float(np.median(mass)),
+                       volts)
+    out = []
+    for name, paths in groups:
+        fits = []
+        for axis in range(4):
+            rows = [(cache[p][0][axis][0], cache[p][0][axis][1], cache[p][0][axis][1],
+                     cache[p][1]) for p in paths]
+            fit = _fit(rows, ("x",) * (rows[0][1].shape[1] - 1), AIR_BAND, "LS")
+            fits.append((fit.d, 0.5 * (fit.d_ci95[1] - fit.d_ci95[0])))
+        first = cache[paths[0]]
+        out.append(AirLoads(name, *fits, rms_speed=float(np.mean([cache[p][2] for p in paths])),
+                            hover_mass_g=float(np.mean([cache[p][3] for p in paths])),
+                            vbat=(first[4][0], cache[paths[-1]][4][1])))
+    return out
+
+
+def print_air_loads(fits: list[AirLoads], params_path: Path) -> None:
+    """The :func:`air_loads` table."""
+    print(f"air loads against {params_path.name}, least squares {AIR_BAND[0]:g}-{AIR_BAND[1]:g}"
+          f" Hz, 95 % intervals (batch means over {BLOCK_S:g} s)")
+    print(f"{'flights':<10} {'RMS v m/s':>9} {'hover g':>8} {'vbat V':>11}  "
+          f"{'flapping roll':>19} {'flapping pitch':>19} {'rotor drag x':>19} "
+          f"{'rotor drag y':>19}")
+    for f in fits:
+        cells = " ".join(f"{v:>10.3e} ± {c:.1e}" for v, c in (f.roll, f.pitch, f.drag_x,
+                                                              f.drag_y))
+        print(f"{f.name:<10} {f.rms_speed:>9.2f} {f.hover_mass_g:>8.2f} "
+              f"{f.vbat[0]:.2f}-{f.vbat[1]:.2f}  {cells}")
+
+
+#: seconds per block of the steady side force's batch means
+SIDE_BLOCK_S = 1.0
+
+
+@dataclass(frozen=True)
+class SideForce:
+    """One flight's steady body-frame side force (N) after the set and its air loads
+    (``models/effects/crazyflie21_nominal.toml``), with 95 % intervals (batch means over
+    SIDE_BLOCK_S blocks), and its mean thrust of ``rotor`` (N): a rotor whose axis leans by a
+    small angle a pushes T a sideways, so a force F beyond the references' reads as a lean of
+    F / T (rad)."""
+
+    name: str
+    force: tuple[float, float]
+    ci95: tuple[float, float]
+    thrust: float
+
+
+def side_forces(paths: list[Path], params_path: Path, effects_path: Path, *,
+                rotor: int = 2) -> list[SideForce]:
+    """:class:`SideForce` of each flight in ``paths`` (``rotor``: 1-based, the set's
+    numbering)."""
+    from quadsim.effects.effectfile import load_effect_file
+    from quadsim.gap.residual import measured_wrench, model_wrench
+    from quadsim.vehicle.params import load_params
+
+    params = load_params(params_path)
+    effects = load_effect_file(effects_path).effects.effects
+    out = []
+    for path in paths:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            states = flight_states(load_log(path))
+        dt = float(states.t[1] - states.t[0])
+        force = measured_wrench(states, params)[0] - model_wrench(states, params, effects)[0]
+        size = max(2, int(round(SIDE_BLOCK_S / dt)))
+        blocks = len(force) // size
+        means = force[:blocks * size, :2].reshape(blocks, size, 2).mean(axis=1)
+        ci = 1.96 * means.std(axis=0, ddof=1) / np.sqrt(blocks)
+        thrust = params.thrust_factor * float(np.mean(np.square(states.rotor_speed[:, rotor - 1])))
+        out.append(SideForce(path.name.split(".")[0], tuple(float(v) for v in means.mean(0)),
+                             tuple(float(v) for v in ci), thrust))
+    return out
+
+
+def print_side_forces(flights: list[SideForce], references: list[SideForce]) -> None:
+    """Each flight's steady side force and, beyond the references' mean, the lean of rotor 2
+    it would read as."""
+    ref = np.array([f.force for f in references])
+    centre, spread = ref.mean(axis=0), ref.std(axis=0, ddof=1)
+    print(f"{len(references)} nominal flights: side force x {1e3 * centre[0]:+.2f} (SD "
+          f"{1e3 * spread[0]:.2f}), y {1e3 * centre[1]:+.2f} (SD {1e3 * spread[1]:.2f}) mN")
+    print(f"{'flight':<11} {'Fx mN':>13} {'Fy mN':>13}   beyond the nominal mean, as rotor 2's "
+          "lean toward x, y (deg)")
+    for f in flights:
+        extra = np.degrees((np.array(f.force) - centre) / f.thrust)
+        ci = np.degrees(np.array(f.ci95) / f.thrust)
+        print(f"{f.name:<11} {1e3 * f.force[0]:+6.2f} ± {1e3 * f.ci95[0]:.2f} "
+              f"{1e3 * f.force[1]:+6.2f} ± {1e3 * f.ci95[1]:.2f}   "
+              f"{extra[0]:+.2f} ± {ci[0]:.2f}, {extra[1]:+.2f} ± {ci[1]:.2f}")
 
 
 #: the yaw loop's trim band (Hz): below it the yaw pattern moves without a yaw acceleration
@@ -438,19 +615,41 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--yaw-balance", action="store_true",
                         help="print the yaw balance's fits of d (models x bands) against the "
                              "set at --out; write nothing")
+    parser.add_argument("--air-loads", action="store_true",
+                        help="print what each nominal flight and each group of flights say "
+                             "about blade flapping and rotor drag against the set at --out; "
+                             "write nothing")
+    parser.add_argument("--side-force", action="store_true",
+                        help="print each log's (--logs; default nominal/) steady side force "
+                             "after the set and its air loads, and the rotor-2 lean it would "
+                             "read as beyond the nominal flights'; write nothing")
     parser.add_argument("--logs", type=Path, nargs="+",
                         help="with --yaw-balance: these logs instead of nominal/ (another "
                              "vehicle's, with --out naming its parameter set)")
     args = parser.parse_args(argv)
-    if args.logs and not args.yaw_balance:
-        raise InputError("--logs: only with --yaw-balance (the set is identified from "
-                         "nominal/ only)")
+    if args.logs and not (args.yaw_balance or args.air_loads or args.side_force):
+        raise InputError("--logs: only with --yaw-balance, --air-loads or --side-force (the "
+                         "set is identified from nominal/ only)")
     nominal = args.logs or sorted((args.data / "nominal").glob("flight_*.csv*"))
     if not nominal:
         raise InputError(f"{args.data / 'nominal'}: no flight_*.csv(.gz) files")
     missing = [p for p in nominal if not p.is_file()]
     if missing:
         raise InputError(f"{missing[0]}: --logs: no such file")
+    if args.side_force:
+        own = sorted((args.data / "nominal").glob("flight_*.csv*"))
+        effects = args.out.parent / "effects" / f"{args.out.stem}_nominal.toml"
+        references = side_forces(own, args.out, effects)
+        flights = references if not args.logs else side_forces(nominal, args.out, effects)
+        print_side_forces(flights, references)
+        return 0
+    if args.air_loads:
+        groups = [(p.name.split(".")[0], [p]) for p in nominal]
+        if len(nominal) == 20:          # nominal/: five flights at each of four speeds
+            groups += [(f"{k:02d}-{k + 4:02d}", nominal[k:k + 5]) for k in (0, 5, 10, 15)]
+            groups += [("00-09", nominal[:10]), ("10-19", nominal[10:])]
+        print_air_loads(air_loads(groups, args.out), args.out)
+        return 0
     if args.yaw_balance:
         print_yaw_balance(yaw_balance(nominal, args.out), args.out)
         share, r2 = slow_yaw_pattern(nominal, args.out)
