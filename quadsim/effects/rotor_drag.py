@@ -151,16 +151,17 @@ class RotorDrag(EffectBase):
         the arms R_i = r_i - c (R, 3), R_i x a_i (R, 3), u_i . a_i = v . a_i + w . (R_i x a_i)
         (B, R), w . R_i (B, R) and |R_i|^2 (R,). With a ``ctx.flight_memo`` (the gap fits,
         which read the rotor speeds at many delays on one flight's motion) the last
-        :data:`KEPT_GEOMETRY` are kept per air-velocity array and vehicle object (the same
+        :data:`KEPT_GEOMETRY` are kept per air-velocity array, rotors and CoM (what they
+        read of the vehicle: a fit that moves its mass or inertia shares them; the same
         numbers, computed once)."""
-        memo = ctx.flight_memo
+        memo, params = ctx.flight_memo, ctx.params
         store = None if memo is None else memo.setdefault("rotor_drag.geometry", {})
-        key = (id(ctx.air_velocity), id(ctx.params))
+        key = (id(ctx.air_velocity), id(params.rotors),
+               np.asarray(params.com, dtype=float).tobytes())
         if store is not None and key in store:
             refs, value = store[key]
-            if refs[0] is ctx.air_velocity and refs[1] is ctx.params:
+            if refs[0] is ctx.air_velocity and refs[1] is params.rotors:
                 return value
-        params = ctx.params
         air_body = ctx.to_body(ctx.air_velocity)
         axes = params.rotor_axes
         arms = params.rotor_positions - params.com
@@ -171,5 +172,5 @@ class RotorDrag(EffectBase):
         if store is not None:
             if len(store) >= RotorDrag.KEPT_GEOMETRY:
                 del store[next(iter(store))]
-            store[key] = ((ctx.air_velocity, ctx.params), value)
+            store[key] = ((ctx.air_velocity, params.rotors), value)
         return value
