@@ -16,11 +16,13 @@ What is kept, and what it is keyed by (an effect is its class and its values):
 
 * per flight (:func:`flight_memo`): the body-to-world rotations of the logged attitude and a
   dict the effects keep their own motion-only values in (the cable's attachment
-  acceleration and swings) -- keyed by the identity of the logged-motion arrays;
+  acceleration and swings, the rotor drag's hub terms) -- keyed by the identity of the
+  logged-motion arrays;
 * per evaluation kind (:func:`memoised`, oldest evicted first past :func:`entries_kept`
   entries): the measured
   wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
-  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics), the model
+  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics) and its
+  command side (:func:`rotor_model`: the same for every rotor delay), the model
   wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
   the states shifted by one rotor delay;
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
