@@ -314,3 +314,44 @@ def test_the_jacobian_steps_back_from_a_wall_of_the_physical_set(cf, states):
     slow = (weighted_residual(states, ref, ref.candidate.effects(back)).ravel()
             - weighted_residual(states, ref, ref.effects()).ravel()) / -h
     _close(jac[:, 0], slow, rel=1e-9)
+
+
+def test_the_rotor_drags_kept_geometry_gives_the_loads_from_scratch(cf):
+    """rotor_drag keeps what it reads of the motion, the air and the vehicle per flight
+    (RotorDrag._geometry): at other rotor speeds, and on a vehicle of another mass (the
+    same rotors and CoM: shared) or another CoM (its own entry), the loads are the ones
+    computed without a memo, to the bit (the same operations on the same numbers)."""
+    import dataclasses
+
+    ctx = _context(cf)
+    memo: dict = {}
+    drag = make_effect("rotor_drag", coefficient=3e-7, axial_coefficient=1e-7)
+    heavier = ctx.params.replace(mass=ctx.params.mass + 0.004)
+    moved = ctx.params.replace(com=ctx.params.com + np.array([0.001, 0.0, 0.0]))
+    for params, speed in [(ctx.params, ctx.rotor_speed), (ctx.params, ctx.rotor_speed * 1.1),
+                          (heavier, ctx.rotor_speed), (moved, ctx.rotor_speed * 0.9)]:
+        plain = dataclasses.replace(ctx, params=params, rotor_speed=speed)
+        kept = dataclasses.replace(plain, flight_memo=memo)
+        fast, slow = drag.loads(kept), drag.loads(plain)
+        assert np.array_equal(fast.force_world, slow.force_world)
+        assert np.array_equal(fast.torque_body, slow.torque_body)
+    assert len(memo["rotor_drag.geometry"]) == 2       # the heavier vehicle shared the first
+
+
+def test_the_rotor_channels_kept_model_gives_the_channel_from_scratch(cf, states):
+    """The rotor channel's command side (quadsim.gap.residual.rotor_model) is kept per
+    command model: read at several rotor delays (the evidence's shifted states share the
+    commands), the channel is the one computed without a memo, to the bit; one model per
+    motor lag, not one per delay."""
+    from quadsim.gap.reference import shifted
+    from quadsim.gap.residual import rotor_residual
+
+    memo: dict = {}
+    for lag in (0.008, 0.012):
+        effects = [make_effect("motor_lag", time_constant=lag),
+                   make_effect("battery_sag", full_voltage=4.1)]
+        for delay in (0.0, 0.002, -0.003):
+            view = shifted(states, delay)
+            fast = rotor_residual(view, cf, effects, memo=memo)
+            assert np.array_equal(fast, rotor_residual(view, cf, effects))
+    assert sum(isinstance(k, tuple) and k[0] == "rotor_model" for k in memo) == 2

@@ -118,28 +118,59 @@ class RotorDrag(EffectBase):
     loads_reads = (("air_velocity", "rotor_speed"),
                    ("rotor_axes", "rotor_positions", "com"))
 
+    #: speed-independent parts kept per flight (:meth:`_geometry`): the air velocities and
+    #: vehicles a fit's last evaluations used
+    KEPT_GEOMETRY = 8
+
     def loads(self, ctx):
         """The sums over rotors of :func:`rotor_drag_forces` and of their torques, through
         sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)
         arrays (the gap fits evaluate this thousands of times per flight)."""
-        params = ctx.params
         c, k = self.coefficient, self.axial_coefficient
-        air_body = ctx.to_body(ctx.air_velocity)
-        axes = params.rotor_axes
-        arms = params.rotor_positions - params.com
+        air_body, axes, arms, lever, along, turn, reach = self._geometry(ctx)
         speed = np.asarray(ctx.rotor_speed, dtype=float)
         rate = np.asarray(ctx.body_rate, dtype=float)
-        lever = _cross(arms, axes)                            # R_i x a_i, (R, 3)
-        axial = speed * (air_body @ axes.T + rate @ lever.T)  # p_i = Omega_i (u_i . a_i)
+        axial = speed * along                                 # p_i = Omega_i (u_i . a_i)
         moment = speed @ arms                                 # S, (B, 3)
         force = (-c * (speed.sum(axis=1)[:, None] * air_body + _cross(rate, moment))
                  + (c - k) * (axial @ axes))
-        spin = (speed * (rate @ arms.T)) @ arms               # sum_i Omega_i (w . R_i) R_i
+        spin = (speed * turn) @ arms                          # sum_i Omega_i (w . R_i) R_i
         torque = (-c * (_cross(moment, air_body)
-                        + rate * (speed @ np.sum(arms ** 2, axis=1))[:, None] - spin)
+                        + rate * (speed @ reach)[:, None] - spin)
                   + (c - k) * (axial @ lever))
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world = ctx.to_world(force)
         loads.torque_body = torque
         return loads
+
+    @staticmethod
+    def _geometry(ctx) -> tuple:
+        """What :meth:`loads` takes from the motion, the air velocity and the vehicle, not
+        from the rotor speeds: the body-frame air velocity (B, 3), the rotor axes a_i (R, 3),
+        the arms R_i = r_i - c (R, 3), R_i x a_i (R, 3), u_i . a_i = v . a_i + w . (R_i x a_i)
+        (B, R), w . R_i (B, R) and |R_i|^2 (R,). With a ``ctx.flight_memo`` (the gap fits,
+        which read the rotor speeds at many delays on one flight's motion) the last
+        :data:`KEPT_GEOMETRY` are kept per air-velocity array, rotors and CoM (what they
+        read of the vehicle: a fit that moves its mass or inertia shares them; the same
+        numbers, computed once)."""
+        memo, params = ctx.flight_memo, ctx.params
+        store = None if memo is None else memo.setdefault("rotor_drag.geometry", {})
+        key = (id(ctx.air_velocity), id(params.rotors),
+               np.asarray(params.com, dtype=float).tobytes())
+        if store is not None and key in store:
+            refs, value = store[key]
+            if refs[0] is ctx.air_velocity and refs[1] is params.rotors:
+                return value
+        air_body = ctx.to_body(ctx.air_velocity)
+        axes = params.rotor_axes
+        arms = params.rotor_positions - params.com
+        rate = np.asarray(ctx.body_rate, dtype=float)
+        lever = _cross(arms, axes)                            # R_i x a_i, (R, 3)
+        value = (air_body, axes, arms, lever, air_body @ axes.T + rate @ lever.T,
+                 rate @ arms.T, np.sum(arms ** 2, axis=1))
+        if store is not None:
+            if len(store) >= RotorDrag.KEPT_GEOMETRY:
+                del store[next(iter(store))]
+            store[key] = ((ctx.air_velocity, params.rotors), value)
+        return value

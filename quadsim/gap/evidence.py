@@ -305,8 +305,12 @@ class Marginal:
     Cholesky factor of A = I + jᵀj, ``logdet`` = log det A."""
 
     def __init__(self, jac: np.ndarray, s_ref: np.ndarray):
-        self.j = jac * s_ref
-        a = np.eye(len(s_ref)) + self.j.T @ self.j
+        j = jac * s_ref
+        a = np.eye(len(s_ref)) + j.T @ j
+        # column-major: the profile's two products over j (jᵀ r, j du) run about a third
+        # faster on these tall, thin matrices than on the row-major copy (the same values,
+        # summed in another order: round-off apart)
+        self.j = np.asfortranarray(j)
         self.chol = cho_factor(a)
         self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
         # cho_solve's own LAPACK call (the same numbers), without its per-call checks and

@@ -16,11 +16,13 @@ What is kept, and what it is keyed by (an effect is its class and its values):
 
 * per flight (:func:`flight_memo`): the body-to-world rotations of the logged attitude and a
   dict the effects keep their own motion-only values in (the cable's attachment
-  acceleration and swings) -- keyed by the identity of the logged-motion arrays;
+  acceleration and swings, the rotor drag's hub terms) -- keyed by the identity of the
+  logged-motion arrays;
 * per evaluation kind (:func:`memoised`, oldest evicted first past :func:`entries_kept`
   entries): the measured
   wrench of one vehicle (mass, CoM, inertia), the rotor channel of one command -> speed
-  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics), the model
+  model (:func:`rotor_key`: the effects with a speed factor or rotor dynamics) and its
+  command side (:func:`rotor_model`: the same for every rotor delay), the model
   wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
   the states shifted by one rotor delay;
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
@@ -165,7 +167,7 @@ __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "iden
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
            "load_exponent", "command_speed", "speed_of_command", "command_of_speed",
            "MAP_WINDOW_S", "MAP_MIN_RANGE", "ROTOR_HORIZON_S", "ROTOR_SUBSTEPS",
-           "min_time_constant", "rate_owner", "rotor_residual"]
+           "min_time_constant", "rate_owner", "rotor_residual", "RotorModel", "rotor_model"]
 
 
 if TYPE_CHECKING:
@@ -175,7 +177,7 @@ if TYPE_CHECKING:
 
 #: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
 #: first); the per-flight ones (:func:`flight_memo`) are kept.
-_PER_EVALUATION = ("measured", "rotor", "wrench", "shifted")
+_PER_EVALUATION = ("measured", "rotor", "rotor_model", "wrench", "shifted")
 
 
 def memoised(memo: dict, key: tuple, states, compute):
@@ -917,11 +919,42 @@ def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: f
     return out
 
 
-def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *,
-                   memo: dict | None = None) -> np.ndarray:
-    """Measured rotor speed at t + h minus the model's prediction from the state at t.
-    ``memo``: a flight's (:func:`memoised`), where the commanded speeds of ``params``' motor
-    map are kept (the same for every model of one flight)."""
+@dataclass(frozen=True)
+class RotorModel:
+    """What the rotor channel's prediction takes from the commands and the effects, not from
+    the measured rotor speeds (:func:`rotor_residual`): ``steps`` samples ahead
+    (:data:`ROTOR_HORIZON_S`), ``n`` predicted samples, ``cmd`` (N, R) the commanded speeds
+    (rad/s) with the effects' command factor applied, ``owner`` the effect that defines the
+    rotor dynamics (None: a command is reached at once), ``tau`` its time constant (s) where
+    it is a lag the same up and down (:func:`heun_linear`), else None, ``dt`` the sample
+    step (s) and ``valid`` (N - steps,) False where a prediction crosses a flight boundary
+    (None: none does). A fit that reads the rotor speeds at many delays keeps one per
+    command -> speed model (:func:`rotor_model`)."""
+
+    steps: int
+    n: int
+    cmd: np.ndarray
+    owner: object | None
+    tau: float | None
+    dt: float
+    valid: np.ndarray | None
+
+
+def rotor_model(states: FlightStates, params: VehicleParams, effects: list, *,
+                memo: dict | None = None) -> RotorModel:
+    """The :class:`RotorModel` of ``params``' motor map and ``effects`` on the commands and
+    times of ``states``. ``memo``: a flight's (:func:`memoised`), where it is kept per
+    command, time and battery arrays, ``params`` and the effects' rotor hooks
+    (:func:`rotor_key`): the states read at another rotor delay share those arrays."""
+    if memo is None or states.command is None:
+        return _rotor_model(states, params, effects, memo)
+    arrays = (states.t, states.command, states.vbat, params)
+    key = ("rotor_model",) + tuple(map(id, arrays)) + (rotor_key(states, params, effects)[3],)
+    return memoised(memo, key, arrays, lambda: _rotor_model(states, params, effects, memo))
+
+
+def _rotor_model(states: FlightStates, params: VehicleParams, effects: list,
+                 memo: dict | None) -> RotorModel:
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, round(ROTOR_HORIZON_S / dt))
     if memo is None or states.command is None:
@@ -935,14 +968,25 @@ def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *
     factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat, cmd.shape[1])
     if factor is not None:
         cmd = cmd * factor
-    speed = states.rotor_speed
     n = len(states.t) - steps
     owner = rate_owner(effects)
-    linear = _linear_time_constant(owner)
+    valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
+    return RotorModel(steps, n, cmd, owner, _linear_time_constant(owner), dt,
+                      None if valid.all() else valid)
+
+
+def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *,
+                   memo: dict | None = None) -> np.ndarray:
+    """Measured rotor speed at t + h minus the model's prediction from the state at t.
+    ``memo``: a flight's (:func:`memoised`), where the commanded speeds of ``params``' motor
+    map and the :class:`RotorModel` are kept (the same for every rotor delay of one flight)."""
+    model = rotor_model(states, params, effects, memo=memo)
+    steps, n, cmd, owner, dt = model.steps, model.n, model.cmd, model.owner, model.dt
+    speed = states.rotor_speed
     if owner is None:
         predicted = cmd[steps:]
-    elif linear is not None:
-        predicted = heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, linear, n)
+    elif model.tau is not None:
+        predicted = heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, model.tau, n)
     else:
         # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
         # dt / (2 ROTOR_SUBSTEPS)).
@@ -962,6 +1006,6 @@ def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *
     out = np.zeros_like(speed)
     out[steps:] = speed[steps:] - predicted
     # Stacked flights: a prediction across a flight boundary (time jump) is not scored.
-    valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
-    out[steps:][~valid] = 0.0
+    if model.valid is not None:
+        out[steps:][~model.valid] = 0.0
     return out
