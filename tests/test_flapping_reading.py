@@ -2,8 +2,6 @@
 shares is normal (the discrepancy term and practical significance), a flight that flaps
 more than its references is named ``blade_flapping`` with its size."""
 
-import types
-
 import pytest
 
 from benchmarks.synthetic import synthetic_flight
@@ -68,19 +66,3 @@ def test_a_flight_that_flaps_against_references_that_do_not_is_named(cf):
     assert flight["params"]["blade_flapping.roll"] == pytest.approx(3 * k, rel=0.05)
     assert flight["params"]["blade_flapping.pitch"] == pytest.approx(3 * k, rel=0.05)
 
-
-
-@pytest.mark.parametrize("identified, refit", [
-    ({"rotor_drag.coefficient": False, "wind.vx": True, "wind.vy": True},
-     ("rotor_drag", "body_drag", "translational_lift", "blade_flapping")),
-    ({"rotor_drag.coefficient": True, "wind.vx": False, "wind.vy": True}, ("blade_flapping",)),
-    ({"rotor_drag.coefficient": True, "wind.vx": True, "wind.vy": True}, ()),
-])
-def test_which_readings_refit_the_references_wind(identified, refit):
-    """The shared wind is refitted by every air-speed load where the references' rotor drag
-    is not identified, by blade flapping alone where the drag is but the wind is not (the
-    sensor pipeline's Crazyflie references: drag 4e-9 +- 3.5e-8 kg/rad identified, wind
-    -0.39 +- 3.9 m/s not), and by none where both are (a measured air speed)."""
-    from quadsim.gap.explanations import refits_wind
-
-    assert refits_wind(types.SimpleNamespace(identified=identified)) == refit

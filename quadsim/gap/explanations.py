@@ -58,7 +58,6 @@ __all__ = [
     "DELAY_SD_S",
     "DETERMINED",
     "DRAGS",
-    "UNSEEN_WIND",
     "VBAT_SD",
     "Explanation",
     "explanations_for",
@@ -69,7 +68,6 @@ __all__ = [
     "prior_spreads",
     "reference_delay_sd",
     "reference_determined",
-    "refits_wind",
     "vertical_prior",
     "wind_readings",
     "with_wind",
@@ -313,9 +311,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     if delay:
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
-    if "wind" in groups:
-        refit = refits_wind(reference)
-        out = [with_wind(e, reference) if e.name in refit else e for e in out]
+    if "wind" in groups and not reference.identified.get("rotor_drag.coefficient", True):
+        out = [with_wind(e, reference) if e.name in DRAGS else e for e in out]
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
@@ -400,28 +397,6 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 #: RMS (``unexplained``); with the wind refitted both flights are named at the true size
 #: (docs/effects.md, blade_flapping).
 DRAGS = ("rotor_drag", "body_drag", "translational_lift", "blade_flapping")
-
-#: explanations that refit the shared wind also where the references' rotor drag is
-#: identified but their wind is not (:func:`refits_wind`): blade flapping, a moment no
-#: reading of the references' own drag can stand in for. Measured on the sensor pipeline's
-#: Crazyflie (rotor drag identified at 4e-9 +- 3.5e-8 kg/rad, wind -0.39 +- 3.9 m/s): with
-#: the true coefficient, the references' wind left My at 18.6 times the noise scale's mean
-#: square (0.11 at calm air; the references: 0.08) and the flight was `unexplained` (My
-#: 7.9x) with the reading at 42 % / 23 % of the truth. Not the drags and the lift: there the
-#: references' identified drag is what fixes the room's air (module doc of :func:`with_wind`).
-UNSEEN_WIND = ("blade_flapping",)
-
-
-def refits_wind(reference: Reference) -> tuple[str, ...]:
-    """The explanations that refit the references' shared wind on a flight
-    (:func:`with_wind`): those of :data:`DRAGS` where the references' rotor drag is not
-    identified, else those of :data:`UNSEEN_WIND` where their wind (either component) is
-    not; none where both are (their wind is then a measured air speed)."""
-    if not reference.identified.get("rotor_drag.coefficient", True):
-        return DRAGS
-    if not all(reference.identified.get(f"wind.{k}", True) for k in ("vx", "vy")):
-        return UNSEEN_WIND
-    return ()
 
 
 def with_wind(expl: Explanation, reference: Reference) -> Explanation:
