@@ -391,8 +391,12 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 #: 0.15 m/s wind a lift of the right size (0.0140 against 0.0141 kg/m) left 11x the
 #: references' Fz mean square (k_h |v - w|^2 carries -2 k_h v . w) and lost to a thrust
 #: curve by 173 log units; with the wind refitted (to 0.001 m/s) it left their level and won
-#: by 9.
-DRAGS = ("rotor_drag", "body_drag", "translational_lift")
+#: by 9. Blade flapping too (a moment k Omega e_z x (v - w), :mod:`quadsim.effects.blade_flapping`):
+#: against RotorPy's references' leftover wind (0.31 m/s on the Crazyflie, 0.10 m/s on the
+#: testbed, neither seen by them) the true law left Mx/My 98-263x and 25-37x the references'
+#: RMS (``unexplained``); with the wind refitted both flights are named at the true size
+#: (docs/effects.md, blade_flapping).
+DRAGS = ("rotor_drag", "body_drag", "translational_lift", "blade_flapping")
 
 
 def with_wind(expl: Explanation, reference: Reference) -> Explanation:
