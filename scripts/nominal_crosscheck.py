@@ -11,9 +11,12 @@ Usage::
 
     python scripts/nominal_crosscheck.py [--data ../shared/data] [--workers 2] [--json out.json]
     python scripts/nominal_crosscheck.py --fastest      # one flight outside its references
+    python scripts/nominal_crosscheck.py --effects-file models/effects/crazyflie21_nominal.toml
 
 ``--fastest``: the fastest nominal flight (RMS speed) judged against the 6 slowest, a flight
-flown outside its references' envelope (``quadsim.gap.reference``).
+flown outside its references' envelope (``quadsim.gap.reference``). ``--effects-file``: an
+effect file on ``crazyflie21`` (:mod:`quadsim.effects.effectfile`) in the references' model
+and so every flight's (``python -m quadsim.gap --per-flight --effects-file``).
 
 Prints, per flight, the verdict and answer, and the no_significant_gap rate. Runs in about
 two minutes on 2 cores.
@@ -46,13 +49,14 @@ def folds(files: list[Path]) -> list[tuple[list[Path], list[Path]]]:
     return [(odd, even), (even, odd)]
 
 
-def crosscheck(data: Path, workers: int) -> dict:
+def crosscheck(data: Path, workers: int, base_effects: tuple = ()) -> dict:
     nominal, logs = _nominal(data)
     params = load_params("crazyflie21")
     rows = []
     for tested, reference in folds(nominal):
         result = diagnose_per_flight(
             [logs[p] for p in tested], [logs[p] for p in reference], params,
+            base_effects=base_effects,
             map_fn=lambda fn, items: run_tasks(fn, list(items), workers=workers))
         for path, flight in zip(tested, result["flights"]):
             rows.append({"file": path.name, "outcome": flight["outcome"],
@@ -80,7 +84,7 @@ def _nominal(data: Path) -> tuple[list[Path], dict]:
 SLOWEST = 6
 
 
-def fastest_against_slowest(data: Path) -> dict:
+def fastest_against_slowest(data: Path, base_effects: tuple = ()) -> dict:
     """The fastest nominal flight (RMS speed, m/s) judged against the :data:`SLOWEST` slowest."""
     import numpy as np
 
@@ -89,12 +93,28 @@ def fastest_against_slowest(data: Path) -> dict:
     order = sorted(nominal, key=lambda p: (speed[p], p.name))
     refs, flight = order[:SLOWEST], order[-1]
     result = diagnose_per_flight([logs[flight]], [logs[p] for p in refs],
-                                 load_params("crazyflie21"))
+                                 load_params("crazyflie21"), base_effects=base_effects)
     entry = result["flights"][0]
     return {"references": {p.name: speed[p] for p in refs}, "file": flight.name,
             "rms_speed": speed[flight], "outcome": entry["outcome"],
             "verdict": entry["verdict"], "answer": entry["answer"],
             "reference_model": result["reference_model"]["params"]}
+
+
+def _base_effects(path: Path | None) -> tuple:
+    """The effects of the effect file ``path`` (none: ()); InputError unless it is on
+    crazyflie21."""
+    if path is None:
+        return ()
+    from quadsim.core.args import check_inputs
+    from quadsim.effects.effectfile import load_effect_file
+
+    check_inputs("--effects-file", [path])
+    model = load_effect_file(path)
+    if model.params != "crazyflie21":
+        raise InputError(f"{path}: params: the effects complete {model.params!r}, this "
+                         "check runs crazyflie21")
+    return tuple(model.effects.effects)
 
 
 def main(argv=None) -> int:
@@ -105,17 +125,25 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, help="write the per-flight rows (JSON)")
     parser.add_argument("--fastest", action="store_true",
                         help="judge the fastest nominal flight against the 6 slowest")
+    parser.add_argument("--effects-file", type=Path, metavar="EFFECTS.toml",
+                        help="an effect file on crazyflie21 in every model (default: none)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
+    base = _base_effects(args.effects_file)
+    if args.effects_file is not None:
+        names = ", ".join(e.name for e in base)
+        print(f"model: crazyflie21 plus {args.effects_file.name} ({names})")
     if args.fastest:
-        out = fastest_against_slowest(args.data)
+        out = fastest_against_slowest(args.data, base)
         refs = ", ".join(f"{k} {v:.2f}" for k, v in out["references"].items())
         print(f"references (RMS speed, m/s): {refs}")
         print("reference model: " + ", ".join(f"{k} {v:.4g}"
                                               for k, v in out["reference_model"].items()))
         print(f"{out['file']} ({out['rms_speed']:.2f} m/s): {out['verdict']}: {out['answer']}")
         return 0
-    out = crosscheck(args.data, args.workers)
+    out = crosscheck(args.data, args.workers, base)
+    if args.effects_file is not None:
+        out["effects_file"] = str(args.effects_file)
     for r in out["flights"]:
         mark = " (tentative)" if r["tentative"] else ""
         print(f"{r['file']}: {r['verdict']}{mark}: {r['answer']}")

@@ -112,3 +112,43 @@ def test_write_effects_then_diagnose_again(flights, tmp_path):
     assert main([*common, "--effects-file", str(first), "--write-effects", str(third),
                  "--add", "rotor_drag"]) == 2
     assert not third.exists()
+
+
+def test_per_flight_on_top_of_an_effects_file(tmp_path, capsys):
+    """``--per-flight --effects-file``: the file's effects are in the references' model (the
+    shared rotor drag is fitted on top of the file's: truth 1e-6 kg/rad less the file's
+    0.6e-6), the JSON and the summary name the file, and the flag is no longer refused."""
+    import json
+
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import prepare
+
+    cf = load_params("crazyflie21")
+    hidden = [make_effect(*DRAG[:1], **DRAG[1])]
+    logs = [synthetic_flight(cf, hidden, seed=s, duration=5.0) for s in (60, 61, 62)]
+    paths = []
+    for k, log in enumerate(logs):
+        paths.append(str(tmp_path / f"f{k}.csv.gz"))
+        write_log(paths[-1], log)
+    file = tmp_path / "drag.toml"
+    file.write_text('schema = "quadsim.effects/1"\nparams = "crazyflie21"\n[[effect]]\n'
+                    'name = "rotor_drag"\ncoefficient = { value = 0.6e-6, unit = "kg/rad", '
+                    'source = "test" }\n')
+    out = tmp_path / "pf.json"
+    assert main(["--model", "crazyflie21", "--per-flight", paths[2], "--reference", *paths[:2],
+                 "--effects-file", str(file), "--effects", "mass_offset",
+                 "--json", str(out), "--workers", "1"]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert result["effects_file"] == str(file)
+    assert result["base_effects"] == [{"name": "rotor_drag",
+                                       "params": {"coefficient": 0.6e-6,
+                                                  "axial_coefficient": 0.0}}]
+    assert "plus drag.toml (rotor_drag)" in printed
+    # the references' own drag is what the file leaves: 0.4e-6 on top of 0.6e-6; without
+    # the file the same references share the whole 1e-6
+    shared = result["reference_model"]["params"]["rotor_drag.coefficient"]
+    assert shared == pytest.approx(0.4e-6, abs=0.1e-6)
+    alone = calibrate(prepare(logs[:2], cf), cf).values()["rotor_drag.coefficient"]
+    assert alone == pytest.approx(1e-6, abs=0.1e-6)
+    assert shared + 0.6e-6 == pytest.approx(alone, abs=0.05e-6)

@@ -56,7 +56,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="effects already added to --model (an effect file, "
                              "quadsim.effects.effectfile): the diagnosis starts from the "
                              "diagnosed model, fits every candidate on top of it and never "
-                             "refits these")
+                             "refits these (--per-flight: the references' model and so every "
+                             "flight's)")
     parser.add_argument("--write-effects", metavar="OUT.toml",
                         help="write an effect file: the --effects-file effects plus the "
                              "named effect (or --add NAME), fitted here with unit and "
@@ -90,9 +91,6 @@ def _check_args(args) -> None:
     check_number("--window", args.window, low=0.0, high=60.0, unit="s")
     if args.effects_file is not None:
         check_inputs("--effects-file", [args.effects_file])
-        if args.per_flight:
-            raise InputError("--effects-file: not used with --per-flight (each flight is "
-                             "judged against the --reference flights' own model)")
     for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
                         ("--reference", args.reference),
                         ("--command-reference", args.command_reference)):
@@ -266,6 +264,20 @@ def _write_effects(args, params, base, result) -> None:
     atomic_write_text(args.write_effects, text)
 
 
+def _with_effects_file(result, path, base_effects):
+    """``result`` naming the --effects-file it was diagnosed on top of (JSON
+    ``effects_file``, and a note the summary and the report show)."""
+    import dataclasses
+
+    names = ", ".join(e.name for e in base_effects)
+    where = ("the references' model and every flight's" if result.mode == "per-flight"
+             else "every fit")
+    note = (f"model: {result.model} plus {Path(path).name} ({names}): in {where}, "
+            "never refitted")
+    return dataclasses.replace(result, effects_file=str(path),
+                               notes=tuple(result.notes) + (note,))
+
+
 def _progress(args):
     """(bar, progress(name)) for the fits: a tqdm bar on a terminal, none with --quiet."""
     progress = None
@@ -360,13 +372,16 @@ def main(argv: list[str] | None = None) -> int:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
             result = diagnose_per_flight(logs, reference, params,
                                          effects=args.effects, progress=progress,
-                                         refused=refused, **extra)
+                                         refused=refused, base_effects=base_effects,
+                                         **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects, **extra)
     finally:
         if bar is not None:
             bar.close()
+    if base is not None:
+        result = _with_effects_file(result, args.effects_file, base_effects)
     _write_outputs(args, params, base, result)
     return 0
 

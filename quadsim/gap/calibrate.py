@@ -712,18 +712,21 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     return x[:k], (float(x[k]) if timing else 0.0), se, wind_se
 
 
-def calibrate(flights, params: VehicleParams) -> Reference:
+def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
     """The reference model from prepared reference flights (:class:`quadsim.gap.diagnose.Flight`
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
+    ``base``: effects already in the model (``--effects-file``), carried as the shared
+    candidate's ``base`` as held-out mode does (:func:`quadsim.gap.diagnose.nominal_reference`):
+    applied first in every residual, never refitted; the shared groups are fitted on top.
 
     The thrust curve's slope (:func:`centred_curve`) is shared only where the references
     determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
     flight's own values are printed by); else the model is
     calibrated again without it. Why: an undetermined slope moves b with it flight by
     flight, and the envelope's trend of b then widens until a mass is "no difference"."""
-    ref = _calibrate(flights, params, curve=True)
+    ref = _calibrate(flights, params, curve=True, base=base)
     if ref is None or not curve_determined(ref):
-        ref = _calibrate(flights, params, curve=False)
+        ref = _calibrate(flights, params, curve=False, base=base)
     return ref
 
 
@@ -777,7 +780,8 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
     return spread > SLOPE_EARLY_MARGIN * DETERMINED * curve_slope_sd(params)
 
 
-def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
+def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = ()
+               ) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
     between-flight scatter only widens it), or its spread with the scatter before the
@@ -794,13 +798,14 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
     if rotor:
         params = fit_motor_map(states, params)
     dt = float(states[0].t[1] - states[0].t[0])
-    sigma0 = noise_scale(np.concatenate([residuals(s, params, [], rotor_channel=rotor)
+    sigma0 = noise_scale(np.concatenate([residuals(s, params, list(base), rotor_channel=rotor)
                                          for s in states]), dt, floor=noise_floor(params, rotor))
     logged = rotor and all(s.vbat is not None and bool(np.all(np.isfinite(s.vbat)))
                            for s in states)
     vbat_ref, vbat_spread = voltage_spread(states) if logged else (None, 0.0)
     vbat = logged and vbat_spread >= VBAT_TESTED
-    cand = per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states))
+    cand = dataclasses.replace(per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states)),
+                               base=tuple(base))
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
     fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
@@ -970,8 +975,9 @@ def _drag_refit(states, reference: Reference, group: str, unit, axes: slice) -> 
     projection)."""
     from .residual import measured_wrench, model_wrench
 
-    shared = reference.effects()
-    without = [e for e in shared if e.name != group]
+    shared, n_base = reference.effects(), len(reference.candidate.base)
+    # effects already in the model (an effect file) stay, as in quadsim.gap.evidence
+    without = shared[:n_base] + [e for e in shared[n_base:] if e.name != group]
     num = den = 0.0
     for s in states:
         base = model_wrench(s, reference.params, without)[0][:, axes]

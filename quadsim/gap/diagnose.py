@@ -387,8 +387,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
                      "correlation_samples": dict(zip(names, map(float, reference.tau))),
                      "window_s": NOISE_WINDOW_S},
         checks=checks, notes=tuple(notes) + more,
-        base_effects=tuple({"name": e.name, "params": {
-            p.name: float(getattr(e, p.name)) for p in e.parameters}} for e in base),
+        base_effects=base_json(base),
         series=held_series[0],
         held_series=held_series)
 
@@ -855,18 +854,24 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         params: VehicleParams, *, effects: Sequence[str] | None = None,
                         progress: Callable | None = None,
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
-                        refused: Sequence[tuple[int, str, str]] = ()) -> Diagnosis:
+                        refused: Sequence[tuple[int, str, str]] = (),
+                        base_effects: Sequence = ()) -> Diagnosis:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
     loader and checks); they are placed at their position in ``flights``.
+    ``base_effects``: effects already in the model (an effect file,
+    :mod:`quadsim.effects.effectfile`), as in :func:`diagnose`: part of the references' model
+    and so of every flight's (:func:`quadsim.gap.calibrate.calibrate`'s ``base``), never
+    refitted; the shared groups and every reading are fitted on top of them.
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     ref_flights = prepare(reference, params, window_s=window_s)
     if len(ref_flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     vehicle = vehicle_check([f.fit for f in ref_flights], params)
-    ref = calibrate(ref_flights, params)
+    base = tuple(base_effects)
+    ref = calibrate(ref_flights, params, base=base)
     ref.self_check = reference_self_check(ref_flights, ref, effects)
     if progress is not None:
         progress("reference")
@@ -886,7 +891,14 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                      reference_model=reference_summary(ref),
                      reference_refit={k: v for k, v in ref.values().items()
                                       if k.startswith("nominal_refit.")},
-                     checks=vehicle, notes=tuple(notes))
+                     checks=vehicle, notes=tuple(notes), base_effects=base_json(base))
+
+
+def base_json(base: Sequence) -> tuple:
+    """The effects already in the model as JSON: ({"name", "params": {parameter: value in
+    the effect's declared unit}}, ...)."""
+    return tuple({"name": e.name, "params": {p.name: float(getattr(e, p.name))
+                                             for p in e.parameters}} for e in base)
 
 
 def reference_summary(ref: Reference) -> dict:

@@ -718,11 +718,15 @@ def jacobian(states, reference: Reference, columns: list[int], build, *,
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
         h = FD_STEP * typical[k]
-        if reference.theta[k] + h > upper[k]:      # a value at its upper bound: step down
+        at_upper = reference.theta[k] + h > upper[k]
+        if at_upper:      # a value at its upper bound: step down
             h = -h
         try:
             moved = _probe(states, reference, build, memo, k, h)
         except ModelError:      # the step crosses a wall of the physical set: the other way
+            if at_upper:        # pinned both ways (its bound above, the wall below): it
+                out[:, j] = 0.0     # cannot move at theta_ref, a zero column
+                continue
             h = -h
             moved = _probe(states, reference, build, memo, k, h)
         out[:, j] = (moved - base) / h

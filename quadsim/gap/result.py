@@ -262,7 +262,9 @@ class Diagnosis(_JsonView):
     and ``reference_refit`` (per flight: the calibrated reference as JSON), ``noise_model``,
     ``where`` (:mod:`.judge`), ``effects``/``baseline``/``combination`` (held out: every
     ranked explanation as JSON), ``checks`` (:func:`quadsim.gap.logcheck.vehicle_check`),
-    ``base_effects``, ``notes``; ``series`` (not in the JSON)."""
+    ``base_effects`` (the effects already in the model, either mode) and ``effects_file``
+    (the file they came from, as given to the CLI; None: none), ``notes``; ``series`` (not
+    in the JSON)."""
 
     schema: str
     model: str
@@ -282,6 +284,7 @@ class Diagnosis(_JsonView):
     combination: Mapping | None = None
     checks: Mapping = field(default_factory=dict)
     base_effects: tuple = ()
+    effects_file: str | None = None
     notes: tuple = ()
     series: Series | None = None
     #: held out: every held-out flight's :class:`Series`, in order (``series`` is the first)
@@ -295,6 +298,10 @@ class Diagnosis(_JsonView):
         out = {"schema": self.schema, "model": self.model, "where": dict(self.where),
                "effects": list(self.effects), "checks": self.checks,
                "notes": list(self.notes)}
+        if self.base_effects:
+            out["base_effects"] = list(self.base_effects)
+        if self.effects_file is not None:
+            out["effects_file"] = self.effects_file
         if self.mode == "per-flight":
             flights = [f.to_json() for f in self.flights]
             out.update(mode="per-flight", reference=list(self.reference),
@@ -311,6 +318,4 @@ class Diagnosis(_JsonView):
                    noise_model=self.noise_model)
         if self.combination is not None:
             out["combination"] = self.combination
-        if self.base_effects:
-            out["base_effects"] = list(self.base_effects)
         return plain(out)
