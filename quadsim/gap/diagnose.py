@@ -71,6 +71,11 @@ Stages (each a named type)
    need implausible sizes usually cancel each other rather than describe the vehicle. So a
    pair is built on the most probable plausible reading (the lead, or the first below an
    implausible lead) with the other plausible readings, and leads where it ranks first.
+   Practical significance held out (:class:`Practical`): a reading within the training
+   flights' between-flight spread, or one that removes at most
+   :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap, counts as "no difference";
+   the verdict states beside the lead every reading the held-out flights do not separate
+   from it (:func:`quadsim.gap.judge.unseparated`).
 
 Example::
 

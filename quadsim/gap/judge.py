@@ -92,7 +92,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    beyond its 95 % interval (1.96 posterior spreads) from the no-difference value
    (:func:`differs`). Per flight, a reading within the references' own between-flight
    spread of it counts as "no difference" too (practical significance,
-   :func:`quadsim.gap.calibrate.negligible`); a battery-sag reading that brings the law
+   :func:`quadsim.gap.calibrate.negligible`; held out the training flights' spread, and a
+   reading that removes at most :data:`FORM_ERROR` of the held-out gap,
+   :class:`quadsim.gap.diagnose.Practical`); a battery-sag reading that brings the law
    speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
    of the flight, and their readings alike (:func:`negligible_at`).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
@@ -117,7 +119,10 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
    name). *Tentative* below :data:`CONFIDENT`, when its value shifts with the regime, when
    the lead's own values carry a caveat (:func:`lead_caveat`) and, held out, when a
-   systematic remainder stays beside the name (part of the gap is outside the library).
+   systematic remainder stays beside the name (part of the gap is outside the library) or
+   when the held-out flights do not separate another reading from it (:func:`unseparated`
+   and :func:`beyond_misfit`: within the form error, and what separates them is the lead's
+   own misfit): that reading is then stated beside the name.
 
 Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
 ``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
