@@ -1148,8 +1148,9 @@ def _unseparated_words(tied: list, shown: str, separate_by: dict) -> str:
     how = "; ".join(f"from {r['name']}: {separate_by.get(r['name'], '')}" for r in tied)
     return (f" The held-out flights do not separate {shown} from: as if {what}: each leaves "
             f"at most {100 * FORM_ERROR:.0f} % more of the gap it explains, within the "
-            f"library's form error, so the data cannot tell these causes apart (to separate "
-            f"them, {how}).")
+            f"library's form error, and what the evidence holds against it lies where "
+            f"{shown} itself misfits the flights, so the data cannot tell these causes apart "
+            f"(to separate them, {how}).")
 
 
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
