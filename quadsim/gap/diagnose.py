@@ -707,7 +707,11 @@ class Practical:
     :data:`PRACTICAL_ROUNDS` of them; none below 3 training flights (no spread to speak
     of). In both cases a reading is no difference either when it removes at most
     :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap (:meth:`small`, given the
-    held-out flights' residuals under the nominal model, ``before``)."""
+    held-out flights' residuals under the nominal model, ``before``; :func:`decide` gives
+    them only where "no difference" leaves no systematic remainder,
+    :func:`quadsim.gap.judge.remainder`: where it does, a small reading may be the
+    library's description of that remainder, and calling the flight ``unexplained``
+    would say the library has none)."""
 
     def __init__(self, train: list, reference: Reference, before: list | None = None):
         self.train, self.reference, self.before = train, reference, before
@@ -846,10 +850,14 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                               if w.train.determined.get(q)}, params)
         if not ok:
             implausible.append((w, text))
-    scale = Practical(train, reference, before)
+    null = next((w for w in weighed if w.name == "no_difference"), None)
+    # the size rule (Practical.small) only where "no difference" leaves nothing systematic:
+    # where it leaves a remainder, a small reading may be the library's description of it
+    quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
+                                               reference, dt)
+    scale = Practical(train, reference, before if quiet else None)
     ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
-    null = next((w for w in weighed if w.name == "no_difference"), None)
     combination = checked = None
     if lead_name != "no_difference":
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,

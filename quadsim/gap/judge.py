@@ -1065,7 +1065,9 @@ def _unseparated(decision, reference, *, before: list, stated: list) -> list:
     on the held-out flights (``before``: their residuals over sigma under "no difference"),
     most probable first: each a reading of its own explanation (not a group's variant), not
     already ``stated``, asserting something beyond the lead's effects (a part of a pair
-    says less, not something else), with a significant determined parameter and every
+    says less, not something else), with a significant determined parameter in a part
+    that is not one of the lead's effects (a pair of the lead's effect with a cable payload
+    of no significant size says nothing else either) and every
     determined value plausible (an implausible one is listed, never a reading); and whose
     log-likelihood deficit beyond the lead's own misfit (:func:`beyond_misfit`) is at most
     log(1 / :data:`READING_P`), the deficit at which a reading is stated at all: what
@@ -1095,7 +1097,8 @@ def _unseparated(decision, reference, *, before: list, stated: list) -> list:
                 or set(k.split("+")) <= own:
             continue
         entry = decision.entry(k)
-        if entry is None or not any(entry["significant"].get(q) for q in entry["params"]) \
+        if entry is None or not any(entry["significant"].get(q) for q in entry["params"]
+                                    if q.split(".")[0] not in own) \
                 or not plausible(entry["params"], reference.params)[0]:
             continue
         ms = ms_of(entry)
