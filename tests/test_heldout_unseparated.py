@@ -80,7 +80,7 @@ def _weighed(name, key, value, held_ms, rng):
                                             for s in (8, 9)])
 
 
-def _decision(rival_mx_ms: float, misfit: bool):
+def _decision(rival_mx_ms: float, misfit: bool, rival=("thrust_factor", "thrust_factor.change")):
     """A held-out decision: the lead ``mass_offset`` (99.9 %) leaves unit mean squares;
     "no difference" leaves Fz at 3 (the lead explains 2 of it); the rival
     ``thrust_factor`` (0.1 %) leaves Mx at ``rival_mx_ms`` (the channel that decides
@@ -88,8 +88,8 @@ def _decision(rival_mx_ms: float, misfit: bool):
     plausible range) leaves Mx at 0.5: the lead misfits the deciding channel."""
     rng = np.random.default_rng(1)
     lead = _weighed("mass_offset", "mass_offset.mass", -0.0015, np.ones(6), rng)
-    rival = _weighed("thrust_factor", "thrust_factor.change", 0.04,
-                     np.array([1, 1, 1, rival_mx_ms, 1, 1.0]), rng)
+    rival_name, rival_key = rival
+    rival = _weighed(rival_name, rival_key, 0.04, np.array([1, 1, 1, rival_mx_ms, 1, 1.0]), rng)
     third = _weighed("inertia_error", "inertia_error.xx", 1.5,
                      np.array([1, 1, 3, 0.5 if misfit else 1.0, 1, 1]), rng)
     null_ms = np.array([1, 1, 3.0, 1, 1, 1])
@@ -105,8 +105,8 @@ def _decision(rival_mx_ms: float, misfit: bool):
     entries = {w.name: entry(w) for w in (lead, rival, third)}
     rows = (Reading("mass_offset", 0.999, "-1.5 g heavier", 0.0,
                     {"mass_offset.mass": -0.0015}, {}, (), {}, ""),
-            Reading("thrust_factor", 0.001, "+4 % thrust per Omega^2 on all 4 rotors", -7.0,
-                    {"thrust_factor.change": 0.04}, {}, (), {}, ""),
+            Reading(rival_name, 0.001, "+4 % thrust per Omega^2 on all 4 rotors", -7.0,
+                    {rival_key: 0.04}, {}, (), {}, ""),
             Reading("inertia_error", 0.0, "I_xx +150 %", -200.0,
                     {"inertia_error.xx": 1.5}, {}, (), {}, ""),
             Reading("no_difference", 0.0, "no difference", -300.0, {}, {}, (), {}, ""))
@@ -114,17 +114,17 @@ def _decision(rival_mx_ms: float, misfit: bool):
     decision = SimpleNamespace(
         rows=rows, lead_name="mass_offset", lead=lead, null=None, implausible=(),
         consistency=None, shown="mass_offset",
-        ranked=(("mass_offset", 0.999, lead), ("thrust_factor", 0.001, rival),
+        ranked=(("mass_offset", 0.999, lead), (rival_name, 0.001, rival),
                 ("inertia_error", 0.0, third), ("no_difference", 0.0, null)),
-        probability={"mass_offset": 0.999, "thrust_factor": 0.001, "inertia_error": 0.0,
+        probability={"mass_offset": 0.999, rival_name: 0.001, "inertia_error": 0.0,
                      "no_difference": 0.0},
         entry=lambda name: entries.get(name))
     before = [_noise(np.random.default_rng(7)) * np.sqrt(null_ms)]
     return decision, before
 
 
-def _judge(rival_mx_ms, cf, misfit=True):
-    decision, before = _decision(rival_mx_ms, misfit)
+def _judge(rival_mx_ms, cf, misfit=True, **rival):
+    decision, before = _decision(rival_mx_ms, misfit, **rival)
     reference = SimpleNamespace(params=cf, sigma=np.ones(6), tau=np.ones(6), rotor=False,
                                 weights=np.ones(6))
     return judge_heldout(decision, reference, before=before,
@@ -161,3 +161,12 @@ def test_a_rival_beyond_the_form_error_is_not_stated(cf):
     assert v.outcome == "effect" and v.readings == ("mass_offset",), v.answer
     assert not v.tentative
     assert "do not separate" not in v.answer
+
+
+def test_a_rival_that_adds_nothing_significant_to_the_lead_is_not_stated(cf):
+    """A rival whose only significant parameter belongs to the lead's own effect (a pair of
+    the lead with a cable payload of no significant size) says nothing else: not stated,
+    though it ties on the held-out flights."""
+    v = _judge(1.02, cf, rival=("cable_payload+mass_offset", "mass_offset.mass"))
+    assert v.outcome == "effect" and v.readings == ("mass_offset",), v.answer
+    assert not v.tentative
