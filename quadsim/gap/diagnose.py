@@ -71,6 +71,11 @@ Stages (each a named type)
    need implausible sizes usually cancel each other rather than describe the vehicle. So a
    pair is built on the most probable plausible reading (the lead, or the first below an
    implausible lead) with the other plausible readings, and leads where it ranks first.
+   Practical significance held out (:class:`Practical`): a reading within the training
+   flights' between-flight spread, or one that removes at most
+   :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap, counts as "no difference";
+   the verdict states beside the lead every reading the held-out flights do not separate
+   from it (:func:`quadsim.gap.judge.unseparated`).
 
 Example::
 
@@ -152,6 +157,7 @@ from .fitting import (
     stack_states,
 )
 from .judge import (
+    FORM_ERROR,
     SLOW_WINDOW_S,
     carry_over,
     channel_names,
@@ -698,20 +704,58 @@ class Practical:
     the gap, so the scale is their spread about no difference, not about their mean. Measured
     lazily (:meth:`rank`): only for the readings that lead, at most
     :data:`PRACTICAL_ROUNDS` of them; none below 3 training flights (no spread to speak
-    of: the statistical rule alone)."""
+    of). In both cases a reading is no difference either when it removes at most
+    :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap (:meth:`small`, given the
+    held-out flights' residuals under the nominal model, ``before``; :func:`decide` gives
+    them only where "no difference" leaves no systematic remainder,
+    :func:`quadsim.gap.judge.remainder`: where it does, a small reading may be the
+    library's description of that remainder, and calling the flight ``unexplained``
+    would say the library has none)."""
 
-    def __init__(self, train: list, reference: Reference):
-        self.train, self.reference = train, reference
+    def __init__(self, train: list, reference: Reference, before: list | None = None):
+        self.train, self.reference, self.before = train, reference, before
         self.spreads: dict = {}
+        self.shares: dict = {}
 
     def negligible(self, ev) -> bool:
-        """Whether reading ``ev`` (an Evidence) is within the training flights' spread."""
+        """Whether reading ``ev`` (an Evidence) is within the training flights' spread, or
+        changes the held-out flights by no more than the library's form error
+        (:meth:`small`)."""
+        return self.spread_negligible(ev) or self.small(ev)
+
+    def spread_negligible(self, ev) -> bool:
+        """Whether reading ``ev`` is within the training flights' spread (alone)."""
         return negligible(ev, SelfCheck((), (), (), self.spreads))
+
+    def small(self, ev) -> bool:
+        """Whether reading ``ev`` removes at most :data:`quadsim.gap.judge.FORM_ERROR` of the
+        held-out gap (the share :func:`entry_of` states as ``reduction``; measured in
+        :meth:`rank`). Why: a right reading may leave that share of the gap as its form's
+        error (:func:`quadsim.gap.judge.within_form_error`), so a reading whose whole effect
+        on the held-out flights is no larger is no difference that matters -- whatever its
+        log evidence, which assumes the library's forms exact. The same size in the
+        data's own units as the between-flight spread is in a parameter's, and the one
+        that applies with fewer than 3 training flights, where there is no spread."""
+        share = self.shares.get((ev.name, ev.explanation.variant))
+        return share is not None and share <= FORM_ERROR
+
+    def _measure(self, weighed: list) -> None:
+        if self.before is None:
+            return
+        gap = float(np.mean(np.concatenate(self.before) ** 2))
+        for w in weighed:
+            key = (w.name, w.train.explanation.variant)
+            if key in self.shares or w.name == "no_difference" or gap <= 0:
+                continue
+            after = float(np.mean(np.concatenate(
+                [r / self.reference.sigma for r in w.held_residuals]) ** 2))
+            self.shares[key] = (gap - after) / gap
 
     def rank(self, weighed: list) -> list:
         """:func:`quadsim.gap.judge.rank` with practical significance: the lead's spread
         over the training flights measured, then ranked again, until the lead is one
         measured or "no difference"."""
+        self._measure(weighed)
         ranked = rank(weighed, self.negligible)
         for _ in range(PRACTICAL_ROUNDS):
             name, _, lead = ranked[0]
@@ -749,7 +793,12 @@ class Decision:
     check (None for "no difference"); ``implausible`` (name, magnitude, prior text) of the
     explanations whose determined values lie outside their documented plausible range:
     weighed like every other, a lead among them named only with the caveat of
-    :func:`quadsim.gap.judge.lead_caveat` (tentative), as per flight."""
+    :func:`quadsim.gap.judge.lead_caveat` (tentative), as per flight; ``small`` (name,
+    magnitude, share of the held-out gap it removes) of the readings more probable than
+    "no difference" that count as none because they remove at most
+    :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap (:meth:`Practical.small`),
+    most probable first; ``weighed`` every explanation weighed (and the pair kept), the
+    set :func:`quadsim.gap.judge.beyond_misfit` measures the lead's misfit against."""
 
     ranked: tuple
     rows: tuple
@@ -760,6 +809,8 @@ class Decision:
     combination: Weighed | None
     consistency: dict | None
     implausible: tuple
+    small: tuple = ()
+    weighed: tuple = ()
 
     @property
     def probability(self) -> dict:
@@ -798,10 +849,14 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                               if w.train.determined.get(q)}, params)
         if not ok:
             implausible.append((w, text))
-    scale = Practical(train, reference)
+    null = next((w for w in weighed if w.name == "no_difference"), None)
+    # the size rule (Practical.small) only where "no difference" leaves nothing systematic:
+    # where it leaves a remainder, a small reading may be the library's description of it
+    quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
+                                               reference, dt)
+    scale = Practical(train, reference, before if quiet else None)
     ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
-    null = next((w for w in weighed if w.name == "no_difference"), None)
     combination = checked = None
     if lead_name != "no_difference":
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
@@ -818,8 +873,11 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
             and base_checked["consistent"] \
             and (remainder(base.train_residuals + base.held_residuals, reference, dt)
                  or carry_over(base, reference, null)):
-        others = [w for k, _, w in ranked if k not in ("no_difference", base.name)
-                  and w.name == k and id(w) not in outside]
+        # partners as ranked before the size rule: a reading too small alone may be the
+        # second half of a pair (whose own size is judged when it is ranked)
+        others = [w for k, _, w in rank(weighed, scale.spread_negligible)
+                  if k not in ("no_difference", base.name) and w.name == k
+                  and id(w) not in outside]
         trials = []
         for other in others:
             trials.append(pair(base, other, partners=len(others), train=train, held=held,
@@ -837,13 +895,25 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
                and k != "no_difference"]
     seen = {e["name"] for e in entries}
+    # a reading the size rule counts as "no difference": its entry is its best variant,
+    # as ranked before that rule (Practical.small), at probability 0
+    entries += [entry_of(w, 0.0, before, reference) for k, _, w in
+                rank(weighed, scale.spread_negligible) if k == w.name and k not in seen
+                and k != "no_difference" and scale.small(w.train) and not seen.add(k)]
     entries += [entry_of(w, 0.0, before, reference) for w in weighed
                 if w.name not in seen and w.name != "no_difference" and not seen.add(w.name)]
     entries.sort(key=lambda e: (-e["probability"], -e["log_evidence"], e["name"]))
+    small = sorted((w for w in weighed if null is not None and w is not null
+                    and w.total.log_z > null.total.log_z and scale.small(w.train)),
+                   key=lambda w: -w.total.log_z)
     return Decision(tuple(ranked), tuple(readings_of(ranked, reference)), tuple(entries),
                     lead, lead_name, null, combination, checked,
                     tuple((w.name, reading_text(w.train, reference), text)
-                          for w, text in implausible))
+                          for w, text in implausible),
+                    tuple((w.name, reading_text(w.train, reference),
+                           scale.shares[(w.name, w.train.explanation.variant)])
+                          for w in small),
+                    tuple(weighed) + ((combination,) if combination is not None else ()))
 
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).

@@ -92,7 +92,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    beyond its 95 % interval (1.96 posterior spreads) from the no-difference value
    (:func:`differs`). Per flight, a reading within the references' own between-flight
    spread of it counts as "no difference" too (practical significance,
-   :func:`quadsim.gap.calibrate.negligible`); a battery-sag reading that brings the law
+   :func:`quadsim.gap.calibrate.negligible`; held out the training flights' spread, and a
+   reading that removes at most :data:`FORM_ERROR` of the held-out gap,
+   :class:`quadsim.gap.diagnose.Practical`); a battery-sag reading that brings the law
    speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
    of the flight, and their readings alike (:func:`negligible_at`).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
@@ -117,7 +119,10 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
    name). *Tentative* below :data:`CONFIDENT`, when its value shifts with the regime, when
    the lead's own values carry a caveat (:func:`lead_caveat`) and, held out, when a
-   systematic remainder stays beside the name (part of the gap is outside the library).
+   systematic remainder stays beside the name (part of the gap is outside the library) or
+   when the held-out flights do not separate another reading from it (:func:`unseparated`
+   and :func:`beyond_misfit`: within the form error, and what separates them is the lead's
+   own misfit): that reading is then stated beside the name.
 
 Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
 ``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
@@ -169,7 +174,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
            "lack_of_fit", "material", "mean_squares", "negligible_at", "outcome_of", "plausible",
            "posterior", "rank", "reading_name", "reading_text", "remainder",
-           "rows_at_reference_voltage", "symptom", "within_form_error"]
+           "rows_at_reference_voltage", "symptom", "unseparated", "within_form_error",
+           "beyond_misfit", "channel_logliks"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -994,13 +1000,27 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     # a name that leaves a systematic remainder explains only part of the gap: the rest is
     # outside the library, so the name may be a stand-in for it (per flight such a lead is
     # unexplained, or tentative within FORM_ERROR_TENTATIVE): never confident
-    unsure = bool(caveat) or bool(remains)
+    # readings the held-out flights do not separate from the lead (:func:`unseparated`):
+    # stated beside it, and the name is tentative (the posterior's preference rests on less
+    # than the library's form error)
+    tied = _unseparated(decision, reference, before=before, stated=stated) \
+        if effect and entry is not None else []
+    others += [row["name"] for row in tied if row["name"] not in others]
+    if effect and tied:
+        separate_by = fitting.separation(shown, others)
+    unsure = bool(caveat) or bool(remains) or bool(tied)
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
                                           unsure=unsure)
     notes += more
-    words += caveat
+    words += _unseparated_words(tied, shown, separate_by) + caveat
+    if lead_name == "no_difference" and getattr(decision, "small", ()):
+        name, magnitude, share = decision.small[0]
+        words += (f" The most probable difference, {name} ({nominal_words(magnitude, True)}), "
+                  f"removes {100 * share:.1f} % of the held-out gap: no more than the "
+                  f"library's form error ({100 * FORM_ERROR:.0f} %), so no difference that "
+                  "matters.")
     verdict = Verdict(
         outcome, shown if effect else outcome, words, p_lead,
         tentative=effect and (p_lead < CONFIDENT or shifted or unsure),
@@ -1022,6 +1042,118 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         reduction=reduction, heldout_gap_before=_gap(before),
         heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
     return verdict, tuple(notes)
+
+
+def unseparated(lead_ms, rival_ms, null_ms) -> bool:
+    """Whether the data do not separate a rival reading from the lead: the rival leaves at
+    most :data:`FORM_ERROR` more of the gap than the lead, per channel and flight, counted
+    against the gap the lead explains, i.e. :func:`form_share` of the rival's mean squares
+    ``rival_ms`` with "no difference"'s ``null_ms`` and the lead's ``lead_ms`` as the typical
+    level ((..., C), sigma_c^2 units; channels where the rival fits better count zero).
+
+    Why FORM_ERROR: a right reading may leave that share of the gap as the error of the
+    library's form of its effect (:func:`within_form_error`), so the true cause's reading
+    may trail the best one by as much; two readings closer than that on the judged flights
+    differ by less than either's form error, and the evidence between them (however many
+    log units a misfit channel gives it: e.g. a moment gain the flights' own attitude
+    estimate distorts) does not tell which cause it is."""
+    return form_share(rival_ms, null_ms, lead_ms) <= FORM_ERROR
+
+
+def _unseparated(decision, reference, *, before: list, stated: list) -> list:
+    """Held out: the posterior rows of readings that :func:`unseparated` ties with the lead
+    on the held-out flights (``before``: their residuals over sigma under "no difference"),
+    most probable first: each a reading of its own explanation (not a group's variant), not
+    already ``stated``, asserting something beyond the lead's effects (a part of a pair
+    says less, not something else), with a significant determined parameter in a part
+    that is not one of the lead's effects (a pair of the lead's effect with a cable payload
+    of no significant size says nothing else either) and every
+    determined value plausible (an implausible one is listed, never a reading); and whose
+    log-likelihood deficit beyond the lead's own misfit (:func:`beyond_misfit`) is at most
+    log(1 / :data:`READING_P`), the deficit at which a reading is stated at all: what
+    separates it from the lead is then the lead's misfit, not the flights' cause."""
+    lead_entry = decision.entry(decision.lead_name)
+    if lead_entry is None:
+        return []
+    sigma = reference.sigma
+    names = channel_names(reference)
+
+    def ms_of(entry):
+        rms = entry.get("heldout_rms_after") or {}
+        if set(rms) != set(names):
+            return None
+        return np.array([rms[n] for n in names]) ** 2 / sigma ** 2
+
+    lead_ms = ms_of(lead_entry)
+    null_ms = np.mean(np.concatenate(before) ** 2, axis=0)
+    if lead_ms is None:
+        return []
+    own = set(decision.lead_name.split("+"))
+    pool = list(getattr(decision, "weighed", ()) or [v for _, _, v in decision.ranked])
+    taken = {r["name"] for r in stated} | {decision.shown}
+    out = []
+    for row, (k, _, w) in zip(decision.rows, decision.ranked):
+        if k != w.name or k in ("no_difference", decision.lead_name) or row["name"] in taken \
+                or set(k.split("+")) <= own:
+            continue
+        entry = decision.entry(k)
+        if entry is None or not any(entry["significant"].get(q) for q in entry["params"]
+                                    if q.split(".")[0] not in own) \
+                or not plausible(entry["params"], reference.params)[0]:
+            continue
+        ms = ms_of(entry)
+        if ms is not None and unseparated(lead_ms, ms, null_ms) \
+                and beyond_misfit(decision.lead, w, pool, getattr(reference, "weights", 1.0)) \
+                <= -np.log(READING_P):
+            out.append(row)
+    return out
+
+
+def channel_logliks(w, weights) -> np.ndarray:
+    """(C,) the log-likelihood per channel of a Weighed ``w`` over its training and
+    held-out residuals, -1/2 sum r^2 weights (``weights``: the reference's per-channel
+    weights, :attr:`quadsim.gap.calibrate.Reference.weights`, 1/sigma^2 over the
+    correlation time)."""
+    return -0.5 * sum(np.sum(r ** 2 * weights, axis=0)
+                      for r in list(w.train_residuals) + list(w.held_residuals))
+
+
+def beyond_misfit(lead, rival, weighed: list, weights) -> float:
+    """The log-likelihood advantage of ``lead`` over ``rival`` (Weighed) that does not lie in
+    the lead's own misfit, in log units: per channel c (:func:`channel_logliks`) the lead's
+    gain g_c over the rival, less, where the lead gains, the misfit m_c it leaves there --
+    the most any other weighed explanation (``weighed``; an implausible one too) fits that
+    channel better than the lead -- summed: sum_c (g_c if g_c <= 0 else max(0, g_c - m_c)).
+
+    Why: where some reading fits a channel better than the lead by m_c, the lead's residual
+    there is not noise, and up to m_c of a gain on it says which of two readings distorts
+    that misfit less, not which cause the flights show (the sensor pipeline's attitude
+    estimate: an inertia reading of +150 % improves Mx/My by ~160 log units, where mass and
+    thrust factor differ by 12 and predict the same forces). Where the lead fits its
+    deciding channels as well as anything the library has (exact flights: a weak rotor
+    against an off-centre mass), the whole gain stands."""
+    ll_lead = channel_logliks(lead, weights)
+    gain = ll_lead - channel_logliks(rival, weights)
+    misfit = np.zeros_like(gain)
+    for w in weighed:
+        if w is lead or w is rival or getattr(w, "train_residuals", None) is None:
+            continue
+        misfit = np.maximum(misfit, channel_logliks(w, weights) - ll_lead)
+    return float(np.sum(np.where(gain <= 0, gain, np.maximum(0.0, gain - misfit))))
+
+
+def _unseparated_words(tied: list, shown: str, separate_by: dict) -> str:
+    """The sentence a held-out answer adds for the readings the held-out flights do not
+    separate from the lead (:func:`_unseparated`); "" without any."""
+    if not tied:
+        return ""
+    what = "; or as if ".join(f"{r['magnitude']} ({r['name']})" for r in tied)
+    how = "; ".join(f"from {r['name']}: {separate_by.get(r['name'], '')}" for r in tied)
+    return (f" The held-out flights do not separate {shown} from: as if {what}: each leaves "
+            f"at most {100 * FORM_ERROR:.0f} % more of the gap it explains, within the "
+            f"library's form error, and what the evidence holds against it lies where "
+            f"{shown} itself misfits the flights, so the data cannot tell these causes apart "
+            f"(to separate them, {how}).")
 
 
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
