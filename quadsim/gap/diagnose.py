@@ -930,9 +930,16 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     for fewer than 3 references."""
     if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
         return None
+    # each reference's inverse information, as the calibration took it (its one-step
+    # standard errors, quadsim.gap.calibrate.inverse_information): the same Jacobian at the
+    # same shared values, up to round-off (the left-out discrepancy's centre, which no shared
+    # parameter moves, cancels in its differences)
+    per = getattr(ref, "per_flight", None)
+    infos = ([None] * len(ref_flights) if per is None or len(per.se) != len(ref_flights) else
+             [per.se[j] ** 2 * len(ref.align(f).t) for j, f in enumerate(ref_flights)])
     weighed = []
     for j, f in enumerate(ref_flights):
-        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
         weighed.append(w if isinstance(w, WeighedFlight) else None)
 
     def judge_fn(j, check):
@@ -984,8 +991,11 @@ class WeighedFlight:
 
 
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
-                 name: str = "log") -> WeighedFlight | Verdict:
-    """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict."""
+                 name: str = "log", info: np.ndarray | None = None
+                 ) -> WeighedFlight | Verdict:
+    """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict.
+    ``info``: the flight's inverse information per sample (M,) where already known
+    (:func:`quadsim.gap.calibrate.inverse_information`; None: computed here)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
@@ -999,9 +1009,10 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
             trend = getattr(reference.envelope, "trend", None)
-            info = (inverse_information(states, reference)
-                    if trend is not None and trend.q_weight is not None
-                    and np.any(trend.q_weight > 0) else None)
+            if trend is None or trend.q_weight is None or not np.any(trend.q_weight > 0):
+                info = None
+            elif info is None:
+                info = inverse_information(states, reference)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
             start = 0.0
