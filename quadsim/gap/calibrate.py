@@ -141,6 +141,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -177,7 +178,8 @@ from .reference import (  # re-exported: the calibration's public names
 )
 from .residual import load_exponent, min_time_constant
 
-__all__ = ["FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
+__all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
+           "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
            "against_text", "leave_one_out", "negligible", "self_check_of", "spreads", "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
            "fit_bounds", "jacobian", "per_flight_candidate", "shared_candidate", "shifted",
@@ -715,6 +717,58 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     wind_se = {n: float(np.sqrt(max(cov[j, j], 0.0)))
                for j, n in enumerate(cand.parameter_names) if n.startswith("wind.")}
     return x[:k], (float(x[k]) if timing else 0.0), se, wind_se
+
+
+#: what :func:`reference_key` hashes first: a new version when :class:`Calibrated` changes
+CALIBRATED_SCHEMA = "quadsim.gap.calibrated/1"
+
+
+@dataclass(frozen=True)
+class Calibrated:
+    """What the per-flight mode makes of the reference flights alone, kept between runs by
+    the CLI's ``--reference-cache`` (:func:`quadsim.gap.diagnose.diagnose_per_flight`):
+    ``key`` (:func:`reference_key`), ``reference`` (the calibrated model with its
+    self-check), ``vehicle`` (the set-fits-the-vehicle check on the references), ``notes``
+    (their signal-delay notes) and ``count`` (how many references)."""
+
+    key: str
+    reference: Reference
+    vehicle: object
+    notes: tuple
+    count: int
+
+
+def code_version() -> str:
+    """SHA-256 (hex) of the source of every module of the ``quadsim`` package (path and
+    text, in path order) and the numpy and scipy versions: what a kept calibration is valid
+    for (another commit, an edited module, another numpy: computed again)."""
+    import hashlib
+
+    import scipy
+
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def reference_key(logs, params: VehicleParams, *, effects=None, window_s: float) -> str:
+    """SHA-256 (hex) of everything the reference stage reads: :data:`CALIBRATED_SCHEMA`,
+    :func:`code_version`, the parameter set, the explanations allowed (``effects``, None:
+    all), the smoothing window (s) and every reference log, whole (its samples, its file
+    name, its notes: pickled). The same key: the same :class:`Calibrated`, bit for bit."""
+    import hashlib
+    import pickle
+
+    digest = hashlib.sha256(CALIBRATED_SCHEMA.encode())
+    digest.update(code_version().encode())
+    digest.update(pickle.dumps((params, None if effects is None else tuple(effects),
+                                float(window_s)), protocol=4))
+    for log in logs:
+        digest.update(pickle.dumps(log, protocol=4))
+    return digest.hexdigest()
 
 
 def calibrate(flights, params: VehicleParams) -> Reference:

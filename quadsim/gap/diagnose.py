@@ -126,6 +126,7 @@ from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from . import evidence, logcheck
 from .calibrate import (
+    Calibrated,
     Reference,
     SelfCheck,
     Spread,
@@ -134,6 +135,7 @@ from .calibrate import (
     leave_one_out,
     negligible,
     readings,
+    reference_key,
     self_check_of,
     shared_candidate,
     spreads,
@@ -855,24 +857,32 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         params: VehicleParams, *, effects: Sequence[str] | None = None,
                         progress: Callable | None = None,
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
-                        refused: Sequence[tuple[int, str, str]] = ()) -> Diagnosis:
+                        refused: Sequence[tuple[int, str, str]] = (),
+                        store=None) -> Diagnosis:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
     loader and checks); they are placed at their position in ``flights``.
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
+    ``store``: keeps the reference stage between runs (``get(key)`` -> a
+    :class:`quadsim.gap.calibrate.Calibrated` or None, ``put(calibrated)``; the CLI's
+    ``--reference-cache``): where it holds the stage of these references
+    (:func:`quadsim.gap.calibrate.reference_key`), their preparation, calibration and
+    self-check are not done again.
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
-    ref_flights = prepare(reference, params, window_s=window_s)
-    if len(ref_flights) < 2:
-        raise InputError("--reference: give at least 2 nominal flights")
-    vehicle = vehicle_check([f.fit for f in ref_flights], params)
-    ref = calibrate(ref_flights, params)
-    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    key = None if store is None else reference_key(reference, params, effects=effects,
+                                                   window_s=window_s)
+    kept = None if store is None else store.get(key)
+    if kept is None:
+        kept = _reference_stage(reference, params, effects=effects, window_s=window_s, key=key)
+        if store is not None:
+            store.put(kept)
+    ref, vehicle = kept.reference, kept.vehicle
     if progress is not None:
         progress("reference")
-    notes = ([(f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
-              "give 10 or more")] if len(ref_flights) < MIN_REFERENCE else [])
-    notes += delay_notes(ref_flights)
+    notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
+              "give 10 or more")] if kept.count < MIN_REFERENCE else [])
+    notes += list(kept.notes)
     one = partial(judge_one, reference=ref, effects=effects, window_s=window_s)
     flights = []
     for entry in map_fn(one, logs):
@@ -887,6 +897,20 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                      reference_refit={k: v for k, v in ref.values().items()
                                       if k.startswith("nominal_refit.")},
                      checks=vehicle, notes=tuple(notes))
+
+
+def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,
+                     key: str | None) -> Calibrated:
+    """The reference flights prepared, checked against the model, calibrated and judged
+    against each other (:func:`reference_self_check`)."""
+    ref_flights = prepare(reference, params, window_s=window_s)
+    if len(ref_flights) < 2:
+        raise InputError("--reference: give at least 2 nominal flights")
+    vehicle = vehicle_check([f.fit for f in ref_flights], params)
+    ref = calibrate(ref_flights, params)
+    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    return Calibrated(key or "", ref, vehicle, tuple(delay_notes(ref_flights)),
+                      len(ref_flights))
 
 
 def reference_summary(ref: Reference) -> dict:
