@@ -293,7 +293,7 @@ class ReferenceCache:
     def get(self, key: str):
         import pickle
 
-        from .calibrate import Calibrated
+        from .diagnose import Calibrated
 
         path = self.folder / f"{key}.pkl"
         if not path.is_file():

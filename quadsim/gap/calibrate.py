@@ -826,7 +826,8 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
     effects = cand.effects(fit.theta)
     per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
     discrepancy = fit_discrepancy(per_flight, states)
-    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy, per_flight)
+    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy,
+                                 per_flight=per_flight)
     probe = Reference(params, rotor, cand, fit.theta.copy(), np.asarray(fit.stderr, float),
                       np.zeros_like(fit.theta), sigma, tau, np.zeros_like(sigma), 1.0, 1,
                       {}, [], {})
@@ -881,7 +882,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool) -> Reference | None:
                   for s in states]
     discrepancy = fit_discrepancy(per_flight, states)
     sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy,
-                                      per_flight)
+                                      per_flight=per_flight)
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
     ref = Reference(params, rotor, cand, theta, stderr,
@@ -920,7 +921,7 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
 
 
 def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
-                 discrepancy=None, per_flight: list | None = None
+                 discrepancy=None, *, per_flight: list | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
     model's residual (``effects``) over the n aligned reference ``states``, after the

@@ -186,7 +186,8 @@ from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_stat
 from .result import Diagnosis, Reading, Series, Verdict
 from .words import batch_answer, nominal_words
 
-__all__ = ["D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision", "Flight", "Weighed",
+__all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
+           "Flight", "Weighed",
            "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
            "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
