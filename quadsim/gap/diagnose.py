@@ -961,7 +961,7 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     # parameter moves, cancels in its differences)
     per = getattr(ref, "per_flight", None)
     infos = ([None] * len(ref_flights) if per is None or len(per.se) != len(ref_flights) else
-             [per.se[j] ** 2 * len(ref.align(f).t) for j, f in enumerate(ref_flights)])
+             [per.se[j] ** 2 * len(getattr(f, "fit", f).t) for j, f in enumerate(ref_flights)])
     weighed = []
     for j, f in enumerate(ref_flights):
         w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
