@@ -23,10 +23,16 @@ own (``time.process_time`` around the CLI's calls: the imports, loading and chec
 logs, preparing the references, their calibration, their self-check, judging the flights):
 where the CPU goes, not a second measurement of the total.
 
+``--against CHECKOUT`` times the 26-flight command alternately with another checkout of the
+repository (say the commit before a change; ``git worktree add ../before HEAD~3``) and this
+one, ``--rounds`` times each (default 2): on a shared machine whose speed drifts, only runs
+side by side compare. Each row states the load average before and after it.
+
 Usage (from the repository root; the machine and its load matter, so say them)::
 
     nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4]
     nice -n 5 python benchmarks/speed_gap.py --stages
+    nice -n 5 python benchmarks/speed_gap.py --against ../before [--rounds 2]
 
 Exit 0 with one ``skipped:`` line when the data folder is absent. Not a test: it measures.
 """
@@ -92,15 +98,16 @@ def cut_log(path: Path, fraction: float, out: Path) -> Path:
     return out
 
 
-def time_gap(label: str, flights: list[Path], references: list[Path]) -> Run:
-    """Run the user's command once; CPU from the children's rusage, wall from a clock."""
+def time_gap(label: str, flights: list[Path], references: list[Path], root: Path = ROOT) -> Run:
+    """Run the user's command once with the package of checkout ``root`` first on the path;
+    CPU from the children's rusage, wall from a clock."""
     command = [sys.executable, "-m", "quadsim.gap", "--model", "crazyflie21", "--per-flight",
                *map(str, flights), "--reference", *map(str, references), "--workers", "1"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    run = subprocess.run(command, capture_output=True, text=True, check=False,
+    run = subprocess.run(command, capture_output=True, text=True, check=False, cwd=root,
                          env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                             p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)})
+                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if run.returncode != 0:
@@ -167,6 +174,21 @@ def time_stages(flights: list[Path], references: list[Path]) -> dict:
     return json.loads(line.split(" ", 1)[1])
 
 
+def alternate(flights: list[Path], references: list[Path], other: Path, rounds: int
+              ) -> list[tuple[str, Run, tuple[float, float]]]:
+    """The command on ``flights`` run alternately with checkout ``other`` and this one,
+    ``rounds`` times each: (which, run, (load average before, after)) per run."""
+    out = []
+    for k in range(rounds):
+        for which, root in (("against", other), ("this", ROOT)):
+            before = os.getloadavg()[0]
+            run = time_gap(f"{which} {k + 1}", flights, references, root=root)
+            out.append((which, run, (before, os.getloadavg()[0])))
+            print(f"  {run.label}: {run.cpu_s:.1f} s CPU, {run.wall_s:.1f} s wall, load "
+                  f"{before:.1f} -> {out[-1][2][1]:.1f}", flush=True)
+    return out
+
+
 def line_fit(runs: list[Run]) -> tuple[float, float]:
     """(fixed CPU s, CPU s per flight-minute) of the least-squares line through ``runs``."""
     x = np.array([r.flight_minutes for r in runs])
@@ -194,7 +216,19 @@ def main(argv: list[str] | None = None) -> int:
                              f"({LENGTH_FLIGHTS} flights; default 0.5 0.75; none: skip)")
     parser.add_argument("--stages", action="store_true",
                         help="time the 26-flight command once by stage instead")
+    parser.add_argument("--against", type=Path, metavar="CHECKOUT",
+                        help="time the 26-flight command alternately with this other "
+                             "checkout of the repository instead")
+    parser.add_argument("--rounds", type=int, default=2,
+                        help="with --against: runs of each checkout (default 2)")
     args = parser.parse_args(argv)
+    if args.against is not None and not (args.against / "quadsim" / "gap").is_dir():
+        print(f"error: {args.against}: --against: not a checkout of this repository "
+              "(no quadsim/gap)", file=sys.stderr)
+        return 2
+    if args.rounds < 1:
+        print(f"error: --rounds: must be >= 1, got {args.rounds}", file=sys.stderr)
+        return 2
     folder = args.data / CAMPAIGN
     mixed = sorted((folder / "mixed").glob("flight_*.csv.gz"))
     nominal = sorted((folder / "nominal").glob("flight_*.csv.gz"))
@@ -206,6 +240,19 @@ def main(argv: list[str] | None = None) -> int:
           f"Python {platform.python_version()}; load average at start "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; QUADSIM_THREADS="
           f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}")
+    if args.against is not None:
+        runs = alternate(mixed, nominal, args.against.resolve(), args.rounds)
+        minutes = runs[0][1].flight_minutes
+        print(f"\n{len(mixed)} mixed flights ({minutes:.2f} flight-min) against {len(nominal)} "
+              "nominal, --workers 1\n\n| checkout | CPU s (each run) | mean CPU s | "
+              "CPU s per flight-min |\n|---|---|---:|---:|")
+        for which, root in (("against", args.against.resolve()), ("this", ROOT)):
+            cpu = [r.cpu_s for w, r, _ in runs if w == which]
+            print(f"| {root.name} | {', '.join(f'{c:.1f}' for c in cpu)} | "
+                  f"{np.mean(cpu):.1f} | {np.mean(cpu) / minutes:.1f} |")
+        same = len({r.verdicts for _, r, _ in runs}) == 1
+        print(f"\nanswers {'the same' if same else 'DIFFER'} in every run")
+        return 0
     if args.stages:
         spent = time_stages(mixed, nominal)
         print("\n| stage | CPU s |\n|---|---:|")

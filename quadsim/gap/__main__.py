@@ -7,6 +7,8 @@ Examples::
         --report gap.html --rerun gap.rrd
     python -m quadsim.gap --model crazyflie21 --per-flight mixed/*.csv.gz \\
         --reference nominal/*.csv.gz --json mixed.json
+    python -m quadsim.gap --model crazyflie21 --per-flight new/*.csv.gz \\
+        --reference nominal/*.csv.gz --reference-cache ~/.cache/quadsim-gap   # 2nd run: faster
     python -m quadsim.gap --model nanodrone_cf21bl.toml --effects-file diagnosed.toml \\
         train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
 """
@@ -17,6 +19,7 @@ import argparse
 import re
 import sys
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.args import ArgumentParser
@@ -48,6 +51,12 @@ def _parser() -> argparse.ArgumentParser:
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
                         help="nominal reference flights for --per-flight")
+    parser.add_argument("--reference-cache", metavar="DIR",
+                        help="with --per-flight: keep the references' calibration and "
+                             "self-check in DIR (created), keyed by the reference logs, the "
+                             "model, --effects, --window and quadsim's code; a later run with "
+                             "the same ones reads it instead (the same answers, bit for bit). "
+                             "DIR must be yours: its files are Python pickles")
     parser.add_argument("--command-reference", nargs="+", metavar="LOG",
                         help="flights with rotor speeds and commands: logs without rotor "
                              "speeds get speeds synthesised from their commands "
@@ -102,6 +111,11 @@ def _check_args(args) -> None:
                          "--reference)")
     if args.reference and not args.per_flight:
         raise InputError("--reference: only used with --per-flight")
+    if args.reference_cache is not None:
+        if not args.per_flight:
+            raise InputError("--reference-cache: only used with --per-flight")
+        if Path(args.reference_cache).exists() and not Path(args.reference_cache).is_dir():
+            raise InputError(f"{args.reference_cache}: --reference-cache: not a folder")
     inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
               *(args.command_reference or []),
               *([args.effects_file] if args.effects_file is not None else [])]
@@ -278,6 +292,46 @@ def _with_effects_file(result, path, base_effects):
                                notes=tuple(result.notes) + (note,))
 
 
+@dataclass(frozen=True)
+class ReferenceCache:
+    """``--reference-cache``: the reference stage of the per-flight mode
+    (:class:`quadsim.gap.calibrate.Calibrated`) kept in ``folder`` as ``KEY.pkl``, KEY its
+    :func:`quadsim.gap.calibrate.reference_key`. A file that does not read back as the
+    entry of its key is computed again (one ``warning:`` line); one that cannot be written
+    leaves the run's answers as they are (one ``warning:`` line)."""
+
+    folder: Path
+
+    def get(self, key: str):
+        import pickle
+
+        from .diagnose import Calibrated
+
+        path = self.folder / f"{key}.pkl"
+        if not path.is_file():
+            return None
+        try:
+            value = pickle.loads(path.read_bytes())
+        except Exception:       # any unpickling failure: computed again, written anew
+            value = None
+        if isinstance(value, Calibrated) and value.key == key:
+            return value
+        print(f"warning: {path}: not a readable reference calibration: computed again",
+              file=sys.stderr)
+        return None
+
+    def put(self, value) -> None:
+        import pickle
+
+        from ..core.files import atomic_write_bytes
+
+        try:
+            atomic_write_bytes(self.folder / f"{value.key}.pkl", pickle.dumps(value, protocol=4),
+                               make_parents=True)
+        except InputError as exc:
+            print(f"warning: {exc}: --reference-cache not written", file=sys.stderr)
+
+
 def _progress(args):
     """(bar, progress(name)) for the fits: a tqdm bar on a terminal, none with --quiet."""
     progress = None
@@ -370,10 +424,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
+            store = (None if args.reference_cache is None
+                     else ReferenceCache(Path(args.reference_cache)))
             result = diagnose_per_flight(logs, reference, params,
                                          effects=args.effects, progress=progress,
                                          refused=refused, base_effects=base_effects,
-                                         **extra)
+                                         store=store, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects, **extra)

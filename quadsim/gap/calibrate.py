@@ -141,6 +141,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -177,7 +178,8 @@ from .reference import (  # re-exported: the calibration's public names
 )
 from .residual import load_exponent, min_time_constant
 
-__all__ = ["FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
+__all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
+           "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
            "against_text", "leave_one_out", "negligible", "self_check_of", "spreads", "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
            "fit_bounds", "jacobian", "per_flight_candidate", "shared_candidate", "shifted",
@@ -598,17 +600,19 @@ REFINE_STEPS = 8
 REFINE_TOL = 0.1
 
 
-def _pooled(flights, probe, shift: float, timing: bool):
+def _pooled(flights, probe, shift: float, timing: bool, bases: list | None = None):
     """Summed information JᵀJ, gradient Jᵀr and cost |r|^2 over the flights at ``shift``;
-    with ``timing`` the last column is the rotor timing offset's (forward difference)."""
+    with ``timing`` the last column is the rotor timing offset's (forward difference).
+    ``bases``: each flight's weighted residual there (flattened) where already computed
+    (:func:`_cost` of the step that moved here)."""
     k = len(probe.theta)
     size = k + int(timing)
     info, grad, cost = np.zeros((size, size)), np.zeros(size), 0.0
-    for f in flights:
+    for i, f in enumerate(flights):
         view = aligned(f, shift)
         memo: dict = {}
         jac, r = jacobian(view, probe, list(range(k)), probe.candidate.effects, memo=memo,
-                          with_base=True)
+                          with_base=True, base=None if bases is None else bases[i])
         if timing:
             later = weighted_residual(aligned(f, shift + SHIFT_STEP_S), probe,
                                       probe.effects(), memo).ravel()
@@ -644,13 +648,15 @@ def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
                               ("upper", theta[k] >= upper[k] - tol[k])) if hit}
 
 
-def _cost(flights, probe, theta, shift: float) -> float:
+def _cost(flights, probe, theta, shift: float) -> tuple[float, list | None]:
+    """(|r|^2 summed over the flights, each flight's weighted residual r flattened) at
+    ``theta`` and ``shift``; (inf, None) where ``theta`` leaves the physical set."""
     try:
         effects = probe.candidate.effects(theta)
-        return float(sum(np.sum(weighted_residual(aligned(f, shift), probe, effects) ** 2)
-                         for f in flights))
+        full = [weighted_residual(aligned(f, shift), probe, effects) for f in flights]
     except ModelError:          # e.g. an inertia breaking the triangle inequality: a wall
-        return float("inf")
+        return float("inf"), None
+    return float(sum(np.sum(r ** 2) for r in full)), [r.ravel() for r in full]
 
 
 def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
@@ -682,10 +688,11 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     # The prior takes such a wind to 0; a wind the data fix moves by (s / 5 m/s)^2 of itself.
     prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
                       for n in cand.parameter_names] + [0.0] * int(timing))
-    lam, info = 1.0, None
+    lam, info, bases = 1.0, None, None
     for _ in range(REFINE_STEPS):
         probe.theta = x[:k].copy()
-        info, grad, cost = _pooled(flights, probe, float(x[k]) if timing else 0.0, timing)
+        info, grad, cost = _pooled(flights, probe, float(x[k]) if timing else 0.0, timing,
+                                   bases)
         info, grad = info + np.diag(prior), grad + prior * x
         cost += float(np.sum(prior * x ** 2))
         while lam < 1e6:
@@ -693,10 +700,10 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
             # not fix does not move
             info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
             trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
-            new = (_cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
-                   + float(np.sum(prior * trial ** 2)))
+            new, moved = _cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
+            new += float(np.sum(prior * trial ** 2))
             if new < cost:
-                x, lam = trial, max(lam / 3.0, 1e-3)
+                x, lam, bases = trial, max(lam / 3.0, 1e-3), moved
                 break
             lam *= 4.0
         else:
@@ -710,6 +717,60 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     wind_se = {n: float(np.sqrt(max(cov[j, j], 0.0)))
                for j, n in enumerate(cand.parameter_names) if n.startswith("wind.")}
     return x[:k], (float(x[k]) if timing else 0.0), se, wind_se
+
+
+#: what :func:`reference_key` hashes first: a new version when :class:`Calibrated` changes
+CALIBRATED_SCHEMA = "quadsim.gap.calibrated/1"
+
+
+@dataclass(frozen=True)
+class Calibrated:
+    """What the per-flight mode makes of the reference flights alone, kept between runs by
+    the CLI's ``--reference-cache`` (:func:`quadsim.gap.diagnose.diagnose_per_flight`):
+    ``key`` (:func:`reference_key`), ``reference`` (the calibrated model with its
+    self-check), ``vehicle`` (the set-fits-the-vehicle check on the references), ``notes``
+    (their signal-delay notes) and ``count`` (how many references)."""
+
+    key: str
+    reference: Reference
+    vehicle: object
+    notes: tuple
+    count: int
+
+
+def code_version() -> str:
+    """SHA-256 (hex) of the source of every module of the ``quadsim`` package (path and
+    text, in path order) and the numpy and scipy versions: what a kept calibration is valid
+    for (another commit, an edited module, another numpy: computed again)."""
+    import hashlib
+
+    import scipy
+
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def reference_key(logs, params: VehicleParams, *, effects=None, window_s: float,
+                  base: tuple = ()) -> str:
+    """SHA-256 (hex) of everything the reference stage reads: :data:`CALIBRATED_SCHEMA`,
+    :func:`code_version`, the parameter set, the explanations allowed (``effects``, None:
+    all), the smoothing window (s), the effects already in the model (``base``, an effect
+    file's: pickled) and every reference log, whole (its samples, its file name, its notes:
+    pickled). The same key: the same :class:`Calibrated`, bit for bit."""
+    import hashlib
+    import pickle
+
+    digest = hashlib.sha256(CALIBRATED_SCHEMA.encode())
+    digest.update(code_version().encode())
+    digest.update(pickle.dumps((params, None if effects is None else tuple(effects),
+                                float(window_s), tuple(base)), protocol=4))
+    for log in logs:
+        digest.update(pickle.dumps(log, protocol=4))
+    return digest.hexdigest()
 
 
 def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
@@ -768,9 +829,10 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
     Why: that calibration's refinement and noise model cost as much again as the one without
     the slope that replaces it; this check costs a tenth of it."""
     effects = cand.effects(fit.theta)
-    discrepancy = fit_discrepancy([residuals(s, params, effects, rotor_channel=rotor)
-                                   for s in states], states)
-    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy)
+    per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    discrepancy = fit_discrepancy(per_flight, states)
+    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy,
+                                 per_flight=per_flight)
     probe = Reference(params, rotor, cand, fit.theta.copy(), np.asarray(fit.stderr, float),
                       np.zeros_like(fit.theta), sigma, tau, np.zeros_like(sigma), 1.0, 1,
                       {}, [], {})
@@ -823,9 +885,11 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = ()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
     states = [aligned(f, shift) for f in flights]
-    discrepancy = fit_discrepancy([residuals(s, params, cand.effects(theta), rotor_channel=rotor)
-                                   for s in states], states)
-    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy)
+    per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
+                  for s in states]
+    discrepancy = fit_discrepancy(per_flight, states)
+    sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy,
+                                      per_flight=per_flight)
     mean = log_ms.mean(axis=0)
     spread, dof, pooled = moderated_spread(log_ms)
     ref = Reference(params, rotor, cand, theta, stderr,
@@ -864,15 +928,18 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
 
 
 def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
-                 discrepancy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 discrepancy=None, *, per_flight: list | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Module doc, stages 4-5: (sigma (C,), tau (C,), log_ms (n, C)) of the calibrated
     model's residual (``effects``) over the n aligned reference ``states``, after the
     references' systematic residual (``discrepancy``'s centre,
     :func:`quadsim.gap.reference.centre_term`; None: none): per-channel RMS
     over all of them, floored at :func:`quadsim.gap.fitting.noise_floor` (N, N m, rad/s);
     per-channel integrated correlation time, the mean over the flights (samples); each
-    flight's log mean square over sigma_c^2."""
-    per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
+    flight's log mean square over sigma_c^2. ``per_flight``: those residuals (N_j, C) where
+    already computed (unchanged here)."""
+    if per_flight is None:
+        per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
     per_flight = [r - centre_term(s, discrepancy, r.shape[1])
                   for r, s in zip(per_flight, states)]
     pooled = np.concatenate(per_flight)

@@ -131,6 +131,7 @@ from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from . import evidence, logcheck
 from .calibrate import (
+    Calibrated,
     Reference,
     SelfCheck,
     Spread,
@@ -139,6 +140,7 @@ from .calibrate import (
     leave_one_out,
     negligible,
     readings,
+    reference_key,
     self_check_of,
     shared_candidate,
     spreads,
@@ -190,7 +192,8 @@ from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_stat
 from .result import Diagnosis, Reading, Series, Verdict
 from .words import batch_answer, nominal_words
 
-__all__ = ["D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision", "Flight", "Weighed",
+__all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
+           "Flight", "Weighed",
            "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
            "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
@@ -925,7 +928,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         progress: Callable | None = None,
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
                         refused: Sequence[tuple[int, str, str]] = (),
-                        base_effects: Sequence = ()) -> Diagnosis:
+                        base_effects: Sequence = (),
+                        store=None) -> Diagnosis:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
@@ -935,19 +939,27 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     and so of every flight's (:func:`quadsim.gap.calibrate.calibrate`'s ``base``), never
     refitted; the shared groups and every reading are fitted on top of them.
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
+    ``store``: keeps the reference stage between runs (``get(key)`` -> a
+    :class:`quadsim.gap.calibrate.Calibrated` or None, ``put(calibrated)``; the CLI's
+    ``--reference-cache``): where it holds the stage of these references
+    (:func:`quadsim.gap.calibrate.reference_key`), their preparation, calibration and
+    self-check are not done again.
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
-    ref_flights = prepare(reference, params, window_s=window_s)
-    if len(ref_flights) < 2:
-        raise InputError("--reference: give at least 2 nominal flights")
-    vehicle = vehicle_check([f.fit for f in ref_flights], params)
     base = tuple(base_effects)
-    ref = calibrate(ref_flights, params, base=base)
-    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    key = None if store is None else reference_key(reference, params, effects=effects,
+                                                   window_s=window_s, base=base)
+    kept = None if store is None else store.get(key)
+    if kept is None:
+        kept = _reference_stage(reference, params, effects=effects, window_s=window_s,
+                                key=key, base=base)
+        if store is not None:
+            store.put(kept)
+    ref, vehicle = kept.reference, kept.vehicle
     if progress is not None:
         progress("reference")
-    notes = ([(f"only {len(ref_flights)} reference flights: their scatter is poorly known; "
-              "give 10 or more")] if len(ref_flights) < MIN_REFERENCE else [])
-    notes += delay_notes(ref_flights)
+    notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
+              "give 10 or more")] if kept.count < MIN_REFERENCE else [])
+    notes += list(kept.notes)
     one = partial(judge_one, reference=ref, effects=effects, window_s=window_s)
     flights = []
     for entry in map_fn(one, logs):
@@ -969,6 +981,21 @@ def base_json(base: Sequence) -> tuple:
     the effect's declared unit}}, ...)."""
     return tuple({"name": e.name, "params": {p.name: float(getattr(e, p.name))
                                              for p in e.parameters}} for e in base)
+
+
+def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,
+                     key: str | None, base: tuple = ()) -> Calibrated:
+    """The reference flights prepared, checked against the model, calibrated on top of the
+    ``base`` effects (an effect file) and judged against each other
+    (:func:`reference_self_check`)."""
+    ref_flights = prepare(reference, params, window_s=window_s)
+    if len(ref_flights) < 2:
+        raise InputError("--reference: give at least 2 nominal flights")
+    vehicle = vehicle_check([f.fit for f in ref_flights], params)
+    ref = calibrate(ref_flights, params, base=base)
+    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    return Calibrated(key or "", ref, vehicle, tuple(delay_notes(ref_flights)),
+                      len(ref_flights))
 
 
 def reference_summary(ref: Reference) -> dict:
@@ -1012,9 +1039,16 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     for fewer than 3 references."""
     if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
         return None
+    # each reference's inverse information, as the calibration took it (its one-step
+    # standard errors, quadsim.gap.calibrate.inverse_information): the same Jacobian at the
+    # same shared values, up to round-off (the left-out discrepancy's centre, which no shared
+    # parameter moves, cancels in its differences)
+    per = getattr(ref, "per_flight", None)
+    infos = ([None] * len(ref_flights) if per is None or len(per.se) != len(ref_flights) else
+             [per.se[j] ** 2 * len(getattr(f, "fit", f).t) for j, f in enumerate(ref_flights)])
     weighed = []
     for j, f in enumerate(ref_flights):
-        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name)
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
         weighed.append(w if isinstance(w, WeighedFlight) else None)
 
     def judge_fn(j, check):
@@ -1066,8 +1100,11 @@ class WeighedFlight:
 
 
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
-                 name: str = "log") -> WeighedFlight | Verdict:
-    """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict."""
+                 name: str = "log", info: np.ndarray | None = None
+                 ) -> WeighedFlight | Verdict:
+    """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict.
+    ``info``: the flight's inverse information per sample (M,) where already known
+    (:func:`quadsim.gap.calibrate.inverse_information`; None: computed here)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
@@ -1081,9 +1118,10 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
             trend = getattr(reference.envelope, "trend", None)
-            info = (inverse_information(states, reference)
-                    if trend is not None and trend.q_weight is not None
-                    and np.any(trend.q_weight > 0) else None)
+            if trend is None or trend.q_weight is None or not np.any(trend.q_weight > 0):
+                info = None
+            elif info is None:
+                info = inverse_information(states, reference)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
             start = 0.0

@@ -704,17 +704,20 @@ def weighted_residual(states, reference: Reference, effects: list,
 
 
 def jacobian(states, reference: Reference, columns: list[int], build, *,
-             memo: dict | None = None, with_base: bool = False):
+             memo: dict | None = None, with_base: bool = False,
+             base: np.ndarray | None = None):
     """Forward-difference Jacobian (N C, len(columns)) of the weighted residual with respect
     to the shared parameters ``columns`` at theta_ref (``build(theta)`` -> effects);
     ``with_base``: (Jacobian, the weighted residual at theta_ref, flattened). The columns
     share the residual parts one parameter does not move (the rotations, the measured
     wrench of one vehicle, the rotor channel of one command -> speed model) through
-    ``memo`` (a new one per call by default)."""
+    ``memo`` (a new one per call by default). ``base``: that weighted residual (N C,) where
+    already computed (the same numbers: it is not computed again)."""
     memo = {} if memo is None else memo
     typical = typical_scales(reference.candidate, reference.params)
     _, upper = parameter_bounds(reference.candidate, reference.params)
-    base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
+    if base is None:
+        base = weighted_residual(states, reference, build(reference.theta), memo).ravel()
     out = np.empty((base.size, len(columns)))
     for j, k in enumerate(columns):
         h = FD_STEP * typical[k]

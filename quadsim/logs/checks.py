@@ -381,6 +381,10 @@ class _TorqueBalance:
     #: noise makes, None for commands (:func:`_regressor_noise`)
     column_noise: np.ndarray | None = None
     samples: int = 0
+    #: :func:`_order_fit`'s results kept per (torque rows, column order): the best order
+    #: (:func:`_best_rss`) and the evidence of each (:func:`rotor_order_evidence`) read the
+    #: same fits
+    fits: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
 
 def _saturated(log, params) -> np.ndarray:
@@ -473,6 +477,15 @@ def _order_fit(balance: _TorqueBalance, torque_rows: np.ndarray,
     from column ``columns[i]``): gain and a constant torque fitted per axis (a wrong b or d
     is a gain, a CoM offset a constant torque); a gain <= 0 explains nothing (the constant
     torque alone)."""
+    key = (torque_rows.tobytes(), tuple(columns))
+    if key not in balance.fits:
+        balance.fits[key] = _fit_order(balance, torque_rows, columns)
+    return balance.fits[key]
+
+
+def _fit_order(balance: _TorqueBalance, torque_rows: np.ndarray,
+               columns) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_order_fit`, computed."""
     r = balance.rotors
     rss, rho = np.zeros(3), np.zeros(3)
     s, t = slice(3, 3 + r), 3 + r

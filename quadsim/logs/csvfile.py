@@ -9,6 +9,13 @@ named twice, no data rows. A file that starts with a ULog or DataFlash magic but
 parse as one is refused as a damaged binary log, not read as text
 (:func:`quadsim.logs.refuse_binary`).
 
+Speed: where pyarrow is installed (the ``parquet`` extra), a CSV whose data rows hold only
+plain decimal numbers (bytes ``0-9 . e E + -``, commas and line ends; no empty cell) is parsed
+by pyarrow's CSV reader (:func:`_fast_columns`), about 2x faster than the plain parser on the
+real Crazyflie logs; both convert a decimal to the nearest double, so the arrays are the same
+(``tests/test_csv_fast.py``). Any other file -- and any file pyarrow refuses -- is read by the
+plain parser, which also words every problem.
+
 Parquet (optional, ``pip install 'quadsim[parquet]'``, pyarrow): the same column names as
 float64; row k is reported as line k + 2. Example::
 
@@ -28,7 +35,8 @@ from ..core.errors import InputError, field_error
 __all__ = ["read_log_columns"]
 
 
-def _open_text(path: Path) -> str:
+def _open_bytes(path: Path) -> bytes:
+    """The file's bytes, gunzipped where it starts with gzip's magic bytes."""
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -40,10 +48,56 @@ def _open_text(path: Path) -> str:
             raw = gzip.decompress(raw)
         except (OSError, EOFError) as exc:
             raise InputError(f"{path}: corrupt gzip data: {exc}") from None
+    return raw
+
+
+def _decode(path: Path, raw: bytes) -> str:
     try:
         return raw.decode("utf-8-sig")  # a spreadsheet may prepend a BOM
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a UTF-8 text (CSV) file") from None
+
+
+#: the bytes a data row may hold for the fast path (:func:`_fast_columns`): plain decimal
+#: numbers, commas, line ends. What pyarrow and Python's ``float`` both read as the nearest
+#: double; anything else (``nan``, spaces, ``1_000``, an empty cell) goes to the plain parser.
+_PLAIN = b"0123456789.eE+-,\r\n"
+_BOM = b"\xef\xbb\xbf"
+
+
+def _fast_columns(raw: bytes) -> dict[str, np.ndarray] | None:
+    """The columns of CSV bytes ``raw`` by pyarrow's CSV reader (one thread, every column
+    float64), or None where the plain parser must read them: pyarrow not installed, a header
+    that is not one line of distinct ASCII names followed by at least one data row, a data
+    byte outside :data:`_PLAIN`, or anything pyarrow refuses (a row of another width, a
+    cell that is not a number)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
+    raw = raw[len(_BOM):] if raw.startswith(_BOM) else raw
+    end = raw.find(b"\n")
+    if end <= 0 or not raw[:end].isascii():
+        return None
+    header = [h.strip() for h in raw[:end].decode("ascii").split(",")]
+    body = raw[end + 1:]
+    if (len(set(header)) < len(header) or not all(header) or not body.strip()
+            or body.translate(None, _PLAIN)):
+        return None
+    try:
+        table = pacsv.read_csv(
+            pa.py_buffer(body),
+            read_options=pacsv.ReadOptions(use_threads=False, column_names=header),
+            convert_options=pacsv.ConvertOptions(
+                column_types={h: pa.float64() for h in header}, null_values=[],
+                strings_can_be_null=False, quoted_strings_can_be_null=False))
+    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+        return None
+    if table.num_rows == 0 or any(c.null_count for c in table.columns):
+        return None
+    # a writable copy (pyarrow's own buffers are read-only), as the plain parser's
+    return {name: np.array(table.column(name).to_numpy(), dtype=float) for name in header}
 
 
 def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
@@ -111,7 +165,11 @@ def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
     from . import refuse_binary  # a damaged ULog/DataFlash, not a CSV
 
     refuse_binary(path)
-    text = _open_text(path)
+    raw = _open_bytes(path)
+    fast = _fast_columns(raw)
+    if fast is not None:
+        return fast
+    text = _decode(path, raw)
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
         raise InputError(f"{path}: empty file (expected a header row)")

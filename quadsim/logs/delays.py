@@ -240,15 +240,15 @@ def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float =
     # fast signals with little noise on both sides, chained back to motion capture.
     pairs = {}
     if gyro is not None:
-        pairs["gyro"] = ("correlation", smooth(body_rate_from_quat(t, quat)), smooth(gyro), None,
-                         None)
+        rate = smooth(gyro)        # both relations read the smoothed gyro: smoothed once
+        pairs["gyro"] = ("correlation", smooth(body_rate_from_quat(t, quat)), rate, None, None)
         if rotor is not None:
             # integrated form: rate vs the integral of Omega^2 (torque impulse), both
             # high-passed; the gyro's vibration noise is not differentiated
             # (the integrated rate is a fixed regressor: linear rate damping, I w = int tau -
             # k int w, would otherwise look like a lag of the rate behind the rotors)
             impulse, turned = _integral(rotor**2, dt), _integral(gyro, dt)
-            pairs["rotor"] = ("regression", _highpass(smooth(gyro), dt),
+            pairs["rotor"] = ("regression", _highpass(rate, dt),
                               _highpass(smooth(impulse), dt), "gyro",
                               _highpass(smooth(turned), dt))
     if rotor is not None and accel is not None:

@@ -1,0 +1,36 @@
+"""benchmarks/speed_gap.py's helpers on a small written log (numbers, not timing)."""
+
+import gzip
+
+import numpy as np
+
+from benchmarks import speed_gap
+
+
+def _log(path, n=101, dt=0.01):
+    rows = [f"{k * dt + 2.0!r},{np.sin(k):.6f}" for k in range(n)]
+    with gzip.open(path, "wt") as handle:
+        handle.write("\n".join(["t,x", *rows]) + "\n")
+    return path
+
+
+def test_duration_and_cut(tmp_path):
+    log = _log(tmp_path / "f.csv.gz")
+    assert abs(speed_gap.log_duration(log) - 1.0) < 1e-12          # 100 steps of 10 ms
+    cut = speed_gap.cut_log(log, 0.5, tmp_path / "half.csv.gz")
+    assert abs(speed_gap.log_duration(cut) - 0.5) < 1e-12
+    with gzip.open(cut, "rt") as handle:
+        assert len(handle.read().split()) == 1 + 51                  # header, t <= 2.5 s
+
+
+def test_line_fit_recovers_a_line():
+    runs = [speed_gap.Run(f"{m}", 1, m, 20.0 + 3.0 * m, 1.0, "") for m in (0.5, 1.0, 2.0)]
+    fixed, per_minute = speed_gap.line_fit(runs)
+    assert abs(fixed - 20.0) < 1e-9 and abs(per_minute - 3.0) < 1e-9
+    assert runs[1].cpu_per_minute == 23.0
+
+
+def test_against_needs_a_checkout(tmp_path, capsys):
+    assert speed_gap.main(["--against", str(tmp_path)]) == 2
+    assert "not a checkout of this repository" in capsys.readouterr().err
+    assert speed_gap.main(["--against", str(speed_gap.ROOT), "--rounds", "0"]) == 2
