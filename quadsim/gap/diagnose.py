@@ -26,6 +26,10 @@ judges the parameter set against flights that all may share the gap, so there ar
 reference flights: the reference model is the parameter set itself (with the training
 flights' static command -> speed map), and the same evidence machinery as the per-flight mode
 (:mod:`.evidence`, :mod:`.judge`) weighs every explanation of how the flights differ from it.
+Where the flights were flown at different charges (:func:`map_voltage`) that map is read in
+command x battery voltage, the law a DC motor follows, so that it transfers to a held-out
+flight at another charge; the voltage is then the reference's, and ``battery_sag`` is only a
+sag rate beyond it.
 
 Stages (each a named type)
 --------------------------
@@ -45,7 +49,8 @@ Stages (each a named type)
    reference (every effect, every shared group at a value of its own) plus what the nominal
    model lacks and the per-flight references carry: ``wind`` fitted with the rotor-drag
    coefficient (wind acts only through drag, and the nominal model has none), ``motor_lag``
-   (with commands), ``battery_sag`` as a full voltage (with a vbat log), and
+   (with commands), ``battery_sag`` as a full voltage (with a vbat log and a map in the
+   command alone), and
    ``nominal_refit`` (b and d re-identified; b prior as thrust_factor, d prior spread 0.5:
    the drag-torque factor of a small propeller is known to a factor of ~2 unless measured
    on a stand -- the Crazyflie's 0.006 m x b from the literature against 0.0013 m x b in its
