@@ -26,6 +26,10 @@ judges the parameter set against flights that all may share the gap, so there ar
 reference flights: the reference model is the parameter set itself (with the training
 flights' static command -> speed map), and the same evidence machinery as the per-flight mode
 (:mod:`.evidence`, :mod:`.judge`) weighs every explanation of how the flights differ from it.
+Where the flights were flown at different charges (:func:`map_voltage`) that map is read in
+command x battery voltage, the law a DC motor follows, so that it transfers to a held-out
+flight at another charge; the voltage is then the reference's, and ``battery_sag`` is only a
+sag rate beyond it.
 
 Stages (each a named type)
 --------------------------
@@ -45,7 +49,8 @@ Stages (each a named type)
    reference (every effect, every shared group at a value of its own) plus what the nominal
    model lacks and the per-flight references carry: ``wind`` fitted with the rotor-drag
    coefficient (wind acts only through drag, and the nominal model has none), ``motor_lag``
-   (with commands), ``battery_sag`` as a full voltage (with a vbat log), and
+   (with commands), ``battery_sag`` as a full voltage (with a vbat log and a map in the
+   command alone), and
    ``nominal_refit`` (b and d re-identified; b prior as thrust_factor, d prior spread 0.5:
    the drag-torque factor of a small propeller is known to a factor of ~2 unless measured
    on a stand -- the Crazyflie's 0.006 m x b from the literature against 0.0013 m x b in its
@@ -131,6 +136,7 @@ from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from . import evidence, logcheck
 from .calibrate import (
+    VBAT_TESTED,
     Calibrated,
     Reference,
     SelfCheck,
@@ -354,7 +360,12 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     base = tuple(base_effects)
     rotor = all(f.fit.command is not None for f in train + held)
     if rotor and not params_have_data_map(params):
-        params = fit_motor_map([f.fit for f in train], params)
+        volts = map_voltage([f.fit for f in train], [f.fit for f in held])
+        params = fit_motor_map([f.fit for f in train], params, duty_voltage=volts)
+        if volts is not None:
+            notes.append(f"command map in command x battery voltage (read at {volts:.3f} V, "
+                         "the training flights' mean; the flights were flown at different "
+                         "charges): a DC motor's speed follows duty x voltage")
     fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
     reference = nominal_reference(fit_on, params, rotor, base)
     weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
@@ -401,6 +412,29 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
         held_series=held_series)
 
 
+def map_voltage(train: list, held: list) -> float | None:
+    """The voltage (V) the held-out reference's command map is read at, in command x vbat
+    (:func:`quadsim.gap.residual.fit_motor_map`'s ``duty_voltage``): the mean of the
+    training flights' mean logged battery voltages, where every flight (training and held
+    out) logs a finite one and the flights were flown at different charges: their mean
+    voltages spread (max - min over the mean) by at least
+    :data:`quadsim.gap.calibrate.VBAT_TESTED` (the per-flight references' rule for sharing
+    the voltage law). Else None: the map in the command alone, as before.
+
+    Why between flights: a map read at one charge transfers to a flight at another only in
+    command x voltage (a DC motor's speed follows duty x voltage); flights that share one
+    voltage profile (a constant log, every generated nominal flight's; or the same sag from
+    the same full voltage, a generated ``battery_sag`` case's flights of one length) need no
+    transfer, and there a sag within each flight stays the reading ``battery_sag``."""
+    states = list(train) + list(held)
+    if not train or any(s.vbat is None or not np.all(np.isfinite(s.vbat)) for s in states):
+        return None
+    means = np.array([float(np.mean(s.vbat)) for s in states])
+    if not means.mean() > 0 or np.ptp(means) / means.mean() < VBAT_TESTED:
+        return None
+    return float(np.mean(means[:len(train)]))
+
+
 def params_have_data_map(params: VehicleParams) -> bool:
     """True when the motor map was already fitted from data by the diagnosis."""
     return params.motor_map is not None and "quadsim.gap" in params.motor_map.source
@@ -412,8 +446,9 @@ def _weigh(train: list, held: list, reference, *, effects, map_fn, tick) -> list
     (:func:`weigh`): one call in this process, one task per
     explanation on workers."""
     vbat = None
-    if reference.rotor and all(s.vbat is not None and np.all(np.isfinite(s.vbat))
-                               for s in train):
+    mm = reference.params.motor_map
+    if (reference.rotor and (mm is None or mm.duty_voltage is None)
+            and all(s.vbat is not None and np.all(np.isfinite(s.vbat)) for s in train)):
         vbat = max(float(np.max(s.vbat)) for s in train)
     expl = heldout_explanations(reference, stack_states(train), vbat=vbat)
     if effects is not None:

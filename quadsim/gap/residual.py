@@ -661,8 +661,18 @@ def joined_states(parts: list[FlightStates]) -> FlightStates:
     return dataclasses.replace(first, **arrays)
 
 
-def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> VehicleParams:
+def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
+                  duty_voltage: float | None = None) -> VehicleParams:
     """``params`` with a per-rotor straight-line map cmd (0-1) -> speed fitted on ``flights``.
+
+    ``duty_voltage`` (V; None: the command alone): the map's command axis is the command
+    times the logged battery voltage over ``duty_voltage`` (``MotorMap.duty_voltage``;
+    every flight must log ``vbat``). Physics: a DC motor driven at duty u from a battery at
+    V turns where ``u V = k Omega + (R d / k) Omega^2`` (:func:`load_exponent`), so its
+    steady speed is a function of u V alone, and a map read on flights at one charge
+    transfers to a flight at another only in u V (the 20 real crazyflie21 nominal flights:
+    hover command x vbat 1.541 at 3.756 V, 1.539 at 3.621 V, with the command 3.6 % apart;
+    docs/identification.md, "The rotor channels held out").
 
     Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
     firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
@@ -691,6 +701,12 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> Vehicle
     a propeller change at 100 %, twice."""
     from ..vehicle.params import MotorMap
 
+    if duty_voltage is not None:
+        if any(f.command is not None and f.vbat is None for f in flights):
+            raise ValueError("fit_motor_map: duty_voltage needs every flight's vbat")
+        flights = [f if f.command is None else dataclasses.replace(
+            f, command=f.command * (np.asarray(f.vbat, float) / duty_voltage)[:, None])
+            for f in flights]
     means = _window_means(flights)
     if means is None:
         return params
@@ -706,8 +722,11 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams) -> Vehicle
             if _line_supported(c, w, (slope, intercept), line, windows):
                 slope, intercept = line
         ends.append([intercept, intercept + slope])
+    source = "fitted on the training flights (quadsim.gap)"
+    if duty_voltage is not None:
+        source += f", in command x vbat / {duty_voltage:.4g} V"
     return params.replace(motor_map=MotorMap("1", np.array([0.0, 1.0]), np.array(ends),
-                                             "fitted on the training flights (quadsim.gap)"))
+                                             source, duty_voltage=duty_voltage))
 
 
 #: window (s) of the moving mean on which the static motor map is fitted.
@@ -808,9 +827,15 @@ def _moving_mean(x: np.ndarray, dt: float) -> np.ndarray:
 
 def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | None:
     """Commanded rotor speed (N, R) rad/s from normalised commands: the parameter set's motor
-    map, else ``command * max_speed``. None without commands."""
+    map, else ``command * max_speed``. None without commands. A map in command x voltage
+    (``MotorMap.duty_voltage``) takes ``command vbat / duty_voltage``; without a voltage log
+    the flight is taken at ``duty_voltage``."""
     if states.command is None:
         return None
+    mm = params.motor_map
+    if mm is not None and mm.duty_voltage is not None and states.vbat is not None:
+        return speed_of_command(params, states.command
+                                * (np.asarray(states.vbat, float) / mm.duty_voltage)[:, None])
     return speed_of_command(params, states.command)
 
 
@@ -960,8 +985,9 @@ def _rotor_model(states: FlightStates, params: VehicleParams, effects: list,
     if memo is None or states.command is None:
         cmd = command_speed(states, params)
     else:
-        cmd = memoised(memo, ("command_speed", id(states.command), id(params)),
-                       (states.command, params), lambda: command_speed(states, params))
+        cmd = memoised(memo, ("command_speed", id(states.command), id(states.vbat), id(params)),
+                       (states.command, states.vbat, params),
+                       lambda: command_speed(states, params))
     # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
     # static (a battery changes the steady speed, not how fast the rotor gets there): only a
     # dynamics effect (motor_lag) makes the rotor follow with a lag.

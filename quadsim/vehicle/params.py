@@ -72,6 +72,10 @@ class MotorMap:
     ``reference_voltage`` (V) when one is given. Optional, from ``identify --logs``:
     ``voltage_gain`` (1/V): the steady speed scales by ``1 + voltage_gain (v - reference_voltage)``
     (:meth:`speed_at`); ``time_constant`` (s): first-order lag from command to speed.
+    ``duty_voltage`` (V; None: not used): the map's command axis is the duty cycle times the
+    battery voltage over ``duty_voltage`` (a DC motor's no-load speed is proportional to duty
+    x voltage), so ``speed = map(command vbat / duty_voltage)`` (:meth:`speed_at`; the
+    held-out diagnosis fits such a map, :func:`quadsim.gap.residual.fit_motor_map`).
     """
 
     command_unit: str
@@ -81,10 +85,15 @@ class MotorMap:
     reference_voltage: float | None = None
     voltage_gain: float = 0.0
     time_constant: float = 0.0
+    duty_voltage: float | None = None
 
     def speed_at(self, command: np.ndarray, voltage: np.ndarray | None) -> np.ndarray:
         """Steady speed (rad/s) for commands (N, R) at battery voltages (N,) (V; None: the
-        reference voltage)."""
+        reference voltage, or ``duty_voltage``)."""
+        if self.duty_voltage is not None:
+            command = np.asarray(command, float)
+            if voltage is not None:
+                command = command * (np.asarray(voltage, float) / self.duty_voltage)[..., None]
         speed = self.speed_of(command)
         if voltage is None or self.reference_voltage is None or self.voltage_gain == 0.0:
             return speed
