@@ -906,7 +906,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         words += (f" Beyond it a systematic remainder stays (the residual's slow part on "
                   f"{where_} the reference flights' typical, each judged against the others): "
                   "part of the difference is outside the library, so the name may stand in "
-                  "for it; tentative.")
+                  "for it.")
     return Verdict(
         outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
         form_remainder={**{k: v[0] for k, v in left.items()},
