@@ -265,7 +265,7 @@ class Evidence:
     #: True: the linearised evidence of :mod:`.screen` (no full fit: it cannot matter)
     screened: bool = False
     #: (C,) mean square of the residual's slow part (its :data:`SLOW_WINDOW_S` moving
-    #: average) over sigma_c^2 (dimensionless); None where not computed (a screened reading)
+    #: average) over sigma_c^2 (dimensionless); None: states without a time base
     slow: np.ndarray | None = None
 
     @property
@@ -611,7 +611,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   dict(zip(keys, map(float, sd))),
                   {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
-                  shared_shift=shift, slow=slow_ms(resid, float(states.t[1] - states.t[0])))
+                  shared_shift=shift, slow=None if getattr(states, "t", None) is None
+                  or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])))
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
                                   own_effects(expl, np.clip(theta, prob.lower, prob.upper)),
