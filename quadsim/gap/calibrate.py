@@ -268,12 +268,16 @@ class SelfCheck:
 
     ``flights``: the reference names; ``verdicts``: each one's verdict (same order);
     ``false_alarms``: (name, verdict, channels) of those not ``no_significant_gap``;
-    ``spreads``: (explanation name, variant) -> parameter -> :class:`Spread`."""
+    ``spreads``: (explanation name, variant) -> parameter -> :class:`Spread`; ``slow``:
+    (n, C) each judged reference's slow-part mean square under "no difference" against the
+    others (:attr:`quadsim.gap.evidence.Evidence.slow`), the per-flight systematic
+    remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured."""
 
     flights: tuple
     verdicts: tuple
     false_alarms: tuple
     spreads: dict
+    slow: np.ndarray | None = None
 
     @property
     def clean(self) -> bool:
@@ -449,7 +453,11 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
         if verdict.outcome != "no_significant_gap":
             chans = tuple(verdict.lack_of_fit or {}) or tuple(verdict.differ_on or ())
             alarms.append((name, verdict.name, chans))
-    return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per))
+    nulls = [next((ev for ev in rows if ev.name == "no_difference"), None)
+             for rows in rows_list if rows is not None]
+    slow = [ev.slow for ev in nulls if ev is not None and ev.slow is not None]
+    return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per),
+                     np.array(slow) if slow else None)
 
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.

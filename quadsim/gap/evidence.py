@@ -264,6 +264,9 @@ class Evidence:
     shared_shift: dict = field(default_factory=dict)
     #: True: the linearised evidence of :mod:`.screen` (no full fit: it cannot matter)
     screened: bool = False
+    #: (C,) mean square of the residual's slow part (its :data:`SLOW_WINDOW_S` moving
+    #: average) over sigma_c^2 (dimensionless); None: states without a time base
+    slow: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -555,6 +558,22 @@ def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
     return np.mean(resid[inside] ** 2, axis=0)
 
 
+#: the slow part's window (s): the held-out noise model's (:data:`quadsim.gap.judge.SLOW_WINDOW_S`)
+SLOW_WINDOW_S = 0.5
+
+
+def slow_ms(resid: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) -> np.ndarray:
+    """(C,) mean square of the moving average over ``window_s`` (an odd number of samples,
+    at least 3, of step ``dt`` s; zero padded at the ends) of each column of ``resid`` (N, C)
+    (the residual over sigma_c: the per-flight systematic remainder's statistic,
+    :func:`quadsim.gap.judge.judge`)."""
+    n = max(3, int(np.rint(window_s / dt)) | 1)
+    c = np.cumsum(np.vstack([np.zeros((n // 2 + 1, resid.shape[1])), resid,
+                             np.zeros((n // 2, resid.shape[1]))]), axis=0)
+    slow = (c[n:] - c[:-n]) / n
+    return np.mean(slow ** 2, axis=0)
+
+
 def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bound: int
             ) -> Evidence:
     """The :class:`Evidence` of ``prob``'s explanation at ``z`` (its parameters in prior
@@ -592,7 +611,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   dict(zip(keys, map(float, sd))),
                   {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
-                  shared_shift=shift)
+                  shared_shift=shift, slow=None if getattr(states, "t", None) is None
+                  or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])))
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
                                   own_effects(expl, np.clip(theta, prob.lower, prob.upper)),

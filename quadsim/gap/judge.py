@@ -111,15 +111,17 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    named readings: "does it carry over").
 3. **Systematic remainder** (:func:`remainder`, held out): the residual's slow part (0.5 s
    moving average) against what noise of the noise model gives it, chi2(nu)/nu with nu =
-   N / W windows, at 1 - LOF_P / C. Per flight the noise model is the references' whole
-   residual, so there is no slow part to test.
+   N / W windows, at 1 - LOF_P / C. Per flight (:func:`remainder_of`) the noise model is
+   the references' whole residual, so the normal is the references' own slow part: each
+   reference's under "no difference" against the others (the self-check), on the log scale,
+   Student-t at 1 - LOF_P / C; tested on a named lead only.
 4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, parameters
    inconsistent between regimes
-   (:mod:`.consistency`), or a systematic remainder with "no difference" the lead;
+   (:mod:`.consistency`), or (held out) a systematic remainder with "no difference" the lead;
    otherwise ``no_significant_gap`` ("no difference" leads) or ``effect`` (the lead's
    name). *Tentative* below :data:`CONFIDENT`, when its value shifts with the regime, when
-   the lead's own values carry a caveat (:func:`lead_caveat`) and, held out, when a
-   systematic remainder stays beside the name (part of the gap is outside the library) or
+   the lead's own values carry a caveat (:func:`lead_caveat`), when a systematic remainder
+   stays beside the name (part of the gap is outside the library; both modes) or, held out,
    when the held-out flights do not separate another reading from it (:func:`unseparated`
    and :func:`beyond_misfit`: within the form error, and what separates them is the lead's
    own misfit): that reading is then stated beside the name.
@@ -172,7 +174,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "lack_of_fit", "material", "mean_squares", "negligible_at", "outcome_of", "plausible",
+           "lack_of_fit", "material", "mean_squares",
+           "remainder_of", "MIN_REMAINDER_REFERENCES", "negligible_at", "outcome_of", "plausible",
            "posterior", "rank", "reading_name", "reading_text", "remainder",
            "rows_at_reference_voltage", "symptom", "unseparated", "within_form_error",
            "beyond_misfit", "channel_logliks"]
@@ -781,6 +784,39 @@ def remainder(residuals: list, reference, dt: float) -> dict:
             if ratio[k] > limit}
 
 
+#: per flight, the fewest references a remainder's normal is measured on (below: no test;
+#: such a reference set is unchecked and every name tentative already)
+MIN_REMAINDER_REFERENCES = 3
+
+
+def remainder_of(ev, check, reference) -> dict:
+    """Per flight, :func:`remainder`'s rule against the references' own normal (module doc,
+    3): channel -> (RMS of the reading's slow part over the references' typical one, z), for
+    the channels where the slow-part mean square ``ev.slow`` (C,; sigma_c^2 units,
+    :attr:`quadsim.gap.evidence.Evidence.slow`) lies beyond the references' (``check.slow``
+    (n, C), each reference under "no difference" against the others). On the log scale, with
+    the references' mean m_c and spread s_c (n - 1 degrees of freedom):
+    z_c = (log slow_c - m_c) / (s_c sqrt(1 + 1/n)) beyond the Student-t quantile at
+    1 - LOF_P / C (the lack-of-fit rule's rate, Bonferroni over the channels); a channel whose
+    slow part lies below its noise floor is no remainder (:func:`above_floor`). {} where
+    there is no such normal (fewer than :data:`MIN_REMAINDER_REFERENCES` references, or no
+    slow part measured)."""
+    normal = None if check is None else getattr(check, "slow", None)
+    if ev is None or getattr(ev, "slow", None) is None or normal is None \
+            or len(normal) < MIN_REMAINDER_REFERENCES:
+        return {}
+    logs = np.log(np.maximum(np.asarray(normal, float), 1e-300))
+    n, c = logs.shape
+    mean, spread = logs.mean(axis=0), logs.std(axis=0, ddof=1)
+    scale = np.maximum(spread * np.sqrt(1 + 1 / n), 1e-9)
+    limit = float(student_t.ppf(1 - LOF_P / c, n - 1))
+    slow = np.asarray(ev.slow, float)
+    z = (np.log(np.maximum(slow, 1e-300)) - mean) / scale
+    names = channel_names(reference)
+    return {names[k]: (float(np.exp(0.5 * (np.log(slow[k]) - mean[k]))), float(z[k]))
+            for k in np.nonzero((z > limit) & above_floor(slow, reference))[0]}
+
+
 # --- 4. outcome -----------------------------------------------------------------------------
 
 def plausible(values: dict, params) -> tuple[bool, str]:
@@ -848,9 +884,13 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     named = [r.name for r in stated if r.name != "no_difference"]
     effect = outcome == "effect"
     caveat = lead_caveat(best, reference.params) if outcome == "effect" else ""
+    # a name that leaves a systematic remainder beyond the references' own (the held-out
+    # rule, against the references' normal): the rest is outside the library, the name may
+    # stand in for it: tentative, the remainder stated
+    remains = remainder_of(best, check, reference) if outcome == "effect" else {}
     # no self-check (fewer than 3 references): what they share cannot be told from a
     # difference of this flight, and practical significance has no scale (docs/gap.md)
-    unsure = check is None or not check.clean or bool(left) or bool(caveat)
+    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains)
     words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
                    against="references", separate=separate,
                    tentative=p_top < CONFIDENT or unsure)
@@ -861,9 +901,16 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                                       - best.values.get(_THROUGH_VBAT, 0.0)))
     words += caveat + _normal_words(sized if effect else None, check, left, share,
                                     at_voltage=vbat_ref if sized is not best else None)
+    if remains:
+        where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in remains.items())
+        words += (f" Beyond it a systematic remainder stays (the residual's slow part on "
+                  f"{where_} the reference flights' typical, each judged against the others): "
+                  "part of the difference is outside the library, so the name may stand in "
+                  "for it.")
     return Verdict(
         outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
-        form_remainder={k: v[0] for k, v in left.items()},
+        form_remainder={**{k: v[0] for k, v in left.items()},
+                        **{k: v[0] for k, v in remains.items()}},
         self_check_clean=None if check is None else check.clean,
         posterior=tuple(readings), readings=tuple(named) if effect else (),
         lack_of_fit={k: v[0] for k, v in lack.items()},
