@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import importlib.util
+import sys
+from pathlib import Path
+
 from quadsim.effects import make_effect
+
+ROOT = Path(__file__).resolve().parents[1]
 
 #: what the generated reference flights of the per-flight tests share: an 8 ms motor lag (s)
 #: and rotor drag (kg/rad)
@@ -24,3 +30,13 @@ def one_line(capsys, *names: str) -> str:
     for name in names:
         assert name in err, err
     return err
+
+
+def load_script(name: str):
+    """The module of ``scripts/NAME.py`` (an analysis script, not a package module), loaded
+    from this checkout and registered under ``name`` (its dataclasses look their module up)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

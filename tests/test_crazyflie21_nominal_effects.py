@@ -8,8 +8,6 @@ own loads, not quadsim.gap's evidence), show the same flapping and rotor drag.""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +16,8 @@ from quadsim.effects import EFFECTS
 from quadsim.effects.effectfile import load_effect_file
 from quadsim.effects.facts import parameter_facts, range_unit
 from quadsim.vehicle.params import load_params
+
+from _helpers import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 FILE = ROOT / "models" / "effects" / "crazyflie21_nominal.toml"
@@ -81,12 +81,7 @@ def test_every_value_has_a_training_only_source(model):
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("identify_crazyflie",
-                                                  ROOT / "scripts/identify_crazyflie.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module          # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_script("identify_crazyflie")
 
 
 @pytest.mark.skipif(not (DATA / "nominal").is_dir(), reason="shared data absent")

@@ -3,24 +3,19 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from _helpers import load_script
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT.parent / "shared/data/crazyflie21_brushless"
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("identify_crazyflie",
-                                                  ROOT / "scripts/identify_crazyflie.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module          # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_script("identify_crazyflie")
 
 
 def test_band_keeps_exactly_the_components_inside_it():
