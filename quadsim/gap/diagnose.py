@@ -935,6 +935,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     seen = {e["name"] for e in entries}
     # a reading the size rule counts as "no difference": its entry is its best variant,
     # as ranked before that rule (Practical.small), at probability 0
+    # (ranked again: the pair's ranking may have measured more spreads)
     entries += [entry_of(w, 0.0, before, reference) for k, _, w in
                 rank(weighed, scale.spread_negligible) if k == w.name and k not in seen
                 and k != "no_difference" and scale.small(w.train) and not seen.add(k)]

@@ -174,11 +174,10 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "lack_of_fit", "material", "mean_squares",
-           "remainder_of", "MIN_REMAINDER_REFERENCES", "negligible_at", "outcome_of", "plausible",
-           "posterior", "rank", "reading_name", "reading_text", "remainder",
-           "rows_at_reference_voltage", "symptom", "unseparated", "within_form_error",
-           "beyond_misfit", "channel_logliks"]
+           "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
+           "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
+           "reading_text", "remainder", "remainder_of", "rows_at_reference_voltage", "symptom",
+           "unseparated", "within_form_error", "beyond_misfit", "channel_logliks"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
