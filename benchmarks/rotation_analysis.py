@@ -49,7 +49,13 @@ Usage::
     python -m benchmarks.rotation_analysis --model models/nanodrone_cf21bl.toml \\
         --train ../shared/data/nanodrone_cf21bl/train/*_run[123].csv.gz \\
         --heldout ../shared/data/nanodrone_cf21bl/train/*_run4.csv.gz --json rot.json \
-        [--effects-file IN.toml --write-effects OUT.toml]
+        [--effects-file IN.toml --write-effects OUT.toml] [--mechanisms also|only]
+
+With ``--mechanisms`` it tests, below 2 Hz and beside the flapping, the mechanisms of
+:data:`MECHANISMS` (airframe drag at a centre of pressure, the rear rotors' wake, per-rotor
+inflow, the measured horizontal force on a lever, the advancing-blade moment, a flapping lag)
+and the state features of :data:`FEATURES`, per log, pooled and held out
+(:func:`analyse_mechanisms`); ``only`` skips the rest.
 
 With ``--write-effects`` it writes the effect file ``--effects-file`` plus ``blade_flapping``
 with ``roll`` and ``pitch`` from :func:`low_band_pooled` on the ``--train`` logs only, each
@@ -660,7 +666,8 @@ def mechanism_balance(train: list[RotationSignals], held: list[RotationSignals],
     * ``windowed_0p5s``: the 0.5 s balance ``J delta-omega = g int tau + c int f + sum_j
       beta_j int X_j`` fitted over every window of the training logs, per held-out log the RMS
       error of the predicted rate change over that of holding the rate, with (``ratio``) and
-      without (``flapping_only``) the mechanism (below 1 beats holding the rate).
+      without (``flapping_only``) the mechanism (below 1 beats holding the rate);
+      ``windowed_coef``: that fit's (g, c, betas).
     """
     def fit(parts):
         x = np.vstack([p[0] for p in parts])
@@ -699,6 +706,8 @@ def mechanism_balance(train: list[RotationSignals], held: list[RotationSignals],
     for label, use in (("ratio", names), ("flapping_only", ())):
         parts = [_windows_with(s, axis, use, horizon) for s in train]
         wcoef = fit(parts)
+        if use:
+            out["windowed_coef"] = [float(f"{c:.4g}") for c in wcoef]
         for s in held:
             x, y = _windows_with(s, axis, use, horizon)
             out["windowed_0p5s"].setdefault(s.name, {})[label] = round(
@@ -742,7 +751,7 @@ def feature_selection(train: list[RotationSignals], held: list[RotationSignals],
 #: :func:`windowed_selection`
 TORQUE_FEATURES = ("torque_x", "torque_y", "lin_x", "lin_y")
 #: delays of the flapping regressor behind the velocity (s) for :func:`flapping_timing`
-FLAPPING_DELAYS_S = (-0.1, -0.05, 0.0, 0.05, 0.1, 0.15, 0.2)
+FLAPPING_DELAYS_S = tuple(np.round(np.arange(-0.1, 0.2001, 0.01), 3))
 
 
 def windowed_selection(train: list[RotationSignals], held: list[RotationSignals], axis: int,
@@ -781,7 +790,9 @@ def flapping_timing(train: list[RotationSignals], held: list[RotationSignals], a
                     *, cutoff_hz: float = 2.0) -> dict:
     """The low-band balance ``M - tau = c f(t - d)`` per delay d of :data:`FLAPPING_DELAYS_S`
     (a wake or inflow that settles after the velocity changes), fitted on the training logs
-    together: per delay (ms) c, the training residual RMS and each held-out log's (N m)."""
+    together: per delay (ms) c, the training residual RMS and each held-out log's (N m);
+    ``best_per_log``: each log's own best delay (ms) and its residual RMS over the undelayed
+    one's."""
     out = {}
     sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
     low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
@@ -799,6 +810,16 @@ def flapping_timing(train: list[RotationSignals], held: list[RotationSignals], a
             "flapping": float(f"{c:.4g}"), "train_rms": float(f"{np.std(y - c * x):.3g}"),
             "heldout_rms": {s.name: float(f"{np.std(part(s, d)[1] - c * part(s, d)[0]):.3g}")
                             for s in held}}
+    best = {}
+    for s in [*train, *held]:
+        rms = []
+        for d in FLAPPING_DELAYS_S:
+            x, y = part(s, d)
+            rms.append(float(np.std(y - (x @ y) / (x @ x) * x)))
+        k = int(np.argmin(rms))
+        best[s.name] = {"delay_ms": round(1e3 * FLAPPING_DELAYS_S[k]),
+                        "rms_ratio": round(rms[k] / rms[FLAPPING_DELAYS_S.index(0.0)], 3)}
+    out["best_per_log"] = best
     return out
 
 
@@ -915,10 +936,9 @@ def print_mechanisms(result: dict) -> None:
         for step in entry["windowed_selection"]:
             print(f"{axis} 0.5 s selection + {step['feature']}: train {step['train_ratio']:.2f}"
                   ", held out " + "/".join(f"{x:.2f}" for x in step["heldout_ratio"].values()))
-        print(f"{axis} flapping delay (ms): " + "; ".join(
-            f"{d} train {v['train_rms']:.3g} held " + "/".join(
-                f"{x:.3g}" for x in v["heldout_rms"].values())
-            for d, v in entry["flapping_timing"].items()))
+        print(f"{axis} flapping delay, best per log (ms, residual ratio): " + "; ".join(
+            f"{k} {v['delay_ms']:+d} {v['rms_ratio']:.2f}"
+            for k, v in entry["flapping_timing"]["best_per_log"].items()))
         for step in entry["selection"]:
             print(f"{axis} selection + {step['feature']}: train RMS {step['train_rms']:.3g}, "
                   "held-out factor " + "/".join(f"{x:.2f}" for x in
