@@ -175,7 +175,7 @@ def _resample(t: np.ndarray, x: np.ndarray, grid: np.ndarray) -> np.ndarray:
 #: candidate mechanisms of the low-band moment the flapping leaves (issue 45); the physics and
 #: the unit of each coefficient: :func:`mechanism_columns`
 MECHANISMS = ("body_drag", "wake_mu", "wake_mu2", "inflow", "inflow_split", "force_lever",
-              "hub_roll", "flapping_lag")
+              "rotor_scale", "hub_roll", "flapping_lag")
 #: exploratory state features (:func:`state_features`), each one column for both axes
 FEATURES = ("v_x", "v_y", "v_z", "|v|v_x", "|v|v_y", "v_z|v_z|", "w_x", "w_y", "w_z", "sf_x",
             "sf_y", "sf_z", "roll_angle", "pitch_angle", "thrust", "torque_x", "torque_y",
@@ -214,6 +214,10 @@ def mechanism_columns(params: VehicleParams, omega: np.ndarray, v_body: np.ndarr
       sf_y``, pitch ``h m sf_x``; h in m. (The rotor-drag part, ``~ sum Omega v``, has the
       flapping regressor's shape: only the rest of the force can tell h.) Absent without
       ``specific_force``.
+    * ``rotor_scale``: a thrust-factor error per rotor, ``T_i = (1 + delta_i) b Omega_i^2``,
+      with the mean of the deltas left out (the collective thrust factor is identified from
+      the vertical channel; an equal delta would be the low-band torque gain itself): columns
+      ``(r_i x a_i) b Omega_i^2`` less their mean over the rotors; delta_i dimensionless.
     * ``hub_roll``: each rotor's advancing/retreating-blade moment about the flight direction,
       spin-signed: ``(sum_i s_i Omega_i) (v_x, v_y)`` on (roll, pitch); kg m/rad.
     """
@@ -250,6 +254,10 @@ def mechanism_columns(params: VehicleParams, omega: np.ndarray, v_body: np.ndarr
         force = params.mass * specific_force
         mechs.append(Mechanism("force_lever", ("m (-sf_y, sf_x)",),
                                np.column_stack([-force[:, 1], force[:, 0]])[:, :, None]))
+    quad = arms[None, :, :2] * (b * omega ** 2)[:, :, None]           # (N, R, 2)
+    quad = quad - quad.mean(axis=1, keepdims=True)
+    mechs.append(Mechanism("rotor_scale", tuple(f"rotor {k + 1}" for k in range(len(r))),
+                           np.transpose(quad, (0, 2, 1))))
     spin_sum = omega @ spins
     mechs.append(Mechanism("hub_roll", ("(sum s_i Omega_i) (v_x, v_y)",),
                            (spin_sum[:, None] * vh)[:, :, None]))
