@@ -36,6 +36,12 @@ def test_closed_forms_on_the_x_frame():
     # equal speeds: the spins cancel, and a vertical velocity gives no differential thrust
     np.testing.assert_allclose(c["hub_roll"][:, 0], [0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(c["inflow_split"][:, 0], 0.0, atol=1e-15)
+    # per-rotor thrust factors: rotor i's torque less the mean torque per rotor
+    omega = np.array([1500.0, 1600.0, 1700.0, 1650.0])
+    c = _columns(omega, (0.0, 0.0, 0.0))
+    arms = np.cross(PARAMS.rotor_positions, PARAMS.rotor_axes)[:, :2]
+    per_rotor = arms * (B * omega ** 2)[:, None]
+    np.testing.assert_allclose(c["rotor_scale"], (per_rotor - per_rotor.mean(axis=0)).T)
     # flying +x: rotors 2 and 3 (x < 0) are behind, each weighted 1/sqrt(2); roll cancels,
     # pitch (r x z)_y = -x = +L for both
     c = _columns([w] * 4, (2.0, 0.0, 0.0))
