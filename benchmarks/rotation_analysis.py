@@ -175,7 +175,7 @@ def _resample(t: np.ndarray, x: np.ndarray, grid: np.ndarray) -> np.ndarray:
 #: candidate mechanisms of the low-band moment the flapping leaves (issue 45); the physics and
 #: the unit of each coefficient: :func:`mechanism_columns`
 MECHANISMS = ("body_drag", "wake_mu", "wake_mu2", "inflow", "inflow_split", "force_lever",
-              "rotor_scale", "hub_roll", "flapping_lag")
+              "rotor_scale", "hub_roll", "flapping_lag", "air_field")
 #: exploratory state features (:func:`state_features`), each one column for both axes
 FEATURES = ("v_x", "v_y", "v_z", "|v|v_x", "|v|v_y", "v_z|v_z|", "w_x", "w_y", "w_z", "sf_x",
             "sf_y", "sf_z", "roll_angle", "pitch_angle", "thrust", "torque_x", "torque_y",
@@ -265,6 +265,27 @@ def mechanism_columns(params: VehicleParams, omega: np.ndarray, v_body: np.ndarr
     return mechs
 
 
+def air_field_columns(omega: np.ndarray, quat: np.ndarray, position: np.ndarray) -> Mechanism:
+    """``air_field``: the flight arena's own air (recirculated downwash), a wind linear in
+    position, ``w(p) = w0 + G (p - mean p)`` (world x, y components), seen by the flapping
+    moment as ``c sum Omega (w_y, -w_x)`` in the body frame with c the flapping coefficient:
+    columns ``sum Omega (e_y, -e_x)`` of each world axis ``k`` (x, y; ``e = R^T e_k``) times
+    (1, p_x, p_y, p_z); coefficients ``-c w0_k`` (kg m/rad x m/s) and ``-c G_kj`` (kg m/rad x
+    1/s). Inputs: rotor speeds (N, R) rad/s, attitude (N, 4) wxyz, position (N, 3) m world."""
+    total = omega.sum(axis=1)
+    pos = position - position.mean(axis=0)
+    cols = []
+    for k in range(2):
+        e = np.zeros((len(omega), 3))
+        e[:, k] = 1.0
+        eb = rotate_inverse(quat, e)
+        base = np.column_stack([total * eb[:, 1], -total * eb[:, 0]])
+        for g in (np.ones(len(omega)), pos[:, 0], pos[:, 1], pos[:, 2]):
+            cols.append(base * g[:, None])
+    labels = tuple(f"w{a}{g}" for a in "xy" for g in ("", "*x", "*y", "*z"))
+    return Mechanism("air_field", labels, np.stack(cols, axis=-1))
+
+
 def state_features(params: VehicleParams, omega: np.ndarray, v_body: np.ndarray,
                    body_rate: np.ndarray, specific_force: np.ndarray | None,
                    quat: np.ndarray) -> list[Mechanism]:
@@ -338,6 +359,8 @@ def rotation_signals(log: FlightLog, params: VehicleParams) -> RotationSignals:
     rate_raw = np.asarray(log.body_rate, float)
     accel = None if log.accel is None else np.asarray(log.accel, float)
     raw = [*mechanism_columns(params, omega, v_body, rate_raw, accel),
+           *([] if log.position is None else [air_field_columns(
+               omega, np.asarray(log.quat, float), np.asarray(log.position, float))]),
            *state_features(params, omega, v_body, rate_raw, accel,
                            np.asarray(log.quat, float))]
     mechanisms = tuple(

@@ -95,3 +95,16 @@ def test_absent_mechanism_leaves_factor_one():
     held = [_signals(100, 1e-7, 0.0)]
     out = ra.mechanism_balance(train, held, 0, ("body_drag",))
     np.testing.assert_allclose(out["pooled"]["heldout"]["s100"]["factor"], 1.0, atol=0.05)
+
+
+def test_air_field_columns_level_vehicle():
+    """Level attitude: world x wind shows as -sum Omega on pitch, world y as +sum Omega on
+    roll; the position columns are those times the position less its mean."""
+    omega = np.full((3, 4), 1000.0)
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    pos = np.array([[0.0, 0.0, 1.0], [1.0, 2.0, 1.0], [2.0, 4.0, 1.0]])
+    m = ra.air_field_columns(omega, quat, pos)
+    np.testing.assert_allclose(m.columns[:, :, 0], [[0.0, -4000.0]] * 3)
+    np.testing.assert_allclose(m.columns[:, :, 4], [[4000.0, 0.0]] * 3)
+    np.testing.assert_allclose(m.columns[:, 1, 1], [4000.0, 0.0, -4000.0])
+    np.testing.assert_allclose(m.columns[:, :, 3], 0.0)
