@@ -145,6 +145,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -312,7 +313,7 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     if store is None:
         store = motion[kind] = OrderedDict()
     hit = store.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+    if hit is not None and all(map(operator.is_, hit[0], refs)):
         store.move_to_end(key)
         return hit[1]
     value = compute()
