@@ -970,11 +970,14 @@ def _refined_coupled(prob: Problem, cols: Columns, z1: np.ndarray, delay_s: floa
     delay kept at ``z1``'s): the better evidence. Why: the step cannot see what a coupled
     parameter reaches, and a wrong start leads the Gauss-Newton steps into another basin;
     some explanations need the step's start, others the centre's."""
+    # the step's stacked residual first: the refined fit starts by asking for it again
+    # (kept as the explanation's last residual), after which it would be evaluated anew
+    a = prob.stacked(z1)
     first = refined(prob, cols, z1)
     centre = prob.start(delay_s)
     if prob.expl.shift and prob.expl.name != "signal_delay":
         centre[-1] = z1[-1]
-    a, b = prob.stacked(z1), prob.stacked(centre)
+    b = prob.stacked(centre)
     if float(b @ b) >= float(a @ a):
         return first
     second = refined(prob, cols, centre)
