@@ -304,21 +304,28 @@ class FitInputs:
 
 class Marginal:
     """The shared parameters not fitted by an explanation, marginalised linearly
-    (:mod:`quadsim.gap.evidence`, module doc): ``j`` = J_s diag(s_ref) (N C, K), ``chol`` the
-    Cholesky factor of A = I + jᵀj, ``logdet`` = log det A."""
+    (:mod:`quadsim.gap.evidence`, module doc): ``j`` = [J_s diag(s_ref), extra] (N C, K; the
+    ``extra`` columns, N C x E, at unit spread), ``chol`` the Cholesky factor of
+    A = I + jᵀj, ``logdet`` = log det A."""
 
-    def __init__(self, jac: np.ndarray, s_ref: np.ndarray):
-        j = jac * s_ref
-        a = np.eye(len(s_ref)) + j.T @ j
+    def __init__(self, jac: np.ndarray, s_ref: np.ndarray, extra: np.ndarray | None = None):
         # column-major: the profile's two products over j (jᵀ r, j du) run about a third
         # faster on these tall, thin matrices than on the row-major copy (the same values,
-        # summed in another order: round-off apart)
-        self.j = np.asfortranarray(j)
+        # summed in another order: round-off apart). Written column-major at once, the
+        # unit-spread ``extra`` columns (N C, E) after jac's: the same numbers as
+        # ``np.hstack([jac, extra]) * np.concatenate([s_ref, ones])``, without the copies
+        extra = np.zeros((jac.shape[0], 0)) if extra is None else extra
+        k = jac.shape[1]
+        j = np.empty((jac.shape[0], k + extra.shape[1]), order="F")
+        np.multiply(jac, s_ref, out=j[:, :k])
+        j[:, k:] = extra
+        a = np.eye(j.shape[1]) + j.T @ j
+        self.j = j
         self.chol = cho_factor(a)
         self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
         # cho_solve's own LAPACK call (the same numbers), without its per-call checks and
         # batch wrapper: most of its cost on these small systems, called thousands of times
-        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if len(s_ref) else None
+        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if j.shape[1] else None
         self._last: tuple | None = None
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -469,8 +476,7 @@ class Problem:
         def build():
             extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
                             self.memo)
-            return Marginal(np.hstack([jac[:, self.keep], extra]),
-                            np.concatenate([s_all[self.keep], np.ones(extra.shape[1])]))
+            return Marginal(jac[:, self.keep], s_all[self.keep], extra)
 
         if self.memo is None:
             return build()
@@ -845,10 +851,16 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
     aug0, du0 = prob.marg.profile(base)
     aug, du = prob.marg.profile(jac)
     a = np.vstack([aug, du, np.eye(n)])
-    b = np.concatenate([aug0, du0, start])
     # one Householder QR of [A b] (R only): R of A, Q^T b in the last column and
-    # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed
-    rb = _upper_factor(np.column_stack([a, b]))
+    # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed. [A b] is written
+    # column-major at once (the layout LAPACK factors in place): the same numbers as
+    # ``np.column_stack([a, b])`` copied to column-major, without the two copies
+    ab = np.empty((a.shape[0], n + 1), order="F")
+    ab[:, :n] = a
+    ab[:len(aug0), n] = aug0
+    ab[len(aug0):len(aug0) + len(du0), n] = du0
+    ab[len(aug0) + len(du0):, n] = start
+    rb = _upper_factor(ab, overwrite=True)
     r, qb, rest = rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2)
     lower, upper = prob.z_lo - start, prob.z_hi - start
     # lsq_linear's own first step: the unconstrained solution, returned when inside the
@@ -863,12 +875,15 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
     return start + x, predicted, a, active
 
 
-def _upper_factor(m: np.ndarray) -> np.ndarray:
+def _upper_factor(m: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """R (K, K) of the QR factorisation of ``m`` (M, K), M >= K: LAPACK geqrf, the call
     ``numpy.linalg.qr(m, mode="r")`` makes (the same numbers), without its wrapper's
-    copies and workspace query (most of its cost on these thin matrices)."""
+    copies and workspace query (most of its cost on these thin matrices). ``overwrite``:
+    ``m`` (column-major float64) is factored in place, its contents lost; else a copy."""
     geqrf = get_lapack_funcs(("geqrf",), (m,))[0]
-    qr, _, _, info = geqrf(np.array(m, order="F"), overwrite_a=True)    # a copy: m stays
+    work = m if overwrite and m.flags.f_contiguous and m.dtype == np.float64 else \
+        np.array(m, order="F")                      # a copy: m stays
+    qr, _, _, info = geqrf(work, overwrite_a=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"geqrf: illegal value in argument {-info}")
     return np.triu(qr[:m.shape[1]])
@@ -955,11 +970,14 @@ def _refined_coupled(prob: Problem, cols: Columns, z1: np.ndarray, delay_s: floa
     delay kept at ``z1``'s): the better evidence. Why: the step cannot see what a coupled
     parameter reaches, and a wrong start leads the Gauss-Newton steps into another basin;
     some explanations need the step's start, others the centre's."""
+    # the step's stacked residual first: the refined fit starts by asking for it again
+    # (kept as the explanation's last residual), after which it would be evaluated anew
+    a = prob.stacked(z1)
     first = refined(prob, cols, z1)
     centre = prob.start(delay_s)
     if prob.expl.shift and prob.expl.name != "signal_delay":
         centre[-1] = z1[-1]
-    a, b = prob.stacked(z1), prob.stacked(centre)
+    b = prob.stacked(centre)
     if float(b @ b) >= float(a @ a):
         return first
     second = refined(prob, cols, centre)

@@ -185,8 +185,10 @@ Example::
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import brentq
@@ -452,12 +454,26 @@ def shifted(states, delay_s: float, spectra: tuple | None = None):
     if joined is not None:                          # both in one inverse transform
         both = read_later(states.t, None, delay_s, joined)
         k = speed.shape[1]
-        return dataclasses.replace(states, rotor_speed=np.ascontiguousarray(both[:, :k]),
-                                   rotor_accel=np.ascontiguousarray(both[:, k:]))
+        return _with_rotors(states, np.ascontiguousarray(both[:, :k]),
+                            np.ascontiguousarray(both[:, k:]))
     return dataclasses.replace(
         states, rotor_speed=read_later(states.t, states.rotor_speed, delay_s, speed),
         rotor_accel=None if states.rotor_accel is None
         else read_later(states.t, states.rotor_accel, delay_s, accel))
+
+
+def _with_rotors(states, speed: np.ndarray, accel: np.ndarray):
+    """``dataclasses.replace(states, rotor_speed=speed, rotor_accel=accel)`` for the frozen
+    fit states (:class:`quadsim.gap.residual.FlightStates`, no ``__post_init__``): a shallow
+    copy with the two fields set, the same object a replace builds at a tenth of its cost (a
+    fit reads the rotor speeds at thousands of delays per flight)."""
+    if type(states).__dict__.get("__post_init__") is not None or \
+            not dataclasses.is_dataclass(states):
+        return dataclasses.replace(states, rotor_speed=speed, rotor_accel=accel)
+    out = copy.copy(states)
+    object.__setattr__(out, "rotor_speed", speed)
+    object.__setattr__(out, "rotor_accel", accel)
+    return out
 
 
 def rotor_spectra(states) -> tuple:
@@ -505,9 +521,19 @@ def read_later(t: np.ndarray, x: np.ndarray, delay_s: float,
             return np.stack([np.interp(t + delay_s, t, c) for c in x.T], -1)
         spectrum = _spectrum(t, x)
     dt = (t[-1] - t[0]) / (n - 1)
-    nu = np.fft.rfftfreq(2 * n)[:, None]        # cycles per sample
-    return np.fft.irfft(spectrum * np.exp(2j * np.pi * nu * (delay_s / dt)), 2 * n,
+    # 2 pi i nu (nu: cycles per sample), kept per length: the same product as
+    # ``2j * np.pi * np.fft.rfftfreq(2 * n)[:, None]``, taken once
+    return np.fft.irfft(spectrum * np.exp(_phase_rate(2 * n) * (delay_s / dt)), 2 * n,
                         axis=0)[:n]
+
+
+@lru_cache(maxsize=64)
+def _phase_rate(length: int) -> np.ndarray:
+    """``2j * pi * rfftfreq(length)[:, None]`` (read-only), the phase per sample of delay
+    of each frequency of a series of ``length`` samples (:func:`read_later`)."""
+    out = 2j * np.pi * np.fft.rfftfreq(length)[:, None]
+    out.flags.writeable = False
+    return out
 
 
 def aligned(flight, delay_s: float):

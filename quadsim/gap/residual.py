@@ -145,6 +145,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -312,7 +313,7 @@ def kept(motion: dict, kind: str, key: tuple, refs: tuple, compute):
     if store is None:
         store = motion[kind] = OrderedDict()
     hit = store.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+    if hit is not None and all(map(operator.is_, hit[0], refs)):
         store.move_to_end(key)
         return hit[1]
     value = compute()
@@ -938,9 +939,15 @@ def heun_linear(start: np.ndarray, cmd: np.ndarray, steps: int, h: float, tau: f
     recursion, once): the same numbers as stepping the rate function, to round-off, at a
     few array operations instead of 2 S steps rate evaluations."""
     gain, weights = _heun_weights(steps, h, tau)
-    out = gain * start
-    for k in range(steps + 1):
-        out = out + weights[k] * cmd[k:k + n]
+    return _heun_sum(gain * start, [weights[k] * cmd[k:k + n] for k in range(steps + 1)])
+
+
+def _heun_sum(out: np.ndarray, terms) -> np.ndarray:
+    """``out`` + terms[0] + terms[1] + ..., added in that order (:func:`heun_linear`'s sum:
+    the terms w_k cmd_k do not depend on the measured speeds, so a fit that reads them at
+    many delays keeps them, :attr:`RotorModel.terms`). ``out`` is written into."""
+    for term in terms:
+        np.add(out, term, out=out)
     return out
 
 
@@ -963,6 +970,18 @@ class RotorModel:
     tau: float | None
     dt: float
     valid: np.ndarray | None
+
+    @functools.cached_property
+    def terms(self) -> tuple:
+        """The command's terms w_k cmd[k:k+n] of :func:`heun_linear` (k = 0..steps, each
+        (n, R) rad/s; read only), kept: the same products at every rotor delay. Only for a
+        linear lag (``tau`` not None). (steps + 1) R values per sample (13 x 4 on a
+        100 Hz fit; the 26 real mixed flights build at most 51 models each, ~11 MB)."""
+        _, weights = _heun_weights(self.steps, self.dt / ROTOR_SUBSTEPS, self.tau)
+        out = tuple(weights[k] * self.cmd[k:k + self.n] for k in range(self.steps + 1))
+        for term in out:
+            term.flags.writeable = False
+        return out
 
 
 def rotor_model(states: FlightStates, params: VehicleParams, effects: list, *,
@@ -1012,7 +1031,9 @@ def rotor_residual(states: FlightStates, params: VehicleParams, effects: list, *
     if owner is None:
         predicted = cmd[steps:]
     elif model.tau is not None:
-        predicted = heun_linear(speed[:n], cmd, steps, dt / ROTOR_SUBSTEPS, model.tau, n)
+        # heun_linear with the command's terms kept (the same numbers, in the same order)
+        gain, _ = _heun_weights(steps, dt / ROTOR_SUBSTEPS, model.tau)
+        predicted = _heun_sum(gain * speed[:n], model.terms)
     else:
         # ROTOR_SUBSTEPS Heun steps per sample (stable for time constants down to about
         # dt / (2 ROTOR_SUBSTEPS)).
