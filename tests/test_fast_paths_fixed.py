@@ -151,3 +151,27 @@ def test_a_judged_flight_with_the_checks_order_is_judged_as_without(cf, calibrat
     assert json.dumps(given.to_json(), sort_keys=True) == json.dumps(read.to_json(),
                                                                      sort_keys=True)
     assert ToJudge(checked, orders[0]).path == checked.path
+
+
+def _rows(weighed):
+    return [(r.explanation.name, r.explanation.variant, r.log_z, tuple(sorted(r.values.items())))
+            for r in weighed.rows]
+
+
+def test_the_weighing_after_the_informations_jacobian_is_the_weighing_alone(cf, calibrated):
+    """The flight's inverse information (its one-step Jacobian at theta_ref) fills the
+    weighing's memo; given from outside, the memo starts empty: the same evidence."""
+    from quadsim.gap.calibrate import inverse_information
+
+    _, ref, _ = calibrated
+    trend = ref.envelope.trend
+    assert trend is not None and np.any(trend.q_weight > 0)    # the information is read
+    log = synthetic_flight(cf, shared_effects(), duration=3.0, seed=9, speed=0.7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        flight = prepare([log], ref.params)[0]
+        filled = weigh_flight(flight, ref, None, name=flight.name)
+        info = inverse_information(ref.align(flight), ref)
+        alone = weigh_flight(flight, ref, None, name=flight.name, info=info)
+    assert _rows(filled) == _rows(alone)
+    assert np.array_equal(filled.place.info, alone.place.info)

@@ -1017,15 +1017,17 @@ def _noise_biased(names, info: np.ndarray) -> np.ndarray:
     return np.where(keep, info, np.nan)
 
 
-def inverse_information(states, reference: Reference) -> np.ndarray:
+def inverse_information(states, reference: Reference, memo: dict | None = None
+                        ) -> np.ndarray:
     """Inverse information per sample (P,) of each shared parameter on one flight's aligned
     ``states``: the squared standard error of its one-step estimate alone (:func:`_scatter`)
     times its samples. How little of each parameter a flight's motion shows per sample, the
     place of :mod:`.reference`'s inverse-information trend: least squares biases a value by
     the noise of its regressor over that regressor's signal (errors in variables), and the
-    signal is what the information counts."""
+    signal is what the information counts. ``memo``: keeps the residual parts of its
+    Jacobian for later evaluations on ``states`` (the flight's weighing; None: a new one)."""
     own: list = []
-    _scatter([states], reference, own)
+    _scatter([states], reference, own, None if memo is None else [memo])
     return own[1][0] ** 2 * len(states.t)
 
 

@@ -1205,19 +1205,21 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
+            # the flight's residual parts and shared Jacobian, kept (from its information's
+            # Jacobian at theta_ref on: the weighing's is the same where the flight lies
+            # inside the references' envelope)
+            memo: dict = {} if kept is None else kept.memo
             trend = getattr(reference.envelope, "trend", None)
             if trend is None or trend.q_weight is None or not np.any(trend.q_weight > 0):
                 info = None
             elif info is None:
-                info = inverse_information(states, reference)
+                info = inverse_information(states, reference, memo)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
                 start = 1e-3 * mine - reference.rotor_shift_s
-            # the flight's residual parts and shared Jacobian, kept
-            memo: dict = {} if kept is None else kept.memo
             law = evidence.choose(states, reference, start, memo)
             expl = evidence.under(explanations_for(reference, states, effects), law)
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
