@@ -175,3 +175,19 @@ def test_the_weighing_after_the_informations_jacobian_is_the_weighing_alone(cf, 
         alone = weigh_flight(flight, ref, None, name=flight.name, info=info)
     assert _rows(filled) == _rows(alone)
     assert np.array_equal(filled.place.info, alone.place.info)
+
+
+def test_the_refinements_views_are_the_flights_aligned_anew(calibrated):
+    """The calibration's views (each flight's rotor spectra computed once) give
+    :func:`quadsim.gap.calibrate.aligned`'s states at every timing, bit for bit."""
+    from quadsim.gap.calibrate import _Views, aligned
+
+    flights, _, _ = calibrated
+    views = _Views(flights)
+    for delay in (0.0, 0.0123, -0.004, 0.0123):
+        for i, f in enumerate(flights):
+            got, want = views.at(i, delay), aligned(f, delay)
+            assert np.array_equal(got.rotor_speed, want.rotor_speed)
+            assert np.array_equal(got.rotor_accel, want.rotor_accel)
+            assert got.t is want.t and got.quat is want.quat
+    assert all(s is not None for s in views.spectra)
