@@ -1,11 +1,11 @@
 """The per-flight mode's fixed part passes what one stage computed to the next instead of
 computing it again (issue 43 item 7); each shortcut against the path it replaces, on
-generated flights: the self-check weighed on the calibration's aligned states and Jacobian
-memo (:class:`quadsim.gap.calibrate.KeptParts`) against aligning each reference again; a
-judged flight's residual series on the weighing's states and memo against a new alignment
-and Jacobian; the rotor-order status read from the checks' torque balances against
-:func:`quadsim.logs.checks.rotor_order_status` on the checked log. Equality is exact: the
-shortcuts reuse the same computations, they do not reorder them."""
+generated flights: a judged flight's residual series on the weighing's states and memo
+against a new alignment and Jacobian; the rotor-order status read from the checks' torque
+balances against :func:`quadsim.logs.checks.rotor_order_status` on the checked log; the
+calibration's flight views (rotor spectra computed once) against
+:func:`quadsim.gap.calibrate.aligned`. Equality is exact: the shortcuts reuse the same
+computations, they do not reorder them."""
 
 from __future__ import annotations
 
@@ -19,14 +19,8 @@ import pytest
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.gap import logcheck
-from quadsim.gap.calibrate import KeptParts, calibrate
-from quadsim.gap.diagnose import (
-    ToJudge,
-    judge_one,
-    prepare,
-    reference_self_check,
-    weigh_flight,
-)
+from quadsim.gap.calibrate import calibrate
+from quadsim.gap.diagnose import ToJudge, judge_one, prepare, weigh_flight
 from quadsim.gap.page import flight_series
 from quadsim.logs.checks import check_logs, order_reading, rotor_order_status
 from quadsim.vehicle.params import load_params
@@ -44,52 +38,17 @@ def cf():
 
 @pytest.fixture(scope="module")
 def calibrated(cf):
-    """Three generated references (shared motor lag and rotor drag), their calibration and
-    the calibration's kept parts."""
+    """Three generated references (shared motor lag and rotor drag) and their calibration."""
     logs = [synthetic_flight(cf, shared_effects(), duration=3.0, seed=s, speed=0.6 + 0.1 * s)
             for s in range(3)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         flights = prepare(logs, cf)
-        parts: list = []
-        ref = calibrate(flights, cf, parts=parts)
-    return flights, ref, parts
-
-
-def test_the_kept_parts_are_the_references_aligned_anew(calibrated):
-    flights, ref, parts = calibrated
-    assert len(parts) == len(flights)
-    for f, kept in zip(flights, parts):
-        assert isinstance(kept, KeptParts)
-        again = ref.align(f)
-        for name in ("t", "velocity", "body_accel", "specific_force", "rotor_speed",
-                     "rotor_accel", "command"):
-            a, b = getattr(kept.states, name), getattr(again, name)
-            assert (a is None and b is None) or np.array_equal(a, b), name
-
-
-def test_the_self_check_on_the_kept_parts_is_the_self_check_aligned_anew(calibrated):
-    flights, ref, parts = calibrated
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        fast = reference_self_check(flights, ref, None, parts=list(parts))
-        slow = reference_self_check(flights, ref, None)
-    assert json.dumps(fast.to_json(), sort_keys=True) == json.dumps(slow.to_json(),
-                                                                    sort_keys=True)
-    assert np.array_equal(fast.slow, slow.slow)
-
-
-def test_the_self_check_consumes_the_parts_it_is_given(calibrated):
-    flights, ref, parts = calibrated
-    given = list(parts)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        reference_self_check(flights, ref, None, parts=given)
-    assert given == []
+        return flights, calibrate(flights, cf)
 
 
 def test_the_series_on_the_weighings_memo_is_the_series_from_scratch(cf, calibrated):
-    _, ref, _ = calibrated
+    _, ref = calibrated
     log = synthetic_flight(cf, shared_effects(), duration=3.0, seed=7, speed=0.9)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
@@ -140,7 +99,7 @@ def test_one_reading_is_the_source_and_the_evidence(cf):
 
 
 def test_a_judged_flight_with_the_checks_order_is_judged_as_without(cf, calibrated):
-    _, ref, _ = calibrated
+    _, ref = calibrated
     log = synthetic_flight(cf, shared_effects(), duration=3.0, seed=8, speed=0.8)
     orders: list = []
     with warnings.catch_warnings():
@@ -153,36 +112,12 @@ def test_a_judged_flight_with_the_checks_order_is_judged_as_without(cf, calibrat
     assert ToJudge(checked, orders[0]).path == checked.path
 
 
-def _rows(weighed):
-    return [(r.explanation.name, r.explanation.variant, r.log_z, tuple(sorted(r.values.items())))
-            for r in weighed.rows]
-
-
-def test_the_weighing_after_the_informations_jacobian_is_the_weighing_alone(cf, calibrated):
-    """The flight's inverse information (its one-step Jacobian at theta_ref) fills the
-    weighing's memo; given from outside, the memo starts empty: the same evidence."""
-    from quadsim.gap.calibrate import inverse_information
-
-    _, ref, _ = calibrated
-    trend = ref.envelope.trend
-    assert trend is not None and np.any(trend.q_weight > 0)    # the information is read
-    log = synthetic_flight(cf, shared_effects(), duration=3.0, seed=9, speed=0.7)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        flight = prepare([log], ref.params)[0]
-        filled = weigh_flight(flight, ref, None, name=flight.name)
-        info = inverse_information(ref.align(flight), ref)
-        alone = weigh_flight(flight, ref, None, name=flight.name, info=info)
-    assert _rows(filled) == _rows(alone)
-    assert np.array_equal(filled.place.info, alone.place.info)
-
-
 def test_the_refinements_views_are_the_flights_aligned_anew(calibrated):
     """The calibration's views (each flight's rotor spectra computed once) give
     :func:`quadsim.gap.calibrate.aligned`'s states at every timing, bit for bit."""
     from quadsim.gap.calibrate import _Views, aligned
 
-    flights, _, _ = calibrated
+    flights, _ = calibrated
     views = _Views(flights)
     for delay in (0.0, 0.0123, -0.004, 0.0123):
         for i, f in enumerate(flights):

@@ -179,7 +179,7 @@ from .reference import (  # re-exported: the calibration's public names
 )
 from .residual import load_exponent, min_time_constant
 
-__all__ = ["CALIBRATED_SCHEMA", "Calibrated", "KeptParts", "code_version", "reference_key",
+__all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
            "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
            "against_text", "leave_one_out", "negligible", "self_check_of", "spreads", "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
@@ -574,13 +574,10 @@ def _covariance(info: np.ndarray, typical: np.ndarray) -> np.ndarray:
 POOLED = ("thrust_curve.quadratic",)
 
 
-def _scatter(flights, reference: Reference, own: list | None = None,
-             memos: list | None = None) -> np.ndarray:
+def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarray:
     """Method-of-moments between-flight variance of each shared parameter (module doc,
     stage 3): one Gauss-Newton step per reference flight from theta_ref. ``own``: a list
     that receives (values (n, P), standard errors (n, P)), each flight's own estimate.
-    ``memos``: one dict per flight that keeps the residual parts of its Jacobian
-    (:func:`quadsim.gap.reference.jacobian`'s ``memo``; None: a new one each).
 
     The step's pseudo-inverse is taken in SI units (not :func:`_covariance`): there it cuts
     the directions one flight's data barely fix (a wind without drag, inertia against
@@ -588,9 +585,8 @@ def _scatter(flights, reference: Reference, own: list | None = None,
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
     values, variances = [], []
-    for i, f in enumerate(flights):
-        jac, r = jacobian(f, reference, free, reference.candidate.effects, with_base=True,
-                          memo=None if memos is None else memos[i])
+    for f in flights:
+        jac, r = jacobian(f, reference, free, reference.candidate.effects, with_base=True)
         info = jac.T @ jac
         cov = np.linalg.pinv(info)
         value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
@@ -811,20 +807,7 @@ def reference_key(logs, params: VehicleParams, *, effects=None, window_s: float,
     return digest.hexdigest()
 
 
-@dataclass(frozen=True, eq=False)
-class KeptParts:
-    """One reference flight as the calibration last evaluated it: ``states`` (its fit
-    states aligned at the calibrated rotor timing, :meth:`Reference.align`'s numbers) and
-    ``memo`` (the residual parts its Jacobian at theta_ref kept, :func:`_scatter`). What
-    the self-check weighs it on (:func:`quadsim.gap.diagnose.reference_self_check`): the
-    same numbers as aligning it again with a new memo, without computing them again."""
-
-    states: object
-    memo: dict
-
-
-def calibrate(flights, params: VehicleParams, *, base: tuple = (),
-              parts: list | None = None) -> Reference:
+def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
     """The reference model from prepared reference flights (:class:`quadsim.gap.diagnose.Flight`
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
     ``base``: effects already in the model (``--effects-file``), carried as the shared
@@ -835,18 +818,11 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = (),
     determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
     flight's own values are printed by); else the model is
     calibrated again without it. Why: an undetermined slope moves b with it flight by
-    flight, and the envelope's trend of b then widens until a mass is "no difference".
-
-    ``parts``: a list that receives one :class:`KeptParts` per flight (in order) of the
-    calibration returned."""
-    kept: list = []
+    flight, and the envelope's trend of b then widens until a mass is "no difference"."""
     views = _Views(flights)     # each flight's rotor spectra, for every timing read
-    ref = _calibrate(flights, params, curve=True, base=base, parts=kept, views=views)
+    ref = _calibrate(flights, params, curve=True, base=base, views=views)
     if ref is None or not curve_determined(ref):
-        kept = []
-        ref = _calibrate(flights, params, curve=False, base=base, parts=kept, views=views)
-    if parts is not None:
-        parts.extend(kept)
+        ref = _calibrate(flights, params, curve=False, base=base, views=views)
     return ref
 
 
@@ -902,7 +878,7 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
 
 
 def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
-               parts: list | None = None, views: _Views | None = None) -> Reference | None:
+               views: _Views | None = None) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
     between-flight scatter only widens it), or its spread with the scatter before the
@@ -963,19 +939,15 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
     ref.log_ms = log_ms
-    memos = [{} for _ in states]
-    _complete(ref, states, log_ms, memos)
-    if parts is not None:
-        parts.extend(KeptParts(s, m) for s, m in zip(states, memos))
+    _complete(ref, states, log_ms)
     return ref
 
 
-def _complete(ref: Reference, states, log_ms: np.ndarray, memos: list | None = None) -> None:
+def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
     """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
     aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
     equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
-    and the envelope (stage 7). ``memos``: one dict per flight that keeps the residual
-    parts of its scatter step's Jacobian (:func:`_scatter`)."""
+    and the envelope (stage 7)."""
     params, rotor, cand = ref.params, ref.rotor, ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
@@ -983,7 +955,7 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, memos: list | None = N
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
-    ref.scatter = _scatter(states, ref, own, memos)
+    ref.scatter = _scatter(states, ref, own)
     ref.per_flight = PerFlight(
         np.array([coordinates(s) for s in states]), own[0], own[1],
         np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
@@ -1045,17 +1017,15 @@ def _noise_biased(names, info: np.ndarray) -> np.ndarray:
     return np.where(keep, info, np.nan)
 
 
-def inverse_information(states, reference: Reference, memo: dict | None = None
-                        ) -> np.ndarray:
+def inverse_information(states, reference: Reference) -> np.ndarray:
     """Inverse information per sample (P,) of each shared parameter on one flight's aligned
     ``states``: the squared standard error of its one-step estimate alone (:func:`_scatter`)
     times its samples. How little of each parameter a flight's motion shows per sample, the
     place of :mod:`.reference`'s inverse-information trend: least squares biases a value by
     the noise of its regressor over that regressor's signal (errors in variables), and the
-    signal is what the information counts. ``memo``: keeps the residual parts of its
-    Jacobian for later evaluations on ``states`` (the flight's weighing; None: a new one)."""
+    signal is what the information counts."""
     own: list = []
-    _scatter([states], reference, own, None if memo is None else [memo])
+    _scatter([states], reference, own)
     return own[1][0] ** 2 * len(states.t)
 
 

@@ -1035,9 +1035,8 @@ def _reference_stage(reference, params: VehicleParams, *, effects, window_s: flo
     if len(ref_flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     vehicle = vehicle_check([f.fit for f in ref_flights], params)
-    parts: list = []      # each reference's aligned states and Jacobian parts, for the check
-    ref = calibrate(ref_flights, params, base=base, parts=parts)
-    ref.self_check = reference_self_check(ref_flights, ref, effects, parts=parts)
+    ref = calibrate(ref_flights, params, base=base)
+    ref.self_check = reference_self_check(ref_flights, ref, effects)
     return Calibrated(key or "", ref, vehicle, tuple(delay_notes(ref_flights)),
                       len(ref_flights))
 
@@ -1076,14 +1075,11 @@ def reference_summary(ref: Reference) -> dict:
             "self_check": None if ref.self_check is None else ref.self_check.to_json()}
 
 
-def reference_self_check(ref_flights: list, ref: Reference, effects=None, *,
-                         parts: list | None = None):
+def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     """The references judged against each other (:mod:`quadsim.gap.calibrate`): each
     reference weighed against :func:`~quadsim.gap.calibrate.leave_one_out` of ``ref``, then
     judged with the other references' readings as the practical-significance scale. None
-    for fewer than 3 references. ``parts``: the calibration's
-    :class:`~quadsim.gap.calibrate.KeptParts` of each reference (``calibrate(parts=)``),
-    weighed on instead of aligning it again (the same numbers); emptied as they are used."""
+    for fewer than 3 references."""
     if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
         return None
     # each reference's inverse information, as the calibration took it (its one-step
@@ -1093,13 +1089,9 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None, *,
     per = getattr(ref, "per_flight", None)
     infos = ([None] * len(ref_flights) if per is None or len(per.se) != len(ref_flights) else
              [per.se[j] ** 2 * len(getattr(f, "fit", f).t) for j, f in enumerate(ref_flights)])
-    if parts is not None and len(parts) != len(ref_flights):
-        parts = None
     weighed = []
     for j, f in enumerate(ref_flights):
-        kept = parts.pop(0) if parts else None      # consumed: the list lets its memo go
-        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j],
-                         kept=kept)
+        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
         # the memo goes (its residual parts are not needed once weighed: memory)
         weighed.append(dataclasses.replace(w, memo=None) if isinstance(w, WeighedFlight)
                        else None)
@@ -1184,20 +1176,16 @@ class WeighedFlight:
 
 
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
-                 name: str = "log", info: np.ndarray | None = None, kept=None
+                 name: str = "log", info: np.ndarray | None = None
                  ) -> WeighedFlight | Verdict:
     """The :class:`WeighedFlight` of a prepared flight, or its ``refused`` verdict.
     ``info``: the flight's inverse information per sample (M,) where already known
-    (:func:`quadsim.gap.calibrate.inverse_information`; None: computed here); ``kept``:
-    the flight's :class:`~quadsim.gap.calibrate.KeptParts` where the calibration has them
-    (its states aligned at ``reference``'s rotor timing and their residual parts; None:
-    aligned here, a new memo)."""
+    (:func:`quadsim.gap.calibrate.inverse_information`; None: computed here)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
-            # the references' rotor-speed timing
-            states = reference.align(flight) if kept is None else kept.states
+            states = reference.align(flight)       # the references' rotor-speed timing
             check_same_kind(states, reference, name)   # a pose on both or neither (posefree)
             if states.command is None and reference.rotor:
                 raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
@@ -1205,21 +1193,18 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
             if len(states.t) < 20:
                 raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
                                  "after smoothing)")
-            # the flight's residual parts and shared Jacobian, kept (from its information's
-            # Jacobian at theta_ref on: the weighing's is the same where the flight lies
-            # inside the references' envelope)
-            memo: dict = {} if kept is None else kept.memo
             trend = getattr(reference.envelope, "trend", None)
             if trend is None or trend.q_weight is None or not np.any(trend.q_weight > 0):
                 info = None
             elif info is None:
-                info = inverse_information(states, reference, memo)
+                info = inverse_information(states, reference)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
             start = 0.0
             mine = (flight.delays_ms or {}).get("rotor")
             if mine is not None and "rotor" in reference.delays_ms:
                 start = 1e-3 * mine - reference.rotor_shift_s
+            memo: dict = {}        # the flight's residual parts and shared Jacobian, kept
             law = evidence.choose(states, reference, start, memo)
             expl = evidence.under(explanations_for(reference, states, effects), law)
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
