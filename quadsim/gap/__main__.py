@@ -155,20 +155,25 @@ def _map_fn(args, bar):
     return map_fn
 
 
-def _load(paths, params, args, lines: list | None = None):
+def _load(paths, params, args, lines: list | None = None, orders: list | None = None):
     """Load, check and count ``paths``: refused when too short, too finely windowed, or
     when all logs so far cost past the caps (``args.samples_loaded`` counts them). The
-    warnings are printed, or appended to ``lines`` when given (printed later, gathered)."""
+    warnings are printed, or appended to ``lines`` when given (printed later, gathered).
+    ``orders``: a list that receives each accepted log's rotor-order status as the checks
+    read it (:func:`quadsim.logs.checks.check_logs`)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
 
-    logs, notes = check_logs(logs, params)
+    read: list | None = None if orders is None else []
+    logs, notes = check_logs(logs, params, orders=read)
     for log in logs:
         check_length(log, args.window)
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
+    if orders is not None:      # only once every log is accepted
+        orders += read
     found = [str(w.message) for w in caught if issubclass(w.category, QuadsimWarning)]
     if lines is not None:
         lines += found + list(notes)
@@ -392,12 +397,12 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
-    refused = []
+    refused, orders = [], None
     if args.per_flight:      # a flight the loader or the checks refuse is refused alone
-        logs, lines = [], []
+        logs, lines, orders = [], [], []    # orders: the rotor-order statuses the checks read
         for k, path in enumerate(args.logs):
             try:
-                logs += _load([path], params, args, lines)
+                logs += _load([path], params, args, lines, orders)
             except InputError as exc:
                 refused.append((k, str(path), str(exc)))
     else:
@@ -413,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
                    else reference)
     roles, command_model = synthesise_all({"logs": logs, "holdout": holdout,
                                            "reference": reference}, params, command_ref)
+    if orders is not None:   # a log with synthesised speeds: its order read again when judged
+        orders = [o if new is old else None for new, old, o in zip(roles["logs"], logs, orders)]
     logs, holdout, reference = roles["logs"], roles["holdout"], roles["reference"]
     if command_model is not None and not args.quiet:
         print(f"note: rotor speeds synthesised for the command-only logs from "
@@ -429,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
             result = diagnose_per_flight(logs, reference, params,
                                          effects=args.effects, progress=progress,
                                          refused=refused, base_effects=base_effects,
-                                         store=store, **extra)
+                                         store=store, orders=orders, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects, **extra)

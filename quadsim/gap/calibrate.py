@@ -173,6 +173,7 @@ from .reference import (  # re-exported: the calibration's public names
     fit_discrepancy,
     jacobian,
     moderated_spread,
+    rotor_spectra,
     shifted,
     weighted_residual,
 )
@@ -608,7 +609,29 @@ REFINE_STEPS = 8
 REFINE_TOL = 0.1
 
 
-def _pooled(flights, probe, shift: float, timing: bool, bases: list | None = None):
+class _Views:
+    """The fit views of prepared flights at any rotor timing: :func:`aligned`'s states, each
+    flight's rotor spectra (:func:`rotor_spectra`) computed once for all the timings the
+    refinement reads (the same numbers: :func:`shifted` with the spectra it would compute)."""
+
+    def __init__(self, flights):
+        self.fits = [getattr(f, "fit", f) for f in flights]
+        self.spectra: list = [None] * len(self.fits)
+
+    def __len__(self) -> int:
+        return len(self.fits)
+
+    def at(self, i: int, delay_s: float):
+        """Flight ``i``'s fit states with its rotor speeds read ``delay_s`` (s) later."""
+        fit = self.fits[i]
+        if delay_s == 0.0 or fit.rotor_speed is None:
+            return fit
+        if self.spectra[i] is None:
+            self.spectra[i] = rotor_spectra(fit)
+        return shifted(fit, delay_s, self.spectra[i])
+
+
+def _pooled(views: _Views, probe, shift: float, timing: bool, bases: list | None = None):
     """Summed information JᵀJ, gradient Jᵀr and cost |r|^2 over the flights at ``shift``;
     with ``timing`` the last column is the rotor timing offset's (forward difference).
     ``bases``: each flight's weighted residual there (flattened) where already computed
@@ -616,13 +639,13 @@ def _pooled(flights, probe, shift: float, timing: bool, bases: list | None = Non
     k = len(probe.theta)
     size = k + int(timing)
     info, grad, cost = np.zeros((size, size)), np.zeros(size), 0.0
-    for i, f in enumerate(flights):
-        view = aligned(f, shift)
+    for i in range(len(views)):
+        view = views.at(i, shift)
         memo: dict = {}
         jac, r = jacobian(view, probe, list(range(k)), probe.candidate.effects, memo=memo,
                           with_base=True, base=None if bases is None else bases[i])
         if timing:
-            later = weighted_residual(aligned(f, shift + SHIFT_STEP_S), probe,
+            later = weighted_residual(views.at(i, shift + SHIFT_STEP_S), probe,
                                       probe.effects(), memo).ravel()
             jac = np.column_stack([jac, (later - r) / SHIFT_STEP_S])
         info += jac.T @ jac
@@ -656,19 +679,20 @@ def bounded(cand: Candidate, params: VehicleParams, theta: np.ndarray, dt: float
                               ("upper", theta[k] >= upper[k] - tol[k])) if hit}
 
 
-def _cost(flights, probe, theta, shift: float) -> tuple[float, list | None]:
+def _cost(views: _Views, probe, theta, shift: float) -> tuple[float, list | None]:
     """(|r|^2 summed over the flights, each flight's weighted residual r flattened) at
     ``theta`` and ``shift``; (inf, None) where ``theta`` leaves the physical set."""
     try:
         effects = probe.candidate.effects(theta)
-        full = [weighted_residual(aligned(f, shift), probe, effects) for f in flights]
+        full = [weighted_residual(views.at(i, shift), probe, effects)
+                for i in range(len(views))]
     except ModelError:          # e.g. an inertia breaking the triangle inequality: a wall
         return float("inf"), None
     return float(sum(np.sum(r ** 2) for r in full)), [r.ravel() for r in full]
 
 
 def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
-            shift: float, sigma: np.ndarray):
+            shift: float, sigma: np.ndarray, views: _Views | None = None):
     """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
     information, over the shared parameters and the rotor speeds' timing offset (module
     doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
@@ -676,6 +700,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     together (module doc, stage 2). Steps in units of each parameter's typical size with
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
+    ``views``: the flights' :class:`_Views` where the caller keeps them.
     Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
@@ -697,9 +722,10 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     prior = np.array([1.0 / WIND_SD_MS ** 2 if n.startswith("wind.") else 0.0
                       for n in cand.parameter_names] + [0.0] * int(timing))
     lam, info, bases = 1.0, None, None
+    views = _Views(flights) if views is None else views
     for _ in range(REFINE_STEPS):
         probe.theta = x[:k].copy()
-        info, grad, cost = _pooled(flights, probe, float(x[k]) if timing else 0.0, timing,
+        info, grad, cost = _pooled(views, probe, float(x[k]) if timing else 0.0, timing,
                                    bases)
         info, grad = info + np.diag(prior), grad + prior * x
         cost += float(np.sum(prior * x ** 2))
@@ -708,7 +734,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
             # not fix does not move
             info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
             trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
-            new, moved = _cost(flights, probe, trial[:k], float(trial[k]) if timing else 0.0)
+            new, moved = _cost(views, probe, trial[:k], float(trial[k]) if timing else 0.0)
             new += float(np.sum(prior * trial ** 2))
             if new < cost:
                 x, lam, bases = trial, max(lam / 3.0, 1e-3), moved
@@ -793,9 +819,10 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
     flight's own values are printed by); else the model is
     calibrated again without it. Why: an undetermined slope moves b with it flight by
     flight, and the envelope's trend of b then widens until a mass is "no difference"."""
-    ref = _calibrate(flights, params, curve=True, base=base)
+    views = _Views(flights)     # each flight's rotor spectra, for every timing read
+    ref = _calibrate(flights, params, curve=True, base=base, views=views)
     if ref is None or not curve_determined(ref):
-        ref = _calibrate(flights, params, curve=False, base=base)
+        ref = _calibrate(flights, params, curve=False, base=base, views=views)
     return ref
 
 
@@ -850,8 +877,8 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
     return spread > SLOPE_EARLY_MARGIN * DETERMINED * curve_slope_sd(params)
 
 
-def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = ()
-               ) -> Reference | None:
+def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
+               views: _Views | None = None) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
     between-flight scatter only widens it), or its spread with the scatter before the
@@ -863,7 +890,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = ()
                  if (getattr(f, "delays_ms", None) or {}).get("rotor") is not None]
     start = float(np.clip(1e-3 * np.mean(estimates), -MAX_SHIFT_S, MAX_SHIFT_S)) \
         if estimates else 0.0
-    states = [aligned(f, start) for f in flights]
+    views = _Views(flights) if views is None else views
+    states = [views.at(i, start) for i in range(len(views))]
     rotor = all(s.command is not None for s in states)
     if rotor:
         params = fit_motor_map(states, params)
@@ -888,11 +916,11 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = ()
         if _slope_clearly_undetermined(states, params, rotor, cand, fit):
             return None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                              shift=start, sigma=sigma0)
+                                              shift=start, sigma=sigma0, views=views)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
-    states = [aligned(f, shift) for f in flights]
+    states = [views.at(i, shift) for i in range(len(views))]
     per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                   for s in states]
     discrepancy = fit_discrepancy(per_flight, states)

@@ -203,6 +203,7 @@ __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "De
            "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
            "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
+           "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
            "weigh_flight"]
 
@@ -965,7 +966,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         window_s: float = DEFAULT_WINDOW_S, map_fn: Callable = map,
                         refused: Sequence[tuple[int, str, str]] = (),
                         base_effects: Sequence = (),
-                        store=None) -> Diagnosis:
+                        store=None, orders: Sequence | None = None) -> Diagnosis:
     """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
@@ -980,6 +981,9 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ``--reference-cache``): where it holds the stage of these references
     (:func:`quadsim.gap.calibrate.reference_key`), their preparation, calibration and
     self-check are not done again.
+    ``orders``: each log's rotor-order status where the checks already read it
+    (:func:`quadsim.logs.checks.check_logs` with ``orders``; None entries, or None: read
+    here), in the order of ``logs``.
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     base = tuple(base_effects)
     key = None if store is None else reference_key(reference, params, effects=effects,
@@ -996,9 +1000,12 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
               "give 10 or more")] if kept.count < MIN_REFERENCE else [])
     notes += list(kept.notes)
-    one = partial(judge_one, reference=ref, effects=effects, window_s=window_s)
+    one = partial(_judge, reference=ref, effects=effects, window_s=window_s)
+    orders = [None] * len(logs) if orders is None else list(orders)
+    if len(orders) != len(logs):
+        raise ValueError(f"orders: {len(orders)} statuses for {len(logs)} logs")
     flights = []
-    for entry in map_fn(one, logs):
+    for entry in map_fn(one, [ToJudge(log, order) for log, order in zip(logs, orders)]):
         flights.append(entry)
         if progress is not None and map_fn is map:
             progress(entry.file)
@@ -1085,7 +1092,9 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     weighed = []
     for j, f in enumerate(ref_flights):
         w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
-        weighed.append(w if isinstance(w, WeighedFlight) else None)
+        # the memo goes (its residual parts are not needed once weighed: memory)
+        weighed.append(dataclasses.replace(w, memo=None) if isinstance(w, WeighedFlight)
+                       else None)
 
     def judge_fn(j, check):
         return verdict_of(weighed[j], check)
@@ -1096,12 +1105,35 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
                              ref.vbat_ref) for w in weighed], judge_fn)
 
 
+@dataclass(frozen=True)
+class ToJudge:
+    """One flight log to judge (:func:`diagnose_per_flight`) and its rotor-order status
+    where the checks already read it (:func:`quadsim.logs.checks.check_logs` with
+    ``orders``; None: read when judged)."""
+
+    log: FlightLog
+    order: object = None
+
+    @property
+    def path(self):
+        """The log's file (the executor's label)."""
+        return self.log.path
+
+
+def _judge(item: ToJudge, **kwargs) -> Verdict:
+    """:func:`judge_one` of ``item`` (module level: sent to workers)."""
+    return judge_one(item.log, order=item.order, **kwargs)
+
+
 def judge_one(log: FlightLog, reference: Reference, effects=None,
-              window_s: float = DEFAULT_WINDOW_S, full: bool = False) -> Verdict:
+              window_s: float = DEFAULT_WINDOW_S, full: bool = False, *,
+              order=None) -> Verdict:
     """One flight's :class:`~quadsim.gap.result.Verdict` (module level: sent to workers);
     ``refused`` with the reason when the flight cannot be judged. ``effects``: restrict the
     explanations; ``window_s`` (s): smoothing window; ``full``: every explanation fully
-    fitted (no screen, :func:`quadsim.gap.evidence.evaluate`)."""
+    fitted (no screen, :func:`quadsim.gap.evidence.evaluate`); ``order``: the log's
+    rotor-order status (:func:`quadsim.logs.checks.rotor_order_status`) where already
+    read (None: read here)."""
     name = str(log.path) if getattr(log, "path", None) is not None else "log"
     try:
         with warnings.catch_warnings():
@@ -1113,12 +1145,15 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     weighed = weigh_flight(flight, reference, effects, full=full, name=name)
     if not isinstance(weighed, WeighedFlight):
         return weighed
-    verdict = verdict_of(weighed, reference.self_check,
-                         logcheck.order_statuses([log], reference.params))
+    statuses = (logcheck.order_statuses([log], reference.params) if order is None
+                else [order])
+    verdict = verdict_of(weighed, reference.self_check, statuses)
     verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.logcheck)
-    local = weighed.reference          # the residual before and after, for the report
+    # the residual before and after, for the report: on the states the flight was weighed
+    # on, with the residual parts and Jacobian its weighing kept
     return dataclasses.replace(verdict, series=flight_series(
-        local.align(weighed.flight), local, weighed.rows, name=weighed.flight.name))
+        weighed.states, weighed.reference, weighed.rows, name=weighed.flight.name,
+        memo=weighed.memo))
 
 
 @dataclass(frozen=True)
@@ -1126,13 +1161,18 @@ class WeighedFlight:
     """One prepared flight weighed against the reference model: ``flight`` (the prepared
     flight), ``rows`` (every explanation's Evidence), ``reference`` (the reference model at
     the flight's place, :func:`quadsim.gap.reference.local_reference`), ``place`` (its
-    envelope position or None), ``law`` (the drag law it is judged under, or None)."""
+    envelope position or None), ``law`` (the drag law it is judged under, or None),
+    ``states`` (the flight's fit states aligned to the references' timing, weighed) and
+    ``memo`` (the residual parts and Jacobian the weighing kept for them,
+    :func:`quadsim.gap.evidence.evaluate`)."""
 
     flight: object
     rows: list
     reference: Reference
     place: object
     law: object
+    states: object = None
+    memo: dict | None = field(default=None, compare=False, repr=False)
 
 
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
@@ -1170,7 +1210,7 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
             rows = evaluate(states, reference, expl, start_delay_s=start, full=full, memo=memo)
     except (InputError, ModelError, ValueError, np.linalg.LinAlgError) as exc:
         return refused_entry(name, str(exc))
-    return WeighedFlight(flight, rows, reference, place, law)
+    return WeighedFlight(flight, rows, reference, place, law, states, memo)
 
 
 def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:

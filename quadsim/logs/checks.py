@@ -56,8 +56,8 @@ from .flightlog import WITHOUT_POSE
 from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
-           "gyro_frame_evidence", "rotor_order_evidence", "rotor_order_source",
-           "rotor_order_status"]
+           "gyro_frame_evidence", "order_reading", "rotor_order_evidence",
+           "rotor_order_source", "rotor_order_status"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -592,6 +592,18 @@ def rotor_order_evidence(log, params, *, commands: bool = False
     rotor-speed sensor's noise, integrated, is noise in the regressor), so its orders' small
     differences are that noise meeting whatever other torque the flight shares (a wind's:
     measured in CHANGELOG.md, issue 47 item 7)."""
+    return _evidence_of(_order_choice(log, params, commands), params)
+
+
+def order_reading(log, params, *, commands: bool = False) -> tuple[str, dict]:
+    """(:func:`rotor_order_source`, :func:`rotor_order_evidence`) of ``log``, the signals
+    chosen once (the same numbers as the two calls)."""
+    choice = _order_choice(log, params, commands)
+    return " and ".join(name for name, _ in choice), _evidence_of(choice, params)
+
+
+def _evidence_of(choice: list, params) -> dict[tuple[int, ...], float]:
+    """:func:`rotor_order_evidence` of the signals ``choice`` (:func:`_order_choice`)."""
     import itertools
 
     from ..vehicle.rotors import allocation_matrix
@@ -599,7 +611,7 @@ def rotor_order_evidence(log, params, *, commands: bool = False
     torque_rows = allocation_matrix(params)[3:6] if params is not None else None
     own_order = tuple(range(params.rotor_count)) if params is not None else ()
     evidence: dict = {}
-    for _, balance in _order_choice(log, params, commands):
+    for _, balance in choice:
         own, _ = _order_fit(balance, torque_rows, own_order)
         share = _noise_share(balance, torque_rows, own_order)
         for perm in itertools.permutations(own_order):
@@ -631,17 +643,21 @@ class RotorOrder:
     note: str
 
 
-def rotor_order_status(log, params) -> RotorOrder:
+def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrder:
     """The log's rotor order as the torque balance sees it (rotor speeds, else commands):
     confirmed, or not told apart from its best rival -- then a wrong order cannot be ruled
     out, and a verdict on the log must say so (issue 44: never stated at > 99 %). A log of
     several airborne stretches (segments): each stretch's Delta chi^2 summed (independent
-    samples; the balance's integrals never run across a ground span)."""
+    samples; the balance's integrals never run across a ground span). ``readings``: each
+    stretch's :func:`order_reading` with ``commands`` where already read (:func:`check_log`
+    with ``orders``), in the order of :meth:`~quadsim.logs.flightlog.FlightLog.parts`."""
     evidence: dict = {}
     sources = []
-    for part in log.parts():
-        sources.append(rotor_order_source(part, params, commands=True))
-        for perm, value in rotor_order_evidence(part, params, commands=True).items():
+    if readings is None:
+        readings = [order_reading(part, params, commands=True) for part in log.parts()]
+    for source, part_evidence in readings:
+        sources.append(source)
+        for perm, value in part_evidence.items():
             evidence[perm] = evidence.get(perm, 0.0) + value
     source = " and ".join(dict.fromkeys(s for s in sources if s)) or (
         "rotor speeds" if log.rotor_speed is not None else "commands")
@@ -666,7 +682,7 @@ def rotor_order_status(log, params) -> RotorOrder:
                       f"the {source}: the order --rotor-map {mapping} {how}")
 
 
-def check_rotor_order(log, params) -> None:
+def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
     """Rotor columns in the parameter set's order, by the torque balance under every
     permutation of the rotor columns.
 
@@ -696,8 +712,10 @@ def check_rotor_order(log, params) -> None:
     rival -200 or less; on the 20 nominal Crazyflie flights of ../shared/data the right
     order's best rival reaches 1.0 (``python scripts/consistency_evidence.py``). Each order
     is scored from the Gram matrices of the per-sample columns (:class:`_TorqueBalance`):
-    a hexarotor's 720 orders cost little more than a quadrotor's 24."""
-    evidence = rotor_order_evidence(log, params)
+    a hexarotor's 720 orders cost little more than a quadrotor's 24.
+    ``evidence``: the log's :func:`rotor_order_evidence` where already read."""
+    if evidence is None:
+        evidence = rotor_order_evidence(log, params)
     if not evidence:
         return
     best = max(evidence, key=evidence.get)
@@ -724,8 +742,11 @@ def check_vehicle(log, params) -> None:
                           f"{params.rotor_count} in the parameter set {name}")
 
 
-def _channel_checks(log, params) -> list[str]:
-    """The checks of channels against each other on one airborne stretch; notes."""
+def _channel_checks(log, params, readings: list | None = None) -> list[str]:
+    """The checks of channels against each other on one airborne stretch; notes.
+    ``readings``: a list that receives the stretch's :func:`order_reading` with
+    ``commands`` (what :func:`rotor_order_status` reads), or None where that is not what the
+    check reads (no rotor speeds logged: the check reads none, the status the commands)."""
     notes = []
     gyro_note = check_gyro(log)
     if gyro_note:
@@ -735,24 +756,38 @@ def _channel_checks(log, params) -> list[str]:
                      "by their magnitudes and the rotor order by the torque balance only")
     check_accel(log, params.gravity if params is not None else 9.81)
     check_rotors(log, params)
-    check_rotor_order(log, params)
+    if readings is None:
+        check_rotor_order(log, params)
+        return notes
+    # with rotor speeds logged the check and the status read the same signals (speeds, and
+    # commands beside them: _order_sources), so one reading serves both
+    reading = order_reading(log, params, commands=True) if log.rotor_speed is not None else None
+    check_rotor_order(log, params, evidence=None if reading is None else reading[1])
+    readings.append(reading)
     return notes
 
 
-def check_log(log, params=None, *, joined: bool = False):
+def check_log(log, params=None, *, joined: bool = False, orders: list | None = None):
     """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes).
     The longest airborne stretch is kept (:func:`check_log_stretches` keeps every one as its
     own log); ``joined``: every airborne stretch kept as a segment of the one log
     (:func:`quadsim.logs.spans.join_airborne`; ``gap`` and ``view``), the channels checked
-    on each stretch alone."""
+    on each stretch alone. ``orders``: a list that receives the cut log's
+    :func:`rotor_order_status` read from the rotor-order check's own torque balances (the
+    same status), or None where the check did not read what the status reads (a log
+    without rotor speeds)."""
     check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
     # ground, idle and landing spans (quadsim.logs.spans)
     log, note = join_airborne(log) if joined else cut_ground(log)
     notes += [note] if note else []
+    readings = None if orders is None or params is None else []
     for part in log.parts():
-        notes += [n for n in _channel_checks(part, params) if n not in notes]
+        notes += [n for n in _channel_checks(part, params, readings) if n not in notes]
+    if orders is not None:
+        orders.append(None if readings is None or None in readings
+                      else rotor_order_status(log, params, readings=readings))
     return log, notes
 
 
@@ -770,13 +805,14 @@ def check_log_stretches(log, params=None):
     return logs, notes
 
 
-def check_logs(logs, params=None):
+def check_logs(logs, params=None, *, orders: list | None = None):
     """:func:`check_log` on each, every airborne stretch a segment (``joined``); returns
     (logs, notes). The diagnosis (``gap``) is its caller; a log without a pose is checked
-    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.logcheck`)."""
+    like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.logcheck`).
+    ``orders``: a list that receives each log's rotor-order status (:func:`check_log`)."""
     out, notes = [], []
     for log in logs:
-        log, n = check_log(log, params, joined=True)
+        log, n = check_log(log, params, joined=True, orders=orders)
         out.append(log)
         notes.extend(n)
     return out, notes
