@@ -122,6 +122,7 @@ from benchmarks.observe import MIN_GAIN
 from benchmarks.score import joined_kind
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimError, QuadsimWarning
+from quadsim.core.executor import limit_numeric_threads
 from quadsim.core.files import atomic_write_text
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
@@ -680,6 +681,7 @@ def speed_benchmark() -> str:
             f"effects + baseline + k-step: {first:.1f} s; verdict {result['verdict']['effect']}\n")
 
 
+@limit_numeric_threads
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="gap_benchmark.json", help="per-case results (JSON)")

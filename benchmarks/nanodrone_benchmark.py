@@ -54,6 +54,7 @@ from benchmarks import nanodrone as bench
 from benchmarks.rollout import rollout
 from quadsim.core.args import check_output
 from quadsim.core.errors import InputError, QuadsimWarning, run_cli
+from quadsim.core.executor import limit_numeric_threads
 from quadsim.core.files import atomic_write_bytes, atomic_write_text
 from quadsim.effects.base import EffectSet
 from quadsim.effects.effectfile import load_effect_file
@@ -159,6 +160,7 @@ def plot(path: Path, curves: dict, protocol: str, published: bool) -> None:
 
 
 @run_cli
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -31,6 +31,8 @@ import warnings
 from multiprocessing import Pool
 from pathlib import Path
 
+from quadsim.core.executor import limit_numeric_threads
+
 __all__ = ["main", "row_line"]
 
 
@@ -109,6 +111,7 @@ def row_line(r: dict) -> str:
             f"| {'YES' if r['confident_wrong'] else 'no'} |")
 
 
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cache", required=True, help="flight cache directory (created)")

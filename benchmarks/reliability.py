@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from quadsim.core.executor import limit_numeric_threads
+
 #: upper edges of the probability bins: [0, 0.7), [0.7, 0.9), [0.9, 0.99), [0.99, 1].
 #: 0.99 is where the answers' words say "> 99 %"; 0.9 and 0.7 split the rest of the range
 #: the diagnosis states (its lowest stated probabilities are about 0.4).
@@ -248,6 +250,7 @@ def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[A
     return out
 
 
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--generated", action="store_true",

@@ -66,6 +66,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
+from quadsim.core.executor import limit_numeric_threads  # noqa: E402
 from quadsim.core.files import atomic_write_text  # noqa: E402
 from quadsim.gap.residual import flight_states  # noqa: E402
 from quadsim.logs.flightlog import load_log  # noqa: E402
@@ -604,6 +605,7 @@ speed = {{ value = [{speeds}], unit = "rad/s", source = "{src_map}" }}
 
 
 @run_cli
+@limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)

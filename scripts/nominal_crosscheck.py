@@ -34,7 +34,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout
 
 from quadsim.core.errors import InputError, QuadsimWarning, run_cli  # noqa: E402
-from quadsim.core.executor import run_tasks  # noqa: E402
+from quadsim.core.executor import limit_numeric_threads, run_tasks  # noqa: E402
 from quadsim.gap import diagnose_per_flight  # noqa: E402
 from quadsim.gap.__main__ import collapse_warnings  # noqa: E402
 from quadsim.logs.flightlog import load_log  # noqa: E402
@@ -117,6 +117,7 @@ def _base_effects(path: Path | None) -> tuple:
     return tuple(model.effects.effects)
 
 
+@limit_numeric_threads
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA,
