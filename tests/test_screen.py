@@ -235,3 +235,36 @@ def test_a_late_log_without_a_hint_is_found_within_its_own_prior():
     shared, own = delay_starts(late, 0.0203, hint_s=0.0)
     assert own == pytest.approx(0.016, abs=DELAY_GRID_S / 2 + 1e-9)
     assert abs(shared) <= DELAY_GRID_SDS * 0.0035 + 1e-9
+
+
+def test_a_fit_that_ends_where_no_rigid_vehicle_is_has_no_evidence(cf, reference):
+    """A fit that ends on :meth:`Problem.stacked`'s wall (values that make no rigid vehicle:
+    a constant residual, a zero Jacobian, a singular precision) weighs nothing: log Z = -inf,
+    not the +inf a singular log det gives, which made a held-out run's posterior NaN
+    (quadcopter-sim case 14, `inertia_error` at the triangle inequality). The posterior
+    counts a NaN log evidence as -inf too."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.judge import posterior
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = prepare([CASES["lag"](cf)], cf)[0].fit
+    names = list(reference.candidate.parameter_names)
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    expl = next(e for e in explanations_for(reference, states) if e.name == "inertia_error")
+    prob = Problem(states, reference, expl, jac, reference.s_ref, {})
+    k = len(prob.mean)
+    wall = prob.evidence(np.zeros(k), np.full(prob.size, 1e3), np.zeros((k, k)), 0)
+    assert wall.log_z == -np.inf
+    fine = prob.evidence(np.zeros(k), prob.stacked(np.zeros(k)), np.eye(k), 0)
+    assert np.isfinite(fine.log_z)
+    rows = [SimpleNamespace(name="no_difference", log_z=-10.0, determined={}),
+            SimpleNamespace(name="mass_offset", log_z=-12.0, determined={"m": True}),
+            SimpleNamespace(name="inertia_error", log_z=float("nan"), determined={"xx": True}),
+            SimpleNamespace(name="motor_lag", log_z=wall.log_z, determined={"tau": True})]
+    got = {name: p for name, p, _ in posterior(rows)}
+    assert got["inertia_error"] == 0.0 and got["motor_lag"] == 0.0
+    assert np.isclose(got["no_difference"] + got["mass_offset"], 1.0)
+    # no_difference carries the prior of the 3 effects: odds e^2 * 3 against mass_offset
+    assert np.isclose(got["no_difference"] / got["mass_offset"], 3 * np.exp(2.0))

@@ -624,6 +624,8 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
     rows = evaluate(stack_states(train), reference, expl, full=True)
     out = []
     for ev in rows:
+        if not np.isfinite(ev.log_z):   # its fit ended where no rigid vehicle is: no reading
+            continue
         try:
             out.append(check(ev, train, held, reference))
         except ModelError:      # its values make no rigid vehicle: not a reading

@@ -604,6 +604,11 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
         logdet_h, post = 0.0, np.zeros(0)
     theta = mean + sd * z
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
+    if not np.isfinite(logdet_h):
+        # H holds the prior's identity rows, so it is singular only where the fit ended on the
+        # wall of values that make no rigid vehicle (:meth:`Problem.stacked`: a constant
+        # residual, a zero Jacobian): no fit, no evidence (not +inf, which would win)
+        log_z = -np.inf
     n = prob.marg.j.shape[0]
     resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
     keys = expl.parameter_names

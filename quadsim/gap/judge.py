@@ -491,7 +491,9 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
             key = "no_difference"
         groups.setdefault(key, []).append(ev)
     prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
-    logs = {k: logsumexp([e.log_z + (prior_null if e.name == "no_difference" else 0.0)
+    # a log evidence that is not a number weighs nothing (-inf), never the whole posterior
+    logs = {k: logsumexp([(e.log_z if not np.isnan(e.log_z) else -np.inf)
+                          + (prior_null if e.name == "no_difference" else 0.0)
                           for e in v]) for k, v in groups.items()}
     total = logsumexp(list(logs.values()))
     out = [(k, float(np.exp(logs[k] - total)),
