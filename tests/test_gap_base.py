@@ -77,6 +77,17 @@ def test_effects_file_cli(flights, tmp_path, capsys):
     assert main(["--model", "crazyflie21", "--effects-file", str(tmp_path / "none.toml"),
                  *paths, "--quiet"]) == 2
     assert "--effects-file: file not found" in capsys.readouterr().err
+    # an effect the engines integrate (a swinging payload) cannot be a diagnosis' base:
+    # refused at once, naming the file and the effect, nothing written
+    swing = tmp_path / "swing.toml"
+    swing.write_text('schema = "quadsim.effects/1"\nparams = "crazyflie21"\n[[effect]]\n'
+                     'name = "cable_payload"\nmass = { value = 0.004, unit = "kg", '
+                     'source = "test" }\nlength = { value = 0.45, unit = "m", source = "test" }\n')
+    assert main(["--model", "crazyflie21", "--effects-file", str(swing), *paths,
+                 "--json", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {swing}: effect cable_payload: has an internal state")
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_write_effects_then_diagnose_again(flights, tmp_path):

@@ -281,6 +281,15 @@ def _write_effects(args, params, base, result) -> None:
         header=f"Written by python -m quadsim.gap --write-effects (rerun it instead of "
                f"editing by hand): {', '.join(n for n, _ in kept + added)} on {params.name}.")
     atomic_write_text(args.write_effects, text)
+    from ..effects import make_effect
+
+    stateful = [n for n, values in added
+                if make_effect(n, **{k: v[0] for k, v in values.items()}).state_size() > 0]
+    if stateful:
+        print(f"note: {args.write_effects}: {', '.join(stateful)} has an internal state the "
+              "engines integrate: the file serves the simulators; as --effects-file for "
+              "quadsim.gap it is refused (a logged flight's residual cannot evaluate it)",
+              file=sys.stderr)
 
 
 def _with_effects_file(result, path, base_effects):
@@ -390,6 +399,13 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError(f"{args.effects_file}: params: the effects complete "
                              f"{base.params!r}, --model is {params.name!r}")
         base_effects = base.effects.effects
+        stateful = [e.name for e in base_effects if e.state_size() > 0]
+        if stateful:
+            raise InputError(
+                f"{args.effects_file}: effect {stateful[0]}: has an internal state (the engines "
+                "integrate it along a simulation) that the residual of a logged flight cannot "
+                "evaluate, so the diagnosis cannot start from it: remove it from the file for "
+                "quadsim.gap (the file still serves the simulators)")
     for out, suffix in ((args.json, ".json"), (args.report, ".html"), (args.rerun, ".rrd")):
         if out is not None and not out.endswith(suffix):
             raise InputError(f"{out}: output name must end in {suffix}")
