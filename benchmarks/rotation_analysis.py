@@ -746,6 +746,24 @@ def mechanism_balance(train: list[RotationSignals], held: list[RotationSignals],
     return out
 
 
+def _best_addition(pool: list[str], chosen: list[str], design, score) -> tuple:
+    """One greedy step: the name of ``pool`` not yet ``chosen`` whose least-squares fit on the
+    stacked ``design((*chosen, name))`` parts ((x, y) per log) gives the smallest
+    ``score(y, fitted)``; (name, score, coefficients)."""
+    best = None
+    for name in pool:
+        if name in chosen:
+            continue
+        parts = design((*chosen, name))
+        x = np.vstack([p[0] for p in parts])
+        y = np.concatenate([p[1] for p in parts])
+        coef = np.linalg.lstsq(x, y, rcond=None)[0]
+        r = score(y, x @ coef)
+        if best is None or r < best[1]:
+            best = (name, r, coef)
+    return best
+
+
 def feature_selection(train: list[RotationSignals], held: list[RotationSignals], axis: int,
                       *, steps: int = 3, cutoff_hz: float = 2.0) -> list[dict]:
     """Greedy forward selection among the :data:`FEATURES` (beside the flapping regressor) on
@@ -757,17 +775,10 @@ def feature_selection(train: list[RotationSignals], held: list[RotationSignals],
     pool = [f"feature:{name}" for name in FEATURES]
     rows = []
     for _ in range(steps):
-        best = None
-        for name in pool:
-            if name in chosen:
-                continue
-            parts = [_lowband_design(s, axis, (*chosen, name), cutoff_hz) for s in train]
-            x = np.vstack([p[0] for p in parts])
-            y = np.concatenate([p[1] for p in parts])
-            coef = np.linalg.lstsq(x, y, rcond=None)[0]
-            r = float(np.std(y - x @ coef))
-            if best is None or r < best[1]:
-                best = (name, r)
+        best = _best_addition(
+            pool, chosen, lambda names: [_lowband_design(s, axis, names, cutoff_hz)
+                                         for s in train],
+            lambda y, fitted: float(np.std(y - fitted)))
         chosen.append(best[0])
         res = mechanism_balance(train, held, axis, tuple(chosen), cutoff_hz=cutoff_hz)
         rows.append({"feature": best[0].split(":", 1)[1], "train_rms": float(f"{best[1]:.3g}"),
@@ -795,17 +806,9 @@ def windowed_selection(train: list[RotationSignals], held: list[RotationSignals]
     pool = [f"feature:{n}" for n in FEATURES if n not in TORQUE_FEATURES]
     rows = []
     for _ in range(steps):
-        best = None
-        for name in pool:
-            if name in chosen:
-                continue
-            parts = [_windows_with(s, axis, (*chosen, name), horizon) for s in train]
-            x = np.vstack([p[0] for p in parts])
-            y = np.concatenate([p[1] for p in parts])
-            coef = np.linalg.lstsq(x, y, rcond=None)[0]
-            r = float(np.sqrt(np.mean((y - x @ coef) ** 2) / np.mean(y ** 2)))
-            if best is None or r < best[1]:
-                best = (name, r, coef)
+        best = _best_addition(
+            pool, chosen, lambda names: [_windows_with(s, axis, names, horizon) for s in train],
+            lambda y, fitted: float(np.sqrt(np.mean((y - fitted) ** 2) / np.mean(y ** 2))))
         chosen.append(best[0])
         held_ratio = {}
         for s in held:
