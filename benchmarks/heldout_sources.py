@@ -217,10 +217,12 @@ def diagnosed_set(refs: list, params, *, label: str, held: int = SET_HELD,
     alone (``--add PART``, their single fits); an ``unexplained`` answer adds its most
     probable reading (the CLI refuses ``--write-effects`` there and asks for ``--add NAME``
     of a ranked candidate), its parts outside the library (``nominal_refit``) left out.
-    Stops at ``no_significant_gap`` or when nothing new can be added. Returns
+    Stops at ``no_significant_gap``, when nothing new can be added, or where the set so far
+    cannot be a base (:class:`~quadsim.core.errors.ModelError`: ``cable_payload`` needs
+    its integrated state, which the residual of a logged flight lacks). Returns
     ([(effect, {parameter: (value, source)})] for
     :func:`quadsim.effects.effectfile.render_effect_file`, the rounds)."""
-    from quadsim.core.errors import InputError, QuadsimWarning
+    from quadsim.core.errors import InputError, ModelError, QuadsimWarning
     from quadsim.effects import make_effect
     from quadsim.gap import diagnose
     from quadsim.gap.report import added_effects, named_candidate
@@ -235,10 +237,19 @@ def diagnosed_set(refs: list, params, *, label: str, held: int = SET_HELD,
     for _ in range(rounds):
         base = tuple(make_effect(name, **{k: v for k, (v, _) in values.items()})
                      for name, values in kept)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", QuadsimWarning)
-            warnings.simplefilter("ignore", RuntimeWarning)
-            result = diagnose(train, params, holdout=holdout, kstep=False, base_effects=base)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", QuadsimWarning)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                result = diagnose(train, params, holdout=holdout, kstep=False,
+                                  base_effects=base)
+        except ModelError as exc:     # an effect the residual cannot evaluate as a base
+            done.append(SetRound(base=tuple(n for n, _ in kept), outcome="error", lead="",
+                                 probability=None, tentative=False, added=(),
+                                 stop=f"the set so far is no base: {exc}", via="",
+                                 verdict={}))
+            progress(f"round {len(done)}: {done[-1].stop}")
+            break
         raw = json.loads(json.dumps(result.to_json(), default=_plain))
         verdict = raw.get("verdict") or {}
         named, via = named_candidate(raw), "named"

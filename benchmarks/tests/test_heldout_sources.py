@@ -199,3 +199,24 @@ def test_diagnosed_set_unexplained_adds_most_probable(monkeypatch):
     assert [(n, p["coefficient"][0]) for n, p in kept] == [("rotor_drag", 2.4e-6)]
     assert rounds[0].via.startswith("--add") and rounds[0].added == ("rotor_drag",)
     assert len(rounds) == 2 and rounds[1].added == () and "names nothing" in rounds[1].stop
+
+
+def test_diagnosed_set_stops_where_the_set_is_no_base(monkeypatch):
+    """A round whose base the residual cannot evaluate (ModelError) ends the set: the effects
+    added so far are kept, the round says why."""
+    import quadsim.gap
+    from quadsim.core.errors import ModelError
+
+    answers = [_diagnosis("effect", "motor_lag", [_fit("motor_lag", {
+        "motor_lag.time_constant": 0.02})])]
+
+    def fake(*args, base_effects, **kwargs):
+        if base_effects:
+            raise ModelError("cable_payload: needs its internal state")
+        return _Result(answers.pop(0))
+
+    monkeypatch.setattr(quadsim.gap, "diagnose", fake)
+    kept, rounds = ho.diagnosed_set(list(range(8)), None, label="x", progress=lambda m: None)
+    assert [(n, p["time_constant"][0]) for n, p in kept] == [("motor_lag", 0.02)]
+    assert [r.outcome for r in rounds] == ["effect", "error"]
+    assert rounds[1].base == ("motor_lag",) and "no base" in rounds[1].stop
