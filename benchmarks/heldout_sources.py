@@ -19,11 +19,26 @@ simulator sources' case seeds are 6e4-1.5e5 and their reference seeds 7e4-1.6e5,
 derived seed (>= 6e5) is any flight's seed of its source. No-effect cases are the source's
 ``none`` cases with their 2 extra flights, judged the same way.
 
+``--train N`` (default 2, the first run's setting) trains on N extra flights: flight k is
+seed ``10 s + k`` at path speed ``v x SPEED_FACTORS[k - 1]`` (the third: ``10 s + 3`` at the
+case's own speed ``v``, another path phase and noise); N >= 3 is held-out mode's minimum for
+practical significance (docs/gap.md). ``--effects-file PATH`` (an effect file,
+:mod:`quadsim.effects.effectfile`, completing the source's parameter set) is every case's base
+model (``diagnose(..., base_effects=)``, what the CLI's ``--effects-file`` passes).
+``--diagnose-set OUT.toml`` builds such a file the way a user would, from the source's 8
+nominal reference flights only (never from the cases, :func:`diagnosed_set`): held-out mode
+on 6 of them (2 held out), the named effect added (``--write-effects``), again from that file,
+at most :data:`SET_ROUNDS` rounds, stopping at an answer that names nothing new.
+
 Cache: ``CACHE/<source>-heldout-<hash>/`` beside the per-flight folder
 (:func:`benchmarks.sim_cases.flight_dir`, whose flights and ``observability.json`` are read,
 or flown first); ``hash`` is the per-flight code hash (:func:`benchmarks.sim_cases.code_hash`)
-with this module's bytes (:func:`heldout_hash`): a change of either never reads a stale
-flight. Each extra flight as ``NAME.csv.gz`` with its ``NAME.truth.json``.
+with the source text of what defines the extra flights (:func:`heldout_hash`: the seed,
+speed and name rules and the flying function, not the judging code): a change of either
+never reads a stale flight, and flight k is the same flight whatever ``--train``. (The first
+run keyed the folder with this module's whole bytes; its flights are these flights, same
+seeds and speeds: its folders can be renamed to the new key.) Each extra flight as
+``NAME.csv.gz`` with its ``NAME.truth.json``.
 
 Scoring (:mod:`.score`, as the RotorPy held-out rows): in-library cases count when they are
 observable, here the source's per-flight observability of the held-out flight (its true
@@ -34,7 +49,10 @@ difference from the references cuts that flight's residual by the source's thres
 Usage::
 
     python -m benchmarks.heldout_sources --source crazyflow --cache /tmp/cfcache \\
-        --out cf_heldout.json [--jobs 1] [--cases 0-5,9] [--generate-only]
+        --out cf_heldout.json [--jobs 1] [--cases 0-5,9] [--generate-only] [--train 3] \\
+        [--effects-file cf_set.toml]
+    python -m benchmarks.heldout_sources --source crazyflow --cache /tmp/cfcache \\
+        --diagnose-set cf_set.toml          # the diagnosed set from the nominal flights
 """
 
 from __future__ import annotations
@@ -42,6 +60,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import hashlib
+import inspect
 import json
 import os
 import resource
@@ -54,13 +73,18 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-__all__ = ["EXTRA", "SPEED_FACTORS", "extra_name", "extra_seeds", "extra_specs", "fly_extra",
-           "heldout_dir", "heldout_hash", "judge_case", "main", "parse_cases", "summarise"]
+__all__ = ["EXTRA", "SET_HELD", "SET_ROUNDS", "SPEED_FACTORS", "SetRound", "diagnosed_set",
+           "extra_name", "extra_seeds", "extra_specs", "fly_extra", "heldout_dir",
+           "heldout_hash", "judge_case", "main", "parse_cases", "summarise"]
 
-#: extra flights per case (the training flights; the frozen case flight is held out)
+#: extra flights per case by default (the training flights; the frozen case flight is held
+#: out): the first run's setting
 EXTRA = 2
-#: path speed of extra flight k (1, 2) as a factor of the case's speed
-SPEED_FACTORS = (1.1, 0.9)
+#: path speed of extra flight k (1, 2, 3) as a factor of the case's speed
+SPEED_FACTORS = (1.1, 0.9, 1.0)
+#: :func:`diagnosed_set`: nominal flights held out (the last ones) and rounds at most
+SET_HELD = 2
+SET_ROUNDS = 3
 #: extra flights flown per child process of the simulator (a lost batch loses few flights)
 BATCH = 8
 
@@ -76,22 +100,29 @@ def extra_name(index: int, case: dict, k: int) -> str:
     return f"case_{index:02d}_{case['case']}_x{k}"
 
 
-def extra_specs(source, index: int, case: dict) -> list[tuple[str, object]]:
-    """(name, spec) of a case's :data:`EXTRA` flights: the source's own ``case_spec`` with the
-    derived seed and speed (module doc)."""
+def extra_specs(source, index: int, case: dict, count: int = EXTRA) -> list[tuple[str, object]]:
+    """(name, spec) of a case's first ``count`` extra flights (at most
+    ``len(SPEED_FACTORS)``): the source's own ``case_spec`` with the derived seed and speed
+    (module doc)."""
+    if not 1 <= count <= len(SPEED_FACTORS):
+        raise ValueError(f"extra flights per case: 1-{len(SPEED_FACTORS)}, not {count}")
     spec = source.case_spec(case)
     return [(extra_name(index, case, k), dataclasses.replace(spec, seed=seed,
                                                              speed=case["speed"] * factor))
-            for k, (seed, factor) in enumerate(zip(extra_seeds(case["seed"]), SPEED_FACTORS),
-                                               start=1)]
+            for k, (seed, factor) in enumerate(zip(extra_seeds(case["seed"], count),
+                                                   SPEED_FACTORS), start=1)]
 
 
 def heldout_hash(source) -> str:
-    """The per-flight code hash of ``source`` with this module's bytes (12 hex digits)."""
+    """The per-flight code hash of ``source`` with the source text of the extra flights'
+    recipe (:func:`extra_seeds`, :func:`extra_name`, :func:`extra_specs`, :func:`fly_extra`,
+    :data:`SPEED_FACTORS`) (12 hex digits)."""
     from . import sim_cases
 
     digest = hashlib.sha256(sim_cases.code_hash(source).encode())
-    digest.update(Path(__file__).read_bytes())
+    for part in (extra_seeds, extra_name, extra_specs, fly_extra):
+        digest.update(inspect.getsource(part).encode())
+    digest.update(repr(SPEED_FACTORS).encode())
     return digest.hexdigest()[:12]
 
 
@@ -99,8 +130,9 @@ def heldout_dir(source, cache) -> Path:
     return Path(cache) / f"{source.name}-heldout-{heldout_hash(source)}"
 
 
-def fly_extra(source, cache, indices: list[int], progress=print) -> Path:
-    """Fly (or keep) the extra flights of the cases numbered ``indices``; the folder."""
+def fly_extra(source, cache, indices: list[int], progress=print, count: int = EXTRA) -> Path:
+    """Fly (or keep) the first ``count`` extra flights of the cases numbered ``indices``; the
+    folder."""
     from quadsim.core.files import atomic_write_text
     from quadsim.logs.flightlog import write_log
 
@@ -110,7 +142,7 @@ def fly_extra(source, cache, indices: list[int], progress=print) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     cases = source.cases()
     todo = [(name, spec, cases[i]) for i in indices for name, spec in extra_specs(
-        source, i, cases[i]) if not (out / f"{name}.csv.gz").exists()]
+        source, i, cases[i], count) if not (out / f"{name}.csv.gz").exists()]
     for start in range(0, len(todo), BATCH):
         batch = todo[start:start + BATCH]
         progress(f"{source.name}: flying extra flights {start + 1}-{start + len(batch)} of "
@@ -128,10 +160,11 @@ def _top(posterior, count: int = 6) -> list[dict]:
                                    "params", "ci")} for p in list(posterior or [])[:count]]
 
 
-def judge_case(row: dict, train: list, params) -> dict:
+def judge_case(row: dict, train: list, params, base_effects=()) -> dict:
     """Held-out verdict of one case: ``train`` (its extra flights) fitted, ``row["_log"]``
-    (its frozen flight) held out; the row (without the log) with ``heldout`` (the read
-    verdict, its score and what it rests on) and ``cpu_s`` (this process's CPU seconds)."""
+    (its frozen flight) held out, ``base_effects`` (an effect file's effects) in the model;
+    the row (without the log) with ``heldout`` (the read verdict, its score and what it rests
+    on) and ``cpu_s`` (this process's CPU seconds)."""
     from quadsim.core.errors import QuadsimWarning
     from quadsim.gap import diagnose
 
@@ -141,7 +174,8 @@ def judge_case(row: dict, train: list, params) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
-        result = diagnose(train, params, holdout=[row["_log"]], kstep=False)
+        result = diagnose(train, params, holdout=[row["_log"]], kstep=False,
+                          base_effects=tuple(base_effects))
     cpu = time.process_time() - start
     raw = json.loads(json.dumps(result["verdict"], default=_plain))
     verdict = read_verdict(raw)
@@ -151,6 +185,110 @@ def judge_case(row: dict, train: list, params) -> dict:
             "heldout": {**verdict, "score": score_case(row["truth"], row["kind"], verdict),
                         "raw": {k: v for k, v in raw.items() if k != "posterior"},
                         "posterior": _top(raw.get("posterior"))}}
+
+
+@dataclasses.dataclass(frozen=True)
+class SetRound:
+    """One round of :func:`diagnosed_set`: the held-out answer on the nominal flights with the
+    effects added so far as base (``base``), its lead (``lead``, the verdict's effect name),
+    ``probability``, ``tentative``, the effects this round added (``added``; empty: the
+    set stops here), how they were chosen (``via``: "named", or the most probable reading of
+    an ``unexplained`` answer) and why it stopped (``stop``; "" when it went on)."""
+
+    base: tuple[str, ...]
+    outcome: str
+    lead: str
+    probability: float | None
+    tentative: bool
+    added: tuple[str, ...]
+    stop: str
+    via: str
+    verdict: dict
+
+
+def diagnosed_set(refs: list, params, *, label: str, held: int = SET_HELD,
+                  rounds: int = SET_ROUNDS, progress=print) -> tuple[list, list[SetRound]]:
+    """The user's diagnosed set from nominal flights (module doc): held-out mode
+    (``diagnose(refs[:-held], params, holdout=refs[-held:], kstep=False, base_effects=...)``)
+    in up to ``rounds`` rounds; each round adds the named effect (or combination) with its
+    fitted values, as ``--write-effects`` does (:func:`quadsim.gap.report.added_effects`), and
+    the next round starts from the effects so far; a named combination with a part already in
+    the set (an effect file holds each effect once: the CLI refuses it) adds its new parts
+    alone (``--add PART``, their single fits); an ``unexplained`` answer adds its most
+    probable reading (the CLI refuses ``--write-effects`` there and asks for ``--add NAME``
+    of a ranked candidate), its parts outside the library (``nominal_refit``) left out.
+    Stops at ``no_significant_gap``, when nothing new can be added, or where the set so far
+    cannot be a base (:class:`~quadsim.core.errors.ModelError`: ``cable_payload`` needs
+    its integrated state, which the residual of a logged flight lacks). Returns
+    ([(effect, {parameter: (value, source)})] for
+    :func:`quadsim.effects.effectfile.render_effect_file`, the rounds)."""
+    from quadsim.core.errors import InputError, ModelError, QuadsimWarning
+    from quadsim.effects import make_effect
+    from quadsim.gap import diagnose
+    from quadsim.gap.report import added_effects, named_candidate
+
+    if not 1 <= held < len(refs) - 1:
+        raise ValueError(f"held-out nominal flights: 1-{len(refs) - 2}, not {held}")
+    train, holdout = refs[:-held], refs[-held:]
+    words = (f"{label}: nominal flights 0-{len(train) - 1} (held out: "
+             f"{', '.join(str(k) for k in range(len(train), len(refs)))})")
+    kept: list = []
+    done: list[SetRound] = []
+    for _ in range(rounds):
+        base = tuple(make_effect(name, **{k: v for k, (v, _) in values.items()})
+                     for name, values in kept)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", QuadsimWarning)
+                warnings.simplefilter("ignore", RuntimeWarning)
+                result = diagnose(train, params, holdout=holdout, kstep=False,
+                                  base_effects=base)
+        except ModelError as exc:     # an effect the residual cannot evaluate as a base
+            done.append(SetRound(base=tuple(n for n, _ in kept), outcome="error", lead="",
+                                 probability=None, tentative=False, added=(),
+                                 stop=f"the set so far is no base: {exc}", via="",
+                                 verdict={}))
+            progress(f"round {len(done)}: {done[-1].stop}")
+            break
+        raw = json.loads(json.dumps(result.to_json(), default=_plain))
+        verdict = raw.get("verdict") or {}
+        named, via = named_candidate(raw), "named"
+        if named is None and verdict.get("outcome") == "unexplained" \
+                and verdict.get("best_candidate"):
+            # the CLI refuses --write-effects here and says "choose a ranked candidate with
+            # --add NAME": a user adds the most probable reading
+            named, via = str(verdict["best_candidate"]), "--add, unexplained: most probable"
+        stop, added = "", []
+        if named is None:
+            stop = f"answer {verdict.get('outcome')}: names nothing"
+        else:
+            have = tuple(n for n, _ in kept)
+            try:
+                added = added_effects(raw, None, logs=words, base=have)
+            except InputError as exc:
+                # a combination with an effect already in the set: what the CLI's error
+                # leaves a user, --add each new part alone (its own single fit)
+                for part in [n for n in named.split("+") if n not in have]:
+                    try:
+                        added += added_effects(raw, part, logs=words, base=have)
+                    except InputError:
+                        pass
+                if not added:
+                    stop = f"nothing new it can add ({exc})"
+        done.append(SetRound(base=tuple(n for n, _ in kept),
+                             outcome=str(verdict.get("outcome")),
+                             lead=str(verdict.get("effect")),
+                             probability=verdict.get("probability"),
+                             tentative=bool(verdict.get("tentative")),
+                             added=tuple(n for n, _ in added), stop=stop, via=via,
+                             verdict={k: v for k, v in verdict.items() if k != "posterior"}))
+        progress(f"round {len(done)}: {done[-1].outcome} {done[-1].lead} [{via}] "
+                 f"(p {done[-1].probability}); added {', '.join(done[-1].added) or '-'}"
+                 f"{'; ' + stop if stop else ''}")
+        if stop:
+            break
+        kept += added
+    return kept, done
 
 
 def _plain(value):
@@ -223,10 +361,21 @@ def _cpu_seconds() -> float:
 
 
 def _judge_task(task: tuple) -> dict:
-    """One case in a worker process: (source name, cache, case number)."""
-    name, cache, index = task
+    """One case in a worker process: (source name, cache, case number, training flights,
+    effect file or None)."""
+    name, cache, index, count, effects_file = task
     source = _source(name)
-    return _judge_index(source, cache, index, _frozen(source, cache)[1][index])
+    return _judge_index(source, cache, index, _frozen(source, cache)[1][index], count=count,
+                        base=_base_effects(effects_file))
+
+
+def _base_effects(path) -> tuple:
+    """The effects of the effect file ``path`` (None: none)."""
+    if path is None:
+        return ()
+    from quadsim.effects.effectfile import load_effect_file
+
+    return tuple(load_effect_file(path).effects.effects)
 
 
 def _source(name: str):
@@ -243,13 +392,43 @@ def _frozen(source, cache):
     return sim_cases.load_flights(source, cache)
 
 
-def _judge_index(source, cache, index: int, row: dict) -> dict:
+def _judge_index(source, cache, index: int, row: dict, *, count: int = EXTRA,
+                 base: tuple = ()) -> dict:
     from quadsim.logs.flightlog import load_log
 
     folder = heldout_dir(source, cache)
     train = [load_log(folder / f"{name}.csv.gz", warn=False)
-             for name, _ in extra_specs(source, index, source.cases()[index])]
-    return {**judge_case(row, train, source.params()), "index": index}
+             for name, _ in extra_specs(source, index, source.cases()[index], count)]
+    return {**judge_case(row, train, source.params(), base), "index": index}
+
+
+def _write_set(source, cache, out: str, say) -> int:
+    """``--diagnose-set``: the diagnosed set from the source's nominal flights, written as an
+    effect file (``out``) with the rounds beside it (``out`` with ``.rounds.json``)."""
+    from dataclasses import asdict
+
+    from quadsim.core.files import atomic_write_text
+    from quadsim.effects.effectfile import render_effect_file
+
+    refs, _ = _frozen(source, cache)
+    params = source.params()
+    start, wall, load = _cpu_seconds(), time.time(), os.getloadavg()
+    kept, rounds = diagnosed_set(refs, params, label=source.name, progress=say)
+    names = ", ".join(n for n, _ in kept) or "no effect"
+    atomic_write_text(out, render_effect_file(
+        params.name, f"{params.name} plus the effects held-out mode named on its {len(refs)} "
+        f"nominal flights ({source.name}; benchmarks.heldout_sources --diagnose-set)", kept,
+        header=f"Written by python -m benchmarks.heldout_sources --diagnose-set: {names} on "
+               f"{params.name}."))
+    meta = {"source": source.name, "command": " ".join(sys.argv), "effects": names,
+            "cpu_s": _cpu_seconds() - start, "wall_s": time.time() - wall,
+            "load_start": load, "load_end": os.getloadavg()}
+    atomic_write_text(str(Path(out).with_suffix(".rounds.json")), json.dumps(
+        {"run": meta, "rounds": [asdict(r) for r in rounds]}, indent=1, sort_keys=True,
+        default=_plain) + "\n")
+    print(f"{out}: {names} ({len(rounds)} round(s)); CPU {meta['cpu_s']:.0f} s, wall "
+          f"{meta['wall_s']:.0f} s; load {load[0]:.1f} -> {meta['load_end'][0]:.1f}")
+    return 0
 
 
 def run(args) -> int:
@@ -270,10 +449,28 @@ def run(args) -> int:
     except ValueError as exc:
         print(f"error: --cases: {exc}", file=sys.stderr)
         return 2
+    base = ()
+    if args.effects_file is not None:
+        from quadsim.core.errors import InputError
+
+        try:
+            base = _base_effects(args.effects_file)
+            from quadsim.effects.effectfile import load_effect_file
+
+            made_for = load_effect_file(args.effects_file).params
+        except (InputError, OSError) as exc:
+            print(f"error: {args.effects_file}: {exc}", file=sys.stderr)
+            return 2
+        if made_for != source.params().name:
+            print(f"error: {args.effects_file}: params: the effects complete {made_for!r}, "
+                  f"the source's set is {source.params().name!r}", file=sys.stderr)
+            return 2
     start, wall, load = _cpu_seconds(), time.time(), os.getloadavg()
     say = lambda m: print(m, file=sys.stderr)  # noqa: E731
     sim_cases.generate(source, args.cache, progress=say)       # the frozen flights (kept)
-    folder = fly_extra(source, args.cache, indices, progress=say)
+    if args.diagnose_set is not None:
+        return _write_set(source, args.cache, args.diagnose_set, say)
+    folder = fly_extra(source, args.cache, indices, progress=say, count=args.train)
     flown = _cpu_seconds() - start
     say(f"extra flights in {folder}; flying and checking: {flown:.0f} s CPU")
     if args.generate_only:
@@ -283,16 +480,20 @@ def run(args) -> int:
         from multiprocessing import Pool
 
         with Pool(args.jobs) as pool:
-            rows = pool.map(_judge_task, [(args.source, args.cache, i) for i in indices])
+            rows = pool.map(_judge_task, [(args.source, args.cache, i, args.train,
+                                           args.effects_file) for i in indices])
     else:
         _, frozen = _frozen(source, args.cache)
         rows = []
         for i in indices:
-            rows.append(_judge_index(source, args.cache, i, frozen[i]))
+            rows.append(_judge_index(source, args.cache, i, frozen[i], count=args.train,
+                                     base=base))
             say(f"{i:2d} {rows[-1]['name']}: {rows[-1]['heldout']['outcome']} "
                 f"{'+'.join(rows[-1]['heldout']['lead'])}")
     meta = {"source": args.source, "command": " ".join(sys.argv), "folder": str(folder),
-            "heldout_hash": heldout_hash(source), "cases": indices,
+            "heldout_hash": heldout_hash(source), "cases": indices, "train": args.train,
+            "effects_file": args.effects_file,
+            "base_effects": [e.name for e in base],
             "cpu_s_flying": flown, "cpu_s_judging": _cpu_seconds() - judged,
             "wall_s": time.time() - wall, "load_start": load, "load_end": os.getloadavg()}
     from quadsim.core.files import atomic_write_text
@@ -319,9 +520,23 @@ def main(argv=None) -> int:
                         help="case numbers, e.g. 0-5,9 (default: all)")
     parser.add_argument("--generate-only", action="store_true",
                         help="only fly and cache the extra flights (no verdict)")
+    parser.add_argument("--train", type=int, default=EXTRA, metavar="N",
+                        help=f"training flights per case, 2-{len(SPEED_FACTORS)} (default "
+                             f"{EXTRA}, the first run's; 3 is held-out mode's minimum for "
+                             "practical significance)")
+    parser.add_argument("--effects-file", metavar="PATH",
+                        help="an effect file completing the source's parameter set: every "
+                             "case's base model (diagnose(..., base_effects=))")
+    parser.add_argument("--diagnose-set", metavar="OUT.toml",
+                        help="instead of judging cases: build the diagnosed set from the "
+                             "source's nominal flights (module doc) and write it")
     args = parser.parse_args(argv)
     if args.jobs < 1:
         print("error: --jobs: at least 1", file=sys.stderr)
+        return 2
+    if not 2 <= args.train <= len(SPEED_FACTORS):
+        print(f"error: --train: 2-{len(SPEED_FACTORS)} training flights per case",
+              file=sys.stderr)
         return 2
     return run(args)
 

@@ -1,6 +1,7 @@
 """benchmarks.heldout_sources without a simulator: the extra flights' seeds and speeds, their
-cache (flown once, keyed by the source's code hash and the module's bytes), the case list
-parser, and the scoring of hand-made held-out rows; no verdict is computed."""
+cache (flown once, keyed by the source's code hash and the flights' recipe), the case list
+parser, the scoring of hand-made held-out rows and the diagnosed set's rounds on a stand-in
+diagnosis; no verdict is computed."""
 
 from __future__ import annotations
 
@@ -25,6 +26,28 @@ def test_extra_seeds_and_specs():
     assert [s.seed for _, s in specs] == [600_031, 600_032]
     assert [s.speed for _, s in specs] == pytest.approx([0.88, 0.72], rel=1e-12)
     assert {s.duration for _, s in specs} == {0.2}
+
+
+def test_third_training_flight():
+    """--train 3: the third flight is seed 10 s + 3 at the case's own speed; the first two are
+    the default's; more than the speed factors give is refused."""
+    assert ho.extra_seeds(60_000, 3) == (600_001, 600_002, 600_003)
+    case = {"case": "none", "truth": "none", "kind": "none", "seed": 60_003, "speed": 0.8,
+            "effects": {}}
+    source = _source([case], [])
+    specs = ho.extra_specs(source, 0, case, 3)
+    assert [n for n, _ in specs] == ["case_00_none_x1", "case_00_none_x2", "case_00_none_x3"]
+    assert [s.seed for _, s in specs] == [600_031, 600_032, 600_033]
+    assert [s.speed for _, s in specs] == pytest.approx([0.88, 0.72, 0.8], rel=1e-12)
+    assert specs[:2] == ho.extra_specs(source, 0, case)
+    with pytest.raises(ValueError):
+        ho.extra_specs(source, 0, case, 4)
+
+
+def test_bad_train_count_refused(capsys):
+    for bad in ("1", "4"):
+        assert ho.main(["--source", "crazyflow", "--cache", "x", "--train", bad]) == 2
+        assert capsys.readouterr().err == "error: --train: 2-3 training flights per case\n"
 
 
 def test_derived_seeds_are_no_flight_of_the_source():
@@ -55,6 +78,9 @@ def test_fly_extra_once_and_keyed(tmp_path):
     ho.fly_extra(source, tmp_path, [0, 1], progress=lambda m: None)
     assert flown == [111, 112, 101, 102]
     assert ho.heldout_dir(_source(cases[:1], []), tmp_path) != folder
+    # a third training flight joins the same folder; the first two are kept
+    assert ho.fly_extra(source, tmp_path, [1], progress=lambda m: None, count=3) == folder
+    assert flown == [111, 112, 101, 102, 113]
 
 
 def test_parse_cases():
@@ -94,3 +120,103 @@ def test_summary_scores_rows():
     assert "| 50% (1/2) |" in score and "| 50% (1/2) | 1/2 |" in score
     assert [ho._ok(r) for r in rows] == [True, False, None, True, False, False, True]
     assert "| MISS (confident wrong) |" in text and "not observable" in text
+
+
+class _Result:
+    def __init__(self, raw):
+        self.raw = raw
+
+    def to_json(self):
+        return self.raw
+
+
+def _fit(name, params, reduction=0.5):
+    return {"name": name, "params": params, "ci": {k: 0.1 * abs(v) for k, v in params.items()},
+            "reduction": reduction}
+
+
+def _diagnosis(outcome, effect, effects, combination=None, best=None):
+    verdict = {"outcome": outcome, "effect": effect, "probability": 0.99, "tentative": True}
+    if best:
+        verdict["best_candidate"] = best
+    return {"verdict": verdict, "effects": effects, "combination": combination}
+
+
+def test_diagnosed_set_rounds(monkeypatch):
+    """Round 1 names motor_lag+rotor_drag: both added at the combination's values; round 2
+    (on top of them) names gyroscopic+rotor_drag: rotor_drag is in the set, gyroscopic is
+    added alone at its single fit (--add gyroscopic); round 3: no_significant_gap, stop.
+    Every round is diagnosed on 6 training and 2 held-out flights with the set so far."""
+    import quadsim.gap
+
+    answers = [
+        _diagnosis("effect", "motor_lag+rotor_drag", [_fit("motor_lag", {
+            "motor_lag.time_constant": 0.05})], _fit("motor_lag+rotor_drag", {
+                "motor_lag.time_constant": 0.058, "rotor_drag.coefficient": 2.0e-6})),
+        _diagnosis("effect", "gyroscopic+rotor_drag", [_fit("gyroscopic", {
+            "gyroscopic.rotor_inertia": 3.5e-8})], _fit("gyroscopic+rotor_drag", {
+                "gyroscopic.rotor_inertia": 3.4e-8, "rotor_drag.coefficient": 7e-7})),
+        _diagnosis("no_significant_gap", "no_significant_gap", [])]
+    calls = []
+
+    def fake(train, params, *, holdout, kstep, base_effects):
+        calls.append((train, holdout, kstep, [(e.name, None) for e in base_effects]))
+        return _Result(answers[len(calls) - 1])
+
+    monkeypatch.setattr(quadsim.gap, "diagnose", fake)
+    kept, rounds = ho.diagnosed_set(list(range(8)), None, label="standin",
+                                    progress=lambda m: None)
+    assert [(n, {k: v for k, (v, _) in p.items()}) for n, p in kept] == [
+        ("motor_lag", {"time_constant": 0.058}), ("rotor_drag", {"coefficient": 2.0e-6}),
+        ("gyroscopic", {"rotor_inertia": 3.5e-8})]
+    assert [c[0] for c in calls] == [list(range(6))] * 3
+    assert [c[1] for c in calls] == [[6, 7]] * 3 and not any(c[2] for c in calls)
+    assert [[n for n, _ in c[3]] for c in calls] == [
+        [], ["motor_lag", "rotor_drag"], ["motor_lag", "rotor_drag", "gyroscopic"]]
+    assert [r.added for r in rounds] == [("motor_lag", "rotor_drag"), ("gyroscopic",), ()]
+    assert [bool(r.stop) for r in rounds] == [False, False, True]
+    assert "nominal flights 0-5 (held out: 6, 7)" in kept[0][1]["time_constant"][1]
+
+
+def test_diagnosed_set_unexplained_adds_most_probable(monkeypatch):
+    """An unexplained answer adds its most probable reading's library part (rotor_drag of
+    rotor_drag+nominal_refit, whose refit is no library effect); an unexplained answer with
+    no reading stops the set."""
+    import quadsim.gap
+
+    answers = [
+        _diagnosis("unexplained", "unexplained", [
+            _fit("rotor_drag+nominal_refit", {"rotor_drag.coefficient": 2.5e-6,
+                                              "nominal_refit.thrust": 0.01}),
+            _fit("rotor_drag", {"rotor_drag.coefficient": 2.4e-6})],
+            best="rotor_drag+nominal_refit"),
+        _diagnosis("unexplained", "unexplained", [])]
+    def fake(*args, **kwargs):
+        return _Result(answers.pop(0))
+
+    monkeypatch.setattr(quadsim.gap, "diagnose", fake)
+    kept, rounds = ho.diagnosed_set(list(range(8)), None, label="x", progress=lambda m: None)
+    assert [(n, p["coefficient"][0]) for n, p in kept] == [("rotor_drag", 2.4e-6)]
+    assert rounds[0].via.startswith("--add") and rounds[0].added == ("rotor_drag",)
+    assert len(rounds) == 2 and rounds[1].added == () and "names nothing" in rounds[1].stop
+
+
+def test_diagnosed_set_stops_where_the_set_is_no_base(monkeypatch):
+    """A round whose base the residual cannot evaluate (ModelError) ends the set: the effects
+    added so far are kept, the round says why."""
+    import quadsim.gap
+    from quadsim.core.errors import ModelError
+
+    answers = [_diagnosis("effect", "motor_lag", [_fit("motor_lag", {
+        "motor_lag.time_constant": 0.02})])]
+
+    def fake(*args, base_effects, **kwargs):
+        if base_effects:
+            raise ModelError("cable_payload: needs its internal state")
+        return _Result(answers.pop(0))
+
+    monkeypatch.setattr(quadsim.gap, "diagnose", fake)
+    kept, rounds = ho.diagnosed_set(list(range(8)), None, label="x", progress=lambda m: None)
+    assert [(n, p["time_constant"][0]) for n, p in kept] == [("motor_lag", 0.02)]
+    assert [r.outcome for r in rounds] == ["effect", "error"]
+    assert rounds[1].base == ("motor_lag",) and "no base" in rounds[1].stop
