@@ -346,7 +346,7 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
              "|---|---|---|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(row) + " |" for row in summary_rows(groups, MIN_GAIN)]
     hidden = [r for r in rows if r["kind"] == "library" and r["oracle_reduction"] < MIN_GAIN]
-    moved = [r for r in rows if r["heldout"].get("truth", r["truth"]) != r["truth"]]
+    moved = [r for r in rows if r.get("heldout", {}).get("truth", r["truth"]) != r["truth"]]
     if moved:
         lines.append(f"\nheld-out mode judges against quadsim's nominal model (instant rotors): "
                      f"{len(moved)} RotorPy no-effect case(s) differ from it by RotorPy's own "
@@ -361,7 +361,7 @@ def summarise_independent(rows: list[dict], self_rows: list[dict] | None = None)
                  "true-effect reduction |")
     lines.append("|---|---|---|---|---|---|---|")
     for r in rows:
-        h, p = r["heldout"], r.get("per_flight", {})
+        h, p = r.get("heldout", {}), r.get("per_flight", {})
         lines.append(f"| {r['source']} | {r['vehicle']} | {r['truth']} | "
                      f"{_cell(h)} ({h.get('best_candidate')}) | {_cell(p)} | "
                      f"{', '.join(p.get('alternatives', []))} | {r['oracle_reduction']:.2f} |")

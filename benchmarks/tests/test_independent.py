@@ -149,3 +149,25 @@ def test_rotorpy_flight_flown_slower_or_faster_has_no_significant_gap(per_flight
     channel at 1.7x) but stays below the noise floor: no_significant_gap, nothing named."""
     verdict = read_verdict(per_flight["flights"][index])
     assert verdict["outcome"] == "no_significant_gap", (speed, verdict)
+
+
+def test_a_per_flight_only_result_is_summarised():
+    """`--summarise-independent` of a `--per-flight-only` result (rows without a held-out
+    verdict) gives the per-flight scores instead of a KeyError."""
+    from benchmarks.gap_benchmark import summarise_independent
+    from benchmarks.score import score_case
+
+    def row(truth, kind, named, outcome):
+        verdict = {"named": named, "lead": named, "outcome": outcome, "alternatives": [],
+                   "confident": True, "readings": len(named)}
+        return {"source": "sim", "vehicle": "v", "truth": truth, "kind": kind, "case": truth,
+                "oracle_reduction": 0.5 if kind == "library" else 0.0,
+                "per_flight": {**verdict, "score": score_case(truth, kind, verdict)}}
+
+    rows = [row("mass_offset", "library", ["mass_offset"], "effect"),
+            row("motor_lag", "library", ["com_offset"], "effect"),
+            row("none", "none", [], "no_significant_gap")]
+    table = summarise_independent(rows)
+    line = next(t for t in table.splitlines() if t.startswith("| sim | per-flight | both"))
+    assert "50% (1/2)" in line and "100% (1/1)" in line
+    assert "heldout" not in table.split("\n\n")[0]
