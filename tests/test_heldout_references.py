@@ -1,0 +1,124 @@
+"""Held-out mode against nominal reference flights (issue 47): ``diagnose(train, params,
+holdout=held, reference=nominal)`` and ``python -m quadsim.gap TRAIN... --holdout HELD...
+--reference NOMINAL...``. "Normal" is what the references share, as per flight: a trait
+every flight has and the parameter set lacks is no difference; a change the training
+flights share beyond it is named with its size and checked on the held-out flight."""
+
+from __future__ import annotations
+
+import importlib
+import json
+
+import pytest
+
+from benchmarks.heldout_sources import MemoryStore
+from benchmarks.synthetic import synthetic_flight
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.__main__ import main
+from quadsim.gap.report import validate
+from quadsim.logs.flightlog import write_log
+from quadsim.vehicle.params import load_params
+
+EFFECTS = ["mass_offset", "com_offset", "thrust_mismatch", "body_drag"]
+#: the trait every generated flight here shares and the parameter set lacks: a quadratic
+#: airframe drag of C_d A 40 cm^2
+DRAG = 0.004
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+def _logs(cf, effects, seeds, duration=4.0):
+    return [synthetic_flight(cf, effects, seed=s, duration=duration, speed=1.5) for s in seeds]
+
+
+@pytest.fixture(scope="module")
+def store():
+    """The benchmark's in-memory stage store, shared by this module's library calls."""
+    return MemoryStore()
+
+
+@pytest.fixture(scope="module")
+def flights(cf):
+    """5 references, 2 training flights and 1 held out, all with the shared drag; the same
+    with +4 g on top for the changed ones."""
+    drag = [make_effect("body_drag", cd_area=DRAG)]
+    heavy = drag + [make_effect("mass_offset", mass=0.004)]
+    return {"reference": _logs(cf, drag, (40, 41, 42, 43, 44)),
+            "train": _logs(cf, drag, (60, 61)), "held": _logs(cf, drag, (62,)),
+            "heavy_train": _logs(cf, heavy, (63, 64)), "heavy_held": _logs(cf, heavy, (65,))}
+
+
+def test_a_trait_every_flight_shares_is_no_difference_against_references(cf, flights, store):
+    """Without references the bare set is the reference, so the training and held-out
+    flights (nothing changed) are named as the drag they share (C_d A about 40 cm^2); with
+    the references, which share it too, the same flights are no_significant_gap."""
+    bare = diagnose(flights["train"], cf, holdout=flights["held"], effects=EFFECTS,
+                    kstep=False).verdict
+    assert bare.outcome == "effect" and bare.name.startswith("body_drag"), bare.answer
+    assert bare.params["body_drag.cd_area"] == pytest.approx(DRAG, abs=0.001)
+    result = diagnose(flights["train"], cf, holdout=flights["held"], effects=EFFECTS,
+                      kstep=False, reference=flights["reference"], store=store)
+    verdict = result.verdict
+    assert verdict.outcome == "no_significant_gap", verdict.answer
+    assert "Judged against 5 nominal reference flights" in verdict.answer
+    out = result.to_json()
+    validate(out)
+    assert len(out["reference"]) == 5 and out["train"] and out["holdout"]
+    # the references' model as per flight: their calibration, discrepancy and self-check
+    model = out["reference_model"]
+    assert model["self_check"] is not None and len(model["self_check"]["flights"]) == 5
+    assert model["discrepancy"] is not None
+    # the references' drag, read as a quadratic airframe drag: about the shared 40 cm^2
+    assert model["quadratic_drag_m2"] == pytest.approx(DRAG, rel=0.3)
+
+
+def test_a_change_the_training_flights_share_beyond_the_references_is_named(cf, flights,
+                                                                           store):
+    """+4 g on the training and held-out flights (on top of the shared drag): named
+    mass_offset at about +4 g, carried over to the held-out flight. The references'
+    stage is calibrated once for this module's calls (the store keeps it)."""
+    verdict = diagnose(flights["heavy_train"], cf, holdout=flights["heavy_held"],
+                       effects=EFFECTS, kstep=False, reference=flights["reference"],
+                       store=store).verdict
+    assert verdict.outcome == "effect" and verdict.name == "mass_offset", verdict.answer
+    assert verdict.params["mass_offset.mass"] == pytest.approx(0.004, abs=0.001)
+    assert verdict.probability > 0.9
+    assert store.made == 1 and len(store.kept) == 1
+
+
+def test_the_cli_takes_references_with_holdout_and_reuses_their_calibration(
+        cf, flights, tmp_path, monkeypatch, capsys):
+    """``--holdout`` with ``--reference`` (refused before this mode) and
+    ``--reference-cache``: the second run reads the kept calibration (calibrating again
+    would fail) and writes the same JSON, byte for byte. ``--write-effects`` with
+    ``--reference`` is refused in one line."""
+    def paths(key, name):
+        return [str(write_log(tmp_path / f"{name}{k}.csv", log))
+                for k, log in enumerate(flights[key])]
+
+    common = ["--model", "crazyflie21", *paths("train", "train"),
+              "--holdout", *paths("held", "held"),
+              "--reference", *paths("reference", "ref"), "--effects", *EFFECTS,
+              "--workers", "1", "--quiet", "--reference-cache", str(tmp_path / "cache")]
+    assert main([*common, "--json", str(tmp_path / "first.json")]) == 0
+    first = json.loads((tmp_path / "first.json").read_text())
+    assert first["verdict"]["outcome"] == "no_significant_gap"
+    assert [p.rsplit("/", 1)[-1] for p in first["reference"]] == [f"ref{k}.csv"
+                                                                 for k in range(5)]
+    assert len(list((tmp_path / "cache").glob("*.pkl"))) == 1
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("calibrated again")
+
+    monkeypatch.setattr(importlib.import_module("quadsim.gap.diagnose"), "calibrate", refuse)
+    assert main([*common, "--json", str(tmp_path / "second.json")]) == 0
+    assert (tmp_path / "first.json").read_bytes() == (tmp_path / "second.json").read_bytes()
+    capsys.readouterr()
+    assert main([*common, "--write-effects", str(tmp_path / "e.toml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --write-effects: not used with --reference"), err
+    assert not (tmp_path / "e.toml").exists()
