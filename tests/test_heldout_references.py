@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 import json
 
+import numpy as np
 import pytest
 
 from benchmarks.heldout_sources import MemoryStore
@@ -122,3 +123,38 @@ def test_the_cli_takes_references_with_holdout_and_reuses_their_calibration(
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: --write-effects: not used with --reference"), err
     assert not (tmp_path / "e.toml").exists()
+
+
+def test_a_pair_of_readings_that_fit_the_rotor_timing_fits_one_delay():
+    """Against references that time their rotor speeds every reading fits the flight's
+    rotor delay (last parameter); a pair of two such readings fits it once, with the lead's
+    prior (the first benchmark run stopped on a pair with two: 6 priors for 4 parameters)."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.diagnose import pair
+    from quadsim.gap.explanations import Explanation
+
+    lead = Explanation("mass_offset", "", (("mass_offset", {}, ("mass",)),), (0.0, 0.001),
+                       (0.01, 0.002), shift="rotor")
+    other = Explanation("com_offset", "", (("com_offset", {}, ("x", "y")),),
+                        (0.0, 0.0, 0.0), (0.01, 0.02, 0.05), shift="rotor", log_prior=-1.0)
+    got = []
+    stub = SimpleNamespace(weigh=lambda expl: got.extend(expl) or ["weighed"])
+
+    def weighed(expl):
+        return SimpleNamespace(train=SimpleNamespace(explanation=expl))
+
+    assert pair(weighed(lead), weighed(other), partners=2, train=[], held=[], reference=None,
+                against=stub) == "weighed"
+    (expl,) = got
+    assert expl.name == "mass_offset+com_offset" and expl.shift == "rotor"
+    assert expl.parameter_names == ["mass_offset.mass", "com_offset.x", "com_offset.y",
+                                    "delay.rotor"]
+    assert expl.mean == (0.0, 0.0, 0.0, 0.001) and expl.sd == (0.01, 0.01, 0.02, 0.002)
+    assert expl.log_prior == pytest.approx(-1.0 - np.log(2.0))
+    # one reading without a delay: the other's delay, once
+    plain = Explanation("mass_offset", "", (("mass_offset", {}, ("mass",)),), (0.0,), (0.01,))
+    got.clear()
+    pair(weighed(plain), weighed(other), partners=1, train=[], held=[], reference=None,
+         against=stub)
+    assert got[0].mean == (0.0, 0.0, 0.0, 0.0) and got[0].sd == (0.01, 0.01, 0.02, 0.05)

@@ -926,9 +926,16 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
     no likelier than the first alone). ``against``: weighed against nominal references
     (:meth:`Against.weigh`) instead of the parameter set."""
     a, b = lead.train.explanation, other.train.explanation
+    # a rotor delay (against references with a timing reading) is one parameter of the pair,
+    # last, with the lead's prior (or the partner's where the lead fits none)
+    timed = a if a.shift else b if b.shift else None
+    mean, sd = _own(a.mean, a) + _own(b.mean, b), _own(a.sd, a) + _own(b.sd, b)
+    if timed is not None:
+        mean, sd = mean + (timed.mean[-1],), sd + (timed.sd[-1],)
     expl = Explanation(f"{a.name}+{b.name}", " ".join(v for v in (a.variant, b.variant) if v),
-                       a.parts + b.parts, a.mean + b.mean, a.sd + b.sd,
-                       tuple(dict.fromkeys(a.replaces + b.replaces)), None,
+                       a.parts + b.parts, mean, sd,
+                       tuple(dict.fromkeys(a.replaces + b.replaces)),
+                       None if timed is None else timed.shift,
                        a.log_prior + b.log_prior - float(np.log(max(1, partners))))
     if against is not None:
         got = against.weigh([expl])
@@ -937,6 +944,12 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
         return got[0]
     ev = evaluate(stack_states(list(train)), reference, [expl])[0]
     return check(ev, train, held, reference)
+
+
+def _own(values: tuple, expl: Explanation) -> tuple:
+    """``values`` (an explanation's prior means or spreads) less its rotor delay's, the last
+    where it fits one."""
+    return tuple(values[:-1]) if expl.shift else tuple(values)
 
 
 def readings_of(ranked: list, reference: Reference) -> list[Reading]:
