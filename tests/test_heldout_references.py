@@ -158,3 +158,24 @@ def test_a_pair_of_readings_that_fit_the_rotor_timing_fits_one_delay():
     pair(weighed(plain), weighed(other), partners=1, train=[], held=[], reference=None,
          against=stub)
     assert got[0].mean == (0.0, 0.0, 0.0, 0.0) and got[0].sd == (0.01, 0.01, 0.02, 0.05)
+
+
+def test_the_kstep_prediction_simulates_a_cable_read_from_the_logged_motion(cf):
+    """A held-out lead with a cable payload (the diagnosis' stateless CableSwing, which
+    differentiates the logged velocity) stopped the k-step prediction of ``where`` with a
+    ZeroDivisionError (the first real-flight run with references, payload flights): it is
+    simulated as the engines' cable_payload of the same mass, length and attachment."""
+    from quadsim.gap.diagnose import prepare, simulable
+    from quadsim.gap.fitting import CableSwing
+    from quadsim.gap.judge import kstep_errors
+
+    swing = CableSwing(mass=0.005, length=0.4, x=0.001, y=-0.002, z=-0.01, lean_x=0.1)
+    other = make_effect("mass_offset", mass=0.002)
+    (cable, kept) = simulable([swing, other])
+    assert kept is other and type(cable).__name__ == "CablePayload"
+    assert (cable.mass, cable.length, cable.x, cable.y, cable.z) == (0.005, 0.4, 0.001,
+                                                                       -0.002, -0.01)
+    assert cable.state_size() > 0
+    flight = prepare([synthetic_flight(cf, [], seed=70, duration=2.0)], cf)[0]
+    errors = kstep_errors([flight.fit], cf, [cable])
+    assert errors and all(np.isfinite(v) for row in errors.values() for v in row.values())

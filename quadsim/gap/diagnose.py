@@ -226,7 +226,8 @@ from .words import batch_answer, nominal_words
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
            "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
-           "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
+           "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "simulable",
+           "slow_part",
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
            "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
@@ -451,7 +452,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
         SCHEMA, params.name, "held-out", verdict=verdict,
         train=tuple(f.name for f in train), holdout=tuple(f.name for f in held),
         where=where(held_on, params, names=names, sigma=sigma, before=before, after=after,
-                    effects_after=effects_after, base=model, kstep=kstep),
+                    effects_after=simulable(effects_after), base=simulable(model),
+                    kstep=kstep),
         effects=decision.entries, baseline=decision.entry("nominal_refit") or {},
         combination=combination,
         noise_model={"sigma": dict(zip(names, map(float, sigma))),
@@ -681,6 +683,20 @@ def _weigh_against(against: Against, *, map_fn, tick) -> list[Weighed]:
             weighed.append(w)
             tick(w.name)
     return weighed
+
+
+def simulable(effects: list) -> list:
+    """``effects`` as the k-step prediction simulates them (:func:`quadsim.gap.judge.where`,
+    multiple shooting): a cable payload read from the logged motion
+    (:class:`quadsim.gap.fitting.CableSwing`, no internal state: it differentiates the logged
+    velocity, which a simulation step does not have) becomes the engines'
+    ``cable_payload`` with its mass, length and attachment (its swing integrated from the
+    engine's start at each restart); every other effect is kept as it is."""
+    from ..effects import make_effect
+    from .fitting import CableSwing
+
+    return [make_effect("cable_payload", mass=e.mass, length=e.length, x=e.x, y=e.y, z=e.z)
+            if isinstance(e, CableSwing) else e for e in effects]
 
 
 def map_voltage(train: list, held: list) -> float | None:
