@@ -179,3 +179,30 @@ def test_the_kstep_prediction_simulates_a_cable_read_from_the_logged_motion(cf):
     flight = prepare([synthetic_flight(cf, [], seed=70, duration=2.0)], cf)[0]
     errors = kstep_errors([flight.fit], cf, [cable])
     assert errors and all(np.isfinite(v) for row in errors.values() for v in row.values())
+
+
+def test_explanations_weighed_on_workers_are_weighed_as_in_one_call(cf, flights, store):
+    """``--workers N``: one explanation per task, the task pickled (the kept residual parts
+    left behind). Every reading's evidence is the one call's: the rotor delay's fits start
+    where "no difference" puts them in both (without it in the task they started at the
+    cross-correlation's estimate: one reading 2 log units apart, found by comparing
+    ``--workers 1`` with ``--workers 2``)."""
+    import pickle
+
+    from quadsim.gap.diagnose import _stage, _weigh_against, against_references, prepare
+    from quadsim.gap.residual import DEFAULT_WINDOW_S
+
+    stage = _stage(flights["reference"], cf, effects=EFFECTS, window_s=DEFAULT_WINDOW_S,
+                   base=(), store=store)
+    against = against_references(prepare(flights["train"], cf), prepare(flights["held"], cf),
+                                 stage.reference, effects=EFFECTS)
+    assert against.explanations[0].shift == "rotor"     # the references time their rotors
+    one = _weigh_against(against, map_fn=map, tick=lambda *_: None)
+
+    def workers(fn, items):
+        return [pickle.loads(pickle.dumps(fn))(item) for item in items]
+
+    many = _weigh_against(against, map_fn=workers, tick=lambda *_: None)
+    assert [w.name for w in many] == [w.name for w in one] and len(one) > 5
+    assert [w.total.log_z for w in many] == pytest.approx([w.total.log_z for w in one],
+                                                          rel=1e-9, abs=1e-6)

@@ -549,12 +549,16 @@ class Against:
     explanations: tuple
     memos: tuple = field(compare=False, repr=False)
 
-    def weigh(self, expl: list) -> list[Weighed]:
+    def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
         :func:`quadsim.gap.evidence.evaluate`), then read on every flight
-        (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading."""
-        rows = evaluate(self.stacked, self.reference, list(expl), start_delay_s=self.start,
-                        full=True, memo=self.memos[-1])
+        (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading.
+        ``null``: "no difference", fitted first and dropped: the rotor delay's fits start
+        where the evaluation reads them from it, so that one explanation per worker gives
+        the numbers of the whole list in one call."""
+        first = [] if null is None else [null]
+        rows = evaluate(self.stacked, self.reference, first + list(expl),
+                        start_delay_s=self.start, full=True, memo=self.memos[-1])[len(first):]
         out = []
         for ev in rows:
             if not np.isfinite(ev.log_z):
@@ -667,9 +671,10 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                    expl, memos)
 
 
-def weigh_against(against: Against, expl: list) -> list[Weighed]:
-    """:meth:`Against.weigh` (module level: sent to workers)."""
-    return against.weigh(expl)
+def weigh_against(against: Against, batch: tuple) -> list[Weighed]:
+    """:meth:`Against.weigh` of ``batch`` (explanations, "no difference" or None; module
+    level: sent to workers)."""
+    return against.weigh(*batch)
 
 
 def _weigh_against(against: Against, *, map_fn, tick) -> list[Weighed]:
@@ -677,8 +682,14 @@ def _weigh_against(against: Against, *, map_fn, tick) -> list[Weighed]:
     one call in this process, one task per explanation on workers."""
     expl = list(against.explanations)
     weighed = []
-    batches = [expl] if map_fn is map else [[e] for e in expl]
-    for ws in map_fn(partial(weigh_against, against), batches):
+    null = next(e for e in expl if e.name == "no_difference")
+    batches = [(expl, None)] if map_fn is map else [([e], None if e is null else null)
+                                                    for e in expl]
+    # to workers without the kept residual parts (they hold LAPACK handles, which do not
+    # pickle; each task computes its own)
+    sent = against if map_fn is map else dataclasses.replace(
+        against, memos=tuple({} for _ in against.memos))
+    for ws in map_fn(partial(weigh_against, sent), batches):
         for w in ws:
             weighed.append(w)
             tick(w.name)
