@@ -25,6 +25,11 @@ case's own speed ``v``, another path phase and noise); N >= 3 is held-out mode's
 practical significance (docs/gap.md). ``--effects-file PATH`` (an effect file,
 :mod:`quadsim.effects.effectfile`, completing the source's parameter set) is every case's base
 model (``diagnose(..., base_effects=)``, what the CLI's ``--effects-file`` passes).
+``--references`` judges each case held out against the source's own per-flight nominal
+reference flights (the 8 in the per-flight folder, :func:`benchmarks.sim_cases.load_flights`):
+``diagnose(train, params, holdout=[held], kstep=False, reference=refs, store=...)``, what
+``python -m quadsim.gap ... --holdout HELD --reference NOMINAL...`` runs; the references are
+calibrated once per source and process (:class:`MemoryStore`), not per case.
 ``--diagnose-set OUT.toml`` builds such a file the way a user would, from the source's 8
 nominal reference flights only (never from the cases, :func:`diagnosed_set`): held-out mode
 on 6 of them (2 held out), the named effect added (``--write-effects``), again from that file,
@@ -50,7 +55,7 @@ Usage::
 
     python -m benchmarks.heldout_sources --source crazyflow --cache /tmp/cfcache \\
         --out cf_heldout.json [--jobs 1] [--cases 0-5,9] [--generate-only] [--train 3] \\
-        [--effects-file cf_set.toml]
+        [--effects-file cf_set.toml] [--references]
     python -m benchmarks.heldout_sources --source crazyflow --cache /tmp/cfcache \\
         --diagnose-set cf_set.toml          # the diagnosed set from the nominal flights
 """
@@ -73,7 +78,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-__all__ = ["EXTRA", "SET_HELD", "SET_ROUNDS", "SPEED_FACTORS", "SetRound", "diagnosed_set",
+__all__ = ["EXTRA", "MemoryStore", "SET_HELD", "SET_ROUNDS", "SPEED_FACTORS", "SetRound",
+           "diagnosed_set",
            "extra_name", "extra_seeds", "extra_specs", "fly_extra", "heldout_dir",
            "heldout_hash", "judge_case", "main", "parse_cases", "summarise"]
 
@@ -160,11 +166,35 @@ def _top(posterior, count: int = 6) -> list[dict]:
                                    "params", "ci")} for p in list(posterior or [])[:count]]
 
 
-def judge_case(row: dict, train: list, params, base_effects=()) -> dict:
+@dataclasses.dataclass
+class MemoryStore:
+    """The references' stage kept in memory (``--references``): ``get(key)`` -> the kept
+    :class:`quadsim.gap.calibrate.Calibrated` or None, ``put(calibrated)``, the ``store`` of
+    :func:`quadsim.gap.diagnose` (so a source's references are calibrated once, not per
+    case); ``made`` counts the stages put (calibrations done)."""
+
+    kept: dict = dataclasses.field(default_factory=dict)
+    made: int = 0
+
+    def get(self, key):
+        return self.kept.get(key)
+
+    def put(self, calibrated) -> None:
+        self.kept[calibrated.key] = calibrated
+        self.made += 1
+
+
+#: the store of this process (``--references``): one calibration per source
+_STORE = MemoryStore()
+
+
+def judge_case(row: dict, train: list, params, base_effects=(), *, reference=None,
+               store=None) -> dict:
     """Held-out verdict of one case: ``train`` (its extra flights) fitted, ``row["_log"]``
-    (its frozen flight) held out, ``base_effects`` (an effect file's effects) in the model;
-    the row (without the log) with ``heldout`` (the read verdict, its score and what it rests
-    on) and ``cpu_s`` (this process's CPU seconds)."""
+    (its frozen flight) held out, ``base_effects`` (an effect file's effects) in the model,
+    ``reference`` (nominal flights, or None: the parameter set is the reference) with the
+    ``store`` their stage is kept in; the row (without the log) with ``heldout`` (the read
+    verdict, its score and what it rests on) and ``cpu_s`` (this process's CPU seconds)."""
     from quadsim.core.errors import QuadsimWarning
     from quadsim.gap import diagnose
 
@@ -174,8 +204,9 @@ def judge_case(row: dict, train: list, params, base_effects=()) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
+        extra = {} if reference is None else {"reference": list(reference), "store": store}
         result = diagnose(train, params, holdout=[row["_log"]], kstep=False,
-                          base_effects=tuple(base_effects))
+                          base_effects=tuple(base_effects), **extra)
     cpu = time.process_time() - start
     raw = json.loads(json.dumps(result["verdict"], default=_plain))
     verdict = read_verdict(raw)
@@ -362,11 +393,11 @@ def _cpu_seconds() -> float:
 
 def _judge_task(task: tuple) -> dict:
     """One case in a worker process: (source name, cache, case number, training flights,
-    effect file or None)."""
-    name, cache, index, count, effects_file = task
+    effect file or None, against the references)."""
+    name, cache, index, count, effects_file, references = task
     source = _source(name)
     return _judge_index(source, cache, index, _frozen(source, cache)[1][index], count=count,
-                        base=_base_effects(effects_file))
+                        base=_base_effects(effects_file), references=references)
 
 
 def _base_effects(path) -> tuple:
@@ -393,13 +424,15 @@ def _frozen(source, cache):
 
 
 def _judge_index(source, cache, index: int, row: dict, *, count: int = EXTRA,
-                 base: tuple = ()) -> dict:
+                 base: tuple = (), references: bool = False) -> dict:
     from quadsim.logs.flightlog import load_log
 
     folder = heldout_dir(source, cache)
     train = [load_log(folder / f"{name}.csv.gz", warn=False)
              for name, _ in extra_specs(source, index, source.cases()[index], count)]
-    return {**judge_case(row, train, source.params(), base), "index": index}
+    refs = _frozen(source, cache)[0] if references else None
+    return {**judge_case(row, train, source.params(), base, reference=refs, store=_STORE),
+            "index": index}
 
 
 def _write_set(source, cache, out: str, say) -> int:
@@ -481,19 +514,21 @@ def run(args) -> int:
 
         with Pool(args.jobs) as pool:
             rows = pool.map(_judge_task, [(args.source, args.cache, i, args.train,
-                                           args.effects_file) for i in indices])
+                                           args.effects_file, args.references)
+                                          for i in indices])
     else:
         _, frozen = _frozen(source, args.cache)
         rows = []
         for i in indices:
             rows.append(_judge_index(source, args.cache, i, frozen[i], count=args.train,
-                                     base=base))
+                                     base=base, references=args.references))
             say(f"{i:2d} {rows[-1]['name']}: {rows[-1]['heldout']['outcome']} "
                 f"{'+'.join(rows[-1]['heldout']['lead'])}")
     meta = {"source": args.source, "command": " ".join(sys.argv), "folder": str(folder),
             "heldout_hash": heldout_hash(source), "cases": indices, "train": args.train,
             "effects_file": args.effects_file,
-            "base_effects": [e.name for e in base],
+            "base_effects": [e.name for e in base], "references": args.references,
+            "calibrations": _STORE.made,
             "cpu_s_flying": flown, "cpu_s_judging": _cpu_seconds() - judged,
             "wall_s": time.time() - wall, "load_start": load, "load_end": os.getloadavg()}
     from quadsim.core.files import atomic_write_text
@@ -527,6 +562,9 @@ def main(argv=None) -> int:
     parser.add_argument("--effects-file", metavar="PATH",
                         help="an effect file completing the source's parameter set: every "
                              "case's base model (diagnose(..., base_effects=))")
+    parser.add_argument("--references", action="store_true",
+                        help="judge against the source's per-flight nominal reference "
+                             "flights (diagnose(..., reference=)), calibrated once")
     parser.add_argument("--diagnose-set", metavar="OUT.toml",
                         help="instead of judging cases: build the diagnosed set from the "
                              "source's nominal flights (module doc) and write it")

@@ -220,3 +220,33 @@ def test_diagnosed_set_stops_where_the_set_is_no_base(monkeypatch):
     assert [(n, p["time_constant"][0]) for n, p in kept] == [("motor_lag", 0.02)]
     assert [r.outcome for r in rounds] == ["effect", "error"]
     assert rounds[1].base == ("motor_lag",) and "no base" in rounds[1].stop
+
+
+def test_references_flag_passes_the_sources_references_and_one_store(monkeypatch):
+    """--references: every case is diagnosed against the source's per-flight nominal
+    flights with the process's one MemoryStore (a stage put once is read by the next case);
+    without it, no reference reaches the diagnosis."""
+    import quadsim.gap
+
+    calls = []
+
+    def fake(train, params, *, holdout, kstep, base_effects, **extra):
+        calls.append(extra)
+        store = extra.get("store")
+        if store is not None and store.get("key") is None:
+            store.put(type("Kept", (), {"key": "key"})())
+        return {"verdict": {"outcome": "no_significant_gap", "effect": "no_significant_gap",
+                            "probability": 0.9, "tentative": False, "posterior": []}}
+
+    monkeypatch.setattr(quadsim.gap, "diagnose", fake)
+    monkeypatch.setattr(ho, "_STORE", ho.MemoryStore())
+    row = {"name": "case_00_none", "truth": "none", "kind": "none", "effects": {},
+           "_log": "held"}
+    for _ in range(2):
+        out = ho.judge_case(dict(row), ["a", "b"], None, reference=["r1", "r2"],
+                            store=ho._STORE)
+        assert out["heldout"]["score"]["no_gap"] is True and "_log" not in out
+    assert [c["reference"] for c in calls] == [["r1", "r2"]] * 2
+    assert calls[0]["store"] is calls[1]["store"] is ho._STORE and ho._STORE.made == 1
+    ho.judge_case(dict(row), ["a", "b"], None)
+    assert calls[-1] == {}

@@ -11,6 +11,8 @@ Examples::
         --reference nominal/*.csv.gz --reference-cache ~/.cache/quadsim-gap   # 2nd run: faster
     python -m quadsim.gap --model nanodrone_cf21bl.toml --effects-file diagnosed.toml \\
         train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
+    python -m quadsim.gap --model crazyflie21 changed/*.csv.gz --holdout changed2.csv.gz \\
+        --reference nominal/*.csv.gz    # what the changed flights share that nominal ones do not
 """
 
 from __future__ import annotations
@@ -50,9 +52,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--per-flight", action="store_true",
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
-                        help="nominal reference flights for --per-flight")
+                        help="nominal reference flights: with --per-flight each LOG is "
+                             "judged against them; held out (LOG... --holdout LOG...) they "
+                             "are the reference model instead of the bare parameter set: "
+                             "what the training LOGs share that they do not, checked on the "
+                             "held-out logs")
     parser.add_argument("--reference-cache", metavar="DIR",
-                        help="with --per-flight: keep the references' calibration and "
+                        help="with --reference: keep the references' calibration and "
                              "self-check in DIR (created), keyed by the reference logs, the "
                              "model, --effects, --window and quadsim's code; a later run with "
                              "the same ones reads it instead (the same answers, bit for bit). "
@@ -109,11 +115,10 @@ def _check_args(args) -> None:
     if args.per_flight and args.holdout:
         raise InputError("--holdout: not used with --per-flight (each LOG is judged against "
                          "--reference)")
-    if args.reference and not args.per_flight:
-        raise InputError("--reference: only used with --per-flight")
     if args.reference_cache is not None:
-        if not args.per_flight:
-            raise InputError("--reference-cache: only used with --per-flight")
+        if not args.per_flight and not args.reference:
+            raise InputError("--reference-cache: only used with --per-flight or --reference "
+                             "(the references' calibration is what it keeps)")
         if Path(args.reference_cache).exists() and not Path(args.reference_cache).is_dir():
             raise InputError(f"{args.reference_cache}: --reference-cache: not a folder")
     inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
@@ -133,6 +138,10 @@ def _check_args(args) -> None:
         raise InputError("--add: only used with --write-effects")
     if args.write_effects is not None and args.per_flight:
         raise InputError("--write-effects: not used with --per-flight")
+    if args.write_effects is not None and args.reference:
+        raise InputError("--write-effects: not used with --reference (a reading is then a "
+                         "difference from the references' model, not an effect to add to "
+                         "--model)")
 
 
 def _map_fn(args, bar):
@@ -308,7 +317,7 @@ def _with_effects_file(result, path, base_effects):
 
 @dataclass(frozen=True)
 class ReferenceCache:
-    """``--reference-cache``: the reference stage of the per-flight mode
+    """``--reference-cache``: the reference stage of either mode with ``--reference``
     (:class:`quadsim.gap.calibrate.Calibrated`) kept in ``folder`` as ``KEY.pkl``, KEY its
     :func:`quadsim.gap.calibrate.reference_key`. A file that does not read back as the
     entry of its key is computed again (one ``warning:`` line); one that cannot be written
@@ -454,8 +463,12 @@ def main(argv: list[str] | None = None) -> int:
                                          refused=refused, base_effects=base_effects,
                                          store=store, orders=orders, **extra)
         else:
+            store = (None if args.reference_cache is None or not reference
+                     else ReferenceCache(Path(args.reference_cache)))
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
-                              progress=progress, base_effects=base_effects, **extra)
+                              progress=progress, base_effects=base_effects,
+                              **({} if not reference else {"reference": reference,
+                                                           "store": store}), **extra)
     finally:
         if bar is not None:
             bar.close()

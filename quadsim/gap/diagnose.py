@@ -87,6 +87,30 @@ Example::
     >>> result = diagnose(train_logs, params, holdout=held_logs)
     >>> result.verdict.name, result.verdict.probability
 
+Held out against nominal references
+-----------------------------------
+``diagnose(train, params, holdout=held, reference=nominal)`` (``python -m quadsim.gap TRAIN...
+--holdout HELD... --reference NOMINAL...``) asks "what do the training flights share that my
+nominal flights do not, and does it carry over to the held-out flights?". "Normal" is then
+what the references share, as per flight, not the bare parameter set (which lacks whatever
+every flight of the vehicle shares): the reference model is the per-flight one
+(:func:`_reference_stage`: calibration, noise model, discrepancy term, self-check; ``store``
+keeps it between runs); the training and held-out flights are aligned to its rotor timing,
+checked to be of the references' kind and placed on their envelope at the stacked training
+flights' place; the drag law is chosen on the stacked training flights; the explanations
+are the per-flight ones (:class:`Against`). Each is fitted on the stacked training flights
+(:func:`quadsim.gap.evidence.evaluate`), then read on every flight at its training MAP
+under the per-flight likelihood (the shared parameters it keeps and the flight's own
+discrepancy marginalised, :func:`_read`); the held-out flights' log-likelihood joins its
+evidence as above. Practical significance is the per-flight rule: a reading within the
+references' between-flight spread of it is no difference
+(:func:`quadsim.gap.calibrate.negligible` with their self-check; :class:`Practical` takes it
+from the reference). Ranking, pairs, consistency (on top of the references' model) and the
+verdict (:func:`quadsim.gap.judge.judge_heldout`) are the held-out ones; "before" is the
+held-out flights' residual under "no difference" against the references. With fewer than 3
+references there is no self-check: the training flights' spread is the scale, as without
+references, and the answer says the references could not be checked.
+
 Per-flight mode
 ---------------
 
@@ -167,6 +191,7 @@ from .fitting import (
 from .judge import (
     FORM_ERROR,
     SLOW_WINDOW_S,
+    UNCHECKED_WORDS,
     carry_over,
     channel_names,
     every_part_stands,
@@ -201,7 +226,8 @@ from .words import batch_answer, nominal_words
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
            "decide", "diagnose", "effects_of", "entry_of", "heldout_explanations", "interior",
-           "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "slow_part",
+           "noise_model", "nominal_reference", "pair", "prepare", "readings_of", "simulable",
+           "slow_part",
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
            "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
@@ -340,7 +366,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
              max_combination: int = 2, progress: Callable | None = None,
              window_s: float = DEFAULT_WINDOW_S, kstep: bool = True,
-             map_fn: Callable = map, base_effects: Sequence = ()) -> Diagnosis:
+             map_fn: Callable = map, base_effects: Sequence = (),
+             reference: Sequence[FlightLog] | None = None, store=None) -> Diagnosis:
     """Diagnose the gap between ``params`` and ``logs`` (see :mod:`quadsim.gap`): a
     :class:`~quadsim.gap.result.Diagnosis` (``mode`` ``"held-out"``).
 
@@ -351,7 +378,12 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     errors (the slowest part of "where"); ``map_fn(fn, items)`` runs the candidate fits
     (e.g. a :mod:`quadsim.core.executor` executor). ``base_effects``: effects already in
     the model (an effect file, :mod:`quadsim.effects.effectfile`): the "before" gap is
-    theirs, every candidate is fitted on top of them, and they are never refitted."""
+    theirs, every candidate is fitted on top of them, and they are never refitted.
+    ``reference``: nominal reference flights (module doc, "Held out against nominal
+    references"): the reference model is theirs, calibrated as per flight
+    (``store``: keeps that stage between runs, as :func:`diagnose_per_flight`'s), and the
+    question is what the training flights share that the references do not, and whether it
+    carries over to the held-out flights; None: the parameter set is the reference."""
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
@@ -360,33 +392,52 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     train, held = _split(flights, held_in, notes)
     base = tuple(base_effects)
     rotor = all(f.fit.command is not None for f in train + held)
-    if rotor and not params_have_data_map(params):
+    against = None
+    if reference is not None:
+        stage = _stage(reference, params, effects=effects, window_s=window_s, base=base,
+                       store=store)
+        if progress is not None:
+            progress("reference")
+        against = against_references(train, held, stage.reference, effects=effects)
+        params, reference = stage.reference.params, against.reference
+        fit_on, held_on = list(against.train), list(against.held)
+        weighed = _weigh_against(against, map_fn=map_fn, tick=progress or (lambda *_: None))
+        null = next(w for w in weighed if w.name == "no_difference")
+        before = [r / reference.sigma for r in null.held_residuals]
+        notes += _stage_notes(stage)
+    elif rotor and not params_have_data_map(params):
         volts = map_voltage([f.fit for f in train], [f.fit for f in held])
         params = fit_motor_map([f.fit for f in train], params, duty_voltage=volts)
         if volts is not None:
             notes.append(f"command map in command x battery voltage (read at {volts:.3f} V, "
                          "the training flights' mean; the flights were flown at different "
                          "charges): a DC motor's speed follows duty x voltage")
-    fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
-    reference = nominal_reference(fit_on, params, rotor, base)
-    weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
-                     tick=progress or (lambda *_: None))
+    if against is None:
+        fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
+        reference = nominal_reference(fit_on, params, rotor, base)
+        weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
+                         tick=progress or (lambda *_: None))
+        sigma = reference.sigma
+        before = [_beyond(b * sigma - centre_term(h, reference.discrepancy, len(sigma)), h,
+                          reference)[0] / sigma for b, h in
+                  zip(scaled_residuals(held_on, params, list(base), sigma, rotor=rotor),
+                      held_on)]
     sigma = reference.sigma
-    before = [_beyond(b * sigma - centre_term(h, reference.discrepancy, len(sigma)), h,
-                      reference)[0] / sigma for b, h in
-              zip(scaled_residuals(held_on, params, list(base), sigma, rotor=rotor), held_on)]
     decision = decide(weighed, train=fit_on, held=held_on, reference=reference,
-                              before=before, max_combination=max_combination,
-                              tick=progress or (lambda *_: None))
+                      before=before, max_combination=max_combination,
+                      tick=progress or (lambda *_: None), against=against)
     lead = decision.lead
-    effects_after = list(base) + (effects_of(lead.train)
-                                  if decision.lead_name != "no_difference" else [])
+    model = list(base) if against is None else against.model(None)
+    effects_after = (model if against is None else against.model(lead.train.explanation)) + (
+        effects_of(lead.train) if decision.lead_name != "no_difference" else [])
     after = [r / sigma for r in lead.held_residuals] if effects_after else before
     dt = float(fit_on[0].t[1] - fit_on[0].t[0])
     statuses = logcheck.order_statuses(list(logs) + list(holdout or []), params)
     decision = logcheck.cap_decision(decision, logcheck.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
     verdict = logcheck.mark(verdict, statuses)
+    if against is not None:
+        verdict = dataclasses.replace(verdict, answer=verdict.answer + against.words())
     posefree = next((g for g in logs if not g.has_pose), None)
     if posefree is not None:                  # what a pose would add (quadsim.gap.logcheck)
         verdict = without_pose_note(verdict, posefree)
@@ -401,7 +452,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
         SCHEMA, params.name, "held-out", verdict=verdict,
         train=tuple(f.name for f in train), holdout=tuple(f.name for f in held),
         where=where(held_on, params, names=names, sigma=sigma, before=before, after=after,
-                    effects_after=effects_after, base=list(base), kstep=kstep),
+                    effects_after=simulable(effects_after), base=simulable(model),
+                    kstep=kstep),
         effects=decision.entries, baseline=decision.entry("nominal_refit") or {},
         combination=combination,
         noise_model={"sigma": dict(zip(names, map(float, sigma))),
@@ -410,7 +462,252 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
         checks=checks, notes=tuple(notes) + more,
         base_effects=base_json(base),
         series=held_series[0],
-        held_series=held_series)
+        held_series=held_series,
+        **({} if against is None else {
+            "reference": tuple(against.reference.names),
+            "reference_model": reference_summary(against.calibrated)}))
+
+
+# --- held out against nominal references (module doc) --------------------------------------
+
+#: the gap (s) between two training flights' time axes when they are stacked against
+#: references (:func:`against_references`): their time axis then only rises, so a rotor
+#: timing read later (:func:`quadsim.gap.reference.read_later`, by interpolation on a
+#: non-uniform base) stays within one flight but within one step of a join, as with the
+#: airborne stretches of one log (:mod:`quadsim.gap.residual`)
+STACK_GAP_S = 1.0
+
+
+def _stacked(states: list):
+    """The training flights as one sample set on a rising time axis (:data:`STACK_GAP_S`
+    between flights; :func:`quadsim.gap.fitting.stack_states`)."""
+    moved, end = [], None
+    for s in states:
+        shift = 0.0 if end is None else end + STACK_GAP_S - float(s.t[0])
+        moved.append(s if shift == 0.0 else dataclasses.replace(s, t=s.t + shift))
+        end = float(moved[-1].t[-1])
+    return stack_states(moved)
+
+
+def _problem(states, reference: Reference, expl: Explanation, memo: dict):
+    """``expl``'s :class:`quadsim.gap.evidence.Problem` on one flight against ``reference``,
+    the flight's Jacobian in the shared parameters kept in ``memo`` (as
+    :func:`quadsim.gap.evidence.evaluate` keeps it)."""
+    from .evidence import FitInputs
+    from .explanations import marginal_sd
+    from .reference import jacobian
+
+    kept = memo.get("evidence.jacobian")
+    if kept is None or kept[0] is not states or kept[1] is not reference:
+        names = reference.candidate.parameter_names
+        kept = memo["evidence.jacobian"] = (states, reference, jacobian(
+            states, reference, list(range(len(names))), reference.candidate.effects,
+            memo=memo))
+    return FitInputs(states, reference, kept[2], marginal_sd(reference), memo).problem(expl)
+
+
+def _read(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
+    """(residual (N, C) in channel units, log-likelihood) of one flight at an explanation's
+    values ``theta`` (its SI units), the per-flight likelihood: the shared parameters it
+    keeps and the flight's own discrepancy coefficients marginalised (linear-Gaussian,
+    :class:`quadsim.gap.evidence.Marginal`): log L = -1/2 (|r + j du|^2 + |du|^2)
+    - 1/2 log det A at the profiled shift du, r the weighted residual. The residual is
+    r + j du back in channel units (what the flight shows beyond its references, as
+    :func:`quadsim.page.flight_series` draws it)."""
+    z = (np.asarray(theta, float) - prob.mean) / prob.sd
+    aug, du = prob.marg.profile(prob.residual(z))
+    ll = -0.5 * float(aug @ aug + du @ du) - 0.5 * prob.marg.logdet
+    weights = prob.reference.weights
+    return aug.reshape(-1, len(weights)) / np.sqrt(weights), ll
+
+
+@dataclass(frozen=True)
+class Against:
+    """Held out against nominal references (:func:`against_references`): ``calibrated``
+    the references' model (:func:`quadsim.gap.calibrate.calibrate`, with its self-check);
+    ``reference`` the same at the training flights' place
+    (:func:`quadsim.gap.reference.local_reference`); ``train``/``held`` the flights' fit
+    states aligned to the references' rotor timing; ``stacked`` the training states as
+    one (:func:`_stacked`); ``start`` (s) the training flights' mean rotor delay against the
+    references' (where the delay fits start); ``delays`` (s, per flight, training then
+    held out; None without a timing reading) each flight's own rotor delay under "no
+    difference" (:func:`quadsim.gap.evidence.delay_starts`): where every reading but
+    ``signal_delay`` reads that flight; ``law`` the drag law the training flights show
+    (None: the references'); ``place`` their envelope position; ``explanations`` the
+    per-flight explanations under that law; ``memos`` the residual parts kept per flight
+    (the stacked training flights' last)."""
+
+    calibrated: Reference
+    reference: Reference
+    train: tuple
+    held: tuple
+    stacked: object
+    start: float
+    delays: tuple
+    law: object
+    place: object
+    explanations: tuple
+    memos: tuple = field(compare=False, repr=False)
+
+    def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
+        """Each of ``expl`` fitted on the stacked training flights (every one fully,
+        :func:`quadsim.gap.evidence.evaluate`), then read on every flight
+        (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading.
+        ``null``: "no difference", fitted first and dropped: the rotor delay's fits start
+        where the evaluation reads them from it, so that one explanation per worker gives
+        the numbers of the whole list in one call."""
+        first = [] if null is None else [null]
+        rows = evaluate(self.stacked, self.reference, first + list(expl),
+                        start_delay_s=self.start, full=True, memo=self.memos[-1])[len(first):]
+        out = []
+        for ev in rows:
+            if not np.isfinite(ev.log_z):
+                continue
+            try:
+                out.append(self.check(ev))
+            except ModelError:
+                continue
+        return out
+
+    def check(self, ev: Evidence) -> Weighed:
+        """One explanation read on each flight at its training MAP (:func:`_read`): its
+        residuals beyond the references on the training and held-out flights, and the
+        held-out flights' log-likelihood. A reading that fits the rotor timing reads each
+        flight at that flight's own delay (:attr:`delays`; the timing is a nuisance, as
+        per flight), ``signal_delay`` at its own value (its delay is the reading)."""
+        expl = ev.explanation
+        theta = np.array([ev.values[k] for k in expl.parameter_names], float)
+        own = bool(expl.shift) and expl.name != "signal_delay"
+        read = []
+        for states, memo, delay in zip(self.train + self.held, self.memos, self.delays):
+            at = theta.copy()
+            if own and delay is not None:
+                at[-1] = delay
+            read.append(_read(_problem(states, self.reference, expl, memo), at))
+        held = read[len(self.train):]
+        ll = sum(h[1] for h in held)
+        return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll),
+                       [r for r, _ in read[:len(self.train)]], [r for r, _ in held], ll)
+
+    def model(self, expl: Explanation | None) -> list:
+        """The reference model's effects an explanation keeps (every one for None): the
+        base of its fits (:func:`consistent`) and of the answer's residual."""
+        from .evidence import _shared_effects
+
+        return list(_shared_effects(self.reference, () if expl is None else expl.replaces)[0])
+
+    def words(self) -> str:
+        """What the answer adds: the references it was judged against, the drag law and
+        place, as per flight; a self-check that is not clean (or none)."""
+        n = len(self.calibrated.names)
+        words = (f" Judged against {n} nominal reference flights: a difference is what the "
+                 "training flights share that the references do not, checked on the "
+                 "held-out flights.")
+        if self.law is not None:
+            words += f" Judged with {self.law.variant} (the law the training flights show)."
+        if self.place is not None and self.place.distance > 0:
+            words += f" Flown {self.place.text}."
+        check = self.calibrated.self_check
+        if check is None:
+            words += " " + UNCHECKED_WORDS
+        elif not check.clean:
+            words += " " + check.text()
+        return words
+
+
+def against_references(train: list[Flight], held: list[Flight], calibrated: Reference, *,
+                       effects: Sequence[str] | None = None) -> Against:
+    """The training and held-out flights against the references' model ``calibrated``
+    (module doc, "Held out against nominal references"): aligned to the references' rotor
+    timing, checked to be of their kind (:func:`quadsim.gap.logcheck.check_same_kind`),
+    placed on their envelope at the stacked training flights' place, the drag law chosen on
+    the stacked training flights (:func:`quadsim.gap.evidence.choose`) and the per-flight
+    explanations built under it (``effects``: restrict them). Raises
+    :class:`~quadsim.core.errors.InputError` for a flight not of the references' kind."""
+    ref = calibrated
+    states = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for f in list(train) + list(held):
+            s = ref.align(f)
+            check_same_kind(s, ref, f.name)
+            if s.command is None and ref.rotor:
+                raise InputError(f"{f.name}: cmd_1..cmd_N: the reference flights log motor "
+                                 "commands, this one does not")
+            if len(s.t) < 20:
+                raise InputError(f"{f.name}: t: too short to judge ({len(s.t)} samples "
+                                 "after smoothing)")
+            states.append(s)
+        tr, he = states[:len(train)], states[len(train):]
+        stacked = _stacked(tr)
+        trend = getattr(ref.envelope, "trend", None)
+        info = (inverse_information(stacked, ref) if trend is not None
+                and trend.q_weight is not None and np.any(trend.q_weight > 0) else None)
+        place = envelope_position(stacked, ref.envelope, info)
+        local = local_reference(ref, place)
+
+        def hint(f):
+            mine = (f.delays_ms or {}).get("rotor")
+            return (1e-3 * mine - local.rotor_shift_s
+                    if mine is not None and "rotor" in local.delays_ms else 0.0)
+
+        start = float(np.mean([hint(f) for f in train]))
+        memos = tuple({} for _ in range(len(states) + 1))
+        law = evidence.choose(stacked, local, start, memos[-1])
+        if effects is not None:         # as without references: a name it cannot weigh
+            known = {e.name for e in explanations_for(local, stacked)} - {"no_difference"}
+            unknown = set(effects) - known
+            if unknown:
+                raise InputError(f"--effects: unknown or unusable effect(s) {sorted(unknown)}; "
+                                 f"valid: {', '.join(sorted(known))}")
+        expl = tuple(evidence.under(explanations_for(local, stacked, effects), law))
+        null = next(e for e in expl if e.name == "no_difference")
+        delays = tuple(
+            evidence.delay_starts(_problem(s, local, null, m), 0.0, hint(f))[0]
+            if null.shift else None
+            for s, m, f in zip(states, memos, list(train) + list(held)))
+    return Against(ref, local, tuple(tr), tuple(he), stacked, start, delays, law, place,
+                   expl, memos)
+
+
+def weigh_against(against: Against, batch: tuple) -> list[Weighed]:
+    """:meth:`Against.weigh` of ``batch`` (explanations, "no difference" or None; module
+    level: sent to workers)."""
+    return against.weigh(*batch)
+
+
+def _weigh_against(against: Against, *, map_fn, tick) -> list[Weighed]:
+    """Every explanation of :attr:`Against.explanations` weighed (:meth:`Against.weigh`):
+    one call in this process, one task per explanation on workers."""
+    expl = list(against.explanations)
+    weighed = []
+    null = next(e for e in expl if e.name == "no_difference")
+    batches = [(expl, None)] if map_fn is map else [([e], None if e is null else null)
+                                                    for e in expl]
+    # to workers without the kept residual parts (they hold LAPACK handles, which do not
+    # pickle; each task computes its own)
+    sent = against if map_fn is map else dataclasses.replace(
+        against, memos=tuple({} for _ in against.memos))
+    for ws in map_fn(partial(weigh_against, sent), batches):
+        for w in ws:
+            weighed.append(w)
+            tick(w.name)
+    return weighed
+
+
+def simulable(effects: list) -> list:
+    """``effects`` as the k-step prediction simulates them (:func:`quadsim.gap.judge.where`,
+    multiple shooting): a cable payload read from the logged motion
+    (:class:`quadsim.gap.fitting.CableSwing`, no internal state: it differentiates the logged
+    velocity, which a simulation step does not have) becomes the engines'
+    ``cable_payload`` with its mass, length and attachment (its swing integrated from the
+    engine's start at each restart); every other effect is kept as it is."""
+    from ..effects import make_effect
+    from .fitting import CableSwing
+
+    return [make_effect("cable_payload", mass=e.mass, length=e.length, x=e.x, y=e.y, z=e.z)
+            if isinstance(e, CableSwing) else e for e in effects]
 
 
 def map_voltage(train: list, held: list) -> float | None:
@@ -650,17 +947,36 @@ def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighe
 
 
 def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: list,
-         reference: Reference) -> Weighed:
+         reference: Reference, against: Against | None = None) -> Weighed:
     """The lead fitted together with ``other`` (module doc, stage 4): its prior is the
     lead's with the partner's, less log(partners) (a second simultaneous effect is a priori
-    no likelier than the first alone)."""
+    no likelier than the first alone). ``against``: weighed against nominal references
+    (:meth:`Against.weigh`) instead of the parameter set."""
     a, b = lead.train.explanation, other.train.explanation
+    # a rotor delay (against references with a timing reading) is one parameter of the pair,
+    # last, with the lead's prior (or the partner's where the lead fits none)
+    timed = a if a.shift else b if b.shift else None
+    mean, sd = _own(a.mean, a) + _own(b.mean, b), _own(a.sd, a) + _own(b.sd, b)
+    if timed is not None:
+        mean, sd = mean + (timed.mean[-1],), sd + (timed.sd[-1],)
     expl = Explanation(f"{a.name}+{b.name}", " ".join(v for v in (a.variant, b.variant) if v),
-                       a.parts + b.parts, a.mean + b.mean, a.sd + b.sd,
-                       tuple(dict.fromkeys(a.replaces + b.replaces)), None,
+                       a.parts + b.parts, mean, sd,
+                       tuple(dict.fromkeys(a.replaces + b.replaces)),
+                       None if timed is None else timed.shift,
                        a.log_prior + b.log_prior - float(np.log(max(1, partners))))
+    if against is not None:
+        got = against.weigh([expl])
+        if not got:
+            raise ModelError(f"{expl.name}: no fit where a rigid vehicle is")
+        return got[0]
     ev = evaluate(stack_states(list(train)), reference, [expl])[0]
     return check(ev, train, held, reference)
+
+
+def _own(values: tuple, expl: Explanation) -> tuple:
+    """``values`` (an explanation's prior means or spreads) less its rotor delay's, the last
+    where it fits one."""
+    return tuple(values[:-1]) if expl.shift else tuple(values)
 
 
 def readings_of(ranked: list, reference: Reference) -> list[Reading]:
@@ -710,17 +1026,21 @@ def entry_of(w: Weighed, probability: float, before: list, reference: Reference)
     return entry
 
 
-def consistent(w: Weighed, entry: dict, flights: list, reference: Reference) -> dict:
+def consistent(w: Weighed, entry: dict, flights: list, reference: Reference,
+               base: tuple | None = None) -> dict:
     """The consistency check (:func:`quadsim.gap.judge.check`) of the reading ``w``
-    (its ``effects`` ``entry``) on ``flights`` (decimated states); the propeller's speed
-    exponent is held at its value (the library's thrust_factor has none)."""
+    (its ``effects`` ``entry``) on ``flights`` (decimated states) on top of ``base``
+    (default the reference's base effects; against references, the references' model the
+    reading keeps, :meth:`Against.model`); the propeller's speed exponent is held at its
+    value (the library's thrust_factor has none)."""
     ev = w.train
     parts, theta = [], []
     for name, fixed, fitted in ev.explanation.parts:
         keep = tuple(p for p in fitted if not (name == "thrust_factor" and p == "alpha"))
         parts.append((name, dict(fixed), keep))
         theta += [ev.values[f"{name}.{p}"] for p in keep]
-    cand = Candidate(ev.name, tuple(parts), reference.candidate.base)
+    cand = Candidate(ev.name, tuple(parts),
+                     reference.candidate.base if base is None else tuple(base))
     judged = [q for q in entry["params"] if not q.endswith(".alpha")
               and entry["significant"].get(q)]
     return consistency_check(cand, np.asarray(theta, float), judged, flights,
@@ -765,8 +1085,13 @@ class Practical:
         return self.spread_negligible(ev) or self.small(ev)
 
     def spread_negligible(self, ev) -> bool:
-        """Whether reading ``ev`` is within the training flights' spread (alone)."""
-        return negligible(ev, SelfCheck((), (), (), self.spreads))
+        """Whether reading ``ev`` is within the training flights' spread (alone); against
+        nominal references (the reference carries their self-check), within the
+        references' between-flight spread about their own readings, the per-flight rule
+        (:func:`quadsim.gap.calibrate.negligible`)."""
+        check = getattr(self.reference, "self_check", None)
+        return negligible(ev, check if check is not None
+                          else SelfCheck((), (), (), self.spreads))
 
     def small(self, ev) -> bool:
         """Whether reading ``ev`` removes at most :data:`quadsim.gap.judge.FORM_ERROR` of the
@@ -801,7 +1126,8 @@ class Practical:
         for _ in range(PRACTICAL_ROUNDS):
             name, _, lead = ranked[0]
             key = (lead.name, lead.train.explanation.variant)
-            if name == "no_difference" or key in self.spreads or len(self.train) < 3:
+            if name == "no_difference" or key in self.spreads or len(self.train) < 3 \
+                    or getattr(self.reference, "self_check", None) is not None:
                 break
             self.spreads[key] = self.spread_of(lead)
             ranked = rank(weighed, self.negligible)
@@ -874,14 +1200,22 @@ class Decision:
 
 
 def decide(weighed: list[Weighed], *, train: list, held: list, reference: Reference,
-           before: list, max_combination: int = 2, tick=None) -> Decision:
+           before: list, max_combination: int = 2, tick=None,
+           against: Against | None = None) -> Decision:
     """Rank the weighed explanations; try the lead with a second effect when it leaves a
     systematic remainder or does not carry over (module doc, stage 4); check the lead's
     consistency. ``train``/``held``: decimated states; ``before``: the held-out residuals
-    over sigma under the nominal model; ``tick(name)``: progress per pair fitted."""
+    over sigma under the nominal model (against references: under "no difference");
+    ``tick(name)``: progress per pair fitted; ``against``: weighed against nominal
+    references (:class:`Against`: a pair is fitted and read as its explanations were, and
+    the consistency check fits on top of the references' model)."""
     params = reference.params
     tick = tick or (lambda *_: None)
     dt = float(train[0].t[1] - train[0].t[0])
+
+    def base_of(w):
+        return None if against is None else against.model(w.train.explanation)
+
     # the per-flight rule (quadsim.gap.judge.lead_caveat): a value outside its documented
     # plausible range keeps its evidence; a lead with one is named with a caveat, tentative
     implausible = []
@@ -901,7 +1235,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     combination = checked = None
     if lead_name != "no_difference":
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
-                             reference)
+                             reference, base_of(lead))
     # a pair needs every part plausible (every_part_stands), so it is built on the most
     # probable plausible reading: the lead, or the first below an implausible lead
     outside = {id(w) for w, _ in implausible}
@@ -909,7 +1243,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                  and id(w) not in outside), None)
     base_checked = checked if base is lead else (
         None if base is None else consistent(base, entry_of(base, 1.0, before, reference),
-                                             train + held, reference))
+                                             train + held, reference, base_of(base)))
     if lead_name != "no_difference" and base is not None and max_combination >= 2 \
             and base_checked["consistent"] \
             and (remainder(base.train_residuals + base.held_residuals, reference, dt)
@@ -921,8 +1255,13 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                   and id(w) not in outside]
         trials = []
         for other in others:
-            trials.append(pair(base, other, partners=len(others), train=train, held=held,
-                               reference=reference))
+            try:
+                trials.append(pair(base, other, partners=len(others), train=train,
+                                   held=held, reference=reference, against=against))
+            except ModelError:      # against references: no fit where a rigid vehicle is
+                if against is None:
+                    raise
+                continue
             tick(trials[-1].name)
         best = max(trials, key=lambda w: w.total.log_z, default=None)
         if best is not None:
@@ -932,7 +1271,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                 ranked, combination = with_pair, best
                 lead_name, _, lead = ranked[0]
                 checked = consistent(lead, entry_of(lead, 1.0, before, reference),
-                                     train + held, reference)
+                                     train + held, reference, base_of(lead))
     entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
                and k != "no_difference"]
     seen = {e["name"] for e in entries}
@@ -988,20 +1327,12 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     here), in the order of ``logs``.
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     base = tuple(base_effects)
-    key = None if store is None else reference_key(reference, params, effects=effects,
-                                                   window_s=window_s, base=base)
-    kept = None if store is None else store.get(key)
-    if kept is None:
-        kept = _reference_stage(reference, params, effects=effects, window_s=window_s,
-                                key=key, base=base)
-        if store is not None:
-            store.put(kept)
+    kept = _stage(reference, params, effects=effects, window_s=window_s, base=base,
+                  store=store)
     ref, vehicle = kept.reference, kept.vehicle
     if progress is not None:
         progress("reference")
-    notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
-              "give 10 or more")] if kept.count < MIN_REFERENCE else [])
-    notes += list(kept.notes)
+    notes = _stage_notes(kept)
     one = partial(_judge, reference=ref, effects=effects, window_s=window_s)
     orders = [None] * len(logs) if orders is None else list(orders)
     if len(orders) != len(logs):
@@ -1026,6 +1357,30 @@ def base_json(base: Sequence) -> tuple:
     the effect's declared unit}}, ...)."""
     return tuple({"name": e.name, "params": {p.name: float(getattr(e, p.name))
                                              for p in e.parameters}} for e in base)
+
+
+def _stage(reference, params: VehicleParams, *, effects, window_s: float, base: tuple,
+           store=None) -> Calibrated:
+    """The reference stage of ``reference`` (logs): from ``store`` where it holds it
+    (:func:`quadsim.gap.calibrate.reference_key`), else :func:`_reference_stage` (then put
+    there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references)."""
+    key = None if store is None else reference_key(reference, params, effects=effects,
+                                                   window_s=window_s, base=base)
+    kept = None if store is None else store.get(key)
+    if kept is None:
+        kept = _reference_stage(reference, params, effects=effects, window_s=window_s,
+                                key=key, base=base)
+        if store is not None:
+            store.put(kept)
+    return kept
+
+
+def _stage_notes(kept: Calibrated) -> list[str]:
+    """The reference stage's notes: too few references (below :data:`MIN_REFERENCE`), and
+    the references' signal-delay notes."""
+    notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
+              "give 10 or more")] if kept.count < MIN_REFERENCE else [])
+    return notes + list(kept.notes)
 
 
 def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,

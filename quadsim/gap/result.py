@@ -316,6 +316,10 @@ class Diagnosis(_JsonView):
         out.update(train=list(self.train), holdout=list(self.holdout),
                    baseline=self.baseline or {}, verdict=self.verdict.to_json(),
                    noise_model=self.noise_model)
+        if self.reference:      # held out against nominal references: as per flight
+            out.update(reference=list(self.reference), reference_model=self.reference_model)
+            if not self.baseline:       # no refit of the bare set's b and d: none to state
+                del out["baseline"]
         if self.combination is not None:
             out["combination"] = self.combination
         return plain(out)

@@ -1,0 +1,208 @@
+"""Held-out mode against nominal reference flights (issue 47): ``diagnose(train, params,
+holdout=held, reference=nominal)`` and ``python -m quadsim.gap TRAIN... --holdout HELD...
+--reference NOMINAL...``. "Normal" is what the references share, as per flight: a trait
+every flight has and the parameter set lacks is no difference; a change the training
+flights share beyond it is named with its size and checked on the held-out flight."""
+
+from __future__ import annotations
+
+import importlib
+import json
+
+import numpy as np
+import pytest
+
+from benchmarks.heldout_sources import MemoryStore
+from benchmarks.synthetic import synthetic_flight
+from quadsim.effects import make_effect
+from quadsim.gap import diagnose
+from quadsim.gap.__main__ import main
+from quadsim.gap.report import validate
+from quadsim.logs.flightlog import write_log
+from quadsim.vehicle.params import load_params
+
+EFFECTS = ["mass_offset", "com_offset", "thrust_mismatch", "body_drag"]
+#: the trait every generated flight here shares and the parameter set lacks: a quadratic
+#: airframe drag of C_d A 40 cm^2
+DRAG = 0.004
+
+
+@pytest.fixture(scope="module")
+def cf():
+    return load_params("crazyflie21")
+
+
+def _logs(cf, effects, seeds, duration=4.0):
+    return [synthetic_flight(cf, effects, seed=s, duration=duration, speed=1.5) for s in seeds]
+
+
+@pytest.fixture(scope="module")
+def store():
+    """The benchmark's in-memory stage store, shared by this module's library calls."""
+    return MemoryStore()
+
+
+@pytest.fixture(scope="module")
+def flights(cf):
+    """5 references, 2 training flights and 1 held out, all with the shared drag; the same
+    with +4 g on top for the changed ones."""
+    drag = [make_effect("body_drag", cd_area=DRAG)]
+    heavy = drag + [make_effect("mass_offset", mass=0.004)]
+    return {"reference": _logs(cf, drag, (40, 41, 42, 43, 44)),
+            "train": _logs(cf, drag, (60, 61)), "held": _logs(cf, drag, (62,)),
+            "heavy_train": _logs(cf, heavy, (63, 64)), "heavy_held": _logs(cf, heavy, (65,))}
+
+
+def test_a_trait_every_flight_shares_is_no_difference_against_references(cf, flights, store):
+    """Without references the bare set is the reference, so the training and held-out
+    flights (nothing changed) are named as the drag they share (C_d A about 40 cm^2); with
+    the references, which share it too, the same flights are no_significant_gap."""
+    bare = diagnose(flights["train"], cf, holdout=flights["held"], effects=EFFECTS,
+                    kstep=False).verdict
+    assert bare.outcome == "effect" and bare.name.startswith("body_drag"), bare.answer
+    assert bare.params["body_drag.cd_area"] == pytest.approx(DRAG, abs=0.001)
+    result = diagnose(flights["train"], cf, holdout=flights["held"], effects=EFFECTS,
+                      kstep=False, reference=flights["reference"], store=store)
+    verdict = result.verdict
+    assert verdict.outcome == "no_significant_gap", verdict.answer
+    assert "Judged against 5 nominal reference flights" in verdict.answer
+    out = result.to_json()
+    validate(out)
+    assert len(out["reference"]) == 5 and out["train"] and out["holdout"]
+    # the references' model as per flight: their calibration, discrepancy and self-check
+    model = out["reference_model"]
+    assert model["self_check"] is not None and len(model["self_check"]["flights"]) == 5
+    assert model["discrepancy"] is not None
+    # the references' drag, read as a quadratic airframe drag: about the shared 40 cm^2
+    assert model["quadratic_drag_m2"] == pytest.approx(DRAG, rel=0.3)
+
+
+def test_a_change_the_training_flights_share_beyond_the_references_is_named(cf, flights,
+                                                                           store):
+    """+4 g on the training and held-out flights (on top of the shared drag): named
+    mass_offset at about +4 g, carried over to the held-out flight. The references'
+    stage is calibrated once for this module's calls (the store keeps it)."""
+    verdict = diagnose(flights["heavy_train"], cf, holdout=flights["heavy_held"],
+                       effects=EFFECTS, kstep=False, reference=flights["reference"],
+                       store=store).verdict
+    assert verdict.outcome == "effect" and verdict.name == "mass_offset", verdict.answer
+    assert verdict.params["mass_offset.mass"] == pytest.approx(0.004, abs=0.001)
+    assert verdict.probability > 0.9
+    assert store.made == 1 and len(store.kept) == 1
+
+
+def test_the_cli_takes_references_with_holdout_and_reuses_their_calibration(
+        cf, flights, tmp_path, monkeypatch, capsys):
+    """``--holdout`` with ``--reference`` (refused before this mode) and
+    ``--reference-cache``: the second run reads the kept calibration (calibrating again
+    would fail) and writes the same JSON, byte for byte. ``--write-effects`` with
+    ``--reference`` is refused in one line."""
+    def paths(key, name):
+        return [str(write_log(tmp_path / f"{name}{k}.csv", log))
+                for k, log in enumerate(flights[key])]
+
+    common = ["--model", "crazyflie21", *paths("train", "train"),
+              "--holdout", *paths("held", "held"),
+              "--reference", *paths("reference", "ref"), "--effects", *EFFECTS,
+              "--workers", "1", "--quiet", "--reference-cache", str(tmp_path / "cache")]
+    assert main([*common, "--json", str(tmp_path / "first.json")]) == 0
+    first = json.loads((tmp_path / "first.json").read_text())
+    assert first["verdict"]["outcome"] == "no_significant_gap"
+    assert [p.rsplit("/", 1)[-1] for p in first["reference"]] == [f"ref{k}.csv"
+                                                                 for k in range(5)]
+    assert len(list((tmp_path / "cache").glob("*.pkl"))) == 1
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("calibrated again")
+
+    monkeypatch.setattr(importlib.import_module("quadsim.gap.diagnose"), "calibrate", refuse)
+    assert main([*common, "--json", str(tmp_path / "second.json")]) == 0
+    assert (tmp_path / "first.json").read_bytes() == (tmp_path / "second.json").read_bytes()
+    capsys.readouterr()
+    assert main([*common, "--write-effects", str(tmp_path / "e.toml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --write-effects: not used with --reference"), err
+    assert not (tmp_path / "e.toml").exists()
+
+
+def test_a_pair_of_readings_that_fit_the_rotor_timing_fits_one_delay():
+    """Against references that time their rotor speeds every reading fits the flight's
+    rotor delay (last parameter); a pair of two such readings fits it once, with the lead's
+    prior (the first benchmark run stopped on a pair with two: 6 priors for 4 parameters)."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.diagnose import pair
+    from quadsim.gap.explanations import Explanation
+
+    lead = Explanation("mass_offset", "", (("mass_offset", {}, ("mass",)),), (0.0, 0.001),
+                       (0.01, 0.002), shift="rotor")
+    other = Explanation("com_offset", "", (("com_offset", {}, ("x", "y")),),
+                        (0.0, 0.0, 0.0), (0.01, 0.02, 0.05), shift="rotor", log_prior=-1.0)
+    got = []
+    stub = SimpleNamespace(weigh=lambda expl: got.extend(expl) or ["weighed"])
+
+    def weighed(expl):
+        return SimpleNamespace(train=SimpleNamespace(explanation=expl))
+
+    assert pair(weighed(lead), weighed(other), partners=2, train=[], held=[], reference=None,
+                against=stub) == "weighed"
+    (expl,) = got
+    assert expl.name == "mass_offset+com_offset" and expl.shift == "rotor"
+    assert expl.parameter_names == ["mass_offset.mass", "com_offset.x", "com_offset.y",
+                                    "delay.rotor"]
+    assert expl.mean == (0.0, 0.0, 0.0, 0.001) and expl.sd == (0.01, 0.01, 0.02, 0.002)
+    assert expl.log_prior == pytest.approx(-1.0 - np.log(2.0))
+    # one reading without a delay: the other's delay, once
+    plain = Explanation("mass_offset", "", (("mass_offset", {}, ("mass",)),), (0.0,), (0.01,))
+    got.clear()
+    pair(weighed(plain), weighed(other), partners=1, train=[], held=[], reference=None,
+         against=stub)
+    assert got[0].mean == (0.0, 0.0, 0.0, 0.0) and got[0].sd == (0.01, 0.01, 0.02, 0.05)
+
+
+def test_the_kstep_prediction_simulates_a_cable_read_from_the_logged_motion(cf):
+    """A held-out lead with a cable payload (the diagnosis' stateless CableSwing, which
+    differentiates the logged velocity) stopped the k-step prediction of ``where`` with a
+    ZeroDivisionError (the first real-flight run with references, payload flights): it is
+    simulated as the engines' cable_payload of the same mass, length and attachment."""
+    from quadsim.gap.diagnose import prepare, simulable
+    from quadsim.gap.fitting import CableSwing
+    from quadsim.gap.judge import kstep_errors
+
+    swing = CableSwing(mass=0.005, length=0.4, x=0.001, y=-0.002, z=-0.01, lean_x=0.1)
+    other = make_effect("mass_offset", mass=0.002)
+    (cable, kept) = simulable([swing, other])
+    assert kept is other and type(cable).__name__ == "CablePayload"
+    assert (cable.mass, cable.length, cable.x, cable.y, cable.z) == (0.005, 0.4, 0.001,
+                                                                       -0.002, -0.01)
+    assert cable.state_size() > 0
+    flight = prepare([synthetic_flight(cf, [], seed=70, duration=2.0)], cf)[0]
+    errors = kstep_errors([flight.fit], cf, [cable])
+    assert errors and all(np.isfinite(v) for row in errors.values() for v in row.values())
+
+
+def test_explanations_weighed_on_workers_are_weighed_as_in_one_call(cf, flights, store):
+    """``--workers N``: one explanation per task, the task pickled (the kept residual parts
+    left behind). Every reading's evidence is the one call's: the rotor delay's fits start
+    where "no difference" puts them in both (without it in the task they started at the
+    cross-correlation's estimate: one reading 2 log units apart, found by comparing
+    ``--workers 1`` with ``--workers 2``)."""
+    import pickle
+
+    from quadsim.gap.diagnose import _stage, _weigh_against, against_references, prepare
+    from quadsim.gap.residual import DEFAULT_WINDOW_S
+
+    stage = _stage(flights["reference"], cf, effects=EFFECTS, window_s=DEFAULT_WINDOW_S,
+                   base=(), store=store)
+    against = against_references(prepare(flights["train"], cf), prepare(flights["held"], cf),
+                                 stage.reference, effects=EFFECTS)
+    assert against.explanations[0].shift == "rotor"     # the references time their rotors
+    one = _weigh_against(against, map_fn=map, tick=lambda *_: None)
+
+    def workers(fn, items):
+        return [pickle.loads(pickle.dumps(fn))(item) for item in items]
+
+    many = _weigh_against(against, map_fn=workers, tick=lambda *_: None)
+    assert [w.name for w in many] == [w.name for w in one] and len(one) > 5
+    assert [w.total.log_z for w in many] == pytest.approx([w.total.log_z for w in one],
+                                                          rel=1e-9, abs=1e-6)
