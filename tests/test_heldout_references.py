@@ -66,6 +66,9 @@ def test_a_trait_every_flight_shares_is_no_difference_against_references(cf, fli
     verdict = result.verdict
     assert verdict.outcome == "no_significant_gap", verdict.answer
     assert "Judged against 5 nominal reference flights" in verdict.answer
+    assert verdict.answer.startswith("No significant gap: no difference from the reference "
+                                     "flights"), verdict.answer
+    assert "nominal model" not in verdict.answer
     out = result.to_json()
     validate(out)
     assert len(out["reference"]) == 5 and out["train"] and out["holdout"]
@@ -206,3 +209,93 @@ def test_explanations_weighed_on_workers_are_weighed_as_in_one_call(cf, flights,
     assert [w.name for w in many] == [w.name for w in one] and len(one) > 5
     assert [w.total.log_z for w in many] == pytest.approx([w.total.log_z for w in one],
                                                           rel=1e-9, abs=1e-6)
+
+
+def _slow_flight(rng, sigma, amplitude, n=2000, dt=0.01):
+    """(n, 6) residual: white noise of ``sigma`` per channel plus a slow part (a 4 s
+    sinusoid of ``amplitude`` sigma, random phase): what a flight flown faster leaves,
+    larger where the shared unmodelled trait grows with speed."""
+    t = dt * np.arange(n)[:, None]
+    phase = rng.uniform(0, 2 * np.pi, 6)
+    return sigma * (rng.standard_normal((n, 6)) + amplitude * np.sin(2 * np.pi * t / 4 + phase))
+
+
+def test_the_held_out_remainder_is_weighed_against_the_references_own_slow_parts(cf):
+    """One systematic-remainder rule whose normal is data of the reference: against nominal
+    references (their self-check carries each one's slow part under "no difference") the
+    judged flights' pooled slow part is weighed against theirs (judge.beyond_normal, the
+    per-flight rule); without them (the bare set) against what noise leaves. A no-effect
+    held-out flight flown faster than its training flights, its slow part inside the
+    references' range, has a remainder against noise (the first --references run's misses)
+    and none against the references; a change outside the library (a slow part 20x the
+    references') has one against both."""
+    from types import SimpleNamespace
+
+    from scipy.stats import t as student_t
+
+    from quadsim.gap.calibrate import SelfCheck
+    from quadsim.gap.evidence import slow_ms
+    from quadsim.gap.judge import LOF_P, beyond_normal, remainder, slow_normal
+
+    rng = np.random.default_rng(3)
+    dt, sigma = 0.01, 100 * np.array([0.02, 0.02, 0.02, 1e-3, 1e-3, 1e-3])
+    refs = [_slow_flight(rng, sigma, a) for a in (0.35, 0.45, 0.5, 0.55, 0.6, 0.65)]
+    normal = np.array([slow_ms(r / sigma, dt) for r in refs])
+    check = SelfCheck(tuple("abcdef"), (), (), {}, normal)
+    against = SimpleNamespace(params=cf, rotor=False, sigma=sigma, tau=np.ones(6),
+                              self_check=check)
+    bare = SimpleNamespace(params=cf, rotor=False, sigma=sigma, tau=np.ones(6),
+                           self_check=None)
+    assert slow_normal(bare) is None and np.array_equal(slow_normal(against), normal)
+    # fewer than 3 references: no normal of theirs, the noise rule
+    assert slow_normal(SimpleNamespace(self_check=SelfCheck((), (), (), {}, normal[:2]))) \
+        is None
+    faster = [_slow_flight(rng, sigma, a) for a in (0.4, 0.45, 0.62)]   # train, train, held
+    assert remainder(faster, against, dt) == {}
+    noise = remainder(faster, bare, dt)
+    assert set(noise) == {"Fx", "Fy", "Fz", "Mx", "My", "Mz"}
+    assert min(v[1] for v in noise.values()) > 3      # slow part 3x+ what noise leaves
+    # a change outside the library: the held-out flight's slow part 20x the references'
+    changed = faster[:2] + [_slow_flight(rng, sigma, 0.5 * np.sqrt(3 * 400))]
+    got = remainder(changed, against, dt)
+    assert set(got) == {"Fx", "Fy", "Fz", "Mx", "My", "Mz"}
+    # closed forms: the pooled slow part over the references' typical, the per-flight z
+    counts = np.array([len(r) for r in changed], float)
+    pooled = sum(n * slow_ms(r / sigma, dt) for n, r in zip(counts, changed)) / counts.sum()
+    logs = np.log(normal)
+    mean, spread = logs.mean(axis=0), logs.std(axis=0, ddof=1)
+    z = (np.log(pooled) - mean) / (spread * np.sqrt(1 + 1 / 6))
+    assert z.min() > float(student_t.ppf(1 - LOF_P / 6, 5))
+    for k, name in enumerate(("Fx", "Fy", "Fz", "Mx", "My", "Mz")):
+        assert got[name][0] == pytest.approx(np.sqrt(pooled[k]) * sigma[k], rel=1e-12)
+        assert got[name][1] == pytest.approx(pooled[k] / np.exp(mean[k]), rel=1e-12)
+        assert beyond_normal(pooled, normal, against)[k][1] == pytest.approx(z[k], rel=1e-12)
+    assert min(v[1] for v in got.values()) > 8
+
+
+def test_held_out_answers_against_references_say_the_reference_flights():
+    """Held out against references the answer's "no difference" is from the reference
+    flights and a remainder is beyond their slow parts; against the bare set the words
+    are unchanged."""
+    from quadsim.gap.words import answer, nominal_words
+
+    lead = {"name": "no_difference", "probability": 0.97, "magnitude": ""}
+    ref = answer("no_significant_gap", lead, stated=[], lack={}, against="training",
+                 references=True)
+    assert ref.startswith("No significant gap: no difference from the reference flights is "
+                          "the most probable reading (97 %) and the residual is within the "
+                          "reference flights' own on every channel.")
+    bare = answer("no_significant_gap", lead, stated=[], lack={}, against="training")
+    assert bare.startswith("No significant gap: no difference from the nominal model is the "
+                           "most probable reading (97 %) and the residual is within the noise "
+                           "on every channel.")
+    remains = {"Fy": (0.004, 4.0)}
+    text = answer("unexplained", lead, stated=[], lack={}, against="training",
+                  remains=remains, references=True)
+    assert "no difference from the reference flights" in text
+    assert "stays beyond the reference flights' own: Fy 0.004 N (2.0x the references')" in text
+    assert "(2.0x the noise's)" in answer("unexplained", lead, stated=[], lack={},
+                                          against="training", remains=remains)
+    assert nominal_words("x", False, references=True) == \
+        "no difference from the reference flights"
+    assert nominal_words("x", False) == "no difference from the nominal model"
