@@ -197,6 +197,7 @@ from .judge import (
     every_part_stands,
     judge,
     judge_heldout,
+    placed_slow,
     plausible,
     rank,
     reading_name,
@@ -647,6 +648,11 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                 and trend.q_weight is not None and np.any(trend.q_weight > 0) else None)
         place = envelope_position(stacked, ref.envelope, info)
         local = local_reference(ref, place)
+        check = ref.self_check
+        if local is not ref and check is not None and getattr(check, "slow", None) is not None:
+            # the systematic remainder's normal at the same place (judge.placed_slow)
+            local = dataclasses.replace(local, self_check=dataclasses.replace(
+                check, slow=placed_slow(check.slow, ref, local)))
 
         def hint(f):
             mine = (f.delays_ms or {}).get("rotor")

@@ -180,7 +180,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
            "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
-           "reading_text", "remainder", "remainder_of", "rows_at_reference_voltage", "symptom",
+           "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
+           "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks"]
 
@@ -847,6 +848,52 @@ def beyond_normal(slow, normal, reference) -> dict:
             for k in np.nonzero((z > limit) & above_floor(slow, reference))[0]}
 
 
+def placed_slow(slow, calibrated, local) -> np.ndarray:
+    """The references' own slow parts ``slow`` (n, C; sigma_c^2 units of ``calibrated``,
+    :attr:`quadsim.gap.calibrate.SelfCheck.slow`) at a flight's place on their envelope,
+    where the reference model is ``local`` (:func:`quadsim.gap.reference.local_reference`):
+    the systematic remainder's normal moved as the lack-of-fit baseline is (module doc, 2-3).
+    On the log scale, per channel, their mean moves by ``local.lof_mean - calibrated.lof_mean``
+    (the trend's move g_c e less the noise scale's widening, which also puts them in
+    ``local``'s sigma units) and their spread s_c about it grows to
+    sqrt(s_c^2 + local.lof_sd^2 - calibrated.lof_sd^2) (the lack-of-fit spread's own growth
+    there: the trend's prediction term and, outside the envelope, at least the pooled
+    spread); each reference keeps its place within them. Inside the envelope and where no
+    trend is measured ``local`` is ``calibrated`` and the normal is unchanged."""
+    slow = np.asarray(slow, float)
+    logs = np.log(np.maximum(slow, 1e-300))
+    mean = logs.mean(axis=0)
+    spread = logs.std(axis=0, ddof=1) if len(logs) > 1 else np.zeros(logs.shape[1])
+    move = np.asarray(local.lof_mean, float) - np.asarray(calibrated.lof_mean, float)
+    extra = np.maximum(np.asarray(local.lof_sd, float) ** 2
+                       - np.asarray(calibrated.lof_sd, float) ** 2, 0.0)
+    grow = np.where(spread > 0, np.sqrt(spread ** 2 + extra) / np.maximum(spread, 1e-300), 1.0)
+    return np.exp(mean + move + (logs - mean) * grow)
+
+
+def against_reference(lead, null, reference) -> tuple[dict, dict, float]:
+    """Held out against nominal references, the per-flight lack of fit (module doc, 2;
+    :func:`judge`'s rule) of the reading ``lead`` (a :class:`~quadsim.gap.heldout.Weighed`)
+    on its training flights against :meth:`Baseline.of_reference` of ``reference``, the
+    references' model at the training flights' place (trend included): (lack, left,
+    share). ``null``: the "no difference" Weighed (the form-error exemption and share);
+    ``lack``/``left``: channel -> (RMS over the references' typical, z), ``left`` a named
+    reading leaving at most :data:`FORM_ERROR_TENTATIVE` of the gap (named tentatively, as
+    per flight); ``share``: that share (inf for "no difference"). The training flights:
+    the reference is placed at their place, and they are the flights the reading was fitted
+    on, as per flight; the held-out flights are judged against them (:func:`carry_over`)."""
+    sigma = reference.sigma
+    baseline = Baseline.of_reference(reference)
+    ms = mean_squares(lead.train_residuals, sigma)
+    null_ms = None if null is None or null is lead else mean_squares(null.train_residuals,
+                                                                      sigma)
+    lack = lack_of_fit(ms, baseline, reference, null_ms=null_ms)
+    share = float("inf") if null_ms is None else form_share(ms, null_ms, np.exp(baseline.mean))
+    if lack and null_ms is not None and share <= FORM_ERROR_TENTATIVE:
+        return {}, lack, share
+    return lack, {}, share
+
+
 def remainder_of(ev, check, reference) -> dict:
     """Per flight, the systematic remainder against the references' own normal (module doc,
     3; :func:`beyond_normal`): channel -> (RMS of the reading's slow part over the
@@ -1079,9 +1126,22 @@ def judge_heldout(decision, reference, *, before: list, after: list,
              f"({nominal_words(magnitude, True, references=references)}; {prior_text}): "
              "named only with a caveat"
              for name, magnitude, prior_text in decision.implausible]
-    remains = remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     # a named reading must carry over to the held-out flights
     lack = carry_over(lead, reference, decision.null) if entry is not None else {}
+    # against nominal references (their own slow parts are the reference's data,
+    # slow_normal) the lead and "no difference" are judged as per flight (judge): the
+    # lack of fit against the references at the training flights' place, and the
+    # systematic remainder after a named lead only; against the bare parameter set the
+    # remainder after every lead, against the noise model
+    per_flight = slow_normal(reference) is not None
+    left: dict = {}
+    beyond: dict = {}
+    share = float("inf")
+    if per_flight:
+        beyond, left, share = against_reference(lead, decision.null, reference)
+        lack = {**lack, **{k: v for k, v in beyond.items() if k not in lack}}
+    remains = {} if per_flight and lead_name == "no_difference" else \
+        remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     checked = decision.consistency if entry is not None else None
     stands = standing(checked) if checked is not None else "stands"
     inconsistent, shifted = stands == "inconsistent", stands == "shifted"
@@ -1105,12 +1165,18 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     others += [row["name"] for row in tied if row["name"] not in others]
     if effect and tied:
         separate_by = fitting.separation(shown, others)
-    unsure = bool(caveat) or bool(remains) or bool(tied)
+    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left)
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
-                                          unsure=unsure, references=references)
+                                          unsure=unsure, references=references,
+                                          beyond=beyond)
     notes += more
+    if left and outcome == "effect":
+        where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
+        words += (f" Beyond it the training flights' residual stays beyond the reference "
+                  f"flights' on {where_} their typical RMS ({100 * share:.0f} % of their gap: "
+                  "the library's form of it, or a further small effect).")
     words += _unseparated_words(tied, shown, separate_by) + caveat
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
@@ -1125,6 +1191,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
                      **{k: v[0] for k, v in lack.items()}},
+        form_remainder={k: v[0] for k, v in left.items()},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
         fixed=entry["fixed"] if entry else {},
         units={k: fitting.unit_of(k) for k in (entry["params"] if entry else {})},
@@ -1132,7 +1199,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         separate_by=separate_by if effect else {},
         consistency=checked, partial=partial, floor_source=FLOOR_SOURCE,
         channels=_channel_table(names, reference.sigma, before=before, after=after,
-                                flagged=set(remains) | set(lack)),
+                                flagged=set(remains) | set(lack) | set(left)),
         alternatives=() if inconsistent else alts,
         best_candidate=next((r["name"] for r in rows if r["name"] != "no_difference"), None),
         heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
@@ -1256,13 +1323,14 @@ def _unseparated_words(tied: list, shown: str, separate_by: dict) -> str:
 
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
                    remains: dict, separate_by: dict, alternatives: tuple,
-                   unsure: bool = False,
-                   references: bool = False) -> tuple[str, dict | None, list[str]]:
+                   unsure: bool = False, references: bool = False,
+                   beyond: dict | None = None) -> tuple[str, dict | None, list[str]]:
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
     name (``stands``, :func:`quadsim.gap.judge.standing`) is a partial explanation;
     otherwise :func:`quadsim.gap.words.answer` (tentative below :data:`CONFIDENT` or
     ``unsure``: a lead with a caveat or a systematic remainder), with the tentative sentence
-    of a shifted name that stands."""
+    of a shifted name that stands. ``beyond``: the channels of ``lack`` beyond the reference
+    flights' (:func:`against_reference`): an unexplained answer says so as per flight."""
     lead_name, checked = decision.lead_name, decision.consistency
     entry = decision.entry(lead_name) or {}
     reduction = entry.get("reduction", 0.0)
@@ -1275,8 +1343,11 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
                    "name": shown}
         return (partial_text(shown, reduction, checked), partial,
                 [inconsistent_note(shown, checked)])
+    carried = {k: v for k, v in lack.items() if k not in (beyond or {})}
+    against = "references" if outcome == "unexplained" and lack and not carried \
+        else "training"
     words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
-                   against="training", remains=remains,
+                   against=against, remains=remains,
                    tentative=decision.probability[lead_name] < CONFIDENT or unsure,
                    reduction=reduction, separate=separate_by, references=references)
     if stands == "shifted" and outcome == "effect":
