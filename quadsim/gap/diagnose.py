@@ -594,9 +594,9 @@ class Against:
     def model(self, expl: Explanation | None) -> list:
         """The reference model's effects an explanation keeps (every one for None): the
         base of its fits (:func:`consistent`) and of the answer's residual."""
-        from .evidence import _shared_effects
+        from .evidence import shared_effects
 
-        return list(_shared_effects(self.reference, () if expl is None else expl.replaces)[0])
+        return list(shared_effects(self.reference, () if expl is None else expl.replaces)[0])
 
     def words(self) -> str:
         """What the answer adds: the references it was judged against, the drag law and

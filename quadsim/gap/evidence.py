@@ -222,7 +222,7 @@ __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
            "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
            "linear_step", "linearised", "marginal_sd", "reference_determined", "refined",
-           "screened", "shifted", "DragLaw", "choose", "under"]
+           "screened", "shifted", "shared_effects", "DragLaw", "choose", "under"]
 
 
 #: bounds (s) of a fitted signal delay (``Explanation.shift``): the lag window of
@@ -378,7 +378,7 @@ def parameter_bounds(expl: Explanation, reference: Reference, dt: float
     return np.asarray(lower, float), np.asarray(upper, float)
 
 
-def _shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[int]]:
+def shared_effects(reference: Reference, replaces: tuple) -> tuple[list, list[int]]:
     """The reference effects without the replaced groups, and the marginalised columns."""
     names = reference.candidate.parameter_names
     keep = [k for k, n in enumerate(names) if n.split(".")[0] not in replaces]
@@ -455,11 +455,11 @@ class Problem:
         self.s_all = s_all
         self.memo = memo          # residual parts shared by evaluations on one flight
         if memo is None:
-            self.shared, self.keep = _shared_effects(reference, expl.replaces)
+            self.shared, self.keep = shared_effects(reference, expl.replaces)
         else:       # the same for every explanation that replaces the same groups
             kept = memo.setdefault("shared_effects", {})
             if expl.replaces not in kept:
-                kept[expl.replaces] = _shared_effects(reference, expl.replaces)
+                kept[expl.replaces] = shared_effects(reference, expl.replaces)
             self.shared, self.keep = kept[expl.replaces]
         self.marg = self._marginal(jac, s_all)
         self.mean, self.sd = np.asarray(expl.mean), np.asarray(expl.sd)
@@ -758,7 +758,7 @@ class Columns:
         self.fixed = tuple(p for p in getattr(null, "parts", ()) if not p[2])
         self.replaced = tuple(getattr(null, "replaces", ())) if self.fixed else ()
         self.effects = reference.effects()
-        if self.fixed:      # as problem._shared_effects: the base's effects always stay
+        if self.fixed:      # as problem.shared_effects: the base's effects always stay
             n_base = len(reference.candidate.base)
             self.effects = (self.effects[:n_base]
                             + [e for e in self.effects[n_base:] if e.name not in self.replaced]
