@@ -200,6 +200,12 @@ def test_explanations_weighed_on_workers_are_weighed_as_in_one_call(cf, flights,
     against = against_references(prepare(flights["train"], cf), prepare(flights["held"], cf),
                                  stage.reference, effects=EFFECTS)
     assert against.explanations[0].shift == "rotor"     # the references time their rotors
+    # the systematic remainder's normal sits where the reference is placed (judge.placed_slow)
+    from quadsim.gap.judge import placed_slow
+
+    slow = against.calibrated.self_check.slow
+    assert against.reference.self_check.slow == pytest.approx(
+        placed_slow(slow, against.calibrated, against.reference), rel=1e-12)
     one = _weigh_against(against, map_fn=map, tick=lambda *_: None)
 
     def workers(fn, items):

@@ -108,17 +108,20 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    flight the reference flights under the reference model (:meth:`Baseline.of_reference`,
    moderated spreads); held out the reading's own training flights
    (:meth:`Baseline.of_training`, pooled spread, C (n - 1) degrees of freedom; tested on
-   named readings: "does it carry over").
+   named readings: "does it carry over"); held out against nominal references also the
+   per-flight test on each training flight against the references at their place
+   (:func:`against_reference`, the lead and "no difference" as per flight).
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
    reference under "no difference" against the others, the self-check's ``slow``, 3 or
    more; per flight, and held out against nominal references) the normal is theirs: on the
    log scale, Student-t at 1 - LOF_P / C (:func:`beyond_normal`; held out on the judged
-   flights' pooled slow part). Where it does not (held out against the bare parameter
-   set, whose noise model is the short-window scatter) the normal is what that noise gives
-   the slow part, chi2(nu)/nu with nu = N / W windows, at 1 - LOF_P / C. Per flight it is
-   tested on a named lead only.
+   flights' pooled slow part, the normal placed at the flights' place on the envelope,
+   :func:`placed_slow`, and tested on a named lead only, as per flight). Where it does not
+   (held out against the bare parameter set, whose noise model is the short-window
+   scatter) the normal is what that noise gives the slow part, chi2(nu)/nu with nu = N / W
+   windows, at 1 - LOF_P / C. Per flight it is tested on a named lead only.
 4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, parameters
    inconsistent between regimes
    (:mod:`.consistency`), or (held out) a systematic remainder with "no difference" the lead;
