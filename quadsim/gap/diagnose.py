@@ -197,6 +197,7 @@ from .judge import (
     every_part_stands,
     judge,
     judge_heldout,
+    placed_slow,
     plausible,
     rank,
     reading_name,
@@ -434,7 +435,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     dt = float(fit_on[0].t[1] - fit_on[0].t[0])
     statuses = logcheck.order_statuses(list(logs) + list(holdout or []), params)
     decision = logcheck.cap_decision(decision, logcheck.probability_cap(statuses))
-    verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt)
+    verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt,
+                                  references=against is not None)
     verdict = logcheck.mark(verdict, statuses)
     if against is not None:
         verdict = dataclasses.replace(verdict, answer=verdict.answer + against.words())
@@ -646,6 +648,11 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                 and trend.q_weight is not None and np.any(trend.q_weight > 0) else None)
         place = envelope_position(stacked, ref.envelope, info)
         local = local_reference(ref, place)
+        check = ref.self_check
+        if local is not ref and check is not None and getattr(check, "slow", None) is not None:
+            # the systematic remainder's normal at the same place (judge.placed_slow)
+            local = dataclasses.replace(local, self_check=dataclasses.replace(
+                check, slow=placed_slow(check.slow, ref, local)))
 
         def hint(f):
             mine = (f.delays_ms or {}).get("rotor")
@@ -979,16 +986,20 @@ def _own(values: tuple, expl: Explanation) -> tuple:
     return tuple(values[:-1]) if expl.shift else tuple(values)
 
 
-def readings_of(ranked: list, reference: Reference) -> list[Reading]:
-    """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words, each
-    named as per flight: the physical change largest against the references first
-    (:func:`quadsim.gap.judge.reading_name`, the lead rule; the training flights' fit)."""
+def readings_of(ranked: list, reference: Reference, *,
+                references: bool = False) -> list[Reading]:
+    """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words
+    (``references``: against nominal reference flights, as per flight,
+    :func:`quadsim.gap.words.nominal_words`), each named as per flight: the physical change
+    largest against the references first (:func:`quadsim.gap.judge.reading_name`, the lead
+    rule; the training flights' fit)."""
     out = []
     for k, p, w in ranked:
         ev = w.train
         det = [q for q, ok in ev.determined.items() if ok]
         out.append(Reading(reading_name(k, ev), p,
-                           nominal_words(reading_text(ev, reference), k == ev.name),
+                           nominal_words(reading_text(ev, reference), k == ev.name,
+                                         references=references),
                            w.total.log_z, {q: ev.values[q] for q in det},
                            {q: 1.96 * ev.post_sd[q] for q in det},
                            tuple(q for q, ok in ev.determined.items() if not ok),
@@ -1287,7 +1298,8 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     small = sorted((w for w in weighed if null is not None and w is not null
                     and w.total.log_z > null.total.log_z and scale.small(w.train)),
                    key=lambda w: -w.total.log_z)
-    return Decision(tuple(ranked), tuple(readings_of(ranked, reference)), tuple(entries),
+    rows = readings_of(ranked, reference, references=against is not None)
+    return Decision(tuple(ranked), tuple(rows), tuple(entries),
                     lead, lead_name, null, combination, checked,
                     tuple((w.name, reading_text(w.train, reference), text)
                           for w, text in implausible),

@@ -108,13 +108,20 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    flight the reference flights under the reference model (:meth:`Baseline.of_reference`,
    moderated spreads); held out the reading's own training flights
    (:meth:`Baseline.of_training`, pooled spread, C (n - 1) degrees of freedom; tested on
-   named readings: "does it carry over").
-3. **Systematic remainder** (:func:`remainder`, held out): the residual's slow part (0.5 s
-   moving average) against what noise of the noise model gives it, chi2(nu)/nu with nu =
-   N / W windows, at 1 - LOF_P / C. Per flight (:func:`remainder_of`) the noise model is
-   the references' whole residual, so the normal is the references' own slow part: each
-   reference's under "no difference" against the others (the self-check), on the log scale,
-   Student-t at 1 - LOF_P / C; tested on a named lead only.
+   named readings: "does it carry over"); held out against nominal references also the
+   per-flight test on each training flight against the references at their place
+   (:func:`against_reference`, the lead and "no difference" as per flight).
+3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
+   the residual's slow part (0.5 s moving average) against its normal, which is data of the
+   reference model. Where the reference carries its references' own slow parts (each
+   reference under "no difference" against the others, the self-check's ``slow``, 3 or
+   more; per flight, and held out against nominal references) the normal is theirs: on the
+   log scale, Student-t at 1 - LOF_P / C (:func:`beyond_normal`; held out on the judged
+   flights' pooled slow part, the normal placed at the flights' place on the envelope,
+   :func:`placed_slow`, and tested on a named lead only, as per flight). Where it does not
+   (held out against the bare parameter set, whose noise model is the short-window
+   scatter) the normal is what that noise gives the slow part, chi2(nu)/nu with nu = N / W
+   windows, at 1 - LOF_P / C. Per flight it is tested on a named lead only.
 4. **Outcome** (:func:`outcome_of`): ``unexplained`` on a lack of fit, parameters
    inconsistent between regimes
    (:mod:`.consistency`), or (held out) a systematic remainder with "no difference" the lead;
@@ -176,8 +183,10 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
            "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
-           "reading_text", "remainder", "remainder_of", "rows_at_reference_voltage", "symptom",
-           "unseparated", "within_form_error", "beyond_misfit", "channel_logliks"]
+           "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
+           "rows_at_reference_voltage", "symptom",
+           "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
+           "channel_logliks"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -769,17 +778,37 @@ def slow_part(residual: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) 
 
 
 def remainder(residuals: list, reference, dt: float) -> dict:
-    """Channels with a systematic residual beyond the noise model (module doc, 3): channel ->
-    (RMS of the slow part in the channel's unit, ratio of its mean square to the noise's
-    expectation sigma_c^2 min(tau_c, W) / W). ``residuals``: (N_j, C) unscaled, every flight
-    (training and held out); ``reference``: ``sigma``, ``tau`` (samples); ``dt`` (s)."""
+    """Held out, channels with a systematic residual beyond its normal (module doc, 3):
+    channel -> (RMS of the slow part in the channel's unit, ratio of its mean square to the
+    normal's typical one). ``residuals``: (N_j, C) unscaled, every flight (training and held
+    out); ``reference``: ``sigma``, ``tau`` (samples) and, where it carries them, its
+    references' own slow parts; ``dt`` (s).
+
+    The normal is the reference's data (:func:`slow_normal`): against nominal references,
+    the references' own slow parts (:func:`beyond_normal`, the per-flight rule of
+    :func:`remainder_of`) on the judged flights' slow-part mean square over sigma_c^2, each
+    flight's as per flight (:func:`quadsim.gap.evidence.slow_ms`) pooled by its samples (a
+    pool of flights varies less than one flight, the references' unit: the test is no
+    looser); against the bare parameter set, what noise of the noise model gives the slow
+    part, sigma_c^2 min(tau_c, W) / W, beyond chi2(nu)/nu at 1 - LOF_P / C, nu = N / W."""
+    names = channel_names(reference)
+    normal = slow_normal(reference)
+    if normal is not None:
+        from .evidence import slow_ms
+
+        sigma = np.asarray(reference.sigma, float)
+        counts = np.array([len(r) for r in residuals], float)
+        slow = np.sum([n * slow_ms(r / sigma, dt) for n, r in zip(counts, residuals)],
+                      axis=0) / np.sum(counts)
+        return {names[k]: (float(np.sqrt(slow[k]) * sigma[k]),
+                           float(np.exp(np.log(slow[k]) - mean)))
+                for k, (mean, _) in beyond_normal(slow, normal, reference).items()}
     window = max(3, int(np.rint(SLOW_WINDOW_S / dt)) | 1)
     slow = np.concatenate([slow_part(r, dt) for r in residuals])
     expected = reference.sigma ** 2 * np.minimum(reference.tau, window) / window
     ratio = np.mean(slow ** 2, axis=0) / expected
     nu = max(1.0, len(slow) / window)
     limit = float(chi2.ppf(1 - LOF_P / len(ratio), nu) / nu)
-    names = channel_names(reference)
     rms = np.sqrt(np.mean(slow ** 2, axis=0))
     return {names[k]: (float(rms[k]), float(ratio[k])) for k in range(len(ratio))
             if ratio[k] > limit}
@@ -790,32 +819,99 @@ def remainder(residuals: list, reference, dt: float) -> dict:
 MIN_REMAINDER_REFERENCES = 3
 
 
-def remainder_of(ev, check, reference) -> dict:
-    """Per flight, :func:`remainder`'s rule against the references' own normal (module doc,
-    3): channel -> (RMS of the reading's slow part over the references' typical one, z), for
-    the channels where the slow-part mean square ``ev.slow`` (C,; sigma_c^2 units,
-    :attr:`quadsim.gap.evidence.Evidence.slow`) lies beyond the references' (``check.slow``
-    (n, C), each reference under "no difference" against the others). On the log scale, with
-    the references' mean m_c and spread s_c (n - 1 degrees of freedom):
+def slow_normal(reference, check=None) -> np.ndarray | None:
+    """The references' own slow parts (n, C; sigma_c^2 units), the systematic remainder's
+    normal (module doc, 3): ``check.slow`` (default the self-check ``reference`` carries),
+    each reference's slow-part mean square under "no difference" against the others; None
+    where there is none or fewer than :data:`MIN_REMAINDER_REFERENCES` (held out against the
+    bare parameter set: the noise model is the normal)."""
+    check = getattr(reference, "self_check", None) if check is None else check
+    normal = getattr(check, "slow", None)
+    if normal is None or len(normal) < MIN_REMAINDER_REFERENCES:
+        return None
+    return np.asarray(normal, float)
+
+
+def beyond_normal(slow, normal, reference) -> dict:
+    """The channels whose slow-part mean square ``slow`` (C,; sigma_c^2 units) lies beyond
+    the references' ``normal`` (n, C, :func:`slow_normal`): channel index -> (m_c, the
+    log of the references' typical slow-part mean square, z_c). On the log scale, with their
+    mean m_c and spread s_c (n - 1 degrees of freedom):
     z_c = (log slow_c - m_c) / (s_c sqrt(1 + 1/n)) beyond the Student-t quantile at
-    1 - LOF_P / C (the lack-of-fit rule's rate, Bonferroni over the channels); a channel whose
-    slow part lies below its noise floor is no remainder (:func:`above_floor`). {} where
-    there is no such normal (fewer than :data:`MIN_REMAINDER_REFERENCES` references, or no
-    slow part measured)."""
-    normal = None if check is None else getattr(check, "slow", None)
-    if ev is None or getattr(ev, "slow", None) is None or normal is None \
-            or len(normal) < MIN_REMAINDER_REFERENCES:
-        return {}
+    1 - LOF_P / C (the lack-of-fit rule's rate, Bonferroni over the channels); a channel
+    whose slow part lies below its noise floor is none (:func:`above_floor`)."""
     logs = np.log(np.maximum(np.asarray(normal, float), 1e-300))
     n, c = logs.shape
     mean, spread = logs.mean(axis=0), logs.std(axis=0, ddof=1)
     scale = np.maximum(spread * np.sqrt(1 + 1 / n), 1e-9)
     limit = float(student_t.ppf(1 - LOF_P / c, n - 1))
-    slow = np.asarray(ev.slow, float)
+    slow = np.asarray(slow, float)
     z = (np.log(np.maximum(slow, 1e-300)) - mean) / scale
-    names = channel_names(reference)
-    return {names[k]: (float(np.exp(0.5 * (np.log(slow[k]) - mean[k]))), float(z[k]))
+    return {int(k): (float(mean[k]), float(z[k]))
             for k in np.nonzero((z > limit) & above_floor(slow, reference))[0]}
+
+
+def placed_slow(slow, calibrated, local) -> np.ndarray:
+    """The references' own slow parts ``slow`` (n, C; sigma_c^2 units of ``calibrated``,
+    :attr:`quadsim.gap.calibrate.SelfCheck.slow`) at a flight's place on their envelope,
+    where the reference model is ``local`` (:func:`quadsim.gap.reference.local_reference`):
+    the systematic remainder's normal moved as the lack-of-fit baseline is (module doc, 2-3).
+    On the log scale, per channel, their mean moves by ``local.lof_mean - calibrated.lof_mean``
+    (the trend's move g_c e less the noise scale's widening, which also puts them in
+    ``local``'s sigma units) and their spread s_c about it grows to
+    sqrt(s_c^2 + local.lof_sd^2 - calibrated.lof_sd^2) (the lack-of-fit spread's own growth
+    there: the trend's prediction term and, outside the envelope, at least the pooled
+    spread); each reference keeps its place within them. Inside the envelope and where no
+    trend is measured ``local`` is ``calibrated`` and the normal is unchanged."""
+    slow = np.asarray(slow, float)
+    logs = np.log(np.maximum(slow, 1e-300))
+    mean = logs.mean(axis=0)
+    spread = logs.std(axis=0, ddof=1) if len(logs) > 1 else np.zeros(logs.shape[1])
+    move = np.asarray(local.lof_mean, float) - np.asarray(calibrated.lof_mean, float)
+    extra = np.maximum(np.asarray(local.lof_sd, float) ** 2
+                       - np.asarray(calibrated.lof_sd, float) ** 2, 0.0)
+    grow = np.where(spread > 0, np.sqrt(spread ** 2 + extra) / np.maximum(spread, 1e-300), 1.0)
+    return np.exp(mean + move + (logs - mean) * grow)
+
+
+def against_reference(lead, null, reference) -> tuple[dict, dict, float]:
+    """Held out against nominal references, the per-flight lack of fit (module doc, 2;
+    :func:`judge`'s rule) of the reading ``lead`` (a :class:`~quadsim.gap.heldout.Weighed`)
+    on its training flights against :meth:`Baseline.of_reference` of ``reference``, the
+    references' model at the training flights' place (trend included): (lack, left,
+    share). ``null``: the "no difference" Weighed (the form-error exemption and share);
+    ``lack``/``left``: channel -> (RMS over the references' typical, z), ``left`` a named
+    reading leaving at most :data:`FORM_ERROR_TENTATIVE` of the gap (named tentatively, as
+    per flight); ``share``: that share (inf for "no difference"). The training flights:
+    the reference is placed at their place, and they are the flights the reading was fitted
+    on, as per flight; the held-out flights are judged against them (:func:`carry_over`)."""
+    sigma = reference.sigma
+    baseline = Baseline.of_reference(reference)
+    ms = mean_squares(lead.train_residuals, sigma)
+    null_ms = None if null is None or null is lead else mean_squares(null.train_residuals,
+                                                                      sigma)
+    lack = lack_of_fit(ms, baseline, reference, null_ms=null_ms)
+    share = float("inf") if null_ms is None else form_share(ms, null_ms, np.exp(baseline.mean))
+    if lack and null_ms is not None and share <= FORM_ERROR_TENTATIVE:
+        return {}, lack, share
+    return lack, {}, share
+
+
+def remainder_of(ev, check, reference) -> dict:
+    """Per flight, the systematic remainder against the references' own normal (module doc,
+    3; :func:`beyond_normal`): channel -> (RMS of the reading's slow part over the
+    references' typical one, z), for the channels where the slow-part mean square
+    ``ev.slow`` (C,; sigma_c^2 units, :attr:`quadsim.gap.evidence.Evidence.slow`) lies
+    beyond the references' (``check.slow`` (n, C), each reference under "no difference"
+    against the others). {} where there is no such normal (:func:`slow_normal`) or no slow
+    part measured."""
+    normal = None if check is None else slow_normal(None, check)
+    if ev is None or getattr(ev, "slow", None) is None or normal is None:
+        return {}
+    slow = np.asarray(ev.slow, float)
+    names = channel_names(reference)
+    return {names[k]: (float(np.exp(0.5 * (np.log(slow[k]) - mean))), z)
+            for k, (mean, z) in beyond_normal(slow, normal, reference).items()}
 
 
 # --- 4. outcome -----------------------------------------------------------------------------
@@ -1015,10 +1111,12 @@ UNCHECKED_WORDS = ("The reference flights could not be judged against each other
 
 
 def judge_heldout(decision, reference, *, before: list, after: list,
-                  dt: float) -> tuple[Verdict, tuple[str, ...]]:
+                  dt: float, references: bool = False) -> tuple[Verdict, tuple[str, ...]]:
     """The held-out :class:`Verdict` and the notes it adds, from ``decision``
     (:class:`quadsim.gap.heldout.Decision`). ``before``/``after``: held-out residuals over
-    sigma under the nominal model and with the lead; ``dt`` (s): the fit step."""
+    sigma under the nominal model and with the lead; ``dt`` (s): the fit step;
+    ``references``: judged against nominal reference flights (their model is ``reference``:
+    the answer's words, :func:`quadsim.gap.words.answer`)."""
     params = reference.params
     names = channel_names(reference)
     rows, lead_name, lead = decision.rows, decision.lead_name, decision.lead
@@ -1028,11 +1126,25 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     # a reading outside its plausible range is weighed as any other (the per-flight rule):
     # as lead it carries lead_caveat's caveat below and is tentative
     notes = [f"{name} fits only at a magnitude outside its plausible range "
-             f"({nominal_words(magnitude, True)}; {prior_text}): named only with a caveat"
+             f"({nominal_words(magnitude, True, references=references)}; {prior_text}): "
+             "named only with a caveat"
              for name, magnitude, prior_text in decision.implausible]
-    remains = remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     # a named reading must carry over to the held-out flights
     lack = carry_over(lead, reference, decision.null) if entry is not None else {}
+    # against nominal references (their own slow parts are the reference's data,
+    # slow_normal) the lead and "no difference" are judged as per flight (judge): the
+    # lack of fit against the references at the training flights' place, and the
+    # systematic remainder after a named lead only; against the bare parameter set the
+    # remainder after every lead, against the noise model
+    per_flight = slow_normal(reference) is not None
+    left: dict = {}
+    beyond: dict = {}
+    share = float("inf")
+    if per_flight:
+        beyond, left, share = against_reference(lead, decision.null, reference)
+        lack = {**lack, **{k: v for k, v in beyond.items() if k not in lack}}
+    remains = {} if per_flight and lead_name == "no_difference" else \
+        remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     checked = decision.consistency if entry is not None else None
     stands = standing(checked) if checked is not None else "stands"
     inconsistent, shifted = stands == "inconsistent", stands == "shifted"
@@ -1056,16 +1168,23 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     others += [row["name"] for row in tied if row["name"] not in others]
     if effect and tied:
         separate_by = fitting.separation(shown, others)
-    unsure = bool(caveat) or bool(remains) or bool(tied)
+    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left)
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
-                                          unsure=unsure)
+                                          unsure=unsure, references=references,
+                                          beyond=beyond)
     notes += more
+    if left and outcome == "effect":
+        where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
+        words += (f" Beyond it the training flights' residual stays beyond the reference "
+                  f"flights' on {where_} their typical RMS ({100 * share:.0f} % of their gap: "
+                  "the library's form of it, or a further small effect).")
     words += _unseparated_words(tied, shown, separate_by) + caveat
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
-        words += (f" The most probable difference, {name} ({nominal_words(magnitude, True)}), "
+        magnitude = nominal_words(magnitude, True, references=references)
+        words += (f" The most probable difference, {name} ({magnitude}), "
                   f"removes {100 * share:.1f} % of the held-out gap: no more than the "
                   f"library's form error ({100 * FORM_ERROR:.0f} %), so no difference that "
                   "matters.")
@@ -1075,6 +1194,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
                      **{k: v[0] for k, v in lack.items()}},
+        form_remainder={k: v[0] for k, v in left.items()},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
         fixed=entry["fixed"] if entry else {},
         units={k: fitting.unit_of(k) for k in (entry["params"] if entry else {})},
@@ -1082,7 +1202,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         separate_by=separate_by if effect else {},
         consistency=checked, partial=partial, floor_source=FLOOR_SOURCE,
         channels=_channel_table(names, reference.sigma, before=before, after=after,
-                                flagged=set(remains) | set(lack)),
+                                flagged=set(remains) | set(lack) | set(left)),
         alternatives=() if inconsistent else alts,
         best_candidate=next((r["name"] for r in rows if r["name"] != "no_difference"), None),
         heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
@@ -1206,12 +1326,14 @@ def _unseparated_words(tied: list, shown: str, separate_by: dict) -> str:
 
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
                    remains: dict, separate_by: dict, alternatives: tuple,
-                   unsure: bool = False) -> tuple[str, dict | None, list[str]]:
+                   unsure: bool = False, references: bool = False,
+                   beyond: dict | None = None) -> tuple[str, dict | None, list[str]]:
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
     name (``stands``, :func:`quadsim.gap.judge.standing`) is a partial explanation;
     otherwise :func:`quadsim.gap.words.answer` (tentative below :data:`CONFIDENT` or
     ``unsure``: a lead with a caveat or a systematic remainder), with the tentative sentence
-    of a shifted name that stands."""
+    of a shifted name that stands. ``beyond``: the channels of ``lack`` beyond the reference
+    flights' (:func:`against_reference`): an unexplained answer says so as per flight."""
     lead_name, checked = decision.lead_name, decision.consistency
     entry = decision.entry(lead_name) or {}
     reduction = entry.get("reduction", 0.0)
@@ -1224,10 +1346,13 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
                    "name": shown}
         return (partial_text(shown, reduction, checked), partial,
                 [inconsistent_note(shown, checked)])
+    carried = {k: v for k, v in lack.items() if k not in (beyond or {})}
+    against = "references" if outcome == "unexplained" and lack and not carried \
+        else "training"
     words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
-                   against="training", remains=remains,
+                   against=against, remains=remains,
                    tentative=decision.probability[lead_name] < CONFIDENT or unsure,
-                   reduction=reduction, separate=separate_by)
+                   reduction=reduction, separate=separate_by, references=references)
     if stands == "shifted" and outcome == "effect":
         return words + tentative_text(checked), None, \
             [tentative_note(checked)]

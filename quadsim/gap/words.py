@@ -7,12 +7,14 @@ Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here deci
   value of its own is set beside the references' value (:func:`reference_text`); wind is
   worded as the steady air force it exerts, with the wind speed at the references' drag.
 * :func:`nominal_words`: the same text where the reference model is the parameter set
-  (held-out mode: "no difference from the nominal model", no references' values).
+  (held-out mode: "no difference from the nominal model", no references' values; held out
+  against nominal reference flights the per-flight text).
 * :func:`answer`: the one answer writer of both modes. Its sentences name what the lack
   of fit was measured against (:attr:`quadsim.gap.judge.Baseline.against`):
   ``"references"`` (per flight: "Not in the library: ... beyond the reference flights'") or
   ``"training"`` (held out: "Unexplained: ... does not carry over"; a systematic
-  remainder beyond the noise model is worded with its size in the channel's unit).
+  remainder beyond the noise model, or against nominal references beyond their own slow
+  parts, is worded with its size in the channel's unit).
 * :func:`batch_answer`: the per-flight result's one line (verdict counts).
 * :func:`residual_text`: a judged flight's residual against the references' before and after
   its answer (the report's and the summary's line, the JSON's ``residual.text``).
@@ -168,11 +170,15 @@ def _wind_text(ev, reference) -> str:
     return text
 
 
-def nominal_words(text: str, own: bool) -> str:
+def nominal_words(text: str, own: bool, *, references: bool = False) -> str:
     """A reading's text (:func:`reading_text`) in held-out terms, where the reference model
     is the parameter set: "no difference from the nominal model", the references' values
     (there are none: "off", no spread) left out. ``own``: whether the text is the reading's
-    own (False: an undetermined explanation counted as "no difference")."""
+    own (False: an undetermined explanation counted as "no difference"). ``references``:
+    held out against nominal reference flights, whose model is the reference: the text as
+    per flight ("no difference from the reference flights", their values kept)."""
+    if references:
+        return text if own else "no difference from the reference flights"
     if not own:
         return "no difference from the nominal model"
     cut = text.find(" (references: ")     # the nominal model's values: "off", no spread
@@ -196,16 +202,18 @@ def _pct(p: float) -> str:
     return f"{100 * p:.0f} %" if p < 0.995 else "> 99 %"
 
 
-def _remains_text(remains: dict) -> str:
+def _remains_text(remains: dict, normal: str = "the noise's") -> str:
     """A systematic remainder (channel -> (slow RMS in the channel's unit, ratio of its mean
-    square to the noise's expectation)) in words."""
-    return ", ".join(f"{k} {v[0]:.2g} {channel_unit(k)} ({v[1] ** 0.5:.1f}x the noise's)"
+    square to its normal's typical one, :func:`quadsim.gap.judge.remainder`)) in words;
+    ``normal``: that normal's words."""
+    return ", ".join(f"{k} {v[0]:.2g} {channel_unit(k)} ({v[1] ** 0.5:.1f}x {normal})"
                      for k, v in remains.items())
 
 
 def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
            remains: dict | None = None, tentative: bool = False,
-           reduction: float | None = None, separate: list | dict = ()) -> str:
+           reduction: float | None = None, separate: list | dict = (),
+           references: bool = False) -> str:
     """The verdict in words a quadrotor engineer acts on.
 
     ``outcome``: the verdict's outcome; ``lead``: the most probable reading (a posterior
@@ -215,16 +223,23 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     :func:`quadsim.gap.judge.lack_of_fit`); ``remains``: the systematic remainder (held
     out); ``tentative``: the name is tentative; ``reduction``: the share of the held-out gap
     the named reading explains; ``separate``: per flight the channels on which the two
-    leaders differ most, held out ``{reading: how to separate it from the lead}``."""
+    leaders differ most, held out ``{reading: how to separate it from the lead}``;
+    ``references``: held out against nominal reference flights (the reference model and
+    the systematic remainder's normal are theirs, :func:`quadsim.gap.judge.remainder`):
+    "no difference from the reference flights", a remainder beyond the references' slow
+    parts; False: "from the nominal model", beyond the noise."""
     if against == "references":
         return _against_references(outcome, lead, stated=stated, lack=lack, separate=separate,
                                    tentative=tentative)
     remains = remains or {}
+    nominal, noise = ("the reference flights", "the reference flights' own") if references \
+        else ("the nominal model", "the noise")
+    normal = "the references'" if references else "the noise's"
     if outcome == "no_significant_gap":
         nxt = stated[0] if stated else None
-        return (f"No significant gap: no difference from the nominal model is the most "
+        return (f"No significant gap: no difference from {nominal} is the most "
                 f"probable reading ({_pct(lead['probability'])}) and the residual is within "
-                f"the noise on every channel." + (f" Next: {nxt['name']} "
+                f"{noise} on every channel." + (f" Next: {nxt['name']} "
                                                   f"({_pct(nxt['probability'])}: "
                                                   f"{nxt['magnitude']})." if nxt else ""))
     if outcome == "unexplained":
@@ -240,9 +255,10 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
                     f"{lead['magnitude']}) needs an implausible magnitude; the cause is "
                     "outside the library.")
         return ("Unexplained: no library effect explains the residual (no difference from "
-                f"the nominal model is the most probable reading, {_pct(lead['probability'])}"
-                f"), yet a systematic residual stays beyond the noise: {_remains_text(remains)}"
-                " (slow part, RMS). The cause is outside the library.")
+                f"{nominal} is the most probable reading, {_pct(lead['probability'])}"
+                f"), yet a systematic residual stays beyond {noise}: "
+                f"{_remains_text(remains, normal)} (slow part, RMS). The cause is outside the "
+                "library.")
     text = f"Behaves as if {lead['magnitude']} ({_pct(lead['probability'])})"
     if stated:
         text += "; or as if " + "; or as if ".join(
@@ -252,10 +268,10 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
         text += ". Tentative"
     text += f". Explains {100 * (reduction or 0.0):.0f} % of the held-out gap"
     if remains:
-        text += (f"; beyond it a systematic residual stays above the noise on "
-                 f"{_remains_text(remains)}: part of the gap is outside the library.")
+        text += (f"; beyond it a systematic residual stays above {noise} on "
+                 f"{_remains_text(remains, normal)}: part of the gap is outside the library.")
     else:
-        text += ", the residual within the noise on every channel after it."
+        text += f", the residual within {noise} on every channel after it."
     return text
 
 
