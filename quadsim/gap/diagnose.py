@@ -232,7 +232,7 @@ __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "De
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
            "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
-           "weigh_flight"]
+           "weigh_flight", "aligned"]
 
 
 SCHEMA = "quadsim.gap/3"
@@ -632,15 +632,7 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
         warnings.simplefilter("ignore", QuadsimWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
         for f in list(train) + list(held):
-            s = ref.align(f)
-            check_same_kind(s, ref, f.name)
-            if s.command is None and ref.rotor:
-                raise InputError(f"{f.name}: cmd_1..cmd_N: the reference flights log motor "
-                                 "commands, this one does not")
-            if len(s.t) < 20:
-                raise InputError(f"{f.name}: t: too short to judge ({len(s.t)} samples "
-                                 "after smoothing)")
-            states.append(s)
+            states.append(aligned(f, ref, f.name))
         tr, he = states[:len(train)], states[len(train):]
         stacked = _stacked(tr)
         trend = getattr(ref.envelope, "trend", None)
@@ -1544,6 +1536,23 @@ class WeighedFlight:
     memo: dict | None = field(default=None, compare=False, repr=False)
 
 
+def aligned(flight, reference: Reference, name: str) -> FlightStates:
+    """A prepared flight's fit states at the references' rotor-speed timing
+    (:meth:`~quadsim.gap.reference.Reference.align`), checked against the references: a pose
+    on both or neither (:func:`quadsim.gap.logcheck.check_same_kind`), motor commands where
+    the references log them, at least 20 samples after smoothing (fewer fit no reading).
+    Raises :class:`InputError` naming ``name`` and the field."""
+    states = reference.align(flight)
+    check_same_kind(states, reference, name)
+    if states.command is None and reference.rotor:
+        raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
+                         "commands, this one does not")
+    if len(states.t) < 20:
+        raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
+                         "after smoothing)")
+    return states
+
+
 def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = False,
                  name: str = "log", info: np.ndarray | None = None
                  ) -> WeighedFlight | Verdict:
@@ -1554,14 +1563,7 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
-            states = reference.align(flight)       # the references' rotor-speed timing
-            check_same_kind(states, reference, name)   # a pose on both or neither (posefree)
-            if states.command is None and reference.rotor:
-                raise InputError(f"{name}: cmd_1..cmd_N: the reference flights log motor "
-                                 "commands, this one does not")
-            if len(states.t) < 20:
-                raise InputError(f"{name}: t: too short to judge ({len(states.t)} samples "
-                                 "after smoothing)")
+            states = aligned(flight, reference, name)
             trend = getattr(reference.envelope, "trend", None)
             if trend is None or trend.q_weight is None or not np.any(trend.q_weight > 0):
                 info = None
