@@ -363,6 +363,67 @@ def _split(flights: list[Flight], holdout: list[Flight] | None, notes: list[str]
     return [parts[0]], [parts[1]]
 
 
+@dataclass(frozen=True)
+class _Weighing:
+    """Held-out mode's weighed split (:func:`diagnose`): the parameter set as used (with
+    the training flights' command map, or the references'), the reference model, the
+    training and held-out fit states, every explanation :class:`Weighed`, the held-out
+    residuals over sigma under the reference model (``before``), the references' side
+    (:class:`Against`, or None for the bare set) and the notes the stage adds."""
+
+    params: VehicleParams
+    reference: Reference
+    train: tuple
+    held: tuple
+    weighed: tuple
+    before: list
+    against: object = None
+    notes: tuple = ()
+
+
+def _weighed_against(train, held, reference_logs, params: VehicleParams, *, effects,
+                     window_s: float, base: tuple, store, map_fn, progress) -> _Weighing:
+    """The split weighed against nominal reference flights (module doc, "Held out against
+    nominal references"): their per-flight stage (``store`` keeps it), the flights aligned
+    and placed on it, every explanation weighed on the training flights and read on all."""
+    stage = _stage(reference_logs, params, effects=effects, window_s=window_s, base=base,
+                   store=store)
+    if progress is not None:
+        progress("reference")
+    against = against_references(train, held, stage.reference, effects=effects)
+    ref = against.reference
+    weighed = _weigh_against(against, map_fn=map_fn, tick=progress or (lambda *_: None))
+    null = next(w for w in weighed if w.name == "no_difference")
+    return _Weighing(stage.reference.params, ref, tuple(against.train), tuple(against.held),
+                     tuple(weighed), [r / ref.sigma for r in null.held_residuals], against,
+                     tuple(_stage_notes(stage)))
+
+
+def _weighed_bare(train, held, params: VehicleParams, rotor: bool, *, effects, base: tuple,
+                  map_fn, progress) -> _Weighing:
+    """The split weighed against the parameter set itself (module doc, stage 1-3), its
+    command map fitted on the training flights (in command x voltage where they were flown
+    at different charges, :func:`map_voltage`)."""
+    notes = []
+    if rotor and not params_have_data_map(params):
+        volts = map_voltage([f.fit for f in train], [f.fit for f in held])
+        params = fit_motor_map([f.fit for f in train], params, duty_voltage=volts)
+        if volts is not None:
+            notes.append(f"command map in command x battery voltage (read at {volts:.3f} V, "
+                         "the training flights' mean; the flights were flown at different "
+                         "charges): a DC motor's speed follows duty x voltage")
+    fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
+    reference = nominal_reference(fit_on, params, rotor, base)
+    weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
+                     tick=progress or (lambda *_: None))
+    sigma = reference.sigma
+    before = [_beyond(b * sigma - centre_term(h, reference.discrepancy, len(sigma)), h,
+                      reference)[0] / sigma for b, h in
+              zip(scaled_residuals(held_on, params, list(base), sigma, rotor=rotor), held_on)]
+    return _Weighing(params, reference, tuple(fit_on), tuple(held_on), tuple(weighed), before,
+                     None, tuple(notes))
+
+
 def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
              holdout: Sequence[FlightLog] | None = None, effects: Sequence[str] | None = None,
              max_combination: int = 2, progress: Callable | None = None,
@@ -393,36 +454,16 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     train, held = _split(flights, held_in, notes)
     base = tuple(base_effects)
     rotor = all(f.fit.command is not None for f in train + held)
-    against = None
     if reference is not None:
-        stage = _stage(reference, params, effects=effects, window_s=window_s, base=base,
-                       store=store)
-        if progress is not None:
-            progress("reference")
-        against = against_references(train, held, stage.reference, effects=effects)
-        params, reference = stage.reference.params, against.reference
-        fit_on, held_on = list(against.train), list(against.held)
-        weighed = _weigh_against(against, map_fn=map_fn, tick=progress or (lambda *_: None))
-        null = next(w for w in weighed if w.name == "no_difference")
-        before = [r / reference.sigma for r in null.held_residuals]
-        notes += _stage_notes(stage)
-    elif rotor and not params_have_data_map(params):
-        volts = map_voltage([f.fit for f in train], [f.fit for f in held])
-        params = fit_motor_map([f.fit for f in train], params, duty_voltage=volts)
-        if volts is not None:
-            notes.append(f"command map in command x battery voltage (read at {volts:.3f} V, "
-                         "the training flights' mean; the flights were flown at different "
-                         "charges): a DC motor's speed follows duty x voltage")
-    if against is None:
-        fit_on, held_on = [f.fit for f in train], [f.fit for f in held]
-        reference = nominal_reference(fit_on, params, rotor, base)
-        weighed = _weigh(fit_on, held_on, reference, effects=effects, map_fn=map_fn,
-                         tick=progress or (lambda *_: None))
-        sigma = reference.sigma
-        before = [_beyond(b * sigma - centre_term(h, reference.discrepancy, len(sigma)), h,
-                          reference)[0] / sigma for b, h in
-                  zip(scaled_residuals(held_on, params, list(base), sigma, rotor=rotor),
-                      held_on)]
+        w = _weighed_against(train, held, reference, params, effects=effects,
+                             window_s=window_s, base=base, store=store, map_fn=map_fn,
+                             progress=progress)
+    else:
+        w = _weighed_bare(train, held, params, rotor, effects=effects, base=base,
+                          map_fn=map_fn, progress=progress)
+    params, reference, against = w.params, w.reference, w.against
+    fit_on, held_on, weighed, before = list(w.train), list(w.held), list(w.weighed), w.before
+    notes += list(w.notes)
     sigma = reference.sigma
     decision = decide(weighed, train=fit_on, held=held_on, reference=reference,
                       before=before, max_combination=max_combination,
