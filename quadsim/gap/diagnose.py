@@ -178,6 +178,7 @@ from .calibrate import (
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
+    CableSwing,
     Candidate,
     build_effect,
     correlation_time,
@@ -1024,15 +1025,63 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
     return out
 
 
+def _beyond_at(ev: Evidence, states, reference: Reference) -> tuple[np.ndarray, float]:
+    """:func:`_beyond` of one flight under ``ev``'s values (the reference's base effects
+    and the explanation's)."""
+    effects = list(reference.candidate.base) + effects_of(ev)
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+    return _beyond(r - centre_term(states, reference.discrepancy, r.shape[1]), states,
+                   reference)
+
+
+def _beyond_own_start(ev: Evidence, states, reference: Reference
+                      ) -> tuple[np.ndarray, float]:
+    """:func:`_beyond_at`, a cable payload's start swing (:data:`START_SWING`) that
+    flight's own, as :func:`_read_own_start`: fitted on the flight from hanging still, the
+    other values held at ``ev``'s, by least squares on the squares of -2 log L (the
+    weighted residual less the discrepancy's posterior mean, that mean, and the start in
+    units of its prior spread, inside :class:`quadsim.gap.fitting.CableSwing`'s bounds); its
+    prior penalty -1/2 |z_start|^2 added to the log-likelihood. Without a start swing:
+    :func:`_beyond_at` unchanged."""
+    expl = ev.explanation
+    idx = start_swing_index(expl)
+    if not idx:
+        return _beyond_at(ev, states, reference)
+    from scipy.optimize import least_squares
+
+    names = [expl.parameter_names[k] for k in idx]
+    mean, sd = np.asarray(expl.mean, float)[idx], np.asarray(expl.sd, float)[idx]
+    bound = {p.name: (p.lower, p.upper) for p in CableSwing.parameters}
+    lo = (np.array([bound[n.split(".")[-1]][0] for n in names]) - mean) / sd
+    hi = (np.array([bound[n.split(".")[-1]][1] for n in names]) - mean) / sd
+    root = np.sqrt(reference.weights)
+    x = (None if reference.discrepancy is None
+         else columns(states, reference.discrepancy, reference.weights))
+
+    def at(zs):
+        return dataclasses.replace(ev, values={**ev.values, **dict(zip(names, mean + sd * zs))})
+
+    def cost(zs):
+        effects = list(reference.candidate.base) + effects_of(at(zs))
+        r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+        rw = ((r - centre_term(states, reference.discrepancy, r.shape[1])) * root).ravel()
+        if x is None:
+            return np.concatenate([rw, zs])
+        u = np.linalg.solve(np.eye(x.shape[1]) + x.T @ x, x.T @ rw)
+        return np.concatenate([rw - x @ u, u, zs])
+
+    got = least_squares(cost, np.zeros(len(idx)), bounds=(lo + 1e-6, hi - 1e-6),
+                        max_nfev=START_FIT_EVALS)
+    resid, ll = _beyond_at(at(got.x), states, reference)
+    return resid, ll - 0.5 * float(got.x @ got.x)
+
+
 def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
     """One explanation's residuals on both sets and its held-out log-likelihood, each
-    flight's own discrepancy marginalised (:func:`_beyond`)."""
-    effects = list(reference.candidate.base) + effects_of(ev)
-
+    flight's own discrepancy marginalised (:func:`_beyond`), a cable payload at each
+    flight's own start swing (:func:`_beyond_own_start`)."""
     def res(states):
-        r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
-        return _beyond(r - centre_term(states, reference.discrepancy, r.shape[1]), states,
-                       reference)
+        return _beyond_own_start(ev, states, reference)
 
     held_res = [res(s) for s in held]
     ll = sum(h[1] for h in held_res)
