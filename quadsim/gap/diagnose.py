@@ -178,6 +178,7 @@ from .calibrate import (
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
+    CableSwing,
     Candidate,
     build_effect,
     correlation_time,
@@ -564,6 +565,59 @@ def _read(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
     return aug.reshape(-1, len(weights)) / np.sqrt(weights), ll
 
 
+#: a cable payload's swing at a flight's first sample (:class:`quadsim.gap.fitting.CableSwing`)
+START_SWING = ("lean_x", "lean_y", "rate_x", "rate_y")
+#: most residual evaluations of one flight's start-swing fit (:func:`_read_own_start`):
+#: 4 parameters, a 2-point Jacobian (5 per step); from hanging still it took 4-11 on
+#: generated flights (tests/test_heldout_references.py), so 40 is about 8 steps
+START_FIT_EVALS = 40
+
+
+def start_swing_index(expl: Explanation) -> list[int]:
+    """Indices in ``expl``'s parameters of a cable payload's start swing
+    (:data:`START_SWING`, in the order of :func:`quadsim.gap.explanations.own_effects`);
+    empty for an explanation without one."""
+    out, k = [], 0
+    for name, _, fitted in expl.parts:
+        for p in fitted:
+            if name == "cable_payload" and p in START_SWING:
+                out.append(k)
+            k += 1
+    return out
+
+
+def _read_own_start(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`_read` of one flight at ``theta``, a cable payload's swing at the flight's
+    first sample (:data:`START_SWING`) that flight's own: fitted on it as a nuisance, every
+    other value held at ``theta`` (mass, length, damping: the reading's), by least squares
+    on the fit's cost (:meth:`quadsim.gap.evidence.Problem.stacked`: the profiled residual,
+    the marginalised shifts and the prior in z, the start's spread
+    :data:`quadsim.gap.fitting.START_PRIOR`) from hanging still (z = 0). A stacked fit fits
+    one start (its first flight's; the swing restarts hanging still at each later flight),
+    so no other flight's start is the one it swung from. The log-likelihood adds the
+    start's prior -1/2 |z_start|^2 (a penalised profile: the start is not marginalised).
+    Without a start swing: :func:`_read` unchanged."""
+    idx = start_swing_index(prob.expl)
+    if not idx:
+        return _read(prob, theta)
+    from scipy.optimize import least_squares
+
+    z_all = (np.asarray(theta, float) - prob.mean) / prob.sd
+    lo, hi = prob.z_lo[idx] + 1e-6, prob.z_hi[idx] - 1e-6
+
+    def cost(zs):
+        z = z_all.copy()
+        z[idx] = zs
+        return prob.stacked(z)
+
+    got = least_squares(cost, np.clip(np.zeros(len(idx)), lo, hi), bounds=(lo, hi),
+                        max_nfev=START_FIT_EVALS)
+    at = np.array(theta, float)
+    at[idx] = prob.mean[idx] + prob.sd[idx] * got.x
+    resid, ll = _read(prob, at)
+    return resid, ll - 0.5 * float(got.x @ got.x)
+
+
 @dataclass(frozen=True)
 class Against:
     """Held out against nominal references (:func:`against_references`): ``calibrated``
@@ -617,7 +671,8 @@ class Against:
         residuals beyond the references on the training and held-out flights, and the
         held-out flights' log-likelihood. A reading that fits the rotor timing reads each
         flight at that flight's own delay (:attr:`delays`; the timing is a nuisance, as
-        per flight), ``signal_delay`` at its own value (its delay is the reading)."""
+        per flight), ``signal_delay`` at its own value (its delay is the reading); a cable
+        payload at each flight's own start swing (:func:`_read_own_start`)."""
         expl = ev.explanation
         theta = np.array([ev.values[k] for k in expl.parameter_names], float)
         own = bool(expl.shift) and expl.name != "signal_delay"
@@ -626,7 +681,7 @@ class Against:
             at = theta.copy()
             if own and delay is not None:
                 at[-1] = delay
-            read.append(_read(_problem(states, self.reference, expl, memo), at))
+            read.append(_read_own_start(_problem(states, self.reference, expl, memo), at))
         held = read[len(self.train):]
         ll = sum(h[1] for h in held)
         return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll),
@@ -970,15 +1025,63 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
     return out
 
 
+def _beyond_at(ev: Evidence, states, reference: Reference) -> tuple[np.ndarray, float]:
+    """:func:`_beyond` of one flight under ``ev``'s values (the reference's base effects
+    and the explanation's)."""
+    effects = list(reference.candidate.base) + effects_of(ev)
+    r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+    return _beyond(r - centre_term(states, reference.discrepancy, r.shape[1]), states,
+                   reference)
+
+
+def _beyond_own_start(ev: Evidence, states, reference: Reference
+                      ) -> tuple[np.ndarray, float]:
+    """:func:`_beyond_at`, a cable payload's start swing (:data:`START_SWING`) that
+    flight's own, as :func:`_read_own_start`: fitted on the flight from hanging still, the
+    other values held at ``ev``'s, by least squares on the squares of -2 log L (the
+    weighted residual less the discrepancy's posterior mean, that mean, and the start in
+    units of its prior spread, inside :class:`quadsim.gap.fitting.CableSwing`'s bounds); its
+    prior penalty -1/2 |z_start|^2 added to the log-likelihood. Without a start swing:
+    :func:`_beyond_at` unchanged."""
+    expl = ev.explanation
+    idx = start_swing_index(expl)
+    if not idx:
+        return _beyond_at(ev, states, reference)
+    from scipy.optimize import least_squares
+
+    names = [expl.parameter_names[k] for k in idx]
+    mean, sd = np.asarray(expl.mean, float)[idx], np.asarray(expl.sd, float)[idx]
+    bound = {p.name: (p.lower, p.upper) for p in CableSwing.parameters}
+    lo = (np.array([bound[n.split(".")[-1]][0] for n in names]) - mean) / sd
+    hi = (np.array([bound[n.split(".")[-1]][1] for n in names]) - mean) / sd
+    root = np.sqrt(reference.weights)
+    x = (None if reference.discrepancy is None
+         else columns(states, reference.discrepancy, reference.weights))
+
+    def at(zs):
+        return dataclasses.replace(ev, values={**ev.values, **dict(zip(names, mean + sd * zs))})
+
+    def cost(zs):
+        effects = list(reference.candidate.base) + effects_of(at(zs))
+        r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
+        rw = ((r - centre_term(states, reference.discrepancy, r.shape[1])) * root).ravel()
+        if x is None:
+            return np.concatenate([rw, zs])
+        u = np.linalg.solve(np.eye(x.shape[1]) + x.T @ x, x.T @ rw)
+        return np.concatenate([rw - x @ u, u, zs])
+
+    got = least_squares(cost, np.zeros(len(idx)), bounds=(lo + 1e-6, hi - 1e-6),
+                        max_nfev=START_FIT_EVALS)
+    resid, ll = _beyond_at(at(got.x), states, reference)
+    return resid, ll - 0.5 * float(got.x @ got.x)
+
+
 def check(ev: Evidence, train: list, held: list, reference: Reference) -> Weighed:
     """One explanation's residuals on both sets and its held-out log-likelihood, each
-    flight's own discrepancy marginalised (:func:`_beyond`)."""
-    effects = list(reference.candidate.base) + effects_of(ev)
-
+    flight's own discrepancy marginalised (:func:`_beyond`), a cable payload at each
+    flight's own start swing (:func:`_beyond_own_start`)."""
     def res(states):
-        r = residuals(states, reference.params, effects, rotor_channel=reference.rotor)
-        return _beyond(r - centre_term(states, reference.discrepancy, r.shape[1]), states,
-                       reference)
+        return _beyond_own_start(ev, states, reference)
 
     held_res = [res(s) for s in held]
     ll = sum(h[1] for h in held_res)
