@@ -178,6 +178,7 @@ from .calibrate import (
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
+    START_SWING,
     CableSwing,
     Candidate,
     build_effect,
@@ -565,8 +566,6 @@ def _read(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
     return aug.reshape(-1, len(weights)) / np.sqrt(weights), ll
 
 
-#: a cable payload's swing at a flight's first sample (:class:`quadsim.gap.fitting.CableSwing`)
-START_SWING = ("lean_x", "lean_y", "rate_x", "rate_y")
 #: most residual evaluations of one flight's start-swing fit (:func:`_read_own_start`):
 #: 4 parameters, a 2-point Jacobian (5 per step); from hanging still it took 4-11 on
 #: generated flights (tests/test_heldout_references.py), so 40 is about 8 steps

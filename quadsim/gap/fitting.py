@@ -205,10 +205,10 @@ from .residual import (  # re-exported: the diagnosis' public fitting names
     wrench_key,
 )
 
-__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "CableSwing", "prior",
-           "start_state", "swing", "FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS", "PSEUDO_EFFECTS",
-           "SPEED_GAIN_PART", "CantedRotorFit", "DragLaw", "NominalRefit", "SpeedGain",
-           "build_effect", "effect_class", "facts_for", "parameter_facts_for",
+__all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING", "CableSwing",
+           "prior", "start_state", "swing", "FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS",
+           "PSEUDO_EFFECTS", "SPEED_GAIN_PART", "CantedRotorFit", "DragLaw", "NominalRefit",
+           "SpeedGain", "build_effect", "effect_class", "facts_for", "parameter_facts_for",
            "CURVE_QUADRATIC_SD", "DETERMINED", "PRIORS", "SEPARATE", "WIND_SD_MS",
            "candidate_plausibility", "curve_quadratic_bounds", "curve_quadratic_sd",
            "curve_slope_sd", "describe", "hover_thrust_per_speed", "momentum_rate_damping",
@@ -228,8 +228,11 @@ LENGTH_PRIOR_M = (0.55, 0.225)
 
 #: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
 START_PRIOR = (0.17, 0.5)
+#: the parameters of the swing at the first sample (rad, rad/s; nuisance): one flight's own,
+#: never another's (held out each flight is read at its own, :mod:`quadsim.gap.diagnose`)
+START_SWING = ("lean_x", "lean_y", "rate_x", "rate_y")
 #: the fitted parameters: the payload, and the swing at the first sample (nuisance).
-FITTED = ("mass", "length", "lean_x", "lean_y", "rate_x", "rate_y", "swing_damping")
+FITTED = ("mass", "length", *START_SWING, "swing_damping")
 #: prior of the swing's damping rate (1/s): centre and spread (module doc)
 DAMPING_PRIOR = (0.5, 0.5)
 
@@ -450,8 +453,7 @@ class CableSwing(CablePayload):
     #: the swing at the first sample, its damping and the attachment's height are fitted
     #: with the payload, never part of an answer (the JSON's params keep them)
     facts = dataclasses.replace(CablePayload.facts,
-                                nuisance=("lean_x", "lean_y", "rate_x", "rate_y",
-                                          "swing_damping", "z"))
+                                nuisance=(*START_SWING, "swing_damping", "z"))
 
     #: (context fields, vehicle attributes) ``loads`` reads
     #: (:attr:`quadsim.effects.base.EffectBase.loads_reads`): the logged motion only (kept
