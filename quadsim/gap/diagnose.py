@@ -534,6 +534,97 @@ def _stacked(states: list):
     return stack_states(moved)
 
 
+def joins(states: Sequence) -> tuple[int, ...]:
+    """The index of each later flight's first sample when ``states`` (one flight's fit
+    states each) are stacked (:func:`_stacked`, :func:`quadsim.gap.fitting.stack_states`:
+    both keep every sample, in order); empty for one flight."""
+    return tuple(int(k) for k in np.cumsum([len(s.t) for s in states])[:-1])
+
+
+def _start_groups(expl: Explanation) -> list[list[int]]:
+    """Per ``cable_payload`` part of ``expl`` that fits its whole start swing
+    (:data:`START_SWING`), the indices of those four parameters (in that order)."""
+    out, k = [], 0
+    for name, _, fitted in expl.parts:
+        if name == "cable_payload" and set(START_SWING) <= set(fitted):
+            out.append([k + list(fitted).index(p) for p in START_SWING])
+        k += len(fitted)
+    return out
+
+
+def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
+                   at: tuple) -> Evidence:
+    """:func:`quadsim.gap.evidence.full_fit` of ``expl`` on stacked flights (``inputs``;
+    ``at``: each later flight's first sample, :func:`joins`), a cable payload's swing at
+    each later flight's first sample that flight's own (:data:`START_SWING`; the
+    explanation's own start is the first flight's): 4 nuisance parameters per later flight
+    and cable, each with the explanation's prior of its start (:data:`START_PRIOR`, bounds
+    and centre alike), fitted jointly with the explanation by the same trust-region least
+    squares (:data:`quadsim.gap.evidence.FULL_FIT_EVALUATIONS`, step
+    :data:`~quadsim.gap.evidence.FULL_FIT_STEP`) on the same cost, the starts' z appended
+    (:meth:`quadsim.gap.evidence.Problem.stacked`). The evidence integrates them out
+    (Laplace): the explanation's posterior precision is the Schur complement
+    H_pp - H_ps H_ss^-1 H_sp of the joint one, and log Z gains -1/2 log det H_ss (with the
+    rest: -1/2 log det H of the joint precision); a value at a bound counts as in
+    :func:`quadsim.gap.evidence.laplace`. The Evidence names the explanation's parameters
+    only. Without a start swing or a later flight: ``full_fit`` unchanged. Joint, not
+    profiled: a start fitted inside each outer evaluation would cost its own fit (tens of
+    evaluations) per evaluation of the outer fit, and its finite-difference Jacobian would
+    differentiate an inner fit's tolerance; jointly each later flight adds 4 columns to the
+    outer fit's Jacobian (4 evaluations of the stacked residual per step)."""
+    from scipy.optimize import least_squares
+
+    from .evidence import FULL_FIT_EVALUATIONS, FULL_FIT_STEP, Problem, flight_residual, laplace
+    from .explanations import own_effects
+    from .fitting import Restart
+
+    groups = _start_groups(expl)
+    if not groups or not at:
+        return evidence.full_fit(inputs, expl, start_delay_s)
+    prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
+    n = len(prob.mean)
+    idx = [k for g in groups for _ in at for k in g]     # (cable, later flight, START_SWING)
+    mean, sd = prob.mean[idx], prob.sd[idx]
+    lower, upper = prob.lower[idx], prob.upper[idx]
+    z_lo, z_hi = prob.z_lo[idx], prob.z_hi[idx]
+    wall = np.full(prob.size + len(idx), 1e3)
+
+    def effects(zz):
+        theta = np.clip(prob.mean + prob.sd * zz[:n], prob.lower, prob.upper)
+        starts = np.clip(mean + sd * zz[n:], lower, upper).reshape(len(groups), len(at), 4)
+        cables = iter(tuple(Restart(a, (float(v[0]), float(v[1])), (float(v[2]), float(v[3])))
+                            for a, v in zip(at, rows)) for rows in starts)
+        own = [CableSwing(restarts=next(cables), **e.values())
+               if isinstance(e, CableSwing) and set(START_SWING) <= set(e.values()) else e
+               for e in own_effects(expl, theta)]
+        return theta, own
+
+    def cost(zz):
+        try:
+            theta, own = effects(zz)
+            flight = prob.shifted(float(theta[n - 1])) if expl.shift else prob.states
+            r = flight_residual(flight, prob.reference, prob.shared + own, prob.memo)
+        except ModelError:
+            return wall
+        aug, du = prob.marg.profile(r)
+        return np.concatenate([aug, du, zz])
+
+    z0 = np.concatenate([prob.start(start_delay_s),
+                         np.clip(np.zeros(len(idx)), z_lo + 1e-6, z_hi - 1e-6)])
+    fit = least_squares(cost, z0, bounds=(np.concatenate([prob.z_lo, z_lo]),
+                                          np.concatenate([prob.z_hi, z_hi])),
+                        diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
+    h = fit.jac.T @ fit.jac
+    h_ss = h[n:, n:]
+    sign, logdet_ss = np.linalg.slogdet(h_ss)
+    if sign > 0:
+        h_own = h[:n, :n] - h[:n, n:] @ np.linalg.solve(h_ss, h[n:, :n])
+    else:           # the fit ended on the wall (a zero Jacobian): no evidence
+        h_own, logdet_ss = h[:n, :n], np.inf
+    ev = laplace(prob, fit.x[:n], fit.fun, h_own, int(np.count_nonzero(fit.active_mask)))
+    return dataclasses.replace(ev, log_z=ev.log_z - 0.5 * logdet_ss)
+
+
 def _problem(states, reference: Reference, expl: Explanation, memo: dict):
     """``expl``'s :class:`quadsim.gap.evidence.Problem` on one flight against ``reference``,
     the flight's Jacobian in the shared parameters kept in ``memo`` (as
@@ -654,7 +745,8 @@ class Against:
         the numbers of the whole list in one call."""
         first = [] if null is None else [null]
         rows = evaluate(self.stacked, self.reference, first + list(expl),
-                        start_delay_s=self.start, full=True, memo=self.memos[-1])[len(first):]
+                        start_delay_s=self.start, full=True, memo=self.memos[-1],
+                        fit=partial(fit_own_starts, at=joins(self.train)))[len(first):]
         out = []
         for ev in rows:
             if not np.isfinite(ev.log_z):
@@ -1012,7 +1104,8 @@ def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
     log-likelihood at the training MAP. ``train``/``held``: decimated states."""
     # every explanation fully fitted (no screen): its result must not depend on which others
     # share its batch, so that workers and one process give the same bytes
-    rows = evaluate(stack_states(train), reference, expl, full=True)
+    rows = evaluate(stack_states(train), reference, expl, full=True,
+                    fit=partial(fit_own_starts, at=joins(train)))
     out = []
     for ev in rows:
         if not np.isfinite(ev.log_z):   # its fit ended where no rigid vehicle is: no reading
@@ -1111,7 +1204,10 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
         if not got:
             raise ModelError(f"{expl.name}: no fit where a rigid vehicle is")
         return got[0]
-    ev = evaluate(stack_states(list(train)), reference, [expl])[0]
+    # a cable's pair fitted as the cable alone: fully, each stacked flight at its own start
+    own = bool(_start_groups(expl)) and len(train) > 1
+    ev = evaluate(stack_states(list(train)), reference, [expl], full=own,
+                  fit=partial(fit_own_starts, at=joins(train)))[0]
     return check(ev, train, held, reference)
 
 

@@ -206,6 +206,7 @@ from .residual import (  # re-exported: the diagnosis' public fitting names
 )
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING", "CableSwing",
+           "Restart",
            "prior", "start_state", "swing", "FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS",
            "PSEUDO_EFFECTS", "SPEED_GAIN_PART", "CantedRotorFit", "DragLaw", "NominalRefit",
            "SpeedGain", "build_effect", "effect_class", "facts_for", "parameter_facts_for",
@@ -276,17 +277,20 @@ def _rate(q, w, a, constants):
 
 
 @_compiled
-def _swing_kernel(t, accel, start, constants, out_q, out_w):
+def _swing_kernel(t, accel, starts, at, constants, out_q, out_w):
     """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
-    ``accel`` (N, 3) the attachment's acceleration (world); ``start`` (2, 3) the rows q0, w0;
-    ``constants`` as :func:`_rate`'s; a time jump restarts hanging still. Fills ``out_q``,
-    ``out_w`` (N, 3)."""
+    ``accel`` (N, 3) the attachment's acceleration (world); ``starts`` (S, 2, 3) the rows
+    q0, w0 of each start, taken at the sample indices ``at`` (S,; rising, ``at[0]`` = 0: a
+    stacked flight's first sample); ``constants`` as :func:`_rate`'s; any other time jump
+    restarts hanging still. Fills ``out_q``, ``out_w`` (N, 3)."""
     n = t.shape[0]
     dt0 = t[1] - t[0] if n > 1 else 1.0
+    j = 0
     for k in range(n):
-        if k == 0:
+        if j < at.shape[0] and k == at[j]:      # a start of its own
             for i in range(3):
-                out_q[k, i], out_w[k, i] = start[0, i], start[1, i]
+                out_q[k, i], out_w[k, i] = starts[j, 0, i], starts[j, 1, i]
+            j += 1
             continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
             out_q[k, 0], out_q[k, 1], out_q[k, 2] = 0.0, 0.0, -1.0
@@ -320,18 +324,22 @@ def _swing_kernel(t, accel, start, constants, out_q, out_w):
         out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
-def _swing_floats(t: list, accel: list, start: tuple, constants: tuple) -> tuple[list, list]:
+def _swing_floats(t: list, accel: list, starts: dict, constants: tuple
+                  ) -> tuple[list, list]:
     """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
-    3-lists, ``start`` = (q0, w0) as 3-lists, ``constants`` as :func:`_rate`'s), for when it
-    is not compiled: the same operations in the same order (the same numbers), without the
-    per-element indexing of numpy arrays that dominates the uncompiled kernel. Returns the
-    lists of q and w rows."""
+    3-lists, ``starts`` sample index -> (q0, w0) as 3-lists, index 0 among them,
+    ``constants`` as :func:`_rate`'s), for when it is not compiled: the same operations in
+    the same order (the same numbers), without the per-element indexing of numpy arrays that
+    dominates the uncompiled kernel. Returns the lists of q and w rows."""
     rate = getattr(_rate, "py_func", _rate)
     n = len(t)
     dt0 = t[1] - t[0] if n > 1 else 1.0
     out_q, out_w = [None] * n, [None] * n
-    out_q[0], out_w[0] = [float(v) for v in start[0]], [float(v) for v in start[1]]
-    for k in range(1, n):
+    for k in range(n):
+        if k in starts:                                   # a start of its own
+            out_q[k], out_w[k] = ([float(v) for v in starts[k][0]],
+                                  [float(v) for v in starts[k][1]])
+            continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
             out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
             continue
@@ -379,24 +387,40 @@ def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
     return q0 / np.linalg.norm(q0), np.cross(q0, dq)
 
 
+@dataclass(frozen=True)
+class Restart:
+    """A stacked flight's own swing at its first sample (:data:`START_SWING`): ``at`` the
+    index of that sample in the stacked states (> 0), ``lean`` (rad) and ``rate`` (rad/s)
+    along world x and y (:func:`start_state`). Without one, a stacked flight starts hanging
+    still (the kernel's restart at a time jump)."""
+
+    at: int
+    lean: tuple
+    rate: tuple
+
+
 def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
-          start: tuple | None = None, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+          start: tuple | None = None, damping: float = 0.0, *,
+          restarts: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
     """Cable direction q (N, 3) and angular velocity w (N, 3, rad/s) along a flight whose
     attachment point accelerates by ``accel`` (N, 3, world m/s^2) at times ``t`` (s), from
     ``start`` = (q0, w0) (default: hanging still, :func:`start_state`), the swing damped at
-    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc)."""
+    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc); ``restarts``
+    (:class:`Restart`, rising ``at``): stacked flights that start at a swing of their own."""
     t = np.ascontiguousarray(t, dtype=float)
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
+    rows = [(0, np.asarray(q0, float), np.asarray(w0, float))]
+    rows += [(r.at, *start_state(r.lean, r.rate)) for r in restarts if 0 < r.at < len(t)]
     q, w = np.empty_like(accel), np.empty_like(accel)
     constants = (float(gravity), float(length), float(damping))
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
-        _swing_kernel(t, accel, np.array([np.asarray(q0, float), np.asarray(w0, float)]),
-                      constants, q, w)
+        _swing_kernel(t, accel, np.array([[r[1], r[2]] for r in rows]),
+                      np.array([r[0] for r in rows], dtype=np.int64), constants, q, w)
     elif len(t):
         rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(),
-                                       (np.asarray(q0, float).tolist(),
-                                        np.asarray(w0, float).tolist()), constants)
+                                       {r[0]: (r[1].tolist(), r[2].tolist()) for r in rows},
+                                       constants)
         q[:], w[:] = rows_q, rows_w
     return q, w
 
@@ -461,6 +485,13 @@ class CableSwing(CablePayload):
     #: speeds, so a rotor-delay shift reuses the pull
     loads_reads = ((), ("com", "gravity"))
 
+    def __init__(self, *, restarts: tuple = (), **values: float):
+        """``values``: the parameters; ``restarts``: the stacked flights that start at a
+        swing of their own (:class:`Restart`; the stacked fit's, :mod:`quadsim.gap.diagnose`:
+        not parameters of the effect, whose start swing is its first flight's)."""
+        super().__init__(**values)
+        self.restarts = tuple(restarts)
+
     def state_size(self) -> int:
         return 0
 
@@ -497,13 +528,13 @@ class CableSwing(CablePayload):
         payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
         shift), so those evaluations reuse it."""
         key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
-               self.x, self.y, self.z, float(gravity), self.swing_damping)
+               self.x, self.y, self.z, float(gravity), self.swing_damping, self.restarts)
         kept = None if memo is None else memo.setdefault("cable_swings", {})
         if kept is not None and key in kept:
             return kept[key]
         value = swing(t, accel, self.length, gravity,
                       start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)),
-                      damping=self.swing_damping)
+                      damping=self.swing_damping, restarts=self.restarts)
         if kept is not None:
             if len(kept) >= self.KEPT_SWINGS:
                 del kept[next(iter(kept))]
