@@ -682,9 +682,9 @@ def _read_own_start(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
     other value held at ``theta`` (mass, length, damping: the reading's), by least squares
     on the fit's cost (:meth:`quadsim.gap.evidence.Problem.stacked`: the profiled residual,
     the marginalised shifts and the prior in z, the start's spread
-    :data:`quadsim.gap.fitting.START_PRIOR`) from hanging still (z = 0). A stacked fit fits
-    one start (its first flight's; the swing restarts hanging still at each later flight),
-    so no other flight's start is the one it swung from. The log-likelihood adds the
+    :data:`quadsim.gap.fitting.START_PRIOR`) from hanging still (z = 0). The stacked fit's
+    starts (:func:`fit_own_starts`) are integrated out there, not kept, and a held-out
+    flight has none: each flight's own is fitted here alike. The log-likelihood adds the
     start's prior -1/2 |z_start|^2 (a penalised profile: the start is not marginalised).
     Without a start swing: :func:`_read` unchanged."""
     idx = start_swing_index(prob.expl)
@@ -738,7 +738,8 @@ class Against:
 
     def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
-        :func:`quadsim.gap.evidence.evaluate`), then read on every flight
+        :func:`quadsim.gap.evidence.evaluate`; a cable payload with each flight's own start
+        swing, :func:`fit_own_starts`), then read on every flight
         (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading.
         ``null``: "no difference", fitted first and dropped: the rotor delay's fits start
         where the evaluation reads them from it, so that one explanation per worker gives
@@ -1100,8 +1101,10 @@ def _beyond(r: np.ndarray, states, reference: Reference) -> tuple[np.ndarray, fl
 
 def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
           ) -> list[Weighed]:
-    """Stage 3 (module doc): training evidence of every explanation, plus its held-out
-    log-likelihood at the training MAP. ``train``/``held``: decimated states."""
+    """Stage 3 (module doc): training evidence of every explanation (on the stacked
+    training flights, a cable payload with each flight's own start swing:
+    :func:`fit_own_starts`), plus its held-out log-likelihood at the training MAP.
+    ``train``/``held``: decimated states."""
     # every explanation fully fitted (no screen): its result must not depend on which others
     # share its batch, so that workers and one process give the same bytes
     rows = evaluate(stack_states(train), reference, expl, full=True,
@@ -1186,7 +1189,10 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
     """The lead fitted together with ``other`` (module doc, stage 4): its prior is the
     lead's with the partner's, less log(partners) (a second simultaneous effect is a priori
     no likelier than the first alone). ``against``: weighed against nominal references
-    (:meth:`Against.weigh`) instead of the parameter set."""
+    (:meth:`Against.weigh`) instead of the parameter set. Without references the pair is
+    screened and fitted (:func:`quadsim.gap.evidence.evaluate`); a pair with a cable
+    payload on several training flights is fitted fully instead, each flight at its own
+    start swing (:func:`fit_own_starts`), as the cable alone was."""
     a, b = lead.train.explanation, other.train.explanation
     # a rotor delay (against references with a timing reading) is one parameter of the pair,
     # last, with the lead's prior (or the partner's where the lead fits none)
@@ -1204,7 +1210,6 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
         if not got:
             raise ModelError(f"{expl.name}: no fit where a rigid vehicle is")
         return got[0]
-    # a cable's pair fitted as the cable alone: fully, each stacked flight at its own start
     own = bool(_start_groups(expl)) and len(train) > 1
     ev = evaluate(stack_states(list(train)), reference, [expl], full=own,
                   fit=partial(fit_own_starts, at=joins(train)))[0]

@@ -29,10 +29,13 @@ engine's model; Sreenath, Lee & Kumar, CDC 2013, eq. 2-4)::
     tau   = (r_a - c) x R^T F            its torque about the CoM (body)
 
 integrated by RK4 between the log's samples (a linearly interpolated between them), q
-renormalised and w kept normal to q after each step; a time jump (stacked flights) restarts
-it hanging still. The damping rate k is fitted (prior N(0.5, 0.5^2) 1/s, at least 0:
-:data:`DAMPING_PRIOR`; the engines damp only the cable's axial spring): an undamped model
-swing kept swinging after the real payload hung still. The swing the payload already had at
+renormalised and w kept normal to q after each step; a stacked flight's first sample starts
+at that flight's own swing where the stacked fit gives it one (:class:`Restart`,
+:func:`quadsim.gap.diagnose.fit_own_starts`), any other time jump (an airborne stretch of
+one log, a stacked flight without one) restarts it hanging still. The damping rate k is
+fitted (prior N(0.5, 0.5^2) 1/s, at least 0: :data:`DAMPING_PRIOR`; the engines damp only
+the cable's axial spring): an undamped model swing kept swinging after the real payload
+hung still. The swing the payload already had at
 the first sample is fitted with the payload too (lean and swing rate along world x and y,
 :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
 :data:`START_PRIOR`); these and k are nuisance parameters, never part of the answer.
@@ -230,7 +233,8 @@ LENGTH_PRIOR_M = (0.55, 0.225)
 #: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
 START_PRIOR = (0.17, 0.5)
 #: the parameters of the swing at the first sample (rad, rad/s; nuisance): one flight's own,
-#: never another's (held out each flight is read at its own, :mod:`quadsim.gap.diagnose`)
+#: never another's (held out each flight is read at its own, and each stacked training
+#: flight fitted at its own, :mod:`quadsim.gap.diagnose`)
 START_SWING = ("lean_x", "lean_y", "rate_x", "rate_y")
 #: the fitted parameters: the payload, and the swing at the first sample (nuisance).
 FITTED = ("mass", "length", *START_SWING, "swing_damping")
@@ -406,12 +410,14 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
     attachment point accelerates by ``accel`` (N, 3, world m/s^2) at times ``t`` (s), from
     ``start`` = (q0, w0) (default: hanging still, :func:`start_state`), the swing damped at
     the rate ``damping`` (1/s: dw/dt gains -damping w; module doc); ``restarts``
-    (:class:`Restart`, rising ``at``): stacked flights that start at a swing of their own."""
+    (:class:`Restart`): stacked flights that start at a swing of their own (one whose
+    ``at`` is not a later sample of ``t`` is not one of them)."""
     t = np.ascontiguousarray(t, dtype=float)
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
     rows = [(0, np.asarray(q0, float), np.asarray(w0, float))]
-    rows += [(r.at, *start_state(r.lean, r.rate)) for r in restarts if 0 < r.at < len(t)]
+    rows += [(r.at, *start_state(r.lean, r.rate))
+             for r in sorted(restarts, key=lambda r: r.at) if 0 < r.at < len(t)]
     q, w = np.empty_like(accel), np.empty_like(accel)
     constants = (float(gravity), float(length), float(damping))
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
