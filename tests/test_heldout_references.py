@@ -468,6 +468,11 @@ def test_the_stacked_fit_starts_each_training_flight_at_its_own_swing(cf, plain)
     assert dg.joins(against.train) == (len(against.train[0].t),)
     expl = next(e for e in against.explanations
                 if e.name == "cable_payload" and e.variant == "")
+    null = next(e for e in against.explanations if e.name == "no_difference")
+    # own starts for a cable on 2..OWN_STARTS_FLIGHTS training flights (the CPU's bound)
+    assert dg.own_starts(expl, 2) and dg.own_starts(expl, dg.OWN_STARTS_FLIGHTS)
+    assert not dg.own_starts(expl, 1) and not dg.own_starts(expl, dg.OWN_STARTS_FLIGHTS + 1)
+    assert not dg.own_starts(null, 2)
     (read,) = against.weigh([expl])
     values = read.train.values
     assert values["cable_payload.mass"] == pytest.approx(mass, rel=0.01)

@@ -234,7 +234,8 @@ __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "De
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
            "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
-           "weigh_flight", "aligned"]
+           "weigh_flight", "aligned", "OWN_STARTS_FLIGHTS", "fit_own_starts", "joins",
+           "own_starts"]
 
 
 SCHEMA = "quadsim.gap/3"
@@ -541,6 +542,24 @@ def joins(states: Sequence) -> tuple[int, ...]:
     return tuple(int(k) for k in np.cumsum([len(s.t) for s in states])[:-1])
 
 
+#: most training flights whose stacked fit starts each at its own cable swing
+#: (:func:`fit_own_starts`); with more, the later ones start hanging still (one start, the
+#: first flight's). Each later flight adds 4 columns to every cable fit's finite-difference
+#: Jacobian, each an evaluation of the residual over all the stacked flights, so the cost
+#: grows as the square of their number: on two real training flights the cable
+#: explanations' fits and reads took 2x; on 14 (the shipped set's 20 nominal flights held
+#: out) the whole run took 184 s CPU against 52 s (benchmarks/README.md, "Payload
+#: under-read"). 4: a payload campaign's few training flights, the Jacobian at most 2.5x.
+OWN_STARTS_FLIGHTS = 4
+
+
+def own_starts(expl: Explanation, flights: int) -> bool:
+    """Whether the stacked fit of ``expl`` on ``flights`` training flights starts each at its
+    own cable swing (:func:`fit_own_starts`): a cable payload fitted with its start swing,
+    on 2 to :data:`OWN_STARTS_FLIGHTS` flights."""
+    return bool(_start_groups(expl)) and 1 < flights <= OWN_STARTS_FLIGHTS
+
+
 def _start_groups(expl: Explanation) -> list[list[int]]:
     """Per ``cable_payload`` part of ``expl`` that fits its whole start swing
     (:data:`START_SWING`), the indices of those four parameters (in that order)."""
@@ -567,7 +586,8 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     H_pp - H_ps H_ss^-1 H_sp of the joint one, and log Z gains -1/2 log det H_ss (with the
     rest: -1/2 log det H of the joint precision); a value at a bound counts as in
     :func:`quadsim.gap.evidence.laplace`. The Evidence names the explanation's parameters
-    only. Without a start swing or a later flight: ``full_fit`` unchanged. Joint, not
+    only. Without a start swing, a later flight, or with more than
+    :data:`OWN_STARTS_FLIGHTS` flights (:func:`own_starts`): ``full_fit`` unchanged. Joint, not
     profiled: a start fitted inside each outer evaluation would cost its own fit (tens of
     evaluations) per evaluation of the outer fit, and its finite-difference Jacobian would
     differentiate an inner fit's tolerance; jointly each later flight adds 4 columns to the
@@ -578,9 +598,9 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     from .explanations import own_effects
     from .fitting import Restart
 
-    groups = _start_groups(expl)
-    if not groups or not at:
+    if not own_starts(expl, len(at) + 1):
         return evidence.full_fit(inputs, expl, start_delay_s)
+    groups = _start_groups(expl)
     prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
     n = len(prob.mean)
     idx = [k for g in groups for _ in at for k in g]     # (cable, later flight, START_SWING)
@@ -1191,8 +1211,9 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
     no likelier than the first alone). ``against``: weighed against nominal references
     (:meth:`Against.weigh`) instead of the parameter set. Without references the pair is
     screened and fitted (:func:`quadsim.gap.evidence.evaluate`); a pair with a cable
-    payload on several training flights is fitted fully instead, each flight at its own
-    start swing (:func:`fit_own_starts`), as the cable alone was."""
+    payload whose training flights start at their own swings (:func:`own_starts`) is
+    fitted fully instead, each at its own (:func:`fit_own_starts`), as the cable alone
+    was."""
     a, b = lead.train.explanation, other.train.explanation
     # a rotor delay (against references with a timing reading) is one parameter of the pair,
     # last, with the lead's prior (or the partner's where the lead fits none)
@@ -1210,8 +1231,8 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
         if not got:
             raise ModelError(f"{expl.name}: no fit where a rigid vehicle is")
         return got[0]
-    own = bool(_start_groups(expl)) and len(train) > 1
-    ev = evaluate(stack_states(list(train)), reference, [expl], full=own,
+    ev = evaluate(stack_states(list(train)), reference, [expl],
+                  full=own_starts(expl, len(train)),
                   fit=partial(fit_own_starts, at=joins(train)))[0]
     return check(ev, train, held, reference)
 
