@@ -284,10 +284,11 @@ def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
     accel = rng.normal(size=(len(t), 3))
     q0, w0 = cable.start_state((0.1, -0.05), (0.3, 0.2))
     q1, w1 = cable.start_state((-0.2, 0.1), (0.0, -0.4))
-    want_q, want_w = np.empty_like(accel), np.empty_like(accel)
+    want = np.empty((2, *accel.shape))
+    want_q, want_w = want
     constants = (9.81, 0.45, 0.3)                    # gravity, length, damped 0.3/s
     cable._swing_kernel(t, accel, np.array([[q0, w0], [q1, w1]]), np.array([0, 300]),
-                        constants, want_q, want_w)
+                        constants, want)
     rows_q, rows_w = cable._swing_floats(t.tolist(), accel.tolist(),
                                          {0: (q0.tolist(), w0.tolist()),
                                           300: (q1.tolist(), w1.tolist())}, constants)

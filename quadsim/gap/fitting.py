@@ -281,28 +281,28 @@ def _rate(q, w, a, constants):
 
 
 @_compiled
-def _swing_kernel(t, accel, starts, at, constants, out_q, out_w):
+def _swing_kernel(t, accel, starts, at, constants, out):
     """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
     ``accel`` (N, 3) the attachment's acceleration (world); ``starts`` (S, 2, 3) the rows
     q0, w0 of each start, taken at the sample indices ``at`` (S,; rising, ``at[0]`` = 0: a
     stacked flight's first sample); ``constants`` as :func:`_rate`'s; any other time jump
-    restarts hanging still. Fills ``out_q``, ``out_w`` (N, 3)."""
+    restarts hanging still. Fills ``out`` (2, N, 3): q, then w."""
     n = t.shape[0]
     dt0 = t[1] - t[0] if n > 1 else 1.0
     j = 0
     for k in range(n):
         if j < at.shape[0] and k == at[j]:      # a start of its own
             for i in range(3):
-                out_q[k, i], out_w[k, i] = starts[j, 0, i], starts[j, 1, i]
+                out[0, k, i], out[1, k, i] = starts[j, 0, i], starts[j, 1, i]
             j += 1
             continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
-            out_q[k, 0], out_q[k, 1], out_q[k, 2] = 0.0, 0.0, -1.0
-            out_w[k, 0], out_w[k, 1], out_w[k, 2] = 0.0, 0.0, 0.0
+            out[0, k, 0], out[0, k, 1], out[0, k, 2] = 0.0, 0.0, -1.0
+            out[1, k, 0], out[1, k, 1], out[1, k, 2] = 0.0, 0.0, 0.0
             continue
         h = t[k] - t[k - 1]
-        qx, qy, qz = out_q[k - 1, 0], out_q[k - 1, 1], out_q[k - 1, 2]
-        wx, wy, wz = out_w[k - 1, 0], out_w[k - 1, 1], out_w[k - 1, 2]
+        qx, qy, qz = out[0, k - 1, 0], out[0, k - 1, 1], out[0, k - 1, 2]
+        wx, wy, wz = out[1, k - 1, 0], out[1, k - 1, 1], out[1, k - 1, 2]
         a0 = (accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2])
         a1 = (accel[k, 0], accel[k, 1], accel[k, 2])
         am = (0.5 * (a0[0] + a1[0]), 0.5 * (a0[1] + a1[1]), 0.5 * (a0[2] + a1[2]))
@@ -324,8 +324,8 @@ def _swing_kernel(t, accel, starts, at, constants, out_q, out_w):
         norm = math.sqrt(qx * qx + qy * qy + qz * qz)
         qx, qy, qz = qx / norm, qy / norm, qz / norm
         along = wx * qx + wy * qy + wz * qz
-        out_q[k, 0], out_q[k, 1], out_q[k, 2] = qx, qy, qz
-        out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
+        out[0, k, 0], out[0, k, 1], out[0, k, 2] = qx, qy, qz
+        out[1, k, 0], out[1, k, 1], out[1, k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
 def _swing_floats(t: list, accel: list, starts: dict, constants: tuple
@@ -418,11 +418,12 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
     rows = [(0, np.asarray(q0, float), np.asarray(w0, float))]
     rows += [(r.at, *start_state(r.lean, r.rate))
              for r in sorted(restarts, key=lambda r: r.at) if 0 < r.at < len(t)]
-    q, w = np.empty_like(accel), np.empty_like(accel)
+    out = np.empty((2, *accel.shape))
+    q, w = out[0], out[1]
     constants = (float(gravity), float(length), float(damping))
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
         _swing_kernel(t, accel, np.array([[r[1], r[2]] for r in rows]),
-                      np.array([r[0] for r in rows], dtype=np.int64), constants, q, w)
+                      np.array([r[0] for r in rows], dtype=np.int64), constants, out)
     elif len(t):
         rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(),
                                        {r[0]: (r[1].tolist(), r[2].tolist()) for r in rows},
