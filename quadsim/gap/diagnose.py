@@ -608,15 +608,17 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     lower, upper = prob.lower[idx], prob.upper[idx]
     z_lo, z_hi = prob.z_lo[idx], prob.z_hi[idx]
     wall = np.full(prob.size + len(idx), 1e3)
+    # which of the explanation's own effects (one per part) are the groups' cables
+    starting = [name == "cable_payload" and set(START_SWING) <= set(fitted)
+                for name, _, fitted in expl.parts]
 
     def effects(zz):
         theta = np.clip(prob.mean + prob.sd * zz[:n], prob.lower, prob.upper)
         starts = np.clip(mean + sd * zz[n:], lower, upper).reshape(len(groups), len(at), 4)
         cables = iter(tuple(Restart(a, (float(v[0]), float(v[1])), (float(v[2]), float(v[3])))
                             for a, v in zip(at, rows)) for rows in starts)
-        own = [CableSwing(restarts=next(cables), **e.values())
-               if isinstance(e, CableSwing) and set(START_SWING) <= set(e.values()) else e
-               for e in own_effects(expl, theta)]
+        own = [CableSwing(restarts=next(cables), **e.values()) if mine else e
+               for e, mine in zip(own_effects(expl, theta), starting)]
         return theta, own
 
     def cost(zz):
