@@ -272,22 +272,34 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
 
 def test_the_uncompiled_swing_on_floats_is_the_kernels_steps():
     """cable._swing_floats (the swing without numba) against cable._swing_kernel stepped on
-    arrays (compiled where numba is installed, else as plain Python), with a time jump."""
+    arrays (compiled where numba is installed, else as plain Python), with two time jumps:
+    a stacked flight at its own start (a Restart) and one hanging still; and
+    cable.swing, which passes the restarts to whichever runs."""
     from quadsim.gap import fitting as cable
 
     rng = np.random.default_rng(1)
     t = np.arange(0.0, 6.4, 0.01)
     t[300:] += 0.5                                   # stacked flights: a restart
+    t[500:] += 0.5                                   # and another, hanging still
     accel = rng.normal(size=(len(t), 3))
     q0, w0 = cable.start_state((0.1, -0.05), (0.3, 0.2))
-    want_q, want_w = np.empty_like(accel), np.empty_like(accel)
+    q1, w1 = cable.start_state((-0.2, 0.1), (0.0, -0.4))
+    want = np.empty((2, *accel.shape))
+    want_q, want_w = want
     constants = (9.81, 0.45, 0.3)                    # gravity, length, damped 0.3/s
-    cable._swing_kernel(t, accel, np.array([q0, w0]), constants, want_q, want_w)
+    cable._swing_kernel(t, accel, np.array([[q0, w0], [q1, w1]]), np.array([0, 300]),
+                        constants, want)
     rows_q, rows_w = cable._swing_floats(t.tolist(), accel.tolist(),
-                                         (q0.tolist(), w0.tolist()), constants)
+                                         {0: (q0.tolist(), w0.tolist()),
+                                          300: (q1.tolist(), w1.tolist())}, constants)
     _close(np.array(rows_q), want_q, rel=1e-12)
     _close(np.array(rows_w), want_w, rel=1e-12)
-    np.testing.assert_array_equal(np.array(rows_q)[300], [0.0, 0.0, -1.0])
+    np.testing.assert_array_equal(np.array(rows_q)[300], q1)
+    np.testing.assert_array_equal(np.array(rows_q)[500], [0.0, 0.0, -1.0])
+    q, w = cable.swing(t, accel, 0.45, 9.81, (q0, w0), damping=0.3,
+                       restarts=(cable.Restart(300, (-0.2, 0.1), (0.0, -0.4)),))
+    _close(q, want_q, rel=1e-12)
+    _close(w, want_w, rel=1e-12)
 
 
 def test_the_jacobian_steps_back_from_a_wall_of_the_physical_set(cf, states):

@@ -234,7 +234,8 @@ __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "De
            "weigh", "MIN_REFERENCE", "WeighedFlight", "diagnose_per_flight", "judge_one",
            "ToJudge",
            "reference_self_check", "reference_summary", "refused_entry", "verdict_of",
-           "weigh_flight", "aligned"]
+           "weigh_flight", "aligned", "OWN_STARTS_FLIGHTS", "fit_own_starts", "joins",
+           "own_starts"]
 
 
 SCHEMA = "quadsim.gap/3"
@@ -534,6 +535,118 @@ def _stacked(states: list):
     return stack_states(moved)
 
 
+def joins(states: Sequence) -> tuple[int, ...]:
+    """The index of each later flight's first sample when ``states`` (one flight's fit
+    states each) are stacked (:func:`_stacked`, :func:`quadsim.gap.fitting.stack_states`:
+    both keep every sample, in order); empty for one flight."""
+    return tuple(int(k) for k in np.cumsum([len(s.t) for s in states])[:-1])
+
+
+#: most training flights whose stacked fit starts each at its own cable swing
+#: (:func:`fit_own_starts`); with more, the later ones start hanging still (one start, the
+#: first flight's). Each later flight adds 4 columns to every cable fit's finite-difference
+#: Jacobian, each an evaluation of the residual over all the stacked flights, so the cost
+#: grows as the square of their number: on two real training flights the cable
+#: explanations' fits and reads took 2x; on 14 (the shipped set's 20 nominal flights held
+#: out) the whole run took 184 s CPU against 52 s (benchmarks/README.md, "Payload
+#: under-read"). 4: a payload campaign's few training flights, the Jacobian at most 2.5x.
+OWN_STARTS_FLIGHTS = 4
+
+
+def own_starts(expl: Explanation, flights: int) -> bool:
+    """Whether the stacked fit of ``expl`` on ``flights`` training flights starts each at its
+    own cable swing (:func:`fit_own_starts`): a cable payload fitted with its start swing,
+    on 2 to :data:`OWN_STARTS_FLIGHTS` flights."""
+    return bool(_start_groups(expl)) and 1 < flights <= OWN_STARTS_FLIGHTS
+
+
+def _start_groups(expl: Explanation) -> list[list[int]]:
+    """Per ``cable_payload`` part of ``expl`` that fits its whole start swing
+    (:data:`START_SWING`), the indices of those four parameters (in that order)."""
+    out, k = [], 0
+    for name, _, fitted in expl.parts:
+        if name == "cable_payload" and set(START_SWING) <= set(fitted):
+            out.append([k + list(fitted).index(p) for p in START_SWING])
+        k += len(fitted)
+    return out
+
+
+def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
+                   at: tuple) -> Evidence:
+    """:func:`quadsim.gap.evidence.full_fit` of ``expl`` on stacked flights (``inputs``;
+    ``at``: each later flight's first sample, :func:`joins`), a cable payload's swing at
+    each later flight's first sample that flight's own (:data:`START_SWING`; the
+    explanation's own start is the first flight's): 4 nuisance parameters per later flight
+    and cable, each with the explanation's prior of its start (:data:`START_PRIOR`, bounds
+    and centre alike), fitted jointly with the explanation by the same trust-region least
+    squares (:data:`quadsim.gap.evidence.FULL_FIT_EVALUATIONS`, step
+    :data:`~quadsim.gap.evidence.FULL_FIT_STEP`) on the same cost, the starts' z appended
+    (:meth:`quadsim.gap.evidence.Problem.stacked`). The evidence integrates them out
+    (Laplace): the explanation's posterior precision is the Schur complement
+    H_pp - H_ps H_ss^-1 H_sp of the joint one, and log Z gains -1/2 log det H_ss (with the
+    rest: -1/2 log det H of the joint precision); a value at a bound counts as in
+    :func:`quadsim.gap.evidence.laplace`. The Evidence names the explanation's parameters
+    only. Without a start swing, a later flight, or with more than
+    :data:`OWN_STARTS_FLIGHTS` flights (:func:`own_starts`): ``full_fit`` unchanged. Joint, not
+    profiled: a start fitted inside each outer evaluation would cost its own fit (tens of
+    evaluations) per evaluation of the outer fit, and its finite-difference Jacobian would
+    differentiate an inner fit's tolerance; jointly each later flight adds 4 columns to the
+    outer fit's Jacobian (4 evaluations of the stacked residual per step)."""
+    from scipy.optimize import least_squares
+
+    from .evidence import FULL_FIT_EVALUATIONS, FULL_FIT_STEP, Problem, flight_residual, laplace
+    from .explanations import own_effects
+    from .fitting import Restart
+
+    if not own_starts(expl, len(at) + 1):
+        return evidence.full_fit(inputs, expl, start_delay_s)
+    groups = _start_groups(expl)
+    prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
+    n = len(prob.mean)
+    idx = [k for g in groups for _ in at for k in g]     # (cable, later flight, START_SWING)
+    mean, sd = prob.mean[idx], prob.sd[idx]
+    lower, upper = prob.lower[idx], prob.upper[idx]
+    z_lo, z_hi = prob.z_lo[idx], prob.z_hi[idx]
+    wall = np.full(prob.size + len(idx), 1e3)
+    # which of the explanation's own effects (one per part) are the groups' cables
+    starting = [name == "cable_payload" and set(START_SWING) <= set(fitted)
+                for name, _, fitted in expl.parts]
+
+    def effects(zz):
+        theta = np.clip(prob.mean + prob.sd * zz[:n], prob.lower, prob.upper)
+        starts = np.clip(mean + sd * zz[n:], lower, upper).reshape(len(groups), len(at), 4)
+        cables = iter(tuple(Restart(a, (float(v[0]), float(v[1])), (float(v[2]), float(v[3])))
+                            for a, v in zip(at, rows)) for rows in starts)
+        own = [CableSwing(restarts=next(cables), **e.values()) if mine else e
+               for e, mine in zip(own_effects(expl, theta), starting)]
+        return theta, own
+
+    def cost(zz):
+        try:
+            theta, own = effects(zz)
+            flight = prob.shifted(float(theta[n - 1])) if expl.shift else prob.states
+            r = flight_residual(flight, prob.reference, prob.shared + own, prob.memo)
+        except ModelError:
+            return wall
+        aug, du = prob.marg.profile(r)
+        return np.concatenate([aug, du, zz])
+
+    z0 = np.concatenate([prob.start(start_delay_s),
+                         np.clip(np.zeros(len(idx)), z_lo + 1e-6, z_hi - 1e-6)])
+    fit = least_squares(cost, z0, bounds=(np.concatenate([prob.z_lo, z_lo]),
+                                          np.concatenate([prob.z_hi, z_hi])),
+                        diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
+    h = fit.jac.T @ fit.jac
+    h_ss = h[n:, n:]
+    sign, logdet_ss = np.linalg.slogdet(h_ss)
+    if sign > 0:
+        h_own = h[:n, :n] - h[:n, n:] @ np.linalg.solve(h_ss, h[n:, :n])
+    else:           # the fit ended on the wall (a zero Jacobian): no evidence
+        h_own, logdet_ss = h[:n, :n], np.inf
+    ev = laplace(prob, fit.x[:n], fit.fun, h_own, int(np.count_nonzero(fit.active_mask)))
+    return dataclasses.replace(ev, log_z=ev.log_z - 0.5 * logdet_ss)
+
+
 def _problem(states, reference: Reference, expl: Explanation, memo: dict):
     """``expl``'s :class:`quadsim.gap.evidence.Problem` on one flight against ``reference``,
     the flight's Jacobian in the shared parameters kept in ``memo`` (as
@@ -591,9 +704,9 @@ def _read_own_start(prob, theta: np.ndarray) -> tuple[np.ndarray, float]:
     other value held at ``theta`` (mass, length, damping: the reading's), by least squares
     on the fit's cost (:meth:`quadsim.gap.evidence.Problem.stacked`: the profiled residual,
     the marginalised shifts and the prior in z, the start's spread
-    :data:`quadsim.gap.fitting.START_PRIOR`) from hanging still (z = 0). A stacked fit fits
-    one start (its first flight's; the swing restarts hanging still at each later flight),
-    so no other flight's start is the one it swung from. The log-likelihood adds the
+    :data:`quadsim.gap.fitting.START_PRIOR`) from hanging still (z = 0). The stacked fit's
+    starts (:func:`fit_own_starts`) are integrated out there, not kept, and a held-out
+    flight has none: each flight's own is fitted here alike. The log-likelihood adds the
     start's prior -1/2 |z_start|^2 (a penalised profile: the start is not marginalised).
     Without a start swing: :func:`_read` unchanged."""
     idx = start_swing_index(prob.expl)
@@ -647,14 +760,16 @@ class Against:
 
     def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
-        :func:`quadsim.gap.evidence.evaluate`), then read on every flight
+        :func:`quadsim.gap.evidence.evaluate`; a cable payload with each flight's own start
+        swing, :func:`fit_own_starts`), then read on every flight
         (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading.
         ``null``: "no difference", fitted first and dropped: the rotor delay's fits start
         where the evaluation reads them from it, so that one explanation per worker gives
         the numbers of the whole list in one call."""
         first = [] if null is None else [null]
         rows = evaluate(self.stacked, self.reference, first + list(expl),
-                        start_delay_s=self.start, full=True, memo=self.memos[-1])[len(first):]
+                        start_delay_s=self.start, full=True, memo=self.memos[-1],
+                        fit=partial(fit_own_starts, at=joins(self.train)))[len(first):]
         out = []
         for ev in rows:
             if not np.isfinite(ev.log_z):
@@ -1008,11 +1123,14 @@ def _beyond(r: np.ndarray, states, reference: Reference) -> tuple[np.ndarray, fl
 
 def weigh(train: list, held: list, reference: Reference, expl: list[Explanation]
           ) -> list[Weighed]:
-    """Stage 3 (module doc): training evidence of every explanation, plus its held-out
-    log-likelihood at the training MAP. ``train``/``held``: decimated states."""
+    """Stage 3 (module doc): training evidence of every explanation (on the stacked
+    training flights, a cable payload with each flight's own start swing:
+    :func:`fit_own_starts`), plus its held-out log-likelihood at the training MAP.
+    ``train``/``held``: decimated states."""
     # every explanation fully fitted (no screen): its result must not depend on which others
     # share its batch, so that workers and one process give the same bytes
-    rows = evaluate(stack_states(train), reference, expl, full=True)
+    rows = evaluate(stack_states(train), reference, expl, full=True,
+                    fit=partial(fit_own_starts, at=joins(train)))
     out = []
     for ev in rows:
         if not np.isfinite(ev.log_z):   # its fit ended where no rigid vehicle is: no reading
@@ -1093,7 +1211,11 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
     """The lead fitted together with ``other`` (module doc, stage 4): its prior is the
     lead's with the partner's, less log(partners) (a second simultaneous effect is a priori
     no likelier than the first alone). ``against``: weighed against nominal references
-    (:meth:`Against.weigh`) instead of the parameter set."""
+    (:meth:`Against.weigh`) instead of the parameter set. Without references the pair is
+    screened and fitted (:func:`quadsim.gap.evidence.evaluate`); a pair with a cable
+    payload whose training flights start at their own swings (:func:`own_starts`) is
+    fitted fully instead, each at its own (:func:`fit_own_starts`), as the cable alone
+    was."""
     a, b = lead.train.explanation, other.train.explanation
     # a rotor delay (against references with a timing reading) is one parameter of the pair,
     # last, with the lead's prior (or the partner's where the lead fits none)
@@ -1111,7 +1233,9 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
         if not got:
             raise ModelError(f"{expl.name}: no fit where a rigid vehicle is")
         return got[0]
-    ev = evaluate(stack_states(list(train)), reference, [expl])[0]
+    ev = evaluate(stack_states(list(train)), reference, [expl],
+                  full=own_starts(expl, len(train)),
+                  fit=partial(fit_own_starts, at=joins(train)))[0]
     return check(ev, train, held, reference)
 
 

@@ -633,7 +633,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
              start_delay_s: float = 0.0, *, full: bool = False,
-             memo: dict | None = None) -> list[Evidence]:
+             memo: dict | None = None, fit=None) -> list[Evidence]:
     """Log evidence of every explanation on one flight: one :class:`Evidence` per entry of
     ``explanations``, in their order.
 
@@ -650,8 +650,9 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:func:`screened`); ``full=True`` fits every one with
-    :func:`quadsim.gap.evidence.full_fit`. ``memo``: the residual parts and the shared
-    Jacobian kept from an earlier call on the same flight and reference
+    :func:`quadsim.gap.evidence.full_fit`, or with ``fit`` (the same arguments: stacked
+    flights' own nuisance parameters, :mod:`quadsim.gap.diagnose`). ``memo``: the residual
+    parts and the shared Jacobian kept from an earlier call on the same flight and reference
     (:func:`quadsim.gap.evidence.choose`)."""
     names = list(reference.candidate.parameter_names)
     s_all = marginal_sd(reference)
@@ -669,7 +670,8 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
                               float(wide.sd[-1]) if wide is not None else 0.0, start_delay_s)
     if not full:
         return screened(inputs, explanations, starts)
-    return [full_fit(inputs, e, starts[1] if e.name == "signal_delay" else starts[0])
+    fit = full_fit if fit is None else fit
+    return [fit(inputs, e, starts[1] if e.name == "signal_delay" else starts[0])
             for e in explanations]
 
 

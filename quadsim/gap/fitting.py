@@ -29,10 +29,13 @@ engine's model; Sreenath, Lee & Kumar, CDC 2013, eq. 2-4)::
     tau   = (r_a - c) x R^T F            its torque about the CoM (body)
 
 integrated by RK4 between the log's samples (a linearly interpolated between them), q
-renormalised and w kept normal to q after each step; a time jump (stacked flights) restarts
-it hanging still. The damping rate k is fitted (prior N(0.5, 0.5^2) 1/s, at least 0:
-:data:`DAMPING_PRIOR`; the engines damp only the cable's axial spring): an undamped model
-swing kept swinging after the real payload hung still. The swing the payload already had at
+renormalised and w kept normal to q after each step; a stacked flight's first sample starts
+at that flight's own swing where the stacked fit gives it one (:class:`Restart`,
+:func:`quadsim.gap.diagnose.fit_own_starts`), any other time jump (an airborne stretch of
+one log, a stacked flight without one) restarts it hanging still. The damping rate k is
+fitted (prior N(0.5, 0.5^2) 1/s, at least 0: :data:`DAMPING_PRIOR`; the engines damp only
+the cable's axial spring): an undamped model swing kept swinging after the real payload
+hung still. The swing the payload already had at
 the first sample is fitted with the payload too (lean and swing rate along world x and y,
 :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
 :data:`START_PRIOR`); these and k are nuisance parameters, never part of the answer.
@@ -206,6 +209,7 @@ from .residual import (  # re-exported: the diagnosis' public fitting names
 )
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING", "CableSwing",
+           "Restart",
            "prior", "start_state", "swing", "FIT_EFFECTS", "FIT_FORMS", "LOCAL_EFFECTS",
            "PSEUDO_EFFECTS", "SPEED_GAIN_PART", "CantedRotorFit", "DragLaw", "NominalRefit",
            "SpeedGain", "build_effect", "effect_class", "facts_for", "parameter_facts_for",
@@ -229,7 +233,8 @@ LENGTH_PRIOR_M = (0.55, 0.225)
 #: prior spreads of the swing at the first sample: lean (rad, 10 deg) and rate (rad/s).
 START_PRIOR = (0.17, 0.5)
 #: the parameters of the swing at the first sample (rad, rad/s; nuisance): one flight's own,
-#: never another's (held out each flight is read at its own, :mod:`quadsim.gap.diagnose`)
+#: never another's (held out each flight is read at its own, and each stacked training
+#: flight fitted at its own, :mod:`quadsim.gap.diagnose`)
 START_SWING = ("lean_x", "lean_y", "rate_x", "rate_y")
 #: the fitted parameters: the payload, and the swing at the first sample (nuisance).
 FITTED = ("mass", "length", *START_SWING, "swing_damping")
@@ -276,25 +281,28 @@ def _rate(q, w, a, constants):
 
 
 @_compiled
-def _swing_kernel(t, accel, start, constants, out_q, out_w):
+def _swing_kernel(t, accel, starts, at, constants, out):
     """RK4 of the cable's direction q and angular velocity w along the samples (module doc);
-    ``accel`` (N, 3) the attachment's acceleration (world); ``start`` (2, 3) the rows q0, w0;
-    ``constants`` as :func:`_rate`'s; a time jump restarts hanging still. Fills ``out_q``,
-    ``out_w`` (N, 3)."""
+    ``accel`` (N, 3) the attachment's acceleration (world); ``starts`` (S, 2, 3) the rows
+    q0, w0 of each start, taken at the sample indices ``at`` (S,; rising, ``at[0]`` = 0: a
+    stacked flight's first sample); ``constants`` as :func:`_rate`'s; any other time jump
+    restarts hanging still. Fills ``out`` (2, N, 3): q, then w."""
     n = t.shape[0]
     dt0 = t[1] - t[0] if n > 1 else 1.0
+    j = 0
     for k in range(n):
-        if k == 0:
+        if j < at.shape[0] and k == at[j]:      # a start of its own
             for i in range(3):
-                out_q[k, i], out_w[k, i] = start[0, i], start[1, i]
+                out[0, k, i], out[1, k, i] = starts[j, 0, i], starts[j, 1, i]
+            j += 1
             continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
-            out_q[k, 0], out_q[k, 1], out_q[k, 2] = 0.0, 0.0, -1.0
-            out_w[k, 0], out_w[k, 1], out_w[k, 2] = 0.0, 0.0, 0.0
+            out[0, k, 0], out[0, k, 1], out[0, k, 2] = 0.0, 0.0, -1.0
+            out[1, k, 0], out[1, k, 1], out[1, k, 2] = 0.0, 0.0, 0.0
             continue
         h = t[k] - t[k - 1]
-        qx, qy, qz = out_q[k - 1, 0], out_q[k - 1, 1], out_q[k - 1, 2]
-        wx, wy, wz = out_w[k - 1, 0], out_w[k - 1, 1], out_w[k - 1, 2]
+        qx, qy, qz = out[0, k - 1, 0], out[0, k - 1, 1], out[0, k - 1, 2]
+        wx, wy, wz = out[1, k - 1, 0], out[1, k - 1, 1], out[1, k - 1, 2]
         a0 = (accel[k - 1, 0], accel[k - 1, 1], accel[k - 1, 2])
         a1 = (accel[k, 0], accel[k, 1], accel[k, 2])
         am = (0.5 * (a0[0] + a1[0]), 0.5 * (a0[1] + a1[1]), 0.5 * (a0[2] + a1[2]))
@@ -316,22 +324,26 @@ def _swing_kernel(t, accel, start, constants, out_q, out_w):
         norm = math.sqrt(qx * qx + qy * qy + qz * qz)
         qx, qy, qz = qx / norm, qy / norm, qz / norm
         along = wx * qx + wy * qy + wz * qz
-        out_q[k, 0], out_q[k, 1], out_q[k, 2] = qx, qy, qz
-        out_w[k, 0], out_w[k, 1], out_w[k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
+        out[0, k, 0], out[0, k, 1], out[0, k, 2] = qx, qy, qz
+        out[1, k, 0], out[1, k, 1], out[1, k, 2] = wx - along * qx, wy - along * qy, wz - along * qz
 
 
-def _swing_floats(t: list, accel: list, start: tuple, constants: tuple) -> tuple[list, list]:
+def _swing_floats(t: list, accel: list, starts: dict, constants: tuple
+                  ) -> tuple[list, list]:
     """:func:`_swing_kernel`'s steps on Python floats (``t`` a list, ``accel`` a list of
-    3-lists, ``start`` = (q0, w0) as 3-lists, ``constants`` as :func:`_rate`'s), for when it
-    is not compiled: the same operations in the same order (the same numbers), without the
-    per-element indexing of numpy arrays that dominates the uncompiled kernel. Returns the
-    lists of q and w rows."""
+    3-lists, ``starts`` sample index -> (q0, w0) as 3-lists, index 0 among them,
+    ``constants`` as :func:`_rate`'s), for when it is not compiled: the same operations in
+    the same order (the same numbers), without the per-element indexing of numpy arrays that
+    dominates the uncompiled kernel. Returns the lists of q and w rows."""
     rate = getattr(_rate, "py_func", _rate)
     n = len(t)
     dt0 = t[1] - t[0] if n > 1 else 1.0
     out_q, out_w = [None] * n, [None] * n
-    out_q[0], out_w[0] = [float(v) for v in start[0]], [float(v) for v in start[1]]
-    for k in range(1, n):
+    for k in range(n):
+        if k in starts:                                   # a start of its own
+            out_q[k], out_w[k] = ([float(v) for v in starts[k][0]],
+                                  [float(v) for v in starts[k][1]])
+            continue
         if abs((t[k] - t[k - 1]) - dt0) > 0.5 * dt0:      # a time jump: a new flight
             out_q[k], out_w[k] = [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]
             continue
@@ -379,24 +391,43 @@ def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
     return q0 / np.linalg.norm(q0), np.cross(q0, dq)
 
 
+@dataclass(frozen=True)
+class Restart:
+    """A stacked flight's own swing at its first sample (:data:`START_SWING`): ``at`` the
+    index of that sample in the stacked states (> 0), ``lean`` (rad) and ``rate`` (rad/s)
+    along world x and y (:func:`start_state`). Without one, a stacked flight starts hanging
+    still (the kernel's restart at a time jump)."""
+
+    at: int
+    lean: tuple
+    rate: tuple
+
+
 def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
-          start: tuple | None = None, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+          start: tuple | None = None, damping: float = 0.0, *,
+          restarts: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
     """Cable direction q (N, 3) and angular velocity w (N, 3, rad/s) along a flight whose
     attachment point accelerates by ``accel`` (N, 3, world m/s^2) at times ``t`` (s), from
     ``start`` = (q0, w0) (default: hanging still, :func:`start_state`), the swing damped at
-    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc)."""
+    the rate ``damping`` (1/s: dw/dt gains -damping w; module doc); ``restarts``
+    (:class:`Restart`): stacked flights that start at a swing of their own (one whose
+    ``at`` is not a later sample of ``t`` is not one of them)."""
     t = np.ascontiguousarray(t, dtype=float)
     accel = np.ascontiguousarray(accel, dtype=float)
     q0, w0 = start_state() if start is None else start
-    q, w = np.empty_like(accel), np.empty_like(accel)
+    rows = [(0, np.asarray(q0, float), np.asarray(w0, float))]
+    rows += [(r.at, *start_state(r.lean, r.rate))
+             for r in sorted(restarts, key=lambda r: r.at) if 0 < r.at < len(t)]
+    out = np.empty((2, *accel.shape))
+    q, w = out[0], out[1]
     constants = (float(gravity), float(length), float(damping))
     if len(t) and hasattr(_swing_kernel, "py_func"):         # compiled (numba)
-        _swing_kernel(t, accel, np.array([np.asarray(q0, float), np.asarray(w0, float)]),
-                      constants, q, w)
+        _swing_kernel(t, accel, np.array([[r[1], r[2]] for r in rows]),
+                      np.array([r[0] for r in rows], dtype=np.int64), constants, out)
     elif len(t):
         rows_q, rows_w = _swing_floats(t.tolist(), accel.tolist(),
-                                       (np.asarray(q0, float).tolist(),
-                                        np.asarray(w0, float).tolist()), constants)
+                                       {r[0]: (r[1].tolist(), r[2].tolist()) for r in rows},
+                                       constants)
         q[:], w[:] = rows_q, rows_w
     return q, w
 
@@ -461,6 +492,13 @@ class CableSwing(CablePayload):
     #: speeds, so a rotor-delay shift reuses the pull
     loads_reads = ((), ("com", "gravity"))
 
+    def __init__(self, *, restarts: tuple = (), **values: float):
+        """``values``: the parameters; ``restarts``: the stacked flights that start at a
+        swing of their own (:class:`Restart`; the stacked fit's, :mod:`quadsim.gap.diagnose`:
+        not parameters of the effect, whose start swing is its first flight's)."""
+        super().__init__(**values)
+        self.restarts = tuple(restarts)
+
     def state_size(self) -> int:
         return 0
 
@@ -497,13 +535,13 @@ class CableSwing(CablePayload):
         payload's mass (it only scales the pull) nor on the rotor speeds (a rotor-delay
         shift), so those evaluations reuse it."""
         key = (self.length, self.lean_x, self.lean_y, self.rate_x, self.rate_y,
-               self.x, self.y, self.z, float(gravity), self.swing_damping)
+               self.x, self.y, self.z, float(gravity), self.swing_damping, self.restarts)
         kept = None if memo is None else memo.setdefault("cable_swings", {})
         if kept is not None and key in kept:
             return kept[key]
         value = swing(t, accel, self.length, gravity,
                       start_state((self.lean_x, self.lean_y), (self.rate_x, self.rate_y)),
-                      damping=self.swing_damping)
+                      damping=self.swing_damping, restarts=self.restarts)
         if kept is not None:
             if len(kept) >= self.KEPT_SWINGS:
                 del kept[next(iter(kept))]
