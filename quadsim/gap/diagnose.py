@@ -147,6 +147,7 @@ others are judged and the summary counts the refusals (the batch goes on).
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -749,8 +750,8 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                                     inverse_information(s, ref) if informed else None)
                   for s in tr]
         placed = tuple(local_reference(ref, p) for p in places)
-        flown = tuple(f"Training flight {f.name}" + (f" (flown {p.text})" if p is not None
-                                                      and p.distance > 0 else "")
+        flown = tuple(f"Training flight {os.path.basename(str(f.name))}"
+                      + (f" (flown {p.text})" if p is not None and p.distance > 0 else "")
                       for f, p in zip(train, places))
         check = ref.self_check
         if local is not ref and check is not None and getattr(check, "slow", None) is not None:
