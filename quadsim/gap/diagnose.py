@@ -97,8 +97,10 @@ every flight of the vehicle shares): the reference model is the per-flight one
 (:func:`_reference_stage`: calibration, noise model, discrepancy term, self-check; ``store``
 keeps it between runs); the training and held-out flights are aligned to its rotor timing,
 checked to be of the references' kind and placed on their envelope at the stacked training
-flights' place; the drag law is chosen on the stacked training flights; the explanations
-are the per-flight ones (:class:`Against`). Each is fitted on the stacked training flights
+flights' place (each training flight also at its own, where its lack of fit against the
+references is judged as per flight, :func:`quadsim.gap.judge.against_reference`); the drag
+law is chosen on the stacked training flights; the explanations are the per-flight ones
+(:class:`Against`). Each is fitted on the stacked training flights
 (:func:`quadsim.gap.evidence.evaluate`), then read on every flight at its training MAP
 under the per-flight likelihood (the shared parameters it keeps and the flight's own
 discrepancy marginalised, :func:`_read`); the held-out flights' log-likelihood joins its
