@@ -888,15 +888,23 @@ def training_lack(lead, null, reference, placed=None) -> list[dict]:
     that model's sigma. ``null``: the "no difference" Weighed (each flight's form-error
     exemption; None or ``lead`` itself: none). One dict per training flight, channel ->
     (RMS over the references' typical there, z)."""
-    placed = list(placed or ())
     out = []
-    for j, resid in enumerate(lead.train_residuals):
-        ref = placed[j] if j < len(placed) and placed[j] is not None else reference
+    for j, (resid, ref) in enumerate(zip(lead.train_residuals,
+                                         _each_place(reference, placed,
+                                                     len(lead.train_residuals)))):
         ms = mean_squares([resid], ref.sigma)
         null_ms = None if null is None or null is lead else \
             mean_squares([null.train_residuals[j]], ref.sigma)
         out.append(lack_of_fit(ms, Baseline.of_reference(ref), ref, null_ms=null_ms))
     return out
+
+
+def _each_place(reference, placed, count: int) -> list:
+    """The reference model each of ``count`` training flights is judged against: its own
+    place's (``placed[j]``), else ``reference`` (the stacked flights' place)."""
+    placed = list(placed or ())
+    return [placed[j] if j < len(placed) and placed[j] is not None else reference
+            for j in range(count)]
 
 
 def alone(per_flight: list[dict]) -> dict:
@@ -935,16 +943,11 @@ def against_reference(lead, null, reference, placed=None) -> tuple[dict, dict, f
     lack = {k: min((d[k] for d in per), key=lambda v: v[1]) for k in sorted(shared)}
     share = float("inf")
     if null is not None and null is not lead:
-        placed = list(placed or ())
-        refs = [placed[j] if j < len(placed) and placed[j] is not None else reference
-                for j in range(len(lead.train_residuals))]
-        left = sum(float(np.sum(np.maximum(0.0, mean_squares([r], ref.sigma)
-                                           - np.exp(Baseline.of_reference(ref).mean))))
-                   for r, ref in zip(lead.train_residuals, refs))
-        gap = sum(float(np.sum(np.maximum(0.0, mean_squares([r], ref.sigma)
-                                          - np.exp(Baseline.of_reference(ref).mean))))
-                  for r, ref in zip(null.train_residuals, refs))
-        share = left / gap if gap > 0 else float("inf")
+        refs = _each_place(reference, placed, len(lead.train_residuals))
+        share = form_share(
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(lead.train_residuals, refs)],
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(null.train_residuals, refs)],
+            np.array([np.exp(Baseline.of_reference(ref).mean) for ref in refs]))
     if lack and null is not None and null is not lead and share <= FORM_ERROR_TENTATIVE:
         return {}, lack, share
     return lack, {}, share
