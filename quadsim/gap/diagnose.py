@@ -97,8 +97,10 @@ every flight of the vehicle shares): the reference model is the per-flight one
 (:func:`_reference_stage`: calibration, noise model, discrepancy term, self-check; ``store``
 keeps it between runs); the training and held-out flights are aligned to its rotor timing,
 checked to be of the references' kind and placed on their envelope at the stacked training
-flights' place; the drag law is chosen on the stacked training flights; the explanations
-are the per-flight ones (:class:`Against`). Each is fitted on the stacked training flights
+flights' place (each training flight also at its own, where its lack of fit against the
+references is judged as per flight, :func:`quadsim.gap.judge.against_reference`); the drag
+law is chosen on the stacked training flights; the explanations are the per-flight ones
+(:class:`Against`). Each is fitted on the stacked training flights
 (:func:`quadsim.gap.evidence.evaluate`), then read on every flight at its training MAP
 under the per-flight likelihood (the shared parameters it keeps and the flight's own
 discrepancy marginalised, :func:`_read`); the held-out flights' log-likelihood joins its
@@ -147,6 +149,7 @@ others are judged and the summary counts the refusals (the batch goes on).
 from __future__ import annotations
 
 import dataclasses
+import os
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -480,7 +483,9 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     statuses = logcheck.order_statuses(list(logs) + list(holdout or []), params)
     decision = logcheck.cap_decision(decision, logcheck.probability_cap(statuses))
     verdict, more = judge_heldout(decision, reference, before=before, after=after, dt=dt,
-                                  references=against is not None)
+                                  references=against is not None,
+                                  placed=() if against is None else against.placed,
+                                  flown=() if against is None else against.flown)
     verdict = logcheck.mark(verdict, statuses)
     if against is not None:
         verdict = dataclasses.replace(verdict, answer=verdict.answer + against.words())
@@ -744,7 +749,11 @@ class Against:
     ``signal_delay`` reads that flight; ``law`` the drag law the training flights show
     (None: the references'); ``place`` their envelope position; ``explanations`` the
     per-flight explanations under that law; ``memos`` the residual parts kept per flight
-    (the stacked training flights' last)."""
+    (the stacked training flights' last); ``placed`` each training flight's reference model
+    at its own place (:func:`quadsim.gap.reference.local_reference`, as per flight: the
+    lack of fit against the references, :func:`quadsim.gap.judge.against_reference`) and
+    ``flown`` each training flight in words (its name, and its place outside the
+    references' envelope)."""
 
     calibrated: Reference
     reference: Reference
@@ -757,6 +766,8 @@ class Against:
     place: object
     explanations: tuple
     memos: tuple = field(compare=False, repr=False)
+    placed: tuple = field(default=(), compare=False, repr=False)
+    flown: tuple = ()
 
     def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
@@ -846,10 +857,19 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
         tr, he = states[:len(train)], states[len(train):]
         stacked = _stacked(tr)
         trend = getattr(ref.envelope, "trend", None)
-        info = (inverse_information(stacked, ref) if trend is not None
-                and trend.q_weight is not None and np.any(trend.q_weight > 0) else None)
+        informed = (trend is not None and trend.q_weight is not None
+                    and np.any(trend.q_weight > 0))
+        info = inverse_information(stacked, ref) if informed else None
         place = envelope_position(stacked, ref.envelope, info)
         local = local_reference(ref, place)
+        # each training flight at its own place, as per flight (weigh_flight)
+        places = [envelope_position(s, ref.envelope,
+                                    inverse_information(s, ref) if informed else None)
+                  for s in tr]
+        placed = tuple(local_reference(ref, p) for p in places)
+        flown = tuple(f"Training flight {os.path.basename(str(f.name))}"
+                      + (f" (flown {p.text})" if p is not None and p.distance > 0 else "")
+                      for f, p in zip(train, places))
         check = ref.self_check
         if local is not ref and check is not None and getattr(check, "slow", None) is not None:
             # the systematic remainder's normal at the same place (judge.placed_slow)
@@ -877,7 +897,7 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
             if null.shift else None
             for s, m, f in zip(states, memos, list(train) + list(held)))
     return Against(ref, local, tuple(tr), tuple(he), stacked, start, delays, law, place,
-                   expl, memos)
+                   expl, memos, placed, flown)
 
 
 def weigh_against(against: Against, batch: tuple) -> list[Weighed]:

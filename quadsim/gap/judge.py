@@ -109,8 +109,11 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    moderated spreads); held out the reading's own training flights
    (:meth:`Baseline.of_training`, pooled spread, C (n - 1) degrees of freedom; tested on
    named readings: "does it carry over"); held out against nominal references also the
-   per-flight test on each training flight against the references at their place
-   (:func:`against_reference`, the lead and "no difference" as per flight).
+   per-flight test on each training flight against the references at that flight's own
+   place (:func:`against_reference`, the lead and "no difference" as per flight, H = 1
+   each), a channel a lack of fit when it lies beyond on every training flight (what they
+   share: an intersection-union test, at the per-flight level with no correction over the
+   flights); beyond on some only (:func:`alone`) it is stated, and a name is tentative.
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
@@ -184,6 +187,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
+           "training_lack", "alone",
            "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks"]
@@ -874,25 +878,77 @@ def placed_slow(slow, calibrated, local) -> np.ndarray:
     return np.exp(mean + move + (logs - mean) * grow)
 
 
-def against_reference(lead, null, reference) -> tuple[dict, dict, float]:
+def training_lack(lead, null, reference, placed=None) -> list[dict]:
+    """Held out against nominal references, each training flight judged as per flight
+    (:func:`judge`'s rule, H = 1): the :func:`lack_of_fit` of the reading ``lead`` (a
+    :class:`~quadsim.gap.heldout.Weighed`) on training flight j against
+    :meth:`Baseline.of_reference` of ``placed[j]``, the references' model at that flight's
+    own place on their envelope (:func:`quadsim.gap.reference.local_reference`; None or
+    shorter: ``reference``, the model at the stacked flights' place), its mean squares in
+    that model's sigma. ``null``: the "no difference" Weighed (each flight's form-error
+    exemption; None or ``lead`` itself: none). One dict per training flight, channel ->
+    (RMS over the references' typical there, z)."""
+    out = []
+    for j, (resid, ref) in enumerate(zip(lead.train_residuals,
+                                         _each_place(reference, placed,
+                                                     len(lead.train_residuals)))):
+        ms = mean_squares([resid], ref.sigma)
+        null_ms = None if null is None or null is lead else \
+            mean_squares([null.train_residuals[j]], ref.sigma)
+        out.append(lack_of_fit(ms, Baseline.of_reference(ref), ref, null_ms=null_ms))
+    return out
+
+
+def _each_place(reference, placed, count: int) -> list:
+    """The reference model each of ``count`` training flights is judged against: its own
+    place's (``placed[j]``), else ``reference`` (the stacked flights' place)."""
+    placed = list(placed or ())
+    return [placed[j] if j < len(placed) and placed[j] is not None else reference
+            for j in range(count)]
+
+
+def alone(per_flight: list[dict]) -> dict:
+    """The channels beyond the references on some training flights but not on every one
+    (``per_flight``: :func:`training_lack`): channel -> (flight index, RMS ratio, z) of the
+    flight where it lies furthest beyond. Not a difference the flights share (that flight's
+    own, or the reference model's error where that flight flies): stated, never a lack of
+    fit; a name beside it is tentative."""
+    shared = set.intersection(*(set(d) for d in per_flight)) if per_flight else set()
+    out: dict = {}
+    for j, d in enumerate(per_flight):
+        for k, (ratio, z) in d.items():
+            if k not in shared and (k not in out or z > out[k][2]):
+                out[k] = (j, ratio, z)
+    return out
+
+
+def against_reference(lead, null, reference, placed=None) -> tuple[dict, dict, float]:
     """Held out against nominal references, the per-flight lack of fit (module doc, 2;
     :func:`judge`'s rule) of the reading ``lead`` (a :class:`~quadsim.gap.heldout.Weighed`)
-    on its training flights against :meth:`Baseline.of_reference` of ``reference``, the
-    references' model at the training flights' place (trend included): (lack, left,
-    share). ``null``: the "no difference" Weighed (the form-error exemption and share);
-    ``lack``/``left``: channel -> (RMS over the references' typical, z), ``left`` a named
-    reading leaving at most :data:`FORM_ERROR_TENTATIVE` of the gap (named tentatively, as
-    per flight); ``share``: that share (inf for "no difference"). The training flights:
-    the reference is placed at their place, and they are the flights the reading was fitted
-    on, as per flight; the held-out flights are judged against them (:func:`carry_over`)."""
-    sigma = reference.sigma
-    baseline = Baseline.of_reference(reference)
-    ms = mean_squares(lead.train_residuals, sigma)
-    null_ms = None if null is None or null is lead else mean_squares(null.train_residuals,
-                                                                      sigma)
-    lack = lack_of_fit(ms, baseline, reference, null_ms=null_ms)
-    share = float("inf") if null_ms is None else form_share(ms, null_ms, np.exp(baseline.mean))
-    if lack and null_ms is not None and share <= FORM_ERROR_TENTATIVE:
+    on its training flights, each against :meth:`Baseline.of_reference` of the references'
+    model at its own place (``placed``, :func:`training_lack`; None: ``reference`` for
+    every flight): (lack, left, share). A channel is a lack of fit when it lies beyond on
+    every training flight (what they share; an intersection-union test: each flight's test
+    at the per-flight level LOF_P / C, so the joint claim is at that level too, with no
+    correction over the flights); its (RMS over the references' typical, z) the flight
+    where it lies least beyond. Beyond on some flights only is not shared
+    (:func:`alone`). ``null``: the "no difference" Weighed (the form-error exemption and
+    share); ``left`` a named reading's shared lack leaving at most
+    :data:`FORM_ERROR_TENTATIVE` of the gap (named tentatively, as per flight); ``share``:
+    that share, summed over the training flights, each over its own typical (inf for "no
+    difference"). The held-out flights are judged against the training flights
+    (:func:`carry_over`)."""
+    per = training_lack(lead, null, reference, placed)
+    shared = set.intersection(*(set(d) for d in per)) if per else set()
+    lack = {k: min((d[k] for d in per), key=lambda v: v[1]) for k in sorted(shared)}
+    share = float("inf")
+    if null is not None and null is not lead:
+        refs = _each_place(reference, placed, len(lead.train_residuals))
+        share = form_share(
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(lead.train_residuals, refs)],
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(null.train_residuals, refs)],
+            np.array([np.exp(Baseline.of_reference(ref).mean) for ref in refs]))
+    if lack and null is not None and null is not lead and share <= FORM_ERROR_TENTATIVE:
         return {}, lack, share
     return lack, {}, share
 
@@ -1111,12 +1167,16 @@ UNCHECKED_WORDS = ("The reference flights could not be judged against each other
 
 
 def judge_heldout(decision, reference, *, before: list, after: list,
-                  dt: float, references: bool = False) -> tuple[Verdict, tuple[str, ...]]:
+                  dt: float, references: bool = False, placed: tuple = (),
+                  flown: tuple = ()) -> tuple[Verdict, tuple[str, ...]]:
     """The held-out :class:`Verdict` and the notes it adds, from ``decision``
     (:class:`quadsim.gap.heldout.Decision`). ``before``/``after``: held-out residuals over
     sigma under the nominal model and with the lead; ``dt`` (s): the fit step;
     ``references``: judged against nominal reference flights (their model is ``reference``:
-    the answer's words, :func:`quadsim.gap.words.answer`)."""
+    the answer's words, :func:`quadsim.gap.words.answer`); ``placed``: against them, each
+    training flight's reference model at its own place (:func:`against_reference`; empty:
+    ``reference`` for each); ``flown``: each training flight in words (its name, and its
+    place where it flies outside the references' envelope), for :func:`alone`'s sentence."""
     params = reference.params
     names = channel_names(reference)
     rows, lead_name, lead = decision.rows, decision.lead_name, decision.lead
@@ -1139,9 +1199,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     per_flight = slow_normal(reference) is not None
     left: dict = {}
     beyond: dict = {}
+    lone: dict = {}         # beyond the references on some training flights, not shared
     share = float("inf")
     if per_flight:
-        beyond, left, share = against_reference(lead, decision.null, reference)
+        beyond, left, share = against_reference(lead, decision.null, reference, placed)
+        lone = alone(training_lack(lead, decision.null, reference, placed))
         lack = {**lack, **{k: v for k, v in beyond.items() if k not in lack}}
     remains = {} if per_flight and lead_name == "no_difference" else \
         remainder(lead.train_residuals + lead.held_residuals, reference, dt)
@@ -1168,7 +1230,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     others += [row["name"] for row in tied if row["name"] not in others]
     if effect and tied:
         separate_by = fitting.separation(shown, others)
-    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left)
+    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left) or bool(lone)
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
@@ -1181,6 +1243,8 @@ def judge_heldout(decision, reference, *, before: list, after: list,
                   f"flights' on {where_} their typical RMS ({100 * share:.0f} % of their gap: "
                   "the library's form of it, or a further small effect).")
     words += _unseparated_words(tied, shown, separate_by) + caveat
+    if lone and outcome != "unexplained":
+        words += _alone_words(lone, flown)
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
         magnitude = nominal_words(magnitude, True, references=references)
@@ -1210,6 +1274,22 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         reduction=reduction, heldout_gap_before=_gap(before),
         heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
     return verdict, tuple(notes)
+
+
+def _alone_words(lone: dict, flown: tuple) -> str:
+    """The sentence of :func:`alone`'s channels: per training flight, where it alone lies
+    beyond the references at its own place."""
+    by: dict = {}
+    for k, (j, ratio, _) in lone.items():
+        by.setdefault(j, []).append(f"{k} at {ratio:.2g}x")
+    text = ""
+    for j, where_ in sorted(by.items()):
+        name = flown[j] if j < len(flown) else f"training flight {j + 1}"
+        text += (f" {name} alone leaves more than the reference flights at its place on "
+                 f"{', '.join(where_)} their typical RMS; the other training flights do not: "
+                 "not a difference the flights share (that flight's own, or the reference "
+                 "model's error where it flies), so it is not judged one.")
+    return text
 
 
 def unseparated(lead_ms, rival_ms, null_ms) -> bool:
