@@ -97,6 +97,23 @@ Stages
    differs from d by the evidence's nuisance delay or the reading ``signal_delay``.
    Values theta_ref and d; standard errors se_pool (the bounded fit's, correlation-widened)
    and se_d (the pooled information's).
+   In those pooled steps (and the scatter's, stage 3) the roll and pitch residual is read
+   where the data determine the inertia (:class:`TorqueSide`): on the torque side
+   (``M_meas - M_model``, N m of the candidate's inertia) and band-passed to the band where
+   the rotors drive the body (:data:`quadsim.identify.rotation.BAND_HZ`, 4-16 Hz). Why: on
+   a real vehicle most of the rotors' roll/pitch torque below a few hertz balances
+   aerodynamic moments the library does not model (blade flapping, the airframe's), and
+   turns the body little; that part is an error on the torque side, uncorrelated with the
+   body's acceleration. The evidence's form ``I (w_dot_meas - I_v^-1 M_model)`` regresses
+   the acceleration on that torque, so such an error attenuates ``1 / I_v`` and the
+   inertia grows until its bound (real Crazyflie references: +200 %, with the rate
+   damping at 0); on the torque side, whole band, the same remainder dominates the cost
+   and moves the rotor timing; in the band the torque-side fit reads the inertia the
+   rotors imply (docs/gap.md, known limits: measured). Yaw keeps the evidence's form: its
+   torque is the rotors' drag torque, with no comparable unmodelled moment, and its small
+   acceleration is where the gyro's noise would attenuate a torque-side fit. The bounded
+   fit before the steps, the noise model (stage 4) and every later comparison keep the
+   evidence's form.
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.
@@ -146,6 +163,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, ModelError
+from ..effects.base import EffectSet
+from ..identify.rotation import BAND_HZ
 from ..vehicle.params import VehicleParams
 from .fitting import (
     DETERMINED,
@@ -692,7 +711,8 @@ def _cost(views: _Views, probe, theta, shift: float) -> tuple[float, list | None
 
 
 def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
-            shift: float, sigma: np.ndarray, views: _Views | None = None):
+            shift: float, sigma: np.ndarray, views: _Views | None = None,
+            side: TorqueSide | None = None):
     """Pooled Levenberg-Marquardt steps from the bounded fit, summing each flight's
     information, over the shared parameters and the rotor speeds' timing offset (module
     doc, stage 2). The bounded fit stops after a few dozen evaluations of 12-14
@@ -700,7 +720,9 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     together (module doc, stage 2). Steps in units of each parameter's typical size with
     a ridge lambda (1 at the start; /3 after a step that lowers the cost, x4 and retried
     after one that does not), clipped to the bounds.
-    ``views``: the flights' :class:`_Views` where the caller keeps them.
+    ``views``: the flights' :class:`_Views` where the caller keeps them; ``side``: the
+    roll and pitch residual's :class:`TorqueSide` (module doc, stage 2), None: as the
+    evidence's.
     Returns (theta, shift, standard error of the shift, the wind's standard errors)."""
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
@@ -712,7 +734,7 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
         typical = np.append(typical, SHIFT_TYPICAL_S)
     probe = Reference(params, rotor, cand, theta.copy(), np.zeros_like(theta),
                       np.zeros_like(theta), sigma, np.ones_like(sigma),
-                      np.zeros_like(sigma), 1.0, 1, {}, [], {})
+                      np.zeros_like(sigma), 1.0, 1, {}, [], {}, side=side)
     x = np.append(theta, shift) if timing else theta.copy()
     k = len(theta)
     # the steady wind's Gaussian prior (mean 0, WIND_SD_MS): a wind acts only through drag,
@@ -807,7 +829,8 @@ def reference_key(logs, params: VehicleParams, *, effects=None, window_s: float,
     return digest.hexdigest()
 
 
-def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
+def calibrate(flights, params: VehicleParams, *, base: tuple = (),
+              torque_side: bool = True) -> Reference:
     """The reference model from prepared reference flights (:class:`quadsim.gap.diagnose.Flight`
     or their ``fit`` states); see the module doc. Raises InputError for fewer than two.
     ``base``: effects already in the model (``--effects-file``), carried as the shared
@@ -818,11 +841,16 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = ()) -> Reference:
     determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
     flight's own values are printed by); else the model is
     calibrated again without it. Why: an undetermined slope moves b with it flight by
-    flight, and the envelope's trend of b then widens until a mass is "no difference"."""
+    flight, and the envelope's trend of b then widens until a mass is "no difference".
+    ``torque_side``: the roll and pitch residual taken on the torque side in the pooled fit
+    and the between-flight scatter (:class:`TorqueSide`, module doc, stage 2); False: as
+    the evidence takes it (the rule before; measurement)."""
     views = _Views(flights)     # each flight's rotor spectra, for every timing read
-    ref = _calibrate(flights, params, curve=True, base=base, views=views)
+    ref = _calibrate(flights, params, curve=True, base=base, views=views,
+                     torque_side=torque_side)
     if ref is None or not curve_determined(ref):
-        ref = _calibrate(flights, params, curve=False, base=base, views=views)
+        ref = _calibrate(flights, params, curve=False, base=base, views=views,
+                         torque_side=torque_side)
     return ref
 
 
@@ -878,7 +906,8 @@ def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
 
 
 def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
-               views: _Views | None = None) -> Reference | None:
+               views: _Views | None = None, torque_side: bool = True
+               ) -> Reference | None:
     """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
     soon as the pooled fit's own spread of a shared slope shows it undetermined (the
     between-flight scatter only widens it), or its spread with the scatter before the
@@ -915,8 +944,10 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
             return None
         if _slope_clearly_undetermined(states, params, rotor, cand, fit):
             return None
+    side = torque_side_of(states) if torque_side else None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                              shift=start, sigma=sigma0, views=views)
+                                              shift=start, sigma=sigma0, views=views,
+                                              side=side)
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
@@ -939,15 +970,17 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
     ref.log_ms = log_ms
-    _complete(ref, states, log_ms)
+    _complete(ref, states, log_ms, side)
     return ref
 
 
-def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
+def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | None = None
+              ) -> None:
     """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
     aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
     equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
-    and the envelope (stage 7)."""
+    and the envelope (stage 7). ``side``: the roll and pitch residual's
+    :class:`TorqueSide`, which the scatter's steps read as the pooled fit did (None: none)."""
     params, rotor, cand = ref.params, ref.rotor, ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
@@ -955,12 +988,61 @@ def _complete(ref: Reference, states, log_ms: np.ndarray) -> None:
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
-    ref.scatter = _scatter(states, ref, own)
+    probe = ref if side is None else dataclasses.replace(ref, side=side)
+    ref.scatter = _scatter(states, probe, own)
     ref.per_flight = PerFlight(
         np.array([coordinates(s) for s in states]), own[0], own[1],
         np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
         _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
     ref.envelope = ref.per_flight.envelope(log_ms)
+
+
+#: the body axes (x roll, y pitch) whose moment residual the calibration reads on the torque
+#: side in the band where the rotors drive the body (:class:`TorqueSide`; module doc, stage 2)
+TORQUE_SIDE_AXES = (0, 1)
+
+
+@dataclass(frozen=True)
+class TorqueSide:
+    """The calibration's roll and pitch residual where the data determine the inertia
+    (module doc, stage 2): in newton-metres of the candidate's own inertia,
+    ``M_meas - M_model`` = ``I_v w_dot + w x I_v w - M_model`` instead of
+    :func:`quadsim.gap.fitting.residuals`' ``I (I_v^-1 (M_meas - M_model))``, band-passed to
+    :data:`quadsim.identify.rotation.BAND_HZ` (zero-phase 4th-order Butterworth, as
+    :mod:`quadsim.identify.rotation`), on the body ``axes`` (0 x, 1 y); the other channels
+    unchanged. ``rate_hz``: the fit samples' rate (Hz; :func:`torque_side` builds one only
+    where it shows the band). Called on the residual (N, C) with the nominal ``params`` and
+    the candidate's ``effects``; returns (N, C). The chosen axes are the residual times
+    ``I^-1 I_v`` restricted to them (the inertia's off-diagonal terms are the parameter
+    set's, unchanged by ``inertia_error``)."""
+
+    rate_hz: float
+    axes: tuple = TORQUE_SIDE_AXES
+
+    def __call__(self, r: np.ndarray, params: VehicleParams, effects: list) -> np.ndarray:
+        from scipy import signal
+
+        vehicle = EffectSet(tuple(effects)).apply_to_params(params)
+        back = np.linalg.solve(np.asarray(params.inertia, float),
+                               np.asarray(vehicle.inertia, float))
+        cols = [3 + a for a in self.axes]
+        out = np.array(r, dtype=float, copy=True)
+        sos = signal.butter(4, BAND_HZ, btype="bandpass", fs=self.rate_hz, output="sos")
+        out[:, cols] = signal.sosfiltfilt(sos, r[:, 3:6] @ back[:, list(self.axes)], axis=0)
+        return out
+
+
+def torque_side_of(states) -> TorqueSide | None:
+    """The :class:`TorqueSide` of fit ``states`` (their first two samples' step), or None
+    where they are sampled below 2.5 times the band's upper edge (the band is not shown:
+    the rule of :func:`quadsim.identify.rotation.band_parts`) or are too short for the
+    filter's padding."""
+    s = states[0]
+    rate = 1.0 / float(s.t[1] - s.t[0])
+    # sosfiltfilt's default padding: 3 (2 sections + 1) samples, 4 sections here
+    if rate < 2.5 * BAND_HZ[1] or min(len(f.t) for f in states) <= 3 * (2 * 4 + 1):
+        return None
+    return TorqueSide(rate)
 
 
 def _noise_model(states, params: VehicleParams, rotor: bool, effects: list,
