@@ -1,8 +1,9 @@
-"""The real references' roll/pitch inertia under the calibration's two weightings (issue 45
-item 2): the moment channels white (``calibrate(..., whiten=False)``, the rule before) and
-whitened (:class:`quadsim.gap.calibrate.Whitening`, feasible generalised least squares).
+"""The real references' roll/pitch inertia under the calibration's two readings of the
+roll/pitch residual (issue 45 item 2): as the evidence takes it (``calibrate(...,
+torque_side=False)``, the rule before) and on the torque side in the band where the rotors
+drive the body (:class:`quadsim.gap.calibrate.TorqueSide`, the rule now).
 
-Per weighting: the pooled shared values (inertia error xx, yy, zz; rate damping x, y) with
+Per reading: the pooled shared values (inertia error xx, yy, zz; rate damping x, y) with
 their bound flags, each reference's own value (the scatter's Gauss-Newton step), and the
 band RMS (N m) of the references' Mx, My residual at the calibrated values (0-2, 2-4, 4-16,
 16-50 Hz; Welch at the fit rate), with the CPU time of the calibration.
