@@ -97,35 +97,35 @@ Stages
    differs from d by the evidence's nuisance delay or the reading ``signal_delay``.
    Values theta_ref and d; standard errors se_pool (the bounded fit's, correlation-widened)
    and se_d (the pooled information's).
-   Where the bounded fit reads a roll or pitch inertia no plausible vehicle has
-   (:func:`rotation_implausible`: outside -50 .. +100 %), in those pooled steps (and the
-   scatter's, stage 3) the roll and pitch residual is read where the data determine the
-   inertia (:class:`TorqueSide`): on the torque side
-   (``M_meas - M_model``, N m of the candidate's inertia) and band-passed to the band where
-   the rotors drive the body (:data:`quadsim.identify.rotation.BAND_HZ`, 4-16 Hz). Why: on
-   a real vehicle most of the rotors' roll/pitch torque below a few hertz balances
-   aerodynamic moments the library does not model (blade flapping, the airframe's), and
-   turns the body little; that part is an error on the torque side, uncorrelated with the
-   body's acceleration. The evidence's form ``I (w_dot_meas - I_v^-1 M_model)`` regresses
-   the acceleration on that torque, so such an error attenuates ``1 / I_v`` and the
-   inertia grows until its bound (real Crazyflie references: +200 %, with the rate
-   damping at 0); on the torque side, whole band, the same remainder dominates the cost
-   and moves the rotor timing; in the band the torque-side fit reads the inertia the
-   rotors imply (docs/gap.md, known limits: measured). Yaw keeps the evidence's form: its
-   torque is the rotors' drag torque, with no comparable unmodelled moment, and its small
-   acceleration is where the gyro's noise would attenuate a torque-side fit. The bounded
-   fit before the steps, the noise model (stage 4) and every later comparison keep the
-   evidence's form. Where the band does not determine the rotation either -- it reads no
-   plausible vehicle, or explains less than :data:`quadsim.identify.rotation.BAND_R2` of
-   the band-passed body moment on roll or pitch (:func:`band_explained`; the acceptance of
-   the band fit of :mod:`quadsim.identify.rotation`) -- the whole band's reading stays, as
-   before (generated logs of :func:`quadsim.logs.generate.generate_flight` whose rotor
-   speeds carry 10 rad/s of noise: band R^2 -2.3 / -2.2, +79 / +78 %; the real Crazyflie
-   references 0.93 / 0.87). Why only where the whole band fails: the band reading needs the body
-   to move in the band and the rotor timing to be right there; read on every reference
-   set, a 5.5 kg simulated quadrotor's references moved their rotor timing 0.1 -> 2.8 ms
-   and their rate damping 0 -> 0.015-0.026 N m s/rad, and inertia errors that source's
-   flights carry went unnamed (docs/gap.md, known limits).
+   Where those steps read a roll or pitch inertia no plausible vehicle has
+   (:func:`rotation_implausible`: outside -50 .. +100 %), the roll/pitch rotation
+   (:data:`ROTATION`: inertia xx, yy, rate damping x, y) is refitted with every other shared
+   value and the timing held (:func:`_rotation_steps`; and so are their per-flight values
+   in stage 3), the roll and pitch residual read where the data determine the inertia
+   (:class:`TorqueSide`): on the torque side (``M_meas - M_model``, N m of the candidate's
+   inertia) and band-passed to the band where the rotors drive the body (:data:`BAND_HZ`,
+   4-16 Hz, :mod:`quadsim.identify.rotation`'s). Why: on a real vehicle most of the rotors'
+   roll/pitch torque below a few hertz balances aerodynamic moments the library does not
+   model (blade flapping, the airframe's), and turns the body little; that part is an
+   error on the torque side, uncorrelated with the body's acceleration. The evidence's form
+   ``I (w_dot_meas - I_v^-1 M_model)`` regresses the acceleration on that torque, so such
+   an error attenuates ``1 / I_v`` and the inertia grows until its bound (real Crazyflie
+   references: +200 %, with the rate damping at 0); on the torque side, whole band, the
+   same remainder dominates the cost; in the band the torque-side fit reads the inertia
+   the rotors imply (docs/gap.md, known limits: measured). The refit is kept only where
+   the band determines the rotation: a plausible inertia, and at least :data:`BAND_R2` of
+   the band-passed body moment explained on roll and pitch (:func:`band_explained`, the
+   acceptance of :mod:`quadsim.identify.rotation`'s band fit); else the whole band's
+   values stay (generated logs of :func:`quadsim.logs.generate.generate_flight` whose
+   rotor speeds carry 10 rad/s of noise: band R^2 -2.3 / -2.2; the real Crazyflie
+   references 0.93 / 0.87). Yaw, the other shared values, the noise model (stage 4) and
+   every later comparison keep the evidence's form. Why so narrow: the band reading needs
+   the body to move in the band and the rotor timing to be right there; read on every
+   reference set with every shared value moving, a 5.5 kg simulated quadrotor's
+   references moved their rotor timing 0.1 -> 2.8 ms and their rate damping 0 ->
+   0.015-0.026 N m s/rad and that source's inertia errors went unnamed; on generated
+   references sharing a flapping moment, the yaw inertia and the timing moved and the set
+   no longer judged itself clean (docs/nanodrone.md).
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.
@@ -176,7 +176,6 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..effects.base import EffectSet
-from ..identify.rotation import BAND_HZ, BAND_R2
 from ..vehicle.params import VehicleParams
 from .fitting import (
     DETERMINED,
@@ -788,6 +787,60 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
     return x[:k], (float(x[k]) if timing else 0.0), se, wind_se
 
 
+#: the shared parameters the torque-side band reading moves (module doc, stage 2): the roll
+#: and pitch rotation, the inertia and the rate damping about x and y
+ROTATION = ("inertia_error.xx", "inertia_error.yy", "rate_damping.x", "rate_damping.y")
+
+
+def _rotation_steps(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
+                    shift: float, sigma: np.ndarray, side: TorqueSide,
+                    views: _Views | None = None) -> np.ndarray:
+    """``theta`` with the :data:`ROTATION` parameters refitted under ``side`` (module doc,
+    stage 2): pooled Levenberg-Marquardt steps as :func:`_refine`'s (ridge in units of each
+    parameter's typical size, at most :data:`REFINE_STEPS`, stopping below
+    :data:`REFINE_TOL`), every other shared parameter and the rotor timing ``shift`` (s)
+    held at their refined values; ``sigma`` the channels' noise scale (the refinement's).
+    Why only these: the band determines the roll/pitch rotation where the rotors balance
+    unmodelled moments; the rest keep what the whole band reads (moved with it, the yaw
+    inertia, the timing and the motor lag shifted and a generated reference set no longer
+    judged itself clean, tests/test_flapping_reading.py)."""
+    free = [j for j, n in enumerate(cand.parameter_names) if n in ROTATION]
+    if not free:
+        return theta
+    dt = float(getattr(flights[0], "fit", flights[0]).t[1]
+               - getattr(flights[0], "fit", flights[0]).t[0])
+    lower, upper = (b[free] for b in fit_bounds(cand, params, dt))
+    typical = typical_scales(cand, params)[free]
+    probe = Reference(params, rotor, cand, theta.copy(), np.zeros_like(theta),
+                      np.zeros_like(theta), sigma, np.ones_like(sigma),
+                      np.zeros_like(sigma), 1.0, 1, {}, [], {}, side=side)
+    views = _Views(flights) if views is None else views
+    x, lam = theta.copy(), 1.0
+    for _ in range(REFINE_STEPS):
+        probe.theta = x.copy()
+        info, grad, cost = np.zeros((len(free),) * 2), np.zeros(len(free)), 0.0
+        for i in range(len(views)):
+            jac, r = jacobian(views.at(i, shift), probe, free, cand.effects, with_base=True)
+            info += jac.T @ jac
+            grad += jac.T @ r
+            cost += float(r @ r)
+        while lam < 1e6:
+            info_z = info * np.outer(typical, typical) + lam * np.eye(len(free))
+            trial = x.copy()
+            trial[free] = np.clip(x[free] - typical * np.linalg.solve(info_z, typical * grad),
+                                  lower, upper)
+            new, _ = _cost(views, probe, trial, shift)
+            if new < cost:
+                x, lam = trial, max(lam / 3.0, 1e-3)
+                break
+            lam *= 4.0
+        else:
+            break
+        if cost - new < REFINE_TOL:
+            break
+    return x
+
+
 #: what :func:`reference_key` hashes first: a new version when :class:`Calibrated` changes
 CALIBRATED_SCHEMA = "quadsim.gap.calibrated/1"
 
@@ -957,20 +1010,21 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
             return None
         if _slope_clearly_undetermined(states, params, rotor, cand, fit):
             return None
-    # module doc, stage 2: where the bounded fit's whole band reads no plausible vehicle,
-    # the roll and pitch rotation is read where the data fix it
-    side = torque_side_of(states) if torque_side and rotation_implausible(
-        cand, fit.theta, params) else None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                              shift=start, sigma=sigma0, views=views,
-                                              side=side)
-    if side is not None and (rotation_implausible(cand, theta, params) or np.any(
-            band_explained([views.at(i, shift) for i in range(len(views))], params, rotor,
-                           cand.effects(theta), side) < BAND_R2)):
-        # the band does not determine the rotation either: the whole band's reading
-        side = None
-        theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                                  shift=start, sigma=sigma0, views=views)
+                                              shift=start, sigma=sigma0, views=views)
+    # module doc, stage 2: where the whole band reads no plausible vehicle, the roll and
+    # pitch rotation is read where the data fix it, kept where the band determines it
+    side = torque_side_of(states) if torque_side and rotation_implausible(
+        cand, theta, params) else None
+    if side is not None:
+        turned = _rotation_steps(flights, params, rotor, cand, theta, shift=shift,
+                                 sigma=sigma0, side=side, views=views)
+        if rotation_implausible(cand, turned, params) or np.any(band_explained(
+                [views.at(i, shift) for i in range(len(views))], params, rotor,
+                cand.effects(turned), side) < BAND_R2):
+            side = None
+        else:
+            theta = turned
     stderr = fit.stderr.copy()
     for j, name in enumerate(cand.parameter_names):
         stderr[j] = wind_se.get(name, stderr[j])
@@ -1011,8 +1065,13 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
-    probe = ref if side is None else dataclasses.replace(ref, side=side)
-    ref.scatter = _scatter(states, probe, own)
+    ref.scatter = _scatter(states, ref, own)
+    if side is not None:    # the rotation's own values as its pooled fit reads them
+        rot: list = []
+        scatter = _scatter(states, dataclasses.replace(ref, side=side), rot)
+        cols = [j for j, n in enumerate(cand.parameter_names) if n in ROTATION]
+        ref.scatter[cols] = scatter[cols]
+        own[0][:, cols], own[1][:, cols] = rot[0][:, cols], rot[1][:, cols]
     ref.per_flight = PerFlight(
         np.array([coordinates(s) for s in states]), own[0], own[1],
         np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
@@ -1020,6 +1079,11 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.envelope = ref.per_flight.envelope(log_ms)
 
 
+#: the band where the rotors drive the body (Hz) and the band fit's acceptance (R^2): the
+#: values of :data:`quadsim.identify.rotation.BAND_HZ` and ``BAND_R2`` (their reasons there;
+#: the gap stage does not import the identify stage, tests/test_layout.py; equal: tests)
+BAND_HZ = (4.0, 16.0)
+BAND_R2 = 0.5
 #: the body axes (x roll, y pitch) whose moment residual the calibration reads on the torque
 #: side in the band where the rotors drive the body (:class:`TorqueSide`; module doc, stage 2)
 TORQUE_SIDE_AXES = (0, 1)
@@ -1033,8 +1097,10 @@ class TorqueSide:
     :func:`quadsim.gap.fitting.residuals`' ``I (I_v^-1 (M_meas - M_model))``, band-passed to
     :data:`quadsim.identify.rotation.BAND_HZ` (zero-phase 4th-order Butterworth, as
     :mod:`quadsim.identify.rotation`), on the body ``axes`` (0 x, 1 y); the other channels
-    unchanged. ``rate_hz``: the fit samples' rate (Hz; :func:`torque_side` builds one only
-    where it shows the band). Called on the residual (N, C) with the nominal ``params`` and
+    unchanged. ``rate_hz``: the fit samples' rate (Hz; :func:`torque_side_of` builds one
+    only where it shows the band). A log of several airborne stretches is filtered across
+    its joins as one series (their few edge samples are a small share of a flight).
+    Called on the residual (N, C) with the nominal ``params`` and
     the candidate's ``effects``; returns (N, C). The chosen axes are the residual times
     ``I^-1 I_v`` restricted to them (the inertia's off-diagonal terms are the parameter
     set's, unchanged by ``inertia_error``)."""
