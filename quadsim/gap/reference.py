@@ -683,6 +683,11 @@ class Reference:
     #: data, ``lof_mean`` their mean): what the self-check leaves one flight out of
     #: (:mod:`quadsim.gap.calibrate`); None where not kept
     log_ms: np.ndarray | None = None
+    #: a callable (residual (N, C), params, effects) -> (N, C) applied after the discrepancy's
+    #: centre and before the weights (:func:`weighted_residual`), or None: the calibration's
+    #: roll and pitch residual on the torque side (:class:`quadsim.gap.calibrate.TorqueSide`),
+    #: set only on the copies its own fits read
+    side: object = None
     #: the self-check of the references against each other
     #: (:class:`quadsim.gap.calibrate.SelfCheck`): what a reading's size is compared with
     #: (practical significance); None before it ran or without one
@@ -726,6 +731,8 @@ def weighted_residual(states, reference: Reference, effects: list,
     (:func:`quadsim.gap.reference.centre_term`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
     r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
+    if reference.side is not None:
+        r = reference.side(r, reference.params, effects)
     return r * np.sqrt(reference.weights)
 
 
