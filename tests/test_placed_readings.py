@@ -7,7 +7,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap.calibrate import PRACTICAL_Z, SelfCheck, negligible, placed, readings, spreads
+from quadsim.gap.calibrate import (
+    PRACTICAL_Z,
+    SelfCheck,
+    against_text,
+    negligible,
+    placed,
+    readings,
+    spreads,
+)
 from quadsim.gap.reference import Position, envelope_of
 
 KEY = ("body_drag", "")
@@ -62,6 +70,12 @@ def test_beyond_the_references_a_reading_is_compared_with_their_trend_there():
     # placed once: the result keeps no readings, and placing it again leaves it
     once = placed(check, fast)
     assert once.per == () and placed(once, fast) is once
+    assert once.edge == pytest.approx(edge) and check.edge == 0.0
+    words = against_text(_evidence(1e-3, 0.3e-4), once)
+    assert words == ("area +0.001 against the references' (on their trend, at this flight's "
+                     f"place beyond them) {here.mean:+.2g} ± {here.sd:.2g} "
+                     f"({(1e-3 - here.mean) / here.sd:.3g} SDs)")
+    assert "on their trend" not in against_text(_evidence(1e-3, 0.3e-4), check)
 
     # a no-effect flight flown faster reads what the trend predicts there: no difference
     # at its place, though a difference against the references' mean (the rule before)

@@ -288,7 +288,8 @@ class SelfCheck:
     remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured;
     ``per``: each reference's :func:`readings` in the order of the reference model's
     envelope coordinates, what :func:`placed` places ``spreads`` with (empty: not kept, or
-    already placed)."""
+    already placed); ``edge``: how far beyond the references' outermost place (log units
+    along their envelope axis) :func:`placed` placed ``spreads`` (0: at their own)."""
 
     flights: tuple
     verdicts: tuple
@@ -296,6 +297,7 @@ class SelfCheck:
     spreads: dict
     slow: np.ndarray | None = None
     per: tuple = ()
+    edge: float = 0.0
 
     @property
     def clean(self) -> bool:
@@ -431,6 +433,8 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
     flight-to-flight SD); where they vary no more than their own estimation noise (``sd``
     0), "mass +0.0066 kg against the references' +1e-05 kg, which vary no more than their
     estimation noise (± 4e-05 kg): 95 % interval of the difference +0.0066 ± 0.0002 kg";
+    placed beyond the references (:func:`placed`), "against the references' (on their
+    trend, at this flight's place beyond them) ...";
     "" where there is nothing to compare with. ``unit_of(key)``: the parameter's unit."""
     if check is None:
         return ""
@@ -442,6 +446,8 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
         s, unit = spread[key], unit_of(key)
         unit = f" {unit}" if unit and unit != "1" else ""
         head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
+        if check.edge > 0:
+            head += "(on their trend, at this flight's place beyond them) "
         if s.sd > 0:
             size = abs(ev.values[key] - s.mean) / s.sd
             parts.append(f"{head}{s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
@@ -506,7 +512,7 @@ def placed(check: SelfCheck | None, reference) -> SelfCheck | None:
             have = [j for j, r in enumerate(check.per) if p in r.get(key, {})]
             out[key][p] = _spread_at(s, u[have], np.array([check.per[j][key][p][0]
                                                            for j in have]), edge)
-    return dataclasses.replace(check, spreads=out, per=())
+    return dataclasses.replace(check, spreads=out, per=(), edge=abs(edge))
 
 
 def _spread_at(s: Spread, u: np.ndarray, v: np.ndarray, edge: float) -> Spread:
