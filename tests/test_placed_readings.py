@@ -70,7 +70,7 @@ def test_beyond_the_references_a_reading_is_compared_with_their_trend_there():
     # placed once: the result keeps no readings, and placing it again leaves it
     once = placed(check, fast)
     assert once.per == () and placed(once, fast) is once
-    assert once.edge == pytest.approx(edge) and check.edge == 0.0
+    assert here.edge == pytest.approx(edge) and s.edge == 0.0
     words = against_text(_evidence(1e-3, 0.3e-4), once)
     assert words == ("area +0.001 against the references' (on their trend, at this flight's "
                      f"place beyond them) {here.mean:+.2g} ± {here.sd:.2g} "
@@ -102,3 +102,6 @@ def test_inside_the_envelope_or_without_a_trend_the_references_mean_holds():
     per = tuple({KEY: r[KEY]} if j < 2 else {} for j, r in enumerate(check.per))
     few = SelfCheck(check.flights, check.verdicts, (), spreads(list(per)), None, per)
     assert placed(few, _at(envelope, 1.6)).spreads == few.spreads
+    # and its size is stated against the references' own readings, not a trend
+    assert "on their trend" not in against_text(_evidence(1e-3, 0.3e-4),
+                                                placed(few, _at(envelope, 1.6)))

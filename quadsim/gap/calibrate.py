@@ -254,13 +254,16 @@ class Spread:
     of its fitted values over ``count`` reference flights, ``sd`` their *physical*
     between-flight standard deviation (their scatter less their own estimation noise: module
     doc, :meth:`of`), ``noise`` the RMS of their posterior SDs and ``mean_se`` the standard
-    error of ``mean`` (0: a centre known exactly)."""
+    error of ``mean`` (0: a centre known exactly); ``edge``: how far beyond the references'
+    outermost place (log units along their envelope axis) :func:`placed` moved it along
+    their trend (0: at their own readings)."""
 
     mean: float
     sd: float
     count: int
     noise: float = 0.0
     mean_se: float = 0.0
+    edge: float = 0.0
 
     @classmethod
     def of(cls, values, post_sd) -> Spread:
@@ -288,8 +291,7 @@ class SelfCheck:
     remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured;
     ``per``: each reference's :func:`readings` in the order of the reference model's
     envelope coordinates, what :func:`placed` places ``spreads`` with (empty: not kept, or
-    already placed); ``edge``: how far beyond the references' outermost place (log units
-    along their envelope axis) :func:`placed` placed ``spreads`` (0: at their own)."""
+    already placed)."""
 
     flights: tuple
     verdicts: tuple
@@ -297,7 +299,6 @@ class SelfCheck:
     spreads: dict
     slow: np.ndarray | None = None
     per: tuple = ()
-    edge: float = 0.0
 
     @property
     def clean(self) -> bool:
@@ -446,7 +447,7 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
         s, unit = spread[key], unit_of(key)
         unit = f" {unit}" if unit and unit != "1" else ""
         head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
-        if check.edge > 0:
+        if s.edge > 0:
             head += "(on their trend, at this flight's place beyond them) "
         if s.sd > 0:
             size = abs(ev.values[key] - s.mean) / s.sd
@@ -512,7 +513,7 @@ def placed(check: SelfCheck | None, reference) -> SelfCheck | None:
             have = [j for j, r in enumerate(check.per) if p in r.get(key, {})]
             out[key][p] = _spread_at(s, u[have], np.array([check.per[j][key][p][0]
                                                            for j in have]), edge)
-    return dataclasses.replace(check, spreads=out, per=(), edge=abs(edge))
+    return dataclasses.replace(check, spreads=out, per=())
 
 
 def _spread_at(s: Spread, u: np.ndarray, v: np.ndarray, edge: float) -> Spread:
@@ -527,7 +528,7 @@ def _spread_at(s: Spread, u: np.ndarray, v: np.ndarray, edge: float) -> Spread:
     var_b = float(rest @ rest) / (len(v) - 2) / s_uu
     return dataclasses.replace(
         s, mean=s.mean + b * edge, mean_se=float(np.hypot(s.mean_se, np.sqrt(var_b) * edge)),
-        sd=float(np.sqrt(s.sd ** 2 + (b ** 2 + var_b) * edge ** 2)))
+        sd=float(np.sqrt(s.sd ** 2 + (b ** 2 + var_b) * edge ** 2)), edge=abs(edge))
 
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.
