@@ -50,6 +50,16 @@ difference" (:func:`quadsim.gap.judge.posterior`), as an undetermined reading do
 nuisance parameters (a signal's delay, a cable's swing at the first sample and its
 damping, a propeller's speed exponent) are never a difference on their own.
 
+At the flight's place (:func:`placed`), as the lack-of-fit baseline is
+(:func:`quadsim.gap.reference.local_reference`): inside the references' range of places
+along their envelope axis their spread holds; a flight at e > 0 beyond the outermost
+reference meets each reading's trend over the references (ordinary least squares of their
+readings v_i on their places u_i: slope b, var(b) = r^2 / S_uu, r^2 the residual variance
+with n - 2 degrees of freedom): the mean moves by b e, se_mean^2 grows by var(b) e^2 (the
+centre's extrapolation) and tau^2 by (b^2 + var(b)) e^2 (the trend may bend out there, as
+the shared values' scatter). Fewer than 3 readings of a parameter, or their places spread
+less than :data:`quadsim.gap.reference.MIN_SPREAD`: no trend is measured, the mean holds.
+
 A set of references that does not judge itself clean -- more than :data:`FALSE_ALARM_SHARE`
 of them not ``no_significant_gap`` -- is marked in every answer ("your references disagree
 with each other on Mx: ..."), and no verdict on it is stated as confident.
@@ -196,6 +206,8 @@ from .fitting import SPEED_GAIN_PART as SPEED_GAIN
 from .logcheck import needs_pose
 from .reference import (  # re-exported: the calibration's public names
     FD_STEP,
+    MIN_FLIGHTS,
+    MIN_SPREAD,
     Reference,
     aligned,
     centre_term,
@@ -212,7 +224,8 @@ from .residual import load_exponent, measured_wrench, min_time_constant
 
 __all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
            "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
-           "against_text", "leave_one_out", "negligible", "self_check_of", "spreads", "FD_STEP",
+           "against_text", "leave_one_out", "negligible", "placed", "self_check_of", "spreads",
+           "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
            "fit_bounds", "jacobian", "per_flight_candidate", "shared_candidate", "shifted",
            "voltage_spread", "weighted_residual"]
@@ -272,13 +285,16 @@ class Spread:
     of its fitted values over ``count`` reference flights, ``sd`` their *physical*
     between-flight standard deviation (their scatter less their own estimation noise: module
     doc, :meth:`of`), ``noise`` the RMS of their posterior SDs and ``mean_se`` the standard
-    error of ``mean`` (0: a centre known exactly)."""
+    error of ``mean`` (0: a centre known exactly); ``edge``: how far beyond the references'
+    outermost place (log units along their envelope axis) :func:`placed` moved it along
+    their trend (0: at their own readings)."""
 
     mean: float
     sd: float
     count: int
     noise: float = 0.0
     mean_se: float = 0.0
+    edge: float = 0.0
 
     @classmethod
     def of(cls, values, post_sd) -> Spread:
@@ -303,13 +319,17 @@ class SelfCheck:
     ``spreads``: (explanation name, variant) -> parameter -> :class:`Spread`; ``slow``:
     (n, C) each judged reference's slow-part mean square under "no difference" against the
     others (:attr:`quadsim.gap.evidence.Evidence.slow`), the per-flight systematic
-    remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured."""
+    remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured;
+    ``per``: each reference's :func:`readings` in the order of the reference model's
+    envelope coordinates, what :func:`placed` places ``spreads`` with (empty: not kept, or
+    already placed)."""
 
     flights: tuple
     verdicts: tuple
     false_alarms: tuple
     spreads: dict
     slow: np.ndarray | None = None
+    per: tuple = ()
 
     @property
     def clean(self) -> bool:
@@ -445,6 +465,8 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
     flight-to-flight SD); where they vary no more than their own estimation noise (``sd``
     0), "mass +0.0066 kg against the references' +1e-05 kg, which vary no more than their
     estimation noise (± 4e-05 kg): 95 % interval of the difference +0.0066 ± 0.0002 kg";
+    placed beyond the references (:func:`placed`), "against the references' (on their
+    trend, at this flight's place beyond them) ...";
     "" where there is nothing to compare with. ``unit_of(key)``: the parameter's unit."""
     if check is None:
         return ""
@@ -456,6 +478,8 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
         s, unit = spread[key], unit_of(key)
         unit = f" {unit}" if unit and unit != "1" else ""
         head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
+        if s.edge > 0:
+            head += "(on their trend, at this flight's place beyond them) "
         if s.sd > 0:
             size = abs(ev.values[key] - s.mean) / s.sd
             parts.append(f"{head}{s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
@@ -479,7 +503,8 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
         if rows_list[j] is None:
             verdicts.append("refused")
             continue
-        others = SelfCheck(tuple(names), (), (), spreads(per[:j] + per[j + 1:]))
+        others = SelfCheck(tuple(names), (), (), spreads(per[:j] + per[j + 1:]),
+                           per=tuple(per[:j] + per[j + 1:]))
         verdict = judge_fn(j, others)
         verdicts.append(verdict.name)
         if verdict.outcome != "no_significant_gap":
@@ -489,7 +514,52 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
              for rows in rows_list if rows is not None]
     slow = [ev.slow for ev in nulls if ev is not None and ev.slow is not None]
     return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per),
-                     np.array(slow) if slow else None)
+                     np.array(slow) if slow else None, tuple(per))
+
+
+def placed(check: SelfCheck | None, reference) -> SelfCheck | None:
+    """``check`` with each reading's :class:`Spread` at the place of the flight that
+    ``reference`` is placed at (``reference.place``,
+    :func:`quadsim.gap.reference.local_reference`): unchanged inside the references' range
+    of places; beyond it by e (log units along the envelope axis) the trend of that reading
+    over the references (module doc, "At the flight's place": mean + b e, mean_se^2 +
+    var(b) e^2, sd^2 + (b^2 + var(b)) e^2), the references' places u_i = coords_i . axis of
+    ``reference.envelope``. ``check`` itself without a place, a trend, kept readings
+    (``per``) or one reading per envelope coordinate; the result keeps no readings (placed
+    once)."""
+    place = getattr(reference, "place", None)
+    envelope = getattr(reference, "envelope", None)
+    trend = getattr(envelope, "trend", None)
+    if check is None or not check.per or place is None or trend is None \
+            or getattr(place, "u", None) is None or len(envelope.coords) != len(check.per):
+        return check
+    edge = float(place.u - np.clip(place.u, trend.u_low, trend.u_high))
+    if edge == 0.0:
+        return check
+    u = np.asarray(envelope.coords, float) @ trend.axis
+    out: dict = {}
+    for key, params in check.spreads.items():
+        out[key] = {}
+        for p, s in params.items():
+            have = [j for j, r in enumerate(check.per) if p in r.get(key, {})]
+            out[key][p] = _spread_at(s, u[have], np.array([check.per[j][key][p][0]
+                                                           for j in have]), edge)
+    return dataclasses.replace(check, spreads=out, per=())
+
+
+def _spread_at(s: Spread, u: np.ndarray, v: np.ndarray, edge: float) -> Spread:
+    """Spread ``s`` of readings ``v`` at places ``u`` moved ``edge`` beyond the outermost
+    reference along their trend (:func:`placed`); ``s`` where no trend is measured."""
+    if len(u) < MIN_FLIGHTS or np.ptp(u) < MIN_SPREAD:
+        return s
+    du = u - u.mean()
+    s_uu = float(du @ du)
+    b = float(du @ (v - v.mean())) / s_uu
+    rest = v - v.mean() - b * du
+    var_b = float(rest @ rest) / (len(v) - 2) / s_uu
+    return dataclasses.replace(
+        s, mean=s.mean + b * edge, mean_se=float(np.hypot(s.mean_se, np.sqrt(var_b) * edge)),
+        sd=float(np.sqrt(s.sd ** 2 + (b ** 2 + var_b) * edge ** 2)), edge=abs(edge))
 
 
 #: shared parameter groups (effect, fitted parameters); motor_lag only with commands.

@@ -178,6 +178,7 @@ from .calibrate import (
     shared_candidate,
     spreads,
 )
+from .calibrate import placed as placed_check
 from .evidence import Evidence, Explanation, evaluate, explanations_for
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
@@ -871,10 +872,13 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                       + (f" (flown {p.text})" if p is not None and p.distance > 0 else "")
                       for f, p in zip(train, places))
         check = ref.self_check
-        if local is not ref and check is not None and getattr(check, "slow", None) is not None:
-            # the systematic remainder's normal at the same place (judge.placed_slow)
-            local = dataclasses.replace(local, self_check=dataclasses.replace(
-                check, slow=placed_slow(check.slow, ref, local)))
+        if local is not ref and check is not None:
+            # the references' readings (calibrate.placed) and the systematic remainder's
+            # normal (judge.placed_slow) at the same place
+            check = placed_check(check, local)
+            if getattr(check, "slow", None) is not None:
+                check = dataclasses.replace(check, slow=placed_slow(check.slow, ref, local))
+            local = dataclasses.replace(local, self_check=check)
 
         def hint(f):
             mine = (f.delays_ms or {}).get("rotor")

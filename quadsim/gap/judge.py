@@ -163,7 +163,7 @@ from ..core.frames import quat_conjugate, quat_multiply
 from ..effects.base import EffectSet
 from ..vehicle.params import VehicleParams
 from . import fitting
-from .calibrate import NUISANCE, against_text, negligible
+from .calibrate import NUISANCE, against_text, negligible, placed
 from .fitting import (
     Candidate,
     candidate_plausibility,
@@ -1013,7 +1013,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     the highest probability stated (:mod:`quadsim.gap.logcheck`: a rotor order the torque
     balance does not confirm); ``vbat``: the flight's logged battery voltage (V, None: not
     logged), the scale of a sag reading's practical significance (:func:`negligible_at`)."""
-    check = getattr(reference, "self_check", None)
+    # the references' readings at the flight's place, as its baseline (calibrate.placed)
+    check = placed(getattr(reference, "self_check", None), reference)
     vbat_ref = getattr(reference, "vbat_ref", None)
     ranked = [(k, min(p, cap), ev) for k, p, ev in
               posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref))]

@@ -696,6 +696,10 @@ class Reference:
     #: between-flight scatter and the envelope are built from, kept for the self-check;
     #: None where not kept
     per_flight: object = None
+    #: the flight's :class:`Position` this model is placed at (:func:`local_reference`):
+    #: where the references' readings are compared too
+    #: (:func:`quadsim.gap.calibrate.placed`); None: the model as calibrated
+    place: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -1004,8 +1008,9 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
 def local_reference(reference, pos: Position | None):
     """The reference model at a flight's place (module doc): a copy of ``reference`` with its
     shared values at the trend's prediction, and widened scatter, noise scale and lack-of-fit
-    statistics beyond the outermost reference; ``reference`` itself where no trend is
-    measured."""
+    statistics beyond the outermost reference, ``place`` = ``pos`` (where the references'
+    readings are compared too, :func:`quadsim.gap.calibrate.placed`); ``reference`` itself
+    where no trend is measured."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
     pooled = getattr(reference, "lof_pooled", None)
     if pos is not None and pos.distance > 0 and pooled is not None:
@@ -1035,7 +1040,7 @@ def local_reference(reference, pos: Position | None):
     scatter = np.sqrt(scatter ** 2 + var + (predicted - theta) ** 2)
     return dataclasses.replace(
         reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
-        lof_mean=reference.lof_mean + shift - widen, lof_sd=spread)
+        lof_mean=reference.lof_mean + shift - widen, lof_sd=spread, place=pos)
 
 
 def _predicted_move(trend: Trend, pos: Position, edge: float
