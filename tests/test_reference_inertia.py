@@ -182,7 +182,7 @@ def test_the_rotation_steps_on_the_quadratic_are_the_evaluated_steps(cf, flappin
     parameter's typical size (measured ~1e-11 on the real references)."""
     before, free, views, evaluated, bounds, typical = _rotation_case(cf, flapping)
     theta = before.theta
-    quad = calibrate_module._Quadratic(theta, free, *evaluated.pooled(theta),
+    quad = calibrate_module._Quadratic(theta.copy(), free, *evaluated.pooled(theta),
                                        cand=before.candidate, params=cf)
     moved = theta.copy()
     moved[free] = np.clip(theta[free] - 0.5 * np.sign(theta[free]) * typical, *bounds)
@@ -209,7 +209,8 @@ def test_a_quadratic_step_across_the_inertia_wall_is_refused(cf, flapping):
     """A roll/pitch inertia whose vehicle breaks Izz <= Ixx + Iyy costs inf on the
     quadratic, as the evaluated cost does (ModelError): the steps turn back from it alike."""
     before, free, _, evaluated, _, _ = _rotation_case(cf, flapping)
-    quad = calibrate_module._Quadratic(before.theta, free, *evaluated.pooled(before.theta),
+    quad = calibrate_module._Quadratic(before.theta.copy(), free,
+                                       *evaluated.pooled(before.theta),
                                        cand=before.candidate, params=cf)
     wall = before.theta.copy()
     names = list(before.candidate.parameter_names)

@@ -828,7 +828,7 @@ def _rotation_steps(flights, params, rotor: bool, cand: Candidate, theta: np.nda
                       np.zeros_like(sigma), 1.0, 1, {}, [], {}, side=side)
     views = _Views(flights) if views is None else views
     evaluated = _Evaluated(views, probe, free, shift)
-    quad = _Quadratic(theta, free, *evaluated.pooled(theta), cand=cand, params=params)
+    quad = _Quadratic(theta.copy(), free, *evaluated.pooled(theta), cand=cand, params=params)
     x = _rotation_lm(quad, theta, free, bounds=bounds, typical=typical)
     new = evaluated.cost(x)
     if np.isfinite(new) and abs(new - quad.cost(x)) < REFINE_TOL:
@@ -864,17 +864,21 @@ class _Evaluated:
         return _cost(self.views, self.probe, x, self.shift)[0]
 
 
+@dataclass(frozen=True)
 class _Quadratic:
     """The pooled cost of :func:`_rotation_steps` where the residual is affine in the
-    columns ``free``: from (``info`` JᵀJ, ``grad`` Jᵀr, ``cost`` |r|^2) at ``theta``,
+    columns ``free``: from (``info`` JᵀJ, ``grad`` Jᵀr, ``base`` |r|^2) at ``theta``,
     ``|r + J d|^2`` and its gradient at ``theta + d`` (d nonzero on ``free`` only); inf
     where ``cand``'s vehicle on ``params`` leaves the physical set (ModelError)."""
 
-    def __init__(self, theta: np.ndarray, free: list, info: np.ndarray, grad: np.ndarray,
-                 cost: float, *, cand: Candidate, params: VehicleParams):
-        self.theta, self.free = theta.copy(), free
-        self.info, self.grad, self.base = info, grad, cost
-        self.cand, self.params = cand, params
+    theta: np.ndarray
+    free: list
+    info: np.ndarray
+    grad: np.ndarray
+    base: float
+    _: dataclasses.KW_ONLY
+    cand: Candidate
+    params: VehicleParams
 
     def pooled(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """(JᵀJ, Jᵀ(r + J d), |r + J d|^2) at ``x`` = ``theta + d``."""
