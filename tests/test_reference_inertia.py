@@ -151,3 +151,71 @@ def test_logs_too_slow_for_the_band_are_fitted_as_before(cf, flapping):
     assert torque_side_of(slow) is not None
     coarse = [s.take(np.arange(0, len(s.t), 4)) for s in slow]     # 25 Hz < 2.5 x 16 Hz
     assert torque_side_of(coarse) is None
+
+
+def _rotation_case(cf, flapping):
+    """The whole-band calibration of the flapping references (roll/pitch near +200 %) and
+    what :func:`calibrate_module._rotation_steps` refits from it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        before = calibrate(flapping, cf, torque_side=False)
+    states = [f.fit for f in flapping]
+    cand = before.candidate
+    free = [j for j, n in enumerate(cand.parameter_names) if n in calibrate_module.ROTATION]
+    dt = float(states[0].t[1] - states[0].t[0])
+    probe = calibrate_module.Reference(
+        cf, before.rotor, cand, before.theta.copy(), np.zeros_like(before.theta),
+        np.zeros_like(before.theta), before.sigma, np.ones_like(before.sigma),
+        np.zeros_like(before.sigma), 1.0, 1, {}, [], {}, side=torque_side_of(states))
+    views = calibrate_module._Views(flapping)
+    evaluated = calibrate_module._Evaluated(views, probe, free, before.rotor_shift_s)
+    bounds = tuple(b[free] for b in calibrate_module.fit_bounds(cand, cf, dt))
+    typical = calibrate_module.typical_scales(cand, cf)[free]
+    return before, free, views, evaluated, bounds, typical
+
+
+def test_the_rotation_steps_on_the_quadratic_are_the_evaluated_steps(cf, flapping):
+    """The torque-side residual is affine in the roll/pitch inertia and rate damping: the
+    quadratic from one Jacobian gives the cost and gradient the flights give at a moved
+    point (relative 1e-8, round-off of the differences), and the steps run on it end where
+    the steps evaluated flight by flight end (the rule before this change): to 1e-6 of each
+    parameter's typical size (measured ~1e-11 on the real references)."""
+    before, free, views, evaluated, bounds, typical = _rotation_case(cf, flapping)
+    theta = before.theta
+    quad = calibrate_module._Quadratic(theta.copy(), free, *evaluated.pooled(theta),
+                                       cand=before.candidate, params=cf)
+    moved = theta.copy()
+    moved[free] = np.clip(theta[free] - 0.5 * np.sign(theta[free]) * typical, *bounds)
+    info_q, grad_q, cost_q = quad.pooled(moved)
+    info_e, grad_e, cost_e = evaluated.pooled(moved)
+    np.testing.assert_allclose(cost_q, cost_e, rtol=1e-8)
+    np.testing.assert_allclose(grad_q * typical, grad_e * typical,
+                               atol=1e-7 * np.abs(grad_e * typical).max())
+    np.testing.assert_allclose(info_q, info_e, rtol=1e-6)
+    fast = calibrate_module._rotation_steps(
+        flapping, cf, before.rotor, before.candidate, theta, shift=before.rotor_shift_s,
+        sigma=before.sigma, side=evaluated.probe.side, views=views)
+    slow = calibrate_module._rotation_lm(evaluated, theta, free, bounds=bounds,
+                                         typical=typical)
+    inertia = [k for k, j in enumerate(free) if before.candidate.parameter_names[j]
+               .startswith("inertia_error")]
+    # it moved (+152 % -> ~-2 %): a real test
+    assert np.all(np.abs(fast[free] - theta[free])[inertia] > typical[inertia])
+    np.testing.assert_allclose(fast[free] / typical, slow[free] / typical, atol=1e-6)
+    np.testing.assert_array_equal(np.delete(fast, free), np.delete(theta, free))
+
+
+def test_a_quadratic_step_across_the_inertia_wall_is_refused(cf, flapping):
+    """A roll/pitch inertia whose vehicle breaks Izz <= Ixx + Iyy costs inf on the
+    quadratic, as the evaluated cost does (ModelError): the steps turn back from it alike."""
+    before, free, _, evaluated, _, _ = _rotation_case(cf, flapping)
+    quad = calibrate_module._Quadratic(before.theta.copy(), free,
+                                       *evaluated.pooled(before.theta),
+                                       cand=before.candidate, params=cf)
+    wall = before.theta.copy()
+    names = list(before.candidate.parameter_names)
+    wall[names.index("inertia_error.xx")] = wall[names.index("inertia_error.yy")] = -0.45
+    if "inertia_error.zz" in names:
+        wall[names.index("inertia_error.zz")] = 0.5
+    assert quad.cost(wall) == np.inf
+    assert evaluated.cost(wall) == np.inf

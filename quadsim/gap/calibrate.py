@@ -179,6 +179,7 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -873,33 +874,116 @@ def _rotation_steps(flights, params, rotor: bool, cand: Candidate, theta: np.nda
     Why only these: the band determines the roll/pitch rotation where the rotors balance
     unmodelled moments; the rest keep what the whole band reads (moved with it, the yaw
     inertia, the timing and the motor lag shifted and a generated reference set no longer
-    judged itself clean, tests/test_flapping_reading.py)."""
+    judged itself clean, tests/test_flapping_reading.py).
+
+    How, cheaply: the weighted residual is affine in these four (on the torque side
+    ``I_v w_dot + w x I_v w - M_model`` with ``I_v``'s diagonal scaled by ``1 + e`` and the
+    model's damping ``-k w``; the yaw channel's ``(Iyy - Ixx) wx wy`` likewise), so one
+    forward-difference Jacobian J at ``theta`` (exact for an affine map, up to round-off)
+    gives every later step's cost ``|r + J d|^2`` and gradient ``Jᵀ(r + J d)``: the steps
+    run on that quadratic (:func:`_rotation_lm` on :class:`_Quadratic`), a trial refused
+    where the vehicle leaves the physical set (the triangle-inequality wall Izz <= Ixx + Iyy
+    the references' yaw inertia sits near), as the evaluated steps refuse it. Kept where the
+    residual at the end costs what the quadratic says to within :data:`REFINE_TOL` (-2 log L
+    units, the steps' own stopping size); else the steps evaluated flight by flight."""
     free = [j for j, n in enumerate(cand.parameter_names) if n in ROTATION]
     if not free:
         return theta
     dt = float(getattr(flights[0], "fit", flights[0]).t[1]
                - getattr(flights[0], "fit", flights[0]).t[0])
-    lower, upper = (b[free] for b in fit_bounds(cand, params, dt))
+    bounds = tuple(b[free] for b in fit_bounds(cand, params, dt))
     typical = typical_scales(cand, params)[free]
     probe = Reference(params, rotor, cand, theta.copy(), np.zeros_like(theta),
                       np.zeros_like(theta), sigma, np.ones_like(sigma),
                       np.zeros_like(sigma), 1.0, 1, {}, [], {}, side=side)
     views = _Views(flights) if views is None else views
-    x, lam = theta.copy(), 1.0
-    for _ in range(REFINE_STEPS):
-        probe.theta = x.copy()
-        info, grad, cost = np.zeros((len(free),) * 2), np.zeros(len(free)), 0.0
-        for i in range(len(views)):
-            jac, r = jacobian(views.at(i, shift), probe, free, cand.effects, with_base=True)
+    evaluated = _Evaluated(views, probe, free, shift)
+    quad = _Quadratic(theta.copy(), free, *evaluated.pooled(theta), cand=cand, params=params)
+    x = _rotation_lm(quad, theta, free, bounds=bounds, typical=typical)
+    new = evaluated.cost(x)
+    if np.isfinite(new) and abs(new - quad.cost(x)) < REFINE_TOL:
+        return x
+    return _rotation_lm(evaluated, theta, free, bounds=bounds, typical=typical)
+
+
+@dataclass(frozen=True)
+class _Evaluated:
+    """The pooled cost of :func:`_rotation_steps`' columns ``free`` evaluated on the
+    flights' ``views`` at rotor timing ``shift`` (s) with the ``probe`` reference (its
+    residual on the torque side)."""
+
+    views: _Views
+    probe: Reference
+    free: list
+    shift: float
+
+    def pooled(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(JᵀJ, Jᵀr, |r|^2) summed over the flights at ``x`` (forward differences)."""
+        self.probe.theta = x.copy()
+        info, grad, cost = np.zeros((len(self.free),) * 2), np.zeros(len(self.free)), 0.0
+        for i in range(len(self.views)):
+            jac, r = jacobian(self.views.at(i, self.shift), self.probe, self.free,
+                              self.probe.candidate.effects, with_base=True)
             info += jac.T @ jac
             grad += jac.T @ r
             cost += float(r @ r)
+        return info, grad, cost
+
+    def cost(self, x: np.ndarray) -> float:
+        """|r|^2 summed over the flights at ``x``; inf outside the physical set."""
+        return _cost(self.views, self.probe, x, self.shift)[0]
+
+
+@dataclass(frozen=True)
+class _Quadratic:
+    """The pooled cost of :func:`_rotation_steps` where the residual is affine in the
+    columns ``free``: from (``info`` JᵀJ, ``grad`` Jᵀr, ``base`` |r|^2) at ``theta``,
+    ``|r + J d|^2`` and its gradient at ``theta + d`` (d nonzero on ``free`` only); inf
+    where ``cand``'s vehicle on ``params`` leaves the physical set (ModelError)."""
+
+    theta: np.ndarray
+    free: list
+    info: np.ndarray
+    grad: np.ndarray
+    base: float
+    _: dataclasses.KW_ONLY
+    cand: Candidate
+    params: VehicleParams
+
+    def pooled(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(JᵀJ, Jᵀ(r + J d), |r + J d|^2) at ``x`` = ``theta + d``."""
+        d = x[self.free] - self.theta[self.free]
+        g = self.grad + self.info @ d
+        return self.info, g, self.base + float(d @ (self.grad + g))
+
+    def cost(self, x: np.ndarray) -> float:
+        """``|r + J d|^2`` at ``x``, inf where its vehicle is not a physical one."""
+        try:
+            EffectSet(tuple(self.cand.effects(x))).apply_to_params(self.params)
+        except ModelError:
+            return float("inf")
+        return self.pooled(x)[2]
+
+
+def _rotation_lm(model, theta: np.ndarray, free: list, *, bounds: tuple,
+                 typical: np.ndarray) -> np.ndarray:
+    """``theta`` with the columns ``free`` refitted by pooled Levenberg-Marquardt steps as
+    :func:`_refine`'s (ridge lambda in units of each parameter's ``typical`` size: 1 at
+    the start, /3 after a step that lowers the cost, x4 and retried after one that does
+    not; at most :data:`REFINE_STEPS`, stopping below :data:`REFINE_TOL`; clipped to
+    ``bounds`` (lower, upper) of those columns) on ``model`` (:class:`_Evaluated` or
+    :class:`_Quadratic`: ``pooled(x)`` -> (JᵀJ, Jᵀr, cost), ``cost(x)``, inf outside the
+    physical set, a step there refused)."""
+    lower, upper = bounds
+    x, lam = theta.copy(), 1.0
+    for _ in range(REFINE_STEPS):
+        info, grad, cost = model.pooled(x)
         while lam < 1e6:
             info_z = info * np.outer(typical, typical) + lam * np.eye(len(free))
             trial = x.copy()
             trial[free] = np.clip(x[free] - typical * np.linalg.solve(info_z, typical * grad),
                                   lower, upper)
-            new, _ = _cost(views, probe, trial, shift)
+            new = model.cost(trial)
             if new < cost:
                 x, lam = trial, max(lam / 3.0, 1e-3)
                 break
@@ -1192,8 +1276,20 @@ class TorqueSide:
         4th-order Butterworth at ``rate_hz``)."""
         from scipy import signal
 
-        sos = signal.butter(4, BAND_HZ, btype="bandpass", fs=self.rate_hz, output="sos")
-        return signal.sosfiltfilt(sos, x, axis=0)
+        # a copy: the filter's Cython code wants a writable buffer; the design stays kept
+        return signal.sosfiltfilt(_band_sos(self.rate_hz).copy(), x, axis=0)
+
+
+@functools.lru_cache(maxsize=8)
+def _band_sos(rate_hz: float) -> np.ndarray:
+    """The second-order sections of :meth:`TorqueSide.band`'s filter at ``rate_hz`` (Hz):
+    the same numbers each call, designed once per rate (the design cost as much as the
+    filtering on a flight's few thousand samples)."""
+    from scipy import signal
+
+    sos = signal.butter(4, BAND_HZ, btype="bandpass", fs=rate_hz, output="sos")
+    sos.setflags(write=False)
+    return sos
 
 
 def band_explained(states, params: VehicleParams, rotor: bool, effects: list,
