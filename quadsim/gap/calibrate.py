@@ -834,19 +834,15 @@ def _refine(flights, params, rotor: bool, cand: Candidate, theta: np.ndarray, *,
                                    bases)
         info, grad = info + np.diag(prior), grad + prior * x
         cost += float(np.sum(prior * x ** 2))
-        while lam < 1e6:
-            # a ridge in units of each parameter's typical size: a direction the data do
-            # not fix does not move
-            info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
-            trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
+        def cost_at(trial):
             new, moved = _cost(views, probe, trial[:k], float(trial[k]) if timing else 0.0)
-            new += float(np.sum(prior * trial ** 2))
-            if new < cost:
-                x, lam, bases = trial, max(lam / 3.0, 1e-3), moved
-                break
-            lam *= 4.0
-        else:
+            return new + float(np.sum(prior * trial ** 2)), moved
+
+        step = _damped_step(x, info, grad, cost, lam=lam, typical=typical,
+                            bounds=(lower, upper), cost_at=cost_at)
+        if step is None:
             break
+        x, new, lam, bases = step
         if cost - new < REFINE_TOL:
             break
     cov = _covariance(info, typical)
@@ -965,6 +961,27 @@ class _Quadratic:
         return self.pooled(x)[2]
 
 
+def _damped_step(x: np.ndarray, info: np.ndarray, grad: np.ndarray, cost: float, *,
+                 lam: float, typical: np.ndarray, bounds: tuple, cost_at):
+    """One accepted Levenberg-Marquardt step of the calibration's pooled refinements
+    (:func:`_refine`, :func:`_rotation_lm`) from ``x`` with information ``info`` (JᵀJ),
+    gradient ``grad`` (Jᵀr) and ``cost`` there: the ridge ``lam`` in units of each
+    parameter's ``typical`` size (a direction the data do not fix does not move),
+    ``x - typical (info typical typical + lam I)^-1 typical grad`` clipped to ``bounds``
+    (lower, upper); ``cost_at(trial)`` -> (cost, extra). A step that lowers the cost is
+    taken and ``lam`` divided by 3 (not below 1e-3); else ``lam`` x4 and retried, up to
+    1e6. Returns (trial, its cost, the new lam, extra), or None where no step lowers it."""
+    lower, upper = bounds
+    while lam < 1e6:
+        info_z = info * np.outer(typical, typical) + lam * np.eye(len(x))
+        trial = np.clip(x - typical * np.linalg.solve(info_z, typical * grad), lower, upper)
+        new, extra = cost_at(trial)
+        if new < cost:
+            return trial, new, max(lam / 3.0, 1e-3), extra
+        lam *= 4.0
+    return None
+
+
 def _rotation_lm(model, theta: np.ndarray, free: list, *, bounds: tuple,
                  typical: np.ndarray) -> np.ndarray:
     """``theta`` with the columns ``free`` refitted by pooled Levenberg-Marquardt steps as
@@ -974,22 +991,20 @@ def _rotation_lm(model, theta: np.ndarray, free: list, *, bounds: tuple,
     ``bounds`` (lower, upper) of those columns) on ``model`` (:class:`_Evaluated` or
     :class:`_Quadratic`: ``pooled(x)`` -> (JᵀJ, Jᵀr, cost), ``cost(x)``, inf outside the
     physical set, a step there refused)."""
-    lower, upper = bounds
     x, lam = theta.copy(), 1.0
     for _ in range(REFINE_STEPS):
         info, grad, cost = model.pooled(x)
-        while lam < 1e6:
-            info_z = info * np.outer(typical, typical) + lam * np.eye(len(free))
+
+        def cost_at(sub, x=x):
             trial = x.copy()
-            trial[free] = np.clip(x[free] - typical * np.linalg.solve(info_z, typical * grad),
-                                  lower, upper)
-            new = model.cost(trial)
-            if new < cost:
-                x, lam = trial, max(lam / 3.0, 1e-3)
-                break
-            lam *= 4.0
-        else:
+            trial[free] = sub
+            return model.cost(trial), trial
+
+        step = _damped_step(x[free], info, grad, cost, lam=lam, typical=typical,
+                            bounds=bounds, cost_at=cost_at)
+        if step is None:
             break
+        _, new, lam, x = step
         if cost - new < REFINE_TOL:
             break
     return x
