@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import quadsim.gap.calibrate as calibrate_module
-import quadsim.identify.rotation as rotation
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
@@ -139,11 +138,6 @@ def test_the_torque_side_is_the_moment_in_the_candidates_inertia_band_passed(cf)
     np.testing.assert_allclose(out[mid, 3], expect[mid, 0], atol=0.02 * np.abs(expect[:, 0]).max())
     assert np.abs(out[mid, 4]).max() < 0.01 * np.abs(expect[:, 1]).max()
     np.testing.assert_array_equal(out[:, [0, 1, 2, 5]], r[:, [0, 1, 2, 5]])
-
-
-def test_the_band_is_identify_rotations():
-    assert calibrate_module.BAND_HZ == rotation.BAND_HZ
-    assert calibrate_module.BAND_R2 == rotation.BAND_R2
 
 
 def test_logs_too_slow_for_the_band_are_fitted_as_before(cf, flapping):

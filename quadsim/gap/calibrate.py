@@ -1248,10 +1248,12 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.envelope = ref.per_flight.envelope(log_ms)
 
 
-#: the band where the rotors drive the body (Hz) and the band fit's acceptance (R^2): the
-#: values of :data:`quadsim.identify.rotation.BAND_HZ` and ``BAND_R2`` (their reasons there;
-#: the gap stage does not import the identify stage, tests/test_layout.py; equal: tests)
+#: the band where the rotors drive the body (Hz): above ~3 Hz the aerodynamic moments (velocity
+#: effects) are small against the torque; below 16 Hz common 18-20 Hz log filters pass > 0.9.
+#: One source for both readers: :mod:`quadsim.identify.rotation` (a later stage) imports it
 BAND_HZ = (4.0, 16.0)
+#: the band fit's acceptance (R^2 of the band-passed moment explained), as the whole-band
+#: inertia fit's (quadsim.identify.from_logs INERTIA_R2); imported by identify.rotation too
 BAND_R2 = 0.5
 #: the body axes (x roll, y pitch) whose moment residual the calibration reads on the torque
 #: side in the band where the rotors drive the body (:class:`TorqueSide`; module doc, stage 2)

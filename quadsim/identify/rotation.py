@@ -27,16 +27,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
+from ..gap.calibrate import BAND_HZ, BAND_R2
 from .logseries import Estimate, LogSeries, Skeleton, confidence_interval
 
-#: the band where the rotors drive the body (Hz): above ~3 Hz the aerodynamic moments (velocity
-#: effects) are small against the torque; below 16 Hz common 18-20 Hz log filters pass > 0.9
-BAND_HZ = (4.0, 16.0)
 #: per-log delay of the torque behind the body terms (s): real logs' rotor-data timing is off
 #: by up to +-17.5 ms (nano-drone benchmark, per run), 2.5 ms steps (~9 deg at 10 Hz)
 DELAY_GRID_S = tuple(float(d) for d in np.round(np.arange(-0.030, 0.0301, 0.0025), 4))
-#: acceptance, as the whole-band fit (quadsim.identify.from_logs INERTIA_R2, INERTIA_CI)
-BAND_R2 = 0.5
+#: acceptance's 95 % half-width, as the whole-band fit (quadsim.identify.from_logs INERTIA_CI);
+#: the band (BAND_HZ) and R^2 (BAND_R2) are the gap calibration's, one source for both
 BAND_CI = 0.15
 #: jackknife blocks when only one log is given
 BLOCKS = 8
