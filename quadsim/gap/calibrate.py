@@ -1266,7 +1266,7 @@ class TorqueSide:
     (module doc, stage 2): in newton-metres of the candidate's own inertia,
     ``M_meas - M_model`` = ``I_v w_dot + w x I_v w - M_model`` instead of
     :func:`quadsim.gap.fitting.residuals`' ``I (I_v^-1 (M_meas - M_model))``, band-passed to
-    :data:`quadsim.identify.rotation.BAND_HZ` (zero-phase 4th-order Butterworth, as
+    :data:`quadsim.gap.calibrate.BAND_HZ` (zero-phase 4th-order Butterworth, as
     :mod:`quadsim.identify.rotation`), on the body ``axes`` (0 x, 1 y); the other channels
     unchanged. ``rate_hz``: the fit samples' rate (Hz; :func:`torque_side_of` builds one
     only where it shows the band). A log of several airborne stretches is filtered across
@@ -1289,7 +1289,7 @@ class TorqueSide:
         return out
 
     def band(self, x: np.ndarray) -> np.ndarray:
-        """``x`` (N, k) band-passed to :data:`quadsim.identify.rotation.BAND_HZ` (zero-phase
+        """``x`` (N, k) band-passed to :data:`quadsim.gap.calibrate.BAND_HZ` (zero-phase
         4th-order Butterworth at ``rate_hz``)."""
         from scipy import signal
 
