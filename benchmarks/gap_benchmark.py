@@ -88,6 +88,11 @@ quadcopter-sim source (``--independent --source quadcopter-sim --cache DIR``,
 rigid-body equations and 0.65 kg plus-configuration vehicle; DC motors, body drag and a
 geometric controller of this project's) against 8 nominal flights.
 
+drone-models source (``--independent --source drone-models --cache DIR``,
+:mod:`benchmarks.dm_cases`): the same for 28 cases from drone-models 0.1.0's first-principles
+Crazyflie 2.1 Brushless (its dynamics and parameters; RK4 and a firmware-shaped PID cascade of
+this project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -600,6 +605,8 @@ SIM_SOURCES = {
                        "qcsim_available", "pip install 'quadsim[qcsim]'"),
     "gym-pybullet-drones": ("benchmarks.gpd_cases", "benchmarks.gpd_source", "gpd_available",
                             GPD_HINT),
+    "drone-models": ("benchmarks.dm_cases", "benchmarks.dm_source", "dm_available",
+                     "pip install 'quadsim[dm]'"),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -718,7 +725,8 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, quadcopter-sim, genesis, "
-                             "gym-pybullet-drones, l2f and its vehicles l2f-fs, "
+                             "gym-pybullet-drones, drone-models, l2f and its vehicles "
+                             "l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
                              "nominal "

@@ -1,8 +1,8 @@
 """Held-out mode, blind, on the simulator sources (issue 47): 2 flights train, 1 is held out.
 
 The simulator sources (:mod:`.sim_cases`: Crazyflow, PyFlyt, multirotor, quadcopter-sim,
-gym-pybullet-drones, ...) fly ONE 8-s flight per case and judge it per flight against 8
-nominal flights. Here the same frozen cases are judged the way a user runs held-out mode
+gym-pybullet-drones, drone-models, ...) fly ONE 8-s flight per case and judge it per flight
+against 8 nominal flights. Here the same frozen cases are judged the way a user runs held-out mode
 (``python -m quadsim.gap --model SET TRAIN... --holdout HELD...``): the parameter set itself
 is the reference (the source's own ``source.params()``, not fitted), the effects are fitted
 on two training flights that carry the change and scored on a third flight that carries it
