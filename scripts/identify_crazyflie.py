@@ -17,8 +17,9 @@ command -> speed map are identified here from the *nominal* flights only (never 
   (:func:`quadsim.identify.motor_fits.fit_motor_map`: per rotor ``Omega = L_tau[a + k cmd
   (1 + gamma (v - v_ref))]``, L_tau a first-order lag, tau on a 2.5 ms grid) on the flights
   as ``identify --logs`` loads them, pooled, with its 95 % interval and the per-flight fits'
-  spread (:func:`motor_lag`). Only tau is kept: the set's map stays the static line above
-  (its voltage law is read by ``quadsim.gap`` from the flights themselves).
+  spread (:func:`motor_lag`). Only tau is kept: the set's map stays the static line above,
+  on which ``--yaw-balance``'s instruments rest (``quadsim.gap`` refits the map, in command x
+  battery voltage where the flights were flown at different charges, from the flights).
 
 Not ``python -m quadsim.identify --logs``: that command identifies d (yaw balance,
 instrumental variables), Ixx, Iyy and a lagged, voltage-dependent motor map from the logs.
@@ -590,6 +591,8 @@ def print_axis_fits(fits: list[AxisFit], params_path: Path) -> None:
 def render(fit: dict, lag: MotorLag) -> str:
     """The parameter set's TOML text: ``fit`` from :func:`identify`, ``lag`` from
     :func:`motor_lag`."""
+    from quadsim.identify.motor_fits import LAG_GRID_S
+
     b, d = fit["b"], TORQUE_RATIO * fit["b"]
     src_b = (f"identified by scripts/identify_crazyflie.py: body-z force balance m*f_z = "
              f"b*sum(Omega^2), accelerometer, {fit['flights']} nominal flights; per-flight "
@@ -600,7 +603,8 @@ def render(fit: dict, lag: MotorLag) -> str:
     speeds = ", ".join(f"[{a:.1f}, {e:.1f}]" for a, e in fit["map"])
     spread = np.array(lag.per_flight)
     src_tau = (f"identify --logs' motor fit (quadsim.identify.motor_fits.fit_motor_map: per-rotor "
-               f"map through a first-order lag, with the battery-voltage law; grid 2.5 ms) on "
+               f"map through a first-order lag, with the battery-voltage law; grid "
+               f"{1e3 * (LAG_GRID_S[1] - LAG_GRID_S[0]):g} ms) on "
                f"the {fit['flights']} nominal flights pooled, 95 % {lag.ci95[0]:.4f}-"
                f"{lag.ci95[1]:.4f} s; per flight {spread.min():.4f}-{spread.max():.4f} s "
                f"(mean {spread.mean():.4f}, SD {spread.std(ddof=1):.4f}); written by "

@@ -28,8 +28,8 @@ def _effects_lag():
 
 
 def test_the_set_carries_its_motor_time_constant():
-    """50 ms on identify's 2.5 ms grid (per flight 45-57.5 ms), with its unit and source;
-    main had none (0: the rotors follow their commands at once)."""
+    """50 ms on identify's 2.5 ms grid (per flight 45-57.5 ms), with its unit and source
+    (0, the default, would mean the rotors follow their commands at once)."""
     params = load_params("crazyflie21")
     assert params.motor_map.time_constant == pytest.approx(0.050, abs=1e-9)
     source = params.sources["motor_map.time_constant"]
