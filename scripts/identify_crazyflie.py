@@ -13,6 +13,13 @@ command -> speed map are identified here from the *nominal* flights only (never 
   stored at cmd = 0 and 1 (it is only trusted inside the flown range, about 0.3-0.5).
 * d = 0.006 m * b (README: torque/thrust ratio of Crazyflie 2.x propellers), checked against
   the flights' yaw balance (below).
+* motor time constant tau (s): ``identify --logs``' own motor fit
+  (:func:`quadsim.identify.motor_fits.fit_motor_map`: per rotor ``Omega = L_tau[a + k cmd
+  (1 + gamma (v - v_ref))]``, L_tau a first-order lag, tau on a 2.5 ms grid) on the flights
+  as ``identify --logs`` loads them, pooled, with its 95 % interval and the per-flight fits'
+  spread (:func:`motor_lag`). Only tau is kept: the set's map stays the static line above,
+  on which ``--yaw-balance``'s instruments rest (``quadsim.gap`` refits the map, in command x
+  battery voltage where the flights were flown at different charges, from the flights).
 
 Not ``python -m quadsim.identify --logs``: that command identifies d (yaw balance,
 instrumental variables), Ixx, Iyy and a lagged, voltage-dependent motor map from the logs.
@@ -103,6 +110,35 @@ def identify(nominal: list[Path]) -> dict:
     return {"b": numerator / denominator, "b_std": float(np.std(per_flight, ddof=1)),
             "flights": len(per_flight), "map": lines, "peak": peak,
             "cmd_range": (float(command.min()), float(command.max()))}
+
+
+@dataclass(frozen=True)
+class MotorLag:
+    """The rotors' first-order lag behind their commands, as ``identify --logs`` fits it:
+    ``tau`` (s) pooled over the flights with its 95 % interval ``ci95`` (s; the fit's
+    profile on its grid), and the per-flight fits' ``per_flight`` (s, one per flight, in
+    the order given)."""
+
+    tau: float
+    ci95: tuple[float, float]
+    per_flight: tuple[float, ...]
+
+
+def motor_lag(nominal: list[Path]) -> MotorLag:
+    """:class:`MotorLag` of the flights: :func:`quadsim.identify.motor_fits.fit_motor_map` on
+    all of them pooled, then on each alone (the flights loaded and cut as ``identify --logs``
+    does, :func:`quadsim.identify.__main__._load_states`)."""
+    from quadsim.identify.__main__ import _load_states, _series
+    from quadsim.identify.motor_fits import fit_motor_map
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states, _ = _load_states(list(nominal))
+    series = [_series(s) for s in states]
+    pooled = fit_motor_map(series)
+    per_flight = tuple(float(fit_motor_map([s])["time_constant"]) for s in series)
+    low, high = pooled["time_constant_ci"]
+    return MotorLag(float(pooled["time_constant"]), (float(low), float(high)), per_flight)
 
 
 # ----------------------------------------------------------------------------- yaw balance
@@ -552,7 +588,11 @@ def print_axis_fits(fits: list[AxisFit], params_path: Path) -> None:
               f"{1e3 * f.delay:+.1f} ms")
 
 
-def render(fit: dict) -> str:
+def render(fit: dict, lag: MotorLag) -> str:
+    """The parameter set's TOML text: ``fit`` from :func:`identify`, ``lag`` from
+    :func:`motor_lag`."""
+    from quadsim.identify.motor_fits import LAG_GRID_S
+
     b, d = fit["b"], TORQUE_RATIO * fit["b"]
     src_b = (f"identified by scripts/identify_crazyflie.py: body-z force balance m*f_z = "
              f"b*sum(Omega^2), accelerometer, {fit['flights']} nominal flights; per-flight "
@@ -561,6 +601,14 @@ def render(fit: dict) -> str:
     src_map = (f"scripts/identify_crazyflie.py: per-rotor line fit on nominal flights "
                f"(flown cmd {lo:.2f}-{hi:.2f}; outside that an extrapolation)")
     speeds = ", ".join(f"[{a:.1f}, {e:.1f}]" for a, e in fit["map"])
+    spread = np.array(lag.per_flight)
+    src_tau = (f"identify --logs' motor fit (quadsim.identify.motor_fits.fit_motor_map: per-rotor "
+               f"map through a first-order lag, with the battery-voltage law; grid "
+               f"{1e3 * (LAG_GRID_S[1] - LAG_GRID_S[0]):g} ms) on "
+               f"the {fit['flights']} nominal flights pooled, 95 % {lag.ci95[0]:.4f}-"
+               f"{lag.ci95[1]:.4f} s; per flight {spread.min():.4f}-{spread.max():.4f} s "
+               f"(mean {spread.mean():.4f}, SD {spread.std(ddof=1):.4f}); written by "
+               f"scripts/identify_crazyflie.py")
     rotors = [("1", HUB, -HUB, "ccw", "front-right"), ("2", -HUB, -HUB, "cw", "rear-right"),
               ("3", -HUB, HUB, "ccw", "rear-left"), ("4", HUB, HUB, "cw", "front-left")]
     rotor_text = "".join(
@@ -601,6 +649,7 @@ radius = {{ value = {RADIUS}, unit = "m", source = "{src_radius}" }}
 command_unit = "1"
 command = {{ value = [0.0, 1.0], unit = "1", source = "{src_map}" }}
 speed = {{ value = [{speeds}], unit = "rad/s", source = "{src_map}" }}
+time_constant = {{ value = {lag.tau:.4g}, unit = "s", source = "{src_tau}" }}
 {rotor_text}'''
 
 
@@ -659,10 +708,11 @@ def main(argv: list[str] | None = None) -> int:
               f"R^2 of that slow part on the body velocity v_x, v_y: {r2:.2f}")
         print_axis_fits(delayed_band_fits(nominal, args.out), args.out)
         return 0
-    fit = identify(nominal)
-    atomic_write_text(args.out, render(fit))
+    fit, lag = identify(nominal), motor_lag(nominal)
+    atomic_write_text(args.out, render(fit, lag))
     print(f"b = {fit['b']:.5g} N s^2/rad^2 (per-flight std {fit['b_std']:.2g}, "
-          f"{fit['flights']} flights) -> {args.out}")
+          f"{fit['flights']} flights), motor time constant {1e3 * lag.tau:.1f} ms "
+          f"(95 % {1e3 * lag.ci95[0]:.1f}-{1e3 * lag.ci95[1]:.1f}) -> {args.out}")
     return 0
 
 

@@ -34,7 +34,8 @@ def model():
 
 def test_names_and_params(model):
     assert model.params == "crazyflie21"
-    assert [e.name for e in model.effects.effects] == ["blade_flapping", "rotor_drag"]
+    assert [e.name for e in model.effects.effects] == ["blade_flapping", "rotor_drag",
+                                                      "motor_lag"]
     load_params(model.params)       # the set it completes exists and loads
 
 
@@ -53,11 +54,11 @@ def test_values_inside_plausible_ranges(model):
                 unit = range_unit(plausible.kind, params)
                 assert plausible.lower * unit <= value <= plausible.upper * unit, spec.name
             checked += 1
-    assert checked == 3             # flapping roll, pitch; rotor drag coefficient
+    assert checked == 4             # flapping roll, pitch; rotor drag coefficient; motor lag
 
 
 def test_values_are_the_identified_ones(model):
-    flapping, drag = model.effects.effects
+    flapping, drag, _ = model.effects.effects
     assert flapping.roll == pytest.approx(8.957e-8, rel=1e-3)
     assert flapping.pitch == pytest.approx(1.369e-7, rel=1e-3)
     assert flapping.coefficient == 0.0
@@ -71,7 +72,7 @@ def test_values_are_the_identified_ones(model):
 
 def test_every_value_has_a_training_only_source(model):
     assert set(model.sources) == {("blade_flapping", "roll"), ("blade_flapping", "pitch"),
-                                  ("rotor_drag", "coefficient")}
+                                  ("rotor_drag", "coefficient"), ("motor_lag", "time_constant")}
     for key, source in model.sources.items():
         assert source.startswith("python -m quadsim.gap on 4 training log(s) flight_00"), key
         assert "held out: flight_04.csv.gz" in source, key
@@ -94,7 +95,7 @@ def test_untouched_flights_show_the_files_air_loads(model):
     script = _script()
     nominal = sorted((DATA / "nominal").glob("flight_*.csv.gz"))
     (late,) = script.air_loads([("10-19", nominal[10:])], ROOT / "models/crazyflie21.toml")
-    flapping, drag = model.effects.effects
+    flapping, drag, _ = model.effects.effects
     assert late.roll[0] == pytest.approx(8.771e-8, rel=0.01)
     assert late.pitch[0] == pytest.approx(1.231e-7, rel=0.01)
     assert flapping.roll == pytest.approx(late.roll[0], rel=0.05)
