@@ -797,17 +797,26 @@ class Against:
         residuals beyond the references on the training and held-out flights, and the
         held-out flights' log-likelihood. A reading that fits the rotor timing reads each
         flight at that flight's own delay (:attr:`delays`; the timing is a nuisance, as
-        per flight), ``signal_delay`` at its own value (its delay is the reading); a cable
-        payload at each flight's own start swing (:func:`_read_own_start`)."""
+        per flight), its log-likelihood less the nuisance's prior -1/2 ((d - mu) / s)^2
+        (mu, s: the delay's prior, the references' timing and spread; a penalised profile,
+        as the per-flight fit pays it: a flight's own delay far outside the references'
+        spread is the difference ``signal_delay`` names, not free timing);
+        ``signal_delay`` at its own value (its delay is the reading, its prior paid in the
+        training evidence); a cable payload at each flight's own start swing
+        (:func:`_read_own_start`)."""
         expl = ev.explanation
         theta = np.array([ev.values[k] for k in expl.parameter_names], float)
         own = bool(expl.shift) and expl.name != "signal_delay"
         read = []
         for states, memo, delay in zip(self.train + self.held, self.memos, self.delays):
             at = theta.copy()
-            if own and delay is not None:
+            timed = own and delay is not None
+            if timed:
                 at[-1] = delay
-            read.append(_read_own_start(_problem(states, self.reference, expl, memo), at))
+            resid, ll = _read_own_start(_problem(states, self.reference, expl, memo), at)
+            if timed:
+                ll -= 0.5 * float((delay - expl.mean[-1]) / expl.sd[-1]) ** 2
+            read.append((resid, ll))
         held = read[len(self.train):]
         ll = sum(h[1] for h in held)
         return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll),
@@ -1365,10 +1374,18 @@ class Practical:
     them only where "no difference" leaves no systematic remainder,
     :func:`quadsim.gap.judge.remainder`: where it does, a small reading may be the
     library's description of that remainder, and calling the flight ``unexplained``
-    would say the library has none)."""
+    would say the library has none). ``own_timing`` (against nominal references, where
+    "no difference" reads each flight at its own rotor delay, :meth:`Against.check`): the
+    size rule does not size ``signal_delay``, whose whole change that nuisance takes on
+    "no difference" (its share of the held-out gap is nil by construction: what tells
+    them apart is the nuisance's prior, in the evidence); per flight its delay is a
+    nuisance parameter, outside practical significance too
+    (:data:`quadsim.gap.calibrate.NUISANCE`)."""
 
-    def __init__(self, train: list, reference: Reference, before: list | None = None):
+    def __init__(self, train: list, reference: Reference, before: list | None = None, *,
+                 own_timing: bool = False):
         self.train, self.reference, self.before = train, reference, before
+        self.own_timing = own_timing
         self.spreads: dict = {}
         self.shares: dict = {}
 
@@ -1396,6 +1413,8 @@ class Practical:
         log evidence, which assumes the library's forms exact. The same size in the
         data's own units as the between-flight spread is in a parameter's, and the one
         that applies with fewer than 3 training flights, where there is no spread."""
+        if self.own_timing and ev.name == "signal_delay":
+            return False
         share = self.shares.get((ev.name, ev.explanation.variant))
         return share is not None and share <= FORM_ERROR
 
@@ -1523,7 +1542,9 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     # where it leaves a remainder, a small reading may be the library's description of it
     quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
                                                reference, dt)
-    scale = Practical(train, reference, before if quiet else None)
+    scale = Practical(train, reference, before if quiet else None,
+                      own_timing=against is not None and any(d is not None
+                                                             for d in against.delays))
     ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
     combination = checked = None
