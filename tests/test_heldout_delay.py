@@ -23,7 +23,8 @@ from benchmarks.heldout_sources import MemoryStore
 from benchmarks.synthetic import synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.gap import diagnose, diagnose_per_flight
-from quadsim.gap.diagnose import Practical
+from quadsim.gap.calibrate import PRACTICAL_Z
+from quadsim.gap.diagnose import Against, Practical
 from quadsim.gap.evidence import Evidence
 from quadsim.gap.explanations import Explanation
 from quadsim.logs.flightlog import FlightLog
@@ -87,16 +88,39 @@ def _weighed(name, log_z, held_ms):
                            held_residuals=[noise * np.sqrt(held_ms)])
 
 
-def test_the_size_rule_does_not_size_the_timing_where_no_difference_reads_each_flights_own():
+def test_the_size_rule_does_not_size_the_timing_no_difference_has_taken():
     """``signal_delay`` 36 log units above "no difference", which (reading each flight at
     its own delay) leaves the held-out flight as it does: share 0 of the held-out gap.
-    Where "no difference" reads each flight's own timing (``own_timing``) the share is not
-    its size: the reading leads; where it does not, the size rule stands as before."""
-    before = [w.held_residuals[0] for w in [_weighed("no_difference", 0.0, 1.0)]]
+    Where that own delay lies beyond the references' timing (``timing_taken``) the share
+    is not its size: the reading leads; where it does not, the size rule stands (main's
+    rule, which keeps a delay read at a periodic optimum, PyFlyt's no-effect case 2 at
+    -63 ms, from being named)."""
+    before = [_weighed("no_difference", 0.0, 1.0).held_residuals[0]]
     weighed = [_weighed("no_difference", -831.7, 1.0), _weighed("signal_delay", -795.6, 1.0)]
-    timed = Practical([], SimpleNamespace(sigma=np.ones(6)), before, own_timing=True)
-    ranked = timed.rank(weighed)
+    taken = Practical([], SimpleNamespace(sigma=np.ones(6)), before, timing_taken=True)
+    ranked = taken.rank(weighed)
     assert ranked[0][0] == "signal_delay" and ranked[0][1] == pytest.approx(1.0)
-    assert timed.shares[("signal_delay", "")] == pytest.approx(0.0, abs=1e-12)
+    assert taken.shares[("signal_delay", "")] == pytest.approx(0.0, abs=1e-12)
     plain = Practical([], SimpleNamespace(sigma=np.ones(6)), before)
     assert plain.rank(weighed)[0][0] == "no_difference"
+
+
+def test_the_timing_is_taken_where_every_held_out_flights_own_delay_is_beyond_the_references():
+    """Closed form: the delay's prior N(0, (2.14 ms)^2) (PyFlyt's references), PRACTICAL_Z
+    = 2 of its spreads: 4.28 ms. The held-out flights' own delays (after the training
+    flights') 17.6 ms: taken; 4.2 ms: not; one of two held-out flights inside: not; no
+    timing reading: not."""
+    assert PRACTICAL_Z == 2.0
+    null = Explanation("no_difference", "", (), (0.0,), (0.00214,), shift="rotor")
+
+    def taken(*delays):
+        return Against.timing_taken(SimpleNamespace(train=(1, 2), delays=delays), null)
+
+    assert taken(0.017, 0.018, 0.0176)
+    assert taken(0.0, 0.0, -0.0043)
+    assert not taken(0.017, 0.018, 0.0042)
+    assert not taken(0.017, 0.018, 0.0176, 0.001)
+    assert not taken(0.017, 0.018, None)
+    bare = Explanation("no_difference", "", (), (), ())
+    assert not Against.timing_taken(SimpleNamespace(train=(1, 2), delays=(0.02, 0.02, 0.02)),
+                                    bare)
