@@ -8,8 +8,9 @@ log at no cost on the held-out flight, and the size rule (a reading that removes
 form error of the held-out gap is none) then called ``signal_delay`` no difference: PyFlyt's
 and multirotor's rotor-delay cases `no_significant_gap` at 1.00 held out, named per flight.
 Now the held-out read pays the prior as the per-flight fit does, and the size rule does not
-size the timing reading whose change that nuisance takes (its delay is a nuisance parameter,
-outside practical significance per flight too)."""
+size ``signal_delay`` where that nuisance took its change (each held-out flight's own delay
+beyond 2 of the references' timing spreads; per flight a delay is a nuisance parameter,
+outside practical significance too)."""
 
 from __future__ import annotations
 
