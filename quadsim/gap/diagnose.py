@@ -103,12 +103,15 @@ law is chosen on the stacked training flights; the explanations are the per-flig
 (:class:`Against`). Each is fitted on the stacked training flights
 (:func:`quadsim.gap.evidence.evaluate`), then read on every flight at its training MAP
 under the per-flight likelihood (the shared parameters it keeps and the flight's own
-discrepancy marginalised, :func:`_read`); the held-out flights' log-likelihood joins its
-evidence as above. Practical significance is the per-flight rule: a reading within the
-references' between-flight spread of it is no difference
+discrepancy marginalised, :func:`_read`; a reading that fits the rotor timing at each flight's
+own delay, that nuisance's prior paid as per flight, :meth:`Against.check`); the held-out
+flights' log-likelihood joins its evidence as above. Practical significance is the per-flight
+rule: a reading within the references' between-flight spread of it is no difference
 (:func:`quadsim.gap.calibrate.negligible` with their self-check; :class:`Practical` takes it
-from the reference). Ranking, pairs, consistency (on top of the references' model) and the
-verdict (:func:`quadsim.gap.judge.judge_heldout`) are the held-out ones; "before" is the
+from the reference; ``signal_delay`` is not sized by the held-out gap where "no difference"
+took it with each held-out flight's own delay, :meth:`Against.timing_taken`). Ranking, pairs,
+consistency (on top of the references' model) and the verdict
+(:func:`quadsim.gap.judge.judge_heldout`) are the held-out ones; "before" is the
 held-out flights' residual under "no difference" against the references. With fewer than 3
 references there is no self-check: the training flights' spread is the scale, as without
 references, and the answer says the references could not be checked.
@@ -163,6 +166,7 @@ from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from . import evidence, logcheck
 from .calibrate import (
+    PRACTICAL_Z,
     VBAT_TESTED,
     Calibrated,
     Reference,
@@ -797,21 +801,43 @@ class Against:
         residuals beyond the references on the training and held-out flights, and the
         held-out flights' log-likelihood. A reading that fits the rotor timing reads each
         flight at that flight's own delay (:attr:`delays`; the timing is a nuisance, as
-        per flight), ``signal_delay`` at its own value (its delay is the reading); a cable
-        payload at each flight's own start swing (:func:`_read_own_start`)."""
+        per flight), its log-likelihood less the nuisance's prior -1/2 ((d - mu) / s)^2
+        (mu, s: the delay's prior, the references' timing and spread; a penalised profile,
+        as the per-flight fit pays it: a flight's own delay far outside the references'
+        spread is the difference ``signal_delay`` names, not free timing);
+        ``signal_delay`` at its own value (its delay is the reading, its prior paid in the
+        training evidence); a cable payload at each flight's own start swing
+        (:func:`_read_own_start`)."""
         expl = ev.explanation
         theta = np.array([ev.values[k] for k in expl.parameter_names], float)
         own = bool(expl.shift) and expl.name != "signal_delay"
         read = []
         for states, memo, delay in zip(self.train + self.held, self.memos, self.delays):
             at = theta.copy()
-            if own and delay is not None:
+            timed = own and delay is not None
+            if timed:
                 at[-1] = delay
-            read.append(_read_own_start(_problem(states, self.reference, expl, memo), at))
+            resid, ll = _read_own_start(_problem(states, self.reference, expl, memo), at)
+            if timed:
+                ll -= 0.5 * float((delay - expl.mean[-1]) / expl.sd[-1]) ** 2
+            read.append((resid, ll))
         held = read[len(self.train):]
         ll = sum(h[1] for h in held)
         return Weighed(ev, dataclasses.replace(ev, log_z=ev.log_z + ll),
                        [r for r, _ in read[:len(self.train)]], [r for r, _ in held], ll)
+
+    def timing_taken(self, null: Explanation) -> bool:
+        """Whether every held-out flight's own rotor delay (:attr:`delays`) lies beyond
+        :data:`quadsim.gap.calibrate.PRACTICAL_Z` of the delay's prior spreads (the
+        references' timing spread) from its centre: a timing difference by the per-flight
+        rule of practical significance, which "no difference" (``null``, the explanation
+        the delays were read under) takes with each flight's own delay
+        (:class:`Practical`). False without a timing reading."""
+        own = self.delays[len(self.train):]
+        if not null.shift or not own or any(d is None for d in own):
+            return False
+        mu, sd = float(null.mean[-1]), float(null.sd[-1])
+        return all(abs(d - mu) > PRACTICAL_Z * sd for d in own)
 
     def model(self, expl: Explanation | None) -> list:
         """The reference model's effects an explanation keeps (every one for None): the
@@ -1365,10 +1391,22 @@ class Practical:
     them only where "no difference" leaves no systematic remainder,
     :func:`quadsim.gap.judge.remainder`: where it does, a small reading may be the
     library's description of that remainder, and calling the flight ``unexplained``
-    would say the library has none)."""
+    would say the library has none). ``timing_taken`` (against nominal references, where
+    "no difference" reads each flight at its own rotor delay, :meth:`Against.check`, and
+    that delay lies beyond the references' timing on every held-out flight,
+    :meth:`Against.timing_taken`): the size rule does not size ``signal_delay``, whose
+    change "no difference" has then taken with each flight's own delay (its share of the
+    held-out gap nil by construction: what tells them apart is that delay's prior, paid in
+    the evidence); per flight a delay is a nuisance parameter, outside practical
+    significance too (:data:`quadsim.gap.calibrate.NUISANCE`). Where the held-out flights'
+    own delays lie within the references' timing the share is the reading's size, as for
+    every reading (a delay read at a periodic optimum far from the timing the flights show
+    removes little of their gap)."""
 
-    def __init__(self, train: list, reference: Reference, before: list | None = None):
+    def __init__(self, train: list, reference: Reference, before: list | None = None, *,
+                 timing_taken: bool = False):
         self.train, self.reference, self.before = train, reference, before
+        self.timing_taken = timing_taken
         self.spreads: dict = {}
         self.shares: dict = {}
 
@@ -1396,6 +1434,8 @@ class Practical:
         log evidence, which assumes the library's forms exact. The same size in the
         data's own units as the between-flight spread is in a parameter's, and the one
         that applies with fewer than 3 training flights, where there is no spread."""
+        if self.timing_taken and ev.name == "signal_delay":
+            return False
         share = self.shares.get((ev.name, ev.explanation.variant))
         return share is not None and share <= FORM_ERROR
 
@@ -1523,7 +1563,9 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     # where it leaves a remainder, a small reading may be the library's description of it
     quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
                                                reference, dt)
-    scale = Practical(train, reference, before if quiet else None)
+    scale = Practical(train, reference, before if quiet else None,
+                      timing_taken=against is not None and null is not None
+                      and against.timing_taken(null.train.explanation))
     ranked = scale.rank(weighed)
     lead_name, _, lead = ranked[0]
     combination = checked = None
