@@ -64,6 +64,7 @@ def test_a_rotor_delay_the_flights_share_is_named_held_out_as_per_flight():
         assert got.outcome == "effect" and got.name == "signal_delay", got.answer
         assert got.params["delay.rotor"] == pytest.approx(DELAY, abs=0.003)
         assert got.probability > 0.9
+        assert "a delay's share of the gap is not its size" in got.answer, got.answer
         per = diagnose_per_flight(
             _flights(cf, (82,), DELAY), refs, cf, store=store).flights[0]
         assert per.name == "signal_delay", per.answer

@@ -227,7 +227,10 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     ``references``: held out against nominal reference flights (the reference model and
     the systematic remainder's normal are theirs, :func:`quadsim.gap.judge.remainder`):
     "no difference from the reference flights", a remainder beyond the references' slow
-    parts; False: "from the nominal model", beyond the noise."""
+    parts, and a named ``signal_delay``'s share of the gap is said not to be its size (no
+    difference reads each flight at its own rotor timing there,
+    :meth:`quadsim.gap.diagnose.Against.check`); False: "from the nominal model", beyond the
+    noise."""
     if against == "references":
         return _against_references(outcome, lead, stated=stated, lack=lack, separate=separate,
                                    tentative=tentative)
@@ -267,6 +270,10 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     if tentative:
         text += ". Tentative"
     text += f". Explains {100 * (reduction or 0.0):.0f} % of the held-out gap"
+    if references and lead["name"] == "signal_delay":
+        text += (" (against the reference flights no difference reads each flight at its own "
+                 "rotor timing too, so a delay's share of the gap is not its size: its "
+                 "evidence is)")
     if remains:
         text += (f"; beyond it a systematic residual stays above {noise} on "
                  f"{_remains_text(remains, normal)}: part of the gap is outside the library.")
