@@ -106,7 +106,15 @@ of evidence below the best. So:
    kink at every sample), so the delay's column is one-sided and is taken again on the other
    side when the step goes there. The stacked cost (profiled residual,
    marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
-   least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
+   least-squares problem (:func:`linear_step`). Where z1 gives a vehicle no rigid body is
+   (an inertia error's moments across the triangle inequality I_a + I_b >= I_c, linear in
+   the errors: :class:`InertiaWall`), z1 is the same quadratic's minimum on that wall
+   (:func:`quadsim.gap.fitting.plane_step`, closed form with one active equality), and the
+   wall counts as a bound in the Laplace volume (half of it, as a value at a bound); a
+   forward difference that would cross it is taken the other way. Without it the step's
+   residual failed and the explanation fell back to the full fit, whose finite differences
+   across the wall meet the non-physical penalty (:meth:`Problem.stacked`) and inflate its
+   Occam factor (measured in CHANGELOG). The residual is evaluated at z1 itself: the
    *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at z1
    with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says how
    far the linear model was off there.
@@ -919,7 +927,8 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
 def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
     """The bounded minimum of the linear model ``r(z) ~ base + jac (z - start)`` of the
     stacked cost: (z1 (P,), its predicted cost, the stacked Jacobian A (N C + K + P, P), the
-    count of values at a bound)."""
+    count of values at a bound, the inertia's wall counted as one where z1 is held on it:
+    module doc, 2.)."""
     n = len(start)
     aug0, du0 = prob.marg.profile(base)
     aug, du = prob.marg.profile(jac)
