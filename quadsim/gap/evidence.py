@@ -897,7 +897,8 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
                      signs: np.ndarray, *, which=None, out: np.ndarray | None = None
                      ) -> np.ndarray:
     """The weighted residual's Jacobian (N C, P) in z at ``start`` (module doc, 2.);
-    one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound);
+    one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound
+    and where it would cross the inertia's wall, :class:`InertiaWall`);
     ``base``: the residual at ``start``; only the columns ``which`` (bool (P,), default all)
     into ``out`` (default a new array). At the reference model the shared parts serve: the
     delay's column, and a replaced group's from the shared Jacobian (taken without the
@@ -1023,7 +1024,8 @@ def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
     """The MAP fit of ``prob`` from ``z`` by projected Gauss-Newton steps (Jacobian by
     forward differences at each iterate, the bounded linear step, halved up to 4 times until
     the cost falls), until the cost falls by less than :data:`CONVERGED` or after
-    :data:`MAX_STEPS` steps; the Laplace evidence at the optimum with the last Jacobian."""
+    :data:`MAX_STEPS` steps; the Laplace evidence at the optimum with the last Jacobian
+    (the inertia's wall counted as a bound where the optimum lies on it, :func:`linear_step`)."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
     a = None
