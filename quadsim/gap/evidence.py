@@ -106,7 +106,15 @@ of evidence below the best. So:
    kink at every sample), so the delay's column is one-sided and is taken again on the other
    side when the step goes there. The stacked cost (profiled residual,
    marginalised shifts, z) is then quadratic; its bounded minimum z1 is a small linear
-   least-squares problem (:func:`linear_step`). The residual is evaluated at z1 itself: the
+   least-squares problem (:func:`linear_step`). Where z1 gives a vehicle no rigid body is
+   (an inertia error's moments across the triangle inequality I_a + I_b >= I_c, linear in
+   the errors: :class:`InertiaWall`), z1 is the same quadratic's minimum on that wall
+   (:func:`quadsim.gap.fitting.plane_step`, closed form with one active equality), and the
+   wall counts as a bound in the Laplace volume (half of it, as a value at a bound); a
+   forward difference that would cross it is taken the other way. Without it the step's
+   residual failed and the explanation fell back to the full fit, whose finite differences
+   across the wall meet the non-physical penalty (:meth:`Problem.stacked`) and inflate its
+   Occam factor (measured in CHANGELOG). The residual is evaluated at z1 itself: the
    *screened* evidence is the Laplace evidence (:func:`quadsim.gap.evidence.laplace`) at z1
    with the Gauss-Newton precision AᵀA, and ``miss`` = |cost(z1) - predicted cost| says how
    far the linear model was off there.
@@ -199,6 +207,7 @@ from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
 from scipy.optimize import least_squares, lsq_linear
 
 from ..core.errors import ModelError
+from ..effects.base import EffectSet
 from .calibrate import jacobian
 from .explanations import (  # re-exported: the evidence's public names
     DELAY_SD_S,
@@ -211,7 +220,7 @@ from .explanations import (  # re-exported: the evidence's public names
     quadratic_laws,
     reference_determined,
 )
-from .fitting import DragLaw, build_effect, residuals
+from .fitting import DragLaw, build_effect, plane_step, residuals
 from .fitting import parameter_bounds as fit_bounds
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
 from .residual import flight_memo, memoised, min_time_constant
@@ -821,17 +830,82 @@ def _base(prob: Problem, cols: Columns, z: np.ndarray) -> np.ndarray:
     return prob.residual(z) if delay is None else cols.base(delay)
 
 
+#: the explanation's own parameters that scale the vehicle's principal moments
+#: (:mod:`quadsim.effects.inertia_error`: I'_ii = (1 + e_i) I_ii)
+INERTIA_KEYS = ("inertia_error.xx", "inertia_error.yy", "inertia_error.zz")
+#: relative tolerance of the triangle inequality, as the vehicle's own check
+#: (:func:`quadsim.vehicle.params.inertia_problems`: A + B >= C (1 - 1e-9))
+WALL_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class InertiaWall:
+    """The triangle inequality of the vehicle's principal moments (no rigid body has
+    I_a + I_b < I_c) as linear functions of a step x (P,) in z from a point: per axis c as
+    the largest, ``g_c = g0_c + g[c] . x = sum_(a != c) I_a - I_c`` (kg m^2), exact where
+    the explanation's own inertia errors are the only values it fits that move the inertia
+    (:func:`inertia_wall`). ``scale``: the largest moment at the point (kg m^2)."""
+
+    g: np.ndarray
+    g0: np.ndarray
+    scale: float
+
+    def crossed(self, values: np.ndarray) -> bool:
+        """Whether ``values`` (3,) of ``g`` leave the physical set (beyond :data:`WALL_TOL`)."""
+        return bool(np.min(values) < -WALL_TOL * self.scale)
+
+    def on(self, values: np.ndarray) -> bool:
+        """Whether ``values`` (3,) of ``g`` lie on the wall (within :data:`WALL_TOL`)."""
+        return bool(np.min(values) <= WALL_TOL * self.scale)
+
+
+def inertia_wall(prob: Problem, start: np.ndarray) -> InertiaWall | None:
+    """The :class:`InertiaWall` of ``prob`` about ``start`` (z, (P,)), or None where the
+    explanation fits no inertia error (:data:`INERTIA_KEYS`), fits another effect too (its
+    values might move the inertia), or the rest of its vehicle has a non-diagonal inertia
+    (the principal moments are then not linear in the errors). With I the inertia of the
+    shared and the explanation's other effects, the moments at theta are (1 + e_i) I_ii,
+    e_i = mean + sd z (the fitted axes; a fixed one at its fixed value)."""
+    expl = prob.expl
+    names = list(expl.parameter_names)
+    if not any(n in INERTIA_KEYS for n in names) or any(
+            fitted and name != "inertia_error" for name, _, fitted in expl.parts):
+        return None
+    theta = np.clip(prob.mean + prob.sd * start, prob.lower, prob.upper)
+    own = own_effects(expl, theta)
+    error = next(e for e in own if e.name == "inertia_error")
+    try:
+        inertia = np.asarray(EffectSet(tuple(prob.shared) + tuple(
+            e for e in own if e.name != "inertia_error")).apply_to_params(
+                prob.reference.params).inertia, float)
+    except ModelError:
+        return None
+    if np.any(inertia - np.diag(np.diag(inertia))):
+        return None
+    base = np.diag(inertia)
+    moments = base * (1.0 + np.array([error.xx, error.yy, error.zz]))
+    slope = np.zeros((3, len(start)))          # d moment_i / d z_k
+    for k, n in enumerate(names):
+        if n in INERTIA_KEYS:
+            i = INERTIA_KEYS.index(n)
+            slope[i, k] = base[i] * prob.sd[k]
+    sign = 1.0 - 2.0 * np.eye(3)               # row c: +1 for a != c, -1 for c
+    return InertiaWall(sign @ slope, sign @ moments, float(np.max(moments)))
+
+
 def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.ndarray,
                      signs: np.ndarray, *, which=None, out: np.ndarray | None = None
                      ) -> np.ndarray:
     """The weighted residual's Jacobian (N C, P) in z at ``start`` (module doc, 2.);
-    one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound);
+    one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound
+    and where it would cross the inertia's wall, :class:`InertiaWall`);
     ``base``: the residual at ``start``; only the columns ``which`` (bool (P,), default all)
     into ``out`` (default a new array). At the reference model the shared parts serve: the
     delay's column, and a replaced group's from the shared Jacobian (taken without the
     delay: a column of the linear model only, the cost is evaluated at the step)."""
     expl, delay = prob.expl, _shared_point(prob, cols, start)
     jac = np.empty((base.size, len(start))) if out is None else out
+    wall = inertia_wall(prob, start)
     for k, key in enumerate(expl.parameter_names):
         if which is not None and not which[k]:
             continue
@@ -843,7 +917,8 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
         else:
             z = start.copy()
             h = signs[k] * STEP
-            if not prob.z_lo[k] <= z[k] + h <= prob.z_hi[k]:
+            if not prob.z_lo[k] <= z[k] + h <= prob.z_hi[k] or (
+                    wall is not None and wall.crossed(wall.g0 + wall.g[:, k] * h)):
                 h = -h
             z[k] += h
             jac[:, k] = (prob.residual(z) - base) / h
@@ -853,7 +928,8 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
 def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
     """The bounded minimum of the linear model ``r(z) ~ base + jac (z - start)`` of the
     stacked cost: (z1 (P,), its predicted cost, the stacked Jacobian A (N C + K + P, P), the
-    count of values at a bound)."""
+    count of values at a bound, the inertia's wall counted as one where z1 is held on it:
+    module doc, 2.)."""
     n = len(start)
     aug0, du0 = prob.marg.profile(base)
     aug, du = prob.marg.profile(jac)
@@ -878,6 +954,14 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
     else:
         step = lsq_linear(r, -qb, bounds=(lower, upper), method="bvls")
         x, active = step.x, int(np.count_nonzero(step.active_mask))
+    wall = inertia_wall(prob, start)
+    if wall is not None and wall.crossed(wall.g0 + wall.g @ x):
+        # across the inertia's wall: the same quadratic's minimum on it (InertiaWall)
+        row = int(np.argmin(wall.g0 + wall.g @ x))
+        on = plane_step(r, qb, wall.g[row], -float(wall.g0[row]), bounds=(lower, upper))
+        if on is not None and not wall.crossed(wall.g0 + wall.g @ on):
+            x = on
+            active = int(np.count_nonzero((x <= lower) | (x >= upper))) + 1
     predicted = rest + float(np.sum((qb + r @ x) ** 2))
     return start + x, predicted, a, active
 
@@ -940,7 +1024,8 @@ def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
     """The MAP fit of ``prob`` from ``z`` by projected Gauss-Newton steps (Jacobian by
     forward differences at each iterate, the bounded linear step, halved up to 4 times until
     the cost falls), until the cost falls by less than :data:`CONVERGED` or after
-    :data:`MAX_STEPS` steps; the Laplace evidence at the optimum with the last Jacobian."""
+    :data:`MAX_STEPS` steps; the Laplace evidence at the optimum with the last Jacobian
+    (the inertia's wall counted as a bound where the optimum lies on it, :func:`linear_step`)."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
     a = None
@@ -966,7 +1051,9 @@ def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
         _, _, a, active = linear_step(prob, z, base, jacobian_columns(
             prob, cols, z, base, np.ones(len(z))))
     else:
-        active = int(np.count_nonzero((z <= prob.z_lo) | (z >= prob.z_hi)))
+        wall = inertia_wall(prob, z)
+        active = int(np.count_nonzero((z <= prob.z_lo) | (z >= prob.z_hi))) + int(
+            wall is not None and wall.on(wall.g0))
     return prob.evidence(z, vec, a.T @ a, active)
 
 

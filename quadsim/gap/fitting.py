@@ -220,7 +220,8 @@ __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING
            "BASELINE", "FIT_SPEC", "NOISE_FLOOR", "NO_OFF_VALUE", "UPSTREAM_OF_SPEED", "Candidate",
            "Fit", "arm_length", "candidates_for", "command_of_speed", "command_speed",
            "correlation_time", "curve_bound", "drag_refit_iv", "fit_candidate", "fit_motor_map",
-           "flight_memo", "noise_floor", "noise_scale", "parameter_bounds", "residuals",
+           "flight_memo", "noise_floor", "noise_scale", "parameter_bounds", "plane_step",
+           "residuals",
            "speed_of_command", "stack_states", "typical_scales"]
 
 
@@ -1374,3 +1375,30 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
 #: parameter set's b and d re-identified; a shared group of the reference model
 #: (:mod:`.calibrate`) and the held-out reading "b and d are off"
 BASELINE = Candidate("nominal_refit", (("nominal_refit", {}, ("thrust", "drag")),))
+
+
+def plane_step(r: np.ndarray, qb: np.ndarray, c: np.ndarray, h: float, *,
+               bounds: tuple) -> np.ndarray | None:
+    """The minimum of the quadratic ``|qb + r x|^2`` on the plane ``c . x = h``: the linear
+    model's step held on one linear wall (:func:`quadsim.gap.evidence.linear_step`, the
+    inertia's triangle inequality).
+
+    ``r`` (P, P): the upper-triangular factor of the linear model's stacked Jacobian
+    (``rᵀr`` its Gauss-Newton precision, positive definite: it holds the prior's identity
+    rows); ``qb`` (P,): Qᵀ of its residual; ``c`` (P,), ``h``: the plane. Closed form with one
+    active equality (Lagrange): with x_u = -r^-1 qb the unconstrained minimum, y = r^-ᵀ c,
+
+        x = x_u - r^-1 y (c . x_u - h) / |y|^2
+
+    Returned only where it lies inside the box ``bounds`` (lower, upper; each (P,)); None
+    where it does not (a box value and the wall active together: no closed form, the
+    caller keeps its step) or ``c`` is zero."""
+    from scipy.linalg import solve_triangular
+
+    lower, upper = bounds
+    if not np.any(c):
+        return None
+    xu = -solve_triangular(r, qb)
+    y = solve_triangular(r, c, trans="T")
+    x = xu - solve_triangular(r, y) * (float(c @ xu) - h) / float(y @ y)
+    return x if np.all((x >= lower) & (x <= upper)) else None
