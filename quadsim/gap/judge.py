@@ -682,14 +682,13 @@ def mean_squares(residuals: list, sigma: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Baseline:
     """What a right model leaves, per channel, on the log mean-square scale (module doc, 2):
-    ``mean`` (C,) m_c, ``spread`` (C,) s_c, ``dof`` its degrees of freedom (one, or (C,) per
-    channel: :func:`quadsim.gap.reference.moderated_spread`), ``count`` n the
+    ``mean`` (C,) m_c, ``spread`` (C,) s_c, ``dof`` its degrees of freedom, ``count`` n the
     pieces it is measured on, ``against`` ``"references"`` or ``"training"`` (which flights:
     the answer's words)."""
 
     mean: np.ndarray
     spread: np.ndarray
-    dof: float | np.ndarray
+    dof: float
     count: int
     against: str
 
@@ -751,7 +750,7 @@ def lack_of_fit(ms, baseline: Baseline, reference, *, null_ms=None) -> dict:
         return {}
     scale = np.maximum(baseline.spread * np.sqrt(1 + 1 / baseline.count), 1e-9)
     h, c = ms.shape
-    limit = student_t.ppf(1 - LOF_P / (c * h), baseline.dof)     # (C,) where dof is per channel
+    limit = float(student_t.ppf(1 - LOF_P / (c * h), baseline.dof))
     names = channel_names(reference)
     out: dict = {}
     for row in ms:

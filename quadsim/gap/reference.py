@@ -25,15 +25,6 @@ left: nu0 infinite, every channel at the pooled spread), and
 ``(nu0 s0^2 + d s_c^2) / (nu0 + d)`` with ``nu0 + d`` degrees of freedom, never more than
 the pooled test's C d.
 
-The prior is a common one only for channels that are alike, so the channels are moderated
-in two groups, each on its own: the wrench channels (forces and moments: the rigid body's
-residual, from the IMU and the motion capture, left by the air and inertia model) and the
-rotor channels (rotor speeds against the motor model: the ESC's speed measurement left by
-the command -> speed map and the rotor's dynamics). They are different physical quantities
-with different noise mechanisms, and one improves without the other: a better motor map
-shrinks the rotor channels' spreads, which moderated together would pull the wrench
-channels' spreads down with them and call a force channel's unchanged scatter a lack of fit.
-
 A channel's spread is what the references show *within* their envelope; how a quiet
 channel grows beyond them they do not show, so a flight outside the envelope is tested
 with the larger of the moderated and the pooled spread
@@ -208,9 +199,8 @@ from ..core.frames import rotate_inverse
 from ..vehicle.params import VehicleParams
 from .fitting import Candidate, parameter_bounds, residuals, typical_scales
 
-__all__ = ["moderated_spread", "WRENCH_CHANNELS", "FORCE_FEATURES", "MOMENT_FEATURES",
-           "RIDGE", "Discrepancy", "centre_term", "columns", "features", "fit_discrepancy",
-           "FD_STEP", "LackOfFitBaseline",
+__all__ = ["moderated_spread", "FORCE_FEATURES", "MOMENT_FEATURES", "RIDGE", "Discrepancy",
+           "centre_term", "columns", "features", "fit_discrepancy", "FD_STEP", "LackOfFitBaseline",
            "Reference", "aligned", "jacobian", "read_later", "rotor_spectra", "shifted",
            "weighted_residual", "COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope",
            "Position", "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend",
@@ -221,32 +211,11 @@ def _trigamma(x):
     return polygamma(1, x)
 
 
-#: the wrench channels (Fx Fy Fz Mx My Mz) lead every residual; rotor channels follow
-WRENCH_CHANNELS = 6
-
-
-def moderated_spread(log_ms: np.ndarray, *, wrench: int = WRENCH_CHANNELS
-                     ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """(spread per channel (C,), its degrees of freedom (C,), (pooled spread (C,), its
-    degrees of freedom (C,))) of ``log_ms`` (n flights, C channels) about each channel's
-    mean, moderated towards the common spread of the channel's group (module doc): the
-    first ``wrench`` channels (forces and moments) and the rest (rotor speeds), each group
-    on its own; "pooled" is pooled within the group."""
+def moderated_spread(log_ms: np.ndarray) -> tuple[np.ndarray, int, tuple[float, int]]:
+    """(spread per channel (C,), its degrees of freedom, (pooled spread, its degrees of
+    freedom)) of ``log_ms`` (n flights, C channels) about each channel's mean, moderated
+    towards the channels' common spread (module doc)."""
     log_ms = np.asarray(log_ms, dtype=float)
-    n, channels = log_ms.shape
-    spread, dof = np.empty(channels), np.empty(channels, dtype=int)
-    pooled, pooled_dof = np.empty(channels), np.empty(channels, dtype=int)
-    for group in (slice(0, min(wrench, channels)), slice(min(wrench, channels), channels)):
-        if group.start == group.stop:
-            continue
-        s, d, (p, pd) = _moderated_group(log_ms[:, group])
-        spread[group], dof[group], pooled[group], pooled_dof[group] = s, d, p, pd
-    return spread, dof, (pooled, pooled_dof)
-
-
-def _moderated_group(log_ms: np.ndarray) -> tuple[np.ndarray, int, tuple[float, int]]:
-    """:func:`moderated_spread` of one group of channels: (spread (C,), dof, (pooled
-    spread, its dof))."""
     n, channels = log_ms.shape
     d = n - 1
     pooled_dof = max(1, channels * d)
@@ -632,9 +601,8 @@ class Reference:
       that the weighted residual's squared sum is -2 log L (:func:`weighted_residual`).
     - ``lof_mean`` (C,): mean over the references of log(ms_jc / sigma_c^2) (natural log of
       each flight's mean square over sigma_c^2); ``lof_sd``: its spread (float, or (C,) per
-      channel, :mod:`quadsim.gap.reference`); ``lof_dof``: its degrees of freedom (int, or
-      (C,) per channel); ``lof_pooled``: (spread, dof) pooled over the channels of each
-      channel's group ((C,) each, :func:`moderated_spread`), or None.
+      channel, :mod:`quadsim.gap.reference`); ``lof_dof``: its degrees of freedom;
+      ``lof_pooled``: (spread, dof) pooled over the channels, or None.
     - ``baseline``: a :class:`LackOfFitBaseline` from flights other than the references
       (held-out mode), or None: the lack-of-fit baseline is then ``lof_*``.
     - ``delays_ms``: signal name (``"gyro"``, ``"rotor"``, ``"accel"``) -> (mean, sample
@@ -659,7 +627,7 @@ class Reference:
     lof_mean: np.ndarray
     #: float, or (C,) per channel at a flight beyond the references (.envelope)
     lof_sd: float | np.ndarray
-    lof_dof: int | np.ndarray
+    lof_dof: int
     delays_ms: dict
     names: list
     identified: dict
@@ -698,8 +666,7 @@ class Reference:
     #: speed map implies for a propeller change (:func:`quadsim.gap.residual.load_exponent`);
     #: None where their commands do not span enough to say
     load_exponent: tuple | None = None
-    #: (spread, degrees of freedom) of the lack of fit pooled over the channels of each
-    #: channel's group ((C,) each, :func:`moderated_spread`): what a
+    #: (spread, degrees of freedom) of the lack of fit pooled over the channels: what a
     #: flight outside the references' envelope is tested with at least
     #: (:mod:`quadsim.gap.reference`); None: ``lof_sd`` is the pooled spread already
     lof_pooled: tuple | None = None
