@@ -93,3 +93,32 @@ def test_a_result_without_per_flight_verdicts_is_refused_in_one_line(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {bad}: flights:")
     assert not out.exists()
+
+
+def test_generated_set_scores_flapping_in_the_library_and_adds_an_outside_wake():
+    """Blade flapping joined the library: its flight is scored as ``blade_flapping``; the
+    out-of-library flight is a rotor-rotor wake drawn from a generator of its own, so the
+    earlier flights' draws (and the log speeds drawn after the list) are unchanged."""
+    import numpy as np
+
+    from benchmarks.draws import draw
+    from benchmarks.outside import BladeFlapping
+    from benchmarks.reliability import FLAPPING, LIBRARY, NO_EFFECT, OUTSIDE, _generated_cases
+    from benchmarks.unmodelled import RotorWake
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    rng = np.random.default_rng(47)
+    cases = _generated_cases(params, rng)
+    truths = [t for t, _ in cases]
+    assert truths == (["none"] * NO_EFFECT + list(LIBRARY) + ["blade_flapping"] * FLAPPING
+                      + ["outside:rotor_wake"] * OUTSIDE)
+    flap, wake = cases[-2][1][0], cases[-1][1][0]
+    assert isinstance(flap, BladeFlapping) and isinstance(wake, RotorWake)
+    assert 0.02 <= wake.k_wake <= 0.04          # draw_unmodelled's realistic range
+    # the generator the log speeds are drawn from continues as if the wake were not there
+    again = np.random.default_rng(47)
+    for name in LIBRARY:
+        draw(name, params, again)
+    again.uniform(0.02, 0.04)
+    assert rng.uniform() == again.uniform()
