@@ -208,6 +208,7 @@ from scipy.optimize import least_squares, lsq_linear
 
 from ..core.errors import ModelError
 from ..effects.base import EffectSet
+from ..vehicle.params import TRIANGLE_RTOL
 from .calibrate import jacobian
 from .explanations import (  # re-exported: the evidence's public names
     DELAY_SD_S,
@@ -833,9 +834,9 @@ def _base(prob: Problem, cols: Columns, z: np.ndarray) -> np.ndarray:
 #: the explanation's own parameters that scale the vehicle's principal moments
 #: (:mod:`quadsim.effects.inertia_error`: I'_ii = (1 + e_i) I_ii)
 INERTIA_KEYS = ("inertia_error.xx", "inertia_error.yy", "inertia_error.zz")
-#: relative tolerance of the triangle inequality, as the vehicle's own check
-#: (:func:`quadsim.vehicle.params.inertia_problems`: A + B >= C (1 - 1e-9))
-WALL_TOL = 1e-9
+#: relative tolerance of the triangle inequality: the vehicle's own check's
+#: (:data:`quadsim.vehicle.params.TRIANGLE_RTOL`, :func:`~quadsim.vehicle.params.inertia_problems`)
+WALL_TOL = TRIANGLE_RTOL
 
 
 @dataclass(frozen=True)

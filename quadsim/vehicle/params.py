@@ -188,6 +188,12 @@ class VehicleParams:
 # ----------------------------------------------------------------------------- validation
 
 
+#: relative tolerance of the triangle inequality A + B >= C (1 - TRIANGLE_RTOL) of the
+#: principal moments (dimensionless; the round-off of summing moments, far below any
+#: physical difference): moments on the flat-body wall A + B = C pass
+TRIANGLE_RTOL = 1e-9
+
+
 def inertia_problems(inertia: np.ndarray) -> list[str]:
     """Reasons why ``inertia`` (3, 3) cannot be a rigid body's inertia tensor (empty if it can).
 
@@ -202,7 +208,7 @@ def inertia_problems(inertia: np.ndarray) -> list[str]:
         # a diagonal tensor (the usual case, checked thousands of times per fit): symmetric,
         # its principal moments are its diagonal -- the same test as below without eigvalsh
         moments = np.sort(diagonal)
-        if moments[0] > 0 and moments[0] + moments[1] >= moments[2] * (1 - 1e-9):
+        if moments[0] > 0 and moments[0] + moments[1] >= moments[2] * (1 - TRIANGLE_RTOL):
             return []
     if not np.allclose(inertia, inertia.T, rtol=1e-9, atol=1e-15):
         problems.append("is not symmetric")
@@ -211,7 +217,7 @@ def inertia_problems(inertia: np.ndarray) -> list[str]:
         problems.append(f"principal moments {moments.tolist()} are not all positive")
     else:
         a, b, c = np.sort(moments)
-        if a + b < c * (1 - 1e-9):
+        if a + b < c * (1 - TRIANGLE_RTOL):
             problems.append(
                 f"principal moments break the triangle inequality: {a:.6g} + {b:.6g} < {c:.6g}"
                 " (no rigid body has this inertia; MuJoCo refuses it)"
