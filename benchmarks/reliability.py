@@ -362,7 +362,8 @@ def main(argv: list[str] | None = None) -> int:
         groups = {**groups, "simulator sources, all": [
             a for t, g in groups.items() if t.startswith("simulator source (") for a in g]}
         print(format_table("simulator sources, all", groups["simulator sources, all"]))
-    if len(groups) > 1:
+    kinds = int(args.generated) + int(args.mixed is not None) + int(bool(args.benchmark))
+    if kinds > 1:
         print(format_table("all", [a for t, g in groups.items()
                                    if t != "simulator sources, all" for a in g]))
     if args.within:

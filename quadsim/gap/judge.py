@@ -556,7 +556,7 @@ def outside_library(share: float, flagged: bool,
     :data:`FORM_ERROR_TENTATIVE` or a systematic remainder beyond the references'); 0 where
     it is not: what it leaves is what a reference flight leaves, so nothing of this flight
     tells an outside effect from the name (an outside effect the name mimics to within the
-    references' noise is beyond any per-flight statistic: a stated limit, docs/gap.md)."""
+    references' noise is beyond any per-flight statistic: docs/gap.md, method 6)."""
     return model.probability(share) if flagged else 0.0
 
 
