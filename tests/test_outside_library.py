@@ -67,7 +67,8 @@ def test_a_name_that_leaves_nothing_beyond_the_references_keeps_its_probability(
 
 def test_the_posterior_with_the_outside_hypothesis_sums_to_one():
     """Three readings, log Z 0, -1, -3 (no_difference's prior: ln 2, two effects): the
-    library's posterior in closed form, then times 1 - p_out; the rows and p_out sum to 1."""
+    library's posterior in closed form; the lead's weight splits into p (1 - q) and p q (the
+    outside hypothesis), the other rows keep theirs; everything sums to 1."""
     rows = [SimpleNamespace(name="no_difference", log_z=-3.0, determined={}),
             SimpleNamespace(name="a", log_z=0.0, determined={"a.x": True}),
             SimpleNamespace(name="b", log_z=-1.0, determined={"b.x": True})]
@@ -76,12 +77,15 @@ def test_the_posterior_with_the_outside_hypothesis_sums_to_one():
     within = posterior(rows)
     assert {k: p for k, p, _ in within} == pytest.approx(
         {k: w / total for k, w in weights.items()}, rel=1e-12)
-    p_out = OUTSIDE_LIBRARY.probability(0.07)
-    out = with_outside(within, p_out)
+    q = OUTSIDE_LIBRARY.probability(0.07)
+    out, p_out = with_outside(within, q)
     assert [k for k, _, _ in out] == [k for k, _, _ in within]
     assert {k: p for k, p, _ in out} == pytest.approx(
-        {k: (1 - p_out) * w / total for k, w in weights.items()}, rel=1e-12)
+        {"a": (1 - q) / total, "b": np.exp(-1.0) / total,
+         "no_difference": 2 * np.exp(-3.0) / total}, rel=1e-12)
+    assert p_out == pytest.approx(q / total, rel=1e-12)
     assert sum(p for _, p, _ in out) + p_out == pytest.approx(1.0, rel=1e-12)
+    assert with_outside(within, 0.0) == (within, 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -128,9 +132,9 @@ def test_a_name_standing_in_for_an_outside_effect_is_below_confident(generated):
     assert flight.outcome == "effect" and flight.tentative
     assert "Fz" in flight.form_remainder
     assert flight.probability_within_library > 0.99
-    assert 0.0 < flight.outside_library < 1.0
-    assert flight.probability == pytest.approx(
-        flight.probability_within_library * (1 - flight.outside_library), rel=1e-12)
+    assert 0.3 < flight.outside_library < 0.7       # the wake leaves 9.9 % of its gap
+    assert flight.probability + flight.outside_library == pytest.approx(
+        flight.probability_within_library, rel=1e-12)
     assert flight.probability < CONFIDENT
     assert flight.posterior[0].probability == flight.probability
     assert sum(r.probability for r in flight.posterior) + flight.outside_library == \

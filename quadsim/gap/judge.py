@@ -100,12 +100,14 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
 1b. **Outside the library** (per flight, :func:`outside_library`): the posterior of 1 is
    over the library's readings only. Beside a named reading that leaves something beyond
    the references' (a lack of fit within :data:`FORM_ERROR_TENTATIVE`, or a systematic
-   remainder, 3), the hypothesis "the difference is outside the library" weighs by the
-   share of the gap the name leaves (:class:`OutsideLibrary`, its classes and prior stated
-   as data, :data:`OUTSIDE_LIBRARY`); every reading's probability is times 1 - P(outside)
-   (:func:`with_outside`), so the name's probability is the chance that it is right. The
-   verdict keeps the library-only one (``probability_within_library``); the stated
-   readings, the outcome and the tentative flag are those of the library's posterior.
+   remainder, 3), its weight splits between "the name is right" and "the name stands in
+   for an effect outside the library" by the share of the gap the name leaves
+   (:class:`OutsideLibrary`, its classes and prior stated as data, :data:`OUTSIDE_LIBRARY`;
+   :func:`with_outside`): the name's probability is the chance that it is right, the other
+   readings keep theirs (the share is what the name leaves, no statistic of theirs). The
+   verdict keeps the library-only one (``probability_within_library``) and the outside
+   hypothesis's (``outside_library``); the stated readings, the outcome and the tentative
+   flag are those of the library's posterior.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -550,21 +552,27 @@ OUTSIDE_LIBRARY = OutsideLibrary(right=((0.90, FORM_ERROR), (0.99, 0.16)),
 
 def outside_library(share: float, flagged: bool,
                     model: OutsideLibrary = OUTSIDE_LIBRARY) -> float:
-    """P(the difference is outside the library) beside a named reading (module doc, 1b):
-    :meth:`OutsideLibrary.probability` of ``share`` (the share of the gap the name leaves,
-    :func:`form_share`) where the name is ``flagged`` (it leaves a lack of fit within
-    :data:`FORM_ERROR_TENTATIVE` or a systematic remainder beyond the references'); 0 where
-    it is not: what it leaves is what a reference flight leaves, so nothing of this flight
-    tells an outside effect from the name (an outside effect the name mimics to within the
-    references' noise is beyond any per-flight statistic: docs/gap.md, method 6)."""
+    """Of a named reading's weight, the share that stands in for an effect outside the
+    library (module doc, 1b): :meth:`OutsideLibrary.probability` of ``share`` (the share of
+    the gap the name leaves, :func:`form_share`) where the name is ``flagged`` (it leaves a
+    lack of fit within :data:`FORM_ERROR_TENTATIVE` or a systematic remainder beyond the
+    references'); 0 where it is not: what it leaves is what a reference flight leaves, so
+    nothing of this flight tells an outside effect from the name (an outside effect the name
+    mimics to within the references' noise is beyond any per-flight statistic: docs/gap.md,
+    method 6)."""
     return model.probability(share) if flagged else 0.0
 
 
-def with_outside(ranked: list, p_out: float) -> list:
-    """The posterior ``ranked`` ((reading, p, Evidence) over the library's readings, summing
-    to 1) with the outside hypothesis beside it: each p times 1 - ``p_out``; the rows and
-    ``p_out`` sum to 1."""
-    return [(k, p * (1.0 - p_out), ev) for k, p, ev in ranked]
+def with_outside(ranked: list, q: float) -> tuple[list, float]:
+    """The posterior ``ranked`` ((reading, p, Evidence) over the library's readings, most
+    probable first, summing to 1) with the outside hypothesis beside it: the lead's p splits
+    into p (1 - ``q``), the name right, and p q, an outside effect it stands in for
+    (:func:`outside_library`); the other rows keep theirs. -> (rows, outside's probability);
+    they sum to what ``ranked`` sums to."""
+    if not ranked:
+        return [], 0.0
+    (k, p, ev), rest = ranked[0], list(ranked[1:])
+    return [(k, p * (1.0 - q), ev), *rest], p * q
 
 
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
@@ -1132,13 +1140,14 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     remains = remainder_of(best, check, reference) if effect else {}
     # beside a name that leaves something beyond the references' (a lack of fit within the
     # tentative share, or a remainder), "outside the library" weighs by its share (1b)
-    p_out = outside_library(share, bool(left) or bool(remains)) if effect else 0.0
+    shown, p_out = with_outside(
+        within, outside_library(share, bool(left) or bool(remains)) if effect else 0.0)
     readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
-                for k, p, ev in with_outside(within, p_out)]
+                for k, p, ev in shown]
     lead = readings[0]
     verdict = lead.name if effect else outcome
-    # which readings are stated: by the library's posterior (the outside weight scales
-    # every reading alike, so it moves no reading in or out)
+    # which readings are stated: by the library's posterior (the outside hypothesis takes
+    # from the lead only, so it moves no reading in or out)
     stated = [r for r, (_, p, _) in zip(readings, within) if p >= READING_P]
     named = [r.name for r in stated if r.name != "no_difference"]
     caveat = lead_caveat(best, reference.params) if effect else ""

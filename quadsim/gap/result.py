@@ -163,10 +163,11 @@ class Verdict(_JsonView):
     self_check_clean: bool | None = None
     #: per flight: the lead reading's probability among the library's readings only (their
     #: posterior sums to 1; before the "outside the library" hypothesis); ``probability`` is
-    #: the name's: this times 1 - ``outside_library``
+    #: the name's: this less ``outside_library``
     probability_within_library: float | None = None
-    #: per flight: P(the difference is outside the library) beside a name that leaves
-    #: something beyond the references' (:func:`quadsim.gap.judge.outside_library`); 0 else
+    #: per flight: P(the name stands in for an effect outside the library) beside a name
+    #: that leaves something beyond the references' (:func:`quadsim.gap.judge.with_outside`);
+    #: 0 else
     outside_library: float = 0.0
     #: per flight: the residual before and after the answer (:mod:`.page`; not in the JSON)
     series: Series | None = None

@@ -204,14 +204,13 @@ def _pct(p: float) -> str:
 
 def outside_words(p_out: float, share: float, within: float) -> str:
     """Per flight, the sentence beside a name that leaves something beyond the references'
-    (:func:`quadsim.gap.judge.outside_library`): ``p_out`` the probability that the
-    difference lies outside the library, ``share`` the share of the flight's gap the name
+    (:func:`quadsim.gap.judge.with_outside`): ``p_out`` the probability that the name stands
+    in for an effect outside the library, ``share`` the share of the flight's gap the name
     leaves, ``within`` the name's probability among the library's readings alone."""
     source = f", from the {100 * share:.1f} % of the gap the name leaves" \
         if np.isfinite(share) else ""
-    return (f" The stated probability counts a difference outside the library "
-            f"({100 * p_out:.0f} %{source}); among the library's readings alone the name "
-            f"has {_pct(within)}.")
+    return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
+            f"that it stands in for an effect outside the library{source}.")
 
 
 def _remains_text(remains: dict, normal: str = "the noise's") -> str:
