@@ -22,6 +22,13 @@ Two kinds of answers, each a (stated probability, right) pair:
   a payload flight named as a mass or cable payload whose masses add up to within
   :data:`PAYLOAD_TOLERANCE` of :data:`PAYLOAD_TOTAL`; a plain flight ``no_significant_gap``.
 
+* **simulator sources** (``--benchmark RESULT.json``, repeatable): the per-case JSON of
+  ``python -m benchmarks.gap_benchmark --independent --source S --cache DIR --out
+  RESULT.json`` (other simulators, judged per flight against their own nominal flights;
+  :func:`benchmark_answers`). Right: an observable library case whose lead reading names it
+  (:func:`benchmarks.score.score_case`'s ``lead``), a no-effect case ``no_significant_gap``,
+  an outside case ``unexplained``; a library case that is not observable is not scored.
+
 The stated probability is the flight's ``probability``: of the verdict's reading (a named
 effect, or "no difference" for ``no_significant_gap``). An ``unexplained`` answer states no
 name (its probability is of the leading reading it declines to name), so it is counted on a
@@ -34,11 +41,18 @@ Usage::
     python -m benchmarks.reliability --generated                   # ~3 min on one core
     python -m benchmarks.reliability --mixed mixed.json            # labelled real flights
     python -m benchmarks.reliability --generated --mixed mixed.json --json rel.json
+    python -m benchmarks.reliability --benchmark cf.json --benchmark pf.json --within
+
+``--within`` adds each group's table at the lead reading's probability among the library's
+readings alone (``probability_within_library``, :func:`quadsim.gap.judge.outside_library`:
+the probability before the "outside the library" hypothesis; a result without the field
+uses ``probability``).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -86,7 +100,8 @@ class Answer:
     """One judged flight: ``source`` (``generated`` / ``mixed``), ``flight`` name, ``truth``
     (the hidden effect, ``none``, or ``outside:NAME``), ``outcome`` (``effect`` /
     ``no_significant_gap`` / ``unexplained`` / ``refused``), ``verdict`` (its name),
-    ``stated`` (the stated probability, 0-1) and ``right``."""
+    ``stated`` (the stated probability, 0-1), ``right`` and ``within`` (the lead reading's
+    probability among the library's readings alone; NaN: not in the result)."""
 
     source: str
     flight: str
@@ -95,6 +110,7 @@ class Answer:
     verdict: str
     stated: float
     right: bool
+    within: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -202,7 +218,42 @@ def mixed_answers(result: dict, labels: dict) -> list[Answer]:
             right = outcome == "no_significant_gap"
         stated = flight.get("probability")
         out.append(Answer("mixed", name, label, outcome, verdict,
-                          math.nan if stated is None else float(stated), bool(right)))
+                          math.nan if stated is None else float(stated), bool(right),
+                          _within(flight)))
+    return out
+
+
+def _within(flight: dict) -> float:
+    value = flight.get("probability_within_library", flight.get("probability"))
+    return math.nan if value is None else float(value)
+
+
+def benchmark_answers(rows: list, name: str = "benchmark") -> list[Answer]:
+    """Answers of a simulator source's per-case rows (``benchmarks.gap_benchmark
+    --independent --source S --out``: ``name``, ``truth``, ``kind`` library / none /
+    outside, ``observable``, ``per_flight`` the read verdict with its ``score``); rows
+    without ``per_flight`` are a ValueError naming the field. Right: module doc."""
+    if not isinstance(rows, list) or not rows or not all(
+            isinstance(r, dict) and isinstance(r.get("per_flight"), dict) for r in rows):
+        raise ValueError("per_flight: no per-flight verdicts (give the --out JSON of "
+                         "`python -m benchmarks.gap_benchmark --independent --source S`)")
+    out = []
+    for r in rows:
+        v = r["per_flight"]
+        if r["kind"] == "library" and not r.get("observable", True):
+            continue
+        outcome = {"named": "effect"}.get(v["outcome"], v["outcome"])
+        if r["kind"] == "library":
+            right = bool(v["score"].get("lead", v["score"]["named"]))
+        elif r["kind"] == "none":
+            right = outcome == "no_significant_gap"
+        else:
+            right = outcome == "unexplained"
+        stated = v.get("probability")
+        out.append(Answer(name, str(r["name"]), str(r["truth"]), outcome,
+                          "+".join(v.get("lead") or []) or outcome,
+                          math.nan if stated is None else float(stated), right,
+                          _within(v)))
     return out
 
 
@@ -257,7 +308,8 @@ def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[A
             right = outcome == "effect" and truth in verdict.split("+")
         stated = flight.get("probability")
         out.append(Answer("generated", f"flight_{i:02d}", truth, outcome, verdict,
-                          math.nan if stated is None else float(stated), right))
+                          math.nan if stated is None else float(stated), right,
+                          _within(flight)))
     return out
 
 
@@ -272,12 +324,24 @@ def main(argv: list[str] | None = None) -> int:
                         help="per-flight result JSON of the labelled mixed/ flights")
     parser.add_argument("--labels", type=Path, default=DEFAULT_LABELS,
                         help="labels of the --mixed flights (mixed_labels.json)")
+    parser.add_argument("--benchmark", type=Path, metavar="RESULT.json", action="append",
+                        default=[], help="per-case JSON of a simulator source "
+                        "(gap_benchmark --independent --source S --out); repeatable")
+    parser.add_argument("--within", action="store_true",
+                        help="also the tables at the library-only probability")
     parser.add_argument("--json", type=Path, metavar="OUT.json",
                         help="write every answer and the tables")
     args = parser.parse_args(argv)
-    if not args.generated and args.mixed is None:
-        parser.error("give --generated and/or --mixed RESULT.json")
+    if not args.generated and args.mixed is None and not args.benchmark:
+        parser.error("give --generated, --mixed RESULT.json and/or --benchmark RESULT.json")
     groups: dict[str, list[Answer]] = {}
+    for path in args.benchmark:
+        try:
+            groups[f"simulator source ({path.name})"] = benchmark_answers(
+                json.loads(path.read_text()), path.stem)
+        except (OSError, ValueError, KeyError) as exc:
+            print(f"error: {path}: {exc}", file=sys.stderr)
+            return 2
     if args.mixed is not None:
         try:
             result = json.loads(args.mixed.read_text())
@@ -294,8 +358,18 @@ def main(argv: list[str] | None = None) -> int:
         for a in answers:
             print(f"    {a.flight:<28} truth {a.truth:<24} {a.verdict:<32} p {a.stated:.3f} "
                   f"{'right' if a.right else 'wrong'}")
-    if len(groups) > 1:
-        print(format_table("all", [a for g in groups.values() for a in g]))
+    if len(args.benchmark) > 1:
+        groups = {**groups, "simulator sources, all": [
+            a for t, g in groups.items() if t.startswith("simulator source (") for a in g]}
+        print(format_table("simulator sources, all", groups["simulator sources, all"]))
+    kinds = int(args.generated) + int(args.mixed is not None) + int(bool(args.benchmark))
+    if kinds > 1:
+        print(format_table("all", [a for t, g in groups.items()
+                                   if t != "simulator sources, all" for a in g]))
+    if args.within:
+        for title, answers in groups.items():
+            print(format_table(f"{title}, library-only probability",
+                               [dataclasses.replace(a, stated=a.within) for a in answers]))
     if args.json is not None:
         args.json.write_text(json.dumps({
             title: {"answers": [asdict(a) for a in answers],

@@ -347,6 +347,8 @@ def judge(source: CaseSource, cache) -> list[dict]:
         out.append({**row, "effects": {k: np.asarray(v).tolist() for k, v in
                                        row["effects"].items()},
                     "per_flight": {**verdict, "reduction": flight.get("reduction"),
+                                   "probability_within_library":
+                                       flight.get("probability_within_library"),
                                    "score": score_case(row["truth"], row["kind"], verdict)},
                     "seconds_all": seconds, "self_check": self_check})
     return out

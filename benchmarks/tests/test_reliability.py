@@ -122,3 +122,33 @@ def test_generated_set_scores_flapping_in_the_library_and_adds_an_outside_wake()
         draw(name, params, again)
     again.uniform(0.02, 0.04)
     assert rng.uniform() == again.uniform()
+
+
+def test_simulator_source_rows_are_scored_by_kind_and_read_both_probabilities():
+    """A gap_benchmark per-case JSON: an observable library case is right when the lead
+    names it, an unobservable one is not scored, no effect right as no_significant_gap, an
+    outside case right only unexplained; ``within`` is the library-only probability (the
+    stated one where a result predates the field)."""
+    from benchmarks.reliability import benchmark_answers
+
+    def row(name, kind, outcome, lead, p, within=None, observable=True, named=False):
+        v = {"outcome": outcome, "lead": lead, "probability": p,
+             "score": {"named": named, "lead": named}}
+        if within is not None:
+            v["probability_within_library"] = within
+        return {"name": name, "truth": name, "kind": kind, "observable": observable,
+                "per_flight": v}
+
+    rows = [row("mass", "library", "named", ["mass_offset"], 0.99, named=True),
+            row("wind", "library", "named", ["wind"], 0.9, observable=False, named=True),
+            row("none_0", "none", "no_significant_gap", [], 0.95, within=0.95),
+            row("wake", "outside", "named", ["blade_flapping"], 0.51, within=1.0),
+            row("lift", "outside", "unexplained", [], 0.99, within=0.99)]
+    got = {a.flight: (a.outcome, a.right, a.stated, a.within)
+           for a in benchmark_answers(rows, "src")}
+    assert got == {"mass": ("effect", True, 0.99, 0.99),
+                   "none_0": ("no_significant_gap", True, 0.95, 0.95),
+                   "wake": ("effect", False, 0.51, 1.0),
+                   "lift": ("unexplained", True, 0.99, 0.99)}
+    with pytest.raises(ValueError, match="per_flight"):
+        benchmark_answers([{"name": "x"}])

@@ -97,6 +97,17 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    :class:`quadsim.gap.diagnose.Practical`); a battery-sag reading that brings the law
    speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
    of the flight, and their readings alike (:func:`negligible_at`).
+1b. **Outside the library** (per flight, :func:`outside_library`): the posterior of 1 is
+   over the library's readings only. Beside a named reading that leaves something beyond
+   the references' (a lack of fit within :data:`FORM_ERROR_TENTATIVE`, or a systematic
+   remainder, 3), its weight splits between "the name is right" and "the name stands in
+   for an effect outside the library" by the share of the gap the name leaves
+   (:class:`OutsideLibrary`, its classes and prior stated as data, :data:`OUTSIDE_LIBRARY`;
+   :func:`with_outside`): the name's probability is the chance that it is right, the other
+   readings keep theirs (the share is what the name leaves, no statistic of theirs). The
+   verdict keeps the library-only one (``probability_within_library``) and the outside
+   hypothesis's (``outside_library``); the stated readings, the outcome and the tentative
+   flag are those of the library's posterior.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -154,8 +165,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import welch
-from scipy.special import logsumexp
-from scipy.stats import chi2
+from scipy.special import expit, logsumexp
+from scipy.stats import chi2, norm
 from scipy.stats import t as student_t
 
 from ..core.errors import ModelError, QuadsimError
@@ -175,7 +186,7 @@ from .fitting import (
 )
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
-from .words import answer, asserted, nominal_words, reading_text
+from .words import answer, asserted, nominal_words, outside_words, reading_text
 
 __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_band", "by_regime",
            "check", "inconsistent_note", "kstep_errors", "partial_text", "regime_masks",
@@ -190,7 +201,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "training_lack", "alone",
            "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
-           "channel_logliks"]
+           "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
+           "with_outside"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -473,6 +485,96 @@ FORM_ERROR = 0.05
 #: the smallest an effect outside the library left under its best reading (19 %), so
 #: neither class moves by chance; tentative, so never a confident wrong name (docs/gap.md)
 FORM_ERROR_TENTATIVE = 0.10
+
+
+@dataclass(frozen=True)
+class OutsideLibrary:
+    """The hypothesis "the difference is outside the library" beside a named reading (module
+    doc, 1b), stated as data.
+
+    What is weighed: ``s``, the share of the flight's gap "no difference" leaves that the
+    named reading leaves (:func:`form_share`). Two classes of flights, ln s normal with one
+    spread sigma in each: a right reading (mean mu_R) and an effect outside the library under
+    its best reading (mean mu_O). ``right``: (quantile, share) pairs of the right readings'
+    shares that fix mu_R and sigma; ``boundary``: the share where the two classes are
+    equally likely, which fixes mu_O = 2 ln(boundary) - mu_R; ``prior``: P(outside) before
+    the share is seen; ``source``: where the numbers were measured. Then
+    P(outside | s) = 1 / (1 + exp(-L)),
+    L = ln(prior / (1 - prior)) + (mu_O - mu_R) / sigma^2 (ln s - ln boundary)."""
+
+    right: tuple
+    boundary: float
+    prior: float
+    source: str
+
+    @property
+    def spread(self) -> float:
+        """sigma: the spread of ln s between the two quantiles of ``right``."""
+        (q1, s1), (q2, s2) = self.right
+        return float(np.log(s2 / s1) / (norm.ppf(q2) - norm.ppf(q1)))
+
+    @property
+    def right_mean(self) -> float:
+        """mu_R: the mean of ln s over right readings."""
+        q1, s1 = self.right[0]
+        return float(np.log(s1) - norm.ppf(q1) * self.spread)
+
+    @property
+    def outside_mean(self) -> float:
+        """mu_O: the mean of ln s over outside effects, mirrored about ln(boundary)."""
+        return float(2 * np.log(self.boundary) - self.right_mean)
+
+    def probability(self, share: float) -> float:
+        """P(outside | s = ``share``) (class doc); the prior where no share is measured
+        (``share`` not finite or not positive: no gap to share)."""
+        if not np.isfinite(share) or share <= 0:
+            return float(self.prior)
+        slope = (self.outside_mean - self.right_mean) / self.spread ** 2
+        odds = np.log(self.prior / (1 - self.prior)) \
+            + slope * (np.log(share) - np.log(self.boundary))
+        return float(expit(odds))
+
+
+#: The outside hypothesis's data. ``right``: the right readings' shares on the independent
+#: simulator sources measured 2026-11-27 (l2f X500 and fs, Crazyflow, multirotor, PyFlyt; 114
+#: case flights, benchmarks/HISTORY.md "The form-error rule"): 90 % under 5 % (FORM_ERROR),
+#: the largest 16 %, taken as the 99 % quantile (the largest of about a hundred). The
+#: effects outside the library on the same flights left 19-100 %: ``boundary`` is
+#: FORM_ERROR_TENTATIVE, the geometric middle between the classes, where a flagged name
+#: turns ``unexplained``; ``prior`` 1/2: beside a name the tool itself flags (what it leaves
+#: lies beyond the references'), inside and outside the library are a priori alike, as the
+#: geometric middle assumed. Then mu_R = ln 1.2 %, sigma = 1.11, mu_O = ln 83 %.
+OUTSIDE_LIBRARY = OutsideLibrary(right=((0.90, FORM_ERROR), (0.99, 0.16)),
+                                 boundary=FORM_ERROR_TENTATIVE, prior=0.5,
+                                 source="benchmarks/HISTORY.md, the form-error rule "
+                                        "(2026-11-27, 114 simulator case flights)")
+
+
+def outside_library(share: float, flagged: bool,
+                    model: OutsideLibrary = OUTSIDE_LIBRARY) -> float:
+    """Of a named reading's weight, the share that stands in for an effect outside the
+    library (module doc, 1b): :meth:`OutsideLibrary.probability` of ``share`` (the share of
+    the gap the name leaves, :func:`form_share`) where the name is ``flagged`` (it leaves a
+    lack of fit within :data:`FORM_ERROR_TENTATIVE` or a systematic remainder beyond the
+    references'); 0 where it is not: what it leaves is what a reference flight leaves, so
+    nothing of this flight tells an outside effect from the name (an outside effect the name
+    mimics to within the references' noise is beyond any per-flight statistic: docs/gap.md,
+    method 6)."""
+    return model.probability(share) if flagged else 0.0
+
+
+def with_outside(ranked: list, q: float) -> tuple[list, float]:
+    """The posterior ``ranked`` ((reading, p, Evidence) over the library's readings, most
+    probable first, summing to 1) with the outside hypothesis beside it: the lead's p splits
+    into p (1 - ``q``), the name right, and p q, an outside effect it stands in for
+    (:func:`outside_library`); the other rows keep theirs. -> (rows, outside's probability);
+    they sum to what ``ranked`` sums to."""
+    if not ranked:
+        return [], 0.0
+    (k, p, ev), rest = ranked[0], list(ranked[1:])
+    return [(k, p * (1.0 - q), ev), *rest], p * q
+
+
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
 #: part (:data:`quadsim.gap.heldout.NOISE_WINDOW_S`, the same value).
 SLOW_WINDOW_S = 0.5
@@ -1016,9 +1118,10 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # the references' readings at the flight's place, as its baseline (calibrate.placed)
     check = placed(getattr(reference, "self_check", None), reference)
     vbat_ref = getattr(reference, "vbat_ref", None)
-    ranked = [(k, min(p, cap), ev) for k, p, ev in
+    # the library's readings (their posterior sums to 1); the name's own probability below
+    within = [(k, min(p, cap), ev) for k, p, ev in
               posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref))]
-    top, p_top, best = ranked[0]
+    top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
     lack = lack_of_fit(best.ms, baseline, reference,
@@ -1028,20 +1131,26 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         form_share(best.ms, null.ms, np.exp(baseline.mean))
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
-    readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
-                for k, p, ev in ranked]
-    lead = readings[0]
-    stated = [r for r in readings if r.probability >= READING_P]
-    separate = _differ_on(best, ranked[1][2] if len(ranked) > 1 else None, reference)
+    separate = _differ_on(best, within[1][2] if len(within) > 1 else None, reference)
     outcome = outcome_of(top, lack, {})
-    verdict = lead.name if outcome == "effect" else outcome
-    named = [r.name for r in stated if r.name != "no_difference"]
     effect = outcome == "effect"
-    caveat = lead_caveat(best, reference.params) if outcome == "effect" else ""
     # a name that leaves a systematic remainder beyond the references' own (the held-out
     # rule, against the references' normal): the rest is outside the library, the name may
     # stand in for it: tentative, the remainder stated
-    remains = remainder_of(best, check, reference) if outcome == "effect" else {}
+    remains = remainder_of(best, check, reference) if effect else {}
+    # beside a name that leaves something beyond the references' (a lack of fit within the
+    # tentative share, or a remainder), "outside the library" weighs by its share (1b)
+    shown, p_out = with_outside(
+        within, outside_library(share, bool(left) or bool(remains)) if effect else 0.0)
+    readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
+                for k, p, ev in shown]
+    lead = readings[0]
+    verdict = lead.name if effect else outcome
+    # which readings are stated: by the library's posterior (the outside hypothesis takes
+    # from the lead only, so it moves no reading in or out)
+    stated = [r for r, (_, p, _) in zip(readings, within) if p >= READING_P]
+    named = [r.name for r in stated if r.name != "no_difference"]
+    caveat = lead_caveat(best, reference.params) if effect else ""
     # no self-check (fewer than 3 references): what they share cannot be told from a
     # difference of this flight, and practical significance has no scale (docs/gap.md)
     unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains)
@@ -1061,8 +1170,12 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                   f"{where_} the reference flights' typical, each judged against the others): "
                   "part of the difference is outside the library, so the name may stand in "
                   "for it.")
+    if p_out > 0:
+        words += outside_words(p_out, share, p_top)
     return Verdict(
-        outcome, verdict, words, p_top, tentative=effect and (p_top < CONFIDENT or unsure),
+        outcome, verdict, words, lead.probability,
+        tentative=effect and (p_top < CONFIDENT or unsure),
+        probability_within_library=p_top, outside_library=p_out,
         form_remainder={**{k: v[0] for k, v in left.items()},
                         **{k: v[0] for k, v in remains.items()}},
         self_check_clean=None if check is None else check.clean,

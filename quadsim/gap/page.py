@@ -549,6 +549,10 @@ def _readings(f) -> str:
     if rest:
         rows.append([_name(f"{len(rest)} more readings", "wrap"), _Cell("< 0.1 % each"),
                      _name(", ".join(rest), "wrap")])
+    if f.get("outside_library"):     # the name's stand-in share (quadsim.gap.judge.with_outside)
+        rows.append([_name("outside the library", "wrap"),
+                     _Cell(_pct1(f["outside_library"])),
+                     _words("the named reading standing in for an effect the library lacks")])
     text = _table(["reading", "probability among the readings weighed",
                    "magnitude (95 % intervals)"], rows)
     post = f.get("posterior", [])

@@ -233,6 +233,8 @@ _FLIGHT = {
                    "consistency": _CONSISTENCY, "partial": _PARTIAL,
                    "tentative": {"type": "boolean"},
                    "probability": {"type": ["number", "null"]},
+                   "probability_within_library": {"type": ["number", "null"]},
+                   "outside_library": {"type": "number"},
                    "posterior": {"type": "array", "items": _READING},
                    "reason": {"type": "string"},
                    "differ_on": {"type": "array", "items": {"type": "string"}},

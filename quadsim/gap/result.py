@@ -93,7 +93,7 @@ _HELDOUT_KEYS = ("floor_source", "channels", "alternatives", "best_candidate",
                  "heldout_gap_after")
 #: JSON keys of a judged flight beyond the common ones.
 _FLIGHT_KEYS = ("differ_on", "symptom", "drag_law", "signal_delays_ms", "form_remainder",
-                "self_check_clean")
+                "self_check_clean", "probability_within_library", "outside_library")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -111,7 +111,8 @@ class Verdict(_JsonView):
     out, when a name was checked).
 
     Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
-    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``; JSON ``residual`` (with
+    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``,
+    ``probability_within_library``, ``outside_library``; JSON ``residual`` (with
     a ``series``): the RMS per channel before and after the answer over the references'
     RMS, the share of the excess removed and its words (:class:`GapShare`,
     :func:`quadsim.gap.words.residual_text`). Held out: ``floor_source``, ``channels`` (RMS
@@ -160,6 +161,14 @@ class Verdict(_JsonView):
     #: per flight: whether the references judge themselves clean
     #: (:class:`quadsim.gap.calibrate.SelfCheck`); None without a self-check
     self_check_clean: bool | None = None
+    #: per flight: the lead reading's probability among the library's readings only (their
+    #: posterior sums to 1; before the "outside the library" hypothesis); ``probability`` is
+    #: the name's: this less ``outside_library``
+    probability_within_library: float | None = None
+    #: per flight: P(the name stands in for an effect outside the library) beside a name
+    #: that leaves something beyond the references' (:func:`quadsim.gap.judge.with_outside`);
+    #: 0 else
+    outside_library: float = 0.0
     #: per flight: the residual before and after the answer (:mod:`.page`; not in the JSON)
     series: Series | None = None
 

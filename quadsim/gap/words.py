@@ -30,7 +30,7 @@ from .explanations import reference_determined
 from .fitting import describe
 from .residual import channel_unit
 
-__all__ = ["answer", "asserted", "batch_answer", "nominal_words", "reading_text",
+__all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
            "reference_text", "residual_text"]
 
 
@@ -200,6 +200,17 @@ def nominal_words(text: str, own: bool, *, references: bool = False) -> str:
 def _pct(p: float) -> str:
     """A probability as whole percent; ``> 99 %`` from 0.995."""
     return f"{100 * p:.0f} %" if p < 0.995 else "> 99 %"
+
+
+def outside_words(p_out: float, share: float, within: float) -> str:
+    """Per flight, the sentence beside a name that leaves something beyond the references'
+    (:func:`quadsim.gap.judge.with_outside`): ``p_out`` the probability that the name stands
+    in for an effect outside the library, ``share`` the share of the flight's gap the name
+    leaves, ``within`` the name's probability among the library's readings alone."""
+    source = f", from the {100 * share:.1f} % of the gap the name leaves" \
+        if np.isfinite(share) else ""
+    return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
+            f"that it stands in for an effect outside the library{source}.")
 
 
 def _remains_text(remains: dict, normal: str = "the noise's") -> str:
