@@ -6,6 +6,7 @@ as data (quadsim.gap.judge.OutsideLibrary); a clean name keeps its probability."
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -144,3 +145,32 @@ def test_a_name_standing_in_for_an_outside_effect_is_below_confident(generated):
     json = flight.to_json()
     assert json["outside_library"] == flight.outside_library
     assert json["probability_within_library"] == flight.probability_within_library
+
+
+MIXED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / \
+    "crazyflie21_brushless"
+
+
+@pytest.mark.skipif(not (MIXED / "mixed" / "flight_120.csv.gz").exists(),
+                    reason="needs ../shared/data/crazyflie21_brushless")
+def test_a_name_more_probably_a_stand_in_is_unexplained():
+    """Plain mixed flight 120 against the twenty nominal flights: its lead (a rotor's thrust) leaves
+    most of its gap and a systematic remainder, so the outside hypothesis outweighs the name
+    (q > 1/2): ``unexplained`` with the outside probability stated (main c41b28b named it
+    ``thrust_mismatch``, tentative, 49 %: a plain flight given a name)."""
+    from quadsim.core.errors import QuadsimWarning
+    from quadsim.gap import diagnose_per_flight
+    from quadsim.logs.flightlog import load_log
+    from quadsim.vehicle.params import load_params
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        refs = [load_log(MIXED / "nominal" / f"flight_{i:02d}.csv.gz") for i in range(20)]
+        flight = load_log(MIXED / "mixed" / "flight_120.csv.gz")
+        result = diagnose_per_flight([flight], refs, load_params("crazyflie21"))
+    v = result.flights[0]
+    assert v.outcome == "unexplained" and v.name == "unexplained" and not v.tentative
+    assert v.outside_library > 0.5 * v.probability_within_library
+    assert v.probability == v.outside_library
+    assert v.readings == () and v.params == {}
+    assert "stands in for an effect outside the library" in v.answer

@@ -106,8 +106,11 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    :func:`with_outside`): the name's probability is the chance that it is right, the other
    readings keep theirs (the share is what the name leaves, no statistic of theirs). The
    verdict keeps the library-only one (``probability_within_library``) and the outside
-   hypothesis's (``outside_library``); the stated readings, the outcome and the tentative
-   flag are those of the library's posterior.
+   hypothesis's (``outside_library``); the stated readings and the tentative flag are those
+   of the library's posterior. Where the outside hypothesis is more probable than the name
+   itself (q > 1/2: the name leaves more than the classes' boundary share), the name is a
+   stand-in, not a cause: the outcome is ``unexplained``, the name and both probabilities
+   stated (:func:`quadsim.gap.words.stand_in_words`).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -186,7 +189,14 @@ from .fitting import (
 )
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
-from .words import answer, asserted, nominal_words, outside_words, reading_text
+from .words import (
+    answer,
+    asserted,
+    nominal_words,
+    outside_words,
+    reading_text,
+    stand_in_words,
+)
 
 __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_band", "by_regime",
            "check", "inconsistent_note", "kstep_errors", "partial_text", "regime_masks",
@@ -1145,6 +1155,11 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
                 for k, p, ev in shown]
     lead = readings[0]
+    # the outside hypothesis more probable than the name itself (1b): the name is a
+    # stand-in, not a cause: unexplained, with the name and both probabilities stated
+    stand_in = effect and p_out > lead.probability
+    if stand_in:
+        outcome, effect = "unexplained", False
     verdict = lead.name if effect else outcome
     # which readings are stated: by the library's posterior (the outside hypothesis takes
     # from the lead only, so it moves no reading in or out)
@@ -1154,9 +1169,11 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # no self-check (fewer than 3 references): what they share cannot be told from a
     # difference of this flight, and practical significance has no scale (docs/gap.md)
     unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains)
-    words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
-                   against="references", separate=separate,
-                   tentative=p_top < CONFIDENT or unsure)
+    words = stand_in_words(lead.name, p_top, readings[0].magnitude, share, p_out) \
+        if stand_in else \
+        answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
+               against="references", separate=separate,
+               tentative=p_top < CONFIDENT or unsure)
     sized = best
     if effect:          # a sag's size: its full voltage at the references' voltage
         sized = max(at_reference_voltage(best, vbat, vbat_ref),
@@ -1170,10 +1187,11 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                   f"{where_} the reference flights' typical, each judged against the others): "
                   "part of the difference is outside the library, so the name may stand in "
                   "for it.")
-    if p_out > 0:
+    if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
     return Verdict(
-        outcome, verdict, words, lead.probability,
+        # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
+        outcome, verdict, words, p_out if stand_in else lead.probability,
         tentative=effect and (p_top < CONFIDENT or unsure),
         probability_within_library=p_top, outside_library=p_out,
         form_remainder={**{k: v[0] for k, v in left.items()},

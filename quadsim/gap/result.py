@@ -103,7 +103,8 @@ class Verdict(_JsonView):
     Common: ``outcome`` (:data:`OUTCOMES`); ``name``: the reading named when ``outcome`` is
     ``effect``, else the outcome (JSON key ``verdict`` per flight, ``effect`` held out);
     ``answer`` in words (:mod:`quadsim.gap.words`); ``probability`` of the lead reading
-    (None when refused); ``tentative``; ``posterior`` (every :class:`Reading`, most probable
+    (None when refused; per flight, an ``unexplained`` name that more probably stands in
+    for an effect outside the library: that hypothesis's, ``outside_library``); ``tentative``; ``posterior`` (every :class:`Reading`, most probable
     first); ``readings`` (names stated with the named one, probability >= READING_P);
     ``lack_of_fit`` (channel -> RMS over the baseline's typical RMS, channels beyond it
     only); the named reading's ``params``/``ci``/``fixed``/``units``; ``confusable_with``
@@ -163,7 +164,7 @@ class Verdict(_JsonView):
     self_check_clean: bool | None = None
     #: per flight: the lead reading's probability among the library's readings only (their
     #: posterior sums to 1; before the "outside the library" hypothesis); ``probability`` is
-    #: the name's: this less ``outside_library``
+    #: the name's: this less ``outside_library`` (a stand-in's: ``outside_library``)
     probability_within_library: float | None = None
     #: per flight: P(the name stands in for an effect outside the library) beside a name
     #: that leaves something beyond the references' (:func:`quadsim.gap.judge.with_outside`);

@@ -31,7 +31,7 @@ from .fitting import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
-           "reference_text", "residual_text"]
+           "reference_text", "residual_text", "stand_in_words"]
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -211,6 +211,21 @@ def outside_words(p_out: float, share: float, within: float) -> str:
         if np.isfinite(share) else ""
     return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
             f"that it stands in for an effect outside the library{source}.")
+
+
+def stand_in_words(name: str, within: float, magnitude: str, share: float,
+                   p_out: float) -> str:
+    """Per flight, the answer where the outside hypothesis is more probable than the name it
+    weighs (:func:`quadsim.gap.judge.with_outside`, outcome ``unexplained``): ``name`` the
+    library's most probable reading, ``within`` its probability among the library's readings
+    alone, ``magnitude`` its reading in words, ``share`` the share of the flight's gap it
+    leaves, ``p_out`` the probability that it stands in for an effect outside the library."""
+    left = f" leaves {100 * share:.0f} % of the flight's gap," if np.isfinite(share) \
+        else " leaves"
+    return (f"Not in the library: the most probable of the library's readings ({name}, "
+            f"{_pct(within)} among them: {magnitude}){left} more than the reference flights "
+            f"leave, so it more probably stands in for an effect outside the library "
+            f"({100 * p_out:.0f} %) than it is the cause ({100 * (within - p_out):.0f} %).")
 
 
 def _remains_text(remains: dict, normal: str = "the noise's") -> str:
