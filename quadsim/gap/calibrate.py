@@ -1170,7 +1170,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
                                base=tuple(base))
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
-    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
+    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40,
+                        compact=True)
     if curve and CURVE_KEY in cand.parameter_names:
         # before the refinement, which changes only the wind's standard errors: a slope the
         # pooled fit leaves undetermined ends this calibration without paying for it
