@@ -684,24 +684,89 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
     The step's pseudo-inverse is taken in SI units (not :func:`_covariance`): there it cuts
     the directions one flight's data barely fix (a wind without drag, inertia against
     damping), which then stay at theta_ref instead of moving per flight."""
+    return _scatters(flights, reference, [own])[0]
+
+
+def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None = None
+              ) -> list[np.ndarray]:
+    """:func:`_scatter` of ``reference`` (into ``owns[0]``) and, with ``side``, of
+    ``reference`` with that torque side (into ``owns[1]``), flight by flight: the side's
+    Jacobian from the plain one's columns (:func:`_side_jacobian`). Returns the scatters."""
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
-    values, variances = [], []
+    turned = None if side is None else dataclasses.replace(reference, side=side)
+    steps: list = [([], []) for _ in range(1 if side is None else 2)]
     for f in flights:
         jac, r = jacobian(f, reference, free, reference.candidate.effects, with_base=True)
-        info = jac.T @ jac
-        cov = np.linalg.pinv(info)
-        value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
-        value[free] -= cov @ (jac.T @ r)
-        variance[free] = np.clip(np.diag(cov), 0, None)
-        values.append(value)
-        variances.append(variance)
-    values, variances = np.asarray(values), np.asarray(variances)
-    if own is not None:
-        own.extend([values, np.sqrt(variances)])
-    if len(values) < 2:
-        return np.zeros(k)
-    return np.sqrt(np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None))
+        pairs = [(jac, r)]
+        if turned is not None:
+            pairs.append(_side_jacobian(f, turned, free, (jac, r)))
+        for (values, variances), (jac, r) in zip(steps, pairs):
+            info = jac.T @ jac
+            cov = np.linalg.pinv(info)
+            value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
+            value[free] -= cov @ (jac.T @ r)
+            variance[free] = np.clip(np.diag(cov), 0, None)
+            values.append(value)
+            variances.append(variance)
+    out = []
+    for own, (values, variances) in zip(owns, steps):
+        values, variances = np.asarray(values), np.asarray(variances)
+        if own is not None:
+            own.extend([values, np.sqrt(variances)])
+        out.append(np.zeros(k) if len(values) < 2 else np.sqrt(
+            np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None)))
+    return out
+
+
+def _side_jacobian(states, reference: Reference, free: list[int], plain: tuple):
+    """:func:`quadsim.gap.reference.jacobian` (with its base) of ``reference``, whose roll and
+    pitch residual is on the torque side (``reference.side``, a :class:`TorqueSide`), on one
+    flight's ``states``, from ``plain`` = (Jacobian, weighted residual) of the same columns
+    ``free`` at the same theta_ref without the side.
+
+    The side replaces the residual's channels 3 + ``axes`` by ``L(r) = band(r[:, 3:6] B)``,
+    ``B = (I^-1 I_v)[:, axes]`` with ``I_v`` the vehicle's inertia, and leaves the others as
+    they are; for a parameter that does not move ``I_v``, ``L`` is the same linear map at
+    the base and at the probe, so the forward difference of ``L(r)`` is ``L`` of the forward
+    difference of ``r``: the plain column (its weight taken off) through ``L``, weighted
+    again; the other channels are the plain column's own. A column that moves ``I_v`` (the
+    inertia) is probed as before. The same numbers to the differences' round-off (1e-16 of
+    the residual over the step; tests/test_side_scatter.py) without the probes' residuals."""
+    side = reference.side
+    params = reference.params
+    memo: dict = {}
+    effects = reference.candidate.effects(reference.theta)
+    base = weighted_residual(states, reference, effects, memo).ravel()
+    inertia = np.asarray(EffectSet(tuple(effects)).apply_to_params(params).inertia, float)
+    typical = typical_scales(reference.candidate, params)
+    linear, probed = [], []
+    for col, j in enumerate(free):
+        theta = reference.theta.copy()
+        theta[j] += FD_STEP * typical[j]
+        try:
+            moved = EffectSet(tuple(reference.candidate.effects(theta))).apply_to_params(params)
+            same = np.array_equal(np.asarray(moved.inertia, float), inertia)
+        except ModelError:
+            same = False
+        (linear if same else probed).append(col)
+    jac_plain = plain[0]
+    weight = np.sqrt(reference.weights)
+    chans = len(weight)
+    jac = np.array(jac_plain, dtype=float, copy=True)
+    if linear:
+        cube = jac.reshape(-1, chans, len(free))[:, :, linear]     # (N, C, k) a view's copy
+        back = np.linalg.solve(np.asarray(params.inertia, float), inertia)[:, list(side.axes)]
+        moment = np.einsum("nik,ia->nak", cube[:, 3:6, :] / weight[3:6][None, :, None], back)
+        banded = side.band(moment.reshape(len(moment), -1)).reshape(moment.shape)
+        cols = [3 + a for a in side.axes]
+        cube[:, cols, :] = banded * weight[cols][None, :, None]
+        view = jac.reshape(-1, chans, len(free))
+        view[:, :, linear] = cube
+    if probed:
+        jac[:, probed] = jacobian(states, reference, [free[c] for c in probed],
+                                  reference.candidate.effects, memo=memo, base=base)
+    return jac, base
 
 
 #: at most this many pooled Levenberg-Marquardt steps after the bounded fit (:func:`_refine`);
@@ -1235,10 +1300,11 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
-    ref.scatter = _scatter(states, ref, own)
-    if side is not None:    # the rotation's own values as its pooled fit reads them
-        rot: list = []
-        scatter = _scatter(states, dataclasses.replace(ref, side=side), rot)
+    rot: list = []      # with a side: the rotation's own values as its pooled fit reads them
+    scatters = _scatters(states, ref, [own, rot], side)
+    ref.scatter = scatters[0]
+    if side is not None:
+        scatter = scatters[1]
         cols = [j for j, n in enumerate(cand.parameter_names) if n in ROTATION]
         ref.scatter[cols] = scatter[cols]
         own[0][:, cols], own[1][:, cols] = rot[0][:, cols], rot[1][:, cols]
