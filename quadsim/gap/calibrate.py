@@ -781,21 +781,33 @@ class _Views:
     flight's rotor spectra (:func:`rotor_spectra`) computed once for all the timings the
     refinement reads (the same numbers: :func:`shifted` with the spectra it would compute)."""
 
+    #: the views kept per flight: the last few timings read (a refinement step reads its
+    #: timing, that plus the difference step, and the trials'; the next step starts at one)
+    KEPT = 4
+
     def __init__(self, flights):
         self.fits = [getattr(f, "fit", f) for f in flights]
         self.spectra: list = [None] * len(self.fits)
+        self.read: list[dict] = [{} for _ in self.fits]
 
     def __len__(self) -> int:
         return len(self.fits)
 
     def at(self, i: int, delay_s: float):
-        """Flight ``i``'s fit states with its rotor speeds read ``delay_s`` (s) later."""
+        """Flight ``i``'s fit states with its rotor speeds read ``delay_s`` (s) later (the
+        same object for a timing read again while kept: the same numbers)."""
         fit = self.fits[i]
         if delay_s == 0.0 or fit.rotor_speed is None:
             return fit
-        if self.spectra[i] is None:
-            self.spectra[i] = rotor_spectra(fit)
-        return shifted(fit, delay_s, self.spectra[i])
+        kept = self.read[i]
+        view = kept.get(float(delay_s))
+        if view is None:
+            if self.spectra[i] is None:
+                self.spectra[i] = rotor_spectra(fit)
+            view = kept[float(delay_s)] = shifted(fit, delay_s, self.spectra[i])
+            if len(kept) > self.KEPT:
+                del kept[next(iter(kept))]
+        return view
 
 
 def _pooled(views: _Views, probe, shift: float, timing: bool, bases: list | None = None):
