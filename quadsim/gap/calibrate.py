@@ -85,7 +85,8 @@ Stages
 ------
 1. Static command -> speed map per rotor (:func:`quadsim.gap.residual.fit_motor_map`) on the
    references (commands logged).
-2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`) of the shared
+2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`, solved through
+   the stacked residual's R factor: :func:`quadsim.gap.lsq.compact_least_squares`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
    (``nominal_refit``; d by instrumental variables), the thrust curve's slope about their
    mean rotor speed where they determine it (:func:`centred_curve`, :func:`calibrate`), the
