@@ -188,6 +188,7 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..effects.base import EffectSet
+from ..logs.zerophase import sosfiltfilt0
 from ..vehicle.params import VehicleParams
 from .fitting import (
     DETERMINED,
@@ -1371,10 +1372,8 @@ class TorqueSide:
     def band(self, x: np.ndarray) -> np.ndarray:
         """``x`` (N, k) band-passed to :data:`quadsim.gap.calibrate.BAND_HZ` (zero-phase
         4th-order Butterworth at ``rate_hz``)."""
-        from scipy import signal
-
-        # a copy: the filter's Cython code wants a writable buffer; the design stays kept
-        return signal.sosfiltfilt(_band_sos(self.rate_hz).copy(), x, axis=0)
+        # scipy's sosfiltfilt bit for bit, its initial conditions kept per design
+        return sosfiltfilt0(_band_sos(self.rate_hz), x)
 
 
 @functools.lru_cache(maxsize=8)
