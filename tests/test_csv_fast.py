@@ -84,3 +84,19 @@ def test_problems_worded_by_the_plain_parser(tmp_path):
     path.write_text(HEADER + "\n")
     with pytest.raises(Exception, match="no data rows"):
         read_log_columns(path)
+
+
+def test_a_chunked_column_is_read_as_to_numpy_reads_it():
+    """:func:`quadsim.logs.csvfile._float_column` (the value buffers copied, no pandas) on
+    a column of several chunks, one of them a slice (its buffer offset): the numbers of
+    pyarrow's ``to_numpy``, bit for bit, in a new writable array."""
+    import pyarrow as pa
+
+    rng = np.random.default_rng(1)
+    parts = [rng.normal(size=n) for n in (5, 1, 9)]
+    column = pa.chunked_array([pa.array(parts[0]), pa.array(parts[1]),
+                               pa.array(np.concatenate([[7.0, 8.0], parts[2]])).slice(2)])
+    out = csvfile._float_column(column)
+    assert out.flags.writeable and out.dtype == np.float64
+    assert np.array_equal(out.view(np.int64), np.asarray(column.to_numpy()).view(np.int64))
+    assert np.array_equal(out, np.concatenate(parts))

@@ -85,7 +85,8 @@ Stages
 ------
 1. Static command -> speed map per rotor (:func:`quadsim.gap.residual.fit_motor_map`) on the
    references (commands logged).
-2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`) of the shared
+2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`, solved through
+   the stacked residual's R factor: :func:`quadsim.gap.lsq.compact_least_squares`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
    (``nominal_refit``; d by instrumental variables), the thrust curve's slope about their
    mean rotor speed where they determine it (:func:`centred_curve`, :func:`calibrate`), the
@@ -187,6 +188,7 @@ import numpy as np
 
 from ..core.errors import InputError, ModelError
 from ..effects.base import EffectSet
+from ..logs.zerophase import sosfiltfilt0
 from ..vehicle.params import VehicleParams
 from .fitting import (
     DETERMINED,
@@ -684,24 +686,89 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
     The step's pseudo-inverse is taken in SI units (not :func:`_covariance`): there it cuts
     the directions one flight's data barely fix (a wind without drag, inertia against
     damping), which then stay at theta_ref instead of moving per flight."""
+    return _scatters(flights, reference, [own])[0]
+
+
+def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None = None
+              ) -> list[np.ndarray]:
+    """:func:`_scatter` of ``reference`` (into ``owns[0]``) and, with ``side``, of
+    ``reference`` with that torque side (into ``owns[1]``), flight by flight: the side's
+    Jacobian from the plain one's columns (:func:`_side_jacobian`). Returns the scatters."""
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
-    values, variances = [], []
+    turned = None if side is None else dataclasses.replace(reference, side=side)
+    steps: list = [([], []) for _ in range(1 if side is None else 2)]
     for f in flights:
         jac, r = jacobian(f, reference, free, reference.candidate.effects, with_base=True)
-        info = jac.T @ jac
-        cov = np.linalg.pinv(info)
-        value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
-        value[free] -= cov @ (jac.T @ r)
-        variance[free] = np.clip(np.diag(cov), 0, None)
-        values.append(value)
-        variances.append(variance)
-    values, variances = np.asarray(values), np.asarray(variances)
-    if own is not None:
-        own.extend([values, np.sqrt(variances)])
-    if len(values) < 2:
-        return np.zeros(k)
-    return np.sqrt(np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None))
+        pairs = [(jac, r)]
+        if turned is not None:
+            pairs.append(_side_jacobian(f, turned, free, (jac, r)))
+        for (values, variances), (jac, r) in zip(steps, pairs):
+            info = jac.T @ jac
+            cov = np.linalg.pinv(info)
+            value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
+            value[free] -= cov @ (jac.T @ r)
+            variance[free] = np.clip(np.diag(cov), 0, None)
+            values.append(value)
+            variances.append(variance)
+    out = []
+    for own, (values, variances) in zip(owns, steps):
+        values, variances = np.asarray(values), np.asarray(variances)
+        if own is not None:
+            own.extend([values, np.sqrt(variances)])
+        out.append(np.zeros(k) if len(values) < 2 else np.sqrt(
+            np.clip(values.var(axis=0, ddof=1) - variances.mean(axis=0), 0, None)))
+    return out
+
+
+def _side_jacobian(states, reference: Reference, free: list[int], plain: tuple):
+    """:func:`quadsim.gap.reference.jacobian` (with its base) of ``reference``, whose roll and
+    pitch residual is on the torque side (``reference.side``, a :class:`TorqueSide`), on one
+    flight's ``states``, from ``plain`` = (Jacobian, weighted residual) of the same columns
+    ``free`` at the same theta_ref without the side.
+
+    The side replaces the residual's channels 3 + ``axes`` by ``L(r) = band(r[:, 3:6] B)``,
+    ``B = (I^-1 I_v)[:, axes]`` with ``I_v`` the vehicle's inertia, and leaves the others as
+    they are; for a parameter that does not move ``I_v``, ``L`` is the same linear map at
+    the base and at the probe, so the forward difference of ``L(r)`` is ``L`` of the forward
+    difference of ``r``: the plain column (its weight taken off) through ``L``, weighted
+    again; the other channels are the plain column's own. A column that moves ``I_v`` (the
+    inertia) is probed as before. The same numbers to the differences' round-off (1e-16 of
+    the residual over the step; tests/test_side_scatter.py) without the probes' residuals."""
+    side = reference.side
+    params = reference.params
+    memo: dict = {}
+    effects = reference.candidate.effects(reference.theta)
+    base = weighted_residual(states, reference, effects, memo).ravel()
+    inertia = np.asarray(EffectSet(tuple(effects)).apply_to_params(params).inertia, float)
+    typical = typical_scales(reference.candidate, params)
+    linear, probed = [], []
+    for col, j in enumerate(free):
+        theta = reference.theta.copy()
+        theta[j] += FD_STEP * typical[j]
+        try:
+            moved = EffectSet(tuple(reference.candidate.effects(theta))).apply_to_params(params)
+            same = np.array_equal(np.asarray(moved.inertia, float), inertia)
+        except ModelError:
+            same = False
+        (linear if same else probed).append(col)
+    jac_plain = plain[0]
+    weight = np.sqrt(reference.weights)
+    chans = len(weight)
+    jac = np.array(jac_plain, dtype=float, copy=True)
+    if linear:
+        cube = jac.reshape(-1, chans, len(free))[:, :, linear]     # (N, C, k) a view's copy
+        back = np.linalg.solve(np.asarray(params.inertia, float), inertia)[:, list(side.axes)]
+        moment = np.einsum("nik,ia->nak", cube[:, 3:6, :] / weight[3:6][None, :, None], back)
+        banded = side.band(moment.reshape(len(moment), -1)).reshape(moment.shape)
+        cols = [3 + a for a in side.axes]
+        cube[:, cols, :] = banded * weight[cols][None, :, None]
+        view = jac.reshape(-1, chans, len(free))
+        view[:, :, linear] = cube
+    if probed:
+        jac[:, probed] = jacobian(states, reference, [free[c] for c in probed],
+                                  reference.candidate.effects, memo=memo, base=base)
+    return jac, base
 
 
 #: at most this many pooled Levenberg-Marquardt steps after the bounded fit (:func:`_refine`);
@@ -716,21 +783,33 @@ class _Views:
     flight's rotor spectra (:func:`rotor_spectra`) computed once for all the timings the
     refinement reads (the same numbers: :func:`shifted` with the spectra it would compute)."""
 
+    #: the views kept per flight: the last few timings read (a refinement step reads its
+    #: timing, that plus the difference step, and the trials'; the next step starts at one)
+    KEPT = 4
+
     def __init__(self, flights):
         self.fits = [getattr(f, "fit", f) for f in flights]
         self.spectra: list = [None] * len(self.fits)
+        self.read: list[dict] = [{} for _ in self.fits]
 
     def __len__(self) -> int:
         return len(self.fits)
 
     def at(self, i: int, delay_s: float):
-        """Flight ``i``'s fit states with its rotor speeds read ``delay_s`` (s) later."""
+        """Flight ``i``'s fit states with its rotor speeds read ``delay_s`` (s) later (the
+        same object for a timing read again while kept: the same numbers)."""
         fit = self.fits[i]
         if delay_s == 0.0 or fit.rotor_speed is None:
             return fit
-        if self.spectra[i] is None:
-            self.spectra[i] = rotor_spectra(fit)
-        return shifted(fit, delay_s, self.spectra[i])
+        kept = self.read[i]
+        view = kept.get(float(delay_s))
+        if view is None:
+            if self.spectra[i] is None:
+                self.spectra[i] = rotor_spectra(fit)
+            view = kept[float(delay_s)] = shifted(fit, delay_s, self.spectra[i])
+            if len(kept) > self.KEPT:
+                del kept[next(iter(kept))]
+        return view
 
 
 def _pooled(views: _Views, probe, shift: float, timing: bool, bases: list | None = None):
@@ -1170,7 +1249,8 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
                                base=tuple(base))
     cand = centred_curve(cand, states) if curve else Candidate(
         cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
-    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40)
+    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40,
+                        compact=True)
     if curve and CURVE_KEY in cand.parameter_names:
         # before the refinement, which changes only the wind's standard errors: a slope the
         # pooled fit leaves undetermined ends this calibration without paying for it
@@ -1234,10 +1314,11 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
     ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
-    ref.scatter = _scatter(states, ref, own)
-    if side is not None:    # the rotation's own values as its pooled fit reads them
-        rot: list = []
-        scatter = _scatter(states, dataclasses.replace(ref, side=side), rot)
+    rot: list = []      # with a side: the rotation's own values as its pooled fit reads them
+    scatters = _scatters(states, ref, [own, rot], side)
+    ref.scatter = scatters[0]
+    if side is not None:
+        scatter = scatters[1]
         cols = [j for j, n in enumerate(cand.parameter_names) if n in ROTATION]
         ref.scatter[cols] = scatter[cols]
         own[0][:, cols], own[1][:, cols] = rot[0][:, cols], rot[1][:, cols]
@@ -1291,10 +1372,8 @@ class TorqueSide:
     def band(self, x: np.ndarray) -> np.ndarray:
         """``x`` (N, k) band-passed to :data:`quadsim.gap.calibrate.BAND_HZ` (zero-phase
         4th-order Butterworth at ``rate_hz``)."""
-        from scipy import signal
-
-        # a copy: the filter's Cython code wants a writable buffer; the design stays kept
-        return signal.sosfiltfilt(_band_sos(self.rate_hz).copy(), x, axis=0)
+        # scipy's sosfiltfilt bit for bit, its initial conditions kept per design
+        return sosfiltfilt0(_band_sos(self.rate_hz), x)
 
 
 @functools.lru_cache(maxsize=8)

@@ -338,12 +338,14 @@ def decimated(states: FlightStates, stride: int) -> FlightStates:
     """
     if stride <= 1:
         return states
-    from scipy.signal import butter, sosfiltfilt
+    from scipy.signal import butter
+
+    from ..logs.zerophase import sosfiltfilt0  # scipy's sosfiltfilt, its zi kept
 
     sos = butter(4, ANTI_ALIAS / stride, output="sos")
 
     def low(x):
-        return None if x is None else sosfiltfilt(sos, x, axis=0)
+        return None if x is None else sosfiltfilt0(sos, x)
 
     low_passed = FlightStates(states.t, low(states.position), low(states.velocity),
                               low(states.accel_world), states.quat, low(states.body_rate),

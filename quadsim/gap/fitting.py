@@ -1303,8 +1303,10 @@ def flagged(candidate: Candidate, flag: str) -> list[int]:
 
 def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: VehicleParams,
                   sigma: np.ndarray, *, rotor_channel: bool, start: np.ndarray | None = None,
-                  max_nfev: int = 60) -> Fit:
-    """Bounded least squares of ``candidate`` on ``flights`` (already decimated)."""
+                  max_nfev: int = 60, compact: bool = False) -> Fit:
+    """Bounded least squares of ``candidate`` on ``flights`` (already decimated).
+    ``compact``: solved through the residual's R factor (:func:`quadsim.gap.lsq.
+    compact_least_squares`: scipy's iterates up to rounding, each SVD on P+1 rows)."""
     typical = typical_scales(candidate, params)
     lower, upper = parameter_bounds(candidate, params)
     # a rotor time constant is at least one sub-step of the rotor channel (min_time_constant)
@@ -1335,8 +1337,14 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
             return np.full(size, 1e3)
 
     z_lower, z_upper = (lower - x0) / typical, (upper - x0) / typical
-    result = least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
-                           diff_step=1e-4, max_nfev=max_nfev, method="trf", x_scale=1.0)
+    if compact:
+        from .lsq import compact_least_squares
+
+        result = compact_least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
+                                       diff_step=1e-4, max_nfev=max_nfev)
+    else:
+        result = least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
+                               diff_step=1e-4, max_nfev=max_nfev, method="trf", x_scale=1.0)
     theta = x0 + result.x * typical
     jac, res = result.jac / typical, result.fun
     dof = max(1, res.size - len(x0))

@@ -152,12 +152,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from ..core.errors import InputError
 from ..core.frames import cross, quat_normalize, rotate_inverse
 from ..effects.base import Effect, EffectBase, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
+from ..logs.savgol import savgol  # scipy's savgol_filter, the ends' fits cached
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
@@ -469,8 +469,7 @@ def flight_states(log: FlightLog, *, window_s: float = DEFAULT_WINDOW_S, polyord
                          f"{window}-sample smoothing window ({window_s} s)")
 
     def smooth(x, deriv=0):
-        return savgol_filter(x, window, polyorder, deriv=deriv, delta=step, axis=0,
-                             mode="interp")
+        return savgol(x, window, polyorder, deriv=deriv, delta=step)   # savgol_filter's
 
     quat = quat_normalize(smooth(_quat_continuous(log.quat)))
     rate_raw = log.body_rate if log.body_rate is not None else body_rate_from_quat(log.t, log.quat)

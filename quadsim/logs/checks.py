@@ -537,8 +537,45 @@ def _best_rss(balance: _TorqueBalance, torque_rows: np.ndarray) -> np.ndarray:
     """(3,) the balance's best residual per axis over every column order (N m s)^2."""
     import itertools
 
-    return np.min([_order_fit(balance, torque_rows, perm)[0] for perm in
-                   itertools.permutations(range(balance.rotors))], axis=0)
+    orders = list(itertools.permutations(range(balance.rotors)))
+    _fit_orders(balance, torque_rows, orders)
+    return np.min([_order_fit(balance, torque_rows, perm)[0] for perm in orders], axis=0)
+
+
+def _fit_orders(balance: _TorqueBalance, torque_rows: np.ndarray, orders: list) -> None:
+    """:func:`_fit_order` of every column order in ``orders`` at once (arrays over the
+    orders and the three axes), kept in ``balance.fits``: the same fits to round-off (the
+    2 x 2 least squares by a pseudo-inverse of the same cut-off as ``lstsq``'s) at a
+    fraction of the per-order loop's cost (issue 43 item 7; tests/test_order_batch.py)."""
+    todo = [o for o in orders if (torque_rows.tobytes(), tuple(o)) not in balance.fits]
+    if not todo:
+        return
+    r, g = balance.rotors, balance.gram
+    s, t = slice(3, 3 + r), 3 + r
+    mix = np.zeros((len(todo), 3, r))
+    for k, columns in enumerate(todo):
+        mix[k][:, list(columns)] = torque_rows             # mix[k, a]: axis a's row, reordered
+    a11 = np.einsum("kai,ij,kaj->ka", mix, g[s, s], mix)
+    a12 = mix @ g[s, t]
+    design = np.empty(mix.shape[:2] + (2, 2))
+    design[..., 0, 0], design[..., 0, 1], design[..., 1, 0] = a11, a12, a12
+    design[..., 1, 1] = g[t, t]
+    target = np.stack([np.einsum("kai,ia->ka", mix, g[s, :3]),
+                       np.broadcast_to(g[t, :3], a11.shape)], axis=-1)
+    beta = np.einsum("kaij,kaj->kai", np.linalg.pinv(design, rcond=2 * np.finfo(float).eps),
+                     target)
+    flat = beta[..., 0] <= 0                               # a gain <= 0 explains nothing
+    beta[..., 0] = np.where(flat, 0.0, beta[..., 0])
+    beta[..., 1] = np.where(flat, g[t, :3] / g[t, t] if g[t, t] > 0 else 0.0, beta[..., 1])
+    w = np.zeros(mix.shape[:2] + (len(g),))
+    w[:, np.arange(3), np.arange(3)] = 1.0
+    w[..., s] = -beta[..., :1] * mix
+    w[..., t] = -beta[..., 1]
+    rss = np.maximum(np.einsum("kai,ij,kaj->ka", w, g, w), 0.0)
+    lagged = np.einsum("kai,ij,kaj->ka", w, balance.lag, w)
+    rho = np.divide(lagged, rss, out=np.zeros_like(rss), where=rss > 0)
+    for k, columns in enumerate(todo):
+        balance.fits[(torque_rows.tobytes(), tuple(columns))] = (rss[k], rho[k])
 
 
 def rotor_order_source(log, params, *, commands: bool = False) -> str:

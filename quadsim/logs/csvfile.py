@@ -97,7 +97,21 @@ def _fast_columns(raw: bytes) -> dict[str, np.ndarray] | None:
     if table.num_rows == 0 or any(c.null_count for c in table.columns):
         return None
     # a writable copy (pyarrow's own buffers are read-only), as the plain parser's
-    return {name: np.array(table.column(name).to_numpy(), dtype=float) for name in header}
+    return {name: _float_column(table.column(name)) for name in header}
+
+
+def _float_column(column) -> np.ndarray:
+    """A float64 pyarrow column without nulls (a ChunkedArray) as a new numpy array: each
+    chunk's value buffer copied in (the numbers of ``column.to_numpy()``, without
+    ``to_numpy``'s import of pandas, ~0.6 s of a command's CPU)."""
+    out = np.empty(len(column))
+    k = 0
+    for chunk in column.chunks:
+        n = len(chunk)
+        out[k:k + n] = np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=n,
+                                     offset=chunk.offset * 8)
+        k += n
+    return out
 
 
 def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:

@@ -52,9 +52,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from .flightlog import FlightLog, body_rate_from_quat
+from .savgol import savgol
 
 __all__ = ["DelayEstimate", "cross_correlation_delay", "estimate_delays", "align_log",
            "align_signal_delays", "delay_notes", "regression_delay", "MIN_PEAK",
@@ -211,7 +211,7 @@ def _integral(x: np.ndarray, dt: float) -> np.ndarray:
 def _highpass(x: np.ndarray, dt: float, window_s: float = HIGHPASS_S) -> np.ndarray:
     """x minus its zero-phase running quadratic fit over ``window_s`` (removes drift)."""
     window = min(len(x) - (1 - len(x) % 2), max(5, int(round(window_s / dt)) | 1))
-    return x - savgol_filter(x, window, 2, axis=0)
+    return x - savgol(x, window, 2)
 
 
 def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float = MAX_LAG_S,
@@ -233,7 +233,7 @@ def estimate_delays(log: FlightLog, *, gravity: float = 9.81, max_lag_s: float =
         return DelayEstimate(delays, peaks, dt, ("log too short to estimate signal delays",))
 
     def smooth(x):
-        return savgol_filter(x, window, 3, axis=0)
+        return savgol(x, window, 3)
 
     # gyro against motion capture; the rotor speeds against the gyro (torque ~ angular
     # acceleration) and the accelerometer against the rotor speeds (thrust ~ specific force):
