@@ -92,3 +92,21 @@ def test_the_profiled_cost_is_the_profiled_residuals_norm(seed):
     assert fresh.cost(base) == pytest.approx(want, rel=1e-12)
     fresh.profile(base)                             # profiled already: its own norm
     assert fresh.cost(base) == want
+
+
+def test_the_kept_moment_is_the_one_computed_anew():
+    """jᵀ r and A^-1 jᵀ r kept from a profile or a cost of the same residual vector
+    (:meth:`Marginal.moment`) against a marginal that computes them for the linear step:
+    the step's factor the same to the bit; another vector is not answered from the kept."""
+    marg, start, base, jac = _problem(9)
+    fresh = Marginal(marg.j, np.ones(marg.j.shape[1]))
+    fresh.profile(base)                             # keeps base's moment
+    want = gram_factor(Marginal(marg.j, np.ones(marg.j.shape[1])), start, base, jac)
+    got = gram_factor(fresh, start, base, jac)
+    for a, b in zip(got, want):
+        assert np.array_equal(a, b)
+    other = base + 1.0
+    rhs, x = fresh.moment(other)
+    assert np.array_equal(rhs, fresh.j.T @ other)
+    np.testing.assert_allclose((np.eye(fresh.j.shape[1]) + fresh.j.T @ fresh.j) @ x, rhs,
+                               rtol=1e-10, atol=1e-10 * float(np.max(np.abs(rhs))))

@@ -203,7 +203,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
+from scipy.linalg import cho_factor, get_lapack_funcs
 from scipy.optimize import least_squares, lsq_linear
 
 from ..core.errors import ModelError
@@ -337,6 +337,19 @@ class Marginal:
         # batch wrapper: most of its cost on these small systems, called thousands of times
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if j.shape[1] else None
         self._last: tuple | None = None
+        self._moment: tuple | None = None
+
+    def moment(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last vector's kept
+        (the profile, the one-pass cost and the linear step's Gram matrix of one residual
+        share them: the same numbers, one pass over j; residuals are not written to)."""
+        kept = self._moment
+        if kept is not None and kept[0] is r:
+            return kept[1], kept[2]
+        rhs = self.j.T @ r
+        x = self.solve(rhs)
+        self._moment = (r, rhs, x)
+        return rhs, x
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(r + j du, du) at the profiled shift du = -A^-1 jᵀ r of the weighted residual
@@ -370,23 +383,14 @@ class Marginal:
         if last is not None and last[0] is r:          # profiled already: its own norm
             aug, du = last[1]
             return float(aug @ aug) + float(du @ du)
-        rhs = self.j.T @ r
+        rhs, x = self.moment(r)
         if not len(rhs):
             return float(r @ r)
-        x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
-        if info != 0:
-            raise ValueError(f"illegal value in {-info}th argument of internal potrs")
         return float(r @ r) - float(rhs @ x)
 
     def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rhs = self.j.T @ r
-        if self._potrs is None:
-            du = -cho_solve(self.chol, rhs)
-        else:
-            x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
-            if info != 0:
-                raise ValueError(f"illegal value in {-info}th argument of internal potrs")
-            du = -x
+        x = self.moment(r)[1] if r.ndim == 1 else self.solve(self.j.T @ r)
+        du = -x
         return r + self.j @ du, du
 
 
@@ -1029,8 +1033,8 @@ def gram_factor(marg: Marginal, start: np.ndarray, base: np.ndarray, jac: np.nda
     the Gram matrix is not positive definite to round-off (b in the span of A: the caller
     factors A itself then)."""
     n = len(start)
-    c_jac, c_base = marg.j.T @ jac, marg.j.T @ base
-    y_jac, y_base = marg.solve(c_jac), marg.solve(c_base)
+    c_jac, (c_base, y_base) = marg.j.T @ jac, marg.moment(base)
+    y_jac = marg.solve(c_jac)
     m = np.empty((n + 1, n + 1))
     m[:n, :n] = jac.T @ jac - c_jac.T @ y_jac + np.eye(n)
     m[:n, n] = m[n, :n] = jac.T @ base - c_jac.T @ y_base + start
