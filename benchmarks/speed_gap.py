@@ -23,6 +23,16 @@ own (``time.process_time`` around the CLI's calls: the imports, loading and chec
 logs, preparing the references, their calibration, their self-check, judging the flights):
 where the CPU goes, not a second measurement of the total.
 
+``--parts`` instead times the weighing's parts (the references' self-check and the judged
+flights' weighing) inside one fresh process of the 26-flight command: the residual
+evaluations (``quadsim.gap.evidence.flight_residual``, each one the model evaluated; the
+residuals kept as a fit's last point are not counted) and the linear algebra after them
+(the marginal's profile and one-pass cost, the linear steps, the Laplace evidence, the
+marginals' factorisations), each part's CPU (``time.process_time``) with what it calls among
+the others apart, and how many calls; with ``--against`` the same for both checkouts, one
+after the other. Steadier than the whole command's CPU on a loaded machine: the evaluation
+count does not move with the load at all.
+
 ``--against CHECKOUT`` times the 26-flight command alternately with another checkout of the
 repository (say the commit before a change; ``git worktree add ../before HEAD~3``) and this
 one, ``--rounds`` times each (default 2): on a shared machine whose speed drifts, only runs
@@ -33,6 +43,7 @@ Usage (from the repository root; the machine and its load matter, so say them)::
     nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4]
     nice -n 5 python benchmarks/speed_gap.py --stages
     nice -n 5 python benchmarks/speed_gap.py --against ../before [--rounds 2]
+    nice -n 5 python benchmarks/speed_gap.py --parts [--against ../before]
 
 Exit 0 with one ``skipped:`` line when the data folder is absent. Not a test: it measures.
 """
@@ -174,6 +185,82 @@ def time_stages(flights: list[Path], references: list[Path]) -> dict:
     return json.loads(line.split(" ", 1)[1])
 
 
+#: (module, class or None, function, part) the weighing's part timer wraps
+#: (:func:`weighing_parts`); a name a checkout lacks is left out
+PARTS = (("quadsim.gap.evidence", None, "flight_residual", "residual evaluations"),
+         ("quadsim.gap.evidence", "Marginal", "_profile", "profiles over the shared columns"),
+         ("quadsim.gap.evidence", "Marginal", "cost", "one-pass profiled costs"),
+         ("quadsim.gap.evidence", None, "linear_step", "linear steps"),
+         ("quadsim.gap.evidence", None, "laplace", "Laplace evidence"),
+         ("quadsim.gap.evidence", "Marginal", "__init__", "marginals factored"),
+         ("quadsim.gap.evidence", None, "evaluate", "the rest of the weighing"))
+
+
+def weighing_parts(argv: list[str]) -> dict:
+    """{part: [CPU s, calls]} of :data:`PARTS` while ``python -m quadsim.gap ARGV`` runs in
+    this process: each part's ``time.process_time`` without the time of the other parts it
+    calls (the residual evaluations inside a linear step count as evaluations), so the parts
+    add up to the weighing's CPU; "the rest of the weighing" is the evaluate calls' own."""
+    import functools
+    import importlib
+
+    spent: dict = {}
+    inner: list = []
+
+    def wrap(owner, name, label):
+        original = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name)
+
+        def timed(*args, _original=original, _label=label, **kwargs):
+            begin = time.process_time()
+            inner.append(0.0)
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                took = time.process_time() - begin
+                own = took - inner.pop()
+                entry = spent.setdefault(_label, [0.0, 0])
+                entry[0] += own
+                entry[1] += 1
+                if inner:
+                    inner[-1] += took
+
+        setattr(owner, name, functools.wraps(original)(timed))
+
+    for module, cls, name, label in PARTS:
+        owner = importlib.import_module(module)
+        owner = getattr(owner, cls) if cls else owner
+        if (owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
+                ) is not None:
+            wrap(owner, name, label)
+    main_module = importlib.import_module("quadsim.gap.__main__")
+    try:
+        main_module.main(argv)
+    except SystemExit:
+        pass
+    return spent
+
+
+def time_parts(flights: list[Path], references: list[Path], root: Path = ROOT) -> dict:
+    """:func:`weighing_parts` of the user's command on ``flights`` in a fresh process of
+    checkout ``root`` (this file's function, its source handed over: the other checkout
+    needs no copy of it)."""
+    import inspect
+    import json
+
+    argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
+            *map(str, references), "--workers", "1"]
+    code = ("import json, sys, time\n" + f"PARTS = {PARTS!r}\n"
+            + inspect.getsource(weighing_parts)
+            + "print('PARTS ' + json.dumps(weighing_parts(sys.argv[1:])))\n")
+    run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
+                         check=False, cwd=root, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
+    line = next((x for x in run.stdout.splitlines() if x.startswith("PARTS ")), None)
+    if line is None:
+        raise SystemExit(f"error: parts: no timing came back: {run.stderr.strip()[-300:]}")
+    return json.loads(line.split(" ", 1)[1])
+
+
 def alternate(flights: list[Path], references: list[Path], other: Path, rounds: int
               ) -> list[tuple[str, Run, tuple[float, float]]]:
     """The command on ``flights`` run alternately with checkout ``other`` and this one,
@@ -219,6 +306,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--against", type=Path, metavar="CHECKOUT",
                         help="time the 26-flight command alternately with this other "
                              "checkout of the repository instead")
+    parser.add_argument("--parts", action="store_true",
+                        help="time the weighing's parts of the 26-flight command instead "
+                             "(with --against: for both checkouts)")
     parser.add_argument("--rounds", type=int, default=2,
                         help="with --against: runs of each checkout (default 2)")
     args = parser.parse_args(argv)
@@ -240,6 +330,27 @@ def main(argv: list[str] | None = None) -> int:
           f"Python {platform.python_version()}; load average at start "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; QUADSIM_THREADS="
           f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}")
+    if args.parts:
+        roots = ([("against", args.against.resolve())] if args.against is not None else []
+                 ) + [("this", ROOT)]
+        found = {which: time_parts(mixed, nominal, root) for which, root in roots}
+        labels = [label for *_, label in PARTS]
+        print("\n| part | " + " | ".join(f"{root.name} CPU s (calls)" for _, root in roots)
+              + " |\n|---|" + "---:|" * len(roots))
+        for label in labels + ["total"]:
+            cells = []
+            for which, _ in roots:
+                parts = found[which]
+                if label == "total":
+                    cells.append(f"{sum(v[0] for v in parts.values()):.1f}")
+                elif label in parts:
+                    cells.append(f"{parts[label][0]:.1f} ({parts[label][1]})")
+                else:
+                    cells.append("-")
+            print(f"| {label} | " + " | ".join(cells) + " |")
+        load = os.getloadavg()
+        print(f"\nload average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+        return 0
     if args.against is not None:
         runs = alternate(mixed, nominal, args.against.resolve(), args.rounds)
         minutes = runs[0][1].flight_minutes

@@ -199,6 +199,11 @@ class _TwoOptima:
         cost = min(40.0 + (d / 0.001) ** 2, ((d + 0.005) / 0.001) ** 2)
         return np.array([np.sqrt(cost), z[0]])
 
+    def cost(self, z):
+        """The squared norm of :meth:`stacked` (as :meth:`Problem.cost`)."""
+        vec = self.stacked(z)
+        return float(vec @ vec)
+
 
 def test_the_delay_fits_start_at_the_global_optimum_under_each_prior():
     """A fit from zero would stay in the shallow optimum at 0, and a reading with the wide

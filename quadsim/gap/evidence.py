@@ -203,7 +203,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, get_lapack_funcs
+from scipy.linalg import cho_factor, get_lapack_funcs
 from scipy.optimize import least_squares, lsq_linear
 
 from ..core.errors import ModelError
@@ -337,6 +337,19 @@ class Marginal:
         # batch wrapper: most of its cost on these small systems, called thousands of times
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if j.shape[1] else None
         self._last: tuple | None = None
+        self._moment: tuple | None = None
+
+    def moment(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last vector's kept
+        (the profile, the one-pass cost and the linear step's Gram matrix of one residual
+        share them: the same numbers, one pass over j; residuals are not written to)."""
+        kept = self._moment
+        if kept is not None and kept[0] is r:
+            return kept[1], kept[2]
+        rhs = self.j.T @ r
+        x = self.solve(rhs)
+        self._moment = (r, rhs, x)
+        return rhs, x
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(r + j du, du) at the profiled shift du = -A^-1 jᵀ r of the weighted residual
@@ -352,15 +365,32 @@ class Marginal:
             self._last = (r, out)
         return out
 
-    def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rhs = self.j.T @ r
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """A^-1 ``rhs`` ((K,) or (K, P)); zeros of its shape where there are no columns."""
         if self._potrs is None:
-            du = -cho_solve(self.chol, rhs)
-        else:
-            x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
-            if info != 0:
-                raise ValueError(f"illegal value in {-info}th argument of internal potrs")
-            du = -x
+            return np.zeros_like(rhs, dtype=float)
+        x, info = self._potrs(self.chol[0], rhs, lower=self.chol[1])
+        if info != 0:
+            raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+        return x
+
+    def cost(self, r: np.ndarray) -> float:
+        """|r + j du|^2 + |du|^2 at the profiled shift of ``r`` (N C,), the squared norm of
+        :meth:`profile`'s two parts without forming them: with b = jᵀ r and du = -A^-1 b,
+        |r + j du|^2 + |du|^2 = |r|^2 + 2 b.du + duᵀ(jᵀj + I) du = |r|^2 - bᵀ A^-1 b
+        (one pass over j instead of two; the same value up to round-off, ~1e-16 of |r|^2)."""
+        last = self._last
+        if last is not None and last[0] is r:          # profiled already: its own norm
+            aug, du = last[1]
+            return float(aug @ aug) + float(du @ du)
+        rhs, x = self.moment(r)
+        if not len(rhs):
+            return float(r @ r)
+        return float(r @ r) - float(rhs @ x)
+
+    def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x = self.moment(r)[1] if r.ndim == 1 else self.solve(self.j.T @ r)
+        du = -x
         return r + self.j @ du, du
 
 
@@ -528,6 +558,16 @@ class Problem:
             return np.full(self.size, 1e3)
         aug, du = self.marg.profile(r)
         return np.concatenate([aug, du, z])
+
+    def cost(self, z: np.ndarray) -> float:
+        """The fit's cost at ``z``: the squared norm of :meth:`stacked` (the same value up to
+        round-off, :meth:`Marginal.cost`), for the callers that need no more than the norm
+        (the delay grid, a refined fit's accepted or halved steps)."""
+        try:
+            r = self.residual(z)
+        except ModelError:
+            return float(self.size) * 1e6
+        return self.marg.cost(r) + float(z @ z)
 
     def start(self, start_delay_s: float = 0.0) -> np.ndarray:
         """z = 0 with the delay at ``start_delay_s``, inside the bounds."""
@@ -736,8 +776,7 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     cost = np.empty(len(grid))
     for k, d in enumerate(grid):
         z = np.array([d / sd])
-        vec = null.stacked(z)
-        cost[k] = float(vec @ vec) - float(z @ z)     # the profiled cost, prior term apart
+        cost[k] = null.cost(z) - float(z @ z)     # the profiled cost, prior term apart
     near = (np.abs(grid) <= reach + 1e-12) | (np.abs(grid - hint_s) <= reach + 1e-12)
     shared = float(grid[near][np.argmin((cost + (grid / sd) ** 2)[near])])
     own = float(grid[np.argmin(cost + (grid / signal_sd) ** 2)]) if signal_sd > 0 else hint_s
@@ -928,24 +967,15 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
 
 def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
     """The bounded minimum of the linear model ``r(z) ~ base + jac (z - start)`` of the
-    stacked cost: (z1 (P,), its predicted cost, the stacked Jacobian A (N C + K + P, P), the
-    count of values at a bound, the inertia's wall counted as one where z1 is held on it:
-    module doc, 2.)."""
-    n = len(start)
-    aug0, du0 = prob.marg.profile(base)
-    aug, du = prob.marg.profile(jac)
-    a = np.vstack([aug, du, np.eye(n)])
-    # one Householder QR of [A b] (R only): R of A, Q^T b in the last column and
-    # |b - Q Q^T b| in the corner -- no Q of the tall matrix is formed. [A b] is written
-    # column-major at once (the layout LAPACK factors in place): the same numbers as
-    # ``np.column_stack([a, b])`` copied to column-major, without the two copies
-    ab = np.empty((a.shape[0], n + 1), order="F")
-    ab[:, :n] = a
-    ab[:len(aug0), n] = aug0
-    ab[len(aug0):len(aug0) + len(du0), n] = du0
-    ab[len(aug0) + len(du0):, n] = start
-    rb = _upper_factor(ab, overwrite=True)
-    r, qb, rest = rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2)
+    stacked cost: (z1 (P,), its predicted cost, the stacked Jacobian's Gauss-Newton precision
+    H = AᵀA (P, P; A the stacked Jacobian, N C + K + P rows), the count of values at a bound,
+    the inertia's wall counted as one where z1 is held on it: module doc, 2.). The linear
+    model's triangle R, Qᵀb and remainder come from :func:`gram_factor` (from the Gram
+    matrix, without forming A), or :func:`qr_factor` where that is not positive definite."""
+    try:
+        r, qb, rest, h = gram_factor(prob.marg, start, base, jac)
+    except np.linalg.LinAlgError:
+        r, qb, rest, h = qr_factor(prob.marg, start, base, jac)
     lower, upper = prob.z_lo - start, prob.z_hi - start
     # lsq_linear's own first step: the unconstrained solution, returned when inside the
     # bounds (the same numbers, without its checks and wrappers)
@@ -964,7 +994,55 @@ def linear_step(prob: Problem, start: np.ndarray, base: np.ndarray, jac: np.ndar
             x = on
             active = int(np.count_nonzero((x <= lower) | (x >= upper))) + 1
     predicted = rest + float(np.sum((qb + r @ x) ** 2))
-    return start + x, predicted, a, active
+    return start + x, predicted, h, active
+
+
+def qr_factor(marg: Marginal, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
+    """(R (P, P), Qᵀb (P,), |b - Q Qᵀb|^2, AᵀA (P, P)) of the linear model's stacked least
+    squares |A x + b|^2, A = [aug; du; I] the profiled columns ``jac`` (N C, P) through
+    ``marg`` (:meth:`Marginal.profile`) over the prior's identity rows, b = [aug0; du0;
+    ``start``] the profiled ``base`` (N C,): one Householder QR of [A b] (R only, LAPACK
+    geqrf in place, :func:`_upper_factor`; no Q of the tall matrix is formed)."""
+    n = len(start)
+    aug0, du0 = marg.profile(base)
+    aug, du = marg.profile(jac)
+    # [A b] written column-major at once (the layout LAPACK factors in place): the same
+    # numbers as ``np.column_stack([a, b])`` copied to column-major, without the two copies
+    ab = np.empty((len(aug) + len(du) + n, n + 1), order="F")
+    ab[:len(aug), :n] = aug
+    ab[len(aug):len(aug) + len(du), :n] = du
+    ab[len(aug) + len(du):, :n] = np.eye(n)
+    ab[:len(aug0), n] = aug0
+    ab[len(aug0):len(aug0) + len(du0), n] = du0
+    ab[len(aug0) + len(du0):, n] = start
+    a = ab[:, :n].copy()
+    rb = _upper_factor(ab, overwrite=True)
+    return rb[:n, :n], rb[:n, n], float(rb[n, n] ** 2), a.T @ a
+
+
+def gram_factor(marg: Marginal, start: np.ndarray, base: np.ndarray, jac: np.ndarray):
+    """:func:`qr_factor`'s four results from the Gram matrix of [A b] instead of A itself:
+    with F = [jac base] (N C, P + 1), C = jᵀF and Y = A_m^-1 C (A_m = I + jᵀj, the
+    marginal's), the profiled rows give [aug aug0]ᵀ[aug aug0] + [du du0]ᵀ[du du0] = FᵀF - CᵀY
+    (aug = F + j du, du = -Y: FᵀF - 2 CᵀY + YᵀA_mY); the prior rows add [I start]ᵀ[I
+    start]. Its upper Cholesky factor U (UᵀU = [A b]ᵀ[A b]) is the R of [A b] up to the
+    rows' signs, which neither the step nor its cost see: R = U[:P, :P], Qᵀb = U[:P, P],
+    the remainder U[P, P]^2. Two passes over the tall arrays (jᵀF, FᵀF) where the QR makes
+    several and forms A; the same numbers up to round-off of the order of the condition
+    number of AᵀA times 1e-16 (tests/test_fast_paths_weighing.py). Raises LinAlgError where
+    the Gram matrix is not positive definite to round-off (b in the span of A: the caller
+    factors A itself then)."""
+    n = len(start)
+    c_jac, (c_base, y_base) = marg.j.T @ jac, marg.moment(base)
+    y_jac = marg.solve(c_jac)
+    m = np.empty((n + 1, n + 1))
+    m[:n, :n] = jac.T @ jac - c_jac.T @ y_jac + np.eye(n)
+    m[:n, n] = m[n, :n] = jac.T @ base - c_jac.T @ y_base + start
+    m[n, n] = float(base @ base) - float(c_base @ y_base) + float(start @ start)
+    u = np.linalg.cholesky(m).T
+    if not np.all(np.isfinite(u)):
+        raise np.linalg.LinAlgError("gram_factor: not finite")
+    return u[:n, :n], u[:n, n], float(u[n, n] ** 2), m[:n, :n].copy()
 
 
 def _upper_factor(m: np.ndarray, overwrite: bool = False) -> np.ndarray:
@@ -988,10 +1066,10 @@ def linearised(prob: Problem, cols: Columns, start: np.ndarray
     one-sided column (the rotor delay's kink) that the step leaves on the other side is
     recomputed on that side."""
     base = _base(prob, cols, start)
-    z1, predicted, a, active = _signed_step(prob, cols, start, base)
+    z1, predicted, h, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)
     miss = abs(float(vec @ vec) - predicted)
-    return prob.evidence(z1, vec, a.T @ a, active), z1, miss
+    return prob.evidence(z1, vec, h, active), z1, miss
 
 
 def _second_reach(prob: Problem, cols: Columns, z1: np.ndarray) -> float:
@@ -1011,14 +1089,14 @@ def _second_reach(prob: Problem, cols: Columns, z1: np.ndarray) -> float:
 def _signed_step(prob: Problem, cols: Columns, start: np.ndarray, base: np.ndarray):
     signs = np.ones(len(start))
     jac = jacobian_columns(prob, cols, start, base, signs)
-    z1, predicted, a, active = linear_step(prob, start, base, jac)
+    z1, predicted, h, active = linear_step(prob, start, base, jac)
     flip = (z1 < start) & (signs > 0)
     flip &= np.array([k == "delay.rotor" for k in prob.expl.parameter_names])
     if np.any(flip):
         signs[flip] = -1.0
         jac = jacobian_columns(prob, cols, start, base, signs, which=flip, out=jac)
-        z1, predicted, a, active = linear_step(prob, start, base, jac)
-    return z1, predicted, a, active
+        z1, predicted, h, active = linear_step(prob, start, base, jac)
+    return z1, predicted, h, active
 
 
 def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
@@ -1029,10 +1107,10 @@ def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
     (the inertia's wall counted as a bound where the optimum lies on it, :func:`linear_step`)."""
     vec = prob.stacked(z)
     cost = float(vec @ vec)
-    a = None
+    h = None
     for _ in range(MAX_STEPS):
         base = prob.residual(z)
-        z_new, _, a, active = _signed_step(prob, cols, z, base)
+        z_new, _, h, active = _signed_step(prob, cols, z, base)
         for _ in range(4):                       # backtrack: a step must lower the cost
             vec_new = prob.stacked(z_new)
             new = float(vec_new @ vec_new)
@@ -1047,15 +1125,15 @@ def refined(prob: Problem, cols: Columns, z: np.ndarray) -> Evidence:
             break
     # the posterior precision from the last Jacobian (at the iterate before the converged
     # step, which moved the cost by less than CONVERGED)
-    if a is None:
+    if h is None:
         base = prob.residual(z)
-        _, _, a, active = linear_step(prob, z, base, jacobian_columns(
+        _, _, h, active = linear_step(prob, z, base, jacobian_columns(
             prob, cols, z, base, np.ones(len(z))))
     else:
         wall = inertia_wall(prob, z)
         active = int(np.count_nonzero((z <= prob.z_lo) | (z >= prob.z_hi))) + int(
             wall is not None and wall.on(wall.g0))
-    return prob.evidence(z, vec, a.T @ a, active)
+    return prob.evidence(z, vec, h, active)
 
 
 def _refined_coupled(prob: Problem, cols: Columns, z1: np.ndarray, delay_s: float
@@ -1072,8 +1150,7 @@ def _refined_coupled(prob: Problem, cols: Columns, z1: np.ndarray, delay_s: floa
     centre = prob.start(delay_s)
     if prob.expl.shift and prob.expl.name != "signal_delay":
         centre[-1] = z1[-1]
-    b = prob.stacked(centre)
-    if float(b @ b) >= float(a @ a):
+    if prob.cost(centre) >= float(a @ a):
         return first
     second = refined(prob, cols, centre)
     return second if second.log_z > first.log_z else first
