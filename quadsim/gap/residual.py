@@ -152,10 +152,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.signal import lfilter, savgol_filter
+from scipy.signal import savgol_filter
 
 from ..core.errors import InputError
 from ..core.frames import cross, quat_normalize, rotate_inverse
+from ..core.lag import first_order_lag
 from ..effects.base import Effect, EffectBase, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..vehicle.params import VehicleParams
@@ -802,7 +803,7 @@ def _window_means(flights: list[FlightStates]) -> tuple | None:
     dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
     speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
     tau = map_lag(usable, dt, speed)
-    command = np.concatenate([_moving_mean(_lagged(f.command, w, tau), w)
+    command = np.concatenate([_moving_mean(first_order_lag(f.command, tau, w), w)
                               for f, w in zip(usable, dt)])
     windows = sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1)
     return command, speed, float(windows)
@@ -812,16 +813,6 @@ def _window_means(flights: list[FlightStates]) -> tuple | None:
 #: log's delay: 7-60 ms on the sources benchmarked) in steps of 5 ms, a twelfth of
 #: drone-models' 60 ms: the slope's error from a lag off by half a step is below 0.1 %
 MAP_LAGS_S = np.arange(0.0, 0.2001, 0.005)
-
-
-def _lagged(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
-    """(N, C) ``x`` through a first-order lag of time constant ``tau`` (s) at sample step
-    ``dt`` (s), started at rest at its first sample (``x`` itself for tau 0)."""
-    if tau <= 0.0 or len(x) < 2:
-        return x
-    x = np.asarray(x, float)
-    a = float(np.exp(-dt / tau))
-    return lfilter([1.0 - a], [1.0, -a], x, axis=0, zi=a * x[:1])[0]
 
 
 def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> float:
@@ -843,7 +834,7 @@ def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> float:
     (drone-models: 270x at 60 ms) and the intercept is the map's own."""
     best, best_rss = 0.0, np.inf
     for tau in MAP_LAGS_S:
-        command = np.concatenate([_moving_mean(_lagged(f.command, w, tau), w)
+        command = np.concatenate([_moving_mean(first_order_lag(f.command, tau, w), w)
                                   for f, w in zip(flights, dt)])
         rss = 0.0
         for i in range(speed.shape[1]):
