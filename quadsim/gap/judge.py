@@ -175,7 +175,7 @@ from .fitting import (
 )
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
-from .words import answer, asserted, nominal_words, reading_text
+from .words import answer, asserted, nominal_words, reading_text, timing_words
 
 __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_band", "by_regime",
            "check", "inconsistent_note", "kstep_errors", "partial_text", "regime_masks",
@@ -1007,6 +1007,40 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
                    ev.explanation.fixed_values, ev.explanation.variant)
 
 
+#: the two readings of a rotor timing difference: the rotors follow their commands with a
+#: first-order lag (``motor_lag``) or their logged speeds are a delayed copy
+#: (``signal_delay``); neither is every rotor's form (a speed-dependent, asymmetric lag)
+TIMINGS = ("motor_lag", "signal_delay")
+
+
+def timing_rival(lead: str, best, rows, baseline: Baseline):
+    """Per flight, the other rotor timing reading (:data:`TIMINGS`) the flight does not
+    separate from a timing lead ``lead`` (Evidence ``best``): its best-supported row in
+    ``rows`` when on every channel c the two readings' log mean squares differ by at most
+    the references' lack-of-fit spread s_c there (``baseline``: what a right model leaves on
+    the reference flights, :meth:`Baseline.of_reference`); else None (and None for any
+    other lead).
+
+    Why: a lag and a delay both shift the rotor speeds in time; on the rotor channels they
+    differ only in their form (a lag smooths, a delay does not), and the references' rotor
+    residual under the calibrated model is that form's error, not noise (the map through
+    the lag leaves it at the rotor's own time scale). The evidence weighs each sample as
+    noise, so a margin of a few per cent of what either timing explains reads as many log
+    units; where it is smaller on every channel than how much the reference flights
+    themselves differ under a right model, the flight's data cannot tell the two forms
+    apart, and both readings are stated (:func:`quadsim.gap.words.timing_words`)."""
+    if lead not in TIMINGS:
+        return None
+    other = TIMINGS[1 - TIMINGS.index(lead)]
+    rivals = [e for e in rows if e.name == other]
+    if not rivals:
+        return None
+    rival = max(rivals, key=lambda e: e.log_z)
+    gap = np.abs(np.log(np.maximum(np.asarray(best.ms, float), 1e-300))
+                 - np.log(np.maximum(np.asarray(rival.ms, float), 1e-300)))
+    return rival if bool(np.all(gap <= np.asarray(baseline.spread, float))) else None
+
+
 def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict:
     """One flight's :class:`Verdict` from the evidence ``rows`` of its explanations against
     the calibrated ``reference`` (per-flight mode); ``name``: the flight's file; ``cap``:
@@ -1032,10 +1066,16 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                 for k, p, ev in ranked]
     lead = readings[0]
     stated = [r for r in readings if r.probability >= READING_P]
+    rival = timing_rival(top, best, rows, baseline) if not lack else None
+    timing = None if rival is None else next(
+        (r for r, (_, _, ev) in zip(readings, ranked) if ev is rival),
+        _reading(rival.name, 0.0, rival, reading_text(rival, reference)))
     separate = _differ_on(best, ranked[1][2] if len(ranked) > 1 else None, reference)
     outcome = outcome_of(top, lack, {})
     verdict = lead.name if outcome == "effect" else outcome
     named = [r.name for r in stated if r.name != "no_difference"]
+    if timing is not None and timing.name not in named:
+        named.append(timing.name)      # both timing readings stated (timing_rival)
     effect = outcome == "effect"
     caveat = lead_caveat(best, reference.params) if outcome == "effect" else ""
     # a name that leaves a systematic remainder beyond the references' own (the held-out
@@ -1044,7 +1084,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     remains = remainder_of(best, check, reference) if outcome == "effect" else {}
     # no self-check (fewer than 3 references): what they share cannot be told from a
     # difference of this flight, and practical significance has no scale (docs/gap.md)
-    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains)
+    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains) \
+        or timing is not None
     words = answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
                    against="references", separate=separate,
                    tentative=p_top < CONFIDENT or unsure)
@@ -1055,6 +1096,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                                       - best.values.get(_THROUGH_VBAT, 0.0)))
     words += caveat + _normal_words(sized if effect else None, check, left, share,
                                     at_voltage=vbat_ref if sized is not best else None)
+    if timing is not None and effect:
+        words += timing_words(lead, timing)
     if remains:
         where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in remains.items())
         words += (f" Beyond it a systematic remainder stays (the residual's slow part on "
