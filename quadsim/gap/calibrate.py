@@ -214,6 +214,7 @@ from .reference import (  # re-exported: the calibration's public names
     centre_term,
     coordinates,
     envelope_of,
+    excitation,
     fit_discrepancy,
     jacobian,
     moderated_spread,
@@ -259,6 +260,8 @@ class PerFlight:
     se: np.ndarray
     identified: np.ndarray
     info: np.ndarray | None
+    #: (n, C') each flight's :func:`quadsim.gap.reference.excitation`; None: not measured
+    excite: np.ndarray | None = None
 
     def scatter(self) -> np.ndarray:
         """(M,) method-of-moments between-flight spread of the shared values (their sample
@@ -271,13 +274,14 @@ class PerFlight:
     def envelope(self, log_ms: np.ndarray):
         """The flights' :func:`quadsim.gap.reference.envelope_of`."""
         return envelope_of(self.coords, self.values, self.se, self.identified, log_ms,
-                           self.info)
+                           self.info, self.excite)
 
     def without(self, j: int) -> PerFlight:
         """The same without flight ``j``."""
         return PerFlight(np.delete(self.coords, j, 0), np.delete(self.values, j, 0),
                          np.delete(self.se, j, 0), self.identified,
-                         None if self.info is None else np.delete(self.info, j, 0))
+                         None if self.info is None else np.delete(self.info, j, 0),
+                         None if self.excite is None else np.delete(self.excite, j, 0))
 
 
 @dataclass(frozen=True)
@@ -1244,8 +1248,16 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.per_flight = PerFlight(
         np.array([coordinates(s) for s in states]), own[0], own[1],
         np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
-        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])),
+        _excitations(states))
     ref.envelope = ref.per_flight.envelope(log_ms)
+
+
+def _excitations(states) -> np.ndarray | None:
+    """(n, C') the reference flights' :func:`quadsim.gap.reference.excitation`; None where
+    they do not all give as many channels (some without rotor speeds)."""
+    rows = [excitation(s) for s in states]
+    return np.array(rows) if len({len(r) for r in rows}) == 1 else None
 
 
 #: the band where the rotors drive the body (Hz): above ~3 Hz the aerodynamic moments (velocity
