@@ -157,6 +157,19 @@ extrapolation, measured by the trend:
   there, as for the shared values (a form error that grows with the motion may grow faster
   beyond the references than along them).
 
+Per channel, a line of its own (:func:`fit_channel_lines`). The place u is one axis for all
+channels; a flight may drive one channel harder than every reference while its place lies
+inside their range (Crazyflow's fastest no-effect flights: Fy's signal 1.22x the largest
+reference's). Each channel's log mean square is regressed on that channel's own excitation x_c
+(:func:`excitation`: the log RMS of its signal about the flight's mean; specific force,
+angular acceleration, rotor speed) by ordinary least squares: slope h_c, residual spread s_x
+pooled over channels (C (n - 2) degrees of freedom). A flight whose x_c lies outside the
+references' range expects at least the line's move there, ``h_c (x_c - mean(x_c))`` (carried
+as noise as the trend's move is), and at least its prediction spread,
+``s_x sqrt(1 + 1/n + (x_c - mean(x_c))^2 / S_xx)`` (over the lack-of-fit test's
+sqrt(1 + 1/n)): what the references show of how that channel's residual grows with how hard
+it is driven, with the line's own uncertainty, rather than the pooled axis's average growth.
+
 A second line per noise-biased parameter (:data:`quadsim.gap.calibrate.NOISE_BIASED`): its
 inverse information per sample q_j = se_j^2 N_j (:func:`quadsim.gap.calibrate.inverse_information`).
 Least squares biases a value scaling a noisy regressor by the noise over the regressor's
