@@ -327,7 +327,10 @@ class SelfCheck:
     remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured;
     ``per``: each reference's :func:`readings` in the order of the reference model's
     envelope coordinates, what :func:`placed` places ``spreads`` with (empty: not kept, or
-    already placed)."""
+    already placed); ``timing``: (n,) each judged reference's log-evidence margin of a rotor
+    lag over a rotor signal delay (:func:`timing_margin`; None: not measured), the margin
+    two rotor forms have on flights that differ in nothing
+    (:func:`quadsim.gap.judge.timing_rival`)."""
 
     flights: tuple
     verdicts: tuple
@@ -335,6 +338,7 @@ class SelfCheck:
     spreads: dict
     slow: np.ndarray | None = None
     per: tuple = ()
+    timing: np.ndarray | None = None
 
     @property
     def clean(self) -> bool:
@@ -518,8 +522,23 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
     nulls = [next((ev for ev in rows if ev.name == "no_difference"), None)
              for rows in rows_list if rows is not None]
     slow = [ev.slow for ev in nulls if ev is not None and ev.slow is not None]
+    timing = [timing_margin(rows) for rows in rows_list if rows is not None]
+    timing = [m for m in timing if m is not None]
     return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per),
-                     np.array(slow) if slow else None, tuple(per))
+                     np.array(slow) if slow else None, tuple(per),
+                     np.array(timing) if len(timing) == len(names) else None)
+
+
+def timing_margin(rows) -> float | None:
+    """One flight's log-evidence margin (natural log) of its best-supported ``motor_lag``
+    row over its best ``signal_delay`` row (Evidence ``rows``); None without both."""
+    best: dict = {}
+    for ev in rows:
+        if ev.name in ("motor_lag", "signal_delay"):
+            best[ev.name] = max(best.get(ev.name, -np.inf), float(ev.log_z))
+    if len(best) < 2:
+        return None
+    return best["motor_lag"] - best["signal_delay"]
 
 
 def placed(check: SelfCheck | None, reference) -> SelfCheck | None:

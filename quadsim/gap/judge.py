@@ -1013,32 +1013,44 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
 TIMINGS = ("motor_lag", "signal_delay")
 
 
-def timing_rival(lead: str, best, rows, baseline: Baseline):
+def timing_rival(lead: str, rows, check) -> object | None:
     """Per flight, the other rotor timing reading (:data:`TIMINGS`) the flight does not
-    separate from a timing lead ``lead`` (Evidence ``best``): its best-supported row in
-    ``rows`` when on every channel c the two readings' log mean squares differ by at most
-    the references' lack-of-fit spread s_c there (``baseline``: what a right model leaves on
-    the reference flights, :meth:`Baseline.of_reference`); else None (and None for any
-    other lead).
+    separate from a timing lead ``lead``: its best-supported row in ``rows`` (Evidence)
+    when the lead's log-evidence margin over it, m = log Z_lead - log Z_rival, is within
+    what the same two readings' margin is on the reference flights, each judged against
+    the others (``check.timing``, :func:`quadsim.gap.calibrate.timing_margin`, in the
+    lead's direction): m <= mean + t s sqrt(1 + 1/n), the Student-t quantile at
+    1 - :data:`LOF_P` with n - 1 degrees of freedom (the lack-of-fit rule's rate: a margin
+    beyond is no more one that flights differing in nothing show). None for any other lead,
+    without the rival, or with fewer than :data:`MIN_REMAINDER_REFERENCES` references'
+    margins.
 
-    Why: a lag and a delay both shift the rotor speeds in time; on the rotor channels they
-    differ only in their form (a lag smooths, a delay does not), and the references' rotor
-    residual under the calibrated model is that form's error, not noise (the map through
-    the lag leaves it at the rotor's own time scale). The evidence weighs each sample as
-    noise, so a margin of a few per cent of what either timing explains reads as many log
-    units; where it is smaller on every channel than how much the reference flights
-    themselves differ under a right model, the flight's data cannot tell the two forms
-    apart, and both readings are stated (:func:`quadsim.gap.words.timing_words`)."""
+    Why: a lag and a delay both shift the rotor speeds in time and differ only in their
+    form (a lag smooths, a delay does not); where neither is the rotor's own form (a
+    speed-dependent, asymmetric lag), the references' rotor residual under the calibrated
+    model is form error, not noise, and the evidence, weighing each sample as noise, gives
+    one form a margin on flights that differ in nothing (drone-models: the lag over the
+    delay by 4-9 log units). A flight's margin within that is the forms' error, not the
+    cause's, and both readings are stated (:func:`quadsim.gap.words.timing_words`). The
+    margins compare as log evidences of flights of similar length (as the references and
+    the flights judged against them are)."""
     if lead not in TIMINGS:
         return None
+    refs = getattr(check, "timing", None)
+    if refs is None or len(refs) < MIN_REMAINDER_REFERENCES:
+        return None
     other = TIMINGS[1 - TIMINGS.index(lead)]
+    own = [e for e in rows if e.name == lead]
     rivals = [e for e in rows if e.name == other]
-    if not rivals:
+    if not own or not rivals:
         return None
     rival = max(rivals, key=lambda e: e.log_z)
-    gap = np.abs(np.log(np.maximum(np.asarray(best.ms, float), 1e-300))
-                 - np.log(np.maximum(np.asarray(rival.ms, float), 1e-300)))
-    return rival if bool(np.all(gap <= np.asarray(baseline.spread, float))) else None
+    margin = max(e.log_z for e in own) - rival.log_z
+    ref = np.asarray(refs, float) * (1.0 if lead == "motor_lag" else -1.0)
+    n = len(ref)
+    bound = ref.mean() + float(student_t.ppf(1 - LOF_P, n - 1)) * ref.std(ddof=1) \
+        * np.sqrt(1 + 1 / n)
+    return rival if margin <= bound else None
 
 
 def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict:
@@ -1066,7 +1078,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                 for k, p, ev in ranked]
     lead = readings[0]
     stated = [r for r in readings if r.probability >= READING_P]
-    rival = timing_rival(top, best, rows, baseline) if not lack else None
+    rival = timing_rival(top, rows, check) if not lack else None
     timing = None if rival is None else next(
         (r for r, (_, _, ev) in zip(readings, ranked) if ev is rival),
         _reading(rival.name, 0.0, rival, reading_text(rival, reference)))

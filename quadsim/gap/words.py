@@ -314,9 +314,9 @@ def timing_words(lead, rival) -> str:
     ``rival`` (posterior rows: name, magnitude), neither a single confident name."""
     return (f" The rotors' timing differs from the reference flights': {lead['magnitude']} "
             f"({lead['name']}), or {rival['magnitude']} ({rival['name']}); the data cannot "
-            "separate them: on every channel the two readings' residuals differ by less than "
-            "the reference flights' own differ under the reference model (the rotor law's "
-            "form error, not noise), so the margin between them is not the cause's.")
+            "separate them: the evidence's margin between the two is within what it is on "
+            "the reference flights, each judged against the others (the rotor law's form "
+            "error, not noise), so it is not the cause's.")
 
 
 def batch_answer(flights: list) -> str:
