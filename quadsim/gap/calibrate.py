@@ -216,6 +216,7 @@ from .reference import (  # re-exported: the calibration's public names
     centre_term,
     coordinates,
     envelope_of,
+    excitation,
     fit_discrepancy,
     jacobian,
     moderated_spread,
@@ -261,6 +262,8 @@ class PerFlight:
     se: np.ndarray
     identified: np.ndarray
     info: np.ndarray | None
+    #: (n, C') each flight's :func:`quadsim.gap.reference.excitation`; None: not measured
+    excite: np.ndarray | None = None
 
     def scatter(self) -> np.ndarray:
         """(M,) method-of-moments between-flight spread of the shared values (their sample
@@ -273,13 +276,14 @@ class PerFlight:
     def envelope(self, log_ms: np.ndarray):
         """The flights' :func:`quadsim.gap.reference.envelope_of`."""
         return envelope_of(self.coords, self.values, self.se, self.identified, log_ms,
-                           self.info)
+                           self.info, self.excite)
 
     def without(self, j: int) -> PerFlight:
         """The same without flight ``j``."""
         return PerFlight(np.delete(self.coords, j, 0), np.delete(self.values, j, 0),
                          np.delete(self.se, j, 0), self.identified,
-                         None if self.info is None else np.delete(self.info, j, 0))
+                         None if self.info is None else np.delete(self.info, j, 0),
+                         None if self.excite is None else np.delete(self.excite, j, 0))
 
 
 @dataclass(frozen=True)
@@ -325,7 +329,10 @@ class SelfCheck:
     remainder's normal (:func:`quadsim.gap.judge.remainder_of`); None: not measured;
     ``per``: each reference's :func:`readings` in the order of the reference model's
     envelope coordinates, what :func:`placed` places ``spreads`` with (empty: not kept, or
-    already placed)."""
+    already placed); ``timing``: (n,) each judged reference's log-evidence margin of a rotor
+    lag over a rotor signal delay (:func:`timing_margin`; None: not measured), the margin
+    two rotor forms have on flights that differ in nothing
+    (:func:`quadsim.gap.judge.timing_rival`)."""
 
     flights: tuple
     verdicts: tuple
@@ -333,6 +340,7 @@ class SelfCheck:
     spreads: dict
     slow: np.ndarray | None = None
     per: tuple = ()
+    timing: np.ndarray | None = None
 
     @property
     def clean(self) -> bool:
@@ -516,8 +524,23 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
     nulls = [next((ev for ev in rows if ev.name == "no_difference"), None)
              for rows in rows_list if rows is not None]
     slow = [ev.slow for ev in nulls if ev is not None and ev.slow is not None]
+    timing = [timing_margin(rows) for rows in rows_list if rows is not None]
+    timing = [m for m in timing if m is not None]
     return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per),
-                     np.array(slow) if slow else None, tuple(per))
+                     np.array(slow) if slow else None, tuple(per),
+                     np.array(timing) if len(timing) == len(names) else None)
+
+
+def timing_margin(rows) -> float | None:
+    """One flight's log-evidence margin (natural log) of its best-supported ``motor_lag``
+    row over its best ``signal_delay`` row (Evidence ``rows``); None without both."""
+    best: dict = {}
+    for ev in rows:
+        if ev.name in ("motor_lag", "signal_delay"):
+            best[ev.name] = max(best.get(ev.name, -np.inf), float(ev.log_z))
+    if len(best) < 2:
+        return None
+    return best["motor_lag"] - best["signal_delay"]
 
 
 def placed(check: SelfCheck | None, reference) -> SelfCheck | None:
@@ -1325,8 +1348,16 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
     ref.per_flight = PerFlight(
         np.array([coordinates(s) for s in states]), own[0], own[1],
         np.array([ref.identified.get(k, True) for k in cand.parameter_names]),
-        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])))
+        _noise_biased(cand.parameter_names, own[1] ** 2 * np.array([[len(s.t)] for s in states])),
+        _excitations(states))
     ref.envelope = ref.per_flight.envelope(log_ms)
+
+
+def _excitations(states) -> np.ndarray | None:
+    """(n, C') the reference flights' :func:`quadsim.gap.reference.excitation`; None where
+    they do not all give as many channels (some without rotor speeds)."""
+    rows = [excitation(s) for s in states]
+    return np.array(rows) if len({len(r) for r in rows}) == 1 else None
 
 
 #: the band where the rotors drive the body (Hz): above ~3 Hz the aerodynamic moments (velocity

@@ -196,6 +196,7 @@ from .words import (
     outside_words,
     reading_text,
     stand_in_words,
+    timing_words,
 )
 
 __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_band", "by_regime",
@@ -1119,6 +1120,52 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
                    ev.explanation.fixed_values, ev.explanation.variant)
 
 
+#: the two readings of a rotor timing difference: the rotors follow their commands with a
+#: first-order lag (``motor_lag``) or their logged speeds are a delayed copy
+#: (``signal_delay``); neither is every rotor's form (a speed-dependent, asymmetric lag)
+TIMINGS = ("motor_lag", "signal_delay")
+
+
+def timing_rival(lead: str, rows, check) -> object | None:
+    """Per flight, the other rotor timing reading (:data:`TIMINGS`) the flight does not
+    separate from a timing lead ``lead``: its best-supported row in ``rows`` (Evidence)
+    when the lead's log-evidence margin over it, m = log Z_lead - log Z_rival, is within
+    what the same two readings' margin is on the reference flights, each judged against
+    the others (``check.timing``, :func:`quadsim.gap.calibrate.timing_margin`, in the
+    lead's direction): m <= mean + t s sqrt(1 + 1/n), the Student-t quantile at
+    1 - :data:`LOF_P` with n - 1 degrees of freedom (the lack-of-fit rule's rate: a margin
+    beyond is no more one that flights differing in nothing show). None for any other lead,
+    without the rival, or with fewer than :data:`MIN_REMAINDER_REFERENCES` references'
+    margins.
+
+    Why: a lag and a delay both shift the rotor speeds in time and differ only in their
+    form (a lag smooths, a delay does not); where neither is the rotor's own form (a
+    speed-dependent, asymmetric lag), the references' rotor residual under the calibrated
+    model is form error, not noise, and the evidence, weighing each sample as noise, gives
+    one form a margin on flights that differ in nothing (drone-models: the lag over the
+    delay by 4-9 log units). A flight's margin within that is the forms' error, not the
+    cause's, and both readings are stated (:func:`quadsim.gap.words.timing_words`). The
+    margins compare as log evidences of flights of similar length (as the references and
+    the flights judged against them are)."""
+    if lead not in TIMINGS:
+        return None
+    refs = getattr(check, "timing", None)
+    if refs is None or len(refs) < MIN_REMAINDER_REFERENCES:
+        return None
+    other = TIMINGS[1 - TIMINGS.index(lead)]
+    own = [e for e in rows if e.name == lead]
+    rivals = [e for e in rows if e.name == other]
+    if not own or not rivals:
+        return None
+    rival = max(rivals, key=lambda e: e.log_z)
+    margin = max(e.log_z for e in own) - rival.log_z
+    ref = np.asarray(refs, float) * (1.0 if lead == "motor_lag" else -1.0)
+    n = len(ref)
+    bound = ref.mean() + float(student_t.ppf(1 - LOF_P, n - 1)) * ref.std(ddof=1) \
+        * np.sqrt(1 + 1 / n)
+    return rival if margin <= bound else None
+
+
 def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict:
     """One flight's :class:`Verdict` from the evidence ``rows`` of its explanations against
     the calibrated ``reference`` (per-flight mode); ``name``: the flight's file; ``cap``:
@@ -1141,6 +1188,9 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         form_share(best.ms, null.ms, np.exp(baseline.mean))
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
+    # a rotor timing the data cannot separate (lag or delay within the references' own
+    # margins, timing_rival): both readings stated, the name tentative
+    rival = timing_rival(top, rows, check) if not lack else None
     separate = _differ_on(best, within[1][2] if len(within) > 1 else None, reference)
     outcome = outcome_of(top, lack, {})
     effect = outcome == "effect"
@@ -1165,10 +1215,16 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # from the lead only, so it moves no reading in or out)
     stated = [r for r, (_, p, _) in zip(readings, within) if p >= READING_P]
     named = [r.name for r in stated if r.name != "no_difference"]
+    timing = None if rival is None else next(
+        (r for r, (_, _, ev) in zip(readings, shown) if ev is rival),
+        _reading(rival.name, 0.0, rival, reading_text(rival, reference)))
+    if timing is not None and timing.name not in named:
+        named.append(timing.name)      # both timing readings stated (timing_rival)
     caveat = lead_caveat(best, reference.params) if effect else ""
     # no self-check (fewer than 3 references): what they share cannot be told from a
     # difference of this flight, and practical significance has no scale (docs/gap.md)
-    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains)
+    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains) \
+        or timing is not None
     words = stand_in_words(lead.name, p_top, readings[0].magnitude, share, p_out) \
         if stand_in else \
         answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
@@ -1181,6 +1237,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                                       - best.values.get(_THROUGH_VBAT, 0.0)))
     words += caveat + _normal_words(sized if effect else None, check, left, share,
                                     at_voltage=vbat_ref if sized is not best else None)
+    if timing is not None and effect:
+        words += timing_words(lead, timing)
     if remains:
         where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in remains.items())
         words += (f" Beyond it a systematic remainder stays (the residual's slow part on "

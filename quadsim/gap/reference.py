@@ -157,6 +157,19 @@ extrapolation, measured by the trend:
   there, as for the shared values (a form error that grows with the motion may grow faster
   beyond the references than along them).
 
+Per channel, a line of its own (:func:`fit_channel_lines`). The place u is one axis for all
+channels; a flight may drive one channel harder than every reference while its place lies
+inside their range (Crazyflow's fastest no-effect flights: Fy's signal 1.22x the largest
+reference's). Each channel's log mean square is regressed on that channel's own excitation x_c
+(:func:`excitation`: the log RMS of its signal about the flight's mean; specific force,
+angular acceleration, rotor speed) by ordinary least squares: slope h_c, residual spread s_x
+pooled over channels (C (n - 2) degrees of freedom). A flight whose x_c lies outside the
+references' range expects at least the line's move there, ``h_c (x_c - mean(x_c))`` (carried
+as noise as the trend's move is), and at least its prediction spread,
+``s_x sqrt(1 + 1/n + (x_c - mean(x_c))^2 / S_xx)`` (over the lack-of-fit test's
+sqrt(1 + 1/n)): what the references show of how that channel's residual grows with how hard
+it is driven, with the line's own uncertainty, rather than the pooled axis's average growth.
+
 A second line per noise-biased parameter (:data:`quadsim.gap.calibrate.NOISE_BIASED`): its
 inverse information per sample q_j = se_j^2 N_j (:func:`quadsim.gap.calibrate.inverse_information`).
 Least squares biases a value scaling a noisy regressor by the noise over the regressor's
@@ -204,7 +217,7 @@ __all__ = ["moderated_spread", "FORCE_FEATURES", "MOMENT_FEATURES", "RIDGE", "Di
            "Reference", "aligned", "jacobian", "read_later", "rotor_spectra", "shifted",
            "weighted_residual", "COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope",
            "Position", "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend",
-           "local_reference", "position"]
+           "local_reference", "position", "ChannelLines", "excitation", "fit_channel_lines"]
 
 
 def _trigamma(x):
@@ -810,6 +823,76 @@ def coordinates(states) -> np.ndarray:
     return np.log(np.maximum([speed, rate, thrust], FLOORS))
 
 
+def excitation(states) -> np.ndarray:
+    """Per residual channel, how hard the flight drives it (natural log of an RMS about the
+    flight's mean, floored at 1e-9 of its unit): Fx, Fy, Fz the specific force's body
+    components (m/s^2), Mx, My, Mz the body angular acceleration's (rad/s^2), then each
+    rotor's speed (rad/s) where the flight logs rotor speeds: (6,) or (6 + R,)."""
+    def rms(x):
+        x = np.asarray(x, float)
+        return np.sqrt(np.mean((x - x.mean(axis=0)) ** 2, axis=0))
+    parts = [rms(states.specific_force), rms(states.body_accel)]
+    if states.rotor_speed is not None:
+        parts.append(rms(states.rotor_speed))
+    return np.log(np.maximum(np.concatenate(parts), 1e-9))
+
+
+@dataclass(frozen=True)
+class ChannelLines:
+    """The references' lack of fit per channel against the flight's own excitation of that
+    channel (module doc, "The envelope"): each channel's log mean square regressed on its
+    :func:`excitation` by ordinary least squares over the n references. ``mean`` (C,) the
+    references' mean excitation, ``slope`` (C,) d(log ms_c)/d(excitation_c), ``s_xx`` (C,)
+    sum of squared excitations about their mean, ``low``/``high`` (C,) the references'
+    range, ``sd`` the residual spread pooled over channels (``dof`` = C (n - 2)), ``n``."""
+
+    mean: np.ndarray
+    slope: np.ndarray
+    s_xx: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    sd: float
+    dof: int
+    n: int
+
+    def beyond(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At a flight's excitation ``x`` (C,): (beyond (C,) bool: outside the references'
+        range, move (C,) the line's log mean square over the references' mean there,
+        spread (C,) its prediction spread over sqrt(1 + 1/n), as the lack-of-fit spreads
+        are: sd sqrt(1 + d^2 / (S_xx (1 + 1/n))), d = x - mean)."""
+        x = np.asarray(x, float)
+        d = x - self.mean
+        spread = self.sd * np.sqrt(1.0 + d ** 2 / (np.maximum(self.s_xx, 1e-300)
+                                                    * (1.0 + 1.0 / self.n)))
+        return (x > self.high) | (x < self.low), self.slope * d, spread
+
+
+def fit_channel_lines(excite: np.ndarray | None, log_ms: np.ndarray) -> ChannelLines | None:
+    """The :class:`ChannelLines` of n references: ``excite`` (n, C') their
+    :func:`excitation` (its first C columns used; None: not measured), ``log_ms`` (n, C)
+    their log mean squares over sigma_c^2. None below :data:`MIN_FLIGHTS` references,
+    without an excitation for every channel, or where a channel's excitations do not spread
+    (their range below :data:`MIN_SPREAD`: no slope can be measured)."""
+    if excite is None:
+        return None
+    excite = np.asarray(excite, float)
+    log_ms = np.asarray(log_ms, float)
+    n, c = log_ms.shape
+    if n < MIN_FLIGHTS or excite.ndim != 2 or excite.shape[0] != n or excite.shape[1] < c:
+        return None
+    x = excite[:, :c]
+    if np.any(np.ptp(x, axis=0) < MIN_SPREAD):
+        return None
+    mean = x.mean(axis=0)
+    dx = x - mean
+    s_xx = np.sum(dx ** 2, axis=0)
+    slope = np.sum(dx * (log_ms - log_ms.mean(axis=0)), axis=0) / s_xx
+    rest = log_ms - log_ms.mean(axis=0) - dx * slope
+    dof = max(1, c * (n - 2))
+    return ChannelLines(mean, slope, s_xx, x.min(axis=0), x.max(axis=0),
+                        float(np.sqrt(np.sum(rest ** 2) / dof)), dof, n)
+
+
 @dataclass
 class Trend:
     """How the references' shared values and residuals move along their axis (module doc).
@@ -850,6 +933,8 @@ class Envelope:
 
     coords: np.ndarray
     trend: Trend | None
+    #: the references' lack of fit against each channel's own excitation (None: not measured)
+    lines: ChannelLines | None = None
 
     @property
     def low(self) -> np.ndarray:
@@ -873,6 +958,8 @@ class Position:
     #: the flight's own inverse information per sample of each shared parameter (P,)
     #: (:func:`quadsim.gap.calibrate.inverse_information`); None: not measured
     info: np.ndarray | None = None
+    #: the flight's :func:`excitation` of each channel; None: not measured
+    excite: np.ndarray | None = None
 
     def to_json(self) -> dict:
         names = [c[0] for c in COORDINATES]
@@ -884,14 +971,17 @@ class Position:
 
 def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
                 identified: np.ndarray, log_ms: np.ndarray,
-                info: np.ndarray | None = None) -> Envelope:
+                info: np.ndarray | None = None, excite: np.ndarray | None = None
+                ) -> Envelope:
     """The envelope of reference flights (coordinates (n, 3)), with the trend of their own
     parameter values ``values`` (n, P) (standard errors ``se``; parameters not
-    ``identified`` get no slope), their log mean squares ``log_ms`` (n, C) and their
-    inverse information per sample ``info`` (n, P; None: no inverse-information form)."""
+    ``identified`` get no slope), their log mean squares ``log_ms`` (n, C), their
+    inverse information per sample ``info`` (n, P; None: no inverse-information form) and
+    their :func:`excitation` ``excite`` (n, C'; None: no per-channel lines)."""
     return Envelope(np.asarray(coords, float),
                     fit_trend(np.asarray(coords, float), values, se, identified, log_ms,
-                              info))
+                              info),
+                    fit_channel_lines(excite, log_ms))
 
 
 def envelope_summary(envelope: Envelope | None, names=()) -> dict | None:
@@ -1002,7 +1092,8 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
                  "; the references do not spread enough to show how their model "
                  "extrapolates: judged by the reference model as calibrated")
     return Position(x, distance, name, u, text,
-                    None if info is None else np.asarray(info, float))
+                    None if info is None else np.asarray(info, float),
+                    excitation(states) if envelope.lines is not None else None)
 
 
 def local_reference(reference, pos: Position | None):
@@ -1031,6 +1122,8 @@ def local_reference(reference, pos: Position | None):
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n))
                      + (trend.lof_slope * edge) ** 2)
+    shift, spread = _channel_growth(reference, pos, shift, spread)
+    widen = np.maximum(shift, 0.0)
     lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
     move, var = _predicted_move(trend, pos, edge)
@@ -1041,6 +1134,20 @@ def local_reference(reference, pos: Position | None):
     return dataclasses.replace(
         reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
         lof_mean=reference.lof_mean + shift - widen, lof_sd=spread, place=pos)
+
+
+def _channel_growth(reference, pos: Position, shift, spread) -> tuple[np.ndarray, np.ndarray]:
+    """The lack-of-fit move ``shift`` (C,) and spread ``spread`` (C,) of
+    :func:`local_reference`, on each channel whose excitation the flight drives beyond every
+    reference's (:class:`ChannelLines`, module doc) at least the references' own line of
+    that channel's lack of fit against its excitation there: its move (never below the
+    trend's) and its prediction spread (never below the spread already there)."""
+    lines = getattr(reference.envelope, "lines", None)
+    if lines is None or pos.excite is None or len(pos.excite) < len(shift):
+        return shift, spread
+    out, move, wide = lines.beyond(pos.excite[:len(shift)])
+    return (np.where(out, np.maximum(shift, move), shift),
+            np.where(out, np.maximum(spread, wide), spread))
 
 
 def _predicted_move(trend: Trend, pos: Position, edge: float

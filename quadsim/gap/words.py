@@ -15,6 +15,8 @@ Pure text over the judgment's data (:mod:`quadsim.gap.judge`); nothing here deci
   ``"training"`` (held out: "Unexplained: ... does not carry over"; a systematic
   remainder beyond the noise model, or against nominal references beyond their own slow
   parts, is worded with its size in the channel's unit).
+* :func:`timing_words`: per flight, a rotor timing stated as a delay or a lag where the
+  data cannot separate the two forms.
 * :func:`batch_answer`: the per-flight result's one line (verdict counts).
 * :func:`residual_text`: a judged flight's residual against the references' before and after
   its answer (the report's and the summary's line, the JSON's ``residual.text``).
@@ -31,7 +33,7 @@ from .fitting import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
-           "reference_text", "residual_text", "stand_in_words"]
+           "reference_text", "residual_text", "stand_in_words", "timing_words"]
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -330,6 +332,17 @@ def _against_references(outcome: str, lead: dict, *, stated: list, lack: dict, s
         if separate:
             text += f" They differ most on {', '.join(separate)}."
     return text
+
+
+def timing_words(lead, rival) -> str:
+    """The sentence a per-flight answer adds where the flight does not separate its rotor
+    timing readings (:func:`quadsim.gap.judge.timing_rival`): both stated, ``lead`` and
+    ``rival`` (posterior rows: name, magnitude), neither a single confident name."""
+    return (f" The rotors' timing differs from the reference flights': {lead['magnitude']} "
+            f"({lead['name']}), or {rival['magnitude']} ({rival['name']}); the data cannot "
+            "separate them: the evidence's margin between the two is within what it is on "
+            "the reference flights, each judged against the others (the rotor law's form "
+            "error, not noise), so it is not the cause's.")
 
 
 def batch_answer(flights: list) -> str:

@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..core.errors import InputError
+from ..core.lag import first_order_lag
 from .logseries import (
     Estimate,
     LogSeries,
@@ -36,13 +36,8 @@ LAG_GRID_S = np.arange(0.0, 0.2001, 0.0025)
 
 
 def _lagged(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
-    """First-order lag (backward Euler, starting at the first value), along axis 0."""
-    if tau <= 0:
-        return x
-    alpha = dt / (tau + dt)
-    zi = (1 - alpha) * x[:1]
-    out, _ = lfilter([alpha], [1, -(1 - alpha)], x, axis=0, zi=zi)
-    return out
+    """First-order lag (:func:`quadsim.core.lag.first_order_lag`), along axis 0."""
+    return first_order_lag(x, tau, dt)
 
 
 def _map_normal_equations(logs: list[LogSeries], tau: float, dt: float, v_ref: float | None):

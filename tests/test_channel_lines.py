@@ -1,0 +1,99 @@
+"""Beyond the references' excitation of a channel, the lack of fit expected there follows the
+references' own line of that channel's residual against its excitation, with the line's
+prediction spread (quadsim.gap.reference.fit_channel_lines, ChannelLines, local_reference;
+issue 47: Crazyflow's no-effect cases 04/05 drive Fy 1.22x beyond every reference)."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_envelope import COORDS, _reference, _states  # noqa: E402
+
+from quadsim.gap.reference import (
+    Envelope,
+    excitation,
+    fit_channel_lines,
+    local_reference,
+    position,
+)
+
+#: four references' log excitations of 10 channels (6 wrench + 4 rotors), spread 0.3
+EXCITE = np.log(np.outer([1.0, 1.1, 1.2, 1.35], np.linspace(0.5, 5.0, 10)))
+
+
+def test_excitation_is_the_log_rms_about_the_mean_per_channel():
+    n = 400
+    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    states = SimpleNamespace(
+        specific_force=np.c_[0.2 * sign, 0.3 * sign, 9.81 + 0.4 * sign],
+        body_accel=np.c_[5 * sign, 6 * sign, 7 * sign],
+        rotor_speed=1500 + np.outer(sign, [10.0, 20.0, 30.0, 40.0]))
+    np.testing.assert_allclose(excitation(states),
+                               np.log([0.2, 0.3, 0.4, 5, 6, 7, 10, 20, 30, 40]), atol=1e-12)
+    no_rotor = SimpleNamespace(**{**vars(states), "rotor_speed": None})
+    assert len(excitation(no_rotor)) == 6
+
+
+def test_an_exact_line_is_recovered_and_predicts_beyond_the_references():
+    """Log mean squares exactly 2 x the excitation (a residual proportional to the
+    channel's signal): slope 2 on every channel, no residual spread; a flight 0.2 beyond the
+    largest reference on Fy only moves Fy's expected lack of fit by 2 (x - mean)."""
+    log_ms = 2.0 * (EXCITE - EXCITE.mean(axis=0))
+    lines = fit_channel_lines(EXCITE, log_ms)
+    np.testing.assert_allclose(lines.slope, 2.0, rtol=1e-12)
+    assert lines.sd < 1e-12 and lines.dof == 10 * 2 and lines.n == 4
+    x = EXCITE[2].copy()
+    x[1] = EXCITE[:, 1].max() + 0.2
+    out, move, _ = lines.beyond(x)
+    assert out.tolist() == [False, True] + [False] * 8
+    assert move[1] == pytest.approx(2.0 * (x[1] - EXCITE[:, 1].mean()), rel=1e-12)
+    assert fit_channel_lines(EXCITE[:2], log_ms[:2]) is None        # below 3 references
+    assert fit_channel_lines(None, log_ms) is None
+
+
+def test_the_prediction_spread_is_the_regressions():
+    """Noisy lines: spread sd sqrt(1 + d^2 / (S_xx (1 + 1/n))), so that the lack-of-fit
+    test's sqrt(1 + 1/n) makes it the regression's prediction spread
+    sd sqrt(1 + 1/n + d^2 / S_xx); sd pooled over the channels with C (n - 2) dof."""
+    rng = np.random.default_rng(3)
+    log_ms = 1.5 * EXCITE + 0.1 * rng.standard_normal(EXCITE.shape)
+    lines = fit_channel_lines(EXCITE, log_ms)
+    dx = EXCITE - EXCITE.mean(axis=0)
+    rest = log_ms - log_ms.mean(axis=0) - dx * lines.slope
+    assert lines.sd == pytest.approx(np.sqrt(np.sum(rest ** 2) / 20), rel=1e-12)
+    x = EXCITE.max(axis=0) + 0.3
+    _, _, spread = lines.beyond(x)
+    d = x - EXCITE.mean(axis=0)
+    np.testing.assert_allclose(spread * np.sqrt(1 + 1 / 4), lines.sd * np.sqrt(
+        1 + 1 / 4 + d ** 2 / np.sum(dx ** 2, axis=0)), rtol=1e-12)
+
+
+def test_the_reference_model_carries_the_line_only_where_the_flight_is_beyond():
+    """A reference whose trend along its place is flat (lof slope 0): inside every channel's
+    excitation nothing moves; with Fy driven beyond, Fy's noise scale grows by the line's
+    move (exp(move / 2)), its lack-of-fit mean stays, its spread is at least the line's
+    prediction spread, and the other channels keep the references' statistics."""
+    ref, _, _ = _reference(COORDS, slope=0.0, lof_slope=0.0)
+    log_ms = 2.0 * (EXCITE - EXCITE.mean(axis=0)) \
+        + 0.05 * np.random.default_rng(1).standard_normal(EXCITE.shape)
+    lines = fit_channel_lines(EXCITE, log_ms)
+    ref.envelope = Envelope(ref.envelope.coords, ref.envelope.trend, lines)
+    pos = position(_states(*COORDS[1:3].mean(0)), Envelope(ref.envelope.coords,
+                                                          ref.envelope.trend))
+    inside = local_reference(ref, dataclasses.replace(pos, excite=EXCITE[1:3].mean(axis=0)))
+    np.testing.assert_array_equal(inside.sigma, ref.sigma)
+    np.testing.assert_array_equal(inside.lof_sd, np.broadcast_to(ref.lof_sd, (10,)))
+    x = EXCITE[1:3].mean(axis=0)
+    x[1] = EXCITE[:, 1].max() + 0.2
+    local = local_reference(ref, dataclasses.replace(pos, excite=x))
+    _, move, spread = lines.beyond(x)
+    assert local.sigma[1] == pytest.approx(ref.sigma[1] * np.exp(move[1] / 2), rel=1e-12)
+    assert local.lof_mean[1] == pytest.approx(ref.lof_mean[1], abs=1e-12)
+    lof_sd = np.broadcast_to(ref.lof_sd, (10,))
+    assert local.lof_sd[1] == pytest.approx(max(lof_sd[1], spread[1]), rel=1e-12)
+    keep = np.arange(10) != 1
+    np.testing.assert_array_equal(local.sigma[keep], ref.sigma[keep])
+    np.testing.assert_array_equal(local.lof_sd[keep], lof_sd[keep])
