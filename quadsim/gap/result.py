@@ -105,7 +105,8 @@ class Verdict(_JsonView):
     ``answer`` in words (:mod:`quadsim.gap.words`); ``probability`` of the lead reading
     (None when refused; per flight, an ``unexplained`` name that more probably stands in
     for an effect outside the library: that hypothesis's, ``outside_library``);
-    ``tentative``; ``posterior`` (every :class:`Reading`, most probable first); ``readings`` (names stated with the named one, probability >= READING_P);
+    ``tentative``; ``posterior`` (every :class:`Reading`, most probable first); ``readings``
+    (names stated with the named one, probability >= READING_P);
     ``lack_of_fit`` (channel -> RMS over the baseline's typical RMS, channels beyond it
     only); the named reading's ``params``/``ci``/``fixed``/``units``; ``confusable_with``
     and ``separate_by``; ``notes``; ``consistency``/``partial`` (:mod:`.consistency`, held
