@@ -170,18 +170,27 @@ def staged(argv: list[str]) -> dict:
 
 def time_stages(flights: list[Path], references: list[Path]) -> dict:
     """:func:`staged` of the user's command on ``flights``, in a fresh process."""
-    argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
-            *map(str, references), "--workers", "1"]
     code = ("import json, sys; from benchmarks.speed_gap import staged; "
             "print('STAGES ' + json.dumps(staged(sys.argv[1:])))")
-    run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
-                         check=False, cwd=ROOT, env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                             p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)})
-    line = next((x for x in run.stdout.splitlines() if x.startswith("STAGES ")), None)
-    if line is None:
-        raise SystemExit(f"error: stages: no timing came back: {run.stderr.strip()[-300:]}")
+    return _timed_in_fresh_process(code, "STAGES", flights, references, ROOT)
+
+
+def _timed_in_fresh_process(code: str, tag: str, flights: list[Path], references: list[Path],
+                            root: Path) -> dict:
+    """Run ``code`` (Python source that prints one line ``TAG <json>``) with the user's
+    command's arguments on ``flights`` against ``references`` in a fresh interpreter of
+    checkout ``root``; -> the decoded JSON. No such line: a one-line error naming ``tag``."""
     import json
 
+    argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
+            *map(str, references), "--workers", "1"]
+    run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
+                         check=False, cwd=root, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
+    line = next((x for x in run.stdout.splitlines() if x.startswith(tag + " ")), None)
+    if line is None:
+        raise SystemExit(f"error: {tag.lower()}: no timing came back: "
+                         f"{run.stderr.strip()[-300:]}")
     return json.loads(line.split(" ", 1)[1])
 
 
@@ -245,20 +254,11 @@ def time_parts(flights: list[Path], references: list[Path], root: Path = ROOT) -
     checkout ``root`` (this file's function, its source handed over: the other checkout
     needs no copy of it)."""
     import inspect
-    import json
 
-    argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
-            *map(str, references), "--workers", "1"]
     code = ("import json, sys, time\n" + f"PARTS = {PARTS!r}\n"
             + inspect.getsource(weighing_parts)
             + "print('PARTS ' + json.dumps(weighing_parts(sys.argv[1:])))\n")
-    run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
-                         check=False, cwd=root, env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
-    line = next((x for x in run.stdout.splitlines() if x.startswith("PARTS ")), None)
-    if line is None:
-        raise SystemExit(f"error: parts: no timing came back: {run.stderr.strip()[-300:]}")
-    return json.loads(line.split(" ", 1)[1])
+    return _timed_in_fresh_process(code, "PARTS", flights, references, root)
 
 
 def alternate(flights: list[Path], references: list[Path], other: Path, rounds: int
