@@ -237,8 +237,9 @@ def test_the_winds_gust_phases_drawn_on_first_use_are_the_seeds():
 
 
 def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
-    """screen.linear_step (R of [A b] alone; lsq_linear's own unconstrained first step where it
-    lies inside the bounds) against Q R of A and ``lsq_linear``, inside and at the bounds."""
+    """evidence.linear_step (its factor from the Gram matrix of [A b]; lsq_linear's own
+    unconstrained first step where it lies inside the bounds) against Q R of the stacked
+    Jacobian A formed here and ``lsq_linear``, inside and at the bounds; its precision AᵀA."""
     from scipy.optimize import lsq_linear
 
     from quadsim.gap.evidence import Columns, FitInputs, jacobian_columns, linear_step
@@ -256,9 +257,12 @@ def test_the_screens_step_is_the_qr_and_bounded_solve_it_replaces(cf, states):
     for squeeze in (None, 1e-3):          # the bounds as they are; then tight around start
         if squeeze is not None:
             prob.z_lo, prob.z_hi = start - squeeze, start + squeeze
-        z1, predicted, a, active = linear_step(prob, start, base, columns)
+        z1, predicted, h, active = linear_step(prob, start, base, columns)
         aug0, du0 = prob.marg.profile(base)
         b = np.concatenate([aug0, du0, start])
+        aug, du = prob.marg.profile(columns)     # the stacked Jacobian A, formed here
+        a = np.vstack([aug, du, np.eye(len(start))])
+        _close(h, a.T @ a, rel=1e-9)
         q, r = np.linalg.qr(a)
         qb = q.T @ b
         want = lsq_linear(r, -qb, bounds=(prob.z_lo - start, prob.z_hi - start),

