@@ -5,11 +5,8 @@ named reading's probability is net of "outside the library" against nominal refe
 (quadsim.gap.judge.rows_with_outside: outside_library and with_outside on the share the lead
 leaves on the training flights, each against the references).
 
-drone-models' case 24 (rotor speeds logged 11.6 ms late) held out against its references was
-`no_significant_gap` at 1.00: "no difference" read each flight at its own rotor delay
-(5.8 ms beyond the references' timing, 2.8 of its spreads: ``timing_taken``) and the lag
-reading left beside it (52 -> 59 ms, within the references' spread of it, removing 1.3 % of
-the held-out gap) counted as no difference by both practical-significance rules."""
+Held out, the log evidence is of the training and held-out flights together, so the timing
+margin is taken per judged flight against the references' one-flight margins."""
 
 from __future__ import annotations
 
@@ -19,10 +16,6 @@ import numpy as np
 import pytest
 from scipy.stats import t as student_t
 
-from quadsim.gap.calibrate import SelfCheck, Spread
-from quadsim.gap.diagnose import Practical
-from quadsim.gap.evidence import Evidence
-from quadsim.gap.explanations import Explanation
 from quadsim.gap.judge import LOF_P, OUTSIDE_LIBRARY, timing_rival
 from quadsim.gap.result import Reading
 
@@ -53,46 +46,43 @@ def test_held_out_the_margin_is_per_judged_flight():
     assert timing_rival("motor_lag", [far, delay], check, flights=3) is None
 
 
-def _weighed(name, log_z, held_ms, *, lag=None):
-    """A Weighed-like reading: ``lag`` (s) a motor_lag reading's time constant, against a
-    prior centre of 52 ms; every reading fits the rotor delay (5.8 ms, as case 24's)."""
-    if lag is None:
-        expl = Explanation(name, "", (), (0.0,), (0.002,), shift="rotor")
-        values, sd = {"delay.rotor": 0.0058}, {"delay.rotor": 0.0005}
-    else:
-        expl = Explanation(name, "", (("motor_lag", {}, ("time_constant",)),),
-                           (0.052, 0.0), (0.02, 0.002), shift="rotor")
-        values = {"motor_lag.time_constant": lag, "delay.rotor": 0.0058}
-        sd = {"motor_lag.time_constant": 0.0008, "delay.rotor": 0.0005}
-    ev = Evidence(expl, values, sd, dict(sd), dict.fromkeys(values, True), log_z,
-                  np.ones(6))
-    noise = np.random.default_rng(5).standard_normal((2000, 6))
-    noise /= np.sqrt(np.mean(noise ** 2, axis=0))
-    return SimpleNamespace(name=name, train=ev, total=ev, train_residuals=[],
-                           held_residuals=[noise * np.sqrt(held_ms)])
+def _w(name, log_z, flights=(2, 1)):
+    """A Weighed-like reading on 2 training flights and 1 held out."""
+    return SimpleNamespace(name=name, total=_ev(name, log_z),
+                           train_residuals=[None] * flights[0],
+                           held_residuals=[None] * flights[1])
 
 
-def test_a_timing_no_difference_has_taken_is_not_sized_by_either_rule():
-    """Case 24's numbers: the lag 59 ± 0.8 ms against the references' 52 ms (between-flight
-    SD 4 ms: |7| - 1.96 x 0.8 = 5.4 < 2 x 4, within their spread) removing 1 % of the
-    held-out gap, 32 log units over "no difference". Where "no difference" took the
-    timing (every held-out flight's own delay beyond the references'), neither the spread
-    nor the size counts it as no difference: the lag leads (main: only ``signal_delay``
-    was exempt, from the size rule alone, so the lag's weight went to "no difference").
-    Where the timing was not taken both rules stand."""
-    check = SelfCheck((), (), (), {("motor_lag", ""): {
-        "motor_lag.time_constant": Spread(0.052, 0.004, 8, 0.001, 0.0014)}})
-    reference = SimpleNamespace(sigma=np.ones(6), self_check=check)
-    before = [_weighed("no_difference", 0.0, 1.0).held_residuals[0]]
-    weighed = [_weighed("no_difference", -508.0, 1.0),
-               _weighed("motor_lag", -476.0, 0.99, lag=0.059)]
-    taken = Practical([], reference, before, timing_taken=True)
-    ranked = taken.rank(weighed)
-    assert ranked[0][0] == "motor_lag" and ranked[0][1] == pytest.approx(1.0)
-    assert taken.shares[("motor_lag", "")] == pytest.approx(0.01, abs=1e-9)
-    plain = Practical([], reference, before)
-    assert plain.rank(weighed)[0][0] == "no_difference"
-    assert plain.spread_negligible(weighed[1].train) and plain.small(weighed[1].train)
+def test_held_out_the_rival_timing_is_stated_beside_the_lead():
+    """drone-models' case 25 held out against its references (rotor speeds 21.6 ms late):
+    the delay -554.24, the lag -569.96: 15.72 log units over 3 flights, 5.24 per flight,
+    within the references' bound the delay's way (their margins negated: 16.14), so the lag
+    is stated beside it (its posterior row; main held out: `signal_delay` alone,
+    confident). A lag 45.76 below is within per flight, beyond as one flight's margin. A
+    lead that is no timing, or references without the margins: none."""
+    from quadsim.gap.judge import _timing_row  # new (main: none held out)
+
+    delay, lag = _w("signal_delay", -554.2416), _w("motor_lag", -569.9632)
+    null = _w("no_difference", -729.9078)
+    rows = [_row("signal_delay", 1.0), _row("motor_lag", 1.5e-7), _row("no_difference", 0.0)]
+    decision = SimpleNamespace(lead=delay, lead_name="signal_delay", weighed=(null, delay, lag),
+                               ranked=[("signal_delay", 1.0, delay), ("motor_lag", 1.5e-7, lag),
+                                       ("no_difference", 0.0, null)], rows=rows)
+    reference = SimpleNamespace(self_check=SimpleNamespace(timing=REFS))
+    bound = -REFS.mean() + student_t.ppf(1 - LOF_P, 7) * REFS.std(ddof=1) * np.sqrt(1 + 1 / 8)
+    assert bound == pytest.approx(16.137, abs=1e-3)
+    assert _timing_row(decision, reference) is rows[1]
+    # a lag 45.76 below: 15.25 per flight, within; one flight's 45.76 is not
+    far = _w("motor_lag", -600.0)
+    wide = SimpleNamespace(**{**vars(decision), "weighed": (null, delay, far),
+                              "ranked": [("signal_delay", 1.0, delay), ("motor_lag", 0.0, far),
+                                         ("no_difference", 0.0, null)]})
+    assert _timing_row(wide, reference) is rows[1]
+    one = SimpleNamespace(**{**vars(wide), "lead": _w("signal_delay", -554.2416, (1, 0))})
+    assert _timing_row(one, reference) is None
+    mass = SimpleNamespace(**{**vars(decision), "lead_name": "mass_offset"})
+    assert _timing_row(mass, reference) is None
+    assert _timing_row(decision, SimpleNamespace(self_check=None)) is None
 
 
 def _row(name, p):

@@ -201,7 +201,6 @@ from .fitting import (
 from .judge import (
     FORM_ERROR,
     SLOW_WINDOW_S,
-    TIMINGS,
     UNCHECKED_WORDS,
     carry_over,
     channel_names,
@@ -1397,14 +1396,11 @@ class Practical:
     would say the library has none). ``timing_taken`` (against nominal references, where
     "no difference" reads each flight at its own rotor delay, :meth:`Against.check`, and
     that delay lies beyond the references' timing on every held-out flight,
-    :meth:`Against.timing_taken`): the size rule does not size either reading of a rotor
-    timing difference (:data:`quadsim.gap.judge.TIMINGS`), whose change "no difference"
-    has then taken with each flight's own delay (``signal_delay``'s share of the held-out
-    gap nil by construction; ``motor_lag``, read at those delays too, keeps only its form's
-    part: what tells them from "no difference" is that delay's prior, paid in the
-    evidence, and which of the two it is, :func:`quadsim.gap.judge.timing_rival`); per
-    flight a delay is a nuisance parameter, outside practical significance too
-    (:data:`quadsim.gap.calibrate.NUISANCE`). Where the held-out flights'
+    :meth:`Against.timing_taken`): the size rule does not size ``signal_delay``, whose
+    change "no difference" has then taken with each flight's own delay (its share of the
+    held-out gap nil by construction: what tells them apart is that delay's prior, paid in
+    the evidence); per flight a delay is a nuisance parameter, outside practical
+    significance too (:data:`quadsim.gap.calibrate.NUISANCE`). Where the held-out flights'
     own delays lie within the references' timing the share is the reading's size, as for
     every reading (a delay read at a periodic optimum far from the timing the flights show
     removes little of their gap)."""
@@ -1426,12 +1422,7 @@ class Practical:
         """Whether reading ``ev`` is within the training flights' spread (alone); against
         nominal references (the reference carries their self-check), within the
         references' between-flight spread about their own readings, the per-flight rule
-        (:func:`quadsim.gap.calibrate.negligible`). Never a rotor timing reading where
-        "no difference" took the timing change (``timing_taken``, class doc): the flights'
-        own delays, beyond the references' timing, are then that change's size, and a
-        timing reading's parameter only the part its form adds to it."""
-        if self.timing_taken and ev.name in TIMINGS:
-            return False
+        (:func:`quadsim.gap.calibrate.negligible`)."""
         check = getattr(self.reference, "self_check", None)
         return negligible(ev, check if check is not None
                           else SelfCheck((), (), (), self.spreads))
@@ -1445,7 +1436,7 @@ class Practical:
         log evidence, which assumes the library's forms exact. The same size in the
         data's own units as the between-flight spread is in a parameter's, and the one
         that applies with fewer than 3 training flights, where there is no spread."""
-        if self.timing_taken and ev.name in TIMINGS:
+        if self.timing_taken and ev.name == "signal_delay":
             return False
         share = self.shares.get((ev.name, ev.explanation.variant))
         return share is not None and share <= FORM_ERROR

@@ -259,8 +259,8 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
     ``references``: held out against nominal reference flights (the reference model and
     the systematic remainder's normal are theirs, :func:`quadsim.gap.judge.remainder`):
     "no difference from the reference flights", a remainder beyond the references' slow
-    parts, and a named ``signal_delay``'s or ``motor_lag``'s share of the gap is said not
-    to be its size (no difference reads each flight at its own rotor timing there,
+    parts, and a named ``signal_delay``'s share of the gap is said not to be its size (no
+    difference reads each flight at its own rotor timing there,
     :meth:`quadsim.gap.diagnose.Against.check`); False: "from the nominal model", beyond the
     noise."""
     if against == "references":
@@ -306,10 +306,6 @@ def answer(outcome: str, lead: dict, *, stated: list, lack: dict, against: str,
         text += (" (against the reference flights no difference reads each flight at its own "
                  "rotor timing too, so a delay's share of the gap is not its size: its "
                  "evidence is)")
-    elif references and lead["name"] == "motor_lag":
-        text += (" (against the reference flights no difference and the lag read each flight "
-                 "at its own rotor timing, so the lag's share of the gap is what its form adds "
-                 "to that timing, not the timing difference's size: its evidence is)")
     if remains:
         text += (f"; beyond it a systematic residual stays above {noise} on "
                  f"{_remains_text(remains, normal)}: part of the gap is outside the library.")
