@@ -97,7 +97,8 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    :class:`quadsim.gap.diagnose.Practical`); a battery-sag reading that brings the law
    speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
    of the flight, and their readings alike (:func:`negligible_at`).
-1b. **Outside the library** (per flight, :func:`outside_library`): the posterior of 1 is
+1b. **Outside the library** (per flight, and held out against nominal references through
+   :func:`rows_with_outside`, :func:`outside_library`): the posterior of 1 is
    over the library's readings only. Beside a named reading that leaves something beyond
    the references' (a lack of fit within :data:`FORM_ERROR_TENTATIVE`, or a systematic
    remainder, 3), its weight splits between "the name is right" and "the name stands in
@@ -148,7 +149,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    stays beside the name (part of the gap is outside the library; both modes) or, held out,
    when the held-out flights do not separate another reading from it (:func:`unseparated`
    and :func:`beyond_misfit`: within the form error, and what separates them is the lead's
-   own misfit): that reading is then stated beside the name.
+   own misfit): that reading is then stated beside the name; or, in both modes against
+   nominal references, when the flights do not separate the rotor timing readings
+   (:func:`timing_rival`; held out its margin per judged flight): both are stated.
 
 Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
 ``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
