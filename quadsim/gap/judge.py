@@ -1530,10 +1530,12 @@ def _timing_row(decision, reference, *, references: bool = False):
     training and held-out flights' count as ``flights``, against the references'
     self-check margins ``reference.self_check.timing``); a row of probability 0 where the
     rival is not ranked; None where :func:`timing_rival` gives none."""
+    check = getattr(reference, "self_check", None)
+    if decision.lead_name not in TIMINGS or getattr(check, "timing", None) is None:
+        return None
     lead = decision.lead
     pool = list(getattr(decision, "weighed", ()) or [w for _, _, w in decision.ranked])
-    rival = timing_rival(decision.lead_name, [w.total for w in pool],
-                         getattr(reference, "self_check", None),
+    rival = timing_rival(decision.lead_name, [w.total for w in pool], check,
                          flights=len(lead.train_residuals) + len(lead.held_residuals))
     if rival is None:
         return None
