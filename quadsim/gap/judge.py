@@ -97,7 +97,8 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    :class:`quadsim.gap.diagnose.Practical`); a battery-sag reading that brings the law
    speed ~ vbat / V_full the references did not test is sized at their voltage, per quarter
    of the flight, and their readings alike (:func:`negligible_at`).
-1b. **Outside the library** (per flight, :func:`outside_library`): the posterior of 1 is
+1b. **Outside the library** (per flight, and held out against nominal references through
+   :func:`rows_with_outside`, :func:`outside_library`): the posterior of 1 is
    over the library's readings only. Beside a named reading that leaves something beyond
    the references' (a lack of fit within :data:`FORM_ERROR_TENTATIVE`, or a systematic
    remainder, 3), its weight splits between "the name is right" and "the name stands in
@@ -148,7 +149,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    stays beside the name (part of the gap is outside the library; both modes) or, held out,
    when the held-out flights do not separate another reading from it (:func:`unseparated`
    and :func:`beyond_misfit`: within the form error, and what separates them is the lead's
-   own misfit): that reading is then stated beside the name.
+   own misfit): that reading is then stated beside the name; or, in both modes against
+   nominal references, when the flights do not separate the rotor timing readings
+   (:func:`timing_rival`; held out its margin per judged flight): both are stated.
 
 Thresholds: ``LOF_P`` 1e-3 (one right model in a thousand called unexplained by chance);
 ``READING_P`` 0.1 (a reading a user should still check, one in ten, is stated);
@@ -213,7 +216,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
-           "with_outside"]
+           "with_outside", "TIMINGS", "timing_rival", "rows_with_outside"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -1126,10 +1129,11 @@ def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
 TIMINGS = ("motor_lag", "signal_delay")
 
 
-def timing_rival(lead: str, rows, check) -> object | None:
-    """Per flight, the other rotor timing reading (:data:`TIMINGS`) the flight does not
+def timing_rival(lead: str, rows, check, *, flights: int = 1) -> object | None:
+    """The other rotor timing reading (:data:`TIMINGS`) the flight does not
     separate from a timing lead ``lead``: its best-supported row in ``rows`` (Evidence)
-    when the lead's log-evidence margin over it, m = log Z_lead - log Z_rival, is within
+    when the lead's log-evidence margin over it per judged flight,
+    m = (log Z_lead - log Z_rival) / ``flights``, is within
     what the same two readings' margin is on the reference flights, each judged against
     the others (``check.timing``, :func:`quadsim.gap.calibrate.timing_margin`, in the
     lead's direction): m <= mean + t s sqrt(1 + 1/n), the Student-t quantile at
@@ -1146,7 +1150,11 @@ def timing_rival(lead: str, rows, check) -> object | None:
     delay by 4-9 log units). A flight's margin within that is the forms' error, not the
     cause's, and both readings are stated (:func:`quadsim.gap.words.timing_words`). The
     margins compare as log evidences of flights of similar length (as the references and
-    the flights judged against them are)."""
+    the flights judged against them are). Held out (:func:`judge_heldout`) the evidence is
+    of ``flights`` flights (training and held out, each read as per flight): their margin
+    per flight is held to the one-flight bound, as if the form error were the same on each
+    (the bound of an average of independent flights would be narrower: this one states
+    both readings at least as often)."""
     if lead not in TIMINGS:
         return None
     refs = getattr(check, "timing", None)
@@ -1158,7 +1166,7 @@ def timing_rival(lead: str, rows, check) -> object | None:
     if not own or not rivals:
         return None
     rival = max(rivals, key=lambda e: e.log_z)
-    margin = max(e.log_z for e in own) - rival.log_z
+    margin = (max(e.log_z for e in own) - rival.log_z) / max(1, flights)
     ref = np.asarray(refs, float) * (1.0 if lead == "motor_lag" else -1.0)
     n = len(ref)
     bound = ref.mean() + float(student_t.ppf(1 - LOF_P, n - 1)) * ref.std(ddof=1) \
@@ -1418,14 +1426,42 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     tied = _unseparated(decision, reference, before=before, stated=stated) \
         if effect and entry is not None else []
     others += [row["name"] for row in tied if row["name"] not in others]
-    if effect and tied:
+    # a rotor timing the flights do not separate (lag or delay within the references' own
+    # margins, per flight, timing_rival; against references, where their self-check
+    # measured them): both readings stated, the name tentative, as per flight
+    timing = _timing_row(decision, reference, references=references) \
+        if effect and named else None
+    if timing is not None and timing["name"] not in others:
+        others.append(timing["name"])
+    if effect and (tied or timing is not None):
         separate_by = fitting.separation(shown, others)
-    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left) or bool(lone)
+    unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left) or bool(lone) \
+        or timing is not None
+    # beside a name that leaves something beyond the references' (a lack of fit within the
+    # tentative share, or a remainder), "outside the library" weighs by the share it leaves
+    # on the training flights, each against the references (the per-flight rule 1b and its
+    # classes); against the bare parameter set no share of that kind exists: not weighed
+    rows, p_out = rows_with_outside(rows, share, bool(left) or bool(remains)) \
+        if effect and per_flight and named else (list(rows), 0.0)
+    stand_in = effect and p_out > rows[0]["probability"]
+    if stand_in:        # the name is a stand-in, not a cause (1b): unexplained, stated
+        outcome, effect = "unexplained", False
     words, partial, more = _heldout_words(decision, outcome=outcome, stands=stands,
                                           stated=stated, lack=lack, remains=remains,
                                           separate_by=separate_by, alternatives=alts,
                                           unsure=unsure, references=references,
-                                          beyond=beyond)
+                                          beyond=beyond, lead_row=rows[0])
+    if stand_in:
+        words = stand_in_words(shown, p_lead, rows[0]["magnitude"], share, p_out,
+                               gap="the training flights' gap")
+        if remains:
+            where_ = ", ".join(f"{k} at {v[1] ** 0.5:.2g}x" for k, v in remains.items())
+            words += (f" Beyond it a systematic remainder stays (the residual's slow part on "
+                      f"{where_} the reference flights' typical).")
+    elif p_out > 0:
+        words += outside_words(p_out, share, p_lead, gap="the training flights' gap")
+    if timing is not None and effect:
+        words += timing_words(rows[0], timing)
     notes += more
     if left and outcome == "effect":
         where_ = ", ".join(f"{k} at {v[0]:.2g}x" for k, v in left.items())
@@ -1443,8 +1479,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
                   f"library's form error ({100 * FORM_ERROR:.0f} %), so no difference that "
                   "matters.")
     verdict = Verdict(
-        outcome, shown if effect else outcome, words, p_lead,
+        # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
+        outcome, shown if effect else outcome, words,
+        p_out if stand_in else rows[0]["probability"],
         tentative=effect and (p_lead < CONFIDENT or shifted or unsure),
+        probability_within_library=p_lead, outside_library=p_out,
         posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
                      **{k: v[0] for k, v in lack.items()}},
@@ -1464,6 +1503,48 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         reduction=reduction, heldout_gap_before=_gap(before),
         heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
     return verdict, tuple(notes)
+
+
+def rows_with_outside(rows, share: float, flagged: bool) -> tuple[list, float]:
+    """Held out against nominal references, the posterior ``rows`` (:class:`Reading`, most
+    probable first) with "outside the library" beside the lead (module doc, 1b; the
+    per-flight rule through :func:`outside_library` and :func:`with_outside`): ``share``
+    the share of the training flights' gap the lead leaves, each flight against the
+    references at its own place, summed over them (:func:`against_reference`: per flight's
+    :func:`form_share` on each, so the classes measured per flight apply to it),
+    ``flagged`` whether the lead leaves something beyond the references' (a lack of fit
+    within :data:`FORM_ERROR_TENTATIVE` or a systematic remainder). -> (rows, the outside
+    hypothesis's probability): the lead's row at p (1 - q), the others as they were.
+    Against the bare parameter set it is not weighed (:func:`judge_heldout`): there the
+    gap is the set's whole error against the noise model, not a share beyond references
+    like the one the classes were measured on."""
+    split, p_out = with_outside([(r, r["probability"], None) for r in rows],
+                                outside_library(share, flagged))
+    return [r if p == r["probability"] else dataclasses.replace(r, probability=p)
+            for r, p, _ in split], p_out
+
+
+def _timing_row(decision, reference, *, references: bool = False):
+    """Held out, the posterior row of the rotor timing reading the flights do not separate
+    from a timing lead (:func:`timing_rival` on every weighed reading's total evidence, the
+    training and held-out flights' count as ``flights``, against the references'
+    self-check margins ``reference.self_check.timing``); a row of probability 0 where the
+    rival is not ranked; None where :func:`timing_rival` gives none."""
+    check = getattr(reference, "self_check", None)
+    if decision.lead_name not in TIMINGS or getattr(check, "timing", None) is None:
+        return None
+    lead = decision.lead
+    pool = list(getattr(decision, "weighed", ()) or [w for _, _, w in decision.ranked])
+    rival = timing_rival(decision.lead_name, [w.total for w in pool], check,
+                         flights=len(lead.train_residuals) + len(lead.held_residuals))
+    if rival is None:
+        return None
+    w = next(w for w in pool if w.total is rival)
+    row = next((r for r, (_, _, x) in zip(decision.rows, decision.ranked) if x is w), None)
+    if row is not None:
+        return row
+    return Reading(rival.name, 0.0, nominal_words(reading_text(w.train, reference), True,
+                                                  references=references), rival.log_z)
 
 
 def _alone_words(lone: dict, flown: tuple) -> str:
@@ -1597,13 +1678,16 @@ def _unseparated_words(tied: list, shown: str, separate_by: dict) -> str:
 def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: dict,
                    remains: dict, separate_by: dict, alternatives: tuple,
                    unsure: bool = False, references: bool = False,
-                   beyond: dict | None = None) -> tuple[str, dict | None, list[str]]:
+                   beyond: dict | None = None,
+                   lead_row=None) -> tuple[str, dict | None, list[str]]:
     """(answer, partial explanation or None, notes) of a held-out verdict: an inconsistent
     name (``stands``, :func:`quadsim.gap.judge.standing`) is a partial explanation;
     otherwise :func:`quadsim.gap.words.answer` (tentative below :data:`CONFIDENT` or
     ``unsure``: a lead with a caveat or a systematic remainder), with the tentative sentence
     of a shifted name that stands. ``beyond``: the channels of ``lack`` beyond the reference
-    flights' (:func:`against_reference`): an unexplained answer says so as per flight."""
+    flights' (:func:`against_reference`): an unexplained answer says so as per flight.
+    ``lead_row``: the lead's posterior row as the answer states it (its probability the
+    name's, net of "outside the library", :func:`with_outside`; None: ``decision``'s)."""
     lead_name, checked = decision.lead_name, decision.consistency
     entry = decision.entry(lead_name) or {}
     reduction = entry.get("reduction", 0.0)
@@ -1619,7 +1703,8 @@ def _heldout_words(decision, *, outcome: str, stands: str, stated: list, lack: d
     carried = {k: v for k, v in lack.items() if k not in (beyond or {})}
     against = "references" if outcome == "unexplained" and lack and not carried \
         else "training"
-    words = answer(outcome, rows[0], stated=[r for r in rows[1:] if r in stated], lack=lack,
+    words = answer(outcome, rows[0] if lead_row is None else lead_row,
+                   stated=[r for r in rows[1:] if r in stated], lack=lack,
                    against=against, remains=remains,
                    tentative=decision.probability[lead_name] < CONFIDENT or unsure,
                    reduction=reduction, separate=separate_by, references=references)

@@ -202,6 +202,8 @@ _VERDICT = {
         "partial": _PARTIAL,
         "tentative": {"type": "boolean"},
         "probability": {"type": ["number", "null"]},
+        "probability_within_library": {"type": ["number", "null"]},
+        "outside_library": {"type": "number"},
         "posterior": {"type": "array", "items": {"type": "object",
                                                  "required": ["name", "probability"]}},
     },

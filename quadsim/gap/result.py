@@ -90,7 +90,7 @@ class Reading(_JsonView):
 #: JSON keys of a held-out verdict beyond the common ones (the field of the same name).
 _HELDOUT_KEYS = ("floor_source", "channels", "alternatives", "best_candidate",
                  "heldout_channel_gap_after", "reduction", "heldout_gap_before",
-                 "heldout_gap_after")
+                 "heldout_gap_after", "probability_within_library", "outside_library")
 #: JSON keys of a judged flight beyond the common ones.
 _FLIGHT_KEYS = ("differ_on", "symptom", "drag_law", "signal_delays_ms", "form_remainder",
                 "self_check_clean", "probability_within_library", "outside_library")
@@ -103,9 +103,10 @@ class Verdict(_JsonView):
     Common: ``outcome`` (:data:`OUTCOMES`); ``name``: the reading named when ``outcome`` is
     ``effect``, else the outcome (JSON key ``verdict`` per flight, ``effect`` held out);
     ``answer`` in words (:mod:`quadsim.gap.words`); ``probability`` of the lead reading
-    (None when refused; per flight, an ``unexplained`` name that more probably stands in
-    for an effect outside the library: that hypothesis's, ``outside_library``);
-    ``tentative``; ``posterior`` (every :class:`Reading`, most probable first); ``readings``
+    (None when refused; an ``unexplained`` name that more probably stands in for an effect
+    outside the library: that hypothesis's, ``outside_library``);
+    ``tentative``; ``probability_within_library``, ``outside_library``; ``posterior``
+    (every :class:`Reading`, most probable first); ``readings``
     (names stated with the named one, probability >= READING_P);
     ``lack_of_fit`` (channel -> RMS over the baseline's typical RMS, channels beyond it
     only); the named reading's ``params``/``ci``/``fixed``/``units``; ``confusable_with``
@@ -113,8 +114,7 @@ class Verdict(_JsonView):
     out, when a name was checked).
 
     Per flight: ``reason`` (refused), ``differ_on``, ``symptom``, ``drag_law``, ``envelope``,
-    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``,
-    ``probability_within_library``, ``outside_library``; JSON ``residual`` (with
+    ``signal_delays_ms``, ``form_remainder``, ``self_check_clean``; JSON ``residual`` (with
     a ``series``): the RMS per channel before and after the answer over the references'
     RMS, the share of the excess removed and its words (:class:`GapShare`,
     :func:`quadsim.gap.words.residual_text`). Held out: ``floor_source``, ``channels`` (RMS
@@ -163,13 +163,13 @@ class Verdict(_JsonView):
     #: per flight: whether the references judge themselves clean
     #: (:class:`quadsim.gap.calibrate.SelfCheck`); None without a self-check
     self_check_clean: bool | None = None
-    #: per flight: the lead reading's probability among the library's readings only (their
+    #: the lead reading's probability among the library's readings only (their
     #: posterior sums to 1; before the "outside the library" hypothesis); ``probability`` is
     #: the name's: this less ``outside_library`` (a stand-in's: ``outside_library``)
     probability_within_library: float | None = None
-    #: per flight: P(the name stands in for an effect outside the library) beside a name
-    #: that leaves something beyond the references' (:func:`quadsim.gap.judge.with_outside`);
-    #: 0 else
+    #: P(the name stands in for an effect outside the library) beside a name that leaves
+    #: something beyond the references' (:func:`quadsim.gap.judge.with_outside`; held out
+    #: against references only); 0 else
     outside_library: float = 0.0
     #: per flight: the residual before and after the answer (:mod:`.page`; not in the JSON)
     series: Series | None = None

@@ -204,25 +204,29 @@ def _pct(p: float) -> str:
     return f"{100 * p:.0f} %" if p < 0.995 else "> 99 %"
 
 
-def outside_words(p_out: float, share: float, within: float) -> str:
-    """Per flight, the sentence beside a name that leaves something beyond the references'
+def outside_words(p_out: float, share: float, within: float, *,
+                  gap: str = "the gap") -> str:
+    """The sentence beside a name that leaves something beyond the references'
     (:func:`quadsim.gap.judge.with_outside`): ``p_out`` the probability that the name stands
     in for an effect outside the library, ``share`` the share of the flight's gap the name
-    leaves, ``within`` the name's probability among the library's readings alone."""
-    source = f", from the {100 * share:.1f} % of the gap the name leaves" \
+    leaves, ``within`` the name's probability among the library's readings alone; ``gap``
+    whose gap that is in words (held out against references: "the training flights' gap")."""
+    source = f", from the {100 * share:.1f} % of {gap} the name leaves" \
         if np.isfinite(share) else ""
     return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
             f"that it stands in for an effect outside the library{source}.")
 
 
 def stand_in_words(name: str, within: float, magnitude: str, share: float,
-                   p_out: float) -> str:
-    """Per flight, the answer where the outside hypothesis is more probable than the name it
+                   p_out: float, *, gap: str = "the flight's gap") -> str:
+    """The answer where the outside hypothesis is more probable than the name it
     weighs (:func:`quadsim.gap.judge.with_outside`, outcome ``unexplained``): ``name`` the
     library's most probable reading, ``within`` its probability among the library's readings
     alone, ``magnitude`` its reading in words, ``share`` the share of the flight's gap it
-    leaves, ``p_out`` the probability that it stands in for an effect outside the library."""
-    left = f" leaves {100 * share:.0f} % of the flight's gap," if np.isfinite(share) \
+    leaves, ``p_out`` the probability that it stands in for an effect outside the library;
+    ``gap``: whose gap, in words (held out against references: "the training flights' gap",
+    each of them against the references)."""
+    left = f" leaves {100 * share:.0f} % of {gap}," if np.isfinite(share) \
         else " leaves"
     return (f"Not in the library: the most probable of the library's readings ({name}, "
             f"{_pct(within)} among them: {magnitude}){left} more than the reference flights "
