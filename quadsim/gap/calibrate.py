@@ -276,7 +276,7 @@ class PerFlight:
     def envelope(self, log_ms: np.ndarray):
         """The flights' :func:`quadsim.gap.reference.envelope_of`."""
         return envelope_of(self.coords, self.values, self.se, self.identified, log_ms,
-                           self.info, self.excite)
+                           info=self.info, excite=self.excite)
 
     def without(self, j: int) -> PerFlight:
         """The same without flight ``j``."""

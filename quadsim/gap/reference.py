@@ -972,7 +972,7 @@ class Position:
 
 
 def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
-                identified: np.ndarray, log_ms: np.ndarray,
+                identified: np.ndarray, log_ms: np.ndarray, *,
                 info: np.ndarray | None = None, excite: np.ndarray | None = None
                 ) -> Envelope:
     """The envelope of reference flights (coordinates (n, 3)), with the trend of their own
