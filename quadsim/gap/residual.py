@@ -794,22 +794,17 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
 def _window_means(flights: list[FlightStates]) -> tuple | None:
     """The flights' commands, passed through the rotors' timing (:func:`map_lag`), and rotor
     speeds averaged over :data:`MAP_WINDOW_S` (moving mean, per flight, edges dropped;
-    (M, R) each, pooled) and how many windows they span; None without a flight logging
-    both."""
+    (M, R) each, pooled): (the commands through the line's timing, the speeds, how many
+    windows they span, the commands through the gain's timing); None without a flight
+    logging both."""
     usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
     if not usable:
         return None
     dt = [float(np.median(np.diff(f.t))) if len(f.t) > 1 else 1.0 for f in usable]
     speed = np.concatenate([_moving_mean(f.rotor_speed, w) for f, w in zip(usable, dt)])
-    line, gain = map_lag(usable, dt, speed)
-
-    def through(timing):
-        return np.concatenate([_moving_mean(_through(f, timing, w), w)
-                               for f, w in zip(usable, dt)])
-
-    command = through(line)
+    (_, command), (_, origin) = map_lag(usable, dt, speed)
     windows = sum((f.t[-1] - f.t[0]) / MAP_WINDOW_S for f in usable if len(f.t) > 1)
-    return command, speed, float(windows), command if gain == line else through(gain)
+    return command, speed, float(windows), origin
 
 
 #: the lags (s) :func:`map_lag` tries: 0 to 0.2 s (motor time constants plus the rotor
@@ -830,47 +825,42 @@ def _through(flight, timing: tuple[str, float], dt: float) -> np.ndarray:
                     axis=1)
 
 
-def map_lag(flights: list, dt: list[float], speed: np.ndarray
-            ) -> tuple[tuple[str, float], tuple[str, float]]:
-    """The timings (``("lag", tau)`` or ``("delay", d)``, s, each one of
-    :data:`MAP_LAGS_S`) between the commands and the rotor speeds of ``flights`` (each
-    logging both; ``dt`` their sample steps, ``speed`` their speeds' window means,
-    :func:`_window_means`) that the static map fits best, (the line's, the gain through the
-    origin's): the least residual sum of squares, over the rotors, of a straight line (a
-    gain) from the window means of the command through it (:func:`_through`) to those of
-    the speed. Both timing forms: a lag attenuates a manoeuvre that a delay passes
-    (1 / sqrt(1 + (2 pi f tau)^2)), so a lag taken for a delayed speed leaves a slope error
-    the line's intercept takes up; each map form its own timing, so that
-    :func:`_line_supported` compares forms with the same freedom (generated 30 ms-late
-    proportional rotors, 0.2 Hz manoeuvres, 20 seeds: the line on 21 of 80 rotors with a
-    lag chosen for the line alone).
+def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> tuple[tuple, tuple]:
+    """The timing between the commands and the rotor speeds of ``flights`` (each logging
+    both; ``dt`` their sample steps, s; ``speed`` (M, R) their speeds' window means,
+    :func:`_window_means`) that the static map fits best, for each map form: ((the line's
+    timing, its commands' window means (M, R)), (the gain through the origin's timing, its
+    commands' window means)). A timing is ``("lag", tau)`` or ``("delay", d)`` (s, each one
+    of :data:`MAP_LAGS_S`, :func:`_through`); best: the least residual sum of squares, over
+    the rotors, of the form fitted from the window means of the command through it to those
+    of the speed. Why through a timing: window means of a command that moves within the
+    window and of a speed that follows it late differ by the timing's attenuation
+    (1 / sqrt(1 + (2 pi f tau)^2) for a lag), so on the raw command the slope shrinks and the
+    line takes a false intercept (benchmarks/README.md, drone-models). Why both timing forms
+    and a timing per map form: a lag taken for a delayed speed leaves a slope error the
+    line's intercept takes up, and :func:`_line_supported` compares the forms with the same
+    freedom only when each has its own best timing. A rotor whose command does not vary:
+    no timing is read (``("lag", 0.0)`` for both, the raw command's means)."""
+    def means(timing):
+        return np.concatenate([_moving_mean(_through(f, timing, w), w)
+                               for f, w in zip(flights, dt)])
 
-    Why: the map is static, but window means of a command that moves within the window
-    (a manoeuvre's 0.5-2 Hz, which a 0.5 s moving mean passes in part) and of a speed that
-    follows it with a lag tau differ by the lag's attenuation, 1 / (1 + (2 pi f tau)^2)
-    in phase: regressed on the raw command the slope shrinks below the static one and the
-    line takes an intercept (drone-models' speed-controlled rotors, 60 ms: an intercept of
-    4 % of the hover speed, read as a load exponent 0.036 ± 0.016 where it is 0, and
-    extrapolated to a flight at a hover speed 4 % higher as 0.14 % less speed per command:
-    on the rotor channels the propeller reading's free exponent took that up and named a
-    mass a thrust factor at 0.96). Through the lag the line's residual falls by two orders
-    (drone-models: 270x at 60 ms) and the intercept is the map's own."""
-    best = {"line": (("lag", 0.0), np.inf), "gain": (("lag", 0.0), np.inf)}
+    raw = means(("lag", 0.0))
+    best = {"line": (("lag", 0.0), raw, np.inf), "gain": (("lag", 0.0), raw, np.inf)}
     for timing in [("lag", float(v)) for v in MAP_LAGS_S] \
             + [("delay", float(v)) for v in MAP_LAGS_S[1:]]:
-        command = np.concatenate([_moving_mean(_through(f, timing, w), w)
-                                  for f, w in zip(flights, dt)])
+        command = raw if timing == ("lag", 0.0) else means(timing)
         rss = {"line": 0.0, "gain": 0.0}
         for i in range(speed.shape[1]):
             c, s = command[:, i], speed[:, i]
             if np.ptp(c) <= 0:
-                return ("lag", 0.0), ("lag", 0.0)
+                return (("lag", 0.0), raw), (("lag", 0.0), raw)
             rss["line"] += float(np.sum((s - np.polyval(np.polyfit(c, s, 1), c)) ** 2))
             rss["gain"] += float(np.sum((s - float(c @ s / (c @ c)) * c) ** 2))
         for form, value in rss.items():
-            if value < best[form][1]:
-                best[form] = (timing, value)
-    return best["line"][0], best["gain"][0]
+            if value < best[form][2]:
+                best[form] = (timing, command, value)
+    return best["line"][:2], best["gain"][:2]
 
 
 def _line_supported(c: np.ndarray, w: np.ndarray, gain: tuple, line, windows: float, *,

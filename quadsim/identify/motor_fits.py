@@ -35,11 +35,6 @@ LAG_GRID_S = np.arange(0.0, 0.2001, 0.0025)
 # ----------------------------------------------------------------------------- motor map
 
 
-def _lagged(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
-    """First-order lag (:func:`quadsim.core.lag.first_order_lag`), along axis 0."""
-    return first_order_lag(x, tau, dt)
-
-
 def _map_normal_equations(logs: list[LogSeries], tau: float, dt: float, v_ref: float | None):
     """Per rotor (X'X, X'y, y'y, n) of the lagged map regression at lag ``tau``."""
     count = logs[0].command.shape[1]
@@ -52,7 +47,7 @@ def _map_normal_equations(logs: list[LogSeries], tau: float, dt: float, v_ref: f
         cols = [np.ones_like(s.command), s.command]
         if v_ref is not None:
             cols.append(s.command * (s.vbat - v_ref)[:, None])
-        lagged = _lagged(np.stack(cols, 2), tau, dt)          # (N, R, width)
+        lagged = first_order_lag(np.stack(cols, 2), tau, dt)          # (N, R, width)
         keep = lagged[:, :, 1] < SATURATED
         keep[: int(5 * tau / dt) + 1] = False                # the filter's start-up
         for i in range(count):
@@ -77,7 +72,7 @@ def _map_correlation(s: LogSeries, coef: np.ndarray, tau: float, dt: float,
     cols = [np.ones(len(s.t)), s.command[:, 0]]
     if v_ref is not None:
         cols.append(s.command[:, 0] * (s.vbat - v_ref))
-    x = _lagged(np.stack(cols, 1), tau, dt)
+    x = first_order_lag(np.stack(cols, 1), tau, dt)
     return correlation_time(s.rotor_speed[:, 0] - x @ coef)
 
 
