@@ -1702,7 +1702,11 @@ def _stage(reference, params: VehicleParams, *, effects, window_s: float, base: 
            store=None) -> Calibrated:
     """The reference stage of ``reference`` (logs): from ``store`` where it holds it
     (:func:`quadsim.gap.calibrate.reference_key`), else :func:`_reference_stage` (then put
-    there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references)."""
+    there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references).
+    ``reference`` already a :class:`Calibrated` (the CLI's cache, :mod:`quadsim.gap.cache`):
+    that stage, as it is."""
+    if isinstance(reference, Calibrated):
+        return reference
     key = None if store is None else reference_key(reference, params, effects=effects,
                                                    window_s=window_s, base=base)
     kept = None if store is None else store.get(key)
