@@ -35,7 +35,7 @@ with one ``warning:`` line.
 
 Bounded: after each write the entries beyond the newest :data:`MAX_ENTRIES` (by modification
 time; a read refreshes its entry's time) or beyond :data:`MAX_BYTES` in all are deleted,
-oldest first (an entry for the 20 Crazyflie references is ~6 MB). Clearing it by hand:
+oldest first (an entry for the 20 Crazyflie references is ~85 kB). Clearing it by hand:
 delete the ``gap-reference-*.pkl`` files (or the folder).
 """
 

@@ -458,7 +458,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     references"): the reference model is theirs, calibrated as per flight
     (``store``: keeps that stage between runs, as :func:`diagnose_per_flight`'s), and the
     question is what the training flights share that the references do not, and whether it
-    carries over to the held-out flights; None: the parameter set is the reference."""
+    carries over to the held-out flights; None: the parameter set is the reference; a
+    :class:`Calibrated`: that stage, already computed (the CLI's cache)."""
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
@@ -1647,7 +1648,9 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         refused: Sequence[tuple[int, str, str]] = (),
                         base_effects: Sequence = (),
                         store=None, orders: Sequence | None = None) -> Diagnosis:
-    """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
+    """Judge each flight on its own against ``reference`` (nominal) flights (module doc);
+    or against their stage already computed (a :class:`Calibrated`: the CLI's cache,
+    :mod:`quadsim.gap.cache`).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
     loader and checks); they are placed at their position in ``flights``.
