@@ -215,6 +215,33 @@ def test_cached_json_equals_uncached(flight_files, tmp_path, monkeypatch, capsys
     assert len(list((tmp_path / "mine").glob(f"{PREFIX}*.pkl"))) == 1
 
 
+def test_command_only_flight_on_a_hit(flight_files, tmp_path, monkeypatch, capsys):
+    """A judged log without rotor speeds (synthesised from the references' commands): on a
+    hit the references are loaded for that, their stage still read (not calibrated again),
+    and the JSON is --no-cache's."""
+    import dataclasses
+
+    from quadsim.logs.flightlog import load_log
+
+    log = load_log(flight_files[2])
+    assert log.rotor_speed is not None and log.rotor_command is not None
+    only = tmp_path / "commands.csv.gz"
+    write_log(only, dataclasses.replace(log, rotor_speed=None))
+    files = [flight_files[0], flight_files[1], only]
+    plain = _run(tmp_path, files, "plain", "--no-cache", "--quiet")
+    assert _run(tmp_path, files, "first") == plain
+    err = capsys.readouterr().err
+    assert "kept in the cache" in err and "rotor speeds synthesised" in err
+    diagnose = importlib.import_module("quadsim.gap.diagnose")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("calibrated again")
+
+    monkeypatch.setattr(diagnose, "calibrate", refuse)
+    assert _run(tmp_path, files, "second") == plain
+    assert "read from the cache" in capsys.readouterr().err
+
+
 def test_older_flag_is_read_as_cache_dir(flight_files, tmp_path, capsys):
     _run(tmp_path, flight_files, "old", "--quiet", "--reference-cache", str(tmp_path / "old"))
     err = capsys.readouterr().err.strip().splitlines()

@@ -370,9 +370,10 @@ class _Writer:
 def _references(args, params, base_effects, logs, holdout, lines):
     """The references: (logs or None, stage or None, store or None). From the cache
     (:mod:`quadsim.gap.cache`) where it holds their entry: (None, the kept stage, None),
-    their loader's warnings said again and their samples counted (unless another log needs
-    rotor speeds synthesised from them: then loaded too); else loaded here, and with the
-    cache on a store that writes the stage the diagnosis computes."""
+    their loader's warnings said again and their samples counted (where another log needs
+    rotor speeds synthesised from them, :func:`quadsim.gap.logcheck.synthesise_all`: loaded
+    too, the logs instead of None); else loaded here, and with the cache on a store that
+    writes the stage the diagnosis computes."""
     if not args.reference:
         return None, None, None
     from .cache import ReferenceStore, cache_dir, entry_key
@@ -387,14 +388,18 @@ def _references(args, params, base_effects, logs, holdout, lines):
                         command_references=args.command_reference or ())
         entry = store.get(key)
         synthesis = any(g.rotor_speed is None for g in [*logs, *(holdout or [])])
-        if entry is not None and not synthesis:
-            _say(entry.found, entry.notes, lines)
-            args.samples_loaded = getattr(args, "samples_loaded", 0) + entry.samples
-            check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
+        if entry is not None:
+            reference = None
+            if synthesis:
+                reference = _load(args.reference, params, args, lines)
+            else:
+                _say(entry.found, entry.notes, lines)
+                args.samples_loaded = getattr(args, "samples_loaded", 0) + entry.samples
+                check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
             if not args.quiet:
                 print(f"note: the references' calibration and self-check read from the "
                       f"cache: {store.path(key)}", file=sys.stderr)
-            return None, entry.stage, None
+            return reference, entry.stage, None
     said: list = []
     before = getattr(args, "samples_loaded", 0)
     reference = _load(args.reference, params, args, lines, said=said)
@@ -504,15 +509,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, kept or reference, params,
+            result = diagnose_per_flight(logs, reference if kept is None else kept, params,
                                          effects=args.effects, progress=progress,
                                          refused=refused, base_effects=base_effects,
                                          store=store, orders=orders, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects,
-                              **({} if not args.reference else {"reference": kept or reference,
-                                                                "store": store}), **extra)
+                              **({} if not args.reference else {
+                                  "reference": reference if kept is None else kept,
+                                  "store": store}), **extra)
     finally:
         if bar is not None:
             bar.close()
