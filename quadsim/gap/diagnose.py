@@ -1661,7 +1661,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
     ``store``: keeps the reference stage between runs (``get(key)`` -> a
     :class:`quadsim.gap.calibrate.Calibrated` or None, ``put(calibrated)``; the CLI's
-    ``--reference-cache``): where it holds the stage of these references
+    cache writes through it, :mod:`quadsim.gap.cache`): where it holds the stage of these references
     (:func:`quadsim.gap.calibrate.reference_key`), their preparation, calibration and
     self-check are not done again.
     ``orders``: each log's rotor-order status where the checks already read it
