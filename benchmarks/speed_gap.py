@@ -33,6 +33,15 @@ the others apart, and how many calls; with ``--against`` the same for both check
 after the other. Steadier than the whole command's CPU on a loaded machine: the evaluation
 count does not move with the load at all.
 
+Cold and warm: the command keeps the references' loading, calibration and self-check in a
+cache folder (``quadsim.gap.cache``, on by default). Every timed run here gets its own fresh
+cache folder (``QUADSIM_CACHE_DIR``), so by default each run is **cold** (it computes the
+references' stage and writes its entry, as a user's first run does: the numbers mean what
+they meant before the cache). ``--warm`` first runs the same command once, untimed, to fill
+that run's fresh folder, then times the second run, which reads the entry (a user's next run
+against the same references); with ``--stages`` the stages of that second run, with
+``--against`` both checkouts so (a checkout without the cache runs cold both times).
+
 ``--against CHECKOUT`` times the 26-flight command alternately with another checkout of the
 repository (say the commit before a change; ``git worktree add ../before HEAD~3``) and this
 one, ``--rounds`` times each (default 2): on a shared machine whose speed drifts, only runs
@@ -40,8 +49,8 @@ side by side compare. Each row states the load average before and after it.
 
 Usage (from the repository root; the machine and its load matter, so say them)::
 
-    nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4]
-    nice -n 5 python benchmarks/speed_gap.py --stages
+    nice -n 5 python benchmarks/speed_gap.py [--data ../shared/data] [--counts 1 2 4] [--warm]
+    nice -n 5 python benchmarks/speed_gap.py --stages [--warm]
     nice -n 5 python benchmarks/speed_gap.py --against ../before [--rounds 2]
     nice -n 5 python benchmarks/speed_gap.py --parts [--against ../before]
 
@@ -109,16 +118,33 @@ def cut_log(path: Path, fraction: float, out: Path) -> Path:
     return out
 
 
-def time_gap(label: str, flights: list[Path], references: list[Path], root: Path = ROOT) -> Run:
-    """Run the user's command once with the package of checkout ``root`` first on the path;
-    CPU from the children's rusage, wall from a clock."""
+def _env(root: Path, cache: str | os.PathLike) -> dict:
+    """The command's environment: checkout ``root`` first on the path, the references'
+    cache in ``cache`` (module doc, "Cold and warm")."""
+    return {**os.environ, "QUADSIM_CACHE_DIR": str(cache), "PYTHONPATH": os.pathsep.join(
+        p for p in (str(root), os.environ.get("PYTHONPATH")) if p)}
+
+
+def time_gap(label: str, flights: list[Path], references: list[Path], root: Path = ROOT, *,
+             warm: bool = False) -> Run:
+    """Run the user's command once with the package of checkout ``root`` first on the path,
+    in a fresh cache folder (cold); ``warm``: once untimed before, in the same folder, and
+    the second run timed. CPU from the children's rusage, wall from a clock."""
+    with tempfile.TemporaryDirectory(prefix="speed_gap_cache_") as cache:
+        if warm:
+            _run_gap(label, flights, references, root, cache)
+        return _run_gap(label, flights, references, root, cache)
+
+
+def _run_gap(label: str, flights: list[Path], references: list[Path], root: Path,
+             cache: str) -> Run:
+    """:func:`time_gap`'s one run, with the references' cache in ``cache``."""
     command = [sys.executable, "-m", "quadsim.gap", "--model", "crazyflie21", "--per-flight",
                *map(str, flights), "--reference", *map(str, references), "--workers", "1"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     run = subprocess.run(command, capture_output=True, text=True, check=False, cwd=root,
-                         env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
+                         env=_env(root, cache))
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if run.returncode != 0:
@@ -168,25 +194,32 @@ def staged(argv: list[str]) -> dict:
     return spent
 
 
-def time_stages(flights: list[Path], references: list[Path]) -> dict:
-    """:func:`staged` of the user's command on ``flights``, in a fresh process."""
+def time_stages(flights: list[Path], references: list[Path], *, warm: bool = False) -> dict:
+    """:func:`staged` of the user's command on ``flights``, in a fresh process and a fresh
+    cache folder (``warm``: filled by one untimed run first)."""
     code = ("import json, sys; from benchmarks.speed_gap import staged; "
             "print('STAGES ' + json.dumps(staged(sys.argv[1:])))")
-    return _timed_in_fresh_process(code, "STAGES", flights, references, ROOT)
+    with tempfile.TemporaryDirectory(prefix="speed_gap_cache_") as cache:
+        if warm:
+            _run_gap("filling the cache", flights, references, ROOT, cache)
+        return _timed_in_fresh_process(code, "STAGES", flights, references, ROOT, cache=cache)
 
 
 def _timed_in_fresh_process(code: str, tag: str, flights: list[Path], references: list[Path],
-                            root: Path) -> dict:
+                            root: Path, *, cache: str | None = None) -> dict:
     """Run ``code`` (Python source that prints one line ``TAG <json>``) with the user's
     command's arguments on ``flights`` against ``references`` in a fresh interpreter of
-    checkout ``root``; -> the decoded JSON. No such line: a one-line error naming ``tag``."""
+    checkout ``root``, the references' cache in ``cache`` (None: a fresh folder, cold);
+    -> the decoded JSON. No such line: a one-line error naming ``tag``."""
     import json
 
+    if cache is None:
+        with tempfile.TemporaryDirectory(prefix="speed_gap_cache_") as fresh:
+            return _timed_in_fresh_process(code, tag, flights, references, root, cache=fresh)
     argv = ["--model", "crazyflie21", "--per-flight", *map(str, flights), "--reference",
             *map(str, references), "--workers", "1"]
     run = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
-                         check=False, cwd=root, env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                             p for p in (str(root), os.environ.get("PYTHONPATH")) if p)})
+                         check=False, cwd=root, env=_env(root, cache))
     line = next((x for x in run.stdout.splitlines() if x.startswith(tag + " ")), None)
     if line is None:
         raise SystemExit(f"error: {tag.lower()}: no timing came back: "
@@ -261,15 +294,16 @@ def time_parts(flights: list[Path], references: list[Path], root: Path = ROOT) -
     return _timed_in_fresh_process(code, "PARTS", flights, references, root)
 
 
-def alternate(flights: list[Path], references: list[Path], other: Path, rounds: int
-              ) -> list[tuple[str, Run, tuple[float, float]]]:
+def alternate(flights: list[Path], references: list[Path], other: Path, rounds: int, *,
+              warm: bool = False) -> list[tuple[str, Run, tuple[float, float]]]:
     """The command on ``flights`` run alternately with checkout ``other`` and this one,
-    ``rounds`` times each: (which, run, (load average before, after)) per run."""
+    ``rounds`` times each (``warm``: each timed run after an untimed one, :func:`time_gap`):
+    (which, run, (load average before, after)) per run."""
     out = []
     for k in range(rounds):
         for which, root in (("against", other), ("this", ROOT)):
             before = os.getloadavg()[0]
-            run = time_gap(f"{which} {k + 1}", flights, references, root=root)
+            run = time_gap(f"{which} {k + 1}", flights, references, root=root, warm=warm)
             out.append((which, run, (before, os.getloadavg()[0])))
             print(f"  {run.label}: {run.cpu_s:.1f} s CPU, {run.wall_s:.1f} s wall, load "
                   f"{before:.1f} -> {out[-1][2][1]:.1f}", flush=True)
@@ -309,12 +343,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--parts", action="store_true",
                         help="time the weighing's parts of the 26-flight command instead "
                              "(with --against: for both checkouts)")
+    parser.add_argument("--warm", action="store_true",
+                        help="time each command's second run, its references' cache filled "
+                             "by an untimed first one (default: cold, a fresh cache)")
     parser.add_argument("--rounds", type=int, default=2,
                         help="with --against: runs of each checkout (default 2)")
     args = parser.parse_args(argv)
     if args.against is not None and not (args.against / "quadsim" / "gap").is_dir():
         print(f"error: {args.against}: --against: not a checkout of this repository "
               "(no quadsim/gap)", file=sys.stderr)
+        return 2
+    if args.warm and args.parts:
+        print("error: --warm: not used with --parts (the weighing's parts include the "
+              "references' self-check, which a warm run reads)", file=sys.stderr)
         return 2
     if args.rounds < 1:
         print(f"error: --rounds: must be >= 1, got {args.rounds}", file=sys.stderr)
@@ -329,7 +370,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"Python {platform.python_version()}; load average at start "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; QUADSIM_THREADS="
-          f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}")
+          f"{os.environ.get('QUADSIM_THREADS', '(unset: 1)')}; references' cache "
+          f"{'warm (filled by an untimed run first)' if args.warm else 'cold (fresh)'}")
     if args.parts:
         roots = ([("against", args.against.resolve())] if args.against is not None else []
                  ) + [("this", ROOT)]
@@ -352,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nload average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
         return 0
     if args.against is not None:
-        runs = alternate(mixed, nominal, args.against.resolve(), args.rounds)
+        runs = alternate(mixed, nominal, args.against.resolve(), args.rounds, warm=args.warm)
         minutes = runs[0][1].flight_minutes
         print(f"\n{len(mixed)} mixed flights ({minutes:.2f} flight-min) against {len(nominal)} "
               "nominal, --workers 1\n\n| checkout | CPU s (each run) | mean CPU s | "
@@ -365,14 +407,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nanswers {'the same' if same else 'DIFFER'} in every run")
         return 0
     if args.stages:
-        spent = time_stages(mixed, nominal)
+        spent = time_stages(mixed, nominal, warm=args.warm)
         print("\n| stage | CPU s |\n|---|---:|")
         for label, value in spent.items():
             print(f"| {label} | {value:.1f} |")
         return 0
     runs = []
     for n in args.counts:
-        runs.append(time_gap(f"{n} mixed, whole", mixed[:n], nominal))
+        runs.append(time_gap(f"{n} mixed, whole", mixed[:n], nominal, warm=args.warm))
         print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s wall "
               f"({runs[-1].verdicts})", flush=True)
     counted = list(runs)
@@ -380,7 +422,8 @@ def main(argv: list[str] | None = None) -> int:
         for fraction in args.fractions:
             cut = [cut_log(p, fraction, Path(tmp) / f"{int(fraction * 100)}_{p.name}")
                    for p in mixed[:LENGTH_FLIGHTS]]
-            runs.append(time_gap(f"{LENGTH_FLIGHTS} mixed, first {fraction:.0%}", cut, nominal))
+            runs.append(time_gap(f"{LENGTH_FLIGHTS} mixed, first {fraction:.0%}", cut, nominal,
+                                 warm=args.warm))
             print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s "
                   f"wall ({runs[-1].verdicts})", flush=True)
     load = os.getloadavg()

@@ -84,7 +84,7 @@ def main() -> None:
             cf, [make_effect("com_offset", x=0.004)] if s % 2 else [], seed=s, duration=4.0)))
             for s in range(args.flights)]
         gap = ["--model", "crazyflie21", "--per-flight", *logs, "--reference", *refs,
-               "--quiet"]
+               "--quiet", "--no-cache"]    # each way computes the references' stage itself
         sweep = ["--model", "physical", "--path", "hover", "--duration", "2", "--quiet",
                  "--effect", "mass_offset:mass=0..0.1", "--initial", "x=-0.2..0.2",
                  "--samples", str(args.sims), "--chunk-size", "4"]

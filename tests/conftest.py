@@ -16,13 +16,22 @@ The workers are the parallelism: like quadsim's own process pools
 (``quadsim.core.executor.SINGLE_THREAD_ENV``), each worker gets one thread for the numeric
 libraries where the user has not set their thread counts, so that 2 workers on 2 cores do not
 run 4 OpenBLAS threads that spin against each other.
+
+The references' cache of ``python -m quadsim.gap`` (:mod:`quadsim.gap.cache`, on by default)
+never touches the user's own: ``QUADSIM_CACHE_DIR`` points at a temporary folder for the
+whole run (subprocesses and pytest-xdist workers inherit it) and at a fresh one for every
+test (no test reads an entry another test wrote).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 
 import pytest
+
+_CACHE_ENV = "QUADSIM_CACHE_DIR"
 
 
 def pytest_addoption(parser):
@@ -32,6 +41,9 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
+    # the references' cache: never the user's (module doc); removed at the end
+    config._quadsim_cache = tempfile.mkdtemp(prefix="quadsim-test-cache-")
+    os.environ[_CACHE_ENV] = config._quadsim_cache
     # without pytest-xdist the marks would be unknown marks
     config.addinivalue_line("markers", "xdist_group(name): run these tests on one worker "
                             "(pytest-xdist --dist loadgroup)")
@@ -67,3 +79,15 @@ def pytest_configure_node(node):
     a mode set above is unknown to it, and only a worker that knows of loadgroup puts the
     group into its tests' ids (which is how the scheduler sees the groups)."""
     node.workerinput["quadsim_dist"] = node.config.option.dist
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_quadsim_cache", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True)
+def _own_cache_dir(tmp_path_factory, monkeypatch):
+    """Each test its own empty references' cache folder (module doc)."""
+    monkeypatch.setenv(_CACHE_ENV, str(tmp_path_factory.mktemp("quadsim-cache")))

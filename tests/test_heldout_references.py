@@ -97,7 +97,7 @@ def test_a_change_the_training_flights_share_beyond_the_references_is_named(cf, 
 def test_the_cli_takes_references_with_holdout_and_reuses_their_calibration(
         cf, flights, tmp_path, monkeypatch, capsys):
     """``--holdout`` with ``--reference`` (refused before this mode) and
-    ``--reference-cache``: the second run reads the kept calibration (calibrating again
+    ``--cache-dir``: the second run reads the kept calibration (calibrating again
     would fail) and writes the same JSON, byte for byte. ``--write-effects`` with
     ``--reference`` is refused in one line."""
     def paths(key, name):
@@ -107,13 +107,13 @@ def test_the_cli_takes_references_with_holdout_and_reuses_their_calibration(
     common = ["--model", "crazyflie21", *paths("train", "train"),
               "--holdout", *paths("held", "held"),
               "--reference", *paths("reference", "ref"), "--effects", *EFFECTS,
-              "--workers", "1", "--quiet", "--reference-cache", str(tmp_path / "cache")]
+              "--workers", "1", "--quiet", "--cache-dir", str(tmp_path / "cache")]
     assert main([*common, "--json", str(tmp_path / "first.json")]) == 0
     first = json.loads((tmp_path / "first.json").read_text())
     assert first["verdict"]["outcome"] == "no_significant_gap"
     assert [p.rsplit("/", 1)[-1] for p in first["reference"]] == [f"ref{k}.csv"
                                                                  for k in range(5)]
-    assert len(list((tmp_path / "cache").glob("*.pkl"))) == 1
+    assert len(list((tmp_path / "cache").glob("gap-reference-*.pkl"))) == 1
 
     def refuse(*args, **kwargs):
         raise AssertionError("calibrated again")

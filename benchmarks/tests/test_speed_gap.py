@@ -1,6 +1,7 @@
 """benchmarks/speed_gap.py's helpers on a small written log (numbers, not timing)."""
 
 import gzip
+import os
 
 import numpy as np
 
@@ -34,3 +35,13 @@ def test_against_needs_a_checkout(tmp_path, capsys):
     assert speed_gap.main(["--against", str(tmp_path)]) == 2
     assert "not a checkout of this repository" in capsys.readouterr().err
     assert speed_gap.main(["--against", str(speed_gap.ROOT), "--rounds", "0"]) == 2
+
+
+def test_each_run_its_own_cache(tmp_path, capsys):
+    """Every timed command gets the cache folder it is handed (cold: a fresh one), with the
+    checkout first on the path; --warm is refused with --parts."""
+    env = speed_gap._env(tmp_path / "co", tmp_path / "cache")
+    assert env["QUADSIM_CACHE_DIR"] == str(tmp_path / "cache")
+    assert env["PYTHONPATH"].split(os.pathsep)[0] == str(tmp_path / "co")
+    assert speed_gap.main(["--warm", "--parts"]) == 2
+    assert "--warm: not used with --parts" in capsys.readouterr().err

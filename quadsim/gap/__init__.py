@@ -59,7 +59,7 @@ and the references' self-check), :mod:`.explanations` (what a flight is weighed 
 (answers), :mod:`.result` (result types), :mod:`.judge` (where and when; the verdict of both
 modes), :mod:`.page` (the HTML report, its figures and residual series), :mod:`.report` (JSON
 and its schema, summaries, the effect file, the rerun recording), :mod:`.diagnose` (both modes'
-entry points). Generated test flights:
+entry points), :mod:`.cache` (the CLI's cache of the references' stage). Generated test flights:
 ``benchmarks.synthetic`` in the repository (not in the wheel).
 
 Example::

@@ -7,8 +7,8 @@ Examples::
         --report gap.html --rerun gap.rrd
     python -m quadsim.gap --model crazyflie21 --per-flight mixed/*.csv.gz \\
         --reference nominal/*.csv.gz --json mixed.json
-    python -m quadsim.gap --model crazyflie21 --per-flight new/*.csv.gz \\
-        --reference nominal/*.csv.gz --reference-cache ~/.cache/quadsim-gap   # 2nd run: faster
+    python -m quadsim.gap --model crazyflie21 --per-flight new2/*.csv.gz \\
+        --reference nominal/*.csv.gz    # again: the references' work read from the cache
     python -m quadsim.gap --model nanodrone_cf21bl.toml --effects-file diagnosed.toml \\
         train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
     python -m quadsim.gap --model crazyflie21 changed/*.csv.gz --holdout changed2.csv.gz \\
@@ -57,12 +57,19 @@ def _parser() -> argparse.ArgumentParser:
                              "are the reference model instead of the bare parameter set: "
                              "what the training LOGs share that they do not, checked on the "
                              "held-out logs")
+    parser.add_argument("--cache-dir", metavar="DIR",
+                        help="with --reference: the folder where the references' loading, "
+                             "calibration and self-check are kept between runs (default "
+                             "$QUADSIM_CACHE_DIR, else ${XDG_CACHE_HOME:-~/.cache}/quadsim; "
+                             "keyed by the reference files, the model, --effects-file, "
+                             "--effects, --window and quadsim's code: a later run with the "
+                             "same ones reads them, the same answers bit for bit; "
+                             "quadsim.gap.cache). DIR must be yours: its files are Python "
+                             "pickles")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="neither read nor write the references' cache")
     parser.add_argument("--reference-cache", metavar="DIR",
-                        help="with --reference: keep the references' calibration and "
-                             "self-check in DIR (created), keyed by the reference logs, the "
-                             "model, --effects, --window and quadsim's code; a later run with "
-                             "the same ones reads it instead (the same answers, bit for bit). "
-                             "DIR must be yours: its files are Python pickles")
+                        help="the older name of --cache-dir (read as it, with a warning)")
     parser.add_argument("--command-reference", nargs="+", metavar="LOG",
                         help="flights with rotor speeds and commands: logs without rotor "
                              "speeds get speeds synthesised from their commands "
@@ -116,11 +123,21 @@ def _check_args(args) -> None:
         raise InputError("--holdout: not used with --per-flight (each LOG is judged against "
                          "--reference)")
     if args.reference_cache is not None:
+        if args.cache_dir is not None:
+            raise InputError("--reference-cache: the older name of --cache-dir: give one")
+        print("warning: --reference-cache: now --cache-dir (the cache is on by default; "
+              "--no-cache turns it off): read as --cache-dir", file=sys.stderr)
+        args.cache_dir, flag = args.reference_cache, "--reference-cache"
+    else:
+        flag = "--cache-dir"
+    if args.cache_dir is not None:
+        if args.no_cache:
+            raise InputError(f"{flag}: not used with --no-cache")
         if not args.per_flight and not args.reference:
-            raise InputError("--reference-cache: only used with --per-flight or --reference "
+            raise InputError(f"{flag}: only used with --per-flight or --reference "
                              "(the references' calibration is what it keeps)")
-        if Path(args.reference_cache).exists() and not Path(args.reference_cache).is_dir():
-            raise InputError(f"{args.reference_cache}: --reference-cache: not a folder")
+        if Path(args.cache_dir).exists() and not Path(args.cache_dir).is_dir():
+            raise InputError(f"{args.cache_dir}: {flag}: not a folder")
     inputs = [*args.logs, *(args.holdout or []), *(args.reference or []),
               *(args.command_reference or []),
               *([args.effects_file] if args.effects_file is not None else [])]
@@ -164,12 +181,15 @@ def _map_fn(args, bar):
     return map_fn
 
 
-def _load(paths, params, args, lines: list | None = None, orders: list | None = None):
+def _load(paths, params, args, lines: list | None = None, orders: list | None = None,
+          said: list | None = None):
     """Load, check and count ``paths``: refused when too short, too finely windowed, or
     when all logs so far cost past the caps (``args.samples_loaded`` counts them). The
     warnings are printed, or appended to ``lines`` when given (printed later, gathered).
     ``orders``: a list that receives each accepted log's rotor-order status as the checks
-    read it (:func:`quadsim.logs.checks.check_logs`)."""
+    read it (:func:`quadsim.logs.checks.check_logs`). ``said``: a list that receives
+    (the loader's warnings, the checks' notes), each a tuple of lines (the cache keeps
+    them: :func:`_say`)."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
@@ -184,14 +204,22 @@ def _load(paths, params, args, lines: list | None = None, orders: list | None = 
     if orders is not None:      # only once every log is accepted
         orders += read
     found = [str(w.message) for w in caught if issubclass(w.category, QuadsimWarning)]
+    if said is not None:
+        said.append((tuple(found), tuple(notes)))
+    _say(found, notes, lines)
+    return logs
+
+
+def _say(found, notes, lines: list | None) -> None:
+    """:func:`_load`'s warnings: appended to ``lines`` when given, else printed (the
+    loader's collapsed by kind, then the checks' notes)."""
     if lines is not None:
-        lines += found + list(notes)
-        return logs
-    for line in collapse_warnings(found):
+        lines += list(found) + list(notes)
+        return
+    for line in collapse_warnings(list(found)):
         print(f"warning: {line}", file=sys.stderr)  # only once every log is accepted
     for note in notes:
         print(f"warning: {note}", file=sys.stderr)
-    return logs
 
 
 _SPAN = re.compile(r"^(?P<file>.*): airborne span t (?P<a>\S+)-(?P<b>\S+) s kept "
@@ -316,43 +344,68 @@ def _with_effects_file(result, path, base_effects):
 
 
 @dataclass(frozen=True)
-class ReferenceCache:
-    """``--reference-cache``: the reference stage of either mode with ``--reference``
-    (:class:`quadsim.gap.calibrate.Calibrated`) kept in ``folder`` as ``KEY.pkl``, KEY its
-    :func:`quadsim.gap.calibrate.reference_key`. A file that does not read back as the
-    entry of its key is computed again (one ``warning:`` line); one that cannot be written
-    leaves the run's answers as they are (one ``warning:`` line)."""
+class _Writer:
+    """The store :func:`quadsim.gap.diagnose.diagnose_per_flight` (and :func:`~quadsim.gap.
+    diagnose.diagnose` with references) put a computed references' stage in: written to the
+    cache as the entry of ``key`` with what loading them left (``said``, ``samples``)."""
 
-    folder: Path
+    store: object
+    key: str
+    said: tuple
+    samples: int
+    quiet: bool
 
-    def get(self, key: str):
-        import pickle
-
-        from .diagnose import Calibrated
-
-        path = self.folder / f"{key}.pkl"
-        if not path.is_file():
-            return None
-        try:
-            value = pickle.loads(path.read_bytes())
-        except Exception:       # any unpickling failure: computed again, written anew
-            value = None
-        if isinstance(value, Calibrated) and value.key == key:
-            return value
-        print(f"warning: {path}: not a readable reference calibration: computed again",
-              file=sys.stderr)
+    def get(self, key):
         return None
 
-    def put(self, value) -> None:
-        import pickle
+    def put(self, stage) -> None:
+        from .cache import Entry
 
-        from ..core.files import atomic_write_bytes
+        path = self.store.put(Entry(self.key, stage, self.said[0], self.said[1], self.samples))
+        if path is not None and not self.quiet:
+            print(f"note: the references' calibration and self-check kept in the cache: "
+                  f"{path}", file=sys.stderr)
 
-        try:
-            atomic_write_bytes(self.folder / f"{value.key}.pkl", pickle.dumps(value, protocol=4),
-                               make_parents=True)
-        except InputError as exc:
-            print(f"warning: {exc}: --reference-cache not written", file=sys.stderr)
+
+def _references(args, params, base_effects, logs, holdout, lines):
+    """The references: (logs or None, stage or None, store or None). From the cache
+    (:mod:`quadsim.gap.cache`) where it holds their entry: (None, the kept stage, None),
+    their loader's warnings said again and their samples counted (where another log needs
+    rotor speeds synthesised from them, :func:`quadsim.gap.logcheck.synthesise_all`: loaded
+    too, the logs instead of None); else loaded here, and with the cache on a store that
+    writes the stage the diagnosis computes."""
+    if not args.reference:
+        return None, None, None
+    from .cache import ReferenceStore, cache_dir, entry_key
+    from .diagnose import DEFAULT_WINDOW_S
+
+    store = key = None
+    if not args.no_cache:
+        store = ReferenceStore(cache_dir(args.cache_dir))
+        key = entry_key(args.reference, params, effects=args.effects,
+                        window_s=DEFAULT_WINDOW_S if args.window is None else args.window,
+                        base=tuple(base_effects),
+                        command_references=args.command_reference or ())
+        entry = store.get(key)
+        synthesis = any(g.rotor_speed is None for g in [*logs, *(holdout or [])])
+        if entry is not None:
+            reference = None
+            if synthesis:
+                reference = _load(args.reference, params, args, lines)
+            else:
+                _say(entry.found, entry.notes, lines)
+                args.samples_loaded = getattr(args, "samples_loaded", 0) + entry.samples
+                check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
+            if not args.quiet:
+                print(f"note: the references' calibration and self-check read from the "
+                      f"cache: {store.path(key)}", file=sys.stderr)
+            return reference, entry.stage, None
+    said: list = []
+    before = getattr(args, "samples_loaded", 0)
+    reference = _load(args.reference, params, args, lines, said=said)
+    writer = (None if store is None else
+              _Writer(store, key, said[0], args.samples_loaded - before, args.quiet))
+    return reference, None, writer
 
 
 def _progress(args):
@@ -433,7 +486,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None
-    reference = _load(args.reference, params, args, lines) if args.reference else None
+    reference, kept, store = _references(args, params, base_effects, logs, holdout, lines)
     for line in gather_notes(lines or []):      # per flight: every log's notes, gathered
         print(f"warning: {line}", file=sys.stderr)
     # command-only logs in any role: speeds synthesised (quadsim.gap.logcheck.synthesise_all)
@@ -456,19 +509,16 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight:
             if not args.reference:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            store = (None if args.reference_cache is None
-                     else ReferenceCache(Path(args.reference_cache)))
-            result = diagnose_per_flight(logs, reference, params,
+            result = diagnose_per_flight(logs, reference if kept is None else kept, params,
                                          effects=args.effects, progress=progress,
                                          refused=refused, base_effects=base_effects,
                                          store=store, orders=orders, **extra)
         else:
-            store = (None if args.reference_cache is None or not reference
-                     else ReferenceCache(Path(args.reference_cache)))
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects,
-                              **({} if not reference else {"reference": reference,
-                                                           "store": store}), **extra)
+                              **({} if not args.reference else {
+                                  "reference": reference if kept is None else kept,
+                                  "store": store}), **extra)
     finally:
         if bar is not None:
             bar.close()

@@ -1119,7 +1119,7 @@ CALIBRATED_SCHEMA = "quadsim.gap.calibrated/1"
 @dataclass(frozen=True)
 class Calibrated:
     """What the per-flight mode makes of the reference flights alone, kept between runs by
-    the CLI's ``--reference-cache`` (:func:`quadsim.gap.diagnose.diagnose_per_flight`):
+    the CLI's cache (:mod:`quadsim.gap.cache`, :func:`quadsim.gap.diagnose.diagnose_per_flight`):
     ``key`` (:func:`reference_key`), ``reference`` (the calibrated model with its
     self-check), ``vehicle`` (the set-fits-the-vehicle check on the references), ``notes``
     (their signal-delay notes) and ``count`` (how many references)."""

@@ -458,7 +458,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     references"): the reference model is theirs, calibrated as per flight
     (``store``: keeps that stage between runs, as :func:`diagnose_per_flight`'s), and the
     question is what the training flights share that the references do not, and whether it
-    carries over to the held-out flights; None: the parameter set is the reference."""
+    carries over to the held-out flights; None: the parameter set is the reference; a
+    :class:`Calibrated`: that stage, already computed (the CLI's cache)."""
     notes: list[str] = []
     flights = prepare(logs, params, window_s=window_s)
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
@@ -1647,7 +1648,9 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
                         refused: Sequence[tuple[int, str, str]] = (),
                         base_effects: Sequence = (),
                         store=None, orders: Sequence | None = None) -> Diagnosis:
-    """Judge each flight on its own against ``reference`` (nominal) flights (module doc).
+    """Judge each flight on its own against ``reference`` (nominal) flights (module doc);
+    or against their stage already computed (a :class:`Calibrated`: the CLI's cache,
+    :mod:`quadsim.gap.cache`).
 
     ``refused``: (position, file, reason) of flights refused before this call (the CLI's
     loader and checks); they are placed at their position in ``flights``.
@@ -1658,7 +1661,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     ``map_fn(fn, logs)`` runs the flights (e.g. a :mod:`quadsim.core.executor` executor).
     ``store``: keeps the reference stage between runs (``get(key)`` -> a
     :class:`quadsim.gap.calibrate.Calibrated` or None, ``put(calibrated)``; the CLI's
-    ``--reference-cache``): where it holds the stage of these references
+    cache writes through it, :mod:`quadsim.gap.cache`): where it holds the stage of these references
     (:func:`quadsim.gap.calibrate.reference_key`), their preparation, calibration and
     self-check are not done again.
     ``orders``: each log's rotor-order status where the checks already read it
@@ -1702,7 +1705,11 @@ def _stage(reference, params: VehicleParams, *, effects, window_s: float, base: 
            store=None) -> Calibrated:
     """The reference stage of ``reference`` (logs): from ``store`` where it holds it
     (:func:`quadsim.gap.calibrate.reference_key`), else :func:`_reference_stage` (then put
-    there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references)."""
+    there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references).
+    ``reference`` already a :class:`Calibrated` (the CLI's cache, :mod:`quadsim.gap.cache`):
+    that stage, as it is."""
+    if isinstance(reference, Calibrated):
+        return reference
     key = None if store is None else reference_key(reference, params, effects=effects,
                                                    window_s=window_s, base=base)
     kept = None if store is None else store.get(key)
