@@ -112,6 +112,19 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    itself (q > 1/2: the name leaves more than the classes' boundary share), the name is a
    stand-in, not a cause: the outcome is ``unexplained``, the name and both probabilities
    stated (:func:`quadsim.gap.words.stand_in_words`).
+1c. **Beyond the references' reach** (per flight; :func:`beyond_reach`): where the flight
+   lies outside its references' envelope along a coordinate in which they do not measure
+   how their model's lack of fit grows (:func:`quadsim.gap.reference.reach_of`, module doc
+   "The reach" there), the reference model's own error at that place is a hypothesis of its
+   own: "no difference of the vehicle, the model errs there". Each named reading's weight p
+   splits into p (1 - f), the reading, and p f, no difference, f the share of what it
+   removes of the flight's gap that lies within what a model error growing in proportion to
+   the flight's excitation gives there (:func:`extrapolation_share`). Then 1b and the rest
+   as before; a ``no_significant_gap`` that got at least :data:`READING_P` of its weight so
+   is ``tentative`` (not sure), and the answer says how far beyond the references the flight
+   lies and what share of each reading lies within that error
+   (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
+   whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -197,6 +210,7 @@ from .words import (
     asserted,
     nominal_words,
     outside_words,
+    reach_words,
     reading_text,
     stand_in_words,
     timing_words,
@@ -216,7 +230,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
-           "with_outside", "TIMINGS", "timing_rival", "rows_with_outside"]
+           "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
+           "extrapolation_share"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -587,6 +602,52 @@ def with_outside(ranked: list, q: float) -> tuple[list, float]:
         return [], 0.0
     (k, p, ev), rest = ranked[0], list(ranked[1:])
     return [(k, p * (1.0 - q), ev), *rest], p * q
+
+
+def extrapolation_share(ms, null_ms, reach) -> float:
+    """Of what a named reading removes of a flight's gap, the share that the reference
+    model's own error could produce where the flight lies beyond its references' reach
+    (module doc, 1c; :class:`quadsim.gap.reference.Reach`): per channel c, with the
+    references' typical mean square t_c, the gap g_c = max(0, m0_c - t_c) "no difference"
+    leaves (``null_ms``), what the reading leaves l_c = max(0, m_c - t_c) (``ms``), what it
+    removes r_c = max(0, g_c - l_c), and the allowance a_c (``reach.allowance``):
+    sum_c min(r_c, a_c) / sum_c r_c; 1 where the reading removes nothing beyond the
+    typical level (it rests on what the references' own noise level covers), 0 without a
+    reach."""
+    if reach is None:
+        return 0.0
+    typical = np.asarray(reach.typical, float)
+    gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
+    removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
+    total = float(removed.sum())
+    if total <= 0:
+        return 1.0
+    return float(np.sum(np.minimum(removed, reach.allowance)) / total)
+
+
+def beyond_reach(ranked: list, reach) -> tuple[list, dict]:
+    """The library's posterior ``ranked`` ((reading, p, Evidence), summing to 1) with the
+    hypothesis "the reference model's error at a place its references never flew" (module
+    doc, 1c): each named reading's p splits into p (1 - f), the reading, and p f, no
+    difference of the vehicle (the model errs there), f its
+    :func:`extrapolation_share`; re-sorted, most probable first. -> (rows, reading ->
+    (its p before, f) for each reading that gave weight). ``ranked`` itself without a
+    ``reach`` or a "no difference" row."""
+    rows = {k: (p, ev) for k, p, ev in ranked}
+    if reach is None or "no_difference" not in rows:
+        return ranked, {}
+    null = rows["no_difference"][1]
+    moved, out, to_null = {}, [], 0.0
+    for k, p, ev in ranked:
+        if k == "no_difference":
+            continue
+        f = extrapolation_share(ev.ms, null.ms, reach)
+        if f > 0 and p > 0:
+            moved[k] = (p, f)
+        out.append((k, p * (1.0 - f), ev))
+        to_null += p * f
+    out.append(("no_difference", rows["no_difference"][0] + to_null, null))
+    return sorted(out, key=lambda x: (-x[1], x[0])), moved
 
 
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
@@ -1184,8 +1245,12 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     check = placed(getattr(reference, "self_check", None), reference)
     vbat_ref = getattr(reference, "vbat_ref", None)
     # the library's readings (their posterior sums to 1); the name's own probability below
-    within = [(k, min(p, cap), ev) for k, p, ev in
-              posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref))]
+    # beyond the references' reach, a name's weight counts the reference model's own error
+    # there as no difference of the vehicle (1c)
+    reach = getattr(reference, "reach", None)
+    within, moved = beyond_reach(
+        posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref)), reach)
+    within = [(k, min(p, cap), ev) for k, p, ev in within]
     top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
@@ -1255,10 +1320,18 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                   "for it.")
     if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
+    # the no difference a reading's weight went to beyond the reach (1c): not sure
+    unsure_null = outcome == "no_significant_gap" and sum(
+        p * f for p, f in moved.values()) >= READING_P
+    evs = {k: ev for k, _, ev in within}
+    said = {k: (p, f, "" if effect and k == top else reading_text(evs[k], reference))
+            for k, (p, f) in moved.items() if p >= READING_P}
+    if said:
+        words += reach_words(reach, said, outcome=outcome)
     return Verdict(
         # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
         outcome, verdict, words, p_out if stand_in else lead.probability,
-        tentative=effect and (p_top < CONFIDENT or unsure),
+        tentative=(effect and (p_top < CONFIDENT or unsure)) or unsure_null,
         probability_within_library=p_top, outside_library=p_out,
         form_remainder={**{k: v[0] for k, v in left.items()},
                         **{k: v[0] for k, v in remains.items()}},
