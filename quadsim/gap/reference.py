@@ -215,8 +215,8 @@ C (n - 2) degrees of freedom; :func:`slope_errors`). The growth is *measured* wh
 of the slope is narrower than the slope of the simplest way a model's error grows, in
 proportion to the signal it predicts (residual RMS proportional to the excitation, its mean
 square to the excitation squared: slope 2). Where it is, they can tell that growth from
-none, and the trend and lines above hold. Measured on the real Crazyflie references: 20
-references over four speed groups se 0.19-0.84, one group of five 1.3-61.
+none, and the trend and lines above hold (the real Crazyflie references' values:
+docs/gap.md, "Few or narrow references").
 
 A flight outside the references' envelope along a coordinate whose growth they do not
 measure is *beyond their reach*. There the reference model's own error may be what a model
