@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap.judge import beyond_reach, extrapolation_share
+from quadsim.gap.judge import beyond_reach, extrapolation_share, form_share
 from quadsim.gap.reference import (
     COORDINATES,
     PROPORTIONAL_SLOPE,
@@ -133,6 +133,18 @@ def test_the_share_is_what_the_reading_removes_within_the_allowance():
     # removing nothing beyond the typical level: all of it within; no reach: none
     assert extrapolation_share([0.5] * C, [0.9] * C, reach) == 1.0
     assert extrapolation_share([1.0] * C, [9.0] * C, None) == 0.0
+
+
+def test_what_a_name_leaves_within_the_allowance_is_not_left():
+    """Beyond the reach, the share of the gap a name leaves (what "outside the library"
+    weighs) counts only what it leaves beyond the allowance: sum max(0, m - t - a) over the
+    undiscounted gap sum max(0, m0 - t); without an allowance, as before."""
+    typical = np.ones(C)
+    null, ms = np.array([2.0, 11.0, 101.0]), np.array([1.5, 6.0, 2.0])
+    assert form_share(ms, null, typical) == pytest.approx((0.5 + 5 + 1) / 111, rel=1e-12)
+    allowance = np.array([0.0, 4.0, 8.0])
+    assert form_share(ms, null, typical, allowance=allowance) == \
+        pytest.approx((0.5 + 1 + 0) / 111, rel=1e-12)
 
 
 def _ev(name, ms):

@@ -120,8 +120,10 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    splits into p (1 - f), the reading, and p f, no difference, f the share of what it
    removes of the flight's gap that lies within what a model error growing in proportion to
    the flight's excitation gives there (:func:`extrapolation_share`). Then 1b and the rest
-   as before; a ``no_significant_gap`` that got at least :data:`READING_P` of its weight so
-   is ``tentative`` (not sure), and the answer says how far beyond the references the flight
+   as before, with what a name leaves within that error not counted in the share it leaves
+   (:func:`form_share`'s ``allowance``: no sign of an effect outside the library); a
+   ``no_significant_gap`` that got at least :data:`READING_P` of its weight so is
+   ``tentative`` (not sure), and the answer says how far beyond the references the flight
    lies and what share of each reading lies within that error
    (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
    whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
@@ -898,10 +900,15 @@ def within_form_error(ms, null_ms, typical) -> bool:
     return form_share(ms, null_ms, typical) <= FORM_ERROR
 
 
-def form_share(ms, null_ms, typical) -> float:
+def form_share(ms, null_ms, typical, *, allowance=None) -> float:
     """The share of the gap "no difference" leaves (``null_ms``) that a reading leaving
-    ``ms`` leaves (:func:`within_form_error`); inf where "no difference" leaves none."""
-    left = float(np.sum(np.maximum(0.0, np.asarray(ms) - typical)))
+    ``ms`` leaves (:func:`within_form_error`); inf where "no difference" leaves none.
+    ``allowance`` (C,): per flight beyond the references' reach (module doc, 1c), what the
+    reference model's own error may leave on each channel
+    (:attr:`quadsim.gap.reference.Reach.allowance`): what the reading leaves within it is
+    not counted as left (it is no sign of an effect outside the library)."""
+    extra = 0.0 if allowance is None else np.asarray(allowance, float)
+    left = float(np.sum(np.maximum(0.0, np.asarray(ms) - typical - extra)))
     gap = float(np.sum(np.maximum(0.0, np.asarray(null_ms) - typical)))
     return left / gap if gap > 0 else float("inf")
 
@@ -1258,7 +1265,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                        null_ms=None if null is None or null is best else null.ms)
     left = {}           # a reading leaving 5-10 % of the gap: named tentatively, stated
     share = float("inf") if null is None or null is best else \
-        form_share(best.ms, null.ms, np.exp(baseline.mean))
+        form_share(best.ms, null.ms, np.exp(baseline.mean),
+                   allowance=None if reach is None else reach.allowance)
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
     # a rotor timing the data cannot separate (lag or delay within the references' own
