@@ -117,14 +117,16 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    how their model's lack of fit grows (:func:`quadsim.gap.reference.reach_of`, module doc
    "The reach" there), the reference model's own error at that place is a hypothesis of its
    own: "no difference of the vehicle, the model errs there". Each named reading's weight p
-   splits into p (1 - f), the reading, and p f, no difference, f the share of what it
-   removes of the flight's gap that lies within what a model error growing in proportion to
-   the flight's excitation gives there (:func:`extrapolation_share`). Then 1b and the rest
+   splits into p (1 - f), the reading, and p f, no difference, f the share of its
+   log-evidence margin over "no difference" that its removal of the flight's gap within
+   what a model error growing in proportion to the flight's excitation gives there earns
+   (:func:`extrapolation_share`; what it earns beyond that, or through the shared values
+   "no difference" would have to move, stays its own). Then 1b and the rest
    as before, with what a name leaves within that error not counted in the share it leaves
    (:func:`form_share`'s ``allowance``: no sign of an effect outside the library); a
    ``no_significant_gap`` that got at least :data:`READING_P` of its weight so is
    ``tentative`` (not sure), and the answer says how far beyond the references the flight
-   lies and what share of each reading lies within that error
+   lies and what share of each reading's evidence that error could produce
    (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
    whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
@@ -606,25 +608,32 @@ def with_outside(ranked: list, q: float) -> tuple[list, float]:
     return [(k, p * (1.0 - q), ev), *rest], p * q
 
 
-def extrapolation_share(ms, null_ms, reach) -> float:
-    """Of what a named reading removes of a flight's gap, the share that the reference
-    model's own error could produce where the flight lies beyond its references' reach
-    (module doc, 1c; :class:`quadsim.gap.reference.Reach`): per channel c, with the
+def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> float:
+    """Of a named reading's log-evidence margin over "no difference", the share that the
+    reference model's own error could produce where the flight lies beyond its references'
+    reach (module doc, 1c; :class:`quadsim.gap.reference.Reach`). Per channel c, with the
     references' typical mean square t_c, the gap g_c = max(0, m0_c - t_c) "no difference"
     leaves (``null_ms``), what the reading leaves l_c = max(0, m_c - t_c) (``ms``), what it
-    removes r_c = max(0, g_c - l_c), and the allowance a_c (``reach.allowance``):
-    sum_c min(r_c, a_c) / sum_c r_c; 1 where the reading removes nothing beyond the
-    typical level (it rests on what the references' own noise level covers), 0 without a
-    reach."""
+    removes r_c = max(0, g_c - l_c), the allowance a_c (``reach.allowance``) and the
+    effective samples n_c (``reach.counts``): the part of the margin its removal within the
+    allowance earns, sum_c n_c min(r_c, a_c) / 2, over the margin ``margin`` (log Z of the
+    reading less that of "no difference"), at most 1. What the reading earns otherwise --
+    beyond the allowance, or through the shared values "no difference" would have to move
+    (a mass the thrust factor would absorb at a price) -- stays its own. Without the counts
+    or a positive margin, the share of what it removes: sum_c min(r_c, a_c) / sum_c r_c; 1
+    where it removes nothing beyond the typical level; 0 without a reach."""
     if reach is None:
         return 0.0
     typical = np.asarray(reach.typical, float)
     gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
     removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
+    within = np.minimum(removed, reach.allowance)
+    if margin is not None and margin > 0 and reach.counts is not None:
+        return float(min(1.0, 0.5 * np.sum(reach.counts * within) / margin))
     total = float(removed.sum())
     if total <= 0:
         return 1.0
-    return float(np.sum(np.minimum(removed, reach.allowance)) / total)
+    return float(np.sum(within) / total)
 
 
 def beyond_reach(ranked: list, reach) -> tuple[list, dict]:
@@ -643,7 +652,7 @@ def beyond_reach(ranked: list, reach) -> tuple[list, dict]:
     for k, p, ev in ranked:
         if k == "no_difference":
             continue
-        f = extrapolation_share(ev.ms, null.ms, reach)
+        f = extrapolation_share(ev.ms, null.ms, reach, ev.log_z - null.log_z)
         if f > 0 and p > 0:
             moved[k] = (p, f)
         out.append((k, p * (1.0 - f), ev))

@@ -224,10 +224,11 @@ error growing in proportion to the flight's excitation gives: on channel c, with
 flight's log excitation e_c beyond the references' largest (:func:`excitation`; 0 within)
 and their typical mean square t_c (exp of their mean log mean square, in the placed model's
 sigma_c^2 units), an *allowance* of mean square ``a_c = t_c (exp(2 e_c) - 1)`` above t_c.
-The judgment then counts, of what each named reading removes, the share that lies within
-the allowance as the model's error, not the vehicle's difference
-(:func:`quadsim.gap.judge.extrapolation_share`). No threshold is tuned: the slope 2 is the
-proportional law, 1.96 the two-sided 95 % quantile. Below 3 references no slope is
+The judgment then counts, of each named reading's log-evidence margin, the part that its
+removal of the gap within the allowance earns (the flight's effective samples N / tau_c
+times half that removal, :attr:`Reach.counts`) as the model's error, not the vehicle's
+difference (:func:`quadsim.gap.judge.extrapolation_share`). No threshold is tuned: the
+slope 2 is the proportional law, 1.96 the two-sided 95 % quantile. Below 3 references no slope is
 measurable and every coordinate is unmeasured.
 
 Example::
@@ -1007,6 +1008,9 @@ class Position:
     info: np.ndarray | None = None
     #: the flight's :func:`excitation` of each channel; None: not measured
     excite: np.ndarray | None = None
+    #: the flight's number of fit samples (None: not known): with the noise model's
+    #: correlation times, its effective sample count per channel (:class:`Reach`)
+    samples: int | None = None
 
     def to_json(self) -> dict:
         names = [c[0] for c in COORDINATES]
@@ -1140,9 +1144,11 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
                  "; the references do not spread enough to show how their model "
                  "extrapolates: judged by the reference model as calibrated")
     measured = envelope.lines is not None or getattr(envelope, "excite", None) is not None
+    t = getattr(states, "t", None)
     return Position(x, distance, name, u, text,
                     None if info is None else np.asarray(info, float),
-                    excitation(states) if measured else None)
+                    excitation(states) if measured else None,
+                    None if t is None else len(t))
 
 
 #: the growth law of a model error in proportion to the signal it predicts: its residual RMS
@@ -1165,7 +1171,9 @@ class Reach:
     per residual channel c (C,): ``beyond`` the flight's log excitation beyond the
     references' largest (0 within), ``typical`` the references' typical mean square and
     ``allowance`` the mean square the reference model's own error may add there, both in
-    the placed model's sigma_c^2 units (what a weighed flight's ``ms`` is in)."""
+    the placed model's sigma_c^2 units (what a weighed flight's ``ms`` is in), ``counts``
+    the flight's effective samples N / tau_c (None: N not known): a mean-square reduction
+    r on channel c is worth counts_c r / 2 in log evidence."""
 
     coordinate: str
     excess: float
@@ -1175,6 +1183,7 @@ class Reach:
     beyond: np.ndarray
     typical: np.ndarray
     allowance: np.ndarray
+    counts: np.ndarray | None = None
 
     @property
     def ratio(self) -> float:
@@ -1230,9 +1239,10 @@ def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
     k = int(np.argmax(excess))
     sigma = reference.sigma if sigma is None else np.asarray(sigma, float)
     typical = np.exp(np.asarray(reference.lof_mean, float)) * (reference.sigma / sigma) ** 2
+    counts = None if pos.samples is None else pos.samples / np.asarray(reference.tau, float)
     return Reach(COORDINATES[k][0], float(excess[k]), bool(above[k] > 0),
                  float(np.ptp(coords[:, k])), se, beyond,
-                 typical, typical * np.expm1(PROPORTIONAL_SLOPE * beyond))
+                 typical, typical * np.expm1(PROPORTIONAL_SLOPE * beyond), counts)
 
 
 def local_reference(reference, pos: Position | None):

@@ -220,9 +220,10 @@ def outside_words(p_out: float, share: float, within: float, *,
 def reach_words(reach, moved: dict, *, outcome: str) -> str:
     """The sentence of a flight beyond its references' reach (:func:`quadsim.gap.judge.
     beyond_reach`): ``reach`` its :class:`quadsim.gap.reference.Reach`; ``moved`` reading ->
-    (its probability among the library's readings, the share f of what it removes that the
-    model's own error could produce there, its reading in words or "" where the answer
-    states it already); ``outcome`` the verdict's. E.g. "Flown 7.3x above your references'
+    (its probability among the library's readings, the share f of its evidence over no
+    difference that the model's own error could produce there,
+    :func:`quadsim.gap.judge.extrapolation_share`, its reading in words or "" where the
+    answer states it already); ``outcome`` the verdict's. E.g. "Flown 7.3x above your references'
     RMS variation of the specific force's size, 39 times their own spread in it: ..."."""
     from .reference import COORDINATES
 
@@ -231,8 +232,8 @@ def reach_words(reach, moved: dict, *, outcome: str) -> str:
              else ", in which they do not spread")
     side = "above" if reach.above else "below"
     parts = "; ".join(f"{k} ({_pct(p)} among the library's readings{': ' + m if m else ''}): "
-                      f"{100 * f:.0f} % of what it removes lies within that error"
-                      for k, (p, f, m) in moved.items())
+                      f"{100 * f:.0f} % of its evidence over no difference that error could "
+                      "produce" for k, (p, f, m) in moved.items())
     tail = (": no difference of the vehicle is the more probable reading, not sure"
             if outcome == "no_significant_gap" else
             ": that share of its weight counts as no difference of the vehicle")
