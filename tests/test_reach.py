@@ -15,7 +15,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from quadsim.gap.judge import beyond_reach, extrapolation_share, form_share
+from quadsim.gap.judge import (
+    Baseline,
+    beyond_reach,
+    extrapolation_share,
+    form_share,
+    reach_baseline,
+)
 from quadsim.gap.reference import (
     COORDINATES,
     PROPORTIONAL_SLOPE,
@@ -171,6 +177,17 @@ def test_what_a_name_leaves_within_the_allowance_is_not_left():
     allowance = np.array([0.0, 4.0, 8.0])
     assert form_share(ms, null, typical, allowance=allowance) == \
         pytest.approx((0.5 + 1 + 0) / 111, rel=1e-12)
+
+
+def test_the_lack_of_fit_expects_the_allowance_beyond_the_reach():
+    """Beyond the reach the lack-of-fit baseline's typical mean square is exp(m) + a on
+    each channel; its spread, degrees of freedom and count as they were; no reach: as is."""
+    base = Baseline(np.log([1.0, 2.0, 0.5]), np.full(C, 0.2), 27, 5, "references")
+    reach = SimpleNamespace(allowance=np.array([0.0, 6.0, 1.5]))
+    out = reach_baseline(base, reach)
+    assert np.exp(out.mean) == pytest.approx([1.0, 8.0, 2.0], rel=1e-12)
+    assert (out.spread is base.spread, out.dof, out.count) == (True, 27, 5)
+    assert reach_baseline(base, None) is base
 
 
 def _ev(name, ms, log_z=0.0):

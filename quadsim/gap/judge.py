@@ -123,7 +123,8 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    (:func:`extrapolation_share`; what it earns beyond that, or through the shared values
    "no difference" would have to move, stays its own). Then 1b and the rest
    as before, with what a name leaves within that error not counted in the share it leaves
-   (:func:`form_share`'s ``allowance``: no sign of an effect outside the library); a
+   (:func:`form_share`'s ``allowance``: no sign of an effect outside the library) nor in
+   the lack of fit (:func:`reach_baseline`); a
    ``no_significant_gap`` that got at least :data:`READING_P` of its weight so is
    ``tentative`` (not sure), and the answer says how far beyond the references the flight
    lies and what share of each reading's evidence that error could produce
@@ -235,7 +236,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
            "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
-           "extrapolation_share"]
+           "extrapolation_share", "reach_baseline"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -902,6 +903,17 @@ class Baseline:
         return cls(mean, np.full(c, spread), dof, n, "training")
 
 
+def reach_baseline(baseline: Baseline, reach) -> Baseline:
+    """The lack-of-fit ``baseline`` of a flight beyond its references' reach (module doc,
+    1c): on each channel the typical mean square exp(m_c) plus the allowance a_c the
+    reference model's own error may add there (:attr:`quadsim.gap.reference.Reach.
+    allowance`), mean log(exp(m_c) + a_c), the spread as it is: a channel left within what
+    that error could produce is no lack of fit. ``baseline`` itself without a reach."""
+    if reach is None:
+        return baseline
+    return dataclasses.replace(baseline, mean=np.log(np.exp(baseline.mean) + reach.allowance))
+
+
 def within_form_error(ms, null_ms, typical) -> bool:
     """Whether a reading leaving mean squares ``ms`` (..., C; sigma_c^2 units) leaves at most
     :data:`FORM_ERROR` of the gap "no difference" leaves (``null_ms``), each counted as the
@@ -1270,7 +1282,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
-    lack = lack_of_fit(best.ms, baseline, reference,
+    lack = lack_of_fit(best.ms, reach_baseline(baseline, reach), reference,
                        null_ms=None if null is None or null is best else null.ms)
     left = {}           # a reading leaving 5-10 % of the gap: named tentatively, stated
     share = float("inf") if null is None or null is best else \
