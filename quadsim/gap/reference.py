@@ -1253,7 +1253,7 @@ def local_reference(reference, pos: Position | None):
     :func:`reach_of` (None within reach); ``reference`` itself where no trend is measured
     and the flight lies within reach."""
     out = _placed_model(reference, pos)
-    reach = reach_of(reference, pos, out.sigma)
+    reach = reach_of(reference, pos, getattr(out, "sigma", None))
     return out if reach is None else dataclasses.replace(out, reach=reach, place=pos)
 
 
