@@ -112,6 +112,24 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    itself (q > 1/2: the name leaves more than the classes' boundary share), the name is a
    stand-in, not a cause: the outcome is ``unexplained``, the name and both probabilities
    stated (:func:`quadsim.gap.words.stand_in_words`).
+1c. **Beyond the references' reach** (per flight; :func:`beyond_reach`): where the flight
+   lies outside its references' envelope along a coordinate in which they do not measure
+   how their model's lack of fit grows (:func:`quadsim.gap.reference.reach_of`, module doc
+   "The reach" there), the reference model's own error at that place is a hypothesis of its
+   own: "no difference of the vehicle, the model errs there". Each named reading's weight p
+   splits into p (1 - f), the reading, and p f, no difference, f the share of its
+   log-evidence margin over "no difference" that its removal of the flight's gap within
+   what a model error growing in proportion to the flight's excitation gives there earns
+   (:func:`extrapolation_share`; what it earns beyond that, or through the shared values
+   "no difference" would have to move, stays its own). Then 1b and the rest
+   as before, with what a name leaves within that error not counted in the share it leaves
+   (:func:`form_share`'s ``allowance``: no sign of an effect outside the library) nor in
+   the lack of fit (:func:`reach_baseline`); a
+   ``no_significant_gap`` that got at least :data:`READING_P` of its weight so is
+   ``tentative`` (not sure), and the answer says how far beyond the references the flight
+   lies and what share of each reading's evidence that error could produce
+   (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
+   whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -197,6 +215,7 @@ from .words import (
     asserted,
     nominal_words,
     outside_words,
+    reach_words,
     reading_text,
     stand_in_words,
     timing_words,
@@ -216,7 +235,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "rows_at_reference_voltage", "symptom",
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
-           "with_outside", "TIMINGS", "timing_rival", "rows_with_outside"]
+           "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
+           "extrapolation_share", "reach_baseline"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -589,6 +609,59 @@ def with_outside(ranked: list, q: float) -> tuple[list, float]:
     return [(k, p * (1.0 - q), ev), *rest], p * q
 
 
+def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> float:
+    """Of a named reading's log-evidence margin over "no difference", the share that the
+    reference model's own error could produce where the flight lies beyond its references'
+    reach (module doc, 1c; :class:`quadsim.gap.reference.Reach`). Per channel c, with the
+    references' typical mean square t_c, the gap g_c = max(0, m0_c - t_c) "no difference"
+    leaves (``null_ms``), what the reading leaves l_c = max(0, m_c - t_c) (``ms``), what it
+    removes r_c = max(0, g_c - l_c), the allowance a_c (``reach.allowance``) and the
+    effective samples n_c (``reach.counts``): the part of the margin its removal within the
+    allowance earns, sum_c n_c min(r_c, a_c) / 2, over the margin ``margin`` (log Z of the
+    reading less that of "no difference"), at most 1. What the reading earns otherwise --
+    beyond the allowance, or through the shared values "no difference" would have to move
+    (a mass the thrust factor would absorb at a price) -- stays its own. Without the counts
+    or a positive margin, the share of what it removes: sum_c min(r_c, a_c) / sum_c r_c; 1
+    where it removes nothing beyond the typical level; 0 without a reach."""
+    if reach is None:
+        return 0.0
+    typical = np.asarray(reach.typical, float)
+    gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
+    removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
+    within = np.minimum(removed, reach.allowance)
+    if margin is not None and margin > 0 and reach.counts is not None:
+        return float(min(1.0, 0.5 * np.sum(reach.counts * within) / margin))
+    total = float(removed.sum())
+    if total <= 0:
+        return 1.0
+    return float(np.sum(within) / total)
+
+
+def beyond_reach(ranked: list, reach) -> tuple[list, dict]:
+    """The library's posterior ``ranked`` ((reading, p, Evidence), summing to 1) with the
+    hypothesis "the reference model's error at a place its references never flew" (module
+    doc, 1c): each named reading's p splits into p (1 - f), the reading, and p f, no
+    difference of the vehicle (the model errs there), f its
+    :func:`extrapolation_share`; re-sorted, most probable first. -> (rows, reading ->
+    (its p before, f) for each reading that gave weight). ``ranked`` itself without a
+    ``reach`` or a "no difference" row."""
+    rows = {k: (p, ev) for k, p, ev in ranked}
+    if reach is None or "no_difference" not in rows:
+        return ranked, {}
+    null = rows["no_difference"][1]
+    moved, out, to_null = {}, [], 0.0
+    for k, p, ev in ranked:
+        if k == "no_difference":
+            continue
+        f = extrapolation_share(ev.ms, null.ms, reach, ev.log_z - null.log_z)
+        if f > 0 and p > 0:
+            moved[k] = (p, f)
+        out.append((k, p * (1.0 - f), ev))
+        to_null += p * f
+    out.append(("no_difference", rows["no_difference"][0] + to_null, null))
+    return sorted(out, key=lambda x: (-x[1], x[0])), moved
+
+
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
 #: part (:data:`quadsim.gap.heldout.NOISE_WINDOW_S`, the same value).
 SLOW_WINDOW_S = 0.5
@@ -830,6 +903,17 @@ class Baseline:
         return cls(mean, np.full(c, spread), dof, n, "training")
 
 
+def reach_baseline(baseline: Baseline, reach) -> Baseline:
+    """The lack-of-fit ``baseline`` of a flight beyond its references' reach (module doc,
+    1c): on each channel the typical mean square exp(m_c) plus the allowance a_c the
+    reference model's own error may add there (:attr:`quadsim.gap.reference.Reach.
+    allowance`), mean log(exp(m_c) + a_c), the spread as it is: a channel left within what
+    that error could produce is no lack of fit. ``baseline`` itself without a reach."""
+    if reach is None:
+        return baseline
+    return dataclasses.replace(baseline, mean=np.log(np.exp(baseline.mean) + reach.allowance))
+
+
 def within_form_error(ms, null_ms, typical) -> bool:
     """Whether a reading leaving mean squares ``ms`` (..., C; sigma_c^2 units) leaves at most
     :data:`FORM_ERROR` of the gap "no difference" leaves (``null_ms``), each counted as the
@@ -837,10 +921,15 @@ def within_form_error(ms, null_ms, typical) -> bool:
     return form_share(ms, null_ms, typical) <= FORM_ERROR
 
 
-def form_share(ms, null_ms, typical) -> float:
+def form_share(ms, null_ms, typical, *, allowance=None) -> float:
     """The share of the gap "no difference" leaves (``null_ms``) that a reading leaving
-    ``ms`` leaves (:func:`within_form_error`); inf where "no difference" leaves none."""
-    left = float(np.sum(np.maximum(0.0, np.asarray(ms) - typical)))
+    ``ms`` leaves (:func:`within_form_error`); inf where "no difference" leaves none.
+    ``allowance`` (C,): per flight beyond the references' reach (module doc, 1c), what the
+    reference model's own error may leave on each channel
+    (:attr:`quadsim.gap.reference.Reach.allowance`): what the reading leaves within it is
+    not counted as left (it is no sign of an effect outside the library)."""
+    extra = 0.0 if allowance is None else np.asarray(allowance, float)
+    left = float(np.sum(np.maximum(0.0, np.asarray(ms) - typical - extra)))
     gap = float(np.sum(np.maximum(0.0, np.asarray(null_ms) - typical)))
     return left / gap if gap > 0 else float("inf")
 
@@ -1184,16 +1273,21 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     check = placed(getattr(reference, "self_check", None), reference)
     vbat_ref = getattr(reference, "vbat_ref", None)
     # the library's readings (their posterior sums to 1); the name's own probability below
-    within = [(k, min(p, cap), ev) for k, p, ev in
-              posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref))]
+    # beyond the references' reach, a name's weight counts the reference model's own error
+    # there as no difference of the vehicle (1c)
+    reach = getattr(reference, "reach", None)
+    within, moved = beyond_reach(
+        posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref)), reach)
+    within = [(k, min(p, cap), ev) for k, p, ev in within]
     top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
-    lack = lack_of_fit(best.ms, baseline, reference,
+    lack = lack_of_fit(best.ms, reach_baseline(baseline, reach), reference,
                        null_ms=None if null is None or null is best else null.ms)
     left = {}           # a reading leaving 5-10 % of the gap: named tentatively, stated
     share = float("inf") if null is None or null is best else \
-        form_share(best.ms, null.ms, np.exp(baseline.mean))
+        form_share(best.ms, null.ms, np.exp(baseline.mean),
+                   allowance=None if reach is None else reach.allowance)
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
     # a rotor timing the data cannot separate (lag or delay within the references' own
@@ -1255,10 +1349,18 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                   "for it.")
     if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
+    # the no difference a reading's weight went to beyond the reach (1c): not sure
+    unsure_null = outcome == "no_significant_gap" and sum(
+        p * f for p, f in moved.values()) >= READING_P
+    evs = {k: ev for k, _, ev in within}
+    said = {k: (p, f, "" if effect and k == top else reading_text(evs[k], reference))
+            for k, (p, f) in moved.items() if p >= READING_P}
+    if said:
+        words += reach_words(reach, said, outcome=outcome)
     return Verdict(
         # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
         outcome, verdict, words, p_out if stand_in else lead.probability,
-        tentative=effect and (p_top < CONFIDENT or unsure),
+        tentative=(effect and (p_top < CONFIDENT or unsure)) or unsure_null,
         probability_within_library=p_top, outside_library=p_out,
         form_remainder={**{k: v[0] for k, v in left.items()},
                         **{k: v[0] for k, v in remains.items()}},

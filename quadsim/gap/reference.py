@@ -196,6 +196,45 @@ Example::
     >>> pos = position(flight.fit, ref.envelope)
     >>> pos.distance, pos.text          # 0.35, "speed 1.42x the fastest reference's ..."
     >>> local = local_reference(ref, pos)      # the Reference this flight is judged by
+
+The reach
+---------
+
+How far beyond its references a flight can be judged by what they show (:func:`reach_of`,
+:class:`Reach`; the judgment's rule 1c, :func:`quadsim.gap.judge.beyond_reach`).
+
+The trend and the channel lines above extrapolate the references' own growth: a slope
+measured over their spread. References flown alike (five copies of one test flight) spread
+by a few per cent, and a flight flown 2-7x harder than them lies tens of their spreads
+beyond: there the slopes say nothing, and the reference model's error at the flight's place
+is unknown. Whether the references measure that growth is read from their own data: per
+envelope coordinate k, the standard error se_k of the slope of their log mean squares on
+x_k (ordinary least squares per channel, the residual spread pooled over the channels,
+C (n - 2) degrees of freedom; :func:`slope_errors`). The growth is *measured* when
+``REACH_Z se_k <= PROPORTIONAL_SLOPE`` (1.96 x se_k within 2): the references' 95 % interval
+of the slope is narrower than the slope of the simplest way a model's error grows, in
+proportion to the signal it predicts (residual RMS proportional to the excitation, its mean
+square to the excitation squared: slope 2). Where it is, they can tell that growth from
+none, and the trend and lines above hold (the real Crazyflie references' values:
+docs/gap.md, "Few or narrow references").
+
+A flight outside the references' envelope along a coordinate whose growth they do not
+measure is *beyond their reach*. There the reference model's own error may be what a model
+error growing in proportion to the flight's excitation gives: on channel c, with the
+flight's log excitation e_c beyond the references' largest (:func:`excitation`; 0 within)
+and their typical mean square t_c (exp of their mean log mean square, in the placed model's
+sigma_c^2 units), an *allowance* of mean square ``a_c = t_c (exp(2 e_c) - 1)`` above t_c.
+The judgment then counts, of each named reading's log-evidence margin, the part that its
+removal of the gap within the allowance earns (the flight's effective samples N / tau_c
+times half that removal, :attr:`Reach.counts`) as the model's error, not the vehicle's
+difference (:func:`quadsim.gap.judge.extrapolation_share`). No threshold is tuned: the
+slope 2 is the proportional law, 1.96 the two-sided 95 % quantile. Below 3 references no slope is
+measurable and every coordinate is unmeasured.
+
+Example::
+
+    >>> reach = reach_of(ref, pos)       # None within reach
+    >>> reach.coordinate, reach.ratio    # "thrust", 39.0 (times the references' spread)
 """
 
 from __future__ import annotations
@@ -219,7 +258,8 @@ __all__ = ["moderated_spread", "FORCE_FEATURES", "MOMENT_FEATURES", "RIDGE", "Di
            "Reference", "aligned", "jacobian", "read_later", "rotor_spectra", "shifted",
            "weighted_residual", "COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope",
            "Position", "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend",
-           "local_reference", "position", "ChannelLines", "excitation", "fit_channel_lines"]
+           "local_reference", "position", "ChannelLines", "excitation", "fit_channel_lines",
+           "Reach", "reach_of", "slope_errors", "PROPORTIONAL_SLOPE", "REACH_Z"]
 
 
 def _trigamma(x):
@@ -715,6 +755,9 @@ class Reference:
     #: where the references' readings are compared too
     #: (:func:`quadsim.gap.calibrate.placed`); None: the model as calibrated
     place: object = None
+    #: the flight's :class:`Reach` where it drives a channel beyond what the references can
+    #: vouch for (:func:`local_reference`); None: within reach, or the model as calibrated
+    reach: object = None
 
     def align(self, flight):
         """A prepared flight's fit states with the references' rotor-speed timing
@@ -937,6 +980,9 @@ class Envelope:
     trend: Trend | None
     #: the references' lack of fit against each channel's own excitation (None: not measured)
     lines: ChannelLines | None = None
+    #: (n, C') each reference's :func:`excitation` (None: not measured): how far beyond them
+    #: a flight drives each channel (:func:`reach_of`)
+    excite: np.ndarray | None = None
 
     @property
     def low(self) -> np.ndarray:
@@ -962,6 +1008,9 @@ class Position:
     info: np.ndarray | None = None
     #: the flight's :func:`excitation` of each channel; None: not measured
     excite: np.ndarray | None = None
+    #: the flight's number of fit samples (None: not known): with the noise model's
+    #: correlation times, its effective sample count per channel (:class:`Reach`)
+    samples: int | None = None
 
     def to_json(self) -> dict:
         names = [c[0] for c in COORDINATES]
@@ -983,7 +1032,8 @@ def envelope_of(coords: np.ndarray, values: np.ndarray, se: np.ndarray,
     return Envelope(np.asarray(coords, float),
                     fit_trend(np.asarray(coords, float), values, se, identified, log_ms,
                               info),
-                    fit_channel_lines(excite, log_ms))
+                    fit_channel_lines(excite, log_ms),
+                    None if excite is None else np.asarray(excite, float))
 
 
 def envelope_summary(envelope: Envelope | None, names=()) -> dict | None:
@@ -1093,17 +1143,122 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
                  "uncertainty and noise widened" if envelope.trend is not None else
                  "; the references do not spread enough to show how their model "
                  "extrapolates: judged by the reference model as calibrated")
+    measured = envelope.lines is not None or getattr(envelope, "excite", None) is not None
+    t = getattr(states, "t", None)
     return Position(x, distance, name, u, text,
                     None if info is None else np.asarray(info, float),
-                    excitation(states) if envelope.lines is not None else None)
+                    excitation(states) if measured else None,
+                    None if t is None else len(t))
+
+
+#: the growth law of a model error in proportion to the signal it predicts: its residual RMS
+#: grows with the channel's excitation, its mean square with the excitation squared, a slope
+#: of 2 in log mean square per log excitation (module doc, "The reach")
+PROPORTIONAL_SLOPE = 2.0
+#: the two-sided 95 % normal quantile: a slope is measured where this many standard errors
+#: of it lie within PROPORTIONAL_SLOPE (module doc, "The reach")
+REACH_Z = 1.96
+
+
+@dataclass(frozen=True)
+class Reach:
+    """A flight beyond what its references can vouch for (module doc, "The reach"):
+    ``coordinate`` the envelope coordinate (:data:`COORDINATES` name) along which it lies
+    furthest outside the references where they do not measure how their model's lack of fit
+    grows, ``excess`` how far (log units), ``above`` whether above their largest (else below
+    their smallest), ``spread`` the references' own spread in it (log units); ``slope_se``
+    (3,) per coordinate the standard error of that growth's slope (inf: not measurable);
+    per residual channel c (C,): ``beyond`` the flight's log excitation beyond the
+    references' largest (0 within), ``typical`` the references' typical mean square and
+    ``allowance`` the mean square the reference model's own error may add there, both in
+    the placed model's sigma_c^2 units (what a weighed flight's ``ms`` is in), ``counts``
+    the flight's effective samples N / tau_c (None: N not known): a mean-square reduction
+    r on channel c is worth counts_c r / 2 in log evidence."""
+
+    coordinate: str
+    excess: float
+    above: bool
+    spread: float
+    slope_se: np.ndarray
+    beyond: np.ndarray
+    typical: np.ndarray
+    allowance: np.ndarray
+    counts: np.ndarray | None = None
+
+    @property
+    def ratio(self) -> float:
+        """``excess`` over ``spread`` (inf where the references do not spread)."""
+        return self.excess / self.spread if self.spread > 0 else float("inf")
+
+
+def slope_errors(x: np.ndarray, log_ms: np.ndarray) -> np.ndarray:
+    """(C,) per channel the standard error of the ordinary least-squares slope of the
+    references' log mean squares ``log_ms`` (n, C) on ``x`` ((n,) one regressor for every
+    channel, or (n, >= C) one per channel, the first C columns): s / sqrt(S_xx,c), s the
+    residual spread pooled over the channels (C (n - 2) degrees of freedom); inf below 3
+    references or where the regressor does not vary."""
+    log_ms = np.asarray(log_ms, float)
+    n, c = log_ms.shape
+    if n < 3:
+        return np.full(c, np.inf)
+    x = np.asarray(x, float)
+    x = np.repeat(x[:, None], c, axis=1) if x.ndim == 1 else x[:, :c]
+    dx = x - x.mean(axis=0)
+    s_xx = np.sum(dx ** 2, axis=0)
+    slope = np.sum(dx * (log_ms - log_ms.mean(axis=0)), axis=0) / np.where(s_xx > 0, s_xx, 1.0)
+    rest = log_ms - log_ms.mean(axis=0) - dx * slope
+    spread = np.sqrt(np.sum(rest ** 2) / (c * (n - 2)))
+    with np.errstate(divide="ignore"):
+        return np.where(s_xx > 0, spread / np.sqrt(s_xx), np.inf)
+
+
+def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
+             ) -> Reach | None:
+    """The :class:`Reach` of a flight at ``pos`` against the calibrated ``reference`` (module
+    doc, "The reach"); ``sigma`` (C,): the placed model's noise scale (default the
+    calibrated one). None where the flight lies outside the references' envelope only along
+    coordinates in which they measure their lack of fit's growth (or inside it), where it
+    drives no channel beyond the references' largest excitation, or where the excitations
+    or the references' log mean squares are not kept."""
+    envelope = getattr(reference, "envelope", None)
+    refs = getattr(envelope, "excite", None)
+    log_ms = getattr(reference, "log_ms", None)
+    if pos is None or refs is None or pos.excite is None or log_ms is None:
+        return None
+    c = len(reference.sigma)
+    coords = np.asarray(envelope.coords, float)
+    if refs.shape[1] < c or len(pos.excite) < c or np.shape(log_ms) != (len(coords), c):
+        return None
+    se = np.array([slope_errors(coords[:, k], log_ms)[0] for k in range(coords.shape[1])])
+    above = pos.coords - coords.max(axis=0)
+    excess = np.maximum(np.maximum(above, coords.min(axis=0) - pos.coords), 0.0)
+    excess = np.where(REACH_Z * se > PROPORTIONAL_SLOPE, excess, 0.0)
+    beyond = np.maximum(0.0, pos.excite[:c] - refs[:, :c].max(axis=0))
+    if not np.any(excess > 0) or not np.any(beyond > 0):
+        return None
+    k = int(np.argmax(excess))
+    sigma = reference.sigma if sigma is None else np.asarray(sigma, float)
+    typical = np.exp(np.asarray(reference.lof_mean, float)) * (reference.sigma / sigma) ** 2
+    counts = None if pos.samples is None else pos.samples / np.asarray(reference.tau, float)
+    return Reach(COORDINATES[k][0], float(excess[k]), bool(above[k] > 0),
+                 float(np.ptp(coords[:, k])), se, beyond,
+                 typical, typical * np.expm1(PROPORTIONAL_SLOPE * beyond), counts)
 
 
 def local_reference(reference, pos: Position | None):
     """The reference model at a flight's place (module doc): a copy of ``reference`` with its
     shared values at the trend's prediction, and widened scatter, noise scale and lack-of-fit
     statistics beyond the outermost reference, ``place`` = ``pos`` (where the references'
-    readings are compared too, :func:`quadsim.gap.calibrate.placed`); ``reference`` itself
-    where no trend is measured."""
+    readings are compared too, :func:`quadsim.gap.calibrate.placed`) and ``reach`` its
+    :func:`reach_of` (None within reach); ``reference`` itself where no trend is measured
+    and the flight lies within reach."""
+    out = _placed_model(reference, pos)
+    reach = reach_of(reference, pos, getattr(out, "sigma", None))
+    return out if reach is None else dataclasses.replace(out, reach=reach, place=pos)
+
+
+def _placed_model(reference, pos: Position | None):
+    """:func:`local_reference` without the reach."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
     pooled = getattr(reference, "lof_pooled", None)
     if pos is not None and pos.distance > 0 and pooled is not None:

@@ -33,7 +33,7 @@ from .fitting import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
-           "reference_text", "residual_text", "stand_in_words", "timing_words"]
+           "reach_words", "reference_text", "residual_text", "stand_in_words", "timing_words"]
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -215,6 +215,32 @@ def outside_words(p_out: float, share: float, within: float, *,
         if np.isfinite(share) else ""
     return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
             f"that it stands in for an effect outside the library{source}.")
+
+
+def reach_words(reach, moved: dict, *, outcome: str) -> str:
+    """The sentence of a flight beyond its references' reach (:func:`quadsim.gap.judge.
+    beyond_reach`): ``reach`` its :class:`quadsim.gap.reference.Reach`; ``moved`` reading ->
+    (its probability among the library's readings, the share f of its evidence over no
+    difference that the model's own error could produce there,
+    :func:`quadsim.gap.judge.extrapolation_share`, its reading in words or "" where the
+    answer states it already); ``outcome`` the verdict's. E.g. "Flown 7.3x above your references'
+    RMS variation of the specific force's size, 39 times their own spread in it: ..."."""
+    from .reference import COORDINATES
+
+    what = next(co[2] for co in COORDINATES if co[0] == reach.coordinate)
+    times = (f", {reach.ratio:.0f} times their own spread in it" if np.isfinite(reach.ratio)
+             else ", in which they do not spread")
+    side = "above" if reach.above else "below"
+    parts = "; ".join(f"{k} ({_pct(p)} among the library's readings{': ' + m if m else ''}): "
+                      f"{100 * f:.0f} % of its evidence over no difference that error could "
+                      "produce" for k, (p, f, m) in moved.items())
+    tail = (": no difference of the vehicle is the more probable reading, not sure"
+            if outcome == "no_significant_gap" else
+            ": that share of its weight counts as no difference of the vehicle")
+    return (f" Flown {np.exp(reach.excess):.2g}x {side} your references' {what}{times}: "
+            "they cannot show how the reference model extrapolates so far, and its own "
+            "error there (a model error growing in proportion to how hard the flight drives "
+            f"each channel) could produce the readings: {parts}{tail}.")
 
 
 def stand_in_words(name: str, within: float, magnitude: str, share: float,
