@@ -1267,8 +1267,8 @@ STEP_MISS = 1e-3
 STEP_LOG_Z = 0.05
 #: the most the converged steps of one flight weigh together, each as exp(reach + STEP_LOG_Z
 #: - best) (its posterior weight over the best's at most): with every one off by at most
-#: STEP_LOG_Z, no probability the judge prints moves by more than 2 (e^0.05 - 1) 0.04 =
-#: 0.0041 / (1 - 0.0021) < 0.005 (:func:`converged_steps`)
+#: STEP_LOG_Z, no probability the judge prints moves by more than
+#: 2 (e^0.05 - 1) 0.04 / (1 - (e^0.05 - 1) 0.04) = 0.0041 < 0.005 (:func:`converged_steps`)
 STEP_SHARE = 0.04
 
 
@@ -1285,8 +1285,8 @@ def converged_steps(explanations: list, screening: Screening) -> set:
     numerator and total each move by at most (e^d - 1) s Z, so the ratio by at most
     2 (e^d - 1) s / (1 - (e^d - 1) s) = 0.0041. d is a measured margin, not a proof: a step
     whose linear model is exact along it may still sit off the optimum where the cost is
-    flat across it (STEP_MISS, measured). The leader and the readings near it are always
-    refined (each weighs ~1 or more)."""
+    flat across it (STEP_MISS, measured). A reading within -log(STEP_SHARE) + STEP_LOG_Z =
+    3.3 log units of the best is always refined (it alone weighs more than STEP_SHARE)."""
     best = max(screening.weight)
     cands = sorted((screening.reach[k], k) for k, e in enumerate(explanations)
                    if not e.coupled and screening.rows[k] is not None
