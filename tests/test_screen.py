@@ -273,3 +273,62 @@ def test_a_fit_that_ends_where_no_rigid_vehicle_is_has_no_evidence(cf, reference
     assert np.isclose(got["no_difference"] + got["mass_offset"], 1.0)
     # no_difference carries the prior of the 3 effects: odds e^2 * 3 against mass_offset
     assert np.isclose(got["no_difference"] / got["mass_offset"], 3 * np.exp(2.0))
+
+
+@pytest.mark.parametrize("case", ["none", "lag"])
+def test_a_converged_step_kept_as_the_fit_stays_within_its_margin(cf, reference, case,
+                                                                 monkeypatch):
+    """The screen's steps kept as fits (evidence.converged_steps) against the same flight
+    with every one of them refined (the path before): each kept step's log Z within
+    STEP_LOG_Z of its refined fit's, every probability the judge prints within 0.005, the
+    same verdict; and the kept steps' weights within their stated sum."""
+    from quadsim.gap import evidence
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = prepare([CASES[case](cf)], cf)[0].fit
+    expl = explanations_for(reference, states)
+    fast = evaluate(states, reference, expl)
+    kept = [k for k, row in enumerate(fast) if row.step_converged]
+    assert kept, "no step kept: the case does not test the path"
+    # the best log weight: "no difference" with its prior (evidence._screen_all)
+    prior_null = np.log(len({e.name for e in expl} - {"no_difference"}))
+    best = max(row.log_z + (prior_null if row.name == "no_difference" else 0.0)
+               for row in fast)
+    assert sum(np.exp(fast[k].log_z - best) for k in kept) <= evidence.STEP_SHARE
+    monkeypatch.setattr(evidence, "converged_steps", lambda *a: set())
+    slow = evaluate(states, reference, expl)
+    assert not any(row.step_converged for row in slow)
+    for k in kept:
+        assert not slow[k].screened
+        assert fast[k].log_z == pytest.approx(slow[k].log_z, abs=evidence.STEP_LOG_Z), k
+    a, b = judge(fast, reference, case), judge(slow, reference, case)
+    assert a["verdict"] == b["verdict"]
+    assert a["probability"] == pytest.approx(b["probability"], abs=0.005)
+    pa = {(r["name"], r.get("variant", "")): r["probability"] for r in a["posterior"]}
+    pb = {(r["name"], r.get("variant", "")): r["probability"] for r in b["posterior"]}
+    for key in pa.keys() | pb.keys():      # a reading listed on one side only: below both
+        assert pa.get(key, 0.0) == pytest.approx(pb.get(key, 0.0), abs=0.005), key
+
+
+def test_converged_steps_keeps_the_lightest_exact_steps_within_the_share():
+    """evidence.converged_steps on a made-up screen: coupled readings, failed steps and
+    inexact linear models are never kept; the exact ones lightest first while their weights
+    sum to at most STEP_SHARE."""
+    from types import SimpleNamespace
+
+    from quadsim.gap import evidence
+
+    best = 0.0
+    expl = [SimpleNamespace(coupled=c) for c in (False, False, False, True, False, False)]
+    reach = [-20.0, -5.0, -4.0, -30.0, -25.0, -0.0]
+    miss = [1e-4, 1e-4, 1e-4, 0.0, 0.5, 0.0]
+    rows = [object(), object(), object(), object(), object(), object()]
+    starts = [np.zeros(1)] * 6
+    screening = evidence.Screening(rows, starts, [best] + [-50.0] * 5, reach, miss)
+    got = evidence.converged_steps(expl, screening)
+    # -20 (e^-19.95) and -5 (e^-4.95 = 0.0071) fit in 0.04; -4 (0.0193) brings 0.026: kept;
+    # the last, at the best (e^0.05), not: the sum would pass 0.04
+    assert got == {0, 1, 2}
+    screening.rows[1] = None
+    assert evidence.converged_steps(expl, screening) == {0, 2}

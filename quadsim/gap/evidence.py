@@ -123,7 +123,10 @@ of evidence below the best. So:
    as in :func:`quadsim.gap.judge.posterior`) is fitted to convergence (:func:`refined`:
    projected Gauss-Newton from z1, a fresh Jacobian per step, halved steps until the cost
    falls, stopped at a cost drop below :data:`CONVERGED`), most promising first, each result
-   raising the best. The others keep their screened Evidence (``screened=True``).
+   raising the best. The others keep their screened Evidence (``screened=True``). Within
+   the cut, a step whose linear model was exact (miss at most :data:`STEP_MISS`) on a
+   reading too light to move a probability by 0.005 is kept as the fit
+   (``step_converged=True``; :func:`converged_steps` states the bound and its margin).
 
 Why the cut does not move a verdict: a screened reading lies more than SCREEN_CUT = log(1e4)
 + 4 below the best, i.e. at posterior odds below 1e-4 against it by its screened evidence;
@@ -260,7 +263,9 @@ class Evidence:
     residual (N, N m, rad/s); ``air_force`` (3,): mean air force of a wind reading beyond the
     references' wind (world, N), else None; ``shared_shift``: shared parameter -> its
     profiled shift from theta_ref (its SI unit); ``screened``: True where the value is the
-    screen's linearised evidence (:mod:`quadsim.gap.screen`), not a converged fit."""
+    screen's linearised evidence (:mod:`quadsim.gap.screen`), not a converged fit;
+    ``step_converged``: True where it is the screen's step taken as the converged fit
+    (:func:`converged_steps`: the flight's value to within its stated margin)."""
 
     explanation: Explanation
     values: dict
@@ -274,6 +279,9 @@ class Evidence:
     shared_shift: dict = field(default_factory=dict)
     #: True: the linearised evidence of :mod:`.screen` (no full fit: it cannot matter)
     screened: bool = False
+    #: True: the screen's step taken as the converged fit (its linear model exact to
+    #: :data:`STEP_MISS`, the reading too light to move a probability: :func:`converged_steps`)
+    step_converged: bool = False
     #: (C,) mean square of the residual's slow part (its :data:`SLOW_WINDOW_S` moving
     #: average) over sigma_c^2 (dimensionless); None: states without a time base
     slow: np.ndarray | None = None
@@ -1186,18 +1194,21 @@ class Screening:
     ``rows`` its Evidence (None where the step failed), ``starts`` the step z1 a refined fit
     starts from (None: exact already, or no step), ``weight`` the log weight it counts with
     towards the best (log Z; "no difference" plus its prior), ``reach`` what a fit could
-    reach (screened log Z + miss / 2; inf where the step failed)."""
+    reach (screened log Z + miss / 2; inf where the step failed), ``miss`` how far the
+    linear model's cost at the step was off (cost units; inf where there is no step)."""
 
     rows: list
     starts: list
     weight: list
     reach: list
+    miss: list = dataclasses.field(default_factory=list)
 
-    def add(self, row, start, weight: float, reach: float) -> None:
+    def add(self, row, start, weight: float, reach: float, miss: float = np.inf) -> None:
         self.rows.append(row)
         self.starts.append(start)
         self.weight.append(weight)
         self.reach.append(reach)
+        self.miss.append(miss)
 
 
 def _null_fit(inputs: FitInputs, cols: Columns, null: Explanation, shared_start: float
@@ -1241,7 +1252,52 @@ def _screen_all(inputs: FitInputs, cols: Columns, explanations: list, null, fitt
             ev, z1, miss = None, None, np.inf
         # what a fit could reach: the screened evidence plus half the linear model's miss
         out.add(ev, z1, -np.inf if ev is None else ev.log_z,
-                np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss)
+                np.inf if ev is None or not np.isfinite(miss) else ev.log_z + 0.5 * miss,
+                miss)
+    return out
+
+
+#: the linear model's miss (cost units: |cost(z1) - predicted|) at or below which the
+#: screen's step z1 is taken as the converged fit (:func:`converged_steps`): log Z off by a
+#: two-thousandth along the step; measured on the 26 real mixed flights (2026-11-29), the
+#: refined fit from such a step moved log Z by at most 0.014 (146 readings)
+STEP_MISS = 1e-3
+#: the margin (log-evidence units) stated for a converged step's log Z against its refined
+#: fit's: 3.5 x the largest move measured (:data:`STEP_MISS`)
+STEP_LOG_Z = 0.05
+#: the most the converged steps of one flight weigh together, each as exp(reach + STEP_LOG_Z
+#: - best) (its posterior weight over the best's at most): with every one off by at most
+#: STEP_LOG_Z, no probability the judge prints moves by more than
+#: 2 (e^0.05 - 1) 0.04 / (1 - (e^0.05 - 1) 0.04) = 0.0041 < 0.005 (:func:`converged_steps`)
+STEP_SHARE = 0.04
+
+
+def converged_steps(explanations: list, screening: Screening) -> set:
+    """The indices of the explanations whose screen step is kept as their converged fit
+    (no :func:`refined` fit): not coupled (its step sees what it reaches), a step there, its
+    linear model's miss at most :data:`STEP_MISS`, the lightest first while their weights
+    exp(reach + :data:`STEP_LOG_Z` - best) sum to at most :data:`STEP_SHARE` (best: the
+    screen's best log weight, which the refined fits only raise).
+
+    Why the probabilities move by less than 0.005: a probability the judge prints is a sum
+    of posterior weights e^w over their total Z >= e^best. Where the kept steps' log Z are
+    each off by at most d = STEP_LOG_Z and weigh at most s = STEP_SHARE e^best together,
+    numerator and total each move by at most (e^d - 1) s Z, so the ratio by at most
+    2 (e^d - 1) s / (1 - (e^d - 1) s) = 0.0041. d is a measured margin, not a proof: a step
+    whose linear model is exact along it may still sit off the optimum where the cost is
+    flat across it (STEP_MISS, measured). A reading within -log(STEP_SHARE) + STEP_LOG_Z =
+    3.3 log units of the best is always refined (it alone weighs more than STEP_SHARE)."""
+    best = max(screening.weight)
+    cands = sorted((screening.reach[k], k) for k, e in enumerate(explanations)
+                   if not e.coupled and screening.rows[k] is not None
+                   and screening.starts[k] is not None
+                   and np.isfinite(screening.miss[k]) and screening.miss[k] <= STEP_MISS)
+    out, total = set(), 0.0
+    for reach, k in cands:
+        total += float(np.exp(reach + STEP_LOG_Z - best))
+        if total > STEP_SHARE:
+            break
+        out.add(k)
     return out
 
 
@@ -1302,18 +1358,21 @@ def screened(inputs: FitInputs, explanations: list[Explanation],
     order = sorted(range(len(explanations)),
                    key=lambda k: (explanations[k].coupled, -screening.reach[k]))
     before = None        # the best weight before any coupled fit: their kin are judged by it
+    kept = converged_steps(explanations, screening)
     for k in order:
         expl = explanations[k]
         if expl is null or (rows[k] is not None and screening.starts[k] is None):
             continue
         if expl.coupled and before is None:
             before = best
-        if _matters(inputs, cols, explanations, k, screening, (best, before)):
+        if not _matters(inputs, cols, explanations, k, screening, (best, before)):
+            rows[k].screened = True
+        elif k in kept:      # the step is its fit (converged_steps); it weighs in as it is
+            rows[k].step_converged = True
+        else:
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
             rows[k] = _fit_to_convergence(inputs, cols, expl, screening.starts[k], delay)
             best = max(best, rows[k].log_z)
-        else:
-            rows[k].screened = True
     return rows
 
 
