@@ -1635,10 +1635,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     moved = getattr(decision, "moved", None) or {}
     unsure_null = outcome == "no_significant_gap" and sum(
         p * f for p, f in moved.values()) >= READING_P
-    magnitudes = {k: r["magnitude"] for r, (k, _, _) in zip(decision.rows, decision.ranked)}
+    magnitudes = {k: r["magnitude"] for r, (k, _, _) in zip(decision.rows, decision.ranked)
+                  } if moved else {}
     said = {k: (p, f, "" if effect and k == lead_name else magnitudes.get(k, ""))
             for k, (p, f) in moved.items() if p >= READING_P}
-    if said and decision.reach is not None:
+    if said and getattr(decision, "reach", None) is not None:
         words += reach_words(decision.reach, said, outcome=outcome)
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
