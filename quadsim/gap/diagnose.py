@@ -109,8 +109,11 @@ flights' log-likelihood joins its evidence as above. Practical significance is t
 rule: a reading within the references' between-flight spread of it is no difference
 (:func:`quadsim.gap.calibrate.negligible` with their self-check; :class:`Practical` takes it
 from the reference; ``signal_delay`` is not sized by the held-out gap where "no difference"
-took it with each held-out flight's own delay, :meth:`Against.timing_taken`). Ranking, pairs,
-consistency (on top of the references' model) and the verdict
+took it with each held-out flight's own delay, :meth:`Against.timing_taken`). Beyond the
+references' reach (a flight outside their envelope along a coordinate in which they do not
+measure how their model's lack of fit grows) the reference model's own error there is weighed
+beside each name before the lead is chosen, as per flight (:meth:`Against.split`;
+:mod:`.judge`, 1c). Ranking, pairs, consistency (on top of the references' model) and the verdict
 (:func:`quadsim.gap.judge.judge_heldout`) are the held-out ones; "before" is the
 held-out flights' residual under "no difference" against the references. With fewer than 3
 references there is no self-check: the training flights' spread is the scale, as without

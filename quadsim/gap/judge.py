@@ -112,7 +112,7 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    itself (q > 1/2: the name leaves more than the classes' boundary share), the name is a
    stand-in, not a cause: the outcome is ``unexplained``, the name and both probabilities
    stated (:func:`quadsim.gap.words.stand_in_words`).
-1c. **Beyond the references' reach** (per flight; :func:`beyond_reach`): where the flight
+1c. **Beyond the references' reach** (:func:`beyond_reach`): where the flight
    lies outside its references' envelope along a coordinate in which they do not measure
    how their model's lack of fit grows (:func:`quadsim.gap.reference.reach_of`, module doc
    "The reach" there), the reference model's own error at that place is a hypothesis of its
@@ -130,6 +130,13 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    lies and what share of each reading's evidence that error could produce
    (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
    whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
+   Held out against nominal references the same rule, one judgment for both modes
+   (:meth:`quadsim.gap.diagnose.Against.split` before the lead is chosen): the margin
+   spans the training evidence and the held-out log-likelihood, so f sums what each flight
+   (training and held out, each with its own reach, :func:`heldout_share`) earns within its
+   allowance (:func:`flights_share`); each training flight's lack of fit and the share it
+   leaves count the allowance of its own place (:func:`training_lack`,
+   :func:`against_reference`); the same words and ``tentative``.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
