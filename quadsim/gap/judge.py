@@ -1642,9 +1642,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     moved = getattr(decision, "moved", None) or {}
     unsure_null = outcome == "no_significant_gap" and sum(
         p * f for p, f in moved.values()) >= READING_P
-    magnitudes = {k: r["magnitude"] for r, (k, _, _) in zip(decision.rows, decision.ranked)
-                  } if moved else {}
-    said = {k: (p, f, "" if effect and k == lead_name else magnitudes.get(k, ""))
+    # each reading as its row states it (its name by the lead rule, its magnitude)
+    as_row = {k: r for r, (k, _, _) in zip(decision.rows, decision.ranked)} if moved else {}
+    said = {(as_row[k]["name"] if k in as_row else k):
+            (p, f, "" if effect and k == lead_name else
+             as_row[k]["magnitude"] if k in as_row else "")
             for k, (p, f) in moved.items() if p >= READING_P}
     if said and getattr(decision, "reach", None) is not None:
         words += reach_words(decision.reach, said, outcome=outcome)
