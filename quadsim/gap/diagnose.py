@@ -109,8 +109,11 @@ flights' log-likelihood joins its evidence as above. Practical significance is t
 rule: a reading within the references' between-flight spread of it is no difference
 (:func:`quadsim.gap.calibrate.negligible` with their self-check; :class:`Practical` takes it
 from the reference; ``signal_delay`` is not sized by the held-out gap where "no difference"
-took it with each held-out flight's own delay, :meth:`Against.timing_taken`). Ranking, pairs,
-consistency (on top of the references' model) and the verdict
+took it with each held-out flight's own delay, :meth:`Against.timing_taken`). Beyond the
+references' reach (a flight outside their envelope along a coordinate in which they do not
+measure how their model's lack of fit grows) the reference model's own error there is weighed
+beside each name before the lead is chosen, as per flight (:meth:`Against.split`;
+:mod:`.judge`, 1c). Ranking, pairs, consistency (on top of the references' model) and the verdict
 (:func:`quadsim.gap.judge.judge_heldout`) are the held-out ones; "before" is the
 held-out flights' residual under "no difference" against the references. With fewer than 3
 references there is no self-check: the training flights' spread is the scale, as without
@@ -202,9 +205,11 @@ from .judge import (
     FORM_ERROR,
     SLOW_WINDOW_S,
     UNCHECKED_WORDS,
+    beyond_reach,
     carry_over,
     channel_names,
     every_part_stands,
+    heldout_share,
     judge,
     judge_heldout,
     placed_slow,
@@ -612,7 +617,7 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     from .fitting import Restart
 
     if not own_starts(expl, len(at) + 1):
-        return evidence.full_fit(inputs, expl, start_delay_s)
+        return off_the_wall(inputs, expl, evidence.full_fit(inputs, expl, start_delay_s))
     groups = _start_groups(expl)
     prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
     n = len(prob.mean)
@@ -658,6 +663,64 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
         h_own, logdet_ss = h[:n, :n], np.inf
     ev = laplace(prob, fit.x[:n], fit.fun, h_own, int(np.count_nonzero(fit.active_mask)))
     return dataclasses.replace(ev, log_z=ev.log_z - 0.5 * logdet_ss)
+
+
+def turned_jacobian(stacked: Callable, z: np.ndarray, *, bounds: tuple, crosses: Callable,
+                    step: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(the stacked vector at ``z``, its forward-difference Jacobian (len, P), whether ``z``
+    lies within one step of a wall): column k by a step of ``step`` max(1, |z_k|) (the full
+    fit's ``diff_step``, relative, as the trust-region solver takes it), forward, turned
+    back where it would leave the box ``bounds`` (lower, upper; each (P,)) or where
+    ``crosses(k, h)`` says the step h on z_k crosses a wall of values that make no vehicle;
+    "near" where a step either way would cross it. A difference taken across such a wall
+    meets its constant penalty (:meth:`quadsim.gap.evidence.Problem.stacked`) and gives a
+    column of ~1e3 / step."""
+    lower, upper = bounds
+    base = stacked(z)
+    jac = np.empty((base.size, len(z)))
+    near = False
+    for k in range(len(z)):
+        h = step * max(1.0, abs(float(z[k])))
+        near = near or crosses(k, h) or crosses(k, -h)
+        if z[k] + h > upper[k] or crosses(k, h):
+            h = -h
+        at = z.copy()
+        at[k] += h
+        jac[:, k] = (stacked(at) - base) / h
+    return base, jac, near
+
+
+def off_the_wall(inputs, expl: Explanation, ev: Evidence) -> Evidence:
+    """``ev`` (:func:`quadsim.gap.evidence.full_fit` of ``expl`` on ``inputs``) with its
+    Laplace evidence taken again where its MAP lies within one finite-difference step of
+    the inertia's triangle inequality (:class:`quadsim.gap.evidence.InertiaWall`): the
+    Jacobian by :func:`turned_jacobian` (no step across the wall) and the wall counted as
+    a bound (half the Laplace volume), as the screen's refined fit counts it
+    (:func:`quadsim.gap.evidence.linear_step`). ``ev`` itself where no inertia error is fitted
+    or no step reaches the wall. Why: the solver's own differences at such a MAP cross the
+    wall (a relative step of a negative value goes down), so every spread it gave was the
+    wall's, not the data's."""
+    from .evidence import FULL_FIT_STEP, Problem, inertia_wall, laplace
+
+    prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
+    if not len(prob.mean):
+        return ev
+    theta = np.array([ev.values[k] for k in expl.parameter_names], float)
+    z = (theta - prob.mean) / prob.sd
+    wall = inertia_wall(prob, z)
+    if wall is None:
+        return ev
+
+    def crosses(k: int, h: float) -> bool:
+        return wall.crossed(wall.g0 + wall.g[:, k] * h)
+
+    steps = FULL_FIT_STEP * np.maximum(1.0, np.abs(z))
+    if not any(crosses(k, h) or crosses(k, -h) for k, h in enumerate(steps)):
+        return ev           # (checked before any residual is evaluated: most fits)
+    vec, jac, _ = turned_jacobian(prob.stacked, z, bounds=(prob.z_lo, prob.z_hi),
+                                  crosses=crosses, step=FULL_FIT_STEP)
+    box = int(np.count_nonzero((z <= prob.z_lo + 1e-9) | (z >= prob.z_hi - 1e-9)))
+    return laplace(prob, z, vec, jac.T @ jac, box + 1)
 
 
 def _problem(states, reference: Reference, expl: Explanation, memo: dict):
@@ -759,9 +822,11 @@ class Against:
     per-flight explanations under that law; ``memos`` the residual parts kept per flight
     (the stacked training flights' last); ``placed`` each training flight's reference model
     at its own place (:func:`quadsim.gap.reference.local_reference`, as per flight: the
-    lack of fit against the references, :func:`quadsim.gap.judge.against_reference`) and
+    lack of fit against the references, :func:`quadsim.gap.judge.against_reference`),
     ``flown`` each training flight in words (its name, and its place outside the
-    references' envelope)."""
+    references' envelope) and ``reaches`` each flight's (training, then held out)
+    :class:`quadsim.gap.reference.Reach` in ``reference``'s noise scale (None within reach:
+    :func:`quadsim.gap.judge.heldout_share`)."""
 
     calibrated: Reference
     reference: Reference
@@ -776,6 +841,23 @@ class Against:
     memos: tuple = field(compare=False, repr=False)
     placed: tuple = field(default=(), compare=False, repr=False)
     flown: tuple = ()
+    reaches: tuple = field(default=(), compare=False, repr=False)
+
+    @property
+    def reach(self):
+        """The flights' :class:`quadsim.gap.reference.Reach` lying furthest beyond the
+        references (the answer's words, :func:`quadsim.gap.words.reach_words`); None where
+        every flight is within reach."""
+        return max((r for r in self.reaches if r is not None), key=lambda r: r.excess,
+                   default=None)
+
+    def split(self, ranked: list) -> tuple[list, dict]:
+        """:func:`quadsim.gap.judge.beyond_reach` of the held-out posterior ``ranked``
+        ((reading, p, Weighed)): beyond the references' reach a reading's weight counts the
+        reference model's own error there as no difference, over every flight its evidence
+        counts (:func:`quadsim.gap.judge.heldout_share`), as per flight."""
+        return beyond_reach(ranked, self.reach, share=partial(
+            heldout_share, reaches=self.reaches, sigma=self.reference.sigma))
 
     def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
@@ -877,6 +959,8 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
     the stacked training flights (:func:`quadsim.gap.evidence.choose`) and the per-flight
     explanations built under it (``effects``: restrict them). Raises
     :class:`~quadsim.core.errors.InputError` for a flight not of the references' kind."""
+    from .reference import reach_of
+
     ref = calibrated
     states = []
     with warnings.catch_warnings():
@@ -897,6 +981,10 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
                                     inverse_information(s, ref) if informed else None)
                   for s in tr]
         placed = tuple(local_reference(ref, p) for p in places)
+        # every flight's reach in the stacked place's noise scale (judge.heldout_share)
+        reaches = tuple(reach_of(ref, p, local.sigma) for p in places + [
+            envelope_position(s, ref.envelope, inverse_information(s, ref) if informed
+                              else None) for s in he])
         flown = tuple(f"Training flight {os.path.basename(str(f.name))}"
                       + (f" (flown {p.text})" if p is not None and p.distance > 0 else "")
                       for f, p in zip(train, places))
@@ -930,7 +1018,7 @@ def against_references(train: list[Flight], held: list[Flight], calibrated: Refe
             if null.shift else None
             for s, m, f in zip(states, memos, list(train) + list(held)))
     return Against(ref, local, tuple(tr), tuple(he), stacked, start, delays, law, place,
-                   expl, memos, placed, flown)
+                   expl, memos, placed, flown, reaches)
 
 
 def weigh_against(against: Against, batch: tuple) -> list[Weighed]:
@@ -1502,7 +1590,10 @@ class Decision:
     "no difference" that count as none because they remove at most
     :data:`quadsim.gap.judge.FORM_ERROR` of the held-out gap (:meth:`Practical.small`),
     most probable first; ``weighed`` every explanation weighed (and the pair kept), the
-    set :func:`quadsim.gap.judge.beyond_misfit` measures the lead's misfit against."""
+    set :func:`quadsim.gap.judge.beyond_misfit` measures the lead's misfit against;
+    ``reach``/``moved``: against references beyond their reach, the flights' furthest
+    :class:`quadsim.gap.reference.Reach` and reading -> (its p before, the share of it that
+    counts as no difference) (:meth:`Against.split`; None / empty otherwise)."""
 
     ranked: tuple
     rows: tuple
@@ -1515,6 +1606,8 @@ class Decision:
     implausible: tuple
     small: tuple = ()
     weighed: tuple = ()
+    reach: object = None
+    moved: dict = field(default_factory=dict)
 
     @property
     def probability(self) -> dict:
@@ -1549,6 +1642,8 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     params = reference.params
     tick = tick or (lambda *_: None)
     dt = float(train[0].t[1] - train[0].t[0])
+    # beyond the references' reach, the model's own error there is a reading (Against.split)
+    split = (lambda r: (r, {})) if against is None else against.split
 
     def base_of(w):
         return None if against is None else against.model(w.train.explanation)
@@ -1569,7 +1664,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     scale = Practical(train, reference, before if quiet else None,
                       timing_taken=against is not None and null is not None
                       and against.timing_taken(null.train.explanation))
-    ranked = scale.rank(weighed)
+    ranked, moved = split(scale.rank(weighed))
     lead_name, _, lead = ranked[0]
     combination = checked = None
     if lead_name != "no_difference":
@@ -1605,9 +1700,9 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         best = max(trials, key=lambda w: w.total.log_z, default=None)
         if best is not None:
             stands = every_part_stands(entry_of(best, 0.0, before, reference), params)
-            with_pair = scale.rank(weighed + [best])
+            with_pair, pair_moved = split(scale.rank(weighed + [best]))
             if stands and with_pair[0][2] is best:
-                ranked, combination = with_pair, best
+                ranked, combination, moved = with_pair, best, pair_moved
                 lead_name, _, lead = ranked[0]
                 checked = consistent(lead, entry_of(lead, 1.0, before, reference),
                                      train + held, reference, base_of(lead))
@@ -1634,7 +1729,8 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                     tuple((w.name, reading_text(w.train, reference),
                            scale.shares[(w.name, w.train.explanation.variant)])
                           for w in small),
-                    tuple(weighed) + ((combination,) if combination is not None else ()))
+                    tuple(weighed) + ((combination,) if combination is not None else ()),
+                    None if against is None or not moved else against.reach, moved)
 
 
 #: fewer reference flights than this gives a note (their scatter is poorly known).

@@ -112,7 +112,7 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    itself (q > 1/2: the name leaves more than the classes' boundary share), the name is a
    stand-in, not a cause: the outcome is ``unexplained``, the name and both probabilities
    stated (:func:`quadsim.gap.words.stand_in_words`).
-1c. **Beyond the references' reach** (per flight; :func:`beyond_reach`): where the flight
+1c. **Beyond the references' reach** (:func:`beyond_reach`): where the flight
    lies outside its references' envelope along a coordinate in which they do not measure
    how their model's lack of fit grows (:func:`quadsim.gap.reference.reach_of`, module doc
    "The reach" there), the reference model's own error at that place is a hypothesis of its
@@ -130,6 +130,13 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    lies and what share of each reading's evidence that error could produce
    (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
    whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
+   Held out against nominal references the same rule, one judgment for both modes
+   (:meth:`quadsim.gap.diagnose.Against.split` before the lead is chosen): the margin
+   spans the training evidence and the held-out log-likelihood, so f sums what each flight
+   (training and held out, each with its own reach, :func:`heldout_share`) earns within its
+   allowance (:func:`flights_share`); each training flight's lack of fit and the share it
+   leaves count the allowance of its own place (:func:`training_lack`,
+   :func:`against_reference`); the same words and ``tentative``.
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -236,7 +243,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
            "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
-           "extrapolation_share", "reach_baseline"]
+           "extrapolation_share", "reach_baseline", "flights_share", "heldout_share"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -609,6 +616,17 @@ def with_outside(ranked: list, q: float) -> tuple[list, float]:
     return [(k, p * (1.0 - q), ev), *rest], p * q
 
 
+def _removal(ms, null_ms, reach) -> tuple[np.ndarray, np.ndarray]:
+    """(within (C,), removed (C,)) of :func:`extrapolation_share`: per channel what a reading
+    leaving ``ms`` removes of the gap "no difference" leaves (``null_ms``), each over the
+    references' typical mean square ``reach.typical``, and the part of it within
+    ``reach.allowance``."""
+    typical = np.asarray(reach.typical, float)
+    gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
+    removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
+    return np.minimum(removed, reach.allowance), removed
+
+
 def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> float:
     """Of a named reading's log-evidence margin over "no difference", the share that the
     reference model's own error could produce where the flight lies beyond its references'
@@ -625,41 +643,73 @@ def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> floa
     where it removes nothing beyond the typical level; 0 without a reach."""
     if reach is None:
         return 0.0
-    typical = np.asarray(reach.typical, float)
-    gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
-    removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
-    within = np.minimum(removed, reach.allowance)
-    if margin is not None and margin > 0 and reach.counts is not None:
-        return float(min(1.0, 0.5 * np.sum(reach.counts * within) / margin))
-    total = float(removed.sum())
+    return flights_share([(ms, null_ms, reach)], margin)
+
+
+def flights_share(flights: list, margin: float | None = None) -> float:
+    """:func:`extrapolation_share` over several flights whose evidence the margin sums
+    (held out: the training and held-out flights, module doc 1c): ``flights`` (ms, null_ms,
+    reach) per flight (a reach None: within it, it earns nothing so); the earned parts add,
+    sum_j sum_c n_jc min(r_jc, a_jc) / 2 over ``margin``, at most 1; without every beyond
+    flight's counts or a positive margin, sum min(r, a) / sum r over them all (1 where they
+    remove nothing beyond the typical level); 0 where no flight has a reach."""
+    parts = [(_removal(ms, null_ms, reach), reach) for ms, null_ms, reach in flights
+             if reach is not None]
+    if not parts:
+        return 0.0
+    if margin is not None and margin > 0 and all(r.counts is not None for _, r in parts):
+        earned = sum(0.5 * float(np.sum(r.counts * within)) for (within, _), r in parts)
+        return float(min(1.0, earned / margin))
+    total = sum(float(removed.sum()) for (_, removed), _ in parts)
     if total <= 0:
         return 1.0
-    return float(np.sum(within) / total)
+    return float(sum(float(within.sum()) for (within, _), _ in parts) / total)
 
 
-def beyond_reach(ranked: list, reach) -> tuple[list, dict]:
+def beyond_reach(ranked: list, reach, *, share=None) -> tuple[list, dict]:
     """The library's posterior ``ranked`` ((reading, p, Evidence), summing to 1) with the
     hypothesis "the reference model's error at a place its references never flew" (module
     doc, 1c): each named reading's p splits into p (1 - f), the reading, and p f, no
     difference of the vehicle (the model errs there), f its
     :func:`extrapolation_share`; re-sorted, most probable first. -> (rows, reading ->
     (its p before, f) for each reading that gave weight). ``ranked`` itself without a
-    ``reach`` or a "no difference" row."""
+    ``reach`` or a "no difference" row. ``share(x, null)``: f of the row object ``x``
+    against the "no difference" row's (held out, where the rows are
+    :class:`~quadsim.gap.diagnose.Weighed` and the margin spans every flight:
+    :func:`heldout_share`); default :func:`extrapolation_share` of Evidence rows."""
     rows = {k: (p, ev) for k, p, ev in ranked}
     if reach is None or "no_difference" not in rows:
         return ranked, {}
+    if share is None:
+        def share(ev, null):
+            return extrapolation_share(ev.ms, null.ms, reach, ev.log_z - null.log_z)
     null = rows["no_difference"][1]
     moved, out, to_null = {}, [], 0.0
     for k, p, ev in ranked:
         if k == "no_difference":
             continue
-        f = extrapolation_share(ev.ms, null.ms, reach, ev.log_z - null.log_z)
+        f = share(ev, null)
         if f > 0 and p > 0:
             moved[k] = (p, f)
         out.append((k, p * (1.0 - f), ev))
         to_null += p * f
     out.append(("no_difference", rows["no_difference"][0] + to_null, null))
     return sorted(out, key=lambda x: (-x[1], x[0])), moved
+
+
+def heldout_share(w, null, *, reaches: tuple, sigma: np.ndarray) -> float:
+    """Held out against nominal references, :func:`flights_share` of the reading ``w`` (a
+    :class:`~quadsim.gap.diagnose.Weighed`) against "no difference" ``null`` on every
+    flight its evidence counts (the training flights, then the held-out ones: their
+    residuals' mean squares over ``sigma``, the stacked training place's model's noise
+    scale), each with its own ``reaches[j]`` (:func:`quadsim.gap.reference.reach_of` in
+    that sigma; None within reach), the margin ``w.total.log_z - null.total.log_z`` (the
+    training evidence and the held-out log-likelihood: what the posterior weighs)."""
+    mine = list(w.train_residuals) + list(w.held_residuals)
+    nulls = list(null.train_residuals) + list(null.held_residuals)
+    flights = [(mean_squares([r], sigma)[0], mean_squares([n], sigma)[0], reach)
+               for r, n, reach in zip(mine, nulls, reaches)]
+    return flights_share(flights, w.total.log_z - null.total.log_z)
 
 
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
@@ -1090,7 +1140,9 @@ def training_lack(lead, null, reference, placed=None) -> list[dict]:
     :meth:`Baseline.of_reference` of ``placed[j]``, the references' model at that flight's
     own place on their envelope (:func:`quadsim.gap.reference.local_reference`; None or
     shorter: ``reference``, the model at the stacked flights' place), its mean squares in
-    that model's sigma. ``null``: the "no difference" Weighed (each flight's form-error
+    that model's sigma; beyond that model's reach (its ``reach``), the baseline with the
+    allowance of the reference model's own error there (:func:`reach_baseline`, as per
+    flight). ``null``: the "no difference" Weighed (each flight's form-error
     exemption; None or ``lead`` itself: none). One dict per training flight, channel ->
     (RMS over the references' typical there, z)."""
     out = []
@@ -1100,7 +1152,9 @@ def training_lack(lead, null, reference, placed=None) -> list[dict]:
         ms = mean_squares([resid], ref.sigma)
         null_ms = None if null is None or null is lead else \
             mean_squares([null.train_residuals[j]], ref.sigma)
-        out.append(lack_of_fit(ms, Baseline.of_reference(ref), ref, null_ms=null_ms))
+        out.append(lack_of_fit(ms, reach_baseline(Baseline.of_reference(ref),
+                                                  getattr(ref, "reach", None)),
+                               ref, null_ms=null_ms))
     return out
 
 
@@ -1110,6 +1164,14 @@ def _each_place(reference, placed, count: int) -> list:
     placed = list(placed or ())
     return [placed[j] if j < len(placed) and placed[j] is not None else reference
             for j in range(count)]
+
+
+def _allowance(ref) -> np.ndarray:
+    """(C,) what the reference model's own error may leave on each channel of a flight
+    judged against ``ref`` (:attr:`quadsim.gap.reference.Reach.allowance`; 0 within
+    reach)."""
+    reach = getattr(ref, "reach", None)
+    return np.zeros(len(ref.sigma)) if reach is None else np.asarray(reach.allowance, float)
 
 
 def alone(per_flight: list[dict]) -> dict:
@@ -1140,9 +1202,10 @@ def against_reference(lead, null, reference, placed=None) -> tuple[dict, dict, f
     (:func:`alone`). ``null``: the "no difference" Weighed (the form-error exemption and
     share); ``left`` a named reading's shared lack leaving at most
     :data:`FORM_ERROR_TENTATIVE` of the gap (named tentatively, as per flight); ``share``:
-    that share, summed over the training flights, each over its own typical (inf for "no
-    difference"). The held-out flights are judged against the training flights
-    (:func:`carry_over`)."""
+    that share, summed over the training flights, each over its own typical, what a flight
+    beyond its place's reach leaves within the allowance not counted (:func:`form_share`,
+    as per flight; inf for "no difference"). The held-out flights are judged against the
+    training flights (:func:`carry_over`)."""
     per = training_lack(lead, null, reference, placed)
     shared = set.intersection(*(set(d) for d in per)) if per else set()
     lack = {k: min((d[k] for d in per), key=lambda v: v[1]) for k in sorted(shared)}
@@ -1152,7 +1215,8 @@ def against_reference(lead, null, reference, placed=None) -> tuple[dict, dict, f
         share = form_share(
             [mean_squares([r], ref.sigma)[0] for r, ref in zip(lead.train_residuals, refs)],
             [mean_squares([r], ref.sigma)[0] for r, ref in zip(null.train_residuals, refs)],
-            np.array([np.exp(Baseline.of_reference(ref).mean) for ref in refs]))
+            np.array([np.exp(Baseline.of_reference(ref).mean) for ref in refs]),
+            allowance=np.array([_allowance(ref) for ref in refs]))
     if lack and null is not None and null is not lead and share <= FORM_ERROR_TENTATIVE:
         return {}, lack, share
     return lack, {}, share
@@ -1573,6 +1637,19 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     words += _unseparated_words(tied, shown, separate_by) + caveat
     if lone and outcome != "unexplained":
         words += _alone_words(lone, flown)
+    # beyond the references' reach, the no difference a reading's weight went to (1c, as
+    # per flight: the split is decide's, quadsim.gap.diagnose.Against.split): not sure
+    moved = getattr(decision, "moved", None) or {}
+    unsure_null = outcome == "no_significant_gap" and sum(
+        p * f for p, f in moved.values()) >= READING_P
+    # each reading as its row states it (its name by the lead rule, its magnitude)
+    as_row = {k: r for r, (k, _, _) in zip(decision.rows, decision.ranked)} if moved else {}
+    said = {(as_row[k]["name"] if k in as_row else k):
+            (p, f, "" if effect and k == lead_name else
+             as_row[k]["magnitude"] if k in as_row else "")
+            for k, (p, f) in moved.items() if p >= READING_P}
+    if said and getattr(decision, "reach", None) is not None:
+        words += reach_words(decision.reach, said, outcome=outcome)
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
         magnitude = nominal_words(magnitude, True, references=references)
@@ -1584,7 +1661,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
         outcome, shown if effect else outcome, words,
         p_out if stand_in else rows[0]["probability"],
-        tentative=effect and (p_lead < CONFIDENT or shifted or unsure),
+        tentative=(effect and (p_lead < CONFIDENT or shifted or unsure)) or unsure_null,
         probability_within_library=p_lead, outside_library=p_out,
         posterior=tuple(rows), readings=tuple([shown] + others) if effect else (),
         lack_of_fit={**{k: v[1] ** 0.5 for k, v in remains.items()},
