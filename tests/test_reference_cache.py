@@ -137,6 +137,12 @@ def test_flag_checks(tmp_path, capsys):
     assert main(["--model", "crazyflie21", "--per-flight", str(data), "--cache-dir",
                  str(tmp_path), "--reference-cache", str(tmp_path)]) == 2
     assert "the older name of --cache-dir" in capsys.readouterr().err
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", str(data), "--reference", str(other),
+                 "--cache-dir", str(data), "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {data}: --cache-dir: not a folder"]
+    assert not out.exists() and data.read_text() == "t\n0\n"
 
 
 @pytest.fixture(scope="module")

@@ -666,6 +666,14 @@ def flights_share(flights: list, margin: float | None = None) -> float:
     return float(sum(float(within.sum()) for (within, _), _ in parts) / total)
 
 
+def not_sure(outcome: str, moved: dict) -> bool:
+    """Whether a ``no_significant_gap`` is not sure (both modes, rule 1c): the weight the
+    readings moved to "no difference" beyond the references' reach, sum of p f over
+    ``moved`` ({name: (p, f)}, :func:`beyond_reach`), is at least :data:`READING_P` (a
+    tenth: as much as a reading a user should still check)."""
+    return outcome == "no_significant_gap" and sum(p * f for p, f in moved.values()) >= READING_P
+
+
 def beyond_reach(ranked: list, reach, *, share=None) -> tuple[list, dict]:
     """The library's posterior ``ranked`` ((reading, p, Evidence), summing to 1) with the
     hypothesis "the reference model's error at a place its references never flew" (module
@@ -1414,8 +1422,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
     # the no difference a reading's weight went to beyond the reach (1c): not sure
-    unsure_null = outcome == "no_significant_gap" and sum(
-        p * f for p, f in moved.values()) >= READING_P
+    unsure_null = not_sure(outcome, moved)
     evs = {k: ev for k, _, ev in within}
     said = {k: (p, f, "" if effect and k == top else reading_text(evs[k], reference))
             for k, (p, f) in moved.items() if p >= READING_P}
@@ -1640,8 +1647,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     # beyond the references' reach, the no difference a reading's weight went to (1c, as
     # per flight: the split is decide's, quadsim.gap.diagnose.Against.split): not sure
     moved = getattr(decision, "moved", None) or {}
-    unsure_null = outcome == "no_significant_gap" and sum(
-        p * f for p, f in moved.values()) >= READING_P
+    unsure_null = not_sure(outcome, moved)
     # each reading as its row states it (its name by the lead rule, its magnitude)
     as_row = {k: r for r, (k, _, _) in zip(decision.rows, decision.ranked)} if moved else {}
     said = {(as_row[k]["name"] if k in as_row else k):
