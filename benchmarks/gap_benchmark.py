@@ -93,6 +93,11 @@ drone-models source (``--independent --source drone-models --cache DIR``,
 Crazyflie 2.1 Brushless (its dynamics and parameters; RK4 and a firmware-shaped PID cascade of
 this project's) against 8 nominal flights; built blind.
 
+Drake source (``--independent --source drake --cache DIR``, :mod:`benchmarks.drake_cases`):
+the same for 28 cases from Drake 1.51.1 (MultibodyPlant, Propeller, its RK3, QuadrotorPlant's
+0.775 kg Skydio 2 values, LQR gains from Drake; rotor-speed scale, linear drag and the case
+handles this project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -607,6 +612,8 @@ SIM_SOURCES = {
                             GPD_HINT),
     "drone-models": ("benchmarks.dm_cases", "benchmarks.dm_source", "dm_available",
                      "pip install 'quadsim[dm]'"),
+    "drake": ("benchmarks.drake_cases", "benchmarks.drake_source", "drake_available",
+              "pip install 'quadsim[drake]'"),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -725,7 +732,7 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, quadcopter-sim, genesis, "
-                             "gym-pybullet-drones, drone-models, l2f and its vehicles "
+                             "gym-pybullet-drones, drone-models, drake, l2f and its vehicles "
                              "l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
