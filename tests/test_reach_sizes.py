@@ -195,7 +195,6 @@ def test_a_generated_mass_flown_beyond_references_flown_alike_is_covered_with_it
     bias the references' model error produces beyond them). Stated with the bias bound
     (reach_bias > 50 standard errors here), each part's and the total's interval hold the
     truth."""
-    from quadsim.core.errors import QuadsimWarning
     from quadsim.effects import EffectSet, make_effect
     from quadsim.gap.calibrate import calibrate
     from quadsim.gap.diagnose import judge_one, prepare
