@@ -285,6 +285,10 @@ class Evidence:
     #: (C,) mean square of the residual's slow part (its :data:`SLOW_WINDOW_S` moving
     #: average) over sigma_c^2 (dimensionless); None: states without a time base
     slow: np.ndarray | None = None
+    #: (P, P) posterior covariance of ``values`` in their SI units, rows and columns in
+    #: ``values``' order (sd_i sd_j (H^+)_ij, :func:`laplace`); None: not kept. A size that
+    #: sums parameters (a payload's fixed and swinging parts) takes its spread from it.
+    post_cov: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -657,9 +661,10 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     if len(mean):
         # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
         logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
-        post = sd * np.sqrt(np.clip(np.diag(np.linalg.pinv(h)), 0, None))
+        cov = sd[:, None] * np.linalg.pinv(h) * sd[None, :]
+        post = np.sqrt(np.clip(np.diag(cov), 0, None))
     else:
-        logdet_h, post = 0.0, np.zeros(0)
+        logdet_h, post, cov = 0.0, np.zeros(0), np.zeros((0, 0))
     theta = mean + sd * z
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
     if not np.isfinite(logdet_h):
@@ -681,7 +686,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
                   shared_shift=shift, slow=None if getattr(states, "t", None) is None
-                  or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])))
+                  or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])),
+                  post_cov=cov)
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
                                   own_effects(expl, np.clip(theta, prob.lower, prob.upper)),

@@ -137,6 +137,16 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    allowance (:func:`flights_share`); each training flight's lack of fit and the share it
    leaves count the allowance of its own place (:func:`training_lack`,
    :func:`against_reference`); the same words and ``tentative``.
+1d. **Sizes beyond the reach** (per flight; :func:`reach_bias`, :func:`as_stated`): the
+   model error of 1c moves a reading's weight, and it moves its values too: a least-squares
+   reading that absorbs a model error e shifts any combination of its values by at most
+   sqrt(e'W P e) of that combination's standard errors (Cauchy-Schwarz), and e'W P e is at
+   most E = sum_c n_c min(r_c, a_c), the chi^2 its removal earns within the allowance
+   (twice what 1c moves). Every interval the answer states beyond the reach (each value,
+   and a payload's total, :func:`quadsim.gap.words.total_mass`) is (1.96 + sqrt(E))
+   standard errors: the noise's 95 % and that bias bound, added. Posterior, verdict and
+   "determined" are the fit's own; within the reach (no :class:`Reach`) nothing changes.
+   Measured cause and coverage: CHANGELOG.md (issue 47).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -226,6 +236,7 @@ from .words import (
     reading_text,
     stand_in_words,
     timing_words,
+    total_mass,
 )
 
 __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_band", "by_regime",
@@ -625,6 +636,60 @@ def _removal(ms, null_ms, reach) -> tuple[np.ndarray, np.ndarray]:
     gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
     removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
     return np.minimum(removed, reach.allowance), removed
+
+
+def reach_bias(ev, null, reach) -> float:
+    """The bias, in its own standard errors, that the reference model's own error where the
+    flight lies beyond its references' reach (module doc, 1c and "Sizes beyond the reach")
+    can cause in any linear combination of the reading ``ev``'s values (one value, or a sum
+    such as a payload's fixed and swinging parts): sqrt(E), E the chi^2 (-2 log L units)
+    that the reading's removal within the allowance earns over "no difference" ``null``,
+    sum_c n_c min(r_c, a_c) (:func:`_removal`, n_c = ``reach.counts``; the same part of
+    the margin that :func:`extrapolation_share` moves to "no difference", E = 2 f margin).
+    Without the counts, f (the share of the removal within the allowance) times twice the
+    log-evidence margin. 0 without a reach, for "no difference" itself, or where the
+    reading removes nothing within the allowance.
+
+    Why sqrt(E) (Cauchy-Schwarz): for a weighted least-squares reading with Jacobian J and
+    weights W, a model error e in the residual moves the values by
+    d = (J'WJ)^-1 J'W e, and any combination a'theta by
+    |a'd| <= sqrt(a'(J'WJ)^-1 a) sqrt(e'W P e) = SE(a'theta) sqrt(e'W P e), P the W-projection
+    onto J's columns; e'W P e is the chi^2 the reading would remove from e alone, and the
+    reading removes at most E that such an error could give (no more than the allowance
+    a_c, no more than the reading removes, r_c, per channel). The bound is exact where e
+    lies along the reading's own column (tests/test_reach_sizes.py) and holds for every
+    effect and every source of the model error alike."""
+    if reach is None or null is None or ev is null or ev.name == "no_difference":
+        return 0.0
+    within, removed = _removal(ev.ms, null.ms, reach)
+    if reach.counts is not None:
+        earned = float(np.sum(np.asarray(reach.counts, float) * within))
+    else:
+        total = float(removed.sum())
+        earned = 0.0 if total <= 0 else \
+            float(within.sum()) / total * 2.0 * max(0.0, ev.log_z - null.log_z)
+    return float(np.sqrt(max(0.0, earned)))
+
+
+#: the two-sided 95 % normal quantile of every stated half-interval (``ci`` = Z95 sd)
+Z95 = 1.96
+
+
+def as_stated(ev, bias: float):
+    """The reading ``ev`` (an :class:`~quadsim.gap.evidence.Evidence`) with its spreads as
+    the answer states them: beyond the references' reach its posterior spreads and
+    covariance times (1 + ``bias`` / :data:`Z95`), so that a stated 95 % half-interval
+    Z95 sd' = (Z95 + bias) sd holds the noise's 95 % and the worst bias the reference
+    model's own error can cause there (:func:`reach_bias`; a bound, added, not combined in
+    quadrature: it is not a random error). ``ev`` itself where ``bias`` is 0. Only the
+    words and the stated intervals read it: posterior, verdict and "determined" are the
+    fit's own (the weight the error could earn is moved by :func:`beyond_reach`)."""
+    if bias <= 0:
+        return ev
+    k = 1.0 + bias / Z95
+    cov = getattr(ev, "post_cov", None)
+    return dataclasses.replace(ev, post_sd={q: k * v for q, v in ev.post_sd.items()},
+                               post_cov=None if cov is None else k * k * np.asarray(cov))
 
 
 def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> float:
@@ -1276,12 +1341,16 @@ def outcome_of(lead: str, lack: dict, remains: dict) -> str:
     return "no_significant_gap" if lead == "no_difference" else "effect"
 
 
-def _reading(k: str, p: float, ev, magnitude: str) -> Reading:
+def _reading(k: str, p: float, ev, magnitude: str, *, bias: float = 0.0) -> Reading:
+    """The :class:`Reading` of ``ev`` (its spreads as stated, :func:`as_stated`), with
+    probability ``p``, words ``magnitude`` and the bias bound ``bias`` (standard errors,
+    :func:`reach_bias`) its intervals include."""
     det = [q for q, ok in ev.determined.items() if ok]
     return Reading(k, p, magnitude, ev.log_z, {q: ev.values[q] for q in det},
                    {q: 1.96 * ev.post_sd[q] for q in det},
                    tuple(q for q, ok in ev.determined.items() if not ok),
-                   ev.explanation.fixed_values, ev.explanation.variant)
+                   ev.explanation.fixed_values, ev.explanation.variant,
+                   total=total_mass(ev) or {}, bias=bias)
 
 
 #: the two readings of a rotor timing difference: the rotors follow their commands with a
@@ -1376,7 +1445,10 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # tentative share, or a remainder), "outside the library" weighs by its share (1b)
     shown, p_out = with_outside(
         within, outside_library(share, bool(left) or bool(remains)) if effect else 0.0)
-    readings = [_reading(reading_name(k, ev), p, ev, reading_text(ev, reference))
+    # beyond the reach the sizes are stated with the bias the model's error can cause there
+    sizes = {id(ev): as_stated(ev, reach_bias(ev, null, reach)) for _, _, ev in shown}
+    readings = [_reading(reading_name(k, ev), p, sizes[id(ev)],
+                         reading_text(sizes[id(ev)], reference), bias=reach_bias(ev, null, reach))
                 for k, p, ev in shown]
     lead = readings[0]
     # the outside hypothesis more probable than the name itself (1b): the name is a
@@ -1424,10 +1496,12 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # the no difference a reading's weight went to beyond the reach (1c): not sure
     unsure_null = not_sure(outcome, moved)
     evs = {k: ev for k, _, ev in within}
-    said = {k: (p, f, "" if effect and k == top else reading_text(evs[k], reference))
+    said = {k: (p, f, "" if effect and k == top else
+                reading_text(sizes.get(id(evs[k]), evs[k]), reference))
             for k, (p, f) in moved.items() if p >= READING_P}
     if said:
-        words += reach_words(reach, said, outcome=outcome)
+        words += reach_words(reach, said, outcome=outcome,
+                             bias=lead.bias if effect else 0.0)
     return Verdict(
         # a stand-in's verdict states the outside hypothesis's probability (its outcome's)
         outcome, verdict, words, p_out if stand_in else lead.probability,
@@ -1439,6 +1513,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         posterior=tuple(readings), readings=tuple(named) if effect else (),
         lack_of_fit={k: v[0] for k, v in lack.items()},
         params=lead.params if effect else {}, ci=lead.ci if effect else {},
+        total=lead.total if effect else {},
         fixed=lead.fixed if effect else {},
         units={k: fitting.unit_of(k) for k in lead.params} if effect else {},
         confusable_with=tuple(r for r in named if r != verdict),

@@ -78,13 +78,24 @@ class Reading(_JsonView):
     undetermined: tuple = ()
     fixed: Mapping = field(default_factory=dict)
     variant: str = ""
+    #: the added mass in all with its 95 % half-interval ({"mass", "ci"}, kg) where the
+    #: reading has two or more mass parts (:func:`quadsim.gap.words.total_mass`); {} else
+    total: Mapping = field(default_factory=dict)
+    #: the bias bound (standard errors) its ``ci`` include beyond the references' reach
+    #: (:func:`quadsim.gap.judge.reach_bias`); 0 within it
+    bias: float = 0.0
 
     def to_json(self) -> dict:
-        return plain({"name": self.name, "probability": self.probability,
-                      "magnitude": self.magnitude, "log_evidence": self.log_evidence,
-                      "params": dict(self.params), "ci": dict(self.ci),
-                      "undetermined": list(self.undetermined), "fixed": dict(self.fixed),
-                      "variant": self.variant})
+        out = {"name": self.name, "probability": self.probability,
+               "magnitude": self.magnitude, "log_evidence": self.log_evidence,
+               "params": dict(self.params), "ci": dict(self.ci),
+               "undetermined": list(self.undetermined), "fixed": dict(self.fixed),
+               "variant": self.variant}
+        if self.total:
+            out["total"] = dict(self.total)
+        if self.bias > 0:
+            out["bias_se"] = self.bias
+        return plain(out)
 
 
 #: JSON keys of a held-out verdict beyond the common ones (the field of the same name).
@@ -135,6 +146,8 @@ class Verdict(_JsonView):
     ci: Mapping = field(default_factory=dict)
     fixed: Mapping = field(default_factory=dict)
     units: Mapping = field(default_factory=dict)
+    #: the named reading's added mass in all ({"mass", "ci"}, kg; :attr:`Reading.total`)
+    total: Mapping = field(default_factory=dict)
     confusable_with: tuple = ()
     separate_by: Mapping = field(default_factory=dict)
     notes: tuple = ()
@@ -194,6 +207,7 @@ class Verdict(_JsonView):
             del out["notes"]            # held out: the notes are the result's
         out.update(tentative=self.tentative, lack_of_fit=dict(self.lack_of_fit),
                    params=dict(self.params), ci=dict(self.ci), fixed=dict(self.fixed),
+                   **({"total": dict(self.total)} if self.total else {}),
                    units=dict(self.units), confusable_with=list(self.confusable_with),
                    separate_by=dict(self.separate_by))
         for key in ("consistency", "partial"):

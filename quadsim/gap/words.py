@@ -33,7 +33,25 @@ from .fitting import describe
 from .residual import channel_unit
 
 __all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
-           "reach_words", "reference_text", "residual_text", "stand_in_words", "timing_words"]
+           "reach_words", "reference_text", "residual_text", "stand_in_words", "timing_words",
+           "total_mass"]
+
+
+def total_mass(ev) -> dict | None:
+    """A reading's added mass in all where it has two or more determined mass parts (a
+    payload's part fixed to the frame and its part on a cable: what a scale weighs):
+    {"mass": the sum (kg), "ci": its 95 % half-interval (kg), 1.96 sqrt(1'C 1) over the
+    parts' posterior covariance C (``ev.post_cov``, as stated: :func:`quadsim.gap.judge.
+    as_stated`)}; None with fewer parts or without the covariance."""
+    keys = list(ev.values)
+    parts = [k for k in keys if k.endswith(".mass") and ev.determined.get(k)]
+    cov = getattr(ev, "post_cov", None)
+    if len(parts) < 2 or cov is None or np.shape(cov) != (len(keys), len(keys)):
+        return None
+    idx = [keys.index(k) for k in parts]
+    var = float(np.sum(np.asarray(cov, float)[np.ix_(idx, idx)]))
+    return {"mass": float(sum(ev.values[k] for k in parts)),
+            "ci": 1.96 * float(np.sqrt(max(0.0, var)))}
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -87,6 +105,10 @@ def reading_text(ev, reference) -> str:
     values = {k: ev.values[k] for k in keys if not k.endswith(".alpha") and k not in calm}
     ci = {k: 1.96 * ev.post_sd[k] for k in values}
     text = describe(name, values, ci, params, ev.explanation.fixed_values)
+    total = total_mass(ev)
+    if total is not None:
+        text += (f"; in all {1e3 * total['mass']:+.2g} ± {1e3 * total['ci']:.2g} g "
+                 "(on the cable and fixed to the frame together: what a scale weighs)")
     if calm and all(ev.determined.get(k) for k in calm):
         text += (f"; in calm air (the wind refitted with it, within ±"
                  f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
@@ -217,13 +239,15 @@ def outside_words(p_out: float, share: float, within: float, *,
             f"that it stands in for an effect outside the library{source}.")
 
 
-def reach_words(reach, moved: dict, *, outcome: str) -> str:
+def reach_words(reach, moved: dict, *, outcome: str, bias: float = 0.0) -> str:
     """The sentence of a flight beyond its references' reach (:func:`quadsim.gap.judge.
     beyond_reach`): ``reach`` its :class:`quadsim.gap.reference.Reach`; ``moved`` reading ->
     (its probability among the library's readings, the share f of its evidence over no
     difference that the model's own error could produce there,
     :func:`quadsim.gap.judge.extrapolation_share`, its reading in words or "" where the
-    answer states it already); ``outcome`` the verdict's. E.g. "Flown 7.3x above your references'
+    answer states it already); ``outcome`` the verdict's; ``bias``: the named reading's
+    bias bound in standard errors that its stated intervals include
+    (:func:`quadsim.gap.judge.reach_bias`; 0: none said). E.g. "Flown 7.3x above your references'
     RMS variation of the specific force's size, 39 times their own spread in it: ..."."""
     from .reference import COORDINATES
 
@@ -237,10 +261,12 @@ def reach_words(reach, moved: dict, *, outcome: str) -> str:
     tail = (": no difference of the vehicle is the more probable reading, not sure"
             if outcome == "no_significant_gap" else
             ": that share of its weight counts as no difference of the vehicle")
+    sizes = (f" The sizes stated include the bias that error could cause: up to "
+             f"{bias:.2g} standard errors beside the noise's 1.96." if bias > 0 else "")
     return (f" Flown {np.exp(reach.excess):.2g}x {side} your references' {what}{times}: "
             "they cannot show how the reference model extrapolates so far, and its own "
             "error there (a model error growing in proportion to how hard the flight drives "
-            f"each channel) could produce the readings: {parts}{tail}.")
+            f"each channel) could produce the readings: {parts}{tail}.{sizes}")
 
 
 def stand_in_words(name: str, within: float, magnitude: str, share: float,
