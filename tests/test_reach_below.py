@@ -10,7 +10,6 @@ flights)."""
 
 from __future__ import annotations
 
-import sys
 import warnings
 from pathlib import Path
 from types import SimpleNamespace
@@ -29,6 +28,8 @@ from quadsim.gap.reference import (
     slope_errors,
 )
 from quadsim.gap.words import reach_words
+
+from _helpers import DRAG  # noqa: E402
 
 C = 3
 
@@ -160,9 +161,6 @@ pytestmark = pytest.mark.xdist_group("test_reach_below")
 
 
 def _generated():
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from _helpers import DRAG
-
     from quadsim.effects import make_effect
 
     # a motor that spins down 4x slower than up: the shared model's one time constant lacks
@@ -209,7 +207,7 @@ def brisk():
 def test_a_gentle_flight_with_no_effect_gets_no_confident_name(hard):
     """At 0.3 m/s (0.19x the references' RMS speed, 31 times their spread) the shared model's
     motor lag misreads the gentle flight's rotor channels: main 51e2cb8 named battery_sag
-    (94 %, tentative). Its whole margin lies under the references' typical level on the
+    (94 %, tentative). Its margin is earned under the references' typical level on the
     channels it drives more gently: no_significant_gap, not sure, the reading stated."""
     cf, reference = hard
     entry = _gentle(cf, reference)
