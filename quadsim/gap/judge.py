@@ -130,6 +130,14 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    lies and what share of each reading's evidence that error could produce
    (:func:`quadsim.gap.words.reach_words`). A reading far larger than that error (a payload
    whose force residual is 16x the references' on a flight 2x beyond them) keeps its weight.
+   A flight flown *below* its references along such a coordinate meets the mirror case: on
+   each channel it drives under every reference, the reference model's error may not shrink
+   with the signal (an inertia or damping calibrated where the references drive the body
+   hard, read where the flight barely excites it), and what a reading removes of the mean
+   square under the references' typical level, up to t_c (1 - k_c^2) (k_c < 1 the channel's
+   excitation over the references' smallest; ``Reach.allowance_under``), counts the same way
+   as the model's error; what it removes above that level (a payload, a CoM offset) stays
+   its own.
    Held out against nominal references the same rule, one judgment for both modes
    (:meth:`quadsim.gap.diagnose.Against.split` before the lead is chosen): the margin
    spans the training evidence and the held-out log-likelihood, so f sums what each flight
@@ -631,11 +639,21 @@ def _removal(ms, null_ms, reach) -> tuple[np.ndarray, np.ndarray]:
     """(within (C,), removed (C,)) of :func:`extrapolation_share`: per channel what a reading
     leaving ``ms`` removes of the gap "no difference" leaves (``null_ms``), each over the
     references' typical mean square ``reach.typical``, and the part of it within
-    ``reach.allowance``."""
+    ``reach.allowance``; on a channel with an allowance under the typical level
+    (``reach.allowance_under`` > 0, a flight below its references: module doc of
+    :mod:`quadsim.gap.reference`, "Below the references") also what it removes under that
+    level, max(0, min(m0, t) - m), within ``reach.allowance_under``."""
     typical = np.asarray(reach.typical, float)
-    gap = np.maximum(0.0, np.asarray(null_ms, float) - typical)
-    removed = np.maximum(0.0, gap - np.maximum(0.0, np.asarray(ms, float) - typical))
-    return np.minimum(removed, reach.allowance), removed
+    null_ms, ms = np.asarray(null_ms, float), np.asarray(ms, float)
+    gap = np.maximum(0.0, null_ms - typical)
+    removed = np.maximum(0.0, gap - np.maximum(0.0, ms - typical))
+    within = np.minimum(removed, reach.allowance)
+    lower = getattr(reach, "allowance_under", None)
+    if lower is None:
+        return within, removed
+    lower = np.asarray(lower, float)
+    under = np.where(lower > 0, np.maximum(0.0, np.minimum(null_ms, typical) - ms), 0.0)
+    return within + np.minimum(under, lower), removed + under
 
 
 def reach_bias(ev, null, reach) -> float:
@@ -701,7 +719,11 @@ def extrapolation_share(ms, null_ms, reach, margin: float | None = None) -> floa
     removes r_c = max(0, g_c - l_c), the allowance a_c (``reach.allowance``) and the
     effective samples n_c (``reach.counts``): the part of the margin its removal within the
     allowance earns, sum_c n_c min(r_c, a_c) / 2, over the margin ``margin`` (log Z of the
-    reading less that of "no difference"), at most 1. What the reading earns otherwise --
+    reading less that of "no difference"), at most 1. Below the references (a flight flown
+    more gently than them, ``reach.allowance_under`` u_c > 0 on the channels it drives under
+    every reference) r_c also holds what the reading removes under the typical level,
+    s_c = max(0, min(m0_c, t_c) - m_c), and the earned part n_c (min(r_c, a_c) + min(s_c,
+    u_c)) / 2: the model's error that need not shrink there. What the reading earns otherwise --
     beyond the allowance, or through the shared values "no difference" would have to move
     (a mass the thrust factor would absorb at a price) -- stays its own. Without the counts
     or a positive margin, the share of what it removes: sum_c min(r_c, a_c) / sum_c r_c; 1

@@ -231,6 +231,30 @@ difference (:func:`quadsim.gap.judge.extrapolation_share`). No threshold is tune
 slope 2 is the proportional law, 1.96 the two-sided 95 % quantile. Below 3 references no slope is
 measurable and every coordinate is unmeasured.
 
+Below the references. A flight flown more gently than every reference, along a coordinate
+whose growth they do not measure, meets the opposite unknown. With k_c = exp(-under_c) < 1
+its excitation of channel c over the references' smallest (``under_c`` the log distance,
+:attr:`Reach.under`), the references cannot tell a lack of fit that shrinks in proportion to
+the signal (slope 2: mean square t_c k_c^2 there) from one that does not shrink at all
+(slope 0: t_c wherever the flight is flown -- an offset, a dead band, or a shared value such
+as the inertia or a damping fitted where the references drive the body hard, read where the
+flight barely excites it). Between the two laws lies t_c (1 - k_c^2): a systematic error
+of the reference model that may still be on the flight where the proportional law would
+have it gone, and a reading that removes it fits the model's own error, not a difference
+of the vehicle. So, on each channel driven under every reference, what a named reading
+removes of the mean square "no difference" leaves *under* the typical level,
+max(0, min(m0_c, t_c) - m_c), counts as the model's error up to the allowance
+``t_c (1 - exp(-2 under_c))`` (:attr:`Reach.allowance_under`; the judgment's share,
+:func:`quadsim.gap.judge.extrapolation_share`). It mirrors the allowance above: there the
+proportional law is the larger, t_c (k^2 - 1) above t_c; here the constant one, t_c (1 -
+k^2) under it. What a reading removes above the typical level stays its own (a payload's
+force or a CoM offset's steady moment leave a gentle flight's gap far above the references'
+level), and the lack-of-fit test is unchanged (nothing under the typical level is a lack of
+fit). No threshold is tuned: the slope 2 and 1.96 as above; the channels are those the
+flight drives under every reference, and only where it lies below them along an unmeasured
+coordinate (a flight above them in one coordinate and gentler in one channel keeps the
+rule above alone).
+
 Example::
 
     >>> reach = reach_of(ref, pos)       # None within reach
@@ -1173,7 +1197,12 @@ class Reach:
     ``allowance`` the mean square the reference model's own error may add there, both in
     the placed model's sigma_c^2 units (what a weighed flight's ``ms`` is in), ``counts``
     the flight's effective samples N / tau_c (None: N not known): a mean-square reduction
-    r on channel c is worth counts_c r / 2 in log evidence."""
+    r on channel c is worth counts_c r / 2 in log evidence. Below the references (module
+    doc, "Below the references"): ``under`` (C,) the flight's log excitation under the
+    references' smallest (0 within, and 0 on every channel unless the flight lies below
+    them along a coordinate whose growth they do not measure) and ``allowance_under`` (C,)
+    the mean square, under the typical level, that the reference model's own error may
+    leave there for a reading to remove, t_c (1 - exp(-2 under_c)) (sigma_c^2 units)."""
 
     coordinate: str
     excess: float
@@ -1184,6 +1213,8 @@ class Reach:
     typical: np.ndarray
     allowance: np.ndarray
     counts: np.ndarray | None = None
+    under: np.ndarray | None = None
+    allowance_under: np.ndarray | None = None
 
     @property
     def ratio(self) -> float:
@@ -1215,11 +1246,12 @@ def slope_errors(x: np.ndarray, log_ms: np.ndarray) -> np.ndarray:
 def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
              ) -> Reach | None:
     """The :class:`Reach` of a flight at ``pos`` against the calibrated ``reference`` (module
-    doc, "The reach"); ``sigma`` (C,): the placed model's noise scale (default the
-    calibrated one). None where the flight lies outside the references' envelope only along
-    coordinates in which they measure their lack of fit's growth (or inside it), where it
-    drives no channel beyond the references' largest excitation, or where the excitations
-    or the references' log mean squares are not kept."""
+    doc, "The reach" and "Below the references"); ``sigma`` (C,): the placed model's noise
+    scale (default the calibrated one). None where the flight lies outside the references'
+    envelope only along coordinates in which they measure their lack of fit's growth (or
+    inside it), where it drives no channel beyond the references' largest excitation and
+    (below them along such a coordinate) none under their smallest, or where the
+    excitations or the references' log mean squares are not kept."""
     envelope = getattr(reference, "envelope", None)
     refs = getattr(envelope, "excite", None)
     log_ms = getattr(reference, "log_ms", None)
@@ -1230,11 +1262,16 @@ def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
     if refs.shape[1] < c or len(pos.excite) < c or np.shape(log_ms) != (len(coords), c):
         return None
     se = np.array([slope_errors(coords[:, k], log_ms)[0] for k in range(coords.shape[1])])
+    unmeasured = REACH_Z * se > PROPORTIONAL_SLOPE
     above = pos.coords - coords.max(axis=0)
-    excess = np.maximum(np.maximum(above, coords.min(axis=0) - pos.coords), 0.0)
-    excess = np.where(REACH_Z * se > PROPORTIONAL_SLOPE, excess, 0.0)
+    below = coords.min(axis=0) - pos.coords
+    excess = np.where(unmeasured, np.maximum(np.maximum(above, below), 0.0), 0.0)
     beyond = np.maximum(0.0, pos.excite[:c] - refs[:, :c].max(axis=0))
-    if not np.any(excess > 0) or not np.any(beyond > 0):
+    # under the references' smallest excitation: only where the flight lies below them
+    # along a coordinate whose growth they do not measure ("Below the references")
+    under = np.maximum(0.0, refs[:, :c].min(axis=0) - pos.excite[:c]) \
+        if np.any(unmeasured & (below > 0)) else np.zeros(c)
+    if not np.any(excess > 0) or not (np.any(beyond > 0) or np.any(under > 0)):
         return None
     k = int(np.argmax(excess))
     sigma = reference.sigma if sigma is None else np.asarray(sigma, float)
@@ -1242,7 +1279,8 @@ def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
     counts = None if pos.samples is None else pos.samples / np.asarray(reference.tau, float)
     return Reach(COORDINATES[k][0], float(excess[k]), bool(above[k] > 0),
                  float(np.ptp(coords[:, k])), se, beyond,
-                 typical, typical * np.expm1(PROPORTIONAL_SLOPE * beyond), counts)
+                 typical, typical * np.expm1(PROPORTIONAL_SLOPE * beyond), counts,
+                 under, -typical * np.expm1(-PROPORTIONAL_SLOPE * under))
 
 
 def local_reference(reference, pos: Position | None):

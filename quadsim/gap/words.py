@@ -261,12 +261,24 @@ def reach_words(reach, moved: dict, *, outcome: str, bias: float = 0.0) -> str:
     tail = (": no difference of the vehicle is the more probable reading, not sure"
             if outcome == "no_significant_gap" else
             ": that share of its weight counts as no difference of the vehicle")
+    # which law's error: growing where the flight drives a channel harder than every
+    # reference, not shrinking where it drives one more gently ("Below the references")
+    grow = ("a model error growing in proportion to how hard the flight drives each "
+            "channel")
+    under = getattr(reach, "allowance_under", None)
+    shrink = under is not None and bool(np.any(np.asarray(under, float) > 0))
+    laws = [grow] if np.any(np.asarray(reach.allowance, float) > 0) or not shrink else []
+    if shrink:
+        laws.append("a model error that need not shrink where the flight drives a channel "
+                    "more gently than every reference")
+    where = (f"{np.exp(reach.excess):.2g}x {side} your references' {what}" if reach.above
+             else f"at {np.exp(-reach.excess):.2g}x the lowest of your references' {what}")
     sizes = (f" The sizes stated include the bias that error could cause: up to "
              f"{bias:.2g} standard errors beside the noise's 1.96." if bias > 0 else "")
-    return (f" Flown {np.exp(reach.excess):.2g}x {side} your references' {what}{times}: "
+    return (f" Flown {where}{times}: "
             "they cannot show how the reference model extrapolates so far, and its own "
-            "error there (a model error growing in proportion to how hard the flight drives "
-            f"each channel) could produce the readings: {parts}{tail}.{sizes}")
+            f"error there ({'; or '.join(laws)}) "
+            f"could produce the readings: {parts}{tail}.{sizes}")
 
 
 def stand_in_words(name: str, within: float, magnitude: str, share: float,
