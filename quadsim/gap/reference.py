@@ -971,6 +971,22 @@ class Trend:
     q_low: np.ndarray | None = None
     q_high: np.ndarray | None = None
 
+    @property
+    def growth_se(self) -> float:
+        """Standard error of the slope of the references' log mean squares on their place
+        u (log mean square per unit place): ``lof_sd / sqrt(s_uu)``, the pooled ordinary
+        least-squares slope's (:func:`slope_errors` with u as the one regressor)."""
+        return self.lof_sd / np.sqrt(self.s_uu)
+
+    @property
+    def measured(self) -> bool:
+        """Whether the references measure how their model's lack of fit grows along their
+        axis: ``REACH_Z growth_se <= PROPORTIONAL_SLOPE``, the reach's rule
+        (:func:`reach_of`, module doc "The reach") on the trend's own axis. Where not, the
+        trend does not extrapolate the shared values beyond the outermost reference
+        (:func:`_predicted_move`)."""
+        return bool(REACH_Z * self.growth_se <= PROPORTIONAL_SLOPE)
+
 
 @dataclass
 class Envelope:
@@ -1252,13 +1268,15 @@ def local_reference(reference, pos: Position | None):
     readings are compared too, :func:`quadsim.gap.calibrate.placed`) and ``reach`` its
     :func:`reach_of` (None within reach); ``reference`` itself where no trend is measured
     and the flight lies within reach."""
-    out = _placed_model(reference, pos)
+    out = _placed_model(reference, pos, reach_of(reference, pos) is not None)
     reach = reach_of(reference, pos, getattr(out, "sigma", None))
     return out if reach is None else dataclasses.replace(out, reach=reach, place=pos)
 
 
-def _placed_model(reference, pos: Position | None):
-    """:func:`local_reference` without the reach."""
+def _placed_model(reference, pos: Position | None, beyond_reach: bool = False):
+    """:func:`local_reference` without the reach; ``beyond_reach``: whether the flight lies
+    beyond its references' reach (:func:`reach_of`), where the shared values are not
+    extrapolated (:func:`_predicted_move`)."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
     pooled = getattr(reference, "lof_pooled", None)
     if pos is not None and pos.distance > 0 and pooled is not None:
@@ -1285,7 +1303,7 @@ def _placed_model(reference, pos: Position | None):
     shift, spread = _channel_growth(reference, pos, shift, spread)
     lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
-    move, var = _predicted_move(trend, pos, edge)
+    move, var = _predicted_move(trend, pos, edge, beyond_reach or not trend.measured)
     predicted = np.clip(reference.theta + move, lower, upper)
     theta = _physical_towards(reference, predicted, np.sqrt(scatter ** 2 + var))
     # the part of the trend's move that no rigid body can make is the model's error there
@@ -1309,12 +1327,24 @@ def _channel_growth(reference, pos: Position, shift, spread) -> tuple[np.ndarray
             np.where(out, np.maximum(spread, wide), spread))
 
 
-def _predicted_move(trend: Trend, pos: Position, edge: float
+def _predicted_move(trend: Trend, pos: Position, edge: float, held: bool = False
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The trend's move of each shared value from the pooled one at the flight's place, and
     its variance (module doc): the place's line, mixed with the inverse-information line by
-    the latter's weight where it is measured and the flight's information is known."""
+    the latter's weight where it is measured and the flight's information is known.
+
+    ``edge`` (place units): how far the flight lies beyond the outermost reference. Where
+    the references do not measure their model's growth along their axis
+    (:attr:`Trend.measured`, references flown alike) the place's line is read at the
+    nearest outermost reference instead (move ``b (clip(u) - u_w)``, variance
+    ``var(b) (clip(u) - u_w)^2``, no extrapolation term): its slope, measured over a span
+    of places many times narrower than the flight's distance, would extrapolate a noise
+    slope and free the vehicle's own constants by its variance (module doc, "The reach":
+    what the reference model's error may be there is the reach's allowance, not a
+    difference of the shared values)."""
     lead = pos.u - trend.u_w
+    if held:
+        lead, edge = lead - edge, 0.0
     move_u = trend.slope * lead
     var_u = trend.slope_var * lead ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2
     if trend.q_weight is None or pos.info is None or len(pos.info) != len(trend.slope):
