@@ -101,6 +101,17 @@ def test_references_flown_alike_hold_the_shared_values_at_the_outermost_referenc
     extrapolated = np.sqrt(trend.slope_var[0] * lead ** 2
                            + (trend.slope[0] ** 2 + trend.slope_var[0]) * edge ** 2)
     assert extrapolated == pytest.approx(29.2 * local.scatter[0], rel=0.01)
+    # the answer says so
+    from types import SimpleNamespace
+
+    from quadsim.gap.reference import position
+    speed, rate, thrust = np.exp(ALIKE[-1] + np.log(1.6))
+    states = SimpleNamespace(velocity=np.tile([speed, 0.0, 0.0], (400, 1)),
+                             body_rate=np.tile([0.0, 0.0, rate], (400, 1)),
+                             specific_force=np.column_stack(
+                                 [np.zeros((400, 2)), 9.81 + thrust * np.resize([1, -1], 400)]))
+    assert position(states, ref.envelope).text.endswith(
+        "the reference model keeps their outermost values there, its noise widened")
     # inside their range the line is read where the flight lies, as before
     inside = _place(ref, ALIKE[2])
     assert local_reference(ref, inside).theta[0] == pytest.approx(

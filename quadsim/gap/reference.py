@@ -184,6 +184,23 @@ by their chi^2 (scaled by the better one's reduced chi^2 s): the q line's weight
 ``(1 - w) v_u + w v_q + w (1 - w) (m_u - m_q)^2`` (each line's v with its extrapolation
 beyond the outermost reference, e_q = q - clip(q, q_min, q_max) for the q line).
 
+Where the trend is not extrapolated (:attr:`Trend.measured`, :func:`_predicted_move`). The
+trend's slopes are measured over the references' span of places; a flight beyond them reads
+the line there only where the references also measure how their model's lack of fit grows
+along their axis: ``REACH_Z s_g / sqrt(S_uu) <= PROPORTIONAL_SLOPE``, the reach's rule below
+on the trend's own axis (se of the growth g_c, the same pooled standard error as
+:func:`slope_errors`). References flown alike (one speed group of the real Crazyflie flights:
+places spanning 0.05-0.12, 1.96 se = 2.6-9.7) do not; references flown over a factor 3 do
+(1.96 se = 0.3). Where they do not, or where the flight lies beyond their reach
+(:func:`reach_of`), each shared value is the line's value at the nearest outermost reference,
+``theta_ref + b (clip(u) - u_w)``, its variance ``var(b) (clip(u) - u_w)^2``, without the
+extrapolation term: a slope measured over a span of places tens of times narrower than the
+flight's distance extrapolates a noise slope, and its variance carried that far frees the
+vehicle's own constants (thrust per Omega^2 by 17 %, so that the gravity balance no longer
+pins a payload's mass) where the references simply did not vary. What the reference
+model's error may be out there is the reach's allowance (below), not a difference of the
+shared values; the lack-of-fit terms above (noise scale, spread) still widen by the trend.
+
 No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
 states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
 slope needs a residual degree of freedom) or when the references' places spread less than
@@ -1155,10 +1172,16 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
                 else f"{100 * abs(ratio - 1):.1f} % {'above' if fast else 'below'}")
         text = (f"outside the reference flights' envelope: {what} {np.exp(x[worst]):.3g} "
                 f"{unit}, {size} the {'largest' if fast else 'smallest'} reference's")
-        text += ("; the reference model follows the references' own trend there, its "
-                 "uncertainty and noise widened" if envelope.trend is not None else
-                 "; the references do not spread enough to show how their model "
-                 "extrapolates: judged by the reference model as calibrated")
+        if envelope.trend is None:
+            text += ("; the references do not spread enough to show how their model "
+                     "extrapolates: judged by the reference model as calibrated")
+        elif envelope.trend.measured:
+            text += ("; the reference model follows the references' own trend there, its "
+                     "uncertainty and noise widened")
+        else:
+            text += ("; the references spread too little to measure their trend that far: "
+                     "the reference model keeps their outermost values there, its noise "
+                     "widened")
     measured = envelope.lines is not None or getattr(envelope, "excite", None) is not None
     t = getattr(states, "t", None)
     return Position(x, distance, name, u, text,
@@ -1263,8 +1286,10 @@ def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
 
 def local_reference(reference, pos: Position | None):
     """The reference model at a flight's place (module doc): a copy of ``reference`` with its
-    shared values at the trend's prediction, and widened scatter, noise scale and lack-of-fit
-    statistics beyond the outermost reference, ``place`` = ``pos`` (where the references'
+    shared values at the trend's prediction (held at the outermost reference's where the trend
+    is not measured that far or the flight lies beyond the reach: :func:`_predicted_move`),
+    and widened scatter, noise scale and lack-of-fit statistics beyond the outermost
+    reference, ``place`` = ``pos`` (where the references'
     readings are compared too, :func:`quadsim.gap.calibrate.placed`) and ``reach`` its
     :func:`reach_of` (None within reach); ``reference`` itself where no trend is measured
     and the flight lies within reach."""
