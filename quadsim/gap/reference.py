@@ -184,6 +184,23 @@ by their chi^2 (scaled by the better one's reduced chi^2 s): the q line's weight
 ``(1 - w) v_u + w v_q + w (1 - w) (m_u - m_q)^2`` (each line's v with its extrapolation
 beyond the outermost reference, e_q = q - clip(q, q_min, q_max) for the q line).
 
+Where the trend is not extrapolated (:attr:`Trend.measured`, :func:`_predicted_move`). The
+trend's slopes are measured over the references' span of places; a flight beyond them reads
+the line there only where the references also measure how their model's lack of fit grows
+along their axis: ``REACH_Z s_g / sqrt(S_uu) <= PROPORTIONAL_SLOPE``, the reach's rule below
+on the trend's own axis (se of the growth g_c, the same pooled standard error as
+:func:`slope_errors`). References flown alike (one speed group of the real Crazyflie flights:
+places spanning 0.05-0.12, 1.96 se = 2.6-9.7) do not; references flown over a factor 3 do
+(1.96 se = 0.3). Where they do not, or where the flight lies beyond their reach
+(:func:`reach_of`), each shared value is the line's value at the nearest outermost reference,
+``theta_ref + b (clip(u) - u_w)``, its variance ``var(b) (clip(u) - u_w)^2``, without the
+extrapolation term: a slope measured over a span of places tens of times narrower than the
+flight's distance extrapolates a noise slope, and its variance carried that far frees the
+vehicle's own constants (thrust per Omega^2 by 17 %, so that the gravity balance no longer
+pins a payload's mass) where the references simply did not vary. What the reference
+model's error may be out there is the reach's allowance (below), not a difference of the
+shared values; the lack-of-fit terms above (noise scale, spread) still widen by the trend.
+
 No threshold decides "inside" or "outside" beyond the references' own extreme: the answer
 states the distance whenever it is above zero. Below :data:`MIN_FLIGHTS` references (3: a
 slope needs a residual degree of freedom) or when the references' places spread less than
@@ -995,6 +1012,22 @@ class Trend:
     q_low: np.ndarray | None = None
     q_high: np.ndarray | None = None
 
+    @property
+    def growth_se(self) -> float:
+        """Standard error of the slope of the references' log mean squares on their place
+        u (log mean square per unit place): ``lof_sd / sqrt(s_uu)``, the pooled ordinary
+        least-squares slope's (:func:`slope_errors` with u as the one regressor)."""
+        return self.lof_sd / np.sqrt(self.s_uu)
+
+    @property
+    def measured(self) -> bool:
+        """Whether the references measure how their model's lack of fit grows along their
+        axis: ``REACH_Z growth_se <= PROPORTIONAL_SLOPE``, the reach's rule
+        (:func:`reach_of`, module doc "The reach") on the trend's own axis. Where not, the
+        trend does not extrapolate the shared values beyond the outermost reference
+        (:func:`_predicted_move`)."""
+        return bool(REACH_Z * self.growth_se <= PROPORTIONAL_SLOPE)
+
 
 @dataclass
 class Envelope:
@@ -1163,10 +1196,16 @@ def position(states, envelope: Envelope | None, info: np.ndarray | None = None
                 else f"{100 * abs(ratio - 1):.1f} % {'above' if fast else 'below'}")
         text = (f"outside the reference flights' envelope: {what} {np.exp(x[worst]):.3g} "
                 f"{unit}, {size} the {'largest' if fast else 'smallest'} reference's")
-        text += ("; the reference model follows the references' own trend there, its "
-                 "uncertainty and noise widened" if envelope.trend is not None else
-                 "; the references do not spread enough to show how their model "
-                 "extrapolates: judged by the reference model as calibrated")
+        if envelope.trend is None:
+            text += ("; the references do not spread enough to show how their model "
+                     "extrapolates: judged by the reference model as calibrated")
+        elif envelope.trend.measured:
+            text += ("; the reference model follows the references' own trend there, its "
+                     "uncertainty and noise widened")
+        else:
+            text += ("; the references spread too little to measure their trend that far: "
+                     "the reference model keeps their outermost values there, its noise "
+                     "widened")
     measured = envelope.lines is not None or getattr(envelope, "excite", None) is not None
     t = getattr(states, "t", None)
     return Position(x, distance, name, u, text,
@@ -1285,18 +1324,22 @@ def reach_of(reference, pos: Position | None, sigma: np.ndarray | None = None
 
 def local_reference(reference, pos: Position | None):
     """The reference model at a flight's place (module doc): a copy of ``reference`` with its
-    shared values at the trend's prediction, and widened scatter, noise scale and lack-of-fit
-    statistics beyond the outermost reference, ``place`` = ``pos`` (where the references'
+    shared values at the trend's prediction (held at the outermost reference's where the trend
+    is not measured that far or the flight lies beyond the reach: :func:`_predicted_move`),
+    and widened scatter, noise scale and lack-of-fit statistics beyond the outermost
+    reference, ``place`` = ``pos`` (where the references'
     readings are compared too, :func:`quadsim.gap.calibrate.placed`) and ``reach`` its
     :func:`reach_of` (None within reach); ``reference`` itself where no trend is measured
     and the flight lies within reach."""
-    out = _placed_model(reference, pos)
+    out = _placed_model(reference, pos, reach_of(reference, pos) is not None)
     reach = reach_of(reference, pos, getattr(out, "sigma", None))
     return out if reach is None else dataclasses.replace(out, reach=reach, place=pos)
 
 
-def _placed_model(reference, pos: Position | None):
-    """:func:`local_reference` without the reach."""
+def _placed_model(reference, pos: Position | None, beyond_reach: bool = False):
+    """:func:`local_reference` without the reach; ``beyond_reach``: whether the flight lies
+    beyond its references' reach (:func:`reach_of`), where the shared values are not
+    extrapolated (:func:`_predicted_move`)."""
     trend = getattr(getattr(reference, "envelope", None), "trend", None)
     pooled = getattr(reference, "lof_pooled", None)
     if pos is not None and pos.distance > 0 and pooled is not None:
@@ -1323,7 +1366,7 @@ def _placed_model(reference, pos: Position | None):
     shift, spread = _channel_growth(reference, pos, shift, spread)
     lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
-    move, var = _predicted_move(trend, pos, edge)
+    move, var = _predicted_move(trend, pos, edge, beyond_reach or not trend.measured)
     predicted = np.clip(reference.theta + move, lower, upper)
     theta = _physical_towards(reference, predicted, np.sqrt(scatter ** 2 + var))
     # the part of the trend's move that no rigid body can make is the model's error there
@@ -1347,12 +1390,24 @@ def _channel_growth(reference, pos: Position, shift, spread) -> tuple[np.ndarray
             np.where(out, np.maximum(spread, wide), spread))
 
 
-def _predicted_move(trend: Trend, pos: Position, edge: float
+def _predicted_move(trend: Trend, pos: Position, edge: float, held: bool = False
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The trend's move of each shared value from the pooled one at the flight's place, and
     its variance (module doc): the place's line, mixed with the inverse-information line by
-    the latter's weight where it is measured and the flight's information is known."""
+    the latter's weight where it is measured and the flight's information is known.
+
+    ``edge`` (place units): how far the flight lies beyond the outermost reference. Where
+    the references do not measure their model's growth along their axis
+    (:attr:`Trend.measured`, references flown alike) the place's line is read at the
+    nearest outermost reference instead (move ``b (clip(u) - u_w)``, variance
+    ``var(b) (clip(u) - u_w)^2``, no extrapolation term): its slope, measured over a span
+    of places many times narrower than the flight's distance, would extrapolate a noise
+    slope and free the vehicle's own constants by its variance (module doc, "The reach":
+    what the reference model's error may be there is the reach's allowance, not a
+    difference of the shared values)."""
     lead = pos.u - trend.u_w
+    if held:
+        lead, edge = lead - edge, 0.0
     move_u = trend.slope * lead
     var_u = trend.slope_var * lead ** 2 + (trend.slope ** 2 + trend.slope_var) * edge ** 2
     if trend.q_weight is None or pos.info is None or len(pos.info) != len(trend.slope):
