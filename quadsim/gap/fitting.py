@@ -443,8 +443,10 @@ ACCEL_WINDOW_S = 0.25
 
 def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d x / d t (N, 3), Savitzky-Golay (cubic, :data:`ACCEL_WINDOW_S`) per stretch of
-    uniform samples (a time jump starts a new one)."""
-    from scipy.signal import savgol_filter
+    uniform samples (a time jump starts a new one): :func:`quadsim.logs.savgol.savgol`,
+    scipy's ``savgol_filter`` to round-off with the ends' fits built once per window (a
+    payload's mount height moves the attachment, and each height differentiates anew)."""
+    from ..logs.savgol import savgol
 
     if len(t) < 3:
         return np.zeros_like(x)
@@ -457,7 +459,7 @@ def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
         step = float(t[piece[1]] - t[piece[0]])
         window = min(len(piece) - (1 - len(piece) % 2), 2 * int(ACCEL_WINDOW_S / (2 * step)) + 1)
         if window >= 5:
-            out[piece] = savgol_filter(x[piece], window, 3, deriv=1, delta=step, axis=0)
+            out[piece] = savgol(x[piece], window, 3, deriv=1, delta=step)
         else:
             out[piece] = np.gradient(x[piece], t[piece], axis=0)
     return out
