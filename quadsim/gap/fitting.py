@@ -164,7 +164,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..core.frames import quat_to_rotmat
+from ..core.frames import cross, quat_to_rotmat
 from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectBase, EffectLoads, EffectParameter
 from ..effects.body_drag import BodyDrag
@@ -389,7 +389,7 @@ def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
     dx = rate[0] * np.sqrt(max(1.0 - sx * sx, 0.0))
     dy = rate[1] * np.sqrt(max(1.0 - sy * sy, 0.0))
     dq = np.array([dx, dy, -(q0[0] * dx + q0[1] * dy) / q0[2]])
-    return q0 / np.linalg.norm(q0), np.cross(q0, dq)
+    return q0 / np.linalg.norm(q0), cross(q0, dq)
 
 
 @dataclass(frozen=True)
@@ -516,7 +516,7 @@ class CableSwing(CablePayload):
         key = ("cable_accel", self.x, self.y, self.z)
         accel = None if memo is None else memo.get(key)
         if accel is None:
-            moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
+            moving = velocity + np.einsum("bij,bj->bi", rot, cross(body_rate, arm))
             accel = _derivative(t, moving)
             if memo is not None:
                 memo[key] = accel
@@ -526,7 +526,7 @@ class CableSwing(CablePayload):
         tension = self.mass * (np.einsum("bi,bi->b", q, e)
                                + self.length * np.einsum("bi,bi->b", w, w))
         force = np.maximum(tension, 0.0)[:, None] * q
-        torque = np.cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
+        torque = cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
         return force, torque, np.arccos(np.clip(-q[:, 2], -1.0, 1.0))
 
     #: swings kept per flight (:meth:`_swing`): a fit's Jacobian and its next step

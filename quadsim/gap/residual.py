@@ -539,7 +539,7 @@ def rotor_matrices(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
     """The (R, 6) maps of :func:`rotor_wrench`: squared speeds to the wrench (the allocation
     matrix, transposed) and thrust offsets (N) to the wrench."""
     axes = vehicle.rotor_axes
-    offset = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    offset = np.hstack([axes, cross(vehicle.rotor_positions - vehicle.com, axes)])
     return allocation_matrix(vehicle).T, offset
 
 
