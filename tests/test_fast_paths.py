@@ -371,3 +371,44 @@ def test_the_rotor_channels_kept_model_gives_the_channel_from_scratch(cf, states
             fast = rotor_residual(view, cf, effects, memo=memo)
             assert np.array_equal(fast, rotor_residual(view, cf, effects))
     assert sum(isinstance(k, tuple) and k[0] == "rotor_model" for k in memo) == 2
+
+
+def test_cable_attachment_derivative_is_scipys_savgol_filter():
+    """The cable's attachment acceleration (:func:`quadsim.gap.fitting._derivative`, through
+    :func:`quadsim.logs.savgol.savgol`) against ``scipy.signal.savgol_filter(..., deriv=1)``
+    itself, per uniform stretch of a time base with a jump (a stacked flight): 1e-12 of the
+    derivative's scale (the ends' fits are the same polynomial, taken as a fixed matrix)."""
+    from scipy.signal import savgol_filter
+
+    from quadsim.gap.fitting import ACCEL_WINDOW_S, _derivative
+
+    rng = np.random.default_rng(5)
+    step = 0.01
+    t = np.concatenate([np.arange(300) * step, 10.0 + np.arange(200) * step])
+    x = np.cumsum(rng.normal(size=(500, 3)), axis=0) * 0.01
+    got = _derivative(t, x)
+    window = 2 * int(ACCEL_WINDOW_S / (2 * step)) + 1
+    for piece in (slice(0, 300), slice(300, 500)):
+        want = savgol_filter(x[piece], window, 3, deriv=1, delta=step, axis=0)
+        np.testing.assert_allclose(got[piece], want, rtol=0,
+                                   atol=1e-12 * float(np.max(np.abs(want))))
+
+
+def test_window_means_kept_for_the_same_arrays(cf, states):
+    """:func:`quadsim.gap.residual._window_means` gives its last answer again while the
+    flights hold the same arrays (the same objects back, equal to a fresh computation) and
+    computes anew for other arrays, even of the same values (a copy)."""
+    import dataclasses
+
+    from quadsim.gap import residual as res
+
+    fresh = res._computed_window_means([states])
+    first = res._window_means([states])
+    assert res._window_means([states]) is first
+    for got, want in zip(first, fresh):
+        np.testing.assert_array_equal(got, want)
+    copy = dataclasses.replace(states, command=states.command.copy())
+    other = res._window_means([copy])
+    assert other is not first
+    for got, want in zip(other, fresh):
+        np.testing.assert_array_equal(got, want)

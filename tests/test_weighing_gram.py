@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quadsim.gap.evidence import Marginal, gram_factor, qr_factor
+from quadsim.gap.evidence import ChannelBlocks, Marginal, gram_factor, qr_factor
 
 
 def _problem(seed: int, rows: int = 3000, shared: int = 12, params: int = 4,
@@ -110,3 +110,32 @@ def test_the_kept_moment_is_the_one_computed_anew():
     assert np.array_equal(rhs, fresh.j.T @ other)
     np.testing.assert_allclose((np.eye(fresh.j.shape[1]) + fresh.j.T @ fresh.j) @ x, rhs,
                                rtol=1e-10, atol=1e-10 * float(np.max(np.abs(rhs))))
+
+
+def test_channel_blocks_give_the_dense_marginal():
+    """The discrepancy's columns kept as :class:`ChannelBlocks` (each column in one channel's
+    rows, products over those N rows only) against the same columns dense: j, A's factor and
+    log det, jᵀr, j u and the profile of a vector and of columns, equal to round-off (1e-12
+    of their scale); a column across two channels is not a block."""
+    rng = np.random.default_rng(11)
+    n, chans, k = 300, 10, 7
+    jac, s_ref = rng.normal(size=(n * chans, k)), rng.uniform(0.1, 3.0, k)
+    cube = np.zeros((n, chans, 6))
+    for e, c in enumerate((0, 0, 2, 5, 5, 5)):
+        cube[:, c, e] = rng.normal(size=n)
+    extra = cube.reshape(n * chans, 6)
+    blocks = ChannelBlocks.of(extra, chans)
+    assert blocks is not None and list(blocks.ch) == [0, 0, 2, 5, 5, 5]
+    assert np.array_equal(blocks.dense(), extra)
+    dense, fast = Marginal(jac, s_ref, extra), Marginal(jac, s_ref, None, blocks=blocks)
+    assert fast.shape == dense.j.shape and np.array_equal(fast.j, dense.j)
+    np.testing.assert_allclose(fast.chol[0], dense.chol[0], rtol=0, atol=1e-12 * n)
+    assert fast.logdet == pytest.approx(dense.logdet, rel=1e-12)
+    for r in (rng.normal(size=n * chans), rng.normal(size=(n * chans, 3))):
+        np.testing.assert_allclose(fast.jt(r), dense.j.T @ r, rtol=0, atol=1e-12 * n)
+        for got, want in zip(fast.profile(r), dense.profile(r)):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * n)
+    for u in (rng.normal(size=k + 6), rng.normal(size=(k + 6, 4))):
+        np.testing.assert_allclose(fast.j_times(u), dense.j @ u, rtol=0, atol=1e-12 * n)
+    cube[:, 1, 0] = 1.0                               # column 0 now in two channels
+    assert ChannelBlocks.of(cube.reshape(n * chans, 6), chans) is None

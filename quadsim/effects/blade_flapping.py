@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.frames import rotate_inverse
+from ..core.frames import cross, rotate_inverse
 from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 from .facts import (
@@ -65,7 +65,7 @@ def flapping_moment(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
     pitch = roll if pitch is None else pitch
     axial = np.einsum("bk,rk->br", air_velocity_body, rotor_axes)          # (B, R)
     in_plane = air_velocity_body[:, None, :] - axial[..., None] * rotor_axes[None]
-    tilt_axis = np.cross(rotor_axes[None], in_plane)                       # (B, R, 3)
+    tilt_axis = cross(rotor_axes[None], in_plane)                          # (B, R, 3)
     gains = np.array([roll, pitch, 0.5 * (roll + pitch)])
     return -gains * np.einsum("br,brk->bk", np.asarray(rotor_speed, float), tilt_axis)
 

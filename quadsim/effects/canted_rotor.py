@@ -33,6 +33,7 @@ import dataclasses
 import numpy as np
 
 from ..core.errors import ModelError
+from ..core.frames import cross
 from .base import EffectBase, EffectParameter
 from .facts import (
     ALL,
@@ -53,7 +54,7 @@ def tilt_axis(axis: np.ndarray, angle: float, azimuth: float) -> np.ndarray:
     """``axis`` (3,) rotated by ``angle`` (rad) about (cos azimuth, sin azimuth, 0)."""
     axis = np.asarray(axis, dtype=float)
     e = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
-    out = axis * np.cos(angle) + np.cross(e, axis) * np.sin(angle) \
+    out = axis * np.cos(angle) + cross(e, axis) * np.sin(angle) \
         + e * np.dot(e, axis) * (1.0 - np.cos(angle))
     return out / np.linalg.norm(out)
 

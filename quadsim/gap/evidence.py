@@ -229,7 +229,8 @@ from .fitting import parameter_bounds as fit_bounds
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
 from .residual import flight_memo, memoised, min_time_constant
 
-__all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "Evidence", "FitInputs",
+__all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlocks", "Evidence",
+           "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
            "read_inside", "shifted_view", "CONVERGED", "DELAY_GRID_S", "DELAY_GRID_SDS",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
@@ -324,32 +325,147 @@ class FitInputs:
         return Problem(self.states, self.reference, expl, self.jac, self.s_all, self.memo)
 
 
+@dataclass(frozen=True)
+class ChannelBlocks:
+    """Marginalised columns each of which lies in one channel's rows (the discrepancy's:
+    channel c's features, :func:`quadsim.gap.reference.columns`): column e is zero outside
+    the rows n C + ch[e] (C = ``channels``) and ``x[:, e]`` (N,) its values there.
+    :class:`Marginal` takes their products over those N rows only, not over the N C rows of
+    their zeros (a tenth of the rows with ten channels): the same sums without their zero
+    terms, round-off apart (the additions' order differs)."""
+
+    ch: np.ndarray
+    x: np.ndarray
+    channels: int
+
+    @classmethod
+    def of(cls, extra: np.ndarray | None, channels: int) -> ChannelBlocks | None:
+        """The blocks of ``extra`` (N C, E); None where a column spans several channels
+        or none, there are no columns, or the rows are not N C for ``channels``."""
+        if extra is None or extra.shape[1] == 0 or channels < 2 or \
+                extra.shape[0] % channels:
+            return None
+        n = extra.shape[0] // channels
+        cube = extra.reshape(n, channels, extra.shape[1])
+        nonzero = np.any(cube != 0.0, axis=0)                   # (C, E)
+        if not np.all(np.count_nonzero(nonzero, axis=0) == 1):
+            return None
+        ch = np.argmax(nonzero, axis=0)
+        return cls(ch, np.ascontiguousarray(cube[:, ch, np.arange(extra.shape[1])]),
+                   int(channels))
+
+    def dense(self) -> np.ndarray:
+        """The columns as (N C, E), zeros included."""
+        n, e = self.x.shape
+        out = np.zeros((n, self.channels, e))
+        out[:, self.ch, np.arange(e)] = self.x
+        return out.reshape(n * self.channels, e)
+
+
 class Marginal:
     """The shared parameters not fitted by an explanation, marginalised linearly
     (:mod:`quadsim.gap.evidence`, module doc): ``j`` = [J_s diag(s_ref), extra] (N C, K; the
     ``extra`` columns, N C x E, at unit spread), ``chol`` the Cholesky factor of
-    A = I + jᵀj, ``logdet`` = log det A."""
+    A = I + jᵀj, ``logdet`` = log det A. ``blocks``: ``extra`` as :class:`ChannelBlocks`
+    (then ``extra`` itself may be None): the products over its columns read N rows each,
+    not N C (:meth:`jt`); ``j`` is then formed only when asked for."""
 
-    def __init__(self, jac: np.ndarray, s_ref: np.ndarray, extra: np.ndarray | None = None):
+    def __init__(self, jac: np.ndarray, s_ref: np.ndarray, extra: np.ndarray | None = None,
+                 *, blocks: ChannelBlocks | None = None):
         # column-major: the profile's two products over j (jᵀ r, j du) run about a third
         # faster on these tall, thin matrices than on the row-major copy (the same values,
         # summed in another order: round-off apart). Written column-major at once, the
         # unit-spread ``extra`` columns (N C, E) after jac's: the same numbers as
         # ``np.hstack([jac, extra]) * np.concatenate([s_ref, ones])``, without the copies
-        extra = np.zeros((jac.shape[0], 0)) if extra is None else extra
         k = jac.shape[1]
-        j = np.empty((jac.shape[0], k + extra.shape[1]), order="F")
-        np.multiply(jac, s_ref, out=j[:, :k])
-        j[:, k:] = extra
-        a = np.eye(j.shape[1]) + j.T @ j
-        self.j = j
+        self._blocks = blocks
+        if blocks is not None:
+            dense = np.empty(jac.shape, order="F")
+            np.multiply(jac, s_ref, out=dense)
+            self._dense, self._j = dense, None
+            self.shape = (jac.shape[0], k + blocks.x.shape[1])
+        else:
+            extra = np.zeros((jac.shape[0], 0)) if extra is None else extra
+            j = np.empty((jac.shape[0], k + extra.shape[1]), order="F")
+            np.multiply(jac, s_ref, out=j[:, :k])
+            j[:, k:] = extra
+            self._dense, self._j = j[:, :k], j
+            self.shape = j.shape
+        self._k = k
+        a = np.eye(self.shape[1]) + self._gram()
         self.chol = cho_factor(a)
         self.logdet = 2.0 * float(np.sum(np.log(np.diag(self.chol[0]))))
         # cho_solve's own LAPACK call (the same numbers), without its per-call checks and
         # batch wrapper: most of its cost on these small systems, called thousands of times
-        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if j.shape[1] else None
+        self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if self.shape[1] \
+            else None
         self._last: tuple | None = None
         self._moment: tuple | None = None
+
+    @property
+    def j(self) -> np.ndarray:
+        """[J_s diag(s_ref), extra] (N C, K), column-major (formed on first use where the
+        extra columns are kept as blocks)."""
+        if self._j is None:
+            j = np.empty(self.shape, order="F")
+            j[:, :self._k] = self._dense
+            j[:, self._k:] = self._blocks.dense()
+            self._j = j
+        return self._j
+
+    def _gram(self) -> np.ndarray:
+        """jᵀj (K, K); with blocks, a block column's products with the dense columns and
+        with the block columns of its own channel over that channel's N rows (zero across
+        channels)."""
+        blocks, dense, k = self._blocks, self._dense, self._k
+        if blocks is None:
+            return self._j.T @ self._j
+        x, ch, chans = blocks.x, blocks.ch, blocks.channels
+        out = np.zeros((self.shape[1], self.shape[1]))
+        out[:k, :k] = dense.T @ dense
+        rows = dense.reshape(x.shape[0], chans, k, order="C")
+        for c in np.unique(ch):
+            cols = np.flatnonzero(ch == c)
+            own = x[:, cols]
+            out[np.ix_(k + cols, k + cols)] = own.T @ own
+            cross = rows[:, c, :].T @ own
+            out[:k, k + cols] = cross
+            out[k + cols, :k] = cross.T
+        return out
+
+    def jt(self, r: np.ndarray) -> np.ndarray:
+        """jᵀ ``r``: (K,) of a residual vector (N C,), (K, P) of columns (N C, P); with
+        blocks, their rows only (class doc)."""
+        blocks = self._blocks
+        if blocks is None:
+            return self._j.T @ r
+        x, ch, chans = blocks.x, blocks.ch, blocks.channels
+        dense = self._dense.T @ r
+        n, e = x.shape
+        if r.ndim == 1:
+            own = (x.T @ r.reshape(n, chans))[np.arange(e), ch]
+        else:
+            p = r.shape[1]
+            own = (x.T @ r.reshape(n, chans * p)).reshape(e, chans, p)[np.arange(e), ch]
+        return np.concatenate([dense, own])
+
+    def j_times(self, u: np.ndarray) -> np.ndarray:
+        """j ``u``: (N C,) of a (K,) vector, (N C, P) of (K, P) columns; with blocks, their
+        rows only (class doc)."""
+        blocks, k = self._blocks, self._k
+        if blocks is None:
+            return self._j @ u
+        x, ch, chans = blocks.x, blocks.ch, blocks.channels
+        n, e = x.shape
+        dense = self._dense @ u[:k]
+        if u.ndim == 1:
+            y = np.zeros((e, chans))
+            y[np.arange(e), ch] = u[k:]
+            return dense + (x @ y).reshape(-1)
+        p = u.shape[1]
+        y = np.zeros((e, chans, p))
+        y[np.arange(e), ch] = u[k:]
+        return dense + (x @ y.reshape(e, chans * p)).reshape(n * chans, p)
 
     def moment(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last vector's kept
@@ -358,7 +474,7 @@ class Marginal:
         kept = self._moment
         if kept is not None and kept[0] is r:
             return kept[1], kept[2]
-        rhs = self.j.T @ r
+        rhs = self.jt(r)
         x = self.solve(rhs)
         self._moment = (r, rhs, x)
         return rhs, x
@@ -401,9 +517,9 @@ class Marginal:
         return float(r @ r) - float(rhs @ x)
 
     def _profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        x = self.moment(r)[1] if r.ndim == 1 else self.solve(self.j.T @ r)
+        x = self.moment(r)[1] if r.ndim == 1 else self.solve(self.jt(r))
         du = -x
-        return r + self.j @ du, du
+        return r + self.j_times(du), du
 
 
 def parameter_bounds(expl: Explanation, reference: Reference, dt: float
@@ -518,17 +634,19 @@ class Problem:
         lower, upper = parameter_bounds(expl, reference, float(states.t[1] - states.t[0]))
         self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
-        self.size = jac.shape[0] + self.marg.j.shape[1] + len(self.mean)
+        self.size = jac.shape[0] + self.marg.shape[1] + len(self.mean)
 
     def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> Marginal:
         """The marginal of the kept shared columns and the discrepancy's
         (:func:`quadsim.gap.reference.columns`, unit spread: they are scaled by the
         coefficients' covariance factor already), after them; with a ``memo``, one per set
-        of columns (most explanations keep them all) and Jacobian."""
+        of columns (most explanations keep them all) and Jacobian. The discrepancy's
+        columns are passed as :class:`ChannelBlocks` (each lies in one channel's rows), found
+        once per flight, reference discrepancy and weights where there is a memo."""
         def build():
-            extra = columns(self.states, self.reference.discrepancy, self.reference.weights,
-                            self.memo)
-            return Marginal(jac[:, self.keep], s_all[self.keep], extra)
+            extra = self._extra()
+            return Marginal(jac[:, self.keep], s_all[self.keep], extra[0],
+                            blocks=extra[1] if len(extra) > 1 else None)
 
         if self.memo is None:
             return build()
@@ -538,6 +656,25 @@ class Problem:
         if key not in kept or kept[key][0] is not jac:
             kept[key] = (jac, build())
         return kept[key][1]
+
+    def _extra(self) -> tuple:
+        """(extra,) or (None, blocks) for :class:`Marginal`: the discrepancy's columns
+        (:func:`quadsim.gap.reference.columns`) as :class:`ChannelBlocks` where they are
+        such (extra None then), else dense; with a ``memo``, kept per states, discrepancy
+        and weights (the same numbers for every marginal of the flight)."""
+        reference = self.reference
+        chans = len(reference.weights)
+        key = ("marginal.extra", id(self.states), id(reference.discrepancy),
+               reference.weights.tobytes())
+        hit = None if self.memo is None else self.memo.get(key)
+        if hit is not None and hit[0] is self.states and hit[1] is reference.discrepancy:
+            return hit[2]
+        extra = columns(self.states, reference.discrepancy, reference.weights, self.memo)
+        blocks = ChannelBlocks.of(extra, chans)
+        value = (extra,) if blocks is None else (None, blocks)
+        if self.memo is not None:
+            self.memo[key] = (self.states, reference.discrepancy, value)
+        return value
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         """The weighted residual at ``z``; with a ``memo``, the last one per explanation is
@@ -672,7 +809,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
         # wall of values that make no rigid vehicle (:meth:`Problem.stacked`: a constant
         # residual, a zero Jacobian): no fit, no evidence (not +inf, which would win)
         log_z = -np.inf
-    n = prob.marg.j.shape[0]
+    n = prob.marg.shape[0]
     resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
     keys = expl.parameter_names
     shift = {names_all[k]: float(prob.s_all[k] * d)
@@ -1047,7 +1184,7 @@ def gram_factor(marg: Marginal, start: np.ndarray, base: np.ndarray, jac: np.nda
     the Gram matrix is not positive definite to round-off (b in the span of A: the caller
     factors A itself then)."""
     n = len(start)
-    c_jac, (c_base, y_base) = marg.j.T @ jac, marg.moment(base)
+    c_jac, (c_base, y_base) = marg.jt(jac), marg.moment(base)
     y_jac = marg.solve(c_jac)
     m = np.empty((n + 1, n + 1))
     m[:n, :n] = jac.T @ jac - c_jac.T @ y_jac + np.eye(n)

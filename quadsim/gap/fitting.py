@@ -164,7 +164,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..core.errors import ModelError
-from ..core.frames import quat_to_rotmat
+from ..core.frames import cross, quat_to_rotmat
 from ..effects import EFFECTS, make_effect
 from ..effects.base import EffectBase, EffectLoads, EffectParameter
 from ..effects.body_drag import BodyDrag
@@ -389,7 +389,7 @@ def start_state(lean: tuple = (0.0, 0.0), rate: tuple = (0.0, 0.0)
     dx = rate[0] * np.sqrt(max(1.0 - sx * sx, 0.0))
     dy = rate[1] * np.sqrt(max(1.0 - sy * sy, 0.0))
     dq = np.array([dx, dy, -(q0[0] * dx + q0[1] * dy) / q0[2]])
-    return q0 / np.linalg.norm(q0), np.cross(q0, dq)
+    return q0 / np.linalg.norm(q0), cross(q0, dq)
 
 
 @dataclass(frozen=True)
@@ -443,8 +443,10 @@ ACCEL_WINDOW_S = 0.25
 
 def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d x / d t (N, 3), Savitzky-Golay (cubic, :data:`ACCEL_WINDOW_S`) per stretch of
-    uniform samples (a time jump starts a new one)."""
-    from scipy.signal import savgol_filter
+    uniform samples (a time jump starts a new one): :func:`quadsim.logs.savgol.savgol`,
+    scipy's ``savgol_filter`` to round-off with the ends' fits built once per window (a
+    payload's mount height moves the attachment, and each height differentiates anew)."""
+    from ..logs.savgol import savgol
 
     if len(t) < 3:
         return np.zeros_like(x)
@@ -457,7 +459,7 @@ def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
         step = float(t[piece[1]] - t[piece[0]])
         window = min(len(piece) - (1 - len(piece) % 2), 2 * int(ACCEL_WINDOW_S / (2 * step)) + 1)
         if window >= 5:
-            out[piece] = savgol_filter(x[piece], window, 3, deriv=1, delta=step, axis=0)
+            out[piece] = savgol(x[piece], window, 3, deriv=1, delta=step)
         else:
             out[piece] = np.gradient(x[piece], t[piece], axis=0)
     return out
@@ -514,7 +516,7 @@ class CableSwing(CablePayload):
         key = ("cable_accel", self.x, self.y, self.z)
         accel = None if memo is None else memo.get(key)
         if accel is None:
-            moving = velocity + np.einsum("bij,bj->bi", rot, np.cross(body_rate, arm))
+            moving = velocity + np.einsum("bij,bj->bi", rot, cross(body_rate, arm))
             accel = _derivative(t, moving)
             if memo is not None:
                 memo[key] = accel
@@ -524,7 +526,7 @@ class CableSwing(CablePayload):
         tension = self.mass * (np.einsum("bi,bi->b", q, e)
                                + self.length * np.einsum("bi,bi->b", w, w))
         force = np.maximum(tension, 0.0)[:, None] * q
-        torque = np.cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
+        torque = cross(arm - params.com, np.einsum("bji,bj->bi", rot, force))
         return force, torque, np.arccos(np.clip(-q[:, 2], -1.0, 1.0))
 
     #: swings kept per flight (:meth:`_swing`): a fit's Jacobian and its next step

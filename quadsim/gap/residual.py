@@ -539,7 +539,7 @@ def rotor_matrices(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
     """The (R, 6) maps of :func:`rotor_wrench`: squared speeds to the wrench (the allocation
     matrix, transposed) and thrust offsets (N) to the wrench."""
     axes = vehicle.rotor_axes
-    offset = np.hstack([axes, np.cross(vehicle.rotor_positions - vehicle.com, axes)])
+    offset = np.hstack([axes, cross(vehicle.rotor_positions - vehicle.com, axes)])
     return allocation_matrix(vehicle).T, offset
 
 
@@ -791,12 +791,30 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
     return float(alpha.mean()), spread
 
 
+#: :func:`_window_means`' last inputs (the flights' t, command and rotor-speed arrays, held)
+#: and result: the two calibrations of one reference set (thrust curve's slope shared or
+#: not) fit the motor map on the same states
+_LAST_MEANS: list = []
+
+
 def _window_means(flights: list[FlightStates]) -> tuple | None:
     """The flights' commands, passed through the rotors' timing (:func:`map_lag`), and rotor
     speeds averaged over :data:`MAP_WINDOW_S` (moving mean, per flight, edges dropped;
     (M, R) each, pooled): (the commands through the line's timing, the speeds, how many
     windows they span, the commands through the gain's timing); None without a flight
-    logging both."""
+    logging both. The last call's answer is kept and given again (the same arrays, not to
+    be written to) while the flights hold the same t, command and rotor-speed arrays."""
+    arrays = tuple((f.t, f.command, f.rotor_speed) for f in flights)
+    if _LAST_MEANS and len(_LAST_MEANS[0]) == len(arrays) and all(
+            a is b for old, new in zip(_LAST_MEANS[0], arrays) for a, b in zip(old, new)):
+        return _LAST_MEANS[1]
+    value = _computed_window_means(flights)
+    _LAST_MEANS[:] = [arrays, value]
+    return value
+
+
+def _computed_window_means(flights: list[FlightStates]) -> tuple | None:
+    """:func:`_window_means` computed."""
     usable = [f for f in flights if f.command is not None and f.rotor_speed is not None]
     if not usable:
         return None
