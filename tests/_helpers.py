@@ -40,3 +40,23 @@ def load_script(name: str):
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+#: the sensor noise of the generated per-flight payload and reach tests (motion capture,
+#: IMU, rotor speeds; SI units: m, m/s, rad, rad/s, m/s^2, rad/s)
+MOCAP_NOISE = {"position": 5e-4, "velocity": 0.01, "attitude": 2e-3, "gyro": 0.02,
+               "accel": 0.1, "rotor": 10.0}
+
+
+def generated_flight(params, effects, seed: int, path: str, speed: float, *,
+                     duration: float = 4.0):
+    """One generated flight log of ``params`` with ``effects`` (a list of effect
+    instances) on ``path`` at ``speed`` (m/s) under :data:`MOCAP_NOISE`
+    (:func:`quadsim.logs.generate.generate_flight`; ``duration`` in s)."""
+    from quadsim.effects import EffectSet
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+
+    return generate_flight(params, path, EffectSet(tuple(effects)),
+                           SensorModel(noise=MOCAP_NOISE), seed, duration=duration,
+                           speed=speed)[0]

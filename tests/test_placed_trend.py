@@ -26,6 +26,8 @@ from quadsim.gap.reference import (
 )
 from quadsim.vehicle.params import load_params
 
+from _helpers import generated_flight
+
 C = 6           # residual channels of the stub references
 #: the references' log mean squares scatter by 0.1 (log units) with no relation to their place
 SCATTER = 0.1 * np.array([[1, -1, 0.5, 0, 1, -1], [-1, 0.5, 1, 1, 0, 0.5],
@@ -165,19 +167,14 @@ def test_a_generated_payload_flown_beyond_references_flown_alike_is_read_right()
     extrapolated the references' trend to it and freed the thrust per Omega^2 with its
     variance: ``no_significant_gap`` 56 %, the mass +7.6 ± 9.7 g. Held at the outermost
     reference: the payload named at 0.93, its total +7.4 ± 2.4 g, holding the truth."""
-    from quadsim.effects import EffectSet, make_effect
+    from quadsim.effects import make_effect
     from quadsim.gap.calibrate import calibrate
     from quadsim.gap.diagnose import judge_one, prepare
-    from quadsim.logs.generate import generate_flight
-    from quadsim.logs.sensors import SensorModel
 
-    noise = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
-                               "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
     cf = load_params("crazyflie21")
 
     def fly(effects, seed, path, speed):
-        return generate_flight(cf, path, EffectSet(tuple(effects)), noise, seed,
-                               duration=4.0, speed=speed)[0]
+        return generated_flight(cf, effects, seed, path, speed)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -20,6 +20,8 @@ import pytest
 from quadsim.gap.judge import Z95, as_stated, reach_bias
 from quadsim.gap.words import total_mass
 
+from _helpers import generated_flight
+
 C = 3
 
 
@@ -201,20 +203,15 @@ def test_a_generated_mass_flown_beyond_references_flown_alike_is_covered_with_it
     bias the references' model error produces beyond them). Stated with the bias bound
     (reach_bias > 50 standard errors here), each part's and the total's interval hold the
     truth."""
-    from quadsim.effects import EffectSet, make_effect
+    from quadsim.effects import make_effect
     from quadsim.gap.calibrate import calibrate
     from quadsim.gap.diagnose import judge_one, prepare
-    from quadsim.logs.generate import generate_flight
-    from quadsim.logs.sensors import SensorModel
     from quadsim.vehicle.params import load_params
 
-    noise = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
-                               "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
     cf = load_params("crazyflie21")
 
     def fly(effects, seed, path, speed):
-        return generate_flight(cf, path, EffectSet(tuple(effects)), noise, seed,
-                               duration=4.0, speed=speed)[0]
+        return generated_flight(cf, effects, seed, path, speed)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
