@@ -1677,6 +1677,20 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         if not ok:
             implausible.append((w, text))
     null = next((w for w in weighed if w.name == "no_difference"), None)
+    # beyond the references' reach every interval is stated with the bias the model's own
+    # error can cause there (quadsim.gap.judge, module doc 1d; Against.bias); within it 0
+    sized: dict = {}
+
+    def bias(w):
+        if against is None:
+            return 0.0
+        if id(w) not in sized:
+            sized[id(w)] = against.bias(w, null)
+        return sized[id(w)]
+
+    def stated(w):          # its reading in words, as stated (module doc 1d of judge)
+        return reading_text(as_stated(w.train, bias(w)), reference)
+
     # the size rule (Practical.small) only where "no difference" leaves nothing systematic:
     # where it leaves a remainder, a small reading may be the library's description of it
     quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
@@ -1726,17 +1740,6 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                 lead_name, _, lead = ranked[0]
                 checked = consistent(lead, entry_of(lead, 1.0, before, reference),
                                      train + held, reference, base_of(lead))
-    # beyond the references' reach every interval is stated with the bias the model's own
-    # error can cause there (quadsim.gap.judge, module doc 1d; Against.bias); within it 0
-    sized: dict = {}
-
-    def bias(w):
-        if against is None:
-            return 0.0
-        if id(w) not in sized:
-            sized[id(w)] = against.bias(w, null)
-        return sized[id(w)]
-
     entries = [entry_of(w, p, before, reference, bias=bias(w)) for k, p, w in ranked
                if k == w.name and k != "no_difference"]
     seen = {e["name"] for e in entries}
@@ -1755,9 +1758,8 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     rows = readings_of(ranked, reference, references=against is not None, bias=bias)
     return Decision(tuple(ranked), tuple(rows), tuple(entries),
                     lead, lead_name, null, combination, checked,
-                    tuple((w.name, reading_text(w.train, reference), text)
-                          for w, text in implausible),
-                    tuple((w.name, reading_text(w.train, reference),
+                    tuple((w.name, stated(w), text) for w, text in implausible),
+                    tuple((w.name, stated(w),
                            scale.shares[(w.name, w.train.explanation.variant)])
                           for w in small),
                     tuple(weighed) + ((combination,) if combination is not None else ()),
