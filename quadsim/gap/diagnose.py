@@ -205,10 +205,12 @@ from .judge import (
     FORM_ERROR,
     SLOW_WINDOW_S,
     UNCHECKED_WORDS,
+    as_stated,
     beyond_reach,
     carry_over,
     channel_names,
     every_part_stands,
+    heldout_bias,
     heldout_share,
     judge,
     judge_heldout,
@@ -237,7 +239,7 @@ from .reference import centre_term, columns, envelope_summary, fit_discrepancy, 
 from .reference import position as envelope_position
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
 from .result import Diagnosis, Reading, Series, Verdict
-from .words import batch_answer, nominal_words
+from .words import batch_answer, nominal_words, total_mass
 
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
@@ -859,6 +861,13 @@ class Against:
         return beyond_reach(ranked, self.reach, share=partial(
             heldout_share, reaches=self.reaches, sigma=self.reference.sigma))
 
+    def bias(self, w: Weighed, null: Weighed | None) -> float:
+        """The bias bound (standard errors) the reading ``w``'s stated intervals include
+        beyond the references' reach (:func:`quadsim.gap.judge.heldout_bias`: what each
+        flight, training and held out at its own allowance, earns against "no difference"
+        ``null``, as :meth:`split` weighs it; 0 within reach)."""
+        return heldout_bias(w, null, reaches=self.reaches, sigma=self.reference.sigma)
+
     def weigh(self, expl: list, null: Explanation | None = None) -> list[Weighed]:
         """Each of ``expl`` fitted on the stacked training flights (every one fully,
         :func:`quadsim.gap.evidence.evaluate`; a cable payload with each flight's own start
@@ -1387,32 +1396,43 @@ def _own(values: tuple, expl: Explanation) -> tuple:
 
 
 def readings_of(ranked: list, reference: Reference, *,
-                references: bool = False) -> list[Reading]:
+                references: bool = False, bias: Callable | None = None) -> list[Reading]:
     """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words
     (``references``: against nominal reference flights, as per flight,
     :func:`quadsim.gap.words.nominal_words`), each named as per flight: the physical change
     largest against the references first (:func:`quadsim.gap.judge.reading_name`, the lead
-    rule; the training flights' fit)."""
+    rule; the training flights' fit). ``bias(w)``: a Weighed's bias bound in standard
+    errors beyond the references' reach (:meth:`Against.bias`; None: 0): its words, values'
+    intervals and a payload's total (:func:`quadsim.gap.words.total_mass`) as stated,
+    (1.96 + bias) standard errors (:func:`quadsim.gap.judge.as_stated`, module doc of
+    :mod:`quadsim.gap.judge`, 1d); the name is the fit's own."""
     out = []
     for k, p, w in ranked:
-        ev = w.train
+        b = 0.0 if bias is None else bias(w)
+        ev = as_stated(w.train, b)
         det = [q for q, ok in ev.determined.items() if ok]
-        out.append(Reading(reading_name(k, ev), p,
+        out.append(Reading(reading_name(k, w.train), p,
                            nominal_words(reading_text(ev, reference), k == ev.name,
                                          references=references),
                            w.total.log_z, {q: ev.values[q] for q in det},
                            {q: 1.96 * ev.post_sd[q] for q in det},
                            tuple(q for q, ok in ev.determined.items() if not ok),
-                           ev.explanation.fixed_values, ev.explanation.variant))
+                           ev.explanation.fixed_values, ev.explanation.variant,
+                           total=total_mass(ev) or {}, bias=b))
     return out
 
 
-def entry_of(w: Weighed, probability: float, before: list, reference: Reference) -> dict:
+def entry_of(w: Weighed, probability: float, before: list, reference: Reference, *,
+             bias: float = 0.0) -> dict:
     """One ranked explanation as an ``effects`` JSON entry (:mod:`.schema` ``_EFFECT``):
     only determined parameters get values (``undetermined`` names the others); the held-out
     gap (mean squared residual over sigma^2) before (``before``: scaled nominal residuals)
-    and after, and its ``reduction`` (gap_before - gap_after) / gap_before."""
+    and after, and its ``reduction`` (gap_before - gap_after) / gap_before. ``bias``: the
+    bias bound (standard errors, :meth:`Against.bias`) beyond the references' reach: each
+    ``ci`` is (1.96 + bias) posterior spreads (:func:`quadsim.gap.judge.as_stated`);
+    ``significant`` stays the fit's own (1.96 spreads: what the consistency check judges)."""
     ev = w.train
+    stated = as_stated(ev, bias)
     sigma = reference.sigma
     gap_before = float(np.mean(np.concatenate(before) ** 2))
     after = [r / sigma for r in w.held_residuals]
@@ -1422,7 +1442,7 @@ def entry_of(w: Weighed, probability: float, before: list, reference: Reference)
     rms = np.sqrt(np.mean(np.concatenate(w.held_residuals) ** 2, axis=0))
     entry = {"name": ev.name, "probability": probability, "log_evidence": w.total.log_z,
              "params": {q: ev.values[q] for q in ev.values if q in det},
-             "ci": {q: 1.96 * ev.post_sd[q] for q in ev.values if q in det},
+             "ci": {q: 1.96 * stated.post_sd[q] for q in ev.values if q in det},
              "fixed": ev.explanation.fixed_values,
              "identifiable": {q: q in det for q in ev.values},
              "significant": {q: bool(abs(ev.values[q]) > 1.96 * ev.post_sd[q])
@@ -1657,6 +1677,20 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         if not ok:
             implausible.append((w, text))
     null = next((w for w in weighed if w.name == "no_difference"), None)
+    # beyond the references' reach every interval is stated with the bias the model's own
+    # error can cause there (quadsim.gap.judge, module doc 1d; Against.bias); within it 0
+    sized: dict = {}
+
+    def bias(w):
+        if against is None:
+            return 0.0
+        if id(w) not in sized:
+            sized[id(w)] = against.bias(w, null)
+        return sized[id(w)]
+
+    def stated(w):          # its reading in words, as stated (module doc 1d of judge)
+        return reading_text(as_stated(w.train, bias(w)), reference)
+
     # the size rule (Practical.small) only where "no difference" leaves nothing systematic:
     # where it leaves a remainder, a small reading may be the library's description of it
     quiet = null is not None and not remainder(null.train_residuals + null.held_residuals,
@@ -1706,27 +1740,26 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                 lead_name, _, lead = ranked[0]
                 checked = consistent(lead, entry_of(lead, 1.0, before, reference),
                                      train + held, reference, base_of(lead))
-    entries = [entry_of(w, p, before, reference) for k, p, w in ranked if k == w.name
-               and k != "no_difference"]
+    entries = [entry_of(w, p, before, reference, bias=bias(w)) for k, p, w in ranked
+               if k == w.name and k != "no_difference"]
     seen = {e["name"] for e in entries}
     # a reading the size rule counts as "no difference": its entry is its best variant,
     # as ranked before that rule (Practical.small), at probability 0
     # (ranked again: the pair's ranking may have measured more spreads)
-    entries += [entry_of(w, 0.0, before, reference) for k, _, w in
+    entries += [entry_of(w, 0.0, before, reference, bias=bias(w)) for k, _, w in
                 rank(weighed, scale.spread_negligible) if k == w.name and k not in seen
                 and k != "no_difference" and scale.small(w.train) and not seen.add(k)]
-    entries += [entry_of(w, 0.0, before, reference) for w in weighed
+    entries += [entry_of(w, 0.0, before, reference, bias=bias(w)) for w in weighed
                 if w.name not in seen and w.name != "no_difference" and not seen.add(w.name)]
     entries.sort(key=lambda e: (-e["probability"], -e["log_evidence"], e["name"]))
     small = sorted((w for w in weighed if null is not None and w is not null
                     and w.total.log_z > null.total.log_z and scale.small(w.train)),
                    key=lambda w: -w.total.log_z)
-    rows = readings_of(ranked, reference, references=against is not None)
+    rows = readings_of(ranked, reference, references=against is not None, bias=bias)
     return Decision(tuple(ranked), tuple(rows), tuple(entries),
                     lead, lead_name, null, combination, checked,
-                    tuple((w.name, reading_text(w.train, reference), text)
-                          for w, text in implausible),
-                    tuple((w.name, reading_text(w.train, reference),
+                    tuple((w.name, stated(w), text) for w, text in implausible),
+                    tuple((w.name, stated(w),
                            scale.shares[(w.name, w.train.explanation.variant)])
                           for w in small),
                     tuple(weighed) + ((combination,) if combination is not None else ()),

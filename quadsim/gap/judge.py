@@ -145,7 +145,7 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    allowance (:func:`flights_share`); each training flight's lack of fit and the share it
    leaves count the allowance of its own place (:func:`training_lack`,
    :func:`against_reference`); the same words and ``tentative``.
-1d. **Sizes beyond the reach** (per flight; :func:`reach_bias`, :func:`as_stated`): the
+1d. **Sizes beyond the reach** (:func:`reach_bias`, :func:`as_stated`): the
    model error of 1c moves a reading's weight, and it moves its values too: a least-squares
    reading that absorbs a model error e shifts any combination of its values by at most
    sqrt(e'W P e) of that combination's standard errors (Cauchy-Schwarz), and e'W P e is at
@@ -154,7 +154,13 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    and a payload's total, :func:`quadsim.gap.words.total_mass`) is (1.96 + sqrt(E))
    standard errors: the noise's 95 % and that bias bound, added. Posterior, verdict and
    "determined" are the fit's own; within the reach (no :class:`Reach`) nothing changes.
-   Measured cause and coverage: CHANGELOG.md (issue 47).
+   Held out against nominal references the same rule, one judgment for both modes
+   (:func:`heldout_bias`, :func:`flights_bias`; :func:`quadsim.gap.diagnose.decide`): E
+   sums what each flight (training and held out, each at its own place and allowance, as
+   :func:`heldout_share`) earns within its allowance for the reading, the values being
+   fitted on all of them; every stated interval (the readings' rows, the ``effects``
+   entries, the verdict's, a payload's total) is (1.96 + sqrt(E)) standard errors, the
+   words the same. Measured cause and coverage: CHANGELOG.md (issue 47).
 2. **Lack of fit** (:func:`lack_of_fit`), per channel c, on the lead reading: with
    l_c = log(ms_c) (mean squared residual over sigma_c^2), the baseline's mean m_c and
    spread s_c over its n pieces, z_c = (l_c - m_c) / (s_c sqrt(1 + 1/n)) against the
@@ -262,7 +268,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
            "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
-           "extrapolation_share", "reach_baseline", "flights_share", "heldout_share"]
+           "extrapolation_share", "reach_baseline", "flights_share", "heldout_share",
+           "flights_bias", "heldout_bias"]
 
 
 BANDS_HZ = ((0.0, 1.0), (1.0, 5.0), (5.0, 20.0), (20.0, np.inf))
@@ -679,13 +686,32 @@ def reach_bias(ev, null, reach) -> float:
     effect and every source of the model error alike."""
     if reach is None or null is None or ev is null or ev.name == "no_difference":
         return 0.0
-    within, removed = _removal(ev.ms, null.ms, reach)
-    if reach.counts is not None:
-        earned = float(np.sum(np.asarray(reach.counts, float) * within))
+    return flights_bias([(ev.ms, null.ms, reach)], ev.log_z - null.log_z)
+
+
+def flights_bias(flights: list, margin: float) -> float:
+    """:func:`reach_bias` over several flights whose evidence the margin sums (held out: the
+    training and held-out flights, module doc 1d; the rule of :func:`flights_share`):
+    ``flights`` (ms, null_ms, reach) per flight (a reach None: within it, it earns
+    nothing so); sqrt(E), E = sum_j sum_c n_jc min(r_jc, a_jc) the chi^2 every flight's
+    removal within its own allowance earns (the same Cauchy-Schwarz bound: the readings'
+    values are fitted on all of those flights' chi^2 together, and a model error on each
+    moves them by at most what the reading removes of it, summed); without every beyond
+    flight's counts, the share of what they remove within the allowances times twice the
+    positive part of ``margin`` (log Z of the reading less that of "no difference"). 0
+    where no flight has a reach or they remove nothing."""
+    parts = [(_removal(ms, null_ms, reach), reach) for ms, null_ms, reach in flights
+             if reach is not None]
+    if not parts:
+        return 0.0
+    if all(r.counts is not None for _, r in parts):
+        earned = sum(float(np.sum(np.asarray(r.counts, float) * within))
+                     for (within, _), r in parts)
     else:
-        total = float(removed.sum())
+        total = sum(float(removed.sum()) for (_, removed), _ in parts)
         earned = 0.0 if total <= 0 else \
-            float(within.sum()) / total * 2.0 * max(0.0, ev.log_z - null.log_z)
+            sum(float(within.sum()) for (within, _), _ in parts) / total \
+            * 2.0 * max(0.0, margin)
     return float(np.sqrt(max(0.0, earned)))
 
 
@@ -800,11 +826,29 @@ def heldout_share(w, null, *, reaches: tuple, sigma: np.ndarray) -> float:
     scale), each with its own ``reaches[j]`` (:func:`quadsim.gap.reference.reach_of` in
     that sigma; None within reach), the margin ``w.total.log_z - null.total.log_z`` (the
     training evidence and the held-out log-likelihood: what the posterior weighs)."""
+    return flights_share(_heldout_flights(w, null, reaches, sigma),
+                         w.total.log_z - null.total.log_z)
+
+
+def heldout_bias(w, null, *, reaches: tuple, sigma: np.ndarray) -> float:
+    """Held out against nominal references, the bias bound (standard errors) of the
+    reading ``w`` (a :class:`~quadsim.gap.diagnose.Weighed`) beyond the references' reach
+    (module doc 1d, one rule for both modes): :func:`flights_bias` over every flight its
+    evidence counts, as :func:`heldout_share` reads them (training, then held out, each at
+    its own ``reaches[j]``, mean squares over ``sigma``), the margin ``w.total.log_z -
+    null.total.log_z``. 0 for "no difference" itself, without it, or within reach."""
+    if null is None or w is null or w.name == "no_difference":
+        return 0.0
+    return flights_bias(_heldout_flights(w, null, reaches, sigma),
+                        w.total.log_z - null.total.log_z)
+
+
+def _heldout_flights(w, null, reaches: tuple, sigma: np.ndarray) -> list:
+    """(ms, null_ms, reach) per flight of :func:`heldout_share` and :func:`heldout_bias`."""
     mine = list(w.train_residuals) + list(w.held_residuals)
     nulls = list(null.train_residuals) + list(null.held_residuals)
-    flights = [(mean_squares([r], sigma)[0], mean_squares([n], sigma)[0], reach)
-               for r, n, reach in zip(mine, nulls, reaches)]
-    return flights_share(flights, w.total.log_z - null.total.log_z)
+    return [(mean_squares([r], sigma)[0], mean_squares([n], sigma)[0], reach)
+            for r, n, reach in zip(mine, nulls, reaches)]
 
 
 #: the held-out noise model's window (s): the residual's moving average over it is its slow
@@ -1752,7 +1796,8 @@ def judge_heldout(decision, reference, *, before: list, after: list,
              as_row[k]["magnitude"] if k in as_row else "")
             for k, (p, f) in moved.items() if p >= READING_P}
     if said and getattr(decision, "reach", None) is not None:
-        words += reach_words(decision.reach, said, outcome=outcome)
+        words += reach_words(decision.reach, said, outcome=outcome,
+                             bias=getattr(decision.rows[0], "bias", 0.0) if effect else 0.0)
     if lead_name == "no_difference" and getattr(decision, "small", ()):
         name, magnitude, share = decision.small[0]
         magnitude = nominal_words(magnitude, True, references=references)
@@ -1771,6 +1816,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
                      **{k: v[0] for k, v in lack.items()}},
         form_remainder={k: v[0] for k, v in left.items()},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
+        total=(getattr(decision.rows[0], "total", None) or {}) if effect and entry else {},
         fixed=entry["fixed"] if entry else {},
         units={k: fitting.unit_of(k) for k in (entry["params"] if entry else {})},
         confusable_with=tuple(others) if effect else (),
