@@ -233,6 +233,7 @@ __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlo
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
            "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "CONVERGED",
+           "THROUGH_SDS", "unidentified",
            "DELAY_GRID_S", "DELAY_GRID_SDS",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
            "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
@@ -847,6 +848,34 @@ def posterior_cov(h: np.ndarray) -> np.ndarray:
     return (vec / np.maximum(lam, 1.0)) @ vec.T
 
 
+#: a parent's value within this many posterior spreads of 0 is not told from "off" (a 95 %
+#: interval that holds 0): a parameter acting only through it is then not identified
+THROUGH_SDS = 2.0
+
+
+def unidentified(expl: Explanation, theta: np.ndarray, post: np.ndarray, cov: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(post, cov) of ``expl`` at ``theta`` (SI, (P,)) with each parameter that acts only
+    through a parent (``expl.through``) given its prior spread, uncorrelated, where the
+    parent's value lies within :data:`THROUGH_SDS` posterior spreads of 0. Why: the
+    parameter's column is proportional to the parent's value (a payload's position moves
+    the CoM by mass x / m), so its Laplace spread is ~sqrt(s_p^2 + v^2 s_m^2) / |m| (s_p:
+    the data's spread of the product, s_m the parent's, v the value): a local curvature of
+    a bilinear surface, finite at any m != 0, while the data allow m = 0 where the parameter
+    acts on nothing (a position of no payload). "Determined" would then be the
+    parametrisation's, not the data's."""
+    names = list(expl.parameter_names)
+    sd = np.asarray(expl.sd, float)
+    post, cov = post.copy(), cov.copy()
+    for child, parent in expl.through:
+        c, q = names.index(child), names.index(parent)
+        if abs(theta[q]) <= THROUGH_SDS * post[q]:
+            post[c] = sd[c]
+            cov[c, :] = cov[:, c] = 0.0
+            cov[c, c] = sd[c] ** 2
+    return post, cov
+
+
 def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bound: int
             ) -> Evidence:
     """The :class:`Evidence` of ``prob``'s explanation at ``z`` (its parameters in prior
@@ -857,7 +886,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     module doc); a value at a bound keeps half the Laplace volume (log 2 per value into
     log det H). Posterior spreads sd sqrt(diag H^-1), H's eigenvalues floored at the
     prior's 1 (:func:`posterior_cov`): never wider than the prior, and no direction of H
-    hides another's spread. ``ms``: each channel's mean squared
+    hides another's spread; a parameter acting only through a parent that the data do not
+    tell from 0 gets its prior spread (:func:`unidentified`). ``ms``: each channel's mean squared
     residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that fits
     the rotor delay, the rotor channels' over the samples read inside the log
     (:func:`read_inside`). A wind reading also gets its air force (:func:`_air_force`)."""
@@ -873,6 +903,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     else:
         logdet_h, post, cov = 0.0, np.zeros(0), np.zeros((0, 0))
     theta = mean + sd * z
+    if expl.through:
+        post, cov = unidentified(expl, theta, post, cov)
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
     if not np.isfinite(logdet_h):
         # H holds the prior's identity rows, so it is singular only where the fit ended on the
