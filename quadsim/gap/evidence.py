@@ -903,7 +903,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     else:
         logdet_h, post, cov = 0.0, np.zeros(0), np.zeros((0, 0))
     theta = mean + sd * z
-    if expl.through:
+    if getattr(expl, "through", ()):
         post, cov = unidentified(expl, theta, post, cov)
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
     if not np.isfinite(logdet_h):
