@@ -148,7 +148,10 @@ class Reading:
     reading is fitted where one of them can matter); ``per_rotor``: one reading per rotor k,
     "{}" in ``fitted`` and ``variant`` standing for k (the effect's ``one_per_rotor`` index
     fixed at k), the rotors sharing the effect's prior odds; ``rotor_speeds``: only where
-    the references log rotor speeds (True), only where they do not (False), always (None)."""
+    the references log rotor speeds (True), only where they do not (False), always (None);
+    ``through``: (parameter, parent) pairs of a coupled reading, a parameter that acts only
+    through its parent's value (none at the parent's "off" value 0): not identified while the
+    data do not tell the parent from 0 (:func:`quadsim.gap.evidence.laplace`)."""
 
     fitted: tuple[str, ...]
     variant: str = ""
@@ -157,6 +160,7 @@ class Reading:
     kin: tuple[str, ...] = ()
     per_rotor: bool = False
     rotor_speeds: bool | None = None
+    through: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)

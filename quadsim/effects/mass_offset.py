@@ -75,7 +75,8 @@ class MassOffset(EffectBase):
         # share the effect's prior
         readings=(Reading(("mass",), odds=2),
                   Reading(("mass", "x", "y"), "off the centre", odds=2, coupled=True,
-                          kin=("mass_offset", "com_offset", "thrust_curve"))),
+                          kin=("mass_offset", "com_offset", "thrust_curve"),
+                          through=(("x", "mass"), ("y", "mass")))),
         scales={"mass": Scale(lambda p: 0.05 * p.mass,
                               "5 % of the vehicle's mass: a small payload")},
         windows={

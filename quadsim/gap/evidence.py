@@ -232,7 +232,9 @@ from .residual import flight_memo, memoised, min_time_constant
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlocks", "Evidence",
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
-           "read_inside", "shifted_view", "CONVERGED", "DELAY_GRID_S", "DELAY_GRID_SDS",
+           "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "CONVERGED",
+           "THROUGH_SDS", "unidentified",
+           "DELAY_GRID_S", "DELAY_GRID_SDS",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
            "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
            "linear_step", "linearised", "marginal_sd", "reference_determined", "refined",
@@ -635,6 +637,10 @@ class Problem:
         self.lower, self.upper = lower, upper
         self.z_lo, self.z_hi = (lower - self.mean) / self.sd, (upper - self.mean) / self.sd
         self.size = jac.shape[0] + self.marg.shape[1] + len(self.mean)
+        #: how many evaluations of :meth:`stacked` met the wall of values that make no
+        #: vehicle (ModelError): a fit's Jacobian is taken again where any did
+        #: (:func:`full_fit`)
+        self.walls = 0
 
     def _marginal(self, jac: np.ndarray, s_all: np.ndarray) -> Marginal:
         """The marginal of the kept shared columns and the discrepancy's
@@ -704,6 +710,7 @@ class Problem:
         try:
             r = self.residual(z)
         except ModelError:
+            self.walls += 1
             return np.full(self.size, 1e3)
         aug, du = self.marg.profile(r)
         return np.concatenate([aug, du, z])
@@ -745,8 +752,57 @@ def full_fit(inputs: FitInputs, expl: Explanation, start_delay_s: float,
         np.asarray(start, dtype=float), prob.z_lo + 1e-6, prob.z_hi - 1e-6)
     fit = least_squares(prob.stacked, z0, bounds=(prob.z_lo, prob.z_hi),
                         diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
-    return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac,
-                         int(np.count_nonzero(fit.active_mask)))
+    at_bound = int(np.count_nonzero(fit.active_mask))
+    if not prob.walls:
+        return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac, at_bound)
+    # the fit met the wall of values that make no vehicle: the solver's last Jacobian may
+    # hold a difference across it (a relative step of a negative value goes down)
+    vec, jac, near = wall_jacobian(prob, fit.x, FULL_FIT_STEP)
+    if vec is None:
+        return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac, at_bound)
+    return prob.evidence(fit.x, vec, jac.T @ jac, at_bound + int(near))
+
+
+def wall_jacobian(prob: Problem, z: np.ndarray, step: float
+                  ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
+    """(:meth:`Problem.stacked` at ``z``, its forward-difference Jacobian (len, P), whether
+    a step met the wall) with no difference taken across the wall of values that make no
+    vehicle (a :class:`ModelError`, :meth:`Problem.stacked`'s constant 1e3 per entry): column
+    k by a step of ``step`` max(1, |z_k|) (z units, relative as the trust-region solver takes
+    it), forward, turned back at the upper bound or where the step meets the wall. A column
+    whose steps meet the wall both ways keeps the prior's row only (the data say nothing
+    there: that parameter's spread is its prior's). (None, None, False) where ``z`` itself
+    lies beyond the wall (no fit: :func:`laplace` gives it no evidence).
+
+    Why: a difference across the wall is ~1e3 sqrt(len) / step, a precision ~1e16-1e20
+    times the data's; its direction then swamps every other in the posterior (the
+    Crazyflie's references: an off-centre payload fitted lighter than modelled by 0.17 g,
+    whose inertia lies ~1e-3 prior spreads from I_x + I_y = I_z, came out "determined" to
+    2e-12 kg and 2e-22 m; CHANGELOG)."""
+    def at(point: np.ndarray) -> np.ndarray | None:
+        walls = prob.walls
+        row = prob.stacked(point)
+        return None if prob.walls > walls else row
+
+    base = at(z)
+    if base is None:
+        return None, None, False
+    jac = np.zeros((base.size, len(z)))
+    near = False
+    for k in range(len(z)):
+        h = step * max(1.0, abs(float(z[k])))
+        for hk in ((h, -h) if z[k] + h <= prob.z_hi[k] else (-h, h)):
+            point = z.copy()
+            point[k] += hk
+            if prob.z_lo[k] <= point[k] <= prob.z_hi[k]:
+                row = at(point)
+                if row is not None:
+                    jac[:, k] = (row - base) / hk
+                    break
+            near = True
+        else:
+            jac[base.size - len(z) + k, k] = 1.0       # the prior's row of z_k
+    return base, jac, near
 
 
 def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
@@ -779,6 +835,47 @@ def slow_ms(resid: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) -> np
     return np.mean(slow ** 2, axis=0)
 
 
+def posterior_cov(h: np.ndarray) -> np.ndarray:
+    """The posterior covariance (P, P) in z units of the posterior precision ``h`` (P, P,
+    JᵀJ of the stacked residual in z units): H^-1 with H's eigenvalues floored at 1.
+    H = J_dᵀJ_d + I holds the prior's identity rows (:meth:`Problem.stacked`), so in exact
+    arithmetic every eigenvalue is >= 1 and the floor changes nothing; it keeps round-off
+    (or a wall's constant residual) from reporting a spread above the prior's, and it
+    replaces a pseudo-inverse, whose cut-off (1e-15 of the largest eigenvalue) dropped every
+    direction but the largest where one direction's precision was ~1e16 times the rest,
+    so that every parameter came out "determined" (:func:`wall_jacobian`)."""
+    lam, vec = np.linalg.eigh(0.5 * (h + h.T))
+    return (vec / np.maximum(lam, 1.0)) @ vec.T
+
+
+#: a parent's value within this many posterior spreads of 0 is not told from "off" (a 95 %
+#: interval that holds 0): a parameter acting only through it is then not identified
+THROUGH_SDS = 2.0
+
+
+def unidentified(expl: Explanation, theta: np.ndarray, post: np.ndarray, cov: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(post, cov) of ``expl`` at ``theta`` (SI, (P,)) with each parameter that acts only
+    through a parent (``expl.through``) given its prior spread, uncorrelated, where the
+    parent's value lies within :data:`THROUGH_SDS` posterior spreads of 0. Why: the
+    parameter's column is proportional to the parent's value (a payload's position moves
+    the CoM by mass x / m), so its Laplace spread is ~sqrt(s_p^2 + v^2 s_m^2) / |m| (s_p:
+    the data's spread of the product, s_m the parent's, v the value): a local curvature of
+    a bilinear surface, finite at any m != 0, while the data allow m = 0 where the parameter
+    acts on nothing (a position of no payload). "Determined" would then be the
+    parametrisation's, not the data's."""
+    names = list(expl.parameter_names)
+    sd = np.asarray(expl.sd, float)
+    post, cov = post.copy(), cov.copy()
+    for child, parent in expl.through:
+        c, q = names.index(child), names.index(parent)
+        if abs(theta[q]) <= THROUGH_SDS * post[q]:
+            post[c] = sd[c]
+            cov[c, :] = cov[:, c] = 0.0
+            cov[c, c] = sd[c] ** 2
+    return post, cov
+
+
 def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bound: int
             ) -> Evidence:
     """The :class:`Evidence` of ``prob``'s explanation at ``z`` (its parameters in prior
@@ -787,7 +884,10 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
 
     log Z = -1/2 |vec|^2 - 1/2 log det H - 1/2 log det A + log pi (:mod:`quadsim.gap.evidence`,
     module doc); a value at a bound keeps half the Laplace volume (log 2 per value into
-    log det H). Posterior spreads sd sqrt(diag H^+). ``ms``: each channel's mean squared
+    log det H). Posterior spreads sd sqrt(diag H^-1), H's eigenvalues floored at the
+    prior's 1 (:func:`posterior_cov`): never wider than the prior, and no direction of H
+    hides another's spread; a parameter acting only through a parent that the data do not
+    tell from 0 gets its prior spread (:func:`unidentified`). ``ms``: each channel's mean squared
     residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that fits
     the rotor delay, the rotor channels' over the samples read inside the log
     (:func:`read_inside`). A wind reading also gets its air force (:func:`_air_force`)."""
@@ -798,11 +898,13 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     if len(mean):
         # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
         logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
-        cov = sd[:, None] * np.linalg.pinv(h) * sd[None, :]
+        cov = sd[:, None] * posterior_cov(h) * sd[None, :]
         post = np.sqrt(np.clip(np.diag(cov), 0, None))
     else:
         logdet_h, post, cov = 0.0, np.zeros(0), np.zeros((0, 0))
     theta = mean + sd * z
+    if getattr(expl, "through", ()):
+        post, cov = unidentified(expl, theta, post, cov)
     log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
     if not np.isfinite(logdet_h):
         # H holds the prior's identity rows, so it is singular only where the fit ended on the

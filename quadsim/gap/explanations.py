@@ -189,6 +189,9 @@ class Explanation:
     #: curve). It is fitted when one of them, or its own screened reach, can matter
     #: (:func:`quadsim.gap.screen.screened`); empty: always fitted
     kin: tuple = ()
+    #: (parameter, parent) full names: a parameter that acts only through its parent's value
+    #: (``Reading.through``; a payload's position through its mass)
+    through: tuple = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -241,7 +244,8 @@ def _reading(cls: type, reading, sd: dict, alpha: tuple[float, float], *,
     return _one(name, reading.variant.format(rotor) if rotor else reading.variant,
                 [(name, fixed, fitted)], [alpha[0] if e else 0.0 for e in exponent],
                 [alpha[1] if e else prior_of(sd, f"{name}.{p}") for p, e in zip(fitted, exponent)],
-                log_prior=log_prior, coupled=reading.coupled, kin=reading.kin)
+                log_prior=log_prior, coupled=reading.coupled, kin=reading.kin,
+                through=tuple((f"{name}.{c}", f"{name}.{q}") for c, q in reading.through))
 
 
 def explanations_for(reference: Reference, states, names=None) -> list[Explanation]:
