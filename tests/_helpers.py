@@ -60,3 +60,18 @@ def generated_flight(params, effects, seed: int, path: str, speed: float, *,
     return generate_flight(params, path, EffectSet(tuple(effects)),
                            SensorModel(noise=MOCAP_NOISE), seed, duration=duration,
                            speed=speed)[0]
+
+
+def fake_reach(allowance, counts=None, typical: float = 1.0, channels: int = 3):
+    """A stand-in for :class:`quadsim.gap.reference.Reach` with what the judge's share and
+    bias rules read: per channel the references' typical mean square ``typical``, the
+    ``allowance`` (sigma^2 units) and the flight's effective samples ``counts`` (None: not
+    kept); ``excess`` 1 (beyond the reach)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    return SimpleNamespace(typical=np.full(channels, typical),
+                           allowance=np.asarray(allowance, float),
+                           counts=None if counts is None else np.asarray(counts, float),
+                           excess=1.0)

@@ -19,13 +19,13 @@ from scipy.optimize import least_squares
 from quadsim.gap.diagnose import turned_jacobian
 from quadsim.gap.judge import beyond_reach, extrapolation_share, flights_share, heldout_share
 
+from _helpers import fake_reach
+
 C = 3
 
 
 def _reach(allowance, counts=None, typical=1.0):
-    return SimpleNamespace(typical=np.full(C, typical), allowance=np.asarray(allowance, float),
-                           counts=None if counts is None else np.asarray(counts, float),
-                           excess=1.0)
+    return fake_reach(allowance, counts, typical, channels=C)
 
 
 def test_the_earned_parts_of_several_flights_add():

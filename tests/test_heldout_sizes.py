@@ -19,15 +19,13 @@ import pytest
 from quadsim.gap.diagnose import entry_of
 from quadsim.gap.judge import Z95, flights_bias, flights_share, heldout_bias, reach_bias
 
-from _helpers import generated_flight
+from _helpers import fake_reach, generated_flight
 
 C = 3
 
 
 def _reach(allowance, counts=None, typical=1.0):
-    return SimpleNamespace(typical=np.full(C, typical), allowance=np.asarray(allowance, float),
-                           counts=None if counts is None else np.asarray(counts, float),
-                           excess=1.0)
+    return fake_reach(allowance, counts, typical, channels=C)
 
 
 def test_what_each_flight_earns_within_its_allowance_adds():
