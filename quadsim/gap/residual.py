@@ -792,9 +792,10 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
 
 
 #: :func:`_window_means`' last inputs (the flights' t, command and rotor-speed arrays, held)
-#: and result: the two calibrations of one reference set (thrust curve's slope shared or
-#: not) fit the motor map on the same states
-_LAST_MEANS: list = []
+#: and result, as one tuple read and replaced whole (no call can pair one call's inputs with
+#: another's result): the two calibrations of one reference set (thrust curve's slope shared
+#: or not) fit the motor map on the same states
+_LAST_MEANS: list = [None]
 
 
 def _window_means(flights: list[FlightStates]) -> tuple | None:
@@ -805,11 +806,12 @@ def _window_means(flights: list[FlightStates]) -> tuple | None:
     logging both. The last call's answer is kept and given again (the same arrays, not to
     be written to) while the flights hold the same t, command and rotor-speed arrays."""
     arrays = tuple((f.t, f.command, f.rotor_speed) for f in flights)
-    if _LAST_MEANS and len(_LAST_MEANS[0]) == len(arrays) and all(
-            a is b for old, new in zip(_LAST_MEANS[0], arrays) for a, b in zip(old, new)):
-        return _LAST_MEANS[1]
+    last = _LAST_MEANS[0]
+    if last is not None and len(last[0]) == len(arrays) and all(
+            a is b for old, new in zip(last[0], arrays) for a, b in zip(old, new)):
+        return last[1]
     value = _computed_window_means(flights)
-    _LAST_MEANS[:] = [arrays, value]
+    _LAST_MEANS[0] = (arrays, value)
     return value
 
 
