@@ -197,3 +197,58 @@ def test_next_to_the_inertias_wall_the_spreads_are_the_datas(setting):
     jac[:, 0] = (prob.stacked(across) - vec) / -h
     old = evidence.laplace(prob, near_wall, vec, jac.T @ jac, 0)
     assert old.post_sd["mass_offset.mass"] < 1e-6 * old.prior_sd["mass_offset.mass"]
+
+
+def test_a_stacked_cable_fit_next_to_a_wall_keeps_the_datas_spreads(cf, monkeypatch):
+    """The stacked fit with each later flight's own start swing (quadsim.gap.diagnose.
+    fit_own_starts, a solver of its own) next to a wall of values that make no vehicle: two
+    exact training flights with a 15 g payload on a 0.5 m cable against 3 plain references,
+    fitted once freely, then again with a ModelError for every mass above the free fit's
+    MAP + half a finite-difference step (a stand-in for the inertia's triangle
+    inequality). The solver's last Jacobian steps the mass forward across that wall (a
+    column ~1e3 / step): before, the mass's spread came out 4.6e-11 kg (the free fit's
+    8.8e-6 kg) and log Z 12 below. Taken again with no difference across the wall
+    (evidence.fitted_jacobian), every spread is the free fit's to 2 % (measured 0.996-1.003)
+    and log Z the free fit's less log 2 (the wall counted as a bound) to 0.2."""
+    import importlib
+
+    import quadsim.gap.explanations as ex
+    from quadsim.gap.fitting import CableSwing
+
+    dg = importlib.import_module("quadsim.gap.diagnose")   # (the package's diagnose: a function)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        refs = [synthetic_flight(cf, [], seed=s, duration=4.0, speed=1.5) for s in (40, 41, 42)]
+        plain = calibrate(prepare(refs, cf), cf)
+        starts = ({"lean_x": 0.25, "rate_y": 0.5}, {"lean_y": -0.25, "rate_x": -0.5}, {})
+        logs = [synthetic_flight(cf, [CableSwing(mass=0.015, length=0.5, swing_damping=0.5,
+                                                 **s)], seed=80 + k, duration=4.0, speed=1.5)
+                for k, s in enumerate(starts)]
+        against = dg.against_references(prepare(logs[:2], cf), prepare(logs[2:], cf), plain)
+    expl = next(e for e in against.explanations
+                if e.name == "cable_payload" and e.variant == "")
+    assert expl.parameter_names[0] == "cable_payload.mass"
+    reference = against.reference
+    jac = evidence.jacobian(against.stacked, reference,
+                            list(range(len(reference.candidate.parameter_names))),
+                            reference.candidate.effects)
+    inputs = evidence.FitInputs(against.stacked, reference, jac, ex.marginal_sd(reference), {})
+    at = dg.joins(against.train)
+    free = dg.fit_own_starts(inputs, expl, against.start, at=at)
+    mass = free.values["cable_payload.mass"]
+    z = (mass - expl.mean[0]) / expl.sd[0]
+    assert z > 0        # the fit comes from below (z = 0): the wall lies ahead of it
+    wall = mass + 0.5 * evidence.FULL_FIT_STEP * max(1.0, z) * expl.sd[0]
+    own = ex.own_effects
+
+    def walled(e, theta):
+        if e is expl and theta[0] > wall:
+            raise ModelError("beyond the stand-in wall")
+        return own(e, theta)
+
+    monkeypatch.setattr(ex, "own_effects", walled)
+    got = dg.fit_own_starts(inputs, expl, against.start, at=at)
+    assert got.values["cable_payload.mass"] <= wall
+    for k in free.post_sd:
+        assert got.post_sd[k] == pytest.approx(free.post_sd[k], rel=0.02), k
+    assert got.log_z == pytest.approx(free.log_z - np.log(2.0), abs=0.2)
