@@ -252,3 +252,51 @@ def test_a_stacked_cable_fit_next_to_a_wall_keeps_the_datas_spreads(cf, monkeypa
     for k in free.post_sd:
         assert got.post_sd[k] == pytest.approx(free.post_sd[k], rel=0.02), k
     assert got.log_z == pytest.approx(free.log_z - np.log(2.0), abs=0.2)
+
+
+@pytest.mark.parametrize("compact", [False, True])
+def test_a_candidate_fit_next_to_a_wall_keeps_the_datas_errors(monkeypatch, compact):
+    """quadsim.gap.fitting.fit_candidate (the calibration's and the judge's solver, the
+    same 1e3 wall, standard errors from the pseudo-inverse of JᵀJ) next to a wall: an
+    inertia error (+10 %, -5 %, 0 on xx, yy, zz) on a generated crazyflie21 flight fitted
+    once freely, then again with a ModelError for every xx above the free fit's value +
+    half a finite-difference step (a stand-in for the triangle inequality). The solver's
+    last Jacobian steps xx across it (a column ~1e3 / step): before, xx's standard error
+    came out 1.4e-8 of the free fit's, yy's and zz's 2e-17 (the pseudo-inverse's cut-off
+    drops every other direction) and no parameter identified. Taken again with no
+    difference across the wall (evidence.wall_jacobian, prior=False): every standard error
+    the free fit's to 1 % (measured 5e-5), each identified as freely; the same through the
+    compact solver (quadsim.gap.lsq)."""
+    from quadsim.effects import make_effect
+    from quadsim.gap import fitting
+
+    params = load_params("crazyflie21")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        log = synthetic_flight(params, [make_effect("inertia_error", xx=0.1, yy=-0.05)],
+                               seed=0, duration=3.0)
+        states = [prepare([log], params)[0].fit]
+    params = fitting.fit_motor_map(states, params)
+    sigma = fitting.noise_scale(
+        fitting.residuals(states[0], params, [], rotor_channel=True),
+        float(states[0].t[1] - states[0].t[0]), floor=fitting.noise_floor(params, True))
+    cand = next(c for c in fitting.candidates_for(params, True) if c.name == "inertia_error")
+    free = fitting.fit_candidate(cand, states, params, sigma, rotor_channel=True,
+                                 compact=compact)
+    typical = fitting.typical_scales(cand, params)
+    z = free.theta[0] / typical[0]          # the fit starts at 0 (no error)
+    assert z > 0
+    wall = free.theta[0] + 0.5 * fitting.FIT_STEP * max(1.0, z) * typical[0]
+    effects = fitting.Candidate.effects
+
+    def walled(self, theta):
+        if self is cand and theta[0] > wall:
+            raise ModelError("beyond the stand-in wall")
+        return effects(self, theta)
+
+    monkeypatch.setattr(fitting.Candidate, "effects", walled)
+    got = fitting.fit_candidate(cand, states, params, sigma, rotor_channel=True,
+                                compact=compact)
+    assert got.theta[0] <= wall
+    np.testing.assert_allclose(got.stderr, free.stderr, rtol=0.01)
+    assert got.identifiable == free.identifiable == [True, True, True]

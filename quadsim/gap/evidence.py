@@ -779,7 +779,7 @@ def fitted_jacobian(prob: Problem, fit, step: float) -> tuple[np.ndarray, np.nda
     return vec, jac, at_bound + int(near)
 
 
-def wall_jacobian(prob: Problem, z: np.ndarray, step: float
+def wall_jacobian(prob: Problem, z: np.ndarray, step: float, *, prior: bool = True
                   ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
     """(:meth:`Problem.stacked` at ``z``, its forward-difference Jacobian (len, P), whether
     a step met the wall) with no difference taken across the wall of values that make no
@@ -790,7 +790,9 @@ def wall_jacobian(prob: Problem, z: np.ndarray, step: float
     there: that parameter's spread is its prior's). (None, None, False) where ``z`` itself
     lies beyond the wall (no fit: :func:`laplace` gives it no evidence). ``prob``: a
     :class:`Problem` or any fit with its ``stacked`` (the prior's rows z last, a ModelError
-    counted in ``walls``), ``walls``, ``z_lo`` and ``z_hi`` (:func:`fitted_jacobian`).
+    counted in ``walls``), ``walls``, ``z_lo`` and ``z_hi`` (:func:`fitted_jacobian`);
+    ``prior=False``: a fit whose vector holds no prior's rows (:func:`quadsim.gap.fitting.
+    fit_candidate`): a column whose steps meet the wall both ways stays zero.
 
     Why: a difference across the wall is ~1e3 sqrt(len) / step, a precision ~1e16-1e20
     times the data's; its direction then swamps every other in the posterior (the
@@ -819,7 +821,8 @@ def wall_jacobian(prob: Problem, z: np.ndarray, step: float
                     break
             near = True
         else:
-            jac[base.size - len(z) + k, k] = 1.0       # the prior's row of z_k
+            if prior:
+                jac[base.size - len(z) + k, k] = 1.0       # the prior's row of z_k
     return base, jac, near
 
 
