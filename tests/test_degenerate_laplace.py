@@ -300,3 +300,47 @@ def test_a_candidate_fit_next_to_a_wall_keeps_the_datas_errors(monkeypatch, comp
     assert got.theta[0] <= wall
     np.testing.assert_allclose(got.stderr, free.stderr, rtol=0.01)
     assert got.identifiable == free.identifiable == [True, True, True]
+
+
+def test_a_propellers_speed_exponent_is_undetermined_where_its_change_is(setting):
+    """thrust_factor's alpha acts only through its change (a command gives (1 + change)^-alpha
+    of its speed: no load change, no speed change), declared so (Reading.through). Closed
+    form at change = 0: alpha's column is exactly 0 (ThrustFactor.speed_factor is None), so
+    alpha keeps its prior spread. At a change of +0.3 % (within THROUGH_SDS posterior
+    spreads of 0 on this flight, +-0.23 %) the Laplace spread of the bilinear surface was
+    finite (alpha's 0.99994 of its prior's): now exactly the prior's, uncorrelated, not
+    determined. At -5 % (22 spreads from 0) alpha keeps the data's Laplace spread (0.984 of
+    its prior's)."""
+    from quadsim.effects import make_effect
+
+    assert make_effect("thrust_factor", change=0.0, alpha=0.3).speed_factor(np.zeros(3)) is None
+    expl = next(e for e in evidence.explanations_for(setting.reference, setting.states)
+                if e.name == "thrust_factor" and "thrust_factor.alpha" in e.parameter_names)
+    assert expl.through == (("thrust_factor.alpha", "thrust_factor.change"),)
+    prob = setting.problem(expl)
+    names = expl.parameter_names
+    c, a = names.index("thrust_factor.change"), names.index("thrust_factor.alpha")
+    sd = np.asarray(expl.sd, float)
+
+    def at(change):
+        z = np.zeros(len(names))
+        z[c] = change / sd[c]
+        if expl.shift:
+            z[-1] = 0.3
+        return z
+
+    _, jac, _ = evidence.wall_jacobian(prob, at(0.0), evidence.FULL_FIT_STEP)
+    np.testing.assert_array_equal(jac[:-len(names), a], 0.0)       # no data row moves
+    ev, _ = _laplace(prob, at(0.0))
+    assert ev.post_sd["thrust_factor.alpha"] == pytest.approx(sd[a], rel=1e-12)
+    ev, _ = _laplace(prob, at(0.003))
+    assert abs(ev.values["thrust_factor.change"]) <= (
+        evidence.THROUGH_SDS * ev.post_sd["thrust_factor.change"])
+    assert ev.post_sd["thrust_factor.alpha"] == sd[a]
+    assert not ev.determined["thrust_factor.alpha"]
+    row = ev.post_cov[a]
+    assert row[a] == sd[a] ** 2 and np.count_nonzero(row) == 1
+    ev, _ = _laplace(prob, at(-0.05))
+    assert abs(ev.values["thrust_factor.change"]) > (
+        evidence.THROUGH_SDS * ev.post_sd["thrust_factor.change"])
+    assert ev.post_sd["thrust_factor.alpha"] < 0.9999 * sd[a]
