@@ -693,15 +693,12 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     through the origin ``k command`` (an ideal motor and ESC). The line needs both a range of
     commands of at least :data:`MAP_MIN_RANGE` of their mean and the data's support
     (:func:`_line_supported`: the Bayesian information criterion on the averaged samples,
-    counted as one per window). Why the range: over a narrower one (a gentle path: the
-    independent benchmark's Crazyflie references span 2 rad/s of 1565) the line's slope is
-    noise, and the moving mean's leftover lag still favours it. Why the support: measured
-    on the l2f source (an X500 whose rotor speed is exactly proportional to its command;
-    references flown at mean commands 0.557-0.564, each rotor's range 5-6 %), the range
-    alone took the line on three rotors, with intercepts of 8-11 rad/s, off by 0.3-0.5
-    rad/s at the mean command 0.58 of a +160 g flight, 0.5 of the rotor channel's noise;
-    the propeller reading's free speed-per-command exponent took that up and named the mass
-    a propeller change at 100 %, twice."""
+    counted as one per window). Why the range: over a narrower one (a gentle path) the
+    line's slope is noise, and the moving mean's leftover lag still favours it. Why the
+    support: on a motor whose speed is proportional to its command, the range alone takes
+    a line whose intercept is noise, off by a fraction of the rotor channel's noise at
+    another command, which the propeller reading's speed-per-command exponent takes up
+    (measured: CHANGELOG.md, "fit_motor_map's measurements")."""
     from ..vehicle.params import MotorMap
 
     if duty_voltage is not None:
