@@ -264,7 +264,7 @@ def test_a_candidate_fit_next_to_a_wall_keeps_the_datas_errors(monkeypatch, comp
     last Jacobian steps xx across it (a column ~1e3 / step): before, xx's standard error
     came out 1.4e-8 of the free fit's, yy's and zz's 2e-17 (the pseudo-inverse's cut-off
     drops every other direction) and no parameter identified. Taken again with no
-    difference across the wall (evidence.wall_jacobian, prior=False): every standard error
+    difference across the wall (lsq.wall_jacobian, prior=False): every standard error
     the free fit's to 1 % (measured 5e-5), each identified as freely; the same through the
     compact solver (quadsim.gap.lsq)."""
     from quadsim.effects import make_effect

@@ -226,6 +226,7 @@ from .explanations import (  # re-exported: the evidence's public names
 )
 from .fitting import DragLaw, build_effect, plane_step, residuals
 from .fitting import parameter_bounds as fit_bounds
+from .lsq import wall_jacobian  # re-exported: the full fit's (fitted_jacobian)
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
 from .residual import flight_memo, memoised, min_time_constant
 
@@ -777,53 +778,6 @@ def fitted_jacobian(prob: Problem, fit, step: float) -> tuple[np.ndarray, np.nda
     if vec is None:
         return fit.fun, fit.jac, at_bound
     return vec, jac, at_bound + int(near)
-
-
-def wall_jacobian(prob: Problem, z: np.ndarray, step: float, *, prior: bool = True
-                  ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
-    """(:meth:`Problem.stacked` at ``z``, its forward-difference Jacobian (len, P), whether
-    a step met the wall) with no difference taken across the wall of values that make no
-    vehicle (a :class:`ModelError`, :meth:`Problem.stacked`'s constant 1e3 per entry): column
-    k by a step of ``step`` max(1, |z_k|) (z units, relative as the trust-region solver takes
-    it), forward, turned back at the upper bound or where the step meets the wall. A column
-    whose steps meet the wall both ways keeps the prior's row only (the data say nothing
-    there: that parameter's spread is its prior's). (None, None, False) where ``z`` itself
-    lies beyond the wall (no fit: :func:`laplace` gives it no evidence). ``prob``: a
-    :class:`Problem` or any fit with its ``stacked`` (the prior's rows z last, a ModelError
-    counted in ``walls``), ``walls``, ``z_lo`` and ``z_hi`` (:func:`fitted_jacobian`);
-    ``prior=False``: a fit whose vector holds no prior's rows (:func:`quadsim.gap.fitting.
-    fit_candidate`): a column whose steps meet the wall both ways stays zero.
-
-    Why: a difference across the wall is ~1e3 sqrt(len) / step, a precision ~1e16-1e20
-    times the data's; its direction then swamps every other in the posterior (the
-    Crazyflie's references: an off-centre payload fitted lighter than modelled by 0.17 g,
-    whose inertia lies ~1e-3 prior spreads from I_x + I_y = I_z, came out "determined" to
-    2e-12 kg and 2e-22 m; CHANGELOG)."""
-    def at(point: np.ndarray) -> np.ndarray | None:
-        walls = prob.walls
-        row = prob.stacked(point)
-        return None if prob.walls > walls else row
-
-    base = at(z)
-    if base is None:
-        return None, None, False
-    jac = np.zeros((base.size, len(z)))
-    near = False
-    for k in range(len(z)):
-        h = step * max(1.0, abs(float(z[k])))
-        for hk in ((h, -h) if z[k] + h <= prob.z_hi[k] else (-h, h)):
-            point = z.copy()
-            point[k] += hk
-            if prob.z_lo[k] <= point[k] <= prob.z_hi[k]:
-                row = at(point)
-                if row is not None:
-                    jac[:, k] = (row - base) / hk
-                    break
-            near = True
-        else:
-            if prior:
-                jac[base.size - len(z) + k, k] = 1.0       # the prior's row of z_k
-    return base, jac, near
 
 
 def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray

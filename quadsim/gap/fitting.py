@@ -1380,7 +1380,7 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
         # the fit met a wall of values that make no vehicle: the solver's last Jacobian
         # may hold a difference across it, a column ~1e3 / step whose direction the
         # pseudo-inverse keeps alone (every other spread 0); taken again without one
-        from .evidence import wall_jacobian
+        from .lsq import wall_jacobian
 
         _, again, _ = wall_jacobian(walled, result.x, FIT_STEP, prior=False)
         if again is not None:
