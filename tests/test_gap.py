@@ -445,6 +445,41 @@ def test_motor_map_is_static_and_survives_a_narrow_command_range(cf):
     assert np.allclose(speed_of_command(tuned, np.full((1, 4), 0.525)), 525.0, rtol=0.002)
 
 
+def test_a_command_flat_on_the_maps_windows_reads_no_timing():
+    """map_lag on commands whose 0.5 s window means do not vary: a constant 0.57 and a 2 Hz
+    sine of 0.1 (its period divides the window). Their window means differ by round-off
+    alone (2e-13 and 2e-14 of their size, below FLAT_COMMAND), where a straight line through
+    them is rank-deficient: numpy's RankWarning (an error here; before, raised on each lag
+    tried) and a slope of round-off. No timing is read: ("lag", 0.0) and the raw window
+    means for both forms. A 0.3 Hz sine of 0.05 % (its means span 0.19 %, seven decades
+    above the rule) has its 30 ms timing read as before."""
+    import warnings
+
+    from quadsim.gap.residual import FLAT_COMMAND, _moving_mean, flat_command, map_lag
+
+    t = np.arange(0, 20, 0.01)
+    ones = np.ones(4)
+    cases = {"constant": np.full((len(t), 4), 0.57),
+             "2 Hz": 0.5 + 0.1 * np.sin(2 * np.pi * 2.0 * t)[:, None] * ones,
+             "narrow": 0.5 + 0.0005 * np.sin(2 * np.pi * 0.3 * t)[:, None] * ones}
+    for name, command in cases.items():
+        flight = _map_flight(command, 0.03)
+        raw = _moving_mean(flight.command, 0.01)
+        rel = np.ptp(raw[:, 0]) / np.max(np.abs(raw[:, 0]))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.RankWarning)
+            line, gain = map_lag([flight], [0.01], _moving_mean(flight.rotor_speed, 0.01))
+        if name == "narrow":
+            assert rel > 1e6 * FLAT_COMMAND and not flat_command(raw[:, 0])
+            assert line[0] == ("lag", 0.03) and gain[0] == ("delay", 0.03)
+            continue
+        assert 0.0 < rel < 1e-12 and flat_command(raw[:, 0]), name
+        for timing, means in (line, gain):
+            assert timing == ("lag", 0.0)
+            np.testing.assert_array_equal(means, raw)
+    assert flat_command(np.zeros(5)) and flat_command(np.zeros(0))
+
+
 def test_motor_map_takes_the_line_only_where_the_data_support_it(cf):
     """Commands spanning 6 % of their mean (wide enough for a slope): a motor whose speed is
     1000 x command gets the gain through the origin (the line's intercept would be the

@@ -61,10 +61,11 @@ class ThrustFactor(EffectBase):
     facts = EffectFacts(
         fitted=("change",),
         load_exponent="alpha",
-        # with rotor speeds logged the propeller's load moves the speed per command too
+        # with rotor speeds logged the propeller's load moves the speed per command too;
+        # alpha acts only through change (no load change, no speed change: speed_factor)
         readings=(Reading(("change",), kin=("mass_offset", "thrust_curve"), rotor_speeds=False),
                   Reading(("change", "alpha"), coupled=True, kin=("mass_offset", "thrust_curve"),
-                          rotor_speeds=True)),
+                          rotor_speeds=True, through=(("alpha", "change"),))),
         scales={"change": Scale(lambda p: 0.05, "5 %: a propeller batch or the air's density"),
                 "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
         ranges={"change": PlausibleRange(

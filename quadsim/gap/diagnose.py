@@ -605,8 +605,10 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     (Laplace): the explanation's posterior precision is the Schur complement
     H_pp - H_ps H_ss^-1 H_sp of the joint one, and log Z gains -1/2 log det H_ss (with the
     rest: -1/2 log det H of the joint precision); a value at a bound counts as in
-    :func:`quadsim.gap.evidence.laplace`. The Evidence names the explanation's parameters
-    only. Without a start swing, a later flight, or with more than
+    :func:`quadsim.gap.evidence.laplace`; a fit that met the wall of values that make no
+    vehicle takes its joint Jacobian again with no difference across the wall, as the
+    full fit does (:func:`quadsim.gap.evidence.fitted_jacobian`). The Evidence names the
+    explanation's parameters only. Without a start swing, a later flight, or with more than
     :data:`OWN_STARTS_FLIGHTS` flights (:func:`own_starts`): ``full_fit`` unchanged. Joint, not
     profiled: a start fitted inside each outer evaluation would cost its own fit (tens of
     evaluations) per evaluation of the outer fit, and its finite-difference Jacobian would
@@ -614,57 +616,82 @@ def fit_own_starts(inputs, expl: Explanation, start_delay_s: float, *,
     outer fit's Jacobian (4 evaluations of the stacked residual per step)."""
     from scipy.optimize import least_squares
 
-    from .evidence import FULL_FIT_EVALUATIONS, FULL_FIT_STEP, Problem, flight_residual, laplace
-    from .explanations import own_effects
-    from .fitting import Restart
+    from .evidence import FULL_FIT_EVALUATIONS, FULL_FIT_STEP, Problem, fitted_jacobian, laplace
 
     if not own_starts(expl, len(at) + 1):
         return off_the_wall(inputs, expl, evidence.full_fit(inputs, expl, start_delay_s))
-    groups = _start_groups(expl)
     prob = Problem(inputs.states, inputs.reference, expl, inputs.jac, inputs.s_all)
+    joint = OwnStarts(prob, at)
     n = len(prob.mean)
-    idx = [k for g in groups for _ in at for k in g]     # (cable, later flight, START_SWING)
-    mean, sd = prob.mean[idx], prob.sd[idx]
-    lower, upper = prob.lower[idx], prob.upper[idx]
-    z_lo, z_hi = prob.z_lo[idx], prob.z_hi[idx]
-    wall = np.full(prob.size + len(idx), 1e3)
-    # which of the explanation's own effects (one per part) are the groups' cables
-    starting = [name == "cable_payload" and set(START_SWING) <= set(fitted)
-                for name, _, fitted in expl.parts]
-
-    def effects(zz):
-        theta = np.clip(prob.mean + prob.sd * zz[:n], prob.lower, prob.upper)
-        starts = np.clip(mean + sd * zz[n:], lower, upper).reshape(len(groups), len(at), 4)
-        cables = iter(tuple(Restart(a, (float(v[0]), float(v[1])), (float(v[2]), float(v[3])))
-                            for a, v in zip(at, rows)) for rows in starts)
-        own = [CableSwing(restarts=next(cables), **e.values()) if mine else e
-               for e, mine in zip(own_effects(expl, theta), starting)]
-        return theta, own
-
-    def cost(zz):
-        try:
-            theta, own = effects(zz)
-            flight = prob.shifted(float(theta[n - 1])) if expl.shift else prob.states
-            r = flight_residual(flight, prob.reference, prob.shared + own, prob.memo)
-        except ModelError:
-            return wall
-        aug, du = prob.marg.profile(r)
-        return np.concatenate([aug, du, zz])
-
     z0 = np.concatenate([prob.start(start_delay_s),
-                         np.clip(np.zeros(len(idx)), z_lo + 1e-6, z_hi - 1e-6)])
-    fit = least_squares(cost, z0, bounds=(np.concatenate([prob.z_lo, z_lo]),
-                                          np.concatenate([prob.z_hi, z_hi])),
+                         np.clip(np.zeros(len(joint.z_lo) - n), joint.z_lo[n:] + 1e-6,
+                                 joint.z_hi[n:] - 1e-6)])
+    fit = least_squares(joint.stacked, z0, bounds=(joint.z_lo, joint.z_hi),
                         diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
-    h = fit.jac.T @ fit.jac
+    # the wall of values that make no vehicle: no difference across it (as full_fit's)
+    vec, jac, at_bound = fitted_jacobian(joint, fit, FULL_FIT_STEP)
+    h = jac.T @ jac
     h_ss = h[n:, n:]
     sign, logdet_ss = np.linalg.slogdet(h_ss)
     if sign > 0:
         h_own = h[:n, :n] - h[:n, n:] @ np.linalg.solve(h_ss, h[n:, :n])
     else:           # the fit ended on the wall (a zero Jacobian): no evidence
         h_own, logdet_ss = h[:n, :n], np.inf
-    ev = laplace(prob, fit.x[:n], fit.fun, h_own, int(np.count_nonzero(fit.active_mask)))
+    ev = laplace(prob, fit.x[:n], vec, h_own, at_bound)
     return dataclasses.replace(ev, log_z=ev.log_z - 0.5 * logdet_ss)
+
+
+class OwnStarts:
+    """The joint fit of :func:`fit_own_starts`: ``prob``'s explanation (z, P values) and a
+    cable payload's start swing at each later flight's first sample (``at``, :func:`joins`),
+    4 per cable part and later flight (:data:`START_SWING`, each with the explanation's
+    prior of its start: centre, spread and bounds), appended in the order (cable, later
+    flight, START_SWING). ``stacked(zz)``: (profiled residual, marginalised shifts, zz),
+    :meth:`quadsim.gap.evidence.Problem.stacked` with the starts; 1e3 per entry where the
+    values make no vehicle (ModelError), counted in ``walls``; ``z_lo``, ``z_hi``: the
+    bounds of zz. The fields :func:`quadsim.gap.evidence.fitted_jacobian` reads."""
+
+    def __init__(self, prob, at: tuple):
+        self.prob, self.at = prob, tuple(at)
+        self.groups = _start_groups(prob.expl)
+        self.idx = [k for g in self.groups for _ in self.at for k in g]
+        # which of the explanation's own effects (one per part) are the groups' cables
+        self.starting = [name == "cable_payload" and set(START_SWING) <= set(fitted)
+                         for name, _, fitted in prob.expl.parts]
+        self.z_lo = np.concatenate([prob.z_lo, prob.z_lo[self.idx]])
+        self.z_hi = np.concatenate([prob.z_hi, prob.z_hi[self.idx]])
+        self.walls = 0
+
+    def effects(self, zz: np.ndarray) -> tuple[np.ndarray, list]:
+        """(the explanation's values theta (SI), its own effects with each cable's
+        restarts) at ``zz``; raises ModelError where they make no vehicle."""
+        from .explanations import own_effects
+        from .fitting import Restart
+
+        prob, idx, n = self.prob, self.idx, len(self.prob.mean)
+        theta = np.clip(prob.mean + prob.sd * zz[:n], prob.lower, prob.upper)
+        starts = np.clip(prob.mean[idx] + prob.sd[idx] * zz[n:], prob.lower[idx],
+                         prob.upper[idx]).reshape(len(self.groups), len(self.at), 4)
+        cables = iter(tuple(Restart(a, (float(v[0]), float(v[1])), (float(v[2]), float(v[3])))
+                            for a, v in zip(self.at, rows)) for rows in starts)
+        own = [CableSwing(restarts=next(cables), **e.values()) if mine else e
+               for e, mine in zip(own_effects(prob.expl, theta), self.starting)]
+        return theta, own
+
+    def stacked(self, zz: np.ndarray) -> np.ndarray:
+        """The joint fit's vector at ``zz`` (its squared norm the cost; class doc)."""
+        from .evidence import flight_residual
+
+        prob, n = self.prob, len(self.prob.mean)
+        try:
+            theta, own = self.effects(zz)
+            flight = prob.shifted(float(theta[n - 1])) if prob.expl.shift else prob.states
+            r = flight_residual(flight, prob.reference, prob.shared + own, prob.memo)
+        except ModelError:
+            self.walls += 1
+            return np.full(prob.size + len(self.idx), 1e3)
+        aug, du = prob.marg.profile(r)
+        return np.concatenate([aug, du, zz])
 
 
 def turned_jacobian(stacked: Callable, z: np.ndarray, *, bounds: tuple, crosses: Callable,

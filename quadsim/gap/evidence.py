@@ -226,13 +226,15 @@ from .explanations import (  # re-exported: the evidence's public names
 )
 from .fitting import DragLaw, build_effect, plane_step, residuals
 from .fitting import parameter_bounds as fit_bounds
+from .lsq import wall_jacobian  # re-exported: the full fit's (fitted_jacobian)
 from .reference import Reference, centre_term, columns, rotor_spectra, shifted
 from .residual import flight_memo, memoised, min_time_constant
 
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlocks", "Evidence",
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
-           "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "CONVERGED",
+           "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "fitted_jacobian",
+           "CONVERGED",
            "THROUGH_SDS", "unidentified",
            "DELAY_GRID_S", "DELAY_GRID_SDS",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
@@ -752,57 +754,30 @@ def full_fit(inputs: FitInputs, expl: Explanation, start_delay_s: float,
         np.asarray(start, dtype=float), prob.z_lo + 1e-6, prob.z_hi - 1e-6)
     fit = least_squares(prob.stacked, z0, bounds=(prob.z_lo, prob.z_hi),
                         diff_step=FULL_FIT_STEP, max_nfev=FULL_FIT_EVALUATIONS, method="trf")
+    vec, jac, at_bound = fitted_jacobian(prob, fit, FULL_FIT_STEP)
+    return prob.evidence(fit.x, vec, jac.T @ jac, at_bound)
+
+
+def fitted_jacobian(prob: Problem, fit, step: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """(the stacked vector at ``fit.x``, its Jacobian (len, P), how many values count as at a
+    bound) of ``fit`` (scipy's ``least_squares`` of ``prob.stacked`` in z, ``diff_step``
+    ``step``): the solver's own where no evaluation met the wall of values that make no
+    vehicle (``prob.walls`` 0); else taken again by :func:`wall_jacobian` (no difference
+    across the wall), the wall counted as a bound where a step met it (half the Laplace
+    volume, as a value at a bound). The solver's own where ``fit.x`` itself lies beyond the
+    wall (its Jacobian is zero there: :func:`laplace` gives no evidence). ``prob``: a
+    :class:`Problem`, or any fit with its ``stacked``, ``walls``, ``z_lo`` and ``z_hi``
+    (:func:`quadsim.gap.diagnose.fit_own_starts`: the explanation and its nuisance starts).
+    Why: the solver's last Jacobian may hold a difference across the wall (a relative step
+    of a negative value goes down; a forward step from a MAP next to it), whose column is
+    ~1e3 sqrt(len) / step (:func:`wall_jacobian`)."""
     at_bound = int(np.count_nonzero(fit.active_mask))
     if not prob.walls:
-        return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac, at_bound)
-    # the fit met the wall of values that make no vehicle: the solver's last Jacobian may
-    # hold a difference across it (a relative step of a negative value goes down)
-    vec, jac, near = wall_jacobian(prob, fit.x, FULL_FIT_STEP)
+        return fit.fun, fit.jac, at_bound
+    vec, jac, near = wall_jacobian(prob, fit.x, step)
     if vec is None:
-        return prob.evidence(fit.x, fit.fun, fit.jac.T @ fit.jac, at_bound)
-    return prob.evidence(fit.x, vec, jac.T @ jac, at_bound + int(near))
-
-
-def wall_jacobian(prob: Problem, z: np.ndarray, step: float
-                  ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
-    """(:meth:`Problem.stacked` at ``z``, its forward-difference Jacobian (len, P), whether
-    a step met the wall) with no difference taken across the wall of values that make no
-    vehicle (a :class:`ModelError`, :meth:`Problem.stacked`'s constant 1e3 per entry): column
-    k by a step of ``step`` max(1, |z_k|) (z units, relative as the trust-region solver takes
-    it), forward, turned back at the upper bound or where the step meets the wall. A column
-    whose steps meet the wall both ways keeps the prior's row only (the data say nothing
-    there: that parameter's spread is its prior's). (None, None, False) where ``z`` itself
-    lies beyond the wall (no fit: :func:`laplace` gives it no evidence).
-
-    Why: a difference across the wall is ~1e3 sqrt(len) / step, a precision ~1e16-1e20
-    times the data's; its direction then swamps every other in the posterior (the
-    Crazyflie's references: an off-centre payload fitted lighter than modelled by 0.17 g,
-    whose inertia lies ~1e-3 prior spreads from I_x + I_y = I_z, came out "determined" to
-    2e-12 kg and 2e-22 m; CHANGELOG)."""
-    def at(point: np.ndarray) -> np.ndarray | None:
-        walls = prob.walls
-        row = prob.stacked(point)
-        return None if prob.walls > walls else row
-
-    base = at(z)
-    if base is None:
-        return None, None, False
-    jac = np.zeros((base.size, len(z)))
-    near = False
-    for k in range(len(z)):
-        h = step * max(1.0, abs(float(z[k])))
-        for hk in ((h, -h) if z[k] + h <= prob.z_hi[k] else (-h, h)):
-            point = z.copy()
-            point[k] += hk
-            if prob.z_lo[k] <= point[k] <= prob.z_hi[k]:
-                row = at(point)
-                if row is not None:
-                    jac[:, k] = (row - base) / hk
-                    break
-            near = True
-        else:
-            jac[base.size - len(z) + k, k] = 1.0       # the prior's row of z_k
-    return base, jac, near
+        return fit.fun, fit.jac, at_bound
+    return vec, jac, at_bound + int(near)
 
 
 def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray

@@ -434,20 +434,16 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
 
     Why: at the references' speeds (about 1 m/s) a linear and a quadratic law give the same
     force; in a wind of several m/s the quadratic law's force grows with the air speed
-    squared and its slope with the wind. Measured on the l2f and PyFlyt sources (a quadratic
-    drag on each body axis): their wind flights' best reading was the wind (at 1.00), yet
-    it left Fx at 2-14x the references' RMS (``unexplained``) and printed 7 m/s for 3.5.
-    Why both laws: the references' ~1 m/s cannot tell them apart, a wind can. In a wind along
-    x the law on the air speed makes the sideways drag grow with the wind (``|v| v_y``, 3x
-    at 3 m/s), the law per axis does not (``|v_y| v_y``). Measured on l2f's two vehicles (a
-    drag per body axis), with only the first law: a 3 m/s wind was read as wind at 1.00 with
-    the right speed, but Fy stayed at 1.8-2.3x the references' (``unexplained``).
-    Fitted where a wind can matter (``kin``: the plain wind reading within the screen's cut,
-    or the variant's own screened step, :func:`quadsim.gap.screen._kin_matters`): fitted on
-    every flight, the two variants took 14 % of the per-flight CPU on the real flights.
-    Why anchored on the references: with C_d A free the variant is a steady force of any
-    size, and it took a canted rotor (at 1.00, a 7 m/s wind through 65 cm^2) and a rotor
-    drag on the pipeline, whose references show no horizontal drag."""
+    squared and its slope with the wind, so a wind read through the linear law leaves the
+    force's growth unexplained and misreads the speed. Why both laws: the references' ~1 m/s
+    cannot tell them apart, a wind can. In a wind along x the law on the air speed makes the
+    sideways drag grow with the wind (``|v| v_y``, 3x at 3 m/s), the law per axis does not
+    (``|v_y| v_y``). Fitted where a wind can matter (``kin``: the plain wind reading within
+    the screen's cut, or the variant's own screened step,
+    :func:`quadsim.gap.screen._kin_matters`), for the per-flight time. Why anchored on the
+    references: with C_d A free the variant is a steady force of any size, which takes
+    other steady forces (a canted rotor, a rotor drag). The measurements behind each reason:
+    CHANGELOG.md ("wind_readings' and vertical_prior's measurements")."""
     plain = _one("wind", "", [("wind", {}, ("vx", "vy"))], mean, spread, replaces=("wind",),
                  log_prior=-np.log(2.0))
     laws = quadratic_laws(reference)
@@ -487,12 +483,9 @@ def vertical_prior(reference: Reference, fixed: dict) -> tuple[float, float] | N
     place: under the law on the air speed the vertical force ``-1/2 rho C_d A_z |v| v_z``
     grows with the horizontal air speed, so in a wind of several m/s the references' vertical
     drag makes a force their own flights (about 1 m/s) never tested, which the linear
-    marginal cannot move. Measured on command-only crazyflie21 flights
-    (tests/test_commands_wind.py, a 20 cm^2 body drag, no vertical drag): the references'
-    vertical C_d A, 13 cm^2, predicted at 43 +- 50 cm^2 at a 4 m/s flight's place; held
-    there, the wind was read 3.28 +- 0.15 m/s through a sideways C_d A of 28.8 cm^2 (the
-    steady air force's size is fixed, the wind and the area trade). Carried here: 4.08
-    +- 0.25 m/s (95 %), C_d A 19 cm^2, the vertical 3 +- 4 cm^2."""
+    marginal cannot move: held there, the steady air force's size is fixed and the wind and
+    the sideways area trade (measured: CHANGELOG.md, "wind_readings' and vertical_prior's
+    measurements"; tests/test_commands_wind.py)."""
     names = list(reference.candidate.parameter_names)
     if fixed.get("per_axis", 0.0) >= 0.5 or VERTICAL_KEY not in names:
         return None

@@ -1303,6 +1303,46 @@ def flagged(candidate: Candidate, flag: str) -> list[int]:
     return out
 
 
+#: the candidate fit's relative finite-difference step (scipy's ``diff_step``), in units of
+#: each parameter's typical size (:func:`fit_candidate`)
+FIT_STEP = 1e-4
+
+
+@dataclass
+class _Walled:
+    """:func:`fit_candidate`'s residual in units of each parameter's typical size:
+    ``stacked(z)`` the residual over sigma (flattened) of ``candidate`` at ``x0 + z
+    typical`` on ``states``; 1e3 per entry where the values make no vehicle (ModelError,
+    e.g. an inertia breaking the triangle inequality: a wall, not a crash), counted in
+    ``walls``; ``z_lo``, ``z_hi``: the bounds in z. The fields
+    :func:`quadsim.gap.evidence.wall_jacobian` reads."""
+
+    candidate: Candidate
+    states: FlightStates
+    params: VehicleParams
+    sigma: np.ndarray
+    _: dataclasses.KW_ONLY
+    rotor_channel: bool
+    x0: np.ndarray
+    typical: np.ndarray
+    z_lo: np.ndarray
+    z_hi: np.ndarray
+    walls: int = 0
+    #: the residual parts one parameter does not move (:func:`residuals`)
+    memo: dict = field(default_factory=dict)
+
+    def stacked(self, z: np.ndarray) -> np.ndarray:
+        """The residual over sigma at ``z`` (class doc)."""
+        try:
+            effects = self.candidate.effects(self.x0 + z * self.typical)
+            return (residuals(self.states, self.params, effects,
+                              rotor_channel=self.rotor_channel, memo=self.memo)
+                    / self.sigma).ravel()
+        except ModelError:
+            self.walls += 1
+            return np.full(len(self.states.t) * len(self.sigma), 1e3)
+
+
 def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: VehicleParams,
                   sigma: np.ndarray, *, rotor_channel: bool, start: np.ndarray | None = None,
                   max_nfev: int = 60, compact: bool = False) -> Fit:
@@ -1322,33 +1362,30 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
         # Start where the sag is neutral on average: the full voltage at the highest logged.
         x0[k] = np.clip(max(float(np.nanmax(s.vbat)) for s in flights), lower[k], upper[k])
 
-    stacked = stack_states(flights)
-    size = len(stacked.t) * len(sigma)
-    memo: dict = {}     # the residual parts one parameter does not move (:func:`residuals`)
-
-    def fun(z):
-        # The solver works in units of each parameter's typical size, so that finite
-        # differences and trust regions suit parameters from 1e-8 kg m^2 to volts.
-        try:
-            effects = candidate.effects(x0 + z * typical)
-            return (residuals(stacked, params, effects, rotor_channel=rotor_channel,
-                              memo=memo) / sigma).ravel()
-        except ModelError:
-            # Parameters that make the vehicle non-physical (e.g. inertia breaking the
-            # triangle inequality) are walls, not crashes.
-            return np.full(size, 1e3)
-
-    z_lower, z_upper = (lower - x0) / typical, (upper - x0) / typical
+    walled = _Walled(candidate, stack_states(flights), params, sigma,
+                     rotor_channel=rotor_channel, x0=x0, typical=typical,
+                     z_lo=(lower - x0) / typical, z_hi=(upper - x0) / typical)
+    fun, z_lower, z_upper = walled.stacked, walled.z_lo, walled.z_hi
     if compact:
         from .lsq import compact_least_squares
 
         result = compact_least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
-                                       diff_step=1e-4, max_nfev=max_nfev)
+                                       diff_step=FIT_STEP, max_nfev=max_nfev)
     else:
         result = least_squares(fun, np.zeros_like(x0), bounds=(z_lower, z_upper),
-                               diff_step=1e-4, max_nfev=max_nfev, method="trf", x_scale=1.0)
+                               diff_step=FIT_STEP, max_nfev=max_nfev, method="trf", x_scale=1.0)
     theta = x0 + result.x * typical
     jac, res = result.jac / typical, result.fun
+    if walled.walls:
+        # the fit met a wall of values that make no vehicle: the solver's last Jacobian
+        # may hold a difference across it, a column ~1e3 / step whose direction the
+        # pseudo-inverse keeps alone (every other spread 0); taken again without one
+        from .lsq import wall_jacobian
+
+        _, again, _ = wall_jacobian(walled, result.x, FIT_STEP, prior=False)
+        if again is not None:
+            jac = again / typical
+    stacked = walled.states
     dof = max(1, res.size - len(x0))
     s2 = float(res @ res) / dof
     inflation = correlation_time(res.reshape(-1, len(sigma)))

@@ -168,7 +168,8 @@ __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "iden
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
            "load_exponent", "command_speed", "speed_of_command", "command_of_speed",
-           "MAP_WINDOW_S", "MAP_MIN_RANGE", "ROTOR_HORIZON_S", "ROTOR_SUBSTEPS",
+           "MAP_WINDOW_S", "MAP_MIN_RANGE", "FLAT_COMMAND", "flat_command", "ROTOR_HORIZON_S",
+           "ROTOR_SUBSTEPS",
            "min_time_constant", "rate_owner", "rotor_residual", "RotorModel", "rotor_model"]
 
 
@@ -692,15 +693,12 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     through the origin ``k command`` (an ideal motor and ESC). The line needs both a range of
     commands of at least :data:`MAP_MIN_RANGE` of their mean and the data's support
     (:func:`_line_supported`: the Bayesian information criterion on the averaged samples,
-    counted as one per window). Why the range: over a narrower one (a gentle path: the
-    independent benchmark's Crazyflie references span 2 rad/s of 1565) the line's slope is
-    noise, and the moving mean's leftover lag still favours it. Why the support: measured
-    on the l2f source (an X500 whose rotor speed is exactly proportional to its command;
-    references flown at mean commands 0.557-0.564, each rotor's range 5-6 %), the range
-    alone took the line on three rotors, with intercepts of 8-11 rad/s, off by 0.3-0.5
-    rad/s at the mean command 0.58 of a +160 g flight, 0.5 of the rotor channel's noise;
-    the propeller reading's free speed-per-command exponent took that up and named the mass
-    a propeller change at 100 %, twice."""
+    counted as one per window). Why the range: over a narrower one (a gentle path) the
+    line's slope is noise, and the moving mean's leftover lag still favours it. Why the
+    support: on a motor whose speed is proportional to its command, the range alone takes
+    a line whose intercept is noise, off by a fraction of the rotor channel's noise at
+    another command, which the propeller reading's speed-per-command exponent takes up
+    (measured: CHANGELOG.md, "fit_motor_map's measurements")."""
     from ..vehicle.params import MotorMap
 
     if duty_voltage is not None:
@@ -827,6 +825,24 @@ def _computed_window_means(flights: list[FlightStates]) -> tuple | None:
     return command, speed, float(windows), origin
 
 
+#: relative range (of the largest size) below which a rotor's window-mean commands count
+#: as not varying (:func:`map_lag`, :func:`flat_command`). The window means of a constant
+#: command, or of a manoeuvre whose period divides :data:`MAP_WINDOW_S` (a 2 Hz sine),
+#: differ by round-off alone (measured 6e-15-2e-13 of their size on tests/test_gap.py's
+#: flights): a straight line through them is rank-deficient (numpy's ``polyfit`` cut-off is
+#: len x eps of the scaled columns, 4e-13 at 2000 samples, 1.3e-10 at 600 000) and its
+#: slope is round-off. A logged command that varies does so by at least its quantum
+#: (1/65535 of full scale on a 16-bit PWM: 1.5e-5), four decades above.
+FLAT_COMMAND = 1e-9
+
+
+def flat_command(c: np.ndarray) -> bool:
+    """Whether the window-mean commands ``c`` (M,) of one rotor do not vary: their range at
+    most :data:`FLAT_COMMAND` of their largest size (all zero included)."""
+    c = np.asarray(c, float)
+    return bool(np.ptp(c) <= FLAT_COMMAND * np.max(np.abs(c))) if c.size else True
+
+
 #: the lags (s) :func:`map_lag` tries: 0 to 0.2 s (motor time constants plus the rotor
 #: log's delay: 7-60 ms on the sources benchmarked) in steps of 5 ms, a twelfth of
 #: drone-models' 60 ms: the slope's error from a lag off by half a step is below 0.1 %
@@ -859,8 +875,9 @@ def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> tuple[tuple, t
     line takes a false intercept (benchmarks/README.md, drone-models). Why both timing forms
     and a timing per map form: a lag taken for a delayed speed leaves a slope error the
     line's intercept takes up, and :func:`_line_supported` compares the forms with the same
-    freedom only when each has its own best timing. A rotor whose command does not vary:
-    no timing is read (``("lag", 0.0)`` for both, the raw command's means)."""
+    freedom only when each has its own best timing. A rotor whose command does not vary
+    (:func:`flat_command`: its window means equal to round-off, where a line through them is
+    rank-deficient): no timing is read (``("lag", 0.0)`` for both, the raw command's means)."""
     def means(timing):
         return np.concatenate([_moving_mean(_through(f, timing, w), w)
                                for f, w in zip(flights, dt)])
@@ -873,7 +890,7 @@ def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> tuple[tuple, t
         rss = {"line": 0.0, "gain": 0.0}
         for i in range(speed.shape[1]):
             c, s = command[:, i], speed[:, i]
-            if np.ptp(c) <= 0:
+            if flat_command(c):
                 return (("lag", 0.0), raw), (("lag", 0.0), raw)
             rss["line"] += float(np.sum((s - np.polyval(np.polyfit(c, s, 1), c)) ** 2))
             rss["gain"] += float(np.sum((s - float(c @ s / (c @ c)) * c) ** 2))
