@@ -39,10 +39,11 @@ from scipy import signal
 from .logseries import Estimate, LogSeries, Skeleton, confidence_interval
 
 #: below this (Hz) the rotors' roll/pitch torque balances air moments and the body barely turns
-#: (on the nano-drone training runs the torque-to-moment gain is ~0.3-0.5 below 2 Hz, flat
-#: ~0.68 from ~1.5 to 8 Hz; docs/nanodrone.md, "Rotation: what the logs say"); above it the
-#: angular acceleration, the inertia's uncertainty and the rotor-data timing (up to +-17.5 ms
-#: per log) dominate the difference tau - M
+#: (on the nano-drone training runs the rotor-speed differences track the angular
+#: acceleration only between ~1.5 and 8 Hz, issue 45; docs/nanodrone.md, "Rotation: what the
+#: logs say"); above it the angular acceleration, the inertia's uncertainty and the rotor-data
+#: timing (up to +-17.5 ms per log) dominate the difference tau - M. The value is
+#: rotation_analysis's, whose results (9.54e-8 / 1.35e-7) the estimator reproduces
 CUTOFF_HZ = 2.0
 #: the delete-one-log jackknife needs this many logs: with two its two replicates give no
 #: usable spread (the same count as quadsim.identify.rotation's delete-one-log jackknife)
