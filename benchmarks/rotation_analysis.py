@@ -612,32 +612,23 @@ def low_band_common(sig: RotationSignals, cutoff_hz: float = 2.0) -> dict:
 
 def low_band_pooled(sigs: list[RotationSignals], axis: int, cutoff_hz: float = 2.0) -> dict:
     """One flapping coefficient for ``axis`` over several logs (the per-axis ``roll`` or
-    ``pitch`` of :mod:`quadsim.effects.blade_flapping`, kg m/rad): below ``cutoff_hz``,
-    ``tau - M = -c f + c0_k`` by least squares over every log's samples together (each log
-    ``k`` its own constant), as :func:`low_band_balance` per log; ``ci``: the 95 % half-width
-    of a delete-one-log jackknife (1.96 x its standard error), ``per_log``: each log's own c."""
-    sos = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
-    low = lambda x: signal.sosfiltfilt(sos, x - x.mean())            # noqa: E731
-    parts = []
-    for s in sigs:
-        diff = low(s.torque[:, axis]) - low(s.moment[:, axis])
-        f = low(s.flapping[:, axis])
-        parts.append((f - f.mean(), diff - diff.mean()))   # the log's constant projected out
+    ``pitch`` of :mod:`quadsim.effects.blade_flapping`, kg m/rad): the package's estimator
+    (:func:`quadsim.identify.flapping.flapping_estimate`, the one ``identify --logs`` reports)
+    on these signals: below ``cutoff_hz``, ``tau - M = -c f + c0_k`` by least squares over
+    every log's samples together (each log ``k`` its own constant), as
+    :func:`low_band_balance` per log; ``ci``: the 95 % half-width of a delete-one-log
+    jackknife (nan below the estimator's 3 logs), ``per_log``: each log's own c,
+    ``identified``/``why``: the estimator's acceptance."""
+    from quadsim.identify.flapping import flapping_estimate, flapping_part
 
-    def fit(keep):
-        xf = np.concatenate([parts[k][0] for k in keep])
-        yd = np.concatenate([parts[k][1] for k in keep])
-        return -float(xf @ yd) / float(xf @ xf)
-
-    n = len(parts)
-    c = fit(range(n))
-    if n > 1:
-        drop = np.array([fit([k for k in range(n) if k != j]) for j in range(n)])
-        ci = 1.96 * float(np.sqrt((n - 1) / n * np.sum((drop - drop.mean()) ** 2)))
-    else:
-        ci = float("nan")
-    return {"flapping": float(f"{c:.4g}"), "ci": float(f"{ci:.3g}"), "logs": n,
-            "per_log": [float(f"{fit([k]):.3g}") for k in range(n)]}
+    parts = [flapping_part(s.name, s.torque[:, axis], s.moment[:, axis], s.flapping[:, axis],
+                           RATE_HZ, cutoff_hz=cutoff_hz) for s in sigs]
+    est = flapping_estimate(parts, AXES[axis])
+    per_log = [flapping_estimate([p], AXES[axis]).value for p in parts]
+    ci = 0.5 * (est.ci95[1] - est.ci95[0])
+    return {"flapping": float(f"{est.value:.4g}"), "ci": float(f"{ci:.3g}"), "logs": len(parts),
+            "per_log": [float(f"{c:.3g}") for c in per_log], "identified": est.identified,
+            "why": est.why}
 
 
 def _mechanism(sig: RotationSignals, name: str) -> Mechanism | None:
@@ -1025,7 +1016,9 @@ def print_summary(result: dict) -> None:
 def flapping_effect_file(effects_file: Path, pooled: dict, train: list[Path]) -> str:
     """The text of effect file ``effects_file`` plus ``blade_flapping`` with ``roll`` and
     ``pitch`` = ``pooled[axis]["flapping"]`` (:func:`low_band_pooled` on ``train``), each with
-    its unit and source; refused when the file already holds ``blade_flapping``."""
+    its unit and source; refused when the file already holds ``blade_flapping`` or when no
+    axis is identified (``pooled[axis]["identified"]``, the package estimator's acceptance;
+    an axis not identified is left out)."""
     from quadsim.effects.effectfile import load_effect_file, render_effect_file
 
     model = load_effect_file(effects_file)
@@ -1035,13 +1028,17 @@ def flapping_effect_file(effects_file: Path, pooled: dict, train: list[Path]) ->
     entries = [(e.name, {k: (v, model.sources[(e.name, k)]) for k, v in e.values().items()
                          if (e.name, k) in model.sources}) for e in model.effects.effects]
     logs = ", ".join(Path(p).name for p in train)
+    kept = [axis for axis in AXES if pooled[axis].get("identified", True)]
+    if not kept:
+        raise InputError("--write-effects: blade flapping not identified on the --train logs: "
+                         + "; ".join(pooled[axis]["why"] for axis in AXES))
     entries.append(("blade_flapping", {
         axis: (pooled[axis]["flapping"],
                f"python -m benchmarks.rotation_analysis on {len(train)} training log(s) {logs}, "
                f"on top of {Path(effects_file).name}: below 2 Hz, rotor torque minus the "
-               f"body's moment on the flapping regressor, the logs together (low_band_pooled), "
-               f"{pooled[axis]['flapping']:.4g} +- {pooled[axis]['ci']:.2g} (95 %, jackknife "
-               "over logs)") for axis in AXES}))
+               f"body's moment on the flapping regressor, the logs together (low_band_pooled: "
+               f"quadsim.identify.flapping), {pooled[axis]['flapping']:.4g} +- "
+               f"{pooled[axis]['ci']:.2g} (95 %, jackknife over logs)") for axis in kept}))
     header = ("Written by python -m benchmarks.rotation_analysis --write-effects (rerun it "
               "instead of editing by hand): " + ", ".join([*names, "blade_flapping"])
               + f" on {model.params}.")

@@ -161,3 +161,46 @@ def test_flapping_effect_file_adds_both_axes_with_sources(tmp_path):
     assert "a_run1.csv.gz" in model.sources[("blade_flapping", "pitch")]
     with pytest.raises(InputError, match="already in it"):
         ra.flapping_effect_file(out, pooled, [])
+
+
+def test_flapping_effect_file_leaves_out_an_axis_the_estimator_refuses(tmp_path):
+    """One estimator (quadsim.identify.flapping): an axis below its acceptance is not written;
+    none accepted: refused, the reasons named."""
+    from quadsim.core.errors import InputError
+    from quadsim.effects.effectfile import load_effect_file
+
+    base = tmp_path / "d1.toml"
+    base.write_text('schema = "quadsim.effects/1"\nparams = "crazyflie21"\n')
+    pooled = {"roll": {"flapping": 9.1e-8, "ci": 1e-8, "identified": True, "why": ""},
+              "pitch": {"flapping": 1e-9, "ci": 2e-8, "identified": False,
+                        "why": "blade flapping pitch not identified: includes 0"}}
+    out = tmp_path / "d2.toml"
+    out.write_text(ra.flapping_effect_file(base, pooled, [tmp_path / "a_run1.csv.gz"]))
+    (flapping,) = load_effect_file(out).effects.effects
+    assert flapping.axes == (9.1e-8, 0.0)
+    pooled["roll"]["identified"] = False
+    pooled["roll"]["why"] = "blade flapping roll not identified: 2 log(s)"
+    with pytest.raises(InputError, match="roll not identified: 2 log.*pitch not identified"):
+        ra.flapping_effect_file(base, pooled, [])
+
+
+def test_low_band_pooled_is_the_package_estimator():
+    """low_band_pooled's value, interval and acceptance are quadsim.identify.flapping's on the
+    same signals; two logs: no interval, not identified."""
+    from quadsim.identify.flapping import flapping_estimate, flapping_part
+
+    logs = []
+    for k in range(4):
+        torque, flap = _noise(50 + k), _noise(60 + k, 1e3)
+        moment = np.column_stack([torque + (0.9 + 0.05 * k) * 1e-7 * flap] * 2)
+        logs.append(ra.RotationSignals(f"log{k}", np.column_stack([torque, torque]), moment,
+                                       np.column_stack([flap, flap]), np.zeros((N, 2)), None,
+                                       np.zeros(N), None))
+    got = ra.low_band_pooled(logs, 0)
+    est = flapping_estimate([flapping_part(s.name, s.torque[:, 0], s.moment[:, 0],
+                                           s.flapping[:, 0], ra.RATE_HZ) for s in logs], "roll")
+    assert got["flapping"] == pytest.approx(est.value, rel=1e-3)
+    assert got["ci"] == pytest.approx(0.5 * (est.ci95[1] - est.ci95[0]), rel=1e-2)
+    assert got["identified"] and got["ci"] > 0
+    two = ra.low_band_pooled(logs[:2], 0)
+    assert not two["identified"] and np.isnan(two["ci"]) and "jackknife needs 3" in two["why"]

@@ -12,12 +12,17 @@ Exit status 2 with a one-line error on bad input (file and column named).
 
 Your own vehicle (docs/own-vehicle.md)::
 
-    python -m quadsim.identify --logs LOG... --vehicle SKELETON.toml -o VEHICLE.toml
+    python -m quadsim.identify --logs LOG... --vehicle SKELETON.toml -o VEHICLE.toml \
+        [--write-effects EFFECTS.toml]
 
 identifies b, d, the command -> speed map (with voltage and lag) and the inertia where the
 manoeuvres excite it from flight logs (ground and idle spans cut, :mod:`quadsim.logs.spans`)
 and writes a complete parameter set (:mod:`quadsim.identify.from_logs`); logs without rotor
-speeds give the command (and voltage) -> thrust map from the accelerometer.
+speeds give the command (and voltage) -> thrust map from the accelerometer. The blade
+flapping per axis (:mod:`quadsim.identify.flapping`) is printed with its interval and
+written into the set's notes; ``--write-effects`` also writes it, where identified, as an
+effect file for ``quadsim.gap --effects-file`` and the simulators (nothing is written when
+neither axis is identified: a warning says why).
 """
 
 from __future__ import annotations
@@ -72,6 +77,10 @@ def _parser() -> argparse.ArgumentParser:
                           "drag_factor, max_speed, [motor_map] and inertia may be absent")
     own.add_argument("-o", "--output", type=Path, metavar="VEHICLE.toml",
                      help="complete parameter set to write (atomically; never the skeleton)")
+    own.add_argument("--write-effects", type=Path, metavar="EFFECTS.toml",
+                     help="also write an effect file with the blade flapping (roll, pitch) "
+                          "the logs determine, for quadsim.gap --effects-file and the "
+                          "simulators (quadsim.identify.flapping)")
     return parser
 
 
@@ -192,7 +201,7 @@ def _print_audit(findings: list[Finding]) -> None:
 @limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    if args.logs or args.vehicle or args.output:
+    if args.logs or args.vehicle or args.output or args.write_effects:
         return identify_logs_command(args)
     from ..core.args import check_inputs, check_number, distinct_files  # before any work
 
@@ -243,10 +252,13 @@ def main(argv: list[str] | None = None) -> int:
 # The fits themselves are pure functions in quadsim.identify.from_logs.
 
 def _series(states):
+    from ..core.frames import rotate_inverse
     from .from_logs import LogSeries
 
+    velocity = rotate_inverse(states.quat, states.velocity) if states.pose else None
     return LogSeries(states.name, states.t, states.specific_force, states.body_rate,
-                     states.body_accel, states.rotor_speed, states.command, states.vbat)
+                     states.body_accel, states.rotor_speed, states.command, states.vbat,
+                     velocity)
 
 
 def _load_states(paths: list[Path], loaded=None):
@@ -304,7 +316,7 @@ def identify_logs_command(args) -> int:
     from .imu_logs import identify_from_imu_logs, load_checked, wants_imu_path
     from .sanity import check_mass_scale, check_swapped
     from .skeleton import load_skeleton
-    from .vehicle_set import build_set
+    from .vehicle_set import build_set, flapping_effects
 
     bench = [f for f in ("json", "stand", "force_lift", "cfd", "physical", "bifilar",
                          "bifilar_rig") if getattr(args, f)]
@@ -319,6 +331,11 @@ def identify_logs_command(args) -> int:
     check_inputs("--vehicle", [args.vehicle])
     distinct_files({"--logs": args.logs, "--vehicle": [args.vehicle]})
     check_output("-o", args.output, (".toml",), inputs=[args.vehicle, *args.logs])
+    if args.write_effects is not None:
+        check_output("--write-effects", args.write_effects, (".toml",),
+                     inputs=[args.vehicle, *args.logs])
+        if Path(args.write_effects).resolve() == Path(args.output).resolve():
+            raise InputError(f"{args.write_effects}: --write-effects: the same file as -o")
     check_swapped(args.logs, args.vehicle)
     skeleton, data = load_skeleton(args.vehicle)
     check_mass_scale(skeleton)
@@ -343,9 +360,16 @@ def identify_logs_command(args) -> int:
         print(line)
     for warning in ident.warnings + report.warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    effects = flapping_effects(ident, params.name, names) if args.write_effects else None
     atomic_write_text(args.output, text)
     print(f"wrote {args.output} ({params.name}: b = {params.thrust_factor:.5g} N s^2/rad^2, "
           f"d = {params.drag_factor:.5g} N m s^2/rad^2; passes the feasibility guards)")
+    if effects is not None:
+        atomic_write_text(args.write_effects, effects)
+        print(f"wrote {args.write_effects} (blade_flapping on {params.name})")
+    elif args.write_effects is not None:
+        print(f"warning: --write-effects: {args.write_effects} not written: no blade flapping "
+              "identified (above)", file=sys.stderr)
     return 0
 
 

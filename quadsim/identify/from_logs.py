@@ -41,6 +41,12 @@ Fits (N samples pooled over the logs; rotor i at (x_i, y_i) from the CoM, spin s
   battery voltage (V) and v_ref its median; saturated commands (>= :data:`SATURATED`) are
   left out. Stored as the map at cmd 0 and 1 at v_ref, ``voltage_gain`` gamma (1/V) and
   ``time_constant`` tau.
+* **blade flapping** per axis (``roll``, ``pitch``, kg m/rad; the library's
+  ``blade_flapping``): below 2 Hz the rotor torque less the body's moment (with the inertia
+  above) on the flapping regressor ``sum_i Omega_i (v_y, -v_x)``, the logs together, each its
+  own constant, 95 % by a delete-one-log jackknife (:mod:`quadsim.identify.flapping`);
+  identified when 3 or more logs give the interval and it excludes 0. Logs without a body
+  velocity (:class:`LogSeries` ``velocity`` None) are left out of it.
 * **commands only** (no rotor speeds in any log): ``m f_z = sum_i T(u_i)``, with u = cmd
   (1 + gamma (v - v_ref)) and ``T(u) = c2 u^2 + c1 u`` per rotor alike; the rotor-speed scale
   is then the skeleton's ``max_speed`` at u = 1 (b = T(1) / max_speed^2, and the motor map
@@ -60,6 +66,7 @@ import math
 import numpy as np
 
 from ..core.errors import InputError
+from .flapping import identify_flapping
 from .logseries import (
     MIX_TOLERANCE,
     Estimate,
@@ -306,8 +313,11 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
     motor = fit_motor_map(with_cmd) if with_cmd else None
     inertia = with_band_inertia(fit_inertia(with_speed, skeleton, thrust.value, defaults),
                                 with_speed, skeleton, thrust.value)
+    izz = float(skeleton.inertia[2]) if skeleton.inertia is not None else float(defaults[2])
+    flapping = identify_flapping(with_speed, skeleton, thrust.value,
+                                 (inertia[0].value, inertia[1].value, izz))
     ident = LogIdentification(thrust, per_log, inertia, motor, curve, False, notes,
-                              ident_warn)
+                              ident_warn, [e for e in flapping if e is not None])
     ident.warnings += [e.why for e in inertia if not e.identified]
     return ident
 

@@ -22,7 +22,8 @@ MIX_TOLERANCE = 0.05
 class LogSeries:
     """One log, smoothed on a uniform grid (SI). t (N,) s; specific_force, body_rate,
     body_accel (N, 3) body (m/s^2, rad/s, rad/s^2); rotor_speed, command (N, R) (rad/s,
-    normalised 0-1) or None; vbat (N,) V or None; name: the file."""
+    normalised 0-1) or None; vbat (N,) V or None; velocity (N, 3) body-frame velocity (m/s)
+    or None (a log without a pose; the blade flapping needs it); name: the file."""
 
     name: str
     t: np.ndarray
@@ -32,6 +33,7 @@ class LogSeries:
     rotor_speed: np.ndarray | None
     command: np.ndarray | None
     vbat: np.ndarray | None
+    velocity: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,10 @@ class Estimate:
 
 @dataclass
 class LogIdentification:
-    """Everything :func:`identify_from_logs` found; notes and warnings are one line each."""
+    """Everything :func:`identify_from_logs` found; notes and warnings are one line each;
+    ``flapping``: blade flapping [roll, pitch] (kg m/rad, :mod:`quadsim.identify.flapping`),
+    empty where it was not read (no rotor speeds or no velocity), an entry None where no log
+    could show it."""
 
     thrust: Estimate
     per_log_thrust: list[tuple[str, float, float]]
@@ -72,6 +77,7 @@ class LogIdentification:
     command_only: bool
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    flapping: list[Estimate | None] = field(default_factory=list)
 
 
 def correlation_time(residual: np.ndarray, max_lag: int = 200) -> float:

@@ -73,6 +73,38 @@ def _fmt_ci(ci) -> str:
     return f"[{ci[0]:.4g}, {ci[1]:.4g}]"
 
 
+def flapping_lines(ident: LogIdentification, logs: str = "") -> list[str]:
+    """One line per blade-flapping axis (value, 95 % interval, how, and ``logs`` when
+    given); those not identified say why."""
+    out = []
+    tail = f"; {logs}" if logs else ""
+    for axis, e in zip(("roll", "pitch"), ident.flapping):
+        if e.identified:
+            out.append(f"blade_flapping {axis} = {e.value:.4g} kg m/rad, 95 % {_fmt_ci(e.ci95)}"
+                       f" (identify --logs: {e.quality}{tail})")
+        else:
+            out.append(f"blade_flapping {axis}: {e.why} ({e.quality}{tail})")
+    return out
+
+
+def flapping_effects(ident: LogIdentification, params_name: str, log_names: str) -> str | None:
+    """The text of an effect file (:mod:`quadsim.effects.effectfile`) for the set
+    ``params_name``: ``blade_flapping`` with each identified axis, its value and source
+    (the fit, its 95 % interval, the logs); None when no axis is identified."""
+    from ..effects.effectfile import render_effect_file
+
+    values = {axis: (float(f"{e.value:.6g}"),
+                     f"python -m quadsim.identify --logs on {log_names}: {e.quality}; 95 % "
+                     f"{_fmt_ci(e.ci95)}")
+              for axis, e in zip(("roll", "pitch"), ident.flapping) if e.identified}
+    if not values:
+        return None
+    header = ("Written by python -m quadsim.identify --logs --write-effects (rerun it instead "
+              f"of editing by hand): blade_flapping on {params_name}.")
+    return render_effect_file(params_name, f"{params_name} plus the blade flapping its logs "
+                              "determine", [("blade_flapping", values)], header)
+
+
 def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_names: str,
               drag_fit, output: Path) -> tuple[str, VehicleParams, SetReport]:
     """(TOML text, loaded params, report) of the complete set. ``drag_fit(provisional)``
@@ -191,7 +223,10 @@ def build_set(data: dict, skeleton: Skeleton, ident: LogIdentification, log_name
         report.warnings.append(f"d not identified ({why}): {kept} kept")
         report.lines.append(f"d = {float(rotors['drag_factor']['value']):.4g} N m s^2/rad^2 "
                             f"kept: {why}")
-    data["notes"] = list(data.get("notes", [])) + [ident.curve, *ident.notes]
+    report.lines += flapping_lines(ident)
+    report.warnings += [e.why for e in ident.flapping if not e.identified]
+    data["notes"] = list(data.get("notes", [])) + [ident.curve, *ident.notes,
+                                                   *flapping_lines(ident, logs)]
     warnings = list(ident.warnings) + report.warnings
     if warnings:
         data["warnings"] = list(data.get("warnings", [])) + warnings
