@@ -105,7 +105,11 @@ SESSION_SPREAD = SessionSpread(
 
 
 def _phrase(parameter, value, ci, params) -> str:
-    return f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors"
+    """The change in words, with how far another session's air alone moves it
+    (:data:`SESSION_SPREAD`: the change is measured against the references' session, so
+    one within it need not be the propellers)."""
+    return (f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors "
+            f"(another session's air alone: ± {100 * SESSION_SPREAD.relative:.2g} %)")
 
 
 class ThrustFactor(EffectBase):
