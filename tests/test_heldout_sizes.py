@@ -183,3 +183,9 @@ def test_a_generated_mass_held_out_beyond_references_flown_alike_is_covered_with
         v.params["cable_payload.mass"] + v.params["mass_offset.mass"], rel=1e-12)
     assert v.total == lead.total and v.to_json()["total"] == pytest.approx(dict(v.total))
     assert "in all +" in v.answer and "The sizes stated include the bias" in v.answer
+    # on another session's air (issue 47): the whole weighed mass times the spread, in
+    # quadrature; the within-session intervals above unchanged
+    assert v.across == lead.across
+    assert v.across["total_ci"] == pytest.approx(np.hypot(
+        v.total["ci"], v.across["thrust_spread"] * (cf.mass + v.total["mass"])), rel=1e-9)
+    assert "on another session's air" in v.answer

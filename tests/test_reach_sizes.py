@@ -192,6 +192,16 @@ def test_one_speed_group_of_references_states_the_payloads_sizes_with_the_bias_t
             v.params["cable_payload.mass"] + v.params["mass_offset.mass"], rel=1e-12)
         assert "in all +" in v.answer and "The sizes stated include the bias" in v.answer
         assert v.to_json()["total"] == pytest.approx(dict(v.total))
+        # on another session's air: the whole weighed mass (37 g + the total) times the
+        # declared spread, in quadrature with the stated interval (issue 47)
+        across = v.across
+        assert across["total_ci"] == pytest.approx(np.hypot(
+            v.total["ci"], across["thrust_spread"] * (37e-3 + v.total["mass"])), rel=1e-9)
+        assert abs(v.total["mass"] - 7.4e-3) <= across["total_ci"]
+        assert "on another session's air" in v.answer
+        written = v.to_json()["across_sessions"]
+        assert written["total_ci"] == pytest.approx(across["total_ci"], rel=1e-5)
+        assert written["ci"] == pytest.approx(dict(across["ci"]), rel=1e-5)
 
 
 def test_a_generated_mass_flown_beyond_references_flown_alike_is_covered_with_its_bias():

@@ -92,6 +92,8 @@ class CablePayload(EffectBase):
     facts = EffectFacts(
         # the payload swings under gravity and the vehicle's world acceleration
         needs_pose=("velocity", "attitude"),
+        # its weight is read through the rotors' thrust, like a fixed payload's
+        weighed=("mass",),
         words={"mass": Words("payload on a cable", "g", 1e3, _phrase),
                "length": Words("cable length", "m", 1.0, _phrase)},
     )

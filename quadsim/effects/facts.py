@@ -241,6 +241,12 @@ class EffectFacts:
     #: diagnosis cannot weigh the effect (:func:`without_pose`); empty: the body-frame force
     #: and torque balance alone shows it
     needs_pose: tuple[str, ...] = ()
+    #: parameters read through the gravity balance (a mass the rotors weigh): measured in
+    #: units of the references' thrust per Omega^2, so their stated size carries the
+    #: between-session spread of that factor
+    #: (:data:`quadsim.effects.thrust_factor.SESSION_SPREAD`,
+    #: :func:`quadsim.gap.words.across_sessions`)
+    weighed: tuple[str, ...] = ()
 
     def fitted_for(self, rotors: int) -> tuple[str, ...]:
         """The parameters the candidate frees on a vehicle with ``rotors`` rotors."""
@@ -323,11 +329,11 @@ def parameter_facts(cls: type, parameter: str) -> ParameterFacts:
 
 def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
     """What effect class ``cls`` lacks for the diagnosis (empty: complete and consistent):
-    its own ``facts``; every fitted, fixed, per-rotor, voltage-log and no-off parameter and
-    every key of its tables among its parameters (or its fit form's); a typical scale and
-    words with a unit for each fitted parameter; scales positive and finite on every set in
-    ``params_sets`` (and a phrase, where declared, stating a number at that scale); ranges
-    ordered (lower < upper) of a known kind with a source; spreads
+    its own ``facts``; every fitted, fixed, per-rotor, voltage-log, no-off and weighed
+    parameter and every key of its tables among its parameters (or its fit form's); a
+    typical scale and words with a unit for each fitted parameter; scales positive and
+    finite on every set in ``params_sets`` (and a phrase, where declared, stating a number
+    at that scale); ranges ordered (lower < upper) of a known kind with a source; spreads
     on a range where they take theirs from it."""
     out = []
     if "facts" not in vars(cls) or not isinstance(vars(cls)["facts"], EffectFacts):
@@ -344,6 +350,7 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
              + list(facts.with_voltage_log)
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)
+             + list(facts.weighed)
              + [facts.one_per_rotor] * bool(facts.one_per_rotor) + list(facts.nuisance)
              + list(facts.together.parameters if facts.together else ())
              + [facts.load_exponent] * bool(facts.load_exponent))

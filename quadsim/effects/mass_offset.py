@@ -70,6 +70,7 @@ class MassOffset(EffectBase):
 
     facts = EffectFacts(
         fitted=("mass",),
+        weighed=("mass",),
         # a payload at the centre, or off it (its mass and where it sits: it also moves the
         # CoM; the position acts only through the mass, so the fit is coupled); the two
         # share the effect's prior

@@ -26,6 +26,16 @@ In the force balance a uniform ``change`` is collinear with an added mass
 separates them (a thrust-per-Omega^2 change from the air also scales the drag torque d),
 weighing the vehicle or a thrust-stand test settles it.
 
+Between sessions (:data:`SESSION_SPREAD`). Reference flights flown in one session fix b
+and d at that session's air; their flight-to-flight scatter (0.14 % in b on the Crazyflie
+2.1 set, ``models/crazyflie21.toml``) cannot show how far another day's air moves them. The
+ideal gas gives rho = p / (R_specific T), so ``d ln b = d ln p - d ln T``: 0.34 % per K at
+293 K, and a weather swing of 20 hPa is 2 % of the ISA sea-level 1013.25 hPa.
+:func:`air_density_spread` turns a stated room-temperature range and pressure swing into
+the 95 % half-width of the relative thrust change between two sessions; a mass read through
+the gravity balance (:attr:`~quadsim.effects.facts.EffectFacts.weighed`) is measured in
+units of the references' b and carries it (:func:`quadsim.gap.words.across_sessions`).
+
 Example: ``make_effect("thrust_factor", change=-0.1)``: 10 % less thrust per Omega^2 on all
 four rotors (hover needs 5.4 % more speed); with ``alpha=0.2`` a command also gives 2.1 %
 less speed (the heavier load).
@@ -33,16 +43,73 @@ less speed (the heavier load).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .base import EffectBase, EffectLoads, EffectParameter
 from .facts import EffectFacts, PlausibleRange, Reading, Scale, Spread, Words, plus_minus
 
-__all__ = ["ThrustFactor"]
+__all__ = ["SESSION_SPREAD", "SessionSpread", "ThrustFactor", "air_density_spread"]
+
+
+def air_density_spread(temperature_k: tuple[float, float], pressure_swing: float) -> float:
+    """The 95 % half-width (relative, 1 = 100 %) of the change of thrust per Omega^2 between
+    two flight sessions from the air's density alone.
+
+    b is proportional to rho = p / (R_specific T) (ideal gas; module doc), so the relative
+    change between two sessions is ln(rho_1 / rho_2) = ln(p_1 / p_2) - ln(T_1 / T_2).
+    ``temperature_k`` (low, high), K: the room's temperature in both sessions lies within
+    it, so |ln(T_1 / T_2)| <= ln(high / low). ``pressure_swing`` (relative): the largest
+    |ln(p_1 / p_2)| between the two sessions' station pressures (weather). Each bound is
+    taken as the 95 % half-width of an independent error and the two combine in
+    quadrature: sqrt(ln(high / low)^2 + pressure_swing^2). Raises ValueError on
+    temperatures that are not 0 < low <= high or a negative swing."""
+    low, high = (float(t) for t in temperature_k)
+    if not 0.0 < low <= high or not pressure_swing >= 0.0:
+        raise ValueError(f"air_density_spread: temperature_k {temperature_k!r} must be "
+                         f"0 < low <= high (K), pressure_swing {pressure_swing!r} >= 0")
+    return float(np.hypot(np.log(high / low), pressure_swing))
+
+
+@dataclass(frozen=True)
+class SessionSpread:
+    """The between-session spread of the thrust (and drag torque) per Omega^2: ``relative``
+    the 95 % half-width of the relative change (1 = 100 %) between the references' session
+    and a judged flight's, ``temperature_k`` and ``pressure_swing`` what it was computed
+    from (:func:`air_density_spread`), ``source`` one line: where the numbers come from and
+    what is left out."""
+
+    temperature_k: tuple[float, float]
+    pressure_swing: float
+    source: str
+
+    @property
+    def relative(self) -> float:
+        return air_density_spread(self.temperature_k, self.pressure_swing)
+
+
+#: the between-session spread of b and d declared for every vehicle: an indoor flight room
+#: held at 20-26 C (293.15-299.15 K) in both sessions, ln(299.15 / 293.15) = 2.03 %, and
+#: weather moving the station pressure by up to 20 hPa between the two days, 1.97 % of
+#: 1013.25 hPa; in quadrature 2.83 %
+SESSION_SPREAD = SessionSpread(
+    temperature_k=(293.15, 299.15),
+    pressure_swing=20.0 / 1013.25,     # 20 hPa of the ISA sea-level pressure
+    source=("ideal-gas air density rho = p / (R T) (b, d proportional to rho: Leishman 2006, "
+            "ch. 2-3) over an indoor room at 20-26 C in both sessions (the ASHRAE 55 / "
+            "ISO 7730 comfort range of operative temperature) and a weather swing of the "
+            "station pressure up to 20 hPa of the ISA 1013.25 hPa between the two days; a "
+            "swapped or worn propeller set (C_T 2-5 % prop to prop, UIUC propeller data) "
+            "is not included: after a swap, fly new references"))
 
 
 def _phrase(parameter, value, ci, params) -> str:
-    return f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors"
+    """The change in words, with how far another session's air alone moves it
+    (:data:`SESSION_SPREAD`: the change is measured against the references' session, so
+    one within it need not be the propellers)."""
+    return (f"{plus_minus(value, ci, 100)} % thrust per Ω² on all {params.rotor_count} rotors "
+            f"(another session's air alone: ± {100 * SESSION_SPREAD.relative:.2g} %)")
 
 
 class ThrustFactor(EffectBase):

@@ -239,7 +239,7 @@ from .reference import centre_term, columns, envelope_summary, fit_discrepancy, 
 from .reference import position as envelope_position
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
 from .result import Diagnosis, Reading, Series, Verdict
-from .words import batch_answer, nominal_words, total_mass
+from .words import across_sessions, batch_answer, nominal_words, total_mass
 
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
@@ -1445,7 +1445,8 @@ def readings_of(ranked: list, reference: Reference, *,
                            {q: 1.96 * ev.post_sd[q] for q in det},
                            tuple(q for q, ok in ev.determined.items() if not ok),
                            ev.explanation.fixed_values, ev.explanation.variant,
-                           total=total_mass(ev) or {}, bias=b))
+                           total=total_mass(ev) or {}, bias=b,
+                           across=across_sessions(ev, reference.params.mass)))
     return out
 
 

@@ -242,6 +242,7 @@ from .fitting import (
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
 from .words import (
+    across_sessions,
     answer,
     asserted,
     nominal_words,
@@ -1407,16 +1408,19 @@ def outcome_of(lead: str, lack: dict, remains: dict) -> str:
     return "no_significant_gap" if lead == "no_difference" else "effect"
 
 
-def _reading(k: str, p: float, ev, magnitude: str, *, bias: float = 0.0) -> Reading:
+def _reading(k: str, p: float, ev, magnitude: str, *, bias: float = 0.0,
+             vehicle_mass: float | None = None) -> Reading:
     """The :class:`Reading` of ``ev`` (its spreads as stated, :func:`as_stated`), with
     probability ``p``, words ``magnitude`` and the bias bound ``bias`` (standard errors,
-    :func:`reach_bias`) its intervals include."""
+    :func:`reach_bias`) its intervals include; with ``vehicle_mass`` (kg, the model's) its
+    weighed masses on another session's air (:func:`quadsim.gap.words.across_sessions`)."""
     det = [q for q, ok in ev.determined.items() if ok]
     return Reading(k, p, magnitude, ev.log_z, {q: ev.values[q] for q in det},
                    {q: 1.96 * ev.post_sd[q] for q in det},
                    tuple(q for q, ok in ev.determined.items() if not ok),
                    ev.explanation.fixed_values, ev.explanation.variant,
-                   total=total_mass(ev) or {}, bias=bias)
+                   total=total_mass(ev) or {}, bias=bias,
+                   across={} if vehicle_mass is None else across_sessions(ev, vehicle_mass))
 
 
 #: the two readings of a rotor timing difference: the rotors follow their commands with a
@@ -1514,7 +1518,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # beyond the reach the sizes are stated with the bias the model's error can cause there
     sizes = {id(ev): as_stated(ev, reach_bias(ev, null, reach)) for _, _, ev in shown}
     readings = [_reading(reading_name(k, ev), p, sizes[id(ev)],
-                         reading_text(sizes[id(ev)], reference), bias=reach_bias(ev, null, reach))
+                         reading_text(sizes[id(ev)], reference), bias=reach_bias(ev, null, reach),
+                         vehicle_mass=reference.params.mass)
                 for k, p, ev in shown]
     lead = readings[0]
     # the outside hypothesis more probable than the name itself (1b): the name is a
@@ -1579,7 +1584,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         posterior=tuple(readings), readings=tuple(named) if effect else (),
         lack_of_fit={k: v[0] for k, v in lack.items()},
         params=lead.params if effect else {}, ci=lead.ci if effect else {},
-        total=lead.total if effect else {},
+        total=lead.total if effect else {}, across=lead.across if effect else {},
         fixed=lead.fixed if effect else {},
         units={k: fitting.unit_of(k) for k in lead.params} if effect else {},
         confusable_with=tuple(r for r in named if r != verdict),
@@ -1817,6 +1822,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         form_remainder={k: v[0] for k, v in left.items()},
         params=entry["params"] if entry else {}, ci=entry["ci"] if entry else {},
         total=(getattr(decision.rows[0], "total", None) or {}) if effect and entry else {},
+        across=(getattr(decision.rows[0], "across", None) or {}) if effect and entry else {},
         fixed=entry["fixed"] if entry else {},
         units={k: fitting.unit_of(k) for k in (entry["params"] if entry else {})},
         confusable_with=tuple(others) if effect else (),

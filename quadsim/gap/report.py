@@ -113,6 +113,12 @@ __all__ = ["GAP_SCHEMA", "added_effects", "document", "flights_summary", "gather
 # --- the result's JSON Schema -----------------------------------------------------------------
 
 _NUMBER_MAP = {"type": "object", "additionalProperties": {"type": ["number", "null"]}}
+#: a weighed mass's 95 % half-intervals on another session's air (words.across_sessions)
+_ACROSS = {"type": "object", "required": ["thrust_spread", "ci"],
+           "properties": {"thrust_spread": {"type": "number", "minimum": 0},
+                          "ci": _NUMBER_MAP, "total_ci": {"type": "number", "minimum": 0}},
+           "additionalProperties": False}
+
 
 _EFFECT = {
     "type": "object",
@@ -204,6 +210,7 @@ _VERDICT = {
         "probability": {"type": ["number", "null"]},
         "probability_within_library": {"type": ["number", "null"]},
         "outside_library": {"type": "number"},
+        "across_sessions": _ACROSS,
         "posterior": {"type": "array", "items": {"type": "object",
                                                  "required": ["name", "probability"]}},
     },
@@ -216,7 +223,7 @@ _READING = {
                    "magnitude": {"type": "string"}, "log_evidence": {"type": "number"},
                    "params": _NUMBER_MAP, "ci": _NUMBER_MAP, "fixed": _NUMBER_MAP,
                    "undetermined": {"type": "array", "items": {"type": "string"}},
-                   "variant": {"type": "string"}},
+                   "variant": {"type": "string"}, "across_sessions": _ACROSS},
 }
 
 _FLIGHT = {
@@ -237,6 +244,7 @@ _FLIGHT = {
                    "probability": {"type": ["number", "null"]},
                    "probability_within_library": {"type": ["number", "null"]},
                    "outside_library": {"type": "number"},
+                   "across_sessions": _ACROSS,
                    "posterior": {"type": "array", "items": _READING},
                    "reason": {"type": "string"},
                    "differ_on": {"type": "array", "items": {"type": "string"}},

@@ -84,6 +84,11 @@ class Reading(_JsonView):
     #: the bias bound (standard errors) its ``ci`` include beyond the references' reach
     #: (:func:`quadsim.gap.judge.reach_bias`); 0 within it
     bias: float = 0.0
+    #: its weighed masses' 95 % half-intervals on another session's air ({"thrust_spread",
+    #: "ci", "total_ci"}: :func:`quadsim.gap.words.across_sessions`; JSON
+    #: ``across_sessions``); {} without one. ``ci`` and ``total`` stay the within-session
+    #: ones (flights of the references' session compare at them)
+    across: Mapping = field(default_factory=dict)
 
     def to_json(self) -> dict:
         out = {"name": self.name, "probability": self.probability,
@@ -95,6 +100,8 @@ class Reading(_JsonView):
             out["total"] = dict(self.total)
         if self.bias > 0:
             out["bias_se"] = self.bias
+        if self.across:
+            out["across_sessions"] = dict(self.across)
         return plain(out)
 
 
@@ -148,6 +155,8 @@ class Verdict(_JsonView):
     units: Mapping = field(default_factory=dict)
     #: the named reading's added mass in all ({"mass", "ci"}, kg; :attr:`Reading.total`)
     total: Mapping = field(default_factory=dict)
+    #: the named reading's weighed masses on another session's air (:attr:`Reading.across`)
+    across: Mapping = field(default_factory=dict)
     confusable_with: tuple = ()
     separate_by: Mapping = field(default_factory=dict)
     notes: tuple = ()
@@ -208,6 +217,7 @@ class Verdict(_JsonView):
         out.update(tentative=self.tentative, lack_of_fit=dict(self.lack_of_fit),
                    params=dict(self.params), ci=dict(self.ci), fixed=dict(self.fixed),
                    **({"total": dict(self.total)} if self.total else {}),
+                   **({"across_sessions": dict(self.across)} if self.across else {}),
                    units=dict(self.units), confusable_with=list(self.confusable_with),
                    separate_by=dict(self.separate_by))
         for key in ("consistency", "partial"):

@@ -28,13 +28,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..effects.thrust_factor import SESSION_SPREAD
 from .explanations import reference_determined
-from .fitting import describe
+from .fitting import FIT_EFFECTS, describe
 from .residual import channel_unit
 
-__all__ = ["answer", "asserted", "batch_answer", "nominal_words", "outside_words", "reading_text",
-           "reach_words", "reference_text", "residual_text", "stand_in_words", "timing_words",
-           "total_mass"]
+__all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
+           "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
+           "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys"]
 
 
 def total_mass(ev) -> dict | None:
@@ -52,6 +53,67 @@ def total_mass(ev) -> dict | None:
     var = float(np.sum(np.asarray(cov, float)[np.ix_(idx, idx)]))
     return {"mass": float(sum(ev.values[k] for k in parts)),
             "ci": 1.96 * float(np.sqrt(max(0.0, var)))}
+
+
+def weighed_keys(ev) -> list[str]:
+    """The determined parameters of ``ev`` read through the gravity balance (each effect's
+    :attr:`~quadsim.effects.facts.EffectFacts.weighed`), in ``ev.values`` order."""
+    out = []
+    for key in ev.values:
+        effect, _, parameter = key.partition(".")
+        cls = FIT_EFFECTS.get(effect)
+        if cls is not None and parameter in cls.facts.weighed and ev.determined.get(key):
+            out.append(key)
+    return out
+
+
+def across_sessions(ev, vehicle_mass: float, spread: float | None = None) -> dict:
+    """The stated sizes of ``ev``'s weighed masses (:func:`weighed_keys`) if the judged
+    flight's session has another thrust per Omega^2 than the references' (issue 47).
+
+    The rotors weigh the vehicle: at hover M g = b sum Omega^2, and the fit reads the whole
+    weighed mass M = ``vehicle_mass`` (the model's, kg: what the references' b was
+    calibrated with) + the added masses in units of the references' b. A flight whose b is
+    (1 + c) times theirs carries M (1 + c), so the added mass read as m is m + c M: the
+    error multiplies the whole weighed mass, not the payload alone (a 6.6 g payload on a
+    37 g vehicle at c = 2.8 % is 1.2 g off, not 0.19 g). ``spread``: the 95 % half-width of
+    c (relative; default :data:`quadsim.effects.thrust_factor.SESSION_SPREAD`). Its part,
+    ``spread`` M, and the stated within-session half-width ``ci`` (noise, and beyond the
+    references' reach their bias bound: ``ev`` as stated) are independent 95 % half-widths
+    and add in quadrature: sqrt(ci^2 + (spread M)^2). The balance does not say how c M
+    splits between two mass parts (a fixed and a swinging one), so each part carries it in
+    full, as their sum does.
+
+    -> {"thrust_spread": spread, "ci": {key: that half-width, kg}, "total_ci": the sum's
+    (kg; only where :func:`total_mass` states one)}; {} without a determined weighed mass.
+    The within-session ``ci`` (``Reading.ci``, ``total["ci"]``) stay as they are: flights
+    of one session (the references' and a flight flown with them) share their b, and only
+    those compare at that width; a scale's reading compares with these."""
+    keys = weighed_keys(ev)
+    if not keys:
+        return {}
+    s = SESSION_SPREAD.relative if spread is None else float(spread)
+    weighed = float(vehicle_mass) + sum(float(ev.values[k]) for k in keys)
+    part = s * abs(weighed)
+    out = {"thrust_spread": s,
+           "ci": {k: float(np.hypot(1.96 * ev.post_sd[k], part)) for k in keys}}
+    total = total_mass(ev)
+    if total is not None:
+        out["total_ci"] = float(np.hypot(total["ci"], part))
+    return out
+
+
+def session_text(across: dict) -> str:
+    """The words of :func:`across_sessions`: "± 1.3 g on another session's air (its thrust
+    per Ω² ± 2.8 %: 20-26 °C, pressure ± 2 %)" (the sum's where it has one, else the one
+    weighed part's); "" without one."""
+    if not across:
+        return ""
+    ci = across.get("total_ci", max(across["ci"].values()))
+    low, high = (t - 273.15 for t in SESSION_SPREAD.temperature_k)
+    return (f"± {1e3 * ci:.2g} g on another session's air (its thrust per Ω² ± "
+            f"{100 * across['thrust_spread']:.2g} %: {low:.0f}-{high:.0f} °C, pressure ± "
+            f"{100 * SESSION_SPREAD.pressure_swing:.0f} %)")
 
 
 def asserted(ev, key: str, off: float = 0.0) -> bool:
@@ -83,7 +145,9 @@ def reference_text(key: str, value: float, sd: float, reference) -> str:
 
 
 def reading_text(ev, reference) -> str:
-    """The magnitude of a reading in words (determined values only)."""
+    """The magnitude of a reading in words (determined values only). A weighed mass is
+    stated at the references' thrust per Omega^2 and, beside it, on another session's air
+    (:func:`across_sessions`, :func:`session_text`)."""
     params, name = reference.params, ev.name
     keys = [k for k, ok in ev.determined.items() if ok]
     if name == "no_difference":
@@ -106,9 +170,13 @@ def reading_text(ev, reference) -> str:
     ci = {k: 1.96 * ev.post_sd[k] for k in values}
     text = describe(name, values, ci, params, ev.explanation.fixed_values)
     total = total_mass(ev)
+    across = session_text(across_sessions(ev, params.mass))
     if total is not None:
         text += (f"; in all {1e3 * total['mass']:+.2g} ± {1e3 * total['ci']:.2g} g "
-                 "(on the cable and fixed to the frame together: what a scale weighs)")
+                 "(on the cable and fixed to the frame together: what a scale weighs) at "
+                 f"the reference flights' thrust per Ω², {across}")
+    elif across:
+        text += f" at the reference flights' thrust per Ω²; {across}"
     if calm and all(ev.determined.get(k) for k in calm):
         text += (f"; in calm air (the wind refitted with it, within ±"
                  f"{max(1.96 * ev.post_sd[k] for k in calm):.2g} m/s)")
@@ -216,6 +284,7 @@ def nominal_words(text: str, own: bool, *, references: bool = False) -> str:
         text = text[:cut] + text[end:]
     return (text.replace("no difference from the reference flights",
                          "no difference from the nominal model")
+            .replace("the reference flights' thrust per Ω²", "the model's thrust per Ω²")
             .replace(" (beyond the references')", "")
             .replace(" beyond the references' at their rotor-drag coefficient",
                      " at the fitted rotor-drag coefficient"))
