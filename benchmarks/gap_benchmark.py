@@ -98,6 +98,12 @@ the same for 28 cases from Drake 1.51.1 (MultibodyPlant, Propeller, its RK3, Qua
 0.775 kg Skydio 2 values, LQR gains from Drake; rotor-speed scale, linear drag and the case
 handles this project's) against 8 nominal flights; built blind.
 
+drones-sim source (``--independent --source drones-sim --cache DIR``,
+:mod:`benchmarks.dsim_cases`): the same for 28 cases from drones-sim 0.2.0 (its RK4 plant,
+rotor forces, 40 ms motor lag, linear drag, wind and rotor-efficiency handles, its 1.0 kg
+default vehicle and its geometric controller; the CoM handle and added loads this
+project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -614,6 +620,9 @@ SIM_SOURCES = {
                      "pip install 'quadsim[dm]'"),
     "drake": ("benchmarks.drake_cases", "benchmarks.drake_source", "drake_available",
               "pip install 'quadsim[drake]'"),
+    "drones-sim": ("benchmarks.dsim_cases", "benchmarks.dsim_source", "dsim_available",
+                   ("pip install 'quadsim[dsim]', or pip install --no-deps drones-sim==0.2.0 "
+                    "with numpy, scipy and matplotlib")),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
