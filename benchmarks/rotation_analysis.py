@@ -62,7 +62,8 @@ with ``roll`` and ``pitch`` from :func:`low_band_pooled` on the ``--train`` logs
 with its unit and source (this command and the logs); an effect file that already holds
 ``blade_flapping`` is refused.
 
-Results and their reading: docs/nanodrone.md, "Rotation: what the logs say".
+Results and their reading: docs/nanodrone.md, "Why the rotor speeds over-predict roll and pitch";
+the tables as measured: benchmarks/HISTORY.md, "Rotation: what the logs say".
 """
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ balance below 2 Hz, each regressor the library effect's own load per unit parame
 flight's RMS speed, hover thrust as a mass and battery voltage (:func:`air_loads`;
 docs/identification.md, "The crazyflie21 set's air loads"). ``--side-force`` prints each
 flight's steady body-frame side force after the set and those air loads, and the lean of
-rotor 2 it would read as beyond the nominal flights' (:func:`side_forces`; docs/nanodrone.md,
+rotor 2 it would read as beyond the nominal flights' (:func:`side_forces`; benchmarks/HISTORY.md,
 "Is the mixed campaign's rotor-2 tilt shared?").
 
 Usage::

@@ -108,7 +108,7 @@ def test_untouched_flights_show_the_files_air_loads(model):
 @pytest.mark.skipif(not (DATA / "mixed").is_dir(), reason="shared data absent")
 def test_side_force_of_plain_mixed_flights():
     """The steady side force behind the rotor-2 tilt named on plain mixed flights
-    (docs/nanodrone.md, "Is the mixed campaign's rotor-2 tilt shared?"): the 20 nominal
+    (benchmarks/HISTORY.md, "Is the mixed campaign's rotor-2 tilt shared?"): the 20 nominal
     flights share +2.59 mN along body y (SD 0.19); plain flight_103 carries +1.2 mN (x) and
     +1.5 mN (y) beyond that, a rotor-2 lean of +0.66 / +0.83 deg, while plain flight_115,
     flown on the same path at the same speed, carries none of it."""

@@ -29,7 +29,8 @@ from _helpers import shared_effects
 
 #: hidden blade flapping of the references (kg m/rad; pitch 1.5x roll, as the nano-drone's
 #: logs read): at 1 m/s and hover speed a moment of ~9e-4 N m, the size of the real
-#: Crazyflie references' 0-2 Hz moment residual (docs/nanodrone.md)
+#: Crazyflie references' 0-2 Hz moment residual (benchmarks/HISTORY.md, "The real references'
+#: inertia on the torque side in the band")
 FLAPPING = 1e-7
 #: tolerance on the relative inertia error: the torque-side fit regresses the rotors' torque
 #: on the body's differentiated gyro, whose noise (0.02 rad/s here) attenuates the inertia a

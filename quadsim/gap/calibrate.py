@@ -136,7 +136,8 @@ Stages
    references moved their rotor timing 0.1 -> 2.8 ms and their rate damping 0 ->
    0.015-0.026 N m s/rad and that source's inertia errors went unnamed; on generated
    references sharing a flapping moment, the yaw inertia and the timing moved and the set
-   no longer judged itself clean (docs/nanodrone.md).
+   no longer judged itself clean (benchmarks/HISTORY.md, "The real references' inertia on the
+   torque side in the band").
 3. Between-flight scatter: one Gauss-Newton step from theta_ref on each reference flight
    alone gives that flight's value theta_j and standard error se_j; the scatter is the
    method-of-moments random-effect variance ``tau^2 = max(0, var_j(theta_j) - mean_j se_j^2)``.

@@ -26,7 +26,8 @@ is reported with the reason and not used.
 
 This is the estimator of ``benchmarks.rotation_analysis --write-effects`` (its
 ``low_band_pooled`` calls :func:`flapping_estimate`): on the nano-drone benchmark's training
-runs roll 9.54e-8 +- 0.51e-8, pitch 1.35e-7 +- 0.08e-7 kg m/rad (docs/nanodrone.md).
+runs roll 9.54e-8 +- 0.51e-8, pitch 1.35e-7 +- 0.08e-7 kg m/rad (docs/identification.md,
+"Blade flapping per axis from the logs").
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ from .logseries import Estimate, LogSeries, Skeleton, confidence_interval
 
 #: below this (Hz) the rotors' roll/pitch torque balances air moments and the body barely turns
 #: (on the nano-drone training runs the rotor-speed differences track the angular
-#: acceleration only between ~1.5 and 8 Hz, issue 45; docs/nanodrone.md, "Rotation: what the
-#: logs say"); above it the angular acceleration, the inertia's uncertainty and the rotor-data
+#: acceleration only between ~1.5 and 8 Hz, issue 45; benchmarks/HISTORY.md, "Rotation: what
+#: the logs say"); above it the angular acceleration, the inertia's uncertainty and the rotor-data
 #: timing (up to +-17.5 ms per log) dominate the difference tau - M. The value is
 #: rotation_analysis's, whose results (9.54e-8 / 1.35e-7) the estimator reproduces
 CUTOFF_HZ = 2.0

@@ -7,7 +7,8 @@ flapping, the rotor drag's lever) and turns the body little: that torque has no 
 acceleration to go with it, and the fit explains too little (on the nano-drone benchmark's
 training runs R^2 0.20 roll, 0.10 pitch) to give an inertia. Between ``BAND_HZ`` the
 rotors drive the body: there the measured moment follows ``b l dOmega^2`` with a flat gain and
-a few milliseconds of delay (docs/nanodrone.md, "Rotation: what the logs say").
+a few milliseconds of delay (docs/nanodrone.md, "Why the rotor speeds over-predict roll and
+pitch"; the per-run tables: benchmarks/HISTORY.md, "Rotation: what the logs say").
 
 Per log: torque ``tau = b sum_i y_i Omega_i^2`` (roll; pitch ``-b sum_i x_i Omega_i^2``) and
 the body terms ``wdot_x`` and ``w_y w_z`` (roll; pitch ``wdot_y``, ``w_x w_z``) are band-passed
