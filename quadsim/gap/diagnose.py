@@ -1981,19 +1981,22 @@ def refined_rows(weighed: WeighedFlight, wanted: set) -> WeighedFlight:
     convergence (:func:`quadsim.gap.evidence.evaluate` with ``full=True``, the delay's
     start from its first "no difference", as the screen's): the value and spread a reading
     has on that flight (:func:`quadsim.gap.calibrate.readings`). ``weighed`` itself where
-    none is screened."""
+    none is screened, or where the fit fails (the rows stay screened: no reading, as before)."""
     idx = [k for k, ev in enumerate(weighed.rows) if ev.name in wanted and ev.screened]
     if not idx:
         return weighed
     nulls = [ev.explanation for ev in weighed.rows
              if ev.name == "no_difference" and ev.explanation.shift][:1]
     expl = nulls + [weighed.rows[k].explanation for k in idx]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        fitted = evaluate(weighed.states, weighed.reference, expl,
-                          start_delay_s=start_delay(weighed.flight, weighed.reference),
-                          full=True)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fitted = evaluate(weighed.states, weighed.reference, expl,
+                              start_delay_s=start_delay(weighed.flight, weighed.reference),
+                              full=True)
+    except (InputError, ModelError, ValueError, np.linalg.LinAlgError):
+        return weighed
     rows = list(weighed.rows)
     for k, ev in zip(idx, fitted[len(expl) - len(idx):]):
         rows[k] = ev
