@@ -181,7 +181,7 @@ from .calibrate import (
     negligible,
     readings,
     reference_key,
-    self_check_of,
+    settled_self_check,
     shared_candidate,
     spreads,
 )
@@ -1938,8 +1938,10 @@ def reference_summary(ref: Reference) -> dict:
 def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     """The references judged against each other (:mod:`quadsim.gap.calibrate`): each
     reference weighed against :func:`~quadsim.gap.calibrate.leave_one_out` of ``ref``, then
-    judged with the other references' readings as the practical-significance scale. None
-    for fewer than 3 references."""
+    judged with the other references' readings as the practical-significance scale, a false
+    alarm's readings read on every reference first
+    (:func:`~quadsim.gap.calibrate.settled_self_check`, :func:`refined_rows`). None for
+    fewer than 3 references."""
     if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
         return None
     # each reference's inverse information, as the calibration took it (its one-step
@@ -1956,13 +1958,49 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
         weighed.append(dataclasses.replace(w, memo=None) if isinstance(w, WeighedFlight)
                        else None)
 
-    def judge_fn(j, check):
-        return verdict_of(weighed[j], check)
+    def rows_of(w):
+        return rows_at_reference_voltage(
+            w.rows, getattr(getattr(w.flight, "fit", w.flight), "vbat", None), ref.vbat_ref)
 
-    return self_check_of([f.name for f in ref_flights],
-                         [None if w is None else rows_at_reference_voltage(
-                             w.rows, getattr(getattr(w.flight, "fit", w.flight), "vbat", None),
-                             ref.vbat_ref) for w in weighed], judge_fn)
+    # a false alarm's readings read on every reference (calibrate.settled_self_check)
+    return settled_self_check([f.name for f in ref_flights], weighed, rows_of=rows_of,
+                              judge_of=verdict_of, refine=refined_rows)
+
+
+def start_delay(flight, reference: Reference) -> float:
+    """Where a flight's rotor delay starts against ``reference`` (s): its logged rotor
+    delay less the references' rotor shift (0 where either is not known)."""
+    mine = (flight.delays_ms or {}).get("rotor")
+    if mine is None or "rotor" not in reference.delays_ms:
+        return 0.0
+    return 1e-3 * mine - reference.rotor_shift_s
+
+
+def refined_rows(weighed: WeighedFlight, wanted: set) -> WeighedFlight:
+    """``weighed`` with its screened rows of the readings named in ``wanted`` fitted to
+    convergence (:func:`quadsim.gap.evidence.evaluate` with ``full=True``, the delay's
+    start from its first "no difference", as the screen's): the value and spread a reading
+    has on that flight (:func:`quadsim.gap.calibrate.readings`). ``weighed`` itself where
+    none is screened, or where the fit fails (the rows stay screened: no reading, as before)."""
+    idx = [k for k, ev in enumerate(weighed.rows) if ev.name in wanted and ev.screened]
+    if not idx:
+        return weighed
+    nulls = [ev.explanation for ev in weighed.rows
+             if ev.name == "no_difference" and ev.explanation.shift][:1]
+    expl = nulls + [weighed.rows[k].explanation for k in idx]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            fitted = evaluate(weighed.states, weighed.reference, expl,
+                              start_delay_s=start_delay(weighed.flight, weighed.reference),
+                              full=True)
+    except (InputError, ModelError, ValueError, np.linalg.LinAlgError):
+        return weighed
+    rows = list(weighed.rows)
+    for k, ev in zip(idx, fitted[len(expl) - len(idx):]):
+        rows[k] = ev
+    return dataclasses.replace(weighed, rows=rows)
 
 
 @dataclass(frozen=True)
@@ -2070,10 +2108,7 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
                 info = inverse_information(states, reference)
             place = envelope_position(states, reference.envelope, info)
             reference = local_reference(reference, place)   # the model at this flight
-            start = 0.0
-            mine = (flight.delays_ms or {}).get("rotor")
-            if mine is not None and "rotor" in reference.delays_ms:
-                start = 1e-3 * mine - reference.rotor_shift_s
+            start = start_delay(flight, reference)
             memo: dict = {}        # the flight's residual parts and shared Jacobian, kept
             law = evidence.choose(states, reference, start, memo)
             expl = evidence.under(explanations_for(reference, states, effects), law)
