@@ -369,9 +369,10 @@ class SelfCheck:
         on = f" on {', '.join(chans[:3])}" if chans else ""
         if self.clean:
             return (f"Self-check: {k} of the {n} reference flights judged against the others "
-                    f"is not no_significant_gap: {which}{more}.")
+                    f"{'is' if k == 1 else 'are'} not no_significant_gap: {which}{more}.")
         return (f"Your references disagree with each other{on}: {k} of the {n}, judged "
-                f"against the others, are not no_significant_gap ({which}{more}); verdicts "
+                f"against the others, {'is' if k == 1 else 'are'} not no_significant_gap "
+                f"({which}{more}); verdicts "
                 "against them are not stated as confident.")
 
     def to_json(self) -> dict:

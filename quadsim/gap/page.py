@@ -533,7 +533,8 @@ def _self_check(model: dict) -> str:
                 "the others, comes out no_significant_gap.")
     which = ", ".join(f"{_page_short(a['flight'])} ({a['verdict']})" for a in alarms[:4])
     return (f"Reference self-check: {len(alarms)} of the {n} reference flights, judged "
-            f"against the others, are not no_significant_gap: {which}"
+            f"against the others, {'is' if len(alarms) == 1 else 'are'} not "
+            f"no_significant_gap: {which}"
             + ("" if check.get("clean", True) else "; the references disagree with each other")
             + ".")
 
