@@ -34,6 +34,27 @@ def check_source_flight(log, heavy_log, params, extra_mass: float, shared: list,
     assert np.all(rms[3:6] < 0.015 * weight * arm), rms
 
 
+def check_case_table(module, counts: tuple[int, int, int], shared: tuple[str, ...]) -> list:
+    """A source's frozen case table (``module``: its cases module) and what every source's
+    shares: the same on a second draw; ``counts`` (no-effect, in-library, outside) cases;
+    seeds apart from the references'; each in-library truth (not a delay) a library effect
+    named by its true difference (:func:`module.library_truth`) on top of the ``shared``
+    effects, in that order. Returns the cases (for the source's own range checks)."""
+    from quadsim.effects import EFFECTS
+
+    cases = module.case_list()
+    assert module.case_list() == cases and len(cases) == sum(counts)
+    kinds = [c["kind"] for c in cases]
+    assert (kinds.count("none"), kinds.count("library"), kinds.count("outside")) == counts
+    assert not {c["seed"] for c in cases} & {s.seed for s in module.reference_specs()}
+    for case in cases:
+        if case["kind"] == "library" and case["truth"] != "rotor_delay":
+            names = [x.name for x in module.library_truth(case)]
+            assert tuple(names[:len(shared)]) == tuple(shared), names
+            assert case["truth"] in EFFECTS and case["truth"] in names
+    return cases
+
+
 def check_motor_case_list(module, shared: tuple[str, str], mass: float, arm: float,
                           payload_kg: tuple[float, float] | None = None) -> None:
     """A DC-motor source's frozen cases (``module``: its cases module; the table
