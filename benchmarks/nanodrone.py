@@ -73,6 +73,7 @@ __all__ = [
     "curves",
     "make_windows",
     "naive_prediction",
+    "of_run",
     "physics_prediction",
     "rate_skill",
     "rotor_delay",
@@ -260,6 +261,19 @@ def curves(windows: Windows, prediction: dict, protocol: str = "published") -> d
             runs = np.unique(windows.run)
             out[key] = np.mean([err[windows.run == r].mean(0) for r in runs], axis=0)
     return out
+
+
+def of_run(windows: Windows, prediction: dict, run: int) -> tuple[Windows, dict]:
+    """The windows of run index ``run`` alone (``windows.run == run``, in their order) and
+    ``prediction`` (quantity -> (B, H, k)) restricted to them: what :func:`make_windows` and
+    the same prediction give for that run's log alone, so that :func:`score` of it is the
+    run's own row (each run reported, not only the pooled one)."""
+    keep = windows.run == run
+    part = Windows(windows.position[keep], windows.velocity[keep], windows.quat[keep],
+                   windows.body_rate[keep], windows.rotor_speed[keep],
+                   {k: v[keep] for k, v in windows.truth.items()}, windows.run[keep],
+                   windows.names)
+    return part, {k: prediction[k][keep] for k in QUANTITIES}
 
 
 def summary(curve: dict) -> dict:

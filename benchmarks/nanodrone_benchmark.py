@@ -31,9 +31,11 @@ Usage::
         [--runs test|validation] [--diagnosed EFFECTS.toml] [--align-rotors]
 
 JSON: ``{"protocol": P, "windows": B, "rows": {NAME: {"p": [h1, h10, h50, SimErr], "v": ...,
-"R": ..., "w": ...}}, "rate_skill": {ROW: ...}}`` (m, m/s, rad, rad/s; ``rate_skill``: per
-body axis, how much of the body-rate change the nominal and diagnosed rows get right,
-:func:`benchmarks.nanodrone.rate_skill`); same inputs give the same bytes. The wall and
+"R": ..., "w": ...}}, "rate_skill": {ROW: ...}, "by_run": {RUN: {ROW: {...}, "rate_skill":
+{ROW: ...}}}}`` (m, m/s, rad, rad/s; ``rate_skill``: per body axis, how much of the body-rate
+change the nominal and diagnosed rows get right, :func:`benchmarks.nanodrone.rate_skill`;
+``by_run``: the :data:`BY_RUN` rows scored on each run's windows alone under the same
+protocol, :func:`benchmarks.nanodrone.of_run`); same inputs give the same bytes. The wall and
 CPU time of each model's predictions go to stdout.
 """
 
@@ -65,6 +67,9 @@ ROOT = Path(__file__).resolve().parent.parent
 TEST_RUNS = ("melon_20251017_run1", "melon_20251017_run4", "melon_20251017_run5")
 NOMINAL = ROOT / "models/nanodrone_cf21bl.toml"
 DIAGNOSED = ROOT / "models/effects/nanodrone_cf21bl_diagnosed.toml"
+#: the rows also scored run by run (``by_run``): the published physics baseline's
+#: reproduction, the diagnosed model and its forces with the rate held
+BY_RUN = ("physics", "quadsim_diagnosed", "quadsim_diagnosed_rate_held")
 
 
 def run_logs(data: Path, runs: str) -> list:
@@ -193,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                   for log, (_, d) in zip(logs, shifted)}
         print("rotor-speed delays behind the body rate (ms): "
               + ", ".join(f"{k} {v:+.1f}" for k, v in delays.items()))
-    rows, curves, skill = {}, {}, {}
+    rows, curves, skill, by_run = {}, {}, {}, {}
     for name, predict in predictions(windows, args.diagnosed, aligned):
         wall, cpu = time.perf_counter(), time.process_time()
         prediction = predict()
@@ -208,6 +213,15 @@ def main(argv: list[str] | None = None) -> int:
                   + "), corr of the predicted and true rate change at h = 50 "
                   + "/".join(f"{x:.2f}" for x in skill[name]["corr_h50"]))
         rows[name] = bench.summary(curves[name])
+        if name in BY_RUN:
+            for run, run_name in enumerate(windows.names):
+                part, pred = bench.of_run(windows, prediction, run)
+                if len(part) < bench.HORIZON:      # the published scoring needs H windows
+                    continue
+                entry = by_run.setdefault(Path(run_name).name.split(".")[0], {})
+                entry[name] = bench.score(part, pred, args.protocol)
+                entry.setdefault("rate_skill", {})[name] = [
+                    round(x, 4) for x in bench.rate_skill(part, pred)["simerr_model"]]
         print(f"{name}: {len(windows)} windows x {bench.HORIZON} steps in {wall:.2f} s wall, "
               f"{cpu:.2f} s CPU; SimErr p {rows[name]['p'][3]:.4f} m, v {rows[name]['v'][3]:.4f}"
               f" m/s, R {rows[name]['R'][3]:.4f} rad, w {rows[name]['w'][3]:.4f} rad/s")
@@ -217,7 +231,15 @@ def main(argv: list[str] | None = None) -> int:
               **({"rotor_delays_ms": delays} if args.align_rotors else {}),
               "rate_skill": skill,
               "rows": {k: {q: [round(x, 6) for x in v[q]] for q in bench.QUANTITIES}
-                       for k, v in rows.items()}}
+                       for k, v in rows.items()},
+              "by_run": {run: {k: v if k == "rate_skill" else
+                               {q: [round(x, 6) for x in v[q]] for q in bench.QUANTITIES}
+                               for k, v in entry.items()} for run, entry in by_run.items()}}
+    for run, entry in by_run.items():
+        print(f"{run}: " + "; ".join(
+            f"{k} SimErr p/v/R/w " + "/".join(f"{entry[k][q][3]:.4g}" for q in bench.QUANTITIES)
+            + " body rate x/y/z " + "/".join(f"{x:.2f}" for x in entry["rate_skill"][k])
+            for k in BY_RUN if k in entry))
     atomic_write_text(args.json, json.dumps(result, indent=1) + "\n")
     if args.plot:
         plot(args.plot, curves, args.protocol, args.runs == "test" and args.protocol == "published")

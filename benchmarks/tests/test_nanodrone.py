@@ -153,6 +153,35 @@ def test_script_refuses_a_folder_without_the_runs(tmp_path):
     assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
 
 
+def test_a_run_scored_alone_is_its_own_windows_scored():
+    """of_run: the windows and prediction of one run of several score exactly as that run's
+    log made into windows alone, under both protocols (per-run rows are not a pooled
+    average's slice)."""
+    logs = [_log(130), _log(145, offset=1.0), _log(120, offset=2.0)]
+    windows = bench.make_windows(logs)
+    offset = np.array([0.01, -0.02, 0.005])
+
+    def predicted(w):
+        return {"p": w.truth["p"] + offset, "v": w.truth["v"] - 2 * offset,
+                "R": w.truth["R"], "w": w.truth["w"] + offset}
+
+    prediction = predicted(windows)
+    for run, log in enumerate(logs):
+        part, pred = bench.of_run(windows, prediction, run)
+        alone = bench.make_windows([log])
+        assert len(part) == len(alone) == len(log.t) - bench.HORIZON - 1
+        for protocol in ("published", "per_run"):
+            got, want = bench.score(part, pred, protocol), bench.score(alone, predicted(alone),
+                                                                       protocol)
+            for q in bench.QUANTITIES:
+                np.testing.assert_allclose(got[q], want[q], rtol=1e-12, atol=1e-15)
+    # pooled under the published protocol is not the mean of the runs' rows
+    pooled = bench.score(windows, prediction)["p"][3]
+    assert pooled != pytest.approx(np.mean([bench.score(*bench.of_run(windows, prediction,
+                                                                      r))["p"][3]
+                                            for r in range(3)]), rel=1e-6)
+
+
 def test_json_rows_shape():
     row = bench.summary({q: np.linspace(0.1, 1.0, 50) for q in bench.QUANTITIES})
     text = json.dumps(row)
@@ -168,7 +197,7 @@ def test_script_end_to_end_on_small_runs(tmp_path):
     hover = float(np.sqrt(0.045 * 9.81 / (4 * 3.7228e-8)))
     (tmp_path / "test").mkdir()
     for k, name in enumerate(("run1", "run4", "run5")):
-        log = _log(70 + 5 * k, offset=float(k), speed=hover)
+        log = _log(120 + 5 * k, offset=float(k), speed=hover)
         write_log(tmp_path / "test" / f"melon_20251017_{name}.csv.gz", log)
     outs = []
     for tag in ("a", "b"):
@@ -180,7 +209,7 @@ def test_script_end_to_end_on_small_runs(tmp_path):
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
     result = json.loads(outs[0])
-    assert result["protocol"] == "published" and result["windows"] == 19 + 24 + 29
+    assert result["protocol"] == "published" and result["windows"] == 69 + 74 + 79
     rows = result["rows"]
     for name in ("naive", "physics", "quadsim_nominal", "quadsim_diagnosed",
                  "quadsim_diagnosed_rate_held", "published_hybrid"):
@@ -188,6 +217,13 @@ def test_script_end_to_end_on_small_runs(tmp_path):
     assert rows["published_physics"] == bench.PUBLISHED["physics"]
     # the held rate is the physics baseline's rotation: the same body-rate row
     assert rows["quadsim_diagnosed_rate_held"]["w"] == rows["physics"]["w"]
+    # each run's own rows, named by its file
+    assert sorted(result["by_run"]) == [f"melon_20251017_{r}" for r in ("run1", "run4", "run5")]
+    for entry in result["by_run"].values():
+        assert {"physics", "quadsim_diagnosed", "quadsim_diagnosed_rate_held",
+                "rate_skill"} <= set(entry)
+        assert len(entry["quadsim_diagnosed"]["w"]) == 4
+        assert len(entry["rate_skill"]["quadsim_diagnosed"]) == 3
 
 
 def test_effect_file_refuses_wrong_units_and_unknown_effects(tmp_path):
