@@ -175,3 +175,15 @@ def test_identify_logs_writes_the_flapping_it_reports(tmp_path, flapping_logs, c
     assert identify_main(["--logs", *map(str, flapping_logs), "--vehicle", str(skel), "-o",
                           str(out), "--write-effects", str(out)]) == 2
     assert "--write-effects: the same file as -o" in capsys.readouterr().err
+    # a wrong suffix, or an input (the skeleton): one line, exit 2, nothing written, the
+    # input as it was
+    before = skel.read_bytes()
+    for target, said in ((tmp_path / "flap.csv", "output name must end in .toml"),
+                         (skel, "is also an input")):
+        out3 = tmp_path / "v3.toml"
+        assert identify_main(["--logs", *map(str, flapping_logs), "--vehicle", str(skel),
+                              "-o", str(out3), "--write-effects", str(target)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and said in err and err.count("\n") == 1, err
+        assert not out3.exists() and not (tmp_path / "flap.csv").exists()
+        assert skel.read_bytes() == before
