@@ -55,6 +55,46 @@ def check_case_table(module, counts: tuple[int, int, int], shared: tuple[str, ..
     return cases
 
 
+def quiet_flight(flights, source: str):
+    """A 1-s nominal flight of a source without sensor noise (``flights``: the source's
+    ``*_flights(specs, workers=)``, ``FlightSpec`` its module's; seed 4): its log, checked
+    to be the ``source``'s and 500 samples long, and the body-frame velocity (m/s, (N, 3))."""
+    import importlib
+
+    import numpy as np
+
+    from benchmarks.simlog import Sensors
+    from quadsim.core.frames import quat_to_rotmat
+
+    spec = importlib.import_module(flights.__module__).FlightSpec
+    quiet = Sensors(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    [(log, truth)] = flights([spec(seed=4, duration=1.0, sensors=quiet)], workers=1)
+    assert truth["source"] == source and len(log.t) == 500
+    return log, np.einsum("nji,nj->ni", quat_to_rotmat(log.quat), log.velocity)
+
+
+def check_drawn(cases: list, mass: float, arm: float, bounds: dict) -> None:
+    """Each case's drawn changes within a source's table (``bounds``: key -> (low, high),
+    inclusive): ``mass`` as a share of the vehicle's ``mass`` (kg), ``com`` by its distance
+    from the centre as a share of ``arm`` (m), ``wind`` by its speed (m/s), ``payload`` a
+    pair of ranges: its mass (kg) and its offset's distance (m); any other key's value
+    itself (``motor_tau`` s, ``motor_slow``, ``drag_scale`` factors)."""
+    import numpy as np
+
+    for case in cases:
+        for key, value in case["effects"].items():
+            if key not in bounds:
+                continue
+            if key == "payload":
+                (m_lo, m_hi), (r_lo, r_hi) = bounds[key]
+                assert m_lo <= value[0] <= m_hi and r_lo <= np.hypot(*value[1:3]) <= r_hi, case
+                continue
+            size = {"mass": lambda v: v / mass, "com": lambda v: np.hypot(*v) / arm,
+                    "wind": lambda v: np.hypot(*v)}.get(key, float)(value)
+            low, high = bounds[key]
+            assert low <= size <= high, case
+
+
 def check_motor_case_list(module, shared: tuple[str, str], mass: float, arm: float,
                           payload_kg: tuple[float, float] | None = None) -> None:
     """A DC-motor source's frozen cases (``module``: its cases module; the table

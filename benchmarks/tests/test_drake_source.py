@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from benchmarks.drake_source import drake_available
-from benchmarks.tests._helpers import check_case_table
+from benchmarks.tests._helpers import check_case_table, check_drawn, quiet_flight
 
 needs_drake = pytest.mark.skipif(not drake_available(), reason="Drake is not installed")
 
@@ -91,21 +91,9 @@ def test_case_list_frozen_and_mapped_to_the_library():
     from benchmarks.drake_source import DRAG_RATE
 
     cases = check_case_table(drake_cases, (6, 20, 2), ("rotor_drag",))
-    for case in cases:
-        e = case["effects"]
-        if "mass" in e:
-            assert 0.05 <= e["mass"] / MASS <= 0.2
-        if "payload" in e:
-            assert 0.04 <= e["payload"][0] <= 0.12
-            assert 0.01 <= np.hypot(*e["payload"][1:3]) <= 0.04
-        if "com" in e:
-            assert 0.03 <= np.hypot(*e["com"]) / L <= 0.1
-        if "motor_tau" in e:
-            assert 0.02 <= e["motor_tau"] <= 0.06
-        if "drag_scale" in e:
-            assert 1.5 <= e["drag_scale"] <= 2.5
-        if "wind" in e:
-            assert 1.0 <= np.hypot(*e["wind"]) <= 3.0
+    check_drawn(cases, MASS, L, {"mass": (0.05, 0.2), "payload": ((0.04, 0.12), (0.01, 0.04)),
+                                 "com": (0.03, 0.1), "motor_tau": (0.02, 0.06),
+                                 "drag_scale": (1.5, 2.5), "wind": (1.0, 3.0)})
     [drag] = drake_cases.shared_effects()
     assert drag.coefficient == pytest.approx(MASS * DRAG_RATE[0] / (4 * HOVER), rel=1e-12)
     assert drag.axial_coefficient == pytest.approx(MASS * DRAG_RATE[2] / (4 * HOVER),
@@ -200,16 +188,9 @@ def test_short_flight_log_obeys_the_source_force_law():
     m equals the thrust b sum Omega^2 on z and the drag -m r v_body on every axis (1e-6 N:
     the log's specific force is the plant's own acceleration); the command is the speed over
     the top speed; the rotor speeds stay within 10 % of hover."""
-    from benchmarks.drake_source import DRAG_RATE, FlightSpec, drake_flights, max_speed
-    from benchmarks.simlog import Sensors
-    from quadsim.core.frames import quat_to_rotmat
+    from benchmarks.drake_source import DRAG_RATE, drake_flights, max_speed
 
-    quiet = Sensors(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    [(log, truth)] = drake_flights([FlightSpec(seed=4, duration=1.0, sensors=quiet)],
-                                   workers=1)
-    assert truth["source"] == "drake" and len(log.t) == 500
-    rot = quat_to_rotmat(log.quat)
-    v_body = np.einsum("nji,nj->ni", rot, log.velocity)
+    log, v_body = quiet_flight(drake_flights, "drake")
     force = MASS * log.accel
     thrust = B * np.sum(log.rotor_speed ** 2, axis=1)
     drag = -MASS * np.asarray(DRAG_RATE) * v_body

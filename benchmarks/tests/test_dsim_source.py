@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from benchmarks.dsim_source import dsim_available
-from benchmarks.tests._helpers import check_case_table
+from benchmarks.tests._helpers import check_case_table, check_drawn, quiet_flight
 
 needs_dsim = pytest.mark.skipif(not dsim_available(), reason="drones-sim is not installed")
 
@@ -90,21 +90,9 @@ def test_case_list_frozen_and_mapped_to_the_library():
     from benchmarks import dsim_cases
 
     cases = check_case_table(dsim_cases, (6, 20, 2), ("motor_lag", "rotor_drag"))
-    for case in cases:
-        e = case["effects"]
-        if "mass" in e:
-            assert 0.05 <= e["mass"] / MASS <= 0.2
-        if "payload" in e:
-            assert 0.05 <= e["payload"][0] <= 0.15
-            assert 0.015 <= np.hypot(*e["payload"][1:3]) <= 0.05
-        if "com" in e:
-            assert 0.03 <= np.hypot(*e["com"]) / L <= 0.1
-        if "motor_slow" in e:
-            assert 1.5 <= e["motor_slow"] <= 2.5
-        if "drag_scale" in e:
-            assert 1.5 <= e["drag_scale"] <= 2.5
-        if "wind" in e:
-            assert 1.0 <= np.hypot(*e["wind"]) <= 3.0
+    check_drawn(cases, MASS, L, {"mass": (0.05, 0.2), "payload": ((0.05, 0.15), (0.015, 0.05)),
+                                 "com": (0.03, 0.1), "motor_slow": (1.5, 2.5),
+                                 "drag_scale": (1.5, 2.5), "wind": (1.0, 3.0)})
     lag, drag = dsim_cases.shared_effects()
     assert lag.time_constant == pytest.approx(TAU, rel=1e-12)
     assert drag.coefficient == pytest.approx(DRAG / (4 * HOVER), rel=1e-12)
@@ -184,16 +172,9 @@ def test_short_flight_log_obeys_the_source_force_law():
     m equals the thrust k_f sum Omega^2 on z and the drag -D v_body on every axis (1e-9 N: the
     log's specific force is the plant's own acceleration); the rotor speeds stay within 15 %
     of hover and follow the command through the exact lag (1e-9 relative)."""
-    from benchmarks.dsim_source import CONTROL_HZ, FlightSpec, dsim_flights
-    from benchmarks.simlog import Sensors
-    from quadsim.core.frames import quat_to_rotmat
+    from benchmarks.dsim_source import CONTROL_HZ, dsim_flights
 
-    quiet = Sensors(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    [(log, truth)] = dsim_flights([FlightSpec(seed=4, duration=1.0, sensors=quiet)],
-                                  workers=1)
-    assert truth["source"] == "drones-sim" and len(log.t) == 500
-    rot = quat_to_rotmat(log.quat)
-    v_body = np.einsum("nji,nj->ni", rot, log.velocity)
+    log, v_body = quiet_flight(dsim_flights, "drones-sim")
     force = MASS * log.accel
     thrust = KF * np.sum(log.rotor_speed ** 2, axis=1)
     np.testing.assert_allclose(force[:, 0:2], -DRAG * v_body[:, 0:2], atol=1e-9)
