@@ -559,12 +559,10 @@ def settled_self_check(names: list, items: list, *, rows_of, judge_of, refine) -
     flight's value). The screen leaves a reading screened where it cannot weigh in that
     flight's own verdict, so the scale held only the references where the reading happened
     to matter: with fewer than 2 there it has no scale at all (:func:`negligible` False,
-    the statistical rule alone), and which ones those are moves with the pooled shared values.
-    Measured on the nano-drone benchmark's 9 training runs (CHANGELOG): square run1's
-    ``translational_lift`` was read on 1 of the other 8 (no scale: an alarm), while
-    against the 8 others calibrated without it the screen read it on 2 (cleared); with
-    every reference fully fitted both clear it. Fitting only the alarmed references' readings
-    keeps the check cheap where it is clean (no alarm: nothing refitted).
+    the statistical rule alone), and which ones those are moves with the pooled shared values
+    (an alarm a full judgment does not raise; docs/gap.md, "The self-check"). Fitting only
+    the alarmed references' readings keeps the check cheap where it is clean (no alarm:
+    nothing refitted).
 
     ``items``: one per reference (None: not judged); ``rows_of(item)``: its Evidence rows;
     ``judge_of(item, check)``: its :class:`~quadsim.gap.result.Verdict` with ``check``;
