@@ -18,6 +18,14 @@ inventing data). A least-squares line CPU = fixed + per-minute x
 flight-minutes over the count series splits the cost that does not grow with the judged
 flights (imports, the 20 references' calibration) from the cost that does.
 
+``--long`` instead times minute-long real logs: the nano-drone benchmark's validation runs
+(``train/*_run4``: square 19 s, then chirp and random 60 s each, 100 Hz) judged per flight
+against its training runs 1-3 (9 flights, 6.95 min) with ``--model
+models/nanodrone_cf21bl.toml``, the first 1, 2 and 3 of them (never the benchmark's test
+runs). The judgment's cost is mostly per flight (a few hundred residual evaluations whatever
+its length), so the mixed flights (~6 s each) are the per-minute worst case and these the
+typical one.
+
 ``--stages`` instead times the 26-flight command once by stage, in a fresh process of its
 own (``time.process_time`` around the CLI's calls: the imports, loading and checking the
 logs, preparing the references, their calibration, their self-check, judging the flights):
@@ -76,6 +84,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data"
 CAMPAIGN = "crazyflie21_brushless"
+#: ``--long``: the nano-drone benchmark's folder, its validation runs in the order judged
+#: (shortest first) and the parameter set they are judged with
+NANO = "nanodrone_cf21bl"
+NANO_RUNS = ("square_20251017_run4", "chirp_20251017_run4", "random_20251017_run4")
+NANO_MODEL = ROOT / "models" / "nanodrone_cf21bl.toml"
 COUNTS = (1, 2, 4, 8, 16, 26)
 #: the share of each flight kept in the length series, and how many flights it judges
 FRACTIONS = (0.5, 0.75)
@@ -126,20 +139,21 @@ def _env(root: Path, cache: str | os.PathLike) -> dict:
 
 
 def time_gap(label: str, flights: list[Path], references: list[Path], root: Path = ROOT, *,
-             warm: bool = False) -> Run:
+             warm: bool = False, model: str = "crazyflie21") -> Run:
     """Run the user's command once with the package of checkout ``root`` first on the path,
     in a fresh cache folder (cold); ``warm``: once untimed before, in the same folder, and
-    the second run timed. CPU from the children's rusage, wall from a clock."""
+    the second run timed. ``model``: ``--model``'s value. CPU from the children's rusage,
+    wall from a clock."""
     with tempfile.TemporaryDirectory(prefix="speed_gap_cache_") as cache:
         if warm:
-            _run_gap(label, flights, references, root, cache)
-        return _run_gap(label, flights, references, root, cache)
+            _run_gap(label, flights, references, root, cache, model)
+        return _run_gap(label, flights, references, root, cache, model)
 
 
 def _run_gap(label: str, flights: list[Path], references: list[Path], root: Path,
-             cache: str) -> Run:
+             cache: str, model: str = "crazyflie21") -> Run:
     """:func:`time_gap`'s one run, with the references' cache in ``cache``."""
-    command = [sys.executable, "-m", "quadsim.gap", "--model", "crazyflie21", "--per-flight",
+    command = [sys.executable, "-m", "quadsim.gap", "--model", model, "--per-flight",
                *map(str, flights), "--reference", *map(str, references), "--workers", "1"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
@@ -346,6 +360,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warm", action="store_true",
                         help="time each command's second run, its references' cache filled "
                              "by an untimed first one (default: cold, a fresh cache)")
+    parser.add_argument("--long", action="store_true",
+                        help="time minute-long real logs instead: the nano-drone benchmark's "
+                             "validation runs against its training runs (module doc)")
     parser.add_argument("--rounds", type=int, default=2,
                         help="with --against: runs of each checkout (default 2)")
     args = parser.parse_args(argv)
@@ -360,6 +377,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.rounds < 1:
         print(f"error: --rounds: must be >= 1, got {args.rounds}", file=sys.stderr)
         return 2
+    if args.long:
+        return _long(args)
     folder = args.data / CAMPAIGN
     mixed = sorted((folder / "mixed").glob("flight_*.csv.gz"))
     nominal = sorted((folder / "nominal").glob("flight_*.csv.gz"))
@@ -435,6 +454,36 @@ def main(argv: list[str] | None = None) -> int:
         fixed, per_minute = line_fit(counted)
         print(f"\nCPU = {fixed:.1f} s + {per_minute:.1f} s per judged flight-minute "
               f"(least squares over the whole-flight runs)")
+    return 0
+
+
+def _long(args) -> int:
+    """``--long`` (module doc): the first 1, 2 and 3 of :data:`NANO_RUNS` against the
+    training runs 1-3, cold or ``--warm``, with the table and the line."""
+    train = args.data / NANO / "train"
+    flights = [train / f"{name}.csv.gz" for name in NANO_RUNS]
+    references = sorted(train.glob("*_run[123].csv.gz"))
+    if not all(p.is_file() for p in flights) or len(references) != 9:
+        print(f"skipped: {train}: not the nano-drone benchmark's training runs")
+        return 0
+    load = os.getloadavg()
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+          f"Python {platform.python_version()}; load average at start {load[0]:.2f}; "
+          f"references' cache {'warm' if args.warm else 'cold (fresh)'}")
+    runs = []
+    for n in range(1, len(flights) + 1):
+        runs.append(time_gap(f"{n} validation run(s)", flights[:n], references,
+                             warm=args.warm, model=str(NANO_MODEL)))
+        print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s wall "
+              f"({runs[-1].verdicts})", flush=True)
+    load = os.getloadavg()
+    print(f"load average at the end {load[0]:.2f}")
+    print(f"references: {len(references)} training runs, "
+          f"{sum(log_duration(p) for p in references) / 60:.2f} min; --workers 1\n")
+    print(table(runs))
+    fixed, per_minute = line_fit(runs)
+    print(f"\nCPU = {fixed:.1f} s + {per_minute:.1f} s per judged flight-minute "
+          f"(least squares over the runs)")
     return 0
 
 

@@ -45,3 +45,12 @@ def test_each_run_its_own_cache(tmp_path, capsys):
     assert env["PYTHONPATH"].split(os.pathsep)[0] == str(tmp_path / "co")
     assert speed_gap.main(["--warm", "--parts"]) == 2
     assert "--warm: not used with --parts" in capsys.readouterr().err
+
+
+def test_long_skips_without_the_nano_drone_runs(tmp_path, capsys):
+    """--long on a data folder without the nano-drone benchmark: one skipped line, exit 0;
+    its runs are the validation runs (run4), never a test run, shortest first."""
+    assert speed_gap.main(["--long", "--data", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.startswith("skipped:")
+    assert all(name.endswith("_run4") for name in speed_gap.NANO_RUNS)
+    assert speed_gap.NANO_RUNS[0].startswith("square") and speed_gap.NANO_MODEL.is_file()
