@@ -472,7 +472,8 @@ def _stored_reference(args, params, base_effects, judged, lines):
     checked against the run (a refusal: one line); no ``--reference`` (nor ``--bare``,
     ``--write-effects``): the set's shipped reference where it fits the run, else None with
     the note why (``--per-flight``: refused). ``judged``: every log to judge (one needing
-    rotor speeds synthesised needs ``--command-reference``)."""
+    rotor speeds synthesised needs ``--command-reference``: refused with a stored file; the
+    shipped one is then not used, as where it does not fit)."""
     from .diagnose import DEFAULT_WINDOW_S
     from .reffile import (
         binding_of,
@@ -496,6 +497,10 @@ def _stored_reference(args, params, base_effects, judged, lines):
         if path is None:
             return None, False, None
         wrong = mismatch(read_header(path), binding)
+        needing = [g for g in judged if g.rotor_speed is None]
+        if wrong is None and needing and not args.command_reference:
+            wrong = ("logs without rotor speeds: their speeds are synthesised from reference "
+                     "flights with speeds, --command-reference LOG...")
         if wrong is not None and args.per_flight:
             raise InputError(f"--per-flight needs --reference LOG... (nominal flights): the "
                              f"set's shipped reference {path.name} does not fit this run: "
@@ -520,13 +525,13 @@ def _stored_reference(args, params, base_effects, judged, lines):
 def _write_reference(args, params, base_effects, refs) -> object:
     """--write-reference: the references' stage (``refs``: (logs, kept stage or None, store,
     loaded)) computed where the cache did not hold it, written; -> the stage."""
-    from .diagnose import DEFAULT_WINDOW_S, _stage
+    from .diagnose import DEFAULT_WINDOW_S, calibrated_stage
     from .reffile import Provenance, binding_of, write_reference
 
     reference, kept, store, loaded = refs
     window = DEFAULT_WINDOW_S if args.window is None else args.window
     if kept is None:
-        kept = _stage(reference, params, effects=args.effects, window_s=window,
+        kept = calibrated_stage(reference, params, effects=args.effects, window_s=window,
                       base=tuple(base_effects), store=store)
     binding = binding_of(params, base=base_effects, effects_file=args.effects_file,
                          effects=args.effects, window_s=window)
