@@ -103,6 +103,12 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     validate(document)
     assert document["schema"] == "quadsim.gap/3"
     assert document["verdict"]["effect"] == "thrust_mismatch"
+    # --effects: the set's shipped reference (the whole library) does not fit: the set alone
+    assert "reference_file" not in document and any(
+        n.startswith("judged against the parameter set alone: its shipped reference "
+                     "crazyflie21.qref does not fit this run (effects: calibrated for the "
+                     "whole library, this run's --effects thrust_mismatch com_offset "
+                     "mass_offset)") for n in document["notes"])
     assert document["train"] and document["holdout"]
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
     assert set(document["where"]["regime"]) >= {"hover", "fast_forward", "near_ground"}

@@ -120,6 +120,12 @@ def test_round_trip_bit_for_bit(written, flight_files, tmp_path):
     assert sentence.startswith(" (judged against the 2 nominal flights: stored reference")
     file_json["verdict"]["answer"] = logs_json["verdict"]["answer"]
     assert file_json == logs_json
+    # written while judging: the same stage bytes as written alone, the logs' JSON
+    both = _judge(tmp_path, flight_files[2], "both", *flight_files[:2],
+                  extra=("--write-reference", str(tmp_path / "both.qref")))
+    assert both == logs_json
+    assert ((tmp_path / "both.qref").read_bytes().partition(b"\n")[2]
+            == written.read_bytes().partition(b"\n")[2])
 
 
 def _rewrite(path: Path, out: Path, header=None, payload=None) -> Path:
@@ -299,6 +305,28 @@ def test_generated_flight_against_the_shipped_reference(tmp_path, capsys):
     assert "--bare: not used with --per-flight" in _error(capsys)
     assert main(["--model", "physical", "--per-flight", str(path)]) == 2
     capsys.readouterr()
+
+
+def test_shipped_reference_left_where_it_cannot_serve(tmp_path, monkeypatch, capsys):
+    """A shipped file of another format (a quadsim that reads format FORMAT + 1) or logs
+    without rotor speeds: --per-flight refused in one line naming why."""
+    from quadsim.logs.flightlog import FlightLog
+
+    cf = load_params("crazyflie21")
+    log = synthetic_flight(cf, [], seed=5, duration=2.0)
+    path = write_log(tmp_path / "g.csv.gz", log)
+    monkeypatch.setattr(reffile, "FORMAT", FORMAT + 1)
+    assert main(["--model", "crazyflie21", "--per-flight", str(path), "--quiet"]) == 2
+    assert _error(capsys).startswith(
+        "error: --per-flight needs --reference LOG... (nominal flights): the set's shipped "
+        f"reference crazyflie21.qref does not fit this run: {shipped_reference('crazyflie21')}"
+        f": format: written by format {FORMAT}, this quadsim reads {FORMAT + 1}")
+    monkeypatch.setattr(reffile, "FORMAT", FORMAT)
+    commands = FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate,
+                         log.accel, rotor_command=log.rotor_command)
+    only = write_log(tmp_path / "c.csv.gz", commands)
+    assert main(["--model", "crazyflie21", "--per-flight", str(only), "--quiet"]) == 2
+    assert "does not fit this run: logs without rotor speeds" in _error(capsys)
 
 
 def test_shipped_file_in_wheel_and_sdist_lists():

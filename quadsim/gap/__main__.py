@@ -470,19 +470,11 @@ def _stored_reference(args, params, base_effects, judged, lines):
     """The stored reference of the run (:mod:`quadsim.gap.reffile`): (Stored or None, whether
     it is the set's shipped one, a note or None). ``--reference FILE.qref``: read and
     checked against the run (a refusal: one line); no ``--reference`` (nor ``--bare``,
-    ``--write-effects``): the set's shipped reference where it fits the run, else None with
-    the note why (``--per-flight``: refused). ``judged``: every log to judge (one needing
-    rotor speeds synthesised needs ``--command-reference``: refused with a stored file; the
-    shipped one is then not used, as where it does not fit)."""
+    ``--write-effects``): the set's shipped reference where it fits the run
+    (:func:`_shipped`). ``judged``: every log to judge (one needing rotor speeds synthesised
+    needs ``--command-reference``: refused with a stored file)."""
     from .diagnose import DEFAULT_WINDOW_S
-    from .reffile import (
-        binding_of,
-        check_fits,
-        mismatch,
-        read_header,
-        read_reference,
-        shipped_reference,
-    )
+    from .reffile import binding_of, check_fits, read_reference, shipped_reference
 
     binding = binding_of(params, base=base_effects, effects_file=args.effects_file,
                          effects=args.effects,
@@ -496,20 +488,10 @@ def _stored_reference(args, params, base_effects, judged, lines):
                 else shipped_reference(params.name))
         if path is None:
             return None, False, None
-        wrong = mismatch(read_header(path), binding)
-        needing = [g for g in judged if g.rotor_speed is None]
-        if wrong is None and needing and not args.command_reference:
-            wrong = ("logs without rotor speeds: their speeds are synthesised from reference "
-                     "flights with speeds, --command-reference LOG...")
-        if wrong is not None and args.per_flight:
-            raise InputError(f"--per-flight needs --reference LOG... (nominal flights): the "
-                             f"set's shipped reference {path.name} does not fit this run: "
-                             f"{wrong}")
-        if wrong is not None:
-            return None, False, (f"judged against the parameter set alone: its shipped "
-                                 f"reference {path.name} does not fit this run ({wrong}); "
-                                 "--reference LOG... calibrates nominal flights for it")
-        stored, shipped = read_reference(path), True
+        stored, note = _shipped(path, binding, judged, args)
+        if stored is None:
+            return None, False, note
+        shipped = True
     args.samples_loaded = getattr(args, "samples_loaded", 0) + stored.samples
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
     needing = [g for g in judged if g.rotor_speed is None]
@@ -520,6 +502,40 @@ def _stored_reference(args, params, base_effects, judged, lines):
                          "with rotor speeds and commands, e.g. the references it was written "
                          "from): give them, or --reference LOG...")
     return stored, shipped, None
+
+
+def _shipped(path, binding, judged, args):
+    """The set's shipped reference ``path`` where it fits the run: (Stored, None); else
+    (None, the note why: held out judged against the parameter set alone). It does not fit
+    a run of another parameter-set content, effect file, ``--effects`` or ``--window``
+    (:func:`quadsim.gap.reffile.mismatch`), one with logs lacking rotor speeds and no
+    ``--command-reference``, nor a file this quadsim cannot read (another format, another
+    numpy). ``--per-flight``: refused (one line) instead of a note."""
+    from .reffile import mismatch, read_header, read_reference
+
+    stored = header = wrong = None
+    try:
+        header = read_header(path)
+    except InputError as exc:
+        wrong = str(exc)
+    wrong = wrong or mismatch(header, binding)
+    if wrong is None and not args.command_reference and any(
+            g.rotor_speed is None for g in judged):
+        wrong = ("logs without rotor speeds: their speeds are synthesised from reference "
+                 "flights with speeds, --command-reference LOG...")
+    if wrong is None:
+        try:
+            stored = read_reference(path)
+        except InputError as exc:
+            wrong = str(exc)
+    if wrong is not None and args.per_flight:
+        raise InputError(f"--per-flight needs --reference LOG... (nominal flights): the set's "
+                         f"shipped reference {path.name} does not fit this run: {wrong}")
+    if wrong is not None:
+        return None, (f"judged against the parameter set alone: its shipped reference "
+                      f"{path.name} does not fit this run ({wrong}); --reference LOG... "
+                      "calibrates nominal flights for it")
+    return stored, None
 
 
 def _write_reference(args, params, base_effects, refs) -> object:

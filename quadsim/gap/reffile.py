@@ -35,7 +35,8 @@ is judged against the parameter set alone with a note saying why; ``--per-flight
 refused (one line) as without a reference. A set without a shipped file behaves as before.
 
 **File format** (:data:`SCHEMA`, :data:`FORMAT`). Line 1: a JSON header (UTF-8, one line),
-readable without unpickling (``head -1 FILE.qref | python -m json.tool``)::
+readable without unpickling (``python -m quadsim.gap.reffile FILE.qref`` prints it, as
+does ``head -1 FILE.qref | python -m json.tool``)::
 
     schema        "quadsim.gap.reference/1"
     format        an integer, FORMAT of the quadsim that wrote it (below)
@@ -281,11 +282,13 @@ def with_paths(stage, path=None, cad_dir=None):
 def write_reference(path, binding: Binding, stage, provenance: Provenance) -> Path:
     """Write ``stage`` (a :class:`~quadsim.gap.calibrate.Calibrated`) to ``path`` (ending in
     :data:`SUFFIX`) atomically: a temporary file renamed into place (its parameter set
-    naming only its file's name, :func:`with_paths`). -> the path."""
+    naming only its file's name, :func:`with_paths`; no cache key): the same references,
+    model and options give the same stage bytes. -> the path."""
     from ..core.files import atomic_write_bytes
 
     own = stage.reference.params.path
-    stage = with_paths(stage, None if own is None else Path(Path(own).name))
+    stage = dataclasses.replace(with_paths(stage, None if own is None else Path(Path(own).name)),
+                                key="")       # the cache's key: no meaning in a file
     payload = pickle.dumps(stage, protocol=4)
     header = make_header(binding, stage, provenance, payload)
     line = json.dumps(header, separators=(", ", ": ")).encode("utf-8") + b"\n"
