@@ -283,7 +283,9 @@ def write_reference(path, binding: Binding, stage, provenance: Provenance) -> Pa
     """Write ``stage`` (a :class:`~quadsim.gap.calibrate.Calibrated`) to ``path`` (ending in
     :data:`SUFFIX`) atomically: a temporary file renamed into place (its parameter set
     naming only its file's name, :func:`with_paths`; no cache key): the same references,
-    model and options give the same stage bytes. -> the path."""
+    model and options give the same stage values, bit for bit (the bytes too within one
+    process; across processes a dict's key order may follow Python's string hashing).
+    -> the path."""
     from ..core.files import atomic_write_bytes
 
     own = stage.reference.params.path
