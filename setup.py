@@ -9,7 +9,10 @@ from setuptools import setup
 from setuptools.command.build_py import build_py
 
 ROOT = Path(__file__).resolve().parent
-SHIPPED = {"models": ("*.toml", "*.xml"), "cad": ("*.toml", "*.stl", "*.step", "*.obj")}
+#: folder -> patterns (a pattern's subfolder is kept: models/references/NAME.qref, the sets'
+#: shipped references, quadsim.gap.reffile)
+SHIPPED = {"models": ("*.toml", "*.xml", "references/*.qref"),
+           "cad": ("*.toml", "*.stl", "*.step", "*.obj")}
 
 
 class BuildPyWithShippedData(build_py):
@@ -22,7 +25,9 @@ class BuildPyWithShippedData(build_py):
             target.mkdir(parents=True, exist_ok=True)
             for pattern in patterns:
                 for source in sorted((ROOT / folder).glob(pattern)):
-                    shutil.copyfile(source, target / source.name)
+                    copy = target / source.relative_to(ROOT / folder)
+                    copy.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(source, copy)
 
 
 setup(cmdclass={"build_py": BuildPyWithShippedData})

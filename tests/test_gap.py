@@ -103,6 +103,12 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     validate(document)
     assert document["schema"] == "quadsim.gap/3"
     assert document["verdict"]["effect"] == "thrust_mismatch"
+    # --effects: the set's shipped reference (the whole library) does not fit: the set alone
+    assert "reference_file" not in document and any(
+        n.startswith("judged against the parameter set alone: its shipped reference "
+                     "crazyflie21.qref does not fit this run (effects: calibrated for the "
+                     "whole library, this run's --effects thrust_mismatch com_offset "
+                     "mass_offset)") for n in document["notes"])
     assert document["train"] and document["holdout"]
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
     assert set(document["where"]["regime"]) >= {"hover", "fast_forward", "near_ground"}
@@ -161,7 +167,9 @@ def test_bad_input(cf, tmp_path, capsys):
     assert any("single flight" in note for note in single["notes"])
     path = str(write_log(tmp_path / "one.csv", log))
     assert main(["--model", "no_such_model", path, "--quiet"]) == 2
-    assert main(["--model", "crazyflie21", "--per-flight", path, "--quiet"]) == 2
+    # per flight without references: the set's shipped one calibrated for the whole library
+    assert main(["--model", "crazyflie21", "--per-flight", path, "--quiet", "--effects",
+                 "mass_offset"]) == 2
     assert main(["--model", "crazyflie21", path, "--json", str(tmp_path / "x.txt")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("error: ") for line in err)

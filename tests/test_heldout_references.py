@@ -192,11 +192,11 @@ def test_explanations_weighed_on_workers_are_weighed_as_in_one_call(cf, flights,
     ``--workers 1`` with ``--workers 2``)."""
     import pickle
 
-    from quadsim.gap.diagnose import _stage, _weigh_against, against_references, prepare
+    from quadsim.gap.diagnose import _weigh_against, against_references, calibrated_stage, prepare
     from quadsim.gap.residual import DEFAULT_WINDOW_S
 
-    stage = _stage(flights["reference"], cf, effects=EFFECTS, window_s=DEFAULT_WINDOW_S,
-                   base=(), store=store)
+    stage = calibrated_stage(flights["reference"], cf, effects=EFFECTS,
+                             window_s=DEFAULT_WINDOW_S, base=(), store=store)
     against = against_references(prepare(flights["train"], cf), prepare(flights["held"], cf),
                                  stage.reference, effects=EFFECTS)
     assert against.explanations[0].shift == "rotor"     # the references time their rotors

@@ -13,6 +13,15 @@ Examples::
         train/*.csv.gz --holdout val/*.csv.gz        # diagnose a diagnosed model again
     python -m quadsim.gap --model crazyflie21 changed/*.csv.gz --holdout changed2.csv.gz \\
         --reference nominal/*.csv.gz    # what the changed flights share that nominal ones do not
+    python -m quadsim.gap --model crazyflie21 --reference nominal/*.csv.gz \\
+        --write-reference nominal.qref  # the references' calibrated stage, stored
+    python -m quadsim.gap --model crazyflie21 --per-flight new/*.csv.gz \\
+        --reference nominal.qref        # judged against it: the logs need not be at hand
+    python -m quadsim.gap --model crazyflie21 --per-flight new/*.csv.gz
+                                        # against the set's shipped reference (its own
+                                        # nominal flights; quadsim.gap.reffile)
+    python -m quadsim.gap --model crazyflie21 a.csv.gz b.csv.gz --holdout c.csv.gz --bare
+                                        # against the parameter set alone
 """
 
 from __future__ import annotations
@@ -45,18 +54,34 @@ def _parser() -> argparse.ArgumentParser:
                     "flights and scored on held-out flights (split by flight, never by "
                     "sample).",
         epilog=__doc__.split("Examples::")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("logs", nargs="+", metavar="LOG", help=f"flight logs ({READABLE})")
+    parser.add_argument("logs", nargs="*", metavar="LOG",
+                        help=f"flight logs ({READABLE}); none only with --write-reference")
     parser.add_argument("--model", required=True, help="parameter set: built-in name or TOML")
     parser.add_argument("--holdout", nargs="+", metavar="LOG",
                         help="held-out logs (default: every third of LOG)")
     parser.add_argument("--per-flight", action="store_true",
                         help="judge each LOG on its own against --reference nominal flights")
     parser.add_argument("--reference", nargs="+", metavar="LOG",
-                        help="nominal reference flights: with --per-flight each LOG is "
+                        help="nominal reference flights, or one stored reference FILE.qref "
+                             "(their calibrated stage, --write-reference; quadsim.gap.reffile): "
+                             "with --per-flight each LOG is "
                              "judged against them; held out (LOG... --holdout LOG...) they "
                              "are the reference model instead of the bare parameter set: "
                              "what the training LOGs share that they do not, checked on the "
-                             "held-out logs")
+                             "held-out logs. Default: the parameter set's shipped reference "
+                             "where it has one that fits the run (models/references/NAME.qref: "
+                             "its own nominal flights), else none")
+    parser.add_argument("--bare", action="store_true",
+                        help="held out: judge against the parameter set alone, not its "
+                             "shipped reference (the behaviour of sets without one)")
+    parser.add_argument("--write-reference", metavar="OUT.qref",
+                        help="write the --reference LOGs' calibrated stage (calibration, "
+                             "noise model, discrepancy term, self-check) to a stored "
+                             "reference file, read later with --reference OUT.qref "
+                             "(quadsim.gap.reffile); with no LOG only that is done")
+    parser.add_argument("--reference-source", metavar="TEXT", default="",
+                        help="with --write-reference: where the reference flights come "
+                             "from (stored in the file's header)")
     parser.add_argument("--cache-dir", metavar="DIR",
                         help="with --reference: the folder where the references' loading, "
                              "calibration and self-check are kept between runs (default "
@@ -111,6 +136,7 @@ def _check_args(args) -> None:
     from ..core.args import check_inputs, check_number, check_output, distinct_files
 
     check_number("--window", args.window, low=0.0, high=60.0, unit="s")
+    _check_stored_args(args)
     if args.effects_file is not None:
         check_inputs("--effects-file", [args.effects_file])
     for flag, paths in (("LOG", args.logs), ("--holdout", args.holdout),
@@ -143,14 +169,16 @@ def _check_args(args) -> None:
               *([args.effects_file] if args.effects_file is not None else [])]
     outputs = [(f, o) for f, o in (("--json", args.json), ("--report", args.report),
                                    ("--rerun", args.rerun),
-                                   ("--write-effects", args.write_effects)) if o is not None]
+                                   ("--write-effects", args.write_effects),
+                                   ("--write-reference", args.write_reference)) if o is not None]
     for flag, out in outputs:
         check_output(flag, out, {"--json": (".json",), "--report": (".html",),
-                                 "--rerun": (".rrd",), "--write-effects": (".toml",)}[flag],
+                                 "--rerun": (".rrd",), "--write-effects": (".toml",),
+                                 "--write-reference": (".qref",)}[flag],
                      inputs=inputs)
     if len({str(o) for _, o in outputs}) < len(outputs):
-        raise InputError("--json/--report/--rerun/--write-effects: the same output file "
-                         "given twice")
+        raise InputError("--json/--report/--rerun/--write-effects/--write-reference: the same "
+                         "output file given twice")
     if args.add is not None and args.write_effects is None:
         raise InputError("--add: only used with --write-effects")
     if args.write_effects is not None and args.per_flight:
@@ -159,6 +187,33 @@ def _check_args(args) -> None:
         raise InputError("--write-effects: not used with --reference (a reading is then a "
                          "difference from the references' model, not an effect to add to "
                          "--model)")
+
+
+def _check_stored_args(args) -> None:
+    """The stored-reference flags (:mod:`quadsim.gap.reffile`) against each other."""
+    from .reffile import SUFFIX, is_reference_file
+
+    stored = [p for p in args.reference or [] if is_reference_file(p)]
+    if stored and len(args.reference) > 1:
+        raise InputError(f"{stored[0]}: --reference: a stored reference ({SUFFIX}) is given "
+                         "alone, not with reference logs or another one")
+    args.reference_file = stored[0] if stored else None
+    if not args.logs and args.write_reference is None:
+        raise InputError("LOG: give the flight logs to judge (or only --reference LOG... "
+                         f"--write-reference OUT{SUFFIX} to write a stored reference)")
+    if args.write_reference is not None and (not args.reference or stored):
+        raise InputError(f"{args.write_reference}: --write-reference: needs --reference "
+                         "LOG... (the reference logs, not a stored reference)")
+    if args.reference_source and args.write_reference is None:
+        raise InputError("--reference-source: only used with --write-reference")
+    if args.bare and args.reference:
+        raise InputError("--bare: not used with --reference (the parameter set alone is the "
+                         "reference model)")
+    if args.bare and args.per_flight:
+        raise InputError("--bare: not used with --per-flight (each LOG is judged against "
+                         "reference flights: --reference LOG..., or the set's shipped one)")
+    if not args.logs and (args.per_flight or args.holdout):
+        raise InputError("LOG: --per-flight and --holdout judge LOGs: give them")
 
 
 def _map_fn(args, bar):
@@ -368,14 +423,15 @@ class _Writer:
 
 
 def _references(args, params, base_effects, logs, holdout, lines):
-    """The references: (logs or None, stage or None, store or None). From the cache
+    """The references: (logs or None, stage or None, store or None, loaded: what loading
+    them left, {"samples", "warnings", "notes"}). From the cache
     (:mod:`quadsim.gap.cache`) where it holds their entry: (None, the kept stage, None),
     their loader's warnings said again and their samples counted (where another log needs
     rotor speeds synthesised from them, :func:`quadsim.gap.logcheck.synthesise_all`: loaded
     too, the logs instead of None); else loaded here, and with the cache on a store that
     writes the stage the diagnosis computes."""
     if not args.reference:
-        return None, None, None
+        return None, None, None, {}
     from .cache import ReferenceStore, cache_dir, entry_key
     from .diagnose import DEFAULT_WINDOW_S
 
@@ -399,13 +455,126 @@ def _references(args, params, base_effects, logs, holdout, lines):
             if not args.quiet:
                 print(f"note: the references' calibration and self-check read from the "
                       f"cache: {store.path(key)}", file=sys.stderr)
-            return reference, entry.stage, None
+            return reference, entry.stage, None, {"samples": entry.samples,
+                                                  "warnings": entry.found, "notes": entry.notes}
     said: list = []
     before = getattr(args, "samples_loaded", 0)
     reference = _load(args.reference, params, args, lines, said=said)
-    writer = (None if store is None else
-              _Writer(store, key, said[0], args.samples_loaded - before, args.quiet))
-    return reference, None, writer
+    samples = args.samples_loaded - before
+    writer = (None if store is None else _Writer(store, key, said[0], samples, args.quiet))
+    return reference, None, writer, {"samples": samples, "warnings": said[0][0],
+                                     "notes": said[0][1]}
+
+
+def _stored_reference(args, params, base_effects, judged, lines):
+    """The stored reference of the run (:mod:`quadsim.gap.reffile`): (Stored or None, whether
+    it is the set's shipped one, a note or None). ``--reference FILE.qref``: read and
+    checked against the run (a refusal: one line); no ``--reference`` (nor ``--bare``,
+    ``--write-effects``): the set's shipped reference where it fits the run
+    (:func:`_shipped`). ``judged``: every log to judge (one needing rotor speeds synthesised
+    needs ``--command-reference``: refused with a stored file)."""
+    from .diagnose import DEFAULT_WINDOW_S
+    from .reffile import binding_of, check_fits, read_reference, shipped_reference
+
+    binding = binding_of(params, base=base_effects, effects_file=args.effects_file,
+                         effects=args.effects,
+                         window_s=DEFAULT_WINDOW_S if args.window is None else args.window)
+    if args.reference_file is not None:
+        stored, shipped = read_reference(args.reference_file), False
+        check_fits(args.reference_file, stored.header, binding)
+        _say(stored.found, stored.notes, lines)
+    else:
+        path = (None if args.reference or args.bare or args.write_effects is not None
+                else shipped_reference(params.name))
+        if path is None:
+            return None, False, None
+        stored, note = _shipped(path, binding, judged, args)
+        if stored is None:
+            return None, False, note
+        shipped = True
+    args.samples_loaded = getattr(args, "samples_loaded", 0) + stored.samples
+    check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
+    needing = [g for g in judged if g.rotor_speed is None]
+    if needing and not args.command_reference:
+        raise InputError(f"{getattr(needing[0], 'path', None) or needing[0].name}: rotor_speed: "
+                         f"not logged; against a stored reference ({stored.path.name}) its "
+                         "speeds are synthesised from --command-reference LOG... (flights "
+                         "with rotor speeds and commands, e.g. the references it was written "
+                         "from): give them, or --reference LOG...")
+    return stored, shipped, None
+
+
+def _shipped(path, binding, judged, args):
+    """The set's shipped reference ``path`` where it fits the run: (Stored, None); else
+    (None, the note why: held out judged against the parameter set alone). It does not fit
+    a run of another parameter-set content, effect file, ``--effects`` or ``--window``
+    (:func:`quadsim.gap.reffile.mismatch`), one with logs lacking rotor speeds and no
+    ``--command-reference``, nor a file this quadsim cannot read (another format, another
+    numpy). ``--per-flight``: refused (one line) instead of a note."""
+    from .reffile import mismatch, read_header, read_reference
+
+    stored = header = wrong = None
+    try:
+        header = read_header(path)
+    except InputError as exc:
+        wrong = str(exc)
+    wrong = wrong or mismatch(header, binding)
+    if wrong is None and not args.command_reference and any(
+            g.rotor_speed is None for g in judged):
+        wrong = ("logs without rotor speeds: their speeds are synthesised from reference "
+                 "flights with speeds, --command-reference LOG...")
+    if wrong is None:
+        try:
+            stored = read_reference(path)
+        except InputError as exc:
+            wrong = str(exc)
+    if wrong is not None and args.per_flight:
+        raise InputError(f"--per-flight needs --reference LOG... (nominal flights): the set's "
+                         f"shipped reference {path.name} does not fit this run: {wrong}")
+    if wrong is not None:
+        return None, (f"judged against the parameter set alone: its shipped reference "
+                      f"{path.name} does not fit this run ({wrong}); --reference LOG... "
+                      "calibrates nominal flights for it")
+    return stored, None
+
+
+def _write_reference(args, params, base_effects, refs) -> object:
+    """--write-reference: the references' stage (``refs``: (logs, kept stage or None, store,
+    loaded)) computed where the cache did not hold it, written; -> the stage."""
+    from .diagnose import DEFAULT_WINDOW_S, calibrated_stage
+    from .reffile import Provenance, binding_of, write_reference
+
+    reference, kept, store, loaded = refs
+    window = DEFAULT_WINDOW_S if args.window is None else args.window
+    if kept is None:
+        kept = calibrated_stage(reference, params, effects=args.effects, window_s=window,
+                      base=tuple(base_effects), store=store)
+    binding = binding_of(params, base=base_effects, effects_file=args.effects_file,
+                         effects=args.effects, window_s=window)
+    provenance = Provenance(tuple(args.reference), tuple(args.command_reference or ()),
+                            args.reference_source, ("python", "-m", "quadsim.gap",
+                                                    *args.argv), loaded)
+    path = write_reference(args.write_reference, binding, kept, provenance)
+    if not args.quiet:
+        print(f"note: wrote {path}: the calibrated stage of {kept.count} reference flights "
+              f"(read it with --reference {path})", file=sys.stderr)
+    return kept
+
+
+def _with_stored(result, stored, shipped: bool):
+    """``result`` saying what it was judged against (:mod:`quadsim.gap.reffile`): JSON
+    ``reference_file``, and a sentence after the answer."""
+    import dataclasses
+
+    from .reffile import describe, sentence
+
+    said = sentence(stored, shipped)
+    if result.verdict is not None:
+        verdict = dataclasses.replace(result.verdict, answer=f"{result.verdict.answer} ({said})")
+        return dataclasses.replace(result, verdict=verdict,
+                                   reference_file=describe(stored, shipped))
+    return dataclasses.replace(result, answer=f"{result.answer} ({said})",
+                               reference_file=describe(stored, shipped))
 
 
 def _progress(args):
@@ -450,6 +619,7 @@ def _write_outputs(args, params, base, result) -> None:
 @limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)   # --write-reference records it
     _check_args(args)  # quadsim.core.args: ranges, duplicates, roles, writable outputs
     params = load_params(args.model)
     base_effects, base = (), None
@@ -486,7 +656,15 @@ def main(argv: list[str] | None = None) -> int:
     else:
         logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None
-    reference, kept, store = _references(args, params, base_effects, logs, holdout, lines)
+    stored, shipped, bare_note = _stored_reference(args, params, base_effects,
+                                                   [*logs, *(holdout or [])], lines)
+    if stored is not None:
+        from .reffile import with_paths
+
+        refs = (None, with_paths(stored.stage, params.path, params.cad_dir), None, {})
+    else:
+        refs = _references(args, params, base_effects, logs, holdout, lines)
+    reference, kept, store, _ = refs
     for line in gather_notes(lines or []):      # per flight: every log's notes, gathered
         print(f"warning: {line}", file=sys.stderr)
     # command-only logs in any role: speeds synthesised (quadsim.gap.logcheck.synthesise_all)
@@ -502,28 +680,39 @@ def main(argv: list[str] | None = None) -> int:
     if command_model is not None and not args.quiet:
         print(f"note: rotor speeds synthesised for the command-only logs from "
               f"{command_model.source}", file=sys.stderr)
+    if args.write_reference is not None:
+        kept, store = _write_reference(args, params, base_effects,
+                                       (reference, kept, store, refs[3])), None
+        if not args.logs:
+            return 0
+    against = reference if kept is None else kept
     bar, progress = _progress(args)
     extra = {} if args.window is None else {"window_s": args.window}
     extra["map_fn"] = _map_fn(args, bar)
     try:
         if args.per_flight:
-            if not args.reference:
+            if against is None:
                 raise InputError("--per-flight needs --reference LOG... (nominal flights)")
-            result = diagnose_per_flight(logs, reference if kept is None else kept, params,
+            result = diagnose_per_flight(logs, against, params,
                                          effects=args.effects, progress=progress,
                                          refused=refused, base_effects=base_effects,
                                          store=store, orders=orders, **extra)
         else:
             result = diagnose(logs, params, holdout=holdout, effects=args.effects,
                               progress=progress, base_effects=base_effects,
-                              **({} if not args.reference else {
-                                  "reference": reference if kept is None else kept,
-                                  "store": store}), **extra)
+                              **({} if against is None else {
+                                  "reference": against, "store": store}), **extra)
     finally:
         if bar is not None:
             bar.close()
     if base is not None:
         result = _with_effects_file(result, args.effects_file, base_effects)
+    if stored is not None:
+        result = _with_stored(result, stored, shipped)
+    elif bare_note is not None:
+        import dataclasses
+
+        result = dataclasses.replace(result, notes=tuple(result.notes) + (bare_note,))
     _write_outputs(args, params, base, result)
     return 0
 

@@ -406,8 +406,8 @@ def _weighed_against(train, held, reference_logs, params: VehicleParams, *, effe
     """The split weighed against nominal reference flights (module doc, "Held out against
     nominal references"): their per-flight stage (``store`` keeps it), the flights aligned
     and placed on it, every explanation weighed on the training flights and read on all."""
-    stage = _stage(reference_logs, params, effects=effects, window_s=window_s, base=base,
-                   store=store)
+    stage = calibrated_stage(reference_logs, params, effects=effects, window_s=window_s,
+                             base=base, store=store)
     if progress is not None:
         progress("reference")
     against = against_references(train, held, stage.reference, effects=effects)
@@ -1826,8 +1826,8 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     here), in the order of ``logs``.
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     base = tuple(base_effects)
-    kept = _stage(reference, params, effects=effects, window_s=window_s, base=base,
-                  store=store)
+    kept = calibrated_stage(reference, params, effects=effects, window_s=window_s,
+                            base=base, store=store)
     ref, vehicle = kept.reference, kept.vehicle
     if progress is not None:
         progress("reference")
@@ -1858,8 +1858,8 @@ def base_json(base: Sequence) -> tuple:
                                              for p in e.parameters}} for e in base)
 
 
-def _stage(reference, params: VehicleParams, *, effects, window_s: float, base: tuple,
-           store=None) -> Calibrated:
+def calibrated_stage(reference, params: VehicleParams, *, effects, window_s: float,
+                     base: tuple, store=None) -> Calibrated:
     """The reference stage of ``reference`` (logs): from ``store`` where it holds it
     (:func:`quadsim.gap.calibrate.reference_key`), else :func:`_reference_stage` (then put
     there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references).

@@ -298,8 +298,9 @@ class Diagnosis(_JsonView):
     ``where`` (:mod:`.judge`), ``effects``/``baseline``/``combination`` (held out: every
     ranked explanation as JSON), ``checks`` (:func:`quadsim.gap.logcheck.vehicle_check`),
     ``base_effects`` (the effects already in the model, either mode) and ``effects_file``
-    (the file they came from, as given to the CLI; None: none), ``notes``; ``series`` (not
-    in the JSON)."""
+    (the file they came from, as given to the CLI; None: none), ``notes``,
+    ``reference_file`` (the stored reference judged against, :mod:`quadsim.gap.reffile`;
+    None: none); ``series`` (not in the JSON)."""
 
     schema: str
     model: str
@@ -321,6 +322,8 @@ class Diagnosis(_JsonView):
     base_effects: tuple = ()
     effects_file: str | None = None
     notes: tuple = ()
+    #: the stored reference judged against (:func:`quadsim.gap.reffile.describe`), or None
+    reference_file: Mapping | None = None
     series: Series | None = None
     #: held out: every held-out flight's :class:`Series`, in order (``series`` is the first)
     held_series: tuple = ()
@@ -337,6 +340,8 @@ class Diagnosis(_JsonView):
             out["base_effects"] = list(self.base_effects)
         if self.effects_file is not None:
             out["effects_file"] = self.effects_file
+        if self.reference_file is not None:
+            out["reference_file"] = dict(self.reference_file)
         if self.mode == "per-flight":
             flights = [f.to_json() for f in self.flights]
             out.update(mode="per-flight", reference=list(self.reference),
