@@ -117,7 +117,8 @@ def test_round_trip_bit_for_bit(written, flight_files, tmp_path):
     stored = file_json.pop("reference_file")
     assert stored["file"] == "two.qref" and stored["shipped"] is False and stored["count"] == 2
     sentence = file_json["verdict"]["answer"][len(logs_json["verdict"]["answer"]):]
-    assert sentence.startswith(" (judged against the 2 nominal flights: stored reference")
+    assert sentence.startswith(" Judged against the 2 nominal flights (stored reference two.qref, "
+                               "written ")
     file_json["verdict"]["answer"] = logs_json["verdict"]["answer"]
     assert file_json == logs_json
     # written while judging: the same stage bytes as written alone, the logs' JSON
@@ -297,8 +298,8 @@ def test_generated_flight_against_the_shipped_reference(tmp_path, capsys):
     result = json.loads(out.read_text())
     assert result["reference_file"]["shipped"] is True
     assert result["reference_file"]["count"] == 20 and len(result["reference"]) == 20
-    assert "judged against the set's own 20 nominal flights: shipped reference " \
-           "crazyflie21.qref" in result["verdict"]["answer"]
+    assert "Judged against the set's own 20 nominal flights (shipped reference " \
+           "crazyflie21.qref, written " in result["verdict"]["answer"]
     assert len(result["flights"]) == 1 and result["flights"][0]["outcome"] in (
         "effect", "unexplained", "no_significant_gap")
     assert main(["--model", "crazyflie21", "--per-flight", str(path), "--bare"]) == 2

@@ -570,10 +570,10 @@ def _with_stored(result, stored, shipped: bool):
 
     said = sentence(stored, shipped)
     if result.verdict is not None:
-        verdict = dataclasses.replace(result.verdict, answer=f"{result.verdict.answer} ({said})")
+        verdict = dataclasses.replace(result.verdict, answer=f"{result.verdict.answer} {said}")
         return dataclasses.replace(result, verdict=verdict,
                                    reference_file=describe(stored, shipped))
-    return dataclasses.replace(result, answer=f"{result.answer} ({said})",
+    return dataclasses.replace(result, answer=f"{result.answer} {said}",
                                reference_file=describe(stored, shipped))
 
 

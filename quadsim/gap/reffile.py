@@ -25,7 +25,7 @@ computes the stage as the one that wrote it did (below, "Staleness").
 its own nominal flights: ``models/references/NAME.qref`` beside ``models/NAME.toml`` (in a
 wheel: ``quadsim/_shipped/models/references``; :func:`shipped_reference`). With ``--model
 NAME`` and no ``--reference``, held-out mode and ``--per-flight`` judge against it, and the
-answer says so ("judged against the set's own 20 nominal flights (shipped reference
+answer says so ("Judged against the set's own 20 nominal flights (shipped reference
 crazyflie21.qref ...)"; JSON ``reference_file`` with ``"shipped": true``). ``--bare``
 judges against the parameter set alone instead (held out: as before the set shipped one;
 ``--write-effects`` always does: its effect is added to ``--model``). The shipped file is
@@ -451,12 +451,14 @@ def describe(stored: Stored, shipped: bool) -> dict:
 
 
 def sentence(stored: Stored, shipped: bool) -> str:
-    """The answer's sentence naming what the flights were judged against."""
+    """The answer's sentence naming what the flights were judged against ("Judged against
+    the set's own 20 nominal flights (shipped reference crazyflie21.qref, written
+    2026-11-29).")."""
     h = stored.header
     what = "the set's own" if shipped else "the"
-    return (f"judged against {what} {h['count']} nominal flights: "
-            f"{'shipped ' if shipped else 'stored '}reference {stored.path.name}, written "
-            f"{str(h.get('written', '?'))[:10]}")
+    return (f"Judged against {what} {h['count']} nominal flights "
+            f"({'shipped' if shipped else 'stored'} reference {stored.path.name}, written "
+            f"{str(h.get('written', '?'))[:10]}).")
 
 
 if __name__ == "__main__":    # pragma: no cover - `python -m quadsim.gap.reffile FILE`
