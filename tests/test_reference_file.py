@@ -117,8 +117,11 @@ def test_round_trip_bit_for_bit(written, flight_files, tmp_path):
     stored = file_json.pop("reference_file")
     assert stored["file"] == "two.qref" and stored["shipped"] is False and stored["count"] == 2
     sentence = file_json["verdict"]["answer"][len(logs_json["verdict"]["answer"]):]
-    assert sentence.startswith(" Judged against the 2 nominal flights (stored reference two.qref, "
-                               "written ")
+    # after the answer's full stop (added where the answer has none)
+    assert sentence.startswith((". Judged", " Judged")) and logs_json["verdict"]["answer"].rstrip(
+        ).endswith(".") == sentence.startswith(" ")
+    assert sentence.lstrip(". ").startswith("Judged against the 2 nominal flights (stored "
+                                            "reference two.qref, written ")
     file_json["verdict"]["answer"] = logs_json["verdict"]["answer"]
     assert file_json == logs_json
     # written while judging: the same stage bytes as written alone, the logs' JSON

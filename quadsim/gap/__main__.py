@@ -569,11 +569,16 @@ def _with_stored(result, stored, shipped: bool):
     from .reffile import describe, sentence
 
     said = sentence(stored, shipped)
+
+    def told(answer: str) -> str:       # the sentence after the answer's last full stop
+        answer = answer.rstrip()
+        return f"{answer} {said}" if answer.endswith(".") else f"{answer}. {said}"
+
     if result.verdict is not None:
-        verdict = dataclasses.replace(result.verdict, answer=f"{result.verdict.answer} {said}")
+        verdict = dataclasses.replace(result.verdict, answer=told(result.verdict.answer))
         return dataclasses.replace(result, verdict=verdict,
                                    reference_file=describe(stored, shipped))
-    return dataclasses.replace(result, answer=f"{result.answer} {said}",
+    return dataclasses.replace(result, answer=told(result.answer),
                                reference_file=describe(stored, shipped))
 
 
