@@ -434,8 +434,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for n in args.counts:
         runs.append(time_gap(f"{n} mixed, whole", mixed[:n], nominal, warm=args.warm))
-        print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s wall "
-              f"({runs[-1].verdicts})", flush=True)
+        _said(runs[-1])
     counted = list(runs)
     with tempfile.TemporaryDirectory() as tmp:
         for fraction in args.fractions:
@@ -443,18 +442,29 @@ def main(argv: list[str] | None = None) -> int:
                    for p in mixed[:LENGTH_FLIGHTS]]
             runs.append(time_gap(f"{LENGTH_FLIGHTS} mixed, first {fraction:.0%}", cut, nominal,
                                  warm=args.warm))
-            print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s "
-                  f"wall ({runs[-1].verdicts})", flush=True)
+            _said(runs[-1])
+    _summary(runs, counted, f"{len(nominal)} nominal flights", nominal)
+    return 0
+
+
+def _said(run: Run) -> None:
+    """One progress line of a timed run."""
+    print(f"  {run.label}: {run.cpu_s:.1f} s CPU, {run.wall_s:.1f} s wall ({run.verdicts})",
+          flush=True)
+
+
+def _summary(runs: list[Run], counted: list[Run], what: str, references: list[Path]) -> None:
+    """The load at the end, the references, the table of ``runs`` and the line through
+    ``counted`` (two or more)."""
     load = os.getloadavg()
     print(f"load average at the end {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
-    print(f"references: {len(nominal)} nominal flights, "
-          f"{sum(log_duration(p) for p in nominal) / 60:.2f} min; --workers 1\n")
+    print(f"references: {what}, {sum(log_duration(p) for p in references) / 60:.2f} min; "
+          "--workers 1\n")
     print(table(runs))
     if len(counted) >= 2:
         fixed, per_minute = line_fit(counted)
         print(f"\nCPU = {fixed:.1f} s + {per_minute:.1f} s per judged flight-minute "
-              f"(least squares over the whole-flight runs)")
-    return 0
+              f"(least squares over the {'whole-flight ' if counted is not runs else ''}runs)")
 
 
 def _long(args) -> int:
@@ -474,16 +484,8 @@ def _long(args) -> int:
     for n in range(1, len(flights) + 1):
         runs.append(time_gap(f"{n} validation run(s)", flights[:n], references,
                              warm=args.warm, model=str(NANO_MODEL)))
-        print(f"  {runs[-1].label}: {runs[-1].cpu_s:.1f} s CPU, {runs[-1].wall_s:.1f} s wall "
-              f"({runs[-1].verdicts})", flush=True)
-    load = os.getloadavg()
-    print(f"load average at the end {load[0]:.2f}")
-    print(f"references: {len(references)} training runs, "
-          f"{sum(log_duration(p) for p in references) / 60:.2f} min; --workers 1\n")
-    print(table(runs))
-    fixed, per_minute = line_fit(runs)
-    print(f"\nCPU = {fixed:.1f} s + {per_minute:.1f} s per judged flight-minute "
-          f"(least squares over the runs)")
+        _said(runs[-1])
+    _summary(runs, runs, f"{len(references)} training runs", references)
     return 0
 
 
