@@ -63,8 +63,8 @@ file calibrated for another parameter set (``model``: compared by content,
 renamed into place (nothing half-written) and never over an input.
 
 **Trust.** The stage is a pickle. It is read with a restricted unpickler
-(:class:`_Restricted`): only classes of ``quadsim.*`` and ``numpy.*``, numpy's array and
-scalar reconstructors, ``pathlib``'s path classes and a few builtins and ``collections``
+(:class:`_Restricted`): only quadsim's dataclasses, numpy's ``ndarray``, ``dtype`` and scalar
+types and their reconstructors, ``pathlib``'s path classes and a few builtins and ``collections``
 classes (:data:`ALLOWED_BUILTINS`) may be named; any other name (a function such as
 ``os.system``) refuses the file before anything in it runs. That narrows what a crafted file
 can do, it does not make one safe: like the cache (:mod:`quadsim.gap.cache`), a reference
@@ -347,9 +347,10 @@ def read_header(path) -> dict:
 
 
 class _Restricted(pickle.Unpickler):
-    """An unpickler that resolves only classes of ``quadsim.*`` and ``numpy.*`` and the
-    names of :data:`ALLOWED_BUILTINS`; anything else raises ``pickle.UnpicklingError``
-    before it is called."""
+    """An unpickler that resolves only quadsim's dataclasses (their constructors only set
+    fields), numpy's ``ndarray``, ``dtype`` and scalar types (not ``memmap``, whose
+    constructor opens a file), and the names of :data:`ALLOWED_BUILTINS`; anything else
+    raises ``pickle.UnpicklingError`` before it is called."""
 
     def find_class(self, module: str, name: str):
         if name in ALLOWED_BUILTINS.get(module, ()):
@@ -357,7 +358,10 @@ class _Restricted(pickle.Unpickler):
         root = module.split(".")[0]
         if root in ("quadsim", "numpy"):
             found = super().find_class(module, name)
-            if isinstance(found, type):
+            if root == "quadsim" and isinstance(found, type) and dataclasses.is_dataclass(found):
+                return found
+            if root == "numpy" and (found is np.ndarray or found is np.dtype or (
+                    isinstance(found, type) and issubclass(found, np.generic))):
                 return found
         raise pickle.UnpicklingError(f"{module}.{name}")
 
