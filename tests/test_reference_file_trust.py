@@ -60,7 +60,7 @@ def test_only_dataclasses_of_quadsim():
 
     class _Cls:
         def __reduce__(self):
-            from quadsim.core.errors import InputError     # a class, not a dataclass
+            from quadsim.core.errors import InputError  # a class, not a dataclass
 
             return (InputError, ("x",))
 
