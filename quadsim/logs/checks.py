@@ -73,9 +73,9 @@ FRAME_GOOD = 0.25
 #: rotor order refused when another order's Delta chi^2 over the log's own exceeds this
 ORDER_CHI2 = 25.0
 #: a rival rotor order fitting better than the log's own by this Delta chi^2 (two sigma)
-#: makes the order doubtful (verdicts tentative; refused above ORDER_CHI2). Measured on the
-#: 20 nominal real Crazyflie flights: the right order's best rival reaches +1.0, rotors 1 and
-#: 2 swapped give +1.5 to +38.6 (17 of 20 above 4, 2 above 25).
+#: makes the order doubtful (verdicts tentative; refused above ORDER_CHI2): on real flights
+#: the right order's rivals stay below it, most swaps lie above (CHANGELOG.md: Docstrings as
+#: contracts).
 DOUBT_CHI2 = 4.0
 #: windows of the torque balance (s) whose means are removed: short against a manoeuvre,
 #: so that an unmodelled torque does not accumulate
@@ -448,9 +448,8 @@ def _regressor_noise(speeds: np.ndarray, t: np.ndarray, m: int) -> np.ndarray:
 #: an axis of the balance tells two column orders apart only where the rotor-speed sensor's
 #: noise makes under this share of the variance of either order's torque column: noise as large as
 #: the signal halves the fitted gain (errors in variables), and the orders then differ by how
-#: that noise meets another torque the flight shares. Measured (CHANGELOG, issue 47 item 7):
-#: generated figure-8s with 10 rad/s of speed noise 0.65-1.7 on every axis, a generated
-#: steps flight 0.18-0.24 on roll and pitch, the real Crazyflie flights below 0.005
+#: that noise meets another torque the flight shares. Generated flights with 10 rad/s of
+#: speed noise lie above, the real Crazyflie flights far below (CHANGELOG.md, issue 47 item 7)
 ORDER_NOISE_SHARE = 0.5
 
 
