@@ -672,9 +672,8 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     every flight must log ``vbat``). Physics: a DC motor driven at duty u from a battery at
     V turns where ``u V = k Omega + (R d / k) Omega^2`` (:func:`load_exponent`), so its
     steady speed is a function of u V alone, and a map read on flights at one charge
-    transfers to a flight at another only in u V (the 20 real crazyflie21 nominal flights:
-    hover command x vbat 1.541 at 3.756 V, 1.539 at 3.621 V, with the command 3.6 % apart;
-    docs/identification.md, "The rotor channels held out").
+    transfers to a flight at another only in u V (docs/identification.md, "The rotor channels
+    held out").
 
     Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
     firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or

@@ -738,15 +738,12 @@ def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
     effect; AR(1) effective sample size). A wrong column order is wrong on every axis it
     moves, so a permutation that fits one axis better but another far worse (that axis'
     Delta chi^2 below -``ORDER_CHI2``) is a model error, not a column order: its evidence is
-    that axis' (negative) value. On the nano-drone benchmark's chirp runs
-    (``../shared/data/nanodrone_cf21bl``, right order), whose torque model is poor (the
-    benchmark's authors name rotation the open problem), the best rival improved roll by 21 %
-    and worsened yaw by 38 % for a summed 32.6. The order with the largest Delta chi^2 is
+    that axis' (negative) value: otherwise a poor torque model passes for a column order
+    (CHANGELOG.md: Docstrings as contracts). The order with the largest Delta chi^2 is
     refused when it exceeds ``ORDER_CHI2`` = 25 (a five-sigma difference), naming the
-    ``--rotor-map`` that applies it. On generated figure-8s (crazyflie21, 6 s, gyro noise
-    0.01 rad/s) rotors 1 and 2 swapped give Delta chi^2 310-340 and the right order's best
-    rival -200 or less; on the 20 nominal Crazyflie flights of ../shared/data the right
-    order's best rival reaches 1.0 (``python scripts/consistency_evidence.py``). Each order
+    ``--rotor-map`` that applies it; a swap on generated flights and the right order on real
+    ones lie far either side of it (``python scripts/consistency_evidence.py``;
+    CHANGELOG.md: Docstrings as contracts). Each order
     is scored from the Gram matrices of the per-sample columns (:class:`_TorqueBalance`):
     a hexarotor's 720 orders cost little more than a quadrotor's 24.
     ``evidence``: the log's :func:`rotor_order_evidence` where already read."""
