@@ -12,11 +12,10 @@ STEP file whose declared unit is wrong is caught by the same size/density check 
 
 Tessellation tolerance: ``STEP_TOLERANCE`` = 1e-6 *relative* chord deflection
 (``tol_relative=True``: deflection / edge size), angular 0.5 rad. Relative, so that the
-result does not depend on the part's size or unit. Measured on a r = 10 mm, h = 30 mm
-cylinder (``tests/data/cylinder.step``) against the closed form (``docs/cad.md``): the
-volume error equals the relative tolerance (-1.0e-2, -9.8e-4, -1.0e-4, -1.0e-5 at 1e-2 ...
-1e-5) and the axial inertia error is twice it; at 1e-6 both are below 3e-6, below any mass
-or inertia we can measure on the bench. Flat faces are exact at any tolerance.
+result does not depend on the part's size or unit. 1e-6: the volume error equals the
+relative tolerance and the axial inertia error twice it, so both stay below any mass or
+inertia the bench measures (``docs/cad.md``: a cylinder against the closed form). Flat faces
+are exact at any tolerance.
 
 A file must hold exactly one solid: several solids (or disconnected bodies) or an open shell
 give a one-line :class:`~quadsim.core.errors.InputError`.

@@ -96,10 +96,8 @@ def _finish(results, failures, labels, keep_going):
 
 #: the environment variable that sets the numeric libraries' threads of a command's own process
 THREADS_ENV = "QUADSIM_THREADS"
-#: their default: one. Measured on the 2-core machine (README, "Speed"): ``python -m
-#: quadsim.gap`` on 26 real flights against 20 references, one worker, took 56 s CPU with
-#: OpenBLAS's own threads and 36-39 s with one (the same output): its linear algebra is on
-#: small matrices, where a second thread costs more in spinning and handing over than it gains.
+#: their default: one: the linear algebra is on small matrices, where a second thread costs
+#: more in spinning and handing over than it gains (README, "Speed": the CPU measured).
 DEFAULT_THREADS = 1
 
 

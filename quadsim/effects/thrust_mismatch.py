@@ -13,10 +13,9 @@ mismatch shows as a constant torque that a controller must trim out.
 The speed a command gives: the drag torque per Omega^2 is the motor's load, so a DC motor
 driven at a fixed duty cycle spins a lighter propeller faster, by (1 + e_i)^-alpha with the
 exponent of :mod:`quadsim.effects.thrust_factor` (0.2 for a DC motor at 75 % voltage
-efficiency; 0, the default, for a motor whose controller holds the commanded speed). Measured
-on the multirotor benchmark source (a 5.5 kg quadrotor with DC motors): one propeller 12.6 %
-weaker spun faster per volt, and without this term the right reading (rotor 4, -13 %) left
-the rotor-4 speed channel at 7x the reference flights' and the flight was ``unexplained``.
+efficiency; 0, the default, for a motor whose controller holds the commanded speed). Why:
+without this term a weaker propeller's faster spin is left in the rotor speed channel
+(CHANGELOG.md: Docstrings as contracts).
 Like a battery it acts upstream of the measured rotor speed (hook ``rotor_speed_factor``).
 
 Parameters ``rotor_1 .. rotor_8`` are the relative deviations e_i (fraction; 0.05 = 5 %
@@ -62,9 +61,9 @@ class ThrustMismatch(EffectBase):
         # reading of its own in which the rotor's command gives (1 + e)^-alpha of its speed
         # (the motor's load). That one is coupled (alpha acts through the deviation); its kin
         # is the plain reading of the same rotor. Why two: with alpha in the only reading, a
-        # speed-controlled motor (alpha 0, two spreads from the prior's centre) lost its weak
-        # rotor to an off-centre mass at 1.00 on the pipeline; without it, a DC motor's weak
-        # rotor left its speed channel at 7x the references' (multirotor, `unexplained`)
+        # speed-controlled motor (alpha 0, two spreads from the prior's centre) loses its weak
+        # rotor to an off-centre mass; without it, a DC motor's weak rotor stays in its speed
+        # channel (CHANGELOG.md: Docstrings as contracts)
         readings=(Reading(("rotor_{}",), "rotor {}", per_rotor=True),
                   Reading(("rotor_{}", "alpha"), "rotor {}, with its speed per command",
                           per_rotor=True, coupled=True, kin=("thrust_mismatch",),

@@ -165,14 +165,9 @@ quadratic (:mod:`quadsim.effects.body_drag`), under one of two laws: on the air 
 faces taken apart: l2f's, PyFlyt's and multirotor's drag). At the references' ~1 m/s the
 three give the same force; a flight flown faster, or in a wind, shows which one the vehicle
 has. The law is the vehicle's, the references' as much as the flight's: it is no reading of
-its own, and every reading must be judged under the same one. Measured, before:
-
-- with the quadratic laws only inside the wind reading, two nominal multirotor flights
-  outside the references' envelope gained 5-10 log units from the law per axis at a wind of
-  0.2-0.6 m/s, and one was named ``wind`` at 0.80;
-- with "no difference" alone given the laws, an l2f roll/pitch inertia error of +34 % (a
-  flight at 1.3x the references' speed) became ``no_significant_gap`` at 0.97: the inertia
-  reading kept the linear law and lost 10 log units on Fx and Fy to it.
+its own, and every reading must be judged under the same one: a law given to one reading
+alone (the wind, or "no difference") wins that reading the law's evidence, and the flight
+its name (CHANGELOG.md: Docstrings as contracts).
 
 How (:func:`choose`). "No difference" is fitted under each law: the references' own, and
 each quadratic law with its C_d A held at the references' equivalent
@@ -1479,8 +1474,8 @@ def _screen_all(inputs: FitInputs, cols: Columns, explanations: list, null, fitt
 
 #: the linear model's miss (cost units: |cost(z1) - predicted|) at or below which the
 #: screen's step z1 is taken as the converged fit (:func:`converged_steps`): log Z off by a
-#: two-thousandth along the step; measured on the 26 real mixed flights (2026-11-29), the
-#: refined fit from such a step moved log Z by at most 0.014 (146 readings)
+#: two-thousandth along the step; the refined fit from such a step moved log Z by at most
+#: 0.014 on the real mixed flights (CHANGELOG.md: Docstrings as contracts)
 STEP_MISS = 1e-3
 #: the margin (log-evidence units) stated for a converged step's log Z against its refined
 #: fit's: 3.5 x the largest move measured (:data:`STEP_MISS`)

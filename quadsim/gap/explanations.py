@@ -134,8 +134,8 @@ def reference_delay_sd(reference: Reference) -> float:
     (:data:`quadsim.logs.delays.REPEAT_TOL_S`, 3 ms: the two halves of a log agree to it)
     weighed as one degree of freedom. Each reference's estimate already carries the
     estimator's error, so s holds it once; adding s_0 to s in quadrature counted it twice
-    (a PyFlyt rotor log 11.4 ms late went unnamed under a 3.5 ms prior where the
-    references' own estimates spread 1.8 ms). Without references' estimates (n = 0): s_0."""
+    and hid a late rotor log (CHANGELOG.md: Docstrings as contracts). Without references'
+    estimates (n = 0): s_0."""
     from ..logs.delays import REPEAT_TOL_S
 
     _, sd_ms, n = reference.delays_ms.get("rotor", (0.0, 0.0, 0))
@@ -254,9 +254,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     ref = reference.values()
     # the rotor speeds' timing is read by its likelihood wherever they are logged and the
     # references' own timing is fitted (calibrate._refine); the cross-correlation estimate
-    # is only a start. Before, a delay was read only where that estimate held on some
-    # reference: on l2f's flightmare vehicle it held on none of 8 (20 ms rotors), and rotor
-    # logs 17.5 and 25 ms late were named `motor_lag` at 1.00, with no delay reading
+    # is only a start, which may hold on no reference (CHANGELOG.md: Docstrings as contracts)
     delay = states.rotor_speed is not None and (reference.timing
                                                 or "rotor" in reference.delays_ms)
     out = [_one("no_difference", "", (), (), ())]
@@ -351,10 +349,8 @@ def _motor_change(reference: Reference, lag: float, lag_sd: float, gain_sd: floa
     constants (its torque constant and winding resistance), so a changed motor moves both;
     the plain ``motor_lag`` reading moves only the first. Half the reading's prior each.
 
-    Why: on PyFlyt, whose motor noise drifts the throttle up by a fixed amount per step, a
-    2.5x slower motor also spins 45 % faster per command. The plain lag reading ran to its
-    0.5 s bound, 2800 log units below a -3.6 % propeller, and the flight was ``unexplained``
-    (rotor 3 at 1.8x the references' RMS after that propeller)."""
+    Why: a slower motor can also spin faster per command, and the plain lag reading then
+    has no place for the speed's change (CHANGELOG.md: Docstrings as contracts)."""
     ref = reference.values()
     return _one("motor_lag", MOTOR_CHANGE, [("motor_lag", {}, ("time_constant",)),
                                             ("speed_gain", {}, ("gain",))],
@@ -371,14 +367,13 @@ ALPHA_MIN_SD = 0.01
 def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
     """(mean, spread) of a propeller reading's speed-per-command exponent alpha: what the
     references' own command -> speed map implies (:attr:`Reference.load_exponent`,
-    :func:`quadsim.gap.residual.load_exponent`: 0 for a speed-controlled motor, 0.40 ± 0.08
-    on the real Crazyflie 2.1 Brushless flights), within the effect's range and at least
-    :data:`ALPHA_MIN_SD` wide; where their commands do not say, the textbook DC motor
-    N(0.2, 0.1^2) (module doc). Why: with the textbook prior on speed-controlled rotors (l2f,
-    PyFlyt, RotorPy: alpha 0, two spreads from its centre) a propeller change paid 2-4 log
-    units for an exponent the data put at 0 and lost to a mass or a thrust curve that
-    predict the same motion; against a speed-controlled motor the two cannot be told apart
-    by the command -> speed map, and the evidence now says so."""
+    :func:`quadsim.gap.residual.load_exponent`: 0 for a speed-controlled motor), within the
+    effect's range and at least :data:`ALPHA_MIN_SD` wide; where their commands do not say,
+    the textbook DC motor N(0.2, 0.1^2) (module doc). Why: with the textbook prior on
+    speed-controlled rotors (alpha 0, two spreads from its centre) a propeller change paid log
+    units for an exponent the data put at 0 and lost to a mass or a thrust curve that predict
+    the same motion (CHANGELOG.md: Docstrings as contracts); against a speed-controlled motor
+    the two cannot be told apart by the command -> speed map, and the evidence now says so."""
     implied = getattr(reference, "load_exponent", None)
     if implied is None:
         return 0.2, float(sd["thrust_factor.alpha"])
@@ -388,18 +383,12 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 #: explanations that give the flight an air-speed load of its own (a drag, a translational
 #: lift): where the references do not identify their rotor drag (so their wind is no
 #: measured air force), each refits the shared wind with it (:func:`with_wind`). Not where
-#: the references' drag is identified: on Crazyflow and PyFlyt wind flights (their wind not
-#: the library's form) a body drag with the wind refitted is a superset of the wind reading
-#: and took it at 100 %. Both drags, not one: with only the rotor drag refitting the wind, it
-#: took RotorPy's body-drag flights. The lift too: against RotorPy's references' leftover
-#: 0.15 m/s wind a lift of the right size (0.0140 against 0.0141 kg/m) left 11x the
-#: references' Fz mean square (k_h |v - w|^2 carries -2 k_h v . w) and lost to a thrust
-#: curve by 173 log units; with the wind refitted (to 0.001 m/s) it left their level and won
-#: by 9. Blade flapping too (a moment k Omega e_z x (v - w), :mod:`quadsim.effects.blade_flapping`):
-#: against RotorPy's references' leftover wind (0.31 m/s on the Crazyflie, 0.10 m/s on the
-#: testbed, neither seen by them) the true law left Mx/My 98-263x and 25-37x the references'
-#: RMS (``unexplained``); with the wind refitted both flights are named at the true size
-#: (docs/effects.md, blade_flapping).
+#: the references' drag is identified: there a body drag with the wind refitted is a superset
+#: of the wind reading and takes it. All four, not one: a reading that alone refits the wind
+#: takes the others' flights, and each reads the references' leftover wind through its own
+#: law (the lift's k_h |v - w|^2 carries -2 k_h v . w; blade flapping's moment
+#: k Omega e_z x (v - w), :mod:`quadsim.effects.blade_flapping`), which held fixed leaves
+#: its flights unexplained (docs/effects.md, blade_flapping; CHANGELOG.md: Docstrings as contracts).
 DRAGS = ("rotor_drag", "body_drag", "translational_lift", "blade_flapping")
 
 
@@ -409,12 +398,10 @@ def with_wind(expl: Explanation, reference: Reference) -> Explanation:
     references see a wind only through their own drag (drag coefficient x air speed); where
     they show no rotor drag their wind is whatever the fit left, and under a drag of the
     flight's own it becomes a spurious steady force (marginalised by the Jacobian at their
-    zero drag, it cannot be moved). The references' value means nothing then (3 synthetic
-    references without drag in a 1.5 m/s wind left it at 5.6 m/s), so the prior is centred
-    on calm air. Such a reading is ``coupled`` and always fitted to convergence (the screen's
-    linear step cannot move the wind). Measured on RotorPy references flown without rotor
-    drag: their wind sat at 0.6 m/s (set through a vertical drag of 1 cm^2), and a flight with
-    rotor drag 15 mN/(m/s) was read as 8.4 with Fx at 36x the references' RMS."""
+    zero drag, it cannot be moved). The references' value means nothing then, so the prior is
+    centred on calm air (CHANGELOG.md: Docstrings as contracts). Such a reading is
+    ``coupled`` and always fitted to convergence (the screen's linear step cannot move the
+    wind)."""
     return dataclasses.replace(expl, parts=expl.parts + (("wind", {}, ("vx", "vy")),),
                                mean=expl.mean + (0.0, 0.0),
                                sd=expl.sd + (WIND_SD_MS, WIND_SD_MS),

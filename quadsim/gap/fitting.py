@@ -39,10 +39,8 @@ hung still. The swing the payload already had at
 the first sample is fitted with the payload too (lean and swing rate along world x and y,
 :func:`start_state`) with priors centred on hanging still (10 deg, 0.5 rad/s:
 :data:`START_PRIOR`); these and k are nuisance parameters, never part of the answer.
-Measured on a generated 6 s "steps" flight (12 deg rms swing): starting hanging still 0.2 s
-after take-off, where the payload already swung at 0.1 rad/s, the modelled direction was off
-by up to 4.8 deg for the whole flight, and the force residual of the true mass and length
-stayed at 4 mN (11 % of the payload's weight); a start along the effective gravity was worse.
+Why fitted: a start hanging still where the payload already swings leaves the modelled
+direction off for the whole flight (CHANGELOG.md: Docstrings as contracts).
 
 What the data fix: at frequencies well below the swing's own (f = sqrt(g / L) / 2 pi, 0.7 Hz
 at 0.5 m) the payload follows the vehicle and the pull is m (g_vec - a): a rigid mass at the
@@ -436,8 +434,7 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
 #: window (s) of the Savitzky-Golay derivative that turns the logged velocity into the
 #: attachment's acceleration: its response falls off above ~4 Hz (slung-load swings are
 #: 0.5-1.6 Hz for 0.1-1 m cables); the difference of a 100 Hz velocity log is noise-dominated
-#: (measured on generated flights with 0.01 m/s velocity noise: 0.14 m/s^2 RMS, which a 7 g
-#: payload turns into 1 mN of force noise, as much as the force residual of a nominal flight).
+#: (CHANGELOG.md: Docstrings as contracts).
 ACCEL_WINDOW_S = 0.25
 
 
@@ -633,10 +630,9 @@ class SpeedGain(EffectBase):
 
     Why. The static command -> speed map (:func:`quadsim.gap.fitting.fit_motor_map`) is fitted
     once on all reference flights pooled; a single flight's mean speed per command still differs
-    from it, and by how it was flown: on the 8 Crazyflow references (path speed 0.8-1.25) the
-    rotor channel's mean residual runs from -0.07 % of the hover speed on the slowest to +0.05 %
-    on the fastest (Crazyflow's rotor dynamics are not first order at one time constant, so the
-    mean speed a varying command gives depends on how much it varies). Without a shared
+    from it, and by how it was flown: where the rotor dynamics are not first order at one
+    time constant, the mean speed a varying command gives depends on how much it varies
+    (CHANGELOG.md: Docstrings as contracts). Without a shared
     parameter for it, that offset had no place in the reference model's uncertainty, and a
     nominal flight's own offset was read as ``thrust_factor`` (whose propeller coupling moves
     the speed per command) or ``battery_sag``. With a battery-voltage log the shared
@@ -648,7 +644,7 @@ class SpeedGain(EffectBase):
     within a few per cent (a map off by more is refused by the motor map's own checks), but a
     flight's reading of another motor or ESC
     (:func:`quadsim.gap.explanations.explanations_for`, ``MOTOR_CHANGE``) takes the gain of its
-    own, and on PyFlyt a 2.5x slower motor spins +45 % per command.
+    own, tens of per cent (CHANGELOG.md: Docstrings as contracts).
 
     Example::
 
@@ -1146,19 +1142,16 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     (``(F_meas - F_model) * m / m_vehicle``): an unmodelled force that the log carries
     (drag a candidate does not model) then weighs the same for every candidate. In newtons
     of the candidate's own vehicle, a candidate that adds mass would also scale every
-    unexplained force by m'/m and lose against an equivalent thrust scale (measured: a 4 g
-    payload on the Crazyflie with unmodelled drag explained 0.865 of the gap against 0.882
-    for -10 % thrust per Omega^2).
+    unexplained force by m'/m and lose against an equivalent thrust scale (CHANGELOG.md:
+    Docstrings as contracts).
 
     The torque channels likewise are angular acceleration times the *nominal* inertia,
     ``I (I_v^-1 (M_meas - M_model))`` = ``I (w_dot_meas - w_dot_model)`` with ``I_v`` the
     candidate vehicle's inertia: the measured angular acceleration (a differentiated, noisy
     gyro) then enters every candidate's residual with weight one. In newtons-metres of the
     candidate's own inertia the gyro noise would be scaled by ``I_v``, and least squares
-    would shrink ``I_v`` to shrink the noise (errors in variables: measured on 8 s
-    inverse-dynamics flights of the testbed with gyro noise 0.1 rad/s and no inertia error:
-    xx -14 %, zz -79 %; in this form +1.2 ± 4.3 %, -1.9 ± 21 %; with a true +30 % on xx, yy:
-    +12 % before, +31 ± 6 % now; docs/gap.md)."""
+    would shrink ``I_v`` to shrink the noise (errors in variables; CHANGELOG.md: Docstrings
+    as contracts)."""
     if memo is None:
         force, torque, vehicle = model_wrench(states, params, effects)
     else:

@@ -604,8 +604,8 @@ class OutsideLibrary:
 
 
 #: The outside hypothesis's data. ``right``: the right readings' shares on the independent
-#: simulator sources measured 2026-11-27 (l2f X500 and fs, Crazyflow, multirotor, PyFlyt; 114
-#: case flights, benchmarks/HISTORY.md "The form-error rule"): 90 % under 5 % (FORM_ERROR),
+#: simulator sources (114 case flights, benchmarks/HISTORY.md "The form-error rule"), which
+#: ``source`` names: 90 % under 5 % (FORM_ERROR),
 #: the largest 16 %, taken as the 99 % quantile (the largest of about a hundred). The
 #: effects outside the library on the same flights left 19-100 %: ``boundary`` is
 #: FORM_ERROR_TENTATIVE, the geometric middle between the classes, where a flagged name
@@ -1446,9 +1446,9 @@ def timing_rival(lead: str, rows, check, *, flights: int = 1) -> object | None:
     form (a lag smooths, a delay does not); where neither is the rotor's own form (a
     speed-dependent, asymmetric lag), the references' rotor residual under the calibrated
     model is form error, not noise, and the evidence, weighing each sample as noise, gives
-    one form a margin on flights that differ in nothing (drone-models: the lag over the
-    delay by 4-9 log units). A flight's margin within that is the forms' error, not the
-    cause's, and both readings are stated (:func:`quadsim.gap.words.timing_words`). The
+    one form a margin on flights that differ in nothing (CHANGELOG.md: Docstrings as
+    contracts). A flight's margin within that is the forms' error, not the cause's, and both
+    readings are stated (:func:`quadsim.gap.words.timing_words`). The
     margins compare as log evidences of flights of similar length (as the references and
     the flights judged against them are). Held out (:func:`judge_heldout`) the evidence is
     of ``flights`` flights (training and held out, each read as per flight): their margin

@@ -159,8 +159,8 @@ extrapolation, measured by the trend:
 
 Per channel, a line of its own (:func:`fit_channel_lines`). The place u is one axis for all
 channels; a flight may drive one channel harder than every reference while its place lies
-inside their range (Crazyflow's fastest no-effect flights: Fy's signal 1.22x the largest
-reference's). Each channel's log mean square is regressed on that channel's own excitation x_c
+inside their range (a fast flight's sideways force; CHANGELOG.md: Docstrings as contracts).
+Each channel's log mean square is regressed on that channel's own excitation x_c
 (:func:`excitation`: the log RMS of its signal about the flight's mean; specific force,
 angular acceleration, rotor speed) by ordinary least squares: slope h_c, residual spread s_x
 pooled over channels (C (n - 2) degrees of freedom). A flight whose x_c lies outside the

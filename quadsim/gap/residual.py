@@ -672,9 +672,8 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     every flight must log ``vbat``). Physics: a DC motor driven at duty u from a battery at
     V turns where ``u V = k Omega + (R d / k) Omega^2`` (:func:`load_exponent`), so its
     steady speed is a function of u V alone, and a map read on flights at one charge
-    transfers to a flight at another only in u V (the 20 real crazyflie21 nominal flights:
-    hover command x vbat 1.541 at 3.756 V, 1.539 at 3.621 V, with the command 3.6 % apart;
-    docs/identification.md, "The rotor channels held out").
+    transfers to a flight at another only in u V (docs/identification.md, "The rotor channels
+    held out").
 
     Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
     firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
@@ -755,12 +754,9 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
     intercept's standard error (samples counted one per window); alpha's spread is that
     error (delta method) and the rotors' own spread, added in squares.
 
-    Measured on each source's references: RotorPy (speed-commanded) 0.000 ± 0.002, l2f's
-    fs vehicle 0.017 ± 0.012, PyFlyt 0.054 ± 0.029, Crazyflow 0.059 ± 0.027, multirotor
-    (DC motors) 0.078 ± 0.003, the 20 real Crazyflie 2.1 Brushless nominal flights
-    0.40 ± 0.08 (0.34-0.48 per rotor); the l2f X500's references span 4.9-6.8 % of their
-    commands per rotor, too little (None). The textbook DC motor at 75 % voltage efficiency
-    is 0.2, the prior where this returns None."""
+    The textbook DC motor at 75 % voltage efficiency is 0.2, the prior where this returns
+    None. What it reads on each benchmark source and on real flights: CHANGELOG.md:
+    Docstrings as contracts."""
     from ..vehicle.params import hover_speed
 
     means = _window_means(flights)
@@ -844,8 +840,8 @@ def flat_command(c: np.ndarray) -> bool:
 
 
 #: the lags (s) :func:`map_lag` tries: 0 to 0.2 s (motor time constants plus the rotor
-#: log's delay: 7-60 ms on the sources benchmarked) in steps of 5 ms, a twelfth of
-#: drone-models' 60 ms: the slope's error from a lag off by half a step is below 0.1 %
+#: log's delay: 7-60 ms on the sources benchmarked, benchmarks/README.md) in steps of 5 ms,
+#: a twelfth of the slowest: the slope's error from a lag off by half a step is below 0.1 %
 MAP_LAGS_S = np.arange(0.0, 0.2001, 0.005)
 
 

@@ -25,9 +25,8 @@ flapping's dependence on speed, battery, regime) is in it. Identified when at le
 is reported with the reason and not used.
 
 This is the estimator of ``benchmarks.rotation_analysis --write-effects`` (its
-``low_band_pooled`` calls :func:`flapping_estimate`): on the nano-drone benchmark's training
-runs roll 9.54e-8 +- 0.51e-8, pitch 1.35e-7 +- 0.08e-7 kg m/rad (docs/identification.md,
-"Blade flapping per axis from the logs").
+``low_band_pooled`` calls :func:`flapping_estimate`); what it reads on the nano-drone
+benchmark's training runs: docs/identification.md, "Blade flapping per axis from the logs".
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ The whole-band fit of :func:`quadsim.identify.from_logs.fit_inertia` regresses t
 on the angular acceleration at every frequency. In translating flight most of the roll/pitch
 torque of the measured rotor speeds, below ~2 Hz, balances aerodynamic moments (blade
 flapping, the rotor drag's lever) and turns the body little: that torque has no angular
-acceleration to go with it, and the fit explains too little (on the nano-drone benchmark's
-training runs R^2 0.20 roll, 0.10 pitch) to give an inertia. Between ``BAND_HZ`` the
+acceleration to go with it, and the fit explains too little to give an inertia (CHANGELOG.md:
+Docstrings as contracts). Between ``BAND_HZ`` the
 rotors drive the body: there the measured moment follows ``b l dOmega^2`` with a flat gain and
 a few milliseconds of delay (docs/nanodrone.md, "Why the rotor speeds over-predict roll and
 pitch"; the per-run tables: benchmarks/HISTORY.md, "Rotation: what the logs say").

@@ -73,9 +73,9 @@ FRAME_GOOD = 0.25
 #: rotor order refused when another order's Delta chi^2 over the log's own exceeds this
 ORDER_CHI2 = 25.0
 #: a rival rotor order fitting better than the log's own by this Delta chi^2 (two sigma)
-#: makes the order doubtful (verdicts tentative; refused above ORDER_CHI2). Measured on the
-#: 20 nominal real Crazyflie flights: the right order's best rival reaches +1.0, rotors 1 and
-#: 2 swapped give +1.5 to +38.6 (17 of 20 above 4, 2 above 25).
+#: makes the order doubtful (verdicts tentative; refused above ORDER_CHI2): on real flights
+#: the right order's rivals stay below it, most swaps lie above (CHANGELOG.md: Docstrings as
+#: contracts).
 DOUBT_CHI2 = 4.0
 #: windows of the torque balance (s) whose means are removed: short against a manoeuvre,
 #: so that an unmodelled torque does not accumulate
@@ -448,9 +448,8 @@ def _regressor_noise(speeds: np.ndarray, t: np.ndarray, m: int) -> np.ndarray:
 #: an axis of the balance tells two column orders apart only where the rotor-speed sensor's
 #: noise makes under this share of the variance of either order's torque column: noise as large as
 #: the signal halves the fitted gain (errors in variables), and the orders then differ by how
-#: that noise meets another torque the flight shares. Measured (CHANGELOG, issue 47 item 7):
-#: generated figure-8s with 10 rad/s of speed noise 0.65-1.7 on every axis, a generated
-#: steps flight 0.18-0.24 on roll and pitch, the real Crazyflie flights below 0.005
+#: that noise meets another torque the flight shares. Generated flights with 10 rad/s of
+#: speed noise lie above, the real Crazyflie flights far below (CHANGELOG.md, issue 47 item 7)
 ORDER_NOISE_SHARE = 0.5
 
 
@@ -739,15 +738,12 @@ def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
     effect; AR(1) effective sample size). A wrong column order is wrong on every axis it
     moves, so a permutation that fits one axis better but another far worse (that axis'
     Delta chi^2 below -``ORDER_CHI2``) is a model error, not a column order: its evidence is
-    that axis' (negative) value. On the nano-drone benchmark's chirp runs
-    (``../shared/data/nanodrone_cf21bl``, right order), whose torque model is poor (the
-    benchmark's authors name rotation the open problem), the best rival improved roll by 21 %
-    and worsened yaw by 38 % for a summed 32.6. The order with the largest Delta chi^2 is
+    that axis' (negative) value: otherwise a poor torque model passes for a column order
+    (CHANGELOG.md: Docstrings as contracts). The order with the largest Delta chi^2 is
     refused when it exceeds ``ORDER_CHI2`` = 25 (a five-sigma difference), naming the
-    ``--rotor-map`` that applies it. On generated figure-8s (crazyflie21, 6 s, gyro noise
-    0.01 rad/s) rotors 1 and 2 swapped give Delta chi^2 310-340 and the right order's best
-    rival -200 or less; on the 20 nominal Crazyflie flights of ../shared/data the right
-    order's best rival reaches 1.0 (``python scripts/consistency_evidence.py``). Each order
+    ``--rotor-map`` that applies it; a swap on generated flights and the right order on real
+    ones lie far either side of it (``python scripts/consistency_evidence.py``;
+    CHANGELOG.md: Docstrings as contracts). Each order
     is scored from the Gram matrices of the per-sample columns (:class:`_TorqueBalance`):
     a hexarotor's 720 orders cost little more than a quadrotor's 24.
     ``evidence``: the log's :func:`rotor_order_evidence` where already read."""
