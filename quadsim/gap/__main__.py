@@ -70,7 +70,8 @@ def _parser() -> argparse.ArgumentParser:
                              "what the training LOGs share that they do not, checked on the "
                              "held-out logs. Default: the parameter set's shipped reference "
                              "where it has one that fits the run (models/references/NAME.qref: "
-                             "its own nominal flights), else none")
+                             "its own nominal flights; NAME_commands.qref, the same with "
+                             "commands only, where any LOG lacks rotor speeds), else none")
     parser.add_argument("--bare", action="store_true",
                         help="held out: judge against the parameter set alone, not its "
                              "shipped reference (the behaviour of sets without one)")
@@ -78,7 +79,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="write the --reference LOGs' calibrated stage (calibration, "
                              "noise model, discrepancy term, self-check) to a stored "
                              "reference file, read later with --reference OUT.qref "
-                             "(quadsim.gap.reffile); with no LOG only that is done")
+                             "(quadsim.gap.reffile; command-only references: with the "
+                             "command -> speed model that synthesised their speeds); with no "
+                             "LOG only that is done")
     parser.add_argument("--reference-source", metavar="TEXT", default="",
                         help="with --write-reference: where the reference flights come "
                              "from (stored in the file's header)")
