@@ -313,7 +313,8 @@ def test_generated_flight_against_the_shipped_reference(tmp_path, capsys):
 
 def test_shipped_reference_left_where_it_cannot_serve(tmp_path, monkeypatch, capsys):
     """A shipped file of another format (a quadsim that reads format FORMAT + 1) or logs
-    without rotor speeds: --per-flight refused in one line naming why."""
+    without rotor speeds (where the set ships no commands file): --per-flight refused in one
+    line naming why."""
     from quadsim.logs.flightlog import FlightLog
 
     cf = load_params("crazyflie21")
@@ -329,6 +330,9 @@ def test_shipped_reference_left_where_it_cannot_serve(tmp_path, monkeypatch, cap
     commands = FlightLog(log.t, log.position, log.quat, log.velocity, log.body_rate,
                          log.accel, rotor_command=log.rotor_command)
     only = write_log(tmp_path / "c.csv.gz", commands)
+    real = reffile.shipped_reference      # the set's commands file (its own test) left out
+    monkeypatch.setattr(reffile, "shipped_reference",
+                        lambda name, commands=False: None if commands else real(name))
     assert main(["--model", "crazyflie21", "--per-flight", str(only), "--quiet"]) == 2
     assert "does not fit this run: logs without rotor speeds" in _error(capsys)
 

@@ -70,7 +70,8 @@ def _parser() -> argparse.ArgumentParser:
                              "what the training LOGs share that they do not, checked on the "
                              "held-out logs. Default: the parameter set's shipped reference "
                              "where it has one that fits the run (models/references/NAME.qref: "
-                             "its own nominal flights), else none")
+                             "its own nominal flights; NAME_commands.qref, the same with "
+                             "commands only, where any LOG lacks rotor speeds), else none")
     parser.add_argument("--bare", action="store_true",
                         help="held out: judge against the parameter set alone, not its "
                              "shipped reference (the behaviour of sets without one)")
@@ -78,7 +79,9 @@ def _parser() -> argparse.ArgumentParser:
                         help="write the --reference LOGs' calibrated stage (calibration, "
                              "noise model, discrepancy term, self-check) to a stored "
                              "reference file, read later with --reference OUT.qref "
-                             "(quadsim.gap.reffile); with no LOG only that is done")
+                             "(quadsim.gap.reffile; command-only references: with the "
+                             "command -> speed model that synthesised their speeds); with no "
+                             "LOG only that is done")
     parser.add_argument("--reference-source", metavar="TEXT", default="",
                         help="with --write-reference: where the reference flights come "
                              "from (stored in the file's header)")
@@ -443,7 +446,9 @@ def _references(args, params, base_effects, logs, holdout, lines):
                         base=tuple(base_effects),
                         command_references=args.command_reference or ())
         entry = store.get(key)
-        synthesis = any(g.rotor_speed is None for g in [*logs, *(holdout or [])])
+        # written to a file: the references loaded (a command-only one's model is stored)
+        synthesis = (args.write_reference is not None
+                     or any(g.rotor_speed is None for g in [*logs, *(holdout or [])]))
         if entry is not None:
             reference = None
             if synthesis:
@@ -471,8 +476,10 @@ def _stored_reference(args, params, base_effects, judged, lines):
     it is the set's shipped one, a note or None). ``--reference FILE.qref``: read and
     checked against the run (a refusal: one line); no ``--reference`` (nor ``--bare``,
     ``--write-effects``): the set's shipped reference where it fits the run
-    (:func:`_shipped`). ``judged``: every log to judge (one needing rotor speeds synthesised
-    needs ``--command-reference``: refused with a stored file)."""
+    (:func:`_shipped`; any judged log without rotor speeds: the set's commands file where it
+    ships one). ``judged``: every log to judge (one needing rotor speeds synthesised needs
+    the file's command model, or with a "speeds" file ``--command-reference``: refused
+    without; ``--command-reference`` with a "commands" file: refused)."""
     from .diagnose import DEFAULT_WINDOW_S
     from .reffile import binding_of, check_fits, read_reference, shipped_reference
 
@@ -484,8 +491,11 @@ def _stored_reference(args, params, base_effects, judged, lines):
         check_fits(args.reference_file, stored.header, binding)
         _say(stored.found, stored.notes, lines)
     else:
+        commands = (not args.command_reference
+                    and any(g.rotor_speed is None for g in judged))
         path = (None if args.reference or args.bare or args.write_effects is not None
-                else shipped_reference(params.name))
+                else (commands and shipped_reference(params.name, commands=True))
+                or shipped_reference(params.name))
         if path is None:
             return None, False, None
         stored, note = _shipped(path, binding, judged, args)
@@ -495,7 +505,12 @@ def _stored_reference(args, params, base_effects, judged, lines):
     args.samples_loaded = getattr(args, "samples_loaded", 0) + stored.samples
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
     needing = [g for g in judged if g.rotor_speed is None]
-    if needing and not args.command_reference:
+    if stored.judges == "commands" and args.command_reference:
+        raise InputError(f"{stored.path}: command_model: this stored reference holds the "
+                         "command -> speed model its command-only references were calibrated "
+                         "with; --command-reference is not taken with it (drop it, or give "
+                         "--reference LOG...)")
+    if needing and stored.judges != "commands" and not args.command_reference:
         raise InputError(f"{getattr(needing[0], 'path', None) or needing[0].name}: rotor_speed: "
                          f"not logged; against a stored reference ({stored.path.name}) its "
                          "speeds are synthesised from --command-reference LOG... (flights "
@@ -511,7 +526,7 @@ def _shipped(path, binding, judged, args):
     (:func:`quadsim.gap.reffile.mismatch`), one with logs lacking rotor speeds and no
     ``--command-reference``, nor a file this quadsim cannot read (another format, another
     numpy). ``--per-flight``: refused (one line) instead of a note."""
-    from .reffile import mismatch, read_header, read_reference
+    from .reffile import judges_of, mismatch, read_header, read_reference
 
     stored = header = wrong = None
     try:
@@ -519,8 +534,8 @@ def _shipped(path, binding, judged, args):
     except InputError as exc:
         wrong = str(exc)
     wrong = wrong or mismatch(header, binding)
-    if wrong is None and not args.command_reference and any(
-            g.rotor_speed is None for g in judged):
+    if (wrong is None and not args.command_reference and judges_of(header) != "commands"
+            and any(g.rotor_speed is None for g in judged)):
         wrong = ("logs without rotor speeds: their speeds are synthesised from reference "
                  "flights with speeds, --command-reference LOG...")
     if wrong is None:
@@ -538,9 +553,10 @@ def _shipped(path, binding, judged, args):
     return stored, None
 
 
-def _write_reference(args, params, base_effects, refs) -> object:
+def _write_reference(args, params, base_effects, refs, command_model=None) -> object:
     """--write-reference: the references' stage (``refs``: (logs, kept stage or None, store,
-    loaded)) computed where the cache did not hold it, written; -> the stage."""
+    loaded)) computed where the cache did not hold it, written (with ``command_model``, the
+    model that synthesised command-only references' speeds, or None); -> the stage."""
     from .diagnose import DEFAULT_WINDOW_S, calibrated_stage
     from .reffile import Provenance, binding_of, write_reference
 
@@ -554,10 +570,12 @@ def _write_reference(args, params, base_effects, refs) -> object:
     provenance = Provenance(tuple(args.reference), tuple(args.command_reference or ()),
                             args.reference_source, ("python", "-m", "quadsim.gap",
                                                     *args.argv), loaded)
-    path = write_reference(args.write_reference, binding, kept, provenance)
+    path = write_reference(args.write_reference, binding, kept, provenance, command_model)
     if not args.quiet:
-        print(f"note: wrote {path}: the calibrated stage of {kept.count} reference flights "
-              f"(read it with --reference {path})", file=sys.stderr)
+        kind = ("" if command_model is None else
+                " (command-only, with their command -> speed model)")
+        print(f"note: wrote {path}: the calibrated stage of {kept.count} reference "
+              f"flights{kind} (read it with --reference {path})", file=sys.stderr)
     return kept
 
 
@@ -677,8 +695,11 @@ def main(argv: list[str] | None = None) -> int:
 
     command_ref = (_load(args.command_reference, params, args) if args.command_reference
                    else reference)
-    roles, command_model = synthesise_all({"logs": logs, "holdout": holdout,
-                                           "reference": reference}, params, command_ref)
+    # references without rotor speeds: a file written from them keeps their command model
+    command_only = reference is not None and any(g.rotor_speed is None for g in reference)
+    roles, command_model = synthesise_all(
+        {"logs": logs, "holdout": holdout, "reference": reference}, params, command_ref,
+        model=None if stored is None else stored.command_model(params))
     if orders is not None:   # a log with synthesised speeds: its order read again when judged
         orders = [o if new is old else None for new, old, o in zip(roles["logs"], logs, orders)]
     logs, holdout, reference = roles["logs"], roles["holdout"], roles["reference"]
@@ -687,7 +708,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{command_model.source}", file=sys.stderr)
     if args.write_reference is not None:
         kept, store = _write_reference(args, params, base_effects,
-                                       (reference, kept, store, refs[3])), None
+                                       (reference, kept, store, refs[3]),
+                                       command_model if command_only else None), None
         if not args.logs:
             return 0
     against = reference if kept is None else kept

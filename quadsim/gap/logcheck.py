@@ -457,22 +457,36 @@ def balance_rotors(logs: Sequence[FlightLog], model, params) -> BalancedModel:
     return BalancedModel(model, np.clip(1.0 + delta, 0.5, 1.5))
 
 
-def synthesise_all(groups: dict[str, Sequence[FlightLog] | None], params,
-                   reference: Sequence[FlightLog] | None = None):
-    """Every command-only log in ``groups`` (role -> logs) gets synthesised speeds: the model
-    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map,
-    balanced rotor by rotor on the command-only logs of the ``"reference"`` role when there
-    are some (:func:`balance_rotors`: per flight, the references are the fleet). Returns
-    (groups with the same keys, the model or None when no log needed one)."""
-    needing = [g for logs in groups.values() for g in (logs or []) if g.rotor_speed is None]
-    if not needing:
-        return groups, None
+def derive_command_model(fleet: Sequence[FlightLog] | None, params,
+                         reference: Sequence[FlightLog] | None = None):
+    """The command -> speed model :func:`synthesise_all` derives from the logs: fitted
+    (:func:`fit_command_model`) on the ``reference`` logs that have speeds and commands, else
+    the parameter set's motor map (:func:`command_model_from_params`) balanced rotor by rotor
+    (:func:`balance_rotors`) on the command-only logs of ``fleet`` (the reference role) when
+    there are some."""
     measured = [g for g in (reference or []) if g.rotor_speed is not None
                 and g.rotor_command is not None]
     model = fit_command_model(measured) if measured else command_model_from_params(params)
-    fleet = [g for g in groups.get("reference") or [] if g.rotor_speed is None]
-    if not measured and fleet:      # a command-only fleet: its own rotor balance
-        model = balance_rotors(fleet, model, params)
+    command_only = [g for g in fleet or [] if g.rotor_speed is None]
+    if not measured and command_only:      # a command-only fleet: its own rotor balance
+        model = balance_rotors(command_only, model, params)
+    return model
+
+
+def synthesise_all(groups: dict[str, Sequence[FlightLog] | None], params,
+                   reference: Sequence[FlightLog] | None = None, *, model=None):
+    """Every command-only log in ``groups`` (role -> logs) gets synthesised speeds: the model
+    is fitted on ``reference`` logs that have speeds, else the parameter set's motor map,
+    balanced rotor by rotor on the command-only logs of the ``"reference"`` role when there
+    are some (:func:`balance_rotors`: per flight, the references are the fleet). ``model``
+    (a command model, e.g. a stored reference's, :mod:`quadsim.gap.reffile`): used as given
+    instead (nothing fitted, nothing balanced). Returns (groups with the same keys, the
+    model or None when no log needed one)."""
+    needing = [g for logs in groups.values() for g in (logs or []) if g.rotor_speed is None]
+    if not needing:
+        return groups, None
+    if model is None:
+        model = derive_command_model(groups.get("reference"), params, reference)
     out = {role: (None if logs is None else
                   [synthesise_speeds(g, model) if g.rotor_speed is None else g for g in logs])
            for role, logs in groups.items()}

@@ -49,9 +49,36 @@ does ``head -1 FILE.qref | python -m json.tool``)::
     references    [{"file", "bytes", "sha256"}] of each reference log, as given
     command_references  the same for --command-reference
     count         reference flights; loaded: {"samples", "warnings", "notes"} of loading them
+    judges        "speeds" (references with rotor speeds) or "commands" (command-only
+                  references: below); absent in older files: "speeds"
+    command_model null, or the command -> speed model of a "commands" file (below)
     stage         {"type", "encoding": "pickle/4", "bytes", "sha256"} of the rest of the file
 
 then the stage, a Python pickle (protocol 4) of the :class:`~quadsim.gap.calibrate.Calibrated`.
+
+**Command-only references** (``judges: "commands"``). Logs with the IMU and the motor
+commands but no rotor speeds get speeds synthesised (:func:`quadsim.gap.logcheck.
+synthesise_all`): references written with ``--reference CMD_LOGS... --command-reference
+SPEED_LOGS...`` were calibrated on speeds synthesised by a command -> speed model fitted on
+the ``--command-reference`` logs (:class:`~quadsim.gap.logcheck.CommandModel`); without
+``--command-reference``, by the parameter set's motor map balanced rotor by rotor on the
+references (:class:`~quadsim.gap.logcheck.BalancedModel`). That model is all a judged
+command-only flight needs beyond the stage, so the header keeps it (``command_model``, JSON,
+floats as ``float.hex``: exact; :func:`model_to_json`): ``{"type": "fitted", "a", "b", "c",
+"v_ref", "tau", "rms", "samples", "source"}``, ``{"type": "motor_map", "tau", "rms",
+"source"}`` (the run's parameter set's map: the same content, ``model``) or ``{"type":
+"balanced", "factors", "model": ...}``. Against such a file a command-only log is judged
+with no ``--command-reference`` (given, it is refused: the stage was calibrated with the
+stored model), with the answers of the logs, bit for bit; a log with speeds is judged as it
+is (as against the logs). Why no :data:`FORMAT` bump: the stage means what it meant (a
+:class:`~quadsim.gap.calibrate.Calibrated` of the references as loaded and synthesised);
+the header only gains two optional keys, a format-1 file without them is a "speeds" file,
+and a quadsim that predates them reads a "commands" file as the logs without
+``--command-reference`` would be read (a command-only log refused), never judging wrongly.
+A set may ship one of each (``NAME.qref``, ``NAME_commands.qref``): the default picks the
+file that fits the judged logs (every one with speeds: ``NAME.qref``; any without:
+``NAME_commands.qref``, the only one that judges them all, one reference for the whole run;
+with ``--command-reference``: ``NAME.qref`` as before).
 
 **Refusals** (one line naming the file and the field, exit 2): a header that is not one
 (a foreign file), another ``schema``, another ``format`` ("written by format 1, this quadsim
@@ -102,10 +129,10 @@ import numpy as np
 
 from ..core.errors import InputError
 
-__all__ = ["ALLOWED_BUILTINS", "FORMAT", "SCHEMA", "SUFFIX", "Binding", "Stored",
-           "binding_of", "effects_hash", "is_reference_file", "make_header", "mismatch",
-           "params_hash", "read_header", "read_reference", "shipped_reference",
-           "write_reference"]
+__all__ = ["ALLOWED_BUILTINS", "FORMAT", "JUDGES", "SCHEMA", "SUFFIX", "Binding", "Stored",
+           "binding_of", "effects_hash", "is_reference_file", "judges_of", "make_header",
+           "mismatch", "model_from_json", "model_to_json", "params_hash", "read_header",
+           "read_reference", "shipped_reference", "write_reference"]
 
 #: the file's kind: another string is not a stored reference of this layout
 SCHEMA = "quadsim.gap.reference/1"
@@ -116,6 +143,10 @@ FORMAT = 1
 SUFFIX = ".qref"
 #: the shipped files' folder inside ``models/``
 SHIPPED_FOLDER = "references"
+#: a set's shipped file for command-only logs: ``NAME`` + this + :data:`SUFFIX`
+COMMANDS_TAG = "_commands"
+#: the header's ``judges``: references with rotor speeds, or command-only references
+JUDGES = ("speeds", "commands")
 #: the pickled stage's type (the header's ``stage.type``)
 STAGE_TYPE = "quadsim.gap.calibrate.Calibrated"
 #: module -> names the restricted unpickler allows besides quadsim's and numpy's classes
@@ -173,6 +204,79 @@ class Stored:
     def samples(self) -> int:
         """The references' logged samples (counted against the cost caps)."""
         return int(self.header["loaded"]["samples"])
+
+    @property
+    def judges(self) -> str:
+        """"speeds" or "commands" (module doc, "Command-only references")."""
+        return judges_of(self.header)
+
+    def command_model(self, params):
+        """The stored command -> speed model (``params``: the run's parameter set, the
+        file's content, for a ``motor_map`` model), or None in a "speeds" file."""
+        data = self.header.get("command_model")
+        return None if data is None else model_from_json(data, params, self.path)
+
+
+def judges_of(header: dict) -> str:
+    """A header's ``judges`` ("speeds" where absent: files written before it)."""
+    return header.get("judges") or "speeds"
+
+
+def _hex(values) -> list:
+    return [float(x).hex() for x in np.asarray(values, dtype=float).ravel()]
+
+
+def _unhex(values, path, field) -> np.ndarray:
+    try:
+        return np.array([float.fromhex(str(x)) for x in values], dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: command_model.{field}: not a list of hex floats") from None
+
+
+def model_to_json(model) -> dict:
+    """A command -> speed model (:class:`~quadsim.gap.logcheck.CommandModel`,
+    :class:`~quadsim.gap.logcheck.MapCommandModel` or :class:`~quadsim.gap.logcheck.
+    BalancedModel` of either) as the header's ``command_model`` (floats as ``float.hex``)."""
+    from .logcheck import BalancedModel, CommandModel, MapCommandModel
+
+    if isinstance(model, BalancedModel):
+        return {"type": "balanced", "factors": _hex(model.factors),
+                "model": model_to_json(model.model)}
+    if isinstance(model, CommandModel):
+        return {"type": "fitted", "a": _hex(model.a), "b": _hex(model.b), "c": _hex(model.c),
+                "v_ref": float(model.v_ref).hex(), "tau": float(model.tau).hex(),
+                "rms": float(model.rms).hex(), "samples": int(model.samples),
+                "source": model.source}
+    if isinstance(model, MapCommandModel):
+        return {"type": "motor_map", "tau": float(model.tau).hex(),
+                "rms": float(model.rms).hex(), "source": model.source}
+    raise TypeError(f"no stored form for a {type(model).__name__}")
+
+
+def model_from_json(data, params, path="reference file"):
+    """The command model of a header's ``command_model`` (:func:`model_to_json`'s inverse,
+    bit for bit); ``params``: the run's parameter set (a ``motor_map`` model's map). A
+    malformed one: :class:`InputError` naming the file and the field."""
+    from .logcheck import BalancedModel, CommandModel, MapCommandModel
+
+    kind = data.get("type") if isinstance(data, dict) else None
+    try:
+        if kind == "balanced":
+            return BalancedModel(model_from_json(data["model"], params, path),
+                                 _unhex(data["factors"], path, "factors"))
+        if kind == "fitted":
+            one = lambda k: float(_unhex([data[k]], path, k)[0])   # noqa: E731
+            return CommandModel(_unhex(data["a"], path, "a"), _unhex(data["b"], path, "b"),
+                                _unhex(data["c"], path, "c"), one("v_ref"), one("tau"),
+                                one("rms"), int(data["samples"]), str(data["source"]))
+        if kind == "motor_map":
+            return MapCommandModel(params, float(_unhex([data["tau"]], path, "tau")[0]),
+                                   str(data["source"]),
+                                   float(_unhex([data["rms"]], path, "rms")[0]))
+    except KeyError as exc:
+        raise InputError(f"{path}: command_model.{exc.args[0]}: missing") from None
+    raise InputError(f"{path}: command_model.type: {kind!r}, not fitted, motor_map or "
+                     "balanced")
 
 
 def _canonical(value):
@@ -242,8 +346,11 @@ class Provenance:
     loaded: dict = dataclasses.field(default_factory=dict)
 
 
-def make_header(binding: Binding, stage, provenance: Provenance, payload: bytes) -> dict:
-    """The JSON header (module doc, "File format") of ``stage`` pickled as ``payload``."""
+def make_header(binding: Binding, stage, provenance: Provenance, payload: bytes,
+                command_model=None) -> dict:
+    """The JSON header (module doc, "File format") of ``stage`` pickled as ``payload``;
+    ``command_model``: the model that synthesised command-only references' speeds (a
+    "commands" file), or None (a "speeds" file)."""
     from .. import __version__
     from .calibrate import code_version
 
@@ -263,6 +370,8 @@ def make_header(binding: Binding, stage, provenance: Provenance, payload: bytes)
         "loaded": {"samples": int(provenance.loaded.get("samples", 0)),
                    "warnings": list(provenance.loaded.get("warnings", ())),
                    "notes": list(provenance.loaded.get("notes", ()))},
+        "judges": JUDGES[command_model is not None],
+        "command_model": None if command_model is None else model_to_json(command_model),
         "stage": {"type": STAGE_TYPE, "encoding": "pickle/4", "bytes": len(payload),
                   "sha256": hashlib.sha256(payload).hexdigest()},
     }
@@ -279,9 +388,12 @@ def with_paths(stage, path=None, cad_dir=None):
     return dataclasses.replace(stage, reference=ref)
 
 
-def write_reference(path, binding: Binding, stage, provenance: Provenance) -> Path:
+def write_reference(path, binding: Binding, stage, provenance: Provenance,
+                    command_model=None) -> Path:
     """Write ``stage`` (a :class:`~quadsim.gap.calibrate.Calibrated`) to ``path`` (ending in
-    :data:`SUFFIX`) atomically: a temporary file renamed into place (its parameter set
+    :data:`SUFFIX`) atomically, with ``command_model`` where the references were
+    command-only (module doc, "Command-only references"): a temporary file renamed into
+    place (its parameter set
     naming only its file's name, :func:`with_paths`; no cache key): the same references,
     model and options give the same stage values, bit for bit (the bytes too within one
     process; across processes a dict's key order may follow Python's string hashing).
@@ -292,7 +404,7 @@ def write_reference(path, binding: Binding, stage, provenance: Provenance) -> Pa
     stage = dataclasses.replace(with_paths(stage, None if own is None else Path(Path(own).name)),
                                 key="")       # the cache's key: no meaning in a file
     payload = pickle.dumps(stage, protocol=4)
-    header = make_header(binding, stage, provenance, payload)
+    header = make_header(binding, stage, provenance, payload, command_model)
     line = json.dumps(header, separators=(", ", ": ")).encode("utf-8") + b"\n"
     return atomic_write_bytes(path, line + payload)
 
@@ -343,6 +455,13 @@ def read_header(path) -> dict:
     for key, kind in _FIELDS.items():
         if not isinstance(header.get(key), kind):
             raise InputError(f"{path}: {key}: missing or of the wrong type in the header")
+    if header.get("judges", "speeds") not in JUDGES:
+        raise InputError(f"{path}: judges: {header.get('judges')!r}, not one of {JUDGES}")
+    if not isinstance(header.get("command_model"), (dict, type(None))):
+        raise InputError(f"{path}: command_model: of the wrong type in the header")
+    if (judges_of(header) == "commands") != (header.get("command_model") is not None):
+        raise InputError(f"{path}: command_model: a \"commands\" file holds one, a "
+                         "\"speeds\" file none")
     return header
 
 
@@ -434,12 +553,14 @@ def check_fits(path, header: dict, binding: Binding) -> None:
                          "(--reference LOGS... --write-reference OUT.qref)")
 
 
-def shipped_reference(name: str) -> Path | None:
+def shipped_reference(name: str, commands: bool = False) -> Path | None:
     """The shipped reference file of the built-in parameter set ``name``
-    (``models/references/NAME.qref``, module doc), or None when it ships none."""
+    (``models/references/NAME.qref``; ``commands``: ``NAME_commands.qref``, for command-only
+    logs; module doc), or None when it ships none."""
     from ..core.shipped import shipped_dir
 
-    path = shipped_dir("models") / SHIPPED_FOLDER / f"{name}{SUFFIX}"
+    tag = COMMANDS_TAG if commands else ""
+    path = shipped_dir("models") / SHIPPED_FOLDER / f"{name}{tag}{SUFFIX}"
     return path if path.is_file() else None
 
 
@@ -449,7 +570,8 @@ def describe(stored: Stored, shipped: bool) -> dict:
     its source, the reference count and the references' names."""
     h = stored.header
     return {"file": stored.path.name, "shipped": bool(shipped), "schema": h["schema"],
-            "format": h["format"], "written": h.get("written"), "source": h.get("source", ""),
+            "format": h["format"], "judges": judges_of(h), "written": h.get("written"),
+            "source": h.get("source", ""),
             "count": h["count"], "references": [r["file"] for r in h["references"]],
             "model": h["model"]}
 
@@ -460,7 +582,8 @@ def sentence(stored: Stored, shipped: bool) -> str:
     2026-11-29).")."""
     h = stored.header
     what = "the set's own" if shipped else "the"
-    return (f"Judged against {what} {h['count']} nominal flights "
+    kind = ", commands only" if judges_of(h) == "commands" else ""
+    return (f"Judged against {what} {h['count']} nominal flights{kind} "
             f"({'shipped' if shipped else 'stored'} reference {stored.path.name}, written "
             f"{str(h.get('written', '?'))[:10]}).")
 

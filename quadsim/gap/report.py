@@ -280,6 +280,7 @@ GAP_SCHEMA = {
                            "properties": {"file": {"type": "string"},
                                           "shipped": {"type": "boolean"},
                                           "format": {"type": "integer"},
+                                          "judges": {"enum": ["speeds", "commands"]},
                                           "count": {"type": "integer"}}},
         "reference_refit": _NUMBER_MAP,
         "reference_refit_ci": _NUMBER_MAP,
