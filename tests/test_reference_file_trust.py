@@ -74,3 +74,28 @@ def test_the_shipped_reference_reads_under_the_restriction():
     assert path is not None
     stored = read_reference(path)
     assert stored.stage.count == 20 and stored.header["count"] == 20
+
+
+def test_a_judged_flight_that_is_one_of_the_references_is_said(tmp_path):
+    """own_flights / in_sample_note: a judged log with the bytes of one of the stored
+    reference's flights is named (judged in sample); a copy with other bytes, or none, not."""
+    import hashlib
+
+    from quadsim.gap.reffile import in_sample_note, own_flights
+
+    ref = tmp_path / "ref.csv.gz"
+    ref.write_bytes(b"t,x\n0,1\n")
+    same = tmp_path / "renamed.csv.gz"
+    same.write_bytes(ref.read_bytes())
+    other = tmp_path / "other.csv.gz"
+    other.write_bytes(b"t,x\n0,2\n")
+    header = {"count": 2, "references": [
+        {"file": "nominal/ref.csv.gz", "bytes": 8,
+         "sha256": hashlib.sha256(ref.read_bytes()).hexdigest()},
+        {"file": "nominal/b.csv.gz", "bytes": 1, "sha256": "0" * 64}]}
+    assert own_flights(header, [same, other, tmp_path / "missing"]) == [
+        (str(same), "nominal/ref.csv.gz")]
+    note = in_sample_note(header, [same, other])
+    assert note.startswith(f"judged in sample: {same} (its nominal/ref.csv.gz) is among the "
+                           "stored reference's own 2 flights (the same bytes)")
+    assert in_sample_note(header, [other]) is None

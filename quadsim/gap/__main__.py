@@ -735,7 +735,14 @@ def main(argv: list[str] | None = None) -> int:
     if base is not None:
         result = _with_effects_file(result, args.effects_file, base_effects)
     if stored is not None:
+        from .reffile import in_sample_note
+
         result = _with_stored(result, stored, shipped)
+        own = in_sample_note(stored.header, [*args.logs, *(args.holdout or [])])
+        if own is not None:
+            import dataclasses
+
+            result = dataclasses.replace(result, notes=tuple(result.notes) + (own,))
     elif bare_note is not None:
         import dataclasses
 

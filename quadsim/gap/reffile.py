@@ -97,6 +97,11 @@ classes (:data:`ALLOWED_BUILTINS`) may be named; any other name (a function such
 can do, it does not make one safe: like the cache (:mod:`quadsim.gap.cache`), a reference
 file must be one you wrote or one that came with quadsim.
 
+**In sample.** A judged log whose bytes are one of the stored reference's own flights (the
+header's SHA-256; :func:`own_flights`) is judged against references that include it: the run's
+notes say so (:func:`in_sample_note`). A copy with other bytes (re-compressed, columns cut) is
+not recognised.
+
 **Staleness.** The stage is bound to the code that computed it: a quadsim that calibrates
 differently would judge against an older model than ``--reference LOGS`` gives. Reading
 does not compare code (the header's ``code`` is for information: any edit of any module
@@ -130,9 +135,10 @@ import numpy as np
 from ..core.errors import InputError
 
 __all__ = ["ALLOWED_BUILTINS", "FORMAT", "JUDGES", "SCHEMA", "SUFFIX", "Binding", "Stored",
-           "binding_of", "effects_hash", "is_reference_file", "judges_of", "make_header",
-           "mismatch", "model_from_json", "model_to_json", "params_hash", "read_header",
-           "read_reference", "shipped_reference", "write_reference"]
+           "binding_of", "effects_hash", "in_sample_note", "is_reference_file", "judges_of",
+           "make_header", "mismatch", "model_from_json", "model_to_json", "own_flights",
+           "params_hash", "read_header", "read_reference", "shipped_reference",
+           "write_reference"]
 
 #: the file's kind: another string is not a stored reference of this layout
 SCHEMA = "quadsim.gap.reference/1"
@@ -551,6 +557,38 @@ def check_fits(path, header: dict, binding: Binding) -> None:
         raise InputError(f"{path}: {wrong}: give the --model/--effects-file/--effects/"
                          f"--window it was written with, or write one for this run "
                          "(--reference LOGS... --write-reference OUT.qref)")
+
+
+def own_flights(header: dict, paths) -> list[tuple[str, str]]:
+    """(given path, the header's file name) of each of ``paths`` whose bytes are one of the
+    stored reference's own flights (the same SHA-256 as a ``references`` or
+    ``command_references`` entry): a flight judged against references that include it. A
+    copy whose bytes differ (re-compressed, columns cut) is not found."""
+    known = {entry["sha256"]: entry["file"]
+             for entry in [*header.get("references", ()), *header.get("command_references", ())]
+             if isinstance(entry, dict) and "sha256" in entry}
+    out = []
+    for path in paths:
+        try:
+            digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        except OSError:
+            continue
+        if digest in known:
+            out.append((str(path), known[digest]))
+    return out
+
+
+def in_sample_note(header: dict, paths) -> str | None:
+    """The note for :func:`own_flights` of ``paths``, or None when there are none."""
+    found = own_flights(header, paths)
+    if not found:
+        return None
+    named = ", ".join(f"{given} (its {own})" if Path(given).name != Path(own).name else given
+                      for given, own in found)
+    return (f"judged in sample: {named} {'is' if len(found) == 1 else 'are'} among the stored "
+            f"reference's own {header.get('count', '?')} flights (the same bytes): a flight is "
+            "judged against references that include it, so its answer shows less difference "
+            "than a new flight's would")
 
 
 def shipped_reference(name: str, commands: bool = False) -> Path | None:
