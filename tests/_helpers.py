@@ -75,3 +75,20 @@ def fake_reach(allowance, counts=None, typical: float = 1.0, channels: int = 3):
                            allowance=np.asarray(allowance, float),
                            counts=None if counts is None else np.asarray(counts, float),
                            excess=1.0)
+
+
+def drag_flights(folder: Path) -> list[Path]:
+    """Three short synthetic crazyflie21 flights with a rotor drag of 1e-6 kg/rad, seeds 60-62,
+    4 s each, written into ``folder`` as f0..f2.csv.gz (two references and one judged, for the
+    references' cache and the stored reference tests)."""
+    from benchmarks.synthetic import synthetic_flight
+    from quadsim.logs.flightlog import write_log
+    from quadsim.vehicle.params import load_params
+
+    cf = load_params("crazyflie21")
+    drag = [make_effect("rotor_drag", coefficient=1e-6)]
+    paths = []
+    for k, seed in enumerate((60, 61, 62)):
+        paths.append(folder / f"f{k}.csv.gz")
+        write_log(paths[-1], synthetic_flight(cf, drag, seed=seed, duration=4.0))
+    return paths

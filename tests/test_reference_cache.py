@@ -12,14 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
-from quadsim.effects import make_effect
 from quadsim.effects.rotor_drag import RotorDrag
 from quadsim.gap import cache as gap_cache
 from quadsim.gap.__main__ import main
 from quadsim.gap.cache import PREFIX, Entry, ReferenceStore, cache_dir, entry_key
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
+
+from _helpers import drag_flights
 
 
 def _files(tmp_path, *texts):
@@ -148,14 +148,7 @@ def test_flag_checks(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def flight_files(tmp_path_factory):
     """Three short synthetic flights with a rotor drag (two references, one judged)."""
-    folder = tmp_path_factory.mktemp("flights")
-    cf = load_params("crazyflie21")
-    drag = [make_effect("rotor_drag", coefficient=1e-6)]
-    paths = []
-    for k, seed in enumerate((60, 61, 62)):
-        paths.append(folder / f"f{k}.csv.gz")
-        write_log(paths[-1], synthetic_flight(cf, drag, seed=seed, duration=4.0))
-    return paths
+    return drag_flights(tmp_path_factory.mktemp("flights"))
 
 
 def _run(tmp_path, files, name, *extra, refs=None):

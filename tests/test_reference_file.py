@@ -35,20 +35,15 @@ from quadsim.gap.reffile import (
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 
+from _helpers import drag_flights
+
 REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def flight_files(tmp_path_factory):
     """Three short synthetic flights with a rotor drag (two references, one judged)."""
-    folder = tmp_path_factory.mktemp("flights")
-    cf = load_params("crazyflie21")
-    drag = [make_effect("rotor_drag", coefficient=1e-6)]
-    paths = []
-    for k, seed in enumerate((60, 61, 62)):
-        paths.append(folder / f"f{k}.csv.gz")
-        write_log(paths[-1], synthetic_flight(cf, drag, seed=seed, duration=4.0))
-    return paths
+    return drag_flights(tmp_path_factory.mktemp("flights"))
 
 
 @pytest.fixture(scope="module")
