@@ -197,6 +197,13 @@ def test_refusals_one_line(written, flight_files, tmp_path, capsys):
     assert "needs --reference LOG..." in _refused(
         ["--model", "crazyflie21", "--reference", str(written), "--write-reference",
          str(tmp_path / "again.qref")], capsys)
+    assert not (tmp_path / "again.qref").exists()
+    assert _refused(["--model", "crazyflie21", str(flight_files[2]), "--bare", "--reference",
+                     str(written)], capsys) == (
+        "error: --bare: not used with --reference (the parameter set alone is the reference "
+        "model)")
+    assert _refused(["--model", "crazyflie21", str(flight_files[2]), "--reference-source",
+                     "x"], capsys) == "error: --reference-source: only used with --write-reference"
     before = flight_files[0].read_bytes()
     assert _refused(["--model", "crazyflie21", "--reference", *map(str, flight_files[:2]),
                      "--write-reference", str(flight_files[0])], capsys).startswith(
