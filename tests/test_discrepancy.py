@@ -11,7 +11,7 @@ from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
 from quadsim.gap.calibrate import PRACTICAL_Z, SelfCheck, Spread, negligible
 from quadsim.gap.evidence import Marginal, laplace
-from quadsim.gap.judge import UNCHECKED_WORDS, posterior
+from quadsim.gap.judge import FEW_WORDS, UNCHECKED_WORDS, posterior
 from quadsim.gap.reference import (
     centre_term,
     channel_features,
@@ -208,10 +208,12 @@ def test_a_damped_swing_decays_as_a_damped_pendulum():
                                           rel=0.02)
 
 
-def test_with_two_references_a_name_is_never_confident(cf):
+def test_with_fewer_than_five_references_a_name_is_never_confident(cf):
     """Two references cannot be judged against each other (no self-check, no scale of what
-    they show flight to flight): +6 g is still read as a mass of about +6 g, but tentative,
-    and the answer says why; with three references the same flight is named confidently."""
+    they show flight to flight), and three are too few for the discrepancy term (a force
+    channel's 4 features need 5 flights): +6 g is still read as a mass of about +6 g, but
+    tentative, and the answer says why in each case; against five that judge themselves
+    clean the same flight is named confidently."""
     tested = _logs(cf, [make_effect("mass_offset", mass=0.006)], (56,))
     two = diagnose_per_flight(tested, _logs(cf, [], (50, 51)), cf,
                               effects=["mass_offset", "com_offset"])
@@ -225,5 +227,14 @@ def test_with_two_references_a_name_is_never_confident(cf):
                                 effects=["mass_offset", "com_offset"])
     flight = three["flights"][0]
     assert three["reference_model"]["self_check"] is not None
+    assert three["reference_model"]["discrepancy"] is None
+    assert flight["verdict"] == "mass_offset" and flight["tentative"] is True, flight["answer"]
+    assert FEW_WORDS.format(n=3) in flight["answer"]
+    five = diagnose_per_flight(tested, _logs(cf, [], (40, 41, 42, 43, 44)), cf,
+                               effects=["mass_offset", "com_offset"])
+    flight = five["flights"][0]
+    assert five["reference_model"]["self_check"]["clean"] is True
+    assert five["reference_model"]["discrepancy"] is not None
     assert flight["verdict"] == "mass_offset" and flight["tentative"] is False, flight["answer"]
-    assert UNCHECKED_WORDS not in flight["answer"]
+    assert flight["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=1.5e-3)
+    assert UNCHECKED_WORDS not in flight["answer"] and "too few" not in flight["answer"]

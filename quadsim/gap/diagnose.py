@@ -204,7 +204,6 @@ from .fitting import (
 from .judge import (
     FORM_ERROR,
     SLOW_WINDOW_S,
-    UNCHECKED_WORDS,
     as_stated,
     beyond_reach,
     carry_over,
@@ -223,6 +222,7 @@ from .judge import (
     rows_at_reference_voltage,
     scaled_residuals,
     slow_part,
+    unvouched,
     where,
 )
 from .judge import check as consistency_check
@@ -969,7 +969,8 @@ class Against:
 
     def words(self) -> str:
         """What the answer adds: the references it was judged against, the drag law and
-        place, as per flight; a self-check that is not clean (or none)."""
+        place, as per flight; why the references cannot vouch for a name, where they
+        cannot (:func:`quadsim.gap.judge.unvouched`)."""
         n = len(self.calibrated.names)
         words = (f" Judged against {n} nominal reference flights: a difference is what the "
                  "training flights share that the references do not, checked on the "
@@ -978,12 +979,8 @@ class Against:
             words += f" Judged with {self.law.variant} (the law the training flights show)."
         if self.place is not None and self.place.distance > 0:
             words += f" Flown {self.place.text}."
-        check = self.calibrated.self_check
-        if check is None:
-            words += " " + UNCHECKED_WORDS
-        elif not check.clean:
-            words += " " + check.text()
-        return words
+        doubt = unvouched(self.calibrated.self_check, self.calibrated)
+        return words + (" " + doubt if doubt else "")
 
 
 def against_references(train: list[Flight], held: list[Flight], calibrated: Reference, *,

@@ -258,11 +258,12 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "check", "inconsistent_note", "kstep_errors", "partial_text", "regime_masks",
            "scaled_residuals", "split_masks", "standing", "tentative_note", "tentative_text",
            "where", "CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P",
-           "UNCHECKED_WORDS",
+           "FEW_WORDS", "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
            "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
+           "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
            "training_lack", "alone",
            "rows_at_reference_voltage", "symptom",
@@ -1538,10 +1539,11 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     if timing is not None and timing.name not in named:
         named.append(timing.name)      # both timing readings stated (timing_rival)
     caveat = lead_caveat(best, reference.params) if effect else ""
-    # no self-check (fewer than 3 references): what they share cannot be told from a
-    # difference of this flight, and practical significance has no scale (docs/gap.md)
-    unsure = check is None or not check.clean or bool(left) or bool(caveat) or bool(remains) \
-        or timing is not None
+    # references that cannot vouch for a name (no self-check, too few for the discrepancy
+    # term, or not clean: :func:`unvouched`): what they share cannot be told from a
+    # difference of this flight (docs/gap.md)
+    doubt = unvouched(check, reference)
+    unsure = bool(doubt) or bool(left) or bool(caveat) or bool(remains) or timing is not None
     words = stand_in_words(lead.name, p_top, readings[0].magnitude, share, p_out) \
         if stand_in else \
         answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
@@ -1553,7 +1555,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                     key=lambda e: abs(e.values.get(_THROUGH_VBAT, 0.0)
                                       - best.values.get(_THROUGH_VBAT, 0.0)))
     words += caveat + _normal_words(sized if effect else None, check, left, share,
-                                    at_voltage=vbat_ref if sized is not best else None)
+                                    at_voltage=vbat_ref if sized is not best else None,
+                                    doubt=doubt)
     if timing is not None and effect:
         words += timing_words(lead, timing)
     if remains:
@@ -1649,14 +1652,14 @@ def _off(key: str) -> float:
 
 
 def _normal_words(lead_ev, check, left: dict, share: float, *,
-                  at_voltage: float | None = None) -> str:
+                  at_voltage: float | None = None, doubt: str = "") -> str:
     """What the answer adds from the references' own normal (docs/gap.md, method): the
     lead's size against the references' readings of it (``lead_ev``: its Evidence, None
     when no effect is named; ``at_voltage`` (V): a sag reading taken at the references'
     voltage, :func:`at_reference_voltage`, at the quarter of the flight farthest from it),
     what a tentatively named reading leaves (``left``: channel -> (ratio, z); ``share`` of
-    the flight's gap), a self-check that is not clean, and :data:`UNCHECKED_WORDS` where
-    there is none (``check`` None: fewer than 3 references)."""
+    the flight's gap), and ``doubt`` (:func:`unvouched`: why the references cannot vouch
+    for a name): stated beside a name, and always where their self-check is not clean."""
     words = ""
     if lead_ev is not None:
         size = against_text(lead_ev, check, fitting.unit_of)
@@ -1670,10 +1673,8 @@ def _normal_words(lead_ev, check, left: dict, share: float, *,
         words += (f" Beyond it the residual stays beyond the reference flights' on {where} "
                   f"their typical RMS ({100 * share:.0f} % of the flight's gap: the library's "
                   "form of it, or a further small effect).")
-    if check is None and lead_ev is not None:
-        words += (" " + UNCHECKED_WORDS)
-    elif check is not None and not check.clean:
-        words += f" {check.text()}"
+    if doubt and (lead_ev is not None or (check is not None and not check.clean)):
+        words += " " + doubt
     return words
 
 
@@ -1681,6 +1682,37 @@ def _normal_words(lead_ev, check, left: dict, share: float, *,
 UNCHECKED_WORDS = ("The reference flights could not be judged against each other (fewer "
                    "than 3), so what they share cannot be told from a difference of this "
                    "flight: the name is tentative; give 10 or more references.")
+
+#: what a named answer adds when the references are too few for the discrepancy term
+#: (:func:`quadsim.gap.reference.fit_discrepancy`: a force channel's 4 features need 5
+#: flights); ``{n}``: their count
+FEW_WORDS = ("Only {n} reference flights: too few to model what they share beyond the "
+             "library (that takes 5), so a trait common to them cannot be told from a "
+             "difference of this flight: the name is tentative; give 10 or more references.")
+
+
+def unvouched(check, reference) -> str:
+    """Why the references cannot vouch for a name, as the sentence the answer adds; ""
+    where they can. ``check``: their self-check (:class:`quadsim.gap.calibrate.SelfCheck`,
+    None where there is none); ``reference``: their :class:`quadsim.gap.reference.Reference`.
+
+    - no self-check (fewer than 3 references): :data:`UNCHECKED_WORDS`;
+    - no discrepancy term (``reference.discrepancy`` None: 3 or 4 references, below the 5
+      a force channel's features need): :data:`FEW_WORDS`. Why: without it, a trait every
+      reference shares beyond the library is not modelled, and a flight flown harder than
+      they were reads it as its own difference; and a self-check of n references with no
+      false alarm bounds their false-alarm share only below 1 - 0.05^(1/n) (95 %): 63 % at
+      3, 53 % at 4. Measured (docs/gap.md "How many references"): the 10 plain real
+      ``mixed/`` flights against three gentle nominal flights all read ``signal_delay`` at
+      0.78-0.99;
+    - a self-check that is not clean: its :meth:`~quadsim.gap.calibrate.SelfCheck.text`.
+
+    A name against references that cannot vouch is ``tentative`` (both modes)."""
+    if check is None:
+        return UNCHECKED_WORDS
+    if getattr(reference, "discrepancy", None) is None:
+        return FEW_WORDS.format(n=len(check.flights))
+    return "" if check.clean else check.text()
 
 
 def judge_heldout(decision, reference, *, before: list, after: list,
@@ -1754,8 +1786,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         others.append(timing["name"])
     if effect and (tied or timing is not None):
         separate_by = fitting.separation(shown, others)
+    # against nominal references that cannot vouch for a name (:func:`unvouched`), as per
+    # flight; the answer says why (:meth:`quadsim.gap.diagnose.Against.words`)
+    doubt = unvouched(getattr(reference, "self_check", None), reference) if references else ""
     unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left) or bool(lone) \
-        or timing is not None
+        or timing is not None or bool(doubt)
     # beside a name that leaves something beyond the references' (a lack of fit within the
     # tentative share, or a remainder), "outside the library" weighs by the share it leaves
     # on the training flights, each against the references (the per-flight rule 1b and its
