@@ -9,17 +9,27 @@ command -> speed map are identified here from the *nominal* flights only (never 
   ``m * f_z = b * sum_i Omega_i^2`` over every sample of every nominal flight, with the
   accelerometer specific force and rotor speeds smoothed by the same Savitzky–Golay filter
   (quadsim.gap.residual). Its spread is the standard deviation of the per-flight estimates.
-* motor map: per-rotor straight line Omega = a + k * cmd fitted on the same samples,
-  stored at cmd = 0 and 1 (it is only trusted inside the flown range, about 0.3-0.5).
+* motor map (the set's ``[motor_map]``): ``identify --logs``' own motor fit
+  (:func:`quadsim.identify.motor_fits.fit_motor_map`: per rotor ``Omega = L_tau[a + k cmd
+  (1 + gamma (v - v_ref))]``, L_tau a first-order lag, tau on a 2.5 ms grid, gamma the
+  battery-voltage gain about the flights' median voltage v_ref) on the flights as ``identify
+  --logs`` loads them, pooled: the steady line a + k cmd stored at cmd = 0 and 1 (trusted
+  inside the flown range, about 0.35-0.49), ``reference_voltage`` v_ref, ``voltage_gain``
+  gamma (the rotors' mean; :class:`quadsim.vehicle.params.MotorMap` scales the whole steady
+  speed by 1 + gamma (v - v_ref): with a ~ 3 % of the hover speed, within 0.1 % of the
+  fit's form over the flights' 3.5-4.1 V) and ``time_constant`` tau, with its 95 % interval
+  and the per-flight fits' spread (:func:`motor_lag`). Why the voltage law: a Crazyflie's
+  battery falls from about 4.1 to 3.5 V over a flight and the controller raises the commands
+  to hold the thrust, so a line without it (the static fit of speed on command) reads the
+  slope about 30 % low and a command-only log's speeds from it are off by the battery's
+  state (docs/logs.md "Diagnosis from commands alone").
 * d = 0.006 m * b (README: torque/thrust ratio of Crazyflie 2.x propellers), checked against
   the flights' yaw balance (below).
 * motor time constant tau (s): ``identify --logs``' own motor fit
   (:func:`quadsim.identify.motor_fits.fit_motor_map`: per rotor ``Omega = L_tau[a + k cmd
   (1 + gamma (v - v_ref))]``, L_tau a first-order lag, tau on a 2.5 ms grid) on the flights
   as ``identify --logs`` loads them, pooled, with its 95 % interval and the per-flight fits'
-  spread (:func:`motor_lag`). Only tau is kept: the set's map stays the static line above,
-  on which ``--yaw-balance``'s instruments rest (``quadsim.gap`` refits the map, in command x
-  battery voltage where the flights were flown at different charges, from the flights).
+  spread (:func:`motor_lag`).
 
 Not ``python -m quadsim.identify --logs``: that command identifies d (yaw balance,
 instrumental variables), Ixx, Iyy and a lagged, voltage-dependent motor map from the logs.
@@ -114,14 +124,23 @@ def identify(nominal: list[Path]) -> dict:
 
 @dataclass(frozen=True)
 class MotorLag:
-    """The rotors' first-order lag behind their commands, as ``identify --logs`` fits it:
-    ``tau`` (s) pooled over the flights with its 95 % interval ``ci95`` (s; the fit's
-    profile on its grid), and the per-flight fits' ``per_flight`` (s, one per flight, in
-    the order given)."""
+    """The rotors' command -> speed map through a first-order lag, as ``identify --logs``
+    fits it: ``tau`` (s) pooled over the flights with its 95 % interval ``ci95`` (s; the
+    fit's profile on its grid), the per-flight fits' ``per_flight`` (s, one per flight, in
+    the order given); the pooled steady map ``speed`` (R, 2) rad/s at cmd 0 and 1 at the
+    ``reference_voltage`` (V, the flights' median), its ``voltage_gain`` (1/V, the rotors'
+    mean) and that gain's spread over the rotors ``gain_spread`` (1/V), the flown
+    ``command_range`` and each rotor's ``r2``."""
 
     tau: float
     ci95: tuple[float, float]
     per_flight: tuple[float, ...]
+    speed: tuple = ()
+    reference_voltage: float | None = None
+    voltage_gain: float = 0.0
+    gain_spread: float = 0.0
+    command_range: tuple[float, float] = (0.0, 1.0)
+    r2: tuple = ()
 
 
 def motor_lag(nominal: list[Path]) -> MotorLag:
@@ -138,7 +157,10 @@ def motor_lag(nominal: list[Path]) -> MotorLag:
     pooled = fit_motor_map(series)
     per_flight = tuple(float(fit_motor_map([s])["time_constant"]) for s in series)
     low, high = pooled["time_constant_ci"]
-    return MotorLag(float(pooled["time_constant"]), (float(low), float(high)), per_flight)
+    return MotorLag(float(pooled["time_constant"]), (float(low), float(high)), per_flight,
+                    tuple(tuple(row) for row in pooled["speed"]), pooled["reference_voltage"],
+                    float(pooled["voltage_gain"]), float(pooled["voltage_gain_spread"]),
+                    tuple(pooled["command_range"]), tuple(pooled["r2"]))
 
 
 # ----------------------------------------------------------------------------- yaw balance
@@ -195,15 +217,17 @@ def yaw_regressors(states, params, terms: tuple[str, ...]):
     """(y, X, Z) of one flight: y the measured yaw torque (N m, Newton-Euler with the set's
     inertia), X (N, 1 + k) d's regressor -sum s_i Omega_i^2 and each term's yaw torque per
     unit parameter from the measured rotor speeds, Z the same from the commanded speeds
-    (the set's motor map through a first-order lag MAP_LAG_S; their time derivative for the
-    spin-up term): the instruments."""
+    (the set's motor map at the logged battery voltage, through a first-order lag MAP_LAG_S;
+    their time derivative for the spin-up term): the instruments."""
     from scipy.signal import lfilter
 
     from quadsim.effects import parse_effect_spec
     from quadsim.gap.residual import measured_wrench, model_wrench, speed_of_command
 
     dt = float(states.t[1] - states.t[0])
-    steady = speed_of_command(params, states.command)
+    mm = params.motor_map       # at the logged battery voltage where the map has its law
+    steady = speed_of_command(params, states.command) if mm is None or states.vbat is None \
+        else mm.speed_at(states.command, states.vbat)
     pole = float(np.exp(-dt / MAP_LAG_S))           # first-order lag, started at rest
     commanded = lfilter([1.0 - pole], [1.0, -pole], steady - steady[0], axis=0) + steady[0]
     instrument = dataclasses.replace(states, rotor_speed=commanded,
@@ -597,10 +621,17 @@ def render(fit: dict, lag: MotorLag) -> str:
     src_b = (f"identified by scripts/identify_crazyflie.py: body-z force balance m*f_z = "
              f"b*sum(Omega^2), accelerometer, {fit['flights']} nominal flights; per-flight "
              f"std {fit['b_std']:.2e}")
-    lo, hi = fit["cmd_range"]
-    src_map = (f"scripts/identify_crazyflie.py: per-rotor line fit on nominal flights "
-               f"(flown cmd {lo:.2f}-{hi:.2f}; outside that an extrapolation)")
-    speeds = ", ".join(f"[{a:.1f}, {e:.1f}]" for a, e in fit["map"])
+    lo, hi = lag.command_range
+    src_map = (f"scripts/identify_crazyflie.py: identify --logs' motor fit "
+               f"(quadsim.identify.motor_fits.fit_motor_map: per-rotor steady line through a "
+               f"first-order lag and the battery-voltage law) on the {fit['flights']} nominal "
+               f"flights pooled, R^2 {min(lag.r2):.3f}-{max(lag.r2):.3f} (flown cmd "
+               f"{lo:.2f}-{hi:.2f}; outside that an extrapolation)")
+    src_v = (f"scripts/identify_crazyflie.py: the median battery voltage of the "
+             f"{fit['flights']} nominal flights, where the map's speed is stated")
+    src_gain = (f"scripts/identify_crazyflie.py: the same motor fit's voltage gain, the "
+                f"rotors' mean (spread over the rotors {lag.gain_spread:.2g} 1/V)")
+    speeds = ", ".join(f"[{a:.1f}, {e:.1f}]" for a, e in lag.speed)
     spread = np.array(lag.per_flight)
     src_tau = (f"identify --logs' motor fit (quadsim.identify.motor_fits.fit_motor_map: per-rotor "
                f"map through a first-order lag, with the battery-voltage law; grid "
@@ -649,6 +680,8 @@ radius = {{ value = {RADIUS}, unit = "m", source = "{src_radius}" }}
 command_unit = "1"
 command = {{ value = [0.0, 1.0], unit = "1", source = "{src_map}" }}
 speed = {{ value = [{speeds}], unit = "rad/s", source = "{src_map}" }}
+reference_voltage = {{ value = {lag.reference_voltage:.4f}, unit = "V", source = "{src_v}" }}
+voltage_gain = {{ value = {lag.voltage_gain:.4g}, unit = "1/V", source = "{src_gain}" }}
 time_constant = {{ value = {lag.tau:.4g}, unit = "s", source = "{src_tau}" }}
 {rotor_text}'''
 

@@ -17,6 +17,8 @@ from quadsim.identify.__main__ import main as identify_main
 from quadsim.logs.flightlog import FlightLog, load_log, write_log
 from quadsim.vehicle.params import MODELS_DIR, load_params
 
+from _helpers import commands_through_map
+
 CF = (MODELS_DIR / "crazyflie21.toml").read_text()
 
 
@@ -213,8 +215,9 @@ def test_gap_command_only_holdout_and_reference(tmp_path, capsys):
     from quadsim.gap.__main__ import main as gap_main
 
     cf = load_params("crazyflie21")
-    only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(
-        synthetic_flight(cf, [], seed=s, duration=2.0), rotor_speed=None)) for s in (42, 43)]
+    only = [write_log(tmp_path / f"cmd{s}.csv", dataclasses.replace(commands_through_map(
+        synthetic_flight(cf, [], seed=s, duration=2.0), cf), rotor_speed=None))
+        for s in (42, 43)]
     out = tmp_path / "gap.json"
     args = ["--model", "crazyflie21", str(only[0]), "--holdout", str(only[1]), "--quiet",
             "--effects", "mass_offset", "--json", str(out)]

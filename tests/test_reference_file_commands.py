@@ -39,6 +39,8 @@ from quadsim.gap.reffile import (
 from quadsim.logs.flightlog import write_log
 from quadsim.vehicle.params import load_params
 
+from _helpers import commands_through_map
+
 
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
@@ -51,7 +53,7 @@ def flights(tmp_path_factory):
     drag = [make_effect("rotor_drag", coefficient=1e-6)]
     speeds, cmd = [], []
     for k, seed in enumerate((70, 71, 72, 73)):
-        log = synthetic_flight(cf, drag, seed=seed, duration=4.0)
+        log = commands_through_map(synthetic_flight(cf, drag, seed=seed, duration=4.0), cf)
         speeds.append(write_log(folder / "speeds" / f"f{k}.csv.gz", log))
         cmd.append(write_log(folder / "cmd" / f"f{k}.csv.gz",
                              dataclasses.replace(log, rotor_speed=None)))
