@@ -1702,9 +1702,8 @@ def unvouched(check, reference) -> str:
       reference shares beyond the library is not modelled, and a flight flown harder than
       they were reads it as its own difference; and a self-check of n references with no
       false alarm bounds their false-alarm share only below 1 - 0.05^(1/n) (95 %): 63 % at
-      3, 53 % at 4. Measured (docs/gap.md "How many references"): the 10 plain real
-      ``mixed/`` flights against three gentle nominal flights all read ``signal_delay`` at
-      0.78-0.99;
+      3, 53 % at 4 (measured on the real flights: docs/gap.md, "How many references";
+      CHANGELOG.md: "Fewer than 5 references cannot vouch for a name");
     - a self-check that is not clean: its :meth:`~quadsim.gap.calibrate.SelfCheck.text`.
 
     A name against references that cannot vouch is ``tentative`` (both modes)."""
