@@ -16,13 +16,14 @@ command -> speed map are identified here from the *nominal* flights only (never 
   --logs`` loads them, pooled: the steady line a + k cmd stored at cmd = 0 and 1 (trusted
   inside the flown range, about 0.35-0.49), ``reference_voltage`` v_ref, ``voltage_gain``
   gamma (the rotors' mean; :class:`quadsim.vehicle.params.MotorMap` scales the whole steady
-  speed by 1 + gamma (v - v_ref): with a ~ 3 % of the hover speed, within 0.1 % of the
-  fit's form over the flights' 3.5-4.1 V) and ``time_constant`` tau, with its 95 % interval
-  and the per-flight fits' spread (:func:`motor_lag`). Why the voltage law: a Crazyflie's
-  battery falls from about 4.1 to 3.5 V over a flight and the controller raises the commands
-  to hold the thrust, so a line without it (the static fit of speed on command) reads the
-  slope about 30 % low and a command-only log's speeds from it are off by the battery's
-  state (docs/logs.md "Diagnosis from commands alone").
+  speed by 1 + gamma (v - v_ref), the fit only k cmd: the two differ by a gamma (v - v_ref),
+  at most 6 rad/s, 0.4 % of the hover speed, over the flights' 3.6-3.9 V) and
+  ``time_constant`` tau, with its 95 % interval and the per-flight fits' spread
+  (:func:`motor_lag`). Why the voltage law: the battery falls as the flights go on and the
+  controller raises the commands to hold the thrust, so a line without it (the static fit
+  of speed on command this script wrote before) reads the slope about 30 % low, and a
+  command-only log's speeds from it are off by the battery's state (docs/logs.md
+  "Diagnosis from commands alone").
 * d = 0.006 m * b (README: torque/thrust ratio of Crazyflie 2.x propellers), checked against
   the flights' yaw balance (below).
 * motor time constant tau (s): ``identify --logs``' own motor fit
@@ -97,9 +98,10 @@ README = "crazyflie21_brushless data README"
 
 
 def identify(nominal: list[Path]) -> dict:
-    """b (N s^2/rad^2), its per-flight spread, the per-rotor linear motor map, speed range."""
+    """b (N s^2/rad^2), its per-flight spread, the flights' count and peak rotor speed
+    (rad/s)."""
     numerator = denominator = 0.0
-    per_flight, rows_cmd, rows_speed, peak = [], [], [], 0.0
+    per_flight, peak = [], 0.0
     for path in nominal:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", QuadsimWarning)
@@ -109,17 +111,9 @@ def identify(nominal: list[Path]) -> dict:
         numerator += float(force_z @ omega2)
         denominator += float(omega2 @ omega2)
         per_flight.append(float(force_z @ omega2) / float(omega2 @ omega2))
-        rows_cmd.append(states.command)
-        rows_speed.append(states.rotor_speed)
         peak = max(peak, float(states.rotor_speed.max()))
-    command, speed = np.concatenate(rows_cmd), np.concatenate(rows_speed)
-    lines = []
-    for i in range(speed.shape[1]):
-        slope, intercept = np.polyfit(command[:, i], speed[:, i], 1)
-        lines.append((intercept, intercept + slope))
     return {"b": numerator / denominator, "b_std": float(np.std(per_flight, ddof=1)),
-            "flights": len(per_flight), "map": lines, "peak": peak,
-            "cmd_range": (float(command.min()), float(command.max()))}
+            "flights": len(per_flight), "peak": peak}
 
 
 @dataclass(frozen=True)
