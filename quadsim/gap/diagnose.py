@@ -301,7 +301,7 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
     = 10 % of its duration per end) are dropped after smoothing: there the derived signals
     are not valid (one-sided Savitzky–Golay derivatives, filter transients; 0.2 s covers the
     smoothing window twice over and a zero-phase low-pass down to 5 Hz, whose transient
-    decays to 1 % in ~1.04 / f_c; docs/gap.md, method).
+    decays to 1 % in ~1.04 / f_c).
 
     Raises :class:`InputError` for a rotor-count mismatch, logs without rotor speeds or
     shorter than :data:`quadsim.gap.logcheck.MIN_LOG_S` (2 s)."""

@@ -66,7 +66,7 @@ distorted by different delays. Its amplitude response is flat at low frequency a
 -3 dB near ``1.1 / window`` for the smoothed value (about 11 Hz for 0.1 s, cubic; the long
 window keeps the noise of differentiated gyro and rotor speeds, which would bias inertia and
 rotor-inertia estimates low, small); content
-above that is attenuated in both sides of the balance alike (see docs/gap.md for the table).
+above that is attenuated in both sides of the balance alike (docs/gap.md, "Residual wrench").
 
 Example::
 
