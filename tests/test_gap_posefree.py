@@ -117,3 +117,30 @@ def test_held_out_weighs_no_effect_that_reads_the_pose(cf):
     assert not weighed & set(without_pose(EFFECTS)) and "mass_offset" in weighed
     assert result.verdict.name in ("mass_offset", "nominal_refit", "thrust_factor")
     assert result.verdict.answer.endswith(f"Not weighed: {missing_words()}.")
+
+
+def test_without_a_pose_what_stays_is_not_said_to_be_outside_the_library():
+    """An ``unexplained`` answer on a log without a pose: the effects that read the pose were
+    not weighed, so what stays is "not explained by the readings weighed" (per flight and
+    held out), and may be one of them; the outcome is unchanged; a named answer only gains
+    the sentence; a log with a pose is left as it is."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.logcheck import without_pose_note
+    from quadsim.gap.result import Verdict
+
+    posefree, posed = SimpleNamespace(has_pose=False), SimpleNamespace(has_pose=True)
+    for opening in ("Not in the library:", "Unexplained:"):
+        verdict = Verdict("unexplained", "unexplained",
+                          f"{opening} after the most probable reading (thrust_factor) the "
+                          "residual stays beyond the reference flights' on Fz at 3x.")
+        noted = without_pose_note(verdict, posefree)
+        assert noted.outcome == "unexplained" and noted.name == "unexplained"
+        assert noted.answer.startswith("Not explained by the readings weighed: after the")
+        assert opening not in noted.answer
+        assert noted.answer.endswith(f"Not weighed: {missing_words()}; what stays may be "
+                                     "one of them.")
+        assert without_pose_note(verdict, posed) is verdict
+    named = Verdict("effect", "mass_offset", "mass_offset (90 %): +4 g heavier.")
+    assert without_pose_note(named, posefree).answer == \
+        f"mass_offset (90 %): +4 g heavier. Not weighed: {missing_words()}."

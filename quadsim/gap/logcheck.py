@@ -591,11 +591,29 @@ def check_same_kind(states, reference, name: str) -> None:
                          "compare them so)")
 
 
+#: how an ``unexplained`` answer opens when effects of the library were not weighed (no
+#: pose): what stays is beyond the readings weighed, not shown to be outside the library
+NOT_WEIGHED_OPENINGS = {"Not in the library:": "Not explained by the readings weighed:",
+                        "Unexplained:": "Not explained by the readings weighed:"}
+
+
 def without_pose_note(verdict, log):
     """``verdict`` (:class:`quadsim.gap.result.Verdict`) with :func:`missing_words` at the
-    end of its answer and in its notes when ``log`` (a FlightLog) has no pose; else as is."""
+    end of its answer and in its notes when ``log`` (a FlightLog) has no pose; else as is.
+    An ``unexplained`` answer then opens with :data:`NOT_WEIGHED_OPENINGS`' words instead
+    of "Not in the library:" / "Unexplained:" and its last sentence says that what stays may
+    be one of the effects not weighed: a cable's swing, a drag or a wind leaves exactly such
+    a remainder on the body-frame balance (the payload flights of the shared mixed set,
+    IMU and commands only: docs/logs.md, "What a log needs"); the outcome is unchanged."""
     if getattr(log, "has_pose", True) or verdict.outcome == "refused":
         return verdict
     said = missing_words()
-    return dataclasses.replace(verdict, answer=f"{verdict.answer} Not weighed: {said}.",
+    answer, tail = verdict.answer, f" Not weighed: {said}."
+    if verdict.outcome == "unexplained":
+        for old, new in NOT_WEIGHED_OPENINGS.items():
+            if answer.startswith(old):
+                answer = new + answer[len(old):]
+                break
+        tail = f" Not weighed: {said}; what stays may be one of them."
+    return dataclasses.replace(verdict, answer=answer + tail,
                                notes=tuple(verdict.notes) + (said,))
