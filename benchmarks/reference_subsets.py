@@ -15,15 +15,24 @@ cannot be sure: :func:`quadsim.gap.judge.unvouched`). One line per subset: paylo
 plain right, plain named *confidently* (a name not tentative: the false alarm the tool
 vouches for), and the names given to plain flights.
 
+``--logs`` cuts every log (judged and references alike, gzip copies in a temporary folder)
+to what a user may have: ``commands`` drops the ``rotor_*`` columns (speeds come from the
+parameter set's motor map, with its lag and battery-voltage law: no log has speeds, so no
+command model is fitted), ``imu`` keeps only ``t``, the gyro, the accelerometer, the
+commands and ``vbat`` (no pose, no speeds: the body-frame balance); ``as-logged`` (default)
+leaves them. A size of 20 or more is the whole set (one draw).
+
 Usage (needs ``../shared/data``; one subset ~10-20 s CPU on the 2-core machine)::
 
     python -m benchmarks.reference_subsets                         # sizes 3 5 10, 4 draws each
     python -m benchmarks.reference_subsets --sizes 3 4 --draws 8 --out subsets.json
+    python -m benchmarks.reference_subsets --logs commands --sizes 3 5 20 --draws 2
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import os
 import random
@@ -37,6 +46,28 @@ from benchmarks.reliability import mixed_answers
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "crazyflie21_brushless"
+
+
+#: the columns each ``--logs`` choice keeps (None: every column)
+KEPT = {"as-logged": None,
+        "commands": lambda name: not name.startswith("rotor_"),
+        "imu": lambda name: name in ("t", "wx", "wy", "wz", "ax", "ay", "az", "vbat")
+        or name.startswith("cmd_")}
+
+
+def cut_log(path: Path, keep, out: Path) -> Path:
+    """A gzip copy of the flight-log CSV ``path`` with only the columns ``keep(name)`` is
+    true for (``keep`` None: every column), written to ``out`` (no file name or time stamp
+    in the gzip header: the same bytes each time)."""
+    with gzip.open(path, "rt") as handle:
+        lines = handle.read().split("\n")
+    head = lines[0].split(",")
+    idx = [i for i, name in enumerate(head) if keep is None or keep(name)]
+    rows = [",".join(row.split(",")[i] for i in idx) for row in lines if row]
+    with open(out, "wb") as raw, gzip.GzipFile(filename="", fileobj=raw, mode="wb",
+                                                         mtime=0) as handle:
+        handle.write(("\n".join(rows) + "\n").encode())
+    return out
 
 
 def subset(size: int, draw: int, count: int = 20) -> list[int]:
@@ -79,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", type=int, nargs="+", default=[3, 5, 10])
     ap.add_argument("--draws", type=int, default=4)
     ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--logs", choices=tuple(KEPT), default="as-logged",
+                    help="cut every log to what a user may have (module doc)")
     ap.add_argument("--out", type=Path, help="all subsets' scores as JSON")
     args = ap.parse_args(argv)
     if not (args.data / "mixed_labels.json").is_file():
@@ -87,12 +120,19 @@ def main(argv: list[str] | None = None) -> int:
     labels = json.loads((args.data / "mixed_labels.json").read_text())
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
+        data = args.data
+        if KEPT[args.logs] is not None:         # the cut copies, judged and references alike
+            data = Path(tmp) / "data"
+            for group in ("mixed", "nominal"):
+                (data / group).mkdir(parents=True)
+                for path in sorted((args.data / group).glob("flight_*.csv.gz")):
+                    cut_log(path, KEPT[args.logs], data / group / path.name)
         for size in args.sizes:
-            for draw in range(1, args.draws + 1):
-                picked = subset(size, draw)
-                refs = [args.data / "nominal" / f"flight_{i:02d}.csv.gz" for i in picked]
-                row = {"size": size, "draw": draw, "references": picked,
-                       **score(judge(refs, Path(tmp) / "r.json", args.data), labels)}
+            for draw in range(1, (1 if size >= 20 else args.draws) + 1):
+                picked = subset(min(size, 20), draw)
+                refs = [data / "nominal" / f"flight_{i:02d}.csv.gz" for i in picked]
+                row = {"size": size, "draw": draw, "logs": args.logs, "references": picked,
+                       **score(judge(refs, Path(tmp) / "r.json", data), labels)}
                 rows.append(row)
                 print(f"k={size} draw {draw} {picked}: payload {row['payload'][0]}/"
                       f"{row['payload'][1]}, plain {row['plain'][0]}/{row['plain'][1]}, "

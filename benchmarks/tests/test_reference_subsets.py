@@ -42,3 +42,24 @@ def test_the_score_counts_payloads_plain_flights_and_confident_false_alarms():
     result["flights"][4] = _flight("n3.csv.gz", "unexplained", "unexplained")
     row = score(result, LABELS)
     assert row["plain_confident"] == 0 and row["plain_names"]["unexplained"] == 1
+
+
+def test_cut_log_keeps_the_columns_a_user_may_have(tmp_path):
+    """``commands`` drops the rotor speeds, ``imu`` keeps t, gyro, accelerometer, commands and
+    vbat; the values are the same strings, and the same cut gives the same bytes."""
+    import gzip
+
+    from benchmarks.reference_subsets import KEPT, cut_log
+
+    src = tmp_path / "f.csv.gz"
+    head = "t,x,qw,wx,wy,wz,ax,ay,az,rotor_1,cmd_1,vbat"
+    with gzip.open(src, "wt") as handle:
+        handle.write(head + "\n0,1.5,1,0.1,0.2,0.3,0,0,9.81,1500,0.42,3.9\n")
+    commands = cut_log(src, KEPT["commands"], tmp_path / "c.csv.gz")
+    imu = cut_log(src, KEPT["imu"], tmp_path / "i.csv.gz")
+    assert gzip.open(commands, "rt").read().split("\n")[:2] == [
+        "t,x,qw,wx,wy,wz,ax,ay,az,cmd_1,vbat", "0,1.5,1,0.1,0.2,0.3,0,0,9.81,0.42,3.9"]
+    assert gzip.open(imu, "rt").read().split("\n")[:2] == [
+        "t,wx,wy,wz,ax,ay,az,cmd_1,vbat", "0,0.1,0.2,0.3,0,0,9.81,0.42,3.9"]
+    again = cut_log(src, KEPT["imu"], tmp_path / "i2.csv.gz")
+    assert again.read_bytes() == imu.read_bytes()
