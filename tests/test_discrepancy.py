@@ -238,3 +238,25 @@ def test_with_fewer_than_five_references_a_name_is_never_confident(cf):
     assert flight["verdict"] == "mass_offset" and flight["tentative"] is False, flight["answer"]
     assert flight["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=1.5e-3)
     assert UNCHECKED_WORDS not in flight["answer"] and "too few" not in flight["answer"]
+
+
+def test_unvouched_says_why_references_cannot_vouch():
+    """The one rule of both modes (``judge.unvouched``): no self-check -> the unchecked
+    sentence; a self-check but no discrepancy term -> "Only n reference flights: too few";
+    a self-check that is not clean -> its own sentence; clean with a discrepancy term -> ""."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.calibrate import SelfCheck
+    from quadsim.gap.judge import unvouched
+
+    names = tuple(f"r{k}.csv" for k in range(6))
+    clean = SelfCheck(names, ("no_significant_gap",) * 6, (), {})
+    alarmed = SelfCheck(names, ("mass_offset",) * 2 + ("no_significant_gap",) * 4,
+                        (("r0.csv", "mass_offset", ("Fz",)), ("r1.csv", "mass_offset", ("Fz",))),
+                        {})
+    with_term, without = SimpleNamespace(discrepancy=object()), SimpleNamespace(discrepancy=None)
+    assert unvouched(None, with_term) == UNCHECKED_WORDS
+    assert unvouched(clean, without) == FEW_WORDS.format(n=6)
+    assert unvouched(clean, with_term) == ""
+    assert not alarmed.clean and unvouched(alarmed, with_term) == alarmed.text()
+    assert "disagree with each other on Fz" in unvouched(alarmed, with_term)
