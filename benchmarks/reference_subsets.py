@@ -56,17 +56,19 @@ KEPT = {"as-logged": None,
 
 
 def cut_log(path: Path, keep, out: Path) -> Path:
-    """A gzip copy of the flight-log CSV ``path`` with only the columns ``keep(name)`` is
-    true for (``keep`` None: every column), written to ``out`` (no file name or time stamp
-    in the gzip header: the same bytes each time)."""
-    with gzip.open(path, "rt") as handle:
-        lines = handle.read().split("\n")
-    head = lines[0].split(",")
-    idx = [i for i, name in enumerate(head) if keep is None or keep(name)]
-    rows = [",".join(row.split(",")[i] for i in idx) for row in lines if row]
+    """A gzip copy of the flight-log CSV ``path`` (gzip) with only the columns whose name
+    (stripped) ``keep(name)`` is true for (``keep`` None: every column), written to ``out``
+    (no file name or time stamp in the gzip header: the same bytes for the same input; the
+    commands-only cut of ``scripts/write_crazyflie_reference.py`` is this one)."""
+    with gzip.open(path, "rt", newline="") as handle:
+        lines = handle.read().splitlines()
+    names = lines[0].split(",")
+    idx = [i for i, name in enumerate(names) if keep is None or keep(name.strip())]
+    text = "\n".join(",".join(row[i] for i in idx)
+                     for row in (line.split(",") for line in lines)) + "\n"
     with open(out, "wb") as raw, gzip.GzipFile(filename="", fileobj=raw, mode="wb",
-                                                         mtime=0) as handle:
-        handle.write(("\n".join(rows) + "\n").encode())
+                                               mtime=0) as handle:
+        handle.write(text.encode())
     return out
 
 

@@ -20,10 +20,10 @@ command -> speed map are identified here from the *nominal* flights only (never 
   at most 6 rad/s, 0.4 % of the hover speed, over the flights' 3.6-3.9 V) and
   ``time_constant`` tau, with its 95 % interval and the per-flight fits' spread
   (:func:`motor_lag`). Why the voltage law: the battery falls as the flights go on and the
-  controller raises the commands to hold the thrust, so a line without it (the static fit
-  of speed on command this script wrote before) reads the slope about 30 % low, and a
-  command-only log's speeds from it are off by the battery's state (docs/logs.md
-  "Diagnosis from commands alone").
+  controller raises the commands to hold the thrust, so a line without it reads the slope
+  about 30 % low, and a command-only log's speeds from it are off by the battery's state
+  (docs/logs.md "Diagnosis from commands alone"; CHANGELOG.md, "the motor map with its
+  battery-voltage law").
 * d = 0.006 m * b (README: torque/thrust ratio of Crazyflie 2.x propellers), checked against
   the flights' yaw balance (below).
 * motor time constant tau (s): ``identify --logs``' own motor fit

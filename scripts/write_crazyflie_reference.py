@@ -36,7 +36,6 @@ e.g. ``zcat nominal/flight_00.csv.gz | cut -d, -f1-17,22-26``). Single-threaded 
 from __future__ import annotations
 
 import argparse
-import gzip
 import os
 import shutil
 import sys
@@ -44,6 +43,7 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))      # benchmarks (the commands-only cut)
 FLIGHTS = ("the set's own 20 nominal flights: Crazyflie 2.1 Brushless figure-8s at four "
            "speeds, nominal/flight_00..19.csv.gz of IMRCLab/crazyflie-data-collection (flights "
            "by its authors)")
@@ -55,16 +55,11 @@ COMMANDS_SOURCE = (f"{FLIGHTS}, their rotor-speed columns cut (cmd/), speeds syn
 
 def cut_speeds(src: Path, dst: Path) -> None:
     """``dst``: the CSV log ``src`` (gzip) without its ``rotor_*`` columns, gzip with no
-    time stamp (the same bytes for the same input)."""
-    with gzip.open(src, "rt", newline="") as f:
-        lines = f.read().splitlines()
-    names = lines[0].split(",")
-    keep = [k for k, name in enumerate(names) if not name.strip().startswith("rotor_")]
-    text = "\n".join(",".join(row[k] for k in keep)
-                     for row in (line.split(",") for line in lines)) + "\n"
-    with open(dst, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0,
-                                               filename="") as f:
-        f.write(text.encode())
+    time stamp (the same bytes for the same input): :func:`benchmarks.reference_subsets.
+    cut_log`'s ``commands`` cut."""
+    from benchmarks.reference_subsets import KEPT, cut_log
+
+    cut_log(src, KEPT["commands"], dst)
 
 
 def main(argv: list[str] | None = None) -> int:
