@@ -231,6 +231,7 @@ from .logcheck import (
     check_same_kind,
     needs_pose,
     posefree_log,
+    synthesised_timing_note,
     vehicle_check,
     without_pose_note,
 )
@@ -283,6 +284,8 @@ class Flight:
     fit: FlightStates
     delays_ms: dict = field(default_factory=dict)   # signal delays vs motion capture (ms)
     delay_notes: tuple = ()                         # why a delay was not estimated
+    #: the log's rotor speeds synthesised from its commands (FlightLog.speeds_synthesised)
+    speeds_synthesised: bool = False
 
 
 def interior(t: np.ndarray, edge_s: float | None = None) -> np.ndarray:
@@ -332,7 +335,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
         fit = joined_states([decimated(s, stride) for s in pieces])
-        out.append(Flight(name, states, fit, delays.ms(), delays.notes))
+        out.append(Flight(name, states, fit, delays.ms(), delays.notes,
+                          speeds_synthesised=log.speeds_synthesised))
     return out
 
 
@@ -507,6 +511,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     posefree = next((g for g in logs if not g.has_pose), None)
     if posefree is not None:                  # what a pose would add (quadsim.gap.logcheck)
         verdict = without_pose_note(verdict, posefree)
+    verdict = synthesised_timing_note(verdict, list(logs) + list(holdout or []))
     names = channel_names(reference)
     combination = None
     if decision.combination is not None and decision.lead_name == decision.combination.name:
@@ -2044,6 +2049,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
                 else [order])
     verdict = verdict_of(weighed, reference.self_check, statuses)
     verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.logcheck)
+    verdict = synthesised_timing_note(verdict, [log])   # a timing read through the motor map
     # the residual before and after, for the report: on the states the flight was weighed
     # on, with the residual parts and Jacobian its weighing kept
     return dataclasses.replace(verdict, series=flight_series(

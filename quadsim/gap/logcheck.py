@@ -152,7 +152,7 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
            "synthesise_all", "synthesise_speeds", "without_speeds", "UNCONFIRMED_MAX_P",
            "cap_decision", "mark", "order_statuses", "probability_cap", "missing_words",
-           "needs_pose", "posefree_log"]
+           "needs_pose", "posefree_log", "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS"]
 
 
 #: largest ratio (either way) of the thrust factor the data need to the model's: a payload
@@ -341,12 +341,12 @@ def synthesise_speeds(log: FlightLog, model: CommandModel, *,
             f"fit rms {model.rms:.3g} rad/s, {model.source})")
     return dataclasses.replace(log, rotor_speed=speed,
                                rotor_command=log.rotor_command if keep_commands else None,
-                               notes=log.notes + (note,))
+                               notes=log.notes + (note,), speeds_synthesised=True)
 
 
 def without_speeds(log: FlightLog) -> FlightLog:
     """The log with its rotor-speed columns removed (what a command-only log looks like)."""
-    return dataclasses.replace(log, rotor_speed=None)
+    return dataclasses.replace(log, rotor_speed=None, speeds_synthesised=False)
 
 
 @dataclass(frozen=True)
@@ -595,6 +595,34 @@ def check_same_kind(states, reference, name: str) -> None:
 #: pose): what stays is beyond the readings weighed, not shown to be outside the library
 NOT_WEIGHED_OPENINGS = {"Not in the library:": "Not explained by the readings weighed:",
                         "Unexplained:": "Not explained by the readings weighed:"}
+
+
+#: what a rotor timing reading (``signal_delay``) means on a log whose rotor speeds were
+#: synthesised from its commands (:func:`synthesised_timing_note`)
+SYNTHESISED_TIMING_WORDS = (
+    "No rotor speeds logged: they are synthesised from the motor commands (the motor map and "
+    "its lag), so a rotor timing here is the commands' timing through that map: the "
+    "commands logged at another time, or the motors responding at another speed, than on "
+    "the reference flights; a logged rotor speed would tell the two apart.")
+
+
+def synthesised_timing_note(verdict, logs):
+    """``verdict`` (:class:`quadsim.gap.result.Verdict`) with
+    :data:`SYNTHESISED_TIMING_WORDS` at the end of its answer where one of ``logs``
+    (FlightLogs: the judged flight, or a held-out run's training and held-out flights) has
+    rotor speeds synthesised from its commands (``FlightLog.speeds_synthesised``) and the
+    answer states the rotor timing reading ``signal_delay`` (its words open with
+    :data:`quadsim.gap.words.TIMING_WORDS`, "the rotor speeds are timed ... later", wherever
+    it is stated: as the name, beside it, or as the lead of an unexplained answer): there it
+    reads a timing of the commands through the command -> speed model, not of a logged
+    signal; else ``verdict`` as is. Outcome and numbers unchanged."""
+    if not any(getattr(g, "speeds_synthesised", False) for g in logs):
+        return verdict
+    from .words import TIMING_WORDS
+
+    if TIMING_WORDS not in verdict.answer:
+        return verdict
+    return dataclasses.replace(verdict, answer=f"{verdict.answer} {SYNTHESISED_TIMING_WORDS}")
 
 
 def without_pose_note(verdict, log):

@@ -35,7 +35,8 @@ from .residual import channel_unit
 
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
            "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
-           "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys"]
+           "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys",
+           "TIMING_WORDS"]
 
 
 def total_mass(ev) -> dict | None:
@@ -144,6 +145,12 @@ def reference_text(key: str, value: float, sd: float, reference) -> str:
             + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
 
 
+#: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
+#: timed 13 ± 1 ms later ..." (:func:`reading_text`; :func:`quadsim.gap.logcheck.
+#: synthesised_timing_note` finds it by these words)
+TIMING_WORDS = "rotor speeds are timed"
+
+
 def reading_text(ev, reference) -> str:
     """The magnitude of a reading in words (determined values only). A weighed mass is
     stated at the references' thrust per Omega^2 and, beside it, on another session's air
@@ -156,11 +163,11 @@ def reading_text(ev, reference) -> str:
         mean = 1e3 * reference.rotor_shift_s      # the references' fitted rotor timing
         d = 1e3 * ev.values["delay.rotor"]
         if not keys:
-            return "rotor speeds logged with a delay of their own (size not determined)"
+            return f"the {TIMING_WORDS} with a delay of their own (size not determined)"
         ci = 1.96e3 * ev.post_sd["delay.rotor"]
-        return (f"the rotor speeds are logged {abs(d):.0f} ± {ci:.0f}"
+        return (f"the {TIMING_WORDS} {abs(d):.0f} ± {ci:.0f}"
                 f" ms {'later' if d > 0 else 'earlier'} than on the reference flights "
-                f"(references: {mean:+.1f} ms against motion capture, fitted)")
+                f"(references: {mean:+.1f} ms against the logged motion, fitted)")
     if name == "wind":
         return _wind_text(ev, reference)
     if not keys:

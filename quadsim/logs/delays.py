@@ -337,10 +337,14 @@ def align_signal_delays(log: FlightLog) -> tuple[FlightLog, DelayEstimate]:
 
 def delay_notes(flights) -> list[str]:
     """One note per flight (objects with ``name``, ``delays_ms`` and ``delay_notes``) that
-    has a delay or a delay that could not be resolved."""
+    has a delay or a delay that could not be resolved. A flight whose rotor speeds were
+    synthesised from its commands (``speeds_synthesised``) has its "rotor" delay named so:
+    it times the commands through the command -> speed model, not a logged signal."""
     out = []
     for f in flights:
-        parts = [f"{k} {v:+.1f} ms" for k, v in getattr(f, "delays_ms", {}).items()
+        synthesised = getattr(f, "speeds_synthesised", False)
+        parts = [f"{'rotor (synthesised from the commands)' if k == 'rotor' and synthesised else k}"
+                 f" {v:+.1f} ms" for k, v in getattr(f, "delays_ms", {}).items()
                  if v is not None]
         if parts:
             out.append(f"{f.name}: signal delays vs motion capture: {', '.join(parts)} "

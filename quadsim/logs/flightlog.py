@@ -139,7 +139,10 @@ class FlightLog:
     airborne stretch of the same flight starts (several take-offs, joined by
     :func:`quadsim.logs.spans.join_airborne`; empty for one stretch). The time axis jumps at
     each and the states with it: nothing may be interpolated, filtered or differentiated
-    across one (:meth:`parts` gives the stretches).
+    across one (:meth:`parts` gives the stretches); speeds_synthesised: True where
+    rotor_speed was not logged but synthesised from rotor_command by a command -> speed
+    model (:func:`quadsim.gap.logcheck.synthesise_speeds`): a timing read on it is the
+    commands' timing through that model, not a logged signal's.
     """
 
     t: np.ndarray
@@ -155,6 +158,7 @@ class FlightLog:
     notes: tuple[str, ...] = ()
     vehicle: str | None = None
     segments: tuple[int, ...] = ()
+    speeds_synthesised: bool = False
 
     def __post_init__(self):
         n = len(self.t)
