@@ -126,3 +126,34 @@ def test_the_page_of_a_result_read_back_from_json(result, tmp_path):
 def test_the_old_page_function_is_refused_with_what_to_change():
     with pytest.raises(ImportError, match=r"quadsim\.gap\.page\.page\(result\)"):
         from quadsim.gap.report import flights_html  # noqa: F401
+
+
+def test_a_reference_model_at_a_bound_is_said_in_the_notes():
+    """``words.bound_words``: every shared value at a bound of the references' fit, grouped
+    by effect, in words with its value and why the bound is there; none at a bound: "".
+    The per-flight notes carry it (``diagnose._stage_notes``), so the text output says it."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.diagnose import _stage_notes
+    from quadsim.gap.words import bound_words
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    values = {"inertia_error.xx": 2.0, "rate_damping.z": 0.0,
+              "motor_lag.time_constant": 0.0025, "wind.vx": 0.3}
+    reference = SimpleNamespace(
+        params=params, values=lambda: values,
+        at_bound={"inertia_error.xx": "upper", "rate_damping.z": "lower",
+                  "motor_lag.time_constant": "lower"})
+    text = bound_words(reference)
+    ixx = params.inertia[0][0]                   # kg m^2; +200 % reads 3x it
+    assert text.startswith("the reference model's fit stops at a bound: I_xx +200 % "
+                           f"({3 * ixx:.3g} kg m² instead of the model's {ixx:.3g} kg m²), "
+                           "at the upper end of its range; yaw rate damping +0 N m per rad/s")
+    assert "+2.5 ms (time constant), at its bound: a quarter of a fit sample" in text
+    assert "wind" not in text                    # not at a bound: not named
+    assert bound_words(SimpleNamespace(at_bound={}, params=params, values=dict)) == ""
+    kept = SimpleNamespace(count=20, reference=reference, notes=("delay note",))
+    assert _stage_notes(kept) == [text, "delay note"]
+    kept = SimpleNamespace(count=20, reference=SimpleNamespace(at_bound={}), notes=())
+    assert _stage_notes(kept) == []

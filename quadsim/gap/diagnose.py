@@ -240,7 +240,7 @@ from .reference import centre_term, columns, envelope_summary, fit_discrepancy, 
 from .reference import position as envelope_position
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
 from .result import Diagnosis, Reading, Series, Verdict
-from .words import across_sessions, batch_answer, nominal_words, total_mass
+from .words import across_sessions, batch_answer, bound_words, nominal_words, total_mass
 
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
@@ -1881,11 +1881,13 @@ def calibrated_stage(reference, params: VehicleParams, *, effects, window_s: flo
 
 
 def _stage_notes(kept: Calibrated) -> list[str]:
-    """The reference stage's notes: too few references (below :data:`MIN_REFERENCE`), and
-    the references' signal-delay notes."""
+    """The reference stage's notes: too few references (below :data:`MIN_REFERENCE`), the
+    reference model's values at a bound of its fit (:func:`quadsim.gap.words.bound_words`),
+    and the references' signal-delay notes."""
     notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
               "give 10 or more")] if kept.count < MIN_REFERENCE else [])
-    return notes + list(kept.notes)
+    bound = bound_words(kept.reference)
+    return notes + ([bound] if bound else []) + list(kept.notes)
 
 
 def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,

@@ -36,7 +36,7 @@ from .residual import channel_unit
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
            "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
            "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys",
-           "TIMING_WORDS"]
+           "TIMING_WORDS", "bound_words"]
 
 
 def total_mass(ev) -> dict | None:
@@ -143,6 +143,38 @@ def reference_text(key: str, value: float, sd: float, reference) -> str:
     why = _BOUND_WHY.get(key, "the end of its physical range")
     return (describe(key.split(".")[0], {key: value}, {}, reference.params)
             + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
+
+
+def bound_words(reference) -> str:
+    """One sentence naming the shared parameters at which the references' calibrated model
+    stops at a bound of its fit (``reference.at_bound``: parameter -> "lower"/"upper",
+    :func:`quadsim.gap.calibrate.bounded`), each with its value in words
+    (:func:`describe`) and why the bound is there; "" where none is. The reference flights
+    would take such a value further than the library's form allows (a trait they share that
+    it does not take: a real vehicle's roll response beyond +200 % inertia, docs/gap.md,
+    "Known limits") or than the data resolve (a motor lag below a quarter of a fit sample);
+    every judged flight is compared with the model at that bound, so the user is told, not
+    only the JSON (``reference_model.at_bound``)."""
+    at = dict(getattr(reference, "at_bound", {}) or {})
+    if not at:
+        return ""
+    values = reference.values()
+    groups: dict[str, dict] = {}
+    for key in at:
+        groups.setdefault(key.split(".")[0], {})[key] = values[key]
+    parts = []
+    for name, vals in groups.items():
+        try:
+            text = describe(name, vals, {}, reference.params)
+        except (KeyError, ValueError):          # a fit form of the diagnosis, not an effect
+            text = ", ".join(f"{k} {v:.3g}" for k, v in vals.items())
+        why = sorted({f"at its bound: {_BOUND_WHY[k]}" if k in _BOUND_WHY else
+                      f"at the {at[k]} end of its range" for k in vals})
+        parts.append(f"{text}, {'; '.join(why)}")
+    return ("the reference model's fit stops at a bound: " + "; ".join(parts) + ". The "
+            "reference flights would take it further than the library's form allows or the "
+            "data resolve; each flight is judged against the model at that bound "
+            "(docs/gap.md, Known limits)")
 
 
 #: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
