@@ -260,3 +260,54 @@ def test_unvouched_says_why_references_cannot_vouch():
     assert unvouched(clean, with_term) == ""
     assert not alarmed.clean and unvouched(alarmed, with_term) == alarmed.text()
     assert "disagree with each other on Fz" in unvouched(alarmed, with_term)
+
+
+def test_a_reference_unlike_the_others_is_left_out_and_said(cf):
+    """Ten references, one of them carrying +6 g (a payload flight given as a reference by
+    mistake): judged against the other nine it is named confidently, so it is left out, the
+    other nine calibrated and checked again (``calibrate.odd_references``), the result and
+    the notes say so, and a +6 g flight is read at its own size against the nine (kept, the
+    heavy one widens the references' own spread of a mass reading until +6 g is "no
+    difference"); nine references have no room for such a step (1 of 9 is more than 10 %:
+    not clean, said in every answer)."""
+    heavy = [make_effect("mass_offset", mass=0.006)]
+    plain = _logs(cf, [], (60, 61, 62, 63, 64, 65, 66, 67, 68))
+    odd = _logs(cf, heavy, (69,))
+    tested = _logs(cf, heavy, (70,))
+    effects = ["mass_offset", "com_offset"]
+    result = diagnose_per_flight(tested, plain + odd, cf, effects=effects)
+    model = result["reference_model"]
+    assert [(e["flight"], e["verdict"]) for e in model["left_out"]] == \
+        [("log9", "mass_offset")], model["left_out"]
+    assert len(result["reference"]) == 9 and model["self_check"]["clean"] is True
+    assert any(n.startswith("left out of the references: ") for n in result["notes"])
+    flight = result["flights"][0]
+    assert flight["verdict"] == "mass_offset", flight["answer"]
+    assert flight["params"]["mass_offset.mass"] == pytest.approx(0.006, abs=1.5e-3)
+    # nine references, one of them heavy: not clean, so nothing is left out (that would make
+    # verdicts confident that the disagreement keeps from being so); the answer says so
+    nine = diagnose_per_flight(tested, plain[:8] + odd, cf, effects=effects)
+    assert nine["reference_model"]["left_out"] == []
+    assert nine["reference_model"]["self_check"]["clean"] is False
+    assert "Your references disagree with each other" in nine["flights"][0]["answer"]
+    assert nine["flights"][0]["outcome"] == "no_significant_gap"      # the +6 g lost in it
+
+
+def test_odd_references_only_from_a_clean_set_and_only_confident_alarms():
+    """``calibrate.odd_references``: the confident false alarms of a clean self-check (at most
+    10 % false alarms); a tentative alarm stays; a set that is not clean keeps all."""
+    from quadsim.gap.calibrate import odd_references
+
+    names = tuple(f"f{k}" for k in range(20))
+
+    def check(alarms, confident):
+        return SelfCheck(names, (), tuple((n, "mass_offset", ("Fz",)) for n in alarms), {},
+                         confident=tuple(confident))
+
+    assert odd_references(None) == ()
+    assert odd_references(check(["f3"], ["f3"])) == ("f3",)
+    assert odd_references(check(["f3", "f7"], ["f7"])) == ("f7",)
+    assert odd_references(check(["f3"], [])) == ()                  # tentative: kept
+    assert odd_references(check(["f1", "f2", "f3"], ["f1"])) == ()  # 3 of 20: not clean
+    nine = SelfCheck(names[:9], (), (("f1", "mass_offset", ()),), {}, confident=("f1",))
+    assert not nine.clean and odd_references(nine) == ()

@@ -233,7 +233,8 @@ __all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
            "settled_self_check", "spreads", "to_refine",
            "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
-           "fit_bounds", "jacobian", "per_flight_candidate", "shared_candidate", "shifted",
+           "fit_bounds", "jacobian", "odd_references", "per_flight_candidate",
+           "shared_candidate", "shifted",
            "voltage_spread", "weighted_residual"]
 
 
@@ -334,7 +335,9 @@ class SelfCheck:
     already placed); ``timing``: (n,) each judged reference's log-evidence margin of a rotor
     lag over a rotor signal delay (:func:`timing_margin`; None: not measured), the margin
     two rotor forms have on flights that differ in nothing
-    (:func:`quadsim.gap.judge.timing_rival`)."""
+    (:func:`quadsim.gap.judge.timing_rival`); ``confident``: the names of the false alarms
+    whose verdict is stated as confident (a name or ``unexplained``, not tentative): a
+    reference unlike the others beyond their spread (:func:`odd_references`)."""
 
     flights: tuple
     verdicts: tuple
@@ -343,6 +346,7 @@ class SelfCheck:
     slow: np.ndarray | None = None
     per: tuple = ()
     timing: np.ndarray | None = None
+    confident: tuple = ()
 
     @property
     def clean(self) -> bool:
@@ -382,6 +386,7 @@ class SelfCheck:
                 "false_alarms": [{"flight": n, "verdict": v, "channels": list(c)}
                                  for n, v, c in self.false_alarms],
                 "clean": self.clean, "channels": self.channels(),
+                "confident": list(self.confident),
                 "spreads": {f"{name}{' (' + variant + ')' if variant else ''}":
                             {p: [s.mean, s.sd, s.count, s.noise] for p, s in params.items()}
                             for (name, variant), params in self.spreads.items()}}
@@ -512,7 +517,7 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
     :class:`~quadsim.gap.result.Verdict` (``outcome``, ``name``, ``lack_of_fit``,
     ``differ_on``)."""
     per = [readings(rows) if rows is not None else {} for rows in rows_list]
-    verdicts, alarms = [], []
+    verdicts, alarms, confident = [], [], []
     for j, name in enumerate(names):
         if rows_list[j] is None:
             verdicts.append("refused")
@@ -524,6 +529,8 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
         if verdict.outcome != "no_significant_gap":
             chans = tuple(verdict.lack_of_fit or {}) or tuple(verdict.differ_on or ())
             alarms.append((name, verdict.name, chans))
+            if not getattr(verdict, "tentative", True):
+                confident.append(name)
     nulls = [next((ev for ev in rows if ev.name == "no_difference"), None)
              for rows in rows_list if rows is not None]
     slow = [ev.slow for ev in nulls if ev is not None and ev.slow is not None]
@@ -531,7 +538,30 @@ def self_check_of(names: list, rows_list: list, judge_fn) -> SelfCheck:
     timing = [m for m in timing if m is not None]
     return SelfCheck(tuple(names), tuple(verdicts), tuple(alarms), spreads(per),
                      np.array(slow) if slow else None, tuple(per),
-                     np.array(timing) if len(timing) == len(names) else None)
+                     np.array(timing) if len(timing) == len(names) else None,
+                     tuple(confident))
+
+
+def odd_references(check: SelfCheck | None) -> tuple:
+    """The names of the references to leave out of a set and calibrate again without: those the
+    self-check ``check`` judges against the others with a verdict stated as confident
+    (``check.confident``: a name or ``unexplained``, not tentative), where the set is
+    otherwise clean -- at most :data:`FALSE_ALARM_SHARE` of it false alarms. Why: such a
+    reference differs from the others beyond their own spread (its reading passed practical
+    significance against theirs, or its residual stays beyond theirs), e.g. a payload flight
+    given by mistake among nominal ones; kept, what it carries passes for normal and shifts
+    the shared model every flight is judged against (one cable-payload flight given with 19
+    nominal Crazyflie references: the other payload flights named with 3.9-6.1 g of their
+    7.4 g at 99 %; docs/gap.md, "The self-check"). Only from a clean set: there the verdicts
+    are stated as confident already, and leaving the odd one out removes what it would pass
+    for normal without raising any confidence; a set that is not clean has its doubt stated
+    in every answer, which leaving one out would lift. A set with more false alarms
+    disagrees with itself and is marked so instead (:attr:`SelfCheck.clean`); a set of fewer
+    than 1 / FALSE_ALARM_SHARE = 10 references has no room for one, so at least 9 stay (more
+    than the discrepancy term's 5). () where none is left out."""
+    if check is None or not check.clean:
+        return ()
+    return tuple(check.confident)
 
 
 def to_refine(names: list, rows_list: list, check: SelfCheck) -> set:

@@ -179,6 +179,7 @@ from .calibrate import (
     inverse_information,
     leave_one_out,
     negligible,
+    odd_references,
     readings,
     reference_key,
     settled_self_check,
@@ -240,7 +241,14 @@ from .reference import centre_term, columns, envelope_summary, fit_discrepancy, 
 from .reference import position as envelope_position
 from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
 from .result import Diagnosis, Reading, Series, Verdict
-from .words import across_sessions, batch_answer, bound_words, nominal_words, total_mass
+from .words import (
+    across_sessions,
+    batch_answer,
+    bound_words,
+    left_out_words,
+    nominal_words,
+    total_mass,
+)
 
 __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "Decision",
            "Flight", "Weighed",
@@ -1887,7 +1895,8 @@ def _stage_notes(kept: Calibrated) -> list[str]:
     notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
               "give 10 or more")] if kept.count < MIN_REFERENCE else [])
     bound = bound_words(kept.reference)
-    return notes + ([bound] if bound else []) + list(kept.notes)
+    left = left_out_words(kept.reference)
+    return notes + ([left] if left else []) + ([bound] if bound else []) + list(kept.notes)
 
 
 def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,
@@ -1901,6 +1910,13 @@ def _reference_stage(reference, params: VehicleParams, *, effects, window_s: flo
     vehicle = vehicle_check([f.fit for f in ref_flights], params)
     ref = calibrate(ref_flights, params, base=base)
     ref.self_check = reference_self_check(ref_flights, ref, effects)
+    odd = odd_references(ref.self_check)
+    if odd:     # unlike the others beyond their spread: calibrated again without them
+        left = tuple(a for a in ref.self_check.false_alarms if a[0] in odd)
+        ref_flights = [f for f in ref_flights if f.name not in odd]
+        ref = calibrate(ref_flights, params, base=base)
+        ref.self_check = reference_self_check(ref_flights, ref, effects)
+        ref.left_out = left
     return Calibrated(key or "", ref, vehicle, tuple(delay_notes(ref_flights)),
                       len(ref_flights))
 
@@ -1920,6 +1936,8 @@ def reference_summary(ref: Reference) -> dict:
             "scatter": dict(zip(ref.candidate.parameter_names, map(float, ref.scatter))),
             "identified": {k: bool(v) for k, v in ref.identified.items()},
             "at_bound": dict(ref.at_bound),
+            "left_out": [{"flight": n, "verdict": v, "channels": list(c)}
+                         for n, v, c in getattr(ref, "left_out", ())],
             "sigma": dict(zip(names, map(float, ref.sigma))),
             "correlation_samples": dict(zip(names, map(float, ref.tau))),
             "rotor_timing_ms": {"value": 1e3 * ref.rotor_shift_s,

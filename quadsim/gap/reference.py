@@ -788,6 +788,9 @@ class Reference:
     #: (:class:`quadsim.gap.calibrate.SelfCheck`): what a reading's size is compared with
     #: (practical significance); None before it ran or without one
     self_check: object = None
+    #: the references left out of this model (:func:`quadsim.gap.calibrate.odd_references`):
+    #: (name, verdict, channels) of each as the first self-check judged it against the others
+    left_out: tuple = ()
     #: each reference flight's own fit (:class:`quadsim.gap.calibrate.PerFlight`): what the
     #: between-flight scatter and the envelope are built from, kept for the self-check;
     #: None where not kept

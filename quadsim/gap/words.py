@@ -26,6 +26,8 @@ Probabilities print as whole percent (``> 99 %`` from 0.995 in held-out wording)
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..effects.thrust_factor import SESSION_SPREAD
@@ -36,7 +38,7 @@ from .residual import channel_unit
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
            "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
            "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys",
-           "TIMING_WORDS", "bound_words"]
+           "TIMING_WORDS", "bound_words", "left_out_words"]
 
 
 def total_mass(ev) -> dict | None:
@@ -175,6 +177,25 @@ def bound_words(reference) -> str:
             "reference flights would take it further than the library's form allows or the "
             "data resolve; each flight is judged against the model at that bound "
             "(docs/gap.md, Known limits)")
+
+
+def left_out_words(reference) -> str:
+    """One sentence naming the references left out of the reference model
+    (``reference.left_out``: (name, verdict, channels), :func:`quadsim.gap.calibrate.
+    odd_references`) with how the self-check judged each against the others, and that the
+    flights are judged against the rest; "" where none was."""
+    left = tuple(getattr(reference, "left_out", ()) or ())
+    if not left:
+        return ""
+    kept = len(getattr(reference, "names", ()) or ())
+    each = "; ".join(f"{Path(n).name} ({v}{', on ' + ', '.join(c[:3]) if c else ''})"
+                     for n, v, c in left)
+    return (f"left out of the references: {each}. Judged against the others "
+            f"{'it is' if len(left) == 1 else 'they are'} unlike them beyond their own "
+            "spread, stated as confident (a flight with a change given as a reference?), so "
+            f"what {'it carries' if len(left) == 1 else 'they carry'} would pass for normal; "
+            f"every flight is judged against the other {kept}, calibrated and checked again "
+            "without it (docs/gap.md, \"The self-check\")")
 
 
 #: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
