@@ -155,5 +155,31 @@ def test_a_reference_model_at_a_bound_is_said_in_the_notes():
     assert bound_words(SimpleNamespace(at_bound={}, params=params, values=dict)) == ""
     kept = SimpleNamespace(count=20, reference=reference, notes=("delay note",))
     assert _stage_notes(kept) == [text, "delay note"]
-    kept = SimpleNamespace(count=20, reference=SimpleNamespace(at_bound={}), notes=())
+    kept = SimpleNamespace(count=20, reference=SimpleNamespace(at_bound={}, values=dict),
+                           notes=())
     assert _stage_notes(kept) == []
+
+
+def test_a_thrust_the_sets_mass_and_b_do_not_give_is_said():
+    """``words.refit_words``: the references' b refit beyond another session's air (2.8 %)
+    is said with its factor and what it means for a mass reading (the balance fixes b / m
+    only); within it, nothing."""
+    from types import SimpleNamespace
+
+    from quadsim.effects.thrust_factor import SESSION_SPREAD
+    from quadsim.gap.words import refit_words
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+
+    def ref(x):
+        return SimpleNamespace(params=params, values=lambda: {"nominal_refit.thrust": x})
+
+    assert refit_words(ref(0.99 * SESSION_SPREAD.relative)) == ""
+    assert refit_words(SimpleNamespace(params=params, values=dict)) == ""
+    text = refit_words(ref(0.21))
+    assert text.startswith("the reference flights' weight balance needs 1.21x the parameter "
+                           "set's thrust per Omega^2 (b) at its mass of 37 g, beyond the 2.8 %")
+    assert "off by the same factor (+21 %)" in text
+    assert refit_words(ref(-0.1)).startswith("the reference flights' weight balance needs "
+                                             "0.9x")

@@ -247,6 +247,7 @@ from .words import (
     bound_words,
     left_out_words,
     nominal_words,
+    refit_words,
     total_mass,
 )
 
@@ -1890,13 +1891,15 @@ def calibrated_stage(reference, params: VehicleParams, *, effects, window_s: flo
 
 def _stage_notes(kept: Calibrated) -> list[str]:
     """The reference stage's notes: too few references (below :data:`MIN_REFERENCE`), the
-    reference model's values at a bound of its fit (:func:`quadsim.gap.words.bound_words`),
-    and the references' signal-delay notes."""
+    references left out (:func:`quadsim.gap.words.left_out_words`), a thrust per Omega^2 the
+    set's mass and b do not give (:func:`~quadsim.gap.words.refit_words`), the reference
+    model's values at a bound of its fit (:func:`~quadsim.gap.words.bound_words`), and the
+    references' signal-delay notes."""
     notes = ([(f"only {kept.count} reference flights: their scatter is poorly known; "
               "give 10 or more")] if kept.count < MIN_REFERENCE else [])
-    bound = bound_words(kept.reference)
-    left = left_out_words(kept.reference)
-    return notes + ([left] if left else []) + ([bound] if bound else []) + list(kept.notes)
+    said = [left_out_words(kept.reference), refit_words(kept.reference),
+            bound_words(kept.reference)]
+    return notes + [text for text in said if text] + list(kept.notes)
 
 
 def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,

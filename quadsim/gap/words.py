@@ -38,7 +38,7 @@ from .residual import channel_unit
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
            "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
            "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys",
-           "TIMING_WORDS", "bound_words", "left_out_words"]
+           "TIMING_WORDS", "bound_words", "left_out_words", "refit_words"]
 
 
 def total_mass(ev) -> dict | None:
@@ -177,6 +177,28 @@ def bound_words(reference) -> str:
             "reference flights would take it further than the library's form allows or the "
             "data resolve; each flight is judged against the model at that bound "
             "(docs/gap.md, Known limits)")
+
+
+def refit_words(reference) -> str:
+    """One sentence where the reference flights' weight balance needs a thrust per Omega^2 (b)
+    further from the parameter set's, at the set's mass, than two sessions' air can move it
+    (``nominal_refit.thrust`` beyond :data:`quadsim.effects.thrust_factor.SESSION_SPREAD`'s
+    95 % half-width, 2.8 %); "" otherwise. The balance m g = b sum(Omega^2) fixes only b / m:
+    the set's b or its mass is off, which the flights cannot tell apart; a mass a flight
+    reads is m times its share of the thrust, so where the set's mass is what is off, every
+    mass reading is off by the same factor (a 45 g set for a 37 g vehicle read a +6.5 g
+    payload as +8.0 g, CHANGELOG.md)."""
+    x = reference.values().get("nominal_refit.thrust")
+    if x is None or abs(x) <= SESSION_SPREAD.relative:
+        return ""
+    mass = 1e3 * reference.params.mass
+    return (f"the reference flights' weight balance needs {1 + x:.3g}x the parameter set's "
+            f"thrust per Omega^2 (b) at its mass of {mass:.3g} g, beyond the "
+            f"{100 * SESSION_SPREAD.relative:.1f} % another session's air can give: the set's "
+            "b or its mass is off, which the balance cannot tell apart; a mass a flight reads "
+            "is stated in the set's mass, so if that is what is off every mass reading is off "
+            f"by the same factor ({100 * x:+.0f} %): put the vehicle's weighed mass in the set "
+            "to state masses in its grams")
 
 
 def left_out_words(reference) -> str:
