@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import re
 from pathlib import Path
 
 import numpy as np
@@ -154,6 +155,24 @@ def test_g_instead_of_m_s2(tmp_path):
     path = write_log(tmp_path / "g.csv", FlightLog(**{**log.__dict__, "accel": log.accel / 9.81}))
     with pytest.raises(InputError, match=r"g.csv: ax..az: .*looks like g"):
         load_log(path)
+
+
+def test_milliseconds_or_microseconds_instead_of_seconds(tmp_path):
+    """``t`` in ms (a 100 Hz log's 10 ms steps read as 10 s) or in us is refused naming the
+    unit; a 2.5 Hz log (0.4 s steps, below MAX_TIME_STEP) passes the time check."""
+    log = _log()
+    step = float(np.median(np.diff(log.t)))
+    for scale, unit in ((1e3, "milliseconds"), (1e6, "microseconds")):
+        path = write_log(tmp_path / f"t{unit}.csv", FlightLog(**{**log.__dict__,
+                                                              "t": log.t * scale}))
+        told = re.escape(f"t{unit}.csv: t: median step {step * scale:.4g} s")
+        with pytest.raises(InputError, match=rf"{told} .*looks like {unit}"):
+            load_log(path)
+    slow = FlightLog(**{**log.__dict__, "t": log.t * (0.4 / step)})
+    try:        # its velocity no longer integrates to its positions: refused, but not for t
+        load_log(write_log(tmp_path / "slow.csv", slow), warn=False)
+    except InputError as exc:
+        assert "slow.csv: t:" not in str(exc), exc
 
 
 def test_non_unit_quaternion(tmp_path):

@@ -100,6 +100,10 @@ MAX_ROTOR_SPEED = 5000.0
 MAX_BODY_RATE = 60.0
 #: a time step over GAP_FACTOR x the median step is reported as a sample-rate jump.
 GAP_FACTOR = 5.0
+#: s; the longest median sample step of a flight log (2 Hz: slower than a multirotor's
+#: attitude dynamics, so no log worth reading has it; a 50 Hz log with ``t`` in
+#: milliseconds reads as 20 s steps, in microseconds 20 000 s)
+MAX_TIME_STEP = 0.5
 #: fixed float format of the writer (10 significant digits).
 FLOAT_FORMAT = "%.10g"
 
@@ -310,6 +314,11 @@ def _check_time(path: Path, t: np.ndarray, notes: list[str]) -> None:
                           f"(previous {t[row - 1]:g} s); time must be strictly increasing")
     if len(steps) >= 2:
         typical = float(np.median(steps))
+        if typical > MAX_TIME_STEP:
+            unit = "milliseconds" if typical <= 1e3 * MAX_TIME_STEP else "microseconds"
+            raise field_error(path, "t", f"median step {typical:.4g} s ({1 / typical:.2g} Hz), "
+                              f"above {MAX_TIME_STEP:g} s: looks like {unit}; expected "
+                              "seconds")
         jumps = np.flatnonzero(steps > GAP_FACTOR * typical)
         if len(jumps):
             row = int(jumps[0]) + 1
