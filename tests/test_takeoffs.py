@@ -137,9 +137,39 @@ def test_gap_gathers_the_stretches_note():
 
     said = gather_notes(["/a/f.csv: 2 airborne stretches used, t 0.00-2.50 s, 4.50-7.00 s "
                          "(5.00 of 7.00 s); cut: idle 2.51-4.49 s"])
-    assert said == ["several take-offs: every airborne stretch used, each a segment of its "
-                    "flight (the ground spans between them cut, nothing fitted across them) "
-                    "on 1 log: f.csv 2 stretches (0.00-2.50 s, 4.50-7.00 s)"]
+    assert said == ["several take-offs or logging gaps: every airborne stretch used, each a "
+                    "segment of its flight (the ground spans and gaps between them cut, "
+                    "nothing fitted across them) on 1 log: f.csv 2 stretches (0.00-2.50 s, "
+                    "4.50-7.00 s)"]
+
+
+def test_a_logging_gap_in_flight_splits_the_stretch():
+    """A time step of MIN_SPAN_S (0.5 s) or more inside an airborne stretch is a logging gap:
+    the stretch is split there (each side a segment, nothing interpolated across it), a
+    piece shorter than MIN_SPAN_S is dropped, both named in the cut list; a shorter gap
+    (0.3 s) is bridged as before."""
+    from quadsim.logs.flightlog import FlightLog
+    from quadsim.logs.spans import airborne_spans, join_airborne
+
+    def flying(t):
+        n = len(t)
+        return FlightLog(t=t, position=None, quat=None, body_rate=np.full((n, 3), 0.5),
+                         accel=np.tile([0.0, 0.0, 9.81], (n, 1)),
+                         rotor_speed=np.full((n, 4), 1500.0))
+
+    step = 0.01
+    a, b = np.arange(0, 3, step), 4.0 + np.arange(0, 3, step)      # a 1.01 s gap at 2.99 s
+    spans = airborne_spans(flying(np.concatenate([a, b])))
+    assert [(s.start, s.stop) for s in spans] == [(0, 300), (300, 600)]
+    assert ("logging gap", pytest.approx(2.99), pytest.approx(4.0)) in spans[0].cut
+    joined, note = join_airborne(flying(np.concatenate([a, b])))
+    assert joined.segments == (300,) and "2 airborne stretches used" in note
+    short = 4.0 + np.arange(0, 0.3, step)                            # 0.29 s after the gap
+    spans = airborne_spans(flying(np.concatenate([a, short])))
+    assert [(s.start, s.stop) for s in spans] == [(0, 300)]
+    assert ("short", pytest.approx(4.0), pytest.approx(4.29)) in spans[0].cut
+    bridged = np.concatenate([a, 3.29 + np.arange(0, 3, step)])     # a 0.3 s gap
+    assert len(airborne_spans(flying(bridged))) == 1
 
 
 def test_view_trajectory_differentiates_each_stretch_alone():

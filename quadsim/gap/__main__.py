@@ -307,8 +307,9 @@ def gather_notes(lines: list[str]) -> list[str]:
         out.append(f"airborne span kept (ground, idle and landing spans cut) on "
                    f"{len(spans)} log{'s' if len(spans) > 1 else ''}: " + ", ".join(spans))
     if several:
-        out.append(f"several take-offs: every airborne stretch used, each a segment of its "
-                   f"flight (the ground spans between them cut, nothing fitted across them) on "
+        out.append(f"several take-offs or logging gaps: every airborne stretch used, each a "
+                   f"segment of its flight (the ground spans and gaps between them cut, nothing "
+                   f"fitted across them) on "
                    f"{len(several)} log{'s' if len(several) > 1 else ''}: " + "; ".join(several))
     return out
 

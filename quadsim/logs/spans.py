@@ -17,7 +17,9 @@ needed"). :func:`airborne_span` marks each sample
   log spans more than :data:`LIFT_HEIGHT_M` in height;
 
 and finds every stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
-so one noisy sample does not split a flight): :func:`split_airborne` keeps each of them (a log
+so one noisy sample does not split a flight; a logging gap -- a time step -- of
+:data:`MIN_SPAN_S` or more splits a stretch, since nothing of the flight is known there and
+an interpolation across it would invent it: a radio log's dropout, two logs joined): :func:`split_airborne` keeps each of them (a log
 with several take-offs is several segments, all used: ``identify --logs``),
 :func:`join_airborne` keeps each as a segment of one flight (``gap`` and ``view``: one flight
 per file, its stretches joined with :attr:`~quadsim.logs.flightlog.FlightLog.segments` marking
@@ -60,7 +62,8 @@ LIFT_HEIGHT_M = 0.3
 #: speed (m/s) and body rate (rad/s) below which the vehicle is at rest.
 REST_SPEED = 0.1
 REST_RATE = 0.2
-#: spans (s) shorter than this are not cut, and no airborne stretch shorter is kept.
+#: spans (s) shorter than this are not cut, and no airborne stretch shorter is kept; a
+#: logging gap (a time step) of at least this splits an airborne stretch.
 MIN_SPAN_S = 0.5
 
 
@@ -135,18 +138,37 @@ def airborne_spans(log) -> tuple[Span, ...]:
     t = np.asarray(log.t, float)
     n = len(t)
     flying, idle, ground = _flying(log)
-    if flying.all():
-        return (Span(0, n, ()),)
-    runs = _runs(flying)
-    if not runs:
-        raise field_error(log.path if log.path is not None else "log", "t",
-                          f"no airborne stretch of {MIN_SPAN_S} s: the whole log is on the "
-                          "ground or with the motors idle")
+    runs = [(0, n)] if flying.all() else _runs(flying)
     cut = []
     for a, b in _runs(~flying):
         kinds = [k for k, m in (("idle", idle), ("ground", ground)) if m[a:b].any()]
         cut.append((", ".join(kinds) or "short", float(t[a]), float(t[b - 1])))
+    runs, gaps = _split_at_gaps(t, runs)
+    if not runs:
+        raise field_error(log.path if log.path is not None else "log", "t",
+                          f"no airborne stretch of {MIN_SPAN_S} s: the whole log is on the "
+                          "ground or with the motors idle")
+    cut = sorted(cut + gaps, key=lambda c: c[1])
     return tuple(Span(a, b, tuple(cut)) for a, b in runs)
+
+
+def _split_at_gaps(t: np.ndarray, runs: list) -> tuple[list, list]:
+    """(runs, cut): each airborne run (start, stop) of the time axis ``t`` (s) split where a
+    time step is :data:`MIN_SPAN_S` or longer (a logging gap: nothing of the flight is known
+    there, and an interpolation across it would invent it; shorter gaps are bridged, as a
+    short ground span is), the pieces shorter than :data:`MIN_SPAN_S` dropped; ``cut``: each
+    gap ("logging gap", t before, t after) and each dropped piece ("short", t from, t to)."""
+    out, cut = [], []
+    for a, b in runs:
+        splits = a + 1 + np.flatnonzero(np.diff(t[a:b]) >= MIN_SPAN_S)
+        cut += [("logging gap", float(t[k - 1]), float(t[k])) for k in splits]
+        edges = [a, *map(int, splits), b]
+        for x, y in zip(edges[:-1], edges[1:]):
+            if t[y - 1] - t[x] >= MIN_SPAN_S:
+                out.append((x, y))
+            else:
+                cut.append(("short", float(t[x]), float(t[y - 1])))
+    return out, cut
 
 
 def airborne_span(log) -> Span:
