@@ -19,8 +19,9 @@ needed"). :func:`airborne_span` marks each sample
 and finds every stretch with neither (gaps shorter than :data:`MIN_SPAN_S` are bridged,
 so one noisy sample does not split a flight; a logging gap -- a time step -- of
 :data:`MIN_SPAN_S` or more splits a stretch, since nothing of the flight is known there and
-an interpolation across it would invent it: a radio log's dropout, two logs joined): :func:`split_airborne` keeps each of them (a log
-with several take-offs is several segments, all used: ``identify --logs``),
+an interpolation across it would invent it: a radio log's dropout, two logs joined):
+:func:`split_airborne` keeps each of them (a log with several take-offs is several
+segments, all used: ``identify --logs``),
 :func:`join_airborne` keeps each as a segment of one flight (``gap`` and ``view``: one flight
 per file, its stretches joined with :attr:`~quadsim.logs.flightlog.FlightLog.segments` marking
 where the time axis and the states jump; the note says "2 airborne stretches used"), and
