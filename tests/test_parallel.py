@@ -114,3 +114,28 @@ def test_sweep_same_bytes_on_ray(ray_local, tmp_path):
     assert sweep_main([*args, "--workers", "1", "-o", str(one)]) == 0
     assert sweep_main([*args, "--ray", "local", "-o", str(ray)]) == 0
     assert one.read_bytes() == ray.read_bytes()
+
+
+def test_self_check_same_bytes_in_process_and_processes(tmp_path):
+    """The references' self-check weighs each reference in the executor's workers
+    (``diagnose.reference_self_check(map_fn=)``): the result JSON of three references and
+    one flight is the same bytes with ``--workers 1`` and ``--workers 2``, the self-check
+    ran (three references) and judged each of them."""
+    import json
+
+    cf = load_params("crazyflie21")
+    flight = str(write_log(tmp_path / "f.csv.gz", synthetic_flight(
+        cf, [make_effect("mass_offset", mass=0.004)], seed=40, duration=2.0)))
+    refs = [str(write_log(tmp_path / f"r{s}.csv.gz", synthetic_flight(cf, [], seed=s,
+                                                                      duration=2.0)))
+            for s in (41, 42, 43)]
+    outputs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"gap_{workers}.json"
+        assert gap_main(["--model", "crazyflie21", "--per-flight", flight, "--reference", *refs,
+                         "--effects", "mass_offset", "com_offset", "--quiet", "--no-cache",
+                         "--workers", workers, "--json", str(out)]) == 0
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
+    check = json.loads(outputs[0])["reference_model"]["self_check"]
+    assert check is not None and len(check["verdicts"]) == 3

@@ -565,7 +565,8 @@ def _write_reference(args, params, base_effects, refs, command_model=None) -> ob
     window = DEFAULT_WINDOW_S if args.window is None else args.window
     if kept is None:
         kept = calibrated_stage(reference, params, effects=args.effects, window_s=window,
-                                base=tuple(base_effects), store=store)
+                                base=tuple(base_effects), store=store,
+                                map_fn=_map_fn(args, None))
     binding = binding_of(params, base=base_effects, effects_file=args.effects_file,
                          effects=args.effects, window_s=window)
     provenance = Provenance(tuple(args.reference), tuple(args.command_reference or ()),

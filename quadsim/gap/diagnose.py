@@ -420,7 +420,7 @@ def _weighed_against(train, held, reference_logs, params: VehicleParams, *, effe
     nominal references"): their per-flight stage (``store`` keeps it), the flights aligned
     and placed on it, every explanation weighed on the training flights and read on all."""
     stage = calibrated_stage(reference_logs, params, effects=effects, window_s=window_s,
-                             base=base, store=store)
+                             base=base, store=store, map_fn=map_fn)
     if progress is not None:
         progress("reference")
     against = against_references(train, held, stage.reference, effects=effects)
@@ -1838,7 +1838,7 @@ def diagnose_per_flight(logs: Sequence[FlightLog], reference: Sequence[FlightLog
     Raises :class:`~quadsim.core.errors.InputError` for fewer than two reference flights."""
     base = tuple(base_effects)
     kept = calibrated_stage(reference, params, effects=effects, window_s=window_s,
-                            base=base, store=store)
+                            base=base, store=store, map_fn=map_fn)
     ref, vehicle = kept.reference, kept.vehicle
     if progress is not None:
         progress("reference")
@@ -1870,12 +1870,14 @@ def base_json(base: Sequence) -> tuple:
 
 
 def calibrated_stage(reference, params: VehicleParams, *, effects, window_s: float,
-                     base: tuple, store=None) -> Calibrated:
+                     base: tuple, store=None, map_fn: Callable = map) -> Calibrated:
     """The reference stage of ``reference`` (logs): from ``store`` where it holds it
     (:func:`quadsim.gap.calibrate.reference_key`), else :func:`_reference_stage` (then put
     there); both modes' (:func:`diagnose_per_flight`, :func:`diagnose` with references).
     ``reference`` already a :class:`Calibrated` (the CLI's cache, :mod:`quadsim.gap.cache`):
-    that stage, as it is."""
+    that stage, as it is. ``map_fn(fn, items)``: runs the self-check's weighings
+    (:func:`reference_self_check`; an executor's, as the flights'), the same values as
+    ``map``."""
     if isinstance(reference, Calibrated):
         return reference
     key = None if store is None else reference_key(reference, params, effects=effects,
@@ -1883,7 +1885,7 @@ def calibrated_stage(reference, params: VehicleParams, *, effects, window_s: flo
     kept = None if store is None else store.get(key)
     if kept is None:
         kept = _reference_stage(reference, params, effects=effects, window_s=window_s,
-                                key=key, base=base)
+                                key=key, base=base, map_fn=map_fn)
         if store is not None:
             store.put(kept)
     return kept
@@ -1903,7 +1905,7 @@ def _stage_notes(kept: Calibrated) -> list[str]:
 
 
 def _reference_stage(reference, params: VehicleParams, *, effects, window_s: float,
-                     key: str | None, base: tuple = ()) -> Calibrated:
+                     key: str | None, base: tuple = (), map_fn: Callable = map) -> Calibrated:
     """The reference flights prepared, checked against the model, calibrated on top of the
     ``base`` effects (an effect file) and judged against each other
     (:func:`reference_self_check`)."""
@@ -1912,13 +1914,13 @@ def _reference_stage(reference, params: VehicleParams, *, effects, window_s: flo
         raise InputError("--reference: give at least 2 nominal flights")
     vehicle = vehicle_check([f.fit for f in ref_flights], params)
     ref = calibrate(ref_flights, params, base=base)
-    ref.self_check = reference_self_check(ref_flights, ref, effects)
+    ref.self_check = reference_self_check(ref_flights, ref, effects, map_fn=map_fn)
     odd = odd_references(ref.self_check)
     if odd:     # unlike the others beyond their spread: calibrated again without them
         left = tuple(a for a in ref.self_check.false_alarms if a[0] in odd)
         ref_flights = [f for f in ref_flights if f.name not in odd]
         ref = calibrate(ref_flights, params, base=base)
-        ref.self_check = reference_self_check(ref_flights, ref, effects)
+        ref.self_check = reference_self_check(ref_flights, ref, effects, map_fn=map_fn)
         ref.left_out = left
     return Calibrated(key or "", ref, vehicle, tuple(delay_notes(ref_flights)),
                       len(ref_flights))
@@ -1960,13 +1962,15 @@ def reference_summary(ref: Reference) -> dict:
             "self_check": None if ref.self_check is None else ref.self_check.to_json()}
 
 
-def reference_self_check(ref_flights: list, ref: Reference, effects=None):
+def reference_self_check(ref_flights: list, ref: Reference, effects=None, *,
+                         map_fn: Callable = map):
     """The references judged against each other (:mod:`quadsim.gap.calibrate`): each
     reference weighed against :func:`~quadsim.gap.calibrate.leave_one_out` of ``ref``, then
     judged with the other references' readings as the practical-significance scale, a false
     alarm's readings read on every reference first
     (:func:`~quadsim.gap.calibrate.settled_self_check`, :func:`refined_rows`). None for
-    fewer than 3 references."""
+    fewer than 3 references. ``map_fn(fn, items)`` weighs the references (an executor's:
+    they are independent; the same values as ``map``, :mod:`quadsim.core.executor`)."""
     if len(ref_flights) < 3 or getattr(ref, "log_ms", None) is None:
         return None
     # each reference's inverse information, as the calibration took it (its one-step
@@ -1976,12 +1980,9 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     per = getattr(ref, "per_flight", None)
     infos = ([None] * len(ref_flights) if per is None or len(per.se) != len(ref_flights) else
              [per.se[j] ** 2 * len(getattr(f, "fit", f).t) for j, f in enumerate(ref_flights)])
-    weighed = []
-    for j, f in enumerate(ref_flights):
-        w = weigh_flight(f, leave_one_out(ref, j), effects, name=f.name, info=infos[j])
-        # the memo goes (its residual parts are not needed once weighed: memory)
-        weighed.append(dataclasses.replace(w, memo=None) if isinstance(w, WeighedFlight)
-                       else None)
+    weighed = list(map_fn(_weigh_reference, [
+        _ToWeigh(f, leave_one_out(ref, j), effects, infos[j])
+        for j, f in enumerate(ref_flights)]))
 
     def rows_of(w):
         return rows_at_reference_voltage(
@@ -1990,6 +1991,32 @@ def reference_self_check(ref_flights: list, ref: Reference, effects=None):
     # a false alarm's readings read on every reference (calibrate.settled_self_check)
     return settled_self_check([f.name for f in ref_flights], weighed, rows_of=rows_of,
                               judge_of=verdict_of, refine=refined_rows)
+
+
+@dataclass(frozen=True)
+class _ToWeigh:
+    """One reference flight to weigh against the others (:func:`reference_self_check`):
+    ``flight`` (prepared), ``reference`` (:func:`~quadsim.gap.calibrate.leave_one_out` of
+    the references without it), ``effects`` and ``info`` (its inverse information, or
+    None)."""
+
+    flight: object
+    reference: Reference
+    effects: object
+    info: object
+
+    @property
+    def name(self) -> str:
+        return self.flight.name
+
+
+def _weigh_reference(item: _ToWeigh) -> WeighedFlight | None:
+    """:func:`weigh_flight` of one reference against the others (module level: sent to
+    workers), its memo dropped (its residual parts are not needed once weighed: memory and
+    what travels back); None where it cannot be weighed."""
+    w = weigh_flight(item.flight, item.reference, item.effects, name=item.flight.name,
+                     info=item.info)
+    return dataclasses.replace(w, memo=None) if isinstance(w, WeighedFlight) else None
 
 
 def start_delay(flight, reference: Reference) -> float:
