@@ -57,7 +57,7 @@ from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
            "gyro_frame_evidence", "order_reading", "rotor_order_evidence",
-           "rotor_order_source", "rotor_order_status"]
+           "rotor_order_source", "rotor_order_status", "spin_reversal_evidence"]
 
 WINDOW_S = 0.1
 MIN_ROTATION_RAD = 0.005
@@ -661,6 +661,49 @@ def _evidence_of(choice: list, params) -> dict[tuple[int, ...], float]:
     return evidence
 
 
+def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | None:
+    """Delta chi^2 of every rotor's spin reversed over the parameter set's spins, the columns
+    in the log's order (:func:`check_rotor_order`'s rule on the yaw torque row of the mixer
+    negated; roll and pitch are the same under both): the yaw balance of a set whose ``spin``
+    entries are all the wrong way round fits far better reversed. A column order cannot
+    stand for it: on an X quadrotor the order that flips every spin (2,3,4,1) also turns the
+    roll and pitch rows by 90 deg, and its evidence, near the reversal's on a flight that
+    rolls and pitches little, would name a --rotor-map that breaks roll and pitch. The
+    largest over the signals read (:func:`_order_choice`, ``commands`` as there); None where
+    the log cannot be judged. Where it is above :data:`ORDER_CHI2` (refused) or
+    :data:`DOUBT_CHI2` (doubtful) and no order beats it by more than :data:`DOUBT_CHI2`,
+    :func:`check_rotor_order` and :func:`rotor_order_status` name the spins, not an order:
+    on a flight that rolls and pitches little the two fit alike, and an order would break
+    roll and pitch if it is the spins; on one that does, every order is far worse on roll or
+    pitch (a model error by the order rule) while the reversal still fits the yaw. On the
+    46 real Crazyflie flights and the 12 nano-drone runs with their own sets it is at most
+    -0.1 (CHANGELOG.md)."""
+    choice = _order_choice(log, params, commands)
+    if not choice:
+        return None
+    from ..vehicle.rotors import allocation_matrix
+
+    rows = allocation_matrix(params)[3:6]
+    flipped = rows.copy()
+    flipped[2] = -flipped[2]
+    own_order = tuple(range(params.rotor_count))
+    best = -np.inf
+    for _, balance in choice:
+        own, _ = _order_fit(balance, rows, own_order)
+        told = np.minimum(_noise_share(balance, rows, own_order),
+                          _noise_share(balance, flipped, own_order)) < ORDER_NOISE_SHARE
+        best = max(best, _order_evidence(balance, own, *_order_fit(balance, flipped,
+                                                                    own_order), told))
+    return float(best)
+
+
+def _spin_words(value: float, params) -> str:
+    """The refusal's or note's words for spins that fit reversed (Delta chi^2 ``value``)."""
+    return (f"the yaw torque balance fits better with every rotor's spin reversed "
+            f"(Delta chi^2 {value:.3g}) than with the spins of {params.path or params.name}: "
+            "is each [[rotor]]'s spin (cw/ccw seen from above) the wrong way round?")
+
+
 @dataclasses.dataclass(frozen=True)
 class RotorOrder:
     """Whether a log's torque balance tells its rotor order. ``confirmed``: every other order
@@ -705,6 +748,14 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
                           "ruled out")
     rival = max(evidence, key=evidence.get)
     value = float(evidence[rival])
+    # every spin reversed fitting better than the set's (and as well as any column order):
+    # the spins are named, not an order (spin_reversal_evidence)
+    spins = sum(v for v in (spin_reversal_evidence(p, params, commands=True)
+                            for p in log.parts()) if v is not None)
+    if spins > DOUBT_CHI2 and spins >= value - DOUBT_CHI2:
+        return RotorOrder(False, True, rival, value, source,
+                          f"{where}: rotor_*: rotor spins not confirmed by the torque "
+                          f"balance of the {source}: {_spin_words(spins, params)}")
     if value < -ORDER_CHI2:
         return RotorOrder(True, False, rival, value, source, "")
     mapping = ",".join(str(m + 1) for m in rival)
@@ -752,6 +803,12 @@ def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
     if not evidence:
         return
     best = max(evidence, key=evidence.get)
+    spins = spin_reversal_evidence(log, params, commands=log.rotor_speed is not None)
+    if spins is not None and spins > ORDER_CHI2 and spins >= evidence[best] - DOUBT_CHI2:
+        raise field_error(_where(log), "rotor_*", f"rotor spins: {_spin_words(spins, params)}"
+                          f" (above {ORDER_CHI2:g}; the best column order, --rotor-map "
+                          f"{','.join(str(m + 1) for m in best)}, {evidence[best]:.3g}: an "
+                          "order would move the roll and pitch columns too)")
     if evidence[best] > ORDER_CHI2:
         mapping = ",".join(str(m + 1) for m in best)
         raise field_error(_where(log), "rotor_*", f"rotor order: the torque balance fits "
