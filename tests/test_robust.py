@@ -404,6 +404,32 @@ def test_body_rate_in_the_world_frame_refused():
         check_gyro(dataclasses.replace(log, body_rate=world))
 
 
+def test_scalar_last_quaternion_named_and_a_true_axis_swap_kept():
+    """A generated flight's quaternions written scalar-last under the scalar-first names
+    (x, y, z, w in qw..qz) are refused naming qw..qz and the order; the gyro's x and y
+    swapped instead keep their own message ("axes swapped?"); the log as written passes."""
+    from quadsim.effects import EffectSet
+    from quadsim.logs.checks import check_gyro
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log, _ = generate_flight(params, "figure8", EffectSet(),
+                                 SensorModel(noise={"gyro": 0.01}), 0, duration=6.0)
+    assert check_gyro(log) is None
+    xyzw = dataclasses.replace(log, quat=log.quat[:, [1, 2, 3, 0]])
+    with pytest.raises(InputError, match=r"qw..qz: the gyro follows the attitude only with "
+                                         r"the quaternion columns read as x, y, z, w"):
+        check_gyro(xyzw)
+    swapped = dataclasses.replace(log, body_rate=log.body_rate[:, [1, 0, 2]])
+    with pytest.raises(InputError, match=r"w[xy]: gyro w[xy] follows the attitude's [xy] "
+                                         r"axis .*axes swapped\?"):
+        check_gyro(swapped)
+
+
 def test_time_in_ms_names_the_time_column(tmp_path, capsys):
     flight = sample_flight(duration_s=3.0, rate_hz=200.0)
     path = _csv(tmp_path / "ms.csv", flight=flight, t=flight.t * 1000.0)

@@ -177,6 +177,18 @@ def _window_rotations(log):
     return k, quat_rot, integral[k[1:]] - integral[k[:-1]]
 
 
+def _scalar_last_fits(log, k: np.ndarray, gyro_rot: np.ndarray, axis: int) -> bool:
+    """Whether the gyro's rotation about ``axis`` over the windows ``k`` follows the
+    attitude's once its columns ``qw, qx, qy, qz`` are read as x, y, z, w (a scalar-last
+    quaternion written under scalar-first names): correlation above 0.7 on that axis (the
+    swap test's own level, :func:`check_gyro`)."""
+    q = np.asarray(log.quat, float)[:, [3, 0, 1, 2]]
+    rot = _rotvec_between(q[k[:-1]], q[k[1:]])
+    if np.std(rot[:, axis]) == 0 or np.std(gyro_rot[:, axis]) == 0:
+        return False
+    return abs(float(np.corrcoef(gyro_rot[:, axis], rot[:, axis])[0, 1])) > 0.7
+
+
 def check_gyro(log) -> str | None:
     """Gyro against the quaternions' rotation (see module); raises, or returns a note when
     the flight is too gentle to judge."""
@@ -198,6 +210,10 @@ def check_gyro(log) -> str | None:
         best = int(np.nanargmax(corr))
         gain = gains[i]
         if best != i and corr[best] > 0.7 and corr[best] > corr[i] + 0.2:
+            if _scalar_last_fits(log, k, gyro_rot, i):
+                raise field_error(_where(log), "qw..qz", "the gyro follows the attitude only "
+                                  "with the quaternion columns read as x, y, z, w: written "
+                                  "scalar-last? (expected scalar first: qw, qx, qy, qz)")
             raise field_error(_where(log), f"w{axis}",
                               f"gyro w{axis} follows the attitude's {'xyz'[best]} axis "
                               f"(correlation {corr[best]:.2f} vs {corr[i]:.2f} with {axis}) "
