@@ -74,6 +74,22 @@ def test_file_kind_names_logs_by_their_bytes(tmp_path):
     assert file_kind(tmp_path / "missing") is None
 
 
+def test_binary_bytes_with_a_bracket_are_no_toml_file(tmp_path):
+    """A damaged or foreign binary named ``.csv.gz`` (not gzip) whose bytes happen to hold a
+    newline then ``[`` was called "a TOML file ... were the log and the vehicle arguments
+    swapped?" by ``gap``, ``view`` and ``identify --logs``; it is refused by its first bytes,
+    as ``convert`` refuses it."""
+    from quadsim.logs import file_kind
+    from quadsim.logs.flightlog import load_log
+
+    path = tmp_path / "flight.csv.gz"
+    path.write_bytes(bytes([0x92, 0xEA, 0x8E, 0x05, 0x00, 0x0A]) + b"[\x00\xff" + bytes(64))
+    assert file_kind(path) is None
+    with pytest.raises(InputError, match=r"flight.csv.gz: header: first bytes 92ea8e05000a5b00 "
+                                         r"match no log format"):
+        load_log(path)
+
+
 def test_rotor_order_status_confirmed_doubtful_or_not_told():
     """Generated figure-8 (crazyflie21, 6 s): the right order confirmed from rotor speeds
     and from commands alone; rotors 1 and 2 swapped doubtful, naming the map that fixes it."""
