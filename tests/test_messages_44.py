@@ -240,3 +240,22 @@ def test_a_held_out_result_never_contradicts_its_own_evidence():
             if a["log_evidence"] > b["log_evidence"] + 10.0:
                 assert a["probability"] >= b["probability"], (a["name"], b["name"])
     assert rows[0]["name"] == "mass_offset"
+
+
+def test_per_flight_with_every_flight_refused_is_one_line_and_exit_2(tmp_path, capsys):
+    """``gap --per-flight`` on logs that all fail to load judged nothing, yet printed a batch
+    answer "0 flights judged against the reference flights: ; 2 refused" and exited 0: now
+    the first refusal in one line (with the others named), exit 2, nothing written."""
+    from quadsim.gap.__main__ import main
+
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    first.write_text("x,y,z\n0,0,0\n1,0,0\n")                       # no t column
+    second.write_text("t,x,y,z\n")                                 # no rows
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", str(first), str(second),
+                 "--json", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0]
+    assert err[0].startswith(f"error: {first}: t: required column missing (time in s) (and 1 "
+                             f"more flight(s) refused: {second})")
+    assert not out.exists()

@@ -676,6 +676,10 @@ def main(argv: list[str] | None = None) -> int:
                 logs += _load([path], params, args, lines, orders)
             except InputError as exc:
                 refused.append((k, str(path), str(exc)))
+        if not logs:         # nothing left to judge: bad input, one line and exit 2
+            more = (f" (and {len(refused) - 1} more flight(s) refused: "
+                    f"{', '.join(p for _, p, _ in refused[1:])})" if len(refused) > 1 else "")
+            raise InputError(f"{refused[0][2]}{more}")
     else:
         logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None

@@ -491,12 +491,16 @@ def timing_words(lead, rival) -> str:
 
 def batch_answer(flights: list) -> str:
     """The per-flight result's answer: how many flights got which verdict, and the refused
-    count (``flights``: verdicts or their JSON, each with ``verdict``)."""
+    count (``flights``: verdicts or their JSON, each with ``verdict``); "No flight judged
+    against the reference flights: 2 refused ..." when every flight was refused."""
     counts: dict[str, int] = {}
     for f in flights:
         counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
     refused = counts.get("refused", 0)
     judged = len(flights) - refused
+    if not judged:
+        return (f"No flight judged against the reference flights: {refused} refused (see each "
+                "flight's reason)")
     text = f"{judged} flights judged against the reference flights: " + ", ".join(
         f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
         if k != "refused")
