@@ -259,3 +259,18 @@ def test_per_flight_with_every_flight_refused_is_one_line_and_exit_2(tmp_path, c
     assert err[0].startswith(f"error: {first}: t: required column missing (time in s) (and 1 "
                              f"more flight(s) refused: {second})")
     assert not out.exists()
+
+
+def test_help_texts_say_what_the_flags_do(capsys):
+    """``openloop --help`` said it "saves PNGs" (only with ``--plots DIR``; none by default)
+    and ``sweep --help`` called ``--quiet`` "no progress bar" (it also drops the closing
+    "wrote ..." line, ``tests/test_sweep.py``)."""
+    from quadsim.openloop import main as openloop
+    from quadsim.sweep.__main__ import main as sweep
+
+    for main in (openloop, sweep):
+        with pytest.raises(SystemExit):
+            main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "saves PNGs" not in text and "PNGs with --plots DIR" in text
+    assert "--quiet no progress bar and no closing summary line" in text
