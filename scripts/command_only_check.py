@@ -62,7 +62,9 @@ def main(argv: list[str] | None = None) -> int:
     mixed_ref = diagnose_per_flight(mix_cmd, nominal, params)
     agree_ref = sum(a["verdict"] == b["verdict"] for a, b in
                     zip(with_speeds["flights"], mixed_ref["flights"]))
-    print(f"variant (reference with measured speeds): agreement {agree_ref}/{len(mixed)}")
+    refused = [f for f in mixed_ref["flights"] if f["verdict"] == "refused"]
+    print(f"variant (reference with measured speeds): agreement {agree_ref}/{len(mixed)}"
+          + (f"; {len(refused)} refused ({refused[0]['reason']})" if refused else ""))
     pairs = [(Path(a["file"]).name, a["verdict"], b["verdict"])
              for a, b in zip(with_speeds["flights"], commands_only["flights"])]
     agree = sum(a == b for _, a, b in pairs)

@@ -274,3 +274,20 @@ def test_help_texts_say_what_the_flags_do(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "saves PNGs" not in text and "PNGs with --plots DIR" in text
     assert "--quiet no progress bar and no closing summary line" in text
+
+
+def test_logs_swallowed_by_a_list_flag_are_named(tmp_path, capsys):
+    """README's form ``gap --model M --command-reference REF... LOG...`` hands LOG... to
+    ``--command-reference`` (a list flag takes every file after it); the refusal said only
+    "give the flight logs to judge". It now says where they went."""
+    from quadsim.gap.__main__ import main
+
+    ref, log = tmp_path / "ref.csv", tmp_path / "log.csv"
+    for path in (ref, log):
+        path.write_text("t,ax\n0,1\n")
+    assert main(["--model", "crazyflie21", "--command-reference", str(ref), str(log)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: LOG: give the flight logs to judge (or only --reference LOG... "
+                   "--write-reference OUT.qref to write a stored reference); "
+                   "--command-reference takes every file after it: give the flight logs "
+                   "before it"]

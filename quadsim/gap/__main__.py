@@ -202,8 +202,15 @@ def _check_stored_args(args) -> None:
                          "alone, not with reference logs or another one")
     args.reference_file = stored[0] if stored else None
     if not args.logs and args.write_reference is None:
+        lists = [flag for flag, given in (("--reference", args.reference),
+                                          ("--holdout", args.holdout),
+                                          ("--command-reference", args.command_reference))
+                 if given]     # a list flag takes every file after it: LOG... went there
+        hint = ("" if not lists else f"; {lists[0]} takes every file after it: give the "
+                "flight logs before it" if len(lists) == 1 else f"; {' and '.join(lists)} "
+                "take every file after them: give the flight logs before them")
         raise InputError("LOG: give the flight logs to judge (or only --reference LOG... "
-                         f"--write-reference OUT{SUFFIX} to write a stored reference)")
+                         f"--write-reference OUT{SUFFIX} to write a stored reference){hint}")
     if args.write_reference is not None and (not args.reference or stored):
         raise InputError(f"{args.write_reference}: --write-reference: needs --reference "
                          "LOG... (the reference logs, not a stored reference)")
