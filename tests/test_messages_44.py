@@ -291,3 +291,22 @@ def test_logs_swallowed_by_a_list_flag_are_named(tmp_path, capsys):
                    "--write-reference OUT.qref to write a stored reference); "
                    "--command-reference takes every file after it: give the flight logs "
                    "before it"]
+
+
+def test_a_binary_file_given_as_a_toml_is_named_by_its_bytes(tmp_path):
+    """``gap --model flight.csv.gz`` said "cannot read: 'utf-8' codec can't decode byte 0x8b
+    in position 1: invalid start byte"; the file is now named for what it is."""
+    import gzip
+
+    from quadsim.vehicle.params import load_params
+
+    log = tmp_path / "flight_00.csv.gz"
+    log.write_bytes(gzip.compress(b"t,x\n0,1\n"))
+    with pytest.raises(InputError, match=r"^\S*flight_00.csv.gz: header: not a TOML text file: "
+                                         r"gzip-compressed \(a .csv.gz flight log\?\)$"):
+        load_params(log)
+    blob = tmp_path / "blob.toml"
+    blob.write_bytes(b"ab\xff\x00")
+    with pytest.raises(InputError, match=r"blob.toml: header: not a TOML text file: byte 0xff "
+                                         r"at offset 2 is not UTF-8 text \(a binary file\?\)$"):
+        load_params(blob)
