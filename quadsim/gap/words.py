@@ -31,6 +31,7 @@ import numpy as np
 from ..effects.thrust_factor import SESSION_SPREAD
 from .explanations import reference_determined
 from .fitting import FIT_EFFECTS, describe
+from .logcheck import TIMING_WORDS  # defined there: logcheck imports no gap module
 from .residual import channel_unit
 
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
@@ -145,10 +146,6 @@ def reference_text(key: str, value: float, sd: float, reference) -> str:
             + f" or {'less' if side == 'lower' else 'more'} (their fit's {side} bound: {why})")
 
 
-#: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
-#: timed 13 ± 1 ms later ..." (:func:`reading_text`; :func:`quadsim.gap.logcheck.
-#: synthesised_timing_note` finds it by these words)
-TIMING_WORDS = "rotor speeds are timed"
 
 
 def reading_text(ev, reference) -> str:
