@@ -472,14 +472,15 @@ def summarise_per_flight(rows: list[dict]) -> str:
 
 def per_flight_speed(data: Path, compare: bool = False) -> str:
     """CPU seconds of the per-flight mode on the real Crazyflie flights (``data``: the shared
-    data folder): the reference calibration on the 20 nominal flights (their preparation
-    included), counted once, then each of the 26 ``mixed/`` flights judged (one process, the
-    numeric libraries on one thread); the verdicts are printed too (nothing is tuned on
-    them). ``compare``: each flight judged again with every explanation fully fitted
+    data folder): the reference stage on the 20 nominal flights (their preparation,
+    calibration and self-check, as ``quadsim.gap --per-flight`` computes it), counted once,
+    then each of the 26 ``mixed/`` flights judged (one process, the numeric libraries on one
+    thread); the verdicts are printed too, the CLI's (nothing is tuned on them).
+    ``compare``: each flight judged again with every explanation fully fitted
     (``evaluate(full=True)``, no screen): verdicts, answers and the largest change of a
     reading's probability."""
     from quadsim.gap.calibrate import calibrate
-    from quadsim.gap.diagnose import judge_one, prepare
+    from quadsim.gap.diagnose import judge_one, prepare, reference_self_check
     from quadsim.logs.checks import check_logs
     from quadsim.logs.flightlog import load_log
 
@@ -491,13 +492,16 @@ def per_flight_speed(data: Path, compare: bool = False) -> str:
     mixed = check_logs([load_log(p) for p in sorted((root / "mixed").glob("*.csv.gz"))],
                        params)[0]
     start = time.process_time()
-    ref = calibrate(prepare(nominal, params), params)
+    prepared = prepare(nominal, params)
+    ref = calibrate(prepared, params)
+    ref.self_check = reference_self_check(prepared, ref)  # the CLI's "not in the library" scale
     calibration = time.process_time() - start
     start = time.process_time()
     rows = [judge_one(log, ref) for log in mixed]
     judged = time.process_time() - start
     minutes = sum(float(log.t[-1] - log.t[0]) for log in mixed) / 60.0
-    lines = [f"reference calibration ({len(nominal)} flights): {calibration:.1f} s CPU",
+    lines = [f"reference calibration and self-check ({len(nominal)} flights): "
+             f"{calibration:.1f} s CPU",
              (f"{len(mixed)} flights, {minutes:.2f} flight-minutes at ~500 Hz: {judged:.1f} s CPU "
              f"= {judged / minutes:.1f} s per flight-minute (calibration not included)")]
     if compare:

@@ -344,8 +344,13 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     if args.mixed is not None:
         try:
-            result = json.loads(args.mixed.read_text())
             labels = json.loads(args.labels.read_text())
+        except (OSError, ValueError) as exc:      # the labels' own file named, not --mixed's
+            print(f"error: {args.labels}: --labels: {getattr(exc, 'strerror', None) or exc}",
+                  file=sys.stderr)
+            return 2
+        try:
+            result = json.loads(args.mixed.read_text())
             groups["labelled real flights (mixed/)"] = mixed_answers(result, labels)
         except (OSError, ValueError, KeyError) as exc:
             where = args.labels if isinstance(exc, KeyError) else args.mixed

@@ -118,7 +118,8 @@ def _parser() -> argparse.ArgumentParser:
                     "channel, simulated in MuJoCo and in the analytic Newton-Euler model. "
                     "Prints step information (python-control step_info where a response "
                     "settles, growth and time to a bound where it diverges), the poles of "
-                    "the hover linearisation and the engine/model comparison; saves PNGs.",
+                    "the hover linearisation and the engine/model comparison; PNGs with "
+                    "--plots DIR.",
         epilog="Models: a built-in name (see models/) or a parameter TOML file. The report set "
                "has an inertia no rigid body has: MuJoCo refuses it and only the analytic "
                "model runs. Exit status 2 with a one-line error on bad input.")

@@ -603,7 +603,7 @@ def test_result_types_give_the_schema_json_and_read_as_it():
     doc = result.to_json()
     validate(doc)
     assert dict(result) == doc and result["flights"][1]["reason"] == "t: gap"
-    assert doc["verdict"]["answer"] == ("0 flights judged against the reference flights: ; "
+    assert doc["verdict"]["answer"] == ("No flight judged against the reference flights: "
                                         "2 refused (see each flight's reason)")
     assert doc["flights"][0] == {"file": "a.csv", "outcome": "refused", "verdict": "refused",
                                  "answer": "Not judged: t: too short", "reason": "t: too short",

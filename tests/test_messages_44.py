@@ -74,6 +74,22 @@ def test_file_kind_names_logs_by_their_bytes(tmp_path):
     assert file_kind(tmp_path / "missing") is None
 
 
+def test_binary_bytes_with_a_bracket_are_no_toml_file(tmp_path):
+    """A damaged or foreign binary named ``.csv.gz`` (not gzip) whose bytes happen to hold a
+    newline then ``[`` was called "a TOML file ... were the log and the vehicle arguments
+    swapped?" by ``gap``, ``view`` and ``identify --logs``; it is refused by its first bytes,
+    as ``convert`` refuses it."""
+    from quadsim.logs import file_kind
+    from quadsim.logs.flightlog import load_log
+
+    path = tmp_path / "flight.csv.gz"
+    path.write_bytes(bytes([0x92, 0xEA, 0x8E, 0x05, 0x00, 0x0A]) + b"[\x00\xff" + bytes(64))
+    assert file_kind(path) is None
+    with pytest.raises(InputError, match=r"flight.csv.gz: header: first bytes 92ea8e05000a5b00 "
+                                         r"match no log format"):
+        load_log(path)
+
+
 def test_rotor_order_status_confirmed_doubtful_or_not_told():
     """Generated figure-8 (crazyflie21, 6 s): the right order confirmed from rotor speeds
     and from commands alone; rotors 1 and 2 swapped doubtful, naming the map that fixes it."""
@@ -224,3 +240,73 @@ def test_a_held_out_result_never_contradicts_its_own_evidence():
             if a["log_evidence"] > b["log_evidence"] + 10.0:
                 assert a["probability"] >= b["probability"], (a["name"], b["name"])
     assert rows[0]["name"] == "mass_offset"
+
+
+def test_per_flight_with_every_flight_refused_is_one_line_and_exit_2(tmp_path, capsys):
+    """``gap --per-flight`` on logs that all fail to load judged nothing, yet printed a batch
+    answer "0 flights judged against the reference flights: ; 2 refused" and exited 0: now
+    the first refusal in one line (with the others named), exit 2, nothing written."""
+    from quadsim.gap.__main__ import main
+
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    first.write_text("x,y,z\n0,0,0\n1,0,0\n")                       # no t column
+    second.write_text("t,x,y,z\n")                                 # no rows
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", str(first), str(second),
+                 "--json", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0]
+    assert err[0].startswith(f"error: {first}: t: required column missing (time in s) (and 1 "
+                             f"more flight(s) refused: {second})")
+    assert not out.exists()
+
+
+def test_help_texts_say_what_the_flags_do(capsys):
+    """``openloop --help`` said it "saves PNGs" (only with ``--plots DIR``; none by default)
+    and ``sweep --help`` called ``--quiet`` "no progress bar" (it also drops the closing
+    "wrote ..." line, ``tests/test_sweep.py``)."""
+    from quadsim.openloop import main as openloop
+    from quadsim.sweep.__main__ import main as sweep
+
+    for main in (openloop, sweep):
+        with pytest.raises(SystemExit):
+            main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "saves PNGs" not in text and "PNGs with --plots DIR" in text
+    assert "--quiet no progress bar and no closing summary line" in text
+
+
+def test_logs_swallowed_by_a_list_flag_are_named(tmp_path, capsys):
+    """README's form ``gap --model M --command-reference REF... LOG...`` hands LOG... to
+    ``--command-reference`` (a list flag takes every file after it); the refusal said only
+    "give the flight logs to judge". It now says where they went."""
+    from quadsim.gap.__main__ import main
+
+    ref, log = tmp_path / "ref.csv", tmp_path / "log.csv"
+    for path in (ref, log):
+        path.write_text("t,ax\n0,1\n")
+    assert main(["--model", "crazyflie21", "--command-reference", str(ref), str(log)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: LOG: give the flight logs to judge (or only --reference LOG... "
+                   "--write-reference OUT.qref to write a stored reference); "
+                   "--command-reference takes every file after it: give the flight logs "
+                   "before it"]
+
+
+def test_a_binary_file_given_as_a_toml_is_named_by_its_bytes(tmp_path):
+    """``gap --model flight.csv.gz`` said "cannot read: 'utf-8' codec can't decode byte 0x8b
+    in position 1: invalid start byte"; the file is now named for what it is."""
+    import gzip
+
+    from quadsim.vehicle.params import load_params
+
+    log = tmp_path / "flight_00.csv.gz"
+    log.write_bytes(gzip.compress(b"t,x\n0,1\n"))
+    with pytest.raises(InputError, match=r"^\S*flight_00.csv.gz: header: not a TOML text file: "
+                                         r"gzip-compressed \(a .csv.gz flight log\?\)$"):
+        load_params(log)
+    blob = tmp_path / "blob.toml"
+    blob.write_bytes(b"ab\xff\x00")
+    with pytest.raises(InputError, match=r"blob.toml: header: not a TOML text file: byte 0xff "
+                                         r"at offset 2 is not UTF-8 text \(a binary file\?\)$"):
+        load_params(blob)

@@ -90,6 +90,7 @@ def test_cli_processes_same_bytes_and_bad_input(tmp_path, capsys):
     one, two = tmp_path / "one.parquet", tmp_path / "two.parquet"
     assert main([*args, "--workers", "1", "-o", str(one)]) == 0
     assert main([*args, "--workers", "2", "-o", str(two)]) == 0
+    assert capsys.readouterr().out == ""          # --quiet: no bar, no summary line
     assert one.read_bytes() == two.read_bytes()
     assert one.with_suffix(".png").read_bytes()[:4] == b"\x89PNG"
     # a different sweep into the same output never mixes with the old chunks

@@ -152,3 +152,16 @@ def test_simulator_source_rows_are_scored_by_kind_and_read_both_probabilities():
                    "lift": ("unexplained", True, 0.99, 0.99)}
     with pytest.raises(ValueError, match="per_flight"):
         benchmark_answers([{"name": "x"}])
+
+
+def test_a_missing_labels_file_is_named_not_the_result(tmp_path, capsys):
+    """Outside the repository's layout the default labels path does not exist; the error
+    named the --mixed result ("error: RESULT.json: [Errno 2] ... mixed_labels.json")."""
+    from benchmarks.reliability import main
+
+    result = tmp_path / "mixed.json"
+    result.write_text('{"mode": "per-flight", "flights": []}')
+    missing = tmp_path / "no" / "mixed_labels.json"
+    assert main(["--mixed", str(result), "--labels", str(missing)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {missing}: --labels: No such file or directory"]

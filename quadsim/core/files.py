@@ -70,11 +70,17 @@ def atomic_write_text(path: str | os.PathLike, text: str, *,
 
 
 def read_toml(path: str | os.PathLike) -> dict:
-    """Parse a TOML file; an unreadable or malformed file raises a one-line InputError."""
+    """Parse a TOML file; an unreadable or malformed file raises a one-line InputError (a
+    binary file, e.g. a flight log given where a TOML belongs, is named by its first bytes)."""
     path = Path(path)
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        what = ("gzip-compressed (a .csv.gz flight log?)" if exc.object[:2] == b"\x1f\x8b"
+                else f"byte 0x{exc.object[exc.start]:02x} at offset {exc.start} is not UTF-8 "
+                "text (a binary file?)")
+        raise InputError(f"{path}: header: not a TOML text file: {what}") from None
+    except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: invalid TOML: {exc}") from None

@@ -202,8 +202,15 @@ def _check_stored_args(args) -> None:
                          "alone, not with reference logs or another one")
     args.reference_file = stored[0] if stored else None
     if not args.logs and args.write_reference is None:
+        lists = [flag for flag, given in (("--reference", args.reference),
+                                          ("--holdout", args.holdout),
+                                          ("--command-reference", args.command_reference))
+                 if given]     # a list flag takes every file after it: LOG... went there
+        hint = ("" if not lists else f"; {lists[0]} takes every file after it: give the "
+                "flight logs before it" if len(lists) == 1 else f"; {' and '.join(lists)} "
+                "take every file after them: give the flight logs before them")
         raise InputError("LOG: give the flight logs to judge (or only --reference LOG... "
-                         f"--write-reference OUT{SUFFIX} to write a stored reference)")
+                         f"--write-reference OUT{SUFFIX} to write a stored reference){hint}")
     if args.write_reference is not None and (not args.reference or stored):
         raise InputError(f"{args.write_reference}: --write-reference: needs --reference "
                          "LOG... (the reference logs, not a stored reference)")
@@ -678,6 +685,10 @@ def main(argv: list[str] | None = None) -> int:
                 logs += _load([path], params, args, lines, orders)
             except InputError as exc:
                 refused.append((k, str(path), str(exc)))
+        if not logs:         # nothing left to judge: bad input, one line and exit 2
+            more = (f" (and {len(refused) - 1} more flight(s) refused: "
+                    f"{', '.join(p for _, p, _ in refused[1:])})" if len(refused) > 1 else "")
+            raise InputError(f"{refused[0][2]}{more}")
     else:
         logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None

@@ -152,7 +152,8 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
            "synthesise_all", "synthesise_speeds", "without_speeds", "UNCONFIRMED_MAX_P",
            "cap_decision", "mark", "order_statuses", "probability_cap", "missing_words",
-           "needs_pose", "posefree_log", "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS"]
+           "needs_pose", "posefree_log", "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
+           "TIMING_WORDS"]
 
 
 #: largest ratio (either way) of the thrust factor the data need to the model's: a payload
@@ -597,6 +598,11 @@ NOT_WEIGHED_OPENINGS = {"Not in the library:": "Not explained by the readings we
                         "Unexplained:": "Not explained by the readings weighed:"}
 
 
+#: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
+#: timed 13 ± 1 ms later ..." (:func:`quadsim.gap.words.reading_text`, which imports it from
+#: here; :func:`synthesised_timing_note` finds the reading by these words)
+TIMING_WORDS = "rotor speeds are timed"
+
 #: what a rotor timing reading (``signal_delay``) means on a log whose rotor speeds were
 #: synthesised from its commands (:func:`synthesised_timing_note`)
 SYNTHESISED_TIMING_WORDS = (
@@ -612,14 +618,12 @@ def synthesised_timing_note(verdict, logs):
     (FlightLogs: the judged flight, or a held-out run's training and held-out flights) has
     rotor speeds synthesised from its commands (``FlightLog.speeds_synthesised``) and the
     answer states the rotor timing reading ``signal_delay`` (its words open with
-    :data:`quadsim.gap.words.TIMING_WORDS`, "the rotor speeds are timed ... later", wherever
+    :data:`TIMING_WORDS`, "the rotor speeds are timed ... later", wherever
     it is stated: as the name, beside it, or as the lead of an unexplained answer): there it
     reads a timing of the commands through the command -> speed model, not of a logged
     signal; else ``verdict`` as is. Outcome and numbers unchanged."""
     if not any(getattr(g, "speeds_synthesised", False) for g in logs):
         return verdict
-    from .words import TIMING_WORDS
-
     if TIMING_WORDS not in verdict.answer:
         return verdict
     return dataclasses.replace(verdict, answer=f"{verdict.answer} {SYNTHESISED_TIMING_WORDS}")

@@ -33,6 +33,7 @@ import numpy as np
 from ..effects.thrust_factor import SESSION_SPREAD
 from .explanations import reference_determined
 from .fitting import FIT_EFFECTS, describe
+from .logcheck import TIMING_WORDS  # defined there: logcheck imports no gap module
 from .residual import channel_unit
 
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
@@ -218,12 +219,6 @@ def left_out_words(reference) -> str:
             f"what {'it carries' if len(left) == 1 else 'they carry'} would pass for normal; "
             f"every flight is judged against the other {kept}, calibrated and checked again "
             "without it (docs/gap.md, \"The self-check\")")
-
-
-#: how a rotor timing reading (``signal_delay``) opens in every answer: "the rotor speeds are
-#: timed 13 ± 1 ms later ..." (:func:`reading_text`; :func:`quadsim.gap.logcheck.
-#: synthesised_timing_note` finds it by these words)
-TIMING_WORDS = "rotor speeds are timed"
 
 
 def reading_text(ev, reference) -> str:
@@ -566,12 +561,16 @@ def timing_words(lead, rival) -> str:
 
 def batch_answer(flights: list) -> str:
     """The per-flight result's answer: how many flights got which verdict, and the refused
-    count (``flights``: verdicts or their JSON, each with ``verdict``)."""
+    count (``flights``: verdicts or their JSON, each with ``verdict``); "No flight judged
+    against the reference flights: 2 refused ..." when every flight was refused."""
     counts: dict[str, int] = {}
     for f in flights:
         counts[f["verdict"]] = counts.get(f["verdict"], 0) + 1
     refused = counts.get("refused", 0)
     judged = len(flights) - refused
+    if not judged:
+        return (f"No flight judged against the reference flights: {refused} refused (see each "
+                "flight's reason)")
     text = f"{judged} flights judged against the reference flights: " + ", ".join(
         f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
         if k != "refused")

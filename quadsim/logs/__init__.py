@@ -88,7 +88,8 @@ def file_kind(path: str | Path) -> str | None:
     PX4 ULog flight log", "a Crazyflie uSD flight log", "an ArduPilot DataFlash flight log",
     "a gzip-compressed file (a .csv.gz flight log?)", "a Parquet file (a flight log?)", "a
     CSV flight log" (a header with ``t``), "a TOML file" (a ``schema =`` or ``[section]``
-    line), or None (unreadable or none of these)."""
+    line), or None (unreadable, none of these, or binary: a NUL byte, which no CSV or TOML
+    holds, so random bytes that happen to hold a newline then ``[`` are no TOML file)."""
     try:
         with open(path, "rb") as handle:
             head = handle.read(4096)
@@ -102,6 +103,8 @@ def file_kind(path: str | Path) -> str | None:
         return "a gzip-compressed file (a .csv.gz flight log?)"
     if head.startswith(b"PAR1"):
         return "a Parquet file (a flight log?)"
+    if b"\0" in head:
+        return None
     text = head.decode("utf-8", "replace")
     first = text.splitlines()[0] if text else ""
     if "," in first and "t" in [c.strip() for c in first.split(",")]:

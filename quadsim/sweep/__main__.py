@@ -46,7 +46,8 @@ def _parser() -> argparse.ArgumentParser:
                         help="local processes (default: the CPU count; 1 = in this process)")
     parser.add_argument("--ray", metavar="ADDRESS", default=None,
                         help="'local' starts a local Ray cluster, HOST:PORT joins one")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress bar and no closing summary line")
     parser.add_argument("--allow-large", action="store_true",
                         help="run past the cost caps (quadsim.core.cost: 4 h, 8 GiB)")
     parser.add_argument("-o", "--output", required=True, help="results (.parquet); plot .png")
