@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gzip
 import importlib
+import json
 import os
 import pickle
 from pathlib import Path
@@ -215,9 +216,11 @@ def test_cached_json_equals_uncached(flight_files, tmp_path, monkeypatch, capsys
 
 
 def test_command_only_flight_on_a_hit(flight_files, tmp_path, monkeypatch, capsys):
-    """A judged log without rotor speeds (synthesised from the references' commands): on a
-    hit the references are loaded for that, their stage still read (not calibrated again),
-    and the JSON is --no-cache's."""
+    """A judged log without rotor speeds (synthesised from the references' commands): it is
+    judged (the references judged alike, their speeds cut and synthesised: not refused for
+    the rotor channel it lacks); on a hit the references are loaded for that, their stage
+    still read (not calibrated again), and the JSON is --no-cache's; the references' stage
+    as command-only is keyed apart from theirs with speeds."""
     import dataclasses
 
     from quadsim.logs.flightlog import load_log
@@ -228,9 +231,15 @@ def test_command_only_flight_on_a_hit(flight_files, tmp_path, monkeypatch, capsy
     write_log(only, dataclasses.replace(log, rotor_speed=None))
     files = [flight_files[0], flight_files[1], only]
     plain = _run(tmp_path, files, "plain", "--no-cache", "--quiet")
+    judged = json.loads(plain)["flights"][0]
+    assert judged["outcome"] != "refused", judged["answer"]
+    with_speeds = _run(tmp_path, flight_files, "speeds")       # the same references' stage
     assert _run(tmp_path, files, "first") == plain
     err = capsys.readouterr().err
     assert "kept in the cache" in err and "rotor speeds synthesised" in err
+    assert "the references are judged alike" in err
+    assert len(list(Path(os.environ["QUADSIM_CACHE_DIR"]).glob(f"{PREFIX}*.pkl"))) >= 2
+    assert _run(tmp_path, flight_files, "speeds again") == with_speeds
     diagnose = importlib.import_module("quadsim.gap.diagnose")
 
     def refuse(*args, **kwargs):

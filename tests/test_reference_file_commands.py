@@ -245,3 +245,28 @@ def test_generated_command_only_flights_against_the_shipped_files(tmp_path, monk
     assert main(["--model", "crazyflie21", "--per-flight", str(only), "--quiet"]) == 2
     assert "crazyflie21.qref does not fit this run: logs without rotor speeds" in \
         capsys.readouterr().err
+
+
+def test_command_only_flight_against_references_with_speeds(flights, tmp_path, capsys):
+    """A command-only flight against references that log speeds and commands: the references
+    are judged alike (their speeds cut and synthesised by the command model their own speeds
+    fit), so the flight is judged, with the numbers of the explicit command-only run
+    (``--reference cmd/ --command-reference speeds/``); against a stored reference written
+    from those references with their speeds it is refused in one line naming --reference."""
+    speeds, cmd = flights
+    auto = _judge(tmp_path, "auto", [cmd[2]], *speeds[:2])
+    explicit = _judge(tmp_path, "explicit", [cmd[2]], *cmd[:2], "--command-reference",
+                      *map(str, speeds[:2]))
+    a, e = auto["flights"][0], explicit["flights"][0]
+    assert a["outcome"] != "refused", a["answer"]
+    for key in ("outcome", "verdict", "probability", "params", "ci", "lack_of_fit"):
+        assert a[key] == e[key], key
+    stored = _write(tmp_path / "speeds.qref", speeds[:2])
+    capsys.readouterr()
+    assert main(["--model", "crazyflie21", "--per-flight", str(cmd[2]), "--reference",
+                 str(stored), "--effects", "mass_offset", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {cmd[2]}: rotor_speed: not logged; "
+                                               "speeds.qref was written from references with "
+                                               "rotor speeds and commands"), err
+    assert "give --reference LOG..." in err[0]

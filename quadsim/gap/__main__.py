@@ -433,6 +433,31 @@ class _Writer:
                   f"{path}", file=sys.stderr)
 
 
+def _judged_as_commands(args, judged) -> bool:
+    """Whether the references (``--reference LOG...``) are to be judged as command-only:
+    every log ``judged`` has motor commands and no rotor speeds, and the references log both
+    (their first is read to see). A flight without speeds has no rotor channel (measured
+    against commanded speed), so against references with one every such flight would be
+    refused; judged alike -- the references' speeds synthesised from their commands by the
+    command model their own speeds (or ``--command-reference``'s) fit
+    (:func:`quadsim.gap.logcheck.synthesise_all`), the stage keyed apart in the cache
+    (:func:`quadsim.gap.cache.entry_key`'s ``as_commands``) -- flights and references are of
+    one kind, as with the set's shipped commands reference (:mod:`quadsim.gap.reffile`). A
+    batch that mixes logs with and without speeds keeps the references as they are (the
+    command-only flights are refused, each saying so)."""
+    if not args.reference or not judged:
+        return False
+    if not all(g.rotor_speed is None and g.rotor_command is not None for g in judged):
+        return False
+    from ..logs.flightlog import load_log
+
+    try:
+        first = load_log(args.reference[0], warn=False)
+    except InputError:
+        return False            # said where the references are loaded
+    return first.rotor_speed is not None and first.rotor_command is not None
+
+
 def _references(args, params, base_effects, logs, holdout, lines):
     """The references: (logs or None, stage or None, store or None, loaded: what loading
     them left, {"samples", "warnings", "notes"}). From the cache
@@ -452,7 +477,8 @@ def _references(args, params, base_effects, logs, holdout, lines):
         key = entry_key(args.reference, params, effects=args.effects,
                         window_s=DEFAULT_WINDOW_S if args.window is None else args.window,
                         base=tuple(base_effects),
-                        command_references=args.command_reference or ())
+                        command_references=args.command_reference or (),
+                        as_commands=getattr(args, "as_commands", False))
         entry = store.get(key)
         # written to a file: the references loaded (a command-only one's model is stored)
         synthesis = (args.write_reference is not None
@@ -486,8 +512,10 @@ def _stored_reference(args, params, base_effects, judged, lines):
     ``--write-effects``): the set's shipped reference where it fits the run
     (:func:`_shipped`; any judged log without rotor speeds: the set's commands file where it
     ships one). ``judged``: every log to judge (one needing rotor speeds synthesised needs
-    the file's command model, or with a "speeds" file ``--command-reference``: refused
-    without; ``--command-reference`` with a "commands" file: refused)."""
+    the file's command model; against a "speeds" file whose references log commands, which
+    judges a flight's rotor channel: refused, naming ``--reference LOG...``; against one
+    whose references log none, ``--command-reference``: refused without;
+    ``--command-reference`` with a "commands" file: refused)."""
     from .diagnose import DEFAULT_WINDOW_S
     from .reffile import binding_of, check_fits, read_reference, shipped_reference
 
@@ -499,8 +527,7 @@ def _stored_reference(args, params, base_effects, judged, lines):
         check_fits(args.reference_file, stored.header, binding)
         _say(stored.found, stored.notes, lines)
     else:
-        commands = (not args.command_reference
-                    and any(g.rotor_speed is None for g in judged))
+        commands = any(g.rotor_speed is None for g in judged)
         path = (None if args.reference or args.bare or args.write_effects is not None
                 else (commands and shipped_reference(params.name, commands=True))
                 or shipped_reference(params.name))
@@ -518,6 +545,15 @@ def _stored_reference(args, params, base_effects, judged, lines):
                          "command -> speed model its command-only references were calibrated "
                          "with; --command-reference is not taken with it (drop it, or give "
                          "--reference LOG...)")
+    if needing and stored.judges != "commands" and getattr(
+            getattr(stored.stage, "reference", None), "rotor", False):
+        raise InputError(f"{getattr(needing[0], 'path', None) or needing[0].name}: rotor_speed: "
+                         f"not logged; {stored.path.name} was written from references with "
+                         "rotor speeds and commands and judges a flight's rotor channel "
+                         "(measured against commanded speed), which a log without speeds "
+                         "lacks: give --reference LOG... (the references are then judged "
+                         "alike, their speeds synthesised from their commands) or a stored "
+                         "reference written from command-only logs")
     if needing and stored.judges != "commands" and not args.command_reference:
         raise InputError(f"{getattr(needing[0], 'path', None) or needing[0].name}: rotor_speed: "
                          f"not logged; against a stored reference ({stored.path.name}) its "
@@ -694,6 +730,9 @@ def main(argv: list[str] | None = None) -> int:
     holdout = _load(args.holdout, params, args) if args.holdout else None
     stored, shipped, bare_note = _stored_reference(args, params, base_effects,
                                                    [*logs, *(holdout or [])], lines)
+    # command-only logs against references with speeds: the references judged alike
+    args.as_commands = stored is None and _judged_as_commands(args, [*logs, *(holdout or [])])
+    as_commands = args.as_commands
     if stored is not None:
         from .reffile import with_paths
 
@@ -706,8 +745,20 @@ def main(argv: list[str] | None = None) -> int:
     # command-only logs in any role: speeds synthesised (quadsim.gap.logcheck.synthesise_all)
     from .logcheck import synthesise_all
 
-    command_ref = (_load(args.command_reference, params, args) if args.command_reference
-                   else reference)
+    if as_commands:     # the model from the references' speeds (or --command-reference's)
+        from .logcheck import without_speeds
+
+        command_ref = (_load(args.command_reference, params, args) if args.command_reference
+                       else reference)
+        reference = None if reference is None else [without_speeds(g) for g in reference]
+        if not args.quiet:
+            print("note: the logs judged have motor commands and no rotor speeds: the "
+                  "references are judged alike, their speeds synthesised from their commands "
+                  "by the command model fitted on logged speeds (the references', or "
+                  "--command-reference's); no rotor channel on either side", file=sys.stderr)
+    else:
+        command_ref = (_load(args.command_reference, params, args) if args.command_reference
+                       else reference)
     # references without rotor speeds: a file written from them keeps their command model
     command_only = reference is not None and any(g.rotor_speed is None for g in reference)
     roles, command_model = synthesise_all(

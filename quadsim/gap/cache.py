@@ -79,11 +79,13 @@ def cache_dir(given: str | os.PathLike | None = None) -> Path:
 
 
 def entry_key(references, params, *, effects=None, window_s: float, base: tuple = (),
-              command_references=()) -> str:
+              command_references=(), as_commands: bool = False) -> str:
     """SHA-256 (hex) of everything the references' stage reads (module doc, "Key"):
     ``references`` and ``command_references`` are file paths (names as given, bytes read
     here), ``params`` the loaded parameter set, ``effects`` the ``--effects`` names (None:
-    all), ``window_s`` the smoothing window (s), ``base`` the effects already in the model.
+    all), ``window_s`` the smoothing window (s), ``base`` the effects already in the model,
+    ``as_commands`` the references judged as command-only (their speeds cut and synthesised:
+    ``quadsim.gap.__main__._judged_as_commands``; another stage of the same files).
     Raises :class:`InputError` for a file that cannot be read."""
     from .. import __version__
     from .calibrate import CALIBRATED_SCHEMA, code_version
@@ -95,6 +97,8 @@ def entry_key(references, params, *, effects=None, window_s: float, base: tuple 
     digest.update(repr((numeric_threads(), [os.environ.get(v) for v in THREAD_VARS])).encode())
     digest.update(pickle.dumps((params, None if effects is None else tuple(effects),
                                 float(window_s), tuple(base)), protocol=4))
+    if as_commands:
+        digest.update(b"\0references judged as command-only\0")
     for role, paths in (("reference", references), ("command-reference", command_references)):
         digest.update(f"\0{role} {len(paths)}\0".encode())
         for path in paths:
