@@ -102,6 +102,34 @@ def test_a_flight_with_a_pose_is_not_judged_against_references_without(cf, refer
     assert "this flight logs a pose, the reference flights do not" in verdict.reason
 
 
+def test_every_flight_refused_while_judged_is_one_line_and_exit_2(cf, tmp_path, capsys):
+    """``gap --per-flight`` whose every flight is refused while judged (here: a pose on the
+    flights, none on the references): the first reason and how many more, one error line
+    (after the loader's warnings on the references), exit 2, no JSON written."""
+    from quadsim.gap.__main__ import main
+    from quadsim.logs.flightlog import write_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        refs = [write_log(tmp_path / f"r{k}.csv.gz",
+                          _imu(generate_flight(cf, "figure8", EffectSet(()), NOISE, 30 + k,
+                                               duration=3.0)[0])) for k in range(2)]
+        posed = [write_log(tmp_path / f"p{k}.csv.gz",
+                           generate_flight(cf, "figure8", EffectSet(()), NOISE, 40 + k,
+                                           duration=3.0)[0]) for k in range(2)]
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", *map(str, posed), "--reference",
+                 *map(str, refs), "--effects", "mass_offset", "--workers", "1", "--no-cache",
+                 "--quiet", "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()      # the loader's warnings first
+    errors = [line for line in err if line.startswith("error:")]
+    assert len(errors) == 1 and errors[0] == err[-1], err
+    assert err[-1].startswith(f"error: {posed[0]}: x..z, qw..qz: this flight logs a pose, the "
+                              "reference flights do not")
+    assert err[-1].endswith("(and 1 more flight(s) refused: p1.csv.gz)")
+    assert not out.exists()
+
+
 def test_held_out_weighs_no_effect_that_reads_the_pose(cf):
     """The held-out diagnosis on three IMU-only flights with a 4 g mass offset: the weight is
     read (as the mass or as the thrust per Omega^2 that carries it: -9.8 % is 1 / 1.108), no

@@ -434,4 +434,4 @@ def test_time_in_ms_names_the_time_column(tmp_path, capsys):
     flight = sample_flight(duration_s=3.0, rate_hz=200.0)
     path = _csv(tmp_path / "ms.csv", flight=flight, t=flight.t * 1000.0)
     assert convert_main([str(path), "-o", str(tmp_path / "o.csv")]) == 2
-    _one_line(capsys, str(path), ": t: ", "time in ms?")
+    _one_line(capsys, str(path), ": t: ", "looks like milliseconds")

@@ -796,6 +796,14 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if bar is not None:
             bar.close()
+    judged = [f for f in result["flights"] if f.get("outcome") != "refused"] \
+        if args.per_flight else [None]
+    if not judged:      # every flight refused while judged: bad input, one line, nothing written
+        first = result["flights"][0]
+        more = (f" (and {len(result['flights']) - 1} more flight(s) refused: "
+                f"{', '.join(Path(f['file']).name for f in result['flights'][1:])})"
+                if len(result["flights"]) > 1 else "")
+        raise InputError(f"{first['reason'] if first.get('reason') else first['answer']}{more}")
     if base is not None:
         result = _with_effects_file(result, args.effects_file, base_effects)
     if stored is not None:
