@@ -1908,7 +1908,9 @@ def _reference_stage(reference, params: VehicleParams, *, effects, window_s: flo
                      key: str | None, base: tuple = (), map_fn: Callable = map) -> Calibrated:
     """The reference flights prepared, checked against the model, calibrated on top of the
     ``base`` effects (an effect file) and judged against each other
-    (:func:`reference_self_check`)."""
+    (:func:`reference_self_check`); a reference the self-check judges confidently unlike the
+    others in an otherwise clean set (:func:`quadsim.gap.calibrate.odd_references`) is left
+    out and the rest calibrated and checked again (``Reference.left_out`` says which)."""
     ref_flights = prepare(reference, params, window_s=window_s)
     if len(ref_flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
