@@ -172,3 +172,36 @@ def test_without_a_pose_what_stays_is_not_said_to_be_outside_the_library():
     named = Verdict("effect", "mass_offset", "mass_offset (90 %): +4 g heavier.")
     assert without_pose_note(named, posefree).answer == \
         f"mass_offset (90 %): +4 g heavier. Not weighed: {missing_words()}."
+
+
+def test_without_a_pose_a_declared_confusable_reading_is_stated_beside_the_name():
+    """A name on a log without a pose gets each reading its effect and the name's declare
+    confusable (``EffectFacts.separate_from``), not stated beside it already, stated with its
+    magnitude and how to tell them apart; the name is then tentative. Readings that are not
+    such a pair, or a log with a pose, change nothing."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.logcheck import confusable, without_pose_note
+    from quadsim.gap.result import Reading, Verdict
+
+    hint = EFFECTS["mass_offset"].facts.separate_from["thrust_factor"]
+    assert confusable("thrust_factor", "mass_offset") == hint          # declared on one side
+    assert confusable("mass_offset", "thrust_factor") == hint
+    assert confusable("cable_payload+mass_offset", "thrust_factor") == \
+        EFFECTS["thrust_factor"].facts.separate_from["cable_payload"]   # a pair: its first part
+    assert confusable("thrust_factor", "wind") == ""
+    posterior = (Reading("thrust_factor", 0.87, "-16 % thrust per Omega^2", -1.0),
+                 Reading("mass_offset", 0.002, "+7.1 g heavier", -7.0),
+                 Reading("wind", 0.001, "a steady air force", -8.0),
+                 Reading("no_difference", 0.0, "no difference", -20.0))
+    named = Verdict("effect", "thrust_factor", "thrust_factor (87 %): -16 %.", 0.87,
+                    posterior=posterior, readings=("thrust_factor",))
+    noted = without_pose_note(named, SimpleNamespace(has_pose=False))
+    assert noted.tentative and noted.readings == ("thrust_factor", "mass_offset")
+    assert noted.confusable_with == ("mass_offset",) and noted.separate_by == {
+        "mass_offset": hint}
+    assert ("Without a pose it is not told from mass_offset (+7.1 g heavier; 0.2 % here; to "
+            f"tell them apart: {hint})") in noted.answer
+    assert noted.answer.endswith(f"Not weighed: {missing_words()}.")
+    assert (noted.outcome, noted.name, noted.probability) == ("effect", "thrust_factor", 0.87)
+    assert without_pose_note(named, SimpleNamespace(has_pose=True)) is named

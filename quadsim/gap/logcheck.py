@@ -153,6 +153,7 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "synthesise_all", "synthesise_speeds", "without_speeds", "UNCONFIRMED_MAX_P",
            "cap_decision", "mark", "order_statuses", "probability_cap", "missing_words",
            "needs_pose", "posefree_log", "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
+           "confusable",
            "TIMING_WORDS"]
 
 
@@ -629,6 +630,33 @@ def synthesised_timing_note(verdict, logs):
     return dataclasses.replace(verdict, answer=f"{verdict.answer} {SYNTHESISED_TIMING_WORDS}")
 
 
+def confusable(a: str, b: str) -> str:
+    """How to tell readings ``a`` and ``b`` apart where an effect of either (a pair ``x+y``
+    counts each) declares the other among those the data may not separate
+    (:attr:`quadsim.effects.facts.EffectFacts.separate_from`); "" where none does."""
+    from ..effects import EFFECTS
+
+    for x in a.split("+"):
+        for y in b.split("+"):
+            for one, other in ((x, y), (y, x)):
+                facts = getattr(EFFECTS.get(one), "facts", None)
+                hint = dict(getattr(facts, "separate_from", {}) or {}).get(other)
+                if hint:
+                    return hint
+    return ""
+
+
+def _unseparated_rivals(verdict) -> list:
+    """The readings of ``verdict``'s posterior, not stated beside its name, that the name's
+    effect and they declare confusable (:func:`confusable`), with a determined magnitude,
+    most probable first: [(reading, how to tell them apart)]."""
+    stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
+    rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
+              if r.name not in stated and r.magnitude]
+    return sorted([(r, hint) for r, hint in rivals if hint],
+                  key=lambda x: -x[0].probability)
+
+
 def without_pose_note(verdict, log):
     """``verdict`` (:class:`quadsim.gap.result.Verdict`) with :func:`missing_words` at the
     end of its answer and in its notes when ``log`` (a FlightLog) has no pose; else as is.
@@ -636,11 +664,29 @@ def without_pose_note(verdict, log):
     of "Not in the library:" / "Unexplained:" and its last sentence says that what stays may
     be one of the effects not weighed: a cable's swing, a drag or a wind leaves exactly such
     a remainder on the body-frame balance (the payload flights of the shared mixed set,
-    IMU and commands only: docs/logs.md, "What a log needs"); the outcome is unchanged."""
+    IMU and commands only: docs/logs.md, "What a log needs"); the outcome is unchanged. A
+    name whose effect and a reading not stated beside it are a declared confusable pair
+    (:func:`confusable`; e.g. a payload and a thrust per Omega^2: the same weight balance)
+    gets that reading stated beside it with how to tell them apart, and is tentative: what
+    separates them on such a log (the roll and pitch moments) is where the effects not
+    weighed act too (a swinging load slows roll and pitch as a weaker rotor authority would:
+    the mixed payload flights cut to IMU and commands, docs/logs.md)."""
     if getattr(log, "has_pose", True) or verdict.outcome == "refused":
         return verdict
     said = missing_words()
     answer, tail = verdict.answer, f" Not weighed: {said}."
+    rivals = _unseparated_rivals(verdict) if verdict.outcome == "effect" else []
+    if rivals:      # declared confusable pairs: not separated without a pose
+        each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to "
+                            f"tell them apart: {hint})" for r, hint in rivals)
+        answer += (f" Without a pose it is not told from {each}: the library names each pair "
+                   "as confusable, and what separates them here (the moments, the fit's "
+                   "shape) is where the effects not weighed act too.")
+        names = tuple(r.name for r, _ in rivals)
+        verdict = dataclasses.replace(
+            verdict, tentative=True, readings=tuple(verdict.readings) + names,
+            confusable_with=tuple(verdict.confusable_with) + names,
+            separate_by={**dict(verdict.separate_by), **{r.name: h for r, h in rivals}})
     if verdict.outcome == "unexplained":
         for old, new in NOT_WEIGHED_OPENINGS.items():
             if answer.startswith(old):
