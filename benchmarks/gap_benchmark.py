@@ -136,7 +136,7 @@ from benchmarks.cases import oracle_reduction
 from benchmarks.draws import draw
 from benchmarks.observe import MIN_GAIN
 from benchmarks.score import joined_kind
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import commands_through_map, synthetic_flight
 from quadsim.core.errors import QuadsimError, QuadsimWarning
 from quadsim.core.executor import limit_numeric_threads
 from quadsim.core.files import atomic_write_text
@@ -699,8 +699,10 @@ def self_check_line(check: dict | None) -> str:
 
 def speed_benchmark() -> str:
     params = load_params("crazyflie21")
-    log = synthetic_flight(params, [make_effect("com_offset", x=0.004)], duration=600.0,
-                           seed=7)
+    # commands through the set's motor map and its voltage law, as its motors would log them
+    # (benchmarks.synthetic.commands_through_map)
+    log = commands_through_map(synthetic_flight(params, [make_effect("com_offset", x=0.004)],
+                                                duration=600.0, seed=7), params)
     start = time.perf_counter()
     result = diagnose([log], params)  # a single flight: split in time, with a warning note
     first = time.perf_counter() - start

@@ -95,23 +95,8 @@ def drag_flights(folder: Path) -> list[Path]:
 
 
 def commands_through_map(log, params):
-    """``log`` with its commands replaced by those ``params``' motor map turns into its logged
-    rotor speeds: the map inverted per rotor at the logged battery voltage (its voltage law)
-    after a first-order lead of the map's time constant (the command model lags by it), so
-    ``quadsim.gap.logcheck.command_model_from_params(params)`` gives the speeds back. What a
-    vehicle whose motors follow the set's map would log; the generators
-    (``benchmarks.synthetic``, ``quadsim.logs.generate``) write ``speed / max_speed``
-    (``quadsim.fly``'s convention), which the set's map does not describe."""
-    import dataclasses
+    """:func:`benchmarks.synthetic.commands_through_map` (kept here under its name for the
+    tests that import it from this module)."""
+    from benchmarks.synthetic import commands_through_map as through_map
 
-    import numpy as np
-
-    mm = params.motor_map
-    speed = np.asarray(log.rotor_speed, float)
-    steady = speed + mm.time_constant * np.gradient(speed, log.t, axis=0)
-    if log.vbat is not None and mm.reference_voltage is not None:
-        steady = steady / (1.0 + mm.voltage_gain
-                           * (np.asarray(log.vbat, float) - mm.reference_voltage))[:, None]
-    command = np.stack([np.interp(steady[:, i], mm.speed[i], mm.command)
-                        for i in range(steady.shape[1])], -1)
-    return dataclasses.replace(log, rotor_command=command)
+    return through_map(log, params)
