@@ -360,9 +360,7 @@ def commands_through_map(log, params):
     (:func:`synthetic_flight`, ``quadsim.logs.generate``) write ``speed / max_speed``
     (``quadsim.fly``'s convention), which the set's map does not describe, so a run that
     reads the commands through the set's own map (held out against the bare set, or
-    command-only) needs this: the speed benchmark's 10-minute flight, whose battery falls
-    0.15 V, reads its hidden CoM offset as ``unexplained`` without it (the rotor channel's
-    misfit grows along the flight) and as ``com_offset`` +4.0 mm with it."""
+    command-only) needs this (CHANGELOG.md, the speed benchmark)."""
     mm = params.motor_map
     speed = np.asarray(log.rotor_speed, float)
     steady = speed + mm.time_constant * np.gradient(speed, log.t, axis=0)

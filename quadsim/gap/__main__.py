@@ -433,6 +433,14 @@ class _Writer:
                   f"{path}", file=sys.stderr)
 
 
+def _all_refused(reason: str, others: list) -> str:
+    """The one line of a ``--per-flight`` run whose every flight is refused: the first
+    flight's ``reason`` and the names of the ``others``."""
+    more = (f" (and {len(others)} more flight(s) refused: {', '.join(map(str, others))})"
+            if others else "")
+    return f"{reason}{more}"
+
+
 def _judged_as_commands(args, judged) -> bool:
     """Whether the references (``--reference LOG...``) are to be judged as command-only:
     every log ``judged`` has motor commands and no rotor speeds, and the references log both
@@ -722,9 +730,7 @@ def main(argv: list[str] | None = None) -> int:
             except InputError as exc:
                 refused.append((k, str(path), str(exc)))
         if not logs:         # nothing left to judge: bad input, one line and exit 2
-            more = (f" (and {len(refused) - 1} more flight(s) refused: "
-                    f"{', '.join(p for _, p, _ in refused[1:])})" if len(refused) > 1 else "")
-            raise InputError(f"{refused[0][2]}{more}")
+            raise InputError(_all_refused(refused[0][2], [p for _, p, _ in refused[1:]]))
     else:
         logs, lines = _load(args.logs, params, args), None
     holdout = _load(args.holdout, params, args) if args.holdout else None
@@ -800,10 +806,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.per_flight else [None]
     if not judged:      # every flight refused while judged: bad input, one line, nothing written
         first = result["flights"][0]
-        more = (f" (and {len(result['flights']) - 1} more flight(s) refused: "
-                f"{', '.join(Path(f['file']).name for f in result['flights'][1:])})"
-                if len(result["flights"]) > 1 else "")
-        raise InputError(f"{first['reason'] if first.get('reason') else first['answer']}{more}")
+        raise InputError(_all_refused(first.get("reason") or first["answer"],
+                                      [Path(f["file"]).name for f in result["flights"][1:]]))
     if base is not None:
         result = _with_effects_file(result, args.effects_file, base_effects)
     if stored is not None:

@@ -550,15 +550,14 @@ def odd_references(check: SelfCheck | None) -> tuple:
     reference differs from the others beyond their own spread (its reading passed practical
     significance against theirs, or its residual stays beyond theirs), e.g. a payload flight
     given by mistake among nominal ones; kept, what it carries passes for normal and shifts
-    the shared model every flight is judged against (one cable-payload flight given with 19
-    nominal Crazyflie references: the other payload flights named with 3.9-6.1 g of their
-    7.4 g at 99 %; docs/gap.md, "The self-check"). Only from a clean set: there the verdicts
-    are stated as confident already, and leaving the odd one out removes what it would pass
-    for normal without raising any confidence; a set that is not clean has its doubt stated
-    in every answer, which leaving one out would lift. A set with more false alarms
-    disagrees with itself and is marked so instead (:attr:`SelfCheck.clean`); a set of fewer
-    than 1 / FALSE_ALARM_SHARE = 10 references has no room for one, so at least 9 stay (more
-    than the discrepancy term's 5). () where none is left out."""
+    the shared model every flight is judged against (docs/gap.md, "The self-check"). Only
+    from a clean set: there the verdicts are stated as confident already, and leaving the
+    odd one out removes what it would pass for normal without raising any confidence; a set
+    that is not clean has its doubt stated in every answer, which leaving one out would
+    lift. A set with more false alarms disagrees with itself and is marked so instead
+    (:attr:`SelfCheck.clean`); a set of fewer than 1 / FALSE_ALARM_SHARE = 10 references has
+    no room for one, so at least 9 stay (more than the discrepancy term's 5). () where none
+    is left out."""
     if check is None or not check.clean:
         return ()
     return tuple(check.confident)

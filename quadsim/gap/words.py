@@ -187,8 +187,7 @@ def refit_words(reference) -> str:
     95 % half-width, 2.8 %); "" otherwise. The balance m g = b sum(Omega^2) fixes only b / m:
     the set's b or its mass is off, which the flights cannot tell apart; a mass a flight
     reads is m times its share of the thrust, so where the set's mass is what is off, every
-    mass reading is off by the same factor (a 45 g set for a 37 g vehicle read a +6.5 g
-    payload as +8.0 g, CHANGELOG.md)."""
+    mass reading is off by the same factor (docs/own-vehicle.md)."""
     x = reference.values().get("nominal_refit.thrust")
     if x is None or abs(x) <= SESSION_SPREAD.relative:
         return ""

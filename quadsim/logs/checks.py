@@ -664,17 +664,24 @@ def _evidence_of(choice: list, params) -> dict[tuple[int, ...], float]:
     own_order = tuple(range(params.rotor_count)) if params is not None else ()
     evidence: dict = {}
     for _, balance in choice:
-        own, _ = _order_fit(balance, torque_rows, own_order)
-        share = _noise_share(balance, torque_rows, own_order)
         for perm in itertools.permutations(own_order):
             if perm != own_order:    # every signal read must fit the log's order
-                # an axis tells the two apart where either order's column is above the noise
-                told = np.minimum(share, _noise_share(balance, torque_rows, perm)) \
-                    < ORDER_NOISE_SHARE
-                value = _order_evidence(balance, own, *_order_fit(balance, torque_rows, perm),
-                                        told)
+                value = _against_own(balance, torque_rows, torque_rows, perm)
                 evidence[perm] = max(evidence.get(perm, -np.inf), value)
     return evidence
+
+
+def _against_own(balance: _TorqueBalance, rows: np.ndarray, other_rows: np.ndarray,
+                 columns) -> float:
+    """Delta chi^2 (:func:`_order_evidence`) of the mixer's torque rows ``other_rows`` with
+    the rotor columns in order ``columns`` over the set's ``rows`` in the log's order; an
+    axis tells the two apart where either one's column is above the sensor noise
+    (:data:`ORDER_NOISE_SHARE`)."""
+    own_order = tuple(range(balance.rotors))
+    own, _ = _order_fit(balance, rows, own_order)
+    told = np.minimum(_noise_share(balance, rows, own_order),
+                      _noise_share(balance, other_rows, columns)) < ORDER_NOISE_SHARE
+    return _order_evidence(balance, own, *_order_fit(balance, other_rows, columns), told)
 
 
 def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | None:
@@ -691,9 +698,8 @@ def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | No
     :func:`check_rotor_order` and :func:`rotor_order_status` name the spins, not an order:
     on a flight that rolls and pitches little the two fit alike, and an order would break
     roll and pitch if it is the spins; on one that does, every order is far worse on roll or
-    pitch (a model error by the order rule) while the reversal still fits the yaw. On the
-    46 real Crazyflie flights and the 12 nano-drone runs with their own sets it is at most
-    -0.1 (CHANGELOG.md)."""
+    pitch (a model error by the order rule) while the reversal still fits the yaw. With a
+    set's right spins it is negative (docs/flightlog.md, "rotor spins")."""
     choice = _order_choice(log, params, commands)
     if not choice:
         return None
@@ -703,14 +709,7 @@ def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | No
     flipped = rows.copy()
     flipped[2] = -flipped[2]
     own_order = tuple(range(params.rotor_count))
-    best = -np.inf
-    for _, balance in choice:
-        own, _ = _order_fit(balance, rows, own_order)
-        told = np.minimum(_noise_share(balance, rows, own_order),
-                          _noise_share(balance, flipped, own_order)) < ORDER_NOISE_SHARE
-        best = max(best, _order_evidence(balance, own, *_order_fit(balance, flipped,
-                                                                    own_order), told))
-    return float(best)
+    return float(max(_against_own(balance, rows, flipped, own_order) for _, balance in choice))
 
 
 def _spin_words(value: float, params) -> str:
