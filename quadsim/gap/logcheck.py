@@ -649,10 +649,12 @@ def confusable(a: str, b: str) -> str:
 def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
     """The readings of ``verdict``'s posterior, not stated beside its name, that the name's
     effect and they declare confusable (:func:`confusable`), with a determined magnitude,
-    and (``within``, log-evidence units) a log evidence no more than that below the name's,
-    most probable first: [(reading, how to tell them apart)]."""
+    and (``within``, log-evidence units) a log evidence no more than that below the name's
+    (the posterior's highest where no reading bears the name: a lead renamed by the lead
+    rule), most probable first: [(reading, how to tell them apart)]."""
     stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
-    own = [r.log_evidence for r in verdict.posterior if r.name == verdict.name]
+    own = ([r.log_evidence for r in verdict.posterior if r.name == verdict.name]
+           or [r.log_evidence for r in verdict.posterior])
     floor = (max(own) - within) if own and np.isfinite(within) else -np.inf
     rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
               if r.name not in stated and r.magnitude and r.log_evidence >= floor]
