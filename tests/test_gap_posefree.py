@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
+import numpy as np
 import pytest
 
 from quadsim.core.errors import QuadsimWarning
@@ -205,3 +206,41 @@ def test_without_a_pose_a_declared_confusable_reading_is_stated_beside_the_name(
     assert noted.answer.endswith(f"Not weighed: {missing_words()}.")
     assert (noted.outcome, noted.name, noted.probability) == ("effect", "thrust_factor", 0.87)
     assert without_pose_note(named, SimpleNamespace(has_pose=True)) is named
+
+
+def test_with_a_pose_a_declared_confusable_reading_within_the_margin_is_stated():
+    """With a pose the same pair is stated only where the name's log evidence exceeds the
+    rival's by less than SEPARATED (ln 150: "very strong" evidence); beyond it, or for a
+    reading no effect declares confusable, or an outcome that names nothing, the verdict is
+    returned as it was. A log without a pose is without_pose_note's (returned as is here)."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.logcheck import SEPARATED, confusable_note
+    from quadsim.gap.result import Reading, Verdict
+
+    assert SEPARATED == pytest.approx(np.log(150.0))
+    hint = EFFECTS["mass_offset"].facts.separate_from["thrust_factor"]
+    pose = SimpleNamespace(has_pose=True)
+
+    def verdict(mass_log_z, outcome="effect"):
+        posterior = (Reading("thrust_factor", 0.96, "-10 % thrust per Omega^2", -173.3),
+                     Reading("mass_offset", 0.018, "+4.2 g heavier", mass_log_z),
+                     Reading("wind", 0.01, "a steady air force", -174.0),
+                     Reading("no_difference", 0.0, "no difference", -337.3))
+        return Verdict(outcome, "thrust_factor" if outcome == "effect" else outcome,
+                       "thrust_factor (96 %): -10 %.", 0.96, posterior=posterior,
+                       readings=("thrust_factor",) if outcome == "effect" else ())
+
+    near = verdict(-173.3 - (SEPARATED - 0.1))
+    noted = confusable_note(near, pose)
+    assert noted.tentative and noted.readings == ("thrust_factor", "mass_offset")
+    assert noted.confusable_with == ("mass_offset",)
+    assert noted.separate_by == {"mass_offset": hint}
+    assert (f"Not told apart from mass_offset (+4.2 g heavier; 1.8 % here; to tell them "
+            f"apart: {hint}): the library names the pair") in noted.answer
+    assert (noted.outcome, noted.name, noted.probability) == ("effect", "thrust_factor", 0.96)
+    far = verdict(-173.3 - (SEPARATED + 0.1))
+    assert confusable_note(far, pose) is far
+    plain = verdict(-173.5, outcome="unexplained")
+    assert confusable_note(plain, pose) is plain
+    assert confusable_note(near, SimpleNamespace(has_pose=False)) is near

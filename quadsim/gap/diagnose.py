@@ -230,6 +230,7 @@ from .judge import check as consistency_check
 from .logcheck import (
     check_length,
     check_same_kind,
+    confusable_note,
     needs_pose,
     posefree_log,
     synthesised_timing_note,
@@ -520,6 +521,8 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     posefree = next((g for g in logs if not g.has_pose), None)
     if posefree is not None:                  # what a pose would add (quadsim.gap.logcheck)
         verdict = without_pose_note(verdict, posefree)
+    else:                                     # a declared pair the data do not separate
+        verdict = confusable_note(verdict, (list(logs) + list(holdout or []))[0])
     verdict = synthesised_timing_note(verdict, list(logs) + list(holdout or []))
     names = channel_names(reference)
     combination = None
@@ -2101,6 +2104,7 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
                 else [order])
     verdict = verdict_of(weighed, reference.self_check, statuses)
     verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.logcheck)
+    verdict = confusable_note(verdict, log)       # a declared pair the data do not separate
     verdict = synthesised_timing_note(verdict, [log])   # a timing read through the motor map
     # the residual before and after, for the report: on the states the flight was weighed
     # on, with the residual parts and Jacobian its weighing kept
