@@ -8,17 +8,19 @@ takes real flights (the plain ``mixed/`` flights by default: no change, 9/10 cle
 trajectory would have logged, exactly for the changes that leave the motion as it was:
 
 * **a rigid mass at the CoM** (``mass``, kg): the vehicle of mass m + dm needs (1 + dm/m) times
-  the collective thrust for the same specific force; added equally to every rotor it adds no
-  roll, pitch or yaw torque (a symmetric X: the hubs' lever arms and the spins cancel), so
-  ``Omega_i'^2 = Omega_i^2 + (dm / m) sum_j Omega_j^2 / R``. The point mass at the CoM adds no
-  inertia. Left out: the drag's share of the thrust (the extra thrust scales the rotors', not
-  the air's: an error of dm/m times the drag, ~0.1 % of the added thrust at 1 m/s).
+  the collective thrust for the same specific force, added without a roll, pitch or yaw torque
+  (:func:`speeds_with_mass`: on a symmetric X every rotor's thrust rises by the same amount).
+  The point mass at the CoM adds no inertia. Left out: the drag's share of the force (the
+  extra thrust scales the rotors', not the air's: an error of dm/m times the drag, ~0.1 % of
+  the added thrust at 1 m/s).
 * **one weaker propeller** (``rotor``, (i, e)): rotor i's thrust and drag torque per Omega^2 are
   (1 + e) times the set's, so the same motion needs ``Omega_i' = Omega_i / sqrt(1 + e)``
-  (thrust and drag torque the same as logged).
+  (thrust and drag torque the same as logged); **every propeller** so (``propeller``, e).
+* **a rotor-speed logging delay** (``delay``, s): the rotor speeds logged that much later
+  (:func:`speeds_later`; the motion and the commands as they were).
 
-In both, the motors are read as speed-controlled (a command asks for a speed, the set's map),
-so the commands move with the speeds: each rotor's steady speed change, led by the map's time
+The motors are read as speed-controlled (a command asks for a speed, the set's map), so the
+commands move with the speeds: each rotor's steady speed change, led by the map's time
 constant (the command model lags by it), is turned into a command change through the set's
 map at the logged battery voltage (:func:`commands_for`). A log without commands keeps none.
 
@@ -28,12 +30,12 @@ types it, in a fresh process with a fresh references' cache::
     python -m quadsim.gap --model crazyflie21 --per-flight <the injected logs> \\
         --reference <the 20 nominal flights> --workers 1 --json OUT
 
-Scored (:func:`score`): a flight as logged (``none``) right when ``no_significant_gap``; a mass
-**named** when the verdict names ``mass_offset`` or ``cable_payload`` with a total within
-``max(MASS_TOLERANCE_KG, MASS_TOLERANCE_SHARE x dm)`` of dm; a propeller named when it names
-``thrust_mismatch`` of rotor i within ``max(0.02, 0.5 |e|)`` of e; **stated** when that reading
-is the name or stated beside it (a collinear reading the answer gives with its size). A wrong
-name not ``tentative`` is counted apart (a confident wrong name).
+Scored (:func:`score`): a flight as logged (``none``) right when ``no_significant_gap``; a
+change **named** when the verdict names it at its size (:data:`EXPECTED`: a mass as
+``mass_offset`` or ``cable_payload``, a propeller as ``thrust_mismatch`` of its rotor, a set as
+``thrust_factor``, a delay as ``signal_delay``), **stated** when that reading is the name or is
+stated beside it (a collinear reading the answer gives with its size). A wrong name not
+``tentative`` is counted apart (a confident wrong name).
 
 Usage (needs ``../shared/data``; ~1 s CPU per judged flight plus the references' ~15 s)::
 
@@ -91,11 +93,21 @@ class Change:
 
 
 def speeds_with_mass(speed: np.ndarray, params, added_kg: float) -> np.ndarray:
-    """(N, R) rad/s: ``speed`` with the collective thrust scaled by 1 + dm/m, added equally to
-    every rotor (module doc): ``Omega_i'^2 = Omega_i^2 + (dm/m) sum_j Omega_j^2 / R``."""
+    """(N, R) rad/s: ``speed`` with the body-z thrust scaled by 1 + dm/m and no roll, pitch or
+    yaw torque added: ``Omega'^2 = Omega^2 + (dm/m) F_z(Omega) s``, with ``F_z`` the rows of
+    :func:`quadsim.vehicle.rotors.allocation_matrix` for body-z force and ``s`` the
+    least-norm squared speeds that give a unit of it and no torque (the pseudo-inverse of its
+    force-z and torque rows; on a symmetric X, 1 / (4 b) on every rotor: each rotor's thrust
+    up by the same amount). ValueError where the layout cannot add thrust without torque."""
+    from quadsim.vehicle.rotors import allocation_matrix
+
     speed = np.asarray(speed, dtype=float)
+    rows = allocation_matrix(params)[2:6]
+    share = np.linalg.pinv(rows)[:, 0]
+    if not np.allclose(rows @ share, [1.0, 0.0, 0.0, 0.0], atol=1e-9):
+        raise ValueError(f"{params.name}: rotors: the layout cannot add thrust without a torque")
     square = np.square(speed)
-    extra = (added_kg / params.mass) * square.sum(axis=1, keepdims=True) / speed.shape[1]
+    extra = (added_kg / params.mass) * (square @ rows[0])[:, None] * share[None, :]
     return np.sqrt(square + extra)
 
 
@@ -314,12 +326,15 @@ def main(argv: list[str] | None = None) -> int:
 
     params = load_params(args.model)
     logs = [load_log(p, warn=False) for p in flights]
-    pairs = [(injected(log, params, c), c)
-             for log, changes in zip(logs, grid({"mass": args.masses,
-                                                 "rotor": args.rotor_changes,
-                                                 "propeller": args.propeller_changes,
-                                                 "delay": delays}, len(logs)))
-             for c in changes]
+    pairs = []
+    for log, changes in zip(logs, grid({"mass": args.masses, "rotor": args.rotor_changes,
+                                        "propeller": args.propeller_changes,
+                                        "delay": delays}, len(logs))):
+        for change in changes:
+            try:
+                pairs.append((injected(log, params, change), change))
+            except ValueError as exc:       # e.g. saturated motors: no command gives it
+                print(f"note: {change.label} not written: {exc}")
     with tempfile.TemporaryDirectory(prefix="qinj_logs_") as folder:
         paths = _write(pairs, Path(folder))
         if args.logs != "as-logged":
@@ -343,8 +358,8 @@ def main(argv: list[str] | None = None) -> int:
         key = (f"rotor {change.value * 100:+.0f} %" if change.kind == "rotor"
                else change.label)
         by.setdefault(key, []).append(answer)
-    print(f"{len(flights)} flights x {len(answers) // len(flights)} changes against "
-          f"{len(references)} references ({args.model})")
+    print(f"{len(flights)} flights, {len(answers)} logs judged against {len(references)} "
+          f"references ({args.model})")
     for key, rows in by.items():
         right = sum(r["right"] for r in rows)
         stated = sum(r["stated"] for r in rows)
