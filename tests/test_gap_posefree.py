@@ -236,8 +236,8 @@ def test_with_a_pose_a_declared_confusable_reading_within_the_margin_is_stated()
     assert noted.tentative and noted.readings == ("thrust_factor", "mass_offset")
     assert noted.confusable_with == ("mass_offset",)
     assert noted.separate_by == {"mass_offset": hint}
-    assert (f"Not told apart from mass_offset (+4.2 g heavier; 1.8 % here; to tell them "
-            f"apart: {hint}): the library names the pair") in noted.answer
+    assert (f"Tentative: not told apart from mass_offset (+4.2 g heavier; 1.8 % here; to tell "
+            f"them apart: {hint}): the library names the pair") in noted.answer
     assert (noted.outcome, noted.name, noted.probability) == ("effect", "thrust_factor", 0.96)
     far = verdict(-173.3 - (SEPARATED + 0.1))
     assert confusable_note(far, pose) is far

@@ -1,10 +1,10 @@
 """Changes written into real logs (benchmarks.injected): the closed forms they promise, on a
 generated log of the crazyflie21 set (its per-rotor map, battery-voltage law and time
 constant), and the scoring rule."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
-
-from dataclasses import replace
 
 from benchmarks.injected import (
     Change,

@@ -687,7 +687,9 @@ def confusable_note(verdict, log):
         return verdict
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
                         f"them apart: {hint})" for r, hint in rivals)
-    answer = (f"{verdict.answer} Not told apart from {each}: the library names "
+    # the name tentative, said once (the judge's words may have said so already)
+    opening = "Not told apart" if "Tentative" in verdict.answer else "Tentative: not told apart"
+    answer = (f"{verdict.answer} {opening} from {each}: the library names "
               f"{'the pair' if len(rivals) == 1 else 'each pair'} as one the data may not "
               f"separate, and the name's evidence exceeds "
               f"{'it' if len(rivals) == 1 else 'each'} by less than the {SEPARATED:.1f} log "
