@@ -293,7 +293,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the flights to change (default: the plain mixed/ flights)")
     ap.add_argument("--reference", type=Path, nargs="+",
                     help="the reference flights (default: the 20 nominal/ flights)")
-    ap.add_argument("--model", default="crazyflie21")
+    ap.add_argument("--model", default="crazyflie21",
+                    help="the parameter set (name or TOML; default crazyflie21)")
     ap.add_argument("--masses", type=float, nargs="*", default=[0.001, 0.002, 0.004],
                     help="rigid masses at the CoM, kg (default 1, 2, 4 g)")
     ap.add_argument("--rotor-changes", type=float, nargs="*", default=[-0.05, -0.10],
@@ -307,9 +308,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="cut every log (judged and references) to what a user may have, as "
                          "benchmarks.reference_subsets --logs does (commands: no rotor "
                          "speeds; imu: no pose and no rotor speeds)")
-    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--data", type=Path, default=DATA,
+                    help="the crazyflie21_brushless folder of the shared data (default "
+                         "../shared/data/crazyflie21_brushless beside the repository)")
     ap.add_argument("--out", type=Path, help="every answer and the scores as JSON")
     args = ap.parse_args(argv)
+    labels = args.data / "mixed_labels.json"
+    if args.flights is None and not labels.is_file():
+        print(f"error: {labels}: not found (give --flights and --reference, or --data)",
+              file=sys.stderr)
+        return 2
     flights = args.flights or _plain_mixed(args.data)
     references = args.reference or sorted((args.data / "nominal").glob("flight_*.csv.gz"))
     if not flights or not references:
@@ -321,11 +329,19 @@ def main(argv: list[str] | None = None) -> int:
         print("note: --delays dropped: a rotor-speed logging delay does not reach a log "
               f"without rotor speeds (--logs {args.logs})")
         delays = []
+    from quadsim.core.errors import InputError
     from quadsim.logs.flightlog import load_log
     from quadsim.vehicle.params import load_params
 
-    params = load_params(args.model)
-    logs = [load_log(p, warn=False) for p in flights]
+    try:
+        params = load_params(args.model)
+        logs = [load_log(p, warn=False) for p in flights]
+        missing = next((p for p in references if not Path(p).is_file()), None)
+        if missing is not None:
+            raise InputError(f"{missing}: no such file")
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     pairs = []
     for log, changes in zip(logs, grid({"mass": args.masses, "rotor": args.rotor_changes,
                                         "propeller": args.propeller_changes,

@@ -124,3 +124,18 @@ def test_the_grid_and_the_scores_of_a_delay_and_a_propeller_set():
                           {"name": "thrust_factor", "params": {"thrust_factor.change": -0.07}}]}
     got = score(Change("propeller", -0.08), weak)
     assert not got["right"] and got["stated"] and not got["confident_wrong"]
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    """A missing flight, an unknown parameter set or a data folder without the labels: one
+    `error:` line naming it, exit 2, nothing judged."""
+    from benchmarks.injected import main
+
+    assert main(["--flights", str(tmp_path / "none.csv.gz")]) == 2
+    assert main(["--model", "no_such_set", "--flights", str(tmp_path / "none.csv.gz")]) == 2
+    assert main(["--data", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("error: ") for line in err)
+    assert "none.csv.gz: no such file" in err[0]
+    assert "no_such_set" in err[1]
+    assert "mixed_labels.json: not found" in err[2]
