@@ -144,8 +144,11 @@ def commands_for(log, params, speed: np.ndarray) -> np.ndarray | None:
     delta = np.asarray(speed, float) - np.asarray(log.rotor_speed, float)
     mm = params.motor_map
     tau = 0.0 if mm is None else float(mm.time_constant)
-    if tau > 0:
-        delta = delta + tau * np.gradient(delta, log.t, axis=0)
+    if tau > 0:         # each airborne stretch alone (no derivative across a ground span)
+        bounds = [0, *log.segments, len(log.t)]
+        delta = delta + tau * np.concatenate(
+            [np.gradient(delta[a:b], log.t[a:b], axis=0) if b - a > 1 else 0.0 * delta[a:b]
+             for a, b in zip(bounds[:-1], bounds[1:])])
     command = np.asarray(log.rotor_command, float)
     if mm is None:
         return command + delta / float(params.max_speed)
@@ -186,10 +189,11 @@ def injected(log, params, change: Change):
     return replace(log, rotor_speed=speed, rotor_command=command)
 
 
-def grid(changes: dict, flights: int) -> list[list[Change]]:
+def grid(changes: dict, flights: int, rotors: int = 4) -> list[list[Change]]:
     """The changes of each of ``flights`` flights: every flight as logged, then for each kind
-    of ``changes`` ({kind: values}) each value ("rotor" on rotor 1 + (flight index mod 4))."""
-    return [[Change("none")] + [Change(kind, v, 1 + k % 4 if kind == "rotor" else 0)
+    of ``changes`` ({kind: values}) each value ("rotor" on rotor 1 + (flight index mod
+    ``rotors``))."""
+    return [[Change("none")] + [Change(kind, v, 1 + k % rotors if kind == "rotor" else 0)
                                 for kind, values in changes.items() for v in values]
             for k in range(flights)]
 
@@ -299,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="rigid masses at the CoM, kg (default 1, 2, 4 g)")
     ap.add_argument("--rotor-changes", type=float, nargs="*", default=[-0.05, -0.10],
                     help="one propeller's relative thrust change, each on rotor 1 + (flight "
-                         "index mod 4) (default -5 %%, -10 %%)")
+                         "index mod the rotor count) (default -5 %%, -10 %%)")
     ap.add_argument("--propeller-changes", type=float, nargs="*", default=[-0.08],
                     help="every propeller's relative thrust change (default -8 %%)")
     ap.add_argument("--delays", type=float, nargs="*", default=[0.01],
@@ -345,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
     pairs = []
     for log, changes in zip(logs, grid({"mass": args.masses, "rotor": args.rotor_changes,
                                         "propeller": args.propeller_changes,
-                                        "delay": delays}, len(logs))):
+                                        "delay": delays}, len(logs), params.rotor_count)):
         for change in changes:
             try:
                 pairs.append((injected(log, params, change), change))
