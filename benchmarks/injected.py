@@ -30,6 +30,11 @@ types it, in a fresh process with a fresh references' cache::
     python -m quadsim.gap --model crazyflie21 --per-flight <the injected logs> \\
         --reference <the 20 nominal flights> --workers 1 --json OUT
 
+``--mode held-out`` takes the flights in threes (two training flights and a held-out one, each
+with the same change) and judges each three in its own run (``python -m quadsim.gap --model
+M A B --holdout C --reference ...``), the references' stage computed once (one cache folder
+for the harness run); its verdict is scored as a per-flight answer.
+
 Scored (:func:`score`): a flight as logged (``none``) right when ``no_significant_gap``; a
 change **named** when the verdict names it at its size (:data:`EXPECTED`: a mass as
 ``mass_offset`` or ``cable_payload``, a propeller as ``thrust_mismatch`` of its rotor, a set as
@@ -42,6 +47,7 @@ Usage (needs ``../shared/data``; ~1 s CPU per judged flight plus the references'
     python -m benchmarks.injected                          # the plain mixed flights, default grid
     python -m benchmarks.injected --masses 0.001 0.002 0.004 --rotor-changes -0.05 --out inj.json
     python -m benchmarks.injected --logs commands          # every log cut to IMU, pose, commands
+    python -m benchmarks.injected --mode held-out          # 2 training + 1 held out, each changed
 """
 
 from __future__ import annotations
@@ -258,30 +264,49 @@ def score(change: Change, flight: dict) -> dict:
 
 
 def _write(logs_changes, folder: Path) -> list[Path]:
+    """Each (log, change) written as a flight-log CSV into ``folder`` (made), named by the
+    folder, the log's file and the change (unique across the run's folders)."""
     from quadsim.logs.flightlog import write_log
 
+    folder.mkdir(parents=True, exist_ok=True)
     out = []
-    for k, (log, change) in enumerate(logs_changes):
+    for log, change in logs_changes:
         stem = Path(str(log.path)).name.split(".")[0]
         tag = change.label.replace(" ", "_").replace("%", "pc").replace("+", "p")
-        out.append(write_log(folder / f"{k:03d}_{stem}_{tag}.csv.gz", log))
+        out.append(write_log(folder / f"{folder.name}_{stem}_{tag}.csv.gz", log))
     return out
 
 
-def judge(paths: list[Path], references: list[Path], out: Path, model: str) -> dict:
-    """The per-flight JSON of ``paths`` against ``references`` (a fresh process and
-    references' cache, one numeric thread, as a user's run)."""
+def _gap(args: list[str], out: Path, cache: str | None = None) -> dict:
+    """The JSON of ``python -m quadsim.gap ARGS --workers 1 --json OUT`` in a fresh process,
+    one numeric thread, as a user's run; ``cache``: its references' cache folder (default a
+    fresh one). RuntimeError with quadsim's last stderr line where it exits non-zero."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
-               QUADSIM_CACHE_DIR=tempfile.mkdtemp(prefix="qinj_"))
-    cmd = [sys.executable, "-m", "quadsim.gap", "--model", model, "--per-flight",
-           *map(str, paths), "--reference", *map(str, references), "--workers", "1",
-           "--json", str(out)]
+               QUADSIM_CACHE_DIR=cache or tempfile.mkdtemp(prefix="qinj_"))
+    cmd = [sys.executable, "-m", "quadsim.gap", *args, "--workers", "1", "--json", str(out)]
     done = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                           text=True)
     if done.returncode != 0:
         last = (done.stderr.strip().splitlines() or ["(no message)"])[-1]
         raise RuntimeError(f"python -m quadsim.gap exited {done.returncode}: {last}")
     return json.loads(out.read_text())
+
+
+def judge(paths: list[Path], references: list[Path], out: Path, model: str) -> dict:
+    """The per-flight JSON of ``paths`` against ``references`` (:func:`_gap`)."""
+    return _gap(["--model", model, "--per-flight", *map(str, paths), "--reference",
+                 *map(str, references)], out)
+
+
+def judge_held_out(train: list[Path], held: Path, references: list[Path], out: Path,
+                   model: str, cache: str) -> dict:
+    """The held-out verdict (JSON ``verdict``) of ``train`` with ``held`` held out against
+    ``references`` (:func:`_gap`; ``cache`` shared by the runs of one harness run: the
+    references' stage is computed once), as a per-flight entry (``verdict`` its ``effect``)."""
+    result = _gap(["--model", model, *map(str, train), "--holdout", str(held), "--reference",
+                   *map(str, references)], out, cache)
+    verdict = dict(result["verdict"])
+    return dict(verdict, verdict=verdict.get("effect"))
 
 
 def _plain_mixed(data: Path) -> list[Path]:
@@ -315,6 +340,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=DATA,
                     help="the crazyflie21_brushless folder of the shared data (default "
                          "../shared/data/crazyflie21_brushless beside the repository)")
+    ap.add_argument("--mode", choices=("per-flight", "held-out"), default="per-flight",
+                    help="per-flight (default): each changed log judged against the "
+                         "references; held-out: the flights in threes (2 training, the third "
+                         "held out), each three with the same change, one run each")
     ap.add_argument("--out", type=Path, help="every answer and the scores as JSON")
     args = ap.parse_args(argv)
     labels = args.data / "mixed_labels.json"
@@ -346,40 +375,60 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    pairs = []
-    for log, changes in zip(logs, grid({"mass": args.masses, "rotor": args.rotor_changes,
-                                        "propeller": args.propeller_changes,
-                                        "delay": delays}, len(logs), params.rotor_count)):
+    groups = ([[log] for log in logs] if args.mode == "per-flight" else
+              [logs[k:k + 3] for k in range(0, len(logs) - 2, 3)])
+    if not groups:
+        print("error: --flights: held out needs 3 flights or more (2 training, 1 held out)",
+              file=sys.stderr)
+        return 2
+    kinds = {"mass": args.masses, "rotor": args.rotor_changes,
+             "propeller": args.propeller_changes, "delay": delays}
+    cases = []          # (the group's changed logs, the change)
+    for group, changes in zip(groups, grid(kinds, len(groups), params.rotor_count)):
         for change in changes:
             try:
-                pairs.append((injected(log, params, change), change))
+                cases.append(([injected(log, params, change) for log in group], change))
             except ValueError as exc:       # e.g. saturated motors: no command gives it
                 print(f"note: {change.label} not written: {exc}")
     with tempfile.TemporaryDirectory(prefix="qinj_logs_") as folder:
-        paths = _write(pairs, Path(folder))
+        folder = Path(folder)
+        keep = None
         if args.logs != "as-logged":
             from benchmarks.reference_subsets import KEPT, cut_log
 
-            cut = Path(folder) / "cut"
-            (cut / "references").mkdir(parents=True)
-            paths = [cut_log(p, KEPT[args.logs], cut / p.name) for p in paths]
-            references = [cut_log(p, KEPT[args.logs], cut / "references" / p.name)
+            keep = KEPT[args.logs]
+            (folder / "references").mkdir()
+            references = [cut_log(p, keep, folder / "references" / p.name)
                           for p in references]
+        written = []
+        for k, (changed, change) in enumerate(cases):
+            paths = _write([(log, change) for log in changed], folder / f"{k:03d}")
+            written.append([p if keep is None else cut_log(p, keep, p) for p in paths])
         try:
-            result = judge(paths, references, Path(folder) / "result.json", args.model)
+            if args.mode == "per-flight":
+                result = judge([p for paths in written for p in paths], references,
+                               folder / "result.json", args.model)
+                answered = {Path(str(f["file"])).name: f for f in result["flights"]}
+                entries = [answered[paths[0].name] for paths in written]
+            else:
+                cache = tempfile.mkdtemp(prefix="qinj_")
+                entries = [judge_held_out(paths[:2], paths[2], references,
+                                          folder / f"{k:03d}.json", args.model, cache)
+                           for k, paths in enumerate(written)]
         except RuntimeError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
-    answered = {Path(str(f["file"])).name: f for f in result["flights"]}
-    answers = [dict(score(change, answered[path.name]), flight=Path(str(log.path)).name)
-               for (log, change), path in zip(pairs, paths)]
+    answers = [dict(score(change, entry),
+                    flight=" ".join(Path(str(log.path)).name for log in changed))
+               for (changed, change), entry in zip(cases, entries)]
     by: dict[str, list] = {}
-    for (_, change), answer in zip(pairs, answers):
+    for (_, change), answer in zip(cases, answers):
         key = (f"rotor {change.value * 100:+.0f} %" if change.kind == "rotor"
                else change.label)
         by.setdefault(key, []).append(answer)
-    print(f"{len(flights)} flights, {len(answers)} logs judged against {len(references)} "
-          f"references ({args.model})")
+    judged = "logs" if args.mode == "per-flight" else "held-out runs"
+    print(f"{len(flights)} flights, {len(answers)} {judged} judged against "
+          f"{len(references)} references ({args.model})")
     for key, rows in by.items():
         right = sum(r["right"] for r in rows)
         stated = sum(r["stated"] for r in rows)

@@ -139,3 +139,13 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert "none.csv.gz: no such file" in err[0]
     assert "no_such_set" in err[1]
     assert "mixed_labels.json: not found" in err[2]
+
+
+def test_held_out_needs_three_flights(flight, tmp_path, capsys):
+    from benchmarks.injected import main
+    from quadsim.logs.flightlog import write_log
+
+    params, log = flight
+    paths = [str(write_log(tmp_path / f"f{k}.csv.gz", log)) for k in range(2)]
+    assert main(["--mode", "held-out", "--flights", *paths, "--reference", *paths]) == 2
+    assert capsys.readouterr().err.startswith("error: --flights: held out needs 3 flights")
