@@ -2103,8 +2103,6 @@ def judge_one(log: FlightLog, reference: Reference, effects=None,
     statuses = (logcheck.order_statuses([log], reference.params) if order is None
                 else [order])
     verdict = verdict_of(weighed, reference.self_check, statuses)
-    verdict = without_pose_note(verdict, log)     # what a pose would add (quadsim.gap.logcheck)
-    verdict = confusable_note(verdict, log)       # a declared pair the data do not separate
     verdict = synthesised_timing_note(verdict, [log])   # a timing read through the motor map
     # the residual before and after, for the report: on the states the flight was weighed
     # on, with the residual parts and Jacobian its weighing kept
@@ -2180,7 +2178,9 @@ def weigh_flight(flight, reference: Reference, effects=None, *, full: bool = Fal
 def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
     """The :class:`~quadsim.gap.result.Verdict` of a :class:`WeighedFlight` flight, judged with the
     references' self-check ``check`` (:class:`quadsim.gap.calibrate.SelfCheck`, or None) and
-    the rotor-order ``statuses`` of its log (:mod:`quadsim.gap.logcheck`; none: not checked)."""
+    the rotor-order ``statuses`` of its log (:mod:`quadsim.gap.logcheck`; none: not checked),
+    with :func:`~quadsim.gap.logcheck.without_pose_note` and
+    :func:`~quadsim.gap.logcheck.confusable_note` by its states' ``pose``."""
     flight, rows, place, law = weighed.flight, weighed.rows, weighed.place, weighed.law
     reference = dataclasses.replace(weighed.reference, self_check=check)
     verdict = logcheck.mark(judge(rows, reference, flight.name,
@@ -2192,11 +2192,15 @@ def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
         words += f" Judged with {law.variant} (the law this flight shows)."
     if place is not None and place.distance > 0:
         words += f" Flown {place.text}."
-    return dataclasses.replace(
+    verdict = dataclasses.replace(
         verdict, answer=words, drag_law=None if law is None else law.variant,
         envelope=None if place is None else place.to_json(),
         signal_delays_ms=flight.delays_ms,
         notes=verdict.notes + tuple(delay_notes([flight])))
+    # what a pose would add, and a declared pair the data do not separate: here, so that a
+    # reference judged against the others (the self-check) is worded and marked as a flight
+    states = getattr(flight, "states", flight)
+    return confusable_note(without_pose_note(verdict, states), states)
 
 
 def refused_entry(name: str, reason: str) -> Verdict:

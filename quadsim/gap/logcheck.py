@@ -674,13 +674,19 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
 SEPARATED = float(np.log(150.0))
 
 
+def _has_pose(log) -> bool:
+    """Whether ``log`` (a FlightLog, ``has_pose``, or FlightStates, ``pose``) has a pose."""
+    return bool(getattr(log, "has_pose", getattr(log, "pose", True)))
+
+
 def confusable_note(verdict, log):
-    """``verdict`` (:class:`quadsim.gap.result.Verdict`) of a log with a pose (``log``; one
-    without is :func:`without_pose_note`'s) with each declared confusable reading
-    (:func:`confusable`) whose log evidence lies within :data:`SEPARATED` of the name's
-    stated beside it, with its probability and how to tell them apart, and the name
-    tentative; else as is. The outcome and the numbers are unchanged."""
-    if not getattr(log, "has_pose", True) or verdict.outcome != "effect":
+    """``verdict`` (:class:`quadsim.gap.result.Verdict`) of a log with a pose (``log``: a
+    FlightLog or its FlightStates; one without is :func:`without_pose_note`'s) with each
+    declared confusable reading (:func:`confusable`) whose log evidence lies within
+    :data:`SEPARATED` of the name's stated beside it, with its probability and how to tell
+    them apart, and the name tentative; else as is. The outcome and the numbers are
+    unchanged."""
+    if not _has_pose(log) or verdict.outcome != "effect":
         return verdict
     rivals = _unseparated_rivals(verdict, SEPARATED)
     if not rivals:
@@ -703,7 +709,8 @@ def confusable_note(verdict, log):
 
 def without_pose_note(verdict, log):
     """``verdict`` (:class:`quadsim.gap.result.Verdict`) with :func:`missing_words` at the
-    end of its answer and in its notes when ``log`` (a FlightLog) has no pose; else as is.
+    end of its answer and in its notes when ``log`` (a FlightLog or its FlightStates) has no
+    pose; else as is.
     An ``unexplained`` answer then opens with :data:`NOT_WEIGHED_OPENINGS`' words instead
     of "Not in the library:" / "Unexplained:" and its last sentence says that what stays may
     be one of the effects not weighed: a cable's swing, a drag or a wind leaves exactly such
@@ -715,7 +722,7 @@ def without_pose_note(verdict, log):
     separates them on such a log (the roll and pitch moments) is where the effects not
     weighed act too (a swinging load slows roll and pitch as a weaker rotor authority would:
     the mixed payload flights cut to IMU and commands, docs/logs.md)."""
-    if getattr(log, "has_pose", True) or verdict.outcome == "refused":
+    if _has_pose(log) or verdict.outcome == "refused":
         return verdict
     said = missing_words()
     answer, tail = verdict.answer, f" Not weighed: {said}."
