@@ -254,7 +254,9 @@ def score(change: Change, flight: dict) -> dict:
         if r.get("name") in set(flight.get("readings") or ())))
     confident_wrong = (not right and outcome == "effect" and not flight.get("tentative"))
     return {"change": change.label, "verdict": verdict, "outcome": outcome,
-            "probability": flight.get("probability"), "tentative": bool(flight.get("tentative")),
+            "probability": flight.get("probability"),
+            "probability_within_library": flight.get("probability_within_library"),
+            "tentative": bool(flight.get("tentative")),
             "reading": reading, "right": bool(right), "stated": bool(stated),
             "confident_wrong": bool(confident_wrong),
             "readings": list(flight.get("readings") or ()),

@@ -22,6 +22,11 @@ Two kinds of answers, each a (stated probability, right) pair:
   a payload flight named as a mass or cable payload whose masses add up to within
   :data:`PAYLOAD_TOLERANCE` of :data:`PAYLOAD_TOTAL`; a plain flight ``no_significant_gap``.
 
+* **real flights with a known change written in** (``--injected RESULT.json``): the ``--out``
+  JSON of ``python -m benchmarks.injected`` (:func:`injected_answers`). Right: the verdict
+  names the change at its size (``right``: :func:`benchmarks.injected.score`'s "named"), a
+  flight as logged ``no_significant_gap``.
+
 * **simulator sources** (``--benchmark RESULT.json``, repeatable): the per-case JSON of
   ``python -m benchmarks.gap_benchmark --independent --source S --cache DIR --out
   RESULT.json`` (other simulators, judged per flight against their own nominal flights;
@@ -42,6 +47,7 @@ Usage::
     python -m benchmarks.reliability --mixed mixed.json            # labelled real flights
     python -m benchmarks.reliability --generated --mixed mixed.json --json rel.json
     python -m benchmarks.reliability --benchmark cf.json --benchmark pf.json --within
+    python -m benchmarks.reliability --injected inj.json           # known changes, real flights
 
 ``--within`` adds each group's table at the lead reading's probability among the library's
 readings alone (``probability_within_library``, :func:`quadsim.gap.judge.outside_library`:
@@ -257,6 +263,24 @@ def benchmark_answers(rows: list, name: str = "benchmark") -> list[Answer]:
     return out
 
 
+def injected_answers(result: dict) -> list[Answer]:
+    """Answers of a ``python -m benchmarks.injected --out`` JSON (``answers``: each with
+    ``flight``, ``change``, ``outcome``, ``verdict``, ``probability``, ``right``); a JSON
+    without them is a ValueError naming the field. Right: module doc."""
+    rows = result.get("answers") if isinstance(result, dict) else None
+    if not isinstance(rows, list) or not rows:
+        raise ValueError("answers: no judged changes (give the --out JSON of "
+                         "`python -m benchmarks.injected`)")
+    out = []
+    for r in rows:
+        stated = r.get("probability")
+        out.append(Answer("injected", str(r["flight"]), str(r["change"]), str(r["outcome"]),
+                          str(r.get("verdict") or r["outcome"]),
+                          math.nan if stated is None else float(stated), bool(r["right"]),
+                          _within(r)))
+    return out
+
+
 def _generated_cases(params, rng) -> list[tuple[str, list]]:
     from benchmarks.draws import draw
     from benchmarks.outside import BladeFlapping
@@ -327,13 +351,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--benchmark", type=Path, metavar="RESULT.json", action="append",
                         default=[], help="per-case JSON of a simulator source "
                         "(gap_benchmark --independent --source S --out); repeatable")
+    parser.add_argument("--injected", type=Path, metavar="RESULT.json",
+                        help="the --out JSON of python -m benchmarks.injected (real flights "
+                             "with a known change written in)")
     parser.add_argument("--within", action="store_true",
                         help="also the tables at the library-only probability")
     parser.add_argument("--json", type=Path, metavar="OUT.json",
                         help="write every answer and the tables")
     args = parser.parse_args(argv)
-    if not args.generated and args.mixed is None and not args.benchmark:
-        parser.error("give --generated, --mixed RESULT.json and/or --benchmark RESULT.json")
+    if (not args.generated and args.mixed is None and not args.benchmark
+            and args.injected is None):
+        parser.error("give --generated, --mixed RESULT.json, --benchmark RESULT.json and/or "
+                     "--injected RESULT.json")
     groups: dict[str, list[Answer]] = {}
     for path in args.benchmark:
         try:
@@ -356,6 +385,13 @@ def main(argv: list[str] | None = None) -> int:
             where = args.labels if isinstance(exc, KeyError) else args.mixed
             print(f"error: {where}: {exc}", file=sys.stderr)
             return 2
+    if args.injected is not None:
+        try:
+            groups[f"real flights, known changes written in ({args.injected.name})"] = \
+                injected_answers(json.loads(args.injected.read_text()))
+        except (OSError, ValueError, KeyError) as exc:
+            print(f"error: {args.injected}: {exc}", file=sys.stderr)
+            return 2
     if args.generated:
         groups[f"generated flights ({args.vehicle})"] = generated_answers(args.vehicle)
     for title, answers in groups.items():
@@ -367,7 +403,8 @@ def main(argv: list[str] | None = None) -> int:
         groups = {**groups, "simulator sources, all": [
             a for t, g in groups.items() if t.startswith("simulator source (") for a in g]}
         print(format_table("simulator sources, all", groups["simulator sources, all"]))
-    kinds = int(args.generated) + int(args.mixed is not None) + int(bool(args.benchmark))
+    kinds = (int(args.generated) + int(args.mixed is not None) + int(bool(args.benchmark))
+             + int(args.injected is not None))
     if kinds > 1:
         print(format_table("all", [a for t, g in groups.items()
                                    if t != "simulator sources, all" for a in g]))

@@ -149,3 +149,23 @@ def test_held_out_needs_three_flights(flight, tmp_path, capsys):
     paths = [str(write_log(tmp_path / f"f{k}.csv.gz", log)) for k in range(2)]
     assert main(["--mode", "held-out", "--flights", *paths, "--reference", *paths]) == 2
     assert capsys.readouterr().err.startswith("error: --flights: held out needs 3 flights")
+
+
+def test_the_answers_feed_the_reliability_table():
+    """benchmarks.reliability --injected: each answer's stated probability and "named" as
+    right; the library-only probability where given, else the stated one; a JSON without
+    answers refused naming the field."""
+    from benchmarks.reliability import injected_answers, reliability_table
+
+    rows = [{"flight": "f.csv.gz", "change": "mass +2.0 g", "outcome": "effect",
+             "verdict": "thrust_factor", "probability": 0.95,
+             "probability_within_library": 0.97, "right": False},
+            {"flight": "f.csv.gz", "change": "none", "outcome": "no_significant_gap",
+             "verdict": "no_significant_gap", "probability": 0.99, "right": True}]
+    answers = injected_answers({"answers": rows})
+    assert [(a.truth, a.stated, a.within, a.right) for a in answers] == [
+        ("mass +2.0 g", 0.95, 0.97, False), ("none", 0.99, 0.99, True)]
+    table = {r.label: r for r in reliability_table(answers)}
+    assert table["0.9-0.99"].answers == 1 and table["0.9-0.99"].fraction_right == 0.0
+    with pytest.raises(ValueError, match="answers"):
+        injected_answers({"flights": []})
