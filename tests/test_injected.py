@@ -131,8 +131,9 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     `error:` line naming it, exit 2, nothing judged."""
     from benchmarks.injected import main
 
-    assert main(["--flights", str(tmp_path / "none.csv.gz")]) == 2
-    assert main(["--model", "no_such_set", "--flights", str(tmp_path / "none.csv.gz")]) == 2
+    none = str(tmp_path / "none.csv.gz")
+    assert main(["--flights", none, "--reference", none]) == 2
+    assert main(["--model", "no_such_set", "--flights", none, "--reference", none]) == 2
     assert main(["--data", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("error: ") for line in err)
