@@ -48,6 +48,7 @@ Usage (needs ``../shared/data``; ~1 s CPU per judged flight plus the references'
     python -m benchmarks.injected --masses 0.001 0.002 0.004 --rotor-changes -0.05 --out inj.json
     python -m benchmarks.injected --logs commands          # every log cut to IMU, pose, commands
     python -m benchmarks.injected --mode held-out          # 2 training + 1 held out, each changed
+    python -m benchmarks.injected --shipped --logs commands  # the set's shipped reference
 """
 
 from __future__ import annotations
@@ -296,8 +297,13 @@ def _gap(args: list[str], out: Path, cache: str | None = None) -> dict:
 
 def judge(paths: list[Path], references: list[Path], out: Path, model: str) -> dict:
     """The per-flight JSON of ``paths`` against ``references`` (:func:`_gap`)."""
-    return _gap(["--model", model, "--per-flight", *map(str, paths), "--reference",
-                 *map(str, references)], out)
+    return _gap(["--model", model, "--per-flight", *map(str, paths),
+                 *_against(references)], out)
+
+
+def _against(references: list[Path]) -> list[str]:
+    """``--reference`` and the references' files; none: the set's shipped reference."""
+    return ["--reference", *map(str, references)] if references else []
 
 
 def judge_held_out(train: list[Path], held: Path, references: list[Path], out: Path,
@@ -305,8 +311,8 @@ def judge_held_out(train: list[Path], held: Path, references: list[Path], out: P
     """The held-out verdict (JSON ``verdict``) of ``train`` with ``held`` held out against
     ``references`` (:func:`_gap`; ``cache`` shared by the runs of one harness run: the
     references' stage is computed once), as a per-flight entry (``verdict`` its ``effect``)."""
-    result = _gap(["--model", model, *map(str, train), "--holdout", str(held), "--reference",
-                   *map(str, references)], out, cache)
+    result = _gap(["--model", model, *map(str, train), "--holdout", str(held),
+                   *_against(references)], out, cache)
     verdict = dict(result["verdict"])
     return dict(verdict, verdict=verdict.get("effect"))
 
@@ -342,6 +348,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=DATA,
                     help="the crazyflie21_brushless folder of the shared data (default "
                          "../shared/data/crazyflie21_brushless beside the repository)")
+    ap.add_argument("--shipped", action="store_true",
+                    help="judge against the parameter set's shipped reference (no "
+                         "--reference given to quadsim.gap: for crazyflie21 its own 20 "
+                         "nominal flights, the commands-only file for logs without speeds)")
     ap.add_argument("--mode", choices=("per-flight", "held-out"), default="per-flight",
                     help="per-flight (default): each changed log judged against the "
                          "references; held-out: the flights in threes (2 training, the third "
@@ -354,8 +364,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     flights = args.flights or _plain_mixed(args.data)
-    references = args.reference or sorted((args.data / "nominal").glob("flight_*.csv.gz"))
-    if not flights or not references:
+    references = [] if args.shipped else (
+        args.reference or sorted((args.data / "nominal").glob("flight_*.csv.gz")))
+    if not flights or not (references or args.shipped):
         print(f"error: {args.data}: no flights found (give --flights and --reference)",
               file=sys.stderr)
         return 2
@@ -429,8 +440,10 @@ def main(argv: list[str] | None = None) -> int:
                else change.label)
         by.setdefault(key, []).append(answer)
     judged = "logs" if args.mode == "per-flight" else "held-out runs"
-    print(f"{len(flights)} flights, {len(answers)} {judged} judged against "
-          f"{len(references)} references ({args.model})")
+    against = (f"{len(references)} references" if references else
+               "the set's shipped reference")
+    print(f"{len(flights)} flights, {len(answers)} {judged} judged against {against} "
+          f"({args.model})")
     for key, rows in by.items():
         right = sum(r["right"] for r in rows)
         stated = sum(r["stated"] for r in rows)
