@@ -198,15 +198,21 @@ def _payload_total(flight: dict) -> float | None:
     return sum(masses) if masses else None
 
 
+def _listed(result, field: str, missing: str) -> list:
+    """``result[field]``, a non-empty list; else a ValueError ``field: missing``."""
+    rows = result.get(field) if isinstance(result, dict) else None
+    if not isinstance(rows, list) or not rows:
+        raise ValueError(f"{field}: {missing}")
+    return rows
+
+
 def mixed_answers(result: dict, labels: dict) -> list[Answer]:
     """Answers of a per-flight result (the ``quadsim.gap/3`` JSON) against ``labels``
     (``{"flights": {file: {"label": "payload" | "none"}}}``); a flight without a label is
     an error naming it; a result without per-flight ``flights`` (held out, or not a gap
     result) is a ValueError naming the field."""
-    flights = result.get("flights") if isinstance(result, dict) else None
-    if not isinstance(flights, list) or not flights:
-        raise ValueError("flights: no per-flight verdicts (give the JSON of "
-                         "`python -m quadsim.gap --per-flight ... --json`)")
+    flights = _listed(result, "flights", "no per-flight verdicts (give the JSON of "
+                      "`python -m quadsim.gap --per-flight ... --json`)")
     out = []
     for flight in flights:
         name = Path(str(flight["file"])).name
@@ -267,10 +273,8 @@ def injected_answers(result: dict) -> list[Answer]:
     """Answers of a ``python -m benchmarks.injected --out`` JSON (``answers``: each with
     ``flight``, ``change``, ``outcome``, ``verdict``, ``probability``, ``right``); a JSON
     without them is a ValueError naming the field. Right: module doc."""
-    rows = result.get("answers") if isinstance(result, dict) else None
-    if not isinstance(rows, list) or not rows:
-        raise ValueError("answers: no judged changes (give the --out JSON of "
-                         "`python -m benchmarks.injected`)")
+    rows = _listed(result, "answers", "no judged changes (give the --out JSON of "
+                   "`python -m benchmarks.injected`)")
     out = []
     for r in rows:
         stated = r.get("probability")
