@@ -317,6 +317,11 @@ def judge_held_out(train: list[Path], held: Path, references: list[Path], out: P
     return dict(verdict, verdict=verdict.get("effect"))
 
 
+def _without_commands(name: str) -> bool:
+    """``--logs speeds``: every column but the commands (``cmd_*``)."""
+    return not name.startswith("cmd_")
+
+
 def _plain_mixed(data: Path) -> list[Path]:
     labels = json.loads((data / "mixed_labels.json").read_text())["flights"]
     return sorted(data / "mixed" / name for name, entry in labels.items()
@@ -341,10 +346,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="every propeller's relative thrust change (default -8 %%)")
     ap.add_argument("--delays", type=float, nargs="*", default=[0.01],
                     help="rotor speeds logged this much later, s (default 10 ms)")
-    ap.add_argument("--logs", choices=("as-logged", "commands", "imu"), default="as-logged",
+    ap.add_argument("--logs", choices=("as-logged", "commands", "imu", "speeds"),
+                    default="as-logged",
                     help="cut every log (judged and references) to what a user may have, as "
                          "benchmarks.reference_subsets --logs does (commands: no rotor "
-                         "speeds; imu: no pose and no rotor speeds)")
+                         "speeds; imu: no pose and no rotor speeds); speeds: no commands (no "
+                         "rotor channel: the change read from the wrench alone)")
     ap.add_argument("--data", type=Path, default=DATA,
                     help="the crazyflie21_brushless folder of the shared data (default "
                          "../shared/data/crazyflie21_brushless beside the repository)")
@@ -371,7 +378,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     delays = args.delays
-    if args.logs != "as-logged" and delays:    # it lives in the rotor speeds, cut away
+    if args.logs in ("commands", "imu") and delays:    # it lives in the speeds, cut away
         print("note: --delays dropped: a rotor-speed logging delay does not reach a log "
               f"without rotor speeds (--logs {args.logs})")
         delays = []
@@ -409,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.logs != "as-logged":
             from benchmarks.reference_subsets import KEPT, cut_log
 
-            keep = KEPT[args.logs]
+            keep = _without_commands if args.logs == "speeds" else KEPT[args.logs]
             (folder / "references").mkdir()
             references = [cut_log(p, keep, folder / "references" / p.name)
                           for p in references]
