@@ -662,16 +662,13 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
                   key=lambda x: -x[0].probability)
 
 
-#: between two readings that their effects declare confusable (:func:`confusable`), a log
-#: evidence margin (natural log) the name must exceed for the data to tell them apart on a
-#: log with a pose: ln 150, "very strong" evidence on Kass & Raftery's scale (1995, J. Am.
-#: Stat. Assoc. 90: 2 ln B > 10). Why so much: what separates such a pair (the priors'
-#: widths, the moments, a small term in the rotor channel) is not the change itself, and the
-#: rotor channel is where the reference model's command model errs; rigid masses of 1-7.4 g
-#: at the CoM written into the real plain mixed flights (``python -m benchmarks.injected``)
-#: were read to within 0.2 g as a mass, yet named ``thrust_factor`` or ``thrust_curve`` by
-#: 0-4.2 units, two of them not tentative (without the commands 0.7-2.7 units: the priors;
-#: the rest the thrust factor's speed-per-command term taking up the commands).
+#: between two readings that their effects declare confusable (:func:`confusable`), the log
+#: evidence margin (natural log) the name must exceed for the data to count as telling them
+#: apart on a log with a pose: ln 150, "very strong" on Kass & Raftery's scale (1995, J. Am.
+#: Stat. Assoc. 90: 2 ln B > 10). Why so high: such a pair gives the same force, and what
+#: separates it (the priors' widths, the moments, the rotor channel's command model) is not
+#: the change itself; measured margins on real flights with a known change:
+#: benchmarks/README.md, "Real flights with a known change written in".
 SEPARATED = float(np.log(150.0))
 
 
