@@ -16,6 +16,7 @@ from quadsim.gap.reference import (
     Envelope,
     excitation,
     fit_channel_lines,
+    growth_law,
     local_reference,
     position,
 )
@@ -55,9 +56,10 @@ def test_an_exact_line_is_recovered_and_predicts_beyond_the_references():
 
 
 def test_the_prediction_spread_is_the_regressions():
-    """Noisy lines: spread sd sqrt(1 + d^2 / (S_xx (1 + 1/n))), so that the lack-of-fit
+    """Noisy lines: spread sd sqrt(1 + L^2 / (S_xx (1 + 1/n))), so that the lack-of-fit
     test's sqrt(1 + 1/n) makes it the regression's prediction spread
-    sd sqrt(1 + 1/n + d^2 / S_xx); sd pooled over the channels with C (n - 2) dof."""
+    sd sqrt(1 + 1/n + L^2 / S_xx), L the law's lever d(move)/d(slope) (|d| for a straight
+    line, d = x - mean); sd pooled over the channels with C (n - 2) dof."""
     rng = np.random.default_rng(3)
     log_ms = 1.5 * EXCITE + 0.1 * rng.standard_normal(EXCITE.shape)
     lines = fit_channel_lines(EXCITE, log_ms)
@@ -65,10 +67,57 @@ def test_the_prediction_spread_is_the_regressions():
     rest = log_ms - log_ms.mean(axis=0) - dx * lines.slope
     assert lines.sd == pytest.approx(np.sqrt(np.sum(rest ** 2) / 20), rel=1e-12)
     x = EXCITE.max(axis=0) + 0.3
-    _, _, spread = lines.beyond(x)
+    _, move, spread = lines.beyond(x)
     d = x - EXCITE.mean(axis=0)
-    np.testing.assert_allclose(spread * np.sqrt(1 + 1 / 4), lines.sd * np.sqrt(
-        1 + 1 / 4 + d ** 2 / np.sum(dx ** 2, axis=0)), rtol=1e-12)
+    # the lever: the law's log (1 + (slope / 2) (e^(2 d) - 1)) differentiated in the slope
+    # (central differences, on the channels whose slope lies within (0, 2), where the share
+    # f = slope / 2 is not clipped), never below |d|
+    inner = (lines.slope > 0) & (lines.slope < 2)
+    assert inner.sum() >= 8
+    h = 1e-6
+    law = lambda s: np.log1p(s / 2 * np.expm1(2 * d))       # noqa: E731
+    lever = np.maximum(np.abs(law(lines.slope + h) - law(lines.slope - h)) / (2 * h), np.abs(d))
+    want = lines.sd * np.sqrt(1 + 1 / 4 + lever ** 2 / np.sum(dx ** 2, axis=0))
+    np.testing.assert_allclose((spread * np.sqrt(1 + 1 / 4))[inner], want[inner], rtol=1e-6)
+    assert np.all(move >= lines.slope * d - 1e-12)
+
+
+def test_the_growth_law_is_noise_plus_an_error_in_proportion():
+    """ms = t ((1 - f) + f e^(2 d)), f = slope / 2: at slope 0 (noise only) and 2 (all of it
+    in proportion) the straight line itself; in between the log of that sum, above the line
+    (convex, tangent at d = 0); a falling line (slope < 0) keeps its own move where it is the
+    larger and the law's 0 beyond."""
+    d = np.array([-1.0, -0.2, 0.0, 0.4, 1.8])
+    for slope in (0.0, 2.0):
+        move, lever = growth_law(np.full(5, slope), d)
+        np.testing.assert_allclose(move, slope * d, atol=1e-12)
+    move, lever = growth_law(np.full(5, 0.1), d)
+    np.testing.assert_allclose(move, np.log(0.95 + 0.05 * np.exp(2 * d)), rtol=1e-12)
+    assert np.all(move >= 0.1 * d - 1e-15)
+    # mixed flight 100's Fz cut to IMU and commands: a slope of 0.1174, 1.811 beyond the mean
+    assert growth_law(np.array([0.1174]), np.array([1.811]))[0][0] == pytest.approx(
+        1.143, abs=1e-3)
+    move, _ = growth_law(np.full(5, -0.3), d)
+    np.testing.assert_allclose(move, np.maximum(-0.3 * d, 0.0), atol=1e-12)
+
+
+def test_a_proportional_error_hidden_under_the_noise_is_expected_beyond_the_references():
+    """References whose residual is noise plus a model error in proportion to the signal,
+    the error 5 % of the noise's mean square at their mean excitation: their straight line
+    is nearly flat, yet a flight flown e-fold harder than the largest of them meets the
+    error grown by e^2 there. The law's move tracks the true log mean square within the
+    line's standard error times its lever; the straight line falls short by more than that."""
+    x = np.linspace(-0.6, 0.6, 20)[:, None].repeat(6, axis=1)
+    true = lambda z: np.log(1.0 + 0.05 * np.exp(2 * z))      # noqa: E731
+    lines = fit_channel_lines(x, true(x) - true(x).mean(axis=0))
+    flight = np.full(6, x.max() + 1.0)
+    _, move, spread = lines.beyond(flight)
+    want = true(flight) - true(x).mean(axis=0)
+    se = 1.0 / np.sqrt(lines.s_xx)           # per unit of the pooled spread
+    _, lever = growth_law(lines.slope, flight - lines.mean)
+    assert np.all(np.abs(move - want) < 0.15 * want)
+    assert np.all(want - lines.slope * (flight - lines.mean) > 0.5)
+    assert np.all(lever * se > flight - lines.mean)
 
 
 def test_the_reference_model_carries_the_line_only_where_the_flight_is_beyond():
