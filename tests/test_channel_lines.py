@@ -148,3 +148,46 @@ def test_the_reference_model_carries_the_line_only_where_the_flight_is_beyond():
     keep = np.arange(10) != 1
     np.testing.assert_array_equal(local.sigma[keep], ref.sigma[keep])
     np.testing.assert_array_equal(local.lof_sd[keep], lof_sd[keep])
+
+
+def test_a_residual_between_the_straight_line_and_the_law_is_grown_not_a_lack_of_fit():
+    """References whose Fy residual grows with a slope of 0.3 per log excitation (a share
+    0.15 of their mean square in proportion to the signal): a flight driving Fy 2 beyond
+    their mean keeps the straight line's expectation beside the law's (``lof_line``), and a
+    residual between the two is no lack of fit (the law's) but is grown (the straight
+    line's, judge.grown_lack), with the sentence that says so; inside the references'
+    excitation nothing is kept and nothing is grown."""
+    from quadsim.gap.judge import Baseline, grown_lack, lack_of_fit
+    from quadsim.gap.words import grown_words
+
+    ref, _, _ = _reference(COORDS, slope=0.0, lof_slope=0.0)
+    rng = np.random.default_rng(7)
+    log_ms = 0.3 * (EXCITE - EXCITE.mean(axis=0)) + 0.02 * rng.standard_normal(EXCITE.shape)
+    lines = fit_channel_lines(EXCITE, log_ms)
+    ref.envelope = Envelope(ref.envelope.coords, ref.envelope.trend, lines)
+    pos = position(_states(*COORDS[1:3].mean(0)), Envelope(ref.envelope.coords,
+                                                          ref.envelope.trend))
+    inside = local_reference(ref, dataclasses.replace(pos, excite=EXCITE[1:3].mean(axis=0)))
+    assert inside.lof_line is None
+    x = EXCITE[1:3].mean(axis=0)
+    x[1] = EXCITE[:, 1].mean() + 2.0
+    local = local_reference(ref, dataclasses.replace(pos, excite=x))
+    _, line_move, line_spread = lines.beyond(x, straight=True)
+    _, law_move, _ = lines.beyond(x)
+    assert local.lof_line is not None
+    assert local.lof_line[0][1] == pytest.approx(ref.lof_mean[1] + line_move[1], abs=1e-12)
+    assert local.lof_mean[1] == pytest.approx(ref.lof_mean[1] + law_move[1], abs=1e-12)
+    assert law_move[1] - line_move[1] > 1.4          # log(1 + 0.15 (e^4 - 1)) = 2.2 vs 0.6
+    keep = np.arange(10) != 1
+    np.testing.assert_array_equal(local.lof_line[0][keep], local.lof_mean[keep])
+    # a flight whose Fy mean square lies at the law's expectation: within it, beyond the line
+    ms = np.exp(local.lof_mean.copy())
+    assert lack_of_fit(ms, Baseline.of_reference(local), local) == {}
+    grown = grown_lack(ms, local)
+    assert list(grown) == ["Fy"]
+    assert grown["Fy"][0] == pytest.approx(np.exp(0.5 * (law_move[1] - line_move[1])),
+                                           rel=1e-9)
+    assert grown_lack(ms, inside) == {}
+    text = grown_words(grown)
+    assert text.startswith(" Not sure: this flight drives Fy harder than every reference")
+    assert f"Fy {grown['Fy'][0]:.2g}x" in text and grown_words({}) == ""

@@ -178,6 +178,14 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    each), a channel a lack of fit when it lies beyond on every training flight (what they
    share: an intersection-union test, at the per-flight level with no correction over the
    flights); beyond on some only (:func:`alone`) it is stated, and a name is tentative.
+   *Grown* (:func:`grown_lack`): beyond the references on a channel, their lack of fit is
+   expected by the law of noise plus an error in proportion to the signal
+   (:func:`quadsim.gap.reference.growth_law`), not by a straight line in log ms. A channel
+   the law's baseline passes and the straight line's would flag lies where the reference
+   model's own error, grown so far beyond them, cannot be told from a difference of the
+   flight: the verdict (``no_significant_gap`` or a name) is tentative, and the sentence of
+   :func:`quadsim.gap.words.grown_words` says so. Held out against nominal references: a
+   channel grown on any training flight (and not already stated by :func:`alone`).
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
