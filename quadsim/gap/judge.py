@@ -178,6 +178,14 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    each), a channel a lack of fit when it lies beyond on every training flight (what they
    share: an intersection-union test, at the per-flight level with no correction over the
    flights); beyond on some only (:func:`alone`) it is stated, and a name is tentative.
+   *Grown* (:func:`grown_lack`): beyond the references on a channel, their lack of fit is
+   expected by the law of noise plus an error in proportion to the signal
+   (:func:`quadsim.gap.reference.growth_law`), not by a straight line in log ms. A channel
+   the law's baseline passes and the straight line's would flag lies where the reference
+   model's own error, grown so far beyond them, cannot be told from a difference of the
+   flight: the verdict (``no_significant_gap`` or a name) is tentative, and the sentence of
+   :func:`quadsim.gap.words.grown_words` says so. Held out against nominal references: a
+   channel grown on any training flight (and not already stated by :func:`alone`).
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
@@ -245,6 +253,7 @@ from .words import (
     across_sessions,
     answer,
     asserted,
+    grown_words,
     nominal_words,
     outside_words,
     reach_words,
@@ -261,7 +270,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "FEW_WORDS", "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
+           "grown_lack", "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
            "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
@@ -1105,6 +1114,25 @@ def reach_baseline(baseline: Baseline, reach) -> Baseline:
     return dataclasses.replace(baseline, mean=np.log(np.exp(baseline.mean) + reach.allowance))
 
 
+def grown_lack(ms, reference, *, null_ms=None) -> dict:
+    """Channels a reading leaving mean squares ``ms`` (C,; sigma_c^2 units) leaves beyond
+    what the references' straight lines of their lack of fit expect at the flight's place
+    (``reference.lof_line``, :func:`quadsim.gap.reference.local_reference`), as
+    :func:`lack_of_fit` reads them (with the reach's allowance, the same form-error
+    exemption): where the lack of fit itself (by :func:`quadsim.gap.reference.growth_law`)
+    finds none, such a channel lies between the two, where the reference model's own
+    error, grown in proportion to the signal, and a difference of this flight cannot be
+    told apart (module doc, 2: "grown"; not sure). {} where the law and the lines agree."""
+    line = getattr(reference, "lof_line", None)
+    if line is None:
+        return {}
+    base = dataclasses.replace(Baseline.of_reference(reference),
+                               mean=np.asarray(line[0], float),
+                               spread=np.asarray(line[1], float))
+    return lack_of_fit(ms, reach_baseline(base, getattr(reference, "reach", None)), reference,
+                       null_ms=null_ms)
+
+
 def within_form_error(ms, null_ms, typical) -> bool:
     """Whether a reading leaving mean squares ``ms`` (..., C; sigma_c^2 units) leaves at most
     :data:`FORM_ERROR` of the gap "no difference" leaves (``null_ms``), each counted as the
@@ -1274,7 +1302,7 @@ def placed_slow(slow, calibrated, local) -> np.ndarray:
     return np.exp(mean + move + (logs - mean) * grow)
 
 
-def training_lack(lead, null, reference, placed=None) -> list[dict]:
+def training_lack(lead, null, reference, placed=None, *, grown: bool = False) -> list[dict]:
     """Held out against nominal references, each training flight judged as per flight
     (:func:`judge`'s rule, H = 1): the :func:`lack_of_fit` of the reading ``lead`` (a
     :class:`~quadsim.gap.heldout.Weighed`) on training flight j against
@@ -1293,7 +1321,8 @@ def training_lack(lead, null, reference, placed=None) -> list[dict]:
         ms = mean_squares([resid], ref.sigma)
         null_ms = None if null is None or null is lead else \
             mean_squares([null.train_residuals[j]], ref.sigma)
-        out.append(lack_of_fit(ms, reach_baseline(Baseline.of_reference(ref),
+        out.append(grown_lack(ms, ref, null_ms=null_ms) if grown else
+                   lack_of_fit(ms, reach_baseline(Baseline.of_reference(ref),
                                                   getattr(ref, "reach", None)),
                                ref, null_ms=null_ms))
     return out
@@ -1502,6 +1531,9 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                    allowance=None if reach is None else reach.allowance)
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
+    # beyond the references' straight lines, within the law's growth: not sure (2, grown)
+    grown = {} if lack or left else grown_lack(
+        best.ms, reference, null_ms=None if null is None or null is best else null.ms)
     # a rotor timing the data cannot separate (lag or delay within the references' own
     # margins, timing_rival): both readings stated, the name tentative
     rival = timing_rival(top, rows, check) if not lack else None
@@ -1543,7 +1575,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # term, or not clean: :func:`unvouched`): what they share cannot be told from a
     # difference of this flight (docs/gap.md)
     doubt = unvouched(check, reference)
-    unsure = bool(doubt) or bool(left) or bool(caveat) or bool(remains) or timing is not None
+    unsure = bool(doubt) or bool(left) or bool(caveat) or bool(remains) or timing is not None \
+        or bool(grown)
     words = stand_in_words(lead.name, p_top, readings[0].magnitude, share, p_out) \
         if stand_in else \
         answer(outcome, lead, stated=[r for r in stated if r is not lead], lack=lack,
@@ -1567,8 +1600,9 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
                   "for it.")
     if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
+    words += grown_words(grown)
     # the no difference a reading's weight went to beyond the reach (1c): not sure
-    unsure_null = not_sure(outcome, moved)
+    unsure_null = not_sure(outcome, moved) or bool(grown)
     evs = {k: ev for k, _, ev in within}
     said = {k: (p, f, "" if effect and k == top else
                 reading_text(sizes.get(id(evs[k]), evs[k]), reference))
@@ -1748,11 +1782,16 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     left: dict = {}
     beyond: dict = {}
     lone: dict = {}         # beyond the references on some training flights, not shared
+    grown: dict = {}        # beyond their straight lines, within the law's growth (2)
     share = float("inf")
     if per_flight:
         beyond, left, share = against_reference(lead, decision.null, reference, placed)
         lone = alone(training_lack(lead, decision.null, reference, placed))
         lack = {**lack, **{k: v for k, v in beyond.items() if k not in lack}}
+        if not lack and not left:           # as per flight (2, grown): not sure
+            grown = {k: v for d in training_lack(lead, decision.null, reference, placed,
+                                                 grown=True)
+                     for k, v in d.items() if k not in lone}
     remains = {} if per_flight and lead_name == "no_difference" else \
         remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     checked = decision.consistency if entry is not None else None
@@ -1789,7 +1828,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     # flight; the answer says why (:meth:`quadsim.gap.diagnose.Against.words`)
     doubt = unvouched(getattr(reference, "self_check", None), reference) if references else ""
     unsure = bool(caveat) or bool(remains) or bool(tied) or bool(left) or bool(lone) \
-        or timing is not None or bool(doubt)
+        or timing is not None or bool(doubt) or bool(grown)
     # beside a name that leaves something beyond the references' (a lack of fit within the
     # tentative share, or a remainder), "outside the library" weighs by the share it leaves
     # on the training flights, each against the references (the per-flight rule 1b and its
@@ -1824,10 +1863,11 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     words += _unseparated_words(tied, shown, separate_by) + caveat
     if lone and outcome != "unexplained":
         words += _alone_words(lone, flown)
+    words += grown_words(grown)
     # beyond the references' reach, the no difference a reading's weight went to (1c, as
     # per flight: the split is decide's, quadsim.gap.diagnose.Against.split): not sure
     moved = getattr(decision, "moved", None) or {}
-    unsure_null = not_sure(outcome, moved)
+    unsure_null = not_sure(outcome, moved) or bool(grown)
     # each reading as its row states it (its name by the lead rule, its magnitude)
     as_row = {k: r for r, (k, _, _) in zip(decision.rows, decision.ranked)} if moved else {}
     said = {(as_row[k]["name"] if k in as_row else k):

@@ -164,13 +164,27 @@ Each channel's log mean square is regressed on that channel's own excitation x_c
 (:func:`excitation`: the log RMS of its signal about the flight's mean; specific force,
 angular acceleration, rotor speed) by ordinary least squares: slope h_c, residual spread s_x
 pooled over channels (C (n - 2) degrees of freedom). A flight whose x_c lies outside the
-references' range expects at least the line's move there, ``h_c (x_c - mean(x_c))`` (in the
-lack-of-fit mean only, not in the noise scale as the trend's move is: a flight's own effect may
-be what drives the channel, and a wider noise would halve its reading's precision), and at
-least its prediction spread,
-``s_x sqrt(1 + 1/n + (x_c - mean(x_c))^2 / S_xx)`` (over the lack-of-fit test's
-sqrt(1 + 1/n)): what the references show of how that channel's residual grows with how hard
-it is driven, with the line's own uncertainty, rather than the pooled axis's average growth.
+references' range expects at least the line's move there (in the lack-of-fit mean only, not
+in the noise scale as the trend's move is: a flight's own effect may be what drives the
+channel, and a wider noise would halve its reading's precision), and at least its prediction
+spread (over the lack-of-fit test's sqrt(1 + 1/n)): what the references show of how that
+channel's residual grows with how hard it is driven, with the line's own uncertainty, rather
+than the pooled axis's average growth.
+
+The move is read by a law, not the straight line (:func:`growth_law`). A reference's mean
+square is noise plus the model's error; an error in proportion to the signal grows as
+e^(2 x), the noise does not: ms = t ((1 - f) + f e^(2 d)), d = x_c - mean(x_c), t the
+references' typical mean square and f the share of it that grows, whose log-log slope at
+their mean is 2 f. So f = clip(h_c / 2, 0, 1) and the move is log((1 - f) + f e^(2 d)),
+never below the line's h_c d. Within the references the two agree to first order (the line
+is the law's tangent at d = 0; at h_c = 0 and 2 they are the same); beyond them the straight
+line of a log mean square falls short wherever an error below the noise grows into view: the
+real Crazyflie references cut to IMU and commands have an Fz line rising 0.12 per log unit,
+and a plain mixed flight driving Fz 1.81 beyond their mean (3.3x the hardest of them) meets
+log(1 + 0.059 (e^3.62 - 1)) = 1.14 there, not the line's 0.21 (docs/logs.md, "What a log
+needs"). The prediction spread is
+``s_x sqrt(1 + 1/n + L^2 / S_xx)``, L = d(move)/d(h_c) the law's lever on the slope's
+uncertainty (|d| for the straight line, never below it).
 
 A second line per noise-biased parameter (:data:`quadsim.gap.calibrate.NOISE_BIASED`): its
 inverse information per sample q_j = se_j^2 N_j (:func:`quadsim.gap.calibrate.inverse_information`).
@@ -300,6 +314,7 @@ __all__ = ["moderated_spread", "FORCE_FEATURES", "MOMENT_FEATURES", "RIDGE", "Di
            "weighted_residual", "COORDINATES", "FLOORS", "MIN_FLIGHTS", "MIN_SPREAD", "Envelope",
            "Position", "Trend", "coordinates", "envelope_of", "envelope_summary", "fit_trend",
            "local_reference", "position", "ChannelLines", "excitation", "fit_channel_lines",
+           "growth_law",
            "Reach", "reach_of", "slope_errors", "PROPORTIONAL_SLOPE", "REACH_Z"]
 
 
@@ -766,6 +781,12 @@ class Reference:
     #: flight outside the references' envelope is tested with at least
     #: (:mod:`quadsim.gap.reference`); None: ``lof_sd`` is the pooled spread already
     lof_pooled: tuple | None = None
+    #: at a flight's place (:func:`quadsim.gap.reference.local_reference`), (mean (C,),
+    #: spread (C,)): the lack-of-fit statistics had the channel lines been read as straight
+    #: lines, where :func:`quadsim.gap.reference.growth_law` expects more (a residual beyond
+    #: these and within ``lof_mean``/``lof_sd`` is the judgment's "grown": not sure); None
+    #: where the two agree
+    lof_line: tuple | None = None
     #: the lack-of-fit baseline from flights other than the references (held-out mode's
     #: training flights, :class:`LackOfFitBaseline`); None: ``lof_mean``/``lof_sd``/``lof_dof``
     baseline: LackOfFitBaseline | None = None
@@ -944,16 +965,38 @@ class ChannelLines:
     dof: int
     n: int
 
-    def beyond(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def beyond(self, x: np.ndarray, *, straight: bool = False
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At a flight's excitation ``x`` (C,): (beyond (C,) bool: outside the references'
-        range, move (C,) the line's log mean square over the references' mean there,
-        spread (C,) its prediction spread over sqrt(1 + 1/n), as the lack-of-fit spreads
-        are: sd sqrt(1 + d^2 / (S_xx (1 + 1/n))), d = x - mean)."""
+        range, move (C,) the line's log mean square over the references' mean there, read
+        by :func:`growth_law` (``straight``: the straight line's slope d), spread (C,) its
+        prediction spread over sqrt(1 + 1/n), as the lack-of-fit spreads are:
+        sd sqrt(1 + L^2 / (S_xx (1 + 1/n))), d = x - mean, L the law's lever (|d|
+        straight))."""
         x = np.asarray(x, float)
         d = x - self.mean
-        spread = self.sd * np.sqrt(1.0 + d ** 2 / (np.maximum(self.s_xx, 1e-300)
-                                                    * (1.0 + 1.0 / self.n)))
-        return (x > self.high) | (x < self.low), self.slope * d, spread
+        move, lever = (self.slope * d, np.abs(d)) if straight else growth_law(self.slope, d)
+        spread = self.sd * np.sqrt(1.0 + lever ** 2 / (np.maximum(self.s_xx, 1e-300)
+                                                        * (1.0 + 1.0 / self.n)))
+        return (x > self.high) | (x < self.low), move, spread
+
+
+def growth_law(slope: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A channel's log mean square ``d`` log excitation units from the references' mean,
+    by the noise-plus-proportional-error law (module doc, "The envelope"): ms = t ((1 - f) +
+    f e^(2 d)), f = clip(slope / 2, 0, 1) the share of the references' typical mean square t
+    that grows in proportion to the excitation (slope: the line's d(log ms)/d(excitation)
+    at their mean, 2 f under the law). Returns (move (C,), the law's log ms over log t and
+    never below the line's ``slope d``; lever (C,), d(move)/d(slope) and never below |d|,
+    what the slope's standard error is multiplied by in the prediction spread)."""
+    slope = np.asarray(slope, float)
+    d = np.asarray(d, float)
+    share = np.clip(slope / PROPORTIONAL_SLOPE, 0.0, 1.0)
+    grow = np.expm1(PROPORTIONAL_SLOPE * d)
+    level = np.maximum(1.0 + share * grow, 1e-300)
+    move = np.maximum(slope * d, np.log(level))
+    lever = np.maximum(np.abs(grow / (PROPORTIONAL_SLOPE * level)), np.abs(d))
+    return move, lever
 
 
 def fit_channel_lines(excite: np.ndarray | None, log_ms: np.ndarray) -> ChannelLines | None:
@@ -1366,7 +1409,12 @@ def _placed_model(reference, pos: Position | None, beyond_reach: bool = False):
     # a channel driven beyond every reference expects its line's lack of fit there: in the
     # lack-of-fit statistics only, not in the noise scale (the flight's own effect may be
     # what drives the channel: widening its noise would halve the effect's own precision)
+    line = _channel_growth(reference, pos, shift, spread, straight=True)
     shift, spread = _channel_growth(reference, pos, shift, spread)
+    # what the straight lines would have expected, where the law expects more (the
+    # judgment's "grown" rule: a residual between the two is not sure)
+    line = None if np.array_equal(line[0], shift) and np.array_equal(line[1], spread) else \
+        (reference.lof_mean + line[0] - widen, line[1])
     lower, upper = getattr(reference, "bounds", None) or parameter_bounds(reference.candidate,
                                                                  reference.params)
     move, var = _predicted_move(trend, pos, edge, beyond_reach or not trend.measured)
@@ -1376,19 +1424,21 @@ def _placed_model(reference, pos: Position | None, beyond_reach: bool = False):
     scatter = np.sqrt(scatter ** 2 + var + (predicted - theta) ** 2)
     return dataclasses.replace(
         reference, theta=theta, scatter=scatter, sigma=reference.sigma * np.exp(widen / 2),
-        lof_mean=reference.lof_mean + shift - widen, lof_sd=spread, place=pos)
+        lof_mean=reference.lof_mean + shift - widen, lof_sd=spread, place=pos, lof_line=line)
 
 
-def _channel_growth(reference, pos: Position, shift, spread) -> tuple[np.ndarray, np.ndarray]:
+def _channel_growth(reference, pos: Position, shift, spread, *, straight: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """The lack-of-fit move ``shift`` (C,) and spread ``spread`` (C,) of
     :func:`local_reference`, on each channel whose excitation the flight drives beyond every
     reference's (:class:`ChannelLines`, module doc) at least the references' own line of
-    that channel's lack of fit against its excitation there: its move (never below the
-    trend's) and its prediction spread (never below the spread already there)."""
+    that channel's lack of fit against its excitation there, read by :func:`growth_law`
+    (``straight``: as a straight line): its move (never below the trend's) and its
+    prediction spread (never below the spread already there)."""
     lines = getattr(reference.envelope, "lines", None)
     if lines is None or pos.excite is None or len(pos.excite) < len(shift):
         return shift, spread
-    out, move, wide = lines.beyond(pos.excite[:len(shift)])
+    out, move, wide = lines.beyond(pos.excite[:len(shift)], straight=straight)
     return (np.where(out, np.maximum(shift, move), shift),
             np.where(out, np.maximum(spread, wide), spread))
 

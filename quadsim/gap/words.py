@@ -37,7 +37,8 @@ from .logcheck import TIMING_WORDS  # defined there: logcheck imports no gap mod
 from .residual import channel_unit
 
 __all__ = ["across_sessions", "answer", "asserted", "batch_answer", "nominal_words",
-           "outside_words", "reach_words", "reading_text", "reference_text", "residual_text",
+           "grown_words", "outside_words", "reach_words", "reading_text", "reference_text",
+           "residual_text",
            "session_text", "stand_in_words", "timing_words", "total_mass", "weighed_keys",
            "TIMING_WORDS", "bound_words", "left_out_words", "refit_words"]
 
@@ -382,6 +383,22 @@ def outside_words(p_out: float, share: float, within: float, *,
         if np.isfinite(share) else ""
     return (f" Of its {_pct(within)} among the library's readings, {100 * p_out:.0f} % is "
             f"that it stands in for an effect outside the library{source}.")
+
+
+def grown_words(grown: dict) -> str:
+    """The sentence of a residual between the references' straight lines and their growth
+    law (:func:`quadsim.gap.judge.grown_lack`): ``grown`` channel -> (RMS over the typical
+    RMS the straight line expects there, z); "" where none. E.g. " Not sure: this flight
+    drives Fz harder than every reference, and its residual there (2.1x the references'
+    straight-line trend) ..."."""
+    if not grown:
+        return ""
+    where = ", ".join(f"{k} {v[0]:.2g}x" for k, v in grown.items())
+    return (f" Not sure: this flight drives {', '.join(grown)} harder than every reference, "
+            f"and its residual there ({where} what the references' straight-line trend of it "
+            "expects) lies within what the reference model's own error may grow to so far "
+            "beyond them (noise plus an error in proportion to the signal): that growth "
+            "cannot be told from a difference of this flight.")
 
 
 def reach_words(reach, moved: dict, *, outcome: str, bias: float = 0.0) -> str:
