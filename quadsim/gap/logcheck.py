@@ -123,6 +123,17 @@ Stand-ins (:func:`posefree_log`): the pose-less log gets position 0, velocity 0 
 identity attitude, so that the states have the shape every stage expects; no effect weighed
 on it reads them (the filter above), and ``FlightStates.pose`` is False.
 
+With the attitude and no position (the on-board estimate's Euler angles, as most flight
+controllers log them; ``FlightLog.has_attitude``): the logged attitude is kept in place of
+the identity, and the states' ``accel_world`` is the accelerometer turned to the world by
+it, a = R f - g e_z (:func:`posefree_states`; f the specific force at the body origin), the
+vehicle's acceleration without differentiating a position. The parts logged
+(:func:`logged_parts`) are then the attitude alone: an effect is weighed when every part it
+declares is logged (:func:`needs_pose`), so a payload swinging on a cable is (its swing reads
+the vertical and that acceleration: :class:`quadsim.gap.fitting.CableSwing`, through
+:attr:`quadsim.effects.base.EffectContext.accel_world`), the drags, wind and ground effect
+are not, and :func:`missing_words` names only what is missing.
+
 Example::
 
     >>> from quadsim.gap.logcheck import missing_words, posefree_log
