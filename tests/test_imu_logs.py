@@ -367,6 +367,13 @@ def test_dataflash_without_position_converts_as_imu_log(tmp_path, capsys):
     log = load_log(out, warn=False)
     assert not log.has_pose and log.rotor_command.shape[1] == 4 and log.vbat is not None
     np.testing.assert_allclose(np.median(log.accel[:, 2]), G, rtol=0.2)
+    # its ATT kept on the IMU instants (issue 47): the circle's constant tilt, as flown
+    assert log.has_attitude and "read as IMU + motors with the attitude" in said.err
+    truth = sample_flight(duration_s=3.0).quat
+
+    def tilt(q):
+        return np.arccos(np.clip(1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2), -1.0, 1.0))
+    np.testing.assert_allclose(tilt(log.quat), np.median(tilt(truth)), atol=1e-3)
 
 
 def test_convert_model_checks_an_imu_log_and_says_what_it_cannot(imu_usd, tmp_path, capsys):

@@ -253,14 +253,19 @@ def test_ulog_round_trip(tmp_path):
 
 
 def test_ulog_bad_inputs(tmp_path, capsys):
-    # no position: an IMU + motors log (issue 44), converted with a warning, no pose columns
+    # no position: an IMU + motors log (issue 44) with its attitude kept (issue 47),
+    # converted with a warning, no position columns; the attitude is PX4's own, turned to ours
     path = tmp_path / "nopos.ulg"
     _write_ulog(path, _px4_topics(position=False))
     assert convert_main([str(path), "-o", str(tmp_path / "imu.csv.gz")]) == 0
-    assert "vehicle_local_position x/y/z: not in the log: read as IMU + motors" in \
-        capsys.readouterr().err
+    assert "vehicle_local_position x/y/z: not in the log: read as IMU + motors with the " \
+        "attitude" in capsys.readouterr().err
     imu = load_log(tmp_path / "imu.csv.gz")
-    assert imu.position is None and imu.quat is None and not imu.has_pose
+    assert imu.position is None and imu.quat is not None and not imu.has_pose
+    euler = quat_to_euler(imu.quat)          # FRD/NED -> ours: roll kept, pitch, yaw negated
+    np.testing.assert_allclose(euler[:, 1:], np.tile([-0.1, -0.5], (len(imu.t), 1)),
+                               atol=1e-6)
+    assert np.max(np.abs(euler[:, 0])) <= 0.3 + 1e-6 and np.ptp(euler[:, 0]) > 0.4
     assert imu.accel is not None and imu.body_rate is not None and imu.rotor_command is not None
     path = tmp_path / "range.ulg"
     _write_ulog(path, _px4_topics(motors=1500.0))

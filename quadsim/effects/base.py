@@ -100,6 +100,11 @@ class EffectContext:
     #: body_rate), kept across the many model evaluations of one flight by a caller that
     #: evaluates many models on the same samples (the gap fits); None: nothing is kept
     flight_memo: dict | None = None
+    #: the vehicle's acceleration (B, 3, world, m/s^2) where the caller knows it but not the
+    #: velocity (a log with the IMU and the attitude and no position: the accelerometer
+    #: turned to the world, :func:`quadsim.gap.logcheck.posefree_states`); None: an effect
+    #: that needs it differentiates ``velocity``
+    accel_world: np.ndarray | None = None
 
     def rotmat(self) -> np.ndarray:
         """Body-to-world rotation matrices (B, 3, 3) of ``quat``, computed once."""

@@ -231,8 +231,10 @@ from .logcheck import (
     check_length,
     check_same_kind,
     confusable_note,
+    logged_parts,
     needs_pose,
     posefree_log,
+    posefree_states,
     synthesised_timing_note,
     vehicle_check,
     without_pose_note,
@@ -338,7 +340,7 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         pieces = [flight_states(p if p.has_pose else posefree_log(p), window_s=window_s,
                                 gravity=params.gravity, dt=step) for p, _ in parts]
         if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.logcheck)
-            pieces = [dataclasses.replace(s, pose=False) for s in pieces]
+            pieces = [posefree_states(s, log.has_attitude, params.gravity) for s in pieces]
         pieces = [s.take(interior(s.t)) for s in pieces]
         states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
@@ -373,7 +375,8 @@ def decimated(states: FlightStates, stride: int) -> FlightStates:
                               low(states.body_accel), low(states.specific_force),
                               low(states.rotor_speed), low(states.rotor_accel),
                               low(states.command), low(states.vbat), states.accel_source,
-                              states.window_s, states.polyorder, states.name, states.pose)
+                              states.window_s, states.polyorder, states.name, states.pose,
+                              states.attitude)
     return low_passed.take(np.arange(0, len(states.t), stride))
 
 
@@ -1261,7 +1264,7 @@ def heldout_explanations(reference: Reference, train_states, names=None,
         keep = set(names) | {"no_difference", "nominal_refit"}
         out = [e for e in out if e.name in keep]
     if not getattr(train_states, "pose", True):         # IMU and motors only (.posefree)
-        out = [e for e in out if not needs_pose(e.parts)]
+        out = [e for e in out if not needs_pose(e.parts, logged_parts(train_states))]
     return out
 
 

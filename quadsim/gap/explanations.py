@@ -52,7 +52,7 @@ from ..effects.translational_lift import TranslationalLift
 from . import fitting as cable
 from .calibrate import SHARED, Reference
 from .fitting import DETERMINED, FIT_EFFECTS, WIND_SD_MS, build_effect
-from .logcheck import needs_pose
+from .logcheck import logged_parts, needs_pose
 
 __all__ = [
     "DELAY_SD_S",
@@ -319,7 +319,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         keep = set(names) | {"no_difference", "signal_delay"}
         out = [e for e in out if e.name in keep]
     if not getattr(states, "pose", True):       # IMU and motors only (quadsim.gap.logcheck)
-        out = [e for e in out if not needs_pose(e.parts)]
+        out = [e for e in out if not needs_pose(e.parts, logged_parts(states))]
     if delay:       # the rotor delay as a shared parameter of every other explanation
         tight = reference_delay_sd(reference)
         out = [e if e.shift else dataclasses.replace(e, mean=e.mean + (0.0,),

@@ -438,15 +438,17 @@ def swing(t: np.ndarray, accel: np.ndarray, length: float, gravity: float,
 ACCEL_WINDOW_S = 0.25
 
 
-def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _derivative(t: np.ndarray, x: np.ndarray, deriv: int = 1) -> np.ndarray:
     """d x / d t (N, 3), Savitzky-Golay (cubic, :data:`ACCEL_WINDOW_S`) per stretch of
     uniform samples (a time jump starts a new one): :func:`quadsim.logs.savgol.savgol`,
     scipy's ``savgol_filter`` to round-off with the ends' fits built once per window (a
-    payload's mount height moves the attachment, and each height differentiates anew)."""
+    payload's mount height moves the attachment, and each height differentiates anew).
+    ``deriv`` 0: the same filter's smoothed ``x`` (an acceleration logged as such, given the
+    response a differentiated velocity has)."""
     from ..logs.savgol import savgol
 
     if len(t) < 3:
-        return np.zeros_like(x)
+        return np.zeros_like(x) if deriv else np.array(x, dtype=float)
     dt = np.diff(t)
     cut = np.nonzero(np.abs(dt - dt[0]) > 0.5 * dt[0])[0] + 1
     out = np.zeros_like(x)
@@ -456,9 +458,11 @@ def _derivative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
         step = float(t[piece[1]] - t[piece[0]])
         window = min(len(piece) - (1 - len(piece) % 2), 2 * int(ACCEL_WINDOW_S / (2 * step)) + 1)
         if window >= 5:
-            out[piece] = savgol(x[piece], window, 3, deriv=1, delta=step)
-        else:
+            out[piece] = savgol(x[piece], window, 3, deriv=deriv, delta=step)
+        elif deriv:
             out[piece] = np.gradient(x[piece], t[piece], axis=0)
+        else:
+            out[piece] = x[piece]
     return out
 
 
@@ -503,18 +507,24 @@ class CableSwing(CablePayload):
         return 0
 
     def pull(self, t, position, velocity, quat, body_rate, params: VehicleParams, *,
-             rotation: np.ndarray | None = None, memo: dict | None = None):
+             rotation: np.ndarray | None = None, memo: dict | None = None,
+             accel_world: np.ndarray | None = None):
         """Cable pull on the vehicle: force (N, 3, world N), torque about the CoM (N, 3, body
         N m) and the swing angle from the vertical (N,, rad). ``rotation``: ``quat``'s
         matrices when the caller has them; ``memo``: a dict kept across calls on the same
-        logged motion (the attachment's acceleration is kept there per attachment point)."""
+        logged motion (the attachment's acceleration is kept there per attachment point).
+        The attachment's acceleration is d/dt (v + R (w x r_a)), ``velocity`` differentiated;
+        ``accel_world`` (N, 3, m/s^2): the vehicle's acceleration where no velocity is
+        logged (IMU and attitude: :attr:`quadsim.effects.base.EffectContext.accel_world`),
+        then a + d/dt R (w x r_a), ``accel_world`` through the same filter."""
         rot = quat_to_rotmat(quat) if rotation is None else rotation
         arm = np.array([self.x, self.y, self.z])
         key = ("cable_accel", self.x, self.y, self.z)
         accel = None if memo is None else memo.get(key)
         if accel is None:
-            moving = velocity + np.einsum("bij,bj->bi", rot, cross(body_rate, arm))
-            accel = _derivative(t, moving)
+            turning = np.einsum("bij,bj->bi", rot, cross(body_rate, arm))
+            accel = _derivative(t, velocity + turning) if accel_world is None else \
+                _derivative(t, turning) + _derivative(t, accel_world, deriv=0)
             if memo is not None:
                 memo[key] = accel
         q, w = self._swing(t, accel, params.gravity, memo)
@@ -553,7 +563,7 @@ class CableSwing(CablePayload):
             return None
         force, torque, _ = self.pull(ctx.t, ctx.position, ctx.velocity, ctx.quat,
                                      ctx.body_rate, ctx.params, rotation=ctx.rotmat(),
-                                     memo=ctx.flight_memo)
+                                     memo=ctx.flight_memo, accel_world=ctx.accel_world)
         batch, rotors = np.shape(ctx.rotor_speed)
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world, loads.torque_body = force, torque
@@ -1131,7 +1141,7 @@ def stack_states(flights: list[FlightStates]) -> FlightStates:
                                            "body_rate", "body_accel", "specific_force",
                                            "rotor_speed", "rotor_accel", "command", "vbat")),
                         first.accel_source, first.window_s, first.polyorder, "stacked",
-                        all(f.pose for f in flights))
+                        all(f.pose for f in flights), all(f.attitude for f in flights))
 
 
 def residuals(states: FlightStates, params: VehicleParams, effects: list, *,

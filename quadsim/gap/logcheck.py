@@ -123,6 +123,17 @@ Stand-ins (:func:`posefree_log`): the pose-less log gets position 0, velocity 0 
 identity attitude, so that the states have the shape every stage expects; no effect weighed
 on it reads them (the filter above), and ``FlightStates.pose`` is False.
 
+With the attitude and no position (the on-board estimate's Euler angles, as most flight
+controllers log them; ``FlightLog.has_attitude``): the logged attitude is kept in place of
+the identity, and the states' ``accel_world`` is the accelerometer turned to the world by
+it, a = R f - g e_z (:func:`posefree_states`; f the specific force at the body origin), the
+vehicle's acceleration without differentiating a position. The parts logged
+(:func:`logged_parts`) are then the attitude alone: an effect is weighed when every part it
+declares is logged (:func:`needs_pose`), so a payload swinging on a cable is (its swing reads
+the vertical and that acceleration: :class:`quadsim.gap.fitting.CableSwing`, through
+:attr:`quadsim.effects.base.EffectContext.accel_world`), the drags, wind and ground effect
+are not, and :func:`missing_words` names only what is missing.
+
 Example::
 
     >>> from quadsim.gap.logcheck import missing_words, posefree_log
@@ -141,6 +152,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
 from ..core.errors import InputError
+from ..core.frames import rotate
 from ..effects import EFFECTS
 from ..effects.facts import POSE_PARTS, without_pose
 from ..logs.checks import RotorOrder, rotor_order_status
@@ -152,7 +164,8 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
            "synthesise_all", "synthesise_speeds", "without_speeds", "UNCONFIRMED_MAX_P",
            "cap_decision", "mark", "order_statuses", "probability_cap", "missing_words",
-           "needs_pose", "posefree_log", "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
+           "needs_pose", "logged_parts", "posefree_log", "posefree_states",
+           "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
            "confusable", "confusable_note", "SEPARATED",
            "TIMING_WORDS"]
 
@@ -541,29 +554,58 @@ def cap_decision(decision, cap: float):
     return dataclasses.replace(decision, ranked=ranked, rows=rows)
 
 
-def needs_pose(parts) -> bool:
+def needs_pose(parts, logged=()) -> bool:
     """Whether any effect of ``parts`` ((effect, fixed, fitted) triples, an explanation's or
-    a shared group's) reads the pose (:attr:`~quadsim.effects.facts.EffectFacts.needs_pose`).
-    Names that are not library effects (the diagnosis' own fit forms) read none."""
-    return any(name in EFFECTS and EFFECTS[name].facts.needs_pose for name, _, _ in parts)
+    a shared group's) reads a part of the pose (:attr:`~quadsim.effects.facts.EffectFacts.
+    needs_pose`) that is not in ``logged`` (:func:`logged_parts`; default none). Names that
+    are not library effects (the diagnosis' own fit forms) read none."""
+    return any(name in EFFECTS and not set(EFFECTS[name].facts.needs_pose) <= set(logged)
+               for name, _, _ in parts)
+
+
+def logged_parts(log) -> frozenset:
+    """The parts of the pose (:data:`quadsim.effects.facts.POSE_PARTS`) that ``log`` (a
+    FlightLog or its FlightStates) gives: every part with a pose; the attitude alone for a
+    log with its attitude and no position (module doc); none for IMU and motors only."""
+    if _has_pose(log):
+        return frozenset(POSE_PARTS)
+    attitude = getattr(log, "has_attitude", getattr(log, "attitude", False))
+    return frozenset({"attitude"}) if attitude else frozenset()
 
 
 def posefree_log(log):
     """``log`` (a FlightLog without a pose) with the stand-in pose of the module doc:
-    position and velocity zero (m, m/s), attitude the identity quaternion."""
+    position and velocity zero (m, m/s), attitude the identity quaternion where none is
+    logged (a logged attitude is kept)."""
     n = len(log.t)
+    quat = log.quat if log.quat is not None else np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
     return dataclasses.replace(log, position=np.zeros((n, 3)), velocity=np.zeros((n, 3)),
-                               quat=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+                               quat=quat)
 
 
-def missing_words() -> str:
-    """One sentence: which pose parts are not logged, the effects not weighed for want of
-    them (from the effects' facts), and what would add them."""
-    needed = without_pose(EFFECTS)
-    parts = [p for p in POSE_PARTS if any(p in v for v in needed.values())]
+def posefree_states(states, attitude: bool, gravity: float):
+    """The states of :func:`posefree_log`'s log marked as without a pose (``pose`` False);
+    with its ``attitude`` logged, ``accel_world`` (m/s^2) is the smoothed accelerometer
+    turned to the world by it, R f - g e_z (the vehicle's acceleration: what a payload's
+    swing reads, module doc), else zero as the other stand-ins."""
+    if not attitude:
+        return dataclasses.replace(states, pose=False, attitude=False)
+    accel = rotate(states.quat, states.specific_force)
+    accel[:, 2] -= gravity
+    return dataclasses.replace(states, pose=False, attitude=True, accel_world=accel)
+
+
+def missing_words(logged=()) -> str:
+    """One sentence: which pose parts are not logged (``logged``: those that are,
+    :func:`logged_parts`; default none), the effects not weighed for want of them (from the
+    effects' facts), and what would add them."""
+    needed = {k: v for k, v in without_pose(EFFECTS).items() if not set(v) <= set(logged)}
+    parts = [p for p in POSE_PARTS if p not in logged and any(p in v for v in needed.values())]
     names = ", ".join(name.replace("_", " ") for name in needed)
-    return (f"no {_listed(parts)} logged: {names} not weighed (the body-frame force and "
-            f"torque balance was used); log the state estimate or motion capture (columns "
+    used = "the body-frame force and torque balance was used" + (
+        ", with the logged attitude" if "attitude" in logged else "")
+    return (f"no {_listed(parts)} logged: {names} not weighed ({used}); log the state "
+            f"estimate or motion capture (columns "
             f"{'; '.join(POSE_PARTS[p] for p in parts)}) to add them")
 
 
@@ -722,7 +764,7 @@ def without_pose_note(verdict, log):
     the mixed payload flights cut to IMU and commands, docs/logs.md)."""
     if _has_pose(log) or verdict.outcome == "refused":
         return verdict
-    said = missing_words()
+    said = missing_words(logged_parts(log))
     answer, tail = verdict.answer, f" Not weighed: {said}."
     rivals = _unseparated_rivals(verdict) if verdict.outcome == "effect" else []
     if rivals:      # declared confusable pairs: not separated without a pose

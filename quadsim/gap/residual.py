@@ -373,9 +373,12 @@ class FlightStates:
     rotor_speed, rotor_accel (N, R) or None; command (N, R) normalised or None; vbat (N,) or
     None; accel_source: "accelerometer" or "kinematics"; window_s, polyorder: the filter;
     name: where the log came from; pose: False for a log without a pose (IMU and motors
-    only): position, velocity and accel_world are then zero and quat the identity, stand-ins
-    that no effect weighed on it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`,
-    :mod:`quadsim.gap.logcheck`).
+    only): position and velocity are then zero, stand-ins that no effect weighed on it
+    reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`, :mod:`quadsim.gap.logcheck`);
+    attitude: whether ``quat`` is the logged attitude (True with a pose). Without a pose and
+    without the attitude, quat is the identity and accel_world zero (stand-ins); without a
+    pose but with the attitude, quat is the logged one and accel_world the accelerometer
+    turned to the world, ``R f + g`` (:func:`quadsim.gap.logcheck.posefree_states`).
     """
 
     t: np.ndarray
@@ -395,6 +398,7 @@ class FlightStates:
     polyorder: int
     name: str = ""
     pose: bool = True
+    attitude: bool = True
 
     def __len__(self) -> int:
         return len(self.t)
@@ -409,7 +413,7 @@ class FlightStates:
                             self.body_accel[index], self.specific_force[index],
                             pick(self.rotor_speed), pick(self.rotor_accel), pick(self.command),
                             pick(self.vbat), self.accel_source, self.window_s, self.polyorder,
-                            self.name, self.pose)
+                            self.name, self.pose, self.attitude)
 
 
 # ----------------------------------------------------------------------------- resampling
@@ -593,7 +597,9 @@ def model_wrench(states: FlightStates, params: VehicleParams,
             return kept(flight_memo, "loads", key, own, compute)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, air, speed, accel, vehicle, vbat,
-                        rotation=rotation, flight_memo=flight_memo)
+                        rotation=rotation, flight_memo=flight_memo,
+                        accel_world=None if states.pose or not states.attitude
+                        else states.accel_world)
     loads = effect_set.loads(ctx, kept=keep)
     wrench = rotor_wrench(vehicle, loads, speed, matrices)
     force, torque = wrench[:, :3], wrench[:, 3:]

@@ -62,7 +62,7 @@ def identify_from_imu_logs(logs, skeleton, notes: list[str] | None = None):
     import numpy as np
 
     from ..logs.checks import check_log_stretches
-    from ..logs.flightlog import WITHOUT_POSE
+    from ..logs.flightlog import WITHOUT_POSE, WITHOUT_POSITION
     from .imu import identification_for_set, identify_imu, segments_from_logs
 
     notes = list(notes or [])
@@ -75,10 +75,12 @@ def identify_from_imu_logs(logs, skeleton, notes: list[str] | None = None):
                              "a log of another vehicle, or the wrong skeleton?")
         parts, found = check_log_stretches(log)
         stretches += parts
-        notes += [n for n in found if n not in notes and WITHOUT_POSE not in n]
-    bare = [Path(str(log.path)).name for log in logs if not log.has_pose]
-    if bare:
-        notes.append(f"{', '.join(bare)}: {WITHOUT_POSE}")
+        notes += [n for n in found if n not in notes and WITHOUT_POSE not in n
+                  and WITHOUT_POSITION not in n]
+    for words in (WITHOUT_POSE, WITHOUT_POSITION):
+        bare = [Path(str(log.path)).name for log in logs if log.without_pose_words == words]
+        if bare:
+            notes.append(f"{', '.join(bare)}: {words}")
     arms = np.asarray(skeleton.positions, float) - np.asarray(skeleton.com, float)
     ident = identify_imu(segments_from_logs(stretches), mass=skeleton.mass, arms=arms)
     return identification_for_set(ident, skeleton, stretches=len(stretches)), notes

@@ -52,7 +52,6 @@ from scipy.integrate import cumulative_trapezoid
 
 from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
-from .flightlog import WITHOUT_POSE
 from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
@@ -857,8 +856,9 @@ def _channel_checks(log, params, readings: list | None = None) -> list[str]:
     if gyro_note:
         notes.append(gyro_note)
     if not log.has_pose:
-        notes.append(f"{_where(log)}: {WITHOUT_POSE}; the gyro and accelerometer are checked "
-                     "by their magnitudes and the rotor order by the torque balance only")
+        notes.append(f"{_where(log)}: {log.without_pose_words}; the gyro and accelerometer "
+                     "are checked by their magnitudes and the rotor order by the torque "
+                     "balance only")
     check_accel(log, params.gravity if params is not None else 9.81)
     check_rotors(log, params)
     if readings is None:

@@ -30,7 +30,8 @@ Rotor count from ``FRAME_CLASS`` (1 quad 4, 2 hexa 6, 3 octa 8, 4 octa-quad 8, 5
 ArduCopter <= 3.x), else 1000-2000 us; ``pwm_range`` overrides. A voltage that is zero
 throughout (no battery monitor, ``BATT_MONITOR`` = 0) is left out.
 
-No position message (or no ATT): read as IMU + motors on the IMU instants, with a note.
+No position message (or no ATT): read as IMU + motors on the IMU instants, with a note; an
+ATT without a position is kept, interpolated onto those instants (rows outside it dropped).
 Errors: no pose and no IMU message; a message missing its fields ("unknown ArduPilot message
 layout": the fields present are listed), a file pymavlink cannot parse, commands outside 0-1.
 """
@@ -300,10 +301,22 @@ def _imu_columns(path: Path, messages: dict, params: dict, formats: dict, imu, *
         speed = np.stack([resample(t, v, t_base) for t, v in speeds], axis=1) * RPM_TO_RAD_S
         sig["rotor_speed"] = map_rotors(path, "ESC", speed, rotor_map)
     lacking = "ATT" if not messages["ATT"] else "XKF1/EKF1/POS"
-    notes = [*_NOTES, f"{path}: {lacking}: not logged: read as IMU + motors (no pose)"]
-    columns = Columns(columns_from_signals(t_base, sig), notes=notes,
-                      vehicle={"rotors": count, "kind": "multirotor",
-                               "source": "ArduPilot FRAME_CLASS"})
+    keep = np.ones(len(t_base), bool)
+    if messages["ATT"]:         # the attitude without a position: kept on the IMU instants
+        t_att, euler = _table(path, messages["ATT"], ["Roll", "Pitch", "Yaw"], "ATT")
+        _check_euler(path, t_att, euler)
+        sig["quat"] = quat_ned_frd_to_world_body(
+            resample_quat(t_att, euler_to_quat(np.radians(euler)), t_base))
+        keep = np.isfinite(sig["quat"]).all(axis=1)
+        if keep.sum() < 2:
+            raise field_error(path, "ATT", "the attitude and the IMU never overlap in time")
+    with_attitude = " with the attitude" if messages["ATT"] else ""
+    notes = [*_NOTES, f"{path}: {lacking}: not logged: read as IMU + motors{with_attitude} "
+             "(no pose)"]
+    columns = Columns(columns_from_signals(
+        t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}),
+        notes=notes, vehicle={"rotors": count, "kind": "multirotor",
+                              "source": "ArduPilot FRAME_CLASS"})
     return common_span(columns, path)
 
 

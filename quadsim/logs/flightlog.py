@@ -25,7 +25,8 @@ column                 unit      meaning
 
 Body frame: x forward, y left, z up. Position needs an attitude (the two together are the
 pose); an IMU log without them (``FlightLog.position`` and ``quat`` None) is read, and each
-stage says what it cannot do without a pose (:data:`WITHOUT_POSE`). Example::
+stage says what it cannot do without a pose (:data:`WITHOUT_POSE`); so is one with its
+attitude but no position (``position`` None: :data:`WITHOUT_POSITION`). Example::
 
     >>> from quadsim.logs.flightlog import load_log, write_log
     >>> log = load_log("flight_00.csv.gz")          # validates; raises InputError
@@ -83,6 +84,7 @@ __all__ = [
     "MAX_BODY_RATE",
     "MAX_ROTOR_SPEED",
     "WITHOUT_POSE",
+    "WITHOUT_POSITION",
     "FlightLog",
     "body_rate_from_quat",
     "load_log",
@@ -122,6 +124,14 @@ WITHOUT_POSE = ("no position or attitude in the log (IMU and motors only): the b
                 "force and torque balance is used; nothing that needs the world frame (speed, "
                 "airspeed, drag, wind, ground effect, height) can be read; a pose (motion "
                 "capture or the on-board estimate) would add it")
+#: the same for a log with its attitude but no position (IMU, motors and attitude: the
+#: on-board estimate's Euler angles or quaternion, as most flight controllers log them).
+WITHOUT_POSITION = ("no position or velocity in the log (IMU, motors and attitude): the "
+                    "body-frame force and torque balance is used, with the attitude for what "
+                    "reads the world's directions (a payload swinging under gravity); nothing "
+                    "that needs the speed or height (airspeed, drag, wind, ground effect) can "
+                    "be read; a position or velocity (motion capture or the on-board estimate) "
+                    "would add it")
 #: the per-sample channels of a FlightLog (besides ``t``).
 ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
           "rotor_command", "vbat")
@@ -133,7 +143,8 @@ class FlightLog:
     """One flight, SI units (see the module docstring for the columns).
 
     t (N,) s; position (N, 3) m world or None; velocity (N, 3) m/s world or None; quat (N, 4)
-    wxyz body-to-world or None (position and quat are None together: an IMU-only log);
+    wxyz body-to-world or None (position None, quat given: IMU, motors and attitude; both
+    None: an IMU-only log);
     body_rate (N, 3) rad/s body or None; accel (N, 3) specific force m/s^2 body or None;
     rotor_speed (N, R) rad/s or None; rotor_command (N, R) normalised 0-1 or None; vbat (N,)
     V or None; path: the file it came from (None if built in code); notes:
@@ -203,8 +214,22 @@ class FlightLog:
 
     @property
     def has_pose(self) -> bool:
-        """Whether the log has position and attitude (else it is IMU + motors only)."""
+        """Whether the log has position and attitude (else it is IMU + motors only, with or
+        without the attitude: :attr:`has_attitude`)."""
         return self.position is not None and self.quat is not None
+
+    @property
+    def has_attitude(self) -> bool:
+        """Whether the log has its attitude (``qw..qz``, or ``roll, pitch, yaw``)."""
+        return self.quat is not None
+
+    @property
+    def without_pose_words(self) -> str:
+        """What a stage says of a log without a pose: :data:`WITHOUT_POSITION` where it has
+        its attitude, else :data:`WITHOUT_POSE`; "" for a log with a pose."""
+        if self.has_pose:
+            return ""
+        return WITHOUT_POSITION if self.has_attitude else WITHOUT_POSE
 
     @property
     def rotor_count(self) -> int:
@@ -408,9 +433,12 @@ def _minimum(path: Path, columns: dict) -> dict:
         raise field_error(path, name, "required with a position: an attitude (qw..qz, or roll, "
                           "pitch, yaw in rad); an IMU log may have neither")
     if has["accel"] and has["body_rate"] and motors:
-        if has["quat"] or has["velocity"]:     # an attitude or velocity without position
-            columns = {k: v for k, v in columns.items()
-                       if k not in _GROUPS["quat"] + _GROUPS["velocity"]}
+        # IMU and motors, with the attitude where logged (FlightLog.has_attitude); a velocity
+        # without a position is left out (the diagnosis' pose-free path reads none)
+        if has["velocity"]:
+            columns = {k: v for k, v in columns.items() if k not in _GROUPS["velocity"]}
+        if not has["quat"]:
+            columns = {k: v for k, v in columns.items() if k not in _GROUPS["quat"]}
         return columns
     lacking = [n for n, ok in (("ax..az", has["accel"]), ("wx..wz", has["body_rate"]),
                                ("rotor_* or cmd_*", motors)) if not ok]

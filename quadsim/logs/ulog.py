@@ -25,7 +25,8 @@ Every topic is interpolated onto the attitude topic's instants (``common.resampl
 NaN across gaps); the rows kept are those where position and attitude both exist, trimmed to
 the span every topic covers (``common.common_span``; time restarts at 0 there). A log with
 no position or attitude topic is read as IMU + motors on the gyro topic's instants (a note
-says so).
+says so), with the attitude interpolated onto them where it is logged without a position
+(rows where it is not known are dropped).
 
 The rotor count is the number of ``actuator_motors`` controls that are not NaN in the log
 (PX4 sets unused ones to NaN), else ``CA_ROTOR_COUNT``, else 4; ESC rotor speeds are taken
@@ -168,9 +169,11 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
             raise field_error(path, topics.get("position", lacking[0]), "not in the log, and "
                               "no gyro and accelerometer topics either: a log needs a pose or the "
                               "IMU (--topic overrides)")
-        notes.append(f"{path}: {', '.join(lacking)}: not in the log: read as IMU + motors on "
-                     f"the {sig['body_rate'][2]} instants (no pose)")
-        sig["position"] = sig["velocity"] = sig["quat"] = None
+        attitude = sig["quat"] is not None      # kept: IMU, motors and attitude
+        notes.append(f"{path}: {', '.join(lacking)}: not in the log: read as IMU + motors"
+                     f"{' with the attitude' if attitude else ''} on the "
+                     f"{sig['body_rate'][2]} instants (no pose)")
+        sig["position"] = sig["velocity"] = None
     base = sig["quat"] if pose else sig["body_rate"]
     t_base = base[0]
     valid = np.isfinite(base[1]).all(axis=1)
@@ -221,12 +224,13 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     for key in ("body_rate", "accel"):
         if out[key] is not None:
             out[key] = frd_to_body(out[key])
-    if pose:
+    if out["quat"] is not None:
         out["quat"] = quat_ned_frd_to_world_body(out["quat"])
     out["rotor_speed"] = map_rotors(path, "esc_status", out["rotor_speed"], rotor_map)
     out["rotor_command"] = map_rotors(path, "actuator_motors", out["rotor_command"], rotor_map)
     keep = (np.isfinite(out["position"]).all(axis=1) & np.isfinite(out["quat"]).all(axis=1)
-            if pose else np.isfinite(out["body_rate"]).all(axis=1))
+            if pose else np.isfinite(out["body_rate"]).all(axis=1) & (
+                True if out["quat"] is None else np.isfinite(out["quat"]).all(axis=1)))
     if keep.sum() < 2:
         raise field_error(path, "vehicle_local_position", "position and attitude never "
                           "overlap in time")

@@ -212,9 +212,8 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
         notes.append(f"{path}: {name}: {state}x/y/z logged without a whole attitude: position "
                      "left out (without the tilt it cannot enter the body-frame balance)")
     if quat is not None and position is None:
-        quat = None
-        notes.append(f"{path}: {name}: attitude logged without {state}x/y/z: left out (the "
-                     "schema's pose is position and attitude together)")
+        notes.append(f"{path}: {name}: attitude logged without {state}x/y/z: kept (IMU, "
+                     "motors and attitude: the diagnosis weighs what reads only the attitude)")
     if position is None and not all(f"{g}.{a}" in ev for g in ("acc", "gyro") for a in "xyz"):
         raise field_error(path, f"{name}: {state}x/y/z", "not logged, and no acc.x/y/z and "
                           "gyro.x/y/z either: a log needs a pose or the IMU (with motor "
