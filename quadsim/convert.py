@@ -171,8 +171,11 @@ def main(argv: list[str] | None = None) -> int:
                   fields=_pairs(args.field, "--field", tuple(TOPICS)),
                   pwm_range=_range(args.pwm_range), model=args.model, start=args.start,
                   end=args.end, rate_hz=args.rate, euler=args.euler)
-    what = "" if log.has_pose else "; IMU + motors, no pose: identify --logs and gap use the " \
-        "body-frame balance, nothing that needs the world frame"
+    what = "" if log.has_pose else (
+        "; IMU + motors with the attitude, no position: identify --logs and gap use the "
+        "body-frame balance and the attitude, nothing that needs the speed or height"
+        if log.has_attitude else "; IMU + motors, no pose: identify --logs and gap use the "
+        "body-frame balance, nothing that needs the world frame")
     print(f"wrote {args.output} ({len(log)} samples, {log.t[-1]:.2f} s, "
           f"{log.rotor_count} rotors{what})")
     return 0

@@ -363,7 +363,7 @@ def test_dataflash_without_position_converts_as_imu_log(tmp_path, capsys):
     assert convert_main([str(path), "-o", str(out)]) == 0
     said = capsys.readouterr()
     assert "XKF1/EKF1/POS: not logged: read as IMU + motors" in said.err
-    assert "IMU + motors, no pose" in said.out
+    assert "IMU + motors with the attitude, no position" in said.out
     log = load_log(out, warn=False)
     assert not log.has_pose and log.rotor_command.shape[1] == 4 and log.vbat is not None
     np.testing.assert_allclose(np.median(log.accel[:, 2]), G, rtol=0.2)
