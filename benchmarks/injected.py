@@ -346,12 +346,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="every propeller's relative thrust change (default -8 %%)")
     ap.add_argument("--delays", type=float, nargs="*", default=[0.01],
                     help="rotor speeds logged this much later, s (default 10 ms)")
-    ap.add_argument("--logs", choices=("as-logged", "commands", "imu", "speeds"),
+    ap.add_argument("--logs", choices=("as-logged", "commands", "imu", "attitude", "speeds"),
                     default="as-logged",
                     help="cut every log (judged and references) to what a user may have, as "
                          "benchmarks.reference_subsets --logs does (commands: no rotor "
-                         "speeds; imu: no pose and no rotor speeds); speeds: no commands (no "
-                         "rotor channel: the change read from the wrench alone)")
+                         "speeds; imu: no pose and no rotor speeds; attitude: imu with the "
+                         "attitude); speeds: no commands (no rotor channel: the change read "
+                         "from the wrench alone)")
     ap.add_argument("--data", type=Path, default=DATA,
                     help="the crazyflie21_brushless folder of the shared data (default "
                          "../shared/data/crazyflie21_brushless beside the repository)")
@@ -378,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     delays = args.delays
-    if args.logs in ("commands", "imu") and delays:    # it lives in the speeds, cut away
+    if args.logs in ("commands", "imu", "attitude") and delays:    # it lives in the speeds
         print("note: --delays dropped: a rotor-speed logging delay does not reach a log "
               f"without rotor speeds (--logs {args.logs})")
         delays = []

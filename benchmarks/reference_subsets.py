@@ -19,8 +19,9 @@ vouches for), and the names given to plain flights.
 to what a user may have: ``commands`` drops the ``rotor_*`` columns (speeds come from the
 parameter set's motor map, with its lag and battery-voltage law: no log has speeds, so no
 command model is fitted), ``imu`` keeps only ``t``, the gyro, the accelerometer, the
-commands and ``vbat`` (no pose, no speeds: the body-frame balance); ``as-logged`` (default)
-leaves them. A size of 20 or more is the whole set (one draw).
+commands and ``vbat`` (no pose, no speeds: the body-frame balance), ``attitude`` the same
+with the attitude ``qw..qz`` (the on-board estimate's, without a position); ``as-logged``
+(default) leaves them. A size of 20 or more is the whole set (one draw).
 
 Usage (needs ``../shared/data``; one subset ~10-20 s CPU on the 2-core machine)::
 
@@ -52,7 +53,9 @@ DATA = ROOT.parent / "shared" / "data" / "crazyflie21_brushless"
 KEPT = {"as-logged": None,
         "commands": lambda name: not name.startswith("rotor_"),
         "imu": lambda name: name in ("t", "wx", "wy", "wz", "ax", "ay", "az", "vbat")
-        or name.startswith("cmd_")}
+        or name.startswith("cmd_"),
+        "attitude": lambda name: name in ("t", "qw", "qx", "qy", "qz", "wx", "wy", "wz", "ax",
+                                          "ay", "az", "vbat") or name.startswith("cmd_")}
 
 
 def cut_log(path: Path, keep, out: Path) -> Path:
