@@ -270,7 +270,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "FEW_WORDS", "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "grown_lack", "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
+           "grown_lack", "overdispersion", "lack_of_fit", "material", "mean_squares",
+           "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
            "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
@@ -1114,6 +1115,18 @@ def reach_baseline(baseline: Baseline, reach) -> Baseline:
     return dataclasses.replace(baseline, mean=np.log(np.exp(baseline.mean) + reach.allowance))
 
 
+def overdispersion(ms, typical) -> float:
+    """The quasi-likelihood dispersion c of a reading (module doc, 2: "Dispersion"; Burnham
+    and Anderson 2002, sec. 2.5, QAIC's c-hat = chi^2 / df of the global model): the mean
+    over channels (and judged flights) of its residual mean square ``ms`` ((C,) or (H, C),
+    sigma_c^2 units) over the references' typical ``typical`` ((C,) or (H, C), the same
+    units), floored at 1. Where a flight's residual after the best reading exceeds what the
+    references leave, the noise model the evidence is computed under holds it less well, and
+    log-evidence differences between readings are larger than the data carry by about c."""
+    ratio = np.asarray(ms, float) / np.maximum(np.asarray(typical, float), 1e-300)
+    return max(1.0, float(np.mean(ratio)))
+
+
 def grown_lack(ms, reference, *, null_ms=None) -> dict:
     """Channels a reading leaving mean squares ``ms`` (C,; sigma_c^2 units) leaves beyond
     what the references' straight lines of their lack of fit expect at the flight's place
@@ -1627,7 +1640,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         confusable_with=tuple(r for r in named if r != verdict),
         separate_by={r: fitting.separation(verdict, [r])[r] for r in named
                      if r != verdict} if effect else {},
-        file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
+        file=name, differ_on=tuple(separate), symptom=symptom(null, reference),
+        dispersion=overdispersion(best.ms, np.exp(reach_baseline(baseline, reach).mean)))
 
 
 #: a value within this share of its fit window's width from a bound is at the bound (the

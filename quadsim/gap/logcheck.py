@@ -728,7 +728,9 @@ def confusable_note(verdict, log):
     unchanged."""
     if not _has_pose(log) or verdict.outcome != "effect":
         return verdict
-    rivals = _unseparated_rivals(verdict, SEPARATED)
+    # in quasi-likelihood units: the margin over the lead's dispersion (Verdict.dispersion)
+    scale = max(1.0, float(getattr(verdict, "dispersion", 1.0)))
+    rivals = _unseparated_rivals(verdict, SEPARATED * scale)
     if not rivals:
         return verdict
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
@@ -739,7 +741,10 @@ def confusable_note(verdict, log):
               f"{'the pair' if len(rivals) == 1 else 'each pair'} as one the data may not "
               f"separate, and the name's evidence exceeds "
               f"{'it' if len(rivals) == 1 else 'each'} by less than the {SEPARATED:.1f} log "
-              "units that very strong evidence needs.")
+              "units that very strong evidence needs"
+              + (f", times {scale:.2g}: the flight's residual after the name is {scale:.2g}x "
+                 "the references' in mean square, which the evidence's noise model does not "
+                 "hold" if scale > 1 else "") + ".")
     names = tuple(r.name for r, _ in rivals)
     return dataclasses.replace(
         verdict, answer=answer, tentative=True, readings=tuple(verdict.readings) + names,
