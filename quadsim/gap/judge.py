@@ -178,6 +178,12 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    each), a channel a lack of fit when it lies beyond on every training flight (what they
    share: an intersection-union test, at the per-flight level with no correction over the
    flights); beyond on some only (:func:`alone`) it is stated, and a name is tentative.
+   *Dispersion* (:func:`overdispersion`): the lead's residual mean square over the
+   references' typical, averaged over the channels (held out against nominal references:
+   and over the training flights, each at its place), floored at 1, is kept on the verdict
+   (``Verdict.dispersion``, not in the JSON): log-evidence margins computed under the
+   references' noise model are read over it where a declared confusable pair is told apart
+   (:func:`quadsim.gap.logcheck.confusable_note`; quasi-likelihood, QAIC's c-hat).
    *Grown* (:func:`grown_lack`): beyond the references on a channel, their lack of fit is
    expected by the law of noise plus an error in proportion to the signal
    (:func:`quadsim.gap.reference.growth_law`), not by a straight line in log ms. A channel
@@ -1797,6 +1803,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     beyond: dict = {}
     lone: dict = {}         # beyond the references on some training flights, not shared
     grown: dict = {}        # beyond their straight lines, within the law's growth (2)
+    dispersion = 1.0        # against the bare set: the noise model is the flights' own
     share = float("inf")
     if per_flight:
         beyond, left, share = against_reference(lead, decision.null, reference, placed)
@@ -1806,6 +1813,12 @@ def judge_heldout(decision, reference, *, before: list, after: list,
             grown = {k: v for d in training_lack(lead, decision.null, reference, placed,
                                                  grown=True)
                      for k, v in d.items() if k not in lone}
+        # the lead's dispersion on its training flights, each against its place (2)
+        refs = _each_place(reference, placed, len(lead.train_residuals))
+        dispersion = overdispersion(
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(lead.train_residuals, refs)],
+            [np.exp(reach_baseline(Baseline.of_reference(ref), getattr(ref, "reach", None)).mean)
+             for ref in refs])
     remains = {} if per_flight and lead_name == "no_difference" else \
         remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     checked = decision.consistency if entry is not None else None
@@ -1923,7 +1936,8 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
             np.concatenate(after) ** 2, axis=0)))),
         reduction=reduction, heldout_gap_before=_gap(before),
-        heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
+        heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before),
+        dispersion=dispersion)
     return verdict, tuple(notes)
 
 
