@@ -244,3 +244,32 @@ def test_with_a_pose_a_declared_confusable_reading_within_the_margin_is_stated()
     plain = verdict(-173.5, outcome="unexplained")
     assert confusable_note(plain, pose) is plain
     assert confusable_note(near, SimpleNamespace(has_pose=False)) is near
+
+
+def test_the_margin_is_read_over_the_leads_dispersion():
+    """overdispersion: the mean over channels of the reading's mean square over the
+    references' typical, floored at 1 (QAIC's c-hat). A pair told apart by 1.5 SEPARATED on a
+    flight the noise model holds (dispersion 1) is not where the lead leaves twice the
+    references' mean square (dispersion 2: 0.75 SEPARATED in quasi-likelihood units), and
+    the answer says by what factor."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.judge import overdispersion
+    from quadsim.gap.logcheck import SEPARATED, confusable_note
+    from quadsim.gap.result import Reading, Verdict
+
+    assert overdispersion([2.0, 4.0, 0.5], [1.0, 2.0, 1.0]) == pytest.approx(1.5)
+    assert overdispersion([0.5, 0.9], [1.0, 1.0]) == 1.0
+    assert overdispersion([[3.0, 1.0], [1.0, 3.0]], [1.0, 1.0]) == pytest.approx(2.0)
+    posterior = (Reading("mass_offset", 0.99, "+1.4 g heavier, off the centre", -100.0),
+                 Reading("thrust_mismatch", 0.005, "rotor 1 -5 %", -100.0 - 1.5 * SEPARATED))
+    held = Verdict("effect", "mass_offset", "mass_offset (99 %): +1.4 g.", 0.99,
+                   posterior=posterior, readings=("mass_offset",))
+    pose = SimpleNamespace(has_pose=True)
+    assert confusable_note(held, pose) is held
+    loose = dataclasses.replace(held, dispersion=2.0)
+    noted = confusable_note(loose, pose)
+    assert noted.tentative and "thrust_mismatch" in noted.readings
+    assert noted.answer.endswith("very strong evidence needs, times 2: the flight's residual "
+                                 "after the name is 2x the references' in mean square, which "
+                                 "the evidence's noise model does not hold.")

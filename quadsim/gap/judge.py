@@ -178,6 +178,12 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    each), a channel a lack of fit when it lies beyond on every training flight (what they
    share: an intersection-union test, at the per-flight level with no correction over the
    flights); beyond on some only (:func:`alone`) it is stated, and a name is tentative.
+   *Dispersion* (:func:`overdispersion`): the lead's residual mean square over the
+   references' typical, averaged over the channels (held out against nominal references:
+   and over the training flights, each at its place), floored at 1, is kept on the verdict
+   (``Verdict.dispersion``, not in the JSON): log-evidence margins computed under the
+   references' noise model are read over it where a declared confusable pair is told apart
+   (:func:`quadsim.gap.logcheck.confusable_note`; quasi-likelihood, QAIC's c-hat).
    *Grown* (:func:`grown_lack`): beyond the references on a channel, their lack of fit is
    expected by the law of noise plus an error in proportion to the signal
    (:func:`quadsim.gap.reference.growth_law`), not by a straight line in log ms. A channel
@@ -270,7 +276,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "FEW_WORDS", "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
            "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
-           "grown_lack", "lack_of_fit", "material", "mean_squares", "MIN_REMAINDER_REFERENCES",
+           "grown_lack", "overdispersion", "lack_of_fit", "material", "mean_squares",
+           "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
            "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
@@ -1114,6 +1121,18 @@ def reach_baseline(baseline: Baseline, reach) -> Baseline:
     return dataclasses.replace(baseline, mean=np.log(np.exp(baseline.mean) + reach.allowance))
 
 
+def overdispersion(ms, typical) -> float:
+    """The quasi-likelihood dispersion c of a reading (module doc, 2: "Dispersion"; Burnham
+    and Anderson 2002, sec. 2.5, QAIC's c-hat = chi^2 / df of the global model): the mean
+    over channels (and judged flights) of its residual mean square ``ms`` ((C,) or (H, C),
+    sigma_c^2 units) over the references' typical ``typical`` ((C,) or (H, C), the same
+    units), floored at 1. Where a flight's residual after the best reading exceeds what the
+    references leave, the noise model the evidence is computed under holds it less well, and
+    log-evidence differences between readings are larger than the data carry by about c."""
+    ratio = np.asarray(ms, float) / np.maximum(np.asarray(typical, float), 1e-300)
+    return max(1.0, float(np.mean(ratio)))
+
+
 def grown_lack(ms, reference, *, null_ms=None) -> dict:
     """Channels a reading leaving mean squares ``ms`` (C,; sigma_c^2 units) leaves beyond
     what the references' straight lines of their lack of fit expect at the flight's place
@@ -1627,7 +1646,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         confusable_with=tuple(r for r in named if r != verdict),
         separate_by={r: fitting.separation(verdict, [r])[r] for r in named
                      if r != verdict} if effect else {},
-        file=name, differ_on=tuple(separate), symptom=symptom(null, reference))
+        file=name, differ_on=tuple(separate), symptom=symptom(null, reference),
+        dispersion=overdispersion(best.ms, np.exp(reach_baseline(baseline, reach).mean)))
 
 
 #: a value within this share of its fit window's width from a bound is at the bound (the
@@ -1783,6 +1803,7 @@ def judge_heldout(decision, reference, *, before: list, after: list,
     beyond: dict = {}
     lone: dict = {}         # beyond the references on some training flights, not shared
     grown: dict = {}        # beyond their straight lines, within the law's growth (2)
+    dispersion = 1.0        # against the bare set: the noise model is the flights' own
     share = float("inf")
     if per_flight:
         beyond, left, share = against_reference(lead, decision.null, reference, placed)
@@ -1792,6 +1813,12 @@ def judge_heldout(decision, reference, *, before: list, after: list,
             grown = {k: v for d in training_lack(lead, decision.null, reference, placed,
                                                  grown=True)
                      for k, v in d.items() if k not in lone}
+        # the lead's dispersion on its training flights, each against its place (2)
+        refs = _each_place(reference, placed, len(lead.train_residuals))
+        dispersion = overdispersion(
+            [mean_squares([r], ref.sigma)[0] for r, ref in zip(lead.train_residuals, refs)],
+            [np.exp(reach_baseline(Baseline.of_reference(ref), getattr(ref, "reach", None)).mean)
+             for ref in refs])
     remains = {} if per_flight and lead_name == "no_difference" else \
         remainder(lead.train_residuals + lead.held_residuals, reference, dt)
     checked = decision.consistency if entry is not None else None
@@ -1909,7 +1936,8 @@ def judge_heldout(decision, reference, *, before: list, after: list,
         heldout_channel_gap_after=dict(zip(names, map(float, np.mean(
             np.concatenate(after) ** 2, axis=0)))),
         reduction=reduction, heldout_gap_before=_gap(before),
-        heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before))
+        heldout_gap_after=entry["heldout_gap_after"] if entry else _gap(before),
+        dispersion=dispersion)
     return verdict, tuple(notes)
 
 

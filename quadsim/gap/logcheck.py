@@ -710,7 +710,10 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
 #: Stat. Assoc. 90: 2 ln B > 10). Why so high: such a pair gives the same force, and what
 #: separates it (the priors' widths, the moments, the rotor channel's command model) is not
 #: the change itself; measured margins on real flights with a known change:
-#: benchmarks/README.md, "Real flights with a known change written in".
+#: benchmarks/README.md, "Real flights with a known change written in". The margin is read
+#: over the lead's dispersion (:attr:`quadsim.gap.result.Verdict.dispersion`): in the
+#: references' noise units where the flight's residual after the name is no larger than
+#: theirs, shrunk by that factor where it is (quasi-likelihood).
 SEPARATED = float(np.log(150.0))
 
 
@@ -724,11 +727,16 @@ def confusable_note(verdict, log):
     FlightLog or its FlightStates; one without is :func:`without_pose_note`'s) with each
     declared confusable reading (:func:`confusable`) whose log evidence lies within
     :data:`SEPARATED` of the name's stated beside it, with its probability and how to tell
-    them apart, and the name tentative; else as is. The outcome and the numbers are
-    unchanged."""
+    them apart, and the name tentative; else as is. The margin is compared in
+    quasi-likelihood units: SEPARATED times ``verdict.dispersion``
+    (:func:`quadsim.gap.judge.overdispersion`, 1 where the flight's residual after the name
+    lies within the references'), which the words state where it is above 1. The outcome
+    and the numbers are unchanged."""
     if not _has_pose(log) or verdict.outcome != "effect":
         return verdict
-    rivals = _unseparated_rivals(verdict, SEPARATED)
+    # in quasi-likelihood units: the margin over the lead's dispersion (Verdict.dispersion)
+    scale = max(1.0, float(getattr(verdict, "dispersion", 1.0)))
+    rivals = _unseparated_rivals(verdict, SEPARATED * scale)
     if not rivals:
         return verdict
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
@@ -739,7 +747,10 @@ def confusable_note(verdict, log):
               f"{'the pair' if len(rivals) == 1 else 'each pair'} as one the data may not "
               f"separate, and the name's evidence exceeds "
               f"{'it' if len(rivals) == 1 else 'each'} by less than the {SEPARATED:.1f} log "
-              "units that very strong evidence needs.")
+              "units that very strong evidence needs"
+              + (f", times {scale:.2g}: the flight's residual after the name is {scale:.2g}x "
+                 "the references' in mean square, which the evidence's noise model does not "
+                 "hold" if scale > 1 else "") + ".")
     names = tuple(r.name for r, _ in rivals)
     return dataclasses.replace(
         verdict, answer=answer, tentative=True, readings=tuple(verdict.readings) + names,

@@ -193,6 +193,12 @@ class Verdict(_JsonView):
     #: something beyond the references' (:func:`quadsim.gap.judge.with_outside`; held out
     #: against references only); 0 else
     outside_library: float = 0.0
+    #: the lead reading's quasi-likelihood dispersion (:func:`quadsim.gap.judge.
+    #: overdispersion`; 1 where the flight's residual after it lies within the references'):
+    #: the factor by which its log-evidence margins exceed what the data carry; the scale on
+    #: which a declared confusable pair counts as told apart
+    #: (:func:`quadsim.gap.logcheck.confusable_note`); not in the JSON
+    dispersion: float = 1.0
     #: per flight: the residual before and after the answer (:mod:`.page`; not in the JSON)
     series: Series | None = None
 
