@@ -200,3 +200,37 @@ def test_real_payload_flights_with_their_attitude_and_no_position(tmp_path):
         total = sum(v for k, v in verdict["params"].items() if k.endswith(".mass"))
         assert abs(total - 0.0074) < 0.002, verdict["params"]
     assert by["flight_114.csv.gz"]["verdict"] == "no_significant_gap", by["flight_114.csv.gz"]
+
+
+def test_euler_angles_in_degrees_are_refused_in_one_line(tmp_path, capsys):
+    """roll, pitch, yaw are rad (z-y-x): a pitch column beyond pi/2 (+ PITCH_SLACK) cannot be
+    one, and a log written in degrees has one once it pitches by more than 1.6 degrees: refused
+    naming the file and the column, exit 2 through the CLI, nothing written; a pitch of
+    exactly pi/2 (the gimbal point) is read."""
+    from quadsim.core.errors import InputError
+    from quadsim.gap.__main__ import main
+    from quadsim.logs.flightlog import PITCH_SLACK
+
+    n = 300
+    t = np.arange(n) * 0.01
+
+    def write(name, pitch):
+        rows = ["t,roll,pitch,yaw,wx,wy,wz,ax,ay,az,cmd_1,cmd_2,cmd_3,cmd_4"]
+        rows += [f"{t[k]:.3f},0,{pitch[k]:.6f},0,0,0,0,0,0,9.81,0.4,0.4,0.4,0.4"
+                 for k in range(n)]
+        path = tmp_path / name
+        path.write_text("\n".join(rows) + "\n")
+        return path
+
+    degrees = write("deg.csv", 5.0 * np.sin(t))
+    with pytest.raises(InputError, match=r"deg\.csv: pitch: \|pitch\| up to 5, beyond pi/2"):
+        load_log(degrees)
+    out = tmp_path / "out.json"
+    other = write("deg2.csv", 5.0 * np.cos(t))
+    assert main(["--model", "crazyflie21", "--per-flight", str(degrees), "--reference",
+                 str(other), "--workers", "1", "--no-cache", "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"error: {degrees}: pitch: ") and not out.exists()
+    edge = write("edge.csv", np.full(n, np.pi / 2))
+    assert load_log(edge, warn=False).has_attitude
+    assert np.pi / 2 + PITCH_SLACK < 1.6      # a degree log pitching by 1.6 degrees is caught

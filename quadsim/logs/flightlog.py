@@ -119,6 +119,9 @@ _GROUPS = {
 _REQUIRED = ("t",)
 #: the Euler-angle columns (rad, z-y-x), read as the quaternion.
 EULER = ("roll", "pitch", "yaw")
+#: how far (rad) a logged pitch may pass +-pi/2 before the log is refused (:func:`_minimum`):
+#: an estimator's round-off at the gimbal point; a log in degrees passes it above 1.6 degrees
+PITCH_SLACK = 0.01
 #: one line a stage prints when a log has no pose (position and attitude).
 WITHOUT_POSE = ("no position or attitude in the log (IMU and motors only): the body-frame "
                 "force and torque balance is used; nothing that needs the world frame (speed, "
@@ -411,7 +414,10 @@ def _minimum(path: Path, columns: dict) -> dict:
     """The columns with Euler angles read as the quaternion, after checking the schema's
     minimum: ``t`` and either a pose (``x..z`` with an attitude) or the IMU (``ax..az``,
     ``wx..wz`` and ``rotor_*`` or ``cmd_*``). Raises naming what each minimum lacks. An IMU
-    log's attitude or velocity without a position is left out (the pose comes whole)."""
+    log's velocity without a position is left out; its attitude is kept (IMU, motors and
+    attitude). A ``pitch`` beyond +-(pi/2 + :data:`PITCH_SLACK`) rad is refused: a z-y-x
+    pitch never lies there, and a log written in degrees does once it pitches by more than
+    1.6 degrees."""
     if "t" not in columns:
         raise field_error(path, "t", "required column missing (time in s)")
     euler = [c for c in EULER if c in columns]
@@ -421,6 +427,12 @@ def _minimum(path: Path, columns: dict) -> dict:
             raise field_error(path, missing[0], f"missing while {', '.join(euler)} present: an "
                               "attitude needs roll, pitch and yaw (rad, z-y-x) or qw..qz")
         from .attitude import quat_from_euler
+        pitch = np.asarray(columns["pitch"], float)
+        worst = float(np.nanmax(np.abs(pitch))) if np.any(np.isfinite(pitch)) else 0.0
+        if worst > np.pi / 2 + PITCH_SLACK:
+            raise field_error(path, "pitch", f"|pitch| up to {worst:.4g}, beyond pi/2 rad: the "
+                              "z-y-x pitch lies within +-90 degrees; in degrees? roll, pitch "
+                              "and yaw are rad")
         columns = dict(columns)
         quat = quat_from_euler(*(columns.pop(c) for c in EULER))
         columns.update({c: quat[:, i] for i, c in enumerate(_GROUPS["quat"])})
