@@ -51,7 +51,9 @@ def test_the_loader_keeps_an_attitude_logged_without_a_position(tmp_path):
     t = np.arange(n) * 0.01
     roll = 0.2 * np.sin(t)
     rows = ["t,roll,pitch,yaw,wx,wy,wz,ax,ay,az,cmd_1,cmd_2,cmd_3,cmd_4"]
-    rows += [f"{t[k]:.3f},{roll[k]:.6f},0,0,0,0,0,0,0,9.81,0.4,0.4,0.4,0.4" for k in range(n)]
+    rate = 0.2 * np.cos(t)                  # the gyro agrees with the attitude (roll rate)
+    rows += [f"{t[k]:.3f},{roll[k]:.6f},0,0,{rate[k]:.6f},0,0,0,0,9.81,0.4,0.4,0.4,0.4"
+             for k in range(n)]
     path = tmp_path / "att.csv"
     path.write_text("\n".join(rows) + "\n")
     log = load_log(path, warn=False)
@@ -62,6 +64,15 @@ def test_the_loader_keeps_an_attitude_logged_without_a_position(tmp_path):
     bare = dataclasses.replace(log, quat=None)
     assert bare.without_pose_words == WITHOUT_POSE and not bare.has_attitude
     assert logged_parts(log) == {"attitude"} and logged_parts(bare) == set()
+    # the checks say what they compared: the gyro against the attitude where it is logged
+    from quadsim.logs.checks import check_log_stretches
+
+    _, notes = check_log_stretches(log)
+    assert any("the gyro is checked against the attitude, the accelerometer by its magnitude"
+               in n for n in notes), notes
+    _, notes = check_log_stretches(bare)
+    assert any("the gyro and accelerometer are checked by their magnitudes" in n
+               for n in notes), notes
 
 
 def test_what_an_attitude_adds_to_the_effects_weighed():

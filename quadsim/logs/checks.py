@@ -856,9 +856,11 @@ def _channel_checks(log, params, readings: list | None = None) -> list[str]:
     if gyro_note:
         notes.append(gyro_note)
     if not log.has_pose:
-        notes.append(f"{_where(log)}: {log.without_pose_words}; the gyro and accelerometer "
-                     "are checked by their magnitudes and the rotor order by the torque "
-                     "balance only")
+        checked = ("the gyro is checked against the attitude, the accelerometer by its "
+                   "magnitude" if log.has_attitude else
+                   "the gyro and accelerometer are checked by their magnitudes")
+        notes.append(f"{_where(log)}: {log.without_pose_words}; {checked} and the rotor "
+                     "order by the torque balance only")
     check_accel(log, params.gravity if params is not None else 9.81)
     check_rotors(log, params)
     if readings is None:
