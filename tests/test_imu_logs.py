@@ -237,6 +237,36 @@ def test_published_identification_crazyflie21_imu_cmd():
     assert ident.inertia[1].value == pytest.approx(1.105e-5, rel=0.10)
 
 
+def test_an_attitude_without_a_position_is_kept_from_a_usd_log(tmp_path):
+    """A uSD log with the IMU, the motors and ``stateEstimate.qw..qz`` but no ``x/y/z``: the
+    attitude is kept (IMU, motors and attitude), the note says so, no position."""
+    from quadsim.logs.usd import usd_columns
+
+    flight = _imu_flight(seconds=2.0)
+    n = len(flight["t"])
+    half = np.sqrt(0.5)                           # a 90-degree yaw, level
+    attitude = {"stateEstimate.qw": np.full(n, half), "stateEstimate.qx": np.zeros(n),
+                "stateEstimate.qy": np.zeros(n), "stateEstimate.qz": np.full(n, half)}
+    path = tmp_path / "log43"
+    path.write_bytes(_usd_bytes(flight, attitude))
+    columns = usd_columns(path)
+    assert any("attitude logged without stateEstimate.x/y/z: kept" in n for n in columns.notes)
+    log = load_log(path, warn=False)
+    assert log.has_attitude and not log.has_pose and log.position is None
+    np.testing.assert_allclose(log.quat, np.tile([half, 0.0, 0.0, half], (len(log.t), 1)),
+                               atol=1e-6)
+
+
+def test_an_attitude_with_neither_imu_nor_position_is_refused_in_one_line(tmp_path):
+    """An attitude alone (no position, no accelerometer): the IMU minimum is named."""
+    path = tmp_path / "att.csv"
+    path.write_text("t,qw,qx,qy,qz,cmd_1,cmd_2,cmd_3,cmd_4\n"
+                    + "".join(f"{0.01 * k:.2f},1,0,0,0,0.4,0.4,0.4,0.4\n" for k in range(50)))
+    with pytest.raises(InputError, match=r"att\.csv: ax\.\.az: required: a log needs either "
+                                         r"the IMU"):
+        load_log(path)
+
+
 def test_flightlog_without_pose_is_a_value():
     t = np.arange(10) * 0.1
     log = FlightLog(t, None, None, accel=np.zeros((10, 3)), body_rate=np.zeros((10, 3)),

@@ -180,8 +180,9 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
     ``stateEstimate`` (linearly interpolated onto the rows; rows outside its span dropped).
     Without quaternions, ``stateEstimate.roll/pitch/yaw`` (deg) are the attitude in the
     ``euler`` convention (:mod:`.attitude`, default ``crazyflie``). Without a pose the log is
-    IMU + motors (``acc``, ``gyro``, ``motor.m*`` or ``pwm.m*_pwm``); the notes say what was
-    left out and why."""
+    IMU + motors (``acc``, ``gyro``, ``motor.m*`` or ``pwm.m*_pwm``), with the attitude where
+    ``stateEstimate`` logs one without ``x/y/z``; the notes say what was left out or kept and
+    why."""
     path = Path(path)
     events, _ = read_usd(path)
     name = event or next((n for n in events if n == "fixedFrequency"), None)
