@@ -16,8 +16,7 @@ import pytest
 
 from quadsim.core.errors import InputError
 from quadsim.effects import make_effect
-from quadsim.logs.checks import (PULSE_TOLERANCE, ROTOR_SPEED_SPREAD, check_log,
-                                 check_rotor_speeds)
+from quadsim.logs.checks import PULSE_TOLERANCE, ROTOR_SPEED_SPREAD, check_log, check_rotor_speeds
 from quadsim.logs.flightlog import load_log, write_log
 from quadsim.vehicle.params import load_params
 
