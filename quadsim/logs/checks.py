@@ -340,12 +340,14 @@ def check_rotor_speeds(log):
     note) with a rotor read at a whole pulse-count factor scaled back and, for each, a short
     line ("rotor_3's speeds read x 2 (logged at 0.501x the other rotors' speed per command:
     a speed sensor counting one turn in every 2?)") added to the log's
-    :attr:`~quadsim.logs.flightlog.FlightLog.corrections` (note None when none is). A rotor's level is its median speed over the log's samples where every rotor turns
+    :attr:`~quadsim.logs.flightlog.FlightLog.corrections` (note None when none is).
+
+    A rotor's level is its median speed over the log's samples where every rotor turns
     (speed above 5 % of the rotors' largest median: the airborne samples, after
     :func:`quadsim.logs.spans.join_airborne`), its ratio that level over the median of the
     other rotors' levels (so one wrong rotor never moves its own yardstick; two of four
     wrong alike are not told from two right). A ratio beyond :data:`ROTOR_SPEED_SPREAD`
-    either way is scaled by n (or 1/n) where the rotor's speed per command over the
+    either way is scaled by n (or 1/n) where the rotor's speed per command over the other
     rotors' median (:func:`_speed_per_command`; the speed ratio itself without commands)
     lies within :data:`PULSE_TOLERANCE` of 1/n (or n), n = 2 .. :data:`MAX_PULSE_FACTOR`,
     and refused otherwise (one field_error line
