@@ -1,6 +1,7 @@
 """Command-only diagnosis on the real Crazyflie flights: per-flight verdicts on the mixed
 flights with measured rotor speeds vs with the speed columns removed and synthesised from
-the commands (model fitted on the nominal flights). Prints agreement and the pairs.
+the commands (model fitted on the nominal flights), every log checked as ``gap`` checks it
+(:func:`quadsim.logs.checks.check_logs`). Prints agreement and the pairs.
 
     python scripts/command_only_check.py [DATA_DIR] [--json OUT.json]
 
@@ -21,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 from quadsim.core.errors import InputError, run_cli  # noqa: E402
 from quadsim.gap import diagnose_per_flight  # noqa: E402
 from quadsim.gap.logcheck import fit_command_model, synthesise_speeds, without_speeds  # noqa: E402
+from quadsim.logs.checks import check_logs  # noqa: E402
 from quadsim.logs.flightlog import load_log  # noqa: E402
 from quadsim.vehicle.params import load_params  # noqa: E402
 
@@ -45,9 +47,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", metavar="OUT.json", help="write the pairs and the verdicts")
     args = parser.parse_args(argv)
     nominal_paths, mixed_paths = _flights(args.data, "nominal"), _flights(args.data, "mixed")
-    nominal = [load_log(p, warn=False) for p in nominal_paths]
-    mixed = [load_log(p, warn=False) for p in mixed_paths]
     params = load_params("crazyflie21")
+    # the logs as gap reads them: checked, ground spans cut, a rotor speed at a pulse-count
+    # factor read back (quadsim.logs.checks.check_logs)
+    nominal = check_logs([load_log(p, warn=False) for p in nominal_paths], params)[0]
+    mixed = check_logs([load_log(p, warn=False) for p in mixed_paths], params)[0]
     model = fit_command_model(nominal)
     print(f"command model: tau {model.tau * 1e3:.1f} ms, rms {model.rms:.2f} rad/s, "
           f"v_ref {model.v_ref:.3f} V, b {model.b.round(1)}, c {model.c.round(1)}", flush=True)

@@ -298,6 +298,8 @@ class Flight:
     delay_notes: tuple = ()                         # why a delay was not estimated
     #: the log's rotor speeds synthesised from its commands (FlightLog.speeds_synthesised)
     speeds_synthesised: bool = False
+    #: what the log checks changed in a channel (FlightLog.corrections): in every answer
+    corrections: tuple = ()
 
 
 def interior(t: np.ndarray, edge_s: float | None = None) -> np.ndarray:
@@ -348,7 +350,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
                      int(np.ceil(len(states.t) / MAX_FIT_SAMPLES_PER_FLIGHT)))
         fit = joined_states([decimated(s, stride) for s in pieces])
         out.append(Flight(name, states, fit, delays.ms(), delays.notes,
-                          speeds_synthesised=log.speeds_synthesised))
+                          speeds_synthesised=log.speeds_synthesised,
+                          corrections=log.corrections))
     return out
 
 
@@ -489,6 +492,7 @@ def diagnose(logs: Sequence[FlightLog], params: VehicleParams, *,
     held_in = prepare(holdout, params, window_s=window_s) if holdout else None
     checks = vehicle_check([f.fit for f in flights + (held_in or [])], params)
     notes.extend(delay_notes(flights + (held_in or [])))
+    notes.extend(f"{f.name}: {c}" for f in flights + (held_in or []) for c in f.corrections)
     train, held = _split(flights, held_in, notes)
     base = tuple(base_effects)
     rotor = all(f.fit.command is not None for f in train + held)
@@ -2195,11 +2199,15 @@ def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
         words += f" Judged with {law.variant} (the law this flight shows)."
     if place is not None and place.distance > 0:
         words += f" Flown {place.text}."
+    corrections = tuple(getattr(flight, "corrections", ()))
+    if corrections:         # what the log checks changed (FlightLog.corrections)
+        words += f" The log as corrected: {'; '.join(corrections)}."
     verdict = dataclasses.replace(
         verdict, answer=words, drag_law=None if law is None else law.variant,
         envelope=None if place is None else place.to_json(),
         signal_delays_ms=flight.delays_ms,
-        notes=verdict.notes + tuple(delay_notes([flight])))
+        notes=verdict.notes + tuple(delay_notes([flight]))
+        + tuple(f"{flight.name}: {c}" for c in corrections))
     # what a pose would add, and a declared pair the data do not separate: here, so that a
     # reference judged against the others (the self-check) is worded and marked as a flight
     states = getattr(flight, "states", flight)

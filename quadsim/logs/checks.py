@@ -28,6 +28,13 @@ checked against another one that measures the same physics:
 * **rotor speeds vs weight** -- ``b sum(Omega^2)`` averaged over the flight against
   ``m g`` (or ``m`` times the logged body-z specific force): the ratio must lie in
   [0.25, 4] (RPM logged as rad/s gives 91, Hz as rad/s 0.025).
+* **rotor speeds, rotor by rotor** -- each rotor's median logged speed over the airborne
+  samples against the median of the other rotors' (:func:`check_rotor_speeds`): a rotor whose
+  speed lies beyond ``ROTOR_SPEED_SPREAD`` = 1.75x of it (a thrust share beyond 3x or below
+  1/3 of the others') holds no vehicle level, so its speed sensor is wrong. At a
+  whole factor n = 2 .. 8 (or 1/n) within ``PULSE_TOLERANCE`` = 5 %, a tachometer that counts
+  n pulses per turn as one or one as n (a pulse-count or pole-pair setting), the speeds are
+  read scaled by it, with a note; otherwise the log is refused naming the rotor.
 * **rotor order** -- the angular momentum per sample against the mixer's torque integral of
   the rotor columns under every permutation (:func:`check_rotor_order`): an order whose
   Delta chi^2 over the log's own exceeds ``ORDER_CHI2`` = 25 at the noise scale is refused
@@ -54,7 +61,7 @@ from ..core.errors import field_error
 from ..core.frames import quat_to_rotmat
 from .spans import cut_ground, join_airborne, split_airborne
 
-__all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs",
+__all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs", "check_rotor_speeds",
            "gyro_frame_evidence", "order_reading", "rotor_order_evidence",
            "rotor_order_source", "rotor_order_status", "spin_reversal_evidence"]
 
@@ -86,6 +93,20 @@ ORDER_WINDOW_S = 0.4
 #: 0.99 as :data:`quadsim.identify.motor_fits.SATURATED`
 ORDER_SATURATED = 0.99
 MIN_KEPT_S = 1.0
+#: a rotor's median airborne speed beyond this factor of the other rotors' median is no rotor
+#: of a flying vehicle (:func:`check_rotor_speeds`): its thrust share would be beyond 3x (or
+#: below 1/3) the others'. A propeller at the library's weakest (thrust -50 %,
+#: :mod:`quadsim.effects.thrust_mismatch`) turns sqrt(2) = 1.41x faster to give its share
+#: (measured on a generated flight: 1.415x), a CoM a quarter arm off the centre moves a
+#: share by +/-25 % (its speed by +/-12 %): 1.58x at most together; real rotors of one
+#: vehicle lie within 1-4 % of each other (the shared Crazyflie flights)
+ROTOR_SPEED_SPREAD = 1.75
+#: a rotor's speed at n or 1/n (n = 2 .. MAX_PULSE_FACTOR) of the other rotors' within this
+#: fraction is read as a tachometer's pulse count (each turn counted as n, or n turns as
+#: one) and scaled back; the real case: two shared Crazyflie flights read rotor 3 at
+#: 0.502-0.503 of the others' (the others within 1.8 % of each other)
+PULSE_TOLERANCE = 0.05
+MAX_PULSE_FACTOR = 8
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
 
@@ -312,6 +333,103 @@ def check_accel(log, gravity: float = 9.81) -> None:
                               f"accelerometer rotated to the world frame = {gain:.4g} x "
                               f"(velocity derivative + g) on world {axis} over {WINDOW_S} s "
                               f"windows (expected 1): {hint}")
+
+
+def check_rotor_speeds(log):
+    """Each rotor's logged speed against the other rotors' (see module): returns (``log``,
+    note) with a rotor read at a whole pulse-count factor scaled back and, for each, a short
+    line ("rotor_3's speeds read x 2 (logged at 0.501x the other rotors' speed per command:
+    a speed sensor counting one turn in every 2?)") added to the log's
+    :attr:`~quadsim.logs.flightlog.FlightLog.corrections` (note None when none is).
+
+    A rotor's level is its median speed over the log's samples where every rotor turns
+    (speed above 5 % of the rotors' largest median: the airborne samples, after
+    :func:`quadsim.logs.spans.join_airborne`), its ratio that level over the median of the
+    other rotors' levels (so one wrong rotor never moves its own yardstick; two of four
+    wrong alike are not told from two right). A ratio beyond :data:`ROTOR_SPEED_SPREAD`
+    either way is scaled by n (or 1/n) where the rotor's speed per command over the other
+    rotors' median (:func:`_speed_per_command`; the speed ratio itself without commands)
+    lies within :data:`PULSE_TOLERANCE` of 1/n (or n), n = 2 .. :data:`MAX_PULSE_FACTOR`,
+    and refused otherwise (one field_error line
+    naming the rotor column). Logs without rotor speeds, or with fewer than three rotors,
+    pass unchanged."""
+    speeds = log.rotor_speed
+    if speeds is None or speeds.ndim != 2 or speeds.shape[1] < 3 or len(speeds) < 2:
+        return log, None
+    if not np.all(np.isfinite(speeds)):
+        return log, None
+    level = np.median(np.abs(speeds), axis=0)
+    turning = np.all(np.abs(speeds) > 0.05 * float(np.max(level)), axis=1)
+    if np.count_nonzero(turning) < 2:
+        return log, None
+    level = np.median(np.abs(speeds[turning]), axis=0)
+    others = _others_median(level)
+    if np.any(others <= 0):
+        return log, None
+    ratio = level / others
+    off = np.flatnonzero(np.abs(np.log(np.maximum(ratio, 1e-12))) > np.log(ROTOR_SPEED_SPREAD))
+    if off.size == 0:
+        return log, None
+    # the factor is read from the speed per command where commands are logged: a pulse count
+    # scales it exactly, while the speed itself also carries the rotor's share of holding
+    # the vehicle level (0.54x on a real flight whose speed per command reads 0.503x)
+    per_command = _speed_per_command(log, turning)
+    scale = np.ones(len(ratio))
+    said, short = [], []
+    for i in off:
+        r = float(ratio[i] if per_command is None else per_command[i])
+        n = round(1.0 / r) if r < 1.0 else round(r)
+        factor = float(n) if r < 1.0 else 1.0 / n
+        if not 2 <= n <= MAX_PULSE_FACTOR or abs(r * factor - 1.0) > PULSE_TOLERANCE:
+            per = "" if per_command is None else f"; its speed per command {r:.3g}x theirs"
+            raise field_error(_where(log), f"rotor_{i + 1}",
+                              f"its speed is {ratio[i]:.3g}x the other rotors' median over "
+                              f"the flight ({level[i]:.4g} against {others[i]:.4g} rad/s: a thrust "
+                              f"share {ratio[i] ** 2:.2g}x the others'{per}), beyond "
+                              f"{ROTOR_SPEED_SPREAD:g}x "
+                              "either way, which no vehicle flies level with, and at no "
+                              "whole pulse-count factor: check that rotor's speed sensor "
+                              "and its scale, or leave the rotor_* columns out to judge on "
+                              "the commands (cmd_*)")
+        scale[i] = factor
+        turns = (f"counting one turn in every {n}" if r < 1.0 else
+                 f"counting {n} pulses per turn")
+        per = "" if per_command is None else f", its speed per command {r:.3g}x theirs"
+        short.append(f"rotor_{i + 1}'s speeds read x {factor:.4g} (logged at "
+                     f"{r:.3g}x the other rotors' speed{' per command' if per else ''}: a "
+                     f"speed sensor {turns}?)")
+        said.append(f"rotor_{i + 1} read x {factor:.4g} (its speed {ratio[i]:.3g}x the "
+                    f"other rotors' median over the flight, {level[i]:.4g} against "
+                    f"{others[i]:.4g} rad/s{per}: a speed sensor {turns}?)")
+    note = (f"{_where(log)}: rotor_*: " + "; ".join(said) + f": a rotor beyond "
+            f"{ROTOR_SPEED_SPREAD:g}x the others' speed holds no vehicle level, and "
+            f"{'this lies' if len(said) == 1 else 'these lie'} within "
+            f"{PULSE_TOLERANCE:.0%} of a whole pulse-count factor")
+    return dataclasses.replace(log, rotor_speed=speeds * scale,
+                               corrections=log.corrections + tuple(short)), note
+
+
+def _speed_per_command(log, turning: np.ndarray) -> np.ndarray | None:
+    """(R,) each rotor's median speed per command over the ``turning`` samples where its
+    command is above 5 % of full, over the other rotors' median (None without commands,
+    or where a rotor has fewer than 2 such samples)."""
+    command = log.rotor_command
+    if command is None or command.shape != log.rotor_speed.shape:
+        return None
+    out = np.empty(command.shape[1])
+    for i in range(command.shape[1]):
+        use = turning & np.isfinite(command[:, i]) & (command[:, i] > 0.05)
+        if np.count_nonzero(use) < 2:
+            return None
+        out[i] = np.median(np.abs(log.rotor_speed[use, i]) / command[use, i])
+    others = _others_median(out)
+    return out / others if np.all(others > 0) else None
+
+
+def _others_median(values: np.ndarray) -> np.ndarray:
+    """(R,) the median of the other entries of ``values`` (R,) at each entry: one wrong
+    rotor never moves its own yardstick."""
+    return np.array([np.median(np.delete(values, i)) for i in range(len(values))])
 
 
 def check_rotors(log, params) -> None:
@@ -889,6 +1007,8 @@ def check_log(log, params=None, *, joined: bool = False, orders: list | None = N
     # ground, idle and landing spans (quadsim.logs.spans)
     log, note = join_airborne(log) if joined else cut_ground(log)
     notes += [note] if note else []
+    log, note = check_rotor_speeds(log)
+    notes += [note] if note else []
     readings = None if orders is None or params is None else []
     for part in log.parts():
         notes += [n for n in _channel_checks(part, params, readings) if n not in notes]
@@ -907,6 +1027,12 @@ def check_log_stretches(log, params=None):
     notes = [note] if note else []
     logs, note = split_airborne(log)
     notes += [note] if note else []
+    checked = []
+    for part in logs:
+        part, note = check_rotor_speeds(part)
+        checked.append(part)
+        notes += [note] if note and note not in notes else []
+    logs = checked
     for part in logs:
         notes += [n for n in _channel_checks(part, params) if n not in notes]
     return logs, notes

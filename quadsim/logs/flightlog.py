@@ -160,7 +160,10 @@ class FlightLog:
     across one (:meth:`parts` gives the stretches); speeds_synthesised: True where
     rotor_speed was not logged but synthesised from rotor_command by a command -> speed
     model (:func:`quadsim.gap.logcheck.synthesise_speeds`): a timing read on it is the
-    commands' timing through that model, not a logged signal's.
+    commands' timing through that model, not a logged signal's; corrections: what the
+    checks changed in a channel, a short phrase each, no file name (a rotor speed read at a
+    pulse-count factor, :func:`quadsim.logs.checks.check_rotor_speeds`): every answer on
+    the log states them.
     """
 
     t: np.ndarray
@@ -177,6 +180,7 @@ class FlightLog:
     vehicle: str | None = None
     segments: tuple[int, ...] = ()
     speeds_synthesised: bool = False
+    corrections: tuple[str, ...] = ()
 
     def __post_init__(self):
         n = len(self.t)
