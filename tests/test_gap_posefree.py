@@ -273,3 +273,40 @@ def test_the_margin_is_read_over_the_leads_dispersion():
     assert noted.answer.endswith("very strong evidence needs, times 2: the flight's residual "
                                  "after the name is 2x the references' in mean square, which "
                                  "the evidence's noise model does not hold.")
+
+
+def test_a_margin_from_where_the_priors_centre_the_values_does_not_separate_a_pair():
+    """A pair that gives the same force told apart only by the prior's location term
+    (Reading.prior_pull = 1/2 |z|^2 at the MAP): l2f's X500 with every propeller 11.7 %
+    weaker read +266 g at 0.996, 5.56 log units ahead of `thrust_factor`, which sat far out in
+    its narrow prior. Counted at their priors' centres the two lie within SEPARATED: the
+    rival is stated, the name tentative, and the words say why; where the data themselves
+    separate them (the margin beyond SEPARATED with the pulls counted too) nothing changes."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.logcheck import SEPARATED, confusable_note
+    from quadsim.gap.result import Reading, Verdict
+
+    pose = SimpleNamespace(has_pose=True)
+
+    def verdict(thrust_pull):
+        posterior = (Reading("mass_offset", 0.996, "+266 g heavier", -311.48, prior_pull=0.02),
+                     Reading("thrust_factor", 0.004, "-11.7 % thrust per Omega^2",
+                             -311.48 - 5.56, prior_pull=thrust_pull))
+        return Verdict("effect", "mass_offset", "mass_offset (100 %): +266 g.", 0.996,
+                       posterior=posterior, readings=("mass_offset",))
+
+    assert 5.56 > SEPARATED
+    apart = verdict(0.0)
+    assert confusable_note(apart, pose) is apart
+    held = verdict(2.7)
+    noted = confusable_note(held, pose)
+    assert noted.tentative and noted.readings == ("mass_offset", "thrust_factor")
+    assert noted.confusable_with == ("thrust_factor",)
+    assert noted.answer.endswith("very strong evidence needs once each value is counted at "
+                                 "its prior's centre (where the priors centre the values is no "
+                                 "evidence of this flight).")
+    assert (noted.outcome, noted.name, noted.probability) == ("effect", "mass_offset", 0.996)
+    edge = verdict(5.56 - SEPARATED + 0.02 - 0.01)     # flat margin just above SEPARATED
+    assert confusable_note(edge, pose) is edge
+

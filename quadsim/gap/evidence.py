@@ -289,6 +289,12 @@ class Evidence:
     #: ``values``' order (sd_i sd_j (H^+)_ij, :func:`laplace`); None: not kept. A size that
     #: sums parameters (a payload's fixed and swinging parts) takes its spread from it.
     post_cov: np.ndarray | None = None
+    #: 1/2 |z|^2 at the MAP (z the explanation's values in prior spreads from the prior's
+    #: centre, :class:`Problem`): the log units that where the prior centres the values takes
+    #: from ``log_z`` (its -1/2 |vec|^2 holds it); log_z + prior_pull is the evidence with
+    #: every value counted at its prior's centre, the data's fit and the Occam volume only
+    #: (:func:`quadsim.gap.logcheck.confusable_note`). 0 where not measured.
+    prior_pull: float = 0.0
 
     @property
     def name(self) -> str:
@@ -896,7 +902,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
                   shared_shift=shift, slow=None if getattr(states, "t", None) is None
                   or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])),
-                  post_cov=cov)
+                  post_cov=cov, prior_pull=0.5 * float(np.dot(z, z)))
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,
                                   own_effects(expl, np.clip(theta, prob.lower, prob.upper)),

@@ -1469,7 +1469,8 @@ def _reading(k: str, p: float, ev, magnitude: str, *, bias: float = 0.0,
                    tuple(q for q, ok in ev.determined.items() if not ok),
                    ev.explanation.fixed_values, ev.explanation.variant,
                    total=total_mass(ev) or {}, bias=bias,
-                   across={} if vehicle_mass is None else across_sessions(ev, vehicle_mass))
+                   across={} if vehicle_mass is None else across_sessions(ev, vehicle_mass),
+                   prior_pull=float(getattr(ev, "prior_pull", 0.0)))
 
 
 #: the two readings of a rotor timing difference: the rotors follow their commands with a

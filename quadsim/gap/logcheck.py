@@ -693,13 +693,24 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
     effect and they declare confusable (:func:`confusable`), with a determined magnitude,
     and (``within``, log-evidence units) a log evidence no more than that below the name's
     (the posterior's highest where no reading bears the name: a lead renamed by the lead
-    rule), most probable first: [(reading, how to tell them apart)]."""
+    rule), or no more than that below it with every value of both counted at its prior's
+    centre (log evidence + :attr:`~quadsim.gap.result.Reading.prior_pull`: where the priors
+    centre a pair's values is no evidence of this flight; a pair that gives the same force
+    is then told apart by the data's fit and the Occam volume alone), most probable first:
+    [(reading, how to tell them apart)]."""
     stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
-    own = ([r.log_evidence for r in verdict.posterior if r.name == verdict.name]
-           or [r.log_evidence for r in verdict.posterior])
-    floor = (max(own) - within) if own and np.isfinite(within) else -np.inf
+    own = ([r for r in verdict.posterior if r.name == verdict.name]
+           or list(verdict.posterior))
+    lead = max(own, key=lambda r: r.log_evidence) if own else None
+    if lead is None or not np.isfinite(within):
+        floor = flat = -np.inf
+    else:
+        floor = lead.log_evidence - within
+        flat = lead.log_evidence + getattr(lead, "prior_pull", 0.0) - within
     rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
-              if r.name not in stated and r.magnitude and r.log_evidence >= floor]
+              if r.name not in stated and r.magnitude and (
+                  r.log_evidence >= floor
+                  or r.log_evidence + getattr(r, "prior_pull", 0.0) >= flat)]
     return sorted([(r, hint) for r, hint in rivals if hint],
                   key=lambda x: -x[0].probability)
 
@@ -717,6 +728,15 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
 SEPARATED = float(np.log(150.0))
 
 
+def _by_priors(verdict, rivals: list, scale: float) -> bool:
+    """Whether a rival of ``rivals`` (:func:`_unseparated_rivals`) lies beyond
+    :data:`SEPARATED` times ``scale`` of the name's log evidence, and so is stated only with
+    every value counted at its prior's centre."""
+    own = [r.log_evidence for r in verdict.posterior if r.name == verdict.name] or \
+        [r.log_evidence for r in verdict.posterior]
+    return bool(own) and any(max(own) - r.log_evidence > SEPARATED * scale for r, _ in rivals)
+
+
 def _has_pose(log) -> bool:
     """Whether ``log`` (a FlightLog, ``has_pose``, or FlightStates, ``pose``) has a pose."""
     return bool(getattr(log, "has_pose", getattr(log, "pose", True)))
@@ -726,8 +746,9 @@ def confusable_note(verdict, log):
     """``verdict`` (:class:`quadsim.gap.result.Verdict`) of a log with a pose (``log``: a
     FlightLog or its FlightStates; one without is :func:`without_pose_note`'s) with each
     declared confusable reading (:func:`confusable`) whose log evidence lies within
-    :data:`SEPARATED` of the name's stated beside it, with its probability and how to tell
-    them apart, and the name tentative; else as is. The margin is compared in
+    :data:`SEPARATED` of the name's (or within it with every value counted at its prior's
+    centre, :func:`_unseparated_rivals`) stated beside it, with its probability and how to
+    tell them apart, and the name tentative; else as is. The margin is compared in
     quasi-likelihood units: SEPARATED times ``verdict.dispersion``
     (:func:`quadsim.gap.judge.overdispersion`, 1 where the flight's residual after the name
     lies within the references'), which the words state where it is above 1. The outcome
@@ -750,7 +771,10 @@ def confusable_note(verdict, log):
               "units that very strong evidence needs"
               + (f", times {scale:.2g}: the flight's residual after the name is {scale:.2g}x "
                  "the references' in mean square, which the evidence's noise model does not "
-                 "hold" if scale > 1 else "") + ".")
+                 "hold" if scale > 1 else "")
+              + (" once each value is counted at its prior's centre (where the priors centre "
+                 "the values is no evidence of this flight)" if _by_priors(verdict, rivals, scale)
+                 else "") + ".")
     names = tuple(r.name for r, _ in rivals)
     return dataclasses.replace(
         verdict, answer=answer, tentative=True, readings=tuple(verdict.readings) + names,

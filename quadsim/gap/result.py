@@ -89,6 +89,10 @@ class Reading(_JsonView):
     #: ``across_sessions``); {} without one. ``ci`` and ``total`` stay the within-session
     #: ones (flights of the references' session compare at them)
     across: Mapping = field(default_factory=dict)
+    #: the log units where the prior centres its values takes from ``log_evidence``
+    #: (:attr:`quadsim.gap.evidence.Evidence.prior_pull`; 0 where not measured); not in
+    #: the JSON
+    prior_pull: float = 0.0
 
     def to_json(self) -> dict:
         out = {"name": self.name, "probability": self.probability,
