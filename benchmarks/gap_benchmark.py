@@ -104,6 +104,12 @@ rotor forces, 40 ms motor lag, linear drag, wind and rotor-efficiency handles, i
 default vehicle and its geometric controller; the CoM handle and added loads this
 project's) against 8 nominal flights; built blind.
 
+quad_sim_python source (``--independent --source quad-sim-python --cache DIR``,
+:mod:`benchmarks.qsp_cases`): the same for 24 cases from quad_sim_python 0.0.2 (bobzwik's
+Quadcopter_SimCon: its plant and dopri5, second-order motors, world-axis quadratic drag and
+wind, its 1.2 kg vehicle, its PX4-like controller and minimum-snap generator; the waypoints,
+the CoM patch and added loads this project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -627,6 +633,9 @@ SIM_SOURCES = {
     "drones-sim": ("benchmarks.dsim_cases", "benchmarks.dsim_source", "dsim_available",
                    ("pip install 'quadsim[dsim]', or pip install --no-deps drones-sim==0.2.0 "
                     "with numpy, scipy and matplotlib")),
+    "quad-sim-python": ("benchmarks.qsp_cases", "benchmarks.qsp_source", "qsp_available",
+                        ("pip install 'quadsim[qsp]', or pip install --no-deps "
+                         "quad_sim_python==0.0.2 with numpy and scipy")),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -747,7 +756,8 @@ def main(argv=None) -> int:
                         default="rotorpy+pipeline",
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, quadcopter-sim, genesis, "
-                             "gym-pybullet-drones, drone-models, drake, l2f and its vehicles "
+                             "gym-pybullet-drones, drone-models, drake, drones-sim, "
+                             "quad-sim-python, l2f and its vehicles "
                              "l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
