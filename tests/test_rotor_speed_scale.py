@@ -173,3 +173,12 @@ def test_the_real_payload_flight_as_a_user_types_it(tmp_path, capsys):
     assert "The log as corrected: rotor_3's speeds read x 2" in flight["answer"]
     assert any(n.endswith("a speed sensor counting one turn in every 2?)")
                for n in flight["notes"])
+
+
+def test_a_log_without_its_speeds_drops_their_correction(flight):
+    """``logcheck.without_speeds`` (a command-only log made from one with speeds) keeps no
+    correction of the speeds it drops: an answer on it never says they were read back."""
+    from quadsim.gap.logcheck import without_speeds
+
+    corrected, _ = check_rotor_speeds(_scaled(flight, 2, 0.5))
+    assert corrected.corrections and without_speeds(corrected).corrections == ()

@@ -360,8 +360,11 @@ def synthesise_speeds(log: FlightLog, model: CommandModel, *,
 
 
 def without_speeds(log: FlightLog) -> FlightLog:
-    """The log with its rotor-speed columns removed (what a command-only log looks like)."""
-    return dataclasses.replace(log, rotor_speed=None, speeds_synthesised=False)
+    """The log with its rotor-speed columns removed (what a command-only log looks like),
+    and with them the checks' corrections of the speeds (``FlightLog.corrections``)."""
+    return dataclasses.replace(log, rotor_speed=None, speeds_synthesised=False,
+                               corrections=tuple(c for c in log.corrections
+                                                 if "'s speeds read x" not in c))
 
 
 @dataclass(frozen=True)
