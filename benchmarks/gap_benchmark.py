@@ -110,6 +110,13 @@ Quadcopter_SimCon: its plant and dopri5, second-order motors, world-axis quadrat
 wind, its 1.2 kg vehicle, its PX4-like controller and minimum-snap generator; the waypoints,
 the CoM patch and added loads this project's) against 8 nominal flights; built blind.
 
+pymulticopter source (``--independent --source pymulticopter --cache DIR``,
+:mod:`benchmarks.pm_cases`): the same for 20 cases from pymulticopter 0.0.1 on pysimenv 0.0.22
+(its rigid body and RK4, quad-X effector and mixer, ActuatorFault gains and biases, rate
+damping D_omega, its 4.34 kg example vehicle and quaternion LQR controllers; the rotor-speed
+scale, position gains, path, CoM and torque patches this project's) against 8 nominal flights;
+built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -636,6 +643,10 @@ SIM_SOURCES = {
     "quad-sim-python": ("benchmarks.qsp_cases", "benchmarks.qsp_source", "qsp_available",
                         ("pip install 'quadsim[qsp]', or pip install --no-deps "
                          "quad_sim_python==0.0.2 with numpy and scipy")),
+    "pymulticopter": ("benchmarks.pm_cases", "benchmarks.pm_source", "pm_available",
+                      ("pip install 'quadsim[pm]', or pip install --no-deps "
+                       "pymulticopter==0.0.1 pysimenv==0.0.22 h5py pytictoc pyquaternion "
+                       "with numpy, scipy, matplotlib and ray")),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -757,7 +768,7 @@ def main(argv=None) -> int:
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, quadcopter-sim, genesis, "
                              "gym-pybullet-drones, drone-models, drake, drones-sim, "
-                             "quad-sim-python, l2f and its vehicles "
+                             "quad-sim-python, pymulticopter, l2f and its vehicles "
                              "l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
