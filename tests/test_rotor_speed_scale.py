@@ -182,3 +182,21 @@ def test_a_log_without_its_speeds_drops_their_correction(flight):
 
     corrected, _ = check_rotor_speeds(_scaled(flight, 2, 0.5))
     assert corrected.corrections and without_speeds(corrected).corrections == ()
+
+
+def test_a_larger_multirotor_keeps_a_weak_rotor_with_a_note(flight):
+    """On six rotors (the generated flight's four columns and two of them again) a rotor at
+    0.4x the others (at no pulse-count factor) is kept as logged with a note: a hexarotor can
+    fly on with one motor failing. At 0.5x it is still read back x 2."""
+    six = dataclasses.replace(flight, rotor_speed=flight.rotor_speed[:, [0, 1, 2, 3, 0, 1]],
+                              rotor_command=flight.rotor_command[:, [0, 1, 2, 3, 0, 1]])
+    weak = _scaled(six, 2, 0.4)
+    out, note = check_rotor_speeds(weak)
+    assert out is weak and out.corrections == ()
+    assert "rotor_3 kept as logged (its speed 0.3" in note and "6 rotors" in note
+    assert "its speed per command 0.4x theirs" in note
+    halved, note = check_rotor_speeds(_scaled(six, 2, 0.5))
+    assert np.allclose(halved.rotor_speed, six.rotor_speed, rtol=1e-12)
+    assert "rotor_3 read x 2" in note
+    with pytest.raises(InputError, match="rotor_3: its speed is"):
+        check_rotor_speeds(_scaled(flight, 2, 0.4))             # four rotors: refused

@@ -110,6 +110,11 @@ ROTOR_SPEED_SPREAD = 1.75
 #: 0.502-0.503 of the others' (the others within 1.8 % of each other)
 PULSE_TOLERANCE = 0.05
 MAX_PULSE_FACTOR = 8
+#: rotors of the largest vehicle that cannot hold level with one rotor far off the others'
+#: thrust (:func:`check_rotor_speeds`): a quadrotor's roll, pitch and yaw need all four; a
+#: hexarotor or octorotor can fly on with one weak or lost, so there a rotor beyond
+#: ROTOR_SPEED_SPREAD at no pulse-count factor is kept as logged, with a note
+QUAD_ROTORS = 4
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
 
@@ -389,9 +394,10 @@ def check_rotor_speeds(log):
     either way is scaled by n (or 1/n) where the rotor's speed per command over the other
     rotors' median (:func:`_speed_per_command`; the speed ratio itself without commands)
     lies within :data:`PULSE_TOLERANCE` of 1/n (or n), n = 2 .. :data:`MAX_PULSE_FACTOR`,
-    and refused otherwise (one field_error line
-    naming the rotor column). Logs without rotor speeds, or with fewer than three rotors,
-    pass unchanged."""
+    and otherwise refused (one field_error line naming the rotor column) on a vehicle of at
+    most :data:`QUAD_ROTORS` rotors, kept as logged with a note (a failing motor?) on a
+    larger one. Logs without rotor speeds, or with fewer than three rotors, pass
+    unchanged."""
     speeds = log.rotor_speed
     if speeds is None or speeds.ndim != 2 or speeds.shape[1] < 3 or len(speeds) < 2:
         return log, None
@@ -414,13 +420,19 @@ def check_rotor_speeds(log):
     # the vehicle level (0.54x on a real flight whose speed per command reads 0.503x)
     per_command = _speed_per_command(log, turning)
     scale = np.ones(len(ratio))
-    said, short = [], []
+    said, short, kept = [], [], []
     for i in off:
         r = float(ratio[i] if per_command is None else per_command[i])
         n = round(1.0 / r) if r < 1.0 else round(r)
         factor = float(n) if r < 1.0 else 1.0 / n
         if not 2 <= n <= MAX_PULSE_FACTOR or abs(r * factor - 1.0) > PULSE_TOLERANCE:
             per = "" if per_command is None else f"; its speed per command {r:.3g}x theirs"
+            if len(ratio) > QUAD_ROTORS:    # a failing rotor a larger multirotor flies with
+                kept.append(f"rotor_{i + 1} kept as logged (its speed {ratio[i]:.3g}x the "
+                            f"other rotors' median over the flight{per}: a failing motor, or "
+                            f"its speed sensor? a vehicle of {len(ratio)} rotors can hold "
+                            "level with one rotor weak)")
+                continue
             raise field_error(_where(log), f"rotor_{i + 1}",
                               f"its speed is {ratio[i]:.3g}x the other rotors' median over "
                               f"the flight ({level[i]:.4g} against {others[i]:.4g} rad/s: a thrust "
@@ -440,10 +452,12 @@ def check_rotor_speeds(log):
         said.append(f"rotor_{i + 1} read x {factor:.4g} (its speed {ratio[i]:.3g}x the "
                     f"other rotors' median over the flight, {level[i]:.4g} against "
                     f"{others[i]:.4g} rad/s{per}: a speed sensor {turns}?)")
-    note = (f"{_where(log)}: rotor_*: " + "; ".join(said) + f": a rotor beyond "
-            f"{ROTOR_SPEED_SPREAD:g}x the others' speed holds no vehicle level, and "
-            f"{'this lies' if len(said) == 1 else 'these lie'} within "
-            f"{PULSE_TOLERANCE:.0%} of a whole pulse-count factor")
+    parts = ([f"{'; '.join(said)}: a rotor beyond {ROTOR_SPEED_SPREAD:g}x the others' speed "
+              f"holds no vehicle level, and {'this lies' if len(said) == 1 else 'these lie'} "
+              f"within {PULSE_TOLERANCE:.0%} of a whole pulse-count factor"] if said else [])
+    note = f"{_where(log)}: rotor_*: " + "; ".join(parts + kept)
+    if not said:
+        return log, note
     return dataclasses.replace(log, rotor_speed=speeds * scale,
                                corrections=log.corrections + tuple(short)), note
 
