@@ -155,7 +155,7 @@ from ..core.errors import InputError
 from ..core.frames import rotate
 from ..effects import EFFECTS
 from ..effects.facts import POSE_PARTS, without_pose
-from ..logs.checks import RotorOrder, rotor_order_status
+from ..logs.checks import SPEED_CORRECTION, RotorOrder, rotor_order_status
 from ..logs.flightlog import FlightLog
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
@@ -364,7 +364,7 @@ def without_speeds(log: FlightLog) -> FlightLog:
     and with them the checks' corrections of the speeds (``FlightLog.corrections``)."""
     return dataclasses.replace(log, rotor_speed=None, speeds_synthesised=False,
                                corrections=tuple(c for c in log.corrections
-                                                 if "'s speeds read x" not in c))
+                                                 if SPEED_CORRECTION not in c))
 
 
 @dataclass(frozen=True)

@@ -115,6 +115,10 @@ MAX_PULSE_FACTOR = 8
 #: hexarotor or octorotor can fly on with one weak or lost, so there a rotor beyond
 #: ROTOR_SPEED_SPREAD at no pulse-count factor is kept as logged, with a note
 QUAD_ROTORS = 4
+#: what each rotor-speed correction in ``FlightLog.corrections`` says after the column name
+#: (:func:`check_rotor_speeds`); a log without its speeds drops these
+#: (:func:`quadsim.gap.logcheck.without_speeds`)
+SPEED_CORRECTION = "'s speeds read x"
 _ARRAYS = ("position", "quat", "velocity", "body_rate", "accel", "rotor_speed",
            "rotor_command", "vbat")
 
@@ -204,9 +208,8 @@ def _deming_gain(measured: np.ndarray, reference: np.ndarray, ratio: float) -> f
     s_xx, s_yy, s_xy the second moments about zero (x the reference, y measured; the windows'
     gravity and manoeuvres are the signal, no intercept),
     beta = (s_yy - r s_xx + sqrt((s_yy - r s_xx)^2 + 4 r s_xy^2)) / (2 s_xy).
-    Why: a noisy velocity (0.02 m/s per sample at 200 Hz, 0.28 m/s^2 on a 0.1 s window's
-    difference) on a gentle flight (0.2 m/s^2 of horizontal manoeuvre) took the least-squares
-    gain to 0.41 and refused a sound log (docs/flightlog.md, consistency checks)."""
+    Why not least squares: the velocity side's noise attenuates its gain by
+    s_signal^2 / (s_signal^2 + s_noise^2) (docs/flightlog.md, consistency checks)."""
     if not np.isfinite(ratio):
         return _gain(measured, reference)
     sxx = float(np.mean(reference * reference))
@@ -446,7 +449,7 @@ def check_rotor_speeds(log):
         turns = (f"counting one turn in every {n}" if r < 1.0 else
                  f"counting {n} pulses per turn")
         per = "" if per_command is None else f", its speed per command {r:.3g}x theirs"
-        short.append(f"rotor_{i + 1}'s speeds read x {factor:.4g} (logged at "
+        short.append(f"rotor_{i + 1}{SPEED_CORRECTION} {factor:.4g} (logged at "
                      f"{r:.3g}x the other rotors' speed{' per command' if per else ''}: a "
                      f"speed sensor {turns}?)")
         said.append(f"rotor_{i + 1} read x {factor:.4g} (its speed {ratio[i]:.3g}x the "
