@@ -117,6 +117,13 @@ damping D_omega, its 4.34 kg example vehicle and quaternion LQR controllers; the
 scale, position gains, path, CoM and torque patches this project's) against 8 nominal flights;
 built blind.
 
+JSBSim source (``--independent --source jsbsim --cache DIR``, :mod:`benchmarks.jsbsim_cases`):
+the same for 24 cases from JSBSim 1.3.3 and the DJI F450 its wheel ships (its 6-DOF plant on
+a rotating Earth, its brushless motors' torque balance against the propeller tables, its
+drag and wind, every case by the F450's own files: Mass.xml pointmasses, CG and inertia,
+propeller tables and inertia, Aero.xml, external_reactions; the geometric controller, the
+airborne start and the path this project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -647,6 +654,8 @@ SIM_SOURCES = {
                       ("pip install 'quadsim[pm]', or pip install --no-deps "
                        "pymulticopter==0.0.1 pysimenv==0.0.22 h5py pytictoc pyquaternion "
                        "with numpy, scipy, matplotlib and ray")),
+    "jsbsim": ("benchmarks.jsbsim_cases", "benchmarks.jsbsim_source", "jsbsim_available",
+               "pip install 'quadsim[jsbsim]', or pip install jsbsim==1.3.3"),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
@@ -768,7 +777,7 @@ def main(argv=None) -> int:
                         help="with --independent: which independent source (crazyflow, "
                              "pyflyt, multirotor, quadcopter-sim, genesis, "
                              "gym-pybullet-drones, drone-models, drake, drones-sim, "
-                             "quad-sim-python, pymulticopter, l2f and its vehicles "
+                             "quad-sim-python, pymulticopter, jsbsim, l2f and its vehicles "
                              "l2f-fs, "
                              "l2f-flightmare, l2f-mrs, l2f-arpl, l2f-soft: per-flight cases "
                              "against 8 "
