@@ -106,10 +106,11 @@ Command -> speed map
 
 The static command -> rotor-speed map of the gap diagnosis (fitted from data).
 
-Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
-firmware: PWM / 65535), so the rotor channel's static map is taken from the data (training
-or reference flights): what the rotor channel then measures is the rotor *dynamics*, and
-effects upstream of the speed (a battery's voltage, a motor lag) act on top of it.
+Logs normalise commands differently (``quadsim.fly``: speed / max_speed, or the command the
+set's own motor map gives; the Crazyflie firmware: PWM / 65535), so the rotor channel's
+static map is taken from the data (training or reference flights): what the rotor channel
+then measures is the rotor *dynamics*, and effects upstream of the speed (a battery's
+voltage, a motor lag) act on top of it.
 
 Example::
 
@@ -681,9 +682,10 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     transfers to a flight at another only in u V (docs/identification.md, "The rotor channels
     held out").
 
-    Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
-    firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
-    reference) data; what the channel then measures is the rotor *dynamics*.
+    Logs normalise commands differently (``quadsim.fly``: speed / max_speed, or the command
+    the set's own motor map gives; the Crazyflie firmware: PWM / 65535), so the rotor
+    channel's static map is taken from the (training or reference) data; what the channel
+    then measures is the rotor *dynamics*.
 
     The map is static, so it is fitted on both signals averaged over
     :data:`MAP_WINDOW_S` (moving mean, per flight, edges dropped): a measured speed that
