@@ -131,3 +131,11 @@ def test_a_command_only_reading_gives_the_flown_speeds(monkeypatch):
     old = dataclasses.replace(log, rotor_command=log.rotor_speed / CF.max_speed)
     ratio = synthesise_speeds(without_speeds(old), model).rotor_speed / log.rotor_speed
     assert np.median(ratio) == pytest.approx(1.52, abs=0.02)
+
+
+def test_a_map_without_an_inverse_is_refused_naming_the_field():
+    mm = CF.motor_map
+    speed = np.array([[0.0, 2000.0, 1500.0]] + [[0.0, 1000.0, 2000.0]] * 3)
+    bent = dataclasses.replace(mm, command=np.array([0.0, 0.5, 1.0]), speed=speed)
+    with pytest.raises(InputError, match="motor_map.speed: rotor 1's speed falls"):
+        logged_command(CF.replace(motor_map=bent), np.full((2, 4), 900.0), np.full(2, 4.2))

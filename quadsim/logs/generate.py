@@ -220,11 +220,17 @@ def logged_command(params: VehicleParams, speed: np.ndarray,
       ``speed_at(command, vbat)`` gives the commanded speed back, and a reader of the log
       with the same set (``gap --model``, ``identify --logs``, command-only diagnosis) reads
       the vehicle that flew it. Recorded as ``command_map`` (the set, the map's source, its
-      voltage law, the range of the voltages it was read at)."""
+      voltage law, the range of the voltages it was read at). InputError where a rotor's
+      map speed falls as its command rises (no inverse)."""
     mm = params.motor_map
     if mm is None:
         return (speed / params.max_speed,
                 {"command_normalisation": {"max_speed": params.max_speed, "unit": "rad/s"}})
+    falling = np.flatnonzero(np.any(np.diff(mm.speed, axis=1) < 0, axis=1))
+    if len(falling):
+        raise InputError(f"{params.path or params.name}: motor_map.speed: rotor "
+                         f"{falling[0] + 1}'s speed falls along the command axis: the map has "
+                         "no inverse to log the commands of a speed")
     vbat = np.asarray(vbat, float)
     record = {"convention": "motor_map", "model": params.name, "source": mm.source,
               "command_unit": mm.command_unit,
