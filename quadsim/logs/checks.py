@@ -727,7 +727,8 @@ def _command_speeds(command: np.ndarray, params) -> np.ndarray:
     per-axis gain is fitted anyway, so only the shape of Omega(u) matters). Its rotors'
     differences matter: read at ``max_speed`` alone, a crazyflie21 flight generated with the
     map's commands (offsets 57-127 rad/s, gains 3481-3632 rad/s per unit) fitted rotors
-    1<->2, 3<->4 swapped better by Delta chi^2 43-60 (CHANGELOG.md, quadsim.fly's commands)."""
+    1<->2 and/or 3<->4 swapped better by Delta chi^2 43-136 (CHANGELOG.md, quadsim.fly's
+    commands)."""
     command = np.clip(command, 0.0, None)
     mm = params.motor_map
     if mm is None or mm.speed.shape[0] != command.shape[1]:
