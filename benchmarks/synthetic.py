@@ -356,17 +356,15 @@ def commands_through_map(log, params):
     rotor speeds: the map inverted per rotor at the logged battery voltage (its voltage law)
     after a first-order lead of the map's time constant (the command model lags by it), so
     ``quadsim.gap.logcheck.command_model_from_params(params)`` gives the speeds back. What a
-    vehicle whose motors follow the set's map would log; the generators
-    (:func:`synthetic_flight`, ``quadsim.logs.generate``) write ``speed / max_speed``
-    (``quadsim.fly``'s convention), which the set's map does not describe, so a run that
-    reads the commands through the set's own map (held out against the bare set, or
-    command-only) needs this (CHANGELOG.md, the speed benchmark)."""
+    vehicle whose motors follow the set's map would log; :func:`synthetic_flight` writes
+    ``speed / max_speed``, which the set's map does not describe, so a run that reads the
+    commands through the set's own map (held out against the bare set, or command-only)
+    needs this (CHANGELOG.md, the speed benchmark). ``quadsim.logs.generate`` writes the
+    map's command of the commanded speed itself (no lead: its vehicle has no motor lag
+    unless a ``motor_lag`` effect is flown). The inverse is the set's own,
+    ``MotorMap.command_at`` (normalised as ``quadsim.gap.residual.command_of_speed``)."""
     mm = params.motor_map
     speed = np.asarray(log.rotor_speed, float)
     steady = speed + mm.time_constant * np.gradient(speed, log.t, axis=0)
-    if log.vbat is not None and mm.reference_voltage is not None:
-        steady = steady / (1.0 + mm.voltage_gain
-                           * (np.asarray(log.vbat, float) - mm.reference_voltage))[:, None]
-    command = np.stack([np.interp(steady[:, i], mm.speed[i], mm.command)
-                        for i in range(steady.shape[1])], -1)
+    command = mm.normalised(mm.command_at(steady, log.vbat))
     return replace(log, rotor_command=command)

@@ -131,7 +131,9 @@ def test_check_log_reads_the_scaled_speeds_and_convert_warns(flight, tmp_path, c
     write_log(src, _scaled(flight, 2, 0.4))
     before = src.read_bytes()
     assert convert([str(src), "-o", str(dst), "--model", "crazyflie21"]) == 2
-    one_line(capsys, str(src), ": rotor_3: its speed is 0.", "its speed per command 0.4x")
+    # 0.4 x 0.992: the commands are the crazyflie21 map's (quadsim.fly), not speed / max_speed,
+    # and rotor 3's own speed per command is 0.992x the others' on this flight (its map)
+    one_line(capsys, str(src), ": rotor_3: its speed is 0.", "its speed per command 0.397x")
     assert not dst.exists() and src.read_bytes() == before
 
 
@@ -194,7 +196,7 @@ def test_a_larger_multirotor_keeps_a_weak_rotor_with_a_note(flight):
     out, note = check_rotor_speeds(weak)
     assert out is weak and out.corrections == ()
     assert "rotor_3 kept as logged (its speed 0.3" in note and "6 rotors" in note
-    assert "its speed per command 0.4x theirs" in note
+    assert "its speed per command 0.397x theirs" in note     # 0.4 x 0.992, as above
     halved, note = check_rotor_speeds(_scaled(six, 2, 0.5))
     assert np.allclose(halved.rotor_speed, six.rotor_speed, rtol=1e-12)
     assert "rotor_3 read x 2" in note

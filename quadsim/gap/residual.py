@@ -106,10 +106,11 @@ Command -> speed map
 
 The static command -> rotor-speed map of the gap diagnosis (fitted from data).
 
-Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
-firmware: PWM / 65535), so the rotor channel's static map is taken from the data (training
-or reference flights): what the rotor channel then measures is the rotor *dynamics*, and
-effects upstream of the speed (a battery's voltage, a motor lag) act on top of it.
+Logs normalise commands differently (``quadsim.fly``: speed / max_speed, or the command the
+set's own motor map gives; the Crazyflie firmware: PWM / 65535), so the rotor channel's
+static map is taken from the data (training or reference flights): what the rotor channel
+then measures is the rotor *dynamics*, and effects upstream of the speed (a battery's
+voltage, a motor lag) act on top of it.
 
 Example::
 
@@ -681,9 +682,10 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     transfers to a flight at another only in u V (docs/identification.md, "The rotor channels
     held out").
 
-    Logs normalise commands differently (``quadsim.fly``: speed / max_speed; the Crazyflie
-    firmware: PWM / 65535), so the rotor channel's static map is taken from the (training or
-    reference) data; what the channel then measures is the rotor *dynamics*.
+    Logs normalise commands differently (``quadsim.fly``: speed / max_speed, or the command
+    the set's own motor map gives; the Crazyflie firmware: PWM / 65535), so the rotor
+    channel's static map is taken from the (training or reference) data; what the channel
+    then measures is the rotor *dynamics*.
 
     The map is static, so it is fitted on both signals averaged over
     :data:`MAP_WINDOW_S` (moving mean, per flight, edges dropped): a measured speed that
@@ -944,10 +946,7 @@ def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | N
 
 def _map_units(params: VehicleParams, command: np.ndarray) -> np.ndarray:
     """Normalised 0-1 command -> the motor map's own command unit (0-1 spans its table)."""
-    mm = params.motor_map
-    if mm.command_unit == "1":
-        return command
-    return mm.command[0] + command * (mm.command[-1] - mm.command[0])
+    return params.motor_map.to_unit(command)
 
 
 def speed_of_command(params: VehicleParams, command: np.ndarray) -> np.ndarray:
@@ -958,16 +957,16 @@ def speed_of_command(params: VehicleParams, command: np.ndarray) -> np.ndarray:
     return command * params.max_speed
 
 
-def command_of_speed(params: VehicleParams, speed: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`speed_of_command` (N, R) (monotone part of the map)."""
+def command_of_speed(params: VehicleParams, speed: np.ndarray,
+                     vbat: np.ndarray | None = None) -> np.ndarray:
+    """Inverse of :func:`speed_of_command` (N, R) (monotone part of the map): normalised
+    commands from speeds (rad/s). ``vbat`` (N,) (V): the battery voltages the speeds are
+    reached at, read through the map's voltage law (``MotorMap.command_at``, the inverse
+    of ``MotorMap.speed_at``); None: the map as stated (at its reference voltage)."""
     if params.motor_map is None:
         return speed / params.max_speed
     mm = params.motor_map
-    raw = np.stack([np.interp(speed[:, i], mm.speed[i], mm.command)
-                    for i in range(speed.shape[1])], -1)
-    if mm.command_unit == "1":
-        return raw
-    return (raw - mm.command[0]) / (mm.command[-1] - mm.command[0])
+    return mm.normalised(mm.command_at(speed, vbat))
 
 
 #: horizon (s) of the rotor-speed channel: speed predicted this far ahead from the measured

@@ -709,16 +709,31 @@ def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
 
 def _order_sources(log, params, commands: bool) -> list[tuple[str, np.ndarray]]:
     """(name, (N, R) rad/s) of the rotor signals that can stand for the rotor speeds in the
-    torque balance: the logged speeds, and the commands (the squared command scaled by the
-    set's max_speed: its per-axis gain is fitted anyway, so only the shape of Omega(u)
-    matters) where ``commands`` or where the speeds are logged too."""
+    torque balance: the logged speeds, and the commands where ``commands`` or where the
+    speeds are logged too (:func:`_command_speeds`)."""
     out = []
     if log.rotor_speed is not None:
         out.append(("rotor speeds", log.rotor_speed))
     if log.rotor_command is not None and params is not None and (commands or out):
-        out.append(("commands", np.clip(log.rotor_command, 0.0, None)
-                    * float(params.max_speed)))
+        out.append(("commands", _command_speeds(log.rotor_command, params)))
     return out
+
+
+def _command_speeds(command: np.ndarray, params) -> np.ndarray:
+    """(N, R) rad/s the commands (N, R) (normalised 0-1, clipped at 0) stand for in the
+    torque balance: the set's motor map rotor by rotor where it has one of the log's rotor
+    count (``MotorMap.speed_of``, at its reference voltage: a voltage scales every rotor
+    alike, which the per-axis gain takes), else the command times the set's max_speed (the
+    per-axis gain is fitted anyway, so only the shape of Omega(u) matters). Its rotors'
+    differences matter: read at ``max_speed`` alone, a crazyflie21 flight generated with the
+    map's commands (offsets 57-127 rad/s, gains 3481-3632 rad/s per unit) fitted rotors
+    1<->2 and/or 3<->4 swapped better by Delta chi^2 43-136 (CHANGELOG.md, quadsim.fly's
+    commands)."""
+    command = np.clip(command, 0.0, None)
+    mm = params.motor_map
+    if mm is None or mm.speed.shape[0] != command.shape[1]:
+        return command * float(params.max_speed)
+    return mm.speed_of(mm.to_unit(command))
 
 
 def _best_rss(balance: _TorqueBalance, torque_rows: np.ndarray) -> np.ndarray:

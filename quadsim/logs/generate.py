@@ -9,11 +9,13 @@ seed, :func:`flight_report`) is returned separately so that a diagnosis can be r
 Same inputs -> same bytes. The command ``python -m quadsim.fly`` is its CLI.
 
 Logged signals: position, velocity, attitude, body rate, rotor speeds (actual), commands
-(``cmd_i = commanded speed / max_speed``, normalised 0-1), battery voltage (from
-``battery_sag`` if present, else the vehicle's full voltage,
-:func:`quadsim.effects.battery_sag.nominal_voltage`, constant) and the accelerometer's specific
-force in the body frame at the body origin, ``R^T (a + g e3)`` (about +g on z at rest),
-computed exactly from the Newton-Euler forces (rotors + effects) at each sample.
+(:func:`logged_command`: normalised 0-1; ``commanded speed / max_speed``, or, where the
+parameter set carries a motor map, the command its map gives for the commanded speed at the
+logged battery voltage), battery voltage (from ``battery_sag`` if present, else the
+vehicle's full voltage, :func:`quadsim.effects.battery_sag.nominal_voltage`, constant) and the
+accelerometer's specific force in the body frame at the body origin, ``R^T (a + g e3)``
+(about +g on z at rest), computed exactly from the Newton-Euler forces (rotors + effects) at
+each sample.
 
 Example::
 
@@ -41,8 +43,9 @@ from ..vehicle.state import Trajectory
 from .flightlog import FlightLog
 from .sensors import SensorModel
 
-__all__ = ["CONTROLLERS", "TRUTH_SCHEMA", "describe_report", "effect_states", "flight_report",
-           "generate_flight", "specific_force", "truth_path"]
+__all__ = ["CONTROLLERS", "TRUTH_SCHEMA", "command_convention", "describe_report",
+           "effect_states", "flight_report", "generate_flight", "logged_command",
+           "specific_force", "truth_path"]
 
 CONTROLLERS = ("geometric", "lqr")
 TRUTH_SCHEMA = "quadsim.flight-truth/1"
@@ -202,6 +205,55 @@ def _battery_voltage(effects: EffectSet, t: np.ndarray, params: VehicleParams) -
     return np.full(len(t), nominal_voltage(params))
 
 
+def logged_command(params: VehicleParams, speed: np.ndarray,
+                   vbat: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The normalised commands (N, R) a log records for commanded rotor speeds ``speed``
+    (N, R) (rad/s) flown at battery voltages ``vbat`` (N,) (V), and the truth sidecar's
+    record of the convention (:func:`command_convention` reads it back).
+
+    * A set without a motor map: ``speed / max_speed``; recorded as
+      ``command_normalisation`` (max_speed, rad/s), as in every sidecar before.
+    * A set with one (``VehicleParams.motor_map``): the command the set's own map gives for
+      the speed at ``vbat`` (``MotorMap.command_at``, the inverse of ``MotorMap.speed_at``,
+      normalised as :func:`quadsim.gap.residual.command_of_speed` does it), the voltage the
+      log records before its vbat sensor's noise, bias and quantisation; so
+      ``speed_at(command, vbat)`` gives the commanded speed back, and a reader of the log
+      with the same set (``gap --model``, ``identify --logs``, command-only diagnosis) reads
+      the vehicle that flew it. Recorded as ``command_map`` (the set, the map's source, its
+      voltage law, the range of the voltages it was read at). InputError where a rotor's
+      map speed falls as its command rises (no inverse)."""
+    mm = params.motor_map
+    if mm is None:
+        return (speed / params.max_speed,
+                {"command_normalisation": {"max_speed": params.max_speed, "unit": "rad/s"}})
+    falling = np.flatnonzero(np.any(np.diff(mm.speed, axis=1) < 0, axis=1))
+    if len(falling):
+        raise InputError(f"{params.path or params.name}: motor_map.speed: rotor "
+                         f"{falling[0] + 1}'s speed falls along the command axis: the map has "
+                         "no inverse to log the commands of a speed")
+    vbat = np.asarray(vbat, float)
+    record = {"convention": "motor_map", "model": params.name, "source": mm.source,
+              "command_unit": mm.command_unit,
+              "reference_voltage_v": mm.reference_voltage, "voltage_gain_per_v": mm.voltage_gain,
+              "voltage": "the log's vbat before the vbat sensor's noise, bias and quantisation",
+              "vbat_range_v": [round(float(np.min(vbat)), 6), round(float(np.max(vbat)), 6)]}
+    return mm.normalised(mm.command_at(speed, vbat)), {"command_map": record}
+
+
+def command_convention(truth: dict) -> dict:
+    """How a generated log's commands were written, from its truth sidecar: ``{"convention":
+    "motor_map", ...}`` (:func:`logged_command`'s ``command_map``) or ``{"convention":
+    "max_speed", "max_speed": rad/s}`` (``command_normalisation``: every sidecar written
+    before the motor-map convention, whatever its set). InputError if it has neither."""
+    if "command_map" in truth:
+        return dict(truth["command_map"])
+    if "command_normalisation" in truth:
+        return {"convention": "max_speed",
+                "max_speed": float(truth["command_normalisation"]["max_speed"])}
+    raise InputError("truth sidecar: command_normalisation / command_map: missing (not a "
+                     f"{TRUTH_SCHEMA} sidecar?)")
+
+
 def generate_flight(params: VehicleParams, path: str | Reference, effects: EffectSet | None,
                     sensors: SensorModel | None, seed: int, *, engine: str = "mujoco",
                     duration: float = 20.0, control_period: float = 0.005, speed: float = 1.0,
@@ -231,11 +283,11 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
                     duration=duration, control_period=control_period, effects=effects)
     truth_params = effects.apply_to_params(params)
     accel = specific_force(truth_params, effects, traj)
-    command = traj.rotor_command / params.max_speed
+    vbat = _battery_voltage(effects, traj.t, params)
+    command, convention = logged_command(params, traj.rotor_command, vbat)
     true_log = FlightLog(t=traj.t, position=traj.position, quat=traj.quat,
                          velocity=traj.velocity, body_rate=traj.body_rate, accel=accel,
-                         rotor_speed=traj.rotor_speed, rotor_command=command,
-                         vbat=_battery_voltage(effects, traj.t, params))
+                         rotor_speed=traj.rotor_speed, rotor_command=command, vbat=vbat)
     log = sensors.apply(true_log, seed=seed)
     truth = {
         "schema": TRUTH_SCHEMA, "model": params.name, "engine": engine,
@@ -243,7 +295,7 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
         "control_period_s": control_period,
         "path": {"name": reference.name, **reference.settings},
         "effects": describe_effects(effects), "sensors": sensors.to_json(),
-        "command_normalisation": {"max_speed": params.max_speed, "unit": "rad/s"},
+        **convention,
         "flight_report": flight_report(params, reference, traj),
     }
     return log, truth

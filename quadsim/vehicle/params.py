@@ -108,6 +108,44 @@ class MotorMap:
             out[..., i] = np.interp(command[..., i], self.command, self.speed[i])
         return out
 
+    def command_of(self, speed: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`speed_of`: the command (..., R) in ``command_unit`` whose steady
+        speed is ``speed`` (..., R) (rad/s), per rotor through the same table (each rotor's
+        speeds must increase along it; a speed beyond the table's ends gives its end command)."""
+        speed = np.asarray(speed, dtype=float)
+        out = np.empty_like(speed)
+        for i in range(self.speed.shape[0]):
+            out[..., i] = np.interp(speed[..., i], self.speed[i], self.command)
+        return out
+
+    def command_at(self, speed: np.ndarray, voltage: np.ndarray | None) -> np.ndarray:
+        """Inverse of :meth:`speed_at`: the command (N, R) in ``command_unit`` whose steady
+        speed at battery voltages ``voltage`` (N,) (V; None: the reference voltage, or
+        ``duty_voltage``) is ``speed`` (N, R) (rad/s): the speed divided by the voltage
+        law's factor ``1 + voltage_gain (v - reference_voltage)``, through :meth:`command_of`,
+        and for a duty-cycle map times ``duty_voltage / v``."""
+        speed = np.asarray(speed, dtype=float)
+        if not (voltage is None or self.reference_voltage is None or self.voltage_gain == 0.0):
+            speed = speed / (1.0 + self.voltage_gain * (np.asarray(voltage, float)
+                                                        - self.reference_voltage))[..., None]
+        command = self.command_of(speed)
+        if self.duty_voltage is not None and voltage is not None:
+            command = command * (self.duty_voltage / np.asarray(voltage, float))[..., None]
+        return command
+
+    def to_unit(self, command: np.ndarray) -> np.ndarray:
+        """Normalised 0-1 commands (a flight log's ``cmd_i``) -> ``command_unit``: the same
+        for a map in ``"1"``, else 0-1 spans the table (e.g. PWM 1000-2000)."""
+        if self.command_unit == "1":
+            return command
+        return self.command[0] + command * (self.command[-1] - self.command[0])
+
+    def normalised(self, command: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_unit`: commands in ``command_unit`` -> normalised 0-1."""
+        if self.command_unit == "1":
+            return command
+        return (command - self.command[0]) / (self.command[-1] - self.command[0])
+
 
 @dataclass(frozen=True)
 class VehicleParams:
