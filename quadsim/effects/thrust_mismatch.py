@@ -70,8 +70,14 @@ class ThrustMismatch(EffectBase):
                           rotor_speeds=True)),
         scales={"rotor_{}": Scale(lambda p: 0.05, "5 %: one worn or chipped propeller"),
                 "alpha": Scale(lambda p: 1.0, "the exponent's unit (its range is 0 .. 0.5)")},
+        # each rotor's deviation; the speed exponent its own (the ALL range would judge
+        # alpha, a motor's law, as a thrust deviation: 0.2 read as "outside -20 .. 10 %")
         ranges={ALL: PlausibleRange(-0.2, 0.1, "relative",
-                                    "one damaged or mismatched prop/motor")},
+                                    "one damaged or mismatched prop/motor"),
+                "alpha": PlausibleRange(0.0, 0.5, "absolute",
+                                        "0 a speed-controlled motor, 0.2 a DC motor at 75 % "
+                                        "voltage efficiency, 0.5 a speed set by the "
+                                        "propeller's torque alone (Q = d Omega^2 fixed)")},
         spreads={ALL: Spread()},
         words={"rotor_{}": Words("one rotor's thrust per Omega^2", "%", 100.0, _phrase),
                "alpha": Words("speed-per-command exponent", "1", 1.0)},
