@@ -238,6 +238,7 @@ def _reading(cls: type, reading, sd: dict, alpha: tuple[float, float], *,
     name, facts = cls.name, cls.facts
     fitted = tuple(p.format(rotor) for p in reading.fitted) if rotor else reading.fitted
     fixed = {facts.one_per_rotor: float(rotor)} if rotor and facts.one_per_rotor else {}
+    fixed.update((p, float(v)) for p, v in reading.fixed)
     exponent = [p == facts.load_exponent for p in fitted]
     if log_prior is None:
         log_prior = -np.log(float(reading.odds)) if reading.odds > 1 else 0.0
