@@ -4,11 +4,14 @@ gives, the bit-for-bit default, and the diagnosis' reading of it (its facts)."""
 
 from __future__ import annotations
 
+import types
+
 import numpy as np
 import pytest
 
 from quadsim.effects import EFFECTS, EffectContext, effect_set_from_specs, make_effect
 from quadsim.gap.explanations import _reading, prior_spreads
+from quadsim.gap.judge import FORM_TOLD, form_words
 from quadsim.sim import engines
 from quadsim.sim.compiled import fast_form_problem
 from quadsim.vehicle.params import hover_speed, load_params
@@ -108,3 +111,29 @@ def test_the_reading_holds_the_share_at_zero_through_the_registry():
     assert expl.fixed_values == {"thrust_mismatch.torque_share": 0.0}
     assert expl.parameter_names == ["thrust_mismatch.rotor_3"]
     assert expl.mean == (0.0,) and expl.sd == (pytest.approx(0.1),)
+
+
+def _row(name, variant, fixed, params, log_z):
+    expl = types.SimpleNamespace(variant=variant, fixed_values=fixed, parameter_names=params)
+    return types.SimpleNamespace(name=name, explanation=expl, log_z=log_z)
+
+
+def test_form_words_state_the_pair_shares_below_95_percent():
+    """Two forms of one rotor's reading (same parameter, another fixed share): at 1.5 log
+    units apart the lead form holds 1 / (1 + e^-1.5) = 81.8 %, stated; at 3.0 (95.3 %, above
+    FORM_TOLD) nothing is said; another rotor's reading (other parameters) and another
+    effect are never a form of it; a canted rotor's other rotor (its one_per_rotor index)
+    neither."""
+    alone = _row("thrust_mismatch", "rotor 3, alone", {"thrust_mismatch.torque_share": 0.0},
+                 ["thrust_mismatch.rotor_3"], -10.0)
+    plain = _row("thrust_mismatch", "rotor 3", {}, ["thrust_mismatch.rotor_3"], -11.5)
+    other = _row("thrust_mismatch", "rotor 2", {}, ["thrust_mismatch.rotor_2"], -10.0)
+    mass = _row("mass_offset", "", {}, ["thrust_mismatch.rotor_3"], -10.0)
+    text = form_words(alone, [alone, plain, other, mass])
+    assert text == " (its form not told apart: this form 82 % against 18 % for 'rotor 3')"
+    assert 1 / (1 + np.exp(-1.5)) == pytest.approx(0.818, abs=5e-4)
+    far = _row("thrust_mismatch", "rotor 3", {}, ["thrust_mismatch.rotor_3"], -13.0)
+    assert form_words(alone, [alone, far]) == "" and FORM_TOLD == 0.95
+    cant = [_row("canted_rotor", f"rotor {k}", {"canted_rotor.rotor": float(k)},
+                 ["canted_rotor.angle", "canted_rotor.azimuth"], -10.0) for k in (1, 2)]
+    assert form_words(cant[0], cant) == ""
