@@ -153,7 +153,9 @@ class Reading:
     through its parent's value (none at the parent's "off" value 0): not identified while the
     data do not tell the parent from 0 (:func:`quadsim.gap.evidence.laplace`); ``fixed``:
     (parameter, value) pairs the reading holds at a value of its own instead of the
-    parameter's default (one rotor's thrust change with the drag torque's share at 0)."""
+    parameter's default (one rotor's thrust change with the drag torque's share at 0): a
+    *form* of the reading with the same ``fitted``; a per-rotor form has the prior of the
+    effect's other per-rotor readings, not a share of it (it is not counted among them)."""
 
     fitted: tuple[str, ...]
     variant: str = ""
