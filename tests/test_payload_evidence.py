@@ -157,3 +157,20 @@ def test_one_rotor_thrust_alone_is_read_as_that_form_or_said_not_told(cf, refere
     else:
         assert lead["variant"] == "rotor 2" or "its form not told apart" in entry["answer"], \
             entry["answer"]
+
+
+def test_the_thrust_alone_form_has_the_prior_of_the_rotor_readings(reference):
+    """With rotor speeds logged a quad's thrust_mismatch has two per-rotor readings (the
+    plain one, the one with its speed per command) and a form of the first (thrust alone):
+    each of the 12 explanations has the log prior -log(4 x 2) (the form is not counted among
+    the readings, so the plain one keeps its 1/8), and the form holds torque_share at 0."""
+    from types import SimpleNamespace
+
+    from quadsim.gap.explanations import explanations_for
+
+    states = SimpleNamespace(rotor_speed=np.zeros((2, 4)), pose=True, vbat=None)
+    mine = [e for e in explanations_for(reference, states) if e.name == "thrust_mismatch"]
+    assert len(mine) == 12
+    assert [e.log_prior for e in mine] == pytest.approx([-np.log(8.0)] * 12, abs=1e-12)
+    alone = [e for e in mine if "thrust alone" in e.variant]
+    assert [e.fixed_values for e in alone] == [{"thrust_mismatch.torque_share": 0.0}] * 4
