@@ -151,7 +151,11 @@ class Reading:
     the references log rotor speeds (True), only where they do not (False), always (None);
     ``through``: (parameter, parent) pairs of a coupled reading, a parameter that acts only
     through its parent's value (none at the parent's "off" value 0): not identified while the
-    data do not tell the parent from 0 (:func:`quadsim.gap.evidence.laplace`)."""
+    data do not tell the parent from 0 (:func:`quadsim.gap.evidence.laplace`); ``fixed``:
+    (parameter, value) pairs the reading holds at a value of its own instead of the
+    parameter's default (one rotor's thrust change with the drag torque's share at 0): a
+    *form* of the reading with the same ``fitted``; a per-rotor form has the prior of the
+    effect's other per-rotor readings, not a share of it (it is not counted among them)."""
 
     fitted: tuple[str, ...]
     variant: str = ""
@@ -161,6 +165,7 @@ class Reading:
     per_rotor: bool = False
     rotor_speeds: bool | None = None
     through: tuple[tuple[str, str], ...] = ()
+    fixed: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -347,6 +352,7 @@ def missing_facts(cls: type, params_sets: tuple = ()) -> list[str]:
         return p == ALL or p in known or (pattern and p == pattern)
 
     names = (list(fitted) + [p for r in facts.readings for p in r.fitted] + list(facts.fixed)
+             + [p for r in facts.readings for p, _ in r.fixed]
              + list(facts.with_voltage_log)
              + list(facts.no_off_value) + list(facts.rotor_time_constants)
              + list(facts.starts_at_logged_voltage) + list(facts.instrumented)

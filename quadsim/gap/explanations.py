@@ -238,6 +238,7 @@ def _reading(cls: type, reading, sd: dict, alpha: tuple[float, float], *,
     name, facts = cls.name, cls.facts
     fitted = tuple(p.format(rotor) for p in reading.fitted) if rotor else reading.fitted
     fixed = {facts.one_per_rotor: float(rotor)} if rotor and facts.one_per_rotor else {}
+    fixed.update((p, float(v)) for p, v in reading.fixed)
     exponent = [p == facts.load_exponent for p in fitted]
     if log_prior is None:
         log_prior = -np.log(float(reading.odds)) if reading.odds > 1 else 0.0
@@ -284,7 +285,10 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     for k in range(1, rotors + 1):
         for cls in reading_effects():
             mine = [r for r in _applicable(cls, reference) if r.per_rotor]
-            out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * len(mine)))
+            # a form of a reading (fixed values of its own: one rotor's thrust change with its
+            # drag torque unchanged) has the prior of the readings, not a share of it
+            kinds = max(1, sum(1 for r in mine if not r.fixed))
+            out += [_reading(cls, r, sd, alpha, rotor=k, log_prior=-np.log(rotors * kinds))
                     for r in mine]
     # a payload on a cable, its swing driven by the logged motion (quadsim.gap.fitting),
     # alone or with what holds it fixed to the frame (a hook, a mount,

@@ -275,7 +275,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "where", "CONFIDENT", "FORM_ERROR", "FORM_ERROR_TENTATIVE", "LOF_P", "READING_P",
            "FEW_WORDS", "UNCHECKED_WORDS",
            "Baseline", "above_floor", "at_reference_voltage", "carry_over", "channel_names",
-           "differs", "every_part_stands", "form_share", "judge", "judge_heldout",
+           "differs", "every_part_stands", "form_share", "form_words", "FORM_TOLD", "judge",
+           "judge_heldout",
            "grown_lack", "overdispersion", "lack_of_fit", "material", "mean_squares",
            "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
@@ -1473,6 +1474,40 @@ def _reading(k: str, p: float, ev, magnitude: str, *, bias: float = 0.0,
                    prior_pull=float(getattr(ev, "prior_pull", 0.0)))
 
 
+#: the share a reading's form must hold against another form of it (:func:`form_words`)
+#: to be stated as that form: 95 %, a 19:1 posterior ratio
+FORM_TOLD = 0.95
+
+
+def form_words(ev, rows) -> str:
+    """Words for the forms of ``ev``'s reading the data do not tell apart: the other rows of
+    its effect that free the same parameters at other fixed values, the effect's
+    per-rotor index (``one_per_rotor``) the same (one rotor's thrust change with its drag
+    torque, or alone, :mod:`quadsim.effects.thrust_mismatch`), each where ``ev``'s share of
+    the pair's posterior is below :data:`FORM_TOLD`, with the two shares; empty where every
+    other form is told apart (or there is none).
+
+    Why: the forms differ only where the references fix what tells them apart (one rotor's
+    drag torque change against the references' drag factor); where they do not, the best
+    form wins by a fraction of a log unit and its variant's words ("drag torque unchanged")
+    would state what the flight did not show (CHANGELOG.md, "Thrust alone")."""
+    own = ev.explanation
+    index = fitting.facts_for(ev.name).one_per_rotor if ev.name in fitting.FIT_EFFECTS else ""
+    key = f"{ev.name}.{index}"
+    parts = []
+    for r in sorted(rows, key=lambda r: -r.log_z):
+        other = r.explanation
+        if r is ev or r.name != ev.name or other.parameter_names != own.parameter_names \
+                or other.fixed_values == own.fixed_values or not np.isfinite(r.log_z) \
+                or other.fixed_values.get(key) != own.fixed_values.get(key):
+            continue
+        share = 1.0 / (1.0 + np.exp(min(r.log_z - ev.log_z, 700.0)))
+        if share < FORM_TOLD:
+            parts.append(f"this form {100 * share:.0f} % against {100 * (1 - share):.0f} % "
+                         f"for '{other.variant or 'its plain form'}'")
+    return f" (its form not told apart: {'; '.join(parts)})" if parts else ""
+
+
 #: the two readings of a rotor timing difference: the rotors follow their commands with a
 #: first-order lag (``motor_lag``) or their logged speeds are a delayed copy
 #: (``signal_delay``); neither is every rotor's form (a speed-dependent, asymmetric lag)
@@ -1571,8 +1606,8 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     # beyond the reach the sizes are stated with the bias the model's error can cause there
     sizes = {id(ev): as_stated(ev, reach_bias(ev, null, reach)) for _, _, ev in shown}
     readings = [_reading(reading_name(k, ev), p, sizes[id(ev)],
-                         reading_text(sizes[id(ev)], reference), bias=reach_bias(ev, null, reach),
-                         vehicle_mass=reference.params.mass)
+                         reading_text(sizes[id(ev)], reference) + form_words(ev, rows),
+                         bias=reach_bias(ev, null, reach), vehicle_mass=reference.params.mass)
                 for k, p, ev in shown]
     lead = readings[0]
     # the outside hypothesis more probable than the name itself (1b): the name is a

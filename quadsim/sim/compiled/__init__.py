@@ -53,7 +53,7 @@ __all__ = ["GUST", "MAX_ROTORS", "Kernel", "analytic_fast_rhs", "available", "en
 _KNOWN = {
     "motor_lag": {"time_constant", "time_constant_down"},
     "thrust_curve": {"linear", "offset", "centre", "quadratic"},
-    "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)} | {"alpha"},
+    "thrust_mismatch": {f"rotor_{i}" for i in range(1, MAX_ROTORS + 1)} | {"alpha", "torque_share"},
     "rotor_drag": {"coefficient", "axial_coefficient"},
     "blade_flapping": {"roll", "pitch", "coefficient"},
     "translational_lift": {"k_h"},
@@ -130,6 +130,8 @@ def fast_form_problem(sets: Sequence[EffectSet], params: Sequence[VehicleParams]
                 return "ground_effect without a rotor radius"
             if effect.name == "thrust_mismatch":
                 values = effect.values()
+                if values["torque_share"] != 1.0:
+                    return "thrust_mismatch with a torque share other than 1"
                 if any(values[f"rotor_{i}"] != 0.0
                        for i in range(p.rotor_count + 1, MAX_ROTORS + 1)):
                     return "thrust_mismatch beyond the vehicle's rotors"
