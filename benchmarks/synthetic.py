@@ -33,6 +33,7 @@ from quadsim.core.frames import quat_multiply, quat_normalize, rotate_inverse
 from quadsim.effects.base import Effect, EffectContext, EffectSet
 from quadsim.gap.residual import rate_owner, rotor_wrench
 from quadsim.logs.flightlog import FlightLog
+from quadsim.logs.generate import logged_command
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
@@ -284,39 +285,54 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
     return position, velocity, quat, rate, specific, speed
 
 
-def _commands(t, speed, effect_set, params, hover, vbat):
-    """Normalised commands (``commanded speed / max_speed``, the convention of
-    :mod:`quadsim.fly`) whose motor dynamics give ``speed`` (Newton on the rate). A speed
-    factor alone (a battery) is static, as the diagnosis models it: command = speed /
-    factor (the engines' 5 ms SPEED_RESPONSE_S smoothing is a numerical convenience, not a
-    lag of the battery)."""
+def _commanded_speeds(t, speed, effect_set, hover, vbat):
+    """Commanded rotor speeds (N, R) (rad/s) whose motor dynamics give ``speed`` (Newton on
+    the rate). A speed factor alone (a battery) is static, as the diagnosis models it:
+    commanded = speed / factor (the engines' 5 ms SPEED_RESPONSE_S smoothing is a numerical
+    convenience, not a lag of the battery)."""
     rate_needed = np.gradient(speed, t, axis=0)
     cmd = speed.copy()
     if rate_owner(effect_set.effects) is None:
         factor = effect_set.command_factor(t, vbat, cmd.shape[1])
-        return (cmd if factor is None else cmd / factor) / params.max_speed
+        return cmd if factor is None else cmd / factor
     if effect_set.has_rotor_dynamics():
         for _ in range(8):
             rate = effect_set.rotor_speed_rate(t, cmd, speed)
             step = 1e-3 * hover
             slope = (effect_set.rotor_speed_rate(t, cmd + step, speed) - rate) / step
             cmd = cmd - (rate - rate_needed) / np.where(np.abs(slope) > 1e-12, slope, 1.0)
-    return cmd / params.max_speed
+    return cmd
 
 
 def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
                      duration: float = 10.0, rate_hz: float = 500.0, speed: float = 1.0,
                      seed: int = 0, noise: SensorNoise | None = SensorNoise(),
                      full_voltage: float = 4.2, load_share: float = 0.0,
-                     name: str = "synthetic") -> FlightLog:
+                     name: str = "synthetic", commands: str = "max_speed") -> FlightLog:
     """An exact log of ``params`` + hidden ``effects`` flying :func:`reference_path`.
 
     Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
-    ``battery_sag`` effect's voltage model). ``load_share``: the motors are DC motors whose
-    load torque takes this share s of the back EMF at hover (commands
-    ``c (1 + s c max_speed / hover) / (1 + s)``, the same at hover); 0: speed-controlled
-    motors, commands proportional to speed. Its propeller reading's exponent is then
-    ``alpha = s / (1 + s)`` (:func:`quadsim.gap.residual.load_exponent`)."""
+    ``battery_sag`` effect's voltage model). ``commands``: how the log writes the commanded
+    rotor speeds w (rad/s) --
+
+    * ``"max_speed"`` (the default): ``w / max_speed``, whatever the set;
+    * ``"fly"``: as ``quadsim.fly`` writes them, its own code
+      (:func:`quadsim.logs.generate.logged_command`): the set's motor map at the battery
+      voltage before the vbat sensor's noise (``MotorMap.command_at``, normalised 0-1), so
+      ``MotorMap.speed_at(command, vbat)`` gives w back; ``w / max_speed`` for a set without
+      a map (the same bytes as the default there).
+
+    Why the default is not ``"fly"``: the held-out diagnosis against the bare set reads
+    the commands through a straight line per rotor fitted on the training flights, which
+    follows neither a curved table nor a voltage law within a flight (the physical and
+    crazyflie21 sets' maps), so flights of no effect are not clear there
+    (CHANGELOG.md, "synthetic_flight's commands").
+
+    ``load_share``: the motors are DC motors whose load torque takes this share s of the
+    back EMF at hover (commanded speeds ``w (1 + s w / hover) / (1 + s)``, the same at
+    hover, before the convention); 0: speed-controlled motors, commanded speed the speed.
+    Its propeller reading's exponent is then ``alpha = s / (1 + s)`` with commands
+    proportional to the commanded speed (:func:`quadsim.gap.residual.load_exponent`)."""
     rng = np.random.default_rng(seed)
     pad = round(float(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
     t = (np.arange(round(float(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
@@ -327,12 +343,18 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     position, velocity, quat, rate, specific, speed_ = _exact_flight(
         t, params, effect_set, position, yaw, vbat)
     hover = hover_speed(params)
-    command = _commands(t, speed_, effect_set, params, hover, vbat)
+    if commands not in ("max_speed", "fly"):
+        raise ValueError(f"synthetic_flight: commands {commands!r}: 'max_speed' or 'fly'")
+    command = _commanded_speeds(t, speed_, effect_set, hover, vbat)      # rad/s
+    unit = 1.0
+    if commands == "max_speed":
+        command, unit = command / params.max_speed, params.max_speed
     if load_share:
         # a DC motor: u V = k Omega + (R d / k) Omega^2, s = R d h / k^2 at hover h
         # (quadsim.gap.residual.load_exponent), scaled to the same command at hover
-        command = command * (1.0 + load_share * command * params.max_speed / hover) \
-            / (1.0 + load_share)
+        command = command * (1.0 + load_share * command * unit / hover) / (1.0 + load_share)
+    if commands == "fly":       # quadsim.fly's convention, through its own code
+        command, _ = logged_command(params, command, vbat)
     keep = slice(pad, len(t) - pad)
     t, position, velocity, quat, rate, specific, speed_, command, vbat = (
         a[keep] for a in (t, position, velocity, quat, rate, specific, speed_, command, vbat))
@@ -356,12 +378,12 @@ def commands_through_map(log, params):
     rotor speeds: the map inverted per rotor at the logged battery voltage (its voltage law)
     after a first-order lead of the map's time constant (the command model lags by it), so
     ``quadsim.gap.logcheck.command_model_from_params(params)`` gives the speeds back. What a
-    vehicle whose motors follow the set's map would log; :func:`synthetic_flight` writes
-    ``speed / max_speed``, which the set's map does not describe, so a run that reads the
-    commands through the set's own map (held out against the bare set, or command-only)
-    needs this (CHANGELOG.md, the speed benchmark). ``quadsim.logs.generate`` writes the
-    map's command of the commanded speed itself (no lead: its vehicle has no motor lag
-    unless a ``motor_lag`` effect is flown). The inverse is the set's own,
+    vehicle whose motors follow the set's map *with its time constant* would log, for a run
+    that reads the commands through the set's own command model, lag included (command-only,
+    CHANGELOG.md, the speed benchmark). :func:`synthetic_flight` (as
+    ``quadsim.logs.generate``) can write the map's command of the commanded speed itself (no
+    lead: its vehicle has no motor lag unless a ``motor_lag`` effect is flown) with
+    ``commands="fly"``, ``speed / max_speed`` by default. The inverse is the set's own,
     ``MotorMap.command_at`` (normalised as ``quadsim.gap.residual.command_of_speed``)."""
     mm = params.motor_map
     speed = np.asarray(log.rotor_speed, float)

@@ -9,6 +9,8 @@ error in u V; in u alone it is off by the voltage ratio's share of the speed (ab
 65 rad/s), the held-out error docs/identification.md measures on the real flights.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -91,3 +93,31 @@ def test_map_voltage_without_log_is_the_plain_command(params):
     bare = dataclasses.replace(high, vbat=None)
     np.testing.assert_allclose(command_speed(bare, with_law),
                                with_law.motor_map.speed_of(high.command))
+
+
+def test_command_speed_follows_the_sets_voltage_law(params):
+    """A set's map with a voltage law (``MotorMap.voltage_gain`` about ``reference_voltage``,
+    as ``[motor_map]`` of crazyflie21 declares): the gap's commanded speed is the closed form
+    (a + k u)(1 + g (v - v_ref)) at the logged voltage -- a line 100 + 2500 u rad/s, g 0.25
+    1/V about 3.7 V: u 0.5 at 3.5 V gives 1350 x 0.95 = 1282.5 rad/s -- and the map as stated
+    without a voltage log; :func:`command_of_speed` at the same voltages gives the commands
+    back (one law both ways)."""
+    from quadsim.gap.residual import command_of_speed
+    from quadsim.vehicle.params import MotorMap
+
+    mm = MotorMap("1", np.array([0.0, 1.0]), np.tile([100.0, 2600.0], (4, 1)), "test",
+                  reference_voltage=3.7, voltage_gain=0.25)
+    lawful = params.replace(motor_map=mm)
+    n = 2000
+    volts = np.linspace(3.9, 3.5, n)
+    states = flight(volts, 7)
+    want = (100.0 + 2500.0 * states.command) * (1.0 + 0.25 * (volts - 3.7))[:, None]
+    np.testing.assert_allclose(command_speed(states, lawful), want, rtol=1e-12)
+    one = flight(np.full(n, 3.5), 7)
+    one = dataclasses.replace(one, command=np.full_like(one.command, 0.5))
+    assert command_speed(one, lawful)[0, 0] == pytest.approx(1282.5, rel=1e-12)
+    bare = dataclasses.replace(states, vbat=None)
+    np.testing.assert_allclose(command_speed(bare, lawful), 100.0 + 2500.0 * states.command,
+                               rtol=1e-12)
+    np.testing.assert_allclose(command_of_speed(lawful, want, volts), states.command,
+                               rtol=1e-10)

@@ -137,3 +137,41 @@ def test_form_words_state_the_pair_shares_below_95_percent():
     cant = [_row("canted_rotor", f"rotor {k}", {"canted_rotor.rotor": float(k)},
                  ["canted_rotor.angle", "canted_rotor.azimuth"], -10.0) for k in (1, 2)]
     assert form_words(cant[0], cant) == ""
+
+
+def _weighed_form(variant, fixed, log_z):
+    """A held-out Weighed of rotor 3's thrust change -10 +- 0.5 % in one form (its total
+    evidence ``log_z``: training plus held-out log-likelihood)."""
+    from quadsim.gap.diagnose import Weighed
+
+    names = ["thrust_mismatch.rotor_3"]
+    expl = types.SimpleNamespace(parts=(("thrust_mismatch", dict(fixed), ("rotor_3",)),),
+                                 parameter_names=names, mean=(0.0,), sd=(0.1,),
+                                 variant=variant, fixed_values=dict(fixed), replaces=())
+    ev = types.SimpleNamespace(name="thrust_mismatch", explanation=expl, air_force=None,
+                               values={names[0]: -0.1}, post_sd={names[0]: 0.005},
+                               determined={names[0]: True}, log_z=log_z)
+    return Weighed(ev, ev, [], [], 0.0)
+
+
+def test_heldout_readings_say_the_forms_not_told_apart_by_the_same_rule():
+    """Held out (quadsim.gap.diagnose.readings_of, what decide states): the thrust-alone form
+    ranked at total log evidence -10.0 beside the plain form at -11.5 (weighed, not ranked:
+    the posterior groups a reading's forms) ends its words with form_words' own sentence,
+    82 % against 18 % (1 / (1 + e^-1.5)), the per-flight rule on the posterior's evidence; the
+    plain form 3.5 log units behind (96.7 %, above FORM_TOLD) adds nothing."""
+    from quadsim.gap.diagnose import readings_of
+
+    reference = types.SimpleNamespace(params=load_params("crazyflie21"), values=dict,
+                                      rotor=True)
+    alone = _weighed_form("rotor 3, its thrust alone (drag torque unchanged)",
+                          {"thrust_mismatch.torque_share": 0.0}, -10.0)
+    plain = _weighed_form("rotor 3", {}, -11.5)
+    said = " (its form not told apart: this form 82 % against 18 % for 'rotor 3')"
+    assert form_words(alone.total, [alone.total, plain.total]) == said
+    rows = readings_of([("thrust_mismatch", 0.9, alone)], reference, pool=(alone, plain))
+    assert rows[0].magnitude.endswith(said), rows[0].magnitude
+    assert rows[0].magnitude.count("form not told apart") == 1
+    far = _weighed_form("rotor 3", {}, -13.5)
+    rows = readings_of([("thrust_mismatch", 0.9, alone)], reference, pool=(alone, far))
+    assert "form not told apart" not in rows[0].magnitude, rows[0].magnitude

@@ -210,6 +210,7 @@ from .judge import (
     carry_over,
     channel_names,
     every_part_stands,
+    form_words,
     heldout_bias,
     heldout_share,
     judge,
@@ -1444,7 +1445,8 @@ def _own(values: tuple, expl: Explanation) -> tuple:
 
 
 def readings_of(ranked: list, reference: Reference, *,
-                references: bool = False, bias: Callable | None = None) -> list[Reading]:
+                references: bool = False, bias: Callable | None = None,
+                pool: Sequence = ()) -> list[Reading]:
     """The posterior as :class:`~quadsim.gap.result.Reading` rows, in held-out words
     (``references``: against nominal reference flights, as per flight,
     :func:`quadsim.gap.words.nominal_words`), each named as per flight: the physical change
@@ -1453,15 +1455,21 @@ def readings_of(ranked: list, reference: Reference, *,
     errors beyond the references' reach (:meth:`Against.bias`; None: 0): its words, values'
     intervals and a payload's total (:func:`quadsim.gap.words.total_mass`) as stated,
     (1.96 + bias) standard errors (:func:`quadsim.gap.judge.as_stated`, module doc of
-    :mod:`quadsim.gap.judge`, 1d); the name is the fit's own."""
+    :mod:`quadsim.gap.judge`, 1d); the name is the fit's own. ``pool``: every Weighed the
+    posterior weighed (every form of each reading, not only the best ranked): a reading's
+    forms the flights do not tell apart are said in its words by the per-flight rule,
+    :func:`quadsim.gap.judge.form_words` on the total evidence (training plus held-out
+    log-likelihood, what the posterior weighs); empty: ``ranked``'s own."""
     out = []
+    totals = [w.total for w in (pool or [w for _, _, w in ranked])]
     for k, p, w in ranked:
         b = 0.0 if bias is None else bias(w)
         ev = as_stated(w.train, b)
         det = [q for q, ok in ev.determined.items() if ok]
         out.append(Reading(reading_name(k, w.train), p,
                            nominal_words(reading_text(ev, reference), k == ev.name,
-                                         references=references),
+                                         references=references)
+                           + form_words(w.total, totals),
                            w.total.log_z, {q: ev.values[q] for q in det},
                            {q: 1.96 * ev.post_sd[q] for q in det},
                            tuple(q for q, ok in ev.determined.items() if not ok),
@@ -1804,14 +1812,16 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     small = sorted((w for w in weighed if null is not None and w is not null
                     and w.total.log_z > null.total.log_z and scale.small(w.train)),
                    key=lambda w: -w.total.log_z)
-    rows = readings_of(ranked, reference, references=against is not None, bias=bias)
+    pool = tuple(weighed) + ((combination,) if combination is not None else ())
+    rows = readings_of(ranked, reference, references=against is not None, bias=bias,
+                       pool=pool)
     return Decision(tuple(ranked), tuple(rows), tuple(entries),
                     lead, lead_name, null, combination, checked,
                     tuple((w.name, stated(w), text) for w, text in implausible),
                     tuple((w.name, stated(w),
                            scale.shares[(w.name, w.train.explanation.variant)])
                           for w in small),
-                    tuple(weighed) + ((combination,) if combination is not None else ()),
+                    pool,
                     None if against is None or not moved else against.reach, moved)
 
 

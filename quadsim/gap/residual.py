@@ -931,17 +931,22 @@ def _moving_mean(x: np.ndarray, dt: float) -> np.ndarray:
 
 
 def command_speed(states: FlightStates, params: VehicleParams) -> np.ndarray | None:
-    """Commanded rotor speed (N, R) rad/s from normalised commands: the parameter set's motor
-    map, else ``command * max_speed``. None without commands. A map in command x voltage
-    (``MotorMap.duty_voltage``) takes ``command vbat / duty_voltage``; without a voltage log
-    the flight is taken at ``duty_voltage``."""
+    """Commanded rotor speed (N, R) rad/s from the normalised commands ``states.command``
+    (0-1): the parameter set's motor map at the logged battery voltage,
+    ``MotorMap.speed_at(command, vbat)`` (its one law, the one :func:`command_of_speed`
+    inverts and ``quadsim.fly`` logs through): the map's table, times the voltage law
+    ``1 + voltage_gain (vbat - reference_voltage)`` where the set declares one, and a map in
+    command x voltage (``duty_voltage``) read at ``command vbat / duty_voltage``. Without a
+    voltage log (``states.vbat`` None) the map as stated (the flight taken at the map's
+    reference voltage, or at ``duty_voltage``); without a map ``command * max_speed``.
+    None without commands."""
     if states.command is None:
         return None
     mm = params.motor_map
-    if mm is not None and mm.duty_voltage is not None and states.vbat is not None:
-        return speed_of_command(params, states.command
-                                * (np.asarray(states.vbat, float) / mm.duty_voltage)[:, None])
-    return speed_of_command(params, states.command)
+    if mm is None:
+        return speed_of_command(params, states.command)
+    vbat = None if states.vbat is None else np.asarray(states.vbat, float)
+    return mm.speed_at(_map_units(params, states.command), vbat)
 
 
 def _map_units(params: VehicleParams, command: np.ndarray) -> np.ndarray:
