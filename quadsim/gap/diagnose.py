@@ -1787,10 +1787,13 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
                              reference, base_of(lead))
     # a pair needs every part plausible (every_part_stands), so it is built on the most
-    # probable plausible reading: the lead, or the first below an implausible lead
+    # probable plausible reading: the lead, or the most probable below an implausible lead
+    # (by probability, then log evidence: the readings below a lead of probability ~1 all
+    # have ~0, and their ranked order among themselves is then by name)
     outside = {id(w) for w, _ in implausible}
-    base = next((w for k, _, w in ranked if k == w.name and k != "no_difference"
-                 and id(w) not in outside), None)
+    base = min(((-p, -float(w.total.log_z), i, w) for i, (k, p, w) in enumerate(ranked)
+                if k == w.name and k != "no_difference" and id(w) not in outside),
+               key=lambda c: c[:3], default=(None,) * 4)[3]
     base_checked = checked if base is lead else (
         None if base is None else consistent(base, entry_of(base, 1.0, before, reference),
                                              train + held, reference, base_of(base)))
