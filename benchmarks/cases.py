@@ -366,22 +366,23 @@ def reference_flights(source: str, vehicle: str) -> list:
 
 def oracle_reduction(logs, params, effects) -> float:
     """Held-out gap reduction with the *true* library effects and values (observability):
-    the last log is held out, the others train (motor map and noise scale, as the
-    diagnosis does). For effects upstream of the rotor speed (a battery's speed factor) the
-    truth includes the map: the nominal model's map is fitted on the logged speeds (which
-    carry the sag), the true model's on the speeds the command gives before the factor
-    (speed / factor), so the true factor is not counted twice."""
+    the last log is held out, the others train (motor map, as the diagnosis fits it,
+    :func:`quadsim.gap.diagnose.training_map`, and noise scale). For effects upstream of
+    the rotor speed (a battery's speed factor) the truth includes the map: the nominal
+    model's map is fitted on the logged speeds (which carry the sag), the true model's on
+    the speeds the command gives before the factor (speed / factor), so the true factor is
+    not counted twice."""
     import dataclasses
 
     from quadsim.effects.base import EffectSet
-    from quadsim.gap.diagnose import prepare
-    from quadsim.gap.fitting import fit_motor_map, noise_floor, noise_scale, residuals
+    from quadsim.gap.diagnose import prepare, training_map
+    from quadsim.gap.fitting import noise_floor, noise_scale, residuals
 
     if not effects:
         return 0.0
     flights = prepare(logs, params)
     train, held = [f.fit for f in flights[:-1]], [f.fit for f in flights[-1:]]
-    nominal_params = fit_motor_map(train, params)
+    nominal_params = training_map(train, params)
     factor_of = EffectSet(tuple(effects)).command_factor
     unfactored = []
     for f in train:
@@ -389,7 +390,7 @@ def oracle_reduction(logs, params, effects) -> float:
                                                                f.rotor_speed.shape[1])
         unfactored.append(f if factor is None else dataclasses.replace(
             f, rotor_speed=f.rotor_speed / factor))
-    true_params = fit_motor_map(unfactored, params)
+    true_params = training_map(unfactored, params)
     nominal = [residuals(f, nominal_params, [], rotor_channel=True) for f in train]
     sigma = noise_scale(np.concatenate(nominal), float(train[0].t[1] - train[0].t[0]),
                         floor=noise_floor(nominal_params, True))

@@ -308,25 +308,20 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
                      duration: float = 10.0, rate_hz: float = 500.0, speed: float = 1.0,
                      seed: int = 0, noise: SensorNoise | None = SensorNoise(),
                      full_voltage: float = 4.2, load_share: float = 0.0,
-                     name: str = "synthetic", commands: str = "max_speed") -> FlightLog:
+                     name: str = "synthetic", commands: str = "fly") -> FlightLog:
     """An exact log of ``params`` + hidden ``effects`` flying :func:`reference_path`.
 
     Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
     ``battery_sag`` effect's voltage model). ``commands``: how the log writes the commanded
     rotor speeds w (rad/s) --
 
-    * ``"max_speed"`` (the default): ``w / max_speed``, whatever the set;
-    * ``"fly"``: as ``quadsim.fly`` writes them, its own code
+    * ``"fly"`` (the default): as ``quadsim.fly`` writes them, its own code
       (:func:`quadsim.logs.generate.logged_command`): the set's motor map at the battery
       voltage before the vbat sensor's noise (``MotorMap.command_at``, normalised 0-1), so
       ``MotorMap.speed_at(command, vbat)`` gives w back; ``w / max_speed`` for a set without
-      a map (the same bytes as the default there).
-
-    Why the default is not ``"fly"``: the held-out diagnosis against the bare set reads
-    the commands through a straight line per rotor fitted on the training flights, which
-    follows neither a curved table nor a voltage law within a flight (the physical and
-    crazyflie21 sets' maps), so flights of no effect are not clear there
-    (CHANGELOG.md, "synthetic_flight's commands").
+      a map;
+    * ``"max_speed"``: ``w / max_speed``, whatever the set (the default before; a set's map
+      is then not the law its commands follow).
 
     ``load_share``: the motors are DC motors whose load torque takes this share s of the
     back EMF at hover (commanded speeds ``w (1 + s w / hover) / (1 + s)``, the same at
@@ -381,9 +376,10 @@ def commands_through_map(log, params):
     vehicle whose motors follow the set's map *with its time constant* would log, for a run
     that reads the commands through the set's own command model, lag included (command-only,
     CHANGELOG.md, the speed benchmark). :func:`synthetic_flight` (as
-    ``quadsim.logs.generate``) can write the map's command of the commanded speed itself (no
-    lead: its vehicle has no motor lag unless a ``motor_lag`` effect is flown) with
-    ``commands="fly"``, ``speed / max_speed`` by default. The inverse is the set's own,
+    ``quadsim.logs.generate``) writes the map's command of the commanded speed itself by
+    default (``commands="fly"``; no lead: its vehicle has no motor lag unless a
+    ``motor_lag`` effect is flown), ``speed / max_speed`` with ``commands="max_speed"``.
+    The inverse is the set's own,
     ``MotorMap.command_at`` (normalised as ``quadsim.gap.residual.command_of_speed``)."""
     mm = params.motor_map
     speed = np.asarray(log.rotor_speed, float)

@@ -5,6 +5,7 @@ rotor drag; numbers checked against the truth with stated tolerances."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import types
 import warnings
@@ -12,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight as _synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight, to_json, validate
@@ -24,6 +25,11 @@ from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import hover_speed, load_params
 
 from _helpers import DRAG, LAG, shared_effects
+
+# The flights here are speed-controlled motors whose logs write the commanded speed over
+# max_speed (commands proportional to speed: the load exponent 0 the tests below read),
+# not the default (quadsim.fly's convention: crazyflie21's map, a line with an intercept).
+synthetic_flight = functools.partial(_synthetic_flight, commands="max_speed")
 
 
 def _shared(**kw):

@@ -8,12 +8,13 @@ closed-form lag integration and the batched delay regression against direct form
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import synthetic_flight as _synthetic_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.calibrate import calibrate, jacobian
@@ -33,6 +34,11 @@ from quadsim.logs.flightlog import FlightLog
 from quadsim.vehicle.params import load_params
 
 from _helpers import shared_effects
+
+# The flights here log the commanded speed over max_speed (the convention these cases were
+# built on): with the default (quadsim.fly's: crazyflie21's map and voltage law) the lag
+# case's screen keeps no converged step, and the case no longer tests that path.
+synthetic_flight = functools.partial(_synthetic_flight, commands="max_speed")
 
 
 def _shared(**kw):

@@ -197,6 +197,7 @@ from .fitting import (
     correlation_time,
     effect_class,
     fit_motor_map,
+    fit_set_map,
     noise_floor,
     noise_scale,
     residuals,
@@ -444,12 +445,13 @@ def _weighed_bare(train, held, params: VehicleParams, rotor: bool, *, effects, b
                   map_fn, progress) -> _Weighing:
     """The split weighed against the parameter set itself (module doc, stage 1-3), its
     command map fitted on the training flights (in command x voltage where they were flown
-    at different charges, :func:`map_voltage`)."""
+    at different charges, :func:`map_voltage`; in the set's own shape where the set has a
+    map, :func:`training_map`)."""
     notes = []
     if rotor and not params_have_data_map(params):
         volts = map_voltage([f.fit for f in train], [f.fit for f in held])
-        params = fit_motor_map([f.fit for f in train], params, duty_voltage=volts)
-        if volts is not None:
+        params = training_map([f.fit for f in train], params, duty_voltage=volts)
+        if volts is not None and not declares_voltage_law(params):
             notes.append(f"command map in command x battery voltage (read at {volts:.3f} V, "
                          "the training flights' mean; the flights were flown at different "
                          "charges): a DC motor's speed follows duty x voltage")
@@ -1141,6 +1143,29 @@ def map_voltage(train: list, held: list) -> float | None:
     return float(np.mean(means[:len(train)]))
 
 
+def declares_voltage_law(params: VehicleParams) -> bool:
+    """Whether ``params``' motor map declares a battery-voltage law (a reference voltage
+    and a non-zero ``voltage_gain``, :meth:`quadsim.vehicle.params.MotorMap.speed_at`)."""
+    mm = params.motor_map
+    return mm is not None and mm.reference_voltage is not None and mm.voltage_gain != 0.0
+
+
+def training_map(train: list, params: VehicleParams, *,
+                 duty_voltage: float | None = None) -> VehicleParams:
+    """The held-out reference's command map against the bare set, fitted on the training
+    states ``train``: where the set has a motor map, that map in its own shape (its table
+    and voltage law) with a per-rotor gain and offset
+    (:func:`quadsim.gap.residual.fit_set_map`), so that what the set declares is not read
+    as an effect (a voltage law read as a line in the command alone is a ``battery_sag``
+    where nothing changed; a curved PWM table leaves the line's bend on the rotor channel)
+    while a sag beyond the set's law stays in the speeds; without a map the straight line
+    per rotor (:func:`quadsim.gap.residual.fit_motor_map`). ``duty_voltage``:
+    :func:`map_voltage`'s, read as those functions say."""
+    if params.motor_map is None:
+        return fit_motor_map(train, params, duty_voltage=duty_voltage)
+    return fit_set_map(train, params, duty_voltage=duty_voltage)
+
+
 def params_have_data_map(params: VehicleParams) -> bool:
     """True when the motor map was already fitted from data by the diagnosis."""
     return params.motor_map is not None and "quadsim.gap" in params.motor_map.source
@@ -1762,10 +1787,13 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
         checked = consistent(lead, entry_of(lead, 1.0, before, reference), train + held,
                              reference, base_of(lead))
     # a pair needs every part plausible (every_part_stands), so it is built on the most
-    # probable plausible reading: the lead, or the first below an implausible lead
+    # probable plausible reading: the lead, or the most probable below an implausible lead
+    # (by probability, then log evidence: the readings below a lead of probability ~1 all
+    # have ~0, and their ranked order among themselves is then by name)
     outside = {id(w) for w, _ in implausible}
-    base = next((w for k, _, w in ranked if k == w.name and k != "no_difference"
-                 and id(w) not in outside), None)
+    base = min(((-p, -float(w.total.log_z), i, w) for i, (k, p, w) in enumerate(ranked)
+                if k == w.name and k != "no_difference" and id(w) not in outside),
+               key=lambda c: c[:3], default=(None,) * 4)[3]
     base_checked = checked if base is lead else (
         None if base is None else consistent(base, entry_of(base, 1.0, before, reference),
                                              train + held, reference, base_of(base)))

@@ -383,8 +383,12 @@ class MapCommandModel:
         return self.params.rotor_count
 
     def speeds(self, t: np.ndarray, command: np.ndarray, vbat: np.ndarray | None) -> np.ndarray:
+        """Rotor speeds (N, R) (rad/s) of the normalised 0-1 commands ``command`` (N, R) (a
+        log's ``cmd_i``) at times ``t`` (N,) (s) and battery voltages ``vbat`` (N,) (V; None:
+        the map as stated): the commands in the map's own unit (:meth:`MotorMap.to_unit`:
+        0-1 spans a PWM table), read by ``MotorMap.speed_at``, through the lag tau."""
         mm = self.params.motor_map
-        steady = mm.speed_at(np.asarray(command, float), vbat)
+        steady = mm.speed_at(mm.to_unit(np.asarray(command, float)), vbat)
         return _lag(steady, _step(t), self.tau)
 
 

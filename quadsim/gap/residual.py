@@ -168,7 +168,8 @@ __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "iden
            "wrench_key", "CHANNELS", "DEFAULT_WINDOW_S", "FlightStates", "channel_unit",
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
-           "load_exponent", "command_speed", "speed_of_command", "command_of_speed",
+           "load_exponent", "command_speed", "fit_set_map", "speed_of_command",
+           "command_of_speed",
            "MAP_WINDOW_S", "MAP_MIN_RANGE", "FLAT_COMMAND", "flat_command", "ROTOR_HORIZON_S",
            "ROTOR_SUBSTEPS",
            "min_time_constant", "rate_owner", "rotor_residual", "RotorModel", "rotor_model"]
@@ -714,26 +715,95 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
         flights = [f if f.command is None else dataclasses.replace(
             f, command=f.command * (np.asarray(f.vbat, float) / duty_voltage)[:, None])
             for f in flights]
-    means = _window_means(flights)
-    if means is None:
+    lines = _static_lines(flights)
+    if lines is None:
         return params
-    command, speed, windows, origin = means
-    ends = []
-    for i in range(speed.shape[1]):
-        c, w, o = command[:, i], speed[:, i], origin[:, i]
-        if np.ptp(c) <= 0 or np.ptp(o) <= 0:
-            return params
-        slope, intercept = float(o @ w / (o @ o)), 0.0
-        if np.ptp(c) >= MAP_MIN_RANGE * np.mean(np.abs(c)):
-            line = np.polyfit(c, w, 1)
-            if _line_supported(c, w, (slope, intercept), line, windows, origin=o):
-                slope, intercept = line
-        ends.append([intercept, intercept + slope])
+    ends = [[intercept, intercept + slope] for slope, intercept in lines]
     source = "fitted on the training flights (quadsim.gap)"
     if duty_voltage is not None:
         source += f", in command x vbat / {duty_voltage:.4g} V"
     return params.replace(motor_map=MotorMap("1", np.array([0.0, 1.0]), np.array(ends),
                                              source, duty_voltage=duty_voltage))
+
+
+def _static_lines(flights: list[FlightStates]) -> list[tuple[float, float]] | None:
+    """Per rotor, the static map (slope, intercept) from ``flights``' commands (whatever
+    their unit) to their rotor speeds (rad/s), as :func:`fit_motor_map` states it: on
+    :data:`MAP_WINDOW_S` window means through the rotors' timing (:func:`map_lag`), the
+    line ``a + k command`` where the commands span :data:`MAP_MIN_RANGE` of their mean and
+    the data support it (:func:`_line_supported`), else the gain through the origin
+    ``k command`` (intercept 0). None without a flight logging both, or where a rotor's
+    commands or speeds do not vary at all."""
+    means = _window_means(flights)
+    if means is None:
+        return None
+    command, speed, windows, origin = means
+    lines = []
+    for i in range(speed.shape[1]):
+        c, w, o = command[:, i], speed[:, i], origin[:, i]
+        if np.ptp(c) <= 0 or np.ptp(o) <= 0:
+            return None
+        slope, intercept = float(o @ w / (o @ o)), 0.0
+        if np.ptp(c) >= MAP_MIN_RANGE * np.mean(np.abs(c)):
+            line = np.polyfit(c, w, 1)
+            if _line_supported(c, w, (slope, intercept), line, windows, origin=o):
+                slope, intercept = line
+        lines.append((float(slope), float(intercept)))
+    return lines
+
+
+def fit_set_map(flights: list[FlightStates], params: VehicleParams, *,
+                duty_voltage: float | None = None) -> VehicleParams:
+    """``params`` with its own motor map corrected per rotor by a gain and an offset fitted
+    on ``flights``: the map in the set's own shape, so that what the set declares (a curved
+    table, a battery-voltage law) is not read as an effect. ``params`` without a map: as
+    :func:`fit_motor_map`.
+
+    The model: the speed the set's map gives for each logged command at its logged battery
+    voltage, ``x = MotorMap.speed_at(command, vbat)`` (rad/s; the map's table and voltage
+    law, the one law ``quadsim.fly`` logs through), then per rotor ``speed = a + k x``
+    fitted by :func:`_static_lines` on ``x`` in place of the command (the same window
+    means, timing, range rule and information criterion as :func:`fit_motor_map`'s line in
+    the command). The result is a map in unit ``"1"`` over the set's table normalised (so a
+    PWM table is read exactly as the set's map reads it, :meth:`MotorMap.to_unit`), its
+    speeds ``a + k table`` and the set's voltage law kept: ``speed_at`` gives
+    ``(a + k table(u)) (1 + g (v - v_ref))``, which differs from ``a + k x`` by
+    ``a g (v - v_ref)``: with the offset a fraction of the speed and the law's factor within
+    a few per cent of 1 (crazyflie21: 0.249 1/V over a 0.15 V sag, 3.7 %), a fraction of
+    the rotor channel's noise. A set whose map fits its flights gives k 1 and a 0 (to
+    round-off on exact flights), a real sag beyond the set's law remains in the speeds.
+
+    ``duty_voltage`` (V; None: not used): for a set whose map declares no voltage law, the
+    map is read in command x vbat / ``duty_voltage`` (:func:`fit_motor_map`'s reason: a
+    DC motor's speed follows duty x voltage; the held-out diagnosis passes it where the
+    flights were flown at different charges); ignored where the set declares a law (the
+    set's law reads the charge). A table whose speed falls along it is kept as it is."""
+    from ..vehicle.params import MotorMap
+
+    mm = params.motor_map
+    if mm is None:
+        return fit_motor_map(flights, params, duty_voltage=duty_voltage)
+    law = mm.reference_voltage is not None and mm.voltage_gain != 0.0
+    duty = mm.duty_voltage if law or duty_voltage is None else duty_voltage
+    if duty is not None and any(f.command is not None and f.vbat is None for f in flights):
+        raise ValueError("fit_set_map: duty_voltage needs every flight's vbat")
+    base = MotorMap("1", mm.normalised(np.asarray(mm.command, float)),
+                    np.asarray(mm.speed, float), mm.source, mm.reference_voltage,
+                    mm.voltage_gain, 0.0, duty)
+    through = [f if f.command is None else dataclasses.replace(
+        f, command=base.speed_at(f.command, None if f.vbat is None
+                                 else np.asarray(f.vbat, float)))
+        for f in flights]
+    lines = _static_lines(through)
+    if lines is None:
+        return params
+    speed = np.array([intercept + slope * row
+                      for (slope, intercept), row in zip(lines, base.speed)])
+    source = (f"the parameter set's map ({mm.source}) with a per-rotor gain and offset "
+              "fitted on the training flights (quadsim.gap)")
+    if duty is not None and not law:
+        source += f", in command x vbat / {duty:.4g} V"
+    return params.replace(motor_map=dataclasses.replace(base, speed=speed, source=source))
 
 
 #: window (s) of the moving mean on which the static motor map is fitted.
