@@ -928,12 +928,16 @@ class Against:
         swing, :func:`fit_own_starts`), then read on every flight
         (:meth:`check`); a fit that ends where no rigid vehicle is gives no reading.
         ``null``: "no difference", fitted first and dropped: the rotor delay's fits start
-        where the evaluation reads them from it, so that one explanation per worker gives
-        the numbers of the whole list in one call."""
+        where the evaluation reads them from it, on the grid of the whole
+        :attr:`explanations` (its "signal_delay"'s wide spread, whether or not ``expl``
+        holds it: :func:`quadsim.gap.evidence.evaluate`'s ``signal_sd``), so that one
+        explanation per worker gives the numbers of the whole list in one call."""
         first = [] if null is None else [null]
+        wide = next((e for e in self.explanations if e.name == "signal_delay"), None)
         rows = evaluate(self.stacked, self.reference, first + list(expl),
                         start_delay_s=self.start, full=True, memo=self.memos[-1],
-                        fit=partial(fit_own_starts, at=joins(self.train)))[len(first):]
+                        fit=partial(fit_own_starts, at=joins(self.train)),
+                        signal_sd=float(wide.sd[-1]) if wide is not None else 0.0)[len(first):]
         out = []
         for ev in rows:
             if not np.isfinite(ev.log_z):

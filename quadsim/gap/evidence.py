@@ -912,7 +912,8 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
 
 def evaluate(states, reference: Reference, explanations: list[Explanation],
              start_delay_s: float = 0.0, *, full: bool = False,
-             memo: dict | None = None, fit=None) -> list[Evidence]:
+             memo: dict | None = None, fit=None,
+             signal_sd: float | None = None) -> list[Evidence]:
     """Log evidence of every explanation on one flight: one :class:`Evidence` per entry of
     ``explanations``, in their order.
 
@@ -925,7 +926,11 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     the references' prior (:func:`~quadsim.gap.explanations.reference_delay_sd`) as a shared
     parameter, or with the wide prior as the reading "signal_delay". Both start at the best
     point of a grid of delays under their prior (:func:`delay_starts`;
-    ``start_delay_s`` is one of its points).
+    ``start_delay_s`` is one of its points). ``signal_sd`` (s): the wide prior's spread the
+    grid spans (None: "signal_delay"'s among ``explanations``, 0 without it). The grid, and
+    so every shared delay's start, depends on it: a caller that weighs a list in parts (one
+    explanation per worker) passes the whole list's, so that each part starts where the
+    whole does.
 
     Each explanation is first screened by one Gauss-Newton step and fully fitted only where
     it can matter (:func:`screened`); ``full=True`` fits every one with
@@ -944,9 +949,10 @@ def evaluate(states, reference: Reference, explanations: list[Explanation],
     starts = (0.0, start_delay_s)
     null = next((e for e in explanations if e.name == "no_difference" and e.shift), None)
     wide = next((e for e in explanations if e.name == "signal_delay"), None)
+    if signal_sd is None:
+        signal_sd = float(wide.sd[-1]) if wide is not None else 0.0
     if null is not None:
-        starts = delay_starts(inputs.problem(null),
-                              float(wide.sd[-1]) if wide is not None else 0.0, start_delay_s)
+        starts = delay_starts(inputs.problem(null), signal_sd, start_delay_s)
     if not full:
         return screened(inputs, explanations, starts)
     fit = full_fit if fit is None else fit
