@@ -160,7 +160,7 @@ from ..core.lag import first_order_lag
 from ..effects.base import Effect, EffectBase, EffectContext, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..logs.savgol import savgol  # scipy's savgol_filter, the ends' fits cached
-from ..vehicle.params import VehicleParams
+from ..vehicle.params import MotorMap, VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "identity", "kept",
@@ -707,8 +707,6 @@ def fit_motor_map(flights: list[FlightStates], params: VehicleParams, *,
     a line whose intercept is noise, off by a fraction of the rotor channel's noise at
     another command, which the propeller reading's speed-per-command exponent takes up
     (measured: CHANGELOG.md, "fit_motor_map's measurements")."""
-    from ..vehicle.params import MotorMap
-
     if duty_voltage is not None:
         if any(f.command is not None and f.vbat is None for f in flights):
             raise ValueError("fit_motor_map: duty_voltage needs every flight's vbat")
@@ -778,8 +776,6 @@ def fit_set_map(flights: list[FlightStates], params: VehicleParams, *,
     DC motor's speed follows duty x voltage; the held-out diagnosis passes it where the
     flights were flown at different charges); ignored where the set declares a law (the
     set's law reads the charge). A table whose speed falls along it is kept as it is."""
-    from ..vehicle.params import MotorMap
-
     mm = params.motor_map
     if mm is None:
         return fit_motor_map(flights, params, duty_voltage=duty_voltage)
