@@ -541,7 +541,9 @@ def per_flight_speed(data: Path, compare: bool = False) -> str:
                      f"{len(rows)}; largest change of a reading's probability {change:.2g}")
     for r in rows:
         prob = "-" if r.get("probability") is None else f"{100 * r['probability']:.0f} %"
-        lines.append(f"{Path(r['file']).name}: {r['verdict']} ({prob}): {r['answer']}")
+        said = r["answer"].startswith(r["verdict"])     # as the CLI (report.flights_summary)
+        lines.append(f"{Path(r['file']).name}: "
+                     + (r["answer"] if said else f"{r['verdict']} ({prob}): {r['answer']}"))
     return "\n".join(lines) + "\n"
 
 

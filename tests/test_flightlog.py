@@ -244,3 +244,20 @@ def test_corrupt_parquet_is_one_line_error(tmp_path):
     with pytest.raises(InputError, match=r"broken\.parquet: not a readable Parquet file") as err:
         load_log(path)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("tail", [b"garbage-after-magic", b"\x00" * 64], ids=["text", "zeros"])
+def test_corrupt_gzip_is_one_line_error(tmp_path, tail):
+    """A .csv.gz whose bytes start with gzip's magic but whose deflate stream is corrupt
+    (zlib.error, not an OSError) is refused in one line naming the file, like a truncated one
+    (EOFError)."""
+    path = tmp_path / "broken.csv.gz"
+    path.write_bytes(b"\x1f\x8b\x08\x00" + tail)
+    with pytest.raises(InputError, match=r"broken\.csv\.gz: gzip: corrupt data") as err:
+        load_log(path)
+    assert "\n" not in str(err.value)
+    full = gzip.compress(b"t,x\n0,0\n")
+    cut = tmp_path / "cut.csv.gz"
+    cut.write_bytes(full[:-6])
+    with pytest.raises(InputError, match=r"cut\.csv\.gz: gzip: corrupt data"):
+        load_log(cut)

@@ -60,6 +60,26 @@ def test_a_toml_given_as_a_log_says_so(tmp_path):
         load_log(path)
 
 
+def test_a_stored_reference_given_as_a_log_says_so(tmp_path):
+    """A ``.qref`` (``gap --write-reference``: a JSON header line, then a pickle) given where a
+    flight log goes (``gap --per-flight X.qref``, ``view --log``, ``identify --logs``) was
+    "not a UTF-8 text (CSV) file"; it is named, with where it goes."""
+    from quadsim.logs import file_kind
+    from quadsim.logs.flightlog import load_log
+
+    path = tmp_path / "mine.qref"
+    path.write_bytes(b'{"schema": "quadsim.gap.reference/1", "format": 1}\n'
+                     b"\x80\x04\x95\x00\x00\x00\x00")
+    assert file_kind(path) == "a quadsim stored reference (.qref)"
+    shipped = Path(__file__).resolve().parents[1] / "models" / "references" / "crazyflie21.qref"
+    assert file_kind(shipped) == "a quadsim stored reference (.qref)"     # as written
+    with pytest.raises(InputError, match=r"mine.qref: header: a quadsim stored reference "
+                                         r"\(\.qref\), not a flight log: give it to "
+                                         r"quadsim.gap as --reference") as err:
+        load_log(path)
+    assert "\n" not in str(err.value)
+
+
 def test_file_kind_names_logs_by_their_bytes(tmp_path):
     import gzip
 

@@ -219,6 +219,21 @@ def test_shipped_commands_file_fits_its_set():
     assert shipped_reference("physical", commands=True) is None
 
 
+def test_synthesis_note_reads_as_a_sentence():
+    """The CLI's note on synthesised speeds names the model: the shipped commands file's
+    fitted one read "... from fitted on 20 reference log(s)"; a set's motor map as before."""
+    from quadsim.gap.__main__ import synthesis_note
+
+    cf = load_params("crazyflie21")
+    fitted = read_reference(shipped_reference("crazyflie21", commands=True)).command_model(cf)
+    assert synthesis_note(fitted.source).startswith(
+        "note: rotor speeds synthesised for the command-only logs from the command -> speed "
+        "model fitted on 20 reference log(s): ")
+    assert synthesis_note("the motor map of crazyflie21 (x)") == (
+        "note: rotor speeds synthesised for the command-only logs from the motor map of "
+        "crazyflie21 (x)")
+
+
 def test_generated_command_only_flights_against_the_shipped_files(tmp_path, monkeypatch,
                                                                   capsys):
     """No --reference: command-only logs (and a mix with a log with speeds) are judged

@@ -691,6 +691,14 @@ def _write_outputs(args, params, base, result) -> None:
         print(summary(result), end="")
 
 
+def synthesis_note(source: str) -> str:
+    """The note naming what synthesised the command-only logs' rotor speeds, from a command
+    model's ``source``: a fitted model's ("fitted on N reference log(s): ...", also as stored
+    in a ``.qref``) or a parameter set's motor map ("the motor map of ...")."""
+    what = f"the command -> speed model {source}" if source.startswith("fitted") else source
+    return f"note: rotor speeds synthesised for the command-only logs from {what}"
+
+
 @run_cli
 @limit_numeric_threads
 def main(argv: list[str] | None = None) -> int:
@@ -774,8 +782,7 @@ def main(argv: list[str] | None = None) -> int:
         orders = [o if new is old else None for new, old, o in zip(roles["logs"], logs, orders)]
     logs, holdout, reference = roles["logs"], roles["holdout"], roles["reference"]
     if command_model is not None and not args.quiet:
-        print(f"note: rotor speeds synthesised for the command-only logs from "
-              f"{command_model.source}", file=sys.stderr)
+        print(synthesis_note(command_model.source), file=sys.stderr)
     if args.write_reference is not None:
         kept, store = _write_reference(args, params, base_effects,
                                        (reference, kept, store, refs[3]),

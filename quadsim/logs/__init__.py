@@ -83,11 +83,18 @@ def parse_budget(path: str | Path) -> Budget:
                   memory_bytes=int(PARSE_MEMORY_BYTES + PARSE_MEMORY_PER_BYTE * size))
 
 
+#: the first bytes of a stored reference (:mod:`quadsim.gap.reffile`, schema
+#: ``quadsim.gap.reference/1``: its JSON header line); spelled here, as ``logs`` imports no
+#: later stage
+QREF_HEADER = b'{"schema": "quadsim.gap.reference/'
+
+
 def file_kind(path: str | Path) -> str | None:
     """What a file is by its first bytes, for messages that catch a swapped argument: "a
     PX4 ULog flight log", "a Crazyflie uSD flight log", "an ArduPilot DataFlash flight log",
     "a gzip-compressed file (a .csv.gz flight log?)", "a Parquet file (a flight log?)", "a
-    CSV flight log" (a header with ``t``), "a TOML file" (a ``schema =`` or ``[section]``
+    quadsim stored reference (.qref)" (``gap --write-reference``'s JSON header line), "a CSV
+    flight log" (a header with ``t``), "a TOML file" (a ``schema =`` or ``[section]``
     line), or None (unreadable, none of these, or binary: a NUL byte, which no CSV or TOML
     holds, so random bytes that happen to hold a newline then ``[`` are no TOML file)."""
     try:
@@ -103,6 +110,8 @@ def file_kind(path: str | Path) -> str | None:
         return "a gzip-compressed file (a .csv.gz flight log?)"
     if head.startswith(b"PAR1"):
         return "a Parquet file (a flight log?)"
+    if head.startswith(QREF_HEADER):
+        return "a quadsim stored reference (.qref)"
     if b"\0" in head:
         return None
     text = head.decode("utf-8", "replace")
@@ -118,8 +127,9 @@ _MAGIC_BY_SUFFIX = {".ulg": ("ULog", "554c6f67011235"), ".bin": ("DataFlash", "a
 
 
 def refuse_binary(path: Path) -> None:
-    """A ``.ulg``/``.bin`` whose first bytes are not its format's magic, or a binary file
-    that is no format at all, is refused here (not handed to the CSV reader)."""
+    """A ``.ulg``/``.bin`` whose first bytes are not its format's magic, a stored reference
+    (``.qref``, :data:`QREF_HEADER`), or a binary file that is no format at all, is refused
+    here (not handed to the CSV reader)."""
     try:
         with open(path, "rb") as handle:
             head = handle.read(4096)
@@ -131,6 +141,9 @@ def refuse_binary(path: Path) -> None:
         name, magic = _MAGIC_BY_SUFFIX[suffix]
         raise field_error(path, "header", f"first bytes {shown}, not the {name} magic "
                           f"{magic}: a damaged or a different file")
+    if head.startswith(QREF_HEADER):
+        raise field_error(path, "header", "a quadsim stored reference (.qref), not a flight "
+                          "log: give it to quadsim.gap as --reference")
     if b"\0" in head and not head.startswith((b"PAR1", b"\x1f\x8b")):
         raise field_error(path, "header", f"first bytes {shown} match no log format (PX4 "
                           "ULog, Crazyflie uSD, ArduPilot DataFlash, CSV, Parquet)")

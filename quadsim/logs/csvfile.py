@@ -26,6 +26,7 @@ float64; row k is reported as line k + 2. Example::
 from __future__ import annotations
 
 import gzip
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +37,9 @@ __all__ = ["read_log_columns"]
 
 
 def _open_bytes(path: Path) -> bytes:
-    """The file's bytes, gunzipped where it starts with gzip's magic bytes."""
+    """The file's bytes, gunzipped where it starts with gzip's magic bytes; a corrupt or
+    truncated gzip stream is one :class:`InputError` naming the file (zlib's own error is not
+    an ``OSError``)."""
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -46,8 +49,8 @@ def _open_bytes(path: Path) -> bytes:
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"{path}: corrupt gzip data: {exc}") from None
+        except (OSError, EOFError, zlib.error) as exc:
+            raise field_error(path, "gzip", f"corrupt data: {exc}") from None
     return raw
 
 
