@@ -103,7 +103,7 @@ def crazyflow_available() -> bool:
 def _package_dir() -> Path:
     spec = importlib.util.find_spec("crazyflow")
     if spec is None or not spec.submodule_search_locations:
-        raise ModelError("crazyflow is not installed (pip install 'quadsim[crazyflow]')")
+        raise ModelError("crazyflow is not installed (pip install -e '.[crazyflow]')")
     return Path(next(iter(spec.submodule_search_locations)))
 
 

@@ -102,7 +102,7 @@ def dm_params(drone: str = DRONE) -> dict:
     importing drone-models; its units: kg, m, kg m^2, N and N m per RPM powers, 1/s)."""
     spec = importlib.util.find_spec("drone_models")
     if spec is None or not spec.submodule_search_locations:
-        raise ModelError("drone-models is not installed (pip install 'quadsim[dm]')")
+        raise ModelError("drone-models is not installed (pip install -e '.[dm]')")
     root = Path(next(iter(spec.submodule_search_locations)))
     with open(root / "data" / "params.toml", "rb") as handle:
         return {k: np.asarray(v, dtype=float) for k, v in tomllib.load(handle)[drone].items()}
@@ -212,7 +212,7 @@ def dm_flights(specs: list[FlightSpec], drone: str = DRONE) -> list[tuple[Flight
     return ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the truth
     sidecar (effects, the flight's parameters in the worker's terms, seed, speed)."""
     if not dm_available():
-        raise ModelError("drone-models is not installed (pip install 'quadsim[dm]')")
+        raise ModelError("drone-models is not installed (pip install -e '.[dm]')")
     p = dm_params(drone)
     n = round(specs[0].duration * PHYSICS_HZ) if specs else 0
     if any(round(s.duration * PHYSICS_HZ) != n for s in specs):

@@ -110,7 +110,7 @@ def drake_params() -> dict:
     """Drake's quadrotor values (``QuadrotorPlant()``): m kg, g m/s^2, L m, I (3, 3) kg m^2,
     kF (N per unit command), kM (N m per unit command)."""
     if not drake_available():
-        raise ModelError("Drake is not installed (pip install 'quadsim[drake]')")
+        raise ModelError("Drake is not installed (pip install -e '.[drake]')")
     from pydrake.examples import QuadrotorPlant
 
     q = QuadrotorPlant()
@@ -480,7 +480,7 @@ def drake_flights(specs: list[FlightSpec], workers: int | None = None
     return ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the truth
     sidecar (effects, the flight's changes in SI, seed, speed)."""
     if not drake_available():
-        raise ModelError("Drake is not installed (pip install 'quadsim[drake]')")
+        raise ModelError("Drake is not installed (pip install -e '.[drake]')")
     jobs = [_job(s) for s in specs]
     return fly_all(fly_one, to_flight_log, specs, jobs, source="drake",
                    model="QuadrotorPlant", rates=(CONTROL_HZ, LOG_HZ), workers=workers)

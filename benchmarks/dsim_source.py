@@ -99,7 +99,7 @@ def dsim_params() -> dict:
     kg m^2, kf N s^2/rad^2, km N m s^2/rad^2, drag (3,) N/(m/s), tau s, wmin, wmax rad/s,
     dirs (4,), pos (4, 3) m."""
     if not dsim_available():
-        raise ModelError("drones-sim is not installed (pip install 'quadsim[dsim]')")
+        raise ModelError("drones-sim is not installed (pip install -e '.[dsim]')")
     from drones_sim.dynamics import QuadcopterConfig
 
     c = QuadcopterConfig()
@@ -322,7 +322,7 @@ def dsim_flights(specs: list[FlightSpec], workers: int | None = None
     return ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the truth
     sidecar (effects, the flight's changes in SI, seed, speed)."""
     if not dsim_available():
-        raise ModelError("drones-sim is not installed (pip install 'quadsim[dsim]')")
+        raise ModelError("drones-sim is not installed (pip install -e '.[dsim]')")
     jobs = [_job(s) for s in specs]
     return fly_all(fly_one, to_flight_log, specs, jobs, source="drones-sim",
                    model="QuadcopterDynamics", rates=(CONTROL_HZ, LOG_HZ), workers=workers)

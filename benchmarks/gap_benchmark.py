@@ -613,18 +613,18 @@ def summarise_simulator(rows: list[dict], source, observability_only: bool = Tru
 
 #: --source NAME -> (cases module, availability check, install hint) of a simulator source
 #: how to install l2f (a C++ build)
-L2F_HINT = "pip install 'quadsim[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"
+L2F_HINT = "pip install -e '.[l2f]' (compiles l2f 2.0.18: ~11 min, 6 GB of memory)"
 #: how to install gym-pybullet-drones (its fork on the package index; pybullet's wheel)
-GPD_HINT = ("pip install 'quadsim[gpd]' "
+GPD_HINT = ("pip install -e '.[gpd]' "
             "then pip install --no-deps swarm-drone-gym==2.0.0.3")
 SIM_SOURCES = {
     "crazyflow": ("benchmarks.crazyflow_cases", "benchmarks.crazyflow_source",
-                  "crazyflow_available", "pip install 'quadsim[crazyflow]'"),
+                  "crazyflow_available", "pip install -e '.[crazyflow]'"),
     "pyflyt": ("benchmarks.pyflyt_cases", "benchmarks.pyflyt_source", "pyflyt_available",
-               "pip install 'quadsim[pyflyt]' then pip install --no-deps PyFlyt==0.29.0"),
+               "pip install -e '.[pyflyt]' then pip install --no-deps PyFlyt==0.29.0"),
     "multirotor": ("benchmarks.multirotor_cases", "benchmarks.multirotor_source",
                    "multirotor_available",
-                   ("pip install 'quadsim[multirotor]' then pip install --no-deps "
+                   ("pip install -e '.[multirotor]' then pip install --no-deps "
                    "multirotor==0.5.0")),
     "l2f": ("benchmarks.l2f_cases", "benchmarks.l2f_source", "l2f_available",
             L2F_HINT),
@@ -639,29 +639,29 @@ SIM_SOURCES = {
     "l2f-soft": ("benchmarks.l2f_soft_cases", "benchmarks.l2f_source", "l2f_available",
                  L2F_HINT),
     "quadcopter-sim": ("benchmarks.qcsim_cases", "benchmarks.qcsim_source",
-                       "qcsim_available", "pip install 'quadsim[qcsim]'"),
+                       "qcsim_available", "pip install -e '.[qcsim]'"),
     "gym-pybullet-drones": ("benchmarks.gpd_cases", "benchmarks.gpd_source", "gpd_available",
                             GPD_HINT),
     "drone-models": ("benchmarks.dm_cases", "benchmarks.dm_source", "dm_available",
-                     "pip install 'quadsim[dm]'"),
+                     "pip install -e '.[dm]'"),
     "drake": ("benchmarks.drake_cases", "benchmarks.drake_source", "drake_available",
-              "pip install 'quadsim[drake]'"),
+              "pip install -e '.[drake]'"),
     "drones-sim": ("benchmarks.dsim_cases", "benchmarks.dsim_source", "dsim_available",
-                   ("pip install 'quadsim[dsim]', or pip install --no-deps drones-sim==0.2.0 "
+                   ("pip install -e '.[dsim]', or pip install --no-deps drones-sim==0.2.0 "
                     "with numpy, scipy and matplotlib")),
     "quad-sim-python": ("benchmarks.qsp_cases", "benchmarks.qsp_source", "qsp_available",
-                        ("pip install 'quadsim[qsp]', or pip install --no-deps "
+                        ("pip install -e '.[qsp]', or pip install --no-deps "
                          "quad_sim_python==0.0.2 with numpy and scipy")),
     "pymulticopter": ("benchmarks.pm_cases", "benchmarks.pm_source", "pm_available",
-                      ("pip install 'quadsim[pm]', or pip install --no-deps "
+                      ("pip install -e '.[pm]', or pip install --no-deps "
                        "pymulticopter==0.0.1 pysimenv==0.0.22 h5py pytictoc pyquaternion "
                        "with numpy, scipy, matplotlib and ray")),
     "jsbsim": ("benchmarks.jsbsim_cases", "benchmarks.jsbsim_source", "jsbsim_available",
-               "pip install 'quadsim[jsbsim]', or pip install jsbsim==1.3.3"),
+               "pip install -e '.[jsbsim]', or pip install jsbsim==1.3.3"),
     "genesis": ("benchmarks.genesis_cases", "benchmarks.genesis_source",
                 "genesis_available",
                 ("pip install torch --index-url https://download.pytorch.org/whl/cpu, then "
-                "pip install 'quadsim[genesis]'; or set QUADSIM_GENESIS_PYTHON to an "
+                "pip install -e '.[genesis]'; or set QUADSIM_GENESIS_PYTHON to an "
                 "interpreter that has Genesis")),
 }
 

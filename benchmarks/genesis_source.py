@@ -45,7 +45,7 @@ Units and frames at the boundary: Genesis' world is z up, its quaternions w-firs
 world, its angular velocity in world axes (turned into body rates here), its propeller speeds
 rev/min (rad/s inside quadsim).
 
-Install: Genesis needs torch; ``pip install 'quadsim[genesis]'`` in an environment with
+Install: Genesis needs torch; ``pip install -e '.[genesis]'`` in an environment with
 torch's CPU wheel (``pip install torch --index-url https://download.pytorch.org/whl/cpu``),
 or point ``QUADSIM_GENESIS_PYTHON`` at the interpreter of another environment that has
 Genesis (the worker imports quadsim's pure modules from this checkout; that environment

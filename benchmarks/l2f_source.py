@@ -562,7 +562,7 @@ def l2f_flights(specs: list[FlightSpec], workers: int | None = None, vehicle: st
     log as :func:`to_flight_log` makes it, the truth sidecar (effects, the flight's l2f
     parameters, seed, speed)."""
     if not l2f_available():
-        raise ModelError("l2f is not installed (pip install 'quadsim[l2f]': compiles l2f "
+        raise ModelError("l2f is not installed (pip install -e '.[l2f]': compiles l2f "
                          "2.0.18: about 11 min)")
     m = VEHICLES[vehicle]
     jobs = [_flight_job(s, m) for s in specs]

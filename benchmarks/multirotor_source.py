@@ -329,7 +329,7 @@ def multirotor_flights(specs: list[FlightSpec], workers: int | None = None
     4) and return ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the
     truth sidecar (effects, the flight's multirotor parameters, seed, speed)."""
     if not multirotor_available():
-        raise ModelError("multirotor is not installed (pip install 'quadsim[multirotor]' then "
+        raise ModelError("multirotor is not installed (pip install -e '.[multirotor]' then "
                          "pip install --no-deps multirotor==0.5.0)")
     jobs = [_flight_job(s) for s in specs]
     return fly_all(_fly, to_flight_log, specs, jobs, source="multirotor", model="multirotor-x4",

@@ -117,7 +117,7 @@ def pyflyt_available() -> bool:
 def _model_dir() -> Path:
     spec = importlib.util.find_spec("PyFlyt")
     if spec is None or not spec.submodule_search_locations:
-        raise ModelError("PyFlyt is not installed (pip install 'quadsim[pyflyt]' then "
+        raise ModelError("PyFlyt is not installed (pip install -e '.[pyflyt]' then "
                          "pip install --no-deps PyFlyt==0.29.0)")
     return Path(next(iter(spec.submodule_search_locations))) / "models" / "vehicles" / "cf2x"
 

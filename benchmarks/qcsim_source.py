@@ -303,7 +303,7 @@ def qcsim_flights(specs: list[FlightSpec], workers: int | None = None
     ``(log, truth)`` per spec: the log as :func:`to_flight_log` makes it, the truth sidecar
     (effects, the flight's parameters, seed, speed)."""
     if not qcsim_available():
-        raise ModelError("quadcopter-sim is not installed (pip install 'quadsim[qcsim]')")
+        raise ModelError("quadcopter-sim is not installed (pip install -e '.[qcsim]')")
     jobs = [_flight_job(s) for s in specs]
     return fly_all(_fly, to_flight_log, specs, jobs, source="quadcopter-sim",
                    model="qcsim-plus", rates=(PHYSICS_HZ, LOG_HZ), workers=workers)

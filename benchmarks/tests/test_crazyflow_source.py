@@ -1,6 +1,6 @@
 """The Crazyflow flight source (benchmarks.crazyflow_source): frames, units and determinism
 against closed forms and against Crazyflow's own dynamics function. Skipped with the reason
-when crazyflow is not installed (``pip install 'quadsim[crazyflow]'``). Crazyflow runs in a
+when crazyflow is not installed (``pip install -e '.[crazyflow]'``). Crazyflow runs in a
 child process (it needs SciPy's array-API mode), so nothing here imports it."""
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from quadsim.vehicle.rotors import rotor_wrench
 
 needs_crazyflow = pytest.mark.skipif(not crazyflow_available(),
                                      reason="crazyflow not installed "
-                                            "(pip install 'quadsim[crazyflow]')")
+                                            "(pip install -e '.[crazyflow]')")
 
 _CRAZYFLOW_WRENCH = r"""
 import json, sys

@@ -1,7 +1,7 @@
 """The Genesis flight source (benchmarks.genesis_source, genesis_cases): the vehicle
 file's numbers in SI, the DC motor at hover, the file's rotor drag as quadsim's rotor drag,
 the frozen case list, and -- with Genesis importable by ``QUADSIM_GENESIS_PYTHON`` (or this
-interpreter: ``pip install 'quadsim[genesis]'`` after torch's CPU wheel) -- one short
+interpreter: ``pip install -e '.[genesis]'`` after torch's CPU wheel) -- one short
 flight pair checked against quadsim's own rigid-body and rotor model (frames, the RACE yaw
 sign as quadsim's spins). CI does not install Genesis (torch); the flight test skips
 there."""

@@ -19,7 +19,7 @@ from quadsim.vehicle.rotors import rotor_wrench
 
 needs_rotorpy = pytest.mark.skipif(not rotorpy_available(),
                                    reason="rotorpy not installed "
-                                          "(pip install 'quadsim[independent]')")
+                                          "(pip install -e '.[independent]')")
 
 
 @needs_rotorpy
@@ -89,7 +89,7 @@ def per_flight():
     two no-effect flights flown slower (0.5) and faster (1.7) than the references (0.8-1.2),
     against 3 nominal RotorPy flights."""
     if not rotorpy_available():
-        pytest.skip("rotorpy not installed (pip install 'quadsim[independent]')")
+        pytest.skip("rotorpy not installed (pip install -e '.[independent]')")
     from quadsim.gap import diagnose_per_flight
 
     params = load_params("crazyflie21")

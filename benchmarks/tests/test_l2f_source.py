@@ -1,6 +1,6 @@
 """The l2f flight source (benchmarks.l2f_source, l2f_cases): the vehicle as quadsim sees it,
 the JSON parameter set handed to l2f, the controller's allocation, the frozen case list, and
--- with l2f installed (``pip install 'quadsim[l2f]'``) -- one short flight pair checked against
+-- with l2f installed (``pip install -e '.[l2f]'``) -- one short flight pair checked against
 quadsim's own rigid-body and rotor model."""
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def test_case_list_frozen_and_mapped_to_the_library():
             assert 2.0 <= np.hypot(*e["wind"]) <= 5.0
 
 
-@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install -e '.[l2f]')")
 def test_flights_agree_with_quadsims_model():
     """A nominal flight (2.1 s logged) and a +0.3 kg flight (0.5 s), one process: 500 Hz,
     unit quaternions near level, commands in 0..1; the logged rotor speeds in quadsim's
@@ -251,7 +251,7 @@ def test_the_mrs_vehicle_and_its_cases():
     assert factor == pytest.approx(0.4511, abs=1e-3)
 
 
-@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install -e '.[l2f]')")
 def test_the_references_share_their_thrust_curves_slope():
     """The fs vehicle's thrust curve (0.785 + 9.16 a + 18.0 a^2 N per rotor) has at hover
     0.66 of the slope the quadratic model gives (2 T / Omega). Four nominal flights (4 s)
@@ -287,7 +287,7 @@ def test_the_references_share_their_thrust_curves_slope():
     assert entry["params"]["mass_offset.mass"] == pytest.approx(0.5, rel=0.1)
 
 
-@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install -e '.[l2f]')")
 def test_a_com_offset_on_a_curved_rotor_is_not_a_payload():
     """l2f's mrs vehicle hovers where its curve's curvature (c2 / w^2) is 0.40 of the b that
     carries the hover. A CoM offset spreads the rotor speeds, and with b Omega^2 alone the
@@ -341,7 +341,7 @@ def test_the_arpl_vehicle_and_its_cases():
     assert coms and max(coms) <= 0.1 * 0.0775 * np.sqrt(2)
 
 
-@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install 'quadsim[l2f]')")
+@pytest.mark.skipif(not l2f_available(), reason="l2f is not installed (pip install -e '.[l2f]')")
 def test_a_thrust_curve_that_bends_down_is_read_against_references_that_bend_down():
     """l2f's arpl vehicle's curve bends down (c2 < 0: -0.04 of the b at its hover). Its
     references' shared curvature ``b + quadratic`` must go below zero
@@ -411,7 +411,7 @@ def test_the_cascades_rate_integral_holds_a_com_offsets_torque():
     assert ctrl.i_rate_max[0] == pytest.approx(27.15, abs=0.01)
     assert Cascade(0.002, MODEL).i_rate_max[0] == pytest.approx(11.3, abs=0.05)
     if not l2f_available():
-        pytest.skip("l2f is not installed (pip install 'quadsim[l2f]')")
+        pytest.skip("l2f is not installed (pip install -e '.[l2f]')")
     spec = FlightSpec(seed=85009, speed=0.911, duration=8.0, effects={"com": (0.0057, 0.0006)})
     (log, _), = l2f_flights([spec], workers=1, vehicle="arpl")
     assert np.max(np.abs(log.position[:, :2])) < 7.0

@@ -1,7 +1,7 @@
 """The quadcopter-sim flight source (benchmarks.qcsim_source, qcsim_cases): its DC motor's
 steady map, time constant and propeller coupling in closed form, the plus layout against
 quadcopter-sim's own torque equations, the frozen case list, and -- with quadcopter-sim
-installed (``pip install 'quadsim[qcsim]'``) -- one short flight pair checked against
+installed (``pip install -e '.[qcsim]'``) -- one short flight pair checked against
 quadsim's own rigid-body and rotor model."""
 
 from __future__ import annotations

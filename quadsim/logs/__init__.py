@@ -23,7 +23,7 @@ Example::
     >>> from quadsim.logs import read_columns
     >>> cols = read_columns("eckart00", rotor_map=(1, 2, 3, 4))   # raw column dict
 
-Optional packages: ``pip install 'quadsim[logs]'`` (pyulog, pymavlink); the uSD reader needs
+Optional packages: ``pip install -e '.[logs]'`` (pyulog, pymavlink); the uSD reader needs
 nothing.
 """
 

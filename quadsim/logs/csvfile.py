@@ -16,7 +16,7 @@ real Crazyflie logs; both convert a decimal to the nearest double, so the arrays
 (``tests/test_csv_fast.py``). Any other file -- and any file pyarrow refuses -- is read by the
 plain parser, which also words every problem.
 
-Parquet (optional, ``pip install 'quadsim[parquet]'``, pyarrow): the same column names as
+Parquet (optional, ``pip install -e '.[parquet]'``, pyarrow): the same column names as
 float64; row k is reported as line k + 2. Example::
 
     >>> from quadsim.logs.csvfile import read_log_columns
@@ -147,12 +147,12 @@ def _parse_rows(path: Path, header: list[str], lines: list[str]) -> np.ndarray:
 
 
 def _read_parquet_columns(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a Parquet log (optional: needs pyarrow, ``pip install quadsim[parquet]``)."""
+    """Columns of a Parquet log (optional: needs pyarrow, ``pip install -e '.[parquet]'``)."""
     try:
         import pyarrow.parquet as pq
     except ImportError:
         raise InputError(f"{path}: reading Parquet needs pyarrow "
-                         "(pip install 'quadsim[parquet]')") from None
+                         "(pip install -e '.[parquet]')") from None
     try:
         table = pq.read_table(path)
     except FileNotFoundError:

@@ -1,5 +1,5 @@
 """ArduPilot DataFlash binary logs (``.bin``) through ``pymavlink``'s DFReader (optional:
-``pip install 'quadsim[logs]'``).
+``pip install -e '.[logs]'``).
 
 Messages read (first instance where a message has several: ``I``/``C``/``Instance`` = 0):
 
@@ -74,7 +74,7 @@ def _read(path: Path) -> tuple[dict[str, list[dict]], dict[str, float], dict[str
         from pymavlink import DFReader
     except ImportError:
         raise InputError(f"{path}: reading DataFlash needs pymavlink "
-                         "(pip install 'quadsim[logs]')") from None
+                         "(pip install -e '.[logs]')") from None
     try:
         reader = DFReader.DFReader_binary(str(path), zero_time_base=False)
     except Exception as exc:  # noqa: BLE001 (pymavlink raises assorted errors on bad files)

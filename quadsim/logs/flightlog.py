@@ -50,7 +50,7 @@ Writer (:func:`write_log`): columns in schema order, floats as ``%.10g`` (time w
 precision, ``%.17g``, when ``%.10g`` would not keep its steps), ``\\n`` line ends;
 ``.gz`` output is gzip with mtime 0 and no stored file name, so equal logs give equal bytes.
 
-Parquet (optional, ``pip install 'quadsim[parquet]'``): a ``.parquet`` file with the same
+Parquet (optional, ``pip install -e '.[parquet]'``): a ``.parquet`` file with the same
 column names (float64) is read and validated the same way, and :func:`write_log` writes one
 when the name ends in ``.parquet`` (zstd-compressed, deterministic). Problems in a Parquet
 file are reported with the CSV-equivalent line number (row k is line k + 2). Reading a file
@@ -555,7 +555,7 @@ def parquet_bytes(log: FlightLog) -> bytes:
         import pyarrow as pa
         import pyarrow.parquet as pq
     except ImportError:
-        raise InputError("writing Parquet needs pyarrow (pip install 'quadsim[parquet]')"
+        raise InputError("writing Parquet needs pyarrow (pip install -e '.[parquet]')"
                          ) from None
     names, blocks = _columns_of(log)
     data = np.hstack(blocks)

@@ -1,4 +1,4 @@
-"""PX4 ULog files through ``pyulog`` (optional: ``pip install 'quadsim[logs]'``).
+"""PX4 ULog files through ``pyulog`` (optional: ``pip install -e '.[logs]'``).
 
 Topics read (first instance, ``multi_id`` 0; ``--topic NAME=TOPIC`` overrides the topic of a
 signal, ``--field NAME=FIELD`` the field prefix):
@@ -81,7 +81,7 @@ def _open(path: Path):
     try:
         from pyulog import ULog
     except ImportError:
-        raise InputError(f"{path}: reading ULog needs pyulog (pip install 'quadsim[logs]')"
+        raise InputError(f"{path}: reading ULog needs pyulog (pip install -e '.[logs]')"
                          ) from None
     try:
         return ULog(str(path))

@@ -24,7 +24,7 @@ names the first effect that has none (another class, a repeated effect, a parame
 kernel does not know); the engine then uses the reference path —
 never an approximation.
 
-Optional: needs numba (``pip install quadsim[fast]``); without it :func:`available` is False
+Optional: needs numba (``pip install -e '.[fast]'``); without it :func:`available` is False
 and the engine uses the reference path. Units SI throughout (m, s, rad, N, N m).
 """
 
@@ -114,7 +114,7 @@ def _effect_problem(effect, seen: set) -> str | None:
 def fast_form_problem(sets: Sequence[EffectSet], params: Sequence[VehicleParams]) -> str | None:
     """Why these effect sets cannot run on the fast path (None: they can)."""
     if _kernels() is None:
-        return "numba is not installed (pip install quadsim[fast])"
+        return "numba is not installed (pip install -e '.[fast]')"
     if params[0].rotor_count > MAX_ROTORS:
         return f"more than {MAX_ROTORS} rotors"
     for effect_set in {id(s): s for s in sets}.values():
