@@ -282,8 +282,12 @@ def test_registry_parsing_and_errors():
         parse_effect_spec("ground_effect:gian=1")
     with pytest.raises(InputError, match="'abc' is not a number"):
         parse_effect_spec("ground_effect:gain=abc")
-    with pytest.raises(InputError, match="outside the plausible range"):
+    with pytest.raises(InputError, match=r"time_constant = -1 s outside the plausible range "
+                                         r"\[0, [0-9.]+\] s$"):
         parse_effect_spec("motor_lag:time_constant=-1")
+    # a dimensionless value ("1") is written bare, not "99 1"
+    with pytest.raises(InputError, match=r"gain = 99 outside the plausible range \[0, 5\]$"):
+        parse_effect_spec("ground_effect:gain=99")
     with pytest.raises(InputError, match="more than once"):
         effect_set_from_specs(["wind:vx=1", "wind:vy=1"])
     described = describe_effects(EffectSet((effect,)))

@@ -108,8 +108,9 @@ def make_effect(name: str, **values: float) -> EffectBase:
                              f"{', '.join(specs)}")
         spec = specs[key]
         if not spec.lower <= float(value) <= spec.upper:
-            raise InputError(f"effect {name}: {key} = {value:g} {spec.unit} outside the "
-                             f"plausible range [{spec.lower:g}, {spec.upper:g}]")
+            unit = "" if spec.unit == "1" else f" {spec.unit}"    # "1": dimensionless
+            raise InputError(f"effect {name}: {key} = {value:g}{unit} outside the "
+                             f"plausible range [{spec.lower:g}, {spec.upper:g}]{unit}")
     return cls(**{k: float(v) for k, v in values.items()})
 
 
