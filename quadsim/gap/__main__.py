@@ -259,9 +259,11 @@ def _load(paths, params, args, lines: list | None = None, orders: list | None = 
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
+    from .logcheck import slow_rotors  # a rotor channel too slow: speeds from the commands
 
     read: list | None = None if orders is None else []
-    logs, notes = check_logs(logs, params, orders=read)
+    logs, notes = check_logs(logs, params, orders=read,
+                             slow=lambda log: slow_rotors(log, args.window))
     for log in logs:
         check_length(log, args.window)
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
