@@ -101,8 +101,8 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     finite = np.isfinite(x)
     if not finite.any():
         return None
-    scale = np.nanmax(np.abs(np.where(finite, x, np.nan)), axis=0)
-    tol = REL_TOL * np.where(np.isfinite(scale) & (scale > 0), scale, 1.0)
+    scale = np.max(np.abs(np.where(finite, x, 0.0)), axis=0)
+    tol = REL_TOL * np.where(scale > 0, scale, 1.0)
     with np.errstate(invalid="ignore"):
         d1 = np.abs(np.diff(x, axis=0)) > tol          # row k+1 differs from row k
         d2 = np.abs(np.diff(x, 2, axis=0)) > tol       # row k+1 bends
