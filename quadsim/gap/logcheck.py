@@ -116,7 +116,7 @@ fit.
 
 Threshold (:func:`needed_rate_hz`): twice the -3 dB frequency of the states' smoothing
 (Savitzky-Golay, :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` = 0.1 s, cubic, at the fit's
-rate :data:`quadsim.gap.diagnose.FIT_RATE_HZ` = 100 Hz: 9.9 Hz, so 19.8 Hz): the fit scores
+rate :data:`quadsim.gap.residual.FIT_RATE_HZ` = 100 Hz: 9.9 Hz, so 19.8 Hz): the fit scores
 the moments up to that frequency, and a channel sampled below twice it cannot carry them
 (Nyquist). A rate is the channel's as logged, no faster than the rows'.
 
@@ -421,9 +421,8 @@ def needed_rate_hz(window_s: float | None = None) -> float:
     """The slowest native rate (Hz) of the channel that carries the rotors (module doc,
     "Slow channels"): twice the -3 dB frequency of the states' smoothing (window
     ``window_s``, default :data:`quadsim.gap.residual.DEFAULT_WINDOW_S`; cubic) at the fit's
-    rate :data:`quadsim.gap.diagnose.FIT_RATE_HZ`; 19.75 Hz by default."""
-    from .diagnose import FIT_RATE_HZ
-    from .residual import DEFAULT_WINDOW_S
+    rate :data:`quadsim.gap.residual.FIT_RATE_HZ`; 19.75 Hz by default."""
+    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
 
     window = DEFAULT_WINDOW_S if window_s is None else window_s
     return 2.0 * smoothing_cutoff_hz(window, FIT_RATE_HZ)
