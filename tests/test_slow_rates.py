@@ -67,6 +67,18 @@ def test_interpolated_channel_reads_its_sample_rate(signal):
     assert between.hz == pytest.approx(7.0, rel=1.0 / 71)
 
 
+def test_interpolated_on_jittered_rows_reads_its_rate(signal):
+    """Rows at 500 Hz with +-0.1 ms jitter (as the Crazyflie's), a channel sampled at 4 Hz on
+    them and interpolated linearly in time: 4 Hz (a second difference in the row index would
+    see the jitter times the slope on every row, and read native)."""
+    t, x = signal
+    t = t + np.random.default_rng(1).uniform(-1e-4, 1e-4, len(t))
+    rows = np.arange(0, len(t), 125)
+    rate = native_rate(t, np.interp(t, t[rows], x[rows]))
+    assert rate.form == "interpolated"
+    assert rate.hz == pytest.approx(4.0, rel=0.01)
+
+
 def test_native_channel_reads_the_rows_rate(signal):
     """A noisy channel changes and bends on every row: native, 500 Hz; four columns of it
     (rotors) alike; a constant one reads nothing (None); a 250 Hz hold: every 2 rows."""

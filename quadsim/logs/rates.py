@@ -16,9 +16,10 @@ from the data by :func:`native_rate`:
 * **held** (sample and hold: a logger that repeats the latest value on every row): the
   value changes only on the rows where a new sample arrived; those rows are the *knots*;
 * **interpolated** (linear interpolation between the samples, what the importers and most
-  resampling exports do): the second difference ``x[k+1] - 2 x[k] + x[k-1]`` is zero
-  between knots and not at a knot (a sample that falls between two rows bends the line on
-  the two rows around it: a knot of two adjacent rows, counted once);
+  resampling exports do): each row lies on the straight line (in time: row instants
+  jitter) through its two neighbours between knots, and not at a knot (a sample that falls
+  between two rows bends the line on the two rows around it: a knot of two adjacent rows,
+  counted once);
 * **native**: the value changes and bends on nearly every row.
 
 Each test flags rows (the rotor columns of a channel together: a knot on any column is a
@@ -33,12 +34,12 @@ median.
 
 Thresholds:
 
-* a row is flagged where the change (or the second difference) exceeds
+* a row is flagged where the change (or its distance from its neighbours' line) exceeds
   :data:`REL_TOL` = 1e-6 of the column's largest magnitude: above the rounding of a value
-  written with 7 significant digits (a linearly interpolated column written so has second
-  differences of up to about 2e-7 of its magnitude), below any change a native channel
-  shows from one row to the next (a rotor speed's noise is ~1e-4 of it, a smooth simulated
-  one at 500 Hz changes by ~1e-5 of it per row);
+  written with 7 significant digits (a linearly interpolated column written so lies up to
+  about 2e-7 of its magnitude off the line), below any change a native channel shows from
+  one row to the next (a rotor speed's noise is ~1e-4 of it, a smooth simulated one at
+  500 Hz changes by ~1e-5 of it per row);
 * :data:`DENSE_RUN` = 3 rows: an interpolated sample bends two rows, a held one changes one,
   so longer runs are no knot but a channel that changes everywhere;
 * :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column).
@@ -103,9 +104,12 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
         return None
     scale = np.max(np.abs(np.where(finite, x, 0.0)), axis=0)
     tol = REL_TOL * np.where(scale > 0, scale, 1.0)
+    # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
+    # a line in t is no line in the row index)
+    w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
     with np.errstate(invalid="ignore"):
         d1 = np.abs(np.diff(x, axis=0)) > tol          # row k+1 differs from row k
-        d2 = np.abs(np.diff(x, 2, axis=0)) > tol       # row k+1 bends
+        d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
     held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
     bent = np.concatenate([[False], d2.any(axis=1), [False]])
     step = float(np.median(np.diff(t)))
