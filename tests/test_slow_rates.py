@@ -184,7 +184,8 @@ def test_gap_judges_slow_speeds_through_the_commands(cf, tmp_path):
     no_significant_gap, the correction in the answer. Before (main 457c8f3, the same
     flights): ``signal_delay`` 63 % and 99 % ("the rotor speeds are timed 38 / 44 ms later":
     the hold's lag); at full rate both clear. A third flight with its commands held at 10 Hz
-    too is refused with the reason (before: judged)."""
+    too is refused with the reason (before: ``no_significant_gap`` 58 %, ``motor_lag`` 41 %
+    next, "the rotors lag their commands by +81 ms")."""
     from quadsim.gap.__main__ import main
 
     refs = [str(_slow_log(cf, tmp_path, f"ref{s}", s, speed=0.7 + 0.1 * s, duration=8.0).path)
