@@ -206,6 +206,22 @@ def test_gap_judges_slow_speeds_through_the_commands(cf, tmp_path):
     assert "motor commands at 10 Hz: too slow for the moments" in flights["both"]["answer"]
 
 
+def test_command_only_flight_against_slow_references_is_refused(cf, tmp_path, capsys):
+    """A command-only flight against references whose speeds are too slow (synthesised from
+    their commands, which are then dropped): refused in one line, exit 2 (before: "no
+    commands to synthesise rotor speeds from", naming a reference)."""
+    from quadsim.gap.__main__ import main
+
+    refs = [str(_slow_log(cf, tmp_path, f"r{s}", s).path) for s in range(2)]
+    log = synthetic_flight(cf, duration=6.0, seed=5)
+    only = write_log(tmp_path / "only.csv", dataclasses.replace(log, rotor_speed=None))
+    assert main(["--model", "crazyflie21", "--per-flight", str(only), "--reference", *refs,
+                 "--workers", "1", "--quiet", "--cache-dir", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "r0.csv: rotor_1..rotor_N: the reference flights' rotor speeds are logged too " \
+           "slowly" in err
+
+
 @pytest.mark.skipif(not (DATA / "px4_ulog").is_dir(), reason="shared data absent")
 def test_importers_state_their_topics_rates():
     """The PX4 sample: esc_status at 4.03 Hz, actuator_motors at 10 Hz, sensor_combined at
