@@ -42,7 +42,7 @@ def test_worked_example_runs_as_written(tmp_path):
     b = tomllib.loads((tmp_path / "px4.toml").read_text())["rotors"]["thrust_factor"]["value"]
     assert b == pytest.approx(2.135e-5, rel=0.005)
     # the page's gap is refused in one line, with the rates the page quotes (issue 47)
-    said = ("rotor speeds logged at 4.03 Hz and motor commands at 10 Hz: too slow for the "
+    said = ("rotor speeds logged at 4.03 Hz and motor commands at 10.2 Hz: too slow for the "
             "moments (needs >= 19.8 Hz")
     refused = subprocess.run(["bash", "-c", gap], cwd=ROOT, env=env, capture_output=True,
                              text=True, timeout=600, check=False)

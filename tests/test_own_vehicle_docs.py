@@ -75,7 +75,7 @@ def test_px4_example_runs_and_asks_for_twice_the_thrust_factor(ran):
     assert (out / "px4.rrd").stat().st_size > 100_000
     _, _, stderr = ran
     assert ("px4_a.csv.gz: rotor_1..rotor_N: rotor speeds logged at 4.03 Hz and motor commands "
-            "at 10 Hz: too slow for the moments (needs >= 19.8 Hz") in stderr
+            "at 10.2 Hz: too slow for the moments (needs >= 19.8 Hz") in stderr
     assert not (out / "px4_gap.json").exists()
 
 

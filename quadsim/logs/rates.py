@@ -35,18 +35,25 @@ median.
 Thresholds:
 
 * a row is flagged where the change (or its distance from its neighbours' line) exceeds
-  :data:`REL_TOL` = 1e-6 of the column's largest magnitude: above the rounding of a value
-  written with 7 significant digits (a linearly interpolated column written so lies up to
-  about 2e-7 of its magnitude off the line), below any change a native channel shows from
-  one row to the next (a rotor speed's noise is ~1e-4 of it, a smooth simulated one at
-  500 Hz changes by ~1e-5 of it per row);
+  :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quantum`: the
+  decimal step of its largest value at the most significant digits its values use; 1e-3
+  rad/s for the Crazyflie's 7-digit speeds, 1e-14 of the value for float64): a linearly
+  interpolated value rounded so lies at most one step off its neighbours' line (half a step
+  of its own rounding, half of theirs), so no rounding is read as a knot, and a smooth
+  native channel without noise (a generated log's commands at 1 kHz bend by ~1e-7 of
+  their value per row) still bends on every row;
 * :data:`DENSE_RUN` = 3 rows: an interpolated sample bends two rows, a held one changes one,
   so longer runs are no knot but a channel that changes everywhere;
-* :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column).
+* :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column);
+* :data:`QUANTUM_STEPS` = 2: a native channel quantised so coarsely that it stays on one
+  value for several rows (a battery voltage in 1 mV steps, integer PWM commands in a hover)
+  changes by one quantum at a time, so the median change is its smallest; a held channel's
+  changes are what the signal did between samples, many quanta and unequal. Where every
+  column's median change is at most twice its smallest, the channel is read as native.
 
-What it cannot tell: a native channel quantised so coarsely that it stays on one value for
-several rows (a battery voltage in 1 mV steps) reads as held at the rate of its changes.
-It costs a few vector operations per column (it runs on every log).
+What it cannot tell: a held channel whose every change is about equal (a held ramp), read
+as native; a quantised channel that moves by several quanta between rows yet stays for
+several, read as held. It costs a few vector operations per column (it runs on every log).
 
 Example::
 
@@ -59,14 +66,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DENSE_RUN", "MIN_KNOTS", "REL_TOL", "NativeRate", "native_rate", "rates_of"]
+__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "ROUND_STEPS", "NativeRate",
+           "native_rate", "rates_of"]
 
-#: relative size (of the column's largest magnitude) of a change that counts (module doc)
-REL_TOL = 1e-6
+#: rounding steps of the column as written (:func:`_quantum`) a change must exceed to count
+#: (module doc)
+ROUND_STEPS = 2.0
+#: the most significant digits a value is read with (float64 holds 15-17)
+MAX_DIGITS = 15
 #: median run of flagged rows at or above which a channel is native (module doc)
 DENSE_RUN = 3
 #: fewest knots from which a rate is read (module doc)
 MIN_KNOTS = 8
+#: a column whose changes have a median at most this many times its smallest change is
+#: quantised, not held (module doc)
+QUANTUM_STEPS = 2.0
 
 
 @dataclass(frozen=True)
@@ -90,6 +104,40 @@ def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
     return starts, float(np.median(ends - starts))
 
 
+def _quantum(column: np.ndarray) -> float:
+    """The rounding step of a column as written: 10^(e - D + 1) for its largest magnitude's
+    decimal exponent e and the most significant digits D any of up to 512 of its values
+    (evenly spread) needs (:data:`MAX_DIGITS` at most: float64 arithmetic); 0 for a column
+    without a nonzero finite value."""
+    v = column[np.isfinite(column) & (column != 0)]
+    if not len(v):
+        return 0.0
+    v = v[np.linspace(0, len(v) - 1, min(len(v), 512)).astype(int)]
+    exponent = np.floor(np.log10(np.abs(v)))
+    digits = np.full(len(v), MAX_DIGITS)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for d in range(MAX_DIGITS - 1, 0, -1):   # the fewest digits that give the value back
+            scale = 10.0 ** (d - 1 - exponent)
+            same = np.abs(np.round(v * scale) / scale - v) <= 1e-12 * np.abs(v)
+            digits = np.where(same, d, digits)
+    top = float(np.floor(np.log10(np.max(np.abs(v)))))
+    return float(10.0 ** (top - int(digits.max()) + 1))
+
+
+def _quantised(changes: np.ndarray, counted: np.ndarray) -> bool:
+    """Whether every column's changes (``changes`` (N-1, K), those ``counted``) are about one
+    quantum: median at most :data:`QUANTUM_STEPS` times the smallest (module doc)."""
+    seen = False
+    for j in range(changes.shape[1]):
+        c = changes[counted[:, j], j]
+        if len(c) < MIN_KNOTS:
+            continue
+        seen = True
+        if np.median(c) > QUANTUM_STEPS * np.min(c):
+            return False
+    return seen
+
+
 def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     """The native rate of one channel (module doc): ``t`` (N,) s, strictly increasing;
     ``values`` (N,) or (N, K) (NaN rows are no knots). Returns None where it cannot tell
@@ -102,8 +150,7 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     finite = np.isfinite(x)
     if not finite.any():
         return None
-    scale = np.max(np.abs(np.where(finite, x, 0.0)), axis=0)
-    tol = REL_TOL * np.where(scale > 0, scale, 1.0)
+    tol = np.array([ROUND_STEPS * _quantum(x[:, j]) for j in range(x.shape[1])])
     # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
     # a line in t is no line in the row index)
     w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
@@ -113,6 +160,8 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
     bent = np.concatenate([[False], d2.any(axis=1), [False]])
     step = float(np.median(np.diff(t)))
+    if _quantised(np.abs(np.diff(x, axis=0)), d1):      # steps of one quantum: native
+        return NativeRate(1.0 / step, "native", np.arange(len(t)))
     best = None
     for form, flags in (("held", held), ("interpolated", bent)):
         starts, run = _knots(flags)
