@@ -90,6 +90,19 @@ def test_native_channel_reads_the_rows_rate(signal):
     assert native_rate(t, _held(t, x, 250.0)).hz == pytest.approx(250.0, rel=1e-6)
 
 
+def test_quantised_column_reads_native(signal):
+    """A 500 Hz battery voltage in 1 mV steps (4.2 V falling 0.15 V over 10 s: a step every
+    ~33 rows, each one quantum): native, not held at its steps' 15 Hz; the 4 Hz-held signal
+    rounded to 1 rad/s stays held (its changes are many steps, unequal); a smooth column
+    without noise written in full (a generated command) bends on every row: native."""
+    t, x = signal
+    volts = np.round((4.2 - 0.015 * t) * 1000.0) / 1000.0
+    assert native_rate(t, volts).form == "native"
+    assert native_rate(t, np.round(_held(t, x, 4.0))).hz == pytest.approx(4.0, rel=1e-9)
+    smooth = 0.42 + 0.01 * np.sin(2 * np.pi * 0.2 * t)
+    assert native_rate(t, smooth).form == "native"
+
+
 def test_smoothing_cutoff_and_need():
     """The -3 dB frequency of the 0.1 s cubic Savitzky-Golay at 100 Hz (11 taps), checked
     against its transfer function summed directly: gain 1/sqrt(2) there (to the grid's

@@ -34,8 +34,9 @@ median.
 
 Thresholds:
 
-* a row is flagged where the change (or its distance from its neighbours' line) exceeds
-  :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quantum`: the
+* a row is flagged where it differs from the row before (a held value repeats exactly, so
+  any change of a rounding step counts), or where its distance from its neighbours' line
+  exceeds :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quantum`: the
   decimal step of its largest value at the most significant digits its values use; 1e-3
   rad/s for the Crazyflie's 7-digit speeds, 1e-14 of the value for float64): a linearly
   interpolated value rounded so lies at most one step off its neighbours' line (half a step
@@ -150,12 +151,13 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     finite = np.isfinite(x)
     if not finite.any():
         return None
-    tol = np.array([ROUND_STEPS * _quantum(x[:, j]) for j in range(x.shape[1])])
+    quantum = np.array([_quantum(x[:, j]) for j in range(x.shape[1])])
+    tol = ROUND_STEPS * quantum
     # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
     # a line in t is no line in the row index)
     w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
     with np.errstate(invalid="ignore"):
-        d1 = np.abs(np.diff(x, axis=0)) > tol          # row k+1 differs from row k
+        d1 = np.abs(np.diff(x, axis=0)) > 0.5 * quantum   # row k+1 differs from row k
         d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
     held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
     bent = np.concatenate([[False], d2.any(axis=1), [False]])
