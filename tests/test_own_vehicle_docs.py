@@ -4,7 +4,6 @@ quotes are checked against what the commands wrote. Skipped without ``../shared/
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import subprocess
@@ -42,8 +41,12 @@ def ran(tmp_path_factory):
         pytest.skip("../shared/data is absent")
     out = tmp_path_factory.mktemp("own")
     env = {**os.environ, "OUT": str(out), "PYTHONPATH": str(ROOT)}
+    # the page's gap runs on the PX4 and ArduPilot logs are refused (their rotors logged at
+    # 4-10 Hz, issue 47): each says why and exits 2, the rest of the page runs on
     script = "set -e\n" + "\n".join(
-        c.replace("python -m", f"{sys.executable} -m", 1) for c in page_commands())
+        c.replace("python -m", f"{sys.executable} -m", 1)
+        + (' || echo "gap exit $?" >&2' if c.startswith("python -m quadsim.gap ") else "")
+        for c in page_commands())
     run = subprocess.run(["bash", "-c", script], cwd=ROOT, env=env, capture_output=True,
                          text=True, timeout=900, check=False)
     assert run.returncode == 0, run.stderr[-2000:]
@@ -70,7 +73,10 @@ def test_px4_example_runs_and_asks_for_twice_the_thrust_factor(ran):
     assert abs(b / 2.135e-5 - 1) < 0.01
     assert "airborne span t 18.10-27.30 s" in stdout
     assert (out / "px4.rrd").stat().st_size > 100_000
-    assert json.loads((out / "px4_gap.json").read_text())["verdict"]["best_candidate"]
+    _, _, stderr = ran
+    assert ("px4_a.csv.gz: rotor_1..rotor_N: rotor speeds logged at 4.03 Hz and motor commands "
+            "at 10.2 Hz: too slow for the moments (needs >= 19.8 Hz") in stderr
+    assert not (out / "px4_gap.json").exists()
 
 
 def test_ardupilot_commands_only(ran):
@@ -80,7 +86,10 @@ def test_ardupilot_commands_only(ran):
     assert abs(full / 6.35 - 1) < 0.01
     assert "no rotor speeds in any log" in stderr
     assert any("d not identified" in w for w in data["warnings"])
-    assert json.loads((out / "copter_gap.json").read_text())["verdict"]["answer"]
+    assert ("copter_a.csv.gz: cmd_1..cmd_N: motor commands logged at 10 Hz and no rotor "
+            "speeds: too slow for the moments") in stderr
+    assert not (out / "copter_gap.json").exists()
+    assert stderr.count("gap exit 2") == 2
 
 
 def test_imu_only_crazyflie_matches_the_published_identification(ran):

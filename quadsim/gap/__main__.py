@@ -259,9 +259,11 @@ def _load(paths, params, args, lines: list | None = None, orders: list | None = 
         warnings.simplefilter("always", QuadsimWarning)
         logs = [load_log(p) for p in paths]
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
+    from .logcheck import slow_rotors  # a rotor channel too slow: speeds from the commands
 
     read: list | None = None if orders is None else []
-    logs, notes = check_logs(logs, params, orders=read)
+    logs, notes = check_logs(logs, params, orders=read,
+                             slow=lambda log: slow_rotors(log, args.window))
     for log in logs:
         check_length(log, args.window)
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
@@ -762,6 +764,14 @@ def main(argv: list[str] | None = None) -> int:
     if as_commands:     # the model from the references' speeds (or --command-reference's)
         from .logcheck import without_speeds
 
+        slow = [g for g in reference or [] if g.speeds_synthesised and g.rotor_command is None]
+        if slow:    # their commands already carry their speeds (logcheck.slow_rotors)
+            raise InputError(f"{slow[0].path}: rotor_1..rotor_N: the reference flights' rotor "
+                             "speeds are logged too slowly for the moments and were "
+                             "synthesised from their commands: the command-only flights "
+                             "cannot be judged alike against them here; give references "
+                             "with rotor speeds logged fast (or judge flights that log "
+                             "their speeds as the references do)")
         command_ref = (_load(args.command_reference, params, args) if args.command_reference
                        else reference)
         reference = None if reference is None else [without_speeds(g) for g in reference]

@@ -244,7 +244,7 @@ from .logcheck import (
 from .page import flight_series
 from .reference import centre_term, columns, envelope_summary, fit_discrepancy, local_reference
 from .reference import position as envelope_position
-from .residual import DEFAULT_WINDOW_S, FlightStates, flight_states, joined_states
+from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ, FlightStates, flight_states, joined_states
 from .result import Diagnosis, Reading, Series, Verdict
 from .words import (
     across_sessions,
@@ -269,7 +269,6 @@ __all__ = ["Calibrated", "D_PRIOR_SD", "EDGE_S", "NOISE_WINDOW_S", "SCHEMA", "De
 
 
 SCHEMA = "quadsim.gap/3"
-FIT_RATE_HZ = 100.0
 #: long flights are decimated further so that one flight costs at most this many samples.
 MAX_FIT_SAMPLES_PER_FLIGHT = 20000
 #: the fit view's anti-alias cut-off, a fraction of its Nyquist frequency (:func:`decimated`):

@@ -103,6 +103,50 @@ Example::
     >>> statuses = order_statuses(logs, params)
     >>> verdict = mark(judge(rows, reference, name, cap=probability_cap(statuses)), statuses)
 
+Slow channels
+-------------
+
+A rotor speed logged slower than the dynamics it must carry (issue 47). The loaders resample
+every channel onto one time base, so a rotor speed logged at 4 Hz (PX4's default
+``esc_status`` profile) sits on 500 Hz rows as held or interpolated values; the moment
+channels' residual is then the interpolation's error, and any reading that soaks it up
+wins. Each channel's native rate is carried with the log (:attr:`quadsim.logs.flightlog.
+FlightLog.rates_hz`, :mod:`quadsim.logs.rates`); :func:`slow_rotors` acts on it before any
+fit.
+
+Threshold (:func:`needed_rate_hz`): twice the -3 dB frequency of the states' smoothing
+(Savitzky-Golay, :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` = 0.1 s, cubic, at the fit's
+rate :data:`quadsim.gap.residual.FIT_RATE_HZ` = 100 Hz: 9.9 Hz, so 19.8 Hz): the fit scores
+the moments up to that frequency, and a channel sampled below twice it cannot carry them
+(Nyquist). A rate is the channel's as logged, no faster than the rows'.
+
+* rotor speeds too slow, commands fast enough: the speeds are synthesised from the commands
+  (:func:`fit_slow_map`: the command -> speed model of the module doc, fitted on this log's
+  own slow speeds *at the rows where a logged sample shows* (the knots of
+  :func:`quadsim.logs.rates.native_rate`), the commands lag-filtered at full rate and read
+  at the same rows, so both sides are the same instants; the lag fitted there too: the
+  samples are the speed at their instants, so 4 Hz of them time the lag against the full-rate
+  commands -- 46-54 ms on the shared Crazyflie flights cut to 4 Hz, whose set says 50 ms; 0.5
+  ms on a generated flight, whose commands have none -- where a set's own lag would be wrong
+  for a log whose commands are not the set's). The commands are
+  then dropped, as for a command-only log (no rotor channel comparing the map with itself),
+  ``speeds_synthesised`` is set, and every answer states it as a correction ("rotor speeds
+  logged at 4 Hz, too slow for the moments (needs >= 19.8 Hz): speeds synthesised from the
+  commands (500 Hz) through a map fitted on them");
+* nothing fast enough carries the rotors (the commands slow too, or missing; or commands
+  alone and slow): the flight is refused with one line naming both rates and the need.
+  Why refuse the flight, not only its moment channels: every stage (the references' model,
+  the noise, the evidence, the judge) weighs the six wrench channels together, and a flight
+  judged on the forces alone against references judged on all six would compare unlike
+  things; the forces too are smoothed through a rotor speed that misses the 1-20 Hz
+  content. Refused, no reading is stated from channels the data do not carry.
+
+Logs whose rates are unknown (built in code, ``rates_hz`` empty) are left as they are.
+
+Example::
+
+    >>> log = slow_rotors(load_log("px4_sample.csv.gz"))   # or InputError
+
 Logs without a pose
 -------------------
 
@@ -167,7 +211,8 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "needs_pose", "logged_parts", "posefree_log", "posefree_states",
            "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
            "confusable", "confusable_note", "SEPARATED",
-           "TIMING_WORDS"]
+           "TIMING_WORDS", "fit_slow_map", "needed_rate_hz", "slow_rotors",
+           "smoothing_cutoff_hz"]
 
 
 #: largest ratio (either way) of the thrust factor the data need to the model's: a payload
@@ -357,6 +402,128 @@ def synthesise_speeds(log: FlightLog, model: CommandModel, *,
     return dataclasses.replace(log, rotor_speed=speed,
                                rotor_command=log.rotor_command if keep_commands else None,
                                notes=log.notes + (note,), speeds_synthesised=True)
+
+
+def smoothing_cutoff_hz(window_s: float, rate_hz: float, polyorder: int = 3) -> float:
+    """The -3 dB frequency (Hz) of a Savitzky-Golay smoother of ``window_s`` (s) and
+    ``polyorder`` at sampling rate ``rate_hz`` (the window rounded to an odd sample count,
+    as :mod:`quadsim.gap.residual` does): where its gain first falls below 1/sqrt(2)."""
+    from scipy.signal import freqz, savgol_coeffs
+
+    n = max(polyorder + 2, int(round(window_s * rate_hz)))
+    n += 1 - n % 2
+    freq, gain = freqz(savgol_coeffs(n, polyorder), worN=4096, fs=rate_hz)
+    below = np.flatnonzero(np.abs(gain) < 1.0 / np.sqrt(2.0))
+    return float(freq[below[0]]) if len(below) else rate_hz / 2.0
+
+
+def needed_rate_hz(window_s: float | None = None) -> float:
+    """The slowest native rate (Hz) of the channel that carries the rotors (module doc,
+    "Slow channels"): twice the -3 dB frequency of the states' smoothing (window
+    ``window_s``, default :data:`quadsim.gap.residual.DEFAULT_WINDOW_S`; cubic) at the fit's
+    rate :data:`quadsim.gap.residual.FIT_RATE_HZ`; 19.75 Hz by default."""
+    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
+
+    window = DEFAULT_WINDOW_S if window_s is None else window_s
+    return 2.0 * smoothing_cutoff_hz(window, FIT_RATE_HZ)
+
+
+def fit_slow_map(log: FlightLog, tau: float | None = None) -> CommandModel:
+    """The command -> speed model of the module doc fitted on ``log``'s own rotor speeds
+    (rad/s) and commands (0-1) at the rows where a logged speed sample shows
+    (:func:`quadsim.logs.rates.native_rate`'s knots; every row where it reads none), each
+    airborne stretch alone: the features lag-filtered at the full rate, then read at those
+    rows. ``tau`` (s): the lag as given; None: fitted there (bounded, :data:`TAU_BOUNDS`,
+    and 0). Raises InputError with fewer than 4 knots per stretch in all."""
+    from ..logs.rates import native_rate
+
+    parts = [p for p in log.parts() if len(p.t) >= 5]
+    with_v = log.vbat is not None and np.isfinite(log.vbat).any()
+    v_ref = float(np.nanmedian(log.vbat)) if with_v else np.nan
+    picked = []
+    for p in parts:
+        rate = native_rate(p.t, p.rotor_speed)
+        knots = np.arange(len(p.t)) if rate is None else rate.knots
+        picked.append((p, knots, _features(p.rotor_command, p.vbat if with_v else None,
+                                           v_ref)))
+    if sum(len(k) for _, k, _ in picked) < 4:
+        raise InputError(f"{log.path or 'log'}: rotor_1..rotor_N: too few logged speed "
+                         "samples to fit the command -> speed map on")
+
+    def solve(tau_s: float):
+        coef, sse, n = [], 0.0, 0
+        for i in range(log.rotor_count):
+            rows, ys = [], []
+            for p, knots, feats in picked:
+                filt = np.stack([_lag(f[:, i], _step(p.t), tau_s) for f in feats], axis=1)
+                a_mat, y = filt[knots], p.rotor_speed[knots, i]
+                ok = np.isfinite(y) & np.isfinite(a_mat).all(axis=1)
+                rows.append(a_mat[ok])
+                ys.append(y[ok])
+            a_mat, y = np.concatenate(rows), np.concatenate(ys)
+            a_mat = a_mat if with_v else a_mat[:, :2]
+            sol, *_ = np.linalg.lstsq(a_mat, y, rcond=None)
+            sse += float(np.sum((a_mat @ sol - y) ** 2))
+            n += len(y)
+            coef.append(sol if with_v else np.append(sol, 0.0))
+        return np.array(coef), sse, max(n, 1)
+
+    if tau is None:
+        best = minimize_scalar(lambda lt: solve(np.exp(lt))[1], bounds=np.log(TAU_BOUNDS),
+                               method="bounded", options={"xatol": 0.01})
+        tau = float(np.exp(best.x))
+        if solve(0.0)[1] <= solve(tau)[1]:
+            tau = 0.0
+    coef, sse, n = solve(tau)
+    return CommandModel(coef[:, 0], coef[:, 1], coef[:, 2], v_ref, float(tau),
+                        float(np.sqrt(sse / n)), n, f"fitted on {log.path or 'the log'}'s own "
+                        "slow rotor speeds at their logged samples")
+
+
+def slow_rotors(log: FlightLog, window_s: float | None = None) -> FlightLog:
+    """``log`` as the diagnosis may use it where the channel carrying its rotors is logged
+    too slowly (module doc, "Slow channels"): as is where the rotor speeds' native rate
+    (:meth:`FlightLog.rate_hz`) is at least :func:`needed_rate_hz` or unknown; the speeds
+    synthesised from the commands through :func:`fit_slow_map` (its lag fitted too), the
+    commands dropped and the correction stated,
+    where the commands are fast enough (or of unknown rate); else InputError, one line
+    naming the file, the channel and both rates. A log with commands alone is refused
+    where they are too slow."""
+    need = needed_rate_hz(window_s)
+    name = log.path or "log"
+    speed_hz, cmd_hz = log.rate_hz("rotor_speed"), log.rate_hz("rotor_command")
+    cmd_ok = log.rotor_command is not None and (cmd_hz is None or cmd_hz >= need)
+    if log.rotor_speed is None:
+        if log.rotor_command is None or cmd_ok:
+            return log
+        raise InputError(f"{name}: cmd_1..cmd_N: motor commands logged at {cmd_hz:.3g} Hz and "
+                         f"no rotor speeds: too slow for the moments (needs >= {need:.3g} Hz, "
+                         "twice the smoothing's -3 dB frequency): the moment channels cannot "
+                         "be judged; log the commands or the rotor speeds faster")
+    if speed_hz is None or speed_hz >= need:
+        return log
+    if not cmd_ok:
+        cmds = ("no motor commands" if log.rotor_command is None else
+                f"motor commands at {cmd_hz:.3g} Hz")
+        raise InputError(f"{name}: rotor_1..rotor_N: rotor speeds logged at {speed_hz:.3g} Hz "
+                         f"and {cmds}: too slow for the moments (needs >= {need:.3g} Hz, "
+                         "twice the smoothing's -3 dB frequency): the moment channels cannot "
+                         "be judged; log the rotor speeds or the commands faster")
+    model = fit_slow_map(log)
+    speed = np.concatenate([model.speeds(p.t, p.rotor_command, p.vbat) for p in log.parts()])
+    rows_hz = 1.0 / float(np.median(np.diff(log.t)))
+    said = (f"rotor speeds logged at {speed_hz:.2g} Hz, too slow for the moments (needs >= "
+            f"{need:.3g} Hz): speeds synthesised from the commands "
+            f"({min(cmd_hz or rows_hz, rows_hz):.3g} Hz) through a map fitted on them")
+    rates = tuple((k, v) for k, v in log.rates_hz if k not in ("rotor_speed", "rotor_command"))
+    if cmd_hz is not None:
+        rates += (("rotor_speed", cmd_hz),)
+    return dataclasses.replace(
+        log, rotor_speed=speed, rotor_command=None, speeds_synthesised=True,
+        corrections=log.corrections + (said,),   # a pulse-count factor kept: the map's scale
+        notes=log.notes + (f"{name}: {said} (tau {model.tau * 1e3:.1f} ms, fit rms "
+                           f"{model.rms:.3g} rad/s over {model.samples} logged samples)",),
+        rates_hz=rates)
 
 
 def without_speeds(log: FlightLog) -> FlightLog:

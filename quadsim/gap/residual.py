@@ -164,7 +164,7 @@ from ..vehicle.params import MotorMap, VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "identity", "kept",
-           "memoised", "rotor_key",
+           "memoised", "rotor_key", "FIT_RATE_HZ",
            "wrench_key", "CHANNELS", "DEFAULT_WINDOW_S", "FlightStates", "channel_unit",
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
@@ -358,6 +358,9 @@ _DYNAMIC_HOOKS = ("rotor_speed_rate", "speed_factor")
 
 #: Savitzky–Golay window (s) used unless told otherwise.
 DEFAULT_WINDOW_S = 0.1
+#: Hz; the rate the diagnosis fits at (:func:`quadsim.gap.diagnose.prepare` decimates the
+#: states to it; re-exported there as ``diagnose.FIT_RATE_HZ``).
+FIT_RATE_HZ = 100.0
 CHANNELS = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 
 

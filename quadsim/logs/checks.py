@@ -1063,7 +1063,8 @@ def _channel_checks(log, params, readings: list | None = None) -> list[str]:
     return notes
 
 
-def check_log(log, params=None, *, joined: bool = False, orders: list | None = None):
+def check_log(log, params=None, *, joined: bool = False, orders: list | None = None,
+              slow=None):
     """All checks on one log; returns (log with NaN runs and ground/idle spans cut, notes).
     The longest airborne stretch is kept (:func:`check_log_stretches` keeps every one as its
     own log); ``joined``: every airborne stretch kept as a segment of the one log
@@ -1071,7 +1072,10 @@ def check_log(log, params=None, *, joined: bool = False, orders: list | None = N
     on each stretch alone. ``orders``: a list that receives the cut log's
     :func:`rotor_order_status` read from the rotor-order check's own torque balances (the
     same status), or None where the check did not read what the status reads (a log
-    without rotor speeds)."""
+    without rotor speeds). ``slow``: a function (FlightLog -> FlightLog) applied to the cut
+    log before the channels are checked against each other: what to do with a rotor channel
+    logged too slowly for them (the diagnosis' :func:`quadsim.gap.logcheck.slow_rotors`);
+    the notes it adds to the log are returned with the others."""
     check_vehicle(log, params)
     log, note = cut_nan(log)
     notes = [note] if note else []
@@ -1080,6 +1084,10 @@ def check_log(log, params=None, *, joined: bool = False, orders: list | None = N
     notes += [note] if note else []
     log, note = check_rotor_speeds(log)
     notes += [note] if note else []
+    if slow is not None:
+        before = len(log.notes)
+        log = slow(log)
+        notes += list(log.notes[before:])
     readings = None if orders is None or params is None else []
     for part in log.parts():
         notes += [n for n in _channel_checks(part, params, readings) if n not in notes]
@@ -1109,14 +1117,15 @@ def check_log_stretches(log, params=None):
     return logs, notes
 
 
-def check_logs(logs, params=None, *, orders: list | None = None):
+def check_logs(logs, params=None, *, orders: list | None = None, slow=None):
     """:func:`check_log` on each, every airborne stretch a segment (``joined``); returns
     (logs, notes). The diagnosis (``gap``) is its caller; a log without a pose is checked
     like the others and diagnosed on the body-frame balance (:mod:`quadsim.gap.logcheck`).
-    ``orders``: a list that receives each log's rotor-order status (:func:`check_log`)."""
+    ``orders``: a list that receives each log's rotor-order status (:func:`check_log`);
+    ``slow``: as :func:`check_log`'s."""
     out, notes = [], []
     for log in logs:
-        log, n = check_log(log, params, joined=True, orders=orders)
+        log, n = check_log(log, params, joined=True, orders=orders, slow=slow)
         out.append(log)
         notes.extend(n)
     return out, notes

@@ -51,14 +51,27 @@ class Columns(dict):
     validation (:func:`quadsim.logs.flightlog.log_from_columns`) adds the notes to the log."""
 
     def __init__(self, *args, notes: tuple[str, ...] = (), vehicle: dict | None = None,
-                 **kwargs):
+                 rates: dict | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self.notes = list(notes)
         #: what the log says about the vehicle: ``{"rotors": int, "kind": str, "source": str}``
         self.vehicle = dict(vehicle or {})
+        #: each signal's native rate (Hz) where the importer knows it, before resampling:
+        #: ``{"rotor_speed": 4.0, ...}`` (signal names of :data:`quadsim.logs.flightlog.
+        #: ARRAYS`; :mod:`quadsim.logs.rates`)
+        self.rates = dict(rates or {})
 
     def __reduce__(self):
-        return (Columns, (dict(self),), {"notes": self.notes, "vehicle": self.vehicle})
+        return (Columns, (dict(self),), {"notes": self.notes, "vehicle": self.vehicle,
+                                         "rates": self.rates})
+
+
+def median_rate(t: np.ndarray) -> float | None:
+    """1 / the median step (Hz) of sample times ``t`` (s); None for fewer than 2 samples or
+    no positive step (a topic's native rate, :attr:`Columns.rates`)."""
+    steps = np.diff(np.asarray(t, dtype=float))
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    return float(1.0 / np.median(steps)) if len(steps) else None
 
 
 def resample(t_src: np.ndarray, values: np.ndarray, t_out: np.ndarray, *,
@@ -209,7 +222,8 @@ def common_span(columns: dict, path: Path | str | None = None) -> Columns:
     flight; a trim losing more than ``LOSS_NOTE`` of the rows is stated in a note with the
     span lost."""
     notes = list(getattr(columns, "notes", ()))
-    out = Columns(columns, notes=notes, vehicle=getattr(columns, "vehicle", None))
+    out = Columns(columns, notes=notes, vehicle=getattr(columns, "vehicle", None),
+                  rates=getattr(columns, "rates", None))
     n = len(out["t"])
     where = path if path is not None else "log"
     groups: dict[str, list[str]] = {}

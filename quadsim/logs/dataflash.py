@@ -54,6 +54,7 @@ from .common import (
     frd_to_body,
     increasing,
     map_rotors,
+    median_rate,
     ned_to_world,
     pwm_to_unit,
     quat_ned_frd_to_world_body,
@@ -234,6 +235,20 @@ def _voltage(path, messages, formats):
     return None
 
 
+def _rates(**series) -> dict[str, float]:
+    """Each message's native rate (Hz, :func:`quadsim.logs.common.median_rate`): signal ->
+    (t, ...) or a list of them (one per ESC instance: the slowest), None left out."""
+    out = {}
+    for key, found in series.items():
+        if not found:
+            continue
+        times = [f[0] for f in found] if isinstance(found, list) else [found[0]]
+        rates = [r for r in (median_rate(t) for t in times) if r is not None]
+        if rates:
+            out[key] = min(rates)
+    return out
+
+
 def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
                       pwm_range: tuple[float, float] | None = None) -> dict[str, np.ndarray]:
     """Flight-log columns (SI, schema names, our frames) from an ArduPilot DataFlash log."""
@@ -276,7 +291,9 @@ def dataflash_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = N
     columns = Columns(columns_from_signals(
         t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}),
         notes=notes, vehicle={"rotors": count, "kind": "multirotor",
-                              "source": "ArduPilot FRAME_CLASS"})
+                              "source": "ArduPilot FRAME_CLASS"},
+        rates=_rates(quat=(t_base,), position=pos, velocity=vel, body_rate=imu, accel=imu,
+                     rotor_command=cmd, rotor_speed=speeds, vbat=volt))
     return common_span(columns, path)
 
 
@@ -316,7 +333,9 @@ def _imu_columns(path: Path, messages: dict, params: dict, formats: dict, imu, *
     columns = Columns(columns_from_signals(
         t_base[keep], {k: (v[keep] if v is not None else None) for k, v in sig.items()}),
         notes=notes, vehicle={"rotors": count, "kind": "multirotor",
-                              "source": "ArduPilot FRAME_CLASS"})
+                              "source": "ArduPilot FRAME_CLASS"},
+        rates=_rates(body_rate=imu, accel=imu, rotor_command=cmd, rotor_speed=speeds,
+                     vbat=volt))
     return common_span(columns, path)
 
 

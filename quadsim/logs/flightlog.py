@@ -163,7 +163,10 @@ class FlightLog:
     commands' timing through that model, not a logged signal's; corrections: what the
     checks changed in a channel, a short phrase each, no file name (a rotor speed read at a
     pulse-count factor, :func:`quadsim.logs.checks.check_rotor_speeds`): every answer on
-    the log states them.
+    the log states them; rates_hz: each channel's native rate, ``((name, Hz), ...)`` with
+    names of :data:`ARRAYS` (how often it was logged before the rows' resampling: the
+    importer's, else read from the data by :func:`quadsim.logs.rates.native_rate`; a channel
+    left out is unknown; :meth:`rate_hz`).
     """
 
     t: np.ndarray
@@ -181,6 +184,7 @@ class FlightLog:
     segments: tuple[int, ...] = ()
     speeds_synthesised: bool = False
     corrections: tuple[str, ...] = ()
+    rates_hz: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self):
         n = len(self.t)
@@ -203,6 +207,17 @@ class FlightLog:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def rate_hz(self, channel: str) -> float | None:
+        """The native rate (Hz) of ``channel`` (a name of :data:`ARRAYS`) as
+        :attr:`rates_hz` states it, no faster than the rows' (1 / the median step: a channel
+        resampled onto slower rows keeps only what they carry); None where unknown."""
+        rate = dict(self.rates_hz).get(channel)
+        if rate is None:
+            return None
+        steps = np.diff(self.t)
+        rows = 1.0 / float(np.median(steps)) if len(steps) else np.inf
+        return float(min(rate, rows))
 
     def parts(self) -> list[FlightLog]:
         """The airborne stretches of a joined log (:attr:`segments`), each a FlightLog with
@@ -497,7 +512,19 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
         for note in notes:
             warnings.warn(note, QuadsimWarning, stacklevel=2)
     vehicle = getattr(source, "vehicle", {}).get("kind")
-    return FlightLog(t=t, path=path, notes=tuple(notes), vehicle=vehicle, **log)
+    return FlightLog(t=t, path=path, notes=tuple(notes), vehicle=vehicle,
+                     rates_hz=_rates(t, log, getattr(source, "rates", {})), **log)
+
+
+def _rates(t: np.ndarray, log: dict, known: dict) -> tuple[tuple[str, float], ...]:
+    """:attr:`FlightLog.rates_hz`: the importer's rate of each channel (``known``) where it
+    gives one, else the one read from the data (:func:`quadsim.logs.rates.native_rate`)."""
+    from .rates import rates_of
+
+    present = {k: log.get(k) for k in ARRAYS if log.get(k) is not None}
+    read = dict(rates_of(t, {k: v for k, v in present.items() if known.get(k) is None}))
+    return tuple((k, float(known[k]) if known.get(k) is not None else read[k])
+                 for k in present if known.get(k) is not None or k in read)
 
 
 # ----------------------------------------------------------------------------- writing

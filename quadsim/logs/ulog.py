@@ -54,6 +54,7 @@ from .common import (
     frd_to_body,
     increasing,
     map_rotors,
+    median_rate,
     ned_to_world,
     pwm_to_unit,
     quat_ned_frd_to_world_body,
@@ -192,6 +193,7 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
                               f"2..{MAX_ROWS:.0e} allowed")
         t_base = t_base[0] + np.arange(int((t_base[-1] - t_base[0]) * rate_hz) + 1) / rate_hz
     out: dict[str, np.ndarray | None] = {}
+    rates: dict[str, float | None] = {}
     for key, found in sig.items():
         if found is None:
             out[key] = None
@@ -213,6 +215,7 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
             notes.append(f"{path}: {topic}: {len(t_src)} usable sample(s); {key} left out")
             out[key] = None
             continue
+        rates[key] = median_rate(t_src)          # the topic's own rate, before resampling
         out[key] = (resample_quat(t_src, values, t_base) if key == "quat"
                     else resample(t_src, values, t_base))
         if key == "vbat":
@@ -247,7 +250,8 @@ def ulog_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
                              else out["rotor_speed"]).shape[1]
     columns = Columns(columns_from_signals(
         t_base[keep], {k: (v[keep] if v is not None else None) for k, v in out.items()}),
-        notes=notes, vehicle=vehicle)
+        notes=notes, vehicle=vehicle,
+        rates={k: r for k, r in rates.items() if r is not None and out.get(k) is not None})
     return common_span(columns, path)
 
 

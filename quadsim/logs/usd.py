@@ -59,7 +59,15 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import field_error
-from .common import RPM_TO_RAD_S, Columns, check_unit_quat, map_rotors, resample, resample_quat
+from .common import (
+    RPM_TO_RAD_S,
+    Columns,
+    check_unit_quat,
+    map_rotors,
+    median_rate,
+    resample,
+    resample_quat,
+)
 
 MAGIC = 0xBC
 #: m/s^2 per g: the Crazyflie firmware's GRAVITY_MAGNITUDE (the nominal CSVs use it too).
@@ -239,13 +247,19 @@ def usd_columns(path: str | Path, *, rotor_map: tuple[int, ...] | None = None,
             cols.update({f"{prefix}_{i + 1}": value[:, i] for i in range(value.shape[1])})
     if "pm.vbatMV" in ev:
         cols["vbat"] = ev["pm.vbatMV"] / 1000.0
+    # every channel at its event's rate (the pose's: the motion-capture event's)
+    rate = median_rate(t)
+    rates = {k: rate for k in ("position", "velocity", "quat", "body_rate", "accel",
+                               "rotor_speed", "rotor_command", "vbat") if rate is not None}
+    if pose is not None and median_rate(events[pose]["t"]) is not None:
+        rates.update(position=median_rate(events[pose]["t"]), quat=median_rate(events[pose]["t"]))
     if pose is not None:
         ok = np.isfinite(position).all(axis=1) & np.isfinite(quat).all(axis=1)
         if ok.sum() < 2:
             raise field_error(path, pose, "pose event and fixed-frequency rows never overlap")
         cols = {k: v[ok] for k, v in cols.items()}
         cols["t"] = cols["t"] - cols["t"][0]
-    return Columns(cols, notes=tuple(notes))
+    return Columns(cols, notes=tuple(notes), rates=rates)
 
 
 def _commands(ev: dict) -> tuple[str, list[str]] | None:

@@ -1,0 +1,198 @@
+"""A channel's native rate: how often it was logged, before any resampling.
+
+The importers resample every topic onto one time base (:func:`quadsim.logs.common.resample`),
+and a CSV or Parquet export repeats or interpolates a slow channel onto its rows, so the rows'
+rate says nothing about how fast a channel was logged. A rotor speed logged at 4 Hz
+(PX4's default ``esc_status`` profile) and spread over 500 Hz rows cannot carry the
+attitude loop's 1-20 Hz content; the diagnosis needs to know (:mod:`quadsim.gap.logcheck`,
+"Slow channels").
+
+Where the loader knows a channel's rate (ULog: each topic's median interval; DataFlash:
+each message's; the Crazyflie uSD reader: the event's), it states it in
+``Columns.rates`` and the FlightLog carries it (:attr:`quadsim.logs.flightlog.FlightLog.
+rates_hz`). For a CSV or Parquet log, and for a channel the loader did not rate, it is read
+from the data by :func:`native_rate`:
+
+* **held** (sample and hold: a logger that repeats the latest value on every row): the
+  value changes only on the rows where a new sample arrived; those rows are the *knots*;
+* **interpolated** (linear interpolation between the samples, what the importers and most
+  resampling exports do): each row lies on the straight line (in time: row instants
+  jitter) through its two neighbours between knots, and not at a knot (a sample that falls
+  between two rows bends the line on the two rows around it: a knot of two adjacent rows,
+  counted once);
+* **native**: the value changes and bends on nearly every row.
+
+Each test flags rows (the rotor columns of a channel together: a knot on any column is a
+knot of the channel), merges runs of adjacent flagged rows into one knot, and takes the
+median time between consecutive knots as the channel's sample interval; the channel's rate
+is the slower of the two tests' (a held channel bends only at its steps, so both tests see
+its knots; an interpolated one changes on every row, so only the second-difference test
+sees them). Runs of flagged rows whose median length is :data:`DENSE_RUN` rows or more
+mean the channel changes on nearly every row: native, the rows' own rate. Rows where the
+channel is constant for long (on the ground, motors off) add no knots and do not bias a
+median.
+
+Thresholds:
+
+* a row is flagged where it differs from the row before (a held value repeats exactly, so
+  any change of a rounding step counts), or where its distance from its neighbours' line
+  exceeds :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quantum`: the
+  decimal step of its largest value at the most significant digits its values use; 1e-3
+  rad/s for the Crazyflie's 7-digit speeds, 1e-14 of the value for float64): a linearly
+  interpolated value rounded so lies at most one step off its neighbours' line (half a step
+  of its own rounding, half of theirs), so no rounding is read as a knot, and a smooth
+  native channel without noise (a generated log's commands at 1 kHz bend by ~1e-7 of
+  their value per row) still bends on every row;
+* :data:`DENSE_RUN` = 3 rows: an interpolated sample bends two rows, a held one changes one,
+  so longer runs are no knot but a channel that changes everywhere;
+* :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column);
+* :data:`QUANTUM_STEPS` = 2: a native channel quantised so coarsely that it stays on one
+  value for several rows (a battery voltage in 1 mV steps, integer PWM commands in a hover)
+  changes by one quantum at a time, so the median change is its smallest; a held channel's
+  changes are what the signal did between samples, many quanta and unequal. Where every
+  column's median change is at most twice its smallest, the channel is read as native.
+
+What it cannot tell: a held channel whose every change is about equal (a held ramp), read
+as native; a quantised channel that moves by several quanta between rows yet stays for
+several, read as held. It costs a few vector operations per column (it runs on every log).
+
+Example::
+
+    >>> native_rate(t, rotor_speed)          # NativeRate(hz=4.0, form="held", knots=...)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "ROUND_STEPS", "NativeRate",
+           "native_rate", "rates_of"]
+
+#: rounding steps of the column as written (:func:`_quantum`) a change must exceed to count
+#: (module doc)
+ROUND_STEPS = 2.0
+#: the most significant digits a value is read with (float64 holds 15-17)
+MAX_DIGITS = 15
+#: median run of flagged rows at or above which a channel is native (module doc)
+DENSE_RUN = 3
+#: fewest knots from which a rate is read (module doc)
+MIN_KNOTS = 8
+#: a column whose changes have a median at most this many times its smallest change is
+#: quantised, not held (module doc)
+QUANTUM_STEPS = 2.0
+
+
+@dataclass(frozen=True)
+class NativeRate:
+    """A channel's native rate: ``hz`` (1/s), ``form`` ("native", "held" or
+    "interpolated"), ``knots``: the row indices (int array) where a logged sample shows
+    (the first row of each knot; every row for a native channel)."""
+
+    hz: float
+    form: str
+    knots: np.ndarray
+
+
+def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
+    """The first index of each run of True in ``flags`` and the runs' median length."""
+    padded = np.concatenate([[False], flags, [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    starts, ends = edges[0::2], edges[1::2]
+    if len(starts) == 0:
+        return starts, 0.0
+    return starts, float(np.median(ends - starts))
+
+
+def _quantum(column: np.ndarray) -> float:
+    """The rounding step of a column as written: 10^(e - D + 1) for its largest magnitude's
+    decimal exponent e and the most significant digits D any of up to 512 of its values
+    (evenly spread) needs (:data:`MAX_DIGITS` at most: float64 arithmetic); 0 for a column
+    without a nonzero finite value."""
+    v = column[np.isfinite(column) & (column != 0)]
+    if not len(v):
+        return 0.0
+    v = v[np.linspace(0, len(v) - 1, min(len(v), 512)).astype(int)]
+    exponent = np.floor(np.log10(np.abs(v)))
+    digits = np.full(len(v), MAX_DIGITS)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for d in range(MAX_DIGITS - 1, 0, -1):   # the fewest digits that give the value back
+            scale = 10.0 ** (d - 1 - exponent)
+            same = np.abs(np.round(v * scale) / scale - v) <= 1e-12 * np.abs(v)
+            digits = np.where(same, d, digits)
+    top = float(np.floor(np.log10(np.max(np.abs(v)))))
+    return float(10.0 ** (top - int(digits.max()) + 1))
+
+
+def _quantised(changes: np.ndarray, counted: np.ndarray) -> bool:
+    """Whether every column's changes (``changes`` (N-1, K), those ``counted``) are about one
+    quantum: median at most :data:`QUANTUM_STEPS` times the smallest (module doc)."""
+    seen = False
+    for j in range(changes.shape[1]):
+        c = changes[counted[:, j], j]
+        if len(c) < MIN_KNOTS:
+            continue
+        seen = True
+        if np.median(c) > QUANTUM_STEPS * np.min(c):
+            return False
+    return seen
+
+
+def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
+    """The native rate of one channel (module doc): ``t`` (N,) s, strictly increasing;
+    ``values`` (N,) or (N, K) (NaN rows are no knots). Returns None where it cannot tell
+    (fewer than :data:`MIN_KNOTS` knots, or fewer than 5 rows)."""
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(values, dtype=float)
+    x = x[:, None] if x.ndim == 1 else x
+    if len(t) < 5 or x.shape[0] != len(t):
+        return None
+    finite = np.isfinite(x)
+    if not finite.any():
+        return None
+    quantum = np.array([_quantum(x[:, j]) for j in range(x.shape[1])])
+    tol = ROUND_STEPS * quantum
+    # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
+    # a line in t is no line in the row index)
+    w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
+    with np.errstate(invalid="ignore"):
+        d1 = np.abs(np.diff(x, axis=0)) > 0.5 * quantum   # row k+1 differs from row k
+        d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
+    held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
+    bent = np.concatenate([[False], d2.any(axis=1), [False]])
+    step = float(np.median(np.diff(t)))
+    if _quantised(np.abs(np.diff(x, axis=0)), d1):      # steps of one quantum: native
+        return NativeRate(1.0 / step, "native", np.arange(len(t)))
+    best = None
+    for form, flags in (("held", held), ("interpolated", bent)):
+        starts, run = _knots(flags)
+        if int(flags.sum()) < MIN_KNOTS:
+            continue
+        if run >= DENSE_RUN:                            # changes on nearly every row
+            candidate = NativeRate(1.0 / step, "native", np.arange(len(t)))
+        elif len(starts) < MIN_KNOTS:
+            continue
+        else:
+            interval = float(np.median(np.diff(t[starts])))
+            if interval <= 1.5 * step:                  # a knot on every row or so
+                candidate = NativeRate(1.0 / step, "native", np.arange(len(t)))
+            else:
+                candidate = NativeRate(1.0 / interval, form, starts)
+        if best is None or candidate.hz < 0.99 * best.hz:     # a tie: the held reading
+            best = candidate
+    return best
+
+
+def rates_of(t: np.ndarray, channels: dict) -> tuple[tuple[str, float], ...]:
+    """``((channel, Hz), ...)`` of the channels ``channels`` (name -> (N,) or (N, K) array
+    or None) whose rate :func:`native_rate` reads; in the given order, the unread left
+    out."""
+    out = []
+    for name, values in channels.items():
+        if values is None:
+            continue
+        rate = native_rate(t, values)
+        if rate is not None:
+            out.append((name, float(rate.hz)))
+    return tuple(out)
