@@ -63,8 +63,9 @@ def savgol(x: np.ndarray, window: int, polyorder: int, *, deriv: int = 0,
     degree ``polyorder`` < ``window``; scipy's ``savgol_filter(..., axis=0)`` with
     ``mode="interp"`` to round-off (module doc). ``fft``: the interior convolved through one
     FFT of length >= N + window - 1 (no wrap-around) instead of ``convolve1d``'s direct sum:
-    the same to round-off (~1e-15 of the signal's scale, not bit for bit), and cheaper for
-    long windows (a 1 s high-pass over ~500 samples: ``quadsim.logs.delays``). Raises
+    the same to round-off (not bit for bit: ~1e-15 of the largest input times the filter's
+    absolute coefficient sum, ``tests/test_delay_regression.py``), and cheaper for long
+    windows (a 1 s high-pass over ~500 samples: ``quadsim.logs.delays``). Raises
     ValueError where ``window`` exceeds N (as scipy)."""
     from scipy.ndimage import convolve1d
 
