@@ -52,7 +52,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.fft import next_fast_len
+from scipy.fft import irfft, next_fast_len, rfft
 
 from .flightlog import FlightLog, body_rate_from_quat
 from .savgol import savgol
@@ -178,13 +178,13 @@ def regression_delay(target: np.ndarray, regressors: np.ndarray, dt: float,
     cross = np.empty((count, r_cols + e_cols, a.shape[1]))
     gram[:, r_cols:, r_cols:] = extra.T @ extra
     cross[:, r_cols:] = extra.T @ a
-    running = np.zeros((n + 1, r_cols, r_cols))
-    np.cumsum(x[:, :, None] * x[:, None, :], axis=0, out=running[1:])
-    gram[:, :r_cols, :r_cols] = running[m:m + count] - running[:count]
+    p, q = np.triu_indices(r_cols)             # each product x_p x_q once (symmetric)
+    running = np.zeros((n + 1, len(p)))
+    np.cumsum(x[:, p] * x[:, q], axis=0, out=running[1:])
+    gram[:, p, q] = gram[:, q, p] = running[m:m + count] - running[:count]
     length = next_fast_len(n, real=True)
-    spectra = np.fft.rfft(x, length, axis=0)[:, :, None] * np.conj(
-        np.fft.rfft(rhs, length, axis=0))[:, None, :]
-    products = np.fft.irfft(spectra, length, axis=0)[:count]   # (count, r_cols, e + a cols)
+    spectra = rfft(x.T, length)[:, None, :] * np.conj(rfft(rhs.T, length))[None, :, :]
+    products = np.moveaxis(irfft(spectra, length)[..., :count], -1, 0)   # (count, r, e + a)
     gram[:, :r_cols, r_cols:] = products[:, :, :e_cols]
     gram[:, r_cols:, :r_cols] = np.swapaxes(products[:, :, :e_cols], 1, 2)
     cross[:, :r_cols] = products[:, :, e_cols:]

@@ -22,7 +22,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.fft import next_fast_len
+from scipy.fft import irfft, next_fast_len, rfft
 
 
 @lru_cache(maxsize=64)
@@ -84,8 +84,8 @@ def savgol(x: np.ndarray, window: int, polyorder: int, *, deriv: int = 0,
     if fft and x.dtype == np.float64:
         # full convolution c (N + window - 1); convolve1d's output is c[half:half + N]
         length = next_fast_len(x.shape[0] + window - 1, real=True)
-        spectrum = np.fft.rfft(coeffs, length).reshape((-1,) + (1,) * (x.ndim - 1))
-        y = np.fft.irfft(np.fft.rfft(x, length, axis=0) * spectrum, length, axis=0)
+        spectrum = rfft(coeffs, length).reshape((-1,) + (1,) * (x.ndim - 1))
+        y = irfft(rfft(x, length, axis=0) * spectrum, length, axis=0)
         y = np.ascontiguousarray(y[window // 2:window // 2 + x.shape[0]])
     else:
         y = convolve1d(x, coeffs, axis=0, mode="constant")
