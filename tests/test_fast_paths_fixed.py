@@ -98,6 +98,45 @@ def test_one_reading_is_the_source_and_the_evidence(cf):
     assert max(evidence, key=evidence.get) == (1, 0, 2, 3)
 
 
+def test_one_reading_is_the_spins_too(cf):
+    """The evidence and the spins from one set of torque balances (``_read_order``) are
+    :func:`order_reading`'s and :func:`spin_reversal_evidence`'s, each on its own."""
+    from quadsim.logs import checks
+
+    log = synthetic_flight(cf, shared_effects(), duration=4.0, seed=12, speed=1.0)
+    for flight in (log, _swapped(log), dataclasses.replace(log, rotor_speed=None)):
+        for commands in (False, True):
+            source, evidence, spins = checks._read_order(flight, cf, commands)
+            assert (source, evidence) == order_reading(flight, cf, commands=commands)
+            assert spins == checks.spin_reversal_evidence(flight, cf, commands=commands)
+
+
+def test_the_checks_read_one_set_of_torque_balances(cf, monkeypatch):
+    """The rotor-order check, its spins and the status kept for the judged flight: one
+    torque balance per signal (rotor speeds, commands) and stretch, with or without the
+    status (before: 4 without it, 6 with it)."""
+    from quadsim.logs import checks
+
+    log = synthetic_flight(cf, shared_effects(), duration=4.0, seed=11, speed=1.0)
+    balances = []
+    original = checks._torque_balance
+
+    def counted(*args, **kwargs):
+        balances.append(kwargs.get("sensor"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(checks, "_torque_balance", counted)
+    for orders in (None, []):
+        balances.clear()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", QuadsimWarning)
+            checked, _ = check_logs([log], cf, orders=orders)
+        assert len(checked[0].parts()) == 1
+        assert sorted(balances) == [False, True]          # commands, rotor speeds
+    monkeypatch.setattr(checks, "_torque_balance", original)
+    assert orders[0] == rotor_order_status(checked[0], cf)
+
+
 def test_a_judged_flight_with_the_checks_order_is_judged_as_without(cf, calibrated):
     _, ref = calibrated
     log = synthetic_flight(cf, shared_effects(), duration=3.0, seed=8, speed=0.8)

@@ -838,8 +838,16 @@ def rotor_order_evidence(log, params, *, commands: bool = False
 def order_reading(log, params, *, commands: bool = False) -> tuple[str, dict]:
     """(:func:`rotor_order_source`, :func:`rotor_order_evidence`) of ``log``, the signals
     chosen once (the same numbers as the two calls)."""
+    return _read_order(log, params, commands)[:2]
+
+
+def _read_order(log, params, commands: bool) -> tuple[str, dict, float | None]:
+    """(:func:`rotor_order_source`, :func:`rotor_order_evidence`,
+    :func:`spin_reversal_evidence`) of ``log``, the signals chosen and their torque balances
+    computed once (the same numbers as the three calls)."""
     choice = _order_choice(log, params, commands)
-    return " and ".join(name for name, _ in choice), _evidence_of(choice, params)
+    return (" and ".join(name for name, _ in choice), _evidence_of(choice, params),
+            _spins_of(choice, params))
 
 
 def _evidence_of(choice: list, params) -> dict[tuple[int, ...], float]:
@@ -888,7 +896,11 @@ def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | No
     roll and pitch if it is the spins; on one that does, every order is far worse on roll or
     pitch (a model error by the order rule) while the reversal still fits the yaw. With a
     set's right spins it is negative (docs/flightlog.md, "rotor spins")."""
-    choice = _order_choice(log, params, commands)
+    return _spins_of(_order_choice(log, params, commands), params)
+
+
+def _spins_of(choice: list, params) -> float | None:
+    """:func:`spin_reversal_evidence` of the signals ``choice`` (:func:`_order_choice`)."""
     if not choice:
         return None
     from ..vehicle.rotors import allocation_matrix
@@ -931,13 +943,15 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
     out, and a verdict on the log must say so (issue 44: never stated at > 99 %). A log of
     several airborne stretches (segments): each stretch's Delta chi^2 summed (independent
     samples; the balance's integrals never run across a ground span). ``readings``: each
-    stretch's :func:`order_reading` with ``commands`` where already read (:func:`check_log`
-    with ``orders``), in the order of :meth:`~quadsim.logs.flightlog.FlightLog.parts`."""
+    stretch's (source, evidence, spin-reversal evidence) with ``commands``
+    (:func:`order_reading` and :func:`spin_reversal_evidence` from one set of torque
+    balances) where already read (:func:`check_log` with ``orders``), in the order of
+    :meth:`~quadsim.logs.flightlog.FlightLog.parts`."""
     evidence: dict = {}
     sources = []
     if readings is None:
-        readings = [order_reading(part, params, commands=True) for part in log.parts()]
-    for source, part_evidence in readings:
+        readings = [_read_order(part, params, commands=True) for part in log.parts()]
+    for source, part_evidence, _ in readings:
         sources.append(source)
         for perm, value in part_evidence.items():
             evidence[perm] = evidence.get(perm, 0.0) + value
@@ -953,8 +967,7 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
     value = float(evidence[rival])
     # every spin reversed fitting better than the set's (and as well as any column order):
     # the spins are named, not an order (spin_reversal_evidence)
-    spins = sum(v for v in (spin_reversal_evidence(p, params, commands=True)
-                            for p in log.parts()) if v is not None)
+    spins = sum(v for _, _, v in readings if v is not None)
     if spins > DOUBT_CHI2 and spins >= value - DOUBT_CHI2:
         return RotorOrder(False, True, rival, value, source,
                           f"{where}: rotor_*: rotor spins not confirmed by the torque "
@@ -972,7 +985,7 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
                       f"the {source}: the order --rotor-map {mapping} {how}")
 
 
-def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
+def check_rotor_order(log, params, *, reading: tuple | None = None) -> None:
     """Rotor columns in the parameter set's order, by the torque balance under every
     permutation of the rotor columns.
 
@@ -1000,13 +1013,18 @@ def check_rotor_order(log, params, *, evidence: dict | None = None) -> None:
     CHANGELOG.md: Docstrings as contracts). Each order
     is scored from the Gram matrices of the per-sample columns (:class:`_TorqueBalance`):
     a hexarotor's 720 orders cost little more than a quadrotor's 24.
-    ``evidence``: the log's :func:`rotor_order_evidence` where already read."""
-    if evidence is None:
-        evidence = rotor_order_evidence(log, params)
+    ``reading``: the log's (source, evidence, spin-reversal evidence) with ``commands``
+    where already read (``_read_order``: :func:`order_reading` and
+    :func:`spin_reversal_evidence` from one set of torque balances). Without it, the
+    evidence and the spins are read from one set of torque balances too: with rotor speeds
+    logged the signals read do not depend on ``commands`` (:func:`_order_sources`), and
+    without them the evidence is empty (nothing checked)."""
+    if reading is None:
+        reading = _read_order(log, params, commands=False)
+    _, evidence, spins = reading
     if not evidence:
         return
     best = max(evidence, key=evidence.get)
-    spins = spin_reversal_evidence(log, params, commands=log.rotor_speed is not None)
     if spins is not None and spins > ORDER_CHI2 and spins >= evidence[best] - DOUBT_CHI2:
         raise field_error(_where(log), "rotor_*", f"rotor spins: {_spin_words(spins, params)}"
                           f" (above {ORDER_CHI2:g}; the best column order, --rotor-map "
@@ -1037,9 +1055,10 @@ def check_vehicle(log, params) -> None:
 
 def _channel_checks(log, params, readings: list | None = None) -> list[str]:
     """The checks of channels against each other on one airborne stretch; notes.
-    ``readings``: a list that receives the stretch's :func:`order_reading` with
-    ``commands`` (what :func:`rotor_order_status` reads), or None where that is not what the
-    check reads (no rotor speeds logged: the check reads none, the status the commands)."""
+    ``readings``: a list that receives the stretch's (source, evidence, spin-reversal
+    evidence) with ``commands`` (what :func:`rotor_order_status` reads: ``_read_order``),
+    or None where that is not what the check reads (no rotor speeds logged: the check reads
+    none, the status the commands)."""
     notes = []
     gyro_note = check_gyro(log)
     if gyro_note:
@@ -1057,8 +1076,8 @@ def _channel_checks(log, params, readings: list | None = None) -> list[str]:
         return notes
     # with rotor speeds logged the check and the status read the same signals (speeds, and
     # commands beside them: _order_sources), so one reading serves both
-    reading = order_reading(log, params, commands=True) if log.rotor_speed is not None else None
-    check_rotor_order(log, params, evidence=None if reading is None else reading[1])
+    reading = _read_order(log, params, commands=True) if log.rotor_speed is not None else None
+    check_rotor_order(log, params, reading=reading)
     readings.append(reading)
     return notes
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft
 
 
 @lru_cache(maxsize=64)
@@ -56,12 +57,16 @@ def _coeffs(window: int, polyorder: int, deriv: int, delta: float) -> np.ndarray
 
 
 def savgol(x: np.ndarray, window: int, polyorder: int, *, deriv: int = 0,
-           delta: float = 1.0) -> np.ndarray:
+           delta: float = 1.0, fft: bool = False) -> np.ndarray:
     """``x`` (N,) or (N, ...) smoothed (``deriv`` 0) or differentiated (``deriv`` >= 1, per
     unit of ``delta``) along axis 0 by a Savitzky–Golay filter of odd length ``window`` and
     degree ``polyorder`` < ``window``; scipy's ``savgol_filter(..., axis=0)`` with
-    ``mode="interp"`` to round-off (module doc). Raises ValueError where ``window`` exceeds N
-    (as scipy)."""
+    ``mode="interp"`` to round-off (module doc). ``fft``: the interior convolved through one
+    FFT of length >= N + window - 1 (no wrap-around) instead of ``convolve1d``'s direct sum:
+    the same to round-off (not bit for bit: ~1e-15 of the largest input times the filter's
+    absolute coefficient sum, ``tests/test_delay_regression.py``), and cheaper for long
+    windows (a 1 s high-pass over ~500 samples: ``quadsim.logs.delays``). Raises
+    ValueError where ``window`` exceeds N (as scipy)."""
     from scipy.ndimage import convolve1d
 
     x = np.asarray(x)
@@ -75,8 +80,15 @@ def savgol(x: np.ndarray, window: int, polyorder: int, *, deriv: int = 0,
         from scipy.signal import savgol_filter
 
         return savgol_filter(x, window, polyorder, deriv=deriv, delta=delta, axis=0)
-    y = convolve1d(x, _coeffs(window, polyorder, deriv, float(delta)), axis=0,
-                   mode="constant")
+    coeffs = _coeffs(window, polyorder, deriv, float(delta))
+    if fft and x.dtype == np.float64:
+        # full convolution c (N + window - 1); convolve1d's output is c[half:half + N]
+        length = next_fast_len(x.shape[0] + window - 1, real=True)
+        spectrum = rfft(coeffs, length).reshape((-1,) + (1,) * (x.ndim - 1))
+        y = irfft(rfft(x, length, axis=0) * spectrum, length, axis=0)
+        y = np.ascontiguousarray(y[window // 2:window // 2 + x.shape[0]])
+    else:
+        y = convolve1d(x, coeffs, axis=0, mode="constant")
     half = window // 2
     if half == 0:
         return y
