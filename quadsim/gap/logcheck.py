@@ -188,8 +188,10 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -212,6 +214,8 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
            "confusable", "confusable_note", "SEPARATED",
            "TIMING_WORDS", "fit_slow_map", "needed_rate_hz", "slow_rotors",
+           "BAND_SHARE", "MIN_BAND_RATE_HZ", "Band", "band_of", "band_window_s", "carrying_rate",
+           "in_band", "rejoined", "timing_carried",
            "smoothing_cutoff_hz"]
 
 
@@ -524,6 +528,148 @@ def slow_rotors(log: FlightLog, window_s: float | None = None) -> FlightLog:
         notes=log.notes + (f"{name}: {said} (tau {model.tau * 1e3:.1f} ms, fit rms "
                            f"{model.rms:.3g} rad/s over {model.samples} logged samples)",),
         rates_hz=rates)
+
+
+#: the band's cut-off as a share of the rate of the channel carrying the rotors (module doc,
+#: "Judged in a band"): linear interpolation through samples at rate r passes a sine of
+#: frequency f with the gain sinc^2(f / r) (the triangle kernel's transform): 0.81 at r / 4,
+#: 0.95 at r / 8; the band's smoothing is down 3 dB at r / 4 and the wrench's content in
+#: the band lies mostly well below its edge (the answers' mass, thrust, drag and wind near
+#: 0-1 Hz, where the interpolation is faithful to 1-4 % at 10 Hz)
+BAND_SHARE = 0.25
+#: the slowest carrying rate (Hz) judged in a band: its band (:data:`BAND_SHARE` of it) at
+#: 1.25 Hz still passes a hanging payload's swing (0.5-1 Hz for cables of 1-0.25 m,
+#: f = sqrt(g / L) / 2 pi) and a manoeuvre's slow part; slower, the flight is refused
+MIN_BAND_RATE_HZ = 5.0
+#: the band's smoothing windows are searched on this grid (s)
+BAND_WINDOW_STEP_S = 0.01
+
+
+@dataclass(frozen=True)
+class Band:
+    """The band a run is judged in where no log's rotors are carried fast enough
+    (:func:`band_of`): ``rate_hz`` the slowest carrying channel's native rate, ``source``
+    its words ("motor commands logged at 10 Hz"), ``name`` the log it is read from,
+    ``window_s`` the smoothing window (s) of the band (:func:`band_window_s`), ``cutoff_hz``
+    its -3 dB frequency at the fit's rate."""
+
+    rate_hz: float
+    source: str
+    name: str
+    window_s: float
+    cutoff_hz: float
+
+    def words(self, name: str | None = None) -> str:
+        """The correction every answer of the run states."""
+        own = name is not None and str(name) == self.name
+        where = "" if own else f" ({Path(self.name).name}; every log of the run alike)"
+        return (f"judged below {self.cutoff_hz:.2g} Hz: {self.source}{where}, too slow for "
+                f"the moments at full band (needs >= {needed_rate_hz():.3g} Hz); the forces, "
+                f"moments and rotor channel compared only below that band (smoothing "
+                f"{self.window_s:.2f} s), timing readings (signal_delay, motor_lag) not weighed")
+
+
+def band_window_s(rate_hz: float) -> float:
+    """The smoothing window (s) of the band of a channel logged at ``rate_hz`` (Hz): the
+    shortest window on the :data:`BAND_WINDOW_STEP_S` grid, from
+    :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` up, whose -3 dB frequency at the fit's rate
+    (:func:`smoothing_cutoff_hz`) is at most :data:`BAND_SHARE` of ``rate_hz``: 0.42 s for
+    9.9-10.2 Hz (-3 dB at 2.48 Hz), 0.86 s for 5 Hz (1.23 Hz), 0.22 s for 19 Hz (4.65 Hz)."""
+    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
+
+    edge = BAND_SHARE * rate_hz
+    window = DEFAULT_WINDOW_S
+    while smoothing_cutoff_hz(window, FIT_RATE_HZ) > edge and window < 60.0:
+        window = round(window + BAND_WINDOW_STEP_S, 6)
+    return window
+
+
+def carrying_rate(log: FlightLog) -> tuple[float, str] | None:
+    """(rate Hz, words) of the slow channel that carries ``log``'s rotors, or None where
+    something fast carries them (at the default smoothing: :func:`needed_rate_hz`) or the
+    rates are unknown (main's path, :func:`slow_rotors`): the faster of the rotor speeds and
+    the commands (the commands synthesise the speeds where they are faster)."""
+    need = needed_rate_hz()
+    have = [(log.rate_hz(key), words) for key, words, value in (
+        ("rotor_speed", "rotor speeds", log.rotor_speed),
+        ("rotor_command", "motor commands", log.rotor_command)) if value is not None]
+    if not have or any(hz is None or hz >= need for hz, _ in have):
+        return None
+    hz, words = max(have)
+    return hz, f"{words} logged at {hz:.2g} Hz"
+
+
+def band_of(logs: Sequence[FlightLog]) -> Band | None:
+    """The band every log of a run is judged in (module doc, "Judged in a band"): that of
+    the log whose carrying channel (:func:`carrying_rate`) is the slowest, None where every
+    log's rotors are carried fast (nothing changes). InputError, one line naming the file
+    and both rates, where that channel is slower than :data:`MIN_BAND_RATE_HZ`."""
+    from .residual import FIT_RATE_HZ
+
+    slow = [(rate, log) for log in logs if (rate := carrying_rate(log)) is not None]
+    if not slow:
+        return None
+    (hz, words), log = min(slow, key=lambda item: item[0][0])
+    name = str(log.path or "log")
+    if hz < MIN_BAND_RATE_HZ:
+        raise InputError(f"{name}: rotor_1..rotor_N: {words} and nothing faster carrying the "
+                         f"rotors: too slow even for a band (needs >= {MIN_BAND_RATE_HZ:g} Hz, "
+                         f"whose quarter, {BAND_SHARE * MIN_BAND_RATE_HZ:g} Hz, still carries a "
+                         "hanging payload's swing): log the rotor speeds or the commands faster")
+    window = band_window_s(hz)
+    return Band(hz, words, name, window, smoothing_cutoff_hz(window, FIT_RATE_HZ))
+
+
+def rejoined(log: FlightLog) -> FlightLog:
+    """``log`` with each rotor channel logged slower than :func:`needed_rate_hz` and held
+    (sample and hold: :func:`quadsim.logs.rates.native_rate`'s form "held") drawn again as
+    the straight lines through its logged samples (each at the first row that shows it):
+    a hold lags its samples by half an interval (50 ms at 10 Hz), which the band would read
+    as a signal delay; interpolated channels are left as they are (their lines are these)."""
+    from ..logs.rates import native_rate
+
+    need = needed_rate_hz()
+    out = {}
+    for key in ("rotor_speed", "rotor_command"):
+        value = getattr(log, key)
+        hz = log.rate_hz(key)
+        if value is None or hz is None or hz >= need:
+            continue
+        rate = native_rate(log.t, value)
+        if rate is None or rate.form != "held" or len(rate.knots) < 2:
+            continue
+        knots = rate.knots if rate.knots[0] == 0 else np.r_[0, rate.knots]
+        out[key] = np.stack([np.interp(log.t, log.t[knots], value[knots, j])
+                             for j in range(value.shape[1])], axis=1)
+    return dataclasses.replace(log, **out) if out else log
+
+
+def timing_carried(window_s: float) -> bool:
+    """Whether states smoothed over ``window_s`` (s) carry the timing readings
+    (``signal_delay``, ``motor_lag``: 10-50 ms read from the moments' phase): their -3 dB
+    frequency at the fit's rate at least :data:`BAND_SHARE` of :func:`needed_rate_hz`
+    (4.94 Hz: windows up to 0.2 s). Every band (:func:`band_window_s`, a carrying channel
+    slower than that need) lies below it: there the slow channel's interpolation bends the
+    phase near the band's edge as a delay of 20 ms would (the 26 mixed Crazyflie flights at
+    10 Hz: 3 plain flights read ``signal_delay`` 51-93 %, "timed 20-22 ms later")."""
+    return _cutoff(round(float(window_s), 9)) >= BAND_SHARE * needed_rate_hz()
+
+
+@functools.lru_cache(maxsize=64)
+def _cutoff(window_s: float) -> float:
+    from .residual import FIT_RATE_HZ
+
+    return smoothing_cutoff_hz(window_s, FIT_RATE_HZ)
+
+
+def in_band(log: FlightLog, band: Band) -> FlightLog:
+    """``log`` as a run judged in ``band`` uses it (module doc, "Judged in a band"): its held
+    slow rotor channels drawn through their samples (:func:`rejoined`), then
+    :func:`slow_rotors` at the band's window (a channel at the band's rate is fast enough
+    there; slower rotor speeds are synthesised from commands at it), the band stated as a
+    correction in every answer."""
+    log = slow_rotors(rejoined(log), band.window_s)
+    return dataclasses.replace(log, corrections=log.corrections + (band.words(log.path),))
 
 
 def without_speeds(log: FlightLog) -> FlightLog:
