@@ -273,7 +273,9 @@ def _load(paths, params, args, lines: list | None = None, orders: list | None = 
                              slow=(lambda log: slow_rotors(log, args.window)) if band is None
                              else (lambda log: in_band(log, band)))
     for log in logs:
-        check_length(log, args.window)
+        check_length(log, args.window, what=None if band is None else (
+            f"t: the band's smoothing window {band.window_s:g} s ({band.source}, judged below "
+            f"{band.cutoff_hz:.2g} Hz; give the log on finer rows: convert --rate 250)"))
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
     if orders is not None:      # only once every log is accepted

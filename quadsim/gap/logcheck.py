@@ -230,10 +230,11 @@ MAX_SPEED_RATIO = 1.5
 MIN_LOG_S = 2.0
 
 
-def check_length(log, window_s: float | None = None, name: str | None = None) -> None:
+def check_length(log, window_s: float | None = None, name: str | None = None, *,
+                 what: str | None = None) -> None:
     """A log long enough for the diagnosis and, with ``window_s`` (s), sampled finely
     enough for it; raises :class:`InputError` naming the file (``name``, default the log's
-    path) and ``t``."""
+    path) and ``t``; ``what``: the window's words (default "--window S s")."""
     name = name or str(log.path)
     duration = float(log.t[-1] - log.t[0]) if len(log.t) else 0.0
     if duration < MIN_LOG_S:
@@ -241,7 +242,8 @@ def check_length(log, window_s: float | None = None, name: str | None = None) ->
                          f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
     step = float(np.median(np.diff(log.t)))
     if window_s is not None and window_s < 5 * step:
-        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {name} "
+        said = f"--window {window_s:g} s" if what is None else what
+        raise InputError(f"{said}: shorter than 5 samples of {name} "
                          f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
@@ -569,17 +571,24 @@ class Band:
                 f"{self.window_s:.2f} s), timing readings (signal_delay, motor_lag) not weighed")
 
 
-def band_window_s(rate_hz: float) -> float:
-    """The smoothing window (s) of the band of a channel logged at ``rate_hz`` (Hz): the
-    shortest window on the :data:`BAND_WINDOW_STEP_S` grid, from
-    :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` up, whose -3 dB frequency at the fit's rate
-    (:func:`smoothing_cutoff_hz`) is at most :data:`BAND_SHARE` of ``rate_hz``: 0.42 s for
-    9.9-10.2 Hz (-3 dB at 2.48 Hz), 0.86 s for 5 Hz (1.23 Hz), 0.22 s for 19 Hz (4.65 Hz)."""
+def band_window_s(rate_hz: float, rows_hz: float | None = None) -> float:
+    """The smoothing window (s) of the band of a channel logged at ``rate_hz`` (Hz), for
+    states smoothed at ``rows_hz`` (the logs' row rate, at most the fit's
+    :data:`quadsim.gap.residual.FIT_RATE_HZ`; default that): the shortest window on the
+    :data:`BAND_WINDOW_STEP_S` grid, from :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` up,
+    whose -3 dB frequency (:func:`smoothing_cutoff_hz`) is at most :data:`BAND_SHARE` of
+    ``rate_hz`` and that spans 5 rows (the differentiator's least): at 100 Hz 0.42 s for
+    9.9-10.2 Hz (-3 dB at 2.48 Hz), 0.86 s for 5 Hz (1.23 Hz), 0.22 s for 19 Hz (4.65 Hz); on
+    10 Hz rows (ArduPilot's log read on its 10 Hz motor outputs) 0.5 s (2.38 Hz), 0.51 s
+    where the rows are a little slower than 10 Hz."""
     from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
 
+    rows = FIT_RATE_HZ if rows_hz is None else min(float(rows_hz), FIT_RATE_HZ)
     edge = BAND_SHARE * rate_hz
-    window = DEFAULT_WINDOW_S
-    while smoothing_cutoff_hz(window, FIT_RATE_HZ) > edge and window < 60.0:
+    window = max(DEFAULT_WINDOW_S, np.ceil(5.0 / rows / BAND_WINDOW_STEP_S)
+                 * BAND_WINDOW_STEP_S)
+    window = round(float(window), 6)
+    while smoothing_cutoff_hz(window, rows) > edge and window < 60.0:
         window = round(window + BAND_WINDOW_STEP_S, 6)
     return window
 
@@ -616,8 +625,19 @@ def band_of(logs: Sequence[FlightLog]) -> Band | None:
                          f"rotors: too slow even for a band (needs >= {MIN_BAND_RATE_HZ:g} Hz, "
                          f"whose quarter, {BAND_SHARE * MIN_BAND_RATE_HZ:g} Hz, still carries a "
                          "hanging payload's swing): log the rotor speeds or the commands faster")
-    window = band_window_s(hz)
-    return Band(hz, words, name, window, smoothing_cutoff_hz(window, FIT_RATE_HZ))
+    need = needed_rate_hz()
+    for g in logs:
+        rows = 1.0 / float(np.median(np.diff(g.t))) if len(g.t) > 1 else np.inf
+        if rows < need:     # the motion no faster than the rotors: nothing fast to judge by
+            raise InputError(f"{g.path or 'log'}: t: rows at {rows:.3g} Hz and {words}: the "
+                             f"motion itself is logged too slowly for the moments (needs >= "
+                             f"{need:.3g} Hz) and no faster than the rotors, so no band can "
+                             "hold a fast side against the slow one: log the IMU, or the "
+                             "rows, faster")
+    rows = min([FIT_RATE_HZ] + [1.0 / float(np.median(np.diff(g.t))) for g in logs
+                                if len(g.t) > 1])
+    window = band_window_s(hz, rows)
+    return Band(hz, words, name, window, smoothing_cutoff_hz(window, rows))
 
 
 def rejoined(log: FlightLog) -> FlightLog:
