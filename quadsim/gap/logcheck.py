@@ -612,7 +612,11 @@ def band_of(logs: Sequence[FlightLog]) -> Band | None:
     """The band every log of a run is judged in (module doc, "Judged in a band"): that of
     the log whose carrying channel (:func:`carrying_rate`) is the slowest, None where every
     log's rotors are carried fast (nothing changes). InputError, one line naming the file
-    and both rates, where that channel is slower than :data:`MIN_BAND_RATE_HZ`."""
+    and the rates, where that channel is slower than :data:`MIN_BAND_RATE_HZ`, or where a
+    log's rows (its motion: IMU, attitude) are themselves slower than :func:`needed_rate_hz`
+    (ArduPilot's DataFlash read on its 10 Hz motor outputs: the measured side is slow too;
+    judged in a band it read ``inertia_error`` +200 % at its bound, Mx 14x the noise's).
+    The window is :func:`band_window_s` at the slowest log's row rate (at most the fit's)."""
     from .residual import FIT_RATE_HZ
 
     slow = [(rate, log) for log in logs if (rate := carrying_rate(log)) is not None]
