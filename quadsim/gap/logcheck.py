@@ -564,7 +564,7 @@ class Band:
     def words(self, name: str | None = None) -> str:
         """The correction every answer of the run states."""
         own = name is not None and str(name) == self.name
-        where = "" if own else f" ({Path(self.name).name}; every log of the run alike)"
+        where = "" if own else f" (the run's slowest, {Path(self.name).name}; every log alike)"
         return (f"judged below {self.cutoff_hz:.2g} Hz: {self.source}{where}, too slow for "
                 f"the moments at full band (needs >= {needed_rate_hz():.3g} Hz); the forces, "
                 f"moments and rotor channel compared only below that band (smoothing "
