@@ -134,12 +134,27 @@ the moments up to that frequency, and a channel sampled below twice it cannot ca
   logged at 4 Hz, too slow for the moments (needs >= 19.8 Hz): speeds synthesised from the
   commands (500 Hz) through a map fitted on them");
 * nothing fast enough carries the rotors (the commands slow too, or missing; or commands
-  alone and slow): the flight is refused with one line naming both rates and the need.
-  Why refuse the flight, not only its moment channels: every stage (the references' model,
-  the noise, the evidence, the judge) weighs the six wrench channels together, and a flight
-  judged on the forces alone against references judged on all six would compare unlike
-  things; the forces too are smoothed through a rotor speed that misses the 1-20 Hz
-  content. Refused, no reading is stated from channels the data do not carry.
+  alone and slow): :func:`slow_rotors` alone refuses, with one line naming both rates and
+  the need; ``gap`` judges the run in a band instead ("Judged in a band" below).
+
+Judged in a band
+----------------
+
+Where a log's rotors are carried only by a slow channel, every log of the run (flights,
+hold-outs, references: one band, the slowest log's, :func:`band_of`) is judged below
+:data:`BAND_SHARE` = a quarter of that channel's rate: the states' smoothing window is
+widened until its -3 dB frequency lies at or below that edge (:func:`band_window_s`: 0.42 s
+for 10 Hz). Every wrench channel is compared there alone, both sides smoothed by the one
+filter (the model's wrench through the smoothed rotor speeds, the measured one through the
+smoothed IMU and attitude). Held channels are drawn through their samples first
+(:func:`rejoined`); rotor speeds slower than the commands are synthesised from them as
+above, at the band's window (:func:`in_band`). The timing readings are not weighed
+(:func:`timing_carried`). Every answer states the band (:meth:`Band.words`). Refused still
+(one line): a carrying channel slower than :data:`MIN_BAND_RATE_HZ` = 5 Hz, and a log whose
+rows (the motion) are slower than :func:`needed_rate_hz` (no fast side to hold against the
+slow one). Why the six channels stay together: every stage (the references' model, the
+noise, the evidence, the judge) weighs them together, so the band is applied to all of
+them, never to the moments alone.
 
 Logs whose rates are unknown (built in code, ``rates_hz`` empty) are left as they are.
 
