@@ -316,8 +316,9 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             window_s: float = DEFAULT_WINDOW_S) -> list[Flight]:
     """Check each log against the model and smooth it (:func:`quadsim.gap.residual.flight_states`).
 
-    The first and last :data:`EDGE_S` = 0.2 s of each log (twice ``window_s`` where that is
-    longer: a band's window, :func:`quadsim.gap.logcheck.band_of`; at most
+    The first and last :data:`EDGE_S` = 0.2 s of each log (scaled by ``window_s`` over
+    :data:`DEFAULT_WINDOW_S` where that is wider: 0.84 s for a band's 0.42 s,
+    :func:`quadsim.gap.logcheck.band_of`; at most
     :data:`MAX_EDGE_SHARE` = 10 % of its duration per end) are dropped after smoothing:
     there the derived signals are not valid (one-sided Savitzky–Golay derivatives, filter
     transients; 0.2 s covers the smoothing window twice over and a zero-phase low-pass down
@@ -347,7 +348,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.logcheck)
             pieces = [posefree_states(s, log.has_attitude, params.gravity) for s in pieces]
         # a band's wider window (quadsim.gap.logcheck.band_of) widens the edges alike
-        pieces = [s.take(interior(s.t, max(EDGE_S, 2.0 * window_s))) for s in pieces]
+        pieces = [s.take(interior(s.t, EDGE_S * max(1.0, window_s / DEFAULT_WINDOW_S)))
+                  for s in pieces]
         states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),
