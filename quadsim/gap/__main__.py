@@ -255,26 +255,67 @@ def _load(paths, params, args, lines: list | None = None, orders: list | None = 
     read it (:func:`quadsim.logs.checks.check_logs`). ``said``: a list that receives
     (the loader's warnings, the checks' notes), each a tuple of lines (the cache keeps
     them: :func:`_say`)."""
+    kept = getattr(args, "preloaded", {})
+    before: list = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", QuadsimWarning)
-        logs = [load_log(p) for p in paths]
+        logs = []
+        for p in paths:
+            log, said_before = kept.pop(str(p), (None, ()))
+            logs.append(load_log(p) if log is None else log)
+            before += said_before
     from ..logs.checks import check_logs  # channels against each other; NaN runs cut or refused
-    from .logcheck import slow_rotors  # a rotor channel too slow: speeds from the commands
+    from .logcheck import in_band, slow_rotors  # a rotor channel too slow (logcheck)
 
+    band = getattr(args, "band", None)
     read: list | None = None if orders is None else []
     logs, notes = check_logs(logs, params, orders=read,
-                             slow=lambda log: slow_rotors(log, args.window))
+                             slow=(lambda log: slow_rotors(log, args.window)) if band is None
+                             else (lambda log: in_band(log, band)))
     for log in logs:
-        check_length(log, args.window)
+        check_length(log, args.window, what=None if band is None else (
+            f"t: the band's smoothing window {band.window_s:g} s ({band.source}, judged below "
+            f"{band.cutoff_hz:.2g} Hz; give the log on finer rows: convert --rate 250)"))
     args.samples_loaded = getattr(args, "samples_loaded", 0) + sum(len(log) for log in logs)
     check_cost(gap_cost(args.samples_loaded), "LOG", allow=args.allow_large)
     if orders is not None:      # only once every log is accepted
         orders += read
-    found = [str(w.message) for w in caught if issubclass(w.category, QuadsimWarning)]
+    found = before + [str(w.message) for w in caught if issubclass(w.category, QuadsimWarning)]
     if said is not None:
         said.append((tuple(found), tuple(notes)))
     _say(found, notes, lines)
     return logs
+
+
+def _band(args) -> None:
+    """The band the run is judged in (:func:`quadsim.gap.logcheck.band_of`; docs/logs.md,
+    "Slow channels"): every log of the run read first (kept in ``args.preloaded`` with its
+    loader's warnings for :func:`_load`; one that fails is read again there, and refused
+    there); where a log's rotors are carried only slowly, ``args.band`` is set and
+    ``args.window`` becomes its window, which every stage, the cache's key and a stored
+    reference's binding then follow. Nothing happens with ``--window`` given or where every
+    rotor channel is fast."""
+    args.band, args.preloaded = None, {}
+    if args.window is not None:
+        return
+    from .logcheck import band_of
+
+    paths = [*(args.logs or []), *(args.holdout or []), *(args.command_reference or []),
+             *([] if args.reference_file is not None else args.reference or [])]
+    for path in paths:
+        if str(path) in args.preloaded:
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", QuadsimWarning)
+            try:
+                log = load_log(path)
+            except InputError:
+                continue
+        args.preloaded[str(path)] = (log, [str(w.message) for w in caught
+                                           if issubclass(w.category, QuadsimWarning)])
+    args.band = band_of([log for log, _ in args.preloaded.values()])
+    if args.band is not None:
+        args.window = args.band.window_s
 
 
 def _say(found, notes, lines: list | None) -> None:
@@ -731,6 +772,7 @@ def main(argv: list[str] | None = None) -> int:
         from ..core.executor import connect_ray
 
         connect_ray(args.ray, args.workers)   # fail fast: Ray missing, address unreachable
+    _band(args)     # a log whose rotors are logged slowly: the run judged in its band
     refused, orders = [], None
     if args.per_flight:      # a flight the loader or the checks refuse is refused alone
         logs, lines, orders = [], [], []    # orders: the rotor-order statuses the checks read

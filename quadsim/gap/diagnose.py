@@ -238,6 +238,7 @@ from .logcheck import (
     posefree_log,
     posefree_states,
     synthesised_timing_note,
+    timing_carried,
     vehicle_check,
     without_pose_note,
 )
@@ -315,11 +316,13 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
             window_s: float = DEFAULT_WINDOW_S) -> list[Flight]:
     """Check each log against the model and smooth it (:func:`quadsim.gap.residual.flight_states`).
 
-    The first and last :data:`EDGE_S` = 0.2 s of each log (at most :data:`MAX_EDGE_SHARE`
-    = 10 % of its duration per end) are dropped after smoothing: there the derived signals
-    are not valid (one-sided Savitzky–Golay derivatives, filter transients; 0.2 s covers the
-    smoothing window twice over and a zero-phase low-pass down to 5 Hz, whose transient
-    decays to 1 % in ~1.04 / f_c).
+    The first and last :data:`EDGE_S` = 0.2 s of each log (scaled by ``window_s`` over
+    :data:`DEFAULT_WINDOW_S` where that is wider: 0.84 s for a band's 0.42 s,
+    :func:`quadsim.gap.logcheck.band_of`; at most
+    :data:`MAX_EDGE_SHARE` = 10 % of its duration per end) are dropped after smoothing:
+    there the derived signals are not valid (one-sided Savitzky–Golay derivatives, filter
+    transients; 0.2 s covers the smoothing window twice over and a zero-phase low-pass down
+    to 5 Hz, whose transient decays to 1 % in ~1.04 / f_c).
 
     Raises :class:`InputError` for a rotor-count mismatch, logs without rotor speeds or
     shorter than :data:`quadsim.gap.logcheck.MIN_LOG_S` (2 s)."""
@@ -344,7 +347,9 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
                                 gravity=params.gravity, dt=step) for p, _ in parts]
         if not log.has_pose:     # IMU and motors only: the stand-in pose (quadsim.gap.logcheck)
             pieces = [posefree_states(s, log.has_attitude, params.gravity) for s in pieces]
-        pieces = [s.take(interior(s.t)) for s in pieces]
+        # a band's wider window (quadsim.gap.logcheck.band_of) widens the edges alike
+        pieces = [s.take(interior(s.t, EDGE_S * max(1.0, window_s / DEFAULT_WINDOW_S)))
+                  for s in pieces]
         states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),
@@ -1269,7 +1274,7 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     """Every explanation of how the training flights differ from the parameter set (module
     doc, stage 2). ``vbat``: the highest logged battery voltage (V) when every training
     flight logs one (the full-voltage prior is centred there); ``names``: restrict."""
-    from .explanations import prior_spreads
+    from .explanations import TIMING_READINGS, prior_spreads
 
     sd = prior_spreads(reference.params)
     out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]
@@ -1298,6 +1303,8 @@ def heldout_explanations(reference: Reference, train_states, names=None,
         out = [e for e in out if e.name in keep]
     if not getattr(train_states, "pose", True):         # IMU and motors only (.posefree)
         out = [e for e in out if not needs_pose(e.parts, logged_parts(train_states))]
+    if not timing_carried(getattr(train_states, "window_s", 0.0)):   # judged in a band
+        out = [e for e in out if e.name not in TIMING_READINGS]
     return out
 
 

@@ -52,7 +52,7 @@ from ..effects.translational_lift import TranslationalLift
 from . import fitting as cable
 from .calibrate import SHARED, Reference
 from .fitting import DETERMINED, FIT_EFFECTS, WIND_SD_MS, build_effect
-from .logcheck import logged_parts, needs_pose
+from .logcheck import logged_parts, needs_pose, timing_carried
 
 __all__ = [
     "DELAY_SD_S",
@@ -71,7 +71,12 @@ __all__ = [
     "vertical_prior",
     "wind_readings",
     "with_wind",
+    "TIMING_READINGS",
 ]
+
+#: the readings of the rotors' timing, not weighed on states judged in a band
+#: (:func:`quadsim.gap.logcheck.timing_carried`)
+TIMING_READINGS = ("signal_delay", "motor_lag")
 
 # VBAT_SD (re-exported): the prior spread of a full battery voltage, a fraction of the
 # pack's voltage (``battery_sag.full_voltage``'s spread, and a flight's V_full against the
@@ -324,6 +329,8 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         out = [e for e in out if e.name in keep]
     if not getattr(states, "pose", True):       # IMU and motors only (quadsim.gap.logcheck)
         out = [e for e in out if not needs_pose(e.parts, logged_parts(states))]
+    if not timing_carried(getattr(states, "window_s", 0.0)):    # judged in a band (logcheck)
+        out = [e for e in out if e.name not in TIMING_READINGS]
     if delay:       # the rotor delay as a shared parameter of every other explanation
         tight = reference_delay_sd(reference)
         out = [e if e.shift else dataclasses.replace(e, mean=e.mean + (0.0,),

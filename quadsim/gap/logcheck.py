@@ -134,12 +134,27 @@ the moments up to that frequency, and a channel sampled below twice it cannot ca
   logged at 4 Hz, too slow for the moments (needs >= 19.8 Hz): speeds synthesised from the
   commands (500 Hz) through a map fitted on them");
 * nothing fast enough carries the rotors (the commands slow too, or missing; or commands
-  alone and slow): the flight is refused with one line naming both rates and the need.
-  Why refuse the flight, not only its moment channels: every stage (the references' model,
-  the noise, the evidence, the judge) weighs the six wrench channels together, and a flight
-  judged on the forces alone against references judged on all six would compare unlike
-  things; the forces too are smoothed through a rotor speed that misses the 1-20 Hz
-  content. Refused, no reading is stated from channels the data do not carry.
+  alone and slow): :func:`slow_rotors` alone refuses, with one line naming both rates and
+  the need; ``gap`` judges the run in a band instead ("Judged in a band" below).
+
+Judged in a band
+----------------
+
+Where a log's rotors are carried only by a slow channel, every log of the run (flights,
+hold-outs, references: one band, the slowest log's, :func:`band_of`) is judged below
+:data:`BAND_SHARE` = a quarter of that channel's rate: the states' smoothing window is
+widened until its -3 dB frequency lies at or below that edge (:func:`band_window_s`: 0.42 s
+for 10 Hz). Every wrench channel is compared there alone, both sides smoothed by the one
+filter (the model's wrench through the smoothed rotor speeds, the measured one through the
+smoothed IMU and attitude). Held channels are drawn through their samples first
+(:func:`rejoined`); rotor speeds slower than the commands are synthesised from them as
+above, at the band's window (:func:`in_band`). The timing readings are not weighed
+(:func:`timing_carried`). Every answer states the band (:meth:`Band.words`). Refused still
+(one line): a carrying channel slower than :data:`MIN_BAND_RATE_HZ` = 5 Hz, and a log whose
+rows (the motion) are slower than :func:`needed_rate_hz` (no fast side to hold against the
+slow one). Why the six channels stay together: every stage (the references' model, the
+noise, the evidence, the judge) weighs them together, so the band is applied to all of
+them, never to the moments alone.
 
 Logs whose rates are unknown (built in code, ``rates_hz`` empty) are left as they are.
 
@@ -188,8 +203,10 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -212,6 +229,8 @@ __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle
            "synthesised_timing_note", "SYNTHESISED_TIMING_WORDS",
            "confusable", "confusable_note", "SEPARATED",
            "TIMING_WORDS", "fit_slow_map", "needed_rate_hz", "slow_rotors",
+           "BAND_SHARE", "MIN_BAND_RATE_HZ", "Band", "band_of", "band_window_s", "carrying_rate",
+           "in_band", "rejoined", "timing_carried",
            "smoothing_cutoff_hz"]
 
 
@@ -226,10 +245,11 @@ MAX_SPEED_RATIO = 1.5
 MIN_LOG_S = 2.0
 
 
-def check_length(log, window_s: float | None = None, name: str | None = None) -> None:
+def check_length(log, window_s: float | None = None, name: str | None = None, *,
+                 what: str | None = None) -> None:
     """A log long enough for the diagnosis and, with ``window_s`` (s), sampled finely
     enough for it; raises :class:`InputError` naming the file (``name``, default the log's
-    path) and ``t``."""
+    path) and ``t``; ``what``: the window's words (default "--window S s")."""
     name = name or str(log.path)
     duration = float(log.t[-1] - log.t[0]) if len(log.t) else 0.0
     if duration < MIN_LOG_S:
@@ -237,7 +257,8 @@ def check_length(log, window_s: float | None = None, name: str | None = None) ->
                          f"at least {MIN_LOG_S:g} s (edges, noise window, a scoring block)")
     step = float(np.median(np.diff(log.t)))
     if window_s is not None and window_s < 5 * step:
-        raise InputError(f"--window {window_s:g} s: shorter than 5 samples of {name} "
+        said = f"--window {window_s:g} s" if what is None else what
+        raise InputError(f"{said}: shorter than 5 samples of {name} "
                          f"(median step {step:.4g} s); the differentiator needs 5 or more")
 
 
@@ -524,6 +545,170 @@ def slow_rotors(log: FlightLog, window_s: float | None = None) -> FlightLog:
         notes=log.notes + (f"{name}: {said} (tau {model.tau * 1e3:.1f} ms, fit rms "
                            f"{model.rms:.3g} rad/s over {model.samples} logged samples)",),
         rates_hz=rates)
+
+
+#: the band's cut-off as a share of the rate of the channel carrying the rotors (module doc,
+#: "Judged in a band"): linear interpolation through samples at rate r passes a sine of
+#: frequency f with the gain sinc^2(f / r) (the triangle kernel's transform): 0.81 at r / 4,
+#: 0.95 at r / 8; the band's smoothing is down 3 dB at r / 4 and the wrench's content in
+#: the band lies mostly well below its edge (the answers' mass, thrust, drag and wind near
+#: 0-1 Hz, where the interpolation is faithful to 1-4 % at 10 Hz)
+BAND_SHARE = 0.25
+#: the slowest carrying rate (Hz) judged in a band: its band (:data:`BAND_SHARE` of it) at
+#: 1.25 Hz still passes a hanging payload's swing (0.5-1 Hz for cables of 1-0.25 m,
+#: f = sqrt(g / L) / 2 pi) and a manoeuvre's slow part; slower, the flight is refused
+MIN_BAND_RATE_HZ = 5.0
+#: the band's smoothing windows are searched on this grid (s)
+BAND_WINDOW_STEP_S = 0.01
+
+
+@dataclass(frozen=True)
+class Band:
+    """The band a run is judged in where no log's rotors are carried fast enough
+    (:func:`band_of`): ``rate_hz`` the slowest carrying channel's native rate, ``source``
+    its words ("motor commands logged at 10 Hz"), ``name`` the log it is read from,
+    ``window_s`` the smoothing window (s) of the band (:func:`band_window_s`), ``cutoff_hz``
+    its -3 dB frequency at the fit's rate."""
+
+    rate_hz: float
+    source: str
+    name: str
+    window_s: float
+    cutoff_hz: float
+
+    def words(self, name: str | None = None) -> str:
+        """The correction every answer of the run states."""
+        own = name is not None and str(name) == self.name
+        where = "" if own else f" (the run's slowest, {Path(self.name).name}; every log alike)"
+        return (f"judged below {self.cutoff_hz:.2g} Hz: {self.source}{where}, too slow for "
+                f"the moments at full band (needs >= {needed_rate_hz():.3g} Hz); the forces, "
+                f"moments and rotor channel compared only below that band (smoothing "
+                f"{self.window_s:.2f} s), timing readings (signal_delay, motor_lag) not weighed")
+
+
+def band_window_s(rate_hz: float, rows_hz: float | None = None) -> float:
+    """The smoothing window (s) of the band of a channel logged at ``rate_hz`` (Hz), for
+    states smoothed at ``rows_hz`` (the logs' row rate, at most the fit's
+    :data:`quadsim.gap.residual.FIT_RATE_HZ`; default that): the shortest window on the
+    :data:`BAND_WINDOW_STEP_S` grid, from :data:`quadsim.gap.residual.DEFAULT_WINDOW_S` up,
+    whose -3 dB frequency (:func:`smoothing_cutoff_hz`) is at most :data:`BAND_SHARE` of
+    ``rate_hz`` and that spans 5 rows (the differentiator's least): at 100 Hz 0.42 s for
+    9.9-10.2 Hz (-3 dB at 2.48 Hz), 0.86 s for 5 Hz (1.23 Hz), 0.22 s for 19 Hz (4.65 Hz); on
+    10 Hz rows (ArduPilot's log read on its 10 Hz motor outputs) 0.5 s (2.38 Hz), 0.51 s
+    where the rows are a little slower than 10 Hz."""
+    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
+
+    rows = FIT_RATE_HZ if rows_hz is None else min(float(rows_hz), FIT_RATE_HZ)
+    edge = BAND_SHARE * rate_hz
+    window = max(DEFAULT_WINDOW_S, np.ceil(5.0 / rows / BAND_WINDOW_STEP_S)
+                 * BAND_WINDOW_STEP_S)
+    window = round(float(window), 6)
+    while smoothing_cutoff_hz(window, rows) > edge and window < 60.0:
+        window = round(window + BAND_WINDOW_STEP_S, 6)
+    return window
+
+
+def carrying_rate(log: FlightLog) -> tuple[float, str] | None:
+    """(rate Hz, words) of the slow channel that carries ``log``'s rotors, or None where
+    something fast carries them (at the default smoothing: :func:`needed_rate_hz`) or the
+    rates are unknown (main's path, :func:`slow_rotors`): the faster of the rotor speeds and
+    the commands (the commands synthesise the speeds where they are faster)."""
+    need = needed_rate_hz()
+    have = [(log.rate_hz(key), words) for key, words, value in (
+        ("rotor_speed", "rotor speeds", log.rotor_speed),
+        ("rotor_command", "motor commands", log.rotor_command)) if value is not None]
+    if not have or any(hz is None or hz >= need for hz, _ in have):
+        return None
+    hz, words = max(have)
+    return hz, f"{words} logged at {hz:.2g} Hz"
+
+
+def band_of(logs: Sequence[FlightLog]) -> Band | None:
+    """The band every log of a run is judged in (module doc, "Judged in a band"): that of
+    the log whose carrying channel (:func:`carrying_rate`) is the slowest, None where every
+    log's rotors are carried fast (nothing changes). InputError, one line naming the file
+    and the rates, where that channel is slower than :data:`MIN_BAND_RATE_HZ`, or where a
+    log's rows (its motion: IMU, attitude) are themselves slower than :func:`needed_rate_hz`
+    (ArduPilot's DataFlash read on its 10 Hz motor outputs: the measured side is slow too;
+    judged in a band it read ``inertia_error`` +200 % at its bound, Mx 14x the noise's).
+    The window is :func:`band_window_s` at the slowest log's row rate (at most the fit's)."""
+    from .residual import FIT_RATE_HZ
+
+    slow = [(rate, log) for log in logs if (rate := carrying_rate(log)) is not None]
+    if not slow:
+        return None
+    (hz, words), log = min(slow, key=lambda item: item[0][0])
+    name = str(log.path or "log")
+    if hz < MIN_BAND_RATE_HZ:
+        raise InputError(f"{name}: rotor_1..rotor_N: {words} and nothing faster carrying the "
+                         f"rotors: too slow even for a band (needs >= {MIN_BAND_RATE_HZ:g} Hz, "
+                         f"whose quarter, {BAND_SHARE * MIN_BAND_RATE_HZ:g} Hz, still carries a "
+                         "hanging payload's swing): log the rotor speeds or the commands faster")
+    need = needed_rate_hz()
+    for g in logs:
+        rows = 1.0 / float(np.median(np.diff(g.t))) if len(g.t) > 1 else np.inf
+        if rows < need:     # the motion no faster than the rotors: nothing fast to judge by
+            raise InputError(f"{g.path or 'log'}: t: rows at {rows:.3g} Hz and {words}: the "
+                             f"motion itself is logged too slowly for the moments (needs >= "
+                             f"{need:.3g} Hz) and no faster than the rotors, so no band can "
+                             "hold a fast side against the slow one: log the IMU, or the "
+                             "rows, faster")
+    rows = min([FIT_RATE_HZ] + [1.0 / float(np.median(np.diff(g.t))) for g in logs
+                                if len(g.t) > 1])
+    window = band_window_s(hz, rows)
+    return Band(hz, words, name, window, smoothing_cutoff_hz(window, rows))
+
+
+def rejoined(log: FlightLog) -> FlightLog:
+    """``log`` with each rotor channel logged slower than :func:`needed_rate_hz` and held
+    (sample and hold: :func:`quadsim.logs.rates.native_rate`'s form "held") drawn again as
+    the straight lines through its logged samples (each at the first row that shows it):
+    a hold lags its samples by half an interval (50 ms at 10 Hz), which the band would read
+    as a signal delay; interpolated channels are left as they are (their lines are these)."""
+    from ..logs.rates import native_rate
+
+    need = needed_rate_hz()
+    out = {}
+    for key in ("rotor_speed", "rotor_command"):
+        value = getattr(log, key)
+        hz = log.rate_hz(key)
+        if value is None or hz is None or hz >= need:
+            continue
+        rate = native_rate(log.t, value)
+        if rate is None or rate.form != "held" or len(rate.knots) < 2:
+            continue
+        knots = rate.knots if rate.knots[0] == 0 else np.r_[0, rate.knots]
+        out[key] = np.stack([np.interp(log.t, log.t[knots], value[knots, j])
+                             for j in range(value.shape[1])], axis=1)
+    return dataclasses.replace(log, **out) if out else log
+
+
+def timing_carried(window_s: float) -> bool:
+    """Whether states smoothed over ``window_s`` (s) carry the timing readings
+    (``signal_delay``, ``motor_lag``: 10-50 ms read from the moments' phase): their -3 dB
+    frequency at the fit's rate at least :data:`BAND_SHARE` of :func:`needed_rate_hz`
+    (4.94 Hz: windows up to 0.2 s). Every band (:func:`band_window_s`, a carrying channel
+    slower than that need) lies below it: there the slow channel's interpolation bends the
+    phase near the band's edge as a delay of 20 ms would (the 26 mixed Crazyflie flights at
+    10 Hz: 3 plain flights read ``signal_delay`` 51-93 %, "timed 20-22 ms later")."""
+    return _cutoff(round(float(window_s), 9)) >= BAND_SHARE * needed_rate_hz()
+
+
+@functools.lru_cache(maxsize=64)
+def _cutoff(window_s: float) -> float:
+    from .residual import FIT_RATE_HZ
+
+    return smoothing_cutoff_hz(window_s, FIT_RATE_HZ)
+
+
+def in_band(log: FlightLog, band: Band) -> FlightLog:
+    """``log`` as a run judged in ``band`` uses it (module doc, "Judged in a band"): its held
+    slow rotor channels drawn through their samples (:func:`rejoined`), then
+    :func:`slow_rotors` at the band's window (a channel at the band's rate is fast enough
+    there; slower rotor speeds are synthesised from commands at it), the band stated as a
+    correction in every answer."""
+    log = slow_rotors(rejoined(log), band.window_s)
+    return dataclasses.replace(log, corrections=log.corrections + (band.words(log.path),))
 
 
 def without_speeds(log: FlightLog) -> FlightLog:
