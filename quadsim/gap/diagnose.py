@@ -188,6 +188,7 @@ from .calibrate import (
 )
 from .calibrate import placed as placed_check
 from .evidence import Evidence, Explanation, evaluate, explanations_for
+from .explanations import TIMING_READINGS, prior_spreads
 from .fitting import (
     BASELINE,  # noqa: F401  (re-exported: quadsim.identify, tests)
     START_SWING,
@@ -1274,7 +1275,6 @@ def heldout_explanations(reference: Reference, train_states, names=None,
     """Every explanation of how the training flights differ from the parameter set (module
     doc, stage 2). ``vbat``: the highest logged battery voltage (V) when every training
     flight logs one (the full-voltage prior is centred there); ``names``: restrict."""
-    from .explanations import TIMING_READINGS, prior_spreads
 
     sd = prior_spreads(reference.params)
     out = [e for e in explanations_for(reference, train_states) if e.name != "wind"]

@@ -210,7 +210,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
-from scipy.signal import lfilter
+from scipy.signal import freqz, lfilter, savgol_coeffs
 
 from ..core.errors import InputError
 from ..core.frames import rotate
@@ -218,8 +218,10 @@ from ..effects import EFFECTS
 from ..effects.facts import POSE_PARTS, without_pose
 from ..logs.checks import SPEED_CORRECTION, RotorOrder, rotor_order_status
 from ..logs.flightlog import FlightLog
+from ..logs.rates import native_rate
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
+from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
 
 __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle_check",
            "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
@@ -429,7 +431,6 @@ def smoothing_cutoff_hz(window_s: float, rate_hz: float, polyorder: int = 3) -> 
     """The -3 dB frequency (Hz) of a Savitzky-Golay smoother of ``window_s`` (s) and
     ``polyorder`` at sampling rate ``rate_hz`` (the window rounded to an odd sample count,
     as :mod:`quadsim.gap.residual` does): where its gain first falls below 1/sqrt(2)."""
-    from scipy.signal import freqz, savgol_coeffs
 
     n = max(polyorder + 2, int(round(window_s * rate_hz)))
     n += 1 - n % 2
@@ -443,7 +444,6 @@ def needed_rate_hz(window_s: float | None = None) -> float:
     "Slow channels"): twice the -3 dB frequency of the states' smoothing (window
     ``window_s``, default :data:`quadsim.gap.residual.DEFAULT_WINDOW_S`; cubic) at the fit's
     rate :data:`quadsim.gap.residual.FIT_RATE_HZ`; 19.75 Hz by default."""
-    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
 
     window = DEFAULT_WINDOW_S if window_s is None else window_s
     return 2.0 * smoothing_cutoff_hz(window, FIT_RATE_HZ)
@@ -456,7 +456,6 @@ def fit_slow_map(log: FlightLog, tau: float | None = None) -> CommandModel:
     airborne stretch alone: the features lag-filtered at the full rate, then read at those
     rows. ``tau`` (s): the lag as given; None: fitted there (bounded, :data:`TAU_BOUNDS`,
     and 0). Raises InputError with fewer than 4 knots per stretch in all."""
-    from ..logs.rates import native_rate
 
     parts = [p for p in log.parts() if len(p.t) >= 5]
     with_v = log.vbat is not None and np.isfinite(log.vbat).any()
@@ -596,7 +595,6 @@ def band_window_s(rate_hz: float, rows_hz: float | None = None) -> float:
     9.9-10.2 Hz (-3 dB at 2.48 Hz), 0.86 s for 5 Hz (1.23 Hz), 0.22 s for 19 Hz (4.65 Hz); on
     10 Hz rows (ArduPilot's log read on its 10 Hz motor outputs) 0.5 s (2.38 Hz), 0.51 s
     where the rows are a little slower than 10 Hz."""
-    from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
 
     rows = FIT_RATE_HZ if rows_hz is None else min(float(rows_hz), FIT_RATE_HZ)
     edge = BAND_SHARE * rate_hz
@@ -632,7 +630,6 @@ def band_of(logs: Sequence[FlightLog]) -> Band | None:
     (ArduPilot's DataFlash read on its 10 Hz motor outputs: the measured side is slow too;
     judged in a band it read ``inertia_error`` +200 % at its bound, Mx 14x the noise's).
     The window is :func:`band_window_s` at the slowest log's row rate (at most the fit's)."""
-    from .residual import FIT_RATE_HZ
 
     slow = [(rate, log) for log in logs if (rate := carrying_rate(log)) is not None]
     if not slow:
@@ -665,7 +662,6 @@ def rejoined(log: FlightLog) -> FlightLog:
     the straight lines through its logged samples (each at the first row that shows it):
     a hold lags its samples by half an interval (50 ms at 10 Hz), which the band would read
     as a signal delay; interpolated channels are left as they are (their lines are these)."""
-    from ..logs.rates import native_rate
 
     need = needed_rate_hz()
     out = {}
@@ -696,7 +692,6 @@ def timing_carried(window_s: float) -> bool:
 
 @functools.lru_cache(maxsize=64)
 def _cutoff(window_s: float) -> float:
-    from .residual import FIT_RATE_HZ
 
     return smoothing_cutoff_hz(window_s, FIT_RATE_HZ)
 

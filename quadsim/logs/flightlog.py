@@ -75,6 +75,7 @@ from ..core.frames import quat_conjugate, quat_multiply
 from ..vehicle.state import Trajectory
 from .csvfile import read_log_columns
 from .plausible import check_plausible
+from .rates import rates_of
 
 __all__ = [
     "EULER",
@@ -519,7 +520,6 @@ def log_from_columns(path: str | Path, columns: dict[str, np.ndarray], *,
 def _rates(t: np.ndarray, log: dict, known: dict) -> tuple[tuple[str, float], ...]:
     """:attr:`FlightLog.rates_hz`: the importer's rate of each channel (``known``) where it
     gives one, else the one read from the data (:func:`quadsim.logs.rates.native_rate`)."""
-    from .rates import rates_of
 
     present = {k: log.get(k) for k in ARRAYS if log.get(k) is not None}
     read = dict(rates_of(t, {k: v for k, v in present.items() if known.get(k) is None}))
