@@ -217,11 +217,12 @@ from ..core.frames import rotate
 from ..effects import EFFECTS
 from ..effects.facts import POSE_PARTS, without_pose
 from ..logs.checks import SPEED_CORRECTION, RotorOrder, rotor_order_status
+from ..logs.common import median_rate
 from ..logs.flightlog import FlightLog
 from ..logs.rates import native_rate
 from ..vehicle.params import VehicleParams
 from ..vehicle.rotors import allocation_matrix
-from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ
+from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ, window_samples
 
 __all__ = ["MAX_RATIO", "MAX_SPEED_RATIO", "MIN_LOG_S", "check_length", "vehicle_check",
            "CommandModel", "MapCommandModel", "command_model_from_params", "fit_command_model",
@@ -427,13 +428,15 @@ def synthesise_speeds(log: FlightLog, model: CommandModel, *,
                                notes=log.notes + (note,), speeds_synthesised=True)
 
 
+@functools.lru_cache(maxsize=256)
 def smoothing_cutoff_hz(window_s: float, rate_hz: float, polyorder: int = 3) -> float:
     """The -3 dB frequency (Hz) of a Savitzky-Golay smoother of ``window_s`` (s) and
-    ``polyorder`` at sampling rate ``rate_hz`` (the window rounded to an odd sample count,
-    as :mod:`quadsim.gap.residual` does): where its gain first falls below 1/sqrt(2)."""
+    ``polyorder`` at sampling rate ``rate_hz`` (the window in samples as the states'
+    smoothing takes it, :func:`quadsim.gap.residual.window_samples`): where its gain first
+    falls below 1/sqrt(2) on a 4096-point grid up to Nyquist. Kept per arguments (every log
+    of a run asks for the same few)."""
 
-    n = max(polyorder + 2, int(round(window_s * rate_hz)))
-    n += 1 - n % 2
+    n = window_samples(window_s, 1.0 / rate_hz, polyorder)
     freq, gain = freqz(savgol_coeffs(n, polyorder), worN=4096, fs=rate_hz)
     below = np.flatnonzero(np.abs(gain) < 1.0 / np.sqrt(2.0))
     return float(freq[below[0]]) if len(below) else rate_hz / 2.0
@@ -531,7 +534,7 @@ def slow_rotors(log: FlightLog, window_s: float | None = None) -> FlightLog:
                          "be judged; log the rotor speeds or the commands faster")
     model = fit_slow_map(log)
     speed = np.concatenate([model.speeds(p.t, p.rotor_command, p.vbat) for p in log.parts()])
-    rows_hz = 1.0 / float(np.median(np.diff(log.t)))
+    rows_hz = median_rate(log.t) or np.inf
     said = (f"rotor speeds logged at {speed_hz:.2g} Hz, too slow for the moments (needs >= "
             f"{need:.3g} Hz): speeds synthesised from the commands "
             f"({min(cmd_hz or rows_hz, rows_hz):.3g} Hz) through a map fitted on them")
@@ -627,8 +630,9 @@ def band_of(logs: Sequence[FlightLog]) -> Band | None:
     log's rotors are carried fast (nothing changes). InputError, one line naming the file
     and the rates, where that channel is slower than :data:`MIN_BAND_RATE_HZ`, or where a
     log's rows (its motion: IMU, attitude) are themselves slower than :func:`needed_rate_hz`
-    (ArduPilot's DataFlash read on its 10 Hz motor outputs: the measured side is slow too;
-    judged in a band it read ``inertia_error`` +200 % at its bound, Mx 14x the noise's).
+    (ArduPilot's DataFlash read on its 10 Hz motor outputs: the measured side is as slow as
+    the rotors, so no band holds a fast side against a slow one; CHANGELOG, "Slow rotors
+    judged in the band they carry").
     The window is :func:`band_window_s` at the slowest log's row rate (at most the fit's)."""
 
     slow = [(rate, log) for log in logs if (rate := carrying_rate(log)) is not None]
@@ -643,14 +647,14 @@ def band_of(logs: Sequence[FlightLog]) -> Band | None:
                          "hanging payload's swing): log the rotor speeds or the commands faster")
     need = needed_rate_hz()
     for g in logs:
-        rows = 1.0 / float(np.median(np.diff(g.t))) if len(g.t) > 1 else np.inf
+        rows = median_rate(g.t) or np.inf
         if rows < need:     # the motion no faster than the rotors: nothing fast to judge by
             raise InputError(f"{g.path or 'log'}: t: rows at {rows:.3g} Hz and {words}: the "
                              f"motion itself is logged too slowly for the moments (needs >= "
                              f"{need:.3g} Hz) and no faster than the rotors, so no band can "
                              "hold a fast side against the slow one: log the IMU, or the "
                              "rows, faster")
-    rows = min([FIT_RATE_HZ] + [1.0 / float(np.median(np.diff(g.t))) for g in logs
+    rows = min([FIT_RATE_HZ] + [median_rate(g.t) for g in logs
                                 if len(g.t) > 1])
     window = band_window_s(hz, rows)
     return Band(hz, words, name, window, smoothing_cutoff_hz(window, rows))
@@ -685,15 +689,10 @@ def timing_carried(window_s: float) -> bool:
     frequency at the fit's rate at least :data:`BAND_SHARE` of :func:`needed_rate_hz`
     (4.94 Hz: windows up to 0.2 s). Every band (:func:`band_window_s`, a carrying channel
     slower than that need) lies below it: there the slow channel's interpolation bends the
-    phase near the band's edge as a delay of 20 ms would (the 26 mixed Crazyflie flights at
-    10 Hz: 3 plain flights read ``signal_delay`` 51-93 %, "timed 20-22 ms later")."""
-    return _cutoff(round(float(window_s), 9)) >= BAND_SHARE * needed_rate_hz()
-
-
-@functools.lru_cache(maxsize=64)
-def _cutoff(window_s: float) -> float:
-
-    return smoothing_cutoff_hz(window_s, FIT_RATE_HZ)
+    phase near the band's edge as a delay of ~20 ms would (measured: CHANGELOG, "Slow rotors
+    judged in the band they carry")."""
+    return (smoothing_cutoff_hz(round(float(window_s), 9), FIT_RATE_HZ)
+            >= BAND_SHARE * needed_rate_hz())
 
 
 def in_band(log: FlightLog, band: Band) -> FlightLog:
