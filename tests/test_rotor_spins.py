@@ -9,10 +9,11 @@ import dataclasses
 import pytest
 
 from benchmarks.synthetic import synthetic_flight
-from quadsim.core.errors import InputError
+from quadsim.core.errors import InputError, QuadsimWarning
 from quadsim.logs.checks import (
     ORDER_CHI2,
     check_rotor_order,
+    order_reading,
     rotor_order_evidence,
     rotor_order_status,
     spin_reversal_evidence,
@@ -58,3 +59,19 @@ def test_a_wrong_column_order_is_still_named_as_an_order(flight):
     assert spin_reversal_evidence(swapped, cf) < evidence[(1, 0, 2, 3)] - 4
     with pytest.raises(InputError, match=r"rotor order: .* --rotor-map 2,1,3,4"):
         check_rotor_order(swapped, cf)
+
+
+def test_the_old_keyword_forms_are_read_with_a_warning(flight):
+    """Callers written before the one-reading check (CHANGELOG.md, speedfix): the
+    ``evidence=`` keyword and (source, evidence) pairs still give the same result, with a
+    warning saying what to pass instead."""
+    cf, log = flight
+    wrong = _reversed(cf)
+    with pytest.warns(QuadsimWarning, match=r"pass reading="):
+        with pytest.raises(InputError, match=r"rotor spins"):
+            check_rotor_order(log, wrong, evidence=rotor_order_evidence(log, wrong))
+    pairs = [order_reading(part, wrong, commands=True) for part in log.parts()]
+    assert all(len(p) == 2 for p in pairs)
+    with pytest.warns(QuadsimWarning, match=r"read again from the log"):
+        old = rotor_order_status(log, wrong, readings=pairs)
+    assert old == rotor_order_status(log, wrong)

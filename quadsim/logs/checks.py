@@ -56,11 +56,12 @@ and the numbers. Example::
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 
-from ..core.errors import field_error
+from ..core.errors import QuadsimWarning, field_error
 from ..core.frames import quat_to_rotmat
 from .spans import cut_ground, join_airborne, split_airborne
 
@@ -949,6 +950,11 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
     :meth:`~quadsim.logs.flightlog.FlightLog.parts`."""
     evidence: dict = {}
     sources = []
+    if readings is not None and any(len(r) == 2 for r in readings):   # before the spins
+        warnings.warn("rotor_order_status(readings=) takes (source, evidence, spins) per "
+                      "stretch; the (source, evidence) pairs given are read again from the "
+                      "log (CHANGELOG.md)", QuadsimWarning, stacklevel=2)
+        readings = None
     if readings is None:
         readings = [_read_order(part, params, commands=True) for part in log.parts()]
     for source, part_evidence, _ in readings:
@@ -985,7 +991,8 @@ def rotor_order_status(log, params, *, readings: list | None = None) -> RotorOrd
                       f"the {source}: the order --rotor-map {mapping} {how}")
 
 
-def check_rotor_order(log, params, *, reading: tuple | None = None) -> None:
+def check_rotor_order(log, params, *, reading: tuple | None = None,
+                      evidence: dict | None = None) -> None:
     """Rotor columns in the parameter set's order, by the torque balance under every
     permutation of the rotor columns.
 
@@ -1018,7 +1025,14 @@ def check_rotor_order(log, params, *, reading: tuple | None = None) -> None:
     :func:`spin_reversal_evidence` from one set of torque balances). Without it, the
     evidence and the spins are read from one set of torque balances too: with rotor speeds
     logged the signals read do not depend on ``commands`` (:func:`_order_sources`), and
-    without them the evidence is empty (nothing checked)."""
+    without them the evidence is empty (nothing checked). ``evidence`` (the keyword before
+    ``reading``: :func:`rotor_order_evidence` alone) is read with a warning, the spins then
+    read from the log."""
+    if evidence is not None and reading is None:
+        warnings.warn("check_rotor_order(evidence=) is read as reading=(source, evidence, "
+                      "spins) with the spins read from the log; pass reading= (CHANGELOG.md)",
+                      QuadsimWarning, stacklevel=2)
+        reading = (None, evidence, spin_reversal_evidence(log, params, commands=False))
     if reading is None:
         reading = _read_order(log, params, commands=False)
     _, evidence, spins = reading
