@@ -307,6 +307,24 @@ def test_command_only_flight_against_slow_references_is_refused(cf, tmp_path, ca
            "slowly" in err
 
 
+def test_a_run_too_slow_even_for_a_band_is_one_line_and_nothing_written(cf, tmp_path, capsys):
+    """Rotor speeds and commands both held at 4 Hz (below MIN_BAND_RATE_HZ = 5 Hz): the run
+    is refused through the CLI in one line naming the file and the rates, exit 2, no JSON
+    written."""
+    from quadsim.gap.__main__ import main
+
+    refs = [str(_slow_log(cf, tmp_path, f"s{s}", s, command_hz=4.0).path) for s in range(3)]
+    flight = _slow_log(cf, tmp_path, "f", 5, command_hz=4.0)
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", str(flight.path), "--reference",
+                 *refs, "--workers", "1", "--quiet", "--json", str(out),
+                 "--cache-dir", str(tmp_path / "c")]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and "too slow even for a band (needs >= 5 Hz" in err[0], err
+    assert "rotor speeds logged at 4" in err[0] and "Traceback" not in err[0]
+    assert not out.exists()
+
+
 @pytest.mark.skipif(not (DATA / "px4_ulog").is_dir(), reason="shared data absent")
 def test_importers_state_their_topics_rates():
     """The PX4 sample: esc_status at 4.03 Hz, actuator_motors at 10 Hz, sensor_combined at
