@@ -113,6 +113,10 @@ def test_json_follows_schema_and_is_deterministic(cf, tmp_path):
     assert not set(document["train"]) & set(document["holdout"])  # split by flight
     assert set(document["where"]["regime"]) >= {"hover", "fast_forward", "near_ground"}
     assert abs(sum(document["where"]["band"].values()) - 1) < 1e-6
+    # the default smoothing's -3 dB frequency (~9.9 Hz at the fit's 100 Hz): the band above
+    # 20 Hz was never compared and is not listed
+    assert 9.0 < document["where"]["band_top_hz"] < 11.0
+    assert list(document["where"]["band"]) == ["0-1 Hz", "1-5 Hz", "5-20 Hz"]
     for horizon in ("0.05", "1"):
         assert document["where"]["kstep_before"][horizon]["position_rms_m"] is not None
     text = html.read_text()

@@ -346,3 +346,19 @@ def test_crazyflie_speeds_and_commands_read_native():
         log = load_log(path, warn=False)
         for channel in ("rotor_speed", "rotor_command"):
             assert log.rate_hz(channel) > 450.0, (path.name, channel)
+
+
+def test_where_lists_only_the_bands_that_were_compared():
+    """A residual sampled at 100 Hz with its power in a 3 Hz sine: all of it in "1-5 Hz";
+    below a top of 2.48 Hz (the band of rotors logged at 10 Hz) the bands above are left
+    out instead of reading 0 %, and the shares still add to 1."""
+    from quadsim.gap.judge import by_band
+
+    t = np.arange(0.0, 8.0, 0.01)
+    e = np.column_stack([np.sin(2 * np.pi * 3.0 * t), 0.5 * np.sin(2 * np.pi * 3.0 * t)])
+    whole = by_band([e], 0.01)
+    assert list(whole) == ["0-1 Hz", "1-5 Hz", "5-20 Hz", "20-inf Hz"]
+    assert whole["1-5 Hz"] == pytest.approx(1.0, abs=0.01)
+    banded = by_band([e], 0.01, 2.48)
+    assert list(banded) == ["0-1 Hz", "1-5 Hz"]
+    assert sum(banded.values()) == pytest.approx(1.0, abs=1e-12)

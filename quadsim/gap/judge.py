@@ -253,6 +253,7 @@ from .fitting import (
     residuals,
     typical_scales,
 )
+from .logcheck import smoothing_cutoff_hz
 from .residual import CHANNELS, FlightStates, channel_unit, rate_owner
 from .result import Reading, Verdict
 from .words import (
@@ -313,11 +314,15 @@ def where(held: list[FlightStates], params: VehicleParams, *, names: list[str],
           effects_after: list, base: list, kstep: bool) -> dict:
     """The ``where`` block of a held-out result: per channel (``names``) the noise scale, the
     held-out RMS before and after (channel units) and the share of the squared gap; by
-    regime (before and after), by band, and the k-step errors under ``base`` and
-    ``effects_after`` (``kstep`` False: empty). ``before``/``after``: the held-out flights'
-    residuals over ``sigma`` under the nominal model and with the verdict."""
+    regime (before and after), by band up to ``band_top_hz`` (Hz: the lowest -3 dB frequency
+    of the held-out states' smoothing, :func:`~quadsim.gap.logcheck.smoothing_cutoff_hz`;
+    the bands above it were never compared, :func:`by_band`), and the k-step errors under
+    ``base`` and ``effects_after`` (``kstep`` False: empty). ``before``/``after``: the
+    held-out flights' residuals over ``sigma`` under the nominal model and with the
+    verdict."""
     masks = [regime_masks(s, params) for s in held]
     dt = float(held[0].t[1] - held[0].t[0])
+    top = min(smoothing_cutoff_hz(float(s.window_s), 1.0 / dt) for s in held)
     energy = np.sum(np.concatenate(before) ** 2, axis=0)
 
     def rms(scaled):
@@ -331,7 +336,8 @@ def where(held: list[FlightStates], params: VehicleParams, *, names: list[str],
         "channel_share": dict(zip(names, map(float, energy / max(energy.sum(), 1e-300)))),
         "regime": by_regime(before, masks),
         "regime_after": by_regime(after, masks),
-        "band": by_band(before, dt),
+        "band": by_band(before, dt, top),
+        "band_top_hz": top,
         "kstep_before": kstep_errors(held, params, list(base)) if kstep else {},
         "kstep_after": kstep_errors(held, params, effects_after) if kstep else {},
     }
@@ -376,15 +382,21 @@ def by_regime(scaled: list[np.ndarray], masks: list[dict[str, np.ndarray]]) -> d
     return out
 
 
-def by_band(scaled: list[np.ndarray], dt: float) -> dict:
-    """Share of the residual power in each frequency band (Welch, all channels together)."""
-    power = {f"{lo:g}-{hi:g} Hz": 0.0 for lo, hi in BANDS_HZ}
+def by_band(scaled: list[np.ndarray], dt: float, top_hz: float = np.inf) -> dict:
+    """Share of the residual power in each frequency band of :data:`BANDS_HZ` (Welch, all
+    channels together; ``scaled`` (N_j, C) residuals over the noise scale, sampled every
+    ``dt`` s), label ``"lo-hi Hz"`` -> share (shares add to 1). A band that starts at or
+    above ``top_hz`` (Hz; the states' smoothing -3 dB frequency, or the band a slow log is
+    judged in) is left out: the smoothing removed what lay there on both sides of the
+    residual, so its share would read 0 % for a band that was never compared."""
+    bands = [(lo, hi) for lo, hi in BANDS_HZ if lo < top_hz]
+    power = {f"{lo:g}-{hi:g} Hz": 0.0 for lo, hi in bands}
     for e in scaled:
         if len(e) < 16:
             continue
         freq, psd = welch(e, fs=1.0 / dt, axis=0, nperseg=min(256, len(e)))
         total = psd.sum(axis=1)
-        for lo, hi in BANDS_HZ:
+        for lo, hi in bands:
             power[f"{lo:g}-{hi:g} Hz"] += float(total[(freq >= lo) & (freq < hi)].sum())
     whole = sum(power.values()) or 1.0
     return {band: value / whole for band, value in power.items()}

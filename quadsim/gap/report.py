@@ -299,6 +299,7 @@ GAP_SCHEMA = {
                     "properties": {"share": {"type": "number"}, "samples": {"type": "number"},
                                    "mean_gap": {"type": "number"}}}},
                 "band": _NUMBER_MAP,
+                "band_top_hz": {"type": "number"},
                 "kstep_before": {"type": "object"},
                 "kstep_after": {"type": "object"},
             },
@@ -404,8 +405,10 @@ def summary(result: dict) -> str:
     lines.append("  by regime: " + ", ".join(
         f"{k} {100 * r['share']:.0f} % (of {100 * r['samples']:.0f} % of samples)"
         for k, r in regimes))
+    top = where.get("band_top_hz")      # absent from results written before it
     lines.append("  by band: " + ", ".join(f"{k} {100 * s:.0f} %"
-                                           for k, s in where["band"].items()))
+                                           for k, s in where["band"].items())
+                 + ("" if top is None else f" (above {top:.2g} Hz smoothed out: not compared)"))
     lines.append("ranking (posterior probability; held-out gap reduction; determined "
                  "parameters only):")
     for e in result["effects"][:6]:
