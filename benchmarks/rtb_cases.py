@@ -1,5 +1,5 @@
 """Robotics Toolbox for Python benchmark cases: each a single flight judged per flight against
-8 nominal flights -- the sixteenth source, built blind (issue 47): the source, this case list
+8 nominal flights -- the nineteenth source, built blind (issue 47): the source, this case list
 and its test were written and committed ("frozen before the first run") before quadsim's
 judge saw one of its flights, and the benchmark was run once.
 
