@@ -124,6 +124,13 @@ drag and wind, every case by the F450's own files: Mass.xml pointmasses, CG and 
 propeller tables and inertia, Aero.xml, external_reactions; the geometric controller, the
 airborne start and the path this project's) against 8 nominal flights; built blind.
 
+Robotics Toolbox source (``--independent --source rtb --cache DIR``,
+:mod:`benchmarks.rtb_cases`): the same for 28 cases from roboticstoolbox-python 1.5.0 (its
+MultiRotor block's dynamics, called directly: Pounds & Corke's 4 kg X-4 Flyer with rotor
+flapping, NED and ZYX Euler angles; every case it has a parameter for through its model
+dict or hub displacements; RK4, a first-order motor, the geometric controller, the path and
+added loads this project's) against 8 nominal flights; built blind.
+
 Genesis source (``--independent --source genesis --cache DIR``,
 :mod:`benchmarks.genesis_cases`): the same table for Genesis 1.4.5 (its rigid-body solver
 and its 0.83 kg racer file; DC motors, the file's rotor drag and the geometric controller of
@@ -649,6 +656,8 @@ SIM_SOURCES = {
     "drones-sim": ("benchmarks.dsim_cases", "benchmarks.dsim_source", "dsim_available",
                    ("pip install -e '.[dsim]', or pip install --no-deps drones-sim==0.2.0 "
                     "with numpy, scipy and matplotlib")),
+    "rtb": ("benchmarks.rtb_cases", "benchmarks.rtb_source", "rtb_available",
+            "pip install -e '.[rtb]' (roboticstoolbox-python 1.5.0 and bdsim 1.4.0)"),
     "quad-sim-python": ("benchmarks.qsp_cases", "benchmarks.qsp_source", "qsp_available",
                         ("pip install -e '.[qsp]', or pip install --no-deps "
                          "quad_sim_python==0.0.2 with numpy and scipy")),
