@@ -115,12 +115,12 @@ def _quantum(column: np.ndarray) -> float:
         return 0.0
     v = v[np.linspace(0, len(v) - 1, min(len(v), 512)).astype(int)]
     exponent = np.floor(np.log10(np.abs(v)))
-    digits = np.full(len(v), MAX_DIGITS)
+    counts = np.arange(1, MAX_DIGITS)[:, None]      # D = 1 .. MAX_DIGITS - 1, one row each
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        for d in range(MAX_DIGITS - 1, 0, -1):   # the fewest digits that give the value back
-            scale = 10.0 ** (d - 1 - exponent)
-            same = np.abs(np.round(v * scale) / scale - v) <= 1e-12 * np.abs(v)
-            digits = np.where(same, d, digits)
+        scale = 10.0 ** (counts - 1 - exponent)
+        same = np.abs(np.round(v * scale) / scale - v) <= 1e-12 * np.abs(v)
+    # the fewest digits that give each value back (MAX_DIGITS where none does)
+    digits = np.where(same.any(axis=0), np.argmax(same, axis=0) + 1, MAX_DIGITS)
     top = float(np.floor(np.log10(np.max(np.abs(v)))))
     return float(10.0 ** (top - int(digits.max()) + 1))
 
