@@ -167,12 +167,13 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     # a line in t is no line in the row index)
     w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
     with np.errstate(invalid="ignore"):
-        d1 = np.abs(np.diff(x, axis=0)) > 0.5 * quantum   # row k+1 differs from row k
+        changes = np.abs(np.diff(x, axis=0))
+        d1 = changes > 0.5 * quantum                        # row k+1 differs from row k
         d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
     held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
     bent = np.concatenate([[False], d2.any(axis=1), [False]])
     step = float(np.median(np.diff(t)))
-    if _quantised(np.abs(np.diff(x, axis=0)), d1):      # steps of one quantum: native
+    if _quantised(changes, d1):                          # steps of one quantum: native
         return NativeRate(1.0 / step, "native", np.arange(len(t)))
     best = None
     for form, flags in (("held", held), ("interpolated", bent)):
