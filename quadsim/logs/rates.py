@@ -154,27 +154,50 @@ def native_rate(t: np.ndarray, values: np.ndarray) -> NativeRate | None:
     ``values`` (N,) or (N, K) (NaN rows are no knots). Returns None where it cannot tell
     (fewer than :data:`MIN_KNOTS` knots, or fewer than 5 rows)."""
     t = np.asarray(t, dtype=float)
+    return _native_rate(t, values, *_time_base(t)) if len(t) >= 5 else None
+
+
+def _time_base(t: np.ndarray) -> tuple[float, np.ndarray]:
+    """What :func:`native_rate` reads of the times ``t`` (N >= 5,) alone, the same for every
+    channel of a log: the median row step (s) and each inner row's place (N-2, 1) between
+    its neighbours in time."""
+    return (float(np.median(np.diff(t))),
+            ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None])
+
+
+def _any_column(flags: np.ndarray) -> np.ndarray:
+    """``flags.any(axis=1)`` of a boolean (M, K) with few columns, taken column by column
+    (numpy's reduction along a short last axis is ~6x slower)."""
+    out = flags[:, 0].copy()
+    for j in range(1, flags.shape[1]):
+        out |= flags[:, j]
+    return out
+
+
+def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
+                 ) -> NativeRate | None:
+    """:func:`native_rate` on float times ``t`` (N >= 5,) with their :func:`_time_base`
+    (``step``, ``w``)."""
     x = np.asarray(values, dtype=float)
     x = x[:, None] if x.ndim == 1 else x
-    if len(t) < 5 or x.shape[0] != len(t):
+    if x.shape[0] != len(t):
         return None
     finite = np.isfinite(x)
     if not finite.any():
         return None
     quantum = np.array([_quantum(x[:, j]) for j in range(x.shape[1])])
     tol = ROUND_STEPS * quantum
-    # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
-    # a line in t is no line in the row index)
-    w = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
     with np.errstate(invalid="ignore"):
         changes = np.abs(np.diff(x, axis=0))
         d1 = changes > 0.5 * quantum                        # row k+1 differs from row k
-        d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
-    held = np.concatenate([[False], d1.any(axis=1)])   # rows where a new value shows
-    bent = np.concatenate([[False], d2.any(axis=1), [False]])
-    step = float(np.median(np.diff(t)))
     if _quantised(changes, d1):                          # steps of one quantum: native
         return NativeRate(1.0 / step, "native", np.arange(len(t)))
+    # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
+    # a line in t is no line in the row index)
+    with np.errstate(invalid="ignore"):
+        d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
+    held = np.concatenate([[False], _any_column(d1)])   # rows where a new value shows
+    bent = np.concatenate([[False], _any_column(d2), [False]])
     best = None
     for form, flags in (("held", held), ("interpolated", bent)):
         starts, run = _knots(flags)
@@ -199,11 +222,13 @@ def rates_of(t: np.ndarray, channels: dict) -> tuple[tuple[str, float], ...]:
     """``((channel, Hz), ...)`` of the channels ``channels`` (name -> (N,) or (N, K) array
     or None) whose rate :func:`native_rate` reads; in the given order, the unread left
     out."""
+    t = np.asarray(t, dtype=float)
+    base = _time_base(t) if len(t) >= 5 else None      # one log's times: read once
     out = []
     for name, values in channels.items():
         if values is None:
             continue
-        rate = native_rate(t, values)
+        rate = None if base is None else _native_rate(t, values, *base)
         if rate is not None:
             out.append((name, float(rate.hz)))
     return tuple(out)
