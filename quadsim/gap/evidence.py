@@ -405,7 +405,7 @@ class Marginal:
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if self.shape[1] \
             else None
         self._last: tuple | None = None
-        self._moment: tuple | None = None
+        self._moment: tuple = ()
 
     @property
     def j(self) -> np.ndarray:
@@ -473,15 +473,18 @@ class Marginal:
         return dense + (x @ y.reshape(e, chans * p)).reshape(n * chans, p)
 
     def moment(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last vector's kept
-        (the profile, the one-pass cost and the linear step's Gram matrix of one residual
-        share them: the same numbers, one pass over j; residuals are not written to)."""
+        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last two vectors'
+        kept (the profile, the one-pass cost and the linear step's Gram matrix of one
+        residual share them; the screen's steps all start from the flight's base residual,
+        each followed by the profile at its own step: the same numbers, one pass over j;
+        residuals are not written to)."""
         kept = self._moment
-        if kept is not None and kept[0] is r:
-            return kept[1], kept[2]
+        for entry in kept:
+            if entry[0] is r:
+                return entry[1], entry[2]
         rhs = self.jt(r)
         x = self.solve(rhs)
-        self._moment = (r, rhs, x)
+        self._moment = ((r, rhs, x),) + kept[:1]
         return rhs, x
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
