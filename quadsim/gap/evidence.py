@@ -1072,13 +1072,16 @@ def _grid_cost(null: Problem, delay_s: float) -> float:
     """The profiled cost of ``null`` (its prior term apart) with the rotor delay at
     ``delay_s`` (s): one point of :func:`delay_starts`' grid, kept per flight
     (:func:`_kept_for`: the drag law's choice and the evaluation after it share the points
-    about zero and about the cross-correlation estimate)."""
+    about zero and about the cross-correlation estimate). ``null``: a :class:`Problem`, or
+    any with its ``cost`` and ``sd`` (kept only where it has a ``memo``)."""
     sd = float(null.sd[-1])
 
     def compute() -> float:
         z = np.array([delay_s / sd])
         return null.cost(z) - float(z @ z)
 
+    if getattr(null, "memo", None) is None:       # no memo (or a stand-in without one)
+        return compute()
     return _kept_for(null, "delay_grid", (null.expl.name, null.expl.variant, delay_s, sd),
                      compute)
 
