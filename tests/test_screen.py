@@ -150,6 +150,48 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
             assert np.linalg.norm(got[:, k] - want) <= 0.02 * scale, key
 
 
+def test_an_idle_column_is_the_evaluated_one_and_a_pending_row_its_laplace(cf, reference):
+    """A parameter acting only through a parent at 0 (an off-centre payload's position at
+    zero mass: :func:`~quadsim.gap.evidence.idle_parameters`) gets the zero column the
+    forward difference gives, bit for bit, without its evaluation; a screened step's
+    :class:`~quadsim.gap.evidence.PendingEvidence` has the log Z and builds the Evidence that
+    :func:`~quadsim.gap.evidence.laplace` gives for the same step."""
+    from quadsim.gap.evidence import PendingEvidence, idle_parameters, laplace, linearised
+
+    log = CASES["lag"](cf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = prepare([log], cf)[0].fit
+    names = list(reference.candidate.parameter_names)
+    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
+    memo: dict = {}
+    cols = Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
+    expl = next(e for e in explanations_for(reference, states)
+                if e.name == "mass_offset" and e.through)
+    prob = Problem(states, reference, expl, jac, reference.s_ref, memo)
+    z0 = prob.start(0.0)
+    base = prob.residual(z0)
+    idle = idle_parameters(prob, z0)
+    assert idle == {"mass_offset.x", "mass_offset.y"}
+    got = jacobian_columns(prob, cols, z0, base, np.ones(len(z0)))
+    for k, key in enumerate(expl.parameter_names):
+        if key in idle:
+            z = z0.copy()
+            z[k] += 1e-3
+            assert np.array_equal(got[:, k], (prob.residual(z) - base) / 1e-3), key
+    moved = z0.copy()
+    moved[0] = 1.0                                   # a mass: its position acts
+    assert not idle_parameters(prob, moved)
+    pending, z1, _ = linearised(prob, cols, z0)
+    assert isinstance(pending, PendingEvidence)
+    pending.screened = True
+    row = pending.evidence()
+    want = laplace(*pending._args)
+    assert row.log_z == want.log_z == pending.log_z and row.values == want.values
+    assert row.post_sd == want.post_sd and np.array_equal(row.ms, want.ms) and row.screened
+    assert np.array_equal(pending._args[1], z1)
+
+
 def test_the_closed_form_lag_integration_matches_stepping_the_rate(cf):
     """rotor_channel.heun_linear against the Heun steps of the motor lag's rate function."""
     log = synthetic_flight(cf, _shared(lag=0.03), duration=2.0, seed=80)

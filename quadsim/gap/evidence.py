@@ -229,7 +229,7 @@ __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlo
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
            "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "fitted_jacobian",
-           "CONVERGED",
+           "CONVERGED", "PendingEvidence", "idle_parameters", "log_evidence",
            "THROUGH_SDS", "unidentified",
            "DELAY_GRID_S", "DELAY_GRID_SDS",
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
@@ -405,7 +405,7 @@ class Marginal:
         self._potrs = get_lapack_funcs(("potrs",), (self.chol[0],))[0] if self.shape[1] \
             else None
         self._last: tuple | None = None
-        self._moment: tuple | None = None
+        self._moment: tuple = ()
 
     @property
     def j(self) -> np.ndarray:
@@ -473,15 +473,18 @@ class Marginal:
         return dense + (x @ y.reshape(e, chans * p)).reshape(n * chans, p)
 
     def moment(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last vector's kept
-        (the profile, the one-pass cost and the linear step's Gram matrix of one residual
-        share them: the same numbers, one pass over j; residuals are not written to)."""
+        """(b, A^-1 b) with b = jᵀ ``r`` of a residual vector (N C,); the last two vectors'
+        kept (the profile, the one-pass cost and the linear step's Gram matrix of one
+        residual share them; the screen's steps all start from the flight's base residual,
+        each followed by the profile at its own step: the same numbers, one pass over j;
+        residuals are not written to)."""
         kept = self._moment
-        if kept is not None and kept[0] is r:
-            return kept[1], kept[2]
+        for entry in kept:
+            if entry[0] is r:
+                return entry[1], entry[2]
         rhs = self.jt(r)
         x = self.solve(rhs)
-        self._moment = (r, rhs, x)
+        self._moment = ((r, rhs, x),) + kept[:1]
         return rhs, x
 
     def profile(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -852,6 +855,45 @@ def unidentified(expl: Explanation, theta: np.ndarray, post: np.ndarray, cov: np
     return post, cov
 
 
+def log_evidence(prob: Problem, vec: np.ndarray, h: np.ndarray, at_bound: int) -> float:
+    """The log evidence :func:`laplace` gives ``prob``'s explanation (the same arguments):
+    log Z = -1/2 |vec|^2 - 1/2 log det H - 1/2 log det A + log pi, a value at a bound
+    keeping half the Laplace volume (log 2 per value into log det H); -inf where H is
+    singular."""
+    if len(prob.expl.mean):
+        # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
+        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
+    else:
+        logdet_h = 0.0
+    if not np.isfinite(logdet_h):
+        # H holds the prior's identity rows, so it is singular only where the fit ended on the
+        # wall of values that make no rigid vehicle (:meth:`Problem.stacked`: a constant
+        # residual, a zero Jacobian): no fit, no evidence (not +inf, which would win)
+        return -np.inf
+    return (-0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet
+            + prob.expl.log_prior)
+
+
+class PendingEvidence:
+    """A screened row whose :class:`Evidence` is built only where it is kept
+    (:func:`screened`: most rows within the cut are fitted to convergence, and their
+    screened Evidence would be dropped unread): ``log_z`` (:func:`log_evidence`) at once,
+    :meth:`evidence` (:func:`laplace` of the same arguments: the same numbers) on demand.
+    ``screened`` and ``step_converged`` as :class:`Evidence`'s, carried over to it."""
+
+    def __init__(self, prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray,
+                 at_bound: int):
+        self._args = (prob, z, vec, h, at_bound)
+        self.log_z = log_evidence(prob, vec, h, at_bound)
+        self.screened = False
+        self.step_converged = False
+
+    def evidence(self) -> Evidence:
+        ev = laplace(*self._args)
+        ev.screened, ev.step_converged = self.screened, self.step_converged
+        return ev
+
+
 def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bound: int
             ) -> Evidence:
     """The :class:`Evidence` of ``prob``'s explanation at ``z`` (its parameters in prior
@@ -872,21 +914,14 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     chans = len(reference.sigma)
     mean, sd = np.asarray(expl.mean), np.asarray(expl.sd)
     if len(mean):
-        # a value at a bound: the posterior there is half a Gaussian, half the Laplace volume
-        logdet_h = np.linalg.slogdet(h)[1] + 2.0 * np.log(2.0) * at_bound
         cov = sd[:, None] * posterior_cov(h) * sd[None, :]
         post = np.sqrt(np.clip(np.diag(cov), 0, None))
     else:
-        logdet_h, post, cov = 0.0, np.zeros(0), np.zeros((0, 0))
+        post, cov = np.zeros(0), np.zeros((0, 0))
     theta = mean + sd * z
     if getattr(expl, "through", ()):
         post, cov = unidentified(expl, theta, post, cov)
-    log_z = -0.5 * float(vec @ vec) - 0.5 * logdet_h - 0.5 * prob.marg.logdet + expl.log_prior
-    if not np.isfinite(logdet_h):
-        # H holds the prior's identity rows, so it is singular only where the fit ended on the
-        # wall of values that make no rigid vehicle (:meth:`Problem.stacked`: a constant
-        # residual, a zero Jacobian): no fit, no evidence (not +inf, which would win)
-        log_z = -np.inf
+    log_z = log_evidence(prob, vec, h, at_bound)
     n = prob.marg.shape[0]
     resid = vec[:n].reshape(-1, chans) * np.sqrt(reference.tau)
     keys = expl.parameter_names
@@ -1008,14 +1043,47 @@ def delay_starts(null, signal_sd: float, hint_s: float = 0.0) -> tuple[float, fl
     about_hint = hint_s + steps if abs(hint_s) > reach else []    # else inside already
     grid = np.unique(np.clip(np.concatenate([own_steps, about_hint, [0.0, hint_s]]),
                              lo + 1e-9, hi - 1e-9))
-    cost = np.empty(len(grid))
-    for k, d in enumerate(grid):
-        z = np.array([d / sd])
-        cost[k] = null.cost(z) - float(z @ z)     # the profiled cost, prior term apart
+    cost = np.array([_grid_cost(null, float(d)) for d in grid])
     near = (np.abs(grid) <= reach + 1e-12) | (np.abs(grid - hint_s) <= reach + 1e-12)
     shared = float(grid[near][np.argmin((cost + (grid / sd) ** 2)[near])])
     own = float(grid[np.argmin(cost + (grid / signal_sd) ** 2)]) if signal_sd > 0 else hint_s
     return shared, own
+
+
+def _kept_for(prob: Problem, kind: str, key: tuple, compute):
+    """``compute()``, kept in ``prob``'s memo under ``kind`` and ``key`` (a key that names
+    the explanation by name and variant, as :meth:`Problem.residual`'s does) while the
+    flight's states, reference and marginal are the same objects: what the drag law's choice
+    (:func:`choose`) computed for "no difference" serves the flight's evaluation after it
+    where that asks for the same (the same numbers: the same inputs). No memo: computed."""
+    if prob.memo is None:
+        return compute()
+    store = prob.memo.setdefault(kind, {})
+    refs = (prob.states, prob.reference, prob.marg)
+    hit = store.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], refs)):
+        return hit[1]
+    value = compute()
+    store[key] = (refs, value)
+    return value
+
+
+def _grid_cost(null: Problem, delay_s: float) -> float:
+    """The profiled cost of ``null`` (its prior term apart) with the rotor delay at
+    ``delay_s`` (s): one point of :func:`delay_starts`' grid, kept per flight
+    (:func:`_kept_for`: the drag law's choice and the evaluation after it share the points
+    about zero and about the cross-correlation estimate). ``null``: a :class:`Problem`, or
+    any with its ``cost`` and ``sd`` (kept only where it has a ``memo``)."""
+    sd = float(null.sd[-1])
+
+    def compute() -> float:
+        z = np.array([delay_s / sd])
+        return null.cost(z) - float(z @ z)
+
+    if getattr(null, "memo", None) is None:       # no memo (or a stand-in without one)
+        return compute()
+    return _kept_for(null, "delay_grid", (null.expl.name, null.expl.variant, delay_s, sd),
+                     compute)
 
 
 class Columns:
@@ -1168,12 +1236,29 @@ def inertia_wall(prob: Problem, start: np.ndarray) -> InertiaWall | None:
     return InertiaWall(sign @ slope, sign @ moments, float(np.max(moments)))
 
 
+def idle_parameters(prob: Problem, z: np.ndarray) -> set:
+    """The parameters of ``prob``'s explanation that act on nothing at ``z`` (prior units):
+    each that acts only through a parent (``Explanation.through``: a payload's position
+    through its mass, a propeller's speed exponent through its change) whose value there
+    (clipped to its bounds, as :meth:`Problem.residual` builds it) is exactly 0. Their
+    column of the residual's Jacobian is zero: the residual a step in them gives is the one
+    at ``z`` itself (the effect multiplies them by the parent's 0, or raises 1 + 0 to them),
+    which the forward difference would evaluate only to subtract it."""
+    through = getattr(prob.expl, "through", ())
+    if not through:
+        return set()
+    names = list(prob.expl.parameter_names)
+    theta = np.clip(prob.mean + prob.sd * z, prob.lower, prob.upper)
+    return {child for child, parent in through if theta[names.index(parent)] == 0.0}
+
+
 def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.ndarray,
                      signs: np.ndarray, *, which=None, out: np.ndarray | None = None
                      ) -> np.ndarray:
     """The weighted residual's Jacobian (N C, P) in z at ``start`` (module doc, 2.);
     one-sided differences of :data:`STEP` towards ``signs`` (P,) (turned round at a bound
-    and where it would cross the inertia's wall, :class:`InertiaWall`);
+    and where it would cross the inertia's wall, :class:`InertiaWall`), zero without an
+    evaluation for a parameter that acts on nothing there (:func:`idle_parameters`);
     ``base``: the residual at ``start``; only the columns ``which`` (bool (P,), default all)
     into ``out`` (default a new array). At the reference model the shared parts serve: the
     delay's column, and a replaced group's from the shared Jacobian (taken without the
@@ -1181,11 +1266,14 @@ def jacobian_columns(prob: Problem, cols: Columns, start: np.ndarray, base: np.n
     expl, delay = prob.expl, _shared_point(prob, cols, start)
     jac = np.empty((base.size, len(start))) if out is None else out
     wall = inertia_wall(prob, start)
+    idle = idle_parameters(prob, start)
     for k, key in enumerate(expl.parameter_names):
         if which is not None and not which[k]:
             continue
         group = key.split(".")[0]
-        if delay is not None and key == "delay.rotor":
+        if key in idle:
+            jac[:, k] = 0.0
+        elif delay is not None and key == "delay.rotor":
             jac[:, k] = cols.delay(delay, float(prob.sd[k]), signs[k])
         elif delay is not None and group in expl.replaces:
             jac[:, k] = cols.jac[:, cols.index[key]] * prob.sd[k]
@@ -1295,16 +1383,16 @@ def _upper_factor(m: np.ndarray, overwrite: bool = False) -> np.ndarray:
 
 
 def linearised(prob: Problem, cols: Columns, start: np.ndarray
-               ) -> tuple[Evidence, np.ndarray, float]:
-    """One Gauss-Newton step of ``prob`` from ``start`` (module doc, 2.): (Evidence at the
-    step, the step z1, how far the linear model's cost there was off, cost units). A
-    one-sided column (the rotor delay's kink) that the step leaves on the other side is
-    recomputed on that side."""
+               ) -> tuple[PendingEvidence, np.ndarray, float]:
+    """One Gauss-Newton step of ``prob`` from ``start`` (module doc, 2.): (the evidence at
+    the step, as a :class:`PendingEvidence`; the step z1; how far the linear model's cost
+    there was off, cost units). A one-sided column (the rotor delay's kink) that the step
+    leaves on the other side is recomputed on that side."""
     base = _base(prob, cols, start)
     z1, predicted, h, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)
     miss = abs(float(vec @ vec) - predicted)
-    return prob.evidence(z1, vec, h, active), z1, miss
+    return PendingEvidence(prob, z1, vec, h, active), z1, miss
 
 
 def _second_reach(prob: Problem, cols: Columns, z1: np.ndarray) -> float:
@@ -1418,7 +1506,8 @@ def _kin_matters(expl: Explanation, explanations: list, screening: Screening, be
 @dataclasses.dataclass
 class Screening:
     """The screen's pass over one flight's explanations, one entry per explanation:
-    ``rows`` its Evidence (None where the step failed), ``starts`` the step z1 a refined fit
+    ``rows`` its Evidence (a :class:`PendingEvidence` for a screened step; None where the
+    step failed), ``starts`` the step z1 a refined fit
     starts from (None: exact already, or no step), ``weight`` the log weight it counts with
     towards the best (log Z; "no difference" plus its prior), ``reach`` what a fit could
     reach (screened log Z + miss / 2; inf where the step failed), ``miss`` how far the
@@ -1443,9 +1532,15 @@ def _null_fit(inputs: FitInputs, cols: Columns, null: Explanation, shared_start:
     """Step 1 of the module doc: "no difference" with the flight's rotor delay, fitted to
     convergence from ``shared_start``; sets ``cols.delay_s`` to its delay, or to
     ``shared_start`` where the delay lies beyond :data:`DELAY_GRID_SDS` prior spreads (there
-    it absorbs a gap rather than timing the log)."""
+    it absorbs a gap rather than timing the log). The fit is kept per flight and start
+    (:func:`_kept_for`): the drag law's choice fits the references' law's "no difference"
+    first, and the evaluation under that law starts it at the same delay on about half of
+    the flights."""
     prob = inputs.problem(null)
-    fitted = refined(prob, cols, prob.start(shared_start))
+    z0 = prob.start(shared_start)
+    fitted = dataclasses.replace(_kept_for(
+        prob, "null_fit", (null.name, null.variant, z0.tobytes()),
+        lambda: refined(prob, cols, z0)))      # a copy: each caller's rows their own
     cols.delay_s = fitted.values["delay.rotor"]
     if abs(cols.delay_s - prob.mean[-1]) > DELAY_GRID_SDS * prob.sd[-1]:
         cols.delay_s = shared_start
@@ -1600,7 +1695,7 @@ def screened(inputs: FitInputs, explanations: list[Explanation],
             delay = start_delay_s if expl.name == "signal_delay" else cols.delay_s
             rows[k] = _fit_to_convergence(inputs, cols, expl, screening.starts[k], delay)
             best = max(best, rows[k].log_z)
-    return rows
+    return [row.evidence() if isinstance(row, PendingEvidence) else row for row in rows]
 
 
 def nulls(reference: Reference, states) -> list[Explanation]:
