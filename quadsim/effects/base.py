@@ -158,7 +158,10 @@ class EffectLoads:
         into the neutral one), so that :meth:`combine` can pass over the fields an effect
         left neutral."""
         ones, zeros, zeros3 = _blank(int(batch), int(rotors))
-        return cls(ones, zeros, zeros3, zeros3, zeros)
+        loads = cls.__new__(cls)            # the fields set as __init__ would, without its
+        loads.thrust_scale, loads.thrust_offset = ones, zeros   # check of curve_offset
+        loads.force_world, loads.torque_body, loads.curve_offset = zeros3, zeros3, zeros
+        return loads
 
     def add(self, other: EffectLoads) -> EffectLoads:
         """Combine: scales multiply, offsets and external loads add."""
@@ -196,6 +199,8 @@ class EffectLoads:
         """Whether field ``name`` is still the shared array of :meth:`neutral` (its value
         then is one for ``thrust_scale``, zero for the others)."""
         value = getattr(self, name)
+        if type(value) is np.ndarray and value.flags.writeable:
+            return False                    # the shared arrays are read-only
         shape = np.shape(value)
         if value is None or len(shape) != 2:
             return False
