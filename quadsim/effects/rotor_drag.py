@@ -127,7 +127,7 @@ class RotorDrag(EffectBase):
         axial = speed * along                                 # p_i = Omega_i (u_i . a_i)
         moment = speed @ arms                                 # S, (B, 3)
         moment_rolled = rolled(moment)
-        force = (-c * (speed.sum(axis=1)[:, None] * air_body
+        force = (-c * (np.add.reduce(speed, axis=1)[:, None] * air_body    # speed.sum(1)
                        + cross_rolled(rate_rolled, moment_rolled))
                  + (c - k) * (axial @ axes))
         spin = (speed * turn) @ arms                          # sum_i Omega_i (w . R_i) R_i
