@@ -149,17 +149,18 @@ class RotorDrag(EffectBase):
         rate :func:`quadsim.core.frames.rolled` (the factors of their cross products). With
         a ``ctx.flight_memo`` (the gap fits, which read the rotor speeds at many delays on
         one flight's motion) the last
-        :data:`KEPT_GEOMETRY` are kept per air-velocity array, rotors and CoM (what they
+        :data:`KEPT_GEOMETRY` used are kept per air-velocity array, rotors and CoM (what they
         read of the vehicle: a fit that moves its mass or inertia shares them; the same
         numbers, computed once)."""
         memo, params = ctx.flight_memo, ctx.params
         store = None if memo is None else memo.setdefault("rotor_drag.geometry", {})
         key = (id(ctx.air_velocity), id(params.rotors),
                np.asarray(params.com, dtype=float).tobytes())
-        if store is not None and key in store:
-            refs, value = store[key]
-            if refs[0] is ctx.air_velocity and refs[1] is params.rotors:
-                return value
+        hit = None if store is None else store.pop(key, None)
+        if hit is not None:
+            store[key] = hit                # the most recently used last
+            if hit[0][0] is ctx.air_velocity and hit[0][1] is params.rotors:
+                return hit[1]
         air_body = ctx.to_body(ctx.air_velocity)
         axes = params.rotor_axes
         arms = params.rotor_positions - params.com

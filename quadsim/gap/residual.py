@@ -187,7 +187,8 @@ if TYPE_CHECKING:
 
 #: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
 #: first); the per-flight ones (:func:`flight_memo`) are kept.
-_PER_EVALUATION = ("measured", "rotor", "rotor_model", "wrench", "shifted")
+_PER_EVALUATION = ("measured", "rotor", "rotor_model", "wrench", "shifted",
+                   "scaled_command")
 
 
 def memoised(memo: dict, key: tuple, states, compute):
@@ -293,7 +294,8 @@ class EffectsPlan:
     :meth:`quadsim.effects.base.EffectSet.loads`); :meth:`rotor` the :func:`rotor_key` part
     per rotor count."""
 
-    __slots__ = ("effects", "wrench", "vehicle", "air", "loads", "stateful", "_rotor")
+    __slots__ = ("effects", "wrench", "vehicle", "air", "loads", "stateful", "_rotor",
+                 "_owner", "factor")
 
     def __init__(self, effects: tuple):
         self.effects = effects
@@ -321,6 +323,18 @@ class EffectsPlan:
         self.wrench, self.vehicle, self.air = tuple(wrench), tuple(vehicle), tuple(air)
         self.loads = tuple(loads)
         self._rotor: dict = {}
+        self._owner: tuple = ()
+        #: :func:`identity` of each effect with a speed factor (``speed_factor``,
+        #: ``rotor_speed_factor``), in order: what the command factor depends on
+        self.factor = tuple(identity(e) for e in effects
+                            if _overrides(type(e), ("speed_factor", "rotor_speed_factor")))
+
+    @property
+    def owner(self):
+        """:func:`rate_owner` of the effects (worked out once)."""
+        if not self._owner:
+            self._owner = (rate_owner(self.effects),)
+        return self._owner[0]
 
     def rotor(self, rotors: int) -> tuple:
         """The effects' part of :func:`rotor_key` for ``rotors`` rotors (kept per count)."""
@@ -1313,20 +1327,30 @@ def _rotor_model(states: FlightStates, params: VehicleParams, effects: list,
                  memo: dict | None) -> RotorModel:
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, round(ROTOR_HORIZON_S / dt))
+
+    def scaled():
+        # Effects upstream of the speed (battery voltage) scale the speed a command gives;
+        # it is static (a battery changes the steady speed, not how fast the rotor gets
+        # there): only a dynamics effect (motor_lag) makes the rotor follow with a lag.
+        factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat,
+                                                          cmd.shape[1])
+        return cmd if factor is None else cmd * factor
+
     if memo is None or states.command is None:
         cmd = command_speed(states, params)
+        cmd = scaled()
+        owner = rate_owner(effects)
     else:
+        arrays = (states.command, states.vbat, params)
         cmd = memoised(memo, ("command_speed", id(states.command), id(states.vbat), id(params)),
-                       (states.command, states.vbat, params),
-                       lambda: command_speed(states, params))
-    # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
-    # static (a battery changes the steady speed, not how fast the rotor gets there): only a
-    # dynamics effect (motor_lag) makes the rotor follow with a lag.
-    factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat, cmd.shape[1])
-    if factor is not None:
-        cmd = cmd * factor
+                       arrays, lambda: command_speed(states, params))
+        plan = effects_plan(effects)
+        # the same for every rotor timing and lag: kept per command, battery and factors
+        cmd = memoised(memo, ("scaled_command", id(states.t), id(states.command),
+                              id(states.vbat), id(params), plan.factor),
+                       (states.t,) + arrays, scaled)
+        owner = plan.owner
     n = len(states.t) - steps
-    owner = rate_owner(effects)
     valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
     return RotorModel(steps, n, cmd, owner, _linear_time_constant(owner), dt,
                       None if valid.all() else valid)
