@@ -158,7 +158,11 @@ class EffectLoads:
         into the neutral one), so that :meth:`combine` can pass over the fields an effect
         left neutral."""
         ones, zeros, zeros3 = _blank(int(batch), int(rotors))
-        return cls(ones, zeros, zeros3, zeros3, zeros)
+        loads = cls.__new__(cls)            # the fields set as __init__ would, without its
+        loads.thrust_scale, loads.thrust_offset = ones, zeros   # check of curve_offset
+        loads.force_world, loads.torque_body, loads.curve_offset = zeros3, zeros3, zeros
+        loads._blank = (ones, zeros, zeros3)
+        return loads
 
     def add(self, other: EffectLoads) -> EffectLoads:
         """Combine: scales multiply, offsets and external loads add."""
@@ -186,16 +190,23 @@ class EffectLoads:
             return neutral if total is None else total
 
         ones, zeros, zeros3 = blank
-        return cls(fold("thrust_scale", ones, np.multiply),
-                   fold("thrust_offset", zeros, np.add),
-                   fold("force_world", zeros3, np.add),
-                   fold("torque_body", zeros3, np.add),
-                   fold("curve_offset", zeros, np.add))
+        out = cls(fold("thrust_scale", ones, np.multiply),
+                  fold("thrust_offset", zeros, np.add),
+                  fold("force_world", zeros3, np.add),
+                  fold("torque_body", zeros3, np.add),
+                  fold("curve_offset", zeros, np.add))
+        out._blank = blank
+        return out
 
     def is_neutral(self, name: str) -> bool:
         """Whether field ``name`` is still the shared array of :meth:`neutral` (its value
         then is one for ``thrust_scale``, zero for the others)."""
         value = getattr(self, name)
+        if type(value) is np.ndarray and value.flags.writeable:
+            return False                    # the shared arrays are read-only
+        blank = self.__dict__.get("_blank")     # those this instance was made with
+        if blank is not None and value is blank[_BLANK_INDEX.get(name, 1)]:
+            return True
         shape = np.shape(value)
         if value is None or len(shape) != 2:
             return False
@@ -210,6 +221,11 @@ class EffectLoads:
         if self.is_neutral("curve_offset"):
             return self.thrust_offset
         return self.thrust_offset + self.thrust_scale * self.curve_offset
+
+
+#: the index in :func:`_blank`'s arrays of each field's neutral value (the rotor offsets:
+#: zeros (B, R), index 1)
+_BLANK_INDEX = {"thrust_scale": 0, "force_world": 2, "torque_body": 2}
 
 
 @lru_cache(maxsize=64)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.frames import cross_rolled, rolled
 from ..vehicle.params import VehicleParams
 from .base import EffectBase, EffectContext, EffectLoads, EffectParameter
 from .facts import EffectFacts, Scale, Spread, Words, plus_minus
@@ -42,9 +43,8 @@ def gyroscopic_torque(rotor_inertia: float, body_rate: np.ndarray, rotor_speed: 
     signed = np.asarray(spins, dtype=float)[:, None] * np.asarray(axes, dtype=float)  # s_i a_i
     momentum_axis = rotor_speed @ signed                                # sum s_i Omega_i a_i
     spin_up = rotor_accel @ signed
-    w, h = body_rate, momentum_axis
-    gyro = np.stack([w[:, 1] * h[:, 2] - w[:, 2] * h[:, 1], w[:, 2] * h[:, 0] - w[:, 0] * h[:, 2],
-                     w[:, 0] * h[:, 1] - w[:, 1] * h[:, 0]], axis=-1)   # w x h, fast for small B
+    gyro = cross_rolled(rolled(np.asarray(body_rate, dtype=float)),
+                        rolled(momentum_axis))                          # w x h
     return -rotor_inertia * (gyro + spin_up)
 
 

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.frames import cross_rolled, rolled
 from ..vehicle.params import hover_speed
 from .base import EffectBase, EffectLoads, EffectParameter
 from .facts import ALL, EffectFacts, Scale, Spread, Words, plus_minus
@@ -61,14 +62,6 @@ def rotor_drag_forces(air_velocity_body: np.ndarray, rotor_speed: np.ndarray,
     in_plane = hub - along
     speed = np.asarray(rotor_speed, dtype=float)[..., None]
     return -speed * (coefficient * in_plane + axial_coefficient * along)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b over the last axis, broadcast (``np.cross``'s products without its axis
-    handling, which is most of its cost on these small arrays)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
 def drag_scale(params) -> float:
@@ -127,18 +120,21 @@ class RotorDrag(EffectBase):
         sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)
         arrays (the gap fits evaluate this thousands of times per flight)."""
         c, k = self.coefficient, self.axial_coefficient
-        air_body, axes, arms, lever, along, turn, reach = self._geometry(ctx)
+        air_body, axes, arms, lever, along, turn, reach, air_rolled, rate_rolled = \
+            self._geometry(ctx)
         speed = np.asarray(ctx.rotor_speed, dtype=float)
         rate = np.asarray(ctx.body_rate, dtype=float)
         axial = speed * along                                 # p_i = Omega_i (u_i . a_i)
         moment = speed @ arms                                 # S, (B, 3)
-        force = (-c * (speed.sum(axis=1)[:, None] * air_body + _cross(rate, moment))
+        moment_rolled = rolled(moment)
+        force = (-c * (np.add.reduce(speed, axis=1)[:, None] * air_body    # speed.sum(1)
+                       + cross_rolled(rate_rolled, moment_rolled))
                  + (c - k) * (axial @ axes))
         spin = (speed * turn) @ arms                          # sum_i Omega_i (w . R_i) R_i
-        torque = (-c * (_cross(moment, air_body)
+        torque = (-c * (cross_rolled(moment_rolled, air_rolled)
                         + rate * (speed @ reach)[:, None] - spin)
                   + (c - k) * (axial @ lever))
-        batch, rotors = np.shape(ctx.rotor_speed)
+        batch, rotors = speed.shape
         loads = EffectLoads.neutral(batch, rotors)
         loads.force_world = ctx.to_world(force)
         loads.torque_body = torque
@@ -149,26 +145,29 @@ class RotorDrag(EffectBase):
         """What :meth:`loads` takes from the motion, the air velocity and the vehicle, not
         from the rotor speeds: the body-frame air velocity (B, 3), the rotor axes a_i (R, 3),
         the arms R_i = r_i - c (R, 3), R_i x a_i (R, 3), u_i . a_i = v . a_i + w . (R_i x a_i)
-        (B, R), w . R_i (B, R) and |R_i|^2 (R,). With a ``ctx.flight_memo`` (the gap fits,
-        which read the rotor speeds at many delays on one flight's motion) the last
-        :data:`KEPT_GEOMETRY` are kept per air-velocity array, rotors and CoM (what they
+        (B, R), w . R_i (B, R), |R_i|^2 (R,) and the body-frame air velocity and the body
+        rate :func:`quadsim.core.frames.rolled` (the factors of their cross products). With
+        a ``ctx.flight_memo`` (the gap fits, which read the rotor speeds at many delays on
+        one flight's motion) the last
+        :data:`KEPT_GEOMETRY` used are kept per air-velocity array, rotors and CoM (what they
         read of the vehicle: a fit that moves its mass or inertia shares them; the same
         numbers, computed once)."""
         memo, params = ctx.flight_memo, ctx.params
         store = None if memo is None else memo.setdefault("rotor_drag.geometry", {})
         key = (id(ctx.air_velocity), id(params.rotors),
                np.asarray(params.com, dtype=float).tobytes())
-        if store is not None and key in store:
-            refs, value = store[key]
-            if refs[0] is ctx.air_velocity and refs[1] is params.rotors:
-                return value
+        hit = None if store is None else store.pop(key, None)
+        if hit is not None:
+            store[key] = hit                # the most recently used last
+            if hit[0][0] is ctx.air_velocity and hit[0][1] is params.rotors:
+                return hit[1]
         air_body = ctx.to_body(ctx.air_velocity)
         axes = params.rotor_axes
         arms = params.rotor_positions - params.com
         rate = np.asarray(ctx.body_rate, dtype=float)
-        lever = _cross(arms, axes)                            # R_i x a_i, (R, 3)
+        lever = cross_rolled(rolled(arms), rolled(axes))      # R_i x a_i, (R, 3)
         value = (air_body, axes, arms, lever, air_body @ axes.T + rate @ lever.T,
-                 rate @ arms.T, np.sum(arms ** 2, axis=1))
+                 rate @ arms.T, np.sum(arms ** 2, axis=1), rolled(air_body), rolled(rate))
         if store is not None:
             if len(store) >= RotorDrag.KEPT_GEOMETRY:
                 del store[next(iter(store))]

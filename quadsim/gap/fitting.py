@@ -194,17 +194,17 @@ from .residual import (  # re-exported: the diagnosis' public fitting names
     FlightStates,
     command_of_speed,
     command_speed,
+    effects_plan,
     fit_motor_map,
     fit_set_map,
     flight_memo,
+    kept,
     measured_wrench,
     memoised,
     min_time_constant,
     model_wrench,
-    rotor_key,
     rotor_residual,
     speed_of_command,
-    wrench_key,
 )
 
 __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING", "CableSwing",
@@ -1166,34 +1166,46 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     as contracts)."""
     if memo is None:
         force, torque, vehicle = model_wrench(states, params, effects)
+        meas_force, meas_torque = measured_wrench(states, vehicle)
+        inertia_map = _vehicle_facts(vehicle, params)[1]
     else:
         rotation, motion = flight_memo(memo, states)
+        plan = effects_plan(effects)
         force, torque, vehicle = memoised(
-            memo, wrench_key(states, params, effects), states,
-            lambda: model_wrench(states, params, effects, rotation=rotation,
+            memo, ("wrench", id(states), id(params), plan.wrench), states,
+            lambda: model_wrench(states, params, plan.effects, rotation=rotation,
                                  flight_memo=motion))
-    if memo is None:
-        meas_force, meas_torque = measured_wrench(states, vehicle)
-    else:       # what the motion implies: the same for every rotor timing of one flight
-        motion = (states.body_rate, states.body_accel, states.specific_force)
-        key = ("measured", *map(id, motion), vehicle.mass, vehicle.com.tobytes(),
-               vehicle.inertia.tobytes())
-        meas_force, meas_torque = memoised(memo, key, motion,
-                                           lambda: measured_wrench(states, vehicle))
+        values, inertia_map = kept(motion, "vehicle_facts", (id(vehicle), id(params)),
+                                   (vehicle, params), lambda: _vehicle_facts(vehicle, params))
+        # what the motion implies: the same for every rotor timing of one flight
+        arrays = (states.body_rate, states.body_accel, states.specific_force)
+        meas_force, meas_torque = memoised(
+            memo, ("measured", id(arrays[0]), id(arrays[1]), id(arrays[2])) + values, arrays,
+            lambda: measured_wrench(states, vehicle))
     torque_residual = meas_torque - torque
-    if vehicle.inertia is not params.inertia and not np.array_equal(vehicle.inertia,
-                                                                     params.inertia):
-        torque_residual = torque_residual @ _inertia_map(
-            np.asarray(vehicle.inertia, dtype=float).tobytes(),
-            np.asarray(params.inertia, dtype=float).tobytes())
-    parts = [(meas_force - force) * (params.mass / vehicle.mass), torque_residual]
-    if rotor_channel:
-        if memo is None:
-            parts.append(rotor_residual(states, params, effects))
-        else:
-            parts.append(memoised(memo, rotor_key(states, params, effects), states,
-                               lambda: rotor_residual(states, params, effects, memo=memo)))
-    return np.concatenate(parts, axis=1)
+    if inertia_map is not None:
+        torque_residual = torque_residual @ inertia_map
+    force_residual = (meas_force - force) * (params.mass / vehicle.mass)
+    if not rotor_channel:
+        return np.concatenate((force_residual, torque_residual), axis=1)
+    if memo is None:
+        rotor = rotor_residual(states, params, effects)
+    else:
+        rotors = params.rotor_count if states.command is None else states.command.shape[1]
+        rotor = memoised(memo, ("rotor", id(states), id(params), plan.rotor(rotors)), states,
+                         lambda: rotor_residual(states, params, plan.effects, memo=memo))
+    return np.concatenate((force_residual, torque_residual, rotor), axis=1)
+
+
+def _vehicle_facts(vehicle: VehicleParams, params: VehicleParams) -> tuple:
+    """What :func:`residuals` reads of the model's vehicle ``vehicle`` against the nominal
+    ``params``: (its mass, CoM and inertia as the key of its measured wrench (kg, float64
+    bytes), ``I_v^-1 I`` (:func:`_inertia_map`) or None where the inertias are equal)."""
+    key = (vehicle.mass, vehicle.com.tobytes(), vehicle.inertia.tobytes())
+    if vehicle.inertia is params.inertia or np.array_equal(vehicle.inertia, params.inertia):
+        return key, None
+    return key, _inertia_map(np.asarray(vehicle.inertia, dtype=float).tobytes(),
+                             np.asarray(params.inertia, dtype=float).tobytes())
 
 
 @lru_cache(maxsize=256)

@@ -25,6 +25,10 @@ What is kept, and what it is keyed by (an effect is its class and its values):
   command side (:func:`rotor_model`: the same for every rotor delay), the model
   wrench of one set of effects that reach it (:func:`wrench_key`: a motor lag does not),
   the states shifted by one rotor delay;
+* per sequence of effect objects (:func:`effects_plan`, the last :data:`PLANS_KEPT`): the
+  keys above and which effects have loads and what they read, worked out once and not
+  per evaluation; the vehicle's attribute values that an effect's loads read are kept
+  with the vehicle object (:func:`_vehicle_values`);
 * per flight and kind, in its motion dict (:func:`kept`, the least recently used evicted
   past :func:`entries_kept` entries; used by :func:`quadsim.gap.residual.model_wrench`): the
   vehicle of the effects that change it, the air velocity of those that move the air, and
@@ -157,13 +161,14 @@ import numpy as np
 from ..core.errors import InputError
 from ..core.frames import cross, quat_normalize, rotate_inverse
 from ..core.lag import first_order_lag
-from ..effects.base import Effect, EffectBase, EffectContext, EffectSet
+from ..effects.base import Effect, EffectBase, EffectContext, EffectLoads, EffectSet
 from ..logs.flightlog import FlightLog, body_rate_from_quat
 from ..logs.savgol import savgol  # scipy's savgol_filter, the ends' fits cached
 from ..vehicle.params import MotorMap, VehicleParams
 from ..vehicle.rotors import allocation_matrix
 
 __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "identity", "kept",
+           "EffectsPlan", "effects_plan", "PLANS_KEPT",
            "memoised", "rotor_key", "FIT_RATE_HZ",
            "wrench_key", "CHANNELS", "DEFAULT_WINDOW_S", "FlightStates", "channel_unit",
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
@@ -182,7 +187,8 @@ if TYPE_CHECKING:
 
 #: kinds of :func:`memoised` entries that one model or one rotor timing owns (evicted oldest
 #: first); the per-flight ones (:func:`flight_memo`) are kept.
-_PER_EVALUATION = ("measured", "rotor", "rotor_model", "wrench", "shifted")
+_PER_EVALUATION = ("measured", "rotor", "rotor_model", "wrench", "shifted",
+                   "scaled_command")
 
 
 def memoised(memo: dict, key: tuple, states, compute):
@@ -275,6 +281,112 @@ def acting(effects: list, hooks: tuple) -> tuple:
 _OVERRIDES: dict[tuple, bool] = {}
 
 
+class EffectsPlan:
+    """What one sequence of effect objects is, for the memo (worked out once per sequence,
+    :func:`effects_plan`; an effect is its class and its values, set at construction): the
+    :func:`acting` keys of the model wrench (``wrench``), of the vehicle (``vehicle``:
+    ``apply_to_params``) and of the air velocity (``air``); ``loads``: (effect,
+    :func:`identity`, what its loads read) of each effect without internal state whose
+    class has its own ``loads``, in order (what it reads: None for anything, else (the
+    indices of its context fields in ``(air_velocity, rotor_speed, rotor_accel, vbat)``,
+    the fields, the vehicle attributes), :attr:`quadsim.effects.base.EffectBase.loads_reads`);
+    ``stateful``: whether any effect has internal state (then the loads go through
+    :meth:`quadsim.effects.base.EffectSet.loads`); :meth:`rotor` the :func:`rotor_key` part
+    per rotor count."""
+
+    __slots__ = ("effects", "wrench", "vehicle", "air", "loads", "stateful", "_rotor",
+                 "_owner", "factor")
+
+    def __init__(self, effects: tuple):
+        self.effects = effects
+        wrench, vehicle, air, loads = [], [], [], []
+        self.stateful = False
+        for effect in effects:
+            cls = type(effect)
+            facts = _CLASS_FACTS.get(cls)
+            if facts is None:
+                facts = _CLASS_FACTS[cls] = _class_facts(cls)
+            stateful = facts[4] and effect.state_size()
+            self.stateful = self.stateful or bool(stateful)
+            if not facts[0]:
+                continue                # no hook of the model wrench
+            key = effect.__dict__.get("_identity")
+            if key is None:
+                key = identity(effect)
+            wrench.append(key)
+            if facts[1]:
+                vehicle.append(key)
+            if facts[2]:
+                air.append(key)
+            if facts[3] and not stateful:
+                loads.append((effect, key, facts[5]))
+        self.wrench, self.vehicle, self.air = tuple(wrench), tuple(vehicle), tuple(air)
+        self.loads = tuple(loads)
+        self._rotor: dict = {}
+        self._owner: tuple = ()
+        #: :func:`identity` of each effect with a speed factor (``speed_factor``,
+        #: ``rotor_speed_factor``), in order: what the command factor depends on
+        self.factor = tuple(identity(e) for e in effects
+                            if _overrides(type(e), ("speed_factor", "rotor_speed_factor")))
+
+    @property
+    def owner(self):
+        """:func:`rate_owner` of the effects (worked out once)."""
+        if not self._owner:
+            self._owner = (rate_owner(self.effects),)
+        return self._owner[0]
+
+    def rotor(self, rotors: int) -> tuple:
+        """The effects' part of :func:`rotor_key` for ``rotors`` rotors (kept per count)."""
+        hit = self._rotor.get(rotors)
+        if hit is None:
+            hit = self._rotor[rotors] = _rotor_part(self.effects, rotors)
+        return hit
+
+
+_CLASS_FACTS: dict[type, tuple] = {}
+
+
+def _class_facts(cls: type) -> tuple:
+    """What :class:`EffectsPlan` reads of an effect class: whether it has its own version
+    of a hook of the model wrench, of ``apply_to_params``, of ``air_velocity``, of
+    ``loads``, of ``state_size``, and what its loads read (``loads_reads`` with the
+    fields' indices in :data:`_CONTEXT_INPUTS`, or None)."""
+    reads = getattr(cls, "loads_reads", None)
+    if reads is not None:
+        fields, attributes = reads
+        reads = (tuple(_CONTEXT_INPUTS.index(name) for name in fields), fields, attributes)
+    return (_overrides(cls, _WRENCH_HOOKS), _overrides(cls, ("apply_to_params",)),
+            _overrides(cls, ("air_velocity",)), cls.loads is not EffectBase.loads,
+            getattr(cls, "state_size", EffectBase.state_size) is not EffectBase.state_size,
+            reads)
+
+
+#: the :class:`quadsim.effects.base.EffectContext` fields an effect's ``loads_reads`` may
+#: name, in the order :func:`model_wrench` hands them to the memo
+_CONTEXT_INPUTS = ("air_velocity", "rotor_speed", "rotor_accel", "vbat")
+#: plans kept (:func:`effects_plan`): a weighing's explanations and their Jacobian columns
+#: build a few hundred effect sequences per flight
+PLANS_KEPT = 512
+_PLANS: dict = {}
+
+
+def effects_plan(effects) -> EffectsPlan:
+    """The :class:`EffectsPlan` of the effect objects ``effects`` (a sequence), kept by
+    their ids (the entry holds the objects, so an id is never another's) for the last
+    :data:`PLANS_KEPT` sequences."""
+    effects = tuple(effects)
+    key = tuple(map(id, effects))
+    hit = _PLANS.get(key)
+    if hit is not None and all(map(operator.is_, hit.effects, effects)):
+        return hit
+    plan = EffectsPlan(effects)
+    if len(_PLANS) >= PLANS_KEPT:
+        del _PLANS[next(iter(_PLANS))]
+    _PLANS[key] = plan
+    return plan
+
+
 def _overrides(cls: type, hooks: tuple) -> bool:
     """Whether ``cls`` has its own version of one of ``hooks`` (kept per class)."""
     key = (cls, hooks)
@@ -336,8 +448,13 @@ def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
     the factor it gives, and not at all where it gives none: the channel multiplies the
     factors in order and skips a None, so a propeller's thrust moved alone (its factor
     None or unchanged) reuses the channel."""
-    out = []
     rotors = params.rotor_count if states.command is None else states.command.shape[1]
+    return ("rotor", id(states), id(params), _rotor_part(effects, rotors))
+
+
+def _rotor_part(effects, rotors: int) -> tuple:
+    """The effects' part of :func:`rotor_key` for ``rotors`` rotors."""
+    out = []
     for effect in effects:
         cls = type(effect)
         if not _overrides(cls, _ROTOR_HOOKS):
@@ -349,7 +466,7 @@ def rotor_key(states, params: VehicleParams, effects: list) -> tuple:
         if factor is not None:
             out.append(("rotor_speed_factor",
                         np.asarray(factor, dtype=float).tobytes()))
-    return ("rotor", id(states), id(params), tuple(out))
+    return tuple(out)
 
 
 #: the rotor-channel hooks other than the static per-rotor factor (:func:`rotor_key`)
@@ -574,38 +691,46 @@ def model_wrench(states: FlightStates, params: VehicleParams,
         vehicle = effect_set.apply_to_params(params)
         air = states.velocity - effect_set.air_velocity(states.t, states.position)
         vbat = states.vbat if states.vbat is not None else np.full(len(states.t), np.nan)
-        matrices = keep = None
+        matrices = None
     else:
-        vehicle_key = (id(params), acting(effect_set.effects, ("apply_to_params",)))
-        vehicle, matrices = kept(
-            flight_memo, "vehicle", vehicle_key, (params,),
+        plan = effects_plan(effect_set.effects)
+        vehicle, matrices, values = kept(
+            flight_memo, "vehicle", (id(params), plan.vehicle), (params,),
             lambda: _vehicle_matrices(effect_set.apply_to_params(params), flight_memo))
-        air_key = acting(effect_set.effects, ("air_velocity",))
-        air = kept(flight_memo, "air", air_key, (),
+        air = kept(flight_memo, "air", plan.air, (),
                    lambda: states.velocity - effect_set.air_velocity(states.t, states.position))
         vbat = states.vbat if states.vbat is not None else kept(
             flight_memo, "no_vbat", (), (), lambda: np.full(len(states.t), np.nan))
-        refs = (vehicle, air, speed, accel, vbat)
-        context_key = tuple(map(id, refs))
-        inputs = {"air_velocity": air, "rotor_speed": speed, "rotor_accel": accel,
-                  "vbat": vbat}
-
-        def keep(effect, compute):
-            reads = getattr(type(effect), "loads_reads", None)
-            if reads is None:       # it may read anything: keyed by the whole context
-                return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
-                            compute)
-            fields, attributes = reads
-            own = tuple(inputs[name] for name in fields)
-            key = (identity(effect), fields, tuple(map(id, own)),
-                   _vehicle_values(flight_memo, vehicle, attributes))
-            return kept(flight_memo, "loads", key, own, compute)
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, air, speed, accel, vehicle, vbat,
                         rotation=rotation, flight_memo=flight_memo,
                         accel_world=None if states.pose or not states.attitude
                         else states.accel_world)
-    loads = effect_set.loads(ctx, kept=keep)
+    if flight_memo is None:
+        loads = effect_set.loads(ctx)
+    elif plan.stateful:
+        loads = effect_set.loads(ctx, kept=_keeper(flight_memo, ctx, values))
+    else:       # EffectSet.loads through _keeper, without its per-effect lookups
+        inputs = (air, speed, accel, vbat)
+        context_key = None
+        parts = []
+        for effect, ident, reads in plan.loads:
+            if reads is None:       # it may read anything: keyed by the whole context
+                if context_key is None:
+                    refs = (vehicle,) + inputs
+                    context_key = tuple(map(id, refs))
+                part = kept(flight_memo, "loads", (ident,) + context_key, refs,
+                            functools.partial(effect.loads, ctx))
+            else:
+                index, fields, attributes = reads
+                own = tuple(map(inputs.__getitem__, index))
+                part = kept(flight_memo, "loads",
+                            (ident, fields, tuple(map(id, own)),
+                             _vehicle_values(values, vehicle, attributes)),
+                            own, functools.partial(effect.loads, ctx))
+            if part is not None:
+                parts.append(part)
+        loads = EffectLoads.combine(parts, speed.shape[0], speed.shape[1])
     wrench = rotor_wrench(vehicle, loads, speed, matrices)
     force, torque = wrench[:, :3], wrench[:, 3:]
     if not loads.is_neutral("force_world"):     # a zero external load adds nothing
@@ -616,24 +741,49 @@ def model_wrench(states: FlightStates, params: VehicleParams,
 
 
 def _vehicle_matrices(vehicle: VehicleParams, flight_memo: dict):
-    """``vehicle`` and its :func:`rotor_matrices`, these kept in ``flight_memo`` by what they
-    depend on (the rotors, the CoM, the thrust and drag factors): a vehicle that differs in
-    its mass or inertia alone shares them."""
+    """``vehicle``, its :func:`rotor_matrices` and a dict for its :func:`_vehicle_values`;
+    the matrices kept in ``flight_memo`` by what they depend on (the rotors, the CoM, the
+    thrust and drag factors): a vehicle that differs in its mass or inertia alone shares
+    them."""
     key = (id(vehicle.rotors), np.asarray(vehicle.com, dtype=float).tobytes(),
            float(vehicle.thrust_factor), float(vehicle.drag_factor))
     return vehicle, kept(flight_memo, "rotor_matrices", key, (vehicle.rotors,),
-                         lambda: rotor_matrices(vehicle))
+                         lambda: rotor_matrices(vehicle)), {}
 
 
-def _vehicle_values(flight_memo: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
-    """The values (float64 bytes) of ``vehicle``'s ``attributes``, kept per vehicle object:
-    an effect's loads that read only these stay the same when a fit moves another part of
-    the vehicle (an inertia, a thrust factor)."""
+def _vehicle_values(values: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:
+    """The values (float64 bytes) of ``vehicle``'s ``attributes``, kept in ``values`` (the
+    dict :func:`_vehicle_matrices` made for this vehicle object): an effect's loads that
+    read only these stay the same when a fit moves another part of the vehicle (an
+    inertia, a thrust factor)."""
     if not attributes:
         return ()
-    return kept(flight_memo, "vehicle_values", (id(vehicle), attributes), (vehicle,),
-                lambda: tuple(np.asarray(getattr(vehicle, name), dtype=float).tobytes()
-                              for name in attributes))
+    hit = values.get(attributes)
+    if hit is None:
+        hit = values[attributes] = tuple(np.asarray(getattr(vehicle, name),
+                                                    dtype=float).tobytes()
+                                         for name in attributes)
+    return hit
+
+
+def _keeper(flight_memo: dict, ctx: EffectContext, values: dict):
+    """The ``kept`` callable of :meth:`quadsim.effects.base.EffectSet.loads` on ``ctx``:
+    each effect's loads kept in ``flight_memo`` (:func:`kept`) by what they read."""
+    refs = (ctx.params, ctx.air_velocity, ctx.rotor_speed, ctx.rotor_accel, ctx.vbat)
+    context_key = tuple(map(id, refs))
+    inputs = dict(zip(_CONTEXT_INPUTS, refs[1:]))
+
+    def keep(effect, compute):
+        reads = getattr(type(effect), "loads_reads", None)
+        if reads is None:       # it may read anything: keyed by the whole context
+            return kept(flight_memo, "loads", (identity(effect),) + context_key, refs,
+                        compute)
+        fields, attributes = reads
+        own = tuple(inputs[name] for name in fields)
+        key = (identity(effect), fields, tuple(map(id, own)),
+               _vehicle_values(values, ctx.params, attributes))
+        return kept(flight_memo, "loads", key, own, compute)
+    return keep
 
 
 def measured_wrench(states: FlightStates, params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
@@ -1168,7 +1318,8 @@ def rotor_model(states: FlightStates, params: VehicleParams, effects: list, *,
     if memo is None or states.command is None:
         return _rotor_model(states, params, effects, memo)
     arrays = (states.t, states.command, states.vbat, params)
-    key = ("rotor_model",) + tuple(map(id, arrays)) + (rotor_key(states, params, effects)[3],)
+    key = ("rotor_model",) + tuple(map(id, arrays)) + (
+        effects_plan(effects).rotor(states.command.shape[1]),)
     return memoised(memo, key, arrays, lambda: _rotor_model(states, params, effects, memo))
 
 
@@ -1176,20 +1327,30 @@ def _rotor_model(states: FlightStates, params: VehicleParams, effects: list,
                  memo: dict | None) -> RotorModel:
     dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else 1.0
     steps = max(1, round(ROTOR_HORIZON_S / dt))
+
+    def scaled():
+        # Effects upstream of the speed (battery voltage) scale the speed a command gives;
+        # it is static (a battery changes the steady speed, not how fast the rotor gets
+        # there): only a dynamics effect (motor_lag) makes the rotor follow with a lag.
+        factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat,
+                                                          cmd.shape[1])
+        return cmd if factor is None else cmd * factor
+
     if memo is None or states.command is None:
         cmd = command_speed(states, params)
+        cmd = scaled()
+        owner = rate_owner(effects)
     else:
+        arrays = (states.command, states.vbat, params)
         cmd = memoised(memo, ("command_speed", id(states.command), id(states.vbat), id(params)),
-                       (states.command, states.vbat, params),
-                       lambda: command_speed(states, params))
-    # Effects upstream of the speed (battery voltage) scale the speed a command gives; it is
-    # static (a battery changes the steady speed, not how fast the rotor gets there): only a
-    # dynamics effect (motor_lag) makes the rotor follow with a lag.
-    factor = EffectSet(tuple(effects)).command_factor(states.t, states.vbat, cmd.shape[1])
-    if factor is not None:
-        cmd = cmd * factor
+                       arrays, lambda: command_speed(states, params))
+        plan = effects_plan(effects)
+        # the same for every rotor timing and lag: kept per command, battery and factors
+        cmd = memoised(memo, ("scaled_command", id(states.t), id(states.command),
+                              id(states.vbat), id(params), plan.factor),
+                       (states.t,) + arrays, scaled)
+        owner = plan.owner
     n = len(states.t) - steps
-    owner = rate_owner(effects)
     valid = np.abs(states.t[steps:] - states.t[:n] - steps * dt) < 0.5 * dt
     return RotorModel(steps, n, cmd, owner, _linear_time_constant(owner), dt,
                       None if valid.all() else valid)
