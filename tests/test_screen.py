@@ -22,10 +22,14 @@ from quadsim.gap.diagnose import prepare
 from quadsim.gap.evidence import (
     Columns,
     FitInputs,
+    PendingEvidence,
     Problem,
     evaluate,
     explanations_for,
+    idle_parameters,
     jacobian_columns,
+    laplace,
+    linearised,
 )
 from quadsim.gap.judge import judge
 from quadsim.gap.residual import heun_linear, rotor_residual
@@ -118,9 +122,9 @@ def test_screened_evidence_gives_the_full_fits_verdict(cf, reference, case):
         assert fast[k].log_z == pytest.approx(full[k].log_z, abs=1.0), reading["name"]
 
 
-def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
-    """The shared shortcuts (the shared Jacobian for a replaced group, the per-flight delay
-    column) against a central difference of the explanation's own residual."""
+def _lag_columns(cf, reference):
+    """The motor-lag case's fit states, the reference's shared Jacobian there, a fresh memo
+    and the :class:`Columns` over them."""
     log = CASES["lag"](cf)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
@@ -128,8 +132,14 @@ def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
     names = list(reference.candidate.parameter_names)
     jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
     memo: dict = {}
+    return states, jac, memo, Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
+
+
+def test_the_linear_models_columns_are_the_residuals_derivatives(cf, reference):
+    """The shared shortcuts (the shared Jacobian for a replaced group, the per-flight delay
+    column) against a central difference of the explanation's own residual."""
+    states, jac, memo, cols = _lag_columns(cf, reference)
     expl_all = explanations_for(reference, states)
-    cols = Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
     for expl in expl_all:
         if expl.name not in ("motor_lag", "rotor_drag", "mass_offset"):
             continue
@@ -156,16 +166,7 @@ def test_an_idle_column_is_the_evaluated_one_and_a_pending_row_its_laplace(cf, r
     forward difference gives, bit for bit, without its evaluation; a screened step's
     :class:`~quadsim.gap.evidence.PendingEvidence` has the log Z and builds the Evidence that
     :func:`~quadsim.gap.evidence.laplace` gives for the same step."""
-    from quadsim.gap.evidence import PendingEvidence, idle_parameters, laplace, linearised
-
-    log = CASES["lag"](cf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        states = prepare([log], cf)[0].fit
-    names = list(reference.candidate.parameter_names)
-    jac = jacobian(states, reference, list(range(len(names))), reference.candidate.effects)
-    memo: dict = {}
-    cols = Columns(FitInputs(states, reference, jac, reference.s_ref, memo))
+    states, jac, memo, cols = _lag_columns(cf, reference)
     expl = next(e for e in explanations_for(reference, states)
                 if e.name == "mass_offset" and e.through)
     prob = Problem(states, reference, expl, jac, reference.s_ref, memo)
