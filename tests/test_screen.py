@@ -30,6 +30,7 @@ from quadsim.gap.evidence import (
     jacobian_columns,
     laplace,
     linearised,
+    screen_step,
 )
 from quadsim.gap.judge import judge
 from quadsim.gap.residual import heun_linear, rotor_residual
@@ -183,8 +184,10 @@ def test_an_idle_column_is_the_evaluated_one_and_a_pending_row_its_laplace(cf, r
     moved = z0.copy()
     moved[0] = 1.0                                   # a mass: its position acts
     assert not idle_parameters(prob, moved)
-    pending, z1, _ = linearised(prob, cols, z0)
+    pending, z1, _ = screen_step(prob, cols, z0)
     assert isinstance(pending, PendingEvidence)
+    built, z1_built, _ = linearised(prob, cols, z0)      # the public step: built at once
+    assert built.log_z == pending.log_z and np.array_equal(z1_built, z1)
     pending.screened = True
     row = pending.evidence()
     want = laplace(*pending._args)

@@ -235,7 +235,7 @@ __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlo
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
            "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
            "linear_step", "linearised", "marginal_sd", "reference_determined", "refined",
-           "screened", "shared_effects", "shifted", "DragLaw", "choose", "under"]
+           "screen_step", "screened", "shared_effects", "shifted", "DragLaw", "choose", "under"]
 
 
 #: bounds (s) of a fitted signal delay (``Explanation.shift``): the lag window of
@@ -1383,11 +1383,20 @@ def _upper_factor(m: np.ndarray, overwrite: bool = False) -> np.ndarray:
 
 
 def linearised(prob: Problem, cols: Columns, start: np.ndarray
-               ) -> tuple[PendingEvidence, np.ndarray, float]:
-    """One Gauss-Newton step of ``prob`` from ``start`` (module doc, 2.): (the evidence at
-    the step, as a :class:`PendingEvidence`; the step z1; how far the linear model's cost
-    there was off, cost units). A one-sided column (the rotor delay's kink) that the step
-    leaves on the other side is recomputed on that side."""
+               ) -> tuple[Evidence, np.ndarray, float]:
+    """One Gauss-Newton step of ``prob`` from ``start`` (module doc, 2.): (the
+    :class:`Evidence` at the step, the step z1, how far the linear model's cost there was
+    off, cost units): :func:`screen_step` with its evidence built."""
+    pending, z1, miss = screen_step(prob, cols, start)
+    return pending.evidence(), z1, miss
+
+
+def screen_step(prob: Problem, cols: Columns, start: np.ndarray
+                ) -> tuple[PendingEvidence, np.ndarray, float]:
+    """:func:`linearised` with the evidence at the step as a :class:`PendingEvidence` (its
+    log Z at once, the :class:`Evidence` built only where the screen keeps the row). A
+    one-sided column (the rotor delay's kink) that the step leaves on the other side is
+    recomputed on that side."""
     base = _base(prob, cols, start)
     z1, predicted, h, active = _signed_step(prob, cols, start, base)
     vec = prob.stacked(z1)
@@ -1403,7 +1412,7 @@ def _second_reach(prob: Problem, cols: Columns, z1: np.ndarray) -> float:
     its kin has it fitted already; it only decides whether the explanation is fitted, and
     the fit starts from ``z1`` as before."""
     try:
-        ev, _, miss = linearised(prob, cols, z1)
+        ev, _, miss = screen_step(prob, cols, z1)
     except (ModelError, np.linalg.LinAlgError):
         return -np.inf
     return ev.log_z + 0.5 * miss if np.isfinite(miss) else -np.inf
@@ -1569,7 +1578,7 @@ def _screen_all(inputs: FitInputs, cols: Columns, explanations: list, null, fitt
             start[-1] = np.clip((cols.delay_s - prob.mean[-1]) / prob.sd[-1],
                                 prob.z_lo[-1], prob.z_hi[-1])
         try:
-            ev, z1, miss = linearised(prob, cols, start)
+            ev, z1, miss = screen_step(prob, cols, start)
         except (ModelError, np.linalg.LinAlgError):
             ev, z1, miss = None, None, np.inf
         # what a fit could reach: the screened evidence plus half the linear model's miss
