@@ -83,9 +83,8 @@ references' own 7 ms, not against zero).
 
 Stages
 ------
-1. Static command -> speed map per rotor on the references (commands logged): a line in the
-   command, or the set's own map with a gain and offset, whichever fits the references'
-   window-mean speeds better (:func:`quadsim.gap.residual.fit_command_map`).
+1. Static command -> speed map per rotor (:func:`quadsim.gap.residual.fit_motor_map`) on the
+   references (commands logged).
 2. One bounded least-squares fit (:func:`quadsim.gap.fitting.fit_candidate`, solved through
    the stacked residual's R factor: :func:`quadsim.gap.lsq.compact_least_squares`) of the shared
    parameters :data:`SHARED` on all reference flights together: relative b and d
@@ -199,7 +198,7 @@ from .fitting import (
     correlation_time,
     curve_slope_sd,
     fit_candidate,
-    fit_command_map,
+    fit_motor_map,
     noise_floor,
     noise_scale,
     parameter_bounds,
@@ -1340,7 +1339,7 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
     states = [views.at(i, start) for i in range(len(views))]
     rotor = all(s.command is not None for s in states)
     if rotor:
-        params = fit_command_map(states, params)
+        params = fit_motor_map(states, params)
     dt = float(states[0].t[1] - states[0].t[0])
     sigma0 = noise_scale(np.concatenate([residuals(s, params, list(base), rotor_channel=rotor)
                                          for s in states]), dt, floor=noise_floor(params, rotor))

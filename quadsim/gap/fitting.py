@@ -195,7 +195,6 @@ from .residual import (  # re-exported: the diagnosis' public fitting names
     command_of_speed,
     command_speed,
     effects_plan,
-    fit_command_map,
     fit_motor_map,
     fit_set_map,
     flight_memo,
@@ -219,8 +218,8 @@ __all__ = ["FITTED", "LENGTH_PRIOR_M", "MASS_PRIOR", "START_PRIOR", "START_SWING
            "momentum_translational_lift", "plausibility", "separation", "torque_text", "unit_of",
            "BASELINE", "FIT_SPEC", "NOISE_FLOOR", "NO_OFF_VALUE", "UPSTREAM_OF_SPEED", "Candidate",
            "Fit", "arm_length", "candidates_for", "command_of_speed", "command_speed",
-           "correlation_time", "curve_bound", "drag_refit_iv", "fit_candidate", "fit_command_map",
-           "fit_motor_map", "fit_set_map",
+           "correlation_time", "curve_bound", "drag_refit_iv", "fit_candidate", "fit_motor_map",
+           "fit_set_map",
            "flight_memo", "noise_floor", "noise_scale", "parameter_bounds", "plane_step",
            "residuals",
            "speed_of_command", "stack_states", "typical_scales"]

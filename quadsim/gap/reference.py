@@ -694,7 +694,7 @@ class Reference:
     channel per rotor in rad/s).
 
     - ``params``: the nominal :class:`~quadsim.vehicle.params.VehicleParams` with the
-      references' static command -> speed map (:func:`quadsim.gap.residual.fit_command_map`)
+      references' static command -> speed map (:func:`quadsim.gap.residual.fit_motor_map`)
       where commands are logged.
     - ``rotor``: whether the rotor-speed channels are part of the residual (commands logged
       on every reference flight; :mod:`quadsim.gap.residual`).

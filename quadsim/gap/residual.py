@@ -174,7 +174,6 @@ __all__ = ["KEPT", "MEMO_VALUES", "acting", "entries_kept", "flight_memo", "iden
            "flight_states", "measured_wrench", "model_wrench", "resample_uniform",
            "rotor_matrices", "rotor_wrench", "window_samples", "joined_states", "fit_motor_map",
            "load_exponent", "command_speed", "fit_set_map", "speed_of_command",
-           "fit_command_map", "map_misfit",
            "command_of_speed",
            "MAP_WINDOW_S", "MAP_MIN_RANGE", "FLAT_COMMAND", "flat_command", "ROTOR_HORIZON_S",
            "ROTOR_SUBSTEPS",
@@ -954,47 +953,6 @@ def fit_set_map(flights: list[FlightStates], params: VehicleParams, *,
     if duty is not None and not law:
         source += f", in command x vbat / {duty:.4g} V"
     return params.replace(motor_map=dataclasses.replace(base, speed=speed, source=source))
-
-
-def fit_command_map(flights: list[FlightStates], params: VehicleParams) -> VehicleParams:
-    """``params`` with the static command -> speed map fitted on ``flights`` in the form that
-    fits them better: the straight line per rotor in the command (:func:`fit_motor_map`)
-    or, where the set has a motor map, the set's own map with a per-rotor gain and offset
-    (:func:`fit_set_map`). ``params`` without a map, or flights without commands and
-    speeds: :func:`fit_motor_map`'s answer.
-
-    Which: the one whose steady speeds (:func:`command_speed`) leave the smaller sum of
-    squares against the logged rotor speeds, both averaged over :data:`MAP_WINDOW_S`
-    (moving mean, per flight, as the maps are fitted; :func:`map_misfit`); a tie keeps the
-    line. Why both: a motor driven through a PWM table with an offset (a Crazyflie's
-    firmware map, a simulator's ESC law that the set's table describes) bends away from a
-    line or a gain through the origin, and the bend left on the rotor channel reads as a
-    delay or a lag where nothing changed; a speed-controlled motor (an ESC holding the
-    commanded speed, most simulators) is a line that a set's curved table would bend.
-    Both forms fitted on the same windows, the data say which shape they have; the per-
-    flight calibration (:func:`quadsim.gap.calibrate.calibrate`) reads its map here
-    (measured: CHANGELOG.md, "The command map in the references' own shape")."""
-    line = fit_motor_map(flights, params)
-    if params.motor_map is None or line is params:
-        return line
-    shaped = fit_set_map(flights, params)
-    if shaped is params:
-        return line
-    return shaped if map_misfit(flights, shaped) < map_misfit(flights, line) else line
-
-
-def map_misfit(flights: list[FlightStates], params: VehicleParams) -> float:
-    """Sum of squares (rad^2/s^2) of ``params``' steady rotor speeds (:func:`command_speed`)
-    against the logged ones, both as :data:`MAP_WINDOW_S` moving means per flight (edges
-    dropped), over every flight logging commands and speeds (0.0 for none)."""
-    total = 0.0
-    for f in flights:
-        if f.command is None or f.rotor_speed is None or len(f.t) < 2:
-            continue
-        dt = float(np.median(np.diff(f.t)))
-        error = _moving_mean(command_speed(f, params) - f.rotor_speed, dt)
-        total += float(np.sum(error * error))
-    return total
 
 
 #: window (s) of the moving mean on which the static motor map is fitted.
