@@ -12,7 +12,7 @@ from scipy.stats import t as student_t
 
 from quadsim.gap.calibrate import self_check_of
 from quadsim.gap.evidence import slow_ms
-from quadsim.gap.judge import LOF_P, remainder_of, slow_part
+from quadsim.gap.judge import LOF_P, remainder_of, slow_floor, slow_part, slow_share
 from quadsim.vehicle.params import load_params
 
 CHANNELS = 6
@@ -93,3 +93,75 @@ def test_the_self_check_keeps_each_references_no_difference_slow_part():
                           lambda j, others: verdict)
     assert check.slow.shape == (2, CHANNELS)
     assert check.slow[:, 0].tolist() == [0.1, 0.3]
+
+
+# --- the floor of a slow part (quadsim.gap.judge.slow_floor) -------------------------------
+#: a noiseless simulator's references (pymulticopter, issue 47): every channel's noise scale
+#: at its floor (sigma = f), correlation time 2.8 samples, the slow part's window 51 samples
+#: (0.5 s at 100 Hz): a noise at the floor keeps 2.8 / 51 = 5.5 % of its mean square there
+TAU, WINDOW = 2.8, 51
+#: their slow parts under "no difference": log scatter +-0.1 about log 0.02 (sigma^2 units)
+NOISELESS = np.log(0.02) + 0.1 * np.array([-1.5, -1, -0.5, 0, 0, 0.5, 1, 1.5])
+
+
+def _at_floor():
+    from quadsim.gap.fitting import noise_floor
+
+    params = load_params("crazyflie21")
+    return SimpleNamespace(sigma=noise_floor(params, False), params=params, rotor=False,
+                           tau=np.full(CHANNELS, TAU))
+
+
+def _timed(slow, window=WINDOW):
+    return SimpleNamespace(slow=np.asarray(slow, float), slow_window=window)
+
+
+def test_the_slow_share_of_a_noise():
+    assert slow_share(np.array([1.0, TAU, 51.0, 200.0]), WINDOW) == pytest.approx(
+        [1 / 51, TAU / 51, 1.0, 1.0], rel=1e-12)
+    ref = _at_floor()
+    assert slow_floor(ref, WINDOW) == pytest.approx(np.full(CHANNELS, TAU / WINDOW), rel=1e-12)
+    assert slow_floor(ref, None) == pytest.approx(np.ones(CHANNELS), rel=1e-12)
+    ref.sigma = 2 * ref.sigma                    # a noisier channel: the floor is further down
+    assert slow_floor(ref, WINDOW) == pytest.approx(np.full(CHANNELS, TAU / WINDOW / 4),
+                                                    rel=1e-12)
+
+
+def test_a_remainder_under_the_full_floor_but_above_a_slow_parts_is_one():
+    """A thrust bias read as a thrust gain (pymulticopter case 18): the moments' slow part
+    0.82 sigma^2 (0.9 of the floor's RMS) against the references' 0.02: beyond their spread,
+    above the floor of a slow part (0.055), under the full floor (1), which hid it."""
+    check = SimpleNamespace(slow=np.repeat(np.exp(NOISELESS)[:, None], CHANNELS, axis=1))
+    ev = _timed([0.02, 0.02, 0.02, 0.82, 0.82, 0.02])
+    left = remainder_of(ev, check, _at_floor())
+    assert list(left) == ["Mx", "My"]
+    assert left["Mx"][0] == pytest.approx(np.sqrt(0.82 / np.exp(np.mean(NOISELESS))),
+                                          rel=1e-12)      # 6.4x the references' slow RMS
+    sd = np.std(NOISELESS, ddof=1)
+    assert left["Mx"][1] == pytest.approx((np.log(0.82) - np.mean(NOISELESS))
+                                          / (sd * np.sqrt(1 + 1 / len(NOISELESS))), rel=1e-12)
+    # without the window (the full floor, as before): hidden
+    assert remainder_of(_timed(ev.slow, None), check, _at_floor()) == {}
+
+
+def test_a_slow_part_beyond_the_references_but_under_a_slow_parts_floor_is_none():
+    """References far under the floor (slow parts 0.002 sigma^2): a slow part 10x theirs,
+    0.02, lies beyond their spread but under what a noise at the floor gives a slow part
+    (0.055): within the resolution the floor states, no remainder."""
+    logs = NOISELESS - np.log(10.0)
+    check = SimpleNamespace(slow=np.repeat(np.exp(logs)[:, None], CHANNELS, axis=1))
+    n, sd = len(logs), np.std(logs, ddof=1)
+    z = (np.log(0.02) - np.mean(logs)) / (sd * np.sqrt(1 + 1 / n))
+    assert z > student_t.ppf(1 - LOF_P / CHANNELS, n - 1)
+    assert remainder_of(_timed([0.002, 0.002, 0.002, 0.02, 0.02, 0.002]), check,
+                        _at_floor()) == {}
+
+
+def test_a_name_leaving_what_the_references_leave_is_unchanged():
+    """A right reading on the noiseless simulator: its slow parts within the references'
+    spread (the largest 1.5x their typical) are no remainder, with the slow part's floor
+    as with the full one."""
+    check = SimpleNamespace(slow=np.repeat(np.exp(NOISELESS)[:, None], CHANNELS, axis=1))
+    slow = 0.02 * np.array([0.7, 1.0, 1.2, 1.5, 0.9, 1.1])
+    assert remainder_of(_timed(slow), check, _at_floor()) == {}
+    assert remainder_of(_timed(slow, None), check, _at_floor()) == {}

@@ -235,7 +235,8 @@ __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlo
            "DELAY_SD_S", "DETERMINED", "MAX_STEPS", "SCREEN_CUT", "STEP", "Columns", "Explanation",
            "centred_is_base", "delay_starts", "evaluate", "explanations_for", "jacobian_columns",
            "linear_step", "linearised", "marginal_sd", "reference_determined", "refined",
-           "screen_step", "screened", "shared_effects", "shifted", "DragLaw", "choose", "under"]
+           "screen_step", "screened", "shared_effects", "shifted", "DragLaw", "choose", "under",
+           "slow_ms", "slow_window"]
 
 
 #: bounds (s) of a fitted signal delay (``Explanation.shift``): the lag window of
@@ -285,6 +286,8 @@ class Evidence:
     #: (C,) mean square of the residual's slow part (its :data:`SLOW_WINDOW_S` moving
     #: average) over sigma_c^2 (dimensionless); None: states without a time base
     slow: np.ndarray | None = None
+    #: the samples W that moving average spans (:func:`slow_window`); None: no slow part
+    slow_window: int | None = None
     #: (P, P) posterior covariance of ``values`` in their SI units, rows and columns in
     #: ``values``' order (sd_i sd_j (H^+)_ij, :func:`laplace`); None: not kept. A size that
     #: sums parameters (a payload's fixed and swinging parts) takes its spread from it.
@@ -802,12 +805,18 @@ def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
 SLOW_WINDOW_S = 0.5
 
 
+def slow_window(dt: float, window_s: float = SLOW_WINDOW_S) -> int:
+    """The samples W of a moving average over ``window_s`` at step ``dt`` (s): the odd
+    number nearest window_s / dt, at least 3."""
+    return max(3, int(np.rint(window_s / dt)) | 1)
+
+
 def slow_ms(resid: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) -> np.ndarray:
-    """(C,) mean square of the moving average over ``window_s`` (an odd number of samples,
-    at least 3, of step ``dt`` s; zero padded at the ends) of each column of ``resid`` (N, C)
+    """(C,) mean square of the moving average over ``window_s`` (:func:`slow_window`
+    samples of step ``dt`` s; zero padded at the ends) of each column of ``resid`` (N, C)
     (the residual over sigma_c: the per-flight systematic remainder's statistic,
     :func:`quadsim.gap.judge.judge`)."""
-    n = max(3, int(np.rint(window_s / dt)) | 1)
+    n = slow_window(dt, window_s)
     c = np.cumsum(np.vstack([np.zeros((n // 2 + 1, resid.shape[1])), resid,
                              np.zeros((n // 2, resid.shape[1]))]), axis=0)
     slow = (c[n:] - c[:-n]) / n
@@ -929,14 +938,17 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
              for k, d in zip(prob.keep, vec[n:n + len(prob.keep)])}
     own = [expl.name == "signal_delay" or k != "delay.rotor" for k in keys]
     ms = np.mean(resid ** 2, axis=0)
+    # the states' time step (s), the slow part's; None: no time base
+    timed = None if getattr(states, "t", None) is None or len(states.t) < 2 \
+        else float(states.t[1] - states.t[0])
     if expl.shift and reference.rotor and chans > 6:
         ms[6:] = read_inside(states.t, float(theta[-1]), resid[:, 6:], ms[6:])
     ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
                   dict(zip(keys, map(float, sd))),
                   {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
-                  shared_shift=shift, slow=None if getattr(states, "t", None) is None
-                  or len(states.t) < 2 else slow_ms(resid, float(states.t[1] - states.t[0])),
+                  shared_shift=shift, slow=None if timed is None else slow_ms(resid, timed),
+                  slow_window=None if timed is None else slow_window(timed),
                   post_cov=cov, prior_pull=0.5 * float(np.dot(z, z)))
     if expl.name == "wind":
         ev.air_force = _air_force(states, reference, prob.shared,

@@ -199,7 +199,9 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    more; per flight, and held out against nominal references) the normal is theirs: on the
    log scale, Student-t at 1 - LOF_P / C (:func:`beyond_normal`; held out on the judged
    flights' pooled slow part, the normal placed at the flights' place on the envelope,
-   :func:`placed_slow`, and tested on a named lead only, as per flight). Where it does not
+   :func:`placed_slow`, and tested on a named lead only, as per flight), a channel counted
+   only above what noise at its floor leaves in the average (:func:`slow_floor`: a slow
+   part's floor, not the full band's). Where it does not
    (held out against the bare parameter set, whose noise model is the short-window
    scatter) the normal is what that noise gives the slow part, chi2(nu)/nu with nu = N / W
    windows, at 1 - LOF_P / C. Per flight it is tested on a named lead only.
@@ -285,7 +287,8 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
            "training_lack", "alone",
            "rows_at_reference_voltage", "symptom",
-           "slow_normal", "beyond_normal", "unseparated", "within_form_error", "beyond_misfit",
+           "slow_normal", "slow_share", "slow_floor", "beyond_normal", "unseparated",
+           "within_form_error", "beyond_misfit",
            "channel_logliks", "OUTSIDE_LIBRARY", "OutsideLibrary", "outside_library",
            "with_outside", "TIMINGS", "timing_rival", "rows_with_outside", "beyond_reach",
            "extrapolation_share", "reach_baseline", "flights_share", "heldout_share",
@@ -1231,8 +1234,11 @@ def carry_over(w, reference, null=None) -> dict:
 
 
 def slow_part(residual: np.ndarray, dt: float, window_s: float = SLOW_WINDOW_S) -> np.ndarray:
-    """Moving average (N, C) of a residual over ``window_s`` (odd number of samples)."""
-    n = max(3, int(np.rint(window_s / dt)) | 1)
+    """Moving average (N, C) of a residual over ``window_s``
+    (:func:`quadsim.gap.evidence.slow_window` samples)."""
+    from .evidence import slow_window
+
+    n = slow_window(dt, window_s)
     kernel = np.ones(n) / n
     return np.stack([np.convolve(c, kernel, mode="same") for c in residual.T], -1)
 
@@ -1251,21 +1257,22 @@ def remainder(residuals: list, reference, dt: float) -> dict:
     pool of flights varies less than one flight, the references' unit: the test is no
     looser); against the bare parameter set, what noise of the noise model gives the slow
     part, sigma_c^2 min(tau_c, W) / W, beyond chi2(nu)/nu at 1 - LOF_P / C, nu = N / W."""
+    from .evidence import slow_ms, slow_window
+
     names = channel_names(reference)
     normal = slow_normal(reference)
+    window = slow_window(dt)
     if normal is not None:
-        from .evidence import slow_ms
-
         sigma = np.asarray(reference.sigma, float)
         counts = np.array([len(r) for r in residuals], float)
         slow = np.sum([n * slow_ms(r / sigma, dt) for n, r in zip(counts, residuals)],
                       axis=0) / np.sum(counts)
         return {names[k]: (float(np.sqrt(slow[k]) * sigma[k]),
                            float(np.exp(np.log(slow[k]) - mean)))
-                for k, (mean, _) in beyond_normal(slow, normal, reference).items()}
-    window = max(3, int(np.rint(SLOW_WINDOW_S / dt)) | 1)
+                for k, (mean, _) in beyond_normal(slow, normal, reference,
+                                                  window=window).items()}
     slow = np.concatenate([slow_part(r, dt) for r in residuals])
-    expected = reference.sigma ** 2 * np.minimum(reference.tau, window) / window
+    expected = reference.sigma ** 2 * slow_share(reference.tau, window)
     ratio = np.mean(slow ** 2, axis=0) / expected
     nu = max(1.0, len(slow) / window)
     limit = float(chi2.ppf(1 - LOF_P / len(ratio), nu) / nu)
@@ -1292,14 +1299,44 @@ def slow_normal(reference, check=None) -> np.ndarray | None:
     return np.asarray(normal, float)
 
 
-def beyond_normal(slow, normal, reference) -> dict:
+def slow_share(tau, window: int) -> np.ndarray:
+    """(C,) the share of a noise's mean square that its moving average over ``window`` = W
+    samples keeps: min(tau_c, W) / W, ``tau`` (C,) the noise's integrated correlation time
+    (samples; :attr:`quadsim.gap.reference.Reference.tau`). A white noise (tau = 1) keeps 1/W
+    (the mean of W independent samples), a noise correlated over the whole window all of
+    it."""
+    return np.minimum(np.asarray(tau, float), window) / window
+
+
+def slow_floor(reference, window: int | None) -> np.ndarray:
+    """(C,) the noise floor of a slow part, in sigma_c^2 units: what noise at the channel's
+    floor (:func:`quadsim.gap.fitting.noise_floor`, f_c) with the channel's correlation time
+    gives a moving average over ``window`` samples, (f_c / sigma_c)^2 :func:`slow_share`
+    (the bare parameter set's normal of :func:`remainder`, at the floor). A slow part below
+    it lies within the resolution the floor states; above it, it is measured. ``window``
+    None (or a ``reference`` without ``tau``): (f_c / sigma_c)^2, the full floor.
+
+    Why not the full floor: the floor bounds a residual's scale, its whole mean square; a
+    slow part is an average over W samples and keeps only min(tau_c, W) / W of a noise's
+    mean square, so a systematic remainder several times the references' own slow part
+    (a thrust bias read as a gain on a noiseless simulator: its moment residual's slow part
+    at 0.9 of the floor against the references' 0.15) would lie under the full floor
+    for ever: the test would compare a slow part with a full-band level."""
+    floor = (noise_floor(reference.params, reference.rotor)
+             / np.asarray(reference.sigma, float)) ** 2
+    tau = getattr(reference, "tau", None)
+    return floor if window is None or tau is None else floor * slow_share(tau, window)
+
+
+def beyond_normal(slow, normal, reference, *, window: int | None = None) -> dict:
     """The channels whose slow-part mean square ``slow`` (C,; sigma_c^2 units) lies beyond
     the references' ``normal`` (n, C, :func:`slow_normal`): channel index -> (m_c, the
     log of the references' typical slow-part mean square, z_c). On the log scale, with their
     mean m_c and spread s_c (n - 1 degrees of freedom):
     z_c = (log slow_c - m_c) / (s_c sqrt(1 + 1/n)) beyond the Student-t quantile at
     1 - LOF_P / C (the lack-of-fit rule's rate, Bonferroni over the channels); a channel
-    whose slow part lies below its noise floor is none (:func:`above_floor`)."""
+    whose slow part lies below the floor of a slow part over ``window`` samples (the moving
+    average's W, :func:`slow_floor`; None: the full noise floor) is none."""
     logs = np.log(np.maximum(np.asarray(normal, float), 1e-300))
     n, c = logs.shape
     mean, spread = logs.mean(axis=0), logs.std(axis=0, ddof=1)
@@ -1308,7 +1345,7 @@ def beyond_normal(slow, normal, reference) -> dict:
     slow = np.asarray(slow, float)
     z = (np.log(np.maximum(slow, 1e-300)) - mean) / scale
     return {int(k): (float(mean[k]), float(z[k]))
-            for k in np.nonzero((z > limit) & above_floor(slow, reference))[0]}
+            for k in np.nonzero((z > limit) & (slow > slow_floor(reference, window)))[0]}
 
 
 def placed_slow(slow, calibrated, local) -> np.ndarray:
@@ -1430,15 +1467,17 @@ def remainder_of(ev, check, reference) -> dict:
     references' typical one, z), for the channels where the slow-part mean square
     ``ev.slow`` (C,; sigma_c^2 units, :attr:`quadsim.gap.evidence.Evidence.slow`) lies
     beyond the references' (``check.slow`` (n, C), each reference under "no difference"
-    against the others). {} where there is no such normal (:func:`slow_normal`) or no slow
-    part measured."""
+    against the others) and above the floor of a slow part over the window it was taken
+    over (``ev.slow_window``, :func:`slow_floor`). {} where there is no such normal
+    (:func:`slow_normal`) or no slow part measured."""
     normal = None if check is None else slow_normal(None, check)
     if ev is None or getattr(ev, "slow", None) is None or normal is None:
         return {}
     slow = np.asarray(ev.slow, float)
     names = channel_names(reference)
     return {names[k]: (float(np.exp(0.5 * (np.log(slow[k]) - mean))), z)
-            for k, (mean, z) in beyond_normal(slow, normal, reference).items()}
+            for k, (mean, z) in beyond_normal(slow, normal, reference,
+                                              window=getattr(ev, "slow_window", None)).items()}
 
 
 # --- 4. outcome -----------------------------------------------------------------------------
