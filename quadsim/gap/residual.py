@@ -1014,8 +1014,8 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
 
 #: :func:`_window_means`' last inputs (the flights' t, command and rotor-speed arrays, held)
 #: and result, as one tuple read and replaced whole (no call can pair one call's inputs with
-#: another's result): the two calibrations of one reference set (thrust curve's slope shared
-#: or not) fit the motor map on the same states
+#: another's result): a caller that reads the same flights' window means again gets them
+#: without the timing search (:func:`map_lag`)
 _LAST_MEANS: list = [None]
 
 
