@@ -797,8 +797,9 @@ def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None
     """:func:`_scatter` of ``reference`` (into ``owns[0]``) and, with ``side``, of
     ``reference`` with that torque side (into ``owns[1]``), flight by flight: the side's
     Jacobian from the plain one's columns (:func:`_side_jacobian`). Returns the scatters.
-    ``pooled``: a list that receives the information summed over the flights (the plain
-    Jacobians' ``sum_j J_jᵀ J_j``, the columns not in :data:`POOLED`)."""
+    ``pooled``: a list that receives each channel's information summed over the flights
+    ((C, P', P'): the plain Jacobians' rows of that channel, ``sum_j J_jcᵀ J_jc``, the
+    columns not in :data:`POOLED`)."""
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
     turned = None if side is None else dataclasses.replace(reference, side=side)
@@ -811,7 +812,9 @@ def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None
         for step, ((values, variances), (jac, r)) in enumerate(zip(steps, pairs)):
             info = jac.T @ jac
             if pooled is not None and step == 0:
-                pooled[:] = [info if not pooled else pooled[0] + info]
+                cube = jac.reshape(-1, len(reference.sigma), jac.shape[1])
+                mine = np.einsum("ncp,ncq->cpq", cube, cube)
+                pooled[:] = [mine if not pooled else pooled[0] + mine]
             cov = np.linalg.pinv(info)
             value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
             value[free] -= cov @ (jac.T @ r)
@@ -1308,8 +1311,9 @@ class _Setup:
     computed once (:func:`_setup`): ``views`` (the flights' :class:`_Views`), ``start`` (s,
     the starting rotor timing), ``states`` (the fit states read at it), ``rotor`` (every
     flight logs commands), ``params`` (with the references' command map), ``dt`` (s, the
-    fit step), ``sigma0`` (C,) (the bounded fit's noise scale), ``vbat_ref`` (V or None)
-    and ``cand`` (the shared candidate with the slope, :func:`centred_curve`)."""
+    fit step), ``sigma0`` (C,) (the bounded fit's noise scale), ``vbat_ref`` (V or None),
+    ``cand`` (the shared candidate with the slope, :func:`centred_curve`) and ``exponent``
+    (the motors' load exponent, :func:`quadsim.gap.residual.load_exponent`, or None)."""
 
     flights: list
     views: _Views
@@ -1321,6 +1325,7 @@ class _Setup:
     sigma0: np.ndarray
     vbat_ref: float | None
     cand: Candidate
+    exponent: tuple | None
 
 
 def _setup(flights, params: VehicleParams, base: tuple = ()) -> _Setup:
@@ -1338,6 +1343,9 @@ def _setup(flights, params: VehicleParams, base: tuple = ()) -> _Setup:
     views = _Views(flights)     # each flight's rotor spectra, for every timing read
     states = [views.at(i, start) for i in range(len(views))]
     rotor = all(s.command is not None for s in states)
+    # the load exponent read on the window means the command map is fitted on (the same
+    # states: their timing search done once, quadsim.gap.residual._window_means)
+    exponent = load_exponent(states, params) if rotor else None
     if rotor:
         params = fit_motor_map(states, params)
     dt = float(states[0].t[1] - states[0].t[0])
@@ -1350,7 +1358,7 @@ def _setup(flights, params: VehicleParams, base: tuple = ()) -> _Setup:
     cand = dataclasses.replace(per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states)),
                                base=tuple(base))
     return _Setup(list(flights), views, start, states, rotor, params, dt, sigma0, vbat_ref,
-                  centred_curve(cand, states))
+                  centred_curve(cand, states), exponent)
 
 
 def _bounded_fit(setup: _Setup, cand: Candidate):
@@ -1360,62 +1368,59 @@ def _bounded_fit(setup: _Setup, cand: Candidate):
                          rotor_channel=setup.rotor, max_nfev=40, compact=True)
 
 
-def _probe_at(setup: _Setup, cand: Candidate, theta: np.ndarray, se_pool: np.ndarray
-              ) -> Reference:
-    """A reference model of ``cand`` at ``theta`` on the references' starting timing with
-    the noise model (stages 4-5: sigma, tau) and discrepancy term of its own residual: what
-    :func:`_scatter` and :func:`slope_spread` read before the refinement."""
+def slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
+    """(spread, identified) of the shared thrust curve's slope read at ``fit``, the bounded
+    fit without the slope (:func:`calibrate`): the model with the slope (``setup.cand``) at
+    ``fit.theta`` and the slope and curvature at their "off" values (0: the same model),
+    linearised there; each part as the whole calibration takes it.
+
+    spread = sqrt(se^2 + tau^2) (N s/rad), the reference spread ``s_ref`` of
+    :func:`curve_determined`. ``se``: the slope's pooled standard error as
+    :func:`quadsim.gap.fitting.fit_candidate` states it, ``sqrt(s2 c (JᵀJ)^-1)`` of the
+    residual over the bounded fit's noise scale ``setup.sigma0``, its mean square ``s2``
+    (over its degrees of freedom) and correlation time ``c`` there, ``JᵀJ`` summed over
+    the flights' forward-difference Jacobians (inverted in units of each parameter's
+    typical size, :func:`_covariance`). ``tau``: the between-flight scatter of
+    :func:`_scatter` (one Gauss-Newton step per flight) with the noise model and the
+    discrepancy term of the residual at ``fit`` (stages 4-5), as :func:`_calibrated` reads
+    it at the refined values. One set of Jacobians serves both: the noise model's weights
+    are per channel, so the information in ``sigma0``'s units is each channel's
+    information rescaled (:func:`_scatters`' ``pooled``). ``identified``: the slope moves
+    the residual and 1.96 se lies inside half its plausible range (``fit_candidate``'s rule;
+    never at a bound here). Why at the fit without the slope: the one-step values, and so
+    the scatter, come from any point near the pooled one, and the slope's own standard
+    error hardly moves with it; the fit with the slope then runs only where it is kept."""
+    cand = setup.cand
+    names = list(cand.parameter_names)
+    plain = dict(zip(fit.candidate.parameter_names, fit.theta))
+    lower, upper = fit_bounds(cand, setup.params, setup.dt)
+    off = np.clip(_start_off(cand), lower, upper)
+    theta = np.array([plain.get(n, off[k]) for k, n in enumerate(names)], float)
     effects = cand.effects(theta)
     per_flight = [residuals(s, setup.params, effects, rotor_channel=setup.rotor)
                   for s in setup.states]
     discrepancy = fit_discrepancy(per_flight, setup.states)
     sigma, tau, _ = _noise_model(setup.states, setup.params, setup.rotor, effects,
                                  discrepancy, per_flight=per_flight)
-    probe = Reference(setup.params, setup.rotor, cand, np.array(theta, float),
-                      np.asarray(se_pool, float), np.zeros_like(theta), sigma, tau,
-                      np.zeros_like(sigma), 1.0, 1, {}, [], {})
+    probe = Reference(setup.params, setup.rotor, cand, theta, np.zeros_like(theta),
+                      np.zeros_like(theta), sigma, tau, np.zeros_like(sigma), 1.0, 1, {}, [],
+                      {})
     probe.discrepancy = discrepancy
-    return probe
-
-
-def slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
-    """(spread, identified) of the shared thrust curve's slope read at ``fit``, the bounded
-    fit without the slope (:func:`calibrate`): the model with the slope (``setup.cand``) at
-    ``fit.theta`` and the slope and curvature at their "off" values (0: the same model),
-    linearised there.
-
-    spread = sqrt(se^2 + tau^2) (N s/rad), the reference spread ``s_ref`` of
-    :func:`curve_determined`: ``se`` the slope's pooled standard error, the square root of
-    its diagonal element of the inverse of the information summed over the flights
-    (``sum_j J_jᵀ J_j``, each flight's forward-difference Jacobian of the weighted residual
-    at the noise model and discrepancy term of that residual, :func:`_probe_at`; inverted
-    in units of each parameter's typical size, :func:`_covariance`); ``tau`` the
-    between-flight scatter of :func:`_scatter` from the same Jacobians (one Gauss-Newton
-    step per flight). ``identified``: the slope moves the residual and 1.96 se lies inside
-    half its plausible range (:func:`quadsim.gap.fitting.fit_candidate`'s rule; never at a
-    bound here). Why here: the slope's spread is mostly its between-flight scatter, which
-    the flights' own one-step values give from any point near the pooled one; the fit
-    with the slope and its refinement move b and the spin inertia with the slope, not the
-    slope's scatter."""
-    cand = setup.cand
-    names = list(cand.parameter_names)
-    plain = dict(zip(fit.candidate.parameter_names, fit.theta))
-    plain_se = dict(zip(fit.candidate.parameter_names, fit.stderr))
-    lower, upper = fit_bounds(cand, setup.params, setup.dt)
-    off = np.clip(_start_off(cand), lower, upper)
-    theta = np.array([plain.get(n, off[k]) for k, n in enumerate(names)], float)
-    se = np.array([plain_se.get(n, 0.0) for n in names], float)
-    probe = _probe_at(setup, cand, theta, se)
-    pooled: list = []
-    scatter = _scatters(setup.states, probe, [None], pooled=pooled)[0]
+    channels: list = []
+    scatter = _scatters(setup.states, probe, [None], pooled=channels)[0]
     free = [j for j, n in enumerate(names) if n not in POOLED]
+    # the information in sigma0's units: channel c's Jacobian is the raw one over
+    # sigma_c sqrt(tau_c) (Reference.weights), the bounded fit's over sigma0_c
+    info = np.einsum("c,cpq->pq", sigma ** 2 * tau / setup.sigma0 ** 2, channels[0])
+    scaled = np.concatenate(per_flight) / setup.sigma0
+    s2 = float(np.sum(scaled ** 2)) / max(1, scaled.size - len(fit.theta))
+    cov = _covariance(info, typical_scales(cand, setup.params)[free]) * s2 \
+        * correlation_time(scaled)
     j = names.index(CURVE_KEY)
-    typical = typical_scales(cand, setup.params)
-    cov = _covariance(pooled[0], typical[free])
     col = free.index(j)
-    se_j = float(np.sqrt(max(cov[col, col], 0.0)))
-    identified = bool(pooled[0][col, col] > 0 and 1.96 * se_j < 0.5 * (upper[j] - lower[j]))
-    return float(np.hypot(se_j, scatter[j])), identified
+    se = float(np.sqrt(max(cov[col, col], 0.0)))
+    identified = bool(info[col, col] > 0 and 1.96 * se < 0.5 * (upper[j] - lower[j]))
+    return float(np.hypot(se, scatter[j])), identified
 
 
 def _calibrated(setup: _Setup, cand: Candidate, fit, *, torque_side: bool = True
@@ -1468,6 +1473,7 @@ def _calibrated(setup: _Setup, cand: Candidate, fit, *, torque_side: bool = True
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
     ref.log_ms = log_ms
+    ref.load_exponent = setup.exponent
     _complete(ref, states, log_ms, side)
     return ref
 
@@ -1476,15 +1482,14 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
               ) -> None:
     """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
     aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
-    equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
-    and the envelope (stage 7). ``side``: the roll and pitch residual's
+    equivalents, the timing flag, the between-flight scatter (stage 3) and the envelope
+    (stage 7). ``side``: the roll and pitch residual's
     :class:`TorqueSide`, which the scatter's steps read as the pooled fit did (None: none)."""
-    params, rotor, cand = ref.params, ref.rotor, ref.candidate
+    cand = ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
     ref.quadratic_vertical_axes = vertical_equivalent(states, ref)
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
-    ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     rot: list = []      # with a side: the rotation's own values as its pooled fit reads them
     scatters = _scatters(states, ref, [own, rot], side)
