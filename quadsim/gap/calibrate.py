@@ -1331,7 +1331,7 @@ class _Setup:
 def _setup(flights, params: VehicleParams, base: tuple = ()) -> _Setup:
     """Stage 1 and the bounded fit's inputs (module doc) of the reference ``flights``: the
     rotor timing to start from (the references' mean cross-correlation delay), the command
-    map (:func:`quadsim.gap.residual.fit_command_map`), the noise scale of the bare model's
+    map (:func:`quadsim.gap.residual.fit_motor_map`), the noise scale of the bare model's
     residual, whether the battery law is tested (:data:`VBAT_TESTED`) and the shared
     candidate on top of ``base``. Raises InputError for fewer than two flights."""
     if len(flights) < 2:
