@@ -195,7 +195,6 @@ from .fitting import (
     DETERMINED,
     WIND_SD_MS,
     Candidate,
-    _start_off,
     correlation_time,
     curve_slope_sd,
     fit_candidate,
@@ -205,6 +204,7 @@ from .fitting import (
     parameter_bounds,
     plausibility,
     residuals,
+    start_off,
     typical_scales,
 )
 from .fitting import SPEED_GAIN_PART as SPEED_GAIN
@@ -1394,7 +1394,7 @@ def slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
     names = list(cand.parameter_names)
     plain = dict(zip(fit.candidate.parameter_names, fit.theta))
     lower, upper = fit_bounds(cand, setup.params, setup.dt)
-    off = np.clip(_start_off(cand), lower, upper)
+    off = np.clip(start_off(cand), lower, upper)
     theta = np.array([plain.get(n, off[k]) for k, n in enumerate(names)], float)
     effects = cand.effects(theta)
     per_flight = [residuals(s, setup.params, effects, rotor_channel=setup.rotor)
