@@ -412,3 +412,24 @@ def test_window_means_kept_for_the_same_arrays(cf, states):
     assert other is not first
     for got, want in zip(other, fresh):
         np.testing.assert_array_equal(got, want)
+
+
+def test_the_line_sum_of_squares_is_polyfits():
+    """:func:`quadsim.gap.residual.line_rss` (the timing search's line, :func:`map_lag`) is
+    the summed residual sum of squares of ``np.polyfit(x, y, 1)`` per column, to 1e-12 of
+    it: a noisy line at a rotor's scale (commands ~0.5, speeds ~2000 rad/s), an exact line
+    (0 to round-off of the speeds' scale) and a column whose x does not vary (y's own sum of
+    squares about its mean)."""
+    from quadsim.gap.residual import line_rss
+
+    rng = np.random.default_rng(7)
+    x = rng.uniform(0.3, 0.7, (500, 3))
+    y = 300.0 + 2500.0 * x + rng.normal(0.0, 15.0, x.shape)
+    want = sum(float(np.sum((y[:, i] - np.polyval(np.polyfit(x[:, i], y[:, i], 1),
+                                                   x[:, i])) ** 2)) for i in range(3))
+    assert line_rss(x, y) == pytest.approx(want, rel=1e-12)
+    exact = 300.0 + 2500.0 * x
+    assert line_rss(x, exact) < 1e-18 * float(np.sum(exact ** 2))
+    flat = np.full((500, 1), 0.5)
+    assert line_rss(flat, y[:, :1]) == pytest.approx(float(np.sum((y[:, 0] - y[:, 0].mean())
+                                                                  ** 2)), rel=1e-12)

@@ -204,6 +204,7 @@ from .fitting import (
     parameter_bounds,
     plausibility,
     residuals,
+    start_off,
     typical_scales,
 )
 from .fitting import SPEED_GAIN_PART as SPEED_GAIN
@@ -791,11 +792,14 @@ def _scatter(flights, reference: Reference, own: list | None = None) -> np.ndarr
     return _scatters(flights, reference, [own])[0]
 
 
-def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None = None
-              ) -> list[np.ndarray]:
+def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None = None,
+              *, pooled: list | None = None) -> list[np.ndarray]:
     """:func:`_scatter` of ``reference`` (into ``owns[0]``) and, with ``side``, of
     ``reference`` with that torque side (into ``owns[1]``), flight by flight: the side's
-    Jacobian from the plain one's columns (:func:`_side_jacobian`). Returns the scatters."""
+    Jacobian from the plain one's columns (:func:`_side_jacobian`). Returns the scatters.
+    ``pooled``: a list that receives each channel's information summed over the flights
+    ((C, P', P'): the plain Jacobians' rows of that channel, ``sum_j J_jcᵀ J_jc``, the
+    columns not in :data:`POOLED`)."""
     k = len(reference.theta)
     free = [j for j, n in enumerate(reference.candidate.parameter_names) if n not in POOLED]
     turned = None if side is None else dataclasses.replace(reference, side=side)
@@ -805,8 +809,12 @@ def _scatters(flights, reference: Reference, owns: list, side: TorqueSide | None
         pairs = [(jac, r)]
         if turned is not None:
             pairs.append(_side_jacobian(f, turned, free, (jac, r)))
-        for (values, variances), (jac, r) in zip(steps, pairs):
+        for step, ((values, variances), (jac, r)) in enumerate(zip(steps, pairs)):
             info = jac.T @ jac
+            if pooled is not None and step == 0:
+                cube = jac.reshape(-1, len(reference.sigma), jac.shape[1])
+                mine = np.einsum("ncp,ncq->cpq", cube, cube)
+                pooled[:] = [mine if not pooled else pooled[0] + mine]
             cov = np.linalg.pinv(info)
             value, variance = reference.theta.copy(), np.asarray(reference.se_pool, float) ** 2
             value[free] -= cov @ (jac.T @ r)
@@ -1254,20 +1262,28 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = (),
     applied first in every residual, never refitted; the shared groups are fitted on top.
 
     The thrust curve's slope (:func:`centred_curve`) is shared only where the references
-    determine it (:func:`curve_determined`: its spread below half its prior's, the rule a
-    flight's own values are printed by); else the model is
-    calibrated again without it. Why: an undetermined slope moves b with it flight by
-    flight, and the envelope's trend of b then widens until a mass is "no difference".
-    ``torque_side``: the roll and pitch residual taken on the torque side in the pooled fit
-    and the between-flight scatter (:class:`TorqueSide`, module doc, stage 2); False: as
-    the evidence takes it (the rule before; measurement)."""
-    views = _Views(flights)     # each flight's rotor spectra, for every timing read
-    ref = _calibrate(flights, params, curve=True, base=base, views=views,
-                     torque_side=torque_side)
-    if ref is None or not curve_determined(ref):
-        ref = _calibrate(flights, params, curve=False, base=base, views=views,
-                         torque_side=torque_side)
-    return ref
+    determine it: its spread below :data:`quadsim.gap.fitting.DETERMINED` times its prior's
+    (:func:`curve_determined`, the rule a flight's own values are printed by). Why: an
+    undetermined slope moves b with it flight by flight, and the envelope's trend of b
+    then widens until a mass is "no difference". Decided in two steps: the shared
+    parameters are first fitted without the slope, and the slope's spread is read there,
+    linearised (:func:`slope_spread`); only where that spread lies below the threshold is
+    the model fitted again with the slope, and kept where its whole calibration still
+    determines it (:func:`curve_determined`); else the calibration without the slope goes
+    on from its fit. ``torque_side``: the roll and pitch residual taken on the torque side
+    in the pooled fit and the between-flight scatter (:class:`TorqueSide`, module doc,
+    stage 2); False: as the evidence takes it (the rule before; measurement)."""
+    setup = _setup(flights, params, base)
+    plain = Candidate(setup.cand.name, tuple(p for p in setup.cand.parts
+                                             if p[0] != "thrust_curve"), setup.cand.base)
+    fit = _bounded_fit(setup, plain)
+    if CURVE_KEY in setup.cand.parameter_names and _slope_kept(
+            *slope_spread(setup, fit), setup.params):
+        ref = _calibrated(setup, setup.cand, _bounded_fit(setup, setup.cand),
+                          torque_side=torque_side)
+        if ref is not None and curve_determined(ref):
+            return ref
+    return _calibrated(setup, plain, fit, torque_side=torque_side)
 
 
 def curve_determined(ref: Reference) -> bool:
@@ -1288,56 +1304,48 @@ def _slope_kept(spread: float, identified: bool, params: VehicleParams) -> bool:
 #: the shared thrust curve's slope (:func:`centred_curve`)
 CURVE_KEY = "thrust_curve.linear"
 
-#: :func:`_slope_clearly_undetermined` decides before the refinement only where the
-#: preliminary spread exceeds the threshold by this factor: the refinement moves the rotor
-#: timing and the spin inertia, not the slope, and the preliminary spread tracks the final
-#: one to well within it (CHANGELOG, issue 43); nearer the threshold the whole calibration
-#: decides, as before.
-SLOPE_EARLY_MARGIN = 1.2
+
+@dataclass(frozen=True)
+class _Setup:
+    """What both calibrations of one reference set (thrust-curve slope shared or not) read,
+    computed once (:func:`_setup`): ``views`` (the flights' :class:`_Views`), ``start`` (s,
+    the starting rotor timing), ``states`` (the fit states read at it), ``rotor`` (every
+    flight logs commands), ``params`` (with the references' command map), ``dt`` (s, the
+    fit step), ``sigma0`` (C,) (the bounded fit's noise scale), ``vbat_ref`` (V or None),
+    ``cand`` (the shared candidate with the slope, :func:`centred_curve`) and ``exponent``
+    (the motors' load exponent, :func:`quadsim.gap.residual.load_exponent`, or None)."""
+
+    flights: list
+    views: _Views
+    start: float
+    states: list
+    rotor: bool
+    params: VehicleParams
+    dt: float
+    sigma0: np.ndarray
+    vbat_ref: float | None
+    cand: Candidate
+    exponent: tuple | None
 
 
-def _slope_clearly_undetermined(states, params: VehicleParams, rotor: bool,
-                                cand: Candidate, fit) -> bool:
-    """Whether the shared slope's reference spread ``s_ref`` (:func:`curve_determined`), taken
-    at the bounded fit ``fit`` (theta, stderr) on the reference ``states`` aligned at the
-    starting timing, lies beyond :data:`SLOPE_EARLY_MARGIN` times the threshold of
-    :func:`_slope_kept`: the between-flight scatter of :func:`_scatter` with the noise model of
-    :func:`_noise_model` after the discrepancy term (:func:`fit_discrepancy`) at ``fit.theta``,
-    as :func:`_calibrate` builds them after the refinement. True: the slope is not shared and
-    the calibration with it ends here (it would be rejected after the whole calibration).
-    Why: that calibration's refinement and noise model cost as much again as the one without
-    the slope that replaces it; this check costs a tenth of it."""
-    effects = cand.effects(fit.theta)
-    per_flight = [residuals(s, params, effects, rotor_channel=rotor) for s in states]
-    discrepancy = fit_discrepancy(per_flight, states)
-    sigma, tau, _ = _noise_model(states, params, rotor, effects, discrepancy,
-                                 per_flight=per_flight)
-    probe = Reference(params, rotor, cand, fit.theta.copy(), np.asarray(fit.stderr, float),
-                      np.zeros_like(fit.theta), sigma, tau, np.zeros_like(sigma), 1.0, 1,
-                      {}, [], {})
-    probe.discrepancy = discrepancy
-    j = cand.parameter_names.index(CURVE_KEY)
-    spread = float(np.hypot(probe.se_pool[j], _scatter(states, probe)[j]))
-    return spread > SLOPE_EARLY_MARGIN * DETERMINED * curve_slope_sd(params)
-
-
-def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
-               views: _Views | None = None, torque_side: bool = True
-               ) -> Reference | None:
-    """:func:`calibrate`, with the thrust curve's slope shared or not (``curve``); None as
-    soon as the pooled fit's own spread of a shared slope shows it undetermined (the
-    between-flight scatter only widens it), or its spread with the scatter before the
-    refinement shows it clearly so (:func:`_slope_clearly_undetermined`), which saves that
-    calibration's refinement, scatter and envelope."""
+def _setup(flights, params: VehicleParams, base: tuple = ()) -> _Setup:
+    """Stage 1 and the bounded fit's inputs (module doc) of the reference ``flights``: the
+    rotor timing to start from (the references' mean cross-correlation delay), the command
+    map (:func:`quadsim.gap.residual.fit_motor_map`), the noise scale of the bare model's
+    residual, whether the battery law is tested (:data:`VBAT_TESTED`) and the shared
+    candidate on top of ``base``. Raises InputError for fewer than two flights."""
     if len(flights) < 2:
         raise InputError("--reference: give at least 2 nominal flights")
     estimates = [f.delays_ms["rotor"] for f in flights
                  if (getattr(f, "delays_ms", None) or {}).get("rotor") is not None]
     start = float(np.clip(1e-3 * np.mean(estimates), -MAX_SHIFT_S, MAX_SHIFT_S)) \
         if estimates else 0.0
-    views = _Views(flights) if views is None else views
+    views = _Views(flights)     # each flight's rotor spectra, for every timing read
     states = [views.at(i, start) for i in range(len(views))]
     rotor = all(s.command is not None for s in states)
+    # the load exponent read on the window means the command map is fitted on (the same
+    # states: their timing search done once, quadsim.gap.residual._window_means)
+    exponent = load_exponent(states, params) if rotor else None
     if rotor:
         params = fit_motor_map(states, params)
     dt = float(states[0].t[1] - states[0].t[0])
@@ -1349,27 +1357,94 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
     vbat = logged and vbat_spread >= VBAT_TESTED
     cand = dataclasses.replace(per_flight_candidate(rotor, vbat, pose=all(s.pose for s in states)),
                                base=tuple(base))
-    cand = centred_curve(cand, states) if curve else Candidate(
-        cand.name, tuple(p for p in cand.parts if p[0] != "thrust_curve"), cand.base)
-    fit = fit_candidate(cand, states, params, sigma0, rotor_channel=rotor, max_nfev=40,
-                        compact=True)
-    if curve and CURVE_KEY in cand.parameter_names:
-        # before the refinement, which changes only the wind's standard errors: a slope the
-        # pooled fit leaves undetermined ends this calibration without paying for it
+    return _Setup(list(flights), views, start, states, rotor, params, dt, sigma0, vbat_ref,
+                  centred_curve(cand, states), exponent)
+
+
+def _bounded_fit(setup: _Setup, cand: Candidate):
+    """The bounded least-squares fit of ``cand`` on the references at the starting timing
+    (module doc, stage 2; :func:`quadsim.gap.fitting.fit_candidate`, 40 evaluations)."""
+    return fit_candidate(cand, setup.states, setup.params, setup.sigma0,
+                         rotor_channel=setup.rotor, max_nfev=40, compact=True)
+
+
+def slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
+    """(spread, identified) of the shared thrust curve's slope read at ``fit``, the bounded
+    fit without the slope (:func:`calibrate`): the model with the slope (``setup.cand``) at
+    ``fit.theta`` and the slope and curvature at their "off" values (0: the same model),
+    linearised there; each part as the whole calibration takes it.
+
+    spread = sqrt(se^2 + tau^2) (N s/rad), the reference spread ``s_ref`` of
+    :func:`curve_determined`. ``se``: the slope's pooled standard error as
+    :func:`quadsim.gap.fitting.fit_candidate` states it, ``sqrt(s2 c (JᵀJ)^-1)`` of the
+    residual over the bounded fit's noise scale ``setup.sigma0``, its mean square ``s2``
+    (over its degrees of freedom) and correlation time ``c`` there, ``JᵀJ`` summed over
+    the flights' forward-difference Jacobians (inverted in units of each parameter's
+    typical size, :func:`_covariance`). ``tau``: the between-flight scatter of
+    :func:`_scatter` (one Gauss-Newton step per flight) with the noise model and the
+    discrepancy term of the residual at ``fit`` (stages 4-5), as :func:`_calibrated` reads
+    it at the refined values. One set of Jacobians serves both: the noise model's weights
+    are per channel, so the information in ``sigma0``'s units is each channel's
+    information rescaled (:func:`_scatters`' ``pooled``). ``identified``: the slope moves
+    the residual and 1.96 se lies inside half its plausible range (``fit_candidate``'s rule;
+    never at a bound here). Why at the fit without the slope: the one-step values, and so
+    the scatter, come from any point near the pooled one, and the slope's own standard
+    error hardly moves with it; the fit with the slope then runs only where it is kept."""
+    cand = setup.cand
+    names = list(cand.parameter_names)
+    plain = dict(zip(fit.candidate.parameter_names, fit.theta))
+    lower, upper = fit_bounds(cand, setup.params, setup.dt)
+    off = np.clip(start_off(cand), lower, upper)
+    theta = np.array([plain.get(n, off[k]) for k, n in enumerate(names)], float)
+    effects = cand.effects(theta)
+    per_flight = [residuals(s, setup.params, effects, rotor_channel=setup.rotor)
+                  for s in setup.states]
+    discrepancy = fit_discrepancy(per_flight, setup.states)
+    sigma, tau, _ = _noise_model(setup.states, setup.params, setup.rotor, effects,
+                                 discrepancy, per_flight=per_flight)
+    probe = Reference(setup.params, setup.rotor, cand, theta, np.zeros_like(theta),
+                      np.zeros_like(theta), sigma, tau, np.zeros_like(sigma), 1.0, 1, {}, [],
+                      {})
+    probe.discrepancy = discrepancy
+    channels: list = []
+    scatter = _scatters(setup.states, probe, [None], pooled=channels)[0]
+    free = [j for j, n in enumerate(names) if n not in POOLED]
+    # the information in sigma0's units: channel c's Jacobian is the raw one over
+    # sigma_c sqrt(tau_c) (Reference.weights), the bounded fit's over sigma0_c
+    info = np.einsum("c,cpq->pq", sigma ** 2 * tau / setup.sigma0 ** 2, channels[0])
+    scaled = np.concatenate(per_flight) / setup.sigma0
+    s2 = float(np.sum(scaled ** 2)) / max(1, scaled.size - len(fit.theta))
+    cov = _covariance(info, typical_scales(cand, setup.params)[free]) * s2 \
+        * correlation_time(scaled)
+    j = names.index(CURVE_KEY)
+    col = free.index(j)
+    se = float(np.sqrt(max(cov[col, col], 0.0)))
+    identified = bool(info[col, col] > 0 and 1.96 * se < 0.5 * (upper[j] - lower[j]))
+    return float(np.hypot(se, scatter[j])), identified
+
+
+def _calibrated(setup: _Setup, cand: Candidate, fit, *, torque_side: bool = True
+                ) -> Reference | None:
+    """The calibration (module doc, stages 2-7) of ``cand`` from its bounded fit ``fit`` on
+    ``setup``'s references; None where ``cand`` shares the slope and the fit's own spread of
+    it shows it undetermined (the between-flight scatter only widens it), before the
+    refinement pays for it."""
+    flights, views, params, rotor, dt = (setup.flights, setup.views, setup.params,
+                                         setup.rotor, setup.dt)
+    if CURVE_KEY in cand.parameter_names:
         j = cand.parameter_names.index(CURVE_KEY)
         if not _slope_kept(fit.stderr[j], bool(fit.identifiable[j]), params):
             return None
-        if _slope_clearly_undetermined(states, params, rotor, cand, fit):
-            return None
     theta, shift, shift_se, wind_se = _refine(flights, params, rotor, cand, fit.theta,
-                                              shift=start, sigma=sigma0, views=views)
+                                              shift=setup.start, sigma=setup.sigma0,
+                                              views=views)
     # module doc, stage 2: where the whole band reads no plausible vehicle, the roll and
     # pitch rotation is read where the data fix it, kept where the band determines it
-    side = torque_side_of(states) if torque_side and rotation_implausible(
+    side = torque_side_of(setup.states) if torque_side and rotation_implausible(
         cand, theta, params) else None
     if side is not None:
         turned = _rotation_steps(flights, params, rotor, cand, theta, shift=shift,
-                                 sigma=sigma0, side=side, views=views)
+                                 sigma=setup.sigma0, side=side, views=views)
         if rotation_implausible(cand, turned, params) or np.any(band_explained(
                 [views.at(i, shift) for i in range(len(views))], params, rotor,
                 cand.effects(turned), side) < BAND_R2):
@@ -1392,12 +1467,13 @@ def _calibrate(flights, params: VehicleParams, curve: bool, base: tuple = (), *,
                     signal_delays(flights),
                     [getattr(f, "name", "") for f in flights],
                     dict(zip(cand.parameter_names, map(bool, fit.identifiable))),
-                    shift, shift_se, vbat_ref=vbat_ref,
+                    shift, shift_se, vbat_ref=setup.vbat_ref,
                     at_bound=bounded(cand, params, theta, dt),
                     bounds=fit_bounds(cand, params, dt))
     ref.lof_pooled = pooled
     ref.discrepancy = discrepancy
     ref.log_ms = log_ms
+    ref.load_exponent = setup.exponent
     _complete(ref, states, log_ms, side)
     return ref
 
@@ -1406,15 +1482,14 @@ def _complete(ref: Reference, states, log_ms: np.ndarray, side: TorqueSide | Non
               ) -> None:
     """Fill in ``ref`` (pooled fit and noise model done) the fields computed from it on the
     aligned reference ``states`` (log mean squares ``log_ms`` (n, C)): the drags' quadratic
-    equivalents, the timing flag, the load exponent, the between-flight scatter (stage 3)
-    and the envelope (stage 7). ``side``: the roll and pitch residual's
+    equivalents, the timing flag, the between-flight scatter (stage 3) and the envelope
+    (stage 7). ``side``: the roll and pitch residual's
     :class:`TorqueSide`, which the scatter's steps read as the pooled fit did (None: none)."""
-    params, rotor, cand = ref.params, ref.rotor, ref.candidate
+    cand = ref.candidate
     ref.quadratic_drag = quadratic_equivalent(states, ref)
     ref.quadratic_drag_axes = quadratic_equivalent(states, ref, per_axis=True)
     ref.quadratic_vertical_axes = vertical_equivalent(states, ref)
     ref.timing = all(s.rotor_speed is not None for s in states)   # as _refine fits it
-    ref.load_exponent = load_exponent(states, params) if rotor else None
     own: list = []
     rot: list = []      # with a side: the rotation's own values as its pooled fit reads them
     scatters = _scatters(states, ref, [own, rot], side)

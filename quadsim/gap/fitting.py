@@ -1105,8 +1105,9 @@ def parameter_bounds(candidate: Candidate, params: VehicleParams
     return np.asarray(lower), np.asarray(upper)
 
 
-def _start_off(candidate: Candidate) -> np.ndarray:
-    """The "off" value of each fitted parameter."""
+def start_off(candidate: Candidate) -> np.ndarray:
+    """The "off" value of each fitted parameter of ``candidate`` (P,): the value that leaves
+    its effect out (each effect's parameter spec), in the parameter's unit."""
     off = []
     for name, _, fitted in candidate.parts:
         specs = {p.name: p for p in effect_class(name).parameters}
@@ -1116,11 +1117,7 @@ def _start_off(candidate: Candidate) -> np.ndarray:
 
 def _start(candidate: Candidate, lower: np.ndarray, upper: np.ndarray,
            typical: np.ndarray) -> np.ndarray:
-    off = []
-    for name, _fixed, fitted in candidate.parts:
-        specs = {p.name: p for p in effect_class(name).parameters}
-        off += [specs[p].off for p in fitted]
-    x0 = np.asarray(off, dtype=float)
+    x0 = start_off(candidate)
     # Start strictly inside the bounds (least_squares' trust region needs it); an effect
     # whose "off" value sits on a bound starts a tenth of its typical size away from it.
     x0 = np.where(x0 <= lower, lower + 0.1 * typical, x0)
@@ -1429,7 +1426,7 @@ def fit_candidate(candidate: Candidate, flights: list[FlightStates], params: Veh
     identifiable = [bool(c > 1e-6 * np.sqrt(res.size) and 1.96 * se < 0.5 * sp
                          and not b and not a)
                     for c, se, sp, b, a in zip(column, stderr, span, at_bound, absurd)]
-    off = _start_off(candidate)
+    off = start_off(candidate)
     significant = [bool(abs(th - o) > 1.96 * se) or name in NO_OFF_VALUE
                    for th, o, se, name in zip(theta, off, stderr, candidate.parameter_names)]
     return Fit(candidate, theta, stderr, corr, float(result.cost), identifiable, significant)

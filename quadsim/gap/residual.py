@@ -1014,8 +1014,8 @@ def load_exponent(flights: list[FlightStates], params: VehicleParams
 
 #: :func:`_window_means`' last inputs (the flights' t, command and rotor-speed arrays, held)
 #: and result, as one tuple read and replaced whole (no call can pair one call's inputs with
-#: another's result): the two calibrations of one reference set (thrust curve's slope shared
-#: or not) fit the motor map on the same states
+#: another's result): a caller that reads the same flights' window means again gets them
+#: without the timing search (:func:`map_lag`)
 _LAST_MEANS: list = [None]
 
 
@@ -1110,17 +1110,31 @@ def map_lag(flights: list, dt: list[float], speed: np.ndarray) -> tuple[tuple, t
     for timing in [("lag", float(v)) for v in MAP_LAGS_S] \
             + [("delay", float(v)) for v in MAP_LAGS_S[1:]]:
         command = raw if timing == ("lag", 0.0) else means(timing)
-        rss = {"line": 0.0, "gain": 0.0}
-        for i in range(speed.shape[1]):
-            c, s = command[:, i], speed[:, i]
-            if flat_command(c):
-                return (("lag", 0.0), raw), (("lag", 0.0), raw)
-            rss["line"] += float(np.sum((s - np.polyval(np.polyfit(c, s, 1), c)) ** 2))
-            rss["gain"] += float(np.sum((s - float(c @ s / (c @ c)) * c) ** 2))
+        if any(flat_command(command[:, i]) for i in range(speed.shape[1])):
+            return (("lag", 0.0), raw), (("lag", 0.0), raw)
+        rss = {"line": line_rss(command, speed),
+               "gain": float(np.sum((speed - np.einsum("ij,ij->j", command, speed)
+                                     / np.einsum("ij,ij->j", command, command) * command) ** 2))}
         for form, value in rss.items():
             if value < best[form][2]:
                 best[form] = (timing, command, value)
     return best["line"][:2], best["gain"][:2]
+
+
+def line_rss(x: np.ndarray, y: np.ndarray) -> float:
+    """Residual sum of squares of the least-squares lines ``y[:, i] = a_i + b_i x[:, i]``
+    (x, y (M, R); each column its own line), summed over the columns: the residuals
+    ``y - ybar - b (x - xbar)`` with ``b = Sxy / Sxx`` about the columns' means, formed and
+    squared (no difference of large sums). The same line as ``np.polyfit(x, y, 1)``, its
+    sum of squares equal to polyfit's to rounding (the closed form instead of an SVD per
+    column). A column whose x does not vary gives ``y``'s own sum of squares about its mean."""
+    dx = x - x.mean(axis=0)
+    dy = y - y.mean(axis=0)
+    sxx = np.einsum("ij,ij->j", dx, dx)
+    slope = np.divide(np.einsum("ij,ij->j", dx, dy), sxx, out=np.zeros_like(sxx),
+                      where=sxx > 0)
+    r = dy - slope * dx
+    return float(np.sum(r * r))
 
 
 def _line_supported(c: np.ndarray, w: np.ndarray, gain: tuple, line, windows: float, *,
