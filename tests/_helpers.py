@@ -105,7 +105,7 @@ def commands_through_map(log, params):
 def early_and_full(flights, params) -> tuple[float, float | None]:
     """The shared thrust-curve slope's spread over its threshold (``DETERMINED`` times its
     prior's) on the prepared reference ``flights``, read two ways: at the bounded fit
-    without the slope (``calibrate.slope_spread``, what the calibration decides by) and
+    without the slope (``calibrate._slope_spread``, what the calibration decides by) and
     after the whole calibration with the slope (``s_ref``; None where the fit with the slope
     already leaves it undetermined, ``calibrate._calibrated``)."""
     from quadsim.gap import calibrate as cal
@@ -114,7 +114,7 @@ def early_and_full(flights, params) -> tuple[float, float | None]:
     plain = cal.Candidate(setup.cand.name, tuple(p for p in setup.cand.parts
                                                  if p[0] != "thrust_curve"), setup.cand.base)
     limit = cal.DETERMINED * cal.curve_slope_sd(setup.params)
-    early, _ = cal.slope_spread(setup, cal._bounded_fit(setup, plain))
+    early, _ = cal._slope_spread(setup, cal._bounded_fit(setup, plain))
     ref = cal._calibrated(setup, setup.cand, cal._bounded_fit(setup, setup.cand))
     if ref is None:
         return early / limit, None

@@ -131,7 +131,7 @@ def test_speed_and_derivative_shifted_together_read_as_each_alone():
 @pytest.mark.skipif(not (DATA / "nominal").is_dir(), reason="shared real data absent")
 def test_early_slope_decision_agrees_with_the_whole_calibration_on_real_references():
     """On the 20 real nominal flights the slope is dropped: its spread read at the fit
-    without it (calibrate.slope_spread) says so, and so does the whole calibration with it."""
+    without it (calibrate._slope_spread) says so, and so does the whole calibration with it."""
     import warnings
 
     from quadsim.gap.diagnose import prepare

@@ -1,5 +1,5 @@
 """The calibration's thrust-curve slope decided at the fit without it
-(quadsim.gap.calibrate.slope_spread) agrees with the whole calibration with the slope:
+(quadsim.gap.calibrate._slope_spread) agrees with the whole calibration with the slope:
 generated references that share one slope (determined) and references whose slopes differ
 flight by flight (not)."""
 

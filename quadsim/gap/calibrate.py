@@ -1267,7 +1267,7 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = (),
     undetermined slope moves b with it flight by flight, and the envelope's trend of b
     then widens until a mass is "no difference". Decided in two steps: the shared
     parameters are first fitted without the slope, and the slope's spread is read there,
-    linearised (:func:`slope_spread`); only where that spread lies below the threshold is
+    linearised (:func:`_slope_spread`); only where that spread lies below the threshold is
     the model fitted again with the slope, and kept where its whole calibration still
     determines it (:func:`curve_determined`); else the calibration without the slope goes
     on from its fit. ``torque_side``: the roll and pitch residual taken on the torque side
@@ -1278,7 +1278,7 @@ def calibrate(flights, params: VehicleParams, *, base: tuple = (),
                                              if p[0] != "thrust_curve"), setup.cand.base)
     fit = _bounded_fit(setup, plain)
     if CURVE_KEY in setup.cand.parameter_names and _slope_kept(
-            *slope_spread(setup, fit), setup.params):
+            *_slope_spread(setup, fit), setup.params):
         ref = _calibrated(setup, setup.cand, _bounded_fit(setup, setup.cand),
                           torque_side=torque_side)
         if ref is not None and curve_determined(ref):
@@ -1368,7 +1368,7 @@ def _bounded_fit(setup: _Setup, cand: Candidate):
                          rotor_channel=setup.rotor, max_nfev=40, compact=True)
 
 
-def slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
+def _slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
     """(spread, identified) of the shared thrust curve's slope read at ``fit``, the bounded
     fit without the slope (:func:`calibrate`): the model with the slope (``setup.cand``) at
     ``fit.theta`` and the slope and curvature at their "off" values (0: the same model),
