@@ -930,8 +930,8 @@ def _log_sum_exp(values: list) -> np.float64:
     """``scipy.special.logsumexp(values)`` of a list of floats: a single finite value is
     returned as it is (its log-sum-exp, log(exp(x - x)) + x, is x exactly in every scipy
     version), the rest goes to scipy. Why: most of :func:`posterior`'s groups hold one
-    reading, and scipy's per-call array handling (~0.2 ms) made the posterior a tenth of a
-    judged flight's verdict."""
+    reading (544 of its 934 calls on the 26 mixed Crazyflie flights), and scipy's per-call
+    array handling costs ~0.2 ms."""
     if len(values) == 1 and np.isfinite(values[0]):
         return np.float64(values[0])
     return logsumexp(values)

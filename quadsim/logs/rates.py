@@ -106,7 +106,7 @@ def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 #: 10.0 ** k (float64, numpy's power: the same numbers) for every whole k that
-#: `_quanta` raises 10 to: D - 1 - e with D in 1 .. MAX_DIGITS - 1 and e the decimal
+#: :func:`_quanta` raises 10 to: D - 1 - e with D in 1 .. MAX_DIGITS - 1 and e the decimal
 #: exponent of a finite nonzero double (-324 .. 308); looked up, not computed per value
 #: (the power was two thirds of its CPU)
 _POWERS_FROM = -310
