@@ -917,13 +917,24 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
         groups.setdefault(key, []).append(ev)
     prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
     # a log evidence that is not a number weighs nothing (-inf), never the whole posterior
-    logs = {k: logsumexp([(e.log_z if not np.isnan(e.log_z) else -np.inf)
-                          + (prior_null if e.name == "no_difference" else 0.0)
-                          for e in v]) for k, v in groups.items()}
-    total = logsumexp(list(logs.values()))
+    logs = {k: _log_sum_exp([(e.log_z if not np.isnan(e.log_z) else -np.inf)
+                             + (prior_null if e.name == "no_difference" else 0.0)
+                             for e in v]) for k, v in groups.items()}
+    total = _log_sum_exp(list(logs.values()))
     out = [(k, float(np.exp(logs[k] - total)),
             max(groups[k], key=lambda e: (e.name == k, e.log_z))) for k in groups]
     return sorted(out, key=lambda x: (-x[1], x[0]))
+
+
+def _log_sum_exp(values: list) -> np.float64:
+    """``scipy.special.logsumexp(values)`` of a list of floats: a single finite value is
+    returned as it is (its log-sum-exp, log(exp(x - x)) + x, is x exactly in every scipy
+    version), the rest goes to scipy. Why: most of :func:`posterior`'s groups hold one
+    reading (544 of its 934 calls on the 26 mixed Crazyflie flights), and scipy's per-call
+    array handling costs ~0.2 ms."""
+    if len(values) == 1 and np.isfinite(values[0]):
+        return np.float64(values[0])
+    return logsumexp(values)
 
 
 #: the parameter whose reading acts through a logged signal by a law the references did not

@@ -589,14 +589,26 @@ def _saturated(log, params) -> np.ndarray:
     return out
 
 
-def _torque_balance(log, params, speeds: np.ndarray | None = None, *,
-                    sensor: bool = False) -> _TorqueBalance | None:
-    """The balance of ``log`` with ``speeds`` (N, R) rad/s standing for the rotor speeds
-    (default the log's). Saturated samples (:func:`_saturated`) are left out: a window is
-    cut at each of them, so that the integrals' error across one stays out of the window
-    means of the samples kept. ``sensor``: ``speeds`` are a sensor's (their white noise is
-    estimated, :func:`_regressor_noise`)."""
-    speeds = log.rotor_speed if speeds is None else speeds
+@dataclasses.dataclass(frozen=True)
+class _BalanceFrame:
+    """What a log's torque balance (:func:`_torque_balance`) reads of the log alone, the same
+    whichever rotor signal stands for its speeds: ``m`` samples per window, ``keep`` (N,)
+    the samples kept, ``window`` (kept,) each kept sample's window index (0 .. ``count`` -
+    1), ``momentum`` (N, 3) N m s, h = I w + int w x I w dt, and ``noise`` (3,) N m s, I_aa
+    times the gyro's white noise (:func:`_gyro_noise`)."""
+
+    m: int
+    keep: np.ndarray
+    window: np.ndarray
+    count: int
+    momentum: np.ndarray
+    noise: np.ndarray
+
+
+def _balance_frame(log, params) -> _BalanceFrame | None:
+    """:class:`_BalanceFrame` of ``log``; None where fewer than 5 windows remain. Saturated
+    samples (:func:`_saturated`) are left out: a window is cut at each of them, so that the
+    integrals' error across one stays out of the window means of the samples kept."""
     t = log.t
     m = max(1, round(ORDER_WINDOW_S / float(np.median(np.diff(t)))))
     cut = _saturated(log, params)
@@ -614,14 +626,30 @@ def _torque_balance(log, params, speeds: np.ndarray | None = None, *,
     momentum = log.body_rate @ inertia.T
     momentum = momentum + cumulative_trapezoid(np.cross(log.body_rate, momentum), t,
                                              axis=0, initial=0)
+    return _BalanceFrame(m, keep, window, count, momentum,
+                         np.diag(inertia) * _gyro_noise(log.body_rate))
+
+
+def _torque_balance(log, params, speeds: np.ndarray | None = None, *,
+                    sensor: bool = False, frame: _BalanceFrame | None = None
+                    ) -> _TorqueBalance | None:
+    """The balance of ``log`` with ``speeds`` (N, R) rad/s standing for the rotor speeds
+    (default the log's), on the log's :class:`_BalanceFrame` ``frame`` (default
+    :func:`_balance_frame`: None, and so no balance, where it has under 5 windows).
+    ``sensor``: ``speeds`` are a sensor's (their white noise is estimated,
+    :func:`_regressor_noise`)."""
+    speeds = log.rotor_speed if speeds is None else speeds
+    frame = _balance_frame(log, params) if frame is None else frame
+    if frame is None:
+        return None
+    t, keep = log.t, frame.keep
     squares = cumulative_trapezoid(np.square(speeds), t, axis=0, initial=0)
-    z = _window_demean(np.hstack([momentum, squares, (t - t[0])[:, None]])[keep], window,
-                       count)
+    z = _window_demean(np.hstack([frame.momentum, squares, (t - t[0])[:, None]])[keep],
+                       frame.window, frame.count)
     lag = z[:-1].T @ z[1:]
     return _TorqueBalance(z.T @ z, 0.5 * (lag + lag.T), squares.shape[1],
-                          int(keep.sum()) - count - 2,
-                          np.diag(inertia) * _gyro_noise(log.body_rate),
-                          _regressor_noise(speeds, t, m) if sensor else None,
+                          int(keep.sum()) - frame.count - 2, frame.noise,
+                          _regressor_noise(speeds, t, frame.m) if sensor else None,
                           int(keep.sum()))
 
 
@@ -798,10 +826,13 @@ def _order_choice(log, params, commands: bool) -> list:
 
     torque_rows = allocation_matrix(params)[3:6]
     judged = []
-    for name, speeds in _order_sources(log, params, commands):
-        if speeds.shape[1] != params.rotor_count or not np.isfinite(speeds).all():
-            continue
-        balance = _torque_balance(log, params, speeds, sensor=name == "rotor speeds")
+    sources = [(name, speeds) for name, speeds in _order_sources(log, params, commands)
+               if speeds.shape[1] == params.rotor_count and np.isfinite(speeds).all()]
+    # the log's own part of every balance, read once
+    frame = _balance_frame(log, params) if sources else None
+    for name, speeds in sources if frame is not None else ():
+        balance = _torque_balance(log, params, speeds, sensor=name == "rotor speeds",
+                                  frame=frame)
         if balance is not None:
             judged.append((name, balance, _best_rss(balance, torque_rows)))
     if len(judged) < 2:

@@ -85,7 +85,8 @@ def _fast_columns(raw: bytes) -> dict[str, np.ndarray] | None:
         return None
     header = [h.strip() for h in raw[:end].decode("ascii").split(",")]
     body = raw[end + 1:]
-    if (len(set(header)) < len(header) or not all(header) or not body.strip()
+    # (not body or body.isspace(): not body.strip(), without copying the body)
+    if (len(set(header)) < len(header) or not all(header) or not body or body.isspace()
             or body.translate(None, _PLAIN)):
         return None
     try:

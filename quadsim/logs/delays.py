@@ -104,10 +104,15 @@ def cross_correlation_delay(reference: np.ndarray, signal: np.ndarray, dt: float
     ref = np.asarray(reference, dtype=float).reshape(len(reference), -1)
     sig = np.asarray(signal, dtype=float).reshape(len(signal), -1)
     ok = np.all(np.isfinite(ref), 1) & np.all(np.isfinite(sig), 1)
-    ref, sig = ref.copy(), sig.copy()
-    ref[~ok], sig[~ok] = np.nan, np.nan
-    ref = (ref - np.nanmean(ref, 0)) / np.maximum(np.nanstd(ref, 0), 1e-300)
-    sig = (sig - np.nanmean(sig, 0)) / np.maximum(np.nanstd(sig, 0), 1e-300)
+    if ok.all():    # numpy's mean and std: the nan-functions' sums and quotients, without
+        # their masked copies (the same numbers, ~60 % of the cost)
+        ref = (ref - ref.mean(0)) / np.maximum(ref.std(0), 1e-300)
+        sig = (sig - sig.mean(0)) / np.maximum(sig.std(0), 1e-300)
+    else:
+        ref, sig = ref.copy(), sig.copy()
+        ref[~ok], sig[~ok] = np.nan, np.nan
+        ref = (ref - np.nanmean(ref, 0)) / np.maximum(np.nanstd(ref, 0), 1e-300)
+        sig = (sig - np.nanmean(sig, 0)) / np.maximum(np.nanstd(sig, 0), 1e-300)
     ref, sig = np.nan_to_num(ref), np.nan_to_num(sig)
     n = len(ref)
     k_max = max(1, min(int(round(max_lag_s / dt)), n // 4))

@@ -36,7 +36,7 @@ Thresholds:
 
 * a row is flagged where it differs from the row before (a held value repeats exactly, so
   any change of a rounding step counts), or where its distance from its neighbours' line
-  exceeds :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quantum`: the
+  exceeds :data:`ROUND_STEPS` = 2 rounding steps of the column as written (:func:`_quanta`: the
   decimal step of its largest value at the most significant digits its values use; 1e-3
   rad/s for the Crazyflie's 7-digit speeds, 1e-14 of the value for float64): a linearly
   interpolated value rounded so lies at most one step off its neighbours' line (half a step
@@ -70,7 +70,7 @@ import numpy as np
 __all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "ROUND_STEPS", "NativeRate",
            "native_rate", "rates_of"]
 
-#: rounding steps of the column as written (:func:`_quantum`) a change must exceed to count
+#: rounding steps of the column as written (:func:`_quanta`) a change must exceed to count
 #: (module doc)
 ROUND_STEPS = 2.0
 #: the most significant digits a value is read with (float64 holds 15-17)
@@ -106,7 +106,7 @@ def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 #: 10.0 ** k (float64, numpy's power: the same numbers) for every whole k that
-#: :func:`_quantum` raises 10 to: D - 1 - e with D in 1 .. MAX_DIGITS - 1 and e the decimal
+#: :func:`_quanta` raises 10 to: D - 1 - e with D in 1 .. MAX_DIGITS - 1 and e the decimal
 #: exponent of a finite nonzero double (-324 .. 308); looked up, not computed per value
 #: (the power was two thirds of its CPU)
 _POWERS_FROM = -310
@@ -115,24 +115,29 @@ with np.errstate(over="ignore"):
 _POWERS.flags.writeable = False
 
 
-def _quantum(column: np.ndarray) -> float:
-    """The rounding step of a column as written: 10^(e - D + 1) for its largest magnitude's
-    decimal exponent e and the most significant digits D any of up to 512 of its values
-    (evenly spread) needs (:data:`MAX_DIGITS` at most: float64 arithmetic); 0 for a column
-    without a nonzero finite value."""
-    v = column[np.isfinite(column) & (column != 0)]
+def _quanta(x: np.ndarray) -> np.ndarray:
+    """(K,) the rounding step of each column of ``x`` (N, K) as written: 10^(e - D + 1) for
+    the column's largest magnitude's decimal exponent e and the most significant digits D
+    any of up to 512 of its values (evenly spread) needs (:data:`MAX_DIGITS` at most:
+    float64 arithmetic); 0 for a column without a nonzero finite value. Columns that are
+    finite and nonzero throughout (a channel's, the common case) are read together, as one
+    array: the same numbers as one column at a time."""
+    usable = np.isfinite(x) & (x != 0)
+    if x.shape[1] > 1 and not usable.all():      # columns of unequal counts: one at a time
+        return np.concatenate([_quanta(x[:, j:j + 1]) for j in range(x.shape[1])])
+    v = x[usable[:, 0]] if x.shape[1] == 1 else x
     if not len(v):
-        return 0.0
-    v = v[np.linspace(0, len(v) - 1, min(len(v), 512)).astype(int)]
+        return np.zeros(1)
+    v = v[np.linspace(0, len(v) - 1, min(len(v), 512)).astype(int)]     # (S, K)
     exponent = np.floor(np.log10(np.abs(v)))
-    counts = np.arange(1, MAX_DIGITS)[:, None]      # D = 1 .. MAX_DIGITS - 1, one row each
+    counts = np.arange(1, MAX_DIGITS)[:, None, None]   # D = 1 .. MAX_DIGITS - 1, one each
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         scale = _POWERS[(counts - 1 - exponent).astype(int) - _POWERS_FROM]
         same = np.abs(np.round(v * scale) / scale - v) <= 1e-12 * np.abs(v)
     # the fewest digits that give each value back (MAX_DIGITS where none does)
     digits = np.where(same.any(axis=0), np.argmax(same, axis=0) + 1, MAX_DIGITS)
-    top = float(np.floor(np.log10(np.max(np.abs(v)))))
-    return float(10.0 ** (top - int(digits.max()) + 1))
+    return np.array([10.0 ** (float(np.floor(np.log10(np.max(np.abs(v[:, j])))))
+                              - int(digits[:, j].max()) + 1) for j in range(v.shape[1])])
 
 
 def _quantised(changes: np.ndarray, counted: np.ndarray) -> bool:
@@ -185,7 +190,7 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
     finite = np.isfinite(x)
     if not finite.any():
         return None
-    quantum = np.array([_quantum(x[:, j]) for j in range(x.shape[1])])
+    quantum = _quanta(x)
     tol = ROUND_STEPS * quantum
     with np.errstate(invalid="ignore"):
         changes = np.abs(np.diff(x, axis=0))
