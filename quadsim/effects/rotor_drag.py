@@ -118,20 +118,11 @@ class RotorDrag(EffectBase):
     def loads(self, ctx):
         """The sums over rotors of :func:`rotor_drag_forces` and of their torques, through
         sums of rotor speeds (module doc): the same loads without the per-rotor (B, R, 3)
-        arrays. With a ``ctx.flight_memo`` (the gap fits, which evaluate this thousands of
-        times per flight at other rotor speeds on one flight's motion) the loads are the
-        rotor speeds times the loads per unit speed (:meth:`_per_speed`, kept): the same
-        sums, each rotor's term formed before the sum over rotors (round-off apart)."""
+        arrays (the gap fits evaluate this thousands of times per flight)."""
         c, k = self.coefficient, self.axial_coefficient
-        speed = np.asarray(ctx.rotor_speed, dtype=float)
-        batch, rotors = speed.shape
-        loads = EffectLoads.neutral(batch, rotors)
-        if ctx.flight_memo is not None:
-            both = np.einsum("bi,bij->bj", speed, self._per_speed(ctx, c, k))
-            loads.force_world, loads.torque_body = both[:, :3], both[:, 3:]
-            return loads
         air_body, axes, arms, lever, along, turn, reach, air_rolled, rate_rolled = \
-            self._geometry(ctx)[:9]
+            self._geometry(ctx)
+        speed = np.asarray(ctx.rotor_speed, dtype=float)
         rate = np.asarray(ctx.body_rate, dtype=float)
         axial = speed * along                                 # p_i = Omega_i (u_i . a_i)
         moment = speed @ arms                                 # S, (B, 3)
@@ -143,46 +134,11 @@ class RotorDrag(EffectBase):
         torque = (-c * (cross_rolled(moment_rolled, air_rolled)
                         + rate * (speed @ reach)[:, None] - spin)
                   + (c - k) * (axial @ lever))
+        batch, rotors = speed.shape
+        loads = EffectLoads.neutral(batch, rotors)
         loads.force_world = ctx.to_world(force)
         loads.torque_body = torque
         return loads
-
-    #: loads per unit rotor speed kept per geometry entry (:meth:`_per_speed`): the
-    #: coefficients a fit's last evaluations used
-    KEPT_PER_SPEED = 4
-
-    def _per_speed(self, ctx, c: float, k: float) -> np.ndarray:
-        """(B, R, 6): rotor i's world-frame force and body-frame torque per rad/s of its
-        speed (module doc, the terms of the sums over rotors), ``-c P_i + (c - k) Q_i`` with
-        ``P_i`` the in-plane parts (v + w x R_i turned to the world; R_i x v + w |R_i|^2 -
-        (w . R_i) R_i) and ``Q_i`` the axial ones ((u_i . a_i) a_i turned to the world;
-        (u_i . a_i) R_i x a_i), kept with the flight's geometry (:meth:`_geometry`) per
-        coefficients (the last :data:`KEPT_PER_SPEED`)."""
-        geometry = self._geometry(ctx)
-        air_body, axes, arms, lever, along, turn, reach = geometry[:7]
-        kept = geometry[9]
-        hit = kept.get((c, k))
-        if hit is not None:
-            return hit
-        parts = kept.get("parts")
-        if parts is None:
-            rate = np.asarray(ctx.body_rate, dtype=float)
-            rot = ctx.rotmat()
-            in_plane = np.empty((len(air_body), len(axes), 6))
-            in_plane[:, :, :3] = np.einsum("bij,brj->bri", rot, air_body[:, None, :]
-                                           + np.cross(rate[:, None, :], arms[None]))
-            in_plane[:, :, 3:] = (np.cross(arms[None], air_body[:, None, :])
-                                  + rate[:, None, :] * reach[None, :, None]
-                                  - turn[:, :, None] * arms[None])
-            axial = np.empty_like(in_plane)
-            axial[:, :, :3] = along[:, :, None] * np.einsum("bij,rj->bri", rot, axes)
-            axial[:, :, 3:] = along[:, :, None] * lever[None]
-            parts = kept["parts"] = (in_plane, axial)
-        value = -c * parts[0] + (c - k) * parts[1]
-        if len(kept) > RotorDrag.KEPT_PER_SPEED:
-            del kept[next(key for key in kept if key != "parts")]
-        kept[(c, k)] = value
-        return value
 
     @staticmethod
     def _geometry(ctx) -> tuple:
@@ -211,8 +167,7 @@ class RotorDrag(EffectBase):
         rate = np.asarray(ctx.body_rate, dtype=float)
         lever = cross_rolled(rolled(arms), rolled(axes))      # R_i x a_i, (R, 3)
         value = (air_body, axes, arms, lever, air_body @ axes.T + rate @ lever.T,
-                 rate @ arms.T, np.sum(arms ** 2, axis=1), rolled(air_body), rolled(rate),
-                 {})     # the loads per unit speed, per coefficients (:meth:`_per_speed`)
+                 rate @ arms.T, np.sum(arms ** 2, axis=1), rolled(air_body), rolled(rate))
         if store is not None:
             if len(store) >= RotorDrag.KEPT_GEOMETRY:
                 del store[next(iter(store))]
