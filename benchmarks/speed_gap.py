@@ -34,12 +34,15 @@ where the CPU goes, not a second measurement of the total.
 ``--parts`` instead times the weighing's parts (the references' self-check and the judged
 flights' weighing) inside one fresh process of the 26-flight command: the residual
 evaluations (``quadsim.gap.evidence.flight_residual``, each one the model evaluated; the
-residuals kept as a fit's last point are not counted) and the linear algebra after them
-(the marginal's profile and one-pass cost, the linear steps, the Laplace evidence, the
-marginals' factorisations), each part's CPU (``time.process_time``) with what it calls among
-the others apart, and how many calls; with ``--against`` the same for both checkouts, one
-after the other. Steadier than the whole command's CPU on a loaded machine: the evaluation
-count does not move with the load at all.
+residuals kept as a fit's last point are not counted) with their own parts apart (the rotor
+speeds read at a delay not read before, the effects' loads, the rotor channel), the linear
+algebra after them (the marginal's profile and one-pass cost, the linear steps, the Laplace
+evidence, the marginals' factorisations) and the rest of the weighing (each flight's
+``weigh_flight`` and evaluate calls' own), each part's CPU (``time.process_time``) with what
+it calls among the others apart, and how many calls: the parts add up to the weighing's
+CPU. With ``--against`` the same for both checkouts, one after the other. Steadier than the
+whole command's CPU on a loaded machine: the evaluation count does not move with the load
+at all.
 
 Cold and warm: the command keeps the references' loading, calibration and self-check in a
 cache folder (``quadsim.gap.cache``, on by default). Every timed run here gets its own fresh
@@ -268,31 +271,50 @@ def _timed_in_fresh_process(code: str, tag: str, flights: list[Path], references
 
 
 #: (module, class or None, function, part) the weighing's part timer wraps
-#: (:func:`weighing_parts`); a name a checkout lacks is left out
-PARTS = (("quadsim.gap.evidence", None, "flight_residual", "residual evaluations"),
+#: (:func:`weighing_parts`); a name a checkout lacks is left out. A class named with a
+#: trailing ``+`` stands for each of its subclasses that defines the function itself (the
+#: effects' own ``loads``). The residual evaluations' own parts come first: the rotor speeds
+#: read at a delay (:func:`quadsim.gap.reference.read_later`, a Fourier shift per delay
+#: not read before on the flight), the effects' loads and the rotor channel; "residual
+#: evaluations" is the rest of an evaluation (the model wrench put together, the measured
+#: wrench, the weighting, the memo)
+PARTS = (("quadsim.gap.reference", None, "read_later", "rotor speeds read at a delay"),
+         ("quadsim.effects.base", "EffectBase+", "loads", "effects' loads"),
+         ("quadsim.gap.fitting", None, "rotor_residual", "the rotor channel"),
+         ("quadsim.gap.evidence", None, "flight_residual", "residual evaluations"),
          ("quadsim.gap.evidence", "Marginal", "_profile", "profiles over the shared columns"),
          ("quadsim.gap.evidence", "Marginal", "cost", "one-pass profiled costs"),
          ("quadsim.gap.evidence", None, "linear_step", "linear steps"),
          ("quadsim.gap.evidence", None, "laplace", "Laplace evidence"),
          ("quadsim.gap.evidence", "Marginal", "__init__", "marginals factored"),
-         ("quadsim.gap.evidence", None, "evaluate", "the rest of the weighing"))
+         ("quadsim.gap.evidence", None, "evaluate", "the rest of the weighing"),
+         ("quadsim.gap.diagnose", None, "weigh_flight", "the rest of the weighing"),
+         ("quadsim.gap.diagnose", None, "refined_rows", "the rest of the weighing"))
 
 
 def weighing_parts(argv: list[str]) -> dict:
     """{part: [CPU s, calls]} of :data:`PARTS` while ``python -m quadsim.gap ARGV`` runs in
     this process: each part's ``time.process_time`` without the time of the other parts it
     calls (the residual evaluations inside a linear step count as evaluations), so the parts
-    add up to the weighing's CPU; "the rest of the weighing" is the evaluate calls' own."""
+    add up to the weighing's CPU; "the rest of the weighing" is the weighings' own (each
+    flight's :func:`~quadsim.gap.diagnose.weigh_flight`, the evaluate calls in it and the
+    self-check's refined rows: aligning, placing, the explanations, the screen's logic). A
+    part outside :mod:`quadsim.gap.evidence` and :mod:`quadsim.gap.diagnose` (the rotor speeds
+    read at a delay, the effects'
+    loads, the rotor channel: the calibration and the log checks call them too) counts only
+    inside another part."""
     import functools
     import importlib
 
     spent: dict = {}
     inner: list = []
 
-    def wrap(owner, name, label):
+    def wrap(owner, name, label, nested=False):
         original = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name)
 
         def timed(*args, _original=original, _label=label, **kwargs):
+            if nested and not inner:        # outside the weighing (the calibration's)
+                return _original(*args, **kwargs)
             begin = time.process_time()
             inner.append(0.0)
             try:
@@ -308,12 +330,23 @@ def weighing_parts(argv: list[str]) -> dict:
 
         setattr(owner, name, functools.wraps(original)(timed))
 
+    def subclasses(cls):
+        for sub in cls.__subclasses__():
+            yield sub
+            yield from subclasses(sub)
+
+    importlib.import_module("quadsim.gap.fitting")       # every effect class defined
     for module, cls, name, label in PARTS:
         owner = importlib.import_module(module)
-        owner = getattr(owner, cls) if cls else owner
-        if (owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
-                ) is not None:
-            wrap(owner, name, label)
+        if cls and cls.endswith("+"):      # each subclass that defines it itself
+            owners = list(dict.fromkeys(subclasses(getattr(owner, cls[:-1]))))
+        else:
+            owners = [getattr(owner, cls) if cls else owner]
+        for owner in owners:
+            if (owner.__dict__.get(name) if isinstance(owner, type)
+                    else getattr(owner, name, None)) is not None:
+                wrap(owner, name, label,
+                     nested=module not in ("quadsim.gap.evidence", "quadsim.gap.diagnose"))
     main_module = importlib.import_module("quadsim.gap.__main__")
     try:
         main_module.main(argv)
@@ -421,7 +454,7 @@ def main(argv: list[str] | None = None) -> int:
         roots = ([("against", args.against.resolve())] if args.against is not None else []
                  ) + [("this", ROOT)]
         found = {which: time_parts(mixed, nominal, root) for which, root in roots}
-        labels = [label for *_, label in PARTS]
+        labels = list(dict.fromkeys(label for *_, label in PARTS))
         print("\n| part | " + " | ".join(f"{root.name} CPU s (calls)" for _, root in roots)
               + " |\n|---|" + "---:|" * len(roots))
         for label in labels + ["total"]:

@@ -54,3 +54,52 @@ def test_long_skips_without_the_nano_drone_runs(tmp_path, capsys):
     assert capsys.readouterr().out.startswith("skipped:")
     assert all(name.endswith("_run4") for name in speed_gap.NANO_RUNS)
     assert speed_gap.NANO_RUNS[0].startswith("square") and speed_gap.NANO_MODEL.is_file()
+
+
+def test_weighing_parts_count_the_nested_parts_inside_the_weighing_only(monkeypatch):
+    """--parts: a part outside the evidence and the diagnosis (the rotor speeds read at a
+    delay, the effects' loads, the rotor channel) counts only inside another part (the
+    calibration reads them too); "EffectBase+" stands for every effect class's own loads;
+    the weighings' own time is "the rest of the weighing"."""
+    import importlib
+
+    from quadsim.effects.base import EffectBase
+    from quadsim.gap import reference
+
+    diagnose = importlib.import_module("quadsim.gap.diagnose")
+    cli = importlib.import_module("quadsim.gap.__main__")
+    importlib.import_module("quadsim.gap.fitting")
+
+    def subclasses(cls):
+        for sub in cls.__subclasses__():
+            yield sub
+            yield from subclasses(sub)
+
+    # every attribute the timer wraps is put back after the test
+    for module, cls, name, _ in speed_gap.PARTS:
+        owner = importlib.import_module(module)
+        owners = (list(subclasses(getattr(owner, cls[:-1]))) if cls and cls.endswith("+")
+                  else [getattr(owner, cls) if cls else owner])
+        for each in owners:
+            kept = each.__dict__.get(name) if isinstance(each, type) else getattr(
+                each, name, None)
+            if kept is not None:
+                monkeypatch.setattr(each, name, kept)
+    t = np.arange(64) * 0.01
+    x = np.sin(t)[:, None]
+
+    def weigh(*args, **kwargs):             # one flight's weighing: one read at a delay
+        return reference.read_later(t, x, 0.003)
+
+    def main(argv):
+        reference.read_later(t, x, 0.002)   # outside the weighing: not counted
+        diagnose.weigh_flight()
+
+    monkeypatch.setattr(diagnose, "weigh_flight", weigh)
+    monkeypatch.setattr(cli, "main", main)
+    spent = speed_gap.weighing_parts([])
+    assert spent["rotor speeds read at a delay"][1] == 1
+    assert spent["the rest of the weighing"][1] == 1
+    wrapped = [cls for cls in subclasses(EffectBase) if "loads" in cls.__dict__
+               and hasattr(cls.__dict__["loads"], "__wrapped__")]
+    assert any(cls.__name__ == "RotorDrag" for cls in wrapped)
