@@ -249,7 +249,10 @@ def test_a_nominal_flight_far_below_ten_plain_references_is_not_named():
     the references' typical level. The rule below the references alone: no_significant_gap
     76 %, not sure; with the placed model holding the shared values where the references do
     not measure their trend (``reference.Trend.measured``) no reading earns there:
-    no_significant_gap 99 %. Either way no name, and "not sure" said wherever it is tentative."""
+    no_significant_gap 99 %; outside their envelope no difference only as far as the data
+    carry it (``judge.sure_null``: thrust_mismatch's interval reaches beyond the references'
+    band): 73 %, not sure, more than half the weight carried. Either way no name, and "not
+    sure" said wherever it is tentative."""
     from quadsim.core.errors import QuadsimWarning
     from quadsim.gap import diagnose_per_flight
     from quadsim.logs.flightlog import load_log
@@ -261,9 +264,10 @@ def test_a_nominal_flight_far_below_ten_plain_references_is_not_named():
         flights = [load_log(DATA / "nominal" / "flight_03.csv.gz")]
         result = diagnose_per_flight(flights, refs, load_params("crazyflie21"))
     entry = result.flights[0]
-    assert entry.outcome == "no_significant_gap" and entry.probability >= 0.75, entry.answer
+    assert entry.outcome == "no_significant_gap" and entry.probability > 0.5, entry.answer
     assert not entry.tentative or ("need not shrink" in entry.answer
-                                   and "not sure" in entry.answer), entry.answer
+                                   and "not sure" in entry.answer) or (
+        "Not sure: flown beyond the reference flights" in entry.answer), entry.answer
 
 
 IMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "crazyflie21_imu_cmd"

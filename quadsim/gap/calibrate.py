@@ -186,6 +186,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import norm
 
 from ..core.errors import InputError, ModelError
 from ..effects.base import EffectSet
@@ -230,7 +231,7 @@ from .residual import load_exponent, measured_wrench, min_time_constant
 
 __all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
            "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
-           "against_text", "leave_one_out", "negligible", "placed", "self_check_of",
+           "against_text", "band_share", "leave_one_out", "negligible", "placed", "self_check_of",
            "settled_self_check", "spreads", "to_refine",
            "FD_STEP",
            "MAX_SHIFT_S", "SHARED", "VBAT_TESTED", "Reference", "aligned", "bounded", "calibrate",
@@ -476,6 +477,42 @@ def negligible(ev, check: SelfCheck | None) -> bool:
         if abs(ev.values[key] - s.mean) - _interval(ev, key, s) > PRACTICAL_Z * s.sd:
             return False
     return compared
+
+
+def band_share(ev, check: SelfCheck | None) -> float:
+    """The posterior probability (0-1) that reading ``ev`` (an Evidence) lies within the
+    references' band of the same reading: for each of its own determined parameters with a
+    spread on the references, the mass of its posterior N(v, sd_post^2 + se_mean^2) (the
+    spread :func:`negligible`'s interval is 1.96 of) inside mean +- :data:`PRACTICAL_Z` sd,
+    multiplied over the parameters (as if independent); 1.0 where :func:`negligible` has
+    nothing to compare with (it then says False: the statistical rule alone).
+
+    What it is for: :func:`negligible` calls a reading no difference that matters where its
+    95 % interval does not lie beyond the band, which includes a reading whose interval is
+    wider than the band and reaches beyond it: the data do not tell whether it lies within
+    (an "indeterminate" reading; equivalence needs the interval inside the band: Schuirmann's
+    two one-sided tests, Kruschke's region of practical equivalence). This share is how much
+    of such a reading's weight the data carry as "within the band"
+    (:func:`quadsim.gap.judge.sure_null`)."""
+    if check is None or ev.name == "no_difference":
+        return 1.0
+    spread = check.spreads.get((ev.name, ev.explanation.variant))
+    if not spread:
+        return 1.0
+    share = 1.0
+    for key, ok in ev.determined.items():
+        if not ok or not _own(key) or key not in spread:
+            continue
+        s = spread[key]
+        scale = float(np.hypot(ev.post_sd[key], s.mean_se))
+        if scale <= 0:
+            inside = abs(ev.values[key] - s.mean) <= PRACTICAL_Z * s.sd
+            share *= float(inside)
+            continue
+        hi = (s.mean + PRACTICAL_Z * s.sd - ev.values[key]) / scale
+        lo = (s.mean - PRACTICAL_Z * s.sd - ev.values[key]) / scale
+        share *= float(max(0.0, norm.cdf(hi) - norm.cdf(lo)))
+    return share
 
 
 def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:

@@ -245,7 +245,7 @@ from ..core.frames import quat_conjugate, quat_multiply
 from ..effects.base import EffectSet
 from ..vehicle.params import VehicleParams
 from . import fitting
-from .calibrate import NUISANCE, against_text, negligible, placed
+from .calibrate import NUISANCE, against_text, band_share, negligible, placed
 from .fitting import (
     Candidate,
     candidate_plausibility,
@@ -282,7 +282,9 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "judge_heldout",
            "grown_lack", "overdispersion", "lack_of_fit", "material", "mean_squares",
            "MIN_REMAINDER_REFERENCES",
-           "negligible_at", "outcome_of", "plausible", "posterior", "rank", "reading_name",
+           "negligible_at", "outcome_of", "sure_null", "null_members", "band_share_at",
+           "beyond_envelope",
+           "band_words", "plausible", "posterior", "rank", "reading_name",
            "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
            "training_lack", "alone",
@@ -910,16 +912,11 @@ def posterior(rows, negligible=None) -> list[tuple[str, float, object]]:
     significance, :func:`quadsim.gap.calibrate.negligible`): its weight counts as "no
     difference", as an undetermined reading's does."""
     groups: dict[str, list] = {}
-    for ev in rows:
-        key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
-        if key != "no_difference" and negligible is not None and negligible(ev):
-            key = "no_difference"
+    weights: dict[str, list] = {}
+    for key, log_w, ev in _weighed(rows, negligible):
         groups.setdefault(key, []).append(ev)
-    prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
-    # a log evidence that is not a number weighs nothing (-inf), never the whole posterior
-    logs = {k: _log_sum_exp([(e.log_z if not np.isnan(e.log_z) else -np.inf)
-                             + (prior_null if e.name == "no_difference" else 0.0)
-                             for e in v]) for k, v in groups.items()}
+        weights.setdefault(key, []).append(log_w)
+    logs = {k: _log_sum_exp(v) for k, v in weights.items()}
     total = _log_sum_exp(list(logs.values()))
     out = [(k, float(np.exp(logs[k] - total)),
             max(groups[k], key=lambda e: (e.name == k, e.log_z))) for k in groups]
@@ -935,6 +932,54 @@ def _log_sum_exp(values: list) -> np.float64:
     if len(values) == 1 and np.isfinite(values[0]):
         return np.float64(values[0])
     return logsumexp(values)
+
+
+def _weighed(rows, negligible=None) -> list[tuple[str, float, object]]:
+    """(group, log weight, Evidence) of each row of :func:`posterior`: its group (its name,
+    or "no difference" where it determines nothing or is ``negligible``) and its log
+    evidence with the null's prior (a log evidence that is not a number weighs nothing,
+    -inf, never the whole posterior)."""
+    prior_null = np.log(max(1, sum(1 for k in {e.name for e in rows} if k != "no_difference")))
+    out = []
+    for ev in rows:
+        key = ev.name if any(ev.determined.values()) or not ev.determined else "no_difference"
+        if key != "no_difference" and negligible is not None and negligible(ev):
+            key = "no_difference"
+        out.append((key, (ev.log_z if not np.isnan(ev.log_z) else -np.inf)
+                    + (prior_null if ev.name == "no_difference" else 0.0), ev))
+    return out
+
+
+def sure_null(rows, negligible, share) -> float:
+    """The share (0-1) of :func:`posterior`'s "no difference" weight that the data carry as
+    no difference: each row of that group weighs in by its own evidence times ``share(ev)``,
+    1 for the "no difference" row itself and for a reading that determines nothing, for a
+    reading counted there as ``negligible`` the probability that it lies within the
+    references' band (:func:`quadsim.gap.calibrate.band_share`). 1.0 where the group is
+    empty or weighs nothing.
+
+    Why: practical significance (:func:`quadsim.gap.calibrate.negligible`) counts a reading
+    as no difference unless its interval lies beyond the references' band, so a reading
+    whose interval is wider than the band counts in full though the data cannot tell
+    whether it lies within. Within the references' envelope their self-check vouches for
+    that: each reference, judged by the same rule against the others, comes out as no
+    difference. Beyond it nothing does (:func:`judge` applies this there only)."""
+    members = null_members(rows, negligible, share)
+    return float(np.clip(sum(w * p for w, p, _ in members), 0.0, 1.0)) if members else 1.0
+
+
+def null_members(rows, negligible, share) -> list[tuple[float, float, object]]:
+    """(weight within the group, share within the references' band, Evidence) of each row
+    :func:`posterior` counts as "no difference" (:func:`sure_null`); [] where the group is
+    empty or weighs nothing."""
+    members = [(log_w, ev) for key, log_w, ev in _weighed(rows, negligible)
+               if key == "no_difference"]
+    logs = np.array([w for w, _ in members], float)
+    if not members or not np.isfinite(logs).any():
+        return []
+    weights = np.exp(logs - logsumexp(logs))
+    return [(float(w), 1.0 if ev.name == "no_difference" or not any(ev.determined.values())
+             else float(share(ev)), ev) for w, (_, ev) in zip(weights, members)]
 
 
 #: the parameter whose reading acts through a logged signal by a law the references did not
@@ -994,6 +1039,39 @@ def negligible_at(ev, check, vbat=None, vbat_ref=None) -> bool:
     ``vbat_ref`` (V): negligible only where it is at every quarter of the flight
     (:func:`at_reference_voltage`)."""
     return all(negligible(e, check) for e in at_reference_voltage(ev, vbat, vbat_ref))
+
+
+def band_share_at(ev, check, vbat=None, vbat_ref=None) -> float:
+    """:func:`quadsim.gap.calibrate.band_share` of reading ``ev`` as :func:`negligible_at`
+    compares it: its smallest over the quarters of the flight (:func:`at_reference_voltage`)."""
+    return min(band_share(e, check) for e in at_reference_voltage(ev, vbat, vbat_ref))
+
+
+def beyond_envelope(reference) -> bool:
+    """Whether the flight ``reference`` is placed at (:func:`quadsim.gap.reference.
+    local_reference`'s ``place``) lies outside the references' envelope (its distance > 0)."""
+    place = getattr(reference, "place", None)
+    return place is not None and float(getattr(place, "distance", 0.0) or 0.0) > 0.0
+
+
+def band_words(rows, check, vbat=None, vbat_ref=None, *, sure: float = 1.0) -> str:
+    """Words for a "no difference" that the data carry only in part beyond the references'
+    envelope (:func:`sure_null`, ``sure`` its share): the readings that take most of the
+    rest (weight times the share outside the references' band), with the share of each
+    within the band."""
+    members = null_members(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref),
+                           lambda ev: band_share_at(ev, check, vbat, vbat_ref))
+    best: dict = {}
+    for w, p, ev in members:
+        if ev.name != "no_difference" and w * (1.0 - p) > best.get(ev.name, (0.0, 1.0))[0]:
+            best[ev.name] = (w * (1.0 - p), p)
+    top = sorted(best.items(), key=lambda kv: -kv[1][0])[:2]
+    which = " and ".join(f"{name} ({100 * p:.0f} % of it within their spread)"
+                         for name, (_, p) in top if _ >= 0.05 * (1.0 - sure))
+    return (" Not sure: flown beyond the reference flights, where their own readings cannot "
+            "vouch that a reading they do not exclude is no difference"
+            + (f": {which} may lie beyond their spread" if which else "")
+            + f"; the data carry {100 * sure:.0f} % of no difference.")
 
 
 def reading_name(key: str, ev) -> str:
@@ -1637,6 +1715,14 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     within, moved = beyond_reach(
         posterior(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref)), reach)
     within = [(k, min(p, cap), ev) for k, p, ev in within]
+    # beyond the references' envelope "no difference" only as far as the data carry it
+    # (sure_null: a reading wider than the references' band is not within it for sure)
+    sure = sure_null(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref),
+                     lambda ev: band_share_at(ev, check, vbat, vbat_ref)) \
+        if beyond_envelope(reference) and within[0][0] == "no_difference" else 1.0
+    unsure_band = sure < 1.0 and within[0][1] * sure < CONFIDENT
+    if sure < 1.0:
+        within[0] = (within[0][0], within[0][1] * sure, within[0][2])
     top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
@@ -1718,8 +1804,10 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     if p_out > 0 and not stand_in:
         words += outside_words(p_out, share, p_top)
     words += grown_words(grown)
+    if unsure_band and not effect:
+        words += band_words(rows, check, vbat, vbat_ref, sure=sure)
     # the no difference a reading's weight went to beyond the reach (1c): not sure
-    unsure_null = not_sure(outcome, moved) or bool(grown)
+    unsure_null = not_sure(outcome, moved) or bool(grown) or (unsure_band and not effect)
     evs = {k: ev for k, _, ev in within}
     said = {k: (p, f, "" if effect and k == top else
                 reading_text(sizes.get(id(evs[k]), evs[k]), reference))
