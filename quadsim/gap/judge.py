@@ -284,7 +284,7 @@ __all__ = ["BANDS_HZ", "HORIZONS_S", "MATERIAL", "MIN_SAMPLES", "SPLITS", "by_ba
            "MIN_REMAINDER_REFERENCES",
            "negligible_at", "outcome_of", "sure_null", "null_members", "band_share_at",
            "beyond_envelope",
-           "band_words", "plausible", "posterior", "rank", "reading_name",
+           "band_words", "NAMED_DOUBT", "plausible", "posterior", "rank", "reading_name",
            "unvouched",
            "reading_text", "remainder", "remainder_of", "placed_slow", "against_reference",
            "training_lack", "alone",
@@ -964,7 +964,11 @@ def sure_null(rows, negligible, share) -> float:
     whether it lies within. Within the references' envelope their self-check vouches for
     that: each reference, judged by the same rule against the others, comes out as no
     difference. Beyond it nothing does (:func:`judge` applies this there only)."""
-    members = null_members(rows, negligible, share)
+    return _carried(null_members(rows, negligible, share))
+
+
+def _carried(members: list) -> float:
+    """:func:`sure_null` of the "no difference" group's :func:`null_members`."""
     return float(np.clip(sum(w * p for w, p, _ in members), 0.0, 1.0)) if members else 1.0
 
 
@@ -1054,20 +1058,25 @@ def beyond_envelope(reference) -> bool:
     return place is not None and float(getattr(place, "distance", 0.0) or 0.0) > 0.0
 
 
-def band_words(rows, check, vbat=None, vbat_ref=None, *, sure: float = 1.0) -> str:
+#: a reading :func:`band_words` names takes at least this share of what the data do not carry
+#: as no difference (1 - ``sure``): words only, so that a reading holding a sliver of the
+#: doubt is not listed as its cause
+NAMED_DOUBT = 0.05
+
+
+def band_words(members: list, *, sure: float = 1.0) -> str:
     """Words for a "no difference" that the data carry only in part beyond the references'
-    envelope (:func:`sure_null`, ``sure`` its share): the readings that take most of the
-    rest (weight times the share outside the references' band), with the share of each
-    within the band."""
-    members = null_members(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref),
-                           lambda ev: band_share_at(ev, check, vbat, vbat_ref))
+    envelope (``members``: the group's :func:`null_members`; ``sure``: :func:`sure_null`'s
+    share): the (at most two) readings that take most of the rest (weight times the share
+    outside the references' band, at least :data:`NAMED_DOUBT` of 1 - ``sure``), with the
+    share of each within the band."""
     best: dict = {}
     for w, p, ev in members:
         if ev.name != "no_difference" and w * (1.0 - p) > best.get(ev.name, (0.0, 1.0))[0]:
             best[ev.name] = (w * (1.0 - p), p)
     top = sorted(best.items(), key=lambda kv: -kv[1][0])[:2]
     which = " and ".join(f"{name} ({100 * p:.0f} % of it within their spread)"
-                         for name, (_, p) in top if _ >= 0.05 * (1.0 - sure))
+                         for name, (doubt, p) in top if doubt >= NAMED_DOUBT * (1.0 - sure))
     return (" Not sure: flown beyond the reference flights, where their own readings cannot "
             "vouch that a reading they do not exclude is no difference"
             + (f": {which} may lie beyond their spread" if which else "")
@@ -1717,9 +1726,10 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     within = [(k, min(p, cap), ev) for k, p, ev in within]
     # beyond the references' envelope "no difference" only as far as the data carry it
     # (sure_null: a reading wider than the references' band is not within it for sure)
-    sure = sure_null(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref),
-                     lambda ev: band_share_at(ev, check, vbat, vbat_ref)) \
-        if beyond_envelope(reference) and within[0][0] == "no_difference" else 1.0
+    members = null_members(rows, lambda ev: negligible_at(ev, check, vbat, vbat_ref),
+                           lambda ev: band_share_at(ev, check, vbat, vbat_ref)) \
+        if beyond_envelope(reference) and within[0][0] == "no_difference" else []
+    sure = _carried(members)
     unsure_band = sure < 1.0 and within[0][1] * sure < CONFIDENT
     if sure < 1.0:
         within[0] = (within[0][0], within[0][1] * sure, within[0][2])
@@ -1805,7 +1815,7 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
         words += outside_words(p_out, share, p_top)
     words += grown_words(grown)
     if unsure_band and not effect:
-        words += band_words(rows, check, vbat, vbat_ref, sure=sure)
+        words += band_words(members, sure=sure)
     # the no difference a reading's weight went to beyond the reach (1c): not sure
     unsure_null = not_sure(outcome, moved) or bool(grown) or (unsure_band and not effect)
     evs = {k: ev for k, _, ev in within}
