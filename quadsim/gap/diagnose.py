@@ -396,8 +396,7 @@ _LOW_PASSED = ("position", "velocity", "accel_world", "body_rate", "body_accel",
 def _anti_alias_sos(stride: int) -> np.ndarray:
     """:func:`decimated`'s filter for ``stride`` (>= 2): the second-order sections of
     ``scipy.signal.butter(4, ANTI_ALIAS / stride, output="sos")``, read-only; designed once
-    per stride (the same numbers each call; the design cost about a third of the filtering on a
-    fit view's few thousand samples)."""
+    per stride (the same numbers each call)."""
     from scipy.signal import butter
 
     sos = butter(4, ANTI_ALIAS / stride, output="sos")
