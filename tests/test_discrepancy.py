@@ -242,7 +242,8 @@ def test_with_fewer_than_five_references_a_name_is_never_confident(cf):
 
 def test_unvouched_says_why_references_cannot_vouch():
     """The one rule of both modes (``judge.unvouched``): no self-check -> the unchecked
-    sentence; a self-check but no discrepancy term -> "Only n reference flights: too few";
+    sentence; a self-check but no discrepancy term on the force and moment channels (none,
+    or the rotor channels' alone) -> "Only n reference flights: too few";
     a self-check that is not clean -> its own sentence; clean with a discrepancy term -> ""."""
     from types import SimpleNamespace
 
@@ -254,9 +255,12 @@ def test_unvouched_says_why_references_cannot_vouch():
     alarmed = SelfCheck(names, ("mass_offset",) * 2 + ("no_significant_gap",) * 4,
                         (("r0.csv", "mass_offset", ("Fz",)), ("r1.csv", "mass_offset", ("Fz",))),
                         {})
-    with_term, without = SimpleNamespace(discrepancy=object()), SimpleNamespace(discrepancy=None)
+    with_term = SimpleNamespace(discrepancy=SimpleNamespace(covers_motion=True))
+    without = SimpleNamespace(discrepancy=None)
+    rotors_only = SimpleNamespace(discrepancy=SimpleNamespace(covers_motion=False))
     assert unvouched(None, with_term) == UNCHECKED_WORDS
     assert unvouched(clean, without) == FEW_WORDS.format(n=6)
+    assert unvouched(clean, rotors_only) == FEW_WORDS.format(n=6)
     assert unvouched(clean, with_term) == ""
     assert not alarmed.clean and unvouched(alarmed, with_term) == alarmed.text()
     assert "disagree with each other on Fz" in unvouched(alarmed, with_term)
@@ -311,3 +315,99 @@ def test_odd_references_only_from_a_clean_set_and_only_confident_alarms():
     assert odd_references(check(["f1", "f2", "f3"], ["f1"])) == ()  # 3 of 20: not clean
     nine = SelfCheck(names[:9], (), (("f1", "mass_offset", ()),), {}, confident=("f1",))
     assert not nine.clean and odd_references(nine) == ()
+
+
+def test_rotor_channels_take_the_command_level_from_the_references_mean():
+    """A map whose slope is off by beta at the references' level: each rotor's residual is
+    beta_k (u_k - u_bar_k) with u_k the command's 0.5 s moving mean. Where the reference
+    model's map is a gain through the origin (``levels``), the term covers the rotor
+    channels with one feature each, its offset the references' mean level (closed form: the
+    mean of the moving means), its centre beta; a flight flown at another level has exactly
+    beta (u - u_bar) taken off its rotor channels. Without ``levels`` (the map a line the
+    references determine), or without commands, no rotor channel is covered."""
+    from quadsim.gap.reference import command_level
+
+    rng = np.random.default_rng(4)
+    betas = np.array([-160.0, -150.0, -170.0, -165.0])      # rad/s per unit command
+    states, resid = [], []
+    for seed in range(5):
+        s = _states(300, 10 + seed)
+        # a level that wanders slowly (manoeuvres), around 0.42 per rotor
+        slow = np.cumsum(rng.normal(0, 0.002, (300, 4)), axis=0)
+        s.command = 0.42 + slow - slow.mean(axis=0) + rng.normal(0, 0.001, 4)
+        states.append(s)
+    level = [command_level(s) for s in states]
+    u_bar = np.concatenate(level).mean(axis=0)
+    for u in level:
+        r = np.zeros((300, 10))
+        r[:, 6:] = (u - u_bar) * betas
+        resid.append(r)
+    assert fit_discrepancy(resid, states).channels == (0, 1, 2)      # no map through 0
+    assert fit_discrepancy(resid, states, levels=(True, False, True)).channels == (
+        0, 1, 2, 6, 8)
+    d = fit_discrepancy(resid, states, levels=(True,) * 4)
+    assert d.channels == (0, 1, 2, 6, 7, 8, 9)
+    assert [d.names[k] for k in range(3, 7)] == [("u_1",), ("u_2",), ("u_3",), ("u_4",)]
+    for k in range(4):
+        assert d.offsets[3 + k] == pytest.approx([u_bar[k]], rel=1e-12)
+        assert d.centre[3 + k] == pytest.approx([betas[k]], rel=1e-9)
+    assert np.allclose(d.offsets[0], 0.0)
+    # a flight flown 0.08 higher: the centre term is beta (u - u_bar) on each rotor
+    heavy = _states(300, 99)
+    heavy.command = np.full((300, 4), 0.50)
+    c = centre_term(heavy, d, 10)
+    assert np.allclose(c[:, 6:], (0.50 - u_bar) * betas, rtol=1e-9)
+    # the moving mean over MAP_WINDOW_S (0.5 s = 50 samples at 100 Hz), edges padded
+    step = _states(300, 5)
+    step.command = np.zeros((300, 4))
+    step.command[150:] = 1.0
+    lv = command_level(step)
+    assert lv[0, 0] == 0.0 and lv[-1, 0] == 1.0 and lv[150, 0] == pytest.approx(0.5, abs=0.011)
+    # without commands the rotor channels are not covered (the features need them)
+    for s in states:
+        s.command = None
+    assert fit_discrepancy(resid, states, levels=(True,) * 4).channels == (0, 1, 2)
+
+
+def test_a_rotor_levels_spread_is_a_random_effect_not_the_noise_of_each_estimate():
+    """Eight references sharing one map slope (-160 rad/s per unit command), each rotor
+    residual with 2 rad/s of white noise on a level that barely moves: their per-flight
+    slopes scatter by their own noise. The predictive variance is
+    max(0, var(beta_j) - mean se_j^2) + var(beta_j) / n (plus the ridge), se_j^2 the
+    least-squares variance s^2 tau / sum(x^2); below the raw scatter x (1 + 1/n) that a
+    force channel's coefficients keep, by the estimates' own noise."""
+    from quadsim.gap.fitting import correlation_time
+    from quadsim.gap.reference import command_level
+
+    rng = np.random.default_rng(8)
+    states, resid = [], []
+    for seed in range(8):
+        s = _states(400, 30 + seed)
+        slow = np.cumsum(rng.normal(0, 0.0005, (400, 4)), axis=0)
+        s.command = 0.42 + slow - slow.mean(axis=0)
+        states.append(s)
+    u_bar = np.concatenate([command_level(s) for s in states]).mean(axis=0)
+    for s in states:
+        r = np.zeros((400, 10))
+        r[:, 6:] = -160.0 * (command_level(s) - u_bar) + rng.normal(0, 2.0, (400, 4))
+        resid.append(r)
+    d = fit_discrepancy(resid, states, levels=(True,) * 4)
+    k = d.channels.index(6)
+    x = [command_level(s)[:, 0] - u_bar[0] for s in states]
+    beta = np.array([xi @ r[:, 6] / (xi @ xi) for xi, r in zip(x, resid)])
+    assert d.coefs[k][:, 0] == pytest.approx(beta, rel=1e-9)
+    se2 = []
+    for xi, r, b in zip(x, resid, beta):
+        e = r[:, 6] - b * xi
+        se2.append(e @ e / (len(e) - 1) * correlation_time(e) / (xi @ xi))
+    var = np.var(beta, ddof=1)
+    want = (max(0.0, var - np.mean(se2)) + var / 8) * (1 + 0.1)
+    got = float(d.factor[k][0, 0] ** 2)
+    assert got == pytest.approx(want, rel=1e-6)
+    # below the raw scatter by the estimates' own noise at least (mean se^2 > 0)
+    assert got <= (var * (1 + 1 / 8) - min(var, np.mean(se2))) * 1.1 + 1e-9
+    # leave one out: the other seven's, by the same rule
+    d7 = d.without(3)
+    var7 = np.var(np.delete(beta, 3), ddof=1)
+    want7 = (max(0.0, var7 - np.mean(np.delete(se2, 3))) + var7 / 7) * 1.1
+    assert float(d7.factor[k][0, 0] ** 2) == pytest.approx(want7, rel=1e-6)

@@ -112,15 +112,20 @@ def test_screened_evidence_gives_the_full_fits_verdict(cf, reference, case):
     assert a["posterior"][0]["name"] == b["posterior"][0]["name"]
     assert a["probability"] == pytest.approx(b["probability"], abs=0.02)
     assert [e.explanation for e in fast] == [e.explanation for e in full]
-    # every reading the answer states: its best variant fitted, not screened, at the same
-    # evidence (a reading below 0.1 can differ by the Occam factor of a value at its bound)
+    # every reading the answer states: its best variant fitted, not screened, at the
+    # evidence the full fit reaches or more (a reading below 0.1 can differ by the Occam
+    # factor of a value at its bound). Not two-sided: the full fit starts at the prior
+    # centre, the refined fit at the screen's step, and where the likelihood has two optima
+    # the refined one may be the higher (the propeller here with the rotor channels' level
+    # term: speed exponent 0.036, log Z -221.0, against the full fit's 0.0008 at its bound,
+    # -228.6, with OpenBLAS on one thread; CHANGELOG.md, "A rotor's command level")
     for reading in b["posterior"]:
         if reading["probability"] < 0.1 or reading["name"] == "no_difference":
             continue
         k = max((i for i, e in enumerate(full) if e.name == reading["name"]),
                 key=lambda i: full[i].log_z)
         assert not fast[k].screened, reading["name"]
-        assert fast[k].log_z == pytest.approx(full[k].log_z, abs=1.0), reading["name"]
+        assert fast[k].log_z >= full[k].log_z - 1.0, reading["name"]
 
 
 def _lag_columns(cf, reference):

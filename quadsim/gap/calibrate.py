@@ -227,7 +227,7 @@ from .reference import (  # re-exported: the calibration's public names
     shifted,
     weighted_residual,
 )
-from .residual import load_exponent, measured_wrench, min_time_constant
+from .residual import load_exponent, measured_wrench, min_time_constant, proportional_rotors
 
 __all__ = ["CALIBRATED_SCHEMA", "Calibrated", "code_version", "reference_key",
            "FALSE_ALARM_SHARE", "NUISANCE", "PRACTICAL_Z", "PerFlight", "SelfCheck", "Spread",
@@ -1436,7 +1436,7 @@ def _slope_spread(setup: _Setup, fit) -> tuple[float, bool]:
     effects = cand.effects(theta)
     per_flight = [residuals(s, setup.params, effects, rotor_channel=setup.rotor)
                   for s in setup.states]
-    discrepancy = fit_discrepancy(per_flight, setup.states)
+    discrepancy = fit_discrepancy(per_flight, setup.states, proportional_rotors(setup.params))
     sigma, tau, _ = _noise_model(setup.states, setup.params, setup.rotor, effects,
                                  discrepancy, per_flight=per_flight)
     probe = Reference(setup.params, setup.rotor, cand, theta, np.zeros_like(theta),
@@ -1494,7 +1494,7 @@ def _calibrated(setup: _Setup, cand: Candidate, fit, *, torque_side: bool = True
     states = [views.at(i, shift) for i in range(len(views))]
     per_flight = [residuals(s, params, cand.effects(theta), rotor_channel=rotor)
                   for s in states]
-    discrepancy = fit_discrepancy(per_flight, states)
+    discrepancy = fit_discrepancy(per_flight, states, proportional_rotors(params))
     sigma, tau, log_ms = _noise_model(states, params, rotor, cand.effects(theta), discrepancy,
                                       per_flight=per_flight)
     mean = log_ms.mean(axis=0)

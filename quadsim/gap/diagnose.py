@@ -246,7 +246,14 @@ from .logcheck import (
 from .page import flight_series
 from .reference import centre_term, columns, envelope_summary, fit_discrepancy, local_reference
 from .reference import position as envelope_position
-from .residual import DEFAULT_WINDOW_S, FIT_RATE_HZ, FlightStates, flight_states, joined_states
+from .residual import (
+    DEFAULT_WINDOW_S,
+    FIT_RATE_HZ,
+    FlightStates,
+    flight_states,
+    joined_states,
+    proportional_rotors,
+)
 from .result import Diagnosis, Reading, Series, Verdict
 from .words import (
     across_sessions,
@@ -1267,7 +1274,7 @@ def nominal_reference(train: list, params: VehicleParams, rotor: bool,
     (carried as the shared candidate's ``base``) and never refitted."""
     dt = float(train[0].t[1] - train[0].t[0])
     nominal = [residuals(s, params, list(base), rotor_channel=rotor) for s in train]
-    discrepancy = fit_discrepancy(nominal, train)
+    discrepancy = fit_discrepancy(nominal, train, proportional_rotors(params))
     nominal = [r - centre_term(s, discrepancy, r.shape[1]) for r, s in zip(nominal, train)]
     sigma, tau = noise_model(nominal, dt, noise_floor(params, rotor))
     full = shared_candidate(rotor, False, pose=all(s.pose for s in train))

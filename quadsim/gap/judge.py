@@ -1946,9 +1946,11 @@ def unvouched(check, reference) -> str:
     None where there is none); ``reference``: their :class:`quadsim.gap.reference.Reference`.
 
     - no self-check (fewer than 3 references): :data:`UNCHECKED_WORDS`;
-    - no discrepancy term (``reference.discrepancy`` None: 3 or 4 references, below the 5
-      a force channel's features need): :data:`FEW_WORDS`. Why: without it, a trait every
-      reference shares beyond the library is not modelled, and a flight flown harder than
+    - no discrepancy term on the force and moment channels (``reference.discrepancy`` None
+      or covering the rotor channels only,
+      :attr:`~quadsim.gap.reference.Discrepancy.covers_motion`: 3 or 4 references, below
+      the 5 a force channel's features need): :data:`FEW_WORDS`. Why: without it, a trait
+      every reference shares beyond the library is not modelled, and a flight flown harder than
       they were reads it as its own difference; and a self-check of n references with no
       false alarm bounds their false-alarm share only below 1 - 0.05^(1/n) (95 %): 63 % at
       3, 53 % at 4 (measured on the real flights: docs/gap.md, "How many references";
@@ -1958,7 +1960,8 @@ def unvouched(check, reference) -> str:
     A name against references that cannot vouch is ``tentative`` (both modes)."""
     if check is None:
         return UNCHECKED_WORDS
-    if getattr(reference, "discrepancy", None) is None:
+    disc = getattr(reference, "discrepancy", None)
+    if disc is None or not disc.covers_motion:
         return FEW_WORDS.format(n=len(check.flights))
     return "" if check.clean else check.text()
 

@@ -60,20 +60,41 @@ rad/s; omega_dot its derivative, rad/s^2)::
 - moment channels Mx, My, Mz (N m): phi = (v_b, omega, omega_dot): moments of the air speed
   (rotor flapping, the rotors' drag moment), of the body rate (damping) and of the angular
   acceleration (inertia), on any axis (9 features);
-- rotor-speed channels: none (their residual is the command -> speed map's, which the
-  reference model fits per rotor already).
+- rotor-speed channels rotor_k (rad/s), where the reference model's map for that rotor is
+  a gain through the origin (:func:`quadsim.gap.residual.proportional_rotors`; none
+  elsewhere): phi = u_k - u_bar_k, rotor k's command averaged over
+  :data:`quadsim.gap.residual.MAP_WINDOW_S` (a moving mean: the command's level, not its
+  manoeuvres) less the references' mean of it (1 feature, in the log's command unit).
+  Why: the reference model's static command -> speed map
+  (:func:`quadsim.gap.residual.fit_motor_map`) is a gain through the origin where the
+  references' commands span too narrow a range for a line (a gentle path): its slope at
+  their level is then an assumption (an ideal motor), and a flight flown at another level
+  (heavier, a rotor loaded harder) meets the slope's error,
+  ``(k_true - k_map) (u - u_bar)``, on its rotor channels. Where the map is a line the
+  references determine its slope, and the rotor channels keep no term (with one, the real
+  Crazyflie references' rotor noise scale fell from 12-13 to 7-9 rad/s and flights flown
+  harder than they met the rotor channel's own timing error there: CHANGELOG.md). Measured
+  on the sensor-pipeline source (physical vehicle, 8 references): every flight's rotor
+  residual follows -160 rad/s per unit command of its level (the references' own slopes -150
+  .. -220, a +0.077 mass flight -12 rad/s); on its crazyflie21 vehicle the references fly
+  within 1e-4 of one level and the slope is not determined (their own -2,600 .. +3,800):
+  there the spread lets a flight's level error go as what the references cannot tell.
 
 No constant and no acceleration feature on the force channels: a mass or thrust change is a
 steady force and one proportional to the acceleration, and it must stay the flight's own.
+No constant on the rotor channels either: at the references' level the map is theirs, and
+a speed off it there (a battery's sag, a propeller's load) is the flight's own.
 
 ``beta_bar_c`` is the mean of each reference flight's least-squares coefficients and
 ``Sigma_c`` their between-flight covariance times (1 + 1/n) (what a new flight of the same
-vehicle may show, n references), with a ridge of :data:`RIDGE` times its diagonal (a
-covariance of n flights has rank n - 1 at most). Every explanation's residual is taken
-after ``phi beta_bar`` (:func:`centre_term`) and the flight's own ``beta_c - beta_bar_c``
-is marginalised with ``Sigma_c`` as extra linear columns of the shared parameters' marginal
-(:func:`columns`; :class:`quadsim.gap.evidence.Marginal`): an explanation earns evidence
-only for what this flight shows beyond what its references already show.
+vehicle may show, n references; on a rotor channel the random effect instead, the scatter
+beyond each estimate's own noise plus the mean's uncertainty, :func:`_from_coefs`), with a
+ridge of :data:`RIDGE` times its diagonal (a covariance of n flights has rank n - 1 at
+most). Every explanation's residual is taken after ``phi beta_bar`` (:func:`centre_term`)
+and the flight's own ``beta_c - beta_bar_c`` is marginalised with ``Sigma_c`` as extra
+linear columns of the shared parameters' marginal (:func:`columns`;
+:class:`quadsim.gap.evidence.Marginal`): an explanation earns evidence only for what this
+flight shows beyond what its references already show.
 
 Example::
 
@@ -305,6 +326,7 @@ from ..core.errors import ModelError
 from ..core.frames import rotate_inverse
 from ..vehicle.params import VehicleParams
 from .fitting import Candidate, parameter_bounds, residuals, typical_scales
+from .residual import MAP_WINDOW_S
 
 __all__ = ["moderated_spread", "FORCE_FEATURES", "MOMENT_FEATURES", "RIDGE", "Discrepancy",
            "centre_term", "columns", "features", "fit_discrepancy", "FD_STEP", "LackOfFitBaseline",
@@ -360,13 +382,14 @@ RIDGE = 0.1
 class Discrepancy:
     """The references' systematic residual on flight-state features (module doc).
 
-    ``channels`` (tuple of int): the residual channels the term covers (0..5: Fx..Mz);
+    ``channels`` (tuple of int): the residual channels the term covers (0..5: Fx..Mz, 6..:
+    the rotor speeds, with commands);
     ``names[k]``: channel ``channels[k]``'s feature names; ``centre[k]`` (F_k,): the mean
     coefficient beta_bar (channel unit per feature unit: N s/m, N s^2/m^2, N m s/m, N m s,
-    N m s^2); ``factor[k]`` (F_k, F_k): a lower-triangular L with L Lᵀ = Sigma_c, the
-    coefficients' predictive covariance; ``flights``: how many references it was fitted on;
-    ``explained`` (C,): the share of each channel's reference mean square the centre
-    explains (0..1; 0 for channels it does not cover)."""
+    N m s^2; rad/s per command unit); ``factor[k]`` (F_k, F_k): a lower-triangular L with L
+    Lᵀ = Sigma_c, the coefficients' predictive covariance; ``flights``: how many references
+    it was fitted on; ``explained`` (C,): the share of each channel's reference mean square
+    the centre explains (0..1; 0 for channels it does not cover)."""
 
     channels: tuple
     names: tuple
@@ -377,6 +400,12 @@ class Discrepancy:
     #: per covered channel, each reference flight's coefficients (n, F_k): what
     #: :meth:`without` leaves one of out
     coefs: tuple = ()
+    #: per covered channel (F_k,): the value each feature is taken from (phi - offset; the
+    #: references' mean command level on a rotor channel, 0 elsewhere); () for none
+    offsets: tuple = ()
+    #: per covered channel, each reference's coefficient variances from its own noise
+    #: (n, F_k) where the covariance is a random effect's (:func:`_from_coefs`), else None
+    noise: tuple = ()
 
     def without(self, j: int) -> Discrepancy | None:
         """The term fitted on every reference but the ``j``-th (its coefficients left out;
@@ -388,7 +417,16 @@ class Discrepancy:
         if not self.coefs or len(self.coefs[0]) - 1 < 2:
             return None
         return _from_coefs(self.channels, self.names,
-                           [np.delete(c, j, axis=0) for c in self.coefs], self.explained)
+                           [np.delete(c, j, axis=0) for c in self.coefs], self.explained,
+                           self.offsets, tuple(None if v is None else np.delete(v, j, axis=0)
+                                               for v in self.noise))
+
+    @property
+    def covers_motion(self) -> bool:
+        """Whether the term covers a force or moment channel (0..5): what the references
+        share of the vehicle's motion, not only of its rotor channels (those take 2
+        references, a force channel 5)."""
+        return any(c < 6 for c in self.channels)
 
     @property
     def size(self) -> int:
@@ -411,7 +449,9 @@ class Discrepancy:
 def features(states) -> dict[str, np.ndarray]:
     """Feature name -> (N,) values on ``states`` (:class:`quadsim.gap.residual.FlightStates`):
     the module doc's features, v_b = R(q)ᵀ v (ground velocity in body axes; the references'
-    wind is small against the speeds flown)."""
+    wind is small against the speeds flown); with commands, ``u_k`` (k = 1..R): rotor k's
+    command level, its moving mean over :data:`quadsim.gap.residual.MAP_WINDOW_S` (edges
+    padded with the nearest sample), uncentred (:class:`Discrepancy` keeps the offset)."""
     vb = rotate_inverse(states.quat, states.velocity)
     speed = np.linalg.norm(vb, axis=1)
     out = {}
@@ -420,56 +460,94 @@ def features(states) -> dict[str, np.ndarray]:
         out[f"|v|v_{axis}"] = speed * vb[:, i]
         out[f"w_{axis}"] = states.body_rate[:, i]
         out[f"wd_{axis}"] = states.body_accel[:, i]
+    if getattr(states, "command", None) is not None:
+        for k, level in enumerate(command_level(states).T):
+            out[f"u_{k + 1}"] = level
     return out
 
 
-def _design(states, names: tuple, memo: dict | None = None) -> np.ndarray:
-    """(N, F) features ``names`` on ``states``, kept in ``memo`` per motion arrays."""
+def command_level(states) -> np.ndarray:
+    """(N, R) each rotor's command averaged over :data:`quadsim.gap.residual.MAP_WINDOW_S`
+    (a centred moving mean; the window at least one sample, the edges padded with the
+    nearest sample): the level the static map is read at, without the manoeuvres that the
+    rotor channel's dynamics (motor lag, timing) read."""
+    from scipy.ndimage import uniform_filter1d
+
+    command = np.asarray(states.command, dtype=float)
+    dt = float(states.t[1] - states.t[0]) if len(states.t) > 1 else MAP_WINDOW_S
+    width = max(1, int(round(MAP_WINDOW_S / dt)))
+    return uniform_filter1d(command, width, axis=0, mode="nearest")
+
+
+def _design(states, names: tuple, memo: dict | None = None,
+            offset: np.ndarray | None = None) -> np.ndarray:
+    """(N, F) features ``names`` on ``states`` less ``offset`` (F,) (None: none), kept in
+    ``memo`` per motion and command arrays."""
     if memo is None:
         f = features(states)
-        return np.column_stack([f[n] for n in names])
-    key = ("discrepancy.features", id(states.velocity), id(states.body_accel), names)
+        x = np.column_stack([f[n] for n in names])
+        return x if offset is None else x - offset
+    command = getattr(states, "command", None)
+    key = ("discrepancy.features", id(states.velocity), id(states.body_accel),
+           id(command), names, None if offset is None else offset.tobytes())
     hit = memo.get(key)
-    if hit is not None and hit[0] is states.velocity and hit[1] is states.body_accel:
-        return hit[2]
+    if hit is not None and hit[0] is states.velocity and hit[1] is states.body_accel \
+            and hit[2] is command:
+        return hit[3]
     f = features(states)
     x = np.column_stack([f[n] for n in names])
-    memo[key] = (states.velocity, states.body_accel, x)
+    if offset is not None:
+        x = x - offset
+    memo[key] = (states.velocity, states.body_accel, command, x)
     return x
 
 
 def channel_features(channel: int) -> tuple:
-    """The feature names of residual channel ``channel`` (0..2 forces, 3..5 moments); ()
-    for a rotor-speed channel."""
+    """The feature names of residual channel ``channel`` (0..2 forces, 3..5 moments, 6 on
+    rotor k = channel - 5's speed: its command level ``u_k``)."""
     if channel < 3:
         return tuple(n.replace("#", "xyz"[channel]) for n in FORCE_FEATURES)
     if channel < 6:
         return MOMENT_FEATURES
-    return ()
+    return (f"u_{channel - 5}",)
 
 
-def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
+def fit_discrepancy(residual_list, states_list, levels=()) -> Discrepancy | None:
     """The :class:`Discrepancy` of the reference model's residuals ``residual_list`` (each
     (N_j, C), SI) on the reference ``states_list`` (module doc). A channel with F features
     is covered from F + 1 flights on (below, its coefficients' between-flight covariance is
-    not of full rank: the force channels from 5 references, the moments from 10); None
-    where no channel is."""
+    not of full rank: the force channels from 5 references, the moments from 10, a rotor's
+    level from 2); None where no channel is. ``levels`` (per rotor, bool): whether rotor
+    k's channel takes its command level as a feature (every flight logging commands):
+    where the reference model's map for it is a gain through the origin
+    (:func:`quadsim.gap.residual.proportional_rotors`), its slope at the references' level
+    an assumption, not the data's."""
     n = len(states_list)
     if n < 3:
         return None
     chans = residual_list[0].shape[1]
-    channels, names, coefs_all = [], [], []
+    commands = all(getattr(s, "command", None) is not None for s in states_list)
+    channels, names, coefs_all, offsets, noise = [], [], [], [], []
     explained = np.zeros(chans)
-    for c in range(min(chans, 6)):
+    for c in range(chans if commands else min(chans, 6)):
+        if c >= 6 and not (c - 6 < len(levels) and levels[c - 6]):
+            continue                # that rotor's map slope is the data's (or no level)
         feats = channel_features(c)
         if n < len(feats) + 1:      # a covariance of F coefficients needs F + 1 flights
             continue
-        designs = [_design(s, feats) for s in states_list]
+        offset = None
+        if c >= 6:                  # a rotor's level: taken from the references' mean
+            offset = np.mean(np.concatenate([_design(s, feats) for s in states_list]),
+                             axis=0)
+        designs = [_design(s, feats, offset=offset) for s in states_list]
         coefs = np.array([np.linalg.lstsq(x, r[:, c], rcond=None)[0]
                           for x, r in zip(designs, residual_list)])
         channels.append(c)
         names.append(feats)
         coefs_all.append(coefs)
+        offsets.append(np.zeros(len(feats)) if offset is None else offset)
+        noise.append(None if offset is None else np.array(
+            [own_noise(x, r[:, c], b) for x, r, b in zip(designs, residual_list, coefs)]))
         centre = coefs.mean(axis=0)
         before = sum(float(np.sum(r[:, c] ** 2)) for r in residual_list)
         after = sum(float(np.sum((r[:, c] - x @ centre) ** 2))
@@ -477,22 +555,59 @@ def fit_discrepancy(residual_list, states_list) -> Discrepancy | None:
         explained[c] = max(0.0, 1.0 - after / before) if before > 0 else 0.0
     if not channels:
         return None
-    return _from_coefs(tuple(channels), tuple(names), coefs_all, explained)
+    return _from_coefs(tuple(channels), tuple(names), coefs_all, explained, tuple(offsets),
+                       tuple(noise))
 
 
-def _from_coefs(channels: tuple, names: tuple, coefs_all: list, explained: np.ndarray
-                ) -> Discrepancy:
+def own_noise(x: np.ndarray, r: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """(F,) the variances of one flight's least-squares coefficients ``coef`` of ``r`` (N,)
+    on the design ``x`` (N, F) from its own noise: ``s^2 tau diag((xᵀx)^-1)``, s^2 the
+    residual's mean square over N - F degrees of freedom and tau its integrated
+    autocorrelation time (samples, :func:`quadsim.gap.fitting.correlation_time`: a
+    correlated residual carries N / tau independent samples)."""
+    from .fitting import correlation_time
+
+    e = r - x @ coef
+    dof = max(1, len(r) - x.shape[1])
+    s2 = float(e @ e) / dof * correlation_time(e)
+    return s2 * np.diag(np.linalg.pinv(x.T @ x))
+
+
+def _from_coefs(channels: tuple, names: tuple, coefs_all: list, explained: np.ndarray,
+                offsets: tuple = (), noise: tuple = ()) -> Discrepancy:
     """The :class:`Discrepancy` of per-flight coefficients ``coefs_all`` (per channel
-    (n, F)): their mean, and their covariance times (1 + 1/n) with the :data:`RIDGE`."""
+    (n, F)): their mean, and their predictive covariance with the :data:`RIDGE`;
+    ``offsets`` the features' (:attr:`Discrepancy.offsets`).
+
+    The predictive covariance, per channel: where ``noise`` gives none (the force and moment
+    channels: aerodynamics that drift with how each flight is flown), the coefficients'
+    sample covariance times (1 + 1/n), their scatter kept whole. Where it gives each
+    flight's coefficient variances from its own noise (n, F) (a rotor's command level: one
+    property of the motor map, the hardware every flight shares), the method-of-moments
+    random effect as the calibration's between-flight scatter is read
+    (:mod:`quadsim.gap.calibrate`, stage 3): ``tau^2 = max(0, var_j(beta_j) - mean_j se_j^2)``
+    per feature, plus the mean's own uncertainty ``var_j(beta_j) / n``: what a new flight's
+    coefficient may be. Why: references flown at one level determine their slope poorly
+    (their per-flight estimates scatter by their noise, not by the vehicle), and that
+    scatter taken whole would let the feature take any flight's steady rotor offset (its
+    level differs from theirs by a constant over the flight) as what the references cannot
+    tell; measured on the sensor pipeline's crazyflie21 vehicle, a battery's sag was then
+    read as a motor lag (CHANGELOG.md)."""
     centres, factors = [], []
-    for coefs in coefs_all:
+    noise = noise or (None,) * len(coefs_all)
+    for coefs, own in zip(coefs_all, noise):
         n, f = coefs.shape
-        cov = np.cov(coefs, rowvar=False).reshape(f, f) * (1.0 + 1.0 / n)
+        cov = np.cov(coefs, rowvar=False).reshape(f, f)
+        if own is None:
+            cov = cov * (1.0 + 1.0 / n)
+        else:
+            scatter = np.maximum(0.0, np.diag(cov) - np.mean(own, axis=0))
+            cov = np.diag(scatter) + cov / n
         cov = cov + RIDGE * np.diag(np.diag(cov)) + 1e-30 * np.eye(f)
         centres.append(coefs.mean(axis=0))
         factors.append(np.linalg.cholesky(cov))
     return Discrepancy(channels, names, tuple(centres), tuple(factors), len(coefs_all[0]),
-                       explained, tuple(coefs_all))
+                       explained, tuple(coefs_all), tuple(offsets), tuple(noise))
 
 
 def centre_term(states, discrepancy: Discrepancy | None, chans: int,
@@ -512,11 +627,19 @@ def centre_term(states, discrepancy: Discrepancy | None, chans: int,
                 and hit[2] is discrepancy:
             return hit[3]
     out = np.zeros((len(states.t), chans))
-    for c, names, centre in zip(discrepancy.channels, discrepancy.names, discrepancy.centre):
-        out[:, c] = _design(states, names, memo) @ centre
+    for k, (c, names, centre) in enumerate(zip(discrepancy.channels, discrepancy.names,
+                                               discrepancy.centre)):
+        out[:, c] = _design(states, names, memo, _offset(discrepancy, k)) @ centre
     if memo is not None:
         memo[key] = (states.velocity, states.body_accel, discrepancy, out)
     return out
+
+
+def _offset(discrepancy: Discrepancy, k: int) -> np.ndarray | None:
+    """The ``k``-th covered channel's feature offset, None where it is zero (or not kept)."""
+    if k >= len(discrepancy.offsets) or not np.any(discrepancy.offsets[k]):
+        return None
+    return discrepancy.offsets[k]
 
 
 def columns(states, discrepancy: Discrepancy | None, weights: np.ndarray,
@@ -531,8 +654,9 @@ def columns(states, discrepancy: Discrepancy | None, weights: np.ndarray,
         return np.zeros((n * chans, 0))
     out = np.zeros((n, chans, discrepancy.size))
     k = 0
-    for c, names, factor in zip(discrepancy.channels, discrepancy.names, discrepancy.factor):
-        x = _design(states, names, memo) @ factor
+    for j, (c, names, factor) in enumerate(zip(discrepancy.channels, discrepancy.names,
+                                               discrepancy.factor)):
+        x = _design(states, names, memo, _offset(discrepancy, j)) @ factor
         out[:, c, k:k + x.shape[1]] = x * np.sqrt(weights[c])
         k += x.shape[1]
     return out.reshape(n * chans, -1)

@@ -955,6 +955,22 @@ def fit_set_map(flights: list[FlightStates], params: VehicleParams, *,
     return params.replace(motor_map=dataclasses.replace(base, speed=speed, source=source))
 
 
+def proportional_rotors(params: VehicleParams) -> tuple[bool, ...]:
+    """Per rotor, whether ``params``' motor map is a gain through the origin
+    (``speed = k command``: a two-point map in unit "1" from command 0 at speed 0, as
+    :func:`fit_motor_map` writes where the references' commands do not determine a line);
+    () without a map. Its slope at the references' level is then an assumption (an ideal
+    motor and ESC), which the discrepancy term carries
+    (:func:`quadsim.gap.reference.fit_discrepancy`)."""
+    mm = params.motor_map
+    if mm is None or mm.command_unit != "1":
+        return ()
+    command, speed = np.asarray(mm.command, float), np.asarray(mm.speed, float)
+    if command.shape != (2,) or command[0] != 0.0 or speed.ndim != 2:
+        return ()
+    return tuple(bool(row[0] == 0.0) for row in speed)
+
+
 #: window (s) of the moving mean on which the static motor map is fitted.
 MAP_WINDOW_S = 0.5
 #: relative range of the (averaged) commands below which the map is a proportional gain.
