@@ -1,5 +1,6 @@
-"""The held-out command map against the bare set in the set's own shape
-(:func:`quadsim.gap.residual.fit_set_map`, :func:`quadsim.gap.diagnose.training_map`), and a
+"""The held-out command map against the bare set in the form the training flights show: the
+set's own shape (:func:`quadsim.gap.residual.fit_set_map`) or a line
+(:func:`quadsim.gap.residual.fit_command_map`, :func:`quadsim.gap.diagnose.training_map`), and a
 command model that reads a map in its own unit (:class:`quadsim.gap.logcheck.MapCommandModel`).
 
 crazyflie21's ``[motor_map]`` declares a battery-voltage law (0.249 1/V about 3.7104 V):
@@ -21,7 +22,14 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.logcheck import MapCommandModel
-from quadsim.gap.residual import FlightStates, command_speed, fit_motor_map, fit_set_map
+from quadsim.gap.residual import (
+    FlightStates,
+    command_speed,
+    fit_command_map,
+    fit_motor_map,
+    fit_set_map,
+    map_misfit,
+)
 from quadsim.vehicle.params import load_params
 
 
@@ -120,3 +128,31 @@ def test_heldout_names_a_sag_beyond_the_sets_law(cf):
     assert verdict["probability"] > 0.99
     # the rotor channels' gap (13-14 rad/s before) down to their noise (1.5-2.1 rad/s)
     assert verdict["reduction"] > 0.9
+
+
+def test_command_map_takes_the_form_the_training_flights_show():
+    """physical's PWM table (40-140, bending above 120): speeds logged through it are the
+    set's map read at ``to_unit`` (the set's form fits them exactly, misfit ~0) and
+    ``fit_command_map`` keeps that form; speeds proportional to the command (a speed-
+    controlled motor, RotorPy's) are a line that the set's bend cannot follow, so the line
+    is kept, and it gives those speeds back exactly."""
+    phys = load_params("physical")
+    mm = phys.motor_map
+    volts = np.full(2000, 12.0)
+    own = _states(phys, volts, lambda u, v: mm.speed_of(mm.to_unit(u)), 4)
+    chosen = fit_command_map([own], phys)
+    assert "the parameter set's map" in chosen.motor_map.source
+    assert map_misfit([own], chosen) < 1e-12 * map_misfit([own], fit_motor_map([own], phys))
+    ideal = _states(phys, volts, lambda u, v: 1500.0 * u, 5)
+    chosen = fit_command_map([ideal], phys)
+    assert chosen.motor_map.source.startswith("fitted on the training flights")
+    assert map_misfit([ideal], chosen) < map_misfit([ideal], fit_set_map([ideal], phys))
+    np.testing.assert_allclose(command_speed(ideal, chosen), ideal.rotor_speed, rtol=1e-9)
+
+
+def test_map_misfit_is_the_window_means_sum_of_squares(cf):
+    """A map 10 rad/s above every logged speed: each of the 4 rotors' window means is off
+    by 10 rad/s, over the 2000 - 50 + 1 moving-mean windows of 0.5 s at 100 Hz."""
+    volts = np.full(2000, 3.9)
+    flight = _states(cf, volts, lambda u, v: cf.motor_map.speed_at(u, v) - 10.0, 6)
+    assert map_misfit([flight], cf) == pytest.approx(100.0 * 4 * (2000 - 50 + 1), rel=1e-9)
