@@ -965,10 +965,11 @@ def fit_command_map(flights: list[FlightStates], params: VehicleParams, *,
     range); without a map, or without flights logging commands and speeds, the line.
     ``duty_voltage``: passed to both, as they read it.
 
-    Which: the one whose steady speeds (:func:`command_speed`) leave the smaller sum of
-    squares against the logged rotor speeds, both averaged over :data:`MAP_WINDOW_S`
-    (moving mean per flight, as the maps are fitted; :func:`map_misfit`); a tie keeps the
-    set's form. Why both: a vehicle flown through the set's own map (a Crazyflie's firmware
+    Which: the line where its steady speeds (:func:`command_speed`) leave a sum of squares
+    against the logged rotor speeds, both averaged over :data:`MAP_WINDOW_S` (moving mean
+    per flight, as the maps are fitted; :func:`map_misfit`), smaller than the set's form's
+    by more than chance allows (:func:`_form_ratio`: an F test at :data:`FORM_LEVEL`),
+    else the set's form. Why both: a vehicle flown through the set's own map (a Crazyflie's firmware
     PWM table and battery law, ``quadsim.fly``'s commands) bends away from a line, and the
     bend left on the rotor channel, or the set's voltage law read as a line in the command
     alone, reads as an effect where nothing changed; a speed-controlled motor (an ESC
@@ -984,7 +985,32 @@ def fit_command_map(flights: list[FlightStates], params: VehicleParams, *,
     shaped = fit_set_map(flights, params, duty_voltage=duty_voltage)
     if shaped is params:
         return line
-    return shaped if map_misfit(flights, shaped) <= map_misfit(flights, line) else line
+    ratio = map_misfit(flights, shaped) / max(map_misfit(flights, line), 1e-300)
+    return line if ratio > _form_ratio(flights) else shaped
+
+
+#: the one-sided level at which the training flights must prefer the line to the set's form
+#: (:func:`fit_command_map`): 95 %
+FORM_LEVEL = 0.95
+
+
+def _form_ratio(flights: list[FlightStates]) -> float:
+    """The misfit ratio (set's form over line) beyond which the line replaces the set's form:
+    the F distribution's :data:`FORM_LEVEL` quantile with the flights' independent window
+    means as both degrees of freedom (each flight's duration over :data:`MAP_WINDOW_S`,
+    times its rotors; both forms fit a gain and an offset per rotor). Why a test, not the
+    smaller misfit: the set declares its form, and held out the training flights carry the
+    change to be read; a battery's sag leaves about as much misfit on either form (the
+    self-generated physical sag flights: 6.56e4 against 6.38e4) and a near tie must not
+    hand the sag to a line that reads part of it away."""
+    from scipy.stats import f as f_dist
+
+    dof = 0.0
+    for f in flights:
+        if f.command is None or f.rotor_speed is None or len(f.t) < 2:
+            continue
+        dof += (float(f.t[-1] - f.t[0]) / MAP_WINDOW_S) * f.rotor_speed.shape[1]
+    return float(f_dist.ppf(FORM_LEVEL, max(dof, 1.0), max(dof, 1.0)))
 
 
 def map_misfit(flights: list[FlightStates], params: VehicleParams) -> float:
