@@ -156,3 +156,29 @@ def test_map_misfit_is_the_window_means_sum_of_squares(cf):
     volts = np.full(2000, 3.9)
     flight = _states(cf, volts, lambda u, v: cf.motor_map.speed_at(u, v) - 10.0, 6)
     assert map_misfit([flight], cf) == pytest.approx(100.0 * 4 * (2000 - 50 + 1), rel=1e-9)
+
+
+def test_the_line_replaces_the_sets_form_only_beyond_chance(monkeypatch):
+    """Two 20 s flights (19.99 s from first to last sample) of 4 rotors: 2 x 39.98 x 4 =
+    319.84 window means each side, so the line is taken where the set's form leaves more
+    than F(0.95; 319.84, 319.84) = 1.202 times its
+    misfit (closed form from scipy's F quantile), the set's form at 1.15 (a sag leaves
+    about as much on either), the line at 1.25 and at 30 (RotorPy's speed-controlled
+    motors under crazyflie21's table)."""
+    from scipy.stats import f as f_dist
+
+    import quadsim.gap.residual as residual
+
+    phys = load_params("physical")
+    mm = phys.motor_map
+    volts = np.full(2000, 12.0)
+    flights = [_states(phys, volts, lambda u, v: mm.speed_of(mm.to_unit(u)), k) for k in (7, 8)]
+    crit = f_dist.ppf(0.95, 2 * 19.99 / 0.5 * 4, 2 * 19.99 / 0.5 * 4)
+    assert residual._form_ratio(flights) == pytest.approx(crit, rel=1e-12)
+    assert crit == pytest.approx(1.202, abs=5e-3)
+    for ratio, form in ((1.15, "the parameter set's map"), (1.25, "fitted on the training"),
+                        (30.0, "fitted on the training")):
+        def misfit(fl, params, ratio=ratio):
+            return ratio if "parameter set's map" in params.motor_map.source else 1.0
+        monkeypatch.setattr(residual, "map_misfit", misfit)
+        assert form in residual.fit_command_map(flights, phys).motor_map.source, ratio
