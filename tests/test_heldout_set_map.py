@@ -1,5 +1,6 @@
-"""The held-out command map against the bare set in the set's own shape
-(:func:`quadsim.gap.residual.fit_set_map`, :func:`quadsim.gap.diagnose.training_map`), and a
+"""The held-out command map against the bare set in the form the training flights show: the
+set's own shape (:func:`quadsim.gap.residual.fit_set_map`) or a line
+(:func:`quadsim.gap.residual.fit_command_map`, :func:`quadsim.gap.diagnose.training_map`), and a
 command model that reads a map in its own unit (:class:`quadsim.gap.logcheck.MapCommandModel`).
 
 crazyflie21's ``[motor_map]`` declares a battery-voltage law (0.249 1/V about 3.7104 V):
@@ -21,7 +22,14 @@ from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose
 from quadsim.gap.logcheck import MapCommandModel
-from quadsim.gap.residual import FlightStates, command_speed, fit_motor_map, fit_set_map
+from quadsim.gap.residual import (
+    FlightStates,
+    command_speed,
+    fit_command_map,
+    fit_motor_map,
+    fit_set_map,
+    map_misfit,
+)
 from quadsim.vehicle.params import load_params
 
 
@@ -120,3 +128,57 @@ def test_heldout_names_a_sag_beyond_the_sets_law(cf):
     assert verdict["probability"] > 0.99
     # the rotor channels' gap (13-14 rad/s before) down to their noise (1.5-2.1 rad/s)
     assert verdict["reduction"] > 0.9
+
+
+def test_command_map_takes_the_form_the_training_flights_show():
+    """physical's PWM table (40-140, bending above 120): speeds logged through it are the
+    set's map read at ``to_unit`` (the set's form fits them exactly, misfit ~0) and
+    ``fit_command_map`` keeps that form; speeds proportional to the command (a speed-
+    controlled motor, RotorPy's) are a line that the set's bend cannot follow, so the line
+    is kept, and it gives those speeds back exactly."""
+    phys = load_params("physical")
+    mm = phys.motor_map
+    volts = np.full(2000, 12.0)
+    own = _states(phys, volts, lambda u, v: mm.speed_of(mm.to_unit(u)), 4)
+    chosen = fit_command_map([own], phys)
+    assert "the parameter set's map" in chosen.motor_map.source
+    assert map_misfit([own], chosen) < 1e-12 * map_misfit([own], fit_motor_map([own], phys))
+    ideal = _states(phys, volts, lambda u, v: 1500.0 * u, 5)
+    chosen = fit_command_map([ideal], phys)
+    assert chosen.motor_map.source.startswith("fitted on the training flights")
+    assert map_misfit([ideal], chosen) < map_misfit([ideal], fit_set_map([ideal], phys))
+    np.testing.assert_allclose(command_speed(ideal, chosen), ideal.rotor_speed, rtol=1e-9)
+
+
+def test_map_misfit_is_the_window_means_sum_of_squares(cf):
+    """A map 10 rad/s above every logged speed: each of the 4 rotors' window means is off
+    by 10 rad/s, over the 2000 - 50 + 1 moving-mean windows of 0.5 s at 100 Hz."""
+    volts = np.full(2000, 3.9)
+    flight = _states(cf, volts, lambda u, v: cf.motor_map.speed_at(u, v) - 10.0, 6)
+    assert map_misfit([flight], cf) == pytest.approx(100.0 * 4 * (2000 - 50 + 1), rel=1e-9)
+
+
+def test_the_line_replaces_the_sets_form_only_beyond_chance(monkeypatch):
+    """Two 20 s flights (19.99 s from first to last sample) of 4 rotors: 2 x 39.98 x 4 =
+    319.84 window means each side, so the line is taken where the set's form leaves more
+    than F(0.95; 319.84, 319.84) = 1.202 times its
+    misfit (closed form from scipy's F quantile), the set's form at 1.15 (a sag leaves
+    about as much on either), the line at 1.25 and at 30 (RotorPy's speed-controlled
+    motors under crazyflie21's table)."""
+    from scipy.stats import f as f_dist
+
+    import quadsim.gap.residual as residual
+
+    phys = load_params("physical")
+    mm = phys.motor_map
+    volts = np.full(2000, 12.0)
+    flights = [_states(phys, volts, lambda u, v: mm.speed_of(mm.to_unit(u)), k) for k in (7, 8)]
+    crit = f_dist.ppf(0.95, 2 * 19.99 / 0.5 * 4, 2 * 19.99 / 0.5 * 4)
+    assert residual._form_ratio(flights) == pytest.approx(crit, rel=1e-12)
+    assert crit == pytest.approx(1.202, abs=5e-3)
+    for ratio, form in ((1.15, "the parameter set's map"), (1.25, "fitted on the training"),
+                        (30.0, "fitted on the training")):
+        def misfit(fl, params, ratio=ratio):
+            return ratio if "parameter set's map" in params.motor_map.source else 1.0
+        monkeypatch.setattr(residual, "map_misfit", misfit)
+        assert form in residual.fit_command_map(flights, phys).motor_map.source, ratio

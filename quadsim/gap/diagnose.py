@@ -197,8 +197,6 @@ from .fitting import (
     build_effect,
     correlation_time,
     effect_class,
-    fit_motor_map,
-    fit_set_map,
     noise_floor,
     noise_scale,
     residuals,
@@ -250,6 +248,7 @@ from .residual import (
     DEFAULT_WINDOW_S,
     FIT_RATE_HZ,
     FlightStates,
+    fit_command_map,
     flight_states,
     joined_states,
     proportional_rotors,
@@ -1183,17 +1182,17 @@ def declares_voltage_law(params: VehicleParams) -> bool:
 def training_map(train: list, params: VehicleParams, *,
                  duty_voltage: float | None = None) -> VehicleParams:
     """The held-out reference's command map against the bare set, fitted on the training
-    states ``train``: where the set has a motor map, that map in its own shape (its table
-    and voltage law) with a per-rotor gain and offset
+    states ``train`` in the form they show (:func:`quadsim.gap.residual.fit_command_map`):
+    where the set has a motor map and its flights follow it, that map in its own shape (its
+    table and voltage law) with a per-rotor gain and offset
     (:func:`quadsim.gap.residual.fit_set_map`), so that what the set declares is not read
     as an effect (a voltage law read as a line in the command alone is a ``battery_sag``
     where nothing changed; a curved PWM table leaves the line's bend on the rotor channel)
-    while a sag beyond the set's law stays in the speeds; without a map the straight line
-    per rotor (:func:`quadsim.gap.residual.fit_motor_map`). ``duty_voltage``:
+    while a sag beyond the set's law stays in the speeds; where the training flights'
+    speeds follow a line better (a speed-controlled motor), or the set has no map, the
+    straight line per rotor (:func:`quadsim.gap.residual.fit_motor_map`). ``duty_voltage``:
     :func:`map_voltage`'s, read as those functions say."""
-    if params.motor_map is None:
-        return fit_motor_map(train, params, duty_voltage=duty_voltage)
-    return fit_set_map(train, params, duty_voltage=duty_voltage)
+    return fit_command_map(train, params, duty_voltage=duty_voltage)
 
 
 def params_have_data_map(params: VehicleParams) -> bool:
