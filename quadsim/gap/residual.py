@@ -958,33 +958,33 @@ def fit_set_map(flights: list[FlightStates], params: VehicleParams, *,
 
 def fit_command_map(flights: list[FlightStates], params: VehicleParams, *,
                     duty_voltage: float | None = None) -> VehicleParams:
-    """``params`` with the static command -> speed map fitted on ``flights`` in the form that
-    fits them better: where the set has a motor map, its own map with a per-rotor gain and
-    offset (:func:`fit_set_map`) or the straight line per rotor in the command
+    """``params`` with the static command -> speed map fitted on ``flights`` in the form they
+    show: where the set has a motor map, its own map with a per-rotor gain and offset
+    (:func:`fit_set_map`) unless the straight line per rotor in the command
     (:func:`fit_motor_map`, a gain through the origin where the commands span too narrow a
-    range); without a map, or without flights logging commands and speeds, the line.
-    ``duty_voltage``: passed to both, as they read it.
+    range) fits them better beyond chance; without a map the line. ``duty_voltage``: passed
+    to both, as they read it. Where one form has nothing to fit (no flight logging
+    commands and speeds, or commands the set's table reads as one speed), the other.
 
     Which: the line where its steady speeds (:func:`command_speed`) leave a sum of squares
     against the logged rotor speeds, both averaged over :data:`MAP_WINDOW_S` (moving mean
     per flight, as the maps are fitted; :func:`map_misfit`), smaller than the set's form's
     by more than chance allows (:func:`_form_ratio`: an F test at :data:`FORM_LEVEL`),
-    else the set's form. Why both: a vehicle flown through the set's own map (a Crazyflie's firmware
-    PWM table and battery law, ``quadsim.fly``'s commands) bends away from a line, and the
-    bend left on the rotor channel, or the set's voltage law read as a line in the command
-    alone, reads as an effect where nothing changed; a speed-controlled motor (an ESC
-    holding the commanded speed, most simulators) is a line that the set's curved table
-    would bend, and the bend reads as an effect instead (RotorPy held out: its motor lag
-    and flapping cases `unexplained` under the set's form; CHANGELOG.md, "The held-out
-    command map in the form the training flights show"). The data say which shape they
-    have."""
+    else the set's form. Why both: a vehicle flown through the set's own map (a
+    Crazyflie's firmware PWM table and battery law, ``quadsim.fly``'s commands) bends away
+    from a line, and the bend left on the rotor channel, or the set's voltage law read as a
+    line in the command alone, reads as an effect where nothing changed; a
+    speed-controlled motor (an ESC holding the commanded speed, most simulators) is a line
+    that the set's curved table would bend, and the bend reads as an effect instead
+    (RotorPy held out: its motor lag and flapping cases `unexplained` under the set's
+    form; CHANGELOG.md, "The held-out command map in the form the training flights
+    show")."""
     line = fit_motor_map(flights, params, duty_voltage=duty_voltage)
-    if params.motor_map is None or line is params:
-        return fit_set_map(flights, params, duty_voltage=duty_voltage) \
-            if params.motor_map is not None else line
-    shaped = fit_set_map(flights, params, duty_voltage=duty_voltage)
-    if shaped is params:
+    if params.motor_map is None:
         return line
+    shaped = fit_set_map(flights, params, duty_voltage=duty_voltage)
+    if shaped is params or line is params:       # one form has nothing to fit: the other
+        return line if shaped is params else shaped
     ratio = map_misfit(flights, shaped) / max(map_misfit(flights, line), 1e-300)
     return line if ratio > _form_ratio(flights) else shaped
 
