@@ -71,14 +71,11 @@ rad/s; omega_dot its derivative, rad/s^2)::
   their level is then an assumption (an ideal motor), and a flight flown at another level
   (heavier, a rotor loaded harder) meets the slope's error,
   ``(k_true - k_map) (u - u_bar)``, on its rotor channels. Where the map is a line the
-  references determine its slope, and the rotor channels keep no term (with one, the real
-  Crazyflie references' rotor noise scale fell from 12-13 to 7-9 rad/s and flights flown
-  harder than they met the rotor channel's own timing error there: CHANGELOG.md). Measured
-  on the sensor-pipeline source (physical vehicle, 8 references): every flight's rotor
-  residual follows -160 rad/s per unit command of its level (the references' own slopes -150
-  .. -220, a +0.077 mass flight -12 rad/s); on its crazyflie21 vehicle the references fly
-  within 1e-4 of one level and the slope is not determined (their own -2,600 .. +3,800):
-  there the spread lets a flight's level error go as what the references cannot tell.
+  references determine its slope, and the rotor channels keep no term: the rotor channel's
+  own timing error on flights flown harder than the references then outweighs what the term
+  removes (measured: CHANGELOG.md, "A rotor's command level"). Where the references fly at
+  one level the slope is not determined, and the term's spread lets a flight's level error
+  go as what they cannot tell.
 
 No constant and no acceleration feature on the force channels: a mass or thrust change is a
 steady force and one proportional to the acceleration, and it must stay the flight's own.
@@ -591,8 +588,7 @@ def _from_coefs(channels: tuple, names: tuple, coefs_all: list, explained: np.nd
     (their per-flight estimates scatter by their noise, not by the vehicle), and that
     scatter taken whole would let the feature take any flight's steady rotor offset (its
     level differs from theirs by a constant over the flight) as what the references cannot
-    tell; measured on the sensor pipeline's crazyflie21 vehicle, a battery's sag was then
-    read as a motor lag (CHANGELOG.md)."""
+    tell (measured: CHANGELOG.md, "A rotor's command level")."""
     centres, factors = [], []
     noise = noise or (None,) * len(coefs_all)
     for coefs, own in zip(coefs_all, noise):

@@ -976,8 +976,7 @@ def fit_command_map(flights: list[FlightStates], params: VehicleParams, *,
     line in the command alone, reads as an effect where nothing changed; a
     speed-controlled motor (an ESC holding the commanded speed, most simulators) is a line
     that the set's curved table would bend, and the bend reads as an effect instead
-    (RotorPy held out: its motor lag and flapping cases `unexplained` under the set's
-    form; CHANGELOG.md, "The held-out command map in the form the training flights
+    (measured: CHANGELOG.md, "The held-out command map in the form the training flights
     show")."""
     line = fit_motor_map(flights, params, duty_voltage=duty_voltage)
     if params.motor_map is None:
@@ -985,12 +984,15 @@ def fit_command_map(flights: list[FlightStates], params: VehicleParams, *,
     shaped = fit_set_map(flights, params, duty_voltage=duty_voltage)
     if shaped is params or line is params:       # one form has nothing to fit: the other
         return line if shaped is params else shaped
+    # rad^2/s^2 over rad^2/s^2; the floor only keeps an exact line (misfit 0) from dividing
+    # by zero: any misfit of the set's form is then beyond chance
     ratio = map_misfit(flights, shaped) / max(map_misfit(flights, line), 1e-300)
     return line if ratio > _form_ratio(flights) else shaped
 
 
-#: the one-sided level at which the training flights must prefer the line to the set's form
-#: (:func:`fit_command_map`): 95 %
+#: the one-sided level (probability, dimensionless) at which the training flights must
+#: prefer the line to the set's form (:func:`fit_command_map`, :func:`_form_ratio`): the
+#: conventional 95 %, the set's declared form kept unless the data reject it
 FORM_LEVEL = 0.95
 
 
@@ -1000,9 +1002,10 @@ def _form_ratio(flights: list[FlightStates]) -> float:
     means as both degrees of freedom (each flight's duration over :data:`MAP_WINDOW_S`,
     times its rotors; both forms fit a gain and an offset per rotor). Why a test, not the
     smaller misfit: the set declares its form, and held out the training flights carry the
-    change to be read; a battery's sag leaves about as much misfit on either form (the
-    self-generated physical sag flights: 6.56e4 against 6.38e4) and a near tie must not
-    hand the sag to a line that reads part of it away."""
+    change to be read; a battery's sag leaves about as much misfit on either form, and a
+    near tie must not hand the sag to a line that reads part of it away (measured: the
+    same CHANGELOG.md entry). The 95 % level: the usual one-sided test size; the F
+    quantile assumes the window means' errors independent and alike on both forms."""
     from scipy.stats import f as f_dist
 
     dof = 0.0
