@@ -24,8 +24,9 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
@@ -37,8 +38,10 @@ from quadsim.logs.generate import logged_command
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
-__all__ = ["NotFlyable", "SPEED_BOUNDS", "SensorNoise", "commands_through_map",
+__all__ = ["NotFlyable", "SPEED_BOUNDS", "SensorNoise", "commands_through_map", "flown_slower",
            "reference_path", "synthetic_flight"]
+
+T = TypeVar("T")
 
 
 class NotFlyable(ValueError):
@@ -399,6 +402,27 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         vbat = vbat + noise.vbat * rng.standard_normal(n)
     quat = np.where(quat[:, :1] < 0, -quat, quat)
     return FlightLog(t, position, quat, velocity, rate, specific, speed_, command, vbat, None)
+
+
+#: a path the rotors cannot fly is flown again this much slower (:func:`flown_slower`), up to
+#: :data:`SLOWER_TRIES` times: its log would otherwise hold rotor speeds that do not produce
+#: its motion, which no effect explains
+SLOWER = 0.9
+SLOWER_TRIES = 5
+
+
+def flown_slower(fly: Callable[[float], T], speed: float) -> tuple[T, float]:
+    """``(fly(v), v)`` for the first path speed v (m/s) of ``speed``, ``SLOWER`` x ``speed``,
+    ... (:data:`SLOWER_TRIES` tries) at which ``fly`` raises no :class:`NotFlyable`; ``fly``
+    flies one case's flights at a path speed with ``flyable_only=True``. The same seeds fly
+    the same path shapes slower, so a benchmark's other cases and draws stay as they were.
+    Raises the last :class:`NotFlyable` where no try flies."""
+    for _ in range(SLOWER_TRIES):
+        try:
+            return fly(speed), speed
+        except NotFlyable:
+            speed *= SLOWER
+    return fly(speed), speed
 
 
 def commands_through_map(log, params):
