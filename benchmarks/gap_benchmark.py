@@ -5,7 +5,8 @@ Blind benchmark: for the 0.84 kg testbed (``physical``) and the 37 g Crazyflie
 no-effect cases and effects *outside* the library (translational lift and a blade-flapping
 moment, scored as in-library since the library gained them; rotor-rotor wake interference and
 the frame's drag moment, benchmarks.unmodelled). Each case is three generated flights
-(:mod:`benchmarks.synthetic`, sensor noise on every signal, random path speed and seed); the
+(:mod:`benchmarks.synthetic`, sensor noise on every signal, random path speed and seed; a path
+the rotors cannot fly flown slower, :func:`benchmarks.synthetic.flown_slower`); the
 diagnosis gets only the logs and the nominal parameter set (truth hidden), splits by flight (2
 train, 1 held out) and gives a verdict. Reported: top-1 accuracy for in-library effects, error
 of the main parameter, held-out gap reduction, and the verdicts for out-of-library and
@@ -163,7 +164,7 @@ from benchmarks.cases import oracle_reduction
 from benchmarks.draws import draw
 from benchmarks.observe import MIN_GAIN
 from benchmarks.score import joined_kind
-from benchmarks.synthetic import commands_through_map, synthetic_flight
+from benchmarks.synthetic import commands_through_map, flown_slower, synthetic_flight
 from quadsim.core.errors import QuadsimError, QuadsimWarning
 from quadsim.core.executor import limit_numeric_threads
 from quadsim.core.files import atomic_write_text
@@ -234,15 +235,18 @@ def run_case(case: dict) -> dict:
     params = load_params(case["vehicle"])
     rng = np.random.default_rng(case["seed"])
     effects = _draw(case["truth"], params, rng)
-    speed = rng.uniform(0.7, 1.5)
-    logs = [synthetic_flight(params, effects, seed=case["seed"] * 10 + s, duration=6.0,
-                             speed=speed) for s in range(3)]
+    # a path the rotors cannot fly is flown slower, all three flights alike (flown_slower)
+    logs, speed = flown_slower(
+        lambda v: [synthetic_flight(params, effects, seed=case["seed"] * 10 + s, duration=6.0,
+                                    speed=v, flyable_only=True) for s in range(3)],
+        rng.uniform(0.7, 1.5))
     start = time.perf_counter()
     result = diagnose(logs[:2], params, holdout=logs[2:], kstep=False)  # truth not passed
     elapsed = time.perf_counter() - start
     verdict = result["verdict"]
     truth_values = {f"{e.name}.{k}": v for e in effects for k, v in e.values().items()}
-    out = {**case, "verdict": verdict["effect"], "reduction": verdict["reduction"],
+    out = {**case, "path_speed": speed, "verdict": verdict["effect"],
+           "reduction": verdict["reduction"],
            "confusable_with": verdict["confusable_with"], "seconds": elapsed,
            "readings": verdict.get("readings", []),
            "tentative": bool(verdict.get("tentative")),

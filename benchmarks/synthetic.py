@@ -24,8 +24,9 @@ Example::
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
@@ -37,7 +38,15 @@ from quadsim.logs.generate import logged_command
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
-__all__ = ["SensorNoise", "commands_through_map", "reference_path", "synthetic_flight"]
+__all__ = ["NotFlyable", "SPEED_BOUNDS", "SensorNoise", "commands_through_map", "flown_slower",
+           "reference_path", "synthetic_flight"]
+
+T = TypeVar("T")
+
+
+class NotFlyable(ValueError):
+    """A generated path the vehicle's rotors cannot fly exactly (:func:`synthetic_flight`,
+    ``flyable_only``)."""
 
 
 @dataclass(frozen=True)
@@ -157,7 +166,8 @@ def _solve_rotors(vehicle, loads, thrust, torque, speed):
     rhs = np.concatenate([thrust[:, None], torque], 1) - offsets
     matrix = alloc[None] * loads.thrust_scale[:, None, :]                # (N, 4, R)
     omega2 = np.einsum("nij,nj->ni", np.linalg.pinv(matrix), rhs)
-    return np.sqrt(np.clip(omega2, (0.05 * speed) ** 2, (3.0 * speed) ** 2))
+    low, high = SPEED_BOUNDS
+    return np.sqrt(np.clip(omega2, (low * speed) ** 2, (high * speed) ** 2))
 
 
 def _rotor_wrench(vehicle, effect_set, ctx, speed):
@@ -193,7 +203,7 @@ def _newton_rotors(vehicle, effect_set, ctx, loads, thrust, inertial_torque, spe
         jac = np.stack([(_rotor_wrench(vehicle, effect_set, ctx, speed + step * e) - base) / step
                         for e in np.eye(speed.shape[1])], -1)                # (N, 4, R)
         delta = np.einsum("nij,nj->ni", np.linalg.pinv(jac), target - base)
-        speed = np.clip(speed + delta, 0.05 * hover, 3.0 * hover)
+        speed = np.clip(speed + delta, SPEED_BOUNDS[0] * hover, SPEED_BOUNDS[1] * hover)
     return speed
 
 
@@ -232,13 +242,22 @@ def _march_rotors(vehicle, loads, thrust, torque, sens, accel_used, speed, dt):
             f = matrix @ (x * x) + coupling @ (x - out[k - 1]) - rhs[k]
             jac = matrix * (2 * x) + coupling
             x = x - (np.linalg.solve(jac, f) if square else np.linalg.lstsq(jac, f, rcond=None)[0])
-        out[k] = np.maximum(x, 0.05 * speed[k])
+        out[k] = np.maximum(x, SPEED_BOUNDS[0] * speed[k])
     return out
 
 
+#: the rotor speeds the solvers hold a sample within, as fractions of the hover speed
+#: (:func:`_solve_rotors`, :func:`_newton_rotors`; :func:`_march_rotors` floors at this
+#: fraction of the previous pass's speed): a sample held at a bound is not flown exactly
+SPEED_BOUNDS = (0.05, 3.0)
+
+
 def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
-    """States and rotor speeds of the exact flight; ``com_path`` is the CoM's path (so the
-    thrust direction does not depend on the angular acceleration)."""
+    """States and rotor speeds of the exact flight, and (N,) whether the last pass held a
+    sample's rotor speeds at a bound (:data:`SPEED_BOUNDS`: the path asks more than the
+    rotors give, so the logged speeds do not produce the logged motion there); ``com_path``
+    is the CoM's path (so the thrust direction does not depend on the angular
+    acceleration)."""
     vehicle = effect_set.apply_to_params(params)
     accel_com = np.gradient(np.gradient(com_path, t, axis=0), t, axis=0)
     hover = hover_speed(params)
@@ -278,11 +297,15 @@ def _exact_flight(t, params, effect_set, com_path, yaw, vbat, passes: int = 10):
                 solved = _newton_rotors(vehicle, effect_set, ctx, loads, thrust,
                                         torque + loads.torque_body, solved, hover)
             speed = solved
+            low, high = (f * hover for f in SPEED_BOUNDS)
+            held = (speed <= low * (1 + 1e-9)) | (speed >= high * (1 - 1e-9))
         else:
+            before = speed
             speed = _march_rotors(vehicle, loads, thrust, torque, sens, rotor_accel, speed, dt)
+            held = speed == SPEED_BOUNDS[0] * before
         force_dir = _rotor_force_dir(vehicle, loads, speed)
     specific = rotate_inverse(quat, np.gradient(velocity, t, axis=0) + [0, 0, vehicle.gravity])
-    return position, velocity, quat, rate, specific, speed
+    return position, velocity, quat, rate, specific, speed, np.any(held, axis=1)
 
 
 def _commanded_speeds(t, speed, effect_set, hover, vbat):
@@ -308,7 +331,8 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
                      duration: float = 10.0, rate_hz: float = 500.0, speed: float = 1.0,
                      seed: int = 0, noise: SensorNoise | None = SensorNoise(),
                      full_voltage: float = 4.2, load_share: float = 0.0,
-                     name: str = "synthetic", commands: str = "fly") -> FlightLog:
+                     name: str = "synthetic", commands: str = "fly",
+                     flyable_only: bool = False) -> FlightLog:
     """An exact log of ``params`` + hidden ``effects`` flying :func:`reference_path`.
 
     Deterministic for a seed. ``vbat`` falls linearly 0.15 V over the flight (or follows a
@@ -327,7 +351,13 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     back EMF at hover (commanded speeds ``w (1 + s w / hover) / (1 + s)``, the same at
     hover, before the convention); 0: speed-controlled motors, commanded speed the speed.
     Its propeller reading's exponent is then ``alpha = s / (1 + s)`` with commands
-    proportional to the commanded speed (:func:`quadsim.gap.residual.load_exponent`)."""
+    proportional to the commanded speed (:func:`quadsim.gap.residual.load_exponent`).
+
+    ``flyable_only``: raise :class:`NotFlyable` where the path asks the rotors for a speed
+    outside :data:`SPEED_BOUNDS` within the logged span (the solvers hold such a sample at
+    the bound, so its logged speeds do not produce its logged motion: a log no vehicle could
+    write, whatever its effects); False (the default, as before): such samples are kept as
+    held."""
     rng = np.random.default_rng(seed)
     pad = round(float(0.5 * rate_hz))  # differentiate on a longer grid, trim the ends
     t = (np.arange(round(float(duration * rate_hz)) + 1 + 2 * pad) - pad) / rate_hz
@@ -335,8 +365,14 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
     effect_set = EffectSet(tuple(effects))
     sag = [e for e in effects if getattr(e, "name", "") == "battery_sag"]
     vbat = sag[0].voltage(t) if sag else full_voltage - 0.15 * t / max(duration, 1e-9)
-    position, velocity, quat, rate, specific, speed_ = _exact_flight(
+    position, velocity, quat, rate, specific, speed_, held = _exact_flight(
         t, params, effect_set, position, yaw, vbat)
+    if flyable_only and np.any(held[pad:len(t) - pad]):
+        span = t[pad:len(t) - pad][held[pad:len(t) - pad]]
+        raise NotFlyable(f"synthetic_flight {name!r} (seed {seed}, speed {speed:g} m/s): the "
+                         f"path asks the rotors for speeds outside {SPEED_BOUNDS[0]:g}-"
+                         f"{SPEED_BOUNDS[1]:g}x hover at {span.size} samples "
+                         f"(t {span.min():.3f}-{span.max():.3f} s)")
     hover = hover_speed(params)
     if commands not in ("max_speed", "fly"):
         raise ValueError(f"synthetic_flight: commands {commands!r}: 'max_speed' or 'fly'")
@@ -366,6 +402,27 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         vbat = vbat + noise.vbat * rng.standard_normal(n)
     quat = np.where(quat[:, :1] < 0, -quat, quat)
     return FlightLog(t, position, quat, velocity, rate, specific, speed_, command, vbat, None)
+
+
+#: a path the rotors cannot fly is flown again this much slower (:func:`flown_slower`), up to
+#: :data:`SLOWER_TRIES` times: its log would otherwise hold rotor speeds that do not produce
+#: its motion, which no effect explains
+SLOWER = 0.9
+SLOWER_TRIES = 5
+
+
+def flown_slower(fly: Callable[[float], T], speed: float) -> tuple[T, float]:
+    """``(fly(v), v)`` for the first path speed v (m/s) of ``speed``, ``SLOWER`` x ``speed``,
+    ... (:data:`SLOWER_TRIES` tries) at which ``fly`` raises no :class:`NotFlyable`; ``fly``
+    flies one case's flights at a path speed with ``flyable_only=True``. The same seeds fly
+    the same path shapes slower, so a benchmark's other cases and draws stay as they were.
+    Raises the last :class:`NotFlyable` where no try flies."""
+    for _ in range(SLOWER_TRIES):
+        try:
+            return fly(speed), speed
+        except NotFlyable:
+            speed *= SLOWER
+    return fly(speed), speed
 
 
 def commands_through_map(log, params):
