@@ -1179,26 +1179,19 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
         meas_force, meas_torque = memoised(
             memo, ("measured", id(arrays[0]), id(arrays[1]), id(arrays[2])) + values, arrays,
             lambda: measured_wrench(states, vehicle))
-    if rotor_channel:
-        if memo is None:
-            rotor = rotor_residual(states, params, effects)
-        else:
-            rotors = params.rotor_count if states.command is None else states.command.shape[1]
-            rotor = memoised(memo, ("rotor", id(states), id(params), plan.rotor(rotors)),
-                             states,
-                             lambda: rotor_residual(states, params, plan.effects, memo=memo))
-    # the channels written into one new array (the same numbers as the differences,
-    # products and column stack, without their intermediate copies)
-    out = np.empty((len(force), 6 + (rotor.shape[1] if rotor_channel else 0)))
-    np.subtract(meas_force, force, out=out[:, :3])
-    np.multiply(out[:, :3], params.mass / vehicle.mass, out=out[:, :3])
-    if inertia_map is None:
-        np.subtract(meas_torque, torque, out=out[:, 3:6])
+    torque_residual = meas_torque - torque
+    if inertia_map is not None:
+        torque_residual = torque_residual @ inertia_map
+    force_residual = (meas_force - force) * (params.mass / vehicle.mass)
+    if not rotor_channel:
+        return np.concatenate((force_residual, torque_residual), axis=1)
+    if memo is None:
+        rotor = rotor_residual(states, params, effects)
     else:
-        out[:, 3:6] = (meas_torque - torque) @ inertia_map
-    if rotor_channel:
-        out[:, 6:] = rotor
-    return out
+        rotors = params.rotor_count if states.command is None else states.command.shape[1]
+        rotor = memoised(memo, ("rotor", id(states), id(params), plan.rotor(rotors)), states,
+                         lambda: rotor_residual(states, params, plan.effects, memo=memo))
+    return np.concatenate((force_residual, torque_residual, rotor), axis=1)
 
 
 def _vehicle_facts(vehicle: VehicleParams, params: VehicleParams) -> tuple:
