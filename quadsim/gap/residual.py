@@ -293,15 +293,25 @@ class EffectsPlan:
     the fields, the vehicle attributes), :attr:`quadsim.effects.base.EffectBase.loads_reads`);
     ``stateful``: whether any effect has internal state (then the loads go through
     :meth:`quadsim.effects.base.EffectSet.loads`); :meth:`rotor` the :func:`rotor_key` part
-    per rotor count."""
+    per rotor count. Each effect's part of these depends on that effect alone, in order:
+    ``prefix``, the plan of ``effects``' first effects, gives theirs as they are (a fit's
+    shared effects, then its own ones, which move at every step)."""
 
     __slots__ = ("effects", "wrench", "vehicle", "air", "loads", "stateful", "_rotor",
-                 "_owner", "factor")
+                 "_owner", "factor", "_prefix")
 
-    def __init__(self, effects: tuple):
+    def __init__(self, effects: tuple, prefix: EffectsPlan | None = None):
         self.effects = effects
-        wrench, vehicle, air, loads, factor = [], [], [], [], []
-        self.stateful = False
+        self._prefix = prefix
+        if prefix is None:
+            wrench, vehicle, air, loads, factor = [], [], [], [], []
+            self.stateful = False
+        else:
+            wrench, vehicle, air, loads, factor = (
+                list(prefix.wrench), list(prefix.vehicle), list(prefix.air),
+                list(prefix.loads), list(prefix.factor))
+            self.stateful = prefix.stateful
+            effects = effects[len(prefix.effects):]
         for effect in effects:
             cls = type(effect)
             facts = _CLASS_FACTS.get(cls)
@@ -337,14 +347,22 @@ class EffectsPlan:
     def owner(self):
         """:func:`rate_owner` of the effects (worked out once)."""
         if not self._owner:
-            self._owner = (rate_owner(self.effects),)
+            prefix = self._prefix
+            owner = None if prefix is None else prefix.owner
+            if owner is None:
+                owner = rate_owner(self.effects[0 if prefix is None else
+                                                len(prefix.effects):])
+            self._owner = (owner,)
         return self._owner[0]
 
     def rotor(self, rotors: int) -> tuple:
         """The effects' part of :func:`rotor_key` for ``rotors`` rotors (kept per count)."""
         hit = self._rotor.get(rotors)
         if hit is None:
-            hit = self._rotor[rotors] = _rotor_part(self.effects, rotors)
+            prefix = self._prefix
+            hit = self._rotor[rotors] = _rotor_part(self.effects, rotors) if prefix is None \
+                else prefix.rotor(rotors) + _rotor_part(self.effects[len(prefix.effects):],
+                                                        rotors)
         return hit
 
 
@@ -381,11 +399,16 @@ def effects_plan(effects) -> EffectsPlan:
     their ids (the entry holds the objects, so an id is never another's) for the last
     :data:`PLANS_KEPT` sequences."""
     effects = tuple(effects)
-    key = tuple(map(id, effects))
+    return _plan(effects, tuple(map(id, effects)))
+
+
+def _plan(effects: tuple, key: tuple) -> EffectsPlan:
+    """:func:`effects_plan` of ``effects`` with their ids ``key``; one not kept is built on
+    the plan of all but its last effect (kept or built so too)."""
     hit = _PLANS.get(key)
     if hit is not None and all(map(operator.is_, hit.effects, effects)):
         return hit
-    plan = EffectsPlan(effects)
+    plan = EffectsPlan(effects, _plan(effects[:-1], key[:-1]) if len(effects) > 1 else None)
     if len(_PLANS) >= PLANS_KEPT:
         del _PLANS[next(iter(_PLANS))]
     _PLANS[key] = plan
