@@ -368,12 +368,12 @@ def weighing_parts(argv: list[str]) -> dict:
 
 def time_parts(flights: list[Path], references: list[Path], root: Path = ROOT) -> dict:
     """:func:`weighing_parts` of the user's command on ``flights`` in a fresh process of
-    checkout ``root`` (this file's function, its source handed over: the other checkout
-    needs no copy of it)."""
+    checkout ``root`` (this file's functions, their source handed over: the other checkout
+    needs no copy of them)."""
     import inspect
 
     code = ("import json, sys, time\n" + f"PARTS = {PARTS!r}\n"
-            + inspect.getsource(weighing_parts)
+            + inspect.getsource(_as_the_command) + inspect.getsource(weighing_parts)
             + "print('PARTS ' + json.dumps(weighing_parts(sys.argv[1:])))\n")
     return _timed_in_fresh_process(code, "PARTS", flights, references, root)
 
