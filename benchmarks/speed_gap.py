@@ -229,12 +229,22 @@ def staged(argv: list[str]) -> dict:
                     spent[_label] = spent.get(_label, 0.0) + time.process_time() - begin
 
         setattr(modules[module], name, functools.wraps(original)(timed))
+    _as_the_command(modules["quadsim.gap.__main__"])
     try:
         modules["quadsim.gap.__main__"].main(argv)
     except SystemExit:
         pass
     spent["total"] = time.process_time()
     return spent
+
+
+def _as_the_command(main_module) -> None:
+    """What ``python -m quadsim.gap`` does before its ``main`` (the garbage collector's
+    setting, ``collector_for_a_command``, where the checkout has it), so that a run timed in
+    this process is the user's command."""
+    setup = getattr(main_module, "collector_for_a_command", None)
+    if setup is not None:
+        setup()
 
 
 def time_stages(flights: list[Path], references: list[Path], *, warm: bool = False) -> dict:
@@ -348,6 +358,7 @@ def weighing_parts(argv: list[str]) -> dict:
                 wrap(owner, name, label,
                      nested=module not in ("quadsim.gap.evidence", "quadsim.gap.diagnose"))
     main_module = importlib.import_module("quadsim.gap.__main__")
+    _as_the_command(main_module)
     try:
         main_module.main(argv)
     except SystemExit:
@@ -357,12 +368,12 @@ def weighing_parts(argv: list[str]) -> dict:
 
 def time_parts(flights: list[Path], references: list[Path], root: Path = ROOT) -> dict:
     """:func:`weighing_parts` of the user's command on ``flights`` in a fresh process of
-    checkout ``root`` (this file's function, its source handed over: the other checkout
-    needs no copy of it)."""
+    checkout ``root`` (this file's functions, their source handed over: the other checkout
+    needs no copy of them)."""
     import inspect
 
     code = ("import json, sys, time\n" + f"PARTS = {PARTS!r}\n"
-            + inspect.getsource(weighing_parts)
+            + inspect.getsource(_as_the_command) + inspect.getsource(weighing_parts)
             + "print('PARTS ' + json.dumps(weighing_parts(sys.argv[1:])))\n")
     return _timed_in_fresh_process(code, "PARTS", flights, references, root)
 

@@ -113,13 +113,15 @@ class EffectContext:
         return self.rotation
 
     def to_world(self, v: np.ndarray) -> np.ndarray:
-        """Body-frame vectors (B, 3) into the world frame (:func:`quadsim.core.frames.rotate`)."""
-        return np.einsum("...ij,...j->...i", self.rotmat(), v)
+        """Body-frame vectors (B, 3) into the world frame (:func:`quadsim.core.frames.rotate`):
+        ``R v`` per sample (:meth:`rotmat`), a stacked matrix product."""
+        return np.matmul(self.rotmat(), np.asarray(v)[..., None])[..., 0]
 
     def to_body(self, v: np.ndarray) -> np.ndarray:
         """World-frame vectors (B, 3) into the body frame
-        (:func:`quadsim.core.frames.rotate_inverse`)."""
-        return np.einsum("...ji,...j->...i", self.rotmat(), v)
+        (:func:`quadsim.core.frames.rotate_inverse`): ``Rᵀ v`` per sample, ``v`` as a row
+        times ``R`` (a stacked matrix product, as :meth:`to_world`)."""
+        return np.matmul(np.asarray(v)[..., None, :], self.rotmat())[..., 0, :]
 
 
 @dataclass

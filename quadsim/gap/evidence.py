@@ -592,8 +592,10 @@ def flight_residual(states, reference: Reference, effects: list, memo: dict | No
     """:func:`quadsim.gap.reference.weighted_residual`, flattened (N C,), with the residual
     parts that repeat on one flight kept in ``memo`` (:func:`quadsim.gap.fitting.residuals`)."""
     r = residuals(states, reference.params, effects, rotor_channel=reference.rotor, memo=memo)
-    r = r - centre_term(states, reference.discrepancy, r.shape[1], memo)
-    return (r * _root_weights(reference, memo)).ravel()
+    # in place: ``residuals`` returns a new array of its own (the same numbers)
+    np.subtract(r, centre_term(states, reference.discrepancy, r.shape[1], memo), out=r)
+    np.multiply(r, _root_weights(reference, memo), out=r)
+    return r.ravel()
 
 
 def _root_weights(reference: Reference, memo: dict | None) -> np.ndarray:

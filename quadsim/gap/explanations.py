@@ -51,7 +51,7 @@ from ..effects.thrust_mismatch import ThrustMismatch
 from ..effects.translational_lift import TranslationalLift
 from . import fitting as cable
 from .calibrate import SHARED, Reference
-from .fitting import DETERMINED, FIT_EFFECTS, WIND_SD_MS, build_effect
+from .fitting import DETERMINED, FIT_EFFECTS, WIND_SD_MS
 from .logcheck import logged_parts, needs_pose, timing_carried
 
 __all__ = [
@@ -526,13 +526,9 @@ QUADRATIC_SD = 0.5
 
 
 def own_effects(expl: Explanation, theta: np.ndarray) -> list:
-    out, k = [], 0
-    for name, fixed, fitted in expl.parts:
-        values = dict(fixed)
-        for p in fitted:
-            values[p] = float(theta[k])
-            k += 1
-        out.append(build_effect(name, values))
-    return out
+    """The effects of ``expl``'s parts at its values ``theta`` (SI, (P,); a fitted delay
+    after them is not read): :func:`quadsim.gap.fitting.built_parts` (the same object for
+    the same values)."""
+    return cable.built_parts(expl.parts, theta)
 
 

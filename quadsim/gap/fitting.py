@@ -972,20 +972,29 @@ class Candidate:
         from ``theta`` (in :attr:`parameter_names` order). An effect is its class and its
         values, set once: a part whose values a step of ``theta`` did not move is the same
         object as before (:func:`_built`)."""
-        out, k = list(self.base), 0
-        for name, fixed, fitted in self.parts:
-            values = dict(fixed)
-            for p in fitted:
-                values[p] = float(theta[k])
-                k += 1
-            try:
-                out.append(_built(name, tuple(values.items())))
-            except TypeError:           # a fixed value that is not hashable: built anew
-                out.append(build_effect(name, values))
-        return out
+        return list(self.base) + built_parts(self.parts, theta)
 
     def combine(self, other: Candidate) -> Candidate:
         return Candidate(f"{self.name}+{other.name}", self.parts + other.parts, self.base)
+
+
+def built_parts(parts: tuple, theta: np.ndarray) -> list:
+    """The effects of ``parts`` ((name, fixed values, fitted parameter names), ...), each
+    built with its fixed values and its fitted ones from ``theta`` (SI, in the parts'
+    order). An effect is its class and its values, set once: a part whose values are those
+    of an earlier build is that same object (:func:`_built`; a fixed value that is not
+    hashable: built anew)."""
+    out, k = [], 0
+    for name, fixed, fitted in parts:
+        values = dict(fixed)
+        for p in fitted:
+            values[p] = float(theta[k])
+            k += 1
+        try:
+            out.append(_built(name, tuple(values.items())))
+        except TypeError:
+            out.append(build_effect(name, values))
+    return out
 
 
 @lru_cache(maxsize=4096)

@@ -293,15 +293,25 @@ class EffectsPlan:
     the fields, the vehicle attributes), :attr:`quadsim.effects.base.EffectBase.loads_reads`);
     ``stateful``: whether any effect has internal state (then the loads go through
     :meth:`quadsim.effects.base.EffectSet.loads`); :meth:`rotor` the :func:`rotor_key` part
-    per rotor count."""
+    per rotor count. Each effect's part of these depends on that effect alone, in order:
+    ``prefix``, the plan of ``effects``' first effects, gives theirs as they are (a fit's
+    shared effects, then its own ones, which move at every step)."""
 
     __slots__ = ("effects", "wrench", "vehicle", "air", "loads", "stateful", "_rotor",
-                 "_owner", "factor")
+                 "_owner", "factor", "_prefix")
 
-    def __init__(self, effects: tuple):
+    def __init__(self, effects: tuple, prefix: EffectsPlan | None = None):
         self.effects = effects
-        wrench, vehicle, air, loads = [], [], [], []
-        self.stateful = False
+        self._prefix = prefix
+        if prefix is None:
+            wrench, vehicle, air, loads, factor = [], [], [], [], []
+            self.stateful = False
+        else:
+            wrench, vehicle, air, loads, factor = (
+                list(prefix.wrench), list(prefix.vehicle), list(prefix.air),
+                list(prefix.loads), list(prefix.factor))
+            self.stateful = prefix.stateful
+            effects = effects[len(prefix.effects):]
         for effect in effects:
             cls = type(effect)
             facts = _CLASS_FACTS.get(cls)
@@ -309,11 +319,15 @@ class EffectsPlan:
                 facts = _CLASS_FACTS[cls] = _class_facts(cls)
             stateful = facts[4] and effect.state_size()
             self.stateful = self.stateful or bool(stateful)
-            if not facts[0]:
-                continue                # no hook of the model wrench
+            if not (facts[0] or facts[6]):
+                continue                # no hook of the model wrench or the command factor
             key = effect.__dict__.get("_identity")
             if key is None:
                 key = identity(effect)
+            if facts[6]:
+                factor.append(key)
+            if not facts[0]:
+                continue                # no hook of the model wrench
             wrench.append(key)
             if facts[1]:
                 vehicle.append(key)
@@ -327,21 +341,28 @@ class EffectsPlan:
         self._owner: tuple = ()
         #: :func:`identity` of each effect with a speed factor (``speed_factor``,
         #: ``rotor_speed_factor``), in order: what the command factor depends on
-        self.factor = tuple(identity(e) for e in effects
-                            if _overrides(type(e), ("speed_factor", "rotor_speed_factor")))
+        self.factor = tuple(factor)
 
     @property
     def owner(self):
         """:func:`rate_owner` of the effects (worked out once)."""
         if not self._owner:
-            self._owner = (rate_owner(self.effects),)
+            prefix = self._prefix
+            owner = None if prefix is None else prefix.owner
+            if owner is None:
+                owner = rate_owner(self.effects[0 if prefix is None else
+                                                len(prefix.effects):])
+            self._owner = (owner,)
         return self._owner[0]
 
     def rotor(self, rotors: int) -> tuple:
         """The effects' part of :func:`rotor_key` for ``rotors`` rotors (kept per count)."""
         hit = self._rotor.get(rotors)
         if hit is None:
-            hit = self._rotor[rotors] = _rotor_part(self.effects, rotors)
+            prefix = self._prefix
+            hit = self._rotor[rotors] = _rotor_part(self.effects, rotors) if prefix is None \
+                else prefix.rotor(rotors) + _rotor_part(self.effects[len(prefix.effects):],
+                                                        rotors)
         return hit
 
 
@@ -351,8 +372,9 @@ _CLASS_FACTS: dict[type, tuple] = {}
 def _class_facts(cls: type) -> tuple:
     """What :class:`EffectsPlan` reads of an effect class: whether it has its own version
     of a hook of the model wrench, of ``apply_to_params``, of ``air_velocity``, of
-    ``loads``, of ``state_size``, and what its loads read (``loads_reads`` with the
-    fields' indices in :data:`_CONTEXT_INPUTS`, or None)."""
+    ``loads``, of ``state_size``, what its loads read (``loads_reads`` with the
+    fields' indices in :data:`_CONTEXT_INPUTS`, or None), and whether it has its own
+    ``speed_factor`` or ``rotor_speed_factor``."""
     reads = getattr(cls, "loads_reads", None)
     if reads is not None:
         fields, attributes = reads
@@ -360,7 +382,7 @@ def _class_facts(cls: type) -> tuple:
     return (_overrides(cls, _WRENCH_HOOKS), _overrides(cls, ("apply_to_params",)),
             _overrides(cls, ("air_velocity",)), cls.loads is not EffectBase.loads,
             getattr(cls, "state_size", EffectBase.state_size) is not EffectBase.state_size,
-            reads)
+            reads, _overrides(cls, ("speed_factor", "rotor_speed_factor")))
 
 
 #: the :class:`quadsim.effects.base.EffectContext` fields an effect's ``loads_reads`` may
@@ -377,11 +399,16 @@ def effects_plan(effects) -> EffectsPlan:
     their ids (the entry holds the objects, so an id is never another's) for the last
     :data:`PLANS_KEPT` sequences."""
     effects = tuple(effects)
-    key = tuple(map(id, effects))
+    return _plan(effects, tuple(map(id, effects)))
+
+
+def _plan(effects: tuple, key: tuple) -> EffectsPlan:
+    """:func:`effects_plan` of ``effects`` with their ids ``key``; one not kept is built on
+    the plan of all but its last effect (kept or built so too)."""
     hit = _PLANS.get(key)
     if hit is not None and all(map(operator.is_, hit.effects, effects)):
         return hit
-    plan = EffectsPlan(effects)
+    plan = EffectsPlan(effects, _plan(effects[:-1], key[:-1]) if len(effects) > 1 else None)
     if len(_PLANS) >= PLANS_KEPT:
         del _PLANS[next(iter(_PLANS))]
     _PLANS[key] = plan
@@ -653,14 +680,38 @@ def rotor_wrench(vehicle: VehicleParams, loads, speed: np.ndarray,
     o_i a_i, torque o_i (r_i - c) x a_i). The effects' other loads are not included.
     ``matrices``: :func:`rotor_matrices` of ``vehicle`` when the caller keeps them."""
     allocation_t, offset_wrench = rotor_matrices(vehicle) if matrices is None else matrices
+    squared, offset = _thrusts(loads, speed)
+    wrench = squared @ allocation_t
+    if offset is None:
+        return wrench                       # no offsets: nothing to add
+    return wrench + offset @ offset_wrench
+
+
+def _thrusts(loads, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(the squared speeds (N, R) times ``loads.thrust_scale``, ``loads.rotor_offset``
+    (N, R) or None where both offsets are neutral) of :func:`rotor_wrench`."""
     neutral = getattr(loads, "is_neutral", lambda name: False)
     squared = np.square(speed)
     if not neutral("thrust_scale"):         # a scale of one changes nothing
         squared = squared * loads.thrust_scale
-    wrench = squared @ allocation_t
     if neutral("thrust_offset") and neutral("curve_offset"):
-        return wrench                       # no offsets: nothing to add
-    return wrench + loads.rotor_offset @ offset_wrench
+        return squared, None
+    return squared, loads.rotor_offset
+
+
+def _rotor_force_torque(loads, speed: np.ndarray, halves: tuple) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+    """:func:`rotor_wrench`'s force (N, 3) and torque (N, 3) as two arrays of their own
+    (contiguous: the residual's differences on them run several times faster than on the
+    wrench's column views), from ``halves``, the force and torque columns of
+    :func:`rotor_matrices` (:func:`_vehicle_matrices`): the same products, each element
+    the same sum over the rotors."""
+    force_map, torque_map, offset_force, offset_torque = halves
+    squared, offset = _thrusts(loads, speed)
+    force, torque = squared @ force_map, squared @ torque_map
+    if offset is None:
+        return force, torque
+    return force + offset @ offset_force, torque + offset @ offset_torque
 
 
 def rotor_matrices(vehicle: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
@@ -732,8 +783,11 @@ def model_wrench(states: FlightStates, params: VehicleParams,
             if part is not None:
                 parts.append(part)
         loads = EffectLoads.combine(parts, speed.shape[0], speed.shape[1])
-    wrench = rotor_wrench(vehicle, loads, speed, matrices)
-    force, torque = wrench[:, :3], wrench[:, 3:]
+    if matrices is None:
+        wrench = rotor_wrench(vehicle, loads, speed)
+        force, torque = wrench[:, :3], wrench[:, 3:]
+    else:
+        force, torque = _rotor_force_torque(loads, speed, matrices[2])
     if not loads.is_neutral("force_world"):     # a zero external load adds nothing
         force = force + ctx.to_body(loads.force_world)
     if not loads.is_neutral("torque_body"):
@@ -742,14 +796,20 @@ def model_wrench(states: FlightStates, params: VehicleParams,
 
 
 def _vehicle_matrices(vehicle: VehicleParams, flight_memo: dict):
-    """``vehicle``, its :func:`rotor_matrices` and a dict for its :func:`_vehicle_values`;
-    the matrices kept in ``flight_memo`` by what they depend on (the rotors, the CoM, the
-    thrust and drag factors): a vehicle that differs in its mass or inertia alone shares
-    them."""
+    """``vehicle``, its :func:`rotor_matrices` with their force and torque columns apart
+    (contiguous (R, 3) each: the allocation's, the offsets'; :func:`_rotor_force_torque`)
+    and a dict for its :func:`_vehicle_values`; the matrices kept in ``flight_memo`` by
+    what they depend on (the rotors, the CoM, the thrust and drag factors): a vehicle that
+    differs in its mass or inertia alone shares them."""
     key = (id(vehicle.rotors), np.asarray(vehicle.com, dtype=float).tobytes(),
            float(vehicle.thrust_factor), float(vehicle.drag_factor))
-    return vehicle, kept(flight_memo, "rotor_matrices", key, (vehicle.rotors,),
-                         lambda: rotor_matrices(vehicle)), {}
+
+    def compute():
+        allocation_t, offset = rotor_matrices(vehicle)
+        halves = tuple(np.ascontiguousarray(m[:, cols]) for m in (allocation_t, offset)
+                       for cols in (slice(0, 3), slice(3, 6)))
+        return allocation_t, offset, halves
+    return vehicle, kept(flight_memo, "rotor_matrices", key, (vehicle.rotors,), compute), {}
 
 
 def _vehicle_values(values: dict, vehicle: VehicleParams, attributes: tuple) -> tuple:

@@ -217,10 +217,27 @@ class VehicleParams:
         """A copy with some fields changed, validated again when the validated field (the
         inertia, :func:`check_physical`) is among them (the fits replace a parameter set
         thousands of times per flight)."""
-        new = dataclasses.replace(self, **changes)
+        fields = _FIELDS.get(type(self))
+        if fields is None:
+            fields = _FIELDS[type(self)] = tuple(f.name for f in dataclasses.fields(self)
+                                                 if f.init)
+        if type(self).__dict__.get("__post_init__") is not None or \
+                not changes.keys() <= set(fields):
+            new = dataclasses.replace(self, **changes)
+        else:
+            # the object dataclasses.replace builds (every init field, the changed ones
+            # new), without its per-field __init__ on the frozen class
+            new = object.__new__(type(self))
+            own = self.__dict__
+            new.__dict__.update({name: own[name] for name in fields})
+            new.__dict__.update(changes)
         if "inertia" in changes:
             check_physical(new, where=new.path or new.name)
         return new
+
+
+#: the init fields' names per VehicleParams class (:meth:`VehicleParams.replace`)
+_FIELDS: dict[type, tuple[str, ...]] = {}
 
 
 # ----------------------------------------------------------------------------- validation
@@ -239,14 +256,19 @@ def inertia_problems(inertia: np.ndarray) -> list[str]:
     triangle inequality A + B >= C for every ordering (MuJoCo checks the same)."""
     inertia = np.asarray(inertia, dtype=float)
     problems = []
-    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
+    if inertia.shape != (3, 3):
         return ["must be a finite 3x3 matrix"]
-    diagonal = inertia.diagonal()
-    if not np.any(inertia - np.diag(diagonal)):
-        # a diagonal tensor (the usual case, checked thousands of times per fit): symmetric,
-        # its principal moments are its diagonal -- the same test as below without eigvalsh
-        moments = np.sort(diagonal)
-        if moments[0] > 0 and moments[0] + moments[1] >= moments[2] * (1 - TRIANGLE_RTOL):
+    # in Python floats (the same float64 values and comparisons; this runs thousands of
+    # times per fit, where numpy's per-call cost on a 3x3 array was most of it)
+    values = inertia.tolist()
+    if not all(map(math.isfinite, values[0] + values[1] + values[2])):
+        return ["must be a finite 3x3 matrix"]
+    (a, b, c), (d, e, f), (g, h, i) = values
+    if b == c == d == f == g == h == 0.0:
+        # a diagonal tensor (the usual case): symmetric, its principal moments are its
+        # diagonal -- the same test as below without eigvalsh
+        low, mid, high = sorted((a, e, i))
+        if low > 0 and low + mid >= high * (1 - TRIANGLE_RTOL):
             return []
     if not np.allclose(inertia, inertia.T, rtol=1e-9, atol=1e-15):
         problems.append("is not symmetric")
