@@ -193,6 +193,30 @@ def test_a_rotor_speed_delay_is_named(cf, reference):
     assert "ms later than on the reference flights" in entry["answer"]
 
 
+def test_what_a_delay_reading_leaves_excludes_the_mirror_fill_on_every_channel(cf, reference):
+    """Evidence.ms (what the lack-of-fit test reads) of the ``signal_delay`` reading on a
+    rotor log 30 ms late: over the samples whose shifted read lies inside the log
+    (evidence.inside_reads), on the force and moment channels too, which read the same
+    shifted speeds through the rotors' wrench. Beyond the log's end the read meets the
+    mirror fill: counted, it left Fz at 4.07, Mx 1.51, My 1.44 times the noise scale here;
+    the right reading leaves the references' level (each below 1.5)."""
+    from quadsim.gap.evidence import evaluate, inside_reads
+    from quadsim.gap.explanations import explanations_for
+
+    log = _delayed(synthetic_flight(cf, _shared(), duration=5.0, seed=11, speed=1.0), 0.03)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        states = reference.align(prepare([log], cf)[0].fit)
+    rows = evaluate(states, reference, explanations_for(reference, states), full=True)
+    ev = next(e for e in rows if e.name == "signal_delay")
+    delay = ev.values["delay.rotor"]
+    assert delay == pytest.approx(0.03, abs=0.004)
+    inside = inside_reads(states.t, delay)
+    assert inside is not None and not inside[-1] and inside[0]
+    assert np.count_nonzero(~inside) == np.count_nonzero(states.t + delay > states.t[-1])
+    assert np.all(ev.ms[:6] < 1.5), ev.ms
+
+
 def test_a_rotor_speed_delay_is_named_without_the_references_cross_correlation(cf, reference):
     """The delay is read by its likelihood wherever rotor speeds are logged: references
     whose cross-correlation estimate held on none of them (l2f's flightmare vehicle: 0 of 8)

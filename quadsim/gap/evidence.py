@@ -228,7 +228,8 @@ from .residual import flight_memo, memoised, min_time_constant
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlocks", "Evidence",
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
-           "posterior_cov", "read_inside", "shifted_view", "wall_jacobian", "fitted_jacobian",
+           "posterior_cov", "read_inside", "inside_reads", "shifted_view", "wall_jacobian",
+           "fitted_jacobian",
            "CONVERGED", "PendingEvidence", "idle_parameters", "log_evidence",
            "THROUGH_SDS", "unidentified",
            "DELAY_GRID_S", "DELAY_GRID_SDS",
@@ -791,16 +792,24 @@ def fitted_jacobian(prob: Problem, fit, step: float) -> tuple[np.ndarray, np.nda
 
 def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
                 ) -> np.ndarray:
-    """The rotor channels' mean square (R,) over the samples whose read ``t + delay_s`` (s)
-    lies inside the log; ``ms`` where all or none do. ``resid`` (N, R): the rotor channels'
-    residual. Beyond the log's ends a rotor log read later meets the mirror image of its
-    samples (:func:`quadsim.gap.reference.read_later`): a fill that keeps the spectrum from
-    ringing, not data, so it does not count in what a reading leaves. The likelihood keeps
-    every sample (each reading's own delay would give each a different sample count)."""
+    """The channels' mean square (C,) over the samples whose read ``t + delay_s`` (s) lies
+    inside the log (:func:`inside_reads`); ``ms`` where all or none do. ``resid`` (N, C): the
+    residual of every channel that reads the shifted rotor speeds (the force and moment
+    channels through the rotors' wrench, the rotor channels directly). Beyond the log's ends
+    a rotor log read later meets the mirror image of its samples
+    (:func:`quadsim.gap.reference.read_later`): a fill that keeps the spectrum from ringing,
+    not data, so it does not count in what a reading leaves. The likelihood keeps every
+    sample (each reading's own delay would give each a different sample count)."""
+    inside = inside_reads(t, delay_s)
+    return ms if inside is None else np.mean(resid[inside] ** 2, axis=0)
+
+
+def inside_reads(t: np.ndarray, delay_s: float) -> np.ndarray | None:
+    """(N,) whether each sample's read ``t + delay_s`` (s) lies inside the log's span
+    [t_0, t_end]; None where every sample's does, or none does (nothing to leave out). The
+    samples outside form one run at one end: the mask is a contiguous span."""
     inside = (t + delay_s <= t[-1]) & (t + delay_s >= t[0])
-    if inside.all() or not inside.any():
-        return ms
-    return np.mean(resid[inside] ** 2, axis=0)
+    return None if inside.all() or not inside.any() else inside
 
 
 #: the slow part's window (s): the held-out noise model's (:data:`quadsim.gap.judge.SLOW_WINDOW_S`)
@@ -917,9 +926,11 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     prior's 1 (:func:`posterior_cov`): never wider than the prior, and no direction of H
     hides another's spread; a parameter acting only through a parent that the data do not
     tell from 0 gets its prior spread (:func:`unidentified`). ``ms``: each channel's mean squared
-    residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that fits
-    the rotor delay, the rotor channels' over the samples read inside the log
-    (:func:`read_inside`). A wind reading also gets its air force (:func:`_air_force`)."""
+    residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that
+    shifts the rotor speeds (the flight's rotor delay, shared or its own), over the samples
+    whose shifted read lies inside the log, on every channel, and its slow part likewise
+    (:func:`read_inside`, :func:`inside_reads`). A wind reading also gets its air force
+    (:func:`_air_force`)."""
     states, reference, expl = prob.states, prob.reference, prob.expl
     names_all = reference.candidate.parameter_names
     chans = len(reference.sigma)
@@ -939,17 +950,20 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     shift = {names_all[k]: float(prob.s_all[k] * d)
              for k, d in zip(prob.keep, vec[n:n + len(prob.keep)])}
     own = [expl.name == "signal_delay" or k != "delay.rotor" for k in keys]
-    ms = np.mean(resid ** 2, axis=0)
     # the states' time step (s), the slow part's; None: no time base
     timed = None if getattr(states, "t", None) is None or len(states.t) < 2 \
         else float(states.t[1] - states.t[0])
-    if expl.shift and reference.rotor and chans > 6:
-        ms[6:] = read_inside(states.t, float(theta[-1]), resid[:, 6:], ms[6:])
+    # what the reading leaves: over the samples whose shifted rotor read lies inside the log
+    # (read_inside: the mirror fill beyond its end is no residual, on every channel that
+    # reads the shifted speeds); the likelihood above keeps every sample
+    inside = inside_reads(states.t, float(theta[-1])) if expl.shift and timed else None
+    left = resid if inside is None else resid[inside]
+    ms = np.mean(left ** 2, axis=0)
     ev = Evidence(expl, dict(zip(keys, map(float, theta))), dict(zip(keys, map(float, post))),
                   dict(zip(keys, map(float, sd))),
                   {k: bool(p < DETERMINED * q) for k, p, q, o in zip(keys, post, sd, own) if o},
                   log_z, ms, np.mean(resid, axis=0) * reference.sigma,
-                  shared_shift=shift, slow=None if timed is None else slow_ms(resid, timed),
+                  shared_shift=shift, slow=None if timed is None else slow_ms(left, timed),
                   slow_window=None if timed is None else slow_window(timed),
                   post_cov=cov, prior_pull=0.5 * float(np.dot(z, z)))
     if expl.name == "wind":
