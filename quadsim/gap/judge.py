@@ -192,6 +192,10 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    flight: the verdict (``no_significant_gap`` or a name) is tentative, and the sentence of
    :func:`quadsim.gap.words.grown_words` says so. Held out against nominal references: a
    channel grown on any training flight (and not already stated by :func:`alone`).
+   *A reading's own units* (:func:`own_units`, per flight): a lead that lowers a principal
+   moment is tested on its torque channels in its own torque units, the mean square times
+   (I_v / I_ref)^2, where its smaller inertia does not scale the rotor speeds' noise up
+   (the residual's angular-acceleration form does, by I_ref / I_v).
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
