@@ -192,6 +192,10 @@ whether the noise model leaves the slow part out (held out: :func:`remainder` ap
    flight: the verdict (``no_significant_gap`` or a name) is tentative, and the sentence of
    :func:`quadsim.gap.words.grown_words` says so. Held out against nominal references: a
    channel grown on any training flight (and not already stated by :func:`alone`).
+   *A reading's own units* (:func:`own_units`, per flight): a lead that lowers a principal
+   moment is tested on its torque channels in its own torque units, the mean square times
+   (I_v / I_ref)^2, where its smaller inertia does not scale the rotor speeds' noise up
+   (the residual's angular-acceleration form does, by I_ref / I_v).
 3. **Systematic remainder** (:func:`remainder` held out, :func:`remainder_of` per flight):
    the residual's slow part (0.5 s moving average) against its normal, which is data of the
    reference model. Where the reference carries its references' own slow parts (each
@@ -1292,6 +1296,42 @@ def above_floor(ms, reference) -> np.ndarray:
         > noise_floor(reference.params, reference.rotor) ** 2
 
 
+#: the torque channels (Mx, My, Mz) in the residual's channel order, and the reading's
+#: parameters that scale the principal moment of each (:mod:`quadsim.effects.inertia_error`)
+TORQUE_CHANNELS = (3, 4, 5)
+INERTIA_AXES = ("inertia_error.xx", "inertia_error.yy", "inertia_error.zz")
+
+
+def own_units(ev, reference) -> np.ndarray:
+    """(C,) the factor on each channel's mean square ``ev.ms`` that states what a reading
+    leaves where its own inertia does not scale the noise up (module doc, 2: "A reading's
+    own units"): on the torque channel of axis i, min(1, ((1 + e_i) / (1 + r_i))^2), e_i the
+    reading's ``inertia_error`` on that axis and r_i the reference model's (0 where it reads
+    none); 1 on every other channel and for every reading that leaves the inertia as the
+    reference model has it.
+
+    Why: the torque channels compare angular accelerations at the nominal inertia,
+    I I_v^-1 (M_meas - M_model) (:func:`quadsim.gap.fitting.residuals`), so that the gyro's
+    differentiated noise weighs alike for every reading. The rotor speeds' noise rides on
+    M_model: a reading with a smaller principal moment I_v scales it by I_ref / I_v there,
+    while the references' typical level holds it at 1. In the reading's own torque units
+    (the residual times I_v / I_ref) the rotor noise is as on the references and the gyro's
+    is scaled by I_v / I_ref < 1; a torque the model lacks is a torque in those units too,
+    as on the references. The smaller of the two forms never states more than the
+    references' level from the reading's own scaling, whichever of the two noises
+    dominates a vehicle's channel."""
+    out = np.ones(len(reference.sigma))
+    values = getattr(ev, "values", None) or {}
+    if not any(k in values for k in INERTIA_AXES):
+        return out
+    shared = reference.values()
+    for channel, key in zip(TORQUE_CHANNELS, INERTIA_AXES):
+        if key in values and channel < len(out):
+            ratio = (1.0 + values[key]) / (1.0 + shared.get(key, 0.0))
+            out[channel] = min(1.0, ratio * ratio)
+    return out
+
+
 def lack_of_fit(ms, baseline: Baseline, reference, *, null_ms=None) -> dict:
     """Channels the lead reading leaves beyond ``baseline`` (module doc, 2): channel ->
     (RMS over the baseline's typical RMS, z), the largest z over the judged flights.
@@ -1735,17 +1775,19 @@ def judge(rows, reference, name: str, *, cap: float = 1.0, vbat=None) -> Verdict
     top, p_top, best = within[0]
     null = next((e for e in rows if e.name == "no_difference"), None)
     baseline = Baseline.of_reference(reference)
-    lack = lack_of_fit(best.ms, reach_baseline(baseline, reach), reference,
+    # what the lead leaves, where its own inertia does not scale the noise up (own_units)
+    left_ms = best.ms * own_units(best, reference)
+    lack = lack_of_fit(left_ms, reach_baseline(baseline, reach), reference,
                        null_ms=None if null is None or null is best else null.ms)
     left = {}           # a reading leaving 5-10 % of the gap: named tentatively, stated
     share = float("inf") if null is None or null is best else \
-        form_share(best.ms, null.ms, np.exp(baseline.mean),
+        form_share(left_ms, null.ms, np.exp(baseline.mean),
                    allowance=None if reach is None else reach.allowance)
     if lack and top != "no_difference" and share <= FORM_ERROR_TENTATIVE:
         left, lack = lack, {}
     # beyond the references' straight lines, within the law's growth: not sure (2, grown)
     grown = {} if lack or left else grown_lack(
-        best.ms, reference, null_ms=None if null is None or null is best else null.ms)
+        left_ms, reference, null_ms=None if null is None or null is best else null.ms)
     # a rotor timing the data cannot separate (lag or delay within the references' own
     # margins, timing_rival): both readings stated, the name tentative
     rival = timing_rival(top, rows, check) if not lack else None
