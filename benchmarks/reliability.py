@@ -306,27 +306,14 @@ def _generated_cases(params, rng) -> list[tuple[str, list]]:
     return cases
 
 
-#: a generated path the rotors cannot fly (:class:`benchmarks.synthetic.NotFlyable`) is
-#: flown again this much slower, up to :data:`GENTLER_TRIES` times: its log would otherwise
-#: hold rotor speeds that do not produce its motion, which no effect explains
-GENTLER = 0.9
-GENTLER_TRIES = 5
-
-
 def _flyable(params, effects, speed: float, seed: int):
     """The generated flight of ``effects`` at path ``speed`` (m/s), or, where the rotors
-    cannot fly that path, at :data:`GENTLER` times it, and so on (the same seed: the same
-    path's shape, flown slower; the set's other flights and draws unchanged)."""
-    from benchmarks.synthetic import NotFlyable, synthetic_flight
+    cannot fly that path, slower (:func:`benchmarks.synthetic.flyable_flight`: the same seed,
+    the same path's shape; the set's other flights and draws unchanged)."""
+    from benchmarks.synthetic import flyable_flight
 
-    for _ in range(GENTLER_TRIES):
-        try:
-            return synthetic_flight(params, effects, duration=DURATION_S, rate_hz=RATE_HZ,
-                                    speed=speed, seed=seed, flyable_only=True)
-        except NotFlyable:
-            speed *= GENTLER
-    return synthetic_flight(params, effects, duration=DURATION_S, rate_hz=RATE_HZ,
-                            speed=speed, seed=seed, flyable_only=True)
+    return flyable_flight(params, effects, speed=speed, seed=seed, duration=DURATION_S,
+                          rate_hz=RATE_HZ)
 
 
 def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[Answer]:

@@ -37,8 +37,8 @@ from quadsim.logs.generate import logged_command
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
-__all__ = ["NotFlyable", "SPEED_BOUNDS", "SensorNoise", "commands_through_map",
-           "reference_path", "synthetic_flight"]
+__all__ = ["GENTLER", "GENTLER_TRIES", "NotFlyable", "SPEED_BOUNDS", "SensorNoise",
+           "commands_through_map", "flyable_flight", "reference_path", "synthetic_flight"]
 
 
 class NotFlyable(ValueError):
@@ -399,6 +399,28 @@ def synthetic_flight(params: VehicleParams, effects: Sequence[Effect] = (), *,
         vbat = vbat + noise.vbat * rng.standard_normal(n)
     quat = np.where(quat[:, :1] < 0, -quat, quat)
     return FlightLog(t, position, quat, velocity, rate, specific, speed_, command, vbat, None)
+
+
+#: a generated path the rotors cannot fly (:class:`NotFlyable`) is flown again this much
+#: slower, up to :data:`GENTLER_TRIES` times (:func:`flyable_flight`): its log would otherwise
+#: hold rotor speeds that do not produce its motion, which no effect explains
+GENTLER = 0.9
+GENTLER_TRIES = 5
+
+
+def flyable_flight(params: VehicleParams, effects: Sequence[Effect] = (), *, speed: float,
+                   **kwargs) -> FlightLog:
+    """:func:`synthetic_flight` of ``effects`` at path ``speed`` (m/s) with ``flyable_only``,
+    or, where the rotors cannot fly that path, at :data:`GENTLER` times it, and so on, up to
+    :data:`GENTLER_TRIES` times (the same seed: the same path's shape, flown slower; a path
+    they can fly is the flight ``synthetic_flight`` gives); ``kwargs`` are
+    ``synthetic_flight``'s. Raises :class:`NotFlyable` where the last speed too is refused."""
+    for _ in range(GENTLER_TRIES):
+        try:
+            return synthetic_flight(params, effects, speed=speed, flyable_only=True, **kwargs)
+        except NotFlyable:
+            speed *= GENTLER
+    return synthetic_flight(params, effects, speed=speed, flyable_only=True, **kwargs)
 
 
 def commands_through_map(log, params):

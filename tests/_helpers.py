@@ -14,12 +14,6 @@ ROOT = Path(__file__).resolve().parents[1]
 #: and rotor drag (kg/rad)
 LAG, DRAG = 0.008, 2e-7
 
-#: the path speed (m/s) of the generated crazyflie21 flights first written at 1.5 m/s: there
-#: its figure-8 (0.4-0.6 m across) asks the rotors, on some seeds, for speeds outside
-#: benchmarks.synthetic.SPEED_BOUNDS, held there (a log whose rotor speeds do not produce its
-#: motion); at this speed every seed these tests draw is flown exactly (``flyable_only=True``)
-FLYABLE_SPEED = 1.2
-
 
 def shared_effects(lag: float = LAG, drag: float = DRAG) -> list:
     """The effects every generated reference flight shares (motor lag, rotor drag)."""

@@ -25,12 +25,9 @@ def lagged():
     cf = load_params("crazyflie21")
     # speed-controlled rotors whose log writes the commanded speed over max_speed (commands
     # proportional to speed: the premise; the default, quadsim.fly's convention, writes
-    # crazyflie21's map, a line with an intercept, whose load exponent is not 0). Path
-    # speeds 0.8-1.2 m/s, each flown exactly (at 1.4 m/s seed 2's path held a rotor at a
-    # speed bound for 22 samples: logged speeds that do not produce the logged motion)
+    # crazyflie21's map, a line with an intercept, whose load exponent is not 0)
     logs = [synthetic_flight(cf, [make_effect("motor_lag", time_constant=LAG_S)],
-                             duration=5.0, seed=s, speed=0.8 + 0.2 * s, commands="max_speed",
-                             flyable_only=True)
+                             duration=5.0, seed=s, speed=1.0 + 0.2 * s, commands="max_speed")
             for s in range(3)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)

@@ -19,8 +19,6 @@ from quadsim.logs.checks import (
 )
 from quadsim.vehicle.params import load_params
 
-from _helpers import FLYABLE_SPEED
-
 
 @pytest.fixture(scope="module")
 def cf():
@@ -30,11 +28,8 @@ def cf():
 def _capped(cf, seed):
     """A commands-only log whose rotor 1 sits at the full-command cap on its top 10 % of
     samples (the controller asks for more than the motor gives: the logged 1.0 overstates
-    the speed the vehicle's motion shows). The flight under it is exact: the cap is written
-    into its commands here (at 1.5 m/s its path held rotors 1 and 3 at the lower speed bound
-    for 13 and 5 samples, a saturation at the other end that the test is not about)."""
-    log = synthetic_flight(cf, [], seed=seed, duration=6.0, speed=FLYABLE_SPEED,
-                           flyable_only=True)
+    the speed the vehicle's motion shows)."""
+    log = synthetic_flight(cf, [], seed=seed, duration=6.0, speed=1.5)
     cmd = log.rotor_command.copy()
     cmd[:, 0] = np.where(cmd[:, 0] >= np.percentile(cmd[:, 0], 90), 1.0, cmd[:, 0])
     return dataclasses.replace(log, rotor_command=cmd, rotor_speed=None)
