@@ -307,13 +307,13 @@ def _generated_cases(params, rng) -> list[tuple[str, list]]:
 
 
 def _flyable(params, effects, speed: float, seed: int):
-    """The generated flight of ``effects`` at path ``speed`` (m/s), flown slower where the
-    rotors cannot fly that path (:func:`benchmarks.synthetic.flown_slower`)."""
-    from benchmarks.synthetic import flown_slower, synthetic_flight
+    """The generated flight of ``effects`` at path ``speed`` (m/s), or, where the rotors
+    cannot fly that path, slower (:func:`benchmarks.synthetic.flyable_flight`: the same seed,
+    the same path's shape; the set's other flights and draws unchanged)."""
+    from benchmarks.synthetic import flyable_flight
 
-    return flown_slower(lambda v: synthetic_flight(params, effects, duration=DURATION_S,
-                                                   rate_hz=RATE_HZ, speed=v, seed=seed,
-                                                   flyable_only=True), speed)[0]
+    return flyable_flight(params, effects, speed=speed, seed=seed, duration=DURATION_S,
+                          rate_hz=RATE_HZ)
 
 
 def generated_answers(vehicle: str = "crazyflie21", *, seed: int = 47) -> list[Answer]:

@@ -38,8 +38,9 @@ from quadsim.logs.generate import logged_command
 from quadsim.vehicle.params import VehicleParams, hover_speed
 from quadsim.vehicle.rotors import allocation_matrix
 
-__all__ = ["NotFlyable", "SPEED_BOUNDS", "SensorNoise", "commands_through_map", "flown_slower",
-           "reference_path", "synthetic_flight"]
+__all__ = ["NotFlyable", "SLOWER", "SLOWER_TRIES", "SPEED_BOUNDS", "SensorNoise",
+           "commands_through_map", "flown_slower", "flyable_flight", "reference_path",
+           "synthetic_flight"]
 
 T = TypeVar("T")
 
@@ -423,6 +424,17 @@ def flown_slower(fly: Callable[[float], T], speed: float) -> tuple[T, float]:
         except NotFlyable:
             speed *= SLOWER
     return fly(speed), speed
+
+
+def flyable_flight(params: VehicleParams, effects: Sequence[Effect] = (), *, speed: float,
+                   **kwargs) -> FlightLog:
+    """:func:`synthetic_flight` of ``effects`` at path ``speed`` (m/s) with ``flyable_only``,
+    flown slower where the rotors cannot fly that path (:func:`flown_slower`: the same seed,
+    the same path's shape; a path they can fly is the flight ``synthetic_flight`` gives);
+    ``kwargs`` are ``synthetic_flight``'s. Raises :class:`NotFlyable` where the last speed
+    too is refused."""
+    return flown_slower(lambda v: synthetic_flight(params, effects, speed=v, flyable_only=True,
+                                                   **kwargs), speed)[0]
 
 
 def commands_through_map(log, params):

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import flyable_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
 from quadsim.gap.calibrate import PRACTICAL_Z, SelfCheck, Spread, negligible
@@ -147,7 +147,9 @@ def test_a_detectable_but_negligible_difference_is_no_difference():
 
 
 def _logs(cf, effects, seeds, duration=4.0):
-    return [synthetic_flight(cf, effects, seed=s, duration=duration, speed=1.5) for s in seeds]
+    """Exact generated flights, one per seed, at 1.5 m/s or, where the rotors cannot fly
+    that path, slower (:func:`benchmarks.synthetic.flyable_flight`)."""
+    return [flyable_flight(cf, effects, seed=s, duration=duration, speed=1.5) for s in seeds]
 
 
 EFFECTS = ["mass_offset", "com_offset", "thrust_mismatch", "body_drag"]

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import flyable_flight
 from quadsim.effects import make_effect
 from quadsim.gap import diagnose_per_flight
 from quadsim.gap.judge import LEAD_Z, change_sizes, lead_caveat, reading_name
@@ -65,10 +65,10 @@ def test_a_body_drag_six_times_the_references_is_named_a_body_drag(cf):
     has a body drag 6x their quadratic equivalent on top, no wind: body_drag leads, and the
     wind reading that carries the same drag is worded as the drag it is (never "wind")."""
     drag = make_effect("rotor_drag", coefficient=5e-7)
-    refs = [synthetic_flight(cf, [drag], seed=s, duration=4.0, speed=1.5)
+    refs = [flyable_flight(cf, [drag], seed=s, duration=4.0, speed=1.5)
             for s in range(70, 75)]
-    test = [synthetic_flight(cf, [drag, make_effect("body_drag", cd_area=0.005)], seed=80,
-                             duration=4.0, speed=1.5)]
+    test = [flyable_flight(cf, [drag, make_effect("body_drag", cd_area=0.005)], seed=80,
+                           duration=4.0, speed=1.5)]
     result = diagnose_per_flight(test, refs, cf,
                                  effects=["wind", "body_drag", "rotor_drag", "mass_offset"])
     flight = result["flights"][0]

@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import flyable_flight
 from quadsim.core.errors import QuadsimWarning
 from quadsim.effects import make_effect
 from quadsim.gap.diagnose import prepare
@@ -25,9 +25,10 @@ def lagged():
     cf = load_params("crazyflie21")
     # speed-controlled rotors whose log writes the commanded speed over max_speed (commands
     # proportional to speed: the premise; the default, quadsim.fly's convention, writes
-    # crazyflie21's map, a line with an intercept, whose load exponent is not 0)
-    logs = [synthetic_flight(cf, [make_effect("motor_lag", time_constant=LAG_S)],
-                             duration=5.0, seed=s, speed=1.0 + 0.2 * s, commands="max_speed")
+    # crazyflie21's map, a line with an intercept, whose load exponent is not 0).
+    # Each flight exact (flyable_flight: seed 2's path at 1.4 m/s is flown slower)
+    logs = [flyable_flight(cf, [make_effect("motor_lag", time_constant=LAG_S)],
+                           duration=5.0, seed=s, speed=1.0 + 0.2 * s, commands="max_speed")
             for s in range(3)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import synthetic_flight
+from benchmarks.synthetic import flyable_flight, synthetic_flight
 from quadsim.core.errors import InputError
 from quadsim.gap.logcheck import needed_rate_hz, slow_rotors, smoothing_cutoff_hz
 from quadsim.logs.flightlog import load_log, log_bytes, write_log
@@ -145,11 +145,12 @@ def cf():
 
 def _slow_log(cf, tmp, name, seed, *, command_hz=None, speed=None, duration=6.0,
               speed_hz=4.0, effects=()):
-    """A synthetic flight (``duration`` s, path ``speed``, default 0.8 + 0.1 seed, hidden
+    """An exact synthetic flight (``duration`` s, path ``speed``, default 0.8 + 0.1 seed, or
+    slower where the rotors cannot fly it: :func:`benchmarks.synthetic.flyable_flight`; hidden
     ``effects``) with its rotor speeds held at ``speed_hz`` (commands at ``command_hz`` held
     too, else full rate), written and read back as a user's CSV."""
-    log = synthetic_flight(cf, effects, duration=duration, seed=seed,
-                           speed=0.8 + 0.1 * seed if speed is None else speed)
+    log = flyable_flight(cf, effects, duration=duration, seed=seed,
+                         speed=0.8 + 0.1 * seed if speed is None else speed)
     log = dataclasses.replace(log, rotor_speed=_held(log.t, log.rotor_speed, speed_hz))
     if command_hz:
         log = dataclasses.replace(log, rotor_command=_held(log.t, log.rotor_command, command_hz))

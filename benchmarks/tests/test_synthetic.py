@@ -4,7 +4,13 @@ vehicle's rotors cannot fly."""
 import numpy as np
 import pytest
 
-from benchmarks.synthetic import SPEED_BOUNDS, NotFlyable, synthetic_flight
+from benchmarks.synthetic import (
+    SLOWER,
+    SPEED_BOUNDS,
+    NotFlyable,
+    flyable_flight,
+    synthetic_flight,
+)
 from quadsim.vehicle.params import hover_speed, load_params
 
 
@@ -27,3 +33,20 @@ def test_a_path_the_rotors_cannot_fly_is_refused_when_asked_and_kept_as_before_o
                          flyable_only=True)
     assert np.array_equal(a.rotor_speed, b.rotor_speed)
     assert np.array_equal(a.position, b.position)
+
+
+def test_flyable_flight_flies_a_path_the_rotors_cannot_fly_slower():
+    """The same seed-3 path at 2 m/s: refused there and at 0.9, 0.81 and 0.729 of it (137,
+    114, 69 and 17 samples held), flown exactly at SLOWER^4 x 2 m/s = 1.3122 m/s; the log is
+    synthetic_flight's at that speed. A path the rotors fly is synthetic_flight's own."""
+    params = load_params("crazyflie21")
+    kw = dict(duration=4.0, rate_hz=250.0, seed=3)
+    got = flyable_flight(params, speed=2.0, **kw)
+    speed = 2.0 * SLOWER * SLOWER * SLOWER * SLOWER      # as flyable_flight steps it
+    want = synthetic_flight(params, speed=speed, **kw)
+    assert np.array_equal(got.rotor_speed, want.rotor_speed)
+    assert np.array_equal(got.position, want.position)
+    with pytest.raises(NotFlyable):
+        synthetic_flight(params, speed=speed / SLOWER, flyable_only=True, **kw)
+    plain = flyable_flight(params, speed=1.0, **kw)
+    assert np.array_equal(plain.rotor_speed, synthetic_flight(params, speed=1.0, **kw).rotor_speed)
