@@ -54,20 +54,19 @@ def test_a_flapping_the_references_share_is_normal(cf):
 
 def test_a_flight_that_flaps_against_references_that_do_not_is_named(cf):
     """References without flapping, a flight with roll = pitch = 3 k: named blade_flapping
-    with both coefficients within 5 % of 3 k. The references show no rotor drag, so their
-    shared wind is no measured air speed; the reading refits it
-    (:func:`quadsim.gap.explanations.with_wind`). Before it did, the references' leftover
-    wind (-0.33 m/s along x) entered the flapping law's air speed: roll read at 0.80 and
-    pitch at 0.39 of the truth (measured; now 0.99 and 1.00). Every flight exact at 1.5 m/s:
-    the seeds from 60 on whose paths the rotors fly there (61 and 63 they do not, nor 62's
-    with the flapping; flown slower, as flyable_flight would, 61 and 63 made references
-    against which the flapping is not named: CHANGELOG)."""
+    with both coefficients within 5 % of 3 k. The references measure no wind (their rotor
+    drag is identified at 0, their wind not identified), so the reading refits it
+    (:func:`quadsim.gap.explanations.with_wind`, :func:`~quadsim.gap.explanations.wind_measured`).
+    Before, the references' leftover wind entered the flapping law's air speed: -0.33 m/s
+    along x read roll at 0.80 and pitch at 0.39 of the truth; with the seeds' paths flown
+    exactly (61 and 63 slower, flyable_flight) the references' wind was 2.1 m/s along y,
+    their rotor drag identified at 0, and the flapping read at 0.02-0.36 of the truth,
+    `unexplained` (now 0.99-1.00)."""
     k = _scale(cf)
-    reference = _logs(cf, [], (60, 62, 64, 65, 66))
-    result = diagnose_per_flight(_logs(cf, _flap(3 * k), (64,)), reference, cf,
+    reference = _logs(cf, [], (60, 61, 62, 63, 64))
+    result = diagnose_per_flight(_logs(cf, _flap(3 * k), (62,)), reference, cf,
                                  effects=EFFECTS)
     flight = result["flights"][0]
     assert flight["verdict"] == "blade_flapping", flight["answer"]
     assert flight["params"]["blade_flapping.roll"] == pytest.approx(3 * k, rel=0.05)
     assert flight["params"]["blade_flapping.pitch"] == pytest.approx(3 * k, rel=0.05)
-

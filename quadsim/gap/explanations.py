@@ -322,7 +322,7 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
     if delay:
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))
-    if "wind" in groups and not reference.identified.get("rotor_drag.coefficient", True):
+    if "wind" in groups and not wind_measured(reference):
         out = [with_wind(e, reference) if e.name in DRAGS else e for e in out]
     if names is not None:
         keep = set(names) | {"no_difference", "signal_delay"}
@@ -401,6 +401,19 @@ def _alpha_prior(reference: Reference, sd: dict) -> tuple[float, float]:
 #: k Omega e_z x (v - w), :mod:`quadsim.effects.blade_flapping`), which held fixed leaves
 #: its flights unexplained (docs/effects.md, blade_flapping; CHANGELOG.md: Docstrings as contracts).
 DRAGS = ("rotor_drag", "body_drag", "translational_lift", "blade_flapping")
+
+
+def wind_measured(reference: Reference) -> bool:
+    """Whether the references' shared wind is one their flights measure: their rotor drag
+    and both wind components identified (``reference.identified``, the calibration's
+    posterior spread below its prior's). Where not, their wind is whatever the fit left and
+    a drag reading refits it (:func:`with_wind`): a rotor drag identified at 0 (no drag the
+    wind could act through) leaves the wind unidentified, and held at such a value (2.1 m/s
+    on generated references with no air loads at all) it enters the flapping law's air
+    speed as a steady moment that no flapping coefficient fits."""
+    ident = reference.identified
+    return all(ident.get(key, True) for key in
+               ("rotor_drag.coefficient", "wind.vx", "wind.vy"))
 
 
 def with_wind(expl: Explanation, reference: Reference) -> Explanation:
