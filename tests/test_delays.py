@@ -107,20 +107,20 @@ def test_delay_not_repeatable_between_halves_is_not_reported():
 
 
 def test_a_late_rotor_logs_mirror_fill_is_not_counted_as_residual():
-    """problem.read_inside: a rotor log read d later is defined on the samples with t + d
-    inside the log; beyond its end the read meets the mirror fill. The rotor channels' mean
-    square leaves those samples out (closed form: 100 samples at 10 ms, a 27 ms read, the last
-    3 rows 10x the others: mean square 1 instead of 3.97); an early read (d < 0) leaves out
-    the first rows; no delay or a delay longer than the log keeps them all."""
-    from quadsim.gap.evidence import read_inside
+    """evidence.inside_reads: a rotor log read d later is defined on the samples with t + d
+    inside the log; beyond its end the read meets the mirror fill. The mean square over the
+    samples it keeps leaves those out (closed form: 100 samples at 10 ms, a 27 ms read, the
+    last 3 rows 10x the others: mean square 1 instead of 3.97); an early read (d < 0) leaves
+    out the first rows; no delay or a delay longer than the log keeps them all (None)."""
+    from quadsim.gap.evidence import inside_reads
 
     t = np.arange(100) * 0.01
     resid = np.ones((100, 2))
     resid[-3:] = 10.0
-    full = np.mean(resid ** 2, axis=0)
-    assert full[0] == pytest.approx(3.97)
-    np.testing.assert_allclose(read_inside(t, 0.027, resid, full), 1.0)
-    early = resid[::-1]
-    np.testing.assert_allclose(read_inside(t, -0.027, early, full), 1.0)
-    np.testing.assert_allclose(read_inside(t, 0.0, resid, full), full)
-    np.testing.assert_allclose(read_inside(t, 2.0, resid, full), full)
+    assert np.mean(resid ** 2, axis=0)[0] == pytest.approx(3.97)
+    late = inside_reads(t, 0.027)
+    assert np.count_nonzero(~late) == 3 and not late[-1] and late[0]
+    np.testing.assert_allclose(np.mean(resid[late] ** 2, axis=0), 1.0)
+    early = inside_reads(t, -0.027)
+    np.testing.assert_allclose(np.mean(resid[::-1][early] ** 2, axis=0), 1.0)
+    assert inside_reads(t, 0.0) is None and inside_reads(t, 2.0) is None

@@ -228,7 +228,7 @@ from .residual import flight_memo, memoised, min_time_constant
 __all__ = ["DELAY_BOUND_S", "FULL_FIT_EVALUATIONS", "FULL_FIT_STEP", "ChannelBlocks", "Evidence",
            "FitInputs",
            "Marginal", "Problem", "flight_residual", "full_fit", "laplace", "parameter_bounds",
-           "posterior_cov", "read_inside", "inside_reads", "shifted_view", "wall_jacobian",
+           "posterior_cov", "inside_reads", "shifted_view", "wall_jacobian",
            "fitted_jacobian",
            "CONVERGED", "PendingEvidence", "idle_parameters", "log_evidence",
            "THROUGH_SDS", "unidentified",
@@ -790,24 +790,16 @@ def fitted_jacobian(prob: Problem, fit, step: float) -> tuple[np.ndarray, np.nda
     return vec, jac, at_bound + int(near)
 
 
-def read_inside(t: np.ndarray, delay_s: float, resid: np.ndarray, ms: np.ndarray
-                ) -> np.ndarray:
-    """The channels' mean square (C,) over the samples whose read ``t + delay_s`` (s) lies
-    inside the log (:func:`inside_reads`); ``ms`` where all or none do. ``resid`` (N, C): the
-    residual of every channel that reads the shifted rotor speeds (the force and moment
-    channels through the rotors' wrench, the rotor channels directly). Beyond the log's ends
-    a rotor log read later meets the mirror image of its samples
-    (:func:`quadsim.gap.reference.read_later`): a fill that keeps the spectrum from ringing,
-    not data, so it does not count in what a reading leaves. The likelihood keeps every
-    sample (each reading's own delay would give each a different sample count)."""
-    inside = inside_reads(t, delay_s)
-    return ms if inside is None else np.mean(resid[inside] ** 2, axis=0)
-
-
 def inside_reads(t: np.ndarray, delay_s: float) -> np.ndarray | None:
     """(N,) whether each sample's read ``t + delay_s`` (s) lies inside the log's span
     [t_0, t_end]; None where every sample's does, or none does (nothing to leave out). The
-    samples outside form one run at one end: the mask is a contiguous span."""
+    samples outside form one run at one end: the mask is a contiguous span. Beyond the log's
+    ends a rotor log read later meets the mirror image of its samples
+    (:func:`quadsim.gap.reference.read_later`): a fill that keeps the spectrum from ringing,
+    not data, so what a reading leaves (:func:`laplace`'s ``ms`` and slow part) counts only
+    the samples inside, on every channel that reads the shifted rotor speeds (the force and
+    moment channels through the rotors' wrench, the rotor channels directly). The likelihood
+    keeps every sample (each reading's own delay would give each a different sample count)."""
     inside = (t + delay_s <= t[-1]) & (t + delay_s >= t[0])
     return None if inside.all() or not inside.any() else inside
 
@@ -929,7 +921,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     residual over sigma_c^2 (the stacked residual times sqrt(tau_c)); for a reading that
     shifts the rotor speeds (the flight's rotor delay, shared or its own), over the samples
     whose shifted read lies inside the log, on every channel, and its slow part likewise
-    (:func:`read_inside`, :func:`inside_reads`). A wind reading also gets its air force
+    (:func:`inside_reads`). A wind reading also gets its air force
     (:func:`_air_force`)."""
     states, reference, expl = prob.states, prob.reference, prob.expl
     names_all = reference.candidate.parameter_names
@@ -954,7 +946,7 @@ def laplace(prob: Problem, z: np.ndarray, vec: np.ndarray, h: np.ndarray, at_bou
     timed = None if getattr(states, "t", None) is None or len(states.t) < 2 \
         else float(states.t[1] - states.t[0])
     # what the reading leaves: over the samples whose shifted rotor read lies inside the log
-    # (read_inside: the mirror fill beyond its end is no residual, on every channel that
+    # (inside_reads: the mirror fill beyond its end is no residual, on every channel that
     # reads the shifted speeds); the likelihood above keeps every sample
     inside = inside_reads(states.t, float(theta[-1])) if expl.shift and timed else None
     left = resid if inside is None else resid[inside]

@@ -407,10 +407,11 @@ def wind_measured(reference: Reference) -> bool:
     """Whether the references' shared wind is one their flights measure: their rotor drag
     and both wind components identified (``reference.identified``, the calibration's
     posterior spread below its prior's). Where not, their wind is whatever the fit left and
-    a drag reading refits it (:func:`with_wind`): a rotor drag identified at 0 (no drag the
-    wind could act through) leaves the wind unidentified, and held at such a value (2.1 m/s
-    on generated references with no air loads at all) it enters the flapping law's air
-    speed as a steady moment that no flapping coefficient fits."""
+    a drag reading refits it (:func:`with_wind`). Why both: a rotor drag identified at 0
+    (no drag the wind could act through) leaves the wind unidentified, and a wind held at
+    such a value enters a drag law's air speed (the flapping law's: a steady moment) as a
+    load no reading of this flight fits (measured: CHANGELOG.md, "A wind the references do
+    not measure")."""
     ident = reference.identified
     return all(ident.get(key, True) for key in
                ("rotor_drag.coefficient", "wind.vx", "wind.vy"))

@@ -1296,9 +1296,10 @@ def above_floor(ms, reference) -> np.ndarray:
         > noise_floor(reference.params, reference.rotor) ** 2
 
 
-#: the torque channels (Mx, My, Mz) in the residual's channel order, and the reading's
-#: parameters that scale the principal moment of each (:mod:`quadsim.effects.inertia_error`)
-TORQUE_CHANNELS = (3, 4, 5)
+#: the torque channels (Mx, My, Mz) in the residual's channel order (:data:`CHANNELS`), and
+#: the reading's parameters that scale the principal moment of each
+#: (:mod:`quadsim.effects.inertia_error`)
+TORQUE_CHANNELS = tuple(CHANNELS.index(name) for name in ("Mx", "My", "Mz"))
 INERTIA_AXES = ("inertia_error.xx", "inertia_error.yy", "inertia_error.zz")
 
 
