@@ -15,8 +15,8 @@ Two kinds of answers, each a (stated probability, right) pair:
   right: ``unexplained``, since any name is a wrong name and no gap a miss). Seeded: the same
   flights every run (the wake's draws from a generator of their own, so adding them left the
   other flights as they were). Every flight is one the rotors fly exactly: a path asking them
-  for a speed outside their bounds is flown slower (:func:`_flyable`; seed 47: the motor-lag
-  flight, whose path held rotors 1 and 3 at 5 % of hover for 13 samples).
+  for a speed outside their bounds is flown slower (:func:`_flyable`; which flight it was:
+  CHANGELOG.md, "Generated flights the vehicle can fly").
 * **labelled real flights** (``--mixed RESULT.json``): the per-flight JSON of the ``mixed/``
   Crazyflie flights (``python -m quadsim.gap --model crazyflie21 --per-flight mixed/*.csv.gz
   --reference nominal/*.csv.gz --json RESULT.json``) with the campaign's labels

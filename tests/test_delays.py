@@ -124,3 +124,9 @@ def test_a_late_rotor_logs_mirror_fill_is_not_counted_as_residual():
     early = inside_reads(t, -0.027)
     np.testing.assert_allclose(np.mean(resid[::-1][early] ** 2, axis=0), 1.0)
     assert inside_reads(t, 0.0) is None and inside_reads(t, 2.0) is None
+
+
+def test_the_removed_read_inside_is_refused_with_what_to_write():
+    """evidence.read_inside left the package: importing it says to use inside_reads."""
+    with pytest.raises(ImportError, match="inside_reads"):
+        from quadsim.gap.evidence import read_inside  # noqa: F401

@@ -204,7 +204,7 @@ import numpy as np
 from scipy.linalg import cho_factor, get_lapack_funcs
 from scipy.optimize import least_squares, lsq_linear
 
-from ..core.errors import ModelError
+from ..core.errors import ModelError, refuse_moved
 from ..effects.base import EffectSet
 from ..vehicle.params import TRIANGLE_RTOL
 from .calibrate import jacobian
@@ -1794,3 +1794,10 @@ def _with_law(e: Explanation, part: tuple, replaced: tuple = ("rotor_drag",)) ->
         mean = tuple(0.0 if k == "rotor_drag.coefficient" else m for k, m in zip(names, mean))
     replaces = e.replaces + tuple(g for g in replaced if g not in e.replaces)
     return dataclasses.replace(e, parts=parts + (part,), mean=mean, replaces=replaces)
+
+
+#: removed names, refused with what to write instead (CHANGELOG.md lists each)
+__getattr__ = refuse_moved(__name__, {
+    "read_inside": "was removed: what a reading leaves counts the samples of "
+                   "`inside_reads(t, delay_s)` (None: all of them); take the mean square over "
+                   "that mask"})
