@@ -472,9 +472,6 @@ def test_a_cable_payload_is_read_on_each_flight_at_that_flights_own_start_swing(
     assert read.held_loglik > -400.0, read.held_loglik
 
 
-@pytest.mark.xfail(strict=True, reason="exact flights (flyable_flight): the held-out "
-                   "log-likelihood is -590 (> -400 asserted); it was -123 only while "
-                   "reference seed 44's path held its rotor speeds at a bound (91 samples)")
 def test_the_stacked_fit_starts_each_training_flight_at_its_own_swing(cf, plain):
     """Two exact training flights with a 7.4 g payload on a 0.5 m cable damped at 0.5 1/s
     (the diagnosis' own CableSwing), each starting with another swing (0.25 rad and
@@ -482,10 +479,16 @@ def test_the_stacked_fit_starts_each_training_flight_at_its_own_swing(cf, plain)
     fitted as ``cable_payload`` (:meth:`Against.weigh`): each stacked flight starts at a
     swing of its own (:func:`quadsim.gap.diagnose.fit_own_starts`), so the fit recovers
     the mass within 1 % and the length within 5 mm (measured: 7.39 g, 0.5001 m) and
-    leaves Fx and Fy at the noise level (mean square over sigma^2 below 1.5; measured 1.10,
-    1.05). With the second flight starting hanging still (one start for both) it read
-    7.07 g and 0.491 m and left 92 and 88. The held-out flight (hanging still) reads
-    within noise: log-likelihood above -400 (measured -116; -2897 before)."""
+    leaves Fx and Fy at the noise level (mean square over sigma^2 below 1.5; measured 1.16,
+    0.98). With the second flight starting hanging still (one start for both) it read
+    7.07 g and 0.491 m and left 92 and 88. The fit carries to the held-out flight (hanging
+    still) as the truth does: its Fx and Fy at the noise level, and its held-out
+    log-likelihood no more than p below the truth's read the same way (p = the reading's 8
+    values: a fit of p values loses p/2 in expectation on new data, Akaike's argument;
+    the bound is twice that). Measured: -590.3 at the fit, -588.0 at the truth (the
+    value's size is set by the flight's 361 samples and the references' noise model, not
+    by the fit; one start for both training flights left -2897)."""
+    from quadsim.gap.evidence import Evidence
     from quadsim.gap.fitting import CableSwing
 
     dg = importlib.import_module("quadsim.gap.diagnose")
@@ -510,7 +513,16 @@ def test_the_stacked_fit_starts_each_training_flight_at_its_own_swing(cf, plain)
     assert np.all(read.train.ms[:2] < 1.5), read.train.ms
     # the Evidence names the explanation's parameters only (the later starts integrated out)
     assert list(values) == expl.parameter_names
-    assert read.held_loglik > -400.0, read.held_loglik
+    truth = {"cable_payload.mass": mass, "cable_payload.length": length,
+             "cable_payload.swing_damping": 0.5}
+    at_truth = against.check(Evidence(expl, {n: truth.get(n, 0.0) for n in values}, {}, {},
+                                      {}, 0.0, np.zeros(10)))
+    weights = against.reference.weights
+    for resid in read.held_residuals + at_truth.held_residuals:
+        ms = np.mean(resid ** 2 * weights, axis=0)
+        assert np.all(ms[:2] < 1.5), ms
+    assert read.held_loglik > at_truth.held_loglik - len(values), \
+        (read.held_loglik, at_truth.held_loglik)
 
 
 def test_held_out_reads_a_shared_parameter_as_per_flight_and_the_stack_what_both_show(

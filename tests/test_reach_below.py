@@ -213,19 +213,24 @@ def brisk():
     return _calibrated(1.5)
 
 
-@pytest.mark.xfail(strict=True, reason="exact flights (every speed 0.6x): the gentle flight "
-                   "is no difference at 100 %, not tentative, no battery_sag reading to state: "
-                   "the misreading this test guards against does not arise")
 def test_a_gentle_flight_with_no_effect_gets_no_confident_name(hard):
-    """At 0.18 m/s (0.19x the references' RMS speed, 31 times their spread) the shared model's
-    motor lag misreads the gentle flight's rotor channels: main 51e2cb8 named battery_sag
-    (94 %, tentative). Its margin is earned under the references' typical level on the
-    channels it drives more gently: no_significant_gap, not sure, the reading stated."""
+    """A flight flown far more gently than its references (0.18 m/s path speed against
+    1.2 m/s; the shared model's asymmetric motor lag and rotor drag alike): no difference,
+    stated at >= 0.9, and the answer says it was flown outside the references' envelope at
+    its own RMS speed. On references whose rotors a path held at a bound (before the
+    generated flights were made exact) main 51e2cb8 named battery_sag here (94 %,
+    tentative): the rule that keeps a margin earned under the references' typical level
+    from naming (``judge.extrapolation_share``) is tested on its numbers above and on real flights
+    below; on these exact flights no reading earns such a margin (measured: 100 %)."""
     cf, reference = hard
     entry = _gentle(cf, reference)
     assert entry["outcome"] == "no_significant_gap", entry["answer"]
-    assert entry["probability"] > 0.9 and entry["tentative"], entry["answer"]
-    assert "need not shrink" in entry["answer"] and "battery_sag" in entry["answer"]
+    assert entry["probability"] > 0.9, entry["answer"]
+    envelope = entry["envelope"]
+    assert envelope["outside"], envelope
+    assert envelope["rms"]["speed"] < 0.3, envelope      # 0.18 m/s path, RMS 0.24 m/s
+    assert f"RMS speed {envelope['rms']['speed']:.3g} m/s" in entry["answer"], entry["answer"]
+    assert "battery_sag" not in entry["answer"], entry["answer"]
 
 
 def test_a_real_change_on_a_gentle_flight_is_still_named(brisk):
