@@ -1732,14 +1732,15 @@ def quadratic_equivalent(states, reference: Reference, per_axis: bool = False) -
     drag is linear, and flights at the references' speeds cannot
     tell the two apart, a wind of several m/s can
     (:func:`quadsim.gap.explanations.wind_readings`). 0 where the reference model has no
-    rotor drag."""
+    rotor drag, or where the area lies beyond body drag's plausible range (:func:`_drag_refit`:
+    flights too slow for a quadratic law to carry their drag with an airframe's area)."""
     from ..effects import make_effect
 
     if reference.values().get("rotor_drag.coefficient", 0.0) <= 0.0:
         return 0.0
     return _drag_refit(states, reference, "rotor_drag",
                        make_effect("body_drag", cd_area=1.0, per_axis=float(per_axis)),
-                       slice(0, 2))
+                       slice(0, 2), scaled="cd_area")
 
 
 def vertical_equivalent(states, reference: Reference) -> float:
@@ -1750,25 +1751,36 @@ def vertical_equivalent(states, reference: Reference) -> float:
 
     Why: a per-axis law that replaced only the references' horizontal (rotor) drag and kept
     their vertical one on the air speed reads the law's own vertical form as the flight's.
-    0 where the references share no vertical drag."""
+    0 where the references share no vertical drag, or where the area lies beyond body drag's
+    plausible range (:func:`_drag_refit`: the law then keeps their vertical drag as it is)."""
     from ..effects import make_effect
 
     if reference.values().get("body_drag.cd_area_vertical", 0.0) <= 0.0:
         return 0.0
     return _drag_refit(states, reference, "body_drag",
                        make_effect("body_drag", cd_area=0.0, cd_area_vertical=1.0,
-                                   per_axis=1.0), slice(2, 3))
+                                   per_axis=1.0), slice(2, 3), scaled="cd_area_vertical")
 
 
-def _drag_refit(states, reference: Reference, group: str, unit, axes: slice) -> float:
-    """Least-squares factor (>= 0) on the ``unit`` drag effect that fits the references'
-    body-frame force on ``axes`` (N) left to their shared ``group`` drag: the measured force
-    less the reference model without that group, over their own flights.
+def _drag_refit(states, reference: Reference, group: str, unit, axes: slice, *,
+                scaled: str) -> float:
+    """Least-squares factor (>= 0) on the ``unit`` drag effect (its parameter ``scaled`` at
+    1) that fits the references' body-frame force on ``axes`` (N) left to their shared
+    ``group`` drag: the measured force less the reference model without that group, over
+    their own flights.
 
     The measured force and not the group's own: fitted to the model's linear force (the
     group's projection onto its own law), the quadratic area comes out low by the squared
     cosine between the two laws' force histories over the references (a projection of a
-    projection)."""
+    projection).
+
+    0 where the factor lies beyond the plausible range of the ``unit`` effect's parameters
+    (body drag's C_d A: at most 1 m^2, :mod:`quadsim.effects.body_drag`). A quadratic force
+    grows with the air speed squared: on references flown slowly (hovering, held in place)
+    a drag that is linear in air speed takes an area of square metres to carry as one (a
+    Crazyflie held at 0.1 m/s: 2 m^2 along z). Such an area is no airframe's, no law the
+    references can be read under; as a fixed value of every reading under that law it would
+    also be refused as an effect, and with it every flight."""
     from .residual import measured_wrench, model_wrench
 
     shared, n_base = reference.effects(), len(reference.candidate.base)
@@ -1781,4 +1793,6 @@ def _drag_refit(states, reference: Reference, group: str, unit, axes: slice) -> 
         unit_force = model_wrench(s, reference.params, without + [unit])[0][:, axes] - base
         num += float(np.sum(target * unit_force))
         den += float(np.sum(unit_force * unit_force))
-    return max(0.0, num / den) if den > 0 else 0.0
+    factor = max(0.0, num / den) if den > 0 else 0.0
+    upper = next(p.upper for p in type(unit).parameters if p.name == scaled)
+    return factor if factor <= upper else 0.0
