@@ -731,7 +731,8 @@ def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
     per_axis = effective * (own - rss) / scale
     if told is not None:
         per_axis = np.where(told, per_axis, 0.0)
-    if per_axis.min() < -ORDER_CHI2:     # far worse on one axis: a model error, not an order
+    # worse on an axis it moves: a model error, not an order (see check_rotor_order)
+    if per_axis.min() < -(DOUBT_CHI2 if balance.column_noise is None else ORDER_CHI2):
         return float(per_axis.min())
     return float(np.sum(per_axis))
 
@@ -1042,9 +1043,12 @@ def check_rotor_order(log, params, *, reading: tuple | None = None,
     to sample (lag-1 autocorrelation rho of P's residual: a filtered gyro or an unmodelled
     effect; AR(1) effective sample size). A wrong column order is wrong on every axis it
     moves, so a permutation that fits one axis better but another far worse (that axis'
-    Delta chi^2 below -``ORDER_CHI2``) is a model error, not a column order: its evidence is
-    that axis' (negative) value: otherwise a poor torque model passes for a column order
-    (CHANGELOG.md: Docstrings as contracts). The order with the largest Delta chi^2 is
+    Delta chi^2 below -``ORDER_CHI2``; below -``DOUBT_CHI2``, two sigma, where the commands
+    stand for the speeds: the set's map, the motors' lag and every moment the mixer lacks
+    are then taken as exact, and their error meets the rival columns on one axis and not
+    on another) is a model error, not a column order: its evidence is that axis' (negative)
+    value: otherwise a poor torque model passes for a column order (CHANGELOG.md:
+    Docstrings as contracts; tests/test_order_model_error.py). The order with the largest Delta chi^2 is
     refused when it exceeds ``ORDER_CHI2`` = 25 (a five-sigma difference), naming the
     ``--rotor-map`` that applies it; a swap on generated flights and the right order on real
     ones lie far either side of it (``python scripts/consistency_evidence.py``;
