@@ -1048,8 +1048,8 @@ def check_rotor_order(log, params, *, reading: tuple | None = None,
     are then taken as exact, and their error meets the rival columns on one axis and not
     on another) is a model error, not a column order: its evidence is that axis' (negative)
     value: otherwise a poor torque model passes for a column order (CHANGELOG.md:
-    Docstrings as contracts; tests/test_order_model_error.py). The order with the largest Delta chi^2 is
-    refused when it exceeds ``ORDER_CHI2`` = 25 (a five-sigma difference), naming the
+    Docstrings as contracts; tests/test_order_model_error.py). The order with the largest
+    Delta chi^2 is refused when it exceeds ``ORDER_CHI2`` = 25 (a five-sigma difference), naming the
     ``--rotor-map`` that applies it; a swap on generated flights and the right order on real
     ones lie far either side of it (``python scripts/consistency_evidence.py``;
     CHANGELOG.md: Docstrings as contracts). Each order
