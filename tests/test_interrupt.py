@@ -5,6 +5,7 @@ imports no module for it (``_signal`` is built in: ``signal`` would import ``enu
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -13,10 +14,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(code: str) -> subprocess.CompletedProcess:
+    """``code`` in a fresh interpreter started as from an interactive shell: SIGINT at its
+    default disposition (a suite run as a background job, ``cmd &`` in a script, inherits
+    SIGINT ignored, and Python then keeps it ignored, as the package does)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get(
         "PYTHONPATH", "")])}
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=env, timeout=120)
+                          env=env, timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def test_interrupt_during_the_first_imports_is_one_line():
