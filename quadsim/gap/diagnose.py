@@ -224,6 +224,7 @@ from .judge import (
     rows_at_reference_voltage,
     scaled_residuals,
     slow_part,
+    torque_shrinkage,
     unvouched,
     where,
 )
@@ -2279,7 +2280,11 @@ def verdict_of(weighed: WeighedFlight, check=None, statuses=()) -> Verdict:
     # what a pose would add, and a declared pair the data do not separate: here, so that a
     # reference judged against the others (the self-check) is worded and marked as a flight
     states = getattr(flight, "states", flight)
-    return confusable_note(without_pose_note(verdict, states), states)
+    # what a reading scaling the rotors' wrench may owe to the speeds' noise (judge)
+    samples = len(weighed.states.t) if weighed.states is not None else 0
+    shrink = {(ev.name, ev.explanation.variant): torque_shrinkage(ev, weighed.reference,
+                                                                  samples) for ev in rows}
+    return confusable_note(without_pose_note(verdict, states), states, shrink)
 
 
 def refused_entry(name: str, reason: str) -> Verdict:

@@ -1041,7 +1041,7 @@ def confusable(a: str, b: str) -> str:
     return ""
 
 
-def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
+def _unseparated_rivals(verdict, within: float = float("inf"), shrink=None) -> list:
     """The readings of ``verdict``'s posterior, not stated beside its name, that the name's
     effect and they declare confusable (:func:`confusable`), with a determined magnitude,
     and (``within``, log-evidence units) a log evidence no more than that below the name's
@@ -1050,20 +1050,28 @@ def _unseparated_rivals(verdict, within: float = float("inf")) -> list:
     centre (log evidence + :attr:`~quadsim.gap.result.Reading.prior_pull`: where the priors
     centre a pair's values is no evidence of this flight; a pair that gives the same force
     is then told apart by the data's fit and the Occam volume alone), most probable first:
-    [(reading, how to tell them apart)]."""
+    [(reading, how to tell them apart)]. ``shrink``: (name, variant) -> the log units a
+    reading may owe to the logged speeds' noise on the torque channels
+    (:func:`quadsim.gap.judge.torque_shrinkage`), taken off each side's log evidence before
+    the margin is read (None: nothing taken off)."""
     stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
     own = ([r for r in verdict.posterior if r.name == verdict.name]
            or list(verdict.posterior))
     lead = max(own, key=lambda r: r.log_evidence) if own else None
+    shrink = shrink or {}
+
+    def owed(r) -> float:
+        return float(shrink.get((r.name, r.variant), 0.0))
+
     if lead is None or not np.isfinite(within):
         floor = flat = -np.inf
     else:
-        floor = lead.log_evidence - within
-        flat = lead.log_evidence + getattr(lead, "prior_pull", 0.0) - within
+        floor = lead.log_evidence - owed(lead) - within
+        flat = lead.log_evidence - owed(lead) + getattr(lead, "prior_pull", 0.0) - within
     rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
               if r.name not in stated and r.magnitude and (
-                  r.log_evidence >= floor
-                  or r.log_evidence + getattr(r, "prior_pull", 0.0) >= flat)]
+                  r.log_evidence - owed(r) >= floor
+                  or r.log_evidence - owed(r) + getattr(r, "prior_pull", 0.0) >= flat)]
     return sorted([(r, hint) for r, hint in rivals if hint],
                   key=lambda x: -x[0].probability)
 
@@ -1095,7 +1103,7 @@ def _has_pose(log) -> bool:
     return bool(getattr(log, "has_pose", getattr(log, "pose", True)))
 
 
-def confusable_note(verdict, log):
+def confusable_note(verdict, log, shrink=None):
     """``verdict`` (:class:`quadsim.gap.result.Verdict`) of a log with a pose (``log``: a
     FlightLog or its FlightStates; one without is :func:`without_pose_note`'s) with each
     declared confusable reading (:func:`confusable`) whose log evidence lies within
@@ -1104,13 +1112,14 @@ def confusable_note(verdict, log):
     tell them apart, and the name tentative; else as is. The margin is compared in
     quasi-likelihood units: SEPARATED times ``verdict.dispersion``
     (:func:`quadsim.gap.judge.overdispersion`, 1 where the flight's residual after the name
-    lies within the references'), which the words state where it is above 1. The outcome
-    and the numbers are unchanged."""
+    lies within the references'), which the words state where it is above 1; each side's
+    evidence less what ``shrink`` says it may owe to the logged speeds' noise
+    (:func:`_unseparated_rivals`). The outcome and the numbers are unchanged."""
     if not _has_pose(log) or verdict.outcome != "effect":
         return verdict
     # in quasi-likelihood units: the margin over the lead's dispersion (Verdict.dispersion)
     scale = max(1.0, float(getattr(verdict, "dispersion", 1.0)))
-    rivals = _unseparated_rivals(verdict, SEPARATED * scale)
+    rivals = _unseparated_rivals(verdict, SEPARATED * scale, shrink)
     if not rivals:
         return verdict
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
