@@ -52,3 +52,12 @@ def test_a_margin_the_speeds_noise_could_give_does_not_tell_the_pair_apart():
     assert rival.name == "mass_offset" and "weigh the vehicle" in hint
     # a margin beyond what the noise could give stays a separation
     assert _unseparated_rivals(_verdict(-1100.0, -1119.0), SEPARATED, owed) == []
+    # a rival's own bound is not taken off it (it may be as good as it looks): a mass named
+    # 3 units above a thrust factor keeps it beside, whatever the factor could owe
+    lead = Reading("mass_offset", 0.9, "+60 g", -1105.0, {"mass_offset.mass": 0.06})
+    rival = Reading("thrust_factor", 0.1, "-6.7 % thrust", -1108.0,
+                    {"thrust_factor.change": -0.067})
+    named_mass = SimpleNamespace(name="mass_offset", readings=("mass_offset",),
+                                 posterior=(lead, rival))
+    (kept, _), = _unseparated_rivals(named_mass, SEPARATED, owed)
+    assert kept.name == "thrust_factor"

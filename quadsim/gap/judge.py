@@ -1350,7 +1350,9 @@ def torque_shrinkage(ev, reference, samples: int) -> float:
     Why (errors in variables, docs/gap.md Known limits): the speeds' white noise rides on the
     model's torque, s M(Omega + e), and a scale s shrinks its variance by s^2; the channel's
     mean square under the reading is at least s^2 times that noise's, so the gain over the
-    references' scale, 1/2 (N/tau) (1 - s^2) V_e / sigma^2, is at most the bound above. Measured
+    references' scale, 1/2 (N/tau) (1 - s^2) V_e / sigma^2, is at most the bound above: taken
+    off a name's evidence where a declared pair is read (:func:`quadsim.gap.logcheck.
+    confusable_note`). Measured
     (benchmarks.campaigns, the report's testbed, +60 g): a thrust factor of -6.7 % gained 8.7
     log units over the mass on roll and pitch, the bound 8.8."""
     values = getattr(ev, "values", None) or {}

@@ -1052,8 +1052,10 @@ def _unseparated_rivals(verdict, within: float = float("inf"), shrink=None) -> l
     is then told apart by the data's fit and the Occam volume alone), most probable first:
     [(reading, how to tell them apart)]. ``shrink``: (name, variant) -> the log units a
     reading may owe to the logged speeds' noise on the torque channels
-    (:func:`quadsim.gap.judge.torque_shrinkage`), taken off each side's log evidence before
-    the margin is read (None: nothing taken off)."""
+    (:func:`quadsim.gap.judge.torque_shrinkage`), taken off the name's log evidence before
+    the margin is read (None: nothing taken off). The name's only: the bound is the most the
+    noise can give, so the name may be that much worse than it looks, a rival no better than
+    it looks; taking it off a rival would call a pair told apart on the noise's account."""
     stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
     own = ([r for r in verdict.posterior if r.name == verdict.name]
            or list(verdict.posterior))
@@ -1070,8 +1072,8 @@ def _unseparated_rivals(verdict, within: float = float("inf"), shrink=None) -> l
         flat = lead.log_evidence - owed(lead) + getattr(lead, "prior_pull", 0.0) - within
     rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
               if r.name not in stated and r.magnitude and (
-                  r.log_evidence - owed(r) >= floor
-                  or r.log_evidence - owed(r) + getattr(r, "prior_pull", 0.0) >= flat)]
+                  r.log_evidence >= floor
+                  or r.log_evidence + getattr(r, "prior_pull", 0.0) >= flat)]
     return sorted([(r, hint) for r, hint in rivals if hint],
                   key=lambda x: -x[0].probability)
 
@@ -1112,7 +1114,7 @@ def confusable_note(verdict, log, shrink=None):
     tell them apart, and the name tentative; else as is. The margin is compared in
     quasi-likelihood units: SEPARATED times ``verdict.dispersion``
     (:func:`quadsim.gap.judge.overdispersion`, 1 where the flight's residual after the name
-    lies within the references'), which the words state where it is above 1; each side's
+    lies within the references'), which the words state where it is above 1; the name's
     evidence less what ``shrink`` says it may owe to the logged speeds' noise
     (:func:`_unseparated_rivals`). The outcome and the numbers are unchanged."""
     if not _has_pose(log) or verdict.outcome != "effect":
