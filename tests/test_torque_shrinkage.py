@@ -61,3 +61,26 @@ def test_a_margin_the_speeds_noise_could_give_does_not_tell_the_pair_apart():
                                  posterior=(lead, rival))
     (kept, _), = _unseparated_rivals(named_mass, SEPARATED, owed)
     assert kept.name == "thrust_factor"
+
+
+def test_the_words_say_the_pair_is_stated_on_the_noises_account():
+    """A thrust factor named 10.7 log units above the mass, 8.9 of them what its scale may
+    owe to the speeds' noise: the mass stated beside it, tentative, and the answer says why;
+    with nothing owed the verdict is returned as it was."""
+    from quadsim.gap.logcheck import confusable_note
+    from quadsim.gap.result import Verdict
+
+    posterior = (Reading("thrust_factor", 0.99, "-6.7 % thrust", -1108.3,
+                         {"thrust_factor.change": -0.067}),
+                 Reading("mass_offset", 0.0, "+60 g heavier", -1119.0,
+                         {"mass_offset.mass": 0.06}))
+    named = Verdict("effect", "thrust_factor", "thrust_factor (99 %): -6.7 %.", 0.99,
+                    posterior=posterior, readings=("thrust_factor",))
+    pose = SimpleNamespace(has_pose=True)
+    assert confusable_note(named, pose) is named
+    noted = confusable_note(named, pose, {("thrust_factor", ""): 8.9})
+    assert noted.tentative and noted.readings == ("thrust_factor", "mass_offset")
+    assert ("once the name's evidence is taken as up to 8.9 log units less (what its scale of "
+            "every rotor's torque may owe to the logged rotor speeds' noise: errors in "
+            "variables).") in noted.answer
+    assert "prior's centre" not in noted.answer

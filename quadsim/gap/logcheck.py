@@ -1091,13 +1091,32 @@ def _unseparated_rivals(verdict, within: float = float("inf"), shrink=None) -> l
 SEPARATED = float(np.log(150.0))
 
 
-def _by_priors(verdict, rivals: list, scale: float) -> bool:
+def _by_priors(verdict, rivals: list, scale: float, owed: float = 0.0) -> bool:
     """Whether a rival of ``rivals`` (:func:`_unseparated_rivals`) lies beyond
-    :data:`SEPARATED` times ``scale`` of the name's log evidence, and so is stated only with
-    every value counted at its prior's centre."""
+    :data:`SEPARATED` times ``scale`` of the name's log evidence less ``owed`` (what it may owe
+    to the logged speeds' noise), and so is stated only with every value counted at its
+    prior's centre."""
+    own = _own_evidence(verdict)
+    return own is not None and any(own - owed - r.log_evidence > SEPARATED * scale
+                                   for r, _ in rivals)
+
+
+def _by_noise(verdict, rivals: list, scale: float, owed: float) -> bool:
+    """Whether a rival of ``rivals`` lies beyond :data:`SEPARATED` times ``scale`` of the
+    name's log evidence and within it of that evidence less ``owed`` > 0: stated only because
+    the name may owe that much to the logged speeds' noise."""
+    own = _own_evidence(verdict)
+    return own is not None and owed > 0 and any(
+        own - r.log_evidence > SEPARATED * scale >= own - owed - r.log_evidence
+        for r, _ in rivals)
+
+
+def _own_evidence(verdict) -> float | None:
+    """The name's log evidence in ``verdict``'s posterior (the highest where no reading bears
+    the name); None for an empty posterior."""
     own = [r.log_evidence for r in verdict.posterior if r.name == verdict.name] or \
         [r.log_evidence for r in verdict.posterior]
-    return bool(own) and any(max(own) - r.log_evidence > SEPARATED * scale for r, _ in rivals)
+    return max(own) if own else None
 
 
 def _has_pose(log) -> bool:
@@ -1124,6 +1143,9 @@ def confusable_note(verdict, log, shrink=None):
     rivals = _unseparated_rivals(verdict, SEPARATED * scale, shrink)
     if not rivals:
         return verdict
+    own = [r for r in verdict.posterior if r.name == verdict.name] or list(verdict.posterior)
+    lead = max(own, key=lambda r: r.log_evidence)
+    owed = float((shrink or {}).get((lead.name, lead.variant), 0.0))
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
                         f"them apart: {hint})" for r, hint in rivals)
     # the name tentative, said once (the judge's words may have said so already)
@@ -1136,9 +1158,12 @@ def confusable_note(verdict, log, shrink=None):
               + (f", times {scale:.2g}: the flight's residual after the name is {scale:.2g}x "
                  "the references' in mean square, which the evidence's noise model does not "
                  "hold" if scale > 1 else "")
+              + (f" once the name's evidence is taken as up to {owed:.2g} log units less (what "
+                 "its scale of every rotor's torque may owe to the logged rotor speeds' noise: "
+                 "errors in variables)" if _by_noise(verdict, rivals, scale, owed) else "")
               + (" once each value is counted at its prior's centre (where the priors centre "
-                 "the values is no evidence of this flight)" if _by_priors(verdict, rivals, scale)
-                 else "") + ".")
+                 "the values is no evidence of this flight)"
+                 if _by_priors(verdict, rivals, scale, owed) else "") + ".")
     names = tuple(r.name for r, _ in rivals)
     return dataclasses.replace(
         verdict, answer=answer, tentative=True, readings=tuple(verdict.readings) + names,
