@@ -1352,9 +1352,7 @@ def torque_shrinkage(ev, reference, samples: int) -> float:
     mean square under the reading is at least s^2 times that noise's, so the gain over the
     references' scale, 1/2 (N/tau) (1 - s^2) V_e / sigma^2, is at most the bound above: taken
     off a name's evidence where a declared pair is read
-    (:func:`quadsim.gap.logcheck.confusable_note`). Measured (benchmarks.campaigns, the
-    report's testbed, +60 g): a thrust factor of -6.7 % gained 8.7 log units over the mass on
-    roll and pitch, the bound 8.9."""
+    (:func:`quadsim.gap.logcheck.confusable_note`; measured: CHANGELOG.md, branch eivpair)."""
     values = getattr(ev, "values", None) or {}
     scale = 1.0 + sum(values.get(key, 0.0) for key in WRENCH_SCALES)
     if scale >= 1.0 or scale <= 0.0 or getattr(ev, "ms", None) is None:

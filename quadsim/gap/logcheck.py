@@ -1057,19 +1057,13 @@ def _unseparated_rivals(verdict, within: float = float("inf"), shrink=None) -> l
     noise can give, so the name may be that much worse than it looks, a rival no better than
     it looks; taking it off a rival would call a pair told apart on the noise's account."""
     stated = set(verdict.readings or ()) | {verdict.name, "no_difference"}
-    own = ([r for r in verdict.posterior if r.name == verdict.name]
-           or list(verdict.posterior))
-    lead = max(own, key=lambda r: r.log_evidence) if own else None
-    shrink = shrink or {}
-
-    def owed(r) -> float:
-        return float(shrink.get((r.name, r.variant), 0.0))
-
+    lead = _lead(verdict)
     if lead is None or not np.isfinite(within):
         floor = flat = -np.inf
     else:
-        floor = lead.log_evidence - owed(lead) - within
-        flat = lead.log_evidence - owed(lead) + getattr(lead, "prior_pull", 0.0) - within
+        owed = _owed(lead, shrink)
+        floor = lead.log_evidence - owed - within
+        flat = lead.log_evidence - owed + getattr(lead, "prior_pull", 0.0) - within
     rivals = [(r, confusable(verdict.name, r.name)) for r in verdict.posterior
               if r.name not in stated and r.magnitude and (
                   r.log_evidence >= floor
@@ -1111,12 +1105,24 @@ def _by_noise(verdict, rivals: list, scale: float, owed: float) -> bool:
         for r, _ in rivals)
 
 
+def _lead(verdict):
+    """The name's reading in ``verdict``'s posterior: its highest-evidence variant, or the
+    posterior's highest where no reading bears the name (a lead renamed by the lead rule);
+    None for an empty posterior."""
+    own = [r for r in verdict.posterior if r.name == verdict.name] or list(verdict.posterior)
+    return max(own, key=lambda r: r.log_evidence) if own else None
+
+
 def _own_evidence(verdict) -> float | None:
-    """The name's log evidence in ``verdict``'s posterior (the highest where no reading bears
-    the name); None for an empty posterior."""
-    own = [r.log_evidence for r in verdict.posterior if r.name == verdict.name] or \
-        [r.log_evidence for r in verdict.posterior]
-    return max(own) if own else None
+    """The log evidence of :func:`_lead`; None for an empty posterior."""
+    lead = _lead(verdict)
+    return None if lead is None else float(lead.log_evidence)
+
+
+def _owed(reading, shrink) -> float:
+    """What ``shrink`` ((name, variant) -> log units, or None) says ``reading`` may owe to
+    the logged speeds' noise (:func:`quadsim.gap.judge.torque_shrinkage`); 0 where none."""
+    return float((shrink or {}).get((reading.name, reading.variant), 0.0))
 
 
 def _has_pose(log) -> bool:
@@ -1143,9 +1149,7 @@ def confusable_note(verdict, log, shrink=None):
     rivals = _unseparated_rivals(verdict, SEPARATED * scale, shrink)
     if not rivals:
         return verdict
-    own = [r for r in verdict.posterior if r.name == verdict.name] or list(verdict.posterior)
-    lead = max(own, key=lambda r: r.log_evidence)
-    owed = float((shrink or {}).get((lead.name, lead.variant), 0.0))
+    owed = _owed(_lead(verdict), shrink)
     each = "; or ".join(f"{r.name} ({r.magnitude}; {100 * r.probability:.2g} % here; to tell "
                         f"them apart: {hint})" for r, hint in rivals)
     # the name tentative, said once (the judge's words may have said so already)
