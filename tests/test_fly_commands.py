@@ -139,3 +139,21 @@ def test_a_map_without_an_inverse_is_refused_naming_the_field():
     bent = dataclasses.replace(mm, command=np.array([0.0, 0.5, 1.0]), speed=speed)
     with pytest.raises(InputError, match="motor_map.speed: rotor 1's speed falls"):
         logged_command(CF.replace(motor_map=bent), np.full((2, 4), 900.0), np.full(2, 4.2))
+
+
+def test_a_sag_on_a_three_cell_vehicle_starts_at_its_pack_voltage(monkeypatch):
+    """``battery_sag:rate=...`` without a full voltage on the 0.84 kg testbed (3S, 12.6 V): the
+    log's voltage starts at the 12.6 V its nominal flights log and falls as
+    V_full sqrt(1 - rate t) (thrust ~ V^2), not from the effect's one-cell 4.2 V; a given
+    ``full_voltage`` is kept; on a one-cell vehicle the two agree (4.2 V)."""
+    phys = load_params("physical")
+    sag = make_effect("battery_sag", rate=0.01)
+    log, truth, _ = _fly(phys, (sag,), monkeypatch=monkeypatch, duration=2.0)
+    np.testing.assert_allclose(log.vbat, 12.6 * np.sqrt(1.0 - 0.01 * log.t), rtol=1e-12)
+    assert truth["command_map"]["vbat_range_v"][1] == pytest.approx(12.6, rel=1e-12)
+    given = make_effect("battery_sag", rate=0.01, full_voltage=11.1)
+    log, _, _ = _fly(phys, (given,), monkeypatch=monkeypatch, duration=1.0)
+    assert log.vbat[0] == pytest.approx(11.1, rel=1e-12)
+    log, _, _ = _fly(CF, (sag,), monkeypatch=monkeypatch, duration=1.0)
+    np.testing.assert_allclose(log.vbat, 4.2 * np.sqrt(1.0 - 0.01 * log.t), rtol=1e-12)
+    assert sag.given() == {"rate"} and given.given() == {"rate", "full_voltage"}

@@ -295,6 +295,12 @@ class EffectBase:
             raise TypeError(f"{self.name}: unknown parameter(s) {sorted(unknown)}; "
                             f"valid: {', '.join(known)}")
         self._values = {name: float(values.get(name, off)) for name, off in known.items()}
+        self._given = frozenset(values)
+
+    def given(self) -> frozenset[str]:
+        """The parameters set when the effect was made (the others are at their off value;
+        an effect unpickled from before this was kept counts every parameter as given)."""
+        return self.__dict__.get("_given", frozenset(self._values))
 
     def __getattr__(self, item: str) -> float:
         values = self.__dict__.get("_values", {})

@@ -12,7 +12,9 @@ Logged signals: position, velocity, attitude, body rate, rotor speeds (actual), 
 (:func:`logged_command`: normalised 0-1; ``commanded speed / max_speed``, or, where the
 parameter set carries a motor map, the command its map gives for the commanded speed at the
 logged battery voltage), battery voltage (from ``battery_sag`` if present, else the
-vehicle's full voltage, :func:`quadsim.effects.battery_sag.nominal_voltage`, constant) and the
+vehicle's full voltage, :func:`quadsim.effects.battery_sag.nominal_voltage`, constant; a
+``battery_sag`` made without a ``full_voltage`` starts from that same vehicle's voltage, not
+from the effect's one-cell default, :func:`on_pack`) and the
 accelerometer's specific force in the body frame at the body origin, ``R^T (a + g e3)``
 (about +g on z at rest), computed exactly from the Newton-Euler forces (rotors + effects) at
 each sample.
@@ -25,6 +27,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +47,7 @@ from .flightlog import FlightLog
 from .sensors import SensorModel
 
 __all__ = ["CONTROLLERS", "TRUTH_SCHEMA", "command_convention", "describe_report",
-           "effect_states", "flight_report", "generate_flight", "logged_command",
+           "effect_states", "flight_report", "generate_flight", "logged_command", "on_pack",
            "specific_force", "truth_path"]
 
 CONTROLLERS = ("geometric", "lqr")
@@ -198,6 +201,21 @@ def _lqr(params: VehicleParams, reference: Reference):
     return LQRController(params, reference=target)
 
 
+def on_pack(effects: EffectSet, params: VehicleParams) -> EffectSet:
+    """``effects`` with each ``battery_sag`` made without a ``full_voltage`` given that of the
+    vehicle's pack (:func:`quadsim.effects.battery_sag.nominal_voltage`: 12.6 V for the 0.84 kg
+    testbed's 3S pack), so that a sag flight's logged voltage starts where the vehicle's
+    nominal flights log theirs; the effect's default (4.2 V, one cell) is kept only for a
+    one-cell vehicle, where the two agree. A given ``full_voltage`` is kept as given."""
+    out = []
+    for effect in effects.effects:
+        if isinstance(effect, BatterySag) and "full_voltage" not in effect.given():
+            effect = BatterySag(**{k: v for k, v in effect.values().items() if k in effect.given()},
+                                full_voltage=nominal_voltage(params))
+        out.append(effect)
+    return dataclasses.replace(effects, effects=tuple(out)) if out else effects
+
+
 def _battery_voltage(effects: EffectSet, t: np.ndarray, params: VehicleParams) -> np.ndarray:
     for effect in effects.effects:
         if isinstance(effect, BatterySag):
@@ -265,7 +283,7 @@ def generate_flight(params: VehicleParams, path: str | Reference, effects: Effec
 
     The truth carries ``flight_report`` (:func:`flight_report`): what the vehicle did.
     ``progress(t)`` (optional) is called with the simulated time after each control step."""
-    effects = effects or EffectSet()
+    effects = on_pack(effects or EffectSet(), params)
     sensors = sensors or SensorModel()
     reference = path if isinstance(path, Reference) else make_reference(
         path, speed=speed, height=height, size=size, duration=duration)
