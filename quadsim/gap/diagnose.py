@@ -358,6 +358,8 @@ def prepare(logs: Sequence[FlightLog], params: VehicleParams, *,
         # a band's wider window (quadsim.gap.logcheck.band_of) widens the edges alike
         pieces = [s.take(interior(s.t, EDGE_S * max(1.0, window_s / DEFAULT_WINDOW_S)))
                   for s in pieces]
+        if log.speeds_synthesised:      # model speeds: an upstream effect acts on them
+            pieces = [dataclasses.replace(s, synthesised=True) for s in pieces]
         states = joined_states(pieces)
         dt = float(states.t[1] - states.t[0])
         stride = max(1, round(1.0 / (FIT_RATE_HZ * dt)),

@@ -319,6 +319,12 @@ def explanations_for(reference: Reference, states, names=None) -> list[Explanati
         else:                                               # no voltage log: a sag rate
             out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
                             [sd["battery_sag.rate"]]))
+    elif getattr(states, "synthesised", False) and "battery_sag" not in groups:
+        # speeds synthesised from the commands (logcheck): a sag beyond the references'
+        # map acts on them (fitting.upstream_speeds), read as a rate (the voltage the
+        # synthesis read already: the references' map and its voltage law)
+        out.append(_one("battery_sag", "", [("battery_sag", {}, ("rate",))], [0.0],
+                        [sd["battery_sag.rate"]]))
     if delay:
         out.append(_one("signal_delay", "rotor", (), [0.0],
                         [np.hypot(DELAY_SD_S, reference_delay_sd(reference))], shift="rotor"))

@@ -1149,7 +1149,8 @@ def stack_states(flights: list[FlightStates]) -> FlightStates:
                                            "body_rate", "body_accel", "specific_force",
                                            "rotor_speed", "rotor_accel", "command", "vbat")),
                         first.accel_source, first.window_s, first.polyorder, "stacked",
-                        all(f.pose for f in flights), all(f.attitude for f in flights))
+                        all(f.pose for f in flights), all(f.attitude for f in flights),
+                        all(f.synthesised for f in flights))
 
 
 def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
@@ -1170,17 +1171,23 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
     candidate's own inertia the gyro noise would be scaled by ``I_v``, and least squares
     would shrink ``I_v`` to shrink the noise (errors in variables; CHANGELOG.md: Docstrings
     as contracts)."""
+    upstream = upstream_speeds(states, effects)
     if memo is None:
-        force, torque, vehicle = model_wrench(states, params, effects)
+        force, torque, vehicle = model_wrench(states, params, effects, rotor_speed=upstream)
         meas_force, meas_torque = measured_wrench(states, vehicle)
         inertia_map = _vehicle_facts(vehicle, params)[1]
     else:
         rotation, motion = flight_memo(memo, states)
         plan = effects_plan(effects)
-        force, torque, vehicle = memoised(
-            memo, ("wrench", id(states), id(params), plan.wrench), states,
-            lambda: model_wrench(states, params, plan.effects, rotation=rotation,
-                                 flight_memo=motion))
+        if upstream is None:
+            force, torque, vehicle = memoised(
+                memo, ("wrench", id(states), id(params), plan.wrench), states,
+                lambda: model_wrench(states, params, plan.effects, rotation=rotation,
+                                     flight_memo=motion))
+        else:   # speeds of this evaluation's own: its wrench is not one to keep
+            force, torque, vehicle = model_wrench(states, params, plan.effects,
+                                                  rotor_speed=upstream, rotation=rotation,
+                                                  flight_memo=motion)
         values, inertia_map = kept(motion, "vehicle_facts", (id(vehicle), id(params)),
                                    (vehicle, params), lambda: _vehicle_facts(vehicle, params))
         # what the motion implies: the same for every rotor timing of one flight
@@ -1201,6 +1208,30 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
         rotor = memoised(memo, ("rotor", id(states), id(params), plan.rotor(rotors)), states,
                          lambda: rotor_residual(states, params, plan.effects, memo=memo))
     return np.concatenate((force_residual, torque_residual, rotor), axis=1)
+
+
+def upstream_speeds(states: FlightStates, effects) -> np.ndarray | None:
+    """The rotor speeds (N, R) rad/s of synthesised ``states`` (speeds made from the log's
+    commands, :attr:`FlightStates.synthesised`) under the effects upstream of the speed
+    (``facts.upstream_of_speed``: a battery's sag), each one's time law
+    ``speed_factor(t - t_0)`` (the log's voltage is not read: the speeds were synthesised
+    through the references' map at it, :mod:`quadsim.gap.logcheck`) times the synthesised
+    speeds; None for measured speeds or where no such effect acts (the speeds as logged).
+
+    Why only there: a measured rotor speed already carries what acts upstream of it
+    (:mod:`quadsim.effects.battery_sag`); a speed synthesised from a command is the model's
+    speed for that command, which such an effect changes."""
+    if not getattr(states, "synthesised", False) or states.rotor_speed is None:
+        return None
+    factor = None
+    for effect in getattr(effects, "effects", effects) or ():
+        facts = getattr(type(effect), "facts", None)
+        if facts is None or not facts.upstream_of_speed:
+            continue
+        one = effect.speed_factor(states.t - states.t[0])
+        if one is not None:
+            factor = one if factor is None else factor * one
+    return None if factor is None else states.rotor_speed * np.asarray(factor)[:, None]
 
 
 def _vehicle_facts(vehicle: VehicleParams, params: VehicleParams) -> tuple:

@@ -67,8 +67,11 @@ What is lost without measured speeds: the rotor channel (measured speed minus th
 commands predict) disappears, so effects that act *between* command and speed are fixed to
 the reference: ``motor_lag`` cannot be fitted and a change of lag reads as an attitude-
 dynamics change (confusable with ``inertia_error``); a rotor that turns slower for the same
-command (a weaker motor, a sagging battery beyond the reference's range) is seen only through
-its thrust, i.e. as ``thrust_mismatch``/``mass_offset`` rather than in the rotor channel.
+command (a weaker motor) is seen only through its thrust, i.e. as
+``thrust_mismatch``/``mass_offset`` rather than in the rotor channel. A battery that sags
+beyond the references' map is read on the synthesised speeds themselves: ``battery_sag`` as a
+rate, its time law scaling them (the states' ``synthesised``,
+:func:`quadsim.gap.fitting.upstream_speeds`).
 
 Example::
 

@@ -549,6 +549,10 @@ class FlightStates:
     name: str = ""
     pose: bool = True
     attitude: bool = True
+    #: the rotor speeds were synthesised from the log's commands
+    #: (:func:`quadsim.gap.logcheck.synthesise_speeds`): model speeds, on which an effect
+    #: upstream of the speed (a battery's sag) acts (:func:`quadsim.gap.fitting.residuals`)
+    synthesised: bool = False
 
     def __len__(self) -> int:
         return len(self.t)
@@ -563,7 +567,7 @@ class FlightStates:
                             self.body_accel[index], self.specific_force[index],
                             pick(self.rotor_speed), pick(self.rotor_accel), pick(self.command),
                             pick(self.vbat), self.accel_source, self.window_s, self.polyorder,
-                            self.name, self.pose, self.attitude)
+                            self.name, self.pose, self.attitude, self.synthesised)
 
 
 # ----------------------------------------------------------------------------- resampling
