@@ -120,3 +120,61 @@ def early_and_full(flights, params) -> tuple[float, float | None]:
         return early / limit, None
     k = list(ref.candidate.parameter_names).index(cal.CURVE_KEY)
     return early / limit, float(ref.s_ref[k]) / limit
+
+
+def crazyflie_without_lag():
+    """The crazyflie21 set with its motor map's time constant 0: the generated flights'
+    rotors follow their commands at once (the engines read a rotor lag only as the
+    ``motor_lag`` effect), so their speeds are synthesised without the set's motor lag."""
+    import dataclasses
+
+    from quadsim.vehicle.params import load_params
+
+    params = load_params("crazyflie21")
+    return params.replace(motor_map=dataclasses.replace(params.motor_map, time_constant=0.0))
+
+
+def commands_only_flight(params, effects, sensors, seed: int, path: str = "figure8", *,
+                         duration: float, through_map: bool = False):
+    """A generated closed-loop flight of ``params`` with ``effects`` (MuJoCo, ``sensors``,
+    1 m/s, ``duration`` s) as a log with motor commands and no rotor speeds, checked
+    (:func:`quadsim.logs.checks.check_logs`, QuadsimWarnings silenced); ``through_map``: its
+    commands written again through the set's map (:func:`commands_through_map`)."""
+    import dataclasses
+    import warnings
+
+    from quadsim.core.errors import QuadsimWarning
+    from quadsim.effects import EffectSet
+    from quadsim.logs.checks import check_logs
+    from quadsim.logs.generate import generate_flight
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        log, _ = generate_flight(params, path, EffectSet(tuple(effects)), sensors, seed,
+                                 duration=duration, speed=1.0)
+        if through_map:
+            log = commands_through_map(log, params)     # commands as the set's map has them
+        return check_logs([dataclasses.replace(log, rotor_speed=None)], params)[0][0]
+
+
+def judge_commands_only(params, references: list, flights: dict) -> dict:
+    """The per-flight verdicts of command-only ``flights`` (name -> log) against command-only
+    ``references`` (logs), their speeds synthesised from the commands
+    (:func:`quadsim.gap.logcheck.synthesise_all`), QuadsimWarnings silenced: name -> verdict,
+    and ``"model"`` (the command model), ``"reference"`` (the calibrated reference model),
+    ``"prepared"`` (the prepared references)."""
+    import warnings
+
+    from quadsim.core.errors import QuadsimWarning
+    from quadsim.gap.calibrate import calibrate
+    from quadsim.gap.diagnose import judge_one, prepare
+    from quadsim.gap.logcheck import synthesise_all
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        roles, model = synthesise_all({"reference": references, "f": list(flights.values())},
+                                      params)
+        prepared = prepare(roles["reference"], params)
+        reference = calibrate(prepared, params)
+        out = {k: judge_one(log, reference) for k, log in zip(flights, roles["f"])}
+    return out | {"model": model, "reference": reference, "prepared": prepared}

@@ -16,21 +16,15 @@ flights of 6 s, commands and battery voltage logged, no rotor speeds.
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import numpy as np
 import pytest
 
-from quadsim.core.errors import QuadsimWarning
-from quadsim.effects import EffectSet, make_effect
-from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import judge_one, prepare
+from quadsim.effects import make_effect
 from quadsim.gap.fitting import residuals, upstream_speeds
-from quadsim.gap.logcheck import synthesise_all
-from quadsim.logs.checks import check_logs
-from quadsim.logs.generate import generate_flight
 from quadsim.logs.sensors import SensorModel
-from quadsim.vehicle.params import load_params
+
+from _helpers import commands_only_flight, crazyflie_without_lag, judge_commands_only
 
 NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
                            "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
@@ -42,30 +36,19 @@ pytestmark = pytest.mark.xdist_group("test_commands_sag")
 
 @pytest.fixture(scope="module")
 def cf():
-    # the generated rotors follow their commands at once (a lag only as the motor_lag
-    # effect): their speeds are synthesised without the set's motor lag
-    params = load_params("crazyflie21")
-    return params.replace(motor_map=dataclasses.replace(params.motor_map, time_constant=0.0))
+    return crazyflie_without_lag()
 
 
 def _commands_only(cf, effects, seed, path="figure8"):
-    log, _ = generate_flight(cf, path, EffectSet(tuple(effects)), NOISE, seed,
-                             duration=6.0, speed=1.0)
-    return check_logs([dataclasses.replace(log, rotor_speed=None)], cf)[0][0]
+    return commands_only_flight(cf, effects, NOISE, seed, path, duration=6.0)
 
 
 @pytest.fixture(scope="module")
 def judged(cf):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [_commands_only(cf, (), seed, path) for seed, path in enumerate(PATHS)]
-        flights = {"calm": _commands_only(cf, (), 21),
-                   "sag": _commands_only(cf, (make_effect("battery_sag", rate=RATE),), 22)}
-        roles, _ = synthesise_all({"reference": refs, "f": list(flights.values())}, cf)
-        prepared = prepare(roles["reference"], cf)
-        reference = calibrate(prepared, cf)
-        out = {k: judge_one(log, reference) for k, log in zip(flights, roles["f"])}
-        return out | {"reference": reference, "prepared": prepared}
+    refs = [_commands_only(cf, (), seed, path) for seed, path in enumerate(PATHS)]
+    flights = {"calm": _commands_only(cf, (), 21),
+               "sag": _commands_only(cf, (make_effect("battery_sag", rate=RATE),), 22)}
+    return judge_commands_only(cf, refs, flights)
 
 
 def test_a_sag_on_a_command_only_log_is_named_with_its_rate(judged):

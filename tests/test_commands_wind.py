@@ -21,23 +21,13 @@ cm^2) and 4.08 +- 0.25 m/s (C_d A 19.1 +- 2.3 cm^2, vertical 2.8 +- 4.3 cm^2); 5
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
-
 import numpy as np
 import pytest
 
-from quadsim.core.errors import QuadsimWarning
-from quadsim.effects import EffectSet, make_effect
-from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import judge_one, prepare
-from quadsim.gap.logcheck import synthesise_all
-from quadsim.logs.checks import check_logs
-from quadsim.logs.generate import generate_flight
+from quadsim.effects import make_effect
 from quadsim.logs.sensors import SensorModel
-from quadsim.vehicle.params import load_params
 
-from _helpers import commands_through_map
+from _helpers import commands_only_flight, crazyflie_without_lag, judge_commands_only
 
 NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
                            "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
@@ -48,33 +38,23 @@ pytestmark = pytest.mark.xdist_group("test_commands_wind")
 
 @pytest.fixture(scope="module")
 def cf():
-    # the generated flights follow their commands at once (the engines read a rotor lag only
-    # as the motor_lag effect): their speeds are synthesised without the set's motor lag
-    params = load_params("crazyflie21")
-    return params.replace(motor_map=dataclasses.replace(params.motor_map, time_constant=0.0))
+    return crazyflie_without_lag()
 
 
 def _commands_only(cf, effects, seed, path="figure8"):
     drag = make_effect("body_drag", cd_area=0.002)
-    log, _ = generate_flight(cf, path, EffectSet((drag, *effects)), NOISE, seed,
-                             duration=5.0, speed=1.0)
-    log = commands_through_map(log, cf)         # commands as the set's map has them
-    return check_logs([dataclasses.replace(log, rotor_speed=None)], cf)[0][0]
+    return commands_only_flight(cf, (drag, *effects), NOISE, seed, path, duration=5.0,
+                                through_map=True)
 
 
 @pytest.fixture(scope="module")
 def judged(cf):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [_commands_only(cf, (), seed, path) for seed, path in enumerate(PATHS)]
-        flights = {"calm": _commands_only(cf, (), 21),
-                   2.0: _commands_only(cf, (make_effect("wind", vx=2.0),), 22),
-                   4.0: _commands_only(cf, (make_effect("wind", vx=4.0),), 23),
-                   5.0: _commands_only(cf, (make_effect("wind", vx=5.0),), 33)}
-        roles, model = synthesise_all({"reference": refs, "f": list(flights.values())}, cf)
-        reference = calibrate(prepare(roles["reference"], cf), cf)
-        out = {k: judge_one(log, reference) for k, log in zip(flights, roles["f"])}
-        return out | {"model": model, "reference": reference}
+    refs = [_commands_only(cf, (), seed, path) for seed, path in enumerate(PATHS)]
+    flights = {"calm": _commands_only(cf, (), 21),
+               2.0: _commands_only(cf, (make_effect("wind", vx=2.0),), 22),
+               4.0: _commands_only(cf, (make_effect("wind", vx=4.0),), 23),
+               5.0: _commands_only(cf, (make_effect("wind", vx=5.0),), 33)}
+    return judge_commands_only(cf, refs, flights)
 
 
 @pytest.mark.parametrize("speed", [2.0, 4.0, 5.0])
