@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from quadsim.effects import make_effect
-from quadsim.gap.fitting import residuals, upstream_speeds
+from quadsim.gap.fitting import SpeedGain, residuals, upstream_speeds
 from quadsim.logs.sensors import SensorModel
 
 from _helpers import commands_only_flight, crazyflie_without_lag, judge_commands_only
@@ -77,6 +77,8 @@ def test_the_sag_scales_only_synthesised_speeds(judged, cf):
     np.testing.assert_allclose(scaled, expected, rtol=1e-12)
     measured = dataclasses.replace(states, synthesised=False)
     assert upstream_speeds(measured, [sag]) is None
+    # the references' map gain is in the synthesis already: not applied again
+    assert upstream_speeds(states, [SpeedGain(gain=0.05)]) is None
     # the wrench reads the scaled speeds: the residual moves on a synthesised log only
     plain = residuals(states, cf, [], rotor_channel=False)
     assert np.abs(residuals(states, cf, [sag], rotor_channel=False) - plain).max() > 1e-4

@@ -1213,7 +1213,8 @@ def residuals(states: FlightStates, params: VehicleParams, effects: list, *,
 def upstream_speeds(states: FlightStates, effects) -> np.ndarray | None:
     """The rotor speeds (N, R) rad/s of synthesised ``states`` (speeds made from the log's
     commands, :attr:`FlightStates.synthesised`) under the effects upstream of the speed
-    (``facts.upstream_of_speed``: a battery's sag), each one's time law
+    (``facts.upstream_of_speed``: a battery's sag; not the motor map's gain
+    :class:`SpeedGain`, the references' own, which the synthesis read), each one's time law
     ``speed_factor(t - t_0)`` (the log's voltage is not read: the speeds were synthesised
     through the references' map at it, :mod:`quadsim.gap.logcheck`) times the synthesised
     speeds; None for measured speeds or where no such effect acts (the speeds as logged).
@@ -1226,7 +1227,9 @@ def upstream_speeds(states: FlightStates, effects) -> np.ndarray | None:
     factor = None
     for effect in getattr(effects, "effects", effects) or ():
         facts = getattr(type(effect), "facts", None)
-        if facts is None or not facts.upstream_of_speed:
+        # the motor map's gain is the references' map's, which the synthesis read already
+        # (its command model is fitted on the references' speeds): never applied twice
+        if facts is None or not facts.upstream_of_speed or isinstance(effect, SpeedGain):
             continue
         one = effect.speed_factor(states.t - states.t[0])
         if one is not None:
