@@ -12,6 +12,12 @@ flight carries.
   0.8-1.2 m/s, 1.5 m high; a rotor drag (1.2e-5 kg/rad) and a 40 ms motor lag on every flight;
   200 Hz. 10 references, 3 calm flights, +60 g, a CoM offset (+10, -6 mm), rotor 3 10 % weak,
   +30/30/20 % inertia, a battery sag (rate 0.01 1/s).
+* ``xquad``: PX4 SITL's jMAVSim X quad (``px4_sitl_iris``, 0.8 kg, no motor map: commands
+  are speed / max_speed) on figure-8s, lissajous and steps at 0.5-1.5 m/s, 2 m high; a
+  rotor drag (1e-5 kg/rad), a 30 ms motor lag and a body drag (C_d A 50 cm^2, vertical
+  100 cm^2) on every flight; 100 Hz, as PX4 logs its actuator outputs. 10 references, 3 calm
+  flights, +80 g, a CoM offset (+8, -5 mm), rotor 2 8 % weak, every propeller 6 % weaker
+  (``thrust_factor``), +25/25/20 % inertia, a battery sag (0.004 1/s), a 2 m/s wind.
 
 Each flight's sensors: white noise on the gyro (0.01 / 0.02 rad/s), accelerometer (0.05 /
 0.1 m/s^2), rotor speeds (5 rad/s) and position (0.5 / 1 mm). The logs are written as the
@@ -29,7 +35,7 @@ beside it; a wrong name at >= 0.9 and not tentative is **confident wrong**.
 
 Usage (from the repository root; ~2 min to fly, ~30 s to judge each campaign)::
 
-    python -m benchmarks.campaigns [--campaign tunnel|testbed|all] [--logs full|commands|imu]
+    python -m benchmarks.campaigns [--campaign tunnel|testbed|xquad|all] [--logs full|commands|imu]
                                    [--out DIR]
 
 Where these campaigns came from, what their first runs found and what was left:
@@ -124,6 +130,27 @@ CAMPAIGNS = {
          Flight("inertia", 34, "lissajous", 1.0,
                 (("inertia_error", {"xx": 0.3, "yy": 0.3, "zz": 0.2}),), "inertia_error"),
          Flight("sag", 35, "figure8", 1.0, (("battery_sag", {"rate": 0.01}),), "battery_sag"))),
+    "xquad": Campaign(
+        "px4_sitl_iris",
+        (("rotor_drag", {"coefficient": 1e-5}), ("motor_lag", {"time_constant": 0.03}),
+         ("body_drag", {"cd_area": 0.005, "cd_area_vertical": 0.01})),
+        {"gyro": 0.01, "accel": 0.05, "rotor": 8.0, "position": 0.001}, 100.0, 2.0, 2.0, 15.0,
+        tuple(Flight(f"ref{s:02d}", s, ("figure8", "lissajous", "steps")[s % 3],
+                     (1.0 + 0.05 * s, 0.8 + 0.04 * s, 0.5)[s % 3]) for s in range(1, 11)),
+        (Flight("calm21", 21, "figure8", 1.2), Flight("calm22", 22, "lissajous", 1.0),
+         Flight("calm23", 23, "steps", 0.5),
+         Flight("mass80", 31, "figure8", 1.2, (("mass_offset", {"mass": 0.08}),), "mass"),
+         Flight("com", 32, "lissajous", 1.0, (("com_offset", {"x": 0.008, "y": -0.005}),),
+                "com_offset"),
+         Flight("weak2", 33, "figure8", 1.2, (("thrust_mismatch", {"rotor_2": -0.08}),),
+                "thrust_mismatch"),
+         Flight("props", 34, "lissajous", 1.0, (("thrust_factor", {"change": -0.06}),),
+                "thrust_factor"),
+         Flight("inertia", 35, "figure8", 1.2,
+                (("inertia_error", {"xx": 0.25, "yy": 0.25, "zz": 0.2}),), "inertia_error"),
+         Flight("sag", 36, "steps", 0.5, (("battery_sag", {"rate": 0.004}),), "battery_sag"),
+         Flight("wind", 37, "figure8", 1.2, (("wind", {"vx": 2.0, "gust": 0.2, "seed": 37}),),
+                "wind"))),
 }
 
 #: the verdict names that name each truth (a mass hangs or sits)
