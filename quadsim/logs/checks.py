@@ -774,29 +774,35 @@ def commands_lag(log, params) -> float:
     model error of the balance, and a rival column order can fit it better: a 0.8 kg X quad
     whose motors lag by 30 ms (``python -m benchmarks.campaigns --campaign xquad``) had its
     right order refused (rotors 1 and 3 swapped, Delta chi^2 63.4; 21.6 on another flight),
-    -17.6 and -10.5 through the 30 ms lag. The lag is the vehicle's, not the order's: taken
-    at the best fit over every order, it favours none."""
+    -16.4 and -10.3 through the lag read so (20 ms). The lag is the vehicle's, not the
+    order's: taken at the best fit over every order, it favours none."""
+    return _lagged_commands(log, params)[0]
+
+
+def _lagged_commands(log, params) -> tuple[float, _TorqueBalance | None]:
+    """(:func:`commands_lag`, the commands' :class:`_TorqueBalance` through it; None where
+    the log cannot be judged)."""
     from ..vehicle.rotors import allocation_matrix
 
     if log.rotor_command is None or params is None:
-        return 0.0
+        return 0.0, None
     rows = allocation_matrix(params)[3:6]
     own = getattr(getattr(params, "motor_map", None), "time_constant", None)
     grid = sorted(set(LAG_GRID_S) | ({float(own)} if own and own > 0 else set()))
     frame = _balance_frame(log, params)
-    best, best_lag = np.inf, 0.0
+    best, out = np.inf, (0.0, None)
     for lag in grid if frame is not None else ():
         speeds = dict(_order_sources(log, params, True, lag)).get("commands")
         if speeds is None or not np.isfinite(speeds).all():
-            return 0.0
+            return 0.0, None
         balance = _torque_balance(log, params, speeds, sensor=False, frame=frame)
         if balance is None:
-            return 0.0
+            return 0.0, None
         misfit = float(np.sum(_best_rss(balance, rows) / np.maximum(balance.noise ** 2,
                                                                      1e-300)))
         if misfit < best:
-            best, best_lag = misfit, lag
-    return best_lag
+            best, out = misfit, (lag, balance)
+    return out
 
 
 def _command_speeds(command: np.ndarray, params) -> np.ndarray:
@@ -867,10 +873,9 @@ def rotor_order_source(log, params, *, commands: bool = False) -> str:
     return _read_order(log, params, commands)[0]
 
 
-def _order_choice(log, params, commands: bool, lag_s: float = 0.0) -> list:
+def _order_choice(log, params, commands: bool) -> list:
     """[(source name, its :class:`_TorqueBalance`)] that :func:`rotor_order_evidence`
-    reads, the commands through a lag of ``lag_s`` (s, :func:`_order_sources`); [] when the
-    log cannot be judged."""
+    reads; [] when the log cannot be judged."""
     if (params is None or log.body_rate is None or len(log.t) < 50
             or params.rotor_count > 6 or not np.isfinite(log.body_rate).all()):
         return []
@@ -878,7 +883,7 @@ def _order_choice(log, params, commands: bool, lag_s: float = 0.0) -> list:
 
     torque_rows = allocation_matrix(params)[3:6]
     judged = []
-    sources = [(name, speeds) for name, speeds in _order_sources(log, params, commands, lag_s)
+    sources = [(name, speeds) for name, speeds in _order_sources(log, params, commands)
                if speeds.shape[1] == params.rotor_count and np.isfinite(speeds).all()]
     # the log's own part of every balance, read once
     frame = _balance_frame(log, params) if sources else None
@@ -930,17 +935,21 @@ def _read_order(log, params, commands: bool) -> tuple[str, dict, float | None]:
     :func:`spin_reversal_evidence`) of ``log``, the signals chosen and their torque balances
     computed once (the same numbers as the three calls).
 
-    Where the commands are read and would doubt the log's order or its spins (a rival's
-    Delta chi^2 above :data:`DOUBT_CHI2`), they are read again through the motor lag under
-    which they fit best (:func:`commands_lag`), and those numbers stand."""
+    Where the commands are among the signals read and would doubt the log's order or its
+    spins (a rival's Delta chi^2 above :data:`DOUBT_CHI2`), their balance is read again
+    through the motor lag under which they fit best (:func:`commands_lag`) and those numbers
+    stand; the signals read stay those chosen as logged, so that the logged speeds' own
+    order is still tested wherever they are read (speed columns in another order than the
+    commands': ``scripts/consistency_evidence.py``)."""
     choice = _order_choice(log, params, commands)
     evidence, spins = _evidence_of(choice, params), _spins_of(choice, params)
     doubt = max(list(evidence.values()) + [spins if spins is not None else -np.inf],
                 default=-np.inf) > DOUBT_CHI2
     if doubt and any(name == "commands" for name, _ in choice):
-        lag = commands_lag(log, params)
-        if lag > 0:
-            choice = _order_choice(log, params, commands, lag)
+        lag, lagged = _lagged_commands(log, params)
+        if lag > 0 and lagged is not None:
+            choice = [(name, lagged if name == "commands" else balance)
+                      for name, balance in choice]
             evidence, spins = _evidence_of(choice, params), _spins_of(choice, params)
     return " and ".join(name for name, _ in choice), evidence, spins
 
