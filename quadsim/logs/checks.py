@@ -63,6 +63,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from ..core.errors import QuadsimWarning, field_error
 from ..core.frames import quat_to_rotmat
+from ..core.lag import first_order_lag
 from .spans import cut_ground, join_airborne, split_airborne
 
 __all__ = ["RotorOrder", "check_log", "check_log_stretches", "check_logs", "check_rotor_speeds",
@@ -737,15 +738,70 @@ def _order_evidence(balance: _TorqueBalance, own: np.ndarray, rss: np.ndarray,
     return float(np.sum(per_axis))
 
 
-def _order_sources(log, params, commands: bool) -> list[tuple[str, np.ndarray]]:
+def _order_sources(log, params, commands: bool, lag_s: float = 0.0
+                   ) -> list[tuple[str, np.ndarray]]:
     """(name, (N, R) rad/s) of the rotor signals that can stand for the rotor speeds in the
     torque balance: the logged speeds, and the commands where ``commands`` or where the
-    speeds are logged too (:func:`_command_speeds`)."""
+    speeds are logged too (:func:`_command_speeds`), read through a first-order lag of
+    ``lag_s`` (s; :func:`quadsim.core.lag.first_order_lag` on the log's median step; 0: as
+    logged)."""
     out = []
     if log.rotor_speed is not None:
         out.append(("rotor speeds", log.rotor_speed))
     if log.rotor_command is not None and params is not None and (commands or out):
-        out.append(("commands", _command_speeds(log.rotor_command, params)))
+        speeds = _command_speeds(log.rotor_command, params)
+        if lag_s > 0 and len(log.t) > 1:
+            speeds = first_order_lag(speeds, lag_s, float(np.median(np.diff(log.t))))
+        out.append(("commands", speeds))
+    return out
+
+
+#: the motor lags (s) the commands are read through where a log's order would otherwise be
+#: doubted on them (:func:`commands_lag`): 0 and 5 ms to 120 ms, the first-order time
+#: constants of small brushless and brushed rotors (the crazyflie21 set's identified 50 ms,
+#: a 0.8 kg X quad's 20-40 ms), with the set's own (``motor_map.time_constant``) added
+LAG_GRID_S = (0.0, 0.005, 0.01, 0.02, 0.03, 0.05, 0.08, 0.12)
+
+
+def commands_lag(log, params) -> float:
+    """The first-order lag (s) through which ``log``'s commands best stand for the rotor
+    speeds in the torque balance: the one of :data:`LAG_GRID_S` (and the set's own time
+    constant) whose commands' balance fits the momentum best under its best column order
+    (:func:`_best_rss`, summed over the axes at the balance's noise scale); 0 where the log
+    has no commands or cannot be judged.
+
+    Why: a command leads the speed it gives by the motor's lag. Read as logged, that lag is a
+    model error of the balance, and a rival column order can fit it better: a 0.8 kg X quad
+    whose motors lag by 30 ms (``python -m benchmarks.campaigns --campaign xquad``) had its
+    right order refused (rotors 1 and 3 swapped, Delta chi^2 63.4; 21.6 on another flight),
+    -16.4 and -10.3 through the lag read so (20 ms). The lag is the vehicle's, not the
+    order's: taken at the best fit over every order, it favours none."""
+    return _lagged_commands(log, params)[0]
+
+
+def _lagged_commands(log, params) -> tuple[float, _TorqueBalance | None]:
+    """(:func:`commands_lag`, the commands' :class:`_TorqueBalance` through it; None where
+    the log cannot be judged)."""
+    from ..vehicle.rotors import allocation_matrix
+
+    if log.rotor_command is None or params is None:
+        return 0.0, None
+    rows = allocation_matrix(params)[3:6]
+    own = getattr(getattr(params, "motor_map", None), "time_constant", None)
+    grid = sorted(set(LAG_GRID_S) | ({float(own)} if own and own > 0 else set()))
+    frame = _balance_frame(log, params)
+    best, out = np.inf, (0.0, None)
+    for lag in grid if frame is not None else ():
+        speeds = dict(_order_sources(log, params, True, lag)).get("commands")
+        if speeds is None or not np.isfinite(speeds).all():
+            return 0.0, None
+        balance = _torque_balance(log, params, speeds, sensor=False, frame=frame)
+        if balance is None:
+            return 0.0, None
+        misfit = float(np.sum(_best_rss(balance, rows) / np.maximum(balance.noise ** 2,
+                                                                     1e-300)))
+        if misfit < best:
+            best, out = misfit, (lag, balance)
     return out
 
 
@@ -814,7 +870,7 @@ def _fit_orders(balance: _TorqueBalance, torque_rows: np.ndarray, orders: list) 
 def rotor_order_source(log, params, *, commands: bool = False) -> str:
     """The rotor signals the order test reads (:func:`rotor_order_evidence`): "rotor
     speeds", "commands", "rotor speeds and commands" or "" (none judged)."""
-    return " and ".join(name for name, _ in _order_choice(log, params, commands))
+    return _read_order(log, params, commands)[0]
 
 
 def _order_choice(log, params, commands: bool) -> list:
@@ -865,7 +921,7 @@ def rotor_order_evidence(log, params, *, commands: bool = False
     rotor-speed sensor's noise, integrated, is noise in the regressor), so its orders' small
     differences are that noise meeting whatever other torque the flight shares (a wind's:
     measured in CHANGELOG.md, issue 47 item 7)."""
-    return _evidence_of(_order_choice(log, params, commands), params)
+    return _read_order(log, params, commands)[1]
 
 
 def order_reading(log, params, *, commands: bool = False) -> tuple[str, dict]:
@@ -877,10 +933,25 @@ def order_reading(log, params, *, commands: bool = False) -> tuple[str, dict]:
 def _read_order(log, params, commands: bool) -> tuple[str, dict, float | None]:
     """(:func:`rotor_order_source`, :func:`rotor_order_evidence`,
     :func:`spin_reversal_evidence`) of ``log``, the signals chosen and their torque balances
-    computed once (the same numbers as the three calls)."""
+    computed once (the same numbers as the three calls).
+
+    Where the commands are among the signals read and would doubt the log's order or its
+    spins (a rival's Delta chi^2 above :data:`DOUBT_CHI2`), their balance is read again
+    through the motor lag under which they fit best (:func:`commands_lag`) and those numbers
+    stand; the signals read stay those chosen as logged, so that the logged speeds' own
+    order is still tested wherever they are read (speed columns in another order than the
+    commands': ``scripts/consistency_evidence.py``)."""
     choice = _order_choice(log, params, commands)
-    return (" and ".join(name for name, _ in choice), _evidence_of(choice, params),
-            _spins_of(choice, params))
+    evidence, spins = _evidence_of(choice, params), _spins_of(choice, params)
+    doubt = max(list(evidence.values()) + [spins if spins is not None else -np.inf],
+                default=-np.inf) > DOUBT_CHI2
+    if doubt and any(name == "commands" for name, _ in choice):
+        lag, lagged = _lagged_commands(log, params)
+        if lag > 0 and lagged is not None:
+            choice = [(name, lagged if name == "commands" else balance)
+                      for name, balance in choice]
+            evidence, spins = _evidence_of(choice, params), _spins_of(choice, params)
+    return " and ".join(name for name, _ in choice), evidence, spins
 
 
 def _evidence_of(choice: list, params) -> dict[tuple[int, ...], float]:
@@ -929,7 +1000,7 @@ def spin_reversal_evidence(log, params, *, commands: bool = False) -> float | No
     roll and pitch if it is the spins; on one that does, every order is far worse on roll or
     pitch (a model error by the order rule) while the reversal still fits the yaw. With a
     set's right spins it is negative (docs/flightlog.md, "rotor spins")."""
-    return _spins_of(_order_choice(log, params, commands), params)
+    return _read_order(log, params, commands)[2]
 
 
 def _spins_of(choice: list, params) -> float | None:
