@@ -178,3 +178,27 @@ def judge_commands_only(params, references: list, flights: dict) -> dict:
         reference = calibrate(prepared, params)
         out = {k: judge_one(log, reference) for k, log in zip(flights, roles["f"])}
     return out | {"model": model, "reference": reference, "prepared": prepared}
+
+
+def lagging_flight(model: str, drag: float, lag: float, noise: dict, rate: float, seed: int,
+                   path: str, *, duration: float, speed: float, height: float, size: float):
+    """(params, log): a generated closed-loop flight of parameter set ``model`` with a rotor
+    drag ``drag`` (kg/rad) and a motor lag ``lag`` (s) (MuJoCo; sensors ``noise`` at ``rate``
+    Hz; QuadsimWarnings silenced)."""
+    import warnings
+
+    from quadsim.core.errors import QuadsimWarning
+    from quadsim.effects import EffectSet
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+    from quadsim.vehicle.params import load_params
+
+    params = load_params(model)
+    effects = EffectSet((make_effect("rotor_drag", coefficient=drag),
+                         make_effect("motor_lag", time_constant=lag)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        log, _ = generate_flight(params, path, effects, SensorModel(noise=noise, rate=rate),
+                                 seed, duration=duration, speed=speed, height=height,
+                                 size=size)
+    return params, log

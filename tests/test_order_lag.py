@@ -14,30 +14,18 @@ both signals is refused as before, more firmly (246 -> 271).
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import pytest
+
+from _helpers import lagging_flight
 
 pytestmark = pytest.mark.xdist_group("test_order_lag")
 
 
 def _flight(path: str, seed: int, speed: float):
-    from quadsim.core.errors import QuadsimWarning
-    from quadsim.effects import EffectSet, make_effect
-    from quadsim.logs.generate import generate_flight
-    from quadsim.logs.sensors import SensorModel
-    from quadsim.vehicle.params import load_params
-
-    params = load_params("px4_sitl_iris")
-    effects = EffectSet((make_effect("rotor_drag", coefficient=1e-5),
-                         make_effect("motor_lag", time_constant=0.03)))
-    sensors = SensorModel(noise={"gyro": 0.01, "accel": 0.05, "rotor": 8.0,
-                                 "position": 0.001}, rate=100.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        log, _ = generate_flight(params, path, effects, sensors, seed, duration=8.0,
-                                 speed=speed, height=2.0, size=2.0)
-    return params, log
+    return lagging_flight("px4_sitl_iris", 1e-5, 0.03, {"gyro": 0.01, "accel": 0.05,
+                                                        "rotor": 8.0, "position": 0.001},
+                          100.0, seed, path, duration=8.0, speed=speed, height=2.0, size=2.0)
 
 
 def test_a_lagging_motor_does_not_doubt_the_right_order():

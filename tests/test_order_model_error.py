@@ -7,9 +7,10 @@ refused, and a true swap of its columns still is."""
 from __future__ import annotations
 
 import dataclasses
-import warnings
 
 import pytest
+
+from _helpers import lagging_flight
 
 pytestmark = pytest.mark.xdist_group("test_order_model_error")
 
@@ -19,22 +20,9 @@ def flight():
     """The report's 0.84 kg "+" testbed on a 12 s lissajous at 1 m/s with a rotor drag
     (1.2e-5 kg/rad: moments at the hubs the mixer lacks) and a 40 ms motor lag its motor
     map (a static PWM table) does not carry; speeds with 5 rad/s of sensor noise, 200 Hz."""
-    from quadsim.core.errors import QuadsimWarning
-    from quadsim.effects import EffectSet, make_effect
-    from quadsim.logs.generate import generate_flight
-    from quadsim.logs.sensors import SensorModel
-    from quadsim.vehicle.params import load_params
-
-    params = load_params("physical")
-    effects = EffectSet((make_effect("rotor_drag", coefficient=1.2e-5),
-                         make_effect("motor_lag", time_constant=0.04)))
-    sensors = SensorModel(noise={"gyro": 0.02, "accel": 0.1, "rotor": 5.0,
-                                 "position": 0.001}, rate=200.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        log, _ = generate_flight(params, "lissajous", effects, sensors, 6, duration=12.0,
-                                 speed=1.0, height=1.5, size=1.5)
-    return params, log
+    return lagging_flight("physical", 1.2e-5, 0.04, {"gyro": 0.02, "accel": 0.1, "rotor": 5.0,
+                                                     "position": 0.001}, 200.0, 6, "lissajous",
+                          duration=12.0, speed=1.0, height=1.5, size=1.5)
 
 
 def test_a_poor_torque_model_read_through_the_commands_refuses_no_log(flight):
