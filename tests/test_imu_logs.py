@@ -178,6 +178,29 @@ def test_identify_with_voltage_recovers_the_voltage_gain(tmp_path):
     assert lo <= TRUE_TM <= hi
 
 
+def test_a_steady_voltage_log_identifies_the_map_in_the_command_alone(tmp_path):
+    """A voltage logged but steady (a bench supply, or a simulator that logs a constant
+    pack voltage: ``quadsim.fly``'s nominal flights): the voltage term is not determined
+    (its column of the thrust fit is constant). It used to end in a traceback
+    (LinAlgError: singular matrix, ``python -m quadsim.identify --logs`` on the xquad
+    campaign's command-only references); the map is now fitted in the command alone, as
+    without a voltage log, and the same numbers come back."""
+    flight = _imu_flight(seed=3)
+    steady = dict(flight, vbat=np.full_like(flight["vbat"], 3.9))
+    idents = []
+    for name, extra in (("log44", {"pm.vbatMV": 1000 * steady["vbat"]}), ("log45", None)):
+        path = tmp_path / name
+        path.write_bytes(_usd_bytes(steady, extra))
+        logs, _ = check_log_stretches(load_log(path, warn=False))
+        idents.append(identify_imu(segments_from_logs(logs), mass=MASS, arms=ARMS))
+    with_v, without = idents
+    assert with_v.thrust.reference_voltage is None
+    assert with_v.thrust.c2 == pytest.approx(without.thrust.c2, rel=1e-9)
+    assert with_v.time_constant.value == pytest.approx(without.time_constant.value, rel=1e-9)
+    full = with_v.thrust.c1 + with_v.thrust.c2
+    assert full / MAX_SPEED ** 2 == pytest.approx(TRUE_B, rel=0.05)
+
+
 def test_euler_usd_converts_with_the_pitch_sign_of_the_gyro(tmp_path, capsys):
     """Crazyflie stateEstimate.roll/pitch/yaw (deg, pitch logged nose-up positive): the
     convention is read from the gyro, the quaternion passes the gyro check; a given

@@ -34,7 +34,8 @@ import numpy as np
 from .base import EffectBase, EffectParameter
 from .facts import EffectFacts, PlausibleRange, Scale, Spread, Words, plus_minus
 
-__all__ = ["CELL_VOLTAGE", "MIN_SCALE", "VBAT_SD", "BatterySag", "nominal_voltage"]
+__all__ = ["CELL_VOLTAGE", "MIN_SCALE", "VBAT_SD", "VOLTAGE_TESTED", "BatterySag",
+           "nominal_voltage", "voltage_spread"]
 
 MIN_SCALE = 0.5
 
@@ -45,6 +46,26 @@ CELL_VOLTAGE = 4.2
 VBAT_SD = 0.1
 #: vehicles lighter than this (kg) fly on one cell
 ONE_CELL_BELOW_KG = 0.1
+#: a law in the logged voltage (speed or thrust per command ~ vbat) is tested only where the
+#: logs' voltage varies by at least this fraction of its mean (:func:`voltage_spread`); below
+#: it the law's slope is not determined (a steady voltage: one column of the fit constant).
+#: 1 %: a hover speed 1 % off, several times a rotor-speed channel's noise. Read by the
+#: diagnosis' references (``quadsim.gap.calibrate.VBAT_TESTED``) and by the identification
+#: from IMU and commands (:mod:`quadsim.identify.imu`).
+VOLTAGE_TESTED = 0.01
+
+
+def voltage_spread(series) -> tuple[float, float]:
+    """(mean, relative spread) of logged battery voltages ``series`` (an iterable of (N,)
+    arrays, V): the spread (max - min) of the mean voltage over each quarter of each series,
+    so that the voltage log's sample noise averages out, over their mean; (nan, 0) where no
+    sample is given."""
+    means = [float(np.mean(q)) for v in series
+             for q in np.array_split(np.asarray(v, float), 4) if len(q)]
+    if not means:
+        return float("nan"), 0.0
+    mean = float(np.mean(means))
+    return mean, float((max(means) - min(means)) / mean) if mean > 0 else 0.0
 
 
 def nominal_voltage(params) -> float:

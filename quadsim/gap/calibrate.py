@@ -190,6 +190,8 @@ from scipy.stats import norm
 
 from ..core.errors import InputError, ModelError
 from ..effects.base import EffectSet
+from ..effects.battery_sag import VOLTAGE_TESTED
+from ..effects.battery_sag import voltage_spread as battery_voltage_spread
 from ..logs.zerophase import sosfiltfilt0
 from ..vehicle.params import VehicleParams
 from .fitting import (
@@ -722,23 +724,18 @@ NEEDS_COMMANDS = {"motor_lag", "battery_sag"}
 NEEDS_VBAT = {"battery_sag"}
 
 #: the references test the law "speed per command ~ vbat / V_full" only where their logged
-#: voltage varies by at least this fraction of its mean (:func:`voltage_spread`). Below it
-#: the law's slope is untested and V_full is only the motor map's gain, so the reference
-#: model takes the gain (:mod:`.speed_gain`) and a flight's own sag is a reading
-#: (:func:`quadsim.gap.explanations.explanations_for`). 1 %: a hover speed 1 % off, several
-#: times the rotor channel's noise.
-VBAT_TESTED = 0.01
+#: voltage varies by at least this fraction of its mean (:func:`voltage_spread`;
+#: :data:`quadsim.effects.battery_sag.VOLTAGE_TESTED`, 1 %). Below it the law's slope is
+#: untested and V_full is only the motor map's gain, so the reference model takes the gain
+#: (:mod:`.speed_gain`) and a flight's own sag is a reading
+#: (:func:`quadsim.gap.explanations.explanations_for`).
+VBAT_TESTED = VOLTAGE_TESTED
 
 
 def voltage_spread(flights) -> tuple[float, float]:
-    """(mean, relative spread) of the flights' logged battery voltage (V, fraction): the
-    spread (max - min) of the mean voltage over each quarter of each flight, so that the
-    voltage log's sample noise averages out, over the mean."""
-    means = [float(np.mean(q)) for f in flights
-             for q in np.array_split(np.asarray(getattr(f, "fit", f).vbat, float), 4)
-             if len(q)]
-    mean = float(np.mean(means))
-    return mean, float((max(means) - min(means)) / mean) if mean > 0 else 0.0
+    """(mean, relative spread) of the flights' logged battery voltage (V, fraction):
+    :func:`quadsim.effects.battery_sag.voltage_spread` of their fit states' voltages."""
+    return battery_voltage_spread([getattr(f, "fit", f).vbat for f in flights])
 
 
 #: the rotor speeds' timing offset is searched within this (s) of zero: the lag window of

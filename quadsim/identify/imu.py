@@ -5,8 +5,10 @@ body frame (x forward, y left, z up) these fix, with no position or attitude:
 
 * the **thrust map per command**: ``m f_z = sum_i T(u_i)`` with ``T(u) = c1 u + c2 u^2`` N
   per rotor (``f_z`` the accelerometer's body-z specific force, m/s^2; ``m`` the skeleton's
-  mass, kg) and, where the battery voltage v is logged, ``T = c1 u + c2 u^2 + c3 u^2 (v -
-  v_ref)`` (``voltage_gain = c3 / c2``, 1/V; v_ref the median voltage);
+  mass, kg) and, where the battery voltage v is logged and varies (by 1 % of its mean at
+  least, :data:`quadsim.effects.battery_sag.VOLTAGE_TESTED`: a steady one does not fix the
+  term), ``T = c1 u + c2 u^2 + c3 u^2 (v - v_ref)`` (``voltage_gain = c3 / c2``, 1/V; v_ref
+  the median voltage);
 * the **motor's first-order time constant** T_m (s): the thrust follows the command through
   ``T_m du_f/dt = u - u_f`` (exact zero-order-hold discretisation, ``u_f`` starting at the
   stretch's first command); every balance below uses ``u_f``;
@@ -56,6 +58,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ..core.errors import InputError
+from ..effects.battery_sag import VOLTAGE_TESTED, voltage_spread
 from .logseries import Estimate, correlation_time
 
 __all__ = ["LAG_GRID_S", "TRIM", "WINDOW_S", "ImuIdentification", "ImuSegment", "ThrustMap",
@@ -322,7 +325,10 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
     if count != {len(arms)}:
         raise InputError(f"{segments[0].name}: cmd_*: {sorted(count)} command column(s), "
                          f"{len(arms)} rotors in the skeleton")
-    has_v = all(s.vbat is not None for s in segments)
+    # the voltage term only where the logs' voltage varies (a steady one leaves its column of
+    # the thrust fit constant: battery_sag.VOLTAGE_TESTED); else the map in u alone
+    has_v = all(s.vbat is not None for s in segments) and \
+        voltage_spread([s.vbat for s in segments])[1] >= VOLTAGE_TESTED
     v_ref = float(np.median(np.concatenate([s.vbat for s in segments]))) if has_v else None
     per_stretch = not has_v and len(segments) > 1
 
