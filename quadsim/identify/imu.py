@@ -36,7 +36,11 @@ residuals' integrated correlation time (windows), for autocorrelated residuals.
 residual variance widened by its correlation time; the inertia's interval also spans its
 values at the ends of T_m's interval (the two are correlated: a longer lag shrinks the
 torque's swing and the inertia with it) and the thrust map's relative uncertainty at the
-hover command (the torque's scale is the thrust map's).
+hover command (the torque's scale is the thrust map's). An inertia is identified where that
+interval is narrower than the value and the torque explains at least
+:data:`quadsim.identify.from_logs.INERTIA_R2` (0.5) of the change of body rate, as with
+rotor speeds; else :func:`identification_for_set` keeps the skeleton's (or the default)
+with the reason.
 
 **Robust**: windows whose residual in any balance exceeds ``TRIM`` robust standard
 deviations (1.4826 x median absolute deviation) at a first fit are left out (impacts,
