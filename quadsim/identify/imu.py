@@ -36,7 +36,11 @@ residuals' integrated correlation time (windows), for autocorrelated residuals.
 residual variance widened by its correlation time; the inertia's interval also spans its
 values at the ends of T_m's interval (the two are correlated: a longer lag shrinks the
 torque's swing and the inertia with it) and the thrust map's relative uncertainty at the
-hover command (the torque's scale is the thrust map's).
+hover command (the torque's scale is the thrust map's). An inertia is identified where that
+interval is narrower than the value and the torque explains at least
+:data:`quadsim.identify.from_logs.INERTIA_R2` (0.5) of the change of body rate, as with
+rotor speeds; else :func:`identification_for_set` keeps the skeleton's (or the default)
+with the reason.
 
 **Robust**: windows whose residual in any balance exceeds ``TRIM`` robust standard
 deviations (1.4826 x median absolute deviation) at a first fit are left out (impacts,
@@ -59,6 +63,7 @@ from scipy.signal import lfilter
 
 from ..core.errors import InputError
 from ..effects.battery_sag import VOLTAGE_TESTED, voltage_spread
+from .from_logs import INERTIA_R2, default_inertia
 from .logseries import Estimate, correlation_time
 
 __all__ = ["LAG_GRID_S", "TRIM", "WINDOW_S", "ImuIdentification", "ImuSegment", "ThrustMap",
@@ -393,10 +398,16 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
         quality = (f"torque of the lagged commands on the change of body rate over "
                    f"{1000 * WINDOW_S:.0f} ms windows; R^2 {r2:.3f} over {int(keep.sum())} "
                    f"windows; interval includes T_m's and the thrust map's")
-        ok = value > 0 and half < value
+        # as the fit with rotor speeds (quadsim.identify.from_logs.INERTIA_R2): a slope the
+        # torque does not explain is no inertia (a 0.8 kg X quad on slow figure-8s: R^2
+        # 0.012 and 0.000, Ixx read 9.5e-5 for 0.005 kg m^2)
+        ok = value > 0 and half < value and r2 >= INERTIA_R2
+        reason = (f"R^2 {r2:.3f} below {INERTIA_R2}: the lagged commands' torque explains too "
+                  "little of the change of body rate" if r2 < INERTIA_R2 else
+                  "too little roll/pitch excitation")
         inertia.append(Estimate(value, (value - half, value + half), quality, ok,
                                 "" if ok else f"{name} fit {value:.3g} kg m^2 +- {half:.2g}: "
-                                "too little roll/pitch excitation"))
+                                f"{reason}"))
     hover = float(np.median(np.concatenate([s.command for s in segments])))
     slope = thrust.c1 + 2 * thrust.c2 * hover                   # dT/du at hover, N
     se_slope = math.sqrt(max(float(np.array([1, 2 * hover]) @ thrust.cov[:2, :2]
@@ -536,10 +547,18 @@ def identification_for_set(ident: ImuIdentification, skeleton, *, stretches: int
               f"({roll.quality})"),
              (f"balances' R^2: thrust {ident.r2[0]:.3f}, roll {ident.r2[1]:.3f}, pitch "
               f"{ident.r2[2]:.3f}"), *ident.notes]
-    out = LogIdentification(thrust, [], list(ident.inertia), table, summary, True, notes)
+    # an inertia not identified is the skeleton's (or the default), as with rotor speeds
+    defaults = default_inertia(skeleton)
+    inertia = [e if e.identified else Estimate(
+        float(skeleton.inertia[k]) if skeleton.inertia is not None else float(defaults[k]),
+        (float("nan"),) * 2, e.quality, False,
+        f"{e.why}; {'the skeleton' if skeleton.inertia is not None else 'the default'}'s "
+        f"{float(skeleton.inertia[k]) if skeleton.inertia is not None else float(defaults[k]):.4g}"
+        " kg m^2 kept") for k, e in enumerate(ident.inertia)]
+    out = LogIdentification(thrust, [], inertia, table, summary, True, notes)
     out.warnings.append("no rotor speeds in any log: b and the motor map are identified "
                         "only as the product b Omega^2 (speed scale from max_speed); the "
                         "spins, Izz and d are not identified (the rotor order is checked by "
                         "the roll/pitch balance of the commands)")
-    out.warnings += [e.why for e in ident.inertia if not e.identified]
+    out.warnings += [e.why for e in inertia if not e.identified]
     return out
