@@ -27,6 +27,10 @@ kept; ``imu``: the IMU, the commands and the battery only) and judged in a fresh
     python -m quadsim.gap --model SET --per-flight FLIGHTS... --reference REFS... \\
         --workers 1 --json OUT
 
+A cut without rotor speeds of a set without a motor map (``xquad``) is judged against the
+set ``python -m quadsim.identify --logs REFS... --vehicle SET.toml -o identified.toml``
+writes from its references (``gap`` refuses such logs with that advice).
+
 Scored: a calm flight right when ``no_significant_gap``; a change **named** when the verdict
 names its effect (the wind as ``wind``, a mass as ``mass_offset`` or ``cable_payload``, a weak
 rotor as ``thrust_mismatch``, the CoM as ``com_offset``, the inertia as ``inertia_error``, the
@@ -208,7 +212,21 @@ def run(name: str, logs: str, out: Path) -> list[tuple[Flight, dict, str]]:
             write_log(path, cut(fly(campaign, flight), logs))
         paths[flight.name] = path
     result = folder / "verdicts.json"
-    command = [sys.executable, "-m", "quadsim.gap", "--model", campaign.params, "--per-flight",
+    model = campaign.params
+    params = load_params(campaign.params)
+    if CUTS[logs] is not None and params.motor_map is None:
+        # no map to synthesise speeds from: the set a user writes first, from the references
+        # (the refusal's own advice), and judges with
+        model = str(folder / "identified.toml")
+        done = subprocess.run([sys.executable, "-m", "quadsim.identify", "--logs",
+                               *[str(paths[f.name]) for f in campaign.references],
+                               "--vehicle", str(params.path), "-o", model],
+                              capture_output=True, text=True)
+        if done.returncode != 0:
+            last = done.stderr.strip().splitlines()[-1:] or ["(no message)"]
+            return [(f, {"outcome": "refused", "answer": last[0]}, "miss")
+                    for f in campaign.flights]
+    command = [sys.executable, "-m", "quadsim.gap", "--model", model, "--per-flight",
                *[str(paths[f.name]) for f in campaign.flights], "--reference",
                *[str(paths[f.name]) for f in campaign.references], "--workers", "1",
                "--json", str(result)]
