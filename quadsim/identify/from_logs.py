@@ -272,6 +272,15 @@ def default_inertia(skeleton: Skeleton) -> np.ndarray:
     return skeleton.mass * r * r * np.asarray(DEFAULT_INERTIA)
 
 
+def kept_inertia(skeleton: Skeleton, axis: int) -> tuple[float, bool]:
+    """(the principal moment kg m^2 of body ``axis`` (0 x, 1 y, 2 z) that a set keeps where
+    the logs do not identify it, whether it is the skeleton's): the skeleton's, else
+    :func:`default_inertia`'s."""
+    if skeleton.inertia is not None:
+        return float(skeleton.inertia[axis]), True
+    return float(default_inertia(skeleton)[axis]), False
+
+
 def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentification:
     """Thrust factor, rotor order and spins, inertia (x, y) and motor map (see module). The
     drag factor d is added by the caller (it needs the gap's model of the yaw torque)."""
@@ -288,10 +297,9 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
         if any(s.command is None for s in logs):
             raise InputError(f"{logs[0].name}: cmd_*: neither rotor speeds nor commands")
         thrust, table, summary = fit_command_thrust(logs, skeleton)
-        inertia = [Estimate(float(skeleton.inertia[k]) if skeleton.inertia is not None
-                            else float(defaults[k]), (float("nan"),) * 2, "", False,
+        inertia = [Estimate(kept_inertia(skeleton, k)[0], (float("nan"),) * 2, "", False,
                             "not identified: without rotor speeds the body torques are "
-                            "unknown; " + ("the skeleton's" if skeleton.inertia is not None
+                            "unknown; " + ("the skeleton's" if kept_inertia(skeleton, k)[1]
                                            else "the default") + " value kept")
                    for k in range(2)]
         ident = LogIdentification(thrust, [], inertia, table, summary, True)
@@ -313,7 +321,7 @@ def identify_from_logs(logs: list[LogSeries], skeleton: Skeleton) -> LogIdentifi
     motor = fit_motor_map(with_cmd) if with_cmd else None
     inertia = with_band_inertia(fit_inertia(with_speed, skeleton, thrust.value, defaults),
                                 with_speed, skeleton, thrust.value)
-    izz = float(skeleton.inertia[2]) if skeleton.inertia is not None else float(defaults[2])
+    izz = kept_inertia(skeleton, 2)[0]
     flapping = identify_flapping(with_speed, skeleton, thrust.value,
                                  (inertia[0].value, inertia[1].value, izz))
     ident = LogIdentification(thrust, per_log, inertia, motor, curve, False, notes,

@@ -63,7 +63,7 @@ from scipy.signal import lfilter
 
 from ..core.errors import InputError
 from ..effects.battery_sag import VOLTAGE_TESTED, voltage_spread
-from .from_logs import INERTIA_R2, default_inertia
+from .from_logs import INERTIA_R2, kept_inertia
 from .logseries import Estimate, correlation_time
 
 __all__ = ["LAG_GRID_S", "TRIM", "WINDOW_S", "ImuIdentification", "ImuSegment", "ThrustMap",
@@ -399,8 +399,7 @@ def identify_imu(segments: list[ImuSegment], *, mass: float, arms: np.ndarray) -
                    f"{1000 * WINDOW_S:.0f} ms windows; R^2 {r2:.3f} over {int(keep.sum())} "
                    f"windows; interval includes T_m's and the thrust map's")
         # as the fit with rotor speeds (quadsim.identify.from_logs.INERTIA_R2): a slope the
-        # torque does not explain is no inertia (a 0.8 kg X quad on slow figure-8s: R^2
-        # 0.012 and 0.000, Ixx read 9.5e-5 for 0.005 kg m^2)
+        # torque does not explain is no inertia (measured: CHANGELOG.md, branch imuinertia)
         ok = value > 0 and half < value and r2 >= INERTIA_R2
         reason = (f"R^2 {r2:.3f} below {INERTIA_R2}: the lagged commands' torque explains too "
                   "little of the change of body rate" if r2 < INERTIA_R2 else
@@ -548,13 +547,15 @@ def identification_for_set(ident: ImuIdentification, skeleton, *, stretches: int
              (f"balances' R^2: thrust {ident.r2[0]:.3f}, roll {ident.r2[1]:.3f}, pitch "
               f"{ident.r2[2]:.3f}"), *ident.notes]
     # an inertia not identified is the skeleton's (or the default), as with rotor speeds
-    defaults = default_inertia(skeleton)
-    inertia = [e if e.identified else Estimate(
-        float(skeleton.inertia[k]) if skeleton.inertia is not None else float(defaults[k]),
-        (float("nan"),) * 2, e.quality, False,
-        f"{e.why}; {'the skeleton' if skeleton.inertia is not None else 'the default'}'s "
-        f"{float(skeleton.inertia[k]) if skeleton.inertia is not None else float(defaults[k]):.4g}"
-        " kg m^2 kept") for k, e in enumerate(ident.inertia)]
+    inertia = []
+    for k, e in enumerate(ident.inertia):
+        if e.identified:
+            inertia.append(e)
+            continue
+        value, own = kept_inertia(skeleton, k)
+        inertia.append(Estimate(value, (float("nan"),) * 2, e.quality, False,
+                                f"{e.why}; {'the skeleton' if own else 'the default'}'s "
+                                f"{value:.4g} kg m^2 kept"))
     out = LogIdentification(thrust, [], inertia, table, summary, True, notes)
     out.warnings.append("no rotor speeds in any log: b and the motor map are identified "
                         "only as the product b Omega^2 (speed scale from max_speed); the "

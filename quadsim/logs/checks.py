@@ -771,11 +771,9 @@ def commands_lag(log, params) -> float:
     has no commands or cannot be judged.
 
     Why: a command leads the speed it gives by the motor's lag. Read as logged, that lag is a
-    model error of the balance, and a rival column order can fit it better: a 0.8 kg X quad
-    whose motors lag by 30 ms (``python -m benchmarks.campaigns --campaign xquad``) had its
-    right order refused (rotors 1 and 3 swapped, Delta chi^2 63.4; 21.6 on another flight),
-    -16.4 and -10.3 through the lag read so (20 ms). The lag is the vehicle's, not the
-    order's: taken at the best fit over every order, it favours none."""
+    model error of the balance, and a rival column order can fit it better (measured:
+    CHANGELOG.md, branch orderlag; ``tests/test_order_lag.py``). The lag is the vehicle's,
+    not the order's: taken at the best fit over every order, it favours none."""
     return _lagged_commands(log, params)[0]
 
 
