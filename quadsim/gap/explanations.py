@@ -103,9 +103,12 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     the references fix (s_ref << w) keeps its spread."""
     sd = prior_spreads(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
+    bound = getattr(reference, "at_bound", None) or {}
     for k, name in enumerate(reference.candidate.parameter_names):
         w = prior_of(sd, name)
-        if w is not None and out[k] > 0:
+        if name in bound:
+            out[k] = 0.0
+        elif w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
     return out
 
