@@ -21,6 +21,8 @@ cm^2) and 4.08 +- 0.25 m/s (C_d A 19.1 +- 2.3 cm^2, vertical 2.8 +- 4.3 cm^2); 5
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -78,23 +80,45 @@ def test_the_wind_readings_carry_the_references_vertical_drag(judged):
     their shared body drag; the law per body axis does not."""
     from quadsim.gap.explanations import marginal_sd, wind_readings
 
+    from quadsim.gap.explanations import VERTICAL_KEY, prior_spreads, vertical_prior
+
     reference = judged["reference"]
     names = reference.candidate.parameter_names
-    k = names.index("body_drag.cd_area_vertical")
+    k = names.index(VERTICAL_KEY)
+    if VERTICAL_KEY in reference.at_bound:
+        # these references' vertical drag stops at its bound, 0: pinned (marginal_sd), no
+        # reading carries it and the shared value stands; the mechanism is read on the same
+        # references with a vertical drag of 100 cm^2 inside its range
+        assert marginal_sd(reference)[k] == 0.0
+        assert vertical_prior(reference, {}) is None
+        theta = reference.theta.copy()
+        theta[k] = 0.01
+        reference = dataclasses.replace(
+            reference, theta=theta,
+            at_bound={n: s for n, s in reference.at_bound.items() if n != VERTICAL_KEY})
     value, spread = reference.theta[k], marginal_sd(reference)[k]
     assert value > 0 and spread > 0
     plain, speed, axes = wind_readings(reference, [0.0, 0.0], [5.0, 5.0])
     assert "body_drag" not in plain.replaces
     # the law per body axis: its vertical force does not grow with a horizontal wind, so the
     # references' vertical drag (or its equivalent, none on these references) stays as before
-    assert axes.parameter_names[-1] == "body_drag.cd_area" and "body_drag" not in axes.replaces
+    flapping = ["blade_flapping.roll", "blade_flapping.pitch"]
+    assert axes.parameter_names[-3:] == ["body_drag.cd_area"] + flapping
+    assert "body_drag" not in axes.replaces
     for expl, factor in ((speed, 1.0),):
         assert expl.parameter_names == ["wind.vx", "wind.vy", "body_drag.cd_area",
-                                        "body_drag.cd_area_vertical"]
+                                        "body_drag.cd_area_vertical"] + flapping
         assert "cd_area_vertical" not in expl.parts[1][1]
         assert "body_drag" in expl.replaces and "rotor_drag" in expl.replaces
-        np.testing.assert_allclose(expl.mean[3:], [factor * value], rtol=1e-12)
-        np.testing.assert_allclose(expl.sd[3:], [factor * spread], rtol=1e-12)
+        np.testing.assert_allclose(expl.mean[3:4], [factor * value], rtol=1e-12)
+        np.testing.assert_allclose(expl.sd[3:4], [factor * spread], rtol=1e-12)
+    # every wind reading carries the rotors' flapping moment (explanations.wind_moment):
+    # centred on none beyond the references', spread by the effect's prior
+    prior = prior_spreads(reference.params)
+    for expl in (plain, speed, axes):
+        assert expl.parameter_names[-2:] == flapping
+        np.testing.assert_array_equal(expl.mean[-2:], [0.0, 0.0])
+        np.testing.assert_allclose(expl.sd[-2:], [prior[k] for k in flapping], rtol=1e-12)
 
 
 def test_a_calm_command_only_flight_is_clear(judged):

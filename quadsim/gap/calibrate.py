@@ -540,18 +540,22 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
     for key, ok in ev.determined.items():
         if not ok or not _own(key, ev.name) or key not in spread:
             continue
-        s, unit = spread[key], unit_of(key)
+        # the rotor speeds' timing in milliseconds, as the reading words it
+        k, unit, label = ((1e3, "ms", "timing") if key == "delay.rotor"
+                          else (1.0, unit_of(key), key.split(".", 1)[1]))
+        s, v = spread[key], k * ev.values[key]
+        mean, sd, noise = k * s.mean, k * s.sd, k * s.noise
         unit = f" {unit}" if unit and unit != "1" else ""
-        head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
+        head = f"{label} {v:+.3g}{unit} against the references' "
         if s.edge > 0:
             head += "(on their trend, at this flight's place beyond them) "
         if s.sd > 0:
             size = abs(ev.values[key] - s.mean) / s.sd
-            parts.append(f"{head}{s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
+            parts.append(f"{head}{mean:+.2g} ± {sd:.2g}{unit} ({size:.3g} SDs)")
         else:
-            parts.append(f"{head}{s.mean:+.2g}{unit}, which vary no more than their estimation "
-                         f"noise (± {s.noise:.2g}{unit}): 95 % interval of the difference "
-                         f"{ev.values[key] - s.mean:+.2g} ± {_interval(ev, key, s):.2g}{unit}")
+            parts.append(f"{head}{mean:+.2g}{unit}, which vary no more than their estimation "
+                         f"noise (± {noise:.2g}{unit}): 95 % interval of the difference "
+                         f"{v - mean:+.2g} ± {k * _interval(ev, key, s):.2g}{unit}")
     return "; ".join(parts)
 
 

@@ -102,25 +102,42 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     With the prior's 50 % the offset is read as 3.9 and 3.6 mm (truth 4.0, 4.8). A parameter
     the references fix (s_ref << w) keeps its spread.
 
-    A parameter whose pooled fit stops at a bound (``reference.at_bound``) gets spread 0:
-    every explanation holds it at the references' value. Why: its value there is the
-    bound's, not a measurement, and its between-flight scatter is the pull against the
-    bound (on noisy logged rotor speeds the inertia's, errors in variables), so the linear
-    marginal, which has no bound, moved it further past the bound on every flight: the
+    A parameter whose pooled fit stops at a bound no plausible vehicle has
+    (:func:`pinned_at_bound`) gets spread 0: every explanation holds it at the references'
+    value. Why: its value there is the bound's, not a measurement, and its between-flight
+    scatter is the pull against the bound (on noisy logged rotor speeds the inertia's,
+    errors in variables), so the linear marginal, which has no bound, moved it further past
+    the bound on every flight: the
     references' inertia at +200 % and a flight's profile +290 % more, the model's torque
     shrunk into the noise, and a CoM offset's or a weak rotor's steady torque with it (the
     campaigns' CoM `unexplained`, a weak rotor named an off-centre mass at 1.00:
     CHANGELOG.md, "The references' inertia at its bound")."""
     sd = prior_spreads(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
-    bound = getattr(reference, "at_bound", None) or {}
+    pinned = pinned_at_bound(reference)
     for k, name in enumerate(reference.candidate.parameter_names):
         w = prior_of(sd, name)
-        if name in bound:
+        if name in pinned:
             out[k] = 0.0
         elif w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
     return out
+
+
+def pinned_at_bound(reference: Reference) -> set[str]:
+    """The shared parameters whose pooled fit stops at a bound of its range
+    (``reference.at_bound``) at a value outside the parameter's plausible range
+    (:func:`quadsim.gap.fitting.plausibility`: the inertia at +200 %, where a factor 2 is
+    another vehicle): :func:`marginal_sd` holds them. A value at a physical floor (no motor
+    lag resolved, no rotor spin inertia, no drag) is a plausible reading of "none" and keeps
+    its spread: a flight may show more of it (pinned, the pymulticopter source's calm
+    flights' motor lag could not move and their rotor channels read 1.2-1.3x worse)."""
+    from .fitting import plausibility
+
+    bound = getattr(reference, "at_bound", None) or {}
+    values = reference.values()
+    return {name for name in bound
+            if name in values and not plausibility(name, values[name], reference.params)[1]}
 
 
 def prior_of(sd: dict, name: str):
