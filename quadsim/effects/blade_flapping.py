@@ -46,7 +46,6 @@ from .facts import (
     Reading,
     Scale,
     Spread,
-    Window,
     Words,
     arm_length,
     plus_minus,
@@ -108,11 +107,6 @@ _RANGE = PlausibleRange(
     "simulators' flapping draws 2-4 % (benchmarks/draws.py, after Mahony et al., IEEE RAM "
     "2012), two Crazyflie 2.1 Brushless logs 3-5 % (docs/nanodrone.md); a negative "
     "coefficient tilts the discs into the wind")
-#: fits read the coefficient at >= 0: a flapping disc tilts away from the relative wind, so a
-#: negative coefficient is no rotor's (what would fit one is another moment the reading stands
-#: in for; fitted beside a wind, its noise read a negative value the answer then flagged)
-_WINDOW = Window(lambda p: 0.0, lambda p: 1e-4,
-                 "a flapping disc tilts away from the relative wind: the coefficient is >= 0")
 _SPREAD = Spread(_scale, "the rotor drag's force half an arm above the CoM: about 2-3 % of "
                          "the weight x arm per m/s, the size real small rotors show")
 
@@ -142,7 +136,6 @@ class BladeFlapping(EffectBase):
         readings=(Reading(("roll", "pitch")),),
         scales={"roll": _SCALE, "pitch": _SCALE, "coefficient": _SCALE},
         ranges={"roll": _RANGE, "pitch": _RANGE},
-        windows={"roll": _WINDOW, "pitch": _WINDOW},
         spreads={"roll": _SPREAD, "pitch": _SPREAD},
         words={"roll": Words("blade flapping (roll)", "kg m/rad", 1.0, _phrase),
                "pitch": Words("blade flapping (pitch)", "kg m/rad", 1.0, _phrase),
