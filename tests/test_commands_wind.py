@@ -78,9 +78,13 @@ def test_the_wind_readings_carry_the_references_vertical_drag(judged):
     """The quadratic wind reading under the law on the air speed fits the references'
     vertical C_d A, centred on their value, spread by their marginal spread, and replaces
     their shared body drag; the law per body axis does not."""
-    from quadsim.gap.explanations import marginal_sd, wind_readings
-
-    from quadsim.gap.explanations import VERTICAL_KEY, prior_spreads, vertical_prior
+    from quadsim.gap.explanations import (
+        VERTICAL_KEY,
+        marginal_sd,
+        prior_spreads,
+        vertical_prior,
+        wind_readings,
+    )
 
     reference = judged["reference"]
     names = reference.candidate.parameter_names

@@ -227,6 +227,11 @@ class Explanation:
     #: (parameter, parent) full names: a parameter that acts only through its parent's value
     #: (``Reading.through``; a payload's position through its mass)
     through: tuple = ()
+    #: full names of what the reading carries beside its own effect, judged outside their
+    #: plausible range only where their 95 % interval lies wholly outside it
+    #: (:func:`quadsim.gap.fitting.plausible_values`): a wind's flapping moment, which a
+    #: flight that shows little air speed fixes near zero but not in sign
+    loose: tuple = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -493,6 +498,11 @@ def wind_moment(reference: Reference) -> tuple[list, list, list]:
             [float(prior_of(sd, f"{name}.{p}")) for p in fitted])
 
 
+#: :data:`WIND_MOMENT`'s full parameter names: loose in every wind reading
+#: (:attr:`Explanation.loose`)
+WIND_MOMENT_KEYS = tuple(f"{WIND_MOMENT[0]}.{p}" for p in WIND_MOMENT[1])
+
+
 def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     """The flight's own wind, through the references' drag as their model has it, and --
     where that drag is a rotor drag (linear in air speed) -- through the same drag as a
@@ -519,7 +529,8 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     CHANGELOG.md ("wind_readings' and vertical_prior's measurements")."""
     flap, flap_mean, flap_sd = wind_moment(reference)
     plain = _one("wind", "", [("wind", {}, ("vx", "vy"))] + flap, list(mean) + flap_mean,
-                 list(spread) + flap_sd, replaces=("wind",), log_prior=-np.log(2.0))
+                 list(spread) + flap_sd, replaces=("wind",), log_prior=-np.log(2.0),
+                 loose=WIND_MOMENT_KEYS)
     laws = quadratic_laws(reference)
     if not laws:
         return [dataclasses.replace(plain, log_prior=0.0)]
@@ -535,7 +546,7 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
         out.append(_one("wind", variant, [("wind", {}, ("vx", "vy")),
                                           ("body_drag", fixed, fitted)] + flap,
                         list(mean) + centre + flap_mean, list(spread) + sd + flap_sd,
-                        replaces=replaces,
+                        replaces=replaces, loose=WIND_MOMENT_KEYS,
                         log_prior=-np.log(2.0 * len(laws)), coupled=True, kin=("wind",)))
     return out
 
