@@ -1837,9 +1837,13 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                  or carry_over(base, reference, null)):
         # partners as ranked before the size rule: a reading too small alone may be the
         # second half of a pair (whose own size is judged when it is ranked)
+        # not a reading that carries an effect the base carries already (a wind carries
+        # the flapping moment, explanations.wind_moment): that pair fits it twice
+        carried = {part[0] for part in base.train.explanation.parts}
         others = [w for k, _, w in rank(weighed, scale.spread_negligible)
                   if k not in ("no_difference", base.name) and w.name == k
-                  and id(w) not in outside]
+                  and id(w) not in outside
+                  and not carried & {part[0] for part in w.train.explanation.parts}]
         trials = []
         for other in others:
             try:

@@ -482,7 +482,10 @@ WIND_MOMENT = ("blade_flapping", ("roll", "pitch"))
 def wind_moment(reference: Reference) -> tuple[list, list, list]:
     """The part a wind reading fits beside its force (``parts``, prior means, prior spreads):
     the rotors' flapping moment (:data:`WIND_MOMENT`), centred on none beyond the
-    references' with the effect's prior spread (:func:`prior_spreads`).
+    references' with the effect's prior spread (:func:`prior_spreads`); none (three empty
+    lists) where the references' wind is not measured (:func:`wind_measured`): there the
+    flapping reading refits the wind itself (:data:`DRAGS`, :func:`with_wind`), the same
+    model, and two of it split one name's probability between them.
 
     Why: a wind acts through every effect of the air speed, the drag force the references'
     drag carries and the hub moment of flapping rotors, which grows with the air speed and
@@ -493,6 +496,9 @@ def wind_moment(reference: Reference) -> tuple[list, list, list]:
     ``unexplained``) or absorbed by the shared inertia's profile (CHANGELOG.md, "The
     references' inertia at its bound")."""
     name, fitted = WIND_MOMENT
+    groups = {part for part, _, _ in reference.candidate.parts}
+    if "wind" in groups and not wind_measured(reference):
+        return [], [], []
     sd = prior_spreads(reference.params)
     return ([(name, {}, fitted)], [0.0] * len(fitted),
             [float(prior_of(sd, f"{name}.{p}")) for p in fitted])
