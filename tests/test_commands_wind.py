@@ -76,25 +76,34 @@ def test_the_wind_readings_carry_the_references_vertical_drag(judged):
     """The quadratic wind reading under the law on the air speed fits the references'
     vertical C_d A, centred on their value, spread by their marginal spread, and replaces
     their shared body drag; the law per body axis does not."""
-    from quadsim.gap.explanations import marginal_sd, wind_readings
+    from quadsim.gap.explanations import VERTICAL_KEY, marginal_sd, prior_spreads, wind_readings
 
     reference = judged["reference"]
     names = reference.candidate.parameter_names
-    k = names.index("body_drag.cd_area_vertical")
+    k = names.index(VERTICAL_KEY)
     value, spread = reference.theta[k], marginal_sd(reference)[k]
     assert value > 0 and spread > 0
     plain, speed, axes = wind_readings(reference, [0.0, 0.0], [5.0, 5.0])
     assert "body_drag" not in plain.replaces
     # the law per body axis: its vertical force does not grow with a horizontal wind, so the
     # references' vertical drag (or its equivalent, none on these references) stays as before
-    assert axes.parameter_names[-1] == "body_drag.cd_area" and "body_drag" not in axes.replaces
+    flapping = ["blade_flapping.roll", "blade_flapping.pitch"]
+    assert axes.parameter_names[-3:] == ["body_drag.cd_area"] + flapping
+    assert "body_drag" not in axes.replaces
     for expl, factor in ((speed, 1.0),):
         assert expl.parameter_names == ["wind.vx", "wind.vy", "body_drag.cd_area",
-                                        "body_drag.cd_area_vertical"]
+                                        "body_drag.cd_area_vertical"] + flapping
         assert "cd_area_vertical" not in expl.parts[1][1]
         assert "body_drag" in expl.replaces and "rotor_drag" in expl.replaces
-        np.testing.assert_allclose(expl.mean[3:], [factor * value], rtol=1e-12)
-        np.testing.assert_allclose(expl.sd[3:], [factor * spread], rtol=1e-12)
+        np.testing.assert_allclose(expl.mean[3:4], [factor * value], rtol=1e-12)
+        np.testing.assert_allclose(expl.sd[3:4], [factor * spread], rtol=1e-12)
+    # every wind reading carries the rotors' flapping moment (explanations.wind_moment):
+    # centred on none beyond the references', spread by the effect's prior
+    prior = prior_spreads(reference.params)
+    for expl in (plain, speed, axes):
+        assert expl.parameter_names[-2:] == flapping
+        np.testing.assert_array_equal(expl.mean[-2:], [0.0, 0.0])
+        np.testing.assert_allclose(expl.sd[-2:], [prior[k] for k in flapping], rtol=1e-12)
 
 
 def test_a_calm_command_only_flight_is_clear(judged):

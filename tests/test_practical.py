@@ -107,3 +107,34 @@ def test_references_without_physical_spread_leave_the_statistical_rule_and_say_s
         "thrust_factor.change": Spread(0.0, 0.004, 20, 0.001, 0.001)}})
     assert against_text(ev(0.02), wide) == \
         "change +0.02 against the references' +0 ± 0.004 (5 SDs)"
+
+
+def _delay(value, post, name="signal_delay", variant="rotor"):
+    ev = _evidence(name, {"delay.rotor": value}, {"delay.rotor": post})
+    ev.explanation = SimpleNamespace(variant=variant, parts=())
+    return ev
+
+
+def test_a_rotor_timing_reading_is_compared_with_the_references_own():
+    """The rotor speeds' timing is every explanation's nuisance but ``signal_delay``'s
+    reading (calibrate._own): the references' own timing readings give its spread, and a
+    flight's delay within it is no difference that matters (the campaigns' calm flights
+    read 29-44 ms where their references read 0-60 ms each against the others: CHANGELOG,
+    "The references' inertia at its bound"); the nuisance stays out of every other reading."""
+    refs = [[_delay(v, 0.001), _evidence("mass_offset", {"mass_offset.mass": 0.001,
+                                                         "delay.rotor": v},
+                                         {"mass_offset.mass": 1e-4, "delay.rotor": 0.001})]
+            for v in (0.0, 0.03, -0.01, 0.045, 0.01, 0.02)]
+    per = [readings(r) for r in refs]
+    assert per[1][("signal_delay", "rotor")] == {"delay.rotor": (0.03, 0.001)}
+    assert "delay.rotor" not in per[1][("mass_offset", "")]
+    check = SelfCheck(("a",) * 6, (), (), spreads(per))
+    s = check.spreads[("signal_delay", "rotor")]["delay.rotor"]
+    assert s.mean == pytest.approx(np.mean([0.0, 0.03, -0.01, 0.045, 0.01, 0.02]))
+    assert negligible(_delay(0.03, 0.001), check)          # within the references' own
+    assert not negligible(_delay(0.20, 0.001), check)      # a 200 ms late log is a difference
+    words = against_text(_delay(0.0594, 0.001), check)
+    size = abs(0.0594 - s.mean) / s.sd
+    assert words == (f"timing +59.4 ms against the references' {1e3 * s.mean:+.2g} ± "
+                     f"{1e3 * s.sd:.2g} ms ({size:.3g} SDs)"), words
+    assert words.startswith("timing +59.4 ms against the references' +16 ± "), words

@@ -420,8 +420,14 @@ def leave_one_out(reference, j: int):
     return out
 
 
-def _own(key: str) -> bool:
-    """Whether parameter ``key`` (``effect.parameter``) can be a difference on its own."""
+def _own(key: str, name: str = "") -> bool:
+    """Whether parameter ``key`` (``effect.parameter``) can be a difference on its own in
+    reading ``name``: not a :data:`NUISANCE` key, except the rotor speeds' timing in the
+    reading that is that timing (``signal_delay``: every other explanation fits
+    ``delay.rotor`` as a nuisance, this one reads it as the flight's difference, so its size
+    is compared with the references' own readings of it as every other reading's is)."""
+    if name == "signal_delay" and key == "delay.rotor":
+        return True
     return key not in NUISANCE and key.split(".")[-1] not in NUISANCE
 
 
@@ -433,7 +439,7 @@ def readings(rows) -> dict:
     centre, :mod:`quadsim.gap.evidence`: not the flight's value), nuisance ones left out."""
     return {(ev.name, ev.explanation.variant): {k: (float(v), float(ev.post_sd[k]))
                                                for k, v in ev.values.items()
-                                               if _own(k) and ev.determined.get(k)}
+                                               if _own(k, ev.name) and ev.determined.get(k)}
             for ev in rows if ev.name != "no_difference" and not getattr(ev, "screened", False)}
 
 
@@ -472,7 +478,7 @@ def negligible(ev, check: SelfCheck | None) -> bool:
         return False
     compared = False
     for key, ok in ev.determined.items():
-        if not ok or not _own(key) or key not in spread:
+        if not ok or not _own(key, ev.name) or key not in spread:
             continue
         s = spread[key]
         compared = True
@@ -503,7 +509,7 @@ def band_share(ev, check: SelfCheck | None) -> float:
         return 1.0
     share = 1.0
     for key, ok in ev.determined.items():
-        if not ok or not _own(key) or key not in spread:
+        if not ok or not _own(key, ev.name) or key not in spread:
             continue
         s = spread[key]
         scale = float(np.hypot(ev.post_sd[key], s.mean_se))
@@ -532,20 +538,24 @@ def against_text(ev, check: SelfCheck | None, unit_of=lambda key: "") -> str:
     spread = check.spreads.get((ev.name, ev.explanation.variant), {})
     parts = []
     for key, ok in ev.determined.items():
-        if not ok or not _own(key) or key not in spread:
+        if not ok or not _own(key, ev.name) or key not in spread:
             continue
-        s, unit = spread[key], unit_of(key)
+        # the rotor speeds' timing in milliseconds, as the reading words it
+        k, unit, label = ((1e3, "ms", "timing") if key == "delay.rotor"
+                          else (1.0, unit_of(key), key.split(".", 1)[1]))
+        s, v = spread[key], k * ev.values[key]
+        mean, sd, noise = k * s.mean, k * s.sd, k * s.noise
         unit = f" {unit}" if unit and unit != "1" else ""
-        head = f"{key.split('.', 1)[1]} {ev.values[key]:+.3g}{unit} against the references' "
+        head = f"{label} {v:+.3g}{unit} against the references' "
         if s.edge > 0:
             head += "(on their trend, at this flight's place beyond them) "
         if s.sd > 0:
             size = abs(ev.values[key] - s.mean) / s.sd
-            parts.append(f"{head}{s.mean:+.2g} ± {s.sd:.2g}{unit} ({size:.3g} SDs)")
+            parts.append(f"{head}{mean:+.2g} ± {sd:.2g}{unit} ({size:.3g} SDs)")
         else:
-            parts.append(f"{head}{s.mean:+.2g}{unit}, which vary no more than their estimation "
-                         f"noise (± {s.noise:.2g}{unit}): 95 % interval of the difference "
-                         f"{ev.values[key] - s.mean:+.2g} ± {_interval(ev, key, s):.2g}{unit}")
+            parts.append(f"{head}{mean:+.2g}{unit}, which vary no more than their estimation "
+                         f"noise (± {noise:.2g}{unit}): 95 % interval of the difference "
+                         f"{v - mean:+.2g} ± {k * _interval(ev, key, s):.2g}{unit}")
     return "; ".join(parts)
 
 

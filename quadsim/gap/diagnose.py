@@ -199,6 +199,7 @@ from .fitting import (
     effect_class,
     noise_floor,
     noise_scale,
+    plausible_values,
     residuals,
     stack_states,
 )
@@ -1484,7 +1485,8 @@ def pair(lead: Weighed, other: Weighed, *, partners: int, train: list, held: lis
                        a.parts + b.parts, mean, sd,
                        tuple(dict.fromkeys(a.replaces + b.replaces)),
                        None if timed is None else timed.shift,
-                       a.log_prior + b.log_prior - float(np.log(max(1, partners))))
+                       a.log_prior + b.log_prior - float(np.log(max(1, partners))),
+                       loose=tuple(dict.fromkeys(a.loose + b.loose)))
     if against is not None:
         got = against.weigh([expl])
         if not got:
@@ -1787,8 +1789,7 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
     # plausible range keeps its evidence; a lead with one is named with a caveat, tentative
     implausible = []
     for w in weighed:
-        ok, text = plausible({q: v for q, v in w.train.values.items()
-                              if w.train.determined.get(q)}, params)
+        ok, text = plausible(plausible_values(w.train, params), params)
         if not ok:
             implausible.append((w, text))
     null = next((w for w in weighed if w.name == "no_difference"), None)
@@ -1836,9 +1837,13 @@ def decide(weighed: list[Weighed], *, train: list, held: list, reference: Refere
                  or carry_over(base, reference, null)):
         # partners as ranked before the size rule: a reading too small alone may be the
         # second half of a pair (whose own size is judged when it is ranked)
+        # not a reading that carries an effect the base carries already (a wind carries
+        # the flapping moment, explanations.wind_moment): that pair fits it twice
+        carried = {part[0] for part in base.train.explanation.parts}
         others = [w for k, _, w in rank(weighed, scale.spread_negligible)
                   if k not in ("no_difference", base.name) and w.name == k
-                  and id(w) not in outside]
+                  and id(w) not in outside
+                  and not carried & {part[0] for part in w.train.explanation.parts}]
         trials = []
         for other in others:
             try:

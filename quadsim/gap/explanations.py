@@ -100,14 +100,44 @@ def marginal_sd(reference: Reference, sd: dict | None = None) -> np.ndarray:
     with a scatter of 160 %; the linear marginal then moved it 3 spreads, the model's torque
     vanished, and a 5 mm CoM offset's 13 mN m steady torque was judged "no difference" (83 %).
     With the prior's 50 % the offset is read as 3.9 and 3.6 mm (truth 4.0, 4.8). A parameter
-    the references fix (s_ref << w) keeps its spread."""
+    the references fix (s_ref << w) keeps its spread.
+
+    A parameter whose pooled fit stops at a bound no plausible vehicle has
+    (:func:`pinned_at_bound`) gets spread 0: every explanation holds it at the references'
+    value. Why: its value there is the bound's, not a measurement, and its between-flight
+    scatter is the pull against the bound (on noisy logged rotor speeds the inertia's,
+    errors in variables), so the linear marginal, which has no bound, moved it further past
+    the bound on every flight: the
+    references' inertia at +200 % and a flight's profile +290 % more, the model's torque
+    shrunk into the noise, and a CoM offset's or a weak rotor's steady torque with it (the
+    campaigns' CoM `unexplained`, a weak rotor named an off-centre mass at 1.00:
+    CHANGELOG.md, "The references' inertia at its bound")."""
     sd = prior_spreads(reference.params) if sd is None else sd
     out = np.array(reference.s_ref, dtype=float)
+    pinned = pinned_at_bound(reference)
     for k, name in enumerate(reference.candidate.parameter_names):
         w = prior_of(sd, name)
-        if w is not None and out[k] > 0:
+        if name in pinned:
+            out[k] = 0.0
+        elif w is not None and out[k] > 0:
             out[k] = 1.0 / np.sqrt(out[k] ** -2 + float(w) ** -2)
     return out
+
+
+def pinned_at_bound(reference: Reference) -> set[str]:
+    """The shared parameters whose pooled fit stops at a bound of its range
+    (``reference.at_bound``) at a value outside the parameter's plausible range
+    (:func:`quadsim.gap.fitting.plausibility`: the inertia at +200 %, where a factor 2 is
+    another vehicle): :func:`marginal_sd` holds them. A value at a physical floor (no motor
+    lag resolved, no rotor spin inertia, no drag) is a plausible reading of "none" and keeps
+    its spread: a flight may show more of it (pinned, the pymulticopter source's calm
+    flights' motor lag could not move and their rotor channels read 1.2-1.3x worse)."""
+    from .fitting import plausibility
+
+    bound = getattr(reference, "at_bound", None) or {}
+    values = reference.values()
+    return {name for name in bound
+            if name in values and not plausibility(name, values[name], reference.params)[1]}
 
 
 def prior_of(sd: dict, name: str):
@@ -197,6 +227,11 @@ class Explanation:
     #: (parameter, parent) full names: a parameter that acts only through its parent's value
     #: (``Reading.through``; a payload's position through its mass)
     through: tuple = ()
+    #: full names of what the reading carries beside its own effect, judged outside their
+    #: plausible range only where their 95 % interval lies wholly outside it
+    #: (:func:`quadsim.gap.fitting.plausible_values`): a wind's flapping moment, which a
+    #: flight that shows little air speed fixes near zero but not in sign
+    loose: tuple = ()
 
     @property
     def parameter_names(self) -> list[str]:
@@ -439,6 +474,41 @@ def with_wind(expl: Explanation, reference: Reference) -> Explanation:
                                replaces=expl.replaces + ("wind",), coupled=True)
 
 
+#: the air-speed moment a wind reading carries with its force (:func:`wind_moment`): the
+#: rotors' flapping, roll and pitch (kg m/rad, :mod:`quadsim.effects.blade_flapping`)
+WIND_MOMENT = ("blade_flapping", ("roll", "pitch"))
+
+
+def wind_moment(reference: Reference) -> tuple[list, list, list]:
+    """The part a wind reading fits beside its force (``parts``, prior means, prior spreads):
+    the rotors' flapping moment (:data:`WIND_MOMENT`), centred on none beyond the
+    references' with the effect's prior spread (:func:`prior_spreads`); none (three empty
+    lists) where the references' wind is not measured (:func:`wind_measured`): there the
+    flapping reading refits the wind itself (:data:`DRAGS`, :func:`with_wind`), the same
+    model, and two of it split one name's probability between them.
+
+    Why: a wind acts through every effect of the air speed, the drag force the references'
+    drag carries and the hub moment of flapping rotors, which grows with the air speed and
+    which the references' own shared values do not hold (:data:`quadsim.gap.calibrate.
+    SHARED`): flown in still air at their speeds they show little of it. In a wind the
+    moment is of the wind's making; read without it, the flight's pitch moment was left to
+    the lack of fit (the tunnel campaign's 1 m/s wind along x: My 35x the references' RMS,
+    ``unexplained``) or absorbed by the shared inertia's profile (CHANGELOG.md, "The
+    references' inertia at its bound")."""
+    name, fitted = WIND_MOMENT
+    groups = {part for part, _, _ in reference.candidate.parts}
+    if "wind" in groups and not wind_measured(reference):
+        return [], [], []
+    sd = prior_spreads(reference.params)
+    return ([(name, {}, fitted)], [0.0] * len(fitted),
+            [float(prior_of(sd, f"{name}.{p}")) for p in fitted])
+
+
+#: :data:`WIND_MOMENT`'s full parameter names: loose in every wind reading
+#: (:attr:`Explanation.loose`)
+WIND_MOMENT_KEYS = tuple(f"{WIND_MOMENT[0]}.{p}" for p in WIND_MOMENT[1])
+
+
 def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     """The flight's own wind, through the references' drag as their model has it, and --
     where that drag is a rotor drag (linear in air speed) -- through the same drag as a
@@ -448,7 +518,8 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     that law (:func:`quadsim.gap.calibrate.quadratic_equivalent`), spread
     :data:`QUADRATIC_SD` of it, the rotor drag replaced; under the law on the air speed the
     references' vertical drag is a parameter of the reading too (:func:`vertical_prior`). The
-    plain reading has half the wind's prior, the two quadratic laws a quarter each.
+    plain reading has half the wind's prior, the two quadratic laws a quarter each. Each
+    carries the rotors' flapping moment beside the force (:func:`wind_moment`).
 
     Why: at the references' speeds (about 1 m/s) a linear and a quadratic law give the same
     force; in a wind of several m/s the quadratic law's force grows with the air speed
@@ -462,8 +533,10 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
     references: with C_d A free the variant is a steady force of any size, which takes
     other steady forces (a canted rotor, a rotor drag). The measurements behind each reason:
     CHANGELOG.md ("wind_readings' and vertical_prior's measurements")."""
-    plain = _one("wind", "", [("wind", {}, ("vx", "vy"))], mean, spread, replaces=("wind",),
-                 log_prior=-np.log(2.0))
+    flap, flap_mean, flap_sd = wind_moment(reference)
+    plain = _one("wind", "", [("wind", {}, ("vx", "vy"))] + flap, list(mean) + flap_mean,
+                 list(spread) + flap_sd, replaces=("wind",), log_prior=-np.log(2.0),
+                 loose=WIND_MOMENT_KEYS)
     laws = quadratic_laws(reference)
     if not laws:
         return [dataclasses.replace(plain, log_prior=0.0)]
@@ -477,8 +550,9 @@ def wind_readings(reference: Reference, mean, spread) -> list[Explanation]:
             fitted, centre, sd = fitted + ("cd_area_vertical",), centre + [own[0]], sd + [own[1]]
             replaces = ("wind", "rotor_drag", "body_drag")
         out.append(_one("wind", variant, [("wind", {}, ("vx", "vy")),
-                                          ("body_drag", fixed, fitted)],
-                        list(mean) + centre, list(spread) + sd, replaces=replaces,
+                                          ("body_drag", fixed, fitted)] + flap,
+                        list(mean) + centre + flap_mean, list(spread) + sd + flap_sd,
+                        replaces=replaces, loose=WIND_MOMENT_KEYS,
                         log_prior=-np.log(2.0 * len(laws)), coupled=True, kin=("wind",)))
     return out
 

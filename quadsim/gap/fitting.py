@@ -802,6 +802,30 @@ def curve_slope_sd(params: VehicleParams) -> float:
     return ThrustCurve.facts.spread_of("linear", params)
 
 
+def plausible_values(ev, params: VehicleParams) -> dict:
+    """The values of reading ``ev`` (an Evidence: ``values``, ``determined``, ``post_sd``,
+    ``explanation.loose``) that its plausibility for ``params`` is judged on: its determined
+    ones, less a loose one (:attr:`quadsim.gap.explanations.Explanation.loose`) whose 95 % interval
+    ``value +- 1.96 post_sd`` reaches its plausible range (:func:`plausibility` at the
+    interval's ends, its middle and its quarter points). Why: what a reading carries beside
+    its effect (a wind's flapping moment) is fitted on every flight, where little air speed
+    fixes it near zero but not in sign; flagged at a value its interval does not place
+    outside, the reading was "outside its plausible range" by noise."""
+    loose = set(getattr(getattr(ev, "explanation", None), "loose", ()) or ())
+    post = getattr(ev, "post_sd", None) or {}
+    out = {}
+    for q, v in ev.values.items():
+        if not ev.determined.get(q):
+            continue
+        if q in loose and q in post:
+            half = 1.96 * float(post[q])
+            if any(
+                    plausibility(q, v + k * half, params)[1] for k in (-1, -0.5, 0, 0.5, 1)):
+                continue
+        out[q] = v
+    return out
+
+
 def candidate_plausibility(values: dict, params: VehicleParams):
     """(score, plausible, text) of a whole fitted candidate: its least plausible parameter.
 

@@ -1955,7 +1955,7 @@ def lead_caveat(ev, params) -> str:
     if at:
         words.append("its fit stopped at a bound (" + "; ".join(at)
                      + "): the data say only \"at or beyond\"")
-    own = {q: ev.values[q] for q, ok in ev.determined.items() if ok}
+    own = fitting.plausible_values(ev, params)
     ok, prior_text = plausible(own, params) if own else (True, "")
     if not ok:
         words.append(f"its size lies outside the plausible range ({prior_text})")
