@@ -37,3 +37,14 @@ def test_a_loose_value_outside_by_its_interval_and_an_own_value_are_judged():
     # the blade_flapping reading's own values are never loose: judged as they are
     own = _reading({"blade_flapping.roll": -1.2e-8}, {"blade_flapping.roll": 8.1e-9}, loose=())
     assert plausible_values(own, params) == {"blade_flapping.roll": -1.2e-8}
+
+
+def test_an_implausible_part_of_a_reading_of_several_effects_is_named():
+    """The prior text says which parameter lies outside where a reading spans several effects
+    (a wind with its flapping moment); a one-effect reading's text is as before."""
+    params = load_params("crazyflie21")
+    _, ok, text = candidate_plausibility({"wind.vx": 0.05, "blade_flapping.pitch": -4.5e-8},
+                                         params)
+    assert not ok and text.startswith("blade_flapping.pitch: plausible 0 .. 3 %"), text
+    _, ok, text = candidate_plausibility({"blade_flapping.pitch": -4.5e-8}, params)
+    assert not ok and text.startswith("plausible 0 .. 3 %"), text

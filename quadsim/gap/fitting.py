@@ -827,7 +827,9 @@ def plausible_values(ev, params: VehicleParams) -> dict:
 
 
 def candidate_plausibility(values: dict, params: VehicleParams):
-    """(score, plausible, text) of a whole fitted candidate: its least plausible parameter.
+    """(score, plausible, text) of a whole fitted candidate: its least plausible parameter
+    (the text led by that parameter's name where the values span several effects and it
+    lies outside its range).
 
     A per-rotor effect's values are split into their mean (judged as the uniform parameter
     its facts name, ``uniform_as``: a mismatch's as a thrust-per-Omega^2 change,
@@ -845,8 +847,15 @@ def candidate_plausibility(values: dict, params: VehicleParams):
             for k, v in rotors.items():
                 values[k] = v - mean
             values[facts.uniform_as] = mean
-    scores = [plausibility(k, v, params) for k, v in values.items()]
-    return max(scores, key=lambda s: s[0]) if scores else (NO_PRIOR_SCORE, True, "")
+    scores = [(plausibility(k, v, params), k) for k, v in values.items()]
+    if not scores:
+        return NO_PRIOR_SCORE, True, ""
+    (score, ok, text), key = max(scores, key=lambda s: s[0][0])
+    # a reading of several effects (a wind with its drag and flapping moment) says which
+    # parameter lies outside, the prior text being that parameter's
+    if not ok and len({k.split(".")[0] for k in values}) > 1:
+        text = f"{key}: {text}"
+    return score, ok, text
 
 
 # --- collinear explanations in words (module doc) ---------------------------------------------
