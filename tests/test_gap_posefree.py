@@ -59,10 +59,10 @@ def reference(cf):
 
 def test_the_effects_that_read_the_pose_are_declared():
     """From the physics: the air velocity (drag, wind, flapping, lift), the height (ground
-    effect), the swing under gravity (cable); none of the body-frame effects."""
+    effect); none of the body-frame effects, and not a payload's swing (it reads the
+    effective gravity at its mount, which the IMU measures: tests/test_imu_swing.py)."""
     assert set(without_pose(EFFECTS)) == {"wind", "body_drag", "rotor_drag", "blade_flapping",
-                                          "translational_lift", "ground_effect",
-                                          "cable_payload"}
+                                          "translational_lift", "ground_effect"}
     assert without_pose(EFFECTS)["ground_effect"][0] == "height"
 
 

@@ -939,16 +939,46 @@ def posefree_log(log):
                                quat=quat)
 
 
+#: how long (s) the start of each airborne stretch is averaged over to level the IMU's
+#: frame (:func:`posefree_states`): a quarter second of a stretch that starts near hover
+#: (the cut of :mod:`quadsim.logs.spans` starts it at the take-off's end), long against
+#: the accelerometer's noise, short against the flight's manoeuvres
+LEVEL_S = 0.25
+
+
 def posefree_states(states, attitude: bool, gravity: float):
-    """The states of :func:`posefree_log`'s log marked as without a pose (``pose`` False);
-    with its ``attitude`` logged, ``accel_world`` (m/s^2) is the smoothed accelerometer
-    turned to the world by it, R f - g e_z (the vehicle's acceleration: what a payload's
-    swing reads, module doc), else zero as the other stand-ins."""
+    """The states of :func:`posefree_log`'s log marked as without a pose (``pose`` False),
+    and ``accel_world`` (m/s^2) the smoothed accelerometer turned to the world,
+    a = R f - g e_z (f the specific force at the body origin, module doc), for what a
+    payload's swing reads. With its ``attitude`` logged, R is the logged attitude; without
+    it (IMU and motors only) R is the gyro's own frame: the body rate integrated
+    (:func:`quadsim.core.frames.integrate_body_rate`) from the tilt the accelerometer reads
+    over the stretch's first :data:`LEVEL_S` (:func:`quadsim.core.frames.levelling_quat`,
+    yaw 0), which becomes ``quat``.
+
+    Why the gyro's frame serves a payload's swing: the swing and the cable's pull in the
+    body frame depend only on the specific force and the rotation at the mount (the
+    effective gravity a swinging mass feels, g - a = -R f, is what the accelerometer
+    measures: the equivalence principle), and the swing's equations are unchanged under a
+    constant rotation of the frame they are integrated in; R' = C R for a constant C (the
+    unknown start yaw, the levelling's error) therefore gives the same pull in the body
+    frame as the true attitude. The gyro's bias turns R' slowly away from C R (0.005 rad/s,
+    0.05 rad in 10 s); below the swing's frequency the payload hangs along the effective
+    gravity whatever the frame, so such a drift moves the pull little
+    (``tests/test_imu_swing.py``). The stretch's first rows are the take-off's end, not a
+    hover: the levelling's error is a constant C too. No other effect the body-frame
+    balance weighs reads R (:func:`needs_pose`)."""
+    from ..core.frames import integrate_body_rate, levelling_quat
+
     if not attitude:
-        return dataclasses.replace(states, pose=False, attitude=False)
+        t = np.asarray(states.t, dtype=float)
+        first = t <= t[0] + LEVEL_S
+        quat = integrate_body_rate(t, states.body_rate,
+                                   levelling_quat(np.mean(states.specific_force[first], axis=0)))
+        states = dataclasses.replace(states, quat=quat)
     accel = rotate(states.quat, states.specific_force)
     accel[:, 2] -= gravity
-    return dataclasses.replace(states, pose=False, attitude=True, accel_world=accel)
+    return dataclasses.replace(states, pose=False, attitude=attitude, accel_world=accel)
 
 
 def missing_words(logged=()) -> str:
