@@ -174,8 +174,11 @@ The residual wrench (:mod:`quadsim.gap.residual`) needs no pose: the measured fo
 mass times the accelerometer's specific force and the measured torque comes from the gyro
 (``I w_dot + w x I w``), both in the body frame; the model's rotor wrench is body-frame too.
 What a pose adds is the effects whose loads read the vehicle's motion in the world: the air
-velocity (wind, body and rotor drag, blade flapping, translational lift), the height (ground
-effect) and the world's directions in the body frame (a payload swinging under gravity).
+velocity (wind, body and rotor drag, blade flapping, translational lift) and the height
+(ground effect). A payload swinging on a cable reads neither: its swing and pull depend on
+the effective gravity at its mount, g - a = -R f, which the accelerometer measures, and on
+the body's rotation, which the gyro measures; it is integrated in any frame R' = C R
+(:func:`posefree_states`: the gyro's own where no attitude is logged).
 Each effect declares what it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`);
 on a log without a pose those effects are neither shared by the references nor weighed as a
 flight's explanation (:func:`needs_pose`), and the answer names them with what would add
@@ -183,7 +186,9 @@ them (:func:`missing_words`).
 
 Stand-ins (:func:`posefree_log`): the pose-less log gets position 0, velocity 0 and the
 identity attitude, so that the states have the shape every stage expects; no effect weighed
-on it reads them (the filter above), and ``FlightStates.pose`` is False.
+on it reads them (the filter above), and ``FlightStates.pose`` is False. The states' attitude
+then becomes the gyro's own frame and ``accel_world`` the accelerometer turned by it
+(:func:`posefree_states`), what the cable's swing reads.
 
 With the attitude and no position (the on-board estimate's Euler angles, as most flight
 controllers log them; ``FlightLog.has_attitude``): the logged attitude is kept in place of
@@ -191,10 +196,11 @@ the identity, and the states' ``accel_world`` is the accelerometer turned to the
 it, a = R f - g e_z (:func:`posefree_states`; f the specific force at the body origin), the
 vehicle's acceleration without differentiating a position. The parts logged
 (:func:`logged_parts`) are then the attitude alone: an effect is weighed when every part it
-declares is logged (:func:`needs_pose`), so a payload swinging on a cable is (its swing reads
-the vertical and that acceleration: :class:`quadsim.gap.fitting.CableSwing`, through
-:attr:`quadsim.effects.base.EffectContext.accel_world`), the drags, wind and ground effect
-are not, and :func:`missing_words` names only what is missing.
+declares is logged (:func:`needs_pose`): the drags, wind and ground effect are not weighed,
+a payload swinging on a cable is (as without the attitude; its swing turned by the logged
+attitude: :class:`quadsim.gap.fitting.CableSwing`, through
+:attr:`quadsim.effects.base.EffectContext.accel_world`), and :func:`missing_words` names
+only what is missing.
 
 Example::
 
