@@ -21,8 +21,14 @@ import numpy as np
 import pytest
 
 from quadsim.core.errors import QuadsimWarning
-from quadsim.core.frames import (integrate_body_rate, levelling_quat, quat_multiply,
-                                 quat_to_rotmat, rotate, rotate_inverse)
+from quadsim.core.frames import (
+    integrate_body_rate,
+    levelling_quat,
+    quat_multiply,
+    quat_to_rotmat,
+    rotate,
+    rotate_inverse,
+)
 from quadsim.effects import EffectSet, make_effect
 from quadsim.gap.calibrate import calibrate
 from quadsim.gap.diagnose import judge_one, prepare
@@ -69,7 +75,8 @@ def test_a_constant_rate_integrates_to_its_closed_form():
     q = integrate_body_rate(t, np.tile(w, (len(t), 1)), q0)
     for k in (500, 2000):
         angle = np.linalg.norm(w) * t[k]
-        want = quat_multiply(q0, np.r_[np.cos(angle / 2), np.sin(angle / 2) * w / np.linalg.norm(w)])
+        axis = w / np.linalg.norm(w)
+        want = quat_multiply(q0, np.r_[np.cos(angle / 2), np.sin(angle / 2) * axis])
         np.testing.assert_allclose(q[k], want, atol=1e-12)
 
 
