@@ -76,14 +76,13 @@ def test_the_loader_keeps_an_attitude_logged_without_a_position(tmp_path):
 
 
 def test_what_an_attitude_adds_to_the_effects_weighed():
-    """With the attitude logged only the effects whose every pose part is the attitude join
-    (the cable payload: its swing reads the world's vertical and the vehicle's acceleration);
-    the words name only what is still missing."""
+    """The attitude alone adds no effect of the library: each that reads the pose reads the
+    speed or the height too (the cable payload reads neither: it is weighed with the IMU
+    alone, tests/test_imu_swing.py); the words name only what is still missing."""
     attitude = logged_parts(FlightLog(np.arange(3.0), None, np.tile([1.0, 0, 0, 0], (3, 1))))
     assert not needs_pose([("cable_payload", {}, ("mass",))], attitude)
-    assert needs_pose([("cable_payload", {}, ("mass",))])
-    assert all(needs_pose([(name, {}, ())], attitude) for name in without_pose(EFFECTS)
-               if name != "cable_payload")
+    assert not needs_pose([("cable_payload", {}, ("mass",))])
+    assert all(needs_pose([(name, {}, ())], attitude) for name in without_pose(EFFECTS))
     said = missing_words(attitude)
     assert said.startswith("no velocity or height logged: ") and "cable payload" not in said
     assert "with the logged attitude" in said and "qw..qz" not in said
@@ -163,7 +162,7 @@ def test_a_cable_payload_is_named_from_the_attitude_and_the_imu(cf):
     """4 nominal references and two flights, all without a position: a nominal one is clear,
     one with 6 g on a 0.5 m cable is read as a payload on a cable (alone or with a part fixed
     to the frame) within 1.5 g of its mass; the answer names only the speed and height as
-    missing. Without the attitude the same payload cannot be weighed on a cable at all."""
+    missing (without the attitude: tests/test_imu_swing.py)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
         refs = [_fly(cf, (), seed, path) for seed, path in enumerate(PATHS)]

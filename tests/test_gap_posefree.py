@@ -59,10 +59,10 @@ def reference(cf):
 
 def test_the_effects_that_read_the_pose_are_declared():
     """From the physics: the air velocity (drag, wind, flapping, lift), the height (ground
-    effect), the swing under gravity (cable); none of the body-frame effects."""
+    effect); none of the body-frame effects, and not a payload's swing (it reads the
+    effective gravity at its mount, which the IMU measures: tests/test_imu_swing.py)."""
     assert set(without_pose(EFFECTS)) == {"wind", "body_drag", "rotor_drag", "blade_flapping",
-                                          "translational_lift", "ground_effect",
-                                          "cable_payload"}
+                                          "translational_lift", "ground_effect"}
     assert without_pose(EFFECTS)["ground_effect"][0] == "height"
 
 
@@ -310,3 +310,23 @@ def test_a_margin_from_where_the_priors_centre_the_values_does_not_separate_a_pa
     edge = verdict(5.56 - SEPARATED + 0.02 - 0.01)     # flat margin just above SEPARATED
     assert confusable_note(edge, pose) is edge
 
+
+
+def test_without_a_pose_only_the_regimes_the_imu_shows_are_read(cf):
+    """regime_masks on a log without a pose: aggressive rotation from the gyro and the
+    battery's low part, none of the regimes that read the stand-in position and velocity
+    of zero (every sample would be near the ground and hovering)."""
+    from quadsim.gap.judge import regime_masks
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        log, _ = generate_flight(cf, "figure8", EffectSet(()), NOISE, 3, duration=5.0,
+                                 speed=1.0)
+        posed = prepare(check_logs([log], cf)[0], cf)[0].fit
+        bare = prepare(check_logs([dataclasses.replace(log, position=None, velocity=None,
+                                                       quat=None)], cf)[0], cf)[0].fit
+    with_pose, without = regime_masks(posed, cf), regime_masks(bare, cf)
+    assert {"near_ground", "hover", "fast_forward"} <= set(with_pose)
+    assert set(without) == {"aggressive_rotation", "low_battery"}
+    np.testing.assert_array_equal(without["aggressive_rotation"],
+                                  np.linalg.norm(bare.body_rate, axis=1) > 2.0)

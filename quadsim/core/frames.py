@@ -128,3 +128,49 @@ def skew(v: np.ndarray) -> np.ndarray:
     o = np.zeros_like(x)
     return np.stack([np.stack([o, -z, y], -1), np.stack([z, o, -x], -1),
                      np.stack([-y, x, o], -1)], -2)
+
+
+def levelling_quat(specific_force: np.ndarray) -> np.ndarray:
+    """The body-to-world quaternion (4,) with no yaw that turns the body-frame specific force
+    ``specific_force`` (3,; m/s^2, the accelerometer's a - g) to the world's +z: the tilt an
+    accelerometer reads where the vehicle does not accelerate (at rest, or in a steady
+    hover). Rotation about the axis f x e_z by the angle between them (the identity where f
+    points up already; f pointing straight down: 180 deg about x)."""
+    f = np.asarray(specific_force, dtype=float)
+    u = f / np.linalg.norm(f)
+    axis = np.array([u[1], -u[0], 0.0])          # u x e_z
+    s, c = float(np.linalg.norm(axis)), float(u[2])
+    if s < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0]) if c > 0 else np.array([0.0, 1.0, 0.0, 0.0])
+    half = 0.5 * np.arctan2(s, c)
+    return np.concatenate([[np.cos(half)], np.sin(half) * axis / s])
+
+
+def integrate_body_rate(t: np.ndarray, body_rate: np.ndarray, q0: np.ndarray) -> np.ndarray:
+    """Body-to-world quaternions (N, 4) from ``q0`` (4,) at ``t[0]`` along the body angular
+    velocity ``body_rate`` (N, 3, rad/s) sampled at ``t`` (N, s): between samples k and k+1
+    the rotation exp(h w_m / 2) with w_m the mean of the two rates and h the step (exact for a
+    rate constant in direction over the step; second order otherwise), q_{k+1} = q_k exp(...),
+    renormalised. Gyro dead reckoning: its error grows with the rate's bias times the time."""
+    t = np.asarray(t, dtype=float)
+    w = np.asarray(body_rate, dtype=float)
+    n = len(t)
+    out = np.empty((n, 4))
+    if n == 0:
+        return out
+    mid = 0.5 * (w[1:] + w[:-1]) * np.diff(t)[:, None]          # rotation vectors (rad)
+    angle = np.linalg.norm(mid, axis=1)
+    half = 0.5 * angle
+    scale = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
+    steps = np.column_stack([np.cos(half), mid * scale[:, None]]).tolist()
+    qw, qx, qy, qz = (float(v) for v in quat_normalize(q0))
+    out[0] = qw, qx, qy, qz
+    for k, (sw, sx, sy, sz) in enumerate(steps, start=1):       # q <- q * step
+        qw, qx, qy, qz = (qw * sw - qx * sx - qy * sy - qz * sz,
+                          qw * sx + qx * sw + qy * sz - qz * sy,
+                          qw * sy - qx * sz + qy * sw + qz * sx,
+                          qw * sz + qx * sy - qy * sx + qz * sw)
+        norm = (qw * qw + qx * qx + qy * qy + qz * qz) ** 0.5
+        qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
+        out[k] = qw, qx, qy, qz
+    return out

@@ -90,9 +90,10 @@ class CablePayload(EffectBase):
     #: no candidate of its own: the payload's state is not logged; the diagnosis integrates
     #: the swing along the logged motion (its fit form, :mod:`quadsim.gap.fitting`)
     facts = EffectFacts(
-        # the payload swings under gravity and the vehicle's world acceleration: the motion
-        # differentiated, or without a position the accelerometer turned by the attitude
-        needs_pose=("attitude",),
+        # the payload swings under the effective gravity at its mount, g - a = -R f: the
+        # motion differentiated, or the accelerometer turned by the attitude or, with the
+        # IMU alone, by the gyro's own frame (quadsim.gap.logcheck.posefree_states): no pose
+        needs_pose=(),
         # its weight is read through the rotors' thrust, like a fixed payload's
         weighed=("mass",),
         words={"mass": Words("payload on a cable", "g", 1e3, _phrase),

@@ -244,7 +244,8 @@ class EffectFacts:
     #: "height" (the position's z, the distance to the ground), "attitude" (the world's
     #: directions in the body frame). On a log without a pose (IMU and motors only) the
     #: diagnosis cannot weigh the effect (:func:`without_pose`); empty: the body-frame force
-    #: and torque balance alone shows it
+    #: and torque balance alone shows it, with the IMU's own frame where the loads need one
+    #: (a payload's swing: :func:`quadsim.gap.logcheck.posefree_states`)
     needs_pose: tuple[str, ...] = ()
     #: parameters read through the gravity balance (a mass the rotors weigh): measured in
     #: units of the references' thrust per Omega^2, so their stated size carries the

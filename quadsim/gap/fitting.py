@@ -517,8 +517,10 @@ class CableSwing(CablePayload):
         logged motion (the attachment's acceleration is kept there per attachment point).
         The attachment's acceleration is d/dt (v + R (w x r_a)), ``velocity`` differentiated;
         ``accel_world`` (N, 3, m/s^2): the vehicle's acceleration where no velocity is
-        logged (IMU and attitude: :attr:`quadsim.effects.base.EffectContext.accel_world`),
-        then a + d/dt R (w x r_a), ``accel_world`` through the same filter."""
+        logged (:attr:`quadsim.effects.base.EffectContext.accel_world`: R f - g e_z, R the
+        logged attitude or the gyro's own frame, :func:`quadsim.gap.logcheck.posefree_states`;
+        the pull in the body frame is the same for any R' = C R, C constant), then
+        a + d/dt R (w x r_a), ``accel_world`` through the same filter."""
         rot = quat_to_rotmat(quat) if rotation is None else rotation
         arm = np.array([self.x, self.y, self.z])
         key = ("cable_accel", self.x, self.y, self.z)

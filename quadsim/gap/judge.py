@@ -354,7 +354,11 @@ def where(held: list[FlightStates], params: VehicleParams, *, names: list[str],
 
 
 def regime_masks(states: FlightStates, params: VehicleParams) -> dict[str, np.ndarray]:
-    """Boolean masks (N,) per flight regime (see module docstring)."""
+    """Boolean masks (N,) per flight regime (see module docstring). Without a pose
+    (``states.pose`` False: IMU and motors only, position and velocity stand-ins of zero,
+    :mod:`quadsim.gap.logcheck`) only the regimes the IMU and the battery show:
+    aggressive_rotation and low_battery (the others would read the stand-ins: every sample
+    near the ground and hovering)."""
     speed = np.linalg.norm(states.velocity, axis=1)
     rate = np.linalg.norm(states.body_rate, axis=1)
     vz = states.velocity[:, 2]
@@ -367,6 +371,8 @@ def regime_masks(states: FlightStates, params: VehicleParams) -> dict[str, np.nd
         "aggressive_rotation": rate > 2.0,
         "near_ground": states.position[:, 2] < ground,
     }
+    if not getattr(states, "pose", True):
+        masks = {"aggressive_rotation": masks["aggressive_rotation"]}
     if states.vbat is not None and np.all(np.isfinite(states.vbat)):
         lo, hi = float(np.min(states.vbat)), float(np.max(states.vbat))
         drained = hi - lo > MIN_VBAT_DROP * abs(float(np.mean(states.vbat)))

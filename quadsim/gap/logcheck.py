@@ -174,8 +174,11 @@ The residual wrench (:mod:`quadsim.gap.residual`) needs no pose: the measured fo
 mass times the accelerometer's specific force and the measured torque comes from the gyro
 (``I w_dot + w x I w``), both in the body frame; the model's rotor wrench is body-frame too.
 What a pose adds is the effects whose loads read the vehicle's motion in the world: the air
-velocity (wind, body and rotor drag, blade flapping, translational lift), the height (ground
-effect) and the world's directions in the body frame (a payload swinging under gravity).
+velocity (wind, body and rotor drag, blade flapping, translational lift) and the height
+(ground effect). A payload swinging on a cable reads neither: its swing and pull depend on
+the effective gravity at its mount, g - a = -R f, which the accelerometer measures, and on
+the body's rotation, which the gyro measures; it is integrated in any frame R' = C R
+(:func:`posefree_states`: the gyro's own where no attitude is logged).
 Each effect declares what it reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`);
 on a log without a pose those effects are neither shared by the references nor weighed as a
 flight's explanation (:func:`needs_pose`), and the answer names them with what would add
@@ -183,7 +186,9 @@ them (:func:`missing_words`).
 
 Stand-ins (:func:`posefree_log`): the pose-less log gets position 0, velocity 0 and the
 identity attitude, so that the states have the shape every stage expects; no effect weighed
-on it reads them (the filter above), and ``FlightStates.pose`` is False.
+on it reads them (the filter above), and ``FlightStates.pose`` is False. The states' attitude
+then becomes the gyro's own frame and ``accel_world`` the accelerometer turned by it
+(:func:`posefree_states`), what the cable's swing reads.
 
 With the attitude and no position (the on-board estimate's Euler angles, as most flight
 controllers log them; ``FlightLog.has_attitude``): the logged attitude is kept in place of
@@ -191,10 +196,11 @@ the identity, and the states' ``accel_world`` is the accelerometer turned to the
 it, a = R f - g e_z (:func:`posefree_states`; f the specific force at the body origin), the
 vehicle's acceleration without differentiating a position. The parts logged
 (:func:`logged_parts`) are then the attitude alone: an effect is weighed when every part it
-declares is logged (:func:`needs_pose`), so a payload swinging on a cable is (its swing reads
-the vertical and that acceleration: :class:`quadsim.gap.fitting.CableSwing`, through
-:attr:`quadsim.effects.base.EffectContext.accel_world`), the drags, wind and ground effect
-are not, and :func:`missing_words` names only what is missing.
+declares is logged (:func:`needs_pose`): the drags, wind and ground effect are not weighed,
+a payload swinging on a cable is (as without the attitude; its swing turned by the logged
+attitude: :class:`quadsim.gap.fitting.CableSwing`, through
+:attr:`quadsim.effects.base.EffectContext.accel_world`), and :func:`missing_words` names
+only what is missing.
 
 Example::
 
@@ -939,16 +945,46 @@ def posefree_log(log):
                                quat=quat)
 
 
+#: how long (s) the start of each airborne stretch is averaged over to level the IMU's
+#: frame (:func:`posefree_states`): a quarter second of a stretch that starts near hover
+#: (the cut of :mod:`quadsim.logs.spans` starts it at the take-off's end), long against
+#: the accelerometer's noise, short against the flight's manoeuvres
+LEVEL_S = 0.25
+
+
 def posefree_states(states, attitude: bool, gravity: float):
-    """The states of :func:`posefree_log`'s log marked as without a pose (``pose`` False);
-    with its ``attitude`` logged, ``accel_world`` (m/s^2) is the smoothed accelerometer
-    turned to the world by it, R f - g e_z (the vehicle's acceleration: what a payload's
-    swing reads, module doc), else zero as the other stand-ins."""
+    """The states of :func:`posefree_log`'s log marked as without a pose (``pose`` False),
+    and ``accel_world`` (m/s^2) the smoothed accelerometer turned to the world,
+    a = R f - g e_z (f the specific force at the body origin, module doc), for what a
+    payload's swing reads. With its ``attitude`` logged, R is the logged attitude; without
+    it (IMU and motors only) R is the gyro's own frame: the body rate integrated
+    (:func:`quadsim.core.frames.integrate_body_rate`) from the tilt the accelerometer reads
+    over the stretch's first :data:`LEVEL_S` (:func:`quadsim.core.frames.levelling_quat`,
+    yaw 0), which becomes ``quat``.
+
+    Why the gyro's frame serves a payload's swing: the swing and the cable's pull in the
+    body frame depend only on the specific force and the rotation at the mount (the
+    effective gravity a swinging mass feels, g - a = -R f, is what the accelerometer
+    measures: the equivalence principle), and the swing's equations are unchanged under a
+    constant rotation of the frame they are integrated in; R' = C R for a constant C (the
+    unknown start yaw, the levelling's error) therefore gives the same pull in the body
+    frame as the true attitude. The gyro's bias turns R' slowly away from C R (0.005 rad/s,
+    0.05 rad in 10 s); below the swing's frequency the payload hangs along the effective
+    gravity whatever the frame, so such a drift moves the pull little
+    (``tests/test_imu_swing.py``). The stretch's first rows are the take-off's end, not a
+    hover: the levelling's error is a constant C too. No other effect the body-frame
+    balance weighs reads R (:func:`needs_pose`)."""
+    from ..core.frames import integrate_body_rate, levelling_quat
+
     if not attitude:
-        return dataclasses.replace(states, pose=False, attitude=False)
+        t = np.asarray(states.t, dtype=float)
+        first = t <= t[0] + LEVEL_S
+        quat = integrate_body_rate(t, states.body_rate,
+                                   levelling_quat(np.mean(states.specific_force[first], axis=0)))
+        states = dataclasses.replace(states, quat=quat)
     accel = rotate(states.quat, states.specific_force)
     accel[:, 2] -= gravity
-    return dataclasses.replace(states, pose=False, attitude=True, accel_world=accel)
+    return dataclasses.replace(states, pose=False, attitude=attitude, accel_world=accel)
 
 
 def missing_words(logged=()) -> str:

@@ -525,10 +525,10 @@ class FlightStates:
     name: where the log came from; pose: False for a log without a pose (IMU and motors
     only): position and velocity are then zero, stand-ins that no effect weighed on it
     reads (:attr:`quadsim.effects.facts.EffectFacts.needs_pose`, :mod:`quadsim.gap.logcheck`);
-    attitude: whether ``quat`` is the logged attitude (True with a pose). Without a pose and
-    without the attitude, quat is the identity and accel_world zero (stand-ins); without a
-    pose but with the attitude, quat is the logged one and accel_world the accelerometer
-    turned to the world, ``R f + g`` (:func:`quadsim.gap.logcheck.posefree_states`).
+    attitude: whether ``quat`` is the logged attitude (True with a pose). Without a pose,
+    accel_world is the accelerometer turned to the world, ``R f - g e_z``, and quat the
+    logged attitude or, without one, the gyro's own frame (the body rate integrated from
+    the accelerometer's tilt at the start, yaw 0: :func:`quadsim.gap.logcheck.posefree_states`).
     """
 
     t: np.ndarray
@@ -760,8 +760,7 @@ def model_wrench(states: FlightStates, params: VehicleParams,
     ctx = EffectContext(states.t, states.position, states.velocity, states.quat,
                         states.body_rate, air, speed, accel, vehicle, vbat,
                         rotation=rotation, flight_memo=flight_memo,
-                        accel_world=None if states.pose or not states.attitude
-                        else states.accel_world)
+                        accel_world=None if states.pose else states.accel_world)
     if flight_memo is None:
         loads = effect_set.loads(ctx)
     elif plan.stateful:
