@@ -972,8 +972,9 @@ def posefree_states(states, attitude: bool, gravity: float):
     body (R' = C R E(t)); below the swing's frequency the payload hangs along the effective
     gravity whatever the frame, so a calibrated gyro's bias moves the pull little: on a
     generated figure-8, 0.10 of the swing's variation at 0.01 rad/s on each axis (as
-    without a bias), 0.22 at 0.05 rad/s, 0.95 at 0.2 rad/s (``tests/test_imu_swing.py``). The stretch's first rows are the take-off's end, not a
-    hover: the levelling's error is a constant C too. No other effect the body-frame
+    without a bias), 0.22 at 0.05 rad/s, 0.95 at 0.2 rad/s (``tests/test_imu_swing.py``).
+    The stretch's first rows are the take-off's end, not a hover: the levelling's error is
+    a constant C too. No other effect the body-frame
     balance weighs reads R (:func:`needs_pose`)."""
     from ..core.frames import integrate_body_rate, levelling_quat
 
