@@ -202,3 +202,53 @@ def lagging_flight(model: str, drag: float, lag: float, noise: dict, rate: float
                                  seed, duration=duration, speed=speed, height=height,
                                  size=size)
     return params, log
+
+
+def posefree_noise():
+    """The sensor noise of the generated flights the pose-free tests cut (position 0.5 mm,
+    velocity 0.01 m/s, attitude 2 mrad, gyro 0.02 rad/s, accelerometer 0.1 m/s^2, rotor
+    speeds 10 rad/s; white)."""
+    from quadsim.logs.sensors import SensorModel
+
+    return SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
+                              "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
+
+
+#: the shared data's labelled real Crazyflie flights (tests that use them skip without it)
+MIXED_DATA = ROOT.parent / "shared" / "data" / "crazyflie21_brushless"
+
+
+def judge_real_cut(tmp_path: Path, keep, references, flights) -> dict:
+    """The real Crazyflie flights cut to what a user may log, judged per flight as a user
+    types it (``python -m quadsim.gap --model crazyflie21 --per-flight ... --reference ...
+    --workers 1 --no-cache``): ``keep(log)`` -> the cut FlightLog; ``references`` the nominal
+    flights' numbers (``nominal/flight_NN``), ``flights`` the mixed ones' (``mixed/flight_N``),
+    each written cut into ``tmp_path``. Returns the result JSON's flights by file name."""
+    import json
+    import warnings
+
+    from quadsim.core.errors import QuadsimWarning
+    from quadsim.gap.__main__ import main
+    from quadsim.logs.flightlog import load_log, write_log
+
+    def cut(path: Path, folder: str) -> str:
+        (tmp_path / folder).mkdir(exist_ok=True)
+        return str(write_log(tmp_path / folder / path.name, keep(load_log(path, warn=False))))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", QuadsimWarning)
+        refs = [cut(MIXED_DATA / "nominal" / f"flight_{k:02d}.csv.gz", "ref")
+                for k in references]
+        judged = [cut(MIXED_DATA / "mixed" / f"flight_{k}.csv.gz", "fly") for k in flights]
+    out = tmp_path / "out.json"
+    assert main(["--model", "crazyflie21", "--per-flight", *judged, "--reference", *refs,
+                 "--workers", "1", "--no-cache", "--quiet", "--json", str(out)]) == 0
+    return {Path(f["file"]).name: f for f in json.loads(out.read_text())["flights"]}
+
+
+def assert_payload_named(verdict: dict, total_kg: float = 0.0074, within: float = 0.002):
+    """A mixed payload flight's verdict names a payload on a cable, its masses adding up to
+    ``total_kg`` within ``within`` (kg)."""
+    assert verdict["verdict"].startswith("cable_payload"), verdict["answer"]
+    total = sum(v for k, v in verdict["params"].items() if k.endswith(".mass"))
+    assert abs(total - total_kg) < within, verdict["params"]

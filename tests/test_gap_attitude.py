@@ -29,11 +29,11 @@ from quadsim.gap.residual import flight_states
 from quadsim.logs.checks import check_logs
 from quadsim.logs.flightlog import WITHOUT_POSE, WITHOUT_POSITION, FlightLog, load_log
 from quadsim.logs.generate import generate_flight
-from quadsim.logs.sensors import SensorModel
 from quadsim.vehicle.params import load_params
 
-NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
-                           "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
+from _helpers import assert_payload_named, judge_real_cut, posefree_noise
+
+NOISE = posefree_noise()
 PATHS = ("figure8", "steps", "lissajous", "figure8")
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "crazyflie21_brushless"
 
@@ -152,30 +152,39 @@ def cf_states(cf):
     return posed, attitude
 
 
-def _fly(cf, effects, seed, path="figure8"):
+def _fly(cf, effects, seed, path="figure8", keep=_attitude_only):
     log, _ = generate_flight(cf, path, EffectSet(tuple(effects)), NOISE, seed, duration=5.0,
                              speed=1.0)
-    return check_logs([_attitude_only(log)], cf)[0][0]
+    return check_logs([keep(log)], cf)[0][0]
 
 
-def test_a_cable_payload_is_named_from_the_attitude_and_the_imu(cf):
-    """4 nominal references and two flights, all without a position: a nominal one is clear,
-    one with 6 g on a 0.5 m cable is read as a payload on a cable (alone or with a part fixed
-    to the frame) within 1.5 g of its mass; the answer names only the speed and height as
-    missing (without the attitude: tests/test_imu_swing.py)."""
+def _imu_only(log):
+    return dataclasses.replace(log, position=None, velocity=None, quat=None)
+
+
+@pytest.mark.parametrize("keep", [_attitude_only, _imu_only], ids=["attitude", "imu"])
+def test_a_cable_payload_is_named_with_or_without_the_attitude(cf, keep):
+    """4 nominal references and two flights, all without a position (with the attitude, or
+    the IMU and motors alone: the swing in the gyro's own frame, tests/test_imu_swing.py): a
+    nominal one is clear, one with 6 g on a 0.5 m cable is read as a payload on a cable
+    (alone or with a part fixed to the frame) within 1.5 g of its mass; the answer's "Not
+    weighed" names only the speed and height (and the attitude where it is not logged), never
+    the cable, nor does the posterior weigh a drag."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [_fly(cf, (), seed, path) for seed, path in enumerate(PATHS)]
+        refs = [_fly(cf, (), seed, path, keep) for seed, path in enumerate(PATHS)]
         reference = calibrate(prepare(refs, cf), cf)
-        calm = judge_one(_fly(cf, (), 11), reference)
+        calm = judge_one(_fly(cf, (), 11, keep=keep), reference)
         slung = judge_one(_fly(cf, (make_effect("cable_payload", mass=0.006, length=0.5),),
-                               12), reference)
+                               12, keep=keep), reference)
     assert calm.outcome == "no_significant_gap", calm.answer
     assert slung.name.startswith("cable_payload"), slung.answer
     total = sum(v for k, v in slung.params.items() if k.endswith(".mass"))
     assert abs(total - 0.006) < 0.0015, slung.params
+    said = missing_words({"attitude"} if keep is _attitude_only else ())
+    assert "cable payload" not in said
     for verdict in (calm, slung):
-        assert f"Not weighed: {missing_words({'attitude'})}" in verdict.answer
+        assert f"Not weighed: {said}" in verdict.answer
     assert not {r.name for r in slung.posterior} & {"wind", "body_drag", "rotor_drag"}
 
 
@@ -185,30 +194,12 @@ def test_real_payload_flights_with_their_attitude_and_no_position(tmp_path):
     to the IMU, the commands and the attitude (no position, velocity or rotor speeds),
     against five nominal flights cut alike, as a user types it: the payloads named on a cable
     within 2 g of +7.4 g in all, the plain flight clear."""
-    import json
+    def keep(log):
+        return dataclasses.replace(log, position=None, velocity=None, rotor_speed=None)
 
-    from quadsim.gap.__main__ import main
-    from quadsim.logs.flightlog import write_log
-
-    def cut(path, folder):
-        log = load_log(path, warn=False)
-        (tmp_path / folder).mkdir(exist_ok=True)
-        return str(write_log(tmp_path / folder / path.name, dataclasses.replace(
-            log, position=None, velocity=None, rotor_speed=None)))
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [cut(DATA / "nominal" / f"flight_{k:02d}.csv.gz", "ref") for k in (0, 4, 8, 12, 16)]
-        flights = [cut(DATA / "mixed" / f"flight_{k}.csv.gz", "fly") for k in (106, 112, 114)]
-    out = tmp_path / "out.json"
-    assert main(["--model", "crazyflie21", "--per-flight", *flights, "--reference", *refs,
-                 "--workers", "1", "--no-cache", "--quiet", "--json", str(out)]) == 0
-    by = {Path(f["file"]).name: f for f in json.loads(out.read_text())["flights"]}
-    for name in ("flight_106.csv.gz", "flight_112.csv.gz"):
-        verdict = by[name]
-        assert verdict["verdict"].startswith("cable_payload"), verdict["answer"]
-        total = sum(v for k, v in verdict["params"].items() if k.endswith(".mass"))
-        assert abs(total - 0.0074) < 0.002, verdict["params"]
+    by = judge_real_cut(tmp_path, keep, (0, 4, 8, 12, 16), (106, 112, 114))
+    assert_payload_named(by["flight_106.csv.gz"])
+    assert_payload_named(by["flight_112.csv.gz"])
     assert by["flight_114.csv.gz"]["verdict"] == "no_significant_gap", by["flight_114.csv.gz"]
 
 

@@ -24,11 +24,11 @@ from quadsim.gap.diagnose import judge_one, prepare
 from quadsim.gap.logcheck import missing_words
 from quadsim.logs.checks import check_logs
 from quadsim.logs.generate import generate_flight
-from quadsim.logs.sensors import SensorModel
 from quadsim.vehicle.params import load_params
 
-NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
-                           "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
+from _helpers import posefree_noise
+
+NOISE = posefree_noise()
 PATHS = ("figure8", "steps", "lissajous", "figure8")
 
 pytestmark = pytest.mark.xdist_group("test_gap_posefree")

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,21 +28,17 @@ from quadsim.core.frames import (
     rotate,
     rotate_inverse,
 )
-from quadsim.effects import EffectSet, make_effect
-from quadsim.gap.calibrate import calibrate
-from quadsim.gap.diagnose import judge_one, prepare
+from quadsim.effects import EffectSet
 from quadsim.gap.fitting import CableSwing
-from quadsim.gap.logcheck import missing_words, posefree_log, posefree_states
+from quadsim.gap.logcheck import posefree_log, posefree_states
 from quadsim.gap.residual import flight_states
-from quadsim.logs.checks import check_logs
 from quadsim.logs.generate import generate_flight
-from quadsim.logs.sensors import SensorModel
 from quadsim.vehicle.params import load_params
 
-NOISE = SensorModel(noise={"position": 5e-4, "velocity": 0.01, "attitude": 2e-3,
-                           "gyro": 0.02, "accel": 0.1, "rotor": 10.0})
-PATHS = ("figure8", "steps", "lissajous", "figure8")
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "crazyflie21_brushless"
+from _helpers import MIXED_DATA, assert_payload_named, judge_real_cut, posefree_noise
+
+NOISE = posefree_noise()
+DATA = MIXED_DATA
 
 pytestmark = pytest.mark.xdist_group("test_imu_swing")
 
@@ -193,31 +188,8 @@ def test_a_gyro_bias_turns_the_frame_and_moves_the_pull_by_its_size(cf, flown):
     assert errors[0] < 0.15 and 0.15 < errors[1] < 0.35 and errors[2] > 0.6, errors
 
 
-def _fly(cf, effects, seed, path="figure8"):
-    log, _ = generate_flight(cf, path, EffectSet(tuple(effects)), NOISE, seed, duration=5.0,
-                             speed=1.0)
-    return check_logs([_imu_only(log)], cf)[0][0]
-
-
-def test_a_cable_payload_is_named_from_the_imu_alone(cf):
-    """4 nominal references and two flights, all IMU and motors only: a nominal one clear,
-    one with 6 g on a 0.5 m cable read as a payload on a cable (alone or with a part fixed to
-    the frame) within 1.5 g of its mass; the answer's "Not weighed" no longer names it."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [_fly(cf, (), seed, path) for seed, path in enumerate(PATHS)]
-        reference = calibrate(prepare(refs, cf), cf)
-        calm = judge_one(_fly(cf, (), 11), reference)
-        slung = judge_one(_fly(cf, (make_effect("cable_payload", mass=0.006, length=0.5),),
-                               12), reference)
-    assert calm.outcome == "no_significant_gap", calm.answer
-    assert slung.name.startswith("cable_payload"), slung.answer
-    total = sum(v for k, v in slung.params.items() if k.endswith(".mass"))
-    assert abs(total - 0.006) < 0.0015, slung.params
-    said = missing_words()
-    assert "cable payload" not in said
-    for verdict in (calm, slung):
-        assert f"Not weighed: {said}" in verdict.answer
+def _imu_cut(log):
+    return dataclasses.replace(_imu_only(log), rotor_speed=None)
 
 
 @pytest.mark.skipif(not (DATA / "mixed_labels.json").is_file(), reason="../shared absent")
@@ -227,30 +199,9 @@ def test_real_payload_flights_from_the_imu_and_the_commands(tmp_path):
     five nominal flights cut alike, as a user types it: the payloads named on a cable within
     2 g of +7.4 g in all (before, `thrust_factor` -16 % or `unexplained`), the plain flight
     clear."""
-    import json
-
-    from quadsim.gap.__main__ import main
-    from quadsim.logs.flightlog import load_log, write_log
-
-    def cut(path, folder):
-        log = load_log(path, warn=False)
-        (tmp_path / folder).mkdir(exist_ok=True)
-        return str(write_log(tmp_path / folder / path.name, dataclasses.replace(
-            _imu_only(log), rotor_speed=None)))
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [cut(DATA / "nominal" / f"flight_{k:02d}.csv.gz", "ref") for k in (0, 4, 8, 12, 16)]
-        flights = [cut(DATA / "mixed" / f"flight_{k}.csv.gz", "fly") for k in (106, 112, 114)]
-    out = tmp_path / "out.json"
-    assert main(["--model", "crazyflie21", "--per-flight", *flights, "--reference", *refs,
-                 "--workers", "1", "--no-cache", "--quiet", "--json", str(out)]) == 0
-    by = {Path(f["file"]).name: f for f in json.loads(out.read_text())["flights"]}
-    for name in ("flight_106.csv.gz", "flight_112.csv.gz"):
-        verdict = by[name]
-        assert verdict["verdict"].startswith("cable_payload"), verdict["answer"]
-        total = sum(v for k, v in verdict["params"].items() if k.endswith(".mass"))
-        assert abs(total - 0.0074) < 0.002, verdict["params"]
+    by = judge_real_cut(tmp_path, _imu_cut, (0, 4, 8, 12, 16), (106, 112, 114))
+    assert_payload_named(by["flight_106.csv.gz"])
+    assert_payload_named(by["flight_112.csv.gz"])
     assert by["flight_114.csv.gz"]["verdict"] == "no_significant_gap", by["flight_114.csv.gz"]
 
 
@@ -261,25 +212,5 @@ def test_a_cable_whose_first_step_misses_is_fitted_where_its_second_reaches(tmp_
     the cut (reach -84.8 against -84.3, its linear model off by 3,390) and a second step
     reaches it (-70.8): fitted, the cable with its mount is named, +7.1 g in all (before
     the second step, `thrust_factor` -16 % led; quadsim.gap.evidence, module doc, 3.)."""
-    import json
-
-    from quadsim.gap.__main__ import main
-    from quadsim.logs.flightlog import load_log, write_log
-
-    def cut(path, folder):
-        log = load_log(path, warn=False)
-        (tmp_path / folder).mkdir(exist_ok=True)
-        return str(write_log(tmp_path / folder / path.name, dataclasses.replace(
-            _imu_only(log), rotor_speed=None)))
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", QuadsimWarning)
-        refs = [cut(DATA / "nominal" / f"flight_{k:02d}.csv.gz", "ref") for k in range(20)]
-        flight = cut(DATA / "mixed" / "flight_125.csv.gz", "fly")
-    out = tmp_path / "out.json"
-    assert main(["--model", "crazyflie21", "--per-flight", flight, "--reference", *refs,
-                 "--workers", "1", "--no-cache", "--quiet", "--json", str(out)]) == 0
-    verdict = json.loads(out.read_text())["flights"][0]
-    assert verdict["verdict"].startswith("cable_payload"), verdict["answer"]
-    total = sum(v for k, v in verdict["params"].items() if k.endswith(".mass"))
-    assert abs(total - 0.0074) < 0.002, verdict["params"]
+    by = judge_real_cut(tmp_path, _imu_cut, range(20), (125,))
+    assert_payload_named(by["flight_125.csv.gz"])
