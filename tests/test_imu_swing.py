@@ -58,6 +58,8 @@ def test_levelling_turns_the_specific_force_up_without_yaw():
     x_axis = rotate(levelling_quat(np.array([2.0, 0.0, 9.0])), np.array([1.0, 0.0, 0.0]))
     assert abs(x_axis[1]) < 1e-12 and x_axis[0] > 0.9
     np.testing.assert_allclose(levelling_quat(np.array([0, 0, 9.81])), [1, 0, 0, 0])
+    for nothing in ([0.0, 0.0, 0.0], [np.nan, 0.0, 9.81]):       # no tilt to read
+        np.testing.assert_array_equal(levelling_quat(np.array(nothing)), [1, 0, 0, 0])
     np.testing.assert_allclose(rotate(levelling_quat(np.array([0, 0, -9.81])),
                                       np.array([0, 0, -9.81])), [0, 0, 9.81], atol=1e-12)
 

@@ -135,9 +135,13 @@ def levelling_quat(specific_force: np.ndarray) -> np.ndarray:
     ``specific_force`` (3,; m/s^2, the accelerometer's a - g) to the world's +z: the tilt an
     accelerometer reads where the vehicle does not accelerate (at rest, or in a steady
     hover). Rotation about the axis f x e_z by the angle between them (the identity where f
-    points up already; f pointing straight down: 180 deg about x)."""
+    points up already, or where it has no length or is not finite: no tilt to read; f
+    pointing straight down: 180 deg about x)."""
     f = np.asarray(specific_force, dtype=float)
-    u = f / np.linalg.norm(f)
+    size = float(np.linalg.norm(f))
+    if not np.isfinite(size) or size < 1e-9:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    u = f / size
     axis = np.array([u[1], -u[0], 0.0])          # u x e_z
     s, c = float(np.linalg.norm(axis)), float(u[2])
     if s < 1e-12:
