@@ -139,7 +139,7 @@ def levelling_quat(specific_force: np.ndarray) -> np.ndarray:
     pointing straight down: 180 deg about x)."""
     f = np.asarray(specific_force, dtype=float)
     size = float(np.linalg.norm(f))
-    if not np.isfinite(size) or size < 1e-9:
+    if not np.isfinite(size) or size < 1e-9:        # m/s^2: no direction to read
         return np.array([1.0, 0.0, 0.0, 0.0])
     u = f / size
     axis = np.array([u[1], -u[0], 0.0])          # u x e_z
@@ -157,9 +157,9 @@ def integrate_body_rate(t: np.ndarray, body_rate: np.ndarray, q0: np.ndarray) ->
     (exact for a rate constant in direction over the step; second order otherwise), and
     q_k = q0 s_1 ... s_k, normalised. The ordered products are formed by a prefix scan
     (Hillis-Steele: log2 N passes of whole-array Hamilton products, each keeping the earlier
-    factor on the left): the same products as one at a time, to round-off (2.5e-14 over
-    10^4 steps, tests/test_imu_swing.py), at a sixth of a Python loop's cost. Gyro dead
-    reckoning: its error grows with the rate's bias times the time."""
+    factor on the left): the same products as one at a time, to round-off
+    (tests/test_imu_swing.py). Gyro dead reckoning: its error grows with the rate's bias
+    times the time."""
     t = np.asarray(t, dtype=float)
     w = np.asarray(body_rate, dtype=float)
     n = len(t)

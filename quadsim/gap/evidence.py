@@ -129,13 +129,12 @@ of evidence below the best. So:
    (``step_converged=True``; :func:`converged_steps` states the bound and its margin).
    Where the linear model missed by more than the cut itself (miss > :data:`SCREEN_CUT`:
    the reach's own error exceeds the margin it is compared with) and the reach lies
-   within twice the cut, a second step from z1 decides (:func:`_second_reach`): fitted
-   where its reach lies within the cut. Why: a reading strongly nonlinear in its values
-   (a payload's swing in its cable's length) reads a poor first step from its prior's
-   centre; on the real mixed payload flight 125 cut to the IMU and the commands the cable
-   readings' first reach was -86.4 / -84.8 against a cut of -84.3, their second -75.7 /
-   -70.8, and fitted the mount variant leads at -68.1 (+7.1 g in all; before, screened
-   out, `thrust_factor` -16 % led).
+   within twice the cut (the second steps kept to readings near the cut: their cost), a
+   second step from z1 decides (:func:`_second_reach`): fitted where its reach lies
+   within the cut. Why: a reading strongly nonlinear in its values (a payload's swing in
+   its cable's length) takes a poor first step from its prior's centre (the case that
+   showed it: CHANGELOG.md, "A screened step whose linear model missed by more than the
+   cut").
 
 Why the cut does not move a verdict: a screened reading lies more than SCREEN_CUT = log(1e4)
 + 4 below the best, i.e. at posterior odds below 1e-4 against it by its screened evidence;
@@ -1679,7 +1678,8 @@ def _matters(inputs: FitInputs, cols: Columns, explanations: list, k: int,
         return bool(expl.kin and start is not None and _second_reach(
             inputs.problem(expl), cols, start) >= best - SCREEN_CUT)
     # a step whose linear model missed by more than the cut itself cannot place the
-    # explanation against the cut: a second step from it decides, within twice the cut
+    # explanation against the cut: a second step from it decides; only within twice the
+    # cut, so that the extra steps stay with readings near it (module doc, 3.)
     return bool(start is not None and screening.miss[k] > SCREEN_CUT
                 and screening.reach[k] >= best - 2.0 * SCREEN_CUT
                 and _second_reach(inputs.problem(expl), cols, start) >= best - SCREEN_CUT)

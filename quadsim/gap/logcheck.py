@@ -969,12 +969,10 @@ def posefree_states(states, attitude: bool, gravity: float):
     constant rotation of the frame they are integrated in; R' = C R for a constant C (the
     unknown start yaw, the levelling's error) therefore gives the same pull in the body
     frame as the true attitude. The gyro's bias turns R' slowly away from C R, within the
-    body (R' = C R E(t)); below the swing's frequency the payload hangs along the effective
-    gravity whatever the frame, so a calibrated gyro's bias moves the pull little: on a
-    generated figure-8, 0.10 of the swing's variation at 0.01 rad/s on each axis (as
-    without a bias), 0.22 at 0.05 rad/s, 0.95 at 0.2 rad/s (``tests/test_imu_swing.py``).
-    The stretch's first rows are the take-off's end, not a hover: the levelling's error is
-    a constant C too. No other effect the body-frame
+    body (R' = C R E(t)), which the argument does not cover: a calibrated gyro's bias
+    (~0.01 rad/s) moves the pull little, a bias of degrees per second does (measured:
+    ``tests/test_imu_swing.py``, docs/logs.md). The stretch's first rows are the take-off's
+    end, not a hover: the levelling's error is a constant C too. No other effect the body-frame
     balance weighs reads R (:func:`needs_pose`)."""
     from ..core.frames import integrate_body_rate, levelling_quat
 
