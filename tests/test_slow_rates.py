@@ -363,3 +363,47 @@ def test_where_lists_only_the_bands_that_were_compared():
     banded = by_band([e], 0.01, 2.48)
     assert list(banded) == ["0-1 Hz", "1-5 Hz"]
     assert sum(banded.values()) == pytest.approx(1.0, abs=1e-12)
+
+
+def _smooth_speeds_log(tmp_path):
+    """A generated 6 s lissajous of ``px4_sitl_iris`` at 100 Hz (rotor drag, body drag, a
+    30 ms motor lag) whose rotor speeds carry no noise, written as a CSV (10 digits) and read
+    back."""
+    from quadsim.effects import EffectSet, make_effect
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+
+    effects = EffectSet((make_effect("rotor_drag", coefficient=1e-5),
+                         make_effect("motor_lag", time_constant=0.03),
+                         make_effect("body_drag", cd_area=0.005, cd_area_vertical=0.01)))
+    sensors = SensorModel(noise={"gyro": 0.01, "accel": 0.05, "rotor": 0.0,
+                                 "position": 0.001}, rate=100.0)
+    log, _ = generate_flight(load_params("px4_sitl_iris"), "lissajous", effects, sensors, 1,
+                             duration=6.0, speed=0.84, height=2.0, size=2.0)
+    path = tmp_path / "smooth.csv.gz"
+    write_log(path, log)
+    return load_log(path)
+
+
+def test_smooth_channel_without_noise_reads_native(tmp_path):
+    """Rotor speeds without noise bend beyond the 10 digits' rounding only where the vehicle
+    turns fast: 8 such rows in 6 s, 2-4 rows apart in clusters between 38-195 rows of
+    straight line. Those rows do not tile the flight at one rate (module doc, "regular"):
+    native, 100 Hz, and the diagnosis keeps the logged speeds (before: 50 Hz
+    "interpolated"; on the 15 s flights 5-25 Hz, the speeds synthesised from the commands
+    and a reference refused by the rotor-order check at Delta chi^2 35)."""
+    log = _smooth_speeds_log(tmp_path)
+    rate = native_rate(log.t, log.rotor_speed)
+    assert (rate.form, rate.hz) == ("native", pytest.approx(100.0, rel=1e-6))
+    assert slow_rotors(log) is log
+
+
+def test_held_channel_constant_in_between_keeps_its_rate(signal):
+    """A 4 Hz hold that stays on one value for 3 s in the middle (on the ground between two
+    take-offs): its samples still tile the time it moves, 4 Hz "held"."""
+    t, x = signal
+    held = _held(t, x, 4.0)
+    ground = (t > 3.0) & (t < 6.0)
+    held[ground] = held[np.flatnonzero(ground)[0]]
+    rate = native_rate(t, held)
+    assert (rate.form, rate.hz) == ("held", pytest.approx(4.0, rel=1e-9))

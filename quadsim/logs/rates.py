@@ -46,6 +46,16 @@ Thresholds:
 * :data:`DENSE_RUN` = 3 rows: an interpolated sample bends two rows, a held one changes one,
   so longer runs are no knot but a channel that changes everywhere;
 * :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column);
+* **regular**: a logger samples at one rate, so a slow channel's knots tile the time it
+  moves at one interval (rows jitter: within one row): the intervals within
+  :data:`REGULAR_SPREAD` = 25 % (and one row) of their median must cover at least
+  :data:`REGULAR_SHARE` = half of the time from the first knot to the last (a held channel
+  constant on the ground in between still covers the rest). A smooth channel without noise
+  whose rows bend beyond the rounding only where it turns fast (a generated 100 Hz rotor
+  speed written to 10 digits on a gentle path: 8-34 knots in 6-15 s, in clusters of 2-4
+  rows apart between stretches of 38-376 rows) is native: read as a 5-50 Hz channel its
+  speeds were synthesised from the commands and a reference refused by the rotor-order
+  check (CHANGELOG.md);
 * :data:`QUANTUM_STEPS` = 2: a native channel quantised so coarsely that it stays on one
   value for several rows (a battery voltage in 1 mV steps, integer PWM commands in a hover)
   changes by one quantum at a time, so the median change is its smallest; a held channel's
@@ -67,8 +77,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "ROUND_STEPS", "NativeRate",
-           "native_rate", "rates_of"]
+__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "REGULAR_SHARE",
+           "REGULAR_SPREAD", "ROUND_STEPS", "NativeRate", "native_rate", "rates_of"]
 
 #: rounding steps of the column as written (:func:`_quanta`) a change must exceed to count
 #: (module doc)
@@ -79,6 +89,12 @@ MAX_DIGITS = 15
 DENSE_RUN = 3
 #: fewest knots from which a rate is read (module doc)
 MIN_KNOTS = 8
+#: knots come at one rate where the intervals within :data:`REGULAR_SPREAD` of their median
+#: cover at least this share of the time from the first knot to the last (module doc,
+#: "regular")
+REGULAR_SHARE = 0.5
+#: the relative spread about the median knot interval that counts as one rate (module doc)
+REGULAR_SPREAD = 0.25
 #: a column whose changes have a median at most this many times its smallest change is
 #: quantised, not held (module doc)
 QUANTUM_STEPS = 2.0
@@ -93,6 +109,16 @@ class NativeRate:
     hz: float
     form: str
     knots: np.ndarray
+
+
+def _regular(gaps: np.ndarray, interval: float, step: float) -> bool:
+    """Whether knot intervals ``gaps`` (s) tile the channel's time as a logger's samples do:
+    the intervals within :data:`REGULAR_SPREAD` of their median ``interval`` (and within one
+    row ``step``, s, of it: rows jitter, and a sample between two rows bends either of them)
+    cover at least :data:`REGULAR_SHARE` of the time from the first knot to the last."""
+    tolerance = max(REGULAR_SPREAD * interval, step)
+    kept = np.abs(gaps - interval) <= tolerance
+    return float(np.sum(gaps[kept])) >= REGULAR_SHARE * float(np.sum(gaps))
 
 
 def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
@@ -213,8 +239,11 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
         elif len(starts) < MIN_KNOTS:
             continue
         else:
-            interval = float(np.median(np.diff(t[starts])))
-            if interval <= 1.5 * step:                  # a knot on every row or so
+            gaps = np.diff(t[starts])
+            interval = float(np.median(gaps))
+            if interval <= 1.5 * step or not _regular(gaps, interval, step):
+                # a knot on every row or so, or knots that do not tile the time at one
+                # rate: a smooth channel's bends above the rounding (module doc, "regular")
                 candidate = NativeRate(1.0 / step, "native", np.arange(len(t)))
             else:
                 candidate = NativeRate(1.0 / interval, form, starts)
