@@ -40,7 +40,10 @@ beside it; a wrong name at >= 0.9 and not tentative is **confident wrong**.
 Usage (from the repository root; ~2 min to fly, ~30 s to judge each campaign)::
 
     python -m benchmarks.campaigns [--campaign tunnel|testbed|xquad|all] [--logs full|commands|imu]
-                                   [--out DIR]
+                                   [--exact-speeds] [--out DIR]
+
+``--exact-speeds`` logs the rotor speeds without their noise, as a simulator that logs its own
+state does (the other sensors as they are).
 
 Where these campaigns came from, what their first runs found and what was left:
 CHANGELOG.md (the slow-references, ordermodel and wind-law entries) and benchmarks/README.md
@@ -200,10 +203,15 @@ def score(flight: Flight, entry: dict) -> str:
             and p >= 0.9 and not entry.get("tentative") else "miss")
 
 
-def run(name: str, logs: str, out: Path) -> list[tuple[Flight, dict, str]]:
-    """Fly campaign ``name`` into ``out``, judge it as a user types it, score each flight."""
+def run(name: str, logs: str, out: Path, *, exact_speeds: bool = False
+        ) -> list[tuple[Flight, dict, str]]:
+    """Fly campaign ``name`` into ``out``, judge it as a user types it, score each flight.
+    ``exact_speeds``: the rotor speeds logged without their noise (what a simulator that logs
+    its own state writes; the other sensors as they are), into ``out / name / exact-LOGS``."""
     campaign = CAMPAIGNS[name]
-    folder = out / name / logs
+    if exact_speeds:
+        campaign = dataclasses.replace(campaign, noise={**campaign.noise, "rotor": 0.0})
+    folder = out / name / (f"exact-{logs}" if exact_speeds else logs)
     folder.mkdir(parents=True, exist_ok=True)
     paths = {}
     for flight in campaign.references + campaign.flights:
@@ -261,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaign", choices=[*CAMPAIGNS, "all"], default="all")
     parser.add_argument("--logs", choices=list(CUTS), default="full")
+    parser.add_argument("--exact-speeds", action="store_true",
+                        help="log the rotor speeds without their noise (a simulator's own state)")
     parser.add_argument("--out", type=Path, default=None,
                         help="folder for the flights and verdicts (default: a temporary one)")
     args = parser.parse_args(argv)
@@ -268,7 +278,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp)
         for name in names:
-            print(table(name, args.logs, run(name, args.logs, out)), end="\n\n", flush=True)
+            rows = run(name, args.logs, out, exact_speeds=args.exact_speeds)
+            label = f"{args.logs}, exact speeds" if args.exact_speeds else args.logs
+            print(table(name, label, rows), end="\n\n", flush=True)
     return 0
 
 

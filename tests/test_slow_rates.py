@@ -363,3 +363,62 @@ def test_where_lists_only_the_bands_that_were_compared():
     banded = by_band([e], 0.01, 2.48)
     assert list(banded) == ["0-1 Hz", "1-5 Hz"]
     assert sum(banded.values()) == pytest.approx(1.0, abs=1e-12)
+
+
+def _smooth_speeds_log(tmp_path, path: str, seed: int, speed: float):
+    """A generated 15 s flight of ``px4_sitl_iris`` at 100 Hz (rotor drag, body drag, a 30 ms
+    motor lag: the xquad campaign's, ``benchmarks.campaigns``) whose rotor speeds carry no
+    noise, written as a CSV (10 digits) and read back."""
+    from quadsim.effects import EffectSet, make_effect
+    from quadsim.logs.generate import generate_flight
+    from quadsim.logs.sensors import SensorModel
+
+    effects = EffectSet((make_effect("rotor_drag", coefficient=1e-5),
+                         make_effect("motor_lag", time_constant=0.03),
+                         make_effect("body_drag", cd_area=0.005, cd_area_vertical=0.01)))
+    sensors = SensorModel(noise={"gyro": 0.01, "accel": 0.05, "rotor": 0.0,
+                                 "position": 0.001}, rate=100.0)
+    log, _ = generate_flight(load_params("px4_sitl_iris"), path, effects, sensors, seed,
+                             duration=15.0, speed=speed, height=2.0, size=2.0)
+    out = tmp_path / f"{path}{seed}.csv.gz"
+    write_log(out, log)
+    return load_log(out)
+
+
+@pytest.mark.parametrize("path, seed, speed, before", [("lissajous", 1, 0.84, "25 Hz"),
+                                                       ("steps", 2, 0.5, "20 Hz held"),
+                                                       ("lissajous", 4, 0.96, "5 Hz")])
+def test_smooth_channel_without_noise_reads_native(tmp_path, path, seed, speed, before):
+    """Rotor speeds without noise (module doc, "dense" and "smooth"): on a lissajous they bend
+    beyond the 10 digits' rounding only where the vehicle turns fast (12-20 rows in 15 s, at
+    intervals of 2-376 rows, with 3-6 rows just under the threshold for each); in steps
+    they stay on one written value at the steady hover and change on every row between.
+    Native, 100 Hz, and the diagnosis keeps the logged speeds (``before``: the rate read
+    then; the speeds were synthesised from the commands and a reference refused by the
+    rotor-order check at Delta chi^2 35)."""
+    log = _smooth_speeds_log(tmp_path, path, seed, speed)
+    rate = native_rate(log.t, log.rotor_speed)
+    assert (rate.form, rate.hz) == ("native", pytest.approx(100.0, rel=1e-6)), before
+    assert slow_rotors(log) is log
+
+
+@pytest.mark.skipif(not DATA.exists(), reason="needs ../shared/data")
+def test_motion_capture_pose_stays_held():
+    """The real Crazyflie flights' pose, held on the 500 Hz rows between motion-capture
+    samples (a new value every 2-5 rows, each on a single row), still reads held at 104-175 Hz
+    (docs/logs.md), not native."""
+    for name in ("mixed/flight_100.csv.gz", "nominal/flight_00.csv.gz"):
+        log = load_log(DATA / "crazyflie21_brushless" / name, warn=False)
+        for channel in ("position", "quat"):
+            assert 100.0 < log.rate_hz(channel) < 180.0, (name, channel)
+
+
+def test_held_channel_constant_in_between_keeps_its_rate(signal):
+    """A 4 Hz hold that stays on one value for 3 s in the middle (on the ground between two
+    take-offs): its samples still tile the time it moves, 4 Hz "held"."""
+    t, x = signal
+    held = _held(t, x, 4.0)
+    ground = (t > 3.0) & (t < 6.0)
+    held[ground] = held[np.flatnonzero(ground)[0]]
+    rate = native_rate(t, held)
+    assert (rate.form, rate.hz) == ("held", pytest.approx(4.0, rel=1e-9))

@@ -46,6 +46,29 @@ Thresholds:
 * :data:`DENSE_RUN` = 3 rows: an interpolated sample bends two rows, a held one changes one,
   so longer runs are no knot but a channel that changes everywhere;
 * :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column);
+* **dense** (the held reading): a held channel's value changes on single rows, where a new
+  sample shows; a channel that changes on :data:`DENSE_RUN` or more consecutive rows wherever
+  it moves changes on every row there: where more than half of its changing rows lie in such
+  runs it is native, whatever the median run. A smooth channel without noise that stays on
+  one written value for stretches (a generated 100 Hz rotor speed at a steady hover, written
+  to 10 digits: 97 % of its changing rows in such runs, between stretches of no change) is
+  native; the Crazyflie's motion-capture pose held on its 500 Hz rows (0 %) stays held;
+* **regular** (the interpolated reading): a logger samples at one rate, so a slow channel's
+  knots tile the time it moves at one interval (rows jitter: within one row): the intervals
+  within :data:`REGULAR_SPREAD` = 25 % (and one row) of their median cover at least
+  :data:`REGULAR_SHARE` = half of the time from the first knot to the last (a channel constant
+  on the ground in between still covers the rest);
+* **smooth** (the interpolated reading): an interpolated value rounded as written lies within
+  one rounding step of its neighbours' line (module doc above), so between its knots no row
+  lies between one and two steps off it; a smooth channel without noise whose rows bend
+  beyond the two steps only where it turns fast has rows just under that threshold too,
+  wherever its curvature crosses it. Where such *grazing* rows number more than
+  :data:`SMOOTH_GRAZING` = 2 per knot and the knots are not regular (above) the channel is
+  native (the generated rotor speeds on a gentle path: 66 and 114 grazing rows on 12 and 20
+  knots; the interpolated channels of converted ULog and DataFlash logs and of the tests:
+  0-1 per knot, except a renormalised quaternion, whose knots are regular). Before both
+  rules such channels read 5-50 Hz, their speeds were synthesised from the commands and a
+  reference was refused by the rotor-order check (CHANGELOG.md);
 * :data:`QUANTUM_STEPS` = 2: a native channel quantised so coarsely that it stays on one
   value for several rows (a battery voltage in 1 mV steps, integer PWM commands in a hover)
   changes by one quantum at a time, so the median change is its smallest; a held channel's
@@ -67,8 +90,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "ROUND_STEPS", "NativeRate",
-           "native_rate", "rates_of"]
+__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "REGULAR_SHARE",
+           "REGULAR_SPREAD", "ROUND_STEPS", "SMOOTH_GRAZING", "NativeRate", "native_rate",
+           "rates_of"]
 
 #: rounding steps of the column as written (:func:`_quanta`) a change must exceed to count
 #: (module doc)
@@ -79,6 +103,15 @@ MAX_DIGITS = 15
 DENSE_RUN = 3
 #: fewest knots from which a rate is read (module doc)
 MIN_KNOTS = 8
+#: knots come at one rate where the intervals within :data:`REGULAR_SPREAD` of their median
+#: cover at least this share of the time from the first knot to the last (module doc,
+#: "regular")
+REGULAR_SHARE = 0.5
+#: the relative spread about the median knot interval that counts as one rate (module doc)
+REGULAR_SPREAD = 0.25
+#: rows between one and two rounding steps off their neighbours' line, per knot, above which
+#: the knots of the "interpolated" reading are a smooth channel's (module doc, "smooth")
+SMOOTH_GRAZING = 2.0
 #: a column whose changes have a median at most this many times its smallest change is
 #: quantised, not held (module doc)
 QUANTUM_STEPS = 2.0
@@ -93,6 +126,25 @@ class NativeRate:
     hz: float
     form: str
     knots: np.ndarray
+
+
+def _regular(gaps: np.ndarray, interval: float, step: float) -> bool:
+    """Whether knot intervals ``gaps`` (s) tile the channel's time as a logger's samples do:
+    the intervals within :data:`REGULAR_SPREAD` of their median ``interval`` (and within one
+    row ``step``, s, of it: rows jitter, and a sample between two rows bends either of them)
+    cover at least :data:`REGULAR_SHARE` of the time from the first knot to the last."""
+    tolerance = max(REGULAR_SPREAD * interval, step)
+    kept = np.abs(gaps - interval) <= tolerance
+    return float(np.sum(gaps[kept])) >= REGULAR_SHARE * float(np.sum(gaps))
+
+
+def _dense_share(flags: np.ndarray) -> float:
+    """The share of the flagged rows of ``flags`` that lie in runs of :data:`DENSE_RUN` rows
+    or more (module doc, "regular")."""
+    padded = np.concatenate([[False], flags, [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    runs = edges[1::2] - edges[0::2]
+    return float(runs[runs >= DENSE_RUN].sum() / runs.sum()) if runs.sum() else 0.0
 
 
 def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
@@ -200,9 +252,13 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
     # row k off the straight line through rows k-1 and k+1, in time (logged instants jitter:
     # a line in t is no line in the row index)
     with np.errstate(invalid="ignore"):
-        d2 = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w)) > tol     # row k+1 bends
+        off = np.abs(x[1:-1] - (x[:-2] * (1.0 - w) + x[2:] * w))
+    d2 = off > tol                                      # row k+1 bends
     held = np.concatenate([[False], _any_column(d1)])   # rows where a new value shows
     bent = np.concatenate([[False], _any_column(d2), [False]])
+    # rows within two rounding steps of the line but beyond one, on no column beyond two:
+    # none on an interpolated channel (module doc, "smooth")
+    grazing = int(np.count_nonzero(_any_column(off > 0.5 * tol) & ~bent[1:-1]))
     best = None
     for form, flags in (("held", held), ("interpolated", bent)):
         starts, run = _knots(flags)
@@ -213,8 +269,14 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
         elif len(starts) < MIN_KNOTS:
             continue
         else:
-            interval = float(np.median(np.diff(t[starts])))
-            if interval <= 1.5 * step:                  # a knot on every row or so
+            gaps = np.diff(t[starts])
+            interval = float(np.median(gaps))
+            smooth = (_dense_share(flags) > 0.5 if form == "held" else
+                      not _regular(gaps, interval, step)
+                      and grazing > SMOOTH_GRAZING * len(starts))
+            if interval <= 1.5 * step or smooth:
+                # a knot on every row or so, or knots of a smooth channel's bends beyond the
+                # rounding (module doc, "regular" and "smooth")
                 candidate = NativeRate(1.0 / step, "native", np.arange(len(t)))
             else:
                 candidate = NativeRate(1.0 / interval, form, starts)
