@@ -66,9 +66,9 @@ Thresholds:
   :data:`SMOOTH_GRAZING` = 2 per knot and the knots are not regular (above) the channel is
   native (the generated rotor speeds on a gentle path: 66 and 114 grazing rows on 12 and 20
   knots; the interpolated channels of converted ULog and DataFlash logs and of the tests:
-  0-1 per knot, except a renormalised quaternion, whose knots are regular). Before both
-  rules such channels read 5-50 Hz, their speeds were synthesised from the commands and a
-  reference was refused by the rotor-order check (CHANGELOG.md);
+  0-1 per knot, except a renormalised quaternion, whose knots are regular). Why both rules:
+  read as a 5-50 Hz channel, such speeds would be synthesised from the commands
+  (:func:`quadsim.gap.logcheck.slow_rotors`) and judged in their stead;
 * :data:`QUANTUM_STEPS` = 2: a native channel quantised so coarsely that it stays on one
   value for several rows (a battery voltage in 1 mV steps, integer PWM commands in a hover)
   changes by one quantum at a time, so the median change is its smallest; a held channel's
@@ -77,7 +77,9 @@ Thresholds:
 
 What it cannot tell: a held channel whose every change is about equal (a held ramp), read
 as native; a quantised channel that moves by several quanta between rows yet stays for
-several, read as held. It costs a few vector operations per column (it runs on every log).
+several, read as held; a slow interpolated channel that shows only a few knots at no one
+interval (a logger that drops most samples) and bends just under the threshold between
+them, read as native. It costs a few vector operations per column (it runs on every log).
 
 Example::
 
