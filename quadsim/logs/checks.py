@@ -191,6 +191,35 @@ def _rotvec_between(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     return v * scale
 
 
+#: the span (s) of the cubic Savitzky-Golay derivative that stands for a velocity a log does
+#: not carry (:func:`_position_velocity`): half the check's window, so that the window's
+#: velocity difference still carries its manoeuvres
+POSITION_SPAN_S = WINDOW_S / 2
+
+
+def _position_velocity(log) -> np.ndarray:
+    """(N, 3) m/s: the velocity of a log that carries its position only: the position
+    smoothed by a cubic Savitzky-Golay filter over :data:`POSITION_SPAN_S` at the rows'
+    median step (:func:`_position_window`), differentiated on the rows' own times
+    (``numpy.gradient``: a logging gap is no jump). Why not the sample-to-sample gradient:
+    a motion-capture position held on faster rows (the Crazyflie's 100-175 Hz pose on
+    500 Hz rows) steps, and its gradient is a train of spikes whose noise estimate
+    (:func:`_window_noise`) swamps the signal (docs/flightlog.md, consistency checks)."""
+    from .savgol import savgol
+
+    dt = float(np.median(np.diff(log.t)))
+    window = _position_window(dt)
+    if len(log.t) <= window:
+        return np.gradient(log.position, log.t, axis=0)
+    return np.gradient(savgol(np.asarray(log.position, float), window, 3), log.t, axis=0)
+
+
+def _position_window(dt: float) -> int:
+    """The odd sample count of :func:`_position_velocity`'s filter at a row step ``dt`` (s):
+    :data:`POSITION_SPAN_S`, at least 5 rows."""
+    return max(5, int(round(POSITION_SPAN_S / dt)) | 1)
+
+
 def _window_noise(log, velocity: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
     """(3,), (3,): the variance that white sensor noise puts into :func:`check_accel`'s
     window means over ``span`` s, per world axis: of the velocity difference over the window,
@@ -360,8 +389,7 @@ def check_accel(log, gravity: float = 9.81) -> None:
     k = _windows(log.t)
     if len(k) < 3:
         return
-    velocity = log.velocity if log.velocity is not None else np.gradient(log.position, log.t,
-                                                                         axis=0)
+    velocity = log.velocity if log.velocity is not None else _position_velocity(log)
     world = np.einsum("nij,nj->ni", quat_to_rotmat(log.quat), log.accel)
     integral = cumulative_trapezoid(world, log.t, axis=0, initial=0)
     span = (log.t[k[1:]] - log.t[k[:-1]])[:, None]
