@@ -216,7 +216,8 @@ def _position_velocity(log) -> np.ndarray:
 
 def _position_window(dt: float) -> int:
     """The odd sample count of :func:`_position_velocity`'s filter at a row step ``dt`` (s):
-    :data:`POSITION_SPAN_S`, at least 5 rows."""
+    :data:`POSITION_SPAN_S`, at least 5 rows (a cubic fit needs more rows than its 4
+    coefficients to smooth anything)."""
     return max(5, int(round(POSITION_SPAN_S / dt)) | 1)
 
 

@@ -48,11 +48,12 @@ Thresholds:
 * :data:`MIN_KNOTS` = 8: fewer knots read nothing (None: unknown, e.g. a constant column);
 * **dense** (the held reading): a held channel's value changes on single rows, where a new
   sample shows; a channel that changes on :data:`DENSE_RUN` or more consecutive rows wherever
-  it moves changes on every row there: where more than half of its changing rows lie in such
-  runs it is native, whatever the median run. A smooth channel without noise that stays on
-  one written value for stretches (a generated 100 Hz rotor speed at a steady hover, written
-  to 10 digits: 97 % of its changing rows in such runs, between stretches of no change) is
-  native; the Crazyflie's motion-capture pose held on its 500 Hz rows (0 %) stays held;
+  it moves changes on every row there: where more than :data:`DENSE_SHARE` = half of its
+  changing rows lie in such runs it is native, whatever the median run. A smooth channel
+  without noise that stays on one written value for stretches (a generated 100 Hz rotor
+  speed at a steady hover, written to 10 digits: 97 % of its changing rows in such runs,
+  between stretches of no change) is native; the Crazyflie's motion-capture pose held on
+  its 500 Hz rows (0 %) stays held;
 * **regular** (the interpolated reading): a logger samples at one rate, so a slow channel's
   knots tile the time it moves at one interval (rows jitter: within one row): the intervals
   within :data:`REGULAR_SPREAD` = 25 % (and one row) of their median cover at least
@@ -92,7 +93,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DENSE_RUN", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "REGULAR_SHARE",
+__all__ = ["DENSE_RUN", "DENSE_SHARE", "MAX_DIGITS", "MIN_KNOTS", "QUANTUM_STEPS", "REGULAR_SHARE",
            "REGULAR_SPREAD", "ROUND_STEPS", "SMOOTH_GRAZING", "NativeRate", "native_rate",
            "rates_of"]
 
@@ -105,6 +106,10 @@ MAX_DIGITS = 15
 DENSE_RUN = 3
 #: fewest knots from which a rate is read (module doc)
 MIN_KNOTS = 8
+#: a held reading whose changing rows lie in runs of DENSE_RUN or more beyond this share is
+#: native (module doc, "dense"): a held channel's changes are single rows, so the runs then
+#: hold most of its changes
+DENSE_SHARE = 0.5
 #: knots come at one rate where the intervals within :data:`REGULAR_SPREAD` of their median
 #: cover at least this share of the time from the first knot to the last (module doc,
 #: "regular")
@@ -140,23 +145,27 @@ def _regular(gaps: np.ndarray, interval: float, step: float) -> bool:
     return float(np.sum(gaps[kept])) >= REGULAR_SHARE * float(np.sum(gaps))
 
 
-def _dense_share(flags: np.ndarray) -> float:
-    """The share of the flagged rows of ``flags`` that lie in runs of :data:`DENSE_RUN` rows
-    or more (module doc, "regular")."""
+def _runs(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first index, length) of each run of True in ``flags``."""
     padded = np.concatenate([[False], flags, [False]])
     edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
-    runs = edges[1::2] - edges[0::2]
-    return float(runs[runs >= DENSE_RUN].sum() / runs.sum()) if runs.sum() else 0.0
+    return edges[0::2], edges[1::2] - edges[0::2]
+
+
+def _dense_share(flags: np.ndarray) -> float:
+    """The share of the flagged rows of ``flags`` that lie in runs of :data:`DENSE_RUN` rows
+    or more (module doc, "dense"); 0 without any."""
+    _, lengths = _runs(flags)
+    total = int(lengths.sum())
+    return float(lengths[lengths >= DENSE_RUN].sum()) / total if total else 0.0
 
 
 def _knots(flags: np.ndarray) -> tuple[np.ndarray, float]:
     """The first index of each run of True in ``flags`` and the runs' median length."""
-    padded = np.concatenate([[False], flags, [False]])
-    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
-    starts, ends = edges[0::2], edges[1::2]
+    starts, lengths = _runs(flags)
     if len(starts) == 0:
         return starts, 0.0
-    return starts, float(np.median(ends - starts))
+    return starts, float(np.median(lengths))
 
 
 #: 10.0 ** k (float64, numpy's power: the same numbers) for every whole k that
@@ -258,8 +267,8 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
     d2 = off > tol                                      # row k+1 bends
     held = np.concatenate([[False], _any_column(d1)])   # rows where a new value shows
     bent = np.concatenate([[False], _any_column(d2), [False]])
-    # rows within two rounding steps of the line but beyond one, on no column beyond two:
-    # none on an interpolated channel (module doc, "smooth")
+    # rows that are no knot (no column beyond two rounding steps of its line) yet have a
+    # column beyond one: none on an interpolated channel (module doc, "smooth")
     grazing = int(np.count_nonzero(_any_column(off > 0.5 * tol) & ~bent[1:-1]))
     best = None
     for form, flags in (("held", held), ("interpolated", bent)):
@@ -273,7 +282,7 @@ def _native_rate(t: np.ndarray, values: np.ndarray, step: float, w: np.ndarray
         else:
             gaps = np.diff(t[starts])
             interval = float(np.median(gaps))
-            smooth = (_dense_share(flags) > 0.5 if form == "held" else
+            smooth = (_dense_share(flags) > DENSE_SHARE if form == "held" else
                       not _regular(gaps, interval, step)
                       and grazing > SMOOTH_GRAZING * len(starts))
             if interval <= 1.5 * step or smooth:
